@@ -1,0 +1,286 @@
+"""Sheath geometry, friction exponent K and the tension-profile memory.
+
+The sheath is a chain of straight runs and circular arcs, listed from the proximal (actuator) end to
+the distal (instrument) end. Along the tendon the Coulomb-capstan friction bounds the tension
+gradient (Phee et al. 2009, eq. (1) in differential form; Agrawal et al. 2010):
+
+    |dT/ds| <= mu * kappa(s) * T(s)      <=>      |d ln T / d theta| <= mu
+
+so the log-tension is mu-Lipschitz in the cumulative wrap angle theta(s) = int_0^s kappa. For a new
+proximal tension T_in, every node i of the profile is updated by the envelope rule
+
+    T_i <- min( max(T_i, T_in * exp(-mu theta_i)), T_in * exp(+mu theta_i) )        (profile update)
+
+Nodes that change are slipping; the others stick and keep their memory. The distal node is T_out,
+and the elongation is int T / EA ds. This is exact for a rigid sheath, Coulomb friction and a distal
+end that does not move while the profile is stuck, for any history of reversals and minor loops.
+The paper's four phases (pull, release and the two transitions) are special cases of this rule.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Iterable, Sequence
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "Run",
+    "SheathGeometry",
+    "SheathModel",
+    "profile_update",
+    "profile_batch",
+]
+
+
+@dataclass(frozen=True)
+class Run:
+    """One piece of the sheath route.
+
+    Parameters
+    ----------
+    length : float
+        Arc length of the piece [m], > 0.
+    radius : float
+        Bend radius [m], > 0; ``math.inf`` for a straight run.
+    """
+
+    length: float
+    radius: float = math.inf
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.length) and self.length > 0):
+            raise ValueError(f"sheath run length must be a positive number of metres, got {self.length!r}")
+        if not (self.radius > 0) or math.isnan(self.radius):
+            raise ValueError(f"sheath run bend radius must be > 0 m (inf for straight), got {self.radius!r}")
+
+    @property
+    def angle(self) -> float:
+        """Bend angle of the piece [rad] = length / radius (0 for a straight run)."""
+        return 0.0 if math.isinf(self.radius) else self.length / self.radius
+
+
+class SheathGeometry:
+    """The route of a sheath as straight runs and arcs, proximal to distal.
+
+    K = mu * sum_i (x_i - x_{i-1}) / R_i  (Phee et al. 2009, eq. (2)) is ``mu * total_angle``.
+
+    Parameters
+    ----------
+    runs : sequence of Run or of (length [m], radius [m]) pairs
+        At least one piece.
+
+    Raises
+    ------
+    ValueError
+        No pieces, or a piece with a non-positive length or radius.
+    """
+
+    def __init__(self, runs: Iterable[Run | tuple[float, float]]):
+        pieces = [r if isinstance(r, Run) else Run(*r) for r in runs]
+        if not pieces:
+            raise ValueError("a sheath needs at least one run")
+        self.runs: tuple[Run, ...] = tuple(pieces)
+        self._ends = np.cumsum([r.length for r in pieces])
+        self._angles = np.array([r.angle for r in pieces])
+
+    @classmethod
+    def uniform(cls, length: float, total_angle: float) -> "SheathGeometry":
+        """One arc of constant curvature (or a straight run when ``total_angle`` is 0) [m, rad]."""
+        if total_angle < 0:
+            raise ValueError(f"total bend angle must be >= 0 rad, got {total_angle}")
+        radius = math.inf if total_angle == 0 else length / total_angle
+        return cls([Run(length, radius)])
+
+    @property
+    def length(self) -> float:
+        """Total sheath length L [m]."""
+        return float(self._ends[-1])
+
+    @property
+    def total_angle(self) -> float:
+        """Total wrap angle sum(theta_i) [rad]."""
+        return float(self._angles.sum())
+
+    def curvature(self, s: np.ndarray | float) -> np.ndarray:
+        """Curvature kappa(s) [1/m] at arc positions ``s`` [m] (shape preserved), measured from the proximal end."""
+        s = np.asarray(s, dtype=float)
+        idx = np.clip(np.searchsorted(self._ends, s, side="right"), 0, len(self.runs) - 1)
+        kappa = np.array([0.0 if math.isinf(r.radius) else 1.0 / r.radius for r in self.runs])
+        return kappa[idx]
+
+    def wrap_angle(self, s: np.ndarray | float) -> np.ndarray:
+        """Cumulative wrap angle theta(s) = int_0^s kappa [rad] at arc positions ``s`` [m] (exact, piecewise linear)."""
+        s = np.clip(np.asarray(s, dtype=float), 0.0, self.length)
+        starts = np.concatenate(([0.0], self._ends[:-1]))
+        lengths = self._ends - starts
+        # fraction of each piece covered up to s, broadcast over pieces: shape (..., n_runs)
+        frac = np.clip((s[..., None] - starts) / lengths, 0.0, 1.0)
+        return frac @ self._angles
+
+    def describe(self) -> str:
+        """One-line summary, e.g. for logs."""
+        return f"L = {self.length:.3f} m, total bend {math.degrees(self.total_angle):.1f} deg in {len(self.runs)} runs"
+
+
+@dataclass(frozen=True)
+class SheathModel:
+    """What the estimator needs to know of one tendon-sheath transmission.
+
+    Parameters
+    ----------
+    K : float
+        Friction exponent mu * sum(theta) [-], >= 0 (Phee et al. 2009, eq. (2)).
+    compliance : float
+        Tendon compliance L / EA [m/N], > 0.
+    wrap_shape : ndarray, shape (n_shape,), optional
+        Normalised cumulative wrap angle theta(s) / theta_total at ``n_shape`` equally spaced points
+        from the proximal (0) to the distal end (1); monotone from 0 to 1. ``None`` means constant
+        curvature, the paper's assumption.
+    """
+
+    K: float
+    compliance: float
+    wrap_shape: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.K) and self.K >= 0):
+            raise ValueError(f"friction exponent K must be a finite number >= 0, got {self.K!r}")
+        if not (math.isfinite(self.compliance) and self.compliance > 0):
+            raise ValueError(f"tendon compliance L/EA must be > 0 m/N, got {self.compliance!r}")
+        if self.wrap_shape is not None:
+            w = np.asarray(self.wrap_shape, dtype=float)
+            if w.ndim != 1 or w.size < 2 or np.any(np.diff(w) < -1e-12) or abs(w[0]) > 1e-9 or abs(w[-1] - 1) > 1e-9:
+                raise ValueError("wrap_shape must be a monotone 1-D array from 0 to 1 with at least 2 points")
+
+    @classmethod
+    def from_geometry(cls, geometry: SheathGeometry, mu: float, EA: float) -> "SheathModel":
+        """Model of a known route with friction coefficient ``mu`` [-] and axial stiffness ``EA`` [N]."""
+        if not (mu >= 0 and math.isfinite(mu)):
+            raise ValueError(f"friction coefficient mu must be >= 0, got {mu!r}")
+        if not (EA > 0 and math.isfinite(EA)):
+            raise ValueError(f"tendon axial stiffness EA must be > 0 N, got {EA!r}")
+        shape = None
+        if geometry.total_angle > 0:
+            s = np.linspace(0.0, geometry.length, 257)
+            shape = geometry.wrap_angle(s) / geometry.total_angle
+        return cls(K=mu * geometry.total_angle, compliance=geometry.length / EA, wrap_shape=shape)
+
+    def with_K(self, K: float) -> "SheathModel":
+        """The same route and compliance with another friction exponent."""
+        return SheathModel(K=K, compliance=self.compliance, wrap_shape=self.wrap_shape)
+
+    def nodes(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Discretise the sheath into ``n`` elements (``n + 1`` nodes, equally spaced in arc length).
+
+        Returns
+        -------
+        log_gain : ndarray, shape (n + 1,)
+            mu * theta(s_i) [-] at each node, 0 at the proximal end and K at the distal end.
+        weight : ndarray, shape (n + 1,)
+            Trapezoid weights [m/N] so that elongation = weight @ T.
+        """
+        if n < 1:
+            raise ValueError(f"the profile needs at least 1 element, got n = {n}")
+        u = np.linspace(0.0, 1.0, n + 1)
+        if self.wrap_shape is None:
+            shape = u
+        else:
+            shape = np.interp(u, np.linspace(0.0, 1.0, len(self.wrap_shape)), self.wrap_shape)
+        weight = np.full(n + 1, self.compliance / n)
+        weight[0] *= 0.5
+        weight[-1] *= 0.5
+        return self.K * shape, weight
+
+    @property
+    def M_e(self) -> float:
+        """Elongation per proximal tension while pulling [m/N]: M_e = (1/EA) int_0^L exp(-mu theta(s)) ds.
+
+        For constant curvature this is L (1 - e^-K) / (EA K), Phee et al. 2009, eq. (12).
+        """
+        return self.compliance * pull_elongation_factor(self.K, self.wrap_shape)
+
+
+def pull_elongation_factor(K: float, wrap_shape: np.ndarray | None = None) -> float:
+    """(1/L) int_0^L exp(-K * shape(s)) ds [-]; (1 - e^-K)/K for constant curvature (1 at K = 0)."""
+    if wrap_shape is None:
+        return 1.0 if K < 1e-12 else -math.expm1(-K) / K
+    w = np.asarray(wrap_shape, dtype=float)
+    f = np.exp(-K * w)
+    return float(np.sum(0.5 * (f[1:] + f[:-1])) / (len(w) - 1))
+
+
+@njit(cache=True, nogil=True)
+def profile_update(T, log_gain, T_in):  # pragma: no cover - compiled
+    """In-place envelope update of a tension profile; returns the distal tension T[-1] [N].
+
+    T : float64[n + 1] node tensions [N], modified in place.
+    log_gain : float64[n + 1] mu * theta at each node.
+    T_in : proximal tension [N]; negative values are treated as 0 (a tendon cannot push).
+    """
+    if T_in < 0.0:
+        T_in = 0.0
+    for i in range(T.shape[0]):
+        g = math.exp(log_gain[i])
+        lo = T_in / g
+        hi = T_in * g
+        t = T[i]
+        if t < lo:
+            t = lo
+        elif t > hi:
+            t = hi
+        T[i] = t
+    return T[T.shape[0] - 1]
+
+
+@njit(cache=True, nogil=True)
+def _profile_batch(T, lo_gain, hi_gain, weight, T_in, T_out, elong):  # pragma: no cover - compiled
+    n = T.shape[0]
+    for k in range(T_in.shape[0]):
+        t_in = T_in[k]
+        if t_in < 0.0:
+            t_in = 0.0
+        e = 0.0
+        for i in range(n):
+            lo = t_in * lo_gain[i]
+            hi = t_in * hi_gain[i]
+            t = T[i]
+            if t < lo:
+                t = lo
+            elif t > hi:
+                t = hi
+            T[i] = t
+            e += weight[i] * t
+        T_out[k] = T[n - 1]
+        elong[k] = e
+
+
+def profile_batch(T0: np.ndarray, log_gain: np.ndarray, weight: np.ndarray, T_in: np.ndarray):
+    """Run the profile update over a recorded proximal tension series.
+
+    Parameters
+    ----------
+    T0 : ndarray, shape (n_nodes,)
+        Initial profile [N]; not modified.
+    log_gain, weight : ndarray, shape (n_nodes,)
+        From :meth:`SheathModel.nodes`.
+    T_in : ndarray, shape (n_samples,)
+        Proximal tension [N].
+
+    Returns
+    -------
+    T_out : ndarray, shape (n_samples,)
+        Distal tension [N].
+    elongation : ndarray, shape (n_samples,)
+        Tendon elongation int T/EA ds [m].
+    T_final : ndarray, shape (n_nodes,)
+        Profile after the last sample [N].
+    """
+    T = np.array(T0, dtype=np.float64, copy=True)
+    T_in = np.ascontiguousarray(T_in, dtype=np.float64)
+    T_out = np.empty_like(T_in)
+    elong = np.empty_like(T_in)
+    g = np.exp(np.asarray(log_gain, dtype=np.float64))
+    _profile_batch(T, 1.0 / g, g, np.ascontiguousarray(weight, dtype=np.float64), T_in, T_out, elong)
+    return T_out, elong, T
