@@ -1,0 +1,210 @@
+"""Distal tension and elongation from proximal sensors: the profile-memory estimator.
+
+State: the tension profile T(s) along the sheath, n_nodes + 1 nodes from proximal to distal. Each
+proximal tension sample updates it by the envelope rule of :mod:`estimator.sheath`
+
+    T_i <- min( max(T_i, T_in e^{-mu theta_i}), T_in e^{+mu theta_i} )
+
+and gives
+
+    T_out_hat      = T_n                                     distal tension [N]
+    elongation_hat = (1/EA) int_0^L T(s) ds  (trapezoid)     tendon elongation [m]
+    x_out_hat      = x_in - elongation_hat                   distal displacement [m]
+
+For a single reversal from full slip this reproduces the seed paper's phase laws (Phee et al. 2009,
+eqs. (1)-(25)); for any other history (minor loops, partial releases) it keeps the exact Coulomb
+memory that the "tension at the last reversal" rule loses (literature.md section 0).
+
+The phase reported is derived from the same state: whether the distal node slipped this sample
+(in which direction) and the smoothed rate of T_in.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from estimator.phase import Phase
+from estimator.sheath import SheathModel, profile_batch, profile_update
+
+__all__ = ["DistalEstimator", "DistalSample", "BatchEstimate", "estimate_batch", "classify_phase"]
+
+
+@dataclass(frozen=True)
+class DistalSample:
+    """One estimate. T_out [N], elongation [m], x_out [m], phase."""
+
+    T_out: float
+    elongation: float
+    x_out: float
+    phase: Phase
+
+
+@dataclass(frozen=True)
+class BatchEstimate:
+    """Estimates over a recording, each ndarray of shape (n_samples,): T_out [N], elongation [m],
+    x_out [m], phase (int8 codes of :class:`Phase`)."""
+
+    T_out: np.ndarray
+    elongation: np.ndarray
+    x_out: np.ndarray
+    phase: np.ndarray
+
+
+class DistalEstimator:
+    """Online profile-memory estimator for one tendon.
+
+    Parameters
+    ----------
+    model : SheathModel
+        K, L/EA and (optionally) the route shape, e.g. from calibration.
+    n_nodes : int
+        Elements of the profile (n_nodes + 1 nodes), >= 1.
+    pretension : float
+        Initial uniform tension along the tendon [N], >= 0.
+    hold_rate : float
+        |dT_in/dt| below this is reported as HOLD when the distal end is stuck [N/s].
+    rate_time_constant : float
+        Time constant of the first-order smoothing of dT_in/dt [s], > 0.
+
+    Raises
+    ------
+    ValueError
+        Non-finite or out-of-range arguments (named in the message).
+    """
+
+    def __init__(self, model: SheathModel, n_nodes: int = 100, pretension: float = 0.0,
+                 hold_rate: float = 0.5, rate_time_constant: float = 0.02):
+        if not (pretension >= 0 and math.isfinite(pretension)):
+            raise ValueError(f"pretension must be >= 0 N, got {pretension!r}")
+        if not (rate_time_constant > 0):
+            raise ValueError(f"rate_time_constant must be > 0 s, got {rate_time_constant!r}")
+        self.model = model
+        self.log_gain, self.weight = model.nodes(int(n_nodes))
+        self.positions = np.linspace(0.0, 1.0, self.log_gain.size)  # normalised arc length s/L
+        self.hold_rate = float(hold_rate)
+        self.tau = float(rate_time_constant)
+        self.reset(pretension)
+
+    def reset(self, pretension: float = 0.0) -> None:
+        """Forget the history: uniform profile at ``pretension`` [N], phase HOLD."""
+        self.profile = np.full(self.log_gain.size, float(pretension))
+        self._T_prev: float | None = None
+        self._t_prev: float | None = None
+        self._rate = 0.0
+        self.phase = Phase.HOLD
+        self.T_out = float(pretension)
+        self.elongation = float(self.weight @ self.profile)
+
+    def step(self, T_in: float, x_in: float, t: float | None = None) -> DistalSample:
+        """Update with one proximal sample.
+
+        Parameters
+        ----------
+        T_in : float
+            Proximal tension [N]; negative readings are treated as 0.
+        x_in : float
+            Proximal displacement [m] (encoder).
+        t : float, optional
+            Sample time [s] for the phase rate; without it a 1 ms period is assumed.
+
+        Raises
+        ------
+        ValueError
+            ``T_in`` or ``x_in`` is not finite.
+        """
+        if not (math.isfinite(T_in) and math.isfinite(x_in)):
+            raise ValueError(f"proximal sample must be finite, got T_in={T_in!r} N, x_in={x_in!r} m")
+        T_prev_out = self.T_out
+        # profile update (envelope rule); T_out is the distal node
+        self.T_out = T_out = profile_update(self.profile, self.log_gain, T_in)
+        # elongation = (1/EA) int T ds
+        self.elongation = e = float(self.weight @ self.profile)
+        if self._T_prev is not None:
+            dt = 1e-3 if t is None or self._t_prev is None else max(t - self._t_prev, 1e-6)
+            a = dt / (self.tau + dt)
+            self._rate += a * ((T_in - self._T_prev) / dt - self._rate)
+        self._T_prev, self._t_prev = T_in, t
+        self.phase = classify_phase(T_out - T_prev_out, T_in, self.model.K, T_out, self._rate, self.hold_rate)
+        return DistalSample(T_out, e, x_in - e, self.phase)
+
+    def profile_samples(self, n_points: int) -> np.ndarray:
+        """The profile resampled at ``n_points`` equally spaced points, proximal to distal [N]."""
+        u = np.linspace(0.0, 1.0, n_points)
+        return np.interp(u, self.positions, self.profile)
+
+
+def classify_phase(dT_out: float, T_in: float, K: float, T_out: float, rate: float, hold_rate: float) -> Phase:
+    """Phase from the distal node's motion and the smoothed proximal rate [N/s].
+
+    The distal end slips while T_out sits on the pull line T_in e^-K or the release line T_in e^K
+    (within 0.5 % + 1 mN) and moves; otherwise it is stuck and the sign of the rate tells the transition.
+    """
+    return Phase(_classify(dT_out, T_in, K, T_out, rate, hold_rate))
+
+
+@njit(cache=True)
+def _classify(dT_out, T_in, K, T_out, rate, hold_rate):  # pragma: no cover - compiled
+    tol = 0.005 * T_out + 1e-3
+    if rate > hold_rate:
+        if abs(T_out - T_in * math.exp(-K)) <= tol and dT_out > 0.0:
+            return 1  # PULL
+        return 4      # RELEASE_TO_PULL
+    if rate < -hold_rate:
+        if abs(T_out - T_in * math.exp(K)) <= tol and dT_out < 0.0:
+            return 2  # RELEASE
+        return 3      # PULL_TO_RELEASE
+    return 0          # HOLD
+
+
+@njit(cache=True)
+def _phase_batch(T_in, T_out, t, K, tau, hold_rate, out):  # pragma: no cover - compiled
+    rate = 0.0
+    out[0] = 0
+    for k in range(1, T_in.shape[0]):
+        dt = t[k] - t[k - 1]
+        if dt < 1e-6:
+            dt = 1e-6
+        a = dt / (tau + dt)
+        rate += a * ((T_in[k] - T_in[k - 1]) / dt - rate)
+        out[k] = _classify(T_out[k] - T_out[k - 1], max(T_in[k], 0.0), K, T_out[k], rate, hold_rate)
+
+
+def estimate_batch(T_in: np.ndarray, x_in: np.ndarray, model: SheathModel, *, time: np.ndarray | None = None,
+                   n_nodes: int = 100, pretension: float = 0.0, hold_rate: float = 0.5,
+                   rate_time_constant: float = 0.02) -> BatchEstimate:
+    """Profile-memory estimates over recorded arrays (the same maths as :class:`DistalEstimator`).
+
+    Parameters
+    ----------
+    T_in : ndarray, shape (n,)   proximal tension [N]
+    x_in : ndarray, shape (n,)   proximal displacement [m]
+    model : SheathModel
+    time : ndarray, shape (n,), optional   sample times [s] (default 1 kHz) for the phase
+    n_nodes, pretension, hold_rate, rate_time_constant : as :class:`DistalEstimator`
+
+    Raises
+    ------
+    ValueError
+        Arrays of different shapes, not 1-D, or with NaN/inf (the first bad index is named).
+    """
+    T_in = np.asarray(T_in, dtype=float)
+    x_in = np.asarray(x_in, dtype=float)
+    if T_in.ndim != 1 or T_in.shape != x_in.shape:
+        raise ValueError(f"T_in and x_in must be 1-D of equal length, got shapes {T_in.shape} and {x_in.shape}")
+    for name, arr in (("T_in", T_in), ("x_in", x_in)):
+        bad = np.flatnonzero(~np.isfinite(arr))
+        if bad.size:
+            raise ValueError(f"{name} has a non-finite value at sample {bad[0]}")
+    if time is None:
+        time = np.arange(T_in.size) * 1e-3
+    log_gain, weight = model.nodes(int(n_nodes))
+    T0 = np.full(log_gain.size, float(pretension))
+    T_out, elong, _ = profile_batch(T0, log_gain, weight, T_in)
+    phase = np.empty(T_in.size, dtype=np.int8)
+    if T_in.size:
+        _phase_batch(T_in, T_out, np.asarray(time, dtype=float), model.K, float(rate_time_constant),
+                     float(hold_rate), phase)
+    return BatchEstimate(T_out=T_out, elongation=elong, x_out=x_in - elong, phase=phase)
