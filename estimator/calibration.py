@@ -140,7 +140,10 @@ def calibrate_joint_limit(x_in: np.ndarray, T_in: np.ndarray, L: float, EA: floa
         else:
             if not (0.0 < ratio < 1.0):
                 K_from_M_e(M_e, L, EA)  # raises with the physical explanation
-            K = float(newton(lambda K: pull_elongation_factor(K, wrap_shape) - ratio, 0.5, tol=1e-12, maxiter=100))
+            w = np.asarray(wrap_shape, dtype=float)
+            dfac = lambda K: -float(np.mean(0.5 * ((w * np.exp(-K * w))[1:] + (w * np.exp(-K * w))[:-1])))  # noqa: E731
+            # convex decreasing in K, so Newton from K = 0 converges monotonically
+            K = float(newton(lambda K: pull_elongation_factor(K, w) - ratio, 0.0, fprime=dfac, tol=1e-12, maxiter=200))
     except (ValueError, RuntimeError) as exc:
         raise CalibrationError(f"calibration: {exc}") from None
     model = SheathModel(K=K, compliance=L / EA, wrap_shape=wrap_shape)

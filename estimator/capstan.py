@@ -107,7 +107,7 @@ def elongation_release_to_pull(T_in, T_in0, K: float, compliance: float):
     return _coef(K, compliance) * (T_in - 2.0 * np.sqrt(T_in * T_in0) + T_in0 * math.exp(K))
 
 
-def K_from_M_e(M_e_value: float, L: float, EA: float, K0: float = 0.5) -> float:
+def K_from_M_e(M_e_value: float, L: float, EA: float) -> float:
     """Solve eq. (13), M_e = L (1 - e^-K) / (EA K), for K by Newton's method.
 
     Raises
@@ -126,10 +126,8 @@ def K_from_M_e(M_e_value: float, L: float, EA: float, K0: float = 0.5) -> float:
         raise ValueError(f"M_e * EA / L = {r:.4g} is outside (0, 1): {why}; cannot solve eq. (13) for K")
     f = lambda K: elongation_factor(K) - r  # noqa: E731
     fprime = lambda K: (math.exp(-K) * (K + 1.0) - 1.0) / (K * K) if K > 1e-6 else -0.5 + K / 3.0  # noqa: E731
-    K = newton(f, K0, fprime=fprime, tol=1e-12, maxiter=100)
-    if not (K >= 0 and math.isfinite(K)):  # Newton left the domain: restart from a safe guess
-        K = newton(f, 2.0 * (1.0 - r), fprime=fprime, tol=1e-12, maxiter=200)
-    return float(K)
+    # (1 - e^-K)/K is convex and decreasing: Newton from K = 0 climbs monotonically to the root.
+    return float(newton(f, 0.0, fprime=fprime, tol=1e-12, maxiter=200))
 
 
 class PhaseFormulaEstimator:
@@ -179,10 +177,13 @@ class PhaseFormulaEstimator:
             ph = Phase.PULL
         self.phase = ph
         T0 = self.T_in0
+        # on a branch, T_in inside the deadband behind the running extremum counts as the extremum
         if ph == Phase.PULL:
-            self.T_out, e = T_in / eK, float(elongation_pull(T_in, K, c))
+            T = self.extremum
+            self.T_out, e = T / eK, float(elongation_pull(T, K, c))
         elif ph == Phase.RELEASE:
-            self.T_out, e = T_in * eK, float(elongation_release(T_in, K, c))
+            T = self.extremum
+            self.T_out, e = T * eK, float(elongation_release(T, K, c))
         elif ph == Phase.PULL_TO_RELEASE:
             self.T_out = self.held
             e = float(elongation_pull_to_release(min(T_in, T0), T0, K, c))

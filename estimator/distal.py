@@ -140,7 +140,8 @@ def classify_phase(dT_out: float, T_in: float, K: float, T_out: float, rate: flo
     """Phase from the distal node's motion and the smoothed proximal rate [N/s].
 
     The distal end slips while T_out sits on the pull line T_in e^-K or the release line T_in e^K
-    (within 0.5 % + 1 mN) and moves; otherwise it is stuck and the sign of the rate tells the transition.
+    (within 0.5 % + 1 mN) and T_in moves that way; otherwise it is stuck and the sign of the rate
+    tells the transition. ``dT_out`` is kept in the signature for callers that log it.
     """
     return Phase(_classify(dT_out, T_in, K, T_out, rate, hold_rate))
 
@@ -149,11 +150,11 @@ def classify_phase(dT_out: float, T_in: float, K: float, T_out: float, rate: flo
 def _classify(dT_out, T_in, K, T_out, rate, hold_rate):  # pragma: no cover - compiled
     tol = 0.005 * T_out + 1e-3
     if rate > hold_rate:
-        if abs(T_out - T_in * math.exp(-K)) <= tol and dT_out > 0.0:
+        if abs(T_out - T_in * math.exp(-K)) <= tol:
             return 1  # PULL
         return 4      # RELEASE_TO_PULL
     if rate < -hold_rate:
-        if abs(T_out - T_in * math.exp(K)) <= tol and dT_out < 0.0:
+        if abs(T_out - T_in * math.exp(K)) <= tol:
             return 2  # RELEASE
         return 3      # PULL_TO_RELEASE
     return 0          # HOLD

@@ -1,0 +1,51 @@
+"""DistalEstimator (online) against estimate_batch (recorded arrays): one maths, two APIs."""
+import math
+
+import numpy as np
+import pytest
+
+from estimator.distal import DistalEstimator, estimate_batch
+from estimator.phase import Phase
+from estimator.sheath import SheathGeometry, SheathModel
+
+
+def test_online_equals_batch_on_noisy_history():
+    model = SheathModel.from_geometry(SheathGeometry([(0.4, math.inf), (0.6, 0.2), (0.5, 0.1)]), 0.1, 1.5e4)
+    rng = np.random.default_rng(7)
+    t = np.arange(3000) * 1e-3
+    T_in = np.abs(15 + 8 * np.sin(2 * np.pi * 0.7 * t) + 3 * np.sin(2 * np.pi * 3.1 * t) + rng.normal(0, 0.05, t.size))
+    x_in = 1e-4 * T_in + 1e-3 * np.sin(t)
+    batch = estimate_batch(T_in, x_in, model, time=t, n_nodes=60, pretension=1.0)
+    est = DistalEstimator(model, n_nodes=60, pretension=1.0)
+    for k in range(t.size):
+        s = est.step(T_in[k], x_in[k], t[k])
+        assert s.T_out == pytest.approx(batch.T_out[k], rel=1e-12, abs=1e-12)
+        assert s.elongation == pytest.approx(batch.elongation[k], rel=1e-12)
+        assert s.x_out == pytest.approx(batch.x_out[k], rel=1e-9, abs=1e-15)
+        assert int(s.phase) == int(batch.phase[k])
+
+
+def test_step_rejects_non_finite():
+    est = DistalEstimator(SheathModel(K=0.3, compliance=1e-4))
+    with pytest.raises(ValueError, match="finite"):
+        est.step(float("nan"), 0.0)
+
+
+def test_batch_rejects_bad_arrays_naming_the_sample():
+    m = SheathModel(K=0.3, compliance=1e-4)
+    with pytest.raises(ValueError, match="sample 2"):
+        estimate_batch(np.array([0.0, 1.0, np.inf]), np.zeros(3), m)
+    with pytest.raises(ValueError, match="equal length"):
+        estimate_batch(np.zeros(3), np.zeros(4), m)
+
+
+def test_hold_when_tension_is_steady():
+    est = DistalEstimator(SheathModel(K=0.3, compliance=1e-4))
+    for k in range(500):
+        est.step(min(k * 0.011, 5.0), 0.0, k * 1e-3)
+    assert est.phase == Phase.PULL
+    for k in range(500, 800):
+        s = est.step(5.0, 0.0, k * 1e-3)
+    assert s.phase == Phase.HOLD
+    prof = est.profile_samples(7)
+    assert prof.shape == (7,) and prof[0] == pytest.approx(5.0) and prof[-1] == pytest.approx(5 * math.exp(-0.3))
