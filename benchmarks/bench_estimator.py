@@ -1,0 +1,63 @@
+"""Estimator speed: online step time per tendon and batch throughput. Prints figures, never fails on time."""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from estimator.capstan import phase_formula_batch
+from estimator.distal import DistalEstimator, estimate_batch
+from estimator.sheath import SheathGeometry, SheathModel
+from teleop.config import Config
+
+
+def _model() -> SheathModel:
+    cfg = Config()
+    return SheathModel.from_geometry(cfg.sheath.geometry(), cfg.sheath.mu, cfg.sheath.EA)
+
+
+def bench_step(n_nodes: int, n: int = 50_000) -> float:
+    est = DistalEstimator(_model(), n_nodes=n_nodes)
+    t = np.arange(n) * 1e-3
+    T_in = 12 + 8 * np.sin(2 * np.pi * 0.5 * t) + np.random.default_rng(0).normal(0, 0.02, n)
+    for k in range(2000):  # warm-up (numba compile, caches)
+        est.step(T_in[k], 0.0, t[k])
+    best = math.inf
+    for _ in range(3):
+        t0 = time.perf_counter()
+        for k in range(n):
+            est.step(T_in[k], 0.0, t[k])
+        best = min(best, (time.perf_counter() - t0) / n)
+    return best
+
+
+def bench_batch(n_nodes: int, n: int = 2_000_000) -> float:
+    m = _model()
+    t = np.arange(n) * 1e-3
+    T_in = 12 + 8 * np.sin(2 * np.pi * 0.5 * t) + np.random.default_rng(0).normal(0, 0.02, n)
+    x_in = np.zeros(n)
+    estimate_batch(T_in[:1000], x_in[:1000], m, time=t[:1000], n_nodes=n_nodes)  # compile
+    t0 = time.perf_counter()
+    estimate_batch(T_in, x_in, m, time=t, n_nodes=n_nodes)
+    return n / (time.perf_counter() - t0)
+
+
+def bench_paper(n: int = 200_000) -> float:
+    T_in = 12 + 8 * np.sin(np.arange(n) * 2e-3)
+    t0 = time.perf_counter()
+    phase_formula_batch(T_in, 0.63, 1e-4)
+    return n / (time.perf_counter() - t0)
+
+
+def main() -> None:
+    print("estimator (profile memory, one tendon)")
+    for nodes in (50, 100, 200):
+        print(f"  online step   n_nodes={nodes:4d}: {bench_step(nodes) * 1e6:7.2f} us/sample   (aim <= 10 us)")
+    for nodes in (50, 100, 200):
+        print(f"  batch         n_nodes={nodes:4d}: {bench_batch(nodes) / 1e6:7.2f} M samples/s (aim >= 1)")
+    print(f"  paper phase formulas (pure Python): {bench_paper() / 1e6:7.3f} M samples/s")
+
+
+if __name__ == "__main__":
+    main()
