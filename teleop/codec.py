@@ -1,0 +1,225 @@
+"""Bytes <-> messages: the only place the wire format lives.
+
+Every message is a 3-byte header followed by little-endian, fixed-layout fields::
+
+    offset 0  uint8   MAGIC (0xA7)
+    offset 1  uint8   WIRE_VERSION (1)
+    offset 2  uint8   message type: 1 Command, 2 Estimate, 3 Heartbeat
+
+    Command   (25 bytes after the header)
+        uint32 seq | float64 t_master [s] | float64 x_in_cmd [m] | uint8 engaged (0/1) | uint32 marker
+    Estimate  (59 bytes + 4 * count after the header)
+        uint32 seq | uint32 cmd_seq | float64 t_slave [s] | float64 T_in [N] | float64 x_in [m]
+        | float64 T_out_hat [N] | float64 elongation_hat [m] | float64 x_out_hat [m] | uint8 phase
+        | uint16 count | float32 profile[count] [N]
+    Heartbeat (14 bytes after the header)
+        uint8 side | uint32 seq | float64 t_sender [s] | uint8 state
+
+A buffer decodes only if it has exactly the length its type (and profile count) implies. Floats must
+be finite both ways: :func:`encode` refuses a message that :func:`decode` would refuse.
+Sequence numbers are uint32: producers wrap them with :func:`next_seq`.
+"""
+from __future__ import annotations
+
+import math
+import struct
+from functools import lru_cache
+from typing import Union
+
+from estimator.phase import Phase
+from teleop.errors import CodecError
+from teleop.messages import Command, Estimate, Heartbeat, Side, SideState
+
+__all__ = [
+    "MAGIC", "WIRE_VERSION", "TYPE_COMMAND", "TYPE_ESTIMATE", "TYPE_HEARTBEAT",
+    "MAX_PROFILE_POINTS", "SEQ_MODULUS", "Message", "encode", "decode", "next_seq",
+]
+
+MAGIC = 0xA7
+WIRE_VERSION = 1
+TYPE_COMMAND = 1
+TYPE_ESTIMATE = 2
+TYPE_HEARTBEAT = 3
+MAX_PROFILE_POINTS = 0xFFFF          # uint16 count
+SEQ_MODULUS = 1 << 32                # sequence numbers are uint32
+
+Message = Union[Command, Estimate, Heartbeat]
+
+_HEADER = struct.Struct("<BBB")
+_COMMAND = struct.Struct("<IddBI")
+_ESTIMATE = struct.Struct("<IIddddddBH")
+_HEARTBEAT = struct.Struct("<BIdB")
+_HDR = _HEADER.size
+_TYPE_NAMES = {TYPE_COMMAND: "Command", TYPE_ESTIMATE: "Estimate", TYPE_HEARTBEAT: "Heartbeat"}
+_PHASES = {int(p): p for p in Phase}
+_SIDES = {int(s): s for s in Side}
+_STATES = {int(s): s for s in SideState}
+_U32 = 0xFFFFFFFF
+
+
+@lru_cache(maxsize=64)
+def _profile_struct(n: int) -> struct.Struct:
+    return struct.Struct(f"<{n}f")
+
+
+def next_seq(seq: int) -> int:
+    """The sequence number after ``seq``, wrapping at 2**32 (uint32 on the wire)."""
+    return (seq + 1) & _U32
+
+
+def _check_finite(kind: str, names: tuple[str, ...], values: tuple[float, ...]) -> None:
+    # One C-level sum catches NaN/inf; only then look for the culprit (an overflowing sum of finite
+    # values is a false alarm and passes the per-field check).
+    if math.isfinite(sum(values)):
+        return
+    for name, v in zip(names, values):
+        if not math.isfinite(v):
+            raise CodecError(f"{kind}.{name} is {v!r}: every float on the wire must be finite")
+
+
+def _check_uint(kind: str, name: str, v: int, bits: int) -> None:
+    if not (isinstance(v, int) and 0 <= v < (1 << bits)):
+        raise CodecError(f"{kind}.{name} is {v!r}: expected an integer in [0, 2**{bits})")
+
+
+def _check_profile(kind: str, profile) -> None:
+    # a sum of float32-range values cannot overflow float64: it is finite iff every value is
+    if not math.isfinite(sum(profile)):
+        for i, v in enumerate(profile):
+            if not math.isfinite(v):
+                raise CodecError(f"{kind}.profile[{i}] is {v!r}: every float on the wire must be finite")
+
+
+_CMD_FLOATS = ("t_master", "x_in_cmd")
+_EST_FLOATS = ("t_slave", "T_in", "x_in", "T_out_hat", "elongation_hat", "x_out_hat")
+
+
+def encode(msg: Message) -> bytes:
+    """Serialise a message to bytes (see the module docstring for the layout).
+
+    Parameters
+    ----------
+    msg : Command, Estimate or Heartbeat
+        Floats finite; ``seq``/``cmd_seq``/``marker`` in [0, 2**32); at most
+        :data:`MAX_PROFILE_POINTS` profile points, each finite in float32.
+
+    Returns
+    -------
+    bytes
+
+    Raises
+    ------
+    CodecError
+        Not a message, a non-finite float, an integer out of its wire range, too long a profile.
+    """
+    t = type(msg)
+    if t is Command:
+        _check_finite("Command", _CMD_FLOATS, (msg.t_master, msg.x_in_cmd))
+        try:
+            body = _COMMAND.pack(msg.seq, msg.t_master, msg.x_in_cmd, bool(msg.engaged), msg.marker)
+        except struct.error:
+            _check_uint("Command", "seq", msg.seq, 32)
+            _check_uint("Command", "marker", msg.marker, 32)
+            raise CodecError(f"Command fields do not fit the wire format: {msg!r}") from None
+        return _HEADER.pack(MAGIC, WIRE_VERSION, TYPE_COMMAND) + body
+    if t is Estimate:
+        floats = (msg.t_slave, msg.T_in, msg.x_in, msg.T_out_hat, msg.elongation_hat, msg.x_out_hat)
+        _check_finite("Estimate", _EST_FLOATS, floats)
+        profile = msg.profile
+        n = len(profile)
+        if n > MAX_PROFILE_POINTS:
+            raise CodecError(f"Estimate.profile has {n} points: at most {MAX_PROFILE_POINTS} fit the wire")
+        if int(msg.phase) not in _PHASES:
+            raise CodecError(f"Estimate.phase is {msg.phase!r}: expected a Phase")
+        try:
+            head = _ESTIMATE.pack(msg.seq, msg.cmd_seq, *floats, int(msg.phase), n)
+        except struct.error:
+            _check_uint("Estimate", "seq", msg.seq, 32)
+            _check_uint("Estimate", "cmd_seq", msg.cmd_seq, 32)
+            raise CodecError(f"Estimate fields do not fit the wire format: {msg!r}") from None
+        try:
+            if n:
+                _check_profile("Estimate", profile)
+            prof = _profile_struct(n).pack(*profile)
+        except (struct.error, TypeError, OverflowError) as e:
+            raise CodecError(f"Estimate.profile must hold finite floats within float32 range ({e})") from None
+        return _HEADER.pack(MAGIC, WIRE_VERSION, TYPE_ESTIMATE) + head + prof
+    if t is Heartbeat:
+        _check_finite("Heartbeat", ("t_sender",), (msg.t_sender,))
+        if int(msg.side) not in _SIDES:
+            raise CodecError(f"Heartbeat.side is {msg.side!r}: expected a Side")
+        if int(msg.state) not in _STATES:
+            raise CodecError(f"Heartbeat.state is {msg.state!r}: expected a SideState")
+        _check_uint("Heartbeat", "seq", msg.seq, 32)
+        body = _HEARTBEAT.pack(int(msg.side), msg.seq, msg.t_sender, int(msg.state))
+        return _HEADER.pack(MAGIC, WIRE_VERSION, TYPE_HEARTBEAT) + body
+    raise CodecError(f"cannot encode a {t.__name__}: expected Command, Estimate or Heartbeat")
+
+
+def _expect_len(kind: str, buf, need: int) -> None:
+    if len(buf) != need:
+        what = "truncated" if len(buf) < need else "too long"
+        raise CodecError(f"{kind} message {what}: {len(buf)} bytes, expected {need}")
+
+
+def decode(buf: bytes | bytearray | memoryview) -> Message:
+    """Parse bytes produced by :func:`encode` back into a message.
+
+    Parameters
+    ----------
+    buf : bytes-like
+        One whole message, exactly.
+
+    Returns
+    -------
+    Command, Estimate or Heartbeat
+        Every float finite; enums are :class:`Phase`, :class:`Side`, :class:`SideState`; the profile
+        is a tuple of Python floats (float32 precision).
+
+    Raises
+    ------
+    CodecError
+        Shorter than a header, wrong magic, another wire version, unknown message type, a length that
+        does not match the type or the profile count, a non-finite float, an unknown enum value.
+    """
+    if len(buf) < _HDR:
+        raise CodecError(f"message truncated: {len(buf)} bytes, a header alone is {_HDR}")
+    magic, version, mtype = _HEADER.unpack_from(buf)
+    if magic != MAGIC:
+        raise CodecError(f"not a teleop message: magic byte 0x{magic:02X}, expected 0x{MAGIC:02X}")
+    if version != WIRE_VERSION:
+        raise CodecError(f"message version {version}, this build speaks {WIRE_VERSION}")
+    if mtype == TYPE_ESTIMATE:
+        if len(buf) < _HDR + _ESTIMATE.size:
+            _expect_len("Estimate", buf, _HDR + _ESTIMATE.size)
+        seq, cmd_seq, t, T_in, x_in, T_out, el, x_out, phase, n = _ESTIMATE.unpack_from(buf, _HDR)
+        need = _HDR + _ESTIMATE.size + 4 * n
+        if len(buf) != need:
+            raise CodecError(f"Estimate profile count {n} needs {need} bytes, got {len(buf)}")
+        floats = (t, T_in, x_in, T_out, el, x_out)
+        _check_finite("Estimate", _EST_FLOATS, floats)
+        ph = _PHASES.get(phase)
+        if ph is None:
+            raise CodecError(f"Estimate.phase {phase} is not a Phase (0..{len(_PHASES) - 1})")
+        profile = _profile_struct(n).unpack_from(buf, _HDR + _ESTIMATE.size) if n else ()
+        if n:
+            _check_profile("Estimate", profile)
+        return Estimate(seq, cmd_seq, t, T_in, x_in, T_out, el, x_out, ph, profile)
+    if mtype == TYPE_COMMAND:
+        _expect_len("Command", buf, _HDR + _COMMAND.size)
+        seq, t, x, engaged, marker = _COMMAND.unpack_from(buf, _HDR)
+        _check_finite("Command", _CMD_FLOATS, (t, x))
+        if engaged > 1:
+            raise CodecError(f"Command.engaged byte is {engaged}: expected 0 or 1")
+        return Command(seq, t, x, engaged == 1, marker)
+    if mtype == TYPE_HEARTBEAT:
+        _expect_len("Heartbeat", buf, _HDR + _HEARTBEAT.size)
+        side, seq, t, state = _HEARTBEAT.unpack_from(buf, _HDR)
+        _check_finite("Heartbeat", ("t_sender",), (t,))
+        if side not in _SIDES:
+            raise CodecError(f"Heartbeat.side {side} is not a Side (1 master, 2 slave)")
+        if state not in _STATES:
+            raise CodecError(f"Heartbeat.state {state} is not a SideState (0..{len(_STATES) - 1})")
+        return Heartbeat(_SIDES[side], seq, t, _STATES[state])
+    raise CodecError(f"unknown message type {mtype}: expected one of {sorted(_TYPE_NAMES)} "
+                     f"({', '.join(_TYPE_NAMES.values())})")
