@@ -1,0 +1,108 @@
+"""FakeClock and Pacer: deadlines, overrun and skip counting, lateness, all on a fake clock."""
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from teleop.clock import Clock, FakeClock, MonotonicClock, Pacer
+
+
+def test_clocks_satisfy_the_protocol():
+    assert isinstance(FakeClock(), Clock)
+    assert isinstance(MonotonicClock(), Clock)
+
+
+def test_monotonic_clock_sleep_until_past_returns_at_once_and_never_goes_back():
+    c = MonotonicClock()
+    t0 = c.now()
+    c.sleep_until(t0 - 1.0)
+    assert c.now() >= t0
+    with pytest.raises(ValueError):
+        MonotonicClock(spin=-1e-3)
+
+
+def test_fake_clock_moves_only_when_told():
+    c = FakeClock(5.0)
+    assert c.now() == 5.0 == c.now()
+    assert c.advance(0.25) == 5.25
+    c.sleep_until(6.0)
+    assert c.now() == 6.0 and c.sleeps == 1
+    c.sleep_until(1.0)                     # in the past: no move
+    assert c.now() == 6.0 and c.sleeps == 1
+    c.set(7.0)
+    assert c.now() == 7.0
+    with pytest.raises(ValueError):
+        c.advance(-1e-9)
+    with pytest.raises(ValueError):
+        c.advance(math.nan)
+    with pytest.raises(ValueError):
+        c.set(6.5)
+
+
+def test_pacer_sleeps_to_a_fixed_grid_when_on_time():
+    c = FakeClock(10.0)
+    p = Pacer(c, 100.0)
+    times = []
+    for _ in range(5):
+        c.advance(0.004)                   # the step takes 4 ms of a 10 ms period
+        times.append(p.wait())
+    assert times == pytest.approx([10.01, 10.02, 10.03, 10.04, 10.05])
+    s = p.stats()
+    assert s["ticks"] == 5 and s["overruns"] == 0 and s["skipped"] == 0
+    assert s["max_lateness"] == 0.0 and s["period"] == pytest.approx(0.01)
+
+
+def test_pacer_counts_an_overrun_and_catches_up_on_the_grid():
+    c = FakeClock(0.0)
+    p = Pacer(c, 100.0)                    # deadlines 0.01, 0.02, ...
+    c.advance(0.013)                       # overran the first period by 3 ms
+    assert p.wait() == pytest.approx(0.013)  # no sleep
+    assert p.overruns == 1 and p.skipped == 0
+    assert p.max_lateness == pytest.approx(0.003)
+    assert p.next_deadline == pytest.approx(0.02)   # same grid: the loop catches up
+    c.advance(0.001)
+    assert p.wait() == pytest.approx(0.02)
+    assert p.overruns == 1 and p.last_lateness == 0.0
+
+
+def test_pacer_skips_whole_missed_periods_instead_of_bursting():
+    c = FakeClock(0.0)
+    p = Pacer(c, 1000.0)                   # 1 ms period, first deadline 0.001
+    c.advance(0.0045)                      # 3.5 ms late: deadlines 0.002, 0.003, 0.004 are gone
+    p.wait()
+    assert p.overruns == 1 and p.skipped == 3
+    assert p.next_deadline == pytest.approx(0.005)
+    assert p.max_lateness == pytest.approx(0.0035)
+    c.advance(0.0002)
+    assert p.wait() == pytest.approx(0.005)
+    s = p.stats()
+    assert s["ticks"] == 2 and s["overrun_fraction"] == 0.5
+
+
+def test_pacer_max_lateness_keeps_the_worst():
+    c = FakeClock(0.0)
+    p = Pacer(c, 10.0)
+    c.advance(0.15)
+    p.wait()                               # 50 ms late
+    c.advance(0.11)
+    p.wait()                               # deadline 0.2, now 0.26: 60 ms late
+    c.advance(0.001)
+    p.wait()
+    assert p.overruns == 2
+    assert p.max_lateness == pytest.approx(0.06)
+
+
+def test_pacer_reset_starts_a_new_grid_and_zeroes_stats():
+    c = FakeClock(0.0)
+    p = Pacer(c, 10.0)
+    c.advance(1.0)
+    p.wait()
+    p.reset()
+    assert p.stats()["overruns"] == 0 and p.next_deadline == pytest.approx(1.1)
+
+
+@pytest.mark.parametrize("rate", [0, -5.0, math.inf, math.nan, True, "100"])
+def test_pacer_rejects_bad_rates(rate):
+    with pytest.raises(ValueError, match="rate_hz"):
+        Pacer(FakeClock(), rate)
