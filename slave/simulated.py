@@ -1,0 +1,295 @@
+"""Simulated slave rig: distributed tendon-sheath physics, proximal motor, distal load and sensors.
+
+The reference simulator of literature.md section 4 (quasi-static distributed Coulomb model), with
+the distal load solved exactly at every step. The compiled kernels live in
+:mod:`slave.simulated_physics`; this module owns the state, the motor, the sensors and validation.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from estimator.sheath import Run, SheathGeometry
+from slave.rig import RigInputError, RigState, RigTruth
+from slave.simulated_physics import advance_proximal, elongation, load_inverse, settle_distal
+from teleop.config import Config, LoadConfig, RigConfig, SheathConfig
+from teleop.errors import ConfigError
+
+__all__ = ["SimulatedRig"]
+
+_NOISE_BLOCK = 4096
+
+
+class SimulatedRig:
+    r"""One tendon in a rigid sheath, driven by a position-controlled motor, with a distal load.
+
+    Model (quasi-static distributed Coulomb friction; Phee et al. 2009 eq. (1) in differential form)
+
+    * Tendon: ``n`` elements, ``n + 1`` nodes at s_i = i L / n (proximal i = 0 to distal i = n), node
+      wrap angle theta_i = int_0^{s_i} kappa from the route (any curvature), g_i = mu theta_i,
+      K = g_n. The node tensions T_i [N] are the state (the tension-profile memory). No tendon
+      inertia: the axial wave time is far below a control period (literature.md section 4).
+    * Friction bound: |ln T_{i+1} - ln T_i| <= g_{i+1} - g_i, with equality where the tendon slides.
+    * Kinematics (rigid, inextensible sheath): x_in - x_out = e, e = sum_i w_i T_i, trapezoid weights
+      w_i = L / (n EA) (halved at both ends).
+    * Distal load (x_out >= 0 [m], + toward the actuator), a monotone graph T_d = F(x_out):
+      F(x) = f + k_j x + [tissue] k_t max(0, x - x_c) + k_lim max(0, x - x_lim) for x > 0, and at
+      the lower stop x_out = 0 any T_d in [0, F(0+)] (a torque-controlled distal actuator with set
+      force f keeps the joint on its stop until the tendon pulls harder than f). T_d >= 0 always.
+    * Proximal step (new motor position x_in, load law unchanged): slip spreads from the proximal end
+      only. With the proximal tension T_p as unknown, every node follows the envelope rule
+      T_i <- min(max(T_i, T_p e^{-g_i}), T_p e^{+g_i}). While the distal node keeps its tension it
+      sticks and x_out stays; once the update reaches it the whole tendon slides,
+      T_i = T_p e^{-g_i} (pull) or T_p e^{+g_i} (release), and (x_out, T_d) is the point of the
+      load graph with x_out + e(T_d) = x_in. The equation x_in - x_out(T_p) = e(T_p) is monotone and
+      piecewise linear in T_p and is solved exactly by a scan over the sorted breakpoints.
+    * Load change at fixed x_in (:meth:`set_load`): slip spreads from the distal end,
+      T_i <- min(max(T_i, T_d e^{-(K - g_i)}), T_d e^{+(K - g_i)}), with T_d and x_out on the new
+      load graph and x_out + e = x_in (bisection to machine precision).
+    * Slack: the tendon cannot push. When x_in falls below what zero tension needs, T = 0 everywhere,
+      x_out rests at the lower stop and x_in - x_out < e = 0.
+    * Pretension P = ``sheath.pretension``: the tendon starts at T_i = P everywhere (as if tensioned
+      with the friction relieved, then the motor locked), the distal end at the smallest x_out with
+      F(x_out) = P (0 if P <= f), and x_in = x_out + P L / EA; the motor starts there.
+    * Motor: first-order position loop toward the command with time constant 1 / (2 pi bandwidth_hz),
+      discretised exactly, x <- x + (1 - e^{-2 pi f_bw dt}) (x_cmd - x), with the step clipped to
+      max_speed * dt. The motor is stiff: the tendon's proximal end follows it.
+    * Sensors: load cell T_in + N(0, load_cell_noise^2) (numpy Generator seeded with
+      ``sensors.seed``); encoder quantised to q = 2 pi pulley_radius / encoder_lines_per_rev,
+      x_enc = q round(x_in / q).
+
+    Assumptions: rigid sheath (no axial compression), Coulomb friction with equal static and dynamic
+    mu, no bending stiffness or clearance, massless tendon and distal joint.
+
+    Parameters
+    ----------
+    sheath : SheathConfig
+        Friction coefficient mu [-], EA [N], route (runs of length [m] and radius [m]), pretension [N].
+    rig : RigConfig
+        ``n_elements``, ``motor``, ``load``, ``sensors`` settings (configs/default.yaml for units).
+
+    Raises
+    ------
+    ConfigError
+        A setting out of range (message names the dotted key, e.g. ``sheath.runs[1].length``).
+    """
+
+    def __init__(self, sheath: SheathConfig, rig: RigConfig):
+        _validate(sheath, rig)
+        self._sheath_cfg = sheath
+        self._rig_cfg = rig
+        self.geometry = SheathGeometry([Run(r.length, r.radius) for r in sheath.runs])
+        n = int(rig.n_elements)
+        L = self.geometry.length
+        self.s = np.linspace(0.0, L, n + 1)
+        self.log_gain = sheath.mu * np.asarray(self.geometry.wrap_angle(self.s), dtype=np.float64)
+        self._lo = np.exp(-self.log_gain)
+        self._hi = np.exp(self.log_gain)
+        w = np.full(n + 1, L / (n * sheath.EA))
+        w[0] *= 0.5
+        w[-1] *= 0.5
+        self._w = w
+        self._c_pull = float(w @ self._lo) / self._lo[-1]  # e = c_pull T_d in full pull slip
+        self._c_rel = float(w @ self._hi) / self._hi[-1]   # e = c_rel T_d in full release slip
+
+        self._tissue = bool(rig.load.tissue)
+        self._force = float(rig.load.force)
+        self._graph = _load_graph(rig.load, self._tissue, self._force)
+
+        P = float(sheath.pretension)
+        self._T = np.full(n + 1, P)
+        self._x_out = float(load_inverse(P, *self._graph)[0])
+        self._x_in = self._x_out + elongation(self._T, self._w)
+
+        m = rig.motor
+        self._omega = 2.0 * math.pi * m.bandwidth_hz
+        self._vmax = float(m.max_speed)
+        self.encoder_resolution = 2.0 * math.pi * m.pulley_radius / m.encoder_lines_per_rev
+        self._sigma = float(rig.sensors.load_cell_noise)
+        self._rng = np.random.default_rng(rig.sensors.seed)
+        self._noise = self._rng.standard_normal(_NOISE_BLOCK)
+        self._k = 0
+        self._t = 0.0
+        self._closed = False
+        self._state = self._read(self._x_in)
+
+    @classmethod
+    def from_config(cls, cfg: Config) -> "SimulatedRig":
+        """Build from a full :class:`teleop.config.Config` (its ``sheath`` and ``rig`` sections)."""
+        return cls(cfg.sheath, cfg.rig)
+
+    # ---- model constants -------------------------------------------------------------------------
+    @property
+    def n_elements(self) -> int:
+        """Number of sheath elements n (n + 1 profile nodes)."""
+        return self._T.shape[0] - 1
+
+    @property
+    def K(self) -> float:
+        """Friction exponent mu * total wrap angle [-] (Phee et al. 2009, eq. (2))."""
+        return float(self.log_gain[-1])
+
+    @property
+    def M_e(self) -> float:
+        """Elongation per proximal tension in full pull slip [m/N]: sum_i w_i e^{-g_i}
+        (the discrete form of (1/EA) int_0^L e^{-mu theta(s)} ds, Phee et al. 2009 eq. (12))."""
+        return float(self._w @ self._lo)
+
+    @property
+    def tissue(self) -> bool:
+        """Tissue contact enabled."""
+        return self._tissue
+
+    @property
+    def force(self) -> float:
+        """Set force of the distal torque-controlled actuator [N]."""
+        return self._force
+
+    # ---- Rig protocol -----------------------------------------------------------------------------
+    @property
+    def state(self) -> RigState:
+        """The last state returned by :meth:`step` (the initial state before any step)."""
+        return self._state
+
+    def step(self, x_in_cmd: float, dt: float) -> RigState:
+        """Advance the motor toward ``x_in_cmd`` [m] for ``dt`` [s], update the tendon, read sensors.
+
+        Raises
+        ------
+        RigInputError (ValueError)
+            ``x_in_cmd`` is not finite, or ``dt`` is not a finite number > 0.
+        """
+        try:
+            cmd = float(x_in_cmd)
+            h = float(dt)
+        except (TypeError, ValueError):
+            raise RigInputError(f"x_in_cmd and dt must be numbers, got x_in_cmd={x_in_cmd!r}, dt={dt!r}") from None
+        if not math.isfinite(cmd):
+            raise RigInputError(f"x_in_cmd must be a finite displacement in metres, got {x_in_cmd!r}")
+        if not (math.isfinite(h) and h > 0.0):
+            raise RigInputError(f"dt must be a finite time step > 0 s, got {dt!r}")
+        # motor: exact first-order step toward the command, speed-limited
+        dx = -math.expm1(-self._omega * h) * (cmd - self._x_in)
+        vmax_dt = self._vmax * h
+        if dx > vmax_dt:
+            dx = vmax_dt
+        elif dx < -vmax_dt:
+            dx = -vmax_dt
+        self._x_in += dx
+        self._x_out = advance_proximal(self._T, self._lo, self._hi, self._w, self._c_pull, self._c_rel,
+                                       self._x_in, self._x_out, *self._graph)
+        self._t += h
+        self._state = self._read(cmd)
+        return self._state
+
+    def set_load(self, *, tissue: bool | None = None, force: float | None = None) -> None:
+        """Switch tissue contact and/or the distal set force [N] at the present motor position.
+
+        The distal end re-balances with slip spreading from the distal end (see the class
+        docstring); :attr:`state` is refreshed (new truth and a new sensor sample, same time).
+
+        Raises
+        ------
+        RigInputError (ValueError)
+            ``force`` is not a finite number >= 0, or ``tissue`` is not a bool.
+        """
+        if tissue is not None:
+            if not isinstance(tissue, (bool, np.bool_)):
+                raise RigInputError(f"tissue must be True or False, got {tissue!r}")
+            self._tissue = bool(tissue)
+        if force is not None:
+            f = float(force)
+            if not (math.isfinite(f) and f >= 0.0):
+                raise RigInputError(f"force must be a finite distal set force >= 0 N, got {force!r}")
+            self._force = f
+        self._graph = _load_graph(self._rig_cfg.load, self._tissue, self._force)
+        self._x_out = settle_distal(self._T, self._lo, self._hi, self._w, self._x_in, self._x_out, *self._graph)
+        self._state = self._read(self._state.x_in_cmd)
+
+    def close(self) -> None:
+        """Nothing to release in simulation; idempotent. Stepping afterwards is allowed."""
+        self._closed = True
+
+    # ---- internals ----------------------------------------------------------------------------------
+    def _read(self, cmd: float) -> RigState:
+        T = self._T
+        profile = T.copy()
+        profile.flags.writeable = False
+        e = elongation(T, self._w)
+        truth = RigTruth(T_in=float(T[0]), T_out=float(T[-1]), x_in=self._x_in, x_out=self._x_out,
+                         elongation=e, profile=profile)
+        if self._k == _NOISE_BLOCK:
+            self._noise = self._rng.standard_normal(_NOISE_BLOCK)
+            self._k = 0
+        T_meas = float(T[0]) + self._sigma * float(self._noise[self._k])
+        self._k += 1
+        q = self.encoder_resolution
+        x_enc = q * round(self._x_in / q)
+        return RigState(t=self._t, x_in=x_enc, T_in=T_meas, x_in_cmd=cmd, truth=truth)
+
+
+def _load_graph(load: LoadConfig, tissue: bool, force: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The distal load law F(x), x > 0, as segments (start bx [m], F at start bF [N], slope bs [N/m]).
+
+    F(x) = force + k_j x + [tissue] k_t max(0, x - x_c) + k_lim max(0, x - x_lim).
+    """
+    kt = load.tissue_stiffness if tissue else 0.0
+    springs = [(0.0, load.joint_stiffness), (load.tissue_contact, kt), (load.joint_limit, load.limit_stiffness)]
+
+    def F(x: float) -> float:
+        return force + sum(k * max(0.0, x - x0) for x0, k in springs)
+
+    def slope(x: float) -> float:  # slope just right of x
+        return sum(k for x0, k in springs if x >= x0)
+
+    starts = sorted({0.0} | {x0 for x0, k in springs if x0 > 0.0 and k > 0.0})
+    bx = np.array(starts, dtype=np.float64)
+    bF = np.array([F(x) for x in starts], dtype=np.float64)
+    bs = np.array([slope(x) for x in starts], dtype=np.float64)
+    return bx, bF, bs
+
+
+def _check(ok: bool, key: str, expected: str, value: object) -> None:
+    if not ok:
+        raise ConfigError(f"{key} must be {expected}, got {value!r}")
+
+
+def _finite(v: object) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _validate(sheath: SheathConfig, rig: RigConfig) -> None:
+    """Range checks of every setting the simulator uses; ConfigError names the dotted key."""
+    _check(_finite(sheath.mu) and sheath.mu >= 0, "sheath.mu", "a finite number >= 0", sheath.mu)
+    _check(_finite(sheath.EA) and sheath.EA > 0, "sheath.EA", "a finite number > 0 N", sheath.EA)
+    _check(_finite(sheath.pretension) and sheath.pretension >= 0, "sheath.pretension", "a finite number >= 0 N",
+           sheath.pretension)
+    _check(len(sheath.runs) > 0, "sheath.runs", "a non-empty list of runs", sheath.runs)
+    for i, r in enumerate(sheath.runs):
+        _check(_finite(r.length) and r.length > 0, f"sheath.runs[{i}].length", "a finite length > 0 m", r.length)
+        _check(isinstance(r.radius, (int, float)) and not math.isnan(r.radius) and r.radius > 0,
+               f"sheath.runs[{i}].radius", "a bend radius > 0 m (inf for straight)", r.radius)
+    n = rig.n_elements
+    _check(isinstance(n, int) and not isinstance(n, bool) and n >= 1, "rig.n_elements", "an integer >= 1", n)
+    m = rig.motor
+    _check(_finite(m.bandwidth_hz) and m.bandwidth_hz > 0, "rig.motor.bandwidth_hz", "a finite number > 0 Hz",
+           m.bandwidth_hz)
+    _check(_finite(m.max_speed) and m.max_speed > 0, "rig.motor.max_speed", "a finite speed > 0 m/s", m.max_speed)
+    _check(_finite(m.pulley_radius) and m.pulley_radius > 0, "rig.motor.pulley_radius", "a finite radius > 0 m",
+           m.pulley_radius)
+    lines = m.encoder_lines_per_rev
+    _check(isinstance(lines, int) and not isinstance(lines, bool) and lines >= 1, "rig.motor.encoder_lines_per_rev",
+           "an integer >= 1", lines)
+    ld = rig.load
+    for key in ("joint_stiffness", "tissue_stiffness", "force", "joint_limit"):
+        v = getattr(ld, key)
+        _check(_finite(v) and v >= 0, f"rig.load.{key}", "a finite number >= 0", v)
+    _check(_finite(ld.limit_stiffness) and ld.limit_stiffness > 0, "rig.load.limit_stiffness",
+           "a finite stiffness > 0 N/m", ld.limit_stiffness)
+    _check(_finite(ld.tissue_contact), "rig.load.tissue_contact", "a finite position in m", ld.tissue_contact)
+    _check(isinstance(ld.tissue, (bool, np.bool_)), "rig.load.tissue", "true or false", ld.tissue)
+    s = rig.sensors
+    _check(_finite(s.load_cell_noise) and s.load_cell_noise >= 0, "rig.sensors.load_cell_noise",
+           "a finite standard deviation >= 0 N", s.load_cell_noise)
+    _check(isinstance(s.seed, int) and not isinstance(s.seed, bool), "rig.sensors.seed", "an integer", s.seed)
