@@ -1,0 +1,27 @@
+"""Run every benchmark and print its figures (`make bench`)."""
+from __future__ import annotations
+
+import importlib
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+BENCHES = ["bench_estimator", "bench_rig", "bench_codec", "bench_diagnosis"]
+
+
+def main() -> None:
+    for name in BENCHES:
+        try:
+            mod = importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name != name:
+                raise
+            continue
+        print(f"== {name}")
+        mod.main()
+        print()
+
+
+if __name__ == "__main__":
+    main()
