@@ -1,0 +1,399 @@
+"""Measured-data files: one tendon per CSV (ARCHITECTURE.md, "Measured-data format").
+
+``# key: value`` lines above the header are metadata (``# units: time=s, x_in=m, T_in=N``), other
+``#`` lines and blank lines are skipped, then a header line of column names, then comma-separated
+plain numbers (no quoting). Columns ``time`` [s], ``x_in`` [m], ``T_in`` [N] are required, ``x_out``
+[m] and ``T_out`` [N] optional, others kept in :attr:`MeasuredData.extra`. Every problem raises
+:class:`~teleop.errors.DataError` with a one-line message naming file, line (1-based) and column.
+
+Writing goes through :class:`CsvRecorder`, which streams rows and is closed and flushed on every
+exit path of its ``with`` block; wrap it in :func:`raise_on_sigterm` so that SIGTERM unwinds the
+block too (``with raise_on_sigterm(), CsvRecorder(...) as rec:``).
+"""
+from __future__ import annotations
+
+import re
+import signal
+import threading
+import warnings
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import IO
+
+import numpy as np
+
+from teleop.errors import DataError
+
+__all__ = ["REQUIRED_COLUMNS", "OPTIONAL_COLUMNS", "SI_UNITS", "MeasuredData", "read_measured_csv",
+           "write_measured_csv", "CsvRecorder", "Terminated", "raise_on_sigterm"]
+
+REQUIRED_COLUMNS = ("time", "x_in", "T_in")
+OPTIONAL_COLUMNS = ("x_out", "T_out")
+#: SI unit of each standard column, written as ``# units:`` metadata and checked on load.
+SI_UNITS = {"time": "s", "x_in": "m", "T_in": "N", "x_out": "m", "T_out": "N"}
+
+_META = re.compile(r"#\s*([A-Za-z_][\w.\-]*)\s*:\s?(.*)$")
+_NAME = re.compile(r"[A-Za-z_][\w.\-\[\]]*$")
+
+
+@dataclass(frozen=True, eq=False)
+class MeasuredData:
+    """One tendon's recording; every array has shape (n_samples,) and dtype float64.
+
+    Attributes
+    ----------
+    time : ndarray [s], strictly increasing.
+    x_in : ndarray [m], proximal tendon displacement, + = drawn toward the actuator.
+    T_in : ndarray [N], proximal tension.
+    x_out : ndarray [m] or None, distal displacement, same sign convention.
+    T_out : ndarray [N] or None, distal tension.
+    extra : dict of str -> ndarray, the other numeric columns in file order (units unknown).
+    metadata : dict of str -> str, the ``# key: value`` lines.
+    source : str, where the data came from (file path), used in error messages.
+    """
+
+    time: np.ndarray
+    x_in: np.ndarray
+    T_in: np.ndarray
+    x_out: np.ndarray | None = None
+    T_out: np.ndarray | None = None
+    extra: dict[str, np.ndarray] = field(default_factory=dict)
+    metadata: dict[str, str] = field(default_factory=dict)
+    source: str = "<memory>"
+
+    def __post_init__(self) -> None:
+        n = np.shape(self.time)
+        for name, arr in self.columns().items():
+            if np.ndim(arr) != 1 or np.shape(arr) != n:
+                raise DataError(f"{self.source}: column '{name}' has shape {np.shape(arr)}, "
+                                f"expected {n} like 'time'")
+
+    def __len__(self) -> int:
+        return int(np.shape(self.time)[0])
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """Every present column by name, in file order: required, optional, then extra."""
+        cols = {"time": self.time, "x_in": self.x_in, "T_in": self.T_in}
+        if self.x_out is not None:
+            cols["x_out"] = self.x_out
+        if self.T_out is not None:
+            cols["T_out"] = self.T_out
+        cols.update(self.extra)
+        return cols
+
+    @property
+    def elongation(self) -> np.ndarray | None:
+        """Tendon elongation ``x_in - x_out`` [m], shape (n_samples,), or None without ``x_out``."""
+        return None if self.x_out is None else self.x_in - self.x_out
+
+    @property
+    def duration(self) -> float:
+        """``time[-1] - time[0]`` [s] (0.0 for fewer than two samples)."""
+        return float(self.time[-1] - self.time[0]) if len(self) >= 2 else 0.0
+
+    def slice(self, start: int | None, stop: int | None) -> MeasuredData:
+        """Samples ``start:stop`` by index (Python slice semantics, views, not copies)."""
+        s = slice(start, stop)
+        cut = (lambda a: None if a is None else a[s])
+        return replace(self, time=self.time[s], x_in=self.x_in[s], T_in=self.T_in[s],
+                       x_out=cut(self.x_out), T_out=cut(self.T_out),
+                       extra={k: v[s] for k, v in self.extra.items()}, metadata=dict(self.metadata))
+
+    def require_distal(self) -> MeasuredData:
+        """Return self if ``x_out`` or ``T_out`` is present, else raise DataError naming both."""
+        if self.x_out is None and self.T_out is None:
+            raise DataError(f"{self.source}: needs a distal column 'x_out' or 'T_out' "
+                            f"(have: {', '.join(self.columns())})")
+        return self
+
+
+def _parse_units(text: str, where: str) -> dict[str, str]:
+    units: dict[str, str] = {}
+    for item in filter(None, (p.strip() for p in text.split(","))):
+        name, eq, unit = item.partition("=")
+        if not eq or not name.strip() or not unit.strip():
+            raise DataError(f"{where}: units: expected 'column=unit', got '{item}'")
+        units[name.strip()] = unit.strip()
+    return units
+
+
+def _read_head(fh: IO[str], src: str) -> tuple[dict[str, str], list[str], int]:
+    """Read metadata and the header line; return (metadata, column names, header line number)."""
+    metadata: dict[str, str] = {}
+    lineno = 0
+    for raw in iter(fh.readline, ""):
+        lineno += 1
+        line = raw.strip()
+        if not line:
+            continue
+        if line.startswith("#"):
+            m = _META.match(line)
+            if m:
+                key, value = m.group(1), m.group(2).strip()
+                if key in metadata:
+                    raise DataError(f"{src}:{lineno}: metadata key '{key}' given twice")
+                metadata[key] = value
+            continue
+        names = [c.strip() for c in line.split(",")]
+        try:
+            float(names[0])
+        except ValueError:
+            pass
+        else:
+            raise DataError(f"{src}:{lineno}: expected a header line of column names, got numbers")
+        for j, name in enumerate(names):
+            if not name:
+                raise DataError(f"{src}:{lineno}: header column {j + 1} is empty")
+            if names.index(name) != j:
+                raise DataError(f"{src}:{lineno}: header column {j + 1}: '{name}' appears twice")
+        return metadata, names, lineno
+    raise DataError(f"{src}: empty file (expected a header line of column names)")
+
+
+def _data_lines(path: Path, header_line: int) -> Iterator[tuple[int, str]]:
+    """(line number, stripped text) of every data line after the header (slow path, errors only)."""
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        for lineno, raw in enumerate(fh, start=1):
+            line = raw.strip()
+            if lineno > header_line and line and not line.startswith("#"):
+                yield lineno, line
+
+
+def _locate_parse_error(path: Path, src: str, header_line: int, names: list[str]) -> DataError:
+    for lineno, line in _data_lines(path, header_line):
+        fields = line.split(",")
+        if len(fields) != len(names):
+            return DataError(f"{src}:{lineno}: expected {len(names)} values "
+                             f"({', '.join(names)}), found {len(fields)}")
+        for j, text in enumerate(fields):
+            try:
+                float(text.replace("_", "x"))  # numpy rejects 1_000, Python accepts it
+            except ValueError:
+                return DataError(f"{src}:{lineno}: column {j + 1} ('{names[j]}'): expected a "
+                                 f"number, got '{text.strip()}'")
+    return DataError(f"{src}: could not parse the data rows")
+
+
+def _line_of_row(path: Path, header_line: int, row: int) -> int:
+    return next((ln for k, (ln, _) in enumerate(_data_lines(path, header_line)) if k == row), -1)
+
+
+def read_measured_csv(path: str | Path) -> MeasuredData:
+    """Read one tendon's measured-data CSV.
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file (format in the module docstring).
+
+    Returns
+    -------
+    MeasuredData
+        Arrays of shape (n_samples,), n_samples >= 2, all finite, ``time`` strictly increasing.
+
+    Raises
+    ------
+    DataError
+        Missing or empty file, no header, missing required column, non-SI ``# units:`` for a
+        standard column, wrong field count or non-numeric value (file:line, column), NaN or inf
+        (file:line, column), time not strictly increasing (file:line, both values), fewer than
+        two rows.
+    """
+    path, src = Path(path), str(path)
+    if not path.is_file():
+        raise DataError(f"{src}: no such file")
+    with open(path, encoding="utf-8") as fh:
+        metadata, names, header_line = _read_head(fh, src)
+        missing = [c for c in REQUIRED_COLUMNS if c not in names]
+        if missing:
+            raise DataError(f"{src}: missing column '{missing[0]}' (have: {', '.join(names)})")
+        if "units" in metadata:
+            units = _parse_units(metadata["units"], src)
+            for col, unit in units.items():
+                if col in SI_UNITS and col in names and unit != SI_UNITS[col]:
+                    raise DataError(f"{src}: units: column '{col}' is in '{unit}', expected "
+                                    f"'{SI_UNITS[col]}' (convert to SI before loading)")
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
+                table = np.loadtxt(fh, delimiter=",", comments="#", ndmin=2, dtype=np.float64)
+        except ValueError:
+            raise _locate_parse_error(path, src, header_line, names) from None
+    n_rows = table.shape[0]
+    if n_rows and table.shape[1] != len(names):
+        raise _locate_parse_error(path, src, header_line, names)
+    if n_rows < 2:
+        raise DataError(f"{src}: {n_rows} data row(s), need at least 2")
+    bad = ~np.isfinite(table)
+    if bad.any():
+        row, col = (int(i) for i in np.argwhere(bad)[0])
+        line = _line_of_row(path, header_line, row)
+        raise DataError(f"{src}:{line}: column {col + 1} ('{names[col]}'): expected a finite "
+                        f"number, got {float(table[row, col])!r}")
+    cols = {name: np.ascontiguousarray(table[:, j]) for j, name in enumerate(names)}
+    t = cols["time"]
+    step = np.diff(t)
+    if not (step > 0).all():
+        row = int(np.argmax(~(step > 0))) + 1
+        line = _line_of_row(path, header_line, row)
+        raise DataError(f"{src}:{line}: column {names.index('time') + 1} ('time'): time "
+                        f"{float(t[row])!r} s is not after the previous {float(t[row - 1])!r} s "
+                        f"(must be strictly increasing)")
+    known = set(REQUIRED_COLUMNS + OPTIONAL_COLUMNS)
+    return MeasuredData(time=t, x_in=cols["x_in"], T_in=cols["T_in"],
+                        x_out=cols.get("x_out"), T_out=cols.get("T_out"),
+                        extra={k: v for k, v in cols.items() if k not in known},
+                        metadata=metadata, source=src)
+
+
+class CsvRecorder:
+    """Streaming writer of the measured-data CSV format (metadata, ``# units:``, header, rows).
+
+    Rows are kept in memory and handed to the OS as whole lines every ``flush_every`` rows, on
+    :meth:`flush` and on :meth:`close`, so the file on disk always ends at a row boundary and is
+    readable while recording or after a crash (up to the last flush). As a context manager it is
+    closed on every exit path: normal exit, exception, ``KeyboardInterrupt``, and SIGTERM when the
+    block runs inside :func:`raise_on_sigterm`.
+
+    Parameters
+    ----------
+    path : str or Path
+        File to create (parent directories are created).
+    columns : sequence of str
+        Column names, e.g. ``("time", "x_in", "T_in", "T_out")``; unique, no commas or spaces.
+    metadata : mapping of str -> str, optional
+        Written as ``# key: value`` lines; the key ``units`` is reserved.
+    units : mapping of str -> str, optional
+        Units of non-standard columns (standard ones are always SI, see :data:`SI_UNITS`).
+    flush_every : int
+        Rows between flushes to the OS, >= 1.
+    overwrite : bool
+        Replace an existing file; by default an existing file raises ``FileExistsError``.
+
+    Raises
+    ------
+    ValueError
+        Bad column names, metadata, units or ``flush_every``; in :meth:`write`/:meth:`write_many`,
+        a wrong row length or a non-finite value, or the recorder is closed.
+    """
+
+    def __init__(self, path: str | Path, columns: Sequence[str],
+                 metadata: Mapping[str, str] | None = None, *,
+                 units: Mapping[str, str] | None = None, flush_every: int = 100,
+                 overwrite: bool = False) -> None:
+        self.path, self.columns = Path(path), tuple(columns)
+        metadata = {str(k): str(v) for k, v in (metadata or {}).items()}
+        bad = [c for c in self.columns if not _NAME.match(c)]
+        bad += [f"{k}: {v}" for k, v in metadata.items()
+                if k == "units" or not _META.match(f"# {k}: {v}") or "\n" in v or "\r" in v]
+        bad += [f"{c}={u}" for c, u in (units or {}).items() if SI_UNITS.get(c, u) != u]
+        unique = len(set(self.columns)) == len(self.columns)
+        if bad or not self.columns or not unique or flush_every < 1:
+            raise ValueError(f"{self.path}: bad recorder setup: columns {self.columns}, "
+                             f"flush_every {flush_every}, rejected {bad} (key 'units' is reserved, "
+                             f"standard columns are SI)")
+        all_units = {c: SI_UNITS[c] for c in self.columns if c in SI_UNITS}
+        all_units.update({c: u for c, u in (units or {}).items() if c in self.columns})
+        self.flush_every, self.rows_written = int(flush_every), 0
+        self._line = ",".join("%.12g" if c == "time" else "%.9g" for c in self.columns) + "\n"
+        self._pending: list[str] = []  # formatted whole lines not yet handed to the OS
+        self._pending_rows = 0
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._fh: IO[str] | None = open(self.path, "w" if overwrite else "x", encoding="utf-8")
+        head = [f"# {k}: {v}" for k, v in metadata.items()]
+        if all_units:
+            head.append("# units: " + ", ".join(f"{c}={u}" for c, u in all_units.items()))
+        self._fh.write("\n".join(head + [",".join(self.columns)]) + "\n")
+        self._fh.flush()
+
+    @property
+    def closed(self) -> bool:
+        return self._fh is None
+
+    def write(self, row: Sequence[float]) -> None:
+        """Append one row, values in the order of ``columns`` (SI units)."""
+        self.write_many(np.asarray(row, dtype=np.float64).reshape(1, -1))
+
+    def write_many(self, rows: np.ndarray) -> None:
+        """Append rows, array-like of shape (n_rows, n_columns) in SI units."""
+        if self._fh is None:
+            raise ValueError(f"{self.path}: recorder is closed")
+        arr = np.asarray(rows, dtype=np.float64)
+        if arr.ndim != 2 or arr.shape[1] != len(self.columns):
+            raise ValueError(f"{self.path}: rows have shape {arr.shape}, expected "
+                             f"(n, {len(self.columns)}) for {', '.join(self.columns)}")
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            r, c = np.argwhere(bad)[0]
+            raise ValueError(f"{self.path}: row {r}, column '{self.columns[c]}': non-finite "
+                             f"value {float(arr[r, c])!r}")
+        for i in range(0, arr.shape[0], 4096):  # one C-level % per block, ~2x np.savetxt
+            block = arr[i:i + 4096]
+            self._pending.append((self._line * block.shape[0]) % tuple(block.ravel().tolist()))
+        self.rows_written += arr.shape[0]
+        self._pending_rows += arr.shape[0]
+        if self._pending_rows >= self.flush_every:
+            self.flush()
+
+    def flush(self) -> None:
+        """Hand every written row to the OS as whole lines (no-op when closed)."""
+        if self._fh is not None:
+            text, self._pending, self._pending_rows = "".join(self._pending), [], 0
+            self._fh.write(text)
+            self._fh.flush()
+
+    def close(self) -> None:
+        """Flush and close; safe to call more than once."""
+        try:
+            self.flush()
+        finally:
+            fh, self._fh = self._fh, None
+            if fh is not None:
+                fh.close()
+
+    def __enter__(self) -> CsvRecorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def write_measured_csv(path: str | Path, data: MeasuredData, *, overwrite: bool = False) -> None:
+    """Write ``data`` in the measured-data format (its metadata and ``# units:`` included)."""
+    metadata = {k: v for k, v in data.metadata.items() if k != "units"}
+    units = _parse_units(data.metadata.get("units", ""), f"{data.source}: metadata")
+    cols = data.columns()
+    with CsvRecorder(path, list(cols), metadata, units={k: u for k, u in units.items()
+                                                        if k in cols and k not in SI_UNITS},
+                     flush_every=1 << 30, overwrite=overwrite) as rec:
+        rec.write_many(np.column_stack(list(cols.values())))
+
+
+class Terminated(KeyboardInterrupt):
+    """Raised in the main thread by :func:`raise_on_sigterm` when SIGTERM arrives."""
+
+
+@contextmanager
+def raise_on_sigterm() -> Iterator[None]:
+    """Within the block, SIGTERM raises :class:`Terminated` (a ``KeyboardInterrupt``), so ``with``
+    blocks unwind (files flushed, closed) when stopped by a process manager. Restores the previous
+    handler on exit.
+
+    Raises
+    ------
+    RuntimeError
+        If called outside the main thread (Python delivers signals to the main thread only).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        raise RuntimeError("raise_on_sigterm() must be used in the main thread")
+
+    def _handler(signum: int, frame: object) -> None:
+        raise Terminated(f"signal {signum} (SIGTERM)")
+
+    previous = signal.signal(signal.SIGTERM, _handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)

@@ -1,0 +1,204 @@
+"""Rerun logging: .rrd files read back with rerun.chunk.RrdReader (rerun-sdk 0.41)."""
+from __future__ import annotations
+
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pytest
+
+pytest.importorskip("rerun")
+
+from rerun.chunk import RrdReader  # noqa: E402
+from rerun.components import TensorDataBatch  # noqa: E402
+
+from estimator.phase import Phase  # noqa: E402
+from teleop.errors import ConfigError  # noqa: E402
+from teleop.rerun_log import RerunLogger, _FastBarValues, signal_path  # noqa: E402
+
+
+def _read(path: Path) -> tuple[RrdReader, dict[str, list[tuple[int | None, dict]]]]:
+    """Entity path -> [(time [ns] or None if static, {component: value}), ...] sorted by time."""
+    reader = RrdReader(path)
+    rows: dict[str, list[tuple[int | None, dict]]] = defaultdict(list)
+    for chunk in reader.stream().to_chunks():
+        batch = chunk.to_record_batch()
+        names = [n for n in batch.schema.names if ":" in n]
+        times = (batch.column("time").cast(pa.int64()).to_pylist() if "time" in batch.schema.names
+                 else [None] * batch.num_rows)
+        columns = {n: batch.column(n).to_pylist() for n in names}
+        for i, t in enumerate(times):
+            rows[chunk.entity_path].append((t, {n: columns[n][i] for n in names
+                                                if columns[n][i] is not None}))
+    for entity in rows:
+        rows[entity].sort(key=lambda r: -1 if r[0] is None else r[0])
+    return reader, rows
+
+
+def _tensor(value: list[dict]) -> list[float]:
+    [tensor] = value
+    assert tensor["shape"] == [len(tensor["buffer"])]
+    return tensor["buffer"]
+
+
+def _run(logger: RerunLogger, n: int = 20) -> tuple[np.ndarray, list[np.ndarray]]:
+    s = np.linspace(0.0, 0.6, 12)
+    hats = []
+    for i in range(n):
+        t = 0.01 * i
+        hat = 10.0 * np.exp(-1.5 * s) + 0.1 * i
+        hats.append(hat)
+        logger.log_profile(t, s, hat, 10.0 * np.exp(-1.2 * s))
+        logger.log_scalars(t, T_in=10.0 + i, T_out_true=8.0, T_out_hat=8.0 + 0.01 * i,
+                           elongation_true=1e-3, elongation_hat=None, x_in=2e-3, marker=1.0)
+        logger.log_phase(t, "pull" if i < 5 or i >= 15 else "release")
+    return s, hats
+
+
+def test_save_writes_rrd_that_reads_back(tmp_path):
+    path = tmp_path / "out" / "live.rrd"
+    with RerunLogger("teleop-test", "rec-save", "save", path) as logger:
+        s, hats = _run(logger)
+        stream = logger.recording  # a live reference must not keep the file unfinished
+    assert path.stat().st_size > 0 and stream is not None
+    reader, rows = _read(path)
+    [entry] = reader.recordings()
+    assert (entry.application_id, entry.recording_id) == ("teleop-test", "rec-save")
+    assert reader.blueprints(), "the default blueprint is stored with the recording"
+    assert reader.store().summary()  # footer written: the lazy (manifest) reader opens it
+    assert {"/profile/T_hat", "/profile/T_true", "/tension/T_in", "/tension/T_out_true",
+            "/tension/T_out_hat", "/elongation/elongation_true", "/displacement/x_in",
+            "/signals/marker", "/phase"} <= set(rows)
+    assert "/elongation/elongation_hat" not in rows  # None values are skipped
+
+    t_in = [(t, r["Scalars:scalars"]) for t, r in rows["/tension/T_in"] if t is not None]
+    assert t_in == [(i * 10_000_000, [10.0 + i]) for i in range(20)]  # 'time' in ns, 10 ms step
+    [(static_t, style)] = [r for r in rows["/tension/T_out_hat"] if r[0] is None]
+    assert style["SeriesLines:names"] == ["T_out_hat"]
+
+    profile = [(t, r) for t, r in rows["/profile/T_hat"] if "BarChart:values" in r]
+    assert [t for t, _ in profile] == [i * 10_000_000 for i in range(20)]
+    for (_, r), hat in zip(profile, hats):
+        np.testing.assert_array_equal(_tensor(r["BarChart:values"]), hat)
+    first = profile[0][1]
+    np.testing.assert_array_equal(_tensor(first["BarChart:abscissa"]), s)
+    assert "BarChart:color" in first
+    assert sum("BarChart:abscissa" in r for _, r in rows["/profile/T_hat"]) == 1  # grid sent once
+
+    phases = [r["StateChange:state"] for t, r in rows["/phase"]]
+    assert phases == [["pull"], ["release"], ["pull"]]  # transitions only
+    assert [t for t, _ in rows["/phase"]] == [0, 50_000_000, 150_000_000]
+
+
+def test_profile_decimation_and_grid_change(tmp_path):
+    path = tmp_path / "d.rrd"
+    logger = RerunLogger("teleop-test", "rec-dec", "save", path, profile_every=3)
+    for i in range(10):
+        s = np.linspace(0, 0.5, 5) if i < 6 else np.linspace(0, 0.7, 8)
+        logger.log_profile(0.1 * i, s, np.full(s.shape, float(i)))
+    logger.close()
+    _, rows = _read(path)
+    logged = [(t, r) for t, r in rows["/profile/T_hat"] if "BarChart:values" in r]
+    assert [_tensor(r["BarChart:values"])[0] for _, r in logged] == [0.0, 3.0, 6.0, 9.0]
+    grids = [_tensor(r["BarChart:abscissa"]) for _, r in logged if "BarChart:abscissa" in r]
+    assert [len(g) for g in grids] == [5, 8]
+    assert "/profile/T_true" not in rows  # no truth given
+
+
+@pytest.mark.parametrize("n", [1, 7, 300])
+def test_fast_bar_values_equal_sdk_conversion(n):
+    fast = _FastBarValues.create()
+    assert fast is not None, "fast path disabled: the SDK's TensorData layout changed"
+    values = np.random.default_rng(n).normal(size=n)
+    assert fast.array(values).equals(TensorDataBatch(values).as_arrow_array())
+
+
+def test_two_streams_coexist(tmp_path):
+    a = RerunLogger("teleop-test", "rec-a", "save", tmp_path / "a.rrd")
+    b = RerunLogger("teleop-test", "rec-b", "save", tmp_path / "b.rrd")
+    a.log_scalars(0.0, T_in=1.0)
+    b.log_scalars(0.0, T_out_hat=2.0)
+    a.log_scalars(0.5, T_in=3.0)
+    a.close()
+    b.close()
+    reader_a, rows_a = _read(tmp_path / "a.rrd")
+    reader_b, rows_b = _read(tmp_path / "b.rrd")
+    assert [e.recording_id for e in reader_a.recordings()] == ["rec-a"]
+    assert [e.recording_id for e in reader_b.recordings()] == ["rec-b"]
+    assert "/tension/T_in" in rows_a and "/tension/T_out_hat" not in rows_a
+    assert "/tension/T_out_hat" in rows_b and "/tension/T_in" not in rows_b
+    t_in = [r["Scalars:scalars"] for t, r in rows_a["/tension/T_in"] if t is not None]
+    assert t_in == [[1.0], [3.0]]
+
+
+def test_off_writes_nothing(tmp_path):
+    logger = RerunLogger("teleop-test", "rec-off", "off", tmp_path / "never.rrd")
+    assert not logger.enabled and logger.recording is None and logger.mode == "off"
+    _run(logger, n=3)
+    logger.flush()
+    logger.close()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_spawn_without_display_falls_back_to_save(tmp_path, monkeypatch, capsys):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.setattr("sys.platform", "linux")
+    path = tmp_path / "fallback.rrd"
+    logger = RerunLogger("teleop-test", "rec-spawn", "spawn", path)
+    assert logger.mode == "save" and logger.path == path
+    logger.log_scalars(0.0, T_in=1.0)
+    logger.close()
+    err = capsys.readouterr().err
+    assert "no display" in err and f"saving to {path}" in err
+    assert "/tension/T_in" in _read(path)[1]
+
+
+def test_spawn_failure_falls_back_to_save(tmp_path, monkeypatch, capsys):
+    import rerun
+
+    def no_viewer(**kwargs):
+        raise RuntimeError("Failed to find Rerun Viewer executable")
+
+    monkeypatch.setattr("teleop.rerun_log.display_available", lambda: True)
+    monkeypatch.setattr(rerun, "spawn", no_viewer)
+    with RerunLogger("teleop-test", "rec-nospawn", "spawn", tmp_path / "f.rrd") as logger:
+        assert logger.mode == "save"
+        logger.log_phase(0.0, Phase.HOLD)
+        logger.log_phase(0.1, "hold")  # same phase: not logged again
+    assert "could not spawn the viewer (Failed to find" in capsys.readouterr().err
+    assert [r["StateChange:state"] for _, r in _read(tmp_path / "f.rrd")[1]["/phase"]] == [["hold"]]
+
+
+def test_close_is_idempotent_and_later_calls_are_noops(tmp_path):
+    path = tmp_path / "c.rrd"
+    logger = RerunLogger("teleop-test", "rec-close", "save", path)
+    logger.log_scalars(0.0, T_in=1.0)
+    logger.close()
+    size = path.stat().st_size
+    logger.close()
+    logger.log_scalars(1.0, T_in=2.0)
+    logger.log_profile(1.0, np.arange(3.0), np.ones(3))
+    assert not logger.enabled and path.stat().st_size == size
+
+
+def test_bad_arguments(tmp_path):
+    with pytest.raises(ConfigError, match="expected one of save, spawn, off, got 'file'"):
+        RerunLogger("a", "b", "file", tmp_path / "x.rrd")
+    with pytest.raises(ConfigError, match="mode 'save' needs a path"):
+        RerunLogger("a", "b", "save", None)
+    with pytest.raises(ConfigError, match="profile_every must be >= 1"):
+        RerunLogger("a", "b", "off", None, profile_every=0)
+    logger = RerunLogger("a", "b", "save", tmp_path / "x.rrd")
+    with pytest.raises(ValueError, match=r"s_positions \(3,\), T_estimated \(4,\)"):
+        logger.log_profile(0.0, np.arange(3.0), np.arange(4.0))
+    with pytest.raises(ValueError, match=r"T_true \(2,\)"):
+        logger.log_profile(0.0, np.arange(3.0), np.arange(3.0), np.arange(2.0))
+    logger.close()
+
+
+def test_signal_paths():
+    assert [signal_path(n) for n in ("T_in", "T_out_hat", "elongation_true", "x_out", "seq")] == [
+        "tension/T_in", "tension/T_out_hat", "elongation/elongation_true", "displacement/x_out",
+        "signals/seq"]
