@@ -19,7 +19,8 @@ from teleop.messages import Side
 
 __all__ = [
     "ROOT", "STREAMS", "SIDES", "LIVELINESS", "validate_instrument_id", "side_name", "key",
-    "command_key", "estimate_key", "heartbeat_key", "liveliness_key", "instrument_keys", "parse_key",
+    "command_key", "estimate_key", "heartbeat_key", "liveliness_key", "liveliness_pattern",
+    "instrument_keys", "parse_key",
 ]
 
 ROOT = "teleop"
@@ -106,6 +107,12 @@ def liveliness_key(instrument: str, side: Side | str) -> str:
     """``teleop/<instrument>/<side>/alive``: the liveliness token of that side's process."""
     validate_instrument_id(instrument)
     return f"{ROOT}/{instrument}/{side_name(side)}/{LIVELINESS}"
+
+
+def liveliness_pattern(instrument: str) -> str:
+    """``teleop/<instrument>/*/alive``: the liveliness tokens of both sides (for monitors)."""
+    validate_instrument_id(instrument)
+    return f"{ROOT}/{instrument}/*/{LIVELINESS}"
 
 
 def instrument_keys(instrument: str) -> str:

@@ -19,6 +19,7 @@ def test_stream_keys():
 def test_liveliness_and_wildcard_keys():
     assert keys.liveliness_key("tsm0", Side.SLAVE) == "teleop/tsm0/slave/alive"
     assert keys.liveliness_key("tsm0", "MASTER") == "teleop/tsm0/master/alive"
+    assert keys.liveliness_pattern("tsm0") == "teleop/tsm0/*/alive"
     assert keys.instrument_keys("tsm0") == "teleop/tsm0/**"
 
 
