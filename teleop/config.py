@@ -6,16 +6,24 @@ file and the dotted key.
 """
 from __future__ import annotations
 
+import dataclasses
+import difflib
 import math
+import re
 from dataclasses import dataclass, field
-from typing import Literal
+from pathlib import Path
+from typing import Any, Literal, get_args, get_origin, get_type_hints
+
+import yaml
 
 from estimator.sheath import Run, SheathGeometry
+from teleop.errors import ConfigError
 
 __all__ = [
     "InstrumentConfig", "RunConfig", "SheathConfig", "MotorConfig", "LoadConfig", "SensorConfig",
     "RigConfig", "EstimatorConfig", "CalibrationConfig", "DeviceConfig", "MappingConfig",
     "MasterConfig", "SlaveConfig", "TransportConfig", "RecordingConfig", "Config",
+    "load_config", "config_from_dict", "config_to_dict", "write_config", "RANGES",
 ]
 
 
@@ -149,4 +157,299 @@ class Config:
     recording: RecordingConfig = field(default_factory=RecordingConfig)
 
 
-# ---- loading: to be completed (strict YAML -> Config). See the module docstring. ----
+# ---- loading: strict YAML -> Config ------------------------------------------------------------
+
+# Valid range and unit of every numeric setting ("[]" stands for any list index). A test checks that
+# each numeric field of the schema has an entry and each entry names a field.
+RANGES: dict[str, tuple[str, str]] = {
+    "sheath.mu": (">= 0", "-"), "sheath.EA": ("> 0", "N"), "sheath.pretension": (">= 0", "N"),
+    "sheath.runs[].length": ("> 0", "m"), "sheath.runs[].radius": ("> 0", "m, .inf = straight"),
+    "rig.n_elements": (">= 1", "-"), "rig.rate_hz": ("> 0", "Hz"),
+    "rig.motor.bandwidth_hz": ("> 0", "Hz"), "rig.motor.max_speed": ("> 0", "m/s"),
+    "rig.motor.pulley_radius": ("> 0", "m"), "rig.motor.encoder_lines_per_rev": (">= 1", "-"),
+    "rig.load.joint_stiffness": (">= 0", "N/m"), "rig.load.joint_limit": ("> 0", "m"),
+    "rig.load.limit_stiffness": ("> 0", "N/m"), "rig.load.tissue_stiffness": (">= 0", "N/m"),
+    "rig.load.tissue_contact": ("any", "m"), "rig.load.force": (">= 0", "N"),
+    "rig.sensors.load_cell_noise": (">= 0", "N"), "rig.sensors.seed": (">= 0", "-"),
+    "estimator.n_nodes": (">= 2", "-"), "estimator.hold_rate": (">= 0", "N/s"),
+    "estimator.rate_time_constant": ("> 0", "s"), "estimator.profile_points": ("0..65535", "-"),
+    "calibration.target_tension": ("> 0", "N"), "calibration.speed": ("> 0", "m/s"),
+    "master.rate_hz": ("> 0", "Hz"), "master.watchdog_ms": ("> 0", "ms"),
+    "master.mapping.motion_scale": ("> 0", "-"), "master.mapping.force_scale": (">= 0", "-"),
+    "master.mapping.force_limit": (">= 0", "N"), "master.mapping.ramp_time": (">= 0", "s"),
+    "master.mapping.force_rate_limit": ("> 0", "N/s"),
+    "slave.watchdog_ms": ("> 0", "ms"), "slave.heartbeat_hz": ("> 0", "Hz"),
+    "recording.log_every": (">= 1", "samples"),
+}
+_INF_OK = {"sheath.runs[].radius"}
+_NON_SI = ("_mm", "_deg", "_ms", "_hz")
+
+
+def _in_range(v: float, rule: str) -> bool:
+    if rule == "any":
+        return True
+    if ".." in rule:
+        lo, hi = (float(x) for x in rule.split(".."))
+        return lo <= v <= hi
+    op, bound = rule.split()
+    return v > float(bound) if op == ">" else v >= float(bound)
+
+
+class _Loader(yaml.SafeLoader):
+    """YAML 1.2 core scalars: ``2.0e6`` and ``1e-3`` are floats, only true/false are booleans
+    (``off``, ``no`` stay strings), integers are decimal (``010`` is ten)."""
+
+
+_Loader.yaml_implicit_resolvers = {
+    ch: [(tag, rx) for tag, rx in rs if tag not in ("tag:yaml.org,2002:bool", "tag:yaml.org,2002:float",
+                                                   "tag:yaml.org,2002:int")]
+    for ch, rs in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+_Loader.add_implicit_resolver("tag:yaml.org,2002:bool", re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"),
+                              list("tTfF"))
+_Loader.add_implicit_resolver("tag:yaml.org,2002:int", re.compile(r"^[-+]?[0-9]+$"), list("-+0123456789"))
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?"
+               r"|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$"), list("-+0123456789."))
+_Loader.add_constructor("tag:yaml.org,2002:int", lambda loader, node: int(loader.construct_scalar(node), 10))
+
+
+class _Ctx:
+    """Where values come from (a file, or "overrides") and the line of each dotted key in it."""
+
+    def __init__(self, source: str, lines: dict[str, int] | None = None):
+        self.source, self.lines = source, lines or {}
+
+    def error(self, path: str, msg: str) -> ConfigError:
+        line = self.lines.get(path)
+        return ConfigError(f"{self.source}:{line}: {msg}" if line else f"{self.source}: {msg}")
+
+
+def _show(v: Any) -> str:
+    kind = {dict: "a mapping", list: "a list", type(None): "nothing (null)"}.get(type(v))
+    return kind or f"{v!r} ({type(v).__name__})"
+
+
+def _schema_keys(cls: type, prefix: str = "") -> list[str]:
+    out = []
+    for name, tp in get_type_hints(cls).items():
+        p = f"{prefix}.{name}" if prefix else name
+        out.append(p)
+        if dataclasses.is_dataclass(tp):
+            out += _schema_keys(tp, p)
+        elif get_origin(tp) is tuple and dataclasses.is_dataclass(get_args(tp)[0]):
+            out += _schema_keys(get_args(tp)[0], p + "[]")
+    return out
+
+
+def _unknown(ctx: _Ctx, path: str, name: str, siblings: list[str]) -> ConfigError:
+    for suf in _NON_SI:
+        if name.endswith(suf) and name[: -len(suf)] in siblings:
+            return ctx.error(path, f"unknown key '{path}': non-SI '{suf}' keys are accepted only where the "
+                                   f"schema names them; give '{name[: -len(suf)]}' in SI units")
+    prefix = path[: len(path) - len(name)]
+    near = difflib.get_close_matches(path, [prefix + s for s in siblings] + _schema_keys(Config), 1, 0.6)
+    hint = f" (did you mean '{near[0]}'?)" if near else f" (expected one of: {', '.join(siblings)})"
+    return ctx.error(path, f"unknown key '{path}'{hint}")
+
+
+def _convert(v: Any, tp: Any, path: str, ctx: _Ctx) -> Any:
+    """Check ``v`` against the schema type ``tp`` and return it as that type."""
+    rule_key = re.sub(r"\[\d+\]", "[]", path)
+    if dataclasses.is_dataclass(tp):
+        return _merge(tp, None, v, path, ctx)
+    origin = get_origin(tp)
+    if origin is Literal:
+        if v not in get_args(tp) or isinstance(v, bool):
+            choices = ", ".join(repr(c) for c in get_args(tp))
+            raise ctx.error(path, f"{path}: expected one of {choices}, got {_show(v)}")
+        return v
+    if origin is tuple:
+        if not isinstance(v, (list, tuple)):
+            raise ctx.error(path, f"{path}: expected a list, got {_show(v)}")
+        return tuple(_convert(x, get_args(tp)[0], f"{path}[{i}]", ctx) for i, x in enumerate(v))
+    if tp is bool:
+        if not isinstance(v, bool):
+            raise ctx.error(path, f"{path}: expected true or false, got {_show(v)}")
+        return v
+    if tp is str:
+        if not isinstance(v, str) or not v:
+            raise ctx.error(path, f"{path}: expected a non-empty string, got {_show(v)}")
+        return v
+    if tp is int:
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise ctx.error(path, f"{path}: expected an integer, got {_show(v)}")
+    elif tp is float:
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise ctx.error(path, f"{path}: expected a number, got {_show(v)}")
+        v = float(v)
+        if math.isnan(v) or (math.isinf(v) and rule_key not in _INF_OK):
+            raise ctx.error(path, f"{path}: expected a finite number, got {v!r}")
+    else:  # pragma: no cover - a schema type this loader does not know
+        raise TypeError(f"config schema type {tp!r} of {path} is not supported")
+    rule, unit = RANGES.get(rule_key, ("any", ""))
+    if not _in_range(v, rule):
+        raise ctx.error(path, f"{path}: {v!r} is out of range: expected {rule} [{unit}]")
+    return v
+
+
+def _merge(cls: type, base: Any, data: Any, path: str, ctx: _Ctx) -> Any:
+    """A ``cls`` instance: ``base`` (None: the field defaults) with the keys of ``data`` replaced."""
+    if data is None:                     # an empty section: nothing overridden
+        data = {}
+    if not isinstance(data, dict):
+        raise ctx.error(path, f"{path or 'top level'}: expected a mapping of settings, got {_show(data)}")
+    hints = get_type_hints(cls)
+    changes = {}
+    for name, v in data.items():
+        p = f"{path}.{name}" if path else str(name)
+        if name not in hints:
+            raise _unknown(ctx, p, str(name), list(hints))
+        tp = hints[name]
+        if dataclasses.is_dataclass(tp):
+            changes[name] = _merge(tp, None if base is None else getattr(base, name), v, p, ctx)
+        else:
+            changes[name] = _convert(v, tp, p, ctx)
+    if base is not None:
+        return dataclasses.replace(base, **changes)
+    for f in dataclasses.fields(cls):
+        if f.name not in changes and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+            raise ctx.error(path, f"{path}: missing key '{f.name}'")
+    return cls(**changes)
+
+
+def _check(cfg: Config, ctx: _Ctx) -> Config:
+    """Checks beyond one value's type and range."""
+    from teleop.keys import validate_instrument_id
+    try:
+        validate_instrument_id(cfg.instrument.id)
+    except ConfigError as e:
+        raise ctx.error("instrument.id", str(e)) from None
+    for name in ("listen", "connect"):
+        for i, ep in enumerate(getattr(cfg.transport, name)):
+            if not re.fullmatch(r"[a-z0-9]+/\S+", ep):
+                raise ctx.error(f"transport.{name}[{i}]", f"transport.{name}[{i}]: {ep!r} is not a zenoh "
+                                                         f"endpoint (expected e.g. 'tcp/127.0.0.1:7447')")
+    if not cfg.sheath.runs:
+        raise ctx.error("sheath.runs", "sheath.runs: expected at least one run")
+    return cfg
+
+
+def _line_map(node: Any, path: str, out: dict[str, int], ctx: _Ctx) -> None:
+    """Record the line of each dotted key; reject duplicate keys (PyYAML keeps the last silently)."""
+    if isinstance(node, yaml.MappingNode):
+        seen = set()
+        for k, v in node.value:
+            p = f"{path}.{k.value}" if path else str(k.value)
+            if k.value in seen:
+                raise ConfigError(f"{ctx.source}:{k.start_mark.line + 1}: duplicate key '{p}'")
+            seen.add(k.value)
+            out[p] = k.start_mark.line + 1
+            _line_map(v, p, out, ctx)
+    elif isinstance(node, yaml.SequenceNode):
+        for i, item in enumerate(node.value):
+            out[f"{path}[{i}]"] = item.start_mark.line + 1
+            _line_map(item, f"{path}[{i}]", out, ctx)
+
+
+def _read_yaml(path: Path) -> tuple[Any, dict[str, int]]:
+    source = str(path)
+    if not path.is_file():
+        raise ConfigError(f"{source}: config file not found (looked for {path.resolve()})")
+    try:
+        text = path.read_text(encoding="utf-8")
+        lines: dict[str, int] = {}
+        node = yaml.compose(text, Loader=_Loader)
+        _line_map(node, "", lines, _Ctx(source))
+        return yaml.load(text, Loader=_Loader), lines
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None) or getattr(e, "context_mark", None)
+        where = f"{source}:{mark.line + 1}:{mark.column + 1}" if mark else source
+        problem = getattr(e, "problem", None) or str(e)
+        raise ConfigError(f"{where}: YAML syntax error: {problem}") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ConfigError(f"{source}: cannot read config file ({e})") from None
+
+
+def _expand_dotted(overrides: dict) -> dict:
+    """``{"rig.rate_hz": 500}`` -> ``{"rig": {"rate_hz": 500}}``, deep-merged with nested entries."""
+    out: dict = {}
+    for k, v in overrides.items():
+        *parents, last = str(k).split(".")
+        d = out
+        for p in parents:
+            d = d.setdefault(p, {})
+        if isinstance(v, dict) and isinstance(d.get(last), dict):
+            d[last] = {**d[last], **_expand_dotted(v)}
+        else:
+            d[last] = _expand_dotted(v) if isinstance(v, dict) else v
+    return out
+
+
+def config_from_dict(data: dict | None, *, source: str = "<dict>", base: Config | None = None) -> Config:
+    """Apply a nested mapping of settings over ``base`` (default: the schema defaults).
+
+    Raises
+    ------
+    ConfigError
+        Unknown key, wrong type, value out of range (message names ``source`` and the dotted key).
+    """
+    ctx = _Ctx(source)
+    return _check(_merge(Config, base or Config(), data, "", ctx), ctx)
+
+
+def load_config(path: str | Path | None = None, overrides: dict | None = None) -> Config:
+    """Load a YAML config over the defaults, then apply ``overrides``.
+
+    The dataclass defaults are the defaults (configs/default.yaml spells them out); a file changes only
+    the keys it names (sections merge deeply, lists are replaced whole).
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        YAML file; None: defaults only.
+    overrides : dict, optional
+        Nested (``{"rig": {"rate_hz": 500}}``) or dotted (``{"rig.rate_hz": 500}``) settings applied
+        last; errors name them as ``overrides``.
+
+    Returns
+    -------
+    Config
+
+    Raises
+    ------
+    ConfigError
+        Missing or unreadable file; YAML syntax error (file, line, column); duplicate key; unknown key
+        (with the closest known key); wrong type (key, expected type, value); value out of range (key,
+        range, unit); invalid instrument id or endpoint. Messages start with ``<file>:<line>:``.
+    """
+    cfg = Config()
+    if path is not None:
+        data, lines = _read_yaml(Path(path))
+        ctx = _Ctx(str(path), lines)
+        cfg = _check(_merge(Config, cfg, data, "", ctx), ctx)
+    if overrides:
+        cfg = config_from_dict(_expand_dotted(overrides), source="overrides", base=cfg)
+    return cfg
+
+
+def config_to_dict(cfg: Any) -> Any:
+    """Plain YAML-ready data of a config (lists for tuples; a straight run omits its radius).
+
+    ``config_from_dict(config_to_dict(cfg)) == cfg`` for every valid ``cfg``.
+    """
+    if isinstance(cfg, RunConfig):
+        return {"length": cfg.length} if math.isinf(cfg.radius) else {"length": cfg.length, "radius": cfg.radius}
+    if dataclasses.is_dataclass(cfg):
+        return {f.name: config_to_dict(getattr(cfg, f.name)) for f in dataclasses.fields(cfg)}
+    if isinstance(cfg, (tuple, list)):
+        return [config_to_dict(x) for x in cfg]
+    return cfg
+
+
+def write_config(cfg: Config, path: str | Path) -> Path:
+    """Write the resolved config as YAML (e.g. next to a recording); returns the path."""
+    path = Path(path)
+    text = "# resolved teleop configuration (every setting, SI units unless the key has a suffix)\n"
+    path.write_text(text + yaml.safe_dump(config_to_dict(cfg), sort_keys=False), encoding="utf-8")
+    return path
