@@ -1,0 +1,446 @@
+"""A thin layer over eclipse-zenoh 1.x: one session, typed publishers, latest-wins subscribers, liveliness.
+
+Default deployment: two peers on loopback, one listening and one connecting, multicast scouting off
+(no traffic leaves 127.0.0.1) and gossip scouting on, so peers that reach one common peer also find
+each other. Payloads are :mod:`teleop.codec` bytes; keys come from :mod:`teleop.keys`.
+
+Zenoh calls subscriber callbacks on its own threads. :class:`LatestSubscriber` and
+:class:`LivelinessWatcher` never let an exception escape a callback: they count it and log it at a
+limited rate, as every real-time path in this project does.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import math
+import re
+import socket
+import threading
+from typing import Callable, Generic, NamedTuple, TypeVar
+
+import zenoh
+
+from teleop.clock import Clock, MonotonicClock
+from teleop.codec import Message, decode, encode
+from teleop.config import TransportConfig
+from teleop.errors import CodecError, ConfigError, TransportError
+
+__all__ = [
+    "zenoh_config", "free_tcp_ports", "free_tcp_port", "loopback_endpoint", "RateLimitedLog",
+    "Session", "Publisher", "Received", "LatestSubscriber", "LivelinessToken", "LivelinessWatcher",
+]
+
+log = logging.getLogger(__name__)
+M = TypeVar("M", bound=Message)
+
+
+def _zerr(e: Exception) -> str:
+    """The human part of a zenoh error (without the Rust source locations)."""
+    text = str(e)
+    m = re.search(r'msg: "(.*?)(?: at /[^"]*)?"', text)
+    return (m.group(1) if m else text.split(" at /")[0]).strip()
+
+
+def _insert(cfg: zenoh.Config, key: str, value, where: str, shown=None) -> None:
+    try:
+        cfg.insert_json5(key, json.dumps(value))
+    except zenoh.ZError as e:
+        raise ConfigError(f"{where}: {value if shown is None else shown!r} rejected by zenoh: {_zerr(e)}") from None
+
+
+def zenoh_config(transport: TransportConfig, *, listen: tuple[str, ...] | None = None,
+                 connect: tuple[str, ...] | None = None) -> zenoh.Config:
+    """Build the zenoh configuration of one process.
+
+    Parameters
+    ----------
+    transport : TransportConfig
+        ``mode`` (peer | client), ``listen`` and ``connect`` endpoints (``tcp/127.0.0.1:7447``),
+        ``multicast_scouting``.
+    listen, connect : tuple of str, optional
+        Replace the configured endpoints (the CLI's ``--listen``/``--connect``; in one config both
+        sides cannot listen on the same port, so one side usually overrides ``listen=()``).
+
+    Returns
+    -------
+    zenoh.Config
+        Gossip scouting on (single hop) so loopback peers find each other through a common peer.
+
+    Raises
+    ------
+    ConfigError
+        An endpoint zenoh does not accept (names ``transport.listen[i]`` / ``transport.connect[i]``).
+    """
+    listen = tuple(transport.listen if listen is None else listen)
+    connect = tuple(transport.connect if connect is None else connect)
+    cfg = zenoh.Config()
+    _insert(cfg, "mode", transport.mode, "transport.mode")
+    for name, eps in (("listen", listen), ("connect", connect)):
+        for i, ep in enumerate(eps):   # validate one by one to name the bad entry
+            _insert(zenoh.Config(), f"{name}/endpoints", [ep], f"transport.{name}[{i}]", ep)
+        _insert(cfg, f"{name}/endpoints", list(eps), f"transport.{name}")
+    _insert(cfg, "scouting/multicast/enabled", bool(transport.multicast_scouting),
+            "transport.multicast_scouting")
+    _insert(cfg, "scouting/gossip/enabled", True, "scouting/gossip/enabled")
+    _insert(cfg, "scouting/gossip/multihop", False, "scouting/gossip/multihop")
+    return cfg
+
+
+def free_tcp_ports(n: int, host: str = "127.0.0.1") -> list[int]:
+    """``n`` distinct TCP ports free on ``host`` right now (for tests: bind them soon after).
+
+    All sockets are held open together, so the ports are distinct; the OS does not hand a just
+    released ephemeral port out again soon, which keeps parallel tests apart.
+    """
+    socks = []
+    try:
+        for _ in range(n):
+            s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            s.bind((host, 0))
+            socks.append(s)
+        return [s.getsockname()[1] for s in socks]
+    finally:
+        for s in socks:
+            s.close()
+
+
+def free_tcp_port(host: str = "127.0.0.1") -> int:
+    """One free TCP port on ``host`` (see :func:`free_tcp_ports`)."""
+    return free_tcp_ports(1, host)[0]
+
+
+def loopback_endpoint(port: int) -> str:
+    """``tcp/127.0.0.1:<port>``."""
+    return f"tcp/127.0.0.1:{int(port)}"
+
+
+class RateLimitedLog:
+    """Log a recurring problem at most once per ``interval`` seconds, with the count suppressed.
+
+    Parameters
+    ----------
+    logger : logging.Logger
+    interval : float
+        Minimum time between two records [s].
+    clock : Clock, optional
+        Time source (default :class:`MonotonicClock`).
+    """
+
+    def __init__(self, logger: logging.Logger, interval: float = 1.0, clock: Clock | None = None):
+        self.logger, self.interval = logger, interval
+        self.clock = clock or MonotonicClock()
+        self._last = -math.inf
+        self._suppressed = 0
+        self._lock = threading.Lock()
+
+    def warning(self, msg: str, *args) -> bool:
+        """Log ``msg % args`` unless one was logged less than ``interval`` ago. Returns True if logged."""
+        with self._lock:
+            now = self.clock.now()
+            if now - self._last < self.interval:
+                self._suppressed += 1
+                return False
+            suppressed, self._suppressed, self._last = self._suppressed, 0, now
+        tail = f" ({suppressed} similar suppressed)" if suppressed else ""
+        self.logger.warning(msg + tail, *args)
+        return True
+
+
+class Session:
+    """One zenoh session; a context manager. Entities declared through it close with it.
+
+    Parameters
+    ----------
+    transport : TransportConfig or zenoh.Config
+        Built with :func:`zenoh_config` when a TransportConfig.
+    clock : Clock, optional
+        Receive-time source of the subscribers declared here (default :class:`MonotonicClock`).
+
+    Raises
+    ------
+    TransportError
+        The session could not be opened (e.g. a listen port already in use).
+    """
+
+    def __init__(self, transport: TransportConfig | zenoh.Config, *, clock: Clock | None = None):
+        zcfg = zenoh_config(transport) if isinstance(transport, TransportConfig) else transport
+        self.clock = clock or MonotonicClock()
+        self._entities: list = []
+        self._lock = threading.Lock()
+        zenoh.try_init_log_from_env()
+        try:
+            self._z = zenoh.open(zcfg)
+        except zenoh.ZError as e:
+            raise TransportError(f"cannot open zenoh session: {_zerr(e)}") from None
+        self._closed = False
+
+    @property
+    def zenoh_session(self) -> zenoh.Session:
+        """The underlying zenoh session (escape hatch; prefer the typed methods)."""
+        return self._z
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise TransportError("zenoh session already closed")
+
+    def _track(self, entity):
+        with self._lock:
+            self._entities.append(entity)
+        return entity
+
+    def publisher(self, key: str, *, express: bool = True,
+                  priority: zenoh.Priority = zenoh.Priority.REAL_TIME) -> "Publisher":
+        """Declare a :class:`Publisher` on ``key`` (no batching, dropped rather than queued when congested)."""
+        self._check_open()
+        return self._track(Publisher(self, key, express=express, priority=priority))
+
+    def subscriber(self, key: str, expect: type[M] | None = None) -> "LatestSubscriber[M]":
+        """Declare a :class:`LatestSubscriber` on ``key``; ``expect`` rejects other message types."""
+        self._check_open()
+        return self._track(LatestSubscriber(self, key, expect=expect))
+
+    def liveliness_token(self, key: str) -> "LivelinessToken":
+        """Declare this process alive on ``key`` until the token or the session closes."""
+        self._check_open()
+        return self._track(LivelinessToken(self, key))
+
+    def liveliness_watcher(self, key: str,
+                           on_change: Callable[[str, bool], None] | None = None) -> "LivelinessWatcher":
+        """Watch the tokens matching ``key`` (already present ones included)."""
+        self._check_open()
+        return self._track(LivelinessWatcher(self, key, on_change))
+
+    def close(self) -> None:
+        """Undeclare every entity, then close the session. Idempotent."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            entities, self._entities = self._entities, []
+        for ent in reversed(entities):
+            ent.close()
+        try:
+            self._z.close()
+        except zenoh.ZError as e:   # pragma: no cover - zenoh closes cleanly in practice
+            log.warning("closing zenoh session: %s", e)
+
+    def __enter__(self) -> "Session":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class _Entity:
+    """Something declared on a session, undeclared once by :meth:`close`."""
+
+    def __init__(self, session: Session, key: str):
+        self.session, self.key = session, key
+        self._handle = None
+        self._closed = False
+
+    def _declare(self, fn, *args, **kwargs) -> None:
+        try:
+            self._handle = fn(*args, **kwargs)
+        except zenoh.ZError as e:
+            raise TransportError(f"cannot declare {type(self).__name__} on {self.key!r}: "
+                                 f"{_zerr(e)}") from None
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def close(self) -> None:
+        """Undeclare. Idempotent; a no-op once the session is closed."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._handle.undeclare()
+        except zenoh.ZError:  # pragma: no cover - undeclare after session close is a no-op
+            pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class Publisher(_Entity):
+    """Publishes messages encoded by :mod:`teleop.codec` on one key. Attribute ``sent``: puts so far."""
+
+    def __init__(self, session: Session, key: str, *, express: bool = True,
+                 priority: zenoh.Priority = zenoh.Priority.REAL_TIME):
+        super().__init__(session, key)
+        self.sent = 0
+        self._declare(session.zenoh_session.declare_publisher, key, express=express, priority=priority,
+                      congestion_control=zenoh.CongestionControl.DROP)
+
+    def put(self, msg: Message) -> None:
+        """Encode and send ``msg``.
+
+        Raises
+        ------
+        CodecError
+            ``msg`` cannot be encoded (non-finite float, ...): a bug of the sender.
+        TransportError
+            The publisher or its session is closed.
+        """
+        self.put_bytes(encode(msg))
+
+    def put_bytes(self, payload: bytes) -> None:
+        """Send raw bytes (tests and tools only: receivers expect codec payloads)."""
+        if self._closed or self.session.closed:
+            raise TransportError(f"publisher on {self.key!r} is closed")
+        try:
+            self._handle.put(payload)
+        except zenoh.ZError as e:
+            raise TransportError(f"put on {self.key!r} failed: {_zerr(e)}") from None
+        self.sent += 1
+
+
+class Received(NamedTuple, Generic[M]):
+    """A decoded message and when it arrived [s, the subscriber's clock]."""
+
+    message: M
+    t_recv: float
+
+
+class LatestSubscriber(_Entity, Generic[M]):
+    """Keeps only the newest decoded message on a key (latest wins), thread-safe.
+
+    Attributes
+    ----------
+    count : int
+        Messages decoded and kept.
+    errors : int
+        Payloads that did not decode (or were of another type than ``expect``); never raised.
+    """
+
+    def __init__(self, session: Session, key: str, *, expect: type[M] | None = None):
+        super().__init__(session, key)
+        self.expect = expect
+        self.clock = session.clock
+        self.count = 0
+        self.errors = 0
+        self._latest: Received[M] | None = None
+        self._cond = threading.Condition()
+        self._log = RateLimitedLog(log, 1.0, self.clock)
+        self._declare(session.zenoh_session.declare_subscriber, key, self._on_sample)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        try:
+            msg = decode(sample.payload.to_bytes())
+            if self.expect is not None and type(msg) is not self.expect:
+                raise CodecError(f"got a {type(msg).__name__}, expected a {self.expect.__name__}")
+        except Exception as e:  # noqa: BLE001 - a bad payload must never kill the zenoh callback
+            with self._cond:
+                self.errors += 1
+                self._cond.notify_all()
+            self._log.warning("dropped a bad message on %s: %s", self.key, e)
+            return
+        rec = Received(msg, self.clock.now())
+        with self._cond:
+            self._latest = rec
+            self.count += 1
+            self._cond.notify_all()
+
+    def latest(self) -> Received[M] | None:
+        """The newest message with its receive time, or None before the first one."""
+        with self._cond:
+            return self._latest
+
+    def age(self, now: float) -> float:
+        """Time since the newest message arrived [s] (``now`` from the same clock); inf if none."""
+        rec = self._latest
+        return math.inf if rec is None else now - rec.t_recv
+
+    def wait(self, count: int = 1, timeout: float | None = None) -> bool:
+        """Block until ``self.count >= count`` or ``timeout`` [s] of real time; True if reached."""
+        with self._cond:
+            return self._cond.wait_for(lambda: self.count >= count, timeout)
+
+    def wait_errors(self, errors: int = 1, timeout: float | None = None) -> bool:
+        """Block until ``self.errors >= errors`` or ``timeout`` [s]; True if reached."""
+        with self._cond:
+            return self._cond.wait_for(lambda: self.errors >= errors, timeout)
+
+    def close(self) -> None:
+        super().close()
+        with self._cond:
+            self._cond.notify_all()
+
+
+class LivelinessToken(_Entity):
+    """This process's liveliness on one key; disappears for watchers when closed or when the session ends."""
+
+    def __init__(self, session: Session, key: str):
+        super().__init__(session, key)
+        self._declare(session.zenoh_session.liveliness().declare_token, key)
+
+
+class LivelinessWatcher(_Entity):
+    """Tracks which liveliness tokens matching a key expression are present.
+
+    Parameters
+    ----------
+    on_change : callable(key: str, alive: bool), optional
+        Called on zenoh's thread for each appearance and disappearance; exceptions are logged and
+        swallowed.
+
+    Attributes
+    ----------
+    alive : bool
+        At least one matching token present.
+    changes : int
+        Appearances plus disappearances seen.
+    """
+
+    def __init__(self, session: Session, key: str,
+                 on_change: Callable[[str, bool], None] | None = None):
+        super().__init__(session, key)
+        self.on_change = on_change
+        self.changes = 0
+        self._present: set[str] = set()
+        self._cond = threading.Condition()
+        self._log = RateLimitedLog(log, 1.0, session.clock)
+        self._declare(session.zenoh_session.liveliness().declare_subscriber, key, self._on_sample, history=True)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        k = str(sample.key_expr)
+        up = sample.kind == zenoh.SampleKind.PUT
+        with self._cond:
+            (self._present.add if up else self._present.discard)(k)
+            self.changes += 1
+            self._cond.notify_all()
+        if self.on_change is not None:
+            try:
+                self.on_change(k, up)
+            except Exception as e:  # noqa: BLE001 - never kill the zenoh callback
+                self._log.warning("liveliness callback on %s failed: %r", k, e)
+
+    @property
+    def alive(self) -> bool:
+        with self._cond:
+            return bool(self._present)
+
+    @property
+    def present(self) -> frozenset[str]:
+        """Keys of the tokens present now."""
+        with self._cond:
+            return frozenset(self._present)
+
+    def wait_for(self, alive: bool, timeout: float | None = None) -> bool:
+        """Block until :attr:`alive` equals ``alive`` or ``timeout`` [s]; True if it does."""
+        with self._cond:
+            return self._cond.wait_for(lambda: bool(self._present) == alive, timeout)
+
+    def close(self) -> None:
+        super().close()
+        with self._cond:
+            self._cond.notify_all()
