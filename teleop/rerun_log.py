@@ -91,61 +91,6 @@ def _blueprint() -> object:
     )
 
 
-class _FastBarValues:
-    """``BarChart:values`` batches built straight in Arrow: ~10 us instead of ~200 us per profile.
-
-    The SDK's generic tensor converter dominates the cost of a bar-chart log. This builds the same
-    ``TensorData`` Arrow array (shape [n], F64 buffer) from a template made by the SDK itself, and
-    :meth:`create` returns None - the caller then uses the SDK path - unless its output equals the
-    SDK's for a probe vector, so an SDK layout change degrades speed, never correctness.
-    """
-
-    def __init__(self) -> None:
-        import pyarrow as pa
-        import rerun as rr
-        from rerun.components import TensorDataBatch
-
-        self._pa, self._batch_cls = pa, TensorDataBatch
-        self._descriptor = rr.BarChart.descriptor_values()
-        template = TensorDataBatch(np.zeros(2)).as_arrow_array()
-        self._struct_type = template.type
-        self._union_type = union_type = self._struct_type.field("buffer").type
-        union = template.field("buffer")
-        names = [union_type.field(i).name for i in range(union_type.num_fields)]
-        self._k = names.index("F64")
-        self._children = [union.field(i) for i in range(union_type.num_fields)]
-        self._list_type = union_type.field(self._k).type
-        self._type_ids = pa.array([union_type.type_codes[self._k]], pa.int8()).buffers()[1]
-        self._offsets = pa.array([0], pa.int32()).buffers()[1]
-        self._names = template.field("names")
-        self._fields = [self._struct_type.field(i) for i in range(self._struct_type.num_fields)]
-
-    @classmethod
-    def create(cls) -> _FastBarValues | None:
-        try:
-            fast = cls()
-            probe = np.array([1.5, -2.0, 3.25])
-            reference = fast._batch_cls(probe).as_arrow_array()
-            return fast if fast.array(probe).equals(reference) else None
-        except Exception:  # any layout surprise: use the SDK converter
-            return None
-
-    def array(self, values: np.ndarray) -> object:
-        pa = self._pa
-        n = values.shape[0]
-        children = list(self._children)
-        children[self._k] = pa.ListArray.from_arrays(
-            pa.array([0, n], pa.int32()), pa.array(values, pa.float64()), type=self._list_type)
-        union = pa.Array.from_buffers(self._union_type, 1, [None, self._type_ids, self._offsets],
-                                      children=children)
-        shape = pa.array([[n]], self._fields[0].type)
-        return pa.StructArray.from_arrays([shape, self._names, union], fields=self._fields)
-
-    def batch(self, values: np.ndarray) -> object:
-        """A described ``BarChart:values`` batch for ``rec.log(entity, [batch])``."""
-        return self._batch_cls(self.array(values)).described(self._descriptor)
-
-
 class RerunLogger:
     """Live tension distribution, signals and phase to a Rerun recording.
 
@@ -190,7 +135,6 @@ class RerunLogger:
         self.path: Path | None = Path(path) if path is not None else None
         self.profile_every = int(profile_every)
         self._rec: rr.RecordingStream | None = None
-        self._fast: _FastBarValues | None = None
         self._profile_calls = 0
         self._abscissa: np.ndarray | None = None
         self._grid: dict[str, dict] = {}  # per bar-chart entity: grid fields still to send
@@ -219,7 +163,6 @@ class RerunLogger:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             rec.save(self.path, default_blueprint=blueprint)
         self._rec = rec
-        self._fast = _FastBarValues.create()
 
     def _fall_back(self, application_id: str, rec: rr.RecordingStream, why: str) -> None:
         if self.path is None:
@@ -280,10 +223,7 @@ class RerunLogger:
             if values is None:
                 continue
             grid = self._grid.pop(entity, None)
-            if grid is None and self._fast is not None:
-                rec.log(entity, [self._fast.batch(values)])
-            else:
-                rec.log(entity, rr.BarChart.from_fields(values=values, **(grid or {})))
+            rec.log(entity, rr.BarChart.from_fields(values=values, **(grid or {})))
 
     def log_scalars(self, t: float, **values: float | None) -> None:
         """Log scalar signals at time ``t``, one entity per name (see :func:`signal_path`).

@@ -11,11 +11,10 @@ import pytest
 pytest.importorskip("rerun")
 
 from rerun.chunk import RrdReader  # noqa: E402
-from rerun.components import TensorDataBatch  # noqa: E402
 
 from estimator.phase import Phase  # noqa: E402
 from teleop.errors import ConfigError  # noqa: E402
-from teleop.rerun_log import RerunLogger, _FastBarValues, signal_path  # noqa: E402
+from teleop.rerun_log import RerunLogger, signal_path  # noqa: E402
 
 
 def _read(path: Path) -> tuple[RrdReader, dict[str, list[tuple[int | None, dict]]]]:
@@ -104,14 +103,6 @@ def test_profile_decimation_and_grid_change(tmp_path):
     grids = [_tensor(r["BarChart:abscissa"]) for _, r in logged if "BarChart:abscissa" in r]
     assert [len(g) for g in grids] == [5, 8]
     assert "/profile/T_true" not in rows  # no truth given
-
-
-@pytest.mark.parametrize("n", [1, 7, 300])
-def test_fast_bar_values_equal_sdk_conversion(n):
-    fast = _FastBarValues.create()
-    assert fast is not None, "fast path disabled: the SDK's TensorData layout changed"
-    values = np.random.default_rng(n).normal(size=n)
-    assert fast.array(values).equals(TensorDataBatch(values).as_arrow_array())
 
 
 def test_two_streams_coexist(tmp_path):
