@@ -129,7 +129,7 @@ def encode(msg: Message) -> bytes:
         n = len(profile)
         if n > MAX_PROFILE_POINTS:
             raise CodecError(f"Estimate.profile has {n} points: at most {MAX_PROFILE_POINTS} fit the wire")
-        if int(msg.phase) not in _PHASES:
+        if msg.phase not in _PHASES or isinstance(msg.phase, bool):
             raise CodecError(f"Estimate.phase is {msg.phase!r}: expected a Phase")
         try:
             head = _ESTIMATE.pack(msg.seq, msg.cmd_seq, *floats, int(msg.phase), n)
@@ -146,9 +146,9 @@ def encode(msg: Message) -> bytes:
         return _HEADER.pack(MAGIC, WIRE_VERSION, TYPE_ESTIMATE) + head + prof
     if t is Heartbeat:
         _check_finite("Heartbeat", ("t_sender",), (msg.t_sender,))
-        if int(msg.side) not in _SIDES:
+        if msg.side not in _SIDES or isinstance(msg.side, bool):
             raise CodecError(f"Heartbeat.side is {msg.side!r}: expected a Side")
-        if int(msg.state) not in _STATES:
+        if msg.state not in _STATES or isinstance(msg.state, bool):
             raise CodecError(f"Heartbeat.state is {msg.state!r}: expected a SideState")
         _check_uint("Heartbeat", "seq", msg.seq, 32)
         body = _HEARTBEAT.pack(int(msg.side), msg.seq, msg.t_sender, int(msg.state))

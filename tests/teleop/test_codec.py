@@ -166,6 +166,12 @@ def test_encode_rejects_out_of_range_integers_and_sizes():
         encode(Estimate(0, -1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, Phase.HOLD))
     with pytest.raises(CodecError, match="65536 points: at most 65535"):
         encode(Estimate(0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, Phase.HOLD, (0.0,) * 65536))
+    with pytest.raises(CodecError, match="Estimate.phase is 'pull': expected a Phase"):
+        encode(Estimate(0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, "pull"))
+    with pytest.raises(CodecError, match="Heartbeat.side is 5: expected a Side"):
+        encode(Heartbeat(5, 0, 0.0, SideState.READY))
+    with pytest.raises(CodecError, match="Heartbeat.state is None: expected a SideState"):
+        encode(Heartbeat(Side.MASTER, 0, 0.0, None))
     with pytest.raises(CodecError, match="cannot encode a dict"):
         encode({"seq": 1})
 
