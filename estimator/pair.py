@@ -20,6 +20,14 @@ with the state the training part left. Baselines: the linear map ``theta = a c +
 uncompensated case) and, as a diagnostic for equivalent backlash (literature.md E1b/E12), that map
 through a play operator of half-width w. :func:`reversal_dead_zones` measures the dead zones
 without any model.
+
+Force path (diagnostic, same profile memory used for the distal *tensions* instead of the
+elongations; the joint as an elastic load of stiffness k, literature.md E11)::
+
+    k theta = r (T_out,a - T_out,b) + k theta_0   =>   theta = beta (T_out,a - T_out,b) + theta_0
+
+with T_out,j the distal node of the envelope rule (one K for both tendons), beta = r / k >= 0
+[rad/N]; the command is not used.
 """
 from __future__ import annotations
 
@@ -32,8 +40,8 @@ from scipy.optimize import least_squares, lsq_linear
 
 from estimator.sheath import SheathModel, profile_batch
 
-__all__ = ["PairParams", "PairFit", "mean_tension", "predict_angle", "fit_pair", "fit_linear", "play",
-           "fit_play_map", "DeadZone", "reversal_dead_zones", "rmse"]
+__all__ = ["PairParams", "PairFit", "mean_tension", "distal_tension", "predict_angle", "fit_pair",
+           "fit_force_path", "fit_linear", "play", "fit_play_map", "DeadZone", "reversal_dead_zones", "rmse"]
 
 K_MAX = 5.0
 _K_GRID = (0.0, 0.1, 0.25, 0.5, 0.8, 1.2, 2.0, 3.0)
@@ -85,11 +93,23 @@ def mean_tension(T: np.ndarray, K: float, n_nodes: int = 50, pretension: float |
     ndarray, shape (n,) [N]; times L/EA gives the elongation change [m] (Phee et al. 2009, eq. (12)
     on a pull branch, the stored profile otherwise).
     """
+    _, E, E0 = _run(T, K, n_nodes, pretension)
+    return E - E0
+
+
+def _run(T, K: float, n_nodes: int, pretension: float | None) -> tuple[np.ndarray, np.ndarray, float]:
+    """(T_out [N], mean_s T [N], its initial value [N]) of the envelope rule driven by ``T``."""
     T = np.ascontiguousarray(T, dtype=np.float64)
     T0 = float(T[0]) if pretension is None else float(pretension)
     log_gain, weight = SheathModel(K=K, compliance=1.0).nodes(n_nodes)
-    _, E, _ = profile_batch(np.full(log_gain.size, T0), log_gain, weight, T)
-    return E - float(weight.sum() * T0)
+    T_out, E, _ = profile_batch(np.full(log_gain.size, T0), log_gain, weight, T)
+    return T_out, E, float(weight.sum() * T0)
+
+
+def distal_tension(T: np.ndarray, K: float, n_nodes: int = 50, pretension: float | None = None) -> np.ndarray:
+    """T_out(t) [N], shape (n,), of the profile-memory model driven by the proximal tension ``T``
+    [N], shape (n,), from a uniform profile at ``pretension`` (default ``T[0]``)."""
+    return _run(T, K, n_nodes, pretension)[0]
 
 
 def predict_angle(p: PairParams, command: np.ndarray, T_a: np.ndarray, T_b: np.ndarray,
@@ -144,6 +164,36 @@ def fit_pair(command, T_a, T_b, angle, n_train: int, n_nodes: int = 50) -> PairF
                         x_scale=[0.1, 0.1, 0.1, 0.01, 0.01, 0.01])
     p = PairParams(*map(float, sol.x))
     return PairFit("seed pair model", p.as_dict(), predict_angle(p, c, Ta, Tb, n_nodes), float(sol.cost))
+
+
+def fit_force_path(T_a, T_b, angle, n_train: int, n_nodes: int = 50) -> PairFit:
+    """Force-path diagnostic theta = beta (T_out,a - T_out,b) + theta_0 (module docstring), fitted
+    on the first ``n_train`` samples: grid of K with (beta, theta_0) by bounded linear least
+    squares, then ``least_squares`` on (K, beta, theta_0), K in [0, 5], beta >= 0.
+
+    Parameters
+    ----------
+    T_a, T_b : ndarray, shape (n,) [N] ; angle : ndarray, shape (n,) [rad] ; n_train : int
+    """
+    Ta, Tb, y = (np.asarray(v, dtype=float) for v in (T_a, T_b, angle))
+    tr = slice(0, int(n_train))
+
+    def diff(K: float, sl: slice) -> np.ndarray:
+        return distal_tension(Ta[sl], K, n_nodes) - distal_tension(Tb[sl], K, n_nodes)
+
+    best = None
+    for K in _K_GRID:
+        A = np.column_stack([diff(K, tr), np.ones(int(n_train))])
+        sol = lsq_linear(A, y[tr], bounds=([0.0, -np.inf], [np.inf, np.inf]))
+        if best is None or sol.cost < best[0]:
+            best = (sol.cost, K, sol.x)
+    _, K0, (b0, t0) = best
+    sol = least_squares(lambda q: q[1] * diff(q[0], tr) + q[2] - y[tr], [max(K0, 1e-3), b0, t0],
+                        bounds=([0.0, 0.0, -np.inf], [K_MAX, np.inf, np.inf]), diff_step=1e-3,
+                        x_scale=[0.1, 0.01, 0.01])
+    K, beta, th0 = map(float, sol.x)
+    return PairFit("force path", {"K": K, "beta": beta, "theta0": th0},
+                   beta * diff(K, slice(None)) + th0, float(sol.cost))
 
 
 def fit_linear(command, angle, n_train: int) -> PairFit:

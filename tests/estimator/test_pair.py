@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from estimator.pair import (PairParams, fit_linear, fit_pair, fit_play_map, mean_tension, play,
-                            predict_angle, reversal_dead_zones, rmse)
+from estimator.pair import (PairParams, distal_tension, fit_force_path, fit_linear, fit_pair, fit_play_map,
+                            mean_tension, play, predict_angle, reversal_dead_zones, rmse)
 
 TRUE = PairParams(G=1.1, K_a=0.4, K_b=0.8, lam_a=0.10, lam_b=0.07, theta0=0.02)
 
@@ -84,3 +84,18 @@ def test_fit_pair_rejects_bad_input():
         fit_pair(np.zeros(10), np.zeros(10), np.zeros(9), np.zeros(10), 8)
     with pytest.raises(ValueError, match="n_train"):
         fit_pair(np.zeros(10), np.ones(10), np.ones(10), np.zeros(10), 4)
+
+
+def test_force_path_fit_recovers_K_and_beta():
+    t, c, Ta, Tb, n_train = signals()
+    K, beta, th0 = 0.6, 0.12, -0.03
+    y = beta * (distal_tension(Ta, K) - distal_tension(Tb, K)) + th0
+    fit = fit_force_path(Ta, Tb, y, n_train)
+    assert fit.params == pytest.approx({"K": K, "beta": beta, "theta0": th0}, rel=0.02)
+    assert rmse(fit.prediction[n_train:] - y[n_train:]) < math.radians(0.01)
+    # the distal tension holds after a reversal until T_in has crossed the 2K band (Phee eq. (14))
+    T = np.array([1.0, 8.0, 7.0, 8.0 * math.exp(-2 * K) + 0.01, 8.0 * math.exp(-2 * K) - 0.2])
+    T_out = distal_tension(T, K, n_nodes=200)
+    assert T_out[1] == pytest.approx(8.0 * math.exp(-K))
+    assert T_out[2] == T_out[3] == T_out[1]
+    assert T_out[4] == pytest.approx((8.0 * math.exp(-2 * K) - 0.2) * math.exp(K))
