@@ -1,0 +1,140 @@
+"""Time-domain passivity observer (PO) and controller (PC) on the force channel at the master port.
+
+Hannaford & Ryu 2002 ("Time-domain passivity control of haptic interfaces", IEEE T-RA 18(1)); for
+delayed teleoperation the same observer sits at the master port of the communication two-port
+(Ryu, Kwon & Hannaford 2004; Ryu, Artigas & Preusche 2010). Everything behind the device (channel,
+delay, packet loss, slave, environment, estimator) is one network seen through the device handle.
+
+Sign convention. ``f`` is the force the device renders on the operator's hand along the device
+axis [N], ``v`` the handle velocity along the same axis [m/s] (+ = pull, as in
+:mod:`master.device`). The power flowing from the operator *into* the network is ``-f v``: pushing
+against a resisting force feeds energy in. The observed energy is::
+
+    E(k) = sum_{j<=k} -f'(j) v(j) dt(j)                            [J]          (PO)
+
+with ``f'`` the force actually rendered. The network is passive while ``E(k) >= 0`` for all k. When
+the unmodified command would make it negative (the network would have generated energy), a
+variable damper takes out exactly that excess in the same step::
+
+    E_cmd = E(k-1) - f v dt
+    alpha = -E_cmd / (v^2 dt)        if E_cmd < 0 and v != 0, else 0       [N s/m]  (PC)
+    f'    = f - alpha v
+
+so ``E(k) = 0`` after an active step. (Hannaford & Ryu write ``f' = f + alpha v`` with ``f`` the force
+the operator applies to the network; here ``f`` is the force applied to the operator, hence the
+minus.) The command is clamped to ``[-limit, limit]`` first; the damped force then always lies
+between 0 and the clamped command (``f' v = E(k-1)/dt >= 0`` with ``|f'| <= |f|``), so the clamp holds
+with the PC active and the PC needs no force the device cannot render.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from teleop.errors import ConfigError
+
+__all__ = ["PassivityStats", "PassivityController"]
+
+
+@dataclass(frozen=True)
+class PassivityStats:
+    """Counters of a :class:`PassivityController`.
+
+    Attributes
+    ----------
+    energy : float
+        Observed energy ``E(k)`` [J] (>= 0 up to rounding while the PC is enabled).
+    dissipated : float
+        Energy removed by the variable damper since the start or the last reset [J], >= 0.
+    energy_in, energy_out : float
+        Energy that flowed into / out of the network at the port [J], both >= 0;
+        ``energy = energy_in - energy_out`` up to rounding.
+    alpha : float
+        Damping of the last step [N s/m] (0: PC inactive).
+    active_steps, steps : int
+        Steps where the PC acted, and all steps.
+    """
+
+    energy: float
+    dissipated: float
+    energy_in: float
+    energy_out: float
+    alpha: float
+    active_steps: int
+    steps: int
+
+
+class PassivityController:
+    """Passivity observer + controller for one force axis (see the module docstring for the equations).
+
+    Parameters
+    ----------
+    limit : float
+        Force clamp [N], finite and > 0; the output is always in ``[-limit, limit]``.
+    enabled : bool
+        False: observe only (the output is the clamped command; ``energy`` may go negative).
+
+    Raises
+    ------
+    ConfigError
+        ``limit`` not finite and positive.
+    """
+
+    def __init__(self, limit: float, enabled: bool = True):
+        if isinstance(limit, bool) or not (math.isfinite(limit) and limit > 0):
+            raise ConfigError(f"passivity limit must be a finite force > 0 N, got {limit!r}")
+        self.limit = float(limit)
+        self.enabled = bool(enabled)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the energy history (e.g. on re-engage, when the force starts again from zero)."""
+        self.energy = 0.0
+        self.dissipated = 0.0
+        self.energy_in = 0.0
+        self.energy_out = 0.0
+        self.alpha = 0.0
+        self.active_steps = 0
+        self.steps = 0
+
+    def step(self, force_cmd: float, velocity: float, dt: float) -> float:
+        """The force to render [N] for the commanded ``force_cmd`` [N] at handle ``velocity`` [m/s].
+
+        ``dt`` [s] is the duration of this sample (the force is held for ``dt``). Non-finite
+        ``force_cmd`` gives 0 N; non-finite ``velocity`` or ``dt <= 0`` gives 0 N without touching the
+        energy (the safe direction: no force is passive).
+        """
+        self.steps += 1
+        self.alpha = 0.0
+        f = float(force_cmd) if math.isfinite(force_cmd) else 0.0
+        f = min(max(f, -self.limit), self.limit)
+        if not (math.isfinite(velocity) and math.isfinite(dt) and dt > 0):
+            return 0.0
+        v = float(velocity)
+        # E_cmd = E(k-1) - f v dt      (energy into the network if f is rendered unchanged)
+        e_cmd = self.energy - f * v * dt
+        if self.enabled and e_cmd < 0.0 and v != 0.0:
+            # alpha = -E_cmd / (v^2 dt);  f' = f - alpha v = E(k-1) / (v dt)
+            # (the last form has no cancellation when v is tiny and alpha huge; |f'| <= |f|;
+            # a rounding-level negative E(k-1) counts as 0, so f' never points against f)
+            f_out = max(self.energy, 0.0) / (v * dt)
+            f_out = min(max(f_out, -self.limit), self.limit)
+            self.alpha = (f - f_out) / v
+            self.dissipated += (f - f_out) * v * dt
+            self.active_steps += 1
+        else:
+            f_out = f
+        # E(k) = E(k-1) - f' v dt
+        de = -f_out * v * dt
+        self.energy += de
+        if de >= 0:
+            self.energy_in += de
+        else:
+            self.energy_out -= de
+        return f_out
+
+    @property
+    def stats(self) -> PassivityStats:
+        """A snapshot of the counters."""
+        return PassivityStats(self.energy, self.dissipated, self.energy_in, self.energy_out, self.alpha,
+                              self.active_steps, self.steps)
