@@ -246,16 +246,19 @@ class HidDevice:
         return self.state(t)
 
     def set_force(self, force: float, t: float) -> None:
-        """Write ``force`` [N], saturated to ``force.limit`` (NaN/inf -> 0). No-op after :meth:`close`.
+        """Write ``force`` [N], saturated to ``force.limit`` (NaN/inf -> 0).
+
+        A no-op once the device is lost or closed: its force output was stopped then, and a zeroing
+        call in a caller's ``finally`` must not mask the error that got it there (:meth:`read` keeps
+        raising for a lost device).
 
         Raises
         ------
         DeviceError
-            The report was not sent (the device is then lost), or the device was already lost.
+            The report was not sent; the device is then lost.
         """
-        if self._closed:
+        if self._closed or self.lost:
             return
-        self._check_usable()
         try:
             self._out.write(force)
         except DeviceError as e:
