@@ -21,7 +21,9 @@ from teleop.errors import ConfigError
 
 __all__ = [
     "InstrumentConfig", "RunConfig", "SheathConfig", "MotorConfig", "LoadConfig", "SensorConfig",
-    "RigConfig", "EstimatorConfig", "CalibrationConfig", "DeviceConfig", "MappingConfig",
+    "RigConfig", "EffectsConfig", "VelocityFrictionConfig", "PretensionEffectConfig",
+    "CurvatureDriftConfig", "TendonStiffeningConfig", "StictionConfig", "FrictionOffsetConfig", "SensorOffsetConfig",
+    "SensorDelayConfig", "EstimatorConfig", "CalibrationConfig", "DeviceConfig", "MappingConfig",
     "MasterConfig", "SlaveConfig", "TransportConfig", "RecordingConfig", "Config",
     "load_config", "config_from_dict", "config_to_dict", "write_config", "RANGES",
 ]
@@ -76,6 +78,71 @@ class SensorConfig:
     seed: int = 0
 
 
+# ---- model effects of the simulated rig (estimator/effects.py has the matching extensions) -------
+# Each effect is off by default; the magnitude fields are in SI units (the range table has them).
+
+@dataclass(frozen=True)
+class VelocityFrictionConfig:
+    enabled: bool = False
+    viscous: float = 15.0                 # [s/m] mu(v) = mu (1 + viscous |v|), v sliding speed
+
+
+@dataclass(frozen=True)
+class PretensionEffectConfig:
+    enabled: bool = False
+    tension: float = 3.0                  # [N] uniform tension at rest, added to sheath.pretension
+
+
+@dataclass(frozen=True)
+class CurvatureDriftConfig:
+    enabled: bool = False
+    rate: float = 0.002                   # [1/s] dK/dt: K(t) = K + rate t (route/mu drift)
+
+
+@dataclass(frozen=True)
+class TendonStiffeningConfig:
+    enabled: bool = False
+    softening: float = 2.0                # [-] extra compliance at zero tension: (1 + softening e^-T/T_c)/EA
+    toe_tension: float = 2.0              # [N] T_c, tension where the toe stiffens
+
+
+@dataclass(frozen=True)
+class StictionConfig:
+    enabled: bool = False
+    static_ratio: float = 0.3             # [-] mu_static / mu_kinetic - 1
+    stick_time: float = 0.03              # [s] without distal slip for this long: stuck again
+
+
+@dataclass(frozen=True)
+class FrictionOffsetConfig:
+    enabled: bool = False
+    tension_offset: float = 1.0           # [N] a = q / mu in dT/dtheta = -mu (T + a)
+
+
+@dataclass(frozen=True)
+class SensorOffsetConfig:
+    enabled: bool = False
+    offset: float = 0.5                   # [N] zero offset added to the proximal load-cell reading
+
+
+@dataclass(frozen=True)
+class SensorDelayConfig:
+    enabled: bool = False
+    delay: float = 0.02                   # [s] the proximal load-cell reading lags the truth
+
+
+@dataclass(frozen=True)
+class EffectsConfig:
+    velocity_friction: VelocityFrictionConfig = field(default_factory=VelocityFrictionConfig)
+    pretension: PretensionEffectConfig = field(default_factory=PretensionEffectConfig)
+    curvature_drift: CurvatureDriftConfig = field(default_factory=CurvatureDriftConfig)
+    tendon_stiffening: TendonStiffeningConfig = field(default_factory=TendonStiffeningConfig)
+    stiction: StictionConfig = field(default_factory=StictionConfig)
+    friction_offset: FrictionOffsetConfig = field(default_factory=FrictionOffsetConfig)
+    sensor_offset: SensorOffsetConfig = field(default_factory=SensorOffsetConfig)
+    sensor_delay: SensorDelayConfig = field(default_factory=SensorDelayConfig)
+
+
 @dataclass(frozen=True)
 class RigConfig:
     type: Literal["simulated"] = "simulated"
@@ -84,6 +151,7 @@ class RigConfig:
     motor: MotorConfig = field(default_factory=MotorConfig)
     load: LoadConfig = field(default_factory=LoadConfig)
     sensors: SensorConfig = field(default_factory=SensorConfig)
+    effects: EffectsConfig = field(default_factory=EffectsConfig)
 
 
 @dataclass(frozen=True)
@@ -171,6 +239,11 @@ RANGES: dict[str, tuple[str, str]] = {
     "rig.load.limit_stiffness": ("> 0", "N/m"), "rig.load.tissue_stiffness": (">= 0", "N/m"),
     "rig.load.tissue_contact": ("any", "m"), "rig.load.force": (">= 0", "N"),
     "rig.sensors.load_cell_noise": (">= 0", "N"), "rig.sensors.seed": (">= 0", "-"),
+    "rig.effects.velocity_friction.viscous": (">= 0", "s/m"), "rig.effects.pretension.tension": (">= 0", "N"),
+    "rig.effects.curvature_drift.rate": ("any", "1/s"), "rig.effects.tendon_stiffening.softening": (">= 0", "-"),
+    "rig.effects.tendon_stiffening.toe_tension": ("> 0", "N"), "rig.effects.stiction.static_ratio": (">= 0", "-"),
+    "rig.effects.stiction.stick_time": ("> 0", "s"), "rig.effects.friction_offset.tension_offset": (">= 0", "N"),
+    "rig.effects.sensor_offset.offset": ("any", "N"), "rig.effects.sensor_delay.delay": (">= 0", "s"),
     "estimator.n_nodes": (">= 2", "-"), "estimator.hold_rate": (">= 0", "N/s"),
     "estimator.rate_time_constant": ("> 0", "s"), "estimator.profile_points": ("0..65535", "-"),
     "calibration.target_tension": ("> 0", "N"), "calibration.speed": ("> 0", "m/s"),
