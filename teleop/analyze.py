@@ -282,11 +282,13 @@ def write_kaist_figures(recs: list[KaistRecording], details: list[dict], summary
     fig.savefig(paths[-1], dpi=110)
     plt.close(fig)
 
-    fig, axes = plt.subplots(1, len(recs), figsize=(3.3 * len(recs), 3.6), squeeze=False)
+    fig, axes = plt.subplots(1, len(recs), figsize=(3.3 * len(recs), 3.7), squeeze=False)
     for ax, rec, det in zip(axes[0], recs, details):
         c2 = det["cycles"][1]
         ax.plot(deg(rec.command[c2]), deg(rec.angle[c2]), "k", lw=1.6, label="measured")
         ax.plot(deg(rec.command[c2]), deg(det["fits"]["seed pair model"].prediction[c2]), "r", lw=1, label="seed pair")
+        ax.plot(deg(rec.command[c2]), deg(det["fits"]["force path"].prediction[c2]), ":",
+                color="tab:green", lw=1.2, label="force path")
         ax.plot(deg(rec.command[c2]), deg(det["fits"]["linear map + play"].prediction[c2]), "--",
                 color="tab:blue", lw=1, label="linear + play")
         ax.set(title=f"N = {rec.config_deg} deg (cycle 2)", xlabel="command [deg]")
@@ -323,6 +325,6 @@ def write_kaist_figures(recs: list[KaistRecording], details: list[dict], summary
         a.grid(alpha=0.3)
     fig.tight_layout()
     paths.append(d / "kaist_residuals.png")
-    fig.savefig(paths[-1], dpi=100)
+    fig.savefig(paths[-1], dpi=90)
     plt.close(fig)
     return paths
