@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 from scipy.optimize import newton
 
 from estimator.phase import Phase
@@ -193,20 +194,72 @@ class PhaseFormulaEstimator:
         return self.T_out, e, ph
 
 
+# Compiled twin of PhaseFormulaEstimator.step (the same state machine; tests keep them equal).
+@njit(cache=True)
+def _phase_kernel(T_in, K, deadband, T0, T_out, e1, phase):  # pragma: no cover - compiled
+    eK = math.exp(K)
+    small = K < 1e-12
+    f_pull = 1.0 if small else -math.expm1(-K) / K
+    f_rel = 1.0 if small else math.expm1(K) / K
+    coef = 1.0 / max(K, 1e-12)
+    ph = 1                                     # PULL
+    T_in0 = T0
+    ext = T0
+    tout = T0 * math.exp(-K)
+    held = tout
+    for k in range(T_in.shape[0]):
+        t = max(T_in[k], 0.0)
+        if ph == 1 or ph == 4:                 # rising branch
+            if t >= ext:
+                ext = t
+            elif t < ext - deadband:           # reversal: pull -> release
+                T_in0, held, ext, ph = ext, tout, t, 3
+        else:
+            if t <= ext:
+                ext = t
+            elif t > ext + deadband:           # reversal: release -> pull
+                T_in0, held, ext, ph = ext, tout, t, 4
+        if ph == 3 and t < T_in0 / (eK * eK):
+            ph = 2
+        elif ph == 4 and t > T_in0 * eK * eK:
+            ph = 1
+        # on a branch, T_in inside the deadband behind the running extremum counts as the extremum
+        if ph == 1:                            # eqs. (1), (12)
+            tout = ext / eK
+            e = ext * f_pull
+        elif ph == 2:                          # eq. (22)
+            tout = ext * eK
+            e = ext * f_rel
+        elif ph == 3:                          # eqs. (14)-(21)
+            tout = held
+            tt = min(t, T_in0)
+            e = tt if small else coef * (2.0 * math.sqrt(tt * T_in0) - tt - T_in0 * math.exp(-K))
+        else:                                  # eqs. (24)-(25)
+            tout = held
+            tt = max(t, T_in0)
+            e = tt if small else coef * (tt - 2.0 * math.sqrt(tt * T_in0) + T_in0 * eK)
+        T_out[k] = tout
+        e1[k] = e
+        phase[k] = ph
+
+
+
 def phase_formula_batch(T_in: np.ndarray, K: float, compliance: float, deadband: float = 0.1, T0: float = 0.0):
-    """Run :class:`PhaseFormulaEstimator` over a recording.
+    """The paper's phase formulas over a recording: :class:`PhaseFormulaEstimator`, compiled.
 
     Parameters
     ----------
-    T_in : ndarray, shape (n,) [N]
+    T_in : ndarray, shape (n,)
+        Proximal tension [N].
+    K : float, >= 0 ; compliance : float, L/EA [m/N] ; deadband : float [N] ; T0 : float, initial tension [N]
 
     Returns
     -------
     T_out : ndarray, shape (n,) [N] ; elongation : ndarray, shape (n,) [m] ; phase : ndarray of int8, shape (n,)
     """
-    est = PhaseFormulaEstimator(K, compliance, deadband, T0)
-    T_in = np.asarray(T_in, dtype=float)
-    out = np.empty((3, T_in.size))
-    for k, t in enumerate(T_in):
-        out[0, k], out[1, k], out[2, k] = est.step(t)
-    return out[0], out[1], out[2].astype(np.int8)
+    _check_K(K)
+    T_in = np.ascontiguousarray(T_in, dtype=np.float64)
+    T_out, e1 = np.empty_like(T_in), np.empty_like(T_in)
+    phase = np.empty(T_in.size, dtype=np.int8)
+    _phase_kernel(T_in, float(K), float(deadband), float(T0), T_out, e1, phase)
+    return T_out, e1 * compliance, phase

@@ -27,13 +27,13 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 from scipy.optimize import least_squares
 
+from estimator.capstan import phase_formula_batch
 from estimator.sheath import SheathModel, profile_batch
 
 __all__ = ["ESTIMATORS", "K_MAX", "Metrics", "ModelFit", "SingleTendonFit", "split_index", "predict",
-           "fit_model", "fit_single", "phase_formula_fast"]
+           "fit_model", "fit_single"]
 
 ESTIMATORS = ("profile", "phase")
 K_MAX = 5.0
@@ -120,73 +120,6 @@ def split_index(time: np.ndarray, train_fraction: float = 0.6) -> int:
     return k
 
 
-@njit(cache=True)
-def _phase_kernel(T_in, K, deadband, T0, T_out, e1):  # pragma: no cover - compiled
-    eK = math.exp(K)
-    small = K < 1e-12
-    f_pull = 1.0 if small else -math.expm1(-K) / K
-    f_rel = 1.0 if small else math.expm1(K) / K
-    coef = 1.0 / max(K, 1e-12)
-    ph = 1                                     # PULL
-    T_in0 = T0
-    ext = T0
-    tout = T0 * math.exp(-K)
-    held = tout
-    for k in range(T_in.shape[0]):
-        t = max(T_in[k], 0.0)
-        if ph == 1 or ph == 4:                 # rising branch
-            if t >= ext:
-                ext = t
-            elif t < ext - deadband:           # reversal: pull -> release
-                T_in0, held, ext, ph = ext, tout, t, 3
-        else:
-            if t <= ext:
-                ext = t
-            elif t > ext + deadband:           # reversal: release -> pull
-                T_in0, held, ext, ph = ext, tout, t, 4
-        if ph == 3 and t < T_in0 / (eK * eK):
-            ph = 2
-        elif ph == 4 and t > T_in0 * eK * eK:
-            ph = 1
-        # on a branch, T_in inside the deadband behind the running extremum counts as the extremum
-        if ph == 1:                            # eqs. (1), (12)
-            tout = ext / eK
-            e = ext * f_pull
-        elif ph == 2:                          # eq. (22)
-            tout = ext * eK
-            e = ext * f_rel
-        elif ph == 3:                          # eqs. (14)-(21)
-            tout = held
-            tt = min(t, T_in0)
-            e = tt if small else coef * (2.0 * math.sqrt(tt * T_in0) - tt - T_in0 * math.exp(-K))
-        else:                                  # eqs. (24)-(25)
-            tout = held
-            tt = max(t, T_in0)
-            e = tt if small else coef * (tt - 2.0 * math.sqrt(tt * T_in0) + T_in0 * eK)
-        T_out[k] = tout
-        e1[k] = e
-
-
-def phase_formula_fast(T_in: np.ndarray, K: float, deadband: float = 0.1, T0: float = 0.0):
-    """The paper's phase formulas over a recording, compiled; same maths as
-    :func:`estimator.capstan.phase_formula_batch` without the phase output.
-
-    Parameters
-    ----------
-    T_in : ndarray, shape (n,), proximal tension [N]
-    K : float, >= 0 ; deadband : float [N] ; T0 : float, initial tension [N]
-
-    Returns
-    -------
-    T_out : ndarray, shape (n,) [N]
-    elongation_per_compliance : ndarray, shape (n,) [N]; times L/EA [m/N] gives the elongation [m].
-    """
-    T_in = np.ascontiguousarray(T_in, dtype=np.float64)
-    T_out, e1 = np.empty_like(T_in), np.empty_like(T_in)
-    _phase_kernel(T_in, float(K), float(deadband), float(T0), T_out, e1)
-    return T_out, e1
-
-
 def _unit_run(estimator: str, T_in: np.ndarray, K: float, n_nodes: int, pretension: float, deadband: float):
     """(T_out_hat [N], elongation / compliance [N]) for compliance 1 (elongation is linear in L/EA)."""
     if estimator == "profile":
@@ -194,7 +127,8 @@ def _unit_run(estimator: str, T_in: np.ndarray, K: float, n_nodes: int, pretensi
         T_out, e1, _ = profile_batch(np.full(log_gain.size, pretension), log_gain, weight, T_in)
         return T_out, e1
     if estimator == "phase":
-        return phase_formula_fast(T_in, K, deadband, pretension)
+        T_out, e1, _ = phase_formula_batch(T_in, K, 1.0, deadband, pretension)
+        return T_out, e1
     raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
 
 

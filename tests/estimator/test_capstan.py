@@ -88,3 +88,17 @@ def test_phase_labels_follow_the_cycle():
     # the pull->release band ends where T_in = 20 e^-2K
     first_release = starts[np.flatnonzero(ph[starts] == Phase.RELEASE)[0]]
     assert T_in[first_release] == pytest.approx(20 * math.exp(-2 * K), rel=0.01)
+
+
+@pytest.mark.parametrize("K_", [0.0, 0.3, 1.1])
+def test_compiled_batch_equals_online_state_machine(K_):
+    """phase_formula_batch is a compiled twin of PhaseFormulaEstimator.step: keep them equal."""
+    t = np.arange(6000) * 1e-3
+    T_in = 10 + 8 * np.sin(2 * np.pi * 0.8 * t) * np.sin(2 * np.pi * 0.13 * t) + np.random.default_rng(3).normal(0, 0.05, t.size)
+    T_b, e_b, ph_b = capstan.phase_formula_batch(T_in, K_, 2e-4, deadband=0.1, T0=T_in[0])
+    est = capstan.PhaseFormulaEstimator(K_, 2e-4, deadband=0.1, T0=T_in[0])
+    for k, T in enumerate(T_in):
+        T_o, e, ph = est.step(T)
+        assert T_o == pytest.approx(T_b[k], rel=1e-12, abs=1e-12)
+        assert e == pytest.approx(e_b[k], rel=1e-12, abs=1e-15)
+        assert int(ph) == int(ph_b[k])

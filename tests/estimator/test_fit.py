@@ -4,7 +4,7 @@ import pytest
 
 from estimator.capstan import phase_formula_batch
 from estimator.distal import estimate_batch
-from estimator.fit import fit_model, fit_single, phase_formula_fast, predict, split_index
+from estimator.fit import fit_model, fit_single, predict, split_index
 from estimator.sheath import SheathModel
 
 K_TRUE, C_TRUE = 0.45, 8e-5        # [-], L/EA [m/N]
@@ -24,16 +24,6 @@ def test_predict_profile_is_estimate_batch():
     T_hat, x_hat = predict("profile", T_in, x_in, K_TRUE, C_TRUE, n_nodes=80)
     np.testing.assert_allclose(T_hat, ref.T_out, rtol=1e-12)
     np.testing.assert_allclose(x_hat, ref.x_out, rtol=1e-12, atol=1e-15)
-
-
-@pytest.mark.parametrize("K", [0.0, 0.3, 1.1])
-def test_compiled_phase_formulas_equal_capstan_reference(K):
-    t, T_in, _ = history(6000)
-    T_in = T_in + np.random.default_rng(3).normal(0, 0.05, T_in.size)     # noise around the deadband
-    ref_T, ref_e, _ = phase_formula_batch(T_in, K, 1.0, deadband=0.1, T0=T_in[0])
-    T_hat, e1 = phase_formula_fast(T_in, K, deadband=0.1, T0=T_in[0])
-    np.testing.assert_allclose(T_hat, ref_T, rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose(e1, ref_e, rtol=1e-12, atol=1e-12)
 
 
 def test_split_is_a_time_block():
