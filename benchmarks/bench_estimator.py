@@ -56,7 +56,7 @@ def main() -> None:
         print(f"  online step   n_nodes={nodes:4d}: {bench_step(nodes) * 1e6:7.2f} us/sample   (aim <= 10 us)")
     for nodes in (50, 100, 200):
         print(f"  batch         n_nodes={nodes:4d}: {bench_batch(nodes) / 1e6:7.2f} M samples/s (aim >= 1)")
-    print(f"  paper phase formulas (pure Python): {bench_paper() / 1e6:7.3f} M samples/s")
+    print(f"  paper phase formulas (compiled)   : {bench_paper() / 1e6:7.3f} M samples/s")
 
 
 if __name__ == "__main__":
