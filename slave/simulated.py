@@ -7,16 +7,22 @@ the distal load solved exactly at every step. The compiled kernels live in
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
 from estimator.sheath import Run, SheathGeometry
 from slave.rig import RigInputError, RigState, RigTruth
-from slave.simulated_physics import advance_proximal, elongation, load_inverse, settle_distal
-from teleop.config import Config, LoadConfig, RigConfig, SheathConfig
+from slave.simulated_physics import (advance_general, advance_proximal, elongation, elongation_general, full_slip,
+                                     load_inverse, settle_distal)
+from teleop.config import Config, EffectsConfig, LoadConfig, RigConfig, SheathConfig
 from teleop.errors import ConfigError
 
-__all__ = ["SimulatedRig"]
+__all__ = ["SimulatedRig", "EFFECT_IDS"]
+
+#: The effect switches of ``rig.effects``, named as in the catalogue (estimator/effects.py).
+EFFECT_IDS = ("velocity_friction", "pretension", "curvature_drift", "tendon_stiffening", "stiction",
+              "friction_offset", "sensor_offset", "sensor_delay")
 
 _NOISE_BLOCK = 4096
 
@@ -60,7 +66,26 @@ class SimulatedRig:
       x_enc = q round(x_in / q).
 
     Assumptions: rigid sheath (no axial compression), Coulomb friction with equal static and dynamic
-    mu, no bending stiffness or clearance, massless tendon and distal joint.
+    mu, no bending stiffness or clearance, massless tendon and distal joint - unless an effect of
+    ``rig.effects`` is switched on (each is off by default; estimator/effects.py fits them back):
+
+    * velocity_friction: mu(v) = mu (1 + viscous |v|) with v the motor speed [m/s] of this step (the
+      sliding speed of the slipping part); a stuck part keeps the profile it had when it stopped.
+    * pretension: the start profile is sheath.pretension + tension [N] (see the pretension bullet).
+    * curvature_drift: K(t) = K + rate t [1/s] (all node gains scaled, route shape kept).
+    * tendon_stiffening: element strain phi(T)/EA, phi(T) = T + softening T_c (1 - e^{-T/T_c}).
+    * stiction: while stuck the bound is mu (1 + static_ratio); when the slip front reaches the
+      distal end the tendon breaks away and the whole tendon re-slides at the kinetic mu in the same
+      step (T_in drops, x_out and T_out jump); it is stuck again after ``stick_time`` [s] without
+      distal slip (holds, reversals).
+    * friction_offset: dT/dtheta = -mu (T + a) sgn(v), a = tension_offset [N] (bending stiffness,
+      clearance): the envelope rule on T + a, T >= 0.
+    * sensor_offset: the load cell reads T_in + offset [N]; sensor_delay: it reads T_in(t - delay)
+      (linear interpolation of the history).
+
+    With an effect that changes the tendon (all but pretension and the two sensor effects) each step
+    is solved by bisection (:func:`slave.simulated_physics.advance_general`) instead of the exact scan;
+    :meth:`set_load` then re-balances with the plain Coulomb bounds of the moment.
 
     Parameters
     ----------
@@ -97,10 +122,11 @@ class SimulatedRig:
         self._force = float(rig.load.force)
         self._graph = _load_graph(rig.load, self._tissue, self._force)
 
-        P = float(sheath.pretension)
+        self._init_effects(getattr(rig, "effects", None) or EffectsConfig(), n)
+        P = float(sheath.pretension) + self._pretension
         self._T = np.full(n + 1, P)
         self._x_out = float(load_inverse(P, *self._graph)[0])
-        self._x_in = self._x_out + elongation(self._T, self._w)
+        self._x_in = self._x_out + elongation_general(self._T, self._w, self._beta, self._Tc)
 
         m = rig.motor
         self._omega = 2.0 * math.pi * m.bandwidth_hz
@@ -177,8 +203,11 @@ class SimulatedRig:
         elif dx < -vmax_dt:
             dx = -vmax_dt
         self._x_in += dx
-        self._x_out = advance_proximal(self._T, self._lo, self._hi, self._w, self._c_pull, self._c_rel,
-                                       self._x_in, self._x_out, *self._graph)
+        if self._general:
+            self._advance_effects(abs(dx) / h, self._t + h)
+        else:
+            self._x_out = advance_proximal(self._T, self._lo, self._hi, self._w, self._c_pull, self._c_rel,
+                                           self._x_in, self._x_out, *self._graph)
         self._t += h
         self._state = self._read(cmd)
         return self._state
@@ -211,18 +240,88 @@ class SimulatedRig:
         """Nothing to release in simulation; idempotent. Stepping afterwards is allowed."""
         self._closed = True
 
+    # ---- effects -------------------------------------------------------------------------------------
+    @property
+    def effects(self) -> tuple[str, ...]:
+        """Identifiers of the effects switched on (estimator/effects.py names), in config order."""
+        return self._effect_ids
+
+    def _init_effects(self, fx: EffectsConfig, n: int) -> None:
+        _validate_effects(fx)
+        on = {name: getattr(fx, name) for name in EFFECT_IDS if getattr(fx, name).enabled}
+        self._effect_ids = tuple(on)
+        self._pretension = float(on["pretension"].tension) if "pretension" in on else 0.0
+        self._a = float(on["friction_offset"].tension_offset) if "friction_offset" in on else 0.0
+        st = on.get("tendon_stiffening")
+        self._beta, self._Tc = (float(st.softening), float(st.toe_tension)) if st else (0.0, 1.0)
+        self._viscous = float(on["velocity_friction"].viscous) if "velocity_friction" in on else 0.0
+        self._K_rate = float(on["curvature_drift"].rate) if "curvature_drift" in on else 0.0
+        sc = on.get("stiction")
+        self._static = 1.0 + float(sc.static_ratio) if sc else 1.0
+        self._stick_time = float(sc.stick_time) if sc else math.inf
+        self._stuck = True
+        self._last_slip = 0.0
+        self._offset = float(on["sensor_offset"].offset) if "sensor_offset" in on else 0.0
+        self._delay = float(on["sensor_delay"].delay) if "sensor_delay" in on else 0.0
+        self._history: deque[tuple[float, float]] = deque()
+        self._general = any(k in on for k in ("velocity_friction", "curvature_drift", "tendon_stiffening",
+                                              "stiction", "friction_offset"))
+        K = float(self.log_gain[-1])
+        # node gain per unit K (the route shape); a straight sheath drifts as if uniformly curved
+        self._shape = self.log_gain / K if K > 0 else np.linspace(0.0, 1.0, n + 1)
+        self._gain_key = math.nan
+
+    def _bounds(self, K_eff: float) -> tuple[np.ndarray, np.ndarray]:
+        if K_eff != self._gain_key:
+            self._gain_key = K_eff
+            self._glo = np.exp(-K_eff * self._shape)
+            self._ghi = 1.0 / self._glo
+        return self._glo, self._ghi
+
+    def _advance_effects(self, speed: float, t: float) -> None:
+        """One proximal step with the effect switches (class docstring); speed [m/s], t [s] after the step."""
+        K_kin = max(self.K + self._K_rate * t, 0.0) * (1.0 + self._viscous * speed)
+        stuck = self._stuck and self._static > 1.0
+        lo, hi = self._bounds(K_kin * (self._static if stuck else 1.0))
+        args = (self._w, self._a, self._beta, self._Tc)
+        self._x_out, slid = advance_general(self._T, lo, hi, *args, self._x_in, self._x_out, *self._graph)
+        if self._static > 1.0:
+            if slid and stuck:        # breakaway: the whole tendon re-slides at the kinetic bound
+                lo, hi = self._bounds(K_kin)
+                self._x_out = full_slip(self._T, lo if slid > 0 else hi, *args, self._x_in, *self._graph)
+                self._stuck = False
+            if slid:
+                self._last_slip = t
+            elif t - self._last_slip >= self._stick_time:
+                self._stuck = True
+
+    def _load_cell(self, T_true: float) -> float:
+        """The load-cell signal before noise: delayed and offset as the sensor effects say [N]."""
+        if self._delay > 0.0:
+            h = self._history
+            h.append((self._t, T_true))
+            t_read = self._t - self._delay
+            while len(h) > 2 and h[1][0] <= t_read:
+                h.popleft()
+            (t0, v0), (t1, v1) = h[0], h[-1] if len(h) == 1 else h[1]
+            if t_read <= t0 or t1 <= t0:
+                T_true = v0
+            else:
+                T_true = v0 + (v1 - v0) * min(1.0, (t_read - t0) / (t1 - t0))
+        return T_true + self._offset
+
     # ---- internals ----------------------------------------------------------------------------------
     def _read(self, cmd: float) -> RigState:
         T = self._T
         profile = T.copy()
         profile.flags.writeable = False
-        e = elongation(T, self._w)
+        e = elongation_general(T, self._w, self._beta, self._Tc)
         truth = RigTruth(T_in=float(T[0]), T_out=float(T[-1]), x_in=self._x_in, x_out=self._x_out,
                          elongation=e, profile=profile)
         if self._k == _NOISE_BLOCK:
             self._noise = self._rng.standard_normal(_NOISE_BLOCK)
             self._k = 0
-        T_meas = float(T[0]) + self._sigma * float(self._noise[self._k])
+        T_meas = self._load_cell(float(T[0])) + self._sigma * float(self._noise[self._k])
         self._k += 1
         q = self.encoder_resolution
         x_enc = q * round(self._x_in / q)
@@ -293,3 +392,20 @@ def _validate(sheath: SheathConfig, rig: RigConfig) -> None:
     _check(_finite(s.load_cell_noise) and s.load_cell_noise >= 0, "rig.sensors.load_cell_noise",
            "a finite standard deviation >= 0 N", s.load_cell_noise)
     _check(isinstance(s.seed, int) and not isinstance(s.seed, bool), "rig.sensors.seed", "an integer", s.seed)
+
+
+def _validate_effects(fx: EffectsConfig) -> None:
+    """Range checks of the effect magnitudes (only of the effects switched on); ConfigError names the key."""
+    rules = {"velocity_friction.viscous": (">=", 0.0), "pretension.tension": (">=", 0.0),
+             "curvature_drift.rate": ("any", 0.0), "tendon_stiffening.softening": (">=", 0.0),
+             "tendon_stiffening.toe_tension": (">", 0.0), "stiction.static_ratio": (">=", 0.0),
+             "stiction.stick_time": (">", 0.0), "friction_offset.tension_offset": (">=", 0.0),
+             "sensor_offset.offset": ("any", 0.0), "sensor_delay.delay": (">=", 0.0)}
+    for key, (op, bound) in rules.items():
+        name, field_name = key.split(".")
+        sub = getattr(fx, name)
+        _check(isinstance(sub.enabled, (bool, np.bool_)), f"rig.effects.{name}.enabled", "true or false",
+               sub.enabled)
+        v = getattr(sub, field_name)
+        ok = _finite(v) and (op == "any" or (v >= bound if op == ">=" else v > bound))
+        _check(ok, f"rig.effects.{key}", "a finite number" + ("" if op == "any" else f" {op} {bound:g}"), v)

@@ -21,9 +21,11 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
-__all__ = ["advance_proximal", "settle_distal", "load_inverse", "load_on_line", "elongation"]
+__all__ = ["advance_proximal", "settle_distal", "load_inverse", "load_on_line", "elongation", "strain",
+           "elongation_general", "full_slip", "advance_general"]
 
 
 @njit(cache=True, nogil=True)
@@ -216,3 +218,198 @@ def settle_distal(T, lo, hi, w, x_in, x_out, bx, bF, bs):  # pragma: no cover - 
     elif x > xh:
         x = xh
     return x
+
+
+# ---- general step for the effect switches (friction offset, stiffening, varying bounds) -----------
+#
+# With a tension offset a (friction that does not scale with tension, dT/dtheta = -mu (T + a)) the
+# envelope rule holds for Y = T + a instead of T, with T >= 0 (Y >= a) where the tendon goes slack.
+# With a stiffening tendon the strain of an element is phi(T) / EA,
+#     phi(T) = T + beta T_c (1 - exp(-T / T_c))       (tangent compliance (1 + beta e^{-T/T_c}) / EA)
+# so the elongation sum(w phi(T_i)) is no longer linear in the proximal tension and each step is
+# solved by a bracketed root search instead of the breakpoint scan. G is lo (pull, s = +1) or hi
+# (release, s = -1): node i slips to Y_p G_i once Y_p passes the running max (min) of Y_j / G_j.
+# When the bounds narrowed since a stuck part was laid down (speed or K dropped), that part is
+# steeper than the new envelope and the slip front crosses it at one proximal tension: the step
+# then ends with the front inside it (its nodes blended between old and new so that the
+# elongation matches x_in - x_out exactly).
+
+
+@njit(cache=True, nogil=True)
+def strain(T, beta, Tc):  # pragma: no cover - compiled
+    """phi(T) [N]: tension-equivalent strain of a stiffening tendon (T when beta = 0)."""
+    if beta == 0.0:
+        return T
+    return T - beta * Tc * math.expm1(-T / Tc)
+
+
+@njit(cache=True, nogil=True)
+def elongation_general(T, w, beta, Tc):  # pragma: no cover - compiled
+    """sum(w * phi(T)) [m]."""
+    e = 0.0
+    for i in range(T.shape[0]):
+        e += w[i] * strain(T[i], beta, Tc)
+    return e
+
+
+@njit(cache=True, nogil=True)
+def _prefix(T, S, G, w, a, beta, Tc, Yp, s, out):  # pragma: no cover - compiled
+    """Elongation change [m] if the proximal end goes to Y_p with slip spreading from it.
+
+    S = phi(T) of the old profile. Writes the new node tensions into ``out`` (its first k entries)
+    and returns (dE, k), k = number of slipping nodes."""
+    n1 = T.shape[0]
+    dE = 0.0
+    run = -math.inf if s > 0 else math.inf
+    for i in range(n1):
+        b = (T[i] + a) / G[i]
+        if s > 0:
+            if b > run:
+                run = b
+            if Yp < run:
+                return dE, i
+        else:
+            if b < run:
+                run = b
+            if Yp > run:
+                return dE, i
+        t = Yp * G[i] - a
+        if t < 0.0:
+            t = 0.0
+        out[i] = t
+        dE += w[i] * (strain(t, beta, Tc) - S[i])
+    return dE, n1
+
+
+@njit(cache=True, nogil=True)
+def _full(G, w, a, beta, Tc, Td, out):  # pragma: no cover - compiled
+    """Elongation [m] of the whole tendon sliding with distal tension T_d (Y_i = Y_d G_i / G_n)."""
+    n1 = G.shape[0]
+    Yd = (Td + a) / G[n1 - 1]
+    e = 0.0
+    for i in range(n1):
+        t = Yd * G[i] - a
+        if t < 0.0:
+            t = 0.0
+        out[i] = t
+        e += w[i] * strain(t, beta, Tc)
+    return e
+
+
+@njit(cache=True, nogil=True)
+def _root(lo, f_lo, hi, f_hi, T, S, G, w, a, beta, Tc, s, x_in, target, bx, bF, bs, out, mode):  # pragma: no cover
+    """Bracketed root of a non-decreasing f with f(lo) < 0 <= f(hi) (Anderson-Bjorck regula falsi,
+    bisection whenever the bracket does not halve). mode 0: f = E(Y_p) - target (prefix slip);
+    mode 1: f = x_hi(T_d) + E_full(T_d) - x_in (whole tendon sliding). Returns the final bracket."""
+    side = 0
+    for it in range(200):
+        width = hi - lo
+        if width <= 1e-15 * max(1.0, abs(hi)):
+            break
+        x = hi - f_hi * width / (f_hi - f_lo) if f_hi > f_lo else 0.5 * (lo + hi)
+        if it % 3 == 2 or not (lo < x < hi):
+            x = 0.5 * (lo + hi)
+        if mode == 0:
+            fx = _prefix(T, S, G, w, a, beta, Tc, x, s, out)[0] - target
+        else:
+            fx = load_inverse(x, bx, bF, bs)[1] + _full(G, w, a, beta, Tc, x, out) - x_in
+        if fx < 0.0:
+            lo, f_lo = x, fx
+            if side == -1:
+                f_hi *= 0.5
+            side = -1
+        else:
+            if fx == 0.0:
+                return x, x
+            hi, f_hi = x, fx
+            if side == 1:
+                f_lo *= 0.5
+            side = 1
+    return lo, hi
+
+
+@njit(cache=True, nogil=True)
+def full_slip(T, G, w, a, beta, Tc, x_in, bx, bF, bs):  # pragma: no cover - compiled
+    """Whole tendon sliding (G = lo pulling, hi releasing): the smallest distal tension T_d with
+    x_hi(T_d) + e(T_d) >= x_in; writes the profile into T and returns x_out [m]."""
+    out = np.empty_like(T)
+    lo = 0.0
+    f_lo = load_inverse(0.0, bx, bF, bs)[1] + _full(G, w, a, beta, Tc, 0.0, out) - x_in
+    if f_lo >= 0.0:
+        hi = 0.0
+    else:
+        hi = max(1.0, 2.0 * T[T.shape[0] - 1])
+        for _ in range(200):
+            f_hi = load_inverse(hi, bx, bF, bs)[1] + _full(G, w, a, beta, Tc, hi, out) - x_in
+            if f_hi >= 0.0:
+                break
+            lo, f_lo, hi = hi, f_hi, 2.0 * hi
+        lo, hi = _root(lo, f_lo, hi, f_hi, T, T, G, w, a, beta, Tc, 0, x_in, 0.0, bx, bF, bs, out, 1)
+    e = _full(G, w, a, beta, Tc, hi, T)
+    xl, xh = load_inverse(hi, bx, bF, bs)
+    x = x_in - e
+    if x < xl:
+        x = xl
+    elif x > xh:
+        x = xh
+    return x
+
+
+@njit(cache=True, nogil=True)
+def advance_general(T, lo, hi, w, a, beta, Tc, x_in, x_out, bx, bF, bs):  # pragma: no cover - compiled
+    """Move the proximal end to ``x_in`` [m] with tension offset ``a`` [N] and stiffening (beta, T_c).
+
+    Same physics as :func:`advance_proximal` (slip spreading from the proximal end, the distal end
+    stuck until the slip front reaches it, then the whole tendon slides on the load graph), solved
+    by a bracketed root search on the proximal tension. Returns (x_out [m], s) with s = +1 (-1) when
+    the whole tendon slid toward the actuator (tip) in this step, else 0.
+    """
+    n1 = T.shape[0]
+    S = np.empty_like(T)
+    for i in range(n1):
+        S[i] = strain(T[i], beta, Tc)
+    e_old = 0.0
+    for i in range(n1):
+        e_old += w[i] * S[i]
+    target = x_in - x_out
+    if abs(target - e_old) <= 4e-16 * (abs(x_in) + abs(x_out) + e_old):
+        return x_out, 0
+    s = 1 if target > e_old else -1
+    G = lo if s > 0 else hi
+    # proximal Y at which the slip front reaches the distal node
+    Ystar = (T[0] + a) / G[0]
+    for i in range(1, n1):
+        b = (T[i] + a) / G[i]
+        if (s > 0 and b > Ystar) or (s < 0 and b < Ystar):
+            Ystar = b
+    Y0 = T[0] + a
+    dt = target - e_old
+    new = np.empty_like(T)
+    if s > 0:
+        f_hi = _prefix(T, S, G, w, a, beta, Tc, Ystar, s, new)[0] - dt
+        if f_hi < 0.0:
+            return full_slip(T, G, w, a, beta, Tc, x_in, bx, bF, bs), 1
+        y_lo, y_hi = _root(Y0, -dt, Ystar, f_hi, T, S, G, w, a, beta, Tc, s, x_in, dt, bx, bF, bs, new, 0)
+        y_in, y_out = y_lo, y_hi
+    else:
+        floor = max(Ystar, a)
+        f_lo = _prefix(T, S, G, w, a, beta, Tc, floor, s, new)[0] - dt
+        if f_lo > 0.0:
+            if Ystar >= a:
+                return full_slip(T, G, w, a, beta, Tc, x_in, bx, bF, bs), -1
+            k = _prefix(T, S, G, w, a, beta, Tc, a, s, new)[1]  # slack: the proximal end cannot push
+            T[:k] = new[:k]
+            return x_out, 0
+        y_lo, y_hi = _root(floor, f_lo, Y0, -dt, T, S, G, w, a, beta, Tc, s, x_in, dt, bx, bF, bs, new, 0)
+        y_in, y_out = y_hi, y_lo
+    # y_in: elongation short of (pull) / above (release) the target; y_out: at or past it
+    d_in, k_in = _prefix(T, S, G, w, a, beta, Tc, y_in, s, new)
+    T[:k_in] = new[:k_in]
+    d_out, k_out = _prefix(T, S, G, w, a, beta, Tc, y_out, s, new)
+    if k_out > k_in and d_out != d_in:
+        # the front crossed a steep stuck part: leave it inside, blending the nodes it passed
+        lam = min(1.0, max(0.0, (dt - d_in) / (d_out - d_in)))
+        for i in range(k_in, k_out):
+            new[i] = T[i] + lam * (new[i] - T[i])
+    T[:k_out] = new[:k_out]
+    return x_out, 0
