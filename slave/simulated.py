@@ -75,9 +75,9 @@ class SimulatedRig:
     * curvature_drift: K(t) = K + rate t [1/s] (all node gains scaled, route shape kept).
     * tendon_stiffening: element strain phi(T)/EA, phi(T) = T + softening T_c (1 - e^{-T/T_c}).
     * stiction: while stuck the bound is mu (1 + static_ratio); when the slip front reaches the
-      distal end the tendon breaks away and the whole tendon re-slides at the kinetic mu in the same
-      step (T_in drops, x_out and T_out jump); it is stuck again after ``stick_time`` [s] without
-      distal slip (holds, reversals).
+      distal end the tendon breaks away and slides as a whole while mu relaxes to the kinetic value,
+      mu (1 + static_ratio e^{-(t - t_b)/slip_time}) for 5 slip_time or until the motor turns back
+      (T_in drops, x_out and T_out jump); it is stuck again after ``stick_time`` [s] without distal slip (holds, reversals).
     * friction_offset: dT/dtheta = -mu (T + a) sgn(v), a = tension_offset [N] (bending stiffness,
       clearance): the envelope rule on T + a, T >= 0.
     * sensor_offset: the load cell reads T_in + offset [N]; sensor_delay: it reads T_in(t - delay)
@@ -204,7 +204,7 @@ class SimulatedRig:
             dx = -vmax_dt
         self._x_in += dx
         if self._general:
-            self._advance_effects(abs(dx) / h, self._t + h)
+            self._advance_effects(dx / h, self._t + h)
         else:
             self._x_out = advance_proximal(self._T, self._lo, self._hi, self._w, self._c_pull, self._c_rel,
                                            self._x_in, self._x_out, *self._graph)
@@ -259,8 +259,10 @@ class SimulatedRig:
         sc = on.get("stiction")
         self._static = 1.0 + float(sc.static_ratio) if sc else 1.0
         self._stick_time = float(sc.stick_time) if sc else math.inf
+        self._slip_time = float(sc.slip_time) if sc else 1.0
         self._stuck = True
         self._last_slip = 0.0
+        self._t_break, self._dir = -math.inf, 0
         self._offset = float(on["sensor_offset"].offset) if "sensor_offset" in on else 0.0
         self._delay = float(on["sensor_delay"].delay) if "sensor_delay" in on else 0.0
         self._history: deque[tuple[float, float]] = deque()
@@ -278,18 +280,24 @@ class SimulatedRig:
             self._ghi = 1.0 / self._glo
         return self._glo, self._ghi
 
-    def _advance_effects(self, speed: float, t: float) -> None:
-        """One proximal step with the effect switches (class docstring); speed [m/s], t [s] after the step."""
-        K_kin = max(self.K + self._K_rate * t, 0.0) * (1.0 + self._viscous * speed)
+    def _advance_effects(self, v: float, t: float) -> None:
+        """One proximal step with the effect switches (class docstring); v [m/s], t [s] after the step."""
+        K_kin = max(self.K + self._K_rate * t, 0.0) * (1.0 + self._viscous * abs(v))
+        args = (self._w, self._a, self._beta, self._Tc)
+        if v * self._dir < -2e-4:
+            self._t_break = -math.inf  # the proximal end turned back: the breakaway slide is over
+        if self._static > 1.0 and not self._stuck and t - self._t_break < 5.0 * self._slip_time:
+            # after breakaway the whole tendon slides while mu relaxes from static to kinetic
+            lo, hi = self._bounds(K_kin * (1.0 + (self._static - 1.0) * math.exp(-(t - self._t_break) / self._slip_time)))
+            self._x_out = full_slip(self._T, lo if self._dir > 0 else hi, *args, self._x_in, *self._graph)
+            self._last_slip = t
+            return
         stuck = self._stuck and self._static > 1.0
         lo, hi = self._bounds(K_kin * (self._static if stuck else 1.0))
-        args = (self._w, self._a, self._beta, self._Tc)
         self._x_out, slid = advance_general(self._T, lo, hi, *args, self._x_in, self._x_out, *self._graph)
         if self._static > 1.0:
-            if slid and stuck:        # breakaway: the whole tendon re-slides at the kinetic bound
-                lo, hi = self._bounds(K_kin)
-                self._x_out = full_slip(self._T, lo if slid > 0 else hi, *args, self._x_in, *self._graph)
-                self._stuck = False
+            if slid and stuck:        # breakaway at the static bound
+                self._stuck, self._t_break, self._dir = False, t, slid
             if slid:
                 self._last_slip = t
             elif t - self._last_slip >= self._stick_time:
@@ -399,7 +407,7 @@ def _validate_effects(fx: EffectsConfig) -> None:
     rules = {"velocity_friction.viscous": (">=", 0.0), "pretension.tension": (">=", 0.0),
              "curvature_drift.rate": ("any", 0.0), "tendon_stiffening.softening": (">=", 0.0),
              "tendon_stiffening.toe_tension": (">", 0.0), "stiction.static_ratio": (">=", 0.0),
-             "stiction.stick_time": (">", 0.0), "friction_offset.tension_offset": (">=", 0.0),
+             "stiction.stick_time": (">", 0.0), "stiction.slip_time": (">", 0.0), "friction_offset.tension_offset": (">=", 0.0),
              "sensor_offset.offset": ("any", 0.0), "sensor_delay.delay": (">=", 0.0)}
     for key, (op, bound) in rules.items():
         name, field_name = key.split(".")

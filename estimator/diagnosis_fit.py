@@ -1,0 +1,181 @@
+"""Fitting and scoring for the diagnosis (:mod:`estimator.diagnosis`): preparation, time split, fits.
+
+The procedure of the diagnosis (docs/diagnosis.md has the reasoning and the calibration):
+
+1. Prepare: block-average the recording to about ``target_rate`` (zero phase; the noise drops, the
+   maths of the rate-independent model does not change), velocity dx_in/dt, noise levels.
+2. Split in time: training = the first ``train_fraction`` of the duration, moved to the nearest
+   rest (slow and low tension) within 8 % of the duration so that whole cycles are held out; the
+   held-out block is the rest. Never random samples (neighbours leak).
+3. Fit the base model (K; L/EA by linear least squares) on the training block with
+   ``scipy.optimize.least_squares``; run it over the whole recording (the held-out block starts from
+   the state the training block left) and score the held-out block.
+4. Fit every extension of :mod:`estimator.effects` the same way (its parameters and K; several
+   starts) and score it on the held-out block: S = mean over measured distal signals of
+   MSE_extension / MSE_base (each signal in its own unit, so both count).
+5. Select: the extension with the lowest S is accepted when its relative improvement 1 - S beats
+   ``PENALTY`` per extra parameter (an information-criterion-like price, calibrated on clean
+   recordings so that none is accepted there); otherwise the answer is ``none``, or ``unknown``
+   when the base residual keeps structure well above the noise. Accepted extensions are then
+   extended greedily by a second one on the same rule relative to the model so far.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from estimator.effects import K_MAX, Effect, Parameter, Series, predict
+from estimator.sheath import SheathModel
+from teleop.recording import MeasuredData
+
+__all__ = ["prepare", "split_at_rest", "fit_model", "start_points", "heldout_mse", "raw_rmse", "noise_level",
+           "SIGNALS"]
+
+_K = Parameter("K", "-", 0.0, K_MAX, 0.5, (), "friction exponent mu * total wrap angle")
+_SCALE = {"K": 0.1, "c_v": 10.0, "T0": 1.0, "K_rate": 1e-3, "beta": 1.0, "T_c": 1.0, "r_s": 0.1, "a": 0.5,
+          "b_T_in": 0.5, "tau": 0.01}
+SIGNALS = ("T_out", "x_out")
+
+
+def noise_level(a: np.ndarray) -> float:
+    """Robust white-noise level [unit of a] from second differences (MAD / sqrt(6))."""
+    if a.size < 5:
+        return 0.0
+    d2 = a[2:] - 2.0 * a[1:-1] + a[:-2]
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6.0))
+
+
+def prepare(data: MeasuredData, *, n_nodes: int = 32, target_rate: float = 200.0,
+            wrap_shape: np.ndarray | None = None) -> Series:
+    """Block-average a recording to about ``target_rate`` [Hz] and set up the model's node grid.
+
+    Parameters
+    ----------
+    data : MeasuredData with time [s], x_in [m], T_in [N] and x_out [m] and/or T_out [N]
+    n_nodes : elements of the tension profile (32 keeps the elongation error below 0.1 um)
+    wrap_shape : normalised route shape, see :class:`estimator.sheath.SheathModel` (None: uniform)
+
+    Raises
+    ------
+    DataError
+        No distal column. ValueError: fewer than 50 samples after averaging.
+    """
+    data.require_distal()
+    t = np.asarray(data.time, dtype=float)
+    fs = (t.size - 1) / max(t[-1] - t[0], 1e-12)
+    m = max(1, int(fs // target_rate))
+    nb = t.size // m
+    if nb < 50:
+        raise ValueError(f"{data.source}: {t.size} samples at {fs:.0f} Hz are too few to diagnose (need >= 50 "
+                         f"after averaging to {target_rate:.0f} Hz)")
+
+    def dec(a):
+        return None if a is None else np.asarray(a, dtype=float)[: nb * m].reshape(nb, m).mean(axis=1)
+
+    time, x_in, T_in = dec(t), dec(data.x_in), dec(data.T_in)
+    velocity = np.convolve(np.pad(np.gradient(x_in, time), 1, mode="edge"), np.ones(3) / 3.0, mode="valid")
+    shape, weight = SheathModel(K=1.0, compliance=1.0, wrap_shape=wrap_shape).nodes(int(n_nodes))
+    T_min = max(10.0 * noise_level(T_in), 0.01 * float(np.ptp(T_in)))
+    return Series(time, x_in, T_in, velocity, dec(data.T_out), dec(data.x_out), shape, weight, T_min)
+
+
+def split_at_rest(s: Series, train_fraction: float) -> int:
+    """Index of the first held-out sample: near ``train_fraction`` of the duration, at a rest.
+
+    Within +-8 % of the duration around the nominal split the sample with the lowest
+    (0.5 s mean speed / its median + T_in / range of T_in) is taken, so the split falls in a hold at
+    low tension between cycles when there is one. Raises ValueError for a fraction outside
+    [0.3, 0.9] or blocks of fewer than 20 samples.
+    """
+    if not 0.3 <= train_fraction <= 0.9:
+        raise ValueError(f"train_fraction must be in [0.3, 0.9], got {train_fraction!r}")
+    t = s.time
+    dur = t[-1] - t[0]
+    lo, hi = np.searchsorted(t, t[0] + (train_fraction - 0.08) * dur), np.searchsorted(t, t[0] + (train_fraction + 0.08) * dur)
+    win = max(1, int(round(0.5 / max(np.median(np.diff(t)), 1e-9))))
+    v = np.convolve(np.abs(s.velocity), np.ones(win) / win, mode="same")
+    score = v / max(float(np.median(v)), 1e-12) + (s.T_in - s.T_in.min()) / max(float(np.ptp(s.T_in)), 1e-12)
+    k = int(lo + np.argmin(score[lo:hi])) if hi > lo else int(np.searchsorted(t, t[0] + train_fraction * dur))
+    if k < 20 or len(s) - k < 20:
+        raise ValueError(f"a {train_fraction:.0%} split leaves a block with fewer than 20 samples")
+    return k
+
+
+def _params(effects: list[Effect]) -> list[Parameter]:
+    return [_K] + [p for e in effects for p in e.parameters]
+
+
+def _residual_scales(s: Series) -> dict[str, float]:
+    out = {}
+    for name in SIGNALS:
+        y = getattr(s, name)
+        if y is not None:
+            out[name] = max(float(np.ptp(y)), 1e-12)
+    return out
+
+
+def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float]], *,
+              max_starts: int = 2) -> tuple[dict[str, float], float, float]:
+    """Least-squares fit of K and the parameters of ``effects`` on a training series.
+
+    Every start (dict of parameter values, missing ones neutral) is scored, the best
+    ``max_starts`` are refined by ``scipy.optimize.least_squares`` (trust-region reflective, within
+    the parameters' bounds, in variables scaled to O(1)). L/EA is solved in closed form inside
+    every residual evaluation. Returns (values, compliance [m/N], cost).
+    """
+    params = _params(effects)
+    scale = np.array([_SCALE[p.name] for p in params])
+    lo = np.array([p.lower for p in params]) / scale
+    hi = np.array([p.upper for p in params]) / scale
+    norm = _residual_scales(train)
+
+    def values(z):
+        return {p.name: float(v) for p, v in zip(params, z * scale)}
+
+    def residual(z):
+        pr = predict(effects, values(z), train)
+        return np.concatenate([(getattr(pr, k) - getattr(train, k)) / v for k, v in norm.items()])
+
+    z_starts = [np.clip(np.array([st.get(p.name, p.neutral) for p in params]) / scale, lo, hi) for st in starts]
+    ranked = sorted(z_starts, key=lambda z: float(np.sum(residual(z) ** 2)))
+    best = None
+    for z0 in ranked[:max_starts]:
+        sol = least_squares(residual, z0, bounds=(lo, hi), diff_step=1e-2, x_scale=1.0, max_nfev=40 * len(params))
+        if best is None or sol.cost < best.cost:
+            best = sol
+    vals = values(best.x)
+    c = predict(effects, vals, train).compliance
+    return vals, c, float(best.cost)
+
+
+def start_points(effects: list[Effect], base: dict[str, float], s: Series, fixed: dict[str, float]) -> list[dict]:
+    """Starting points: the fitted values so far, and the product of each new parameter's starts."""
+    grids = []
+    for e in effects:
+        for p in e.parameters:
+            if p.name in fixed:
+                grids.append([(p.name, fixed[p.name])])
+            elif p.name == "T0":       # the tension read at rest before the first move
+                grids.append([(p.name, max(float(np.median(s.T_in[: max(3, len(s) // 200)])), 0.1))])
+            else:
+                grids.append([(p.name, v) for v in (p.starts or (p.neutral,))])
+    return [{"K": base["K"], **dict(combo)} for combo in itertools.product(*grids)]
+
+
+def heldout_mse(pr, s: Series, k: int) -> dict[str, float]:
+    return {name: float(np.mean((getattr(pr, name)[k:] - getattr(s, name)[k:]) ** 2))
+            for name in SIGNALS if getattr(s, name) is not None}
+
+
+def raw_rmse(pr, s: Series, data: MeasuredData, t_split: float) -> dict[str, float | None]:
+    """Held-out rmse on the measured samples (predictions interpolated to the raw time base)."""
+    m = data.time >= t_split
+    out: dict[str, float | None] = {}
+    for name, unit in (("T_out", "N"), ("x_out", "m")):
+        y = getattr(data, name)
+        out[f"rmse_{name}_{unit}"] = None if y is None else float(
+            np.sqrt(np.mean((np.interp(data.time[m], s.time, getattr(pr, name)) - y[m]) ** 2)))
+    return out

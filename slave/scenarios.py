@@ -1,0 +1,261 @@
+"""Realistic recordings from the simulated rig, with one model effect hidden at a seeded magnitude.
+
+A recording is what a bench session with a distal load cell and a distal position sensor gives:
+
+* a motion protocol of repeated blocks; each block is a shuffled mix of pull/release cycles at
+  several amplitudes and speeds (2-20 mm/s), minor loops (partial release, re-pull past the old
+  peak), staircases with holds, and small oscillations around a mid level (0.5-2 Hz); every block
+  starts and ends at rest, so a time split at a block boundary holds out whole cycles;
+* the rig of :mod:`slave.simulated` (quasi-static distributed Coulomb tendon, 100 elements, motor
+  with 40 Hz bandwidth, tissue spring at the tip) with randomised K, EA and load stiffness;
+* sensors: proximal load cell with white noise, motor encoder quantised at 0.47 um, distal load
+  cell with white noise, distal position with noise and 1 um quantisation; both positions are
+  zeroed at the start (the encoders are reset at rest), as on a bench.
+
+The hidden effect is one of :data:`EFFECT_IDS` with its magnitude drawn from :func:`realistic_range`
+(``level`` in [0, 1] picks the position in the range; random from the seed when omitted). The
+returned :class:`Recording` keeps the truth apart from the data, so a diagnosis cannot read it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from estimator.sheath import SheathGeometry
+from slave.simulated import EFFECT_IDS, SimulatedRig
+from teleop import config as C
+from teleop.recording import MeasuredData
+
+__all__ = ["EFFECT_IDS", "UNCATALOGUED", "Recording", "realistic_range", "effects_config", "protocol",
+           "record"]
+
+#: Effects outside the catalogue, for testing the answer ``unknown``: a slow wander of the distal
+#: load cell's zero (thermal drift of its bridge), smooth on a ~10 s scale.
+UNCATALOGUED = ("load_cell_drift",)
+
+# realistic magnitude of each effect: parameter -> (low, high) in its SI unit (docs/diagnosis.md)
+_RANGES = {
+    "velocity_friction": {"viscous": (5.0, 25.0)},               # s/m: +5..25 % friction at 10 mm/s
+    "pretension": {"tension": (1.0, 5.0)},                       # N
+    "curvature_drift": {"relative_change": (0.10, 0.30)},        # |dK| / K over the recording, either sign
+    "tendon_stiffening": {"softening": (1.0, 4.0), "toe_tension": (1.0, 3.0)},   # -, N
+    "stiction": {"static_ratio": (0.15, 0.6)},                   # mu_s / mu_k - 1
+    "friction_offset": {"distal_offset": (0.2, 1.0)},            # N: F0 = a (1 - e^-K) at the tip
+    "sensor_offset": {"offset": (0.2, 1.0)},                     # N, either sign
+    "sensor_delay": {"delay": (0.010, 0.050)},                   # s
+    "load_cell_drift": {"amplitude": (0.3, 0.8)},                # N
+}
+
+
+@dataclass(frozen=True, eq=False)
+class Recording:
+    """A simulated recording and its hidden truth.
+
+    data : MeasuredData with time [s], x_in [m], T_in [N], x_out [m], T_out [N] (measured, noisy).
+    truth : dict with ``effect`` (id or "none"), ``parameters`` (name -> SI value), ``K`` [-],
+        ``compliance`` L/EA [m/N], ``level`` [0, 1], the noise levels and ``signals`` (noise-free
+        T_out [N], x_out [m], x_in [m], shape (n,)); for evaluation only.
+    """
+
+    data: MeasuredData
+    truth: dict = field(default_factory=dict)
+
+
+def realistic_range(effect: str) -> dict[str, tuple[float, float]]:
+    """The magnitude range(s) of one effect's rig parameter(s), SI units.
+
+    Raises
+    ------
+    ValueError
+        ``effect`` is neither a catalogue id nor in :data:`UNCATALOGUED`.
+    """
+    if effect not in _RANGES:
+        raise ValueError(f"unknown effect {effect!r}; expected one of {sorted(_RANGES)}")
+    return dict(_RANGES[effect])
+
+
+def effects_config(effect: str | None, level: float, K: float, duration: float,
+                   rng: np.random.Generator) -> tuple[C.EffectsConfig, dict[str, float]]:
+    """The rig's effect switches for one hidden effect at ``level`` in [0, 1] of its range.
+
+    Returns the :class:`teleop.config.EffectsConfig` and the truth parameters (SI units). Signs of
+    the offset and the drift are drawn from ``rng``.
+    """
+    fx = C.EffectsConfig()
+    if effect is None or effect == "none" or effect in UNCATALOGUED:
+        return fx, {}
+    r = {k: lo + level * (hi - lo) for k, (lo, hi) in realistic_range(effect).items()}
+    sign = 1.0 if rng.random() < 0.5 else -1.0
+    if effect == "velocity_friction":
+        sub, p = C.VelocityFrictionConfig(True, r["viscous"]), {"viscous": r["viscous"]}
+    elif effect == "pretension":
+        sub, p = C.PretensionEffectConfig(True, r["tension"]), {"tension": r["tension"]}
+    elif effect == "curvature_drift":
+        rate = sign * r["relative_change"] * K / duration
+        sub, p = C.CurvatureDriftConfig(True, rate), {"K_rate": rate}
+    elif effect == "tendon_stiffening":
+        sub = C.TendonStiffeningConfig(True, r["softening"], r["toe_tension"])
+        p = {"softening": r["softening"], "toe_tension": r["toe_tension"]}
+    elif effect == "stiction":
+        sub, p = C.StictionConfig(True, r["static_ratio"]), {"static_ratio": r["static_ratio"]}
+    elif effect == "friction_offset":
+        a = r["distal_offset"] / -math.expm1(-K)
+        sub, p = C.FrictionOffsetConfig(True, a), {"tension_offset": a, "distal_offset": r["distal_offset"]}
+    elif effect == "sensor_offset":
+        sub, p = C.SensorOffsetConfig(True, sign * r["offset"]), {"offset": sign * r["offset"]}
+    elif effect == "sensor_delay":
+        sub, p = C.SensorDelayConfig(True, r["delay"]), {"delay": r["delay"]}
+    else:  # pragma: no cover - realistic_range raised already
+        raise ValueError(effect)
+    return replace(fx, **{effect: sub}), p
+
+
+def protocol(duration: float, rate_hz: float, x_max: float, rng: np.random.Generator,
+             x_rest: float = 0.0) -> np.ndarray:
+    """Proximal displacement command [m], shape (round(duration * rate_hz),), relative to rest.
+
+    Blocks of shuffled moves (module docstring) from and back to ``x_rest`` [m], up to ``x_max``
+    [m], repeated until ``duration`` [s] is filled; the last block is cut where time runs out.
+    """
+    dt = 1.0 / rate_hz
+    n = int(round(duration * rate_hz))
+    pts: list[tuple[float, float]] = [(0.0, x_rest)]        # (time [s], position [m]) corners
+
+    def speed() -> float:
+        return float(rng.choice([0.002, 0.004, 0.008, 0.016]) * rng.uniform(0.8, 1.25))
+
+    def move(u: float, v: float | None = None) -> None:
+        t, x = pts[-1]
+        x1 = x_rest + u * (x_max - x_rest)
+        pts.append((t + max(abs(x1 - x) / (v or speed()), dt), x1))
+
+    def hold(lo: float = 0.2, hi: float = 1.2) -> None:
+        t, x = pts[-1]
+        pts.append((t + rng.uniform(lo, hi), x))
+
+    def cycle() -> None:
+        v = speed()
+        move(float(rng.choice([0.35, 0.65, 1.0])) * rng.uniform(0.9, 1.0), v)
+        hold()
+        move(0.0, v)
+        hold(0.3, 1.5)
+
+    def minor() -> None:
+        a = rng.uniform(0.4, 0.75)
+        move(a)
+        hold(0.1, 0.5)
+        move(a * rng.uniform(0.3, 0.7))
+        hold(0.1, 0.5)
+        move(rng.uniform(a + 0.1, 1.0))
+        hold(0.1, 0.5)
+        move(rng.uniform(0.2, 0.5) * a)
+        hold(0.1, 0.5)
+        move(0.0)
+        hold(0.3, 1.0)
+
+    def stairs() -> None:
+        k = int(rng.integers(3, 5))
+        for j in range(1, k + 1):
+            move(j / k * rng.uniform(0.85, 1.0))
+            hold(0.4, 1.0)
+        for j in range(k - 1, -1, -1):
+            move(j / k)
+            hold(0.4, 1.0)
+
+    def wiggle() -> None:
+        mid, amp, f = rng.uniform(0.4, 0.6), rng.uniform(0.1, 0.25), rng.uniform(0.5, 2.0)
+        move(mid)
+        t0, _ = pts[-1]
+        for t in np.arange(1, int(rng.integers(3, 6)) * 16 + 1) / (16 * f):
+            pts.append((t0 + t, x_rest + (mid + amp * math.sin(2 * math.pi * t * f)) * (x_max - x_rest)))
+        move(0.0)
+        hold(0.3, 1.0)
+
+    kinds = [cycle, cycle, minor, stairs, wiggle]
+    hold(0.5, 1.0)
+    while pts[-1][0] < duration:
+        for j in rng.permutation(len(kinds)):
+            kinds[j]()
+    t, x = np.array(pts).T
+    return np.interp(np.arange(n) * dt, t, x)
+
+
+def record(effect: str | None = None, *, seed: int = 0, level: float | None = None, duration: float = 90.0,
+           rate_hz: float = 1000.0) -> Recording:
+    """Run one protocol through the simulated rig with ``effect`` hidden (None or "none": clean).
+
+    Parameters
+    ----------
+    effect : str or None
+        A catalogue id (:data:`EFFECT_IDS`), an id of :data:`UNCATALOGUED`, or None / "none".
+    seed : int
+        Seeds the rig (K, EA, load), the protocol, the magnitude and every noise.
+    level : float in [0, 1], optional
+        Position of the magnitude in :func:`realistic_range`; uniform random from the seed if None.
+    duration : float
+        Length [s], >= 5.
+    rate_hz : float
+        Sampling and control rate [Hz], >= 100.
+
+    Raises
+    ------
+    ValueError
+        Unknown effect, ``level`` outside [0, 1], too short or too slowly sampled a recording.
+    """
+    if effect not in (None, "none") and effect not in EFFECT_IDS and effect not in UNCATALOGUED:
+        raise ValueError(f"unknown effect {effect!r}; expected None, 'none' or one of {EFFECT_IDS + UNCATALOGUED}")
+    if level is not None and not 0.0 <= level <= 1.0:
+        raise ValueError(f"level must be in [0, 1], got {level!r}")
+    if not (duration >= 5.0 and rate_hz >= 100.0):
+        raise ValueError(f"need duration >= 5 s and rate_hz >= 100 Hz, got {duration!r} s, {rate_hz!r} Hz")
+    # independent streams, so that one seed gives the same rig and protocol whatever the effect
+    rng, rng_fx, rng_proto, rng_noise = (np.random.default_rng(s) for s in np.random.SeedSequence([seed, 7]).spawn(4))
+    u = float(rng_fx.uniform()) if level is None else float(level)
+    L, angle = 1.5, 2.0 * math.pi
+    K = float(rng.uniform(0.4, 1.0))
+    EA = float(rng.uniform(10e3, 20e3))
+    k_tissue = float(rng.uniform(1000.0, 3000.0))
+    noise_in, noise_out = float(rng.uniform(0.01, 0.03)), float(rng.uniform(0.02, 0.04))
+    noise_x, q_x = 1e-6, 1e-6
+    geo = SheathGeometry.uniform(L, angle)
+    sheath = C.SheathConfig(mu=K / angle, EA=EA, runs=tuple(C.RunConfig(r.length, r.radius) for r in geo.runs))
+    fx, params = effects_config(effect, u, K, duration, rng_fx)
+    rig_cfg = C.RigConfig(n_elements=100, rate_hz=rate_hz, effects=fx,
+                          load=C.LoadConfig(joint_stiffness=100.0, joint_limit=0.05, tissue_stiffness=k_tissue,
+                                            tissue_contact=0.0, tissue=True, force=0.0),
+                          sensors=C.SensorConfig(load_cell_noise=noise_in, seed=int(rng.integers(2**31))))
+    rig = SimulatedRig(sheath, rig_cfg)
+    c = L / EA
+    per_newton = math.exp(-K) / (100.0 + k_tissue) + c * -math.expm1(-K) / K   # x_in per T_in, pulling
+    x0 = rig.state.truth.x_in
+    x_rest = float(rng.uniform(0.1, 0.4)) * per_newton
+    if effect == "friction_offset":   # rest where the tendon stays taut: friction holds a(e^K - 1) at the tip
+        x_rest += 1.2 * params["tension_offset"] * math.expm1(K) * (1.0 / (100.0 + k_tissue) + c)
+    cmd = x0 + protocol(duration, rate_hz, float(rng.uniform(12.0, 20.0)) * per_newton, rng_proto, x_rest=x_rest)
+    dt = 1.0 / rate_hz
+    enc0, x_out0, x_in0 = rig.state.x_in, rig.state.truth.x_out, rig.state.truth.x_in   # at rest, before moving
+    out = np.empty((cmd.size, 5))
+    for k, x in enumerate(cmd):
+        s = rig.step(float(x), dt)
+        out[k] = (s.x_in, s.T_in, s.truth.x_out, s.truth.T_out, s.truth.x_in)
+    T_out = out[:, 3] + noise_out * rng_noise.standard_normal(cmd.size)
+    x_out = q_x * np.round((out[:, 2] - x_out0 + noise_x * rng_noise.standard_normal(cmd.size)) / q_x)
+    if effect == "load_cell_drift":
+        amp = realistic_range(effect)["amplitude"]
+        amplitude = amp[0] + u * (amp[1] - amp[0])
+        knots = np.arange(0.0, duration + 20.0, 10.0)
+        wander = np.interp(np.arange(cmd.size) * dt, knots, rng_fx.uniform(-1.0, 1.0, knots.size))
+        T_out = T_out + amplitude * wander / max(np.max(np.abs(wander)), 1e-9)
+        params = {"amplitude": amplitude}
+    data = MeasuredData(time=np.arange(1, cmd.size + 1) * dt, x_in=out[:, 0] - enc0, T_in=out[:, 1],
+                        x_out=x_out, T_out=T_out,
+                        metadata={"source": "slave/scenarios.py simulated bench recording",
+                                  "units": "time=s, x_in=m, T_in=N, x_out=m, T_out=N"},
+                        source=f"<scenario seed {seed}>")
+    truth = {"effect": effect or "none", "parameters": params, "level": u,
+             "K": K, "compliance": c, "EA": EA, "noise_T_in": noise_in, "noise_T_out": noise_out,
+             "noise_x_out": noise_x,
+             "signals": {"T_out": out[:, 3], "x_out": out[:, 2] - x_out0, "x_in": out[:, 4] - x_in0}}
+    return Recording(data=data, truth=truth)
