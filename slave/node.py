@@ -1,0 +1,301 @@
+"""The slave (instrument-side) node: latest Command -> rig -> estimator -> Estimate, with a watchdog.
+
+One :meth:`SlaveNode.step` per cycle (``rig.rate_hz``), given the time by the caller:
+
+* CALIBRATING (from power-up): :class:`slave.calibrate.JointLimitCalibration` drives the rig; no
+  command is accepted and no estimate is sent. When it is done, a :class:`DistalEstimator` is built
+  on the calibrated :class:`SheathModel` and replays the routine's proximal samples so that its
+  tension-profile memory matches the tendon's; calibration.json is written.
+* Then, each cycle, the latest Command decides (latest wins):
+
+  ========================================  ==========  =======================================
+  latest command                            state       rig command
+  ========================================  ==========  =======================================
+  none, or older than ``slave.watchdog_ms``  SAFE        hold the last applied position
+  fresh, ``engaged=False``                  READY       hold the last applied position
+  fresh, ``engaged=True``                   ENGAGED     ``x_in_cmd``
+  ========================================  ==========  =======================================
+
+  rig.step -> estimator.step(T_in, x_in, t) (proximal sensors only, never the truth) -> Estimate
+  (with the profile at ``estimator.profile_points`` points) -> one CSV row per cycle and Rerun
+  every ``recording.log_every`` cycles (estimate against truth when the rig has it).
+* A Heartbeat at ``slave.heartbeat_hz`` carries the state. With ``stop_on_master_stop`` the node
+  sets :attr:`done` when the master's heartbeat says STOPPING.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from estimator.distal import DistalEstimator
+from estimator.sheath import SheathModel, profile_batch
+from slave.calibrate import JointLimitCalibration
+from slave.rig import Rig, RigState
+from teleop.clock import Clock, Pacer
+from teleop.codec import next_seq
+from teleop.config import Config
+from teleop.messages import Estimate, Heartbeat, Side, SideState
+
+__all__ = ["SlaveLinks", "SlaveNode", "CSV_COLUMNS", "CSV_TRUTH_COLUMNS", "csv_columns"]
+
+log = logging.getLogger("teleop.slave")
+
+#: Columns of the slave's recording (measured-data format; truth columns only with a simulated rig).
+CSV_TRUTH_COLUMNS = ("x_out", "T_out", "elongation")
+CSV_COLUMNS = ("time", "x_in", "T_in", "x_out", "T_out", "elongation", "T_out_hat", "elongation_hat",
+               "x_out_hat", "phase", "marker", "cmd_seq", "x_in_cmd", "state")
+
+
+@dataclass
+class SlaveLinks:
+    """The slave's side of the transport (real: :mod:`teleop.transport`; tests: in-memory fakes).
+
+    estimate, heartbeat : objects with ``put(msg)``.
+    command, master_heartbeat : latest-wins subscribers with ``latest()`` and ``age(now)`` [s].
+    """
+
+    estimate: Any
+    heartbeat: Any
+    command: Any
+    master_heartbeat: Any
+
+
+class SlaveNode:
+    """Slave side of one tendon's teleoperation loop.
+
+    Parameters
+    ----------
+    cfg : Config
+    rig : Rig
+    links : SlaveLinks
+    recorder : object with ``write(row)`` (a :class:`teleop.recording.CsvRecorder` with ``columns``
+        from :func:`csv_columns`), or None.
+    rerun : object with ``log_profile``/``log_scalars``/``log_phase`` (a
+        :class:`teleop.rerun_log.RerunLogger`), or None.
+    run_dir : Path or None
+        Where calibration.json goes.
+    stop_on_master_stop : bool
+        Finish when the master announces STOPPING.
+    calibrate : bool
+        Run the joint-limit routine first (False: use ``model`` at once, for tests).
+    model : SheathModel, optional
+        The model when ``calibrate`` is False.
+    """
+
+    def __init__(self, cfg: Config, rig: Rig, links: SlaveLinks, *, recorder=None, rerun=None,
+                 run_dir: str | Path | None = None, stop_on_master_stop: bool = False,
+                 calibrate: bool = True, model=None):
+        self.cfg = cfg
+        self.rig = rig
+        self.links = links
+        self.recorder = recorder
+        self.rerun = rerun
+        self.run_dir = None if run_dir is None else Path(run_dir)
+        self.stop_on_master_stop = stop_on_master_stop
+        self.watchdog = cfg.slave.watchdog_ms * 1e-3
+        self.hb_period = 1.0 / cfg.slave.heartbeat_hz
+        self.period = 1.0 / cfg.rig.rate_hz
+        self.L = cfg.sheath.geometry().length
+        self.s_points = np.linspace(0.0, self.L, cfg.estimator.profile_points)
+        self.done = False
+        self.seq = 0
+        self.hb_seq = 0
+        self._next_hb = -math.inf
+        self._t_prev: float | None = None
+        self.x_hold = rig.state.x_in
+        self.cmd_seq = 0
+        self.marker = 0
+        self.estimator: DistalEstimator | None = None
+        self.calibration: JointLimitCalibration | None = None
+        self.state = SideState.STARTING
+        self.rig_state: RigState = rig.state
+        self.cycles = 0
+        self.commands_applied = 0
+        self.safe_events = 0
+        self.pacer_stats: dict[str, float] = {}
+        self.master_stopped = False
+        # load the compiled kernels now, not in the first real-time cycle
+        DistalEstimator(SheathModel(K=0.5, compliance=1e-4), n_nodes=2).step(1.0, 0.0, 0.0)
+        if calibrate:
+            self.calibration = JointLimitCalibration(cfg, rig)
+            self._set_state(SideState.CALIBRATING, 0.0, "power-up joint-limit initialisation")
+        else:
+            if model is None:
+                raise ValueError("SlaveNode(calibrate=False) needs a SheathModel in model=")
+            self._make_estimator(model)
+            self._set_state(SideState.SAFE, 0.0, "no command yet")
+
+    # ------------------------------------------------------------------------------------------------
+    def _make_estimator(self, model) -> None:
+        e = self.cfg.estimator
+        self.estimator = DistalEstimator(model, n_nodes=e.n_nodes, pretension=self.cfg.sheath.pretension,
+                                         hold_rate=e.hold_rate, rate_time_constant=e.rate_time_constant)
+
+    def _finish_calibration(self, now: float) -> None:
+        cal = self.calibration
+        self._make_estimator(cal.result.model)
+        # replay the routine (compiled batch): the estimator's memory = the tendon's proximal history
+        t_h, x_h, T_h = cal.history
+        est = self.estimator
+        _, _, est.profile[:] = profile_batch(est.profile, est.log_gain, est.weight, np.asarray(T_h, dtype=float))
+        est.step(T_h[-1], x_h[-1], t_h[-1])
+        self.x_hold = cal.x_cmd
+        if self.run_dir is not None:
+            self.run_dir.mkdir(parents=True, exist_ok=True)
+            (self.run_dir / "calibration.json").write_text(json.dumps(cal.as_dict(), indent=2) + "\n",
+                                                           encoding="utf-8")
+        # first full Rerun log now: its one-off set-up cost (tens of ms) stays out of the engaged loop
+        self._log_rerun(self.rig_state, est.T_out, est.elongation, est.phase,
+                        est.profile_samples(len(self.s_points)), everything=True)
+        r = cal.result
+        log.info("calibrated: K = %.4f, M_e = %.4e m/N (knee at T_in = %.2f N)", r.K, r.M_e, r.knee_T_in)
+        self._set_state(SideState.SAFE, now, "calibrated; waiting for commands")
+
+    def _set_state(self, state: SideState, now: float, why: str) -> None:
+        if state != self.state:
+            log.info("slave %s -> %s at t=%.3f s: %s", self.state.name, state.name, now, why)
+            if state == SideState.SAFE and self.state == SideState.ENGAGED:
+                self.safe_events += 1
+            self.state = state
+
+    def _command(self, now: float) -> float:
+        """Apply the watchdog to the latest command; return the rig command [m]."""
+        rec = self.links.command.latest()
+        if rec is None or self.links.command.age(now) > self.watchdog:
+            self._set_state(SideState.SAFE, now, "no command" if rec is None else "command stale")
+            self.marker = 0
+            return self.x_hold
+        cmd = rec.message
+        self.cmd_seq = cmd.seq
+        if not cmd.engaged:
+            self._set_state(SideState.READY, now, "master not engaged")
+            self.marker = 0
+            return self.x_hold
+        self._set_state(SideState.ENGAGED, now, "master engaged")
+        self.marker = cmd.marker
+        self.x_hold = cmd.x_in_cmd
+        self.commands_applied += 1
+        return cmd.x_in_cmd
+
+    def step(self, now: float) -> None:
+        """One slave cycle at time ``now`` [s] (see the module docstring)."""
+        if self.done:
+            return
+        dt = self.period if self._t_prev is None else now - self._t_prev
+        if not dt > 0:          # same instant twice: nothing to advance
+            return
+        self._t_prev = now
+        self.cycles += 1
+        hb = self.links.master_heartbeat.latest()
+        if hb is not None and hb.message.state == SideState.STOPPING:
+            self.master_stopped = True
+            if self.stop_on_master_stop:
+                self.done = True
+
+        if self.state == SideState.CALIBRATING:
+            cal = self.calibration
+            x_cmd = cal.command(self.rig_state, dt)
+            self.rig_state = self.rig.step(x_cmd, dt)
+            cal.observe(self.rig_state)
+            self._record_calibration(self.rig_state, x_cmd)
+            if cal.done:
+                self._finish_calibration(now)
+        else:
+            x_cmd = self._command(now)
+            rs = self.rig_state = self.rig.step(x_cmd, dt)
+            est = self.estimator.step(rs.T_in, rs.x_in, rs.t)
+            profile = self.estimator.profile_samples(len(self.s_points))
+            self.links.estimate.put(Estimate(self.seq, self.cmd_seq, now, rs.T_in, rs.x_in, est.T_out,
+                                             est.elongation, est.x_out, est.phase,
+                                             tuple(float(v) for v in profile)))
+            self.seq = next_seq(self.seq)
+            self._record(rs, est, x_cmd, profile)
+
+        if now >= self._next_hb:
+            self.links.heartbeat.put(Heartbeat(Side.SLAVE, self.hb_seq, now, self.state))
+            self.hb_seq = next_seq(self.hb_seq)
+            self._next_hb = now + self.hb_period if self._next_hb == -math.inf else max(
+                self._next_hb + self.hb_period, now)
+
+    def _record_calibration(self, rs: RigState, x_cmd: float) -> None:
+        """Rerun only (the CSV starts when the estimator does): the calibration pull as it happens."""
+        if self.rerun is None or self.cycles % self.cfg.recording.log_every:
+            return
+        tr = rs.truth
+        self.rerun.log_scalars(rs.t, T_in=rs.T_in, T_out_true=None if tr is None else tr.T_out,
+                               elongation_true=None if tr is None else tr.elongation)
+
+    def _record(self, rs: RigState, est, x_cmd: float, profile: np.ndarray) -> None:
+        tr = rs.truth
+        if self.recorder is not None:
+            truth = (tr.x_out, tr.T_out, tr.elongation) if tr is not None else ()
+            self.recorder.write((rs.t, rs.x_in, rs.T_in, *truth, est.T_out, est.elongation, est.x_out,
+                                 int(est.phase), self.marker, self.cmd_seq, x_cmd, int(self.state)))
+        self._log_rerun(rs, est.T_out, est.elongation, est.phase, profile)
+
+    def _log_rerun(self, rs: RigState, T_out_hat: float, elongation_hat: float, phase, profile: np.ndarray,
+                   everything: bool = False) -> None:
+        """Every ``log_every`` cycles: the profile (~0.5 ms) and, half a window later, the scalars and
+        phase (~0.1 ms), so that no single cycle carries both; ``everything`` logs both now."""
+        if self.rerun is None:
+            return
+        n = self.cfg.recording.log_every
+        k = self.cycles % n
+        tr = rs.truth
+        if k == 0 or everything:
+            T_true = None
+            if tr is not None:
+                u = np.linspace(0.0, 1.0, tr.profile.size)
+                T_true = np.interp(self.s_points / self.L, u, tr.profile)
+            self.rerun.log_profile(rs.t, self.s_points, profile, T_true)
+        if k == n // 2 or everything:
+            self.rerun.log_scalars(rs.t, T_in=rs.T_in, T_out_hat=T_out_hat,
+                                   T_out_true=None if tr is None else tr.T_out,
+                                   elongation_hat=elongation_hat,
+                                   elongation_true=None if tr is None else tr.elongation)
+            self.rerun.log_phase(rs.t, phase.label)
+
+    # ------------------------------------------------------------------------------------------------
+    def run(self, clock: Clock, *, max_duration: float | None = None) -> None:
+        """Pace :meth:`step` at ``rig.rate_hz`` until :attr:`done` (or ``max_duration`` [s])."""
+        pacer = Pacer(clock, self.cfg.rig.rate_hz)
+        t0 = clock.now()
+        try:
+            while not self.done:
+                now = pacer.wait()
+                self.step(now)
+                if max_duration is not None and now - t0 >= max_duration:
+                    break
+        finally:
+            self.pacer_stats = pacer.stats()
+
+    def stats(self) -> dict[str, Any]:
+        """Counters for the run summary (JSON-serialisable)."""
+        cmd = self.links.command
+        return {
+            "side": "slave",
+            "state": self.state.name,
+            "cycles": self.cycles,
+            "estimates_sent": self.seq,
+            "commands_received": int(getattr(cmd, "count", 0)),
+            "command_decode_errors": int(getattr(cmd, "errors", 0)),
+            "commands_applied": self.commands_applied,
+            "safe_events": self.safe_events,
+            "master_stopped": self.master_stopped,
+            "calibrated": self.estimator is not None,
+            "pacer": dict(self.pacer_stats),
+        }
+
+    def write_stats(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.stats(), indent=2) + "\n", encoding="utf-8")
+
+
+def csv_columns(has_truth: bool) -> tuple[str, ...]:
+    """The recording's columns: :data:`CSV_COLUMNS`, without the truth ones for a hardware rig."""
+    return CSV_COLUMNS if has_truth else tuple(c for c in CSV_COLUMNS if c not in CSV_TRUTH_COLUMNS)
