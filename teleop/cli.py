@@ -1,0 +1,229 @@
+"""The ``teleop`` command: ``teleop demo|master|slave|analyze``.
+
+:func:`main` takes an argument list and returns an exit code; argument parsing is separate
+(:func:`build_parser`) and every subcommand is a function of the parsed arguments. Exit codes:
+
+* 0   done;
+* 1   the run finished but failed its checks (``demo``: accuracy or process failure);
+* 2   bad input: unknown option, config typo, missing file, bad CSV... one line
+      ``teleop: error: <message>`` on stderr, no traceback;
+* 130 interrupted by Ctrl-C, 143 stopped by SIGTERM; recordings are closed and flushed either way.
+
+Shared flags: ``--config FILE`` (YAML over the defaults), ``--listen EP`` / ``--connect EP``
+(repeatable Zenoh endpoints such as ``tcp/127.0.0.1:7447``; given either, they replace both
+configured lists), ``--run-dir DIR`` (where recordings and stats go; default
+``<recording.dir>/<timestamp>``).
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import time
+from pathlib import Path
+
+from teleop.errors import TeleopError
+
+__all__ = ["build_parser", "main", "run_slave", "run_master", "default_run_dir", "endpoints"]
+
+PROG = "teleop"
+
+
+def default_run_dir(base: str | Path) -> Path:
+    """A fresh ``<base>/<YYYYmmdd-HHMMSS>[-n]`` directory path (not created)."""
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    path = Path(base) / stamp
+    n = 1
+    while path.exists():
+        path = Path(base) / f"{stamp}-{n}"
+        n += 1
+    return path
+
+
+def endpoints(args: argparse.Namespace) -> tuple[tuple[str, ...] | None, tuple[str, ...] | None]:
+    """(listen, connect) overrides from the flags: both None when neither flag is given."""
+    if args.listen is None and args.connect is None:
+        return None, None
+    return tuple(args.listen or ()), tuple(args.connect or ())
+
+
+def _shared(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", metavar="FILE", help="YAML config over the defaults (configs/default.yaml)")
+    p.add_argument("--listen", metavar="EP", action="append",
+                   help="Zenoh endpoint to listen on, e.g. tcp/127.0.0.1:7447 (repeatable)")
+    p.add_argument("--connect", metavar="EP", action="append",
+                   help="Zenoh endpoint to connect to (repeatable)")
+    p.add_argument("--run-dir", metavar="DIR", help="directory for recordings and stats (default runs/<timestamp>)")
+    p.add_argument("-v", "--verbose", action="store_true", help="log state changes and details")
+
+
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The argument parser. ``argv`` decides whether ``teleop.analyze`` is imported (only for analyze)."""
+    parser = argparse.ArgumentParser(prog=PROG, description="Haptic teleoperation of tendon-sheath instruments.")
+    sub = parser.add_subparsers(dest="command", metavar="{demo,master,slave,analyze}", required=True)
+
+    p = sub.add_parser("demo", help="both sides as two processes over Zenoh on 127.0.0.1, then a summary")
+    _shared(p)
+    p.add_argument("--protocol", default="paper,minor", help="operator protocol(s) (default paper,minor)")
+    p.add_argument("--timeout", type=float, default=50.0, help="give up on the processes after this [s]")
+    p.set_defaults(func=_cmd_demo)
+
+    p = sub.add_parser("slave", help="instrument side: calibrate, then follow commands and estimate")
+    _shared(p)
+    p.add_argument("--exit-on-master-stop", action="store_true", help="finish when the master announces STOPPING")
+    p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
+    p.add_argument("--rerun", choices=("save", "spawn", "off"), default=None, help="override recording.rerun")
+    p.set_defaults(func=_cmd_slave)
+
+    p = sub.add_parser("master", help="operator side: device -> commands, estimate -> force")
+    _shared(p)
+    p.add_argument("--protocol", default="paper,minor",
+                   help="scripted operator protocol(s), comma separated: paper, minor, short")
+    p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
+    p.set_defaults(func=_cmd_master)
+
+    args = sys.argv[1:] if argv is None else argv
+    if "analyze" in args[:1]:
+        from teleop import analyze  # lazy: only `teleop analyze` pays for it
+        p = sub.add_parser("analyze", help="run the model against a recording")
+        analyze.add_arguments(p)
+        p.set_defaults(func=analyze.main_analyze)
+    else:
+        p = sub.add_parser("analyze", help="run the model against a recording (see `teleop analyze -h`)",
+                           add_help=False)
+        p.set_defaults(func=None)
+    return parser
+
+
+# ---- subcommands ---------------------------------------------------------------------------------
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from teleop.demo import main_demo
+    return main_demo(args)
+
+
+def _cmd_slave(args: argparse.Namespace) -> int:
+    return run_slave(args)
+
+
+def _cmd_master(args: argparse.Namespace) -> int:
+    return run_master(args)
+
+
+def run_slave(args: argparse.Namespace) -> int:
+    """``teleop slave``: calibrate the rig, then serve commands until stopped."""
+    from slave.node import SlaveLinks, SlaveNode, csv_columns
+    from slave.simulated import SimulatedRig
+    from teleop.clock import MonotonicClock
+    from teleop.config import load_config
+    from teleop.keys import command_key, estimate_key, heartbeat_key, liveliness_key
+    from teleop.messages import Command, Heartbeat
+    from teleop.recording import CsvRecorder, raise_on_sigterm
+    from teleop.rerun_log import RerunLogger
+    from teleop.transport import Session, zenoh_config
+
+    cfg = load_config(args.config)
+    listen, connect = endpoints(args)
+    zcfg = zenoh_config(cfg.transport, listen=listen, connect=connect)
+    run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(cfg.recording.dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    rig = SimulatedRig.from_config(cfg)
+    has_truth = rig.state.truth is not None
+    meta = {"source": "teleop slave", "instrument": cfg.instrument.id, "rig": cfg.rig.type,
+            "truth": "x_out, T_out, elongation are simulator ground truth (evaluation only)" if has_truth else "none"}
+    ident = cfg.instrument.id
+    clock = MonotonicClock()
+    node = None
+    with raise_on_sigterm(), \
+            Session(zcfg, clock=clock) as session, \
+            CsvRecorder(run_dir / "slave.csv", csv_columns(has_truth), meta, flush_every=500) as rec, \
+            RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd") as rr:
+        links = SlaveLinks(estimate=session.publisher(estimate_key(ident)),
+                           heartbeat=session.publisher(heartbeat_key(ident, "slave")),
+                           command=session.subscriber(command_key(ident), Command),
+                           master_heartbeat=session.subscriber(heartbeat_key(ident, "master"), Heartbeat))
+        session.liveliness_token(liveliness_key(ident, "slave"))
+        node = SlaveNode(cfg, rig, links, recorder=rec, rerun=rr, run_dir=run_dir,
+                         stop_on_master_stop=args.exit_on_master_stop)
+        try:
+            node.run(clock, max_duration=args.max_duration)
+        finally:
+            node.write_stats(run_dir / "slave_stats.json")
+    logging.getLogger("teleop.slave").info("slave done: %s", run_dir)
+    return 0
+
+
+def run_master(args: argparse.Namespace) -> int:
+    """``teleop master``: run the operator side until the device's protocol is finished."""
+    from master.node import MasterLinks, MasterNode
+    from master.simulated import ScriptedOperator, build_protocol
+    from teleop.clock import MonotonicClock
+    from teleop.config import load_config
+    from teleop.errors import DeviceError
+    from teleop.keys import command_key, estimate_key, heartbeat_key, liveliness_key
+    from teleop.messages import Estimate, Heartbeat
+    from teleop.recording import raise_on_sigterm
+    from teleop.transport import Session, zenoh_config
+
+    cfg = load_config(args.config)
+    if cfg.master.device.type != "simulated":
+        raise DeviceError(f"master.device.type {cfg.master.device.type!r}: only 'simulated' is available so far")
+    device = ScriptedOperator(build_protocol(args.protocol))
+    listen, connect = endpoints(args)
+    zcfg = zenoh_config(cfg.transport, listen=listen, connect=connect)
+    run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(cfg.recording.dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    ident = cfg.instrument.id
+    clock = MonotonicClock()
+    with raise_on_sigterm(), Session(zcfg, clock=clock) as session:
+        watcher = session.liveliness_watcher(liveliness_key(ident, "slave"))
+        links = MasterLinks(command=session.publisher(command_key(ident)),
+                            heartbeat=session.publisher(heartbeat_key(ident, "master")),
+                            estimate=session.subscriber(estimate_key(ident), Estimate),
+                            slave_heartbeat=session.subscriber(heartbeat_key(ident, "slave"), Heartbeat),
+                            slave_alive=lambda: watcher.alive)
+        session.liveliness_token(liveliness_key(ident, "master"))
+        node = MasterNode(cfg, device, links)
+        try:
+            node.run(clock, max_duration=args.max_duration)
+        finally:
+            device.close()
+            node.write_stats(run_dir / "master_stats.json")
+    lat = node.latency_stats()
+    logging.getLogger("teleop.master").info("master done: %s commands, rtt p50 %s ms, p99 %s ms",
+                                            node.commands_sent, lat["p50_ms"], lat["p99_ms"])
+    return 0 if device.finished else 1
+
+
+# ---- entry point ---------------------------------------------------------------------------------
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``teleop`` with ``argv`` (default ``sys.argv[1:]``); returns the exit code."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        parser = build_parser(argv)
+    except ImportError as e:
+        print(f"{PROG}: error: analyze is not available ({e})", file=sys.stderr)
+        return 2
+    args = parser.parse_args(argv)
+    if args.func is None:
+        print(f"{PROG}: error: analyze is not available in this build", file=sys.stderr)
+        return 2
+    logging.basicConfig(level=logging.INFO if getattr(args, "verbose", False) or args.command in ("slave", "master")
+                        else logging.WARNING,
+                        format=f"[{args.command}] %(levelname)s %(message)s", stream=sys.stderr)
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt as e:   # Ctrl-C, or SIGTERM inside raise_on_sigterm (Terminated)
+        from teleop.recording import Terminated
+        stopped = isinstance(e, Terminated)
+        print(f"{PROG}: {'terminated' if stopped else 'interrupted'}", file=sys.stderr)
+        return 143 if stopped else 130
+    except (TeleopError, ValueError, FileNotFoundError) as e:
+        msg = " ".join(str(e).split()) or type(e).__name__
+        print(f"{PROG}: error: {msg}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # python -m teleop.cli
+    sys.exit(main())

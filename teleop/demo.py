@@ -1,0 +1,282 @@
+"""``teleop demo``: the whole system end to end on one machine, then an accuracy summary.
+
+1. ``runs/<id>/`` (id = timestamp) gets the resolved config; a free TCP port on 127.0.0.1 is picked.
+2. The slave (``python -m teleop.cli slave``: calibration, simulated rig, estimator, CSV + Rerun)
+   starts and listens there; once the port accepts connections the master (``... master``: scripted
+   operator, protocols ``paper,minor``) starts and connects. Both are OS processes talking Zenoh.
+3. When the master has finished its protocol it announces STOPPING and the slave exits too. Either
+   running past ``--timeout`` is stopped with SIGTERM (recordings are flushed) and reported.
+4. :func:`evaluate` reads the slave's CSV and computes, per experiment (marker 1 = paper's,
+   2 = minor loops) and per estimator (the online profile-memory estimate recorded in the CSV; the
+   paper's phase formulas re-run over the recorded T_in with the calibrated K and L/EA), the
+   full-scale errors: max and mean of |estimate - truth| over the experiment divided by the range
+   of the true signal in that experiment, for the distal tension and the elongation.
+5. A table is printed and ``summary.json`` written, with the latency and overruns of both sides
+   and the calibration against the simulator's true K and M_e.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from estimator.capstan import phase_formula_batch
+from teleop.config import Config, load_config, write_config
+from teleop.errors import DataError
+from teleop.recording import read_measured_csv
+
+__all__ = ["PAPER_BOUNDS", "baseline_deadband", "evaluate", "checks", "format_summary", "main_demo"]
+
+#: The seed paper's reported accuracy: max force error, max elongation error, mean error (full scale).
+PAPER_BOUNDS = {"force_error_max_fs": 0.07, "elongation_error_max_fs": 0.03, "mean_error_fs": 0.02}
+EXPERIMENTS = {1: "paper", 2: "minor"}
+DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "sim.yaml"
+
+
+def baseline_deadband(cfg: Config) -> float:
+    """Reversal deadband of the paper-formula baseline [N]: 10 load-cell noise sigmas, at least 0.1 N.
+
+    A running extremum of noisy samples sits ~3.5 sigma out and a later sample ~3.5 sigma the other
+    way, so a smaller band declares reversals on noise alone and is unfair to the baseline.
+    """
+    return max(0.1, 10.0 * cfg.rig.sensors.load_cell_noise)
+
+
+def _errors(est: np.ndarray, true: np.ndarray) -> tuple[float, float]:
+    fs = float(np.ptp(true))
+    err = np.abs(est - true)
+    if fs <= 0:
+        return math.nan, math.nan
+    return float(err.max() / fs), float(err.mean() / fs)
+
+
+def evaluate(csv_path: str | Path, calibration: dict, cfg: Config) -> dict:
+    """Full-scale errors per experiment and estimator from the slave's recording.
+
+    Parameters
+    ----------
+    csv_path : path of ``slave.csv`` (columns of :data:`slave.node.CSV_COLUMNS`, with truth).
+    calibration : the contents of ``calibration.json`` (``K``, ``compliance_m_per_N``).
+    cfg : the run's config (baseline deadband from the load-cell noise).
+
+    Returns
+    -------
+    dict
+        ``{"paper": {"profile_memory": {...}, "paper_formulas": {...}, "samples": n, "duration_s": ...,
+        "force_full_scale_N": ..., "elongation_full_scale_m": ...}, "minor": {...}}``, each estimator
+        with ``force_error_max_fs``, ``force_error_mean_fs``, ``elongation_error_max_fs``,
+        ``elongation_error_mean_fs``.
+
+    Raises
+    ------
+    DataError
+        The CSV is unreadable or lacks the truth or estimate columns.
+    """
+    data = read_measured_csv(csv_path)
+    need = ("marker", "T_out_hat", "elongation_hat")
+    missing = [c for c in need if c not in data.extra]
+    if data.T_out is None or data.x_out is None or missing:
+        raise DataError(f"{csv_path}: needs truth columns x_out, T_out and estimate columns {', '.join(need)}")
+    elong = data.extra.get("elongation", data.x_in - data.x_out)
+    marker = data.extra["marker"].astype(int)
+    T_pf, e_pf, _ = phase_formula_batch(data.T_in, float(calibration["K"]), float(calibration["compliance_m_per_N"]),
+                                        deadband=baseline_deadband(cfg))
+    out: dict = {}
+    for m, name in EXPERIMENTS.items():
+        sel = marker == m
+        if not sel.any():
+            continue
+        T, e = data.T_out[sel], elong[sel]
+        row = {"samples": int(sel.sum()), "duration_s": float(data.time[sel][-1] - data.time[sel][0]),
+               "force_full_scale_N": float(np.ptp(T)), "elongation_full_scale_m": float(np.ptp(e))}
+        for est, T_hat, e_hat in (("profile_memory", data.extra["T_out_hat"][sel], data.extra["elongation_hat"][sel]),
+                                  ("paper_formulas", T_pf[sel], e_pf[sel])):
+            fmax, fmean = _errors(T_hat, T)
+            emax, emean = _errors(e_hat, e)
+            row[est] = {"force_error_max_fs": fmax, "force_error_mean_fs": fmean,
+                        "elongation_error_max_fs": emax, "elongation_error_mean_fs": emean}
+        out[name] = row
+    return out
+
+
+def checks(experiments: dict) -> dict[str, bool]:
+    """The demo's acceptance checks (missing experiments fail)."""
+    res: dict[str, bool] = {}
+    p = experiments.get("paper", {}).get("profile_memory")
+    res["paper: profile-memory force error max <= 0.07 FS"] = bool(p and p["force_error_max_fs"] <= 0.07)
+    res["paper: profile-memory elongation error max <= 0.03 FS"] = bool(p and p["elongation_error_max_fs"] <= 0.03)
+    m = experiments.get("minor", {})
+    a, b = m.get("profile_memory"), m.get("paper_formulas")
+    for q in ("force", "elongation"):
+        k = f"{q}_error_max_fs"
+        res[f"minor: profile memory beats paper formulas on {q} (max error)"] = bool(a and b and a[k] < b[k])
+    return res
+
+
+def _calibration_summary(calib: dict, cfg: Config) -> dict:
+    from slave.simulated import SimulatedRig
+    rig = SimulatedRig.from_config(cfg)
+    K, M_e = float(calib["K"]), float(calib["M_e_m_per_N"])
+    return {"K": K, "K_true": rig.K, "K_error_rel": K / rig.K - 1.0,
+            "M_e_m_per_N": M_e, "M_e_true_m_per_N": rig.M_e, "M_e_error_rel": M_e / rig.M_e - 1.0,
+            "knee_T_in_N": calib.get("knee_T_in_N"), "use_route": calib.get("use_route")}
+
+
+def _read_json(path: Path) -> dict:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return {}
+
+
+def format_summary(s: dict) -> str:
+    """The printed table of a summary dict (see :func:`main_demo`)."""
+    L = [f"teleop demo: {s['run_dir']}"]
+    c = s.get("calibration")
+    if c:
+        L.append(f"calibration   K   = {c['K']:.4f}       (simulator {c['K_true']:.4f}, {100 * c['K_error_rel']:+.1f} %)")
+        L.append(f"              M_e = {c['M_e_m_per_N']:.4e} m/N (simulator {c['M_e_true_m_per_N']:.4e}, "
+                 f"{100 * c['M_e_error_rel']:+.1f} %)")
+    L.append("")
+    L.append("full-scale errors      estimator        force max  force mean  elong max  elong mean")
+    for name, row in s.get("experiments", {}).items():
+        title = f"{name} ({row['duration_s']:.1f} s)"
+        for i, est in enumerate(("profile_memory", "paper_formulas")):
+            r = row[est]
+            L.append(f"{title if i == 0 else '':22s} {est.replace('_', ' '):16s} {r['force_error_max_fs']:9.3f} "
+                     f"{r['force_error_mean_fs']:11.3f} {r['elongation_error_max_fs']:10.3f} "
+                     f"{r['elongation_error_mean_fs']:11.3f}")
+        L.append(f"{'':22s} {'paper reports':16s} {0.07:9.3f} {'<0.02':>11s} {0.03:10.3f} {'<0.02':>11s}")
+    L.append(f"(full scale = range of the true signal in the experiment; paper-formula reversal deadband "
+             f"{s.get('baseline_deadband_N', float('nan')):.2f} N)")
+    L.append("")
+    for side in ("master", "slave"):
+        st = s.get(side, {})
+        pc = st.get("pacer", {})
+        L.append(f"{side:6s} loop: {pc.get('ticks', 0)} cycles at {pc.get('rate_hz', 0):.0f} Hz, "
+                 f"{pc.get('overruns', 0)} overruns ({100 * pc.get('overrun_fraction', 0):.2f} %), "
+                 f"worst lateness {1e3 * pc.get('max_lateness', 0):.1f} ms, safe events {st.get('safe_events', 0)}")
+    lat = s.get("master", {}).get("latency_rtt", {})
+    if lat.get("n"):
+        L.append(f"round trip (command -> estimate echo): p50 {lat['p50_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms, "
+                 f"max {lat['max_ms']:.2f} ms over {lat['n']} echoes")
+    L.append("")
+    for name, ok in s.get("checks", {}).items():
+        L.append(f"[{'PASS' if ok else 'FAIL'}] {name}")
+    for p in s.get("problems", []):
+        L.append(f"[FAIL] {p}")
+    L.append("")
+    L.append(f"recording: {s['run_dir']}/slave.csv (measured-data format, truth + estimates per cycle)")
+    L.append(f"rerun:     {s['run_dir']}/slave.rrd  ->  open with `rerun {s['run_dir']}/slave.rrd`"
+             f" (or .venv/bin/rerun)")
+    L.append(f"summary:   {s['run_dir']}/summary.json")
+    return "\n".join(L)
+
+
+def _wait_listening(port: int, proc: subprocess.Popen, deadline: float) -> bool:
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            return False
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=0.2):
+                return True
+        except OSError:
+            time.sleep(0.05)
+    return False
+
+
+def _stop(proc: subprocess.Popen) -> None:
+    """SIGTERM (the child flushes its recordings), then SIGKILL after 5 s."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(5.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def _run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str]) -> None:
+    from teleop.transport import free_tcp_port, loopback_endpoint
+    if args.listen:
+        ep = args.listen[0]
+        port = int(ep.rsplit(":", 1)[1])
+    else:
+        port = free_tcp_port()
+        ep = loopback_endpoint(port)
+    timeout = float(args.timeout)
+    base = [sys.executable, "-m", "teleop.cli"]
+    common = ["--config", str(cfg_file), "--run-dir", str(run_dir), "--max-duration", f"{timeout:g}"]
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    deadline = time.monotonic() + timeout
+    procs: list[tuple[str, subprocess.Popen]] = []
+    with open(run_dir / "slave.log", "w") as slog, open(run_dir / "master.log", "w") as mlog:
+        try:
+            slave = subprocess.Popen(base + ["slave", "--listen", ep, "--exit-on-master-stop"] + common,
+                                     stdout=slog, stderr=subprocess.STDOUT, env=env)
+            procs.append(("slave", slave))
+            if not _wait_listening(port, slave, deadline):
+                problems.append(f"the slave did not listen on {ep} (see {run_dir}/slave.log)")
+                return
+            master = subprocess.Popen(base + ["master", "--connect", ep, "--protocol", args.protocol] + common,
+                                      stdout=mlog, stderr=subprocess.STDOUT, env=env)
+            procs.append(("master", master))
+            print(f"slave and master running on {ep} (calibration, then protocol {args.protocol}) ...", flush=True)
+            for name, p in procs[::-1]:
+                try:
+                    rc = p.wait(max(0.1, deadline - time.monotonic()))
+                except subprocess.TimeoutExpired:
+                    problems.append(f"the {name} did not finish within --timeout {timeout:g} s; stopped")
+                    _stop(p)
+                    rc = p.returncode
+                if rc != 0:
+                    problems.append(f"the {name} exited with code {rc} (see {run_dir}/{name}.log)")
+        finally:
+            for _, p in procs:
+                _stop(p)
+
+
+def main_demo(args) -> int:
+    """``teleop demo``: returns 0 when the run finished and every check passed, else 1."""
+    from teleop.cli import default_run_dir
+    cfg_path = args.config or (DEFAULT_CONFIG if DEFAULT_CONFIG.is_file() else None)
+    cfg = load_config(cfg_path)
+    run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(cfg.recording.dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    cfg_file = write_config(cfg, run_dir / "config.yaml")
+    t0 = time.monotonic()
+    problems: list[str] = []
+    try:
+        _run_processes(args, cfg_file, run_dir, problems)
+    except KeyboardInterrupt:
+        print(f"teleop demo: interrupted; partial recordings in {run_dir}", file=sys.stderr)
+        raise
+    summary: dict = {"run_dir": str(run_dir), "config": str(cfg_file), "protocol": args.protocol,
+                     "baseline_deadband_N": baseline_deadband(cfg), "paper_bounds": PAPER_BOUNDS}
+    calib = _read_json(run_dir / "calibration.json")
+    summary["master"] = _read_json(run_dir / "master_stats.json")
+    summary["slave"] = _read_json(run_dir / "slave_stats.json")
+    if calib:
+        summary["calibration"] = _calibration_summary(calib, cfg)
+        try:
+            summary["experiments"] = evaluate(run_dir / "slave.csv", calib, cfg)
+        except DataError as e:
+            problems.append(str(e))
+    else:
+        problems.append(f"no calibration.json in {run_dir}: the slave did not finish calibrating")
+    summary["checks"] = checks(summary.get("experiments", {}))
+    summary["problems"] = problems
+    summary["wall_time_s"] = time.monotonic() - t0
+    summary["ok"] = not problems and all(summary["checks"].values())
+    (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    print(format_summary(summary))
+    print(f"wall time {summary['wall_time_s']:.1f} s")
+    return 0 if summary["ok"] else 1
