@@ -1,0 +1,95 @@
+"""Scripted operator: follows tension targets in order, carries markers, arm impedance, finishes."""
+from __future__ import annotations
+
+import pytest
+
+from master.device import HapticDevice, OperatorView
+from master.simulated import PROTOCOLS, ScriptedOperator, Segment, build_protocol
+from teleop.errors import ConfigError
+
+DT = 1e-3
+STIFFNESS = 2000.0   # toy plant: T_in = STIFFNESS * max(0, position) [N/m]
+
+
+def drive(op: ScriptedOperator, t_end: float, force=lambda T: 0.0):
+    """Close the loop with a toy plant; return (times, positions, tensions, markers)."""
+    t, T = 0.0, 0.0
+    log = []
+    while t < t_end and not op.finished:
+        op.watch(T, engaged=True)
+        pos = op.read(t).position
+        T = STIFFNESS * max(0.0, pos)
+        op.set_force(force(T), t)
+        log.append((t, pos, T, op.marker))
+        t += DT
+    return log
+
+
+def test_is_a_device_and_an_operator_view():
+    op = ScriptedOperator(PROTOCOLS["short"])
+    assert isinstance(op, HapticDevice) and isinstance(op, OperatorView)
+
+
+def test_follows_targets_in_order_and_finishes():
+    segs = (Segment(20.0, 1), Segment(5.0, 1), Segment(12.0, 2), Segment(0.3, 2))
+    op = ScriptedOperator(segs, speed=0.025, dwell=0.1, start_delay=0.0)
+    t, T, reached, markers = 0.0, 0.0, [], []
+    while t < 30.0 and not op.finished:
+        op.watch(T, engaged=True)
+        moving = op.direction
+        T = STIFFNESS * max(0.0, op.read(t).position)
+        if moving and op.direction == 0:          # a segment ended: the tension it reached
+            reached.append(T)
+        markers.append(op.marker)
+        t += DT
+    assert op.finished and op.timeouts == 0
+    step_T = STIFFNESS * 0.025 * DT               # one step of hand motion in tension
+    assert reached == pytest.approx([20.0, 5.0, 12.0, 0.3], abs=2 * step_T)
+    assert markers[0] == 1 and markers[-1] == 2 and markers.index(2) > 0
+    assert sorted(set(markers)) == [1, 2]
+
+
+def test_does_nothing_until_engaged_and_seeing_tension():
+    op = ScriptedOperator(PROTOCOLS["short"], start_delay=0.0)
+    for k in range(100):
+        op.watch(None, engaged=True)           # nothing seen yet
+        assert op.read(k * DT).position == 0.0
+    for k in range(100, 200):
+        op.watch(0.0, engaged=False)           # not engaged
+        assert op.read(k * DT).position == 0.0
+    op.watch(0.0, engaged=True)
+    op.read(0.2)
+    assert op.read(0.3).position > 0.0
+
+
+def test_arm_impedance_hand_yields_to_the_force():
+    op = ScriptedOperator(PROTOCOLS["short"], arm_stiffness=250.0)
+    op.set_force(-2.0, 0.0)
+    assert op.read(0.0).position == pytest.approx(op.intended - 2.0 / 250.0)
+    op.set_force(float("nan"), 0.0)            # a NaN force is not rendered
+    assert op.read(0.001).position == op.intended
+
+
+def test_resisting_force_makes_the_hand_go_further():
+    # the operator closes the loop on the tension it sees, so the hand lag does not change the targets
+    op = ScriptedOperator((Segment(10.0, 1),), start_delay=0.0, dwell=0.0)
+    drive(op, 10.0, force=lambda T: -0.2 * T)
+    assert op.finished
+    assert op.intended > 10.0 / STIFFNESS     # intended position beyond the hand position
+
+
+def test_segment_timeout_moves_on():
+    op = ScriptedOperator((Segment(1e6, 1), Segment(0.3, 1)), start_delay=0.0, dwell=0.0, segment_timeout=0.5)
+    drive(op, 5.0)
+    assert op.finished and op.timeouts == 1
+
+
+def test_build_protocol():
+    assert build_protocol("paper,minor") == PROTOCOLS["paper"] + PROTOCOLS["minor"]
+    assert {s.marker for s in PROTOCOLS["paper"]} == {1} and {s.marker for s in PROTOCOLS["minor"]} == {2}
+    with pytest.raises(ConfigError, match="unknown protocol 'papr'"):
+        build_protocol("papr")
+    with pytest.raises(ConfigError):
+        build_protocol(" , ")
+    with pytest.raises(ConfigError, match="speed"):
+        ScriptedOperator(PROTOCOLS["short"], speed=0.0)
