@@ -1,0 +1,205 @@
+"""SlaveNode.step with a FakeClock and an in-memory transport: calibration, watchdog, echo, recording."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from estimator.sheath import SheathModel
+from slave.calibrate import CalStage, JointLimitCalibration
+from slave.node import CSV_COLUMNS, SlaveLinks, SlaveNode, csv_columns
+from slave.rig import RigState
+from slave.simulated import SimulatedRig
+from teleop.clock import FakeClock
+from teleop.config import CalibrationConfig, Config, SlaveConfig
+from teleop.errors import CalibrationError
+from teleop.messages import Command, Estimate, Heartbeat, Side, SideState
+from teleop.transport import Received
+
+DT = 1e-3
+MODEL = SheathModel(K=0.6, compliance=1e-4)
+
+
+class Topic:
+    """In-memory latest-wins topic (receive time = the fake clock)."""
+
+    def __init__(self, clock: FakeClock):
+        self.clock, self.sent, self.last, self.count, self.errors = clock, [], None, 0, 0
+
+    def put(self, msg) -> None:
+        self.sent.append(msg)
+        self.last = Received(msg, self.clock.now())
+        self.count += 1
+
+    def latest(self):
+        return self.last
+
+    def age(self, now: float) -> float:
+        return math.inf if self.last is None else now - self.last.t_recv
+
+
+class Rows:
+    def __init__(self):
+        self.rows = []
+
+    def write(self, row):
+        self.rows.append(tuple(row))
+
+
+class Untouchable:
+    """Ground truth that fails the test if anyone reads it."""
+
+    def __getattr__(self, name):
+        raise AssertionError(f"the slave node read the ground truth ({name})")
+
+
+class EchoRig:
+    """Follows the command exactly; T_in = 1000 N/m * x_in; truth present but forbidden."""
+
+    def __init__(self):
+        self.t, self.cmds = 0.0, []
+        self.state = RigState(0.0, 0.0, 0.0, 0.0, Untouchable())
+
+    def step(self, x_in_cmd, dt):
+        self.t += dt
+        self.cmds.append(x_in_cmd)
+        self.state = RigState(self.t, x_in_cmd, 1000.0 * x_in_cmd, x_in_cmd, Untouchable())
+        return self.state
+
+    def set_load(self, *, tissue=None, force=None):
+        pass
+
+    def close(self):
+        pass
+
+
+def make(rig=None, calibrate=False, watchdog_ms=50.0, **kw):
+    cfg = Config(slave=SlaveConfig(watchdog_ms=watchdog_ms))
+    clock = FakeClock(10.0)
+    links = SlaveLinks(*(Topic(clock) for _ in range(4)))
+    node = SlaveNode(cfg, rig or EchoRig(), links, calibrate=calibrate, model=None if calibrate else MODEL, **kw)
+    return node, links, clock
+
+
+def tick(node, clock, n=1):
+    for _ in range(n):
+        clock.advance(DT)
+        node.step(clock.now())
+
+
+def command(links, seq, x, engaged=True, marker=0):
+    links.command.put(Command(seq, 0.0, x, engaged, marker))
+
+
+def test_no_command_is_safe_and_holds():
+    node, links, clock = make()
+    tick(node, clock, 5)
+    assert node.state == SideState.SAFE
+    assert node.rig.cmds == [0.0] * 5
+    assert links.heartbeat.sent[0].state == SideState.SAFE and links.heartbeat.sent[0].side == Side.SLAVE
+
+
+def test_engaged_command_is_applied_and_echoed_without_reading_truth():
+    node, links, clock = make()
+    for k in range(10):
+        command(links, 100 + k, 0.001 * k, marker=2)
+        tick(node, clock)
+    assert node.state == SideState.ENGAGED
+    assert node.rig.cmds[-1] == pytest.approx(0.009)
+    est = links.estimate.sent[-1]
+    assert isinstance(est, Estimate) and est.cmd_seq == 109 and est.seq == 9
+    assert est.T_in == pytest.approx(9.0) and len(est.profile) == node.cfg.estimator.profile_points
+    assert est.T_out_hat == pytest.approx(9.0 * math.exp(-0.6), rel=1e-6)   # full pull slip
+    assert est.profile[0] == pytest.approx(9.0, rel=1e-6)
+
+
+def test_not_engaged_is_ready_and_holds_the_last_position():
+    node, links, clock = make()
+    command(links, 1, 0.002)
+    tick(node, clock)
+    command(links, 2, 0.005, engaged=False)
+    tick(node, clock, 3)
+    assert node.state == SideState.READY and node.rig.cmds[-3:] == [0.002] * 3
+
+
+def test_stale_command_goes_safe_after_watchdog_ms_and_holds():
+    node, links, clock = make(watchdog_ms=50.0)
+    command(links, 1, 0.003)
+    tick(node, clock, 49)                 # command 49 ms old: still followed
+    assert node.state == SideState.ENGAGED
+    tick(node, clock, 2)                  # 51 ms
+    assert node.state == SideState.SAFE and node.safe_events == 1
+    tick(node, clock, 100)
+    assert set(node.rig.cmds) == {0.003}
+    command(links, 2, 0.004)              # commands come back: follows again
+    tick(node, clock)
+    assert node.state == SideState.ENGAGED and node.rig.cmds[-1] == 0.004
+
+
+def test_records_one_row_per_cycle_in_the_recording_columns():
+    rows = Rows()
+    node, links, clock = make(rig=SimulatedRig(Config().sheath, Config().rig), recorder=rows)
+    for k in range(20):
+        command(links, k, 1e-4 * k, marker=1)
+        tick(node, clock)
+    assert len(rows.rows) == 20 and all(len(r) == len(CSV_COLUMNS) for r in rows.rows)
+    r = dict(zip(CSV_COLUMNS, rows.rows[-1]))
+    assert r["marker"] == 1 and r["cmd_seq"] == 19 and r["state"] == int(SideState.ENGAGED)
+    assert r["x_in_cmd"] == pytest.approx(19e-4)
+    assert np.all(np.diff([row[0] for row in rows.rows]) > 0)
+    assert csv_columns(False) == tuple(c for c in CSV_COLUMNS if c not in ("x_out", "T_out", "elongation"))
+
+
+def test_stops_when_the_master_announces_stopping():
+    node, links, clock = make(stop_on_master_stop=True)
+    links.master_heartbeat.put(Heartbeat(Side.MASTER, 0, 0.0, SideState.ENGAGED))
+    tick(node, clock, 3)
+    assert not node.done
+    links.master_heartbeat.put(Heartbeat(Side.MASTER, 1, 0.0, SideState.STOPPING))
+    tick(node, clock)
+    assert node.done and node.master_stopped
+    n = len(links.estimate.sent)
+    tick(node, clock, 3)
+    assert len(links.estimate.sent) == n
+
+
+def test_power_up_calibration_against_the_simulator(tmp_path):
+    cfg = Config(calibration=CalibrationConfig(speed=0.02))          # a quick pull for the test
+    rig = SimulatedRig.from_config(cfg)
+    clock = FakeClock(0.0)
+    links = SlaveLinks(*(Topic(clock) for _ in range(4)))
+    node = SlaveNode(cfg, rig, links, run_dir=tmp_path)
+    assert node.state == SideState.CALIBRATING
+    command(links, 1, 0.05)                                          # ignored while calibrating
+    tissue_seen = []
+    for _ in range(20000):
+        tick(node, clock)
+        tissue_seen.append(rig.tissue)
+        if node.state != SideState.CALIBRATING:
+            break
+    assert node.state == SideState.SAFE                              # calibrated, no fresh command
+    assert not links.estimate.sent                                   # nothing estimated while calibrating
+    assert {h.state for h in links.heartbeat.sent} == {SideState.CALIBRATING}
+    assert tissue_seen[0] is False and rig.tissue is True            # tissue off for the pull, back after
+    cal = json.loads((tmp_path / "calibration.json").read_text())
+    assert cal["K"] == pytest.approx(rig.K, rel=0.05)
+    assert cal["M_e_m_per_N"] == pytest.approx(rig.M_e, rel=0.02)
+    assert node.estimator.model.K == cal["K"]
+    assert rig.state.truth.T_in < 0.5                                # released back to (near) zero tension
+    # the estimator's memory matches the tendon after the replay of the routine
+    est = node.estimator
+    assert est.T_out == pytest.approx(rig.state.truth.T_out, abs=0.3)
+
+
+def test_calibration_without_a_joint_limit_fails_with_a_message():
+    cfg = Config(calibration=CalibrationConfig(speed=0.05, target_tension=1e4))
+    rig = SimulatedRig.from_config(cfg)
+    cal = JointLimitCalibration(cfg, rig, max_travel=0.01)
+    state = rig.state
+    with pytest.raises(CalibrationError, match="no joint limit found"):
+        for _ in range(10000):
+            state = rig.step(cal.command(state, DT), DT)
+            cal.observe(state)
+    assert cal.stage == CalStage.PULL
