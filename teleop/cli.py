@@ -24,7 +24,7 @@ from pathlib import Path
 
 from teleop.errors import TeleopError
 
-__all__ = ["build_parser", "main", "run_slave", "run_master", "default_run_dir", "endpoints"]
+__all__ = ["build_parser", "main", "run_slave", "run_master", "default_run_dir", "endpoints", "open_session"]
 
 PROG = "teleop"
 
@@ -45,6 +45,29 @@ def endpoints(args: argparse.Namespace) -> tuple[tuple[str, ...] | None, tuple[s
     if args.listen is None and args.connect is None:
         return None, None
     return tuple(args.listen or ()), tuple(args.connect or ())
+
+
+def open_session(cfg, args: argparse.Namespace, clock):
+    """The Zenoh session of one side; a failure to open names the endpoints tried.
+
+    Raises
+    ------
+    ConfigError
+        An endpoint zenoh rejects in the configuration.
+    TransportError
+        The session cannot be opened (port in use, address not resolvable).
+    """
+    from teleop.errors import TransportError
+    from teleop.transport import Session, zenoh_config
+
+    listen, connect = endpoints(args)
+    zcfg = zenoh_config(cfg.transport, listen=listen, connect=connect)
+    try:
+        return Session(zcfg, clock=clock)
+    except TransportError as e:
+        lst = cfg.transport.listen if listen is None else listen
+        con = cfg.transport.connect if connect is None else connect
+        raise TransportError(f"{e} (listen: {', '.join(lst) or 'none'}; connect: {', '.join(con) or 'none'})") from None
 
 
 def _shared(p: argparse.ArgumentParser) -> None:
@@ -120,11 +143,8 @@ def run_slave(args: argparse.Namespace) -> int:
     from teleop.messages import Command, Heartbeat
     from teleop.recording import CsvRecorder, raise_on_sigterm
     from teleop.rerun_log import RerunLogger
-    from teleop.transport import Session, zenoh_config
 
     cfg = load_config(args.config)
-    listen, connect = endpoints(args)
-    zcfg = zenoh_config(cfg.transport, listen=listen, connect=connect)
     run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(cfg.recording.dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     rig = SimulatedRig.from_config(cfg)
@@ -135,7 +155,7 @@ def run_slave(args: argparse.Namespace) -> int:
     clock = MonotonicClock()
     node = None
     with raise_on_sigterm(), \
-            Session(zcfg, clock=clock) as session, \
+            open_session(cfg, args, clock) as session, \
             CsvRecorder(run_dir / "slave.csv", csv_columns(has_truth), meta, flush_every=500) as rec, \
             RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd") as rr:
         links = SlaveLinks(estimate=session.publisher(estimate_key(ident)),
@@ -163,19 +183,16 @@ def run_master(args: argparse.Namespace) -> int:
     from teleop.keys import command_key, estimate_key, heartbeat_key, liveliness_key
     from teleop.messages import Estimate, Heartbeat
     from teleop.recording import raise_on_sigterm
-    from teleop.transport import Session, zenoh_config
 
     cfg = load_config(args.config)
     if cfg.master.device.type != "simulated":
         raise DeviceError(f"master.device.type {cfg.master.device.type!r}: only 'simulated' is available so far")
     device = ScriptedOperator(build_protocol(args.protocol))
-    listen, connect = endpoints(args)
-    zcfg = zenoh_config(cfg.transport, listen=listen, connect=connect)
     run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(cfg.recording.dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     ident = cfg.instrument.id
     clock = MonotonicClock()
-    with raise_on_sigterm(), Session(zcfg, clock=clock) as session:
+    with raise_on_sigterm(), open_session(cfg, args, clock) as session:
         watcher = session.liveliness_watcher(liveliness_key(ident, "slave"))
         links = MasterLinks(command=session.publisher(command_key(ident)),
                             heartbeat=session.publisher(heartbeat_key(ident, "master")),

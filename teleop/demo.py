@@ -108,16 +108,22 @@ def evaluate(csv_path: str | Path, calibration: dict, cfg: Config) -> dict:
 
 
 def checks(experiments: dict) -> dict[str, bool]:
-    """The demo's acceptance checks (missing experiments fail)."""
+    """The demo's acceptance checks, for the experiments that were run (NaN errors fail).
+
+    paper: the profile-memory estimator within the paper's 0.07 (force) and 0.03 (elongation) of
+    full scale; minor: its max errors below those of the paper's formulas, force and elongation.
+    """
     res: dict[str, bool] = {}
     p = experiments.get("paper", {}).get("profile_memory")
-    res["paper: profile-memory force error max <= 0.07 FS"] = bool(p and p["force_error_max_fs"] <= 0.07)
-    res["paper: profile-memory elongation error max <= 0.03 FS"] = bool(p and p["elongation_error_max_fs"] <= 0.03)
+    if p:
+        res["paper: profile-memory force error max <= 0.07 FS"] = bool(p["force_error_max_fs"] <= 0.07)
+        res["paper: profile-memory elongation error max <= 0.03 FS"] = bool(p["elongation_error_max_fs"] <= 0.03)
     m = experiments.get("minor", {})
     a, b = m.get("profile_memory"), m.get("paper_formulas")
-    for q in ("force", "elongation"):
-        k = f"{q}_error_max_fs"
-        res[f"minor: profile memory beats paper formulas on {q} (max error)"] = bool(a and b and a[k] < b[k])
+    if a and b:
+        for q in ("force", "elongation"):
+            k = f"{q}_error_max_fs"
+            res[f"minor: profile memory beats paper formulas on {q} (max error)"] = bool(a[k] < b[k])
     return res
 
 
@@ -272,6 +278,8 @@ def main_demo(args) -> int:
             problems.append(str(e))
     else:
         problems.append(f"no calibration.json in {run_dir}: the slave did not finish calibrating")
+    if calib and not summary.get("experiments") and not problems:
+        problems.append("the recording has no experiment rows (marker 1 or 2): the protocol did not run")
     summary["checks"] = checks(summary.get("experiments", {}))
     summary["problems"] = problems
     summary["wall_time_s"] = time.monotonic() - t0
