@@ -1,0 +1,127 @@
+"""Slave and master as two OS processes talking Zenoh on a free 127.0.0.1 port.
+
+Deadlines below only bound how long a test waits for something to happen; nothing passes or fails
+on how fast it happened.
+"""
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from teleop.config import load_config
+from teleop.keys import heartbeat_key
+from teleop.messages import Heartbeat, SideState
+from teleop.recording import read_measured_csv
+from teleop.transport import Session, free_tcp_port, loopback_endpoint, zenoh_config
+
+pytestmark = pytest.mark.integration
+
+# quick calibration pull; everything else is the simulated demo's configuration
+CONFIG = """\
+instrument:
+  id: {ident}
+calibration:
+  speed: 0.02
+recording:
+  rerun: "{rerun}"
+"""
+
+
+def write_config(tmp_path: Path, ident: str, rerun: str = "off") -> Path:
+    path = tmp_path / "test.yaml"
+    path.write_text(CONFIG.format(ident=ident, rerun=rerun), encoding="utf-8")
+    return path
+
+
+def teleop(*args: str, log: Path) -> subprocess.Popen:
+    with open(log, "w") as fh:
+        return subprocess.Popen([sys.executable, "-m", "teleop.cli", *args], stdout=fh, stderr=subprocess.STDOUT)
+
+
+def stop(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
+
+
+def wait_for(predicate, timeout: float, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.02)
+    raise AssertionError(f"gave up waiting {timeout:g} s for {what}")
+
+
+def test_demo_runs_both_processes_and_writes_the_summary(tmp_path):
+    cfg = write_config(tmp_path, "itdemo", rerun="save")
+    run_dir = tmp_path / "run"
+    proc = subprocess.run([sys.executable, "-m", "teleop.cli", "demo", "--config", str(cfg), "--protocol", "short",
+                           "--run-dir", str(run_dir), "--timeout", "40"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode in (0, 1), proc.stderr
+    assert "Traceback" not in proc.stderr + (run_dir / "slave.log").read_text() + (run_dir / "master.log").read_text()
+    for name in ("slave.csv", "slave.rrd", "summary.json", "calibration.json", "config.yaml"):
+        assert (run_dir / name).is_file(), name
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["problems"] == [], summary["problems"]
+    assert summary["master"]["commands_sent"] > 1000 and summary["slave"]["commands_applied"] > 1000
+    assert summary["master"]["finished"] and summary["master"]["latency_rtt"]["n"] > 100
+    paper = summary["experiments"]["paper"]["profile_memory"]
+    assert all(np.isfinite(v) for v in paper.values())
+    assert "minor" not in summary["experiments"]                      # the short protocol is marker 1 only
+    data = read_measured_csv(run_dir / "slave.csv")
+    assert set(np.unique(data.extra["marker"])) == {0.0, 1.0}
+    assert "round trip" in proc.stdout and str(run_dir / "slave.rrd") in proc.stdout
+
+
+def test_killing_the_master_makes_the_slave_go_safe(tmp_path):
+    ident = "itkill"
+    cfg_path = write_config(tmp_path, ident)
+    cfg = load_config(cfg_path)
+    port = free_tcp_port()
+    ep = loopback_endpoint(port)
+    run_dir = tmp_path / "run"
+    slave = teleop("slave", "--config", str(cfg_path), "--listen", ep, "--run-dir", str(run_dir),
+                   "--max-duration", "60", log=tmp_path / "slave.log")
+    master = None
+    try:
+        with Session(zenoh_config(cfg.transport, listen=(), connect=(ep,))) as session:
+            beats = session.subscriber(heartbeat_key(ident, "slave"), Heartbeat)
+
+            def slave_state():
+                rec = beats.latest()
+                return None if rec is None else rec.message.state
+
+            master = teleop("master", "--config", str(cfg_path), "--connect", ep, "--run-dir", str(run_dir),
+                            "--protocol", "paper", "--max-duration", "60", log=tmp_path / "master.log")
+            wait_for(lambda: slave_state() == SideState.ENGAGED, 40, "the slave to be ENGAGED")
+            time.sleep(0.5)                                  # let the operator move the tendon
+            master.send_signal(signal.SIGKILL)
+            master.wait()
+            wait_for(lambda: slave_state() == SideState.SAFE, 10, "the slave to go SAFE")
+            time.sleep(0.2)                                  # some SAFE cycles in the recording
+        slave.send_signal(signal.SIGINT)                     # Ctrl-C: clean exit, recordings closed
+        assert slave.wait(20) == 130
+    finally:
+        stop(slave)
+        if master is not None:
+            stop(master)
+    log = (tmp_path / "slave.log").read_text()
+    assert "Traceback" not in log and "ENGAGED -> SAFE" in log and "command stale" in log
+    stats = json.loads((run_dir / "slave_stats.json").read_text())
+    assert stats["commands_applied"] > 100 and stats["safe_events"] == 1
+    data = read_measured_csv(run_dir / "slave.csv")
+    state = data.extra["state"].astype(int)
+    engaged = np.flatnonzero(state == SideState.ENGAGED)
+    assert engaged.size > 100
+    after = slice(engaged[-1] + 1, None)
+    assert np.all(state[after] == SideState.SAFE) and state[after].size > 50
+    hold = data.extra["x_in_cmd"][after]
+    assert np.all(hold == hold[0]) and hold[0] == data.extra["x_in_cmd"][engaged[-1]]   # held the last position
