@@ -241,14 +241,16 @@ class SlaveNode:
 
     def _log_rerun(self, rs: RigState, T_out_hat: float, elongation_hat: float, phase, profile: np.ndarray,
                    everything: bool = False) -> None:
-        """Every ``log_every`` cycles: the profile (~0.5 ms) and, half a window later, the scalars and
-        phase (~0.1 ms), so that no single cycle carries both; ``everything`` logs both now."""
+        """Every ``log_every`` cycles the scalars and phase (~0.1 ms); every ``profile_every``-th of those
+        windows also the profile (~0.5 ms), half a window apart so that no single cycle carries both;
+        ``everything`` logs both now."""
         if self.rerun is None:
             return
         n = self.cfg.recording.log_every
         k = self.cycles % n
         tr = rs.truth
-        if k == 0 or everything:
+        window = self.cycles // n
+        if (k == 0 and window % self.cfg.recording.profile_every == 0) or everything:
             T_true = None
             if tr is not None:
                 u = np.linspace(0.0, 1.0, tr.profile.size)

@@ -211,6 +211,7 @@ class RecordingConfig:
     dir: str = "runs"
     rerun: Literal["save", "spawn", "off"] = "save"
     log_every: int = 10
+    profile_every: int = 5
 
 
 @dataclass(frozen=True)
@@ -254,6 +255,7 @@ RANGES: dict[str, tuple[str, str]] = {
     "master.mapping.force_rate_limit": ("> 0", "N/s"),
     "slave.watchdog_ms": ("> 0", "ms"), "slave.heartbeat_hz": ("> 0", "Hz"),
     "recording.log_every": (">= 1", "samples"),
+    "recording.profile_every": (">= 1", "logs"),
 }
 _INF_OK = {"sheath.runs[].radius"}
 _NON_SI = ("_mm", "_deg", "_ms", "_hz")
