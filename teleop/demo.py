@@ -183,6 +183,8 @@ def format_summary(s: dict) -> str:
     L.append(f"recording: {s['run_dir']}/slave.csv (measured-data format, truth + estimates per cycle)")
     L.append(f"rerun:     {s['run_dir']}/slave.rrd  ->  open with `rerun {s['run_dir']}/slave.rrd`"
              f" (or .venv/bin/rerun)")
+    if s.get("figure"):
+        L.append(f"figure:    {s['figure']}  (distal tension and elongation: truth vs estimates)")
     L.append(f"summary:   {s['run_dir']}/summary.json")
     return "\n".join(L)
 
@@ -274,6 +276,10 @@ def main_demo(args) -> int:
         summary["calibration"] = _calibration_summary(calib, cfg)
         try:
             summary["experiments"] = evaluate(run_dir / "slave.csv", calib, cfg)
+            if summary["experiments"]:
+                from teleop.demo_figures import demo_figure
+                summary["figure"] = str(demo_figure(run_dir / "slave.csv", calib, baseline_deadband(cfg),
+                                                    run_dir / "estimates.png", EXPERIMENTS))
         except DataError as e:
             problems.append(str(e))
     else:
