@@ -101,6 +101,8 @@ class SlaveNode:
         self.watchdog = cfg.slave.watchdog_ms * 1e-3
         self.hb_period = 1.0 / cfg.slave.heartbeat_hz
         self.period = 1.0 / cfg.rig.rate_hz
+        self.max_dt = 5.0 * self.period     # longest step the ramps and the rig advance in one cycle [s]
+        self.stalls = 0                     # cycles whose wall-clock period exceeded max_dt
         self.L = cfg.sheath.geometry().length
         self.s_points = np.linspace(0.0, self.L, cfg.estimator.profile_points)
         self.done = False
@@ -190,6 +192,9 @@ class SlaveNode:
         dt = self.period if self._t_prev is None else now - self._t_prev
         if not dt > 0:          # same instant twice: nothing to advance
             return
+        if dt > self.max_dt:    # a stalled cycle must not turn into a jump of the ramps and the rig
+            self.stalls += 1
+            dt = self.max_dt
         self._t_prev = now
         self.cycles += 1
         hb = self.links.master_heartbeat.latest()
@@ -289,6 +294,7 @@ class SlaveNode:
             "command_decode_errors": int(getattr(cmd, "errors", 0)),
             "commands_applied": self.commands_applied,
             "safe_events": self.safe_events,
+            "stalls": self.stalls,
             "master_stopped": self.master_stopped,
             "calibrated": self.estimator is not None,
             "pacer": dict(self.pacer_stats),
@@ -301,3 +307,23 @@ class SlaveNode:
 def csv_columns(has_truth: bool) -> tuple[str, ...]:
     """The recording's columns: :data:`CSV_COLUMNS`, without the truth ones for a hardware rig."""
     return CSV_COLUMNS if has_truth else tuple(c for c in CSV_COLUMNS if c not in CSV_TRUTH_COLUMNS)
+
+
+def warm_up(cfg: Config) -> None:
+    """Compile the rig's and the estimator's numba kernels before the real-time loop starts.
+
+    With an empty numba cache (a fresh checkout) the first call of each kernel takes seconds; done
+    inside the loop it would stall the first cycles. Uses throwaway objects: nothing is kept.
+    """
+    from estimator.calibration import calibrate_joint_limit  # noqa: F401  (import cost, too)
+    from estimator.distal import DistalEstimator
+    from estimator.sheath import SheathModel
+    from slave.simulated import SimulatedRig
+
+    rig = SimulatedRig.from_config(cfg)
+    est = DistalEstimator(SheathModel(K=0.5, compliance=1e-4), n_nodes=8)
+    for k in range(4):
+        rs = rig.step(1e-4 * k, 1.0 / cfg.rig.rate_hz)
+        est.step(rs.T_in, rs.x_in, 1e-3 * k)
+    rig.set_load(tissue=not cfg.rig.load.tissue)
+    rig.close()

@@ -1,4 +1,4 @@
-"""The ``teleop`` command: ``teleop demo|master|slave|analyze``.
+"""The ``teleop`` command: ``teleop demo|master|slave|analyze|devices``.
 
 :func:`main` takes an argument list and returns an exit code; argument parsing is separate
 (:func:`build_parser`) and every subcommand is a function of the parsed arguments. Exit codes:
@@ -83,7 +83,7 @@ def _shared(p: argparse.ArgumentParser) -> None:
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The argument parser. ``argv`` decides whether ``teleop.analyze`` is imported (only for analyze)."""
     parser = argparse.ArgumentParser(prog=PROG, description="Haptic teleoperation of tendon-sheath instruments.")
-    sub = parser.add_subparsers(dest="command", metavar="{demo,master,slave,analyze}", required=True)
+    sub = parser.add_subparsers(dest="command", metavar="{demo,master,slave,analyze,devices}", required=True)
 
     p = sub.add_parser("demo", help="both sides as two processes over Zenoh on 127.0.0.1, then a summary")
     _shared(p)
@@ -104,6 +104,14 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
                    help="scripted operator protocol(s), comma separated: paper, minor, short")
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
     p.set_defaults(func=_cmd_master)
+
+    p = sub.add_parser("devices", help="list HID devices (vendor/product id, usage page, usage, path)")
+    if "devices" in (sys.argv[1:] if argv is None else argv)[:1]:
+        from master import devices_list  # lazy: only `teleop devices` imports hidapi
+        devices_list.add_arguments(p)
+        p.set_defaults(func=devices_list.main_devices)
+    else:
+        p.set_defaults(func=None)
 
     args = sys.argv[1:] if argv is None else argv
     if "analyze" in args[:1]:
@@ -135,7 +143,7 @@ def _cmd_master(args: argparse.Namespace) -> int:
 
 def run_slave(args: argparse.Namespace) -> int:
     """``teleop slave``: calibrate the rig, then serve commands until stopped."""
-    from slave.node import SlaveLinks, SlaveNode, csv_columns
+    from slave.node import SlaveLinks, SlaveNode, csv_columns, warm_up
     from slave.simulated import SimulatedRig
     from teleop.clock import MonotonicClock
     from teleop.config import load_config
@@ -147,6 +155,7 @@ def run_slave(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
     run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(cfg.recording.dir)
     run_dir.mkdir(parents=True, exist_ok=True)
+    warm_up(cfg)  # compile the numba kernels now, not in the first real-time cycles
     rig = SimulatedRig.from_config(cfg)
     has_truth = rig.state.truth is not None
     meta = {"source": "teleop slave", "instrument": cfg.instrument.id, "rig": cfg.rig.type,
@@ -224,7 +233,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     args = parser.parse_args(argv)
     if args.func is None:
-        print(f"{PROG}: error: analyze is not available in this build", file=sys.stderr)
+        print(f"{PROG}: error: {args.command} is not available in this build", file=sys.stderr)
         return 2
     logging.basicConfig(level=logging.INFO if getattr(args, "verbose", False) or args.command in ("slave", "master")
                         else logging.WARNING,
