@@ -17,6 +17,7 @@ configured lists), ``--run-dir DIR`` (where recordings and stats go; default
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import sys
 import time
@@ -113,6 +114,14 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     else:
         p.set_defaults(func=None)
 
+    p = sub.add_parser("devices", help="list HID devices (vendor/product id, usage page, usage, path)")
+    if "devices" in (sys.argv[1:] if argv is None else argv)[:1]:
+        from master import devices_list  # lazy: only `teleop devices` imports hidapi
+        devices_list.add_arguments(p)
+        p.set_defaults(func=devices_list.main_devices)
+    else:
+        p.set_defaults(func=None)
+
     args = sys.argv[1:] if argv is None else argv
     if "analyze" in args[:1]:
         from teleop import analyze  # lazy: only `teleop analyze` pays for it
@@ -188,37 +197,51 @@ def run_master(args: argparse.Namespace) -> int:
     from master.simulated import ScriptedOperator, build_protocol
     from teleop.clock import MonotonicClock
     from teleop.config import load_config
-    from teleop.errors import DeviceError
     from teleop.keys import command_key, estimate_key, heartbeat_key, liveliness_key
     from teleop.messages import Estimate, Heartbeat
     from teleop.recording import raise_on_sigterm
 
     cfg = load_config(args.config)
-    if cfg.master.device.type != "simulated":
-        raise DeviceError(f"master.device.type {cfg.master.device.type!r}: only 'simulated' is available so far")
-    device = ScriptedOperator(build_protocol(args.protocol))
-    run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(cfg.recording.dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    ident = cfg.instrument.id
-    clock = MonotonicClock()
-    with raise_on_sigterm(), open_session(cfg, args, clock) as session:
-        watcher = session.liveliness_watcher(liveliness_key(ident, "slave"))
-        links = MasterLinks(command=session.publisher(command_key(ident)),
-                            heartbeat=session.publisher(heartbeat_key(ident, "master")),
-                            estimate=session.subscriber(estimate_key(ident), Estimate),
-                            slave_heartbeat=session.subscriber(heartbeat_key(ident, "slave"), Heartbeat),
-                            slave_alive=lambda: watcher.alive)
-        session.liveliness_token(liveliness_key(ident, "master"))
-        node = MasterNode(cfg, device, links)
-        try:
-            node.run(clock, max_duration=args.max_duration)
-        finally:
-            device.close()
-            node.write_stats(run_dir / "master_stats.json")
+    if cfg.master.device.type == "hid":
+        from master.hid import HidDevice
+        # opens, resets and enables the actuators; raises DeviceError naming the device when absent
+        device = HidDevice.from_file(cfg.master.device.file)
+    else:
+        device = ScriptedOperator(build_protocol(args.protocol))
+    # from here on the device is closed on every exit path (HID: zero force, stop all effects,
+    # disable actuators), whatever fails: session, recording, the loop, Ctrl-C or SIGTERM
+    with _closing(device):
+        run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(cfg.recording.dir)
+        run_dir.mkdir(parents=True, exist_ok=True)
+        ident = cfg.instrument.id
+        clock = MonotonicClock()
+        with raise_on_sigterm(), open_session(cfg, args, clock) as session:
+            watcher = session.liveliness_watcher(liveliness_key(ident, "slave"))
+            links = MasterLinks(command=session.publisher(command_key(ident)),
+                                heartbeat=session.publisher(heartbeat_key(ident, "master")),
+                                estimate=session.subscriber(estimate_key(ident), Estimate),
+                                slave_heartbeat=session.subscriber(heartbeat_key(ident, "slave"), Heartbeat),
+                                slave_alive=lambda: watcher.alive)
+            session.liveliness_token(liveliness_key(ident, "master"))
+            node = MasterNode(cfg, device, links)
+            try:
+                node.run(clock, max_duration=args.max_duration)
+            finally:
+                device.close()
+                node.write_stats(run_dir / "master_stats.json")
     lat = node.latency_stats()
     logging.getLogger("teleop.master").info("master done: %s commands, rtt p50 %s ms, p99 %s ms",
                                             node.commands_sent, lat["p50_ms"], lat["p99_ms"])
-    return 0 if device.finished else 1
+    return 0 if getattr(device, "finished", True) else 1
+
+
+@contextlib.contextmanager
+def _closing(device):
+    """``device.close()`` on leaving the block, however it is left."""
+    try:
+        yield device
+    finally:
+        device.close()
 
 
 # ---- entry point ---------------------------------------------------------------------------------

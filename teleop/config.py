@@ -12,7 +12,7 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, get_args, get_origin, get_type_hints
+from typing import Any, Literal, Optional, Union, get_args, get_origin, get_type_hints
 
 import yaml
 
@@ -173,6 +173,7 @@ class CalibrationConfig:
 @dataclass(frozen=True)
 class DeviceConfig:
     type: Literal["simulated", "hid"] = "simulated"
+    file: Optional[str] = None            # device file (configs/devices/*.yaml), required when type is hid
 
 
 @dataclass(frozen=True)
@@ -182,6 +183,9 @@ class MappingConfig:
     force_limit: float = 4.0              # [N]
     ramp_time: float = 0.5                # [s]
     force_rate_limit: float = 100.0       # [N/s]
+    passivity: bool = True                # time-domain passivity controller on the force channel
+    align_tolerance: float = 0.001        # [m] of tendon: re-engage only when this close to the slave
+    clutch_button: int = 1                # bit of DeviceState.buttons held to clutch; -1: no clutch
 
 
 @dataclass(frozen=True)
@@ -190,12 +194,17 @@ class MasterConfig:
     device: DeviceConfig = field(default_factory=DeviceConfig)
     mapping: MappingConfig = field(default_factory=MappingConfig)
     watchdog_ms: float = 50.0
+    max_tension: float = 200.0            # [N] estimates with |T_in| or |T_out_hat| above: rejected
 
 
 @dataclass(frozen=True)
 class SlaveConfig:
     watchdog_ms: float = 50.0
     heartbeat_hz: float = 50.0
+    relax_speed: float = 0.005            # [m/s] SAFE: release toward sheath.pretension at this speed
+    x_in_min: float = -0.005              # [m] commands outside [x_in_min, x_in_max]: rejected
+    x_in_max: float = 0.03                # [m]
+    engage_tolerance: float = 0.002       # [m] (re-)engage only on a command this close to x_in
 
 
 @dataclass(frozen=True)
@@ -252,7 +261,10 @@ RANGES: dict[str, tuple[str, str]] = {
     "master.rate_hz": ("> 0", "Hz"), "master.watchdog_ms": ("> 0", "ms"),
     "master.mapping.motion_scale": ("> 0", "-"), "master.mapping.force_scale": (">= 0", "-"),
     "master.mapping.force_limit": (">= 0", "N"), "master.mapping.ramp_time": (">= 0", "s"),
-    "master.mapping.force_rate_limit": ("> 0", "N/s"),
+    "master.mapping.force_rate_limit": ("> 0", "N/s"), "master.mapping.align_tolerance": ("> 0", "m"),
+    "master.mapping.clutch_button": ("-1..31", "bit"), "master.max_tension": ("> 0", "N"),
+    "slave.relax_speed": (">= 0", "m/s"), "slave.x_in_min": ("any", "m"), "slave.x_in_max": ("any", "m"),
+    "slave.engage_tolerance": ("> 0", "m"),
     "slave.watchdog_ms": ("> 0", "ms"), "slave.heartbeat_hz": ("> 0", "Hz"),
     "recording.log_every": (">= 1", "samples"),
     "recording.profile_every": (">= 1", "logs"),
@@ -335,6 +347,11 @@ def _convert(v: Any, tp: Any, path: str, ctx: _Ctx) -> Any:
     if dataclasses.is_dataclass(tp):
         return _merge(tp, None, v, path, ctx)
     origin = get_origin(tp)
+    if origin is Union and type(None) in get_args(tp):      # Optional[X]: null or an X
+        if v is None:
+            return None
+        tp = next(a for a in get_args(tp) if a is not type(None))
+        origin = get_origin(tp)
     if origin is Literal:
         if v not in get_args(tp) or isinstance(v, bool):
             choices = ", ".join(repr(c) for c in get_args(tp))
@@ -408,6 +425,12 @@ def _check(cfg: Config, ctx: _Ctx) -> Config:
                                                          f"endpoint (expected e.g. 'tcp/127.0.0.1:7447')")
     if not cfg.sheath.runs:
         raise ctx.error("sheath.runs", "sheath.runs: expected at least one run")
+    if cfg.master.device.type == "hid" and not cfg.master.device.file:
+        raise ctx.error("master.device.type", "master.device.file: a device file (configs/devices/*.yaml) "
+                                              "is required when master.device.type is 'hid'")
+    if not cfg.slave.x_in_min < cfg.slave.x_in_max:
+        raise ctx.error("slave.x_in_max", f"slave.x_in_max ({cfg.slave.x_in_max!r} m) must be above "
+                                          f"slave.x_in_min ({cfg.slave.x_in_min!r} m)")
     return cfg
 
 
