@@ -114,14 +114,6 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     else:
         p.set_defaults(func=None)
 
-    p = sub.add_parser("devices", help="list HID devices (vendor/product id, usage page, usage, path)")
-    if "devices" in (sys.argv[1:] if argv is None else argv)[:1]:
-        from master import devices_list  # lazy: only `teleop devices` imports hidapi
-        devices_list.add_arguments(p)
-        p.set_defaults(func=devices_list.main_devices)
-    else:
-        p.set_defaults(func=None)
-
     args = sys.argv[1:] if argv is None else argv
     if "analyze" in args[:1]:
         from teleop import analyze  # lazy: only `teleop analyze` pays for it
