@@ -32,6 +32,8 @@ __all__ = [
 @dataclass(frozen=True)
 class InstrumentConfig:
     id: str = "tsm0"
+    # empty: the single-tendon rig of `sheath` and `rig.load`; 1..4 entries: antagonistic-pair joints
+    joints: tuple[JointConfig, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -51,6 +53,47 @@ class SheathConfig:
 
     def geometry(self) -> SheathGeometry:
         return SheathGeometry([Run(r.length, r.radius) for r in self.runs])
+
+
+# ---- instruments of 1..4 joints, each driven by an antagonistic tendon pair (slave/joint_rig.py) --
+
+@dataclass(frozen=True)
+class TendonConfig:
+    """One tendon-sheath transmission of a joint (its own route, friction and stiffness)."""
+
+    mu: float = 0.1               # [-] >= 0
+    EA: float = 15000.0           # [N] > 0
+    runs: tuple[RunConfig, ...] = SheathConfig.runs
+
+    def geometry(self) -> SheathGeometry:
+        return SheathGeometry([Run(r.length, r.radius) for r in self.runs])
+
+
+@dataclass(frozen=True)
+class TendonPairConfig:
+    a: TendonConfig = field(default_factory=TendonConfig)   # pulling a turns the joint to + angles
+    b: TendonConfig = field(default_factory=TendonConfig)   # pulling b turns it to - angles
+
+
+@dataclass(frozen=True)
+class JointLoadConfig:
+    tissue: bool = True
+    tissue_stiffness: float = 0.02        # [N m/rad] torsional tissue spring beyond the contact angle
+    tissue_contact: float = 0.2           # [rad] >= 0: in contact where |theta| > tissue_contact
+    torque: float = 0.0                   # [N m] constant external torque (gravity, a held load)
+
+
+@dataclass(frozen=True)
+class JointConfig:
+    name: str                             # [A-Za-z0-9_-]+, unique in the instrument
+    pulley_radius: float = 0.004          # [m] distal pulley: x_out,a = +r theta, x_out,b = -r theta
+    limits: tuple[float, ...] = (-1.2, 1.2)  # [rad] lower < 0 < upper (0: the rest pose)
+    stiffness: float = 0.005              # [N m/rad] joint return spring
+    damping: float = 0.0002               # [N m s/rad]
+    limit_stiffness: float = 50.0         # [N m/rad] stiffness of the joint limits
+    pretension: float = 0.0               # [N] tension of the pair at rest; 0: none (antagonist slack-free)
+    load: JointLoadConfig = field(default_factory=JointLoadConfig)
+    tendons: TendonPairConfig = field(default_factory=TendonPairConfig)
 
 
 @dataclass(frozen=True)
@@ -168,6 +211,7 @@ class CalibrationConfig:
     target_tension: float = 20.0          # [N]
     speed: float = 0.004                  # [m/s]
     use_route: bool = True
+    dir: str = "configs/calibration"      # joint instruments: <dir>/<instrument.id>.yaml
 
 
 @dataclass(frozen=True)
@@ -208,6 +252,17 @@ class SlaveConfig:
 
 
 @dataclass(frozen=True)
+class PairControlConfig:
+    """Slave-side control of each antagonistic pair (slave/pair_control.py)."""
+
+    min_tension: float = 0.5              # [N] antagonist's set tension when the joint has no pretension
+    tension_gain: float = 0.01            # [m/(N s)] integral gain of the antagonist's tension loop
+    switch_band: float = 0.01             # [rad] |command| below: both tendons hold their set tension
+    feedforward: bool = True              # antagonist pays out the pulling side's commanded travel
+    axes: tuple[int, ...] = ()            # master: device axis of each joint; empty: joint i on axis i
+
+
+@dataclass(frozen=True)
 class TransportConfig:
     mode: Literal["peer", "client"] = "peer"
     listen: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
@@ -234,6 +289,7 @@ class Config:
     slave: SlaveConfig = field(default_factory=SlaveConfig)
     transport: TransportConfig = field(default_factory=TransportConfig)
     recording: RecordingConfig = field(default_factory=RecordingConfig)
+    pair_control: PairControlConfig = field(default_factory=PairControlConfig)
 
 
 # ---- loading: strict YAML -> Config ------------------------------------------------------------
@@ -267,9 +323,20 @@ RANGES: dict[str, tuple[str, str]] = {
     "slave.engage_tolerance": ("> 0", "m"),
     "slave.watchdog_ms": ("> 0", "ms"), "slave.heartbeat_hz": ("> 0", "Hz"),
     "recording.log_every": (">= 1", "samples"),
+    "instrument.joints[].pulley_radius": ("> 0", "m"), "instrument.joints[].limits[]": ("any", "rad"),
+    "instrument.joints[].stiffness": (">= 0", "N m/rad"), "instrument.joints[].damping": (">= 0", "N m s/rad"),
+    "instrument.joints[].limit_stiffness": ("> 0", "N m/rad"), "instrument.joints[].pretension": (">= 0", "N"),
+    "instrument.joints[].load.tissue_stiffness": (">= 0", "N m/rad"),
+    "instrument.joints[].load.tissue_contact": (">= 0", "rad"), "instrument.joints[].load.torque": ("any", "N m"),
+    **{f"instrument.joints[].tendons.{t}.{k}": v for t in "ab" for k, v in (
+        ("mu", (">= 0", "-")), ("EA", ("> 0", "N")), ("runs[].length", ("> 0", "m")),
+        ("runs[].radius", ("> 0", "m, .inf = straight")))},
+    "pair_control.min_tension": ("> 0", "N"), "pair_control.tension_gain": ("> 0", "m/(N s)"),
+    "pair_control.switch_band": (">= 0", "rad"), "pair_control.axes[]": (">= 0", "-"),
     "recording.profile_every": (">= 1", "logs"),
 }
-_INF_OK = {"sheath.runs[].radius"}
+_INF_OK = {"sheath.runs[].radius", "instrument.joints[].tendons.a.runs[].radius",
+           "instrument.joints[].tendons.b.runs[].radius"}
 _NON_SI = ("_mm", "_deg", "_ms", "_hz")
 
 
@@ -431,7 +498,43 @@ def _check(cfg: Config, ctx: _Ctx) -> Config:
     if not cfg.slave.x_in_min < cfg.slave.x_in_max:
         raise ctx.error("slave.x_in_max", f"slave.x_in_max ({cfg.slave.x_in_max!r} m) must be above "
                                           f"slave.x_in_min ({cfg.slave.x_in_min!r} m)")
+    _check_joints(cfg, ctx)
     return cfg
+
+
+MAX_JOINTS = 4
+_JOINT_NAME = re.compile(r"[A-Za-z0-9_-]+")
+
+
+def _check_joints(cfg: Config, ctx: _Ctx) -> None:
+    """instrument.joints: 0 (single tendon) or 1..4 joints with unique names, limits [lower < 0 < upper],
+    non-empty tendon routes; pair_control.axes empty or one distinct axis per joint."""
+    joints = cfg.instrument.joints
+    if len(joints) > MAX_JOINTS:
+        raise ctx.error("instrument.joints", f"instrument.joints: {len(joints)} joints, an instrument has "
+                                             f"1 to {MAX_JOINTS}")
+    seen: dict[str, int] = {}
+    for i, j in enumerate(joints):
+        where = f"instrument.joints[{i}]"
+        if not _JOINT_NAME.fullmatch(j.name):
+            raise ctx.error(f"{where}.name", f"{where}.name: {j.name!r} is not a joint name (letters, digits, "
+                                             f"'_' or '-' only)")
+        if j.name in seen:
+            raise ctx.error(f"{where}.name", f"{where}.name: {j.name!r} is already the name of "
+                                             f"instrument.joints[{seen[j.name]}]")
+        seen[j.name] = i
+        lim = j.limits
+        if len(lim) != 2 or not (lim[0] < 0.0 < lim[1]):
+            raise ctx.error(f"{where}.limits", f"{where}.limits ({j.name}): expected [lower, upper] [rad] with "
+                                               f"lower < 0 < upper (0 is the rest pose), got {list(lim)}")
+        for t in ("a", "b"):
+            if not getattr(j.tendons, t).runs:
+                raise ctx.error(f"{where}.tendons.{t}.runs", f"{where}.tendons.{t}.runs ({j.name}): expected "
+                                                             f"at least one run")
+    axes = cfg.pair_control.axes
+    if axes and (len(axes) != len(joints) or len(set(axes)) != len(axes)):
+        raise ctx.error("pair_control.axes", f"pair_control.axes: expected one distinct device axis per joint "
+                                             f"({len(joints)}), got {list(axes)}")
 
 
 def _line_map(node: Any, path: str, out: dict[str, int], ctx: _Ctx) -> None:

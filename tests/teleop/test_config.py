@@ -5,7 +5,7 @@ import dataclasses
 import math
 import re
 from pathlib import Path
-from typing import get_type_hints
+from typing import get_args, get_origin, get_type_hints
 
 import pytest
 
@@ -197,8 +197,10 @@ def test_range_table_covers_every_numeric_field_and_nothing_else():
             p = prefix + name
             if dataclasses.is_dataclass(tp):
                 walk(tp, p + ".")
-            elif tp == tuple[RunConfig, ...]:
-                walk(RunConfig, p + "[].")
+            elif get_origin(tp) is tuple and dataclasses.is_dataclass(get_args(tp)[0]):
+                walk(get_args(tp)[0], p + "[].")      # sheath.runs, instrument.joints, ...
+            elif get_origin(tp) is tuple and get_args(tp)[0] in (int, float):
+                numeric.append(p + "[]")               # joint limits, device axes
             elif tp in (int, float):
                 numeric.append(p)
     walk(Config, "")
