@@ -9,12 +9,28 @@ One :meth:`SlaveNode.step` per cycle (``rig.rate_hz``), given the time by the ca
 * Then, each cycle, the latest Command decides (latest wins):
 
   ========================================  ==========  =======================================
-  latest command                            state       rig command
+  latest accepted command                   state       rig command
   ========================================  ==========  =======================================
-  none, or older than ``slave.watchdog_ms``  SAFE        hold the last applied position
+  none, older than ``slave.watchdog_ms``,   SAFE        hold, then relax toward the pretension
+  or the master's liveliness token gone
   fresh, ``engaged=False``                  READY       hold the last applied position
   fresh, ``engaged=True``                   ENGAGED     ``x_in_cmd``
   ========================================  ==========  =======================================
+
+  A command is *accepted* only when it is newer than the last accepted one (sequence number, uint32
+  wrap: duplicates and reordered old messages are counted and ignored) and ``x_in_cmd`` lies in
+  ``[slave.x_in_min, slave.x_in_max]`` (out of range: counted and ignored). Only accepted commands
+  feed the watchdog, so a stream of corrupt or impossible commands ends in SAFE within the watchdog
+  time. Entering ENGAGED from another state needs ``|x_in_cmd - x_in| <= slave.engage_tolerance``
+  (measured x_in): a master that has not re-aligned never makes the tendon jump.
+
+  SAFE (the single-tendon version of "hold the joints, relax the tendons to pretension"): the motor
+  holds where it was, then moves in the release direction only, at ``slave.relax_speed``, while
+  the measured proximal tension is above ``sheath.pretension + RELAX_BAND``; it never pulls and never
+  goes below ``slave.x_in_min``. Releasing a single tendon lets its joint go back under its return
+  spring: the instrument goes limp, away from the tissue, with no stored energy, which is the safe
+  state of a flexible instrument; the speed bound keeps that motion slow and smooth. (An
+  antagonistic joint would instead lower both tensions to the pretension at a constant difference.)
 
   rig.step -> estimator.step(T_in, x_in, t) (proximal sensors only, never the truth) -> Estimate
   (with the profile at ``estimator.profile_points`` points) -> one CSV row per cycle and Rerun
@@ -29,7 +45,7 @@ import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -38,18 +54,25 @@ from estimator.sheath import SheathModel, profile_batch
 from slave.calibrate import JointLimitCalibration
 from slave.rig import Rig, RigState
 from teleop.clock import Clock, Pacer
-from teleop.codec import next_seq
+from teleop.codec import SEQ_MODULUS, next_seq
 from teleop.config import Config
 from teleop.messages import Estimate, Heartbeat, Side, SideState
 
-__all__ = ["SlaveLinks", "SlaveNode", "CSV_COLUMNS", "CSV_TRUTH_COLUMNS", "csv_columns"]
+__all__ = ["SlaveLinks", "SlaveNode", "CSV_COLUMNS", "CSV_TRUTH_COLUMNS", "csv_columns", "RELAX_BAND", "seq_newer"]
 
 log = logging.getLogger("teleop.slave")
 
 #: Columns of the slave's recording (measured-data format; truth columns only with a simulated rig).
 CSV_TRUTH_COLUMNS = ("x_out", "T_out", "elongation")
 CSV_COLUMNS = ("time", "x_in", "T_in", "x_out", "T_out", "elongation", "T_out_hat", "elongation_hat",
-               "x_out_hat", "phase", "marker", "cmd_seq", "x_in_cmd", "state")
+               "x_out_hat", "phase", "marker", "cmd_seq", "x_in_cmd", "state", "t_node", "t_cmd_recv")
+#: SAFE stops relaxing when the measured T_in is within this of the pretension [N] (load-cell noise margin).
+RELAX_BAND = 0.2
+
+
+def seq_newer(seq: int, than: int | None) -> bool:
+    """Whether uint32 sequence number ``seq`` comes after ``than`` (wrapping; None: anything is newer)."""
+    return than is None or 0 < (seq - than) % SEQ_MODULUS < SEQ_MODULUS // 2
 
 
 @dataclass
@@ -64,6 +87,7 @@ class SlaveLinks:
     heartbeat: Any
     command: Any
     master_heartbeat: Any
+    master_alive: Callable[[], bool] | None = None
 
 
 class SlaveNode:
@@ -122,6 +146,18 @@ class SlaveNode:
         self.safe_events = 0
         self.pacer_stats: dict[str, float] = {}
         self.master_stopped = False
+        self.x_min, self.x_max = cfg.slave.x_in_min, cfg.slave.x_in_max
+        self.relax_speed = cfg.slave.relax_speed
+        self.relax_to = cfg.sheath.pretension + RELAX_BAND
+        self.engage_tolerance = cfg.slave.engage_tolerance
+        self._accepted = None                  # last accepted Received command
+        self._seen = None                      # last Received object looked at
+        self._refused = None                   # last command refused for engaging too far away
+        self._t_warn = -math.inf
+        self.last_safe_reason: str | None = None
+        self._now = 0.0
+        self.counts = dict.fromkeys(("commands_rejected_range", "commands_out_of_order", "commands_duplicate",
+                                     "engage_refused"), 0)
         # load the compiled kernels now, not in the first real-time cycle
         DistalEstimator(SheathModel(K=0.5, compliance=1e-4), n_nodes=2).step(1.0, 0.0, 0.0)
         if calibrate:
@@ -161,23 +197,71 @@ class SlaveNode:
 
     def _set_state(self, state: SideState, now: float, why: str) -> None:
         if state != self.state:
+            self.last_safe_reason = why if state == SideState.SAFE else None
             log.info("slave %s -> %s at t=%.3f s: %s", self.state.name, state.name, now, why)
             if state == SideState.SAFE and self.state == SideState.ENGAGED:
                 self.safe_events += 1
             self.state = state
 
-    def _command(self, now: float) -> float:
-        """Apply the watchdog to the latest command; return the rig command [m]."""
+    def _warn(self, now: float, msg: str, *args) -> None:
+        """A warning at most once per second (real-time loops never flood the log)."""
+        if now - self._t_warn >= 1.0:
+            self._t_warn = now
+            log.warning(msg, *args)
+
+    def _accept(self, now: float) -> None:
+        """Look at the latest received command once: accept it when newer and within range."""
         rec = self.links.command.latest()
-        if rec is None or self.links.command.age(now) > self.watchdog:
-            self._set_state(SideState.SAFE, now, "no command" if rec is None else "command stale")
-            self.marker = 0
-            return self.x_hold
+        if rec is None or rec is self._seen:
+            return
+        self._seen = rec
+        cmd = rec.message
+        last = None if self._accepted is None else self._accepted.message.seq
+        if not seq_newer(cmd.seq, last):
+            self.counts["commands_duplicate" if cmd.seq == last else "commands_out_of_order"] += 1
+            return
+        if not self.x_min <= cmd.x_in_cmd <= self.x_max:
+            self.counts["commands_rejected_range"] += 1
+            self._warn(now, "rejected command %d: x_in_cmd %.6g m outside [%g, %g] m (slave.x_in_min/max)",
+                       cmd.seq, cmd.x_in_cmd, self.x_min, self.x_max)
+            return
+        self._accepted = rec
+
+    def _safe(self, now: float, why: str, dt: float) -> float:
+        """SAFE: hold, then release toward the pretension (module docstring); the rig command [m]."""
+        self._set_state(SideState.SAFE, now, why)
+        if self.state == SideState.SAFE and self.last_safe_reason is None:
+            self.last_safe_reason = why
+        self.marker = 0
+        if self.relax_speed > 0 and self.rig_state.T_in > self.relax_to and self.x_hold > self.x_min:
+            # release only, at most relax_speed dt per cycle, never below x_in_min
+            self.x_hold = max(self.x_min, self.x_hold - self.relax_speed * dt)
+        return self.x_hold
+
+    def _command(self, now: float, dt: float = 0.0) -> float:
+        """Apply the watchdog to the latest accepted command; return the rig command [m]."""
+        self._accept(now)
+        rec = self._accepted
+        if rec is None or now - rec.t_recv > self.watchdog:
+            return self._safe(now, "no command" if rec is None else "command stale", dt)
+        alive = self.links.master_alive
+        if alive is not None and not alive():
+            return self._safe(now, "master liveliness token gone", dt)
         cmd = rec.message
         self.cmd_seq = cmd.seq
         if not cmd.engaged:
             self._set_state(SideState.READY, now, "master not engaged")
             self.marker = 0
+            return self.x_hold
+        if self.state != SideState.ENGAGED and abs(cmd.x_in_cmd - self.rig_state.x_in) > self.engage_tolerance:
+            if rec is not self._refused:
+                self._refused = rec
+                self.counts["engage_refused"] += 1
+            self._warn(now, "engaged command %d refused: x_in_cmd %.6g m is %.3g mm from x_in (tolerance %.3g mm)",
+                       cmd.seq, cmd.x_in_cmd, 1e3 * abs(cmd.x_in_cmd - self.rig_state.x_in),
+                       1e3 * self.engage_tolerance)
+            if self.state == SideState.SAFE:
+                return self._safe(now, "engaged command too far from x_in", dt)
             return self.x_hold
         self._set_state(SideState.ENGAGED, now, "master engaged")
         self.marker = cmd.marker
@@ -212,7 +296,8 @@ class SlaveNode:
             if cal.done:
                 self._finish_calibration(now)
         else:
-            x_cmd = self._command(now)
+            self._now = now
+            x_cmd = self._command(now, dt)
             rs = self.rig_state = self.rig.step(x_cmd, dt)
             est = self.estimator.step(rs.T_in, rs.x_in, rs.t)
             profile = self.estimator.profile_samples(len(self.s_points))
@@ -241,7 +326,8 @@ class SlaveNode:
         if self.recorder is not None:
             truth = (tr.x_out, tr.T_out, tr.elongation) if tr is not None else ()
             self.recorder.write((rs.t, rs.x_in, rs.T_in, *truth, est.T_out, est.elongation, est.x_out,
-                                 int(est.phase), self.marker, self.cmd_seq, x_cmd, int(self.state)))
+                                 int(est.phase), self.marker, self.cmd_seq, x_cmd, int(self.state), self._now,
+                                 0.0 if self._accepted is None else self._accepted.t_recv))
         self._log_rerun(rs, est.T_out, est.elongation, est.phase, profile)
 
     def _log_rerun(self, rs: RigState, T_out_hat: float, elongation_hat: float, phase, profile: np.ndarray,
@@ -293,6 +379,7 @@ class SlaveNode:
             "commands_received": int(getattr(cmd, "count", 0)),
             "command_decode_errors": int(getattr(cmd, "errors", 0)),
             "commands_applied": self.commands_applied,
+            **self.counts,
             "safe_events": self.safe_events,
             "stalls": self.stalls,
             "master_stopped": self.master_stopped,

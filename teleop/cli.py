@@ -81,6 +81,35 @@ def _shared(p: argparse.ArgumentParser) -> None:
     p.add_argument("-v", "--verbose", action="store_true", help="log state changes and details")
 
 
+def _inject_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--inject", metavar="SPEC", default=None,
+                   help="fault injection on this side's outgoing messages (tests), e.g. "
+                        "delay=30ms,drop=0.1,dup=0.05,reorder=0.05,seed=1 or corrupt=nan,stream=command,on=usr1 "
+                        "(teleop/faults.py)")
+
+
+def _injector(args: argparse.Namespace, clock):
+    """The fault injector of ``--inject`` (SIGUSR1 trigger installed), or None."""
+    if not getattr(args, "inject", None):
+        return None
+    from teleop.faults import FaultInjector
+    inj = FaultInjector(args.inject, clock)
+    inj.install_signal()
+    logging.getLogger("teleop.faults").warning("fault injection on: %s", args.inject)
+    return inj
+
+
+def _publisher(session, key: str, stream: str, injector):
+    pub = session.publisher(key)
+    return pub if injector is None else injector.wrap(pub, stream)
+
+
+def _write_fault_stats(injector, path: Path) -> None:
+    if injector is not None:
+        import json
+        path.write_text(json.dumps(injector.stats(), indent=2) + "\n", encoding="utf-8")
+
+
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The argument parser. ``argv`` decides whether ``teleop.analyze`` is imported (only for analyze)."""
     parser = argparse.ArgumentParser(prog=PROG, description="Haptic teleoperation of tendon-sheath instruments.")
@@ -97,12 +126,14 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     p.add_argument("--exit-on-master-stop", action="store_true", help="finish when the master announces STOPPING")
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
     p.add_argument("--rerun", choices=("save", "spawn", "off"), default=None, help="override recording.rerun")
+    _inject_flag(p)
     p.set_defaults(func=_cmd_slave)
 
     p = sub.add_parser("master", help="operator side: device -> commands, estimate -> force")
     _shared(p)
     p.add_argument("--protocol", default="paper,minor",
                    help="scripted operator protocol(s), comma separated: paper, minor, short")
+    _inject_flag(p)
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
     p.set_defaults(func=_cmd_master)
 
@@ -163,15 +194,18 @@ def run_slave(args: argparse.Namespace) -> int:
             "truth": "x_out, T_out, elongation are simulator ground truth (evaluation only)" if has_truth else "none"}
     ident = cfg.instrument.id
     clock = MonotonicClock()
+    injector = _injector(args, clock)
     node = None
     with raise_on_sigterm(), \
             open_session(cfg, args, clock) as session, \
             CsvRecorder(run_dir / "slave.csv", csv_columns(has_truth), meta, flush_every=500) as rec, \
             RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd") as rr:
-        links = SlaveLinks(estimate=session.publisher(estimate_key(ident)),
-                           heartbeat=session.publisher(heartbeat_key(ident, "slave")),
+        watcher = session.liveliness_watcher(liveliness_key(ident, "master"))
+        links = SlaveLinks(estimate=_publisher(session, estimate_key(ident), "estimate", injector),
+                           heartbeat=_publisher(session, heartbeat_key(ident, "slave"), "heartbeat", injector),
                            command=session.subscriber(command_key(ident), Command),
-                           master_heartbeat=session.subscriber(heartbeat_key(ident, "master"), Heartbeat))
+                           master_heartbeat=session.subscriber(heartbeat_key(ident, "master"), Heartbeat),
+                           master_alive=lambda: watcher.alive)
         session.liveliness_token(liveliness_key(ident, "slave"))
         node = SlaveNode(cfg, rig, links, recorder=rec, rerun=rr, run_dir=run_dir,
                          stop_on_master_stop=args.exit_on_master_stop)
@@ -179,6 +213,7 @@ def run_slave(args: argparse.Namespace) -> int:
             node.run(clock, max_duration=args.max_duration)
         finally:
             node.write_stats(run_dir / "slave_stats.json")
+            _write_fault_stats(injector, run_dir / "slave_faults.json")
     logging.getLogger("teleop.slave").info("slave done: %s", run_dir)
     return 0
 

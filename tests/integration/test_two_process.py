@@ -114,7 +114,8 @@ def test_killing_the_master_makes_the_slave_go_safe(tmp_path):
         if master is not None:
             stop(master)
     log = (tmp_path / "slave.log").read_text()
-    assert "Traceback" not in log and "ENGAGED -> SAFE" in log and "command stale" in log
+    assert "Traceback" not in log and "ENGAGED -> SAFE" in log
+    assert "master liveliness token gone" in log or "command stale" in log
     stats = json.loads((run_dir / "slave_stats.json").read_text())
     assert stats["commands_applied"] > 100 and stats["safe_events"] == 1
     data = read_measured_csv(run_dir / "slave.csv")
@@ -124,4 +125,6 @@ def test_killing_the_master_makes_the_slave_go_safe(tmp_path):
     after = slice(engaged[-1] + 1, None)
     assert np.all(state[after] == SideState.SAFE) and state[after].size > 50
     hold = data.extra["x_in_cmd"][after]
-    assert np.all(hold == hold[0]) and hold[0] == data.extra["x_in_cmd"][engaged[-1]]   # held the last position
+    # held the last position, then released (never pulled) at <= slave.relax_speed toward the pretension
+    assert hold[0] <= data.extra["x_in_cmd"][engaged[-1]] and np.all(np.diff(hold) <= 0)
+    assert np.all(-np.diff(hold) <= cfg.slave.relax_speed * np.diff(data.time[after]) + 1e-12)

@@ -75,8 +75,8 @@ class EchoRig:
         pass
 
 
-def make(rig=None, calibrate=False, watchdog_ms=50.0, **kw):
-    cfg = Config(slave=SlaveConfig(watchdog_ms=watchdog_ms))
+def make(rig=None, calibrate=False, watchdog_ms=50.0, slave=None, **kw):
+    cfg = Config(slave=SlaveConfig(watchdog_ms=watchdog_ms, **(slave or {})))
     clock = FakeClock(10.0)
     links = SlaveLinks(*(Topic(clock) for _ in range(4)))
     node = SlaveNode(cfg, rig or EchoRig(), links, calibrate=calibrate, model=None if calibrate else MODEL, **kw)
@@ -125,17 +125,76 @@ def test_not_engaged_is_ready_and_holds_the_last_position():
 
 
 def test_stale_command_goes_safe_after_watchdog_ms_and_holds():
-    node, links, clock = make(watchdog_ms=50.0)
-    command(links, 1, 0.003)
+    node, links, clock = make(watchdog_ms=50.0, slave={"relax_speed": 0.0})   # hold only
+    command(links, 1, 0.0015)
     tick(node, clock, 49)                 # command 49 ms old: still followed
     assert node.state == SideState.ENGAGED
     tick(node, clock, 2)                  # 51 ms
     assert node.state == SideState.SAFE and node.safe_events == 1
     tick(node, clock, 100)
-    assert set(node.rig.cmds) == {0.003}
-    command(links, 2, 0.004)              # commands come back: follows again
+    assert set(node.rig.cmds) == {0.0015}
+    command(links, 2, 0.0025)             # commands come back: follows again
     tick(node, clock)
-    assert node.state == SideState.ENGAGED and node.rig.cmds[-1] == 0.004
+    assert node.state == SideState.ENGAGED and node.rig.cmds[-1] == 0.0025
+
+
+def test_safe_relaxes_at_the_relax_speed_down_to_the_pretension_and_never_pulls():
+    node, links, clock = make(slave={"relax_speed": 0.01})
+    for k in range(1, 21):                # walk up to 2 mm (T_in = 2 N on the echo rig)
+        command(links, k, 1e-4 * k)
+        tick(node, clock)
+    tick(node, clock, 400)                # stale after 50 ms, then relax at 10 mm/s
+    cmds = np.array(node.rig.cmds[20:])
+    assert node.state == SideState.SAFE and node.last_safe_reason == "command stale"
+    assert np.all(np.diff(cmds) <= 0)                                  # release only
+    assert np.max(-np.diff(cmds)) == pytest.approx(0.01 * DT)          # at most relax_speed dt per cycle
+    assert cmds[48] == pytest.approx(0.002)                            # held first, for the watchdog time
+    # stops once T_in (1000 N/m x_in on this rig) <= pretension (0) + RELAX_BAND: x = 0.2 mm
+    assert cmds[-1] == pytest.approx(0.0002, abs=0.01 * DT) and cmds[-1] == cmds[-100]
+
+
+def test_duplicates_old_and_out_of_range_commands_are_ignored_and_counted():
+    node, links, clock = make()
+    command(links, 10, 0.001)
+    tick(node, clock)
+    command(links, 10, 0.001)             # duplicate
+    tick(node, clock)
+    command(links, 9, 0.0005)             # reordered: older than the applied one
+    tick(node, clock)
+    command(links, 11, 1.0)               # impossible (slave.x_in_max 0.03 m)
+    tick(node, clock)
+    assert node.rig.cmds == [0.001] * 4 and node.state == SideState.ENGAGED
+    assert (node.counts["commands_duplicate"], node.counts["commands_out_of_order"],
+            node.counts["commands_rejected_range"]) == (1, 1, 1)
+    command(links, 11, 0.0011)            # seq 11 again, now in range: accepted
+    tick(node, clock)
+    assert node.rig.cmds[-1] == 0.0011
+    for _ in range(60):                   # only rejected commands from now on: the watchdog trips
+        command(links, 50, float("1e3"))
+        tick(node, clock)
+    assert node.state == SideState.SAFE and node.stats()["commands_rejected_range"] == 61
+
+
+def test_sequence_numbers_wrap():
+    from slave.node import seq_newer
+    assert seq_newer(0, 2**32 - 1) and not seq_newer(2**32 - 1, 0) and seq_newer(5, None)
+    assert not seq_newer(5, 5) and seq_newer(6, 5) and not seq_newer(4, 5)
+
+
+def test_engage_needs_the_command_close_to_x_in_and_liveliness_loss_is_safe_at_once():
+    node, links, clock = make()
+    alive = [True]
+    node.links.master_alive = lambda: alive[0]
+    command(links, 1, 0.005)              # 5 mm from x_in = 0: refused, stays SAFE, rig holds
+    tick(node, clock, 3)
+    assert node.state == SideState.SAFE and node.rig.cmds == [0.0] * 3 and node.counts["engage_refused"] == 1
+    command(links, 2, 0.001)
+    tick(node, clock)
+    assert node.state == SideState.ENGAGED
+    alive[0] = False                      # the master's token disappears: SAFE in the same cycle
+    command(links, 3, 0.0012)
+    tick(node, clock)
+    assert node.state == SideState.SAFE and node.last_safe_reason == "master liveliness token gone"
 
 
 def test_records_one_row_per_cycle_in_the_recording_columns():
