@@ -6,9 +6,9 @@ Motion (:class:`MotionMap`), with ``s`` = ``motion_scale`` [-]::
 
 The anchor pair (device position ``p_anchor`` [m], tendon displacement ``x_anchor`` [m]) is set on
 engage from the slave's current ``x_in``, so engaging never makes the tendon jump. A clutch is the
-same operation: while it is open the command holds; closing it re-anchors at the current hand
-position and the held command. (No clutch button is wired yet; :meth:`MotionMap.open_clutch` and
-:meth:`MotionMap.anchor` are the hooks.)
+same operation: while it is open the command holds; :meth:`MotionMap.anchor` re-anchors,
+:meth:`MotionMap.resume` closes it again on the kept anchor. :mod:`master.console` decides which
+(clutch button, deadman, alignment).
 
 Force (:class:`ForceMap`), applied in this order every cycle::
 
@@ -84,8 +84,17 @@ class MotionMap:
         self.anchored = True
 
     def open_clutch(self) -> None:
-        """Decouple: :meth:`command` holds the last command until the next :meth:`anchor`."""
+        """Decouple: :meth:`command` holds the last command until :meth:`anchor` or :meth:`resume`."""
         self.anchored = False
+
+    def resume(self) -> None:
+        """Couple again on the kept anchor pair (the caller has checked the alignment)."""
+        self.anchored = True
+
+    def target(self, position: float) -> float:
+        """Where ``position`` [m] maps with the present anchor [m], coupled or not (NaN in, NaN out)."""
+        # x_in_cmd = x_anchor + s (p - p_anchor)
+        return self.x_anchor + self.scale * (position - self.p_anchor)
 
     def command(self, position: float) -> float:
         """The displacement command [m] for device ``position`` [m].

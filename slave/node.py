@@ -54,7 +54,7 @@ from estimator.sheath import SheathModel, profile_batch
 from slave.calibrate import JointLimitCalibration
 from slave.rig import Rig, RigState
 from teleop.clock import Clock, Pacer
-from teleop.codec import SEQ_MODULUS, next_seq
+from teleop.codec import next_seq, seq_newer
 from teleop.config import Config
 from teleop.messages import Estimate, Heartbeat, Side, SideState
 

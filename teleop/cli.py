@@ -220,13 +220,13 @@ def run_slave(args: argparse.Namespace) -> int:
 
 def run_master(args: argparse.Namespace) -> int:
     """``teleop master``: run the operator side until the device's protocol is finished."""
-    from master.node import MasterLinks, MasterNode
+    from master.node import CSV_COLUMNS as MASTER_CSV, CSV_UNITS as MASTER_UNITS, MasterLinks, MasterNode
     from master.simulated import ScriptedOperator, build_protocol
     from teleop.clock import MonotonicClock
     from teleop.config import load_config
     from teleop.keys import command_key, estimate_key, heartbeat_key, liveliness_key
     from teleop.messages import Estimate, Heartbeat
-    from teleop.recording import raise_on_sigterm
+    from teleop.recording import CsvRecorder, raise_on_sigterm
 
     cfg = load_config(args.config)
     if cfg.master.device.type == "hid":
@@ -242,20 +242,25 @@ def run_master(args: argparse.Namespace) -> int:
         run_dir.mkdir(parents=True, exist_ok=True)
         ident = cfg.instrument.id
         clock = MonotonicClock()
-        with raise_on_sigterm(), open_session(cfg, args, clock) as session:
+        injector = _injector(args, clock)
+        meta = {"source": "teleop master", "instrument": ident, "device": cfg.master.device.type,
+                "columns": "x_in = command sent, T_in = slave's latest proximal tension, force = rendered"}
+        with raise_on_sigterm(), open_session(cfg, args, clock) as session, \
+                CsvRecorder(run_dir / "master.csv", MASTER_CSV, meta, units=MASTER_UNITS, flush_every=100) as rec:
             watcher = session.liveliness_watcher(liveliness_key(ident, "slave"))
-            links = MasterLinks(command=session.publisher(command_key(ident)),
-                                heartbeat=session.publisher(heartbeat_key(ident, "master")),
+            links = MasterLinks(command=_publisher(session, command_key(ident), "command", injector),
+                                heartbeat=_publisher(session, heartbeat_key(ident, "master"), "heartbeat", injector),
                                 estimate=session.subscriber(estimate_key(ident), Estimate),
                                 slave_heartbeat=session.subscriber(heartbeat_key(ident, "slave"), Heartbeat),
                                 slave_alive=lambda: watcher.alive)
             session.liveliness_token(liveliness_key(ident, "master"))
-            node = MasterNode(cfg, device, links)
+            node = MasterNode(cfg, device, links, recorder=rec)
             try:
                 node.run(clock, max_duration=args.max_duration)
             finally:
                 device.close()
                 node.write_stats(run_dir / "master_stats.json")
+                _write_fault_stats(injector, run_dir / "master_faults.json")
     lat = node.latency_stats()
     logging.getLogger("teleop.master").info("master done: %s commands, rtt p50 %s ms, p99 %s ms",
                                             node.commands_sent, lat["p50_ms"], lat["p99_ms"])

@@ -32,7 +32,7 @@ from teleop.messages import Command, Estimate, Heartbeat, Side, SideState
 
 __all__ = [
     "MAGIC", "WIRE_VERSION", "TYPE_COMMAND", "TYPE_ESTIMATE", "TYPE_HEARTBEAT",
-    "MAX_PROFILE_POINTS", "SEQ_MODULUS", "Message", "encode", "decode", "next_seq",
+    "MAX_PROFILE_POINTS", "SEQ_MODULUS", "Message", "encode", "decode", "next_seq", "seq_newer",
 ]
 
 MAGIC = 0xA7
@@ -65,6 +65,11 @@ def _profile_struct(n: int) -> struct.Struct:
 def next_seq(seq: int) -> int:
     """The sequence number after ``seq``, wrapping at 2**32 (uint32 on the wire)."""
     return (seq + 1) & _U32
+
+
+def seq_newer(seq: int, than: int | None) -> bool:
+    """Whether sequence number ``seq`` comes after ``than`` (uint32 wrap, half the range ahead; None: yes)."""
+    return than is None or 0 < (seq - than) % SEQ_MODULUS < SEQ_MODULUS // 2
 
 
 def _check_finite(kind: str, names: tuple[str, ...], values: tuple[float, ...]) -> None:

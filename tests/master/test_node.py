@@ -40,9 +40,10 @@ class Hand:
 
     def __init__(self):
         self.position, self.forces, self.finished, self.marker, self.present = 0.0, [], False, 7, True
+        self.buttons = 0
 
     def read(self, t):
-        return DeviceState(t, self.position, operator_present=self.present)
+        return DeviceState(t, self.position, self.buttons, operator_present=self.present)
 
     def set_force(self, force, t):
         self.forces.append(force)
@@ -65,6 +66,13 @@ def estimate(seq, cmd_seq=0, T_out=10.0, x_in=0.004, T_in=15.0):
     return Estimate(seq, cmd_seq, 0.0, T_in, x_in, T_out, 1e-4, x_in - 1e-4, Phase.PULL, ())
 
 
+def put_est(links, seq, cmd_seq=None, **kw):
+    """An estimate echoing the last command sent (as a live slave does), unless cmd_seq is given."""
+    if cmd_seq is None:
+        cmd_seq = links.command.sent[-1].seq if links.command.sent else 0
+    links.estimate.put(estimate(seq, cmd_seq, **kw))
+
+
 def slave_beat(links, clock, state=SideState.READY):
     links.slave_heartbeat.put(Heartbeat(Side.SLAVE, 0, clock.now(), state))
 
@@ -76,8 +84,9 @@ def tick(node, clock, n=1):
 
 
 def engage(node, links, clock):
+    tick(node, clock)                     # a first command for the slave to echo
     slave_beat(links, clock)
-    links.estimate.put(estimate(1))
+    put_est(links, 1)
     tick(node, clock)
     assert node.state == SideState.ENGAGED
 
@@ -86,7 +95,7 @@ def test_commands_flow_but_not_engaged_until_the_slave_is_ready():
     node, hand, links, clock = make()
     tick(node, clock, 5)
     slave_beat(links, clock, SideState.CALIBRATING)
-    links.estimate.put(estimate(1))
+    put_est(links, 1)
     tick(node, clock, 5)
     cmds = links.command.sent
     assert len(cmds) == 10 and [c.seq for c in cmds] == list(range(10))
@@ -110,7 +119,7 @@ def test_force_is_minus_scale_times_the_estimate():
     node, hand, links, clock = make()
     engage(node, links, clock)
     for k in range(5):
-        links.estimate.put(estimate(2 + k, T_out=10.0))
+        put_est(links, 2 + k, T_out=10.0)
         tick(node, clock)
     assert hand.forces[-1] == pytest.approx(-2.0)
 
@@ -135,7 +144,7 @@ def test_missing_slave_heartbeat_goes_safe_even_with_fresh_estimates():
     node, hand, links, clock = make(watchdog_ms=50.0)
     engage(node, links, clock)
     for k in range(200):
-        links.estimate.put(estimate(10 + k))
+        put_est(links, 10 + k)
         tick(node, clock)
         if node.state == SideState.SAFE:
             break
@@ -149,13 +158,13 @@ def test_slave_going_safe_or_liveliness_lost_disengages():
     node, hand, links, clock = make()
     engage(node, links, clock)
     slave_beat(links, clock, SideState.SAFE)
-    links.estimate.put(estimate(2))
+    put_est(links, 2)
     tick(node, clock)
     assert node.state == SideState.SAFE and node.last_reason == "slave SAFE"
     alive = [True]
     node.links.slave_alive = lambda: alive[0]
     slave_beat(links, clock)
-    links.estimate.put(estimate(3))
+    put_est(links, 3)
     tick(node, clock)
     assert node.state == SideState.ENGAGED and node.engage_count == 2   # recovers, re-anchored
     alive[0] = False
@@ -167,18 +176,18 @@ def test_recovery_restarts_the_ramp():
     node, hand, links, clock = make(ramp_time=0.1)
     engage(node, links, clock)
     for k in range(150):
-        links.estimate.put(estimate(2 + k))
+        put_est(links, 2 + k)
         slave_beat(links, clock)
         tick(node, clock)
     assert hand.forces[-1] == pytest.approx(-2.0)
     tick(node, clock, 70)                  # everything stale -> SAFE
     assert hand.forces[-1] == 0.0
     slave_beat(links, clock)
-    links.estimate.put(estimate(500))
+    put_est(links, 500)
     tick(node, clock)
     assert node.state == SideState.ENGAGED and hand.forces[-1] == 0.0
     for k in range(50):
-        links.estimate.put(estimate(501 + k))
+        put_est(links, 501 + k)
         slave_beat(links, clock)
         tick(node, clock)
     assert hand.forces[-1] == pytest.approx(-1.0, rel=0.05)      # half-way up the 0.1 s ramp
@@ -191,7 +200,7 @@ def test_round_trip_latency_from_the_echo():
     for k in range(100):
         slave_beat(links, clock)
         seq = links.command.sent[-1].seq
-        links.estimate.put(estimate(10 + k, cmd_seq=max(0, seq - delay)))
+        put_est(links, 10 + k, cmd_seq=max(0, seq - delay))
         tick(node, clock)
     lat = node.latency_stats()
     assert lat["n"] >= 95
@@ -201,11 +210,11 @@ def test_round_trip_latency_from_the_echo():
 def test_repeated_echo_is_counted_once():
     node, hand, links, clock = make()
     slave_beat(links, clock)
-    links.estimate.put(estimate(1, cmd_seq=99))               # echo of a command never sent: ignored
+    put_est(links, 1, cmd_seq=99)               # echo of a command never sent: ignored
     tick(node, clock, 2)
     for k in range(10):
         slave_beat(links, clock)
-        links.estimate.put(estimate(10 + k, cmd_seq=0))    # the slave keeps echoing command 0
+        put_est(links, 10 + k, cmd_seq=0)    # the slave keeps echoing command 0
         tick(node, clock)
     assert node.latency_stats()["n"] == 1
 
@@ -229,8 +238,9 @@ def test_heartbeat_rate_and_stopping_when_the_device_finishes():
 def test_operator_absent_does_not_engage():
     node, hand, links, clock = make()
     hand.present = False
+    tick(node, clock)
     slave_beat(links, clock)
-    links.estimate.put(estimate(1))
+    put_est(links, 1)
     tick(node, clock, 3)
     assert node.state != SideState.ENGAGED and node.last_reason == "operator not present"
 
@@ -241,4 +251,131 @@ def test_stats_are_json_ready(tmp_path):
     node.write_stats(tmp_path / "m.json")
     import json
     s = json.loads((tmp_path / "m.json").read_text())
-    assert s["commands_sent"] == 1 and s["engage_count"] == 1 and s["state"] == "ENGAGED"
+    assert s["commands_sent"] == 2 and s["engage_count"] == 1 and s["state"] == "ENGAGED"
+
+
+# ---- console: clutch, alignment, passivity in the force path, estimate checks, recording ----------
+
+def run(node, links, clock, n, **est):
+    for _ in range(n):
+        slave_beat(links, clock)
+        put_est(links, node._last_est_seq + 1 if node._last_est_seq is not None else 1, **est)
+        tick(node, clock)
+
+
+def test_clutch_holds_the_instrument_and_re_anchors_on_release():
+    node, hand, links, clock = make(motion_scale=0.5)
+    hand.position = 0.10
+    engage(node, links, clock)
+    hand.position = 0.11
+    run(node, links, clock, 5)
+    assert links.command.sent[-1].x_in_cmd == pytest.approx(0.004 + 0.005)
+    hand.buttons = 0b10                                  # clutch (bit 1) held: hand moves freely
+    for p in np.linspace(0.11, 0.05, 30):
+        hand.position = p
+        run(node, links, clock, 1)
+        assert not links.command.sent[-1].engaged and hand.forces[-1] == 0.0
+    assert node.state == SideState.READY and node.last_reason == "clutch held"
+    hand.buttons = 0                                     # release: re-anchored at the slave's x_in
+    run(node, links, clock, 1, x_in=0.009)
+    assert node.state == SideState.ENGAGED and node.console.clutches == 1 and node.engage_count == 2
+    assert links.command.sent[-1].x_in_cmd == pytest.approx(0.009)       # no jump
+    hand.position = 0.07
+    run(node, links, clock, 1, x_in=0.009)
+    assert links.command.sent[-1].x_in_cmd == pytest.approx(0.009 + 0.5 * 0.02)
+
+
+def test_re_engage_after_a_fault_needs_alignment_or_a_clutch():
+    node, hand, links, clock = make(motion_scale=0.5, align_tolerance=0.001)
+    hand.position = 0.10
+    engage(node, links, clock)
+    tick(node, clock, 70)                                # links stale: SAFE
+    assert node.state == SideState.SAFE
+    hand.position = 0.104                                # the hand drifted: maps 2 mm away
+    run(node, links, clock, 3)
+    assert node.state == SideState.READY and node.console.status.name == "ALIGN"
+    assert node.console.misalignment == pytest.approx(0.002) and "2.00 mm" in node.last_reason
+    assert all(not c.engaged for c in links.command.sent[-3:]) and node.console.refusals == 1
+    hand.position = 0.1015                               # back within 1 mm (0.75 mm): engages, no re-anchor
+    run(node, links, clock, 1)
+    assert node.state == SideState.ENGAGED and node.console.clutches == 0
+    assert links.command.sent[-1].x_in_cmd == pytest.approx(0.004 + 0.5 * 0.0015)
+    tick(node, clock, 70)
+    hand.position = 0.2                                  # far away: clutch press + release realigns
+    run(node, links, clock, 2)
+    assert node.console.status.name == "ALIGN"
+    hand.buttons = 0b10
+    run(node, links, clock, 2)
+    hand.buttons = 0
+    run(node, links, clock, 1)
+    assert node.state == SideState.ENGAGED and links.command.sent[-1].x_in_cmd == pytest.approx(0.004)
+
+
+def test_operator_letting_go_is_safe_with_zero_force():
+    node, hand, links, clock = make()
+    engage(node, links, clock)
+    run(node, links, clock, 10)
+    assert hand.forces[-1] == pytest.approx(-2.0)
+    hand.present = False
+    run(node, links, clock, 1)
+    assert node.state == SideState.SAFE and hand.forces[-1] == 0.0 and node.last_reason == "operator not present"
+
+
+def test_passivity_controller_cuts_energy_generating_force_and_the_clamp_holds():
+    node, hand, links, clock = make(force_limit=1.5, passivity=True)
+    engage(node, links, clock)
+    for k in range(300):                                 # the force pushes along the motion: active
+        hand.position = 0.01 * math.sin(2 * math.pi * 5 * k * DT)
+        v = math.cos(2 * math.pi * 5 * k * DT)
+        run(node, links, clock, 1, T_out=-40.0 * v)      # force = -0.2 T_out = 8 v N: generates energy
+    assert max(abs(f) for f in hand.forces) <= 1.5
+    assert node.passivity.energy >= -1e-12 and node.passivity.stats.active_steps > 50
+    off, hand2, links2, clock2 = make(force_limit=1.5, passivity=False)
+    engage(off, links2, clock2)
+    for k in range(300):
+        hand2.position = 0.01 * math.sin(2 * math.pi * 5 * k * DT)
+        run(off, links2, clock2, 1, T_out=-40.0 * math.cos(2 * math.pi * 5 * k * DT))
+    assert off.passivity.energy < -1e-3 and max(abs(f) for f in hand2.forces) == pytest.approx(1.5)
+
+
+def test_estimates_out_of_order_duplicate_or_impossible_are_ignored():
+    node, hand, links, clock = make()
+    engage(node, links, clock)
+    run(node, links, clock, 5)
+    n = node._last_est_seq
+    put_est(links, n - 3)
+    tick(node, clock)
+    put_est(links, n - 3)                                # the same old one again: still older than accepted
+    tick(node, clock)
+    put_est(links, n + 1, T_out=1e4)                     # impossible: master.max_tension 200 N
+    tick(node, clock)
+    assert node.counts == {"estimates_rejected_range": 1, "estimates_out_of_order": 2, "estimates_duplicate": 0}
+    assert hand.forces[-1] == pytest.approx(-2.0) and node._last_est_seq == n
+    for _ in range(60):                                  # only impossible estimates: stale, SAFE
+        slave_beat(links, clock)
+        put_est(links, n + 1, T_out=float("1e5"))
+        tick(node, clock)
+    assert node.state == SideState.SAFE and node.last_reason == "estimate stale" and hand.forces[-1] == 0.0
+
+
+def test_a_late_echo_trips_the_round_trip_watchdog():
+    node, hand, links, clock = make(watchdog_ms=50.0)
+    engage(node, links, clock)
+    for k in range(80):                                  # the slave echoes the command sent 60 ms ago
+        slave_beat(links, clock)
+        put_est(links, 10 + k, cmd_seq=max(0, links.command.sent[-1].seq - 60))
+        tick(node, clock)
+    assert node.state == SideState.SAFE and node.last_reason == "command echo stale"
+
+
+def test_one_csv_row_per_cycle_with_force_and_state():
+    rows = []
+    node, hand, links, clock = make()
+    node.recorder = type("R", (), {"write": lambda self, r: rows.append(tuple(r))})()
+    engage(node, links, clock)
+    run(node, links, clock, 20)
+    from master.node import CSV_COLUMNS
+    assert len(rows) == 22 and all(len(r) == len(CSV_COLUMNS) for r in rows)
+    last = dict(zip(CSV_COLUMNS, rows[-1]))
+    assert last["state"] == int(SideState.ENGAGED) and last["force"] == pytest.approx(-2.0)
+    assert last["time"] == pytest.approx(clock.now()) and 0 <= last["echo_age"] < 0.01
