@@ -70,11 +70,6 @@ CSV_COLUMNS = ("time", "x_in", "T_in", "x_out", "T_out", "elongation", "T_out_ha
 RELAX_BAND = 0.2
 
 
-def seq_newer(seq: int, than: int | None) -> bool:
-    """Whether uint32 sequence number ``seq`` comes after ``than`` (wrapping; None: anything is newer)."""
-    return than is None or 0 < (seq - than) % SEQ_MODULUS < SEQ_MODULUS // 2
-
-
 @dataclass
 class SlaveLinks:
     """The slave's side of the transport (real: :mod:`teleop.transport`; tests: in-memory fakes).
