@@ -11,6 +11,10 @@ a simple arm impedance (Hogan's spring model, static)::
 
 so the master's force feedback acts on the motion it commands, as with a real hand.
 
+When the console asks to align (after a fault the hand has moved, or the slave relaxed) the
+operator clutches: it holds the clutch button (``clutch_bit``) for ``clutch_time`` and lets go, which
+re-anchors the map (:mod:`master.console`); it presses the deadman all the time.
+
 Each segment carries a marker (1 = paper experiment, 2 = minor-loop experiment), which the master
 sends in ``Command.marker`` so the recordings can be cut per experiment.
 """
@@ -101,7 +105,8 @@ class ScriptedOperator:
     """
 
     def __init__(self, segments, speed: float = 0.025, arm_stiffness: float = 300.0, dwell: float = 0.2,
-                 start_delay: float = 0.5, segment_timeout: float = 15.0):
+                 start_delay: float = 0.5, segment_timeout: float = 15.0, clutch_bit: int = 1,
+                 clutch_time: float = 0.05):
         self.segments = tuple(segments)
         if not self.segments:
             raise ConfigError("protocol: a scripted operator needs at least one segment")
@@ -125,8 +130,17 @@ class ScriptedOperator:
         self._t_prev: float | None = None
         self._wait_until: float | None = None   # start delay / dwell end [s]
         self._t_segment = 0.0
+        self.clutch_bit, self.clutch_time = int(clutch_bit), float(clutch_time)
+        self.clutches = 0
+        self._clutch_wanted = False
+        self._clutch_until: float | None = None
 
     # -- OperatorView ------------------------------------------------------------------------------
+    def on_console(self, status) -> None:
+        """The console's status (:class:`master.console.ConsoleStatus`): ALIGN makes the operator clutch."""
+        if getattr(status, "name", status) == "ALIGN" and self._clutch_until is None and self.clutch_bit >= 0:
+            self._clutch_wanted = True
+
     def watch(self, T_in: float | None, engaged: bool) -> None:
         """Latest proximal tension [N] (None: none yet) and whether control is engaged."""
         self._T_in = T_in if T_in is None or math.isfinite(T_in) else None
@@ -139,8 +153,17 @@ class ScriptedOperator:
         self._t_prev = t
         if self._engaged and not self.finished and self._T_in is not None:
             self._advance(t, dt, self._T_in)
+        buttons = 0
+        if self._clutch_wanted:
+            self._clutch_wanted, self._clutch_until = False, t + self.clutch_time
+            self.clutches += 1
+        if self._clutch_until is not None:
+            if t < self._clutch_until:
+                buttons = 1 << self.clutch_bit
+            else:
+                self._clutch_until = None
         # p_hand = p_intended + F / k_arm
-        return DeviceState(t=t, position=self.intended + self.force / self.k_arm)
+        return DeviceState(t=t, position=self.intended + self.force / self.k_arm, buttons=buttons)
 
     def set_force(self, force: float, t: float) -> None:
         self.force = float(force) if math.isfinite(force) else 0.0

@@ -379,3 +379,18 @@ def test_one_csv_row_per_cycle_with_force_and_state():
     last = dict(zip(CSV_COLUMNS, rows[-1]))
     assert last["state"] == int(SideState.ENGAGED) and last["force"] == pytest.approx(-2.0)
     assert last["time"] == pytest.approx(clock.now()) and 0 <= last["echo_age"] < 0.01
+
+
+def test_scripted_operator_clutches_when_asked_to_align_and_control_resumes():
+    from master.simulated import ScriptedOperator, build_protocol
+    node, _, links, clock = make(motion_scale=0.5, align_tolerance=0.001)
+    op = ScriptedOperator(build_protocol("short"), start_delay=0.0)
+    node.device = op
+    engage(node, links, clock)
+    run(node, links, clock, 100, T_in=0.5)                # pulling: the hand moves
+    tick(node, clock, 70)                                 # link lost: SAFE, force gone
+    run(node, links, clock, 1, x_in=0.0)                  # the slave relaxed to 0: 2.5+ mm away
+    assert node.console.status.name == "ALIGN" and node.state == SideState.READY
+    run(node, links, clock, 80, x_in=0.0, T_in=0.5)
+    assert op.clutches == 1 and node.console.clutches == 1
+    assert node.state == SideState.ENGAGED and node.engage_count == 2

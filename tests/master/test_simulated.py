@@ -93,3 +93,14 @@ def test_build_protocol():
         build_protocol(" , ")
     with pytest.raises(ConfigError, match="speed"):
         ScriptedOperator(PROTOCOLS["short"], speed=0.0)
+
+
+def test_the_operator_holds_the_clutch_for_clutch_time_when_the_console_says_align():
+    from master.simulated import ScriptedOperator, build_protocol
+    op = ScriptedOperator(build_protocol("short"), clutch_bit=1, clutch_time=0.05)
+    assert op.read(0.0).buttons == 0
+    op.on_console("ENGAGED")
+    assert op.read(0.001).buttons == 0
+    op.on_console("ALIGN")
+    held = [op.read(0.002 + 0.001 * k).buttons for k in range(60)]
+    assert held[:50] == [0b10] * 50 and set(held[50:]) == {0} and op.clutches == 1
