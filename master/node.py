@@ -4,8 +4,9 @@ One :meth:`MasterNode.step` per cycle (1 kHz), given the time by the caller:
 
 1. show the operator the latest proximal tension (simulated operators only), read the device;
 2. link health: the last *accepted* estimate is fresh (younger than ``master.watchdog_ms``), the
-   command it echoes was sent less than ``watchdog_ms`` ago (the round trip: catches delay and loss
-   on the way out too, without synchronised clocks), the slave's heartbeat is fresh (younger than
+   command it echoes was sent less than ``2 watchdog_ms`` ago (the round trip: catches delay and loss
+   on the way out too, without synchronised clocks; budget ``2 watchdog_ms``, one per leg, so a
+   process stall on top of an allowed one-way delay does not trip it), the slave's heartbeat is fresh (younger than
    ``max(watchdog_ms, 3 heartbeat periods)``) and says READY or ENGAGED, and its liveliness token
    (when watched) is present. An estimate is accepted when its seq is newer than the last accepted
    one (duplicates and reordered ones are counted and ignored) and ``|T_in|``, ``|T_out_hat|`` are
@@ -152,7 +153,7 @@ class MasterNode:
             return est, False, f"slave {hb_rec.message.state.name}"
         if est is None or now - rec.t_recv > self.watchdog:
             return est, False, "estimate stale"
-        if self._t_echo is None or now - self._t_echo > self.watchdog:
+        if self._t_echo is None or now - self._t_echo > 2.0 * self.watchdog:
             return est, False, "command echo stale"
         return est, True, "ok"
 

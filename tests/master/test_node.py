@@ -361,9 +361,14 @@ def test_estimates_out_of_order_duplicate_or_impossible_are_ignored():
 def test_a_late_echo_trips_the_round_trip_watchdog():
     node, hand, links, clock = make(watchdog_ms=50.0)
     engage(node, links, clock)
-    for k in range(80):                                  # the slave echoes the command sent 60 ms ago
+    for k in range(95):                                  # echoes of commands sent 90 ms ago: within 2 x 50 ms
         slave_beat(links, clock)
-        put_est(links, 10 + k, cmd_seq=max(0, links.command.sent[-1].seq - 60))
+        put_est(links, 10 + k, cmd_seq=max(1, links.command.sent[-1].seq - 90))
+        tick(node, clock)
+    assert node.state == SideState.ENGAGED
+    for k in range(20):                                  # 110 ms ago: beyond the round-trip budget
+        slave_beat(links, clock)
+        put_est(links, 200 + k, cmd_seq=links.command.sent[-1].seq - 110)
         tick(node, clock)
     assert node.state == SideState.SAFE and node.last_reason == "command echo stale"
 

@@ -1,0 +1,200 @@
+"""Run one fault against the two real processes (`teleop slave` + `teleop master` over Zenoh on 127.0.0.1).
+
+:func:`run_fault` starts both sides on a free port, waits until both are ENGAGED (seen from their
+heartbeats by an observer session), lets them run, applies the fault (a signal to one process or
+SIGUSR1 to the process whose ``--inject`` spec waits for it), observes, stops both with SIGINT
+(recordings flushed) and returns what the recordings say. Times are CLOCK_MONOTONIC, which all
+processes on the machine share: the test's own signal times, the injector's fault time and the
+rows of ``slave.csv`` (``t_node``, ``t_cmd_recv``) and ``master.csv`` (``time``, ``t_est_recv``) compare
+directly.
+
+Time to safe state of a surviving side = first row in SAFE after the fault minus the receive time
+of the last valid message from the other side recorded in that row (a command for the slave, an
+estimate for the master). Deadlines here only bound waiting; the figures come from the recordings.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from teleop.config import load_config
+from teleop.keys import heartbeat_key
+from teleop.messages import Heartbeat, SideState
+from teleop.recording import read_measured_csv
+from teleop.transport import Session, free_tcp_ports, loopback_endpoint, zenoh_config
+
+CONFIG = """\
+instrument:
+  id: {ident}
+calibration:
+  speed: 0.04
+recording:
+  rerun: "off"
+"""
+SAFE = int(SideState.SAFE)
+DEBUG = []
+
+
+@dataclass
+class FaultRun:
+    name: str
+    t_fault: float
+    run_dir: Path
+    logs: dict[str, str]
+    rc: dict[str, int | None]
+    slave: object = None              # MeasuredData of slave.csv (None if unreadable)
+    master: object = None             # MeasuredData of master.csv
+    stats: dict[str, dict] = field(default_factory=dict)
+    faults: dict[str, dict] = field(default_factory=dict)
+    errors: dict[str, str] = field(default_factory=dict)
+
+    # ---- figures ------------------------------------------------------------------------------
+    def _safe_after(self, side: str, t_col: str, recv_col: str, t0: float):
+        d = getattr(self, side)
+        t = d.time if t_col == "time" else d.extra[t_col]
+        state = d.extra["state"].astype(int)
+        idx = np.flatnonzero((t >= t0) & (state == SAFE))
+        if idx.size == 0:
+            return None
+        i = int(idx[0])
+        return {"t_safe": float(t[i]), "t_last_msg": float(d.extra[recv_col][i]),
+                "from_last_msg_ms": 1e3 * float(t[i] - d.extra[recv_col][i]),
+                "from_fault_ms": 1e3 * float(t[i] - self.t_fault)}
+
+    def slave_safe(self):
+        """Slave: first SAFE row at/after the fault, from the last accepted command's receive time."""
+        return self._safe_after("slave", "t_node", "t_cmd_recv", self.t_fault - 0.2)
+
+    def master_safe(self):
+        """Master: first SAFE row at/after the fault, from the last accepted estimate's receive time."""
+        return self._safe_after("master", "time", "t_est_recv", self.t_fault - 0.2)
+
+    def engaged_before_fault(self, side: str) -> bool:
+        d = getattr(self, side)
+        t = d.time if side == "master" else d.extra["t_node"]
+        sel = (t > self.t_fault - 0.3) & (t < self.t_fault)
+        return bool(np.any(d.extra["state"][sel] == int(SideState.ENGAGED)))
+
+    def states_after(self, side: str, t0: float):
+        d = getattr(self, side)
+        t = d.time if side == "master" else d.extra["t_node"]
+        return d.extra["state"][t >= t0].astype(int)
+
+    def max_gap(self, side: str) -> float:
+        d = getattr(self, side)
+        t = d.time if side == "master" else d.extra["t_node"]
+        return float(np.diff(t).max())
+
+
+def _observer_state(sub):
+    rec = sub.latest()
+    return None if rec is None else rec.message.state
+
+
+def _listening(port: int) -> bool:
+    try:
+        with socket.create_connection(("127.0.0.1", port), timeout=0.2):
+            return True
+    except OSError:
+        return False
+
+
+def _wait(pred, timeout: float, what: str, procs) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if pred():
+            return
+        for name, p in procs.items():
+            if p.poll() is not None:
+                raise AssertionError(f"the {name} exited with {p.returncode} while waiting for {what}"
+                                     f"{DEBUG[0]() if DEBUG else ''}")
+        time.sleep(0.01)
+    raise AssertionError(f"gave up waiting {timeout:g} s for {what}")
+
+
+
+def run_fault(tmp: Path, name: str, *, inject: dict[str, str] | None = None, signal_to: str | None = None,
+              sig: int | None = None, resume_after: float | None = None, observe: float = 1.0,
+              engaged_for: float = 0.6, trigger_side: str | None = None) -> FaultRun:
+    """Run one fault scenario; see the module docstring.
+
+    inject : {"master"|"slave": spec} passed as ``--inject`` (use ``on=usr1`` to start at the fault).
+    signal_to, sig : send ``sig`` to that side at the fault (SIGKILL, SIGSTOP); ``resume_after`` [s]:
+        SIGCONT after this long.
+    trigger_side : side whose injector is triggered by SIGUSR1 at the fault.
+    """
+    ident = f"f{name.replace('_', '')}"[:20]
+    run_dir = tmp / name
+    run_dir.mkdir(parents=True)
+    cfg_path = run_dir / "cfg.yaml"
+    cfg_path.write_text(CONFIG.format(ident=ident), encoding="utf-8")
+    cfg = load_config(cfg_path)
+    port, port_m = free_tcp_ports(2)
+    ep = loopback_endpoint(port)
+    inject = inject or {}
+    base = [sys.executable, "-m", "teleop.cli"]
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    procs: dict[str, subprocess.Popen] = {}
+    logs = {s: run_dir / f"{s}.log" for s in ("slave", "master")}
+    t_fault = None
+    try:
+        for side, extra in (("slave", ["--listen", ep]), ("master", ["--connect", ep, "--listen", loopback_endpoint(port_m), "--protocol", "paper"])):
+            args = base + [side, "--config", str(cfg_path), "--run-dir", str(run_dir), "--max-duration", "60",
+                           *extra] + (["--inject", inject[side]] if side in inject else [])
+            with open(logs[side], "w") as fh:
+                procs[side] = subprocess.Popen(args, stdout=fh, stderr=subprocess.STDOUT, env=env)
+            if side == "slave":
+                _wait(lambda: _listening(port), 60, f"the slave to listen on {ep}", procs)
+        with Session(zenoh_config(cfg.transport, listen=(), connect=(ep,))) as obs:
+            beats = {s: obs.subscriber(heartbeat_key(ident, s), Heartbeat) for s in ("slave", "master")}
+            DEBUG[:] = [lambda: str({s: (b.count, b.errors, _observer_state(b)) for s, b in beats.items()})]
+            _wait(lambda: all(_observer_state(b) == SideState.ENGAGED for b in beats.values()), 60,
+                  "both sides ENGAGED", procs)
+            time.sleep(engaged_for)
+            t_fault = time.monotonic()
+            if signal_to is not None:
+                procs[signal_to].send_signal(sig)
+            if trigger_side is not None:
+                procs[trigger_side].send_signal(signal.SIGUSR1)
+            if resume_after is not None:
+                time.sleep(resume_after)
+                procs[signal_to].send_signal(signal.SIGCONT)
+            time.sleep(observe)
+        for p in procs.values():
+            if p.poll() is None:
+                p.send_signal(signal.SIGINT)
+        rc = {}
+        for s, p in procs.items():
+            try:
+                rc[s] = p.wait(20)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                rc[s] = p.wait()
+    finally:
+        for p in procs.values():
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    out = FaultRun(name, t_fault, run_dir, {s: logs[s].read_text() for s in logs}, rc)
+    for side in ("slave", "master"):
+        try:
+            setattr(out, side, read_measured_csv(run_dir / f"{side}.csv"))
+        except Exception as e:  # noqa: BLE001 - reported by the test
+            out.errors[side] = f"{type(e).__name__}: {e}"
+        for kind in ("stats", "faults"):
+            path = run_dir / f"{side}_{kind}.json"
+            if path.is_file():
+                getattr(out, kind)[side] = json.loads(path.read_text())
+    inj = [f.get("t_fault") for f in out.faults.values() if f.get("t_fault") is not None]
+    if inj:
+        out.t_fault = float(min(inj))
+    return out
