@@ -1,0 +1,368 @@
+"""Distal joint torque and angle of an antagonistic tendon pair, from proximal signals only.
+
+A joint of pulley radius r is turned by tendon a (pulling it gives + angles) and tendon b, each
+through its own sheath (own K, L/EA, route). Per tendon j in {a, b}, sign s_a = +1, s_b = -1:
+
+    T(s)_j          tension-profile memory driven by T_in,j (envelope rule, :mod:`estimator.sheath`),
+                    from a uniform pretension P_j                                    literature.md E1, E5
+    T_out,j         = T_n,j,    e_j = (1/EA_j) int T_j ds                         Phee et al. 2009 (1), (5)
+    x_out,j         = x_in,j - e_j                                                   distal displacement
+    theta_j         = s_j (x_out,j - x_out,j(0)) / r                 kinematic angle seen by tendon j  (J1)
+
+and for the joint
+
+    torque_hat      = r (T_out,a - T_out,b)                         distal joint torque [N m]        (J2)
+    angle_hat       = (theta_a + theta_b) / 2                                                         (J3)
+                    = ((x_in,a - e_a) - (x_in,b - e_b) - (x_out,a(0) - x_out,b(0))) / (2 r)
+
+(J3) follows from x_out,a = +r theta + c_a and x_out,b = -r theta + c_b (both taut on the pulley):
+subtracting cancels the unknown offsets to the zero pose, taken at :meth:`JointEstimator.zero`
+(power-up rest, theta = 0), and halves independent elongation errors of the two tendons.
+
+Pair coupling (literature.md E13). A single-tendon estimator assumes the distal end stays put while
+the profile near it is stuck. In a pair the two distal ends are tied: the joint turns only when the
+torque r (T_out,a - T_out,b) moves away from what its load holds at the present angle, and when it
+turns it moves both distal ends. Two rules, applied after the proximal updates of each sample:
+
+* Joint moving (J4). The driving tendon d - the one with the higher proximal tension (hysteresis
+  0.2 N + 10 %), whose profile the proximal update keeps right - gives the motion: its kinematic
+  angle (J1), through a play of half-width ``play / r`` that keeps sensor noise out. Each output
+  step delta of the play moves the other tendon q's distal end by s_q r delta with its proximal
+  tension held at the measured T_in,q (the envelope rule has already placed the proximal part), by
+  the distal slip rule (:mod:`estimator.distal_slip`):
+
+      e_q <- e_q - s_q r delta,   T_d from (D),   T_in,q e^{-K_q} <= T_d <= T_in,q e^{+K_q}
+
+  The bounds are the whole tendon sliding with its proximal tension held, where an antagonist kept
+  at a set tension by its own load cell ends up while the joint turns. The part of the motion that
+  (J5) below has already given the tendon (the joint creeping inside the play) is not given twice.
+* Joint still (J5). While the play does not move, the angle, hence the load torque, is unchanged:
+
+      r (T_out,a - T_out,b) = tau_lock
+
+  If the proximal update moved one tendon's distal tension (its slip front reached the tip), the
+  other tendon absorbs the change from its distal end - rule (D) with T_d set to keep tau_lock,
+  clipped to the same sliding bounds. Once it reaches a bound the torque can no longer be held; the
+  joint turns, which the play sees a few micrometres later. tau_lock follows the estimate after every
+  sample. The elongation change (J5) gives the absorbing tendon is the joint motion it implies; it
+  is kept (signed) and subtracted from the next motion (J4) in the same direction. (J5) is exact for a load whose stiffness is small next to the antagonist's capstan band
+  (a joint spring, tissue); against a hard stop it may move the other tendon's distal tension by up
+  to its band, T_in (e^K - e^-K), which the torque estimate then carries.
+
+Without these rules the antagonist's distal tension is unknown within its band, which at a 2 N
+pretension is a quarter of the full scale of the paper's protocol; with them the pretension is
+carried through (E5).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from estimator.distal import DistalEstimator
+from estimator.distal_slip import distal_clip, distal_gains, distal_tension, elongation
+from estimator.phase import Phase
+from estimator.sheath import SheathModel, profile_update
+
+__all__ = ["JointSample", "JointBatch", "JointEstimator", "estimate_joint_batch", "DEFAULT_PLAY"]
+
+#: Default play of the coupling: distal tendon displacement that counts as joint motion [m]
+#: (several times the elongation noise a 0.02 N load cell leaves in the profile, plus encoder steps).
+DEFAULT_PLAY = 2e-5
+
+
+@dataclass(frozen=True)
+class JointSample:
+    """One estimate of a joint.
+
+    torque [N m] (J2); angle [rad] (J3); T_out, elongation, x_out: per tendon (a, b) [N], [m], [m];
+    angle_a, angle_b: the kinematic angle of each tendon (J1) [rad]; phase: per tendon (a, b).
+    """
+
+    torque: float
+    angle: float
+    T_out: tuple[float, float]
+    elongation: tuple[float, float]
+    x_out: tuple[float, float]
+    angle_a: float
+    angle_b: float
+    phase: tuple[Phase, Phase]
+
+
+@dataclass(frozen=True)
+class JointBatch:
+    """Estimates over a recording: torque [N m] and angle [rad] of shape (n,); T_out [N] and
+    elongation [m] of shape (n, 2) (columns a, b)."""
+
+    torque: np.ndarray
+    angle: np.ndarray
+    T_out: np.ndarray
+    elongation: np.ndarray
+
+
+@njit(cache=True, nogil=True)
+def _stretch(T, dlo, dhi, w, K, de):  # pragma: no cover - compiled
+    """Distal end of one tendon moved: elongation change ``de`` [m], proximal node held (J4)."""
+    e = elongation(T, w)
+    Td = distal_tension(T, dlo, dhi, w, e, e + de)
+    lo = T[0] * math.exp(-K)
+    hi = T[0] * math.exp(K)
+    distal_clip(T, dlo, dhi, min(max(Td, lo), hi))
+
+
+@njit(cache=True, nogil=True)
+def _hold(T, dlo, dhi, K, Td):  # pragma: no cover - compiled
+    """Set one tendon's distal tension to ``Td`` [N] within its sliding bounds (J5)."""
+    lo = T[0] * math.exp(-K)
+    hi = T[0] * math.exp(K)
+    distal_clip(T, dlo, dhi, min(max(Td, lo), hi))
+
+
+@njit(cache=True, nogil=True)
+def couple(Pa, dloa, dhia, wa, Ka, Pb, dlob, dhib, wb, Kb, Ta_prev, Tb_prev, ua, ub, r, hw,
+           state):  # pragma: no cover - compiled
+    """Pair coupling (J4)/(J5) after the proximal updates of one sample; profiles updated in place.
+
+    Pa, Pb : float64[n + 1] profiles [N]; dlo*, dhi*, w*: distal gains and weights; K*: friction
+    exponents. Ta_prev, Tb_prev: distal tensions before this sample's proximal updates [N];
+    ua, ub: kinematic angles (J1) after them [rad]; r [m]; hw: play half-width [rad].
+    state : float64[5] (driver 0/1, play output [rad], tau_lock [N m], elongation (J5) gave the
+    driven tendon [m], direction of the last play move), updated in place; driver -1 means not
+    started (the call only sets it).
+    """
+    Ta_in = Pa[0]
+    Tb_in = Pb[0]
+    d = int(state[0])
+    if d < 0:
+        d = 0 if Ta_in >= Tb_in else 1
+        state[0] = d
+        state[1] = ua if d == 0 else ub
+        state[2] = r * (Pa[Pa.shape[0] - 1] - Pb[Pb.shape[0] - 1])
+        state[3] = 0.0
+        state[4] = 0.0
+        return
+    # driver: the tendon with the higher proximal tension, with hysteresis
+    if d == 0 and Tb_in > 1.1 * Ta_in + 0.2:
+        d = 1
+        state[1] = ub
+        state[3] = 0.0
+        state[4] = 0.0
+    elif d == 1 and Ta_in > 1.1 * Tb_in + 0.2:
+        d = 0
+        state[1] = ua
+        state[3] = 0.0
+        state[4] = 0.0
+    state[0] = d
+    u = ua if d == 0 else ub
+    y = state[1]
+    y_new = min(max(y, u - hw), u + hw)
+    delta = y_new - y
+    state[1] = y_new
+    na = Pa.shape[0] - 1
+    nb = Pb.shape[0] - 1
+    if delta != 0.0:
+        # (J4): the joint turned by delta: e_q -= s_q r delta (x_out,a = +r theta, x_out,b = -r theta),
+        # less what (J5) already gave in that direction
+        de = r * delta if d == 0 else -r * delta
+        sgn = 1.0 if delta > 0.0 else -1.0
+        # the play had to be taken up before it moved: none after a move the same way, its whole
+        # width after a reversal, half of it from the start; (J5) gave that part already
+        take = 0.0 if sgn == state[4] else (2.0 * r * hw if state[4] != 0.0 else r * hw)
+        state[4] = sgn
+        done = state[3]
+        if done * de > 0.0:
+            usable = max(0.0, abs(done) - take)
+            used = min(abs(de), usable)
+            sd = 1.0 if de > 0.0 else -1.0
+            de -= sd * used
+            state[3] = 0.0 if usable == 0.0 else done - sd * (used + take)
+        else:
+            state[3] = 0.0
+        if de != 0.0:
+            if d == 0:
+                _stretch(Pb, dlob, dhib, wb, Kb, de)
+            else:
+                _stretch(Pa, dloa, dhia, wa, Ka, de)
+    else:
+        # (J5): joint still, torque held; the tendon whose distal tension did not move absorbs
+        moved_a = Pa[na] != Ta_prev
+        moved_b = Pb[nb] != Tb_prev
+        tau = state[2]
+        if moved_a and not moved_b:
+            e0 = elongation(Pb, wb)
+            _hold(Pb, dlob, dhib, Kb, Pa[na] - tau / r)
+            if d == 0:
+                state[3] += elongation(Pb, wb) - e0
+        elif moved_b and not moved_a:
+            e0 = elongation(Pa, wa)
+            _hold(Pa, dloa, dhia, Ka, Pb[nb] + tau / r)
+            if d == 1:
+                state[3] += elongation(Pa, wa) - e0
+    state[2] = r * (Pa[na] - Pb[nb])
+
+
+class JointEstimator:
+    """Online torque and angle estimator of one antagonistic joint (module docstring, (J1)-(J4)).
+
+    Parameters
+    ----------
+    model_a, model_b : SheathModel
+        K, L/EA and route shape of tendons a and b (e.g. from calibration).
+    pulley_radius : float
+        Distal pulley radius r [m], > 0.
+    n_nodes : int
+        Elements of each profile (n_nodes + 1 nodes), >= 1.
+    pretension : float or (float, float)
+        Uniform tension of each tendon at rest [N], >= 0.
+    coupling : bool
+        Apply the pair coupling (J4); False: two independent single-tendon estimators.
+    play : float
+        Coupling play as distal tendon displacement [m], >= 0.
+    hold_rate, rate_time_constant : float
+        Phase settings of :class:`~estimator.distal.DistalEstimator` [N/s], [s].
+
+    Raises
+    ------
+    ValueError
+        A non-finite or out-of-range argument (named in the message).
+    """
+
+    def __init__(self, model_a: SheathModel, model_b: SheathModel, pulley_radius: float, *, n_nodes: int = 100,
+                 pretension: float | tuple[float, float] = 0.0, coupling: bool = True,
+                 play: float = DEFAULT_PLAY, hold_rate: float = 0.5, rate_time_constant: float = 0.02):
+        if not (math.isfinite(pulley_radius) and pulley_radius > 0):
+            raise ValueError(f"pulley_radius must be > 0 m, got {pulley_radius!r}")
+        if not (math.isfinite(play) and play >= 0):
+            raise ValueError(f"play must be a distal displacement >= 0 m, got {play!r}")
+        P = (pretension, pretension) if np.isscalar(pretension) else tuple(pretension)
+        if len(P) != 2:
+            raise ValueError(f"pretension must be one tension or one per tendon (a, b), got {pretension!r}")
+        self.r = float(pulley_radius)
+        self.coupling = bool(coupling)
+        self.half_width = float(play) / self.r
+        self.pretension = (float(P[0]), float(P[1]))
+        self.tendons = tuple(DistalEstimator(m, n_nodes=n_nodes, pretension=p, hold_rate=hold_rate,
+                                             rate_time_constant=rate_time_constant)
+                             for m, p in zip((model_a, model_b), self.pretension))
+        self._dgain = tuple(distal_gains(t.log_gain) for t in self.tendons)
+        self._x0: tuple[float, float] | None = None
+        self._state = np.array([-1.0, 0.0, 0.0, 0.0, 0.0])    # coupling (see couple())
+
+    def reset(self) -> None:
+        """Back to uniform profiles at the pretension, no angle zero (the next :meth:`step` sets it)."""
+        for t, p in zip(self.tendons, self.pretension):
+            t.reset(p)
+        self._x0 = None
+        self._state[0] = -1.0
+
+    def zero(self, x_in_a: float, x_in_b: float) -> None:
+        """Take the present pose as theta = 0: x_out,j(0) = x_in,j - e_j [m]."""
+        self._x0 = (float(x_in_a) - self.tendons[0].elongation, float(x_in_b) - self.tendons[1].elongation)
+        self._state[0] = -1.0
+
+    def angles(self, x_in_a: float, x_in_b: float) -> tuple[float, float]:
+        """Kinematic angles (J1) of tendons a and b [rad] for encoder readings ``x_in_a``, ``x_in_b`` [m]."""
+        x0a, x0b = self._x0 if self._x0 is not None else (0.0, 0.0)
+        ta, tb = self.tendons
+        return (x_in_a - ta.elongation - x0a) / self.r, -(x_in_b - tb.elongation - x0b) / self.r
+
+    def step(self, T_in_a: float, x_in_a: float, T_in_b: float, x_in_b: float, t: float | None = None) -> JointSample:
+        """Update with one proximal sample of both tendons (load cells [N], encoders [m], time [s]).
+
+        The first call without a prior :meth:`zero` takes the pose after the update as theta = 0.
+
+        Raises
+        ------
+        ValueError
+            A non-finite sample (from :meth:`DistalEstimator.step`, naming the value).
+        """
+        ta, tb = self.tendons
+        Ta_prev, Tb_prev = ta.T_out, tb.T_out
+        sa = ta.step(T_in_a, x_in_a, t)
+        sb = tb.step(T_in_b, x_in_b, t)
+        if self._x0 is None:
+            self.zero(x_in_a, x_in_b)
+        if self.coupling:
+            ua, ub = self.angles(x_in_a, x_in_b)
+            (dloa, dhia), (dlob, dhib) = self._dgain
+            couple(ta.profile, dloa, dhia, ta.weight, ta.model.K, tb.profile, dlob, dhib, tb.weight, tb.model.K,
+                   Ta_prev, Tb_prev, ua, ub, self.r, self.half_width, self._state)
+            for est in self.tendons:
+                est.T_out = float(est.profile[-1])
+                est.elongation = float(est.weight @ est.profile)
+        ang_a, ang_b = self.angles(x_in_a, x_in_b)
+        return JointSample(torque=self.r * (ta.T_out - tb.T_out), angle=0.5 * (ang_a + ang_b),
+                           T_out=(ta.T_out, tb.T_out), elongation=(ta.elongation, tb.elongation),
+                           x_out=(x_in_a - ta.elongation, x_in_b - tb.elongation), angle_a=ang_a, angle_b=ang_b,
+                           phase=(sa.phase, sb.phase))
+
+
+@njit(cache=True)
+def _batch(Ta, xa, Tb, xb, Pa, Pb, ga, gb, wa, wb, dloa, dhia, dlob, dhib, r, hw, coupling,
+           torque, angle, T_out, elong):  # pragma: no cover - compiled
+    Ka = ga[-1]
+    Kb = gb[-1]
+    x0a = 0.0
+    x0b = 0.0
+    state = np.array([-1.0, 0.0, 0.0, 0.0, 0.0])
+    for k in range(Ta.shape[0]):
+        Ta_prev = Pa[-1]
+        Tb_prev = Pb[-1]
+        profile_update(Pa, ga, Ta[k])
+        profile_update(Pb, gb, Tb[k])
+        ea = elongation(Pa, wa)
+        eb = elongation(Pb, wb)
+        if k == 0:
+            x0a = xa[0] - ea
+            x0b = xb[0] - eb
+        if coupling:
+            ua = (xa[k] - ea - x0a) / r
+            ub = -(xb[k] - eb - x0b) / r
+            couple(Pa, dloa, dhia, wa, Ka, Pb, dlob, dhib, wb, Kb, Ta_prev, Tb_prev, ua, ub, r, hw, state)
+            ea = elongation(Pa, wa)
+            eb = elongation(Pb, wb)
+        T_out[k, 0] = Pa[-1]
+        T_out[k, 1] = Pb[-1]
+        elong[k, 0] = ea
+        elong[k, 1] = eb
+        torque[k] = r * (Pa[-1] - Pb[-1])
+        angle[k] = 0.5 * ((xa[k] - ea - x0a) - (xb[k] - eb - x0b)) / r
+
+
+def estimate_joint_batch(T_a, x_a, T_b, x_b, model_a: SheathModel, model_b: SheathModel, pulley_radius: float, *,
+                         n_nodes: int = 100, pretension: float | tuple[float, float] = 0.0, coupling: bool = True,
+                         play: float = DEFAULT_PLAY) -> JointBatch:
+    """The maths of :class:`JointEstimator` over recorded arrays (compiled), zero pose at sample 0.
+
+    Parameters
+    ----------
+    T_a, x_a, T_b, x_b : ndarray, shape (n,)
+        Proximal tensions [N] and displacements [m] of tendons a and b.
+    model_a, model_b, pulley_radius, n_nodes, pretension, coupling, play
+        As :class:`JointEstimator`.
+
+    Raises
+    ------
+    ValueError
+        Arrays not 1-D of one length, with NaN/inf (the first bad index is named), or bad settings.
+    """
+    arrs = [np.ascontiguousarray(v, dtype=np.float64) for v in (T_a, x_a, T_b, x_b)]
+    n = arrs[0].shape
+    for name, a in zip(("T_a", "x_a", "T_b", "x_b"), arrs):
+        if a.ndim != 1 or a.shape != n:
+            raise ValueError(f"T_a, x_a, T_b, x_b must be 1-D of equal length, got {name} of shape {a.shape}")
+        bad = np.flatnonzero(~np.isfinite(a))
+        if bad.size:
+            raise ValueError(f"{name} has a non-finite value at sample {bad[0]}")
+    ref = JointEstimator(model_a, model_b, pulley_radius, n_nodes=n_nodes, pretension=pretension, coupling=coupling,
+                         play=play)   # validates the settings and builds the nodes
+    ta, tb = ref.tendons
+    (dloa, dhia), (dlob, dhib) = ref._dgain
+    m = n[0]
+    torque, angle = np.empty(m), np.empty(m)
+    T_out, elong = np.empty((m, 2)), np.empty((m, 2))
+    _batch(*arrs, ta.profile.copy(), tb.profile.copy(), ta.log_gain, tb.log_gain, ta.weight, tb.weight, dloa, dhia,
+           dlob, dhib, ref.r, ref.half_width, bool(coupling), torque, angle, T_out, elong)
+    return JointBatch(torque=torque, angle=angle, T_out=T_out, elongation=elong)

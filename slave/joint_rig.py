@@ -1,0 +1,315 @@
+"""Simulated instrument of 1 to 4 joints, each driven by an antagonistic pair of distributed tendons.
+
+The reference simulator of literature.md section 4 extended to a pull-pull pair (E5, E11-E13):
+the compiled step is in :mod:`slave.joint_physics`; this module owns the state, the motors, the
+sensors and validation.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from estimator.distal_slip import distal_gains
+from slave.instrument import InstrumentState, InstrumentTruth
+from slave.joint_physics import RIGID_STOP, load_torque, settle_joint, step_joint
+from slave.rig import RigInputError
+from teleop.config import Config, JointConfig, RigConfig, TendonConfig
+from teleop.errors import ConfigError
+
+__all__ = ["SimulatedInstrument", "TendonPhysics"]
+
+_NOISE_BLOCK = 2048
+
+
+class TendonPhysics:
+    """Constant arrays of one simulated tendon: node gains, weights, K and M_e.
+
+    Parameters
+    ----------
+    tendon : TendonConfig
+    n_elements : int
+        Elements n (n + 1 nodes equally spaced in arc length).
+    """
+
+    def __init__(self, tendon: TendonConfig, n_elements: int):
+        geom = tendon.geometry()
+        self.L = geom.length
+        s = np.linspace(0.0, self.L, n_elements + 1)
+        self.log_gain = tendon.mu * np.asarray(geom.wrap_angle(s), dtype=np.float64)
+        self.lo = np.exp(-self.log_gain)
+        self.hi = np.exp(self.log_gain)
+        self.dlo, self.dhi = distal_gains(self.log_gain)
+        w = np.full(n_elements + 1, self.L / (n_elements * tendon.EA))
+        w[0] *= 0.5
+        w[-1] *= 0.5
+        self.w = w
+        self.c_pull = float(w @ self.lo) / self.lo[-1]
+        self.c_rel = float(w @ self.hi) / self.hi[-1]
+
+    @property
+    def K(self) -> float:
+        """Friction exponent mu * total wrap angle [-] (Phee et al. 2009, eq. (2))."""
+        return float(self.log_gain[-1])
+
+    @property
+    def M_e(self) -> float:
+        """Elongation per proximal tension in full pull slip [m/N], sum_i w_i e^{-g_i} (eq. (12))."""
+        return float(self.w @ self.lo)
+
+
+class SimulatedInstrument:
+    r"""An instrument of 1..4 independent joints, each turned by two tendons through their own sheaths.
+
+    Model of one joint (quasi-static distributed Coulomb friction in each tendon; joint per
+    literature.md E11 with the pair coupling E13; pretension E5):
+
+    * Tendons a and b: the distributed model of :class:`slave.simulated.SimulatedRig` each (``n``
+      elements, own route, mu and EA from ``instrument.joints[i].tendons``), both tied to a distal
+      pulley of radius r: x_out,a = + r theta, x_out,b = - r theta. A tendon cannot push (slack: zero
+      tension along it).
+    * Joint: quasi-static torque balance with damping (first-order relaxation, implicit Euler)
+
+          r (T_out,a - T_out,b) = k theta + b dtheta/dt + tau_tissue + tau_limit + tau_ext
+
+      tau_tissue = k_t (|theta| - theta_c) sgn(theta) beyond |theta| > theta_c when tissue is on,
+      tau_limit = k_lim (theta - hi) above hi and k_lim (theta - lo) below lo, tau_ext constant.
+      Joint inertia is left out: with grams on millimetres its time constant is far below 1 ms.
+    * One step: the motors move with the joint held (slip from the proximal ends), then the joint
+      settles with the motors held (slip from the distal ends) - a first-order splitting, exact in
+      the limit of small steps (:mod:`slave.joint_physics`).
+    * Pretension P (``pretension``): both tendons start uniform at P with theta = 0, the motors at
+      x_in = P L/EA (x_out = 0); P = 0: both start at zero tension.
+    * Motors: the first-order position loop of :class:`~slave.simulated.SimulatedRig`
+      (``rig.motor``: bandwidth, speed limit); encoders quantised to 2 pi pulley_radius / lines.
+    * Load cells: T_in + N(0, ``rig.sensors.load_cell_noise``^2), one seeded generator.
+
+    Parameters
+    ----------
+    joints : sequence of JointConfig
+        1 to 4 joints.
+    rig : RigConfig
+        ``n_elements`` (per tendon), ``motor``, ``sensors``.
+
+    Raises
+    ------
+    ConfigError
+        No joints, more than 4, or a setting out of range (the message names the joint and key).
+    """
+
+    def __init__(self, joints, rig: RigConfig):
+        joints = tuple(joints)
+        _validate(joints, rig)
+        self.joints = joints
+        self.joint_names = tuple(j.name for j in joints)
+        n = int(rig.n_elements)
+        self.tendons = [(TendonPhysics(j.tendons.a, n), TendonPhysics(j.tendons.b, n)) for j in joints]
+        nj = len(joints)
+        self._T = [[np.full(n + 1, float(j.pretension)), np.full(n + 1, float(j.pretension))] for j in joints]
+        self._theta = np.zeros(nj)
+        self._x = np.array([[float(p.w.sum() * j.pretension) for p in pair] for j, pair in zip(joints, self.tendons)])
+        self._tissue = [bool(j.load.tissue) for j in joints]
+        self._slope = np.array([j.stiffness + j.load.tissue_stiffness
+                                + j.pulley_radius ** 2 * (1.0 / pa.M_e + 1.0 / pb.M_e)
+                                for j, (pa, pb) in zip(joints, self.tendons)])
+        m = rig.motor
+        self._omega = 2.0 * math.pi * m.bandwidth_hz
+        self._vmax = float(m.max_speed)
+        self.encoder_resolution = 2.0 * math.pi * m.pulley_radius / m.encoder_lines_per_rev
+        self._sigma = float(rig.sensors.load_cell_noise)
+        self._rng = np.random.default_rng(rig.sensors.seed)
+        self._noise = self._rng.standard_normal((_NOISE_BLOCK, nj, 2))
+        self._k = 0
+        self._t = 0.0
+        self._state = self._read(self._x.copy())
+
+    @classmethod
+    def from_config(cls, cfg: Config) -> "SimulatedInstrument":
+        """Build from a full config (``instrument.joints`` and ``rig``).
+
+        Raises
+        ------
+        ConfigError
+            ``instrument.joints`` is empty (a single-tendon config: use :class:`slave.simulated.SimulatedRig`).
+        """
+        return cls(cfg.instrument.joints, cfg.rig)
+
+    # ---- model constants -------------------------------------------------------------------------
+    @property
+    def n_joints(self) -> int:
+        return len(self.joints)
+
+    @property
+    def K(self) -> np.ndarray:
+        """Friction exponents [-], shape (n_joints, 2)."""
+        return np.array([[p.K for p in pair] for pair in self.tendons])
+
+    @property
+    def M_e(self) -> np.ndarray:
+        """Pull-slip elongation per proximal tension [m/N], shape (n_joints, 2)."""
+        return np.array([[p.M_e for p in pair] for pair in self.tendons])
+
+    @property
+    def tissue(self) -> tuple[bool, ...]:
+        return tuple(self._tissue)
+
+    # ---- Instrument protocol ----------------------------------------------------------------------
+    @property
+    def state(self) -> InstrumentState:
+        return self._state
+
+    def step(self, x_in_cmd, dt: float) -> InstrumentState:
+        """Move every motor toward ``x_in_cmd`` [m], shape (n_joints, 2), for ``dt`` [s]; read sensors.
+
+        Raises
+        ------
+        RigInputError (ValueError)
+            ``x_in_cmd`` of another shape or not finite; ``dt`` not a finite number > 0.
+        """
+        try:
+            cmd = np.array(x_in_cmd, dtype=np.float64)
+            h = float(dt)
+        except (TypeError, ValueError):
+            raise RigInputError(f"x_in_cmd must be numbers of shape ({self.n_joints}, 2) and dt a number, "
+                                f"got x_in_cmd={x_in_cmd!r}, dt={dt!r}") from None
+        if cmd.shape != self._x.shape:
+            raise RigInputError(f"x_in_cmd must have shape ({self.n_joints}, 2) [joint, tendon a/b], "
+                                f"got {cmd.shape}")
+        if not np.all(np.isfinite(cmd)):
+            raise RigInputError(f"x_in_cmd must be finite displacements in metres, got {cmd.tolist()}")
+        if not (math.isfinite(h) and h > 0.0):
+            raise RigInputError(f"dt must be a finite time step > 0 s, got {dt!r}")
+        # motors: exact first-order step toward the command, speed-limited
+        dx = np.clip(-math.expm1(-self._omega * h) * (cmd - self._x), -self._vmax * h, self._vmax * h)
+        self._x += dx
+        sbx, sbF, sbs = RIGID_STOP
+        for i, j in enumerate(self.joints):
+            pa, pb = self.tendons[i]
+            Ta, Tb = self._T[i]
+            kt = j.load.tissue_stiffness if self._tissue[i] else 0.0
+            self._theta[i] = step_joint(
+                Ta, pa.lo, pa.hi, pa.dlo, pa.dhi, pa.w, pa.c_pull, pa.c_rel,
+                Tb, pb.lo, pb.hi, pb.dlo, pb.dhi, pb.w, pb.c_pull, pb.c_rel,
+                self._x[i, 0], self._x[i, 1], j.pulley_radius, self._theta[i], j.stiffness, j.damping / h,
+                kt, j.load.tissue_contact, j.limits[0], j.limits[1], j.limit_stiffness, j.load.torque,
+                self._slope[i] + j.damping / h, sbx, sbF, sbs)
+        self._t += h
+        self._state = self._read(cmd)
+        return self._state
+
+    def set_load(self, *, tissue: bool | None = None) -> None:
+        """Switch tissue contact on every joint; the joints re-balance at once (no damping) with the
+        motors held; :attr:`state` is refreshed (new truth and sensor sample, same time).
+
+        Raises
+        ------
+        RigInputError (ValueError)
+            ``tissue`` is not a bool.
+        """
+        if tissue is None:
+            return
+        if not isinstance(tissue, (bool, np.bool_)):
+            raise RigInputError(f"tissue must be True or False, got {tissue!r}")
+        self._tissue = [bool(tissue)] * self.n_joints
+        for i, j in enumerate(self.joints):
+            pa, pb = self.tendons[i]
+            Ta, Tb = self._T[i]
+            kt = j.load.tissue_stiffness if self._tissue[i] else 0.0
+            self._theta[i] = settle_joint(Ta, pa.dlo, pa.dhi, pa.w, self._x[i, 0], Tb, pb.dlo, pb.dhi, pb.w,
+                                          self._x[i, 1], j.pulley_radius, self._theta[i], j.stiffness, 0.0, kt,
+                                          j.load.tissue_contact, j.limits[0], j.limits[1], j.limit_stiffness,
+                                          j.load.torque, self._slope[i])
+        self._state = self._read(self._state.x_in_cmd)
+
+    def close(self) -> None:
+        """Nothing to release in simulation; idempotent."""
+
+    # ---- internals ----------------------------------------------------------------------------------
+    def _read(self, cmd: np.ndarray) -> InstrumentState:
+        nj = self.n_joints
+        T_in = np.empty((nj, 2))
+        T_out = np.empty((nj, 2))
+        elong = np.empty((nj, 2))
+        profiles = []
+        for i in range(nj):
+            for k in range(2):
+                T = self._T[i][k]
+                T_in[i, k] = T[0]
+                T_out[i, k] = T[-1]
+                elong[i, k] = float(self.tendons[i][k].w @ T)
+                snap = T.copy()
+                snap.flags.writeable = False
+                profiles.append(snap)
+        r = np.array([j.pulley_radius for j in self.joints])
+        x_out = np.column_stack((r * self._theta, -r * self._theta))
+        truth = InstrumentTruth(theta=self._theta.copy(), torque=r * (T_out[:, 0] - T_out[:, 1]), T_in=T_in,
+                                T_out=T_out, x_in=self._x.copy(), x_out=x_out, elongation=elong,
+                                profiles=tuple(profiles))
+        if self._k == _NOISE_BLOCK:
+            self._noise = self._rng.standard_normal((_NOISE_BLOCK, nj, 2))
+            self._k = 0
+        T_meas = T_in + self._sigma * self._noise[self._k]
+        self._k += 1
+        q = self.encoder_resolution
+        x_enc = q * np.round(self._x / q)
+        return InstrumentState(t=self._t, x_in=x_enc, T_in=T_meas, x_in_cmd=cmd, truth=truth)
+
+    def load_torque(self, i: int, theta: float) -> float:
+        """Static load torque of joint ``i`` at ``theta`` [rad] with the present tissue setting [N m]."""
+        j = self.joints[i]
+        kt = j.load.tissue_stiffness if self._tissue[i] else 0.0
+        return float(load_torque(theta, j.stiffness, kt, j.load.tissue_contact, j.limits[0], j.limits[1],
+                                 j.limit_stiffness, j.load.torque))
+
+
+def _check(ok: bool, key: str, expected: str, value: object) -> None:
+    if not ok:
+        raise ConfigError(f"{key} must be {expected}, got {value!r}")
+
+
+def _finite(v: object) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _validate(joints: tuple[JointConfig, ...], rig: RigConfig) -> None:
+    """Range checks of what the simulator uses; ConfigError names the joint and the dotted key."""
+    _check(1 <= len(joints) <= 4, "instrument.joints", "a list of 1 to 4 joints", len(joints))
+    for i, j in enumerate(joints):
+        p = f"instrument.joints[{i}] ({j.name})"
+        _check(_finite(j.pulley_radius) and j.pulley_radius > 0, f"{p}.pulley_radius", "a radius > 0 m",
+               j.pulley_radius)
+        _check(len(j.limits) == 2 and j.limits[0] < 0.0 < j.limits[1], f"{p}.limits",
+               "[lower, upper] with lower < 0 < upper [rad]", j.limits)
+        for key in ("stiffness", "damping", "pretension"):
+            _check(_finite(getattr(j, key)) and getattr(j, key) >= 0, f"{p}.{key}", "a finite number >= 0",
+                   getattr(j, key))
+        _check(_finite(j.limit_stiffness) and j.limit_stiffness > 0, f"{p}.limit_stiffness",
+               "a stiffness > 0 N m/rad", j.limit_stiffness)
+        _check(_finite(j.load.tissue_stiffness) and j.load.tissue_stiffness >= 0, f"{p}.load.tissue_stiffness",
+               "a finite number >= 0 N m/rad", j.load.tissue_stiffness)
+        _check(_finite(j.load.tissue_contact) and j.load.tissue_contact >= 0, f"{p}.load.tissue_contact",
+               "an angle >= 0 rad", j.load.tissue_contact)
+        _check(_finite(j.load.torque), f"{p}.load.torque", "a finite torque in N m", j.load.torque)
+        for t in ("a", "b"):
+            td = getattr(j.tendons, t)
+            _check(_finite(td.mu) and td.mu >= 0, f"{p}.tendons.{t}.mu", "a finite number >= 0", td.mu)
+            _check(_finite(td.EA) and td.EA > 0, f"{p}.tendons.{t}.EA", "a finite number > 0 N", td.EA)
+            _check(len(td.runs) > 0, f"{p}.tendons.{t}.runs", "a non-empty list of runs", td.runs)
+            for k, r in enumerate(td.runs):
+                _check(_finite(r.length) and r.length > 0, f"{p}.tendons.{t}.runs[{k}].length", "a length > 0 m",
+                       r.length)
+                _check(isinstance(r.radius, (int, float)) and not math.isnan(r.radius) and r.radius > 0,
+                       f"{p}.tendons.{t}.runs[{k}].radius", "a bend radius > 0 m (inf for straight)", r.radius)
+    n = rig.n_elements
+    _check(isinstance(n, int) and not isinstance(n, bool) and n >= 1, "rig.n_elements", "an integer >= 1", n)
+    m = rig.motor
+    _check(_finite(m.bandwidth_hz) and m.bandwidth_hz > 0, "rig.motor.bandwidth_hz", "a finite number > 0 Hz",
+           m.bandwidth_hz)
+    _check(_finite(m.max_speed) and m.max_speed > 0, "rig.motor.max_speed", "a finite speed > 0 m/s", m.max_speed)
+    _check(_finite(m.pulley_radius) and m.pulley_radius > 0, "rig.motor.pulley_radius", "a radius > 0 m",
+           m.pulley_radius)
+    _check(isinstance(m.encoder_lines_per_rev, int) and m.encoder_lines_per_rev >= 1,
+           "rig.motor.encoder_lines_per_rev", "an integer >= 1", m.encoder_lines_per_rev)
+    s = rig.sensors
+    _check(_finite(s.load_cell_noise) and s.load_cell_noise >= 0, "rig.sensors.load_cell_noise",
+           "a standard deviation >= 0 N", s.load_cell_noise)

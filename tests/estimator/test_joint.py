@@ -1,0 +1,107 @@
+"""JointEstimator against the simulated pair: torque (J2) and angle (J3) vs truth, pair coupling, batch = online."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from estimator.distal_slip import distal_clip, distal_gains, distal_tension, elongation
+from estimator.joint import JointEstimator, estimate_joint_batch
+from estimator.sheath import SheathModel, profile_update
+from tests.slave.joint_helpers import Loop, joint_config, max_fs
+
+
+def test_distal_tension_inverts_the_distal_slip_rule_exactly():
+    rng = np.random.default_rng(7)
+    g, w = SheathModel(K=0.8, compliance=1e-4).nodes(60)
+    dlo, dhi = distal_gains(g)
+    for _ in range(500):
+        T = np.full(g.size, rng.uniform(0, 3))
+        for T_in in rng.uniform(0, 20, 4):
+            profile_update(T, g, T_in)
+        e0 = elongation(T, w)
+        target = e0 * rng.uniform(-0.2, 2.5)
+        Td = distal_tension(T, dlo, dhi, w, e0, target)
+        distal_clip(T, dlo, dhi, Td)
+        if target <= 0:
+            assert Td == 0.0 and not T.any()
+        else:
+            assert elongation(T, w) == pytest.approx(target, rel=1e-12)
+            assert T[-1] == pytest.approx(Td, rel=1e-12)
+
+
+@pytest.fixture(scope="module")
+def paper_runs():
+    """The paper's protocol on tendon a then tendon b, with and without the pair coupling (no pretension)."""
+    out = {}
+    for coupling in (True, False):
+        loop = Loop(joint_config(), coupling=coupling)
+        out[coupling] = (loop.protocol(0), loop.protocol(1, start=-0.02), loop)
+    return out
+
+
+# columns of the antagonist's true proximal tension and (true, estimated) distal tension, per pulling side
+ANTAGONIST = {0: (8, 6, 7), 1: (9, 4, 5)}
+
+
+def test_torque_and_angle_track_the_simulator_on_the_paper_protocol(paper_runs):
+    for side, rows in enumerate(paper_runs[True][:2]):
+        assert np.ptp(rows[:, 0]) > 0.03                     # a real torque range [N m]
+        assert max_fs(rows) <= 0.04                          # acceptance: <= 0.05
+        assert np.abs(rows[:, 3] - rows[:, 2]).max() < 0.01  # angle within 0.6 deg over ~1 rad
+        assert rows[:, ANTAGONIST[side][0]].min() > 0.1      # the antagonist never went slack
+
+
+def test_pair_coupling_is_what_keeps_the_antagonist_right(paper_runs):
+    """Without (J4)-(J6) the loose tendon's distal tension is off by its capstan band most of the run."""
+    for side, (with_c, without) in enumerate(zip(paper_runs[True][:2], paper_runs[False][:2])):
+        _, true, est = ANTAGONIST[side]
+        err = lambda r: np.abs(r[:, est] - r[:, true]).mean()   # noqa: E731
+        assert err(with_c) < 0.3 * err(without)
+        assert max_fs(with_c) < max_fs(without)
+
+
+def test_pretension_is_carried_through():
+    loop = Loop(joint_config(pretension=2.0))
+    rows = loop.protocol(0)
+    ref = Loop(joint_config(pretension=2.0), coupling=False).protocol(0)
+    assert max_fs(rows) <= 0.06 and max_fs(ref) > 0.2
+    assert rows[:, 8].min() > 1.5                           # the antagonist held its pretension
+
+
+def test_batch_equals_online():
+    loop = Loop(joint_config(), settle=50)
+    loop.protocol(0, targets=(8.0, 3.0, 8.0), dwell=50)
+    est = loop.est
+    # replay the loop's proximal samples through both implementations
+    rng = np.random.default_rng(0)
+    n = 3000
+    t = np.arange(n) * 1e-3
+    Ta = 4 + 4 * np.sin(t * 3) + rng.normal(0, 0.02, n)
+    Tb = 0.3 + rng.normal(0, 0.02, n)
+    xa = 1e-3 * np.sin(t * 3) + 6e-5 * Ta
+    xb = -1e-3 * np.sin(t * 3)
+    on = JointEstimator(est.tendons[0].model, est.tendons[1].model, est.r, n_nodes=40, pretension=0.3)
+    rows = [on.step(*v) for v in zip(Ta, xa, Tb, xb)]
+    b = estimate_joint_batch(Ta, xa, Tb, xb, est.tendons[0].model, est.tendons[1].model, est.r, n_nodes=40,
+                             pretension=0.3)
+    assert np.allclose(b.torque, [s.torque for s in rows], rtol=0, atol=1e-12)
+    assert np.allclose(b.angle, [s.angle for s in rows], rtol=0, atol=1e-12)
+    assert np.allclose(b.T_out, [s.T_out for s in rows], rtol=0, atol=1e-12)
+    assert np.ptp(b.angle) > 0.3
+
+
+def test_bad_arguments_are_named():
+    m = SheathModel(K=0.5, compliance=1e-4)
+    with pytest.raises(ValueError, match="pulley_radius"):
+        JointEstimator(m, m, 0.0)
+    with pytest.raises(ValueError, match="play"):
+        JointEstimator(m, m, 0.004, play=-1.0)
+    with pytest.raises(ValueError, match="pretension"):
+        JointEstimator(m, m, 0.004, pretension=(1.0, 2.0, 3.0))
+    with pytest.raises(ValueError, match="x_b has a non-finite value at sample 2"):
+        estimate_joint_batch(np.ones(3), np.zeros(3), np.ones(3), [0, 0, math.nan], m, m, 0.004)
+    est = JointEstimator(m, m, 0.004)
+    with pytest.raises(ValueError, match="finite"):
+        est.step(math.nan, 0.0, 1.0, 0.0)

@@ -1,0 +1,143 @@
+"""SimulatedInstrument: cross-check with the single-tendon rig, torque balance, dead zone, pretension, inputs."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from slave.joint_rig import SimulatedInstrument
+from slave.rig import RigInputError
+from slave.simulated import SimulatedRig
+from teleop.config import config_from_dict
+from teleop.errors import ConfigError
+from tests.slave.joint_helpers import DT, joint_config
+
+R, K_J, K_T, T_C, HI, K_LIM = 0.004, 0.005, 0.02, 0.2, 1.2, 50.0
+
+
+def test_one_taut_tendon_equals_the_single_tendon_rig():
+    """Tendon b slack: the joint is tendon a on a spring load, which SimulatedRig solves exactly."""
+    quiet = {"n_elements": 100, "sensors": {"load_cell_noise": 0.0}}
+    cfg = config_from_dict({"instrument": {"joints": [{
+        "name": "j", "pulley_radius": R, "stiffness": K_J, "damping": 0.0, "limits": [-1.2, HI],
+        "limit_stiffness": K_LIM, "load": {"tissue_stiffness": K_T, "tissue_contact": T_C}}]}, "rig": quiet})
+    inst = SimulatedInstrument.from_config(cfg)
+    single = SimulatedRig.from_config(config_from_dict({"rig": {**quiet, "load": {
+        "joint_stiffness": K_J / R ** 2, "tissue_stiffness": K_T / R ** 2, "tissue_contact": R * T_C,
+        "joint_limit": R * HI, "limit_stiffness": K_LIM / R ** 2, "tissue": True, "force": 0.0}}}))
+    t = np.arange(9000) * DT
+    # pull (into the limit), partial release, re-pull past the peak, minor loops, release to slack
+    x = np.interp(t, [0, 2, 3, 4, 5, 6, 7, 9], [0, 0.0075, 0.006, 0.0078, 0.004, 0.0065, 0.001, 0.0])
+    worst = np.zeros(3)
+    for xx in x:
+        a = inst.step([[xx, -0.02]], DT).truth
+        b = single.step(xx, DT).truth
+        assert a.T_in[0, 1] == 0.0 and a.T_out[0, 1] == 0.0
+        worst = np.maximum(worst, np.abs([a.T_in[0, 0] - b.T_in, a.T_out[0, 0] - b.T_out, a.x_out[0, 0] - b.x_out]))
+    assert worst[0] < 1e-8 and worst[1] < 1e-8 and worst[2] < 1e-12
+
+
+def test_torque_balance_holds_every_step_and_tendons_stay_lipschitz():
+    cfg = joint_config(damping=0.001)
+    inst = SimulatedInstrument.from_config(cfg)
+    j = cfg.instrument.joints[0]
+    x0 = inst.state.x_in_cmd.copy()
+    t = np.arange(3000) * DT
+    u = 0.006 * np.sin(np.pi * t / 1.5) ** 2
+    theta_prev = 0.0
+    for k, uu in enumerate(u):
+        tr = inst.step(x0 + [[uu + 1e-4, -0.8 * uu + 1e-4]], DT).truth
+        th = tr.theta[0]
+        load = inst.load_torque(0, th) + j.damping * (th - theta_prev) / DT
+        assert tr.torque[0] == pytest.approx(load, abs=1e-9)
+        theta_prev = th
+        for p, pair in zip(tr.profiles, inst.tendons[0]):
+            g = pair.log_gain
+            lp = np.log(np.maximum(p, 1e-300))
+            if p.min() > 0:
+                assert np.all(np.abs(np.diff(lp)) <= np.diff(g) + 1e-9)
+    assert 0.3 < tr.theta.max() or theta_prev > 0.0
+
+
+def test_dead_zone_after_a_reversal_inside_the_band():
+    """Releasing the pulled tendon by less than the capstan band does not move the joint (eqs. (14)-(21))."""
+    inst = SimulatedInstrument.from_config(joint_config())
+    x0 = inst.state.x_in_cmd.copy()
+    for k in range(1500):
+        inst.step(x0 + [[4e-6 * k, -4e-6 * k]], DT)
+    for _ in range(200):       # let the motors arrive
+        inst.step(x0 + [[4e-6 * 1499, -4e-6 * 1499]], DT)
+    th = inst.state.truth.theta[0]
+    T_out = inst.state.truth.T_out[0, 0]
+    T_in = inst.state.truth.T_in[0, 0]
+    for k in range(1, 100):      # back off tendon a by 0.1 mm: T_in falls, the tip does not move
+        s = inst.step(x0 + [[4e-6 * 1499 - 1e-6 * k, -4e-6 * 1499]], DT)
+    assert s.truth.T_in[0, 0] < 0.9 * T_in
+    assert s.truth.T_in[0, 0] > T_in * math.exp(-2 * inst.K[0, 0])
+    assert s.truth.theta[0] == pytest.approx(th, abs=1e-12)
+    assert s.truth.T_out[0, 0] == pytest.approx(T_out, abs=1e-9)
+
+
+def test_pretension_start_state_and_symmetric_pull():
+    inst = SimulatedInstrument.from_config(joint_config(pretension=2.0))
+    st = inst.state
+    assert np.all(st.truth.T_in == 2.0) and np.all(st.truth.T_out == 2.0) and st.truth.theta[0] == 0.0
+    assert np.allclose(st.truth.elongation, st.truth.x_in)           # x_out = 0 at theta = 0
+    x0 = st.x_in_cmd.copy()
+    for _ in range(200):
+        s = inst.step(x0 + 1e-4, DT)      # pull both equally: tensions rise, the joint hardly turns
+    assert s.truth.T_in.min() > 2.5 and abs(s.truth.theta[0]) < 0.02
+
+
+def test_set_load_rebalances_with_the_motors_held():
+    inst = SimulatedInstrument.from_config(joint_config())
+    x0 = inst.state.x_in_cmd.copy()
+    for k in range(1000):
+        inst.step(x0 + [[5e-6 * k, -5e-6 * k]], DT)
+    th_tissue = inst.state.truth.theta[0]
+    x_held = inst.state.truth.x_in.copy()
+    inst.set_load(tissue=False)
+    tr = inst.state.truth
+    assert tr.theta[0] > th_tissue + 0.05 and np.array_equal(tr.x_in, x_held)
+    assert tr.torque[0] == pytest.approx(inst.load_torque(0, tr.theta[0]), abs=1e-9)
+    with pytest.raises(RigInputError, match="tissue"):
+        inst.set_load(tissue="no")
+
+
+def test_sensors_are_seeded_noisy_and_quantised():
+    a, b = (SimulatedInstrument.from_config(joint_config(seed=3)) for _ in range(2))
+    c = SimulatedInstrument.from_config(joint_config(seed=4))
+    x0 = a.state.x_in_cmd.copy()
+    ra = [a.step(x0 + 1e-4, DT) for _ in range(50)]
+    rb = [b.step(x0 + 1e-4, DT) for _ in range(50)]
+    rc = [c.step(x0 + 1e-4, DT) for _ in range(50)]
+    assert all(np.array_equal(p.T_in, q.T_in) for p, q in zip(ra, rb))
+    assert not np.array_equal(ra[-1].T_in, rc[-1].T_in)
+    noise = np.array([s.T_in - s.truth.T_in for s in ra])
+    assert 0.01 < noise.std() < 0.03
+    q = a.encoder_resolution
+    assert np.allclose(ra[-1].x_in / q, np.round(ra[-1].x_in / q))
+    assert np.abs(ra[-1].x_in - ra[-1].truth.x_in).max() <= q / 2 + 1e-15
+
+
+@pytest.mark.parametrize("cmd, dt, match", [
+    ([[0.0, 0.0], [0.0, 0.0]], DT, r"shape \(1, 2\)"),
+    ([[math.nan, 0.0]], DT, "finite"),
+    ([[0.0, 0.0]], 0.0, "dt must be"),
+    ([[0.0, 0.0]], math.inf, "dt must be"),
+    ("x", DT, "numbers"),
+])
+def test_bad_step_inputs_name_the_argument(cmd, dt, match):
+    inst = SimulatedInstrument.from_config(joint_config())
+    with pytest.raises(RigInputError, match=match):
+        inst.step(cmd, dt)
+
+
+def test_config_errors_name_the_joint_and_key():
+    with pytest.raises(ConfigError, match=r"instrument.joints must be a list of 1 to 4"):
+        SimulatedInstrument((), config_from_dict({}).rig)
+    cfg = joint_config()
+    bad = cfg.instrument.joints[0].__class__(name="wrist", stiffness=-1.0)
+    with pytest.raises(ConfigError, match=r"instrument.joints\[0\] \(wrist\).stiffness"):
+        SimulatedInstrument((bad,), cfg.rig)
