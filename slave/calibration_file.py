@@ -1,0 +1,202 @@
+"""Calibration data of a joint instrument: ``<calibration.dir>/<instrument.id>.yaml``, written by
+``teleop calibrate`` (or the slave's power-up routine) and reloaded by the slave.
+
+Format (YAML, SI units; unknown keys are errors)::
+
+    instrument: flex3                    # must be the config's instrument.id
+    date: 2026-01-01T12:00:00+00:00      # ISO 8601, when the fit was made
+    method: joint-limit knee each way (Phee et al. 2009, Sec. IV); K from M_e by Newton (eq. 13)
+    target_tension: 20.0                 # [N] where each pull stopped
+    use_route: true                      # K solved with each tendon's route shape
+    joints:                              # in instrument.joints order, names must match
+      - name: bend_ud
+        a: {K: 0.62, M_e: 8.1e-05, compliance: 0.0001, knee_x_in: 0.0061, knee_T_in: 4.1,
+            residual_rms: 3.0e-07, n_samples: 1500}
+        b: {...}
+
+K [-] >= 0, M_e [m/N] > 0, compliance = L/EA [m/N] > 0, knee_x_in [m], knee_T_in [N], residual_rms [m]
+(of the post-knee line x_in = M_e T_in + c) >= 0, n_samples >= 1 (samples after the knee).
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from estimator.calibration import CalibrationResult
+from estimator.sheath import SheathModel
+from slave.instrument import TENDONS
+from slave.pair_calibrate import tendon_wrap_shape
+from teleop.config import Config
+from teleop.errors import CalibrationError
+
+__all__ = ["TendonCalibration", "InstrumentCalibration", "calibration_path", "from_results", "save_calibration",
+           "load_calibration", "sheath_models"]
+
+METHOD = "joint-limit knee each way (Phee et al. 2009, Sec. IV); K from M_e by Newton (eq. 13)"
+_TENDON_KEYS = {"K": float, "M_e": float, "compliance": float, "knee_x_in": float, "knee_T_in": float,
+                "residual_rms": float, "n_samples": int}
+_TOP_KEYS = ("instrument", "date", "method", "target_tension", "use_route", "joints")
+
+
+@dataclass(frozen=True)
+class TendonCalibration:
+    """Fitted values of one tendon (units in the module docstring)."""
+
+    K: float
+    M_e: float
+    compliance: float
+    knee_x_in: float
+    knee_T_in: float
+    residual_rms: float
+    n_samples: int
+
+    @classmethod
+    def from_result(cls, r: CalibrationResult) -> "TendonCalibration":
+        return cls(K=r.K, M_e=r.M_e, compliance=r.model.compliance, knee_x_in=r.knee_x_in, knee_T_in=r.knee_T_in,
+                   residual_rms=r.residual_rms, n_samples=r.n_samples)
+
+
+@dataclass(frozen=True)
+class InstrumentCalibration:
+    """A whole instrument: ``joints`` is a tuple of (name, {"a": TendonCalibration, "b": ...})."""
+
+    instrument: str
+    date: str
+    target_tension: float
+    use_route: bool
+    joints: tuple[tuple[str, dict[str, TendonCalibration]], ...]
+    method: str = METHOD
+
+    def as_dict(self) -> dict:
+        return {"instrument": self.instrument, "date": self.date, "method": self.method,
+                "target_tension": self.target_tension, "use_route": self.use_route,
+                "joints": [{"name": n, **{t: {k: getattr(c[t], k) for k in _TENDON_KEYS} for t in TENDONS}}
+                           for n, c in self.joints]}
+
+
+def calibration_path(cfg: Config) -> Path:
+    """``<calibration.dir>/<instrument.id>.yaml``."""
+    return Path(cfg.calibration.dir) / f"{cfg.instrument.id}.yaml"
+
+
+def from_results(cfg: Config, results: list[dict[str, CalibrationResult]], date: str | None = None) -> InstrumentCalibration:
+    """The calibration data of a finished :class:`~slave.pair_calibrate.PairCalibration` (date: now, UTC)."""
+    date = date or _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    joints = tuple((j.name, {t: TendonCalibration.from_result(res[t]) for t in TENDONS})
+                   for j, res in zip(cfg.instrument.joints, results))
+    return InstrumentCalibration(instrument=cfg.instrument.id, date=date, target_tension=cfg.calibration.target_tension,
+                                 use_route=cfg.calibration.use_route, joints=joints)
+
+
+def save_calibration(cal: InstrumentCalibration, path: str | Path) -> Path:
+    """Write ``cal`` as YAML to ``path`` (directories created); returns the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    head = ("# tendon-sheath calibration of a joint instrument (teleop calibrate); SI units:\n"
+            "# K [-], M_e and compliance = L/EA [m/N], knee_x_in [m], knee_T_in [N], residual_rms [m]\n")
+    path.write_text(head + yaml.safe_dump(cal.as_dict(), sort_keys=False), encoding="utf-8")
+    return path
+
+
+def _fail(path: Path, msg: str) -> CalibrationError:
+    return CalibrationError(f"{path}: {msg}")
+
+
+def load_calibration(path: str | Path, cfg: Config) -> InstrumentCalibration:
+    """Read and check a calibration file against the config.
+
+    Raises
+    ------
+    CalibrationError
+        Missing or unreadable file, YAML error, unknown or missing key, a value of the wrong type or
+        out of range, another instrument id, or joints that are not the config's (names in order).
+        The message starts with the file name and names the key.
+    """
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise _fail(path, "calibration file not found (run `teleop calibrate --config ...`)") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise _fail(path, f"cannot read the calibration file ({e})") from None
+    except yaml.YAMLError as e:
+        raise _fail(path, f"YAML syntax error: {getattr(e, 'problem', None) or e}") from None
+    if not isinstance(data, dict):
+        raise _fail(path, "expected a mapping with keys " + ", ".join(_TOP_KEYS))
+    for k in data:
+        if k not in _TOP_KEYS:
+            raise _fail(path, f"unknown key {k!r} (expected {', '.join(_TOP_KEYS)})")
+    for k in _TOP_KEYS:
+        if k not in data:
+            raise _fail(path, f"missing key {k!r}")
+    if data["instrument"] != cfg.instrument.id:
+        raise _fail(path, f"instrument is {data['instrument']!r}, the config's instrument.id is {cfg.instrument.id!r}: "
+                          f"this calibration is for another instrument")
+    if not isinstance(data["date"], (str, _dt.datetime, _dt.date)):
+        raise _fail(path, f"date: expected an ISO 8601 date, got {data['date']!r}")
+    date = data["date"] if isinstance(data["date"], str) else data["date"].isoformat()
+    try:
+        _dt.datetime.fromisoformat(date)
+    except ValueError:
+        raise _fail(path, f"date: {date!r} is not an ISO 8601 date") from None
+    tt = data["target_tension"]
+    if isinstance(tt, bool) or not isinstance(tt, (int, float)) or not (math.isfinite(tt) and tt > 0):
+        raise _fail(path, f"target_tension: expected a tension > 0 N, got {tt!r}")
+    if not isinstance(data["use_route"], bool):
+        raise _fail(path, f"use_route: expected true or false, got {data['use_route']!r}")
+    names = [j.name for j in cfg.instrument.joints]
+    joints = data["joints"]
+    if not isinstance(joints, list) or [j.get("name") if isinstance(j, dict) else None for j in joints] != names:
+        got = [j.get("name") if isinstance(j, dict) else j for j in joints] if isinstance(joints, list) else joints
+        raise _fail(path, f"joints: expected the config's joints {names} in that order, got {got}")
+    out = []
+    for i, j in enumerate(joints):
+        extra = set(j) - {"name", *TENDONS}
+        if extra:
+            raise _fail(path, f"joints[{i}] ({j['name']}): unknown key {sorted(extra)[0]!r}")
+        tend = {}
+        for t in TENDONS:
+            where = f"joints[{i}].{t} ({j['name']})"
+            v = j.get(t)
+            if not isinstance(v, dict):
+                raise _fail(path, f"{where}: missing or not a mapping of fitted values")
+            unknown = set(v) - set(_TENDON_KEYS)
+            if unknown:
+                raise _fail(path, f"{where}: unknown key {sorted(unknown)[0]!r}")
+            vals = {}
+            for key, tp in _TENDON_KEYS.items():
+                x = v.get(key)
+                ok = (not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(x)
+                      and (tp is float or isinstance(x, int)))
+                if ok and key in ("M_e", "compliance"):
+                    ok = x > 0
+                elif ok and key in ("K", "residual_rms"):
+                    ok = x >= 0
+                elif ok and key == "n_samples":
+                    ok = x >= 1
+                if not ok:
+                    raise _fail(path, f"{where}.{key}: expected {'an integer >= 1' if tp is int else 'a finite number'}"
+                                      f"{' > 0' if key in ('M_e', 'compliance') else ' >= 0' if key in ('K', 'residual_rms') else ''}"
+                                      f", got {x!r}")
+                vals[key] = tp(x)
+            tend[t] = TendonCalibration(**vals)
+        out.append((j["name"], tend))
+    return InstrumentCalibration(instrument=data["instrument"], date=date, target_tension=float(tt),
+                                 use_route=data["use_route"], joints=tuple(out), method=str(data["method"]))
+
+
+def sheath_models(cal: InstrumentCalibration, cfg: Config) -> list[tuple[SheathModel, SheathModel]]:
+    """Per joint, the estimator's models of tendons a and b: calibrated K and L/EA, and the route shape
+    when the calibration used it."""
+    out = []
+    for (name, tend), joint in zip(cal.joints, cfg.instrument.joints):
+        pair = []
+        for t in TENDONS:
+            shape = tendon_wrap_shape(getattr(joint.tendons, t)) if cal.use_route else None
+            pair.append(SheathModel(K=tend[t].K, compliance=tend[t].compliance, wrap_shape=shape))
+        out.append((pair[0], pair[1]))
+    return out
