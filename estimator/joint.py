@@ -66,11 +66,14 @@ from estimator.distal_slip import distal_clip, distal_gains, distal_tension, elo
 from estimator.phase import Phase
 from estimator.sheath import SheathModel, profile_update
 
-__all__ = ["JointSample", "JointBatch", "JointEstimator", "estimate_joint_batch", "DEFAULT_PLAY"]
+__all__ = ["JointSample", "JointBatch", "JointEstimator", "estimate_joint_batch", "predict_pair_angle", "DEFAULT_PLAY",
+           "KAIST_PLAY"]
 
 #: Default play of the coupling: distal tendon displacement that counts as joint motion [m]
 #: (several times the elongation noise a 0.02 N load cell leaves in the profile, plus encoder steps).
 DEFAULT_PLAY = 2e-5
+#: Coupling play for the KAIST recordings, in units of the pulley radius [rad] (predict_pair_angle).
+KAIST_PLAY = 0.005
 
 
 @dataclass(frozen=True)
@@ -366,3 +369,26 @@ def estimate_joint_batch(T_a, x_a, T_b, x_b, model_a: SheathModel, model_b: Shea
     _batch(*arrs, ta.profile.copy(), tb.profile.copy(), ta.log_gain, tb.log_gain, ta.weight, tb.weight, dloa, dhia,
            dlob, dhib, ref.r, ref.half_width, bool(coupling), torque, angle, T_out, elong)
     return JointBatch(torque=torque, angle=angle, T_out=T_out, elongation=elong)
+
+
+def predict_pair_angle(p, command, T_a, T_b, n_nodes: int = 50, play: float = KAIST_PLAY) -> np.ndarray:
+    """Distal angle [rad], shape (n,), of a pair driven as the KAIST robot drives it, by this estimator.
+
+    The motor turns both tendons, x_in,a = +g c and x_in,b = -g c for the command c [rad]; with the
+    pulley radius r, g and the compliances not separately observable, the estimator runs in units of
+    r (r = 1): x_in,a = G c, x_in,b = -G c, L/EA_j = 2 lam_j [rad/N], from uniform profiles at the
+    first measured tensions (the pretension), so that (J3) reads
+
+        theta = G (c - c_0) - lam_a (E_a - E_a(0)) + lam_b (E_b - E_b(0)) + theta_0,   E_j = mean_s T_j
+
+    - the seed pair model of :mod:`estimator.pair` with the pair coupling (J4)-(J6) acting on the
+    profiles. ``p`` is an :class:`estimator.pair.PairParams`; ``play`` [rad] the coupling's play.
+    Use with :func:`estimator.pair.fit_pair` (``predict=predict_pair_angle``).
+    """
+    c = np.asarray(command, dtype=float)
+    Ta = np.asarray(T_a, dtype=float)
+    Tb = np.asarray(T_b, dtype=float)
+    models = [SheathModel(K=K, compliance=max(2.0 * lam, 1e-12)) for K, lam in ((p.K_a, p.lam_a), (p.K_b, p.lam_b))]
+    b = estimate_joint_batch(Ta, p.G * c, Tb, -p.G * c, *models, 1.0, n_nodes=n_nodes,
+                             pretension=(float(Ta[0]), float(Tb[0])), play=play)
+    return b.angle + p.G * c[0] + p.theta0

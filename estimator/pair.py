@@ -119,7 +119,8 @@ def predict_angle(p: PairParams, command: np.ndarray, T_a: np.ndarray, T_b: np.n
             + p.lam_b * mean_tension(T_b, p.K_b, n_nodes) + p.theta0)
 
 
-def fit_pair(command, T_a, T_b, angle, n_train: int, n_nodes: int = 50) -> PairFit:
+def fit_pair(command, T_a, T_b, angle, n_train: int, n_nodes: int = 50, *, predict=None,
+             name: str = "seed pair model") -> PairFit:
     """Fit the seed pair model on the first ``n_train`` samples.
 
     Start: for every (K_a, K_b) of a grid, the linear parameters (G, lam_a, lam_b, theta_0) by
@@ -129,6 +130,10 @@ def fit_pair(command, T_a, T_b, angle, n_train: int, n_nodes: int = 50) -> PairF
     ----------
     command : ndarray, shape (n,) [rad] ; T_a, T_b : ndarray, shape (n,) [N] ; angle : ndarray, shape (n,) [rad]
     n_train : int, training samples, in [8, n]
+    predict : callable (PairParams, command, T_a, T_b, n_nodes) -> angle [rad], optional
+        Another model with the same six parameters (default :func:`predict_angle`; e.g.
+        :func:`estimator.joint.predict_pair_angle`, the joint estimator with its pair coupling).
+    name : str, the fitted model's name
 
     Raises
     ------
@@ -153,9 +158,11 @@ def fit_pair(command, T_a, T_b, angle, n_train: int, n_nodes: int = 50) -> PairF
                 best = (sol.cost, Ka, Kb, sol.x)
     _, Ka, Kb, (G, la, lb, th0) = best
 
+    predict = predict or predict_angle
+
     def residual(q: np.ndarray) -> np.ndarray:
         p = PairParams(*q)
-        return predict_angle(p, c[tr], Ta[tr], Tb[tr], n_nodes) - y[tr]
+        return predict(p, c[tr], Ta[tr], Tb[tr], n_nodes) - y[tr]
 
     x0 = np.array([G, Ka, Kb, la, lb, th0])
     lb_ = np.array([0.0, 0.0, 0.0, 0.0, 0.0, -np.inf])
@@ -163,7 +170,7 @@ def fit_pair(command, T_a, T_b, angle, n_train: int, n_nodes: int = 50) -> PairF
     sol = least_squares(residual, np.clip(x0, lb_ + 1e-9, ub_), bounds=(lb_, ub_), diff_step=1e-3,
                         x_scale=[0.1, 0.1, 0.1, 0.01, 0.01, 0.01])
     p = PairParams(*map(float, sol.x))
-    return PairFit("seed pair model", p.as_dict(), predict_angle(p, c, Ta, Tb, n_nodes), float(sol.cost))
+    return PairFit(name, p.as_dict(), predict(p, c, Ta, Tb, n_nodes), float(sol.cost))
 
 
 def fit_force_path(T_a, T_b, angle, n_train: int, n_nodes: int = 50) -> PairFit:
