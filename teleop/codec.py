@@ -3,8 +3,8 @@
 Every message is a 3-byte header followed by little-endian, fixed-layout fields::
 
     offset 0  uint8   MAGIC (0xA7)
-    offset 1  uint8   WIRE_VERSION (1)
-    offset 2  uint8   message type: 1 Command, 2 Estimate, 3 Heartbeat
+    offset 1  uint8   WIRE_VERSION (2: joint instruments added)
+    offset 2  uint8   message type: 1 Command, 2 Estimate, 3 Heartbeat, 4 JointCommand, 5 JointEstimate
 
     Command   (25 bytes after the header)
         uint32 seq | float64 t_master [s] | float64 x_in_cmd [m] | uint8 engaged (0/1) | uint32 marker
@@ -14,6 +14,14 @@ Every message is a 3-byte header followed by little-endian, fixed-layout fields:
         | uint16 count | float32 profile[count] [N]
     Heartbeat (14 bytes after the header)
         uint8 side | uint32 seq | float64 t_sender [s] | uint8 state
+    JointCommand (18 + 8 * n bytes after the header), n = joints, 1..4
+        uint32 seq | float64 t_master [s] | uint8 engaged | uint32 marker | uint8 n | float64 angle[n] [rad]
+    JointEstimate (19 + 82 * n + 8 * n * p bytes after the header), p = profile points per tendon
+        uint32 seq | uint32 cmd_seq | float64 t_slave [s] | uint8 n | uint16 p
+        | n x ( float64 torque_hat [N m] | float64 angle_hat [rad]
+                | 2 x (float64 T_in [N] | float64 x_in [m] | float64 T_out_hat [N]
+                       | float64 elongation_hat [m] | uint8 phase) )        tendon a, then b
+        | float32 profile[2 n][p] [N]                                      joint 0 a, joint 0 b, ...
 
 A buffer decodes only if it has exactly the length its type (and profile count) implies. Floats must
 be finite both ways: :func:`encode` refuses a message that :func:`decode` would refuse.
@@ -28,29 +36,37 @@ from typing import Union
 
 from estimator.phase import Phase
 from teleop.errors import CodecError
-from teleop.messages import Command, Estimate, Heartbeat, Side, SideState
+from teleop.messages import (Command, Estimate, Heartbeat, JointCommand, JointEstimate, JointState, Side, SideState,
+                             TendonState)
 
 __all__ = [
-    "MAGIC", "WIRE_VERSION", "TYPE_COMMAND", "TYPE_ESTIMATE", "TYPE_HEARTBEAT",
-    "MAX_PROFILE_POINTS", "SEQ_MODULUS", "Message", "encode", "decode", "next_seq", "seq_newer",
+    "MAGIC", "WIRE_VERSION", "TYPE_COMMAND", "TYPE_ESTIMATE", "TYPE_HEARTBEAT", "TYPE_JOINT_COMMAND",
+    "TYPE_JOINT_ESTIMATE", "MAX_JOINTS", "MAX_PROFILE_POINTS", "SEQ_MODULUS", "Message", "encode", "decode", "next_seq", "seq_newer",
 ]
 
 MAGIC = 0xA7
-WIRE_VERSION = 1
+WIRE_VERSION = 2
 TYPE_COMMAND = 1
 TYPE_ESTIMATE = 2
 TYPE_HEARTBEAT = 3
+TYPE_JOINT_COMMAND = 4
+TYPE_JOINT_ESTIMATE = 5
+MAX_JOINTS = 4
 MAX_PROFILE_POINTS = 0xFFFF          # uint16 count
 SEQ_MODULUS = 1 << 32                # sequence numbers are uint32
 
-Message = Union[Command, Estimate, Heartbeat]
+Message = Union[Command, Estimate, Heartbeat, JointCommand, JointEstimate]
 
 _HEADER = struct.Struct("<BBB")
 _COMMAND = struct.Struct("<IddBI")
 _ESTIMATE = struct.Struct("<IIddddddBH")
 _HEARTBEAT = struct.Struct("<BIdB")
+_JCMD = struct.Struct("<IdBIB")
+_JEST = struct.Struct("<IIdBH")
+_JOINT = struct.Struct("<dd4dB4dB")
 _HDR = _HEADER.size
-_TYPE_NAMES = {TYPE_COMMAND: "Command", TYPE_ESTIMATE: "Estimate", TYPE_HEARTBEAT: "Heartbeat"}
+_TYPE_NAMES = {TYPE_COMMAND: "Command", TYPE_ESTIMATE: "Estimate", TYPE_HEARTBEAT: "Heartbeat",
+               TYPE_JOINT_COMMAND: "JointCommand", TYPE_JOINT_ESTIMATE: "JointEstimate"}
 _PHASES = {int(p): p for p in Phase}
 _SIDES = {int(s): s for s in Side}
 _STATES = {int(s): s for s in SideState}
@@ -104,9 +120,10 @@ def encode(msg: Message) -> bytes:
 
     Parameters
     ----------
-    msg : Command, Estimate or Heartbeat
+    msg : Command, Estimate, Heartbeat, JointCommand or JointEstimate
         Floats finite; ``seq``/``cmd_seq``/``marker`` in [0, 2**32); at most
-        :data:`MAX_PROFILE_POINTS` profile points, each finite in float32.
+        :data:`MAX_PROFILE_POINTS` profile points, each finite in float32; 1 to :data:`MAX_JOINTS`
+        joints, two tendons each, profiles none or one per tendon of one length.
 
     Returns
     -------
@@ -115,7 +132,8 @@ def encode(msg: Message) -> bytes:
     Raises
     ------
     CodecError
-        Not a message, a non-finite float, an integer out of its wire range, too long a profile.
+        Not a message, a non-finite float, an integer out of its wire range, too long a profile, a
+        joint count outside 1..4, profiles that are not one per tendon.
     """
     t = type(msg)
     if t is Command:
@@ -158,7 +176,110 @@ def encode(msg: Message) -> bytes:
         _check_uint("Heartbeat", "seq", msg.seq, 32)
         body = _HEARTBEAT.pack(int(msg.side), msg.seq, msg.t_sender, int(msg.state))
         return _HEADER.pack(MAGIC, WIRE_VERSION, TYPE_HEARTBEAT) + body
-    raise CodecError(f"cannot encode a {t.__name__}: expected Command, Estimate or Heartbeat")
+    if t is JointCommand:
+        return _encode_joint_command(msg)
+    if t is JointEstimate:
+        return _encode_joint_estimate(msg)
+    raise CodecError(f"cannot encode a {t.__name__}: expected Command, Estimate, Heartbeat, JointCommand or "
+                     f"JointEstimate")
+
+
+def _joint_count(kind: str, n: int) -> None:
+    if not 1 <= n <= MAX_JOINTS:
+        raise CodecError(f"{kind} has {n} joints: expected 1 to {MAX_JOINTS}")
+
+
+def _encode_joint_command(msg: JointCommand) -> bytes:
+    n = len(msg.angles)
+    _joint_count("JointCommand", n)
+    _check_finite("JointCommand", ("t_master",) + tuple(f"angles[{i}]" for i in range(n)), (msg.t_master, *msg.angles))
+    _check_uint("JointCommand", "seq", msg.seq, 32)
+    _check_uint("JointCommand", "marker", msg.marker, 32)
+    try:
+        return (_HEADER.pack(MAGIC, WIRE_VERSION, TYPE_JOINT_COMMAND)
+                + _JCMD.pack(msg.seq, msg.t_master, bool(msg.engaged), msg.marker, n) + struct.pack(f"<{n}d", *msg.angles))
+    except struct.error:
+        raise CodecError(f"JointCommand fields do not fit the wire format: {msg!r}") from None
+
+
+def _encode_joint_estimate(msg: JointEstimate) -> bytes:
+    n = len(msg.joints)
+    _joint_count("JointEstimate", n)
+    _check_finite("JointEstimate", ("t_slave",), (msg.t_slave,))
+    _check_uint("JointEstimate", "seq", msg.seq, 32)
+    _check_uint("JointEstimate", "cmd_seq", msg.cmd_seq, 32)
+    profiles = msg.profiles
+    points = len(profiles[0]) if profiles else 0
+    if profiles and (len(profiles) != 2 * n or any(len(p) != points for p in profiles)):
+        raise CodecError(f"JointEstimate.profiles: expected none or {2 * n} profiles (two per joint) of one length")
+    if points > MAX_PROFILE_POINTS:
+        raise CodecError(f"JointEstimate.profiles have {points} points: at most {MAX_PROFILE_POINTS} fit the wire")
+    parts = [_HEADER.pack(MAGIC, WIRE_VERSION, TYPE_JOINT_ESTIMATE), _JEST.pack(msg.seq, msg.cmd_seq, msg.t_slave, n,
+                                                                                 points)]
+    for i, j in enumerate(msg.joints):
+        vals, phases = [j.torque_hat, j.angle_hat], []
+        for td in j.tendons:
+            vals += [td.T_in, td.x_in, td.T_out_hat, td.elongation_hat]
+            if td.phase not in _PHASES or isinstance(td.phase, bool):
+                raise CodecError(f"JointEstimate.joints[{i}] phase is {td.phase!r}: expected a Phase")
+            phases.append(int(td.phase))
+        if len(j.tendons) != 2:
+            raise CodecError(f"JointEstimate.joints[{i}] has {len(j.tendons)} tendons: expected 2 (a, b)")
+        _check_finite(f"JointEstimate.joints[{i}]", _JOINT_FLOATS, tuple(vals))
+        parts.append(_JOINT.pack(*vals[:6], phases[0], *vals[6:], phases[1]))
+    try:
+        for k, p in enumerate(profiles):
+            _check_profile(f"JointEstimate.profiles[{k}]", p)
+            parts.append(_profile_struct(points).pack(*p))
+    except (struct.error, TypeError, OverflowError) as e:
+        raise CodecError(f"JointEstimate.profiles must hold finite floats within float32 range ({e})") from None
+    return b"".join(parts)
+
+
+_JOINT_FLOATS = ("torque_hat", "angle_hat", "a.T_in", "a.x_in", "a.T_out_hat", "a.elongation_hat",
+                 "b.T_in", "b.x_in", "b.T_out_hat", "b.elongation_hat")
+
+
+def _decode_joint_command(buf) -> JointCommand:
+    if len(buf) < _HDR + _JCMD.size:
+        _expect_len("JointCommand", buf, _HDR + _JCMD.size)
+    seq, t, engaged, marker, n = _JCMD.unpack_from(buf, _HDR)
+    _joint_count("JointCommand", n)
+    _expect_len("JointCommand", buf, _HDR + _JCMD.size + 8 * n)
+    angles = struct.unpack_from(f"<{n}d", buf, _HDR + _JCMD.size)
+    _check_finite("JointCommand", ("t_master",) + tuple(f"angles[{i}]" for i in range(n)), (t, *angles))
+    if engaged > 1:
+        raise CodecError(f"JointCommand.engaged byte is {engaged}: expected 0 or 1")
+    return JointCommand(seq, t, tuple(angles), engaged == 1, marker)
+
+
+def _decode_joint_estimate(buf) -> JointEstimate:
+    if len(buf) < _HDR + _JEST.size:
+        _expect_len("JointEstimate", buf, _HDR + _JEST.size)
+    seq, cmd_seq, t, n, points = _JEST.unpack_from(buf, _HDR)
+    _joint_count("JointEstimate", n)
+    need = _HDR + _JEST.size + _JOINT.size * n + 8 * n * points
+    if len(buf) != need:
+        raise CodecError(f"JointEstimate with {n} joints and {points} profile points needs {need} bytes, got {len(buf)}")
+    _check_finite("JointEstimate", ("t_slave",), (t,))
+    joints, off = [], _HDR + _JEST.size
+    for i in range(n):
+        v = _JOINT.unpack_from(buf, off)
+        off += _JOINT.size
+        floats = v[:6] + v[7:11]
+        _check_finite(f"JointEstimate.joints[{i}]", _JOINT_FLOATS, floats)
+        ph = [_PHASES.get(v[6]), _PHASES.get(v[11])]
+        if None in ph:
+            raise CodecError(f"JointEstimate.joints[{i}] phase {v[6] if ph[0] is None else v[11]} is not a Phase "
+                             f"(0..{len(_PHASES) - 1})")
+        joints.append(JointState(v[0], v[1], (TendonState(*v[2:6], ph[0]), TendonState(*v[7:11], ph[1]))))
+    profiles = []
+    for k in range(2 * n if points else 0):
+        p = _profile_struct(points).unpack_from(buf, off)
+        off += 4 * points
+        _check_profile(f"JointEstimate.profiles[{k}]", p)
+        profiles.append(p)
+    return JointEstimate(seq, cmd_seq, t, tuple(joints), tuple(profiles))
 
 
 def _expect_len(kind: str, buf, need: int) -> None:
@@ -177,7 +298,7 @@ def decode(buf: bytes | bytearray | memoryview) -> Message:
 
     Returns
     -------
-    Command, Estimate or Heartbeat
+    Command, Estimate, Heartbeat, JointCommand or JointEstimate
         Every float finite; enums are :class:`Phase`, :class:`Side`, :class:`SideState`; the profile
         is a tuple of Python floats (float32 precision).
 
@@ -185,7 +306,8 @@ def decode(buf: bytes | bytearray | memoryview) -> Message:
     ------
     CodecError
         Shorter than a header, wrong magic, another wire version, unknown message type, a length that
-        does not match the type or the profile count, a non-finite float, an unknown enum value.
+        does not match the type or the profile count (joint count: 1..4), a non-finite float, an
+        unknown enum value.
     """
     if len(buf) < _HDR:
         raise CodecError(f"message truncated: {len(buf)} bytes, a header alone is {_HDR}")
@@ -226,5 +348,9 @@ def decode(buf: bytes | bytearray | memoryview) -> Message:
         if state not in _STATES:
             raise CodecError(f"Heartbeat.state {state} is not a SideState (0..{len(_STATES) - 1})")
         return Heartbeat(_SIDES[side], seq, t, _STATES[state])
+    if mtype == TYPE_JOINT_COMMAND:
+        return _decode_joint_command(buf)
+    if mtype == TYPE_JOINT_ESTIMATE:
+        return _decode_joint_estimate(buf)
     raise CodecError(f"unknown message type {mtype}: expected one of {sorted(_TYPE_NAMES)} "
                      f"({', '.join(_TYPE_NAMES.values())})")

@@ -10,7 +10,8 @@ from enum import IntEnum
 
 from estimator.phase import Phase
 
-__all__ = ["Phase", "Side", "Command", "Estimate", "Heartbeat", "SideState"]
+__all__ = ["Phase", "Side", "Command", "Estimate", "Heartbeat", "SideState", "JointCommand", "TendonState", "JointState",
+           "JointEstimate"]
 
 
 class Side(IntEnum):
@@ -83,3 +84,64 @@ class Heartbeat:
     seq: int
     t_sender: float
     state: SideState
+
+
+# ---- joint instruments (1..4 antagonistic pairs, config instrument.joints) -------------------------
+
+@dataclass(frozen=True)
+class JointCommand:
+    """Master -> slave: joint-angle commands of a joint instrument, every joint in config order.
+
+    seq : int, increments by one per command (uint32 wrap).
+    t_master : float [s], master monotonic clock at send.
+    angles : tuple of float [rad], one per joint (1..4); + turns toward tendon a.
+    engaged : bool, the operator is in control (False: the slave holds).
+    marker : int, experiment/protocol segment tag for recordings (0 = none).
+    """
+
+    seq: int
+    t_master: float
+    angles: tuple[float, ...]
+    engaged: bool = True
+    marker: int = 0
+
+
+@dataclass(frozen=True)
+class TendonState:
+    """One tendon in a JointEstimate: T_in [N] (load cell), x_in [m] (encoder), T_out_hat [N],
+    elongation_hat [m], phase."""
+
+    T_in: float
+    x_in: float
+    T_out_hat: float
+    elongation_hat: float
+    phase: Phase
+
+
+@dataclass(frozen=True)
+class JointState:
+    """One joint in a JointEstimate: torque_hat [N m] = r (T_out,a - T_out,b), angle_hat [rad],
+    tendons (a, b)."""
+
+    torque_hat: float
+    angle_hat: float
+    tendons: tuple[TendonState, TendonState]
+
+
+@dataclass(frozen=True)
+class JointEstimate:
+    """Slave -> master: measured and estimated state of every joint of a joint instrument.
+
+    seq : int, slave cycle counter.
+    cmd_seq : int, seq of the last JointCommand the slave applied (echo, for round-trip latency).
+    t_slave : float [s], slave monotonic clock.
+    joints : tuple of JointState, one per joint (1..4), config order.
+    profiles : tuple of tuple of float [N], empty or one per tendon (joint 0 a, joint 0 b, joint 1 a,
+        ...), all of one length: tension along each sheath, proximal to distal (decimated).
+    """
+
+    seq: int
+    cmd_seq: int
+    t_slave: float
+    joints: tuple[JointState, ...]
+    profiles: tuple[tuple[float, ...], ...] = field(default=())

@@ -65,14 +65,14 @@ def test_heartbeat_round_trip_random():
 
 def test_layout_is_pinned():
     """The documented layout, built by hand, decodes; a change of layout must change WIRE_VERSION."""
-    assert (MAGIC, WIRE_VERSION) == (0xA7, 1)
-    cmd = struct.pack("<BBBIddBI", 0xA7, 1, 1, 7, 1.5, -0.002, 1, 3)
+    assert (MAGIC, WIRE_VERSION) == (0xA7, 2)
+    cmd = struct.pack("<BBBIddBI", 0xA7, 2, 1, 7, 1.5, -0.002, 1, 3)
     assert encode(Command(7, 1.5, -0.002, True, 3)) == cmd
     assert len(cmd) == 28
-    est = struct.pack("<BBBIIddddddBH2f", 0xA7, 1, 2, 5, 4, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 2, 2, 0.5, 0.25)
+    est = struct.pack("<BBBIIddddddBH2f", 0xA7, 2, 2, 5, 4, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 2, 2, 0.5, 0.25)
     assert decode(est) == Estimate(5, 4, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, Phase.RELEASE, (0.5, 0.25))
     assert len(encode(Estimate(0, 0, 0, 0, 0, 0, 0, 0, Phase.HOLD, (1.0,) * 50))) == 62 + 4 * 50
-    hb = struct.pack("<BBBBIdB", 0xA7, 1, 3, 2, 9, 0.25, 3)
+    hb = struct.pack("<BBBBIdB", 0xA7, 2, 3, 2, 9, 0.25, 3)
     assert decode(hb) == Heartbeat(Side.SLAVE, 9, 0.25, SideState.ENGAGED)
 
 
@@ -96,7 +96,7 @@ GOOD_HB = encode(Heartbeat(Side.MASTER, 1, 0.0, SideState.READY))
     (GOOD_HB[:10], "Heartbeat message truncated"),
     (GOOD_EST[:20], "Estimate message truncated"),
     (b"\x00" + GOOD_CMD[1:], "magic byte 0x00"),
-    (GOOD_CMD[:1] + b"\x03" + GOOD_CMD[2:], r"message version 3, this build speaks 1"),
+    (GOOD_CMD[:1] + b"\x03" + GOOD_CMD[2:], r"message version 3, this build speaks 2"),
     (GOOD_CMD[:2] + b"\x09" + GOOD_CMD[3:], "unknown message type 9"),
     (GOOD_EST[:-4], "profile count 3 needs"),
     (GOOD_EST + b"\x00\x00\x80\x3f", "profile count 3 needs"),
@@ -110,32 +110,32 @@ def test_decode_rejects(buf, match):
 def test_decode_rejects_non_finite_in_every_float_field(bad):
     cmd = struct.Struct("<BBBIddBI")
     for i, name in ((4, "t_master"), (5, "x_in_cmd")):
-        fields = [0xA7, 1, 1, 1, 0.0, 0.0, 1, 0]
+        fields = [0xA7, WIRE_VERSION, 1, 1, 0.0, 0.0, 1, 0]
         fields[i] = bad
         with pytest.raises(CodecError, match=f"Command.{name} is"):
             decode(cmd.pack(*fields))
     est = struct.Struct("<BBBIIddddddBH2f")
     for i, name in enumerate(("t_slave", "T_in", "x_in", "T_out_hat", "elongation_hat", "x_out_hat")):
-        fields = [0xA7, 1, 2, 1, 1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 2, 1.0, 1.0]
+        fields = [0xA7, WIRE_VERSION, 2, 1, 1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 2, 1.0, 1.0]
         fields[5 + i] = bad
         with pytest.raises(CodecError, match=f"Estimate.{name} is"):
             decode(est.pack(*fields))
-    fields = [0xA7, 1, 2, 1, 1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 2, 1.0, bad]
+    fields = [0xA7, WIRE_VERSION, 2, 1, 1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 2, 1.0, bad]
     with pytest.raises(CodecError, match=r"Estimate.profile\[1\] is"):
         decode(est.pack(*fields))
     with pytest.raises(CodecError, match="Heartbeat.t_sender is"):
-        decode(struct.pack("<BBBBIdB", 0xA7, 1, 3, 1, 0, bad, 0))
+        decode(struct.pack("<BBBBIdB", 0xA7, WIRE_VERSION, 3, 1, 0, bad, 0))
 
 
 def test_decode_rejects_bad_enums_and_bools():
     with pytest.raises(CodecError, match="Estimate.phase 7 is not a Phase"):
-        decode(struct.pack("<BBBIIddddddBH", 0xA7, 1, 2, 0, 0, 0, 0, 0, 0, 0, 0, 7, 0))
+        decode(struct.pack("<BBBIIddddddBH", 0xA7, WIRE_VERSION, 2, 0, 0, 0, 0, 0, 0, 0, 0, 7, 0))
     with pytest.raises(CodecError, match="Heartbeat.side 0 is not a Side"):
-        decode(struct.pack("<BBBBIdB", 0xA7, 1, 3, 0, 0, 0.0, 0))
+        decode(struct.pack("<BBBBIdB", 0xA7, WIRE_VERSION, 3, 0, 0, 0.0, 0))
     with pytest.raises(CodecError, match="Heartbeat.state 9 is not a SideState"):
-        decode(struct.pack("<BBBBIdB", 0xA7, 1, 3, 1, 0, 0.0, 9))
+        decode(struct.pack("<BBBBIdB", 0xA7, WIRE_VERSION, 3, 1, 0, 0.0, 9))
     with pytest.raises(CodecError, match="Command.engaged byte is 2"):
-        decode(struct.pack("<BBBIddBI", 0xA7, 1, 1, 0, 0.0, 0.0, 2, 0))
+        decode(struct.pack("<BBBIddBI", 0xA7, WIRE_VERSION, 1, 0, 0.0, 0.0, 2, 0))
 
 
 def test_decode_accepts_bytearray_and_memoryview():

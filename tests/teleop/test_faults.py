@@ -10,7 +10,7 @@ import pytest
 
 from estimator.phase import Phase
 from teleop.clock import FakeClock
-from teleop.codec import decode, encode
+from teleop.codec import WIRE_VERSION, decode, encode
 from teleop.errors import CodecError, ConfigError
 from teleop.faults import FaultInjector, corrupt_payload, parse_fault_spec
 from teleop.messages import Command, Estimate, Heartbeat, Side, SideState
@@ -133,7 +133,7 @@ EST = Estimate(3, 2, 1.0, 10.0, 0.004, 5.0, 1e-4, 0.0039, Phase.PULL, (1.0, 2.0)
 
 @pytest.mark.parametrize("msg", [Command(1, 0.5, 0.002, True, 1), EST,
                                  Heartbeat(Side.SLAVE, 4, 2.0, SideState.READY)])
-@pytest.mark.parametrize("kind, error", [("nan", "nan"), ("inf", "inf"), ("version", "version 2")])
+@pytest.mark.parametrize("kind, error", [("nan", "nan"), ("inf", "inf"), ("version", f"version {WIRE_VERSION + 1}")])
 def test_byte_level_corruptions_are_refused_by_the_codec(msg, kind, error):
     bad = corrupt_payload(encode(msg), kind)
     assert len(bad) == len(encode(msg))
@@ -150,5 +150,5 @@ def test_range_corruption_decodes_to_an_impossible_value():
 
 def test_corrupt_stream_counts_every_message():
     inj, wire, _ = run("corrupt=version", n=20)
-    assert inj.counts["corrupted"] == 20 and all(p[1] == 2 for _, p in wire.out)
+    assert inj.counts["corrupted"] == 20 and all(p[1] == WIRE_VERSION + 1 for _, p in wire.out)
     assert inj.stats()["spec"] == "corrupt=version"
