@@ -1,0 +1,339 @@
+"""The slave node of a joint instrument: latest JointCommand -> pair controllers -> instrument ->
+joint estimators -> JointEstimate, with the same watchdog rules as the single-tendon node.
+
+One :meth:`JointSlaveNode.step` per cycle (``rig.rate_hz``), given the time by the caller:
+
+* CALIBRATING when no calibration was given: :class:`slave.pair_calibrate.PairCalibration` pulls
+  every tendon into its joint limit (all joints at once, both directions); the fit is saved as
+  calibration data (``calibration_file``) and every joint estimator replays the routine's proximal
+  samples so that its profile memory matches the tendons'. With a calibration (reloaded from
+  ``configs/calibration/<instrument>.yaml``) the node starts SAFE at once.
+* Then, each cycle, the latest JointCommand decides (latest wins):
+
+  ========================================  ==========  ===========================================
+  latest accepted command                   state       every joint's pair controller gets
+  ========================================  ==========  ===========================================
+  none, older than ``slave.watchdog_ms``,   SAFE        no command: both tendons relax to their set
+  or the master's liveliness token gone                 tension, the joint returns toward rest
+  fresh, ``engaged=False``                  READY       the last applied angle (hold)
+  fresh, ``engaged=True``                   ENGAGED     the commanded angle
+  ========================================  ==========  ===========================================
+
+  A command is *accepted* only when newer than the last accepted one (uint32 sequence), for this
+  many joints, and with every angle within the joint's limits widened by the stretch of its tendons
+  at ``calibration.target_tension`` (over r) plus 0.1 rad; others are counted and ignored. (The
+  command is the angle the joint would take with inextensible tendons: the puller's motor moves r
+  per radian of command, and the joint lags by the tendon's stretch over r, which the estimate
+  reports.) Entering ENGAGED needs every commanded angle within ``slave.engage_tolerance / r``
+  of the estimated one (the master anchors at the slave's angle when it engages).
+
+  controllers -> instrument.step -> JointEstimator.step per joint (proximal sensors only, never the
+  truth) -> JointEstimate -> one CSV row per cycle (``slave_joints.csv``) and Rerun every
+  ``recording.log_every`` cycles.
+* A Heartbeat at ``slave.heartbeat_hz``; with ``stop_on_master_stop`` the node finishes when the
+  master's heartbeat says STOPPING.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from estimator.joint import JointEstimator
+from slave.calibration_file import InstrumentCalibration, from_results, save_calibration, sheath_models
+from slave.instrument import TENDONS, Instrument, InstrumentState
+from slave.node import SlaveLinks
+from slave.pair_calibrate import PairCalibration, set_tension
+from slave.pair_control import PairController
+from teleop.clock import Clock, Pacer
+from teleop.codec import next_seq, seq_newer
+from teleop.config import Config
+from teleop.messages import Heartbeat, JointCommand, JointEstimate, JointState, Side, SideState, TendonState
+
+__all__ = ["JointSlaveNode", "joint_csv_columns", "LIMIT_MARGIN"]
+
+log = logging.getLogger("teleop.slave")
+#: Commanded angles may exceed the joint limits by this much [rad] (the limit itself is stiff).
+LIMIT_MARGIN = 0.1
+_TENDON_COLS = ("x_in", "T_in", "x_in_cmd", "T_out_hat", "elongation_hat", "phase")
+_TENDON_TRUTH = ("T_out", "elongation")
+
+
+def joint_csv_columns(names, has_truth: bool) -> tuple[str, ...]:
+    """Columns of ``slave_joints.csv``: time, marker, cmd_seq, state, then per joint ``<name>.cmd``,
+    ``.mode``, ``.torque_hat``, ``.angle_hat`` (and ``.torque``, ``.angle`` truth) and per tendon
+    ``<name>.<a|b>.x_in``, ``.T_in``, ``.x_in_cmd``, ``.T_out_hat``, ``.elongation_hat``, ``.phase``
+    (and ``.T_out``, ``.elongation`` truth)."""
+    cols = ["time", "marker", "cmd_seq", "state"]
+    for n in names:
+        cols += [f"{n}.cmd", f"{n}.mode", f"{n}.torque_hat", f"{n}.angle_hat"]
+        cols += [f"{n}.torque", f"{n}.angle"] if has_truth else []
+        for t in TENDONS:
+            cols += [f"{n}.{t}.{c}" for c in _TENDON_COLS]
+            cols += [f"{n}.{t}.{c}" for c in _TENDON_TRUTH] if has_truth else []
+    return tuple(cols)
+
+
+class JointSlaveNode:
+    """Slave side of a joint instrument's teleoperation loop (module docstring).
+
+    Parameters
+    ----------
+    cfg : Config
+        With ``instrument.joints`` (1..4).
+    instrument : Instrument
+    links : SlaveLinks
+        ``command`` delivers :class:`~teleop.messages.JointCommand`, ``estimate`` takes
+        :class:`~teleop.messages.JointEstimate`.
+    recorder : object with ``write(row)`` for :func:`joint_csv_columns`, or None.
+    rerun : a :class:`teleop.rerun_log.RerunLogger`, or None.
+    calibration : InstrumentCalibration, optional
+        Reloaded calibration data; None: calibrate at power-up.
+    calibration_file : path, optional
+        Where the power-up calibration is saved.
+    run_dir : path, optional
+        Where ``calibration.json`` (fit vs routine settings) and the stats go.
+    stop_on_master_stop : bool
+    """
+
+    def __init__(self, cfg: Config, instrument: Instrument, links: SlaveLinks, *, recorder=None, rerun=None,
+                 calibration: InstrumentCalibration | None = None, calibration_file: str | Path | None = None,
+                 run_dir: str | Path | None = None, stop_on_master_stop: bool = False):
+        self.cfg, self.instrument, self.links = cfg, instrument, links
+        self.recorder, self.rerun = recorder, rerun
+        self.joints = cfg.instrument.joints
+        self.names = tuple(j.name for j in self.joints)
+        self.r = np.array([j.pulley_radius for j in self.joints])
+        stretch = [cfg.calibration.target_tension * max(t.geometry().length / t.EA for t in (j.tendons.a, j.tendons.b))
+                   for j in self.joints]
+        self.cmd_range = [(j.limits[0] - LIMIT_MARGIN - e / j.pulley_radius, j.limits[1] + LIMIT_MARGIN + e / j.pulley_radius)
+                          for j, e in zip(self.joints, stretch)]
+        self.calibration_file = None if calibration_file is None else Path(calibration_file)
+        self.run_dir = None if run_dir is None else Path(run_dir)
+        self.stop_on_master_stop = stop_on_master_stop
+        self.watchdog = cfg.slave.watchdog_ms * 1e-3
+        self.hb_period = 1.0 / cfg.slave.heartbeat_hz
+        self.period = 1.0 / cfg.rig.rate_hz
+        self.max_dt = 5.0 * self.period
+        self.done = False
+        self.seq = self.hb_seq = self.cmd_seq = self.marker = 0
+        self._next_hb = -math.inf
+        self._t_prev: float | None = None
+        self.state = SideState.STARTING
+        self.inst_state: InstrumentState = instrument.state
+        self.hold: tuple[float, ...] | None = None
+        self.cycles = self.commands_applied = self.safe_events = self.stalls = 0
+        self.master_stopped = False
+        self.pacer_stats: dict[str, float] = {}
+        self.counts = dict.fromkeys(("commands_rejected_range", "commands_wrong_joints", "commands_out_of_order",
+                                     "commands_duplicate", "engage_refused"), 0)
+        self._accepted = self._seen = None
+        self._t_warn = -math.inf
+        self.estimators: list[JointEstimator] = []
+        self.samples: list = []
+        self.controllers: list[PairController] = []
+        self.calibration: InstrumentCalibration | None = calibration
+        self.routine: PairCalibration | None = None
+        if calibration is None:
+            self.routine = PairCalibration(cfg, instrument)
+            self._set_state(SideState.CALIBRATING, 0.0, "power-up joint-limit calibration, both directions")
+        else:
+            self._start(calibration, history=None)
+            self._set_state(SideState.SAFE, 0.0, "calibration loaded; no command yet")
+
+    # ---- set-up ------------------------------------------------------------------------------------
+    def _start(self, calibration: InstrumentCalibration, history) -> None:
+        e, pc = self.cfg.estimator, self.cfg.pair_control
+        self.estimators = [JointEstimator(ma, mb, j.pulley_radius, n_nodes=e.n_nodes, pretension=j.pretension,
+                                          hold_rate=e.hold_rate, rate_time_constant=e.rate_time_constant)
+                           for j, (ma, mb) in zip(self.joints, sheath_models(calibration, self.cfg))]
+        st = self.inst_state
+        if history is None:
+            self.controllers = [PairController(j.pulley_radius, set_tension(self.cfg, j), pc.tension_gain,
+                                               pc.switch_band, self.cfg.rig.motor.max_speed, tuple(st.x_in_cmd[i]),
+                                               feedforward=pc.feedforward) for i, j in enumerate(self.joints)]
+            history = [(st.t, st.x_in, st.T_in)]
+        for t, x, T in history:       # replay: each estimator's memory = its tendons' proximal history
+            self.samples = [est.step(T[i, 0], x[i, 0], T[i, 1], x[i, 1], t) for i, est in enumerate(self.estimators)]
+
+    def _finish_calibration(self, now: float) -> None:
+        routine = self.routine
+        self.calibration = from_results(self.cfg, routine.results)
+        self.controllers = routine.controllers()
+        self._start(self.calibration, history=routine.history + [(self.inst_state.t, self.inst_state.x_in,
+                                                                   self.inst_state.T_in)])
+        if self.calibration_file is not None:
+            save_calibration(self.calibration, self.calibration_file)
+        if self.run_dir is not None:
+            self.run_dir.mkdir(parents=True, exist_ok=True)
+            (self.run_dir / "calibration.json").write_text(json.dumps(self.calibration.as_dict(), indent=2) + "\n",
+                                                           encoding="utf-8")
+        for name, tend in self.calibration.joints:
+            log.info("calibrated %s: K_a = %.4f, K_b = %.4f, M_e,a = %.4e, M_e,b = %.4e m/N", name, tend["a"].K,
+                     tend["b"].K, tend["a"].M_e, tend["b"].M_e)
+        self._set_state(SideState.SAFE, now, "calibrated; waiting for commands")
+
+    def _set_state(self, state: SideState, now: float, why: str) -> None:
+        if state != self.state:
+            log.info("slave %s -> %s at t=%.3f s: %s", self.state.name, state.name, now, why)
+            if state == SideState.SAFE and self.state == SideState.ENGAGED:
+                self.safe_events += 1
+            self.state = state
+
+    def _warn(self, now: float, msg: str, *args) -> None:
+        if now - self._t_warn >= 1.0:
+            self._t_warn = now
+            log.warning(msg, *args)
+
+    # ---- commands ----------------------------------------------------------------------------------
+    def _accept(self, now: float) -> None:
+        rec = self.links.command.latest()
+        if rec is None or rec is self._seen:
+            return
+        self._seen = rec
+        cmd = rec.message
+        if not isinstance(cmd, JointCommand) or len(cmd.angles) != len(self.joints):
+            self.counts["commands_wrong_joints"] += 1
+            self._warn(now, "rejected command: expected a JointCommand for %d joints", len(self.joints))
+            return
+        last = None if self._accepted is None else self._accepted.message.seq
+        if not seq_newer(cmd.seq, last):
+            self.counts["commands_duplicate" if cmd.seq == last else "commands_out_of_order"] += 1
+            return
+        for j, a, (lo, hi) in zip(self.joints, cmd.angles, self.cmd_range):
+            if not lo <= a <= hi:
+                self.counts["commands_rejected_range"] += 1
+                self._warn(now, "rejected command %d: %s angle %.4g rad outside [%.3g, %.3g] rad", cmd.seq, j.name, a,
+                           lo, hi)
+                return
+        self._accepted = rec
+
+    def _commands(self, now: float) -> list[float | None]:
+        """The watchdog applied to the latest accepted command: one angle (or None) per joint."""
+        self._accept(now)
+        rec, none = self._accepted, [None] * len(self.joints)
+        alive = self.links.master_alive
+        if rec is None or now - rec.t_recv > self.watchdog or (alive is not None and not alive()):
+            why = "no command" if rec is None else ("command stale" if now - rec.t_recv > self.watchdog
+                                                    else "master liveliness token gone")
+            self._set_state(SideState.SAFE, now, why)
+            self.marker, self.hold = 0, None
+            return none
+        cmd = rec.message
+        self.cmd_seq = cmd.seq
+        if not cmd.engaged:
+            self._set_state(SideState.READY, now, "master not engaged")
+            self.marker = 0
+            return list(self.hold) if self.hold is not None else none
+        if self.state != SideState.ENGAGED:
+            far = [abs(a - s.angle) * r > self.cfg.slave.engage_tolerance
+                   for a, s, r in zip(cmd.angles, self.samples, self.r)]
+            if any(far):
+                self.counts["engage_refused"] += 1
+                self._warn(now, "engaged command %d refused: angles %s too far from the estimates", cmd.seq,
+                           [round(a, 4) for a in cmd.angles])
+                return list(self.hold) if self.hold is not None else none
+        self._set_state(SideState.ENGAGED, now, "master engaged")
+        self.marker, self.hold = cmd.marker, tuple(cmd.angles)
+        self.commands_applied += 1
+        return list(cmd.angles)
+
+    # ---- the cycle ---------------------------------------------------------------------------------
+    def step(self, now: float) -> None:
+        """One slave cycle at time ``now`` [s] (module docstring)."""
+        if self.done:
+            return
+        dt = self.period if self._t_prev is None else now - self._t_prev
+        if not dt > 0:
+            return
+        if dt > self.max_dt:
+            self.stalls += 1
+            dt = self.max_dt
+        self._t_prev = now
+        self.cycles += 1
+        hb = self.links.master_heartbeat.latest()
+        if hb is not None and hb.message.state == SideState.STOPPING:
+            self.master_stopped = True
+            self.done = self.done or self.stop_on_master_stop
+        if self.state == SideState.CALIBRATING:
+            x = self.routine.command(self.inst_state, dt)
+            self.inst_state = self.instrument.step(x, dt)
+            if self.routine.done:
+                self._finish_calibration(now)
+        else:
+            cmds = self._commands(now)
+            st = self.inst_state
+            x = [c.step(cmd, st.T_in[i], dt, s.x_out) for i, (c, cmd, s) in
+                 enumerate(zip(self.controllers, cmds, self.samples))]
+            st = self.inst_state = self.instrument.step(x, dt)
+            self.samples = [est.step(st.T_in[i, 0], st.x_in[i, 0], st.T_in[i, 1], st.x_in[i, 1], st.t)
+                            for i, est in enumerate(self.estimators)]
+            self.links.estimate.put(self._message(now, st))
+            self.seq = next_seq(self.seq)
+            self._record(st, cmds)
+        if now >= self._next_hb:
+            self.links.heartbeat.put(Heartbeat(Side.SLAVE, self.hb_seq, now, self.state))
+            self.hb_seq = next_seq(self.hb_seq)
+            self._next_hb = now + self.hb_period if self._next_hb == -math.inf else max(self._next_hb + self.hb_period,
+                                                                                        now)
+
+    def _message(self, now: float, st: InstrumentState) -> JointEstimate:
+        joints = tuple(JointState(s.torque, s.angle, tuple(
+            TendonState(float(st.T_in[i, k]), float(st.x_in[i, k]), s.T_out[k], s.elongation[k], s.phase[k])
+            for k in range(2))) for i, s in enumerate(self.samples))
+        return JointEstimate(self.seq, self.cmd_seq, now, joints)
+
+    def _record(self, st: InstrumentState, cmds) -> None:
+        tr = st.truth
+        if self.recorder is not None:
+            row = [st.t, self.marker, self.cmd_seq, int(self.state)]
+            for i, (s, c) in enumerate(zip(self.samples, cmds)):
+                row += [0.0 if c is None else c, int(self.controllers[i].mode), s.torque, s.angle]
+                row += [tr.torque[i], tr.theta[i]] if tr is not None else []
+                for k in range(2):
+                    row += [st.x_in[i, k], st.T_in[i, k], st.x_in_cmd[i, k], s.T_out[k], s.elongation[k], int(s.phase[k])]
+                    row += [tr.T_out[i, k], tr.elongation[i, k]] if tr is not None else []
+            self.recorder.write(row)
+        if self.rerun is not None and self.cycles % self.cfg.recording.log_every == 0:
+            values: dict[str, float | None] = {}
+            for i, (name, s) in enumerate(zip(self.names, self.samples)):
+                values[f"{name}/torque_hat"] = s.torque
+                values[f"{name}/angle_hat"] = s.angle
+                values[f"{name}/torque_true"] = None if tr is None else float(tr.torque[i])
+                values[f"{name}/angle_true"] = None if tr is None else float(tr.theta[i])
+                for k, t in enumerate(TENDONS):
+                    values[f"{name}/{t}/T_in_meas"] = float(st.T_in[i, k])
+                    values[f"{name}/{t}/T_out_hat"] = s.T_out[k]
+            self.rerun.log_scalars(st.t, **values)
+
+    # ---- running -----------------------------------------------------------------------------------
+    def run(self, clock: Clock, *, max_duration: float | None = None) -> None:
+        """Pace :meth:`step` at ``rig.rate_hz`` until :attr:`done` (or ``max_duration`` [s])."""
+        pacer = Pacer(clock, self.cfg.rig.rate_hz)
+        t0 = clock.now()
+        try:
+            while not self.done:
+                now = pacer.wait()
+                self.step(now)
+                if max_duration is not None and now - t0 >= max_duration:
+                    break
+        finally:
+            self.pacer_stats = pacer.stats()
+
+    def stats(self) -> dict[str, Any]:
+        """Counters for the run summary (JSON-serialisable)."""
+        cmd = self.links.command
+        return {"side": "slave", "state": self.state.name, "cycles": self.cycles, "estimates_sent": self.seq,
+                "commands_received": int(getattr(cmd, "count", 0)),
+                "command_decode_errors": int(getattr(cmd, "errors", 0)), "commands_applied": self.commands_applied,
+                "safe_events": self.safe_events, "stalls": self.stalls, "master_stopped": self.master_stopped,
+                "calibrated": self.calibration is not None, "joints": list(self.names),
+                "side_switches": [c.switches for c in self.controllers], **self.counts,
+                "pacer": dict(self.pacer_stats)}
+
+    def write_stats(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.stats(), indent=2) + "\n", encoding="utf-8")

@@ -1,0 +1,149 @@
+"""JointSlaveNode and JointMasterNode on one FakeClock, talking through in-memory topics that go
+through the codec: calibration at power-up, the paper protocol on all three joints, watchdog."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from master.joint_node import JointMasterLinks, JointMasterNode
+from master.joint_operator import MultiAxisOperator, joint_marker, paper_protocol
+from slave.calibration_file import load_calibration
+from slave.joint_node import JointSlaveNode, joint_csv_columns
+from slave.joint_rig import SimulatedInstrument
+from slave.node import SlaveLinks
+from slave.pair_calibrate import set_tension
+from teleop.clock import FakeClock
+from teleop.codec import decode, encode
+from teleop.config import load_config
+from teleop.messages import JointCommand, SideState
+from teleop.transport import Received
+
+CONFIG = Path(__file__).resolve().parents[2] / "configs" / "instrument-3dof.yaml"
+DT = 1e-3
+
+
+class Topic:
+    """Latest-wins topic through the codec; receive time = the fake clock; can be cut."""
+
+    def __init__(self, clock):
+        self.clock, self.last, self.count, self.errors, self.cut = clock, None, 0, 0, False
+
+    def put(self, msg):
+        if not self.cut:
+            self.last = Received(decode(encode(msg)), self.clock.now())
+            self.count += 1
+
+    def latest(self):
+        return self.last
+
+    def age(self, now):
+        return math.inf if self.last is None else now - self.last.t_recv
+
+
+class Rows:
+    def __init__(self):
+        self.rows = []
+
+    def write(self, row):
+        self.rows.append(tuple(row))
+
+
+def build(tmp_path, calibration=None):
+    cfg = load_config(CONFIG, {"calibration.speed": 0.01})
+    clock = FakeClock(0.0)
+    cmd, est, shb, mhb = (Topic(clock) for _ in range(4))
+    inst = SimulatedInstrument.from_config(cfg)
+    rec = Rows()
+    slave = JointSlaveNode(cfg, inst, SlaveLinks(estimate=est, heartbeat=shb, command=cmd, master_heartbeat=mhb),
+                           recorder=rec, calibration=calibration, calibration_file=tmp_path / "flex3.yaml",
+                           run_dir=tmp_path, stop_on_master_stop=True)
+    op = MultiAxisOperator([paper_protocol(set_tension(cfg, j)) for j in cfg.instrument.joints])
+    master = JointMasterNode(cfg, op, JointMasterLinks(command=cmd, heartbeat=mhb, estimate=est, slave_heartbeat=shb))
+    return cfg, clock, slave, master, op, rec, (cmd, est, shb, mhb)
+
+
+def run(clock, slave, master, seconds, until=None):
+    for _ in range(int(seconds / DT)):
+        clock.advance(DT)
+        now = clock.now()
+        slave.step(now)
+        master.step(now)
+        if until is not None and until():
+            break
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    tmp_path = tmp_path_factory.mktemp("joint_nodes")
+    cfg, clock, slave, master, op, rec, topics = build(tmp_path)
+    run(clock, slave, master, 60.0, until=lambda: master.done and slave.done)
+    return cfg, slave, master, op, rec, tmp_path
+
+
+def test_power_up_calibration_is_saved_and_reloadable(demo):
+    cfg, slave, master, op, rec, tmp_path = demo
+    cal = load_calibration(tmp_path / "flex3.yaml", cfg)
+    assert [n for n, _ in cal.joints] == ["bend_ud", "bend_lr", "grasp"]
+    assert (tmp_path / "calibration.json").is_file()
+    inst = SimulatedInstrument.from_config(cfg)
+    for i, (_, tend) in enumerate(cal.joints):
+        for k, t in enumerate("ab"):
+            assert tend[t].K == pytest.approx(inst.K[i, k], rel=0.05)
+
+
+def test_paper_protocol_on_every_joint_within_5_percent_full_scale(demo):
+    cfg, slave, master, op, rec, _ = demo
+    assert op.finished and op.timeouts == 0 and master.done and slave.done
+    assert master.safe_events == 0 and slave.safe_events == 0 and master.engage_count == 1
+    cols = joint_csv_columns([j.name for j in cfg.instrument.joints], True)
+    data = np.array(rec.rows)
+    c = {name: data[:, k] for k, name in enumerate(cols)}
+    for j, joint in enumerate(cfg.instrument.joints):
+        n = joint.name
+        tags = np.array([joint_marker(int(m), j) for m in c["marker"]])
+        for tag in (1, 2):                                  # tendon a's protocol, then b's
+            sel = tags == tag
+            assert sel.sum() > 1000
+            true, hat = c[f"{n}.torque"][sel], c[f"{n}.torque_hat"][sel]
+            assert np.ptp(true) > 0.01
+            assert np.abs(hat - true).max() / np.ptp(true) <= 0.05, (n, tag)
+            pulled = "a" if tag == 1 else "b"
+            assert c[f"{n}.{pulled}.T_in"][sel].max() > 19.5
+        assert np.abs(c[f"{n}.angle_hat"] - c[f"{n}.angle"]).max() < 0.02
+    assert set(slave.stats()["side_switches"]) != {0}
+    assert master.latency_stats()["n"] > 1000 and master.max_abs_force <= cfg.master.mapping.force_limit
+
+
+def test_reloaded_calibration_starts_safe_and_the_watchdog_relaxes_the_joints(demo, tmp_path):
+    cfg = demo[0]
+    cal = load_calibration(demo[5] / "flex3.yaml", cfg)
+    cfg2, clock, slave, master, op, rec, (cmd, est, shb, mhb) = build(tmp_path, calibration=cal)
+    assert slave.state == SideState.SAFE
+    run(clock, slave, master, 3.0)                          # engage and pull for a while
+    assert slave.state == SideState.ENGAGED and master.state == SideState.ENGAGED
+    theta = slave.inst_state.truth.theta.copy()
+    assert np.abs(theta).max() > 0.2
+    cmd.cut = True                                          # master -> slave link cut
+    run(clock, slave, master, 0.15)
+    assert slave.state == SideState.SAFE and master.state == SideState.SAFE   # echo stale on the master too
+    run(clock, slave, master, 3.0)
+    tr = slave.inst_state.truth
+    assert np.abs(tr.theta).max() < 0.5 * np.abs(theta).max()              # relaxing toward rest
+    assert np.all(tr.T_in < 2.0) and np.all(tr.T_in > 0.05)                # both tendons loose, none slack
+    assert all(c.mode == 0 for c in slave.controllers)
+
+
+def test_commands_for_another_instrument_or_out_of_range_are_refused(demo, tmp_path):
+    cal = load_calibration(demo[5] / "flex3.yaml", demo[0])
+    cfg, clock, slave, master, op, rec, (cmd, est, shb, mhb) = build(tmp_path, calibration=cal)
+    for k, c in enumerate((JointCommand(1, 0.0, (0.0, 0.0)), JointCommand(2, 0.0, (0.0, 0.0, 6.0)),
+                           JointCommand(3, 0.0, (0.0, 0.0, 0.0)), JointCommand(3, 0.0, (0.0, 0.0, 0.0)))):
+        cmd.put(c)
+        clock.advance(DT)
+        slave.step(clock.now())
+    s = slave.stats()
+    assert s["commands_wrong_joints"] == 1 and s["commands_rejected_range"] == 1 and s["commands_duplicate"] == 1
+    assert slave.state == SideState.READY or slave.state == SideState.ENGAGED
