@@ -3,8 +3,12 @@
 :func:`diagnose` fits the base model (profile memory with K and L/EA) on a training block, holds
 out the rest (whole cycles: the split is moved to a rest), fits every extension of the catalogue
 (:mod:`estimator.effects`) on the same block and scores all of them on the held-out block. The
-extension with the lowest held-out score S = mean over measured distal signals of
-MSE_extension / MSE_base is accepted when
+extension with the lowest held-out score
+
+    S = sum_signals (rmse_ext / floor)^2 / sum_signals (rmse_base / floor)^2
+
+(rmse on the held-out measured samples, floor = the noise a perfect model would leave on that signal)
+is accepted when
 
     S + PENALTY * n_extra_parameters < 1                       (relative to the model so far)
 
@@ -30,7 +34,7 @@ from teleop.recording import MeasuredData
 
 __all__ = ["diagnose", "PENALTY", "STRUCTURE_RATIO"]
 
-PENALTY = 0.08          # required relative held-out improvement per extra parameter [-]
+PENALTY = 0.25          # required relative held-out improvement per extra parameter [-]
 STRUCTURE_RATIO = 3.0   # held-out rmse / noise above this on a signal: structure left [-]
 _UNITS = {"T_out": "N", "x_out": "m"}
 
@@ -62,13 +66,12 @@ class _Fit:
     """One fitted model (a list of extensions) with its held-out scores."""
 
     def __init__(self, effects: list[Effect], values: dict, compliance: float, s, k: int, data, t_split: float,
-                 base: "_Fit | None" = None):
+                 base: "_Fit | None" = None, floor: dict[str, float] | None = None):
         self.effects, self.values, self.compliance = effects, values, compliance
         self.pred = predict(effects, values, s, compliance=compliance)
         self.mse = heldout_mse(self.pred, s, k)                       # averaged series (structure test)
         self.raw = raw_rmse(self.pred, s, data, t_split)               # measured samples (selection, gain)
-        ref = (base or self).raw
-        self.S = float(np.mean([(v / ref[n]) ** 2 for n, v in self.raw.items() if v is not None and ref[n]]))
+        self.S = 1.0 if base is None else _score(self.raw, base.raw, floor)
 
     @property
     def n_params(self) -> int:
@@ -77,6 +80,19 @@ class _Fit:
     @property
     def ids(self) -> list[str]:
         return [e.id for e in self.effects]
+
+
+def _score(raw: dict, base: dict, floor: dict[str, float]) -> float:
+    """Held-out score relative to the base: sum over signals of (rmse / floor)^2, extension over base.
+
+    Each signal counts by how far above its noise floor it is, so a signal the extension does not
+    touch (T_out for tendon stiffening) does not dilute what it explains in the other."""
+    num = den = 0.0
+    for key, f in floor.items():
+        if raw.get(key) is not None and base.get(key) and f > 0:
+            num += (raw[key] / f) ** 2
+            den += (base[key] / f) ** 2
+    return num / den if den > 0 else 1.0
 
 
 def _structure(fit: _Fit, s, k: int, noise: dict[str, float]) -> dict[str, float]:
@@ -151,17 +167,20 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     cands = [CATALOGUE[n] for n in names]
     bar = _Progress(1 + len(cands) + (max_effects - 1) * max(len(cands) - 1, 0), progress)
     sensor = {n: noise_level(getattr(s, n)) for n in SIGNALS if getattr(s, n) is not None}
+    sensor_raw = {n: noise_level(np.asarray(getattr(data, n), dtype=float)) for n in sensor}
 
     vals, c, _ = fit_model([], train, [{"K": K0} for K0 in (0.2, 0.6, 1.2)])
     base = _Fit([], vals, c, s, k, data, t_split)
     bar("base model")
     # the floor a perfect model reaches: sensor noise plus the load-cell noise carried through it
-    sigma_in = noise_level(s.T_in)
-    noise = {n: math.hypot(v, sigma_in * (1.0 if n == "T_out" else base.compliance)) for n, v in sensor.items()}
+    sigma_in = s.sigma_T_in
+    gain_in = {"T_out": 1.0, "x_out": base.compliance}   # d(signal)/d(T_in), order of magnitude
+    noise = {n: math.hypot(v, sigma_in * gain_in[n]) for n, v in sensor.items()}
+    floor = {f"rmse_{n}_{_UNITS[n]}": math.hypot(v, sigma_in * gain_in[n]) for n, v in sensor_raw.items()}
     singles: dict[str, _Fit] = {}
     for e in cands:
         vals, c, _ = fit_model([e], train, start_points([e], base.values, s, {}))
-        singles[e.id] = _Fit([e], vals, c, s, k, data, t_split, base)
+        singles[e.id] = _Fit([e], vals, c, s, k, data, t_split, base, floor)
         bar(e.id)
 
     # forward selection with a price per parameter, relative to the model so far
@@ -177,7 +196,7 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
             for eid in pool:
                 fx = chosen.effects + [CATALOGUE[eid]]
                 vals, c, _ = fit_model(fx, train, start_points(fx, chosen.values, s, chosen.values))
-                trial[eid] = _Fit(fx, vals, c, s, k, data, t_split, base)
+                trial[eid] = _Fit(fx, vals, c, s, k, data, t_split, base, floor)
                 bar(f"{'+'.join(chosen.ids)}+{eid}")
         price = {eid: f.S / chosen.S + PENALTY * (f.n_params - chosen.n_params) for eid, f in trial.items()}
         best = min(price, key=price.get)
@@ -212,8 +231,8 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         "split": {"time_s": t_split, "n_train": int(np.sum(data.time < t_split)),
                   "n_heldout": int(np.sum(data.time >= t_split)),
                   "train_fraction": float((t_split - data.time[0]) / max(data.duration, 1e-12))},
-        "noise": {**{f"{n}_{_UNITS[n]}": v for n, v in sensor.items()}, "T_in_N": sigma_in,
-                  **{f"floor_{n}_{_UNITS[n]}": v for n, v in noise.items()}},
+        "noise": {**{f"{n}_{_UNITS[n]}": v for n, v in sensor_raw.items()}, "T_in_N": sigma_in,
+                  **{f"floor_{k[5:]}": v for k, v in floor.items()}},
         "structure": {"base": _structure(base, s, k, noise), "extended": left},
         "model": {"effects": chosen.ids, "values": chosen.values, "compliance": chosen.compliance},
         "base_model": {"effects": [], "values": base.values, "compliance": base.compliance},

@@ -76,10 +76,14 @@ def prepare(data: MeasuredData, *, n_nodes: int = 32, target_rate: float = 200.0
         return None if a is None else np.asarray(a, dtype=float)[: nb * m].reshape(nb, m).mean(axis=1)
 
     time, x_in, T_in = dec(t), dec(data.x_in), dec(data.T_in)
-    velocity = np.convolve(np.pad(np.gradient(x_in, time), 1, mode="edge"), np.ones(3) / 3.0, mode="valid")
+    sigma_in = noise_level(T_in) / math.sqrt(3.0)          # after the mean below
+    # a further 3-sample zero-phase mean on T_in: the play operator latches noise extremes (times
+    # e^K on release), and this halves that bias while keeping reversal corners (docs/diagnosis.md)
+    T_in = np.convolve(np.pad(T_in, 1, mode="edge"), np.ones(3) / 3.0, mode="valid")
+    velocity = np.gradient(x_in, time)
     shape, weight = SheathModel(K=1.0, compliance=1.0, wrap_shape=wrap_shape).nodes(int(n_nodes))
-    T_min = max(10.0 * noise_level(T_in), 0.01 * float(np.ptp(T_in)))
-    return Series(time, x_in, T_in, velocity, dec(data.T_out), dec(data.x_out), shape, weight, T_min)
+    T_min = max(10.0 * sigma_in, 0.01 * float(np.ptp(T_in)))
+    return Series(time, x_in, T_in, velocity, dec(data.T_out), dec(data.x_out), shape, weight, T_min, sigma_in)
 
 
 def split_at_rest(s: Series, train_fraction: float) -> int:

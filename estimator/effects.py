@@ -46,7 +46,8 @@ class Series:
 
     time [s], x_in [m], T_in [N], velocity dx_in/dt [m/s], T_out [N] or None, x_out [m] or None,
     u (m + 1,) normalised wrap angle of the nodes, w (m + 1,) trapezoid weights (sum 1),
-    T_min [N] the tension below which a breakaway is lost in the load-cell noise.
+    T_min [N] the tension below which a breakaway is lost in the load-cell noise, sigma_T_in [N]
+    the white-noise level of the prepared T_in.
     """
 
     time: np.ndarray
@@ -58,6 +59,7 @@ class Series:
     u: np.ndarray
     w: np.ndarray
     T_min: float = 0.0
+    sigma_T_in: float = 0.0
 
     def __len__(self) -> int:
         return int(self.time.shape[0])
@@ -66,7 +68,7 @@ class Series:
         """The first ``stop`` samples (the training block)."""
         cut = (lambda a: None if a is None else a[:stop])
         return Series(self.time[:stop], self.x_in[:stop], self.T_in[:stop], self.velocity[:stop],
-                      cut(self.T_out), cut(self.x_out), self.u, self.w, self.T_min)
+                      cut(self.T_out), cut(self.x_out), self.u, self.w, self.T_min, self.sigma_T_in)
 
 
 @dataclass(frozen=True)
@@ -148,7 +150,7 @@ _EFFECTS: tuple[Effect, ...] = (
     Effect("stiction",
            "static friction above kinetic: breakaway after sticking (dry coil sheaths)",
            "after holds and reversals T_in overshoots then drops; T_out and x_out jump at breakaway",
-           "E4", (Parameter("r_s", "-", 0.0, 2.0, 0.0, (0.15, 0.5), "mu_static / mu_kinetic - 1"),),
+           "E4", (Parameter("r_s", "-", 0.0, 2.0, 0.0, (0.1, 0.25, 0.5, 0.9), "mu_static / mu_kinetic - 1"),),
            knobs=("r_s",)),
     Effect("friction_offset",
            "friction that does not scale with tension: wire bending stiffness, clearance, weight",
@@ -220,7 +222,7 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
         corrected = e.correct_input(own, s.time, T_in)
         if corrected is not None:
             T_in = corrected
-    T_out, E1 = run_extended(T_in, s.velocity, s.time, s.u, s.w, T_min=s.T_min, **knobs)
+    T_out, E1 = run_extended(T_in, s.velocity, s.time, s.u, s.w, T_min=s.T_min, sigma=s.sigma_T_in, **knobs)
     c = compliance
     if c is None:
         c = 0.0

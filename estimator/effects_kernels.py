@@ -6,19 +6,30 @@ model is the kernel with every knob neutral and extensions compose. Per sample k
 shape u_i = theta_i / theta_L in [0, 1] and weights w_i (sum 1):
 
     K_k   = max(K + K_rate t_k, 0) (1 + c_v |v_k|)           drift and viscous friction   (E6, E3)
-    bound = K_k (1 + r_s) while stuck, else K_k               static friction              (E4)
     Y_p   = max(T_in,k, 0) + a                                 tension-independent friction (E8)
-    Y_i  <- clip(Y_i, Y_p e^{-bound u_i}, Y_p e^{+bound u_i}), Y_i >= a, node by node from the
-            proximal end until a node does not change (slip spreads from the proximal end)
     T_out = Y_n - a
     E1    = sum_i w_i phi(Y_i - a) - phi(T0),   phi(T) = T + beta T_c (1 - e^{-T/T_c})       (E9, E5)
 
-and x_out = x_in - (L/EA) E1 (a taut tendon). The profile starts uniform at T0 (pretension, E5; the encoders are
-zeroed there). Stiction: the tendon starts stuck; when the slip front reaches the distal node at the
-static bound it breaks away and the whole profile follows Y_p e^{-+K_k f u_i} with
-f = 1 + r_s e^{-(t - t_b)/t_slip} for 5 t_slip (or until the proximal end turns back faster than
-V_STOP); it sticks again after t_stick without distal slip.
-The same rules drive the simulated rig (slave/simulated.py), there in displacement instead of T_in.
+and x_out = x_in - (L/EA) E1 (a taut tendon). The profile Y_i = T_i + a starts uniform at T0
+(pretension, E5; the encoders are zeroed there) and is updated in one of two ways:
+
+* stuck distal end (the memory rule of the base model):
+      Y_i <- clip(Y_i, Y_p e^{-b u_i}, Y_p e^{+b u_i}), Y_i >= a,
+  node by node from the proximal end until a node does not change, with b = K_k, or
+  K_k (1 + r_s) with static friction (E4: the tendon is stuck whenever it does not slide).
+  When the update reaches the distal node the whole tendon slides in that direction s;
+* sliding (s != 0, while the proximal end keeps moving that way faster than V_STOP):
+      Y_i = Y_p e^{-s K_k f u_i},  f = 1 + r_s e^{-(t - t_b)/t_slip}
+  the whole profile follows T_in at the present sliding friction (so it follows a change of
+  speed or K at once); f > 1 only after a breakaway at t_b (static friction relaxing to kinetic).
+  The distal end of a sliding tendon only moves on, so a T_out that would turn back by more than
+  the noise ends the slide too (a reversal shows in the averaged T_in before x_in turns), except
+  within 5 t_slip of a breakaway, where the averaging blunts the turn of T_in.
+  A breakaway is also taken when T_in turns back within BREAK_MARGIN of the static threshold
+  while the proximal end keeps going (the breakaway peak, blunted by the averaging of the data),
+  and below T_min it is too small to see and gets no relaxation.
+
+The simulated rig (slave/simulated.py) follows the same rules, there driven by displacement.
 """
 from __future__ import annotations
 
@@ -27,9 +38,10 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["run_extended", "V_STOP"]
+__all__ = ["run_extended", "V_STOP", "BREAK_MARGIN"]
 
-V_STOP = 2e-4   # proximal speed against the breakaway direction that ends the slide [m/s]
+V_STOP = 2e-4        # proximal speed below which a slide ends (the tendon sticks) [m/s]
+BREAK_MARGIN = 0.35  # share of the kinetic-static gap within which a turn of T_in counts as breakaway [-]
 
 
 @njit(cache=True, nogil=True)
@@ -40,7 +52,7 @@ def _phi(T, beta, Tc):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _kernel(T_in, v, t, u, w, K, a, T0, K_rate, c_v, r_s, t_stick, t_slip, T_min, beta, Tc,
+def _kernel(T_in, v, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, sigma, beta, Tc,
             T_out, E1):  # pragma: no cover - compiled
     m1 = u.shape[0]
     Y = np.full(m1, T0 + a)
@@ -50,10 +62,9 @@ def _kernel(T_in, v, t, u, w, K, a, T0, K_rate, c_v, r_s, t_stick, t_slip, T_min
     stiction = r_s > 0.0
     g_kin = np.exp(-K * u)
     g_sta = np.exp(-K * (1.0 + r_s) * u)
-    stuck = True
-    t_last = t[0] if t.shape[0] else 0.0
+    sliding = 0                     # direction of the whole-tendon slide, 0 when the distal end sticks
     t_b = -math.inf
-    direction = 0
+    Yp_prev = T0 + a
     for k in range(T_in.shape[0]):
         tk = t[k]
         Kk = K
@@ -66,27 +77,45 @@ def _kernel(T_in, v, t, u, w, K, a, T0, K_rate, c_v, r_s, t_stick, t_slip, T_min
         if Yp < 0.0:
             Yp = 0.0
         Yp += a
-        if stiction and not stuck and tk - t_b < 5.0 * t_slip and v[k] * direction < -V_STOP:
-            t_b = -math.inf     # the proximal end turned back: the breakaway slide is over
-        if stiction and not stuck and tk - t_b < 5.0 * t_slip:
-            # after breakaway: the whole tendon slides while mu relaxes to kinetic
-            f = Kk * (1.0 + r_s * math.exp(-(tk - t_b) / t_slip)) * direction
+        if sliding != 0 and v[k] * sliding <= V_STOP:
+            sliding = 0             # the proximal end stopped or turned: the tendon sticks
+            t_b = -math.inf
+        stuck = stiction and sliding == 0
+        if stuck and k > 0 and Yp_prev - a >= T_min and abs(v[k]) > V_STOP:
+            # breakaway seen as a turn of T_in near the static threshold while the proximal end goes on
+            dm = 1 if v[k] > 0.0 else -1
+            yn = Y[m1 - 1]
+            gk = math.exp(-Kk * u[m1 - 1] * dm)
+            gs = math.exp(-Kk * (1.0 + r_s) * u[m1 - 1] * dm)
+            near = yn / gk + (1.0 - BREAK_MARGIN) * (yn / gs - yn / gk)
+            if (Yp_prev - near) * dm >= 0.0 and (Yp_prev - Yp) * dm > 2.0 * sigma:
+                sliding = dm
+                t_b = t[k - 1]
+        Yp_prev = Yp
+        if sliding != 0:
+            f = Kk
+            if t_b > -math.inf:
+                f *= 1.0 + r_s * math.exp(-(tk - t_b) / t_slip)
+            g_n = math.exp(-f * sliding * u[m1 - 1])
+            if tk - t_b > 5.0 * t_slip and (Yp * g_n - Y[m1 - 1]) * sliding < -2.0 * sigma * g_n:
+                # a sliding distal end only moves on (T_out rises pulling, falls releasing): T_in
+                # turned back beyond the noise, the tendon sticks (the averaged T_in turns before x_in)
+                sliding = 0
+                t_b = -math.inf
+        if sliding != 0:
             E = 0.0
             for i in range(m1):
-                y = Yp * math.exp(-f * u[i])
+                y = Yp * math.exp(-f * sliding * u[i])
                 if y < a:
                     y = a
                 Y[i] = y
                 E += w[i] * _phi(y - a, beta, Tc)
-            t_last = tk
         else:
-            use_static = stiction and stuck
-            bound = Kk * (1.0 + r_s) if use_static else Kk
-            slid = 0
+            bound = Kk * (1.0 + r_s) if stuck else Kk
             for i in range(m1):
                 if varying:
                     g = math.exp(-bound * u[i])
-                elif use_static:
+                elif stuck:
                     g = g_sta[i]
                 else:
                     g = g_kin[i]
@@ -105,26 +134,18 @@ def _kernel(T_in, v, t, u, w, K, a, T0, K_rate, c_v, r_s, t_stick, t_slip, T_min
                     break
                 E += w[i] * (_phi(ny - a, beta, Tc) - _phi(y - a, beta, Tc))
                 Y[i] = ny
-                if i == m1 - 1:
-                    slid = d
-            if stiction:
-                if slid != 0 and stuck:
-                    stuck = False
-                    if Yp - a >= T_min:  # a breakaway below T_min is lost in the noise
-                        t_b = tk
-                        direction = slid
-                if slid != 0:
-                    t_last = tk
-                elif tk - t_last >= t_stick:
-                    stuck = True
+                if i == m1 - 1:         # the slip reached the distal end: the whole tendon slides
+                    sliding = d
+                    if stuck and Yp - a >= T_min:
+                        t_b = tk        # breakaway from static friction
         T_out[k] = Y[m1 - 1] - a
         E1[k] = E - E0
 
 
 def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np.ndarray, w: np.ndarray, *,
                  K: float, a: float = 0.0, T0: float = 0.0, K_rate: float = 0.0, c_v: float = 0.0,
-                 r_s: float = 0.0, t_stick: float = 0.03, t_slip: float = 0.02, T_min: float = 0.0,
-                 beta: float = 0.0, Tc: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+                 r_s: float = 0.0, t_slip: float = 0.02, T_min: float = 0.0,
+                 sigma: float = 0.0, beta: float = 0.0, Tc: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Run the extended profile-memory model over a recording (module docstring for the equations).
 
     Parameters
@@ -146,8 +167,9 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
     K_rate : float
         dK/dt [1/s] (E6). c_v : viscous coefficient [s/m], >= 0 (E3).
     r_s : float
-        mu_static / mu_kinetic - 1 [-], >= 0 (E4); t_stick, t_slip [s] its stick and relaxation times;
-        breakaways below the proximal tension T_min [N] switch to kinetic without the relaxation.
+        mu_static / mu_kinetic - 1 [-], >= 0 (E4); t_slip [s] its relaxation time after breakaway;
+        breakaways below the proximal tension T_min [N] switch to kinetic without the relaxation;
+        sigma [N] is the noise of T_in (a turn of T_in must exceed 2 sigma to count as breakaway).
     beta, Tc : float
         Stiffening: extra compliance at zero tension [-] and its tension scale [N], > 0 (E9).
 
@@ -163,6 +185,6 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
     E1 = np.empty_like(T_in)
     _kernel(T_in, np.ascontiguousarray(velocity, dtype=np.float64), np.ascontiguousarray(time, dtype=np.float64),
             np.ascontiguousarray(u, dtype=np.float64), np.ascontiguousarray(w, dtype=np.float64), float(K),
-            float(a), float(T0), float(K_rate), float(c_v), float(r_s), float(t_stick), float(t_slip), float(T_min),
-            float(beta), float(Tc), T_out, E1)
+            float(a), float(T0), float(K_rate), float(c_v), float(r_s), float(t_slip), float(T_min),
+            float(sigma), float(beta), float(Tc), T_out, E1)
     return T_out, E1

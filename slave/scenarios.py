@@ -2,8 +2,8 @@
 
 A recording is what a bench session with a distal load cell and a distal position sensor gives:
 
-* a motion protocol of repeated blocks; each block is a shuffled mix of pull/release cycles at
-  several amplitudes and speeds (2-20 mm/s), minor loops (partial release, re-pull past the old
+* a motion protocol of repeated blocks; each block is a shuffled mix of a slow (1.5-4 mm/s) and a
+  fast (12-25 mm/s) pull/release cycle of random amplitude, minor loops (partial release, re-pull past the old
   peak), staircases with holds, and small oscillations around a mid level (0.5-2 Hz); every block
   starts and ends at rest, so a time split at a block boundary holds out whole cycles;
 * the rig of :mod:`slave.simulated` (quasi-static distributed Coulomb tendon, 100 elements, motor
@@ -37,7 +37,7 @@ UNCATALOGUED = ("load_cell_drift",)
 
 # realistic magnitude of each effect: parameter -> (low, high) in its SI unit (docs/diagnosis.md)
 _RANGES = {
-    "velocity_friction": {"viscous": (5.0, 25.0)},               # s/m: +5..25 % friction at 10 mm/s
+    "velocity_friction": {"viscous": (8.0, 30.0)},               # s/m: +8..30 % friction at 10 mm/s
     "pretension": {"tension": (1.0, 5.0)},                       # N
     "curvature_drift": {"relative_change": (0.10, 0.30)},        # |dK| / K over the recording, either sign
     "tendon_stiffening": {"softening": (1.0, 4.0), "toe_tension": (1.0, 3.0)},   # -, N
@@ -123,8 +123,8 @@ def protocol(duration: float, rate_hz: float, x_max: float, rng: np.random.Gener
     n = int(round(duration * rate_hz))
     pts: list[tuple[float, float]] = [(0.0, x_rest)]        # (time [s], position [m]) corners
 
-    def speed() -> float:
-        return float(rng.choice([0.002, 0.004, 0.008, 0.016]) * rng.uniform(0.8, 1.25))
+    def speed(lo: float = 0.002, hi: float = 0.02) -> float:     # log-uniform [m/s]
+        return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
 
     def move(u: float, v: float | None = None) -> None:
         t, x = pts[-1]
@@ -135,12 +135,18 @@ def protocol(duration: float, rate_hz: float, x_max: float, rng: np.random.Gener
         t, x = pts[-1]
         pts.append((t + rng.uniform(lo, hi), x))
 
-    def cycle() -> None:
-        v = speed()
+    def cycle(lo: float, hi: float) -> None:
+        v = speed(lo, hi)
         move(float(rng.choice([0.35, 0.65, 1.0])) * rng.uniform(0.9, 1.0), v)
         hold()
         move(0.0, v)
         hold(0.3, 1.5)
+
+    def slow() -> None:
+        cycle(0.0015, 0.004)
+
+    def fast() -> None:
+        cycle(0.012, 0.025)
 
     def minor() -> None:
         a = rng.uniform(0.4, 0.75)
@@ -173,7 +179,7 @@ def protocol(duration: float, rate_hz: float, x_max: float, rng: np.random.Gener
         move(0.0)
         hold(0.3, 1.0)
 
-    kinds = [cycle, cycle, minor, stairs, wiggle]
+    kinds = [slow, fast, minor, stairs, wiggle]
     hold(0.5, 1.0)
     while pts[-1][0] < duration:
         for j in rng.permutation(len(kinds)):

@@ -25,6 +25,7 @@ EFFECT_IDS = ("velocity_friction", "pretension", "curvature_drift", "tendon_stif
               "friction_offset", "sensor_offset", "sensor_delay")
 
 _NOISE_BLOCK = 4096
+_V_STOP = 2e-4   # motor speed below which a whole-tendon slide ends [m/s] (estimator.effects_kernels.V_STOP)
 
 
 class SimulatedRig:
@@ -69,23 +70,26 @@ class SimulatedRig:
     mu, no bending stiffness or clearance, massless tendon and distal joint - unless an effect of
     ``rig.effects`` is switched on (each is off by default; estimator/effects.py fits them back):
 
-    * velocity_friction: mu(v) = mu (1 + viscous |v|) with v the motor speed [m/s] of this step (the
-      sliding speed of the slipping part); a stuck part keeps the profile it had when it stopped.
+    * velocity_friction: mu(v) = mu (1 + viscous |v|) with v the motor speed [m/s] of this step.
     * pretension: the start profile is sheath.pretension + tension [N] (see the pretension bullet).
     * curvature_drift: K(t) = K + rate t [1/s] (all node gains scaled, route shape kept).
     * tendon_stiffening: element strain phi(T)/EA, phi(T) = T + softening T_c (1 - e^{-T/T_c}).
-    * stiction: while stuck the bound is mu (1 + static_ratio); when the slip front reaches the
-      distal end the tendon breaks away and slides as a whole while mu relaxes to the kinetic value,
-      mu (1 + static_ratio e^{-(t - t_b)/slip_time}) for 5 slip_time or until the motor turns back
-      (T_in drops, x_out and T_out jump); it is stuck again after ``stick_time`` [s] without distal slip (holds, reversals).
+    * stiction: whenever the tendon does not slide it is stuck and the bound is mu (1 +
+      static_ratio); when the slip front reaches the distal end it breaks away and slides with
+      mu (1 + static_ratio e^{-(t - t_b)/slip_time}) (T_in drops, x_out and T_out jump); below
+      0.2 mm/s it sticks again at once, which gives stick-slip on slow ramps.
     * friction_offset: dT/dtheta = -mu (T + a) sgn(v), a = tension_offset [N] (bending stiffness,
       clearance): the envelope rule on T + a, T >= 0.
     * sensor_offset: the load cell reads T_in + offset [N]; sensor_delay: it reads T_in(t - delay)
       (linear interpolation of the history).
 
-    With an effect that changes the tendon (all but pretension and the two sensor effects) each step
-    is solved by bisection (:func:`slave.simulated_physics.advance_general`) instead of the exact scan;
-    :meth:`set_load` then re-balances with the plain Coulomb bounds of the moment.
+    With the tendon effects (all but pretension and the sensor ones) a step is one of two: while
+    the whole tendon slides and the motor keeps going that way (faster than 0.2 mm/s) the profile
+    is the full-slip profile at the present friction (:func:`slave.simulated_physics.full_slip`,
+    so it follows a change of speed or K at once); otherwise slip spreads from the proximal end
+    (:func:`slave.simulated_physics.advance_general`, a bracketed root search instead of the exact
+    scan) and the whole tendon starts sliding when it reaches the distal end.
+    :meth:`set_load` re-balances with the plain Coulomb bounds of the moment.
 
     Parameters
     ----------
@@ -258,10 +262,7 @@ class SimulatedRig:
         self._K_rate = float(on["curvature_drift"].rate) if "curvature_drift" in on else 0.0
         sc = on.get("stiction")
         self._static = 1.0 + float(sc.static_ratio) if sc else 1.0
-        self._stick_time = float(sc.stick_time) if sc else math.inf
         self._slip_time = float(sc.slip_time) if sc else 1.0
-        self._stuck = True
-        self._last_slip = 0.0
         self._t_break, self._dir = -math.inf, 0
         self._offset = float(on["sensor_offset"].offset) if "sensor_offset" in on else 0.0
         self._delay = float(on["sensor_delay"].delay) if "sensor_delay" in on else 0.0
@@ -284,24 +285,24 @@ class SimulatedRig:
         """One proximal step with the effect switches (class docstring); v [m/s], t [s] after the step."""
         K_kin = max(self.K + self._K_rate * t, 0.0) * (1.0 + self._viscous * abs(v))
         args = (self._w, self._a, self._beta, self._Tc)
-        if v * self._dir < -2e-4:
-            self._t_break = -math.inf  # the proximal end turned back: the breakaway slide is over
-        if self._static > 1.0 and not self._stuck and t - self._t_break < 5.0 * self._slip_time:
-            # after breakaway the whole tendon slides while mu relaxes from static to kinetic
-            lo, hi = self._bounds(K_kin * (1.0 + (self._static - 1.0) * math.exp(-(t - self._t_break) / self._slip_time)))
+        if self._dir and v * self._dir <= _V_STOP:     # the motor stopped or turned: the tendon sticks
+            self._dir, self._t_break = 0, -math.inf
+        if self._dir:
+            # the whole tendon slides: the profile follows at the present sliding friction, which
+            # after a breakaway relaxes from static to kinetic
+            f = K_kin
+            if self._t_break > -math.inf:
+                f *= 1.0 + (self._static - 1.0) * math.exp(-(t - self._t_break) / self._slip_time)
+            lo, hi = self._bounds(f)
             self._x_out = full_slip(self._T, lo if self._dir > 0 else hi, *args, self._x_in, *self._graph)
-            self._last_slip = t
-            return
-        stuck = self._stuck and self._static > 1.0
-        lo, hi = self._bounds(K_kin * (self._static if stuck else 1.0))
-        self._x_out, slid = advance_general(self._T, lo, hi, *args, self._x_in, self._x_out, *self._graph)
-        if self._static > 1.0:
-            if slid and stuck:        # breakaway at the static bound
-                self._stuck, self._t_break, self._dir = False, t, slid
+        else:
+            stuck = self._static > 1.0                 # not sliding: static friction holds it
+            lo, hi = self._bounds(K_kin * (self._static if stuck else 1.0))
+            self._x_out, slid = advance_general(self._T, lo, hi, *args, self._x_in, self._x_out, *self._graph)
             if slid:
-                self._last_slip = t
-            elif t - self._last_slip >= self._stick_time:
-                self._stuck = True
+                self._dir = slid
+                if stuck:
+                    self._t_break = t              # breakaway from static friction
 
     def _load_cell(self, T_true: float) -> float:
         """The load-cell signal before noise: delayed and offset as the sensor effects say [N]."""
@@ -407,7 +408,7 @@ def _validate_effects(fx: EffectsConfig) -> None:
     rules = {"velocity_friction.viscous": (">=", 0.0), "pretension.tension": (">=", 0.0),
              "curvature_drift.rate": ("any", 0.0), "tendon_stiffening.softening": (">=", 0.0),
              "tendon_stiffening.toe_tension": (">", 0.0), "stiction.static_ratio": (">=", 0.0),
-             "stiction.stick_time": (">", 0.0), "stiction.slip_time": (">", 0.0), "friction_offset.tension_offset": (">=", 0.0),
+             "stiction.slip_time": (">", 0.0), "friction_offset.tension_offset": (">=", 0.0),
              "sensor_offset.offset": ("any", 0.0), "sensor_delay.delay": (">=", 0.0)}
     for key, (op, bound) in rules.items():
         name, field_name = key.split(".")

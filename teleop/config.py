@@ -153,7 +153,6 @@ class TendonStiffeningConfig:
 class StictionConfig:
     enabled: bool = False
     static_ratio: float = 0.3             # [-] mu_static / mu_kinetic - 1
-    stick_time: float = 0.03              # [s] without distal slip for this long: stuck again
     slip_time: float = 0.02               # [s] after breakaway mu relaxes from static to kinetic (time constant)
 
 
@@ -309,7 +308,7 @@ RANGES: dict[str, tuple[str, str]] = {
     "rig.effects.velocity_friction.viscous": (">= 0", "s/m"), "rig.effects.pretension.tension": (">= 0", "N"),
     "rig.effects.curvature_drift.rate": ("any", "1/s"), "rig.effects.tendon_stiffening.softening": (">= 0", "-"),
     "rig.effects.tendon_stiffening.toe_tension": ("> 0", "N"), "rig.effects.stiction.static_ratio": (">= 0", "-"),
-    "rig.effects.stiction.stick_time": ("> 0", "s"), "rig.effects.stiction.slip_time": ("> 0", "s"), "rig.effects.friction_offset.tension_offset": (">= 0", "N"),
+    "rig.effects.stiction.slip_time": ("> 0", "s"), "rig.effects.friction_offset.tension_offset": (">= 0", "N"),
     "rig.effects.sensor_offset.offset": ("any", "N"), "rig.effects.sensor_delay.delay": (">= 0", "s"),
     "estimator.n_nodes": (">= 2", "-"), "estimator.hold_rate": (">= 0", "N/s"),
     "estimator.rate_time_constant": ("> 0", "s"), "estimator.profile_points": ("0..65535", "-"),
