@@ -17,7 +17,10 @@ and for the joint
 
 (J3) follows from x_out,a = +r theta + c_a and x_out,b = -r theta + c_b (both taut on the pulley):
 subtracting cancels the unknown offsets to the zero pose, taken at :meth:`JointEstimator.zero`
-(power-up rest, theta = 0), and halves independent elongation errors of the two tendons.
+(power-up rest, theta = 0), and halves independent elongation errors of the two tendons. A slack
+tendon's x_in - e is not where its tip is, so each term is weighted by w_j = min(1, T_in,j /
+``taut_tension``) (T_in,j >= 0): angle_hat = (w_a theta_a + w_b theta_b) / (w_a + w_b), which is
+(J3) whenever both tendons carry at least ``taut_tension`` (the plain mean if neither does).
 
 Pair coupling (literature.md E13). A single-tendon estimator assumes the distal end stays put while
 the profile near it is stuck. In a pair the two distal ends are tied: the joint turns only when the
@@ -223,6 +226,8 @@ class JointEstimator:
         Apply the pair coupling (J4); False: two independent single-tendon estimators.
     play : float
         Coupling play as distal tendon displacement [m], >= 0.
+    taut_tension : float
+        Proximal tension from which a tendon's kinematic angle counts fully in (J3) [N], > 0.
     hold_rate, rate_time_constant : float
         Phase settings of :class:`~estimator.distal.DistalEstimator` [N/s], [s].
 
@@ -234,11 +239,15 @@ class JointEstimator:
 
     def __init__(self, model_a: SheathModel, model_b: SheathModel, pulley_radius: float, *, n_nodes: int = 100,
                  pretension: float | tuple[float, float] = 0.0, coupling: bool = True,
-                 play: float = DEFAULT_PLAY, hold_rate: float = 0.5, rate_time_constant: float = 0.02):
+                 play: float = DEFAULT_PLAY, taut_tension: float = 0.1, hold_rate: float = 0.5,
+                 rate_time_constant: float = 0.02):
         if not (math.isfinite(pulley_radius) and pulley_radius > 0):
             raise ValueError(f"pulley_radius must be > 0 m, got {pulley_radius!r}")
         if not (math.isfinite(play) and play >= 0):
             raise ValueError(f"play must be a distal displacement >= 0 m, got {play!r}")
+        if not (math.isfinite(taut_tension) and taut_tension > 0):
+            raise ValueError(f"taut_tension must be > 0 N, got {taut_tension!r}")
+        self.taut = float(taut_tension)
         P = (pretension, pretension) if np.isscalar(pretension) else tuple(pretension)
         if len(P) != 2:
             raise ValueError(f"pretension must be one tension or one per tendon (a, b), got {pretension!r}")
@@ -296,14 +305,25 @@ class JointEstimator:
                 est.T_out = float(est.profile[-1])
                 est.elongation = float(est.weight @ est.profile)
         ang_a, ang_b = self.angles(x_in_a, x_in_b)
-        return JointSample(torque=self.r * (ta.T_out - tb.T_out), angle=0.5 * (ang_a + ang_b),
+        return JointSample(torque=self.r * (ta.T_out - tb.T_out),
+                           angle=_weighted_angle(ang_a, ang_b, T_in_a, T_in_b, self.taut),
                            T_out=(ta.T_out, tb.T_out), elongation=(ta.elongation, tb.elongation),
                            x_out=(x_in_a - ta.elongation, x_in_b - tb.elongation), angle_a=ang_a, angle_b=ang_b,
                            phase=(sa.phase, sb.phase))
 
 
+@njit(cache=True, nogil=True)
+def _weighted_angle(ang_a, ang_b, T_a, T_b, taut):  # pragma: no cover - compiled
+    """(J3) with the slack weights w_j = min(1, max(T_in,j, 0) / taut)."""
+    wa = min(1.0, max(T_a, 0.0) / taut)
+    wb = min(1.0, max(T_b, 0.0) / taut)
+    if wa + wb <= 0.0:
+        return 0.5 * (ang_a + ang_b)
+    return (wa * ang_a + wb * ang_b) / (wa + wb)
+
+
 @njit(cache=True)
-def _batch(Ta, xa, Tb, xb, Pa, Pb, ga, gb, wa, wb, dloa, dhia, dlob, dhib, r, hw, coupling,
+def _batch(Ta, xa, Tb, xb, Pa, Pb, ga, gb, wa, wb, dloa, dhia, dlob, dhib, r, hw, coupling, taut,
            torque, angle, T_out, elong):  # pragma: no cover - compiled
     Ka = ga[-1]
     Kb = gb[-1]
@@ -331,19 +351,19 @@ def _batch(Ta, xa, Tb, xb, Pa, Pb, ga, gb, wa, wb, dloa, dhia, dlob, dhib, r, hw
         elong[k, 0] = ea
         elong[k, 1] = eb
         torque[k] = r * (Pa[-1] - Pb[-1])
-        angle[k] = 0.5 * ((xa[k] - ea - x0a) - (xb[k] - eb - x0b)) / r
+        angle[k] = _weighted_angle((xa[k] - ea - x0a) / r, -(xb[k] - eb - x0b) / r, Ta[k], Tb[k], taut)
 
 
 def estimate_joint_batch(T_a, x_a, T_b, x_b, model_a: SheathModel, model_b: SheathModel, pulley_radius: float, *,
                          n_nodes: int = 100, pretension: float | tuple[float, float] = 0.0, coupling: bool = True,
-                         play: float = DEFAULT_PLAY) -> JointBatch:
+                         play: float = DEFAULT_PLAY, taut_tension: float = 0.1) -> JointBatch:
     """The maths of :class:`JointEstimator` over recorded arrays (compiled), zero pose at sample 0.
 
     Parameters
     ----------
     T_a, x_a, T_b, x_b : ndarray, shape (n,)
         Proximal tensions [N] and displacements [m] of tendons a and b.
-    model_a, model_b, pulley_radius, n_nodes, pretension, coupling, play
+    model_a, model_b, pulley_radius, n_nodes, pretension, coupling, play, taut_tension
         As :class:`JointEstimator`.
 
     Raises
@@ -360,14 +380,14 @@ def estimate_joint_batch(T_a, x_a, T_b, x_b, model_a: SheathModel, model_b: Shea
         if bad.size:
             raise ValueError(f"{name} has a non-finite value at sample {bad[0]}")
     ref = JointEstimator(model_a, model_b, pulley_radius, n_nodes=n_nodes, pretension=pretension, coupling=coupling,
-                         play=play)   # validates the settings and builds the nodes
+                         play=play, taut_tension=taut_tension)   # validates the settings and builds the nodes
     ta, tb = ref.tendons
     (dloa, dhia), (dlob, dhib) = ref._dgain
     m = n[0]
     torque, angle = np.empty(m), np.empty(m)
     T_out, elong = np.empty((m, 2)), np.empty((m, 2))
     _batch(*arrs, ta.profile.copy(), tb.profile.copy(), ta.log_gain, tb.log_gain, ta.weight, tb.weight, dloa, dhia,
-           dlob, dhib, ref.r, ref.half_width, bool(coupling), torque, angle, T_out, elong)
+           dlob, dhib, ref.r, ref.half_width, bool(coupling), ref.taut, torque, angle, T_out, elong)
     return JointBatch(torque=torque, angle=angle, T_out=T_out, elongation=elong)
 
 

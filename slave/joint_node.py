@@ -20,11 +20,12 @@ One :meth:`JointSlaveNode.step` per cycle (``rig.rate_hz``), given the time by t
   ========================================  ==========  ===========================================
 
   A command is *accepted* only when newer than the last accepted one (uint32 sequence), for this
-  many joints, and with every angle within the joint's limits widened by the stretch of its tendons
-  at ``calibration.target_tension`` (over r) plus 0.1 rad; others are counted and ignored. (The
-  command is the angle the joint would take with inextensible tendons: the puller's motor moves r
-  per radian of command, and the joint lags by the tendon's stretch over r, which the estimate
-  reports.) Entering ENGAGED needs every commanded angle within ``slave.engage_tolerance / r``
+  many joints, and with every angle within the joint's limits widened by pi + twice the stretch of
+  its tendons at ``calibration.target_tension`` over r; others are counted and ignored. The command
+  moves the puller's motor by r per radian (the joint lags by the stretch, which the estimate
+  reports), relative to where it took over (bumpless), so command and joint angle drift apart by the
+  friction dead zones; what bounds the tendons is the motors' travel: every motor command is
+  clipped to the zero pose +- (r max(|limits|) + twice that stretch + 2 mm). Entering ENGAGED needs every commanded angle within ``slave.engage_tolerance / r``
   of the estimated one (the master anchors at the slave's angle when it engages).
 
   controllers -> instrument.step -> JointEstimator.step per joint (proximal sensors only, never the
@@ -54,11 +55,9 @@ from teleop.codec import next_seq, seq_newer
 from teleop.config import Config
 from teleop.messages import Heartbeat, JointCommand, JointEstimate, JointState, Side, SideState, TendonState
 
-__all__ = ["JointSlaveNode", "joint_csv_columns", "LIMIT_MARGIN"]
+__all__ = ["JointSlaveNode", "joint_csv_columns"]
 
 log = logging.getLogger("teleop.slave")
-#: Commanded angles may exceed the joint limits by this much [rad] (the limit itself is stiff).
-LIMIT_MARGIN = 0.1
 _TENDON_COLS = ("x_in", "T_in", "x_in_cmd", "T_out_hat", "elongation_hat", "phase")
 _TENDON_TRUTH = ("T_out", "elongation")
 
@@ -110,8 +109,10 @@ class JointSlaveNode:
         self.r = np.array([j.pulley_radius for j in self.joints])
         stretch = [cfg.calibration.target_tension * max(t.geometry().length / t.EA for t in (j.tendons.a, j.tendons.b))
                    for j in self.joints]
-        self.cmd_range = [(j.limits[0] - LIMIT_MARGIN - e / j.pulley_radius, j.limits[1] + LIMIT_MARGIN + e / j.pulley_radius)
+        self.cmd_range = [(j.limits[0] - math.pi - 2 * e / j.pulley_radius, j.limits[1] + math.pi + 2 * e / j.pulley_radius)
                           for j, e in zip(self.joints, stretch)]
+        self.travel = [j.pulley_radius * max(abs(v) for v in j.limits) + 2 * e + 0.002
+                       for j, e in zip(self.joints, stretch)]
         self.calibration_file = None if calibration_file is None else Path(calibration_file)
         self.run_dir = None if run_dir is None else Path(run_dir)
         self.stop_on_master_stop = stop_on_master_stop
@@ -154,11 +155,17 @@ class JointSlaveNode:
         st = self.inst_state
         if history is None:
             self.controllers = [PairController(j.pulley_radius, set_tension(self.cfg, j), pc.tension_gain,
-                                               pc.switch_band, self.cfg.rig.motor.max_speed, tuple(st.x_in_cmd[i]),
+                                               pc.switch_band, self.cfg.slave.relax_speed, tuple(st.x_in_cmd[i]),
                                                feedforward=pc.feedforward) for i, j in enumerate(self.joints)]
             history = [(st.t, st.x_in, st.T_in)]
+        # travel limits about the zero pose (the first sample: power-up rest)
+        x0 = history[0][1]
+        for i, c in enumerate(self.controllers):
+            c.x_limits = tuple((x0[i, k] - self.travel[i], x0[i, k] + self.travel[i]) for k in range(2))
         for t, x, T in history:       # replay: each estimator's memory = its tendons' proximal history
             self.samples = [est.step(T[i, 0], x[i, 0], T[i, 1], x[i, 1], t) for i, est in enumerate(self.estimators)]
+        # first Rerun log of every series now: its one-off set-up cost stays out of the engaged loop
+        self._log_rerun(self.inst_state, everything=True)
 
     def _finish_calibration(self, now: float) -> None:
         routine = self.routine
@@ -298,17 +305,23 @@ class JointSlaveNode:
                     row += [st.x_in[i, k], st.T_in[i, k], st.x_in_cmd[i, k], s.T_out[k], s.elongation[k], int(s.phase[k])]
                     row += [tr.T_out[i, k], tr.elongation[i, k]] if tr is not None else []
             self.recorder.write(row)
-        if self.rerun is not None and self.cycles % self.cfg.recording.log_every == 0:
-            values: dict[str, float | None] = {}
-            for i, (name, s) in enumerate(zip(self.names, self.samples)):
-                values[f"{name}/torque_hat"] = s.torque
-                values[f"{name}/angle_hat"] = s.angle
-                values[f"{name}/torque_true"] = None if tr is None else float(tr.torque[i])
-                values[f"{name}/angle_true"] = None if tr is None else float(tr.theta[i])
-                for k, t in enumerate(TENDONS):
-                    values[f"{name}/{t}/T_in_meas"] = float(st.T_in[i, k])
-                    values[f"{name}/{t}/T_out_hat"] = s.T_out[k]
-            self.rerun.log_scalars(st.t, **values)
+        self._log_rerun(st)
+
+    def _log_rerun(self, st: InstrumentState, everything: bool = False) -> None:
+        """Every ``recording.log_every`` cycles each joint's torque and angle, estimate and truth (two
+        series each); the 2 n_joints pairs take turns in successive cycles so that no cycle carries
+        more than one pair (~0.1 ms per series). ``everything``: all of them now (set-up)."""
+        if self.rerun is None:
+            return
+        k = self.cycles % self.cfg.recording.log_every
+        tr = st.truth
+        for i, (name, s) in enumerate(zip(self.names, self.samples)):
+            if everything or k == (2 * i) % self.cfg.recording.log_every:
+                self.rerun.log_scalars(st.t, **{f"{name}/torque_hat": s.torque,
+                                                f"{name}/torque_true": None if tr is None else float(tr.torque[i])})
+            if everything or k == (2 * i + 1) % self.cfg.recording.log_every:
+                self.rerun.log_scalars(st.t, **{f"{name}/angle_hat": s.angle,
+                                                f"{name}/angle_true": None if tr is None else float(tr.theta[i])})
 
     # ---- running -----------------------------------------------------------------------------------
     def run(self, clock: Clock, *, max_duration: float | None = None) -> None:

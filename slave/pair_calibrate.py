@@ -72,7 +72,7 @@ class _Joint:
         self.target = c.target_tension
         pc = cfg.pair_control
         self.ctl = PairController(self.r, set_tension(cfg, joint), pc.tension_gain, pc.switch_band,
-                                  cfg.rig.motor.max_speed, x_init, feedforward=pc.feedforward)
+                                  cfg.slave.relax_speed, x_init, feedforward=pc.feedforward)
         elastic = [SheathModel(K=0.0, compliance=t.geometry().length / t.EA) for t in (joint.tendons.a, joint.tendons.b)]
         self.est = JointEstimator(*elastic, self.r, pretension=joint.pretension)
         self.side = 0
@@ -131,7 +131,8 @@ class PairCalibration:
     ----------
     cfg : Config
         ``calibration`` (target_tension [N], speed [m/s], use_route), ``instrument.joints`` (routes,
-        EA, pulley radii, pretension), ``pair_control`` (set tension, gain, band), ``rig.motor.max_speed``.
+        EA, pulley radii, pretension), ``pair_control`` (set tension, gain, band), ``slave.relax_speed``
+        (rate limit of the tension loops).
     instrument : Instrument
     release_factor : float
         Release speed as a multiple of the pull speed [-].

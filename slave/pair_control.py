@@ -18,7 +18,8 @@ the command changes sign. On entry the pulling side's reference (x_ref, c_ref) i
 command and theta_cmd (bumpless transfer): the tendon does not jump when it takes over, and the
 joint then turns by the commanded change (less the tendon's stretch, which the estimator reports).
 
-Tension control of a tendon (integral action on the load cell, rate-limited to the motor speed)::
+Tension control of a tendon (integral action on the load cell, rate-limited to ``max_speed`` - the
+slave passes ``slave.relax_speed``, so a SAFE relaxation from a high tension is gentle)::
 
     x_cmd <- x_cmd + clip(g (T_set - T_in) dt, -v_max dt, v_max dt)  [+ ff]
 
@@ -29,7 +30,8 @@ feedforward follows the joint, not the command: against a joint limit or stiff t
 dead zone after a reversal (the puller's distal end stuck), the joint stands still and so does the
 antagonist, instead of going slack (or being pulled tight) by the commanded travel.
 Without a command (None: watchdog, not engaged) the pair goes IDLE: both tendons relax to T_set and
-the joint returns toward rest under its own spring.
+the joint returns toward rest under its own spring. Every motor command is finally clipped to the
+tendon's travel limits (``x_limits``), whatever the command or the loop asks.
 """
 from __future__ import annotations
 
@@ -66,6 +68,8 @@ class PairController:
         Feed the pulling side's estimated distal motion to the antagonist.
     play : float
         Half-width of the play on that motion [m], >= 0 (keeps estimate noise out).
+    x_limits : ((float, float), (float, float)), optional
+        Travel limits [m] of the motor commands of tendons a and b, (low, high) each.
 
     Raises
     ------
@@ -74,7 +78,7 @@ class PairController:
     """
 
     def __init__(self, pulley_radius: float, set_tension: float, gain: float, band: float, max_speed: float,
-                 x_init: tuple[float, float], feedforward: bool = True, play: float = 5e-6):
+                 x_init: tuple[float, float], feedforward: bool = True, play: float = 5e-6, x_limits=None):
         for name, v, lo_ok in (("pulley_radius", pulley_radius, False), ("set_tension", set_tension, False),
                                ("gain", gain, False), ("band", band, True), ("max_speed", max_speed, False),
                                ("play", play, True)):
@@ -88,6 +92,9 @@ class PairController:
         self.vmax = float(max_speed)
         self.feedforward = bool(feedforward)
         self.play = float(play)
+        self.x_limits = None if x_limits is None else tuple((float(lo), float(hi)) for lo, hi in x_limits)
+        if self.x_limits is not None and (len(self.x_limits) != 2 or any(not lo < hi for lo, hi in self.x_limits)):
+            raise ValueError(f"pair control: x_limits must be ((low, high), (low, high)) [m], got {x_limits!r}")
         self._ff: float | None = None      # play output on the puller's distal displacement [m]
         self.x_cmd = [float(x_init[0]), float(x_init[1])]
         self.mode = PairMode.IDLE
@@ -144,7 +151,7 @@ class PairController:
         if p < 0:
             self._tension_step(0, T_in[0], dt)
             self._tension_step(1, T_in[1], dt)
-            return self.x_cmd[0], self.x_cmd[1]
+            return self._clip()
         s = 1.0 if p == 0 else -1.0
         # pulling side: x_cmd = x_ref + s r (c - c_ref)
         x_new = self._x_ref + s * self.r * (float(theta_cmd) - self._c_ref)
@@ -159,4 +166,10 @@ class PairController:
             self.x_cmd[q] -= y - self._ff
             self._ff = y
         self._tension_step(q, T_in[q], dt)
+        return self._clip()
+
+    def _clip(self) -> tuple[float, float]:
+        if self.x_limits is not None:
+            for j, (lo, hi) in enumerate(self.x_limits):
+                self.x_cmd[j] = min(max(self.x_cmd[j], lo), hi)
         return self.x_cmd[0], self.x_cmd[1]

@@ -1,4 +1,4 @@
-"""The ``teleop`` command: ``teleop demo|master|slave|analyze|devices``.
+"""The ``teleop`` command: ``teleop demo|master|slave|calibrate|analyze|devices``.
 
 :func:`main` takes an argument list and returns an exit code; argument parsing is separate
 (:func:`build_parser`) and every subcommand is a function of the parsed arguments. Exit codes:
@@ -113,7 +113,7 @@ def _write_fault_stats(injector, path: Path) -> None:
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The argument parser. ``argv`` decides whether ``teleop.analyze`` is imported (only for analyze)."""
     parser = argparse.ArgumentParser(prog=PROG, description="Haptic teleoperation of tendon-sheath instruments.")
-    sub = parser.add_subparsers(dest="command", metavar="{demo,master,slave,analyze,devices}", required=True)
+    sub = parser.add_subparsers(dest="command", metavar="{demo,master,slave,calibrate,analyze,devices}", required=True)
 
     p = sub.add_parser("demo", help="both sides as two processes over Zenoh on 127.0.0.1, then a summary")
     _shared(p)
@@ -136,6 +136,12 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     _inject_flag(p)
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
     p.set_defaults(func=_cmd_master)
+
+    p = sub.add_parser("calibrate", help="joint instruments: joint-limit calibration of every tendon, both "
+                                         "directions, saved as configs/calibration/<instrument>.yaml")
+    from teleop.cli_joints import add_calibrate_arguments, run_calibrate
+    add_calibrate_arguments(p)
+    p.set_defaults(func=run_calibrate)
 
     p = sub.add_parser("devices", help="list HID devices (vendor/product id, usage page, usage, path)")
     if "devices" in (sys.argv[1:] if argv is None else argv)[:1]:
@@ -185,6 +191,9 @@ def run_slave(args: argparse.Namespace) -> int:
     from teleop.rerun_log import RerunLogger
 
     cfg = load_config(args.config)
+    if cfg.instrument.joints:           # a joint instrument: its own node, same transport and flags
+        from teleop.cli_joints import run_joint_slave
+        return run_joint_slave(args, cfg)
     run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(cfg.recording.dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     warm_up(cfg)  # compile the numba kernels now, not in the first real-time cycles
@@ -229,6 +238,9 @@ def run_master(args: argparse.Namespace) -> int:
     from teleop.recording import CsvRecorder, raise_on_sigterm
 
     cfg = load_config(args.config)
+    if cfg.instrument.joints:           # a joint instrument: its own node, same transport and flags
+        from teleop.cli_joints import run_joint_master
+        return run_joint_master(args, cfg)
     if cfg.master.device.type == "hid":
         from master.hid import HidDevice
         # opens, resets and enables the actuators; raises DeviceError naming the device when absent

@@ -259,6 +259,9 @@ def main_demo(args) -> int:
     cfg = load_config(cfg_path)
     run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(cfg.recording.dir)
     run_dir.mkdir(parents=True, exist_ok=True)
+    if cfg.instrument.joints:           # a joint instrument (configs/instrument-3dof.yaml): teleop/demo_joints.py
+        from teleop.demo_joints import main_joint_demo
+        return main_joint_demo(args, cfg, run_dir)
     cfg_file = write_config(cfg, run_dir / "config.yaml")
     t0 = time.monotonic()
     problems: list[str] = []

@@ -105,3 +105,15 @@ def test_bad_arguments_are_named():
     est = JointEstimator(m, m, 0.004)
     with pytest.raises(ValueError, match="finite"):
         est.step(math.nan, 0.0, 1.0, 0.0)
+
+
+def test_a_slack_tendon_does_not_count_in_the_angle():
+    m = SheathModel(K=0.5, compliance=1e-4)
+    est = JointEstimator(m, m, 0.004, pretension=0.25)
+    est.step(0.25, 0.0, 0.25, 0.0)                           # zero pose
+    s = est.step(5.0, 0.004, 0.0, -0.009)                   # b slack: its motor paid out far too much
+    assert s.angle == pytest.approx(s.angle_a) and abs(s.angle_b - s.angle_a) > 0.5
+    s = est.step(5.0, 0.004, 0.05, -0.009)                  # half taut (taut_tension 0.1 N): half weight
+    assert s.angle == pytest.approx((s.angle_a + 0.5 * s.angle_b) / 1.5)
+    s = est.step(5.0, 0.004, 3.0, -0.0036)                  # both taut: the mean (J3)
+    assert s.angle == pytest.approx(0.5 * (s.angle_a + s.angle_b))

@@ -139,7 +139,7 @@ def test_reloaded_calibration_starts_safe_and_the_watchdog_relaxes_the_joints(de
 def test_commands_for_another_instrument_or_out_of_range_are_refused(demo, tmp_path):
     cal = load_calibration(demo[5] / "flex3.yaml", demo[0])
     cfg, clock, slave, master, op, rec, (cmd, est, shb, mhb) = build(tmp_path, calibration=cal)
-    for k, c in enumerate((JointCommand(1, 0.0, (0.0, 0.0)), JointCommand(2, 0.0, (0.0, 0.0, 6.0)),
+    for k, c in enumerate((JointCommand(1, 0.0, (0.0, 0.0)), JointCommand(2, 0.0, (0.0, 0.0, 20.0)),
                            JointCommand(3, 0.0, (0.0, 0.0, 0.0)), JointCommand(3, 0.0, (0.0, 0.0, 0.0)))):
         cmd.put(c)
         clock.advance(DT)

@@ -77,3 +77,15 @@ def test_antagonist_holds_its_set_tension_on_the_simulated_pair():
 def test_bad_settings_are_named(kw, match):
     with pytest.raises(ValueError, match=match):
         make(**kw)
+
+
+def test_travel_limits_clip_every_motor_command():
+    c = make(x_limits=((0.0, 2e-3), (-1e-3, 1e-3)))
+    c.step(0.02, (0.25, 0.25), DT)
+    xa, xb = c.step(5.0, (0.25, 0.25), DT)                  # a runaway command: 20 mm of tendon a
+    assert xa == 2e-3 and xb == pytest.approx(2e-4)
+    for _ in range(100):
+        xa, xb = c.step(None, (0.25, 50.0), DT)              # tension loop paying b out hard
+    assert xb == -1e-3
+    with pytest.raises(ValueError, match="x_limits"):
+        make(x_limits=((1.0, 0.0), (0.0, 1.0)))

@@ -1,0 +1,223 @@
+"""``teleop demo --config configs/instrument-3dof.yaml``: a joint instrument end to end, then a summary.
+
+1. ``runs/<id>/config.yaml`` gets the resolved config with ``calibration.dir`` set to
+   ``runs/<id>/calibration``;
+2. ``teleop calibrate`` (in this process, simulated as fast as it computes): every tendon pulled into
+   its joint limit, both directions, saved as ``runs/<id>/calibration/<instrument>.yaml``;
+3. the slave (reloads that file) and the master (scripted operator: the seed paper's protocol on
+   tendon a then tendon b of every joint, all joints together) as two processes over Zenoh on
+   127.0.0.1, exactly as for one tendon (:func:`teleop.demo._run_processes`);
+4. :func:`evaluate_joints` reads ``slave_joints.csv`` and computes, per joint and per pulled tendon,
+   the full-scale errors of the distal joint torque (max and mean of |estimate - truth| over the
+   range of the true torque in that experiment) and of the angle; ``summary.json`` has them under
+   ``joints.<name>`` with the calibration against the simulator's K and M_e.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from master.joint_operator import MARKER_PAPER_A, MARKER_PAPER_B, joint_marker
+from teleop.config import Config, write_config
+from teleop.errors import DataError
+
+__all__ = ["TORQUE_BOUND", "CALIBRATION_BOUND", "read_joint_csv", "evaluate_joints", "joint_checks",
+           "format_joint_summary", "main_joint_demo"]
+
+#: Acceptance: max full-scale error of the distal joint torque on the paper's protocol, each joint.
+TORQUE_BOUND = 0.05
+#: Acceptance: calibrated K and M_e within this relative error of the simulator's, each tendon.
+CALIBRATION_BOUND = 0.05
+_SIDES = {MARKER_PAPER_A: "a", MARKER_PAPER_B: "b"}
+
+
+def read_joint_csv(path: str | Path) -> dict[str, np.ndarray]:
+    """Columns of ``slave_joints.csv`` by name, each shape (n_rows,).
+
+    Raises
+    ------
+    DataError
+        Missing file, no header or fewer than two rows.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: no such file")
+    with open(path, encoding="utf-8") as fh:
+        skip, header = 0, None
+        for line in fh:
+            skip += 1
+            if not line.startswith("#"):
+                header = line.strip().split(",")
+                break
+    if header is None:
+        raise DataError(f"{path}: no header line")
+    data = np.loadtxt(path, delimiter=",", skiprows=skip, ndmin=2)
+    if data.shape[0] < 2:
+        raise DataError(f"{path}: {data.shape[0]} data row(s), need at least 2")
+    return {name: data[:, k] for k, name in enumerate(header)}
+
+
+def _fs(est: np.ndarray, true: np.ndarray) -> tuple[float, float]:
+    fs = float(np.ptp(true))
+    if fs <= 0:
+        return math.nan, math.nan
+    err = np.abs(est - true)
+    return float(err.max() / fs), float(err.mean() / fs)
+
+
+def evaluate_joints(cols: dict[str, np.ndarray], cfg: Config) -> dict:
+    """Per joint: per pulled tendon (``a``, ``b``) the torque and angle errors; the joint's worst.
+
+    Returns
+    -------
+    dict
+        ``{name: {"a": {...}, "b": {...}, "torque_error_max_fs": worst of a and b,
+        "torque_error_mean_fs": ..., "angle_error_max_rad": ...}}``; per tendon ``samples``,
+        ``duration_s``, ``torque_full_scale_Nm``, ``torque_error_max_fs``, ``torque_error_mean_fs``,
+        ``angle_range_rad``, ``angle_error_max_rad``, ``angle_error_rms_rad``, ``T_in_max_N``.
+    """
+    out: dict = {}
+    for j, joint in enumerate(cfg.instrument.joints):
+        n = joint.name
+        tags = np.array([joint_marker(int(m), j) for m in cols["marker"]])
+        row: dict = {}
+        for tag, side in _SIDES.items():
+            sel = tags == tag
+            if sel.sum() < 2:
+                continue
+            t = cols["time"][sel]
+            tq, tq_hat = cols[f"{n}.torque"][sel], cols[f"{n}.torque_hat"][sel]
+            ang, ang_hat = cols[f"{n}.angle"][sel], cols[f"{n}.angle_hat"][sel]
+            fmax, fmean = _fs(tq_hat, tq)
+            row[side] = {"samples": int(sel.sum()), "duration_s": float(t[-1] - t[0]),
+                         "torque_full_scale_Nm": float(np.ptp(tq)), "torque_error_max_fs": fmax,
+                         "torque_error_mean_fs": fmean, "angle_range_rad": float(np.ptp(ang)),
+                         "angle_error_max_rad": float(np.abs(ang_hat - ang).max()),
+                         "angle_error_rms_rad": float(np.sqrt(np.mean((ang_hat - ang) ** 2))),
+                         "T_in_max_N": float(cols[f"{n}.{side}.T_in"][sel].max())}
+        if row:
+            per = [row[s] for s in ("a", "b") if s in row]
+            row["torque_error_max_fs"] = max(r["torque_error_max_fs"] for r in per)
+            row["torque_error_mean_fs"] = max(r["torque_error_mean_fs"] for r in per)
+            row["angle_error_max_rad"] = max(r["angle_error_max_rad"] for r in per)
+            out[n] = row
+    return out
+
+
+def _calibration_summary(cal_path: Path, cfg: Config) -> dict:
+    from slave.calibration_file import load_calibration
+    from slave.joint_rig import SimulatedInstrument
+    cal = load_calibration(cal_path, cfg)
+    inst = SimulatedInstrument.from_config(cfg)
+    out = {"file": str(cal_path), "date": cal.date}
+    for i, (name, tend) in enumerate(cal.joints):
+        out[name] = {t: {"K": c.K, "K_true": float(inst.K[i, k]), "K_error_rel": c.K / inst.K[i, k] - 1.0,
+                         "M_e_m_per_N": c.M_e, "M_e_true_m_per_N": float(inst.M_e[i, k]),
+                         "M_e_error_rel": c.M_e / inst.M_e[i, k] - 1.0, "residual_rms_m": c.residual_rms,
+                         "n_samples": c.n_samples} for k, (t, c) in enumerate(tend.items())}
+    return out
+
+
+def joint_checks(joints: dict, calibration: dict, cfg: Config) -> dict[str, bool]:
+    """Acceptance: each joint's torque within :data:`TORQUE_BOUND` of full scale, both directions run;
+    each tendon's K and M_e within :data:`CALIBRATION_BOUND` of the simulator's."""
+    res: dict[str, bool] = {}
+    for joint in cfg.instrument.joints:
+        r = joints.get(joint.name, {})
+        both = "a" in r and "b" in r
+        res[f"{joint.name}: torque error max <= {TORQUE_BOUND} FS, both directions"] = bool(
+            both and r["torque_error_max_fs"] <= TORQUE_BOUND)
+        c = calibration.get(joint.name)
+        res[f"{joint.name}: calibrated K and M_e within {100 * CALIBRATION_BOUND:.0f} % (a and b)"] = bool(
+            c and all(abs(c[t][k]) <= CALIBRATION_BOUND for t in "ab" for k in ("K_error_rel", "M_e_error_rel")))
+    return res
+
+
+def format_joint_summary(s: dict) -> str:
+    """The printed table of a joint demo summary."""
+    L = [f"teleop demo (joint instrument {s.get('instrument')}): {s['run_dir']}", ""]
+    cal = s.get("calibration", {})
+    if cal:
+        L.append("calibration (both directions)   K   (vs simulator)      M_e [m/N] (vs simulator)")
+        for name, tend in cal.items():
+            if not isinstance(tend, dict) or "a" not in tend:
+                continue
+            for t in "ab":
+                c = tend[t]
+                L.append(f"  {name:10s} tendon {t}          {c['K']:.4f} ({100 * c['K_error_rel']:+6.2f} %)   "
+                         f"{c['M_e_m_per_N']:.4e} ({100 * c['M_e_error_rel']:+6.2f} %)")
+        L.append("")
+    L.append("paper protocol, per joint and pulled tendon: torque error (full scale)   angle error")
+    L.append(f"  {'joint':10s} {'pulled':6s} {'FS [N m]':>9s} {'max':>7s} {'mean':>7s}   {'max [deg]':>9s} {'rms [deg]':>9s}")
+    for name, row in s.get("joints", {}).items():
+        for t in "ab":
+            r = row.get(t)
+            if r:
+                L.append(f"  {name:10s} {t:6s} {r['torque_full_scale_Nm']:9.4f} {r['torque_error_max_fs']:7.3f} "
+                         f"{r['torque_error_mean_fs']:7.3f}   {math.degrees(r['angle_error_max_rad']):9.2f} "
+                         f"{math.degrees(r['angle_error_rms_rad']):9.2f}")
+        L.append(f"  {name:10s} {'worst':6s} {'':9s} {row['torque_error_max_fs']:7.3f} {row['torque_error_mean_fs']:7.3f}"
+                 f"   (bound {TORQUE_BOUND})")
+    L.append("")
+    for side in ("master", "slave"):
+        st = s.get(side, {})
+        pc = st.get("pacer", {})
+        L.append(f"{side:6s} loop: {pc.get('ticks', 0)} cycles at {pc.get('rate_hz', 0):.0f} Hz, "
+                 f"{pc.get('overruns', 0)} overruns ({100 * pc.get('overrun_fraction', 0):.2f} %), "
+                 f"safe events {st.get('safe_events', 0)}")
+    lat = s.get("master", {}).get("latency_rtt", {})
+    if lat.get("n"):
+        L.append(f"round trip: p50 {lat['p50_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms over {lat['n']} echoes")
+    L.append("")
+    for name, ok in s.get("checks", {}).items():
+        L.append(f"[{'PASS' if ok else 'FAIL'}] {name}")
+    for p in s.get("problems", []):
+        L.append(f"[FAIL] {p}")
+    L.append(f"recording: {s['run_dir']}/slave_joints.csv, rerun: {s['run_dir']}/slave.rrd, "
+             f"summary: {s['run_dir']}/summary.json")
+    return "\n".join(L)
+
+
+def _read_json(path: Path) -> dict:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return {}
+
+
+def main_joint_demo(args, cfg: Config, run_dir: Path) -> int:
+    """The joint-instrument demo (module docstring); 0 when it finished and every check passed."""
+    from slave.calibration_file import calibration_path
+    from teleop.cli_joints import run_calibrate
+    from teleop.demo import _run_processes
+    cfg = dataclasses.replace(cfg, calibration=dataclasses.replace(cfg.calibration, dir=str(run_dir / "calibration")))
+    cfg_file = write_config(cfg, run_dir / "config.yaml")
+    t0 = time.monotonic()
+    problems: list[str] = []
+    print(f"calibrating {cfg.instrument.id}: every tendon into its joint limit, both directions ...", flush=True)
+    run_calibrate(argparse.Namespace(config=str(cfg_file), out=None))
+    _run_processes(args, cfg_file, run_dir, problems)
+    summary: dict = {"run_dir": str(run_dir), "config": str(cfg_file), "instrument": cfg.instrument.id,
+                     "protocol": "paper (tendon a, then b; all joints together)", "torque_bound_fs": TORQUE_BOUND,
+                     "master": _read_json(run_dir / "master_stats.json"),
+                     "slave": _read_json(run_dir / "slave_stats.json")}
+    summary["calibration"] = _calibration_summary(calibration_path(cfg), cfg)
+    try:
+        summary["joints"] = evaluate_joints(read_joint_csv(run_dir / "slave_joints.csv"), cfg)
+    except DataError as e:
+        problems.append(str(e))
+        summary["joints"] = {}
+    summary["checks"] = joint_checks(summary["joints"], summary["calibration"], cfg)
+    summary["problems"] = problems
+    summary["wall_time_s"] = time.monotonic() - t0
+    summary["ok"] = not problems and all(summary["checks"].values())
+    (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    print(format_joint_summary(summary))
+    print(f"wall time {summary['wall_time_s']:.1f} s")
+    return 0 if summary["ok"] else 1
