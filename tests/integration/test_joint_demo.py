@@ -1,0 +1,76 @@
+"""The 3-joint instrument as two OS processes over Zenoh on 127.0.0.1 (``teleop demo --config
+configs/instrument-3dof.yaml``), and ``teleop calibrate`` on the command line.
+
+Deadlines only bound how long a test waits; nothing passes or fails on how fast it happened."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from slave.calibration_file import load_calibration
+from teleop.cli import main
+from teleop.config import load_config
+
+CONFIG = Path(__file__).resolve().parents[2] / "configs" / "instrument-3dof.yaml"
+
+
+def quiet_config(tmp_path: Path, ident: str) -> Path:
+    """The 3-joint instrument with its own id, no Rerun recording and calibration files under tmp_path."""
+    text = CONFIG.read_text().replace("id: flex3", f"id: {ident}").replace("rerun: save", "rerun: off")
+    text = text.replace("dir: configs/calibration", f"dir: {tmp_path / 'calibration'}")
+    path = tmp_path / "inst.yaml"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.integration
+def test_three_joint_demo_end_to_end_over_zenoh(tmp_path):
+    cfg = quiet_config(tmp_path, "itjoints")
+    run_dir = tmp_path / "run"
+    proc = subprocess.run([sys.executable, "-m", "teleop.cli", "demo", "--config", str(cfg), "--run-dir", str(run_dir),
+                           "--timeout", "50"], capture_output=True, text=True, timeout=90)
+    logs = proc.stderr + (run_dir / "slave.log").read_text() + (run_dir / "master.log").read_text()
+    assert "Traceback" not in logs, logs[-3000:]
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["problems"] == [] and proc.returncode == 0, (summary["problems"], summary["checks"])
+    assert "calibration loaded from" in (run_dir / "slave.log").read_text()       # the slave reloaded the file
+    for name in ("bend_ud", "bend_lr", "grasp"):
+        j = summary["joints"][name]
+        assert j["torque_error_max_fs"] <= 0.05 and set(j) >= {"a", "b"}
+        assert j["a"]["T_in_max_N"] > 19.5 and j["b"]["T_in_max_N"] > 19.5        # the paper's 20 N both ways
+        assert abs(summary["calibration"][name]["a"]["K_error_rel"]) <= 0.05
+        assert f"{name:10s} worst" in proc.stdout
+    assert summary["master"]["finished"] and summary["slave"]["commands_applied"] > 1000
+    assert summary["master"]["latency_rtt"]["n"] > 1000
+
+
+def test_calibrate_writes_the_file_the_slave_reloads(tmp_path, capsys):
+    cfg_path = quiet_config(tmp_path, "itcal")
+    assert main(["calibrate", "--config", str(cfg_path)]) == 0
+    out = capsys.readouterr().out
+    assert "bend_ud    a" in out and "grasp      b" in out and "vs sim" in out
+    cal = load_calibration(tmp_path / "calibration" / "itcal.yaml", load_config(cfg_path))
+    assert [n for n, _ in cal.joints] == ["bend_ud", "bend_lr", "grasp"]
+
+
+def test_calibrate_refuses_a_single_tendon_config(tmp_path, capsys):
+    cfg = tmp_path / "one.yaml"
+    cfg.write_text("instrument:\n  id: one\n")
+    assert main(["calibrate", "--config", str(cfg)]) == 2
+    err = capsys.readouterr().err
+    assert "teleop: error:" in err and "instrument.joints" in err and "Traceback" not in err
+
+
+def test_slave_refuses_a_calibration_of_another_instrument(tmp_path, capsys):
+    cfg_path = quiet_config(tmp_path, "itother")
+    (tmp_path / "calibration").mkdir()
+    (tmp_path / "calibration" / "itother.yaml").write_text(
+        "instrument: flex3\ndate: 2026-01-01T00:00:00+00:00\nmethod: x\ntarget_tension: 20.0\nuse_route: true\n"
+        "joints: []\n")
+    assert main(["slave", "--config", str(cfg_path), "--run-dir", str(tmp_path / "run"), "--max-duration", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "itother.yaml" in err and "another instrument" in err
