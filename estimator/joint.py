@@ -55,6 +55,8 @@ turns it moves both distal ends. Two rules, applied after the proximal updates o
 Without these rules the antagonist's distal tension is unknown within its band, which at a 2 N
 pretension is a quarter of the full scale of the paper's protocol; with them the pretension is
 carried through (E5).
+
+The same maths over recorded arrays (compiled) is :func:`estimator.joint_batch.estimate_joint_batch`.
 """
 from __future__ import annotations
 
@@ -67,15 +69,14 @@ from numba import njit
 from estimator.distal import DistalEstimator
 from estimator.distal_slip import distal_clip, distal_gains, distal_tension, elongation
 from estimator.phase import Phase
-from estimator.sheath import SheathModel, profile_update
+from estimator.sheath import SheathModel
 
-__all__ = ["JointSample", "JointBatch", "JointEstimator", "estimate_joint_batch", "predict_pair_angle", "DEFAULT_PLAY",
-           "KAIST_PLAY"]
+__all__ = ["JointSample", "JointBatch", "JointEstimator", "couple", "weighted_angle", "DEFAULT_PLAY", "KAIST_PLAY"]
 
 #: Default play of the coupling: distal tendon displacement that counts as joint motion [m]
 #: (several times the elongation noise a 0.02 N load cell leaves in the profile, plus encoder steps).
 DEFAULT_PLAY = 2e-5
-#: Coupling play for the KAIST recordings, in units of the pulley radius [rad] (predict_pair_angle).
+#: Coupling play for the KAIST recordings, in units of the pulley radius [rad] (joint_batch.predict_pair_angle).
 KAIST_PLAY = 0.005
 
 
@@ -306,109 +307,17 @@ class JointEstimator:
                 est.elongation = float(est.weight @ est.profile)
         ang_a, ang_b = self.angles(x_in_a, x_in_b)
         return JointSample(torque=self.r * (ta.T_out - tb.T_out),
-                           angle=_weighted_angle(ang_a, ang_b, T_in_a, T_in_b, self.taut),
+                           angle=weighted_angle(ang_a, ang_b, T_in_a, T_in_b, self.taut),
                            T_out=(ta.T_out, tb.T_out), elongation=(ta.elongation, tb.elongation),
                            x_out=(x_in_a - ta.elongation, x_in_b - tb.elongation), angle_a=ang_a, angle_b=ang_b,
                            phase=(sa.phase, sb.phase))
 
 
 @njit(cache=True, nogil=True)
-def _weighted_angle(ang_a, ang_b, T_a, T_b, taut):  # pragma: no cover - compiled
+def weighted_angle(ang_a, ang_b, T_a, T_b, taut):  # pragma: no cover - compiled
     """(J3) with the slack weights w_j = min(1, max(T_in,j, 0) / taut)."""
     wa = min(1.0, max(T_a, 0.0) / taut)
     wb = min(1.0, max(T_b, 0.0) / taut)
     if wa + wb <= 0.0:
         return 0.5 * (ang_a + ang_b)
     return (wa * ang_a + wb * ang_b) / (wa + wb)
-
-
-@njit(cache=True)
-def _batch(Ta, xa, Tb, xb, Pa, Pb, ga, gb, wa, wb, dloa, dhia, dlob, dhib, r, hw, coupling, taut,
-           torque, angle, T_out, elong):  # pragma: no cover - compiled
-    Ka = ga[-1]
-    Kb = gb[-1]
-    x0a = 0.0
-    x0b = 0.0
-    state = np.array([-1.0, 0.0, 0.0, 0.0, 0.0])
-    for k in range(Ta.shape[0]):
-        Ta_prev = Pa[-1]
-        Tb_prev = Pb[-1]
-        profile_update(Pa, ga, Ta[k])
-        profile_update(Pb, gb, Tb[k])
-        ea = elongation(Pa, wa)
-        eb = elongation(Pb, wb)
-        if k == 0:
-            x0a = xa[0] - ea
-            x0b = xb[0] - eb
-        if coupling:
-            ua = (xa[k] - ea - x0a) / r
-            ub = -(xb[k] - eb - x0b) / r
-            couple(Pa, dloa, dhia, wa, Ka, Pb, dlob, dhib, wb, Kb, Ta_prev, Tb_prev, ua, ub, r, hw, state)
-            ea = elongation(Pa, wa)
-            eb = elongation(Pb, wb)
-        T_out[k, 0] = Pa[-1]
-        T_out[k, 1] = Pb[-1]
-        elong[k, 0] = ea
-        elong[k, 1] = eb
-        torque[k] = r * (Pa[-1] - Pb[-1])
-        angle[k] = _weighted_angle((xa[k] - ea - x0a) / r, -(xb[k] - eb - x0b) / r, Ta[k], Tb[k], taut)
-
-
-def estimate_joint_batch(T_a, x_a, T_b, x_b, model_a: SheathModel, model_b: SheathModel, pulley_radius: float, *,
-                         n_nodes: int = 100, pretension: float | tuple[float, float] = 0.0, coupling: bool = True,
-                         play: float = DEFAULT_PLAY, taut_tension: float = 0.1) -> JointBatch:
-    """The maths of :class:`JointEstimator` over recorded arrays (compiled), zero pose at sample 0.
-
-    Parameters
-    ----------
-    T_a, x_a, T_b, x_b : ndarray, shape (n,)
-        Proximal tensions [N] and displacements [m] of tendons a and b.
-    model_a, model_b, pulley_radius, n_nodes, pretension, coupling, play, taut_tension
-        As :class:`JointEstimator`.
-
-    Raises
-    ------
-    ValueError
-        Arrays not 1-D of one length, with NaN/inf (the first bad index is named), or bad settings.
-    """
-    arrs = [np.ascontiguousarray(v, dtype=np.float64) for v in (T_a, x_a, T_b, x_b)]
-    n = arrs[0].shape
-    for name, a in zip(("T_a", "x_a", "T_b", "x_b"), arrs):
-        if a.ndim != 1 or a.shape != n:
-            raise ValueError(f"T_a, x_a, T_b, x_b must be 1-D of equal length, got {name} of shape {a.shape}")
-        bad = np.flatnonzero(~np.isfinite(a))
-        if bad.size:
-            raise ValueError(f"{name} has a non-finite value at sample {bad[0]}")
-    ref = JointEstimator(model_a, model_b, pulley_radius, n_nodes=n_nodes, pretension=pretension, coupling=coupling,
-                         play=play, taut_tension=taut_tension)   # validates the settings and builds the nodes
-    ta, tb = ref.tendons
-    (dloa, dhia), (dlob, dhib) = ref._dgain
-    m = n[0]
-    torque, angle = np.empty(m), np.empty(m)
-    T_out, elong = np.empty((m, 2)), np.empty((m, 2))
-    _batch(*arrs, ta.profile.copy(), tb.profile.copy(), ta.log_gain, tb.log_gain, ta.weight, tb.weight, dloa, dhia,
-           dlob, dhib, ref.r, ref.half_width, bool(coupling), ref.taut, torque, angle, T_out, elong)
-    return JointBatch(torque=torque, angle=angle, T_out=T_out, elongation=elong)
-
-
-def predict_pair_angle(p, command, T_a, T_b, n_nodes: int = 50, play: float = KAIST_PLAY) -> np.ndarray:
-    """Distal angle [rad], shape (n,), of a pair driven as the KAIST robot drives it, by this estimator.
-
-    The motor turns both tendons, x_in,a = +g c and x_in,b = -g c for the command c [rad]; with the
-    pulley radius r, g and the compliances not separately observable, the estimator runs in units of
-    r (r = 1): x_in,a = G c, x_in,b = -G c, L/EA_j = 2 lam_j [rad/N], from uniform profiles at the
-    first measured tensions (the pretension), so that (J3) reads
-
-        theta = G (c - c_0) - lam_a (E_a - E_a(0)) + lam_b (E_b - E_b(0)) + theta_0,   E_j = mean_s T_j
-
-    - the seed pair model of :mod:`estimator.pair` with the pair coupling (J4)-(J6) acting on the
-    profiles. ``p`` is an :class:`estimator.pair.PairParams`; ``play`` [rad] the coupling's play.
-    Use with :func:`estimator.pair.fit_pair` (``predict=predict_pair_angle``).
-    """
-    c = np.asarray(command, dtype=float)
-    Ta = np.asarray(T_a, dtype=float)
-    Tb = np.asarray(T_b, dtype=float)
-    models = [SheathModel(K=K, compliance=max(2.0 * lam, 1e-12)) for K, lam in ((p.K_a, p.lam_a), (p.K_b, p.lam_b))]
-    b = estimate_joint_batch(Ta, p.G * c, Tb, -p.G * c, *models, 1.0, n_nodes=n_nodes,
-                             pretension=(float(Ta[0]), float(Tb[0])), play=play)
-    return b.angle + p.G * c[0] + p.theta0

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from estimator.joint import predict_pair_angle
+from estimator.joint_batch import predict_pair_angle
 from estimator.pair import PairParams, fit_linear, fit_pair, predict_angle, rmse
 from teleop.kaist import cycles, default_kaist_dir, load_all
 
