@@ -141,3 +141,17 @@ def test_config_errors_name_the_joint_and_key():
     bad = cfg.instrument.joints[0].__class__(name="wrist", stiffness=-1.0)
     with pytest.raises(ConfigError, match=r"instrument.joints\[0\] \(wrist\).stiffness"):
         SimulatedInstrument((bad,), cfg.rig)
+
+
+def test_one_to_four_independent_joints():
+    j = joint_config().instrument.joints[0]
+    joints = [j.__class__(**{**j.__dict__, "name": f"j{i}", "pulley_radius": 0.003 + 0.001 * i}) for i in range(4)]
+    inst = SimulatedInstrument(joints, joint_config().rig)
+    x0 = inst.state.x_in_cmd.copy()
+    for _ in range(300):
+        s = inst.step(x0 + [[3e-3, -3e-3], [0, 0], [-3e-3, 3e-3], [0, 0]], DT)
+    th = s.truth.theta
+    assert th[0] > 0.2 and th[2] < -0.2 and abs(th[1]) < 1e-9 and abs(th[3]) < 1e-9   # joints do not interact
+    assert s.T_in.shape == (4, 2) and len(s.truth.profiles) == 8
+    with pytest.raises(ConfigError, match="1 to 4"):
+        SimulatedInstrument(joints + joints[:1], joint_config().rig)
