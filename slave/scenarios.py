@@ -114,14 +114,15 @@ def effects_config(effect: str | None, level: float, K: float, duration: float,
 
 def protocol(duration: float, rate_hz: float, x_max: float, rng: np.random.Generator,
              x_rest: float = 0.0) -> np.ndarray:
-    """Proximal displacement command [m], shape (round(duration * rate_hz),), relative to rest.
+    """Proximal displacement command [m], shape (round(duration * rate_hz),), relative to the start.
 
-    Blocks of shuffled moves (module docstring) from and back to ``x_rest`` [m], up to ``x_max``
-    [m], repeated until ``duration`` [s] is filled; the last block is cut where time runs out.
+    A hold at 0, a slow move to ``x_rest`` [m], then blocks of shuffled moves (module docstring) from
+    and back to ``x_rest``, up to ``x_max`` [m], repeated until ``duration`` [s] is filled; the last
+    block is cut where time runs out.
     """
     dt = 1.0 / rate_hz
     n = int(round(duration * rate_hz))
-    pts: list[tuple[float, float]] = [(0.0, x_rest)]        # (time [s], position [m]) corners
+    pts: list[tuple[float, float]] = [(0.0, 0.0)]           # (time [s], position [m]) corners
 
     def speed(lo: float = 0.002, hi: float = 0.02) -> float:     # log-uniform [m/s]
         return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
@@ -180,7 +181,9 @@ def protocol(duration: float, rate_hz: float, x_max: float, rng: np.random.Gener
         hold(0.3, 1.0)
 
     kinds = [slow, fast, minor, stairs, wiggle]
-    hold(0.5, 1.0)
+    hold(0.5, 1.0)                                            # at rest where the encoders were zeroed
+    move(0.0, 0.002)                                          # take up to the rest position
+    hold(0.3, 0.6)
     while pts[-1][0] < duration:
         for j in rng.permutation(len(kinds)):
             kinds[j]()

@@ -403,13 +403,18 @@ def advance_general(T, lo, hi, w, a, beta, Tc, x_in, x_out, bx, bF, bs):  # prag
         y_lo, y_hi = _root(floor, f_lo, Y0, -dt, T, S, G, w, a, beta, Tc, s, x_in, dt, bx, bF, bs, new, 0)
         y_in, y_out = y_hi, y_lo
     # y_in: elongation short of (pull) / above (release) the target; y_out: at or past it
-    d_in, k_in = _prefix(T, S, G, w, a, beta, Tc, y_in, s, new)
-    T[:k_in] = new[:k_in]
-    d_out, k_out = _prefix(T, S, G, w, a, beta, Tc, y_out, s, new)
-    if k_out > k_in and d_out != d_in:
+    d_lo, k_lo = _prefix(T, S, G, w, a, beta, Tc, y_in, s, new)
+    if (d_lo - dt) * s > 0.0:
+        # past the target already at y_in: the front jumps right at the start (a steeper part next to
+        # the proximal end), so blend from the old profile
+        d_hi, k_hi, d_lo, k_lo = d_lo, k_lo, 0.0, 0
+    else:
+        T[:k_lo] = new[:k_lo]
+        d_hi, k_hi = _prefix(T, S, G, w, a, beta, Tc, y_out, s, new)
+    if k_hi > k_lo and d_hi != d_lo:
         # the front crossed a steep stuck part: leave it inside, blending the nodes it passed
-        lam = min(1.0, max(0.0, (dt - d_in) / (d_out - d_in)))
-        for i in range(k_in, k_out):
+        lam = min(1.0, max(0.0, (dt - d_lo) / (d_hi - d_lo)))
+        for i in range(k_lo, k_hi):
             new[i] = T[i] + lam * (new[i] - T[i])
-    T[:k_out] = new[:k_out]
+    T[:k_hi] = new[:k_hi]
     return x_out, 0

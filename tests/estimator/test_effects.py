@@ -1,0 +1,204 @@
+"""The effect catalogue and its kernel: identifiers, closed forms, composability, and a cross-check
+against the simulated rig (two implementations of the same physics, driven differently).
+
+Tolerances: closed forms 1e-9 relative unless stated; rig cross-checks in N and m, stated per test.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from estimator.distal import estimate_batch
+from estimator.effects import CATALOGUE, EFFECT_IDS, Series, effect, neutral_values, predict
+from estimator.effects_kernels import run_extended
+from estimator.sheath import SheathGeometry, SheathModel
+from slave.scenarios import protocol
+from slave.simulated import SimulatedRig
+from teleop import config as C
+
+IDS = ("velocity_friction", "pretension", "curvature_drift", "tendon_stiffening", "stiction", "friction_offset",
+       "sensor_offset", "sensor_delay")
+K, L, EA = 0.7, 1.5, 15000.0
+NODES = 32
+
+
+def grid(m=NODES):
+    shape, weight = SheathModel(K=1.0, compliance=1.0).nodes(m)
+    return shape, weight
+
+
+def series(T_in, x_in=None, dt=1e-3, velocity=None, T_out=None, x_out=None):
+    T_in = np.asarray(T_in, dtype=float)
+    t = np.arange(1, T_in.size + 1) * dt
+    x_in = np.zeros_like(T_in) if x_in is None else np.asarray(x_in, dtype=float)
+    v = np.gradient(x_in, t) if velocity is None else np.asarray(velocity, dtype=float)
+    u, w = grid()
+    return Series(t, x_in, T_in, v, T_out, x_out, u, w)
+
+
+def test_catalogue_ids_parameters_and_texts():
+    assert EFFECT_IDS == IDS
+    for eid, e in CATALOGUE.items():
+        assert e.id == eid and len(e.cause) > 20 and len(e.signature) > 20 and e.literature.startswith("E")
+        assert e.primary in ("T_out", "x_out") and e.parameters
+        for p in e.parameters:
+            assert p.lower <= p.neutral <= p.upper and p.unit and p.meaning
+            assert all(p.lower <= s <= p.upper for s in p.starts)
+        d = e.describe()
+        assert d["id"] == eid and all("unit" in q and len(q["bounds"]) == 2 for q in d["parameters"])
+    assert effect("stiction") is CATALOGUE["stiction"]
+    with pytest.raises(KeyError, match="known: velocity_friction"):
+        effect("backlash")
+
+
+def _history(n=6000, seed=0):
+    rng = np.random.default_rng(seed)
+    knots = np.concatenate(([0.0], rng.uniform(0.5, 20.0, 30)))
+    return np.interp(np.linspace(0, knots.size - 1, n), np.arange(knots.size), knots)
+
+
+def test_base_kernel_is_the_profile_memory_estimator():
+    T_in = _history()
+    T_out, E1 = run_extended(T_in, np.zeros_like(T_in), np.arange(T_in.size) * 1e-3, *grid(100), K=K)
+    ref = estimate_batch(T_in, np.zeros_like(T_in), SheathModel(K=K, compliance=1.0), n_nodes=100)
+    np.testing.assert_allclose(T_out, ref.T_out, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(E1, ref.elongation, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("eid", IDS)
+def test_every_extension_at_its_neutral_values_is_the_base(eid):
+    s = series(_history(3000, 1), x_in=np.linspace(0, 0.004, 3000))
+    base = predict([], {"K": K}, s, compliance=1e-4)
+    ext = predict([eid], {"K": K, **neutral_values([effect(eid)])}, s, compliance=1e-4)
+    np.testing.assert_allclose(ext.T_out, base.T_out, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(ext.x_out, base.x_out, rtol=0, atol=1e-15)
+
+
+def _pull(T_max=15.0, n=2000):
+    """A monotone pull from 0 with the proximal end moving at a constant 5 mm/s."""
+    T_in = np.linspace(0.0, T_max, n)
+    x_in = np.linspace(0.0, 0.005 * n * 1e-3, n)
+    return T_in, x_in
+
+
+def test_friction_offset_closed_form_on_pull_and_release():
+    a = 1.5
+    T_up = np.linspace(0.0, 15.0, 1500)
+    T = np.concatenate((T_up, T_up[::-1][1:]))
+    x = np.concatenate((np.linspace(0, 0.005, 1500), np.linspace(0.005, 0, 1500)[1:]))
+    pr = predict(["friction_offset"], {"K": K, "a": a}, series(T, x), compliance=1e-4)
+    up = T_up > (a * math.expm1(K) + 0.1)             # distal end taut on the pull
+    np.testing.assert_allclose(pr.T_out[:1500][up], (T_up[up] + a) * math.exp(-K) - a, rtol=1e-9)
+    down = T[1500:] < (15.0 + a) * math.exp(-2 * K) - a - 0.1   # past the transition band
+    np.testing.assert_allclose(pr.T_out[1500:][down], (T[1500:][down] + a) * math.exp(K) - a, rtol=1e-9)
+
+
+def test_velocity_friction_raises_the_slip_exponent_with_speed():
+    T_in, x_in = _pull()
+    c_v = 20.0
+    s = series(T_in, x_in, velocity=np.full(T_in.size, 0.005))
+    pr = predict(["velocity_friction"], {"K": K, "c_v": c_v}, s, compliance=1e-4)
+    m = T_in > 1.0
+    np.testing.assert_allclose(pr.T_out[m], T_in[m] * math.exp(-K * (1 + c_v * 0.005)), rtol=1e-9)
+
+
+def test_curvature_drift_changes_K_linearly_in_time():
+    T_in, x_in = _pull()
+    s = series(T_in, x_in)
+    rate = 0.1
+    pr = predict(["curvature_drift"], {"K": K, "K_rate": rate}, s, compliance=1e-4)
+    m = T_in > 1.0
+    np.testing.assert_allclose(pr.T_out[m], T_in[m] * np.exp(-(K + rate * (s.time[m] - s.time[0]))), rtol=1e-9)
+
+
+def test_tendon_stiffening_elongation_closed_form_and_T_out_unchanged():
+    T_in, x_in = _pull()
+    beta, Tc = 3.0, 2.0
+    s = series(T_in, x_in)
+    pr = predict(["tendon_stiffening"], {"K": K, "beta": beta, "T_c": Tc}, s, compliance=1e-4)
+    base = predict([], {"K": K}, s, compliance=1e-4)
+    np.testing.assert_array_equal(pr.T_out, base.T_out)
+    u = np.linspace(0, 1, 4001)
+    for k in (500, 1999):        # e/(L/EA) = int_0^1 phi(T_in e^{-K u}) du, phi(T) = T + beta Tc (1 - e^{-T/Tc})
+        prof = T_in[k] * np.exp(-K * u)
+        phi = prof + beta * Tc * (1 - np.exp(-prof / Tc))
+        expected = np.trapezoid(phi, u)
+        assert (x_in[k] - pr.x_out[k]) / 1e-4 == pytest.approx(expected, rel=2e-3)
+
+
+def test_pretension_starts_from_a_uniform_profile_and_zeroed_positions():
+    T0 = 3.0
+    T_in = np.concatenate((np.full(200, T0), np.linspace(T0, 12.0, 1000)))
+    x_in = np.concatenate((np.zeros(200), np.linspace(0, 0.003, 1000)))
+    pr = predict(["pretension"], {"K": K, "T0": T0}, series(T_in, x_in), compliance=1e-4)
+    base = predict([], {"K": K}, series(T_in, x_in), compliance=1e-4)
+    np.testing.assert_allclose(pr.T_out[:200], T0)          # at rest the distal end carries T0
+    np.testing.assert_allclose(pr.x_out[:200], 0.0, atol=1e-15)
+    assert base.T_out[0] == pytest.approx(T0 * math.exp(-K)) and base.x_out[0] < -1e-5
+    # the first pull moves the distal end only once T_in exceeds T0 e^K
+    still = T_in[200:] < T0 * math.exp(K) * 0.999
+    np.testing.assert_allclose(pr.T_out[200:][still], T0)
+
+
+def test_sensor_effects_are_input_corrections():
+    T_in, x_in = _pull()
+    s = series(T_in + 0.7, x_in)
+    shifted = predict(["sensor_offset"], {"K": K, "b_T_in": 0.7}, s, compliance=1e-4)
+    np.testing.assert_allclose(shifted.T_out, predict([], {"K": K}, series(T_in, x_in), compliance=1e-4).T_out,
+                               rtol=1e-12, atol=1e-12)
+    lagged = series(np.interp(np.arange(T_in.size) - 20.0, np.arange(T_in.size), T_in), x_in)  # 20 ms late
+    fixed = predict(["sensor_delay"], {"K": K, "tau": 0.020}, lagged, compliance=1e-4)
+    ref = predict([], {"K": K}, series(T_in, x_in), compliance=1e-4)
+    np.testing.assert_allclose(fixed.T_out[30:-30], ref.T_out[30:-30], rtol=1e-9, atol=1e-9)
+
+
+def test_compliance_is_fitted_by_linear_least_squares():
+    T_in, x_in = _pull()
+    s = series(T_in, x_in)
+    truth = predict([], {"K": K}, s, compliance=1.234e-4)
+    s2 = Series(s.time, s.x_in, s.T_in, s.velocity, None, truth.x_out, s.u, s.w)
+    assert predict([], {"K": K}, s2).compliance == pytest.approx(1.234e-4, rel=1e-9)
+
+
+# ---- cross-check: the rig's physics (driven by x_in) against the kernel (driven by the rig's T_in) --
+
+RIG_CASES = {   # rig switch, kernel values, rms tolerance on T_out [N] and on x_out [m]
+    "velocity_friction": (C.VelocityFrictionConfig(True, 20.0), {"c_v": 20.0}, 0.02, 6e-6),
+    "curvature_drift": (C.CurvatureDriftConfig(True, 0.01), {"K_rate": 0.01}, 1e-4, 1e-7),
+    "tendon_stiffening": (C.TendonStiffeningConfig(True, 2.0, 2.0), {"beta": 2.0, "T_c": 2.0}, 1e-9, 1e-7),
+    "stiction": (C.StictionConfig(True, 0.4), {"r_s": 0.4}, 1e-6, 1e-7),
+    "friction_offset": (C.FrictionOffsetConfig(True, 1.0), {"a": 1.0}, 1e-6, 1e-7),
+}
+
+
+@pytest.mark.parametrize("eid", sorted(RIG_CASES))
+def test_extension_reproduces_the_rig_with_the_same_effect(eid):
+    """The rig (displacement-driven, 100 elements) and the kernel (driven by the rig's T_in, 32 nodes)
+    agree to round-off for the rate-independent effects; viscous friction differs by the speed the
+    kernel sees (the differenced encoder instead of the motor's step) - a few mN and um."""
+    sub, values, tol_T, tol_x = RIG_CASES[eid]
+    geo = SheathGeometry.uniform(L, 2 * math.pi)
+    sheath = C.SheathConfig(mu=K / (2 * math.pi), EA=EA, runs=tuple(C.RunConfig(r.length, r.radius) for r in geo.runs))
+    rig = SimulatedRig(sheath, C.RigConfig(n_elements=100, effects=C.EffectsConfig(**{eid: sub}),
+                                           sensors=C.SensorConfig(load_cell_noise=0.0),
+                                           load=C.LoadConfig(joint_limit=0.05, tissue_stiffness=2000.0)))
+    rest = 0.0012 if eid == "friction_offset" else 0.0002        # taut at rest
+    cmd = rig.state.truth.x_in + protocol(20.0, 1000.0, 0.006, np.random.default_rng(3), rest)
+    tr = [rig.step(float(x), 1e-3).truth for x in cmd]
+    T_in = np.array([t.T_in for t in tr])
+    x_in = np.array([t.x_in for t in tr]) - tr[0].x_in
+    x_out = np.array([t.x_out for t in tr]) - tr[0].x_out
+    T_out = np.array([t.T_out for t in tr])
+    v = np.diff(np.concatenate(([0.0], x_in))) / 1e-3
+    s = series(T_in, x_in, velocity=v)
+    s = Series(s.time, s.x_in, s.T_in, s.velocity, None, None, s.u, s.w, T_min=0.1, sigma_T_in=1e-3)
+    ext = predict([eid], {"K": K, **values}, s, compliance=L / EA)
+    base = predict([], {"K": K}, s, compliance=L / EA)
+    rms = lambda e: float(np.sqrt(np.mean(e ** 2)))  # noqa: E731
+    off = ext.x_out[0] - x_out[0]
+    assert rms(ext.T_out - T_out) < tol_T
+    assert rms(ext.x_out - off - x_out) < tol_x
+    if eid != "tendon_stiffening":   # it leaves T_out alone
+        assert rms(base.T_out - T_out) > 5 * rms(ext.T_out - T_out)
+    else:
+        assert rms(base.x_out - x_out) > 20 * rms(ext.x_out - off - x_out)

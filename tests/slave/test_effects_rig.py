@@ -1,0 +1,175 @@
+"""The simulated rig's effect switches against closed forms (relative 1 % unless stated)."""
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from estimator.sheath import SheathGeometry
+from slave.scenarios import EFFECT_IDS, record, realistic_range
+from slave.simulated import SimulatedRig
+from teleop import config as C
+
+L, ANGLE, MU, EA = 1.5, 2.0 * math.pi, 0.1, 15000.0
+K = MU * ANGLE
+DT = 1e-3
+FAST = C.MotorConfig(bandwidth_hz=1e6, max_speed=10.0)
+SPRING = C.LoadConfig(joint_stiffness=100.0, joint_limit=0.1, tissue_stiffness=2000.0, tissue=True)
+
+
+def make_rig(fx: C.EffectsConfig, noise=0.0, motor=FAST, pretension=0.0) -> SimulatedRig:
+    g = SheathGeometry.uniform(L, ANGLE)
+    sheath = C.SheathConfig(mu=MU, EA=EA, runs=tuple(C.RunConfig(r.length, r.radius) for r in g.runs),
+                            pretension=pretension)
+    return SimulatedRig(sheath, C.RigConfig(n_elements=200, motor=motor, load=SPRING, effects=fx,
+                                            sensors=C.SensorConfig(load_cell_noise=noise, seed=1)))
+
+
+def drive(rig, xs):
+    states = [rig.step(float(x), DT) for x in xs]
+    tr = {k: np.array([getattr(s.truth, k) for s in states]) for k in ("T_in", "T_out", "x_in", "x_out", "elongation")}
+    tr["reading"] = np.array([s.T_in for s in states])
+    return tr
+
+
+def ramp(a, b, speed):
+    n = max(2, int(abs(b - a) / (speed * DT)) + 1)
+    return np.linspace(a, b, n)[1:]
+
+
+def test_effects_are_off_by_default_and_listed_when_on():
+    assert make_rig(C.EffectsConfig()).effects == ()
+    fx = C.EffectsConfig(stiction=C.StictionConfig(enabled=True), sensor_delay=C.SensorDelayConfig(enabled=True))
+    assert make_rig(fx).effects == ("stiction", "sensor_delay")
+    assert EFFECT_IDS == ("velocity_friction", "pretension", "curvature_drift", "tendon_stiffening", "stiction",
+                          "friction_offset", "sensor_offset", "sensor_delay")
+
+
+def test_bad_effect_magnitude_names_the_key():
+    with pytest.raises(ValueError, match=r"rig\.effects\.stiction\.static_ratio"):
+        make_rig(C.EffectsConfig(stiction=C.StictionConfig(True, -0.1)))
+    with pytest.raises(ValueError, match=r"rig\.effects\.sensor_delay\.delay"):
+        make_rig(C.EffectsConfig(sensor_delay=C.SensorDelayConfig(True, math.nan)))
+
+
+@pytest.mark.parametrize("speed", [0.002, 0.02])
+def test_velocity_friction_slip_ratio_grows_with_speed(speed):
+    c_v = 20.0
+    tr = drive(make_rig(C.EffectsConfig(velocity_friction=C.VelocityFrictionConfig(True, c_v))), ramp(0, 0.006, speed))
+    m = tr["T_in"] > 1.0
+    np.testing.assert_allclose(tr["T_out"][m] / tr["T_in"][m], math.exp(-K * (1 + c_v * speed)), rtol=0.01)
+
+
+def test_curvature_drift_changes_K_with_time():
+    rate = 0.02
+    rig = make_rig(C.EffectsConfig(curvature_drift=C.CurvatureDriftConfig(True, rate)))
+    drive(rig, np.zeros(10000))                     # 10 s at rest
+    tr = drive(rig, ramp(0, 0.006, 0.01))
+    t = 10.0 + DT * np.arange(1, tr["T_in"].size + 1)
+    m = tr["T_in"] > 1.0
+    np.testing.assert_allclose(tr["T_out"][m] / tr["T_in"][m], np.exp(-(K + rate * t[m])), rtol=0.01)
+
+
+def test_friction_offset_pull_and_release_lines():
+    a = 1.0
+    rig = make_rig(C.EffectsConfig(friction_offset=C.FrictionOffsetConfig(True, a)))
+    up = drive(rig, ramp(0, 0.007, 0.005))
+    m = up["T_out"] > 0.5
+    np.testing.assert_allclose(up["T_out"][m], (up["T_in"][m] + a) * math.exp(-K) - a, rtol=0.01)
+    T0 = up["T_in"][-1]
+    dn = drive(rig, ramp(0.007, 0.003, 0.005))
+    m = dn["T_in"] < (T0 + a) * math.exp(-2 * K) - a - 0.2
+    assert m.sum() > 100
+    np.testing.assert_allclose(dn["T_out"][m], (dn["T_in"][m] + a) * math.exp(K) - a, rtol=0.01)
+    # friction that does not vanish with tension: T_in - T_out > (1 - e^-K) T_in on the pull
+    p = up["T_out"] > 0.5
+    assert np.all(up["T_in"][p] - up["T_out"][p] > (1 - math.exp(-K)) * up["T_in"][p] + 0.5 * a * (1 - math.exp(-K)))
+
+
+def test_tendon_stiffening_elongation_and_unchanged_T_out():
+    beta, Tc = 3.0, 2.0
+    tr = drive(make_rig(C.EffectsConfig(tendon_stiffening=C.TendonStiffeningConfig(True, beta, Tc))),
+               ramp(0, 0.006, 0.005))
+    base = drive(make_rig(C.EffectsConfig()), ramp(0, 0.006, 0.005))
+    u = np.linspace(0, 1, 2001)
+    for k in (200, tr["T_in"].size - 1):
+        prof = tr["T_in"][k] * np.exp(-K * u)
+        phi = prof + beta * Tc * (1 - np.exp(-prof / Tc))
+        assert tr["x_in"][k] - tr["x_out"][k] == pytest.approx(L / EA * np.trapezoid(phi, u), rel=0.01)
+    m = tr["T_in"] > 0.5
+    np.testing.assert_allclose(tr["T_out"][m] / tr["T_in"][m], math.exp(-K), rtol=1e-6)
+    # the soft toe adds at most softening * T_c L/EA of elongation (all of it once T >> T_c everywhere)
+    e_base = np.interp(tr["T_in"][-1], base["T_in"], base["x_in"] - base["x_out"])
+    extra = (tr["x_in"][-1] - tr["x_out"][-1]) - e_base
+    prof = tr["T_in"][-1] * np.exp(-K * u)
+    assert extra == pytest.approx(beta * Tc * L / EA * np.trapezoid(1 - np.exp(-prof / Tc), u), rel=0.01)
+    assert 0.5 * beta * Tc * L / EA < extra < beta * Tc * L / EA
+
+
+def test_stiction_breakaway_after_a_hold():
+    r_s = 0.5
+    rig = make_rig(C.EffectsConfig(stiction=C.StictionConfig(True, r_s, 0.02)),
+                   motor=C.MotorConfig(bandwidth_hz=1e6, max_speed=10.0))
+    up = drive(rig, ramp(0, 0.005, 0.005))
+    drive(rig, np.full(500, 0.005))                   # hold: the tendon sticks
+    T_out0 = rig.state.truth.T_out
+    tr = drive(rig, ramp(0.005, 0.008, 0.005))
+    k = int(np.argmax(tr["T_out"] > T_out0 * (1 + 1e-6)))   # the distal end first moves here
+    assert k > 0
+    # breakaway at the static bound: T_in reaches T_out e^{K (1 + r_s)} before the distal end moves
+    assert tr["T_in"][k - 1] == pytest.approx(T_out0 * math.exp(K * (1 + r_s)), rel=0.01)
+    assert tr["T_in"][k + 5] < tr["T_in"][k - 1]      # then T_in drops (the spike)
+    assert tr["T_out"][-1] == pytest.approx(tr["T_in"][-1] * math.exp(-K), rel=0.01)   # kinetic again
+    assert up["T_out"][-1] == pytest.approx(up["T_in"][-1] * math.exp(-K), rel=0.01)
+
+
+def test_pretension_effect_adds_to_the_sheath_pretension():
+    rig = make_rig(C.EffectsConfig(pretension=C.PretensionEffectConfig(True, 2.5)), pretension=1.0)
+    np.testing.assert_allclose(rig.state.truth.profile, 3.5)
+    assert rig.state.truth.x_out == pytest.approx(3.5 / 2100.0, rel=1e-9)
+
+
+def test_sensor_offset_and_delay_act_on_the_reading_only():
+    fx = C.EffectsConfig(sensor_offset=C.SensorOffsetConfig(True, -0.4), sensor_delay=C.SensorDelayConfig(True, 0.0125))
+    rig, ref = make_rig(fx), make_rig(C.EffectsConfig())
+    xs = 0.003 + 0.002 * np.sin(2 * math.pi * 1.0 * DT * np.arange(1, 3001))
+    tr, base = drive(rig, xs), drive(ref, xs)
+    np.testing.assert_array_equal(tr["T_out"], base["T_out"])
+    t = DT * np.arange(1, xs.size + 1)
+    expected = np.interp(t - 0.0125, t, tr["T_in"]) - 0.4
+    np.testing.assert_allclose(tr["reading"][100:], expected[100:], atol=1e-9)
+
+
+def test_general_solver_keeps_the_taut_invariant():
+    fx = C.EffectsConfig(friction_offset=C.FrictionOffsetConfig(True, 0.5),
+                         tendon_stiffening=C.TendonStiffeningConfig(True, 2.0, 1.5),
+                         velocity_friction=C.VelocityFrictionConfig(True, 10.0),
+                         stiction=C.StictionConfig(True, 0.3))
+    rig = make_rig(fx, motor=C.MotorConfig())
+    rng = np.random.default_rng(4)
+    cmd = np.clip(0.004 + np.cumsum(rng.normal(0, 3e-5, 4000)), 0.002, 0.009)
+    for x in cmd:
+        t = rig.step(float(x), DT).truth
+        assert np.all(t.profile >= 0.0)
+        if t.profile.min() > 1e-6:  # (a slide that slowed leaves a steeper part; the front crossing it
+            # is blended linearly in T, not in strain: nanometres)
+            assert t.x_in - t.x_out == pytest.approx(t.elongation, rel=1e-4, abs=1e-12)
+
+
+def test_scenario_recordings_look_like_a_bench():
+    rec = record("sensor_offset", seed=3, duration=30.0, rate_hz=500.0)
+    d = rec.data
+    assert len(d) == 15000 and d.x_out is not None and d.T_out is not None
+    assert d.x_in[0] == 0.0 and abs(d.x_out[0]) <= 4e-6                         # zeroed encoders
+    q = 2 * math.pi * 0.005 / 67000
+    np.testing.assert_allclose(d.x_in / q, np.round(d.x_in / q), atol=1e-6)          # quantised encoder
+    assert np.std(d.T_out - rec.truth["signals"]["T_out"]) == pytest.approx(rec.truth["noise_T_out"], rel=0.05)
+    lo, hi = realistic_range("sensor_offset")["offset"]
+    assert lo <= abs(rec.truth["parameters"]["offset"]) <= hi
+    again = record("sensor_offset", seed=3, duration=30.0, rate_hz=500.0)
+    np.testing.assert_array_equal(again.data.T_in, d.T_in)
+    clean = record(None, seed=3, duration=30.0, rate_hz=500.0)      # same rig and protocol, no effect
+    np.testing.assert_array_equal(clean.data.x_in, d.x_in)
+    assert "offset" not in str(d.metadata)
+    with pytest.raises(ValueError, match="unknown effect"):
+        record("backlash")
