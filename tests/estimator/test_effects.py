@@ -191,7 +191,7 @@ def test_extension_reproduces_the_rig_with_the_same_effect(eid):
     T_out = np.array([t.T_out for t in tr])
     v = np.diff(np.concatenate(([0.0], x_in))) / 1e-3
     s = series(T_in, x_in, velocity=v)
-    s = Series(s.time, s.x_in, s.T_in, s.velocity, None, None, s.u, s.w, T_min=0.1, sigma_T_in=1e-3)
+    s = Series(s.time, s.x_in, s.T_in, s.velocity, None, None, s.u, s.w, T_min=0.0, sigma_T_in=1e-3)
     ext = predict([eid], {"K": K, **values}, s, compliance=L / EA)
     base = predict([], {"K": K}, s, compliance=L / EA)
     rms = lambda e: float(np.sqrt(np.mean(e ** 2)))  # noqa: E731
