@@ -61,16 +61,16 @@ def prepare(data: MeasuredData, *, n_nodes: int = 32, target_rate: float = 200.0
     Raises
     ------
     DataError
-        No distal column. ValueError: fewer than 50 samples after averaging.
+        No distal column. ValueError: fewer than 400 samples after averaging.
     """
     data.require_distal()
     t = np.asarray(data.time, dtype=float)
     fs = (t.size - 1) / max(t[-1] - t[0], 1e-12)
     m = max(1, int(fs // target_rate))
     nb = t.size // m
-    if nb < 50:
-        raise ValueError(f"{data.source}: {t.size} samples at {fs:.0f} Hz are too few to diagnose (need >= 50 "
-                         f"after averaging to {target_rate:.0f} Hz)")
+    if nb < 400:
+        raise ValueError(f"{data.source}: {t.size} samples at {fs:.0f} Hz are too few to diagnose (need >= 400 "
+                         f"after averaging to {target_rate:.0f} Hz, i.e. a few cycles)")
 
     def dec(a):
         return None if a is None else np.asarray(a, dtype=float)[: nb * m].reshape(nb, m).mean(axis=1)
@@ -99,7 +99,7 @@ def split_at_rest(s: Series, train_fraction: float) -> int:
     t = s.time
     dur = t[-1] - t[0]
     lo, hi = np.searchsorted(t, t[0] + (train_fraction - 0.08) * dur), np.searchsorted(t, t[0] + (train_fraction + 0.08) * dur)
-    win = max(1, int(round(0.5 / max(np.median(np.diff(t)), 1e-9))))
+    win = max(1, min(int(round(0.5 / max(np.median(np.diff(t)), 1e-9))), len(s) // 4))
     v = np.convolve(np.abs(s.velocity), np.ones(win) / win, mode="same")
     score = v / max(float(np.median(v)), 1e-12) + (s.T_in - s.T_in.min()) / max(float(np.ptp(s.T_in)), 1e-12)
     k = int(lo + np.argmin(score[lo:hi])) if hi > lo else int(np.searchsorted(t, t[0] + train_fraction * dur))
