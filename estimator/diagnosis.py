@@ -32,7 +32,7 @@ from estimator.diagnosis_fit import (SIGNALS, fit_model, heldout_mse, noise_leve
 from estimator.effects import CATALOGUE, NONE, UNKNOWN, Effect, predict
 from teleop.recording import MeasuredData
 
-__all__ = ["diagnose", "PENALTY", "STRUCTURE_RATIO"]
+__all__ = ["diagnose", "predictions", "PENALTY", "STRUCTURE_RATIO"]
 
 PENALTY = 0.25          # required relative held-out improvement per extra parameter [-]
 STRUCTURE_RATIO = 3.0   # held-out rmse / noise above this on a signal: structure left [-]
@@ -241,3 +241,33 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
                      "wrap_shape": None if wrap_shape is None else [float(v) for v in wrap_shape]},
         "elapsed_s": _time.perf_counter() - t_start,
     }
+
+
+def predictions(result: dict, data: MeasuredData) -> dict[str, np.ndarray | None]:
+    """Re-run the base and the extended model of a :func:`diagnose` result on the measured samples.
+
+    Returns
+    -------
+    dict of ndarray, shape (n_samples,) (None for a signal not recorded): ``T_out_base``,
+    ``T_out_ext`` [N], ``x_out_base``, ``x_out_ext`` [m] (interpolated from the averaged series to
+    ``data.time``), ``velocity`` [m/s] and ``phase`` (int8 codes of :class:`estimator.phase.Phase`,
+    from the base model).
+    """
+    from estimator.distal import estimate_batch      # local: phase classification only
+    from estimator.sheath import SheathModel
+
+    st = result["settings"]
+    shape = None if st.get("wrap_shape") is None else np.asarray(st["wrap_shape"], dtype=float)
+    s = prepare(data, n_nodes=st["n_nodes"], target_rate=st["target_rate_hz"], wrap_shape=shape)
+    out: dict[str, np.ndarray | None] = {}
+    for tag, model in (("base", result["base_model"]), ("ext", result["model"])):
+        pr = predict(model["effects"], model["values"], s, compliance=model["compliance"])
+        for name in SIGNALS:
+            out[f"{name}_{tag}"] = None if getattr(data, name) is None else np.interp(data.time, s.time,
+                                                                                     getattr(pr, name))
+    out["velocity"] = np.interp(data.time, s.time, s.velocity)
+    base = result["base_model"]
+    out["phase"] = estimate_batch(np.interp(data.time, s.time, s.T_in), data.x_in,
+                                  SheathModel(K=base["values"]["K"], compliance=max(base["compliance"], 1e-12),
+                                              wrap_shape=shape), time=data.time, n_nodes=st["n_nodes"]).phase
+    return out

@@ -128,3 +128,14 @@ def test_progress_callback_and_bad_inputs():
         diagnose(rec.data, effects=("backlash",))
     with pytest.raises(ValueError, match="train_fraction"):
         diagnose(rec.data, train_fraction=0.1)
+
+
+def test_report_writes_markdown_and_figures(clean_result, tmp_path):
+    from teleop.report import format_summary, write_report
+    rec, res = clean_result
+    path = write_report(res, rec.data, tmp_path / "rep")
+    text = path.read_text()
+    assert "**none**" in text and "| K |" in text and "| compliance |" in text
+    for png in ("residuals_time.png", "residuals_by.png", "loops.png", "candidates.png"):
+        assert (tmp_path / "rep" / png).stat().st_size > 10_000 and f"]({png})" in text
+    assert format_summary(res).startswith("cause: none")

@@ -1,0 +1,209 @@
+"""Markdown report with figures of a diagnosis (:func:`estimator.diagnosis.diagnose`).
+
+``write_report(result, data, out_dir)`` writes ``out_dir/report.md`` and four PNG figures (matplotlib,
+Agg canvas, no display needed):
+
+* ``residuals_time.png``   residual of T_out and x_out vs time, base and extended model, split marked;
+* ``residuals_by.png``     held-out residuals vs sliding speed |dx_in/dt|, vs T_in and by phase;
+* ``loops.png``            T_out vs T_in and elongation x_in - x_out vs T_in, measured beside the base
+                           and the extended model (held-out block);
+* ``candidates.png``       held-out score and gain of every extension.
+
+The report names the cause, the physical explanation and the signature from the catalogue
+(:mod:`estimator.effects`), the held-out errors, the gain and the fitted parameters with units.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from estimator.diagnosis import predictions
+from estimator.effects import CATALOGUE
+from estimator.phase import Phase
+from teleop.recording import MeasuredData
+
+__all__ = ["write_report", "format_summary"]
+
+_MAX_POINTS = 20000
+_SIG = (("T_out", "N", 1.0, "N"), ("x_out", "m", 1e6, "um"))   # name, SI unit, plot scale, plot unit
+
+
+def _save(fig: Figure, path: Path) -> str:
+    FigureCanvasAgg(fig)
+    fig.savefig(path, dpi=110)
+    return path.name
+
+
+def _every(n: int) -> slice:
+    return slice(None, None, max(1, n // _MAX_POINTS))
+
+
+def _fig_time(data, pred, t_split, path) -> str:
+    sigs = [s for s in _SIG if getattr(data, s[0]) is not None]
+    fig = Figure(figsize=(11, 2.6 * len(sigs) + 0.6), layout="constrained")
+    ev = _every(len(data))
+    for i, (name, _, k, unit) in enumerate(sigs):
+        ax = fig.add_subplot(len(sigs), 1, i + 1)
+        y = getattr(data, name)
+        ax.plot(data.time[ev], k * (pred[f"{name}_base"] - y)[ev], lw=0.5, label="base model")
+        ax.plot(data.time[ev], k * (pred[f"{name}_ext"] - y)[ev], lw=0.5, label="extended model")
+        ax.axvline(t_split, color="k", ls="--", lw=1)
+        ax.text(t_split, ax.get_ylim()[1], "  held out ->", va="top", fontsize=8)
+        ax.set_ylabel(f"{name} residual [{unit}]")
+        ax.legend(loc="lower left", fontsize=8)
+    ax.set_xlabel("time [s]")
+    return _save(fig, path)
+
+
+def _fig_by(data, pred, held, path) -> str:
+    sigs = [s for s in _SIG if getattr(data, s[0]) is not None]
+    fig = Figure(figsize=(12, 2.8 * len(sigs) + 0.6), layout="constrained")
+    ev = _every(int(held.sum()))
+    speed = np.abs(pred["velocity"][held])[ev] * 1e3
+    T_in = data.T_in[held][ev]
+    phase = pred["phase"][held][ev]
+    codes = [int(p) for p in Phase]
+    for i, (name, _, k, unit) in enumerate(sigs):
+        y = getattr(data, name)[held][ev]
+        rb = k * (pred[f"{name}_base"][held][ev] - y)
+        re = k * (pred[f"{name}_ext"][held][ev] - y)
+        for j, (x, label) in enumerate(((speed, "sliding speed |dx_in/dt| [mm/s]"), (T_in, "T_in [N]"))):
+            ax = fig.add_subplot(len(sigs), 3, 3 * i + j + 1)
+            ax.plot(x, rb, ".", ms=1, alpha=0.4, label="base")
+            ax.plot(x, re, ".", ms=1, alpha=0.4, label="extended")
+            ax.set_xlabel(label)
+            ax.set_ylabel(f"{name} residual [{unit}]")
+        ax = fig.add_subplot(len(sigs), 3, 3 * i + 3)
+        for off, r, lab in ((-0.18, rb, "base"), (0.18, re, "extended")):
+            rms = [np.sqrt(np.mean(r[phase == c] ** 2)) if np.any(phase == c) else 0.0 for c in codes]
+            ax.bar(np.arange(len(codes)) + off, rms, width=0.36, label=lab)
+        ax.set_xticks(range(len(codes)), [Phase(c).label for c in codes], rotation=30, fontsize=7)
+        ax.set_ylabel(f"rms {name} residual [{unit}]")
+        ax.legend(fontsize=7)
+    fig.suptitle("held-out residuals by sliding speed, tension and phase")
+    return _save(fig, path)
+
+
+def _fig_loops(data, pred, held, path) -> str:
+    panels = []
+    if data.T_out is not None:
+        panels.append(("T_out [N]", data.T_out, pred["T_out_base"], pred["T_out_ext"]))
+    if data.x_out is not None:
+        e = data.x_in - data.x_out
+        panels.append(("elongation x_in - x_out [mm]", 1e3 * e, 1e3 * (data.x_in - pred["x_out_base"]),
+                       1e3 * (data.x_in - pred["x_out_ext"])))
+    fig = Figure(figsize=(12, 3.6 * len(panels)), layout="constrained")
+    ev = _every(int(held.sum()))
+    T_in = data.T_in[held][ev]
+    for i, (label, meas, base, ext) in enumerate(panels):
+        for j, (y, title) in enumerate(((meas, "measured"), (base, "base model"), (ext, "extended model"))):
+            ax = fig.add_subplot(len(panels), 3, 3 * i + j + 1)
+            ax.plot(T_in, y[held][ev], lw=0.4)
+            ax.set_title(title, fontsize=9)
+            ax.set_xlabel("T_in [N]")
+            ax.set_ylabel(label)
+    fig.suptitle("loops on the held-out block: measured beside simulated")
+    return _save(fig, path)
+
+
+def _fig_candidates(result, path) -> str:
+    c = result["candidates"]
+    ids = sorted(c, key=lambda k: c[k]["score"])
+    fig = Figure(figsize=(10, 3.4), layout="constrained")
+    ax = fig.add_subplot(1, 2, 1)
+    ax.barh(ids, [c[k]["score"] for k in ids], color=["C2" if c[k]["accepted"] else "C0" for k in ids])
+    ax.axvline(1.0, color="k", lw=1)
+    ax.set_xlabel("held-out score S (base = 1)")
+    ax.set_xscale("log")
+    ax = fig.add_subplot(1, 2, 2)
+    ax.barh(ids, [max(c[k]["gain"] or 0.0, -1.0) for k in ids])
+    ax.axvline(0.3, color="k", ls="--", lw=1)
+    ax.set_xlabel("held-out gain on the primary signal")
+    ax.set_yticks([])
+    return _save(fig, path)
+
+
+def _fmt(v, unit: str) -> str:
+    if v is None:
+        return "-"
+    if unit == "m":
+        return f"{v * 1e6:.2f} um"
+    return f"{v:.4g} {unit}"
+
+
+def format_summary(result: dict) -> str:
+    """A few plain-text lines: cause, gain, held-out errors (for a terminal)."""
+    b, e = result["base"], result["extended"]
+    lines = [f"cause: {result['cause']}" + (f"  (all: {', '.join(result['causes'])})" if len(result["causes"]) > 1 else ""),
+             f"held-out gain on {result['primary_signal']}: {result['gain']:.2f}"]
+    for name, unit in (("T_out", "N"), ("x_out", "m")):
+        key = f"rmse_{name}_{unit}"
+        if b.get(key) is not None:
+            lines.append(f"held-out rmse {name}: base {_fmt(b[key], unit)} -> extended {_fmt(e[key], unit)}")
+    return "\n".join(lines)
+
+
+def write_report(result: dict, data: MeasuredData, out_dir: str | Path) -> Path:
+    """Write ``report.md`` and its figures for one diagnosis into ``out_dir`` (created if needed).
+
+    Parameters
+    ----------
+    result : dict
+        What :func:`estimator.diagnosis.diagnose` returned for ``data``.
+    data : MeasuredData
+        The recording that was diagnosed.
+    out_dir : str or Path
+
+    Returns
+    -------
+    Path of report.md.
+
+    Raises
+    ------
+    OSError
+        ``out_dir`` cannot be created or written.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    pred = predictions(result, data)
+    t_split = result["split"]["time_s"]
+    held = data.time >= t_split
+    figs = {"residuals over time": _fig_time(data, pred, t_split, out / "residuals_time.png"),
+            "residuals by speed, tension and phase": _fig_by(data, pred, held, out / "residuals_by.png"),
+            "loops, measured beside simulated": _fig_loops(data, pred, held, out / "loops.png"),
+            "candidates": _fig_candidates(result, out / "candidates.png")}
+    cause = result["cause"]
+    md = [f"# Diagnosis of {data.source}", "", "```", format_summary(result), "```", ""]
+    if cause in CATALOGUE:
+        e = CATALOGUE[cause]
+        md += [f"**{cause}** ({e.literature}): {e.cause}.", "", f"Signature in data: {e.signature}.", ""]
+    elif cause == "none":
+        md += ["**none**: the base model (profile memory, K and L/EA) explains the held-out data within the "
+               "noise; no extension earns its parameters.", ""]
+    else:
+        md += ["**unknown**: structure is left in the held-out residual (rmse well above the noise floor) "
+               "that no extension of the catalogue explains.", ""]
+    md += ["## Fitted parameters", "", "| parameter | value | unit | from |", "|---|---|---|---|"]
+    md += [f"| {k} | {p['value']:.6g} | {p['unit']} | {p['effect']} |" for k, p in result["parameters"].items()]
+    md += ["", "## Candidates (held-out block)", "",
+           "| extension | score S | gain | gain T_out | gain x_out | rmse T_out [N] | rmse x_out [um] | accepted |",
+           "|---|---|---|---|---|---|---|---|"]
+    g = (lambda v: "-" if v is None else f"{v:.3f}")  # noqa: E731
+    for k, c in sorted(result["candidates"].items(), key=lambda kv: kv[1]["score"]):
+        x = c["rmse_x_out_m"]
+        md.append(f"| {k} | {c['score']:.3f} | {g(c['gain'])} | {g(c['gain_T_out'])} | {g(c['gain_x_out'])} | "
+                  f"{g(c['rmse_T_out_N'])} | {'-' if x is None else f'{x * 1e6:.2f}'} | "
+                  f"{'yes' if c['accepted'] else ''} |")
+    sp = result["split"]
+    md += ["", f"Training block: up to t = {t_split:.2f} s ({sp['train_fraction']:.0%} of the recording, at a rest); "
+           f"held out: the {sp['n_heldout']} samples after it. Score S: held-out (rmse / noise floor)^2 summed over "
+           "the measured distal signals, relative to the base model; an extension is accepted when S plus "
+           f"{result['settings']['penalty_per_parameter']} per parameter stays below 1.", ""]
+    for title, name in figs.items():
+        md += [f"## {title.capitalize()}", "", f"![{title}]({name})", ""]
+    path = out / "report.md"
+    path.write_text("\n".join(md), encoding="utf-8")
+    return path
