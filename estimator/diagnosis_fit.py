@@ -98,7 +98,8 @@ def split_at_rest(s: Series, train_fraction: float) -> int:
         raise ValueError(f"train_fraction must be in [0.3, 0.9], got {train_fraction!r}")
     t = s.time
     dur = t[-1] - t[0]
-    lo, hi = np.searchsorted(t, t[0] + (train_fraction - 0.08) * dur), np.searchsorted(t, t[0] + (train_fraction + 0.08) * dur)
+    lo = np.searchsorted(t, t[0] + (train_fraction - 0.08) * dur)
+    hi = np.searchsorted(t, t[0] + (train_fraction + 0.08) * dur)
     win = max(1, min(int(round(0.5 / max(np.median(np.diff(t)), 1e-9))), len(s) // 4))
     v = np.convolve(np.abs(s.velocity), np.ones(win) / win, mode="same")
     score = v / max(float(np.median(v)), 1e-12) + (s.T_in - s.T_in.min()) / max(float(np.ptp(s.T_in)), 1e-12)

@@ -7,28 +7,22 @@ the distal load solved exactly at every step. The compiled kernels live in
 from __future__ import annotations
 
 import math
-from collections import deque
 
 import numpy as np
 
 from estimator.sheath import Run, SheathGeometry
 from slave.rig import RigInputError, RigState, RigTruth
-from slave.simulated_physics import (advance_general, advance_proximal, elongation, elongation_general, full_slip,
-                                     load_inverse, settle_distal)
+from slave.simulated_effects import EFFECT_IDS, EffectSwitches, elongation_general
+from slave.simulated_physics import advance_proximal, load_inverse, settle_distal
 from teleop.config import Config, EffectsConfig, LoadConfig, RigConfig, SheathConfig
 from teleop.errors import ConfigError
 
 __all__ = ["SimulatedRig", "EFFECT_IDS"]
 
-#: The effect switches of ``rig.effects``, named as in the catalogue (estimator/effects.py).
-EFFECT_IDS = ("velocity_friction", "pretension", "curvature_drift", "tendon_stiffening", "stiction",
-              "friction_offset", "sensor_offset", "sensor_delay")
-
 _NOISE_BLOCK = 4096
-_V_STOP = 2e-4   # motor speed below which a whole-tendon slide ends [m/s] (estimator.effects_kernels.V_STOP)
 
 
-class SimulatedRig:
+class SimulatedRig(EffectSwitches):
     r"""One tendon in a rigid sheath, driven by a position-controlled motor, with a distal load.
 
     Model (quasi-static distributed Coulomb friction; Phee et al. 2009 eq. (1) in differential form)
@@ -244,81 +238,6 @@ class SimulatedRig:
         """Nothing to release in simulation; idempotent. Stepping afterwards is allowed."""
         self._closed = True
 
-    # ---- effects -------------------------------------------------------------------------------------
-    @property
-    def effects(self) -> tuple[str, ...]:
-        """Identifiers of the effects switched on (estimator/effects.py names), in config order."""
-        return self._effect_ids
-
-    def _init_effects(self, fx: EffectsConfig, n: int) -> None:
-        _validate_effects(fx)
-        on = {name: getattr(fx, name) for name in EFFECT_IDS if getattr(fx, name).enabled}
-        self._effect_ids = tuple(on)
-        self._pretension = float(on["pretension"].tension) if "pretension" in on else 0.0
-        self._a = float(on["friction_offset"].tension_offset) if "friction_offset" in on else 0.0
-        st = on.get("tendon_stiffening")
-        self._beta, self._Tc = (float(st.softening), float(st.toe_tension)) if st else (0.0, 1.0)
-        self._viscous = float(on["velocity_friction"].viscous) if "velocity_friction" in on else 0.0
-        self._K_rate = float(on["curvature_drift"].rate) if "curvature_drift" in on else 0.0
-        sc = on.get("stiction")
-        self._static = 1.0 + float(sc.static_ratio) if sc else 1.0
-        self._slip_time = float(sc.slip_time) if sc else 1.0
-        self._t_break, self._dir = -math.inf, 0
-        self._offset = float(on["sensor_offset"].offset) if "sensor_offset" in on else 0.0
-        self._delay = float(on["sensor_delay"].delay) if "sensor_delay" in on else 0.0
-        self._history: deque[tuple[float, float]] = deque()
-        self._general = any(k in on for k in ("velocity_friction", "curvature_drift", "tendon_stiffening",
-                                              "stiction", "friction_offset"))
-        K = float(self.log_gain[-1])
-        # node gain per unit K (the route shape); a straight sheath drifts as if uniformly curved
-        self._shape = self.log_gain / K if K > 0 else np.linspace(0.0, 1.0, n + 1)
-        self._gain_key = math.nan
-
-    def _bounds(self, K_eff: float) -> tuple[np.ndarray, np.ndarray]:
-        if K_eff != self._gain_key:
-            self._gain_key = K_eff
-            self._glo = np.exp(-K_eff * self._shape)
-            self._ghi = 1.0 / self._glo
-        return self._glo, self._ghi
-
-    def _advance_effects(self, v: float, t: float) -> None:
-        """One proximal step with the effect switches (class docstring); v [m/s], t [s] after the step."""
-        K_kin = max(self.K + self._K_rate * t, 0.0) * (1.0 + self._viscous * abs(v))
-        args = (self._w, self._a, self._beta, self._Tc)
-        if self._dir and v * self._dir <= _V_STOP:     # the motor stopped or turned: the tendon sticks
-            self._dir, self._t_break = 0, -math.inf
-        if self._dir:
-            # the whole tendon slides: the profile follows at the present sliding friction, which
-            # after a breakaway relaxes from static to kinetic
-            f = K_kin
-            if self._t_break > -math.inf:
-                f *= 1.0 + (self._static - 1.0) * math.exp(-(t - self._t_break) / self._slip_time)
-            lo, hi = self._bounds(f)
-            self._x_out = full_slip(self._T, lo if self._dir > 0 else hi, *args, self._x_in, *self._graph)
-        else:
-            stuck = self._static > 1.0                 # not sliding: static friction holds it
-            lo, hi = self._bounds(K_kin * (self._static if stuck else 1.0))
-            self._x_out, slid = advance_general(self._T, lo, hi, *args, self._x_in, self._x_out, *self._graph)
-            if slid:
-                self._dir = slid
-                if stuck:
-                    self._t_break = t              # breakaway from static friction
-
-    def _load_cell(self, T_true: float) -> float:
-        """The load-cell signal before noise: delayed and offset as the sensor effects say [N]."""
-        if self._delay > 0.0:
-            h = self._history
-            h.append((self._t, T_true))
-            t_read = self._t - self._delay
-            while len(h) > 2 and h[1][0] <= t_read:
-                h.popleft()
-            (t0, v0), (t1, v1) = h[0], h[-1] if len(h) == 1 else h[1]
-            if t_read <= t0 or t1 <= t0:
-                T_true = v0
-            else:
-                T_true = v0 + (v1 - v0) * min(1.0, (t_read - t0) / (t1 - t0))
-        return T_true + self._offset
-
     # ---- internals ----------------------------------------------------------------------------------
     def _read(self, cmd: float) -> RigState:
         T = self._T
@@ -401,20 +320,3 @@ def _validate(sheath: SheathConfig, rig: RigConfig) -> None:
     _check(_finite(s.load_cell_noise) and s.load_cell_noise >= 0, "rig.sensors.load_cell_noise",
            "a finite standard deviation >= 0 N", s.load_cell_noise)
     _check(isinstance(s.seed, int) and not isinstance(s.seed, bool), "rig.sensors.seed", "an integer", s.seed)
-
-
-def _validate_effects(fx: EffectsConfig) -> None:
-    """Range checks of the effect magnitudes (only of the effects switched on); ConfigError names the key."""
-    rules = {"velocity_friction.viscous": (">=", 0.0), "pretension.tension": (">=", 0.0),
-             "curvature_drift.rate": ("any", 0.0), "tendon_stiffening.softening": (">=", 0.0),
-             "tendon_stiffening.toe_tension": (">", 0.0), "stiction.static_ratio": (">=", 0.0),
-             "stiction.slip_time": (">", 0.0), "friction_offset.tension_offset": (">=", 0.0),
-             "sensor_offset.offset": ("any", 0.0), "sensor_delay.delay": (">=", 0.0)}
-    for key, (op, bound) in rules.items():
-        name, field_name = key.split(".")
-        sub = getattr(fx, name)
-        _check(isinstance(sub.enabled, (bool, np.bool_)), f"rig.effects.{name}.enabled", "true or false",
-               sub.enabled)
-        v = getattr(sub, field_name)
-        ok = _finite(v) and (op == "any" or (v >= bound if op == ">=" else v > bound))
-        _check(ok, f"rig.effects.{key}", "a finite number" + ("" if op == "any" else f" {op} {bound:g}"), v)

@@ -137,7 +137,8 @@ def _fmt(v, unit: str) -> str:
 def format_summary(result: dict) -> str:
     """A few plain-text lines: cause, gain, held-out errors (for a terminal)."""
     b, e = result["base"], result["extended"]
-    lines = [f"cause: {result['cause']}" + (f"  (all: {', '.join(result['causes'])})" if len(result["causes"]) > 1 else ""),
+    more = f"  (all: {', '.join(result['causes'])})" if len(result["causes"]) > 1 else ""
+    lines = [f"cause: {result['cause']}{more}",
              f"held-out gain on {result['primary_signal']}: {result['gain']:.2f}"]
     for name, unit in (("T_out", "N"), ("x_out", "m")):
         key = f"rmse_{name}_{unit}"

@@ -5,7 +5,6 @@ recordings must give ``none``; an effect outside the catalogue must give ``unkno
 Recordings are 60 s at 500 Hz (the benchmark runs the full confusion matrix at 1 kHz).
 """
 import json
-import math
 from dataclasses import replace
 
 import numpy as np

@@ -1,6 +1,5 @@
 """The simulated rig's effect switches against closed forms (relative 1 % unless stated)."""
 import math
-from dataclasses import replace
 
 import numpy as np
 import pytest
