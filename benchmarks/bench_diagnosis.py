@@ -35,7 +35,8 @@ def one(case: tuple[str, float | None, int, float, float]) -> dict:
     return {"effect": effect, "level": rec.truth["level"], "seed": seed, "cause": res["cause"],
             "causes": res["causes"], "gain": res["gain"], "seconds": time.perf_counter() - t0,
             "truth": rec.truth["parameters"], "fitted": {k: v["value"] for k, v in res["parameters"].items()},
-            "scores": {k: round(v["score"], 3) for k, v in res["candidates"].items()}}
+            "scores": {k: round(v["score"], 3) for k, v in res["candidates"].items()},
+            "structure": max(res["structure"]["base"].values())}
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -87,6 +88,13 @@ def main(argv: list[str] | None = None) -> None:
     fa = np.mean([r["cause"] != NONE for r in clean]) if clean else float("nan")
     print(f"\noverall accuracy (catalogue + clean): {correct / max(total, 1):.3f}  ({correct}/{total})")
     print(f"false-alarm rate on clean data: {fa:.3f}  ({sum(r['cause'] != NONE for r in clean)}/{len(clean)})")
+    if clean:
+        best = [min(r["scores"].values()) for r in clean]
+        print(f"clean data: lowest candidate score S {min(best):.3f} (median {np.median(best):.3f}; an extension "
+              f"needs S + price < 1), highest base structure ratio {max(r['structure'] for r in clean):.2f}")
+    hit = [r["scores"][r["effect"]] for r in rows if r["effect"] in EFFECT_IDS]
+    if hit:
+        print(f"hidden effects: score S of the right extension, median {np.median(hit):.3f}, worst {max(hit):.3f}")
     low = [r for r in rows if r["effect"] in EFFECT_IDS and r["cause"] == r["effect"] and r["gain"] < 0.3]
     print(f"correct answers with held-out gain < 0.3: {len(low)}")
     if args.verbose:

@@ -40,6 +40,7 @@ def test_catalogue_ids_parameters_and_texts():
     assert EFFECT_IDS == IDS
     for eid, e in CATALOGUE.items():
         assert e.id == eid and len(e.cause) > 20 and len(e.signature) > 20 and e.literature.startswith("E")
+        assert len(e.extension) > 10 and type(e).__name__ != "Effect"   # one class per effect
         assert e.primary in ("T_out", "x_out") and e.parameters
         for p in e.parameters:
             assert p.lower <= p.neutral <= p.upper and p.unit and p.meaning
@@ -86,7 +87,7 @@ def test_friction_offset_closed_form_on_pull_and_release():
     T_up = np.linspace(0.0, 15.0, 1500)
     T = np.concatenate((T_up, T_up[::-1][1:]))
     x = np.concatenate((np.linspace(0, 0.005, 1500), np.linspace(0.005, 0, 1500)[1:]))
-    pr = predict(["friction_offset"], {"K": K, "a": a}, series(T, x), compliance=1e-4)
+    pr = CATALOGUE["friction_offset"].predict({"K": K, "a": a}, series(T, x), compliance=1e-4)
     up = T_up > (a * math.expm1(K) + 0.1)             # distal end taut on the pull
     np.testing.assert_allclose(pr.T_out[:1500][up], (T_up[up] + a) * math.exp(-K) - a, rtol=1e-9)
     down = T[1500:] < (15.0 + a) * math.exp(-2 * K) - a - 0.1   # past the transition band
