@@ -36,8 +36,6 @@ One :meth:`JointSlaveNode.step` per cycle (``rig.rate_hz``), given the time by t
 """
 from __future__ import annotations
 
-import json
-import logging
 import math
 from pathlib import Path
 from typing import Any
@@ -47,17 +45,14 @@ import numpy as np
 from estimator.joint import JointEstimator
 from slave.calibration_file import InstrumentCalibration, from_results, save_calibration, sheath_models
 from slave.instrument import TENDONS, Instrument, InstrumentState
-from slave.node import SlaveLinks
+from slave.node_base import SlaveLinks, SlaveNodeBase
 from slave.pair_calibrate import PairCalibration, set_tension
 from slave.pair_control import PairController
-from teleop.clock import Clock, Pacer
-from teleop.codec import next_seq, seq_newer
 from teleop.config import Config
-from teleop.messages import Heartbeat, JointCommand, JointEstimate, JointState, Side, SideState, TendonState
+from teleop.messages import JointCommand, JointEstimate, JointState, SideState, TendonState
 
 __all__ = ["JointSlaveNode", "joint_csv_columns"]
 
-log = logging.getLogger("teleop.slave")
 _TENDON_COLS = ("x_in", "T_in", "x_in_cmd", "T_out_hat", "elongation_hat", "phase")
 _TENDON_TRUTH = ("T_out", "elongation")
 
@@ -77,7 +72,7 @@ def joint_csv_columns(names, has_truth: bool) -> tuple[str, ...]:
     return tuple(cols)
 
 
-class JointSlaveNode:
+class JointSlaveNode(SlaveNodeBase):
     """Slave side of a joint instrument's teleoperation loop (module docstring).
 
     Parameters
@@ -102,7 +97,10 @@ class JointSlaveNode:
     def __init__(self, cfg: Config, instrument: Instrument, links: SlaveLinks, *, recorder=None, rerun=None,
                  calibration: InstrumentCalibration | None = None, calibration_file: str | Path | None = None,
                  run_dir: str | Path | None = None, stop_on_master_stop: bool = False):
-        self.cfg, self.instrument, self.links = cfg, instrument, links
+        super().__init__(cfg, links, run_dir=run_dir, stop_on_master_stop=stop_on_master_stop,
+                         counts=("commands_rejected_range", "commands_wrong_joints", "commands_out_of_order",
+                                 "commands_duplicate", "engage_refused"))
+        self.instrument = instrument
         self.recorder, self.rerun = recorder, rerun
         self.joints = cfg.instrument.joints
         self.names = tuple(j.name for j in self.joints)
@@ -114,26 +112,8 @@ class JointSlaveNode:
         self.travel = [j.pulley_radius * max(abs(v) for v in j.limits) + 2 * e + 0.002
                        for j, e in zip(self.joints, stretch)]
         self.calibration_file = None if calibration_file is None else Path(calibration_file)
-        self.run_dir = None if run_dir is None else Path(run_dir)
-        self.stop_on_master_stop = stop_on_master_stop
-        self.watchdog = cfg.slave.watchdog_ms * 1e-3
-        self.hb_period = 1.0 / cfg.slave.heartbeat_hz
-        self.period = 1.0 / cfg.rig.rate_hz
-        self.max_dt = 5.0 * self.period
-        self.done = False
-        self.seq = self.hb_seq = self.cmd_seq = self.marker = 0
-        self._next_hb = -math.inf
-        self._t_prev: float | None = None
-        self.state = SideState.STARTING
         self.inst_state: InstrumentState = instrument.state
         self.hold: tuple[float, ...] | None = None
-        self.cycles = self.commands_applied = self.safe_events = self.stalls = 0
-        self.master_stopped = False
-        self.pacer_stats: dict[str, float] = {}
-        self.counts = dict.fromkeys(("commands_rejected_range", "commands_wrong_joints", "commands_out_of_order",
-                                     "commands_duplicate", "engage_refused"), 0)
-        self._accepted = self._seen = None
-        self._t_warn = -math.inf
         self.estimators: list[JointEstimator] = []
         self.samples: list = []
         self.controllers: list[PairController] = []
@@ -175,58 +155,35 @@ class JointSlaveNode:
                                                                    self.inst_state.T_in)])
         if self.calibration_file is not None:
             save_calibration(self.calibration, self.calibration_file)
-        if self.run_dir is not None:
-            self.run_dir.mkdir(parents=True, exist_ok=True)
-            (self.run_dir / "calibration.json").write_text(json.dumps(self.calibration.as_dict(), indent=2) + "\n",
-                                                           encoding="utf-8")
+        self._write_calibration_json(self.calibration.as_dict())
         for name, tend in self.calibration.joints:
-            log.info("calibrated %s: K_a = %.4f, K_b = %.4f, M_e,a = %.4e, M_e,b = %.4e m/N", name, tend["a"].K,
-                     tend["b"].K, tend["a"].M_e, tend["b"].M_e)
+            self.log.info("calibrated %s: K_a = %.4f, K_b = %.4f, M_e,a = %.4e, M_e,b = %.4e m/N", name,
+                          tend["a"].K, tend["b"].K, tend["a"].M_e, tend["b"].M_e)
         self._set_state(SideState.SAFE, now, "calibrated; waiting for commands")
 
-    def _set_state(self, state: SideState, now: float, why: str) -> None:
-        if state != self.state:
-            log.info("slave %s -> %s at t=%.3f s: %s", self.state.name, state.name, now, why)
-            if state == SideState.SAFE and self.state == SideState.ENGAGED:
-                self.safe_events += 1
-            self.state = state
-
-    def _warn(self, now: float, msg: str, *args) -> None:
-        if now - self._t_warn >= 1.0:
-            self._t_warn = now
-            log.warning(msg, *args)
-
     # ---- commands ----------------------------------------------------------------------------------
-    def _accept(self, now: float) -> None:
-        rec = self.links.command.latest()
-        if rec is None or rec is self._seen:
-            return
-        self._seen = rec
-        cmd = rec.message
-        if not isinstance(cmd, JointCommand) or len(cmd.angles) != len(self.joints):
-            self.counts["commands_wrong_joints"] += 1
-            self._warn(now, "rejected command: expected a JointCommand for %d joints", len(self.joints))
-            return
-        last = None if self._accepted is None else self._accepted.message.seq
-        if not seq_newer(cmd.seq, last):
-            self.counts["commands_duplicate" if cmd.seq == last else "commands_out_of_order"] += 1
-            return
+    def _fits(self, cmd, now: float) -> bool:
+        if isinstance(cmd, JointCommand) and len(cmd.angles) == len(self.joints):
+            return True
+        self.counts["commands_wrong_joints"] += 1
+        self._warn(now, "rejected command: expected a JointCommand for %d joints", len(self.joints))
+        return False
+
+    def _in_range(self, cmd: JointCommand, now: float) -> bool:
         for j, a, (lo, hi) in zip(self.joints, cmd.angles, self.cmd_range):
             if not lo <= a <= hi:
                 self.counts["commands_rejected_range"] += 1
                 self._warn(now, "rejected command %d: %s angle %.4g rad outside [%.3g, %.3g] rad", cmd.seq, j.name, a,
                            lo, hi)
-                return
-        self._accepted = rec
+                return False
+        return True
 
     def _commands(self, now: float) -> list[float | None]:
         """The watchdog applied to the latest accepted command: one angle (or None) per joint."""
         self._accept(now)
         rec, none = self._accepted, [None] * len(self.joints)
-        alive = self.links.master_alive
-        if rec is None or now - rec.t_recv > self.watchdog or (alive is not None and not alive()):
-            why = "no command" if rec is None else ("command stale" if now - rec.t_recv > self.watchdog
-                                                    else "master liveliness token gone")
+        why = self._command_fault(now)
+        if why is not None:
             self._set_state(SideState.SAFE, now, why)
             self.marker, self.hold = 0, None
             return none
@@ -250,43 +207,22 @@ class JointSlaveNode:
         return list(cmd.angles)
 
     # ---- the cycle ---------------------------------------------------------------------------------
-    def step(self, now: float) -> None:
-        """One slave cycle at time ``now`` [s] (module docstring)."""
-        if self.done:
-            return
-        dt = self.period if self._t_prev is None else now - self._t_prev
-        if not dt > 0:
-            return
-        if dt > self.max_dt:
-            self.stalls += 1
-            dt = self.max_dt
-        self._t_prev = now
-        self.cycles += 1
-        hb = self.links.master_heartbeat.latest()
-        if hb is not None and hb.message.state == SideState.STOPPING:
-            self.master_stopped = True
-            self.done = self.done or self.stop_on_master_stop
-        if self.state == SideState.CALIBRATING:
-            x = self.routine.command(self.inst_state, dt)
-            self.inst_state = self.instrument.step(x, dt)
-            if self.routine.done:
-                self._finish_calibration(now)
-        else:
-            cmds = self._commands(now)
-            st = self.inst_state
-            x = [c.step(cmd, st.T_in[i], dt, s.x_out) for i, (c, cmd, s) in
-                 enumerate(zip(self.controllers, cmds, self.samples))]
-            st = self.inst_state = self.instrument.step(x, dt)
-            self.samples = [est.step(st.T_in[i, 0], st.x_in[i, 0], st.T_in[i, 1], st.x_in[i, 1], st.t)
-                            for i, est in enumerate(self.estimators)]
-            self.links.estimate.put(self._message(now, st))
-            self.seq = next_seq(self.seq)
-            self._record(st, cmds)
-        if now >= self._next_hb:
-            self.links.heartbeat.put(Heartbeat(Side.SLAVE, self.hb_seq, now, self.state))
-            self.hb_seq = next_seq(self.hb_seq)
-            self._next_hb = now + self.hb_period if self._next_hb == -math.inf else max(self._next_hb + self.hb_period,
-                                                                                        now)
+    def _calibration_step(self, now: float, dt: float) -> None:
+        x = self.routine.command(self.inst_state, dt)
+        self.inst_state = self.instrument.step(x, dt)
+        if self.routine.done:
+            self._finish_calibration(now)
+
+    def _control_step(self, now: float, dt: float) -> None:
+        cmds = self._commands(now)
+        st = self.inst_state
+        x = [c.step(cmd, st.T_in[i], dt, s.x_out) for i, (c, cmd, s) in
+             enumerate(zip(self.controllers, cmds, self.samples))]
+        st = self.inst_state = self.instrument.step(x, dt)
+        self.samples = [est.step(st.T_in[i, 0], st.x_in[i, 0], st.T_in[i, 1], st.x_in[i, 1], st.t)
+                        for i, est in enumerate(self.estimators)]
+        self._publish(self._message(now, st))
+        self._record(st, cmds)
 
     def _message(self, now: float, st: InstrumentState) -> JointEstimate:
         joints = tuple(JointState(s.torque, s.angle, tuple(
@@ -323,30 +259,8 @@ class JointSlaveNode:
                 self.rerun.log_scalars(st.t, **{f"{name}/angle_hat": s.angle,
                                                 f"{name}/angle_true": None if tr is None else float(tr.theta[i])})
 
-    # ---- running -----------------------------------------------------------------------------------
-    def run(self, clock: Clock, *, max_duration: float | None = None) -> None:
-        """Pace :meth:`step` at ``rig.rate_hz`` until :attr:`done` (or ``max_duration`` [s])."""
-        pacer = Pacer(clock, self.cfg.rig.rate_hz)
-        t0 = clock.now()
-        try:
-            while not self.done:
-                now = pacer.wait()
-                self.step(now)
-                if max_duration is not None and now - t0 >= max_duration:
-                    break
-        finally:
-            self.pacer_stats = pacer.stats()
-
-    def stats(self) -> dict[str, Any]:
-        """Counters for the run summary (JSON-serialisable)."""
-        cmd = self.links.command
-        return {"side": "slave", "state": self.state.name, "cycles": self.cycles, "estimates_sent": self.seq,
-                "commands_received": int(getattr(cmd, "count", 0)),
-                "command_decode_errors": int(getattr(cmd, "errors", 0)), "commands_applied": self.commands_applied,
-                "safe_events": self.safe_events, "stalls": self.stalls, "master_stopped": self.master_stopped,
+    # ---- summary -----------------------------------------------------------------------------------
+    def _stats_detail(self) -> dict[str, Any]:
+        return {"safe_events": self.safe_events, "stalls": self.stalls, "master_stopped": self.master_stopped,
                 "calibrated": self.calibration is not None, "joints": list(self.names),
-                "side_switches": [c.switches for c in self.controllers], **self.counts,
-                "pacer": dict(self.pacer_stats)}
-
-    def write_stats(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(self.stats(), indent=2) + "\n", encoding="utf-8")
+                "side_switches": [c.switches for c in self.controllers], **self.counts}

@@ -37,26 +37,26 @@ One :meth:`SlaveNode.step` per cycle (``rig.rate_hz``), given the time by the ca
   every ``recording.log_every`` cycles (estimate against truth when the rig has it).
 * A Heartbeat at ``slave.heartbeat_hz`` carries the state. With ``stop_on_master_stop`` the node
   sets :attr:`done` when the master's heartbeat says STOPPING.
+
+The cycle, the watchdog's reasons and the summary counters are shared with the joint-instrument
+slave: :mod:`slave.node_base`; heartbeat, state changes and pacing with every node: :mod:`teleop.node`.
 """
 from __future__ import annotations
 
-import json
 import logging
-import math
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from estimator.distal import DistalEstimator
 from estimator.sheath import SheathModel, profile_batch
 from slave.calibrate import JointLimitCalibration
+from slave.node_base import SlaveLinks, SlaveNodeBase
 from slave.rig import Rig, RigState
-from teleop.clock import Clock, Pacer
-from teleop.codec import next_seq, seq_newer
+from teleop.codec import seq_newer
 from teleop.config import Config
-from teleop.messages import Estimate, Heartbeat, Side, SideState
+from teleop.messages import Command, Estimate, SideState
 
 __all__ = ["SlaveLinks", "SlaveNode", "CSV_COLUMNS", "CSV_TRUTH_COLUMNS", "csv_columns", "RELAX_BAND", "seq_newer"]
 
@@ -70,22 +70,7 @@ CSV_COLUMNS = ("time", "x_in", "T_in", "x_out", "T_out", "elongation", "T_out_ha
 RELAX_BAND = 0.2
 
 
-@dataclass
-class SlaveLinks:
-    """The slave's side of the transport (real: :mod:`teleop.transport`; tests: in-memory fakes).
-
-    estimate, heartbeat : objects with ``put(msg)``.
-    command, master_heartbeat : latest-wins subscribers with ``latest()`` and ``age(now)`` [s].
-    """
-
-    estimate: Any
-    heartbeat: Any
-    command: Any
-    master_heartbeat: Any
-    master_alive: Callable[[], bool] | None = None
-
-
-class SlaveNode:
+class SlaveNode(SlaveNodeBase):
     """Slave side of one tendon's teleoperation loop.
 
     Parameters
@@ -110,49 +95,25 @@ class SlaveNode:
     def __init__(self, cfg: Config, rig: Rig, links: SlaveLinks, *, recorder=None, rerun=None,
                  run_dir: str | Path | None = None, stop_on_master_stop: bool = False,
                  calibrate: bool = True, model=None):
-        self.cfg = cfg
+        super().__init__(cfg, links, run_dir=run_dir, stop_on_master_stop=stop_on_master_stop,
+                         counts=("commands_rejected_range", "commands_out_of_order", "commands_duplicate",
+                                 "engage_refused"))
         self.rig = rig
-        self.links = links
         self.recorder = recorder
         self.rerun = rerun
-        self.run_dir = None if run_dir is None else Path(run_dir)
-        self.stop_on_master_stop = stop_on_master_stop
-        self.watchdog = cfg.slave.watchdog_ms * 1e-3
-        self.hb_period = 1.0 / cfg.slave.heartbeat_hz
-        self.period = 1.0 / cfg.rig.rate_hz
-        self.max_dt = 5.0 * self.period     # longest step the ramps and the rig advance in one cycle [s]
-        self.stalls = 0                     # cycles whose wall-clock period exceeded max_dt
         self.L = cfg.sheath.geometry().length
         self.s_points = np.linspace(0.0, self.L, cfg.estimator.profile_points)
-        self.done = False
-        self.seq = 0
-        self.hb_seq = 0
-        self._next_hb = -math.inf
-        self._t_prev: float | None = None
         self.x_hold = rig.state.x_in
-        self.cmd_seq = 0
-        self.marker = 0
         self.estimator: DistalEstimator | None = None
         self.calibration: JointLimitCalibration | None = None
-        self.state = SideState.STARTING
         self.rig_state: RigState = rig.state
-        self.cycles = 0
-        self.commands_applied = 0
-        self.safe_events = 0
-        self.pacer_stats: dict[str, float] = {}
-        self.master_stopped = False
         self.x_min, self.x_max = cfg.slave.x_in_min, cfg.slave.x_in_max
         self.relax_speed = cfg.slave.relax_speed
         self.relax_to = cfg.sheath.pretension + RELAX_BAND
         self.engage_tolerance = cfg.slave.engage_tolerance
-        self._accepted = None                  # last accepted Received command
-        self._seen = None                      # last Received object looked at
         self._refused = None                   # last command refused for engaging too far away
-        self._t_warn = -math.inf
         self.last_safe_reason: str | None = None
         self._now = 0.0
-        self.counts = dict.fromkeys(("commands_rejected_range", "commands_out_of_order", "commands_duplicate",
-                                     "engage_refused"), 0)
         # load the compiled kernels now, not in the first real-time cycle
         DistalEstimator(SheathModel(K=0.5, compliance=1e-4), n_nodes=2).step(1.0, 0.0, 0.0)
         if calibrate:
@@ -179,10 +140,7 @@ class SlaveNode:
         _, _, est.profile[:] = profile_batch(est.profile, est.log_gain, est.weight, np.asarray(T_h, dtype=float))
         est.step(T_h[-1], x_h[-1], t_h[-1])
         self.x_hold = cal.x_cmd
-        if self.run_dir is not None:
-            self.run_dir.mkdir(parents=True, exist_ok=True)
-            (self.run_dir / "calibration.json").write_text(json.dumps(cal.as_dict(), indent=2) + "\n",
-                                                           encoding="utf-8")
+        self._write_calibration_json(cal.as_dict())
         # first full Rerun log now: its one-off set-up cost (tens of ms) stays out of the engaged loop
         self._log_rerun(self.rig_state, est.T_out, est.elongation, est.phase,
                         est.profile_samples(len(self.s_points)), everything=True)
@@ -193,34 +151,15 @@ class SlaveNode:
     def _set_state(self, state: SideState, now: float, why: str) -> None:
         if state != self.state:
             self.last_safe_reason = why if state == SideState.SAFE else None
-            log.info("slave %s -> %s at t=%.3f s: %s", self.state.name, state.name, now, why)
-            if state == SideState.SAFE and self.state == SideState.ENGAGED:
-                self.safe_events += 1
-            self.state = state
+        super()._set_state(state, now, why)
 
-    def _warn(self, now: float, msg: str, *args) -> None:
-        """A warning at most once per second (real-time loops never flood the log)."""
-        if now - self._t_warn >= 1.0:
-            self._t_warn = now
-            log.warning(msg, *args)
-
-    def _accept(self, now: float) -> None:
-        """Look at the latest received command once: accept it when newer and within range."""
-        rec = self.links.command.latest()
-        if rec is None or rec is self._seen:
-            return
-        self._seen = rec
-        cmd = rec.message
-        last = None if self._accepted is None else self._accepted.message.seq
-        if not seq_newer(cmd.seq, last):
-            self.counts["commands_duplicate" if cmd.seq == last else "commands_out_of_order"] += 1
-            return
-        if not self.x_min <= cmd.x_in_cmd <= self.x_max:
-            self.counts["commands_rejected_range"] += 1
-            self._warn(now, "rejected command %d: x_in_cmd %.6g m outside [%g, %g] m (slave.x_in_min/max)",
-                       cmd.seq, cmd.x_in_cmd, self.x_min, self.x_max)
-            return
-        self._accepted = rec
+    def _in_range(self, cmd: Command, now: float) -> bool:
+        if self.x_min <= cmd.x_in_cmd <= self.x_max:
+            return True
+        self.counts["commands_rejected_range"] += 1
+        self._warn(now, "rejected command %d: x_in_cmd %.6g m outside [%g, %g] m (slave.x_in_min/max)",
+                   cmd.seq, cmd.x_in_cmd, self.x_min, self.x_max)
+        return False
 
     def _safe(self, now: float, why: str, dt: float) -> float:
         """SAFE: hold, then release toward the pretension (module docstring); the rig command [m]."""
@@ -236,12 +175,10 @@ class SlaveNode:
     def _command(self, now: float, dt: float = 0.0) -> float:
         """Apply the watchdog to the latest accepted command; return the rig command [m]."""
         self._accept(now)
+        why = self._command_fault(now)
+        if why is not None:
+            return self._safe(now, why, dt)
         rec = self._accepted
-        if rec is None or now - rec.t_recv > self.watchdog:
-            return self._safe(now, "no command" if rec is None else "command stale", dt)
-        alive = self.links.master_alive
-        if alive is not None and not alive():
-            return self._safe(now, "master liveliness token gone", dt)
         cmd = rec.message
         self.cmd_seq = cmd.seq
         if not cmd.engaged:
@@ -264,49 +201,24 @@ class SlaveNode:
         self.commands_applied += 1
         return cmd.x_in_cmd
 
-    def step(self, now: float) -> None:
-        """One slave cycle at time ``now`` [s] (see the module docstring)."""
-        if self.done:
-            return
-        dt = self.period if self._t_prev is None else now - self._t_prev
-        if not dt > 0:          # same instant twice: nothing to advance
-            return
-        if dt > self.max_dt:    # a stalled cycle must not turn into a jump of the ramps and the rig
-            self.stalls += 1
-            dt = self.max_dt
-        self._t_prev = now
-        self.cycles += 1
-        hb = self.links.master_heartbeat.latest()
-        if hb is not None and hb.message.state == SideState.STOPPING:
-            self.master_stopped = True
-            if self.stop_on_master_stop:
-                self.done = True
+    def _calibration_step(self, now: float, dt: float) -> None:
+        cal = self.calibration
+        x_cmd = cal.command(self.rig_state, dt)
+        self.rig_state = self.rig.step(x_cmd, dt)
+        cal.observe(self.rig_state)
+        self._record_calibration(self.rig_state, x_cmd)
+        if cal.done:
+            self._finish_calibration(now)
 
-        if self.state == SideState.CALIBRATING:
-            cal = self.calibration
-            x_cmd = cal.command(self.rig_state, dt)
-            self.rig_state = self.rig.step(x_cmd, dt)
-            cal.observe(self.rig_state)
-            self._record_calibration(self.rig_state, x_cmd)
-            if cal.done:
-                self._finish_calibration(now)
-        else:
-            self._now = now
-            x_cmd = self._command(now, dt)
-            rs = self.rig_state = self.rig.step(x_cmd, dt)
-            est = self.estimator.step(rs.T_in, rs.x_in, rs.t)
-            profile = self.estimator.profile_samples(len(self.s_points))
-            self.links.estimate.put(Estimate(self.seq, self.cmd_seq, now, rs.T_in, rs.x_in, est.T_out,
-                                             est.elongation, est.x_out, est.phase,
-                                             tuple(float(v) for v in profile)))
-            self.seq = next_seq(self.seq)
-            self._record(rs, est, x_cmd, profile)
-
-        if now >= self._next_hb:
-            self.links.heartbeat.put(Heartbeat(Side.SLAVE, self.hb_seq, now, self.state))
-            self.hb_seq = next_seq(self.hb_seq)
-            self._next_hb = now + self.hb_period if self._next_hb == -math.inf else max(
-                self._next_hb + self.hb_period, now)
+    def _control_step(self, now: float, dt: float) -> None:
+        self._now = now
+        x_cmd = self._command(now, dt)
+        rs = self.rig_state = self.rig.step(x_cmd, dt)
+        est = self.estimator.step(rs.T_in, rs.x_in, rs.t)
+        profile = self.estimator.profile_samples(len(self.s_points))
+        self._publish(Estimate(self.seq, self.cmd_seq, now, rs.T_in, rs.x_in, est.T_out, est.elongation, est.x_out,
+                               est.phase, tuple(float(v) for v in profile)))
+        self._record(rs, est, x_cmd, profile)
 
     def _record_calibration(self, rs: RigState, x_cmd: float) -> None:
         """Rerun only (the CSV starts when the estimator does): the calibration pull as it happens."""
@@ -350,40 +262,14 @@ class SlaveNode:
             self.rerun.log_phase(rs.t, phase.label)
 
     # ------------------------------------------------------------------------------------------------
-    def run(self, clock: Clock, *, max_duration: float | None = None) -> None:
-        """Pace :meth:`step` at ``rig.rate_hz`` until :attr:`done` (or ``max_duration`` [s])."""
-        pacer = Pacer(clock, self.cfg.rig.rate_hz)
-        t0 = clock.now()
-        try:
-            while not self.done:
-                now = pacer.wait()
-                self.step(now)
-                if max_duration is not None and now - t0 >= max_duration:
-                    break
-        finally:
-            self.pacer_stats = pacer.stats()
-
-    def stats(self) -> dict[str, Any]:
-        """Counters for the run summary (JSON-serialisable)."""
-        cmd = self.links.command
+    def _stats_detail(self) -> dict[str, Any]:
         return {
-            "side": "slave",
-            "state": self.state.name,
-            "cycles": self.cycles,
-            "estimates_sent": self.seq,
-            "commands_received": int(getattr(cmd, "count", 0)),
-            "command_decode_errors": int(getattr(cmd, "errors", 0)),
-            "commands_applied": self.commands_applied,
             **self.counts,
             "safe_events": self.safe_events,
             "stalls": self.stalls,
             "master_stopped": self.master_stopped,
             "calibrated": self.estimator is not None,
-            "pacer": dict(self.pacer_stats),
         }
-
-    def write_stats(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(self.stats(), indent=2) + "\n", encoding="utf-8")
 
 
 def csv_columns(has_truth: bool) -> tuple[str, ...]:

@@ -1,0 +1,181 @@
+"""What both slave nodes share (one tendon: :mod:`slave.node`; joint instrument: :mod:`slave.joint_node`).
+
+The cycle and the watchdog of the instrument side, the same whatever the instrument:
+
+* one cycle per :meth:`SlaveNodeBase.step` at ``rig.rate_hz``: the same instant twice does nothing;
+  a cycle whose wall-clock period exceeds ``5 / rig.rate_hz`` (a stall) is counted and advances the
+  ramps and the rig by that much only, never by a jump;
+* the master's heartbeat saying STOPPING is noted (and ends the node with ``stop_on_master_stop``);
+* CALIBRATING runs the node's power-up routine, every other state follows the latest accepted
+  command (:meth:`SlaveNodeBase._command_fault`: none yet, older than ``slave.watchdog_ms`` or the
+  master's liveliness token gone means SAFE); a command is accepted when it fits the instrument,
+  is newer than the last accepted one and lies within range;
+* one estimate published per control cycle, a Heartbeat at ``slave.heartbeat_hz``;
+* ``calibration.json`` in the run directory, and the counters of the run summary.
+"""
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+from teleop.codec import next_seq
+from teleop.config import Config
+from teleop.messages import Side, SideState
+from teleop.node import NodeBase
+
+__all__ = ["SlaveLinks", "SlaveNodeBase"]
+
+
+@dataclass
+class SlaveLinks:
+    """The slave's side of the transport (real: :mod:`teleop.transport`; tests: in-memory fakes).
+
+    estimate, heartbeat : objects with ``put(msg)``.
+    command, master_heartbeat : latest-wins subscribers with ``latest()`` and ``age(now)`` [s].
+    """
+
+    estimate: Any
+    heartbeat: Any
+    command: Any
+    master_heartbeat: Any
+    master_alive: Callable[[], bool] | None = None
+
+
+class SlaveNodeBase(NodeBase):
+    """The cycle, watchdog and summary of a slave node (module docstring).
+
+    Subclasses implement :meth:`_calibration_step`, :meth:`_control_step`, ``_in_range(cmd, now)``
+    and :meth:`_stats_detail`; ``_fits(cmd, now)`` as needed.
+
+    Parameters
+    ----------
+    cfg : Config
+        ``slave`` (watchdog, heartbeat) and ``rig.rate_hz`` are used here.
+    links : SlaveLinks
+    run_dir : path or None
+        Where ``calibration.json`` goes.
+    stop_on_master_stop : bool
+        Finish when the master announces STOPPING.
+    counts : iterable of str
+        The node's event counters.
+    """
+
+    side = Side.SLAVE
+    log = logging.getLogger("teleop.slave")
+
+    def __init__(self, cfg: Config, links: SlaveLinks, *, run_dir: str | Path | None, stop_on_master_stop: bool,
+                 counts):
+        super().__init__(cfg.slave.heartbeat_hz, counts)
+        self.cfg = cfg
+        self.links = links
+        self.run_dir = None if run_dir is None else Path(run_dir)
+        self.stop_on_master_stop = stop_on_master_stop
+        self.watchdog = cfg.slave.watchdog_ms * 1e-3
+        self.period = 1.0 / cfg.rig.rate_hz
+        self.max_dt = 5.0 * self.period     # longest step the ramps and the rig advance in one cycle [s]
+        self.stalls = 0                     # cycles whose wall-clock period exceeded max_dt
+        self._t_prev: float | None = None
+        self.cmd_seq = 0
+        self.marker = 0
+        self.cycles = 0
+        self.commands_applied = 0
+        self.master_stopped = False
+        self._accepted = None                  # last accepted Received command
+
+    @property
+    def rate_hz(self) -> float:
+        return self.cfg.rig.rate_hz
+
+    # ---- the cycle ---------------------------------------------------------------------------------
+    def _cycle_dt(self, now: float) -> float | None:
+        """Start a cycle at ``now`` [s]: its time step [s] (stalls clipped to ``max_dt``), or None when
+        there is nothing to do (done, or the same instant twice)."""
+        if self.done:
+            return None
+        dt = self.period if self._t_prev is None else now - self._t_prev
+        if not dt > 0:          # same instant twice: nothing to advance
+            return None
+        if dt > self.max_dt:    # a stalled cycle must not turn into a jump of the ramps and the rig
+            self.stalls += 1
+            dt = self.max_dt
+        self._t_prev = now
+        self.cycles += 1
+        hb = self.links.master_heartbeat.latest()
+        if hb is not None and hb.message.state == SideState.STOPPING:
+            self.master_stopped = True
+            if self.stop_on_master_stop:
+                self.done = True
+        return dt
+
+    def step(self, now: float) -> None:
+        """One slave cycle at time ``now`` [s] (see the module docstrings)."""
+        dt = self._cycle_dt(now)
+        if dt is None:
+            return
+        if self.state == SideState.CALIBRATING:
+            self._calibration_step(now, dt)
+        else:
+            self._control_step(now, dt)
+        self._heartbeat(now)
+
+    def _calibration_step(self, now: float, dt: float) -> None:
+        """One cycle of the power-up calibration routine."""
+        raise NotImplementedError
+
+    def _control_step(self, now: float, dt: float) -> None:
+        """One cycle following the commands: rig, estimators, :meth:`_publish`, recording."""
+        raise NotImplementedError
+
+    # ---- commands and estimates --------------------------------------------------------------------
+    def _accept(self, now: float) -> None:
+        """Look at the latest received command once: accept it when it fits, is newer and within range."""
+        last = None if self._accepted is None else self._accepted.message.seq
+        rec = self._take(self.links.command, last, "commands", now)
+        if rec is not None:
+            self._accepted = rec
+
+    def _command_fault(self, now: float) -> str | None:
+        """Why the latest accepted command cannot be followed (SAFE), or None when it can."""
+        rec = self._accepted
+        if rec is None:
+            return "no command"
+        if now - rec.t_recv > self.watchdog:
+            return "command stale"
+        alive = self.links.master_alive
+        if alive is not None and not alive():
+            return "master liveliness token gone"
+        return None
+
+    def _publish(self, msg) -> None:
+        """Publish the estimate of this cycle (built with seq :attr:`seq`)."""
+        self.links.estimate.put(msg)
+        self.seq = next_seq(self.seq)
+
+    # ---- files and summary -------------------------------------------------------------------------
+    def _write_calibration_json(self, data: dict) -> None:
+        """``calibration.json`` in the run directory (none without one)."""
+        if self.run_dir is not None:
+            self.run_dir.mkdir(parents=True, exist_ok=True)
+            (self.run_dir / "calibration.json").write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+
+    def _stats_detail(self) -> dict[str, Any]:
+        """The node's own counters, between the command counters and the pacer in :meth:`stats`."""
+        raise NotImplementedError
+
+    def stats(self) -> dict[str, Any]:
+        """Counters for the run summary (JSON-serialisable)."""
+        cmd = self.links.command
+        return {
+            "side": "slave",
+            "state": self.state.name,
+            "cycles": self.cycles,
+            "estimates_sent": self.seq,
+            "commands_received": int(getattr(cmd, "count", 0)),
+            "command_decode_errors": int(getattr(cmd, "errors", 0)),
+            "commands_applied": self.commands_applied,
+            **self._stats_detail(),
+            "pacer": dict(self.pacer_stats),
+        }

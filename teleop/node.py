@@ -1,0 +1,156 @@
+"""What every teleoperation node shares, master or slave, one tendon or a joint instrument.
+
+A node is a :meth:`step` callable once per cycle with the time given by the caller and a
+:meth:`NodeBase.run` that only paces it (ARCHITECTURE.md). Around the side-specific cycle every node
+does the same bookkeeping, kept here once:
+
+* its :class:`~teleop.messages.SideState` and the log line of every change; a change from ENGAGED
+  to SAFE counts as a *safe event*;
+* warnings at most once per second (a real-time loop never floods the log);
+* the look at the newest message of a latest-wins subscriber, once per message: accepted when it is
+  of the expected kind, newer than the last accepted one (uint32 wrap, :func:`teleop.codec.seq_newer`;
+  duplicates and reordered old messages are counted) and within the node's bounds;
+* a Heartbeat at ``slave.heartbeat_hz`` carrying the state (both sides use that rate): the first at
+  once, then one per period without drifting and without bursts after a stall;
+* pacing at a fixed rate until :attr:`done` (or a maximum duration), the pacer's figures kept for
+  the stats, and the stats written as JSON.
+
+Subclasses set :attr:`side` (:class:`~teleop.messages.Side`), :attr:`log` (their logger) and
+:attr:`rate_hz`, and provide ``step(now)``, ``stats()`` and the range check ``_in_range(msg, now)``
+(``_fits(msg, now)`` optionally); ``links.heartbeat`` takes the heartbeats.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import math
+from pathlib import Path
+from typing import Any
+
+from teleop.clock import Clock, Pacer
+from teleop.codec import next_seq, seq_newer
+from teleop.messages import Heartbeat, Side, SideState
+
+__all__ = ["NodeBase"]
+
+
+class NodeBase:
+    """State, warnings, message acceptance, heartbeat, pacing and stats of one node (module docstring).
+
+    Parameters
+    ----------
+    heartbeat_hz : float
+        Heartbeat rate [Hz] (``slave.heartbeat_hz`` on both sides).
+    counts : iterable of str
+        Names of the node's event counters (all start at 0), reported in the stats.
+    """
+
+    side: Side
+    log: logging.Logger
+
+    def __init__(self, heartbeat_hz: float, counts=()):
+        self.hb_period = 1.0 / heartbeat_hz
+        self.state = SideState.STARTING
+        self.done = False
+        self.seq = 0
+        self.hb_seq = 0
+        self._next_hb = -math.inf
+        self._seen = None                      # last Received object looked at
+        self._t_warn = -math.inf
+        self.safe_events = 0
+        self.counts: dict[str, int] = dict.fromkeys(counts, 0)
+        self.pacer_stats: dict[str, float] = {}
+
+    # ---- state and log -----------------------------------------------------------------------------
+    @property
+    def rate_hz(self) -> float:
+        """The rate :meth:`run` paces :meth:`step` at [Hz]."""
+        raise NotImplementedError
+
+    def _set_state(self, state: SideState, now: float, why: str) -> None:
+        """Change the state (logged with the reason); ENGAGED -> SAFE counts a safe event."""
+        if state != self.state:
+            self.log.info("%s %s -> %s at t=%.3f s: %s", self.side.name.lower(), self.state.name, state.name, now, why)
+            if state == SideState.SAFE and self.state == SideState.ENGAGED:
+                self.safe_events += 1
+            self.state = state
+
+    def _warn(self, now: float, msg: str, *args) -> None:
+        """A warning at most once per second (real-time loops never flood the log)."""
+        if now - self._t_warn >= 1.0:
+            self._t_warn = now
+            self.log.warning(msg, *args)
+
+    # ---- incoming messages -------------------------------------------------------------------------
+    def _unseen(self, subscriber):
+        """The subscriber's newest Received the first time it is looked at, else None."""
+        rec = subscriber.latest()
+        if rec is None or rec is self._seen:
+            return None
+        self._seen = rec
+        return rec
+
+    def _fits(self, msg, now: float) -> bool:
+        """Whether ``msg`` is of the kind this node reads (checked before the order; default True)."""
+        return True
+
+    def _in_range(self, msg, now: float) -> bool:
+        """Whether the values of ``msg`` are within the node's bounds (else counted and warned)."""
+        raise NotImplementedError
+
+    def _take(self, subscriber, last: int | None, noun: str, now: float):
+        """The subscriber's newest Received when it is unseen, fits (:meth:`_fits`), is newer than the
+        last accepted seq ``last`` (:meth:`_newer`) and is in range (:meth:`_in_range`), in that
+        order; else None (each refusal counted by the check that made it)."""
+        rec = self._unseen(subscriber)
+        if rec is None:
+            return None
+        msg = rec.message
+        if self._fits(msg, now) and self._newer(msg.seq, last, noun) and self._in_range(msg, now):
+            return rec
+        return None
+
+    def _newer(self, seq: int, last: int | None, noun: str) -> bool:
+        """Whether ``seq`` is newer than ``last`` (the last accepted one, None before any); if not,
+        counted as ``<noun>_duplicate`` or ``<noun>_out_of_order``."""
+        if seq_newer(seq, last):
+            return True
+        self.counts[f"{noun}_duplicate" if seq == last else f"{noun}_out_of_order"] += 1
+        return False
+
+    # ---- outgoing ----------------------------------------------------------------------------------
+    def _heartbeat(self, now: float) -> None:
+        """Publish a Heartbeat when one is due (one per ``hb_period``, the first at once)."""
+        if now >= self._next_hb:
+            self.links.heartbeat.put(Heartbeat(self.side, self.hb_seq, now, self.state))
+            self.hb_seq = next_seq(self.hb_seq)
+            self._next_hb = now + self.hb_period if self._next_hb == -math.inf else max(
+                self._next_hb + self.hb_period, now)
+
+    # ---- running -----------------------------------------------------------------------------------
+    def run(self, clock: Clock, *, max_duration: float | None = None) -> None:
+        """Pace :meth:`step` at :attr:`rate_hz` until :attr:`done` (or ``max_duration`` [s])."""
+        pacer = Pacer(clock, self.rate_hz)
+        t0 = clock.now()
+        try:
+            while not self.done:
+                now = pacer.wait()
+                self.step(now)
+                if max_duration is not None and now - t0 >= max_duration:
+                    break
+        finally:
+            self.pacer_stats = pacer.stats()
+            self._run_ended(clock)
+
+    def _run_ended(self, clock: Clock) -> None:
+        """Called once when :meth:`run` returns or raises (default: nothing)."""
+
+    def step(self, now: float) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def stats(self) -> dict[str, Any]:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def write_stats(self, path: str | Path) -> None:
+        """Write :meth:`stats` as JSON to ``path``."""
+        Path(path).write_text(json.dumps(self.stats(), indent=2) + "\n", encoding="utf-8")
