@@ -25,7 +25,8 @@ from pathlib import Path
 
 from teleop.errors import TeleopError
 
-__all__ = ["build_parser", "main", "run_slave", "run_master", "default_run_dir", "endpoints", "open_session"]
+__all__ = ["build_parser", "main", "run_slave", "run_master", "default_run_dir", "prepare_run_dir", "endpoints",
+           "open_session", "slave_links", "master_links"]
 
 PROG = "teleop"
 
@@ -110,6 +111,71 @@ def _write_fault_stats(injector, path: Path) -> None:
         path.write_text(json.dumps(injector.stats(), indent=2) + "\n", encoding="utf-8")
 
 
+def prepare_run_dir(args: argparse.Namespace, cfg) -> Path:
+    """``--run-dir``, else a fresh ``<recording.dir>/<timestamp>``; created."""
+    run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(cfg.recording.dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    return run_dir
+
+
+def _side_streams(session, ident: str, injector, me: str, peer: str, out: tuple[str, str], incoming: tuple[str, type]):
+    """Declare the streams of side ``me`` on ``session``: the peer's liveliness watched, the outgoing
+    publisher ``out = (key, stream name)`` and the heartbeat (``--inject`` faults on both), the
+    incoming subscriber ``incoming = (key, message type)`` and the peer's heartbeat; then the own
+    liveliness token. Returns (outgoing, heartbeat, incoming, peer heartbeat, peer alive)."""
+    from teleop.keys import heartbeat_key, liveliness_key
+    from teleop.messages import Heartbeat
+
+    watcher = session.liveliness_watcher(liveliness_key(ident, peer))
+    streams = (_publisher(session, out[0], out[1], injector),
+               _publisher(session, heartbeat_key(ident, me), "heartbeat", injector),
+               session.subscriber(incoming[0], incoming[1]),
+               session.subscriber(heartbeat_key(ident, peer), Heartbeat),
+               lambda: watcher.alive)
+    session.liveliness_token(liveliness_key(ident, me))
+    return streams
+
+
+def slave_links(session, ident: str, injector, command_type):
+    """The slave's links on ``session`` (:func:`_side_streams`): estimates out, commands of
+    ``command_type`` (Command or JointCommand) in."""
+    from slave.node_base import SlaveLinks
+    from teleop.keys import command_key, estimate_key
+
+    # SlaveLinks' fields in order: estimate, heartbeat, command, master_heartbeat, master_alive
+    return SlaveLinks(*_side_streams(session, ident, injector, "slave", "master", (estimate_key(ident), "estimate"),
+                                     (command_key(ident), command_type)))
+
+
+def master_links(session, ident: str, injector, estimate_type):
+    """The master's links on ``session`` (:func:`_side_streams`): commands out, estimates of
+    ``estimate_type`` (Estimate or JointEstimate) in."""
+    from master.node_base import MasterLinks
+    from teleop.keys import command_key, estimate_key
+
+    # MasterLinks' fields in order: command, heartbeat, estimate, slave_heartbeat, slave_alive
+    return MasterLinks(*_side_streams(session, ident, injector, "master", "slave", (command_key(ident), "command"),
+                                      (estimate_key(ident), estimate_type)))
+
+
+def _serve(node, clock, args: argparse.Namespace, run_dir: Path, side: str, injector, *, close_first=None) -> None:
+    """Run ``node`` until done (or ``--max-duration``); however it ends, ``close_first()`` (e.g. the
+    device), then ``<side>_stats.json`` and ``<side>_faults.json`` in ``run_dir``."""
+    try:
+        node.run(clock, max_duration=args.max_duration)
+    finally:
+        if close_first is not None:
+            close_first()
+        node.write_stats(run_dir / f"{side}_stats.json")
+        _write_fault_stats(injector, run_dir / f"{side}_faults.json")
+
+
+def _log_master_done(node) -> None:
+    lat = node.latency_stats()
+    logging.getLogger("teleop.master").info("master done: %s commands, rtt p50 %s ms, p99 %s ms",
+                                            node.commands_sent, lat["p50_ms"], lat["p99_ms"])
+
+
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The argument parser. ``argv`` decides whether ``teleop.analyze`` is imported (only for analyze)."""
     parser = argparse.ArgumentParser(prog=PROG, description="Haptic teleoperation of tendon-sheath instruments.")
@@ -181,12 +247,11 @@ def _cmd_master(args: argparse.Namespace) -> int:
 
 def run_slave(args: argparse.Namespace) -> int:
     """``teleop slave``: calibrate the rig, then serve commands until stopped."""
-    from slave.node import SlaveLinks, SlaveNode, csv_columns, warm_up
+    from slave.node import SlaveNode, csv_columns, warm_up
     from slave.simulated import SimulatedRig
     from teleop.clock import MonotonicClock
     from teleop.config import load_config
-    from teleop.keys import command_key, estimate_key, heartbeat_key, liveliness_key
-    from teleop.messages import Command, Heartbeat
+    from teleop.messages import Command
     from teleop.recording import CsvRecorder, raise_on_sigterm
     from teleop.rerun_log import RerunLogger
 
@@ -194,8 +259,7 @@ def run_slave(args: argparse.Namespace) -> int:
     if cfg.instrument.joints:           # a joint instrument: its own node, same transport and flags
         from teleop.cli_joints import run_joint_slave
         return run_joint_slave(args, cfg)
-    run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(cfg.recording.dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
+    run_dir = prepare_run_dir(args, cfg)
     warm_up(cfg)  # compile the numba kernels now, not in the first real-time cycles
     rig = SimulatedRig.from_config(cfg)
     has_truth = rig.state.truth is not None
@@ -209,32 +273,21 @@ def run_slave(args: argparse.Namespace) -> int:
             open_session(cfg, args, clock) as session, \
             CsvRecorder(run_dir / "slave.csv", csv_columns(has_truth), meta, flush_every=500) as rec, \
             RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd") as rr:
-        watcher = session.liveliness_watcher(liveliness_key(ident, "master"))
-        links = SlaveLinks(estimate=_publisher(session, estimate_key(ident), "estimate", injector),
-                           heartbeat=_publisher(session, heartbeat_key(ident, "slave"), "heartbeat", injector),
-                           command=session.subscriber(command_key(ident), Command),
-                           master_heartbeat=session.subscriber(heartbeat_key(ident, "master"), Heartbeat),
-                           master_alive=lambda: watcher.alive)
-        session.liveliness_token(liveliness_key(ident, "slave"))
+        links = slave_links(session, ident, injector, Command)
         node = SlaveNode(cfg, rig, links, recorder=rec, rerun=rr, run_dir=run_dir,
                          stop_on_master_stop=args.exit_on_master_stop)
-        try:
-            node.run(clock, max_duration=args.max_duration)
-        finally:
-            node.write_stats(run_dir / "slave_stats.json")
-            _write_fault_stats(injector, run_dir / "slave_faults.json")
+        _serve(node, clock, args, run_dir, "slave", injector)
     logging.getLogger("teleop.slave").info("slave done: %s", run_dir)
     return 0
 
 
 def run_master(args: argparse.Namespace) -> int:
     """``teleop master``: run the operator side until the device's protocol is finished."""
-    from master.node import CSV_COLUMNS as MASTER_CSV, CSV_UNITS as MASTER_UNITS, MasterLinks, MasterNode
+    from master.node import CSV_COLUMNS as MASTER_CSV, CSV_UNITS as MASTER_UNITS, MasterNode
     from master.simulated import ScriptedOperator, build_protocol
     from teleop.clock import MonotonicClock
     from teleop.config import load_config
-    from teleop.keys import command_key, estimate_key, heartbeat_key, liveliness_key
-    from teleop.messages import Estimate, Heartbeat
+    from teleop.messages import Estimate
     from teleop.recording import CsvRecorder, raise_on_sigterm
 
     cfg = load_config(args.config)
@@ -250,8 +303,7 @@ def run_master(args: argparse.Namespace) -> int:
     # from here on the device is closed on every exit path (HID: zero force, stop all effects,
     # disable actuators), whatever fails: session, recording, the loop, Ctrl-C or SIGTERM
     with _closing(device):
-        run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(cfg.recording.dir)
-        run_dir.mkdir(parents=True, exist_ok=True)
+        run_dir = prepare_run_dir(args, cfg)
         ident = cfg.instrument.id
         clock = MonotonicClock()
         injector = _injector(args, clock)
@@ -259,23 +311,10 @@ def run_master(args: argparse.Namespace) -> int:
                 "columns": "x_in = command sent, T_in = slave's latest proximal tension, force = rendered"}
         with raise_on_sigterm(), open_session(cfg, args, clock) as session, \
                 CsvRecorder(run_dir / "master.csv", MASTER_CSV, meta, units=MASTER_UNITS, flush_every=100) as rec:
-            watcher = session.liveliness_watcher(liveliness_key(ident, "slave"))
-            links = MasterLinks(command=_publisher(session, command_key(ident), "command", injector),
-                                heartbeat=_publisher(session, heartbeat_key(ident, "master"), "heartbeat", injector),
-                                estimate=session.subscriber(estimate_key(ident), Estimate),
-                                slave_heartbeat=session.subscriber(heartbeat_key(ident, "slave"), Heartbeat),
-                                slave_alive=lambda: watcher.alive)
-            session.liveliness_token(liveliness_key(ident, "master"))
+            links = master_links(session, ident, injector, Estimate)
             node = MasterNode(cfg, device, links, recorder=rec)
-            try:
-                node.run(clock, max_duration=args.max_duration)
-            finally:
-                device.close()
-                node.write_stats(run_dir / "master_stats.json")
-                _write_fault_stats(injector, run_dir / "master_faults.json")
-    lat = node.latency_stats()
-    logging.getLogger("teleop.master").info("master done: %s commands, rtt p50 %s ms, p99 %s ms",
-                                            node.commands_sent, lat["p50_ms"], lat["p99_ms"])
+            _serve(node, clock, args, run_dir, "master", injector, close_first=device.close)
+    _log_master_done(node)
     return 0 if getattr(device, "finished", True) else 1
 
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-from pathlib import Path
 
 from teleop.config import Config
 from teleop.errors import ConfigError, DeviceError
@@ -87,19 +86,16 @@ def run_joint_slave(args: argparse.Namespace, cfg: Config) -> int:
     from estimator.sheath import SheathModel
     from slave.joint_node import JointSlaveNode, joint_csv_columns
     from slave.joint_rig import SimulatedInstrument
-    from slave.node import SlaveLinks
-    from teleop.cli import _injector, _publisher, _write_fault_stats, default_run_dir, open_session
+    from teleop.cli import _injector, _serve, open_session, prepare_run_dir, slave_links
     from teleop.clock import MonotonicClock
-    from teleop.keys import command_key, estimate_key, heartbeat_key, liveliness_key
-    from teleop.messages import Heartbeat, JointCommand
+    from teleop.messages import JointCommand
     from teleop.recording import CsvRecorder, raise_on_sigterm
     from teleop.rerun_log import RerunLogger
 
     log = logging.getLogger("teleop.slave")
     calibration, cal_path = _load_or_none(cfg)
     log.info("calibration %s", f"loaded from {cal_path}" if calibration else f"missing: calibrating, then {cal_path}")
-    run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(cfg.recording.dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
+    run_dir = prepare_run_dir(args, cfg)
     inst = SimulatedInstrument.from_config(cfg)
     # compile the numba kernels now, not in the first real-time cycles
     SimulatedInstrument(cfg.instrument.joints[:1], cfg.rig).step([[1e-4, 1e-4]], 1e-3)
@@ -114,20 +110,10 @@ def run_joint_slave(args: argparse.Namespace, cfg: Config) -> int:
     with raise_on_sigterm(), open_session(cfg, args, clock) as session, \
             CsvRecorder(run_dir / "slave_joints.csv", joint_csv_columns(names, True), meta, flush_every=500) as rec, \
             RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd") as rr:
-        watcher = session.liveliness_watcher(liveliness_key(ident, "master"))
-        links = SlaveLinks(estimate=_publisher(session, estimate_key(ident), "estimate", injector),
-                           heartbeat=_publisher(session, heartbeat_key(ident, "slave"), "heartbeat", injector),
-                           command=session.subscriber(command_key(ident), JointCommand),
-                           master_heartbeat=session.subscriber(heartbeat_key(ident, "master"), Heartbeat),
-                           master_alive=lambda: watcher.alive)
-        session.liveliness_token(liveliness_key(ident, "slave"))
+        links = slave_links(session, ident, injector, JointCommand)
         node = JointSlaveNode(cfg, inst, links, recorder=rec, rerun=rr, calibration=calibration,
                               calibration_file=cal_path, run_dir=run_dir, stop_on_master_stop=args.exit_on_master_stop)
-        try:
-            node.run(clock, max_duration=args.max_duration)
-        finally:
-            node.write_stats(run_dir / "slave_stats.json")
-            _write_fault_stats(injector, run_dir / "slave_faults.json")
+        _serve(node, clock, args, run_dir, "slave", injector)
     log.info("slave done: %s", run_dir)
     return 0
 
@@ -151,41 +137,27 @@ def joint_protocols(cfg: Config, names: str):
 
 def run_joint_master(args: argparse.Namespace, cfg: Config) -> int:
     """``teleop master`` for a joint instrument: the scripted multi-axis operator until its protocol is done."""
-    from master.joint_node import JointMasterLinks, JointMasterNode
+    from master.joint_node import JointMasterNode
     from master.joint_operator import MultiAxisOperator
-    from teleop.cli import _injector, _publisher, _write_fault_stats, default_run_dir, open_session
+    from teleop.cli import _injector, _log_master_done, _serve, master_links, open_session, prepare_run_dir
     from teleop.clock import MonotonicClock
-    from teleop.keys import command_key, estimate_key, heartbeat_key, liveliness_key
-    from teleop.messages import Heartbeat, JointEstimate
+    from teleop.messages import JointEstimate
     from teleop.recording import raise_on_sigterm
 
     if cfg.master.device.type != "simulated":
         raise DeviceError("master.device.type: joint instruments have only the simulated multi-axis operator so far")
     protocol = "paper" if args.protocol in ("paper,minor", "paper") else args.protocol
     device = MultiAxisOperator(joint_protocols(cfg, protocol))
-    run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(cfg.recording.dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
+    run_dir = prepare_run_dir(args, cfg)
     ident = cfg.instrument.id
     clock = MonotonicClock()
     injector = _injector(args, clock)
     try:
         with raise_on_sigterm(), open_session(cfg, args, clock) as session:
-            watcher = session.liveliness_watcher(liveliness_key(ident, "slave"))
-            links = JointMasterLinks(command=_publisher(session, command_key(ident), "command", injector),
-                                     heartbeat=_publisher(session, heartbeat_key(ident, "master"), "heartbeat", injector),
-                                     estimate=session.subscriber(estimate_key(ident), JointEstimate),
-                                     slave_heartbeat=session.subscriber(heartbeat_key(ident, "slave"), Heartbeat),
-                                     slave_alive=lambda: watcher.alive)
-            session.liveliness_token(liveliness_key(ident, "master"))
+            links = master_links(session, ident, injector, JointEstimate)
             node = JointMasterNode(cfg, device, links)
-            try:
-                node.run(clock, max_duration=args.max_duration)
-            finally:
-                node.write_stats(run_dir / "master_stats.json")
-                _write_fault_stats(injector, run_dir / "master_faults.json")
+            _serve(node, clock, args, run_dir, "master", injector)
     finally:
         device.close()
-    lat = node.latency_stats()
-    logging.getLogger("teleop.master").info("master done: %s commands, rtt p50 %s ms, p99 %s ms", node.commands_sent,
-                                            lat["p50_ms"], lat["p99_ms"])
+    _log_master_done(node)
     return 0 if device.finished else 1
