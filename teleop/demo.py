@@ -3,7 +3,8 @@
 1. ``runs/<id>/`` (id = timestamp) gets the resolved config; a free TCP port on 127.0.0.1 is picked.
 2. The slave (``python -m teleop.cli slave``: calibration, simulated rig, estimator, CSV + Rerun)
    starts and listens there; once the port accepts connections the master (``... master``: scripted
-   operator, protocols ``paper,minor``) starts and connects. Both are OS processes talking Zenoh.
+   operator, protocols ``paper,minor``) starts and connects. Both are OS processes talking Zenoh
+   (:func:`teleop.demo_run.run_processes`, shared with the joint-instrument demo).
 3. When the master has finished its protocol it announces STOPPING and the slave exits too. Either
    running past ``--timeout`` is stopped with SIGTERM (recordings are flushed) and reported.
 4. :func:`evaluate` reads the slave's CSV and computes, per experiment (marker 1 = paper's,
@@ -16,12 +17,6 @@
 """
 from __future__ import annotations
 
-import json
-import math
-import os
-import signal
-import socket
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -30,6 +25,7 @@ import numpy as np
 
 from estimator.capstan import phase_formula_batch
 from teleop.config import Config, load_config, write_config
+from teleop.demo_run import finish, full_scale_errors, loop_lines, read_json, run_processes, verdict_lines
 from teleop.errors import DataError
 from teleop.recording import read_measured_csv
 
@@ -48,14 +44,6 @@ def baseline_deadband(cfg: Config) -> float:
     way, so a smaller band declares reversals on noise alone and is unfair to the baseline.
     """
     return max(0.1, 10.0 * cfg.rig.sensors.load_cell_noise)
-
-
-def _errors(est: np.ndarray, true: np.ndarray) -> tuple[float, float]:
-    fs = float(np.ptp(true))
-    err = np.abs(est - true)
-    if fs <= 0:
-        return math.nan, math.nan
-    return float(err.max() / fs), float(err.mean() / fs)
 
 
 def evaluate(csv_path: str | Path, calibration: dict, cfg: Config) -> dict:
@@ -99,8 +87,8 @@ def evaluate(csv_path: str | Path, calibration: dict, cfg: Config) -> dict:
                "force_full_scale_N": float(np.ptp(T)), "elongation_full_scale_m": float(np.ptp(e))}
         for est, T_hat, e_hat in (("profile_memory", data.extra["T_out_hat"][sel], data.extra["elongation_hat"][sel]),
                                   ("paper_formulas", T_pf[sel], e_pf[sel])):
-            fmax, fmean = _errors(T_hat, T)
-            emax, emean = _errors(e_hat, e)
+            fmax, fmean = full_scale_errors(T_hat, T)
+            emax, emean = full_scale_errors(e_hat, e)
             row[est] = {"force_error_max_fs": fmax, "force_error_mean_fs": fmean,
                         "elongation_error_max_fs": emax, "elongation_error_mean_fs": emean}
         out[name] = row
@@ -136,13 +124,6 @@ def _calibration_summary(calib: dict, cfg: Config) -> dict:
             "knee_T_in_N": calib.get("knee_T_in_N"), "use_route": calib.get("use_route")}
 
 
-def _read_json(path: Path) -> dict:
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        return {}
-
-
 def format_summary(s: dict) -> str:
     """The printed table of a summary dict (see :func:`main_demo`)."""
     L = [f"teleop demo: {s['run_dir']}"]
@@ -164,21 +145,9 @@ def format_summary(s: dict) -> str:
     L.append(f"(full scale = range of the true signal in the experiment; paper-formula reversal deadband "
              f"{s.get('baseline_deadband_N', float('nan')):.2f} N)")
     L.append("")
-    for side in ("master", "slave"):
-        st = s.get(side, {})
-        pc = st.get("pacer", {})
-        L.append(f"{side:6s} loop: {pc.get('ticks', 0)} cycles at {pc.get('rate_hz', 0):.0f} Hz, "
-                 f"{pc.get('overruns', 0)} overruns ({100 * pc.get('overrun_fraction', 0):.2f} %), "
-                 f"worst lateness {1e3 * pc.get('max_lateness', 0):.1f} ms, safe events {st.get('safe_events', 0)}")
-    lat = s.get("master", {}).get("latency_rtt", {})
-    if lat.get("n"):
-        L.append(f"round trip (command -> estimate echo): p50 {lat['p50_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms, "
-                 f"max {lat['max_ms']:.2f} ms over {lat['n']} echoes")
+    L += loop_lines(s, detailed=True)
     L.append("")
-    for name, ok in s.get("checks", {}).items():
-        L.append(f"[{'PASS' if ok else 'FAIL'}] {name}")
-    for p in s.get("problems", []):
-        L.append(f"[FAIL] {p}")
+    L += verdict_lines(s)
     L.append("")
     L.append(f"recording: {s['run_dir']}/slave.csv (measured-data format, truth + estimates per cycle)")
     L.append(f"rerun:     {s['run_dir']}/slave.rrd  ->  open with `rerun {s['run_dir']}/slave.rrd`"
@@ -189,76 +158,12 @@ def format_summary(s: dict) -> str:
     return "\n".join(L)
 
 
-def _wait_listening(port: int, proc: subprocess.Popen, deadline: float) -> bool:
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            return False
-        try:
-            with socket.create_connection(("127.0.0.1", port), timeout=0.2):
-                return True
-        except OSError:
-            time.sleep(0.05)
-    return False
-
-
-def _stop(proc: subprocess.Popen) -> None:
-    """SIGTERM (the child flushes its recordings), then SIGKILL after 5 s."""
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(5.0)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-
-
-def _run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str]) -> None:
-    from teleop.transport import free_tcp_port, loopback_endpoint
-    if args.listen:
-        ep = args.listen[0]
-        port = int(ep.rsplit(":", 1)[1])
-    else:
-        port = free_tcp_port()
-        ep = loopback_endpoint(port)
-    timeout = float(args.timeout)
-    base = [sys.executable, "-m", "teleop.cli"]
-    common = ["--config", str(cfg_file), "--run-dir", str(run_dir), "--max-duration", f"{timeout:g}"]
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    deadline = time.monotonic() + timeout
-    procs: list[tuple[str, subprocess.Popen]] = []
-    with open(run_dir / "slave.log", "w") as slog, open(run_dir / "master.log", "w") as mlog:
-        try:
-            slave = subprocess.Popen(base + ["slave", "--listen", ep, "--exit-on-master-stop"] + common,
-                                     stdout=slog, stderr=subprocess.STDOUT, env=env)
-            procs.append(("slave", slave))
-            if not _wait_listening(port, slave, deadline):
-                problems.append(f"the slave did not listen on {ep} (see {run_dir}/slave.log)")
-                return
-            master = subprocess.Popen(base + ["master", "--connect", ep, "--protocol", args.protocol] + common,
-                                      stdout=mlog, stderr=subprocess.STDOUT, env=env)
-            procs.append(("master", master))
-            print(f"slave and master running on {ep} (calibration, then protocol {args.protocol}) ...", flush=True)
-            for name, p in procs[::-1]:
-                try:
-                    rc = p.wait(max(0.1, deadline - time.monotonic()))
-                except subprocess.TimeoutExpired:
-                    problems.append(f"the {name} did not finish within --timeout {timeout:g} s; stopped")
-                    _stop(p)
-                    rc = p.returncode
-                if rc != 0:
-                    problems.append(f"the {name} exited with code {rc} (see {run_dir}/{name}.log)")
-        finally:
-            for _, p in procs:
-                _stop(p)
-
-
 def main_demo(args) -> int:
     """``teleop demo``: returns 0 when the run finished and every check passed, else 1."""
-    from teleop.cli import default_run_dir
+    from teleop.cli import prepare_run_dir
     cfg_path = args.config or (DEFAULT_CONFIG if DEFAULT_CONFIG.is_file() else None)
     cfg = load_config(cfg_path)
-    run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(cfg.recording.dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
+    run_dir = prepare_run_dir(args, cfg)
     if cfg.instrument.joints:           # a joint instrument (configs/instrument-3dof.yaml): teleop/demo_joints.py
         from teleop.demo_joints import main_joint_demo
         return main_joint_demo(args, cfg, run_dir)
@@ -266,15 +171,15 @@ def main_demo(args) -> int:
     t0 = time.monotonic()
     problems: list[str] = []
     try:
-        _run_processes(args, cfg_file, run_dir, problems)
+        run_processes(args, cfg_file, run_dir, problems)
     except KeyboardInterrupt:
         print(f"teleop demo: interrupted; partial recordings in {run_dir}", file=sys.stderr)
         raise
     summary: dict = {"run_dir": str(run_dir), "config": str(cfg_file), "protocol": args.protocol,
                      "baseline_deadband_N": baseline_deadband(cfg), "paper_bounds": PAPER_BOUNDS}
-    calib = _read_json(run_dir / "calibration.json")
-    summary["master"] = _read_json(run_dir / "master_stats.json")
-    summary["slave"] = _read_json(run_dir / "slave_stats.json")
+    calib = read_json(run_dir / "calibration.json")
+    summary["master"] = read_json(run_dir / "master_stats.json")
+    summary["slave"] = read_json(run_dir / "slave_stats.json")
     if calib:
         summary["calibration"] = _calibration_summary(calib, cfg)
         try:
@@ -289,11 +194,4 @@ def main_demo(args) -> int:
         problems.append(f"no calibration.json in {run_dir}: the slave did not finish calibrating")
     if calib and not summary.get("experiments") and not problems:
         problems.append("the recording has no experiment rows (marker 1 or 2): the protocol did not run")
-    summary["checks"] = checks(summary.get("experiments", {}))
-    summary["problems"] = problems
-    summary["wall_time_s"] = time.monotonic() - t0
-    summary["ok"] = not problems and all(summary["checks"].values())
-    (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-    print(format_summary(summary))
-    print(f"wall time {summary['wall_time_s']:.1f} s")
-    return 0 if summary["ok"] else 1
+    return finish(summary, checks(summary.get("experiments", {})), problems, t0, run_dir, format_summary)

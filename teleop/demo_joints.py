@@ -6,7 +6,7 @@
    its joint limit, both directions, saved as ``runs/<id>/calibration/<instrument>.yaml``;
 3. the slave (reloads that file) and the master (scripted operator: the seed paper's protocol on
    tendon a then tendon b of every joint, all joints together) as two processes over Zenoh on
-   127.0.0.1, exactly as for one tendon (:func:`teleop.demo._run_processes`);
+   127.0.0.1, exactly as for one tendon (:func:`teleop.demo_run.run_processes`);
 4. :func:`evaluate_joints` reads ``slave_joints.csv`` and computes, per joint and per pulled tendon,
    the full-scale errors of the distal joint torque (max and mean of |estimate - truth| over the
    range of the true torque in that experiment) and of the angle; ``summary.json`` has them under
@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import math
 import time
 from pathlib import Path
@@ -25,6 +24,7 @@ import numpy as np
 
 from master.joint_operator import MARKER_PAPER_A, MARKER_PAPER_B, joint_marker
 from teleop.config import Config, write_config
+from teleop.demo_run import finish, full_scale_errors, loop_lines, read_json, run_processes, verdict_lines
 from teleop.errors import DataError
 
 __all__ = ["TORQUE_BOUND", "CALIBRATION_BOUND", "read_joint_csv", "evaluate_joints", "joint_checks",
@@ -63,14 +63,6 @@ def read_joint_csv(path: str | Path) -> dict[str, np.ndarray]:
     return {name: data[:, k] for k, name in enumerate(header)}
 
 
-def _fs(est: np.ndarray, true: np.ndarray) -> tuple[float, float]:
-    fs = float(np.ptp(true))
-    if fs <= 0:
-        return math.nan, math.nan
-    err = np.abs(est - true)
-    return float(err.max() / fs), float(err.mean() / fs)
-
-
 def evaluate_joints(cols: dict[str, np.ndarray], cfg: Config) -> dict:
     """Per joint: per pulled tendon (``a``, ``b``) the torque and angle errors; the joint's worst.
 
@@ -94,7 +86,7 @@ def evaluate_joints(cols: dict[str, np.ndarray], cfg: Config) -> dict:
             t = cols["time"][sel]
             tq, tq_hat = cols[f"{n}.torque"][sel], cols[f"{n}.torque_hat"][sel]
             ang, ang_hat = cols[f"{n}.angle"][sel], cols[f"{n}.angle_hat"][sel]
-            fmax, fmean = _fs(tq_hat, tq)
+            fmax, fmean = full_scale_errors(tq_hat, tq)
             row[side] = {"samples": int(sel.sum()), "duration_s": float(t[-1] - t[0]),
                          "torque_full_scale_Nm": float(np.ptp(tq)), "torque_error_max_fs": fmax,
                          "torque_error_mean_fs": fmean, "angle_range_rad": float(np.ptp(ang)),
@@ -165,59 +157,34 @@ def format_joint_summary(s: dict) -> str:
         L.append(f"  {name:10s} {'worst':6s} {'':9s} {row['torque_error_max_fs']:7.3f} {row['torque_error_mean_fs']:7.3f}"
                  f"   (bound {TORQUE_BOUND})")
     L.append("")
-    for side in ("master", "slave"):
-        st = s.get(side, {})
-        pc = st.get("pacer", {})
-        L.append(f"{side:6s} loop: {pc.get('ticks', 0)} cycles at {pc.get('rate_hz', 0):.0f} Hz, "
-                 f"{pc.get('overruns', 0)} overruns ({100 * pc.get('overrun_fraction', 0):.2f} %), "
-                 f"safe events {st.get('safe_events', 0)}")
-    lat = s.get("master", {}).get("latency_rtt", {})
-    if lat.get("n"):
-        L.append(f"round trip: p50 {lat['p50_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms over {lat['n']} echoes")
+    L += loop_lines(s, detailed=False)
     L.append("")
-    for name, ok in s.get("checks", {}).items():
-        L.append(f"[{'PASS' if ok else 'FAIL'}] {name}")
-    for p in s.get("problems", []):
-        L.append(f"[FAIL] {p}")
+    L += verdict_lines(s)
     L.append(f"recording: {s['run_dir']}/slave_joints.csv, rerun: {s['run_dir']}/slave.rrd, "
              f"summary: {s['run_dir']}/summary.json")
     return "\n".join(L)
-
-
-def _read_json(path: Path) -> dict:
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        return {}
 
 
 def main_joint_demo(args, cfg: Config, run_dir: Path) -> int:
     """The joint-instrument demo (module docstring); 0 when it finished and every check passed."""
     from slave.calibration_file import calibration_path
     from teleop.cli_joints import run_calibrate
-    from teleop.demo import _run_processes
     cfg = dataclasses.replace(cfg, calibration=dataclasses.replace(cfg.calibration, dir=str(run_dir / "calibration")))
     cfg_file = write_config(cfg, run_dir / "config.yaml")
     t0 = time.monotonic()
     problems: list[str] = []
     print(f"calibrating {cfg.instrument.id}: every tendon into its joint limit, both directions ...", flush=True)
     run_calibrate(argparse.Namespace(config=str(cfg_file), out=None))
-    _run_processes(args, cfg_file, run_dir, problems)
+    run_processes(args, cfg_file, run_dir, problems)
     summary: dict = {"run_dir": str(run_dir), "config": str(cfg_file), "instrument": cfg.instrument.id,
                      "protocol": "paper (tendon a, then b; all joints together)", "torque_bound_fs": TORQUE_BOUND,
-                     "master": _read_json(run_dir / "master_stats.json"),
-                     "slave": _read_json(run_dir / "slave_stats.json")}
+                     "master": read_json(run_dir / "master_stats.json"),
+                     "slave": read_json(run_dir / "slave_stats.json")}
     summary["calibration"] = _calibration_summary(calibration_path(cfg), cfg)
     try:
         summary["joints"] = evaluate_joints(read_joint_csv(run_dir / "slave_joints.csv"), cfg)
     except DataError as e:
         problems.append(str(e))
         summary["joints"] = {}
-    summary["checks"] = joint_checks(summary["joints"], summary["calibration"], cfg)
-    summary["problems"] = problems
-    summary["wall_time_s"] = time.monotonic() - t0
-    summary["ok"] = not problems and all(summary["checks"].values())
-    (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-    print(format_joint_summary(summary))
-    print(f"wall time {summary['wall_time_s']:.1f} s")
-    return 0 if summary["ok"] else 1
+    return finish(summary, joint_checks(summary["joints"], summary["calibration"], cfg), problems, t0, run_dir,
+                  format_joint_summary)

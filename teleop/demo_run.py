@@ -1,0 +1,155 @@
+"""What both demos share (one tendon: :mod:`teleop.demo`; joint instrument: :mod:`teleop.demo_joints`):
+the two processes over Zenoh on 127.0.0.1, and the pieces of the summary that do not depend on the
+instrument.
+
+* :func:`run_processes`: the slave (``python -m teleop.cli slave``) listens on a free TCP port (or
+  the first ``--listen``); once the port accepts connections the master connects. When the master
+  has finished its protocol it announces STOPPING and the slave exits too. Either running past
+  ``--timeout`` is stopped with SIGTERM (recordings are flushed) and reported, as is a non-zero exit.
+* :func:`full_scale_errors`: max and mean of |estimate - truth| over the range of the truth.
+* :func:`loop_lines`, :func:`verdict_lines`: the lines on both loops and the link, and on the checks.
+* :func:`finish`: checks, problems and wall time into the summary, ``summary.json``, the printed
+  table, the exit code.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+__all__ = ["run_processes", "read_json", "full_scale_errors", "loop_lines", "verdict_lines", "finish"]
+
+
+def full_scale_errors(est: np.ndarray, true: np.ndarray) -> tuple[float, float]:
+    """(max, mean) of ``|est - true|`` divided by the range of ``true`` [-]; NaN when the range is 0.
+
+    est, true : ndarray, shape (n_samples,), same unit.
+    """
+    fs = float(np.ptp(true))
+    if fs <= 0:
+        return math.nan, math.nan
+    err = np.abs(est - true)
+    return float(err.max() / fs), float(err.mean() / fs)
+
+
+def read_json(path: Path) -> dict:
+    """The JSON object in ``path``; {} when the file is missing (a process that did not get that far)."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return {}
+
+
+def loop_lines(s: dict, *, detailed: bool) -> list[str]:
+    """One line per side (cycles, rate, overruns, safe events), then the round trip when echoes were
+    seen (p50, p99); ``detailed`` adds each loop's worst lateness and the round trip's maximum."""
+    lines = []
+    for side in ("master", "slave"):
+        st = s.get(side, {})
+        pc = st.get("pacer", {})
+        worst = f"worst lateness {1e3 * pc.get('max_lateness', 0):.1f} ms, " if detailed else ""
+        lines.append(f"{side:6s} loop: {pc.get('ticks', 0)} cycles at {pc.get('rate_hz', 0):.0f} Hz, "
+                     f"{pc.get('overruns', 0)} overruns ({100 * pc.get('overrun_fraction', 0):.2f} %), "
+                     f"{worst}safe events {st.get('safe_events', 0)}")
+    lat = s.get("master", {}).get("latency_rtt", {})
+    if lat.get("n") and detailed:
+        lines.append(f"round trip (command -> estimate echo): p50 {lat['p50_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms, "
+                     f"max {lat['max_ms']:.2f} ms over {lat['n']} echoes")
+    elif lat.get("n"):
+        lines.append(f"round trip: p50 {lat['p50_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms over {lat['n']} echoes")
+    return lines
+
+
+def verdict_lines(s: dict) -> list[str]:
+    """``[PASS]``/``[FAIL]`` per check, then ``[FAIL]`` per problem."""
+    lines = [f"[{'PASS' if ok else 'FAIL'}] {name}" for name, ok in s.get("checks", {}).items()]
+    lines += [f"[FAIL] {p}" for p in s.get("problems", [])]
+    return lines
+
+
+def finish(summary: dict, checks: dict[str, bool], problems: list[str], t0: float, run_dir: Path,
+           fmt: Callable[[dict], str]) -> int:
+    """Complete ``summary`` (checks, problems, wall time since ``t0`` [s, monotonic], ok), write
+    ``run_dir/summary.json``, print ``fmt(summary)`` and the wall time; 0 when ok, else 1."""
+    summary["checks"] = checks
+    summary["problems"] = problems
+    summary["wall_time_s"] = time.monotonic() - t0
+    summary["ok"] = not problems and all(summary["checks"].values())
+    (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    print(fmt(summary))
+    print(f"wall time {summary['wall_time_s']:.1f} s")
+    return 0 if summary["ok"] else 1
+
+
+def _wait_listening(port: int, proc: subprocess.Popen, deadline: float) -> bool:
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            return False
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=0.2):
+                return True
+        except OSError:
+            time.sleep(0.05)
+    return False
+
+
+def _stop(proc: subprocess.Popen) -> None:
+    """SIGTERM (the child flushes its recordings), then SIGKILL after 5 s."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(5.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str]) -> None:
+    """Slave and master as two processes with ``cfg_file`` (module docstring); what went wrong is
+    appended to ``problems``. ``args``: ``listen``, ``timeout`` [s], ``protocol``."""
+    from teleop.transport import free_tcp_port, loopback_endpoint
+    if args.listen:
+        ep = args.listen[0]
+        port = int(ep.rsplit(":", 1)[1])
+    else:
+        port = free_tcp_port()
+        ep = loopback_endpoint(port)
+    timeout = float(args.timeout)
+    base = [sys.executable, "-m", "teleop.cli"]
+    common = ["--config", str(cfg_file), "--run-dir", str(run_dir), "--max-duration", f"{timeout:g}"]
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    deadline = time.monotonic() + timeout
+    procs: list[tuple[str, subprocess.Popen]] = []
+    with open(run_dir / "slave.log", "w") as slog, open(run_dir / "master.log", "w") as mlog:
+        try:
+            slave = subprocess.Popen(base + ["slave", "--listen", ep, "--exit-on-master-stop"] + common,
+                                     stdout=slog, stderr=subprocess.STDOUT, env=env)
+            procs.append(("slave", slave))
+            if not _wait_listening(port, slave, deadline):
+                problems.append(f"the slave did not listen on {ep} (see {run_dir}/slave.log)")
+                return
+            master = subprocess.Popen(base + ["master", "--connect", ep, "--protocol", args.protocol] + common,
+                                      stdout=mlog, stderr=subprocess.STDOUT, env=env)
+            procs.append(("master", master))
+            print(f"slave and master running on {ep} (calibration, then protocol {args.protocol}) ...", flush=True)
+            for name, p in procs[::-1]:
+                try:
+                    rc = p.wait(max(0.1, deadline - time.monotonic()))
+                except subprocess.TimeoutExpired:
+                    problems.append(f"the {name} did not finish within --timeout {timeout:g} s; stopped")
+                    _stop(p)
+                    rc = p.returncode
+                if rc != 0:
+                    problems.append(f"the {name} exited with code {rc} (see {run_dir}/{name}.log)")
+        finally:
+            for _, p in procs:
+                _stop(p)
