@@ -28,7 +28,7 @@ from slave.rig import Rig, RigState
 from teleop.config import Config
 from teleop.errors import CalibrationError
 
-__all__ = ["CalStage", "JointLimitCalibration", "route_wrap_shape"]
+__all__ = ["CalStage", "JointLimitCalibration", "route_wrap_shape", "wrap_shape", "check_settings"]
 
 
 class CalStage(Enum):
@@ -39,16 +39,34 @@ class CalStage(Enum):
     DONE = "done"
 
 
-def route_wrap_shape(cfg: Config, n_points: int = 257) -> np.ndarray | None:
-    """Normalised cumulative wrap angle theta(s)/theta_total of the configured route, shape (n_points,).
+def wrap_shape(geom, n_points: int = 257) -> np.ndarray | None:
+    """Normalised cumulative wrap angle theta(s)/theta_total of a sheath geometry, shape (n_points,).
 
     None for a straight sheath (no wrap, the shape is undefined).
     """
-    geom = cfg.sheath.geometry()
     if geom.total_angle <= 0:
         return None
     s = np.linspace(0.0, geom.length, n_points)
     return np.asarray(geom.wrap_angle(s), dtype=float) / geom.total_angle
+
+
+def route_wrap_shape(cfg: Config, n_points: int = 257) -> np.ndarray | None:
+    """:func:`wrap_shape` of the configured route (``sheath``), shape (n_points,); None when straight."""
+    return wrap_shape(cfg.sheath.geometry(), n_points)
+
+
+def check_settings(c) -> None:
+    """Range checks of the routine's ``calibration`` settings (speed, target tension).
+
+    Raises
+    ------
+    CalibrationError
+        ``speed`` not a finite speed > 0 m/s, or ``target_tension`` not > 0 N.
+    """
+    if not (math.isfinite(c.speed) and c.speed > 0):
+        raise CalibrationError(f"calibration.speed must be a finite speed > 0 m/s, got {c.speed!r}")
+    if not (math.isfinite(c.target_tension) and c.target_tension > 0):
+        raise CalibrationError(f"calibration.target_tension must be > 0 N, got {c.target_tension!r}")
 
 
 class JointLimitCalibration:
@@ -79,10 +97,7 @@ class JointLimitCalibration:
     def __init__(self, cfg: Config, rig: Rig, *, max_travel: float = 0.08, release_factor: float = 3.0,
                  settle: float = 0.2):
         c = cfg.calibration
-        if not (math.isfinite(c.speed) and c.speed > 0):
-            raise CalibrationError(f"calibration.speed must be a finite speed > 0 m/s, got {c.speed!r}")
-        if not (math.isfinite(c.target_tension) and c.target_tension > 0):
-            raise CalibrationError(f"calibration.target_tension must be > 0 N, got {c.target_tension!r}")
+        check_settings(c)
         self.cfg = cfg
         self.rig = rig
         self.max_travel = float(max_travel)

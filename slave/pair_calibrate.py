@@ -21,7 +21,6 @@ with K = 0 (elastic tendons, no friction known yet). The ground truth is never r
 """
 from __future__ import annotations
 
-import math
 from enum import Enum
 
 import numpy as np
@@ -29,6 +28,7 @@ import numpy as np
 from estimator.calibration import CalibrationResult, calibrate_joint_limit
 from estimator.joint import JointEstimator
 from estimator.sheath import SheathModel
+from slave.calibrate import check_settings, wrap_shape
 from slave.instrument import TENDONS, Instrument, InstrumentState
 from slave.pair_control import PairController
 from teleop.config import Config, JointConfig, TendonConfig
@@ -46,11 +46,7 @@ class PairStage(Enum):
 
 def tendon_wrap_shape(tendon: TendonConfig, n_points: int = 257) -> np.ndarray | None:
     """theta(s)/theta_total of a tendon's route, shape (n_points,); None for a straight sheath."""
-    geom = tendon.geometry()
-    if geom.total_angle <= 0:
-        return None
-    s = np.linspace(0.0, geom.length, n_points)
-    return np.asarray(geom.wrap_angle(s), dtype=float) / geom.total_angle
+    return wrap_shape(tendon.geometry(), n_points)
 
 
 def set_tension(cfg: Config, joint: JointConfig) -> float:
@@ -154,11 +150,7 @@ class PairCalibration:
 
     def __init__(self, cfg: Config, instrument: Instrument, *, release_factor: float = 3.0, settle: float = 0.3,
                  max_travel: float = 0.03):
-        c = cfg.calibration
-        if not (math.isfinite(c.speed) and c.speed > 0):
-            raise CalibrationError(f"calibration.speed must be a finite speed > 0 m/s, got {c.speed!r}")
-        if not (math.isfinite(c.target_tension) and c.target_tension > 0):
-            raise CalibrationError(f"calibration.target_tension must be > 0 N, got {c.target_tension!r}")
+        check_settings(cfg.calibration)
         self.cfg = cfg
         self.instrument = instrument
         st = instrument.state
