@@ -28,6 +28,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from estimator.sheath import envelope_clip
+
 __all__ = ["distal_gains", "distal_tension", "distal_clip", "elongation"]
 
 
@@ -93,11 +95,4 @@ def distal_tension(T, dlo, dhi, w, e_old, target):  # pragma: no cover - compile
 def distal_clip(T, dlo, dhi, Td):  # pragma: no cover - compiled
     """Apply rule (D) with distal tension ``Td`` [N] to the node tensions ``T`` [N] in place."""
     for i in range(T.shape[0]):
-        a = Td * dlo[i]
-        b = Td * dhi[i]
-        t = T[i]
-        if t < a:
-            t = a
-        elif t > b:
-            t = b
-        T[i] = t
+        T[i] = envelope_clip(T[i], Td * dlo[i], Td * dhi[i])

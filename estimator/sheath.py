@@ -29,6 +29,7 @@ __all__ = [
     "Run",
     "SheathGeometry",
     "SheathModel",
+    "envelope_clip",
     "profile_update",
     "profile_batch",
 ]
@@ -211,6 +212,17 @@ def pull_elongation_factor(K: float, wrap_shape: np.ndarray | None = None) -> fl
     return float(np.sum(0.5 * (f[1:] + f[:-1])) / (len(w) - 1))
 
 
+@njit(cache=True, nogil=True, inline="always")
+def envelope_clip(t, lo, hi):  # pragma: no cover - compiled
+    """A node tension ``t`` [N] kept within its envelope [``lo``, ``hi``] [N] (Phee et al. 2009,
+    eq. (1) at one node: it changes only where the new end tension forces it); NaN stays NaN."""
+    if t < lo:
+        t = lo
+    elif t > hi:
+        t = hi
+    return t
+
+
 @njit(cache=True, nogil=True)
 def profile_update(T, log_gain, T_in):  # pragma: no cover - compiled
     """In-place envelope update of a tension profile; returns the distal tension T[-1] [N].
@@ -223,14 +235,7 @@ def profile_update(T, log_gain, T_in):  # pragma: no cover - compiled
         T_in = 0.0
     for i in range(T.shape[0]):
         g = math.exp(log_gain[i])
-        lo = T_in / g
-        hi = T_in * g
-        t = T[i]
-        if t < lo:
-            t = lo
-        elif t > hi:
-            t = hi
-        T[i] = t
+        T[i] = envelope_clip(T[i], T_in / g, T_in * g)
     return T[T.shape[0] - 1]
 
 
@@ -243,13 +248,7 @@ def _profile_batch(T, lo_gain, hi_gain, weight, T_in, T_out, elong):  # pragma: 
             t_in = 0.0
         e = 0.0
         for i in range(n):
-            lo = t_in * lo_gain[i]
-            hi = t_in * hi_gain[i]
-            t = T[i]
-            if t < lo:
-                t = lo
-            elif t > hi:
-                t = hi
+            t = envelope_clip(T[i], t_in * lo_gain[i], t_in * hi_gain[i])
             T[i] = t
             e += weight[i] * t
         T_out[k] = T[n - 1]
