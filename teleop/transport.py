@@ -5,8 +5,11 @@ Default deployment: two peers on loopback, one listening and one connecting, mul
 each other. Payloads are :mod:`teleop.codec` bytes; keys come from :mod:`teleop.keys`.
 
 Zenoh calls subscriber callbacks on its own threads. :class:`LatestSubscriber` and
-:class:`LivelinessWatcher` never let an exception escape a callback: they count it and log it at a
-limited rate, as every real-time path in this project does.
+:class:`~teleop.liveliness.LivelinessWatcher` never let an exception escape a callback: they count it
+and log it at a limited rate, as every real-time path in this project does.
+
+Liveliness tokens and watchers are in :mod:`teleop.liveliness`; they are declared through
+:class:`Session` and importable from here too.
 """
 from __future__ import annotations
 
@@ -16,7 +19,7 @@ import math
 import re
 import socket
 import threading
-from typing import Callable, Generic, NamedTuple, TypeVar
+from typing import TYPE_CHECKING, Callable, Generic, NamedTuple, TypeVar
 
 import zenoh
 
@@ -24,6 +27,9 @@ from teleop.clock import Clock, MonotonicClock
 from teleop.codec import Message, decode, encode
 from teleop.config import TransportConfig
 from teleop.errors import CodecError, ConfigError, TransportError
+
+if TYPE_CHECKING:
+    from teleop.liveliness import LivelinessToken, LivelinessWatcher
 
 __all__ = [
     "zenoh_config", "free_tcp_ports", "free_tcp_port", "loopback_endpoint", "RateLimitedLog",
@@ -205,12 +211,14 @@ class Session:
 
     def liveliness_token(self, key: str) -> "LivelinessToken":
         """Declare this process alive on ``key`` until the token or the session closes."""
+        from teleop.liveliness import LivelinessToken
         self._check_open()
         return self._track(LivelinessToken(self, key))
 
     def liveliness_watcher(self, key: str,
                            on_change: Callable[[str, bool], None] | None = None) -> "LivelinessWatcher":
         """Watch the tokens matching ``key`` (already present ones included)."""
+        from teleop.liveliness import LivelinessWatcher
         self._check_open()
         return self._track(LivelinessWatcher(self, key, on_change))
 
@@ -376,71 +384,10 @@ class LatestSubscriber(_Entity, Generic[M]):
             self._cond.notify_all()
 
 
-class LivelinessToken(_Entity):
-    """This process's liveliness on one key; disappears for watchers when closed or when the session ends."""
-
-    def __init__(self, session: Session, key: str):
-        super().__init__(session, key)
-        self._declare(session.zenoh_session.liveliness().declare_token, key)
-
-
-class LivelinessWatcher(_Entity):
-    """Tracks which liveliness tokens matching a key expression are present.
-
-    Parameters
-    ----------
-    on_change : callable(key: str, alive: bool), optional
-        Called on zenoh's thread for each appearance and disappearance; exceptions are logged and
-        swallowed.
-
-    Attributes
-    ----------
-    alive : bool
-        At least one matching token present.
-    changes : int
-        Appearances plus disappearances seen.
-    """
-
-    def __init__(self, session: Session, key: str,
-                 on_change: Callable[[str, bool], None] | None = None):
-        super().__init__(session, key)
-        self.on_change = on_change
-        self.changes = 0
-        self._present: set[str] = set()
-        self._cond = threading.Condition()
-        self._log = RateLimitedLog(log, 1.0, session.clock)
-        self._declare(session.zenoh_session.liveliness().declare_subscriber, key, self._on_sample, history=True)
-
-    def _on_sample(self, sample: zenoh.Sample) -> None:
-        k = str(sample.key_expr)
-        up = sample.kind == zenoh.SampleKind.PUT
-        with self._cond:
-            (self._present.add if up else self._present.discard)(k)
-            self.changes += 1
-            self._cond.notify_all()
-        if self.on_change is not None:
-            try:
-                self.on_change(k, up)
-            except Exception as e:  # noqa: BLE001 - never kill the zenoh callback
-                self._log.warning("liveliness callback on %s failed: %r", k, e)
-
-    @property
-    def alive(self) -> bool:
-        with self._cond:
-            return bool(self._present)
-
-    @property
-    def present(self) -> frozenset[str]:
-        """Keys of the tokens present now."""
-        with self._cond:
-            return frozenset(self._present)
-
-    def wait_for(self, alive: bool, timeout: float | None = None) -> bool:
-        """Block until :attr:`alive` equals ``alive`` or ``timeout`` [s]; True if it does."""
-        with self._cond:
-            return self._cond.wait_for(lambda: bool(self._present) == alive, timeout)
-
-    def close(self) -> None:
-        super().close()
-        with self._cond:
-            self._cond.notify_all()
+def __getattr__(name: str):
+    """Re-exports: the liveliness classes live in :mod:`teleop.liveliness` (imported on first use,
+    since they build on :class:`_Entity` here)."""
+    if name in ("LivelinessToken", "LivelinessWatcher"):
+        from teleop import liveliness
+        return getattr(liveliness, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
