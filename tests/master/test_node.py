@@ -12,27 +12,9 @@ from master.node import MasterLinks, MasterNode
 from teleop.clock import FakeClock
 from teleop.config import Config, MappingConfig, MasterConfig
 from teleop.messages import Estimate, Heartbeat, Side, SideState
-from teleop.transport import Received
+from tests.fakes import Topic
 
 DT = 1e-3
-
-
-class Topic:
-    """In-memory latest-wins topic: a publisher and a subscriber in one (receive time = the fake clock)."""
-
-    def __init__(self, clock: FakeClock):
-        self.clock, self.sent, self.last, self.count, self.errors = clock, [], None, 0, 0
-
-    def put(self, msg) -> None:
-        self.sent.append(msg)
-        self.last = Received(msg, self.clock.now())
-        self.count += 1
-
-    def latest(self):
-        return self.last
-
-    def age(self, now: float) -> float:
-        return math.inf if self.last is None else now - self.last.t_recv
 
 
 class Hand:

@@ -2,7 +2,6 @@
 through the codec: calibration at power-up, the paper protocol on all three joints, watchdog."""
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -16,45 +15,18 @@ from slave.joint_rig import SimulatedInstrument
 from slave.node import SlaveLinks
 from slave.pair_calibrate import set_tension
 from teleop.clock import FakeClock
-from teleop.codec import decode, encode
 from teleop.config import load_config
 from teleop.messages import JointCommand, SideState
-from teleop.transport import Received
+from tests.fakes import Rows, Topic
 
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "instrument-3dof.yaml"
 DT = 1e-3
 
 
-class Topic:
-    """Latest-wins topic through the codec; receive time = the fake clock; can be cut."""
-
-    def __init__(self, clock):
-        self.clock, self.last, self.count, self.errors, self.cut = clock, None, 0, 0, False
-
-    def put(self, msg):
-        if not self.cut:
-            self.last = Received(decode(encode(msg)), self.clock.now())
-            self.count += 1
-
-    def latest(self):
-        return self.last
-
-    def age(self, now):
-        return math.inf if self.last is None else now - self.last.t_recv
-
-
-class Rows:
-    def __init__(self):
-        self.rows = []
-
-    def write(self, row):
-        self.rows.append(tuple(row))
-
-
 def build(tmp_path, calibration=None):
     cfg = load_config(CONFIG, {"calibration.speed": 0.01})
     clock = FakeClock(0.0)
-    cmd, est, shb, mhb = (Topic(clock) for _ in range(4))
+    cmd, est, shb, mhb = (Topic(clock, codec=True, keep=False) for _ in range(4))
     inst = SimulatedInstrument.from_config(cfg)
     rec = Rows()
     slave = JointSlaveNode(cfg, inst, SlaveLinks(estimate=est, heartbeat=shb, command=cmd, master_heartbeat=mhb),

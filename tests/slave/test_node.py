@@ -16,36 +16,10 @@ from teleop.clock import FakeClock
 from teleop.config import CalibrationConfig, Config, SlaveConfig
 from teleop.errors import CalibrationError
 from teleop.messages import Command, Estimate, Heartbeat, Side, SideState
-from teleop.transport import Received
+from tests.fakes import Rows, Topic
 
 DT = 1e-3
 MODEL = SheathModel(K=0.6, compliance=1e-4)
-
-
-class Topic:
-    """In-memory latest-wins topic (receive time = the fake clock)."""
-
-    def __init__(self, clock: FakeClock):
-        self.clock, self.sent, self.last, self.count, self.errors = clock, [], None, 0, 0
-
-    def put(self, msg) -> None:
-        self.sent.append(msg)
-        self.last = Received(msg, self.clock.now())
-        self.count += 1
-
-    def latest(self):
-        return self.last
-
-    def age(self, now: float) -> float:
-        return math.inf if self.last is None else now - self.last.t_recv
-
-
-class Rows:
-    def __init__(self):
-        self.rows = []
-
-    def write(self, row):
-        self.rows.append(tuple(row))
 
 
 class Untouchable:
