@@ -1,18 +1,22 @@
-"""``teleop analyze``: run the seed model against measured recordings and report held-out errors.
+"""``teleop analyze``: what the model gets wrong on a measured recording, why, and what fixes it.
 
 Two modes:
 
-* ``teleop analyze FILE.csv`` (measured-data format, one tendon, docs/formats.md): fit K and L/EA of
-  the profile-memory estimator and of the paper's phase formulas on the first 60 % of the time span,
-  report the errors of T_out and/or x_out on the remaining 40 % (:mod:`estimator.fit`).
+* ``teleop analyze FILE.csv`` (measured-data format, one tendon, docs/formats.md; T_out and x_out
+  optional, at least one): the diagnosis of :func:`estimator.diagnosis.diagnose` - the base model
+  (profile memory, K and L/EA) fitted on the first part of the recording, every catalogue extension
+  fitted on the same block, all scored on the held-out rest; prints the cause, the held-out errors
+  and the gain (:func:`teleop.report.format_summary`) and the fitted parameters. A progress bar goes
+  to stderr on long recordings.
 * ``teleop analyze --kaist [DIR]`` or ``teleop analyze .../sine_config_N.txt``: every KAIST
   configuration (:mod:`teleop.kaist`; unlicensed data read in place): the seed pair model
   (:mod:`estimator.pair`) calibrated on command cycle 1 and tested on cycle 2, beside the
   force-path variant, the linear map and the linear map through a play operator, plus the
   model-free reversal dead zones.
 
-``--json OUT`` writes the summary numbers (never per-sample data); ``--figures DIR`` writes the
-KAIST summary plots ``kaist_*.png``. Bad input raises DataError / ConfigError (one line, exit 2).
+``--json OUT`` writes the result (summary numbers, never per-sample data); ``--report DIR`` a
+Markdown report with PNG figures (CSV mode: :func:`teleop.report.write_report`); ``--figures DIR``
+the KAIST summary plots ``kaist_*.png``. Bad input raises DataError / ConfigError (one line, exit 2).
 """
 from __future__ import annotations
 
@@ -23,15 +27,18 @@ from pathlib import Path
 
 import numpy as np
 
-from estimator.fit import fit_single
+from estimator.diagnosis import diagnose
 from estimator.pair import fit_force_path, fit_linear, fit_pair, fit_play_map, reversal_dead_zones, rmse
 from teleop.errors import ConfigError, DataError
 from teleop.kaist import KaistRecording, cycles, is_kaist_file, load_all
+from teleop.recording import MeasuredData, read_measured_csv
+from teleop.report import format_summary, write_report
 
-__all__ = ["add_arguments", "main_analyze", "analyze_file", "analyze_kaist", "format_single",
-           "format_kaist", "write_kaist_figures"]
+__all__ = ["add_arguments", "main_analyze", "diagnose_file", "format_diagnosis", "analyze_kaist", "format_kaist",
+           "write_kaist_figures", "PROGRESS_SAMPLES"]
 
-_LABELS = {"profile": "profile memory", "phase": "phase formulas"}
+#: Recordings of at least this many samples get a progress bar on stderr (100 s at 1 kHz).
+PROGRESS_SAMPLES = 100_000
 _MODELS = ("seed pair model", "force path", "linear map", "linear map + play")
 
 
@@ -41,10 +48,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="measured-data CSV (one tendon), or a KAIST sine_config_N.txt")
     parser.add_argument("--kaist", nargs="?", const="", default=None, metavar="DIR",
                         help="analyse every KAIST configuration (default DIR ../shared/data/kaist-tsm)")
-    parser.add_argument("--json", metavar="OUT", help="write the summary numbers as JSON to OUT")
+    parser.add_argument("--json", metavar="OUT", help="write the result (summary numbers) as JSON to OUT")
+    parser.add_argument("--report", metavar="DIR", help="write a Markdown report with PNG figures to DIR")
     parser.add_argument("--figures", metavar="DIR", help="KAIST mode: write the kaist_*.png plots to DIR")
     parser.add_argument("--train-fraction", type=float, default=0.6, metavar="F",
-                        help="CSV mode: fit on this leading fraction of the time span (default 0.6)")
+                        help="CSV mode: nominal share of the duration used for fitting, in [0.3, 0.9]; the "
+                             "split moves to a rest within 8%% of it (default 0.6)")
 
 
 def main_analyze(args: argparse.Namespace) -> int:
@@ -53,6 +62,9 @@ def main_analyze(args: argparse.Namespace) -> int:
         raise ConfigError("analyze needs FILE or --kaist [DIR]")
     if args.json is not None and not Path(args.json).resolve().parent.is_dir():
         raise ConfigError(f"--json {args.json}: directory {Path(args.json).resolve().parent} does not exist")
+    for opt, d in (("--report", args.report), ("--figures", args.figures)):
+        if d is not None and Path(d).exists() and not Path(d).is_dir():
+            raise ConfigError(f"{opt} {d}: exists and is not a directory")
     if args.file is not None and not Path(args.file).is_file():
         raise DataError(f"{args.file}: no such file")
     if args.kaist is not None or is_kaist_file(args.file):
@@ -65,9 +77,11 @@ def main_analyze(args: argparse.Namespace) -> int:
                 print(f"wrote {p}")
     else:
         if args.figures:
-            raise ConfigError("--figures is for the KAIST analysis (--kaist)")
-        summary = analyze_file(args.file, train_fraction=args.train_fraction)
-        print(format_single(summary))
+            raise ConfigError("--figures is for the KAIST analysis (--kaist); use --report DIR")
+        summary, data = diagnose_file(args.file, train_fraction=args.train_fraction)
+        print(format_diagnosis(summary))
+        if args.report is not None:
+            print(f"wrote {write_report(summary, data, args.report)}")
     if args.json is not None:
         Path(args.json).write_text(json.dumps(summary, indent=2, allow_nan=False, default=_nan_none) + "\n")
         print(f"wrote {args.json}")
@@ -75,6 +89,8 @@ def main_analyze(args: argparse.Namespace) -> int:
 
 
 def _nan_none(obj):
+    if isinstance(obj, np.generic):
+        return obj.item()
     raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
 
 
@@ -84,54 +100,53 @@ def _finite(x: float) -> float | None:
 
 # ---- one tendon, measured-data CSV ------------------------------------------------------------
 
-def analyze_file(path: str | Path, train_fraction: float = 0.6, n_nodes: int = 100) -> dict:
-    """Fit and score both estimators on one measured-data CSV.
+def diagnose_file(path: str | Path, train_fraction: float = 0.6,
+                  progress: bool | None = None) -> tuple[dict, MeasuredData]:
+    """Diagnose one measured-data CSV (:func:`estimator.diagnosis.diagnose`).
+
+    Parameters
+    ----------
+    path : the CSV (docs/formats.md): time [s], x_in [m], T_in [N], and T_out [N] and/or x_out [m]
+    train_fraction : nominal share of the duration used for fitting, in [0.3, 0.9]
+    progress : stderr progress bar; default: on for recordings of at least
+        :data:`PROGRESS_SAMPLES` samples
 
     Returns
     -------
-    dict
-        ``file``, ``mode`` ("single"), ``n_samples``, ``duration`` [s], ``train_fraction``,
-        ``split_time`` [s], ``n_train``, ``n_heldout``, ``signals`` (the distal columns present) and
-        ``estimators``: {"profile"|"phase": {K, compliance [m/N] or None, cost, train, heldout}},
-        where train/heldout map "T_out"/"x_out" to {rmse, max_abs, full_scale, rmse_fs, max_fs} (SI).
+    result : dict
+        The diagnosis (cause, causes, base and extended {rmse_T_out_N, rmse_x_out_m}, gain,
+        parameters, candidates, ...; JSON-ready) plus ``file``, ``n_samples`` and ``duration_s``.
+    data : MeasuredData, the recording (for :func:`teleop.report.write_report`)
 
     Raises
     ------
     DataError
-        Missing or malformed file, no distal column, a distal column constant on the training
-        block, or a split leaving a block with fewer than 2 samples.
+        Missing or malformed file, neither T_out nor x_out, a recording too short to diagnose.
+    ConfigError
+        ``train_fraction`` outside [0.3, 0.9].
     """
-    from teleop.recording import read_measured_csv
+    if not 0.3 <= train_fraction <= 0.9:
+        raise ConfigError(f"--train-fraction must be in [0.3, 0.9], got {train_fraction!r}")
     data = read_measured_csv(path).require_distal()
     try:
-        res = fit_single(data.time, data.T_in, data.x_in, T_out=data.T_out, x_out=data.x_out,
-                         train_fraction=train_fraction, n_nodes=n_nodes)
+        result = diagnose(data, train_fraction=train_fraction,
+                          progress=len(data) >= PROGRESS_SAMPLES if progress is None else progress)
     except ValueError as e:
-        raise DataError(f"{data.source}: {e}") from None
-    out = {"file": str(path), "mode": "single", "n_samples": len(data), "duration": data.duration,
-           "train_fraction": train_fraction,
-           "signals": [s for s in ("T_out", "x_out") if getattr(data, s) is not None]}
-    out.update(res.as_dict())
-    return out
+        raise DataError(str(e) if str(e).startswith(data.source) else f"{data.source}: {e}") from None
+    result.update({"file": str(path), "n_samples": len(data), "duration_s": data.duration})
+    return result, data
 
 
-def format_single(s: dict) -> str:
-    """The short table printed for one CSV (T_out in N, x_out shown in mm)."""
-    lines = [f"{s['file']}: {s['n_samples']} samples, {s['duration']:.1f} s; fit on t < {s['split_time']:.2f} s "
-             f"({s['n_train']} samples), held out: the remaining {s['n_heldout']} samples"]
-    head = f"{'estimator':<16}{'K':>7}{'L/EA [m/N]':>12}"
-    for sig in s["signals"]:
-        unit = "N" if sig == "T_out" else "mm"
-        head += f"{sig + ' RMSE [' + unit + ']':>18}{'max/FS':>9}"
-    lines.append(head)
-    for name, f in s["estimators"].items():
-        c = "-" if f["compliance"] is None else f"{f['compliance']:.3e}"
-        row = f"{_LABELS[name]:<16}{f['K']:>7.3f}{c:>12}"
-        for sig in s["signals"]:
-            m, k = f["heldout"][sig], (1.0 if sig == "T_out" else 1e3)
-            row += f"{m['rmse'] * k:>18.4g}{m['max_fs']:>9.2%}"
-        lines.append(row)
-    return "\n".join(lines)
+def format_diagnosis(result: dict) -> str:
+    """The lines printed for one CSV: :func:`teleop.report.format_summary`, then the split and the
+    fitted parameters of the extended model (SI units)."""
+    sp = result["split"]
+    pars = ", ".join(f"{k} = {p['value']:.4g}" + ("" if p["unit"] in ("", "-") else f" {p['unit']}")
+                     for k, p in result["parameters"].items())
+    return "\n".join([f"{result['file']}: {result['n_samples']} samples, {result['duration_s']:.1f} s; fitted on "
+                      f"t < {sp['time_s']:.2f} s, held out: the {sp['n_heldout']} samples after it "
+                      f"({result['elapsed_s']:.1f} s)",
+                      format_summary(result), f"parameters: {pars}"])
 
 
 # ---- KAIST antagonistic pair ------------------------------------------------------------------

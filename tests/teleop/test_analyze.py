@@ -36,30 +36,49 @@ def write_csv(path, n=4000, distal=("x_out", "T_out"), K=0.5, c=1e-4):
     return path
 
 
-def test_single_csv_table_and_json(tmp_path, capsys):
-    out = tmp_path / "summary.json"
-    assert run([str(write_csv(tmp_path / "run.csv")), "--json", str(out)]) == 0
+@pytest.fixture(scope="module")
+def offset_csv(tmp_path_factory):
+    """A simulated bench recording (slave.scenarios) with tension-independent friction hidden in it."""
+    from slave.scenarios import record
+    from teleop.recording import write_measured_csv
+    rec = record("friction_offset", seed=3, level=1.0, duration=45.0)
+    path = tmp_path_factory.mktemp("scenario") / "offset.csv"
+    write_measured_csv(path, rec.data)
+    return path, rec
+
+
+def test_csv_diagnosis_json_and_report(offset_csv, tmp_path, capsys):
+    path, rec = offset_csv
+    out, rep = tmp_path / "d.json", tmp_path / "report"
+    assert run([str(path), "--json", str(out), "--report", str(rep)]) == 0
     text = capsys.readouterr().out
-    assert "profile memory" in text and "phase formulas" in text and "T_out RMSE [N]" in text
+    assert "cause: friction_offset" in text and "held-out rmse T_out: base" in text and "parameters: K = " in text
     s = json.loads(out.read_text())
-    assert s["mode"] == "single" and s["signals"] == ["T_out", "x_out"]
-    assert s["split_time"] == pytest.approx(0.6 * 3.999, abs=2e-3)
-    assert s["n_train"] + s["n_heldout"] == 4000
-    for name in ("profile", "phase"):
-        f = s["estimators"][name]
-        assert set(f) == {"K", "compliance", "cost", "train", "heldout"}
-        for sig in ("T_out", "x_out"):
-            assert set(f["heldout"][sig]) == {"rmse", "max_abs", "full_scale", "rmse_fs", "max_fs"}
-    prof = s["estimators"]["profile"]
-    assert prof["K"] == pytest.approx(0.5, rel=0.02) and prof["compliance"] == pytest.approx(1e-4, rel=0.02)
-    assert prof["heldout"]["T_out"]["max_fs"] < 1e-3
+    assert {"cause", "causes", "base", "extended", "gain", "parameters", "candidates"} <= set(s)
+    for key in ("base", "extended"):
+        assert set(s[key]) == {"rmse_T_out_N", "rmse_x_out_m"}
+        assert all(v > 0 for v in s[key].values())
+    assert s["cause"] == "friction_offset" and s["causes"][0] == "friction_offset"
+    assert s["gain"] > 0.5 and s["extended"]["rmse_T_out_N"] < 0.5 * s["base"]["rmse_T_out_N"]
+    assert s["parameters"]["a"]["unit"] == "N"
+    assert s["parameters"]["a"]["value"] == pytest.approx(rec.truth["parameters"]["tension_offset"], rel=0.2)
+    assert set(s["candidates"]) >= {"friction_offset", "sensor_offset", "pretension"}
+    assert s["n_samples"] == len(rec.data) and len(out.read_text()) < 40_000     # no per-sample arrays
+    names = sorted(p.name for p in rep.iterdir())
+    assert "report.md" in names and sum(n.endswith(".png") for n in names) >= 4
+    md = (rep / "report.md").read_text()
+    assert "friction_offset" in md and all(f"({n})" in md for n in names if n.endswith(".png"))
 
 
-def test_single_csv_with_T_out_only(tmp_path, capsys):
+def test_csv_with_T_out_only(tmp_path, capsys):
     out = tmp_path / "s.json"
     assert run([str(write_csv(tmp_path / "r.csv", distal=("T_out",))), "--json", str(out)]) == 0
     s = json.loads(out.read_text())
-    assert s["signals"] == ["T_out"] and s["estimators"]["profile"]["compliance"] is None
+    assert s["base"]["rmse_x_out_m"] is None and s["extended"]["rmse_x_out_m"] is None
+    # the profile memory from a uniform 6 N profile (the first T_in): the base model starts from zero
+    assert s["cause"] == "pretension" and s["parameters"]["T0"]["value"] == pytest.approx(6.0, rel=0.05)
+    assert s["extended"]["rmse_T_out_N"] < 0.01 < s["base"]["rmse_T_out_N"]
+    assert s["parameters"]["K"]["value"] == pytest.approx(0.5, rel=0.05)
     assert "x_out" not in capsys.readouterr().out
 
 
@@ -72,12 +91,18 @@ def test_errors(tmp_path):
         run([str(write_csv(tmp_path / "prox.csv", distal=()))])
     with pytest.raises(ConfigError, match="--json .*does not exist"):
         run([str(write_csv(tmp_path / "r.csv")), "--json", str(tmp_path / "no" / "dir" / "s.json")])
+    with pytest.raises(ConfigError, match="--report .*not a directory"):
+        run([str(tmp_path / "r.csv"), "--report", str(tmp_path / "r.csv")])
+    with pytest.raises(ConfigError, match=r"--train-fraction must be in \[0.3, 0.9\]"):
+        run([str(tmp_path / "r.csv"), "--train-fraction", "0.95"])
     with pytest.raises(DataError, match="KAIST data not found at"):
         run(["--kaist", str(tmp_path / "nowhere")])
     bad = tmp_path / "bad.csv"
     bad.write_text("time,x_in,T_in,T_out\n0,0,1,1\n0.001,0,x,1\n0.002,0,1,1\n")
     with pytest.raises(DataError, match=r"bad\.csv:3"):
         run([str(bad)])
+    with pytest.raises(DataError, match=r"short\.csv: .*too few to diagnose"):
+        run([str(write_csv(tmp_path / "short.csv", n=300))])
 
 
 def test_cli_turns_a_missing_file_into_one_line_and_exit_2(tmp_path, capsys):
@@ -85,6 +110,16 @@ def test_cli_turns_a_missing_file_into_one_line_and_exit_2(tmp_path, capsys):
     assert cli.main(["analyze", str(tmp_path / "missing.csv")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "missing.csv: no such file" in err[0]
+
+
+def test_cli_csv_without_T_out_and_x_out_is_one_line_and_exit_2(tmp_path, capsys):
+    cli = pytest.importorskip("teleop.cli")
+    path = write_csv(tmp_path / "proximal.csv", distal=())
+    assert cli.main(["analyze", str(path), "--json", str(tmp_path / "d.json")]) == 2
+    cap = capsys.readouterr()
+    err = cap.err.strip().splitlines()
+    assert len(err) == 1 and "proximal.csv: needs a distal column 'x_out' or 'T_out'" in err[0]
+    assert not (tmp_path / "d.json").exists() and cap.out == ""
 
 
 def write_kaist_dir(d):

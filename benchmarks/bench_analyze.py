@@ -1,0 +1,70 @@
+"""`teleop analyze` speed: a 10-minute 1 kHz recording with a hidden effect, diagnosed and reported.
+
+Generates the recording with :func:`slave.scenarios.record` (not timed), writes it as a measured-data
+CSV, then runs ``teleop analyze FILE --json OUT --report DIR`` as a separate process pinned to one
+thread (OMP/MKL/OpenBLAS/NUMBA threads = 1) and prints the wall time, split into reading,
+diagnosis and report from the same steps run in-process. Prints figures, never fails on them.
+
+    .venv/bin/python benchmarks/bench_analyze.py [--minutes 10] [--rate 1000] [--effect friction_offset]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ONE_THREAD = {k: "1" for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")}
+os.environ.update(ONE_THREAD)           # before numpy loads: the in-process split runs on one thread too
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from estimator.diagnosis import diagnose  # noqa: E402
+from slave.scenarios import record  # noqa: E402
+from teleop.recording import read_measured_csv, write_measured_csv  # noqa: E402
+from teleop.report import write_report  # noqa: E402
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--minutes", type=float, default=10.0)
+    ap.add_argument("--rate", type=float, default=1000.0)
+    ap.add_argument("--effect", default="friction_offset")
+    args = ap.parse_args([] if argv is None else argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp)
+        rec = record(args.effect, seed=1, level=0.5, duration=60.0 * args.minutes, rate_hz=args.rate)
+        csv = d / "run.csv"
+        write_measured_csv(csv, rec.data)
+        mb = csv.stat().st_size / 1e6
+        # the CLI as a user runs it, one thread
+        env = {**os.environ, **ONE_THREAD}
+        cmd = [sys.executable, "-m", "teleop.cli", "analyze", str(csv), "--json", str(d / "d.json"),
+               "--report", str(d / "report")]
+        t0 = time.perf_counter()
+        proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+        if proc.returncode != 0:
+            print(f"teleop analyze failed ({proc.returncode}): {proc.stderr.strip()}")
+            return
+        res = json.loads((d / "d.json").read_text())
+        # the same steps in-process, for the split (numba caches are warm by now)
+        t0 = time.perf_counter()
+        data = read_measured_csv(csv)
+        t1 = time.perf_counter()
+        result = diagnose(data)
+        t2 = time.perf_counter()
+        write_report(result, data, d / "report2")
+        t3 = time.perf_counter()
+    n = len(rec.data)
+    print(f"teleop analyze, {args.minutes:g} min at {args.rate:g} Hz ({n} samples, {mb:.0f} MB CSV, hidden "
+          f"{args.effect}): {wall:.1f} s wall on one thread, cause {res['cause']}, gain {res['gain']:.2f}")
+    print(f"  in-process split: read {t1 - t0:.1f} s, diagnose {t2 - t1:.1f} s, report {t3 - t2:.1f} s")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
