@@ -1,0 +1,201 @@
+"""What the seed pair model gets wrong on a recording of an antagonistic pair, why, and the gain.
+
+The pair counterpart of :func:`estimator.diagnosis.diagnose` for recordings with a motor command,
+the two proximal tensions and the distal angle only (the KAIST flexible endoscope,
+docs/findings.md). The models and effects are in :mod:`estimator.pair_models`. Same held-out
+discipline as the single-tendon diagnosis:
+
+1. Every model is fitted on the training samples (the first command cycle) with
+   ``scipy.optimize.least_squares`` from a few starting points, and always runs from the first
+   sample, so the test block (the second cycle) starts from the state the training left.
+2. Score on the test block relative to the seed model: S = (rmse / rmse_seed)^2 (one signal).
+3. Forward selection with a price per parameter: starting from the seed, the candidate with the
+   lowest S / S_chosen + PENALTY (n_params - n_params_chosen) is accepted when that is below 1
+   (PENALTY of :mod:`estimator.diagnosis`, 0.25 per parameter); the first round offers the capstan
+   structure (``capstan_joint``) and the seed with each effect, later rounds every effect that
+   applies to the model chosen so far; at most ``max_effects`` are accepted.
+4. ``unknown`` is appended when the chosen model's test rmse is still above STRUCTURE_RATIO (3) times
+   the tracker noise (robust level of the angle's second differences): structure left that no
+   candidate explains. ``none`` when nothing is accepted and no structure is left.
+"""
+from __future__ import annotations
+
+import math
+import time as _time
+from typing import Callable
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from estimator.diagnosis import PENALTY, STRUCTURE_RATIO
+from estimator.diagnosis_fit import noise_level
+from estimator.pair import fit_pair
+from estimator.pair_models import (CAUSE_OF_SEED, PAIR_EFFECTS, applicable, model_id, model_params,
+                                   predict_model)
+
+__all__ = ["CAPSTAN_STARTS", "fit_model", "diagnose_pair", "FitResult"]
+
+#: Starting points of the capstan structure (G [-], lam [rad/N], K_a, K_b [-], k [N/rad]).
+CAPSTAN_STARTS = ({"G": 1.4, "lam": 0.4, "K_a": 0.8, "K_b": 0.4, "k": 4.0},
+                  {"G": 2.0, "lam": 0.3, "K_a": 0.3, "K_b": 0.3, "k": 2.0},
+                  {"G": 2.0, "lam": 0.3, "K_a": 1.2, "K_b": 0.8, "k": 10.0})
+_BAD = 10.0     # residual [rad] returned for a parameter set the kernels refuse
+
+
+class FitResult:
+    """A fitted model over one recording: structure, effects, values (name -> SI value), the angle
+    [rad] and (capstan) proximal tensions [N] over the whole recording, train and test rmse [rad]."""
+
+    def __init__(self, structure: str, effects: tuple[str, ...], values: dict[str, float], rec, train: slice,
+                 test: slice):
+        self.structure, self.effects, self.values = structure, tuple(effects), dict(values)
+        self.angle, self.T_in = predict_model(structure, self.effects, self.values, rec)
+        err = self.angle - np.asarray(rec.angle, dtype=float)
+        self.rmse_train = float(np.sqrt(np.mean(err[train] ** 2)))
+        self.rmse_test = float(np.sqrt(np.mean(err[test] ** 2)))
+        self.max_test = float(np.max(np.abs(err[test])))
+        T = np.column_stack([rec.T_a, rec.T_b])
+        self.rmse_T_in = None if self.T_in is None else float(np.sqrt(np.mean((self.T_in[test] - T[test]) ** 2)))
+
+    @property
+    def id(self) -> str:
+        return model_id(self.structure, self.effects)
+
+    @property
+    def n_params(self) -> int:
+        return len(model_params(self.structure, self.effects))
+
+    def summary(self) -> dict:
+        """JSON-ready: model, params {name: {value, unit}}, rmse_train_deg, rmse_test_deg,
+        max_abs_test_deg, rmse_T_in_N (predicted vs measured proximal tensions on the test block;
+        None for the seed structure, which takes them as input)."""
+        units = {p.name: p.unit for p in model_params(self.structure, self.effects)}
+        return {"model": self.id, "params": {k: {"value": float(v), "unit": units[k]} for k, v in self.values.items()},
+                "rmse_train_deg": math.degrees(self.rmse_train), "rmse_test_deg": math.degrees(self.rmse_test),
+                "max_abs_test_deg": math.degrees(self.max_test), "rmse_T_in_N": self.rmse_T_in}
+
+
+def fit_model(structure: str, effects: tuple[str, ...], rec, train: slice, test: slice,
+              starts: list[dict[str, float]]) -> FitResult:
+    """Fit one model on the ``train`` samples by ``least_squares`` from each start; keep the lowest
+    training cost.
+
+    Parameters
+    ----------
+    structure, effects : the model (:mod:`estimator.pair_models`)
+    rec : recording (time, command, T_a, T_b, angle; arrays of shape (n,))
+    train, test : slices of the samples (the model runs from sample 0 in both cases)
+    starts : starting values by name; a missing name takes each of its parameter's ``starts``
+
+    Returns
+    -------
+    FitResult
+    """
+    params = model_params(structure, effects)
+    names = [p.name for p in params]
+    lo = np.array([p.lo for p in params])
+    hi = np.array([p.hi for p in params])
+    y = np.asarray(rec.angle, dtype=float)[train]
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        try:
+            th, _ = predict_model(structure, effects, dict(zip(names, map(float, x))), rec)
+        except ValueError:
+            return np.full(y.size, _BAD)
+        return th[train] - y
+
+    x0s = []
+    for s in starts:
+        missing = [p for p in params if p.name not in s]
+        for extra in (zip(*[p.starts for p in missing]) if missing else [()]):
+            v = {**s, **{p.name: x for p, x in zip(missing, extra)}}
+            x0s.append(np.clip([v[n] for n in names], lo, hi))
+    best = None
+    for x0 in x0s:
+        sol = least_squares(residual, x0, bounds=(lo, hi), x_scale=[p.scale for p in params], diff_step=1e-3)
+        if best is None or sol.cost < best.cost:
+            best = sol
+    return FitResult(structure, effects, dict(zip(names, map(float, best.x))), rec, train, test)
+
+
+def _starts(fit: FitResult) -> list[dict[str, float]]:
+    return [dict(fit.values)]
+
+
+def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 3,
+                  progress: Callable[[str], None] | None = None) -> tuple[dict, dict[str, FitResult]]:
+    """Diagnose one pair recording: the seed model's error, the effects that explain it, the gain.
+
+    Parameters
+    ----------
+    rec : recording with time [s], command [rad], T_a, T_b [N], angle [rad], arrays of shape (n,)
+    train, test : sample slices (KAIST: command cycles 1 and 2, :func:`teleop.kaist.cycles`)
+    max_effects : most effects accepted (the capstan structure counts as one), >= 1
+    progress : called with a label after every fitted model
+
+    Returns
+    -------
+    summary : dict, JSON-ready
+        ``seed`` and ``extended`` (:meth:`FitResult.summary`), ``cause`` (first accepted effect,
+        "none" or "unknown"), ``causes`` (accepted in order, plus "unknown" when structure is left),
+        ``gain`` (1 - extended / seed test rmse), ``candidates`` (model id -> rmse_test_deg, score S,
+        price, accepted, round, params), ``noise_deg``, ``structure_ratio``, ``n_train``, ``n_test``,
+        ``elapsed_s``.
+    fits : dict of model id -> FitResult (predictions for figures; not JSON)
+
+    Raises
+    ------
+    ValueError
+        ``max_effects`` < 1, or a training block shorter than 8 samples.
+    """
+    t0 = _time.perf_counter()
+    if max_effects < 1:
+        raise ValueError(f"max_effects must be >= 1, got {max_effects!r}")
+    n_train = len(range(*train.indices(len(rec.angle))))
+    if n_train < 8:
+        raise ValueError(f"the training block has {n_train} samples, need at least 8")
+    tick = progress or (lambda label: None)
+    sp = fit_pair(rec.command, rec.T_a, rec.T_b, rec.angle, train.stop).params
+    seed = fit_model("seed", (), rec, train, test, [sp])
+    tick("seed")
+    fits: dict[str, FitResult] = {seed.id: seed}
+    candidates: dict[str, dict] = {}
+    chosen, accepted = seed, []
+    for rnd in range(1, max_effects + 1):
+        trial: dict[str, tuple[str, FitResult]] = {}
+        if chosen.structure == "seed":
+            fx = fit_model("capstan", chosen.effects, rec, train, test,
+                           [{**s, **{k: v for k, v in chosen.values.items() if k not in ("G", "theta0")}}
+                            for s in CAPSTAN_STARTS])
+            trial[CAUSE_OF_SEED] = ("capstan", fx)
+            tick(fx.id)
+        for eid in applicable(chosen.structure, chosen.effects):
+            fx = fit_model(chosen.structure, chosen.effects + (eid,), rec, train, test, _starts(chosen))
+            trial[eid] = (chosen.structure, fx)
+            tick(fx.id)
+        price = {}
+        for eid, (_, fx) in trial.items():
+            fits[fx.id] = fx
+            S = (fx.rmse_test / seed.rmse_test) ** 2
+            price[eid] = S / (chosen.rmse_test / seed.rmse_test) ** 2 + PENALTY * (fx.n_params - chosen.n_params)
+            candidates[fx.id] = {"effect": eid, "round": rnd, "rmse_test_deg": math.degrees(fx.rmse_test),
+                                 "rmse_train_deg": math.degrees(fx.rmse_train), "score": S, "price": price[eid],
+                                 "accepted": False, "params": {k: float(v) for k, v in fx.values.items()}}
+        if not price:
+            break
+        best = min(price, key=price.get)
+        if price[best] >= 1.0:
+            break
+        chosen = trial[best][1]
+        accepted.append(best)
+        candidates[chosen.id]["accepted"] = True
+    noise = noise_level(np.asarray(rec.angle, dtype=float))
+    ratio = chosen.rmse_test / max(noise, 1e-12)
+    causes = accepted + (["unknown"] if ratio > STRUCTURE_RATIO else [])
+    summary = {"seed": seed.summary(), "extended": chosen.summary(), "cause": causes[0] if causes else "none",
+               "causes": causes, "gain": 1.0 - chosen.rmse_test / seed.rmse_test, "candidates": candidates,
+               "noise_deg": math.degrees(noise), "structure_ratio": ratio, "n_train": n_train,
+               "n_test": len(range(*test.indices(len(rec.angle)))), "penalty_per_parameter": PENALTY,
+               "literature": {e: PAIR_EFFECTS[e].literature for e in accepted},
+               "elapsed_s": _time.perf_counter() - t0}
+    return summary, fits

@@ -1,0 +1,171 @@
+"""The capstan-joint pair model: two distributed Coulomb tendons on one elastic joint, driven by the motor.
+
+The seed pair model (:mod:`estimator.pair`) lets the angle follow each tendon's kinematics at every
+sample, with the elongation driven by the measured tension. Here the tendons, the sheath friction
+and the joint are one mechanism, the pull-pull pair of the reference simulator (literature.md
+section 4, Agrawal et al. 2010; :mod:`slave.joint_physics`), driven by the recorded motor command:
+
+    x_in,a = x_in,a(0) + G (c - c_0),   x_in,b = x_in,b(0) - G (c - c_0)      motor, r = 1 units  (P1)
+    T_j(s)                              tension-profile memory of tendon j, K_j, compliance lam   (P2)
+    x_out,a = + theta,  x_out,b = - theta,   e_j = x_in,j - x_out,j            both taut on r    (P3)
+    T_d,a - T_d,b = k theta + tau_0 (+- tau_c while the joint slides)         joint balance      (P4)
+
+All lengths are in units of the joint pulley radius r, so G = g / r (motor to joint transmission),
+lam = (L/EA) / r [rad/N] (tendon compliance seen at the joint), k = k_joint / r [N/rad] (the joint
+stiffness k_joint [N m/rad] as a tendon-tension difference per radian), and the
+angle is in rad. One step (each sample is split into ``substeps``): the motors move with the joint
+held (slip spreads from each proximal end, :func:`slave.simulated_physics.advance_proximal`), then
+the joint settles with the motors held (slip spreads from each distal end and theta solves (P4),
+:func:`slave.joint_physics.settle_joint`). So the joint stays put after a reversal until a slip front
+reaches a tip - the capstan band of each tendon acting on the joint (E1 with E11, E13) - and the
+proximal tensions are an output of the model, not an input.
+
+Both tendons start as uniform profiles at the measured pretensions (E5) with theta = 0; tau_0 is the
+distal torque of that rest, so the rest is an equilibrium. Extensions (literature.md numbers):
+
+* ``lam_s``  a frictionless series compliance between motor and sheath (drive, load cell, sheath
+  compression, E10): a straight run of ``n_series`` nodes with zero wrap angle ahead of the sheath;
+* ``tau_c``  Coulomb friction torque in the joint (E11/E12 dead band): the joint moves only when the
+  torque imbalance exceeds tau_c;
+* ``shape``  initial profile T_i = P e^{-shape g_i} (E5: shape 1 is the pull-slip profile a
+  pretension applied from the motor leaves, 0 a uniform profile);
+* ``offset`` tension-independent friction (E8): the capstan law acts on T + a, dT/dtheta =
+  -mu (T + a), so the profile memory runs on T' = T + a (torques and elongation changes are the
+  same in T and T'); the slack floor stays at T' = 0, so a released tendon may carry down to -a,
+  an approximation that matters only for a tendon within a of slack.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from estimator.distal_slip import distal_gains, elongation
+from slave.joint_physics import joint_torque_balance, settle_joint
+from slave.simulated_physics import advance_proximal
+
+__all__ = ["tendon_arrays", "simulate_pair"]
+
+_BIG = 1e200
+
+
+def tendon_arrays(K: float, lam: float, n_nodes: int = 24, lam_s: float = 0.0, n_series: int = 3):
+    """Node arrays of one tendon (constant curvature), proximal to distal.
+
+    Parameters
+    ----------
+    K : friction exponent mu * wrap angle [-], >= 0
+    lam : compliance of the sheathed tendon [rad/N] (units of r), > 0
+    n_nodes : elements along the sheath
+    lam_s : frictionless series compliance ahead of the sheath [rad/N], >= 0 (none when 0)
+    n_series : elements of the series run (used when ``lam_s`` > 0)
+
+    Returns
+    -------
+    lo, hi, dlo, dhi, w : ndarray, shape (m,), m = n_nodes + 1 (+ n_series): e^{-g}, e^{+g},
+        distal gains (:func:`estimator.distal_slip.distal_gains`) and trapezoid weights [rad/N]
+    c_pull, c_rel : float, elongation per distal tension of the whole tendon sliding [rad/N]
+    """
+    g = K * np.linspace(0.0, 1.0, n_nodes + 1)
+    w = np.full(n_nodes + 1, lam / n_nodes)
+    w[0] *= 0.5
+    w[-1] *= 0.5
+    if lam_s > 0.0:
+        ws = np.full(n_series, lam_s / n_series)
+        ws[0] *= 0.5
+        w[0] += 0.5 * lam_s / n_series
+        g = np.concatenate([np.zeros(n_series), g])
+        w = np.concatenate([ws, w])
+    lo, hi = np.exp(-g), np.exp(g)
+    dlo, dhi = distal_gains(g)
+    return lo, hi, dlo, dhi, w, float(w @ lo) / lo[-1], float(w @ hi) / hi[-1]
+
+
+@njit(cache=True)
+def _simulate(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, cpa, cra, lo_b, hi_b, dlo_b, dhi_b, wb, cpb, crb,
+              k, tau_c, substeps, theta, T_in):  # pragma: no cover - compiled
+    Ta = Pa.copy()
+    Tb = Pb.copy()
+    xa0 = elongation(Ta, wa)
+    xb0 = elongation(Tb, wb)
+    tau0 = Ta[Ta.shape[0] - 1] - Tb[Tb.shape[0] - 1]
+    sbx = np.zeros(1)
+    sbF = np.full(1, 1e200)
+    sbs = np.ones(1)
+    slope = k + 1.0 / max(elongation(lo_a, wa), 1e-9) + 1.0 / max(elongation(lo_b, wb), 1e-9)
+    th = 0.0
+    c0 = c[0]
+    prev = c[0]
+    for i in range(c.shape[0]):
+        for s in range(substeps):
+            u = prev + (c[i] - prev) * (s + 1) / substeps - c0
+            xa = xa0 + G * u
+            xb = xb0 - G * u
+            advance_proximal(Ta, lo_a, hi_a, wa, cpa, cra, xa - th, 0.0, sbx, sbF, sbs)
+            advance_proximal(Tb, lo_b, hi_b, wb, cpb, crb, xb + th, 0.0, sbx, sbF, sbs)
+            tau = tau0
+            if tau_c > 0.0:
+                f0 = joint_torque_balance(th, Ta, dlo_a, dhi_a, wa, elongation(Ta, wa), xa, Tb, dlo_b, dhi_b, wb,
+                                          elongation(Tb, wb), xb, 1.0, th, k, 0.0, 0.0, 0.0, -_BIG, _BIG, 0.0,
+                                          tau0)
+                if abs(f0) <= tau_c:
+                    continue
+                tau = tau0 + (tau_c if f0 > 0.0 else -tau_c)
+            th = settle_joint(Ta, dlo_a, dhi_a, wa, xa, Tb, dlo_b, dhi_b, wb, xb, 1.0, th, k, 0.0, 0.0, 0.0,
+                              -_BIG, _BIG, 0.0, tau, slope)
+        prev = c[i]
+        theta[i] = th
+        T_in[i, 0] = Ta[0]
+        T_in[i, 1] = Tb[0]
+
+
+def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple[float, float],
+                  K: tuple[float, float], k: float, *, lam_s: float = 0.0, tau_c: float = 0.0, shape: float = 0.0,
+                  offset: float = 0.0, n_nodes: int = 24, substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Run the capstan-joint pair model (module docstring, (P1)-(P4)) over a recorded command.
+
+    Parameters
+    ----------
+    command : ndarray, shape (n,)
+        Motor-side command c [rad].
+    pretension : (P_a, P_b) [N], uniform initial tensions (measured at rest), >= 0
+    G : motor-to-joint transmission g / r [-], >= 0
+    lam : (lam_a, lam_b), tendon compliances (L/EA) / r [rad/N], > 0
+    K : (K_a, K_b), friction exponents [-], >= 0
+    k : joint stiffness / r [N/rad], > 0
+    lam_s : series compliance [rad/N] (E10); tau_c : joint friction [N] (torque / r); shape : initial
+        profile exponent in [0, 1] (E5); offset : tension offset a of the capstan law [N] (E8)
+    n_nodes : elements per sheath
+    substeps : steps per sample; the model is rate-independent and the splitting error of one step
+        per 40 Hz sample was below 1e-12 rad on the KAIST commands, so 1 is the default
+
+    Returns
+    -------
+    theta : ndarray, shape (n,), joint angle from the start [rad]
+    T_in : ndarray, shape (n, 2), proximal tensions of tendons a and b [N]
+
+    Raises
+    ------
+    ValueError
+        A non-finite or out-of-range parameter, or a command that is not 1-D and finite.
+    """
+    c = np.ascontiguousarray(command, dtype=np.float64)
+    if c.ndim != 1 or c.size == 0 or not np.all(np.isfinite(c)):
+        raise ValueError("command must be a non-empty 1-D array of finite angles [rad]")
+    vals = {"G": G, "lam_a": lam[0], "lam_b": lam[1], "K_a": K[0], "K_b": K[1], "k": k, "lam_s": lam_s,
+            "tau_c": tau_c, "shape": shape, "offset": offset, "P_a": pretension[0], "P_b": pretension[1]}
+    for name, v in vals.items():
+        if not math.isfinite(v) or v < 0.0:
+            raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+    if min(lam) <= 0.0 or k <= 0.0:
+        raise ValueError(f"lam_a, lam_b and k must be > 0, got {lam!r}, {k!r}")
+    if not 0.0 <= shape <= 1.0:
+        raise ValueError(f"shape must be in [0, 1], got {shape!r}")
+    arrs = [tendon_arrays(Kj, lj, n_nodes, lam_s) for Kj, lj in zip(K, lam)]
+    P = [(P0 + offset) * np.exp(-shape * np.log(a[1])) for P0, a in zip(pretension, arrs)]
+    theta = np.empty(c.size)
+    T_in = np.empty((c.size, 2))
+    _simulate(c, float(G), P[0], P[1], *arrs[0], *arrs[1], float(k), float(tau_c), max(int(substeps), 1), theta,
+              T_in)
+    return theta, T_in - offset

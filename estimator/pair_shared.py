@@ -1,0 +1,251 @@
+"""One set of physical parameters across tube configurations, with K growing with the bend (E6).
+
+The per-configuration diagnosis (:mod:`estimator.pair_diagnosis`) fits every configuration on its
+own. Here one model holds for all of them: the capstan-joint pair model
+(:mod:`estimator.pair_kernels`) with the transmission G, the tendon compliance lam and the joint
+stiffness k shared, and the friction exponent of each tendon growing with the configuration's
+accumulated bend angle N [rad] (literature.md E6; Phee et al. 2009, eq. (2): K = mu sum(theta)):
+
+    K_j(N) = K0_j + mu N,   j = a, b                                                          (S1)
+
+K0_j is the rest of each tendon's route (its own base wrap), mu the friction coefficient of the
+added bend. The angle starts at the measured first sample (no offset is fitted per configuration),
+so a configuration is predicted from its command, its measured pretension and N alone.
+
+Three shared models are fitted the same way (training samples of every configuration together,
+``scipy.optimize.least_squares``), so that the configuration dependence is tested, not assumed:
+
+* ``capstan``             (S1) with mu free: G, lam, k, K0_a, K0_b, mu (6 parameters);
+* ``capstan, mu = 0``     the same without E6 (5 parameters);
+* ``seed+joint_backlash`` the seed model with a play of one width b (E12; 6 parameters: G, K_a,
+  K_b, lam_a, lam_b, b), the other way to get a dead zone, which has no reason to grow with N;
+* ``capstan, X per configuration`` for X = G, lam, k: (S1) with X fitted once per configuration,
+  to see whether a second quantity drifts with the configuration besides K.
+
+Leave-one-configuration-out: the shared model is refitted on all samples up to the end of the test
+block of the other configurations and predicts the left-out one.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from estimator.pair_models import Param, model_params, predict_model
+
+__all__ = ["SharedModel", "SHARED_MODELS", "LEAVE_ONE_OUT", "fit_shared", "leave_one_out", "shared_params",
+           "config_values", "score", "shared_analysis"]
+
+_MU = Param("mu", "1/rad", -1.0, 3.0, (0.15,), 0.02)
+_BAD = 10.0
+
+
+@dataclass(frozen=True)
+class SharedModel:
+    """A model shared across configurations: name, structure, effects, whether K grows with N (S1),
+    starting points (name -> value; missing names take their parameter's first start) and the
+    parameters fitted once per configuration instead (``per_config``, named ``G[i]`` etc.)."""
+
+    name: str
+    structure: str
+    effects: tuple[str, ...]
+    grows: bool
+    starts: tuple[dict, ...]
+    per_config: tuple[str, ...] = ()
+
+
+SHARED_MODELS = {m.name: m for m in (
+    SharedModel("capstan", "capstan", (), True,
+                ({"G": 1.4, "lam": 0.5, "k": 3.0, "K0_a": 0.6, "K0_b": 0.2, "mu": 0.13},
+                 {"G": 2.5, "lam": 0.9, "k": 4.0, "K0_a": 0.6, "K0_b": 0.2, "mu": 0.13})),
+    SharedModel("capstan, mu = 0", "capstan", (), False,
+                ({"G": 1.4, "lam": 0.5, "k": 3.0, "K_a": 0.9, "K_b": 0.4},
+                 {"G": 2.5, "lam": 0.9, "k": 4.0, "K_a": 1.2, "K_b": 0.6})),
+    SharedModel("seed+joint_backlash", "seed", ("joint_backlash",), False,
+                ({"G": 1.2, "K_a": 0.1, "K_b": 0.1, "lam_a": 0.1, "lam_b": 0.1, "b": 0.2},
+                 {"G": 1.5, "K_a": 0.8, "K_b": 0.5, "lam_a": 0.2, "lam_b": 0.2, "b": 0.3})),
+    *(SharedModel(f"capstan, {q} per configuration", "capstan", (), True,
+                  ({"G": 1.6, "lam": 0.5, "k": 5.0, "K0_a": 0.8, "K0_b": 0.3, "mu": 0.15},), (q,))
+      for q in ("G", "lam", "k")),
+)}
+#: Shared models refitted leaving each configuration out (those without per-configuration parameters).
+LEAVE_ONE_OUT = ("capstan", "seed+joint_backlash")
+
+
+def shared_params(m: SharedModel, n_configs: int = 1) -> tuple[Param, ...]:
+    """Parameters of a shared model over ``n_configs`` configurations: the structure's and effects'
+    without theta0, K_j renamed K0_j and mu added when K grows with N, each ``per_config`` one
+    repeated as ``name[i]``."""
+    out = []
+    for p in model_params(m.structure, m.effects):
+        if p.name == "theta0":
+            continue
+        if m.grows and p.name in ("K_a", "K_b"):
+            p = Param("K0" + p.name[1:], p.unit, p.lo, p.hi, p.starts, p.scale)
+        if p.name in m.per_config:
+            out += [Param(f"{p.name}[{i}]", p.unit, p.lo, p.hi, p.starts, p.scale) for i in range(n_configs)]
+        else:
+            out.append(p)
+    return tuple(out) + ((_MU,) if m.grows else ())
+
+
+def config_values(m: SharedModel, values: dict[str, float], rec, bend: float, i: int = 0) -> dict[str, float]:
+    """The model values of configuration ``i`` in a shared fit: K_j = K0_j + mu N (clipped at 0),
+    the per-configuration parameters of ``i``, theta0 from the first measured angle."""
+    v = {k: x for k, x in values.items() if "[" not in k}
+    v.update({q: values[f"{q}[{i}]"] for q in m.per_config})
+    if m.grows:
+        for j in ("a", "b"):
+            v[f"K_{j}"] = max(v.pop(f"K0_{j}") + v["mu"] * bend, 0.0)
+        v.pop("mu")
+    g = v["G"] * float(rec.command[0]) if m.structure == "seed" else 0.0
+    v["theta0"] = float(rec.angle[0]) - g
+    return v
+
+
+def _predict(m: SharedModel, values: dict, rec, bend: float, i: int = 0) -> np.ndarray:
+    return predict_model(m.structure, m.effects, config_values(m, values, rec, bend, i), rec)[0]
+
+
+def fit_shared(m: SharedModel, recs: list, bends: list[float], fit_on: list[slice], *,
+               starts: list[dict] | None = None) -> dict[str, float]:
+    """Fit one shared model on the ``fit_on`` samples of every recording together.
+
+    Parameters
+    ----------
+    m : SharedModel
+    recs : recordings (time, command, T_a, T_b, angle), one per configuration
+    bends : accumulated bend angle N of each configuration [rad]
+    fit_on : sample slice of each recording used in the fit (the models run from sample 0)
+    starts : starting values (default ``m.starts``)
+
+    Returns
+    -------
+    dict name -> value (SI units) of :func:`shared_params`.
+
+    Raises
+    ------
+    ValueError
+        ``recs``, ``bends`` and ``fit_on`` of different lengths or empty.
+    """
+    if not (len(recs) == len(bends) == len(fit_on) > 0):
+        raise ValueError("recs, bends and fit_on must be non-empty and of equal length")
+    if m.per_config and len(recs) < 2:
+        raise ValueError(f"{m.name}: per-configuration parameters need at least 2 configurations")
+    params = shared_params(m, len(recs))
+    names = [p.name for p in params]
+    lo, hi = np.array([p.lo for p in params]), np.array([p.hi for p in params])
+    ys = [np.asarray(r.angle, dtype=float)[s] for r, s in zip(recs, fit_on)]
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        v = dict(zip(names, map(float, x)))
+        out = []
+        for i, (r, b, s, y) in enumerate(zip(recs, bends, fit_on, ys)):
+            try:
+                out.append(_predict(m, v, r, b, i)[s] - y)
+            except ValueError:
+                out.append(np.full(y.size, _BAD))
+        return np.concatenate(out)
+
+    best = None
+    for s in (starts or m.starts):
+        x0 = np.clip([s.get(p.name, s.get(p.name.split("[")[0], p.starts[0])) for p in params], lo, hi)
+        sol = least_squares(residual, x0, bounds=(lo, hi), x_scale=[p.scale for p in params], diff_step=1e-3)
+        if best is None or sol.cost < best.cost:
+            best = sol
+    return dict(zip(names, map(float, best.x)))
+
+
+def score(m: SharedModel, values: dict, recs: list, bends: list[float], train: list[slice],
+          test: list[slice]) -> list[dict]:
+    """Per configuration: rmse on ``train`` and ``test`` [deg], the max |error| on test [deg], K_a and
+    K_b [-] (shared models with K growing), and the prediction [rad] (key ``angle``, not JSON)."""
+    out = []
+    for i, (r, b, tr, te) in enumerate(zip(recs, bends, train, test)):
+        th = _predict(m, values, r, b, i)
+        err = th - np.asarray(r.angle, dtype=float)
+        v = config_values(m, values, r, b, i)
+        out.append({"rmse_train_deg": math.degrees(float(np.sqrt(np.mean(err[tr] ** 2)))),
+                    "rmse_test_deg": math.degrees(float(np.sqrt(np.mean(err[te] ** 2)))),
+                    "max_abs_test_deg": math.degrees(float(np.max(np.abs(err[te])))),
+                    "K_a": v.get("K_a"), "K_b": v.get("K_b"), **{q: v[q] for q in m.per_config},
+                    "angle": th})
+    return out
+
+
+def leave_one_out(m: SharedModel, recs: list, bends: list[float], fit_on: list[slice], test: list[slice],
+                  start: dict, progress: Callable[[str], None] | None = None) -> list[dict]:
+    """Refit the shared model without each configuration in turn and predict that one.
+
+    ``fit_on`` [i] is the part of configuration i used when it is not left out (e.g. both cycles);
+    ``start`` the full shared fit (the starting point). Returns per configuration:
+    ``rmse_test_deg`` (the left-out configuration's test block), ``rmse_all_deg`` (all its samples),
+    ``params`` (the refit), ``angle`` [rad] (not JSON).
+    """
+    out = []
+    for i, (r, b, te) in enumerate(zip(recs, bends, test)):
+        keep = [j for j in range(len(recs)) if j != i]
+        v = fit_shared(m, [recs[j] for j in keep], [bends[j] for j in keep], [fit_on[j] for j in keep],
+                       starts=[start])
+        th = _predict(m, v, r, b)
+        err = th - np.asarray(r.angle, dtype=float)
+        out.append({"rmse_test_deg": math.degrees(float(np.sqrt(np.mean(err[te] ** 2)))),
+                    "rmse_all_deg": math.degrees(float(np.sqrt(np.mean(err ** 2)))), "params": v, "angle": th})
+        if progress:
+            progress(f"leave out {i}")
+    return out
+
+
+def shared_analysis(recs: list, bends: list[float], train: list[slice], test: list[slice],
+                    progress: Callable[[str], None] | None = None) -> tuple[dict, dict]:
+    """All shared fits (:data:`SHARED_MODELS`), scored per configuration, with leave-one-out for
+    ``capstan`` and ``seed+joint_backlash``, and the E6 test.
+
+    Parameters
+    ----------
+    recs, bends : recordings and their bend angles N [rad]
+    train, test : per recording, the training and test sample slices (KAIST: cycles 1 and 2); the
+        leave-one-out refits use every sample up to the end of each other configuration's test block
+
+    Returns
+    -------
+    summary : dict, JSON-ready
+        ``models``: name -> {params {name: {value, unit}}, n_params, rmse_test_deg (all test blocks
+        pooled), configurations [per recording: rmse_train_deg, rmse_test_deg, max_abs_test_deg, K_a,
+        K_b]}; ``leave_one_out``: name -> [per recording: rmse_test_deg, rmse_all_deg, params];
+        ``E6``: {score S of capstan against mu = 0 on the pooled test rmse, price S + PENALTY,
+        accepted}; ``mu`` [1/rad].
+    details : dict of per-sample predictions [rad] (``models`` / ``leave_one_out`` -> name -> list of
+        arrays), for figures; not JSON.
+    """
+    from estimator.diagnosis import PENALTY
+    tick = progress or (lambda label: None)
+    summary: dict = {"models": {}, "leave_one_out": {}}
+    details: dict = {"models": {}, "leave_one_out": {}}
+    fitted = {}
+    for name, m in SHARED_MODELS.items():
+        v = fit_shared(m, recs, bends, train)
+        tick(f"shared {name}")
+        fitted[name] = v
+        rows = score(m, v, recs, bends, train, test)
+        details["models"][name] = [r.pop("angle") for r in rows]
+        err2 = [np.square(a - np.asarray(r.angle, dtype=float))[te] for a, r, te in
+                zip(details["models"][name], recs, test)]
+        units = {p.name: p.unit for p in shared_params(m, len(recs))}
+        summary["models"][name] = {"params": {k: {"value": x, "unit": units[k]} for k, x in v.items()},
+                                   "n_params": len(v), "configurations": rows,
+                                   "rmse_test_deg": math.degrees(float(np.sqrt(np.mean(np.concatenate(err2)))))}
+    upto = [slice(0, te.stop) for te in test]
+    for name in LEAVE_ONE_OUT:
+        rows = leave_one_out(SHARED_MODELS[name], recs, bends, upto, test, fitted[name], tick)
+        details["leave_one_out"][name] = [r.pop("angle") for r in rows]
+        summary["leave_one_out"][name] = rows
+    ms = summary["models"]
+    S = (ms["capstan"]["rmse_test_deg"] / ms["capstan, mu = 0"]["rmse_test_deg"]) ** 2
+    price = S + PENALTY * (ms["capstan"]["n_params"] - ms["capstan, mu = 0"]["n_params"])
+    summary["E6"] = {"score": S, "price": price, "accepted": price < 1.0}
+    summary["mu"] = fitted["capstan"]["mu"]
+    return summary, details

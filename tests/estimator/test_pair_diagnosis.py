@@ -1,0 +1,193 @@
+"""Capstan-joint pair model, pair diagnosis and shared fit: synthetic data made by the models
+themselves (parameters recovered, the right cause named), and the KAIST findings when the data is
+present (docs/findings.md, Finding 2)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from estimator.pair import PairParams, play, predict_angle, reversal_dead_zones
+from estimator.pair_diagnosis import diagnose_pair, fit_model
+from estimator.pair_kernels import simulate_pair
+from estimator.pair_models import PAIR_EFFECTS, applicable, parse_model, predict_model
+from estimator.pair_shared import SHARED_MODELS, fit_shared, leave_one_out, shared_params
+from teleop.kaist import default_kaist_dir
+
+KAIST_DIR = default_kaist_dir()
+DT = 0.025                                   # 40 Hz, as the KAIST recordings
+N_CYCLE = int(round(2 * math.pi / DT))       # samples per command cycle (period 2 pi s)
+TRAIN, TEST = slice(0, N_CYCLE), slice(N_CYCLE, 2 * N_CYCLE)
+TRUE = {"G": 1.4, "lam": 0.4, "K_a": 0.9, "K_b": 0.5, "k": 4.0, "theta0": 0.01}
+
+
+class Rec:
+    """A KAIST-like recording: 2 cycles of a 60 deg sine command, 40 Hz."""
+
+    def __init__(self, angle, T, command, config_deg=0):
+        self.time = np.arange(angle.size) * DT
+        self.command, self.angle, self.config_deg = command, angle, config_deg
+        self.T_a, self.T_b = T[:, 0], T[:, 1]
+
+
+def command(n=2 * N_CYCLE + 20):
+    return math.radians(60.0) * np.sin(np.arange(n) * DT)
+
+
+def capstan_rec(v=TRUE, noise_deg=0.05, seed=0, config_deg=0):
+    """The capstan model's own output with tracker noise and 0.02 N load-cell noise."""
+    c = command()
+    th, T = simulate_pair(c, (5.0, 5.0), v["G"], (v["lam"], v["lam"]), (v["K_a"], v["K_b"]), v["k"])
+    rng = np.random.default_rng(seed)
+    T = T + 0.02 * rng.standard_normal(T.shape)
+    T[0] = 5.0
+    return Rec(th + v["theta0"] + math.radians(noise_deg) * rng.standard_normal(c.size), T, c, config_deg)
+
+
+# ---- the kernel -------------------------------------------------------------------------------
+
+def test_rest_is_an_equilibrium_and_one_step_per_sample_is_enough():
+    c = command()
+    th, T = simulate_pair(np.zeros(50), (5.0, 4.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0)
+    assert np.all(th == 0.0) and np.allclose(T, [5.0, 4.0])            # unequal pretensions: still at rest
+    a1, T1 = simulate_pair(c, (5.0, 5.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0, substeps=1)
+    a8, T8 = simulate_pair(c, (5.0, 5.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0, substeps=8)
+    assert np.max(np.abs(a1 - a8)) < 1e-9 and np.max(np.abs(T1 - T8)) < 1e-7
+
+
+def test_dead_zone_after_a_reversal_grows_with_K_and_tensions_follow_the_motor():
+    c = command()
+    zones = []
+    for K in (0.2, 0.6, 1.2):
+        th, T = simulate_pair(c, (5.0, 5.0), 1.4, (0.4, 0.4), (K, K), 4.0)
+        dz = reversal_dead_zones(c, th, T[:, 0], T[:, 1])
+        zones.append(np.nanmean([z.command_travel for z in dz]))
+        # the released tendon's proximal tension falls by e^{-2K} before the joint moves (Phee eqs. (14)-(21))
+        assert np.nanmedian([z.K_release for z in dz]) == pytest.approx(K, rel=0.15)
+        assert np.corrcoef(c, T[:, 0] - T[:, 1])[0, 1] > 0.8               # motor pulls a on + command
+    assert zones[0] < zones[1] < zones[2] and zones[2] > 2 * zones[0]
+
+
+def test_kernel_refuses_bad_parameters():
+    c = command(10)
+    with pytest.raises(ValueError, match="k must be > 0"):
+        simulate_pair(c, (5.0, 5.0), 1.0, (0.4, 0.4), (0.5, 0.5), 0.0)
+    with pytest.raises(ValueError, match="K_a must be finite and >= 0"):
+        simulate_pair(c, (5.0, 5.0), 1.0, (0.4, 0.4), (-0.1, 0.5), 1.0)
+    with pytest.raises(ValueError, match="shape must be in"):
+        simulate_pair(c, (5.0, 5.0), 1.0, (0.4, 0.4), (0.5, 0.5), 1.0, shape=2.0)
+    with pytest.raises(ValueError, match="1-D array of finite"):
+        simulate_pair(np.array([0.0, np.nan]), (5.0, 5.0), 1.0, (0.4, 0.4), (0.5, 0.5), 1.0)
+
+
+def test_catalogue_structures_and_ids():
+    assert parse_model("capstan+joint_backlash+sensor_delay") == ("capstan", ("joint_backlash", "sensor_delay"))
+    with pytest.raises(ValueError, match="does not apply to the seed"):
+        parse_model("seed+joint_friction")
+    with pytest.raises(ValueError, match="unknown pair structure"):
+        parse_model("spring")
+    assert "capstan_joint" not in applicable("capstan", ())
+    assert set(applicable("seed", ())) == {"joint_backlash", "sensor_delay", "friction_offset"}
+    assert all(e.literature.startswith("E") for e in PAIR_EFFECTS.values())
+
+
+# ---- fitting and diagnosis on the models' own output ---------------------------------------------
+
+def test_capstan_model_recovers_its_parameters():
+    rec = capstan_rec()
+    f = fit_model("capstan", (), rec, TRAIN, TEST, [{"G": 2.0, "lam": 0.3, "K_a": 0.3, "K_b": 0.3, "k": 2.0}])
+    for name, want in TRUE.items():
+        assert f.values[name] == pytest.approx(want, rel=0.06, abs=0.002), name
+    assert math.degrees(f.rmse_test) < 0.06                            # the tracker noise, 0.05 deg
+    assert f.rmse_T_in < 0.15                      # it predicts the load cells too (range 2-10 N, noise 0.02 N)
+
+
+def test_diagnosis_names_the_capstan_joint_on_its_own_data():
+    rec = capstan_rec(seed=1)
+    s, fits = diagnose_pair(rec, TRAIN, TEST)
+    assert s["causes"] == ["capstan_joint"]                            # nothing left above the noise
+    assert s["extended"]["model"] == "capstan"
+    assert s["extended"]["rmse_test_deg"] < 0.06 < 0.2 < s["seed"]["rmse_test_deg"]
+    assert s["candidates"]["capstan"]["accepted"] and s["gain"] > 0.7
+    assert s["extended"]["params"]["K_a"]["value"] == pytest.approx(0.9, rel=0.06)
+
+
+def test_diagnosis_names_joint_backlash_when_the_seed_model_has_one():
+    base = capstan_rec(seed=2, noise_deg=0.0)
+    p = PairParams(1.3, 0.2, 0.2, 0.1, 0.1, 0.0)
+    th = play(predict_angle(p, base.command, base.T_a, base.T_b), math.radians(8.0), 0.0)
+    rec = Rec(th + math.radians(0.05) * np.random.default_rng(3).standard_normal(th.size),
+              np.column_stack([base.T_a, base.T_b]), base.command)
+    s, _ = diagnose_pair(rec, TRAIN, TEST)
+    assert s["cause"] == "joint_backlash" and s["extended"]["model"].startswith("seed+joint_backlash")
+    assert math.degrees(s["extended"]["params"]["b"]["value"]) == pytest.approx(8.0, rel=0.1)
+    assert s["extended"]["rmse_test_deg"] < 0.1
+
+
+def test_shared_fit_recovers_mu_and_predicts_a_left_out_configuration():
+    v0 = {"G": 1.4, "lam": 0.4, "k": 4.0, "K0_a": 0.6, "K0_b": 0.3, "mu": 0.15}
+    bends = [math.radians(n) for n in (0, 90, 180, 240)]
+    recs = [capstan_rec({**v0, "K_a": v0["K0_a"] + v0["mu"] * b, "K_b": v0["K0_b"] + v0["mu"] * b, "theta0": 0.0},
+                        seed=10 + i) for i, b in enumerate(bends)]
+    m = SHARED_MODELS["capstan"]
+    assert [p.name for p in shared_params(m)] == ["G", "lam", "K0_a", "K0_b", "k", "mu"]
+    v = fit_shared(m, recs, bends, [TRAIN] * 4)
+    for name, want in v0.items():
+        assert v[name] == pytest.approx(want, rel=0.08), name
+    loo = leave_one_out(m, recs, bends, [slice(0, TEST.stop)] * 4, [TEST] * 4, v)
+    assert max(r["rmse_test_deg"] for r in loo) < 0.15                  # 3x the noise, from N alone
+    with pytest.raises(ValueError, match="equal length"):
+        fit_shared(m, recs, bends[:2], [TRAIN] * 4)
+
+
+def test_predict_model_applies_delay_and_backlash():
+    rec = capstan_rec(noise_deg=0.0)
+    v = {**TRUE, "tau": 2 * DT, "b": 0.0}
+    th, T = predict_model("capstan", ("sensor_delay",), v, rec)
+    th0, _ = predict_model("capstan", (), TRUE, rec)
+    assert np.allclose(th[10:], th0[8:-2]) and T.shape == (th.size, 2)
+    thb, _ = predict_model("capstan", ("joint_backlash",), {**TRUE, "b": 0.05}, rec)
+    assert np.max(np.abs(thb - th0)) == pytest.approx(0.05, abs=1e-3)
+
+
+# ---- the KAIST recordings (unlicensed: read in place, skipped when absent) ----------------------
+
+needs_kaist = pytest.mark.skipif(not KAIST_DIR.is_dir(), reason=f"KAIST data not found at {KAIST_DIR}: these "
+                                 "tests need the unlicensed measurements, see docs/findings.md")
+
+
+@pytest.fixture(scope="module")
+def kaist():
+    from teleop.kaist import cycles, load_all
+    recs = load_all(KAIST_DIR)
+    cs = [cycles(r) for r in recs]
+    return recs, [slice(0, c[0].stop) for c in cs], [c[1] for c in cs]
+
+
+@needs_kaist
+@pytest.mark.kaist
+def test_kaist_extended_beats_seed_on_every_configuration(kaist):
+    recs, train, test = kaist
+    for r, tr, te in zip(recs, train, test):
+        s, _ = diagnose_pair(r, tr, te)
+        assert s["causes"] and s["causes"][0] == "capstan_joint", r.config_deg
+        assert s["extended"]["rmse_test_deg"] < 0.5 * s["seed"]["rmse_test_deg"], r.config_deg
+        assert s["extended"]["rmse_test_deg"] < 1.5, r.config_deg
+
+
+@needs_kaist
+@pytest.mark.kaist
+def test_kaist_shared_fit_K_grows_with_the_bend(kaist):
+    recs, train, test = kaist
+    bends = [math.radians(r.config_deg) for r in recs]
+    m = SHARED_MODELS["capstan"]
+    v = fit_shared(m, recs, bends, train)
+    assert 0.05 < v["mu"] < 0.3                                         # mu of the added bend, cf. 0.158 from ratios
+    K = [v["K0_a"] + v["mu"] * b for b in bends]
+    assert all(a < b for a, b in zip(K, K[1:]))
+    v0 = fit_shared(SHARED_MODELS["capstan, mu = 0"], recs, bends, train)
+    from estimator.pair_shared import score
+    rm = lambda rows: np.sqrt(np.mean([x["rmse_test_deg"] ** 2 for x in rows]))      # noqa: E731
+    assert rm(score(m, v, recs, bends, train, test)) < 0.5 * rm(score(SHARED_MODELS["capstan, mu = 0"], v0, recs,
+                                                                       bends, train, test))
