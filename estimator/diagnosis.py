@@ -34,7 +34,7 @@ from teleop.recording import MeasuredData
 
 __all__ = ["diagnose", "predictions", "PENALTY", "STRUCTURE_RATIO"]
 
-PENALTY = 0.25          # required relative held-out improvement per extra parameter [-]
+PENALTY = 0.30          # price per extra parameter on the held-out score S (base = 1) [-]
 STRUCTURE_RATIO = 3.0   # held-out rmse / noise above this on a signal: structure left [-]
 _UNITS = {"T_out": "N", "x_out": "m"}
 

@@ -1,23 +1,16 @@
-"""Fitting and scoring for the diagnosis (:mod:`estimator.diagnosis`): preparation, time split, fits.
+"""Fitting and scoring for the diagnosis (:mod:`estimator.diagnosis` selects; docs/diagnosis.md).
 
-The procedure of the diagnosis (docs/diagnosis.md has the reasoning and the calibration):
-
-1. Prepare: block-average the recording to about ``target_rate`` (zero phase; the noise drops, the
-   maths of the rate-independent model does not change), velocity dx_in/dt, noise levels.
-2. Split in time: training = the first ``train_fraction`` of the duration, moved to the nearest
-   rest (slow and low tension) within 8 % of the duration so that whole cycles are held out; the
-   held-out block is the rest. Never random samples (neighbours leak).
-3. Fit the base model (K; L/EA by linear least squares) on the training block with
-   ``scipy.optimize.least_squares``; run it over the whole recording (the held-out block starts from
-   the state the training block left) and score the held-out block.
-4. Fit every extension of :mod:`estimator.effects` the same way (its parameters and K; several
-   starts) and score it on the held-out block: S = mean over measured distal signals of
-   MSE_extension / MSE_base (each signal in its own unit, so both count).
-5. Select: the extension with the lowest S is accepted when its relative improvement 1 - S beats
-   ``PENALTY`` per extra parameter (an information-criterion-like price, calibrated on clean
-   recordings so that none is accepted there); otherwise the answer is ``none``, or ``unknown``
-   when the base residual keeps structure well above the noise. Accepted extensions are then
-   extended greedily by a second one on the same rule relative to the model so far.
+* :func:`prepare`: block-average the recording to about ``target_rate`` (zero phase; the noise
+  drops, the rate-independent maths does not change), a 3-sample mean on T_in, velocity dx_in/dt,
+  noise levels, the model's node grid.
+* :func:`split_at_rest`: training = the first ``train_fraction`` of the duration, moved to the
+  quietest rest within 8 % of it so that whole cycles are held out; never random samples
+  (neighbouring samples are almost equal and would leak).
+* :func:`fit_model`: K and the extensions' parameters by ``scipy.optimize.least_squares`` on the
+  training block, L/EA in closed form inside every evaluation (it enters x_out linearly).
+* :func:`heldout_mse`, :func:`raw_rmse`: held-out errors on the averaged series and on the
+  measured samples (the model always runs from the first sample, so the held-out block starts from
+  the state the training block left, as online use would).
 """
 from __future__ import annotations
 
@@ -148,7 +141,8 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
     ranked = sorted(z_starts, key=lambda z: float(np.sum(residual(z) ** 2)))
     best = None
     for z0 in ranked[:max_starts]:
-        sol = least_squares(residual, z0, bounds=(lo, hi), diff_step=1e-2, x_scale=1.0, max_nfev=40 * len(params))
+        sol = least_squares(residual, z0, bounds=(lo, hi), diff_step=1e-2, x_scale=1.0, ftol=1e-6, xtol=1e-6,
+                            max_nfev=40 * len(params))
         if best is None or sol.cost < best.cost:
             best = sol
     vals = values(best.x)

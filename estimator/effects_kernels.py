@@ -61,6 +61,7 @@ def _kernel(T_in, v, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, sigma, 
     varying = K_rate != 0.0 or c_v != 0.0
     stiction = r_s > 0.0
     g_kin = np.exp(-K * u)
+    g_kin_inv = 1.0 / g_kin
     g_sta = np.exp(-K * (1.0 + r_s) * u)
     sliding = 0                     # direction of the whole-tendon slide, 0 when the distal end sticks
     t_b = -math.inf
@@ -104,8 +105,12 @@ def _kernel(T_in, v, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, sigma, 
                 t_b = -math.inf
         if sliding != 0:
             E = 0.0
+            fixed = not varying and t_b == -math.inf      # the kinetic bound: tabulated
             for i in range(m1):
-                y = Yp * math.exp(-f * sliding * u[i])
+                if fixed:
+                    y = Yp * (g_kin[i] if sliding > 0 else g_kin_inv[i])
+                else:
+                    y = Yp * math.exp(-f * sliding * u[i])
                 if y < a:
                     y = a
                 Y[i] = y
