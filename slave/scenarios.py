@@ -54,7 +54,7 @@ class Recording:
     """A simulated recording and its hidden truth.
 
     data : MeasuredData with time [s], x_in [m], T_in [N], x_out [m], T_out [N] (measured, noisy).
-    truth : dict with ``effect`` (id or "none"), ``parameters`` (name -> SI value), ``K`` [-],
+    truth : dict with ``effect`` (id, ids joined by "+", or "none"), ``effects`` (tuple), ``parameters`` (name -> SI value), ``K`` [-],
         ``compliance`` L/EA [m/N], ``level`` [0, 1], the noise levels and ``signals`` (noise-free
         T_out [N], x_out [m], x_in [m], shape (n,)); for evaluation only.
     """
@@ -191,14 +191,15 @@ def protocol(duration: float, rate_hz: float, x_max: float, rng: np.random.Gener
     return np.interp(np.arange(n) * dt, t, x)
 
 
-def record(effect: str | None = None, *, seed: int = 0, level: float | None = None, duration: float = 90.0,
+def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level: float | None = None, duration: float = 90.0,
            rate_hz: float = 1000.0) -> Recording:
     """Run one protocol through the simulated rig with ``effect`` hidden (None or "none": clean).
 
     Parameters
     ----------
-    effect : str or None
-        A catalogue id (:data:`EFFECT_IDS`), an id of :data:`UNCATALOGUED`, or None / "none".
+    effect : str, tuple of str, or None
+        A catalogue id (:data:`EFFECT_IDS`), an id of :data:`UNCATALOGUED`, several of them (all at
+        the same ``level``), or None / "none".
     seed : int
         Seeds the rig (K, EA, load), the protocol, the magnitude and every noise.
     level : float in [0, 1], optional
@@ -213,8 +214,10 @@ def record(effect: str | None = None, *, seed: int = 0, level: float | None = No
     ValueError
         Unknown effect, ``level`` outside [0, 1], too short or too slowly sampled a recording.
     """
-    if effect not in (None, "none") and effect not in EFFECT_IDS and effect not in UNCATALOGUED:
-        raise ValueError(f"unknown effect {effect!r}; expected None, 'none' or one of {EFFECT_IDS + UNCATALOGUED}")
+    hidden = () if effect in (None, "none") else (effect,) if isinstance(effect, str) else tuple(effect)
+    for e in hidden:
+        if e not in EFFECT_IDS and e not in UNCATALOGUED:
+            raise ValueError(f"unknown effect {e!r}; expected None, 'none' or one of {EFFECT_IDS + UNCATALOGUED}")
     if level is not None and not 0.0 <= level <= 1.0:
         raise ValueError(f"level must be in [0, 1], got {level!r}")
     if not (duration >= 5.0 and rate_hz >= 100.0):
@@ -230,7 +233,12 @@ def record(effect: str | None = None, *, seed: int = 0, level: float | None = No
     noise_x, q_x = 1e-6, 1e-6
     geo = SheathGeometry.uniform(L, angle)
     sheath = C.SheathConfig(mu=K / angle, EA=EA, runs=tuple(C.RunConfig(r.length, r.radius) for r in geo.runs))
-    fx, params = effects_config(effect, u, K, duration, rng_fx)
+    fx, params = C.EffectsConfig(), {}
+    for e in hidden:
+        one, p = effects_config(e, u, K, duration, rng_fx)
+        if e in EFFECT_IDS:
+            fx = replace(fx, **{e: getattr(one, e)})
+        params.update(p)
     rig_cfg = C.RigConfig(n_elements=100, rate_hz=rate_hz, effects=fx,
                           load=C.LoadConfig(joint_stiffness=100.0, joint_limit=0.05, tissue_stiffness=k_tissue,
                                             tissue_contact=0.0, tissue=True, force=0.0),
@@ -240,7 +248,7 @@ def record(effect: str | None = None, *, seed: int = 0, level: float | None = No
     per_newton = math.exp(-K) / (100.0 + k_tissue) + c * -math.expm1(-K) / K   # x_in per T_in, pulling
     x0 = rig.state.truth.x_in
     x_rest = float(rng.uniform(0.1, 0.4)) * per_newton
-    if effect == "friction_offset":   # rest where the tendon stays taut: friction holds a(e^K - 1) at the tip
+    if "friction_offset" in hidden:   # rest where the tendon stays taut: friction holds a(e^K - 1) at the tip
         x_rest += 1.2 * params["tension_offset"] * math.expm1(K) * (1.0 / (100.0 + k_tissue) + c)
     cmd = x0 + protocol(duration, rate_hz, float(rng.uniform(12.0, 20.0)) * per_newton, rng_proto, x_rest=x_rest)
     dt = 1.0 / rate_hz
@@ -251,19 +259,19 @@ def record(effect: str | None = None, *, seed: int = 0, level: float | None = No
         out[k] = (s.x_in, s.T_in, s.truth.x_out, s.truth.T_out, s.truth.x_in)
     T_out = out[:, 3] + noise_out * rng_noise.standard_normal(cmd.size)
     x_out = q_x * np.round((out[:, 2] - x_out0 + noise_x * rng_noise.standard_normal(cmd.size)) / q_x)
-    if effect == "load_cell_drift":
-        amp = realistic_range(effect)["amplitude"]
+    if "load_cell_drift" in hidden:
+        amp = realistic_range("load_cell_drift")["amplitude"]
         amplitude = amp[0] + u * (amp[1] - amp[0])
         knots = np.arange(0.0, duration + 20.0, 10.0)
         wander = np.interp(np.arange(cmd.size) * dt, knots, rng_fx.uniform(-1.0, 1.0, knots.size))
         T_out = T_out + amplitude * wander / max(np.max(np.abs(wander)), 1e-9)
-        params = {"amplitude": amplitude}
+        params["amplitude"] = amplitude
     data = MeasuredData(time=np.arange(1, cmd.size + 1) * dt, x_in=out[:, 0] - enc0, T_in=out[:, 1],
                         x_out=x_out, T_out=T_out,
                         metadata={"source": "slave/scenarios.py simulated bench recording",
                                   "units": "time=s, x_in=m, T_in=N, x_out=m, T_out=N"},
                         source=f"<scenario seed {seed}>")
-    truth = {"effect": effect or "none", "parameters": params, "level": u,
+    truth = {"effect": "+".join(hidden) or "none", "effects": hidden, "parameters": params, "level": u,
              "K": K, "compliance": c, "EA": EA, "noise_T_in": noise_in, "noise_T_out": noise_out,
              "noise_x_out": noise_x,
              "signals": {"T_out": out[:, 3], "x_out": out[:, 2] - x_out0, "x_in": out[:, 4] - x_in0}}

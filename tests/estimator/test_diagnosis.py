@@ -138,3 +138,15 @@ def test_report_writes_markdown_and_figures(clean_result, tmp_path):
     for png in ("residuals_time.png", "residuals_by.png", "loops.png", "candidates.png"):
         assert (tmp_path / "rep" / png).stat().st_size > 10_000 and f"]({png})" in text
     assert format_summary(res).startswith("cause: none")
+
+
+def test_a_second_effect_is_accepted_when_it_earns_its_place():
+    rec = record(("sensor_offset", "tendon_stiffening"), seed=13, duration=DUR, rate_hz=RATE)
+    res = diagnose(rec.data)
+    assert set(res["causes"][:2]) == {"sensor_offset", "tendon_stiffening"}
+    assert res["parameters"]["b_T_in"]["value"] == pytest.approx(rec.truth["parameters"]["offset"], rel=0.25)
+    assert res["parameters"]["beta"]["value"] == pytest.approx(rec.truth["parameters"]["softening"], rel=0.25)
+    one = res["candidates"][res["causes"][0]]
+    # the pair beats the first effect alone on the held-out block
+    for name, unit in (("T_out", "N"), ("x_out", "m")):
+        assert res["extended"][f"rmse_{name}_{unit}"] <= one[f"rmse_{name}_{unit}"] * 1.001
