@@ -20,7 +20,9 @@ Three shared models are fitted the same way (training samples of every configura
 * ``seed+joint_backlash`` the seed model with a play of one width b (E12; 6 parameters: G, K_a,
   K_b, lam_a, lam_b, b), the other way to get a dead zone, which has no reason to grow with N;
 * ``capstan, X per configuration`` for X = G, lam, k: (S1) with X fitted once per configuration,
-  to see whether a second quantity drifts with the configuration besides K.
+  to see whether a second quantity drifts with the configuration besides K;
+* ``capstan, G falls with N``: (S1) and G = G + G_N N (7 parameters), the drift the previous
+  variants point at, as one shared slope.
 
 Leave-one-configuration-out: the shared model is refitted on all samples up to the end of the test
 block of the other configurations and predicts the left-out one.
@@ -34,20 +36,23 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import least_squares
 
+from estimator.pair_diagnosis import MAX_NFEV
 from estimator.pair_models import Param, model_params, predict_model
 
 __all__ = ["SharedModel", "SHARED_MODELS", "LEAVE_ONE_OUT", "fit_shared", "leave_one_out", "shared_params",
            "config_values", "score", "shared_analysis"]
 
 _MU = Param("mu", "1/rad", -1.0, 3.0, (0.15,), 0.02)
+_G_N = Param("G_N", "1/rad", -5.0, 5.0, (0.0,), 0.02)
 _BAD = 10.0
 
 
 @dataclass(frozen=True)
 class SharedModel:
     """A model shared across configurations: name, structure, effects, whether K grows with N (S1),
-    starting points (name -> value; missing names take their parameter's first start) and the
-    parameters fitted once per configuration instead (``per_config``, named ``G[i]`` etc.)."""
+    starting points (name -> value; missing names take their parameter's first start), the
+    parameters fitted once per configuration instead (``per_config``, named ``G[i]`` etc.) and
+    whether the transmission also changes linearly with N (``g_slope``: G = G + G_N N)."""
 
     name: str
     structure: str
@@ -55,6 +60,7 @@ class SharedModel:
     grows: bool
     starts: tuple[dict, ...]
     per_config: tuple[str, ...] = ()
+    g_slope: bool = False
 
 
 SHARED_MODELS = {m.name: m for m in (
@@ -67,12 +73,15 @@ SHARED_MODELS = {m.name: m for m in (
     SharedModel("seed+joint_backlash", "seed", ("joint_backlash",), False,
                 ({"G": 1.2, "K_a": 0.1, "K_b": 0.1, "lam_a": 0.1, "lam_b": 0.1, "b": 0.2},
                  {"G": 1.5, "K_a": 0.8, "K_b": 0.5, "lam_a": 0.2, "lam_b": 0.2, "b": 0.3})),
+    SharedModel("capstan, G falls with N", "capstan", (), True,
+                ({"G": 1.9, "G_N": -0.13, "lam": 0.3, "k": 8.0, "K0_a": 1.4, "K0_b": 0.8, "mu": 0.2},
+                 {"G": 2.5, "G_N": 0.0, "lam": 1.0, "k": 3.6, "K0_a": 0.55, "K0_b": 0.15, "mu": 0.12}), (), True),
     *(SharedModel(f"capstan, {q} per configuration", "capstan", (), True,
                   ({"G": 1.6, "lam": 0.5, "k": 5.0, "K0_a": 0.8, "K0_b": 0.3, "mu": 0.15},), (q,))
       for q in ("G", "lam", "k")),
 )}
 #: Shared models refitted leaving each configuration out (those without per-configuration parameters).
-LEAVE_ONE_OUT = ("capstan", "seed+joint_backlash")
+LEAVE_ONE_OUT = ("capstan", "seed+joint_backlash", "capstan, G falls with N")
 
 
 def shared_params(m: SharedModel, n_configs: int = 1) -> tuple[Param, ...]:
@@ -89,7 +98,7 @@ def shared_params(m: SharedModel, n_configs: int = 1) -> tuple[Param, ...]:
             out += [Param(f"{p.name}[{i}]", p.unit, p.lo, p.hi, p.starts, p.scale) for i in range(n_configs)]
         else:
             out.append(p)
-    return tuple(out) + ((_MU,) if m.grows else ())
+    return tuple(out) + ((_MU,) if m.grows else ()) + ((_G_N,) if m.g_slope else ())
 
 
 def config_values(m: SharedModel, values: dict[str, float], rec, bend: float, i: int = 0) -> dict[str, float]:
@@ -101,6 +110,8 @@ def config_values(m: SharedModel, values: dict[str, float], rec, bend: float, i:
         for j in ("a", "b"):
             v[f"K_{j}"] = max(v.pop(f"K0_{j}") + v["mu"] * bend, 0.0)
         v.pop("mu")
+    if m.g_slope:
+        v["G"] = max(v["G"] + v.pop("G_N") * bend, 1e-6)
     g = v["G"] * float(rec.command[0]) if m.structure == "seed" else 0.0
     v["theta0"] = float(rec.angle[0]) - g
     return v
@@ -153,7 +164,8 @@ def fit_shared(m: SharedModel, recs: list, bends: list[float], fit_on: list[slic
     best = None
     for s in (starts or m.starts):
         x0 = np.clip([s.get(p.name, s.get(p.name.split("[")[0], p.starts[0])) for p in params], lo, hi)
-        sol = least_squares(residual, x0, bounds=(lo, hi), x_scale=[p.scale for p in params], diff_step=1e-3)
+        sol = least_squares(residual, x0, bounds=(lo, hi), x_scale=[p.scale for p in params], diff_step=1e-3,
+                            max_nfev=MAX_NFEV)
         if best is None or sol.cost < best.cost:
             best = sol
     return dict(zip(names, map(float, best.x)))
@@ -200,15 +212,17 @@ def leave_one_out(m: SharedModel, recs: list, bends: list[float], fit_on: list[s
 
 
 def shared_analysis(recs: list, bends: list[float], train: list[slice], test: list[slice],
-                    progress: Callable[[str], None] | None = None) -> tuple[dict, dict]:
-    """All shared fits (:data:`SHARED_MODELS`), scored per configuration, with leave-one-out for
-    ``capstan`` and ``seed+joint_backlash``, and the E6 test.
+                    progress: Callable[[str], None] | None = None, drift: bool = False) -> tuple[dict, dict]:
+    """The shared fits (:data:`SHARED_MODELS`), scored per configuration, with leave-one-out for
+    those of :data:`LEAVE_ONE_OUT`, the E6 test and the test of a transmission falling with N.
 
     Parameters
     ----------
     recs, bends : recordings and their bend angles N [rad]
     train, test : per recording, the training and test sample slices (KAIST: cycles 1 and 2); the
         leave-one-out refits use every sample up to the end of each other configuration's test block
+    drift : also fit the models with parameters per configuration (``capstan, X per configuration``;
+        about a minute more)
 
     Returns
     -------
@@ -217,7 +231,7 @@ def shared_analysis(recs: list, bends: list[float], train: list[slice], test: li
         pooled), configurations [per recording: rmse_train_deg, rmse_test_deg, max_abs_test_deg, K_a,
         K_b]}; ``leave_one_out``: name -> [per recording: rmse_test_deg, rmse_all_deg, params];
         ``E6``: {score S of capstan against mu = 0 on the pooled test rmse, price S + PENALTY,
-        accepted}; ``mu`` [1/rad].
+        accepted}; ``G_slope``: the same for "capstan, G falls with N" against capstan; ``mu`` [1/rad].
     details : dict of per-sample predictions [rad] (``models`` / ``leave_one_out`` -> name -> list of
         arrays), for figures; not JSON.
     """
@@ -227,7 +241,11 @@ def shared_analysis(recs: list, bends: list[float], train: list[slice], test: li
     details: dict = {"models": {}, "leave_one_out": {}}
     fitted = {}
     for name, m in SHARED_MODELS.items():
-        v = fit_shared(m, recs, bends, train)
+        if m.per_config and not drift:
+            continue
+        # the variants of the capstan model start from its fit (their extra freedom at its values)
+        warm = [dict(fitted["capstan"])] if m.structure == "capstan" and m.grows and "capstan" in fitted else []
+        v = fit_shared(m, recs, bends, train, starts=warm + list(m.starts[:1]) if warm else None)
         tick(f"shared {name}")
         fitted[name] = v
         rows = score(m, v, recs, bends, train, test)
@@ -247,5 +265,8 @@ def shared_analysis(recs: list, bends: list[float], train: list[slice], test: li
     S = (ms["capstan"]["rmse_test_deg"] / ms["capstan, mu = 0"]["rmse_test_deg"]) ** 2
     price = S + PENALTY * (ms["capstan"]["n_params"] - ms["capstan, mu = 0"]["n_params"])
     summary["E6"] = {"score": S, "price": price, "accepted": price < 1.0}
+    S = (ms["capstan, G falls with N"]["rmse_test_deg"] / ms["capstan"]["rmse_test_deg"]) ** 2
+    price = S + PENALTY * (ms["capstan, G falls with N"]["n_params"] - ms["capstan"]["n_params"])
+    summary["G_slope"] = {"score": S, "price": price, "accepted": price < 1.0}
     summary["mu"] = fitted["capstan"]["mu"]
     return summary, details

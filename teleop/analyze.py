@@ -23,14 +23,18 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
 
 from estimator.diagnosis import diagnose
 from estimator.pair import fit_force_path, fit_linear, fit_pair, fit_play_map, reversal_dead_zones, rmse
+from estimator.pair_diagnosis import diagnose_pair
+from estimator.pair_shared import shared_analysis
 from teleop.errors import ConfigError, DataError
 from teleop.kaist import KaistRecording, cycles, is_kaist_file, load_all
+from teleop.kaist_report import write_kaist_figures, write_kaist_report
 from teleop.recording import MeasuredData, read_measured_csv
 from teleop.report import format_summary, write_report
 
@@ -39,7 +43,6 @@ __all__ = ["add_arguments", "main_analyze", "diagnose_file", "format_diagnosis",
 
 #: Recordings of at least this many samples get a progress bar on stderr (100 s at 1 kHz).
 PROGRESS_SAMPLES = 100_000
-_MODELS = ("seed pair model", "force path", "linear map", "linear map + play")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -70,11 +73,13 @@ def main_analyze(args: argparse.Namespace) -> int:
     if args.kaist is not None or is_kaist_file(args.file):
         directory = Path(args.file).parent if args.kaist is None else (args.kaist or None)
         recs = load_all(directory)
-        summary, fits = analyze_kaist(recs)
+        summary, fits = analyze_kaist(recs, progress=sys.stderr.isatty())
         print(format_kaist(summary))
         if args.figures:
             for p in write_kaist_figures(recs, fits, summary, args.figures):
                 print(f"wrote {p}")
+        if args.report is not None:
+            print(f"wrote {write_kaist_report(recs, fits, summary, args.report)}")
     else:
         if args.figures:
             raise ConfigError("--figures is for the KAIST analysis (--kaist); use --report DIR")
@@ -180,28 +185,59 @@ def _kaist_one(rec: KaistRecording) -> tuple[dict, dict]:
     return summary, {"fits": fits, "cycles": (c1, c2)}
 
 
-def analyze_kaist(recs: list[KaistRecording]) -> tuple[dict, list[dict]]:
-    """Seed pair model vs the linear maps on every configuration (train cycle 1, test cycle 2).
+def analyze_kaist(recs: list[KaistRecording], progress: bool = False) -> tuple[dict, list[dict]]:
+    """Every KAIST configuration: the pair diagnosis, the shared fit and the Finding 1 baselines.
+
+    Per configuration (train on command cycle 1, test on cycle 2): the seed pair model beside the
+    force path, the linear map and the linear map + play, the model-free reversal dead zones, and
+    the pair diagnosis (:func:`estimator.pair_diagnosis.diagnose_pair`: the seed model against the
+    capstan-joint model and the pair-level effects). Across configurations: one set of physical
+    parameters with K growing with the bend angle (:func:`estimator.pair_shared.shared_analysis`).
+
+    Parameters
+    ----------
+    recs : recordings, one per configuration
+    progress : a status line on stderr (the analysis takes about a minute)
 
     Returns
     -------
-    summary : dict
+    summary : dict, JSON-ready
         ``mode`` ("kaist"), ``configurations`` (one dict per recording: config_deg, cycle times,
-        models {name: {params, rmse_train_deg, rmse_test_deg, max_abs_test_deg}}, dead_zones) and
-        ``trend``: least-squares line of the mean release-side band exponent K_release against the
-        configuration angle [rad] (``K_release_per_rad``, ``K_release_at_0``), when >= 2 configurations.
+        models {name: {params, rmse_train_deg, rmse_test_deg, max_abs_test_deg}}, dead_zones,
+        ``diagnosis`` (the pair diagnosis: seed, extended, cause, causes, gain, candidates) and
+        ``shared`` {rmse_test_deg, leave_one_out_rmse_test_deg, K_a, K_b}), ``shared`` (every shared
+        model, leave-one-out, the E6 test, mu) and ``trend``: least-squares line of the mean
+        release-side band exponent K_release against the configuration angle [rad]
+        (``K_release_per_rad``, ``K_release_at_0``), when >= 2 configurations.
     details : list of dict
-        Per recording: ``fits`` (name -> PairFit with the predictions) and ``cycles``; for the figures.
+        Per recording: ``fits`` (name -> PairFit), ``cycles``, ``pair_fits`` (model id -> FitResult),
+        ``extended`` (its id), ``shared_angle``, ``loco_angle`` [rad]; for the figures.
 
     Raises
     ------
     DataError
         A recording without two complete command cycles.
     """
+    tick = _Status(progress)
     summaries, details = zip(*(_kaist_one(r) for r in recs)) if recs else ((), ())
     out = {"mode": "kaist", "train": "command cycle 1", "test": "command cycle 2",
            "configurations": list(summaries)}
+    train = [slice(0, d["cycles"][0].stop) for d in details]
+    test = [d["cycles"][1] for d in details]
+    for rec, s, d, tr, te in zip(recs, summaries, details, train, test):
+        diag, fits = diagnose_pair(rec, tr, te, progress=lambda label, n=rec.config_deg: tick(f"N = {n}: {label}"))
+        s["diagnosis"], d["pair_fits"], d["extended"] = diag, fits, diag["extended"]["model"]
     Ns = [math.radians(s["config_deg"]) for s in summaries]
+    if len(recs) >= 3:
+        shared, sdet = shared_analysis(list(recs), Ns, train, test, progress=tick)
+        out["shared"] = shared
+        for i, (s, d) in enumerate(zip(summaries, details)):
+            row = shared["models"]["capstan"]["configurations"][i]
+            s["shared"] = {"rmse_test_deg": row["rmse_test_deg"], "K_a": row["K_a"], "K_b": row["K_b"],
+                           "leave_one_out_rmse_test_deg": shared["leave_one_out"]["capstan"][i]["rmse_test_deg"]}
+            d["shared_angle"] = sdet["models"]["capstan"][i]
+            d["loco_angle"] = sdet["leave_one_out"]["capstan"][i]
+    tick.done()
     Kr = [np.nanmean([z["K_release"] if z["K_release"] is not None else np.nan for z in s["dead_zones"]])
           for s in summaries]
     ok = [i for i, k in enumerate(Kr) if math.isfinite(k)]
@@ -211,135 +247,70 @@ def analyze_kaist(recs: list[KaistRecording]) -> tuple[dict, list[dict]]:
     return out, list(details)
 
 
+class _Status:
+    """A one-line status on stderr (when enabled), overwritten in place."""
+
+    def __init__(self, enabled: bool):
+        self.enabled, self.n = enabled, 0
+
+    def __call__(self, label: str) -> None:
+        self.n += 1
+        if self.enabled:
+            sys.stderr.write(f"\ranalyze --kaist: {self.n:3d} models fitted, {label:<60.60}")
+            sys.stderr.flush()
+
+    def done(self) -> None:
+        if self.enabled and self.n:
+            sys.stderr.write("\n")
+
+
+def _fmt_causes(causes: list[str]) -> str:
+    return ", ".join(causes) if causes else "none"
+
+
 def format_kaist(s: dict) -> str:
-    """The table printed for the KAIST analysis: cycle-2 RMSE [deg] per configuration."""
-    lines = ["KAIST antagonistic pair: distal angle, calibrated on command cycle 1, tested on cycle 2",
-             f"{'config [deg]':>12}{'seed pair':>11}{'force path':>12}{'linear':>9}{'lin+play':>10}"
-             f"{'dead zone':>11}{'K_release':>11}{'K_force':>9}",
-             ]
+    """The tables printed for the KAIST analysis: the pair diagnosis per configuration (held-out
+    angle RMSE [deg] of the seed model, the extended model, the shared fit and its leave-one-out
+    prediction; the causes), the shared parameters, then the Finding 1 baselines."""
+    lines = ["KAIST antagonistic pair: distal angle, calibrated on command cycle 1, tested on cycle 2 (RMSE [deg])",
+             f"{'config [deg]':>12}{'seed':>7}{'extended':>10}{'gain':>6}{'shared':>8}{'LOCO':>7}"
+             f"{'T_in [N]':>9}  causes (extended model)"]
+    for c in s["configurations"]:
+        d, sh = c["diagnosis"], c.get("shared", {})
+        t = d["extended"]["rmse_T_in_N"]
+        lines.append(f"{c['config_deg']:>12}{d['seed']['rmse_test_deg']:>7.2f}{d['extended']['rmse_test_deg']:>10.2f}"
+                     f"{d['gain']:>6.2f}{sh.get('rmse_test_deg', math.nan):>8.2f}"
+                     f"{sh.get('leave_one_out_rmse_test_deg', math.nan):>7.2f}{t if t is not None else math.nan:>9.2f}"
+                     f"  {_fmt_causes(d['causes'])} ({d['extended']['model']})")
+    lines.append("extended: the model the diagnosis chose; shared: one parameter set for all configurations with "
+                 "K = K0 + mu N; LOCO: refitted without that configuration; T_in: the extended model's prediction "
+                 "of the proximal tensions (not fitted)")
+    if "shared" in s:
+        sh = s["shared"]
+        for name, m in sh["models"].items():
+            p = ", ".join(f"{k} {v['value']:.3g}" for k, v in m["params"].items())
+            rows = " ".join(f"{r['rmse_test_deg']:.2f}" for r in m["configurations"])
+            lines.append(f"shared {name:<28} test RMSE {m['rmse_test_deg']:.2f} (per configuration {rows}): {p}")
+        for name, rows in sh["leave_one_out"].items():
+            lines.append(f"leave one out, {name:<20} " + " ".join(f"{r['rmse_test_deg']:.2f}" for r in rows))
+        e6 = sh["E6"]
+        gs = sh["G_slope"]
+        lines.append(f"E6 (K grows with the bend): score {e6['score']:.3f} against mu = 0, price {e6['price']:.3f} -> "
+                     f"{'accepted' if e6['accepted'] else 'rejected'}; mu = {sh['mu']:.3f} /rad")
+        lines.append(f"G falls with the bend too: score {gs['score']:.3f} against capstan, price {gs['price']:.3f} -> "
+                     f"{'accepted' if gs['accepted'] else 'rejected'}")
+    lines += ["", "Finding 1 baselines (RMSE [deg]; dead zone after a reversal [deg of command]; K_release: capstan "
+              "band from tension ratios; K_force: K of the force-path fit)",
+              f"{'config [deg]':>12}{'force path':>12}{'linear':>9}{'lin+play':>10}{'dead zone':>11}{'K_release':>11}"
+              f"{'K_force':>9}"]
     for c in s["configurations"]:
         m = {k: v["rmse_test_deg"] for k, v in c["models"].items()}
         dz = [z["command_travel_deg"] for z in c["dead_zones"] if z["command_travel_deg"] is not None]
         kr = [z["K_release"] for z in c["dead_zones"] if z["K_release"] is not None]
-        lines.append(f"{c['config_deg']:>12}{m['seed pair model']:>11.2f}{m['force path']:>12.2f}"
-                     f"{m['linear map']:>9.2f}{m['linear map + play']:>10.2f}"
+        lines.append(f"{c['config_deg']:>12}{m['force path']:>12.2f}{m['linear map']:>9.2f}{m['linear map + play']:>10.2f}"
                      f"{np.mean(dz) if dz else math.nan:>11.1f}{np.mean(kr) if kr else math.nan:>11.2f}"
                      f"{c['models']['force path']['params']['K']:>9.2f}")
-    lines.append("RMSE of the angle on cycle 2 [deg]; dead zone after a reversal [deg of command]; "
-                 "K_release: capstan band from tension ratios; K_force: K of the force-path fit")
     if "trend" in s:
         lines.append(f"K_release = {s['trend']['K_release_at_0']:.2f} + {s['trend']['K_release_per_rad']:.3f} "
                      "* configuration angle [rad]")
     return "\n".join(lines)
-
-
-def write_kaist_figures(recs: list[KaistRecording], details: list[dict], summary: dict,
-                        directory: str | Path) -> list[Path]:
-    """Write kaist_rmse.png, kaist_loops.png, kaist_residuals.png into ``directory`` (created).
-
-    Raises
-    ------
-    ConfigError
-        ``directory`` exists and is not a directory, or cannot be created.
-    """
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    d = Path(directory)
-    try:
-        d.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise ConfigError(f"--figures {d}: cannot create the directory ({e.strerror})") from None
-    deg = np.degrees
-    colors = plt.cm.viridis(np.linspace(0.0, 0.85, len(recs)))
-    Ns = [c["config_deg"] for c in summary["configurations"]]
-    paths = []
-
-    fig, (ax1, ax2, ax3) = plt.subplots(1, 3, figsize=(15, 4.3), gridspec_kw={"width_ratios": [1.5, 1, 1]})
-    x = np.arange(len(Ns))
-    wb = 0.8 / len(_MODELS)
-    for i, name in enumerate(_MODELS):
-        vals = [c["models"][name]["rmse_test_deg"] for c in summary["configurations"]]
-        bars = ax1.bar(x + (i - (len(_MODELS) - 1) / 2) * wb, vals, wb, label=name)
-        ax1.bar_label(bars, fmt="%.1f", fontsize=7)
-    ax1.set(xticks=x, xticklabels=[str(n) for n in Ns], xlabel="configuration N [deg]",
-            ylabel="distal angle RMSE on cycle 2 [deg]", title="Held-out error (calibrated on cycle 1)")
-    ax1.legend(fontsize=8)
-    for c, n in zip(summary["configurations"], Ns):
-        for q in c["dead_zones"]:
-            if q["command_travel_deg"] is None:
-                continue
-            top = q["command_deg"] > 0           # after a maximum: A released, B pulled
-            ax2.plot(n, q["command_travel_deg"], "ks", mfc="k" if top else "none", ms=5)
-            ax3.plot(n, q["K_release"], "o", color="tab:blue", mfc="tab:blue" if top else "none", ms=5)
-            ax3.plot(n, q["K_pull"], "^", color="tab:orange", mfc="tab:orange" if top else "none", ms=5)
-        ax3.plot(n, c["models"]["force path"]["params"]["K"], "D", color="tab:green", ms=6)
-    ax2.plot([], [], "ks", label="after a command maximum")
-    ax2.plot([], [], "ks", mfc="none", label="after a command minimum")
-    ax2.set(xlabel="configuration N [deg]", ylabel="command travel before the angle moves 1 deg [deg]",
-            title="Model-free: dead zone after each reversal")
-    ax2.legend(fontsize=7)
-    ax3.plot([], [], "o", color="tab:blue", label="K_release = 0.5 ln(T_rel at reversal / at motion)")
-    ax3.plot([], [], "^", color="tab:orange", label="K_pull = 0.5 ln(T_pull at motion / at reversal)")
-    ax3.plot([], [], "D", color="tab:green", label="K fitted by the force path (cycle 1)")
-    if "trend" in summary:
-        nn = np.linspace(0, max(Ns), 2)
-        t = summary["trend"]
-        ax3.plot(nn, t["K_release_at_0"] + t["K_release_per_rad"] * np.radians(nn), "-", color="tab:blue", lw=1)
-    ax3.set(xlabel="configuration N [deg]", ylabel="friction exponent K [-]",
-            title="Capstan band (filled: after a maximum)")
-    ax3.legend(fontsize=7, loc="upper left")
-    for a in (ax2, ax3):
-        a.grid(alpha=0.3)
-    fig.tight_layout()
-    paths.append(d / "kaist_rmse.png")
-    fig.savefig(paths[-1], dpi=110)
-    plt.close(fig)
-
-    fig, axes = plt.subplots(1, len(recs), figsize=(3.3 * len(recs), 3.7), squeeze=False)
-    for ax, rec, det in zip(axes[0], recs, details):
-        c2 = det["cycles"][1]
-        ax.plot(deg(rec.command[c2]), deg(rec.angle[c2]), "k", lw=1.6, label="measured")
-        ax.plot(deg(rec.command[c2]), deg(det["fits"]["seed pair model"].prediction[c2]), "r", lw=1, label="seed pair")
-        ax.plot(deg(rec.command[c2]), deg(det["fits"]["force path"].prediction[c2]), ":",
-                color="tab:green", lw=1.2, label="force path")
-        ax.plot(deg(rec.command[c2]), deg(det["fits"]["linear map + play"].prediction[c2]), "--",
-                color="tab:blue", lw=1, label="linear + play")
-        ax.set(title=f"N = {rec.config_deg} deg (cycle 2)", xlabel="command [deg]")
-        ax.grid(alpha=0.3)
-    axes[0][0].set_ylabel("distal angle [deg]")
-    axes[0][0].legend(fontsize=7)
-    fig.tight_layout()
-    paths.append(d / "kaist_loops.png")
-    fig.savefig(paths[-1], dpi=100)
-    plt.close(fig)
-
-    fig, ax = plt.subplots(2, 2, figsize=(11, 7.5))
-    for col, rec, det in zip(colors, recs, details):
-        c2 = det["cycles"][1]
-        r = deg(det["fits"]["seed pair model"].prediction[c2] - rec.angle[c2])
-        t = rec.time[c2] - rec.time[c2.start]
-        ph = 360.0 * t / (rec.time[c2.stop] - rec.time[c2.start])
-        kw = {"color": col, "lw": 1}
-        ax[0, 0].plot(ph, r, label=f"N = {rec.config_deg}", **kw)
-        ax[0, 1].plot(deg(rec.command[c2]), r, **kw)
-        ax[1, 0].plot((rec.T_a - rec.T_b)[c2], r, ".", color=col, ms=3)
-        ax[1, 1].plot(ph, deg(rec.angle[c2]), **kw)
-        ax[1, 1].plot(ph, deg(det["fits"]["seed pair model"].prediction[c2]), ":", **kw)
-    for a in (ax[0, 0], ax[1, 1]):
-        for v in (90, 270):
-            a.axvline(v, color="k", lw=0.8, ls="--")
-        a.set_xlabel("phase of the command cycle [deg] (reversals at 90, 270)")
-    ax[0, 0].set(ylabel="seed pair residual [deg]", title="Residual (predicted - measured), cycle 2")
-    ax[0, 0].legend(fontsize=7)
-    ax[0, 1].set(xlabel="command [deg]", ylabel="residual [deg]", title="Residual vs command")
-    ax[1, 0].set(xlabel="T_a - T_b [N]", ylabel="residual [deg]", title="Residual vs proximal tension difference")
-    ax[1, 1].set(ylabel="distal angle [deg]", title="Measured (solid) and seed pair (dotted)")
-    for a in ax.ravel():
-        a.grid(alpha=0.3)
-    fig.tight_layout()
-    paths.append(d / "kaist_residuals.png")
-    fig.savefig(paths[-1], dpi=90)
-    plt.close(fig)
-    return paths
