@@ -9,14 +9,17 @@ Two modes:
   and the gain (:func:`teleop.report.format_summary`) and the fitted parameters. A progress bar goes
   to stderr on long recordings.
 * ``teleop analyze --kaist [DIR]`` or ``teleop analyze .../sine_config_N.txt``: every KAIST
-  configuration (:mod:`teleop.kaist`; unlicensed data read in place): the seed pair model
-  (:mod:`estimator.pair`) calibrated on command cycle 1 and tested on cycle 2, beside the
-  force-path variant, the linear map and the linear map through a play operator, plus the
-  model-free reversal dead zones.
+  configuration (:mod:`teleop.kaist`; unlicensed data read in place), calibrated on command cycle 1
+  and tested on cycle 2: the pair diagnosis (:mod:`estimator.pair_diagnosis`: the seed pair model
+  against the capstan-joint model and the pair-level effects; causes, extended model, gain), one
+  parameter set for all configurations with K growing with the bend and its leave-one-out
+  predictions (:mod:`estimator.pair_shared`), and the Finding 1 baselines (force path, linear map,
+  linear map through a play operator, model-free reversal dead zones). About a minute.
 
 ``--json OUT`` writes the result (summary numbers, never per-sample data); ``--report DIR`` a
-Markdown report with PNG figures (CSV mode: :func:`teleop.report.write_report`); ``--figures DIR``
-the KAIST summary plots ``kaist_*.png``. Bad input raises DataError / ConfigError (one line, exit 2).
+Markdown report with PNG figures (:func:`teleop.report.write_report`,
+:func:`teleop.kaist_report.write_kaist_report`); ``--figures DIR`` the KAIST plots ``kaist_*.png``.
+Bad input raises DataError / ConfigError (one line, exit 2).
 """
 from __future__ import annotations
 
