@@ -124,10 +124,6 @@ def fit_model(structure: str, effects: tuple[str, ...], rec, train: slice, test:
     return FitResult(structure, effects, dict(zip(names, map(float, best.x))), rec, train, test)
 
 
-def _starts(fit: FitResult) -> list[dict[str, float]]:
-    return [dict(fit.values)]
-
-
 def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 3,
                   progress: Callable[[str], None] | None = None) -> tuple[dict, dict[str, FitResult]]:
     """Diagnose one pair recording: the seed model's error, the effects that explain it, the gain.
@@ -178,7 +174,7 @@ def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 3,
             trial[CAUSE_OF_SEED] = ("capstan", fx)
             tick(fx.id)
         for eid in applicable(chosen.structure, chosen.effects):
-            fx = fit_model(chosen.structure, chosen.effects + (eid,), rec, train, test, _starts(chosen))
+            fx = fit_model(chosen.structure, chosen.effects + (eid,), rec, train, test, [dict(chosen.values)])
             trial[eid] = (chosen.structure, fx)
             tick(fx.id)
         price = {}

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from estimator.fit import predict
-from estimator.pair import play
 from teleop import analyze
 from teleop.errors import ConfigError, DataError
 from teleop.kaist import CONFIGS_DEG, default_kaist_dir
