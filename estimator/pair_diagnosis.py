@@ -11,10 +11,11 @@ discipline as the single-tendon diagnosis:
 2. Score on the test block relative to the seed model: S = (rmse / rmse_seed)^2 (one signal).
 3. Forward selection with a price per parameter: starting from the seed, the candidate with the
    lowest S / S_chosen + PENALTY (n_params - n_params_chosen) is accepted when that is below 1
-   (PENALTY of :mod:`estimator.diagnosis`, 0.25 per parameter); the first round offers the capstan
-   structure (``capstan_joint``) and the seed with each effect, later rounds every effect that
-   applies to the model chosen so far; at most ``max_effects`` are accepted, and the search stops
-   once the chosen model's test rmse is within STRUCTURE_RATIO times the tracker noise.
+   (PENALTY: the single-tendon diagnosis's price, :data:`estimator.diagnosis.PENALTY`); the first
+   round offers the capstan structure (``capstan_joint``) and the seed with each effect, later
+   rounds every effect that applies to the model chosen so far; at most ``max_effects`` are
+   accepted, and the search stops once the chosen model's test rmse is within STRUCTURE_RATIO
+   times the tracker noise.
 4. ``unknown`` is appended when the chosen model's test rmse is still above STRUCTURE_RATIO (3) times
    the tracker noise (robust level of the angle's second differences): structure left that no
    candidate explains. ``none`` when nothing is accepted and no structure is left.
