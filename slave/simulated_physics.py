@@ -23,16 +23,9 @@ import math
 
 from numba import njit
 
+from estimator.distal_slip import elongation  # the one sum(w * T) kernel, shared with the estimator
+
 __all__ = ["advance_proximal", "settle_distal", "load_inverse", "load_on_line", "elongation"]
-
-
-@njit(cache=True, nogil=True)
-def elongation(T, w):  # pragma: no cover - compiled
-    """sum(w * T) [m]."""
-    e = 0.0
-    for i in range(T.shape[0]):
-        e += w[i] * T[i]
-    return e
 
 
 @njit(cache=True, nogil=True)
