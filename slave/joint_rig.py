@@ -14,8 +14,8 @@ from estimator.distal_slip import distal_gains
 from slave.instrument import InstrumentState, InstrumentTruth
 from slave.joint_physics import RIGID_STOP, load_torque, settle_joint, step_joint
 from slave.rig import RigInputError
+from slave.simulated import check_setting, is_finite, validate_drive, validate_runs
 from teleop.config import Config, JointConfig, RigConfig, TendonConfig
-from teleop.errors import ConfigError
 
 __all__ = ["SimulatedInstrument", "TendonPhysics"]
 
@@ -262,54 +262,28 @@ class SimulatedInstrument:
                                  j.limit_stiffness, j.load.torque))
 
 
-def _check(ok: bool, key: str, expected: str, value: object) -> None:
-    if not ok:
-        raise ConfigError(f"{key} must be {expected}, got {value!r}")
-
-
-def _finite(v: object) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-
 def _validate(joints: tuple[JointConfig, ...], rig: RigConfig) -> None:
     """Range checks of what the simulator uses; ConfigError names the joint and the dotted key."""
-    _check(1 <= len(joints) <= 4, "instrument.joints", "a list of 1 to 4 joints", len(joints))
+    check_setting(1 <= len(joints) <= 4, "instrument.joints", "a list of 1 to 4 joints", len(joints))
     for i, j in enumerate(joints):
         p = f"instrument.joints[{i}] ({j.name})"
-        _check(_finite(j.pulley_radius) and j.pulley_radius > 0, f"{p}.pulley_radius", "a radius > 0 m",
+        check_setting(is_finite(j.pulley_radius) and j.pulley_radius > 0, f"{p}.pulley_radius", "a radius > 0 m",
                j.pulley_radius)
-        _check(len(j.limits) == 2 and j.limits[0] < 0.0 < j.limits[1], f"{p}.limits",
+        check_setting(len(j.limits) == 2 and j.limits[0] < 0.0 < j.limits[1], f"{p}.limits",
                "[lower, upper] with lower < 0 < upper [rad]", j.limits)
         for key in ("stiffness", "damping", "pretension"):
-            _check(_finite(getattr(j, key)) and getattr(j, key) >= 0, f"{p}.{key}", "a finite number >= 0",
+            check_setting(is_finite(getattr(j, key)) and getattr(j, key) >= 0, f"{p}.{key}", "a finite number >= 0",
                    getattr(j, key))
-        _check(_finite(j.limit_stiffness) and j.limit_stiffness > 0, f"{p}.limit_stiffness",
+        check_setting(is_finite(j.limit_stiffness) and j.limit_stiffness > 0, f"{p}.limit_stiffness",
                "a stiffness > 0 N m/rad", j.limit_stiffness)
-        _check(_finite(j.load.tissue_stiffness) and j.load.tissue_stiffness >= 0, f"{p}.load.tissue_stiffness",
+        check_setting(is_finite(j.load.tissue_stiffness) and j.load.tissue_stiffness >= 0, f"{p}.load.tissue_stiffness",
                "a finite number >= 0 N m/rad", j.load.tissue_stiffness)
-        _check(_finite(j.load.tissue_contact) and j.load.tissue_contact >= 0, f"{p}.load.tissue_contact",
+        check_setting(is_finite(j.load.tissue_contact) and j.load.tissue_contact >= 0, f"{p}.load.tissue_contact",
                "an angle >= 0 rad", j.load.tissue_contact)
-        _check(_finite(j.load.torque), f"{p}.load.torque", "a finite torque in N m", j.load.torque)
+        check_setting(is_finite(j.load.torque), f"{p}.load.torque", "a finite torque in N m", j.load.torque)
         for t in ("a", "b"):
             td = getattr(j.tendons, t)
-            _check(_finite(td.mu) and td.mu >= 0, f"{p}.tendons.{t}.mu", "a finite number >= 0", td.mu)
-            _check(_finite(td.EA) and td.EA > 0, f"{p}.tendons.{t}.EA", "a finite number > 0 N", td.EA)
-            _check(len(td.runs) > 0, f"{p}.tendons.{t}.runs", "a non-empty list of runs", td.runs)
-            for k, r in enumerate(td.runs):
-                _check(_finite(r.length) and r.length > 0, f"{p}.tendons.{t}.runs[{k}].length", "a length > 0 m",
-                       r.length)
-                _check(isinstance(r.radius, (int, float)) and not math.isnan(r.radius) and r.radius > 0,
-                       f"{p}.tendons.{t}.runs[{k}].radius", "a bend radius > 0 m (inf for straight)", r.radius)
-    n = rig.n_elements
-    _check(isinstance(n, int) and not isinstance(n, bool) and n >= 1, "rig.n_elements", "an integer >= 1", n)
-    m = rig.motor
-    _check(_finite(m.bandwidth_hz) and m.bandwidth_hz > 0, "rig.motor.bandwidth_hz", "a finite number > 0 Hz",
-           m.bandwidth_hz)
-    _check(_finite(m.max_speed) and m.max_speed > 0, "rig.motor.max_speed", "a finite speed > 0 m/s", m.max_speed)
-    _check(_finite(m.pulley_radius) and m.pulley_radius > 0, "rig.motor.pulley_radius", "a radius > 0 m",
-           m.pulley_radius)
-    _check(isinstance(m.encoder_lines_per_rev, int) and m.encoder_lines_per_rev >= 1,
-           "rig.motor.encoder_lines_per_rev", "an integer >= 1", m.encoder_lines_per_rev)
-    s = rig.sensors
-    _check(_finite(s.load_cell_noise) and s.load_cell_noise >= 0, "rig.sensors.load_cell_noise",
-           "a standard deviation >= 0 N", s.load_cell_noise)
+            check_setting(is_finite(td.mu) and td.mu >= 0, f"{p}.tendons.{t}.mu", "a finite number >= 0", td.mu)
+            check_setting(is_finite(td.EA) and td.EA > 0, f"{p}.tendons.{t}.EA", "a finite number > 0 N", td.EA)
+            validate_runs(td.runs, f"{p}.tendons.{t}.runs")
+    validate_drive(rig)

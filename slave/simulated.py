@@ -277,46 +277,59 @@ def _load_graph(load: LoadConfig, tissue: bool, force: float) -> tuple[np.ndarra
     return bx, bF, bs
 
 
-def _check(ok: bool, key: str, expected: str, value: object) -> None:
+def check_setting(ok: bool, key: str, expected: str, value: object) -> None:
+    """Raise ConfigError "<key> must be <expected>, got <value>" unless ``ok``."""
     if not ok:
         raise ConfigError(f"{key} must be {expected}, got {value!r}")
 
 
-def _finite(v: object) -> bool:
+def is_finite(v: object) -> bool:
+    """A real finite number (bools are not numbers here)."""
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+
+def validate_runs(runs, key: str) -> None:
+    """A sheath route: non-empty, every run of finite length > 0 m and bend radius > 0 m (inf: straight)."""
+    check_setting(len(runs) > 0, key, "a non-empty list of runs", runs)
+    for i, r in enumerate(runs):
+        check_setting(is_finite(r.length) and r.length > 0, f"{key}[{i}].length", "a finite length > 0 m", r.length)
+        check_setting(isinstance(r.radius, (int, float)) and not math.isnan(r.radius) and r.radius > 0,
+               f"{key}[{i}].radius", "a bend radius > 0 m (inf for straight)", r.radius)
+
+
+def validate_drive(rig: RigConfig) -> None:
+    """What every simulated rig uses of ``rig``: element count, proximal motor, load-cell sensors."""
+    n = rig.n_elements
+    check_setting(isinstance(n, int) and not isinstance(n, bool) and n >= 1, "rig.n_elements", "an integer >= 1", n)
+    m = rig.motor
+    check_setting(is_finite(m.bandwidth_hz) and m.bandwidth_hz > 0, "rig.motor.bandwidth_hz", "a finite number > 0 Hz",
+           m.bandwidth_hz)
+    check_setting(is_finite(m.max_speed) and m.max_speed > 0, "rig.motor.max_speed", "a finite speed > 0 m/s", m.max_speed)
+    check_setting(is_finite(m.pulley_radius) and m.pulley_radius > 0, "rig.motor.pulley_radius", "a finite radius > 0 m",
+           m.pulley_radius)
+    lines = m.encoder_lines_per_rev
+    check_setting(isinstance(lines, int) and not isinstance(lines, bool) and lines >= 1, "rig.motor.encoder_lines_per_rev",
+           "an integer >= 1", lines)
+    s = rig.sensors
+    check_setting(is_finite(s.load_cell_noise) and s.load_cell_noise >= 0, "rig.sensors.load_cell_noise",
+           "a finite standard deviation >= 0 N", s.load_cell_noise)
+    check_setting(isinstance(s.seed, int) and not isinstance(s.seed, bool), "rig.sensors.seed", "an integer", s.seed)
 
 
 def _validate(sheath: SheathConfig, rig: RigConfig) -> None:
     """Range checks of every setting the simulator uses; ConfigError names the dotted key."""
-    _check(_finite(sheath.mu) and sheath.mu >= 0, "sheath.mu", "a finite number >= 0", sheath.mu)
-    _check(_finite(sheath.EA) and sheath.EA > 0, "sheath.EA", "a finite number > 0 N", sheath.EA)
-    _check(_finite(sheath.pretension) and sheath.pretension >= 0, "sheath.pretension", "a finite number >= 0 N",
+    check_setting(is_finite(sheath.mu) and sheath.mu >= 0, "sheath.mu", "a finite number >= 0", sheath.mu)
+    check_setting(is_finite(sheath.EA) and sheath.EA > 0, "sheath.EA", "a finite number > 0 N", sheath.EA)
+    check_setting(is_finite(sheath.pretension) and sheath.pretension >= 0, "sheath.pretension", "a finite number >= 0 N",
            sheath.pretension)
-    _check(len(sheath.runs) > 0, "sheath.runs", "a non-empty list of runs", sheath.runs)
-    for i, r in enumerate(sheath.runs):
-        _check(_finite(r.length) and r.length > 0, f"sheath.runs[{i}].length", "a finite length > 0 m", r.length)
-        _check(isinstance(r.radius, (int, float)) and not math.isnan(r.radius) and r.radius > 0,
-               f"sheath.runs[{i}].radius", "a bend radius > 0 m (inf for straight)", r.radius)
-    n = rig.n_elements
-    _check(isinstance(n, int) and not isinstance(n, bool) and n >= 1, "rig.n_elements", "an integer >= 1", n)
-    m = rig.motor
-    _check(_finite(m.bandwidth_hz) and m.bandwidth_hz > 0, "rig.motor.bandwidth_hz", "a finite number > 0 Hz",
-           m.bandwidth_hz)
-    _check(_finite(m.max_speed) and m.max_speed > 0, "rig.motor.max_speed", "a finite speed > 0 m/s", m.max_speed)
-    _check(_finite(m.pulley_radius) and m.pulley_radius > 0, "rig.motor.pulley_radius", "a finite radius > 0 m",
-           m.pulley_radius)
-    lines = m.encoder_lines_per_rev
-    _check(isinstance(lines, int) and not isinstance(lines, bool) and lines >= 1, "rig.motor.encoder_lines_per_rev",
-           "an integer >= 1", lines)
+    validate_runs(sheath.runs, "sheath.runs")
+    validate_drive(rig)
     ld = rig.load
     for key in ("joint_stiffness", "tissue_stiffness", "force", "joint_limit"):
         v = getattr(ld, key)
-        _check(_finite(v) and v >= 0, f"rig.load.{key}", "a finite number >= 0", v)
-    _check(_finite(ld.limit_stiffness) and ld.limit_stiffness > 0, "rig.load.limit_stiffness",
+        check_setting(is_finite(v) and v >= 0, f"rig.load.{key}", "a finite number >= 0", v)
+    check_setting(is_finite(ld.limit_stiffness) and ld.limit_stiffness > 0, "rig.load.limit_stiffness",
            "a finite stiffness > 0 N/m", ld.limit_stiffness)
-    _check(_finite(ld.tissue_contact), "rig.load.tissue_contact", "a finite position in m", ld.tissue_contact)
-    _check(isinstance(ld.tissue, (bool, np.bool_)), "rig.load.tissue", "true or false", ld.tissue)
-    s = rig.sensors
-    _check(_finite(s.load_cell_noise) and s.load_cell_noise >= 0, "rig.sensors.load_cell_noise",
-           "a finite standard deviation >= 0 N", s.load_cell_noise)
-    _check(isinstance(s.seed, int) and not isinstance(s.seed, bool), "rig.sensors.seed", "an integer", s.seed)
+    check_setting(is_finite(ld.tissue_contact), "rig.load.tissue_contact", "a finite position in m", ld.tissue_contact)
+    check_setting(isinstance(ld.tissue, (bool, np.bool_)), "rig.load.tissue", "true or false", ld.tissue)
