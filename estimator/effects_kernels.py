@@ -38,14 +38,16 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["run_extended", "V_STOP", "BREAK_MARGIN"]
+__all__ = ["run_extended", "stiffening_strain", "V_STOP", "BREAK_MARGIN"]
 
 V_STOP = 2e-4        # proximal speed below which a slide ends (the tendon sticks) [m/s]
 BREAK_MARGIN = 0.35  # share of the kinetic-static gap within which a turn of T_in counts as breakaway [-]
 
 
 @njit(cache=True, nogil=True)
-def _phi(T, beta, Tc):  # pragma: no cover - compiled
+def stiffening_strain(T, beta, Tc):  # pragma: no cover - compiled
+    """phi(T) [N]: tension-equivalent strain of a stiffening tendon, T + beta T_c (1 - e^{-T/T_c})
+    (T when beta = 0); elongation = (L/EA) int phi(T) ds. Used by the estimator and the simulated rig."""
     if beta == 0.0:
         return T
     return T - beta * Tc * math.expm1(-T / Tc)
@@ -56,7 +58,7 @@ def _kernel(T_in, v, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, sigma, 
             T_out, E1):  # pragma: no cover - compiled
     m1 = u.shape[0]
     Y = np.full(m1, T0 + a)
-    E0 = _phi(T0, beta, Tc)
+    E0 = stiffening_strain(T0, beta, Tc)
     E = E0
     varying = K_rate != 0.0 or c_v != 0.0
     stiction = r_s > 0.0
@@ -114,7 +116,7 @@ def _kernel(T_in, v, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, sigma, 
                 if y < a:
                     y = a
                 Y[i] = y
-                E += w[i] * _phi(y - a, beta, Tc)
+                E += w[i] * stiffening_strain(y - a, beta, Tc)
         else:
             bound = Kk * (1.0 + r_s) if stuck else Kk
             for i in range(m1):
@@ -137,7 +139,7 @@ def _kernel(T_in, v, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, sigma, 
                     break
                 if ny == y:
                     break
-                E += w[i] * (_phi(ny - a, beta, Tc) - _phi(y - a, beta, Tc))
+                E += w[i] * (stiffening_strain(ny - a, beta, Tc) - stiffening_strain(y - a, beta, Tc))
                 Y[i] = ny
                 if i == m1 - 1:         # the slip reached the distal end: the whole tendon slides
                     sliding = d

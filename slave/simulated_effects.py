@@ -13,6 +13,7 @@ from collections import deque
 import numpy as np
 from numba import njit
 
+from estimator.effects_kernels import stiffening_strain as strain  # one phi(T), shared with the estimator
 from slave.simulated_physics import load_inverse
 from teleop.config import EffectsConfig
 from teleop.errors import ConfigError
@@ -38,14 +39,6 @@ _V_STOP = 2e-4   # motor speed below which a whole-tendon slide ends [m/s] (esti
 # steeper than the new envelope and the slip front crosses it at one proximal tension: the step
 # then ends with the front inside it (its nodes blended between old and new so that the
 # elongation matches x_in - x_out exactly).
-
-
-@njit(cache=True, nogil=True)
-def strain(T, beta, Tc):  # pragma: no cover - compiled
-    """phi(T) [N]: tension-equivalent strain of a stiffening tendon (T when beta = 0)."""
-    if beta == 0.0:
-        return T
-    return T - beta * Tc * math.expm1(-T / Tc)
 
 
 @njit(cache=True, nogil=True)
