@@ -35,7 +35,9 @@ __all__ = ["EFFECT_IDS", "UNCATALOGUED", "Recording", "realistic_range", "effect
 #: load cell's zero (thermal drift of its bridge), smooth on a ~10 s scale.
 UNCATALOGUED = ("load_cell_drift",)
 
-# realistic magnitude of each effect: parameter -> (low, high) in its SI unit (docs/diagnosis.md)
+# realistic magnitude of each effect: parameter -> (low, high) in its SI unit (docs/diagnosis.md). The
+# one table both simulators draw from (slave/scenarios.py and slave/lumped_scenarios.py). Offsets,
+# gains and drift rates are magnitudes: the simulator draws their sign from the seed.
 _RANGES = {
     "velocity_friction": {"viscous": (8.0, 30.0)},               # s/m: +8..30 % friction at 10 mm/s
     "pretension": {"tension": (1.0, 5.0)},                       # N
@@ -43,9 +45,26 @@ _RANGES = {
     "tendon_stiffening": {"softening": (1.0, 4.0), "toe_tension": (1.0, 3.0)},   # -, N
     "stiction": {"static_ratio": (0.15, 0.6)},                   # mu_s / mu_k - 1
     "friction_offset": {"distal_offset": (0.2, 1.0)},            # N: F0 = a (1 - e^-K) at the tip
+    "presliding": {"distance": (40e-6, 150e-6)},                 # m: Dahl pre-sliding travel F_c / sigma
+    "distal_backlash": {"width": (50e-6, 300e-6)},               # m: total dead zone tendon end <-> x_out
+    "sensor_offset:T_in": {"offset": (0.2, 1.0)},                # N, either sign
+    "sensor_offset:T_out": {"offset": (0.2, 1.0)},               # N, either sign
+    "sensor_gain:T_in": {"gain": (0.03, 0.10)},                  # relative scale error, either sign
+    "sensor_gain:T_out": {"gain": (0.03, 0.10)},                 # relative scale error, either sign
+    "sensor_lag:T_in": {"delay": (0.010, 0.050)},                # s, the channel lags the others
+    "sensor_lag:T_out": {"delay": (0.010, 0.050)},               # s
+    "sensor_drift:T_in": {"rate": (0.003, 0.012)},               # N/s (0.3-1 N over 90 s), either sign
+    "sensor_drift:T_out": {"rate": (0.003, 0.012)},              # N/s, either sign
+    "sensor_offset:x_in": {"offset": (20e-6, 100e-6)},           # m, either sign
+    "sensor_offset:x_out": {"offset": (20e-6, 100e-6)},          # m, either sign
+    "sensor_lag:x_in": {"delay": (0.010, 0.050)},                # s
+    "sensor_lag:x_out": {"delay": (0.010, 0.050)},               # s
+    # legacy names of the proximal load-cell effects (the rig switches rig.effects.sensor_offset/_delay)
     "sensor_offset": {"offset": (0.2, 1.0)},                     # N, either sign
     "sensor_delay": {"delay": (0.010, 0.050)},                   # s
+    # outside the catalogue (the answer "unknown"): a smooth ~10 s random wander of the distal load cell zero
     "load_cell_drift": {"amplitude": (0.3, 0.8)},                # N
+    "load_cell_wander": {"amplitude": (0.3, 0.8)},               # N (the contract's name for the same)
 }
 
 
