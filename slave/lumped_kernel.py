@@ -1,0 +1,181 @@
+"""Compiled step of the dynamic lumped-mass tendon-sheath simulator (:mod:`slave.lumped` explains it).
+
+One substep of length ``dt`` is backward (implicit) Euler on the node velocities with the element
+stiffness, the load slope and the friction linearised at the start of the substep; the linear
+system is tridiagonal (a chain) and is solved by the Thomas algorithm, O(n) per substep. Arrays,
+0-based, proximal to distal:
+
+    u[i], v[i]   node displacement [m] (+ toward the actuator) and velocity [m/s], i = 0..n-1
+    e[i], T[i]   stretch [m] and tension [N] of element i (element 0 joins the proximal tendon
+                 point xp to node 0, element i joins node i-1 to node i)
+    z[i]         bristle deflection [m] of node i against the sheath (LuGre state)
+    m[i]         node mass [kg] (the distal load mass is added to node n-1)
+    dth[i]       wrap angle [rad] carried by node i; qds[i] tension-independent normal load [N]
+    s = [x_motor, xp, x_joint, t, T_out]  scalar state
+
+Nothing here is shared with the quasi-static rig or the estimator's kernels on purpose: it is the
+independent second formulation of issue 8.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ["simulate", "load_force"]
+
+
+@njit(cache=True, nogil=True)
+def load_force(x, lx, lF, ls):  # pragma: no cover - compiled
+    """Distal load force [N] (pulls the tendon end distally) and its slope [N/m] at x [m].
+
+    Piecewise linear through (lx[j], lF[j]); ls[0] is the slope left of lx[0], ls[j] the slope
+    right of lx[j-1] (so ls has len(lx) + 1 entries).
+    """
+    m = lx.shape[0]
+    if x <= lx[0]:
+        return lF[0] + ls[0] * (x - lx[0]), ls[0]
+    for j in range(1, m):
+        if x <= lx[j]:
+            return lF[j - 1] + ls[j] * (x - lx[j - 1]), ls[j]
+    return lF[m - 1] + ls[m] * (x - lx[m - 1]), ls[m]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _tension(e, T, k_lin, beta, Tc):  # pragma: no cover - compiled
+    """Element tension [N] from stretch e [m]: phi(T) = k_lin e with phi(T) = T + beta Tc (1 - e^-T/Tc);
+    a tendon cannot push (0 for e <= 0). Newton from the previous tension T (phi is concave)."""
+    if e <= 0.0:
+        return 0.0
+    y = k_lin * e
+    if beta == 0.0:
+        return y
+    t = T if T > 0.0 else y / (1.0 + beta)
+    for _ in range(30):
+        ex = math.exp(-t / Tc)
+        f = t + beta * Tc * (1.0 - ex) - y
+        dt_ = f / (1.0 + beta * ex)
+        t -= dt_
+        if t < 0.0:
+            t = 0.0
+        if abs(dt_) <= 1e-13 * (1.0 + y):
+            break
+    return t
+
+
+@njit(cache=True, nogil=True)
+def simulate(xcmd, n_sub, dt, bw_alpha, vmax, u, v, e, T, z, s, m, dth, qds, visc, k_lin, beta, Tc,
+             inv_ks, mu0, mu_rate, cv, rs, vs, sigma0, lx, lF, ls, b_load, m_load, half_play,
+             out):  # pragma: no cover - compiled
+    """Run the chain over the command samples ``xcmd`` [m], ``n_sub`` substeps of ``dt`` [s] each.
+
+    Motor: x_m += clip(bw_alpha (x_target - x_m), +-vmax dt), x_target linear between samples.
+    Friction of node i (LuGre with the normal force N_i = max(Tbar_i, 0) dth_i + qds_i):
+        dz/dt = v - sigma0 |v| z / g(v),  g(v) = mu(t) (1 + cv |v|) (1 + rs exp(-(v/vs)^2)),
+        F_i = N_i sigma0 z + visc_i v,  mu(t) = mu0 + mu_rate t.
+    Writes per sample k: out[k] = (x_motor, T_in, u_distal, T_out, x_joint, xp).
+    """
+    n = u.shape[0]
+    a = np.empty(n)
+    b = np.empty(n)
+    c = np.empty(n)
+    d = np.empty(n)
+    ktan = np.empty(n)
+    F0 = np.empty(n)
+    alpha = np.empty(n)
+    Nn = np.empty(n)
+    xprev = s[0]
+    for k in range(xcmd.shape[0]):
+        x_goal = xcmd[k]
+        for j in range(n_sub):
+            # motor: first-order position loop toward the interpolated command, speed-limited
+            target = xprev + (x_goal - xprev) * (j + 1) / n_sub
+            step = bw_alpha * (target - s[0])
+            lim = vmax * dt
+            if step > lim:
+                step = lim
+            elif step < -lim:
+                step = -lim
+            s[0] += step
+            s[3] += dt
+            mu = mu0 + mu_rate * s[3]
+            if mu < 0.0:
+                mu = 0.0
+            FL, kL = load_force(u[n - 1], lx, lF, ls)
+            # element tangent stiffness (0 when slack), friction linearisation per node
+            for i in range(n):
+                if e[i] > 0.0:
+                    if beta == 0.0:
+                        ktan[i] = k_lin
+                    else:
+                        ktan[i] = k_lin / (1.0 + beta * math.exp(-T[i] / Tc))
+                else:
+                    ktan[i] = 0.0
+                Tnext = T[i + 1] if i < n - 1 else s[4]
+                tb = 0.5 * (T[i] + Tnext)
+                if tb < 0.0:
+                    tb = 0.0
+                Nn[i] = tb * dth[i] + qds[i]
+                av = abs(v[i])
+                g = mu * (1.0 + cv * av)
+                if rs != 0.0:
+                    g *= 1.0 + rs * math.exp(-(v[i] / vs) ** 2)
+                if g > 0.0:
+                    alpha[i] = 1.0 / (1.0 + dt * sigma0 * av / g)
+                else:
+                    alpha[i] = 0.0
+                # F' = N sigma0 alpha (z + dt v') + visc v' = F0 + D v'
+                F0[i] = Nn[i] * sigma0 * alpha[i] * z[i]
+                b[i] = m[i] / dt + Nn[i] * sigma0 * alpha[i] * dt + visc[i]
+            # proximal tendon point behind the sheath spring: v_p' = A + B v_0'
+            r = ktan[0] * inv_ks
+            A = (s[0] - s[1] - T[0] * inv_ks) / (dt * (1.0 + r))
+            B = r / (1.0 + r)
+            for i in range(n):
+                ci = ktan[i] * dt
+                cn = ktan[i + 1] * dt if i < n - 1 else (kL * dt + b_load)
+                Tn = T[i + 1] if i < n - 1 else FL
+                b[i] += cn + (ci * (1.0 - B) if i == 0 else ci)
+                d[i] = m[i] / dt * v[i] + T[i] - Tn - F0[i]
+                if i == 0:
+                    d[i] += ci * A
+                    a[i] = 0.0
+                else:
+                    a[i] = -ci
+                c[i] = -cn if i < n - 1 else 0.0
+            # Thomas algorithm (symmetric, diagonally dominant)
+            for i in range(1, n):
+                w = a[i] / b[i - 1]
+                b[i] -= w * c[i - 1]
+                d[i] -= w * d[i - 1]
+            vnew_last = d[n - 1] / b[n - 1]
+            d[n - 1] = vnew_last
+            for i in range(n - 2, -1, -1):
+                d[i] = (d[i] - c[i] * d[i + 1]) / b[i]
+            vp = A + B * d[0]
+            s[1] += dt * vp
+            acc_last = (d[n - 1] - v[n - 1]) / dt
+            for i in range(n):
+                vi = d[i]
+                vprox = vp if i == 0 else d[i - 1]
+                e[i] += dt * (vprox - vi)
+                z[i] = alpha[i] * (z[i] + dt * vi)
+                u[i] += dt * vi
+                v[i] = vi
+            for i in range(n):
+                T[i] = _tension(e[i], T[i], k_lin, beta, Tc)
+            FL, kL = load_force(u[n - 1], lx, lF, ls)
+            s[4] = FL + b_load * v[n - 1] + m_load * acc_last
+            # joint behind the distal backlash (play operator of total width 2 half_play)
+            if s[2] < u[n - 1] - half_play:
+                s[2] = u[n - 1] - half_play
+            elif s[2] > u[n - 1] + half_play:
+                s[2] = u[n - 1] + half_play
+        xprev = x_goal
+        out[k, 0] = s[0]
+        out[k, 1] = T[0]
+        out[k, 2] = u[n - 1]
+        out[k, 3] = s[4]
+        out[k, 4] = s[2]
+        out[k, 5] = s[1]
