@@ -23,7 +23,7 @@ from scipy.optimize import newton
 
 from estimator.capstan import K_from_M_e
 from estimator.sheath import SheathModel, pull_elongation_factor
-from teleop.errors import CalibrationError
+from estimator.errors import CalibrationError
 
 __all__ = ["CalibrationResult", "detect_knee", "calibrate_joint_limit"]
 

@@ -1,9 +1,16 @@
 """The project's error hierarchy.
 
 Every error subclasses a builtin so callers that only know the builtin still catch it.
-The CLI turns any :class:`TeleopError` into a one-line message and exit code 2.
+The CLI turns any :class:`TeleopError` (and any ValueError) into a one-line message and exit code 2.
+:class:`DataError` and :class:`CalibrationError` are defined by the estimator (floor 0, which imports
+nothing of the rest) and re-exported here; they subclass ``ValueError`` like the others.
 """
 from __future__ import annotations
+
+from estimator.errors import CalibrationError, DataError, EstimatorError
+
+__all__ = ["TeleopError", "ConfigError", "DataError", "CalibrationError", "EstimatorError", "CodecError",
+           "DeviceError", "TransportError"]
 
 
 class TeleopError(Exception):
@@ -12,14 +19,6 @@ class TeleopError(Exception):
 
 class ConfigError(TeleopError, ValueError):
     """A configuration file or value is wrong (unknown key, wrong type, out of range)."""
-
-
-class DataError(TeleopError, ValueError):
-    """A measured-data file is wrong (missing column, NaN, non-increasing time, ...)."""
-
-
-class CalibrationError(TeleopError, ValueError):
-    """A calibration could not be computed from the given recording."""
 
 
 class CodecError(TeleopError, ValueError):
