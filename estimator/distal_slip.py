@@ -11,7 +11,7 @@ tip; Agrawal et al. 2010)
 with g_i = mu theta(s_i) the node's log gain from the proximal end (K = g_n). The elongation
 e(T_d) = sum_i w_i T_i(T_d) is non-decreasing and piecewise linear in T_d, so the T_d that gives a
 wanted elongation is found exactly by one scan over the breakpoints (the mirror image of the
-proximal scan in :func:`slave.simulated_physics.advance_proximal`):
+proximal scan in :func:`estimator.kernels.advance_proximal`):
 
 * stretching (wanted e above the present one): node i joins once T_d > p_i = T_i dhi_i. The stored
   profile is mu-Lipschitz in log T over theta, so p_i does not decrease toward the proximal end:

@@ -42,8 +42,7 @@ import numpy as np
 from numba import njit
 
 from estimator.distal_slip import distal_gains, elongation
-from slave.joint_physics import joint_torque_balance, settle_joint
-from slave.simulated_physics import advance_proximal
+from estimator.kernels import advance_proximal, joint_torque_balance, settle_joint
 
 __all__ = ["tendon_arrays", "simulate_pair"]
 

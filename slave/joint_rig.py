@@ -1,7 +1,7 @@
 """Simulated instrument of 1 to 4 joints, each driven by an antagonistic pair of distributed tendons.
 
 The reference simulator of literature.md section 4 extended to a pull-pull pair (E5, E11-E13):
-the compiled step is in :mod:`slave.joint_physics`; this module owns the state, the motors, the
+the compiled step is in :mod:`estimator.kernels`; this module owns the state, the motors, the
 sensors and validation.
 """
 from __future__ import annotations
@@ -10,9 +10,8 @@ import math
 
 import numpy as np
 
-from estimator.distal_slip import distal_gains
+from estimator.kernels import RIGID_STOP, distal_gains, load_torque, settle_joint, step_joint
 from slave.instrument import InstrumentState, InstrumentTruth
-from slave.joint_physics import RIGID_STOP, load_torque, settle_joint, step_joint
 from slave.rig import RigInputError
 from slave.simulated import check_setting, is_finite, validate_drive, validate_runs
 from teleop.config import Config, JointConfig, RigConfig, TendonConfig
@@ -77,7 +76,7 @@ class SimulatedInstrument:
       Joint inertia is left out: with grams on millimetres its time constant is far below 1 ms.
     * One step: the motors move with the joint held (slip from the proximal ends), then the joint
       settles with the motors held (slip from the distal ends) - a first-order splitting, exact in
-      the limit of small steps (:mod:`slave.joint_physics`).
+      the limit of small steps (:mod:`estimator.kernels`).
     * Pretension P (``pretension``): both tendons start uniform at P with theta = 0, the motors at
       x_in = P L/EA (x_out = 0); P = 0: both start at zero tension.
     * Motors: the first-order position loop of :class:`~slave.simulated.SimulatedRig`

@@ -2,7 +2,7 @@
 
 The reference simulator of literature.md section 4 (quasi-static distributed Coulomb model), with
 the distal load solved exactly at every step. The compiled kernels live in
-:mod:`slave.simulated_physics`; this module owns the state, the motor, the sensors and validation.
+:mod:`estimator.kernels` (shared with the estimator); this module owns the state, the motor, the sensors and validation.
 """
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ import math
 
 import numpy as np
 
+from estimator.kernels import advance_proximal, load_inverse, settle_distal
 from estimator.sheath import Run, SheathGeometry
 from slave.rig import RigInputError, RigState, RigTruth
 from slave.simulated_effects import EFFECT_IDS, EffectSwitches, elongation_general
-from slave.simulated_physics import advance_proximal, load_inverse, settle_distal
 from teleop.config import Config, EffectsConfig, LoadConfig, RigConfig, SheathConfig
 from teleop.errors import ConfigError
 
@@ -79,9 +79,9 @@ class SimulatedRig(EffectSwitches):
 
     With the tendon effects (all but pretension and the sensor ones) a step is one of two: while
     the whole tendon slides and the motor keeps going that way (faster than 0.2 mm/s) the profile
-    is the full-slip profile at the present friction (:func:`slave.simulated_physics.full_slip`,
+    is the full-slip profile at the present friction (:func:`slave.simulated_effects.full_slip`,
     so it follows a change of speed or K at once); otherwise slip spreads from the proximal end
-    (:func:`slave.simulated_physics.advance_general`, a bracketed root search instead of the exact
+    (:func:`slave.simulated_effects.advance_general`, a bracketed root search instead of the exact
     scan) and the whole tendon starts sliding when it reaches the distal end.
     :meth:`set_load` re-balances with the plain Coulomb bounds of the moment.
 

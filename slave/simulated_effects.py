@@ -14,7 +14,7 @@ import numpy as np
 from numba import njit
 
 from estimator.effects_kernels import stiffening_strain as strain  # one phi(T), shared with the estimator
-from slave.simulated_physics import load_inverse
+from estimator.kernels import load_inverse
 from teleop.config import EffectsConfig
 from teleop.errors import ConfigError
 
