@@ -30,7 +30,7 @@ import numpy as np
 from estimator.diagnosis_fit import (SIGNALS, fit_model, heldout_mse, noise_level, prepare, raw_rmse, split_at_rest,
                                      start_points)
 from estimator.effects import CATALOGUE, NONE, UNKNOWN, Effect, predict
-from teleop.recording import MeasuredData
+from estimator.data import MeasuredData
 
 __all__ = ["diagnose", "predictions", "PENALTY", "STRUCTURE_RATIO"]
 

@@ -22,7 +22,7 @@ from scipy.optimize import least_squares
 
 from estimator.effects import K_MAX, Effect, Parameter, Series, predict
 from estimator.sheath import SheathModel
-from teleop.recording import MeasuredData
+from estimator.data import MeasuredData
 
 __all__ = ["prepare", "split_at_rest", "fit_model", "start_points", "heldout_mse", "raw_rmse", "noise_level",
            "SIGNALS"]
