@@ -4,22 +4,28 @@ A token disappears for the watchers of a matching key expression when it is clos
 session ends. Both sides declare one and watch the other's; the nodes' own heartbeat watchdogs stay
 the fast safety stop (ARCHITECTURE.md). Declared through
 :meth:`teleop.transport.Session.liveliness_token` and :meth:`~teleop.transport.Session.liveliness_watcher`
-(both classes are importable from :mod:`teleop.transport` too). The watcher's callback never lets an
+(both classes are importable from :mod:`teleop.transport` too; they build on :class:`teleop.entity.Entity`). The watcher's callback never lets an
 exception escape into zenoh's thread: it is logged at a limited rate.
 """
 from __future__ import annotations
 
+import logging
 import threading
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import zenoh
 
-from teleop.transport import RateLimitedLog, Session, _Entity, log
+from teleop.entity import Entity, RateLimitedLog
+
+if TYPE_CHECKING:
+    from teleop.transport import Session
 
 __all__ = ["LivelinessToken", "LivelinessWatcher"]
 
+log = logging.getLogger("teleop.transport")
 
-class LivelinessToken(_Entity):
+
+class LivelinessToken(Entity):
     """This process's liveliness on one key; disappears for watchers when closed or when the session ends."""
 
     def __init__(self, session: Session, key: str):
@@ -27,7 +33,7 @@ class LivelinessToken(_Entity):
         self._declare(session.zenoh_session.liveliness().declare_token, key)
 
 
-class LivelinessWatcher(_Entity):
+class LivelinessWatcher(Entity):
     """Tracks which liveliness tokens matching a key expression are present.
 
     Parameters

@@ -16,20 +16,18 @@ from __future__ import annotations
 import json
 import logging
 import math
-import re
 import socket
 import threading
-from typing import TYPE_CHECKING, Callable, Generic, NamedTuple, TypeVar
+from typing import Callable, Generic, NamedTuple, TypeVar
 
 import zenoh
 
 from teleop.clock import Clock, MonotonicClock
 from teleop.codec import Message, decode, encode
 from teleop.config import TransportConfig
+from teleop.entity import Entity, RateLimitedLog, zenoh_error_text
 from teleop.errors import CodecError, ConfigError, TransportError
-
-if TYPE_CHECKING:
-    from teleop.liveliness import LivelinessToken, LivelinessWatcher
+from teleop.liveliness import LivelinessToken, LivelinessWatcher
 
 __all__ = [
     "zenoh_config", "free_tcp_ports", "free_tcp_port", "loopback_endpoint", "RateLimitedLog",
@@ -40,18 +38,11 @@ log = logging.getLogger(__name__)
 M = TypeVar("M", bound=Message)
 
 
-def _zerr(e: Exception) -> str:
-    """The human part of a zenoh error (without the Rust source locations)."""
-    text = str(e)
-    m = re.search(r'msg: "(.*?)(?: at /[^"]*)?"', text)
-    return (m.group(1) if m else text.split(" at /")[0]).strip()
-
-
 def _insert(cfg: zenoh.Config, key: str, value, where: str, shown=None) -> None:
     try:
         cfg.insert_json5(key, json.dumps(value))
     except zenoh.ZError as e:
-        raise ConfigError(f"{where}: {value if shown is None else shown!r} rejected by zenoh: {_zerr(e)}") from None
+        raise ConfigError(f"{where}: {value if shown is None else shown!r} rejected by zenoh: {zenoh_error_text(e)}") from None
 
 
 def zenoh_config(transport: TransportConfig, *, listen: tuple[str, ...] | None = None,
@@ -120,38 +111,6 @@ def loopback_endpoint(port: int) -> str:
     return f"tcp/127.0.0.1:{int(port)}"
 
 
-class RateLimitedLog:
-    """Log a recurring problem at most once per ``interval`` seconds, with the count suppressed.
-
-    Parameters
-    ----------
-    logger : logging.Logger
-    interval : float
-        Minimum time between two records [s].
-    clock : Clock, optional
-        Time source (default :class:`MonotonicClock`).
-    """
-
-    def __init__(self, logger: logging.Logger, interval: float = 1.0, clock: Clock | None = None):
-        self.logger, self.interval = logger, interval
-        self.clock = clock or MonotonicClock()
-        self._last = -math.inf
-        self._suppressed = 0
-        self._lock = threading.Lock()
-
-    def warning(self, msg: str, *args) -> bool:
-        """Log ``msg % args`` unless one was logged less than ``interval`` ago. Returns True if logged."""
-        with self._lock:
-            now = self.clock.now()
-            if now - self._last < self.interval:
-                self._suppressed += 1
-                return False
-            suppressed, self._suppressed, self._last = self._suppressed, 0, now
-        tail = f" ({suppressed} similar suppressed)" if suppressed else ""
-        self.logger.warning(msg + tail, *args)
-        return True
-
-
 class Session:
     """One zenoh session; a context manager. Entities declared through it close with it.
 
@@ -177,7 +136,7 @@ class Session:
         try:
             self._z = zenoh.open(zcfg)
         except zenoh.ZError as e:
-            raise TransportError(f"cannot open zenoh session: {_zerr(e)}") from None
+            raise TransportError(f"cannot open zenoh session: {zenoh_error_text(e)}") from None
         self._closed = False
 
     @property
@@ -211,14 +170,12 @@ class Session:
 
     def liveliness_token(self, key: str) -> "LivelinessToken":
         """Declare this process alive on ``key`` until the token or the session closes."""
-        from teleop.liveliness import LivelinessToken
         self._check_open()
         return self._track(LivelinessToken(self, key))
 
     def liveliness_watcher(self, key: str,
                            on_change: Callable[[str, bool], None] | None = None) -> "LivelinessWatcher":
         """Watch the tokens matching ``key`` (already present ones included)."""
-        from teleop.liveliness import LivelinessWatcher
         self._check_open()
         return self._track(LivelinessWatcher(self, key, on_change))
 
@@ -243,43 +200,7 @@ class Session:
         self.close()
 
 
-class _Entity:
-    """Something declared on a session, undeclared once by :meth:`close`."""
-
-    def __init__(self, session: Session, key: str):
-        self.session, self.key = session, key
-        self._handle = None
-        self._closed = False
-
-    def _declare(self, fn, *args, **kwargs) -> None:
-        try:
-            self._handle = fn(*args, **kwargs)
-        except zenoh.ZError as e:
-            raise TransportError(f"cannot declare {type(self).__name__} on {self.key!r}: "
-                                 f"{_zerr(e)}") from None
-
-    @property
-    def closed(self) -> bool:
-        return self._closed
-
-    def close(self) -> None:
-        """Undeclare. Idempotent; a no-op once the session is closed."""
-        if self._closed:
-            return
-        self._closed = True
-        try:
-            self._handle.undeclare()
-        except zenoh.ZError:  # pragma: no cover - undeclare after session close is a no-op
-            pass
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-
-class Publisher(_Entity):
+class Publisher(Entity):
     """Publishes messages encoded by :mod:`teleop.codec` on one key. Attribute ``sent``: puts so far."""
 
     def __init__(self, session: Session, key: str, *, express: bool = True,
@@ -308,7 +229,7 @@ class Publisher(_Entity):
         try:
             self._handle.put(payload)
         except zenoh.ZError as e:
-            raise TransportError(f"put on {self.key!r} failed: {_zerr(e)}") from None
+            raise TransportError(f"put on {self.key!r} failed: {zenoh_error_text(e)}") from None
         self.sent += 1
 
 
@@ -319,7 +240,7 @@ class Received(NamedTuple, Generic[M]):
     t_recv: float
 
 
-class LatestSubscriber(_Entity, Generic[M]):
+class LatestSubscriber(Entity, Generic[M]):
     """Keeps only the newest decoded message on a key (latest wins), thread-safe.
 
     Attributes
@@ -382,12 +303,3 @@ class LatestSubscriber(_Entity, Generic[M]):
         super().close()
         with self._cond:
             self._cond.notify_all()
-
-
-def __getattr__(name: str):
-    """Re-exports: the liveliness classes live in :mod:`teleop.liveliness` (imported on first use,
-    since they build on :class:`_Entity` here)."""
-    if name in ("LivelinessToken", "LivelinessWatcher"):
-        from teleop import liveliness
-        return getattr(liveliness, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
