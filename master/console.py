@@ -59,6 +59,9 @@ class Console:
         Largest |mapped handle - slave x_in| that may engage [m of tendon], > 0.
     clutch_button : int
         Bit of :attr:`DeviceState.buttons` that is the clutch; -1: no clutch.
+    unit_length : float
+        Tendon displacement per unit of the axis [m/unit]: 1 for a tendon (positions in m), the pulley
+        radius r for a joint (positions in rad, ``align_tolerance`` then in rad); used by the prompt.
 
     Attributes
     ----------
@@ -71,12 +74,13 @@ class Console:
         Clutch releases (re-anchors), and engage attempts refused for misalignment.
     """
 
-    def __init__(self, motion: MotionMap, align_tolerance: float, clutch_button: int = -1):
+    def __init__(self, motion: MotionMap, align_tolerance: float, clutch_button: int = -1, unit_length: float = 1.0):
         if not (math.isfinite(align_tolerance) and align_tolerance > 0):
             raise ConfigError(f"master.mapping.align_tolerance must be > 0 m, got {align_tolerance!r}")
         if isinstance(clutch_button, bool) or not (isinstance(clutch_button, int) and -1 <= clutch_button <= 31):
             raise ConfigError(f"master.mapping.clutch_button must be a bit 0..31 or -1, got {clutch_button!r}")
         self.motion = motion
+        self.unit_length = float(unit_length)
         self.tolerance = float(align_tolerance)
         self.clutch_bit = int(clutch_button)
         self.status = ConsoleStatus.WAIT_SLAVE
@@ -131,6 +135,13 @@ class Console:
             self.motion.open_clutch()
         return status
 
+    def drop(self) -> None:
+        """Leave ENGAGED without a reason of this axis's own (another axis of the instrument is not
+        engaged): the next :meth:`update` checks the alignment again."""
+        if self.engaged:
+            self.status = ConsoleStatus.WAIT_SLAVE
+            self.motion.open_clutch()
+
     def stop(self) -> None:
         """The session ends: STOPPING, decoupled."""
         self.released_now = self.engaged
@@ -142,7 +153,7 @@ class Console:
         """One line for the operator about the present status."""
         if self.status == ConsoleStatus.ALIGN:
             way = "release (push)" if self.misalignment > 0 else "pull"
-            return (f"align: the handle maps {1e3 * abs(self.misalignment):.2f} mm of tendon away from the "
+            return (f"align: the handle maps {1e3 * abs(self.misalignment) * self.unit_length:.2f} mm of tendon away from the "
                     f"instrument; {way} back or clutch to re-anchor")
         return {ConsoleStatus.WAIT_SLAVE: "waiting for the slave", ConsoleStatus.WAIT_OPERATOR: "hold the deadman",
                 ConsoleStatus.CLUTCH: "clutch: handle free, instrument held", ConsoleStatus.ENGAGED: "engaged",

@@ -1,6 +1,10 @@
-"""The master (operator-side) node: device -> Command, latest Estimate -> safe device force.
+"""The master (operator-side) node of every instrument: device -> command, latest estimate -> safe forces.
 
-One :meth:`MasterNode.step` per cycle (1 kHz), given the time by the caller:
+An instrument is a list of axes (:mod:`master.axes`): one for a single tendon (Command/Estimate,
+positions in m), one per antagonistic pair for a joint instrument (JointCommand/JointEstimate,
+angles in rad). Every axis gets the whole console, the force map and a passivity controller; the
+node is ENGAGED only while every axis's console is. One :meth:`MasterNode.step` per cycle (1 kHz),
+given the time by the caller:
 
 1. show the operator the latest proximal tension (simulated operators only), read the device;
 2. link health: the last *accepted* estimate is fresh (younger than ``master.watchdog_ms``), the
@@ -11,13 +15,16 @@ One :meth:`MasterNode.step` per cycle (1 kHz), given the time by the caller:
    (when watched) is present. An estimate is accepted when its seq is newer than the last accepted
    one (duplicates and reordered ones are counted and ignored) and ``|T_in|``, ``|T_out_hat|`` are
    below ``master.max_tension`` (else counted as rejected);
-3. the console (:mod:`master.console`: deadman, clutch, alignment) decides ENGAGED. Entering it
+3. the console of each axis (:mod:`master.console`: deadman, clutch, alignment; the deadman and the
+   clutch button are shared, the alignment is checked per axis in its own unit) decides ENGAGED;
+   an axis still engaged while another is not is dropped, so that it is checked again. Entering it
    re-anchors or checks the alignment and restarts the force ramp and the passivity observer.
    Leaving it because of the links or the deadman: SAFE, zero force at once, commands sent with
    ``engaged=False`` (the slave holds); clutch or misalignment: READY;
-4. publish ``Command(seq, t_master, x_in_cmd, engaged, marker)`` and keep its send time by seq in a
+4. publish the command (``Command(seq, t_master, x_in_cmd, engaged, marker)``, or a JointCommand
+   with one angle per joint) and keep its send time by seq in a
    ring buffer; an Estimate echoing ``cmd_seq`` gives the round-trip latency;
-5. render ``-force_scale * T_out_hat`` ramped, clamped, slew-limited (:class:`master.mapping.ForceMap`),
+5. render ``-force_scale * T_k`` on each axis (``T_out_hat``, or ``torque_hat / r`` of a pair) ramped, clamped, slew-limited (:class:`master.mapping.ForceMap`),
    then through the passivity controller (:mod:`master.passivity`, velocity from successive device
    positions; ``master.mapping.passivity``), then clamped again: no force above
    ``master.mapping.force_limit`` ever reaches the device;
@@ -26,80 +33,154 @@ One :meth:`MasterNode.step` per cycle (1 kHz), given the time by the caller:
 When the device reports ``finished`` (a scripted operator at the end of its protocol) the node
 disengages, announces STOPPING for ``stop_linger`` seconds and sets :attr:`done`.
 
-The link side (estimate acceptance, echo, link health, STOPPING, summary counters) is shared with
-the joint-instrument master: :mod:`master.node_base`; heartbeat, state changes and pacing with
-every node: :mod:`teleop.node`.
+The link side (estimate acceptance, echo, link health, STOPPING, summary counters) is
+:mod:`master.node_base`; heartbeat, state changes and pacing are shared with every node:
+:mod:`teleop.node`. A device reports ``position`` (one axis) or ``positions`` (several) and takes
+``set_force`` or ``set_forces``.
 """
 from __future__ import annotations
 
 import math
 from typing import Any
 
+from master.axes import TENDON_CSV_COLUMNS as CSV_COLUMNS
+from master.axes import TENDON_CSV_UNITS as CSV_UNITS
+from master.axes import InstrumentAxes, instrument_axes
 from master.console import Console, ConsoleStatus
-from master.device import HapticDevice, OperatorView
+from master.device import DeviceState
 from master.mapping import ForceMap, MotionMap, clamp_force
 from master.node_base import RING_SIZE, MasterLinks, MasterNodeBase
 from master.passivity import PassivityController
 from teleop.clock import Clock
 from teleop.config import Config
-from teleop.messages import Command, Estimate, SideState
+from teleop.messages import SideState
 
-__all__ = ["MasterLinks", "MasterNode", "RING_SIZE", "CSV_COLUMNS", "CSV_UNITS"]
+__all__ = ["MasterLinks", "MasterNode", "RING_SIZE", "CSV_COLUMNS", "CSV_UNITS", "csv_columns", "csv_units"]
 
-#: The master's recording, one row per cycle (measured-data format: x_in is the command sent, T_in the
-#: slave's latest accepted proximal tension, 0 before any).
-CSV_COLUMNS = ("time", "x_in", "T_in", "position", "T_out_hat", "force_cmd", "force", "energy", "state",
-               "console", "t_est_recv", "echo_age", "cmd_seq")
-CSV_UNITS = {"position": "m", "T_out_hat": "N", "force_cmd": "N", "force": "N", "energy": "J", "state": "SideState",
-             "console": "ConsoleStatus", "t_est_recv": "s", "echo_age": "s", "cmd_seq": "-"}
-_LINK_REASONS = ("slave", "estimate", "command echo")
+_WAITING = {ConsoleStatus.WAIT_OPERATOR: "operator not present", ConsoleStatus.CLUTCH: "clutch held"}
+
+
+def csv_columns(cfg: Config) -> tuple[str, ...]:
+    """Columns of the master's recording for the configured instrument (:mod:`master.axes`)."""
+    return instrument_axes(cfg).csv_columns()
+
+
+def csv_units(cfg: Config) -> dict[str, str]:
+    """Units of :func:`csv_columns`."""
+    return instrument_axes(cfg).csv_units()
 
 
 class MasterNode(MasterNodeBase):
-    """Master side of one tendon's teleoperation loop.
+    """Master side of an instrument's teleoperation loop, one axis or several (module docstring).
 
     Parameters
     ----------
     cfg : Config
-        ``master`` (rate, mapping, watchdog) and ``slave.heartbeat_hz`` are used.
-    device : HapticDevice
-        Optionally also an :class:`~master.device.OperatorView` and with ``finished``/``marker``
-        attributes (scripted operators).
+        ``master`` (rate, mapping, watchdog, max_tension), ``slave.heartbeat_hz``; for a joint
+        instrument ``instrument.joints`` (pulley radii) and ``pair_control.axes``.
+    device : a haptic device: ``read(t)`` -> a state with ``position`` [m] (one axis) or ``positions``
+        (one per device axis), ``buttons``, ``operator_present``; ``set_force(f, t)`` or
+        ``set_forces(forces, t)`` [N]. Optionally ``watch(view, engaged)`` (simulated operators: the
+        proximal tension, or per joint the pair's), ``on_console(status)``, ``finished``, ``marker``.
     links : MasterLinks
     stop_linger : float
         Time the STOPPING state is announced before :attr:`done` [s].
     recorder : object with ``write(row)`` (a :class:`teleop.recording.CsvRecorder` with
-        :data:`CSV_COLUMNS`), or None.
+        :func:`csv_columns`), or None.
+    axes : InstrumentAxes, optional
+        The instrument's axes (default :func:`master.axes.instrument_axes` of ``cfg``).
+
+    Attributes
+    ----------
+    consoles, motion, forces, passivity : list, one per axis.
+    force, force_cmd : list of float, the last rendered and mapped force per axis [N].
+    status : ConsoleStatus, of the instrument (the lowest of the axes').
     """
 
-    def __init__(self, cfg: Config, device: HapticDevice, links: MasterLinks, *, stop_linger: float = 0.2,
-                 recorder=None):
+    def __init__(self, cfg: Config, device, links: MasterLinks, *, stop_linger: float = 0.2, recorder=None,
+                 axes: InstrumentAxes | None = None):
         super().__init__(cfg, device, links, stop_linger=stop_linger,
-                         counts=("estimates_rejected_range", "estimates_out_of_order", "estimates_duplicate"))
+                         counts=("estimates_rejected_range", "estimates_out_of_order", "estimates_duplicate",
+                                 "estimates_wrong_instrument"))
         self.recorder = recorder
+        self.axes = axes or instrument_axes(cfg)
         m = cfg.master.mapping
-        self.motion = MotionMap(m.motion_scale)
-        self.forces = ForceMap.from_config(m)
-        self.console = Console(self.motion, m.align_tolerance, m.clutch_button)
-        self.passivity = PassivityController(m.force_limit, enabled=m.passivity)
+        r = self.axes.radius
+        self.motion = [MotionMap(m.motion_scale / rk) for rk in r]
+        self.forces = [ForceMap.from_config(m) for _ in r]
+        self.consoles = [Console(mm, m.align_tolerance / rk, m.clutch_button, unit_length=rk)
+                         for mm, rk in zip(self.motion, r)]
+        self.passivity = [PassivityController(m.force_limit, enabled=m.passivity) for _ in r]
         self.limit = m.force_limit
-        self._p_prev: float | None = None
-        self.force_cmd = 0.0
+        self.status = ConsoleStatus.WAIT_SLAVE
+        self.align_refusals = 0                  # engage attempts refused for a misaligned axis
+        self._p_prev: list[float | None] = [None] * len(r)
+        self.force_cmd = [0.0] * len(r)
+        self.force = [0.0] * len(r)
         self.max_abs_force = 0.0
-        self.force = 0.0
 
     # ------------------------------------------------------------------------------------------------
-    def _in_range(self, est: Estimate, now: float) -> bool:
-        if abs(est.T_out_hat) <= self.max_tension and abs(est.T_in) <= self.max_tension:
+    def _fits(self, est, now: float) -> bool:
+        if self.axes.fits(est):
+            return True
+        self.counts["estimates_wrong_instrument"] += 1
+        return False
+
+    def _in_range(self, est, now: float) -> bool:
+        if all(abs(v) <= self.max_tension for v in self.axes.tensions(est)):
             return True
         self.counts["estimates_rejected_range"] += 1
-        self._warn(now, "rejected estimate %d: T_in %.6g N, T_out_hat %.6g N beyond master.max_tension %g N",
-                   est.seq, est.T_in, est.T_out_hat, self.max_tension)
+        self._warn(now, "rejected estimate %d: a tension beyond master.max_tension %g N", est.seq, self.max_tension)
         return False
 
     def _disengage_all(self) -> None:
-        self.forces.disengage()
-        self.console.stop()
+        for f, c in zip(self.forces, self.consoles):
+            f.disengage()
+            c.stop()
+        self.status = ConsoleStatus.STOPPING
+
+    def _positions(self, dev) -> list[float]:
+        """The device position of each instrument axis [m] (NaN for a missing device axis)."""
+        ps = getattr(dev, "positions", None)
+        ps = (dev.position,) if ps is None else tuple(ps)
+        return [float(ps[a]) if a < len(ps) else math.nan for a in self.axes.device_axes]
+
+    def _consoles(self, now: float, dev, pos: list[float], healthy: bool, reason: str, est) -> None:
+        """Every axis's console, then the instrument's state (module docstring, step 3)."""
+        q = [None] * len(pos) if est is None else self.axes.slave_positions(est)
+        for c, p, qk in zip(self.consoles, pos, q):
+            c.update(DeviceState(dev.t, p, dev.buttons, dev.operator_present), healthy, qk)
+        status = min(c.status for c in self.consoles)
+        self.align_refusals += status == ConsoleStatus.ALIGN and self.status != ConsoleStatus.ALIGN
+        self.status = status
+        on_console = getattr(self.device, "on_console", None)
+        if on_console is not None:
+            on_console(status)
+        if status == ConsoleStatus.ENGAGED:
+            if self.state != SideState.ENGAGED:      # ramp and passivity observer start afresh
+                for f, pc in zip(self.forces, self.passivity):
+                    f.engage()
+                    pc.reset()
+                self.engage_count += 1
+                self._set_state(SideState.ENGAGED, now, "slave ready, links fresh, aligned")
+            return
+        for c, f in zip(self.consoles, self.forces):
+            if self.state == SideState.ENGAGED:
+                f.disengage()
+            c.drop()                                  # an engaged axis is checked again with the others
+        worst = next(c for c in self.consoles if c.status == status)
+        many = len(self.consoles) > 1
+        self.last_reason = (reason if not healthy else "no slave position") if status == ConsoleStatus.WAIT_SLAVE \
+            else _WAITING.get(status) or (f"{self.axes.names[self.consoles.index(worst)]}: " if many else "") + worst.prompt()
+        if status == ConsoleStatus.ALIGN:
+            self._warn(now, "master: %s", self.last_reason)
+        if status in (ConsoleStatus.WAIT_SLAVE, ConsoleStatus.WAIT_OPERATOR):
+            if self.state == SideState.ENGAGED:      # a safe event
+                self._set_state(SideState.SAFE, now, self.last_reason)
+            elif self.state == SideState.STARTING:
+                self._set_state(SideState.READY, now, "device read")
+        else:
+            self._set_state(SideState.READY, now, self.last_reason)
 
     def step(self, now: float) -> None:
         """One master cycle at time ``now`` [s] (see the module docstring)."""
@@ -107,80 +188,81 @@ class MasterNode(MasterNodeBase):
             return
         self._receive(now)
         est, healthy, reason = self._peer_status(now)
-        engaged = self.state == SideState.ENGAGED
-        if isinstance(self.device, OperatorView):
-            self.device.watch(None if est is None else est.T_in, engaged)
+        watch = getattr(self.device, "watch", None)
+        if watch is not None:
+            watch(self.axes.view(est), self.state == SideState.ENGAGED)
         dev = self.device.read(now)
-        finished = bool(getattr(self.device, "finished", False))
-
-        # ---- state machine (console: deadman, clutch, alignment) ----
-        if not self._stopping(now, finished):
-            status = self.console.update(dev, healthy, None if est is None else est.x_in)
-            on_console = getattr(self.device, "on_console", None)
-            if on_console is not None:
-                on_console(status)
-            if status == ConsoleStatus.ENGAGED:
-                if self.console.engaged_now:      # ramp and passivity observer start afresh
-                    self.forces.engage()
-                    self.passivity.reset()
-                    self.engage_count += 1
-                    self._set_state(SideState.ENGAGED, now, "slave ready, links fresh, aligned")
-            else:
-                if self.console.released_now:
-                    self.forces.disengage()
-                self.last_reason = {ConsoleStatus.WAIT_SLAVE: reason if not healthy else "no slave position",
-                                    ConsoleStatus.WAIT_OPERATOR: "operator not present",
-                                    ConsoleStatus.CLUTCH: "clutch held"}.get(status) or self.console.prompt()
-                if status == ConsoleStatus.ALIGN:
-                    self._warn(now, "master: %s", self.last_reason)
-                if status in (ConsoleStatus.WAIT_SLAVE, ConsoleStatus.WAIT_OPERATOR):
-                    if self.state == SideState.ENGAGED:      # a safe event
-                        self._set_state(SideState.SAFE, now, self.last_reason)
-                    elif self.state == SideState.STARTING:
-                        self._set_state(SideState.READY, now, "device read")
-                else:
-                    self._set_state(SideState.READY, now, self.last_reason)
+        pos = self._positions(dev)
+        if not self._stopping(now, bool(getattr(self.device, "finished", False))):
+            self._consoles(now, dev, pos, healthy, reason, est)
         engaged = self.state == SideState.ENGAGED
 
         # ---- command ----
-        x_cmd = self.motion.command(dev.position) if engaged else self.motion.last
+        q = [mm.command(p) if engaged else mm.last for mm, p in zip(self.motion, pos)]
         marker = int(getattr(self.device, "marker", 0)) if engaged else 0
-        self._send_command(Command(self.seq, now, x_cmd, engaged, marker), now)
+        self._send_command(self.axes.command(self.seq, now, q, engaged, marker), now)
 
-        # ---- force: map (scale, ramp, clamp, slew) -> passivity controller -> clamp ----
-        T_out_hat = math.nan if est is None else est.T_out_hat
-        self.force_cmd = self.forces.step(T_out_hat, now, fresh=engaged and healthy)
+        # ---- forces, per axis: map (scale, ramp, clamp, slew) -> passivity controller -> clamp ----
         dt = 1.0 / self.cfg.master.rate_hz if self._t_prev is None else now - self._t_prev
-        p = dev.position if math.isfinite(dev.position) else math.nan
-        v = 0.0 if self._p_prev is None else (p - self._p_prev) / dt if dt > 0 else math.nan
-        self._t_prev, self._p_prev = now, (p if math.isfinite(p) else self._p_prev)
-        self.force = clamp_force(self.passivity.step(self.force_cmd, v, dt), self.limit)
-        self.max_abs_force = max(self.max_abs_force, abs(self.force))
-        self.device.set_force(self.force, now)
+        self._t_prev = now
+        rendered = [math.nan] * len(pos) if est is None else self.axes.rendered(est)
+        for k, (fm, pc, p, T) in enumerate(zip(self.forces, self.passivity, pos, rendered)):
+            self.force_cmd[k] = fm.step(T, now, fresh=engaged and healthy)
+            prev = self._p_prev[k]
+            p = p if math.isfinite(p) else math.nan
+            v = 0.0 if prev is None else (p - prev) / dt if dt > 0 else math.nan
+            if math.isfinite(p):
+                self._p_prev[k] = p
+            self.force[k] = clamp_force(pc.step(self.force_cmd[k], v, dt), self.limit)
+            self.max_abs_force = max(self.max_abs_force, abs(self.force[k]))
+        self._render(self.force, now)
         if self.recorder is not None:
-            rec = self._accepted
-            self.recorder.write((now, x_cmd, 0.0 if est is None else est.T_in, p if math.isfinite(p) else 0.0,
-                                 0.0 if est is None else est.T_out_hat, self.force_cmd, self.force,
-                                 self.passivity.energy, int(self.state), int(self.console.status),
-                                 0.0 if rec is None else rec.t_recv,
-                                 -1.0 if self._t_echo is None else now - self._t_echo, self.seq - 1 & 0xFFFFFFFF))
+            self._record(now, est, q, pos, rendered, marker)
 
         # ---- heartbeat ----
         self._heartbeat(now)
 
+    def _render(self, forces: list[float], now: float) -> None:
+        """Send one force per instrument axis to its device axis [N]."""
+        set_forces = getattr(self.device, "set_forces", None)
+        if set_forces is None:
+            self.device.set_force(forces[0], now)
+            return
+        out = [0.0] * (max(self.axes.device_axes, default=-1) + 1)
+        for a, f in zip(self.axes.device_axes, forces):
+            out[a] = f
+        set_forces(out, now)
+
+    def _record(self, now: float, est, q, pos, rendered, marker: int) -> None:
+        rec = self._accepted
+        common = (int(self.state), int(self.status), 0.0 if rec is None else rec.t_recv,
+                  -1.0 if self._t_echo is None else now - self._t_echo, self.seq - 1 & 0xFFFFFFFF, marker)
+        slave = [math.nan] * len(q) if est is None else self.axes.slave_positions(est)
+        axes = [(qk, _fin(sk), _fin(p), _fin(T), fc, f, pc.energy) for qk, sk, p, T, fc, f, pc in
+                zip(q, slave, pos, rendered, self.force_cmd, self.force, self.passivity)]
+        self.recorder.write(self.axes.csv_row(now, est, common, axes))
+
     # ------------------------------------------------------------------------------------------------
     def _run_ended(self, clock: Clock) -> None:
-        self.device.set_force(0.0, clock.now())
+        self._render([0.0] * len(self.force), clock.now())
 
     def _stats_detail(self) -> dict[str, Any]:
+        ps = [p.stats for p in self.passivity]
         return {
             **self.counts,
-            "console": self.console.status.name,
-            "clutches": self.console.clutches,
-            "align_refusals": self.console.refusals,
+            "axes": list(self.axes.names),
+            "console": self.status.name,
+            "clutches": max(c.clutches for c in self.consoles),     # every axis re-anchors on a release
+            "align_refusals": self.align_refusals,
             "max_abs_force": self.max_abs_force,
             "force_limit": self.limit,
-            "passivity": {"enabled": self.passivity.enabled, **{
-                k: getattr(self.passivity.stats, k) for k in ("energy", "dissipated", "active_steps", "steps")}},
+            "passivity": {"enabled": all(p.enabled for p in self.passivity),
+                          **{k: sum(getattr(s, k) for s in ps) for k in ("energy", "dissipated", "active_steps")},
+                          "steps": max(s.steps for s in ps)},
             "latency_rtt": self.latency_stats(),
+            "recording": getattr(self.recorder, "path", None) and str(self.recorder.path),
         }
+
+
+def _fin(v: float) -> float:
+    return v if math.isfinite(v) else 0.0

@@ -1,4 +1,4 @@
-"""What both master nodes share (one tendon: :mod:`master.node`; joint instrument: :mod:`master.joint_node`).
+"""The link side of the master node (:mod:`master.node`, one node for every instrument; kept apart for size).
 
 The link side of the master, the same whatever it renders:
 

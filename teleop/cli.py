@@ -23,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-from teleop.errors import TeleopError
+from teleop.errors import DeviceError, TeleopError
 
 __all__ = ["build_parser", "main", "run_slave", "run_master", "default_run_dir", "prepare_run_dir", "endpoints",
            "open_session", "slave_links", "master_links"]
@@ -281,25 +281,40 @@ def run_slave(args: argparse.Namespace) -> int:
     return 0
 
 
-def run_master(args: argparse.Namespace) -> int:
-    """``teleop master``: run the operator side until the device's protocol is finished."""
-    from master.node import CSV_COLUMNS as MASTER_CSV, CSV_UNITS as MASTER_UNITS, MasterNode
+def open_device(cfg, protocol: str):
+    """The configured haptic device (``master.device.type``) for the configured instrument.
+
+    Raises
+    ------
+    DeviceError
+        A HID device for a joint instrument (one report map per axis is not there yet), or a HID
+        device that cannot be opened (named).
+    """
     from master.simulated import ScriptedOperator, build_protocol
+    if cfg.master.device.type == "hid":
+        if cfg.instrument.joints:
+            raise DeviceError("master.device.type: a HID device drives a single tendon so far; joint instruments "
+                              "have the simulated multi-axis operator")
+        from master.hid import HidDevice
+        # opens, resets and enables the actuators; raises DeviceError naming the device when absent
+        return HidDevice.from_file(cfg.master.device.file)
+    if cfg.instrument.joints:
+        from master.joint_operator import MultiAxisOperator
+        from teleop.cli_joints import joint_protocols
+        return MultiAxisOperator(joint_protocols(cfg, "paper" if protocol in ("paper,minor", "paper") else protocol))
+    return ScriptedOperator(build_protocol(protocol))
+
+
+def run_master(args: argparse.Namespace) -> int:
+    """``teleop master``: run the operator side of any instrument until the device's protocol is finished."""
+    from master.node import MasterNode, csv_columns, csv_units
     from teleop.clock import MonotonicClock
     from teleop.config import load_config
-    from teleop.messages import Estimate
+    from teleop.messages import Estimate, JointEstimate
     from teleop.recording import CsvRecorder, raise_on_sigterm
 
     cfg = load_config(args.config)
-    if cfg.instrument.joints:           # a joint instrument: its own node, same transport and flags
-        from teleop.cli_joints import run_joint_master
-        return run_joint_master(args, cfg)
-    if cfg.master.device.type == "hid":
-        from master.hid import HidDevice
-        # opens, resets and enables the actuators; raises DeviceError naming the device when absent
-        device = HidDevice.from_file(cfg.master.device.file)
-    else:
-        device = ScriptedOperator(build_protocol(args.protocol))
+    device = open_device(cfg, args.protocol)
     # from here on the device is closed on every exit path (HID: zero force, stop all effects,
     # disable actuators), whatever fails: session, recording, the loop, Ctrl-C or SIGTERM
     with _closing(device):
@@ -308,10 +323,12 @@ def run_master(args: argparse.Namespace) -> int:
         clock = MonotonicClock()
         injector = _injector(args, clock)
         meta = {"source": "teleop master", "instrument": ident, "device": cfg.master.device.type,
-                "columns": "x_in = command sent, T_in = slave's latest proximal tension, force = rendered"}
+                "columns": "x_in = command sent, T_in = slave's latest proximal tension, force = rendered"
+                if not cfg.instrument.joints else "per joint: cmd, slave angle [rad], device position [m], "
+                "rendered tension torque_hat / r [N], forces [N], passivity energy [J]"}
         with raise_on_sigterm(), open_session(cfg, args, clock) as session, \
-                CsvRecorder(run_dir / "master.csv", MASTER_CSV, meta, units=MASTER_UNITS, flush_every=100) as rec:
-            links = master_links(session, ident, injector, Estimate)
+                CsvRecorder(run_dir / "master.csv", csv_columns(cfg), meta, units=csv_units(cfg), flush_every=100) as rec:
+            links = master_links(session, ident, injector, JointEstimate if cfg.instrument.joints else Estimate)
             node = MasterNode(cfg, device, links, recorder=rec)
             _serve(node, clock, args, run_dir, "master", injector, close_first=device.close)
     _log_master_done(node)

@@ -1,5 +1,6 @@
 """The ``teleop`` subcommands for joint instruments (config ``instrument.joints``): ``calibrate``, and
-the joint versions of ``slave`` and ``master`` that :mod:`teleop.cli` hands over to.
+the joint version of ``slave`` that :mod:`teleop.cli` hands over to (``master`` is one path for every
+instrument).
 
 One Zenoh session per process, as for one tendon; the key expressions are the same
 (``teleop/<instrument>/<side>/<stream>``), the payloads are JointCommand / JointEstimate.
@@ -10,10 +11,9 @@ import argparse
 import logging
 
 from teleop.config import Config
-from teleop.errors import ConfigError, DeviceError
+from teleop.errors import ConfigError
 
-__all__ = ["add_calibrate_arguments", "run_calibrate", "calibration_report", "run_joint_slave", "run_joint_master",
-           "joint_protocols"]
+__all__ = ["add_calibrate_arguments", "run_calibrate", "calibration_report", "run_joint_slave", "joint_protocols"]
 
 
 def add_calibrate_arguments(p: argparse.ArgumentParser) -> None:
@@ -133,31 +133,3 @@ def joint_protocols(cfg: Config, names: str):
     if targets is None:
         raise ConfigError(f"protocol: {names!r} is not a joint-instrument protocol (expected 'paper' or 'short')")
     return [paper_protocol(set_tension(cfg, j), targets) for j in cfg.instrument.joints]
-
-
-def run_joint_master(args: argparse.Namespace, cfg: Config) -> int:
-    """``teleop master`` for a joint instrument: the scripted multi-axis operator until its protocol is done."""
-    from master.joint_node import JointMasterNode
-    from master.joint_operator import MultiAxisOperator
-    from teleop.cli import _injector, _log_master_done, _serve, master_links, open_session, prepare_run_dir
-    from teleop.clock import MonotonicClock
-    from teleop.messages import JointEstimate
-    from teleop.recording import raise_on_sigterm
-
-    if cfg.master.device.type != "simulated":
-        raise DeviceError("master.device.type: joint instruments have only the simulated multi-axis operator so far")
-    protocol = "paper" if args.protocol in ("paper,minor", "paper") else args.protocol
-    device = MultiAxisOperator(joint_protocols(cfg, protocol))
-    run_dir = prepare_run_dir(args, cfg)
-    ident = cfg.instrument.id
-    clock = MonotonicClock()
-    injector = _injector(args, clock)
-    try:
-        with raise_on_sigterm(), open_session(cfg, args, clock) as session:
-            links = master_links(session, ident, injector, JointEstimate)
-            node = JointMasterNode(cfg, device, links)
-            _serve(node, clock, args, run_dir, "master", injector)
-    finally:
-        device.close()
-    _log_master_done(node)
-    return 0 if device.finished else 1

@@ -157,10 +157,15 @@ def format_joint_summary(s: dict) -> str:
         L.append(f"  {name:10s} {'worst':6s} {'':9s} {row['torque_error_max_fs']:7.3f} {row['torque_error_mean_fs']:7.3f}"
                  f"   (bound {TORQUE_BOUND})")
     L.append("")
+    m = s.get("master", {})
+    if m:
+        L.append(f"master console: engaged {m.get('engage_count', 0)} time(s), clutches {m.get('clutches', 0)}, "
+                 f"align refusals {m.get('align_refusals', 0)}, safe events {m.get('safe_events', 0)}, "
+                 f"max |force| {m.get('max_abs_force', 0.0):.2f} N (limit {m.get('force_limit', 0.0):g} N)")
     L += loop_lines(s, detailed=False)
     L.append("")
     L += verdict_lines(s)
-    L.append(f"recording: {s['run_dir']}/slave_joints.csv, rerun: {s['run_dir']}/slave.rrd, "
+    L.append(f"recording: {s['run_dir']}/slave_joints.csv, {s['run_dir']}/master.csv, rerun: {s['run_dir']}/slave.rrd, "
              f"summary: {s['run_dir']}/summary.json")
     return "\n".join(L)
 

@@ -46,6 +46,12 @@ def test_three_joint_demo_end_to_end_over_zenoh(tmp_path):
         assert f"{name:10s} worst" in proc.stdout
     assert summary["master"]["finished"] and summary["slave"]["commands_applied"] > 1000
     assert summary["master"]["latency_rtt"]["n"] > 1000
+    m = summary["master"]                                    # the joint master has the whole console
+    assert m["engage_count"] >= 1 and m["clutches"] == 0 and m["align_refusals"] == 0 and "console" in m
+    assert m["max_abs_force"] <= m["force_limit"] and m["axes"] == ["bend_ud", "bend_lr", "grasp"]
+    assert m["recording"].endswith("master.csv") and "master console: engaged" in proc.stdout
+    header = [ln for ln in (run_dir / "master.csv").read_text().splitlines() if not ln.startswith("#")]
+    assert "grasp.force" in header[0].split(",") and len(header) > 1000      # a row per cycle, complete
 
 
 def test_calibrate_writes_the_file_the_slave_reloads(tmp_path, capsys):

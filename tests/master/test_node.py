@@ -260,7 +260,7 @@ def test_clutch_holds_the_instrument_and_re_anchors_on_release():
     assert node.state == SideState.READY and node.last_reason == "clutch held"
     hand.buttons = 0                                     # release: re-anchored at the slave's x_in
     run(node, links, clock, 1, x_in=0.009)
-    assert node.state == SideState.ENGAGED and node.console.clutches == 1 and node.engage_count == 2
+    assert node.state == SideState.ENGAGED and node.consoles[0].clutches == 1 and node.engage_count == 2
     assert links.command.sent[-1].x_in_cmd == pytest.approx(0.009)       # no jump
     hand.position = 0.07
     run(node, links, clock, 1, x_in=0.009)
@@ -275,17 +275,17 @@ def test_re_engage_after_a_fault_needs_alignment_or_a_clutch():
     assert node.state == SideState.SAFE
     hand.position = 0.104                                # the hand drifted: maps 2 mm away
     run(node, links, clock, 3)
-    assert node.state == SideState.READY and node.console.status.name == "ALIGN"
-    assert node.console.misalignment == pytest.approx(0.002) and "2.00 mm" in node.last_reason
-    assert all(not c.engaged for c in links.command.sent[-3:]) and node.console.refusals == 1
+    assert node.state == SideState.READY and node.consoles[0].status.name == "ALIGN"
+    assert node.consoles[0].misalignment == pytest.approx(0.002) and "2.00 mm" in node.last_reason
+    assert all(not c.engaged for c in links.command.sent[-3:]) and node.consoles[0].refusals == 1
     hand.position = 0.1015                               # back within 1 mm (0.75 mm): engages, no re-anchor
     run(node, links, clock, 1)
-    assert node.state == SideState.ENGAGED and node.console.clutches == 0
+    assert node.state == SideState.ENGAGED and node.consoles[0].clutches == 0
     assert links.command.sent[-1].x_in_cmd == pytest.approx(0.004 + 0.5 * 0.0015)
     tick(node, clock, 70)
     hand.position = 0.2                                  # far away: clutch press + release realigns
     run(node, links, clock, 2)
-    assert node.console.status.name == "ALIGN"
+    assert node.consoles[0].status.name == "ALIGN"
     hand.buttons = 0b10
     run(node, links, clock, 2)
     hand.buttons = 0
@@ -311,13 +311,13 @@ def test_passivity_controller_cuts_energy_generating_force_and_the_clamp_holds()
         v = math.cos(2 * math.pi * 5 * k * DT)
         run(node, links, clock, 1, T_out=-40.0 * v)      # force = -0.2 T_out = 8 v N: generates energy
     assert max(abs(f) for f in hand.forces) <= 1.5
-    assert node.passivity.energy >= -1e-12 and node.passivity.stats.active_steps > 50
+    assert node.passivity[0].energy >= -1e-12 and node.passivity[0].stats.active_steps > 50
     off, hand2, links2, clock2 = make(force_limit=1.5, passivity=False)
     engage(off, links2, clock2)
     for k in range(300):
         hand2.position = 0.01 * math.sin(2 * math.pi * 5 * k * DT)
         run(off, links2, clock2, 1, T_out=-40.0 * math.cos(2 * math.pi * 5 * k * DT))
-    assert off.passivity.energy < -1e-3 and max(abs(f) for f in hand2.forces) == pytest.approx(1.5)
+    assert off.passivity[0].energy < -1e-3 and max(abs(f) for f in hand2.forces) == pytest.approx(1.5)
 
 
 def test_estimates_out_of_order_duplicate_or_impossible_are_ignored():
@@ -331,7 +331,8 @@ def test_estimates_out_of_order_duplicate_or_impossible_are_ignored():
     tick(node, clock)
     put_est(links, n + 1, T_out=1e4)                     # impossible: master.max_tension 200 N
     tick(node, clock)
-    assert node.counts == {"estimates_rejected_range": 1, "estimates_out_of_order": 2, "estimates_duplicate": 0}
+    assert node.counts == {"estimates_rejected_range": 1, "estimates_out_of_order": 2, "estimates_duplicate": 0,
+                           "estimates_wrong_instrument": 0}
     assert hand.forces[-1] == pytest.approx(-2.0) and node._last_est_seq == n
     for _ in range(60):                                  # only impossible estimates: stale, SAFE
         slave_beat(links, clock)
@@ -377,7 +378,7 @@ def test_scripted_operator_clutches_when_asked_to_align_and_control_resumes():
     run(node, links, clock, 100, T_in=0.5)                # pulling: the hand moves
     tick(node, clock, 70)                                 # link lost: SAFE, force gone
     run(node, links, clock, 1, x_in=0.0)                  # the slave relaxed to 0: 2.5+ mm away
-    assert node.console.status.name == "ALIGN" and node.state == SideState.READY
+    assert node.consoles[0].status.name == "ALIGN" and node.state == SideState.READY
     run(node, links, clock, 80, x_in=0.0, T_in=0.5)
-    assert op.clutches == 1 and node.console.clutches == 1
+    assert op.clutches == 1 and node.consoles[0].clutches == 1
     assert node.state == SideState.ENGAGED and node.engage_count == 2

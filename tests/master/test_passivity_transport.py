@@ -129,8 +129,8 @@ def run_loop(passivity: bool, T: float = 3.0, seed: int = 1):
             _wait_delivered([m_est, m_hb], inj_s, base_m, "estimates")
             out["t"].append(now)
             out["x"].append(hand.x)
-            out["f"].append(master.force)
-            out["E"].append(master.passivity.energy)
+            out["f"].append(master.force[0])
+            out["E"].append(master.passivity[0].energy)
             out["state"].append(int(master.state))
     return {k: np.asarray(v) for k, v in out.items()}, master, (inj_m.counts, inj_s.counts)
 
@@ -161,4 +161,4 @@ def test_with_the_passivity_controller_it_stays_passive_stable_and_clamped(runs)
     assert np.abs(out["x"]).max() < 0.01             # no overshoot past the target (7.5 mm)
     assert np.ptp(out["x"][1500:]) < 0.001           # settled: < 1 mm peak to peak in the last second
     assert np.mean(out["state"] == 3) > 0.95 and master.safe_events == 0
-    assert np.abs(out["f"]).max() <= 20.0 and master.passivity.stats.active_steps > 100
+    assert np.abs(out["f"]).max() <= 20.0 and master.passivity[0].stats.active_steps > 100

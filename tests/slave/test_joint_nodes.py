@@ -1,4 +1,4 @@
-"""JointSlaveNode and JointMasterNode on one FakeClock, talking through in-memory topics that go
+"""JointSlaveNode and the MasterNode of a joint instrument on one FakeClock, talking through in-memory topics that go
 through the codec: calibration at power-up, the paper protocol on all three joints, watchdog."""
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from master.joint_node import JointMasterLinks, JointMasterNode
 from master.joint_operator import MultiAxisOperator, joint_marker, paper_protocol
+from master.node import MasterLinks, MasterNode, csv_columns
 from slave.calibration_file import load_calibration
 from slave.joint_node import JointSlaveNode, joint_csv_columns
 from slave.joint_rig import SimulatedInstrument
@@ -33,7 +33,8 @@ def build(tmp_path, calibration=None):
                            recorder=rec, calibration=calibration, calibration_file=tmp_path / "flex3.yaml",
                            run_dir=tmp_path, stop_on_master_stop=True)
     op = MultiAxisOperator([paper_protocol(set_tension(cfg, j)) for j in cfg.instrument.joints])
-    master = JointMasterNode(cfg, op, JointMasterLinks(command=cmd, heartbeat=mhb, estimate=est, slave_heartbeat=shb))
+    master = MasterNode(cfg, op, MasterLinks(command=cmd, heartbeat=mhb, estimate=est, slave_heartbeat=shb),
+                        recorder=Rows())
     return cfg, clock, slave, master, op, rec, (cmd, est, shb, mhb)
 
 
@@ -119,3 +120,20 @@ def test_commands_for_another_instrument_or_out_of_range_are_refused(demo, tmp_p
     s = slave.stats()
     assert s["commands_wrong_joints"] == 1 and s["commands_rejected_range"] == 1 and s["commands_duplicate"] == 1
     assert slave.state == SideState.READY or slave.state == SideState.ENGAGED
+
+
+def test_the_joint_master_reports_its_console_and_records_every_cycle(demo):
+    cfg, slave, master, op, rec, _ = demo
+    s = master.stats()
+    assert s["axes"] == [j.name for j in cfg.instrument.joints] and s["console"] == "STOPPING"
+    assert s["engage_count"] == 1 and s["clutches"] == 0 and s["align_refusals"] == 0
+    cols = csv_columns(cfg)
+    data = np.array(master.recorder.rows)
+    assert data.shape == (master.pacer_stats.get("ticks", data.shape[0]), len(cols))
+    c = {name: data[:, k] for k, name in enumerate(cols)}
+    engaged = c["state"] == SideState.ENGAGED
+    assert engaged.sum() > 5000                         # seconds of teleoperation at 1 kHz
+    for j in cfg.instrument.joints:
+        assert np.abs(c[f"{j.name}.force"]).max() <= cfg.master.mapping.force_limit + 1e-12
+        cmd, angle = c[f"{j.name}.cmd"][engaged], c[f"{j.name}.slave"][engaged]
+        assert np.ptp(cmd) > 0.1 and np.corrcoef(cmd, angle)[0, 1] > 0.9      # the joint follows (with its lag)
