@@ -12,13 +12,17 @@ with a smooth friction state per node, so that it can serve as an independent se
 * Route: straight runs and arcs (:class:`estimator.sheath.SheathGeometry`, geometry only); node i
   carries the wrap angle dtheta_i of the route over [s_i - ds/2, s_i + ds/2] (node 0 also the
   first half element, the distal node the last half).
-* Friction of node i: normal force N_i = Tbar_i dtheta_i + q ds_i (Tbar_i the mean tension of its
-  two elements, q a tension-independent normal load per length for E8). LuGre bristle state z_i
-  with normal-force-scaled coefficients (Palli & Melchiorri 2006):
-      dz/dt = v - sigma0 |v| z / g(v),   F_i = N_i sigma0 z_i + c ds v_i,
+* Friction of node i: normal force N_i = Tbar_i dtheta_i + (q + rho g) ds_i (Tbar_i the mean tension
+  of its two elements, q a tension-independent normal load per length for E8, rho g the tendon's
+  weight: ~0.013 N/m, 2 mN of friction over 1.5 m, below any load cell's noise). A Dahl state F_i per node
+  whose bound scales with the normal force (tension-scaled Dahl, literature.md E2):
+      dF_i/dt = (Fc_i / z_ss) (v_i - |v_i| F_i / Fc_i),   Fc_i = N_i g(v_i),
       g(v) = mu(t) (1 + c_v |v|) (1 + r_s exp(-(v / v_s)^2)),   mu(t) = mu + mu_rate t,
-  so the node slides with friction N_i g(v) and pre-slides over z_ss = g / sigma0 [m] (the
-  ``presliding`` distance). A Stribeck peak r_s > 0 gives breakaway and stick-slip.
+  plus a viscous c ds v_i. A node pre-slides over about z_ss [m] (the ``presliding`` distance)
+  before it slides with friction Fc_i; when Fc_i drops below |F_i| (tension falls, Stribeck
+  decay) F_i is clipped to the bound at once (the node slips). A Stribeck peak r_s > 0 gives
+  breakaway and stick-slip. Unlike a bristle deflection, F_i does not jump when N_i changes, so
+  a rising tension cannot pump energy into a stuck node.
 * Sheath: a series spring k_s between the motor and the proximal tendon point,
   x_p = x_motor - T_in / k_s (inf: rigid sheath).
 * Distal load on the last node: a piecewise-linear force law F(x) (:class:`Load`: spring,
@@ -45,6 +49,7 @@ from slave.lumped_kernel import simulate
 __all__ = ["Load", "LumpedTendon", "LOAD_KINDS"]
 
 LOAD_KINDS = ("spring", "preloaded", "constant", "joint", "fixed")
+_GRAVITY = 9.81  # m/s^2
 
 
 def _check(ok: bool, name: str, expected: str, value: object) -> None:
@@ -131,7 +136,7 @@ class LumpedTendon:
     load : Load, distal load.
     n_nodes : int >= 4, number of elements (= masses).
     line_density : float > 0 [kg/m], tendon mass per length.
-    presliding : float > 0 [m], bristle pre-sliding distance z_ss = mu / sigma0.
+    presliding : float > 0 [m], pre-sliding distance z_ss of the Dahl state.
     static_ratio : float >= 0, Stribeck peak r_s (mu_static / mu_kinetic - 1); stribeck_speed [m/s].
     speed_coefficient : float >= 0 [s/m], c_v in g(v) = mu (1 + c_v |v|) (E3).
     viscous : float >= 0 [N s/m^2], tension-independent viscous friction per length.
@@ -143,6 +148,7 @@ class LumpedTendon:
     sheath_stiffness : float > 0 [N/m] or inf, series sheath spring k_s.
     motor_bandwidth_hz, motor_max_speed : float > 0 [Hz], [m/s].
     substep_hz : float >= 1000 [Hz], integration rate (rounded up to a multiple of the sample rate).
+    newton_iterations : int in [1, 20], Newton iterations of the implicit friction law per substep.
     """
 
     def __init__(self, route, mu: float, EA: float, load: Load | None = None, *, n_nodes: int = 48,
@@ -151,7 +157,7 @@ class LumpedTendon:
                  normal_load: float = 0.0, softening: float = 0.0, toe_tension: float = 1.0,
                  pretension: float = 0.0, mu_rate: float = 0.0, backlash: float = 0.0,
                  sheath_stiffness: float = math.inf, motor_bandwidth_hz: float = 60.0,
-                 motor_max_speed: float = 0.2, substep_hz: float = 10000.0):
+                 motor_max_speed: float = 0.2, substep_hz: float = 10000.0, newton_iterations: int = 10):
         if not isinstance(route, SheathGeometry):
             try:
                 route = SheathGeometry(route)
@@ -179,7 +185,10 @@ class LumpedTendon:
         self.L = route.length
         self.n = n = n_nodes
         self.ds = ds = self.L / n
+        _check(isinstance(newton_iterations, int) and not isinstance(newton_iterations, bool)
+               and 1 <= newton_iterations <= 20, "newton_iterations", "an int in [1, 20]", newton_iterations)
         self.substep_hz = float(substep_hz)
+        self.n_iter = newton_iterations
         self.backlash = float(backlash)
         self.pretension = float(pretension)
         self.motor = (float(motor_bandwidth_hz), float(motor_max_speed))
@@ -191,14 +200,14 @@ class LumpedTendon:
         self.mass[-1] = 0.5 * line_density * ds + load.mass
         seg = np.full(n, ds)
         seg[0], seg[-1] = 1.5 * ds, 0.5 * ds
-        self.qds = normal_load * seg
+        self.qds = (normal_load + _GRAVITY * line_density) * seg   # the tendon's weight presses too
         self.visc = viscous * seg
         self.k_lin = self.EA / ds
         self.beta, self.Tc = float(softening), float(toe_tension)
         self.inv_ks = 0.0 if math.isinf(sheath_stiffness) else 1.0 / float(sheath_stiffness)
         self.mu_rate = float(mu_rate)
         self.friction = (float(speed_coefficient), float(static_ratio), float(stribeck_speed))
-        self.sigma0 = max(self.mu, 1e-9) / float(presliding)
+        self.presliding = float(presliding)
         self.graph = load.graph()
         self.reset()
 
@@ -214,7 +223,7 @@ class LumpedTendon:
 
     def reset(self) -> None:
         """Rest state: uniform pretension along the tendon, distal end where the load holds it,
-        velocities and bristles zero, time 0."""
+        velocities and friction states zero, time 0."""
         P, n = self.pretension, self.n
         u_end = self.load.position_at(P) if P > 0 else min(0.0, self.load.position_at(0.0))
         y = P + self.beta * self.Tc * -math.expm1(-P / self.Tc)  # phi(P)
@@ -223,6 +232,7 @@ class LumpedTendon:
         self.u = u_end + np.concatenate((np.cumsum(e[:0:-1])[::-1], [0.0]))
         self.v = np.zeros(n)
         self.z = np.zeros(n)
+        self.status = np.zeros(n, dtype=np.int64)
         xp = self.u[0] + e[0]
         xm = xp + P * self.inv_ks
         self.state = np.array([xm, xp, u_end, 0.0, P])
@@ -258,8 +268,8 @@ class LumpedTendon:
         cv, rs, vs = self.friction
         lx, lF, ls = self.graph
         simulate(x, n_sub, dt, -math.expm1(-2 * math.pi * f_bw * dt), v_max, self.u, self.v, self.e, self.T,
-                 self.z, self.state, self.mass, self.dtheta, self.qds, self.visc, self.k_lin, self.beta, self.Tc,
-                 self.inv_ks, self.mu, self.mu_rate, cv, rs, vs, self.sigma0, lx, lF, ls, self.load.damping,
-                 self.load.mass, 0.5 * self.backlash, out)
+                 self.z, self.status, self.state, self.mass, self.dtheta, self.qds, self.visc, self.k_lin, self.beta, self.Tc,
+                 self.inv_ks, self.mu, self.mu_rate, cv, rs, vs, 1.0 / self.presliding, lx, lF, ls, self.load.damping,
+                 self.load.mass, 0.5 * self.backlash, self.n_iter, out)
         return {"x_motor": out[:, 0], "T_in": out[:, 1], "x_end": out[:, 2], "T_out": out[:, 3],
                 "x_joint": out[:, 4], "x_p": out[:, 5]}

@@ -8,7 +8,8 @@ system is tridiagonal (a chain) and is solved by the Thomas algorithm, O(n) per 
     u[i], v[i]   node displacement [m] (+ toward the actuator) and velocity [m/s], i = 0..n-1
     e[i], T[i]   stretch [m] and tension [N] of element i (element 0 joins the proximal tendon
                  point xp to node 0, element i joins node i-1 to node i)
-    z[i]         bristle deflection [m] of node i against the sheath (LuGre state)
+    z[i]         friction force [N] of node i against the sheath (bristle state); st[i] its
+                 status (0 stick, +1 / -1 sliding toward / away from the actuator)
     m[i]         node mass [kg] (the distal load mass is added to node n-1)
     dth[i]       wrap angle [rad] carried by node i; qds[i] tension-independent normal load [N]
     s = [x_motor, xp, x_joint, t, T_out]  scalar state
@@ -65,15 +66,31 @@ def _tension(e, T, k_lin, beta, Tc):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def simulate(xcmd, n_sub, dt, bw_alpha, vmax, u, v, e, T, z, s, m, dth, qds, visc, k_lin, beta, Tc,
-             inv_ks, mu0, mu_rate, cv, rs, vs, sigma0, lx, lF, ls, b_load, m_load, half_play,
+def _thomas(a, b, c, d, n):  # pragma: no cover - compiled
+    """Solve the tridiagonal system in place; the solution is left in d."""
+    for i in range(1, n):
+        w = a[i] / b[i - 1]
+        b[i] -= w * c[i - 1]
+        d[i] -= w * d[i - 1]
+    d[n - 1] = d[n - 1] / b[n - 1]
+    for i in range(n - 2, -1, -1):
+        d[i] = (d[i] - c[i] * d[i + 1]) / b[i]
+
+
+@njit(cache=True, nogil=True)
+def simulate(xcmd, n_sub, dt, bw_alpha, vmax, u, v, e, T, z, st, s, m, dth, qds, visc, k_lin, beta, Tc,
+             inv_ks, mu0, mu_rate, cv, rs, vs, inv_zss, lx, lF, ls, b_load, m_load, half_play, n_iter,
              out):  # pragma: no cover - compiled
     """Run the chain over the command samples ``xcmd`` [m], ``n_sub`` substeps of ``dt`` [s] each.
 
     Motor: x_m += clip(bw_alpha (x_target - x_m), +-vmax dt), x_target linear between samples.
-    Friction of node i (LuGre with the normal force N_i = max(Tbar_i, 0) dth_i + qds_i):
-        dz/dt = v - sigma0 |v| z / g(v),  g(v) = mu(t) (1 + cv |v|) (1 + rs exp(-(v/vs)^2)),
-        F_i = N_i sigma0 z + visc_i v,  mu(t) = mu0 + mu_rate t.
+    Friction of node i: an elasto-plastic bristle (a single-state LuGre-family model) with the
+    normal-force-scaled bound Fc_i = N_i g(v), N_i = max(Tbar_i, 0) dth_i + qds_i,
+    g(v) = mu(t) (1 + cv |v|) (1 + rs exp(-(v/vs)^2)), mu(t) = mu0 + mu_rate t (v of the last substep):
+    stick F' = F + (Fc / zss) dt v' while |F'| <= Fc, else slip F' = +-Fc; plus visc_i v. The
+    stick/slip status of every node (``st``: 0, +1, -1, kept between substeps) is found by an
+    active-set iteration (at most ``n_iter`` tridiagonal solves, usually one); N_i, g, the element
+    stiffness and the load slope are frozen over a substep; |F| is clipped to Fc when the bound drops.
     Writes per sample k: out[k] = (x_motor, T_in, u_distal, T_out, x_joint, xp).
     """
     n = u.shape[0]
@@ -82,9 +99,9 @@ def simulate(xcmd, n_sub, dt, bw_alpha, vmax, u, v, e, T, z, s, m, dth, qds, vis
     c = np.empty(n)
     d = np.empty(n)
     ktan = np.empty(n)
-    F0 = np.empty(n)
-    alpha = np.empty(n)
-    Nn = np.empty(n)
+    Fcs = np.empty(n)
+    cs = np.empty(n)
+    w = np.empty(n)
     xprev = s[0]
     for k in range(xcmd.shape[0]):
         x_goal = xcmd[k]
@@ -103,9 +120,9 @@ def simulate(xcmd, n_sub, dt, bw_alpha, vmax, u, v, e, T, z, s, m, dth, qds, vis
             if mu < 0.0:
                 mu = 0.0
             FL, kL = load_force(u[n - 1], lx, lF, ls)
-            # element tangent stiffness (0 when slack), friction linearisation per node
+            # element tangent stiffness (0 when slack) and each node's Coulomb bound
             for i in range(n):
-                if e[i] > 0.0:
+                if e[i] >= 0.0:
                     if beta == 0.0:
                         ktan[i] = k_lin
                     else:
@@ -116,51 +133,73 @@ def simulate(xcmd, n_sub, dt, bw_alpha, vmax, u, v, e, T, z, s, m, dth, qds, vis
                 tb = 0.5 * (T[i] + Tnext)
                 if tb < 0.0:
                     tb = 0.0
-                Nn[i] = tb * dth[i] + qds[i]
                 av = abs(v[i])
                 g = mu * (1.0 + cv * av)
                 if rs != 0.0:
                     g *= 1.0 + rs * math.exp(-(v[i] / vs) ** 2)
-                if g > 0.0:
-                    alpha[i] = 1.0 / (1.0 + dt * sigma0 * av / g)
-                else:
-                    alpha[i] = 0.0
-                # F' = N sigma0 alpha (z + dt v') + visc v' = F0 + D v'
-                F0[i] = Nn[i] * sigma0 * alpha[i] * z[i]
-                b[i] = m[i] / dt + Nn[i] * sigma0 * alpha[i] * dt + visc[i]
+                Fc = (tb * dth[i] + qds[i]) * g
+                # a node whose bound dropped below its friction slips at once
+                if z[i] > Fc:
+                    z[i] = Fc
+                elif z[i] < -Fc:
+                    z[i] = -Fc
+                Fcs[i] = Fc
+                cs[i] = Fc * dt * inv_zss
+                w[i] = v[i]
             # proximal tendon point behind the sheath spring: v_p' = A + B v_0'
             r = ktan[0] * inv_ks
             A = (s[0] - s[1] - T[0] * inv_ks) / (dt * (1.0 + r))
             B = r / (1.0 + r)
-            for i in range(n):
-                ci = ktan[i] * dt
-                cn = ktan[i + 1] * dt if i < n - 1 else (kL * dt + b_load)
-                Tn = T[i + 1] if i < n - 1 else FL
-                b[i] += cn + (ci * (1.0 - B) if i == 0 else ci)
-                d[i] = m[i] / dt * v[i] + T[i] - Tn - F0[i]
-                if i == 0:
-                    d[i] += ci * A
-                    a[i] = 0.0
-                else:
-                    a[i] = -ci
-                c[i] = -cn if i < n - 1 else 0.0
-            # Thomas algorithm (symmetric, diagonally dominant)
-            for i in range(1, n):
-                w = a[i] / b[i - 1]
-                b[i] -= w * c[i - 1]
-                d[i] -= w * d[i - 1]
-            vnew_last = d[n - 1] / b[n - 1]
-            d[n - 1] = vnew_last
-            for i in range(n - 2, -1, -1):
-                d[i] = (d[i] - c[i] * d[i + 1]) / b[i]
-            vp = A + B * d[0]
+            # active set of the elasto-plastic bristles: stick F' = F + c v', slip F' = st Fc
+            for it in range(n_iter):
+                for i in range(n):
+                    if st[i] == 0:
+                        D = cs[i]
+                        Fw = z[i]
+                    else:
+                        D = 0.0
+                        Fw = st[i] * Fcs[i]
+                    ci = ktan[i] * dt
+                    cn = ktan[i + 1] * dt if i < n - 1 else (kL * dt + b_load)
+                    Tn = T[i + 1] if i < n - 1 else FL
+                    b[i] = m[i] / dt + D + visc[i] + cn + (ci * (1.0 - B) if i == 0 else ci)
+                    d[i] = m[i] / dt * v[i] + T[i] - Tn - Fw
+                    if i == 0:
+                        d[i] += ci * A
+                        a[i] = 0.0
+                    else:
+                        a[i] = -ci
+                    c[i] = -cn if i < n - 1 else 0.0
+                _thomas(a, b, c, d, n)
+                changed = False
+                for i in range(n):
+                    w[i] = d[i]
+                    trial = z[i] + cs[i] * d[i]
+                    if st[i] == 0:
+                        if trial > Fcs[i] and Fcs[i] > 0.0:
+                            st[i] = 1
+                            changed = True
+                        elif trial < -Fcs[i] and Fcs[i] > 0.0:
+                            st[i] = -1
+                            changed = True
+                    elif st[i] * trial < Fcs[i]:
+                        st[i] = 0
+                        changed = True
+                if not changed:
+                    break
+            vp = A + B * w[0]
             s[1] += dt * vp
-            acc_last = (d[n - 1] - v[n - 1]) / dt
+            acc_last = (w[n - 1] - v[n - 1]) / dt
             for i in range(n):
-                vi = d[i]
-                vprox = vp if i == 0 else d[i - 1]
+                vi = w[i]
+                vprox = vp if i == 0 else w[i - 1]
                 e[i] += dt * (vprox - vi)
-                z[i] = alpha[i] * (z[i] + dt * vi)
+                f = z[i] + cs[i] * vi
+                if f > Fcs[i]:
+                    f = Fcs[i]
+                elif f < -Fcs[i]:
+                    f = -Fcs[i]
+                z[i] = f
                 u[i] += dt * vi
                 v[i] = vi
             for i in range(n):

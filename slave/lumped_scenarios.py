@@ -2,7 +2,7 @@
 
 The second simulator of issue 8 (:mod:`slave.lumped`; contract in the issue's CONTRACT_SIM2): the
 same :class:`slave.scenarios.Recording` and truth keys as :func:`slave.scenarios.record`, but a
-different physics (tendon masses, LuGre bristles per node, normal force from the local curvature)
+different physics (tendon masses, a Dahl friction state per node, normal force from the local curvature)
 and a different, seeded randomisation of everything a bench changes between sessions:
 
 * route: 1-4 arcs (position, length and angle random) joined by straight runs, L = 1-2 m, total
@@ -207,7 +207,8 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     K, L = mu * geo.total_angle, geo.length
     EA = float(rng.uniform(6e3, 25e3))
     load = draw_load(rng)
-    rate = float(round(math.exp(rng.uniform(math.log(200.0), math.log(2000.0))))) if rate_hz is None else float(rate_hz)
+    rate = float(round(math.exp(rng.uniform(math.log(200.0), math.log(2000.0)))))   # drawn always: same rig
+    rate = rate if rate_hz is None else float(rate_hz)
     noise_in, noise_out = float(rng.uniform(0.01, 0.04)), float(rng.uniform(0.01, 0.05))
     q_T, q_in, q_out = float(rng.uniform(1e-3, 5e-3)), float(rng.uniform(0.2e-6, 1e-6)), float(rng.uniform(0.5e-6, 2e-6))
     noise_x = float(rng.uniform(0.0, 0.5e-6))
