@@ -2,7 +2,7 @@ r"""Dynamic lumped-mass tendon-sheath simulator: the second formulation of issue
 
 The quasi-static rig (:mod:`slave.simulated`) solves the capstan envelope of a massless tendon with
 Coulomb friction exactly. This one integrates Newton's law for a chain of tendon masses instead,
-with a smooth friction state per node, so that it can serve as an independent second opinion:
+with a bristle friction state per node, so that it can serve as an independent second opinion:
 
 * Tendon: ``n`` elements of length ds = L / n between the proximal tendon point (behind the
   sheath spring) and nodes i = 0..n-1 at s_i = (i + 1) ds. Node mass m_i = rho ds (half at the
@@ -14,15 +14,18 @@ with a smooth friction state per node, so that it can serve as an independent se
   first half element, the distal node the last half).
 * Friction of node i: normal force N_i = Tbar_i dtheta_i + (q + rho g) ds_i (Tbar_i the mean tension
   of its two elements, q a tension-independent normal load per length for E8, rho g the tendon's
-  weight: ~0.013 N/m, 2 mN of friction over 1.5 m, below any load cell's noise). A Dahl state F_i per node
-  whose bound scales with the normal force (tension-scaled Dahl, literature.md E2):
-      dF_i/dt = (Fc_i / z_ss) (v_i - |v_i| F_i / Fc_i),   Fc_i = N_i g(v_i),
+  weight: ~0.013 N/m, 2 mN of friction over 1.5 m, below any load cell's noise).
+  Each node carries a bristle friction state F_i (elasto-plastic single-state model, the
+  LuGre family with a sharp pre-sliding limit; Dupont et al. 2002) whose bound scales with the
+  normal force:
+      |F_i| <= Fc_i = N_i g(v_i),   dF_i/dt = (Fc_i / z_ss) v_i while |F_i| < Fc_i (stick),
+      F_i = sgn(v_i) Fc_i while sliding,
       g(v) = mu(t) (1 + c_v |v|) (1 + r_s exp(-(v / v_s)^2)),   mu(t) = mu + mu_rate t,
-  plus a viscous c ds v_i. A node pre-slides over about z_ss [m] (the ``presliding`` distance)
-  before it slides with friction Fc_i; when Fc_i drops below |F_i| (tension falls, Stribeck
-  decay) F_i is clipped to the bound at once (the node slips). A Stribeck peak r_s > 0 gives
-  breakaway and stick-slip. Unlike a bristle deflection, F_i does not jump when N_i changes, so
-  a rising tension cannot pump energy into a stuck node.
+  plus a viscous c ds v_i. A node pre-slides elastically over z_ss [m] (the ``presliding``
+  distance: 10 nm by default, far below any encoder quantum) before it slides; when Fc_i drops
+  below |F_i| (tension falls, Stribeck decay) F_i is clipped to the bound at once. A Stribeck
+  peak r_s > 0 gives breakaway and stick-slip. F_i does not jump when N_i changes, so a rising
+  tension cannot pump energy into a stuck node.
 * Sheath: a series spring k_s between the motor and the proximal tendon point,
   x_p = x_motor - T_in / k_s (inf: rigid sheath).
 * Distal load on the last node: a piecewise-linear force law F(x) (:class:`Load`: spring,
@@ -32,9 +35,10 @@ with a smooth friction state per node, so that it can serve as an independent se
   of total width ``backlash``.
 * Motor: first-order position loop of bandwidth f_bw toward the command (linear between samples),
   speed-limited to v_max. Load cell T_in = T_0; encoder = motor position.
-* Integration: backward Euler on the velocities with the stiffness, load slope and friction
-  linearised per substep (tridiagonal solve, :mod:`slave.lumped_kernel`); stable for any
-  substep, default 10 kHz.
+* Integration: backward Euler on the velocities, the element stiffness, load slope and friction
+  bounds frozen per substep, the stick/slip status of every node found by an active-set
+  iteration (each pass one tridiagonal solve, :mod:`slave.lumped_kernel`); stable for any
+  substep (default 10 kHz; 5 and 160 kHz agree within 0.01 N on a 40 mm/s pull).
 """
 from __future__ import annotations
 
@@ -136,7 +140,7 @@ class LumpedTendon:
     load : Load, distal load.
     n_nodes : int >= 4, number of elements (= masses).
     line_density : float > 0 [kg/m], tendon mass per length.
-    presliding : float > 0 [m], pre-sliding distance z_ss of the Dahl state.
+    presliding : float > 0 [m], pre-sliding distance z_ss of the bristle state.
     static_ratio : float >= 0, Stribeck peak r_s (mu_static / mu_kinetic - 1); stribeck_speed [m/s].
     speed_coefficient : float >= 0 [s/m], c_v in g(v) = mu (1 + c_v |v|) (E3).
     viscous : float >= 0 [N s/m^2], tension-independent viscous friction per length.
@@ -148,7 +152,7 @@ class LumpedTendon:
     sheath_stiffness : float > 0 [N/m] or inf, series sheath spring k_s.
     motor_bandwidth_hz, motor_max_speed : float > 0 [Hz], [m/s].
     substep_hz : float >= 1000 [Hz], integration rate (rounded up to a multiple of the sample rate).
-    newton_iterations : int in [1, 20], Newton iterations of the implicit friction law per substep.
+    newton_iterations : int in [1, 20], most active-set passes (tridiagonal solves) per substep.
     """
 
     def __init__(self, route, mu: float, EA: float, load: Load | None = None, *, n_nodes: int = 48,

@@ -2,7 +2,8 @@
 
 The second simulator of issue 8 (:mod:`slave.lumped`; contract in the issue's CONTRACT_SIM2): the
 same :class:`slave.scenarios.Recording` and truth keys as :func:`slave.scenarios.record`, but a
-different physics (tendon masses, a Dahl friction state per node, normal force from the local curvature)
+different physics (tendon masses, an elasto-plastic bristle friction state per node, normal force from
+the local curvature)
 and a different, seeded randomisation of everything a bench changes between sessions:
 
 * route: 1-4 arcs (position, length and angle random) joined by straight runs, L = 1-2 m, total
