@@ -85,12 +85,14 @@ def simulate(xcmd, n_sub, dt, bw_alpha, vmax, u, v, e, T, z, st, s, m, dth, qds,
 
     Motor: x_m += clip(bw_alpha (x_target - x_m), +-vmax dt), x_target linear between samples.
     Friction of node i: an elasto-plastic bristle (a single-state LuGre-family model) with the
-    normal-force-scaled bound Fc_i = N_i g(v), N_i = max(Tbar_i, 0) dth_i + qds_i,
-    g(v) = mu(t) (1 + cv |v|) (1 + rs exp(-(v/vs)^2)), mu(t) = mu0 + mu_rate t (v of the last substep):
-    stick F' = F + (Fc / zss) dt v' while |F'| <= Fc, else slip F' = +-Fc; plus visc_i v. The
-    stick/slip status of every node (``st``: 0, +1, -1, kept between substeps) is found by an
-    active-set iteration (at most ``n_iter`` tridiagonal solves, usually one); N_i, g, the element
-    stiffness and the load slope are frozen over a substep; |F| is clipped to Fc when the bound drops.
+    normal-force-scaled bound Fc_i = N_i mu(t) (1 + rs exp(-(v/vs)^2)), N_i = max(Tbar_i, 0) dth_i
+    + qds_i, mu(t) = mu0 + mu_rate t (v of the last substep in the Stribeck factor): stick
+    F' = F + (Fc / zss) dt v' while |F'| <= Fc, else slip F' = s Fc + N_i mu cv v' (s = +-1, the
+    speed-strengthening term implicit: taken explicitly it is an unstable damper for light nodes);
+    plus visc_i v'. The stick/slip status of every node (``st``: 0, +1, -1, kept between
+    substeps) is found by an active-set iteration (at most ``n_iter`` tridiagonal solves, usually
+    one); N_i, the Stribeck factor, the element stiffness and the load slope are frozen over a
+    substep; |F| is clipped to Fc when the bound drops.
     Writes per sample k: out[k] = (x_motor, T_in, u_distal, T_out, x_joint, xp).
     """
     n = u.shape[0]
@@ -101,6 +103,7 @@ def simulate(xcmd, n_sub, dt, bw_alpha, vmax, u, v, e, T, z, st, s, m, dth, qds,
     ktan = np.empty(n)
     Fcs = np.empty(n)
     cs = np.empty(n)
+    cvs = np.empty(n)
     w = np.empty(n)
     xprev = s[0]
     for k in range(xcmd.shape[0]):
@@ -133,11 +136,13 @@ def simulate(xcmd, n_sub, dt, bw_alpha, vmax, u, v, e, T, z, st, s, m, dth, qds,
                 tb = 0.5 * (T[i] + Tnext)
                 if tb < 0.0:
                     tb = 0.0
-                av = abs(v[i])
-                g = mu * (1.0 + cv * av)
+                Nmu = (tb * dth[i] + qds[i]) * mu
+                # speed-strengthening part implicit (slip: F' = s Fc + Nmu cv v'), Stribeck part lagged
+                cvs[i] = Nmu * cv
+                g = 1.0
                 if rs != 0.0:
-                    g *= 1.0 + rs * math.exp(-(v[i] / vs) ** 2)
-                Fc = (tb * dth[i] + qds[i]) * g
+                    g += rs * math.exp(-(v[i] / vs) ** 2)
+                Fc = Nmu * g
                 # a node whose bound dropped below its friction slips at once
                 if z[i] > Fc:
                     z[i] = Fc
@@ -157,7 +162,7 @@ def simulate(xcmd, n_sub, dt, bw_alpha, vmax, u, v, e, T, z, st, s, m, dth, qds,
                         D = cs[i]
                         Fw = z[i]
                     else:
-                        D = 0.0
+                        D = cvs[i]
                         Fw = st[i] * Fcs[i]
                     ci = ktan[i] * dt
                     cn = ktan[i + 1] * dt if i < n - 1 else (kL * dt + b_load)

@@ -219,16 +219,25 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     u = float(rng_fx.uniform()) if level is None else float(level)
     sim_kw, sensor, by_effect = _effect_knobs(hidden, u, K, mu, geo, duration, rng_fx)
     tl = LumpedTendon(geo, mu, EA, load, motor_bandwidth_hz=bw, motor_max_speed=vmax, **sim_kw)
-    # proximal travel per tension while pulling from rest: load position at T e^-K + M_e T
+    # proximal travel from rest to a pull at T [N] (a bench operator aims at a peak tension):
+    # load travel to T e^-K plus the elongation (1/EA) int phi(T e^-mu theta) ds, from the rest state
     s = np.linspace(0.0, L, 2001)
     f = np.exp(-mu * geo.wrap_angle(s))
     M_e = float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(s))) / EA
-    x0_load = load.position_at(0.0) if load.kind != "constant" else 0.0
+    beta, Tc = sim_kw.get("softening", 0.0), sim_kw.get("toe_tension", 1.0)
+    T0 = sim_kw.get("pretension", 0.0)
 
     def x_of(T: float) -> float:
-        x_load = load.position_at(T * math.exp(-K)) - x0_load if load.kind != "constant" else 0.0
-        return max(x_load, 0.0) + M_e * T
+        prof = T * f
+        strain = prof + beta * Tc * -np.expm1(-prof / Tc)
+        elong = float(np.sum(0.5 * (strain[1:] + strain[:-1]) * np.diff(s))) / EA
+        if load.kind == "constant":
+            return elong
+        return max(load.position_at(T * math.exp(-K)) - load.position_at(T0), 0.0) + elong
 
+    x_base = x_of(T0)
+    x_of0 = x_of
+    x_of = (lambda T: max(x_of0(T) - x_base, 0.0))  # noqa: E731 - travel counted from the rest state
     x_rest = x_of(T_rest + 1.2 * by_effect.get("friction_offset", {}).get("tension_offset", 0.0) * math.expm1(K))
     x_top = x_of(T_peak) + (travel if load.kind == "constant" else 0.0)
     x_top = max(x_top, x_rest + x_of(2.0))
