@@ -108,6 +108,10 @@ class MultiAxisOperator:
         One per axis (1..4).
     speed, arm_stiffness, dwell, start_delay, segment_timeout
         As :class:`master.simulated.ScriptedOperator` [m/s, N/m, s, s, s].
+    clutch_bit, clutch_time
+        As :class:`master.simulated.ScriptedOperator`: when the console asks to align, the operator
+        holds the clutch button (bit ``clutch_bit``) for ``clutch_time`` [s] and lets go, which
+        re-anchors every axis where the hands are.
 
     Raises
     ------
@@ -117,7 +121,8 @@ class MultiAxisOperator:
     """
 
     def __init__(self, protocols, speed: float = 0.025, arm_stiffness: float = 300.0, dwell: float = 0.2,
-                 start_delay: float = 0.5, segment_timeout: float = 15.0):
+                 start_delay: float = 0.5, segment_timeout: float = 15.0, clutch_bit: int = 1,
+                 clutch_time: float = 0.05):
         protocols = [tuple(p) for p in protocols]
         if not protocols or any(not p for p in protocols):
             raise ConfigError("protocol: a multi-axis operator needs one non-empty protocol per axis")
@@ -136,6 +141,10 @@ class MultiAxisOperator:
         self._T: list[tuple[float, float]] | None = None
         self._engaged = False
         self._t_prev: float | None = None
+        self.clutch_bit, self.clutch_time = int(clutch_bit), float(clutch_time)
+        self.clutches = 0
+        self._clutch_wanted = False
+        self._clutch_until: float | None = None
 
     @property
     def n_axes(self) -> int:
@@ -160,14 +169,28 @@ class MultiAxisOperator:
         self._T = list(T_in) if ok else None
         self._engaged = bool(engaged)
 
+    def on_console(self, status) -> None:
+        """The console's status (:class:`master.console.ConsoleStatus`): ALIGN makes the operator clutch."""
+        if getattr(status, "name", status) == "ALIGN" and self._clutch_until is None and self.clutch_bit >= 0:
+            self._clutch_wanted = True
+
     def read(self, t: float) -> MultiAxisState:
-        """Advance every axis's script to ``t`` [s]; hand positions [m]."""
+        """Advance every axis's script to ``t`` [s]; hand positions [m] and the clutch button."""
         dt = 0.0 if self._t_prev is None else max(0.0, t - self._t_prev)
         self._t_prev = t
         if self._engaged and self._T is not None:
             for a, T in zip(self.axes, self._T):
                 a.advance(t, dt, T)
-        return MultiAxisState(t=t, positions=tuple(a.intended + a.force / a.k_arm for a in self.axes))
+        buttons = 0
+        if self._clutch_wanted:
+            self._clutch_wanted, self._clutch_until = False, t + self.clutch_time
+            self.clutches += 1
+        if self._clutch_until is not None:
+            if t < self._clutch_until:
+                buttons = 1 << self.clutch_bit
+            else:
+                self._clutch_until = None
+        return MultiAxisState(t=t, positions=tuple(a.intended + a.force / a.k_arm for a in self.axes), buttons=buttons)
 
     def set_forces(self, forces, t: float) -> None:
         """Render one force per axis [N] (non-finite: 0)."""

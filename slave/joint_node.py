@@ -58,11 +58,12 @@ _TENDON_TRUTH = ("T_out", "elongation")
 
 
 def joint_csv_columns(names, has_truth: bool) -> tuple[str, ...]:
-    """Columns of ``slave_joints.csv``: time, marker, cmd_seq, state, then per joint ``<name>.cmd``,
+    """Columns of ``slave_joints.csv``: time (rig), marker, cmd_seq, state, t_node (the node's clock),
+    t_cmd_recv (receive time of the applied command, 0 before any), then per joint ``<name>.cmd``,
     ``.mode``, ``.torque_hat``, ``.angle_hat`` (and ``.torque``, ``.angle`` truth) and per tendon
     ``<name>.<a|b>.x_in``, ``.T_in``, ``.x_in_cmd``, ``.T_out_hat``, ``.elongation_hat``, ``.phase``
     (and ``.T_out``, ``.elongation`` truth)."""
-    cols = ["time", "marker", "cmd_seq", "state"]
+    cols = ["time", "marker", "cmd_seq", "state", "t_node", "t_cmd_recv"]
     for n in names:
         cols += [f"{n}.cmd", f"{n}.mode", f"{n}.torque_hat", f"{n}.angle_hat"]
         cols += [f"{n}.torque", f"{n}.angle"] if has_truth else []
@@ -222,7 +223,7 @@ class JointSlaveNode(SlaveNodeBase):
         self.samples = [est.step(st.T_in[i, 0], st.x_in[i, 0], st.T_in[i, 1], st.x_in[i, 1], st.t)
                         for i, est in enumerate(self.estimators)]
         self._publish(self._message(now, st))
-        self._record(st, cmds)
+        self._record(st, cmds, now)
 
     def _message(self, now: float, st: InstrumentState) -> JointEstimate:
         joints = tuple(JointState(s.torque, s.angle, tuple(
@@ -230,10 +231,11 @@ class JointSlaveNode(SlaveNodeBase):
             for k in range(2))) for i, s in enumerate(self.samples))
         return JointEstimate(self.seq, self.cmd_seq, now, joints)
 
-    def _record(self, st: InstrumentState, cmds) -> None:
+    def _record(self, st: InstrumentState, cmds, now: float) -> None:
         tr = st.truth
         if self.recorder is not None:
-            row = [st.t, self.marker, self.cmd_seq, int(self.state)]
+            row = [st.t, self.marker, self.cmd_seq, int(self.state), now,
+                   0.0 if self._accepted is None else self._accepted.t_recv]
             for i, (s, c) in enumerate(zip(self.samples, cmds)):
                 row += [0.0 if c is None else c, int(self.controllers[i].mode), s.torque, s.angle]
                 row += [tr.torque[i], tr.theta[i]] if tr is not None else []

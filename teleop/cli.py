@@ -301,8 +301,9 @@ def open_device(cfg, protocol: str):
     if cfg.instrument.joints:
         from master.joint_operator import MultiAxisOperator
         from teleop.cli_joints import joint_protocols
-        return MultiAxisOperator(joint_protocols(cfg, "paper" if protocol in ("paper,minor", "paper") else protocol))
-    return ScriptedOperator(build_protocol(protocol))
+        return MultiAxisOperator(joint_protocols(cfg, "paper" if protocol in ("paper,minor", "paper") else protocol),
+                                 clutch_bit=cfg.master.mapping.clutch_button)
+    return ScriptedOperator(build_protocol(protocol), clutch_bit=cfg.master.mapping.clutch_button)
 
 
 def run_master(args: argparse.Namespace) -> int:

@@ -7,7 +7,9 @@ put on a wrapped publisher passes through it; while the fault is active each one
 1. dropped with probability ``drop``;
 2. corrupted (``corrupt``): ``nan`` / ``inf`` written over one float field at byte level (the codec
    refuses to encode them), ``range`` a finite but impossible value (Command.x_in_cmd = 1 m,
-   Estimate.T_out_hat = 1e4 N, Heartbeat.t_sender = 1e12 s), ``version`` the wire version byte + 1;
+   Estimate.T_out_hat = 1e4 N, Heartbeat.t_sender = 1e12 s; on a joint instrument the first joint's
+   JointCommand angle = 100 rad, the first tendon's JointEstimate T_out_hat = 1e4 N), ``version``
+   the wire version byte + 1;
 3. held back with probability ``reorder`` and sent right after the next message of the same stream;
 4. sent twice with probability ``dup``;
 5. delayed by ``delay`` seconds.
@@ -44,7 +46,7 @@ import numpy as np
 from teleop.clock import Clock, MonotonicClock
 from teleop.codec import WIRE_VERSION, decode, encode
 from teleop.errors import ConfigError
-from teleop.messages import Command, Estimate, Heartbeat
+from teleop.messages import Command, Estimate, Heartbeat, JointCommand, JointEstimate
 
 __all__ = ["FaultSpec", "parse_fault_spec", "FaultInjector", "FaultyPublisher", "corrupt_payload", "STREAMS",
            "CORRUPTIONS"]
@@ -53,7 +55,21 @@ STREAMS = ("command", "estimate", "heartbeat")
 CORRUPTIONS = ("nan", "inf", "range", "version")
 HOLD_MAX = 0.1       # a reordered message waits at most this long for the next one [s]
 _SENTINEL = 1234.56789012345
-_FIELD = {Command: ("x_in_cmd", 1.0), Estimate: ("T_out_hat", 1.0e4), Heartbeat: ("t_sender", 1.0e12)}
+
+
+
+def _joint_estimate_with(msg: JointEstimate, v: float) -> JointEstimate:
+    j0 = msg.joints[0]
+    t0 = dataclasses.replace(j0.tendons[0], T_out_hat=v)
+    return dataclasses.replace(msg, joints=(dataclasses.replace(j0, tendons=(t0, j0.tendons[1])), *msg.joints[1:]))
+
+
+#: The float field each corruption writes over: message type -> (message with the value v, impossible v).
+_FIELD = {Command: (lambda m, v: dataclasses.replace(m, x_in_cmd=v), 1.0),
+          Estimate: (lambda m, v: dataclasses.replace(m, T_out_hat=v), 1.0e4),
+          Heartbeat: (lambda m, v: dataclasses.replace(m, t_sender=v), 1.0e12),
+          JointCommand: (lambda m, v: dataclasses.replace(m, angles=(v, *m.angles[1:])), 100.0),
+          JointEstimate: (_joint_estimate_with, 1.0e4)}
 
 
 @dataclass(frozen=True)
@@ -147,14 +163,14 @@ def corrupt_payload(payload: bytes, kind: str) -> bytes:
     if kind == "version":
         return payload[:1] + bytes([(WIRE_VERSION + 1) & 0xFF]) + payload[2:]
     msg = decode(payload)
-    name, impossible = _FIELD[type(msg)]
+    with_value, impossible = _FIELD[type(msg)]
     if kind == "range":
-        return encode(dataclasses.replace(msg, **{name: impossible}))
-    marked = encode(dataclasses.replace(msg, **{name: _SENTINEL}))
+        return encode(with_value(msg, impossible))
+    marked = encode(with_value(msg, _SENTINEL))
     bad = math.nan if kind == "nan" else math.inf
     out = marked.replace(struct.pack("<d", _SENTINEL), struct.pack("<d", bad))
     if out == marked:  # pragma: no cover - the codec stores floats as little-endian float64
-        raise ValueError(f"cannot find {type(msg).__name__}.{name} in the payload")
+        raise ValueError(f"cannot find the corrupted field of {type(msg).__name__} in the payload")
     return out
 
 

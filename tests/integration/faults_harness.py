@@ -1,5 +1,9 @@
 """Run one fault against the two real processes (`teleop slave` + `teleop master` over Zenoh on 127.0.0.1).
 
+``instrument="tendon"`` runs the single tendon of the default config, ``"3dof"`` the three-joint
+instrument of configs/instrument-3dof.yaml (calibrated once with ``teleop calibrate``, the file
+copied under each scenario's instrument id; the slave records ``slave_joints.csv``).
+
 :func:`run_fault` starts both sides on a free port, waits until both are ENGAGED (seen from their
 heartbeats by an observer session), lets them run, applies the fault (a signal to one process or
 SIGUSR1 to the process whose ``--inject`` spec waits for it), observes, stops both with SIGINT
@@ -26,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from teleop.cli import main as teleop_main
 from teleop.config import load_config
 from teleop.keys import heartbeat_key
 from teleop.messages import Heartbeat, SideState
@@ -42,6 +47,41 @@ recording:
 """
 SAFE = int(SideState.SAFE)
 DEBUG = []
+JOINT_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "instrument-3dof.yaml"
+_JOINT_CAL: dict[str, str] = {}          # the calibration text of the 3-joint instrument, made once
+
+
+class Rows:
+    """A recording read by column name, any columns: ``time`` and the other columns in ``extra``."""
+
+    def __init__(self, path: Path):
+        with open(path, encoding="utf-8") as fh:
+            lines = [ln for ln in fh if ln.strip() and not ln.startswith("#")]
+        header = lines[0].strip().split(",")
+        data = np.loadtxt(lines[1:], delimiter=",", ndmin=2)
+        self.extra = {name: data[:, k] for k, name in enumerate(header)}
+        self.time = self.extra["time"]
+        if np.any(~np.isfinite(data)) or np.any(np.diff(self.time) < 0):
+            raise ValueError(f"{path}: non-finite values or time going back")
+
+
+def _joint_config(run_dir: Path, ident: str) -> Path:
+    """The 3-joint instrument under ``ident``, quiet, with its calibration file in ``run_dir``."""
+    cal_dir = run_dir / "calibration"
+    if "text" not in _JOINT_CAL:
+        tmp = run_dir.parent / "_joint_calibration"
+        tmp.mkdir(exist_ok=True)
+        cfg = tmp / "cfg.yaml"
+        cfg.write_text(JOINT_CONFIG.read_text().replace("id: flex3", "id: fjoints").replace("rerun: save", "rerun: off")
+                       .replace("dir: configs/calibration", f"dir: {tmp}"))
+        assert teleop_main(["calibrate", "--config", str(cfg)]) == 0
+        _JOINT_CAL["text"] = (tmp / "fjoints.yaml").read_text()
+    cal_dir.mkdir()
+    (cal_dir / f"{ident}.yaml").write_text(_JOINT_CAL["text"].replace("instrument: fjoints", f"instrument: {ident}"))
+    path = run_dir / "cfg.yaml"
+    path.write_text(JOINT_CONFIG.read_text().replace("id: flex3", f"id: {ident}").replace("rerun: save", "rerun: off")
+                    .replace("dir: configs/calibration", f"dir: {cal_dir}"), encoding="utf-8")
+    return path
 
 
 @dataclass
@@ -51,13 +91,19 @@ class FaultRun:
     run_dir: Path
     logs: dict[str, str]
     rc: dict[str, int | None]
-    slave: object = None              # MeasuredData of slave.csv (None if unreadable)
-    master: object = None             # MeasuredData of master.csv
+    slave: object = None              # MeasuredData of slave.csv, Rows of slave_joints.csv (None if unreadable)
+    master: object = None             # MeasuredData or Rows of master.csv
     stats: dict[str, dict] = field(default_factory=dict)
     faults: dict[str, dict] = field(default_factory=dict)
     errors: dict[str, str] = field(default_factory=dict)
 
     # ---- figures ------------------------------------------------------------------------------
+    @property
+    def force(self) -> np.ndarray:
+        """The largest |rendered force| over the device axes at each master row [N]."""
+        cols = [v for k, v in self.master.extra.items() if k == "force" or k.endswith(".force")]
+        return np.abs(np.array(cols)).max(axis=0)
+
     def _safe_after(self, side: str, t_col: str, recv_col: str, t0: float):
         d = getattr(self, side)
         t = d.time if t_col == "time" else d.extra[t_col]
@@ -124,19 +170,24 @@ def _wait(pred, timeout: float, what: str, procs) -> None:
 
 def run_fault(tmp: Path, name: str, *, inject: dict[str, str] | None = None, signal_to: str | None = None,
               sig: int | None = None, resume_after: float | None = None, observe: float = 1.0,
-              engaged_for: float = 0.6, trigger_side: str | None = None) -> FaultRun:
+              engaged_for: float = 0.6, trigger_side: str | None = None, instrument: str = "tendon") -> FaultRun:
     """Run one fault scenario; see the module docstring.
 
     inject : {"master"|"slave": spec} passed as ``--inject`` (use ``on=usr1`` to start at the fault).
     signal_to, sig : send ``sig`` to that side at the fault (SIGKILL, SIGSTOP); ``resume_after`` [s]:
         SIGCONT after this long.
     trigger_side : side whose injector is triggered by SIGUSR1 at the fault.
+    instrument : ``"tendon"`` or ``"3dof"`` (module docstring).
     """
-    ident = f"f{name.replace('_', '')}"[:20]
+    joints = instrument == "3dof"
+    ident = f"f{'j' if joints else ''}{name.replace('_', '')}"[:20]
     run_dir = tmp / name
     run_dir.mkdir(parents=True)
-    cfg_path = run_dir / "cfg.yaml"
-    cfg_path.write_text(CONFIG.format(ident=ident), encoding="utf-8")
+    if joints:
+        cfg_path = _joint_config(run_dir, ident)
+    else:
+        cfg_path = run_dir / "cfg.yaml"
+        cfg_path.write_text(CONFIG.format(ident=ident), encoding="utf-8")
     cfg = load_config(cfg_path)
     port, port_m = free_tcp_ports(2)
     ep = loopback_endpoint(port)
@@ -187,7 +238,10 @@ def run_fault(tmp: Path, name: str, *, inject: dict[str, str] | None = None, sig
     out = FaultRun(name, t_fault, run_dir, {s: logs[s].read_text() for s in logs}, rc)
     for side in ("slave", "master"):
         try:
-            setattr(out, side, read_measured_csv(run_dir / f"{side}.csv"))
+            if joints:
+                setattr(out, side, Rows(run_dir / ("slave_joints.csv" if side == "slave" else "master.csv")))
+            else:
+                setattr(out, side, read_measured_csv(run_dir / f"{side}.csv"))
         except Exception as e:  # noqa: BLE001 - reported by the test
             out.errors[side] = f"{type(e).__name__}: {e}"
         for kind in ("stats", "faults"):

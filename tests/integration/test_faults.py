@@ -1,4 +1,5 @@
-"""Fault-injection suite over the two real processes (slave + master over Zenoh on 127.0.0.1).
+"""Fault-injection suite over the two real processes (slave + master over Zenoh on 127.0.0.1), on the
+single tendon and on the three-joint instrument (configs/instrument-3dof.yaml) with the same limits.
 
 One scenario per fault (tests/integration/faults_harness.py runs it). For each: the side(s) that
 must react reach SAFE within 100 ms (measured from the recordings: the first SAFE row minus the
@@ -71,11 +72,11 @@ def report():
 
 
 def format_report(results: dict[str, dict]) -> str:
-    lines = [f"{'fault':16s} {'slave safe ms':>14s} {'master safe ms':>15s} {'lost/rejected':>14s}  "
+    lines = [f"{'fault':23s} {'slave safe ms':>14s} {'master safe ms':>15s} {'lost/rejected':>14s}  "
              f"{'max |F| N':>9s}  what the sides did"]
     for name, r in results.items():
         cell = {s: ("-" if r["safe"].get(s) is None else f"{r['safe'][s]:.1f}") for s in ("slave", "master")}
-        lines.append(f"{name:16s} {cell['slave']:>14s} {cell['master']:>15s} {r['lost']:>14d}  "
+        lines.append(f"{name:23s} {cell['slave']:>14s} {cell['master']:>15s} {r['lost']:>14d}  "
                      f"{r['max_force']:9.3f}  {r['note']}")
     return "\n".join(lines)
 
@@ -92,10 +93,11 @@ def _counts(run) -> dict[str, int]:
             "est_out_of_order": m.get("estimates_out_of_order", 0)}
 
 
+@pytest.mark.parametrize("instrument", ["tendon", "3dof"])
 @pytest.mark.parametrize("name", list(SCENARIOS))
-def test_fault(name, tmp_path):
+def test_fault(name, instrument, tmp_path_factory):
     sc = SCENARIOS[name]
-    run = run_fault(tmp_path, name, **sc["kw"])
+    run = run_fault(tmp_path_factory.mktemp(instrument), name, instrument=instrument, **sc["kw"])
     stopped_side = sc["kw"].get("signal_to")
     killed = stopped_side if sc["kw"].get("sig") == signal.SIGKILL else None
 
@@ -110,8 +112,8 @@ def test_fault(name, tmp_path):
         if side != stopped_side:      # continuous: one row per cycle, no stall of the survivor
             assert run.max_gap(side) < 0.1, f"{side} recording has a gap of {run.max_gap(side):.3f} s"
     # no force above the clamp at any sample
-    force = run.master.extra["force"]
-    assert np.all(np.abs(force) <= FORCE_LIMIT + 1e-9) and run.stats.get("master", {}).get(
+    force = run.force
+    assert np.all(force <= FORCE_LIMIT + 1e-9) and run.stats.get("master", {}).get(
         "max_abs_force", 0.0) <= FORCE_LIMIT + 1e-9
 
     safe = {}
@@ -153,8 +155,9 @@ def test_fault(name, tmp_path):
             }.get(name, ", ".join(f"{k} {v}" for k, v in counts.items() if v) or "-")
     if blips:
         note += f" ({blips} brief SAFE)"
-    RESULTS[name] = {"safe": safe, "lost": int(lost), "max_force": float(np.abs(force).max()), "note": note,
-                     "counts": counts, "recovered": bool(sc.get("recovers"))}
+    RESULTS[name if instrument == "tendon" else f"{name} (3dof)"] = {
+        "safe": safe, "lost": int(lost), "max_force": float(force.max()), "note": note,
+        "counts": counts, "recovered": bool(sc.get("recovers"))}
 
 
 def test_config_typo_one_line_exit_2_on_both_sides(tmp_path):

@@ -13,7 +13,7 @@ from teleop.clock import FakeClock
 from teleop.codec import WIRE_VERSION, decode, encode
 from teleop.errors import CodecError, ConfigError
 from teleop.faults import FaultInjector, corrupt_payload, parse_fault_spec
-from teleop.messages import Command, Estimate, Heartbeat, Side, SideState
+from teleop.messages import Command, Estimate, Heartbeat, JointCommand, JointEstimate, JointState, Side, SideState, TendonState
 
 DT = 1e-3
 
@@ -152,3 +152,16 @@ def test_corrupt_stream_counts_every_message():
     inj, wire, _ = run("corrupt=version", n=20)
     assert inj.counts["corrupted"] == 20 and all(p[1] == WIRE_VERSION + 1 for _, p in wire.out)
     assert inj.stats()["spec"] == "corrupt=version"
+
+
+def test_joint_messages_are_corrupted_too():
+    t = TendonState(5.0, 0.001, 4.0, 1e-4, Phase.PULL)
+    cmd = JointCommand(3, 1.0, (0.1, -0.2, 0.3), True, 0)
+    est = JointEstimate(4, 3, 1.0, tuple(JointState(0.01, 0.1, (t, t)) for _ in range(3)))
+    for msg in (cmd, est):
+        for kind in ("nan", "inf", "version"):
+            with pytest.raises(CodecError):
+                decode(corrupt_payload(encode(msg), kind))
+    assert decode(corrupt_payload(encode(cmd), "range")).angles == (100.0, -0.2, 0.3)
+    bad = decode(corrupt_payload(encode(est), "range"))
+    assert bad.joints[0].tendons[0].T_out_hat == 1e4 and bad.joints[1:] == est.joints[1:]
