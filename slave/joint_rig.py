@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from estimator.kernels import RIGID_STOP, distal_gains, load_torque, settle_joint, step_joint
+from slave.drive import Drive
 from slave.instrument import InstrumentState, InstrumentTruth
 from slave.rig import RigInputError
 from slave.simulated import check_setting, is_finite, validate_drive, validate_runs
@@ -18,7 +19,6 @@ from teleop.config import Config, JointConfig, RigConfig, TendonConfig
 
 __all__ = ["SimulatedInstrument", "TendonPhysics"]
 
-_NOISE_BLOCK = 2048
 
 
 class TendonPhysics:
@@ -111,14 +111,8 @@ class SimulatedInstrument:
         self._slope = np.array([j.stiffness + j.load.tissue_stiffness
                                 + j.pulley_radius ** 2 * (1.0 / pa.M_e + 1.0 / pb.M_e)
                                 for j, (pa, pb) in zip(joints, self.tendons)])
-        m = rig.motor
-        self._omega = 2.0 * math.pi * m.bandwidth_hz
-        self._vmax = float(m.max_speed)
-        self.encoder_resolution = 2.0 * math.pi * m.pulley_radius / m.encoder_lines_per_rev
-        self._sigma = float(rig.sensors.load_cell_noise)
-        self._rng = np.random.default_rng(rig.sensors.seed)
-        self._noise = self._rng.standard_normal((_NOISE_BLOCK, nj, 2))
-        self._k = 0
+        self.drive = Drive(rig, (nj, 2))        # motor loops, encoders, load cells (shared by every simulated rig)
+        self.encoder_resolution = self.drive.encoder_resolution
         self._t = 0.0
         self._state = self._read(self._x.copy())
 
@@ -179,8 +173,7 @@ class SimulatedInstrument:
         if not (math.isfinite(h) and h > 0.0):
             raise RigInputError(f"dt must be a finite time step > 0 s, got {dt!r}")
         # motors: exact first-order step toward the command, speed-limited
-        dx = np.clip(-math.expm1(-self._omega * h) * (cmd - self._x), -self._vmax * h, self._vmax * h)
-        self._x += dx
+        self._x += self.drive.move(self._x, cmd, h)
         sbx, sbF, sbs = RIGID_STOP
         for i, j in enumerate(self.joints):
             pa, pb = self.tendons[i]
@@ -244,14 +237,8 @@ class SimulatedInstrument:
         truth = InstrumentTruth(theta=self._theta.copy(), torque=r * (T_out[:, 0] - T_out[:, 1]), T_in=T_in,
                                 T_out=T_out, x_in=self._x.copy(), x_out=x_out, elongation=elong,
                                 profiles=tuple(profiles))
-        if self._k == _NOISE_BLOCK:
-            self._noise = self._rng.standard_normal((_NOISE_BLOCK, nj, 2))
-            self._k = 0
-        T_meas = T_in + self._sigma * self._noise[self._k]
-        self._k += 1
-        q = self.encoder_resolution
-        x_enc = q * np.round(self._x / q)
-        return InstrumentState(t=self._t, x_in=x_enc, T_in=T_meas, x_in_cmd=cmd, truth=truth)
+        T_meas = T_in + self.drive.load_cell_noise()
+        return InstrumentState(t=self._t, x_in=self.drive.encoder(self._x), T_in=T_meas, x_in_cmd=cmd, truth=truth)
 
     def load_torque(self, i: int, theta: float) -> float:
         """Static load torque of joint ``i`` at ``theta`` [rad] with the present tissue setting [N m]."""

@@ -12,6 +12,7 @@ import numpy as np
 
 from estimator.kernels import advance_proximal, load_inverse, settle_distal
 from estimator.sheath import Run, SheathGeometry
+from slave.drive import Drive
 from slave.rig import RigInputError, RigState, RigTruth
 from slave.simulated_effects import EFFECT_IDS, EffectSwitches, elongation_general
 from teleop.config import Config, EffectsConfig, LoadConfig, RigConfig, SheathConfig
@@ -19,7 +20,6 @@ from teleop.errors import ConfigError
 
 __all__ = ["SimulatedRig", "EFFECT_IDS"]
 
-_NOISE_BLOCK = 4096
 
 
 class SimulatedRig(EffectSwitches):
@@ -126,14 +126,8 @@ class SimulatedRig(EffectSwitches):
         self._x_out = float(load_inverse(P, *self._graph)[0])
         self._x_in = self._x_out + elongation_general(self._T, self._w, self._beta, self._Tc)
 
-        m = rig.motor
-        self._omega = 2.0 * math.pi * m.bandwidth_hz
-        self._vmax = float(m.max_speed)
-        self.encoder_resolution = 2.0 * math.pi * m.pulley_radius / m.encoder_lines_per_rev
-        self._sigma = float(rig.sensors.load_cell_noise)
-        self._rng = np.random.default_rng(rig.sensors.seed)
-        self._noise = self._rng.standard_normal(_NOISE_BLOCK)
-        self._k = 0
+        self.drive = Drive(rig)                 # motor loop, encoder, load cell (shared by every simulated rig)
+        self.encoder_resolution = self.drive.encoder_resolution
         self._t = 0.0
         self._closed = False
         self._state = self._read(self._x_in)
@@ -194,12 +188,7 @@ class SimulatedRig(EffectSwitches):
         if not (math.isfinite(h) and h > 0.0):
             raise RigInputError(f"dt must be a finite time step > 0 s, got {dt!r}")
         # motor: exact first-order step toward the command, speed-limited
-        dx = -math.expm1(-self._omega * h) * (cmd - self._x_in)
-        vmax_dt = self._vmax * h
-        if dx > vmax_dt:
-            dx = vmax_dt
-        elif dx < -vmax_dt:
-            dx = -vmax_dt
+        dx = self.drive.move(self._x_in, cmd, h)
         self._x_in += dx
         if self._general:
             self._advance_effects(dx / h, self._t + h)
@@ -246,14 +235,8 @@ class SimulatedRig(EffectSwitches):
         e = elongation_general(T, self._w, self._beta, self._Tc)
         truth = RigTruth(T_in=float(T[0]), T_out=float(T[-1]), x_in=self._x_in, x_out=self._x_out,
                          elongation=e, profile=profile)
-        if self._k == _NOISE_BLOCK:
-            self._noise = self._rng.standard_normal(_NOISE_BLOCK)
-            self._k = 0
-        T_meas = self._load_cell(float(T[0])) + self._sigma * float(self._noise[self._k])
-        self._k += 1
-        q = self.encoder_resolution
-        x_enc = q * round(self._x_in / q)
-        return RigState(t=self._t, x_in=x_enc, T_in=T_meas, x_in_cmd=cmd, truth=truth)
+        T_meas = self._load_cell(float(T[0])) + self.drive.load_cell_noise()
+        return RigState(t=self._t, x_in=self.drive.encoder(self._x_in), T_in=T_meas, x_in_cmd=cmd, truth=truth)
 
 
 def _load_graph(load: LoadConfig, tissue: bool, force: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
