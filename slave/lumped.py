@@ -272,7 +272,8 @@ class LumpedTendon:
         cv, rs, vs = self.friction
         lx, lF, ls = self.graph
         simulate(x, n_sub, dt, -math.expm1(-2 * math.pi * f_bw * dt), v_max, self.u, self.v, self.e, self.T,
-                 self.z, self.status, self.state, self.mass, self.dtheta, self.qds, self.visc, self.k_lin, self.beta, self.Tc,
+                 self.z, self.status, self.state, self.mass, self.dtheta, self.qds, self.visc, self.k_lin,
+                 self.beta, self.Tc,
                  self.inv_ks, self.mu, self.mu_rate, cv, rs, vs, 1.0 / self.presliding, lx, lF, ls, self.load.damping,
                  self.load.mass, 0.5 * self.backlash, self.n_iter, out)
         return {"x_motor": out[:, 0], "T_in": out[:, 1], "x_end": out[:, 2], "T_out": out[:, 3],

@@ -120,7 +120,7 @@ def _effect_knobs(hidden: tuple[str, ...], u: float, K: float, mu: float, geo: S
         elif e == "stiction":                  # Stribeck peak of the LuGre g(v)
             sim["static_ratio"], sim["stribeck_speed"] = r["static_ratio"], _STRIBECK_SPEED
             p = {"static_ratio": r["static_ratio"], "stribeck_speed": _STRIBECK_SPEED}
-        elif e == "friction_offset":           # q from the distal offset F0 = mu q int_0^L e^{-mu (theta_L - theta(s))} ds
+        elif e == "friction_offset":           # q from F0 = mu q int_0^L e^{-mu (theta_L - theta(s))} ds
             s = np.linspace(0.0, geo.length, 2001)
             f = np.exp(-mu * (geo.total_angle - geo.wrap_angle(s)))
             integral = float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(s)))
@@ -211,7 +211,8 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     rate = float(round(math.exp(rng.uniform(math.log(200.0), math.log(2000.0)))))   # drawn always: same rig
     rate = rate if rate_hz is None else float(rate_hz)
     noise_in, noise_out = float(rng.uniform(0.01, 0.04)), float(rng.uniform(0.01, 0.05))
-    q_T, q_in, q_out = float(rng.uniform(1e-3, 5e-3)), float(rng.uniform(0.2e-6, 1e-6)), float(rng.uniform(0.5e-6, 2e-6))
+    q_T, q_in = float(rng.uniform(1e-3, 5e-3)), float(rng.uniform(0.2e-6, 1e-6))
+    q_out = float(rng.uniform(0.5e-6, 2e-6))
     noise_x = float(rng.uniform(0.0, 0.5e-6))
     bw, vmax = float(rng.uniform(30.0, 80.0)), float(rng.uniform(0.1, 0.2))
     T_peak, T_rest = float(rng.uniform(8.0, 20.0)), float(rng.uniform(0.3, 1.5))
