@@ -160,7 +160,7 @@ def format_summary(s: dict) -> str:
 
 def main_demo(args) -> int:
     """``teleop demo``: returns 0 when the run finished and every check passed, else 1."""
-    from teleop.cli import prepare_run_dir
+    from teleop.sides import prepare_run_dir
     cfg_path = args.config or (DEFAULT_CONFIG if DEFAULT_CONFIG.is_file() else None)
     cfg = load_config(cfg_path)
     run_dir = prepare_run_dir(args, cfg)

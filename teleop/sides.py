@@ -1,0 +1,309 @@
+"""The two side processes of ``teleop``: ``slave`` and ``master`` of any instrument, and what they share.
+
+One Zenoh session per process (:func:`open_session`), the streams of :mod:`teleop.keys` wired to a
+node (:func:`slave_links`, :func:`master_links`; ``--inject`` wraps the publishers in a
+:class:`teleop.faults.FaultInjector`), a run directory for recordings and stats
+(:func:`prepare_run_dir`), and the node run until it is done, stopped or out of time (``_serve``).
+:mod:`teleop.cli` parses the arguments and calls :func:`run_slave` / :func:`run_master`; the single
+tendon and the joint instrument share everything here but the slave's node.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import time
+from pathlib import Path
+
+from teleop.config import Config
+from teleop.errors import ConfigError, DeviceError
+
+__all__ = ["run_slave", "run_master", "run_joint_slave", "open_device", "joint_protocols", "default_run_dir",
+           "prepare_run_dir", "endpoints", "open_session", "slave_links", "master_links"]
+
+
+def default_run_dir(base: str | Path) -> Path:
+    """A fresh ``<base>/<YYYYmmdd-HHMMSS>[-n]`` directory path (not created)."""
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    path = Path(base) / stamp
+    n = 1
+    while path.exists():
+        path = Path(base) / f"{stamp}-{n}"
+        n += 1
+    return path
+
+
+def endpoints(args: argparse.Namespace) -> tuple[tuple[str, ...] | None, tuple[str, ...] | None]:
+    """(listen, connect) overrides from the flags: both None when neither flag is given."""
+    if args.listen is None and args.connect is None:
+        return None, None
+    return tuple(args.listen or ()), tuple(args.connect or ())
+
+
+def open_session(cfg, args: argparse.Namespace, clock):
+    """The Zenoh session of one side; a failure to open names the endpoints tried.
+
+    Raises
+    ------
+    ConfigError
+        An endpoint zenoh rejects in the configuration.
+    TransportError
+        The session cannot be opened (port in use, address not resolvable).
+    """
+    from teleop.errors import TransportError
+    from teleop.transport import Session, zenoh_config
+
+    listen, connect = endpoints(args)
+    zcfg = zenoh_config(cfg.transport, listen=listen, connect=connect)
+    try:
+        return Session(zcfg, clock=clock)
+    except TransportError as e:
+        lst = cfg.transport.listen if listen is None else listen
+        con = cfg.transport.connect if connect is None else connect
+        raise TransportError(f"{e} (listen: {', '.join(lst) or 'none'}; connect: {', '.join(con) or 'none'})") from None
+
+
+def _injector(args: argparse.Namespace, clock):
+    """The fault injector of ``--inject`` (SIGUSR1 trigger installed), or None."""
+    if not getattr(args, "inject", None):
+        return None
+    from teleop.faults import FaultInjector
+    inj = FaultInjector(args.inject, clock)
+    inj.install_signal()
+    logging.getLogger("teleop.faults").warning("fault injection on: %s", args.inject)
+    return inj
+
+
+def _publisher(session, key: str, stream: str, injector):
+    pub = session.publisher(key)
+    return pub if injector is None else injector.wrap(pub, stream)
+
+
+def _write_fault_stats(injector, path: Path) -> None:
+    if injector is not None:
+        import json
+        path.write_text(json.dumps(injector.stats(), indent=2) + "\n", encoding="utf-8")
+
+
+def prepare_run_dir(args: argparse.Namespace, cfg) -> Path:
+    """``--run-dir``, else a fresh ``<recording.dir>/<timestamp>``; created."""
+    run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(cfg.recording.dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    return run_dir
+
+
+def _side_streams(session, ident: str, injector, me: str, peer: str, out: tuple[str, str], incoming: tuple[str, type]):
+    """Declare the streams of side ``me`` on ``session``: the peer's liveliness watched, the outgoing
+    publisher ``out = (key, stream name)`` and the heartbeat (``--inject`` faults on both), the
+    incoming subscriber ``incoming = (key, message type)`` and the peer's heartbeat; then the own
+    liveliness token. Returns (outgoing, heartbeat, incoming, peer heartbeat, peer alive)."""
+    from teleop.keys import heartbeat_key, liveliness_key
+    from teleop.messages import Heartbeat
+
+    watcher = session.liveliness_watcher(liveliness_key(ident, peer))
+    streams = (_publisher(session, out[0], out[1], injector),
+               _publisher(session, heartbeat_key(ident, me), "heartbeat", injector),
+               session.subscriber(incoming[0], incoming[1]),
+               session.subscriber(heartbeat_key(ident, peer), Heartbeat),
+               lambda: watcher.alive)
+    session.liveliness_token(liveliness_key(ident, me))
+    return streams
+
+
+def slave_links(session, ident: str, injector, command_type):
+    """The slave's links on ``session`` (:func:`_side_streams`): estimates out, commands of
+    ``command_type`` (Command or JointCommand) in."""
+    from slave.node_base import SlaveLinks
+    from teleop.keys import command_key, estimate_key
+
+    # SlaveLinks' fields in order: estimate, heartbeat, command, master_heartbeat, master_alive
+    return SlaveLinks(*_side_streams(session, ident, injector, "slave", "master", (estimate_key(ident), "estimate"),
+                                     (command_key(ident), command_type)))
+
+
+def master_links(session, ident: str, injector, estimate_type):
+    """The master's links on ``session`` (:func:`_side_streams`): commands out, estimates of
+    ``estimate_type`` (Estimate or JointEstimate) in."""
+    from master.node_base import MasterLinks
+    from teleop.keys import command_key, estimate_key
+
+    # MasterLinks' fields in order: command, heartbeat, estimate, slave_heartbeat, slave_alive
+    return MasterLinks(*_side_streams(session, ident, injector, "master", "slave", (command_key(ident), "command"),
+                                      (estimate_key(ident), estimate_type)))
+
+
+def _serve(node, clock, args: argparse.Namespace, run_dir: Path, side: str, injector, *, close_first=None) -> None:
+    """Run ``node`` until done (or ``--max-duration``); however it ends, ``close_first()`` (e.g. the
+    device), then ``<side>_stats.json`` and ``<side>_faults.json`` in ``run_dir``."""
+    try:
+        node.run(clock, max_duration=args.max_duration)
+    finally:
+        if close_first is not None:
+            close_first()
+        node.write_stats(run_dir / f"{side}_stats.json")
+        _write_fault_stats(injector, run_dir / f"{side}_faults.json")
+
+
+def _log_master_done(node) -> None:
+    lat = node.latency_stats()
+    logging.getLogger("teleop.master").info("master done: %s commands, rtt p50 %s ms, p99 %s ms",
+                                            node.commands_sent, lat["p50_ms"], lat["p99_ms"])
+
+
+def run_slave(args: argparse.Namespace) -> int:
+    """``teleop slave``: calibrate the rig, then serve commands until stopped."""
+    from slave.node import SlaveNode, csv_columns, warm_up
+    from slave.simulated import SimulatedRig
+    from teleop.clock import MonotonicClock
+    from teleop.config import load_config
+    from teleop.messages import Command
+    from teleop.recording import CsvRecorder, raise_on_sigterm
+    from teleop.rerun_log import RerunLogger
+
+    cfg = load_config(args.config)
+    if cfg.instrument.joints:           # a joint instrument: its own node, same transport and flags
+        return run_joint_slave(args, cfg)
+    run_dir = prepare_run_dir(args, cfg)
+    warm_up(cfg)  # compile the numba kernels now, not in the first real-time cycles
+    rig = SimulatedRig.from_config(cfg)
+    has_truth = rig.state.truth is not None
+    meta = {"source": "teleop slave", "instrument": cfg.instrument.id, "rig": cfg.rig.type,
+            "truth": "x_out, T_out, elongation are simulator ground truth (evaluation only)" if has_truth else "none"}
+    ident = cfg.instrument.id
+    clock = MonotonicClock()
+    injector = _injector(args, clock)
+    node = None
+    with raise_on_sigterm(), \
+            open_session(cfg, args, clock) as session, \
+            CsvRecorder(run_dir / "slave.csv", csv_columns(has_truth), meta, flush_every=500) as rec, \
+            RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd") as rr:
+        links = slave_links(session, ident, injector, Command)
+        node = SlaveNode(cfg, rig, links, recorder=rec, rerun=rr, run_dir=run_dir,
+                         stop_on_master_stop=args.exit_on_master_stop)
+        _serve(node, clock, args, run_dir, "slave", injector)
+    logging.getLogger("teleop.slave").info("slave done: %s", run_dir)
+    return 0
+
+
+def open_device(cfg, protocol: str):
+    """The configured haptic device (``master.device.type``) for the configured instrument.
+
+    Raises
+    ------
+    DeviceError
+        A HID device for a joint instrument (one report map per axis is not there yet), or a HID
+        device that cannot be opened (named).
+    """
+    from master.simulated import ScriptedOperator, build_protocol
+    if cfg.master.device.type == "hid":
+        if cfg.instrument.joints:
+            raise DeviceError("master.device.type: a HID device drives a single tendon so far; joint instruments "
+                              "have the simulated multi-axis operator")
+        from master.hid import HidDevice
+        # opens, resets and enables the actuators; raises DeviceError naming the device when absent
+        return HidDevice.from_file(cfg.master.device.file)
+    if cfg.instrument.joints:
+        from master.joint_operator import MultiAxisOperator
+        return MultiAxisOperator(joint_protocols(cfg, "paper" if protocol in ("paper,minor", "paper") else protocol),
+                                 clutch_bit=cfg.master.mapping.clutch_button)
+    return ScriptedOperator(build_protocol(protocol), clutch_bit=cfg.master.mapping.clutch_button)
+
+
+def run_master(args: argparse.Namespace) -> int:
+    """``teleop master``: run the operator side of any instrument until the device's protocol is finished."""
+    from master.node import MasterNode, csv_columns, csv_units
+    from teleop.clock import MonotonicClock
+    from teleop.config import load_config
+    from teleop.messages import Estimate, JointEstimate
+    from teleop.recording import CsvRecorder, raise_on_sigterm
+
+    cfg = load_config(args.config)
+    device = open_device(cfg, args.protocol)
+    # from here on the device is closed on every exit path (HID: zero force, stop all effects,
+    # disable actuators), whatever fails: session, recording, the loop, Ctrl-C or SIGTERM
+    with _closing(device):
+        run_dir = prepare_run_dir(args, cfg)
+        ident = cfg.instrument.id
+        clock = MonotonicClock()
+        injector = _injector(args, clock)
+        meta = {"source": "teleop master", "instrument": ident, "device": cfg.master.device.type,
+                "columns": "x_in = command sent, T_in = slave's latest proximal tension, force = rendered"
+                if not cfg.instrument.joints else "per joint: cmd, slave angle [rad], device position [m], "
+                "rendered tension torque_hat / r [N], forces [N], passivity energy [J]"}
+        with raise_on_sigterm(), open_session(cfg, args, clock) as session, \
+                CsvRecorder(run_dir / "master.csv", csv_columns(cfg), meta, units=csv_units(cfg), flush_every=100) as rec:
+            links = master_links(session, ident, injector, JointEstimate if cfg.instrument.joints else Estimate)
+            node = MasterNode(cfg, device, links, recorder=rec)
+            _serve(node, clock, args, run_dir, "master", injector, close_first=device.close)
+    _log_master_done(node)
+    return 0 if getattr(device, "finished", True) else 1
+
+
+@contextlib.contextmanager
+def _closing(device):
+    """``device.close()`` on leaving the block, however it is left."""
+    try:
+        yield device
+    finally:
+        device.close()
+
+
+def _load_or_none(cfg: Config):
+    from slave.calibration_file import calibration_path, load_calibration
+    path = calibration_path(cfg)
+    return (load_calibration(path, cfg) if path.is_file() else None), path
+
+
+def run_joint_slave(args: argparse.Namespace, cfg: Config) -> int:
+    """``teleop slave`` for a joint instrument: reload ``<calibration.dir>/<id>.yaml`` (or calibrate at
+    power-up and save it there), then serve JointCommands until stopped."""
+    from estimator.joint import JointEstimator
+    from estimator.sheath import SheathModel
+    from slave.joint_node import JointSlaveNode, joint_csv_columns
+    from slave.joint_rig import SimulatedInstrument
+    from teleop.clock import MonotonicClock
+    from teleop.messages import JointCommand
+    from teleop.recording import CsvRecorder, raise_on_sigterm
+    from teleop.rerun_log import RerunLogger
+
+    log = logging.getLogger("teleop.slave")
+    calibration, cal_path = _load_or_none(cfg)
+    log.info("calibration %s", f"loaded from {cal_path}" if calibration else f"missing: calibrating, then {cal_path}")
+    run_dir = prepare_run_dir(args, cfg)
+    inst = SimulatedInstrument.from_config(cfg)
+    # compile the numba kernels now, not in the first real-time cycles
+    SimulatedInstrument(cfg.instrument.joints[:1], cfg.rig).step([[1e-4, 1e-4]], 1e-3)
+    m = SheathModel(K=0.5, compliance=1e-4)
+    JointEstimator(m, m, 0.004, n_nodes=4).step(1.0, 0.0, 0.5, 0.0, 0.0)
+    names = [j.name for j in cfg.instrument.joints]
+    meta = {"source": "teleop slave", "instrument": cfg.instrument.id, "joints": " ".join(names),
+            "truth": "torque, angle, T_out, elongation are simulator ground truth (evaluation only)"}
+    ident = cfg.instrument.id
+    clock = MonotonicClock()
+    injector = _injector(args, clock)
+    with raise_on_sigterm(), open_session(cfg, args, clock) as session, \
+            CsvRecorder(run_dir / "slave_joints.csv", joint_csv_columns(names, True), meta, flush_every=500) as rec, \
+            RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd") as rr:
+        links = slave_links(session, ident, injector, JointCommand)
+        node = JointSlaveNode(cfg, inst, links, recorder=rec, rerun=rr, calibration=calibration,
+                              calibration_file=cal_path, run_dir=run_dir, stop_on_master_stop=args.exit_on_master_stop)
+        _serve(node, clock, args, run_dir, "slave", injector)
+    log.info("slave done: %s", run_dir)
+    return 0
+
+
+def joint_protocols(cfg: Config, names: str):
+    """One axis protocol per joint: ``paper`` (the seed paper's experiment on tendon a, then b) or
+    ``short`` (6 N, 2 N each way).
+
+    Raises
+    ------
+    ConfigError
+        Another protocol name.
+    """
+    from master.joint_operator import paper_protocol
+    from slave.pair_calibrate import set_tension
+    targets = {"paper": (20.0, 5.0, 20.0), "short": (6.0, 2.0)}.get(names.strip())
+    if targets is None:
+        raise ConfigError(f"protocol: {names!r} is not a joint-instrument protocol (expected 'paper' or 'short')")
+    return [paper_protocol(set_tension(cfg, j), targets) for j in cfg.instrument.joints]
