@@ -21,8 +21,10 @@ with a bristle friction state per node, so that it can serve as an independent s
       |F_i| <= Fc_i = N_i g(v_i),   dF_i/dt = (Fc_i / z_ss) v_i while |F_i| < Fc_i (stick),
       F_i = sgn(v_i) Fc_i while sliding,
       g(v) = mu(t) (1 + c_v |v|) (1 + r_s exp(-(v / v_s)^2)),   mu(t) = mu + mu_rate t,
-  plus a viscous c ds v_i. A node pre-slides elastically over z_ss [m] (the ``presliding``
-  distance: 10 nm by default, far below any encoder quantum) before it slides; when Fc_i drops
+  plus a viscous c ds v_i. A node pre-slides elastically over z_ss = d_p / 2 [m] before it slides:
+  its friction reverses from -Fc to +Fc over the travel d_p (the ``presliding`` distance; 10 nm by
+  default, far below any encoder quantum; a Dahl law dF/dx = (Fc / d_p)(1 - sgn(v) F / Fc) has the
+  same stiffness 2 Fc / d_p right after a reversal); when Fc_i drops
   below |F_i| (tension falls, Stribeck decay) F_i is clipped to the bound at once. A Stribeck
   peak r_s > 0 gives breakaway and stick-slip. F_i does not jump when N_i changes, so a rising
   tension cannot pump energy into a stuck node.
@@ -140,7 +142,8 @@ class LumpedTendon:
     load : Load, distal load.
     n_nodes : int >= 4, number of elements (= masses).
     line_density : float > 0 [kg/m], tendon mass per length.
-    presliding : float > 0 [m], pre-sliding distance z_ss of the bristle state.
+    presliding : float > 0 [m], pre-sliding distance d_p: the travel over which a node's friction
+        reverses (bristle stiffness 2 Fc / d_p).
     static_ratio : float >= 0, Stribeck peak r_s (mu_static / mu_kinetic - 1); stribeck_speed [m/s].
     speed_coefficient : float >= 0 [s/m], c_v in g(v) = mu (1 + c_v |v|) (E3).
     viscous : float >= 0 [N s/m^2], tension-independent viscous friction per length.
@@ -274,7 +277,8 @@ class LumpedTendon:
         simulate(x, n_sub, dt, -math.expm1(-2 * math.pi * f_bw * dt), v_max, self.u, self.v, self.e, self.T,
                  self.z, self.status, self.state, self.mass, self.dtheta, self.qds, self.visc, self.k_lin,
                  self.beta, self.Tc,
-                 self.inv_ks, self.mu, self.mu_rate, cv, rs, vs, 1.0 / self.presliding, lx, lF, ls, self.load.damping,
+                 self.inv_ks, self.mu, self.mu_rate, cv, rs, vs, 2.0 / self.presliding, lx, lF, ls,
+                 self.load.damping,
                  self.load.mass, 0.5 * self.backlash, self.n_iter, out)
         return {"x_motor": out[:, 0], "T_in": out[:, 1], "x_end": out[:, 2], "T_out": out[:, 3],
                 "x_joint": out[:, 4], "x_p": out[:, 5]}

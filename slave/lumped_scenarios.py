@@ -128,7 +128,7 @@ def _effect_knobs(hidden: tuple[str, ...], u: float, K: float, mu: float, geo: S
             sim["normal_load"] = q
             p = {"distal_offset": r["distal_offset"], "normal_load": q,
                  "tension_offset": r["distal_offset"] / -math.expm1(-K)}
-        elif e == "presliding":                # bristle travel z_ss = mu / sigma0
+        elif e == "presliding":                # reversal travel d_p of every node's bristle
             sim["presliding"] = r["distance"]
             p = {"distance": r["distance"]}
         elif e == "distal_backlash":
