@@ -1,22 +1,25 @@
 """What the base model gets wrong on a recording, which physical effect explains it, and the gain.
 
-:func:`diagnose` fits the base model (profile memory with K and L/EA) on a training block, holds
-out the rest (whole cycles: the split is moved to a rest), fits every extension of the catalogue
-(:mod:`estimator.effects`) on the same block and scores all of them on the held-out block. The
-extension with the lowest held-out score
+:func:`diagnose` splits the recording in time into a training block and a test block (both at a
+rest, so whole cycles are held out); the training block is split again into a fit block and a
+validation block. Model choice uses only the training block:
 
-    S = sum_signals (rmse_ext / floor)^2 / sum_signals (rmse_base / floor)^2
+* the base model (profile memory with K, L/EA and the route shares r_1, r_2 of
+  :data:`estimator.effects.ROUTE`) and every extension of the catalogue (:mod:`estimator.effects`)
+  are fitted on the fit block and scored on the validation block,
 
-(rmse on the held-out measured samples, floor = the noise a perfect model would leave on that signal)
-is accepted when
+      S = sum_signals (rmse_ext / floor)^2 / sum_signals (rmse_base / floor)^2
 
-    S + PENALTY * n_extra_parameters < 1                       (relative to the model so far)
+  (floor = the noise a perfect model would leave on that signal, estimated from the data itself);
+* an extension is accepted when S + PENALTY * n_extra_parameters < 1 (relative to the model so
+  far); a second one is tried with it while the validation residual still holds structure (rmse
+  above STRUCTURE_RATIO times the floor on a signal). With nothing accepted the answer is ``none``,
+  or ``unknown`` when the base residual holds such structure.
 
-PENALTY is an information-criterion-like price calibrated on clean recordings so that no extension
-earns its place there (docs/diagnosis.md). A second extension is tried on the same rule, relative to
-the first, while the residual still holds structure: held-out rmse above STRUCTURE_RATIO times the
-noise of a signal. With nothing accepted the answer is ``none`` - or ``unknown`` when the base
-residual holds such structure. Fitting helpers live in :mod:`estimator.diagnosis_fit`.
+Then the base and the chosen model are refitted on the whole training block and run once over the
+test block: the reported held-out errors and the gain come from that one evaluation. Effects that
+give the same outputs (:data:`estimator.effects.EQUIVALENT`) are fitted once and reported with
+their equivalents. Fitting helpers live in :mod:`estimator.diagnosis_fit`.
 """
 from __future__ import annotations
 
@@ -27,15 +30,18 @@ from typing import Callable
 
 import numpy as np
 
-from estimator.diagnosis_fit import (SIGNALS, fit_model, heldout_mse, noise_level, prepare, raw_rmse, split_at_rest,
+from estimator.diagnosis_fit import (SIGNALS, fit_model, noise_level, prepare, quantum, raw_rmse, split_at_rest,
                                      start_points)
-from estimator.effects import CATALOGUE, NONE, UNKNOWN, Effect, predict
+from estimator.effects import CATALOGUE, EQUIVALENT, NONE, UNKNOWN, Effect, effect, predict
 from estimator.data import MeasuredData
 
-__all__ = ["diagnose", "predictions", "PENALTY", "STRUCTURE_RATIO"]
+__all__ = ["diagnose", "predictions", "PENALTY", "STRUCTURE_RATIO", "VALIDATION_FRACTION"]
 
-PENALTY = 0.30          # price per extra parameter on the held-out score S (base = 1) [-]
-STRUCTURE_RATIO = 3.0   # held-out rmse / noise above this on a signal: structure left [-]
+PENALTY = 0.30              # price per extra parameter on the validation score S (base = 1) [-]
+STRUCTURE_RATIO = 3.0       # validation rmse / noise floor above this on a signal: structure left [-]
+VALIDATION_FRACTION = 0.35  # share of the training block held out for model choice [-]
+SECOND_ROUND = 6            # extensions tried together with the first accepted one (best single scores)
+POLISH = 3                  # best single extensions refitted with the route shares free
 _UNITS = {"T_out": "N", "x_out": "m"}
 
 
@@ -57,21 +63,44 @@ class _Progress:
             sys.stderr.flush()
 
     def finish(self) -> None:
-        if self.done < self.total:
-            self.done = self.total - 1
+        while self.done < self.total:       # the steps that were not needed
             self("done")
 
 
-class _Fit:
-    """One fitted model (a list of extensions) with its held-out scores."""
+class _Folds:
+    """The training block [0, kt) of a prepared series and its two time-blocked folds: forward (fit
+    on [0, kv), validate on [kv, kt)) and backward (fit on [kb, kt), validate on [0, kb)). The model
+    always runs from the first sample; a fold only chooses which residuals count."""
 
-    def __init__(self, effects: list[Effect], values: dict, compliance: float, s, k: int, data, t_split: float,
-                 base: "_Fit | None" = None, floor: dict[str, float] | None = None):
-        self.effects, self.values, self.compliance = effects, values, compliance
-        self.pred = predict(effects, values, s, compliance=compliance)
-        self.mse = heldout_mse(self.pred, s, k)                       # averaged series (structure test)
-        self.raw = raw_rmse(self.pred, s, data, t_split)               # measured samples (selection, gain)
-        self.S = 1.0 if base is None else _score(self.raw, base.raw, floor)
+    def __init__(self, s, kb: int, kv: int, kt: int):
+        self.s, self.train, self.kt = s, s.slice(kt), kt
+        self.fit = (slice(0, kv), slice(kb, kt))
+        self.val = (slice(kv, kt), slice(0, kb))
+
+
+class _Fit:
+    """One model (a list of extensions) fitted on each fold's fit block, with its validation errors."""
+
+    def __init__(self, effects: list[Effect], folds: _Folds, starts: list[dict], *, route: bool = False,
+                 fixed: dict | None = None, base: "_Fit | None" = None, floor: dict[str, float] | None = None,
+                 need: float = math.inf):
+        self.effects = effects
+        self.values, self.compliance, self.mse = [], [], []
+        tr = folds.train
+        for j, (fm, vm) in enumerate(zip(folds.fit, folds.val)):
+            if j == 1 and base is not None and _score(self.mse[0], base.mse[0], floor) >= need:
+                break           # cannot be accepted (the worse fold counts): the second fold is not needed
+            vals, c, _ = fit_model(effects, tr, starts if j == 0 else [self.values[0]], route=route,
+                                   fixed=fixed[j] if isinstance(fixed, list) else fixed, mask=fm,
+                                   max_starts=2 if j == 0 else 1)
+            pred = predict(effects, vals, tr, compliance=c)
+            self.values.append(vals)
+            self.compliance.append(c)
+            self.mse.append({n: float(np.mean((getattr(pred, n)[vm] - getattr(tr, n)[vm]) ** 2))
+                             for n in SIGNALS if getattr(tr, n) is not None})
+        # the worse fold counts: an extension must help forward and backward in time
+        self.S = 1.0 if base is None else max(_score(m, bm, floor) for m, bm in zip(self.mse, base.mse))
+        self.complete = len(self.mse) == len(folds.fit)
 
     @property
     def n_params(self) -> int:
@@ -81,23 +110,27 @@ class _Fit:
     def ids(self) -> list[str]:
         return [e.id for e in self.effects]
 
+    def val_mse(self) -> dict[str, float]:
+        """Mean over the folds of the validation mean square error per signal."""
+        return {n: float(np.mean([m[n] for m in self.mse])) for n in self.mse[0]}
 
-def _score(raw: dict, base: dict, floor: dict[str, float]) -> float:
-    """Held-out score relative to the base: sum over signals of (rmse / floor)^2, extension over base.
+
+def _score(mse: dict, base: dict, floor: dict[str, float]) -> float:
+    """Validation score relative to the base: sum over signals of (rmse / floor)^2, extension over base.
 
     Each signal counts by how far above its noise floor it is, so a signal the extension does not
     touch (T_out for tendon stiffening) does not dilute what it explains in the other."""
     num = den = 0.0
     for key, f in floor.items():
-        if raw.get(key) is not None and base.get(key) and f > 0:
-            num += (raw[key] / f) ** 2
-            den += (base[key] / f) ** 2
+        if key in mse and base.get(key) and f > 0:
+            num += mse[key] / f ** 2
+            den += base[key] / f ** 2
     return num / den if den > 0 else 1.0
 
 
-def _structure(fit: _Fit, s, k: int, noise: dict[str, float]) -> dict[str, float]:
-    """Held-out rmse / noise floor per signal on the averaged series [-]."""
-    return {n: math.sqrt(fit.mse[n]) / max(noise[n], 1e-300) for n in fit.mse}
+def _structure(fit: _Fit, noise: dict[str, float]) -> dict[str, float]:
+    """Validation rmse / noise floor per signal on the averaged series [-] (mean over the folds)."""
+    return {n: math.sqrt(v) / max(noise[n], 1e-300) for n, v in fit.val_mse().items()}
 
 
 def _gain(ext: dict, base: dict, signal: str) -> float | None:
@@ -105,13 +138,44 @@ def _gain(ext: dict, base: dict, signal: str) -> float | None:
     return None if b is None or e is None or b <= 0 else 1.0 - e / b
 
 
-def _parameters(fit: _Fit) -> dict:
-    out = {"K": {"value": fit.values["K"], "unit": "-", "effect": "base"},
-           "compliance": {"value": fit.compliance, "unit": "m/N", "effect": "base"}}
-    for e in fit.effects:
+def _parameters(effects: list[Effect], values: dict, compliance: float, rename: dict) -> dict:
+    out = {"K": {"value": values["K"], "unit": "-", "effect": "base"},
+           "compliance": {"value": compliance, "unit": "m/N", "effect": "base"}}
+    for name in ("r_1", "r_2"):
+        if name in values:
+            out[name] = {"value": values[name], "unit": "-", "effect": "base"}
+    for e in effects:
         for p in e.parameters:
-            out[p.name] = {"value": fit.values[p.name], "unit": p.unit, "effect": e.id}
+            name, conv = rename.get(p.name, (p.name, float))
+            out[name] = {"value": conv(values[p.name]), "unit": p.unit, "effect": rename.get(e.id, (e.id,))[0]}
     return out
+
+
+def _block(data: MeasuredData, t0: float, t1: float) -> dict:
+    """Raw sample range [start, stop) and time range [s] of data.time in [t0, t1)."""
+    i0, i1 = int(np.searchsorted(data.time, t0)), int(np.searchsorted(data.time, t1))
+    return {"index": [i0, i1], "time_s": [float(data.time[min(i0, len(data) - 1)]),
+                                          float(data.time[max(i1 - 1, i0)])], "n_samples": i1 - i0}
+
+
+def _rest_reading(data: MeasuredData, name: str) -> float:
+    """|median| of a channel over the initial rest (the samples before x_in first moves by 5 um) [unit]."""
+    x = np.asarray(data.x_in, dtype=float)
+    moved = np.flatnonzero(np.abs(x - x[0]) > 5e-6)
+    stop = max(int(moved[0]) if moved.size else len(x), 5)
+    return abs(float(np.median(np.asarray(getattr(data, name), dtype=float)[:stop])))
+
+
+def _channel_choice(data: MeasuredData, eid: str) -> str:
+    """Of two equivalent effects, the one the data point to: an offset on a position channel shows as a
+    reading away from zero at the initial rest (positions are zeroed there); a gain is reported on
+    T_out by convention (it is not separable from one on T_in)."""
+    if eid in ("sensor_offset:x_in", "sensor_offset:x_out") and data.x_out is not None:
+        return "sensor_offset:x_in" if _rest_reading(data, "x_in") > _rest_reading(data, "x_out") \
+            else "sensor_offset:x_out"
+    if eid in ("sensor_gain:T_in", "sensor_gain:T_out"):
+        return "sensor_gain:T_out"
+    return eid
 
 
 def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool | Callable = False,
@@ -125,7 +189,8 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         time [s], x_in [m], T_in [N] and at least one of T_out [N], x_out [m]; positions zeroed at a
         rest of the unloaded tendon (or at the preloaded rest: that is the pretension effect).
     train_fraction : float in [0.3, 0.9]
-        Nominal share of the duration used for fitting; the split moves to a rest within 8 %.
+        Nominal share of the duration used for training (fit + validation); the split moves to a
+        rest within 8 %. The test block after it is used once, for the reported errors and gain.
     progress : bool or callable(done, total, label)
         A stderr progress bar, or a callback per fitted model.
     effects : tuple of ids, optional
@@ -133,20 +198,23 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     max_effects : int
         Most extensions accepted together, >= 1.
     n_nodes, target_rate, wrap_shape
-        Profile elements, averaging rate [Hz] and route shape, see :func:`estimator.diagnosis_fit.prepare`.
+        Profile elements, averaging rate [Hz] and route shape, see :func:`estimator.diagnosis_fit.prepare`;
+        with ``wrap_shape`` given the route is held, without it the route shares are fitted.
 
     Returns
     -------
     dict, JSON-ready:
         ``cause`` one id (an effect, "none" or "unknown"); ``causes`` accepted ids in order (plus
-        "unknown" when structure is left); ``base``, ``extended`` {rmse_T_out_N, rmse_x_out_m} on the
-        held-out measured samples (None for a signal not recorded); ``gain`` 1 - extended/base on
-        ``primary_signal`` (T_out when recorded, x_out for the effects that leave T_out alone after
-        the first pull: pretension, tendon_stiffening, or without T_out); ``parameters`` name ->
-        {value, unit, effect}; ``candidates`` id -> {rmse_T_out_N, rmse_x_out_m, gain, gain_T_out,
-        gain_x_out, score, accepted, parameters}; ``split``, ``noise``, ``structure``, ``model`` and
-        ``base_model`` (enough to re-run both, see :func:`teleop.report.write_report`), ``settings``,
-        ``elapsed_s``.
+        "unknown" when structure is left); ``equivalent`` ids that explain the data identically;
+        ``base``, ``extended`` {rmse_T_out_N, rmse_x_out_m} on the test block (measured samples,
+        None for a signal not recorded); ``gain`` 1 - extended/base on ``primary_signal``;
+        ``parameters`` name -> {value, unit, effect} of the chosen model refitted on the training
+        block; ``candidates`` id -> {validation rmse, score, penalised_score, accepted, parameters}
+        (fit block only); ``split`` {fit, validation, test: {index [start, stop) of the measured
+        samples, time_s [first, last], n_samples}, time_s, n_train, n_heldout, train_fraction};
+        ``noise``, ``structure`` (validation rmse / floor: base, extended), ``model`` and
+        ``base_model`` (refitted on the training block; enough to re-run both, see
+        :func:`teleop.report.write_report`), ``settings``, ``elapsed_s``.
 
     Raises
     ------
@@ -155,48 +223,70 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     """
     t_start = _time.perf_counter()
     names = tuple(CATALOGUE) if effects is None else tuple(effects)
-    for n in names:
-        if n not in CATALOGUE:
-            raise ValueError(f"unknown effect {n!r}; known: {', '.join(CATALOGUE)}")
+    try:
+        cands_all = [effect(n) for n in names]
+    except KeyError as e:
+        raise ValueError(f"unknown effect: {e.args[0]}") from None
     if max_effects < 1:
         raise ValueError(f"max_effects must be >= 1, got {max_effects!r}")
     s = prepare(data, n_nodes=n_nodes, target_rate=target_rate, wrap_shape=wrap_shape)
-    k = split_at_rest(s, train_fraction)
-    train = s.slice(k)
-    t_split = float(s.time[k] - 0.5 * (s.time[1] - s.time[0]))
-    cands = [CATALOGUE[n] for n in names]
-    bar = _Progress(1 + len(cands) + (max_effects - 1) * max(len(cands) - 1, 0), progress)
-    sensor = {n: noise_level(getattr(s, n)) for n in SIGNALS if getattr(s, n) is not None}
-    sensor_raw = {n: noise_level(np.asarray(getattr(data, n), dtype=float)) for n in sensor}
+    kt = split_at_rest(s, train_fraction)
+    kv = split_at_rest(s.slice(kt), 1.0 - VALIDATION_FRACTION)
+    kb = split_at_rest(s.slice(kt), VALIDATION_FRACTION)
+    folds = _Folds(s, kb, kv, kt)
+    measured = [n for n in SIGNALS if getattr(data, n) is not None]
+    # one of each group of equivalent effects, and only those the recording can show
+    cands: list[Effect] = []
+    for e in cands_all:
+        if all(r in measured for r in e.requires) and not any(q.id in EQUIVALENT.get(e.id, ()) for q in cands):
+            cands.append(e)
+    route = wrap_shape is None
+    n_second = min(SECOND_ROUND, max(len(cands) - 1, 0)) * (max_effects - 1)
+    bar = _Progress(1 + len(cands) + (POLISH if route else 0) + n_second + 2, progress)
+    sensor = {n: noise_level(getattr(s, n)) for n in measured}
+    sensor_raw = {n: noise_level(np.asarray(getattr(data, n), dtype=float)) for n in measured}
+    quanta = {n: quantum(getattr(data, n)) for n in measured}
 
-    vals, c, _ = fit_model([], train, [{"K": K0} for K0 in (0.2, 0.6, 1.2)])
-    base = _Fit([], vals, c, s, k, data, t_split)
+    base = _Fit([], folds, [{"K": K0} for K0 in (0.2, 0.6, 1.2)], route=route)
+    shape = [{k: v[k] for k in ("r_1", "r_2") if k in v} for v in base.values]
     bar("base model")
-    # the floor a perfect model reaches: sensor noise plus the load-cell noise carried through it
+    # the floor a perfect model reaches: sensor noise and quantisation, plus the load-cell noise
+    # carried through the model (all estimated from the recording itself)
     sigma_in = s.sigma_T_in
-    gain_in = {"T_out": 1.0, "x_out": base.compliance}   # d(signal)/d(T_in), order of magnitude
-    noise = {n: math.hypot(v, sigma_in * gain_in[n]) for n, v in sensor.items()}
-    floor = {f"rmse_{n}_{_UNITS[n]}": math.hypot(v, sigma_in * gain_in[n]) for n, v in sensor_raw.items()}
+    gain_in = {"T_out": 1.0, "x_out": base.compliance[0]}   # d(signal)/d(T_in), order of magnitude
+    noise = {n: math.sqrt(v ** 2 + quanta[n] ** 2 / 12.0 + (sigma_in * gain_in[n]) ** 2) for n, v in sensor.items()}
+    floor = noise
     singles: dict[str, _Fit] = {}
     for e in cands:
-        vals, c, _ = fit_model([e], train, start_points([e], base.values, s, {}))
-        singles[e.id] = _Fit([e], vals, c, s, k, data, t_split, base, floor)
+        singles[e.id] = _Fit([e], folds, start_points([e], base.values[0], s, {}), fixed=shape, base=base,
+                             floor=floor, need=1.0 - PENALTY * len(e.parameters))
         bar(e.id)
+    # the best few again with the route free too (an effect the base model lacks distorts its route)
+    if route:
+        for eid in sorted(singles, key=lambda k: singles[k].S)[:POLISH]:
+            f = _Fit([CATALOGUE[eid]], folds, [singles[eid].values[0]], route=True, base=base, floor=floor,
+                     need=1.0 - PENALTY * singles[eid].n_params)
+            if f.S < singles[eid].S:
+                singles[eid] = f
+            bar(f"{eid}, route")
 
-    # forward selection with a price per parameter, relative to the model so far
+    # forward selection on the validation blocks with a price per parameter, relative to the model so far
     chosen = base
     pool = dict(singles)
     while len(chosen.effects) < max_effects and pool:
-        if chosen is not base and max(_structure(chosen, s, k, noise).values()) <= STRUCTURE_RATIO:
+        if chosen is not base and max(_structure(chosen, noise).values()) <= STRUCTURE_RATIO:
             break                       # nothing left above the noise for another effect to explain
         if chosen is base:
             trial = pool
         else:
             trial = {}
-            for eid in pool:
+            for eid in sorted(pool, key=lambda k: pool[k].S)[:SECOND_ROUND]:
                 fx = chosen.effects + [CATALOGUE[eid]]
-                vals, c, _ = fit_model(fx, train, start_points(fx, chosen.values, s, chosen.values))
-                trial[eid] = _Fit(fx, vals, c, s, k, data, t_split, base, floor)
+                v0 = chosen.values[0]
+                trial[eid] = _Fit(fx, folds, start_points(fx, v0, s, v0),
+                                  fixed=[{k: v[k] for k in ("r_1", "r_2") if k in v} for v in chosen.values],
+                                  base=base, floor=floor,
+                                  need=chosen.S * (1.0 - PENALTY * len(CATALOGUE[eid].parameters)))
                 bar(f"{'+'.join(chosen.ids)}+{eid}")
         price = {eid: f.S / chosen.S + PENALTY * (f.n_params - chosen.n_params) for eid, f in trial.items()}
         best = min(price, key=price.get)
@@ -204,13 +294,40 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
             break
         chosen = trial[best]
         pool.pop(best)
-    bar.finish()
+    left = _structure(chosen, noise)
 
-    base_raw, ext_raw = base.raw, chosen.raw
-    left = _structure(chosen, s, k, noise)
-    causes = chosen.ids + ([UNKNOWN] if max(left.values()) > STRUCTURE_RATIO else [])
+    # the test block, touched once: base and chosen model refitted on the whole training block
+    half = 0.5 * (s.time[1] - s.time[0])
+    t_split, t_val, t_back = (float(s.time[k] - half) for k in (kt, kv, kb))
+    train_s = folds.train
+    vals, c, _ = fit_model([], train_s, [base.values[0]], route=route)
+    final_base = (vals, c)
+    bar("base model, training block")
+    if chosen.effects:
+        vals, c, _ = fit_model(chosen.effects, train_s, [chosen.values[0]], route=route)
+    final = (vals, c)
+    bar("chosen model, training block")
+    bar.finish()
+    base_raw = raw_rmse(predict([], final_base[0], s, compliance=final_base[1]), s, data, t_split)
+    ext_raw = raw_rmse(predict(chosen.effects, final[0], s, compliance=final[1]), s, data, t_split) \
+        if chosen.effects else dict(base_raw)
+
+    # equivalent effects: report the channel the data point to
+    rename: dict = {}
+    equivalent: list[str] = []
+    for e in chosen.effects:
+        if e.id in EQUIVALENT:
+            pick = _channel_choice(data, e.id)
+            equivalent += [q for q in (e.id, *EQUIVALENT[e.id]) if q != pick]
+            if pick != e.id:
+                other = CATALOGUE[pick]
+                # x_in offset b <-> x_out offset -b; T_in gain g <-> T_out gain 1/(1 + g) - 1
+                conv = (lambda v: -v) if "offset" in e.id else (lambda v: 1.0 / (1.0 + v) - 1.0)
+                rename[e.id] = (pick,)
+                rename[e.parameters[0].name] = (other.parameters[0].name, conv)
+    ids = [rename.get(i, (i,))[0] for i in chosen.ids]
+    causes = ids + ([UNKNOWN] if max(left.values()) > STRUCTURE_RATIO else [])
     cause = causes[0] if causes else NONE
-    measured = [n for n in SIGNALS if getattr(data, n) is not None]
 
     def primary(fx: list[Effect]) -> str:
         want = fx[0].primary if fx else "T_out"
@@ -218,25 +335,36 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
 
     candidates = {}
     for eid, f in singles.items():
-        raw = f.raw
-        candidates[eid] = {**raw, "gain": _gain(raw, base_raw, primary(f.effects)),
-                           "gain_T_out": _gain(raw, base_raw, "T_out"), "gain_x_out": _gain(raw, base_raw, "x_out"),
-                           "score": f.S, "penalised_score": f.S + PENALTY * f.n_params,
-                           "accepted": eid in chosen.ids, "parameters": _parameters(f)}
+        vm = f.val_mse()
+        rm = {f"rmse_{n}_{_UNITS[n]}": (math.sqrt(vm[n]) if n in vm else None) for n in SIGNALS}
+        candidates[eid] = {**{f"validation_{k}": v for k, v in rm.items()}, "score": f.S,
+                           "penalised_score": f.S + PENALTY * f.n_params, "accepted": eid in chosen.ids,
+                           "equivalent": list(EQUIVALENT.get(eid, ())),
+                           "parameters": _parameters(f.effects, f.values[0], f.compliance[0], {})}
     prim = primary(chosen.effects)
+    n = len(data)
+    i_t = int(np.searchsorted(data.time, t_split))
+    model_values = {**final[0]}
     return {
-        "cause": cause, "causes": causes, "base": base_raw, "extended": ext_raw,
-        "gain": _gain(ext_raw, base_raw, prim) or 0.0 if chosen.effects else 0.0, "primary_signal": prim,
-        "parameters": _parameters(chosen), "candidates": candidates,
-        "split": {"time_s": t_split, "n_train": int(np.sum(data.time < t_split)),
-                  "n_heldout": int(np.sum(data.time >= t_split)),
-                  "train_fraction": float((t_split - data.time[0]) / max(data.duration, 1e-12))},
-        "noise": {**{f"{n}_{_UNITS[n]}": v for n, v in sensor_raw.items()}, "T_in_N": sigma_in,
-                  **{f"floor_{k[5:]}": v for k, v in floor.items()}},
-        "structure": {"base": _structure(base, s, k, noise), "extended": left},
-        "model": {"effects": chosen.ids, "values": chosen.values, "compliance": chosen.compliance},
-        "base_model": {"effects": [], "values": base.values, "compliance": base.compliance},
-        "settings": {"train_fraction": train_fraction, "n_nodes": n_nodes, "target_rate_hz": target_rate,
+        "cause": cause, "causes": causes, "equivalent": equivalent, "base": base_raw, "extended": ext_raw,
+        "gain": (_gain(ext_raw, base_raw, prim) or 0.0) if chosen.effects else 0.0, "primary_signal": prim,
+        "parameters": _parameters(chosen.effects, final[0], final[1], rename), "candidates": candidates,
+        "split": {"folds": [{"fit": _block(data, -math.inf, t_val), "validation": _block(data, t_val, t_split)},
+                            {"fit": _block(data, t_back, t_split), "validation": _block(data, -math.inf, t_back)}],
+                  "train": _block(data, -math.inf, t_split), "test": _block(data, t_split, math.inf), "time_s": t_split, "n_train": i_t,
+                  "n_heldout": n - i_t, "heldout_s": float(data.time[-1] - data.time[min(i_t, n - 1)]),
+                  "train_fraction": float((t_split - data.time[0]) / max(data.duration, 1e-12)),
+                  "selection": "model choice by two time-blocked folds inside the training block (fit on one "
+                               "part, validate on the other, forward and backward in time; the worse fold "
+                               "counts); the chosen and the base model refitted on the whole training block; "
+                               "the test block used once, for the reported errors and gain"},
+        "noise": {**{f"{k}_{_UNITS[k]}": v for k, v in sensor_raw.items()}, "T_in_N": sigma_in,
+                  **{f"floor_{k}_{_UNITS[k]}": v for k, v in noise.items()}},
+        "structure": {"base": _structure(base, noise), "extended": left},
+        "model": {"effects": chosen.ids, "values": model_values, "compliance": final[1]},
+        "base_model": {"effects": [], "values": final_base[0], "compliance": final_base[1]},
+        "settings": {"train_fraction": train_fraction, "validation_fraction": VALIDATION_FRACTION,
+                     "n_nodes": n_nodes, "target_rate_hz": target_rate,
                      "penalty_per_parameter": PENALTY, "structure_ratio": STRUCTURE_RATIO,
                      "wrap_shape": None if wrap_shape is None else [float(v) for v in wrap_shape]},
         "elapsed_s": _time.perf_counter() - t_start,

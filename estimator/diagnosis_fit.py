@@ -20,17 +20,22 @@ import math
 import numpy as np
 from scipy.optimize import least_squares
 
-from estimator.effects import K_MAX, Effect, Parameter, Series, predict
+from estimator.effects import K_MAX, ROUTE, Effect, Parameter, Series, predict
 from estimator.sheath import SheathModel
 from estimator.data import MeasuredData
 
 __all__ = ["prepare", "split_at_rest", "fit_model", "start_points", "heldout_mse", "raw_rmse", "noise_level",
-           "SIGNALS"]
+           "quantum", "SIGNALS"]
 
 _K = Parameter("K", "-", 0.0, K_MAX, 0.5, (), "friction exponent mu * total wrap angle")
 _SCALE = {"K": 0.1, "c_v": 10.0, "T0": 1.0, "K_rate": 1e-3, "beta": 1.0, "T_c": 1.0, "r_s": 0.1, "a": 0.5,
-          "b_T_in": 0.5, "tau": 0.01}
+          "x_p": 2e-5, "d_b": 2e-5, "r_1": 0.1, "r_2": 0.1,
+          "b_T_in": 0.5, "b_T_out": 0.5, "g_T_in": 0.02, "g_T_out": 0.02, "tau_T_in": 0.01, "tau_T_out": 0.01,
+          "d_T_in": 2e-3, "d_T_out": 2e-3, "b_x_in": 2e-5, "b_x_out": 2e-5, "tau_x_in": 0.01, "tau_x_out": 0.01}
 SIGNALS = ("T_out", "x_out")
+#: every FIT_STRIDE-th sample of the averaged series enters the least-squares residual (the model
+#: runs on all of them; the residual vector, and so the trust-region algebra, is that much shorter)
+FIT_STRIDE = 3
 
 
 def noise_level(a: np.ndarray) -> float:
@@ -39,6 +44,18 @@ def noise_level(a: np.ndarray) -> float:
         return 0.0
     d2 = a[2:] - 2.0 * a[1:-1] + a[:-2]
     return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6.0))
+
+
+def quantum(a: np.ndarray) -> float:
+    """The quantisation step of a recorded channel [unit of a]: the 5th percentile of the non-zero
+    sample-to-sample steps when the channel only takes multiples of one step (else 0)."""
+    d = np.abs(np.diff(np.asarray(a, dtype=float)))
+    d = d[d > 0]
+    if d.size < 20:
+        return 0.0
+    q = float(np.percentile(d, 5))
+    steps = d[: 2000] / q
+    return q if np.all(np.abs(steps - np.round(steps)) < 0.05) else 0.0
 
 
 def prepare(data: MeasuredData, *, n_nodes: int = 32, target_rate: float = 200.0,
@@ -102,8 +119,8 @@ def split_at_rest(s: Series, train_fraction: float) -> int:
     return k
 
 
-def _params(effects: list[Effect]) -> list[Parameter]:
-    return [_K] + [p for e in effects for p in e.parameters]
+def _params(effects: list[Effect], route: bool = False) -> list[Parameter]:
+    return [_K] + (list(ROUTE) if route else []) + [p for e in effects for p in e.parameters]
 
 
 def _residual_scales(s: Series) -> dict[str, float]:
@@ -116,26 +133,33 @@ def _residual_scales(s: Series) -> dict[str, float]:
 
 
 def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float]], *,
-              max_starts: int = 2) -> tuple[dict[str, float], float, float]:
+              max_starts: int = 2, route: bool = False, fixed: dict[str, float] | None = None,
+              mask: slice | None = None) -> tuple[dict[str, float], float, float]:
     """Least-squares fit of K and the parameters of ``effects`` on a training series.
 
     Every start (dict of parameter values, missing ones neutral) is scored, the best
     ``max_starts`` are refined by ``scipy.optimize.least_squares`` (trust-region reflective, within
     the parameters' bounds, in variables scaled to O(1)). L/EA is solved in closed form inside
-    every residual evaluation. Returns (values, compliance [m/N], cost).
+    every residual evaluation. ``route``: fit the route shares r_1, r_2 too (estimator.effects.ROUTE);
+    ``fixed``: values held (e.g. the base model's route); ``mask``: the samples of ``train`` whose
+    residuals count (default all; the model always runs from the first sample). Returns (values,
+    compliance [m/N], cost).
     """
-    params = _params(effects)
+    m = slice(None) if mask is None else mask
+    params = _params(effects, route)
+    fixed = dict(fixed or {})
     scale = np.array([_SCALE[p.name] for p in params])
     lo = np.array([p.lower for p in params]) / scale
     hi = np.array([p.upper for p in params]) / scale
     norm = _residual_scales(train)
+    ys = {k: getattr(train, k)[m][::FIT_STRIDE] for k in norm}
 
     def values(z):
-        return {p.name: float(v) for p, v in zip(params, z * scale)}
+        return {**fixed, **{p.name: float(v) for p, v in zip(params, z * scale)}}
 
     def residual(z):
-        pr = predict(effects, values(z), train)
-        return np.concatenate([(getattr(pr, k) - getattr(train, k)) / v for k, v in norm.items()])
+        pr = predict(effects, values(z), train, fit_mask=m)
+        return np.concatenate([(getattr(pr, k)[m][::FIT_STRIDE] - ys[k]) / v for k, v in norm.items()])
 
     z_starts = [np.clip(np.array([st.get(p.name, p.neutral) for p in params]) / scale, lo, hi) for st in starts]
     ranked = sorted(z_starts, key=lambda z: float(np.sum(residual(z) ** 2)))
@@ -146,7 +170,7 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
         if best is None or sol.cost < best.cost:
             best = sol
     vals = values(best.x)
-    c = predict(effects, vals, train).compliance
+    c = predict(effects, vals, train, fit_mask=m).compliance
     return vals, c, float(best.cost)
 
 

@@ -16,11 +16,12 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from estimator.effects_kernels import run_extended
+from estimator.effects_kernels import backlash_play, run_extended, travel_lag
 
 __all__ = ["Parameter", "Effect", "VelocityFriction", "Pretension", "CurvatureDrift", "TendonStiffening", "Stiction",
-           "FrictionOffset", "SensorOffset", "SensorDelay", "Series", "Prediction", "CATALOGUE", "EFFECT_IDS", "NONE", "UNKNOWN",
-           "effect", "predict", "neutral_values", "K_MAX"]
+           "FrictionOffset", "Presliding", "DistalBacklash", "SensorEffect", "Series", "Prediction", "CATALOGUE",
+           "EFFECT_IDS", "ALIASES", "EQUIVALENT", "NONE", "UNKNOWN", "effect", "predict", "neutral_values",
+           "route_shape", "ROUTE", "K_MAX"]
 
 NONE = "none"          # the base model explains the data within the noise
 UNKNOWN = "unknown"    # structure left in the residual that no extension explains
@@ -101,6 +102,8 @@ class Effect:
     parameters: tuple[Parameter, ...] = ()
     primary: str = "T_out"
     knobs: dict[str, str] = {}
+    requires: tuple[str, ...] = ()      # distal signals the recording must have for the effect to show
+    channel: str = ""                   # the sensor channel (sensor effects only)
 
     def correct_input(self, values: dict[str, float], time: np.ndarray, T_in: np.ndarray) -> np.ndarray | None:
         """The corrected proximal tension [N], shape (n,), from ``T_in`` [N] sampled at ``time`` [s];
@@ -189,41 +192,109 @@ class FrictionOffset(Effect):
     knobs = {"a": "a"}
 
 
-class SensorOffset(Effect):
-    id = "sensor_offset"
-    cause = "zero offset of the proximal load cell (tare, drift of the bridge)"
-    signature = "T_out != 0 at T_in = 0; residual of one sign on pull and release, ratio e^-2K"
-    extension = "input correction T_in - b_T_in"
+class Presliding(Effect):
+    id = "presliding"
+    cause = "pre-sliding: friction builds up over a small travel after a reversal (liner/asperity compliance, Dahl)"
+    signature = "rounded loop corners: T_out bends gradually after a reversal instead of staying flat; relaxes in dwells"
+    extension = ("tension-scaled Dahl element: the friction T_in - T_out follows the memory model's with a "
+                 "first-order lag in proximal travel, dF/dx = (F_memory - F) / x_p")
+    literature = "E2"
+    parameters = (Parameter("x_p", "m", 0.0, 1e-3, 0.0, (40e-6, 120e-6), "pre-sliding travel F_c / sigma"),)
+
+
+class DistalBacklash(Effect):
+    id = "distal_backlash"
+    cause = "play between the tendon's distal end and the distal joint/load (pulley, gear or clevis clearance)"
+    signature = "x_out stands still while the tendon end crosses a gap after each reversal; x_out vs x_in dead zone"
+    extension = "x_out = backlash operator of the tendon end, total width d_b (the joint stays until the gap closes)"
+    literature = "E12"
+    parameters = (Parameter("d_b", "m", 0.0, 2e-3, 0.0, (60e-6, 200e-6), "total dead-zone width"),)
+    primary = "x_out"
+    requires = ("x_out",)
+
+
+# per channel: kind -> (parameter prefix, unit of the parameter by channel, bounds, starts, meaning)
+_SENSOR = {
+    "offset": ("b", {"T": ("N", -10.0, 10.0, (-0.5, 0.5)), "x": ("m", -5e-3, 5e-3, (-5e-5, 5e-5))},
+               "zero offset: reading = true + b"),
+    "gain": ("g", {"T": ("-", -0.5, 0.5, (-0.05, 0.05))}, "scale error: reading = (1 + g) true"),
+    "lag": ("tau", {"T": ("s", 0.0, 0.2, (0.01, 0.04)), "x": ("s", 0.0, 0.2, (0.01, 0.04))},
+            "time delay of the channel: reading(t) = true(t - tau)"),
+    "drift": ("d", {"T": ("N/s", -0.1, 0.1, (-0.005, 0.005))}, "linear zero drift: reading = true + d (t - t_0)"),
+}
+_CAUSE = {"offset": "zero offset of the {what} (tare, encoder zeroed off the rest)",
+          "gain": "scale error of the {what} (calibration factor)",
+          "lag": "the {what} channel lags the others (filter, bus or sampling skew)",
+          "drift": "slow zero drift of the {what} (thermal drift of the bridge)"}
+_SIGN = {"offset": "a constant residual of one sign on pull and release; a non-zero reading at the initial rest",
+         "gain": "the pull and release slopes scaled together (their product is not e^0 = 1)",
+         "lag": "residual proportional to the rate of the channel; loop area grows with frequency",
+         "drift": "residual growing linearly with time on both branches"}
+_WHAT = {"T_in": "proximal load cell", "T_out": "distal load cell", "x_in": "proximal encoder",
+         "x_out": "distal position sensor"}
+
+
+class SensorEffect(Effect):
+    """A sensor effect on one channel (E14): ``id`` = "sensor_<kind>:<channel>", e.g. "sensor_lag:T_out".
+
+    Proximal channels are corrected before the model runs (the model is driven by the true T_in and
+    x_in); distal channels are applied to the model's output (what the distal sensor would read).
+    """
+
     literature = "E14"
-    parameters = (Parameter("b_T_in", "N", -10.0, 10.0, 0.0, (-0.5, 0.5), "T_in,measured = T_in + b_T_in"),)
 
-    def correct_input(self, values, time, T_in):
-        # T_in,true = T_in,measured - b
-        return T_in - values["b_T_in"]
+    def __init__(self, kind: str, channel: str):
+        prefix, units, meaning = _SENSOR[kind]
+        unit, lo, hi, starts = units[channel[0]]
+        self.kind, self.channel = kind, channel
+        self.id = f"sensor_{kind}:{channel}"
+        self.cause = _CAUSE[kind].format(what=_WHAT[channel])
+        self.signature = _SIGN[kind]
+        self.extension = (f"{'input correction of' if channel.endswith('_in') else 'reading model of'} {channel}: "
+                          f"{meaning}")
+        self.pname = f"{prefix}_{channel}"
+        self.parameters = (Parameter(self.pname, unit, lo, hi, 0.0, starts, f"{channel} {meaning}"),)
+        self.primary = "x_out" if channel[0] == "x" else "T_out"
+        self.requires = ("x_out",) if channel[0] == "x" else ("T_out",) if channel == "T_out" else ()
 
 
-class SensorDelay(Effect):
-    id = "sensor_delay"
-    cause = "the load-cell channel lags the others (filter, bus or sampling skew)"
-    signature = "cross-correlation lag between T_in and T_out in slip; loop area grows with frequency"
-    extension = "input correction T_in(t + tau) (linear interpolation)"
-    literature = "E14"
-    parameters = (Parameter("tau", "s", -0.2, 0.2, 0.0, (0.01, 0.04), "T_in,measured(t) = T_in(t - tau)"),)
-
-    def correct_input(self, values, time, T_in):
-        # T_in,true(t) = T_in,measured(t + tau): the load-cell channel lags by tau
-        return np.interp(time + values["tau"], time, T_in)
+def _sensor_ids() -> list[tuple[str, str]]:
+    return [("offset", "T_in"), ("offset", "T_out"), ("gain", "T_in"), ("gain", "T_out"), ("lag", "T_in"),
+            ("lag", "T_out"), ("drift", "T_in"), ("drift", "T_out"), ("offset", "x_in"), ("offset", "x_out"),
+            ("lag", "x_in"), ("lag", "x_out")]
 
 
 _EFFECTS: tuple[Effect, ...] = (VelocityFriction(), Pretension(), CurvatureDrift(), TendonStiffening(), Stiction(),
-                                FrictionOffset(), SensorOffset(), SensorDelay())
+                                FrictionOffset(), Presliding(), DistalBacklash(),
+                                *(SensorEffect(k, c) for k, c in _sensor_ids()))
 
 CATALOGUE: dict[str, Effect] = {e.id: e for e in _EFFECTS}
 EFFECT_IDS: tuple[str, ...] = tuple(CATALOGUE)
+#: former ids of the proximal load-cell effects
+ALIASES = {"sensor_offset": "sensor_offset:T_in", "sensor_delay": "sensor_lag:T_in"}
+#: effects that change the model's outputs identically (not separable from T_in, x_in, T_out, x_out):
+#: a scale on T_in is a scale on T_out (the capstan memory is homogeneous of degree 1 and L/EA absorbs
+#: it in x_out); an offset on x_in is an offset of the other sign on x_out (only x_in - x_out enters)
+EQUIVALENT = {"sensor_gain:T_in": ("sensor_gain:T_out",), "sensor_gain:T_out": ("sensor_gain:T_in",),
+              "sensor_offset:x_in": ("sensor_offset:x_out",), "sensor_offset:x_out": ("sensor_offset:x_in",)}
+
+# ---- the route: where along the sheath the curvature sits (the base model's shape parameters) -----
+#: shape parameters of the base model: the wrap angle is spread over three equal thirds of the sheath
+#: in the shares q1 = r_1, q2 = (1 - r_1) r_2, q3 = (1 - r_1)(1 - r_2); r = (1/3, 1/2) is uniform (E7)
+ROUTE = (Parameter("r_1", "-", 0.0, 1.0, 1.0 / 3.0, (1.0 / 3.0,), "share of the wrap angle in the proximal third"),
+         Parameter("r_2", "-", 0.0, 1.0, 0.5, (0.5,), "share of the rest in the middle third"))
+
+
+def route_shape(n1: int, r_1: float, r_2: float) -> np.ndarray:
+    """Normalised wrap angle u(s) [-], shape (n1,), at n1 nodes equally spaced in arc length: piecewise
+    linear over three equal thirds holding the shares q1, q2, q3 of the total angle (see :data:`ROUTE`)."""
+    q1 = r_1
+    q2 = (1.0 - r_1) * r_2
+    return np.interp(np.linspace(0.0, 1.0, n1), [0.0, 1 / 3, 2 / 3, 1.0], [0.0, q1, q1 + q2, 1.0])
 
 
 def effect(name: str) -> Effect:
-    """The catalogue entry ``name``.
+    """The catalogue entry ``name`` (former ids of :data:`ALIASES` accepted).
 
     Raises
     ------
@@ -231,26 +302,36 @@ def effect(name: str) -> Effect:
         Not a catalogue identifier (the message lists them).
     """
     try:
-        return CATALOGUE[name]
+        return CATALOGUE[ALIASES.get(name, name)]
     except KeyError:
         raise KeyError(f"no effect {name!r} in the catalogue; known: {', '.join(EFFECT_IDS)}") from None
+
+
+def _shift(time: np.ndarray, y: np.ndarray, tau: float) -> np.ndarray:
+    """y(t - tau) by linear interpolation (held at the ends)."""
+    return y if tau == 0.0 else np.interp(time - tau, time, y)
 
 
 def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series, *,
             compliance: float | None = None, fit_mask: slice | np.ndarray | None = None) -> Prediction:
     """Outputs of the base model extended by ``effects`` over a series.
 
+    Order: proximal sensor corrections (T_in, x_in: the model runs on the true inputs), the kernel
+    (:func:`estimator.effects_kernels.run_extended`), pre-sliding on T_out and the distal backlash on
+    x_out, then the distal sensors' reading models (T_out, x_out).
+
     Parameters
     ----------
     effects : iterable of Effect or id
         The extensions switched on (none: the base model).
     values : dict
-        ``K`` [-] and every parameter of the listed effects (names as in their Parameter lists);
+        ``K`` [-], optionally the route shares ``r_1``, ``r_2`` (:data:`ROUTE`; default the series'
+        own node shape) and every parameter of the listed effects (names as in their Parameter lists);
         missing ones take their neutral value.
     s : Series
     compliance : float, optional
         L/EA [m/N]. Without it and with a measured x_out it is fitted by linear least squares on
-        ``fit_mask`` (default all samples): x_in - x_out = (L/EA) E1.
+        ``fit_mask`` (default all samples): x_in - x_out = (L/EA) E1 through the linear reading models.
 
     Returns
     -------
@@ -263,26 +344,74 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
     """
     fx: Sequence[Effect] = [e if isinstance(e, Effect) else effect(e) for e in effects]
     knobs = {"K": float(values["K"])}
-    T_in = s.T_in
+    t, T_in, x_in, vel = s.time, s.T_in, s.x_in, s.velocity
+    t0 = float(t[0])
+    sensors: dict[str, float] = {}
+    x_p = d_b = 0.0
     for e in fx:
         own = {p.name: float(values.get(p.name, p.neutral)) for p in e.parameters}
         knobs.update({e.knobs[k]: v for k, v in own.items() if k in e.knobs})
-        corrected = e.correct_input(own, s.time, T_in)
-        if corrected is not None:
-            T_in = corrected
-    T_out, E1 = run_extended(T_in, s.velocity, s.time, s.u, s.w, T_min=s.T_min, sigma=s.sigma_T_in, **knobs)
+        if isinstance(e, SensorEffect):
+            sensors[e.id] = own[e.pname]
+        elif isinstance(e, Presliding):
+            x_p = own["x_p"]
+        elif isinstance(e, DistalBacklash):
+            d_b = own["d_b"]
+    g = sensors.get
+    # proximal channels: the true input from the reading
+    if g("sensor_offset:T_in"):
+        T_in = T_in - g("sensor_offset:T_in")
+    if g("sensor_gain:T_in"):
+        T_in = T_in / (1.0 + g("sensor_gain:T_in"))
+    if g("sensor_drift:T_in"):
+        T_in = T_in - g("sensor_drift:T_in") * (t - t0)
+    if g("sensor_lag:T_in"):
+        T_in = _shift(t, T_in, -g("sensor_lag:T_in"))
+    if g("sensor_lag:x_in"):
+        x_in, vel = _shift(t, x_in, -g("sensor_lag:x_in")), _shift(t, vel, -g("sensor_lag:x_in"))
+    if g("sensor_offset:x_in"):
+        x_in = x_in - g("sensor_offset:x_in")
+    u = s.u if "r_1" not in values else route_shape(s.u.shape[0], values["r_1"], values.get("r_2", 0.5))
+    T_out, E1 = run_extended(T_in, vel, t, u, s.w, T_min=s.T_min, sigma=s.sigma_T_in, **knobs)
+    if x_p > 0.0:
+        T_out = T_in - travel_lag(T_in - T_out, x_in, x_p)
+    # distal channels: the reading from the true output (offset and lag are linear in L/EA)
+    if g("sensor_gain:T_out"):
+        T_out = T_out * (1.0 + g("sensor_gain:T_out"))
+    if g("sensor_offset:T_out"):
+        T_out = T_out + g("sensor_offset:T_out")
+    if g("sensor_drift:T_out"):
+        T_out = T_out + g("sensor_drift:T_out") * (t - t0)
+    T_out = _shift(t, T_out, g("sensor_lag:T_out", 0.0))
+    tau_x = g("sensor_lag:x_out", 0.0)
+    A = _shift(t, x_in, tau_x) + g("sensor_offset:x_out", 0.0)
+    B = _shift(t, E1, tau_x)
     c = compliance
     if c is None:
         c = 0.0
         if s.x_out is not None:
             m = slice(None) if fit_mask is None else fit_mask
-            a, b = E1[m], (s.x_in - s.x_out)[m]
+            a, b = B[m], (A - s.x_out)[m]
             den = float(a @ a)
             c = max(float(a @ b) / den, 0.0) if den > 0 else 0.0
-    return Prediction(T_out=T_out, x_out=s.x_in - c * E1, compliance=float(c))
+    x_out = A - c * B
+    if d_b > 0.0:       # the joint through its play; L/EA refined on the samples in contact
+        for _ in range(3 if compliance is None and s.x_out is not None else 1):
+            x_end = x_in - c * E1
+            delta = backlash_play(x_end, d_b) - x_end                 # +-d_b/2 in contact
+            x_out = _shift(t, x_end + delta, tau_x) + g("sensor_offset:x_out", 0.0)
+            if compliance is None and s.x_out is not None:
+                on = np.abs(np.abs(delta) - 0.5 * d_b) < 1e-3 * d_b
+                if fit_mask is not None:
+                    on &= np.isin(np.arange(on.size), np.arange(on.size)[fit_mask])
+                a = B[on]
+                den = float(a @ a)
+                if den > 0:
+                    c = max(float(a @ (A + _shift(t, delta, tau_x) - s.x_out)[on]) / den, 0.0)
+                    x_out = _shift(t, x_in - c * E1 + delta, tau_x) + g("sensor_offset:x_out", 0.0)
+    return Prediction(T_out=T_out, x_out=x_out, compliance=float(c))
 
 
 def neutral_values(effects: Iterable[Effect]) -> dict[str, float]:
     """Neutral value of every parameter of ``effects`` (the base model)."""
     return {p.name: p.neutral for e in effects for p in e.parameters}
-

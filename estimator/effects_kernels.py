@@ -38,7 +38,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["run_extended", "stiffening_strain", "V_STOP", "BREAK_MARGIN"]
+__all__ = ["run_extended", "stiffening_strain", "travel_lag", "backlash_play", "V_STOP", "BREAK_MARGIN"]
 
 V_STOP = 2e-4        # proximal speed below which a slide ends (the tendon sticks) [m/s]
 BREAK_MARGIN = 0.35  # share of the kinetic-static gap within which a turn of T_in counts as breakaway [-]
@@ -147,6 +147,46 @@ def _kernel(T_in, v, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, sigma, 
                         t_b = tk        # breakaway from static friction
         T_out[k] = Y[m1 - 1] - a
         E1[k] = E - E0
+
+
+@njit(cache=True, nogil=True)
+def _travel_lag(F, x, x_p, out):  # pragma: no cover - compiled
+    y = F[0]
+    out[0] = y
+    for k in range(1, F.shape[0]):
+        y = F[k] + (y - F[k]) * math.exp(-abs(x[k] - x[k - 1]) / x_p)
+        out[k] = y
+
+
+def travel_lag(F: np.ndarray, x: np.ndarray, x_p: float) -> np.ndarray:
+    """Pre-sliding (E2, a Dahl element): F lagged in travel, dF_lag/d|x| = (F - F_lag) / x_p.
+
+    F [N] the friction T_in - T_out of the memory model, x [m] the proximal position, shape (n,);
+    x_p [m] > 0 the pre-sliding travel. Rate-independent: the friction reverses over about x_p of
+    travel after a reversal instead of at once (rounded loop corners). Returns shape (n,)."""
+    out = np.empty(F.shape[0])
+    _travel_lag(np.ascontiguousarray(F, dtype=np.float64), np.ascontiguousarray(x, dtype=np.float64), float(x_p),
+                out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _play(x, half, out):  # pragma: no cover - compiled
+    p = x[0]
+    for k in range(x.shape[0]):
+        if x[k] - p > half:
+            p = x[k] - half
+        elif p - x[k] > half:
+            p = x[k] + half
+        out[k] = p
+
+
+def backlash_play(x: np.ndarray, width: float) -> np.ndarray:
+    """Backlash (play) operator (E12): the joint position [m], shape (n,), that follows the tendon end
+    ``x`` [m] only once it has crossed a gap of total ``width`` [m] >= 0; starts at x[0] (mid-gap)."""
+    out = np.empty(x.shape[0])
+    _play(np.ascontiguousarray(x, dtype=np.float64), 0.5 * float(width), out)
+    return out
 
 
 def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np.ndarray, w: np.ndarray, *,

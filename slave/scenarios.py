@@ -23,17 +23,24 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from estimator.effects import EFFECT_IDS as CATALOGUE_IDS
+from estimator.effects_kernels import backlash_play, travel_lag
 from estimator.sheath import SheathGeometry
 from slave.simulated import EFFECT_IDS, SimulatedRig
 from teleop import config as C
 from teleop.recording import MeasuredData
 
-__all__ = ["EFFECT_IDS", "UNCATALOGUED", "Recording", "realistic_range", "effects_config", "protocol",
+__all__ = ["EFFECT_IDS", "CATALOGUE_IDS", "RIG_SWITCH", "UNCATALOGUED", "Recording", "realistic_range", "effects_config", "protocol",
            "record"]
 
 #: Effects outside the catalogue, for testing the answer ``unknown``: a slow wander of the distal
 #: load cell's zero (thermal drift of its bridge), smooth on a ~10 s scale.
-UNCATALOGUED = ("load_cell_drift",)
+UNCATALOGUED = ("load_cell_drift", "load_cell_wander")
+#: catalogue id -> the rig switch that simulates it (the others are applied to the recorded signals:
+#: the sensor effects on their channel, pre-sliding on T_out, the distal backlash on x_out)
+RIG_SWITCH = {e: e for e in EFFECT_IDS if not e.startswith("sensor")}
+RIG_SWITCH.update({"sensor_offset:T_in": "sensor_offset", "sensor_lag:T_in": "sensor_delay",
+                   "sensor_offset": "sensor_offset", "sensor_delay": "sensor_delay"})
 
 # realistic magnitude of each effect: parameter -> (low, high) in its SI unit (docs/diagnosis.md). The
 # one table both simulators draw from (slave/scenarios.py and slave/lumped_scenarios.py). Offsets,
@@ -107,6 +114,10 @@ def effects_config(effect: str | None, level: float, K: float, duration: float,
         return fx, {}
     r = {k: lo + level * (hi - lo) for k, (lo, hi) in realistic_range(effect).items()}
     sign = 1.0 if rng.random() < 0.5 else -1.0
+    if effect not in RIG_SWITCH:       # applied to the recorded signals by record()
+        key = next(iter(r))
+        return fx, {key: (sign if key in ("offset", "gain", "rate") else 1.0) * r[key]}
+    effect = RIG_SWITCH[effect]
     if effect == "velocity_friction":
         sub, p = C.VelocityFrictionConfig(True, r["viscous"]), {"viscous": r["viscous"]}
     elif effect == "pretension":
@@ -234,9 +245,10 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
         Unknown effect, ``level`` outside [0, 1], too short or too slowly sampled a recording.
     """
     hidden = () if effect in (None, "none") else (effect,) if isinstance(effect, str) else tuple(effect)
+    known = CATALOGUE_IDS + EFFECT_IDS + UNCATALOGUED
     for e in hidden:
-        if e not in EFFECT_IDS and e not in UNCATALOGUED:
-            raise ValueError(f"unknown effect {e!r}; expected None, 'none' or one of {EFFECT_IDS + UNCATALOGUED}")
+        if e not in known:
+            raise ValueError(f"unknown effect {e!r}; expected None, 'none' or one of {known}")
     if level is not None and not 0.0 <= level <= 1.0:
         raise ValueError(f"level must be in [0, 1], got {level!r}")
     if not (duration >= 5.0 and rate_hz >= 100.0):
@@ -255,8 +267,8 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     fx, params = C.EffectsConfig(), {}
     for e in hidden:
         one, p = effects_config(e, u, K, duration, rng_fx)
-        if e in EFFECT_IDS:
-            fx = replace(fx, **{e: getattr(one, e)})
+        if e in RIG_SWITCH:
+            fx = replace(fx, **{RIG_SWITCH[e]: getattr(one, RIG_SWITCH[e])})
         params.update(p)
     rig_cfg = C.RigConfig(n_elements=100, rate_hz=rate_hz, effects=fx,
                           load=C.LoadConfig(joint_stiffness=100.0, joint_limit=0.05, tissue_stiffness=k_tissue,
@@ -276,17 +288,20 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     for k, x in enumerate(cmd):
         s = rig.step(float(x), dt)
         out[k] = (s.x_in, s.T_in, s.truth.x_out, s.truth.T_out, s.truth.x_in)
-    T_out = out[:, 3] + noise_out * rng_noise.standard_normal(cmd.size)
-    x_out = q_x * np.round((out[:, 2] - x_out0 + noise_x * rng_noise.standard_normal(cmd.size)) / q_x)
-    if "load_cell_drift" in hidden:
-        amp = realistic_range("load_cell_drift")["amplitude"]
+    time = np.arange(1, cmd.size + 1) * dt
+    T_in, x_in, T_true, x_true = out[:, 1], out[:, 0] - enc0, out[:, 3], out[:, 2] - x_out0
+    T_true, x_true = _signal_effects(hidden, params, time, out[:, 1], out[:, 4] - x_in0, T_true, x_true)
+    T_out = T_true + noise_out * rng_noise.standard_normal(cmd.size)
+    x_out = q_x * np.round((x_true + noise_x * rng_noise.standard_normal(cmd.size)) / q_x)
+    T_in, x_in, T_out, x_out = _sensor_effects(hidden, params, time, T_in, x_in, T_out, x_out)
+    if "load_cell_drift" in hidden or "load_cell_wander" in hidden:
+        amp = realistic_range("load_cell_wander")["amplitude"]
         amplitude = amp[0] + u * (amp[1] - amp[0])
         knots = np.arange(0.0, duration + 20.0, 10.0)
         wander = np.interp(np.arange(cmd.size) * dt, knots, rng_fx.uniform(-1.0, 1.0, knots.size))
         T_out = T_out + amplitude * wander / max(np.max(np.abs(wander)), 1e-9)
         params["amplitude"] = amplitude
-    data = MeasuredData(time=np.arange(1, cmd.size + 1) * dt, x_in=out[:, 0] - enc0, T_in=out[:, 1],
-                        x_out=x_out, T_out=T_out,
+    data = MeasuredData(time=time, x_in=x_in, T_in=T_in, x_out=x_out, T_out=T_out,
                         metadata={"source": "slave/scenarios.py simulated bench recording",
                                   "units": "time=s, x_in=m, T_in=N, x_out=m, T_out=N"},
                         source=f"<scenario seed {seed}>")
@@ -295,3 +310,33 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
              "noise_x_out": noise_x,
              "signals": {"T_out": out[:, 3], "x_out": out[:, 2] - x_out0, "x_in": out[:, 4] - x_in0}}
     return Recording(data=data, truth=truth)
+
+
+def _signal_effects(hidden, params, time, T_in, x_in, T_out, x_out):
+    """Pre-sliding on T_out (a Dahl lag of the friction in proximal travel) and the distal backlash on x_out."""
+    if "presliding" in hidden:
+        T_out = T_in - travel_lag(T_in - T_out, x_in, params["distance"])
+    if "distal_backlash" in hidden:
+        x_out = backlash_play(x_out, params["width"])
+    return T_out, x_out
+
+
+def _sensor_effects(hidden, params, time, T_in, x_in, T_out, x_out):
+    """The sensor effects on the recorded channels other than the rig's load cell (offset, gain, lag
+    [s], drift [unit/s]; sign conventions of estimator.effects.SensorEffect)."""
+    chans = {"T_in": T_in, "x_in": x_in, "T_out": T_out, "x_out": x_out}
+    for e in hidden:
+        if not e.startswith("sensor_") or ":" not in e or e in RIG_SWITCH:
+            continue
+        kind, ch = e[7:].split(":")
+        y = chans[ch]
+        if kind == "offset":
+            y = y + params["offset"]
+        elif kind == "gain":
+            y = y * (1.0 + params["gain"])
+        elif kind == "drift":
+            y = y + params["rate"] * time
+        elif kind == "lag":
+            y = np.interp(time - params["delay"], time, y)
+        chans[ch] = y
+    return chans["T_in"], chans["x_in"], chans["T_out"], chans["x_out"]

@@ -39,7 +39,7 @@ from teleop.errors import ConfigError, DataError
 from teleop.kaist import KaistRecording, cycles, is_kaist_file, load_all
 from teleop.kaist_report import write_kaist_figures, write_kaist_report
 from teleop.recording import MeasuredData, read_measured_csv
-from teleop.report import format_summary, write_report
+from teleop.report import format_summary, split_text, write_report
 
 __all__ = ["add_arguments", "main_analyze", "diagnose_file", "format_diagnosis", "analyze_kaist", "format_kaist",
            "write_kaist_figures", "PROGRESS_SAMPLES"]
@@ -148,12 +148,10 @@ def diagnose_file(path: str | Path, train_fraction: float = 0.6,
 def format_diagnosis(result: dict) -> str:
     """The lines printed for one CSV: :func:`teleop.report.format_summary`, then the split and the
     fitted parameters of the extended model (SI units)."""
-    sp = result["split"]
     pars = ", ".join(f"{k} = {p['value']:.4g}" + ("" if p["unit"] in ("", "-") else f" {p['unit']}")
                      for k, p in result["parameters"].items())
-    return "\n".join([f"{result['file']}: {result['n_samples']} samples, {result['duration_s']:.1f} s; fitted on "
-                      f"t < {sp['time_s']:.2f} s, held out: the {sp['n_heldout']} samples after it "
-                      f"({result['elapsed_s']:.1f} s)",
+    return "\n".join([f"{result['file']}: {result['n_samples']} samples, {result['duration_s']:.1f} s "
+                      f"(diagnosed in {result['elapsed_s']:.1f} s)", split_text(result),
                       format_summary(result), f"parameters: {pars}"])
 
 

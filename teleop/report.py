@@ -25,7 +25,7 @@ from estimator.effects import CATALOGUE
 from estimator.phase import Phase
 from teleop.recording import MeasuredData
 
-__all__ = ["write_report", "format_summary"]
+__all__ = ["write_report", "format_summary", "split_text"]
 
 _MAX_POINTS = 20000
 _SIG = (("T_out", "N", 1.0, "N"), ("x_out", "m", 1e6, "um"))   # name, SI unit, plot scale, plot unit
@@ -112,17 +112,15 @@ def _fig_loops(data, pred, held, path) -> str:
 def _fig_candidates(result, path) -> str:
     c = result["candidates"]
     ids = sorted(c, key=lambda k: c[k]["score"])
-    fig = Figure(figsize=(10, 3.4), layout="constrained")
-    ax = fig.add_subplot(1, 2, 1)
+    fig = Figure(figsize=(10, 0.9 + 0.22 * len(ids)), layout="constrained")
+    ax = fig.add_subplot(1, 1, 1)
     ax.barh(ids, [c[k]["score"] for k in ids], color=["C2" if c[k]["accepted"] else "C0" for k in ids])
+    ax.barh(ids, [c[k]["penalised_score"] - c[k]["score"] for k in ids], left=[c[k]["score"] for k in ids],
+            color="0.8", label="price of the parameters")
     ax.axvline(1.0, color="k", lw=1)
-    ax.set_xlabel("held-out score S (base = 1)")
+    ax.set_xlabel("validation score S (base = 1; training block only), accepted below 1 with the price")
     ax.set_xscale("log")
-    ax = fig.add_subplot(1, 2, 2)
-    ax.barh(ids, [max(c[k]["gain"] or 0.0, -1.0) for k in ids])
-    ax.axvline(0.3, color="k", ls="--", lw=1)
-    ax.set_xlabel("held-out gain on the primary signal")
-    ax.set_yticks([])
+    ax.legend(fontsize=8)
     return _save(fig, path)
 
 
@@ -134,11 +132,25 @@ def _fmt(v, unit: str) -> str:
     return f"{v:.4g} {unit}"
 
 
+def split_text(result: dict) -> str:
+    """One sentence on which samples were used for what (fit/validation folds, training, test)."""
+    sp = result["split"]
+    tr, te = sp["train"], sp["test"]
+    dur = te["time_s"][1] - te["time_s"][0]
+    f0, f1 = sp["folds"]
+    return (f"Model choice on the training block (samples {tr['index'][0]}-{tr['index'][1] - 1}, t = "
+            f"{tr['time_s'][0]:.2f}-{tr['time_s'][1]:.2f} s, {sp['train_fraction']:.0%} of the recording) by two "
+            f"time-blocked folds (fit t < {f0['fit']['time_s'][1]:.1f} s, validate after; fit t > "
+            f"{f1['fit']['time_s'][0]:.1f} s, validate before); held out for the reported errors: the "
+            f"{te['n_samples']} samples from t = {te['time_s'][0]:.2f} s ({dur:.1f} s), used once.")
+
+
 def format_summary(result: dict) -> str:
     """A few plain-text lines: cause, gain, held-out errors (for a terminal)."""
     b, e = result["base"], result["extended"]
     more = f"  (all: {', '.join(result['causes'])})" if len(result["causes"]) > 1 else ""
-    lines = [f"cause: {result['cause']}{more}",
+    eq = f"  (or equivalently: {', '.join(result['equivalent'])})" if result.get("equivalent") else ""
+    lines = [f"cause: {result['cause']}{more}{eq}",
              f"held-out gain on {result['primary_signal']}: {result['gain']:.2f}"]
     for name, unit in (("T_out", "N"), ("x_out", "m")):
         key = f"rmse_{name}_{unit}"
@@ -189,19 +201,19 @@ def write_report(result: dict, data: MeasuredData, out_dir: str | Path) -> Path:
                "that no extension of the catalogue explains.", ""]
     md += ["## Fitted parameters", "", "| parameter | value | unit | from |", "|---|---|---|---|"]
     md += [f"| {k} | {p['value']:.6g} | {p['unit']} | {p['effect']} |" for k, p in result["parameters"].items()]
-    md += ["", "## Candidates (held-out block)", "",
-           "| extension | score S | gain | gain T_out | gain x_out | rmse T_out [N] | rmse x_out [um] | accepted |",
-           "|---|---|---|---|---|---|---|---|"]
+    md += ["", "## Candidates (model choice on the training block)", "",
+           "| extension | score S | S + price | validation rmse T_out [N] | validation rmse x_out [um] | accepted |",
+           "|---|---|---|---|---|---|"]
     g = (lambda v: "-" if v is None else f"{v:.3f}")  # noqa: E731
     for k, c in sorted(result["candidates"].items(), key=lambda kv: kv[1]["score"]):
-        x = c["rmse_x_out_m"]
-        md.append(f"| {k} | {c['score']:.3f} | {g(c['gain'])} | {g(c['gain_T_out'])} | {g(c['gain_x_out'])} | "
-                  f"{g(c['rmse_T_out_N'])} | {'-' if x is None else f'{x * 1e6:.2f}'} | "
-                  f"{'yes' if c['accepted'] else ''} |")
-    sp = result["split"]
-    md += ["", f"Training block: up to t = {t_split:.2f} s ({sp['train_fraction']:.0%} of the recording, at a rest); "
-           f"held out: the {sp['n_heldout']} samples after it. Score S: held-out (rmse / noise floor)^2 summed over "
-           "the measured distal signals, relative to the base model; an extension is accepted when S plus "
+        x = c["validation_rmse_x_out_m"]
+        md.append(f"| {k} | {c['score']:.3f} | {c['penalised_score']:.3f} | {g(c['validation_rmse_T_out_N'])} | "
+                  f"{'-' if x is None else f'{x * 1e6:.2f}'} | {'yes' if c['accepted'] else ''} |")
+    if result.get("equivalent"):
+        md += ["", f"Equivalent explanations (the same outputs, not separable from these signals): "
+               f"{', '.join(result['equivalent'])}."]
+    md += ["", split_text(result), "Score S: validation (rmse / noise floor)^2 summed over the measured distal "
+           "signals, relative to the base model, the worse of the two folds; an extension is accepted when S plus "
            f"{result['settings']['penalty_per_parameter']} per parameter stays below 1.", ""]
     for title, name in figs.items():
         md += [f"## {title.capitalize()}", "", f"![{title}]({name})", ""]

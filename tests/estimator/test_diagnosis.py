@@ -1,8 +1,12 @@
-"""Diagnosis: recordings of the simulated rig with one effect hidden at a seeded random magnitude in
-its realistic range must be diagnosed with the right identifier and a held-out gain >= 0.3; clean
-recordings must give ``none``; an effect outside the catalogue must give ``unknown``.
+"""Diagnosis: recordings with one effect hidden at a seeded random magnitude in its realistic range
+must be diagnosed with the right identifier (naming the channel for the sensor effects), a held-out
+gain >= 0.3 and the magnitude within 25 %; clean recordings must give ``none``; an effect outside
+the catalogue must give ``unknown``. Two simulators: the project's rig (slave.scenarios, every
+catalogue id) and the independent lumped-mass simulator (slave.lumped_scenarios, a subset; the
+benchmark runs the full confusion matrix on both).
 
-Recordings are 60 s at 500 Hz (the benchmark runs the full confusion matrix at 1 kHz).
+Recordings are 45-60 s at 500 Hz here (the benchmark uses 90 s at 1 kHz and the lumped simulator's own
+rates); seeds are development seeds (the benchmark's final seeds are never used in tests).
 """
 import json
 from dataclasses import replace
@@ -12,15 +16,38 @@ import pytest
 
 from estimator.diagnosis import diagnose
 from estimator.diagnosis_fit import prepare, split_at_rest
-from estimator.effects import EFFECT_IDS
+from estimator.effects import CATALOGUE, EFFECT_IDS, EQUIVALENT
+from slave import lumped_scenarios
 from slave.scenarios import record
 from teleop.errors import DataError
 
-DUR, RATE = 60.0, 500.0
-SEEDS = (13, 11)            # magnitudes at 10 % and 87 % of the realistic range (level from the seed)
-# rig parameter -> fitted parameter
+DUR, RATE = 45.0, 500.0
+# rig parameter -> fitted parameter (physical effects; a sensor effect's one parameter is its own)
 FITTED = {"viscous": "c_v", "tension": "T0", "K_rate": "K_rate", "softening": "beta", "toe_tension": "T_c",
-          "static_ratio": "r_s", "tension_offset": "a", "offset": "b_T_in", "delay": "tau"}
+          "static_ratio": "r_s", "tension_offset": "a", "distance": "x_p", "width": "d_b"}
+
+
+def check_named(eid: str, rec, res: dict, rel: float = 0.25) -> None:
+    """The identifier (or, for the inseparable pairs, its equivalent), the gain and the magnitude."""
+    scores = {k: round(v["score"], 3) for k, v in res["candidates"].items()}
+    ok = {eid, *EQUIVALENT.get(eid, ())} if eid.startswith("sensor_gain") else {eid}
+    assert res["cause"] in ok, (res["causes"], scores)
+    assert res["gain"] >= 0.3, (res["gain"], scores)
+    truth = rec.truth["parameters"]
+    if eid.startswith("sensor_"):
+        name, true = next(iter(truth.items()))
+        e = CATALOGUE[res["cause"]]
+        if res["cause"] != eid:         # a T_in gain g reads as a T_out gain 1/(1 + g) - 1
+            true = 1.0 / (1.0 + true) - 1.0
+        p = res["parameters"][e.parameters[0].name]
+        assert p["effect"] == res["cause"] and p["value"] == pytest.approx(true, rel=rel), (name, truth)
+    for name, true in truth.items():
+        if name in FITTED:
+            p = res["parameters"][FITTED[name]]
+            assert p["effect"] == eid and p["value"] == pytest.approx(true, rel=rel), (name, p, truth)
+    prim = res["primary_signal"]
+    unit = "N" if prim == "T_out" else "m"
+    assert res["extended"][f"rmse_{prim}_{unit}"] < 0.7 * res["base"][f"rmse_{prim}_{unit}"]
 
 
 @pytest.fixture(scope="module")
@@ -29,24 +56,13 @@ def clean_result():
     return rec, diagnose(rec.data)
 
 
-@pytest.mark.parametrize("eid,seed", [(e, s) for e in EFFECT_IDS for s in SEEDS])
-def test_hidden_effect_is_named_and_earns_its_gain(eid, seed):
+@pytest.mark.parametrize("eid", EFFECT_IDS)
+def test_hidden_effect_is_named_and_earns_its_gain(eid):
+    seed = 13 if EFFECT_IDS.index(eid) % 2 else 11           # magnitudes at 10 % and 87 % of the range
     rec = record(eid, seed=seed, duration=DUR, rate_hz=RATE)
     res = diagnose(rec.data)
-    assert res["cause"] == eid, {k: round(v["score"], 3) for k, v in res["candidates"].items()}
-    assert res["causes"][0] == eid
-    assert res["gain"] >= 0.3
-    assert res["candidates"][eid]["accepted"] and res["candidates"][eid]["gain"] == pytest.approx(res["gain"]) \
-        or len(res["causes"]) > 1
-    # the fitted magnitude is the hidden one (within 25 %), in SI units
-    for name, true in rec.truth["parameters"].items():
-        if name in FITTED:
-            p = res["parameters"][FITTED[name]]
-            assert p["effect"] == eid and p["value"] == pytest.approx(true, rel=0.25), name
-    # the extended model is better on the held-out block in the primary signal
-    prim = res["primary_signal"]
-    unit = "N" if prim == "T_out" else "m"
-    assert res["extended"][f"rmse_{prim}_{unit}"] < 0.7 * res["base"][f"rmse_{prim}_{unit}"]
+    check_named(eid, rec, res)
+    assert {k for k, c in res["candidates"].items() if c["accepted"]} == set(res["model"]["effects"])
 
 
 @pytest.mark.parametrize("seed", [21, 22, 23])
@@ -78,12 +94,13 @@ def test_result_keys_units_and_json(clean_result):
                 "split", "noise", "structure", "model", "base_model", "settings", "elapsed_s"):
         assert key in res
     assert set(res["base"]) == {"rmse_T_out_N", "rmse_x_out_m"}
-    assert set(res["candidates"]) == set(EFFECT_IDS)
+    # one of each pair of equivalent effects is fitted (they give the same outputs)
+    assert set(res["candidates"]) == set(EFFECT_IDS) - {"sensor_gain:T_out", "sensor_offset:x_out"}
     for c in res["candidates"].values():
-        assert {"rmse_T_out_N", "rmse_x_out_m", "gain", "gain_T_out", "gain_x_out", "score", "accepted",
-                "parameters"} <= set(c)
+        assert {"validation_rmse_T_out_N", "validation_rmse_x_out_m", "score", "penalised_score", "accepted",
+                "parameters", "equivalent"} <= set(c)
     assert res["parameters"]["compliance"]["unit"] == "m/N"
-    assert res["candidates"]["sensor_delay"]["parameters"]["tau"]["unit"] == "s"
+    assert res["candidates"]["sensor_lag:T_in"]["parameters"]["tau_T_in"]["unit"] == "s"
     again = json.loads(json.dumps(res))
     assert again["cause"] == res["cause"]
 
@@ -93,6 +110,15 @@ def test_split_is_a_time_block_at_a_rest(clean_result):
     sp = res["split"]
     assert 0.52 <= sp["train_fraction"] <= 0.68
     assert sp["n_train"] + sp["n_heldout"] == len(rec.data)
+    # which samples served for what: folds inside the training block, the test block after it
+    tr, te = sp["train"], sp["test"]
+    assert tr["index"] == [0, sp["n_train"]] and te["index"] == [sp["n_train"], len(rec.data)]
+    assert te["time_s"][0] >= sp["time_s"] > tr["time_s"][1]
+    for fold in sp["folds"]:
+        f, v = fold["fit"]["index"], fold["validation"]["index"]
+        assert 0 <= min(f + v) and max(f + v) <= sp["n_train"]           # never the test block
+        assert f[1] <= v[0] or v[1] <= f[0]                              # fit and validation apart
+        assert f[1] - f[0] > v[1] - v[0] > 0.2 * sp["n_train"]
     assert sp["n_train"] == int(np.sum(rec.data.time < sp["time_s"]))    # everything before, nothing after
     s = prepare(rec.data)
     k = split_at_rest(s, 0.6)
@@ -103,9 +129,9 @@ def test_split_is_a_time_block_at_a_rest(clean_result):
 
 
 def test_distal_tension_only_and_distal_position_only():
-    rec = record("sensor_offset", seed=13, duration=DUR, rate_hz=RATE)
+    rec = record("sensor_offset:T_in", seed=13, duration=DUR, rate_hz=RATE)
     res = diagnose(replace(rec.data, x_out=None))
-    assert res["cause"] == "sensor_offset" and res["gain"] >= 0.3
+    assert res["cause"] == "sensor_offset:T_in" and res["gain"] >= 0.3
     assert res["base"]["rmse_x_out_m"] is None and res["primary_signal"] == "T_out"
     rec = record("tendon_stiffening", seed=13, duration=DUR, rate_hz=RATE)
     res = diagnose(replace(rec.data, T_out=None))
@@ -114,10 +140,10 @@ def test_distal_tension_only_and_distal_position_only():
 
 
 def test_progress_callback_and_bad_inputs():
-    rec = record("sensor_offset", seed=13, duration=30.0, rate_hz=RATE)
+    rec = record("sensor_offset:T_in", seed=13, duration=30.0, rate_hz=RATE)
     calls = []
     diagnose(rec.data, progress=lambda done, total, label: calls.append((done, total, label)),
-             effects=("sensor_offset", "friction_offset"))
+             effects=("sensor_offset:T_in", "friction_offset"))
     assert [c[0] for c in calls] == list(range(1, len(calls) + 1)) and calls[-1][0] == calls[-1][1]
     with pytest.raises(DataError, match="x_out"):
         diagnose(replace(rec.data, x_out=None, T_out=None))
@@ -141,12 +167,10 @@ def test_report_writes_markdown_and_figures(clean_result, tmp_path):
 
 
 def test_a_second_effect_is_accepted_when_it_earns_its_place():
-    rec = record(("sensor_offset", "tendon_stiffening"), seed=13, duration=DUR, rate_hz=RATE)
+    rec = record(("sensor_offset:T_in", "tendon_stiffening"), seed=13, duration=DUR, rate_hz=RATE)
     res = diagnose(rec.data)
-    assert set(res["causes"][:2]) == {"sensor_offset", "tendon_stiffening"}
+    assert set(res["causes"][:2]) == {"sensor_offset:T_in", "tendon_stiffening"}
     assert res["parameters"]["b_T_in"]["value"] == pytest.approx(rec.truth["parameters"]["offset"], rel=0.25)
     assert res["parameters"]["beta"]["value"] == pytest.approx(rec.truth["parameters"]["softening"], rel=0.25)
-    one = res["candidates"][res["causes"][0]]
-    # the pair beats the first effect alone on the held-out block
-    for name, unit in (("T_out", "N"), ("x_out", "m")):
-        assert res["extended"][f"rmse_{name}_{unit}"] <= one[f"rmse_{name}_{unit}"] * 1.001
+    # the pair earns both its parameters on the validation folds, and gains on the test block
+    assert res["gain"] >= 0.3 and all(res["candidates"][k]["accepted"] for k in res["causes"][:2])

@@ -17,7 +17,10 @@ from slave.simulated import SimulatedRig
 from teleop import config as C
 
 IDS = ("velocity_friction", "pretension", "curvature_drift", "tendon_stiffening", "stiction", "friction_offset",
-       "sensor_offset", "sensor_delay")
+       "presliding", "distal_backlash",
+       "sensor_offset:T_in", "sensor_offset:T_out", "sensor_gain:T_in", "sensor_gain:T_out", "sensor_lag:T_in",
+       "sensor_lag:T_out", "sensor_drift:T_in", "sensor_drift:T_out", "sensor_offset:x_in", "sensor_offset:x_out",
+       "sensor_lag:x_in", "sensor_lag:x_out")
 K, L, EA = 0.7, 1.5, 15000.0
 NODES = 32
 
@@ -48,6 +51,10 @@ def test_catalogue_ids_parameters_and_texts():
         d = e.describe()
         assert d["id"] == eid and all("unit" in q and len(q["bounds"]) == 2 for q in d["parameters"])
     assert effect("stiction") is CATALOGUE["stiction"]
+    assert effect("sensor_delay") is CATALOGUE["sensor_lag:T_in"]          # former ids
+    for eid in IDS[8:]:                                                    # sensor ids name their channel
+        e = CATALOGUE[eid]
+        assert e.channel == eid.split(":")[1] and e.parameters[0].name.endswith(e.channel)
     with pytest.raises(KeyError, match="known: velocity_friction"):
         effect("backlash")
 
@@ -148,9 +155,53 @@ def test_sensor_effects_are_input_corrections():
     np.testing.assert_allclose(shifted.T_out, predict([], {"K": K}, series(T_in, x_in), compliance=1e-4).T_out,
                                rtol=1e-12, atol=1e-12)
     lagged = series(np.interp(np.arange(T_in.size) - 20.0, np.arange(T_in.size), T_in), x_in)  # 20 ms late
-    fixed = predict(["sensor_delay"], {"K": K, "tau": 0.020}, lagged, compliance=1e-4)
+    fixed = predict(["sensor_lag:T_in"], {"K": K, "tau_T_in": 0.020}, lagged, compliance=1e-4)
     ref = predict([], {"K": K}, series(T_in, x_in), compliance=1e-4)
     np.testing.assert_allclose(fixed.T_out[30:-30], ref.T_out[30:-30], rtol=1e-9, atol=1e-9)
+
+
+def test_distal_sensor_effects_are_reading_models():
+    T = np.concatenate((np.linspace(0, 15, 1500), np.linspace(15, 2, 1300)))
+    x = np.concatenate((np.linspace(0, 0.005, 1500), np.linspace(0.005, 0.001, 1300)))
+    s = series(T, x)
+    ref = predict([], {"K": K}, s, compliance=1e-4)
+    t = s.time
+    cases = {"sensor_offset:T_out": (0.3, ref.T_out + 0.3, ref.x_out), "sensor_gain:T_out": (0.05, 1.05 * ref.T_out, ref.x_out),
+             "sensor_drift:T_out": (0.01, ref.T_out + 0.01 * (t - t[0]), ref.x_out),
+             "sensor_lag:T_out": (0.02, np.interp(t - 0.02, t, ref.T_out), ref.x_out),
+             "sensor_offset:x_out": (4e-5, ref.T_out, ref.x_out + 4e-5),
+             "sensor_lag:x_out": (0.02, ref.T_out, np.interp(t - 0.02, t, ref.x_out)),
+             "sensor_offset:x_in": (4e-5, ref.T_out, ref.x_out - 4e-5)}
+    for eid, (v, T_exp, x_exp) in cases.items():
+        pr = predict([eid], {"K": K, CATALOGUE[eid].parameters[0].name: v}, s, compliance=1e-4)
+        np.testing.assert_allclose(pr.T_out, T_exp, rtol=1e-12, atol=1e-12, err_msg=eid)
+        np.testing.assert_allclose(pr.x_out, x_exp, rtol=0, atol=1e-12, err_msg=eid)
+    # a gain on T_in is a gain 1/(1 + g) - 1 on T_out (the memory is homogeneous), L/EA absorbs it in x_out
+    s2 = series(1.05 * T, x, x_out=ref.x_out)
+    a = predict(["sensor_gain:T_in"], {"K": K, "g_T_in": 0.05}, s2)
+    b = predict(["sensor_gain:T_out"], {"K": K, "g_T_out": 1 / 1.05 - 1}, s2)
+    np.testing.assert_allclose(a.T_out, b.T_out, rtol=1e-9)
+    np.testing.assert_allclose(a.x_out, b.x_out, atol=1e-12)
+
+
+def test_presliding_rounds_the_reversal_and_backlash_holds_x_out():
+    T = np.concatenate((np.linspace(0, 15, 1500), np.linspace(15, 2, 1300)))
+    x = np.concatenate((np.linspace(0, 0.005, 1500), np.linspace(0.005, 0.001, 1300)))
+    s = series(T, x)
+    ref = predict([], {"K": K}, s, compliance=1e-4)
+    pr = predict(["presliding"], {"K": K, "x_p": 1e-4}, s, compliance=1e-4)
+    flat = slice(1510, 1560)                           # just after the reversal the base T_out stays put
+    assert np.ptp(ref.T_out[flat]) < 1e-9 and np.all(np.diff(pr.T_out[flat]) < 0)   # rounded: it already falls
+    # far from the corner the friction lags by x_p dF/dx at most: (1 - e^-K) (15 N / 5 mm) x_p
+    lag = (1 - math.exp(-K)) * 15.0 / 0.005 * 1e-4
+    assert np.max(np.abs(pr.T_out[1000:1400] - ref.T_out[1000:1400])) <= lag * 1.01
+    d_b = 2e-4
+    bl = predict(["distal_backlash"], {"K": K, "d_b": d_b}, s, compliance=1e-4)
+    np.testing.assert_array_equal(bl.T_out, ref.T_out)
+    assert np.max(np.abs(bl.x_out - ref.x_out)) <= 0.5 * d_b + 1e-15
+    turn = int(np.argmax(ref.x_out))                   # after the tendon end turns, the joint waits for d_b
+    still = (ref.x_out[turn:] > ref.x_out[turn] - d_b * 0.999)
+    np.testing.assert_allclose(bl.x_out[turn:][still], bl.x_out[turn])
 
 
 def test_compliance_is_fitted_by_linear_least_squares():

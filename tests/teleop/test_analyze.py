@@ -61,7 +61,10 @@ def test_csv_diagnosis_json_and_report(offset_csv, tmp_path, capsys):
     assert s["gain"] > 0.5 and s["extended"]["rmse_T_out_N"] < 0.5 * s["base"]["rmse_T_out_N"]
     assert s["parameters"]["a"]["unit"] == "N"
     assert s["parameters"]["a"]["value"] == pytest.approx(rec.truth["parameters"]["tension_offset"], rel=0.2)
-    assert set(s["candidates"]) >= {"friction_offset", "sensor_offset", "pretension"}
+    assert set(s["candidates"]) >= {"friction_offset", "sensor_offset:T_in", "pretension"}
+    te = s["split"]["test"]      # the held-out duration is printed as such (not the run time)
+    assert f"({te['time_s'][1] - te['time_s'][0]:.1f} s), used once" in text
+    assert te["index"][1] == len(rec.data) and s["split"]["train"]["index"][1] == te["index"][0]
     assert s["n_samples"] == len(rec.data) and len(out.read_text()) < 40_000     # no per-sample arrays
     names = sorted(p.name for p in rep.iterdir())
     assert "report.md" in names and sum(n.endswith(".png") for n in names) >= 4
