@@ -76,8 +76,9 @@ def draw_route(rng: np.random.Generator) -> tuple[tuple[tuple[float, float], ...
     return tuple(pieces), float(mu)
 
 
-def draw_load(rng: np.random.Generator, kind: str | None = None) -> Load:
-    """A random distal load of ``kind`` (random among spring, preloaded, constant, joint if None)."""
+def draw_load(rng: np.random.Generator, kind: str | None = None, K: float = 0.8) -> Load:
+    """A random distal load of ``kind`` (random among spring, preloaded, constant, joint if None);
+    a constant force is drawn so that the proximal tension while it slides, P e^K, is 4-12 N."""
     kind = kind or str(rng.choice(["spring", "preloaded", "constant", "joint"]))
     mass, damping = rng.uniform(0.002, 0.010), rng.uniform(1.0, 5.0)
     logu = (lambda lo, hi: float(math.exp(rng.uniform(math.log(lo), math.log(hi)))))
@@ -87,7 +88,7 @@ def draw_load(rng: np.random.Generator, kind: str | None = None) -> Load:
         return Load("preloaded", stiffness=logu(300.0, 3000.0), preload=rng.uniform(0.5, 3.0), mass=mass,
                     damping=damping)
     if kind == "constant":
-        return Load("constant", preload=rng.uniform(1.0, 5.0), mass=mass, damping=damping)
+        return Load("constant", preload=rng.uniform(4.0, 12.0) * math.exp(-K), mass=mass, damping=damping)
     if kind == "joint":
         return Load("joint", stiffness=rng.uniform(50.0, 300.0), limit=rng.uniform(1e-3, 4e-3),
                     stop=logu(1e5, 1e6), mass=mass, damping=damping)
@@ -207,7 +208,7 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     geo = SheathGeometry(route)
     K, L = mu * geo.total_angle, geo.length
     EA = float(rng.uniform(6e3, 25e3))
-    load = draw_load(rng)
+    load = draw_load(rng, K=K)
     rate = float(round(math.exp(rng.uniform(math.log(200.0), math.log(2000.0)))))   # drawn always: same rig
     rate = rate if rate_hz is None else float(rate_hz)
     noise_in, noise_out = float(rng.uniform(0.01, 0.04)), float(rng.uniform(0.01, 0.05))
