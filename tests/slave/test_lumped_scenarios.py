@@ -113,10 +113,22 @@ def test_pretension_loads_the_tendon_at_rest():
     assert np.mean(rec.data.T_out[:n0]) == pytest.approx(P, abs=0.05)
 
 
-def test_every_id_is_accepted_with_its_truth_parameters():
+def test_every_id_is_accepted_and_changes_only_its_channels():
+    base = record(None, seed=3, duration=8.0)
     for e in EFFECT_IDS + UNCATALOGUED:
-        tr = record(e, seed=3, duration=5.0, level=0.0).truth
+        rec = record(e, seed=3, duration=8.0, level=0.0)
+        tr = rec.truth
         assert tr["effect"] == e and tr["parameters"] and e in tr["parameters_by_effect"]
+        changed = {ch for ch in ("x_in", "T_in", "x_out", "T_out")
+                   if not np.array_equal(getattr(rec.data, ch), getattr(base.data, ch))}
+        if e.startswith("sensor_"):
+            assert changed == {e.split(":")[1]}, (e, changed)
+        elif e == "load_cell_wander":
+            assert changed == {"T_out"}
+        elif e == "distal_backlash":
+            assert changed == {"x_out"}
+        else:                                                       # physics: the tensions change
+            assert {"T_in", "T_out"} <= changed, (e, changed)
     both = record(("presliding", "sensor_lag:T_out"), seed=3, duration=5.0).truth
     assert both["effect"] == "presliding+sensor_lag:T_out" and {"distance", "delay"} <= set(both["parameters"])
 
