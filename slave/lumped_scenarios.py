@@ -160,6 +160,36 @@ def _channel(sensor: dict, ch: str, t: np.ndarray, x: np.ndarray) -> np.ndarray:
     return (1.0 + g) * x + off + rate * t
 
 
+def _span(geo: SheathGeometry, mu: float, EA: float, load: Load, sim_kw: dict, T_rest: float, T_peak: float,
+          travel: float, tension_offset: float) -> tuple[float, float, float]:
+    """Rest and top positions of the protocol [m] from the rest state, and M_e [m/N].
+
+    A bench operator aims at a proximal tension: the travel to a pull at T [N] is the load's travel
+    to T e^-K plus the elongation (1/EA) int phi(T e^{-mu theta(s)}) ds (phi the stiffening law, the
+    identity without it), counted from the rest state (pretension included). With a friction offset
+    the rest is raised so that the tendon stays taut; a constant-force load adds ``travel`` [m].
+    """
+    K = mu * geo.total_angle
+    s = np.linspace(0.0, geo.length, 2001)
+    f = np.exp(-mu * geo.wrap_angle(s))
+    M_e = float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(s))) / EA
+    beta, Tc = sim_kw.get("softening", 0.0), sim_kw.get("toe_tension", 1.0)
+    T0 = sim_kw.get("pretension", 0.0)
+
+    def reach(T: float) -> float:
+        prof = T * f
+        strain = prof + beta * Tc * -np.expm1(-prof / Tc)
+        elong = float(np.sum(0.5 * (strain[1:] + strain[:-1]) * np.diff(s))) / EA
+        if load.kind == "constant":
+            return elong
+        return max(load.position_at(T * math.exp(-K)) - load.position_at(T0), 0.0) + elong
+
+    base = reach(T0)
+    x_rest = max(reach(T_rest + 1.2 * tension_offset * math.expm1(K)) - base, 0.0)
+    x_top = max(reach(T_peak) - base, 0.0) + (travel if load.kind == "constant" else 0.0)
+    return x_rest, max(x_top, x_rest + max(reach(2.0) - base, 0.0)), M_e
+
+
 def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level: float | None = None,
            duration: float = 90.0, rate_hz: float | None = None) -> Recording:
     """One randomised bench recording from the lumped simulator with ``effect`` hidden.
@@ -221,28 +251,8 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     u = float(rng_fx.uniform()) if level is None else float(level)
     sim_kw, sensor, by_effect = _effect_knobs(hidden, u, K, mu, geo, duration, rng_fx)
     tl = LumpedTendon(geo, mu, EA, load, motor_bandwidth_hz=bw, motor_max_speed=vmax, **sim_kw)
-    # proximal travel from rest to a pull at T [N] (a bench operator aims at a peak tension):
-    # load travel to T e^-K plus the elongation (1/EA) int phi(T e^-mu theta) ds, from the rest state
-    s = np.linspace(0.0, L, 2001)
-    f = np.exp(-mu * geo.wrap_angle(s))
-    M_e = float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(s))) / EA
-    beta, Tc = sim_kw.get("softening", 0.0), sim_kw.get("toe_tension", 1.0)
-    T0 = sim_kw.get("pretension", 0.0)
-
-    def x_of(T: float) -> float:
-        prof = T * f
-        strain = prof + beta * Tc * -np.expm1(-prof / Tc)
-        elong = float(np.sum(0.5 * (strain[1:] + strain[:-1]) * np.diff(s))) / EA
-        if load.kind == "constant":
-            return elong
-        return max(load.position_at(T * math.exp(-K)) - load.position_at(T0), 0.0) + elong
-
-    x_base = x_of(T0)
-    x_of0 = x_of
-    x_of = (lambda T: max(x_of0(T) - x_base, 0.0))  # noqa: E731 - travel counted from the rest state
-    x_rest = x_of(T_rest + 1.2 * by_effect.get("friction_offset", {}).get("tension_offset", 0.0) * math.expm1(K))
-    x_top = x_of(T_peak) + (travel if load.kind == "constant" else 0.0)
-    x_top = max(x_top, x_rest + x_of(2.0))
+    x_rest, x_top, M_e = _span(geo, mu, EA, load, sim_kw, T_rest, T_peak, travel,
+                               by_effect.get("friction_offset", {}).get("tension_offset", 0.0))
     tl.run(np.full(int(round(_SETTLE * rate)), tl.state[0]), rate)   # settle at rest, not recorded
     tl.state[3] = 0.0
     start = {k: float(v) for k, v in zip(("x_motor", "x_joint", "x_end"), (tl.state[0], tl.state[2], tl.u[-1]))}
