@@ -1,0 +1,367 @@
+"""``teleop record``: a process of its own that writes every message of an instrument, losing none.
+
+It subscribes to ``teleop/<id>/**`` (commands, estimates, heartbeats, anything a later wire version
+adds) and to the liveliness tokens of both sides, and writes ``<run dir>/recorder/``:
+
+* ``messages.bin``: every payload as received, ``<d t_recv [s]><H key length><I payload length>``
+  then the key and the codec bytes (the lossless record; :func:`read_messages` reads it back);
+* ``<side>_<stream>.csv`` per key, in the measured-data format (``# key: value`` metadata,
+  ``# units:``, header, one row per message): ``time`` is the recorder's receive time [s, monotonic],
+  then every field of the message as :mod:`teleop.codec` decoded it, flattened generically over the
+  dataclass fields (``profile[3]``, ``joints[0].tendons[1].T_in``; enums and flags as integers), so
+  the estimate file (``x_in``, ``T_in``) loads with :func:`teleop.recording.read_measured_csv`;
+* ``state_changes.csv`` (every change of a heartbeat's state) and ``liveliness.csv``;
+* ``record.rrd`` (Rerun, scalar fields decimated by ``recording.log_every``), and at the end
+  ``summary.json`` (per stream: count, first/last seq, seqs missing, duplicates, rate; the command
+  -> echo delay seen here) and ``streams.png``.
+
+Nothing runs on zenoh's callback thread but a queue put: a writer thread decodes, formats and
+writes, handing the files to the OS at least every ``recording.flush_interval`` seconds, so a SIGKILL
+of the slave or the master loses nothing that reached the recorder (and a SIGKILL of the recorder
+itself at most that interval). Subscribers are reliable; the publishers drop only under congestion.
+"""
+from __future__ import annotations
+
+import dataclasses
+import enum
+import json
+import logging
+import queue
+import struct
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from teleop.codec import decode, seq_newer
+from teleop.entity import Entity
+from teleop.keys import instrument_keys, liveliness_pattern
+
+__all__ = ["flatten", "Recorder", "read_messages", "run_record"]
+
+log = logging.getLogger("teleop.record")
+_RAW = struct.Struct("<dHI")
+_STOP = object()
+_SI = {"T": "N", "x": "m", "e": "m", "t": "s"}
+_fields_cache: dict[type, tuple[str, ...]] = {}
+
+
+def flatten(msg, prefix: str = "", out: list | None = None) -> list[tuple[str, float | int]]:
+    """``[(column name, number), ...]`` of a decoded message, generically over its dataclass fields.
+
+    Nested dataclasses join names with ``.``, tuples index with ``[i]``; enums and booleans become
+    integers. Works for whatever message types :mod:`teleop.codec` decodes.
+    """
+    out = [] if out is None else out
+    if dataclasses.is_dataclass(msg):
+        names = _fields_cache.get(type(msg))
+        if names is None:
+            names = _fields_cache[type(msg)] = tuple(f.name for f in dataclasses.fields(msg))
+        for n in names:
+            flatten(getattr(msg, n), f"{prefix}.{n}" if prefix else n, out)
+    elif isinstance(msg, (tuple, list)):
+        for i, v in enumerate(msg):
+            flatten(v, f"{prefix}[{i}]", out)
+    elif isinstance(msg, (bool, enum.Enum)):
+        out.append((prefix, int(msg)))
+    else:
+        out.append((prefix, msg))
+    return out
+
+
+def _unit(name: str) -> str | None:
+    leaf = name.rsplit(".", 1)[-1].split("[")[0]
+    if leaf.startswith(("T_", "profile")):
+        return "N"
+    if leaf.startswith(("x_", "elongation")):
+        return "m"
+    if leaf.startswith("t_"):
+        return "s"
+    if leaf.startswith("angle"):
+        return "rad"
+    if leaf.startswith("torque"):
+        return "N m"
+    return None
+
+
+class _Csv:
+    """One measured-data CSV of one stream (columns fixed by its first message)."""
+
+    def __init__(self, path: Path, names: tuple[str, ...], sample: list, meta: dict[str, str]):
+        self.path, self.names = path, names
+        cols = ("time",) + names
+        units = [f"{c}={u}" for c in cols if (u := ("s" if c == "time" else _unit(c)))]
+        self.fmt = ",".join(["%.12g"] + ["%d" if isinstance(v, int) else "%.12g" for _, v in sample]) + "\n"
+        self.fh = open(path, "w", encoding="utf-8")
+        head = [f"# {k}: {v}" for k, v in meta.items()] + ["# units: " + ", ".join(units), ",".join(cols)]
+        self.fh.write("\n".join(head) + "\n")
+        self.rows = 0
+
+    def write(self, t: float, values: tuple) -> None:
+        self.fh.write(self.fmt % ((t,) + values))
+        self.rows += 1
+
+
+class _Stream:
+    """Counters of one key: messages, seqs missing (gaps), duplicates or out of order, decode errors."""
+
+    def __init__(self):
+        self.count = self.errors = self.missing = self.dup_or_old = 0
+        self.first_seq = self.last_seq = None
+        self.t_first = self.t_last = None
+        self.type = None
+
+    def see(self, seq, t: float) -> None:
+        self.count += 1
+        self.t_first = t if self.t_first is None else self.t_first
+        self.t_last = t
+        if seq is None:
+            return
+        if self.first_seq is None:
+            self.first_seq = self.last_seq = seq
+        elif seq_newer(seq, self.last_seq):
+            self.missing += (seq - self.last_seq) % (1 << 32) - 1
+            self.last_seq = seq
+        else:
+            self.dup_or_old += 1
+
+    def summary(self) -> dict:
+        span = (self.t_last - self.t_first) if self.count > 1 else 0.0
+        return {"type": self.type, "count": self.count, "first_seq": self.first_seq, "last_seq": self.last_seq,
+                "missing": self.missing, "duplicate_or_old": self.dup_or_old, "decode_errors": self.errors,
+                "rate_hz": (self.count - 1) / span if span > 0 else 0.0}
+
+
+class _Subscription(Entity):
+    """A plain zenoh subscriber with a callback, closed with its session."""
+
+    def __init__(self, session, key: str, callback):
+        super().__init__(session, key)
+        self._declare(session.zenoh_session.declare_subscriber, key, callback)
+
+
+class Recorder:
+    """Subscribe to every stream of ``cfg.instrument.id`` on ``session`` and write ``out_dir`` (module docstring).
+
+    Parameters
+    ----------
+    session : teleop.transport.Session
+    cfg : Config
+        ``instrument.id``, ``recording`` (``flush_interval`` [s], ``log_every``, ``rerun``).
+    out_dir : Path
+        Created; the files of the module docstring go there.
+    rerun : {'save', 'spawn', 'off'}, optional
+        Overrides ``recording.rerun``.
+    """
+
+    def __init__(self, session, cfg, out_dir: Path, *, rerun: str | None = None, run_id: str = ""):
+        self.cfg, self.dir = cfg, Path(out_dir)
+        self.dir.mkdir(parents=True, exist_ok=True)
+        self.clock = session.clock
+        self.ident = cfg.instrument.id
+        self.flush_interval = cfg.recording.flush_interval
+        self.streams: dict[str, _Stream] = {}
+        self.alive: dict[str, bool] = {}
+        self.ever_alive: set[str] = set()
+        self.state_changes: list[dict] = []
+        self._states: dict[str, int] = {}
+        self._csv: dict[tuple[str, tuple], _Csv] = {}
+        self._cmd_t: dict[int, float] = {}
+        self._echo_delays: list[float] = []
+        self._echoed: set[int] = set()
+        self._q: queue.SimpleQueue = queue.SimpleQueue()
+        self._raw = open(self.dir / "messages.bin", "wb")
+        self._aux = {"state": self._aux_csv("state_changes.csv", "time,side,state,seq"),
+                     "alive": self._aux_csv("liveliness.csv", "time,side,alive")}
+        from teleop.rerun_log import RerunLogger
+        self._rr = RerunLogger("teleop-record", run_id or None, rerun or cfg.recording.rerun, self.dir / "record.rrd")
+        self._thread = threading.Thread(target=self._writer, name="teleop-record-writer", daemon=True)
+        self._thread.start()
+        session._track(_Subscription(session, instrument_keys(self.ident), self._on_sample))
+        session.liveliness_watcher(liveliness_pattern(self.ident), self._on_alive)
+
+    def _aux_csv(self, name: str, header: str):
+        fh = open(self.dir / name, "w", encoding="utf-8")
+        fh.write(f"# source: teleop record\n# instrument: {self.ident}\n# units: time=s\n{header}\n")
+        return fh
+
+    # ---- zenoh threads: a queue put and nothing else ------------------------------------------------
+    def _on_sample(self, sample) -> None:
+        self._q.put((self.clock.now(), str(sample.key_expr), sample.payload.to_bytes()))
+
+    def _on_alive(self, key: str, up: bool) -> None:
+        self._q.put((self.clock.now(), key, bool(up)))
+
+    # ---- the writer thread --------------------------------------------------------------------------
+    def _writer(self) -> None:
+        last_flush = time.monotonic()
+        while True:
+            try:
+                item = self._q.get(timeout=self.flush_interval)
+            except queue.Empty:
+                item = None
+            if item is _STOP:
+                break
+            if item is not None:
+                try:
+                    self._handle(*item)
+                except Exception as e:  # noqa: BLE001 - one bad message must not end the recording
+                    log.warning("recorder: %s on %s: %r", type(e).__name__, item[1], e)
+            if time.monotonic() - last_flush >= self.flush_interval:
+                self._flush()
+                last_flush = time.monotonic()
+        self._flush()
+
+    def _flush(self) -> None:
+        self._raw.flush()
+        for f in self._csv.values():
+            f.fh.flush()
+        for fh in self._aux.values():
+            fh.flush()
+
+    def _handle(self, t: float, key: str, payload) -> None:
+        if isinstance(payload, bool):
+            side = key.split("/")[2] if key.count("/") >= 3 else key
+            self.alive[side] = payload
+            if payload:
+                self.ever_alive.add(side)
+            self._aux["alive"].write(f"{t:.12g},{side},{int(payload)}\n")
+            return
+        kb = key.encode()
+        self._raw.write(_RAW.pack(t, len(kb), len(payload)) + kb + payload)
+        st = self.streams.get(key)
+        if st is None:
+            st = self.streams[key] = _Stream()
+        try:
+            msg = decode(payload)
+        except Exception:  # noqa: BLE001 - CodecError: counted, kept in messages.bin
+            st.errors += 1
+            st.count += 1
+            return
+        st.type = type(msg).__name__
+        seq = getattr(msg, "seq", None)
+        st.see(seq, t)
+        flat = flatten(msg)
+        names = tuple(n for n, _ in flat)
+        values = tuple(v for _, v in flat)
+        f = self._csv.get((key, names))
+        if f is None:
+            f = self._open_csv(key, names, flat)
+        f.write(t, values)
+        self._derived(t, key, msg, seq, flat, st.count)
+
+    def _open_csv(self, key: str, names: tuple, flat: list) -> _Csv:
+        parts = key.split("/")
+        stem = "_".join(parts[2:]) if len(parts) > 2 else parts[-1]
+        n = sum(1 for (k, _) in self._csv if k == key)
+        path = self.dir / (f"{stem}.csv" if n == 0 else f"{stem}-{n + 1}.csv")
+        meta = {"source": "teleop record", "instrument": self.ident, "key": key,
+                "time": "recorder receive time (monotonic clock of the recorder)"}
+        f = self._csv[(key, names)] = _Csv(path, names, flat, meta)
+        return f
+
+    def _derived(self, t: float, key: str, msg, seq, flat: list, count: int) -> None:
+        """State changes, the command -> echo delay, and the decimated Rerun scalars."""
+        fields = dict(flat)
+        if "state" in fields and "side" in fields:
+            side = key.split("/")[2]
+            if self._states.get(side) != fields["state"]:
+                self._states[side] = fields["state"]
+                name = getattr(getattr(msg, "state", None), "name", str(fields["state"]))
+                self.state_changes.append({"time": t, "side": side, "state": name, "seq": seq})
+                self._aux["state"].write(f"{t:.12g},{side},{fields['state']},{seq}\n")
+        if key.endswith("/command") and seq is not None:
+            self._cmd_t[seq] = t
+            if len(self._cmd_t) > 20000:
+                for k in list(self._cmd_t)[:10000]:
+                    del self._cmd_t[k]
+        echo = fields.get("cmd_seq")
+        if echo is not None and echo not in self._echoed and echo in self._cmd_t:
+            self._echoed.add(echo)
+            self._echo_delays.append(t - self._cmd_t[echo])
+            if len(self._echoed) > 20000:
+                self._echoed.clear()
+        if count % self.cfg.recording.log_every == 0 and self._rr.enabled:
+            side = key.split("/")[2]
+            vals = {f"{side}_state" if n == "state" else n.replace("[", "").replace("]", "").replace(".", "_"): float(v)
+                    for n, v in flat if (n == "state" or isinstance(v, float)) and not n.startswith("t_")
+                    and "profile" not in n}
+            self._rr.log_scalars(t, **vals)
+
+    # ---- the end -------------------------------------------------------------------------------------
+    def close(self) -> dict:
+        """Stop the writer after the queued messages, close the files, write ``summary.json`` and
+        ``streams.png``; returns the summary. Idempotent."""
+        if self._raw.closed:
+            return self.summary()
+        self._q.put(_STOP)
+        self._thread.join(30.0)
+        for f in self._csv.values():
+            f.fh.close()
+        for fh in self._aux.values():
+            fh.close()
+        self._raw.close()
+        self._rr.close()
+        s = self.summary()
+        try:
+            from teleop.record_figures import streams_figure
+            s["figure"] = str(streams_figure([f.path for f in self._csv.values()], self.dir / "streams.png"))
+        except Exception as e:  # noqa: BLE001 - a figure problem must not lose the summary
+            s["figure_error"] = repr(e)
+        (self.dir / "summary.json").write_text(json.dumps(s, indent=2) + "\n", encoding="utf-8")
+        return s
+
+    def summary(self) -> dict:
+        d = np.asarray(self._echo_delays) * 1e3
+        echo = ({"n": int(d.size), "p50_ms": float(np.percentile(d, 50)), "p99_ms": float(np.percentile(d, 99)),
+                 "max_ms": float(d.max())} if d.size else {"n": 0})
+        return {"instrument": self.ident, "streams": {k: s.summary() for k, s in sorted(self.streams.items())},
+                "files": sorted(str(f.path.name) for f in self._csv.values()),
+                "state_changes": self.state_changes, "command_to_echo_at_recorder": echo}
+
+
+def read_messages(path: str | Path):
+    """Yield ``(t_recv [s], key, payload bytes)`` from a ``messages.bin`` (a torn last record is ignored)."""
+    data = Path(path).read_bytes()
+    off = 0
+    while off + _RAW.size <= len(data):
+        t, nk, npay = _RAW.unpack_from(data, off)
+        end = off + _RAW.size + nk + npay
+        if end > len(data):
+            return
+        key = data[off + _RAW.size: off + _RAW.size + nk].decode()
+        yield t, key, data[off + _RAW.size + nk: end]
+        off = end
+
+
+def run_record(args) -> int:
+    """``teleop record``: record until Ctrl-C/SIGTERM, ``--max-duration``, or (``--exit-when-done``)
+    once every side seen has gone (liveliness) for half a second."""
+    from teleop.config import load_config
+    from teleop.discovery import side_run_dir, side_session
+    from teleop.recording import raise_on_sigterm
+
+    cfg = load_config(args.config)
+    with raise_on_sigterm():
+        session = side_session(cfg, args)
+        with session:
+            run_dir = side_run_dir(args, cfg)
+            rec = Recorder(session, cfg, run_dir / "recorder", rerun=args.rerun, run_id=run_dir.name)
+            log.info("recording %s into %s", instrument_keys(cfg.instrument.id), rec.dir)
+            print(f"teleop record: {rec.dir} (ready)", flush=True)
+            t0, gone_since = time.monotonic(), None
+            try:
+                while args.max_duration is None or time.monotonic() - t0 < args.max_duration:
+                    time.sleep(0.05)
+                    if args.exit_when_done and rec.ever_alive:
+                        anyone = any(rec.alive.values())
+                        gone_since = None if anyone else (gone_since or time.monotonic())
+                        if gone_since is not None and time.monotonic() - gone_since > 0.5:
+                            break
+            finally:
+                s = rec.close()
+    counts = ", ".join(f"{k.rsplit('/', 2)[-2]}/{k.rsplit('/', 1)[-1]} {v['count']} (missing {v['missing']})"
+                       for k, v in s["streams"].items())
+    print(f"teleop record: {counts or 'nothing received'}; {rec.dir}/summary.json", flush=True)
+    return 0

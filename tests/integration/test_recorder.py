@@ -1,0 +1,128 @@
+"""`teleop record` loses nothing: recorder, slave and master as three processes, one of them SIGKILLed.
+
+The three are started bare (no --listen/--connect) on a config whose listen port is a free one: the
+recorder gets the port, the sides find it taken and connect, and all three agree one run id. Each
+side logs every message it hands to zenoh (TELEOP_PUBLISH_LOG, written straight to the OS, so the
+kill loses none of its lines); the test compares those with what the recorder wrote. Deadlines only
+bound waits.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from teleop.codec import decode
+from teleop.publish_log import read_publish_log
+from teleop.record import read_messages
+from teleop.recording import read_measured_csv
+from teleop.transport import free_tcp_port
+
+pytestmark = pytest.mark.integration
+
+CONFIG = """\
+instrument:
+  id: {ident}
+calibration:
+  speed: 0.02
+recording:
+  rerun: "off"
+  dir: "{runs}"
+transport:
+  listen: ["tcp/127.0.0.1:{port}"]
+"""
+
+
+def start(args: list[str], log: Path, env: dict | None = None) -> subprocess.Popen:
+    with open(log, "w") as fh:
+        return subprocess.Popen([sys.executable, "-m", "teleop.cli", *args], stdout=fh, stderr=subprocess.STDOUT,
+                                env=dict(os.environ, PYTHONUNBUFFERED="1", **(env or {})))
+
+
+def wait_for(predicate, timeout: float, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"gave up waiting {timeout:g} s for {what}")
+
+
+def stop_all(procs) -> None:
+    for p in procs:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+
+
+def recorded(rec_dir: Path) -> dict[str, list[int]]:
+    """key -> seqs in the recorder's messages.bin."""
+    out: dict[str, list[int]] = {}
+    for _, key, payload in read_messages(rec_dir / "messages.bin"):
+        out.setdefault(key, []).append(decode(payload).seq)
+    return out
+
+
+def _state_seen(rec_dir: Path, side: str, state: int) -> bool:
+    path = rec_dir / "state_changes.csv"
+    return path.is_file() and f",{side},{state}," in path.read_text()
+
+
+@pytest.mark.parametrize("victim", ["slave", "master"])
+def test_sigkill_of_a_side_loses_no_published_message(tmp_path, victim):
+    ident = f"rk{victim}"
+    runs = tmp_path / "runs"
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(CONFIG.format(ident=ident, runs=runs, port=free_tcp_port()), encoding="utf-8")
+    logs = {side: tmp_path / f"{side}.pub" for side in ("slave", "master")}
+    procs: dict[str, subprocess.Popen] = {}
+    try:
+        procs["recorder"] = start(["record", "--config", str(cfg), "--max-duration", "90"], tmp_path / "record.log")
+        wait_for(lambda: "(ready)" in (tmp_path / "record.log").read_text(), 20, "the recorder to be ready")
+        procs["slave"] = start(["slave", "--config", str(cfg), "--max-duration", "90"], tmp_path / "slave.log",
+                               {"TELEOP_PUBLISH_LOG": str(logs["slave"])})
+        procs["master"] = start(["master", "--config", str(cfg), "--protocol", "paper", "--max-duration", "90"],
+                                tmp_path / "master.log", {"TELEOP_PUBLISH_LOG": str(logs["master"])})
+        run_dirs = lambda: sorted(p for p in runs.glob("*") if p.is_dir())   # noqa: E731
+        wait_for(lambda: len(run_dirs()) == 1 and (run_dirs()[0] / "recorder").is_dir(), 10, "the run directory")
+        rec_dir = run_dirs()[0] / "recorder"
+        wait_for(lambda: _state_seen(rec_dir, "slave", 3), 40, "the slave to be ENGAGED")
+        time.sleep(0.5)                                         # teleoperation under way
+        procs[victim].send_signal(signal.SIGKILL)
+        procs[victim].wait(10)
+        survivor = "master" if victim == "slave" else "slave"
+        time.sleep(0.5)                                         # the survivor goes safe, still publishing
+        procs[survivor].send_signal(signal.SIGINT)              # Ctrl-C: clean exit
+        assert procs[survivor].wait(20) in (0, 1, 130)
+        procs["recorder"].send_signal(signal.SIGINT)
+        assert procs["recorder"].wait(30) == 130
+    finally:
+        stop_all(procs.values())
+    assert run_dirs() == [rec_dir.parent], "the three processes must share one run directory"
+    assert (rec_dir.parent / "slave.csv").is_file() and (rec_dir.parent / "master.csv").is_file()
+    got = recorded(rec_dir)
+    for side, path in logs.items():
+        published = read_publish_log(path)
+        assert set(published) == {k for k in got if f"/{side}/" in k}, (side, sorted(published), sorted(got))
+        for key, seqs in published.items():
+            assert len(seqs) > 100 if not key.endswith("heartbeat") else len(seqs) > 10
+            lost = sorted(set(seqs) - set(got[key]))
+            assert lost == [], f"{key}: {len(lost)} of {len(seqs)} published messages not recorded: {lost[:20]}"
+            assert len(got[key]) == len(seqs)                   # nothing recorded twice, nothing invented
+    summary = json.loads((rec_dir / "summary.json").read_text())
+    assert all(s["missing"] == 0 and s["decode_errors"] == 0 for s in summary["streams"].values())
+    states = [(c["side"], c["state"]) for c in summary["state_changes"]]
+    assert ("slave", "ENGAGED") in states
+    if victim == "master":                                      # the slave went safe: the recorder saw it
+        assert states.index(("slave", "SAFE"), states.index(("slave", "ENGAGED"))) > 0
+    est = read_measured_csv(rec_dir / "slave_estimate.csv")     # the measured-data format
+    assert est.time.size == len(got[f"teleop/{ident}/slave/estimate"])
+    assert np.all(np.isfinite(est.T_in)) and "T_out_hat" in est.extra and "profile[0]" in est.extra
+    assert (rec_dir / "streams.png").is_file()
