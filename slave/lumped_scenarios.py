@@ -185,9 +185,10 @@ def _span(geo: SheathGeometry, mu: float, EA: float, load: Load, sim_kw: dict, T
         return max(load.position_at(T * math.exp(-K)) - load.position_at(T0), 0.0) + elong
 
     base = reach(T0)
-    x_rest = max(reach(T_rest + 1.2 * tension_offset * math.expm1(K)) - base, 0.0)
-    x_top = max(reach(T_peak) - base, 0.0) + (travel if load.kind == "constant" else 0.0)
-    return x_rest, max(x_top, x_rest + max(reach(2.0) - base, 0.0)), M_e
+    T_low = T_rest + 1.2 * tension_offset * math.expm1(K)
+    x_rest = max(reach(T_low) - base, 0.0)
+    x_top = max(reach(max(T_peak, T_low + 2.0)) - base, 0.0) + (travel if load.kind == "constant" else 0.0)
+    return x_rest, x_top, M_e
 
 
 def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level: float | None = None,
