@@ -48,6 +48,14 @@ def test_contract_keys_columns_and_randomised_rig(clean):
     assert len(kinds) >= 3
 
 
+def test_protocol_reaches_a_bench_tension_range():
+    # the span aims at a peak proximal tension of 8-20 N counted from rest, whatever the load
+    for seed in range(100, 106):
+        rec = record(None, seed=seed, duration=20.0)
+        T = rec.truth["signals"]["T_in"]
+        assert 4.0 < np.max(T) < 30.0, (seed, rec.truth["load"]["kind"], np.max(T))
+
+
 def test_seeds_are_reproducible_and_the_rig_does_not_depend_on_the_effect(clean):
     again = record(None, seed=SEED, duration=DUR)
     np.testing.assert_array_equal(again.data.T_out, clean.data.T_out)
