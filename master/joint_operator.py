@@ -18,10 +18,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from teleop.config import Config, joint_set_tension
 from teleop.errors import ConfigError
 
-__all__ = ["AxisSegment", "MultiAxisState", "paper_protocol", "MultiAxisOperator", "MARKER_PAPER_A", "MARKER_PAPER_B",
-           "joint_marker"]
+__all__ = ["AxisSegment", "MultiAxisState", "paper_protocol", "joint_protocols", "MultiAxisOperator", "MARKER_PAPER_A",
+           "MARKER_PAPER_B", "joint_marker"]
 
 MARKER_PAPER_A = 1
 MARKER_PAPER_B = 2
@@ -59,6 +60,23 @@ def paper_protocol(rest_tension: float, targets=(20.0, 5.0, 20.0)) -> tuple[Axis
         out += [AxisSegment(side, float(t), tag) for t in targets]
         out.append(AxisSegment(side, float(rest_tension) + 0.5, tag))
     return tuple(out)
+
+
+def joint_protocols(cfg: Config, names: str) -> list[tuple[AxisSegment, ...]]:
+    """One axis protocol per joint of ``cfg.instrument.joints``: ``paper`` (also ``paper,minor``: the
+    seed paper's experiment on tendon a, then b) or ``short`` (6 N, 2 N each way), each ending at the
+    joint's set tension + 0.5 N.
+
+    Raises
+    ------
+    ConfigError
+        Another protocol name.
+    """
+    name = "paper" if names.strip() in ("paper,minor", "paper") else names.strip()
+    targets = {"paper": (20.0, 5.0, 20.0), "short": (6.0, 2.0)}.get(name)
+    if targets is None:
+        raise ConfigError(f"protocol: {names!r} is not a joint-instrument protocol (expected 'paper' or 'short')")
+    return [paper_protocol(joint_set_tension(cfg, j), targets) for j in cfg.instrument.joints]
 
 
 class _Axis:

@@ -31,7 +31,7 @@ from estimator.sheath import SheathModel
 from slave.calibrate import check_settings, wrap_shape
 from slave.instrument import TENDONS, Instrument, InstrumentState
 from slave.pair_control import PairController
-from teleop.config import Config, JointConfig, TendonConfig
+from teleop.config import Config, JointConfig, TendonConfig, joint_set_tension
 from teleop.errors import CalibrationError
 
 __all__ = ["PairStage", "tendon_wrap_shape", "set_tension", "PairCalibration"]
@@ -50,8 +50,8 @@ def tendon_wrap_shape(tendon: TendonConfig, n_points: int = 257) -> np.ndarray |
 
 
 def set_tension(cfg: Config, joint: JointConfig) -> float:
-    """The antagonist's set tension of a joint [N]: its pretension, else ``pair_control.min_tension``."""
-    return joint.pretension if joint.pretension > 0 else cfg.pair_control.min_tension
+    """The antagonist's set tension of a joint [N] (:func:`teleop.config.joint_set_tension`)."""
+    return joint_set_tension(cfg, joint)
 
 
 class _Joint:

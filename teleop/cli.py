@@ -1,4 +1,4 @@
-"""The ``teleop`` command: ``teleop demo|master|slave|calibrate|analyze|devices``.
+"""The ``teleop`` command: ``teleop demo|master|slave|bridge|calibrate|analyze|devices``.
 
 :func:`main` takes an argument list and returns an exit code; argument parsing is separate
 (:func:`build_parser`) and every subcommand is a function of the parsed arguments. Exit codes:
@@ -48,7 +48,8 @@ def _inject_flag(p: argparse.ArgumentParser) -> None:
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The argument parser. ``argv`` decides whether ``teleop.analyze`` is imported (only for analyze)."""
     parser = argparse.ArgumentParser(prog=PROG, description="Haptic teleoperation of tendon-sheath instruments.")
-    sub = parser.add_subparsers(dest="command", metavar="{demo,master,slave,calibrate,analyze,devices}", required=True)
+    sub = parser.add_subparsers(dest="command", metavar="{demo,master,slave,bridge,calibrate,analyze,devices}",
+                                required=True)
 
     p = sub.add_parser("demo", help="both sides as two processes over Zenoh on 127.0.0.1, then a summary")
     _shared(p)
@@ -71,6 +72,12 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     _inject_flag(p)
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
     p.set_defaults(func=_cmd_master)
+
+    p = sub.add_parser("bridge", help="the simulated rig of --config behind the Zenoh rig interface (rig.type "
+                                      "zenoh on the slave), as its own process")
+    _shared(p)
+    p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
+    p.set_defaults(func=_cmd_bridge)
 
     p = sub.add_parser("calibrate", help="joint instruments: joint-limit calibration of every tendon, both "
                                          "directions, saved as configs/calibration/<instrument>.yaml")
@@ -106,6 +113,11 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return main_demo(args)
 
 
+def _cmd_bridge(args: argparse.Namespace) -> int:
+    from teleop.bridge import run_bridge
+    return run_bridge(args)
+
+
 def _cmd_slave(args: argparse.Namespace) -> int:
     return run_slave(args)
 
@@ -128,7 +140,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.func is None:
         print(f"{PROG}: error: {args.command} is not available in this build", file=sys.stderr)
         return 2
-    logging.basicConfig(level=logging.INFO if getattr(args, "verbose", False) or args.command in ("slave", "master")
+    logging.basicConfig(level=logging.INFO if getattr(args, "verbose", False) or args.command in ("slave", "master",
+                                                                                                     "bridge")
                         else logging.WARNING,
                         format=f"[{args.command}] %(levelname)s %(message)s", stream=sys.stderr)
     try:

@@ -187,14 +187,23 @@ class EffectsConfig:
 
 
 @dataclass(frozen=True)
+class ZenohRigConfig:
+    """The ``zenoh`` rig: set-points out, samples in on ``teleop/<instrument>/rig/{setpoint,sample}``."""
+
+    timeout_ms: float = 50.0              # samples older than this are counted as stale [ms]
+    wait_s: float = 10.0                  # at start, wait this long for the first sample [s]
+
+
+@dataclass(frozen=True)
 class RigConfig:
-    type: Literal["simulated"] = "simulated"
+    type: Literal["simulated", "zenoh"] = "simulated"
     n_elements: int = 200
     rate_hz: float = 1000.0
     motor: MotorConfig = field(default_factory=MotorConfig)
     load: LoadConfig = field(default_factory=LoadConfig)
     sensors: SensorConfig = field(default_factory=SensorConfig)
     effects: EffectsConfig = field(default_factory=EffectsConfig)
+    zenoh: ZenohRigConfig = field(default_factory=ZenohRigConfig)
 
 
 @dataclass(frozen=True)
@@ -305,6 +314,7 @@ RANGES: dict[str, tuple[str, str]] = {
     "rig.load.limit_stiffness": ("> 0", "N/m"), "rig.load.tissue_stiffness": (">= 0", "N/m"),
     "rig.load.tissue_contact": ("any", "m"), "rig.load.force": (">= 0", "N"),
     "rig.sensors.load_cell_noise": (">= 0", "N"), "rig.sensors.seed": (">= 0", "-"),
+    "rig.zenoh.timeout_ms": ("> 0", "ms"), "rig.zenoh.wait_s": ("> 0", "s"),
     "rig.effects.velocity_friction.viscous": (">= 0", "s/m"), "rig.effects.pretension.tension": (">= 0", "N"),
     "rig.effects.curvature_drift.rate": ("any", "1/s"), "rig.effects.tendon_stiffening.softening": (">= 0", "-"),
     "rig.effects.tendon_stiffening.toe_tension": ("> 0", "N"), "rig.effects.stiction.static_ratio": (">= 0", "-"),
@@ -632,6 +642,11 @@ def load_config(path: str | Path | None = None, overrides: dict | None = None) -
     if overrides:
         cfg = config_from_dict(_expand_dotted(overrides), source="overrides", base=cfg)
     return cfg
+
+
+def joint_set_tension(cfg: Config, joint: JointConfig) -> float:
+    """The antagonist's set tension of a joint [N]: its pretension, else ``pair_control.min_tension``."""
+    return joint.pretension if joint.pretension > 0 else cfg.pair_control.min_tension
 
 
 def config_to_dict(cfg: Any) -> Any:

@@ -171,7 +171,7 @@ def main_demo(args) -> int:
     t0 = time.monotonic()
     problems: list[str] = []
     try:
-        run_processes(args, cfg_file, run_dir, problems)
+        run_processes(args, cfg_file, run_dir, problems, bridge=cfg.rig.type == "zenoh")
     except KeyboardInterrupt:
         print(f"teleop demo: interrupted; partial recordings in {run_dir}", file=sys.stderr)
         raise

@@ -6,6 +6,8 @@ instrument.
   the first ``--listen``); once the port accepts connections the master connects. When the master
   has finished its protocol it announces STOPPING and the slave exits too. Either running past
   ``--timeout`` is stopped with SIGTERM (recordings are flushed) and reported, as is a non-zero exit.
+  With ``rig.type: zenoh`` a third process, ``teleop bridge``, runs the simulated rig behind the
+  Zenoh rig interface and the slave connects to it.
 * :func:`full_scale_errors`: max and mean of |estimate - truth| over the range of the truth.
 * :func:`loop_lines`, :func:`verdict_lines`: the lines on both loops and the link, and on the checks.
 * :func:`finish`: checks, problems and wall time into the summary, ``summary.json``, the printed
@@ -13,6 +15,7 @@ instrument.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -113,9 +116,11 @@ def _stop(proc: subprocess.Popen) -> None:
             proc.wait()
 
 
-def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str]) -> None:
+def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, bridge: bool = False) -> None:
     """Slave and master as two processes with ``cfg_file`` (module docstring); what went wrong is
-    appended to ``problems``. ``args``: ``listen``, ``timeout`` [s], ``protocol``."""
+    appended to ``problems``. ``args``: ``listen``, ``timeout`` [s], ``protocol``. ``bridge``: the rig
+    is ``rig.type: zenoh``, so ``teleop bridge`` runs the simulated rig as a third process on its own
+    loopback port, which the slave connects to (stopped once slave and master are done)."""
     from teleop.transport import free_tcp_port, loopback_endpoint
     if args.listen:
         ep = args.listen[0]
@@ -129,19 +134,40 @@ def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str]) -> N
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     deadline = time.monotonic() + timeout
     procs: list[tuple[str, subprocess.Popen]] = []
-    with open(run_dir / "slave.log", "w") as slog, open(run_dir / "master.log", "w") as mlog:
+    rig_link: list[str] = []
+    with open(run_dir / "slave.log", "w") as slog, open(run_dir / "master.log", "w") as mlog, \
+            open(run_dir / "bridge.log", "w") if bridge else contextlib.nullcontext() as blog:
         try:
-            slave = subprocess.Popen(base + ["slave", "--listen", ep, "--exit-on-master-stop"] + common,
+            from teleop.record import start_recorder       # `teleop record` first: it hears every message
+            recorder, rec_link = start_recorder(base, common, run_dir, env, deadline)
+            procs.append(("recorder", recorder))
+            if rec_link is None:
+                problems.append(f"the recorder did not start (see {run_dir}/recorder.log)")
+                return
+            if bridge:
+                port_b = free_tcp_port()
+                ep_b = loopback_endpoint(port_b)
+                rig = subprocess.Popen(base + ["bridge", "--listen", ep_b, "--config", str(cfg_file), "--run-dir",
+                                               str(run_dir), "--max-duration", f"{timeout:g}"],
+                                       stdout=blog, stderr=subprocess.STDOUT, env=env)
+                procs.append(("bridge", rig))
+                if not _wait_listening(port_b, rig, deadline):
+                    problems.append(f"the bridge did not listen on {ep_b} (see {run_dir}/bridge.log)")
+                    return
+                rig_link = ["--connect", ep_b]
+            slave = subprocess.Popen(base + ["slave", "--listen", ep, "--exit-on-master-stop"] + rig_link + rec_link + common,
                                      stdout=slog, stderr=subprocess.STDOUT, env=env)
             procs.append(("slave", slave))
             if not _wait_listening(port, slave, deadline):
                 problems.append(f"the slave did not listen on {ep} (see {run_dir}/slave.log)")
                 return
-            master = subprocess.Popen(base + ["master", "--connect", ep, "--protocol", args.protocol] + common,
+            master = subprocess.Popen(base + ["master", "--connect", ep, "--protocol", args.protocol] + rec_link + common,
                                       stdout=mlog, stderr=subprocess.STDOUT, env=env)
             procs.append(("master", master))
             print(f"slave and master running on {ep} (calibration, then protocol {args.protocol}) ...", flush=True)
             for name, p in procs[::-1]:
+                if name == "bridge":
+                    continue                 # serves until stopped below
                 try:
                     rc = p.wait(max(0.1, deadline - time.monotonic()))
                 except subprocess.TimeoutExpired:

@@ -18,7 +18,7 @@ from teleop.errors import ConfigError
 from teleop.messages import Side
 
 __all__ = [
-    "ROOT", "STREAMS", "SIDES", "LIVELINESS", "validate_instrument_id", "side_name", "key",
+    "ROOT", "STREAMS", "SIDES", "LIVELINESS", "RIG_STREAMS", "validate_instrument_id", "side_name", "key", "rig_key",
     "command_key", "estimate_key", "heartbeat_key", "liveliness_key", "liveliness_pattern",
     "instrument_keys", "parse_key",
 ]
@@ -96,6 +96,23 @@ def command_key(instrument: str) -> str:
 def estimate_key(instrument: str) -> str:
     """``teleop/<instrument>/slave/estimate``: Estimate, slave -> master."""
     return key(instrument, "slave", "estimate")
+
+
+RIG_STREAMS = ("setpoint", "sample")
+
+
+def rig_key(instrument: str, stream: str) -> str:
+    """The key of the rig interface (:mod:`teleop.rig_wire`): ``teleop/<instrument>/rig/<setpoint|sample>``.
+
+    Raises
+    ------
+    ConfigError
+        Invalid instrument id or unknown stream.
+    """
+    validate_instrument_id(instrument)
+    if stream not in RIG_STREAMS:
+        raise ConfigError(f"rig stream: {stream!r} is not one of {', '.join(RIG_STREAMS)}")
+    return f"{ROOT}/{instrument}/rig/{stream}"
 
 
 def heartbeat_key(instrument: str, side: Side | str) -> str:

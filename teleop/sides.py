@@ -16,9 +16,8 @@ import time
 from pathlib import Path
 
 from teleop.config import Config
-from teleop.errors import ConfigError, DeviceError
 
-__all__ = ["run_slave", "run_master", "run_joint_slave", "open_device", "joint_protocols", "default_run_dir",
+__all__ = ["run_slave", "run_master", "run_joint_slave", "default_run_dir",
            "prepare_run_dir", "endpoints", "open_session", "slave_links", "master_links"]
 
 
@@ -153,7 +152,7 @@ def _log_master_done(node) -> None:
 def run_slave(args: argparse.Namespace) -> int:
     """``teleop slave``: calibrate the rig, then serve commands until stopped."""
     from slave.node import SlaveNode, csv_columns, warm_up
-    from slave.simulated import SimulatedRig
+    from slave.rigs import make_rig
     from teleop.clock import MonotonicClock
     from teleop.config import load_config
     from teleop.messages import Command
@@ -165,52 +164,31 @@ def run_slave(args: argparse.Namespace) -> int:
         return run_joint_slave(args, cfg)
     run_dir = prepare_run_dir(args, cfg)
     warm_up(cfg)  # compile the numba kernels now, not in the first real-time cycles
-    rig = SimulatedRig.from_config(cfg)
-    has_truth = rig.state.truth is not None
-    meta = {"source": "teleop slave", "instrument": cfg.instrument.id, "rig": cfg.rig.type,
-            "truth": "x_out, T_out, elongation are simulator ground truth (evaluation only)" if has_truth else "none"}
     ident = cfg.instrument.id
     clock = MonotonicClock()
     injector = _injector(args, clock)
-    node = None
-    with raise_on_sigterm(), \
-            open_session(cfg, args, clock) as session, \
-            CsvRecorder(run_dir / "slave.csv", csv_columns(has_truth), meta, flush_every=500) as rec, \
-            RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd") as rr:
-        links = slave_links(session, ident, injector, Command)
-        node = SlaveNode(cfg, rig, links, recorder=rec, rerun=rr, run_dir=run_dir,
-                         stop_on_master_stop=args.exit_on_master_stop)
-        _serve(node, clock, args, run_dir, "slave", injector)
+    with raise_on_sigterm(), open_session(cfg, args, clock) as session:
+        rig = make_rig(cfg, session)     # rig.type: simulated in process, zenoh (a drive or `teleop bridge`), ...
+        try:
+            has_truth = rig.state.truth is not None
+            meta = {"source": "teleop slave", "instrument": ident, "rig": cfg.rig.type,
+                    "truth": "x_out, T_out, elongation are simulator ground truth (evaluation only)" if has_truth
+                    else "none"}
+            with CsvRecorder(run_dir / "slave.csv", csv_columns(has_truth), meta, flush_every=500) as rec, \
+                    RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd") as rr:
+                links = slave_links(session, ident, injector, Command)
+                node = SlaveNode(cfg, rig, links, recorder=rec, rerun=rr, run_dir=run_dir,
+                                 stop_on_master_stop=args.exit_on_master_stop)
+                _serve(node, clock, args, run_dir, "slave", injector)
+        finally:
+            rig.close()
     logging.getLogger("teleop.slave").info("slave done: %s", run_dir)
     return 0
 
 
-def open_device(cfg, protocol: str):
-    """The configured haptic device (``master.device.type``) for the configured instrument.
-
-    Raises
-    ------
-    DeviceError
-        A HID device for a joint instrument (one report map per axis is not there yet), or a HID
-        device that cannot be opened (named).
-    """
-    from master.simulated import ScriptedOperator, build_protocol
-    if cfg.master.device.type == "hid":
-        if cfg.instrument.joints:
-            raise DeviceError("master.device.type: a HID device drives a single tendon so far; joint instruments "
-                              "have the simulated multi-axis operator")
-        from master.hid import HidDevice
-        # opens, resets and enables the actuators; raises DeviceError naming the device when absent
-        return HidDevice.from_file(cfg.master.device.file)
-    if cfg.instrument.joints:
-        from master.joint_operator import MultiAxisOperator
-        return MultiAxisOperator(joint_protocols(cfg, "paper" if protocol in ("paper,minor", "paper") else protocol),
-                                 clutch_bit=cfg.master.mapping.clutch_button)
-    return ScriptedOperator(build_protocol(protocol), clutch_bit=cfg.master.mapping.clutch_button)
-
-
 def run_master(args: argparse.Namespace) -> int:
     """``teleop master``: run the operator side of any instrument until the device's protocol is finished."""
+    from master.devices import make_device
     from master.node import MasterNode, csv_columns, csv_units
     from teleop.clock import MonotonicClock
     from teleop.config import load_config
@@ -218,7 +196,7 @@ def run_master(args: argparse.Namespace) -> int:
     from teleop.recording import CsvRecorder, raise_on_sigterm
 
     cfg = load_config(args.config)
-    device = open_device(cfg, args.protocol)
+    device = make_device(cfg, args.protocol)     # master.device.type through the registry
     # from here on the device is closed on every exit path (HID: zero force, stop all effects,
     # disable actuators), whatever fails: session, recording, the loop, Ctrl-C or SIGTERM
     with _closing(device):
@@ -261,6 +239,7 @@ def run_joint_slave(args: argparse.Namespace, cfg: Config) -> int:
     from estimator.sheath import SheathModel
     from slave.joint_node import JointSlaveNode, joint_csv_columns
     from slave.joint_rig import SimulatedInstrument
+    from slave.rigs import make_rig
     from teleop.clock import MonotonicClock
     from teleop.messages import JointCommand
     from teleop.recording import CsvRecorder, raise_on_sigterm
@@ -270,7 +249,7 @@ def run_joint_slave(args: argparse.Namespace, cfg: Config) -> int:
     calibration, cal_path = _load_or_none(cfg)
     log.info("calibration %s", f"loaded from {cal_path}" if calibration else f"missing: calibrating, then {cal_path}")
     run_dir = prepare_run_dir(args, cfg)
-    inst = SimulatedInstrument.from_config(cfg)
+    inst = make_rig(cfg)
     # compile the numba kernels now, not in the first real-time cycles
     SimulatedInstrument(cfg.instrument.joints[:1], cfg.rig).step([[1e-4, 1e-4]], 1e-3)
     m = SheathModel(K=0.5, compliance=1e-4)
@@ -290,20 +269,3 @@ def run_joint_slave(args: argparse.Namespace, cfg: Config) -> int:
         _serve(node, clock, args, run_dir, "slave", injector)
     log.info("slave done: %s", run_dir)
     return 0
-
-
-def joint_protocols(cfg: Config, names: str):
-    """One axis protocol per joint: ``paper`` (the seed paper's experiment on tendon a, then b) or
-    ``short`` (6 N, 2 N each way).
-
-    Raises
-    ------
-    ConfigError
-        Another protocol name.
-    """
-    from master.joint_operator import paper_protocol
-    from slave.pair_calibrate import set_tension
-    targets = {"paper": (20.0, 5.0, 20.0), "short": (6.0, 2.0)}.get(names.strip())
-    if targets is None:
-        raise ConfigError(f"protocol: {names!r} is not a joint-instrument protocol (expected 'paper' or 'short')")
-    return [paper_protocol(set_tension(cfg, j), targets) for j in cfg.instrument.joints]

@@ -18,7 +18,7 @@ import logging
 import math
 import socket
 import threading
-from typing import Callable, Generic, NamedTuple, TypeVar
+from typing import Any, Callable, Generic, NamedTuple, TypeVar
 
 import zenoh
 
@@ -157,16 +157,19 @@ class Session:
             self._entities.append(entity)
         return entity
 
-    def publisher(self, key: str, *, express: bool = True,
-                  priority: zenoh.Priority = zenoh.Priority.REAL_TIME) -> "Publisher":
-        """Declare a :class:`Publisher` on ``key`` (no batching, dropped rather than queued when congested)."""
+    def publisher(self, key: str, *, express: bool = True, priority: zenoh.Priority = zenoh.Priority.REAL_TIME,
+                  encoder: Callable[[Any], bytes] = encode) -> "Publisher":
+        """Declare a :class:`Publisher` on ``key`` (no batching, dropped rather than queued when congested);
+        ``encoder``: another byte format (e.g. :func:`teleop.rig_wire.encode_rig`)."""
         self._check_open()
-        return self._track(Publisher(self, key, express=express, priority=priority))
+        return self._track(Publisher(self, key, express=express, priority=priority, encoder=encoder))
 
-    def subscriber(self, key: str, expect: type[M] | None = None) -> "LatestSubscriber[M]":
-        """Declare a :class:`LatestSubscriber` on ``key``; ``expect`` rejects other message types."""
+    def subscriber(self, key: str, expect: type[M] | None = None, *,
+                   decoder: Callable[[bytes], Any] = decode) -> "LatestSubscriber[M]":
+        """Declare a :class:`LatestSubscriber` on ``key``; ``expect`` rejects other message types;
+        ``decoder``: another byte format (e.g. :func:`teleop.rig_wire.decode_rig`)."""
         self._check_open()
-        return self._track(LatestSubscriber(self, key, expect=expect))
+        return self._track(LatestSubscriber(self, key, expect=expect, decoder=decoder))
 
     def liveliness_token(self, key: str) -> "LivelinessToken":
         """Declare this process alive on ``key`` until the token or the session closes."""
@@ -204,9 +207,10 @@ class Publisher(Entity):
     """Publishes messages encoded by :mod:`teleop.codec` on one key. Attribute ``sent``: puts so far."""
 
     def __init__(self, session: Session, key: str, *, express: bool = True,
-                 priority: zenoh.Priority = zenoh.Priority.REAL_TIME):
+                 priority: zenoh.Priority = zenoh.Priority.REAL_TIME, encoder: Callable[[Any], bytes] = encode):
         super().__init__(session, key)
         self.sent = 0
+        self.encoder = encoder
         self._declare(session.zenoh_session.declare_publisher, key, express=express, priority=priority,
                       congestion_control=zenoh.CongestionControl.DROP)
 
@@ -220,7 +224,7 @@ class Publisher(Entity):
         TransportError
             The publisher or its session is closed.
         """
-        self.put_bytes(encode(msg))
+        self.put_bytes(self.encoder(msg))
 
     def put_bytes(self, payload: bytes) -> None:
         """Send raw bytes (tests and tools only: receivers expect codec payloads)."""
@@ -251,9 +255,11 @@ class LatestSubscriber(Entity, Generic[M]):
         Payloads that did not decode (or were of another type than ``expect``); never raised.
     """
 
-    def __init__(self, session: Session, key: str, *, expect: type[M] | None = None):
+    def __init__(self, session: Session, key: str, *, expect: type[M] | None = None,
+                 decoder: Callable[[bytes], Any] = decode):
         super().__init__(session, key)
         self.expect = expect
+        self.decoder = decoder
         self.clock = session.clock
         self.count = 0
         self.errors = 0
@@ -264,7 +270,7 @@ class LatestSubscriber(Entity, Generic[M]):
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         try:
-            msg = decode(sample.payload.to_bytes())
+            msg = self.decoder(sample.payload.to_bytes())
             if self.expect is not None and type(msg) is not self.expect:
                 raise CodecError(f"got a {type(msg).__name__}, expected a {self.expect.__name__}")
         except Exception as e:  # noqa: BLE001 - a bad payload must never kill the zenoh callback

@@ -21,7 +21,7 @@ PACKAGES = ("estimator", "teleop", "slave", "master")
 #: Application modules still at the top of teleop/ (issue 9: they move to teleop/app/ once the other
 #: rooms' files are committed). They may import master/ and slave/; the base may not import them.
 APP_NOT_YET_MOVED = frozenset({
-    "teleop.cli", "teleop.cli_joints", "teleop.sides", "teleop.demo", "teleop.demo_joints", "teleop.demo_run",
+    "teleop.cli", "teleop.cli_joints", "teleop.sides", "teleop.bridge", "teleop.demo", "teleop.demo_joints", "teleop.demo_run",
     "teleop.demo_figures", "teleop.analyze", "teleop.kaist", "teleop.kaist_report", "teleop.report",
 })
 
@@ -30,6 +30,9 @@ APP_NOT_YET_MOVED = frozenset({
 KNOWN_CYCLES: tuple[frozenset[str], ...] = (
     # the KAIST report is drawn from analyze's results, analyze calls the report writer
     frozenset({"teleop.analyze", "teleop.kaist_report"}),
+    # appeared in the offline room during issue 9 (pair_shared lazily imports pair_general, which
+    # imports pair_shared): to be untied by that room
+    frozenset({"estimator.pair_general", "estimator.pair_shared"}),
 )
 
 #: (importer, imported module, private name) imports across modules that exist today.

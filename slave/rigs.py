@@ -1,0 +1,67 @@
+"""The rig registry: ``rig.type`` names the factory that builds the slave's rig (as lerobot does).
+
+A factory takes the config and the slave's transport session (None where there is none) and returns
+a rig: a :class:`slave.rig.Rig` for a single tendon, a :class:`slave.instrument.Instrument` for a
+joint instrument. Registered here:
+
+=============  ==============================================================================
+``simulated``  the in-process simulators (:class:`slave.simulated.SimulatedRig`, one tendon;
+               :class:`slave.joint_rig.SimulatedInstrument`, ``instrument.joints`` given)
+``zenoh``      set-points out, samples in over Zenoh (:class:`slave.zenoh_rig.ZenohRig`): a motor
+               controller running zenoh-pico, or ``teleop bridge`` (single tendon so far)
+=============  ==============================================================================
+
+Another rig is one :func:`register_rig` call; nothing else chooses by type.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable
+
+from teleop.config import Config
+from teleop.errors import ConfigError
+
+__all__ = ["RIG_TYPES", "register_rig", "make_rig"]
+
+#: rig type -> factory(cfg, session) -> rig
+RIG_TYPES: dict[str, Callable[[Config, Any], Any]] = {}
+
+
+def register_rig(name: str):
+    """Decorator: register ``factory(cfg, session)`` under ``rig.type`` ``name``."""
+    def deco(factory):
+        RIG_TYPES[name] = factory
+        return factory
+    return deco
+
+
+def make_rig(cfg: Config, session: Any = None):
+    """The rig of ``cfg.rig.type``.
+
+    Raises
+    ------
+    ConfigError
+        An unregistered type, or one that cannot drive this instrument (the message says which).
+    """
+    factory = RIG_TYPES.get(cfg.rig.type)
+    if factory is None:
+        raise ConfigError(f"rig.type: {cfg.rig.type!r} is not a registered rig (known: {', '.join(sorted(RIG_TYPES))})")
+    return factory(cfg, session)
+
+
+@register_rig("simulated")
+def _simulated(cfg: Config, session: Any):
+    if cfg.instrument.joints:
+        from slave.joint_rig import SimulatedInstrument
+        return SimulatedInstrument.from_config(cfg)
+    from slave.simulated import SimulatedRig
+    return SimulatedRig.from_config(cfg)
+
+
+@register_rig("zenoh")
+def _zenoh(cfg: Config, session: Any):
+    if cfg.instrument.joints:
+        raise ConfigError("rig.type zenoh: single tendon only so far (instrument.joints is given)")
+    if session is None:
+        raise ConfigError("rig.type zenoh needs the slave's transport session")
+    from slave.zenoh_rig import ZenohRig
+    return ZenohRig(session, cfg)

@@ -1,0 +1,141 @@
+"""A rig behind Zenoh: the slave sends motor set-points and reads load-cell and encoder samples.
+
+``rig.type: zenoh``. Whatever drives the motors - a motor controller running zenoh-pico, or
+``teleop bridge`` running the simulated rig as its own process - subscribes to the set-points on
+``teleop/<instrument>/rig/setpoint`` and publishes one sample per cycle on
+``teleop/<instrument>/rig/sample`` (byte format: :mod:`teleop.rig_wire`). :meth:`ZenohRig.step`
+publishes the new set-point and returns the newest sample received (one cycle behind, as a real
+drive's sensors are), time-stamped on the slave's clock from the start (the two loops are not
+in lock step: a sample may be read twice, ``repeats`` counts it, and the slave's time stays strictly
+increasing); the slave node's watchdogs and calibration see it as any other :class:`slave.rig.Rig`. A sample older than ``rig.zenoh.timeout_ms`` is counted (``stale``) and
+logged at a limited rate; the rig side holds its motors when the set-points stop (the bridge does).
+
+Single tendon for now: a joint instrument over Zenoh needs the pair's arrays (same messages, n = 2
+per joint) in the joint slave.
+"""
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+
+from slave.rig import RigInputError, RigState, RigTruth
+from teleop.clock import MonotonicClock
+from teleop.codec import next_seq
+from teleop.config import Config
+from teleop.entity import RateLimitedLog
+from teleop.errors import TransportError
+from teleop.keys import rig_key
+from teleop.rig_wire import RigSample, RigSetpoint, decode_rig, encode_rig
+
+__all__ = ["ZenohRig", "state_from_sample"]
+
+log = logging.getLogger("teleop.slave")
+_NO_PROFILE = np.zeros(0)
+_NO_PROFILE.flags.writeable = False
+
+
+def state_from_sample(s: RigSample, t: float | None = None) -> RigState:
+    """The :class:`RigState` of tendon 0 of a sample (truth when the sample carries it), at time ``t``
+    [s] (default: the sample's own time stamp)."""
+    truth = None
+    if s.truth:
+        T_in, T_out, x_in, x_out, e = s.truth[0]
+        truth = RigTruth(T_in=T_in, T_out=T_out, x_in=x_in, x_out=x_out, elongation=e, profile=_NO_PROFILE)
+    return RigState(t=s.t if t is None else t, x_in=s.x_in[0], T_in=s.T_in[0], x_in_cmd=s.x_in_cmd[0], truth=truth)
+
+
+class ZenohRig:
+    """The ``zenoh`` rig of one tendon (module docstring).
+
+    Parameters
+    ----------
+    session : teleop.transport.Session
+        The slave's session (its endpoints reach the rig).
+    cfg : Config
+        ``instrument.id`` (keys), ``rig.zenoh`` (timeout_ms, wait_s).
+
+    Attributes
+    ----------
+    stale : int
+        Steps that returned a sample older than ``rig.zenoh.timeout_ms``.
+    repeats : int
+        Steps that returned the same sample as the step before.
+
+    Raises
+    ------
+    TransportError
+        No sample within ``rig.zenoh.wait_s`` of starting (the message names the key).
+    """
+
+    def __init__(self, session, cfg: Config):
+        ident = cfg.instrument.id
+        z = cfg.rig.zenoh
+        self.clock = getattr(session, "clock", None) or MonotonicClock()
+        self.timeout = z.timeout_ms * 1e-3
+        self._pub = session.publisher(rig_key(ident, "setpoint"), encoder=encode_rig)
+        self._sub = session.subscriber(rig_key(ident, "sample"), RigSample, decoder=decode_rig)
+        self._seq = 0
+        self._tissue = -1
+        self.stale = self.repeats = 0
+        self._log = RateLimitedLog(log, 1.0, self.clock)
+        if not self._sub.wait(1, z.wait_s):
+            raise TransportError(f"rig.type zenoh: no sample on {rig_key(ident, 'sample')} within {z.wait_s:g} s "
+                                 f"(is `teleop bridge` or the motor controller running and reachable?)")
+        self._t0 = self.clock.now()
+        self._seen = self._sub.latest()
+        self._state = state_from_sample(self._seen.message, 0.0)
+
+    @property
+    def state(self) -> RigState:
+        """The newest sample as a RigState."""
+        return self._state
+
+    def step(self, x_in_cmd: float, dt: float) -> RigState:
+        """Publish the set-point ``x_in_cmd`` [m]; return the newest sample (``dt`` is the rig's own business).
+
+        Raises
+        ------
+        RigInputError (ValueError)
+            ``x_in_cmd`` not a finite number.
+        """
+        try:
+            cmd = float(x_in_cmd)
+        except (TypeError, ValueError):
+            raise RigInputError(f"x_in_cmd must be a number, got {x_in_cmd!r}") from None
+        if not math.isfinite(cmd):
+            raise RigInputError(f"x_in_cmd must be a finite displacement in metres, got {x_in_cmd!r}")
+        self._pub.put(RigSetpoint(self._seq, self.clock.now(), (cmd,), self._tissue))
+        self._seq = next_seq(self._seq)
+        now = self.clock.now()
+        rec = self._sub.latest()
+        age = self._sub.age(now)
+        if age > self.timeout:
+            self.stale += 1
+            self._log.warning("rig sample %.1f ms old (rig.zenoh.timeout_ms %g)", 1e3 * age, self.timeout * 1e3)
+        self.repeats += rec is self._seen
+        self._seen = rec
+        self._state = state_from_sample(rec.message, max(now - self._t0, self._state.t + 1e-9))
+        return self._state
+
+    def set_load(self, *, tissue: bool | None = None, force: float | None = None) -> None:
+        """Tissue contact of a simulated rig behind the bridge (sent with the next set-points).
+
+        Raises
+        ------
+        RigInputError (ValueError)
+            ``force`` given (a distal set force is not part of the rig interface).
+        """
+        if force is not None:
+            raise RigInputError("rig.type zenoh: a distal set force cannot be set through the rig interface")
+        if tissue is not None:
+            self._tissue = int(bool(tissue))
+
+    def close(self) -> None:
+        """Undeclare the set-point publisher and the sample subscriber; idempotent."""
+        for ent in (self._pub, self._sub):
+            try:
+                ent.close()
+            except TransportError:  # pragma: no cover - the session went first
+                pass
