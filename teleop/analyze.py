@@ -54,6 +54,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="measured-data CSV (one tendon), or a KAIST sine_config_N.txt")
     parser.add_argument("--kaist", nargs="?", const="", default=None, metavar="DIR",
                         help="analyse every KAIST configuration (default DIR ../shared/data/kaist-tsm)")
+    parser.add_argument("--mrd", nargs="?", const="", default=None, metavar="DIR",
+                        help="jaw torque and angle of a da Vinci tool from its spindle: every *.TXT run of an MRD "
+                             "folder (default ../shared/data/mrd-davinci; teleop.mrd_report)")
+    parser.add_argument("--calibration", metavar="RUN|segment:SECONDS",
+                        help="MRD mode: calibrate on one run (default: the slowest, lightest) or on the first "
+                             "SECONDS of every run")
     parser.add_argument("--json", metavar="OUT", help="write the result (summary numbers) as JSON to OUT")
     parser.add_argument("--report", metavar="DIR", help="write a Markdown report with PNG figures to DIR")
     parser.add_argument("--figures", metavar="DIR", help="KAIST mode: write the kaist_*.png plots to DIR")
@@ -64,6 +70,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main_analyze(args: argparse.Namespace) -> int:
     """Run the subcommand; returns the exit code (0). Raises DataError / ConfigError on bad input."""
+    if getattr(args, "mrd", None) is not None:
+        from teleop.mrd_report import main_mrd  # lazy: the MRD analysis and its figures
+        return main_mrd(args)
     if args.file is None and args.kaist is None:
         raise ConfigError("analyze needs FILE or --kaist [DIR]")
     if args.json is not None and not Path(args.json).resolve().parent.is_dir():

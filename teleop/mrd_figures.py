@@ -1,0 +1,192 @@
+"""Figures and the Markdown report of ``teleop analyze --mrd`` (summary plots, docs/findings.md Finding 4).
+
+* ``mrd_loops.png``     jaw torque against jaw angle, measured beside predicted (leave-one-run-out
+  and calibrated on one run), for the four corner runs (slowest / fastest x lightest / heaviest);
+* ``mrd_residuals.png`` torque RMSE [FS] over frequency x load: one-run calibration, the linear
+  baseline, the folder model left out, and its residual against the phase of the spindle stroke;
+* ``mrd_bands.png``     model-free: spindle friction band half-width and jaw-side friction against
+  load and speed (E3, E8), the jaw angle gap between the directions (E12 / cable stretch).
+
+Data: MRD Lab data repository, University of Minnesota (ODbL 1.0 / DbCL 1.0); the attribution is
+written into every figure and the report.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from teleop.errors import ConfigError
+from teleop.mrd import MrdRun
+
+__all__ = ["write_mrd_figures", "write_mrd_report", "FIGURES"]
+
+FIGURES = ("mrd_loops.png", "mrd_residuals.png", "mrd_bands.png")
+_CREDIT = "data: MRD Lab, University of Minnesota (ODbL/DbCL)"
+
+
+def _plt():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def _mkdir(d: str | Path, option: str) -> Path:
+    d = Path(d)
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ConfigError(f"{option} {d}: cannot create the directory ({e.strerror})") from None
+    return d
+
+
+def _grid(runs: list[MrdRun], values: dict[str, float]) -> tuple[np.ndarray, list[float], list[int]]:
+    freqs = sorted({round(r.frequency_hz, 2) for r in runs})
+    loads = sorted({r.load_level for r in runs})
+    g = np.full((len(loads), len(freqs)), np.nan)
+    for r in runs:
+        if r.name in values:
+            g[loads.index(r.load_level), freqs.index(round(r.frequency_hz, 2))] = values[r.name]
+    return g, freqs, loads
+
+
+def _heat(ax, g, freqs, loads, title, vmax):
+    im = ax.imshow(g, origin="lower", cmap="viridis", vmin=0.0, vmax=vmax, aspect="auto")
+    for (i, j), v in np.ndenumerate(g):
+        if math.isfinite(v):
+            ax.text(j, i, f"{v:.3f}", ha="center", va="center", fontsize=7, color="w" if v < 0.6 * vmax else "k")
+    ax.set_xticks(range(len(freqs)), [f"{f:g}" for f in freqs])
+    ax.set_yticks(range(len(loads)), [str(x) for x in loads])
+    ax.set_xlabel("sine frequency [Hz]")
+    ax.set_ylabel("load level")
+    ax.set_title(title, fontsize=9)
+    return im
+
+
+def _corners(runs: list[MrdRun]) -> list[MrdRun]:
+    fr = sorted({round(r.frequency_hz, 2) for r in runs})
+    ld = sorted({r.load_level for r in runs})
+    out = []
+    for f in (fr[0], fr[-1]):
+        for lv in (ld[0], ld[-1]):
+            out += [r for r in runs if round(r.frequency_hz, 2) == f and r.load_level == lv][:1]
+    return out
+
+
+def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, directory: str | Path) -> list[Path]:
+    """Write :data:`FIGURES` to ``directory``; returns their paths. Raises ConfigError when the
+    directory cannot be created."""
+    plt = _plt()
+    d = _mkdir(directory, "--figures")
+    paths = []
+    k0 = details["k0"]
+
+    corners = _corners(runs)
+    fig, axes = plt.subplots(2, len(corners), figsize=(3.6 * len(corners), 6.2), squeeze=False)
+    for j, r in enumerate(corners):
+        k = k0.get(r.name, 0)
+        ax = axes[0, j]
+        ax.plot(np.degrees(r.theta_d[k:]), 1e3 * r.tau_d[k:], color="0.3", lw=0.6, label="measured")
+        if r.name in details["loro_pred"]:
+            pt, pa = details["loro_pred"][r.name]
+            ax.plot(np.degrees(pa[k:]), 1e3 * pt[k:], color="tab:orange", lw=0.6, label="folder model, left out")
+        if r.name in details["pred"]:
+            pt, pa = details["pred"][r.name]
+            ax.plot(np.degrees(pa[k:]), 1e3 * pt[k:], color="tab:blue", lw=0.5, alpha=0.6, label="calibrated on one run")
+        ax.set_title(f"run {r.name}: {r.frequency_hz:.1f} Hz, load {r.load_level}", fontsize=9)
+        ax.set_xlabel("jaw angle [deg]")
+        ax.set_ylabel("jaw torque [mN m]")
+        ax = axes[1, j]
+        t = r.time[k:]
+        m = t < t[0] + 2.2 / max(r.frequency_hz, 1e-3)
+        ax.plot(t[m], 1e3 * r.tau_d[k:][m], color="0.3", lw=0.6)
+        if r.name in details["loro_pred"]:
+            ax.plot(t[m], 1e3 * details["loro_pred"][r.name][0][k:][m], color="tab:orange", lw=0.7)
+        ax2 = ax.twinx()
+        ax2.plot(t[m], 1e3 * r.tau_p[k:][m], color="tab:green", lw=0.5, alpha=0.5)
+        ax2.set_ylabel("spindle torque [mN m] (green)", fontsize=8)
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("jaw torque [mN m]")
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle(f"Jaw torque: measured and predicted from the spindle only ({_CREDIT})", fontsize=10)
+    fig.tight_layout()
+    paths.append(d / FIGURES[0])
+    fig.savefig(paths[-1], dpi=80)
+    plt.close(fig)
+
+    fig, axes = plt.subplots(1, 4, figsize=(17, 3.8))
+    cal = {n: v["torque_rmse_fs"] for n, v in summary["runs"].items()}
+    lin = {n: v["baselines"]["linear"]["torque_rmse_fs"] for n, v in summary["runs"].items()}
+    lo = {n: v["torque_rmse_fs"] for n, v in summary.get("loro", {}).get("runs", {}).items()}
+    vmax = max([0.1] + [v for v in lo.values()])
+    c = summary["calibration"]
+    ctitle = f"calibrated on run {c['run']}" if c["mode"] == "run" else f"first {c['seconds']:g} s of each run"
+    for ax, vals, title, vm in ((axes[0], cal, f"model, {ctitle}", max(cal.values())),
+                                (axes[1], lin, f"linear baseline, {ctitle}", max(lin.values())),
+                                (axes[2], lo, "folder model, leave-one-run-out", vmax)):
+        im = _heat(ax, *_grid(runs, vals), f"{title}: torque RMSE [FS]", vm)
+        fig.colorbar(im, ax=ax, fraction=0.046)
+    ax = axes[3]
+    nb = 24
+    for r in _corners(runs):
+        if r.name not in details["loro_pred"]:
+            continue
+        k = k0.get(r.name, 0)
+        e = (details["loro_pred"][r.name][0] - r.tau_d)[k:] / summary["full_scale_Nm"]
+        ph = (2 * math.pi * r.frequency_hz * r.time[k:]) % (2 * math.pi)
+        idx = np.minimum((ph / (2 * math.pi) * nb).astype(int), nb - 1)
+        mean = np.array([e[idx == i].mean() if np.any(idx == i) else np.nan for i in range(nb)])
+        ax.plot((np.arange(nb) + 0.5) * 360 / nb, mean, marker=".", label=r.name)
+    ax.axhline(0, color="0.5", lw=0.5)
+    ax.set_xlabel("phase of the spindle sine [deg]")
+    ax.set_ylabel("mean residual [FS]")
+    ax.set_title("folder model left out: residual over the cycle", fontsize=9)
+    ax.legend(fontsize=7)
+    fig.suptitle(f"Where the jaw torque estimate fails ({_CREDIT})", fontsize=10)
+    fig.tight_layout()
+    paths.append(d / FIGURES[1])
+    fig.savefig(paths[-1], dpi=80)
+    plt.close(fig)
+
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
+    bands = summary["bands"]
+    freqs = sorted({round(r.frequency_hz, 2) for r in runs})
+    cols = plt.cm.viridis(np.linspace(0, 0.85, len(freqs)))
+    for f, col in zip(freqs, cols):
+        rs = sorted([r for r in runs if round(r.frequency_hz, 2) == f], key=lambda r: r.load_level)
+        x = [1e3 * bands[r.name]["jaw_torque_mean_Nm"] for r in rs]
+        axes[0].plot(x, [1e3 * bands[r.name]["band_half_width_Nm"] for r in rs], "o-", color=col, label=f"{f:g} Hz")
+        axes[1].plot([math.degrees(r.peak_speed) for r in rs],
+                     [1e3 * abs(bands[r.name]["jaw_torque_direction_half_diff_Nm"]) for r in rs], "o", color=col)
+        axes[2].plot(x, [abs(bands[r.name]["jaw_angle_direction_half_diff_deg"]) for r in rs], "o-", color=col)
+    axes[0].set_xlabel("mean jaw torque [mN m]")
+    axes[0].set_ylabel("spindle band half-width [mN m]")
+    axes[0].set_title("E8 / E3: friction band against load and frequency", fontsize=9)
+    axes[0].legend(fontsize=7)
+    axes[1].set_xlabel("peak spindle speed [deg/s]")
+    axes[1].set_ylabel("jaw torque half-gap between directions [mN m]")
+    axes[1].set_title("friction beyond the jaw pulley (load motor)", fontsize=9)
+    axes[2].set_xlabel("mean jaw torque [mN m]")
+    axes[2].set_ylabel("jaw angle half-gap between directions [deg]")
+    axes[2].set_title("E12 / stretch: angle gap against load", fontsize=9)
+    fig.suptitle(f"Model-free loop measurements, middle of the stroke ({_CREDIT})", fontsize=10)
+    fig.tight_layout()
+    paths.append(d / FIGURES[2])
+    fig.savefig(paths[-1], dpi=80)
+    plt.close(fig)
+    return paths
+
+
+def write_mrd_report(runs: list[MrdRun], summary: dict, details: dict, directory: str | Path) -> Path:
+    """``report.md`` with the printed table and the figures in ``directory``; returns its path."""
+    from teleop.mrd_report import format_mrd
+    d = _mkdir(directory, "--report")
+    figs = write_mrd_figures(runs, summary, details, d)
+    text = ["# Jaw torque of a da Vinci tool from its spindle (teleop analyze --mrd)", "",
+            f"Data: {summary['attribution']}.", "", "```", format_mrd(summary), "```", ""]
+    text += [f"![{p.stem}]({p.name})" for p in figs]
+    out = d / "report.md"
+    out.write_text("\n".join(text) + "\n")
+    return out

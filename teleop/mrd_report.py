@@ -1,0 +1,304 @@
+"""``teleop analyze --mrd DIR``: the spindle pair model against measured jaw torque and angle.
+
+Data: MRD Lab data repository, University of Minnesota (O'Neill, Stephens, Kowalewski, IEEE RA-L
+3(4):3027-3034, 2018; ODbL 1.0 / DbCL 1.0; ../shared/data/mrd-davinci/SOURCE.md).
+
+Protocol (docs/findings.md, Finding 4):
+
+* calibration ``RUN`` (default: the slowest, lightest run) or ``segment:SECONDS`` (the first
+  SECONDS of every run, scored on the rest). The model's *inputs* are always the spindle torque
+  and angle; the calibration's jaw torque and angle are the fit *targets* (the spindle side alone
+  cannot give the torque scale, the jaw-side offset or the friction beyond the jaw pulley; the
+  JSON lists them under ``not_from_proximal``). Scored runs never contribute a distal sample.
+* score: torque RMSE and max |error| as fractions of full scale (range of the measured jaw torque
+  over the folder), angle RMSE [deg], from ``SCORE_FROM_S`` on (the load motor ramps in first).
+* across the folder: model-free band measurements per run (E3 frequency, E8 load, distal-side
+  friction, E12 backlash), one shared parameter set fitted on all runs and scored leave-one-run-out.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import time
+
+import numpy as np
+
+from estimator.spindle import first_reversal, make_batch, predict_angle, predict_torque, spindle_rate
+from estimator.spindle_fit import EXTENSIONS, band_centre, fit_baselines
+from estimator.spindle_shared import RunData, batch_of, leave_one_out, select_extensions, shared_fit
+from teleop.errors import ConfigError, DataError
+from teleop.mrd import ATTRIBUTION, MrdRun
+
+__all__ = ["analyze_mrd", "format_mrd", "parse_calibration", "band_measurements", "SCORE_FROM_S"]
+
+SCORE_FROM_S = 0.5         # the first reversal is searched after this [s] (the load motor ramps in first)
+FIT_STEP, SHARED_STEP = 10, 50      # decimation of the fits (1 kHz -> 100 Hz, 20 Hz)
+NOT_FROM_PROXIMAL = {
+    "rho": "torque scale (r_d / r_p times the ratio of the two sensors' gains): one run at one load level shows "
+           "the load only through rho times the load; needs at least two load levels with jaw torque",
+    "b": "jaw torque at zero cable torque difference (internal preload, sensor zero): no proximal signature",
+    "f": "friction beyond the jaw pulley (jaw pivot, load motor) lies inside the spindle's friction band, "
+         "indistinguishable from cable friction without a jaw-side measurement",
+    "theta0": "jaw zero of the distal encoder",
+}
+
+
+class _Progress:
+    def __init__(self, enabled: bool, total: int):
+        self.enabled, self.total, self.n = enabled, max(total, 1), 0
+
+    def __call__(self, label: str) -> None:
+        self.n += 1
+        if self.enabled:
+            k = int(30 * min(self.n, self.total) / self.total)
+            sys.stderr.write(f"\ranalyze --mrd [{'#' * k}{'.' * (30 - k)}] {min(self.n, self.total)}/{self.total} "
+                             f"{label:<24.24}")
+            sys.stderr.flush()
+
+    def done(self) -> None:
+        if self.enabled:
+            sys.stderr.write("\n")
+
+
+def parse_calibration(spec: str | None, runs: list[MrdRun]) -> tuple[str, object]:
+    """("run", name) or ("segment", seconds) from ``--calibration``; default the slowest, lightest run.
+
+    Raises ConfigError for an unknown run name or a segment outside [1, half the shortest run] s.
+    """
+    names = [r.name for r in runs]
+    if spec is None or spec == "":
+        r = min(runs, key=lambda r: (round(r.frequency_hz, 3), r.load_level, r.name))
+        return "run", r.name
+    if spec.startswith("segment:"):
+        try:
+            s = float(spec.split(":", 1)[1])
+        except ValueError:
+            raise ConfigError(f"--calibration {spec}: SECONDS must be a number") from None
+        shortest = min(float(r.time[-1]) for r in runs)
+        if not 1.0 <= s <= 0.5 * shortest:
+            raise ConfigError(f"--calibration {spec}: SECONDS must be in [1, {0.5 * shortest:.1f}]")
+        return "segment", s
+    if spec not in names:
+        raise ConfigError(f"--calibration {spec}: no run of that name (runs: {', '.join(names)})")
+    return "run", spec
+
+
+def band_measurements(run: MrdRun, bins_deg: float = 2.0) -> dict:
+    """Model-free loop measurements of one run, in spindle-angle bins over the middle 60 % of the
+    stroke where both directions are in full motion (|omega| > 0.05 rad/s): the spindle torque
+    band's half-width and centre [N m], the jaw torque's mean and half difference between the
+    directions [N m], the jaw angle's half difference between the directions [deg]."""
+    k = first_reversal(run.theta_p, run.dt, SCORE_FROM_S)
+    th, tp, td, ad = run.theta_p[k:], run.tau_p[k:], run.tau_d[k:], run.theta_d[k:]
+    om = spindle_rate(run.theta_p, run.dt)[k:]
+    lo, hi = np.percentile(th, [20, 80])
+    edges = np.arange(lo, hi, math.radians(bins_deg))
+    rows = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        m = (th >= a) & (th < b)
+        up, dn = m & (om > 0.05), m & (om < -0.05)
+        if up.sum() > 5 and dn.sum() > 5:
+            rows.append((tp[up].mean(), tp[dn].mean(), td[up].mean(), td[dn].mean(), ad[up].mean(), ad[dn].mean()))
+    if not rows:
+        raise DataError(f"{run.source}: the spindle never moves both ways through the middle of its stroke")
+    r = np.asarray(rows)
+    return {"band_half_width_Nm": float(np.mean(np.abs(r[:, 0] - r[:, 1])) / 2),
+            "band_centre_Nm": float(np.mean(r[:, 0] + r[:, 1]) / 2),
+            "jaw_torque_mean_Nm": float(np.mean(r[:, 2] + r[:, 3]) / 2),
+            "jaw_torque_direction_half_diff_Nm": float(np.mean(r[:, 2] - r[:, 3]) / 2),
+            "jaw_angle_direction_half_diff_deg": float(math.degrees(np.mean(r[:, 4] - r[:, 5]) / 2))}
+
+
+def _score(pt, pa, run: MrdRun, k0: int, fs: float) -> dict:
+    e, ea = pt[k0:] - run.tau_d[k0:], pa[k0:] - run.theta_d[k0:]
+    return {"torque_rmse_fs": float(np.sqrt(np.mean(e ** 2)) / fs), "torque_max_fs": float(np.max(np.abs(e)) / fs),
+            "angle_rmse_deg": float(math.degrees(np.sqrt(np.mean(ea ** 2))))}
+
+
+def _agg(rows: list[dict]) -> dict:
+    t = [r["torque_rmse_fs"] for r in rows]
+    return {"median_torque_rmse_fs": float(np.median(t)), "max_torque_rmse_fs": float(np.max(t)),
+            "max_torque_max_fs": float(max(r["torque_max_fs"] for r in rows)),
+            "median_angle_rmse_deg": float(np.median([r["angle_rmse_deg"] for r in rows]))}
+
+
+def _rundata(r: MrdRun, stop: int | None = None) -> RunData:
+    n = len(r) if stop is None else stop
+    return RunData(r.name, r.tau_p[:n], r.theta_p[:n], r.tau_d[:n], r.theta_d[:n],
+                   min(first_reversal(r.theta_p, r.dt, SCORE_FROM_S), n - 2), r.dt)
+
+
+def _calibrate(cal: list[RunData], tick) -> tuple[dict, dict, dict, float, float]:
+    """Base and selected models plus the baselines on calibration data; (fits, baselines, selection, centre, ref)."""
+    centre = float(np.mean([band_centre(c.tau_p) for c in cal]))
+    ref = float(np.mean([np.mean(c.theta_p) for c in cal]))
+    sel = select_extensions(cal, centre, ref, FIT_STEP, progress=tick)
+    fits = {"pair": shared_fit(cal, (), centre, ref, FIT_STEP)}
+    if sel["chosen"]:
+        fits["pair+" + "+".join(sel["chosen"])] = shared_fit(cal, tuple(sel["chosen"]), centre, ref, FIT_STEP)
+    tick("calibrated")
+    bt, yt, ya, w = batch_of(cal, centre, ref, FIT_STEP)
+    m = w > 0
+    sub = make_batch([(c.tau_p, c.theta_p) for c in cal], centre, ref, cal[0].dt, FIT_STEP)
+    base = fit_baselines(sub, yt, ya, mask=m)
+    tick("baselines")
+    return fits, base, sel, centre, ref
+
+
+def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bool = False,
+                loro: bool = True) -> tuple[dict, dict]:
+    """Calibrate, predict and score every run; the folder-wide diagnosis (module docstring).
+
+    Returns (summary, details): summary is JSON-ready (``runs.<name>.{torque_rmse_fs, torque_max_fs,
+    angle_rmse_deg}`` for the model chosen on the calibration data, ``.models.<name>`` for every model,
+    ``.baselines.<name>`` the same keys; ``shared`` / ``loro`` the folder-wide fit); details hold
+    per-sample predictions for the figures (never written to JSON).
+
+    Raises DataError for no runs, ConfigError for a bad ``calibration``.
+    """
+    t_start = time.perf_counter()
+    if not runs:
+        raise DataError("no MRD runs to analyse")
+    mode, cal = parse_calibration(calibration, runs)
+    fs = float(max(r.tau_d.max() for r in runs) - min(r.tau_d.min() for r in runs))
+    n_cal = 1 if mode == "run" else len(runs)
+    tick = _Progress(progress, n_cal * 14 + len(runs) + 14 + (len(runs) if loro else 0))
+    out = {"mode": "mrd", "full_scale_Nm": fs, "attribution": ATTRIBUTION, "not_from_proximal": NOT_FROM_PROXIMAL,
+           "scored_from": "the first reversal of the spindle after 0.5 s (the stroke before it initialises the "
+                          "estimator, as the paper's calibration pull does)", "runs": {}}
+    details = {"pred": {}, "shared_pred": {}, "loro_pred": {}, "k0": {}}
+    cal_inputs = {"inputs": ["spindle torque", "spindle encoder"], "targets": ["jaw torque", "jaw encoder"]}
+    if mode == "run":
+        fits, base, sel, centre, ref = _calibrate([_rundata(next(r for r in runs if r.name == cal))], tick)
+        out["calibration"] = {"mode": "run", "run": cal, **cal_inputs,
+                              "scored": "every other run, from its spindle signals only"}
+        plan = [(r, fits, base, centre, ref, _rundata(r).k0) for r in runs if r.name != cal]
+        out["parameters"] = {n: p.as_dict() for n, p in fits.items()}
+        out["baseline_parameters"] = {n: b.params for n, b in base.items()}
+        out["selection"] = sel
+    else:
+        out["calibration"] = {"mode": "segment", "seconds": cal, **cal_inputs,
+                              "scored": f"t >= {cal} s of the same run, from its spindle signals only"}
+        plan, out["parameters"] = [], {}
+        for r in runs:
+            n = int(round(cal / r.dt))
+            fits, base, sel, centre, ref = _calibrate([_rundata(r, n)], tick)
+            plan.append((r, fits, base, centre, ref, n))
+            out["parameters"][r.name] = {k: p.as_dict() for k, p in fits.items()}
+    for r, fits, base, centre, ref, k0 in plan:
+        b = make_batch([(r.tau_p, r.theta_p)], centre, ref, r.dt)
+        models = {}
+        for name, p in fits.items():
+            pt, pa = predict_torque(p, b), predict_angle(p, b)
+            models[name] = _score(pt, pa, r, k0, fs)
+            details["pred"][r.name] = (pt, pa)          # the last one is the selected model
+        chosen = list(fits)[-1]
+        bl = {n: _score(*m.predict(b), r, k0, fs) for n, m in base.items()}
+        out["runs"][r.name] = {"frequency_hz": r.frequency_hz, "load_level": r.load_level, "model": chosen,
+                               **models[chosen], "models": models, "baselines": bl}
+        details["k0"][r.name] = k0
+        tick(f"predict {r.name}")
+    scored = list(out["runs"].values())
+    names = sorted({n for s in scored for n in s["models"]})
+    out["summary"] = {"model": _agg(scored),
+                      "models": {n: _agg([s["models"][n] for s in scored if n in s["models"]]) for n in names},
+                      "baselines": {n: _agg([s["baselines"][n] for s in scored]) for n in scored[0]["baselines"]},
+                      "better_than_linear_every_run": bool(all(
+                          s["torque_rmse_fs"] < s["baselines"]["linear"]["torque_rmse_fs"] for s in scored))}
+    out["bands"] = {r.name: band_measurements(r) for r in runs}
+    _shared(runs, out, details, fs, tick, loro)
+    tick.done()
+    out["elapsed_s"] = time.perf_counter() - t_start
+    return out, details
+
+
+def _shared(runs, out, details, fs, tick, loro: bool) -> None:
+    """Extensions chosen on a time split of all runs, one parameter set for the folder, leave-one-run-out."""
+    rd = [_rundata(r) for r in runs]
+    centre = float(np.mean([band_centre(r.tau_p) for r in runs]))
+    ref = float(np.mean([np.mean(r.theta_p) for r in runs]))
+    sel = select_extensions(rd, centre, ref, SHARED_STEP, progress=tick)
+    free = tuple(sel["chosen"])
+    p = shared_fit(rd, free, centre, ref, SHARED_STEP)
+    tick("shared fit")
+    sh = {"model": "pair" + "".join("+" + c for c in free), "selection": sel, "parameters": p.as_dict(),
+          "fitted_on": "every run from its first reversal (in-sample)", "runs": {}}
+    for r, d in zip(runs, rd):
+        b = make_batch([(r.tau_p, r.theta_p)], centre, ref, r.dt)
+        pt, pa = predict_torque(p, b), predict_angle(p, b)
+        sh["runs"][r.name] = _score(pt, pa, r, d.k0, fs)
+        details["shared_pred"][r.name] = (pt, pa)
+        details["k0"].setdefault(r.name, d.k0)
+    sh["summary"] = _agg(list(sh["runs"].values()))
+    out["shared"] = sh
+    if not loro:
+        return
+    lo = {"model": sh["model"], "note": "extensions chosen on the time split of all runs; parameters refitted "
+                                        "without the scored run", "runs": {}, "parameters": {}}
+    for r, d, (q, pt, pa) in zip(runs, rd, leave_one_out(rd, free, centre, ref, p, SHARED_STEP, progress=tick)):
+        lo["runs"][r.name] = _score(pt, pa, r, d.k0, fs)
+        lo["parameters"][r.name] = q.as_dict()
+        details["loro_pred"][r.name] = (pt, pa)
+    lo["summary"] = _agg(list(lo["runs"].values()))
+    out["loro"] = lo
+
+
+def format_mrd(s: dict) -> str:
+    """The table printed by ``teleop analyze --mrd`` (RMSE and max |error| as fractions of full scale)."""
+    cal = s["calibration"]
+    head = (f"calibrated on run {cal['run']}" if cal["mode"] == "run"
+            else f"calibrated on the first {cal['seconds']:g} s of each run")
+    lines = [f"MRD da Vinci runs ({s['attribution']})",
+             f"{len(s['bands'])} runs, full scale {s['full_scale_Nm'] * 1e3:.1f} mN m; {head} (inputs spindle torque "
+             "+ encoder, targets jaw torque + encoder); scored from each run's first reversal",
+             f"{'run':>4}{'f [Hz]':>8}{'load':>5}{'RMSE':>7}{'max':>7}{'angle':>7}   constant   linear    phase"
+             f"{'shared':>8}{'LORO':>7}"]
+    for name, r in s["runs"].items():
+        bl = r["baselines"]
+        sh = s.get("shared", {}).get("runs", {}).get(name, {}).get("torque_rmse_fs", math.nan)
+        lo = s.get("loro", {}).get("runs", {}).get(name, {}).get("torque_rmse_fs", math.nan)
+        lines.append(f"{name:>4}{r['frequency_hz']:>8.3f}{r['load_level']:>5}{r['torque_rmse_fs']:>7.3f}"
+                     f"{r['torque_max_fs']:>7.3f}{r['angle_rmse_deg']:>7.2f}{bl['constant']['torque_rmse_fs']:>11.3f}"
+                     f"{bl['linear']['torque_rmse_fs']:>9.3f}{bl['phase']['torque_rmse_fs']:>9.3f}{sh:>8.3f}{lo:>7.3f}")
+    m = s["summary"]
+    lines.append(f"better than the linear baseline on every run: {m['better_than_linear_every_run']}")
+    rows = {**{f"model {n}": a for n, a in m["models"].items()}, **{f"baseline {n}": a for n, a in m["baselines"].items()}}
+    for key, label in (("shared", "one parameter set (in-sample)"), ("loro", "one parameter set, leave-one-run-out")):
+        if key in s:
+            rows[f"{label}: {s[key]['model']}"] = s[key]["summary"]
+    for n, a in rows.items():
+        lines.append(f"  {n:<58} RMSE median {a['median_torque_rmse_fs']:.3f} worst {a['max_torque_rmse_fs']:.3f}, "
+                     f"max |error| {a['max_torque_max_fs']:.3f} FS; angle median {a['median_angle_rmse_deg']:.2f} deg")
+    lines.append("not identifiable from the spindle side alone: " + ", ".join(s["not_from_proximal"]))
+    lines.append("extensions: " + "; ".join(f"{k} ({v[0]})" for k, v in EXTENSIONS.items()))
+    lines.append(f"analysed in {s['elapsed_s']:.1f} s")
+    return "\n".join(lines)
+
+
+def main_mrd(args) -> int:
+    """``teleop analyze --mrd [DIR] [--calibration RUN|segment:SECONDS] [--json OUT] [--figures DIR]
+    [--report DIR]``: load, analyse, print; one line per unreadable file. Returns 0."""
+    import json
+    from pathlib import Path
+
+    from teleop.mrd import load_mrd_dir
+    from teleop.mrd_figures import write_mrd_figures, write_mrd_report
+
+    if args.json is not None and not Path(args.json).resolve().parent.is_dir():
+        raise ConfigError(f"--json {args.json}: directory {Path(args.json).resolve().parent} does not exist")
+    runs, bad = load_mrd_dir(args.mrd or None)
+    for line in bad:
+        print(f"skipped: {line}")
+    summary, details = analyze_mrd(runs, getattr(args, "calibration", None), progress=sys.stderr.isatty())
+    summary["skipped"] = bad
+    print(format_mrd(summary))
+    if getattr(args, "figures", None):
+        for p in write_mrd_figures(runs, summary, details, args.figures):
+            print(f"wrote {p}")
+    if args.report is not None:
+        print(f"wrote {write_mrd_report(runs, summary, details, args.report)}")
+    if args.json is not None:
+        Path(args.json).write_text(json.dumps(summary, indent=2, allow_nan=False,
+                                              default=lambda o: o.item() if hasattr(o, "item") else str(o)) + "\n")
+        print(f"wrote {args.json}")
+    return 0
