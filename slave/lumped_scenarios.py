@@ -80,7 +80,7 @@ def draw_load(rng: np.random.Generator, kind: str | None = None, K: float = 0.8)
     """A random distal load of ``kind`` (random among spring, preloaded, constant, joint if None);
     a constant force is drawn so that the proximal tension while it slides, P e^K, is 4-12 N."""
     kind = kind or str(rng.choice(["spring", "preloaded", "constant", "joint"]))
-    mass, damping = rng.uniform(0.002, 0.010), rng.uniform(1.0, 5.0)
+    mass, damping = rng.uniform(0.002, 0.010), rng.uniform(0.2, 1.0)
     logu = (lambda lo, hi: float(math.exp(rng.uniform(math.log(lo), math.log(hi)))))
     if kind == "spring":
         return Load("spring", stiffness=logu(500.0, 5000.0), mass=mass, damping=damping)
