@@ -43,7 +43,8 @@ EXTENSIONS = {
 BOUNDS = {"rho": (0.0, 5.0, 0.1), "Q": (1e-3, 5.0, 0.05), "K_a": (0.0, 3.0, 0.1), "K_b": (0.0, 3.0, 0.1),
           "b": (-1.0, 1.0, 0.01), "k_p": (-0.2, 0.2, 0.005), "k_d": (-0.2, 0.2, 0.005), "f": (-0.1, 0.1, 0.001),
           "f_s": (-0.2, 0.2, 0.005), "c_v": (-0.2, 0.2, 0.005)}
-_STARTS = ({"K_a": 0.3, "K_b": 0.3, "Q": 1.5}, {"K_a": 0.8, "K_b": 0.8, "Q": 3.0}, {"K_a": 0.1, "K_b": 0.1, "Q": 0.5})
+#: Starting points; Q in multiples of its lower bound (1.02 max |tau_p|).
+_STARTS = ({"K_a": 0.3, "K_b": 0.3, "Q": 1.5}, {"K_a": 0.8, "K_b": 0.8, "Q": 1.1}, {"K_a": 0.1, "K_b": 0.1, "Q": 5.0})
 
 
 def band_centre(tau_p: np.ndarray) -> float:
@@ -53,15 +54,18 @@ def band_centre(tau_p: np.ndarray) -> float:
 
 
 def fit_torque(bt: Batch, target: np.ndarray, free: tuple[str, ...] = (), start: SpindleParams | None = None,
-               weights: np.ndarray | None = None, max_nfev: int = 300) -> tuple[SpindleParams, float]:
+               weights: np.ndarray | None = None, max_nfev: int = 300,
+               fixed: tuple[str, ...] = ()) -> tuple[SpindleParams, float]:
     """Fit the torque parameters BASE + ``free`` to ``target`` [N m], shape (n,), over a batch.
 
     ``weights`` (shape (n,), >= 0) scale the residuals (0 leaves a sample out); ``start`` gives
-    one starting point (else three); at most ``max_nfev`` evaluations per start.
+    one starting point (else three); at most ``max_nfev`` evaluations per start; ``fixed`` names
+    base parameters held at their ``start`` values (e.g. rho from known pulley radii: with rho free,
+    K and Q are only known through rho cosh K and Q tanh K).
     Q is kept above 1.02 max |tau_p| at every start (both cables taut). Returns the parameters and
     the rms residual [N m]. Raises ValueError for an unknown parameter name or a shape mismatch.
     """
-    names = BASE + tuple(n for n in free if n not in BASE)
+    names = tuple(n for n in BASE if n not in fixed) + tuple(n for n in free if n not in BASE)
     for n in names:
         if n not in BOUNDS:
             raise ValueError(f"unknown torque parameter {n!r}; known: {', '.join(BOUNDS)}")
@@ -87,9 +91,9 @@ def fit_torque(bt: Batch, target: np.ndarray, free: tuple[str, ...] = (), start:
     best = None
     starts = [dict()] if start is not None else [dict(s) for s in _STARTS]
     for s in starts:
-        p0 = base.with_values(**s)
+        p0 = base.with_values(**{k: (v * qmin if k == "Q" and start is None else v) for k, v in s.items()})
         x0 = np.clip([getattr(p0, n) for n in names], lo + 1e-9, hi - 1e-9)
-        if start is None:   # linear start for rho and b
+        if start is None and "rho" in names:   # linear start for rho and b
             Td = predict_torque(p0.with_values(rho=1.0, b=0.0, k_d=0.0, f=0.0), bt)
             A = np.column_stack([Td, np.ones_like(Td)])
             (r0, b0), *_ = np.linalg.lstsq(A, y, rcond=None)

@@ -1,0 +1,159 @@
+"""MRD da Vinci importer and analysis: synthetic runs from the project's pair simulator, bad files,
+the CLI, and the real folder when it is present (../shared/data/mrd-davinci, ODbL/DbCL)."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from estimator.pair_kernels import simulate_pair
+from estimator.spindle import SpindleParams, first_reversal, make_batch, predict_torque
+from estimator.spindle_fit import band_centre, fit_torque
+from teleop.errors import ConfigError, DataError
+from teleop.mrd import (DISTAL_COUNTS_PER_REV, DISTAL_SIGN, PROXIMAL_COUNTS_PER_REV, TORQUE_NM_PER_COUNT,
+                        default_mrd_dir, load_mrd_dir, read_mrd)
+from teleop.mrd_report import analyze_mrd, band_measurements, parse_calibration
+
+MRD_DIR = default_mrd_dir()
+needs_mrd = pytest.mark.skipif(not MRD_DIR.is_dir(), reason=f"MRD da Vinci data not found at {MRD_DIR}: the "
+                               "real-folder tests need ../shared/data/mrd-davinci (see its SOURCE.md)")
+
+R = 0.005            # pulley radius of spindle and jaw [m] (rho = 1)
+K_TRUE, P_TRUE = 0.2, 8.0
+
+
+def simulate(freq=0.5, amp=0.8, duration=6.0, dt=0.001, K=K_TRUE, P=P_TRUE, k=5.0):
+    """Spindle angle [rad], spindle torque, jaw angle [rad], jaw torque [N m] from the capstan-joint
+    pair simulator (estimator.pair_kernels): tendons of pretension P on pulleys of radius R, joint
+    stiffness k [N/rad per unit radius]."""
+    t = np.arange(0.0, duration, dt)
+    c = 0.5 * amp * (1.0 - np.cos(2 * math.pi * freq * t))
+    th, T = simulate_pair(c, (P, P), 1.0, (0.002, 0.002), (K, K), k, n_nodes=24)
+    return t, c, R * (T[:, 0] - T[:, 1]), th, R * k * th
+
+
+def write_txt(path, t, theta_p, tau_p, theta_d, tau_d, load_cmd=0.1, header=True, rows=None):
+    lines = ["%synthetic run from estimator.pair_kernels.simulate_pair", "%header may be wrong: 9.99 Hz"] if header else []
+    for i in range(t.size if rows is None else rows):
+        lines.append(f"{t[i]:.3f},{theta_p[i] * PROXIMAL_COUNTS_PER_REV / (2 * math.pi):.2f},"
+                     f"{tau_p[i] / TORQUE_NM_PER_COUNT:.2f},0.0,"
+                     f"{DISTAL_SIGN * theta_d[i] * DISTAL_COUNTS_PER_REV / (2 * math.pi):.2f},"
+                     f"{DISTAL_SIGN * tau_d[i] / TORQUE_NM_PER_COUNT:.2f},{load_cmd:.2f},0.00,0.00,0.00")
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_synthetic_file_read_back_in_si_units(tmp_path):
+    t, c, tp, th, td = simulate()
+    run = read_mrd(write_txt(tmp_path / "00.TXT", t, c, tp, th, td))
+    assert len(run) == t.size and run.name == "00"
+    assert abs(run.frequency_hz - 0.5) < 0.01                      # from the data, not the header
+    assert np.max(np.abs(run.theta_p - c)) < 2 * math.pi / PROXIMAL_COUNTS_PER_REV
+    assert np.max(np.abs(run.tau_d - td)) < TORQUE_NM_PER_COUNT     # jaw sign flipped back
+    assert np.max(np.abs(run.theta_d - th)) < 2 * math.pi / DISTAL_COUNTS_PER_REV
+
+
+def test_synthetic_band_and_gain_recovered_from_the_simulator(tmp_path):
+    """The spindle pair model fitted to the simulator's jaw torque gives back the identifiable
+    combinations of K and pretension: the band half-width Q tanh K (Q = 2 P r) and the gain
+    rho cosh K; K and Q alone trade off on one run."""
+    t, c, tp, th, td = simulate()
+    run = read_mrd(write_txt(tmp_path / "00.TXT", t, c, tp, th, td))
+    k0 = first_reversal(run.theta_p, run.dt)
+    true = SpindleParams(rho=1.0, Q=2 * P_TRUE * R, K_a=K_TRUE, K_b=K_TRUE)
+    bt = make_batch([(run.tau_p, run.theta_p)], band_centre(run.tau_p), float(np.mean(run.theta_p)), run.dt)
+    rng = float(np.ptp(run.tau_d))
+    err_true = np.sqrt(np.mean((predict_torque(true, bt) - run.tau_d)[k0:] ** 2)) / rng
+    assert err_true < 0.08                                          # model and simulator agree at this K
+    b10 = make_batch([(run.tau_p, run.theta_p)], band_centre(run.tau_p), float(np.mean(run.theta_p)), run.dt, 10)
+    w = (np.arange(len(run))[::10] >= k0).astype(float)
+    p, _ = fit_torque(b10, run.tau_d[::10], (), weights=w)
+    assert abs(p.Q * math.tanh(p.K_a) - true.Q * math.tanh(K_TRUE)) < 0.1 * true.Q * math.tanh(K_TRUE)
+    assert abs(p.rho * math.cosh(p.K_a) - math.cosh(K_TRUE)) < 0.1
+    err_fit = np.sqrt(np.mean((predict_torque(p, bt) - run.tau_d)[k0:] ** 2)) / rng
+    assert err_fit < 0.05
+
+
+def test_bad_and_truncated_files_are_one_line_each(tmp_path):
+    t, c, tp, th, td = simulate(duration=3.0)
+    write_txt(tmp_path / "00.TXT", t, c, tp, th, td)
+    write_txt(tmp_path / "01.TXT", t, c, tp, th, td, rows=500)                       # truncated
+    (tmp_path / "02.TXT").write_text("%h\n" + "0.0,1,2,3\n" * 3000)                  # 4 columns
+    (tmp_path / "SerialLog.txt").write_text("not a run\n")
+    runs, bad = load_mrd_dir(tmp_path)
+    assert [r.name for r in runs] == ["00"]
+    assert len(bad) == 2 and "01.TXT" in bad[0] and "truncated" in bad[0]
+    assert "02.TXT" in bad[1] and "line 2" in bad[1] and "\n" not in "".join(bad)
+    with pytest.raises(DataError, match="not found"):
+        load_mrd_dir(tmp_path / "nowhere")
+    (tmp_path / "00.TXT").unlink()
+    with pytest.raises(DataError, match="no readable run"):
+        load_mrd_dir(tmp_path)
+
+
+def _folder(tmp_path):
+    for name, freq, k, load in (("00", 0.25, 5.0, 0.1), ("01", 0.25, 8.0, 0.2), ("10", 0.5, 5.0, 0.1)):
+        t, c, tp, th, td = simulate(freq=freq, k=k, duration=8.0)
+        write_txt(tmp_path / f"{name}.TXT", t, c, tp, th, td, load_cmd=load)
+    return load_mrd_dir(tmp_path)[0]
+
+
+def test_analysis_keys_calibration_and_what_was_fitted_on(tmp_path):
+    runs = _folder(tmp_path)
+    assert [r.load_level for r in runs] == [0, 1, 0]
+    assert parse_calibration(None, runs) == ("run", "00")           # slowest, lightest
+    assert parse_calibration("segment:2", runs) == ("segment", 2.0)
+    for bad in ("99", "segment:x", "segment:0.2"):
+        with pytest.raises(ConfigError):
+            parse_calibration(bad, runs)
+    s, d = analyze_mrd(runs, loro=True)
+    assert set(s["runs"]) == {"01", "10"}                            # the calibration run is not scored
+    for r in s["runs"].values():
+        assert {"torque_rmse_fs", "torque_max_fs", "angle_rmse_deg"} <= set(r)
+        assert set(r["baselines"]) == {"constant", "linear", "phase"}
+        for b in r["baselines"].values():
+            assert {"torque_rmse_fs", "torque_max_fs", "angle_rmse_deg"} <= set(b)
+    assert s["calibration"]["inputs"] == ["spindle torque", "spindle encoder"]
+    assert "rho" in s["not_from_proximal"] and "ODbL" in s["attribution"]
+    assert set(s["loro"]["runs"]) == {"00", "01", "10"}
+    assert s["loro"]["summary"]["median_torque_rmse_fs"] < 0.1
+    seg, _ = analyze_mrd(runs, "segment:3", loro=False)
+    assert set(seg["runs"]) == {"00", "01", "10"} and seg["calibration"]["mode"] == "segment"
+    json.dumps(s, allow_nan=False)
+
+
+def test_cli_mrd_prints_and_writes_json(tmp_path, capsys):
+    from teleop.cli import main
+    _folder(tmp_path)
+    out = tmp_path / "out.json"
+    assert main(["analyze", "--mrd", str(tmp_path), "--json", str(out), "--calibration", "01"]) == 0
+    text = capsys.readouterr().out
+    assert "ODbL" in text and "calibrated on run 01" in text
+    s = json.loads(out.read_text())
+    assert set(s["runs"]) == {"00", "10"} and s["calibration"]["run"] == "01"
+
+
+@needs_mrd
+@pytest.mark.mrd
+def test_real_folder_read_and_banded():
+    runs, bad = load_mrd_dir(MRD_DIR)
+    assert len(runs) == 20 and bad == []
+    assert sorted({round(r.frequency_hz, 1) for r in runs}) == [0.1, 0.2, 0.3, 0.4, 0.5]
+    assert sorted({r.load_level for r in runs}) == [0, 1, 2, 3]
+    bands = {r.name: band_measurements(r) for r in runs if r.name in ("00", "03", "40", "43")}
+    # the spindle friction band grows with load and does not grow with frequency (E8 yes, E3 no)
+    assert bands["03"]["band_half_width_Nm"] > bands["00"]["band_half_width_Nm"] + 0.004
+    assert abs(bands["40"]["band_half_width_Nm"] - bands["00"]["band_half_width_Nm"]) < 0.004
+
+
+@needs_mrd
+@pytest.mark.mrd
+def test_real_folder_model_beats_linear_and_one_set_predicts_the_folder():
+    runs, _ = load_mrd_dir(MRD_DIR)
+    s, _ = analyze_mrd(runs, loro=False)
+    assert s["calibration"]["run"] == "00"
+    assert s["summary"]["better_than_linear_every_run"]
+    assert s["shared"]["summary"]["median_torque_rmse_fs"] < 0.05
+    assert s["shared"]["summary"]["median_angle_rmse_deg"] < 1.0
