@@ -48,7 +48,8 @@ def _inject_flag(p: argparse.ArgumentParser) -> None:
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The argument parser. ``argv`` decides whether ``teleop.analyze`` is imported (only for analyze)."""
     parser = argparse.ArgumentParser(prog=PROG, description="Haptic teleoperation of tendon-sheath instruments.")
-    sub = parser.add_subparsers(dest="command", metavar="{demo,master,slave,bridge,calibrate,analyze,devices}",
+    sub = parser.add_subparsers(dest="command",
+                                metavar="{demo,master,slave,record,router,bridge,calibrate,analyze,devices}",
                                 required=True)
 
     p = sub.add_parser("demo", help="both sides as two processes over Zenoh on 127.0.0.1, then a summary")
@@ -72,6 +73,18 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     _inject_flag(p)
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
     p.set_defaults(func=_cmd_master)
+
+    p = sub.add_parser("record", help="record every stream of the instrument over Zenoh (teleop/record.py)")
+    _shared(p)
+    p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
+    p.add_argument("--exit-when-done", action="store_true", help="finish once every side seen has gone")
+    p.add_argument("--rerun", choices=("save", "spawn", "off"), default=None, help="override recording.rerun")
+    p.set_defaults(func=lambda a: __import__("teleop.record", fromlist=["run_record"]).run_record(a))
+
+    p = sub.add_parser("router", help="a Zenoh router the sides and the recorder connect to (teleop/router.py)")
+    _shared(p)
+    p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
+    p.set_defaults(func=lambda a: __import__("teleop.router", fromlist=["run_router"]).run_router(a))
 
     p = sub.add_parser("bridge", help="the simulated rig of --config behind the Zenoh rig interface (rig.type "
                                       "zenoh on the slave), as its own process")

@@ -24,7 +24,7 @@ __all__ = [
     "RigConfig", "EffectsConfig", "VelocityFrictionConfig", "PretensionEffectConfig",
     "CurvatureDriftConfig", "TendonStiffeningConfig", "StictionConfig", "FrictionOffsetConfig", "SensorOffsetConfig",
     "SensorDelayConfig", "EstimatorConfig", "CalibrationConfig", "DeviceConfig", "MappingConfig",
-    "MasterConfig", "SlaveConfig", "TransportConfig", "RecordingConfig", "Config",
+    "MasterConfig", "SlaveConfig", "TransportConfig", "TransportAuthConfig", "TransportTlsConfig", "RecordingConfig", "Config",
     "load_config", "config_from_dict", "config_to_dict", "write_config", "RANGES",
 ]
 
@@ -271,11 +271,36 @@ class PairControlConfig:
 
 
 @dataclass(frozen=True)
+class TransportAuthConfig:
+    """Zenoh user/password authentication of every link (teleop/link_security.py); null: none."""
+
+    user: Optional[str] = None            # this process's user name
+    password: Optional[str] = None        # its password (prefer password_file outside tests)
+    password_file: Optional[str] = None   # file holding the password (first line)
+    dictionary_file: Optional[str] = None  # listener: accepted "user:password" lines
+
+
+@dataclass(frozen=True)
+class TransportTlsConfig:
+    """TLS of ``tls/...`` endpoints: PEM files; null: no TLS settings."""
+
+    root_ca: Optional[str] = None         # CA certificate that signs the peers' certificates
+    certificate: Optional[str] = None     # this process's certificate (listener; mutual: connector too)
+    private_key: Optional[str] = None     # its private key
+    mutual: bool = False                  # connectors must present a certificate too
+
+
+@dataclass(frozen=True)
 class TransportConfig:
     mode: Literal["peer", "client"] = "peer"
     listen: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
     connect: tuple[str, ...] = ()
     multicast_scouting: bool = False
+    auto_connect: bool = True             # bare start: listen, or connect when the port is taken (teleop/discovery.py)
+    run_id_timeout: float = 3.0           # [s] a connecting side asks its peers for the run id this long
+    lock_master: bool = True              # slave: commands and master heartbeats from one master session only
+    auth: TransportAuthConfig = field(default_factory=TransportAuthConfig)
+    tls: TransportTlsConfig = field(default_factory=TransportTlsConfig)
 
 
 @dataclass(frozen=True)
@@ -284,6 +309,7 @@ class RecordingConfig:
     rerun: Literal["save", "spawn", "off"] = "save"
     log_every: int = 10
     profile_every: int = 5
+    flush_interval: float = 0.02          # [s] recorder files handed to the OS at least this often
 
 
 @dataclass(frozen=True)
@@ -343,6 +369,7 @@ RANGES: dict[str, tuple[str, str]] = {
     "pair_control.min_tension": ("> 0", "N"), "pair_control.tension_gain": ("> 0", "m/(N s)"),
     "pair_control.switch_band": (">= 0", "rad"), "pair_control.axes[]": (">= 0", "-"),
     "recording.profile_every": (">= 1", "logs"),
+    "recording.flush_interval": ("> 0", "s"), "transport.run_id_timeout": (">= 0", "s"),
 }
 _INF_OK = {"sheath.runs[].radius", "instrument.joints[].tendons.a.runs[].radius",
            "instrument.joints[].tendons.b.runs[].radius"}

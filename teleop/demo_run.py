@@ -138,6 +138,12 @@ def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, b
     with open(run_dir / "slave.log", "w") as slog, open(run_dir / "master.log", "w") as mlog, \
             open(run_dir / "bridge.log", "w") if bridge else contextlib.nullcontext() as blog:
         try:
+            from teleop.record import start_recorder       # `teleop record` first: it hears every message
+            recorder, rec_link = start_recorder(base, common, run_dir, env, deadline)
+            procs.append(("recorder", recorder))
+            if rec_link is None:
+                problems.append(f"the recorder did not start (see {run_dir}/recorder.log)")
+                return
             if bridge:
                 port_b = free_tcp_port()
                 ep_b = loopback_endpoint(port_b)
@@ -149,13 +155,13 @@ def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, b
                     problems.append(f"the bridge did not listen on {ep_b} (see {run_dir}/bridge.log)")
                     return
                 rig_link = ["--connect", ep_b]
-            slave = subprocess.Popen(base + ["slave", "--listen", ep, "--exit-on-master-stop"] + rig_link + common,
+            slave = subprocess.Popen(base + ["slave", "--listen", ep, "--exit-on-master-stop"] + rig_link + rec_link + common,
                                      stdout=slog, stderr=subprocess.STDOUT, env=env)
             procs.append(("slave", slave))
             if not _wait_listening(port, slave, deadline):
                 problems.append(f"the slave did not listen on {ep} (see {run_dir}/slave.log)")
                 return
-            master = subprocess.Popen(base + ["master", "--connect", ep, "--protocol", args.protocol] + common,
+            master = subprocess.Popen(base + ["master", "--connect", ep, "--protocol", args.protocol] + rec_link + common,
                                       stdout=mlog, stderr=subprocess.STDOUT, env=env)
             procs.append(("master", master))
             print(f"slave and master running on {ep} (calibration, then protocol {args.protocol}) ...", flush=True)

@@ -32,7 +32,7 @@ from teleop.errors import TransportError
 from teleop.keys import run_key
 from teleop.transport import Session, zenoh_config
 
-__all__ = ["open_auto_session", "agree_run_id", "new_run_id", "side_session", "side_run_dir", "RunIdServer"]
+__all__ = ["RunIdServer", "agree_run_id", "new_run_id", "open_auto_session", "side_run_dir", "side_session"]
 
 log = logging.getLogger("teleop.discovery")
 _RUN_ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}")

@@ -20,7 +20,7 @@ from teleop.messages import Side
 __all__ = [
     "ROOT", "STREAMS", "SIDES", "LIVELINESS", "RIG_STREAMS", "validate_instrument_id", "side_name", "key", "rig_key",
     "command_key", "estimate_key", "heartbeat_key", "liveliness_key", "liveliness_pattern",
-    "instrument_keys", "parse_key",
+    "instrument_keys", "parse_key", "run_key",
 ]
 
 ROOT = "teleop"
@@ -152,3 +152,10 @@ def parse_key(key_expr: str) -> tuple[str, Side, str]:
     instrument, side, stream = parts[1], side_name(parts[2]), parts[3]
     validate_instrument_id(instrument, where=f"key {key_expr!r}")
     return instrument, Side[side.upper()], stream
+
+
+def run_key(instrument: str) -> str:
+    """``teleop/<instrument>/run``: queryable answering the run id the processes of a session share
+    (:mod:`teleop.discovery`)."""
+    validate_instrument_id(instrument)
+    return f"{ROOT}/{instrument}/run"

@@ -18,12 +18,12 @@ from __future__ import annotations
 
 import json
 import threading
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from teleop.errors import ConfigError
 
-__all__ = ["link_security_settings", "read_password", "SourceLock"]
+__all__ = ["SourceLock", "link_security_settings", "read_password"]
 
 
 def read_password(auth, where: str = "transport.auth") -> str | None:

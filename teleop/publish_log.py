@@ -12,7 +12,7 @@ import os
 import threading
 from pathlib import Path
 
-__all__ = ["PublishLog", "PUBLISH_LOG", "read_publish_log"]
+__all__ = ["PUBLISH_LOG", "PublishLog", "read_publish_log"]
 
 ENV = "TELEOP_PUBLISH_LOG"
 

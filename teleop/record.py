@@ -38,7 +38,7 @@ from teleop.codec import decode, seq_newer
 from teleop.entity import Entity
 from teleop.keys import instrument_keys, liveliness_pattern
 
-__all__ = ["flatten", "Recorder", "read_messages", "run_record"]
+__all__ = ["Recorder", "flatten", "read_messages", "run_record"]
 
 log = logging.getLogger("teleop.record")
 _RAW = struct.Struct("<dHI")
@@ -365,3 +365,23 @@ def run_record(args) -> int:
                        for k, v in s["streams"].items())
     print(f"teleop record: {counts or 'nothing received'}; {rec.dir}/summary.json", flush=True)
     return 0
+
+
+def start_recorder(base: list[str], common: list[str], run_dir: Path, env: dict, deadline: float):
+    """Start ``teleop record`` for a demo beside the sides: listening on a free loopback port, exiting
+    once both sides have gone. Returns ``(process, ["--connect", endpoint])`` once it is ready (the
+    sides connect to it, so it hears every message from their first one), or ``(process, None)`` when
+    it did not become ready before ``deadline`` [s, monotonic] (see ``<run_dir>/recorder.log``)."""
+    import subprocess
+
+    from teleop.transport import free_tcp_port, loopback_endpoint
+    ep = loopback_endpoint(free_tcp_port())
+    log_path = run_dir / "recorder.log"
+    with open(log_path, "w") as fh:
+        proc = subprocess.Popen(base + ["record", "--listen", ep, "--exit-when-done"] + common, stdout=fh,
+                                stderr=subprocess.STDOUT, env=env)
+    while time.monotonic() < deadline and proc.poll() is None:
+        if "(ready)" in log_path.read_text(encoding="utf-8", errors="replace"):
+            return proc, ["--connect", ep]
+        time.sleep(0.05)
+    return proc, None

@@ -49,17 +49,14 @@ def open_session(cfg, args: argparse.Namespace, clock):
     TransportError
         The session cannot be opened (port in use, address not resolvable).
     """
-    from teleop.errors import TransportError
-    from teleop.transport import Session, zenoh_config
+    from teleop.discovery import side_session   # bare start: listen, or connect when taken
+    return side_session(cfg, args, clock)
 
-    listen, connect = endpoints(args)
-    zcfg = zenoh_config(cfg.transport, listen=listen, connect=connect)
-    try:
-        return Session(zcfg, clock=clock)
-    except TransportError as e:
-        lst = cfg.transport.listen if listen is None else listen
-        con = cfg.transport.connect if connect is None else connect
-        raise TransportError(f"{e} (listen: {', '.join(lst) or 'none'}; connect: {', '.join(con) or 'none'})") from None
+
+def side_run_dir(args: argparse.Namespace, cfg) -> Path:
+    """A side's run directory: the session opened now, the run id agreed with the peers (teleop/discovery.py)."""
+    from teleop.discovery import side_run_dir as agreed
+    return agreed(args, cfg)
 
 
 def _injector(args: argparse.Namespace, clock):
@@ -99,11 +96,14 @@ def _side_streams(session, ident: str, injector, me: str, peer: str, out: tuple[
     from teleop.keys import heartbeat_key, liveliness_key
     from teleop.messages import Heartbeat
 
-    watcher = session.liveliness_watcher(liveliness_key(ident, peer))
+    from teleop.link_security import SourceLock   # slave: one master session only (transport.lock_master)
+    lock = SourceLock() if me == "slave" and getattr(session, "lock_master", False) else None
+    only = {} if lock is None else {"source_lock": lock}
+    watcher = session.liveliness_watcher(liveliness_key(ident, peer), None if lock is None else lock.on_liveliness)
     streams = (_publisher(session, out[0], out[1], injector),
                _publisher(session, heartbeat_key(ident, me), "heartbeat", injector),
-               session.subscriber(incoming[0], incoming[1]),
-               session.subscriber(heartbeat_key(ident, peer), Heartbeat),
+               session.subscriber(incoming[0], incoming[1], **only),
+               session.subscriber(heartbeat_key(ident, peer), Heartbeat, **only),
                lambda: watcher.alive)
     session.liveliness_token(liveliness_key(ident, me))
     return streams
@@ -156,13 +156,14 @@ def run_slave(args: argparse.Namespace) -> int:
     from teleop.clock import MonotonicClock
     from teleop.config import load_config
     from teleop.messages import Command
-    from teleop.recording import CsvRecorder, raise_on_sigterm
+    from teleop.csv_writer import ThreadedCsvRecorder as CsvRecorder  # the loop only queues rows; a thread writes
+    from teleop.recording import raise_on_sigterm
     from teleop.rerun_log import RerunLogger
 
     cfg = load_config(args.config)
     if cfg.instrument.joints:           # a joint instrument: its own node, same transport and flags
         return run_joint_slave(args, cfg)
-    run_dir = prepare_run_dir(args, cfg)
+    run_dir = side_run_dir(args, cfg)
     warm_up(cfg)  # compile the numba kernels now, not in the first real-time cycles
     ident = cfg.instrument.id
     clock = MonotonicClock()
@@ -193,14 +194,15 @@ def run_master(args: argparse.Namespace) -> int:
     from teleop.clock import MonotonicClock
     from teleop.config import load_config
     from teleop.messages import Estimate, JointEstimate
-    from teleop.recording import CsvRecorder, raise_on_sigterm
+    from teleop.csv_writer import ThreadedCsvRecorder as CsvRecorder  # the loop only queues rows; a thread writes
+    from teleop.recording import raise_on_sigterm
 
     cfg = load_config(args.config)
     device = make_device(cfg, args.protocol)     # master.device.type through the registry
     # from here on the device is closed on every exit path (HID: zero force, stop all effects,
     # disable actuators), whatever fails: session, recording, the loop, Ctrl-C or SIGTERM
     with _closing(device):
-        run_dir = prepare_run_dir(args, cfg)
+        run_dir = side_run_dir(args, cfg)
         ident = cfg.instrument.id
         clock = MonotonicClock()
         injector = _injector(args, clock)
@@ -242,13 +244,14 @@ def run_joint_slave(args: argparse.Namespace, cfg: Config) -> int:
     from slave.rigs import make_rig
     from teleop.clock import MonotonicClock
     from teleop.messages import JointCommand
-    from teleop.recording import CsvRecorder, raise_on_sigterm
+    from teleop.csv_writer import ThreadedCsvRecorder as CsvRecorder  # the loop only queues rows; a thread writes
+    from teleop.recording import raise_on_sigterm
     from teleop.rerun_log import RerunLogger
 
     log = logging.getLogger("teleop.slave")
     calibration, cal_path = _load_or_none(cfg)
     log.info("calibration %s", f"loaded from {cal_path}" if calibration else f"missing: calibrating, then {cal_path}")
-    run_dir = prepare_run_dir(args, cfg)
+    run_dir = side_run_dir(args, cfg)
     inst = make_rig(cfg)
     # compile the numba kernels now, not in the first real-time cycles
     SimulatedInstrument(cfg.instrument.joints[:1], cfg.rig).step([[1e-4, 1e-4]], 1e-3)

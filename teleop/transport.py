@@ -27,7 +27,9 @@ from teleop.codec import Message, decode, encode
 from teleop.config import TransportConfig
 from teleop.entity import Entity, RateLimitedLog, zenoh_error_text
 from teleop.errors import CodecError, ConfigError, TransportError
+from teleop.link_security import link_security_settings
 from teleop.liveliness import LivelinessToken, LivelinessWatcher
+from teleop.publish_log import PUBLISH_LOG
 
 __all__ = [
     "zenoh_config", "free_tcp_ports", "free_tcp_port", "loopback_endpoint", "RateLimitedLog",
@@ -80,6 +82,11 @@ def zenoh_config(transport: TransportConfig, *, listen: tuple[str, ...] | None =
             "transport.multicast_scouting")
     _insert(cfg, "scouting/gossip/enabled", True, "scouting/gossip/enabled")
     _insert(cfg, "scouting/gossip/multihop", False, "scouting/gossip/multihop")
+    # express messages take one tx batch each: 16 queued batches (zenoh's default is 2) absorb a ~16 ms stall of
+    # the tx thread at 1 kHz instead of dropping after 1 ms (a loaded 2-core machine does stall that long)
+    _insert(cfg, "transport/link/tx/queue/size/real_time", 16, "transport/link/tx/queue/size/real_time")
+    for k, v in link_security_settings(transport).items():   # TLS, user/password (teleop/link_security.py)
+        _insert(cfg, k, v, k.replace("/", "."), shown="***" if k.endswith("password") else None)
     return cfg
 
 
@@ -164,12 +171,13 @@ class Session:
         self._check_open()
         return self._track(Publisher(self, key, express=express, priority=priority, encoder=encoder))
 
-    def subscriber(self, key: str, expect: type[M] | None = None, *,
-                   decoder: Callable[[bytes], Any] = decode) -> "LatestSubscriber[M]":
+    def subscriber(self, key: str, expect: type[M] | None = None, *, decoder: Callable[[bytes], Any] = decode,
+                   source_lock=None) -> "LatestSubscriber[M]":
         """Declare a :class:`LatestSubscriber` on ``key``; ``expect`` rejects other message types;
-        ``decoder``: another byte format (e.g. :func:`teleop.rig_wire.decode_rig`)."""
+        ``decoder``: another byte format (e.g. :func:`teleop.rig_wire.decode_rig`); ``source_lock``: a
+        :class:`teleop.link_security.SourceLock` admitting one sending session only."""
         self._check_open()
-        return self._track(LatestSubscriber(self, key, expect=expect, decoder=decoder))
+        return self._track(LatestSubscriber(self, key, expect=expect, decoder=decoder, source_lock=source_lock))
 
     def liveliness_token(self, key: str) -> "LivelinessToken":
         """Declare this process alive on ``key`` until the token or the session closes."""
@@ -212,7 +220,8 @@ class Publisher(Entity):
         self.sent = 0
         self.encoder = encoder
         self._declare(session.zenoh_session.declare_publisher, key, express=express, priority=priority,
-                      congestion_control=zenoh.CongestionControl.DROP)
+                      congestion_control=zenoh.CongestionControl.DROP, reliability=zenoh.Reliability.RELIABLE)
+        self._source = zenoh.SourceInfo(self._handle.id, 0)   # receivers can tell the sending session
 
     def put(self, msg: Message) -> None:
         """Encode and send ``msg``.
@@ -225,13 +234,15 @@ class Publisher(Entity):
             The publisher or its session is closed.
         """
         self.put_bytes(self.encoder(msg))
+        if PUBLISH_LOG is not None:       # test-only: TELEOP_PUBLISH_LOG names a file
+            PUBLISH_LOG.note(self.key, msg)
 
     def put_bytes(self, payload: bytes) -> None:
         """Send raw bytes (tests and tools only: receivers expect codec payloads)."""
         if self._closed or self.session.closed:
             raise TransportError(f"publisher on {self.key!r} is closed")
         try:
-            self._handle.put(payload)
+            self._handle.put(payload, source_info=self._source)
         except zenoh.ZError as e:
             raise TransportError(f"put on {self.key!r} failed: {zenoh_error_text(e)}") from None
         self.sent += 1
@@ -256,10 +267,11 @@ class LatestSubscriber(Entity, Generic[M]):
     """
 
     def __init__(self, session: Session, key: str, *, expect: type[M] | None = None,
-                 decoder: Callable[[bytes], Any] = decode):
+                 decoder: Callable[[bytes], Any] = decode, source_lock=None):
         super().__init__(session, key)
         self.expect = expect
         self.decoder = decoder
+        self.source_lock = source_lock      # SourceLock: samples of other sessions are dropped (counted there)
         self.clock = session.clock
         self.count = 0
         self.errors = 0
@@ -269,6 +281,8 @@ class LatestSubscriber(Entity, Generic[M]):
         self._declare(session.zenoh_session.declare_subscriber, key, self._on_sample)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
+        if self.source_lock is not None and not self.source_lock.admit(sample):
+            return
         try:
             msg = self.decoder(sample.payload.to_bytes())
             if self.expect is not None and type(msg) is not self.expect:

@@ -90,7 +90,7 @@ def test_sigkill_of_a_side_loses_no_published_message(tmp_path, victim):
                                {"TELEOP_PUBLISH_LOG": str(logs["slave"])})
         procs["master"] = start(["master", "--config", str(cfg), "--protocol", "paper", "--max-duration", "90"],
                                 tmp_path / "master.log", {"TELEOP_PUBLISH_LOG": str(logs["master"])})
-        run_dirs = lambda: sorted(p for p in runs.glob("*") if p.is_dir())   # noqa: E731
+        run_dirs = lambda: sorted(p for p in runs.glob("*") if p.is_dir())
         wait_for(lambda: len(run_dirs()) == 1 and (run_dirs()[0] / "recorder").is_dir(), 10, "the run directory")
         rec_dir = run_dirs()[0] / "recorder"
         wait_for(lambda: _state_seen(rec_dir, "slave", 3), 40, "the slave to be ENGAGED")

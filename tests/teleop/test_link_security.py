@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from teleop.config import TransportAuthConfig, TransportConfig, TransportTlsConfig
 from teleop.codec import decode
+from teleop.config import TransportAuthConfig, TransportConfig, TransportTlsConfig
 from teleop.errors import ConfigError
 from teleop.keys import command_key, estimate_key
 from teleop.link_security import SourceLock, link_security_settings
@@ -117,6 +117,10 @@ def test_slave_lock_admits_one_master_session_until_its_token_goes():
         sub = slave.subscriber(command_key("sec3"), Command, source_lock=lock)
         first = master.publisher(command_key("sec3"))
         second = other.publisher(command_key("sec3"))
+        deadline = time.monotonic() + DEADLINE                 # both publishers know the subscriber
+        while not (second._handle.matching_status.matching and first._handle.matching_status.matching):
+            assert time.monotonic() < deadline, "routes to the subscriber not established"
+            time.sleep(0.01)
         assert _until(first, Command(1, 0.0, 0.001), sub)
         assert lock.owner == str(master.zenoh_session.zid())
         for i in range(50):

@@ -1,0 +1,130 @@
+"""Round trip of the teleoperation link beside a bare Zenoh ping-pong, measured in the same run.
+
+1. Bare Zenoh: two processes on 127.0.0.1; the ping process publishes a 40-byte message at 1 kHz
+   (paced by :class:`teleop.clock.Pacer`, express, real-time priority, like the nodes), the pong
+   process echoes each one from its subscriber callback; the ping measures send -> echo received.
+2. ``teleop demo --protocol short`` (recorder + slave + master as three processes, rerun off): the
+   master's command -> estimate-echo round trip and both loops' overruns, from ``summary.json``.
+
+Prints the figures, never fails on time. ``python benchmarks/bench_roundtrip.py [seconds]``.
+"""
+from __future__ import annotations
+
+import json
+import os
+import struct
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+_MSG = struct.Struct("<Id32x")     # seq, send time [s], padding: 44 bytes like a Command
+
+
+def _session(listen, connect):
+    from teleop.config import TransportConfig
+    from teleop.transport import Session
+    return Session(TransportConfig(listen=tuple(listen), connect=tuple(connect)))
+
+
+def pong(endpoint: str, seconds: float) -> None:
+    """Echo every message on ``bench/ping`` to ``bench/pong`` (runs in its own process)."""
+    import zenoh
+    with _session([endpoint], []) as s:
+        z = s.zenoh_session
+        pub = z.declare_publisher("bench/pong", express=True, priority=zenoh.Priority.REAL_TIME,
+                                  congestion_control=zenoh.CongestionControl.DROP)
+        sub = z.declare_subscriber("bench/ping", lambda sample: pub.put(sample.payload.to_bytes()))  # noqa: F841
+        print("ready", flush=True)
+        time.sleep(seconds + 5.0)
+
+
+def ping(endpoint: str, seconds: float, rate_hz: float = 1000.0) -> dict:
+    """Publish at ``rate_hz`` for ``seconds``; round-trip statistics [ms] of the echoes."""
+    import zenoh
+
+    from teleop.clock import MonotonicClock, Pacer
+    rtt: list[float] = []
+    with _session([], [endpoint]) as s:
+        z = s.zenoh_session
+        pub = z.declare_publisher("bench/ping", express=True, priority=zenoh.Priority.REAL_TIME,
+                                  congestion_control=zenoh.CongestionControl.DROP)
+
+        def on_pong(sample):
+            _seq, t = _MSG.unpack(sample.payload.to_bytes())
+            rtt.append(time.monotonic() - t)
+        sub = z.declare_subscriber("bench/pong", on_pong)  # noqa: F841
+        deadline = time.monotonic() + 5.0
+        while not rtt and time.monotonic() < deadline:        # routes up
+            pub.put(_MSG.pack(0, time.monotonic()))
+            time.sleep(0.01)
+        rtt.clear()
+        clock = MonotonicClock()
+        pacer = Pacer(clock, rate_hz)
+        n = int(seconds * rate_hz)
+        for k in range(n):
+            pacer.wait()
+            pub.put(_MSG.pack(k, time.monotonic()))
+        time.sleep(0.2)
+        stats = pacer.stats()
+    d = np.asarray(rtt) * 1e3
+    return {"sent": n, "echoed": int(d.size), "p50_ms": float(np.percentile(d, 50)),
+            "p99_ms": float(np.percentile(d, 99)), "max_ms": float(d.max()),
+            "overrun_fraction": float(stats.get("overrun_fraction", 0.0))}
+
+
+def bare_pingpong(seconds: float) -> dict:
+    from teleop.transport import free_tcp_port, loopback_endpoint
+    ep = loopback_endpoint(free_tcp_port())
+    proc = subprocess.Popen([sys.executable, __file__, "--pong", ep, str(seconds)], stdout=subprocess.PIPE, text=True,
+                            cwd=ROOT)
+    try:
+        proc.stdout.readline()                                # "ready"
+        return ping(ep, seconds)
+    finally:
+        proc.kill()
+        proc.wait()
+
+
+def demo_roundtrip(timeout: float = 120.0) -> dict:
+    with tempfile.TemporaryDirectory() as tmp:
+        cfg = Path(tmp) / "c.yaml"
+        cfg.write_text("recording:\n  rerun: \"off\"\n", encoding="utf-8")
+        run = Path(tmp) / "run"
+        subprocess.run([sys.executable, "-m", "teleop.cli", "demo", "--config", str(cfg), "--protocol", "short",
+                        "--run-dir", str(run), "--timeout", str(timeout)], check=False, cwd=ROOT, capture_output=True,
+                       timeout=timeout + 30, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+        s = json.loads((run / "summary.json").read_text())
+        rec = json.loads((run / "recorder" / "summary.json").read_text()) if (run / "recorder" / "summary.json").is_file() \
+            else {}
+    lat = s["master"]["latency_rtt"]
+    return {"p50_ms": lat["p50_ms"], "p99_ms": lat["p99_ms"], "max_ms": lat["max_ms"], "n": lat["n"],
+            "master_overruns": s["master"]["pacer"]["overrun_fraction"],
+            "slave_overruns": s["slave"]["pacer"]["overrun_fraction"],
+            "recorded_missing": sum(v["missing"] for v in rec.get("streams", {}).values()),
+            "recorded": sum(v["count"] for v in rec.get("streams", {}).values())}
+
+
+def main(seconds: float = 10.0) -> None:
+    bare = bare_pingpong(seconds)
+    demo = demo_roundtrip()
+    load = os.getloadavg()[0]
+    print(f"machine: {os.cpu_count()} cores, load average {load:.1f} during the run")
+    print(f"bare zenoh ping-pong, 2 processes, 1 kHz, {seconds:g} s: p50 {bare['p50_ms']:.3f} ms, "
+          f"p99 {bare['p99_ms']:.3f} ms, max {bare['max_ms']:.2f} ms ({bare['echoed']}/{bare['sent']} echoed, "
+          f"pacer overruns {100 * bare['overrun_fraction']:.2f} %)")
+    print(f"teleop demo (recorder+slave+master), command -> estimate echo: p50 {demo['p50_ms']:.3f} ms, "
+          f"p99 {demo['p99_ms']:.3f} ms, max {demo['max_ms']:.2f} ms over {demo['n']} echoes")
+    print(f"  overruns: master {100 * demo['master_overruns']:.2f} %, slave {100 * demo['slave_overruns']:.2f} %; "
+          f"recorder: {demo['recorded']} messages, {demo['recorded_missing']} missing by seq")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) > 1 and sys.argv[1] == "--pong":
+        pong(sys.argv[2], float(sys.argv[3]))
+    else:
+        main(float(sys.argv[1]) if len(sys.argv) > 1 else 10.0)

@@ -1,0 +1,97 @@
+"""Router deployment: `teleop router` + slave + master + recorder as four processes on 127.0.0.1.
+
+The three clients differ from the loopback default by their config only (``transport: {mode: client,
+connect: [router], listen: []}``), as they would on three machines. Every message goes through the
+router. Deadlines only bound waits.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from teleop.publish_log import read_publish_log
+from teleop.transport import free_tcp_port
+
+pytestmark = pytest.mark.integration
+
+CLIENT = """\
+instrument:
+  id: itrouter
+calibration:
+  speed: 0.02
+recording:
+  rerun: "off"
+  dir: "{runs}"
+transport:
+  mode: client
+  listen: []
+  connect: ["tcp/127.0.0.1:{port}"]
+  run_id_timeout: 1.5
+"""
+
+
+def start(args: list[str], log: Path, env: dict | None = None) -> subprocess.Popen:
+    with open(log, "w") as fh:
+        return subprocess.Popen([sys.executable, "-m", "teleop.cli", *args], stdout=fh, stderr=subprocess.STDOUT,
+                                env=dict(os.environ, PYTHONUNBUFFERED="1", **(env or {})))
+
+
+def wait_text(path: Path, text: str, timeout: float) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if path.is_file() and text in path.read_text():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"gave up waiting {timeout:g} s for {text!r} in {path.name}: {path.read_text()[-2000:]}")
+
+
+def test_router_slave_master_recorder_as_four_processes(tmp_path):
+    port = free_tcp_port()
+    runs = tmp_path / "runs"
+    cfg = tmp_path / "client.yaml"
+    cfg.write_text(CLIENT.format(runs=runs, port=port), encoding="utf-8")
+    procs: list[subprocess.Popen] = []
+    try:
+        procs.append(start(["router", "--config", str(cfg), "--listen", f"tcp/127.0.0.1:{port}", "--max-duration", "90"],
+                           tmp_path / "router.log"))
+        wait_text(tmp_path / "router.log", "(ready)", 20)
+        recorder = start(["record", "--config", str(cfg), "--exit-when-done", "--max-duration", "90"],
+                         tmp_path / "record.log")
+        procs.append(recorder)
+        wait_text(tmp_path / "record.log", "(ready)", 20)
+        slave = start(["slave", "--config", str(cfg), "--exit-on-master-stop", "--max-duration", "60"],
+                      tmp_path / "slave.log", {"TELEOP_PUBLISH_LOG": str(tmp_path / "slave.pub")})
+        procs.append(slave)
+        master = start(["master", "--config", str(cfg), "--protocol", "short", "--max-duration", "60"],
+                       tmp_path / "master.log", {"TELEOP_PUBLISH_LOG": str(tmp_path / "master.pub")})
+        procs.append(master)
+        assert master.wait(80) == 0, (tmp_path / "master.log").read_text()[-3000:]
+        assert slave.wait(20) == 0, (tmp_path / "slave.log").read_text()[-3000:]
+        assert recorder.wait(20) == 0, (tmp_path / "record.log").read_text()[-3000:]
+        procs[0].send_signal(signal.SIGINT)
+        assert procs[0].wait(20) == 130
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    dirs = [p for p in runs.glob("*") if p.is_dir()]
+    assert len(dirs) == 1, f"one shared run directory expected, got {dirs}"
+    run = dirs[0]
+    master_stats = json.loads((run / "master_stats.json").read_text())
+    slave_stats = json.loads((run / "slave_stats.json").read_text())
+    assert master_stats["finished"] and master_stats["latency_rtt"]["n"] > 100
+    assert slave_stats["commands_applied"] > 100 and slave_stats["safe_events"] == 0
+    summary = json.loads((run / "recorder" / "summary.json").read_text())
+    for side in ("slave", "master"):
+        for key, seqs in read_publish_log(tmp_path / f"{side}.pub").items():
+            s = summary["streams"][key]
+            assert s["count"] == len(seqs) and s["missing"] == 0, (key, s, len(seqs))
+    assert summary["command_to_echo_at_recorder"]["n"] > 100
