@@ -1,4 +1,5 @@
 # `make demo` and `make test` create .venv on first use (and again when pyproject.toml changes).
+# `make test`: ruff (lint + import order), mypy (estimator/, teleop/), then pytest.
 PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
@@ -15,6 +16,8 @@ demo: $(STAMP)
 	$(VENV)/bin/teleop demo
 
 test: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy
 	$(VENV)/bin/python -m pytest -q
 
 bench: $(STAMP)

@@ -8,7 +8,7 @@ import numpy as np
 
 from estimator.capstan import phase_formula_batch
 from estimator.distal import DistalEstimator, estimate_batch
-from estimator.sheath import SheathGeometry, SheathModel
+from estimator.sheath import SheathModel
 from teleop.config import Config
 
 

@@ -22,8 +22,8 @@ import numpy as np
 from scipy.optimize import newton
 
 from estimator.capstan import K_from_M_e
-from estimator.sheath import SheathModel, pull_elongation_factor
 from estimator.errors import CalibrationError
+from estimator.sheath import SheathModel, pull_elongation_factor
 
 __all__ = ["CalibrationResult", "detect_knee", "calibrate_joint_limit"]
 

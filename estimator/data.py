@@ -72,7 +72,10 @@ class MeasuredData:
     def slice(self, start: int | None, stop: int | None) -> MeasuredData:
         """Samples ``start:stop`` by index (Python slice semantics, views, not copies)."""
         s = slice(start, stop)
-        cut = (lambda a: None if a is None else a[s])
+
+        def cut(a):
+            return None if a is None else a[s]
+
         return replace(self, time=self.time[s], x_in=self.x_in[s], T_in=self.T_in[s],
                        x_out=cut(self.x_out), T_out=cut(self.T_out),
                        extra={k: v[s] for k, v in self.extra.items()}, metadata=dict(self.metadata))

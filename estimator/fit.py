@@ -217,7 +217,7 @@ def fit_model(estimator: str, T_in, x_in, *, T_out=None, x_out=None, n_train: in
     else:       # T_out does not depend on L/EA
         sol = least_squares(lambda p: residual(p[0], 1.0), [max(K0, 1e-3)], bounds=([0.0], [K_MAX]),
                             diff_step=1e-4, x_scale=[0.1])
-        K, c = float(sol.x[0]), None
+        K, c = float(sol.x[0]), None  # type: ignore[assignment]  # no compliance without T_out
     Th, xh = predict(estimator, T_in, x_in, K, c if c is not None else 1.0, n_nodes=n_nodes,
                      pretension=T0, deadband=deadband)
     fits_tr, fits_ho = {}, {}

@@ -249,7 +249,7 @@ class JointEstimator:
         if not (math.isfinite(taut_tension) and taut_tension > 0):
             raise ValueError(f"taut_tension must be > 0 N, got {taut_tension!r}")
         self.taut = float(taut_tension)
-        P = (pretension, pretension) if np.isscalar(pretension) else tuple(pretension)
+        P = (pretension, pretension) if isinstance(pretension, (int, float, np.number)) else tuple(pretension)
         if len(P) != 2:
             raise ValueError(f"pretension must be one tension or one per tendon (a, b), got {pretension!r}")
         self.r = float(pulley_radius)

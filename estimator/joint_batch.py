@@ -103,6 +103,6 @@ def predict_pair_angle(p, command, T_a, T_b, n_nodes: int = 50, play: float = KA
     Ta = np.asarray(T_a, dtype=float)
     Tb = np.asarray(T_b, dtype=float)
     models = [SheathModel(K=K, compliance=max(2.0 * lam, 1e-12)) for K, lam in ((p.K_a, p.lam_a), (p.K_b, p.lam_b))]
-    b = estimate_joint_batch(Ta, p.G * c, Tb, -p.G * c, *models, 1.0, n_nodes=n_nodes,
+    b = estimate_joint_batch(Ta, p.G * c, Tb, -p.G * c, models[0], models[1], 1.0, n_nodes=n_nodes,
                              pretension=(float(Ta[0]), float(Tb[0])), play=play)
     return b.angle + p.G * c[0] + p.theta0

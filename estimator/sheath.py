@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Iterable, Sequence
+from typing import Iterable
 
 import numpy as np
 from numba import njit
@@ -113,11 +113,11 @@ class SheathGeometry:
 
     def wrap_angle(self, s: np.ndarray | float) -> np.ndarray:
         """Cumulative wrap angle theta(s) = int_0^s kappa [rad] at arc positions ``s`` [m] (exact, piecewise linear)."""
-        s = np.clip(np.asarray(s, dtype=float), 0.0, self.length)
+        s_arr = np.clip(np.asarray(s, dtype=float), 0.0, self.length)
         starts = np.concatenate(([0.0], self._ends[:-1]))
         lengths = self._ends - starts
         # fraction of each piece covered up to s, broadcast over pieces: shape (..., n_runs)
-        frac = np.clip((s[..., None] - starts) / lengths, 0.0, 1.0)
+        frac = np.clip((s_arr[..., None] - starts) / lengths, 0.0, 1.0)
         return frac @ self._angles
 
     def describe(self) -> str:

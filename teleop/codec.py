@@ -36,8 +36,17 @@ from typing import Union
 
 from estimator.phase import Phase
 from teleop.errors import CodecError
-from teleop.messages import (Command, Estimate, Heartbeat, JointCommand, JointEstimate, JointState, Side, SideState,
-                             TendonState)
+from teleop.messages import (
+    Command,
+    Estimate,
+    Heartbeat,
+    JointCommand,
+    JointEstimate,
+    JointState,
+    Side,
+    SideState,
+    TendonState,
+)
 
 __all__ = [
     "MAGIC", "WIRE_VERSION", "TYPE_COMMAND", "TYPE_ESTIMATE", "TYPE_HEARTBEAT", "TYPE_JOINT_COMMAND",
@@ -136,7 +145,7 @@ def encode(msg: Message) -> bytes:
         joint count outside 1..4, profiles that are not one per tendon.
     """
     t = type(msg)
-    if t is Command:
+    if isinstance(msg, Command):
         _check_finite("Command", _CMD_FLOATS, (msg.t_master, msg.x_in_cmd))
         try:
             body = _COMMAND.pack(msg.seq, msg.t_master, msg.x_in_cmd, bool(msg.engaged), msg.marker)
@@ -145,7 +154,7 @@ def encode(msg: Message) -> bytes:
             _check_uint("Command", "marker", msg.marker, 32)
             raise CodecError(f"Command fields do not fit the wire format: {msg!r}") from None
         return _HEADER.pack(MAGIC, WIRE_VERSION, TYPE_COMMAND) + body
-    if t is Estimate:
+    if isinstance(msg, Estimate):
         floats = (msg.t_slave, msg.T_in, msg.x_in, msg.T_out_hat, msg.elongation_hat, msg.x_out_hat)
         _check_finite("Estimate", _EST_FLOATS, floats)
         profile = msg.profile
@@ -167,7 +176,7 @@ def encode(msg: Message) -> bytes:
         except (struct.error, TypeError, OverflowError) as e:
             raise CodecError(f"Estimate.profile must hold finite floats within float32 range ({e})") from None
         return _HEADER.pack(MAGIC, WIRE_VERSION, TYPE_ESTIMATE) + head + prof
-    if t is Heartbeat:
+    if isinstance(msg, Heartbeat):
         _check_finite("Heartbeat", ("t_sender",), (msg.t_sender,))
         if msg.side not in _SIDES or isinstance(msg.side, bool):
             raise CodecError(f"Heartbeat.side is {msg.side!r}: expected a Side")
@@ -176,9 +185,9 @@ def encode(msg: Message) -> bytes:
         _check_uint("Heartbeat", "seq", msg.seq, 32)
         body = _HEARTBEAT.pack(int(msg.side), msg.seq, msg.t_sender, int(msg.state))
         return _HEADER.pack(MAGIC, WIRE_VERSION, TYPE_HEARTBEAT) + body
-    if t is JointCommand:
+    if isinstance(msg, JointCommand):
         return _encode_joint_command(msg)
-    if t is JointEstimate:
+    if isinstance(msg, JointEstimate):
         return _encode_joint_estimate(msg)
     raise CodecError(f"cannot encode a {t.__name__}: expected Command, Estimate, Heartbeat, JointCommand or "
                      f"JointEstimate")
@@ -268,11 +277,12 @@ def _decode_joint_estimate(buf) -> JointEstimate:
         off += _JOINT.size
         floats = v[:6] + v[7:11]
         _check_finite(f"JointEstimate.joints[{i}]", _JOINT_FLOATS, floats)
-        ph = [_PHASES.get(v[6]), _PHASES.get(v[11])]
-        if None in ph:
-            raise CodecError(f"JointEstimate.joints[{i}] phase {v[6] if ph[0] is None else v[11]} is not a Phase "
+        pa, pb = _PHASES.get(v[6]), _PHASES.get(v[11])
+        if pa is None or pb is None:
+            raise CodecError(f"JointEstimate.joints[{i}] phase {v[6] if pa is None else v[11]} is not a Phase "
                              f"(0..{len(_PHASES) - 1})")
-        joints.append(JointState(v[0], v[1], (TendonState(*v[2:6], ph[0]), TendonState(*v[7:11], ph[1]))))
+        joints.append(JointState(v[0], v[1], (TendonState(v[2], v[3], v[4], v[5], pa),
+                                              TendonState(v[7], v[8], v[9], v[10], pb))))
     profiles = []
     for k in range(2 * n if points else 0):
         p = _profile_struct(points).unpack_from(buf, off)

@@ -20,6 +20,7 @@ from __future__ import annotations
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -83,7 +84,7 @@ def evaluate(csv_path: str | Path, calibration: dict, cfg: Config) -> dict:
         if not sel.any():
             continue
         T, e = data.T_out[sel], elong[sel]
-        row = {"samples": int(sel.sum()), "duration_s": float(data.time[sel][-1] - data.time[sel][0]),
+        row: dict[str, Any] = {"samples": int(sel.sum()), "duration_s": float(data.time[sel][-1] - data.time[sel][0]),
                "force_full_scale_N": float(np.ptp(T)), "elongation_full_scale_m": float(np.ptp(e))}
         for est, T_hat, e_hat in (("profile_memory", data.extra["T_out_hat"][sel], data.extra["elongation_hat"][sel]),
                                   ("paper_formulas", T_pf[sel], e_pf[sel])):

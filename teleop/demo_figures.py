@@ -40,6 +40,7 @@ def demo_figure(csv_path: str | Path, calibration: dict, deadband: float, out_pn
     T_pf, e_pf, _ = phase_formula_batch(d.T_in, float(calibration["K"]), float(calibration["compliance_m_per_N"]),
                                         deadband=deadband)
     rows = [(m, n) for m, n in experiments.items() if np.any(marker == m)]
+    assert d.T_out is not None, "demo_figure needs the truth column T_out"
     fig, axes = plt.subplots(len(rows), 3, figsize=(15, 4.2 * len(rows)), squeeze=False)
     for r, (m, name) in enumerate(rows):
         sel = marker == m

@@ -19,6 +19,7 @@ import dataclasses
 import math
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -107,7 +108,7 @@ def _calibration_summary(cal_path: Path, cfg: Config) -> dict:
     from slave.joint_rig import SimulatedInstrument
     cal = load_calibration(cal_path, cfg)
     inst = SimulatedInstrument.from_config(cfg)
-    out = {"file": str(cal_path), "date": cal.date}
+    out: dict[str, Any] = {"file": str(cal_path), "date": cal.date}
     for i, (name, tend) in enumerate(cal.joints):
         out[name] = {t: {"K": c.K, "K_true": float(inst.K[i, k]), "K_error_rel": c.K / inst.K[i, k] - 1.0,
                          "M_e_m_per_N": c.M_e, "M_e_true_m_per_N": float(inst.M_e[i, k]),

@@ -138,7 +138,7 @@ def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, b
     with open(run_dir / "slave.log", "w") as slog, open(run_dir / "master.log", "w") as mlog, \
             open(run_dir / "bridge.log", "w") if bridge else contextlib.nullcontext() as blog:
         try:
-            from teleop.record import start_recorder       # `teleop record` first: it hears every message
+            from teleop.record import start_recorder  # `teleop record` first: it hears every message
             recorder, rec_link = start_recorder(base, common, run_dir, env, deadline)
             procs.append(("recorder", recorder))
             if rec_link is None:

@@ -11,7 +11,7 @@ import logging
 import math
 import re
 import threading
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import zenoh
 
@@ -68,7 +68,7 @@ class Entity:
 
     def __init__(self, session: "Session", key: str):
         self.session, self.key = session, key
-        self._handle = None
+        self._handle: Any = None
         self._closed = False
 
     def _declare(self, fn, *args, **kwargs) -> None:

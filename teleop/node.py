@@ -48,6 +48,8 @@ class NodeBase:
     side: Side
     log: logging.Logger
 
+    links: Any                                 # the subclass's links (``heartbeat`` at least)
+
     def __init__(self, heartbeat_hz: float, counts=()):
         self.hb_period = 1.0 / heartbeat_hz
         self.state = SideState.STARTING

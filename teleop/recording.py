@@ -157,10 +157,10 @@ def read_measured_csv(path: str | Path) -> MeasuredData:
         raise DataError(f"{src}: {n_rows} data row(s), need at least 2")
     bad = ~np.isfinite(table)
     if bad.any():
-        row, col = (int(i) for i in np.argwhere(bad)[0])
-        line = _line_of_row(path, header_line, row)
-        raise DataError(f"{src}:{line}: column {col + 1} ('{names[col]}'): expected a finite "
-                        f"number, got {float(table[row, col])!r}")
+        r_bad, c_bad = (int(i) for i in np.argwhere(bad)[0])
+        line = _line_of_row(path, header_line, r_bad)
+        raise DataError(f"{src}:{line}: column {c_bad + 1} ('{names[c_bad]}'): expected a finite "
+                        f"number, got {float(table[r_bad, c_bad])!r}")
     cols = {name: np.ascontiguousarray(table[:, j]) for j, name in enumerate(names)}
     t = cols["time"]
     step = np.diff(t)

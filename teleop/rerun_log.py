@@ -25,7 +25,7 @@ import os
 import sys
 import tempfile
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -147,7 +147,7 @@ class RerunLogger:
 
         self._rr = rr
         rec = rr.RecordingStream(application_id, recording_id=recording_id)
-        blueprint = _blueprint()
+        blueprint: Any = _blueprint()
         if mode == "spawn":
             if display_available():
                 beside = Path(sys.executable).with_name("rerun")  # venv not on PATH

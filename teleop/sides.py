@@ -49,7 +49,7 @@ def open_session(cfg, args: argparse.Namespace, clock):
     TransportError
         The session cannot be opened (port in use, address not resolvable).
     """
-    from teleop.discovery import side_session   # bare start: listen, or connect when taken
+    from teleop.discovery import side_session  # bare start: listen, or connect when taken
     return side_session(cfg, args, clock)
 
 
@@ -94,9 +94,8 @@ def _side_streams(session, ident: str, injector, me: str, peer: str, out: tuple[
     incoming subscriber ``incoming = (key, message type)`` and the peer's heartbeat; then the own
     liveliness token. Returns (outgoing, heartbeat, incoming, peer heartbeat, peer alive)."""
     from teleop.keys import heartbeat_key, liveliness_key
+    from teleop.link_security import SourceLock  # slave: one master session only (transport.lock_master)
     from teleop.messages import Heartbeat
-
-    from teleop.link_security import SourceLock   # slave: one master session only (transport.lock_master)
     lock = SourceLock() if me == "slave" and getattr(session, "lock_master", False) else None
     only = {} if lock is None else {"source_lock": lock}
     watcher = session.liveliness_watcher(liveliness_key(ident, peer), None if lock is None else lock.on_liveliness)
@@ -155,8 +154,8 @@ def run_slave(args: argparse.Namespace) -> int:
     from slave.rigs import make_rig
     from teleop.clock import MonotonicClock
     from teleop.config import load_config
-    from teleop.messages import Command
     from teleop.csv_writer import ThreadedCsvRecorder as CsvRecorder  # the loop only queues rows; a thread writes
+    from teleop.messages import Command
     from teleop.recording import raise_on_sigterm
     from teleop.rerun_log import RerunLogger
 
@@ -193,8 +192,8 @@ def run_master(args: argparse.Namespace) -> int:
     from master.node import MasterNode, csv_columns, csv_units
     from teleop.clock import MonotonicClock
     from teleop.config import load_config
-    from teleop.messages import Estimate, JointEstimate
     from teleop.csv_writer import ThreadedCsvRecorder as CsvRecorder  # the loop only queues rows; a thread writes
+    from teleop.messages import Estimate, JointEstimate
     from teleop.recording import raise_on_sigterm
 
     cfg = load_config(args.config)
@@ -243,8 +242,8 @@ def run_joint_slave(args: argparse.Namespace, cfg: Config) -> int:
     from slave.joint_rig import SimulatedInstrument
     from slave.rigs import make_rig
     from teleop.clock import MonotonicClock
-    from teleop.messages import JointCommand
     from teleop.csv_writer import ThreadedCsvRecorder as CsvRecorder  # the loop only queues rows; a thread writes
+    from teleop.messages import JointCommand
     from teleop.recording import raise_on_sigterm
     from teleop.rerun_log import RerunLogger
 

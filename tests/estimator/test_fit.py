@@ -2,7 +2,6 @@
 import numpy as np
 import pytest
 
-from estimator.capstan import phase_formula_batch
 from estimator.distal import estimate_batch
 from estimator.fit import fit_model, fit_single, predict, split_index
 from estimator.sheath import SheathModel

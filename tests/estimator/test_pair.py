@@ -4,8 +4,19 @@ import math
 import numpy as np
 import pytest
 
-from estimator.pair import (PairParams, distal_tension, fit_force_path, fit_linear, fit_pair, fit_play_map,
-                            mean_tension, play, predict_angle, reversal_dead_zones, rmse)
+from estimator.pair import (
+    PairParams,
+    distal_tension,
+    fit_force_path,
+    fit_linear,
+    fit_pair,
+    fit_play_map,
+    mean_tension,
+    play,
+    predict_angle,
+    reversal_dead_zones,
+    rmse,
+)
 
 TRUE = PairParams(G=1.1, K_a=0.4, K_b=0.8, lam_a=0.10, lam_b=0.07, theta0=0.02)
 

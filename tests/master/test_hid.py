@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from master.devices_list import NONE_FOUND, add_arguments, format_devices, list_devices, main_devices, probe_open
 from master.device import DeviceState, HapticDevice
+from master.devices_list import NONE_FOUND, add_arguments, format_devices, list_devices, main_devices, probe_open
 from master.hid import HidDevice, load_device_file, parse_device
 from master.hid_reports import Field, OutputMap, Section, parse_input, parse_output
 from teleop.errors import ConfigError, DeviceError

@@ -16,8 +16,6 @@ oscillation decays and the force stays within the clamp.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 

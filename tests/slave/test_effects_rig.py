@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from estimator.sheath import SheathGeometry
-from slave.scenarios import EFFECT_IDS, record, realistic_range
+from slave.scenarios import EFFECT_IDS, realistic_range, record
 from slave.simulated import SimulatedRig
 from teleop import config as C
 

@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 import yaml
 
-from slave.calibration_file import (calibration_path, from_results, load_calibration, save_calibration,
-                                    sheath_models)
+from slave.calibration_file import calibration_path, from_results, load_calibration, save_calibration, sheath_models
 from slave.joint_rig import SimulatedInstrument
 from slave.pair_calibrate import PairCalibration
 from teleop.config import config_from_dict, load_config

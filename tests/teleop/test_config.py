@@ -9,8 +9,16 @@ from typing import get_args, get_origin, get_type_hints
 
 import pytest
 
-from teleop.config import (RANGES, Config, RunConfig, TransportConfig, config_from_dict, config_to_dict,
-                           load_config, write_config)
+from teleop.config import (
+    RANGES,
+    Config,
+    RunConfig,
+    TransportConfig,
+    config_from_dict,
+    config_to_dict,
+    load_config,
+    write_config,
+)
 from teleop.errors import ConfigError
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"

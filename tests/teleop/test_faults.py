@@ -13,7 +13,17 @@ from teleop.clock import FakeClock
 from teleop.codec import WIRE_VERSION, decode, encode
 from teleop.errors import CodecError, ConfigError
 from teleop.faults import FaultInjector, corrupt_payload, parse_fault_spec
-from teleop.messages import Command, Estimate, Heartbeat, JointCommand, JointEstimate, JointState, Side, SideState, TendonState
+from teleop.messages import (
+    Command,
+    Estimate,
+    Heartbeat,
+    JointCommand,
+    JointEstimate,
+    JointState,
+    Side,
+    SideState,
+    TendonState,
+)
 
 DT = 1e-3
 

@@ -16,8 +16,7 @@ from teleop.config import TransportConfig
 from teleop.errors import CodecError, ConfigError, TransportError
 from teleop.keys import command_key, estimate_key, liveliness_key, liveliness_pattern
 from teleop.messages import Command, Estimate, Phase, Side
-from teleop.transport import (RateLimitedLog, Session, free_tcp_port, free_tcp_ports, loopback_endpoint,
-                              zenoh_config)
+from teleop.transport import RateLimitedLog, Session, free_tcp_port, free_tcp_ports, loopback_endpoint, zenoh_config
 
 DEADLINE = 5.0     # [s] upper bound of any wait; the waits return as soon as the event happens
 
