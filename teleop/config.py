@@ -1,8 +1,8 @@
-"""Configuration schema (dataclasses) and strict YAML loading.
+"""Strict YAML loading of the configuration (the schema and the range table are :mod:`teleop.schema`).
 
-The schema mirrors configs/default.yaml key for key. Loading merges a file over the defaults and
-rejects unknown keys, wrong types and out-of-range values with a :class:`ConfigError` that names the
-file and the dotted key.
+Loading merges a file over the defaults and rejects unknown keys, wrong types and out-of-range
+values with a :class:`ConfigError` that names the file and the dotted key. Every schema name is
+re-exported here, so ``from teleop.config import Config, RigConfig, ...`` keeps working.
 """
 from __future__ import annotations
 
@@ -10,367 +10,63 @@ import dataclasses
 import difflib
 import math
 import re
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, Optional, Union, get_args, get_origin, get_type_hints
+from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
 
 import yaml
 
-from estimator.sheath import Run, SheathGeometry
 from teleop.errors import ConfigError
+from teleop.schema import (
+    RANGES,
+    CalibrationConfig,
+    Config,
+    CurvatureDriftConfig,
+    DeviceConfig,
+    EffectsConfig,
+    EstimatorConfig,
+    FrictionOffsetConfig,
+    InstrumentConfig,
+    JointConfig,
+    JointLoadConfig,
+    LoadConfig,
+    MappingConfig,
+    MasterConfig,
+    MotorConfig,
+    PairControlConfig,
+    PretensionEffectConfig,
+    RecordingConfig,
+    RigConfig,
+    RunConfig,
+    SensorConfig,
+    SensorDelayConfig,
+    SensorOffsetConfig,
+    SheathConfig,
+    SlaveConfig,
+    StictionConfig,
+    TendonConfig,
+    TendonPairConfig,
+    TendonStiffeningConfig,
+    TransportAuthConfig,
+    TransportConfig,
+    TransportTlsConfig,
+    VelocityFrictionConfig,
+    ZenohRigConfig,
+    joint_set_tension,
+)
 
-__all__ = [
-    "InstrumentConfig", "RunConfig", "SheathConfig", "MotorConfig", "LoadConfig", "SensorConfig",
-    "RigConfig", "EffectsConfig", "VelocityFrictionConfig", "PretensionEffectConfig",
-    "CurvatureDriftConfig", "TendonStiffeningConfig", "StictionConfig", "FrictionOffsetConfig", "SensorOffsetConfig",
-    "SensorDelayConfig", "EstimatorConfig", "CalibrationConfig", "DeviceConfig", "MappingConfig",
-    "MasterConfig", "SlaveConfig", "TransportConfig", "TransportAuthConfig", "TransportTlsConfig", "RecordingConfig", "Config",
-    "load_config", "config_from_dict", "config_to_dict", "write_config", "RANGES",
+__all__ = [  # the schema's names (teleop.schema) and the loader's
+    "InstrumentConfig", "RunConfig", "SheathConfig", "TendonConfig", "TendonPairConfig", "JointLoadConfig", "JointConfig",
+    "MotorConfig", "LoadConfig", "SensorConfig", "ZenohRigConfig", "RigConfig", "EffectsConfig", "VelocityFrictionConfig",
+    "PretensionEffectConfig", "CurvatureDriftConfig", "TendonStiffeningConfig", "StictionConfig",
+    "FrictionOffsetConfig", "SensorOffsetConfig", "SensorDelayConfig", "EstimatorConfig", "CalibrationConfig",
+    "DeviceConfig", "MappingConfig", "MasterConfig", "SlaveConfig", "PairControlConfig", "TransportConfig",
+    "TransportAuthConfig", "TransportTlsConfig", "RecordingConfig", "Config", "RANGES", "joint_set_tension",
+    "load_config", "config_from_dict", "config_to_dict", "write_config", "MAX_JOINTS",
 ]
-
-
-@dataclass(frozen=True)
-class InstrumentConfig:
-    id: str = "tsm0"
-    # empty: the single-tendon rig of `sheath` and `rig.load`; 1..4 entries: antagonistic-pair joints
-    joints: tuple[JointConfig, ...] = ()
-
-
-@dataclass(frozen=True)
-class RunConfig:
-    length: float                 # [m] > 0
-    radius: float = math.inf      # [m] > 0, inf = straight
-
-
-@dataclass(frozen=True)
-class SheathConfig:
-    mu: float = 0.1               # [-] >= 0
-    EA: float = 15000.0           # [N] > 0
-    runs: tuple[RunConfig, ...] = (
-        RunConfig(0.30), RunConfig(0.60, 0.191), RunConfig(0.30), RunConfig(0.30, 0.0955),
-    )
-    pretension: float = 0.0       # [N] >= 0
-
-    def geometry(self) -> SheathGeometry:
-        return SheathGeometry([Run(r.length, r.radius) for r in self.runs])
-
-
-# ---- instruments of 1..4 joints, each driven by an antagonistic tendon pair (slave/joint_rig.py) --
-
-@dataclass(frozen=True)
-class TendonConfig:
-    """One tendon-sheath transmission of a joint (its own route, friction and stiffness)."""
-
-    mu: float = 0.1               # [-] >= 0
-    EA: float = 15000.0           # [N] > 0
-    runs: tuple[RunConfig, ...] = SheathConfig.runs
-
-    def geometry(self) -> SheathGeometry:
-        return SheathGeometry([Run(r.length, r.radius) for r in self.runs])
-
-
-@dataclass(frozen=True)
-class TendonPairConfig:
-    a: TendonConfig = field(default_factory=TendonConfig)   # pulling a turns the joint to + angles
-    b: TendonConfig = field(default_factory=TendonConfig)   # pulling b turns it to - angles
-
-
-@dataclass(frozen=True)
-class JointLoadConfig:
-    tissue: bool = True
-    tissue_stiffness: float = 0.02        # [N m/rad] torsional tissue spring beyond the contact angle
-    tissue_contact: float = 0.2           # [rad] >= 0: in contact where |theta| > tissue_contact
-    torque: float = 0.0                   # [N m] constant external torque (gravity, a held load)
-
-
-@dataclass(frozen=True)
-class JointConfig:
-    name: str                             # [A-Za-z0-9_-]+, unique in the instrument
-    pulley_radius: float = 0.004          # [m] distal pulley: x_out,a = +r theta, x_out,b = -r theta
-    limits: tuple[float, ...] = (-1.2, 1.2)  # [rad] lower < 0 < upper (0: the rest pose)
-    stiffness: float = 0.005              # [N m/rad] joint return spring
-    damping: float = 0.0002               # [N m s/rad]
-    limit_stiffness: float = 50.0         # [N m/rad] stiffness of the joint limits
-    pretension: float = 0.0               # [N] tension of the pair at rest; 0: none (antagonist slack-free)
-    load: JointLoadConfig = field(default_factory=JointLoadConfig)
-    tendons: TendonPairConfig = field(default_factory=TendonPairConfig)
-
-
-@dataclass(frozen=True)
-class MotorConfig:
-    bandwidth_hz: float = 40.0
-    max_speed: float = 0.05               # [m/s]
-    pulley_radius: float = 0.005          # [m]
-    encoder_lines_per_rev: int = 67000
-
-
-@dataclass(frozen=True)
-class LoadConfig:
-    joint_stiffness: float = 100.0        # [N/m]
-    joint_limit: float = 0.020            # [m]
-    limit_stiffness: float = 2.0e6        # [N/m]
-    tissue_stiffness: float = 2000.0      # [N/m]
-    tissue_contact: float = 0.0           # [m]
-    tissue: bool = True
-    force: float = 0.0                    # [N]
-
-
-@dataclass(frozen=True)
-class SensorConfig:
-    load_cell_noise: float = 0.02         # [N]
-    seed: int = 0
-
-
-# ---- model effects of the simulated rig (estimator/effects.py has the matching extensions) -------
-# Each effect is off by default; the magnitude fields are in SI units (the range table has them).
-
-@dataclass(frozen=True)
-class VelocityFrictionConfig:
-    enabled: bool = False
-    viscous: float = 15.0                 # [s/m] mu(v) = mu (1 + viscous |v|), v sliding speed
-
-
-@dataclass(frozen=True)
-class PretensionEffectConfig:
-    enabled: bool = False
-    tension: float = 3.0                  # [N] uniform tension at rest, added to sheath.pretension
-
-
-@dataclass(frozen=True)
-class CurvatureDriftConfig:
-    enabled: bool = False
-    rate: float = 0.002                   # [1/s] dK/dt: K(t) = K + rate t (route/mu drift)
-
-
-@dataclass(frozen=True)
-class TendonStiffeningConfig:
-    enabled: bool = False
-    softening: float = 2.0                # [-] extra compliance at zero tension: (1 + softening e^-T/T_c)/EA
-    toe_tension: float = 2.0              # [N] T_c, tension where the toe stiffens
-
-
-@dataclass(frozen=True)
-class StictionConfig:
-    enabled: bool = False
-    static_ratio: float = 0.3             # [-] mu_static / mu_kinetic - 1
-    slip_time: float = 0.02               # [s] after breakaway mu relaxes from static to kinetic (time constant)
-
-
-@dataclass(frozen=True)
-class FrictionOffsetConfig:
-    enabled: bool = False
-    tension_offset: float = 1.0           # [N] a = q / mu in dT/dtheta = -mu (T + a)
-
-
-@dataclass(frozen=True)
-class SensorOffsetConfig:
-    enabled: bool = False
-    offset: float = 0.5                   # [N] zero offset added to the proximal load-cell reading
-
-
-@dataclass(frozen=True)
-class SensorDelayConfig:
-    enabled: bool = False
-    delay: float = 0.02                   # [s] the proximal load-cell reading lags the truth
-
-
-@dataclass(frozen=True)
-class EffectsConfig:
-    velocity_friction: VelocityFrictionConfig = field(default_factory=VelocityFrictionConfig)
-    pretension: PretensionEffectConfig = field(default_factory=PretensionEffectConfig)
-    curvature_drift: CurvatureDriftConfig = field(default_factory=CurvatureDriftConfig)
-    tendon_stiffening: TendonStiffeningConfig = field(default_factory=TendonStiffeningConfig)
-    stiction: StictionConfig = field(default_factory=StictionConfig)
-    friction_offset: FrictionOffsetConfig = field(default_factory=FrictionOffsetConfig)
-    sensor_offset: SensorOffsetConfig = field(default_factory=SensorOffsetConfig)
-    sensor_delay: SensorDelayConfig = field(default_factory=SensorDelayConfig)
-
-
-@dataclass(frozen=True)
-class ZenohRigConfig:
-    """The ``zenoh`` rig: set-points out, samples in on ``teleop/<instrument>/rig/{setpoint,sample}``."""
-
-    timeout_ms: float = 50.0              # samples older than this are counted as stale [ms]
-    wait_s: float = 10.0                  # at start, wait this long for the first sample [s]
-
-
-@dataclass(frozen=True)
-class RigConfig:
-    type: Literal["simulated", "zenoh"] = "simulated"
-    n_elements: int = 200
-    rate_hz: float = 1000.0
-    motor: MotorConfig = field(default_factory=MotorConfig)
-    load: LoadConfig = field(default_factory=LoadConfig)
-    sensors: SensorConfig = field(default_factory=SensorConfig)
-    effects: EffectsConfig = field(default_factory=EffectsConfig)
-    zenoh: ZenohRigConfig = field(default_factory=ZenohRigConfig)
-
-
-@dataclass(frozen=True)
-class EstimatorConfig:
-    n_nodes: int = 100
-    hold_rate: float = 0.5                # [N/s]
-    rate_time_constant: float = 0.02      # [s]
-    profile_points: int = 50
-
-
-@dataclass(frozen=True)
-class CalibrationConfig:
-    target_tension: float = 20.0          # [N]
-    speed: float = 0.004                  # [m/s]
-    use_route: bool = True
-    dir: str = "configs/calibration"      # joint instruments: <dir>/<instrument.id>.yaml
-
-
-@dataclass(frozen=True)
-class DeviceConfig:
-    type: Literal["simulated", "hid"] = "simulated"
-    file: Optional[str] = None            # device file (configs/devices/*.yaml), required when type is hid
-
-
-@dataclass(frozen=True)
-class MappingConfig:
-    motion_scale: float = 0.2
-    force_scale: float = 0.2
-    force_limit: float = 4.0              # [N]
-    ramp_time: float = 0.5                # [s]
-    force_rate_limit: float = 100.0       # [N/s]
-    passivity: bool = True                # time-domain passivity controller on the force channel
-    align_tolerance: float = 0.001        # [m] of tendon: re-engage only when this close to the slave
-    clutch_button: int = 1                # bit of DeviceState.buttons held to clutch; -1: no clutch
-
-
-@dataclass(frozen=True)
-class MasterConfig:
-    rate_hz: float = 1000.0
-    device: DeviceConfig = field(default_factory=DeviceConfig)
-    mapping: MappingConfig = field(default_factory=MappingConfig)
-    watchdog_ms: float = 50.0
-    max_tension: float = 200.0            # [N] estimates with |T_in| or |T_out_hat| above: rejected
-
-
-@dataclass(frozen=True)
-class SlaveConfig:
-    watchdog_ms: float = 50.0
-    heartbeat_hz: float = 50.0
-    relax_speed: float = 0.005            # [m/s] SAFE: release toward sheath.pretension at this speed
-    x_in_min: float = -0.005              # [m] commands outside [x_in_min, x_in_max]: rejected
-    x_in_max: float = 0.03                # [m]
-    engage_tolerance: float = 0.002       # [m] (re-)engage only on a command this close to x_in
-
-
-@dataclass(frozen=True)
-class PairControlConfig:
-    """Slave-side control of each antagonistic pair (slave/pair_control.py)."""
-
-    min_tension: float = 0.5              # [N] antagonist's set tension when the joint has no pretension
-    tension_gain: float = 0.01            # [m/(N s)] integral gain of the antagonist's tension loop
-    switch_band: float = 0.01             # [rad] |command| below: both tendons hold their set tension
-    feedforward: bool = True              # antagonist pays out the pulling side's commanded travel
-    axes: tuple[int, ...] = ()            # master: device axis of each joint; empty: joint i on axis i
-
-
-@dataclass(frozen=True)
-class TransportAuthConfig:
-    """Zenoh user/password authentication of every link (teleop/link_security.py); null: none."""
-
-    user: Optional[str] = None            # this process's user name
-    password: Optional[str] = None        # its password (prefer password_file outside tests)
-    password_file: Optional[str] = None   # file holding the password (first line)
-    dictionary_file: Optional[str] = None  # listener: accepted "user:password" lines
-
-
-@dataclass(frozen=True)
-class TransportTlsConfig:
-    """TLS of ``tls/...`` endpoints: PEM files; null: no TLS settings."""
-
-    root_ca: Optional[str] = None         # CA certificate that signs the peers' certificates
-    certificate: Optional[str] = None     # this process's certificate (listener; mutual: connector too)
-    private_key: Optional[str] = None     # its private key
-    mutual: bool = False                  # connectors must present a certificate too
-
-
-@dataclass(frozen=True)
-class TransportConfig:
-    mode: Literal["peer", "client"] = "peer"
-    listen: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
-    connect: tuple[str, ...] = ()
-    multicast_scouting: bool = False
-    auto_connect: bool = True             # bare start: listen, or connect when the port is taken (teleop/discovery.py)
-    run_id_timeout: float = 3.0           # [s] a connecting side asks its peers for the run id this long
-    lock_master: bool = True              # slave: commands and master heartbeats from one master session only
-    auth: TransportAuthConfig = field(default_factory=TransportAuthConfig)
-    tls: TransportTlsConfig = field(default_factory=TransportTlsConfig)
-
-
-@dataclass(frozen=True)
-class RecordingConfig:
-    dir: str = "runs"
-    rerun: Literal["save", "spawn", "off"] = "save"
-    log_every: int = 10
-    profile_every: int = 5
-    flush_interval: float = 0.02          # [s] recorder files handed to the OS at least this often
-
-
-@dataclass(frozen=True)
-class Config:
-    instrument: InstrumentConfig = field(default_factory=InstrumentConfig)
-    sheath: SheathConfig = field(default_factory=SheathConfig)
-    rig: RigConfig = field(default_factory=RigConfig)
-    estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
-    calibration: CalibrationConfig = field(default_factory=CalibrationConfig)
-    master: MasterConfig = field(default_factory=MasterConfig)
-    slave: SlaveConfig = field(default_factory=SlaveConfig)
-    transport: TransportConfig = field(default_factory=TransportConfig)
-    recording: RecordingConfig = field(default_factory=RecordingConfig)
-    pair_control: PairControlConfig = field(default_factory=PairControlConfig)
 
 
 # ---- loading: strict YAML -> Config ------------------------------------------------------------
 
-# Valid range and unit of every numeric setting ("[]" stands for any list index). A test checks that
-# each numeric field of the schema has an entry and each entry names a field.
-RANGES: dict[str, tuple[str, str]] = {
-    "sheath.mu": (">= 0", "-"), "sheath.EA": ("> 0", "N"), "sheath.pretension": (">= 0", "N"),
-    "sheath.runs[].length": ("> 0", "m"), "sheath.runs[].radius": ("> 0", "m, .inf = straight"),
-    "rig.n_elements": (">= 1", "-"), "rig.rate_hz": ("> 0", "Hz"),
-    "rig.motor.bandwidth_hz": ("> 0", "Hz"), "rig.motor.max_speed": ("> 0", "m/s"),
-    "rig.motor.pulley_radius": ("> 0", "m"), "rig.motor.encoder_lines_per_rev": (">= 1", "-"),
-    "rig.load.joint_stiffness": (">= 0", "N/m"), "rig.load.joint_limit": ("> 0", "m"),
-    "rig.load.limit_stiffness": ("> 0", "N/m"), "rig.load.tissue_stiffness": (">= 0", "N/m"),
-    "rig.load.tissue_contact": ("any", "m"), "rig.load.force": (">= 0", "N"),
-    "rig.sensors.load_cell_noise": (">= 0", "N"), "rig.sensors.seed": (">= 0", "-"),
-    "rig.zenoh.timeout_ms": ("> 0", "ms"), "rig.zenoh.wait_s": ("> 0", "s"),
-    "rig.effects.velocity_friction.viscous": (">= 0", "s/m"), "rig.effects.pretension.tension": (">= 0", "N"),
-    "rig.effects.curvature_drift.rate": ("any", "1/s"), "rig.effects.tendon_stiffening.softening": (">= 0", "-"),
-    "rig.effects.tendon_stiffening.toe_tension": ("> 0", "N"), "rig.effects.stiction.static_ratio": (">= 0", "-"),
-    "rig.effects.stiction.slip_time": ("> 0", "s"), "rig.effects.friction_offset.tension_offset": (">= 0", "N"),
-    "rig.effects.sensor_offset.offset": ("any", "N"), "rig.effects.sensor_delay.delay": (">= 0", "s"),
-    "estimator.n_nodes": (">= 2", "-"), "estimator.hold_rate": (">= 0", "N/s"),
-    "estimator.rate_time_constant": ("> 0", "s"), "estimator.profile_points": ("0..65535", "-"),
-    "calibration.target_tension": ("> 0", "N"), "calibration.speed": ("> 0", "m/s"),
-    "master.rate_hz": ("> 0", "Hz"), "master.watchdog_ms": ("> 0", "ms"),
-    "master.mapping.motion_scale": ("> 0", "-"), "master.mapping.force_scale": (">= 0", "-"),
-    "master.mapping.force_limit": (">= 0", "N"), "master.mapping.ramp_time": (">= 0", "s"),
-    "master.mapping.force_rate_limit": ("> 0", "N/s"), "master.mapping.align_tolerance": ("> 0", "m"),
-    "master.mapping.clutch_button": ("-1..31", "bit"), "master.max_tension": ("> 0", "N"),
-    "slave.relax_speed": (">= 0", "m/s"), "slave.x_in_min": ("any", "m"), "slave.x_in_max": ("any", "m"),
-    "slave.engage_tolerance": ("> 0", "m"),
-    "slave.watchdog_ms": ("> 0", "ms"), "slave.heartbeat_hz": ("> 0", "Hz"),
-    "recording.log_every": (">= 1", "samples"),
-    "instrument.joints[].pulley_radius": ("> 0", "m"), "instrument.joints[].limits[]": ("any", "rad"),
-    "instrument.joints[].stiffness": (">= 0", "N m/rad"), "instrument.joints[].damping": (">= 0", "N m s/rad"),
-    "instrument.joints[].limit_stiffness": ("> 0", "N m/rad"), "instrument.joints[].pretension": (">= 0", "N"),
-    "instrument.joints[].load.tissue_stiffness": (">= 0", "N m/rad"),
-    "instrument.joints[].load.tissue_contact": (">= 0", "rad"), "instrument.joints[].load.torque": ("any", "N m"),
-    **{f"instrument.joints[].tendons.{t}.{k}": v for t in "ab" for k, v in (
-        ("mu", (">= 0", "-")), ("EA", ("> 0", "N")), ("runs[].length", ("> 0", "m")),
-        ("runs[].radius", ("> 0", "m, .inf = straight")))},
-    "pair_control.min_tension": ("> 0", "N"), "pair_control.tension_gain": ("> 0", "m/(N s)"),
-    "pair_control.switch_band": (">= 0", "rad"), "pair_control.axes[]": (">= 0", "-"),
-    "recording.profile_every": (">= 1", "logs"),
-    "recording.flush_interval": ("> 0", "s"), "transport.run_id_timeout": (">= 0", "s"),
-}
 _INF_OK = {"sheath.runs[].radius", "instrument.joints[].tendons.a.runs[].radius",
            "instrument.joints[].tendons.b.runs[].radius"}
 _NON_SI = ("_mm", "_deg", "_ms", "_hz")
@@ -421,7 +117,7 @@ def _show(v: Any) -> str:
     return kind or f"{v!r} ({type(v).__name__})"
 
 
-def _schema_keys(cls: type, prefix: str = "") -> list[str]:
+def _schema_keys(cls: Any, prefix: str = "") -> list[str]:
     out = []
     for name, tp in get_type_hints(cls).items():
         p = f"{prefix}.{name}" if prefix else name
@@ -489,7 +185,7 @@ def _convert(v: Any, tp: Any, path: str, ctx: _Ctx) -> Any:
     return v
 
 
-def _merge(cls: type, base: Any, data: Any, path: str, ctx: _Ctx) -> Any:
+def _merge(cls: Any, base: Any, data: Any, path: str, ctx: _Ctx) -> Any:
     """A ``cls`` instance: ``base`` (None: the field defaults) with the keys of ``data`` replaced."""
     if data is None:                     # an empty section: nothing overridden
         data = {}
@@ -669,11 +365,6 @@ def load_config(path: str | Path | None = None, overrides: dict | None = None) -
     if overrides:
         cfg = config_from_dict(_expand_dotted(overrides), source="overrides", base=cfg)
     return cfg
-
-
-def joint_set_tension(cfg: Config, joint: JointConfig) -> float:
-    """The antagonist's set tension of a joint [N]: its pretension, else ``pair_control.min_tension``."""
-    return joint.pretension if joint.pretension > 0 else cfg.pair_control.min_tension
 
 
 def config_to_dict(cfg: Any) -> Any:
