@@ -70,6 +70,26 @@ def flatten(msg, prefix: str = "", out: list | None = None) -> list[tuple[str, f
     return out
 
 
+def _values(x, out: list) -> None:
+    """The numbers of :func:`flatten` without the names (the writer's per-message path, ~10x faster)."""
+    if dataclasses.is_dataclass(x):
+        names = _fields_cache.get(type(x))
+        if names is None:
+            names = _fields_cache[type(x)] = tuple(f.name for f in dataclasses.fields(x))
+        for n in names:
+            _values(getattr(x, n), out)
+    elif isinstance(x, (tuple, list)):
+        if all(type(v) is float for v in x):      # a profile: one extend
+            out.extend(x)
+        else:
+            for v in x:
+                _values(v, out)
+    elif isinstance(x, (bool, enum.Enum)):
+        out.append(int(x))
+    else:
+        out.append(x)
+
+
 def _unit(name: str) -> str | None:
     leaf = name.rsplit(".", 1)[-1].split("[")[0]
     if leaf.startswith(("T_", "profile")):
@@ -166,7 +186,7 @@ class Recorder:
         self.ever_alive: set[str] = set()
         self.state_changes: list[dict] = []
         self._states: dict[str, int] = {}
-        self._csv: dict[tuple[str, tuple], _Csv] = {}
+        self._csv: dict[tuple, _Csv] = {}          # (key, message type, value count) -> its file
         self._cmd_t: dict[int, float] = {}
         self._echo_delays: list[float] = []
         self._echoed: set[int] = set()
@@ -242,41 +262,42 @@ class Recorder:
         st.type = type(msg).__name__
         seq = getattr(msg, "seq", None)
         st.see(seq, t)
-        flat = flatten(msg)
-        names = tuple(n for n, _ in flat)
-        values = tuple(v for _, v in flat)
-        f = self._csv.get((key, names))
-        if f is None:
-            f = self._open_csv(key, names, flat)
-        f.write(t, values)
-        self._derived(t, key, msg, seq, flat, st.count)
+        vals: list = []
+        _values(msg, vals)
+        shape = (key, type(msg), len(vals))
+        f = self._csv.get(shape)
+        if f is None:                             # a new message shape on this key: names, units, a file
+            f = self._open_csv(shape, flatten(msg))
+        f.write(t, tuple(vals))
+        self._derived(t, key, msg, seq, f.names, vals, st.count)
 
-    def _open_csv(self, key: str, names: tuple, flat: list) -> _Csv:
+    def _open_csv(self, shape: tuple, flat: list) -> _Csv:
+        key = shape[0]
         parts = key.split("/")
         stem = "_".join(parts[2:]) if len(parts) > 2 else parts[-1]
-        n = sum(1 for (k, _) in self._csv if k == key)
+        n = sum(1 for s in self._csv if s[0] == key)
         path = self.dir / (f"{stem}.csv" if n == 0 else f"{stem}-{n + 1}.csv")
-        meta = {"source": "teleop record", "instrument": self.ident, "key": key,
+        meta = {"source": "teleop record", "instrument": self.ident, "key": key, "message": shape[1].__name__,
                 "time": "recorder receive time (monotonic clock of the recorder)"}
-        f = self._csv[(key, names)] = _Csv(path, names, flat, meta)
+        f = self._csv[shape] = _Csv(path, tuple(n for n, _ in flat), flat, meta)
         return f
 
-    def _derived(self, t: float, key: str, msg, seq, flat: list, count: int) -> None:
+    def _derived(self, t: float, key: str, msg, seq, names: tuple, vals: list, count: int) -> None:
         """State changes, the command -> echo delay, and the decimated Rerun scalars."""
-        fields = dict(flat)
-        if "state" in fields and "side" in fields:
+        state = getattr(msg, "state", None)
+        if state is not None and hasattr(msg, "side"):
             side = key.split("/")[2]
-            if self._states.get(side) != fields["state"]:
-                self._states[side] = fields["state"]
-                name = getattr(getattr(msg, "state", None), "name", str(fields["state"]))
+            if self._states.get(side) != int(state):
+                self._states[side] = int(state)
+                name = getattr(state, "name", str(state))
                 self.state_changes.append({"time": t, "side": side, "state": name, "seq": seq})
-                self._aux["state"].write(f"{t:.12g},{side},{fields['state']},{seq}\n")
+                self._aux["state"].write(f"{t:.12g},{side},{int(state)},{seq}\n")
         if key.endswith("/command") and seq is not None:
             self._cmd_t[seq] = t
             if len(self._cmd_t) > 20000:
                 for k in list(self._cmd_t)[:10000]:
                     del self._cmd_t[k]
-        echo = fields.get("cmd_seq")
+        echo = getattr(msg, "cmd_seq", None)
         if echo is not None and echo not in self._echoed and echo in self._cmd_t:
             self._echoed.add(echo)
             self._echo_delays.append(t - self._cmd_t[echo])
@@ -285,7 +306,7 @@ class Recorder:
         if count % self.cfg.recording.log_every == 0 and self._rr.enabled:
             side = key.split("/")[2]
             vals = {f"{side}_state" if n == "state" else n.replace("[", "").replace("]", "").replace(".", "_"): float(v)
-                    for n, v in flat if (n == "state" or isinstance(v, float)) and not n.startswith("t_")
+                    for n, v in zip(names, vals) if (n == "state" or isinstance(v, float)) and not n.startswith("t_")
                     and "profile" not in n}
             self._rr.log_scalars(t, **vals)
 
