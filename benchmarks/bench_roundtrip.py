@@ -3,7 +3,7 @@
 1. Bare Zenoh: two processes on 127.0.0.1; the ping process publishes a 40-byte message at 1 kHz
    (paced by :class:`teleop.clock.Pacer`, express, real-time priority, like the nodes), the pong
    process echoes each one from its subscriber callback; the ping measures send -> echo received.
-2. ``teleop demo --protocol short`` (recorder + slave + master as three processes, rerun off): the
+2. ``teleop demo --protocol short`` (recorder + slave + master as three processes, configs/sim.yaml): the
    master's command -> estimate-echo round trip and both loops' overruns, from ``summary.json``.
 
 Prints the figures, never fails on time. ``python benchmarks/bench_roundtrip.py [seconds]``.
@@ -92,10 +92,8 @@ def bare_pingpong(seconds: float) -> dict:
 
 def demo_roundtrip(timeout: float = 120.0) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
-        cfg = Path(tmp) / "c.yaml"
-        cfg.write_text("recording:\n  rerun: \"off\"\n", encoding="utf-8")
         run = Path(tmp) / "run"
-        subprocess.run([sys.executable, "-m", "teleop.cli", "demo", "--config", str(cfg), "--protocol", "short",
+        subprocess.run([sys.executable, "-m", "teleop.cli", "demo", "--protocol", "short",
                         "--run-dir", str(run), "--timeout", str(timeout)], check=False, cwd=ROOT, capture_output=True,
                        timeout=timeout + 30, env=dict(os.environ, PYTHONUNBUFFERED="1"))
         s = json.loads((run / "summary.json").read_text())

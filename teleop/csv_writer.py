@@ -18,6 +18,7 @@ import threading
 import numpy as np
 
 from teleop.recording import CsvRecorder
+from teleop.rerun_thread import lower_switch_interval
 
 __all__ = ["ThreadedCsvRecorder"]
 
@@ -49,6 +50,7 @@ class ThreadedCsvRecorder(CsvRecorder):
         self._queue: collections.deque = collections.deque()
         self._stop = threading.Event()
         self._io = threading.Lock()
+        lower_switch_interval()             # the woken loop gets the interpreter back within 0.5 ms
         self._thread = threading.Thread(target=self._run, name=f"csv-writer:{self.path.name}", daemon=True)
         self._thread.start()
 

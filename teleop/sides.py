@@ -157,7 +157,7 @@ def run_slave(args: argparse.Namespace) -> int:
     from teleop.csv_writer import ThreadedCsvRecorder as CsvRecorder  # the loop only queues rows; a thread writes
     from teleop.messages import Command
     from teleop.recording import raise_on_sigterm
-    from teleop.rerun_log import RerunLogger
+    from teleop.rerun_thread import ThreadedRerunLogger as RerunLogger  # the loop only queues the calls
 
     cfg = load_config(args.config)
     if cfg.instrument.joints:           # a joint instrument: its own node, same transport and flags
@@ -245,13 +245,12 @@ def run_joint_slave(args: argparse.Namespace, cfg: Config) -> int:
     from teleop.csv_writer import ThreadedCsvRecorder as CsvRecorder  # the loop only queues rows; a thread writes
     from teleop.messages import JointCommand
     from teleop.recording import raise_on_sigterm
-    from teleop.rerun_log import RerunLogger
+    from teleop.rerun_thread import ThreadedRerunLogger as RerunLogger  # the loop only queues the calls
 
     log = logging.getLogger("teleop.slave")
     calibration, cal_path = _load_or_none(cfg)
     log.info("calibration %s", f"loaded from {cal_path}" if calibration else f"missing: calibrating, then {cal_path}")
     run_dir = side_run_dir(args, cfg)
-    inst = make_rig(cfg)
     # compile the numba kernels now, not in the first real-time cycles
     SimulatedInstrument(cfg.instrument.joints[:1], cfg.rig).step([[1e-4, 1e-4]], 1e-3)
     m = SheathModel(K=0.5, compliance=1e-4)
@@ -265,6 +264,7 @@ def run_joint_slave(args: argparse.Namespace, cfg: Config) -> int:
     with raise_on_sigterm(), open_session(cfg, args, clock) as session, \
             CsvRecorder(run_dir / "slave_joints.csv", joint_csv_columns(names, True), meta, flush_every=500) as rec, \
             RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd") as rr:
+        inst = make_rig(cfg, session)   # rig.type: simulated in process, zenoh (a drive or `teleop bridge`), ...
         links = slave_links(session, ident, injector, JointCommand)
         node = JointSlaveNode(cfg, inst, links, recorder=rec, rerun=rr, calibration=calibration,
                               calibration_file=cal_path, run_dir=run_dir, stop_on_master_stop=args.exit_on_master_stop)
