@@ -176,6 +176,8 @@ def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, b
                     rc = p.returncode
                 if rc != 0:
                     problems.append(f"the {name} exited with code {rc} (see {run_dir}/{name}.log)")
+            from teleop.record import summary_line
+            print(summary_line(run_dir / "recorder"), flush=True)
         finally:
             for _, p in procs:
                 _stop(p)

@@ -406,3 +406,15 @@ def start_recorder(base: list[str], common: list[str], run_dir: Path, env: dict,
             return proc, ["--connect", ep]
         time.sleep(0.05)
     return proc, None
+
+
+def summary_line(out_dir: str | Path) -> str:
+    """One line on a finished recording: messages, streams, seqs missing, where the files are."""
+    path = Path(out_dir) / "summary.json"
+    try:
+        s = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return f"recorder: no summary in {out_dir}"
+    streams = s.get("streams", {}).values()
+    return (f"recorder: {sum(v['count'] for v in streams)} messages on {len(s.get('streams', {}))} streams, "
+            f"{sum(v['missing'] for v in streams)} missing by seq -> {out_dir}")

@@ -156,3 +156,35 @@ def test_security_settings_and_their_errors(pki, tmp_path):
         link_security_settings(TransportConfig(tls=TransportTlsConfig(root_ca=str(tmp_path / "nowhere.pem"))))
     with pytest.raises(ConfigError, match="exactly one of password and password_file"):
         link_security_settings(TransportConfig(auth=TransportAuthConfig(user="u")))
+
+
+def test_the_slaves_links_hear_one_master_session_and_follow_a_new_one_after_its_token_goes():
+    from teleop.keys import liveliness_key
+    from teleop.sides import slave_links
+    port = free_tcp_port()
+    with Session(TransportConfig(listen=(loopback_endpoint(port),), connect=())) as slave:
+        slave.lock_master = True                             # what teleop.discovery sets from transport.lock_master
+        links = slave_links(slave, "sec4", None, Command)
+        with Session(TransportConfig(listen=(), connect=(loopback_endpoint(port),))) as master, \
+                Session(TransportConfig(listen=(), connect=(loopback_endpoint(port),))) as intruder:
+            token = master.liveliness_token(liveliness_key("sec4", "master"))
+            mine, theirs = master.publisher(command_key("sec4")), intruder.publisher(command_key("sec4"))
+            assert _until(mine, Command(1, 0.0, 0.001), links.command)
+            deadline = time.monotonic() + DEADLINE
+            while not theirs._handle.matching_status.matching:     # the intruder's puts do reach the slave
+                assert time.monotonic() < deadline
+                time.sleep(0.01)
+            n, lock = links.command.count, links.command.source_lock
+            for i in range(30):
+                theirs.put(Command(500 + i, 0.0, 0.002))
+            mine.put(Command(2, 0.0, 0.001))
+            assert links.command.wait(n + 1, timeout=DEADLINE)
+            while lock.foreign < 30 and time.monotonic() < deadline:
+                time.sleep(0.01)
+            assert lock.foreign == 30 and links.master_heartbeat.source_lock is lock
+            assert links.command.latest().message.seq == 2 and links.command.count == n + 1
+            token.close()                                    # the master is gone: the next session is admitted
+            deadline = time.monotonic() + DEADLINE
+            while links.master_alive() and time.monotonic() < deadline:
+                time.sleep(0.01)
+            assert _until(theirs, Command(600, 0.0, 0.002), links.command, n + 2)
