@@ -7,8 +7,9 @@ joint instrument. Registered here:
 =============  ==============================================================================
 ``simulated``  the in-process simulators (:class:`slave.simulated.SimulatedRig`, one tendon;
                :class:`slave.joint_rig.SimulatedInstrument`, ``instrument.joints`` given)
-``zenoh``      set-points out, samples in over Zenoh (:class:`slave.zenoh_rig.ZenohRig`): a motor
-               controller running zenoh-pico, or ``teleop bridge`` (single tendon so far)
+``zenoh``      set-points out, samples in over Zenoh (:class:`slave.zenoh_rig.ZenohRig`, one tendon;
+               :class:`slave.zenoh_rig.ZenohInstrument`, joints): a motor controller running
+               zenoh-pico, or ``teleop bridge``
 =============  ==============================================================================
 
 Another rig is one :func:`register_rig` call; nothing else chooses by type.
@@ -59,9 +60,7 @@ def _simulated(cfg: Config, session: Any):
 
 @register_rig("zenoh")
 def _zenoh(cfg: Config, session: Any):
-    if cfg.instrument.joints:
-        raise ConfigError("rig.type zenoh: single tendon only so far (instrument.joints is given)")
     if session is None:
         raise ConfigError("rig.type zenoh needs the slave's transport session")
-    from slave.zenoh_rig import ZenohRig
-    return ZenohRig(session, cfg)
+    from slave.zenoh_rig import ZenohInstrument, ZenohRig
+    return ZenohInstrument(session, cfg) if cfg.instrument.joints else ZenohRig(session, cfg)

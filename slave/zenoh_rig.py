@@ -10,8 +10,9 @@ in lock step: a sample may be read twice, ``repeats`` counts it, and the slave's
 increasing); the slave node's watchdogs and calibration see it as any other :class:`slave.rig.Rig`. A sample older than ``rig.zenoh.timeout_ms`` is counted (``stale``) and
 logged at a limited rate; the rig side holds its motors when the set-points stop (the bridge does).
 
-Single tendon for now: a joint instrument over Zenoh needs the pair's arrays (same messages, n = 2
-per joint) in the joint slave.
+:class:`ZenohRig` is the single tendon (n = 1), :class:`ZenohInstrument` a joint instrument (n = 2 per
+joint, in the order joint 0 a, joint 0 b, joint 1 a, ...); the samples' truth, when present, gives
+the joint angle theta = x_out,a / r and torque r (T_out,a - T_out,b) of each joint.
 """
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ import math
 
 import numpy as np
 
+from slave.instrument import InstrumentState, InstrumentTruth
 from slave.rig import RigInputError, RigState, RigTruth
 from teleop.clock import MonotonicClock
 from teleop.codec import next_seq
@@ -29,7 +31,7 @@ from teleop.errors import TransportError
 from teleop.keys import rig_key
 from teleop.rig_wire import RigSample, RigSetpoint, decode_rig, encode_rig
 
-__all__ = ["ZenohRig", "state_from_sample"]
+__all__ = ["ZenohRig", "ZenohInstrument", "state_from_sample", "instrument_state_from_sample"]
 
 log = logging.getLogger("teleop.slave")
 _NO_PROFILE = np.zeros(0)
@@ -46,28 +48,25 @@ def state_from_sample(s: RigSample, t: float | None = None) -> RigState:
     return RigState(t=s.t if t is None else t, x_in=s.x_in[0], T_in=s.T_in[0], x_in_cmd=s.x_in_cmd[0], truth=truth)
 
 
-class ZenohRig:
-    """The ``zenoh`` rig of one tendon (module docstring).
+def instrument_state_from_sample(s: RigSample, r: np.ndarray, t: float | None = None) -> InstrumentState:
+    """The :class:`InstrumentState` of a sample of ``2 n_joints`` tendons; ``r`` [m] the pulley radii,
+    shape (n_joints,) (truth: theta = x_out,a / r, torque = r (T_out,a - T_out,b))."""
+    nj = len(r)
+    if len(s.x_in) != 2 * nj:
+        raise RigInputError(f"rig sample of {len(s.x_in)} tendons for an instrument of {nj} joints (2 each)")
+    shape = (nj, 2)
+    truth = None
+    if s.truth:
+        a = np.asarray(s.truth, dtype=float).reshape(nj, 2, 5)
+        T_out, x_out = a[..., 1], a[..., 3]
+        truth = InstrumentTruth(theta=x_out[:, 0] / r, torque=r * (T_out[:, 0] - T_out[:, 1]), T_in=a[..., 0],
+                                T_out=T_out, x_in=a[..., 2], x_out=x_out, elongation=a[..., 4])
+    return InstrumentState(t=s.t if t is None else t, x_in=np.reshape(s.x_in, shape), T_in=np.reshape(s.T_in, shape),
+                           x_in_cmd=np.reshape(s.x_in_cmd, shape), truth=truth)
 
-    Parameters
-    ----------
-    session : teleop.transport.Session
-        The slave's session (its endpoints reach the rig).
-    cfg : Config
-        ``instrument.id`` (keys), ``rig.zenoh`` (timeout_ms, wait_s).
 
-    Attributes
-    ----------
-    stale : int
-        Steps that returned a sample older than ``rig.zenoh.timeout_ms``.
-    repeats : int
-        Steps that returned the same sample as the step before.
-
-    Raises
-    ------
-    TransportError
-        No sample within ``rig.zenoh.wait_s`` of starting (the message names the key).
-    """
+class _ZenohLink:
+    """Set-points out, samples in (module docstring); subclasses turn samples into states."""
 
     def __init__(self, session, cfg: Config):
         ident = cfg.instrument.id
@@ -85,28 +84,19 @@ class ZenohRig:
                                  f"(is `teleop bridge` or the motor controller running and reachable?)")
         self._t0 = self.clock.now()
         self._seen = self._sub.latest()
-        self._state = state_from_sample(self._seen.message, 0.0)
+        self._state = self._convert(self._seen.message, 0.0)
+
+    def _convert(self, sample: RigSample, t: float):
+        raise NotImplementedError
 
     @property
-    def state(self) -> RigState:
-        """The newest sample as a RigState."""
+    def state(self):
+        """The newest sample as a state."""
         return self._state
 
-    def step(self, x_in_cmd: float, dt: float) -> RigState:
-        """Publish the set-point ``x_in_cmd`` [m]; return the newest sample (``dt`` is the rig's own business).
-
-        Raises
-        ------
-        RigInputError (ValueError)
-            ``x_in_cmd`` not a finite number.
-        """
-        try:
-            cmd = float(x_in_cmd)
-        except (TypeError, ValueError):
-            raise RigInputError(f"x_in_cmd must be a number, got {x_in_cmd!r}") from None
-        if not math.isfinite(cmd):
-            raise RigInputError(f"x_in_cmd must be a finite displacement in metres, got {x_in_cmd!r}")
-        self._pub.put(RigSetpoint(self._seq, self.clock.now(), (cmd,), self._tissue))
+    def _exchange(self, x_in_cmd: tuple[float, ...]):
+        """Publish the set-points; the newest sample as a state on the slave's clock (module docstring)."""
+        self._pub.put(RigSetpoint(self._seq, self.clock.now(), x_in_cmd, self._tissue))
         self._seq = next_seq(self._seq)
         now = self.clock.now()
         rec = self._sub.latest()
@@ -116,7 +106,7 @@ class ZenohRig:
             self._log.warning("rig sample %.1f ms old (rig.zenoh.timeout_ms %g)", 1e3 * age, self.timeout * 1e3)
         self.repeats += rec is self._seen
         self._seen = rec
-        self._state = state_from_sample(rec.message, max(now - self._t0, self._state.t + 1e-9))
+        self._state = self._convert(rec.message, max(now - self._t0, self._state.t + 1e-9))
         return self._state
 
     def set_load(self, *, tissue: bool | None = None, force: float | None = None) -> None:
@@ -139,3 +129,84 @@ class ZenohRig:
                 ent.close()
             except TransportError:  # pragma: no cover - the session went first
                 pass
+
+
+class ZenohRig(_ZenohLink):
+    """The ``zenoh`` rig of one tendon (module docstring).
+
+    Parameters
+    ----------
+    session : teleop.transport.Session
+        The slave's session (its endpoints reach the rig).
+    cfg : Config
+        ``instrument.id`` (keys), ``rig.zenoh`` (timeout_ms, wait_s).
+
+    Attributes
+    ----------
+    stale : int
+        Steps that returned a sample older than ``rig.zenoh.timeout_ms``.
+    repeats : int
+        Steps that returned the same sample as the step before.
+
+    Raises
+    ------
+    TransportError
+        No sample within ``rig.zenoh.wait_s`` of starting (the message names the key).
+    """
+
+    def _convert(self, sample: RigSample, t: float) -> RigState:
+        return state_from_sample(sample, t)
+
+    def step(self, x_in_cmd: float, dt: float) -> RigState:
+        """Publish the set-point ``x_in_cmd`` [m]; return the newest sample (``dt`` is the rig's own business).
+
+        Raises
+        ------
+        RigInputError (ValueError)
+            ``x_in_cmd`` not a finite number.
+        """
+        try:
+            cmd = float(x_in_cmd)
+        except (TypeError, ValueError):
+            raise RigInputError(f"x_in_cmd must be a number, got {x_in_cmd!r}") from None
+        if not math.isfinite(cmd):
+            raise RigInputError(f"x_in_cmd must be a finite displacement in metres, got {x_in_cmd!r}")
+        return self._exchange((cmd,))
+
+
+class ZenohInstrument(_ZenohLink):
+    """The ``zenoh`` rig of a joint instrument: two tendons per joint (module docstring).
+
+    Parameters
+    ----------
+    session, cfg : as :class:`ZenohRig`; ``instrument.joints`` gives the names and pulley radii.
+    """
+
+    def __init__(self, session, cfg: Config):
+        self.joint_names = tuple(j.name for j in cfg.instrument.joints)
+        self._r = np.array([j.pulley_radius for j in cfg.instrument.joints], dtype=float)
+        super().__init__(session, cfg)
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.joint_names)
+
+    def _convert(self, sample: RigSample, t: float) -> InstrumentState:
+        return instrument_state_from_sample(sample, self._r, t)
+
+    def step(self, x_in_cmd, dt: float) -> InstrumentState:
+        """Publish every motor's set-point (``x_in_cmd`` [m], shape (n_joints, 2)); the newest sample.
+
+        Raises
+        ------
+        RigInputError (ValueError)
+            Another shape or a non-finite value.
+        """
+        try:
+            cmd = np.array(x_in_cmd, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise RigInputError(f"x_in_cmd must be numbers of shape ({self.n_joints}, 2)") from None
+        if cmd.shape != (self.n_joints, 2) or not np.all(np.isfinite(cmd)):
+            raise RigInputError(f"x_in_cmd must be finite, shape ({self.n_joints}, 2) [joint, tendon a/b], got "
+                                f"{cmd.tolist()}")
+        return self._exchange(tuple(float(v) for v in cmd.ravel()))

@@ -1,6 +1,6 @@
 """``teleop bridge --config FILE``: the simulated rig behind the Zenoh rig interface, as its own process.
 
-The process a motor controller would be: it subscribes to the set-points on
+The process a motor controller would be (one tendon, or every tendon of a joint instrument): it subscribes to the set-points on
 ``teleop/<instrument>/rig/setpoint`` and, at ``rig.rate_hz``, moves the simulated motor toward the
 newest one and publishes a sample (encoder, load cell, applied set-point and the simulator's truth)
 on ``teleop/<instrument>/rig/sample`` (:mod:`teleop.rig_wire`). Set-points older than
@@ -15,10 +15,11 @@ import dataclasses
 import logging
 from typing import Any
 
+import numpy as np
+
 from teleop.clock import Clock, MonotonicClock, Pacer
 from teleop.codec import next_seq
 from teleop.config import Config
-from teleop.errors import ConfigError
 from teleop.rig_wire import RigSample, RigSetpoint
 
 __all__ = ["RigBridge", "sample_of", "run_bridge"]
@@ -26,11 +27,19 @@ __all__ = ["RigBridge", "sample_of", "run_bridge"]
 log = logging.getLogger("teleop.bridge")
 
 
+def _flat(a) -> tuple[float, ...]:
+    return tuple(float(v) for v in np.ravel(a))
+
+
 def sample_of(state, seq: int, setpoint_seq: int) -> RigSample:
-    """The RigSample of a single-tendon :class:`slave.rig.RigState` (truth when it has one)."""
+    """The RigSample of a rig's state: a :class:`slave.rig.RigState` (one tendon) or a
+    :class:`slave.instrument.InstrumentState` (tendons joint 0 a, joint 0 b, ...), truth when it has one."""
     tr = state.truth
-    truth = ((tr.T_in, tr.T_out, tr.x_in, tr.x_out, tr.elongation),) if tr is not None else ()
-    return RigSample(seq, setpoint_seq, state.t, (state.x_in,), (state.T_in,), (state.x_in_cmd,), truth)
+    truth: tuple = ()
+    if tr is not None:
+        cols = [_flat(getattr(tr, k)) for k in ("T_in", "T_out", "x_in", "x_out", "elongation")]
+        truth = tuple(zip(*cols))
+    return RigSample(seq, setpoint_seq, state.t, _flat(state.x_in), _flat(state.T_in), _flat(state.x_in_cmd), truth)
 
 
 class RigBridge:
@@ -38,7 +47,7 @@ class RigBridge:
 
     Parameters
     ----------
-    rig : a single-tendon rig (``step``, ``state``, ``set_load``)
+    rig : a rig of one tendon or a joint instrument (``step``, ``state``, ``set_load``)
     setpoints : latest-wins subscriber of RigSetpoint (``latest()``, ``age(now)``)
     samples : publisher of RigSample (``put``)
     rate_hz : float, the rig's cycle rate [Hz]
@@ -54,11 +63,15 @@ class RigBridge:
         self.rig, self.setpoints, self.samples = rig, setpoints, samples
         self.rate_hz, self.timeout = float(rate_hz), float(timeout)
         self.dt = 1.0 / self.rate_hz
-        self.hold = float(rig.state.x_in_cmd)
+        self.shape = np.shape(rig.state.x_in_cmd)        # () for one tendon, (n_joints, 2) for an instrument
+        self.hold: Any = self._shaped(_flat(rig.state.x_in_cmd))
         self.cycles = self.followed = self.held = 0
         self._seq = 0
         self._sp_seq = 0
         self._last: Any = None
+
+    def _shaped(self, values: tuple[float, ...]):
+        return float(values[0]) if self.shape == () else np.reshape(np.array(values, dtype=float), self.shape)
 
     def step(self, now: float) -> None:
         """Follow the newest fresh set-point (else hold), step the rig one cycle, publish its sample."""
@@ -68,10 +81,11 @@ class RigBridge:
             if rec is not self._last and sp.tissue >= 0:
                 self.rig.set_load(tissue=bool(sp.tissue))
             self._last = rec
-            self.hold, self._sp_seq = float(sp.x_in_cmd[0]), sp.seq
+            self.hold, self._sp_seq = self._shaped(sp.x_in_cmd), sp.seq
             self.followed += 1
         else:
-            self.hold = float(self.rig.state.truth.x_in) if self.rig.state.truth is not None else self.hold
+            tr = self.rig.state.truth                   # hold the motors where they are
+            self.hold = self._shaped(_flat(tr.x_in)) if tr is not None else self.hold
             self.held += 1
         st = self.rig.step(self.hold, self.dt)
         self.samples.put(sample_of(st, self._seq, self._sp_seq))
@@ -100,8 +114,6 @@ def run_bridge(args: argparse.Namespace) -> int:
     from teleop.sides import open_session
 
     cfg: Config = load_config(args.config)
-    if cfg.instrument.joints:
-        raise ConfigError(f"{args.config}: `teleop bridge` serves a single-tendon rig so far (instrument.joints given)")
     sim = dataclasses.replace(cfg, rig=dataclasses.replace(cfg.rig, type="simulated"))
     rig = make_rig(sim)
     ident = cfg.instrument.id

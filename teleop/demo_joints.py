@@ -181,7 +181,7 @@ def main_joint_demo(args, cfg: Config, run_dir: Path) -> int:
     problems: list[str] = []
     print(f"calibrating {cfg.instrument.id}: every tendon into its joint limit, both directions ...", flush=True)
     run_calibrate(argparse.Namespace(config=str(cfg_file), out=None))
-    run_processes(args, cfg_file, run_dir, problems)
+    run_processes(args, cfg_file, run_dir, problems, bridge=cfg.rig.type == "zenoh")
     summary: dict = {"run_dir": str(run_dir), "config": str(cfg_file), "instrument": cfg.instrument.id,
                      "protocol": "paper (tendon a, then b; all joints together)", "torque_bound_fs": TORQUE_BOUND,
                      "master": read_json(run_dir / "master_stats.json"),

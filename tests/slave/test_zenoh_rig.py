@@ -15,7 +15,7 @@ from slave.joint_rig import SimulatedInstrument
 from slave.rig import RigInputError
 from slave.rigs import RIG_TYPES, make_rig
 from slave.simulated import SimulatedRig
-from slave.zenoh_rig import ZenohRig
+from slave.zenoh_rig import ZenohInstrument, ZenohRig
 from teleop.bridge import RigBridge
 from teleop.clock import FakeClock
 from teleop.config import load_config
@@ -148,9 +148,38 @@ def test_registries_choose_by_type_only():
     assert isinstance(op, MultiAxisOperator) and op.n_axes == 3
     with pytest.raises(ConfigError, match="session"):
         make_rig(load_config(None, {"rig.type": "zenoh"}))
-    with pytest.raises(ConfigError, match="single tendon"):
+    with pytest.raises(ConfigError, match="session"):
         make_rig(load_config(JOINTS, {"rig.type": "zenoh"}))
     with pytest.raises(DeviceError, match="single tendon"):
         make_device(load_config(JOINTS, {"master.device.type": "hid", "master.device.file": "x.yaml"}))
     with pytest.raises(ConfigError, match="protocol"):
         make_device(joints, "minor")
+
+
+def test_a_joint_instrument_through_the_interface():
+    cfg = load_config(JOINTS, {"instrument.id": "zj", "rig.type": "zenoh", "rig.n_elements": 30,
+                               "rig.sensors.load_cell_noise": 0.0})
+    clock = FakeClock(1.0)
+    session = FakeSession(clock)
+    sim = SimulatedInstrument.from_config(cfg)
+    bridge = RigBridge(sim, session._wire(rig_key("zj", "setpoint")),
+                       Pub(session._wire(rig_key("zj", "sample")), encode_rig, decode_rig),
+                       cfg.rig.rate_hz, cfg.rig.zenoh.timeout_ms * 1e-3)
+    bridge.step(clock.now())
+    inst = make_rig(cfg, session)
+    assert isinstance(inst, ZenohInstrument) and inst.joint_names == ("bend_ud", "bend_lr", "grasp")
+    x0 = inst.state.x_in_cmd.copy()
+    pull = np.array([[1.0, -0.5]] * 3) * 1e-3               # tendon a drawn, b let out: every joint turns +
+    prev = None
+    for k in range(300):
+        st = cycle(clock, inst, bridge, x0 + pull * min(1.0, k / 100))
+        if prev is not None:                                # one cycle behind the bridge's instrument
+            assert np.array_equal(st.T_in, prev.T_in) and np.array_equal(st.x_in_cmd, prev.x_in_cmd)
+            assert np.allclose(st.truth.theta, prev.truth.theta) and np.allclose(st.truth.torque, prev.truth.torque)
+        prev = sim.state
+    assert st.x_in.shape == (3, 2) and np.all(st.truth.theta > 0.02)
+    inst.set_load(tissue=False)
+    cycle(clock, inst, bridge, x0 + pull)
+    assert sim.tissue == (False, False, False)
+    with pytest.raises(RigInputError, match="shape"):
+        inst.step(np.zeros((2, 2)), DT)
