@@ -188,3 +188,25 @@ def test_the_slaves_links_hear_one_master_session_and_follow_a_new_one_after_its
             while links.master_alive() and time.monotonic() < deadline:
                 time.sleep(0.01)
             assert _until(theirs, Command(600, 0.0, 0.002), links.command, n + 2)
+
+
+def test_a_router_with_a_credentials_dictionary_routes_only_for_authorised_clients(pki):
+    from teleop.config import config_from_dict
+    from teleop.errors import TransportError
+    from teleop.router import router_config
+    ep = loopback_endpoint(free_tcp_port())
+    router_cfg = config_from_dict({"transport": {"listen": [ep], "auth": {"user": "router", "password": "s3cret",
+                                                                          "dictionary_file": pki["users"]}}})
+
+    def client(user: str, password: str) -> TransportConfig:
+        return TransportConfig(mode="client", listen=(), connect=(ep,),
+                               auth=TransportAuthConfig(user=user, password=password))
+    with Session(router_config(router_cfg)), Session(client("slave", "s3cret")) as slave, \
+            Session(client("surgeon", "right")) as master:
+        commands = slave.subscriber(command_key("sec5"), Command)
+        good_est = master.subscriber(estimate_key("sec5"), Estimate)
+        with pytest.raises(TransportError, match="Unable to connect"):   # a client with a wrong password: no session
+            Session(client("surgeon", "guess"))
+        assert _until(master.publisher(command_key("sec5")), Command(1, 0.0, 0.001), commands)
+        assert _until(slave.publisher(estimate_key("sec5")), Estimate(1, 1, 0.0, 2.0, 0.0, 1.5, 0.0, 0.0, Phase.HOLD),
+                      good_est)
