@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
-__all__ = ["DeviceState", "HapticDevice", "OperatorView"]
+__all__ = ["DeviceState", "MultiAxisState", "HapticDevice", "OperatorView"]
 
 
 @dataclass(frozen=True)
@@ -35,6 +35,24 @@ class DeviceState:
 
     t: float
     position: float
+    buttons: int = 0
+    operator_present: bool = True
+
+
+@dataclass(frozen=True)
+class MultiAxisState:
+    """One reading of a device with several axes (one per axis of a joint instrument).
+
+    Attributes
+    ----------
+    t : float, time of the reading [s].
+    positions : tuple of float, handle position per device axis [m], + pulls tendon a of its joint.
+    buttons : int, button bit mask.
+    operator_present : bool, deadman.
+    """
+
+    t: float
+    positions: tuple[float, ...]
     buttons: int = 0
     operator_present: bool = True
 

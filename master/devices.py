@@ -8,7 +8,7 @@ Registered here:
 ``simulated``  a scripted operator: :class:`master.simulated.ScriptedOperator` on one tendon,
                :class:`master.joint_operator.MultiAxisOperator` (one axis per joint) otherwise
 ``hid``        a USB HID device described by ``master.device.file`` (:class:`master.hid.HidDevice`;
-               one axis so far: refused for a joint instrument)
+               a joint instrument needs one position axis and one force report map per joint)
 =============  ==============================================================================
 
 Another device is one :func:`register_device` call; nothing else chooses by type.
@@ -20,7 +20,7 @@ from typing import Any, Callable
 from teleop.config import Config
 from teleop.errors import ConfigError, DeviceError
 
-__all__ = ["DEVICE_TYPES", "register_device", "make_device"]
+__all__ = ["DEVICE_TYPES", "register_device", "make_device", "device_axes_needed"]
 
 #: device type -> factory(cfg, protocol) -> device
 DEVICE_TYPES: dict[str, Callable[[Config, str], Any]] = {}
@@ -61,11 +61,21 @@ def _scripted(cfg: Config, protocol: str):
     return ScriptedOperator(build_protocol(protocol), clutch_bit=clutch)
 
 
+def device_axes_needed(cfg: Config) -> int:
+    """How many device axes the instrument needs: 1 for a tendon, else the highest ``pair_control.axes``
+    entry + 1 (default one per joint)."""
+    if not cfg.instrument.joints:
+        return 1
+    return max(cfg.pair_control.axes) + 1 if cfg.pair_control.axes else len(cfg.instrument.joints)
+
+
 @register_device("hid")
 def _hid(cfg: Config, protocol: str):
-    if cfg.instrument.joints:
-        raise DeviceError("master.device.type: a HID device drives a single tendon so far (one report map per "
-                          "axis is not there yet); joint instruments have the simulated multi-axis operator")
-    from master.hid import HidDevice
+    from master.hid import HidDevice, load_device_file
+    dev = load_device_file(cfg.master.device.file)
+    have, need = len(dev.input.position_axes), device_axes_needed(cfg)
+    if have < need:
+        raise DeviceError(f"{cfg.master.device.file}: the device has {have} position axis(es), the instrument needs "
+                          f"{need} (input.position_axes, with one force report map per axis)")
     # opens, resets and enables the actuators; raises DeviceError naming the device when absent
-    return HidDevice.from_file(cfg.master.device.file)
+    return HidDevice(dev)

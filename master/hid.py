@@ -6,10 +6,14 @@ The report layout comes from a device file (``configs/devices/*.yaml``)::
     match: {vendor_id: "0x1209", product_id: "0x0001"}   # or {path: /dev/hidraw3}; serial optional
     input:                                # master.hid_reports.parse_input, plus:
       lost_after_ms: 100                  # no valid report for this long: device lost [ms]
+      position_axes: [x, y, z]            # several axes (one per joint of an instrument); else position_axis
     force:
       limit: 4.0                          # clamp of the rendered force [N]
       backend: pid                        # pid (master.hid_pid) | report (vendor output report)
-      pid: {...}  or  report: {...}
+      pid: {...}  or  report: {...}       # report: a list of maps, one per position axis, for several axes
+
+With several position axes the device reads as a multi-axis state (``positions``, one per axis) and
+renders one force per axis (:meth:`HidDevice.set_forces`); the PID backend drives one axis only.
 
 Safety: the force written is always finite and within ``force.limit``; a read error, a write error
 or silence longer than ``lost_after_ms`` marks the device lost (``operator_present`` False, zero
@@ -33,7 +37,7 @@ from typing import Any, Callable
 
 import yaml
 
-from master.device import DeviceState
+from master.device import DeviceState, MultiAxisState
 from master.hid_pid import PidConfig, PidForce, parse_pid
 from master.hid_reports import InputMap, InputSample, OutputMap, Section, parse_input, parse_output, send_report
 from teleop.errors import ConfigError, DeviceError
@@ -79,7 +83,7 @@ class HidDeviceConfig:
     match: Match
     input: InputMap
     force_limit: float                     # [N]
-    force: OutputMap | PidConfig
+    force: OutputMap | PidConfig | tuple[OutputMap, ...]   # a tuple: one report map per position axis
     lost_after: float = 0.1                # [s]
 
 
@@ -109,10 +113,21 @@ def parse_device(data: Any, source: str = "<dict>") -> HidDeviceConfig:
     fs = top.sub("force")
     limit = fs.num("limit", positive=True)
     backend = fs.choice("backend", ("pid", "report"))
-    force: OutputMap | PidConfig
+    force: OutputMap | PidConfig | tuple[OutputMap, ...]
+    n_axes = len(inp.position_axes)
     if backend == "pid":
+        if n_axes > 1:
+            raise fs.error(f"the PID backend drives one axis; {n_axes} position axes need backend: report with one "
+                           f"report map per axis", "backend")
         force = parse_pid(fs.sub("pid"))
+    elif isinstance(fs.raw("report", None), list):
+        items = fs.raw("report")
+        if len(items) != n_axes:
+            raise fs.error(f"expected one report map per position axis ({n_axes}), got {len(items)}", "report")
+        force = tuple(parse_output(Section(it, source, fs.key(f"report[{i}]")), limit) for i, it in enumerate(items))
     else:
+        if n_axes > 1:
+            raise fs.error(f"{n_axes} position axes need a list of report maps, one per axis", "report")
         force = parse_output(fs.sub("report"), limit)
     fs.done()
     name = top.raw("name", match.describe())
@@ -143,17 +158,21 @@ def load_device_file(path: str | Path) -> HidDeviceConfig:
 
 
 class _ReportForce:
-    """Force as a vendor output/feature report (:class:`OutputMap`): zero on start, nothing to stop."""
+    """Force as vendor output/feature reports (:class:`OutputMap`, one per axis): zero on start, nothing
+    to stop. ``write`` takes one force [N] or one per axis."""
 
-    def __init__(self, omap: OutputMap, handle: Any):
-        self.omap, self.handle = omap, handle
-        self.limit = omap.limit
+    def __init__(self, omaps: OutputMap | tuple[OutputMap, ...], handle: Any):
+        self.omaps = omaps if isinstance(omaps, tuple) else (omaps,)
+        self.handle = handle
+        self.limit = self.omaps[0].limit
 
     def start(self) -> None:
-        self.write(0.0)
+        self.write([0.0] * len(self.omaps))
 
-    def write(self, force: float) -> None:
-        send_report(self.handle, self.omap.kind, self.omap.encode(force), "force")
+    def write(self, force) -> None:
+        forces = [force] if not isinstance(force, (list, tuple)) else list(force)
+        for om, f in zip(self.omaps, forces + [0.0] * (len(self.omaps) - len(forces))):
+            send_report(self.handle, om.kind, om.encode(f), "force")
 
     def stop(self) -> None:
         pass
@@ -181,7 +200,9 @@ class HidDevice:
         self.input = dataclasses.replace(cfg.input, rejected=dict.fromkeys(cfg.input.rejected, 0), accepted=0)
         self.lost = False
         self.lost_reason = ""
-        self.force = 0.0                       # last force sent [N], after the clamp
+        self.force = 0.0                       # last force sent [N], after the clamp (axis 0)
+        self.n_axes = len(cfg.input.position_axes) or 1
+        self.forces = [0.0] * self.n_axes      # last force sent per axis [N]
         self._closed = False
         self._stopped = False
         self._last: InputSample | None = None
@@ -214,7 +235,7 @@ class HidDevice:
 
     # ---- HapticDevice -------------------------------------------------------------------------
 
-    def read(self, t: float) -> DeviceState:
+    def read(self, t: float) -> DeviceState | MultiAxisState:
         """Drain the pending input reports and return the state of the latest valid one at ``t`` [s].
 
         Malformed reports are counted in ``self.input.rejected`` and skipped. Before the first valid
@@ -257,13 +278,21 @@ class HidDevice:
         DeviceError
             The report was not sent; the device is then lost.
         """
+        self.set_forces([force], t)
+
+    def set_forces(self, forces, t: float) -> None:
+        """Write one force per position axis [N] (missing ones 0), each saturated to ``force.limit``;
+        otherwise as :meth:`set_force`."""
         if self._closed or self.lost:
             return
+        fs = [float(f) for f in forces][:self.n_axes]
+        fs += [0.0] * (self.n_axes - len(fs))
         try:
-            self._out.write(force)
+            self._out.write(fs if self.n_axes > 1 else fs[0])
         except DeviceError as e:
             self._lose(str(e))
-        self.force = _clamp(force, self._out.limit)
+        self.forces = [_clamp(f, self._out.limit) for f in fs]
+        self.force = self.forces[0]
 
     def close(self) -> None:
         """Zero force, stop the force channel, close the handle; once (later calls do nothing)."""
@@ -286,12 +315,16 @@ class HidDevice:
 
     # ---- helpers --------------------------------------------------------------------------------
 
-    def state(self, t: float) -> DeviceState:
-        """The last known state at ``t`` [s] (operator not present when lost or never read)."""
+    def state(self, t: float) -> DeviceState | MultiAxisState:
+        """The last known state at ``t`` [s] (operator not present when lost or never read); a
+        :class:`MultiAxisState` when the device has several position axes."""
         s = self._last
+        multi = self.n_axes > 1
         if s is None:
-            return DeviceState(t, 0.0, 0, False)
+            return MultiAxisState(t, (0.0,) * self.n_axes, 0, False) if multi else DeviceState(t, 0.0, 0, False)
         present = (True if s.present is None else s.present) and not self.lost and not self._closed
+        if multi:
+            return MultiAxisState(t, tuple(s.axes[a] for a in self.input.position_axes), s.buttons, present)
         return DeviceState(t, s.axes[self.input.position_axis], s.buttons, present)
 
     @property
@@ -310,7 +343,8 @@ class HidDevice:
             return
         self._stopped = True
         self.force = 0.0
-        for step in (lambda: self._out.write(0.0), self._out.stop):
+        self.forces = [0.0] * self.n_axes
+        for step in (lambda: self._out.write([0.0] * self.n_axes if self.n_axes > 1 else 0.0), self._out.stop):
             try:
                 step()
             except (DeviceError, OSError, ValueError):

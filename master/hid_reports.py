@@ -203,6 +203,7 @@ class InputMap:
     report_id: int | None
     axes: dict[str, Field]
     position_axis: str
+    position_axes: tuple[str, ...] = ()            # several device axes (one per instrument axis); () = (position_axis,)
     buttons: Field | None = None
     button_masks: tuple[int, ...] = ()
     presence: Field | None = None
@@ -262,10 +263,15 @@ def parse_input(sec: Section) -> InputMap:
     for name in list(axes_sec.data):
         axes[str(name)] = parse_field(axes_sec.sub(name))
     axes_sec.done()
-    position_axis = sec.raw("position_axis", next(iter(axes)))
+    listed = sec.raw("position_axes", None)
+    if listed is not None and (not isinstance(listed, list) or not listed or len(set(map(str, listed))) != len(listed)
+                               or any(str(a) not in axes for a in listed)):
+        raise sec.error(f"expected a list of distinct axes out of ({', '.join(axes)}), got {listed!r}", "position_axes")
+    position_axis = sec.raw("position_axis", str(listed[0]) if listed else next(iter(axes)))
     if position_axis not in axes:
         raise sec.error(f"{position_axis!r} is not one of the axes ({', '.join(axes)})", "position_axis")
     m = InputMap(report_id=sec.int("report_id", None, 0, 255), axes=axes, position_axis=position_axis,
+                 position_axes=tuple(str(a) for a in listed) if listed else (position_axis,),
                  read_size=sec.int("read_size", 64, 1, 4096))
     if sec.has("buttons"):
         b = sec.sub("buttons")

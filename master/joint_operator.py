@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from master.device import MultiAxisState
 from teleop.config import Config, joint_set_tension
 from teleop.errors import ConfigError
 
@@ -40,17 +41,6 @@ class AxisSegment:
     side: int
     target: float
     marker: int = 0
-
-
-@dataclass(frozen=True)
-class MultiAxisState:
-    """One reading of a multi-axis device: t [s], positions [m] per axis (+ pulls tendon a), buttons,
-    operator_present (deadman)."""
-
-    t: float
-    positions: tuple[float, ...]
-    buttons: int = 0
-    operator_present: bool = True
 
 
 def paper_protocol(rest_tension: float, targets=(20.0, 5.0, 20.0)) -> tuple[AxisSegment, ...]:

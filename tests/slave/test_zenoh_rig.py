@@ -150,8 +150,9 @@ def test_registries_choose_by_type_only():
         make_rig(load_config(None, {"rig.type": "zenoh"}))
     with pytest.raises(ConfigError, match="session"):
         make_rig(load_config(JOINTS, {"rig.type": "zenoh"}))
-    with pytest.raises(DeviceError, match="single tendon"):
-        make_device(load_config(JOINTS, {"master.device.type": "hid", "master.device.file": "x.yaml"}))
+    one_axis = str(JOINTS.parent / "devices" / "vendor_report_example.yaml")
+    with pytest.raises(DeviceError, match="needs 3"):        # a one-axis HID device for three joints
+        make_device(load_config(JOINTS, {"master.device.type": "hid", "master.device.file": one_axis}))
     with pytest.raises(ConfigError, match="protocol"):
         make_device(joints, "minor")
 
