@@ -53,6 +53,8 @@ class SpindleParams:
     """Spindle pair model parameters (module docstring, SI units)."""
 
     rho: float = 1.0
+    rho_1: float = 0.0
+    rho_2: float = 0.0
     Q: float = 0.3
     K_a: float = 0.3
     K_b: float = 0.3
@@ -212,7 +214,8 @@ def predict_torque(p: SpindleParams, bt: Batch, n_nodes: int = N_NODES) -> np.nd
         raise ValueError(f"pretension torque Q must be > 0 and K_a, K_b >= 0, got Q={p.Q!r}, K={p.K_a!r}, {p.K_b!r}")
     Td, _ = _cables(p, bt, n_nodes)
     d = bt.theta_p - bt.theta_ref
-    return p.rho * Td + p.b + p.k_d * d - p.f * np.tanh(bt.omega_p / OMEGA_S)
+    rho = p.rho * (1.0 + (p.rho_1 + p.rho_2 * d) * d)
+    return rho * Td + p.b + p.k_d * d - p.f * np.tanh(bt.omega_p / OMEGA_S)
 
 
 def elongation_difference(p: SpindleParams, bt: Batch, n_nodes: int = N_NODES) -> np.ndarray:

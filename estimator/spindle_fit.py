@@ -33,6 +33,8 @@ BASE = ("rho", "Q", "K_a", "b")
 #: Extension parameter -> (literature number, what it stands for).
 EXTENSIONS = {
     "K_b": ("E13", "a second friction exponent for the other cable (asymmetric routing: band grows with load)"),
+    "rho_1": ("E7", "torque ratio changing with the jaw angle (cable lever arm at the jaw), first order"),
+    "rho_2": ("E7", "torque ratio changing with the jaw angle, second order"),
     "k_p": ("E11", "elastic torque inside the proximal end (loads the spindle, not the jaw)"),
     "k_d": ("E11", "angle-dependent torque at the jaw side (jaw spring, load)"),
     "f": ("E11/E12", "Coulomb friction beyond the jaw pulley (jaw pivot, load motor)"),
@@ -41,7 +43,7 @@ EXTENSIONS = {
 }
 #: (lo, hi, scale) per torque parameter.
 BOUNDS = {"rho": (0.0, 5.0, 0.1), "Q": (1e-3, 5.0, 0.05), "K_a": (0.0, 3.0, 0.1), "K_b": (0.0, 3.0, 0.1),
-          "b": (-1.0, 1.0, 0.01), "k_p": (-0.2, 0.2, 0.005), "k_d": (-0.2, 0.2, 0.005), "f": (-0.1, 0.1, 0.001),
+          "b": (-1.0, 1.0, 0.01), "rho_1": (-3.0, 3.0, 0.05), "rho_2": (-5.0, 5.0, 0.05), "k_p": (-0.2, 0.2, 0.005), "k_d": (-0.2, 0.2, 0.005), "f": (-0.1, 0.1, 0.001),
           "f_s": (-0.2, 0.2, 0.005), "c_v": (-0.2, 0.2, 0.005)}
 #: Starting points; Q in multiples of its lower bound (1.02 max |tau_p|).
 _STARTS = ({"K_a": 0.3, "K_b": 0.3, "Q": 1.5}, {"K_a": 0.8, "K_b": 0.8, "Q": 1.1}, {"K_a": 0.1, "K_b": 0.1, "Q": 5.0})

@@ -109,7 +109,7 @@ def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, director
         ax2.set_ylabel("spindle torque [mN m] (green)", fontsize=8)
         ax.set_xlabel("time [s]")
         ax.set_ylabel("jaw torque [mN m]")
-    axes[0, 0].legend(fontsize=7)
+    axes[0, -1].legend(fontsize=7)
     fig.suptitle(f"Jaw torque: measured and predicted from the spindle only ({_CREDIT})", fontsize=10)
     fig.tight_layout()
     paths.append(d / FIGURES[0])

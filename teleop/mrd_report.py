@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from estimator.spindle import first_reversal, make_batch, predict_angle, predict_torque, spindle_rate
+from estimator.spindle import SpindleParams, first_reversal, make_batch, predict_angle, predict_torque, spindle_rate
 from estimator.spindle_fit import EXTENSIONS, band_centre, fit_baselines
 from estimator.spindle_shared import RunData, batch_of, leave_one_out, select_extensions, shared_fit
 from teleop.errors import ConfigError, DataError
@@ -133,9 +133,10 @@ def _calibrate(cal: list[RunData], tick) -> tuple[dict, dict, dict, float, float
     centre = float(np.mean([band_centre(c.tau_p) for c in cal]))
     ref = float(np.mean([np.mean(c.theta_p) for c in cal]))
     sel = select_extensions(cal, centre, ref, FIT_STEP, progress=tick)
-    fits = {"pair": shared_fit(cal, (), centre, ref, FIT_STEP)}
+    fits = {"pair": shared_fit(cal, (), centre, ref, FIT_STEP, start=SpindleParams(**sel["base"]["params"]))}
     if sel["chosen"]:
-        fits["pair+" + "+".join(sel["chosen"])] = shared_fit(cal, tuple(sel["chosen"]), centre, ref, FIT_STEP)
+        fits["pair+" + "+".join(sel["chosen"])] = shared_fit(cal, tuple(sel["chosen"]), centre, ref, FIT_STEP,
+                                                             start=SpindleParams(**sel["params"]))
     tick("calibrated")
     bt, yt, ya, w = batch_of(cal, centre, ref, FIT_STEP)
     m = w > 0
@@ -219,7 +220,7 @@ def _shared(runs, out, details, fs, tick, loro: bool) -> None:
     ref = float(np.mean([np.mean(r.theta_p) for r in runs]))
     sel = select_extensions(rd, centre, ref, SHARED_STEP, progress=tick)
     free = tuple(sel["chosen"])
-    p = shared_fit(rd, free, centre, ref, SHARED_STEP)
+    p = shared_fit(rd, free, centre, ref, SHARED_STEP, start=SpindleParams(**sel["params"]))
     tick("shared fit")
     sh = {"model": "pair" + "".join("+" + c for c in free), "selection": sel, "parameters": p.as_dict(),
           "fitted_on": "every run from its first reversal (in-sample)", "runs": {}}
