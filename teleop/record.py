@@ -34,17 +34,43 @@ from pathlib import Path
 
 import numpy as np
 
-from teleop.codec import decode, seq_newer
+from teleop.codec import MAGIC, decode, seq_newer
 from teleop.entity import Entity
 from teleop.keys import instrument_keys, liveliness_pattern
 
-__all__ = ["Recorder", "flatten", "read_messages", "run_record"]
+__all__ = ["Recorder", "decode_any", "flatten", "read_messages", "run_record", "start_recorder", "summary_line"]
 
 log = logging.getLogger("teleop.record")
 _RAW = struct.Struct("<dHI")
 _STOP = object()
 _SI = {"T": "N", "x": "m", "e": "m", "t": "s"}
 _fields_cache: dict[type, tuple[str, ...]] = {}
+
+
+_DECODERS: dict = {}   # first (magic) byte -> decoder; filled at the end of the module
+
+
+def _decoders() -> dict:
+    """Decoder by first (magic) byte: the teleop codec, and the rig interface when present."""
+    out = {MAGIC: decode}
+    try:
+        from teleop.rig_wire import RIG_MAGIC, decode_rig
+        out[RIG_MAGIC] = decode_rig
+    except ImportError:   # pragma: no cover - a build without the rig interface
+        pass
+    return out
+
+
+def decode_any(payload: bytes):
+    """Decode a payload of any byte format of this project (by its magic byte).
+
+    Raises
+    ------
+    CodecError
+        Empty, an unknown magic byte, or what the format's decoder raises.
+    """
+    fn = _DECODERS.get(payload[0]) if payload else None
+    return decode(payload) if fn is None else fn(payload)    # unknown: the codec's own error message
 
 
 def flatten(msg, prefix: str = "", out: list | None = None) -> list[tuple[str, float | int]]:
@@ -254,7 +280,7 @@ class Recorder:
         if st is None:
             st = self.streams[key] = _Stream()
         try:
-            msg = decode(payload)
+            msg = decode_any(payload)
         except Exception:  # noqa: BLE001 - CodecError: counted, kept in messages.bin
             st.errors += 1
             st.count += 1
@@ -418,3 +444,6 @@ def summary_line(out_dir: str | Path) -> str:
     streams = s.get("streams", {}).values()
     return (f"recorder: {sum(v['count'] for v in streams)} messages on {len(s.get('streams', {}))} streams, "
             f"{sum(v['missing'] for v in streams)} missing by seq -> {out_dir}")
+
+
+_DECODERS.update(_decoders())

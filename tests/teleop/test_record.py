@@ -80,3 +80,12 @@ def test_read_messages_ignores_a_torn_last_record(tmp_path):
     rec = _RAW.pack(1.5, 3, len(one)) + b"a/b" + one
     p.write_bytes(rec + rec[:-4])
     assert [(t, k) for t, k, _ in read_messages(p)] == [(1.5, "a/b")]
+
+
+def test_rig_interface_payloads_are_decoded_too():
+    from teleop.record import decode_any
+    from teleop.rig_wire import RigSample, encode_rig
+    m = RigSample(4, 3, 0.5, (0.001,), (2.0,), (0.0011,), ((2.0, 1.5, 0.001, 0.0009, 1e-4),))
+    flat = dict(flatten(decode_any(encode_rig(m))))
+    assert flat["seq"] == 4 and flat["T_in[0]"] == 2.0 and flat["truth[0][1]"] == 1.5
+    assert decode_any(encode(Command(1, 0.0, 0.0))) == Command(1, 0.0, 0.0)
