@@ -147,7 +147,7 @@ def _calibrate(cal: list[RunData], tick) -> tuple[dict, dict, dict, float, float
 
 
 def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bool = False,
-                loro: bool = True) -> tuple[dict, dict]:
+                loro: bool = True, folder: bool = True) -> tuple[dict, dict]:
     """Calibrate, predict and score every run; the folder-wide diagnosis (module docstring).
 
     Returns (summary, details): summary is JSON-ready (``runs.<name>.{torque_rmse_fs, torque_max_fs,
@@ -155,6 +155,7 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
     ``.baselines.<name>`` the same keys; ``shared`` / ``loro`` the folder-wide fit); details hold
     per-sample predictions for the figures (never written to JSON).
 
+    ``folder`` False skips the folder-wide selection and fit (and ``loro``).
     Raises DataError for no runs, ConfigError for a bad ``calibration``.
     """
     t_start = time.perf_counter()
@@ -207,7 +208,8 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
                       "better_than_linear_every_run": bool(all(
                           s["torque_rmse_fs"] < s["baselines"]["linear"]["torque_rmse_fs"] for s in scored))}
     out["bands"] = {r.name: band_measurements(r) for r in runs}
-    _shared(runs, out, details, fs, tick, loro)
+    if folder:
+        _shared(runs, out, details, fs, tick, loro)
     tick.done()
     out["elapsed_s"] = time.perf_counter() - t_start
     return out, details
