@@ -40,7 +40,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["SpindleParams", "Batch", "make_batch", "pair_kernel", "predict_torque", "predict_angle",
-           "play_batch", "elongation_difference", "spindle_rate", "initial_side", "first_reversal", "OMEGA_S", "N_NODES"]
+           "play_batch", "angle_lag", "elongation_difference", "spindle_rate", "initial_side", "first_reversal", "OMEGA_S", "N_NODES"]
 
 #: Speed scale of the smoothed direction of motion, tanh(omega / OMEGA_S) [rad/s].
 OMEGA_S = 0.05
@@ -64,6 +64,7 @@ class SpindleParams:
     f: float = 0.0
     f_s: float = 0.0
     c_v: float = 0.0
+    theta_c: float = 0.0
     n_k: float = 1.0
     lam: float = 0.0
     theta0: float = 0.0
@@ -215,12 +216,35 @@ def predict_torque(p: SpindleParams, bt: Batch, n_nodes: int = N_NODES) -> np.nd
     Td, _ = _cables(p, bt, n_nodes)
     d = bt.theta_p - bt.theta_ref
     rho = p.rho * (1.0 + (p.rho_1 + p.rho_2 * d) * d)
-    return rho * Td + p.b + p.k_d * d - p.f * np.tanh(bt.omega_p / OMEGA_S)
+    out = rho * Td + p.b + p.k_d * d - p.f * np.tanh(bt.omega_p / OMEGA_S)
+    return angle_lag(out, bt.theta_p, bt.starts, p.theta_c) if p.theta_c > 1e-6 else out
 
 
 def elongation_difference(p: SpindleParams, bt: Batch, n_nodes: int = N_NODES) -> np.ndarray:
     """E_a - E_b [N m], shape (n,): difference of the two cables' mean profile tensions (S4)."""
     return _cables(p, bt, n_nodes)[1]
+
+
+@njit(cache=True)
+def _angle_lag_runs(x, theta, starts, theta_c, out):  # pragma: no cover - compiled
+    for r in range(starts.shape[0] - 1):
+        y = x[starts[r]]
+        prev = theta[starts[r]]
+        for i in range(starts[r], starts[r + 1]):
+            a = abs(theta[i] - prev) / theta_c
+            prev = theta[i]
+            y += (x[i] - y) * (1.0 - math.exp(-a))
+            out[i] = y
+
+
+def angle_lag(x: np.ndarray, theta: np.ndarray, starts: np.ndarray, theta_c: float) -> np.ndarray:
+    """Rate-independent first-order lag of ``x`` in the travel of ``theta`` [rad], run by run:
+    y approaches x by the factor 1 - exp(-|d theta| / theta_c) per sample (a Dahl-type pre-sliding
+    transition, literature.md E2, with characteristic travel ``theta_c`` [rad] > 0)."""
+    out = np.empty_like(np.asarray(x, dtype=float))
+    _angle_lag_runs(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(theta, dtype=float), starts,
+                    float(theta_c), out)
+    return out
 
 
 @njit(cache=True)

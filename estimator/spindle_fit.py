@@ -26,7 +26,7 @@ from scipy.optimize import least_squares, minimize_scalar
 from estimator.capstan import phase_formula_batch
 from estimator.spindle import OMEGA_S, Batch, SpindleParams, elongation_difference, play_batch, predict_torque
 
-__all__ = ["BASE", "EXTENSIONS", "BOUNDS", "fit_torque", "fit_angle", "fit_model", "fit_baselines", "Baseline",
+__all__ = ["BASE", "EXTENSIONS", "EXTENSION_STARTS", "BOUNDS", "fit_torque", "fit_angle", "fit_model", "fit_baselines", "Baseline",
            "band_centre"]
 
 BASE = ("rho", "Q", "K_a", "b")
@@ -40,11 +40,15 @@ EXTENSIONS = {
     "f": ("E11/E12", "Coulomb friction beyond the jaw pulley (jaw pivot, load motor)"),
     "f_s": ("E8", "Coulomb friction at the spindle ahead of the cables (tension-independent)"),
     "c_v": ("E3", "viscous torque at the spindle (rate dependence)"),
+    "theta_c": ("E2", "pre-sliding: the jaw torque approaches the capstan value over a travel theta_c"),
 }
 #: (lo, hi, scale) per torque parameter.
 BOUNDS = {"rho": (0.0, 5.0, 0.1), "Q": (1e-3, 5.0, 0.05), "K_a": (0.0, 3.0, 0.1), "K_b": (0.0, 3.0, 0.1),
           "b": (-1.0, 1.0, 0.01), "rho_1": (-3.0, 3.0, 0.05), "rho_2": (-5.0, 5.0, 0.05), "k_p": (-0.2, 0.2, 0.005), "k_d": (-0.2, 0.2, 0.005), "f": (-0.1, 0.1, 0.001),
-          "f_s": (-0.2, 0.2, 0.005), "c_v": (-0.2, 0.2, 0.005)}
+          "f_s": (-0.2, 0.2, 0.005), "c_v": (-0.2, 0.2, 0.005),
+          "theta_c": (0.0, 0.5, 0.01)}
+#: Start of an extension parameter when it is added to a fitted model (0 unless listed).
+EXTENSION_STARTS = {"theta_c": 0.03}
 #: Starting points; Q in multiples of its lower bound (1.02 max |tau_p|).
 _STARTS = ({"K_a": 0.3, "K_b": 0.3, "Q": 1.5}, {"K_a": 0.8, "K_b": 0.8, "Q": 1.1}, {"K_a": 0.1, "K_b": 0.1, "Q": 5.0})
 

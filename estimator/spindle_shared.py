@@ -23,7 +23,7 @@ import numpy as np
 
 from estimator.diagnosis import PENALTY
 from estimator.spindle import Batch, SpindleParams, make_batch, predict_angle, predict_torque
-from estimator.spindle_fit import EXTENSIONS, fit_angle, fit_torque
+from estimator.spindle_fit import EXTENSION_STARTS, EXTENSIONS, fit_angle, fit_torque
 
 __all__ = ["RunData", "batch_of", "select_extensions", "shared_fit", "leave_one_out"]
 
@@ -88,7 +88,8 @@ def select_extensions(runs: list[RunData], centre: float, theta_ref: float, step
         rnd = {}
         best = None
         for c in [c for c in cands if c not in chosen]:
-            q, _ = fit_torque(bf, yf, tuple(chosen) + (c,), start=p_ch, weights=wf, max_nfev=80)
+            q, _ = fit_torque(bf, yf, tuple(chosen) + (c,), start=p_ch.with_values(**{c: EXTENSION_STARTS.get(c, 0.0)}),
+                              weights=wf, max_nfev=80)
             v = _rmse(q, bv, yv, wv)
             S = (v / base_val) ** 2
             price = S / s_ch + PENALTY * 1
