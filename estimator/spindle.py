@@ -5,16 +5,18 @@ to the two cables of a pull-pull pair; literature.md E1, E5, E13). All tensions 
 torque units at the spindle (tension times the spindle radius r_p, N m), so only ratios of the
 pulley radii appear::
 
-    u       = tau_p - k_p (theta_p - theta_ref) - c_v omega_p - f_s tanh(omega_p / omega_s)
-                                                                  spindle torque carried by the cables [N m]
+    d       = theta_p - theta_ref
+    u       = tau_p - k_p d - c_v omega_p - f_s tanh(omega_p / omega_s)   spindle torque on the cables [N m]
     T_a,p   = (Q + u) / 2,   T_b,p = (Q - u) / 2                 the two proximal cable tensions     (S1)
     T_j,d   = profile memory of cable j, friction exponent K_j   (estimator.sheath envelope rule)    (S2)
-    tau_d   = rho (T_a,d - T_b,d) + b + k_d (theta_p - theta_ref) - f tanh(omega_p / omega_s)        (S3)
+    tau_d   = rho (1 + rho_1 d + rho_2 d^2) (T_a,d - T_b,d) + b + k_d d - f tanh(omega_p / omega_s)  (S3)
+    (E2)    tau_d <- angle_lag(tau_d, theta_p, theta_c)          when theta_c > 0
     theta_d = n_k (theta_p - lam (E_a - E_b)) + theta_0,   E_j = mean_s T_j(s)                       (S4)
     (E12)   theta_d <- play(theta_d, beta)
 
 Parameters (SI): rho = r_d / r_p scaled by the sensors [-] (distal torque per unit of cable torque
-difference), Q = (T_a + T_b) r_p the pretension torque [N m] (>= max |u|, else a cable goes
+difference), rho_1 [1/rad], rho_2 [1/rad^2] its change with the angle (the cable's lever arm at the
+jaw, E7), theta_c [rad] the travel of the E2 lag, Q = (T_a + T_b) r_p the pretension torque [N m] (>= max |u|, else a cable goes
 slack), K_a, K_b the friction exponents of the two cables' paths over the shaft pulleys [-]
 (equal for a symmetric routing; K_a != K_b makes the band grow with the load, E13), b the distal
 torque at zero cable torque difference [N m] (internal preload, sensor zero), k_p [N m/rad] an

@@ -139,9 +139,7 @@ def _calibrate(cal: list[RunData], tick) -> tuple[dict, dict, dict, float, float
                                                              start=SpindleParams(**sel["params"]))
     tick("calibrated")
     bt, yt, ya, w = batch_of(cal, centre, ref, FIT_STEP)
-    m = w > 0
-    sub = make_batch([(c.tau_p, c.theta_p) for c in cal], centre, ref, cal[0].dt, FIT_STEP)
-    base = fit_baselines(sub, yt, ya, mask=m)
+    base = fit_baselines(bt, yt, ya, mask=w > 0)
     tick("baselines")
     return fits, base, sel, centre, ref
 
