@@ -1,7 +1,7 @@
 """Round trip of the teleoperation link beside a bare Zenoh ping-pong, measured in the same run.
 
 1. Bare Zenoh: two processes on 127.0.0.1; the ping process publishes a 40-byte message at 1 kHz
-   (paced by :class:`teleop.clock.Pacer`, express, real-time priority, like the nodes), the pong
+   (paced by :class:`teleop.clock.Pacer`, real-time priority, not express, like the nodes), the pong
    process echoes each one from its subscriber callback; the ping measures send -> echo received.
 2. ``teleop demo --protocol short`` (recorder + slave + master as three processes, configs/sim.yaml): the
    master's command -> estimate-echo round trip and both loops' overruns, from ``summary.json``.
@@ -36,7 +36,7 @@ def pong(endpoint: str, seconds: float) -> None:
     import zenoh
     with _session([endpoint], []) as s:
         z = s.zenoh_session
-        pub = z.declare_publisher("bench/pong", express=True, priority=zenoh.Priority.REAL_TIME,
+        pub = z.declare_publisher("bench/pong", express=False, priority=zenoh.Priority.REAL_TIME,
                                   congestion_control=zenoh.CongestionControl.DROP)
         sub = z.declare_subscriber("bench/ping", lambda sample: pub.put(sample.payload.to_bytes()))  # noqa: F841
         print("ready", flush=True)
@@ -51,7 +51,7 @@ def ping(endpoint: str, seconds: float, rate_hz: float = 1000.0) -> dict:
     rtt: list[float] = []
     with _session([], [endpoint]) as s:
         z = s.zenoh_session
-        pub = z.declare_publisher("bench/ping", express=True, priority=zenoh.Priority.REAL_TIME,
+        pub = z.declare_publisher("bench/ping", express=False, priority=zenoh.Priority.REAL_TIME,
                                   congestion_control=zenoh.CongestionControl.DROP)
 
         def on_pong(sample):

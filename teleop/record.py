@@ -8,8 +8,10 @@ adds) and to the liveliness tokens of both sides, and writes ``<run dir>/recorde
 * ``<side>_<stream>.csv`` per key, in the measured-data format (``# key: value`` metadata,
   ``# units:``, header, one row per message): ``time`` is the recorder's receive time [s, monotonic],
   then every field of the message as :mod:`teleop.codec` decoded it, flattened generically over the
-  dataclass fields (``profile[3]``, ``joints[0].tendons[1].T_in``; enums and flags as integers), so
-  the estimate file (``x_in``, ``T_in``) loads with :func:`teleop.recording.read_measured_csv`;
+  dataclass fields (``profiles[0][3]``, ``axes[1].tendons[0].T_in``; enums and flags as integers); a
+  nested field keeps only its own name where that is unambiguous (:func:`short_names`), so the
+  estimate file of a single tendon (``x_in``, ``T_in``) loads with
+  :func:`teleop.recording.read_measured_csv`;
 * ``state_changes.csv`` (every change of a heartbeat's state) and ``liveliness.csv``;
 * ``record.rrd`` (Rerun, scalar fields decimated by ``recording.log_every``), and at the end
   ``summary.json`` (per stream: count, first/last seq, seqs missing, duplicates, rate; the command
@@ -39,7 +41,8 @@ from teleop.codec import MAGIC, decode, seq_newer
 from teleop.entity import Entity
 from teleop.keys import instrument_keys, liveliness_pattern
 
-__all__ = ["Recorder", "decode_any", "flatten", "read_messages", "run_record", "start_recorder", "summary_line"]
+__all__ = ["Recorder", "decode_any", "flatten", "read_messages", "run_record", "short_names", "start_recorder",
+           "summary_line"]
 
 log = logging.getLogger("teleop.record")
 _RAW = struct.Struct("<dHI")
@@ -115,6 +118,17 @@ def _values(x, out: list) -> None:
         out.append(int(x))
     else:
         out.append(x)
+
+
+def short_names(names) -> tuple[str, ...]:
+    """Column names: a nested field keeps only its own name where that is unambiguous in the message
+    (``axes[0].tendons[0].T_in`` -> ``T_in`` on a single tendon, so the file loads as measured data),
+    the full path where it is not (two axes, two tendons) or would clash with another column."""
+    leaves = [n.rsplit(".", 1)[-1] for n in names]
+    count: dict[str, int] = {}
+    for x in leaves:                      # a top-level name is its own leaf: a nested namesake keeps its path
+        count[x] = count.get(x, 0) + 1
+    return tuple(leaf if "." in n and count[leaf] == 1 else n for n, leaf in zip(names, leaves))
 
 
 def _unit(name: str) -> str | None:
@@ -306,7 +320,7 @@ class Recorder:
         path = self.dir / (f"{stem}.csv" if n == 0 else f"{stem}-{n + 1}.csv")
         meta = {"source": "teleop record", "instrument": self.ident, "key": key, "message": shape[1].__name__,
                 "time": "recorder receive time (monotonic clock of the recorder)"}
-        f = self._csv[shape] = _Csv(path, tuple(n for n, _ in flat), flat, meta)
+        f = self._csv[shape] = _Csv(path, short_names([n for n, _ in flat]), flat, meta)
         return f
 
     def _derived(self, t: float, key: str, msg, seq, names: tuple, vals: list, count: int) -> None:

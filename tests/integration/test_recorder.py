@@ -115,7 +115,10 @@ def test_sigkill_of_a_side_loses_no_published_message(tmp_path, victim):
             assert len(seqs) > 100 if not key.endswith("heartbeat") else len(seqs) > 10
             lost = sorted(set(seqs) - set(got[key]))
             assert lost == [], f"{key}: {len(lost)} of {len(seqs)} published messages not recorded: {lost[:20]}"
-            assert len(got[key]) == len(seqs)                   # nothing recorded twice, nothing invented
+            assert len(got[key]) == len(set(got[key]))          # nothing recorded twice
+            extra = set(got[key]) - set(seqs)                   # nothing invented: at most the one message
+            # the killed side handed to zenoh just before SIGKILL hit, before its log line was written
+            assert extra <= ({max(seqs) + 1} if side == victim else set()), (key, sorted(extra))
     summary = json.loads((rec_dir / "summary.json").read_text())
     assert all(s["missing"] == 0 and s["decode_errors"] == 0 for s in summary["streams"].values())
     states = [(c["side"], c["state"]) for c in summary["state_changes"]]
@@ -124,5 +127,5 @@ def test_sigkill_of_a_side_loses_no_published_message(tmp_path, victim):
         assert states.index(("slave", "SAFE"), states.index(("slave", "ENGAGED"))) > 0
     est = read_measured_csv(rec_dir / "slave_estimate.csv")     # the measured-data format
     assert est.time.size == len(got[f"teleop/{ident}/slave/estimate"])
-    assert np.all(np.isfinite(est.T_in)) and "T_out_hat" in est.extra and "profile[0]" in est.extra
+    assert np.all(np.isfinite(est.T_in)) and "T_out_hat" in est.extra and any(c.startswith("profile") for c in est.extra)
     assert (rec_dir / "streams.png").is_file()
