@@ -72,7 +72,7 @@ def run(threaded: bool, n: int, tmp: Path) -> np.ndarray:
         for k in range(n):
             clock.t += 1e-3
             x = 0.004 * (1 - math.cos(2 * math.pi * 0.25 * clock.t))
-            links.command.put(Command(k, clock.t, x))
+            links.command.put(Command(k, clock.t, (x,)))
             t0 = time.perf_counter()
             node.step(clock.t)
             times[k] = time.perf_counter() - t0

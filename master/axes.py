@@ -23,7 +23,7 @@ from __future__ import annotations
 from typing import Any
 
 from teleop.config import Config
-from teleop.messages import Command, Estimate, JointCommand, JointEstimate
+from teleop.messages import Command, Estimate
 
 __all__ = ["InstrumentAxes", "TendonAxes", "JointAxes", "instrument_axes", "TENDON_CSV_COLUMNS", "TENDON_CSV_UNITS"]
 
@@ -107,22 +107,23 @@ class TendonAxes(InstrumentAxes):
     unit = "m"
 
     def fits(self, est: Any) -> bool:
-        return isinstance(est, Estimate)
+        return isinstance(est, Estimate) and len(est.axes) == 1 and len(est.axes[0].tendons) == 1
 
     def tensions(self, est: Estimate) -> tuple[float, ...]:
-        return (est.T_in, est.T_out_hat)
+        t = est.axes[0].tendons[0]
+        return (t.T_in, t.T_out_hat)
 
     def slave_positions(self, est: Estimate) -> list[float]:
-        return [est.x_in]
+        return [est.axes[0].tendons[0].x_in]
 
     def rendered(self, est: Estimate) -> list[float]:
-        return [est.T_out_hat]
+        return [est.axes[0].tendons[0].T_out_hat]
 
     def view(self, est: Estimate | None):
-        return None if est is None else est.T_in
+        return None if est is None else est.axes[0].tendons[0].T_in
 
     def command(self, seq: int, now: float, q: list[float], engaged: bool, marker: int) -> Command:
-        return Command(seq, now, q[0], engaged, marker)
+        return Command(seq, now, (q[0],), engaged, marker)
 
     def csv_columns(self) -> tuple[str, ...]:
         return TENDON_CSV_COLUMNS
@@ -133,7 +134,7 @@ class TendonAxes(InstrumentAxes):
     def csv_row(self, now: float, est: Estimate | None, common: tuple, axes: list[tuple]) -> tuple:
         cmd, _, p, T, f_cmd, f, energy = axes[0]
         state, console, t_recv, echo_age, cmd_seq, _ = common
-        return (now, cmd, 0.0 if est is None else est.T_in, p, T, f_cmd, f, energy, state, console, t_recv,
+        return (now, cmd, 0.0 if est is None else est.axes[0].tendons[0].T_in, p, T, f_cmd, f, energy, state, console, t_recv,
                 echo_age, cmd_seq)
 
 
@@ -155,22 +156,23 @@ class JointAxes(InstrumentAxes):
         self.device_axes = tuple(cfg.pair_control.axes) or tuple(range(len(joints)))
 
     def fits(self, est: Any) -> bool:
-        return isinstance(est, JointEstimate) and len(est.joints) == self.n
+        return (isinstance(est, Estimate) and len(est.axes) == self.n
+                and all(len(a.tendons) == 2 for a in est.axes))
 
-    def tensions(self, est: JointEstimate) -> tuple[float, ...]:
-        return tuple(v for j in est.joints for t in j.tendons for v in (t.T_in, t.T_out_hat))
+    def tensions(self, est: Estimate) -> tuple[float, ...]:
+        return tuple(v for t in est.tendons for v in (t.T_in, t.T_out_hat))
 
-    def slave_positions(self, est: JointEstimate) -> list[float]:
-        return [j.angle_hat for j in est.joints]
+    def slave_positions(self, est: Estimate) -> list[float]:
+        return [a.position_hat for a in est.axes]
 
-    def rendered(self, est: JointEstimate) -> list[float]:
-        return [j.torque_hat / r for j, r in zip(est.joints, self.radius)]
+    def rendered(self, est: Estimate) -> list[float]:
+        return [a.effort_hat / r for a, r in zip(est.axes, self.radius)]
 
-    def view(self, est: JointEstimate | None):
-        return None if est is None else [(j.tendons[0].T_in, j.tendons[1].T_in) for j in est.joints]
+    def view(self, est: Estimate | None):
+        return None if est is None else [(a.tendons[0].T_in, a.tendons[1].T_in) for a in est.axes]
 
-    def command(self, seq: int, now: float, q: list[float], engaged: bool, marker: int) -> JointCommand:
-        return JointCommand(seq, now, tuple(q), engaged, marker)
+    def command(self, seq: int, now: float, q: list[float], engaged: bool, marker: int) -> Command:
+        return Command(seq, now, tuple(q), engaged, marker)
 
     def csv_columns(self) -> tuple[str, ...]:
         return ("time", *_COMMON) + tuple(f"{n}.{c}" for n in self.names for c in _AXIS_COLS)
@@ -183,7 +185,7 @@ class JointAxes(InstrumentAxes):
                           f"{n}.force_cmd": "N", f"{n}.force": "N", f"{n}.energy": "J"})
         return units
 
-    def csv_row(self, now: float, est: JointEstimate | None, common: tuple, axes: list[tuple]) -> tuple:
+    def csv_row(self, now: float, est: Estimate | None, common: tuple, axes: list[tuple]) -> tuple:
         return (now, *common, *(v for a in axes for v in a))
 
 

@@ -1,8 +1,8 @@
 """The master (operator-side) node of every instrument: device -> command, latest estimate -> safe forces.
 
-An instrument is a list of axes (:mod:`master.axes`): one for a single tendon (Command/Estimate,
-positions in m), one per antagonistic pair for a joint instrument (JointCommand/JointEstimate,
-angles in rad). Every axis gets the whole console, the force map and a passivity controller; the
+An instrument is a list of axes (:mod:`master.axes`): one for a single tendon (positions in m),
+one per antagonistic pair for a joint instrument (angles in rad); both speak the one Command and
+Estimate of :mod:`teleop.messages` with one entry per axis. Every axis gets the whole console, the force map and a passivity controller; the
 node is ENGAGED only while every axis's console is. One :meth:`MasterNode.step` per cycle (1 kHz),
 given the time by the caller:
 
@@ -21,10 +21,10 @@ given the time by the caller:
    re-anchors or checks the alignment and restarts the force ramp and the passivity observer.
    Leaving it because of the links or the deadman: SAFE, zero force at once, commands sent with
    ``engaged=False`` (the slave holds); clutch or misalignment: READY;
-4. publish the command (``Command(seq, t_master, x_in_cmd, engaged, marker)``, or a JointCommand
-   with one angle per joint) and keep its send time by seq in a
+4. publish the command (``Command(seq, t_master, targets, engaged, marker)``, one target per axis:
+   ``x_in_cmd`` of a tendon, the angle of a joint) and keep its send time by seq in a
    ring buffer; an Estimate echoing ``cmd_seq`` gives the round-trip latency;
-5. render ``-force_scale * T_k`` on each axis (``T_out_hat``, or ``torque_hat / r`` of a pair) ramped, clamped, slew-limited (:class:`master.mapping.ForceMap`),
+5. render ``-force_scale * T_k`` on each axis (``T_out_hat`` of a tendon, ``effort_hat / r`` (torque / r) of a pair) ramped, clamped, slew-limited (:class:`master.mapping.ForceMap`),
    then through the passivity controller (:mod:`master.passivity`, velocity from successive device
    positions; ``master.mapping.passivity``), then clamped again: no force above
    ``master.mapping.force_limit`` ever reaches the device;

@@ -1,5 +1,5 @@
-"""The slave node of a joint instrument: latest JointCommand -> pair controllers -> instrument ->
-joint estimators -> JointEstimate, with the same watchdog rules as the single-tendon node.
+"""The slave node of a joint instrument: latest Command (one angle per joint) -> pair controllers -> instrument ->
+joint estimators -> Estimate (one axis per joint), with the same watchdog rules as the single-tendon node.
 
 One :meth:`JointSlaveNode.step` per cycle (``rig.rate_hz``), given the time by the caller:
 
@@ -8,7 +8,7 @@ One :meth:`JointSlaveNode.step` per cycle (``rig.rate_hz``), given the time by t
   calibration data (``calibration_file``) and every joint estimator replays the routine's proximal
   samples so that its profile memory matches the tendons'. With a calibration (reloaded from
   ``configs/calibration/<instrument>.yaml``) the node starts SAFE at once.
-* Then, each cycle, the latest JointCommand decides (latest wins):
+* Then, each cycle, the latest Command decides (latest wins):
 
   ========================================  ==========  ===========================================
   latest accepted command                   state       every joint's pair controller gets
@@ -29,7 +29,7 @@ One :meth:`JointSlaveNode.step` per cycle (``rig.rate_hz``), given the time by t
   of the estimated one (the master anchors at the slave's angle when it engages).
 
   controllers -> instrument.step -> JointEstimator.step per joint (proximal sensors only, never the
-  truth) -> JointEstimate -> one CSV row per cycle (``slave_joints.csv``) and Rerun every
+  truth) -> Estimate -> one CSV row per cycle (``slave_joints.csv``) and Rerun every
   ``recording.log_every`` cycles.
 * A Heartbeat at ``slave.heartbeat_hz``; with ``stop_on_master_stop`` the node finishes when the
   master's heartbeat says STOPPING.
@@ -49,7 +49,7 @@ from slave.node_base import SlaveLinks, SlaveNodeBase
 from slave.pair_calibrate import PairCalibration, set_tension
 from slave.pair_control import PairController
 from teleop.config import Config
-from teleop.messages import JointCommand, JointEstimate, JointState, SideState, TendonState
+from teleop.messages import AxisState, Command, Estimate, SideState, TendonState
 
 __all__ = ["JointSlaveNode", "joint_csv_columns"]
 
@@ -82,8 +82,8 @@ class JointSlaveNode(SlaveNodeBase):
         With ``instrument.joints`` (1..4).
     instrument : Instrument
     links : SlaveLinks
-        ``command`` delivers :class:`~teleop.messages.JointCommand`, ``estimate`` takes
-        :class:`~teleop.messages.JointEstimate`.
+        ``command`` delivers :class:`~teleop.messages.Command`, ``estimate`` takes
+        :class:`~teleop.messages.Estimate`.
     recorder : object with ``write(row)`` for :func:`joint_csv_columns`, or None.
     rerun : a :class:`teleop.rerun_log.RerunLogger`, or None.
     calibration : InstrumentCalibration, optional
@@ -99,7 +99,7 @@ class JointSlaveNode(SlaveNodeBase):
                  calibration: InstrumentCalibration | None = None, calibration_file: str | Path | None = None,
                  run_dir: str | Path | None = None, stop_on_master_stop: bool = False):
         super().__init__(cfg, links, run_dir=run_dir, stop_on_master_stop=stop_on_master_stop,
-                         counts=("commands_rejected_range", "commands_wrong_joints", "commands_out_of_order",
+                         counts=("commands_rejected_range", "commands_wrong_axes", "commands_out_of_order",
                                  "commands_duplicate", "engage_refused"))
         self.instrument = instrument
         self.recorder, self.rerun = recorder, rerun
@@ -164,14 +164,14 @@ class JointSlaveNode(SlaveNodeBase):
 
     # ---- commands ----------------------------------------------------------------------------------
     def _fits(self, cmd, now: float) -> bool:
-        if isinstance(cmd, JointCommand) and len(cmd.angles) == len(self.joints):
+        if isinstance(cmd, Command) and len(cmd.targets) == len(self.joints):
             return True
-        self.counts["commands_wrong_joints"] += 1
-        self._warn(now, "rejected command: expected a JointCommand for %d joints", len(self.joints))
+        self.counts["commands_wrong_axes"] += 1
+        self._warn(now, "rejected command: expected a Command with one angle per joint (%d)", len(self.joints))
         return False
 
-    def _in_range(self, cmd: JointCommand, now: float) -> bool:
-        for j, a, (lo, hi) in zip(self.joints, cmd.angles, self.cmd_range):
+    def _in_range(self, cmd: Command, now: float) -> bool:
+        for j, a, (lo, hi) in zip(self.joints, cmd.targets, self.cmd_range):
             if not lo <= a <= hi:
                 self.counts["commands_rejected_range"] += 1
                 self._warn(now, "rejected command %d: %s angle %.4g rad outside [%.3g, %.3g] rad", cmd.seq, j.name, a,
@@ -196,16 +196,16 @@ class JointSlaveNode(SlaveNodeBase):
             return list(self.hold) if self.hold is not None else none
         if self.state != SideState.ENGAGED:
             far = [abs(a - s.angle) * r > self.cfg.slave.engage_tolerance
-                   for a, s, r in zip(cmd.angles, self.samples, self.r)]
+                   for a, s, r in zip(cmd.targets, self.samples, self.r)]
             if any(far):
                 self.counts["engage_refused"] += 1
                 self._warn(now, "engaged command %d refused: angles %s too far from the estimates", cmd.seq,
-                           [round(a, 4) for a in cmd.angles])
+                           [round(a, 4) for a in cmd.targets])
                 return list(self.hold) if self.hold is not None else none
         self._set_state(SideState.ENGAGED, now, "master engaged")
-        self.marker, self.hold = cmd.marker, tuple(cmd.angles)
+        self.marker, self.hold = cmd.marker, tuple(cmd.targets)
         self.commands_applied += 1
-        return list(cmd.angles)
+        return list(cmd.targets)
 
     # ---- the cycle ---------------------------------------------------------------------------------
     def _calibration_step(self, now: float, dt: float) -> None:
@@ -225,11 +225,11 @@ class JointSlaveNode(SlaveNodeBase):
         self._publish(self._message(now, st))
         self._record(st, cmds, now)
 
-    def _message(self, now: float, st: InstrumentState) -> JointEstimate:
-        joints = tuple(JointState(s.torque, s.angle, tuple(
+    def _message(self, now: float, st: InstrumentState) -> Estimate:
+        joints = tuple(AxisState(s.torque, s.angle, tuple(
             TendonState(float(st.T_in[i, k]), float(st.x_in[i, k]), s.T_out[k], s.elongation[k], s.phase[k])
             for k in range(2))) for i, s in enumerate(self.samples))
-        return JointEstimate(self.seq, self.cmd_seq, now, joints)
+        return Estimate(self.seq, self.cmd_seq, now, joints)
 
     def _record(self, st: InstrumentState, cmds, now: float) -> None:
         tr = st.truth

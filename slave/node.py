@@ -56,7 +56,7 @@ from slave.node_base import SlaveLinks, SlaveNodeBase
 from slave.rig import Rig, RigState
 from teleop.codec import seq_newer
 from teleop.config import Config
-from teleop.messages import Command, Estimate, SideState
+from teleop.messages import Command, SideState, tendon_estimate
 
 __all__ = ["SlaveLinks", "SlaveNode", "CSV_COLUMNS", "CSV_TRUTH_COLUMNS", "csv_columns", "RELAX_BAND", "seq_newer"]
 
@@ -96,7 +96,7 @@ class SlaveNode(SlaveNodeBase):
                  run_dir: str | Path | None = None, stop_on_master_stop: bool = False,
                  calibrate: bool = True, model=None):
         super().__init__(cfg, links, run_dir=run_dir, stop_on_master_stop=stop_on_master_stop,
-                         counts=("commands_rejected_range", "commands_out_of_order", "commands_duplicate",
+                         counts=("commands_rejected_range", "commands_wrong_axes", "commands_out_of_order", "commands_duplicate",
                                  "engage_refused"))
         self.rig = rig
         self.recorder = recorder
@@ -153,12 +153,20 @@ class SlaveNode(SlaveNodeBase):
             self.last_safe_reason = why if state == SideState.SAFE else None
         super()._set_state(state, now, why)
 
+    def _fits(self, cmd, now: float) -> bool:
+        if isinstance(cmd, Command) and len(cmd.targets) == 1:
+            return True
+        self.counts["commands_wrong_axes"] += 1
+        self._warn(now, "rejected command: expected a Command with one target (x_in_cmd) for a single tendon")
+        return False
+
     def _in_range(self, cmd: Command, now: float) -> bool:
-        if self.x_min <= cmd.x_in_cmd <= self.x_max:
+        x_in_cmd = cmd.targets[0]
+        if self.x_min <= x_in_cmd <= self.x_max:
             return True
         self.counts["commands_rejected_range"] += 1
         self._warn(now, "rejected command %d: x_in_cmd %.6g m outside [%g, %g] m (slave.x_in_min/max)",
-                   cmd.seq, cmd.x_in_cmd, self.x_min, self.x_max)
+                   cmd.seq, x_in_cmd, self.x_min, self.x_max)
         return False
 
     def _safe(self, now: float, why: str, dt: float) -> float:
@@ -185,21 +193,22 @@ class SlaveNode(SlaveNodeBase):
             self._set_state(SideState.READY, now, "master not engaged")
             self.marker = 0
             return self.x_hold
-        if self.state != SideState.ENGAGED and abs(cmd.x_in_cmd - self.rig_state.x_in) > self.engage_tolerance:
+        x_in_cmd = cmd.targets[0]
+        if self.state != SideState.ENGAGED and abs(x_in_cmd - self.rig_state.x_in) > self.engage_tolerance:
             if rec is not self._refused:
                 self._refused = rec
                 self.counts["engage_refused"] += 1
             self._warn(now, "engaged command %d refused: x_in_cmd %.6g m is %.3g mm from x_in (tolerance %.3g mm)",
-                       cmd.seq, cmd.x_in_cmd, 1e3 * abs(cmd.x_in_cmd - self.rig_state.x_in),
+                       cmd.seq, x_in_cmd, 1e3 * abs(x_in_cmd - self.rig_state.x_in),
                        1e3 * self.engage_tolerance)
             if self.state == SideState.SAFE:
                 return self._safe(now, "engaged command too far from x_in", dt)
             return self.x_hold
         self._set_state(SideState.ENGAGED, now, "master engaged")
         self.marker = cmd.marker
-        self.x_hold = cmd.x_in_cmd
+        self.x_hold = x_in_cmd
         self.commands_applied += 1
-        return cmd.x_in_cmd
+        return x_in_cmd
 
     def _calibration_step(self, now: float, dt: float) -> None:
         cal = self.calibration
@@ -216,8 +225,8 @@ class SlaveNode(SlaveNodeBase):
         rs = self.rig_state = self.rig.step(x_cmd, dt)
         est = self.estimator.step(rs.T_in, rs.x_in, rs.t)
         profile = self.estimator.profile_samples(len(self.s_points))
-        self._publish(Estimate(self.seq, self.cmd_seq, now, rs.T_in, rs.x_in, est.T_out, est.elongation, est.x_out,
-                               est.phase, tuple(float(v) for v in profile)))
+        self._publish(tendon_estimate(self.seq, self.cmd_seq, now, rs.T_in, rs.x_in, est.T_out, est.elongation,
+                                      est.x_out, est.phase, tuple(float(v) for v in profile)))
         self._record(rs, est, x_cmd, profile)
 
     def _record_calibration(self, rs: RigState, x_cmd: float) -> None:

@@ -6,9 +6,9 @@ put on a wrapped publisher passes through it; while the fault is active each one
 
 1. dropped with probability ``drop``;
 2. corrupted (``corrupt``): ``nan`` / ``inf`` written over one float field at byte level (the codec
-   refuses to encode them), ``range`` a finite but impossible value (Command.x_in_cmd = 1 m,
-   Estimate.T_out_hat = 1e4 N, Heartbeat.t_sender = 1e12 s; on a joint instrument the first joint's
-   JointCommand angle = 100 rad, the first tendon's JointEstimate T_out_hat = 1e4 N), ``version``
+   refuses to encode them), ``range`` a finite but impossible value (the Command's first target = 100, i.e. 100 m of
+   a tendon or 100 rad of a joint; the Estimate's first tendon T_out_hat = 1e4 N; Heartbeat.t_sender
+   = 1e12 s), ``version``
    the wire version byte + 1;
 3. held back with probability ``reorder`` and sent right after the next message of the same stream;
 4. sent twice with probability ``dup``;
@@ -46,7 +46,7 @@ import numpy as np
 from teleop.clock import Clock, MonotonicClock
 from teleop.codec import WIRE_VERSION, decode, encode
 from teleop.errors import ConfigError
-from teleop.messages import Command, Estimate, Heartbeat, JointCommand, JointEstimate
+from teleop.messages import Command, Estimate, Heartbeat
 
 __all__ = ["FaultSpec", "parse_fault_spec", "FaultInjector", "FaultyPublisher", "corrupt_payload", "STREAMS",
            "CORRUPTIONS"]
@@ -58,18 +58,18 @@ _SENTINEL = 1234.56789012345
 
 
 
-def _joint_estimate_with(msg: JointEstimate, v: float) -> JointEstimate:
-    j0 = msg.joints[0]
-    t0 = dataclasses.replace(j0.tendons[0], T_out_hat=v)
-    return dataclasses.replace(msg, joints=(dataclasses.replace(j0, tendons=(t0, j0.tendons[1])), *msg.joints[1:]))
+def _estimate_with(msg: Estimate, v: float) -> Estimate:
+    """``msg`` with the first tendon's T_out_hat = v."""
+    a0 = msg.axes[0]
+    t0 = dataclasses.replace(a0.tendons[0], T_out_hat=v)
+    return dataclasses.replace(msg, axes=(dataclasses.replace(a0, tendons=(t0, *a0.tendons[1:])), *msg.axes[1:]))
 
 
 #: The float field each corruption writes over: message type -> (message with the value v, impossible v).
-_FIELD = {Command: (lambda m, v: dataclasses.replace(m, x_in_cmd=v), 1.0),
-          Estimate: (lambda m, v: dataclasses.replace(m, T_out_hat=v), 1.0e4),
-          Heartbeat: (lambda m, v: dataclasses.replace(m, t_sender=v), 1.0e12),
-          JointCommand: (lambda m, v: dataclasses.replace(m, angles=(v, *m.angles[1:])), 100.0),
-          JointEstimate: (_joint_estimate_with, 1.0e4)}
+#: A Command's first target: 100 m of a tendon or 100 rad of a joint, out of range either way.
+_FIELD = {Command: (lambda m, v: dataclasses.replace(m, targets=(v, *m.targets[1:])), 100.0),
+          Estimate: (_estimate_with, 1.0e4),
+          Heartbeat: (lambda m, v: dataclasses.replace(m, t_sender=v), 1.0e12)}
 
 
 @dataclass(frozen=True)

@@ -108,26 +108,28 @@ def _side_streams(session, ident: str, injector, me: str, peer: str, out: tuple[
     return streams
 
 
-def slave_links(session, ident: str, injector, command_type):
-    """The slave's links on ``session`` (:func:`_side_streams`): estimates out, commands of
-    ``command_type`` (Command or JointCommand) in."""
+def slave_links(session, ident: str, injector):
+    """The slave's links on ``session`` (:func:`_side_streams`): estimates out, commands in (any
+    other message on the command key is dropped by the subscriber)."""
     from slave.node_base import SlaveLinks
     from teleop.keys import command_key, estimate_key
+    from teleop.messages import Command
 
     # SlaveLinks' fields in order: estimate, heartbeat, command, master_heartbeat, master_alive
     return SlaveLinks(*_side_streams(session, ident, injector, "slave", "master", (estimate_key(ident), "estimate"),
-                                     (command_key(ident), command_type)))
+                                     (command_key(ident), Command)))
 
 
-def master_links(session, ident: str, injector, estimate_type):
-    """The master's links on ``session`` (:func:`_side_streams`): commands out, estimates of
-    ``estimate_type`` (Estimate or JointEstimate) in."""
+def master_links(session, ident: str, injector):
+    """The master's links on ``session`` (:func:`_side_streams`): commands out, estimates in (any
+    other message on the estimate key is dropped by the subscriber)."""
     from master.node_base import MasterLinks
     from teleop.keys import command_key, estimate_key
+    from teleop.messages import Estimate
 
     # MasterLinks' fields in order: command, heartbeat, estimate, slave_heartbeat, slave_alive
     return MasterLinks(*_side_streams(session, ident, injector, "master", "slave", (command_key(ident), "command"),
-                                      (estimate_key(ident), estimate_type)))
+                                      (estimate_key(ident), Estimate)))
 
 
 def _serve(node, clock, args: argparse.Namespace, run_dir: Path, side: str, injector, *, close_first=None) -> None:
@@ -155,7 +157,6 @@ def run_slave(args: argparse.Namespace) -> int:
     from teleop.clock import MonotonicClock
     from teleop.config import load_config
     from teleop.csv_writer import ThreadedCsvRecorder as CsvRecorder  # the loop only queues rows; a thread writes
-    from teleop.messages import Command
     from teleop.recording import raise_on_sigterm
     from teleop.rerun_thread import ThreadedRerunLogger as RerunLogger  # the loop only queues the calls
 
@@ -176,7 +177,7 @@ def run_slave(args: argparse.Namespace) -> int:
                     else "none"}
             with CsvRecorder(run_dir / "slave.csv", csv_columns(has_truth), meta, flush_every=500) as rec, \
                     RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd") as rr:
-                links = slave_links(session, ident, injector, Command)
+                links = slave_links(session, ident, injector)
                 node = SlaveNode(cfg, rig, links, recorder=rec, rerun=rr, run_dir=run_dir,
                                  stop_on_master_stop=args.exit_on_master_stop)
                 _serve(node, clock, args, run_dir, "slave", injector)
@@ -193,7 +194,6 @@ def run_master(args: argparse.Namespace) -> int:
     from teleop.clock import MonotonicClock
     from teleop.config import load_config
     from teleop.csv_writer import ThreadedCsvRecorder as CsvRecorder  # the loop only queues rows; a thread writes
-    from teleop.messages import Estimate, JointEstimate
     from teleop.recording import raise_on_sigterm
 
     cfg = load_config(args.config)
@@ -211,7 +211,7 @@ def run_master(args: argparse.Namespace) -> int:
                 "rendered tension torque_hat / r [N], forces [N], passivity energy [J]"}
         with raise_on_sigterm(), open_session(cfg, args, clock) as session, \
                 CsvRecorder(run_dir / "master.csv", csv_columns(cfg), meta, units=csv_units(cfg), flush_every=100) as rec:
-            links = master_links(session, ident, injector, JointEstimate if cfg.instrument.joints else Estimate)
+            links = master_links(session, ident, injector)
             node = MasterNode(cfg, device, links, recorder=rec)
             _serve(node, clock, args, run_dir, "master", injector, close_first=device.close)
     _log_master_done(node)
@@ -235,7 +235,7 @@ def _load_or_none(cfg: Config):
 
 def run_joint_slave(args: argparse.Namespace, cfg: Config) -> int:
     """``teleop slave`` for a joint instrument: reload ``<calibration.dir>/<id>.yaml`` (or calibrate at
-    power-up and save it there), then serve JointCommands until stopped."""
+    power-up and save it there), then serve Commands (one angle per joint) until stopped."""
     from estimator.joint import JointEstimator
     from estimator.sheath import SheathModel
     from slave.joint_node import JointSlaveNode, joint_csv_columns
@@ -243,7 +243,6 @@ def run_joint_slave(args: argparse.Namespace, cfg: Config) -> int:
     from slave.rigs import make_rig
     from teleop.clock import MonotonicClock
     from teleop.csv_writer import ThreadedCsvRecorder as CsvRecorder  # the loop only queues rows; a thread writes
-    from teleop.messages import JointCommand
     from teleop.recording import raise_on_sigterm
     from teleop.rerun_thread import ThreadedRerunLogger as RerunLogger  # the loop only queues the calls
 
@@ -265,7 +264,7 @@ def run_joint_slave(args: argparse.Namespace, cfg: Config) -> int:
             CsvRecorder(run_dir / "slave_joints.csv", joint_csv_columns(names, True), meta, flush_every=500) as rec, \
             RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd") as rr:
         inst = make_rig(cfg, session)   # rig.type: simulated in process, zenoh (a drive or `teleop bridge`), ...
-        links = slave_links(session, ident, injector, JointCommand)
+        links = slave_links(session, ident, injector)
         node = JointSlaveNode(cfg, inst, links, recorder=rec, rerun=rr, calibration=calibration,
                               calibration_file=cal_path, run_dir=run_dir, stop_on_master_stop=args.exit_on_master_stop)
         _serve(node, clock, args, run_dir, "slave", injector)

@@ -84,4 +84,4 @@ def test_the_master_node_drives_a_three_axis_hid_device():
     r = [j.pulley_radius for j in cfg.instrument.joints]
     m = cfg.master.mapping
     want = [max(-3.0, min(3.0, -m.force_scale * tq / rk)) for tq, rk in zip(TORQUES, r)]
-    assert dev.forces[1:] == pytest.approx(want[1:]) and links.command.sent[-1].angles[1:] == pytest.approx(ANGLES[1:])
+    assert dev.forces[1:] == pytest.approx(want[1:]) and links.command.sent[-1].targets[1:] == pytest.approx(ANGLES[1:])

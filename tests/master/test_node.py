@@ -11,7 +11,7 @@ from master.device import DeviceState
 from master.node import MasterLinks, MasterNode
 from teleop.clock import FakeClock
 from teleop.config import Config, MappingConfig, MasterConfig
-from teleop.messages import Estimate, Heartbeat, Side, SideState
+from teleop.messages import Heartbeat, Side, SideState, tendon_estimate
 from tests.fakes import Topic
 
 DT = 1e-3
@@ -45,7 +45,7 @@ def make(watchdog_ms=50.0, **mapping):
 
 
 def estimate(seq, cmd_seq=0, T_out=10.0, x_in=0.004, T_in=15.0):
-    return Estimate(seq, cmd_seq, 0.0, T_in, x_in, T_out, 1e-4, x_in - 1e-4, Phase.PULL, ())
+    return tendon_estimate(seq, cmd_seq, 0.0, T_in, x_in, T_out, 1e-4, x_in - 1e-4, Phase.PULL, ())
 
 
 def put_est(links, seq, cmd_seq=None, **kw):
@@ -91,10 +91,10 @@ def test_engage_anchors_at_the_slave_position_and_marks_commands():
     hand.position = 0.3
     engage(node, links, clock)
     first = links.command.sent[-1]
-    assert first.engaged and first.x_in_cmd == pytest.approx(0.004) and first.marker == 7
+    assert first.engaged and first.targets[0] == pytest.approx(0.004) and first.marker == 7
     hand.position = 0.32
     tick(node, clock)
-    assert links.command.sent[-1].x_in_cmd == pytest.approx(0.004 + 0.5 * 0.02)
+    assert links.command.sent[-1].targets[0] == pytest.approx(0.004 + 0.5 * 0.02)
 
 
 def test_force_is_minus_scale_times_the_estimate():
@@ -251,7 +251,7 @@ def test_clutch_holds_the_instrument_and_re_anchors_on_release():
     engage(node, links, clock)
     hand.position = 0.11
     run(node, links, clock, 5)
-    assert links.command.sent[-1].x_in_cmd == pytest.approx(0.004 + 0.005)
+    assert links.command.sent[-1].targets[0] == pytest.approx(0.004 + 0.005)
     hand.buttons = 0b10                                  # clutch (bit 1) held: hand moves freely
     for p in np.linspace(0.11, 0.05, 30):
         hand.position = p
@@ -261,10 +261,10 @@ def test_clutch_holds_the_instrument_and_re_anchors_on_release():
     hand.buttons = 0                                     # release: re-anchored at the slave's x_in
     run(node, links, clock, 1, x_in=0.009)
     assert node.state == SideState.ENGAGED and node.consoles[0].clutches == 1 and node.engage_count == 2
-    assert links.command.sent[-1].x_in_cmd == pytest.approx(0.009)       # no jump
+    assert links.command.sent[-1].targets[0] == pytest.approx(0.009)       # no jump
     hand.position = 0.07
     run(node, links, clock, 1, x_in=0.009)
-    assert links.command.sent[-1].x_in_cmd == pytest.approx(0.009 + 0.5 * 0.02)
+    assert links.command.sent[-1].targets[0] == pytest.approx(0.009 + 0.5 * 0.02)
 
 
 def test_re_engage_after_a_fault_needs_alignment_or_a_clutch():
@@ -281,7 +281,7 @@ def test_re_engage_after_a_fault_needs_alignment_or_a_clutch():
     hand.position = 0.1015                               # back within 1 mm (0.75 mm): engages, no re-anchor
     run(node, links, clock, 1)
     assert node.state == SideState.ENGAGED and node.consoles[0].clutches == 0
-    assert links.command.sent[-1].x_in_cmd == pytest.approx(0.004 + 0.5 * 0.0015)
+    assert links.command.sent[-1].targets[0] == pytest.approx(0.004 + 0.5 * 0.0015)
     tick(node, clock, 70)
     hand.position = 0.2                                  # far away: clutch press + release realigns
     run(node, links, clock, 2)
@@ -290,7 +290,7 @@ def test_re_engage_after_a_fault_needs_alignment_or_a_clutch():
     run(node, links, clock, 2)
     hand.buttons = 0
     run(node, links, clock, 1)
-    assert node.state == SideState.ENGAGED and links.command.sent[-1].x_in_cmd == pytest.approx(0.004)
+    assert node.state == SideState.ENGAGED and links.command.sent[-1].targets[0] == pytest.approx(0.004)
 
 
 def test_operator_letting_go_is_safe_with_zero_force():

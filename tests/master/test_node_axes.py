@@ -10,7 +10,7 @@ from estimator.phase import Phase
 from master.node import MasterLinks, MasterNode, csv_columns
 from teleop.clock import FakeClock
 from teleop.config import load_config
-from teleop.messages import Heartbeat, JointCommand, JointEstimate, JointState, Side, SideState, TendonState
+from teleop.messages import AxisState, Command, Estimate, Heartbeat, Side, SideState, TendonState
 from tests.fakes import Rows, Topic
 
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "instrument-3dof.yaml"
@@ -43,7 +43,7 @@ def make():
 
 def estimate(seq, cmd_seq, angles=ANGLES):
     t = TendonState(10.0, 0.004, 9.0, 1e-4, Phase.PULL)
-    return JointEstimate(seq, cmd_seq, 0.0, tuple(JointState(tq, a, (t, t)) for tq, a in zip(TORQUES, angles)))
+    return Estimate(seq, cmd_seq, 0.0, tuple(AxisState(tq, a, (t, t)) for tq, a in zip(TORQUES, angles)))
 
 
 def run(node, links, clock, n, seq=[0]):
@@ -61,7 +61,7 @@ def test_every_axis_is_anchored_commanded_and_rendered_through_its_pulley():
     run(node, links, clock, 3)
     assert node.state == SideState.ENGAGED and node.engage_count == 1
     cmd = links.command.sent[-1]
-    assert isinstance(cmd, JointCommand) and cmd.engaged and cmd.angles == pytest.approx(ANGLES)
+    assert isinstance(cmd, Command) and cmd.engaged and cmd.targets == pytest.approx(ANGLES)
     r = [j.pulley_radius for j in cfg.instrument.joints]
     m = cfg.master.mapping
     # rendered with the hands still: -force_scale torque / r, within the clamp
@@ -69,11 +69,11 @@ def test_every_axis_is_anchored_commanded_and_rendered_through_its_pulley():
     assert hands.forces[-1] == pytest.approx(expected, abs=1e-9) and max(map(abs, expected)) > 0.3
     hands.positions[1] += 0.01                          # 10 mm on axis 1 (bend_lr, r = 3.5 mm)
     run(node, links, clock, 1)
-    assert links.command.sent[-1].angles[1] == pytest.approx(ANGLES[1] + m.motion_scale * 0.01 / r[1])
+    assert links.command.sent[-1].targets[1] == pytest.approx(ANGLES[1] + m.motion_scale * 0.01 / r[1])
     cols = csv_columns(cfg)
     assert len(rec.rows[-1]) == len(cols) and "grasp.force" in cols
     row = dict(zip(cols, rec.rows[-1]))
-    assert row["bend_lr.cmd"] == pytest.approx(links.command.sent[-1].angles[1])
+    assert row["bend_lr.cmd"] == pytest.approx(links.command.sent[-1].targets[1])
     assert row["grasp.slave"] == pytest.approx(ANGLES[2]) and row["state"] == SideState.ENGAGED
 
 
@@ -97,12 +97,12 @@ def test_deadman_alignment_per_axis_and_clutch():
     hands.buttons = 0
     run(node, links, clock, 1)
     assert node.state == SideState.ENGAGED and node.engage_count == 2 and node.stats()["clutches"] == 1
-    assert links.command.sent[-1].angles == pytest.approx(ANGLES)   # re-anchored: no joint jumps
+    assert links.command.sent[-1].targets == pytest.approx(ANGLES)   # re-anchored: no joint jumps
 
 
 def test_an_estimate_of_another_instrument_is_counted_and_ignored():
     cfg, node, hands, links, clock, rec = make()
-    links.estimate.put(JointEstimate(1, 0, 0.0, estimate(1, 0).joints[:2]))
+    links.estimate.put(Estimate(1, 0, 0.0, estimate(1, 0).axes[:2]))
     clock.advance(DT)
     node.step(clock.now())
     assert node.counts["estimates_wrong_instrument"] == 1 and node.state != SideState.ENGAGED

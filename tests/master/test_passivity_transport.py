@@ -109,7 +109,7 @@ def run_loop(passivity: bool, T: float = 3.0, seed: int = 1):
         # both sessions see each other's subscribers before the clock starts (a put before that is lost)
         probe_c, probe_h = zm.publisher(command_key(ident)), zs.publisher(heartbeat_key(ident, "slave"))
         for _ in range(400):
-            probe_c.put(Command(0, clock.now(), 0.0, False))
+            probe_c.put(Command(0, clock.now(), (0.0,), False))
             probe_h.put(Heartbeat(Side.SLAVE, 0, clock.now(), SideState.SAFE))
             if s_cmd.wait(1, 0.025) and m_hb.wait(1, 0.025):
                 break

@@ -16,7 +16,7 @@ from slave.node import SlaveLinks
 from slave.pair_calibrate import set_tension
 from teleop.clock import FakeClock
 from teleop.config import load_config
-from teleop.messages import JointCommand, SideState
+from teleop.messages import Command, SideState
 from tests.fakes import Rows, Topic
 
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "instrument-3dof.yaml"
@@ -112,13 +112,13 @@ def test_reloaded_calibration_starts_safe_and_the_watchdog_relaxes_the_joints(de
 def test_commands_for_another_instrument_or_out_of_range_are_refused(demo, tmp_path):
     cal = load_calibration(demo[5] / "flex3.yaml", demo[0])
     cfg, clock, slave, master, op, rec, (cmd, est, shb, mhb) = build(tmp_path, calibration=cal)
-    for k, c in enumerate((JointCommand(1, 0.0, (0.0, 0.0)), JointCommand(2, 0.0, (0.0, 0.0, 20.0)),
-                           JointCommand(3, 0.0, (0.0, 0.0, 0.0)), JointCommand(3, 0.0, (0.0, 0.0, 0.0)))):
+    for k, c in enumerate((Command(1, 0.0, (0.0, 0.0)), Command(2, 0.0, (0.0, 0.0, 20.0)),
+                           Command(3, 0.0, (0.0, 0.0, 0.0)), Command(3, 0.0, (0.0, 0.0, 0.0)))):
         cmd.put(c)
         clock.advance(DT)
         slave.step(clock.now())
     s = slave.stats()
-    assert s["commands_wrong_joints"] == 1 and s["commands_rejected_range"] == 1 and s["commands_duplicate"] == 1
+    assert s["commands_wrong_axes"] == 1 and s["commands_rejected_range"] == 1 and s["commands_duplicate"] == 1
     assert slave.state == SideState.READY or slave.state == SideState.ENGAGED
 
 

@@ -64,7 +64,7 @@ def tick(node, clock, n=1):
 
 
 def command(links, seq, x, engaged=True, marker=0):
-    links.command.put(Command(seq, 0.0, x, engaged, marker))
+    links.command.put(Command(seq, 0.0, (x,), engaged, marker))
 
 
 def test_no_command_is_safe_and_holds():
@@ -84,9 +84,11 @@ def test_engaged_command_is_applied_and_echoed_without_reading_truth():
     assert node.rig.cmds[-1] == pytest.approx(0.009)
     est = links.estimate.sent[-1]
     assert isinstance(est, Estimate) and est.cmd_seq == 109 and est.seq == 9
-    assert est.T_in == pytest.approx(9.0) and len(est.profile) == node.cfg.estimator.profile_points
-    assert est.T_out_hat == pytest.approx(9.0 * math.exp(-0.6), rel=1e-6)   # full pull slip
-    assert est.profile[0] == pytest.approx(9.0, rel=1e-6)
+    (tendon,), (profile,) = est.tendons, est.profiles          # one axis of one tendon
+    assert tendon.T_in == pytest.approx(9.0) and len(profile) == node.cfg.estimator.profile_points
+    assert tendon.T_out_hat == pytest.approx(9.0 * math.exp(-0.6), rel=1e-6)   # full pull slip
+    assert est.axes[0].effort_hat == tendon.T_out_hat
+    assert profile[0] == pytest.approx(9.0, rel=1e-6)
 
 
 def test_not_engaged_is_ready_and_holds_the_last_position():

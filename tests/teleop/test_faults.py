@@ -13,17 +13,7 @@ from teleop.clock import FakeClock
 from teleop.codec import WIRE_VERSION, decode, encode
 from teleop.errors import CodecError, ConfigError
 from teleop.faults import FaultInjector, corrupt_payload, parse_fault_spec
-from teleop.messages import (
-    Command,
-    Estimate,
-    Heartbeat,
-    JointCommand,
-    JointEstimate,
-    JointState,
-    Side,
-    SideState,
-    TendonState,
-)
+from teleop.messages import AxisState, Command, Estimate, Heartbeat, Side, SideState, TendonState, tendon_estimate
 
 DT = 1e-3
 
@@ -47,7 +37,7 @@ def run(spec, n=200, stream="command"):
     wire = Wire(clock)
     pub = inj.wrap(wire, stream)
     for k in range(n):
-        pub.put(Command(k, clock.now(), 1e-3, True, 0))
+        pub.put(Command(k, clock.now(), (1e-3,), True, 0))
         clock.advance(DT)
     return inj, wire, clock
 
@@ -100,7 +90,7 @@ def test_a_held_message_goes_out_even_without_a_next_one():
     clock = FakeClock(0.0)
     inj = FaultInjector("reorder=1", clock)
     wire = Wire(clock)
-    inj.wrap(wire, "command").put(Command(7, 0.0, 0.0))
+    inj.wrap(wire, "command").put(Command(7, 0.0, (0.0,)))
     assert wire.out == [] and inj.pending() == 1
     clock.advance(0.2)
     assert inj.pump() == 1 and wire.seqs() == [7]
@@ -112,7 +102,7 @@ def test_fault_window_at_and_for_and_other_streams_untouched():
     cmd, hb = Wire(clock), Wire(clock)
     pc, ph = inj.wrap(cmd, "command"), inj.wrap(hb, "heartbeat")
     for k in range(100):
-        pc.put(Command(k, clock.now(), 0.0))
+        pc.put(Command(k, clock.now(), (0.0,)))
         ph.put(Heartbeat(Side.MASTER, k, clock.now(), SideState.ENGAGED))
         clock.advance(DT)
     assert cmd.seqs() == list(range(50)) + list(range(70, 100)) and len(hb.out) == 100
@@ -128,20 +118,20 @@ def test_sigusr1_triggers_the_fault():
         wire = Wire(clock)
         pub = inj.wrap(wire, "command")
         for k in range(10):
-            pub.put(Command(k, clock.now(), 0.0))
+            pub.put(Command(k, clock.now(), (0.0,)))
             clock.advance(DT)
         assert len(wire.out) == 10 and inj.t_fault is None
         os.kill(os.getpid(), signal.SIGUSR1)
-        pub.put(Command(10, clock.now(), 0.0))
+        pub.put(Command(10, clock.now(), (0.0,)))
         assert len(wire.out) == 10 and inj.t_fault == pytest.approx(0.01)
     finally:
         signal.signal(signal.SIGUSR1, old)
 
 
-EST = Estimate(3, 2, 1.0, 10.0, 0.004, 5.0, 1e-4, 0.0039, Phase.PULL, (1.0, 2.0))
+EST = tendon_estimate(3, 2, 1.0, 10.0, 0.004, 5.0, 1e-4, 0.0039, Phase.PULL, (1.0, 2.0))
 
 
-@pytest.mark.parametrize("msg", [Command(1, 0.5, 0.002, True, 1), EST,
+@pytest.mark.parametrize("msg", [Command(1, 0.5, (0.002,), True, 1), EST,
                                  Heartbeat(Side.SLAVE, 4, 2.0, SideState.READY)])
 @pytest.mark.parametrize("kind, error", [("nan", "nan"), ("inf", "inf"), ("version", f"version {WIRE_VERSION + 1}")])
 def test_byte_level_corruptions_are_refused_by_the_codec(msg, kind, error):
@@ -152,10 +142,10 @@ def test_byte_level_corruptions_are_refused_by_the_codec(msg, kind, error):
 
 
 def test_range_corruption_decodes_to_an_impossible_value():
-    assert decode(corrupt_payload(encode(Command(1, 0.5, 0.002)), "range")).x_in_cmd == 1.0
-    assert decode(corrupt_payload(encode(EST), "range")).T_out_hat == 1e4
-    raw = corrupt_payload(encode(Command(1, 0.5, 0.002)), "nan")
-    assert math.isnan(struct.unpack_from("<d", raw, raw.index(struct.pack("<d", 0.5)) + 8)[0])
+    assert decode(corrupt_payload(encode(Command(1, 0.5, (0.002,))), "range")).targets == (100.0,)
+    assert decode(corrupt_payload(encode(EST), "range")).tendons[0].T_out_hat == 1e4
+    raw = corrupt_payload(encode(Command(1, 0.5, (0.002,))), "nan")
+    assert math.isnan(struct.unpack_from("<d", raw, len(raw) - 8)[0])       # the last field: the target
 
 
 def test_corrupt_stream_counts_every_message():
@@ -164,14 +154,14 @@ def test_corrupt_stream_counts_every_message():
     assert inj.stats()["spec"] == "corrupt=version"
 
 
-def test_joint_messages_are_corrupted_too():
+def test_messages_of_a_joint_instrument_are_corrupted_too():
     t = TendonState(5.0, 0.001, 4.0, 1e-4, Phase.PULL)
-    cmd = JointCommand(3, 1.0, (0.1, -0.2, 0.3), True, 0)
-    est = JointEstimate(4, 3, 1.0, tuple(JointState(0.01, 0.1, (t, t)) for _ in range(3)))
+    cmd = Command(3, 1.0, (0.1, -0.2, 0.3), True, 0)
+    est = Estimate(4, 3, 1.0, tuple(AxisState(0.01, 0.1, (t, t)) for _ in range(3)))
     for msg in (cmd, est):
         for kind in ("nan", "inf", "version"):
             with pytest.raises(CodecError):
                 decode(corrupt_payload(encode(msg), kind))
-    assert decode(corrupt_payload(encode(cmd), "range")).angles == (100.0, -0.2, 0.3)
+    assert decode(corrupt_payload(encode(cmd), "range")).targets == (100.0, -0.2, 0.3)
     bad = decode(corrupt_payload(encode(est), "range"))
-    assert bad.joints[0].tendons[0].T_out_hat == 1e4 and bad.joints[1:] == est.joints[1:]
+    assert bad.axes[0].tendons[0].T_out_hat == 1e4 and bad.axes[0].tendons[1] == t and bad.axes[1:] == est.axes[1:]

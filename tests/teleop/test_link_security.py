@@ -19,7 +19,7 @@ from teleop.config import TransportAuthConfig, TransportConfig, TransportTlsConf
 from teleop.errors import ConfigError
 from teleop.keys import command_key, estimate_key
 from teleop.link_security import SourceLock, link_security_settings
-from teleop.messages import Command, Estimate, Phase
+from teleop.messages import Command, Estimate, Phase, tendon_estimate
 from teleop.transport import Session, free_tcp_port, loopback_endpoint
 
 DEADLINE = 5.0   # [s] bound of any wait
@@ -75,19 +75,19 @@ def test_wrong_password_peer_can_neither_command_nor_read_estimates(pki):
         rogue_est = rogue.subscriber(estimate_key("sec1"), Estimate)
         rogue_cmd = rogue.publisher(command_key("sec1"))
         good_cmd = master.publisher(command_key("sec1"))
-        est = Estimate(1, 1, 0.0, 2.0, 0.001, 1.5, 1e-5, 0.00099, Phase.HOLD)
+        est = tendon_estimate(1, 1, 0.0, 2.0, 0.001, 1.5, 1e-5, 0.00099, Phase.HOLD)
         # the authorised master is heard and hears; over the same window the rogue's 100 commands are not
         for i in range(100):
-            rogue_cmd.put(Command(10_000 + i, 0.0, 0.002))
-        assert _until(good_cmd, Command(1, 0.0, 0.001), commands)
+            rogue_cmd.put(Command(10_000 + i, 0.0, (0.002,)))
+        assert _until(good_cmd, Command(1, 0.0, (0.001,)), commands)
         assert _until(est_pub, est, good_est, 1)
         for i in range(100):
-            rogue_cmd.put(Command(20_000 + i, 0.0, 0.002))
+            rogue_cmd.put(Command(20_000 + i, 0.0, (0.002,)))
             est_pub.put(est)
         assert good_est.wait(good_est.count + 1, timeout=DEADLINE)
         assert heard and all(seq == 1 for seq in heard)    # the rogue's 200 commands never arrived
         assert rogue_est.count == 0 and rogue_est.latest() is None
-        assert commands.latest().message == Command(1, 0.0, 0.001)
+        assert commands.latest().message == Command(1, 0.0, (0.001,))
         assert str(rogue.zenoh_session.zid()) not in {str(z) for z in slave.zenoh_session.info.peers_zid()}
         assert str(master.zenoh_session.zid()) in {str(z) for z in slave.zenoh_session.info.peers_zid()}
 
@@ -103,7 +103,7 @@ def test_a_certificate_from_another_ca_is_refused(pki, tmp_path):
         sub = a.subscriber(command_key("sec2"))
         pub = b.publisher(command_key("sec2"))
         for i in range(20):
-            pub.put(Command(i, 0.0, 0.0))
+            pub.put(Command(i, 0.0, (0.0,)))
         assert not sub.wait(1, timeout=0.5)
         assert list(a.zenoh_session.info.peers_zid()) == []
 
@@ -121,18 +121,18 @@ def test_slave_lock_admits_one_master_session_until_its_token_goes():
         while not (second._handle.matching_status.matching and first._handle.matching_status.matching):
             assert time.monotonic() < deadline, "routes to the subscriber not established"
             time.sleep(0.01)
-        assert _until(first, Command(1, 0.0, 0.001), sub)
+        assert _until(first, Command(1, 0.0, (0.001,)), sub)
         assert lock.owner == str(master.zenoh_session.zid())
         for i in range(50):
-            second.put(Command(100 + i, 0.0, 0.002))
-        first.put(Command(2, 0.0, 0.001))
+            second.put(Command(100 + i, 0.0, (0.002,)))
+        first.put(Command(2, 0.0, (0.001,)))
         assert sub.wait(sub.count + 1, timeout=DEADLINE)
         deadline = time.monotonic() + DEADLINE
         while lock.foreign < 50 and time.monotonic() < deadline:
             time.sleep(0.01)
         assert lock.foreign == 50 and sub.latest().message.seq == 2
         lock.on_liveliness("teleop/sec3/master/alive", False)     # the master's token is gone
-        assert _until(second, Command(200, 0.0, 0.002), sub, sub.count + 1)
+        assert _until(second, Command(200, 0.0, (0.002,)), sub, sub.count + 1)
         assert lock.owner == str(other.zenoh_session.zid())
 
 
@@ -164,20 +164,20 @@ def test_the_slaves_links_hear_one_master_session_and_follow_a_new_one_after_its
     port = free_tcp_port()
     with Session(TransportConfig(listen=(loopback_endpoint(port),), connect=())) as slave:
         slave.lock_master = True                             # what teleop.discovery sets from transport.lock_master
-        links = slave_links(slave, "sec4", None, Command)
+        links = slave_links(slave, "sec4", None)
         with Session(TransportConfig(listen=(), connect=(loopback_endpoint(port),))) as master, \
                 Session(TransportConfig(listen=(), connect=(loopback_endpoint(port),))) as intruder:
             token = master.liveliness_token(liveliness_key("sec4", "master"))
             mine, theirs = master.publisher(command_key("sec4")), intruder.publisher(command_key("sec4"))
-            assert _until(mine, Command(1, 0.0, 0.001), links.command)
+            assert _until(mine, Command(1, 0.0, (0.001,)), links.command)
             deadline = time.monotonic() + DEADLINE
             while not theirs._handle.matching_status.matching:     # the intruder's puts do reach the slave
                 assert time.monotonic() < deadline
                 time.sleep(0.01)
             n, lock = links.command.count, links.command.source_lock
             for i in range(30):
-                theirs.put(Command(500 + i, 0.0, 0.002))
-            mine.put(Command(2, 0.0, 0.001))
+                theirs.put(Command(500 + i, 0.0, (0.002,)))
+            mine.put(Command(2, 0.0, (0.001,)))
             assert links.command.wait(n + 1, timeout=DEADLINE)
             while lock.foreign < 30 and time.monotonic() < deadline:
                 time.sleep(0.01)
@@ -187,7 +187,7 @@ def test_the_slaves_links_hear_one_master_session_and_follow_a_new_one_after_its
             deadline = time.monotonic() + DEADLINE
             while links.master_alive() and time.monotonic() < deadline:
                 time.sleep(0.01)
-            assert _until(theirs, Command(600, 0.0, 0.002), links.command, n + 2)
+            assert _until(theirs, Command(600, 0.0, (0.002,)), links.command, n + 2)
 
 
 def test_a_router_with_a_credentials_dictionary_routes_only_for_authorised_clients(pki):
@@ -207,6 +207,6 @@ def test_a_router_with_a_credentials_dictionary_routes_only_for_authorised_clien
         good_est = master.subscriber(estimate_key("sec5"), Estimate)
         with pytest.raises(TransportError, match="Unable to connect"):   # a client with a wrong password: no session
             Session(client("surgeon", "guess"))
-        assert _until(master.publisher(command_key("sec5")), Command(1, 0.0, 0.001), commands)
-        assert _until(slave.publisher(estimate_key("sec5")), Estimate(1, 1, 0.0, 2.0, 0.0, 1.5, 0.0, 0.0, Phase.HOLD),
+        assert _until(master.publisher(command_key("sec5")), Command(1, 0.0, (0.001,)), commands)
+        assert _until(slave.publisher(estimate_key("sec5")), tendon_estimate(1, 1, 0.0, 2.0, 0.0, 1.5, 0.0, 0.0, Phase.HOLD),
                       good_est)

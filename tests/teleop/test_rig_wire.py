@@ -36,7 +36,7 @@ def test_bad_messages_are_refused_when_encoding(msg, match):
 def test_bad_buffers_are_refused_when_decoding():
     good = encode_rig(RigSetpoint(1, 0.0, (0.0,)))
     with pytest.raises(CodecError, match="not a rig message"):
-        decode_rig(encode(Command(1, 0.0, 0.0)))                # a teleop message is not a rig message
+        decode_rig(encode(Command(1, 0.0, (0.0,))))                # a teleop message is not a rig message
     with pytest.raises(CodecError, match="version"):
         decode_rig(good[:1] + bytes([9]) + good[2:])
     with pytest.raises(CodecError, match="expected 25"):

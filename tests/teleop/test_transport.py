@@ -15,7 +15,7 @@ from teleop.clock import FakeClock
 from teleop.config import TransportConfig
 from teleop.errors import CodecError, ConfigError, TransportError
 from teleop.keys import command_key, estimate_key, liveliness_key, liveliness_pattern
-from teleop.messages import Command, Estimate, Phase, Side
+from teleop.messages import Command, Estimate, Phase, Side, tendon_estimate
 from teleop.transport import RateLimitedLog, Session, free_tcp_port, free_tcp_ports, loopback_endpoint, zenoh_config
 
 DEADLINE = 5.0     # [s] upper bound of any wait; the waits return as soon as the event happens
@@ -76,7 +76,7 @@ def test_command_published_is_received_decoded(pair):
     sub = a.subscriber(command_key("t1"), expect=Command)
     pub = b.publisher(command_key("t1"))
     assert sub.latest() is None and sub.age(0.0) == math.inf
-    msg = Command(42, 1.25, 0.003, True, 7)
+    msg = Command(42, 1.25, (0.003,), True, 7)
     assert _publish_until_received(pub, sub, msg)
     rec = sub.latest()
     assert rec.message == msg and isinstance(rec.message, Command)
@@ -87,29 +87,29 @@ def test_latest_wins_and_estimate_profile_survives(pair):
     a, b = pair
     sub = a.subscriber(estimate_key("t2"), expect=Estimate)
     pub = b.publisher(estimate_key("t2"))
-    first = Estimate(0, 0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0, Phase.HOLD)
+    first = tendon_estimate(0, 0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0, Phase.HOLD)
     assert _publish_until_received(pub, sub, first)
     n = sub.count
     for seq in range(1, 21):
-        pub.put(Estimate(seq, seq, 0.1 * seq, 5.0, 0.01, 3.0, 1e-4, 0.0099, Phase.PULL, (5.0, 4.0, 3.0)))
+        pub.put(tendon_estimate(seq, seq, 0.1 * seq, 5.0, 0.01, 3.0, 1e-4, 0.0099, Phase.PULL, (5.0, 4.0, 3.0)))
     assert sub.wait(n + 20, timeout=DEADLINE)
     last = sub.latest().message
-    assert last.seq == 20 and last.profile == (5.0, 4.0, 3.0) and last.phase is Phase.PULL
+    assert last.seq == 20 and last.profiles == ((5.0, 4.0, 3.0),) and last.tendons[0].phase is Phase.PULL
 
 
 def test_garbage_is_counted_not_raised_and_subscriber_survives(pair, caplog):
     a, b = pair
     sub = a.subscriber(command_key("t3"), expect=Command)
     pub = b.publisher(command_key("t3"))
-    assert _publish_until_received(pub, sub, Command(1, 0.0, 0.0))
+    assert _publish_until_received(pub, sub, Command(1, 0.0, (0.0,)))
     with caplog.at_level(logging.WARNING, logger="teleop.transport"):
         pub.put_bytes(b"\x00garbage")
         pub.put_bytes(b"\xa7\x03\x01" + bytes(25))                       # a future wire version
         assert sub.wait_errors(2, timeout=DEADLINE)
-    assert sub.latest().message == Command(1, 0.0, 0.0)                  # garbage did not replace it
+    assert sub.latest().message == Command(1, 0.0, (0.0,))                  # garbage did not replace it
     assert "dropped a bad message" in caplog.text
     n = sub.count
-    pub.put(Command(2, 0.0, 0.001))
+    pub.put(Command(2, 0.0, (0.001,)))
     assert sub.wait(n + 1, timeout=DEADLINE)
     assert sub.latest().message.seq == 2 and sub.errors == 2
 
@@ -118,10 +118,10 @@ def test_wrong_message_type_on_a_key_is_an_error(pair):
     a, b = pair
     sub = a.subscriber(command_key("t4"), expect=Command)
     pub = b.publisher(command_key("t4"))
-    assert _publish_until_received(pub, sub, Command(1, 0.0, 0.0))
-    pub.put(Estimate(0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, Phase.HOLD))
+    assert _publish_until_received(pub, sub, Command(1, 0.0, (0.0,)))
+    pub.put(tendon_estimate(0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, Phase.HOLD))
     assert sub.wait_errors(1, timeout=DEADLINE)
-    assert sub.latest().message == Command(1, 0.0, 0.0)
+    assert sub.latest().message == Command(1, 0.0, (0.0,))
 
 
 def test_receive_time_comes_from_the_injected_clock():
@@ -130,7 +130,7 @@ def test_receive_time_comes_from_the_injected_clock():
     with Session(_listener(port), clock=clock) as a, Session(_connector(port)) as b:
         sub = a.subscriber(command_key("t5"))
         pub = b.publisher(command_key("t5"))
-        assert _publish_until_received(pub, sub, Command(1, 0.0, 0.0))
+        assert _publish_until_received(pub, sub, Command(1, 0.0, (0.0,)))
         assert sub.latest().t_recv == 100.0
         assert sub.age(100.25) == pytest.approx(0.25)
 
@@ -185,7 +185,7 @@ def test_close_is_idempotent_and_use_after_close_is_a_transport_error():
     assert s.closed and pub.closed and sub.closed
     pub.close()
     with pytest.raises(TransportError, match="closed"):
-        pub.put(Command(1, 0.0, 0.0))
+        pub.put(Command(1, 0.0, (0.0,)))
     with pytest.raises(TransportError, match="session already closed"):
         s.publisher(command_key("t9"))
 
@@ -200,8 +200,8 @@ def test_port_in_use_is_a_transport_error():
 def test_encode_errors_reach_the_sender(pair):
     _, b = pair
     pub = b.publisher(command_key("t10"))
-    with pytest.raises(CodecError, match="Command.x_in_cmd is nan"):
-        pub.put(Command(1, 0.0, math.nan))
+    with pytest.raises(CodecError, match=r"Command.targets\[0\] is nan"):
+        pub.put(Command(1, 0.0, (math.nan,)))
     assert pub.sent == 0
 
 
