@@ -61,9 +61,12 @@ class _Progress:
 
 
 def parse_calibration(spec: str | None, runs: list[MrdRun]) -> tuple[str, object]:
-    """("run", name) or ("segment", seconds) from ``--calibration``; default the slowest, lightest run.
+    """("run", names) or ("segment", seconds) from ``--calibration``: ``RUN`` or ``RUN,RUN,...``
+    (calibrate on those runs together, score the others), or ``segment:SECONDS``; default the
+    slowest, lightest run. ``names`` is the comma-separated string.
 
-    Raises ConfigError for an unknown run name or a segment outside [1, half the shortest run] s.
+    Raises ConfigError for an unknown run name, every run named, or a segment outside
+    [1, half the shortest run] s.
     """
     names = [r.name for r in runs]
     if spec is None or spec == "":
@@ -78,9 +81,13 @@ def parse_calibration(spec: str | None, runs: list[MrdRun]) -> tuple[str, object
         if not 1.0 <= s <= 0.5 * shortest:
             raise ConfigError(f"--calibration {spec}: SECONDS must be in [1, {0.5 * shortest:.1f}]")
         return "segment", s
-    if spec not in names:
-        raise ConfigError(f"--calibration {spec}: no run of that name (runs: {', '.join(names)})")
-    return "run", spec
+    asked = [n.strip() for n in spec.split(",") if n.strip()]
+    unknown = [n for n in asked if n not in names]
+    if unknown or not asked:
+        raise ConfigError(f"--calibration {spec}: no run named {', '.join(unknown) or spec!r} (runs: {', '.join(names)})")
+    if len(set(asked)) == len(names):
+        raise ConfigError(f"--calibration {spec}: every run is a calibration run, none is left to score")
+    return "run", ",".join(dict.fromkeys(asked))
 
 
 def band_measurements(run: MrdRun, bins_deg: float = 2.0) -> dict:
@@ -169,10 +176,11 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
     details = {"pred": {}, "shared_pred": {}, "loro_pred": {}, "k0": {}}
     cal_inputs = {"inputs": ["spindle torque", "spindle encoder"], "targets": ["jaw torque", "jaw encoder"]}
     if mode == "run":
-        fits, base, sel, centre, ref = _calibrate([_rundata(next(r for r in runs if r.name == cal))], tick)
-        out["calibration"] = {"mode": "run", "run": cal, **cal_inputs,
+        cal_names = cal.split(",")
+        fits, base, sel, centre, ref = _calibrate([_rundata(r) for r in runs if r.name in cal_names], tick)
+        out["calibration"] = {"mode": "run", "run": cal, "runs": cal_names, **cal_inputs,
                               "scored": "every other run, from its spindle signals only"}
-        plan = [(r, fits, base, centre, ref, _rundata(r).k0) for r in runs if r.name != cal]
+        plan = [(r, fits, base, centre, ref, _rundata(r).k0) for r in runs if r.name not in cal_names]
         out["parameters"] = {n: p.as_dict() for n, p in fits.items()}
         out["baseline_parameters"] = {n: b.params for n, b in base.items()}
         out["selection"] = sel

@@ -105,7 +105,8 @@ def test_analysis_keys_calibration_and_what_was_fitted_on(tmp_path):
     assert [r.load_level for r in runs] == [0, 1, 0]
     assert parse_calibration(None, runs) == ("run", "00")           # slowest, lightest
     assert parse_calibration("segment:2", runs) == ("segment", 2.0)
-    for bad in ("99", "segment:x", "segment:0.2"):
+    assert parse_calibration("01,00,01", runs) == ("run", "01,00")
+    for bad in ("99", "segment:x", "segment:0.2", "00,01,10", "00,99"):
         with pytest.raises(ConfigError):
             parse_calibration(bad, runs)
     s, d = analyze_mrd(runs, loro=True)
@@ -119,6 +120,8 @@ def test_analysis_keys_calibration_and_what_was_fitted_on(tmp_path):
     assert "rho" in s["not_from_proximal"] and "ODbL" in s["attribution"]
     assert set(s["loro"]["runs"]) == {"00", "01", "10"}
     assert s["loro"]["summary"]["median_torque_rmse_fs"] < 0.1
+    two, _ = analyze_mrd(runs, "00,01", folder=False)
+    assert set(two["runs"]) == {"10"} and two["calibration"]["runs"] == ["00", "01"]
     seg, _ = analyze_mrd(runs, "segment:3", loro=False)
     assert set(seg["runs"]) == {"00", "01", "10"} and seg["calibration"]["mode"] == "segment"
     json.dumps(s, allow_nan=False)
