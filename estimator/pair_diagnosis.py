@@ -2,21 +2,30 @@
 
 The pair counterpart of :func:`estimator.diagnosis.diagnose` for recordings with a motor command,
 the two proximal tensions and the distal angle only (the KAIST flexible endoscope,
-docs/findings.md). The models and effects are in :mod:`estimator.pair_models`. Same held-out
-discipline as the single-tendon diagnosis:
+docs/findings.md). The models and effects are in :mod:`estimator.pair_models`. Held-out
+discipline: model choice sees the training block only; the test block is touched once, for the
+reported figure of the chosen model (and of the seed model it is compared with).
 
-1. Every model is fitted on the training samples (the first command cycle) with
+1. Every model is fitted on the whole training block (the first command cycle) with
    ``scipy.optimize.least_squares`` from a few starting points, and always runs from the first
-   sample, so the test block (the second cycle) starts from the state the training left.
-2. Score on the test block relative to the seed model: S = (rmse / rmse_seed)^2 (one signal).
+   sample, so the test block (the later cycles) starts from the state the training left.
+2. Choice by time-blocked cross-validation inside the training block: the block is cut into
+   CV_BLOCKS (8) contiguous time blocks, the even ones form fold 1 and the odd ones fold 2; the
+   model is refitted on each fold (warm start from step 1, at most CV_NFEV evaluations, the model
+   still running from the first sample) and scored on the other; cv rmse = root of the mean of the
+   two squared fold errors. (Halves, one reversal each, made the refits wander: an extrapolation
+   to the other reversal rather than a check of the fit.)
+   Score S = (cv rmse / cv rmse of the seed)^2.
 3. Forward selection with a price per parameter: starting from the seed, the candidate with the
    lowest S / S_chosen + PENALTY (n_params - n_params_chosen) is accepted when that is below 1
    (PENALTY: the single-tendon diagnosis's price, :data:`estimator.diagnosis.PENALTY`); the first
    round offers the capstan structure (``capstan_joint``) and the seed with each effect, later
    rounds every effect that applies to the model chosen so far; at most ``max_effects`` are
-   accepted, and the search stops once the chosen model's test rmse is within STRUCTURE_RATIO
-   times the tracker noise.
-4. ``unknown`` is appended when the chosen model's test rmse is still above STRUCTURE_RATIO (3) times
+   accepted, and the search stops once the chosen model's cv rmse is within STRUCTURE_RATIO
+   times the tracker noise. A candidate whose *training* rmse ratio alone already prices it out
+   ((rmse_train / rmse_train,chosen)^2 + PENALTY x extra parameters >= 1 + SCREEN_MARGIN) is not
+   cross-validated (listed as ``screened_out``), which saves most of the refits.
+4. ``unknown`` is appended when the chosen model's cv rmse is still above STRUCTURE_RATIO (3) times
    the tracker noise (robust level of the angle's second differences): structure left that no
    candidate explains. ``none`` when nothing is accepted and no structure is left.
 """
@@ -35,7 +44,8 @@ from estimator.pair import fit_pair
 from estimator.pair_models import (CAUSE_OF_SEED, PAIR_EFFECTS, applicable, model_id, model_params,
                                    predict_model)
 
-__all__ = ["CAPSTAN_STARTS", "MAX_NFEV", "fit_model", "diagnose_pair", "FitResult"]
+__all__ = ["CAPSTAN_STARTS", "MAX_NFEV", "CV_NFEV", "fit_model", "folds", "cross_validate", "diagnose_pair",
+           "FitResult"]
 
 #: Starting points of the capstan structure (G [-], lam [rad/N], K_a, K_b [-], k [N/rad]).
 CAPSTAN_STARTS = ({"G": 1.4, "lam": 0.4, "K_a": 0.8, "K_b": 0.4, "k": 4.0},
@@ -46,6 +56,12 @@ _BAD = 10.0     # residual [rad] returned for a parameter set the kernels refuse
 #: Most residual evaluations of one least-squares start (bounds the run time on data far from every
 #: model; the KAIST fits converge in 30-190).
 MAX_NFEV = 200
+#: Most residual evaluations of a cross-validation refit (warm-started from the full training fit).
+CV_NFEV = 40
+#: A candidate whose training-error ratio alone gives a price >= 1 + SCREEN_MARGIN is not cross-validated.
+SCREEN_MARGIN = 0.1
+#: Contiguous time blocks of the training block, alternately given to the two cross-validation folds.
+CV_BLOCKS = 8
 
 
 class FitResult:
@@ -82,7 +98,7 @@ class FitResult:
 
 
 def fit_model(structure: str, effects: tuple[str, ...], rec, train: slice, test: slice,
-              starts: list[dict[str, float]]) -> FitResult:
+              starts: list[dict[str, float]], max_nfev: int = MAX_NFEV) -> FitResult:
     """Fit one model on the ``train`` samples by ``least_squares`` from each start; keep the lowest
     training cost.
 
@@ -92,6 +108,7 @@ def fit_model(structure: str, effects: tuple[str, ...], rec, train: slice, test:
     rec : recording (time, command, T_a, T_b, angle; arrays of shape (n,))
     train, test : slices of the samples (the model runs from sample 0 in both cases)
     starts : starting values by name; a missing name takes each of its parameter's ``starts``
+    max_nfev : most residual evaluations per start
 
     Returns
     -------
@@ -119,54 +136,81 @@ def fit_model(structure: str, effects: tuple[str, ...], rec, train: slice, test:
     best = None
     for x0 in x0s:
         sol = least_squares(residual, x0, bounds=(lo, hi), x_scale=[p.scale for p in params], diff_step=1e-3,
-                            max_nfev=MAX_NFEV)
+                            max_nfev=max_nfev)
         if best is None or sol.cost < best.cost:
             best = sol
     return FitResult(structure, effects, dict(zip(names, map(float, best.x))), rec, train, test)
 
 
-def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 3,
+def folds(train: slice, n: int, blocks: int = CV_BLOCKS) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The two folds of the time-blocked cross-validation inside ``train`` (of a recording of ``n``
+    samples): the block is cut into ``blocks`` contiguous time blocks, fold 1 holds the even ones and
+    fold 2 the odd ones; returns [(fit on fold 1, score on fold 2), (fit on fold 2, score on fold 1)]
+    as sample index arrays."""
+    a, b, _ = train.indices(n)
+    edges = np.linspace(a, b, blocks + 1).round().astype(int)
+    parts = [np.arange(edges[i], edges[i + 1]) for i in range(blocks)]
+    even, odd = np.concatenate(parts[0::2]), np.concatenate(parts[1::2])
+    return [(even, odd), (odd, even)]
+
+
+def cross_validate(fx: FitResult, rec, train: slice, max_nfev: int = CV_NFEV) -> float:
+    """Time-blocked cross-validation rmse [rad] of a fitted model inside the training block
+    (:func:`folds`; each fold refitted from ``fx.values``, the model running from the first sample)."""
+    y = np.asarray(rec.angle, dtype=float)
+    sq = []
+    for fit_on, score_on in folds(train, len(y)):
+        f = fit_model(fx.structure, fx.effects, rec, fit_on, score_on, [dict(fx.values)], max_nfev=max_nfev)
+        sq.append(np.mean((f.angle[score_on] - y[score_on]) ** 2))
+    return float(np.sqrt(np.mean(sq)))
+
+
+def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,
                   progress: Callable[[str], None] | None = None) -> tuple[dict, dict[str, FitResult]]:
     """Diagnose one pair recording: the seed model's error, the effects that explain it, the gain.
 
     Parameters
     ----------
     rec : recording with time [s], command [rad], T_a, T_b [N], angle [rad], arrays of shape (n,)
-    train, test : sample slices (KAIST: command cycles 1 and 2, :func:`teleop.kaist.cycles`)
+    train, test : sample slices (KAIST: command cycle 1 and the later cycles, :func:`teleop.kaist.split`);
+        the choice uses ``train`` only (module docstring), ``test`` gives the reported figures
     max_effects : most effects accepted (the capstan structure counts as one), >= 1
     progress : called with a label after every fitted model
 
     Returns
     -------
     summary : dict, JSON-ready
-        ``seed`` and ``extended`` (:meth:`FitResult.summary`), ``cause`` (first accepted effect,
-        "none" or "unknown"), ``causes`` (accepted in order, plus "unknown" when structure is left),
-        ``gain`` (1 - extended / seed test rmse), ``candidates`` (model id -> rmse_test_deg, score S,
-        price, accepted, round, params), ``noise_deg``, ``structure_ratio``, ``n_train``, ``n_test``,
-        ``elapsed_s``.
+        ``seed`` and ``extended`` (:meth:`FitResult.summary` plus ``rmse_cv_deg``), ``cause`` (first
+        accepted effect, "none" or "unknown"), ``causes`` (accepted in order, plus "unknown" when
+        structure is left), ``gain`` (1 - extended / seed test rmse), ``candidates`` (model id ->
+        rmse_cv_deg, rmse_train_deg, score S, price, accepted, round, params; no test figure),
+        ``samples`` (which samples were used for what), ``noise_deg``, ``structure_ratio``,
+        ``n_train``, ``n_test``, ``elapsed_s``.
     fits : dict of model id -> FitResult (predictions for figures; not JSON)
 
     Raises
     ------
     ValueError
-        ``max_effects`` < 1, or a training block shorter than 8 samples.
+        ``max_effects`` < 1, or a training block shorter than 16 samples.
     """
     t0 = _time.perf_counter()
     if max_effects < 1:
         raise ValueError(f"max_effects must be >= 1, got {max_effects!r}")
-    n_train = len(range(*train.indices(len(rec.angle))))
-    if n_train < 8:
-        raise ValueError(f"the training block has {n_train} samples, need at least 8")
+    n = len(rec.angle)
+    n_train = len(range(*train.indices(n)))
+    if n_train < 16:
+        raise ValueError(f"the training block has {n_train} samples, need at least 16")
     tick = progress or (lambda label: None)
     sp = fit_pair(rec.command, rec.T_a, rec.T_b, rec.angle, train.stop).params
     seed = fit_model("seed", (), rec, train, test, [sp])
+    cv = {seed.id: cross_validate(seed, rec, train)}
     tick("seed")
     fits: dict[str, FitResult] = {seed.id: seed}
     candidates: dict[str, dict] = {}
     chosen, accepted = seed, []
     noise = noise_level(np.asarray(rec.angle, dtype=float))
     for rnd in range(1, max_effects + 1):
-        if chosen.rmse_test <= STRUCTURE_RATIO * noise:
+        if cv[chosen.id] <= STRUCTURE_RATIO * noise:
             break                       # nothing left above the noise for another effect to explain
         trial: dict[str, tuple[str, FitResult]] = {}
         if chosen.structure == "seed":
@@ -181,9 +225,18 @@ def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 3,
         price = {}
         for eid, (_, fx) in trial.items():
             fits[fx.id] = fx
-            S = (fx.rmse_test / seed.rmse_test) ** 2
-            price[eid] = S / (chosen.rmse_test / seed.rmse_test) ** 2 + PENALTY * (fx.n_params - chosen.n_params)
-            candidates[fx.id] = {"effect": eid, "round": rnd, "rmse_test_deg": math.degrees(fx.rmse_test),
+            extra = PENALTY * (fx.n_params - chosen.n_params)
+            if (fx.rmse_train / chosen.rmse_train) ** 2 + extra >= 1.0 + SCREEN_MARGIN:
+                # priced out on its training error alone (a cv error is not below it): no cv refits
+                candidates[fx.id] = {"effect": eid, "round": rnd, "rmse_cv_deg": None,
+                                     "rmse_train_deg": math.degrees(fx.rmse_train), "score": None, "price": None,
+                                     "accepted": False, "params": {k: float(v) for k, v in fx.values.items()},
+                                     "screened_out": "training error alone prices it out"}
+                continue
+            cv[fx.id] = cross_validate(fx, rec, train)
+            S = (cv[fx.id] / cv[seed.id]) ** 2
+            price[eid] = S / (cv[chosen.id] / cv[seed.id]) ** 2 + PENALTY * (fx.n_params - chosen.n_params)
+            candidates[fx.id] = {"effect": eid, "round": rnd, "rmse_cv_deg": math.degrees(cv[fx.id]),
                                  "rmse_train_deg": math.degrees(fx.rmse_train), "score": S, "price": price[eid],
                                  "accepted": False, "params": {k: float(v) for k, v in fx.values.items()}}
         if not price:
@@ -194,12 +247,19 @@ def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 3,
         chosen = trial[best][1]
         accepted.append(best)
         candidates[chosen.id]["accepted"] = True
-    ratio = chosen.rmse_test / max(noise, 1e-12)
+    ratio = cv[chosen.id] / max(noise, 1e-12)
     causes = accepted + (["unknown"] if ratio > STRUCTURE_RATIO else [])
-    summary = {"seed": seed.summary(), "extended": chosen.summary(), "cause": causes[0] if causes else "none",
+    summary = {"seed": {**seed.summary(), "rmse_cv_deg": math.degrees(cv[seed.id])},
+               "extended": {**chosen.summary(), "rmse_cv_deg": math.degrees(cv[chosen.id])},
+               "cause": causes[0] if causes else "none",
                "causes": causes, "gain": 1.0 - chosen.rmse_test / seed.rmse_test, "candidates": candidates,
                "noise_deg": math.degrees(noise), "structure_ratio": ratio, "n_train": n_train,
-               "n_test": len(range(*test.indices(len(rec.angle)))), "penalty_per_parameter": PENALTY,
+               "n_test": len(range(*test.indices(n))), "penalty_per_parameter": PENALTY,
+               "samples": {"fit": [train.start or 0, train.stop],
+                           "choice": f"time-blocked cross-validation inside the fit block: {CV_BLOCKS} contiguous "
+                                     "blocks, the even ones fitted and the odd ones scored, and the reverse",
+                           "test": [test.start, test.stop],
+                           "test_use": "once, for the chosen model's reported figure (and the seed's)"},
                "literature": {e: PAIR_EFFECTS[e].literature for e in accepted},
                "elapsed_s": _time.perf_counter() - t0}
     return summary, fits

@@ -29,6 +29,9 @@ distal torque of that rest, so the rest is an equilibrium. Extensions (literatur
   torque imbalance exceeds tau_c;
 * ``shape``  initial profile T_i = P e^{-shape g_i} (E5: shape 1 is the pull-slip profile a
   pretension applied from the motor leaves, 0 a uniform profile);
+* ``k2``, ``theta_c`` a stiffening joint (E11: the bending section's load grows faster than linear):
+  the joint stiffness is k + k2 beyond |theta| > theta_c (the simulator's tissue term,
+  :func:`estimator.kernels.load_torque`);
 * ``offset`` tension-independent friction (E8): the capstan law acts on T + a, dT/dtheta =
   -mu (T + a), so the profile memory runs on T' = T + a (torques and elongation changes are the
   same in T and T'); the slack floor stays at T' = 0, so a released tendon may carry down to -a,
@@ -83,7 +86,7 @@ def tendon_arrays(K: float, lam: float, n_nodes: int = 24, lam_s: float = 0.0, n
 
 @njit(cache=True)
 def _simulate(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, cpa, cra, lo_b, hi_b, dlo_b, dhi_b, wb, cpb, crb,
-              k, tau_c, substeps, theta, T_in):  # pragma: no cover - compiled
+              k, tau_c, substeps, theta, T_in, k2, thc):  # pragma: no cover - compiled
     Ta = Pa.copy()
     Tb = Pb.copy()
     xa0 = elongation(Ta, wa)
@@ -92,7 +95,7 @@ def _simulate(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, cpa, cra, lo_b, hi_b, 
     sbx = np.zeros(1)
     sbF = np.full(1, 1e200)
     sbs = np.ones(1)
-    slope = k + 1.0 / max(elongation(lo_a, wa), 1e-9) + 1.0 / max(elongation(lo_b, wb), 1e-9)
+    slope = k + k2 + 1.0 / max(elongation(lo_a, wa), 1e-9) + 1.0 / max(elongation(lo_b, wb), 1e-9)
     th = 0.0
     c0 = c[0]
     prev = c[0]
@@ -106,12 +109,12 @@ def _simulate(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, cpa, cra, lo_b, hi_b, 
             tau = tau0
             if tau_c > 0.0:
                 f0 = joint_torque_balance(th, Ta, dlo_a, dhi_a, wa, elongation(Ta, wa), xa, Tb, dlo_b, dhi_b, wb,
-                                          elongation(Tb, wb), xb, 1.0, th, k, 0.0, 0.0, 0.0, -_BIG, _BIG, 0.0,
+                                          elongation(Tb, wb), xb, 1.0, th, k, 0.0, k2, thc, -_BIG, _BIG, 0.0,
                                           tau0)
                 if abs(f0) <= tau_c:
                     continue
                 tau = tau0 + (tau_c if f0 > 0.0 else -tau_c)
-            th = settle_joint(Ta, dlo_a, dhi_a, wa, xa, Tb, dlo_b, dhi_b, wb, xb, 1.0, th, k, 0.0, 0.0, 0.0,
+            th = settle_joint(Ta, dlo_a, dhi_a, wa, xa, Tb, dlo_b, dhi_b, wb, xb, 1.0, th, k, 0.0, k2, thc,
                               -_BIG, _BIG, 0.0, tau, slope)
         prev = c[i]
         theta[i] = th
@@ -121,7 +124,8 @@ def _simulate(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, cpa, cra, lo_b, hi_b, 
 
 def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple[float, float],
                   K: tuple[float, float], k: float, *, lam_s: float = 0.0, tau_c: float = 0.0, shape: float = 0.0,
-                  offset: float = 0.0, n_nodes: int = 24, substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
+                  offset: float = 0.0, k2: float = 0.0, theta_c: float = 0.0, n_nodes: int = 24,
+                  substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """Run the capstan-joint pair model (module docstring, (P1)-(P4)) over a recorded command.
 
     Parameters
@@ -134,7 +138,8 @@ def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple
     K : (K_a, K_b), friction exponents [-], >= 0
     k : joint stiffness / r [N/rad], > 0
     lam_s : series compliance [rad/N] (E10); tau_c : joint friction [N] (torque / r); shape : initial
-        profile exponent in [0, 1] (E5); offset : tension offset a of the capstan law [N] (E8)
+        profile exponent in [0, 1] (E5); offset : tension offset a of the capstan law [N] (E8);
+        k2 : extra joint stiffness [N/rad] beyond |theta| > theta_c [rad] (E11 stiffening, none when 0)
     n_nodes : elements per sheath
     substeps : steps per sample; the model is rate-independent and the splitting error of one step
         per 40 Hz sample was below 1e-12 rad on the KAIST commands, so 1 is the default
@@ -153,7 +158,8 @@ def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple
     if c.ndim != 1 or c.size == 0 or not np.all(np.isfinite(c)):
         raise ValueError("command must be a non-empty 1-D array of finite angles [rad]")
     vals = {"G": G, "lam_a": lam[0], "lam_b": lam[1], "K_a": K[0], "K_b": K[1], "k": k, "lam_s": lam_s,
-            "tau_c": tau_c, "shape": shape, "offset": offset, "P_a": pretension[0], "P_b": pretension[1]}
+            "tau_c": tau_c, "shape": shape, "offset": offset, "k2": k2, "theta_c": theta_c, "P_a": pretension[0],
+            "P_b": pretension[1]}
     for name, v in vals.items():
         if not math.isfinite(v) or v < 0.0:
             raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
@@ -166,5 +172,5 @@ def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple
     theta = np.empty(c.size)
     T_in = np.empty((c.size, 2))
     _simulate(c, float(G), P[0], P[1], *arrs[0], *arrs[1], float(k), float(tau_c), max(int(substeps), 1), theta,
-              T_in)
+              T_in, float(k2), float(theta_c) if k2 > 0.0 else _BIG)
     return theta, T_in - offset

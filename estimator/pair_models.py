@@ -23,6 +23,8 @@ id                        literature   extension                                
 ``joint_friction``        E11, E12     Coulomb torque tau_c [N] (per r) in the joint     capstan
 ``series_compliance``     E10          frictionless compliance lam_s [rad/N] ahead of    capstan
                                        the sheath (drive, load cell, sheath compression)
+``joint_stiffening``      E11          joint stiffness k + k2 [N/rad] beyond |theta| >    capstan
+                                       theta_c [rad] (bending section stiffens)
 ========================= ============ ================================================ ==================
 
 Inputs of every model: a recording with ``time`` [s], ``command`` [rad] (motor side), ``T_a``,
@@ -111,6 +113,11 @@ PAIR_EFFECTS: dict[str, PairEffect] = {e.id: e for e in (
                "axial compression", "proximal travel larger than the tendon stretch; softer tension loops",
                "frictionless series spring lam_s ahead of the sheath",
                (Param("lam_s", "rad/N", 0.0, 5.0, (0.1,), 0.05),), ("capstan",)),
+    PairEffect("joint_stiffening", "E11", "the bending section stiffens towards its range (links closing up, "
+               "compressed backbone)", "the angle saturates at the end of a stroke while the pulled tendon's "
+               "tension keeps rising steeply", "joint stiffness k + k2 beyond |theta| > theta_c",
+               (Param("k2", "N/rad", 0.0, 200.0, (3.0,), 0.5), Param("theta_c", "rad", 0.02, 1.0, (0.15,), 0.02)),
+               ("capstan",)),
 )}
 
 
@@ -165,7 +172,8 @@ def predict_model(structure: str, effects: tuple[str, ...], values: dict[str, fl
     else:
         th, T_in = simulate_pair(rec.command, (float(rec.T_a[0]), float(rec.T_b[0])), v["G"], (v["lam"], v["lam"]),
                                  (v["K_a"], v["K_b"]), v["k"], lam_s=v.get("lam_s", 0.0), tau_c=v.get("tau_c", 0.0),
-                                 shape=v.get("shape", 0.0), offset=a, n_nodes=n_nodes)
+                                 shape=v.get("shape", 0.0), offset=a, k2=v.get("k2", 0.0),
+                                 theta_c=v.get("theta_c", 0.0), n_nodes=n_nodes)
         theta = th + v["theta0"]
     if "joint_backlash" in effects:
         theta = play(theta, v["b"], float(theta[0]))

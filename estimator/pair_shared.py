@@ -39,10 +39,18 @@ from scipy.optimize import least_squares
 from estimator.pair_diagnosis import MAX_NFEV
 from estimator.pair_models import Param, model_params, predict_model
 
-__all__ = ["SharedModel", "SHARED_MODELS", "LEAVE_ONE_OUT", "fit_shared", "leave_one_out", "shared_params",
-           "config_values", "score", "shared_analysis"]
+__all__ = ["SharedModel", "SHARED_MODELS", "CHOICE", "COMPARED", "TENSION_WEIGHT", "LEAVE_ONE_OUT", "fit_shared",
+           "predict_config", "leave_one_out", "shared_params", "config_values", "score", "shared_analysis"]
 
 _MU = Param("mu", "1/rad", -1.0, 3.0, (0.15,), 0.02)
+_S = Param("s", "N/rad", 0.05, 100.0, (3.0,), 0.2)
+#: Weight of the proximal-tension residual [rad/N] in the "+T" shared fits: 1 N of tension error
+#: costs as much as 0.57 deg of angle error (tension range ~10 N, angle range 20-70 deg).
+TENSION_WEIGHT = 0.01
+#: Transmission G held in the "+T" models: with the tensions in the fit the data pin s = G / lam but
+#: not G itself (bootstrap 95 % interval 3-15 when free; the held-out angle changes by < 0.3 deg for G
+#: in 3-20, docs/findings.md, Finding 3), so G is fixed and s carries the tendon compliance.
+G_FIXED = 5.0
 _G_N = Param("G_N", "1/rad", -5.0, 5.0, (0.0,), 0.02)
 _BAD = 10.0
 
@@ -52,7 +60,12 @@ class SharedModel:
     """A model shared across configurations: name, structure, effects, whether K grows with N (S1),
     starting points (name -> value; missing names take their parameter's first start), the
     parameters fitted once per configuration instead (``per_config``, named ``G[i]`` etc.) and
-    whether the transmission also changes linearly with N (``g_slope``: G = G + G_N N)."""
+    whether the transmission also changes linearly with N (``g_slope``: G = G + G_N N);
+    ``tension_weight`` [rad/N] > 0 adds the measured proximal tensions to the fit (residual
+    w (T_in,model - T_in,measured) beside the angle's), which pins the ratio of motor travel to
+    tendon compliance; ``stiffness_ratio`` fits s = G / lam [N/rad] (proximal tension per radian of
+    command with the tip held) in place of lam, the combination the data determine;
+    ``fixed`` (name, value) pairs are held, not fitted."""
 
     name: str
     structure: str
@@ -61,6 +74,9 @@ class SharedModel:
     starts: tuple[dict, ...]
     per_config: tuple[str, ...] = ()
     g_slope: bool = False
+    tension_weight: float = 0.0
+    stiffness_ratio: bool = False
+    fixed: tuple[tuple[str, float], ...] = ()
 
 
 SHARED_MODELS = {m.name: m for m in (
@@ -79,9 +95,22 @@ SHARED_MODELS = {m.name: m for m in (
     *(SharedModel(f"capstan, {q} per configuration", "capstan", (), True,
                   ({"G": 1.6, "lam": 0.5, "k": 5.0, "K0_a": 0.8, "K0_b": 0.3, "mu": 0.15},), (q,))
       for q in ("G", "lam", "k")),
+    SharedModel("capstan+T", "capstan", (), True,
+                ({"s": 3.5, "k": 3.0, "K0_a": 0.6, "K0_b": 0.2, "mu": 0.13},
+                 {"s": 2.5, "k": 5.0, "K0_a": 0.55, "K0_b": 0.25, "mu": 0.13}),
+                tension_weight=TENSION_WEIGHT, stiffness_ratio=True, fixed=(("G", G_FIXED),)),
+    SharedModel("capstan+T, G falls with N", "capstan", (), True,
+                ({"G_N": -0.29, "s": 3.1, "k": 5.8, "K0_a": 0.66, "K0_b": 0.34, "mu": 0.07},
+                 {"G_N": -0.12, "s": 6.9, "k": 7.9, "K0_a": 1.5, "K0_b": 0.87, "mu": 0.24}), (), True,
+                tension_weight=TENSION_WEIGHT, stiffness_ratio=True, fixed=(("G", G_FIXED),)),
 )}
+#: Candidates of the shared structure, in the order of the forward choice by leave-one-configuration-out
+#: on the training cycles (:func:`estimator.pair_general.choose_shared`).
+CHOICE = ("capstan", "capstan+T", "capstan+T, G falls with N")
 #: Shared models refitted leaving each configuration out (those without per-configuration parameters).
-LEAVE_ONE_OUT = ("capstan", "seed+joint_backlash", "capstan, G falls with N")
+LEAVE_ONE_OUT = ("capstan",)
+#: Shared models fitted for comparison by :func:`shared_analysis` (besides :data:`CHOICE`).
+COMPARED = ("capstan, mu = 0", "seed+joint_backlash")
 
 
 def shared_params(m: SharedModel, n_configs: int = 1) -> tuple[Param, ...]:
@@ -89,11 +118,14 @@ def shared_params(m: SharedModel, n_configs: int = 1) -> tuple[Param, ...]:
     without theta0, K_j renamed K0_j and mu added when K grows with N, each ``per_config`` one
     repeated as ``name[i]``."""
     out = []
+    held = dict(m.fixed)
     for p in model_params(m.structure, m.effects):
-        if p.name == "theta0":
+        if p.name == "theta0" or p.name in held:
             continue
         if m.grows and p.name in ("K_a", "K_b"):
             p = Param("K0" + p.name[1:], p.unit, p.lo, p.hi, p.starts, p.scale)
+        if m.stiffness_ratio and p.name == "lam":
+            p = _S
         if p.name in m.per_config:
             out += [Param(f"{p.name}[{i}]", p.unit, p.lo, p.hi, p.starts, p.scale) for i in range(n_configs)]
         else:
@@ -104,7 +136,7 @@ def shared_params(m: SharedModel, n_configs: int = 1) -> tuple[Param, ...]:
 def config_values(m: SharedModel, values: dict[str, float], rec, bend: float, i: int = 0) -> dict[str, float]:
     """The model values of configuration ``i`` in a shared fit: K_j = K0_j + mu N (clipped at 0),
     the per-configuration parameters of ``i``, theta0 from the first measured angle."""
-    v = {k: x for k, x in values.items() if "[" not in k}
+    v = {**{k: x for k, x in values.items() if "[" not in k}, **dict(m.fixed)}
     v.update({q: values[f"{q}[{i}]"] for q in m.per_config})
     if m.grows:
         for j in ("a", "b"):
@@ -112,17 +144,20 @@ def config_values(m: SharedModel, values: dict[str, float], rec, bend: float, i:
         v.pop("mu")
     if m.g_slope:
         v["G"] = max(v["G"] + v.pop("G_N") * bend, 1e-6)
+    if m.stiffness_ratio:
+        v["lam"] = max(v["G"] / v.pop("s"), 1e-4)
     g = v["G"] * float(rec.command[0]) if m.structure == "seed" else 0.0
     v["theta0"] = float(rec.angle[0]) - g
     return v
 
 
-def _predict(m: SharedModel, values: dict, rec, bend: float, i: int = 0) -> np.ndarray:
+def predict_config(m: SharedModel, values: dict, rec, bend: float, i: int = 0) -> np.ndarray:
+    """Angle [rad], shape (n,), of configuration ``i`` (bend [rad]) under a shared fit."""
     return predict_model(m.structure, m.effects, config_values(m, values, rec, bend, i), rec)[0]
 
 
-def fit_shared(m: SharedModel, recs: list, bends: list[float], fit_on: list[slice], *,
-               starts: list[dict] | None = None) -> dict[str, float]:
+def fit_shared(m: SharedModel, recs: list, bends: list[float], fit_on: list, *,
+               starts: list[dict] | None = None, max_nfev: int = MAX_NFEV, full: bool = False):
     """Fit one shared model on the ``fit_on`` samples of every recording together.
 
     Parameters
@@ -130,12 +165,15 @@ def fit_shared(m: SharedModel, recs: list, bends: list[float], fit_on: list[slic
     m : SharedModel
     recs : recordings (time, command, T_a, T_b, angle), one per configuration
     bends : accumulated bend angle N of each configuration [rad]
-    fit_on : sample slice of each recording used in the fit (the models run from sample 0)
+    fit_on : sample slice (or index array, repeats allowed: a bootstrap) of each recording used in
+        the fit (the models run from sample 0)
     starts : starting values (default ``m.starts``)
+    max_nfev : most residual evaluations per start
+    full : also return the ``scipy.optimize.OptimizeResult`` of the best start (jac, fun)
 
     Returns
     -------
-    dict name -> value (SI units) of :func:`shared_params`.
+    dict name -> value (SI units) of :func:`shared_params` (and the result when ``full``).
 
     Raises
     ------
@@ -150,25 +188,31 @@ def fit_shared(m: SharedModel, recs: list, bends: list[float], fit_on: list[slic
     names = [p.name for p in params]
     lo, hi = np.array([p.lo for p in params]), np.array([p.hi for p in params])
     ys = [np.asarray(r.angle, dtype=float)[s] for r, s in zip(recs, fit_on)]
+    w = m.tension_weight
+    Ts = [np.column_stack([r.T_a, r.T_b])[s] for r, s in zip(recs, fit_on)] if w > 0 else []
 
     def residual(x: np.ndarray) -> np.ndarray:
         v = dict(zip(names, map(float, x)))
         out = []
         for i, (r, b, s, y) in enumerate(zip(recs, bends, fit_on, ys)):
             try:
-                out.append(_predict(m, v, r, b, i)[s] - y)
+                th, T = predict_model(m.structure, m.effects, config_values(m, v, r, b, i), r)
+                out.append(th[s] - y)
+                if w > 0:
+                    out.append((w * (T[s] - Ts[i])).ravel())
             except ValueError:
-                out.append(np.full(y.size, _BAD))
+                out.append(np.full(y.size * (3 if w > 0 else 1), _BAD))
         return np.concatenate(out)
 
     best = None
     for s in (starts or m.starts):
         x0 = np.clip([s.get(p.name, s.get(p.name.split("[")[0], p.starts[0])) for p in params], lo, hi)
         sol = least_squares(residual, x0, bounds=(lo, hi), x_scale=[p.scale for p in params], diff_step=1e-3,
-                            max_nfev=MAX_NFEV)
+                            max_nfev=max_nfev)
         if best is None or sol.cost < best.cost:
             best = sol
-    return dict(zip(names, map(float, best.x)))
+    values = dict(zip(names, map(float, best.x)))
+    return (values, best) if full else values
 
 
 def score(m: SharedModel, values: dict, recs: list, bends: list[float], train: list[slice],
@@ -177,7 +221,7 @@ def score(m: SharedModel, values: dict, recs: list, bends: list[float], train: l
     K_b [-] (shared models with K growing), and the prediction [rad] (key ``angle``, not JSON)."""
     out = []
     for i, (r, b, tr, te) in enumerate(zip(recs, bends, train, test)):
-        th = _predict(m, values, r, b, i)
+        th = predict_config(m, values, r, b, i)
         err = th - np.asarray(r.angle, dtype=float)
         v = config_values(m, values, r, b, i)
         out.append({"rmse_train_deg": math.degrees(float(np.sqrt(np.mean(err[tr] ** 2)))),
@@ -202,7 +246,7 @@ def leave_one_out(m: SharedModel, recs: list, bends: list[float], fit_on: list[s
         keep = [j for j in range(len(recs)) if j != i]
         v = fit_shared(m, [recs[j] for j in keep], [bends[j] for j in keep], [fit_on[j] for j in keep],
                        starts=[start])
-        th = _predict(m, v, r, b)
+        th = predict_config(m, v, r, b)
         err = th - np.asarray(r.angle, dtype=float)
         out.append({"rmse_test_deg": math.degrees(float(np.sqrt(np.mean(err[te] ** 2)))),
                     "rmse_all_deg": math.degrees(float(np.sqrt(np.mean(err ** 2)))), "params": v, "angle": th})
@@ -212,39 +256,48 @@ def leave_one_out(m: SharedModel, recs: list, bends: list[float], fit_on: list[s
 
 
 def shared_analysis(recs: list, bends: list[float], train: list[slice], test: list[slice],
-                    progress: Callable[[str], None] | None = None, drift: bool = False) -> tuple[dict, dict]:
-    """The shared fits (:data:`SHARED_MODELS`), scored per configuration, with leave-one-out for
-    those of :data:`LEAVE_ONE_OUT`, the E6 test and the test of a transmission falling with N.
+                    progress: Callable[[str], None] | None = None, drift: bool = False,
+                    n_bootstrap: int = 20, blocks: list[list[slice]] | None = None) -> tuple[dict, dict]:
+    """The shared fits, the choice of the shared structure on the training cycles, its
+    leave-one-out predictions, its uncertainty, the E6 test and the exported parameter set.
 
     Parameters
     ----------
     recs, bends : recordings and their bend angles N [rad]
-    train, test : per recording, the training and test sample slices (KAIST: cycles 1 and 2); the
-        leave-one-out refits use every sample up to the end of each other configuration's test block
-    drift : also fit the models with parameters per configuration (``capstan, X per configuration``;
-        about a minute more)
+    train, test : per recording, the training and test sample slices (KAIST: cycle 1 and the later
+        cycles); the fits and the choice use ``train`` only; the leave-one-out refits use every
+        sample up to the end of each *other* configuration's test block
+    drift : also fit the models with parameters per configuration (``capstan, X per configuration``)
+    n_bootstrap : bootstrap draws of the exported set (0: none)
+    blocks : per recording, its cycles (for the bootstrap); default: [train, test]
 
     Returns
     -------
     summary : dict, JSON-ready
         ``models``: name -> {params {name: {value, unit}}, n_params, rmse_test_deg (all test blocks
         pooled), configurations [per recording: rmse_train_deg, rmse_test_deg, max_abs_test_deg, K_a,
-        K_b]}; ``leave_one_out``: name -> [per recording: rmse_test_deg, rmse_all_deg, params];
-        ``E6``: {score S of capstan against mu = 0 on the pooled test rmse, price S + PENALTY,
-        accepted}; ``G_slope``: the same for "capstan, G falls with N" against capstan; ``mu`` [1/rad].
+        K_b]}; ``choice`` (:func:`estimator.pair_general.choose_shared`); ``chosen`` (name);
+        ``leave_one_out``: name -> [per recording: rmse_test_deg, rmse_all_deg, params]; ``E6``:
+        {score S of capstan against mu = 0 on the pooled test rmse, price, accepted}; ``mu`` [1/rad];
+        ``params`` (the chosen set refitted on every sample of every configuration, with bootstrap
+        std / ci95: :func:`estimator.pair_general.export_params`); ``uncertainty`` (bootstrap
+        correlation matrix, local correlation); ``samples`` (what was used for what).
     details : dict of per-sample predictions [rad] (``models`` / ``leave_one_out`` -> name -> list of
         arrays), for figures; not JSON.
     """
     from estimator.diagnosis import PENALTY
+    from estimator.pair_general import bootstrap, choose_shared, export_params, local_correlation
     tick = progress or (lambda label: None)
     summary: dict = {"models": {}, "leave_one_out": {}}
     details: dict = {"models": {}, "leave_one_out": {}}
     fitted = {}
-    for name, m in SHARED_MODELS.items():
-        if m.per_config and not drift:
-            continue
-        # the variants of the capstan model start from its fit (their extra freedom at its values)
-        warm = [dict(fitted["capstan"])] if m.structure == "capstan" and m.grows and "capstan" in fitted else []
+    names = list(dict.fromkeys(("capstan",) + COMPARED + CHOICE))
+    names += [n for n, m in SHARED_MODELS.items() if m.per_config and drift]
+    for name in names:
+        m = SHARED_MODELS[name]
+        # variants of the angle-only capstan model start from its fit (their extra freedom at its values)
+        warm = [dict(fitted["capstan"])] if (m.structure == "capstan" and m.grows and "capstan" in fitted
+                                             and not m.tension_weight) else []
         v = fit_shared(m, recs, bends, train, starts=warm + list(m.starts[:1]) if warm else None)
         tick(f"shared {name}")
         fitted[name] = v
@@ -256,8 +309,11 @@ def shared_analysis(recs: list, bends: list[float], train: list[slice], test: li
         summary["models"][name] = {"params": {k: {"value": x, "unit": units[k]} for k, x in v.items()},
                                    "n_params": len(v), "configurations": rows,
                                    "rmse_test_deg": math.degrees(float(np.sqrt(np.mean(np.concatenate(err2)))))}
+    choice = choose_shared(recs, bends, train, CHOICE, fitted, tick)
+    chosen = choice["chosen"]
+    summary.update(choice=choice, chosen=chosen)
     upto = [slice(0, te.stop) for te in test]
-    for name in LEAVE_ONE_OUT:
+    for name in dict.fromkeys(LEAVE_ONE_OUT + (chosen,)):
         rows = leave_one_out(SHARED_MODELS[name], recs, bends, upto, test, fitted[name], tick)
         details["leave_one_out"][name] = [r.pop("angle") for r in rows]
         summary["leave_one_out"][name] = rows
@@ -265,8 +321,23 @@ def shared_analysis(recs: list, bends: list[float], train: list[slice], test: li
     S = (ms["capstan"]["rmse_test_deg"] / ms["capstan, mu = 0"]["rmse_test_deg"]) ** 2
     price = S + PENALTY * (ms["capstan"]["n_params"] - ms["capstan, mu = 0"]["n_params"])
     summary["E6"] = {"score": S, "price": price, "accepted": price < 1.0}
-    S = (ms["capstan, G falls with N"]["rmse_test_deg"] / ms["capstan"]["rmse_test_deg"]) ** 2
-    price = S + PENALTY * (ms["capstan, G falls with N"]["n_params"] - ms["capstan"]["n_params"])
-    summary["G_slope"] = {"score": S, "price": price, "accepted": price < 1.0}
     summary["mu"] = fitted["capstan"]["mu"]
+    # the exported set: the chosen structure refitted on every sample of every configuration
+    m = SHARED_MODELS[chosen]
+    v_all, res = fit_shared(m, recs, bends, upto, starts=[fitted[chosen]], full=True)
+    tick("shared set, all samples")
+    unc = bootstrap(m, recs, bends, blocks or [[tr, te] for tr, te in zip(train, test)], v_all,
+                    n_draws=n_bootstrap) if n_bootstrap else None
+    tick("bootstrap")
+    summary["params"] = export_params(m, v_all, "every sample up to the end of the test block of "
+                                      f"{len(recs)} configurations (bends {', '.join(f'{b:.3f}' for b in bends)} rad)",
+                                      unc)
+    summary["uncertainty"] = {"bootstrap": None if unc is None else {k: unc[k] for k in ("correlation", "n_draws",
+                                                                                        "method")},
+                              "local_correlation": local_correlation(res, list(v_all))}
+    summary["samples"] = {"fit": "training block of every configuration", "choice": choice["rule"],
+                          "test": "once per model: its reported figures",
+                          "leave_one_out": "refit on every sample of the other configurations, scored on the "
+                                           "left-out configuration's test block",
+                          "params": "refit on every sample of every configuration, for new configurations"}
     return summary, details

@@ -34,15 +34,17 @@ import numpy as np
 from estimator.diagnosis import diagnose
 from estimator.pair import fit_force_path, fit_linear, fit_pair, fit_play_map, reversal_dead_zones, rmse
 from estimator.pair_diagnosis import diagnose_pair
+from estimator.pair_general import predict_shared
 from estimator.pair_shared import shared_analysis
+from teleop.columns import parse_column_map
 from teleop.errors import ConfigError, DataError
-from teleop.kaist import KaistRecording, cycles, is_kaist_file, load_all
+from teleop.kaist import KaistRecording, cycles, is_kaist_file, load_dir, read_kaist, split
 from teleop.kaist_report import write_kaist_figures, write_kaist_report
 from teleop.recording import MeasuredData, read_measured_csv
 from teleop.report import format_summary, split_text, write_report
 
 __all__ = ["add_arguments", "main_analyze", "diagnose_file", "format_diagnosis", "analyze_kaist", "format_kaist",
-           "write_kaist_figures", "PROGRESS_SAMPLES"]
+           "write_kaist_figures", "PROGRESS_SAMPLES", "load_kaist_input", "predict_kaist", "format_prediction"]
 
 #: Recordings of at least this many samples get a progress bar on stderr (100 s at 1 kHz).
 PROGRESS_SAMPLES = 100_000
@@ -63,6 +65,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", metavar="OUT", help="write the result (summary numbers) as JSON to OUT")
     parser.add_argument("--report", metavar="DIR", help="write a Markdown report with PNG figures to DIR")
     parser.add_argument("--figures", metavar="DIR", help="KAIST mode: write the kaist_*.png plots to DIR")
+    parser.add_argument("--bend", type=float, metavar="DEG",
+                        help="KAIST mode: bend angle N [deg] of a FILE not named sine_config_<N>.txt")
+    parser.add_argument("--columns", metavar="MAP",
+                        help="KAIST mode: column map, e.g. time=0,command=1,angle=3,T_a=4,T_b=5[,units=rad] "
+                             "(default: the 8-column KAIST layout)")
+    parser.add_argument("--shared-params", metavar="JSON",
+                        help="KAIST mode: predict every configuration with the shared parameter set saved by "
+                             "--json (its shared.params); nothing is refitted")
+    parser.add_argument("--bootstrap", type=int, default=20, metavar="B",
+                        help="KAIST mode: bootstrap draws for the shared parameters' uncertainty (0: none; "
+                             "default 20)")
     parser.add_argument("--train-fraction", type=float, default=0.6, metavar="F",
                         help="CSV mode: nominal share of the duration used for fitting, in [0.3, 0.9]; the "
                              "split moves to a rest within 8%% of it (default 0.6)")
@@ -82,16 +95,23 @@ def main_analyze(args: argparse.Namespace) -> int:
             raise ConfigError(f"{opt} {d}: exists and is not a directory")
     if args.file is not None and not Path(args.file).is_file():
         raise DataError(f"{args.file}: no such file")
-    if args.kaist is not None or is_kaist_file(args.file):
-        directory = Path(args.file).parent if args.kaist is None else (args.kaist or None)
-        recs = load_all(directory)
-        summary, fits = analyze_kaist(recs, progress=sys.stderr.isatty())
-        print(format_kaist(summary))
-        if args.figures:
-            for p in write_kaist_figures(recs, fits, summary, args.figures):
-                print(f"wrote {p}")
-        if args.report is not None:
-            print(f"wrote {write_kaist_report(recs, fits, summary, args.report)}")
+    kaist = (args.kaist is not None or is_kaist_file(args.file) or args.bend is not None
+             or args.columns is not None or args.shared_params is not None)
+    if kaist:
+        recs = load_kaist_input(args)
+        if args.shared_params is not None:
+            summary = predict_kaist(recs, args.shared_params)
+            print(format_prediction(summary))
+        else:
+            if not 0 <= args.bootstrap <= 1000 or 0 < args.bootstrap < 5:
+                raise ConfigError(f"--bootstrap must be 0 or in [5, 1000], got {args.bootstrap}")
+            summary, fits = analyze_kaist(recs, progress=sys.stderr.isatty(), n_bootstrap=args.bootstrap)
+            print(format_kaist(summary))
+            if args.figures:
+                for p in write_kaist_figures(recs, fits, summary, args.figures):
+                    print(f"wrote {p}")
+            if args.report is not None:
+                print(f"wrote {write_kaist_report(recs, fits, summary, args.report)}")
     else:
         if args.figures:
             raise ConfigError("--figures is for the KAIST analysis (--kaist); use --report DIR")
@@ -166,11 +186,40 @@ def format_diagnosis(result: dict) -> str:
 
 # ---- KAIST antagonistic pair ------------------------------------------------------------------
 
+def load_kaist_input(args: argparse.Namespace) -> list[KaistRecording]:
+    """The recordings of the KAIST mode: ``--kaist [DIR]`` (every ``sine_config_<N>.txt`` in DIR), a
+    ``sine_config_<N>.txt`` FILE (its whole directory) or another FILE with ``--bend DEG``; read with
+    ``--columns`` when given. Files that cannot be read get one line on stderr each and are left out.
+
+    Raises
+    ------
+    DataError
+        Nothing readable (the problems named), or FILE without ``--bend`` and not named
+        ``sine_config_<N>.txt``.
+    ConfigError
+        A malformed ``--columns`` map.
+    """
+    cmap = parse_column_map(args.columns) if args.columns is not None else None
+    if args.file is not None and (args.bend is not None or not is_kaist_file(args.file)):
+        if args.bend is None:
+            raise DataError(f"{args.file}: not named sine_config_<N>.txt: give its bend with --bend DEG")
+        recs, problems = [read_kaist(args.file, args.bend, cmap)], []
+    else:
+        directory = Path(args.file).parent if args.kaist is None else (args.kaist or None)
+        recs, problems = load_dir(directory, cmap)
+    for line in problems:
+        print(f"skipped {line}", file=sys.stderr)
+    if not recs:
+        raise DataError("no readable KAIST recording: " + "; ".join(problems))
+    for r in recs:
+        for note in r.notes:
+            if note.startswith("WARNING") or "no column map" in note:
+                print(f"{Path(r.source).name}: {note}", file=sys.stderr)
+    return recs
+
+
 def _kaist_one(rec: KaistRecording) -> tuple[dict, dict]:
-    cs = cycles(rec)
-    if len(cs) < 2:
-        raise DataError(f"{rec.source}: found {len(cs)} complete command cycle(s), need 2 (train, test)")
-    c1, c2 = cs[0], cs[1]
+    c1, c2, how = split(rec)
     n_train = c1.stop
     fits = {"seed pair model": fit_pair(rec.command, rec.T_a, rec.T_b, rec.angle, n_train),
             "force path": fit_force_path(rec.T_a, rec.T_b, rec.angle, n_train),
@@ -184,9 +233,9 @@ def _kaist_one(rec: KaistRecording) -> tuple[dict, dict]:
                         "max_abs_test_deg": math.degrees(float(np.max(np.abs(err[c2]))))}
     zones = reversal_dead_zones(rec.command, rec.angle, rec.T_a, rec.T_b)
     summary = {"config_deg": rec.config_deg, "source": rec.source, "n_samples": len(rec),
-               "pretension": list(rec.pretension),
-               "cycle1": [float(rec.time[c1.start]), float(rec.time[c1.stop])],
-               "cycle2": [float(rec.time[c2.start]), float(rec.time[c2.stop])],
+               "import_notes": list(rec.notes), "split": how, "pretension": list(rec.pretension),
+               "cycle1": [float(rec.time[c1.start]), float(rec.time[min(c1.stop, len(rec) - 1)])],
+               "cycle2": [float(rec.time[c2.start]), float(rec.time[min(c2.stop, len(rec) - 1)])],
                "angle_range_deg": [math.degrees(float(rec.angle.min())), math.degrees(float(rec.angle.max()))],
                "models": models,
                "dead_zones": [{"time": float(rec.time[z.index]), "command_deg": math.degrees(rec.command[z.index]),
@@ -195,7 +244,8 @@ def _kaist_one(rec: KaistRecording) -> tuple[dict, dict]:
     return summary, {"fits": fits, "cycles": (c1, c2)}
 
 
-def analyze_kaist(recs: list[KaistRecording], progress: bool = False) -> tuple[dict, list[dict]]:
+def analyze_kaist(recs: list[KaistRecording], progress: bool = False,
+                  n_bootstrap: int = 20) -> tuple[dict, list[dict]]:
     """Every KAIST configuration: the pair diagnosis, the shared fit and the Finding 1 baselines.
 
     Per configuration (train on command cycle 1, test on cycle 2): the seed pair model beside the
@@ -207,7 +257,8 @@ def analyze_kaist(recs: list[KaistRecording], progress: bool = False) -> tuple[d
     Parameters
     ----------
     recs : recordings, one per configuration
-    progress : a status line on stderr (the analysis takes about a minute)
+    progress : a status line on stderr (the analysis takes a few minutes)
+    n_bootstrap : bootstrap draws of the shared set's uncertainty (0: none)
 
     Returns
     -------
@@ -215,8 +266,9 @@ def analyze_kaist(recs: list[KaistRecording], progress: bool = False) -> tuple[d
         ``mode`` ("kaist"), ``configurations`` (one dict per recording: config_deg, cycle times,
         models {name: {params, rmse_train_deg, rmse_test_deg, max_abs_test_deg}}, dead_zones,
         ``diagnosis`` (the pair diagnosis: seed, extended, cause, causes, gain, candidates) and
-        ``shared`` {rmse_test_deg, leave_one_out_rmse_test_deg, K_a, K_b}), ``shared`` (every shared
-        model, leave-one-out, the E6 test, mu) and ``trend``: least-squares line of the mean
+        ``shared`` {model, rmse_test_deg, leave_one_out_rmse_test_deg, K_a, K_b} of the chosen shared
+        structure), ``shared`` (every shared model, the choice, leave-one-out, the E6 test, mu, the
+        exported set ``params`` with its uncertainty) and ``trend``: least-squares line of the mean
         release-side band exponent K_release against the configuration angle [rad]
         (``K_release_per_rad``, ``K_release_at_0``), when >= 2 configurations.
     details : list of dict
@@ -230,23 +282,24 @@ def analyze_kaist(recs: list[KaistRecording], progress: bool = False) -> tuple[d
     """
     tick = _Status(progress)
     summaries, details = zip(*(_kaist_one(r) for r in recs)) if recs else ((), ())
-    out = {"mode": "kaist", "train": "command cycle 1", "test": "command cycle 2",
+    out = {"mode": "kaist", "train": "command cycle 1 (from the first sample)", "test": "the later command cycles",
            "configurations": list(summaries)}
-    train = [slice(0, d["cycles"][0].stop) for d in details]
+    train = [d["cycles"][0] for d in details]
     test = [d["cycles"][1] for d in details]
     for rec, s, d, tr, te in zip(recs, summaries, details, train, test):
         diag, fits = diagnose_pair(rec, tr, te, progress=lambda label, n=rec.config_deg: tick(f"N = {n}: {label}"))
         s["diagnosis"], d["pair_fits"], d["extended"] = diag, fits, diag["extended"]["model"]
     Ns = [math.radians(s["config_deg"]) for s in summaries]
     if len(recs) >= 3:
-        shared, sdet = shared_analysis(list(recs), Ns, train, test, progress=tick)
+        shared, sdet = shared_analysis(list(recs), Ns, train, test, progress=tick, n_bootstrap=n_bootstrap)
         out["shared"] = shared
+        ch = shared["chosen"]
         for i, (s, d) in enumerate(zip(summaries, details)):
-            row = shared["models"]["capstan"]["configurations"][i]
-            s["shared"] = {"rmse_test_deg": row["rmse_test_deg"], "K_a": row["K_a"], "K_b": row["K_b"],
-                           "leave_one_out_rmse_test_deg": shared["leave_one_out"]["capstan"][i]["rmse_test_deg"]}
-            d["shared_angle"] = sdet["models"]["capstan"][i]
-            d["loco_angle"] = sdet["leave_one_out"]["capstan"][i]
+            row = shared["models"][ch]["configurations"][i]
+            s["shared"] = {"model": ch, "rmse_test_deg": row["rmse_test_deg"], "K_a": row["K_a"], "K_b": row["K_b"],
+                           "leave_one_out_rmse_test_deg": shared["leave_one_out"][ch][i]["rmse_test_deg"]}
+            d["shared_angle"] = sdet["models"][ch][i]
+            d["loco_angle"] = sdet["leave_one_out"][ch][i]
     tick.done()
     Kr = [np.nanmean([z["K_release"] if z["K_release"] is not None else np.nan for z in s["dead_zones"]])
           for s in summaries]
@@ -272,6 +325,57 @@ class _Status:
     def done(self) -> None:
         if self.enabled and self.n:
             sys.stderr.write("\n")
+
+
+def predict_kaist(recs: list[KaistRecording], params_path: str | Path) -> dict:
+    """Predict every recording with the shared set saved by ``--json`` (``shared.params``); nothing
+    is refitted (the pretension and the angle offset are the recording's first sample).
+
+    Returns
+    -------
+    dict, JSON-ready: ``mode`` ("kaist-shared-prediction"), ``params_file``, ``model``,
+    ``shared_prediction`` {str(N): {rmse_deg (every sample), rmse_cycle_deg [per complete command
+    cycle], max_abs_deg, K_a, K_b, n_samples, source, import_notes}}.
+
+    Raises
+    ------
+    DataError
+        The parameter file is missing, not JSON, or has no usable ``shared.params``.
+    """
+    path = Path(params_path)
+    try:
+        doc = json.loads(path.read_text())
+        params = doc["shared"]["params"] if "shared" in doc else doc["params"]
+    except FileNotFoundError:
+        raise DataError(f"{path}: no such file") from None
+    except (ValueError, KeyError, TypeError) as e:
+        raise DataError(f"{path}: not a teleop analyze --kaist JSON with shared.params ({e})") from None
+    out = {"mode": "kaist-shared-prediction", "params_file": str(path), "model": params.get("model"),
+           "shared_prediction": {}}
+    for rec in recs:
+        try:
+            th, v = predict_shared(params, rec, math.radians(rec.config_deg))
+        except ValueError as e:
+            raise DataError(f"{path}: {e}") from None
+        err = th - rec.angle
+        out["shared_prediction"][str(rec.config_deg)] = {
+            "rmse_deg": math.degrees(rmse(err)), "max_abs_deg": math.degrees(float(np.max(np.abs(err)))),
+            "rmse_cycle_deg": [math.degrees(rmse(err[c])) for c in cycles(rec)],
+            "K_a": v.get("K_a"), "K_b": v.get("K_b"), "n_samples": len(rec), "source": rec.source,
+            "import_notes": list(rec.notes)}
+    return out
+
+
+def format_prediction(s: dict) -> str:
+    """The lines printed for ``--shared-params``: per configuration the RMSE over every sample and per
+    command cycle [deg]."""
+    lines = [f"shared parameter set {s['params_file']} ({(s.get('model') or {}).get('name')}): distal angle "
+             "predicted from the command, the pretension and the bend alone (RMSE [deg])",
+             f"{'config [deg]':>12}{'all':>7}{'max':>7}{'K_a':>6}{'K_b':>6}  per cycle"]
+    for n, r in s["shared_prediction"].items():
+        lines.append(f"{n:>12}{r['rmse_deg']:>7.2f}{r['max_abs_deg']:>7.2f}{r['K_a']:>6.2f}{r['K_b']:>6.2f}  "
+                     + " ".join(f"{x:.2f}" for x in r["rmse_cycle_deg"]))
+    return "\n".join(lines)
 
 
 def _fmt_causes(causes: list[str]) -> str:
@@ -304,11 +408,22 @@ def format_kaist(s: dict) -> str:
         for name, rows in sh["leave_one_out"].items():
             lines.append(f"leave one out, {name:<20} " + " ".join(f"{r['rmse_test_deg']:.2f}" for r in rows))
         e6 = sh["E6"]
-        gs = sh["G_slope"]
         lines.append(f"E6 (K grows with the bend): score {e6['score']:.3f} against mu = 0, price {e6['price']:.3f} -> "
                      f"{'accepted' if e6['accepted'] else 'rejected'}; mu = {sh['mu']:.3f} /rad")
-        lines.append(f"G falls with the bend too: score {gs['score']:.3f} against capstan, price {gs['price']:.3f} -> "
-                     f"{'accepted' if gs['accepted'] else 'rejected'}")
+        for name, c in sh["choice"]["candidates"].items():
+            per = " ".join(f"{x:.2f}" for x in c["loco_train_rmse_deg"])
+            pr = "" if c.get("price") is None else f", price {c['price']:.3f}"
+            lines.append(f"choice (leave one out, training cycles) {name:<28} {per} (rms {c['rms_deg']:.2f}{pr})"
+                         f"{' <- chosen' if name == sh['chosen'] else ''}")
+        lines.append("shared set for new configurations (" + sh["params"]["model"]["name"] + ", refitted on every "
+                     "sample; bootstrap std over cycles):")
+        lines.append("  " + ", ".join(f"{k} {v['value']:.4g}" + (f" +- {v['std']:.2g}" if "std" in v else "")
+                                      + ("" if v["unit"] in ("", "-") else f" {v['unit']}")
+                                      for k, v in sh["params"]["values"].items()))
+        bc = (sh["uncertainty"]["bootstrap"] or {}).get("correlation") or sh["uncertainty"]["local_correlation"]
+        strong = [f"{a}/{b} {bc['matrix'][i][j]:+.2f}" for i, a in enumerate(bc["names"])
+                  for j, b in enumerate(bc["names"]) if j > i and abs(bc["matrix"][i][j]) >= 0.8]
+        lines.append("  correlations |r| >= 0.8: " + (", ".join(strong) if strong else "none"))
     lines += ["", "Finding 1 baselines (RMSE [deg]; dead zone after a reversal [deg of command]; K_release: capstan "
               "band from tension ratios; K_force: K of the force-path fit)",
               f"{'config [deg]':>12}{'force path':>12}{'linear':>9}{'lin+play':>10}{'dead zone':>11}{'K_release':>11}"

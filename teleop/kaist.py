@@ -1,17 +1,20 @@
-"""Importer for the KAIST flexible-endoscope sine recordings (antagonistic tendon pair).
+"""Importer for the KAIST flexible-endoscope recordings (antagonistic tendon pair) and similar data.
 
-The files (``sine_config_N.txt``, N = 0, 60, 120, 180, 240) are described in
+The files (``sine_config_N.txt``, N the tube configuration in degrees) are described in
 ``../shared/data/kaist-tsm/SOURCE.md``. They have **no licence**: this module reads them where they
 lie (or from a directory the user gives) and the project never copies them or per-sample data
 derived from them.
 
-File format: comma separated, no header, 8 numeric columns and a trailing comma, logged at 40 Hz
-with each time stamp repeated several times (later repeats carry updated sensor values that reappear
-in the next time stamp's first row). As the source says, every row whose time equals the previous
-row's is dropped, which leaves about 510 rows.
+The 8-column files are comma separated, no header, with a trailing comma, logged at 40 Hz with each
+time stamp repeated several times; as the source says, every row whose time equals the previous
+row's is dropped, which leaves about 510 rows. The reader is :func:`teleop.columns.read_table`: the
+same importer reads the longer 10-column KAIST recordings (about 2 kHz, repeated stamps, all-zero
+columns, a time reset) and other labs' CSV files through a column map
+(:func:`teleop.columns.parse_column_map`). Recordings faster than twice :data:`RATE_HZ` are
+averaged in blocks down to :data:`RATE_HZ` (the pair models are rate-independent).
 
 ==== ============================================ =============== ============================
-col  meaning                                      file unit       here
+col  meaning (8-column KAIST map)                 file unit       here
 ==== ============================================ =============== ============================
 0    time                                         s               ``time`` [s]
 1    commanded joint angle (motor side)           deg             ``command`` [rad]
@@ -26,20 +29,22 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from teleop.columns import ColumnMap, read_table
 from teleop.errors import DataError
 
-__all__ = ["CONFIGS_DEG", "KaistRecording", "default_kaist_dir", "find_kaist_dir", "is_kaist_file",
-           "kaist_path", "read_kaist", "load_all", "cycles"]
+__all__ = ["CONFIGS_DEG", "RATE_HZ", "KaistRecording", "default_kaist_dir", "find_kaist_dir", "find_configs",
+           "is_kaist_file", "kaist_path", "read_kaist", "load_all", "load_dir", "resample", "cycles", "split"]
 
-#: Insertion-tube configurations recorded (most likely the accumulated bend angle [deg]).
+#: Insertion-tube configurations shipped in ../shared/data/kaist-tsm (bend angle [deg]).
 CONFIGS_DEG = (0, 60, 120, 180, 240)
-N_COLUMNS = 8
-_NAME = re.compile(r"sine_config_(\d+)\.txt$")
+#: Rate [Hz] the recordings are analysed at (the 40 Hz of the shipped files).
+RATE_HZ = 40.0
+_NAME = re.compile(r"sine_config_(\d+(?:\.\d+)?)\.txt$")
 _MISSING_HINT = "these tests need the unlicensed measurements, see docs/findings.md"
 
 
@@ -49,17 +54,18 @@ class KaistRecording:
 
     Attributes
     ----------
-    config_deg : int, insertion-tube configuration N [deg] from the file name.
-    time : ndarray [s], strictly increasing (40 Hz).
+    config_deg : float, insertion-tube configuration N [deg] (file name or ``--bend``); an int when whole.
+    time : ndarray [s], strictly increasing.
     command : ndarray [rad], commanded joint angle on the motor side (the proximal reference).
-    velocity_cmd : ndarray, commanded velocity, raw file value (scale unknown).
+    velocity_cmd : ndarray, commanded velocity, raw file value (scale unknown; nan when not mapped).
     angle : ndarray [rad], measured distal bending angle.
     T_a, T_b : ndarray [N], proximal tensions of tendons A (rises with + angle) and B.
-    motor_a, motor_b : ndarray, raw motor signals (probably mA).
+    motor_a, motor_b : ndarray, raw motor signals (probably mA; nan when not mapped).
     source : str, the file read.
+    notes : tuple of str, what the importer did (columns used, rows dropped, resets, resampling).
     """
 
-    config_deg: int
+    config_deg: float
     time: np.ndarray
     command: np.ndarray
     velocity_cmd: np.ndarray
@@ -69,6 +75,7 @@ class KaistRecording:
     motor_a: np.ndarray
     motor_b: np.ndarray
     source: str
+    notes: tuple = field(default=())
 
     def __len__(self) -> int:
         return int(self.time.shape[0])
@@ -78,15 +85,40 @@ class KaistRecording:
         """Tensions of tendons A and B at the first sample [N] (the preload, about 5 N)."""
         return float(self.T_a[0]), float(self.T_b[0])
 
+    @property
+    def rate_hz(self) -> float:
+        """Median sample rate [Hz]."""
+        return float(1.0 / np.median(np.diff(self.time)))
+
 
 def default_kaist_dir() -> Path:
     """``<repo>/../shared/data/kaist-tsm``, where the project expects the data by default."""
     return Path(__file__).resolve().parents[1].parent / "shared" / "data" / "kaist-tsm"
 
 
-def kaist_path(directory: str | Path, config_deg: int) -> Path:
+def kaist_path(directory: str | Path, config_deg: float) -> Path:
     """Path of configuration ``config_deg`` [deg] inside ``directory``."""
-    return Path(directory) / f"sine_config_{int(config_deg)}.txt"
+    return Path(directory) / f"sine_config_{_fmt(config_deg)}.txt"
+
+
+def _fmt(n: float) -> str:
+    return str(int(n)) if float(n).is_integer() else str(n)
+
+
+def _num(text: str) -> float:
+    v = float(text)
+    return int(v) if v.is_integer() else v
+
+
+def find_configs(directory: str | Path) -> list[tuple[float, Path]]:
+    """Every ``sine_config_<N>.txt`` in ``directory`` as (N [deg], path), sorted by N."""
+    d = Path(directory)
+    found = []
+    for p in d.iterdir() if d.is_dir() else ():
+        m = _NAME.fullmatch(p.name)
+        if m and p.is_file():
+            found.append((_num(m.group(1)), p))
+    return sorted(found, key=lambda x: x[0])
 
 
 def find_kaist_dir(path: str | Path | None = None) -> Path:
@@ -100,99 +132,96 @@ def find_kaist_dir(path: str | Path | None = None) -> Path:
     Raises
     ------
     DataError
-        The directory does not exist or holds none of the ``sine_config_N.txt`` files.
+        The directory does not exist or holds no ``sine_config_<N>.txt`` file.
     """
     d = Path(path) if path is not None else default_kaist_dir()
-    if not d.is_dir() or not any(kaist_path(d, n).is_file() for n in CONFIGS_DEG):
+    if not d.is_dir() or not find_configs(d):
         raise DataError(f"KAIST data not found at {d}: {_MISSING_HINT}")
     return d
 
 
-def is_kaist_file(path: str | Path) -> bool:
+def is_kaist_file(path: str | Path | None) -> bool:
     """True when the file name is ``sine_config_<N>.txt`` (the name alone decides)."""
-    return _NAME.search(Path(path).name) is not None
+    return path is not None and _NAME.search(Path(path).name) is not None
 
 
-def _parse_rows(path: Path) -> tuple[np.ndarray, list[int]]:
-    """Numeric rows (n_rows, 8) with duplicate time stamps dropped, and their 1-based line numbers."""
-    src = str(path)
-    rows: list[list[float]] = []
-    lines: list[int] = []
-    prev_time: float | None = None
-    try:
-        fh = open(path, encoding="utf-8", errors="replace")
-    except FileNotFoundError:
-        raise DataError(f"{src}: no such file") from None
-    except OSError as exc:
-        raise DataError(f"{src}: cannot read ({exc.strerror})") from None
-    with fh:
-        for lineno, raw in enumerate(fh, start=1):
-            line = raw.strip()
-            if not line:
-                continue
-            fields = line.split(",")
-            if len(fields) == N_COLUMNS + 1 and not fields[-1].strip():
-                fields = fields[:-1]                     # the trailing comma
-            if len(fields) != N_COLUMNS:
-                raise DataError(f"{src}:{lineno}: expected {N_COLUMNS} comma-separated numbers "
-                                f"(and a trailing comma), found {len(fields)}")
-            values = []
-            for j, text in enumerate(fields):
-                try:
-                    v = float(text)
-                except ValueError:
-                    raise DataError(f"{src}:{lineno}: column {j}: expected a number, "
-                                    f"got '{text.strip()}'") from None
-                if not math.isfinite(v):
-                    raise DataError(f"{src}:{lineno}: column {j}: expected a finite number, "
-                                    f"got '{text.strip()}'")
-                values.append(v)
-            t = values[0]
-            if prev_time is not None and t == prev_time:
-                continue                                 # repeated time stamp: drop (SOURCE.md)
-            if prev_time is not None and t < prev_time:
-                raise DataError(f"{src}:{lineno}: column 0: time {t} s goes back "
-                                f"(previous row {prev_time} s)")
-            prev_time = t
-            rows.append(values)
-            lines.append(lineno)
-    if len(rows) < 2:
-        raise DataError(f"{src}: {len(rows)} distinct time stamp(s), need at least 2")
-    return np.asarray(rows, dtype=np.float64), lines
+def resample(rec: KaistRecording, rate_hz: float = RATE_HZ) -> KaistRecording:
+    """Block means over bins of 1 / ``rate_hz`` seconds (empty bins dropped); ``rec`` itself when it
+    is not faster than twice ``rate_hz``. The note records the rates."""
+    if len(rec) < 3 or rec.rate_hz <= 2.0 * rate_hz:
+        return rec
+    b = np.floor((rec.time - rec.time[0]) * rate_hz).astype(np.int64)
+    starts = np.flatnonzero(np.r_[True, b[1:] != b[:-1]])
+    counts = np.diff(np.r_[starts, b.size])
+
+    def mean(x):
+        return np.add.reduceat(x, starts) / counts
+
+    names = ("time", "command", "velocity_cmd", "angle", "T_a", "T_b", "motor_a", "motor_b")
+    arrays = {n: mean(getattr(rec, n)) for n in names}
+    arrays["time"][0], arrays["command"][0], arrays["angle"][0] = rec.time[0], rec.command[0], rec.angle[0]
+    arrays["T_a"][0], arrays["T_b"][0] = rec.T_a[0], rec.T_b[0]       # the rest state stays the first sample
+    note = f"resampled from {rec.rate_hz:.0f} Hz to {rate_hz:.0f} Hz (block means; first sample kept)"
+    return KaistRecording(rec.config_deg, **arrays, source=rec.source, notes=rec.notes + (note,))
 
 
-def read_kaist(path: str | Path, config_deg: int | None = None) -> KaistRecording:
-    """Read one ``sine_config_N.txt`` file; degrees become radians, tensions stay in N.
+def read_kaist(path: str | Path, config_deg: float | None = None, column_map: ColumnMap | None = None,
+               rate_hz: float | None = RATE_HZ) -> KaistRecording:
+    """Read one recording; degrees become radians (unless the map says rad), tensions stay in N.
 
     Parameters
     ----------
     path : str or Path
-    config_deg : int, optional
-        Configuration [deg]; default: the N of the file name.
+    config_deg : float, optional
+        Configuration [deg]; default: the N of a ``sine_config_<N>.txt`` name.
+    column_map : default the 8-column KAIST map (:data:`teleop.columns.KAIST_MAP`)
+    rate_hz : resample faster recordings to this rate (:func:`resample`); None keeps every sample
 
     Raises
     ------
     DataError
-        Missing file; a row without 8 numbers, a non-number or non-finite value (file:line,
-        column); time going back; fewer than 2 distinct time stamps; no N in the name and
-        ``config_deg`` not given.
+        Missing file; a malformed row (file:line, column); a required column all zero; fewer than 2
+        distinct time stamps; no N in the name and ``config_deg`` not given.
     """
     path = Path(path)
     if config_deg is None:
         m = _NAME.search(path.name)
         if m is None:
-            raise DataError(f"{path}: file name is not sine_config_<N>.txt and no configuration was given")
-        config_deg = int(m.group(1))
-    a, _ = _parse_rows(path)
-    deg = math.pi / 180.0
-    return KaistRecording(config_deg=int(config_deg), time=a[:, 0].copy(), command=a[:, 1] * deg,
-                          velocity_cmd=a[:, 2].copy(), angle=a[:, 3] * deg, T_a=a[:, 4].copy(),
-                          T_b=a[:, 5].copy(), motor_a=a[:, 6].copy(), motor_b=a[:, 7].copy(),
-                          source=str(path))
+            raise DataError(f"{path}: file name is not sine_config_<N>.txt and no bend was given (--bend DEG)")
+        config_deg = _num(m.group(1))
+    tab = read_table(path, column_map)
+    k = math.pi / 180.0 if tab.column_map.units == "deg" else 1.0
+    d = tab.data
+    nan = np.full(d["time"].size, np.nan)
+    rec = KaistRecording(config_deg=config_deg, time=d["time"], command=d["command"] * k,
+                         velocity_cmd=d.get("velocity_cmd", nan), angle=d["angle"] * k, T_a=d["T_a"], T_b=d["T_b"],
+                         motor_a=d.get("motor_a", nan), motor_b=d.get("motor_b", nan), source=str(path),
+                         notes=tuple(tab.notes))
+    return resample(rec, rate_hz) if rate_hz else rec
+
+
+def load_dir(path: str | Path | None = None, column_map: ColumnMap | None = None,
+             rate_hz: float | None = RATE_HZ) -> tuple[list[KaistRecording], list[str]]:
+    """Every ``sine_config_<N>.txt`` of a directory, sorted by N, and one line per file that could not
+    be read (``"<file>: <why>"``), which is left out.
+
+    Raises
+    ------
+    DataError
+        The directory does not exist or holds no such file (:func:`find_kaist_dir`).
+    """
+    d = find_kaist_dir(path)
+    recs, problems = [], []
+    for n, p in find_configs(d):
+        try:
+            recs.append(read_kaist(p, n, column_map, rate_hz))
+        except DataError as e:
+            problems.append(str(e) if str(e).startswith(str(p)) else f"{p}: {e}")
+    return recs, problems
 
 
 def load_all(path: str | Path | None = None) -> list[KaistRecording]:
-    """Every configuration of :data:`CONFIGS_DEG`, in that order.
+    """Every configuration of :data:`CONFIGS_DEG`, in that order (the shipped set; strict).
 
     Raises
     ------
@@ -240,3 +269,26 @@ def cycles(rec: KaistRecording, arm_fraction: float = 0.5) -> list[slice]:
             starts.append(k)
             armed = False
     return [slice(a, b) for a, b in zip(starts[:-1], starts[1:])]
+
+
+def split(rec: KaistRecording) -> tuple[slice, slice, str]:
+    """Training and test samples of a recording, and how they were chosen.
+
+    With >= 2 complete command cycles (:func:`cycles`): training = from the first sample to the end of
+    cycle 1, test = the later complete cycles. Otherwise the first half of the samples and the rest
+    (a recording whose command is not a repeated cycle).
+
+    Raises
+    ------
+    DataError
+        Fewer than 16 samples.
+    """
+    n = len(rec)
+    if n < 16:
+        raise DataError(f"{rec.source}: {n} samples, too few to split into training and test")
+    cs = cycles(rec)
+    if len(cs) >= 2:
+        return slice(0, cs[0].stop), slice(cs[1].start, cs[-1].stop), \
+            f"train: command cycle 1 (t < {rec.time[cs[0].stop]:.2f} s); test: cycles 2-{len(cs)}"
+    h = n // 2
+    return slice(0, h), slice(h, n), f"{len(cs)} complete command cycle(s): train on t < {rec.time[h]:.2f} s, test after"

@@ -124,13 +124,14 @@ def test_cli_csv_without_T_out_and_x_out_is_one_line_and_exit_2(tmp_path, capsys
     assert not (tmp_path / "d.json").exists() and cap.out == ""
 
 
-def write_kaist_dir(d, noise_deg=0.05):
-    """Five synthetic configurations made by the capstan-joint pair model with K = 0.5 + 0.15 N
-    (N the configuration angle [rad]) and tracker / load-cell noise, in the KAIST file layout."""
+def write_kaist_dir(d, noise_deg=0.05, configs=CONFIGS_DEG):
+    """Synthetic configurations (default the five shipped bends) made by the capstan-joint pair model
+    with K = 0.5 + 0.15 N (N the configuration angle [rad]) and tracker / load-cell noise, in the
+    KAIST file layout."""
     from estimator.pair_kernels import simulate_pair
     d.mkdir()
     rng = np.random.default_rng(0)
-    for N in CONFIGS_DEG:
+    for N in configs:
         t = np.arange(0, 12.85, 0.025)
         cmd = 60 * np.sin(t - 0.025)
         cmd[0] = 0.0
@@ -156,13 +157,13 @@ def longest_list(obj) -> int:
 
 def test_kaist_mode_on_synthetic_files(tmp_path, capsys):
     from teleop.kaist_report import FIGURES
-    d = write_kaist_dir(tmp_path / "kaist")
+    d = write_kaist_dir(tmp_path / "kaist", configs=(0, 120, 240))
     out = tmp_path / "k.json"
-    assert run(["--kaist", str(d), "--json", str(out), "--report", str(tmp_path / "rep")]) == 0
+    assert run(["--kaist", str(d), "--json", str(out), "--report", str(tmp_path / "rep"), "--bootstrap", "5"]) == 0
     text = capsys.readouterr().out
     assert "seed" in text and "extended" in text and "lin+play" in text and "E6 (K grows with the bend)" in text
     s = json.loads(out.read_text())
-    assert [c["config_deg"] for c in s["configurations"]] == list(CONFIGS_DEG)
+    assert [c["config_deg"] for c in s["configurations"]] == [0, 120, 240]
     for c in s["configurations"]:
         assert set(c["models"]) == {"seed pair model", "force path", "linear map", "linear map + play"}
         assert c["cycle1"][1] == c["cycle2"][0] == pytest.approx(2 * math.pi, abs=0.05)
@@ -174,6 +175,21 @@ def test_kaist_mode_on_synthetic_files(tmp_path, capsys):
         assert c["shared"]["rmse_test_deg"] < 0.08 and c["shared"]["leave_one_out_rmse_test_deg"] < 0.2
     sh = s["shared"]
     assert sh["mu"] == pytest.approx(0.15, rel=0.05) and sh["E6"]["accepted"]
+    assert sh["chosen"] in sh["choice"]["candidates"] and sh["params"]["model"]["name"] == sh["chosen"]
+    vals = sh["params"]["values"]
+    assert vals["mu"]["value"] == pytest.approx(0.15, rel=0.05) and vals["mu"]["std"] < 0.02
+    assert all(v["ci95"][0] <= v["value"] + 1e-9 and v["std"] >= 0 for v in vals.values())
+    corr = np.array(sh["uncertainty"]["bootstrap"]["correlation"]["matrix"])
+    assert corr.shape == (len(vals), len(vals)) and np.allclose(np.diag(corr), 1.0, atol=1e-3)
+    # fit once, predict new bends: configurations never seen, nothing refitted
+    d2 = write_kaist_dir(tmp_path / "new", configs=(90, 300))
+    out2 = tmp_path / "p.json"
+    assert run(["--kaist", str(d2), "--shared-params", str(out), "--json", str(out2)]) == 0
+    pred = json.loads(out2.read_text())["shared_prediction"]
+    assert set(pred) == {"90", "300"}
+    assert all(r["rmse_deg"] < 0.2 for r in pred.values())              # 0.05 deg noise, K from the bend alone
+    assert pred["300"]["K_a"] == pytest.approx(0.5 + 0.15 * math.radians(300), rel=0.05)
+    assert "shared parameter set" in capsys.readouterr().out
     assert sh["models"]["capstan, mu = 0"]["rmse_test_deg"] > 5 * sh["models"]["capstan"]["rmse_test_deg"]
     zones = [np.nanmean([z["command_travel_deg"] or np.nan for z in c["dead_zones"]]) for c in s["configurations"]]
     assert all(a < b for a, b in zip(zones, zones[1:]))                 # model-free: dead zone grows with N
@@ -188,7 +204,7 @@ def test_a_kaist_file_name_runs_its_whole_directory(tmp_path, monkeypatch, capsy
     d = write_kaist_dir(tmp_path / "kaist")
     seen = []
 
-    def fake(recs, progress=False):
+    def fake(recs, progress=False, **kw):
         seen.extend(r.config_deg for r in recs)
         return {"mode": "kaist", "configurations": []}, []
     monkeypatch.setattr(analyze, "analyze_kaist", fake)
@@ -201,7 +217,7 @@ def test_a_kaist_file_name_runs_its_whole_directory(tmp_path, monkeypatch, capsy
                                                    "the unlicensed measurements, see docs/findings.md")
 def test_kaist_findings_hold_on_the_real_data(tmp_path, capsys):
     out = tmp_path / "k.json"
-    assert run(["--kaist", str(KAIST_DIR), "--json", str(out)]) == 0
+    assert run(["--kaist", str(KAIST_DIR), "--json", str(out), "--bootstrap", "5"]) == 0
     s = json.loads(out.read_text())
     rm = {c["config_deg"]: {k: v["rmse_test_deg"] for k, v in c["models"].items()} for c in s["configurations"]}
     for N, r in rm.items():
@@ -217,5 +233,14 @@ def test_kaist_findings_hold_on_the_real_data(tmp_path, capsys):
     # Finding 2: the capstan-joint model beats the seed model on every configuration; K grows with N
     for c in s["configurations"]:
         g = c["diagnosis"]
-        assert g["causes"][0] == "capstan_joint" and g["extended"]["rmse_test_deg"] < g["seed"]["rmse_test_deg"]
+        assert g["causes"][0] == "capstan_joint" and g["extended"]["rmse_test_deg"] < 0.5 * g["seed"]["rmse_test_deg"]
+        assert g["extended"]["rmse_test_deg"] < 1.5 and "test" not in str(g["candidates"])   # choice: training only
+        assert g["samples"]["fit"][1] <= g["samples"]["test"][0]
     assert s["shared"]["E6"]["accepted"] and 0.05 < s["shared"]["mu"] < 0.3
+    ms = s["shared"]["models"]
+    assert ms["capstan"]["rmse_test_deg"] < 0.5 * ms["capstan, mu = 0"]["rmse_test_deg"]      # K grows with N
+    # Finding 3: one set for all five, chosen by leave-one-out on the training cycles, with uncertainties
+    sh = s["shared"]
+    vals = sh["params"]["values"]
+    assert 0.05 < vals["mu"]["value"] < 0.3 and vals["mu"]["std"] < 0.5 * vals["mu"]["value"]
+    assert all(r["rmse_test_deg"] < 5.0 for r in sh["leave_one_out"][sh["chosen"]])

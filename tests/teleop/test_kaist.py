@@ -61,17 +61,96 @@ def test_malformed_row_names_file_and_line(tmp_path):
     p.write_text("".join(lines))
     with pytest.raises(DataError, match=r"sine_config_0\.txt:5: expected 8 comma-separated numbers"):
         read_kaist(p)
-    lines[4] = "0.010000, 1.0, 2.0, 0.0, 5.0, 5.0, 1.0, 1.0, \n"             # time goes back
-    p.write_text("".join(lines))
-    with pytest.raises(DataError, match=r":5: column 0: time 0.01 s goes back"):
-        read_kaist(p)
     lines[4] = "0.100000, nan, 2.0, 0.0, 5.0, 5.0, 1.0, 1.0, \n"
     p.write_text("".join(lines))
     with pytest.raises(DataError, match=r":5: column 1: expected a finite number"):
         read_kaist(p)
 
 
+def test_time_reset_near_the_end_is_cut_and_one_in_the_middle_stitched(tmp_path):
+    p = write_sine(tmp_path / "sine_config_0.txt", n_stamps=100, repeats=2)
+    text = p.read_text().splitlines(keepends=True)
+    tail = [_row(0.025 * k, 1.0, 0.0, 1.0, 5.0, 5.0, 1.0, 1.0) for k in range(10)]     # logger restarted
+    p.write_text("".join(text + tail))
+    rec = read_kaist(p)
+    assert len(rec) == 100 and rec.time[-1] == pytest.approx(99 * 0.025)
+    assert any(n.startswith("WARNING time reset at line 201") and "10 rows" in n for n in rec.notes)
+    q = tmp_path / "sine_config_5.txt"                                       # reset half way: stitched
+    rows = [_row(0.025 * (k % 50), 0.1 * k, 0.0, 0.05 * k, 5.0, 5.0, 0.0, 0.0) for k in range(100)]
+    q.write_text("".join(rows))
+    rec = read_kaist(q)
+    assert len(rec) == 100 and np.all(np.diff(rec.time) > 0)
+    np.testing.assert_allclose(np.diff(rec.time), 0.025)                    # continues at the median step
+    np.testing.assert_allclose(np.degrees(rec.command), 0.1 * np.arange(100))
+    assert any("stitched" in n for n in rec.notes)
+    assert any("all-zero column(s) 2, 6, 7" in n for n in rec.notes)
+    assert np.all(np.isnan(rec.motor_a))                                     # an all-zero optional column is left out
+
+
+def write_long(path, rate=2000.0, seconds=13.0, reset_at=12.5, repeats=2, zero_cols=(8, 9)):
+    """A 10-column long KAIST-like recording: rate Hz, each stamp written ``repeats`` times, two
+    all-zero columns, the logger clock reset at ``reset_at`` s (the rest written from 0 again)."""
+    t = np.arange(0.0, seconds, 1.0 / rate)
+    cmd = 60.0 * np.sin(t)
+    ang = 0.5 * cmd
+    cols = [t, cmd, np.gradient(cmd), ang, 5 + cmd / 20, 5 - cmd / 20, 100 + 0 * t, -100 + 0 * t, 0 * t, 0 * t]
+    a = np.column_stack(cols)
+    cut = int(reset_at * rate)
+    a[cut:, 0] -= a[cut, 0]                                                   # time reset near the end
+    for j in zero_cols:
+        a[:, j] = 0.0
+    a = np.repeat(a, repeats, axis=0)
+    path.write_text("".join(", ".join(f"{v:.6f}" for v in r) + ", \n" for r in a))
+    return path
+
+
+def test_long_10_column_recording_read_with_the_same_importer(tmp_path):
+    from teleop.columns import parse_column_map
+    p = write_long(tmp_path / "sine_config_90.txt")
+    rec = read_kaist(p)                                       # no map: the 8-column KAIST map, a note says so
+    assert rec.config_deg == 90
+    notes = " | ".join(rec.notes)
+    assert "10 columns, no column map given" in notes and "columns 8, 9 not used" in notes
+    assert "repeat the previous time stamp" in notes and "WARNING time reset" in notes and "cut off" in notes
+    assert "all-zero column(s) 8, 9" in notes and "resampled from 2000 Hz to 40 Hz" in notes
+    assert rec.rate_hz == pytest.approx(40.0, rel=0.01) and rec.time[-1] < 12.5
+    np.testing.assert_allclose(np.degrees(rec.angle), 0.5 * np.degrees(rec.command), atol=1e-6)
+    assert len(cycles(rec)) == 1                              # 12.5 s of a 2 pi s sine after the cut
+    full = read_kaist(p, rate_hz=None)
+    assert full.rate_hz == pytest.approx(2000.0, rel=0.01)
+    m = parse_column_map("time=0,command=1,angle=3,T_a=4,T_b=5")
+    rec2 = read_kaist(p, column_map=m)
+    assert rec2.notes[0] == "columns used: time=0,command=1,angle=3,T_a=4,T_b=5"
+    assert np.all(np.isnan(rec2.motor_a))
+    with pytest.raises(DataError, match=r"angle \(column 8\) all zero: wrong column map"):
+        read_kaist(p, column_map=parse_column_map("time=0,command=1,angle=8,T_a=4,T_b=5"))
+    with pytest.raises(DataError, match="the column map asks for angle=12"):
+        read_kaist(p, column_map=parse_column_map("time=0,command=1,angle=12,T_a=4,T_b=5"))
+
+
+def test_generic_csv_with_header_and_column_map(tmp_path):
+    from teleop.columns import parse_column_map
+    p = tmp_path / "lab.csv"
+    t = np.arange(0, 2.0, 0.01)
+    p.write_text("t;T_A;T_B;cmd_rad;tip_rad\n" + "".join(
+        f"{a:.3f};{d:.3f};{e:.3f};{b:.5f};{c:.5f}\n" for a, b, c, d, e in zip(t, np.sin(t), 0.4 * np.sin(t), 5 + t, 5 - t)))
+    rec = read_kaist(p, 30, parse_column_map("time=0,T_a=1,T_b=2,command=3,angle=4,units=rad"), rate_hz=None)
+    assert rec.config_deg == 30 and len(rec) == t.size
+    np.testing.assert_allclose(rec.command, np.sin(t), atol=1e-5)
+    np.testing.assert_allclose(rec.T_b, 5 - t, atol=1e-3)
+    assert "line 1 read as a header and skipped" in rec.notes
+    assert len(read_kaist(p, 30, parse_column_map("time=0,T_a=1,T_b=2,command=3,angle=4,units=rad"))) == 80  # 40 Hz
+    from teleop.errors import ConfigError
+    for bad, msg in (("time=0,command=1", "missing angle, T_a, T_b"), ("time=0,x=1", "unknown field 'x'"),
+                     ("time=a", "0-based integer"), ("time=0,command=0", "mapped twice"),
+                     ("time=0,command=1,angle=2,T_a=3,T_b=4,units=grad", "units must be deg or rad"),
+                     ("time0", "not name=column")):
+        with pytest.raises(ConfigError, match=msg):
+            parse_column_map(bad)
+
+
 def test_missing_file_and_directory_are_named(tmp_path):
+    from teleop.kaist import find_configs, load_dir
     with pytest.raises(DataError, match=r"sine_config_0\.txt: no such file"):
         read_kaist(tmp_path / "sine_config_0.txt")
     with pytest.raises(DataError, match=r"KAIST data not found at .*these tests need the unlicensed"):
@@ -81,9 +160,18 @@ def test_missing_file_and_directory_are_named(tmp_path):
     with pytest.raises(DataError, match=r"missing KAIST file\(s\) sine_config_60\.txt, sine_config_180\.txt, "
                                         r"sine_config_240\.txt"):
         load_all(tmp_path)
-    with pytest.raises(DataError, match="not sine_config_<N>.txt"):
+    with pytest.raises(DataError, match=r"not sine_config_<N>.txt and no bend was given \(--bend DEG\)"):
         read_kaist(write_sine(tmp_path / "other.txt", n_stamps=10))
+    assert read_kaist(tmp_path / "other.txt", 75).config_deg == 75
     assert is_kaist_file("/a/b/sine_config_180.txt") and not is_kaist_file("run.csv")
+    # any N in the directory, sorted; a malformed file is one line and left out
+    write_sine(tmp_path / "sine_config_300.txt", n_stamps=10)
+    (tmp_path / "sine_config_45.txt").write_text("0.0, 1.0\n")
+    assert [n for n, _ in find_configs(tmp_path)] == [0, 45, 120, 300]
+    recs, problems = load_dir(tmp_path)
+    assert [r.config_deg for r in recs] == [0, 120, 300]
+    assert len(problems) == 1 and problems[0].startswith(str(tmp_path / "sine_config_45.txt")) \
+        and "\n" not in problems[0]
 
 
 def test_cycles_split_at_upward_zero_crossings(tmp_path):

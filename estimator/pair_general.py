@@ -1,0 +1,192 @@
+"""Fit once, predict new tube shapes: choice of the shared structure, uncertainty, export and prediction.
+
+The shared models of :mod:`estimator.pair_shared` hold one parameter set for every configuration
+with K_j = K0_j + mu N (N the configuration's bend angle [rad]). This module adds what is needed to
+use that set on configurations it has never seen:
+
+* :func:`choose_shared` - the structure is chosen on the training cycles only, by
+  leave-one-configuration-out: for each candidate (:data:`estimator.pair_shared.CHOICE`, in order)
+  refit on the training cycles of all configurations but one and score the training cycle of the
+  left-out one; forward choice with the project's price per parameter (S = (rms / rms_chosen)^2,
+  accepted when S + PENALTY * extra parameters < 1).
+* :func:`bootstrap` - uncertainty by a bootstrap over cycles: the (configuration, cycle) blocks are
+  drawn with replacement, the model refitted (warm start) on each draw; standard deviation, 2.5-97.5 %
+  interval and the correlation matrix of the parameters. :func:`local_correlation` gives the
+  Gauss-Newton correlation (J^T J)^-1 at the optimum beside it.
+* :func:`export_params` / :func:`predict_shared` - the set as JSON (``shared.params``) and the
+  prediction of a new recording from its command, its measured pretension (first sample) and its
+  bend alone, nothing refitted.
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import numpy as np
+
+from estimator.diagnosis import PENALTY
+from estimator.pair_shared import SHARED_MODELS, SharedModel, config_values, fit_shared, predict_config, shared_params
+
+__all__ = ["choose_shared", "bootstrap", "local_correlation", "export_params", "predict_shared", "CV_NFEV"]
+
+#: Most residual evaluations of a leave-one-out or bootstrap refit (warm-started from the full fit).
+CV_NFEV = 40
+
+
+def _rmse_deg(err: np.ndarray) -> float:
+    return math.degrees(float(np.sqrt(np.mean(np.square(err)))))
+
+
+def choose_shared(recs: list, bends: list[float], train: list, candidates: tuple[str, ...],
+                  fitted: dict[str, dict], progress: Callable[[str], None] | None = None) -> dict:
+    """Forward choice of the shared structure by leave-one-configuration-out on the training cycles.
+
+    Parameters
+    ----------
+    recs, bends : recordings and bend angles N [rad]
+    train : per recording, the training samples (slice); nothing else is used
+    candidates : model names of :data:`estimator.pair_shared.SHARED_MODELS`, in forward order
+    fitted : name -> values of each candidate fitted on ``train`` of all recordings (warm starts)
+
+    Returns
+    -------
+    dict: ``chosen`` (name), ``candidates`` {name: {loco_train_rmse_deg [per configuration],
+    rms_deg, n_params, score, price, accepted}}, ``rule``.
+
+    Raises
+    ------
+    ValueError
+        Fewer than 3 recordings.
+    """
+    if len(recs) < 3:
+        raise ValueError("leave-one-configuration-out needs at least 3 configurations")
+    tick = progress or (lambda label: None)
+    rows: dict[str, dict] = {}
+    for name in candidates:
+        m = SHARED_MODELS[name]
+        per = []
+        for i in range(len(recs)):
+            keep = [j for j in range(len(recs)) if j != i]
+            v = fit_shared(m, [recs[j] for j in keep], [bends[j] for j in keep], [train[j] for j in keep],
+                           starts=[fitted[name]], max_nfev=CV_NFEV)
+            err = predict_config(m, v, recs[i], bends[i])[train[i]] - np.asarray(recs[i].angle, dtype=float)[train[i]]
+            per.append(_rmse_deg(err))
+        tick(f"choice {name}")
+        rows[name] = {"loco_train_rmse_deg": per, "rms_deg": float(np.sqrt(np.mean(np.square(per)))),
+                      "n_params": len(shared_params(m, len(recs))), "accepted": False}
+    chosen = candidates[0]
+    rows[chosen].update(score=1.0, price=None, accepted=True)
+    for name in candidates[1:]:
+        S = (rows[name]["rms_deg"] / rows[chosen]["rms_deg"]) ** 2
+        price = S + PENALTY * (rows[name]["n_params"] - rows[chosen]["n_params"])
+        rows[name].update(score=S, price=price)
+        if price < 1.0:
+            rows[name]["accepted"] = True
+            chosen = name
+    return {"chosen": chosen, "candidates": rows,
+            "rule": f"leave one configuration out, fitted and scored on the training cycles only; a candidate "
+                    f"replaces the chosen one when (rms / rms_chosen)^2 + {PENALTY} x (extra parameters) < 1"}
+
+
+def bootstrap(m: SharedModel, recs: list, bends: list[float], blocks: list[list[slice]], values: dict,
+              n_draws: int = 20, seed: int = 0) -> dict:
+    """Bootstrap over cycles: draw the (configuration, cycle) blocks with replacement, refit.
+
+    Parameters
+    ----------
+    m, recs, bends : the shared model, its recordings and bend angles [rad]
+    blocks : per recording, its cycles (sample slices) that the fit used
+    values : the fit on every block (the warm start and the centre)
+    n_draws : bootstrap draws (>= 5)
+
+    Returns
+    -------
+    dict name -> {value, std, ci95 [lo, hi]} under ``params``, ``correlation`` {names, matrix}
+    (of the draws), ``n_draws``, ``method``.
+
+    Raises
+    ------
+    ValueError
+        ``n_draws`` < 5.
+    """
+    if n_draws < 5:
+        raise ValueError(f"n_draws must be >= 5, got {n_draws}")
+    rng = np.random.default_rng(seed)
+    units = [(i, b) for i, bl in enumerate(blocks) for b in bl]
+    names = list(values)
+    draws = []
+    for _ in range(n_draws):
+        pick = [units[k] for k in rng.integers(0, len(units), len(units))]
+        idx = [np.concatenate([np.arange(b.start, b.stop) for i2, b in pick if i2 == i] or [np.arange(0)])
+               for i in range(len(recs))]
+        use = [i for i in range(len(recs)) if idx[i].size]
+        v = fit_shared(m, [recs[i] for i in use], [bends[i] for i in use], [idx[i] for i in use],
+                       starts=[values], max_nfev=CV_NFEV)
+        draws.append([v[n] for n in names])
+    d = np.asarray(draws)
+    corr = np.corrcoef(d, rowvar=False) if d.shape[0] > 1 else np.eye(len(names))
+    corr = np.where(np.isfinite(corr), corr, 0.0)
+    return {"params": {n: {"value": float(values[n]), "std": float(np.std(d[:, j], ddof=1)),
+                           "ci95": [float(np.percentile(d[:, j], 2.5)), float(np.percentile(d[:, j], 97.5))]}
+                       for j, n in enumerate(names)},
+            "correlation": {"names": names, "matrix": np.round(corr, 3).tolist()}, "n_draws": n_draws,
+            "method": "bootstrap over cycles: (configuration, cycle) blocks drawn with replacement, refitted"}
+
+
+def local_correlation(result, names: list[str]) -> dict:
+    """Gauss-Newton correlation of the parameters at a least-squares optimum (``result.jac``):
+    cov ~ (J^T J)^-1; {names, matrix}. A local figure (residuals are autocorrelated, so its
+    standard errors would be too small; only the correlations are reported)."""
+    J = np.asarray(result.jac, dtype=float)
+    cov = np.linalg.pinv(J.T @ J)
+    sd = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
+    corr = np.clip(cov / np.outer(sd, sd), -1.0, 1.0)
+    return {"names": list(names), "matrix": np.round(corr, 3).tolist()}
+
+
+def export_params(m: SharedModel, values: dict, fitted_on: str, uncertainty: dict | None = None) -> dict:
+    """The shared set as JSON: ``model`` (name, structure, effects and the laws), ``values`` {name:
+    {value, unit[, std, ci95]}}, ``fitted_on``. Read back by :func:`predict_shared`."""
+    units = {p.name: p.unit for p in shared_params(m)}
+    unc = (uncertainty or {}).get("params", {})
+    vals = {k: {"value": float(x), "unit": units[k], **{q: unc[k][q] for q in ("std", "ci95") if k in unc}}
+            for k, x in values.items()}
+    laws = ["K_j = K0_j + mu * N (N: bend angle [rad])"] + [f"{k} = {x:g} (held: not identifiable)"
+                                                           for k, x in m.fixed]
+    if m.g_slope:
+        laws.append("G = G + G_N * N")
+    if m.stiffness_ratio:
+        laws.append("lam = G / s")
+    laws.append("initial tensions: the recording's first sample (pretension); angle offset: its first sample")
+    return {"model": {"name": m.name, "structure": m.structure, "effects": list(m.effects), "laws": laws},
+            "values": vals, "fitted_on": fitted_on}
+
+
+def predict_shared(params: dict, rec, bend: float) -> tuple[np.ndarray, dict]:
+    """Predict a recording with an exported shared set (:func:`export_params`), nothing refitted.
+
+    Parameters
+    ----------
+    params : the ``shared.params`` dict
+    rec : recording (command [rad], T_a, T_b [N] (first samples used), angle [rad]), shape (n,)
+    bend : its bend angle N [rad]
+
+    Returns
+    -------
+    angle : ndarray (n,) [rad]; values : the kernel values used (K_a, K_b, G, lam, ...)
+
+    Raises
+    ------
+    ValueError
+        Unknown model name or missing parameters in ``params``.
+    """
+    try:
+        name = params["model"]["name"]
+        m = SHARED_MODELS[name]
+        values = {k: float(v["value"]) for k, v in params["values"].items()}
+    except (KeyError, TypeError) as e:
+        raise ValueError(f"shared parameter set: missing or unknown entry {e}") from None
+    missing = [p.name for p in shared_params(m) if p.name not in values]
+    if missing:
+        raise ValueError(f"shared parameter set ({name}): missing {', '.join(missing)}")
+    return predict_config(m, values, rec, bend), config_values(m, values, rec, bend)
