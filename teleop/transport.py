@@ -85,6 +85,9 @@ def zenoh_config(transport: TransportConfig, *, listen: tuple[str, ...] | None =
     # 16 queued tx batches (zenoh's default is 2, 16 its maximum): a stall of zenoh's tx thread fills them before
     # anything is dropped (a loaded 2-core machine does stall for tens of ms)
     _insert(cfg, "transport/link/tx/queue/size/real_time", 16, "transport/link/tx/queue/size/real_time")
+    # a batch is never held back waiting for more messages (default 1 ms): what a side published is on the
+    # socket at once, so a SIGKILL right after a put loses nothing that was put (tests/integration/test_recorder.py)
+    _insert(cfg, "transport/link/tx/queue/batching/time_limit", 0, "transport/link/tx/queue/batching/time_limit")
     for k, v in link_security_settings(transport).items():   # TLS, user/password (teleop/link_security.py)
         _insert(cfg, k, v, k.replace("/", "."), shown="***" if k.endswith("password") else None)
     return cfg
@@ -218,8 +221,10 @@ class Publisher(Entity):
     Reliable, real-time priority, congestion control DROP (the loop never blocks for long), and not
     ``express`` by default: zenoh then batches only while the link is busy, so at 1 kHz the latency is
     that of express (ping-pong p50 0.12 ms either way, measured) but a burst fills 16 queued batches of
-    many messages instead of 16 messages (100 000 puts in a tight loop: all delivered; express: 36 %
-    dropped). That is what makes the recorder lose nothing when a side's tx thread stalls.
+    many messages instead of 16 messages (100 000 puts in a tight loop: all delivered; express: 34-48 %
+    dropped). With the batching time limit at 0 (:func:`zenoh_config`) nothing waits for a batch to
+    fill. That is what makes the recorder lose nothing when a side's tx thread stalls or the side is
+    killed right after a put.
     """
 
     def __init__(self, session: Session, key: str, *, express: bool = False,

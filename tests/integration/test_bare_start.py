@@ -22,6 +22,7 @@ instrument:
   id: itbare
 calibration:
   speed: 0.02
+  dir: "{runs}-calibration"
 recording:
   rerun: "off"
   dir: "{runs}"

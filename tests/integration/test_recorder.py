@@ -32,6 +32,7 @@ instrument:
   id: {ident}
 calibration:
   speed: 0.02
+  dir: "{runs}-calibration"
 recording:
   rerun: "off"
   dir: "{runs}"
@@ -93,7 +94,11 @@ def test_sigkill_of_a_side_loses_no_published_message(tmp_path, victim):
         run_dirs = lambda: sorted(p for p in runs.glob("*") if p.is_dir())
         wait_for(lambda: len(run_dirs()) == 1 and (run_dirs()[0] / "recorder").is_dir(), 10, "the run directory")
         rec_dir = run_dirs()[0] / "recorder"
-        wait_for(lambda: _state_seen(rec_dir, "slave", 3), 40, "the slave to be ENGAGED")
+        try:
+            wait_for(lambda: _state_seen(rec_dir, "slave", 3), 40, "the slave to be ENGAGED")
+        except AssertionError as e:
+            tails = {n: (tmp_path / f"{n}.log").read_text()[-1500:] for n in ("slave", "master", "record")}
+            raise AssertionError(f"{e}; logs: {tails}") from None
         time.sleep(0.5)                                         # teleoperation under way
         procs[victim].send_signal(signal.SIGKILL)
         procs[victim].wait(10)

@@ -26,6 +26,7 @@ instrument:
   id: itrouter
 calibration:
   speed: 0.02
+  dir: "{runs}-calibration"
 recording:
   rerun: "off"
   dir: "{runs}"
