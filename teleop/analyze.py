@@ -8,13 +8,19 @@ Two modes:
   fitted on the same block, all scored on the held-out rest; prints the cause, the held-out errors
   and the gain (:func:`teleop.report.format_summary`) and the fitted parameters. A progress bar goes
   to stderr on long recordings.
-* ``teleop analyze --kaist [DIR]`` or ``teleop analyze .../sine_config_N.txt``: every KAIST
-  configuration (:mod:`teleop.kaist`; unlicensed data read in place), calibrated on command cycle 1
-  and tested on cycle 2: the pair diagnosis (:mod:`estimator.pair_diagnosis`: the seed pair model
-  against the capstan-joint model and the pair-level effects; causes, extended model, gain), one
-  parameter set for all configurations with K growing with the bend and its leave-one-out
-  predictions (:mod:`estimator.pair_shared`), and the Finding 1 baselines (force path, linear map,
-  linear map through a play operator, model-free reversal dead zones). About a minute.
+* ``teleop analyze --kaist [DIR]`` or ``teleop analyze .../sine_config_N.txt`` (or any FILE with
+  ``--bend DEG``; other layouts with ``--columns MAP``, :mod:`teleop.columns`): every
+  ``sine_config_<N>.txt`` configuration (:mod:`teleop.kaist`; unlicensed data read in place),
+  calibrated on command cycle 1 and tested on the later cycles, the model choice on cycle 1 only:
+  the pair diagnosis (:mod:`estimator.pair_diagnosis`: the seed pair model against the
+  capstan-joint model and the pair-level effects; causes, extended model, gain), one parameter set
+  for all configurations with K growing with the bend, its structure chosen by leave-one-
+  configuration-out on the training cycles, its leave-one-out predictions and its bootstrap
+  uncertainty, saved under ``shared.params`` (:mod:`estimator.pair_shared`,
+  :mod:`estimator.pair_general`), and the Finding 1 baselines (force path, linear map, linear map
+  through a play operator, model-free reversal dead zones). A few minutes.
+* ``teleop analyze --kaist DIR2 --shared-params OUT``: every configuration of DIR2 predicted with the
+  set saved by ``--json OUT``, nothing refitted (``shared_prediction.<N>.rmse_deg``).
 
 ``--json OUT`` writes the result (summary numbers, never per-sample data); ``--report DIR`` a
 Markdown report with PNG figures (:func:`teleop.report.write_report`,
