@@ -27,18 +27,24 @@ col  meaning (8-column KAIST map)                 file unit       here
 """
 from __future__ import annotations
 
+import argparse
+import json
 import math
 import re
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from teleop.columns import ColumnMap, read_table
+from estimator.pair import rmse
+from estimator.pair_general import predict_shared
+from teleop.columns import ColumnMap, parse_column_map, read_table
 from teleop.errors import DataError
 
 __all__ = ["CONFIGS_DEG", "RATE_HZ", "KaistRecording", "default_kaist_dir", "find_kaist_dir", "find_configs",
-           "is_kaist_file", "kaist_path", "read_kaist", "load_all", "load_dir", "resample", "cycles", "split"]
+           "is_kaist_file", "kaist_path", "read_kaist", "load_all", "load_dir", "resample", "cycles", "split",
+           "load_kaist_input", "predict_kaist", "format_prediction"]
 
 #: Insertion-tube configurations shipped in ../shared/data/kaist-tsm (bend angle [deg]).
 CONFIGS_DEG = (0, 60, 120, 180, 240)
@@ -292,3 +298,89 @@ def split(rec: KaistRecording) -> tuple[slice, slice, str]:
             f"train: command cycle 1 (t < {rec.time[cs[0].stop]:.2f} s); test: cycles 2-{len(cs)}"
     h = n // 2
     return slice(0, h), slice(h, n), f"{len(cs)} complete command cycle(s): train on t < {rec.time[h]:.2f} s, test after"
+
+
+# ---- the command line's KAIST input and the prediction with a saved shared set -----------------
+
+def load_kaist_input(args: argparse.Namespace) -> list[KaistRecording]:
+    """The recordings of the KAIST mode: ``--kaist [DIR]`` (every ``sine_config_<N>.txt`` in DIR), a
+    ``sine_config_<N>.txt`` FILE (its whole directory) or another FILE with ``--bend DEG``; read with
+    ``--columns`` when given. Files that cannot be read get one line on stderr each and are left out.
+
+    Raises
+    ------
+    DataError
+        Nothing readable (the problems named), or FILE without ``--bend`` and not named
+        ``sine_config_<N>.txt``.
+    ConfigError
+        A malformed ``--columns`` map.
+    """
+    cmap = parse_column_map(args.columns) if args.columns is not None else None
+    if args.file is not None and (args.bend is not None or not is_kaist_file(args.file)):
+        if args.bend is None:
+            raise DataError(f"{args.file}: not named sine_config_<N>.txt: give its bend with --bend DEG")
+        recs: list[KaistRecording] = [read_kaist(args.file, args.bend, cmap)]
+        problems: list[str] = []
+    else:
+        directory = Path(args.file).parent if args.kaist is None else (args.kaist or None)
+        recs, problems = load_dir(directory, cmap)
+    for line in problems:
+        print(f"skipped {line}", file=sys.stderr)
+    if not recs:
+        raise DataError("no readable KAIST recording: " + "; ".join(problems))
+    for r in recs:
+        for note in r.notes:
+            if note.startswith("WARNING") or "no column map" in note:
+                print(f"{Path(r.source).name}: {note}", file=sys.stderr)
+    return recs
+
+
+def predict_kaist(recs: list[KaistRecording], params_path: str | Path) -> dict:
+    """Predict every recording with the shared set saved by ``--json`` (``shared.params``); nothing
+    is refitted (the pretension and the angle offset are the recording's first sample).
+
+    Returns
+    -------
+    dict, JSON-ready: ``mode`` ("kaist-shared-prediction"), ``params_file``, ``model``,
+    ``shared_prediction`` {str(N): {rmse_deg (every sample), rmse_cycle_deg [per complete command
+    cycle], max_abs_deg, K_a, K_b, n_samples, source, import_notes}}.
+
+    Raises
+    ------
+    DataError
+        The parameter file is missing, not JSON, or has no usable ``shared.params``.
+    """
+    path = Path(params_path)
+    try:
+        doc = json.loads(path.read_text())
+        params = doc["shared"]["params"] if "shared" in doc else doc["params"]
+    except FileNotFoundError:
+        raise DataError(f"{path}: no such file") from None
+    except (ValueError, KeyError, TypeError) as e:
+        raise DataError(f"{path}: not a teleop analyze --kaist JSON with shared.params ({e})") from None
+    out = {"mode": "kaist-shared-prediction", "params_file": str(path), "model": params.get("model"),
+           "shared_prediction": {}}
+    for rec in recs:
+        try:
+            th, v = predict_shared(params, rec, math.radians(rec.config_deg))
+        except ValueError as e:
+            raise DataError(f"{path}: {e}") from None
+        err = th - rec.angle
+        out["shared_prediction"][str(rec.config_deg)] = {
+            "rmse_deg": math.degrees(rmse(err)), "max_abs_deg": math.degrees(float(np.max(np.abs(err)))),
+            "rmse_cycle_deg": [math.degrees(rmse(err[c])) for c in cycles(rec)],
+            "K_a": v.get("K_a"), "K_b": v.get("K_b"), "n_samples": len(rec), "source": rec.source,
+            "import_notes": list(rec.notes)}
+    return out
+
+
+def format_prediction(s: dict) -> str:
+    """The lines printed for ``--shared-params``: per configuration the RMSE over every sample and per
+    command cycle [deg]."""
+    lines = [f"shared parameter set {s['params_file']} ({(s.get('model') or {}).get('name')}): distal angle "
+             "predicted from the command, the pretension and the bend alone (RMSE [deg])",
+             f"{'config [deg]':>12}{'all':>7}{'max':>7}{'K_a':>6}{'K_b':>6}  per cycle"]
+    for n, r in s["shared_prediction"].items():
+        lines.append(f"{n:>12}{r['rmse_deg']:>7.2f}{r['max_abs_deg']:>7.2f}{r['K_a']:>6.2f}{r['K_b']:>6.2f}  "
+                     + " ".join(f"{x:.2f}" for x in r["rmse_cycle_deg"]))
+    return "\n".join(lines)

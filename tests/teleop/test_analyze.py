@@ -212,6 +212,35 @@ def test_a_kaist_file_name_runs_its_whole_directory(tmp_path, monkeypatch, capsy
     assert seen == list(CONFIGS_DEG)
 
 
+def test_kaist_bend_option_columns_and_shared_params_errors(tmp_path, monkeypatch, capsys):
+    d = write_kaist_dir(tmp_path / "kaist", configs=(60,))
+    other = d / "run_a.txt"
+    other.write_text((d / "sine_config_60.txt").read_text())
+    seen = []
+
+    def fake(recs, progress=False, **kw):
+        seen.extend((r.config_deg, r.notes[0]) for r in recs)
+        return {"mode": "kaist", "configurations": []}, []
+    monkeypatch.setattr(analyze, "analyze_kaist", fake)
+    assert run([str(other), "--bend", "75", "--columns", "time=0,command=1,angle=3,T_a=4,T_b=5"]) == 0
+    assert seen == [(75, "columns used: time=0,command=1,angle=3,T_a=4,T_b=5")]
+    with pytest.raises(DataError, match=r"run_a\.txt: not named sine_config_<N>\.txt: give its bend with --bend"):
+        run([str(other), "--columns", "time=0,command=1,angle=3,T_a=4,T_b=5"])
+    with pytest.raises(ConfigError, match="--columns: missing T_b"):
+        run(["--kaist", str(d), "--columns", "time=0,command=1,angle=3,T_a=4"])
+    with pytest.raises(DataError, match=r"nope\.json: no such file"):
+        run(["--kaist", str(d), "--shared-params", str(tmp_path / "nope.json")])
+    (tmp_path / "bad.json").write_text("{}")
+    with pytest.raises(DataError, match=r"bad\.json: not a teleop analyze --kaist JSON with shared\.params"):
+        run(["--kaist", str(d), "--shared-params", str(tmp_path / "bad.json")])
+    (d / "sine_config_90.txt").write_text("1, 2\n")                    # malformed: one line, left out
+    seen.clear()
+    assert run(["--kaist", str(d)]) == 0
+    assert [n for n, _ in seen] == [60]
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("skipped ") and "sine_config_90.txt" in err[0]
+
+
 @pytest.mark.kaist
 @pytest.mark.skipif(not KAIST_DIR.is_dir(), reason=f"KAIST data not found at {KAIST_DIR}: these tests need "
                                                    "the unlicensed measurements, see docs/findings.md")
