@@ -172,7 +172,10 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
     tick = _Progress(progress, n_cal * 14 + len(runs) + 14 + (len(runs) if loro else 0))
     out = {"mode": "mrd", "full_scale_Nm": fs, "attribution": ATTRIBUTION, "not_from_proximal": NOT_FROM_PROXIMAL,
            "scored_from": "the first reversal of the spindle after 0.5 s (the stroke before it initialises the "
-                          "estimator, as the paper's calibration pull does)", "runs": {}}
+                          "estimator, as the paper's calibration pull does)", "runs": {},
+           "found": {r.name: {"frequency_hz": r.frequency_hz, "load_level": r.load_level,
+                              "load_command_A": r.load_command, "n_samples": len(r),
+                              "duration_s": float(r.time[-1])} for r in runs}}
     details = {"pred": {}, "shared_pred": {}, "loro_pred": {}, "k0": {}}
     cal_inputs = {"inputs": ["spindle torque", "spindle encoder"], "targets": ["jaw torque", "jaw encoder"]}
     if mode == "run":
@@ -257,8 +260,14 @@ def format_mrd(s: dict) -> str:
     cal = s["calibration"]
     head = (f"calibrated on run {cal['run']}" if cal["mode"] == "run"
             else f"calibrated on the first {cal['seconds']:g} s of each run")
+    found = s["found"].values()
+    freqs = ", ".join(f"{f:g}" for f in sorted({round(v["frequency_hz"], 2) for v in found}))
+    cmds = sorted({round(v["load_command_A"], 3) for v in found})
     lines = [f"MRD da Vinci runs ({s['attribution']})",
-             f"{len(s['bands'])} runs, full scale {s['full_scale_Nm'] * 1e3:.1f} mN m; {head} (inputs spindle torque "
+             f"found {len(s['found'])} runs: sine frequencies {freqs} Hz (from the spindle angle), "
+             f"{len(cmds)} load levels (front-end command {cmds[0]:g}-{cmds[-1]:g} A), "
+             f"{min(v['duration_s'] for v in found):.1f}-{max(v['duration_s'] for v in found):.1f} s each",
+             f"full scale {s['full_scale_Nm'] * 1e3:.1f} mN m; {head} (inputs spindle torque "
              "+ encoder, targets jaw torque + encoder); scored from each run's first reversal",
              f"{'run':>4}{'f [Hz]':>8}{'load':>5}{'RMSE':>7}{'max':>7}{'angle':>7}   constant   linear    phase"
              f"{'shared':>8}{'LORO':>7}"]
