@@ -21,7 +21,8 @@ Written ``time=0,command=1,angle=3,T_a=4,T_b=5`` (0-based columns), optionally w
 :func:`read_table` is robust to what long logger files carry, and says what it did in ``notes``:
 
 * a header line (first line not all numbers) is skipped; separators: comma (a trailing comma is
-  allowed), semicolon or white space;
+  allowed), semicolon or white space; a last line cut short (a logger stopped mid-write) is dropped
+  with a warning, a malformed line anywhere else is an error naming file, line and column;
 * rows whose time stamp equals the previous row's are dropped (the KAIST logger writes each stamp
   several times; the later repeats carry values that reappear in the next stamp's first row);
 * a *time reset* (time going back) splits the file into segments: a last segment holding at most
@@ -146,7 +147,9 @@ def _rows(path: Path) -> tuple[np.ndarray, np.ndarray, list[str]]:
     width = None
     rows: list[list[float]] = []
     linenos: list[int] = []
-    for lineno, raw in enumerate(text.splitlines(), start=1):
+    lines = text.splitlines()
+    last = max((i for i, raw in enumerate(lines, start=1) if raw.strip()), default=0)
+    for lineno, raw in enumerate(lines, start=1):
         line = raw.strip()
         if not line or line.startswith("#"):
             continue
@@ -162,10 +165,16 @@ def _rows(path: Path) -> tuple[np.ndarray, np.ndarray, list[str]]:
                 continue
             width = len(fields)
         fields = _split(line, sep)
-        if len(fields) != width:
-            raise DataError(f"{src}:{lineno}: expected {width} {'comma-' if sep == ',' else ''}separated numbers "
-                            f"(as the first data row), found {len(fields)}")
-        rows.append(_to_floats(fields, src, lineno))
+        try:
+            if len(fields) != width:
+                raise DataError(f"{src}:{lineno}: expected {width} {'comma-' if sep == ',' else ''}separated "
+                                f"numbers (as the first data row), found {len(fields)}")
+            rows.append(_to_floats(fields, src, lineno))
+        except DataError as e:
+            if lineno != last or len(rows) < 2:
+                raise
+            notes.append(f"WARNING the last line ({lineno}) is cut short or malformed: dropped ({e})")
+            break
         linenos.append(lineno)
     if not rows:
         raise DataError(f"{src}: no numeric rows")

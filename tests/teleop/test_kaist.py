@@ -65,6 +65,10 @@ def test_malformed_row_names_file_and_line(tmp_path):
     p.write_text("".join(lines))
     with pytest.raises(DataError, match=r":5: column 1: expected a finite number"):
         read_kaist(p)
+    lines[4] = "0.100000, 1.0, 2.0, 0.0, 5.0, 5.0, 1.0, 1.0, \n"
+    p.write_text("".join(lines) + "0.250000, 1.0, 2.0, 0.0, 5.\n")                # logger stopped mid-line
+    rec = read_kaist(p)
+    assert len(rec) == 10 and any("the last line (11) is cut short" in n for n in rec.notes)
 
 
 def test_time_reset_near_the_end_is_cut_and_one_in_the_middle_stitched(tmp_path):
