@@ -1,7 +1,8 @@
-"""Calibration data of a joint instrument: ``<calibration.dir>/<instrument.id>.yaml``, written by
-``teleop calibrate`` (or the slave's power-up routine) and reloaded by the slave.
+"""Calibration data of an instrument: ``<calibration.dir>/<instrument.id>.yaml``, written by
+``teleop calibrate`` (or the slave's power-up routine when the file is missing, or on
+``teleop slave --recalibrate``) and reloaded by the slave: one life cycle for every instrument.
 
-Format (YAML, SI units; unknown keys are errors)::
+Format (YAML, SI units; unknown keys are errors). A joint instrument (``instrument.joints``)::
 
     instrument: flex3                    # must be the config's instrument.id
     date: 2026-01-01T12:00:00+00:00      # ISO 8601, when the fit was made
@@ -13,6 +14,16 @@ Format (YAML, SI units; unknown keys are errors)::
         a: {K: 0.62, M_e: 8.1e-05, compliance: 0.0001, knee_x_in: 0.0061, knee_T_in: 4.1,
             residual_rms: 3.0e-07, n_samples: 1500}
         b: {...}
+
+A single-tendon instrument (one axis of one tendon) has ``tendon:`` instead of ``joints:``::
+
+    instrument: tendon0
+    date: 2026-01-01T12:00:00+00:00
+    method: joint-limit knee (Phee et al. 2009, Sec. IV); K from M_e by Newton (eq. 13)
+    target_tension: 20.0
+    use_route: true
+    tendon: {K: 0.62, M_e: 8.1e-05, compliance: 0.0001, knee_x_in: 0.0061, knee_T_in: 4.1,
+             residual_rms: 3.0e-07, n_samples: 1500}
 
 K [-] >= 0, M_e [m/N] > 0, compliance = L/EA [m/N] > 0, knee_x_in [m], knee_T_in [N], residual_rms [m]
 (of the post-knee line x_in = M_e T_in + c) >= 0, n_samples >= 1 (samples after the knee).
@@ -28,18 +39,20 @@ import yaml
 
 from estimator.calibration import CalibrationResult
 from estimator.sheath import SheathModel
+from slave.calibrate import route_wrap_shape
 from slave.instrument import TENDONS
 from slave.pair_calibrate import tendon_wrap_shape
 from teleop.config import Config
 from teleop.errors import CalibrationError
 
-__all__ = ["TendonCalibration", "InstrumentCalibration", "calibration_path", "from_results", "save_calibration",
-           "load_calibration", "sheath_models"]
+__all__ = ["TendonCalibration", "InstrumentCalibration", "calibration_path", "from_results", "from_tendon_result",
+           "save_calibration", "load_calibration", "sheath_models", "tendon_model"]
 
 METHOD = "joint-limit knee each way (Phee et al. 2009, Sec. IV); K from M_e by Newton (eq. 13)"
+METHOD_TENDON = "joint-limit knee (Phee et al. 2009, Sec. IV); K from M_e by Newton (eq. 13)"
 _TENDON_KEYS = {"K": float, "M_e": float, "compliance": float, "knee_x_in": float, "knee_T_in": float,
                 "residual_rms": float, "n_samples": int}
-_TOP_KEYS = ("instrument", "date", "method", "target_tension", "use_route", "joints")
+_TOP_KEYS = ("instrument", "date", "method", "target_tension", "use_route")       # + joints or tendon
 
 
 @dataclass(frozen=True)
@@ -62,20 +75,26 @@ class TendonCalibration:
 
 @dataclass(frozen=True)
 class InstrumentCalibration:
-    """A whole instrument: ``joints`` is a tuple of (name, {"a": TendonCalibration, "b": ...})."""
+    """A whole instrument: ``joints`` is a tuple of (name, {"a": TendonCalibration, "b": ...}) for a
+    joint instrument; ``tendon`` the one tendon of a single-tendon instrument (``joints`` empty)."""
 
     instrument: str
     date: str
     target_tension: float
     use_route: bool
-    joints: tuple[tuple[str, dict[str, TendonCalibration]], ...]
+    joints: tuple[tuple[str, dict[str, TendonCalibration]], ...] = ()
     method: str = METHOD
+    tendon: TendonCalibration | None = None
 
     def as_dict(self) -> dict:
-        return {"instrument": self.instrument, "date": self.date, "method": self.method,
-                "target_tension": self.target_tension, "use_route": self.use_route,
-                "joints": [{"name": n, **{t: {k: getattr(c[t], k) for k in _TENDON_KEYS} for t in TENDONS}}
-                           for n, c in self.joints]}
+        out = {"instrument": self.instrument, "date": self.date, "method": self.method,
+               "target_tension": self.target_tension, "use_route": self.use_route}
+        if self.tendon is not None:
+            out["tendon"] = {k: getattr(self.tendon, k) for k in _TENDON_KEYS}
+        else:
+            out["joints"] = [{"name": n, **{t: {k: getattr(c[t], k) for k in _TENDON_KEYS} for t in TENDONS}}
+                             for n, c in self.joints]
+        return out
 
 
 def calibration_path(cfg: Config) -> Path:
@@ -92,11 +111,21 @@ def from_results(cfg: Config, results: list[dict[str, CalibrationResult]], date:
                                  use_route=cfg.calibration.use_route, joints=joints)
 
 
+def from_tendon_result(cfg: Config, result: CalibrationResult, date: str | None = None) -> InstrumentCalibration:
+    """The calibration data of a single tendon's finished :class:`~slave.calibrate.JointLimitCalibration`
+    (date: now, UTC)."""
+    date = date or _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    return InstrumentCalibration(instrument=cfg.instrument.id, date=date, target_tension=cfg.calibration.target_tension,
+                                 use_route=cfg.calibration.use_route, method=METHOD_TENDON,
+                                 tendon=TendonCalibration.from_result(result))
+
+
 def save_calibration(cal: InstrumentCalibration, path: str | Path) -> Path:
     """Write ``cal`` as YAML to ``path`` (directories created); returns the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    head = ("# tendon-sheath calibration of a joint instrument (teleop calibrate); SI units:\n"
+    kind = "a single-tendon" if cal.tendon is not None else "a joint"
+    head = (f"# tendon-sheath calibration of {kind} instrument (teleop calibrate); SI units:\n"
             "# K [-], M_e and compliance = L/EA [m/N], knee_x_in [m], knee_T_in [N], residual_rms [m]\n")
     path.write_text(head + yaml.safe_dump(cal.as_dict(), sort_keys=False), encoding="utf-8")
     return path
@@ -113,8 +142,9 @@ def load_calibration(path: str | Path, cfg: Config) -> InstrumentCalibration:
     ------
     CalibrationError
         Missing or unreadable file, YAML error, unknown or missing key, a value of the wrong type or
-        out of range, another instrument id, or joints that are not the config's (names in order).
-        The message starts with the file name and names the key.
+        out of range, another instrument id, joints that are not the config's (names in order), a
+        single tendon's file for a joint instrument or the other way round. The message starts with
+        the file name and names the key.
     """
     path = Path(path)
     try:
@@ -125,12 +155,18 @@ def load_calibration(path: str | Path, cfg: Config) -> InstrumentCalibration:
         raise _fail(path, f"cannot read the calibration file ({e})") from None
     except yaml.YAMLError as e:
         raise _fail(path, f"YAML syntax error: {getattr(e, 'problem', None) or e}") from None
+    kind = "joints" if cfg.instrument.joints else "tendon"
+    keys = _TOP_KEYS + (kind,)
     if not isinstance(data, dict):
-        raise _fail(path, "expected a mapping with keys " + ", ".join(_TOP_KEYS))
+        raise _fail(path, "expected a mapping with keys " + ", ".join(keys))
+    other = "tendon" if kind == "joints" else "joints"
+    if other in data:
+        raise _fail(path, f"{other}: this is the calibration of a {'single-tendon' if other == 'tendon' else 'joint'} "
+                          f"instrument, the config's is a {'joint' if kind == 'joints' else 'single-tendon'} instrument")
     for k in data:
-        if k not in _TOP_KEYS:
-            raise _fail(path, f"unknown key {k!r} (expected {', '.join(_TOP_KEYS)})")
-    for k in _TOP_KEYS:
+        if k not in keys:
+            raise _fail(path, f"unknown key {k!r} (expected {', '.join(keys)})")
+    for k in keys:
         if k not in data:
             raise _fail(path, f"missing key {k!r}")
     if data["instrument"] != cfg.instrument.id:
@@ -148,6 +184,10 @@ def load_calibration(path: str | Path, cfg: Config) -> InstrumentCalibration:
         raise _fail(path, f"target_tension: expected a tension > 0 N, got {tt!r}")
     if not isinstance(data["use_route"], bool):
         raise _fail(path, f"use_route: expected true or false, got {data['use_route']!r}")
+    if kind == "tendon":
+        return InstrumentCalibration(instrument=data["instrument"], date=date, target_tension=float(tt),
+                                     use_route=data["use_route"], method=str(data["method"]),
+                                     tendon=_tendon_values(path, "tendon", data["tendon"]))
     names = [j.name for j in cfg.instrument.joints]
     joints = data["joints"]
     if not isinstance(joints, list) or [j.get("name") if isinstance(j, dict) else None for j in joints] != names:
@@ -158,35 +198,51 @@ def load_calibration(path: str | Path, cfg: Config) -> InstrumentCalibration:
         extra = set(j) - {"name", *TENDONS}
         if extra:
             raise _fail(path, f"joints[{i}] ({j['name']}): unknown key {sorted(extra)[0]!r}")
-        tend = {}
-        for t in TENDONS:
-            where = f"joints[{i}].{t} ({j['name']})"
-            v = j.get(t)
-            if not isinstance(v, dict):
-                raise _fail(path, f"{where}: missing or not a mapping of fitted values")
-            unknown = set(v) - set(_TENDON_KEYS)
-            if unknown:
-                raise _fail(path, f"{where}: unknown key {sorted(unknown)[0]!r}")
-            vals = {}
-            for key, tp in _TENDON_KEYS.items():
-                x = v.get(key)
-                ok = (not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(x)
-                      and (tp is float or isinstance(x, int)))
-                if ok and key in ("M_e", "compliance"):
-                    ok = x > 0
-                elif ok and key in ("K", "residual_rms"):
-                    ok = x >= 0
-                elif ok and key == "n_samples":
-                    ok = x >= 1
-                if not ok:
-                    raise _fail(path, f"{where}.{key}: expected {'an integer >= 1' if tp is int else 'a finite number'}"
-                                      f"{' > 0' if key in ('M_e', 'compliance') else ' >= 0' if key in ('K', 'residual_rms') else ''}"
-                                      f", got {x!r}")
-                vals[key] = tp(x)
-            tend[t] = TendonCalibration(**vals)
+        tend = {t: _tendon_values(path, f"joints[{i}].{t} ({j['name']})", j.get(t)) for t in TENDONS}
         out.append((j["name"], tend))
     return InstrumentCalibration(instrument=data["instrument"], date=date, target_tension=float(tt),
                                  use_route=data["use_route"], joints=tuple(out), method=str(data["method"]))
+
+
+def _tendon_values(path: Path, where: str, v) -> TendonCalibration:
+    """One tendon's fitted values, checked (module docstring: ranges); ``where`` names it in errors."""
+    if not isinstance(v, dict):
+        raise _fail(path, f"{where}: missing or not a mapping of fitted values")
+    unknown = set(v) - set(_TENDON_KEYS)
+    if unknown:
+        raise _fail(path, f"{where}: unknown key {sorted(unknown)[0]!r}")
+    vals = {}
+    for key, tp in _TENDON_KEYS.items():
+        x = v.get(key)
+        ok = (not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(x)
+              and (tp is float or isinstance(x, int)))
+        if ok and key in ("M_e", "compliance"):
+            ok = x > 0
+        elif ok and key in ("K", "residual_rms"):
+            ok = x >= 0
+        elif ok and key == "n_samples":
+            ok = x >= 1
+        if not ok:
+            raise _fail(path, f"{where}.{key}: expected {'an integer >= 1' if tp is int else 'a finite number'}"
+                              f"{' > 0' if key in ('M_e', 'compliance') else ' >= 0' if key in ('K', 'residual_rms') else ''}"
+                              f", got {x!r}")
+        vals[key] = tp(x)
+    return TendonCalibration(**vals)
+
+
+def tendon_model(cal: InstrumentCalibration, cfg: Config) -> SheathModel:
+    """The estimator's model of a single-tendon instrument: calibrated K and L/EA, and the route shape
+    (``sheath``) when the calibration used it.
+
+    Raises
+    ------
+    CalibrationError
+        ``cal`` is a joint instrument's calibration.
+    """
+    if cal.tendon is None:
+        raise CalibrationError(f"the calibration of {cal.instrument} is a joint instrument's: no single tendon")
+    shape = route_wrap_shape(cfg) if cal.use_route else None
+    return SheathModel(K=cal.tendon.K, compliance=cal.tendon.compliance, wrap_shape=shape)
 
 
 def sheath_models(cal: InstrumentCalibration, cfg: Config) -> list[tuple[SheathModel, SheathModel]]:

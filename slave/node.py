@@ -2,10 +2,14 @@
 
 One :meth:`SlaveNode.step` per cycle (``rig.rate_hz``), given the time by the caller:
 
-* CALIBRATING (from power-up): :class:`slave.calibrate.JointLimitCalibration` drives the rig; no
-  command is accepted and no estimate is sent. When it is done, a :class:`DistalEstimator` is built
-  on the calibrated :class:`SheathModel` and replays the routine's proximal samples so that its
-  tension-profile memory matches the tendon's; calibration.json is written.
+* CALIBRATING (from power-up, when no calibration was given: the same life cycle as a joint
+  instrument's, :mod:`slave.calibration_file`): :class:`slave.calibrate.JointLimitCalibration` drives
+  the rig; no command is accepted and no estimate is sent. When it is done, a
+  :class:`DistalEstimator` is built on the calibrated :class:`SheathModel` and replays the routine's
+  proximal samples so that its tension-profile memory matches the tendon's; the fit is saved as
+  calibration data (``calibration_file``) and calibration.json is written. With a calibration
+  (reloaded from ``configs/calibration/<instrument>.yaml``) the node starts SAFE at once, its
+  estimator at rest (uniform pretension), and calibration.json holds the reloaded values.
 * Then, each cycle, the latest Command decides (latest wins):
 
   ========================================  ==========  =======================================
@@ -52,6 +56,7 @@ import numpy as np
 from estimator.distal import DistalEstimator
 from estimator.sheath import SheathModel, profile_batch
 from slave.calibrate import JointLimitCalibration
+from slave.calibration_file import InstrumentCalibration, from_tendon_result, save_calibration, tendon_model
 from slave.node_base import SlaveLinks, SlaveNodeBase
 from slave.rig import Rig, RigState
 from teleop.codec import seq_newer
@@ -87,14 +92,21 @@ class SlaveNode(SlaveNodeBase):
     stop_on_master_stop : bool
         Finish when the master announces STOPPING.
     calibrate : bool
-        Run the joint-limit routine first (False: use ``model`` at once, for tests).
+        Run the joint-limit routine first unless ``calibration`` is given (False: use ``model`` at
+        once, for tests).
     model : SheathModel, optional
         The model when ``calibrate`` is False.
+    calibration : InstrumentCalibration, optional
+        Reloaded calibration data of this single tendon (:mod:`slave.calibration_file`); the node
+        starts SAFE with its model.
+    calibration_file : path, optional
+        Where the power-up calibration is saved.
     """
 
     def __init__(self, cfg: Config, rig: Rig, links: SlaveLinks, *, recorder=None, rerun=None,
                  run_dir: str | Path | None = None, stop_on_master_stop: bool = False,
-                 calibrate: bool = True, model=None):
+                 calibrate: bool = True, model=None, calibration=None,
+                 calibration_file: str | Path | None = None):
         super().__init__(cfg, links, run_dir=run_dir, stop_on_master_stop=stop_on_master_stop,
                          counts=("commands_rejected_range", "commands_wrong_axes", "commands_out_of_order", "commands_duplicate",
                                  "engage_refused"))
@@ -105,7 +117,7 @@ class SlaveNode(SlaveNodeBase):
         self.s_points = np.linspace(0.0, self.L, cfg.estimator.profile_points)
         self.x_hold = rig.state.x_in
         self.estimator: DistalEstimator | None = None
-        self.calibration: JointLimitCalibration | None = None
+        self.routine: JointLimitCalibration | None = None
         self.rig_state: RigState = rig.state
         self.x_min, self.x_max = cfg.slave.x_in_min, cfg.slave.x_in_max
         self.relax_speed = cfg.slave.relax_speed
@@ -116,8 +128,20 @@ class SlaveNode(SlaveNodeBase):
         self._now = 0.0
         # load the compiled kernels now, not in the first real-time cycle
         DistalEstimator(SheathModel(K=0.5, compliance=1e-4), n_nodes=2).step(1.0, 0.0, 0.0)
-        if calibrate:
-            self.calibration = JointLimitCalibration(cfg, rig)
+        self.calibration_file = None if calibration_file is None else Path(calibration_file)
+        self.calibration: InstrumentCalibration | None = calibration
+        if calibration is not None:
+            self._make_estimator(tendon_model(calibration, cfg))
+            self.estimator.step(self.rig_state.T_in, self.rig_state.x_in, self.rig_state.t)
+            t = calibration.tendon
+            self._write_calibration_json({
+                "K": t.K, "M_e_m_per_N": t.M_e, "compliance_m_per_N": t.compliance, "knee_x_in_m": t.knee_x_in,
+                "knee_T_in_N": t.knee_T_in, "residual_rms_m": t.residual_rms, "n_samples": t.n_samples,
+                "target_tension_N": calibration.target_tension, "use_route": calibration.use_route,
+                "date": calibration.date, "loaded_from": str(self.calibration_file or "")})
+            self._set_state(SideState.SAFE, 0.0, "calibration loaded; no command yet")
+        elif calibrate:
+            self.routine = JointLimitCalibration(cfg, rig)
             self._set_state(SideState.CALIBRATING, 0.0, "power-up joint-limit initialisation")
         else:
             if model is None:
@@ -132,7 +156,7 @@ class SlaveNode(SlaveNodeBase):
                                          hold_rate=e.hold_rate, rate_time_constant=e.rate_time_constant)
 
     def _finish_calibration(self, now: float) -> None:
-        cal = self.calibration
+        cal = self.routine
         self._make_estimator(cal.result.model)
         # replay the routine (compiled batch): the estimator's memory = the tendon's proximal history
         t_h, x_h, T_h = cal.history
@@ -140,6 +164,9 @@ class SlaveNode(SlaveNodeBase):
         _, _, est.profile[:] = profile_batch(est.profile, est.log_gain, est.weight, np.asarray(T_h, dtype=float))
         est.step(T_h[-1], x_h[-1], t_h[-1])
         self.x_hold = cal.x_cmd
+        self.calibration = from_tendon_result(self.cfg, cal.result)
+        if self.calibration_file is not None:
+            save_calibration(self.calibration, self.calibration_file)
         self._write_calibration_json(cal.as_dict())
         # first full Rerun log now: its one-off set-up cost (tens of ms) stays out of the engaged loop
         self._log_rerun(self.rig_state, est.T_out, est.elongation, est.phase,
@@ -211,7 +238,7 @@ class SlaveNode(SlaveNodeBase):
         return x_in_cmd
 
     def _calibration_step(self, now: float, dt: float) -> None:
-        cal = self.calibration
+        cal = self.routine
         x_cmd = cal.command(self.rig_state, dt)
         self.rig_state = self.rig.step(x_cmd, dt)
         cal.observe(self.rig_state)
@@ -278,6 +305,8 @@ class SlaveNode(SlaveNodeBase):
             "stalls": self.stalls,
             "master_stopped": self.master_stopped,
             "calibrated": self.estimator is not None,
+            "calibration": "power-up" if self.routine is not None else "loaded" if self.calibration is not None
+            else "given model",
         }
 
 

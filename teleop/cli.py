@@ -58,8 +58,11 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     p.add_argument("--timeout", type=float, default=50.0, help="give up on the processes after this [s]")
     p.set_defaults(func=_cmd_demo)
 
-    p = sub.add_parser("slave", help="instrument side: calibrate, then follow commands and estimate")
+    p = sub.add_parser("slave", help="instrument side: reload or make the calibration, then follow commands and "
+                                     "estimate")
     _shared(p)
+    p.add_argument("--recalibrate", action="store_true",
+                   help="calibrate at power-up even when <calibration.dir>/<instrument.id>.yaml exists (and replace it)")
     p.add_argument("--exit-on-master-stop", action="store_true", help="finish when the master announces STOPPING")
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
     p.add_argument("--rerun", choices=("save", "spawn", "off"), default=None, help="override recording.rerun")
@@ -92,9 +95,9 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
     p.set_defaults(func=_cmd_bridge)
 
-    p = sub.add_parser("calibrate", help="joint instruments: joint-limit calibration of every tendon, both "
-                                         "directions, saved as configs/calibration/<instrument>.yaml")
-    from teleop.cli_joints import add_calibrate_arguments, run_calibrate
+    p = sub.add_parser("calibrate", help="joint-limit calibration of every tendon of the instrument (both "
+                                         "directions of a pair), saved as configs/calibration/<instrument>.yaml")
+    from teleop.calibrate import add_calibrate_arguments, run_calibrate
     add_calibrate_arguments(p)
     p.set_defaults(func=run_calibrate)
 

@@ -165,29 +165,60 @@ def _encode_command(msg: Command) -> bytes:
         raise CodecError(f"Command fields do not fit the wire format: {msg!r}") from None
 
 
+@lru_cache(maxsize=8)
+def _axis_struct(k: int) -> struct.Struct:
+    """An axis of ``k`` tendons: uint8 k | effort_hat | position_hat | k x (4 float64 | uint8 phase)."""
+    return struct.Struct("<Bdd" + "4dB" * k)
+
+
+def _name_bad_axis(i: int, ax: AxisState) -> None:
+    """Raise the CodecError naming the first non-finite float or bad phase of axis ``i`` (the slow path)."""
+    kind = f"Estimate.axes[{i}]"
+    _check_finite(kind, ("effort_hat", "position_hat"), (ax.effort_hat, ax.position_hat))
+    for j, td in enumerate(ax.tendons):
+        tk = f"{kind}.tendons[{j}]"
+        _check_finite(tk, _TENDON_FLOATS, (td.T_in, td.x_in, td.T_out_hat, td.elongation_hat))
+        _phase(tk, td.phase)
+
+
+def _name_bad_estimate(msg: Estimate) -> None:
+    """Raise the CodecError naming the first non-finite float or bad phase of ``msg`` (the slow path)."""
+    _check_finite("Estimate", ("t_slave",), (msg.t_slave,))
+    for i, ax in enumerate(msg.axes):
+        _name_bad_axis(i, ax)
+
+
 def _encode_estimate(msg: Estimate) -> bytes:
     n = len(msg.axes)
     _axis_count("Estimate", n)
-    _check_finite("Estimate", ("t_slave",), (msg.t_slave,))
     _check_uint("Estimate", "seq", msg.seq, 32)
     _check_uint("Estimate", "cmd_seq", msg.cmd_seq, 32)
+    parts = [b""]
+    total = msg.t_slave
+    m = 0
+    try:
+        for i, ax in enumerate(msg.axes):
+            tendons = ax.tendons
+            k = len(tendons)
+            if k not in (1, 2):
+                raise CodecError(f"Estimate.axes[{i}] has {k} tendons: expected 1 (a single tendon) or 2 (a pair)")
+            vals: list = [k, ax.effort_hat, ax.position_hat]
+            total += ax.effort_hat + ax.position_hat
+            for td in tendons:
+                ph = td.phase
+                if ph not in _PHASES or isinstance(ph, bool):
+                    raise TypeError
+                total += td.T_in + td.x_in + td.T_out_hat + td.elongation_hat
+                vals += (td.T_in, td.x_in, td.T_out_hat, td.elongation_hat, int(ph))
+            parts.append(_axis_struct(k).pack(*vals))
+            m += k
+    except (TypeError, struct.error):
+        _name_bad_estimate(msg)
+        raise CodecError(f"Estimate fields do not fit the wire format: {msg!r}") from None
+    if not math.isfinite(total):
+        _name_bad_estimate(msg)
     profiles = msg.profiles
     points = len(profiles[0]) if profiles else 0
-    parts = [b""]
-    m = 0
-    for i, ax in enumerate(msg.axes):
-        kind = f"Estimate.axes[{i}]"
-        k = len(ax.tendons)
-        if k not in (1, 2):
-            raise CodecError(f"{kind} has {k} tendons: expected 1 (a single tendon) or 2 (a pair)")
-        _check_finite(kind, ("effort_hat", "position_hat"), (ax.effort_hat, ax.position_hat))
-        parts.append(_AXIS.pack(k, ax.effort_hat, ax.position_hat))
-        for j, td in enumerate(ax.tendons):
-            tk = f"{kind}.tendons[{j}]"
-            vals = (td.T_in, td.x_in, td.T_out_hat, td.elongation_hat)
-            _check_finite(tk, _TENDON_FLOATS, vals)
-            parts.append(_TENDON.pack(*vals, _phase(tk, td.phase)))
-        m += k
     if profiles and (len(profiles) != m or any(len(p) != points for p in profiles)):
         raise CodecError(f"Estimate.profiles: expected none or {m} profiles (one per tendon) of one length, "
                          f"got {len(profiles)}")
@@ -231,27 +262,27 @@ def _decode_estimate(buf) -> Estimate:
     _check_finite("Estimate", ("t_slave",), (t,))
     axes, off, m, size = [], _HDR + _ESTIMATE.size, 0, len(buf)
     for i in range(n):
-        kind = f"Estimate.axes[{i}]"
-        if off + _AXIS.size > size:
+        if off >= size:
             raise CodecError(f"Estimate message truncated: {size} bytes end inside axis {i} of {n}")
-        k, effort, pos = _AXIS.unpack_from(buf, off)
-        off += _AXIS.size
+        k = buf[off]
         if k not in (1, 2):
-            raise CodecError(f"{kind} has {k} tendons: expected 1 (a single tendon) or 2 (a pair)")
-        _check_finite(kind, ("effort_hat", "position_hat"), (effort, pos))
-        if off + _TENDON.size * k > size:
+            raise CodecError(f"Estimate.axes[{i}] has {k} tendons: expected 1 (a single tendon) or 2 (a pair)")
+        st = _axis_struct(k)
+        if off + st.size > size:
             raise CodecError(f"Estimate message truncated: {size} bytes end inside axis {i} of {n}")
+        v = st.unpack_from(buf, off)
+        off += st.size
         tendons = []
         for j in range(k):
-            T_in, x_in, T_out, el, ph = _TENDON.unpack_from(buf, off)
-            off += _TENDON.size
-            tk = f"{kind}.tendons[{j}]"
-            _check_finite(tk, _TENDON_FLOATS, (T_in, x_in, T_out, el))
+            T_in, x_in, T_out, el, ph = v[3 + 5 * j: 8 + 5 * j]
             phase = _PHASES.get(ph)
             if phase is None:
-                raise CodecError(f"{tk}.phase {ph} is not a Phase (0..{len(_PHASES) - 1})")
+                raise CodecError(f"Estimate.axes[{i}].tendons[{j}].phase {ph} is not a Phase (0..{len(_PHASES) - 1})")
             tendons.append(TendonState(T_in, x_in, T_out, el, phase))
-        axes.append(AxisState(effort, pos, tuple(tendons)))
+        axis = AxisState(v[1], v[2], tuple(tendons))
+        if not math.isfinite(sum(v)):                 # the phases and k are small integers: finite
+            _name_bad_axis(i, axis)
+        axes.append(axis)
         m += k
     need = off + 4 * m * points
     if size != need:

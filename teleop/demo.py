@@ -17,6 +17,7 @@
 """
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -168,6 +169,8 @@ def main_demo(args) -> int:
     if cfg.instrument.joints:           # a joint instrument (configs/instrument-3dof.yaml): teleop/demo_joints.py
         from teleop.demo_joints import main_joint_demo
         return main_joint_demo(args, cfg, run_dir)
+    # the run's own calibration file: the slave calibrates at power-up and saves it in the run
+    cfg = dataclasses.replace(cfg, calibration=dataclasses.replace(cfg.calibration, dir=str(run_dir / "calibration")))
     cfg_file = write_config(cfg, run_dir / "config.yaml")
     t0 = time.monotonic()
     problems: list[str] = []

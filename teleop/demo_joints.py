@@ -174,7 +174,7 @@ def format_joint_summary(s: dict) -> str:
 def main_joint_demo(args, cfg: Config, run_dir: Path) -> int:
     """The joint-instrument demo (module docstring); 0 when it finished and every check passed."""
     from slave.calibration_file import calibration_path
-    from teleop.cli_joints import run_calibrate
+    from teleop.calibrate import run_calibrate
     cfg = dataclasses.replace(cfg, calibration=dataclasses.replace(cfg.calibration, dir=str(run_dir / "calibration")))
     cfg_file = write_config(cfg, run_dir / "config.yaml")
     t0 = time.monotonic()

@@ -151,7 +151,8 @@ def _log_master_done(node) -> None:
 
 
 def run_slave(args: argparse.Namespace) -> int:
-    """``teleop slave``: calibrate the rig, then serve commands until stopped."""
+    """``teleop slave``: reload ``<calibration.dir>/<id>.yaml`` (or calibrate at power-up and save it
+    there: missing, or ``--recalibrate``), then serve commands until stopped; either kind of instrument."""
     from slave.node import SlaveNode, csv_columns, warm_up
     from slave.rigs import make_rig
     from teleop.clock import MonotonicClock
@@ -163,6 +164,7 @@ def run_slave(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
     if cfg.instrument.joints:           # a joint instrument: its own node, same transport and flags
         return run_joint_slave(args, cfg)
+    calibration, cal_path = _load_or_none(cfg, args)
     run_dir = side_run_dir(args, cfg)
     warm_up(cfg)  # compile the numba kernels now, not in the first real-time cycles
     ident = cfg.instrument.id
@@ -179,7 +181,8 @@ def run_slave(args: argparse.Namespace) -> int:
                     RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd") as rr:
                 links = slave_links(session, ident, injector)
                 node = SlaveNode(cfg, rig, links, recorder=rec, rerun=rr, run_dir=run_dir,
-                                 stop_on_master_stop=args.exit_on_master_stop)
+                                 stop_on_master_stop=args.exit_on_master_stop, calibration=calibration,
+                                 calibration_file=cal_path)
                 _serve(node, clock, args, run_dir, "slave", injector)
         finally:
             rig.close()
@@ -227,10 +230,19 @@ def _closing(device):
         device.close()
 
 
-def _load_or_none(cfg: Config):
+def _load_or_none(cfg: Config, args: argparse.Namespace):
+    """The calibration life cycle of every instrument: ``(calibration, path)`` with the data reloaded
+    from ``<calibration.dir>/<instrument.id>.yaml``, or None (missing, or ``--recalibrate``: the slave
+    calibrates at power-up and saves it there). A file that does not fit the config raises
+    :class:`CalibrationError` naming it."""
     from slave.calibration_file import calibration_path, load_calibration
     path = calibration_path(cfg)
-    return (load_calibration(path, cfg) if path.is_file() else None), path
+    again = getattr(args, "recalibrate", False)
+    calibration = load_calibration(path, cfg) if path.is_file() and not again else None
+    logging.getLogger("teleop.slave").info(
+        "calibration %s", f"loaded from {path}" if calibration else
+        f"{'recalibrating on request' if again else 'missing'}: calibrating, then {path}")
+    return calibration, path
 
 
 def run_joint_slave(args: argparse.Namespace, cfg: Config) -> int:
@@ -247,8 +259,7 @@ def run_joint_slave(args: argparse.Namespace, cfg: Config) -> int:
     from teleop.rerun_thread import ThreadedRerunLogger as RerunLogger  # the loop only queues the calls
 
     log = logging.getLogger("teleop.slave")
-    calibration, cal_path = _load_or_none(cfg)
-    log.info("calibration %s", f"loaded from {cal_path}" if calibration else f"missing: calibrating, then {cal_path}")
+    calibration, cal_path = _load_or_none(cfg, args)
     run_dir = side_run_dir(args, cfg)
     # compile the numba kernels now, not in the first real-time cycles
     SimulatedInstrument(cfg.instrument.joints[:1], cfg.rig).step([[1e-4, 1e-4]], 1e-3)

@@ -42,6 +42,7 @@ instrument:
   id: {ident}
 calibration:
   speed: 0.04
+  dir: "{caldir}"
 recording:
   rerun: "off"
 """
@@ -187,7 +188,7 @@ def run_fault(tmp: Path, name: str, *, inject: dict[str, str] | None = None, sig
         cfg_path = _joint_config(run_dir, ident)
     else:
         cfg_path = run_dir / "cfg.yaml"
-        cfg_path.write_text(CONFIG.format(ident=ident), encoding="utf-8")
+        cfg_path.write_text(CONFIG.format(ident=ident, caldir=run_dir / "calibration"), encoding="utf-8")
     cfg = load_config(cfg_path)
     port, port_m = free_tcp_ports(2)
     ep = loopback_endpoint(port)

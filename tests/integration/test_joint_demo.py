@@ -14,6 +14,7 @@ import pytest
 from slave.calibration_file import load_calibration
 from teleop.cli import main
 from teleop.config import load_config
+from teleop.errors import CalibrationError
 
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "instrument-3dof.yaml"
 
@@ -63,12 +64,23 @@ def test_calibrate_writes_the_file_the_slave_reloads(tmp_path, capsys):
     assert [n for n, _ in cal.joints] == ["bend_ud", "bend_lr", "grasp"]
 
 
-def test_calibrate_refuses_a_single_tendon_config(tmp_path, capsys):
+def test_calibrate_a_single_tendon_writes_the_file_its_slave_reloads(tmp_path, capsys):
+    """One calibration life cycle: a single tendon (a one-axis instrument) is calibrated by the same
+    command into the same kind of file; a joint instrument refuses it."""
     cfg = tmp_path / "one.yaml"
-    cfg.write_text("instrument:\n  id: one\n")
-    assert main(["calibrate", "--config", str(cfg)]) == 2
-    err = capsys.readouterr().err
-    assert "teleop: error:" in err and "instrument.joints" in err and "Traceback" not in err
+    cfg.write_text(f"instrument:\n  id: one\ncalibration:\n  dir: {tmp_path / 'calibration'}\n")
+    assert main(["calibrate", "--config", str(cfg)]) == 0
+    out = capsys.readouterr().out
+    assert "tendon" in out and "K vs sim" in out and "wrote" in out
+    cal = load_calibration(tmp_path / "calibration" / "one.yaml", load_config(cfg))
+    from slave.simulated import SimulatedRig
+    rig = SimulatedRig.from_config(load_config(cfg))
+    assert cal.tendon is not None and cal.joints == () and abs(cal.tendon.K / rig.K - 1) < 0.05
+    joint_cfg = quiet_config(tmp_path, "itone")
+    (tmp_path / "calibration" / "itone.yaml").write_text(
+        (tmp_path / "calibration" / "one.yaml").read_text().replace("instrument: one", "instrument: itone"))
+    with pytest.raises(CalibrationError, match="tendon: this is the calibration of a single-tendon instrument"):
+        load_calibration(tmp_path / "calibration" / "itone.yaml", load_config(joint_cfg))
 
 
 def test_slave_refuses_a_calibration_of_another_instrument(tmp_path, capsys):

@@ -29,6 +29,7 @@ instrument:
   id: {ident}
 calibration:
   speed: 0.02
+  dir: "{caldir}"
 recording:
   rerun: "{rerun}"
 """
@@ -36,7 +37,7 @@ recording:
 
 def write_config(tmp_path: Path, ident: str, rerun: str = "off") -> Path:
     path = tmp_path / "test.yaml"
-    path.write_text(CONFIG.format(ident=ident, rerun=rerun), encoding="utf-8")
+    path.write_text(CONFIG.format(ident=ident, rerun=rerun, caldir=tmp_path / "calibration"), encoding="utf-8")
     return path
 
 

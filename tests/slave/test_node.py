@@ -9,6 +9,7 @@ import pytest
 
 from estimator.sheath import SheathModel
 from slave.calibrate import CalStage, JointLimitCalibration
+from slave.calibration_file import load_calibration
 from slave.node import CSV_COLUMNS, SlaveLinks, SlaveNode, csv_columns
 from slave.rig import RigState
 from slave.simulated import SimulatedRig
@@ -205,7 +206,7 @@ def test_power_up_calibration_against_the_simulator(tmp_path):
     rig = SimulatedRig.from_config(cfg)
     clock = FakeClock(0.0)
     links = SlaveLinks(*(Topic(clock) for _ in range(4)))
-    node = SlaveNode(cfg, rig, links, run_dir=tmp_path)
+    node = SlaveNode(cfg, rig, links, run_dir=tmp_path, calibration_file=tmp_path / "cal" / "tendon0.yaml")
     assert node.state == SideState.CALIBRATING
     command(links, 1, 0.05)                                          # ignored while calibrating
     tissue_seen = []
@@ -226,6 +227,25 @@ def test_power_up_calibration_against_the_simulator(tmp_path):
     # the estimator's memory matches the tendon after the replay of the routine
     est = node.estimator
     assert est.T_out == pytest.approx(rig.state.truth.T_out, abs=0.3)
+    # the calibration life cycle of every instrument: saved, reloaded by the next power-up (no routine)
+    saved = load_calibration(tmp_path / "cal" / "tendon0.yaml", cfg)
+    assert saved.tendon.K == pytest.approx(cal["K"]) and saved.tendon.M_e == pytest.approx(cal["M_e_m_per_N"])
+    again = SimulatedRig.from_config(cfg)
+    node2 = SlaveNode(cfg, again, SlaveLinks(*(Topic(clock) for _ in range(4))), run_dir=tmp_path / "second",
+                      calibration=saved, calibration_file=tmp_path / "cal" / "tendon0.yaml")
+    assert node2.state == SideState.SAFE and node2.routine is None               # no routine runs
+    assert node2.estimator.model.K == saved.tendon.K and node2.estimator.model.compliance == saved.tendon.compliance
+    cal2 = json.loads((tmp_path / "second" / "calibration.json").read_text())
+    assert cal2["K"] == saved.tendon.K and cal2["loaded_from"].endswith("tendon0.yaml")
+    assert node2.stats()["calibration"] == "loaded" and node.stats()["calibration"] == "power-up"
+
+
+def test_a_command_for_another_number_of_axes_is_counted_and_ignored():
+    node, links, clock = make()
+    links.command.put(Command(1, 0.0, (0.001, 0.002), True, 0))      # two targets: not a single tendon
+    tick(node, clock)
+    assert node.counts["commands_wrong_axes"] == 1 and node.commands_applied == 0
+    assert node.state == SideState.SAFE
 
 
 def test_calibration_without_a_joint_limit_fails_with_a_message():
