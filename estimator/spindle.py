@@ -6,7 +6,7 @@ torque units at the spindle (tension times the spindle radius r_p, N m), so only
 pulley radii appear::
 
     d       = theta_p - theta_ref
-    u       = tau_p - k_p d - c_v omega_p - f_s tanh(omega_p / omega_s)   spindle torque on the cables [N m]
+    u       = tau_p - k_p d - c_v omega_p - f_s lag(tanh(omega_p / omega_s))   spindle torque on the cables [N m]
     T_a,p   = (Q + u) / 2,   T_b,p = (Q - u) / 2                 the two proximal cable tensions     (S1)
     T_j,d   = profile memory of cable j, friction exponent K_j   (estimator.sheath envelope rule)    (S2)
     tau_d   = rho (1 + rho_1 d + rho_2 d^2) (T_a,d - T_b,d) + b + k_d d - f tanh(omega_p / omega_s)  (S3)
@@ -21,8 +21,9 @@ slack), K_a, K_b the friction exponents of the two cables' paths over the shaft 
 (equal for a symmetric routing; K_a != K_b makes the band grow with the load, E13), b the distal
 torque at zero cable torque difference [N m] (internal preload, sensor zero), k_p [N m/rad] an
 elastic torque inside the proximal end (seal, spring, or the two cables' wrap angles changing in
-opposite senses with the angle; it loads the spindle, not the jaw), f_s [N m] Coulomb friction at
-the spindle itself, ahead of the cables (bearings, seals; tension-independent, E8), k_d
+opposite senses with the angle; it loads the spindle, not the jaw), f_s [N m] friction at the
+spindle itself, ahead of the cables (bearings, seals; tension-independent, E8), whose direction
+term reverses over a spindle travel SPINDLE_TRAVEL (``angle_lag``: pre-sliding, E2), k_d
 [N m/rad] an angle-dependent torque at the jaw side, f [N m] Coulomb friction beyond the jaw pulley
 (jaw pivot, and on this rig the load motor; E11), c_v [N m s/rad] viscous torque at the spindle
 (E3), n_k = r_p / r_d the kinematic ratio [-], lam [rad/(N m)] cable compliance seen at the
@@ -41,11 +42,14 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 from numba import njit
 
-__all__ = ["SpindleParams", "Batch", "make_batch", "pair_kernel", "predict_torque", "predict_angle",
+__all__ = ["SPINDLE_TRAVEL", "SpindleParams", "Batch", "make_batch", "pair_kernel", "predict_torque", "predict_angle",
            "play_batch", "angle_lag", "elongation_difference", "spindle_rate", "initial_side", "first_reversal", "OMEGA_S", "N_NODES"]
 
 #: Speed scale of the smoothed direction of motion, tanh(omega / OMEGA_S) [rad/s].
 OMEGA_S = 0.05
+#: Spindle travel over which the spindle's own friction reverses (E2 at the proximal end) [rad]: after
+#: a reversal the MRD spindle torque creeps over 2-3 deg while the jaw stands still (Finding 4).
+SPINDLE_TRAVEL = 0.05
 #: Profile elements per cable (the distal tension changes by < 1e-4 relative from 16 to 64).
 N_NODES = 16
 
@@ -204,7 +208,9 @@ def pair_kernel(u, starts, side, Q, K_a, K_b, n_nodes, Td, dE):  # pragma: no co
 
 def _cables(p: SpindleParams, bt: Batch, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
     d = bt.theta_p - bt.theta_ref
-    u = bt.tau_p - p.k_p * d - p.c_v * bt.omega_p - p.f_s * np.tanh(bt.omega_p / OMEGA_S)
+    u = bt.tau_p - p.k_p * d - p.c_v * bt.omega_p
+    if p.f_s != 0.0:
+        u = u - p.f_s * angle_lag(np.tanh(bt.omega_p / OMEGA_S), bt.theta_p, bt.starts, SPINDLE_TRAVEL)
     Td, dE = np.empty_like(u), np.empty_like(u)
     pair_kernel(np.ascontiguousarray(u), bt.starts, bt.side, float(p.Q), float(p.K_a), float(p.K_b), int(n_nodes),
                 Td, dE)

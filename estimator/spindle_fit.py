@@ -38,7 +38,8 @@ EXTENSIONS = {
     "k_p": ("E11", "elastic torque inside the proximal end (loads the spindle, not the jaw)"),
     "k_d": ("E11", "angle-dependent torque at the jaw side (jaw spring, load)"),
     "f": ("E11/E12", "Coulomb friction beyond the jaw pulley (jaw pivot, load motor)"),
-    "f_s": ("E8", "Coulomb friction at the spindle ahead of the cables (tension-independent)"),
+    "f_s": ("E8/E2", "friction at the spindle ahead of the cables (tension-independent), reversing over "
+                     "a spindle travel of 0.05 rad (pre-sliding)"),
     "c_v": ("E3", "viscous torque at the spindle (rate dependence)"),
     "theta_c": ("E2", "pre-sliding: the jaw torque approaches the capstan value over a travel theta_c"),
 }
@@ -48,7 +49,7 @@ BOUNDS = {"rho": (0.0, 5.0, 0.1), "Q": (1e-3, 5.0, 0.05), "K_a": (0.0, 3.0, 0.1)
           "f_s": (-0.2, 0.2, 0.005), "c_v": (-0.2, 0.2, 0.005),
           "theta_c": (0.0, 0.5, 0.01)}
 #: Start of an extension parameter when it is added to a fitted model (0 unless listed).
-EXTENSION_STARTS = {"theta_c": 0.03}
+EXTENSION_STARTS = {"theta_c": 0.03, "f_s": -0.01}
 #: Starting points; Q in multiples of its lower bound (1.02 max |tau_p|).
 _STARTS = ({"K_a": 0.3, "K_b": 0.3, "Q": 1.5}, {"K_a": 0.8, "K_b": 0.8, "Q": 1.1}, {"K_a": 0.1, "K_b": 0.1, "Q": 5.0})
 
