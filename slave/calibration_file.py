@@ -40,8 +40,8 @@ import yaml
 from estimator.calibration import CalibrationResult
 from estimator.sheath import SheathModel
 from slave.calibrate import route_wrap_shape
-from slave.instrument import TENDONS
 from slave.pair_calibrate import tendon_wrap_shape
+from slave.rig import TENDONS
 from teleop.config import Config
 from teleop.errors import CalibrationError
 

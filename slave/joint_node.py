@@ -44,10 +44,10 @@ import numpy as np
 
 from estimator.joint import JointEstimator
 from slave.calibration_file import InstrumentCalibration, from_results, save_calibration, sheath_models
-from slave.instrument import TENDONS, Instrument, InstrumentState
 from slave.node_base import SlaveLinks, SlaveNodeBase
 from slave.pair_calibrate import PairCalibration, set_tension
 from slave.pair_control import PairController
+from slave.rig import TENDONS, Rig, RigState
 from teleop.config import Config
 from teleop.messages import AxisState, Command, Estimate, SideState, TendonState
 
@@ -80,7 +80,7 @@ class JointSlaveNode(SlaveNodeBase):
     ----------
     cfg : Config
         With ``instrument.joints`` (1..4).
-    instrument : Instrument
+    instrument : Rig
     links : SlaveLinks
         ``command`` delivers :class:`~teleop.messages.Command`, ``estimate`` takes
         :class:`~teleop.messages.Estimate`.
@@ -95,7 +95,7 @@ class JointSlaveNode(SlaveNodeBase):
     stop_on_master_stop : bool
     """
 
-    def __init__(self, cfg: Config, instrument: Instrument, links: SlaveLinks, *, recorder=None, rerun=None,
+    def __init__(self, cfg: Config, instrument: Rig, links: SlaveLinks, *, recorder=None, rerun=None,
                  calibration: InstrumentCalibration | None = None, calibration_file: str | Path | None = None,
                  run_dir: str | Path | None = None, stop_on_master_stop: bool = False):
         super().__init__(cfg, links, run_dir=run_dir, stop_on_master_stop=stop_on_master_stop,
@@ -113,7 +113,7 @@ class JointSlaveNode(SlaveNodeBase):
         self.travel = [j.pulley_radius * max(abs(v) for v in j.limits) + 2 * e + 0.002
                        for j, e in zip(self.joints, stretch)]
         self.calibration_file = None if calibration_file is None else Path(calibration_file)
-        self.inst_state: InstrumentState = instrument.state
+        self.inst_state: RigState = instrument.state
         self.hold: tuple[float, ...] | None = None
         self.estimators: list[JointEstimator] = []
         self.samples: list = []
@@ -225,13 +225,13 @@ class JointSlaveNode(SlaveNodeBase):
         self._publish(self._message(now, st))
         self._record(st, cmds, now)
 
-    def _message(self, now: float, st: InstrumentState) -> Estimate:
+    def _message(self, now: float, st: RigState) -> Estimate:
         joints = tuple(AxisState(s.torque, s.angle, tuple(
             TendonState(float(st.T_in[i, k]), float(st.x_in[i, k]), s.T_out[k], s.elongation[k], s.phase[k])
             for k in range(2))) for i, s in enumerate(self.samples))
         return Estimate(self.seq, self.cmd_seq, now, joints)
 
-    def _record(self, st: InstrumentState, cmds, now: float) -> None:
+    def _record(self, st: RigState, cmds, now: float) -> None:
         tr = st.truth
         if self.recorder is not None:
             row = [st.t, self.marker, self.cmd_seq, int(self.state), now,
@@ -245,7 +245,7 @@ class JointSlaveNode(SlaveNodeBase):
             self.recorder.write(row)
         self._log_rerun(st)
 
-    def _log_rerun(self, st: InstrumentState, everything: bool = False) -> None:
+    def _log_rerun(self, st: RigState, everything: bool = False) -> None:
         """Every ``recording.log_every`` cycles each joint's torque and angle, estimate and truth (two
         series each); the 2 n_joints pairs take turns in successive cycles so that no cycle carries
         more than one pair (~0.1 ms per series). ``everything``: all of them now (set-up)."""

@@ -12,8 +12,7 @@ import numpy as np
 
 from estimator.kernels import RIGID_STOP, distal_gains, load_torque, settle_joint, step_joint
 from slave.drive import Drive
-from slave.instrument import InstrumentState, InstrumentTruth
-from slave.rig import RigInputError
+from slave.rig import InstrumentTruth, RigInputError, RigState
 from slave.simulated import check_setting, is_finite, validate_drive, validate_runs
 from teleop.config import Config, JointConfig, RigConfig, TendonConfig
 
@@ -146,12 +145,12 @@ class SimulatedInstrument:
     def tissue(self) -> tuple[bool, ...]:
         return tuple(self._tissue)
 
-    # ---- Instrument protocol ----------------------------------------------------------------------
+    # ---- Rig protocol ----------------------------------------------------------------------
     @property
-    def state(self) -> InstrumentState:
+    def state(self) -> RigState:
         return self._state
 
-    def step(self, x_in_cmd, dt: float) -> InstrumentState:
+    def step(self, x_in_cmd, dt: float) -> RigState:
         """Move every motor toward ``x_in_cmd`` [m], shape (n_joints, 2), for ``dt`` [s]; read sensors.
 
         Raises
@@ -189,15 +188,18 @@ class SimulatedInstrument:
         self._state = self._read(cmd)
         return self._state
 
-    def set_load(self, *, tissue: bool | None = None) -> None:
+    def set_load(self, *, tissue: bool | None = None, force: float | None = None) -> None:
         """Switch tissue contact on every joint; the joints re-balance at once (no damping) with the
         motors held; :attr:`state` is refreshed (new truth and sensor sample, same time).
 
         Raises
         ------
         RigInputError (ValueError)
-            ``tissue`` is not a bool.
+            ``tissue`` is not a bool; ``force`` given (a distal set force is a single tendon's load).
         """
+        if force is not None:
+            raise RigInputError(f"force={force!r}: a joint instrument's distal load is tissue contact only "
+                                f"(a distal set force is a single tendon's)")
         if tissue is None:
             return
         if not isinstance(tissue, (bool, np.bool_)):
@@ -217,7 +219,7 @@ class SimulatedInstrument:
         """Nothing to release in simulation; idempotent."""
 
     # ---- internals ----------------------------------------------------------------------------------
-    def _read(self, cmd: np.ndarray) -> InstrumentState:
+    def _read(self, cmd: np.ndarray) -> RigState:
         nj = self.n_joints
         T_in = np.empty((nj, 2))
         T_out = np.empty((nj, 2))
@@ -238,7 +240,7 @@ class SimulatedInstrument:
                                 T_out=T_out, x_in=self._x.copy(), x_out=x_out, elongation=elong,
                                 profiles=tuple(profiles))
         T_meas = T_in + self.drive.load_cell_noise()
-        return InstrumentState(t=self._t, x_in=self.drive.encoder(self._x), T_in=T_meas, x_in_cmd=cmd, truth=truth)
+        return RigState(t=self._t, x_in=self.drive.encoder(self._x), T_in=T_meas, x_in_cmd=cmd, truth=truth)
 
     def load_torque(self, i: int, theta: float) -> float:
         """Static load torque of joint ``i`` at ``theta`` [rad] with the present tissue setting [N m]."""

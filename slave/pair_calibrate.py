@@ -29,8 +29,8 @@ from estimator.calibration import CalibrationResult, calibrate_joint_limit
 from estimator.joint import JointEstimator
 from estimator.sheath import SheathModel
 from slave.calibrate import check_settings, wrap_shape
-from slave.instrument import TENDONS, Instrument, InstrumentState
 from slave.pair_control import PairController
+from slave.rig import TENDONS, Rig, RigState
 from teleop.config import Config, JointConfig, TendonConfig, joint_set_tension
 from teleop.errors import CalibrationError
 
@@ -129,7 +129,7 @@ class PairCalibration:
         ``calibration`` (target_tension [N], speed [m/s], use_route), ``instrument.joints`` (routes,
         EA, pulley radii, pretension), ``pair_control`` (set tension, gain, band), ``slave.relax_speed``
         (rate limit of the tension loops).
-    instrument : Instrument
+    instrument : Rig
     release_factor : float
         Release speed as a multiple of the pull speed [-].
     settle : float
@@ -148,7 +148,7 @@ class PairCalibration:
         A calibration setting out of range.
     """
 
-    def __init__(self, cfg: Config, instrument: Instrument, *, release_factor: float = 3.0, settle: float = 0.3,
+    def __init__(self, cfg: Config, instrument: Rig, *, release_factor: float = 3.0, settle: float = 0.3,
                  max_travel: float = 0.03):
         check_settings(cfg.calibration)
         self.cfg = cfg
@@ -164,7 +164,7 @@ class PairCalibration:
     def done(self) -> bool:
         return self._done
 
-    def command(self, state: InstrumentState, dt: float) -> np.ndarray:
+    def command(self, state: RigState, dt: float) -> np.ndarray:
         """Motor commands [m], shape (n_joints, 2), for the next step, given the last state and period ``dt`` [s].
 
         Raises

@@ -1,21 +1,32 @@
-"""The instrument-side rig interface: what a slave node needs from real or simulated hardware.
+"""The instrument-side rig interface: one protocol over arrays of tendons, for every instrument.
 
-A rig takes a proximal displacement command each cycle and returns what the proximal sensors read:
-the motor encoder (``x_in``) and the load cell (``T_in``). A simulated rig also returns the ground
-truth (:class:`RigTruth`) for evaluation; estimators must never read it.
+A rig drives the tendons of an instrument, each with its own proximal motor (position command,
+encoder ``x_in``) and load cell (``T_in``). Every array of a rig has the rig's *tendon shape*:
+
+* ``()`` - a single tendon (a one-axis instrument): plain floats;
+* ``(n_joints, 2)`` - an instrument of 1 to 4 antagonistic pairs (config ``instrument.joints``),
+  indexed ``[joint, tendon]`` with tendon 0 = a (pulling it turns the joint to + angles) and 1 = b.
+
+Each step takes a command per tendon and returns what the proximal sensors read. A simulated rig
+also returns the ground truth (:class:`RigTruth` for a single tendon, :class:`InstrumentTruth` for a
+pair instrument) for evaluation; estimators and controllers must never read it.
 
 Sign convention (ARCHITECTURE.md): + = tendon drawn toward the actuator; x_in - x_out = elongation.
+At a distal pulley of radius r: x_out,a = + r theta, x_out,b = - r theta.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, Union, runtime_checkable
 
 import numpy as np
 
 from teleop.errors import TeleopError
 
-__all__ = ["RigTruth", "RigState", "Rig", "RigInputError"]
+__all__ = ["TENDONS", "RigTruth", "InstrumentTruth", "RigState", "Rig", "RigInputError"]
+
+#: Tendon labels of a pair, in array order.
+TENDONS = ("a", "b")
 
 
 class RigInputError(TeleopError, ValueError):
@@ -27,7 +38,7 @@ class RigInputError(TeleopError, ValueError):
 
 @dataclass(frozen=True)
 class RigTruth:
-    """Ground truth of a simulated rig at one instant (for evaluation only).
+    """Ground truth of a simulated single tendon at one instant (for evaluation only).
 
     Attributes
     ----------
@@ -56,41 +67,81 @@ class RigTruth:
 
 
 @dataclass(frozen=True)
+class InstrumentTruth:
+    """Ground truth of a simulated instrument of antagonistic pairs at one instant (evaluation only).
+
+    Attributes
+    ----------
+    theta : ndarray, shape (n_joints,)
+        Joint angles [rad].
+    torque : ndarray, shape (n_joints,)
+        Distal joint torque r (T_out,a - T_out,b) [N m].
+    T_in, T_out : ndarray, shape (n_joints, 2)
+        True proximal and distal tensions [N].
+    x_in, x_out : ndarray, shape (n_joints, 2)
+        True proximal (motor) and distal tendon displacements [m].
+    elongation : ndarray, shape (n_joints, 2)
+        Tendon elongations (1/EA) int T ds [m].
+    profiles : tuple of ndarray
+        ``2 * n_joints`` node-tension snapshots [N] (joint 0 a, joint 0 b, joint 1 a, ...), proximal
+        to distal, read-only.
+    """
+
+    theta: np.ndarray
+    torque: np.ndarray
+    T_in: np.ndarray
+    T_out: np.ndarray
+    x_in: np.ndarray
+    x_out: np.ndarray
+    elongation: np.ndarray
+    profiles: tuple[np.ndarray, ...] = field(repr=False, default=())
+
+
+#: A value per tendon: a float for a single tendon, an ndarray of shape (n_joints, 2) for pairs.
+Tendons = Union[float, np.ndarray]
+
+
+@dataclass(frozen=True)
 class RigState:
-    """What the rig reports after a step.
+    """What a rig reports after a step; every array has the rig's tendon shape (module docstring).
 
     Attributes
     ----------
     t : float
         Rig time [s], the sum of the time steps since construction.
-    x_in : float
-        Proximal displacement from the motor encoder [m] (quantised on real and simulated rigs).
-    T_in : float
-        Proximal tension from the load cell [N] (noisy; may read slightly negative).
-    x_in_cmd : float
-        The displacement command applied in this step [m].
-    truth : RigTruth or None
-        Ground truth for simulated rigs; ``None`` on hardware.
+    x_in : float or ndarray
+        Proximal displacement from each motor encoder [m] (quantised on real and simulated rigs).
+    T_in : float or ndarray
+        Proximal tension from each load cell [N] (noisy; may read slightly negative).
+    x_in_cmd : float or ndarray
+        The displacement commands applied in this step [m].
+    truth : RigTruth, InstrumentTruth or None
+        Ground truth of a simulated rig; ``None`` on hardware.
     """
 
     t: float
-    x_in: float
-    T_in: float
-    x_in_cmd: float
-    truth: RigTruth | None = None
+    x_in: Any
+    T_in: Any
+    x_in_cmd: Any
+    truth: RigTruth | InstrumentTruth | None = None
 
 
 @runtime_checkable
 class Rig(Protocol):
-    """A tendon rig: one proximal motor with encoder and load cell driving one tendon."""
+    """The tendons of an instrument: a proximal motor with encoder and load cell per tendon.
 
-    def step(self, x_in_cmd: float, dt: float) -> RigState:
-        """Command the proximal displacement ``x_in_cmd`` [m], advance ``dt`` [s] > 0, read sensors.
+    A pair instrument also has ``joint_names`` (tuple of str, one per joint, config order).
+    """
+
+    def step(self, x_in_cmd: Any, dt: float) -> RigState:
+        """Command every motor (``x_in_cmd`` [m], the rig's tendon shape), advance ``dt`` [s] > 0,
+        read the sensors.
 
         Raises
         ------
         ValueError
-            (:class:`RigInputError`) ``x_in_cmd`` not finite or ``dt`` not a finite positive number.
+            (:class:`RigInputError`) a command not finite or of the wrong shape, ``dt`` not a finite
+            positive number.
         """
         ...
 
@@ -100,10 +151,9 @@ class Rig(Protocol):
         ...
 
     def set_load(self, *, tissue: bool | None = None, force: float | None = None) -> None:
-        """Switch the distal load at run time: tissue contact on/off, distal set force [N] >= 0.
-
-        ``None`` leaves a setting unchanged.
-        """
+        """Switch the distal load at run time: tissue contact on/off (every joint of a pair
+        instrument), a single tendon's distal set force [N] >= 0 (pair instruments take ``tissue``
+        only). ``None`` leaves a setting unchanged."""
         ...
 
     def close(self) -> None:

@@ -1,8 +1,8 @@
 """The rig registry: ``rig.type`` names the factory that builds the slave's rig (as lerobot does).
 
 A factory takes the config and the slave's transport session (None where there is none) and returns
-a rig: a :class:`slave.rig.Rig` for a single tendon, a :class:`slave.instrument.Instrument` for a
-joint instrument. Registered here:
+a :class:`slave.rig.Rig` (one protocol over arrays of tendons: a single tendon, or the pairs of a
+joint instrument). Registered here:
 
 =============  ==============================================================================
 ``simulated``  the in-process simulators (:class:`slave.simulated.SimulatedRig`, one tendon;

@@ -21,8 +21,7 @@ import math
 
 import numpy as np
 
-from slave.instrument import InstrumentState, InstrumentTruth
-from slave.rig import RigInputError, RigState, RigTruth
+from slave.rig import InstrumentTruth, RigInputError, RigState, RigTruth
 from teleop.clock import MonotonicClock
 from teleop.codec import next_seq
 from teleop.config import Config
@@ -48,8 +47,8 @@ def state_from_sample(s: RigSample, t: float | None = None) -> RigState:
     return RigState(t=s.t if t is None else t, x_in=s.x_in[0], T_in=s.T_in[0], x_in_cmd=s.x_in_cmd[0], truth=truth)
 
 
-def instrument_state_from_sample(s: RigSample, r: np.ndarray, t: float | None = None) -> InstrumentState:
-    """The :class:`InstrumentState` of a sample of ``2 n_joints`` tendons; ``r`` [m] the pulley radii,
+def instrument_state_from_sample(s: RigSample, r: np.ndarray, t: float | None = None) -> RigState:
+    """The :class:`RigState` of a sample of ``2 n_joints`` tendons; ``r`` [m] the pulley radii,
     shape (n_joints,) (truth: theta = x_out,a / r, torque = r (T_out,a - T_out,b))."""
     nj = len(r)
     if len(s.x_in) != 2 * nj:
@@ -61,7 +60,7 @@ def instrument_state_from_sample(s: RigSample, r: np.ndarray, t: float | None = 
         T_out, x_out = a[..., 1], a[..., 3]
         truth = InstrumentTruth(theta=x_out[:, 0] / r, torque=r * (T_out[:, 0] - T_out[:, 1]), T_in=a[..., 0],
                                 T_out=T_out, x_in=a[..., 2], x_out=x_out, elongation=a[..., 4])
-    return InstrumentState(t=s.t if t is None else t, x_in=np.reshape(s.x_in, shape), T_in=np.reshape(s.T_in, shape),
+    return RigState(t=s.t if t is None else t, x_in=np.reshape(s.x_in, shape), T_in=np.reshape(s.T_in, shape),
                            x_in_cmd=np.reshape(s.x_in_cmd, shape), truth=truth)
 
 
@@ -191,10 +190,10 @@ class ZenohInstrument(_ZenohLink):
     def n_joints(self) -> int:
         return len(self.joint_names)
 
-    def _convert(self, sample: RigSample, t: float) -> InstrumentState:
+    def _convert(self, sample: RigSample, t: float) -> RigState:
         return instrument_state_from_sample(sample, self._r, t)
 
-    def step(self, x_in_cmd, dt: float) -> InstrumentState:
+    def step(self, x_in_cmd, dt: float) -> RigState:
         """Publish every motor's set-point (``x_in_cmd`` [m], shape (n_joints, 2)); the newest sample.
 
         Raises

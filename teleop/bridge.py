@@ -33,7 +33,7 @@ def _flat(a) -> tuple[float, ...]:
 
 def sample_of(state, seq: int, setpoint_seq: int) -> RigSample:
     """The RigSample of a rig's state: a :class:`slave.rig.RigState` (one tendon) or a
-    :class:`slave.instrument.InstrumentState` (tendons joint 0 a, joint 0 b, ...), truth when it has one."""
+    :class:`slave.rig.RigState` (tendons joint 0 a, joint 0 b, ...), truth when it has one."""
     tr = state.truth
     truth: tuple = ()
     if tr is not None:

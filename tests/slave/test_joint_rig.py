@@ -103,6 +103,21 @@ def test_set_load_rebalances_with_the_motors_held():
     assert tr.torque[0] == pytest.approx(inst.load_torque(0, tr.theta[0]), abs=1e-9)
     with pytest.raises(RigInputError, match="tissue"):
         inst.set_load(tissue="no")
+    with pytest.raises(RigInputError, match="force=2.0: a joint instrument's distal load is tissue contact only"):
+        inst.set_load(force=2.0)
+
+
+def test_one_rig_protocol_over_arrays_of_tendons():
+    """A single tendon and a joint instrument are both a Rig; their states are one RigState type whose
+    arrays have the rig's tendon shape: () and (n_joints, 2)."""
+    from slave.rig import Rig, RigState
+    from slave.simulated import SimulatedRig
+    from teleop.config import Config
+    inst, one = SimulatedInstrument.from_config(joint_config()), SimulatedRig.from_config(Config())
+    for rig, shape in ((inst, (len(inst.joint_names), 2)), (one, ())):
+        st = rig.step(rig.state.x_in_cmd, DT)
+        assert isinstance(rig, Rig) and type(st) is RigState
+        assert np.shape(st.x_in) == np.shape(st.T_in) == np.shape(st.x_in_cmd) == shape
 
 
 def test_sensors_are_seeded_noisy_and_quantised():
