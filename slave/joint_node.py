@@ -44,7 +44,7 @@ import numpy as np
 
 from estimator.joint import JointEstimator
 from slave.calibration_file import InstrumentCalibration, from_results, save_calibration, sheath_models
-from slave.node_base import SlaveLinks, SlaveNodeBase
+from slave.node_base import Decision, SlaveLinks, SlaveNodeBase
 from slave.pair_calibrate import PairCalibration, set_tension
 from slave.pair_control import PairController
 from slave.rig import TENDONS, Rig, RigState
@@ -179,33 +179,20 @@ class JointSlaveNode(SlaveNodeBase):
                 return False
         return True
 
+    def _too_far(self, cmd: Command) -> str | None:
+        far = [abs(a - s.angle) * r > self.cfg.slave.engage_tolerance
+               for a, s, r in zip(cmd.targets, self.samples, self.r)]
+        return f"angles {[round(a, 4) for a in cmd.targets]} too far from the estimates" if any(far) else None
+
     def _commands(self, now: float) -> list[float | None]:
-        """The watchdog applied to the latest accepted command: one angle (or None) per joint."""
-        self._accept(now)
-        rec, none = self._accepted, [None] * len(self.joints)
-        why = self._command_fault(now)
-        if why is not None:
-            self._set_state(SideState.SAFE, now, why)
-            self.marker, self.hold = 0, None
-            return none
-        cmd = rec.message
-        self.cmd_seq = cmd.seq
-        if not cmd.engaged:
-            self._set_state(SideState.READY, now, "master not engaged")
-            self.marker = 0
-            return list(self.hold) if self.hold is not None else none
-        if self.state != SideState.ENGAGED:
-            far = [abs(a - s.angle) * r > self.cfg.slave.engage_tolerance
-                   for a, s, r in zip(cmd.targets, self.samples, self.r)]
-            if any(far):
-                self.counts["engage_refused"] += 1
-                self._warn(now, "engaged command %d refused: angles %s too far from the estimates", cmd.seq,
-                           [round(a, 4) for a in cmd.targets])
-                return list(self.hold) if self.hold is not None else none
-        self._set_state(SideState.ENGAGED, now, "master engaged")
-        self.marker, self.hold = cmd.marker, tuple(cmd.targets)
-        self.commands_applied += 1
-        return list(cmd.targets)
+        """The watchdog's decision on the latest accepted command (:meth:`_decide`): one angle (or None:
+        relax) per joint."""
+        decision, detail = self._decide(now)
+        if decision is Decision.SAFE:
+            self.hold = None
+        elif decision is Decision.ENGAGED:
+            self.hold = tuple(detail.targets)
+        return list(self.hold) if self.hold is not None else [None] * len(self.joints)
 
     # ---- the cycle ---------------------------------------------------------------------------------
     def _calibration_step(self, now: float, dt: float) -> None:

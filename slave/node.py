@@ -57,7 +57,7 @@ from estimator.distal import DistalEstimator
 from estimator.sheath import SheathModel, profile_batch
 from slave.calibrate import JointLimitCalibration
 from slave.calibration_file import InstrumentCalibration, from_tendon_result, save_calibration, tendon_model
-from slave.node_base import SlaveLinks, SlaveNodeBase
+from slave.node_base import Decision, SlaveLinks, SlaveNodeBase
 from slave.rig import Rig, RigState
 from teleop.codec import seq_newer
 from teleop.config import Config
@@ -123,7 +123,6 @@ class SlaveNode(SlaveNodeBase):
         self.relax_speed = cfg.slave.relax_speed
         self.relax_to = cfg.sheath.pretension + RELAX_BAND
         self.engage_tolerance = cfg.slave.engage_tolerance
-        self._refused = None                   # last command refused for engaging too far away
         self.last_safe_reason: str | None = None
         self._now = 0.0
         # load the compiled kernels now, not in the first real-time cycle
@@ -207,35 +206,24 @@ class SlaveNode(SlaveNodeBase):
             self.x_hold = max(self.x_min, self.x_hold - self.relax_speed * dt)
         return self.x_hold
 
-    def _command(self, now: float, dt: float = 0.0) -> float:
-        """Apply the watchdog to the latest accepted command; return the rig command [m]."""
-        self._accept(now)
-        why = self._command_fault(now)
-        if why is not None:
-            return self._safe(now, why, dt)
-        rec = self._accepted
-        cmd = rec.message
-        self.cmd_seq = cmd.seq
-        if not cmd.engaged:
-            self._set_state(SideState.READY, now, "master not engaged")
-            self.marker = 0
-            return self.x_hold
+    def _too_far(self, cmd: Command) -> str | None:
         x_in_cmd = cmd.targets[0]
-        if self.state != SideState.ENGAGED and abs(x_in_cmd - self.rig_state.x_in) > self.engage_tolerance:
-            if rec is not self._refused:
-                self._refused = rec
-                self.counts["engage_refused"] += 1
-            self._warn(now, "engaged command %d refused: x_in_cmd %.6g m is %.3g mm from x_in (tolerance %.3g mm)",
-                       cmd.seq, x_in_cmd, 1e3 * abs(x_in_cmd - self.rig_state.x_in),
-                       1e3 * self.engage_tolerance)
-            if self.state == SideState.SAFE:
-                return self._safe(now, "engaged command too far from x_in", dt)
-            return self.x_hold
-        self._set_state(SideState.ENGAGED, now, "master engaged")
-        self.marker = cmd.marker
-        self.x_hold = x_in_cmd
-        self.commands_applied += 1
-        return x_in_cmd
+        gap = abs(x_in_cmd - self.rig_state.x_in)
+        if gap <= self.engage_tolerance:
+            return None
+        return (f"x_in_cmd {x_in_cmd:.6g} m is {1e3 * gap:.3g} mm from x_in "
+                f"(tolerance {1e3 * self.engage_tolerance:.3g} mm)")
+
+    def _command(self, now: float, dt: float = 0.0) -> float:
+        """The watchdog's decision on the latest accepted command (:meth:`_decide`) as the rig command [m]."""
+        decision, detail = self._decide(now)
+        if decision is Decision.SAFE:
+            return self._safe(now, detail, dt)
+        if decision is Decision.REFUSED and self.state == SideState.SAFE:
+            return self._safe(now, "engaged command too far from x_in", dt)
+        if decision is Decision.ENGAGED:
+            self.x_hold = detail.targets[0]
+        return self.x_hold
 
     def _calibration_step(self, now: float, dt: float) -> None:
         cal = self.routine

@@ -7,9 +7,14 @@ The cycle and the watchdog of the instrument side, the same whatever the instrum
   ramps and the rig by that much only, never by a jump;
 * the master's heartbeat saying STOPPING is noted (and ends the node with ``stop_on_master_stop``);
 * CALIBRATING runs the node's power-up routine, every other state follows the latest accepted
-  command (:meth:`SlaveNodeBase._command_fault`: none yet, older than ``slave.watchdog_ms`` or the
-  master's liveliness token gone means SAFE); a command is accepted when it fits the instrument,
-  is newer than the last accepted one and lies within range;
+  command by one set of watchdog rules (:meth:`SlaveNodeBase._decide`): none yet, older than
+  ``slave.watchdog_ms`` or the master's liveliness token gone -> SAFE; ``engaged=False`` -> READY
+  (hold); entering ENGAGED from another state only when the command is close to where the axes are
+  (the node's ``_too_far``; refused commands counted once each), else ENGAGED. A command is accepted
+  when it fits the instrument (one target per axis), is newer than the last accepted one and lies
+  within range. What each decision does to the motors is the node's: a single tendon holds and
+  relaxes toward its pretension when SAFE, the pair controllers of a joint instrument relax both
+  tendons to their set tension;
 * one estimate published per control cycle, a Heartbeat at ``slave.heartbeat_hz``;
 * ``calibration.json`` in the run directory, and the counters of the run summary.
 """
@@ -18,6 +23,7 @@ from __future__ import annotations
 import json
 import logging
 from dataclasses import dataclass
+from enum import Enum
 from pathlib import Path
 from typing import Any, Callable
 
@@ -26,7 +32,16 @@ from teleop.config import Config
 from teleop.messages import Side, SideState
 from teleop.node import NodeBase
 
-__all__ = ["SlaveLinks", "SlaveNodeBase"]
+__all__ = ["SlaveLinks", "SlaveNodeBase", "Decision"]
+
+
+class Decision(Enum):
+    """What the latest accepted command asks of the instrument this cycle (:meth:`SlaveNodeBase._decide`)."""
+
+    SAFE = "safe"            # no fresh command: the node's safe behaviour (state SAFE)
+    HOLD = "hold"            # the master is not engaged: hold the last applied targets (state READY)
+    REFUSED = "refused"      # engaging too far from where the axes are: state unchanged, hold
+    ENGAGED = "engaged"      # follow the command's targets (state ENGAGED)
 
 
 @dataclass
@@ -84,6 +99,7 @@ class SlaveNodeBase(NodeBase):
         self.commands_applied = 0
         self.master_stopped = False
         self._accepted = None                  # last accepted Received command
+        self._refused = None                   # last command refused for engaging too far away
 
     @property
     def rate_hz(self) -> float:
@@ -148,6 +164,45 @@ class SlaveNodeBase(NodeBase):
         if alive is not None and not alive():
             return "master liveliness token gone"
         return None
+
+    def _too_far(self, cmd) -> str | None:
+        """Why engaging on ``cmd`` would move the instrument too far at once (for the warning), or None."""
+        raise NotImplementedError
+
+    def _decide(self, now: float):
+        """The watchdog rules of every slave applied to the latest accepted command (module docstring).
+
+        Returns
+        -------
+        (Decision, detail)
+            ``(SAFE, why)``, or ``(HOLD | REFUSED | ENGAGED, command)``. States, ``cmd_seq``,
+            ``marker``, ``commands_applied`` and the ``engage_refused`` count are updated here.
+        """
+        self._accept(now)
+        why = self._command_fault(now)
+        if why is not None:
+            self._set_state(SideState.SAFE, now, why)
+            self.marker = 0
+            return Decision.SAFE, why
+        rec = self._accepted
+        cmd = rec.message
+        self.cmd_seq = cmd.seq
+        if not cmd.engaged:
+            self._set_state(SideState.READY, now, "master not engaged")
+            self.marker = 0
+            return Decision.HOLD, cmd
+        if self.state != SideState.ENGAGED:
+            far = self._too_far(cmd)
+            if far is not None:
+                if rec is not self._refused:
+                    self._refused = rec
+                    self.counts["engage_refused"] += 1
+                self._warn(now, "engaged command %d refused: %s", cmd.seq, far)
+                return Decision.REFUSED, cmd
+        self._set_state(SideState.ENGAGED, now, "master engaged")
+        self.marker = cmd.marker
+        self.commands_applied += 1
+        return Decision.ENGAGED, cmd
 
     def _publish(self, msg) -> None:
         """Publish the estimate of this cycle (built with seq :attr:`seq`)."""
