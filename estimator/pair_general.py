@@ -156,7 +156,7 @@ def export_params(m: SharedModel, values: dict, fitted_on: str, uncertainty: dic
     if m.g_slope:
         laws.append("G = G + G_N * N")
     if m.stiffness_ratio:
-        laws.append("lam = G / s")
+        laws.append("lam = G / s" + (" + lam_N * N" if m.lam_slope else ""))
     laws.append("initial tensions: the recording's first sample (pretension); angle offset: its first sample")
     return {"model": {"name": m.name, "structure": m.structure, "effects": list(m.effects), "laws": laws},
             "values": vals, "fitted_on": fitted_on}

@@ -12,7 +12,7 @@ K0_j is the rest of each tendon's route (its own base wrap), mu the friction coe
 added bend. The angle starts at the measured first sample (no offset is fitted per configuration),
 so a configuration is predicted from its command, its measured pretension and N alone.
 
-Three shared models are fitted the same way (training samples of every configuration together,
+Shared models are fitted the same way (training samples of every configuration together,
 ``scipy.optimize.least_squares``), so that the configuration dependence is tested, not assumed:
 
 * ``capstan``             (S1) with mu free: G, lam, k, K0_a, K0_b, mu (6 parameters);
@@ -22,10 +22,15 @@ Three shared models are fitted the same way (training samples of every configura
 * ``capstan, X per configuration`` for X = G, lam, k: (S1) with X fitted once per configuration,
   to see whether a second quantity drifts with the configuration besides K;
 * ``capstan, G falls with N``: (S1) and G = G + G_N N (7 parameters), the drift the previous
-  variants point at, as one shared slope.
+  variants point at, as one shared slope;
+* ``capstan+T`` and its variants (:data:`CHOICE`): the measured proximal tensions enter the fit too
+  (weight :data:`TENSION_WEIGHT`), s = G / lam [N/rad] is fitted in place of lam and G is held at
+  :data:`G_FIXED` (the data pin s, not G); ``G falls with N`` and ``lam grows with N`` add one slope.
 
-Leave-one-configuration-out: the shared model is refitted on all samples up to the end of the test
-block of the other configurations and predicts the left-out one.
+The structure is chosen by leave-one-configuration-out on the training cycles
+(:func:`estimator.pair_general.choose_shared`). Leave-one-configuration-out for the report: the chosen
+model is refitted on all samples up to the end of the test block of the other configurations and
+predicts the left-out one.
 """
 from __future__ import annotations
 
@@ -52,6 +57,7 @@ TENSION_WEIGHT = 0.01
 #: in 3-20, docs/findings.md, Finding 3), so G is fixed and s carries the tendon compliance.
 G_FIXED = 5.0
 _G_N = Param("G_N", "1/rad", -5.0, 5.0, (0.0,), 0.02)
+_LAM_N = Param("lam_N", "rad/N/rad", -2.0, 5.0, (0.05,), 0.02)
 _BAD = 10.0
 
 
@@ -65,7 +71,8 @@ class SharedModel:
     w (T_in,model - T_in,measured) beside the angle's), which pins the ratio of motor travel to
     tendon compliance; ``stiffness_ratio`` fits s = G / lam [N/rad] (proximal tension per radian of
     command with the tip held) in place of lam, the combination the data determine;
-    ``fixed`` (name, value) pairs are held, not fitted."""
+    ``fixed`` (name, value) pairs are held, not fitted; ``lam_slope``: the compliance grows with N,
+    lam = lam + lam_N N (sheath axial compliance of the bent tube, E10)."""
 
     name: str
     structure: str
@@ -77,6 +84,7 @@ class SharedModel:
     tension_weight: float = 0.0
     stiffness_ratio: bool = False
     fixed: tuple[tuple[str, float], ...] = ()
+    lam_slope: bool = False
 
 
 SHARED_MODELS = {m.name: m for m in (
@@ -103,10 +111,14 @@ SHARED_MODELS = {m.name: m for m in (
                 ({"G_N": -0.29, "s": 3.1, "k": 5.8, "K0_a": 0.66, "K0_b": 0.34, "mu": 0.07},
                  {"G_N": -0.12, "s": 6.9, "k": 7.9, "K0_a": 1.5, "K0_b": 0.87, "mu": 0.24}), (), True,
                 tension_weight=TENSION_WEIGHT, stiffness_ratio=True, fixed=(("G", G_FIXED),)),
+    SharedModel("capstan+T, lam grows with N", "capstan", (), True,
+                ({"lam_N": 0.095, "s": 3.16, "k": 5.86, "K0_a": 0.67, "K0_b": 0.31, "mu": 0.10},
+                 {"lam_N": 0.03, "s": 2.6, "k": 4.7, "K0_a": 0.55, "K0_b": 0.22, "mu": 0.12}),
+                tension_weight=TENSION_WEIGHT, stiffness_ratio=True, fixed=(("G", G_FIXED),), lam_slope=True),
 )}
 #: Candidates of the shared structure, in the order of the forward choice by leave-one-configuration-out
 #: on the training cycles (:func:`estimator.pair_general.choose_shared`).
-CHOICE = ("capstan", "capstan+T", "capstan+T, G falls with N")
+CHOICE = ("capstan", "capstan+T", "capstan+T, G falls with N", "capstan+T, lam grows with N")
 #: Shared models refitted leaving each configuration out besides the chosen one (none: each costs five refits).
 LEAVE_ONE_OUT: tuple[str, ...] = ()
 #: Shared models fitted for comparison by :func:`shared_analysis` (besides :data:`CHOICE`).
@@ -130,7 +142,7 @@ def shared_params(m: SharedModel, n_configs: int = 1) -> tuple[Param, ...]:
             out += [Param(f"{p.name}[{i}]", p.unit, p.lo, p.hi, p.starts, p.scale) for i in range(n_configs)]
         else:
             out.append(p)
-    return tuple(out) + ((_MU,) if m.grows else ()) + ((_G_N,) if m.g_slope else ())
+    return tuple(out) + ((_MU,) if m.grows else ()) + ((_G_N,) if m.g_slope else ()) + ((_LAM_N,) if m.lam_slope else ())
 
 
 def config_values(m: SharedModel, values: dict[str, float], rec, bend: float, i: int = 0) -> dict[str, float]:
@@ -146,6 +158,8 @@ def config_values(m: SharedModel, values: dict[str, float], rec, bend: float, i:
         v["G"] = max(v["G"] + v.pop("G_N") * bend, 1e-6)
     if m.stiffness_ratio:
         v["lam"] = max(v["G"] / v.pop("s"), 1e-4)
+    if m.lam_slope:
+        v["lam"] = max(v["lam"] + v.pop("lam_N") * bend, 1e-4)
     g = v["G"] * float(rec.command[0]) if m.structure == "seed" else 0.0
     v["theta0"] = float(rec.angle[0]) - g
     return v
