@@ -53,12 +53,14 @@ def make_device(cfg: Config, protocol: str = "paper,minor"):
 
 @register_device("simulated")
 def _scripted(cfg: Config, protocol: str):
+    from master.arm import ArmParameters
     clutch = cfg.master.mapping.clutch_button
+    arm = ArmParameters.from_config(cfg.master.device.arm)
     if cfg.instrument.joints:
         from master.joint_operator import MultiAxisOperator, joint_protocols
-        return MultiAxisOperator(joint_protocols(cfg, protocol), clutch_bit=clutch)
+        return MultiAxisOperator(joint_protocols(cfg, protocol), clutch_bit=clutch, arm=arm)
     from master.simulated import ScriptedOperator, build_protocol
-    return ScriptedOperator(build_protocol(protocol), clutch_bit=clutch)
+    return ScriptedOperator(build_protocol(protocol), clutch_bit=clutch, arm=arm)
 
 
 def device_axes_needed(cfg: Config) -> int:

@@ -5,7 +5,8 @@ Each axis runs its own protocol of tension targets on one tendon of its joint at
 the current segment (in the latest JointEstimate, what a surgeon sees on the tension read-out),
 moves its intended hand position at ``speed`` toward the target - + pulls tendon a, - pulls tendon
 b - dwells at each reversal, and takes the next segment once the target is crossed. The rendered
-force pushes the hand back through the arm impedance, p_hand = p_intended + F / k_arm [m].
+force pushes the hand back through a human arm holding the device, one mass-damper-spring per axis
+about the intended position (:mod:`master.arm`, as :mod:`master.simulated`).
 
 The paper protocol on a joint is the seed paper's experiment on tendon a (pull to 20 N, release to
 5 N, pull to 20 N, release to the set tension + 0.5 N), then the same on tendon b. All axes run
@@ -18,6 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from master.arm import ArmParameters, HumanArm
 from master.device import MultiAxisState
 from teleop.config import Config, joint_set_tension
 from teleop.errors import ConfigError
@@ -70,16 +72,18 @@ def joint_protocols(cfg: Config, names: str) -> list[tuple[AxisSegment, ...]]:
 
 
 class _Axis:
-    def __init__(self, segments, speed, k_arm, dwell, start_delay, timeout):
-        self.segments, self.speed, self.k_arm, self.dwell = tuple(segments), speed, k_arm, dwell
+    def __init__(self, segments, speed, arm: ArmParameters, dwell, start_delay, timeout):
+        self.segments, self.speed, self.k_arm, self.dwell = tuple(segments), speed, arm.stiffness, dwell
+        self.arm = HumanArm(arm)
         self.start_delay, self.timeout = start_delay, timeout
-        self.intended = self.force = 0.0
+        self.intended = self.force = self.velocity = 0.0
         self.index, self.direction, self.marker, self.timeouts = -1, 0, 0, 0
         self.finished = False
         self._wait: float | None = None
         self._t_seg = 0.0
 
     def advance(self, t: float, dt: float, T_in: tuple[float, float]) -> None:
+        self.velocity = 0.0                      # intended hand speed [m/s], set below while moving
         if self.finished:
             return
         if self.index < 0 or self._wait is not None:
@@ -104,7 +108,8 @@ class _Axis:
             self.direction, self._wait, self.start_delay = 0, t + self.dwell, self.dwell
             return
         # + device motion pulls tendon a, - pulls b
-        self.intended += (1.0 if seg.side == 0 else -1.0) * self.direction * self.speed * dt
+        self.velocity = (1.0 if seg.side == 0 else -1.0) * self.direction * self.speed
+        self.intended += self.velocity * dt
 
 
 class MultiAxisOperator:
@@ -116,6 +121,8 @@ class MultiAxisOperator:
         One per axis (1..4).
     speed, arm_stiffness, dwell, start_delay, segment_timeout
         As :class:`master.simulated.ScriptedOperator` [m/s, N/m, s, s, s].
+    arm : ArmParameters, optional
+        Arm and device of every axis (:mod:`master.arm`); default ``ArmParameters(stiffness=arm_stiffness)``.
     clutch_bit, clutch_time
         As :class:`master.simulated.ScriptedOperator`: when the console asks to align, the operator
         holds the clutch button (bit ``clutch_bit``) for ``clutch_time`` [s] and lets go, which
@@ -130,7 +137,7 @@ class MultiAxisOperator:
 
     def __init__(self, protocols, speed: float = 0.025, arm_stiffness: float = 300.0, dwell: float = 0.2,
                  start_delay: float = 0.5, segment_timeout: float = 15.0, clutch_bit: int = 1,
-                 clutch_time: float = 0.05):
+                 clutch_time: float = 0.05, arm: ArmParameters | None = None):
         protocols = [tuple(p) for p in protocols]
         if not protocols or any(not p for p in protocols):
             raise ConfigError("protocol: a multi-axis operator needs one non-empty protocol per axis")
@@ -144,7 +151,8 @@ class MultiAxisOperator:
         for name, v in (("dwell", dwell), ("start_delay", start_delay)):
             if not (math.isfinite(v) and v >= 0):
                 raise ConfigError(f"multi-axis operator: {name} must be a finite number >= 0, got {v!r}")
-        self.axes = [_Axis(p, float(speed), float(arm_stiffness), float(dwell), float(start_delay),
+        arm = arm or ArmParameters(stiffness=float(arm_stiffness))
+        self.axes = [_Axis(p, float(speed), arm, float(dwell), float(start_delay),
                            float(segment_timeout)) for p in protocols]
         self._T: list[tuple[float, float]] | None = None
         self._engaged = False
@@ -186,6 +194,8 @@ class MultiAxisOperator:
         """Advance every axis's script to ``t`` [s]; hand positions [m] and the clutch button."""
         dt = 0.0 if self._t_prev is None else max(0.0, t - self._t_prev)
         self._t_prev = t
+        for a in self.axes:
+            a.velocity = 0.0
         if self._engaged and self._T is not None:
             for a, T in zip(self.axes, self._T):
                 a.advance(t, dt, T)
@@ -198,7 +208,9 @@ class MultiAxisOperator:
                 buttons = 1 << self.clutch_bit
             else:
                 self._clutch_until = None
-        return MultiAxisState(t=t, positions=tuple(a.intended + a.force / a.k_arm for a in self.axes), buttons=buttons)
+        # per axis: (m_a + m_d) dv/dt = k_a (p_i - p) + b_a (v_i - v) + F - b_d v - F_c sgn(v)
+        pos = tuple(a.arm.step(dt, a.intended, a.velocity, a.force) for a in self.axes)
+        return MultiAxisState(t=t, positions=pos, buttons=buttons)
 
     def set_forces(self, forces, t: float) -> None:
         """Render one force per axis [N] (non-finite: 0)."""

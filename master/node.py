@@ -110,7 +110,8 @@ class MasterNode(MasterNodeBase):
         self.forces = [ForceMap.from_config(m) for _ in r]
         self.consoles = [Console(mm, m.align_tolerance / rk, m.clutch_button, unit_length=rk)
                          for mm, rk in zip(self.motion, r)]
-        self.passivity = [PassivityController(m.force_limit, enabled=m.passivity) for _ in r]
+        self.passivity = [PassivityController(m.force_limit, enabled=m.passivity, reserve=m.passivity_reserve)
+                          for _ in r]
         self.limit = m.force_limit
         self.status = ConsoleStatus.WAIT_SLAVE
         self.align_refusals = 0                  # engage attempts refused for a misaligned axis

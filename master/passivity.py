@@ -20,7 +20,16 @@ variable damper takes out exactly that excess in the same step::
     alpha = -E_cmd / (v^2 dt)        if E_cmd < 0 and v != 0, else 0       [N s/m]  (PC)
     f'    = f - alpha v
 
-so ``E(k) = 0`` after an active step. (Hannaford & Ryu write ``f' = f + alpha v`` with ``f`` the force
+so ``E(k) = 0`` after an active step. With an energy *reserve* ``E_r`` > 0 (``master.mapping.passivity_reserve``)
+the controller first eases the force off smoothly while the port gives energy back (``-f v < 0``)::
+
+    f = f min(1, E(k-1) / E_r)                                                         (reserve)
+
+so the stored energy decays like ``dE/dt = -(E/E_r) |f v|`` instead of running into the hard
+correction, which then only catches what the scaling misses. The hard PC alone switches between
+full force and the damped force from one sample to the next; on a hand of small inertia that is a
+limit cycle of its own (docs/stability.md). Scaling the force toward 0 never makes the port active
+(``|f'| <= |f|``, same sign). (Hannaford & Ryu write ``f' = f + alpha v`` with ``f`` the force
 the operator applies to the network; here ``f`` is the force applied to the operator, hence the
 minus.) The command is clamped to ``[-limit, limit]`` first; the damped force then always lies
 between 0 and the clamped command (``f' v = E(k-1)/dt >= 0`` with ``|f'| <= |f|``), so the clamp holds
@@ -73,6 +82,9 @@ class PassivityController:
         Force clamp [N], finite and > 0; the output is always in ``[-limit, limit]``.
     enabled : bool
         False: observe only (the output is the clamped command; ``energy`` may go negative).
+    reserve : float
+        Energy reserve E_r [J], >= 0: below it the outgoing force is scaled by E / E_r (module
+        docstring); 0 = the hard controller only.
 
     Raises
     ------
@@ -80,10 +92,13 @@ class PassivityController:
         ``limit`` not finite and positive.
     """
 
-    def __init__(self, limit: float, enabled: bool = True):
+    def __init__(self, limit: float, enabled: bool = True, reserve: float = 0.0):
         if isinstance(limit, bool) or not (math.isfinite(limit) and limit > 0):
             raise ConfigError(f"passivity limit must be a finite force > 0 N, got {limit!r}")
+        if isinstance(reserve, bool) or not (math.isfinite(reserve) and reserve >= 0):
+            raise ConfigError(f"master.mapping.passivity_reserve must be a finite energy >= 0 J, got {reserve!r}")
         self.limit = float(limit)
+        self.reserve = float(reserve)
         self.enabled = bool(enabled)
         self.reset()
 
@@ -111,6 +126,10 @@ class PassivityController:
         if not (math.isfinite(velocity) and math.isfinite(dt) and dt > 0):
             return 0.0
         v = float(velocity)
+        f_in = f
+        if self.enabled and self.reserve > 0.0 and f * v > 0.0:
+            # reserve: f = f min(1, E(k-1) / E_r) while the port gives energy back
+            f *= min(1.0, max(self.energy, 0.0) / self.reserve)
         # E_cmd = E(k-1) - f v dt      (energy into the network if f is rendered unchanged)
         e_cmd = self.energy - f * v * dt
         if self.enabled and e_cmd < 0.0 and v != 0.0:
@@ -119,11 +138,12 @@ class PassivityController:
             # a rounding-level negative E(k-1) counts as 0, so f' never points against f)
             f_out = max(self.energy, 0.0) / (v * dt)
             f_out = min(max(f_out, -self.limit), self.limit)
-            self.alpha = (f - f_out) / v
-            self.dissipated += (f - f_out) * v * dt
-            self.active_steps += 1
         else:
             f_out = f
+        if f_out != f_in:                        # the hard PC or the reserve took energy out
+            self.alpha = (f_in - f_out) / v
+            self.dissipated += (f_in - f_out) * v * dt
+            self.active_steps += 1
         # E(k) = E(k-1) - f' v dt
         de = -f_out * v * dt
         self.energy += de

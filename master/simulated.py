@@ -4,12 +4,16 @@ The operator follows a *protocol*, a list of proximal-tension targets ("pull unt
 20 N, then release until 5 N, ..."). It watches the T_in echoed in the latest Estimate (what a
 surgeon sees on the endoscope and the tension read-out), moves its intended hand position at a set
 speed toward the next target, dwells briefly at each reversal, and goes on to the next segment when
-the target is crossed. The hand is not a position source: the rendered force pushes it back through
-a simple arm impedance (Hogan's spring model, static)::
+the target is crossed. The hand is not a position source: it is a human arm as haptics models it, a
+mass-damper-spring about the intended position holding a device with its own mass and friction
+(:mod:`master.arm`; Hogan 1985, Tsuji et al. 1995)::
 
-    p_hand = p_intended + F_rendered / k_arm          [m] = [m] + [N] / [N/m]
+    (m_a + m_d) dv/dt = k_a (p_intended - p) + b_a (v_intended - v) + F_rendered - b_d v - F_c sgn(v)
 
-so the master's force feedback acts on the motion it commands, as with a real hand.
+so the master's force feedback acts on the motion it commands, as with a real hand. ``static_arm``
+keeps the first model, a massless spring ``p = p_intended + F / k_arm``, for comparisons only: with
+it the passivity controller's force steps become position steps and the loop chatters
+(docs/stability.md).
 
 When the console asks to align (after a fault the hand has moved, or the slave relaxed) the
 operator clutches: it holds the clutch button (``clutch_bit``) for ``clutch_time`` and lets go, which
@@ -23,6 +27,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from master.arm import ArmParameters, HumanArm
 from master.device import DeviceState
 from teleop.errors import ConfigError
 
@@ -85,7 +90,11 @@ class ScriptedOperator:
     speed : float
         Intended hand speed along the device axis [m/s], > 0.
     arm_stiffness : float
-        Arm impedance k_arm [N/m], > 0.
+        Arm stiffness k_a [N/m], > 0, used when ``arm`` is None.
+    arm : ArmParameters, optional
+        The arm and device (:mod:`master.arm`); default ``ArmParameters(stiffness=arm_stiffness)``.
+    static_arm : bool
+        The massless spring ``p = p_intended + F / k_a`` instead (comparisons only; module docstring).
     dwell : float
         Pause at each reversal [s], >= 0.
     start_delay : float
@@ -106,7 +115,7 @@ class ScriptedOperator:
 
     def __init__(self, segments, speed: float = 0.025, arm_stiffness: float = 300.0, dwell: float = 0.2,
                  start_delay: float = 0.5, segment_timeout: float = 15.0, clutch_bit: int = 1,
-                 clutch_time: float = 0.05):
+                 clutch_time: float = 0.05, arm: ArmParameters | None = None, static_arm: bool = False):
         self.segments = tuple(segments)
         if not self.segments:
             raise ConfigError("protocol: a scripted operator needs at least one segment")
@@ -116,7 +125,11 @@ class ScriptedOperator:
             if not (math.isfinite(v) and (v >= 0 if zero_ok else v > 0)):
                 raise ConfigError(f"scripted operator: {name} must be a finite number "
                                   f"{'>= 0' if zero_ok else '> 0'}, got {v!r}")
-        self.speed, self.k_arm, self.dwell = float(speed), float(arm_stiffness), float(dwell)
+        self.speed, self.dwell = float(speed), float(dwell)
+        self.arm_params = arm or ArmParameters(stiffness=float(arm_stiffness))
+        self.k_arm = self.arm_params.stiffness
+        self.arm = HumanArm(self.arm_params)
+        self.static_arm = bool(static_arm)
         self.start_delay, self.segment_timeout = float(start_delay), float(segment_timeout)
         self.intended = 0.0          # [m]
         self.force = 0.0             # rendered force [N]
@@ -162,8 +175,13 @@ class ScriptedOperator:
                 buttons = 1 << self.clutch_bit
             else:
                 self._clutch_until = None
-        # p_hand = p_intended + F / k_arm
-        return DeviceState(t=t, position=self.intended + self.force / self.k_arm, buttons=buttons)
+        if self.static_arm:
+            # p_hand = p_intended + F / k_arm   (massless spring)
+            p = self.intended + self.force / self.k_arm
+        else:
+            # (m_a + m_d) dv/dt = k_a (p_i - p) + b_a (v_i - v) + F - b_d v - F_c sgn(v)
+            p = self.arm.step(dt, self.intended, self.direction * self.speed, self.force)
+        return DeviceState(t=t, position=p, buttons=buttons)
 
     def set_force(self, force: float, t: float) -> None:
         self.force = float(force) if math.isfinite(force) else 0.0

@@ -18,7 +18,7 @@ __all__ = [
     "JointConfig", "MotorConfig", "LoadConfig", "SensorConfig", "VelocityFrictionConfig", "PretensionEffectConfig",
     "CurvatureDriftConfig", "TendonStiffeningConfig", "StictionConfig", "FrictionOffsetConfig",
     "SensorOffsetConfig", "SensorDelayConfig", "EffectsConfig", "ZenohRigConfig", "RigConfig", "EstimatorConfig",
-    "CalibrationConfig", "DeviceConfig", "MappingConfig", "MasterConfig", "SlaveConfig", "PairControlConfig",
+    "CalibrationConfig", "ArmConfig", "DeviceConfig", "MappingConfig", "MasterConfig", "SlaveConfig", "PairControlConfig",
     "TransportAuthConfig", "TransportTlsConfig", "TransportConfig", "RecordingConfig", "Config", "RANGES",
     "joint_set_tension",
 ]
@@ -218,9 +218,20 @@ class CalibrationConfig:
 
 
 @dataclass(frozen=True)
+class ArmConfig:                          # the simulated operator's arm + device (master/arm.py)
+    mass: float = 1.5                     # [kg]
+    damping: float = 15.0                 # [N s/m]
+    stiffness: float = 300.0              # [N/m]
+    device_mass: float = 0.1              # [kg]
+    device_damping: float = 0.5           # [N s/m]
+    device_friction: float = 0.2          # [N]
+
+
+@dataclass(frozen=True)
 class DeviceConfig:
     type: Literal["simulated", "hid"] = "simulated"
     file: Optional[str] = None            # device file (configs/devices/*.yaml), required when type is hid
+    arm: ArmConfig = field(default_factory=ArmConfig)
 
 
 @dataclass(frozen=True)
@@ -231,6 +242,7 @@ class MappingConfig:
     ramp_time: float = 0.5                # [s]
     force_rate_limit: float = 100.0       # [N/s]
     passivity: bool = True                # time-domain passivity controller on the force channel
+    passivity_reserve: float = 0.005      # [J] below it the outgoing force eases off (master/passivity.py)
     align_tolerance: float = 0.001        # [m] of tendon: re-engage only when this close to the slave
     clutch_button: int = 1                # bit of DeviceState.buttons held to clutch; -1: no clutch
 
@@ -347,6 +359,9 @@ RANGES: dict[str, tuple[str, str]] = {
     "master.mapping.force_limit": (">= 0", "N"), "master.mapping.ramp_time": (">= 0", "s"),
     "master.mapping.force_rate_limit": ("> 0", "N/s"), "master.mapping.align_tolerance": ("> 0", "m"),
     "master.mapping.clutch_button": ("-1..31", "bit"), "master.max_tension": ("> 0", "N"),
+    "master.mapping.passivity_reserve": (">= 0", "J"), "master.device.arm.mass": ("> 0", "kg"), "master.device.arm.damping": (">= 0", "N s/m"),
+    "master.device.arm.stiffness": ("> 0", "N/m"), "master.device.arm.device_mass": (">= 0", "kg"),
+    "master.device.arm.device_damping": (">= 0", "N s/m"), "master.device.arm.device_friction": (">= 0", "N"),
     "slave.relax_speed": (">= 0", "m/s"), "slave.x_in_min": ("any", "m"), "slave.x_in_max": ("any", "m"),
     "slave.engage_tolerance": ("> 0", "m"),
     "slave.watchdog_ms": ("> 0", "ms"), "slave.heartbeat_hz": ("> 0", "Hz"),

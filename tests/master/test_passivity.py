@@ -154,3 +154,21 @@ def test_with_pc_the_clamp_holds_when_it_binds():
     assert np.abs(run["f"]).max() == pytest.approx(0.8)
     assert np.all(np.abs(run["f"]) <= 0.8)
     assert run["E"].min() >= -1e-12 and np.abs(run["x"]).max() < 0.02
+
+
+def test_reserve_eases_the_force_off_smoothly_where_the_hard_controller_switches():
+    """A port that gives energy back (f v > 0) on a slow hand: the hard PC alternates between full
+    and damped force, the reserve scales it down smoothly; neither lets the energy go below zero."""
+    dt = 1e-3
+    out = {}
+    for reserve in (0.0, 0.005):
+        pc = PassivityController(4.0, reserve=reserve)
+        pc.step(-1.0, 0.02, dt * 400)          # 8 mJ in: pushing against the force
+        fs = []
+        for k in range(2000):
+            fs.append(pc.step(1.0, 0.02, dt))   # force along the motion: energy out
+            assert pc.energy >= -1e-12
+        out[reserve] = np.array(fs)
+    hard, eased = out[0.0], out[0.005]
+    assert np.abs(np.diff(eased)).max() < 0.01 < np.abs(np.diff(hard)).max()
+    assert eased[0] == pytest.approx(1.0) and eased[-1] < 0.05

@@ -44,7 +44,8 @@ def test_follows_targets_in_order_and_finishes():
         t += DT
     assert op.finished and op.timeouts == 0
     step_T = STIFFNESS * 0.025 * DT               # one step of hand motion in tension
-    assert reached == pytest.approx([20.0, 5.0, 12.0, 0.3], abs=2 * step_T)
+    # the script stops the intention when it sees the target; the hand's mass carries it ~2 steps on
+    assert reached == pytest.approx([20.0, 5.0, 12.0, 0.3], abs=4 * step_T)
     assert markers[0] == 1 and markers[-1] == 2 and markers.index(2) > 0
     assert sorted(set(markers)) == [1, 2]
 
@@ -62,12 +63,26 @@ def test_does_nothing_until_engaged_and_seeing_tension():
     assert op.read(0.3).position > 0.0
 
 
-def test_arm_impedance_hand_yields_to_the_force():
-    op = ScriptedOperator(PROTOCOLS["short"], arm_stiffness=250.0)
+def test_static_arm_hand_yields_to_the_force_at_once():
+    op = ScriptedOperator(PROTOCOLS["short"], arm_stiffness=250.0, static_arm=True)
     op.set_force(-2.0, 0.0)
     assert op.read(0.0).position == pytest.approx(op.intended - 2.0 / 250.0)
     op.set_force(float("nan"), 0.0)            # a NaN force is not rendered
     assert op.read(0.001).position == op.intended
+
+
+def test_arm_with_mass_yields_smoothly_and_settles_at_force_over_stiffness():
+    from master.arm import ArmParameters
+    arm = ArmParameters(mass=1.5, damping=15.0, stiffness=250.0, device_mass=0.1, device_damping=0.5,
+                        device_friction=0.0)
+    op = ScriptedOperator(PROTOCOLS["short"], arm=arm)
+    op.read(0.0)
+    op.set_force(-2.0, 0.0)
+    first = op.read(DT).position
+    assert -1e-5 < first < 0.0                 # a mass does not jump: 1 ms of 2 N on 1.6 kg is ~0.6 um
+    for k in range(2, 5000):
+        p = op.read(k * DT).position
+    assert p == pytest.approx(-2.0 / 250.0, rel=1e-3)
 
 
 def test_resisting_force_makes_the_hand_go_further():
@@ -79,7 +94,7 @@ def test_resisting_force_makes_the_hand_go_further():
 
 
 def test_segment_timeout_moves_on():
-    op = ScriptedOperator((Segment(1e6, 1), Segment(0.3, 1)), start_delay=0.0, dwell=0.0, segment_timeout=0.5)
+    op = ScriptedOperator((Segment(1e6, 1), Segment(5.0, 1)), start_delay=0.0, dwell=0.0, segment_timeout=0.5)
     drive(op, 5.0)
     assert op.finished and op.timeouts == 1
 

@@ -1,0 +1,132 @@
+"""Stability sweep of the haptic loop: force scale x network delay x arm stiffness -> stable or not, chatter.
+
+One process, no Zenoh: the real pieces of the loop stepped at 1 kHz on one clock (docs/stability.md)::
+
+    scripted operator + arm/device (master.arm) -> MotionMap (motion_scale) -> delay d ->
+    SimulatedRig (sheath, motor, load) -> DistalEstimator (true K, L/EA, route) -> delay d ->
+    ForceMap (force_scale, ramp, clamp, slew) -> PassivityController -> the hand
+
+The protocol is the paper's (pull to 20 N, release to 5 N, pull to 20 N, release to 0.3 N). For
+each point: chatter of x_in_cmd and of the rendered force above 30 Hz (worst 100 ms window,
+:mod:`teleop.loop_metrics`) and the transparency RMS. A point is *stable* when both worst windows are
+below :data:`teleop.loop_metrics.CHATTER_LIMITS` (20 um, 0.05 N) and the protocol finished.
+
+Usage: ``.venv/bin/python benchmarks/bench_stability.py [--quick] [--pc off|hard|reserve]``
+(prints a table; ~1 s of CPU per point).
+"""
+from __future__ import annotations
+
+import argparse
+import collections
+import dataclasses
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from estimator.distal import DistalEstimator  # noqa: E402
+from estimator.sheath import SheathModel  # noqa: E402
+from master.arm import ArmParameters  # noqa: E402
+from master.mapping import ForceMap, MotionMap, clamp_force  # noqa: E402
+from master.passivity import PassivityController  # noqa: E402
+from master.simulated import PROTOCOLS, ScriptedOperator  # noqa: E402
+from slave.simulated import SimulatedRig  # noqa: E402
+from teleop.config import Config  # noqa: E402
+from teleop.loop_metrics import CHATTER_LIMITS, chatter  # noqa: E402
+
+
+def run_loop(force_scale: float = 0.2, delay: float = 0.001, arm: ArmParameters | None = None,
+             pc: str = "reserve", static_arm: bool = False, motion_scale: float = 0.2,
+             protocol: str = "paper", t_max: float = 30.0) -> dict:
+    """One closed-loop run; returns chatter, transparency and whether the protocol finished.
+
+    force_scale [-], delay: one-way network delay [s] (each way), pc: 'off' | 'hard' | 'reserve'
+    (passivity controller: none, Hannaford-Ryu, with the 5 mJ reserve), static_arm: the massless
+    spring of the first scripted operator.
+    """
+    cfg = Config()
+    dt = 1e-3
+    rig = SimulatedRig.from_config(cfg)
+    model = SheathModel.from_geometry(cfg.sheath.geometry(), cfg.sheath.mu, cfg.sheath.EA)
+    est = DistalEstimator(model, n_nodes=cfg.estimator.n_nodes)
+    op = ScriptedOperator(PROTOCOLS[protocol], arm=arm or ArmParameters(), static_arm=static_arm)
+    motion = MotionMap(motion_scale)
+    m = cfg.master.mapping
+    fmap = ForceMap(force_scale, m.force_limit, m.ramp_time, m.force_rate_limit)
+    passivity = PassivityController(m.force_limit, enabled=pc != "off", reserve=0.005 if pc == "reserve" else 0.0)
+    nd = max(0, int(round(delay / dt)))
+    cmd_q: collections.deque = collections.deque([0.0] * nd)
+    est_q: collections.deque = collections.deque([(0.0, 0.0, 0.0)] * nd)
+    seen = (0.0, 0.0, 0.0)                   # (T_in, T_out_hat, T_out true) at the master
+    p_prev, force = 0.0, 0.0
+    motion.anchor(0.0, 0.0)
+    fmap.engage()
+    log = []
+    t = 0.0
+    while t < t_max and not op.finished:
+        # master
+        op.watch(seen[0], True)
+        p = op.read(t).position
+        x_cmd = motion.command(p)
+        f_cmd = fmap.step(seen[1], t)
+        v = (p - p_prev) / dt
+        p_prev = p
+        force = clamp_force(passivity.step(f_cmd, v, dt), m.force_limit)
+        op.set_force(force, t)
+        log.append((t, x_cmd, force, -force_scale * seen[2]))
+        # network out, slave, network back
+        cmd_q.append(x_cmd)
+        rs = rig.step(cmd_q.popleft(), dt)
+        e = est.step(rs.T_in, rs.x_in, rs.t)
+        est_q.append((rs.T_in, e.T_out, rs.truth.T_out))
+        seen = est_q.popleft()
+        t += dt
+    a = np.array(log)
+    _, xw, _ = chatter(a[:, 0], a[:, 1])
+    _, fw, _ = chatter(a[:, 0], a[:, 2])
+    err = a[:, 2] - a[:, 3]
+    fs = float(np.ptp(a[:, 3])) or float("nan")
+    stable = bool(op.finished and xw < CHATTER_LIMITS["x_in_cmd_m"] and fw < CHATTER_LIMITS["force_N"])
+    return {"stable": stable, "finished": bool(op.finished), "x_in_cmd_worst_um": 1e6 * xw, "force_worst_N": fw,
+            "transparency_rms_fs": float(np.sqrt(np.mean(err ** 2)) / fs), "duration_s": t,
+            "pc_active_steps": passivity.active_steps}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="a 2 x 2 x 2 grid")
+    ap.add_argument("--pc", default="all", choices=("off", "hard", "reserve", "all"))
+    args = ap.parse_args()
+    scales = (0.2, 0.8) if args.quick else (0.1, 0.2, 0.4, 0.8)
+    delays = (0.001, 0.02) if args.quick else (0.001, 0.005, 0.02, 0.05)
+    stiff = (100.0, 800.0) if args.quick else (100.0, 300.0, 800.0)
+    modes = ("off", "hard", "reserve") if args.pc == "all" else (args.pc,)
+    t0 = time.process_time()
+    print("before/after at the defaults (force_scale 0.2, 1 ms each way, k_arm 300 N/m):")
+    for label, kw in (("massless arm + hard PC (before)", dict(static_arm=True, pc="hard")),
+                      ("massless arm, no PC", dict(static_arm=True, pc="off")),
+                      ("arm + device, hard PC", dict(pc="hard")),
+                      ("arm + device, PC with reserve (default)", dict(pc="reserve"))):
+        r = run_loop(**kw)
+        print(f"  {label:42s} stable {str(r['stable']):5s} x_in_cmd {r['x_in_cmd_worst_um']:8.2f} um  "
+              f"force {r['force_worst_N']:6.3f} N  transparency rms {r['transparency_rms_fs']:.3f} FS")
+    print()
+    print(f"{'pc':8s} {'f_scale':>7s} {'delay_ms':>8s} {'k_arm':>6s} {'stable':>6s} {'x_worst_um':>10s} "
+          f"{'F_worst_N':>9s} {'transp_rms':>10s} {'fin':>4s}")
+    for mode in modes:
+        for fs in scales:
+            for d in delays:
+                for k in stiff:
+                    arm = dataclasses.replace(ArmParameters(), stiffness=k)
+                    r = run_loop(force_scale=fs, delay=d, arm=arm, pc=mode)
+                    print(f"{mode:8s} {fs:7.2f} {1e3 * d:8.0f} {k:6.0f} {str(r['stable']):>6s} "
+                          f"{r['x_in_cmd_worst_um']:10.2f} {r['force_worst_N']:9.3f} {r['transparency_rms_fs']:10.3f} "
+                          f"{'y' if r['finished'] else 'n':>4s}", flush=True)
+    print(f"CPU {time.process_time() - t0:.1f} s")
+
+
+if __name__ == "__main__":
+    main()

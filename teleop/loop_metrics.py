@@ -1,0 +1,118 @@
+"""Is the haptic loop quiet and transparent? Chatter and transparency from the two sides' recordings.
+
+*Chatter* of a signal y(t) (the command ``x_in_cmd`` [m], the rendered force [N]): y resampled on a
+uniform grid at the loop rate, high-passed above ``cutoff`` (30 Hz, 4th-order Butterworth, zero
+phase: ``scipy.signal.sosfiltfilt``); reported as the RMS over the experiment and the RMS of the
+worst ``window`` (100 ms) window. An operator's hand moves below ~10 Hz, so content above 30 Hz is
+the loop's, not the surgeon's: a limit cycle shows as a worst window far above the experiment RMS.
+
+*Transparency*: the rendered force F(t) against the force an ideal loop would render, the scaled
+true distal tension ``-force_scale T_out(t)`` (the simulator's truth, interpolated at the master's
+times; the two sides share one monotonic clock on one machine), so estimator error, delay, slew,
+ramp and passivity damping all count::
+
+    e(t) = F(t) + force_scale T_out(t)          [N]
+    rms_fs = RMS(e) / (force_scale ptp(T_out)),  max_fs = max|e| / (force_scale ptp(T_out))   [-]
+
+The master rows of an experiment are those whose command seq the slave recorded under the
+experiment's marker (the tendon master's CSV has no marker column).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from teleop.errors import DataError
+
+__all__ = ["CUTOFF_HZ", "WINDOW_S", "chatter", "loop_metrics", "CHATTER_LIMITS"]
+
+CUTOFF_HZ = 30.0
+WINDOW_S = 0.1
+#: The demo's check: worst-window chatter below these (x_in_cmd [m], force [N]).
+CHATTER_LIMITS = {"x_in_cmd_m": 20e-6, "force_N": 0.05}
+
+
+def chatter(t: np.ndarray, y: np.ndarray, *, cutoff: float = CUTOFF_HZ, window: float = WINDOW_S,
+            rate: float = 1000.0) -> tuple[float, float, float]:
+    """(RMS above ``cutoff``, RMS of the worst ``window``, start time of that window) of ``y(t)``.
+
+    t : ndarray, shape (n,) [s], increasing; y : ndarray, shape (n,) [any unit]; cutoff [Hz]; window
+    [s]; rate [Hz] of the uniform grid. Returns NaNs for fewer than 0.2 s of data.
+
+    Raises
+    ------
+    DataError
+        ``t`` and ``y`` of different shapes.
+    """
+    from scipy.signal import butter, sosfiltfilt
+
+    t, y = np.asarray(t, float), np.asarray(y, float)
+    if t.shape != y.shape or t.ndim != 1:
+        raise DataError(f"chatter: time {t.shape} and signal {y.shape} must be 1-D of one length")
+    ok = np.isfinite(t) & np.isfinite(y)
+    t, y = t[ok], y[ok]
+    if t.size < 2 or t[-1] - t[0] < 0.2:
+        return math.nan, math.nan, math.nan
+    keep = np.concatenate(([True], np.diff(t) > 0))
+    t, y = t[keep], y[keep]
+    tu = np.arange(t[0], t[-1], 1.0 / rate)
+    yu = np.interp(tu, t, y)
+    sos = butter(4, cutoff, btype="highpass", fs=rate, output="sos")
+    h = sosfiltfilt(sos, yu)
+    n = max(1, int(round(window * rate)))
+    p2 = np.convolve(h * h, np.ones(n) / n, mode="valid") if h.size >= n else np.array([np.mean(h * h)])
+    k = int(np.argmax(p2))
+    return float(np.sqrt(np.mean(h * h))), float(np.sqrt(p2[k])), float(tu[k] - t[0])
+
+
+def loop_metrics(master: dict, slave: dict, force_scale: float, experiments: dict[int, str]) -> dict:
+    """Chatter and transparency per experiment (module docstring).
+
+    Parameters
+    ----------
+    master : columns of ``master.csv`` (``time``, ``x_in``, ``force``, ``cmd_seq``), ndarrays (n_m,).
+    slave : columns of ``slave.csv`` (``t_node``, ``T_out``, ``marker``, ``cmd_seq``), ndarrays (n_s,).
+    force_scale : master.mapping.force_scale [-].
+    experiments : marker -> experiment name.
+
+    Returns
+    -------
+    dict: name -> {"chatter": {"x_in_cmd_rms_m", "x_in_cmd_worst_m", "force_rms_N", "force_worst_N",
+    "worst_window_s"}, "transparency": {"force_error_rms_fs", "force_error_max_fs", "full_scale_N"}}.
+
+    Raises
+    ------
+    DataError
+        A needed column is missing.
+    """
+    for side, cols, data in (("master", ("time", "x_in", "force", "cmd_seq"), master),
+                             ("slave", ("t_node", "T_out", "marker", "cmd_seq"), slave)):
+        missing = [c for c in cols if c not in data]
+        if missing:
+            raise DataError(f"loop metrics: {side}.csv lacks column(s) {', '.join(missing)}")
+    out: dict = {}
+    order = np.argsort(slave["t_node"], kind="stable")
+    ts, Ts = slave["t_node"][order], slave["T_out"][order]
+    for m, name in experiments.items():
+        seqs = slave["cmd_seq"][slave["marker"].astype(int) == m]
+        if seqs.size == 0:
+            continue
+        sel = (master["cmd_seq"] >= seqs.min()) & (master["cmd_seq"] <= seqs.max())
+        if sel.sum() < 10:
+            continue
+        t, x, f = master["time"][sel], master["x_in"][sel], master["force"][sel]
+        xr, xw, tw = chatter(t, x)
+        fr, fw, tf = chatter(t, f)
+        ideal = -force_scale * np.interp(t, ts, Ts)
+        fs = float(np.ptp(ideal))
+        e = f - ideal
+        out[name] = {
+            "chatter": {"x_in_cmd_rms_m": xr, "x_in_cmd_worst_m": xw, "force_rms_N": fr, "force_worst_N": fw,
+                        "worst_window_s": tw if xw / CHATTER_LIMITS["x_in_cmd_m"] >= fw / CHATTER_LIMITS["force_N"]
+                        else tf},
+            "transparency": {"force_error_rms_fs": float(np.sqrt(np.mean(e * e)) / fs) if fs > 0 else math.nan,
+                             "force_error_max_fs": float(np.max(np.abs(e)) / fs) if fs > 0 else math.nan,
+                             "full_scale_N": fs},
+        }
+    return out
