@@ -12,7 +12,10 @@
    paper's phase formulas re-run over the recorded T_in with the calibrated K and L/EA), the
    full-scale errors: max and mean of |estimate - truth| over the experiment divided by the range
    of the true signal in that experiment, for the distal tension and the elongation.
-5. A table is printed and ``summary.json`` written, with the latency and overruns of both sides
+5. Per experiment the haptic loop's chatter (RMS of x_in_cmd and of the rendered force above 30 Hz,
+   worst 100 ms window; a check) and transparency (rendered force against the scaled true distal
+   tension, RMS and max of full scale) from both sides' CSVs (:mod:`teleop.loop_metrics`).
+6. A table is printed and ``summary.json`` written, with the latency and overruns of both sides
    and the calibration against the simulator's true K and M_e.
 """
 from __future__ import annotations
@@ -146,6 +149,10 @@ def format_summary(s: dict) -> str:
         L.append(f"{'':22s} {'paper reports':16s} {0.07:9.3f} {'<0.02':>11s} {0.03:10.3f} {'<0.02':>11s}")
     L.append(f"(full scale = range of the true signal in the experiment; paper-formula reversal deadband "
              f"{s.get('baseline_deadband_N', float('nan')):.2f} N)")
+    if s.get("haptic_loop"):
+        from teleop.loop_metrics import loop_metric_lines
+        L.append("")
+        L += loop_metric_lines(s["haptic_loop"])
     L.append("")
     L += loop_lines(s, detailed=True)
     L.append("")
@@ -194,8 +201,15 @@ def main_demo(args) -> int:
                                                     run_dir / "estimates.png", EXPERIMENTS))
         except DataError as e:
             problems.append(str(e))
+        try:            # chatter and transparency of the haptic loop (teleop/loop_metrics.py)
+            from teleop.loop_metrics import run_loop_metrics
+            summary["haptic_loop"] = run_loop_metrics(run_dir, cfg.master.mapping.force_scale, EXPERIMENTS)
+        except DataError as e:
+            problems.append(str(e))
     else:
         problems.append(f"no calibration.json in {run_dir}: the slave did not finish calibrating")
     if calib and not summary.get("experiments") and not problems:
         problems.append("the recording has no experiment rows (marker 1 or 2): the protocol did not run")
-    return finish(summary, checks(summary.get("experiments", {})), problems, t0, run_dir, format_summary)
+    from teleop.loop_metrics import chatter_checks
+    verdicts = {**checks(summary.get("experiments", {})), **chatter_checks(summary.get("haptic_loop", {}))}
+    return finish(summary, verdicts, problems, t0, run_dir, format_summary)

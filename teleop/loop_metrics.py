@@ -25,7 +25,8 @@ import numpy as np
 
 from teleop.errors import DataError
 
-__all__ = ["CUTOFF_HZ", "WINDOW_S", "chatter", "loop_metrics", "CHATTER_LIMITS"]
+__all__ = ["CUTOFF_HZ", "WINDOW_S", "CHATTER_LIMITS", "chatter", "loop_metrics", "read_columns", "run_loop_metrics",
+           "chatter_checks", "loop_metric_lines"]
 
 CUTOFF_HZ = 30.0
 WINDOW_S = 0.1
@@ -115,4 +116,53 @@ def loop_metrics(master: dict, slave: dict, force_scale: float, experiments: dic
                              "force_error_max_fs": float(np.max(np.abs(e)) / fs) if fs > 0 else math.nan,
                              "full_scale_N": fs},
         }
+    return out
+
+
+def read_columns(path) -> dict[str, np.ndarray]:
+    """Every column of a recording CSV (``#`` comment lines, one header line) as float arrays.
+
+    Raises
+    ------
+    DataError
+        The file is missing, has no header or a malformed row.
+    """
+    try:
+        with open(path, encoding="utf-8") as fh:
+            lines = [ln for ln in fh if not ln.startswith("#") and ln.strip()]
+    except OSError as e:
+        raise DataError(f"{path}: cannot read ({e})") from e
+    if len(lines) < 2:
+        raise DataError(f"{path}: no header and data rows")
+    names = lines[0].strip().split(",")
+    try:
+        a = np.loadtxt(lines[1:], delimiter=",", ndmin=2)
+    except ValueError as e:
+        raise DataError(f"{path}: malformed row ({e})") from e
+    return {n: a[:, i] for i, n in enumerate(names)}
+
+
+def run_loop_metrics(run_dir, force_scale: float, experiments: dict[int, str]) -> dict:
+    """:func:`loop_metrics` of ``run_dir/master.csv`` and ``run_dir/slave.csv``."""
+    from pathlib import Path
+    d = Path(run_dir)
+    return loop_metrics(read_columns(d / "master.csv"), read_columns(d / "slave.csv"), force_scale, experiments)
+
+
+def chatter_checks(metrics: dict) -> dict[str, bool]:
+    """Per experiment: worst-window chatter of x_in_cmd and of the force below :data:`CHATTER_LIMITS`."""
+    lim = CHATTER_LIMITS
+    return {f"{name}: no chatter (worst 100 ms above 30 Hz: x_in_cmd < {1e6 * lim['x_in_cmd_m']:g} um, "
+            f"force < {lim['force_N']:g} N)": bool(r["chatter"]["x_in_cmd_worst_m"] < lim["x_in_cmd_m"]
+                                                   and r["chatter"]["force_worst_N"] < lim["force_N"])
+            for name, r in metrics.items()}
+
+
+def loop_metric_lines(metrics: dict) -> list[str]:
+    """Printed lines: chatter and transparency per experiment."""
+    out = [f"{'haptic loop':22s} {'chatter >30 Hz, worst 100 ms':34s} transparency (rendered vs scaled true T_out)"]
+    for name, r in metrics.items():
+        c, tr = r["chatter"], r["transparency"]
+        out.append(f"{name:22s} x_in_cmd {1e6 * c['x_in_cmd_worst_m']:6.2f} um, force {c['force_worst_N']:5.3f} N  "
+                   f"rms {tr['force_error_rms_fs']:.3f} FS, max {tr['force_error_max_fs']:.3f} FS")
     return out

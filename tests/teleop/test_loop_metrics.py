@@ -1,0 +1,38 @@
+"""Chatter finds a 300 Hz burst and not a hand's motion; transparency against the scaled truth."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from teleop.errors import DataError
+from teleop.loop_metrics import CHATTER_LIMITS, chatter, chatter_checks, loop_metrics
+
+
+def test_a_burst_is_found_where_it_is_and_a_slow_motion_is_quiet():
+    t = np.arange(0.0, 4.0, 1e-3)
+    hand = 0.005 * np.sin(2 * np.pi * 0.5 * t) + 0.002 * np.clip(t - 2, 0, None)     # slow, with a corner
+    rms, worst, _ = chatter(t, hand)
+    assert worst < 0.25 * CHATTER_LIMITS["x_in_cmd_m"]
+    burst = np.where((t > 1.0) & (t < 1.5), 3e-4 * np.sign(np.sin(2 * np.pi * 300 * t)), 0.0)
+    rms, worst, at = chatter(t, hand + burst)
+    assert worst > 2e-4 and 0.95 <= at <= 1.45 and rms < worst
+    with pytest.raises(DataError, match="1-D of one length"):
+        chatter(t, hand[:-1])
+
+
+def test_loop_metrics_per_experiment_and_checks():
+    n = 3000
+    t = 100.0 + np.arange(n) * 1e-3
+    T_out = 5.0 + 5.0 * np.sin(2 * np.pi * 0.5 * (t - 100))
+    marker = np.where(np.arange(n) < 1500, 1, 2)
+    slave = {"t_node": t, "T_out": T_out, "marker": marker, "cmd_seq": np.arange(n)}
+    force = -0.2 * T_out + 0.01                                   # 0.01 N off everywhere
+    force[2000:2100] += 0.5 * np.sign(np.sin(2 * np.pi * 250 * t[2000:2100]))   # chatter in experiment 2
+    master = {"time": t, "x_in": 1e-3 * np.sin(t), "force": force, "cmd_seq": np.arange(n)}
+    m = loop_metrics(master, slave, 0.2, {1: "paper", 2: "minor"})
+    assert m["paper"]["transparency"]["force_error_max_fs"] == pytest.approx(0.01 / 2.0, rel=0.02)
+    assert m["minor"]["chatter"]["force_worst_N"] > CHATTER_LIMITS["force_N"]
+    ok = chatter_checks(m)
+    assert [v for k, v in sorted(ok.items())] == [False, True]     # minor fails, paper passes
+    with pytest.raises(DataError, match="slave.csv lacks column"):
+        loop_metrics(master, {k: v for k, v in slave.items() if k != "T_out"}, 0.2, {1: "paper"})
