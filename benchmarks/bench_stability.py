@@ -40,7 +40,7 @@ from teleop.loop_metrics import CHATTER_LIMITS, chatter  # noqa: E402
 
 def run_loop(force_scale: float = 0.2, delay: float = 0.001, arm: ArmParameters | None = None,
              pc: str = "reserve", static_arm: bool = False, motion_scale: float = 0.2,
-             protocol: str = "paper", t_max: float = 30.0) -> dict:
+             protocol: str = "paper", t_max: float = 30.0, force_limit: float | None = None) -> dict:
     """One closed-loop run; returns chatter, transparency and whether the protocol finished.
 
     force_scale [-], delay: one-way network delay [s] (each way), pc: 'off' | 'hard' | 'reserve'
@@ -55,6 +55,8 @@ def run_loop(force_scale: float = 0.2, delay: float = 0.001, arm: ArmParameters 
     op = ScriptedOperator(PROTOCOLS[protocol], arm=arm or ArmParameters(), static_arm=static_arm)
     motion = MotionMap(motion_scale)
     m = cfg.master.mapping
+    if force_limit is not None:
+        m = dataclasses.replace(m, force_limit=float(force_limit))
     fmap = ForceMap(force_scale, m.force_limit, m.ramp_time, m.force_rate_limit)
     passivity = PassivityController(m.force_limit, enabled=pc != "off", reserve=0.005 if pc == "reserve" else 0.0)
     nd = max(0, int(round(delay / dt)))
@@ -99,7 +101,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="a 2 x 2 x 2 grid")
     ap.add_argument("--pc", default="all", choices=("off", "hard", "reserve", "all"))
+    ap.add_argument("--boundary", action="store_true",
+                    help="the loop without passivity control at high force scales, force limit 40 N")
     args = ap.parse_args()
+    if args.boundary:
+        boundary()
+        return
     scales = (0.2, 0.8) if args.quick else (0.1, 0.2, 0.4, 0.8)
     delays = (0.001, 0.02) if args.quick else (0.001, 0.005, 0.02, 0.05)
     stiff = (100.0, 800.0) if args.quick else (100.0, 300.0, 800.0)
@@ -126,6 +133,21 @@ def main() -> None:
                           f"{r['x_in_cmd_worst_um']:10.2f} {r['force_worst_N']:9.3f} {r['transparency_rms_fs']:10.3f} "
                           f"{'y' if r['finished'] else 'n':>4s}", flush=True)
     print(f"CPU {time.process_time() - t0:.1f} s")
+
+
+def boundary() -> None:
+    """Where the force loop through the tendon itself goes unstable (no PC, force limit 40 N); the
+    small-gain estimate L0 = force_scale motion_scale k_t / k_arm with k_t = dT_out/dx_in ~ 1700 N/m."""
+    print(f"{'f_scale':>7s} {'delay_ms':>8s} {'k_arm':>6s} {'L0':>6s} {'stable':>6s} {'x_worst_um':>10s} "
+          f"{'F_worst_N':>9s} {'transp_rms':>10s}")
+    for fs in (0.8, 1.6, 3.2, 6.4):
+        for d in (0.001, 0.02, 0.05):
+            for k in (100.0, 800.0):
+                r = run_loop(force_scale=fs, delay=d, arm=dataclasses.replace(ArmParameters(), stiffness=k),
+                             pc="off", force_limit=40.0, t_max=20.0)
+                print(f"{fs:7.2f} {1e3 * d:8.0f} {k:6.0f} {fs * 0.2 * 1700 / k:6.2f} {str(r['stable']):>6s} "
+                      f"{r['x_in_cmd_worst_um']:10.2f} {r['force_worst_N']:9.3f} {r['transparency_rms_fs']:10.3f}",
+                      flush=True)
 
 
 if __name__ == "__main__":
