@@ -15,8 +15,10 @@ For a single reversal from full slip this reproduces the seed paper's phase laws
 eqs. (1)-(25)); for any other history (minor loops, partial releases) it keeps the exact Coulomb
 memory that the "tension at the last reversal" rule loses (literature.md section 0).
 
-The phase reported is derived from the same state: whether the distal node slipped this sample
-(in which direction) and the smoothed rate of T_in.
+The phase reported is the readable one of :mod:`estimator.phase` (a change needs T_in to move past
+``phase_band``, default 0.2 N = 10 load-cell noise sigmas): the direction from T_in's turns past the
+band, slip from the distal node sitting on the slip line of the last extreme. ``phase_band=0`` gives
+the sample-to-sample classifier on the smoothed rate of T_in (:func:`classify_phase`).
 """
 from __future__ import annotations
 
@@ -26,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from estimator.phase import Phase
+from estimator.phase import Phase, new_phase_state, readable_step
 from estimator.sheath import SheathModel, profile_batch, profile_update
 
 __all__ = ["DistalEstimator", "DistalSample", "BatchEstimate", "estimate_batch", "classify_phase"]
@@ -68,6 +70,8 @@ class DistalEstimator:
         |dT_in/dt| below this is reported as HOLD when the distal end is stuck [N/s].
     rate_time_constant : float
         Time constant of the first-order smoothing of dT_in/dt [s], > 0.
+    phase_band : float
+        Noise band of the readable phase [N], >= 0 (module docstring; 0: the rate classifier).
 
     Raises
     ------
@@ -76,7 +80,7 @@ class DistalEstimator:
     """
 
     def __init__(self, model: SheathModel, n_nodes: int = 100, pretension: float = 0.0,
-                 hold_rate: float = 0.5, rate_time_constant: float = 0.02):
+                 hold_rate: float = 0.5, rate_time_constant: float = 0.02, phase_band: float = 0.2):
         if not (pretension >= 0 and math.isfinite(pretension)):
             raise ValueError(f"pretension must be >= 0 N, got {pretension!r}")
         if not (rate_time_constant > 0):
@@ -86,6 +90,9 @@ class DistalEstimator:
         self.positions = np.linspace(0.0, 1.0, self.log_gain.size)  # normalised arc length s/L
         self.hold_rate = float(hold_rate)
         self.tau = float(rate_time_constant)
+        if not (math.isfinite(phase_band) and phase_band >= 0):
+            raise ValueError(f"phase_band must be >= 0 N, got {phase_band!r}")
+        self.phase_band = float(phase_band)
         self.reset(pretension)
 
     def reset(self, pretension: float = 0.0) -> None:
@@ -95,6 +102,7 @@ class DistalEstimator:
         self._t_prev: float | None = None
         self._rate = 0.0
         self.phase = Phase.HOLD
+        self._phase_state = new_phase_state(float(pretension))
         self.T_out = float(pretension)
         self.elongation = float(self.weight @ self.profile)
 
@@ -126,8 +134,15 @@ class DistalEstimator:
             dt = 1e-3 if t is None or self._t_prev is None else max(t - self._t_prev, 1e-6)
             a = dt / (self.tau + dt)
             self._rate += a * ((T_in - self._T_prev) / dt - self._rate)
-        self._T_prev, self._t_prev = T_in, t
-        self.phase = classify_phase(T_out - T_prev_out, T_in, self.model.K, T_out, self._rate, self.hold_rate)
+        if self.phase_band > 0:
+            if self._T_prev is None:
+                self._phase_state = new_phase_state(T_in, 0.0 if t is None else t)
+            tk = (t if t is not None else (self._t_prev or 0.0) + 1e-3)
+            self.phase = Phase(readable_step(self._phase_state, max(T_in, 0.0), T_out, tk, self.model.K,
+                                             self.phase_band, self.hold_rate))
+        else:
+            self.phase = classify_phase(T_out - T_prev_out, T_in, self.model.K, T_out, self._rate, self.hold_rate)
+        self._T_prev, self._t_prev = T_in, (t if t is not None else (self._t_prev or 0.0) + 1e-3)
         return DistalSample(T_out, e, x_in - e, self.phase)
 
     def profile_samples(self, n_points: int) -> np.ndarray:
@@ -161,6 +176,13 @@ def _classify(dT_out, T_in, K, T_out, rate, hold_rate):  # pragma: no cover - co
 
 
 @njit(cache=True)
+def _readable_batch(T_in, T_out, t, K, band, hold_rate, out):  # pragma: no cover - compiled
+    state = np.array([0.0, max(T_in[0], 0.0), max(T_in[0], 0.0), t[0], 0.0])
+    for k in range(T_in.shape[0]):
+        out[k] = readable_step(state, max(T_in[k], 0.0), T_out[k], t[k], K, band, hold_rate)
+
+
+@njit(cache=True)
 def _phase_batch(T_in, T_out, t, K, tau, hold_rate, out):  # pragma: no cover - compiled
     rate = 0.0
     out[0] = 0
@@ -175,7 +197,7 @@ def _phase_batch(T_in, T_out, t, K, tau, hold_rate, out):  # pragma: no cover - 
 
 def estimate_batch(T_in: np.ndarray, x_in: np.ndarray, model: SheathModel, *, time: np.ndarray | None = None,
                    n_nodes: int = 100, pretension: float = 0.0, hold_rate: float = 0.5,
-                   rate_time_constant: float = 0.02) -> BatchEstimate:
+                   rate_time_constant: float = 0.02, phase_band: float = 0.2) -> BatchEstimate:
     """Profile-memory estimates over recorded arrays (the same maths as :class:`DistalEstimator`).
 
     Parameters
@@ -184,7 +206,7 @@ def estimate_batch(T_in: np.ndarray, x_in: np.ndarray, model: SheathModel, *, ti
     x_in : ndarray, shape (n,)   proximal displacement [m]
     model : SheathModel
     time : ndarray, shape (n,), optional   sample times [s] (default 1 kHz) for the phase
-    n_nodes, pretension, hold_rate, rate_time_constant : as :class:`DistalEstimator`
+    n_nodes, pretension, hold_rate, rate_time_constant, phase_band : as :class:`DistalEstimator`
 
     Raises
     ------
@@ -205,7 +227,9 @@ def estimate_batch(T_in: np.ndarray, x_in: np.ndarray, model: SheathModel, *, ti
     T0 = np.full(log_gain.size, float(pretension))
     T_out, elong, _ = profile_batch(T0, log_gain, weight, T_in)
     phase = np.empty(T_in.size, dtype=np.int8)
-    if T_in.size:
+    if T_in.size and phase_band > 0:
+        _readable_batch(T_in, T_out, np.asarray(time, dtype=float), model.K, float(phase_band), float(hold_rate), phase)
+    elif T_in.size:
         _phase_batch(T_in, T_out, np.asarray(time, dtype=float), model.K, float(rate_time_constant),
                      float(hold_rate), phase)
     return BatchEstimate(T_out=T_out, elongation=elong, x_out=x_in - elong, phase=phase)

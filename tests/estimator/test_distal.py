@@ -49,3 +49,23 @@ def test_hold_when_tension_is_steady():
     assert s.phase == Phase.HOLD
     prof = est.profile_samples(7)
     assert prof.shape == (7,) and prof[0] == pytest.approx(5.0) and prof[-1] == pytest.approx(5 * math.exp(-0.3))
+
+
+def test_readable_phase_changes_only_past_the_noise():
+    """Pull to 20 N, release to 5 N, pull again, hold, with 0.02 N of load-cell noise: the readable phase
+    reads pull, pull->release, release, release->pull, pull, hold (a handful of changes) where the
+    rate classifier flickers hundreds of times."""
+    model = SheathModel(K=0.6, compliance=1e-4)
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 5.0, 1e-3)
+    T_in = np.interp(t, [0.0, 1.5, 2.5, 3.5, 5.0], [0.0, 20.0, 5.0, 25.0, 25.0]) + rng.normal(0, 0.02, t.size)
+    x_in = 1e-4 * T_in
+    readable = estimate_batch(T_in, x_in, model, time=t).phase
+    flicker = estimate_batch(T_in, x_in, model, time=t, phase_band=0.0).phase
+    changes = np.flatnonzero(np.diff(readable))
+    assert len(changes) <= 8 < 100 < np.count_nonzero(np.diff(flicker))
+    seq = [int(readable[i + 1]) for i in changes]
+    assert seq[:4] == [Phase.PULL, Phase.PULL_TO_RELEASE, Phase.RELEASE, Phase.RELEASE_TO_PULL]
+    assert readable[-1] == Phase.HOLD and Phase.PULL in seq[4:]
+    with pytest.raises(ValueError, match="phase_band"):
+        DistalEstimator(model, phase_band=-1.0)
