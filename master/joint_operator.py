@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 from master.arm import ArmParameters, HumanArm
 from master.device import MultiAxisState
+from master.simulated import approach
 from teleop.config import Config, joint_set_tension
 from teleop.errors import ConfigError
 
@@ -108,7 +109,7 @@ class _Axis:
             self.direction, self._wait, self.start_delay = 0, t + self.dwell, self.dwell
             return
         # + device motion pulls tendon a, - pulls b
-        self.velocity = (1.0 if seg.side == 0 else -1.0) * self.direction * self.speed
+        self.velocity = (1.0 if seg.side == 0 else -1.0) * self.direction * self.speed * approach(abs(seg.target - T))
         self.intended += self.velocity * dt
 
 

@@ -23,10 +23,12 @@ variable damper takes out exactly that excess in the same step::
 so ``E(k) = 0`` after an active step. With an energy *reserve* ``E_r`` > 0 (``master.mapping.passivity_reserve``)
 the controller first eases the force off smoothly while the port gives energy back (``-f v < 0``)::
 
-    f = f min(1, E(k-1) / E_r)                                                         (reserve)
+    f = f [1 - w (1 - min(1, E(k-1) / E_r))],   w = min(1, |v| / v_r)                 (reserve)
 
 so the stored energy decays like ``dE/dt = -(E/E_r) |f v|`` instead of running into the hard
-correction, which then only catches what the scaling misses. The hard PC alone switches between
+correction, which then only catches what the scaling misses. The weight ``w`` (v_r = 5 mm/s) fades
+the scaling in with speed: a hand creeping through the device's stick-slip (v jumping between 0
+and a few um/s) carries almost no power and must not switch the force. The hard PC alone switches between
 full force and the damped force from one sample to the next; on a hand of small inertia that is a
 limit cycle of its own (docs/stability.md). Scaling the force toward 0 never makes the port active
 (``|f'| <= |f|``, same sign). (Hannaford & Ryu write ``f' = f + alpha v`` with ``f`` the force
@@ -43,6 +45,9 @@ from dataclasses import dataclass
 from teleop.errors import ConfigError
 
 __all__ = ["PassivityStats", "PassivityController"]
+
+#: Handle speed v_r [m/s] at which the reserve scaling is fully applied (below it, in proportion).
+RESERVE_SPEED = 0.005
 
 
 @dataclass(frozen=True)
@@ -128,8 +133,10 @@ class PassivityController:
         v = float(velocity)
         f_in = f
         if self.enabled and self.reserve > 0.0 and f * v > 0.0:
-            # reserve: f = f min(1, E(k-1) / E_r) while the port gives energy back
-            f *= min(1.0, max(self.energy, 0.0) / self.reserve)
+            # reserve: f = f [1 - w (1 - min(1, E(k-1) / E_r))], w = min(1, |v| / v_r), while the port
+            # gives energy back; w fades the scaling in with speed (no switching on a creeping hand)
+            w = min(1.0, abs(v) / RESERVE_SPEED)
+            f *= 1.0 - w * (1.0 - min(1.0, max(self.energy, 0.0) / self.reserve))
         # E_cmd = E(k-1) - f v dt      (energy into the network if f is rendered unchanged)
         e_cmd = self.energy - f * v * dt
         if self.enabled and e_cmd < 0.0 and v != 0.0:

@@ -80,6 +80,16 @@ def build_protocol(names: str) -> tuple[Segment, ...]:
     return tuple(out)
 
 
+#: Tension error [N] below which the operator slows its intention, and the slowest fraction of speed.
+APPROACH_BAND, APPROACH_MIN = 1.0, 0.15
+
+
+def approach(error: float) -> float:
+    """Fraction of the set speed at ``error`` [N] from the target: 1 beyond APPROACH_BAND, down to
+    APPROACH_MIN at the target (an operator slows down as the read-out nears the target)."""
+    return min(1.0, max(APPROACH_MIN, error / APPROACH_BAND))
+
+
 class ScriptedOperator:
     """A :class:`~master.device.HapticDevice` and :class:`~master.device.OperatorView` driven by a script.
 
@@ -132,6 +142,7 @@ class ScriptedOperator:
         self.static_arm = bool(static_arm)
         self.start_delay, self.segment_timeout = float(start_delay), float(segment_timeout)
         self.intended = 0.0          # [m]
+        self.velocity = 0.0          # intended speed [m/s]
         self.force = 0.0             # rendered force [N]
         self.index = -1              # current segment; -1 before the start
         self.direction = 0           # +1 pulling, -1 releasing, 0 still
@@ -164,6 +175,7 @@ class ScriptedOperator:
         """Advance the script to time ``t`` [s] and return the hand position."""
         dt = 0.0 if self._t_prev is None else max(0.0, t - self._t_prev)
         self._t_prev = t
+        self.velocity = 0.0
         if self._engaged and not self.finished and self._T_in is not None:
             self._advance(t, dt, self._T_in)
         buttons = 0
@@ -180,7 +192,7 @@ class ScriptedOperator:
             p = self.intended + self.force / self.k_arm
         else:
             # (m_a + m_d) dv/dt = k_a (p_i - p) + b_a (v_i - v) + F - b_d v - F_c sgn(v)
-            p = self.arm.step(dt, self.intended, self.direction * self.speed, self.force)
+            p = self.arm.step(dt, self.intended, self.velocity, self.force)
         return DeviceState(t=t, position=p, buttons=buttons)
 
     def set_force(self, force: float, t: float) -> None:
@@ -191,6 +203,7 @@ class ScriptedOperator:
 
     # -- script ------------------------------------------------------------------------------------
     def _advance(self, t: float, dt: float, T_in: float) -> None:
+        self.velocity = 0.0                      # intended hand speed [m/s], set below while moving
         if self.index < 0:                       # first engaged reading: wait, then start
             if self._wait_until is None:
                 self._wait_until = t + self.start_delay
@@ -214,7 +227,10 @@ class ScriptedOperator:
             self.direction = 0
             self._wait_until = t + self.dwell
             return
-        self.intended += self.direction * self.speed * dt
+        # slow down near the target (a hand with mass lags its intention: stopping at full speed would
+        # carry the tendon on by ~b v / k of hand travel, several newtons where the tendon sticks)
+        self.velocity = self.direction * self.speed * approach(abs(seg.target - T_in))
+        self.intended += self.velocity * dt
 
     def _start(self, index: int, t: float, T_in: float) -> None:
         seg = self.segments[index]
