@@ -28,7 +28,8 @@ the controller first eases the force off smoothly while the port gives energy ba
 so the stored energy decays like ``dE/dt = -(E/E_r) |f v|`` instead of running into the hard
 correction, which then only catches what the scaling misses. The weight ``w`` (v_r = 5 mm/s) fades
 the scaling in with speed: a hand creeping through the device's stick-slip (v jumping between 0
-and a few um/s) carries almost no power and must not switch the force. The hard PC alone switches between
+and a few um/s) carries almost no power and must not switch the force; at v = 0 (the handle held by
+the device's friction) the last motion decides, so stick-slip does not switch it either. The hard PC alone switches between
 full force and the damped force from one sample to the next; on a hand of small inertia that is a
 limit cycle of its own (docs/stability.md). Scaling the force toward 0 never makes the port active
 (``|f'| <= |f|``, same sign). (Hannaford & Ryu write ``f' = f + alpha v`` with ``f`` the force
@@ -116,6 +117,7 @@ class PassivityController:
         self.alpha = 0.0
         self.active_steps = 0
         self.steps = 0
+        self._v_last = 0.0
 
     def step(self, force_cmd: float, velocity: float, dt: float) -> float:
         """The force to render [N] for the commanded ``force_cmd`` [N] at handle ``velocity`` [m/s].
@@ -132,10 +134,15 @@ class PassivityController:
             return 0.0
         v = float(velocity)
         f_in = f
-        if self.enabled and self.reserve > 0.0 and f * v > 0.0:
+        # a handle held still by the device's friction (v = 0) keeps its last motion for the reserve:
+        # giving the full force back at each stick and cutting it at each slip is a limit cycle
+        v_r = v if v != 0.0 else self._v_last
+        if v != 0.0:
+            self._v_last = v
+        if self.enabled and self.reserve > 0.0 and f * v_r > 0.0:
             # reserve: f = f [1 - w (1 - min(1, E(k-1) / E_r))], w = min(1, |v| / v_r), while the port
             # gives energy back; w fades the scaling in with speed (no switching on a creeping hand)
-            w = min(1.0, abs(v) / RESERVE_SPEED)
+            w = min(1.0, abs(v_r) / RESERVE_SPEED)
             f *= 1.0 - w * (1.0 - min(1.0, max(self.energy, 0.0) / self.reserve))
         # E_cmd = E(k-1) - f v dt      (energy into the network if f is rendered unchanged)
         e_cmd = self.energy - f * v * dt
@@ -148,7 +155,7 @@ class PassivityController:
         else:
             f_out = f
         if f_out != f_in:                        # the hard PC or the reserve took energy out
-            self.alpha = (f_in - f_out) / v
+            self.alpha = (f_in - f_out) / v if v != 0.0 else 0.0
             self.dissipated += (f_in - f_out) * v * dt
             self.active_steps += 1
         # E(k) = E(k-1) - f' v dt

@@ -15,7 +15,9 @@ ramp and passivity damping all count::
     rms_fs = RMS(e) / (force_scale ptp(T_out)),  max_fs = max|e| / (force_scale ptp(T_out))   [-]
 
 The master rows of an experiment are those whose command seq the slave recorded under the
-experiment's marker (the tendon master's CSV has no marker column).
+experiment's marker (the tendon master's CSV has no marker column). Chatter leaves out the windows
+around rows where the master was not ENGAGED (a watchdog's safe event cuts the force at once and
+ramps it in again: a step, not a limit cycle); ``not_engaged_s`` reports how long that was.
 """
 from __future__ import annotations
 
@@ -28,6 +30,7 @@ from teleop.errors import DataError
 __all__ = ["CUTOFF_HZ", "WINDOW_S", "CHATTER_LIMITS", "chatter", "loop_metrics", "read_columns", "run_loop_metrics",
            "chatter_checks", "loop_metric_lines"]
 
+ENGAGED = 3          # teleop.messages.SideState.ENGAGED
 CUTOFF_HZ = 30.0
 WINDOW_S = 0.1
 #: The demo's check: worst-window chatter below these (x_in_cmd [m], force [N]).
@@ -35,11 +38,13 @@ CHATTER_LIMITS = {"x_in_cmd_m": 20e-6, "force_N": 0.05}
 
 
 def chatter(t: np.ndarray, y: np.ndarray, *, cutoff: float = CUTOFF_HZ, window: float = WINDOW_S,
-            rate: float = 1000.0) -> tuple[float, float, float]:
+            rate: float = 1000.0, exclude: np.ndarray | None = None) -> tuple[float, float, float]:
     """(RMS above ``cutoff``, RMS of the worst ``window``, start time of that window) of ``y(t)``.
 
     t : ndarray, shape (n,) [s], increasing; y : ndarray, shape (n,) [any unit]; cutoff [Hz]; window
-    [s]; rate [Hz] of the uniform grid. Returns NaNs for fewer than 0.2 s of data.
+    [s]; rate [Hz] of the uniform grid; exclude : bool ndarray, shape (n,), optional: samples (e.g. not
+    engaged) whose windows, widened by one ``window`` each side, are left out. Returns NaNs for fewer
+    than 0.2 s of data.
 
     Raises
     ------
@@ -52,6 +57,7 @@ def chatter(t: np.ndarray, y: np.ndarray, *, cutoff: float = CUTOFF_HZ, window: 
     if t.shape != y.shape or t.ndim != 1:
         raise DataError(f"chatter: time {t.shape} and signal {y.shape} must be 1-D of one length")
     ok = np.isfinite(t) & np.isfinite(y)
+    bad = None if exclude is None else np.asarray(exclude, bool)[ok]
     t, y = t[ok], y[ok]
     if t.size < 2 or t[-1] - t[0] < 0.2:
         return math.nan, math.nan, math.nan
@@ -62,9 +68,18 @@ def chatter(t: np.ndarray, y: np.ndarray, *, cutoff: float = CUTOFF_HZ, window: 
     sos = butter(4, cutoff, btype="highpass", fs=rate, output="sos")
     h = sosfiltfilt(sos, yu)
     n = max(1, int(round(window * rate)))
-    p2 = np.convolve(h * h, np.ones(n) / n, mode="valid") if h.size >= n else np.array([np.mean(h * h)])
+    use = np.ones(tu.size, bool)
+    if bad is not None and bad[keep].any():
+        tb = t[bad[keep]]
+        near = np.abs(tu[:, None] - tb[None, :]).min(axis=1) if tb.size < 2000 else \
+            np.abs(tu - np.interp(tu, tb, tb, left=tb[0], right=tb[-1]))
+        use = near > window
+    hm = np.where(use, h, 0.0)
+    if not use.any():
+        return math.nan, math.nan, math.nan
+    p2 = np.convolve(hm * hm, np.ones(n) / n, mode="valid") if h.size >= n else np.array([np.mean(hm * hm)])
     k = int(np.argmax(p2))
-    return float(np.sqrt(np.mean(h * h))), float(np.sqrt(p2[k])), float(tu[k] - t[0])
+    return float(np.sqrt(np.sum(hm * hm) / use.sum())), float(np.sqrt(p2[k])), float(tu[k] - t[0])
 
 
 def loop_metrics(master: dict, slave: dict, force_scale: float, experiments: dict[int, str]) -> dict:
@@ -87,7 +102,7 @@ def loop_metrics(master: dict, slave: dict, force_scale: float, experiments: dic
     DataError
         A needed column is missing.
     """
-    for side, cols, data in (("master", ("time", "x_in", "force", "cmd_seq"), master),
+    for side, cols, data in (("master", ("time", "x_in", "force", "cmd_seq", "state"), master),
                              ("slave", ("t_node", "T_out", "marker", "cmd_seq"), slave)):
         missing = [c for c in cols if c not in data]
         if missing:
@@ -103,8 +118,10 @@ def loop_metrics(master: dict, slave: dict, force_scale: float, experiments: dic
         if sel.sum() < 10:
             continue
         t, x, f = master["time"][sel], master["x_in"][sel], master["force"][sel]
-        xr, xw, tw = chatter(t, x)
-        fr, fw, tf = chatter(t, f)
+        # a safe event (watchdog: force cut at once, ramp on re-engage) is not the loop's oscillation
+        off = master["state"][sel].astype(int) != ENGAGED
+        xr, xw, tw = chatter(t, x, exclude=off)
+        fr, fw, tf = chatter(t, f, exclude=off)
         ideal = -force_scale * np.interp(t, ts, Ts)
         fs = float(np.ptp(ideal))
         e = f - ideal
@@ -112,6 +129,7 @@ def loop_metrics(master: dict, slave: dict, force_scale: float, experiments: dic
             "chatter": {"x_in_cmd_rms_m": xr, "x_in_cmd_worst_m": xw, "force_rms_N": fr, "force_worst_N": fw,
                         "worst_window_s": tw if xw / CHATTER_LIMITS["x_in_cmd_m"] >= fw / CHATTER_LIMITS["force_N"]
                         else tf},
+            "not_engaged_s": float(np.sum(np.diff(t, prepend=t[0])[off])),
             "transparency": {"force_error_rms_fs": float(np.sqrt(np.mean(e * e)) / fs) if fs > 0 else math.nan,
                              "force_error_max_fs": float(np.max(np.abs(e)) / fs) if fs > 0 else math.nan,
                              "full_scale_N": fs},

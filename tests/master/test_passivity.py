@@ -172,3 +172,11 @@ def test_reserve_eases_the_force_off_smoothly_where_the_hard_controller_switches
     hard, eased = out[0.0], out[0.005]
     assert np.abs(np.diff(eased)).max() < 0.01 < np.abs(np.diff(hard)).max()
     assert eased[0] == pytest.approx(1.0) and eased[-1] < 0.05
+
+
+def test_reserve_does_not_switch_on_a_stick_slip_handle():
+    """Empty reserve, a handle that sticks (v = 0) and slips (v = 20 mm/s) in turn along the force:
+    the force stays eased off instead of coming back in full at every stick."""
+    pc = PassivityController(4.0, reserve=0.005)
+    out = [pc.step(1.0, 0.02 if k % 3 else 0.0, 1e-3) for k in range(300)]
+    assert max(out[10:]) < 0.05 and pc.energy >= -1e-12

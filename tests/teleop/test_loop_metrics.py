@@ -28,7 +28,7 @@ def test_loop_metrics_per_experiment_and_checks():
     slave = {"t_node": t, "T_out": T_out, "marker": marker, "cmd_seq": np.arange(n)}
     force = -0.2 * T_out + 0.01                                   # 0.01 N off everywhere
     force[2000:2100] += 0.5 * np.sign(np.sin(2 * np.pi * 250 * t[2000:2100]))   # chatter in experiment 2
-    master = {"time": t, "x_in": 1e-3 * np.sin(t), "force": force, "cmd_seq": np.arange(n)}
+    master = {"time": t, "x_in": 1e-3 * np.sin(t), "force": force, "cmd_seq": np.arange(n), "state": np.full(n, 3)}
     m = loop_metrics(master, slave, 0.2, {1: "paper", 2: "minor"})
     assert m["paper"]["transparency"]["force_error_max_fs"] == pytest.approx(0.01 / 2.0, rel=0.02)
     assert m["minor"]["chatter"]["force_worst_N"] > CHATTER_LIMITS["force_N"]
