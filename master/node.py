@@ -57,6 +57,7 @@ from teleop.messages import SideState
 
 __all__ = ["MasterLinks", "MasterNode", "RING_SIZE", "CSV_COLUMNS", "CSV_UNITS", "csv_columns", "csv_units"]
 
+_EXPERIMENTS = {1: "paper", 2: "minor"}
 _WAITING = {ConsoleStatus.WAIT_OPERATOR: "operator not present", ConsoleStatus.CLUTCH: "clutch held"}
 
 
@@ -89,6 +90,9 @@ class MasterNode(MasterNodeBase):
         :func:`csv_columns`), or None.
     axes : InstrumentAxes, optional
         The instrument's axes (default :func:`master.axes.instrument_axes` of ``cfg``).
+    rerun : object with ``log_master`` (a :class:`teleop.rerun_log.RerunLogger` made with
+        ``wall_clock=True``), or None: master-side series for the live view every ``recording.log_every``
+        cycles.
 
     Attributes
     ----------
@@ -98,11 +102,13 @@ class MasterNode(MasterNodeBase):
     """
 
     def __init__(self, cfg: Config, device, links: MasterLinks, *, stop_linger: float = 0.2, recorder=None,
-                 axes: InstrumentAxes | None = None):
+                 axes: InstrumentAxes | None = None, rerun=None):
         super().__init__(cfg, device, links, stop_linger=stop_linger,
                          counts=("estimates_rejected_range", "estimates_out_of_order", "estimates_duplicate",
                                  "estimates_wrong_instrument"))
         self.recorder = recorder
+        self.rerun = rerun                       # master-side series for the live view, or None
+        self._rerun_count = 0
         self.axes = axes or instrument_axes(cfg)
         m = cfg.master.mapping
         r = self.axes.radius
@@ -219,6 +225,8 @@ class MasterNode(MasterNodeBase):
         self._render(self.force, now)
         if self.recorder is not None:
             self._record(now, est, q, pos, rendered, marker)
+        if self.rerun is not None:
+            self._log_rerun(now, q, marker)
 
         # ---- heartbeat ----
         self._heartbeat(now)
@@ -242,6 +250,16 @@ class MasterNode(MasterNodeBase):
         axes = [(qk, _fin(sk), _fin(p), _fin(T), fc, f, pc.energy) for qk, sk, p, T, fc, f, pc in
                 zip(q, slave, pos, rendered, self.force_cmd, self.force, self.passivity)]
         self.recorder.write(self.axes.csv_row(now, est, common, axes))
+
+    def _log_rerun(self, now: float, q, marker: int) -> None:
+        """Every ``recording.log_every`` cycles: command, rendered and mapped force of axis 0, the last
+        round trip (command -> estimate echo) [s], the console state and the experiment (marker)."""
+        self._rerun_count += 1
+        if self._rerun_count % self.cfg.recording.log_every:
+            return
+        self.rerun.log_master(now, x_in_cmd=q[0], force=self.force[0], force_cmd=self.force_cmd[0],
+                              rtt=self.rtts[-1] if self.rtts else None, console=self.status.name,
+                              experiment=_EXPERIMENTS.get(marker & 0xF, f"marker {marker}") if marker else "none")
 
     # ------------------------------------------------------------------------------------------------
     def _run_ended(self, clock: Clock) -> None:

@@ -1,6 +1,9 @@
 """Rerun logging of the live tendon-sheath state (rerun-sdk 0.41, one explicit RecordingStream).
 
-Entity layout (timeline ``time``, a duration in seconds)::
+Entity layout (timeline ``time``, a duration in seconds: the caller's time, the rig's on the slave;
+timeline ``wall``: the monotonic clock, on which the slave's ``slave.rrd`` and the master's
+``master.rrd`` line up - both use the same application and recording id, so ``rerun slave.rrd
+master.rrd`` shows one recording)::
 
     profile/T_hat          BarChart  tension along the sheath [N] over arc length [m], estimated
     profile/T_true         BarChart  the same, ground truth (simulation or instrumented rig)
@@ -8,7 +11,13 @@ Entity layout (timeline ``time``, a duration in seconds)::
     elongation/<name>      Scalars   names starting with "elongation" [m]
     displacement/<name>    Scalars   names starting with "x_" [m]
     signals/<name>         Scalars   anything else
-    phase                  StateChange  the transmission phase label, logged on change only
+    phase                  StateChange  the transmission phase label (readable: estimator/phase.py), on change
+    sheath/route           LineStrips3D the sheath route from the config (static, grey), when ``route`` is given
+    sheath/tension         LineStrips3D the route coloured by the estimated tension along it [N]
+    sheath/tension_true    LineStrips3D the same from the truth, drawn beside it
+    sheath/distal          Points3D     the distal joint: estimated and true T_out in its label
+    master/<name>          Scalars      master-side series (command, rendered force, round trip)
+    master/console, experiment  StateChange  console state and experiment marker, on change
 
 The bar chart is the only 0.41 view with real numeric x and y axes for non-time data (a
 ``TimeSeriesView`` always plots against a timeline; a ``Spatial2DView`` has no axis ticks and a
@@ -24,6 +33,7 @@ from __future__ import annotations
 import os
 import sys
 import tempfile
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -31,13 +41,17 @@ import numpy as np
 
 from teleop.errors import ConfigError
 
+#: Fixed ranges of the plots (the y axes do not rescale every frame): tension [N], elongation [m].
+TENSION_RANGE, ELONGATION_RANGE = (0.0, 25.0), (0.0, 2.0e-3)
+
 if TYPE_CHECKING:
     import rerun as rr
 
-__all__ = ["RerunLogger", "signal_path", "display_available", "MODES"]
+__all__ = ["RerunLogger", "signal_path", "display_available", "MODES", "route_points", "tension_colors"]
 
 MODES = ("save", "spawn", "off")
 TIMELINE = "time"
+WALL = "wall"
 _BLUE, _BLUE_SEE_THROUGH = (31, 119, 180, 255), (31, 119, 180, 110)
 _ORANGE, _GREY = (255, 127, 14, 255), (150, 150, 150, 255)
 
@@ -70,23 +84,66 @@ def display_available() -> bool:
     return True
 
 
+def route_points(runs, n_per_arc: int = 24) -> np.ndarray:
+    """The sheath route as a planar polyline, shape (n, 3) [m], from proximal (origin, heading +x) to
+    distal: straight runs go ahead, arcs turn left by ``length / radius``.
+
+    runs : sequence of objects with ``length`` [m] and ``radius`` [m] (inf or None = straight), or
+    (length, radius) pairs.
+    """
+    pts = [np.zeros(3)]
+    heading = 0.0
+    for r in runs:
+        length, radius = (r if isinstance(r, (tuple, list)) else (r.length, getattr(r, "radius", None)))
+        p0 = pts[-1]
+        if radius is None or not np.isfinite(radius):
+            pts.append(p0 + length * np.array([np.cos(heading), np.sin(heading), 0.0]))
+            continue
+        turn = length / radius
+        centre = p0 + radius * np.array([-np.sin(heading), np.cos(heading), 0.0])
+        for a in np.linspace(0.0, turn, n_per_arc + 1)[1:]:
+            h = heading + a
+            pts.append(centre + radius * np.array([np.sin(h), -np.cos(h), 0.0]))
+        heading += turn
+    return np.array(pts)
+
+
+def tension_colors(T: np.ndarray, vmax: float = TENSION_RANGE[1]) -> np.ndarray:
+    """RGBA colours, shape (n, 4) uint8, of tensions ``T`` [N] on a fixed scale 0..``vmax`` (blue -> red)."""
+    u = np.clip(np.asarray(T, dtype=float) / vmax, 0.0, 1.0)
+    # blue (low) -> yellow -> red (high)
+    r = np.clip(2 * u, 0, 1)
+    g = np.clip(1.6 * (1 - np.abs(2 * u - 1)), 0, 1) * 0.85 + 0.15 * (u < 0.5)
+    b = np.clip(1 - 2 * u, 0, 1)
+    return (np.stack([r, g, b, np.ones_like(u)], axis=1) * 255).astype(np.uint8)
+
+
 def _blueprint() -> object:
     import rerun.blueprint as rrb
 
+    fixed_T = rrb.ScalarAxis(range=TENSION_RANGE, zoom_lock=False)
     return rrb.Blueprint(
-        rrb.Vertical(
-            rrb.BarChartView(origin="profile", name="Tension along the sheath: T [N] vs s [m]",
-                             plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop)),
-            rrb.Horizontal(
-                rrb.TimeSeriesView(origin="tension", name="Tension [N]"),
-                rrb.Tabs(rrb.TimeSeriesView(origin="elongation", name="Elongation [m]"),
+        rrb.Horizontal(
+            rrb.Vertical(
+                rrb.Spatial3DView(origin="sheath", name="Sheath route coloured by tension (0-25 N, blue -> red)"),
+                rrb.BarChartView(origin="profile", name="Tension along the sheath: T [N] vs s [m]",
+                                 plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop)),
+                row_shares=[3, 2],
+            ),
+            rrb.Vertical(
+                rrb.TimeSeriesView(origin="tension", name="Tension [N]", axis_y=fixed_T),
+                rrb.Tabs(rrb.TimeSeriesView(origin="elongation", name="Elongation [m]",
+                                            axis_y=rrb.ScalarAxis(range=ELONGATION_RANGE, zoom_lock=False)),
+                         rrb.TimeSeriesView(origin="master", name="Master: command, force, round trip"),
                          rrb.TimeSeriesView(origin="displacement", name="Displacement [m]"),
                          rrb.TimeSeriesView(origin="signals", name="Other signals")),
+                rrb.StateTimelineView(origin="/", contents=["/phase", "/master/console", "/experiment"],
+                                      name="Phase, console, experiment"),
+                row_shares=[4, 4, 2],
             ),
-            rrb.StateTimelineView(origin="phase", name="Phase"),
-            row_shares=[4, 4, 1],
+            column_shares=[1, 1],
         ),
-        rrb.TimePanel(timeline=TIMELINE),
+        rrb.TimePanel(timeline=WALL),
         auto_views=False,
     )
 
@@ -108,6 +165,11 @@ class RerunLogger:
         The .rrd file for 'save' (required) and for the 'spawn' fallback.
     profile_every : int
         Log one profile in this many :meth:`log_profile` calls (>= 1); scalars are never dropped.
+    route : sequence of runs (``length`` [m], ``radius`` [m] or inf), optional
+        The sheath route (``cfg.sheath.runs``): draws ``sheath/*`` in 3D, coloured by the tension.
+    wall_clock : bool
+        The caller's ``t`` is the monotonic clock (the master): it goes on the ``wall`` timeline as
+        given; otherwise (the slave, whose ``t`` is the rig's time) ``wall`` is the clock at the call.
 
     Attributes
     ----------
@@ -124,7 +186,7 @@ class RerunLogger:
 
     def __init__(self, application_id: str, recording_id: str | None = None,
                  mode: Literal["save", "spawn", "off"] = "save", path: str | Path | None = None,
-                 *, profile_every: int = 1) -> None:
+                 *, profile_every: int = 1, route=None, wall_clock: bool = False) -> None:
         if mode not in MODES:
             raise ConfigError(f"recording.rerun: expected one of {', '.join(MODES)}, got {mode!r}")
         if mode == "save" and path is None:
@@ -140,6 +202,14 @@ class RerunLogger:
         self._grid: dict[str, dict] = {}  # per bar-chart entity: grid fields still to send
         self._paths: dict[str, str] = {}
         self._phase: str | None = None
+        self._states: dict[str, str] = {}
+        self._route: np.ndarray | None = None
+        self._route_s: np.ndarray | None = None
+        self._started = False
+        self._wall_is_t = bool(wall_clock)
+        if route is not None and len(route):
+            self._route = route_points(route)
+            self._route_s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(self._route, axis=0), axis=1))]
         if mode == "off":
             return
 
@@ -211,7 +281,9 @@ class RerunLogger:
             raise ValueError(f"log_profile: s_positions {s.shape}, T_estimated {est.shape} and "
                              f"T_true {None if true is None else true.shape} must be equal (n,)")
         rr = self._rr
-        rec.set_time(TIMELINE, duration=float(t))
+        self._start(t)
+        self._set_time(rec, t)
+        self._log_sheath(s, est, true)
         if self._abscissa is None or not np.array_equal(self._abscissa, s):
             # The grid rarely changes: send it only then (temporal: earlier profiles keep theirs).
             first, self._abscissa = self._abscissa is None, s.copy()
@@ -224,6 +296,81 @@ class RerunLogger:
                 continue
             grid = self._grid.pop(entity, None)
             rec.log(entity, rr.BarChart.from_fields(values=values, **(grid or {})))
+
+    def _set_time(self, rec, t: float) -> None:
+        """``t`` on the ``time`` timeline and, unless the caller's ``t`` is the monotonic clock
+        (``wall_clock``), the monotonic clock now on ``wall`` (where slave and master recordings line up)."""
+        rec.set_time(TIMELINE, duration=float(t))
+        rec.set_time(WALL, duration=float(t) if self._wall_is_t else time.monotonic())
+
+    def _start(self, t: float) -> None:
+        """At the first log: the static pieces (route, fixed profile range) and a rest profile at ``t``,
+        so that every view has data from where the recording starts."""
+        if self._started or self._rec is None:
+            return
+        self._started = True
+        rec, rr = self._rec, self._rr
+        # an invisible bar pair fixes the profile plot's y range (the bar chart view has no axis setting)
+        L = float(self._route_s[-1]) if self._route_s is not None else 1.0
+        rec.log("profile/range", rr.BarChart.from_fields(values=np.array(TENSION_RANGE), abscissa=np.array([0.0, L]),
+                                                          widths=np.array([1e-6, 1e-6]), color=(0, 0, 0, 0)),
+                static=True)
+        if self._route is not None:
+            rec.log("sheath/route", rr.LineStrips3D([self._route], radii=0.002, colors=[(120, 120, 120, 255)]),
+                    static=True)
+            self._set_time(rec, t)
+            s = np.linspace(0.0, L, 50)
+            self._log_sheath(s, np.zeros_like(s), None)
+
+    def _log_sheath(self, s: np.ndarray, est: np.ndarray, true: np.ndarray | None) -> None:
+        """The route coloured by the estimated (and beside it the true) tension; the distal joint."""
+        if self._route is None or self._route_s is None or s.size < 2:
+            return
+        rr, rec = self._rr, self._rec
+        u = s / s[-1] * self._route_s[-1]
+        pts = np.stack([np.interp(u, self._route_s, self._route[:, k]) for k in range(3)], axis=1)
+        segs = np.stack([pts[:-1], pts[1:]], axis=1)
+        for entity, T, dz in (("sheath/tension", est, 0.0), ("sheath/tension_true", true, 0.02)):
+            if T is None:
+                continue
+            Tm = 0.5 * (T[:-1] + T[1:])
+            rec.log(entity, rr.LineStrips3D(segs + np.array([0.0, 0.0, dz]), radii=0.006 if dz == 0 else 0.003,
+                                            colors=tension_colors(Tm)))
+        label = f"distal T_out est {est[-1]:.2f} N" + ("" if true is None else f" / true {true[-1]:.2f} N")
+        rec.log("sheath/distal", rr.Points3D([pts[-1]], radii=0.004 + 0.001 * float(est[-1]),
+                                             colors=tension_colors(est[-1:]), labels=[label], show_labels=True))
+
+    def log_state(self, t: float, entity: str, label: str) -> None:
+        """A state label (console state, experiment) on ``entity`` at ``t`` [s], logged on change only."""
+        rec = self._rec
+        label = str(label)
+        if rec is None or self._states.get(entity) == label:
+            return
+        self._states[entity] = label
+        self._start(t)
+        self._set_time(rec, t)
+        rec.log(entity, self._rr.StateChange(state=label))
+
+    def log_master(self, t: float, *, x_in_cmd: float, force: float, force_cmd: float, rtt: float | None,
+                   console: str, experiment: str) -> None:
+        """Master-side series at ``t`` [s]: command [m], rendered and mapped force [N], round trip [s]
+        (None: none yet), console state and experiment name (on change)."""
+        rec = self._rec
+        if rec is None:
+            return
+        self._start(t)
+        rr = self._rr
+        self._set_time(rec, t)
+        for name, v in (("x_in_cmd", x_in_cmd), ("force", force), ("force_cmd", force_cmd), ("rtt", rtt)):
+            if v is None:
+                continue
+            entity = f"master/{name}"
+            if entity not in self._paths:
+                self._paths[entity] = entity
+                rec.log(entity, rr.SeriesLines(names=name, widths=1.5), static=True)
+            rec.log(entity, rr.Scalars.from_fields(scalars=[float(v)]))
+        self.log_state(t, "master/console", console)
+        self.log_state(t, "experiment", experiment)
 
     def log_scalars(self, t: float, **values: float | None) -> None:
         """Log scalar signals at time ``t``, one entity per name (see :func:`signal_path`).
@@ -238,7 +385,8 @@ class RerunLogger:
         if rec is None:
             return
         rr = self._rr
-        rec.set_time(TIMELINE, duration=float(t))
+        self._start(t)
+        self._set_time(rec, t)
         for name, value in values.items():
             if value is None:
                 continue
@@ -257,7 +405,7 @@ class RerunLogger:
         if rec is None or label == self._phase:
             return
         self._phase = label
-        rec.set_time(TIMELINE, duration=float(t))
+        self._set_time(rec, t)
         rec.log("phase", self._rr.StateChange(state=self._phase))
 
     def flush(self) -> None:

@@ -89,6 +89,14 @@ class ThreadedRerunLogger:
         """Queue :meth:`RerunLogger.log_phase`."""
         self._put(self._inner.log_phase, (t, phase_label), {})
 
+    def log_master(self, t: float, **values) -> None:
+        """Queue :meth:`RerunLogger.log_master` (master-side series)."""
+        self._put(self._inner.log_master, (t,), values)
+
+    def log_state(self, t: float, entity: str, label: str) -> None:
+        """Queue :meth:`RerunLogger.log_state`."""
+        self._put(self._inner.log_state, (t, entity, label), {})
+
     def _drain(self) -> None:
         q = self._queue
         while q:

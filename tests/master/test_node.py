@@ -382,3 +382,20 @@ def test_scripted_operator_clutches_when_asked_to_align_and_control_resumes():
     run(node, links, clock, 80, x_in=0.0, T_in=0.5)
     assert op.clutches == 1 and node.consoles[0].clutches == 1
     assert node.state == SideState.ENGAGED and node.engage_count == 2
+
+
+def test_master_side_series_go_to_the_live_view():
+    class View:
+        def __init__(self):
+            self.calls = []
+
+        def log_master(self, t, **kw):
+            self.calls.append((t, kw))
+
+    node, hand, links, clock = make()
+    node.rerun = view = View()
+    engage(node, links, clock)
+    run(node, links, clock, 50)
+    assert view.calls and all(set(kw) == {"x_in_cmd", "force", "force_cmd", "rtt", "console", "experiment"}
+                              for _, kw in view.calls)
+    assert view.calls[-1][1]["console"] == "ENGAGED" and view.calls[-1][1]["force"] == node.force[0]
