@@ -23,13 +23,13 @@ variable damper takes out exactly that excess in the same step::
 so ``E(k) = 0`` after an active step. With an energy *reserve* ``E_r`` > 0 (``master.mapping.passivity_reserve``)
 the controller first eases the force off smoothly while the port gives energy back (``-f v < 0``)::
 
-    f = f [1 - w (1 - min(1, E(k-1) / E_r))],   w = min(1, |v| / v_r)                 (reserve)
+    f = f min(1, E(k-1) / E_r)         when f d > 0, d = sign of the last |v| > v_d   (reserve)
 
 so the stored energy decays like ``dE/dt = -(E/E_r) |f v|`` instead of running into the hard
-correction, which then only catches what the scaling misses. The weight ``w`` (v_r = 5 mm/s) fades
-the scaling in with speed: a hand creeping through the device's stick-slip (v jumping between 0
-and a few um/s) carries almost no power and must not switch the force; at v = 0 (the handle held by
-the device's friction) the last motion decides, so stick-slip does not switch it either. The hard PC alone switches between
+correction, which then only catches what the scaling misses. The direction ``d`` is the handle's
+last clear motion (v_d = 0.5 mm/s): a handle held by the device's friction (v = 0 between slips) or
+creeping at a few um/s carries almost no power, and deciding on the sign of such a v switched the
+force between full and zero every other sample. The hard PC alone switches between
 full force and the damped force from one sample to the next; on a hand of small inertia that is a
 limit cycle of its own (docs/stability.md). Scaling the force toward 0 never makes the port active
 (``|f'| <= |f|``, same sign). (Hannaford & Ryu write ``f' = f + alpha v`` with ``f`` the force
@@ -47,8 +47,8 @@ from teleop.errors import ConfigError
 
 __all__ = ["PassivityStats", "PassivityController"]
 
-#: Handle speed v_r [m/s] at which the reserve scaling is fully applied (below it, in proportion).
-RESERVE_SPEED = 0.005
+#: Handle speed v_d [m/s] above which a motion sets the direction the reserve acts on.
+RESERVE_SPEED = 0.0005
 
 
 @dataclass(frozen=True)
@@ -117,7 +117,7 @@ class PassivityController:
         self.alpha = 0.0
         self.active_steps = 0
         self.steps = 0
-        self._v_last = 0.0
+        self._direction = 0.0
 
     def step(self, force_cmd: float, velocity: float, dt: float) -> float:
         """The force to render [N] for the commanded ``force_cmd`` [N] at handle ``velocity`` [m/s].
@@ -134,16 +134,13 @@ class PassivityController:
             return 0.0
         v = float(velocity)
         f_in = f
-        # a handle held still by the device's friction (v = 0) keeps its last motion for the reserve:
-        # giving the full force back at each stick and cutting it at each slip is a limit cycle
-        v_r = v if v != 0.0 else self._v_last
-        if v != 0.0:
-            self._v_last = v
-        if self.enabled and self.reserve > 0.0 and f * v_r > 0.0:
-            # reserve: f = f [1 - w (1 - min(1, E(k-1) / E_r))], w = min(1, |v| / v_r), while the port
-            # gives energy back; w fades the scaling in with speed (no switching on a creeping hand)
-            w = min(1.0, abs(v_r) / RESERVE_SPEED)
-            f *= 1.0 - w * (1.0 - min(1.0, max(self.energy, 0.0) / self.reserve))
+        # the direction of the handle's last clear motion (|v| > v_d): a handle held by the device's
+        # friction or jittering about zero keeps it, so the reserve does not switch on stick-slip
+        if abs(v) > RESERVE_SPEED:
+            self._direction = 1.0 if v > 0 else -1.0
+        if self.enabled and self.reserve > 0.0 and f * self._direction > 0.0:
+            # reserve: f = f min(1, E(k-1) / E_r) while the port gives energy back
+            f *= min(1.0, max(self.energy, 0.0) / self.reserve)
         # E_cmd = E(k-1) - f v dt      (energy into the network if f is rendered unchanged)
         e_cmd = self.energy - f * v * dt
         if self.enabled and e_cmd < 0.0 and v != 0.0:
