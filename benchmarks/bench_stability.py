@@ -40,7 +40,8 @@ from teleop.loop_metrics import CHATTER_LIMITS, chatter  # noqa: E402
 
 def run_loop(force_scale: float = 0.2, delay: float = 0.001, arm: ArmParameters | None = None,
              pc: str = "reserve", static_arm: bool = False, motion_scale: float = 0.2,
-             protocol: str = "paper", t_max: float = 30.0, force_limit: float | None = None) -> dict:
+             protocol: str = "paper", t_max: float = 30.0, force_limit: float | None = None,
+             trace: list | None = None) -> dict:
     """One closed-loop run; returns chatter, transparency and whether the protocol finished.
 
     force_scale [-], delay: one-way network delay [s] (each way), pc: 'off' | 'hard' | 'reserve'
@@ -79,6 +80,8 @@ def run_loop(force_scale: float = 0.2, delay: float = 0.001, arm: ArmParameters 
         force = clamp_force(passivity.step(f_cmd, v, dt), m.force_limit)
         op.set_force(force, t)
         log.append((t, x_cmd, force, -force_scale * seen[2]))
+        if trace is not None:
+            trace.append((t, seen[0], op.index, op.direction))
         # network out, slave, network back
         cmd_q.append(x_cmd)
         rs = rig.step(cmd_q.popleft(), dt)

@@ -82,6 +82,8 @@ def build_protocol(names: str) -> tuple[Segment, ...]:
 
 #: Tension error [N] below which the operator slows its intention, and the slowest fraction of speed.
 APPROACH_BAND, APPROACH_MIN = 1.0, 0.15
+#: Smoothing time of the read-out rate the operator anticipates with [s].
+RATE_TIME = 0.01
 
 
 def approach(error: float) -> float:
@@ -143,6 +145,10 @@ class ScriptedOperator:
         self.start_delay, self.segment_timeout = float(start_delay), float(segment_timeout)
         self.intended = 0.0          # [m]
         self.velocity = 0.0          # intended speed [m/s]
+        self._T_last: float | None = None
+        self._rate = 0.0             # smoothed dT_in/dt [N/s]
+        a = self.arm_params
+        self._lead = 0.0 if static_arm else (a.damping + a.device_damping) / a.stiffness   # [s]
         self.force = 0.0             # rendered force [N]
         self.index = -1              # current segment; -1 before the start
         self.direction = 0           # +1 pulling, -1 releasing, 0 still
@@ -204,6 +210,9 @@ class ScriptedOperator:
     # -- script ------------------------------------------------------------------------------------
     def _advance(self, t: float, dt: float, T_in: float) -> None:
         self.velocity = 0.0                      # intended hand speed [m/s], set below while moving
+        if self._T_last is not None and dt > 0:  # read-out rate [N/s], smoothed over RATE_TIME
+            self._rate += dt / (RATE_TIME + dt) * ((T_in - self._T_last) / dt - self._rate)
+        self._T_last = T_in
         if self.index < 0:                       # first engaged reading: wait, then start
             if self._wait_until is None:
                 self._wait_until = t + self.start_delay
@@ -221,7 +230,11 @@ class ScriptedOperator:
             self._start(self.index + 1, t, T_in)
             return
         seg = self.segments[self.index]
-        reached = T_in >= seg.target if self.direction > 0 else T_in <= seg.target
+        # the operator anticipates: the hand lags its intention by ~(b_a + b_d) / k_a seconds, so it
+        # stops the intention when the read-out, carried on at its present rate for that long, reaches
+        # the target (a person stops early when the read-out moves fast)
+        T_seen = T_in + self._rate * self._lead
+        reached = T_seen >= seg.target if self.direction > 0 else T_seen <= seg.target
         if reached or t - self._t_segment > self.segment_timeout:
             self.timeouts += 0 if reached else 1
             self.direction = 0
@@ -229,7 +242,7 @@ class ScriptedOperator:
             return
         # slow down near the target (a hand with mass lags its intention: stopping at full speed would
         # carry the tendon on by ~b v / k of hand travel, several newtons where the tendon sticks)
-        self.velocity = self.direction * self.speed * approach(abs(seg.target - T_in))
+        self.velocity = self.direction * self.speed * approach(abs(seg.target - T_seen))
         self.intended += self.velocity * dt
 
     def _start(self, index: int, t: float, T_in: float) -> None:

@@ -32,20 +32,22 @@ def test_is_a_device_and_an_operator_view():
 
 def test_follows_targets_in_order_and_finishes():
     segs = (Segment(20.0, 1), Segment(5.0, 1), Segment(12.0, 2), Segment(0.3, 2))
-    op = ScriptedOperator(segs, speed=0.025, dwell=0.1, start_delay=0.0)
-    t, T, reached, markers = 0.0, 0.0, [], []
+    op = ScriptedOperator(segs, speed=0.025, dwell=0.3, start_delay=0.0)
+    t, T, markers = 0.0, 0.0, []
+    extreme: dict[int, list[float]] = {}
     while t < 30.0 and not op.finished:
         op.watch(T, engaged=True)
-        moving = op.direction
         T = STIFFNESS * max(0.0, op.read(t).position)
-        if moving and op.direction == 0:          # a segment ended: the tension it reached
-            reached.append(T)
+        if op.index >= 0:
+            extreme.setdefault(op.index, []).append(T)
         markers.append(op.marker)
         t += DT
     assert op.finished and op.timeouts == 0
-    step_T = STIFFNESS * 0.025 * DT               # one step of hand motion in tension
-    # the script stops the intention when it sees the target; the hand's mass carries it ~2 steps on
-    assert reached == pytest.approx([20.0, 5.0, 12.0, 0.3], abs=4 * step_T)
+    # the tension each segment turned at (the hand has mass: the operator stops its intention early,
+    # anticipating the hand's lag, and the hand lands near the target)
+    turned = [max(v) if segs[i].target > (extreme[i - 1][-1] if i else 0.0) else min(v)
+              for i, v in sorted(extreme.items())]
+    assert turned == pytest.approx([20.0, 5.0, 12.0, 0.3], abs=1.5)      # a stiff toy plant: 2000 N/m of hand
     assert markers[0] == 1 and markers[-1] == 2 and markers.index(2) > 0
     assert sorted(set(markers)) == [1, 2]
 
