@@ -51,7 +51,7 @@ from slave.rig import TENDONS, Rig, RigState
 from teleop.config import Config
 from teleop.messages import AxisState, Command, Estimate, SideState, TendonState
 
-__all__ = ["JointSlaveNode", "joint_csv_columns"]
+__all__ = ["JointSlaveNode", "joint_csv_columns", "recording", "warm_up"]
 
 _TENDON_COLS = ("x_in", "T_in", "x_in_cmd", "T_out_hat", "elongation_hat", "phase")
 _TENDON_TRUTH = ("T_out", "elongation")
@@ -71,6 +71,26 @@ def joint_csv_columns(names, has_truth: bool) -> tuple[str, ...]:
             cols += [f"{n}.{t}.{c}" for c in _TENDON_COLS]
             cols += [f"{n}.{t}.{c}" for c in _TENDON_TRUTH] if has_truth else []
     return tuple(cols)
+
+
+def recording(cfg: Config, rig: Rig) -> tuple[str, tuple[str, ...], dict[str, str]]:
+    """The slave's recording of a joint instrument: ``slave_joints.csv``, :func:`joint_csv_columns`
+    (truth columns always: a row leaves them out only when the rig has no truth) and metadata."""
+    names = [j.name for j in cfg.instrument.joints]
+    meta = {"source": "teleop slave", "instrument": cfg.instrument.id, "joints": " ".join(names),
+            "truth": "torque, angle, T_out, elongation are simulator ground truth (evaluation only)"}
+    return "slave_joints.csv", joint_csv_columns(names, True), meta
+
+
+def warm_up(cfg: Config) -> None:
+    """Compile the instrument's and the joint estimators' numba kernels before the real-time loop
+    starts (throwaway objects)."""
+    from estimator.sheath import SheathModel
+    from slave.joint_rig import SimulatedInstrument
+
+    SimulatedInstrument(cfg.instrument.joints[:1], cfg.rig).step([[1e-4, 1e-4]], 1e-3)
+    m = SheathModel(K=0.5, compliance=1e-4)
+    JointEstimator(m, m, 0.004, n_nodes=4).step(1.0, 0.0, 0.5, 0.0, 0.0)
 
 
 class JointSlaveNode(SlaveNodeBase):

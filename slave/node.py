@@ -63,7 +63,8 @@ from teleop.codec import seq_newer
 from teleop.config import Config
 from teleop.messages import Command, SideState, tendon_estimate
 
-__all__ = ["SlaveLinks", "SlaveNode", "CSV_COLUMNS", "CSV_TRUTH_COLUMNS", "csv_columns", "RELAX_BAND", "seq_newer"]
+__all__ = ["SlaveLinks", "SlaveNode", "CSV_COLUMNS", "CSV_TRUTH_COLUMNS", "csv_columns", "RELAX_BAND", "seq_newer",
+           "recording", "warm_up"]
 
 log = logging.getLogger("teleop.slave")
 
@@ -301,6 +302,15 @@ class SlaveNode(SlaveNodeBase):
 def csv_columns(has_truth: bool) -> tuple[str, ...]:
     """The recording's columns: :data:`CSV_COLUMNS`, without the truth ones for a hardware rig."""
     return CSV_COLUMNS if has_truth else tuple(c for c in CSV_COLUMNS if c not in CSV_TRUTH_COLUMNS)
+
+
+def recording(cfg: Config, rig: Rig) -> tuple[str, tuple[str, ...], dict[str, str]]:
+    """The slave's recording of a single tendon: file name, columns (:func:`csv_columns`, truth only
+    when ``rig`` has it) and metadata."""
+    has_truth = rig.state.truth is not None
+    meta = {"source": "teleop slave", "instrument": cfg.instrument.id, "rig": cfg.rig.type,
+            "truth": "x_out, T_out, elongation are simulator ground truth (evaluation only)" if has_truth else "none"}
+    return "slave.csv", csv_columns(has_truth), meta
 
 
 def warm_up(cfg: Config) -> None:

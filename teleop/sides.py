@@ -14,10 +14,11 @@ import contextlib
 import logging
 import time
 from pathlib import Path
+from typing import Any
 
 from teleop.config import Config
 
-__all__ = ["run_slave", "run_master", "run_joint_slave", "default_run_dir",
+__all__ = ["run_slave", "run_master", "load_or_recalibrate", "default_run_dir",
            "prepare_run_dir", "endpoints", "open_session", "slave_links", "master_links"]
 
 
@@ -151,9 +152,9 @@ def _log_master_done(node) -> None:
 
 
 def run_slave(args: argparse.Namespace) -> int:
-    """``teleop slave``: reload ``<calibration.dir>/<id>.yaml`` (or calibrate at power-up and save it
-    there: missing, or ``--recalibrate``), then serve commands until stopped; either kind of instrument."""
-    from slave.node import SlaveNode, csv_columns, warm_up
+    """``teleop slave`` for any instrument: reload ``<calibration.dir>/<id>.yaml`` (or calibrate at
+    power-up and save it there: missing, or ``--recalibrate``), then serve commands until stopped. One
+    path; only the node, its recording and its warm-up depend on the kind (``instrument.joints``)."""
     from slave.rigs import make_rig
     from teleop.clock import MonotonicClock
     from teleop.config import load_config
@@ -162,9 +163,8 @@ def run_slave(args: argparse.Namespace) -> int:
     from teleop.rerun_thread import ThreadedRerunLogger as RerunLogger  # the loop only queues the calls
 
     cfg = load_config(args.config)
-    if cfg.instrument.joints:           # a joint instrument: its own node, same transport and flags
-        return run_joint_slave(args, cfg)
-    calibration, cal_path = _load_or_none(cfg, args)
+    Node, recording, warm_up = _slave_kind(cfg)
+    calibration, cal_path = load_or_recalibrate(cfg, getattr(args, "recalibrate", False))
     run_dir = side_run_dir(args, cfg)
     warm_up(cfg)  # compile the numba kernels now, not in the first real-time cycles
     ident = cfg.instrument.id
@@ -173,21 +173,28 @@ def run_slave(args: argparse.Namespace) -> int:
     with raise_on_sigterm(), open_session(cfg, args, clock) as session:
         rig = make_rig(cfg, session)     # rig.type: simulated in process, zenoh (a drive or `teleop bridge`), ...
         try:
-            has_truth = rig.state.truth is not None
-            meta = {"source": "teleop slave", "instrument": ident, "rig": cfg.rig.type,
-                    "truth": "x_out, T_out, elongation are simulator ground truth (evaluation only)" if has_truth
-                    else "none"}
-            with CsvRecorder(run_dir / "slave.csv", csv_columns(has_truth), meta, flush_every=500) as rec, \
+            name, columns, meta = recording(cfg, rig)
+            with CsvRecorder(run_dir / name, columns, meta, flush_every=500) as rec, \
                     RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd") as rr:
                 links = slave_links(session, ident, injector)
-                node = SlaveNode(cfg, rig, links, recorder=rec, rerun=rr, run_dir=run_dir,
-                                 stop_on_master_stop=args.exit_on_master_stop, calibration=calibration,
-                                 calibration_file=cal_path)
+                node = Node(cfg, rig, links, recorder=rec, rerun=rr, run_dir=run_dir,
+                            stop_on_master_stop=args.exit_on_master_stop, calibration=calibration,
+                            calibration_file=cal_path)
                 _serve(node, clock, args, run_dir, "slave", injector)
         finally:
             rig.close()
     logging.getLogger("teleop.slave").info("slave done: %s", run_dir)
     return 0
+
+
+def _slave_kind(cfg: Config) -> tuple[Any, Any, Any]:
+    """What depends on the kind of instrument in ``teleop slave``: (node class, ``recording(cfg, rig)``,
+    ``warm_up(cfg)``) of a joint instrument (one axis per antagonistic pair) or of a single tendon."""
+    if cfg.instrument.joints:
+        from slave import joint_node
+        return joint_node.JointSlaveNode, joint_node.recording, joint_node.warm_up
+    from slave import node
+    return node.SlaveNode, node.recording, node.warm_up
 
 
 def run_master(args: argparse.Namespace) -> int:
@@ -230,54 +237,27 @@ def _closing(device):
         device.close()
 
 
-def _load_or_none(cfg: Config, args: argparse.Namespace):
-    """The calibration life cycle of every instrument: ``(calibration, path)`` with the data reloaded
-    from ``<calibration.dir>/<instrument.id>.yaml``, or None (missing, or ``--recalibrate``: the slave
-    calibrates at power-up and saves it there). A file that does not fit the config raises
-    :class:`CalibrationError` naming it."""
+def load_or_recalibrate(cfg: Config, recalibrate: bool = False):
+    """The calibration life cycle of every instrument, as ``teleop slave`` starts it.
+
+    Returns
+    -------
+    (InstrumentCalibration or None, Path)
+        The data reloaded from ``<calibration.dir>/<instrument.id>.yaml``, or None when the file is
+        missing or ``recalibrate`` (``--recalibrate``) is set: the slave then calibrates at power-up
+        and saves the fit at that path.
+
+    Raises
+    ------
+    CalibrationError
+        The file does not fit the config (another instrument, another kind, bad values); the
+        message names the file and the key.
+    """
     from slave.calibration_file import calibration_path, load_calibration
     path = calibration_path(cfg)
-    again = getattr(args, "recalibrate", False)
+    again = bool(recalibrate)
     calibration = load_calibration(path, cfg) if path.is_file() and not again else None
     logging.getLogger("teleop.slave").info(
         "calibration %s", f"loaded from {path}" if calibration else
         f"{'recalibrating on request' if again else 'missing'}: calibrating, then {path}")
     return calibration, path
-
-
-def run_joint_slave(args: argparse.Namespace, cfg: Config) -> int:
-    """``teleop slave`` for a joint instrument: reload ``<calibration.dir>/<id>.yaml`` (or calibrate at
-    power-up and save it there), then serve Commands (one angle per joint) until stopped."""
-    from estimator.joint import JointEstimator
-    from estimator.sheath import SheathModel
-    from slave.joint_node import JointSlaveNode, joint_csv_columns
-    from slave.joint_rig import SimulatedInstrument
-    from slave.rigs import make_rig
-    from teleop.clock import MonotonicClock
-    from teleop.csv_writer import ThreadedCsvRecorder as CsvRecorder  # the loop only queues rows; a thread writes
-    from teleop.recording import raise_on_sigterm
-    from teleop.rerun_thread import ThreadedRerunLogger as RerunLogger  # the loop only queues the calls
-
-    log = logging.getLogger("teleop.slave")
-    calibration, cal_path = _load_or_none(cfg, args)
-    run_dir = side_run_dir(args, cfg)
-    # compile the numba kernels now, not in the first real-time cycles
-    SimulatedInstrument(cfg.instrument.joints[:1], cfg.rig).step([[1e-4, 1e-4]], 1e-3)
-    m = SheathModel(K=0.5, compliance=1e-4)
-    JointEstimator(m, m, 0.004, n_nodes=4).step(1.0, 0.0, 0.5, 0.0, 0.0)
-    names = [j.name for j in cfg.instrument.joints]
-    meta = {"source": "teleop slave", "instrument": cfg.instrument.id, "joints": " ".join(names),
-            "truth": "torque, angle, T_out, elongation are simulator ground truth (evaluation only)"}
-    ident = cfg.instrument.id
-    clock = MonotonicClock()
-    injector = _injector(args, clock)
-    with raise_on_sigterm(), open_session(cfg, args, clock) as session, \
-            CsvRecorder(run_dir / "slave_joints.csv", joint_csv_columns(names, True), meta, flush_every=500) as rec, \
-            RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd") as rr:
-        inst = make_rig(cfg, session)   # rig.type: simulated in process, zenoh (a drive or `teleop bridge`), ...
-        links = slave_links(session, ident, injector)
-        node = JointSlaveNode(cfg, inst, links, recorder=rec, rerun=rr, calibration=calibration,
-                              calibration_file=cal_path, run_dir=run_dir, stop_on_master_stop=args.exit_on_master_stop)
-        _serve(node, clock, args, run_dir, "slave", injector)
-    log.info("slave done: %s", run_dir)
-    return 0

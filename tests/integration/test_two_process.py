@@ -15,9 +15,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from slave.node import RELAX_BAND
 from teleop.config import load_config
-from teleop.keys import heartbeat_key
-from teleop.messages import Heartbeat, SideState
+from teleop.keys import estimate_key, heartbeat_key
+from teleop.messages import Estimate, Heartbeat, SideState
 from teleop.recording import read_measured_csv
 from teleop.transport import Session, free_tcp_port, loopback_endpoint, zenoh_config
 
@@ -95,6 +96,7 @@ def test_killing_the_master_makes_the_slave_go_safe(tmp_path):
     try:
         with Session(zenoh_config(cfg.transport, listen=(), connect=(ep,))) as session:
             beats = session.subscriber(heartbeat_key(ident, "slave"), Heartbeat)
+            estimates = session.subscriber(estimate_key(ident), Estimate)
 
             def slave_state():
                 rec = beats.latest()
@@ -103,7 +105,10 @@ def test_killing_the_master_makes_the_slave_go_safe(tmp_path):
             master = teleop("master", "--config", str(cfg_path), "--connect", ep, "--run-dir", str(run_dir),
                             "--protocol", "paper", "--max-duration", "60", log=tmp_path / "master.log")
             wait_for(lambda: slave_state() == SideState.ENGAGED, 40, "the slave to be ENGAGED")
-            time.sleep(0.5)                                  # let the operator move the tendon
+            # let the operator pull the tendon well above pretension + RELAX_BAND, so that SAFE has to release
+            pulled = cfg.sheath.pretension + RELAX_BAND + 1.0
+            wait_for(lambda: (rec := estimates.latest()) is not None and rec.message.tendons[0].T_in > pulled, 20,
+                     f"the operator to pull the tendon above {pulled:g} N")
             master.send_signal(signal.SIGKILL)
             master.wait()
             wait_for(lambda: slave_state() == SideState.SAFE, 10, "the slave to go SAFE")
