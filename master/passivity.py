@@ -23,13 +23,14 @@ variable damper takes out exactly that excess in the same step::
 so ``E(k) = 0`` after an active step. With an energy *reserve* ``E_r`` > 0 (``master.mapping.passivity_reserve``)
 the controller first eases the force off smoothly while the port gives energy back (``-f v < 0``)::
 
-    f = f min(1, E(k-1) / E_r)         when f d > 0, d = sign of the last |v| > v_d   (reserve)
+    f = f min(1, E(k-1) / E_r)         when f d > 0, d = the direction of the last clear motion   (reserve)
 
 so the stored energy decays like ``dE/dt = -(E/E_r) |f v|`` instead of running into the hard
 correction, which then only catches what the scaling misses. The direction ``d`` is the handle's
-last clear motion (v_d = 0.5 mm/s): a handle held by the device's friction (v = 0 between slips) or
+last clear motion (its velocity smoothed over 20 ms beyond v_d = 2 mm/s): a handle held by the device's friction (v = 0 between slips) or
 creeping at a few um/s carries almost no power, and deciding on the sign of such a v switched the
-force between full and zero every other sample. The hard PC alone switches between
+force between full and zero every other sample; so did a raw-velocity threshold, as one force step
+moves the hand by ~1 mm/s within a sample. The hard PC alone switches between
 full force and the damped force from one sample to the next; on a hand of small inertia that is a
 limit cycle of its own (docs/stability.md). Scaling the force toward 0 never makes the port active
 (``|f'| <= |f|``, same sign). (Hannaford & Ryu write ``f' = f + alpha v`` with ``f`` the force
@@ -47,8 +48,9 @@ from teleop.errors import ConfigError
 
 __all__ = ["PassivityStats", "PassivityController"]
 
-#: Handle speed v_d [m/s] above which a motion sets the direction the reserve acts on.
-RESERVE_SPEED = 0.0005
+#: Handle speed v_d [m/s] above which the smoothed motion sets the direction the reserve acts on,
+#: and the smoothing time [s] (first order).
+RESERVE_SPEED, RESERVE_TIME = 0.002, 0.02
 
 
 @dataclass(frozen=True)
@@ -118,6 +120,7 @@ class PassivityController:
         self.active_steps = 0
         self.steps = 0
         self._direction = 0.0
+        self._v_smooth = 0.0
 
     def step(self, force_cmd: float, velocity: float, dt: float) -> float:
         """The force to render [N] for the commanded ``force_cmd`` [N] at handle ``velocity`` [m/s].
@@ -136,8 +139,11 @@ class PassivityController:
         f_in = f
         # the direction of the handle's last clear motion (|v| > v_d): a handle held by the device's
         # friction or jittering about zero keeps it, so the reserve does not switch on stick-slip
-        if abs(v) > RESERVE_SPEED:
-            self._direction = 1.0 if v > 0 else -1.0
+        # smoothed over RESERVE_TIME: one force step moves a hand of ~1.6 kg by ~1 mm/s in a sample,
+        # which must not flip the direction (else the step itself switches the force back: a cycle)
+        self._v_smooth += dt / (RESERVE_TIME + dt) * (v - self._v_smooth)
+        if abs(self._v_smooth) > RESERVE_SPEED:
+            self._direction = 1.0 if self._v_smooth > 0 else -1.0
         if self.enabled and self.reserve > 0.0 and f * self._direction > 0.0:
             # reserve: f = f min(1, E(k-1) / E_r) while the port gives energy back
             f *= min(1.0, max(self.energy, 0.0) / self.reserve)
