@@ -193,3 +193,35 @@ def test_signal_paths():
     assert [signal_path(n) for n in ("T_in", "T_out_hat", "elongation_true", "x_out", "seq")] == [
         "tension/T_in", "tension/T_out_hat", "elongation/elongation_true", "displacement/x_out",
         "signals/seq"]
+
+
+def test_route_geometry_follows_the_config_runs():
+    from teleop.rerun_log import route_points
+    runs = [(0.3, float("inf")), (0.6, 0.191), (0.3, float("inf"))]
+    p = route_points(runs)
+    length = np.linalg.norm(np.diff(p, axis=0), axis=1).sum()
+    assert length == pytest.approx(1.2, rel=2e-3)                 # chords of the arc: slightly short
+    # the ~180 deg bend turns the route back: the last run heads -x, 2 r above the first
+    assert p[-1][1] == pytest.approx(2 * 0.191 * np.sin(0.6 / 0.191 / 2) ** 2, rel=1e-2)   # 1 - cos = 2 sin^2
+    assert p[-1][0] < p[-2][0] and p[1][0] == pytest.approx(0.3)
+
+
+def test_sheath_view_master_series_and_states_are_logged(tmp_path):
+    from teleop.rerun_log import tension_colors
+    path = tmp_path / "view.rrd"
+    with RerunLogger("test", "view", "save", path, route=[(0.5, float("inf")), (0.5, 0.2)]) as rr:
+        rr.log_scalars(0.0, T_in=0.0)                             # first log: route, range, rest profile
+        s = np.linspace(0.0, 1.0, 20)
+        rr.log_profile(0.1, s, np.linspace(10.0, 5.0, 20), np.linspace(10.0, 5.2, 20))
+        rr.log_master(0.1, x_in_cmd=1e-3, force=-1.0, force_cmd=-1.1, rtt=0.001, console="ENGAGED",
+                      experiment="paper")
+        rr.log_master(0.2, x_in_cmd=1e-3, force=-1.0, force_cmd=-1.1, rtt=None, console="ENGAGED",
+                      experiment="paper")
+    _, rows = _read(path)
+    for entity in ("/sheath/route", "/sheath/tension", "/sheath/tension_true", "/sheath/distal", "/profile/range",
+                   "/master/force", "/master/x_in_cmd", "/master/console", "/experiment"):
+        assert entity in rows, entity
+    assert len(rows["/sheath/tension"]) == 2                      # the rest profile, then the estimate
+    assert len(rows["/master/console"]) == 1 and len(rows["/master/rtt"]) == 2   # static style + one value
+    c = tension_colors(np.array([0.0, 25.0, 100.0]))
+    assert c[0][2] == 255 and c[1][0] == 255 and (c[1] == c[2]).all()            # blue low, red high, clipped
