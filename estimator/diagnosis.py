@@ -29,14 +29,13 @@ their equivalents. The thresholds were set on development seeds of both simulato
 from __future__ import annotations
 
 import math
-import sys
 import time as _time
 from typing import Callable
 
 import numpy as np
 
-from estimator.diagnosis_fit import (SIGNALS, fit_model, noise_level, prepare, quantum, raw_rmse, split_at_rest,
-                                     start_points)
+from estimator.diagnosis_fit import (SIGNALS, Progress, fit_model, noise_level, prepare, quantum, raw_rmse,
+                                     rest_reading, sample_block, split_at_rest, start_points, trimmed_ms)
 from estimator.effects import CATALOGUE, EQUIVALENT, NONE, UNKNOWN, Effect, effect, predict
 from estimator.data import MeasuredData
 
@@ -50,28 +49,6 @@ MODEL_RESOLUTION = 0.003    # the base model's own resolution, share of the sign
 TRIM = 0.02                 # share of the largest validation residuals left out of the scores [-]
 POLISH = 3                  # best single extensions refitted with the route shares free
 _UNITS = {"T_out": "N", "x_out": "m"}
-
-
-class _Progress:
-    """A one-line stderr bar (``enabled`` True), a callback(done, total, label), or nothing."""
-
-    def __init__(self, total: int, enabled: bool | Callable):
-        self.total, self.done, self.enabled = total, 0, enabled
-
-    def __call__(self, label: str) -> None:
-        self.done = min(self.done + 1, self.total)
-        if callable(self.enabled):
-            self.enabled(self.done, self.total, label)
-        elif self.enabled:
-            n = 30 * self.done // self.total
-            sys.stderr.write(f"\rdiagnose [{'#' * n}{'.' * (30 - n)}] {self.done}/{self.total} {label:<28}")
-            if self.done >= self.total:
-                sys.stderr.write("\n")
-            sys.stderr.flush()
-
-    def finish(self) -> None:
-        while self.done < self.total:       # the steps that were not needed
-            self("done")
 
 
 class _Folds:
@@ -103,7 +80,7 @@ class _Fit:
             pred = predict(effects, vals, tr, compliance=c)
             self.values.append(vals)
             self.compliance.append(c)
-            self.mse.append({n: _trimmed_ms(getattr(pred, n)[vm] - getattr(tr, n)[vm])
+            self.mse.append({n: trimmed_ms(getattr(pred, n)[vm] - getattr(tr, n)[vm], TRIM)
                              for n in SIGNALS if getattr(tr, n) is not None})
         # the worse fold counts: an extension must help forward and backward in time
         self.S = 1.0 if base is None else max(_score(m, bm, floor) for m, bm in zip(self.mse, base.mse))
@@ -120,13 +97,6 @@ class _Fit:
     def val_mse(self) -> dict[str, float]:
         """Mean over the folds of the validation mean square error per signal."""
         return {n: float(np.mean([m[n] for m in self.mse])) for n in self.mse[0]}
-
-
-def _trimmed_ms(r: np.ndarray) -> float:
-    """Mean square of a residual without its largest TRIM share: the short transients of fast moves
-    (load and motor dynamics outside any quasi-static model) do not decide the model choice."""
-    r2 = np.sort(r * r)
-    return float(np.mean(r2[: max(1, int(round(r2.size * (1.0 - TRIM))))]))
 
 
 def _score(mse: dict, base: dict, floor: dict[str, float]) -> float:
@@ -165,27 +135,12 @@ def _parameters(effects: list[Effect], values: dict, compliance: float, rename: 
     return out
 
 
-def _block(data: MeasuredData, t0: float, t1: float) -> dict:
-    """Raw sample range [start, stop) and time range [s] of data.time in [t0, t1)."""
-    i0, i1 = int(np.searchsorted(data.time, t0)), int(np.searchsorted(data.time, t1))
-    return {"index": [i0, i1], "time_s": [float(data.time[min(i0, len(data) - 1)]),
-                                          float(data.time[max(i1 - 1, i0)])], "n_samples": i1 - i0}
-
-
-def _rest_reading(data: MeasuredData, name: str) -> float:
-    """|median| of a channel over the initial rest (the samples before x_in first moves by 5 um) [unit]."""
-    x = np.asarray(data.x_in, dtype=float)
-    moved = np.flatnonzero(np.abs(x - x[0]) > 5e-6)
-    stop = max(int(moved[0]) if moved.size else len(x), 5)
-    return abs(float(np.median(np.asarray(getattr(data, name), dtype=float)[:stop])))
-
-
 def _channel_choice(data: MeasuredData, eid: str) -> str:
     """Of two equivalent effects, the one the data point to: an offset on a position channel shows as a
     reading away from zero at the initial rest (positions are zeroed there); a gain is reported on
     T_out by convention (it is not separable from one on T_in)."""
     if eid in ("sensor_offset:x_in", "sensor_offset:x_out") and data.x_out is not None:
-        return "sensor_offset:x_in" if _rest_reading(data, "x_in") > _rest_reading(data, "x_out") \
+        return "sensor_offset:x_in" if rest_reading(data, "x_in") > rest_reading(data, "x_out") \
             else "sensor_offset:x_out"
     if eid in ("sensor_gain:T_in", "sensor_gain:T_out"):
         return "sensor_gain:T_out"
@@ -204,7 +159,7 @@ def _look_alike(best: str, price: dict, data: MeasuredData) -> str:
     if price[other] > 1.1 * price[best]:
         return best
     tol = 3.0 * max(quantum(data.x_out), quantum(data.x_in), noise_level(np.asarray(data.x_out, dtype=float)), 1e-9)
-    moved = max(_rest_reading(data, "x_in"), _rest_reading(data, "x_out")) > tol
+    moved = max(rest_reading(data, "x_in"), rest_reading(data, "x_out")) > tol
     return group[1] if moved else group[0]
 
 
@@ -272,7 +227,7 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
             cands.append(e)
     route = wrap_shape is None
     n_second = min(SECOND_ROUND, max(len(cands) - 1, 0)) * (max_effects - 1)
-    bar = _Progress(1 + len(cands) + (POLISH if route else 0) + n_second + 2, progress)
+    bar = Progress(1 + len(cands) + (POLISH if route else 0) + n_second + 2, progress)
     sensor = {n: noise_level(getattr(s, n)) for n in measured}
     sensor_raw = {n: noise_level(np.asarray(getattr(data, n), dtype=float)) for n in measured}
     quanta = {n: quantum(getattr(data, n)) for n in measured}
@@ -388,9 +343,9 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         "cause": cause, "causes": causes, "equivalent": equivalent, "base": base_raw, "extended": ext_raw,
         "gain": (_gain(ext_raw, base_raw, prim) or 0.0) if chosen.effects else 0.0, "primary_signal": prim,
         "parameters": _parameters(chosen.effects, final[0], final[1], rename), "candidates": candidates,
-        "split": {"folds": [{"fit": _block(data, -math.inf, t_val), "validation": _block(data, t_val, t_split)},
-                            {"fit": _block(data, t_back, t_split), "validation": _block(data, -math.inf, t_back)}],
-                  "train": _block(data, -math.inf, t_split), "test": _block(data, t_split, math.inf), "time_s": t_split, "n_train": i_t,
+        "split": {"folds": [{"fit": sample_block(data, -math.inf, t_val), "validation": sample_block(data, t_val, t_split)},
+                            {"fit": sample_block(data, t_back, t_split), "validation": sample_block(data, -math.inf, t_back)}],
+                  "train": sample_block(data, -math.inf, t_split), "test": sample_block(data, t_split, math.inf), "time_s": t_split, "n_train": i_t,
                   "n_heldout": n - i_t, "heldout_s": float(data.time[-1] - data.time[min(i_t, n - 1)]),
                   "train_fraction": float((t_split - data.time[0]) / max(data.duration, 1e-12)),
                   "selection": "model choice by two time-blocked folds inside the training block (fit on one "

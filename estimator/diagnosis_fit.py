@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import itertools
 import math
+import sys
+from typing import Callable
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -24,7 +26,7 @@ from estimator.effects import K_MAX, ROUTE, Effect, Parameter, Series, predict
 from estimator.sheath import SheathModel
 from estimator.data import MeasuredData
 
-__all__ = ["prepare", "split_at_rest", "fit_model", "start_points", "heldout_mse", "raw_rmse", "noise_level",
+__all__ = ["Progress", "trimmed_ms", "sample_block", "rest_reading", "prepare", "split_at_rest", "fit_model", "start_points", "heldout_mse", "raw_rmse", "noise_level",
            "quantum", "SIGNALS"]
 
 _K = Parameter("K", "-", 0.0, K_MAX, 0.5, (), "friction exponent mu * total wrap angle")
@@ -202,3 +204,47 @@ def raw_rmse(pr, s: Series, data: MeasuredData, t_split: float) -> dict[str, flo
         out[f"rmse_{name}_{unit}"] = None if y is None else float(
             np.sqrt(np.mean((np.interp(data.time[m], s.time, getattr(pr, name)) - y[m]) ** 2)))
     return out
+
+
+class Progress:
+    """A one-line stderr bar (``enabled`` True), a callback(done, total, label), or nothing."""
+
+    def __init__(self, total: int, enabled: bool | Callable):
+        self.total, self.done, self.enabled = total, 0, enabled
+
+    def __call__(self, label: str) -> None:
+        self.done = min(self.done + 1, self.total)
+        if callable(self.enabled):
+            self.enabled(self.done, self.total, label)
+        elif self.enabled:
+            n = 30 * self.done // self.total
+            sys.stderr.write(f"\rdiagnose [{'#' * n}{'.' * (30 - n)}] {self.done}/{self.total} {label:<28}")
+            if self.done >= self.total:
+                sys.stderr.write("\n")
+            sys.stderr.flush()
+
+    def finish(self) -> None:
+        while self.done < self.total:       # the steps that were not needed
+            self("done")
+
+
+def trimmed_ms(r: np.ndarray, trim: float) -> float:
+    """Mean square of a residual without its largest ``trim`` share: the short transients of fast moves
+    (load and motor dynamics outside any quasi-static model) do not decide the model choice."""
+    r2 = np.sort(r * r)
+    return float(np.mean(r2[: max(1, int(round(r2.size * (1.0 - trim))))]))
+
+
+def sample_block(data: MeasuredData, t0: float, t1: float) -> dict:
+    """Raw sample range [start, stop) and time range [s] of data.time in [t0, t1)."""
+    i0, i1 = int(np.searchsorted(data.time, t0)), int(np.searchsorted(data.time, t1))
+    return {"index": [i0, i1], "time_s": [float(data.time[min(i0, len(data) - 1)]),
+                                          float(data.time[max(i1 - 1, i0)])], "n_samples": i1 - i0}
+
+
+def rest_reading(data: MeasuredData, name: str) -> float:
+    """|median| of a channel over the initial rest (the samples before x_in first moves by 5 um) [unit]."""
+    x = np.asarray(data.x_in, dtype=float)
+    moved = np.flatnonzero(np.abs(x - x[0]) > 5e-6)
+    stop = max(int(moved[0]) if moved.size else len(x), 5)
+    return abs(float(np.median(np.asarray(getattr(data, name), dtype=float)[:stop])))

@@ -16,7 +16,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from estimator.effects_kernels import backlash_play, run_extended, travel_lag
+from estimator.effects_kernels import backlash_play, route_shape, run_extended, travel_lag
 
 __all__ = ["Parameter", "Effect", "VelocityFriction", "Pretension", "CurvatureDrift", "TendonStiffening", "Stiction",
            "FrictionOffset", "Presliding", "DistalBacklash", "SensorEffect", "Series", "Prediction", "CATALOGUE",
@@ -222,12 +222,11 @@ _SENSOR = {
             "time delay of the channel: reading(t) = true(t - tau)"),
     "drift": ("d", {"T": ("N/s", -0.1, 0.1, (-0.005, 0.005))}, "linear zero drift: reading = true + d (t - t_0)"),
 }
-_CAUSE = {"offset": "zero offset of the {what} (tare, encoder zeroed off the rest)",
-          "gain": "scale error of the {what} (calibration factor)",
-          "lag": "the {what} channel lags the others (filter, bus or sampling skew)",
+_CAUSE = {"offset": "zero offset of the {what} (tare, encoder zeroed off the rest)", "gain": "scale error of the "
+          "{what} (calibration factor)", "lag": "the {what} channel lags the others (filter, bus or sampling skew)",
           "drift": "slow zero drift of the {what} (thermal drift of the bridge)"}
 _SIGN = {"offset": "a constant residual of one sign on pull and release; a non-zero reading at the initial rest",
-         "gain": "the pull and release slopes scaled together (their product is not e^0 = 1)",
+         "gain": "the pull and release slopes scaled together (their product is not 1)",
          "lag": "residual proportional to the rate of the channel; loop area grows with frequency",
          "drift": "residual growing linearly with time on both branches"}
 _WHAT = {"T_in": "proximal load cell", "T_out": "distal load cell", "x_in": "proximal encoder",
@@ -258,23 +257,16 @@ class SensorEffect(Effect):
         self.requires = ("x_out",) if channel[0] == "x" else ("T_out",) if channel == "T_out" else ()
 
 
-def _sensor_ids() -> list[tuple[str, str]]:
-    return [("offset", "T_in"), ("offset", "T_out"), ("gain", "T_in"), ("gain", "T_out"), ("lag", "T_in"),
-            ("lag", "T_out"), ("drift", "T_in"), ("drift", "T_out"), ("offset", "x_in"), ("offset", "x_out"),
-            ("lag", "x_in"), ("lag", "x_out")]
-
-
 _EFFECTS: tuple[Effect, ...] = (VelocityFriction(), Pretension(), CurvatureDrift(), TendonStiffening(), Stiction(),
                                 FrictionOffset(), Presliding(), DistalBacklash(),
-                                *(SensorEffect(k, c) for k, c in _sensor_ids()))
+                                *(SensorEffect(k, c) for k, chans in (("offset", "TT"), ("gain", "TT"), ("lag", "TT"),
+                                  ("drift", "TT"), ("offset", "xx"), ("lag", "xx")) for c in (f"{chans[0]}_in", f"{chans[0]}_out")))
 
 CATALOGUE: dict[str, Effect] = {e.id: e for e in _EFFECTS}
 EFFECT_IDS: tuple[str, ...] = tuple(CATALOGUE)
-#: former ids of the proximal load-cell effects
-ALIASES = {"sensor_offset": "sensor_offset:T_in", "sensor_delay": "sensor_lag:T_in"}
-#: effects that change the model's outputs identically (not separable from T_in, x_in, T_out, x_out):
-#: a scale on T_in is a scale on T_out (the capstan memory is homogeneous of degree 1 and L/EA absorbs
-#: it in x_out); an offset on x_in is an offset of the other sign on x_out (only x_in - x_out enters)
+ALIASES = {"sensor_offset": "sensor_offset:T_in", "sensor_delay": "sensor_lag:T_in"}   #: former ids
+#: effects with identical outputs: a T_in scale is a T_out scale (the memory is homogeneous, L/EA absorbs
+#: it in x_out); an x_in offset is an x_out offset of the other sign (only x_in - x_out enters)
 EQUIVALENT = {"sensor_gain:T_in": ("sensor_gain:T_out",), "sensor_gain:T_out": ("sensor_gain:T_in",),
               "sensor_offset:x_in": ("sensor_offset:x_out",), "sensor_offset:x_out": ("sensor_offset:x_in",)}
 
@@ -283,14 +275,6 @@ EQUIVALENT = {"sensor_gain:T_in": ("sensor_gain:T_out",), "sensor_gain:T_out": (
 #: in the shares q1 = r_1, q2 = (1 - r_1) r_2, q3 = (1 - r_1)(1 - r_2); r = (1/3, 1/2) is uniform (E7)
 ROUTE = (Parameter("r_1", "-", 0.0, 1.0, 1.0 / 3.0, (1.0 / 3.0,), "share of the wrap angle in the proximal third"),
          Parameter("r_2", "-", 0.0, 1.0, 0.5, (0.5,), "share of the rest in the middle third"))
-
-
-def route_shape(n1: int, r_1: float, r_2: float) -> np.ndarray:
-    """Normalised wrap angle u(s) [-], shape (n1,), at n1 nodes equally spaced in arc length: piecewise
-    linear over three equal thirds holding the shares q1, q2, q3 of the total angle (see :data:`ROUTE`)."""
-    q1 = r_1
-    q2 = (1.0 - r_1) * r_2
-    return np.interp(np.linspace(0.0, 1.0, n1), [0.0, 1 / 3, 2 / 3, 1.0], [0.0, q1, q1 + q2, 1.0])
 
 
 def effect(name: str) -> Effect:

@@ -38,7 +38,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["run_extended", "stiffening_strain", "travel_lag", "backlash_play", "V_STOP", "BREAK_MARGIN"]
+__all__ = ["run_extended", "route_shape", "stiffening_strain", "travel_lag", "backlash_play", "V_STOP", "BREAK_MARGIN"]
 
 V_STOP = 2e-4        # proximal speed below which a slide ends (the tendon sticks) [m/s]
 BREAK_MARGIN = 0.35  # share of the kinetic-static gap within which a turn of T_in counts as breakaway [-]
@@ -187,6 +187,14 @@ def backlash_play(x: np.ndarray, width: float) -> np.ndarray:
     out = np.empty(x.shape[0])
     _play(np.ascontiguousarray(x, dtype=np.float64), 0.5 * float(width), out)
     return out
+
+
+def route_shape(n1: int, r_1: float, r_2: float) -> np.ndarray:
+    """Normalised wrap angle u(s) [-], shape (n1,), at n1 nodes equally spaced in arc length: piecewise
+    linear over three equal thirds holding the shares q1, q2, q3 of the total angle (see :data:`estimator.effects.ROUTE`)."""
+    q1 = r_1
+    q2 = (1.0 - r_1) * r_2
+    return np.interp(np.linspace(0.0, 1.0, n1), [0.0, 1 / 3, 2 / 3, 1.0], [0.0, q1, q1 + q2, 1.0])
 
 
 def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np.ndarray, w: np.ndarray, *,
