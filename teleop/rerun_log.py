@@ -318,9 +318,9 @@ class RerunLogger:
         if self._route is not None:
             rec.log("sheath/route", rr.LineStrips3D([self._route], radii=0.002, colors=[(120, 120, 120, 255)]),
                     static=True)
-            self._set_time(rec, t)
             s = np.linspace(0.0, L, 50)
-            self._log_sheath(s, np.zeros_like(s), None)
+            self.log_profile(t, s, np.zeros_like(s))          # the rest profile: bars and route at 0 N
+            self._profile_calls -= 1                           # not counted by the decimation
 
     def _log_sheath(self, s: np.ndarray, est: np.ndarray, true: np.ndarray | None) -> None:
         """The route coloured by the estimated (and beside it the true) tension; the distal joint."""

@@ -175,7 +175,8 @@ def run_slave(args: argparse.Namespace) -> int:
         try:
             name, columns, meta = recording(cfg, rig)
             with CsvRecorder(run_dir / name, columns, meta, flush_every=500) as rec, \
-                    RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd") as rr:
+                    RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd",
+                                route=None if cfg.instrument.joints else cfg.sheath.runs) as rr:   # 3D sheath view
                 links = slave_links(session, ident, injector)
                 node = Node(cfg, rig, links, recorder=rec, rerun=rr, run_dir=run_dir,
                             stop_on_master_stop=args.exit_on_master_stop, calibration=calibration,
@@ -205,6 +206,7 @@ def run_master(args: argparse.Namespace) -> int:
     from teleop.config import load_config
     from teleop.csv_writer import ThreadedCsvRecorder as CsvRecorder  # the loop only queues rows; a thread writes
     from teleop.recording import raise_on_sigterm
+    from teleop.rerun_thread import ThreadedRerunLogger as RerunLogger  # the loop only queues the calls
 
     cfg = load_config(args.config)
     device = make_device(cfg, args.protocol)     # master.device.type through the registry
@@ -220,9 +222,11 @@ def run_master(args: argparse.Namespace) -> int:
                 if not cfg.instrument.joints else "per joint: cmd, slave angle [rad], device position [m], "
                 "rendered tension torque_hat / r [N], forces [N], passivity energy [J]"}
         with raise_on_sigterm(), open_session(cfg, args, clock) as session, \
-                CsvRecorder(run_dir / "master.csv", csv_columns(cfg), meta, units=csv_units(cfg), flush_every=100) as rec:
+                CsvRecorder(run_dir / "master.csv", csv_columns(cfg), meta, units=csv_units(cfg), flush_every=100) as rec, \
+                RerunLogger("teleop", run_dir.name, getattr(args, "rerun", None) or cfg.recording.rerun, run_dir / "master.rrd",
+                            wall_clock=True) as rr:   # master-side series; same recording id as slave.rrd
             links = master_links(session, ident, injector)
-            node = MasterNode(cfg, device, links, recorder=rec)
+            node = MasterNode(cfg, device, links, recorder=rec, rerun=rr)
             _serve(node, clock, args, run_dir, "master", injector, close_first=device.close)
     _log_master_done(node)
     return 0 if getattr(device, "finished", True) else 1
