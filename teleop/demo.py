@@ -159,8 +159,8 @@ def format_summary(s: dict) -> str:
     L += verdict_lines(s)
     L.append("")
     L.append(f"recording: {s['run_dir']}/slave.csv (measured-data format, truth + estimates per cycle)")
-    L.append(f"rerun:     {s['run_dir']}/slave.rrd  ->  open with `rerun {s['run_dir']}/slave.rrd`"
-             f" (or .venv/bin/rerun)")
+    L.append(f"rerun:     open with `.venv/bin/rerun {s['run_dir']}/slave.rrd {s['run_dir']}/master.rrd` "
+             f"(no display: README, 'Looking at a run')")
     if s.get("figure"):
         L.append(f"figure:    {s['figure']}  (distal tension and elongation: truth vs estimates)")
     L.append(f"summary:   {s['run_dir']}/summary.json")

@@ -324,9 +324,9 @@ class RerunLogger:
 
     def _log_sheath(self, s: np.ndarray, est: np.ndarray, true: np.ndarray | None) -> None:
         """The route coloured by the estimated (and beside it the true) tension; the distal joint."""
-        if self._route is None or self._route_s is None or s.size < 2:
-            return
         rr, rec = self._rr, self._rec
+        if rec is None or self._route is None or self._route_s is None or s.size < 2:
+            return
         u = s / s[-1] * self._route_s[-1]
         pts = np.stack([np.interp(u, self._route_s, self._route[:, k]) for k in range(3)], axis=1)
         segs = np.stack([pts[:-1], pts[1:]], axis=1)
