@@ -178,5 +178,7 @@ def test_reserve_does_not_switch_on_a_stick_slip_handle():
     """Empty reserve, a handle that sticks (v = 0) and slips (v = 20 mm/s) in turn along the force:
     the force stays eased off instead of coming back in full at every stick."""
     pc = PassivityController(4.0, reserve=0.005)
+    assert pc.energy == 0.005                    # a (re-)engage starts with the reserve
+    pc.energy = 0.0                              # emptied
     out = [pc.step(1.0, 0.02 if k % 3 else 0.0, 1e-3) for k in range(300)]
     assert max(out[10:]) < 0.05 and pc.energy >= -1e-12
