@@ -49,7 +49,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The argument parser. ``argv`` decides whether ``teleop.analyze`` is imported (only for analyze)."""
     parser = argparse.ArgumentParser(prog=PROG, description="Haptic teleoperation of tendon-sheath instruments.")
     sub = parser.add_subparsers(dest="command",
-                                metavar="{demo,master,slave,record,router,bridge,calibrate,analyze,devices}",
+                                metavar="{demo,master,slave,record,router,bridge,calibrate,replay,analyze,devices}",
                                 required=True)
 
     p = sub.add_parser("demo", help="both sides as two processes over Zenoh on 127.0.0.1, then a summary")
@@ -100,6 +100,12 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     from teleop.calibrate import add_calibrate_arguments, run_calibrate
     add_calibrate_arguments(p)
     p.set_defaults(func=run_calibrate)
+
+    p = sub.add_parser("replay", help="play a recorded run back through the estimator and the Rerun view, "
+                                      "compared with the recorded estimate and the truth (teleop/app/replay.py)")
+    from teleop.app import replay
+    replay.add_arguments(p)
+    p.set_defaults(func=replay.main_replay)
 
     p = sub.add_parser("devices", help="list HID devices (vendor/product id, usage page, usage, path)")
     if "devices" in (sys.argv[1:] if argv is None else argv)[:1]:
