@@ -119,7 +119,13 @@ def test_sigkill_of_a_side_loses_no_published_message(tmp_path, victim):
         for key, seqs in published.items():
             assert len(seqs) > 100 if not key.endswith("heartbeat") else len(seqs) > 10
             lost = sorted(set(seqs) - set(got[key]))
-            assert lost == [], f"{key}: {len(lost)} of {len(seqs)} published messages not recorded: {lost[:20]}"
+            # The killed side's newest message may still sit in its own zenoh tx queue (handed over,
+            # logged, not yet on the socket) when SIGKILL hits: no process can flush a user-space queue
+            # through a SIGKILL. Anything older than that one message has left the process and must be
+            # in the recording (seen once in 20+ runs: seq 575 of 576, the last, on a loaded machine).
+            in_flight = {max(seqs)} if side == victim else set()
+            assert set(lost) <= in_flight, \
+                f"{key}: {len(lost)} of {len(seqs)} published messages not recorded: {lost[:20]}"
             assert len(got[key]) == len(set(got[key]))          # nothing recorded twice
             extra = set(got[key]) - set(seqs)                   # nothing invented: at most the one message
             # the killed side handed to zenoh just before SIGKILL hit, before its log line was written
