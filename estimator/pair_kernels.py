@@ -3,7 +3,7 @@
 The seed pair model (:mod:`estimator.pair`) lets the angle follow each tendon's kinematics at every
 sample, with the elongation driven by the measured tension. Here the tendons, the sheath friction
 and the joint are one mechanism, the pull-pull pair of the reference simulator (literature.md
-section 4, Agrawal et al. 2010; :mod:`slave.joint_physics`), driven by the recorded motor command:
+section 4, Agrawal et al. 2010; :mod:`estimator.kernels`), driven by the recorded motor command:
 
     x_in,a = x_in,a(0) + G (c - c_0),   x_in,b = x_in,b(0) - G (c - c_0)      motor, r = 1 units  (P1)
     T_j(s)                              tension-profile memory of tendon j, K_j, compliance lam   (P2)
@@ -14,9 +14,9 @@ All lengths are in units of the joint pulley radius r, so G = g / r (motor to jo
 lam = (L/EA) / r [rad/N] (tendon compliance seen at the joint), k = k_joint / r [N/rad] (the joint
 stiffness k_joint [N m/rad] as a tendon-tension difference per radian), and the
 angle is in rad. One step (each sample is split into ``substeps``): the motors move with the joint
-held (slip spreads from each proximal end, :func:`slave.simulated_physics.advance_proximal`), then
+held (slip spreads from each proximal end, :func:`estimator.kernels.advance_proximal`), then
 the joint settles with the motors held (slip spreads from each distal end and theta solves (P4),
-:func:`slave.joint_physics.settle_joint`). So the joint stays put after a reversal until a slip front
+:func:`estimator.kernels.settle_joint`). So the joint stays put after a reversal until a slip front
 reaches a tip - the capstan band of each tendon acting on the joint (E1 with E11, E13) - and the
 proximal tensions are an output of the model, not an input.
 
