@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 from master.arm import ArmParameters, HumanArm
 from master.device import MultiAxisState
-from master.simulated import approach
+from master.simulated import ClutchHand, approach
 from teleop.config import Config, joint_set_tension
 from teleop.errors import ConfigError
 
@@ -158,10 +158,7 @@ class MultiAxisOperator:
         self._T: list[tuple[float, float]] | None = None
         self._engaged = False
         self._t_prev: float | None = None
-        self.clutch_bit, self.clutch_time = int(clutch_bit), float(clutch_time)
-        self.clutches = 0
-        self._clutch_wanted = False
-        self._clutch_until: float | None = None
+        self.clutch = ClutchHand(clutch_bit, clutch_time)
 
     @property
     def n_axes(self) -> int:
@@ -188,8 +185,12 @@ class MultiAxisOperator:
 
     def on_console(self, status) -> None:
         """The console's status (:class:`master.console.ConsoleStatus`): ALIGN makes the operator clutch."""
-        if getattr(status, "name", status) == "ALIGN" and self._clutch_until is None and self.clutch_bit >= 0:
-            self._clutch_wanted = True
+        self.clutch.on_console(status)
+
+    @property
+    def clutches(self) -> int:
+        """Clutch presses so far."""
+        return self.clutch.count
 
     def read(self, t: float) -> MultiAxisState:
         """Advance every axis's script to ``t`` [s]; hand positions [m] and the clutch button."""
@@ -200,15 +201,7 @@ class MultiAxisOperator:
         if self._engaged and self._T is not None:
             for a, T in zip(self.axes, self._T):
                 a.advance(t, dt, T)
-        buttons = 0
-        if self._clutch_wanted:
-            self._clutch_wanted, self._clutch_until = False, t + self.clutch_time
-            self.clutches += 1
-        if self._clutch_until is not None:
-            if t < self._clutch_until:
-                buttons = 1 << self.clutch_bit
-            else:
-                self._clutch_until = None
+        buttons = self.clutch.buttons(t)
         # per axis: (m_a + m_d) dv/dt = k_a (p_i - p) + b_a (v_i - v) + F - b_d v - F_c sgn(v)
         pos = tuple(a.arm.step(dt, a.intended, a.velocity, a.force) for a in self.axes)
         return MultiAxisState(t=t, positions=pos, buttons=buttons)

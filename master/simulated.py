@@ -31,7 +31,7 @@ from master.arm import ArmParameters, HumanArm
 from master.device import DeviceState
 from teleop.errors import ConfigError
 
-__all__ = ["Segment", "PROTOCOLS", "build_protocol", "ScriptedOperator"]
+__all__ = ["Segment", "PROTOCOLS", "build_protocol", "ClutchHand", "ScriptedOperator"]
 
 MARKER_PAPER = 1
 MARKER_MINOR = 2
@@ -90,6 +90,34 @@ def approach(error: float) -> float:
     """Fraction of the set speed at ``error`` [N] from the target: 1 beyond APPROACH_BAND, down to
     APPROACH_MIN at the target (an operator slows down as the read-out nears the target)."""
     return min(1.0, max(APPROACH_MIN, error / APPROACH_BAND))
+
+
+class ClutchHand:
+    """The scripted hand's clutch button: when the console asks to align (status ALIGN), the hand
+    presses button ``bit`` for ``hold`` [s] and lets go, which re-anchors the master where the hand
+    is. A negative ``bit``: the hand never clutches. ``count`` is the number of presses."""
+
+    def __init__(self, bit: int, hold: float):
+        self.bit, self.hold = int(bit), float(hold)
+        self.count = 0
+        self._wanted = False
+        self._until: float | None = None    # [s] end of the press under way
+
+    def on_console(self, status) -> None:
+        """ALIGN asks for one press (not while one is under way)."""
+        if getattr(status, "name", status) == "ALIGN" and self._until is None and self.bit >= 0:
+            self._wanted = True
+
+    def buttons(self, t: float) -> int:
+        """The button bits at time ``t`` [s]: ``1 << bit`` while pressed, else 0."""
+        if self._wanted:
+            self._wanted, self._until = False, t + self.hold
+            self.count += 1
+        if self._until is not None:
+            if t < self._until:
+                return 1 << self.bit
+            self._until = None
+        return 0
 
 
 class ScriptedOperator:
@@ -160,16 +188,17 @@ class ScriptedOperator:
         self._t_prev: float | None = None
         self._wait_until: float | None = None   # start delay / dwell end [s]
         self._t_segment = 0.0
-        self.clutch_bit, self.clutch_time = int(clutch_bit), float(clutch_time)
-        self.clutches = 0
-        self._clutch_wanted = False
-        self._clutch_until: float | None = None
+        self.clutch = ClutchHand(clutch_bit, clutch_time)
 
     # -- OperatorView ------------------------------------------------------------------------------
     def on_console(self, status) -> None:
         """The console's status (:class:`master.console.ConsoleStatus`): ALIGN makes the operator clutch."""
-        if getattr(status, "name", status) == "ALIGN" and self._clutch_until is None and self.clutch_bit >= 0:
-            self._clutch_wanted = True
+        self.clutch.on_console(status)
+
+    @property
+    def clutches(self) -> int:
+        """Clutch presses so far."""
+        return self.clutch.count
 
     def watch(self, T_in: float | None, engaged: bool) -> None:
         """Latest proximal tension [N] (None: none yet) and whether control is engaged."""
@@ -184,15 +213,7 @@ class ScriptedOperator:
         self.velocity = 0.0
         if self._engaged and not self.finished and self._T_in is not None:
             self._advance(t, dt, self._T_in)
-        buttons = 0
-        if self._clutch_wanted:
-            self._clutch_wanted, self._clutch_until = False, t + self.clutch_time
-            self.clutches += 1
-        if self._clutch_until is not None:
-            if t < self._clutch_until:
-                buttons = 1 << self.clutch_bit
-            else:
-                self._clutch_until = None
+        buttons = self.clutch.buttons(t)
         if self.static_arm:
             # p_hand = p_intended + F / k_arm   (massless spring)
             p = self.intended + self.force / self.k_arm
