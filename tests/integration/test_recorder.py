@@ -9,10 +9,8 @@ bound waits.
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -24,6 +22,7 @@ from teleop.publish_log import read_publish_log
 from teleop.record import read_messages
 from teleop.recording import read_measured_csv
 from teleop.transport import free_tcp_port
+from tests.integration.processes import start, stop_all, wait_for
 
 pytestmark = pytest.mark.integration
 
@@ -39,28 +38,6 @@ recording:
 transport:
   listen: ["tcp/127.0.0.1:{port}"]
 """
-
-
-def start(args: list[str], log: Path, env: dict | None = None) -> subprocess.Popen:
-    with open(log, "w") as fh:
-        return subprocess.Popen([sys.executable, "-m", "teleop.cli", *args], stdout=fh, stderr=subprocess.STDOUT,
-                                env=dict(os.environ, PYTHONUNBUFFERED="1", **(env or {})))
-
-
-def wait_for(predicate, timeout: float, what: str) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"gave up waiting {timeout:g} s for {what}")
-
-
-def stop_all(procs) -> None:
-    for p in procs:
-        if p.poll() is None:
-            p.kill()
-            p.wait()
 
 
 def recorded(rec_dir: Path) -> dict[str, list[int]]:

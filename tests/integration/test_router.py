@@ -7,17 +7,14 @@ router. Deadlines only bound waits.
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
-import sys
-import time
-from pathlib import Path
 
 import pytest
 
 from teleop.publish_log import read_publish_log
 from teleop.transport import free_tcp_port
+from tests.integration.processes import start, stop_all, wait_text
 
 pytestmark = pytest.mark.integration
 
@@ -36,21 +33,6 @@ transport:
   connect: ["tcp/127.0.0.1:{port}"]
   run_id_timeout: 1.5
 """
-
-
-def start(args: list[str], log: Path, env: dict | None = None) -> subprocess.Popen:
-    with open(log, "w") as fh:
-        return subprocess.Popen([sys.executable, "-m", "teleop.cli", *args], stdout=fh, stderr=subprocess.STDOUT,
-                                env=dict(os.environ, PYTHONUNBUFFERED="1", **(env or {})))
-
-
-def wait_text(path: Path, text: str, timeout: float) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if path.is_file() and text in path.read_text():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"gave up waiting {timeout:g} s for {text!r} in {path.name}: {path.read_text()[-2000:]}")
 
 
 def test_router_slave_master_recorder_as_four_processes(tmp_path):
@@ -79,10 +61,7 @@ def test_router_slave_master_recorder_as_four_processes(tmp_path):
         procs[0].send_signal(signal.SIGINT)
         assert procs[0].wait(20) == 130
     finally:
-        for p in procs:
-            if p.poll() is None:
-                p.kill()
-                p.wait()
+        stop_all(procs)
     dirs = [p for p in runs.glob("*") if p.is_dir()]
     assert len(dirs) == 1, f"one shared run directory expected, got {dirs}"
     run = dirs[0]

@@ -21,6 +21,7 @@ from teleop.keys import estimate_key, heartbeat_key
 from teleop.messages import Estimate, Heartbeat, SideState
 from teleop.recording import read_measured_csv
 from teleop.transport import Session, free_tcp_port, loopback_endpoint, zenoh_config
+from tests.integration.processes import start, stop_all, wait_for
 
 pytestmark = pytest.mark.integration
 
@@ -40,26 +41,6 @@ def write_config(tmp_path: Path, ident: str, rerun: str = "off") -> Path:
     path = tmp_path / "test.yaml"
     path.write_text(CONFIG.format(ident=ident, rerun=rerun, caldir=tmp_path / "calibration"), encoding="utf-8")
     return path
-
-
-def teleop(*args: str, log: Path) -> subprocess.Popen:
-    with open(log, "w") as fh:
-        return subprocess.Popen([sys.executable, "-m", "teleop.cli", *args], stdout=fh, stderr=subprocess.STDOUT)
-
-
-def stop(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        proc.kill()
-        proc.wait()
-
-
-def wait_for(predicate, timeout: float, what: str) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return
-        time.sleep(0.02)
-    raise AssertionError(f"gave up waiting {timeout:g} s for {what}")
 
 
 def test_demo_runs_both_processes_and_writes_the_summary(tmp_path):
@@ -90,8 +71,8 @@ def test_killing_the_master_makes_the_slave_go_safe(tmp_path):
     port = free_tcp_port()
     ep = loopback_endpoint(port)
     run_dir = tmp_path / "run"
-    slave = teleop("slave", "--config", str(cfg_path), "--listen", ep, "--run-dir", str(run_dir),
-                   "--max-duration", "60", log=tmp_path / "slave.log")
+    slave = start(["slave", "--config", str(cfg_path), "--listen", ep, "--run-dir", str(run_dir),
+                   "--max-duration", "60"], tmp_path / "slave.log")
     master = None
     try:
         with Session(zenoh_config(cfg.transport, listen=(), connect=(ep,))) as session:
@@ -102,8 +83,8 @@ def test_killing_the_master_makes_the_slave_go_safe(tmp_path):
                 rec = beats.latest()
                 return None if rec is None else rec.message.state
 
-            master = teleop("master", "--config", str(cfg_path), "--connect", ep, "--run-dir", str(run_dir),
-                            "--protocol", "paper", "--max-duration", "60", log=tmp_path / "master.log")
+            master = start(["master", "--config", str(cfg_path), "--connect", ep, "--run-dir", str(run_dir),
+                            "--protocol", "paper", "--max-duration", "60"], tmp_path / "master.log")
             wait_for(lambda: slave_state() == SideState.ENGAGED, 40, "the slave to be ENGAGED")
             # let the operator pull the tendon well above pretension + RELAX_BAND, so that SAFE has to release
             pulled = cfg.sheath.pretension + RELAX_BAND + 1.0
@@ -116,9 +97,7 @@ def test_killing_the_master_makes_the_slave_go_safe(tmp_path):
         slave.send_signal(signal.SIGINT)                     # Ctrl-C: clean exit, recordings closed
         assert slave.wait(20) == 130
     finally:
-        stop(slave)
-        if master is not None:
-            stop(master)
+        stop_all([slave] if master is None else [slave, master])
     log = (tmp_path / "slave.log").read_text()
     assert "Traceback" not in log and "ENGAGED -> SAFE" in log
     assert "master liveliness token gone" in log or "command stale" in log

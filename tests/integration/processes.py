@@ -1,0 +1,45 @@
+"""Starting, waiting for and stopping `teleop` processes in the integration tests (one copy).
+
+Deadlines only bound waits: every wait polls a condition and gives up with a message naming it.
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+
+def start(args: list[str], log: Path, env: dict | None = None) -> subprocess.Popen:
+    """``python -m teleop.cli *args`` with stdout and stderr in ``log`` (unbuffered; ``env`` added)."""
+    with open(log, "w") as fh:
+        return subprocess.Popen([sys.executable, "-m", "teleop.cli", *args], stdout=fh, stderr=subprocess.STDOUT,
+                                env=dict(os.environ, PYTHONUNBUFFERED="1", **(env or {})))
+
+
+def wait_for(predicate, timeout: float, what: str) -> None:
+    """Poll ``predicate`` until true; AssertionError naming ``what`` after ``timeout`` [s]."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.02)
+    raise AssertionError(f"gave up waiting {timeout:g} s for {what}")
+
+
+def wait_text(path: Path, text: str, timeout: float) -> None:
+    """Wait until the file ``path`` contains ``text``; the AssertionError shows the file's tail."""
+    try:
+        wait_for(lambda: path.is_file() and text in path.read_text(), timeout, f"{text!r} in {path.name}")
+    except AssertionError as e:
+        tail = path.read_text()[-2000:] if path.is_file() else "(no file)"
+        raise AssertionError(f"{e}: {tail}") from None
+
+
+def stop_all(procs) -> None:
+    """SIGKILL every process still running and reap it."""
+    for p in procs:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
