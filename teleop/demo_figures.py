@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from estimator.capstan import phase_formula_batch
+from teleop.figure_files import pyplot
 from teleop.recording import read_measured_csv
 
 __all__ = ["demo_figure"]
@@ -30,9 +31,7 @@ def demo_figure(csv_path: str | Path, calibration: dict, deadband: float, out_pn
     -------
     Path of the PNG.
     """
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     d = read_measured_csv(csv_path)
     marker = d.extra["marker"].astype(int)

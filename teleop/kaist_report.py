@@ -21,29 +21,13 @@ from pathlib import Path
 
 import numpy as np
 
-from teleop.errors import ConfigError
+from teleop.figure_files import output_dir, pyplot
 
 __all__ = ["write_kaist_figures", "write_kaist_report", "FIGURES"]
 
 _MODELS = ("seed pair model", "force path", "linear map", "linear map + play")
 FIGURES = ("kaist_rmse.png", "kaist_loops.png", "kaist_residuals.png", "kaist_pair_loops.png",
            "kaist_pair_residuals.png", "kaist_pair_tensions.png", "kaist_shared.png")
-
-
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
-def _mkdir(directory: str | Path, option: str) -> Path:
-    d = Path(directory)
-    try:
-        d.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise ConfigError(f"{option} {d}: cannot create the directory ({e.strerror})") from None
-    return d
 
 
 def _finding1_figures(recs, details, summary, d: Path, plt) -> list[Path]:
@@ -292,8 +276,8 @@ def write_kaist_figures(recs, details: list[dict], summary: dict, directory: str
     ConfigError
         ``directory`` exists and is not a directory, or cannot be created.
     """
-    plt = _plt()
-    d = _mkdir(directory, option)
+    plt = pyplot()
+    d = output_dir(directory, option)
     return _finding1_figures(recs, details, summary, d, plt) + _pair_figures(recs, details, summary, d, plt)
 
 

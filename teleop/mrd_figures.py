@@ -17,29 +17,13 @@ from pathlib import Path
 
 import numpy as np
 
-from teleop.errors import ConfigError
+from teleop.figure_files import output_dir, pyplot
 from teleop.mrd import MrdRun
 
 __all__ = ["write_mrd_figures", "write_mrd_report", "FIGURES"]
 
 FIGURES = ("mrd_loops.png", "mrd_residuals.png", "mrd_bands.png")
 _CREDIT = "data: MRD Lab, University of Minnesota (ODbL/DbCL)"
-
-
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
-def _mkdir(d: str | Path, option: str) -> Path:
-    d = Path(d)
-    try:
-        d.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise ConfigError(f"{option} {d}: cannot create the directory ({e.strerror})") from None
-    return d
 
 
 def _grid(runs: list[MrdRun], values: dict[str, float]) -> tuple[np.ndarray, list[float], list[int]]:
@@ -78,8 +62,8 @@ def _corners(runs: list[MrdRun]) -> list[MrdRun]:
 def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, directory: str | Path) -> list[Path]:
     """Write :data:`FIGURES` to ``directory``; returns their paths. Raises ConfigError when the
     directory cannot be created."""
-    plt = _plt()
-    d = _mkdir(directory, "--figures")
+    plt = pyplot()
+    d = output_dir(directory, "--figures")
     paths = []
     k0 = details["k0"]
 
@@ -182,7 +166,7 @@ def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, director
 def write_mrd_report(runs: list[MrdRun], summary: dict, details: dict, directory: str | Path) -> Path:
     """``report.md`` with the printed table and the figures in ``directory``; returns its path."""
     from teleop.mrd_report import format_mrd
-    d = _mkdir(directory, "--report")
+    d = output_dir(directory, "--report")
     figs = write_mrd_figures(runs, summary, details, d)
     text = ["# Jaw torque of a da Vinci tool from its spindle (teleop analyze --mrd)", "",
             f"Data: {summary['attribution']}.", "", "```", format_mrd(summary), "```", ""]

@@ -5,6 +5,8 @@ from pathlib import Path
 
 import numpy as np
 
+from teleop.figure_files import pyplot
+
 __all__ = ["streams_figure"]
 
 _SKIP = ("seq", "cmd_seq", "marker", "side", "engaged", "phase", "count")
@@ -23,9 +25,7 @@ def streams_figure(paths, out: str | Path, max_signals: int = 4) -> Path:
     """One panel per CSV in ``paths`` (the recorder's per-stream files): up to ``max_signals`` of its
     columns against ``time`` [s] (time stamps, counters, profiles and enums left out; the heartbeat
     ``state`` kept). Returns ``out`` (PNG)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     tables = [(Path(p), *_read(Path(p))) for p in paths]
     tables = [t for t in tables if t[2].size]
