@@ -42,6 +42,8 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 from numba import njit
 
+from estimator.sheath import envelope_clip
+
 __all__ = ["SPINDLE_TRAVEL", "SpindleParams", "Batch", "make_batch", "pair_kernel", "predict_torque", "predict_angle",
            "play_batch", "angle_lag", "elongation_difference", "spindle_rate", "initial_side", "first_reversal", "OMEGA_S", "N_NODES"]
 
@@ -187,21 +189,11 @@ def pair_kernel(u, starts, side, Q, K_a, K_b, n_nodes, Td, dE):  # pragma: no co
             tb = max(0.5 * (Q - u[i]), 0.0)
             ea = 0.0
             eb = 0.0
-            for j in range(n_nodes + 1):
-                x = Ta[j]
-                if x < ta * lo[j]:
-                    x = ta * lo[j]
-                elif x > ta * hi[j]:
-                    x = ta * hi[j]
-                Ta[j] = x
-                ea += w[j] * x
-                y = Tb[j]
-                if y < tb * lob[j]:
-                    y = tb * lob[j]
-                elif y > tb * hib[j]:
-                    y = tb * hib[j]
-                Tb[j] = y
-                eb += w[j] * y
+            for j in range(n_nodes + 1):         # each cable's profile memory (Phee et al. eq. (1) per node)
+                Ta[j] = envelope_clip(Ta[j], ta * lo[j], ta * hi[j])
+                ea += w[j] * Ta[j]
+                Tb[j] = envelope_clip(Tb[j], tb * lob[j], tb * hib[j])
+                eb += w[j] * Tb[j]
             Td[i] = Ta[n_nodes] - Tb[n_nodes]
             dE[i] = ea - eb
 
