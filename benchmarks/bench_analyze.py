@@ -23,10 +23,10 @@ os.environ.update(ONE_THREAD)           # before numpy loads: the in-process spl
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from estimator.diagnosis import diagnose  # noqa: E402
+from estimator.offline.diagnosis import diagnose  # noqa: E402
 from slave.scenarios import record  # noqa: E402
+from teleop.app.report import write_report  # noqa: E402
 from teleop.recording import read_measured_csv, write_measured_csv  # noqa: E402
-from teleop.report import write_report  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -43,7 +43,7 @@ def main(argv: list[str] | None = None) -> None:
         mb = csv.stat().st_size / 1e6
         # the CLI as a user runs it, one thread
         env = {**os.environ, **ONE_THREAD}
-        cmd = [sys.executable, "-m", "teleop.cli", "analyze", str(csv), "--json", str(d / "d.json"),
+        cmd = [sys.executable, "-m", "teleop.app.cli", "analyze", str(csv), "--json", str(d / "d.json"),
                "--report", str(d / "report")]
         t0 = time.perf_counter()
         proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)

@@ -13,7 +13,7 @@ hidden effect. Two simulators, reported apart:
 Seed sets: ``dev`` (effects 100+, clean 500+, uncatalogued 900+) is what the thresholds were set on;
 ``final`` (the same offsets + 100000, the contract's final range) is run once, never tuned on.
 Prints per effect and per channel: accuracy (strict, and up to the inseparable pairs of
-estimator.effects.EQUIVALENT), gains, false alarms on clean data; never fails on the figures (the
+estimator.offline.effects.EQUIVALENT), gains, false alarms on clean data; never fails on the figures (the
 pass/fail checks are in tests/estimator/test_diagnosis.py).
 
     .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|final] [--seeds 2]
@@ -33,8 +33,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from estimator.diagnosis import diagnose  # noqa: E402
-from estimator.effects import EFFECT_IDS, EQUIVALENT, NONE  # noqa: E402
+from estimator.offline.diagnosis import diagnose  # noqa: E402
+from estimator.offline.effects import EFFECT_IDS, EQUIVALENT, NONE  # noqa: E402
 
 SEED_BASE = {"dev": 0, "final": 100000}
 UNCATALOGUED = "load_cell_wander"

@@ -7,7 +7,7 @@ import time
 import numpy as np
 
 from estimator.capstan import phase_formula_batch
-from estimator.distal import DistalEstimator, estimate_batch
+from estimator.online.distal import DistalEstimator, estimate_batch
 from estimator.sheath import SheathModel
 from teleop.config import Config
 

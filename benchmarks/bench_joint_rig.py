@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from estimator.joint import JointEstimator
+from estimator.online.joint import JointEstimator
 from estimator.sheath import SheathModel
 from slave.joint_rig import SimulatedInstrument
 from slave.pair_control import PairController

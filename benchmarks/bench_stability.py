@@ -27,7 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from estimator.distal import DistalEstimator  # noqa: E402
+from estimator.online.distal import DistalEstimator  # noqa: E402
 from estimator.sheath import SheathModel  # noqa: E402
 from master.arm import ArmParameters  # noqa: E402
 from master.mapping import ForceMap, MotionMap, clamp_force  # noqa: E402

@@ -1,6 +1,6 @@
 """The capstan-joint pair model: two distributed Coulomb tendons on one elastic joint, driven by the motor.
 
-The seed pair model (:mod:`estimator.pair`) lets the angle follow each tendon's kinematics at every
+The seed pair model (:mod:`estimator.offline.pair`) lets the angle follow each tendon's kinematics at every
 sample, with the elongation driven by the measured tension. Here the tendons, the sheath friction
 and the joint are one mechanism, the pull-pull pair of the reference simulator (literature.md
 section 4, Agrawal et al. 2010; :mod:`estimator.kernels`), driven by the recorded motor command:

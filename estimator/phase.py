@@ -1,7 +1,7 @@
 """The phase of a tendon-sheath transmission (Phee et al. 2009, Sec. III), and a readable classifier.
 
-The readable phase (:func:`readable_step`, used by :class:`estimator.distal.DistalEstimator` and
-:func:`estimator.distal.estimate_batch`) changes only when the proximal tension has moved past the
+The readable phase (:func:`readable_step`, used by :class:`estimator.online.distal.DistalEstimator` and
+:func:`estimator.online.distal.estimate_batch`) changes only when the proximal tension has moved past the
 noise: with a band ``delta`` [N] (a few load-cell noise sigmas),
 
 * the direction turns from rising to falling once ``T_in < max_since_last_turn - delta`` (and back

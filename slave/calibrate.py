@@ -5,7 +5,7 @@ Sequence, one :meth:`JointLimitCalibration.step` per control cycle:
 1. ``set_load(tissue=False)``: nothing but the joint's own spring and its limit at the tip;
 2. PULL: ramp the proximal command at ``calibration.speed`` from the present position until the load
    cell reads ``T_in >= calibration.target_tension`` (at most ``max_travel`` of travel);
-3. fit: :func:`estimator.calibration.calibrate_joint_limit` on the recorded (x_in, T_in) of the pull,
+3. fit: :func:`estimator.offline.calibration.calibrate_joint_limit` on the recorded (x_in, T_in) of the pull,
    with L = sheath length, EA from the tendon datasheet and, if ``calibration.use_route``, the wrap
    shape of the configured route (else constant curvature, as in the paper);
 4. RELEASE: ramp the command back to the starting position at ``release_factor`` times the speed,
@@ -23,7 +23,7 @@ from enum import Enum
 
 import numpy as np
 
-from estimator.calibration import CalibrationResult, calibrate_joint_limit
+from estimator.offline.calibration import CalibrationResult, calibrate_joint_limit
 from slave.rig import Rig, RigState
 from teleop.config import Config
 from teleop.errors import CalibrationError

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import yaml
 
-from estimator.calibration import CalibrationResult
+from estimator.offline.calibration import CalibrationResult
 from estimator.sheath import SheathModel
 from slave.calibrate import route_wrap_shape
 from slave.pair_calibrate import tendon_wrap_shape

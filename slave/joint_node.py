@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from estimator.joint import JointEstimator
+from estimator.online.joint import JointEstimator
 from slave.calibration_file import InstrumentCalibration, from_results, save_calibration, sheath_models
 from slave.node_base import Decision, SlaveLinks, SlaveNodeBase
 from slave.pair_calibrate import PairCalibration, set_tension

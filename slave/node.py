@@ -53,7 +53,7 @@ from typing import Any
 
 import numpy as np
 
-from estimator.distal import DistalEstimator
+from estimator.online.distal import DistalEstimator
 from estimator.sheath import SheathModel, profile_batch
 from slave.calibrate import JointLimitCalibration
 from slave.calibration_file import InstrumentCalibration, from_tendon_result, save_calibration, tendon_model
@@ -319,8 +319,8 @@ def warm_up(cfg: Config) -> None:
     With an empty numba cache (a fresh checkout) the first call of each kernel takes seconds; done
     inside the loop it would stall the first cycles. Uses throwaway objects: nothing is kept.
     """
-    from estimator.calibration import calibrate_joint_limit  # noqa: F401  (import cost, too)
-    from estimator.distal import DistalEstimator
+    from estimator.offline.calibration import calibrate_joint_limit  # noqa: F401  (import cost, too)
+    from estimator.online.distal import DistalEstimator
     from estimator.sheath import SheathModel
     from slave.simulated import SimulatedRig
 

@@ -1,6 +1,6 @@
 """Joint-limit calibration of every tendon of an instrument, both directions, from proximal signals only.
 
-The seed paper's initialisation (Phee et al. 2009, Sec. IV; :mod:`estimator.calibration`) run on each
+The seed paper's initialisation (Phee et al. 2009, Sec. IV; :mod:`estimator.offline.calibration`) run on each
 tendon of each antagonistic pair: pulling tendon a turns the joint into its upper limit, pulling b
 into its lower one. Per joint, one :meth:`PairCalibration.command` per control cycle, all joints at
 once (they are mechanically independent):
@@ -25,8 +25,8 @@ from enum import Enum
 
 import numpy as np
 
-from estimator.calibration import CalibrationResult, calibrate_joint_limit
-from estimator.joint import JointEstimator
+from estimator.offline.calibration import CalibrationResult, calibrate_joint_limit
+from estimator.online.joint import JointEstimator
 from estimator.sheath import SheathModel
 from slave.calibrate import check_settings, wrap_shape
 from slave.pair_control import PairController

@@ -23,8 +23,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from estimator.effects import EFFECT_IDS as CATALOGUE_IDS
-from estimator.effects_kernels import backlash_play, travel_lag
+from estimator.offline.effects import EFFECT_IDS as CATALOGUE_IDS
+from estimator.offline.effects_kernels import backlash_play, travel_lag
 from estimator.sheath import SheathGeometry
 from slave.simulated import EFFECT_IDS, SimulatedRig
 from teleop import config as C
@@ -323,7 +323,7 @@ def _signal_effects(hidden, params, time, T_in, x_in, T_out, x_out):
 
 def _sensor_effects(hidden, params, time, T_in, x_in, T_out, x_out):
     """The sensor effects on the recorded channels other than the rig's load cell (offset, gain, lag
-    [s], drift [unit/s]; sign conventions of estimator.effects.SensorEffect)."""
+    [s], drift [unit/s]; sign conventions of estimator.offline.effects.SensorEffect)."""
     chans = {"T_in": T_in, "x_in": x_in, "T_out": T_out, "x_out": x_out}
     for e in hidden:
         if not e.startswith("sensor_") or ":" not in e or e in RIG_SWITCH:

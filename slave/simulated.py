@@ -62,7 +62,7 @@ class SimulatedRig(EffectSwitches):
 
     Assumptions: rigid sheath (no axial compression), Coulomb friction with equal static and dynamic
     mu, no bending stiffness or clearance, massless tendon and distal joint - unless an effect of
-    ``rig.effects`` is switched on (each is off by default; estimator/effects.py fits them back):
+    ``rig.effects`` is switched on (each is off by default; estimator/offline/effects.py fits them back):
 
     * velocity_friction: mu(v) = mu (1 + viscous |v|) with v the motor speed [m/s] of this step.
     * pretension: the start profile is sheath.pretension + tension [N] (see the pretension bullet).

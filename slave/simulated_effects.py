@@ -2,7 +2,7 @@
 
 :class:`EffectSwitches` is mixed into :class:`slave.simulated.SimulatedRig`; it owns the effect state
 and the step with effects on, the kernels below solve it. The physics and the sliding rule are
-described in the SimulatedRig docstring; estimator/effects_kernels.py runs the same rules driven by
+described in the SimulatedRig docstring; estimator/offline/effects_kernels.py runs the same rules driven by
 T_in instead of x_in.
 """
 from __future__ import annotations
@@ -13,17 +13,17 @@ from collections import deque
 import numpy as np
 from numba import njit
 
-from estimator.effects_kernels import stiffening_strain as strain  # one phi(T), shared with the estimator
 from estimator.kernels import load_inverse
+from estimator.offline.effects_kernels import stiffening_strain as strain  # one phi(T), shared with the estimator
 from teleop.config import EffectsConfig
 from teleop.errors import ConfigError
 
 __all__ = ["EFFECT_IDS", "EffectSwitches", "strain", "elongation_general", "full_slip", "advance_general"]
 
-#: The effect switches of ``rig.effects``, named as in the catalogue (estimator/effects.py).
+#: The effect switches of ``rig.effects``, named as in the catalogue (estimator/offline/effects.py).
 EFFECT_IDS = ("velocity_friction", "pretension", "curvature_drift", "tendon_stiffening", "stiction",
               "friction_offset", "sensor_offset", "sensor_delay")
-_V_STOP = 2e-4   # motor speed below which a whole-tendon slide ends [m/s] (estimator.effects_kernels.V_STOP)
+_V_STOP = 2e-4   # motor speed below which a whole-tendon slide ends [m/s] (estimator.offline.effects_kernels.V_STOP)
 
 
 # ---- general step for the effect switches (friction offset, stiffening, varying bounds) -----------
@@ -223,7 +223,7 @@ class EffectSwitches:
 
     @property
     def effects(self) -> tuple[str, ...]:
-        """Identifiers of the effects switched on (estimator/effects.py names), in config order."""
+        """Identifiers of the effects switched on (estimator/offline/effects.py names), in config order."""
         return self._effect_ids
 
     def _init_effects(self, fx: EffectsConfig, n: int) -> None:

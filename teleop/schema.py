@@ -116,7 +116,7 @@ class SensorConfig:
     seed: int = 0
 
 
-# ---- model effects of the simulated rig (estimator/effects.py has the matching extensions) -------
+# ---- model effects of the simulated rig (estimator/offline/effects.py has the matching extensions) -------
 # Each effect is off by default; the magnitude fields are in SI units (the range table has them).
 
 @dataclass(frozen=True)
@@ -303,7 +303,7 @@ class TransportConfig:
     listen: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
     connect: tuple[str, ...] = ()
     multicast_scouting: bool = False
-    auto_connect: bool = True             # bare start: listen, or connect when the port is taken (teleop/discovery.py)
+    auto_connect: bool = True             # bare start: listen, or connect when the port is taken (teleop/app/discovery.py)
     run_id_timeout: float = 3.0           # [s] a connecting side asks its peers for the run id this long
     lock_master: bool = True              # slave: commands and master heartbeats from one master session only
     auth: TransportAuthConfig = field(default_factory=TransportAuthConfig)

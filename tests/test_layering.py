@@ -1,8 +1,10 @@
 """The import graph keeps the floors of ARCHITECTURE.md ("Layout"): a walk over the packages' sources.
 
-Floors: estimator/ (0) imports nothing of the project; teleop/ base (1) imports only estimator/;
-master/ and slave/ (2) never import each other; the application (3, teleop.app, for now the modules
-in :data:`APP_NOT_YET_MOVED`) may import anything. No two modules import each other, directly or
+Floors: estimator/ (0) imports nothing of the project; inside it the model core (its top-level
+modules) imports neither the online estimator (estimator.online) nor the offline identification and
+diagnosis (estimator.offline), and the online estimator never imports the offline one; teleop/ base
+(1) imports only estimator/; master/ and slave/ (2) never import each other; the application (3,
+teleop.app) may import anything. No two modules import each other, directly or
 round a circle, and no module imports another module's private (``_name``) helper.
 
 What is not done yet is listed below as the currently allowed set, so that the test fails on any new
@@ -18,24 +20,9 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("estimator", "teleop", "slave", "master")
 
-#: Application modules still at the top of teleop/ (issue 9: they move to teleop/app/ once the other
-#: rooms' files are committed). They may import master/ and slave/; the base may not import them.
-APP_NOT_YET_MOVED = frozenset({
-    "teleop.cli", "teleop.calibrate", "teleop.sides", "teleop.bridge", "teleop.demo", "teleop.demo_joints", "teleop.demo_run",
-    "teleop.demo_figures", "teleop.analyze", "teleop.kaist", "teleop.kaist_report", "teleop.report",
-})
-
 #: Import circles that exist today (each set is one strongly connected component allowed to remain,
 #: or to shrink). A new circle, or a module joining one of these, fails the test.
-KNOWN_CYCLES: tuple[frozenset[str], ...] = (
-    # the KAIST report is drawn from analyze's results, analyze calls the report writer
-    frozenset({"teleop.analyze", "teleop.kaist_report"}),
-    # appeared in the offline room during issue 9 (pair_shared lazily imports pair_general, which
-    # imports pair_shared): to be untied by that room
-    frozenset({"estimator.pair_general", "estimator.pair_shared"}),
-    # the same, for the MRD report and its figures
-    frozenset({"teleop.mrd_figures", "teleop.mrd_report"}),
-)
+KNOWN_CYCLES: tuple[frozenset[str], ...] = ()
 
 #: (importer, imported module, private name) imports across modules that exist today.
 KNOWN_PRIVATE: frozenset[tuple[str, str, str]] = frozenset()
@@ -106,15 +93,19 @@ FILES, GRAPH = _graph()
 
 
 def _floor(mod: str) -> str:
-    top = mod.split(".")[0]
-    if top == "teleop" and (mod in APP_NOT_YET_MOVED or mod == "teleop.app" or mod.startswith("teleop.app.")):
+    parts = mod.split(".")
+    if parts[0] == "teleop" and parts[1:2] == ["app"]:
         return "app"
-    return top
+    if parts[0] == "estimator" and parts[1:2] in (["online"], ["offline"]):
+        return f"estimator.{parts[1]}"
+    return parts[0]
 
 
 #: For each floor, the floors it must not import.
 FORBIDDEN = {
-    "estimator": {"teleop", "app", "slave", "master"},
+    "estimator": {"estimator.online", "estimator.offline", "teleop", "app", "slave", "master"},
+    "estimator.online": {"estimator.offline", "teleop", "app", "slave", "master"},
+    "estimator.offline": {"teleop", "app", "slave", "master"},
     "teleop": {"app", "slave", "master"},
     "slave": {"master", "app"},
     "master": {"slave", "app"},
@@ -127,7 +118,8 @@ def test_every_source_parses():
 
 
 def test_the_walk_sees_the_packages():
-    assert {"estimator.sheath", "teleop.messages", "slave.node", "master.node"} <= set(GRAPH)
+    assert {"estimator.sheath", "estimator.online.distal", "estimator.offline.diagnosis", "teleop.messages",
+            "teleop.app.cli", "slave.node", "master.node"} <= set(GRAPH)
     assert any(dep == "estimator.sheath" for dep, _, _ in GRAPH["slave.simulated"])
 
 

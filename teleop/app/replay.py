@@ -4,7 +4,7 @@ RUN is a run directory (``runs/<id>/`` with ``slave.csv``, ``config.yaml`` and
 ``calibration/<instrument>.yaml`` or ``calibration.json``) or a ``slave.csv``. The proximal signals
 (``time``, ``T_in``, ``x_in``) are re-estimated with the run's own config and calibration, or with
 the given ones (``--config``, ``--calibration``), by the profile-memory estimator the slave runs
-(:func:`estimator.distal.estimate_batch`, the same maths as its :class:`DistalEstimator`) or by the
+(:func:`estimator.online.distal.estimate_batch`, the same maths as its :class:`DistalEstimator`) or by the
 paper's phase formulas (:func:`estimator.capstan.phase_formula_batch`, Phee et al. 2009). The new
 estimate is compared with the recorded one (``T_out_hat``, ``elongation_hat``) and with the truth
 (``T_out``, ``elongation`` or ``x_in - x_out``) when the recording has them: max and mean absolute
@@ -28,18 +28,18 @@ from typing import Any
 import numpy as np
 
 from estimator.capstan import phase_formula_batch
-from estimator.distal import estimate_batch
+from estimator.online.distal import estimate_batch
 from estimator.phase import Phase
 from estimator.sheath import SheathModel, profile_batch
+from teleop.app.demo_run import full_scale_errors
 from teleop.config import Config, load_config
-from teleop.demo_run import full_scale_errors
 from teleop.errors import CalibrationError, ConfigError, DataError
 from teleop.recording import MeasuredData, read_measured_csv
 
 __all__ = ["ReplayInput", "load_run", "load_model", "parse_speed", "reestimate", "compare", "replay",
            "add_arguments", "main_replay"]
 
-EXPERIMENTS = {1: "paper", 2: "minor"}  # marker codes of the operator protocols (teleop.demo)
+EXPERIMENTS = {1: "paper", 2: "minor"}  # marker codes of the operator protocols (teleop.app.demo)
 ESTIMATORS = ("profile", "paper")
 
 
@@ -161,7 +161,7 @@ def reestimate(data: MeasuredData, model: SheathModel, cfg: Config, estimator: s
                            rate_time_constant=e.rate_time_constant)
         return {"T_out": b.T_out, "elongation": b.elongation, "phase": b.phase}
     if estimator == "paper":
-        from teleop.demo import baseline_deadband
+        from teleop.app.demo import baseline_deadband
         T, el, ph = phase_formula_batch(data.T_in, model.K, model.compliance, deadband=baseline_deadband(cfg),
                                         T0=cfg.sheath.pretension)
         return {"T_out": T, "elongation": el, "phase": ph}

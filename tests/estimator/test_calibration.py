@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from estimator.calibration import calibrate_joint_limit, detect_knee
+from estimator.offline.calibration import calibrate_joint_limit, detect_knee
 from estimator.sheath import Run, SheathGeometry, SheathModel
 from teleop.errors import CalibrationError
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from estimator import capstan
-from estimator.distal import estimate_batch
+from estimator.online.distal import estimate_batch
 from estimator.phase import Phase
 from estimator.sheath import SheathModel
 

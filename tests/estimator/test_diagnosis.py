@@ -14,9 +14,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from estimator.diagnosis import diagnose
-from estimator.diagnosis_fit import prepare, split_at_rest
-from estimator.effects import CATALOGUE, EFFECT_IDS, EQUIVALENT
+from estimator.offline.diagnosis import diagnose
+from estimator.offline.diagnosis_fit import prepare, split_at_rest
+from estimator.offline.effects import CATALOGUE, EFFECT_IDS, EQUIVALENT
 from slave import lumped_scenarios
 from slave.scenarios import record
 from teleop.errors import DataError
@@ -178,7 +178,7 @@ def test_progress_callback_and_bad_inputs():
 
 
 def test_report_writes_markdown_and_figures(clean_result, tmp_path):
-    from teleop.report import format_summary, write_report
+    from teleop.app.report import format_summary, write_report
     rec, res = clean_result
     path = write_report(res, rec.data, tmp_path / "rep")
     text = path.read_text()

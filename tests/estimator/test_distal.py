@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from estimator.distal import DistalEstimator, estimate_batch
+from estimator.online.distal import DistalEstimator, estimate_batch
 from estimator.phase import Phase
 from estimator.sheath import SheathGeometry, SheathModel
 

@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from estimator.distal import estimate_batch
-from estimator.effects import CATALOGUE, EFFECT_IDS, Series, effect, neutral_values, predict
-from estimator.effects_kernels import run_extended
+from estimator.offline.effects import CATALOGUE, EFFECT_IDS, Series, effect, neutral_values, predict
+from estimator.offline.effects_kernels import run_extended
+from estimator.online.distal import estimate_batch
 from estimator.sheath import SheathGeometry, SheathModel
 from slave.scenarios import protocol
 from slave.simulated import SimulatedRig

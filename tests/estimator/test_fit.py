@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from estimator.distal import estimate_batch
-from estimator.fit import fit_model, fit_single, predict, split_index
+from estimator.offline.fit import fit_model, fit_single, predict, split_index
+from estimator.online.distal import estimate_batch
 from estimator.sheath import SheathModel
 
 K_TRUE, C_TRUE = 0.45, 8e-5        # [-], L/EA [m/N]

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from estimator.distal_slip import distal_clip, distal_gains, distal_tension, elongation
-from estimator.joint import JointEstimator
-from estimator.joint_batch import estimate_joint_batch
+from estimator.online.joint import JointEstimator
+from estimator.online.joint_batch import estimate_joint_batch
 from estimator.sheath import SheathModel, profile_update
 from tests.slave.joint_helpers import Loop, joint_config, max_fs
 

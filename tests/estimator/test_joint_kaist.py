@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from estimator.joint_batch import predict_pair_angle
-from estimator.pair import PairParams, fit_linear, fit_pair, predict_angle, rmse
-from teleop.kaist import cycles, default_kaist_dir, load_all
+from estimator.offline.pair import PairParams, fit_linear, fit_pair, predict_angle, rmse
+from estimator.online.joint_batch import predict_pair_angle
+from teleop.app.kaist import cycles, default_kaist_dir, load_all
 
 KAIST_DIR = default_kaist_dir()
 pytestmark = [pytest.mark.kaist, pytest.mark.skipif(

@@ -8,11 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from estimator.pair import PairParams, play, predict_angle, reversal_dead_zones
-from estimator.pair_diagnosis import diagnose_pair, fit_model
+from estimator.offline.pair import PairParams, play, predict_angle, reversal_dead_zones
+from estimator.offline.pair_diagnosis import diagnose_pair, fit_model
+from estimator.offline.pair_models import PAIR_EFFECTS, applicable, parse_model, predict_model
+from estimator.offline.pair_shared import SHARED_MODELS, fit_shared, leave_one_out, shared_params
 from estimator.pair_kernels import simulate_pair
-from estimator.pair_models import PAIR_EFFECTS, applicable, parse_model, predict_model
-from estimator.pair_shared import SHARED_MODELS, fit_shared, leave_one_out, shared_params
 
 DT = 0.025                                   # 40 Hz, as the KAIST recordings
 N_CYCLE = int(round(2 * math.pi / DT))       # samples per command cycle (period 2 pi s)
@@ -152,7 +152,7 @@ def test_predict_model_applies_delay_and_backlash():
 # ---- the stiffening joint, the cross-validation folds, the exported shared set -------------------
 
 def test_stiffening_joint_caps_the_angle_and_folds_split_the_training_block():
-    from estimator.pair_diagnosis import folds
+    from estimator.offline.pair_diagnosis import folds
     c = command()
     th0, _ = simulate_pair(c, (5.0, 5.0), 1.4, (0.4, 0.4), (0.5, 0.5), 4.0)
     th1, _ = simulate_pair(c, (5.0, 5.0), 1.4, (0.4, 0.4), (0.5, 0.5), 4.0, k2=40.0, theta_c=0.1)
@@ -165,7 +165,7 @@ def test_stiffening_joint_caps_the_angle_and_folds_split_the_training_block():
 
 
 def test_exported_shared_set_predicts_without_refit():
-    from estimator.pair_general import export_params, predict_shared
+    from estimator.offline.pair_general import export_params, predict_shared
     m = SHARED_MODELS["capstan+T"]
     v = {"s": 12.5, "k": 4.0, "K0_a": 0.6, "K0_b": 0.3, "mu": 0.15}                 # G held at 5: lam = 5 / 12.5
     b = math.radians(150)

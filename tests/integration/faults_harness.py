@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from teleop.cli import main as teleop_main
+from teleop.app.cli import main as teleop_main
 from teleop.config import load_config
 from teleop.keys import heartbeat_key
 from teleop.messages import Heartbeat, SideState
@@ -193,7 +193,7 @@ def run_fault(tmp: Path, name: str, *, inject: dict[str, str] | None = None, sig
     port, port_m = free_tcp_ports(2)
     ep = loopback_endpoint(port)
     inject = inject or {}
-    base = [sys.executable, "-m", "teleop.cli"]
+    base = [sys.executable, "-m", "teleop.app.cli"]
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     procs: dict[str, subprocess.Popen] = {}
     logs = {s: run_dir / f"{s}.log" for s in ("slave", "master")}

@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from teleop.app.record import read_messages
 from teleop.codec import decode
 from teleop.publish_log import read_publish_log
-from teleop.record import read_messages
 from teleop.recording import read_measured_csv
 from teleop.transport import free_tcp_port
 from tests.integration.processes import start, stop_all, wait_for

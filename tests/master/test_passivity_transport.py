@@ -2,7 +2,7 @@
 
 In-process (deterministic) version of the two-process loop: a :class:`MasterNode` and a
 :class:`SlaveNode` each with its own zenoh session (peer mode, 127.0.0.1, multicast off), the
-master's commands and the slave's estimates passed through a :class:`teleop.faults.FaultInjector`
+master's commands and the slave's estimates passed through a :class:`teleop.app.faults.FaultInjector`
 (20 ms each way = 40 ms round trip, 10 % of the messages lost, seeded). Both nodes and both injectors
 run on one FakeClock; after each step the test waits until zenoh has delivered every message the
 injector released (it waits for delivery, never for time), so a run is the same every time.
@@ -24,9 +24,9 @@ from master.device import DeviceState
 from master.node import MasterLinks, MasterNode
 from slave.node import SlaveLinks, SlaveNode
 from slave.simulated import SimulatedRig
+from teleop.app.faults import FaultInjector
 from teleop.clock import FakeClock
 from teleop.config import config_from_dict
-from teleop.faults import FaultInjector
 from teleop.keys import command_key, estimate_key, heartbeat_key
 from teleop.messages import Command, Estimate, Heartbeat, Side, SideState
 from teleop.transport import Session, free_tcp_port, loopback_endpoint, zenoh_config

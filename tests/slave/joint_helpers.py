@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimator.joint import JointEstimator
+from estimator.online.joint import JointEstimator
 from estimator.sheath import SheathModel
 from slave.joint_rig import SimulatedInstrument
 from slave.pair_control import PairController

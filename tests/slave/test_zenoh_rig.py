@@ -16,7 +16,7 @@ from slave.rig import RigInputError
 from slave.rigs import RIG_TYPES, make_rig
 from slave.simulated import SimulatedRig
 from slave.zenoh_rig import ZenohInstrument, ZenohRig
-from teleop.bridge import RigBridge
+from teleop.app.bridge import RigBridge
 from teleop.clock import FakeClock
 from teleop.config import load_config
 from teleop.errors import ConfigError, DeviceError, TransportError

@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from estimator.fit import predict
-from teleop import analyze
+from estimator.offline.fit import predict
+from teleop.app import analyze
+from teleop.app.kaist import CONFIGS_DEG, default_kaist_dir
 from teleop.errors import ConfigError, DataError
-from teleop.kaist import CONFIGS_DEG, default_kaist_dir
 
 KAIST_DIR = default_kaist_dir()
 
@@ -108,14 +108,14 @@ def test_errors(tmp_path):
 
 
 def test_cli_turns_a_missing_file_into_one_line_and_exit_2(tmp_path, capsys):
-    cli = pytest.importorskip("teleop.cli")
+    cli = pytest.importorskip("teleop.app.cli")
     assert cli.main(["analyze", str(tmp_path / "missing.csv")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "missing.csv: no such file" in err[0]
 
 
 def test_cli_csv_without_T_out_and_x_out_is_one_line_and_exit_2(tmp_path, capsys):
-    cli = pytest.importorskip("teleop.cli")
+    cli = pytest.importorskip("teleop.app.cli")
     path = write_csv(tmp_path / "proximal.csv", distal=())
     assert cli.main(["analyze", str(path), "--json", str(tmp_path / "d.json")]) == 2
     cap = capsys.readouterr()
@@ -156,7 +156,7 @@ def longest_list(obj) -> int:
 
 
 def test_kaist_mode_on_synthetic_files(tmp_path, capsys):
-    from teleop.kaist_report import FIGURES
+    from teleop.app.kaist_report import FIGURES
     d = write_kaist_dir(tmp_path / "kaist", configs=(0, 120, 240))
     out = tmp_path / "k.json"
     assert run(["--kaist", str(d), "--json", str(out), "--report", str(tmp_path / "rep"), "--bootstrap", "5"]) == 0

@@ -14,7 +14,7 @@ from types import SimpleNamespace
 import pytest
 
 import master.hid
-from teleop.cli import main
+from teleop.app.cli import main
 from teleop.transport import free_tcp_port, loopback_endpoint
 
 DEVICE_FILE = Path(__file__).resolve().parents[2] / "configs" / "devices" / "generic_pid_joystick.yaml"
@@ -68,7 +68,7 @@ def one_line(capsys) -> str:
 
 
 def test_devices_without_any_device_says_so_in_one_line_exit_0():
-    proc = subprocess.run([sys.executable, "-m", "teleop.cli", "devices"], capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, "-m", "teleop.app.cli", "devices"], capture_output=True, text=True,
                           timeout=60)
     assert proc.returncode == 0, proc.stderr
     out = [ln for ln in proc.stdout.splitlines() if ln.strip()]
@@ -76,7 +76,7 @@ def test_devices_without_any_device_says_so_in_one_line_exit_0():
 
 
 def test_devices_is_listed_in_the_help():
-    proc = subprocess.run([sys.executable, "-m", "teleop.cli", "-h"], capture_output=True, text=True, timeout=60)
+    proc = subprocess.run([sys.executable, "-m", "teleop.app.cli", "-h"], capture_output=True, text=True, timeout=60)
     assert "devices" in proc.stdout
 
 

@@ -7,8 +7,8 @@ import re
 
 import pytest
 
+from teleop.app.discovery import agree_run_id, ask_run_id, open_auto_session, side_run_dir, side_session
 from teleop.config import Config, config_from_dict
-from teleop.discovery import agree_run_id, ask_run_id, open_auto_session, side_run_dir, side_session
 from teleop.errors import TransportError
 from teleop.transport import free_tcp_port
 

@@ -9,10 +9,10 @@ import struct
 import pytest
 
 from estimator.phase import Phase
+from teleop.app.faults import FaultInjector, corrupt_payload, parse_fault_spec
 from teleop.clock import FakeClock
 from teleop.codec import WIRE_VERSION, decode, encode
 from teleop.errors import CodecError, ConfigError
-from teleop.faults import FaultInjector, corrupt_payload, parse_fault_spec
 from teleop.messages import AxisState, Command, Estimate, Heartbeat, Side, SideState, TendonState, tendon_estimate
 
 DT = 1e-3

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from teleop.errors import DataError
-from teleop.kaist import (CONFIGS_DEG, cycles, default_kaist_dir, find_kaist_dir, is_kaist_file,
+from teleop.app.kaist import (CONFIGS_DEG, cycles, default_kaist_dir, find_kaist_dir, is_kaist_file,
                           load_all, read_kaist)
 
 KAIST_DIR = default_kaist_dir()
@@ -154,7 +154,7 @@ def test_generic_csv_with_header_and_column_map(tmp_path):
 
 
 def test_missing_file_and_directory_are_named(tmp_path):
-    from teleop.kaist import find_configs, load_dir
+    from teleop.app.kaist import find_configs, load_dir
     with pytest.raises(DataError, match=r"sine_config_0\.txt: no such file"):
         read_kaist(tmp_path / "sine_config_0.txt")
     with pytest.raises(DataError, match=r"KAIST data not found at .*these tests need the unlicensed"):

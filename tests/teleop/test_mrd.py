@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from estimator.pair_kernels import simulate_pair
-from estimator.spindle import SpindleParams, first_reversal, make_batch, predict_torque
-from estimator.spindle_fit import band_centre, fit_torque
+from estimator.online.spindle import SpindleParams, first_reversal, make_batch, predict_torque
+from estimator.offline.spindle_fit import band_centre, fit_torque
 from teleop.errors import ConfigError, DataError
-from teleop.mrd import (DISTAL_COUNTS_PER_REV, DISTAL_SIGN, PROXIMAL_COUNTS_PER_REV, TORQUE_NM_PER_COUNT,
+from teleop.app.mrd import (DISTAL_COUNTS_PER_REV, DISTAL_SIGN, PROXIMAL_COUNTS_PER_REV, TORQUE_NM_PER_COUNT,
                         default_mrd_dir, load_mrd_dir, read_mrd)
-from teleop.mrd_report import analyze_mrd, band_measurements, parse_calibration
+from teleop.app.mrd_report import analyze_mrd, band_measurements, parse_calibration
 
 MRD_DIR = default_mrd_dir()
 needs_mrd = pytest.mark.skipif(not MRD_DIR.is_dir(), reason=f"MRD da Vinci data not found at {MRD_DIR}: the "
@@ -128,7 +128,7 @@ def test_analysis_keys_calibration_and_what_was_fitted_on(tmp_path):
 
 
 def test_cli_mrd_prints_and_writes_json(tmp_path, capsys):
-    from teleop.cli import main
+    from teleop.app.cli import main
     _folder(tmp_path)
     out = tmp_path / "out.json"
     assert main(["analyze", "--mrd", str(tmp_path), "--json", str(out), "--calibration", "01"]) == 0

@@ -7,11 +7,11 @@ import json
 import time
 
 from estimator.phase import Phase
+from teleop.app.record import Recorder, flatten, read_messages
 from teleop.codec import decode, encode
 from teleop.config import Config
 from teleop.keys import command_key, estimate_key, heartbeat_key
 from teleop.messages import AxisState, Command, Estimate, Heartbeat, Side, SideState, TendonState, tendon_estimate
-from teleop.record import Recorder, flatten, read_messages
 from teleop.recording import read_measured_csv
 from teleop.transport import Session, free_tcp_port, loopback_endpoint
 
@@ -74,7 +74,7 @@ def test_recorder_writes_every_message_per_stream_and_a_summary(tmp_path):
 
 
 def test_read_messages_ignores_a_torn_last_record(tmp_path):
-    from teleop.record import _RAW
+    from teleop.app.record import _RAW
     p = tmp_path / "m.bin"
     one = encode(Command(1, 0.0, (0.0,)))
     rec = _RAW.pack(1.5, 3, len(one)) + b"a/b" + one
@@ -83,7 +83,7 @@ def test_read_messages_ignores_a_torn_last_record(tmp_path):
 
 
 def test_rig_interface_payloads_are_decoded_too():
-    from teleop.record import decode_any
+    from teleop.app.record import decode_any
     from teleop.rig_wire import RigSample, encode_rig
     m = RigSample(4, 3, 0.5, (0.001,), (2.0,), (0.0011,), ((2.0, 1.5, 0.001, 0.0009, 1e-4),))
     flat = dict(flatten(decode_any(encode_rig(m))))
@@ -92,7 +92,7 @@ def test_rig_interface_payloads_are_decoded_too():
 
 
 def test_short_names_where_unambiguous():
-    from teleop.record import short_names
+    from teleop.app.record import short_names
     one = ["seq", "axes[0].effort_hat", "axes[0].tendons[0].T_in", "axes[0].tendons[0].x_in", "profiles[0][1]"]
     assert short_names(one) == ("seq", "effort_hat", "T_in", "x_in", "profiles[0][1]")
     two = ["seq", "axes[0].tendons[0].T_in", "axes[0].tendons[1].T_in", "axes[1].seq"]

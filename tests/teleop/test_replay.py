@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from estimator.data import MeasuredData
-from estimator.distal import estimate_batch
+from estimator.online.distal import estimate_batch
 from estimator.sheath import SheathModel
-from teleop.cli import main
+from teleop.app.cli import main
 from teleop.config import load_config, write_config
 from teleop.recording import write_measured_csv
 

@@ -3,28 +3,28 @@
 Two modes:
 
 * ``teleop analyze FILE.csv`` (measured-data format, one tendon, docs/formats.md; T_out and x_out
-  optional, at least one): the diagnosis of :func:`estimator.diagnosis.diagnose` - the base model
+  optional, at least one): the diagnosis of :func:`estimator.offline.diagnosis.diagnose` - the base model
   (profile memory, K and L/EA) fitted on the first part of the recording, every catalogue extension
   fitted on the same block, all scored on the held-out rest; prints the cause, the held-out errors
-  and the gain (:func:`teleop.report.format_summary`) and the fitted parameters. A progress bar goes
+  and the gain (:func:`teleop.app.report.format_summary`) and the fitted parameters. A progress bar goes
   to stderr on long recordings.
 * ``teleop analyze --kaist [DIR]`` or ``teleop analyze .../sine_config_N.txt`` (or any FILE with
   ``--bend DEG``; other layouts with ``--columns MAP``, :mod:`teleop.columns`): every
-  ``sine_config_<N>.txt`` configuration (:mod:`teleop.kaist`; unlicensed data read in place),
+  ``sine_config_<N>.txt`` configuration (:mod:`teleop.app.kaist`; unlicensed data read in place),
   calibrated on command cycle 1 and tested on the later cycles, the model choice on cycle 1 only:
-  the pair diagnosis (:mod:`estimator.pair_diagnosis`: the seed pair model against the
+  the pair diagnosis (:mod:`estimator.offline.pair_diagnosis`: the seed pair model against the
   capstan-joint model and the pair-level effects; causes, extended model, gain), one parameter set
   for all configurations with K growing with the bend, its structure chosen by leave-one-
   configuration-out on the training cycles, its leave-one-out predictions and its bootstrap
-  uncertainty, saved under ``shared.params`` (:mod:`estimator.pair_shared`,
-  :mod:`estimator.pair_general`), and the Finding 1 baselines (force path, linear map, linear map
+  uncertainty, saved under ``shared.params`` (:mod:`estimator.offline.pair_shared`,
+  :mod:`estimator.offline.pair_general`), and the Finding 1 baselines (force path, linear map, linear map
   through a play operator, model-free reversal dead zones). A few minutes.
 * ``teleop analyze --kaist DIR2 --shared-params OUT``: every configuration of DIR2 predicted with the
   set saved by ``--json OUT``, nothing refitted (``shared_prediction.<N>.rmse_deg``).
 
 ``--json OUT`` writes the result (summary numbers, never per-sample data); ``--report DIR`` a
-Markdown report with PNG figures (:func:`teleop.report.write_report`,
-:func:`teleop.kaist_report.write_kaist_report`); ``--figures DIR`` the KAIST plots ``kaist_*.png``.
+Markdown report with PNG figures (:func:`teleop.app.report.write_report`,
+:func:`teleop.app.kaist_report.write_kaist_report`); ``--figures DIR`` the KAIST plots ``kaist_*.png``.
 Bad input raises DataError / ConfigError (one line, exit 2).
 """
 from __future__ import annotations
@@ -37,15 +37,16 @@ from pathlib import Path
 
 import numpy as np
 
-from estimator.diagnosis import diagnose
-from estimator.pair import fit_force_path, fit_linear, fit_pair, fit_play_map, reversal_dead_zones, rmse
-from estimator.pair_diagnosis import diagnose_pair
-from estimator.pair_shared import shared_analysis
+from estimator.offline.diagnosis import diagnose
+from estimator.offline.pair import fit_force_path, fit_linear, fit_pair, fit_play_map, reversal_dead_zones, rmse
+from estimator.offline.pair_diagnosis import diagnose_pair
+from estimator.offline.pair_general import shared_analysis
+from teleop.app.kaist import KaistRecording, format_prediction, is_kaist_file, load_kaist_input, predict_kaist, split
+from teleop.app.kaist_report import write_kaist_figures, write_kaist_report
+from teleop.app.kaist_summary import format_kaist
+from teleop.app.report import format_summary, split_text, write_report
 from teleop.errors import ConfigError, DataError
-from teleop.kaist import KaistRecording, format_prediction, is_kaist_file, load_kaist_input, predict_kaist, split
-from teleop.kaist_report import write_kaist_figures, write_kaist_report
 from teleop.recording import MeasuredData, read_measured_csv
-from teleop.report import format_summary, split_text, write_report
 
 __all__ = ["add_arguments", "main_analyze", "diagnose_file", "format_diagnosis", "analyze_kaist", "format_kaist",
            "write_kaist_figures", "PROGRESS_SAMPLES", "load_kaist_input", "predict_kaist", "format_prediction"]
@@ -62,7 +63,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="analyse every KAIST configuration (default DIR ../shared/data/kaist-tsm)")
     parser.add_argument("--mrd", nargs="?", const="", default=None, metavar="DIR",
                         help="jaw torque and angle of a da Vinci tool from its spindle: every *.TXT run of an MRD "
-                             "folder (default ../shared/data/mrd-davinci; teleop.mrd_report)")
+                             "folder (default ../shared/data/mrd-davinci; teleop.app.mrd_report)")
     parser.add_argument("--calibration", metavar="RUN[,RUN]|segment:SECONDS",
                         help="MRD mode: calibrate on one run (default: the slowest, lightest), on several runs "
                              "together, or on the first SECONDS of every run")
@@ -88,7 +89,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def main_analyze(args: argparse.Namespace) -> int:
     """Run the subcommand; returns the exit code (0). Raises DataError / ConfigError on bad input."""
     if getattr(args, "mrd", None) is not None:
-        from teleop.mrd_report import main_mrd  # lazy: the MRD analysis and its figures
+        from teleop.app.mrd_report import main_mrd  # lazy: the MRD analysis and its figures
         return main_mrd(args)
     if args.file is None and args.kaist is None:
         raise ConfigError("analyze needs FILE or --kaist [DIR]")
@@ -143,7 +144,7 @@ def _finite(x: float) -> float | None:
 
 def diagnose_file(path: str | Path, train_fraction: float = 0.6,
                   progress: bool | None = None) -> tuple[dict, MeasuredData]:
-    """Diagnose one measured-data CSV (:func:`estimator.diagnosis.diagnose`).
+    """Diagnose one measured-data CSV (:func:`estimator.offline.diagnosis.diagnose`).
 
     Parameters
     ----------
@@ -157,7 +158,7 @@ def diagnose_file(path: str | Path, train_fraction: float = 0.6,
     result : dict
         The diagnosis (cause, causes, base and extended {rmse_T_out_N, rmse_x_out_m}, gain,
         parameters, candidates, ...; JSON-ready) plus ``file``, ``n_samples`` and ``duration_s``.
-    data : MeasuredData, the recording (for :func:`teleop.report.write_report`)
+    data : MeasuredData, the recording (for :func:`teleop.app.report.write_report`)
 
     Raises
     ------
@@ -179,7 +180,7 @@ def diagnose_file(path: str | Path, train_fraction: float = 0.6,
 
 
 def format_diagnosis(result: dict) -> str:
-    """The lines printed for one CSV: :func:`teleop.report.format_summary`, then the split and the
+    """The lines printed for one CSV: :func:`teleop.app.report.format_summary`, then the split and the
     fitted parameters of the extended model (SI units)."""
     pars = ", ".join(f"{k} = {p['value']:.4g}" + ("" if p["unit"] in ("", "-") else f" {p['unit']}")
                      for k, p in result["parameters"].items())
@@ -222,9 +223,9 @@ def analyze_kaist(recs: list[KaistRecording], progress: bool = False,
 
     Per configuration (train on command cycle 1, test on cycle 2): the seed pair model beside the
     force path, the linear map and the linear map + play, the model-free reversal dead zones, and
-    the pair diagnosis (:func:`estimator.pair_diagnosis.diagnose_pair`: the seed model against the
+    the pair diagnosis (:func:`estimator.offline.pair_diagnosis.diagnose_pair`: the seed model against the
     capstan-joint model and the pair-level effects). Across configurations: one set of physical
-    parameters with K growing with the bend angle (:func:`estimator.pair_shared.shared_analysis`).
+    parameters with K growing with the bend angle (:func:`estimator.offline.pair_general.shared_analysis`).
 
     Parameters
     ----------
@@ -297,66 +298,3 @@ class _Status:
     def done(self) -> None:
         if self.enabled and self.n:
             sys.stderr.write("\n")
-
-
-def _fmt_causes(causes: list[str]) -> str:
-    return ", ".join(causes) if causes else "none"
-
-
-def format_kaist(s: dict) -> str:
-    """The tables printed for the KAIST analysis: the pair diagnosis per configuration (held-out
-    angle RMSE [deg] of the seed model, the extended model, the shared fit and its leave-one-out
-    prediction; the causes), the shared parameters, then the Finding 1 baselines."""
-    lines = ["KAIST antagonistic pair: distal angle, calibrated on command cycle 1, tested on cycle 2 (RMSE [deg])",
-             f"{'config [deg]':>12}{'seed':>7}{'extended':>10}{'gain':>6}{'shared':>8}{'LOCO':>7}"
-             f"{'T_in [N]':>9}  causes (extended model)"]
-    for c in s["configurations"]:
-        d, sh = c["diagnosis"], c.get("shared", {})
-        t = d["extended"]["rmse_T_in_N"]
-        lines.append(f"{c['config_deg']:>12}{d['seed']['rmse_test_deg']:>7.2f}{d['extended']['rmse_test_deg']:>10.2f}"
-                     f"{d['gain']:>6.2f}{sh.get('rmse_test_deg', math.nan):>8.2f}"
-                     f"{sh.get('leave_one_out_rmse_test_deg', math.nan):>7.2f}{t if t is not None else math.nan:>9.2f}"
-                     f"  {_fmt_causes(d['causes'])} ({d['extended']['model']})")
-    lines.append("extended: the model the diagnosis chose; shared: one parameter set for all configurations with "
-                 "K = K0 + mu N; LOCO: refitted without that configuration; T_in: the extended model's prediction "
-                 "of the proximal tensions (not fitted)")
-    if "shared" in s:
-        sh = s["shared"]
-        for name, m in sh["models"].items():
-            p = ", ".join(f"{k} {v['value']:.3g}" for k, v in m["params"].items())
-            rows = " ".join(f"{r['rmse_test_deg']:.2f}" for r in m["configurations"])
-            lines.append(f"shared {name:<28} test RMSE {m['rmse_test_deg']:.2f} (per configuration {rows}): {p}")
-        for name, rows in sh["leave_one_out"].items():
-            lines.append(f"leave one out, {name:<20} " + " ".join(f"{r['rmse_test_deg']:.2f}" for r in rows))
-        e6 = sh["E6"]
-        lines.append(f"E6 (K grows with the bend): score {e6['score']:.3f} against mu = 0, price {e6['price']:.3f} -> "
-                     f"{'accepted' if e6['accepted'] else 'rejected'}; mu = {sh['mu']:.3f} /rad")
-        for name, c in sh["choice"]["candidates"].items():
-            per = " ".join(f"{x:.2f}" for x in c["loco_train_rmse_deg"])
-            pr = "" if c.get("price") is None else f", price {c['price']:.3f}"
-            lines.append(f"choice (leave one out, training cycles) {name:<28} {per} (rms {c['rms_deg']:.2f}{pr})"
-                         f"{' <- chosen' if name == sh['chosen'] else ''}")
-        lines.append("shared set for new configurations (" + sh["params"]["model"]["name"] + ", refitted on every "
-                     "sample; bootstrap std over cycles):")
-        lines.append("  " + ", ".join(f"{k} {v['value']:.4g}" + (f" +- {v['std']:.2g}" if "std" in v else "")
-                                      + ("" if v["unit"] in ("", "-") else f" {v['unit']}")
-                                      for k, v in sh["params"]["values"].items()))
-        bc = (sh["uncertainty"]["bootstrap"] or {}).get("correlation") or sh["uncertainty"]["local_correlation"]
-        strong = [f"{a}/{b} {bc['matrix'][i][j]:+.2f}" for i, a in enumerate(bc["names"])
-                  for j, b in enumerate(bc["names"]) if j > i and abs(bc["matrix"][i][j]) >= 0.8]
-        lines.append("  correlations |r| >= 0.8: " + (", ".join(strong) if strong else "none"))
-    lines += ["", "Finding 1 baselines (RMSE [deg]; dead zone after a reversal [deg of command]; K_release: capstan "
-              "band from tension ratios; K_force: K of the force-path fit)",
-              f"{'config [deg]':>12}{'force path':>12}{'linear':>9}{'lin+play':>10}{'dead zone':>11}{'K_release':>11}"
-              f"{'K_force':>9}"]
-    for c in s["configurations"]:
-        m = {k: v["rmse_test_deg"] for k, v in c["models"].items()}
-        dz = [z["command_travel_deg"] for z in c["dead_zones"] if z["command_travel_deg"] is not None]
-        kr = [z["K_release"] for z in c["dead_zones"] if z["K_release"] is not None]
-        lines.append(f"{c['config_deg']:>12}{m['force path']:>12.2f}{m['linear map']:>9.2f}{m['linear map + play']:>10.2f}"
-                     f"{np.mean(dz) if dz else math.nan:>11.1f}{np.mean(kr) if kr else math.nan:>11.2f}"
-                     f"{c['models']['force path']['params']['K']:>9.2f}")
-    if "trend" in s:
-        lines.append(f"K_release = {s['trend']['K_release_at_0']:.2f} + {s['trend']['K_release_per_rad']:.3f} "
-                     "* configuration angle [rad]")
-    return "\n".join(lines)

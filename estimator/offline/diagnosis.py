@@ -6,7 +6,7 @@ folds inside it (fit on the first 65 % and validate on the rest; fit on the last
 on the first 35 %; the model always runs from the first sample):
 
 * the base model (profile memory with K, L/EA and the route shares r_1, r_2 of
-  :data:`estimator.effects.ROUTE`) and every extension of the catalogue (:mod:`estimator.effects`)
+  :data:`estimator.offline.effects.ROUTE`) and every extension of the catalogue (:mod:`estimator.offline.effects`)
   are fitted on each fold's fit part and scored on its validation part,
 
       S = sum_signals (rms_ext / floor)^2 / sum_signals (rms_base / floor)^2
@@ -22,9 +22,9 @@ on the first 35 %; the model always runs from the first sample):
 
 Then the base and the chosen model are refitted on the whole training block and run once over the
 test block: the reported held-out errors and the gain come from that one evaluation. Effects that
-give the same outputs (:data:`estimator.effects.EQUIVALENT`) are fitted once and reported with
+give the same outputs (:data:`estimator.offline.effects.EQUIVALENT`) are fitted once and reported with
 their equivalents. The thresholds were set on development seeds of both simulators
-(docs/diagnosis.md). Fitting helpers live in :mod:`estimator.diagnosis_fit`.
+(docs/diagnosis.md). Fitting helpers live in :mod:`estimator.offline.diagnosis_fit`.
 """
 from __future__ import annotations
 
@@ -34,9 +34,9 @@ from typing import Callable
 
 import numpy as np
 
-from estimator.diagnosis_fit import (SIGNALS, Progress, fit_model, noise_level, prepare, quantum, raw_rmse,
+from estimator.offline.diagnosis_fit import (SIGNALS, Progress, fit_model, noise_level, prepare, quantum, raw_rmse,
                                      rest_reading, sample_block, split_at_rest, start_points, trimmed_ms)
-from estimator.effects import CATALOGUE, EQUIVALENT, NONE, UNKNOWN, Effect, effect, predict
+from estimator.offline.effects import CATALOGUE, EQUIVALENT, NONE, UNKNOWN, Effect, effect, predict
 from estimator.data import MeasuredData
 
 __all__ = ["diagnose", "predictions", "PENALTY", "STRUCTURE_RATIO", "VALIDATION_FRACTION"]
@@ -183,7 +183,7 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     max_effects : int
         Most extensions accepted together, >= 1.
     n_nodes, target_rate, wrap_shape
-        Profile elements, averaging rate [Hz] and route shape, see :func:`estimator.diagnosis_fit.prepare`;
+        Profile elements, averaging rate [Hz] and route shape, see :func:`estimator.offline.diagnosis_fit.prepare`;
         with ``wrap_shape`` given the route is held, without it the route shares are fitted.
 
     Returns
@@ -199,7 +199,7 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         samples, time_s [first, last], n_samples}, time_s, n_train, n_heldout, train_fraction};
         ``noise``, ``structure`` (validation rmse / floor: base, extended), ``model`` and
         ``base_model`` (refitted on the training block; enough to re-run both, see
-        :func:`teleop.report.write_report`), ``settings``, ``elapsed_s``.
+        :func:`teleop.app.report.write_report`), ``settings``, ``elapsed_s``.
 
     Raises
     ------
@@ -376,7 +376,7 @@ def predictions(result: dict, data: MeasuredData) -> dict[str, np.ndarray | None
     ``data.time``), ``velocity`` [m/s] and ``phase`` (int8 codes of :class:`estimator.phase.Phase`,
     from the base model).
     """
-    from estimator.distal import estimate_batch      # local: phase classification only
+    from estimator.online.distal import estimate_batch      # local: phase classification only
     from estimator.sheath import SheathModel
 
     st = result["settings"]

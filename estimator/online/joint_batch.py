@@ -1,6 +1,6 @@
 """The joint estimator over recorded arrays (compiled), and the KAIST pair driven through it.
 
-:func:`estimate_joint_batch` is the maths of :class:`estimator.joint.JointEstimator` ((J1)-(J6) there)
+:func:`estimate_joint_batch` is the maths of :class:`estimator.online.joint.JointEstimator` ((J1)-(J6) there)
 in one compiled loop; :func:`predict_pair_angle` maps a recording of the KAIST flexible-endoscope pair
 (two proximal tensions, one motor command, the distal angle) onto it.
 """
@@ -10,7 +10,7 @@ import numpy as np
 from numba import njit
 
 from estimator.distal_slip import elongation
-from estimator.joint import DEFAULT_PLAY, KAIST_PLAY, JointBatch, JointEstimator, couple, weighted_angle
+from estimator.online.joint import DEFAULT_PLAY, KAIST_PLAY, JointBatch, JointEstimator, couple, weighted_angle
 from estimator.sheath import SheathModel, profile_update
 
 __all__ = ["estimate_joint_batch", "predict_pair_angle"]
@@ -95,9 +95,9 @@ def predict_pair_angle(p, command, T_a, T_b, n_nodes: int = 50, play: float = KA
 
         theta = G (c - c_0) - lam_a (E_a - E_a(0)) + lam_b (E_b - E_b(0)) + theta_0,   E_j = mean_s T_j
 
-    - the seed pair model of :mod:`estimator.pair` with the pair coupling (J4)-(J6) acting on the
-    profiles. ``p`` is an :class:`estimator.pair.PairParams`; ``play`` [rad] the coupling's play.
-    Use with :func:`estimator.pair.fit_pair` (``predict=predict_pair_angle``).
+    - the seed pair model of :mod:`estimator.offline.pair` with the pair coupling (J4)-(J6) acting on the
+    profiles. ``p`` is an :class:`estimator.offline.pair.PairParams`; ``play`` [rad] the coupling's play.
+    Use with :func:`estimator.offline.pair.fit_pair` (``predict=predict_pair_angle``).
     """
     c = np.asarray(command, dtype=float)
     Ta = np.asarray(T_a, dtype=float)

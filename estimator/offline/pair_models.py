@@ -2,7 +2,7 @@
 
 A model is a structure plus a list of effects, written ``"capstan+joint_backlash"``:
 
-* structure ``seed`` - the seed pair model (:mod:`estimator.pair`): each tendon's elongation from
+* structure ``seed`` - the seed pair model (:mod:`estimator.offline.pair`): each tendon's elongation from
   its profile memory driven by its *measured* proximal tension, the angle following the tendon
   kinematics at every sample. Parameters G [-], K_a, K_b [-], lam_a, lam_b [rad/N], theta0 [rad].
 * structure ``capstan`` - the capstan-joint pair model (:mod:`estimator.pair_kernels`): the same
@@ -30,7 +30,7 @@ id                        literature   extension                                
 Inputs of every model: a recording with ``time`` [s], ``command`` [rad] (motor side), ``T_a``,
 ``T_b`` [N] (proximal tensions; the capstan structure uses only their first values, the measured
 pretension) and ``angle`` [rad] (the target), all of shape (n,) (e.g.
-:class:`teleop.kaist.KaistRecording`).
+:class:`teleop.app.kaist.KaistRecording`).
 """
 from __future__ import annotations
 
@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimator.pair import PairParams, mean_tension, play
+from estimator.offline.pair import PairParams, mean_tension, play
 from estimator.pair_kernels import simulate_pair
 
 __all__ = ["Param", "PairEffect", "STRUCTURES", "PAIR_EFFECTS", "CAUSE_OF_SEED", "model_id", "parse_model",

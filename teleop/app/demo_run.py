@@ -1,8 +1,8 @@
-"""What both demos share (one tendon: :mod:`teleop.demo`; joint instrument: :mod:`teleop.demo_joints`):
+"""What both demos share (one tendon: :mod:`teleop.app.demo`; joint instrument: :mod:`teleop.app.demo_joints`):
 the two processes over Zenoh on 127.0.0.1, and the pieces of the summary that do not depend on the
 instrument.
 
-* :func:`run_processes`: the slave (``python -m teleop.cli slave``) listens on a free TCP port (or
+* :func:`run_processes`: the slave (``python -m teleop.app.cli slave``) listens on a free TCP port (or
   the first ``--listen``); once the port accepts connections the master connects. When the master
   has finished its protocol it announces STOPPING and the slave exits too. Either running past
   ``--timeout`` is stopped with SIGTERM (recordings are flushed) and reported, as is a non-zero exit.
@@ -129,7 +129,7 @@ def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, b
         port = free_tcp_port()
         ep = loopback_endpoint(port)
     timeout = float(args.timeout)
-    base = [sys.executable, "-m", "teleop.cli"]
+    base = [sys.executable, "-m", "teleop.app.cli"]
     common = ["--config", str(cfg_file), "--run-dir", str(run_dir), "--max-duration", f"{timeout:g}"]
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     deadline = time.monotonic() + timeout
@@ -138,7 +138,7 @@ def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, b
     with open(run_dir / "slave.log", "w") as slog, open(run_dir / "master.log", "w") as mlog, \
             open(run_dir / "bridge.log", "w") if bridge else contextlib.nullcontext() as blog:
         try:
-            from teleop.record import start_recorder  # `teleop record` first: it hears every message
+            from teleop.app.record import start_recorder  # `teleop record` first: it hears every message
             recorder, rec_link = start_recorder(base, common, run_dir, env, deadline)
             procs.append(("recorder", recorder))
             if rec_link is None:
@@ -176,7 +176,7 @@ def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, b
                     rc = p.returncode
                 if rc != 0:
                     problems.append(f"the {name} exited with code {rc} (see {run_dir}/{name}.log)")
-            from teleop.record import summary_line
+            from teleop.app.record import summary_line
             print(summary_line(run_dir / "recorder"), flush=True)
         finally:
             for _, p in procs:

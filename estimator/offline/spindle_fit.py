@@ -1,4 +1,4 @@
-"""Calibration of the spindle pair model (:mod:`estimator.spindle`) and its baselines.
+"""Calibration of the spindle pair model (:mod:`estimator.online.spindle`) and its baselines.
 
 Every fit maps the spindle signals (torque tau_p [N m], angle theta_p [rad]) of the calibration
 data to the jaw torque and angle of the same data; the predictions of other data use their
@@ -24,7 +24,7 @@ import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
 
 from estimator.capstan import phase_formula_batch
-from estimator.spindle import OMEGA_S, Batch, SpindleParams, elongation_difference, play_batch, predict_torque
+from estimator.online.spindle import OMEGA_S, Batch, SpindleParams, elongation_difference, play_batch, predict_torque
 
 __all__ = ["BASE", "EXTENSIONS", "EXTENSION_STARTS", "BOUNDS", "fit_torque", "fit_angle", "fit_model", "fit_baselines", "Baseline",
            "band_centre"]

@@ -1,8 +1,8 @@
 """What the seed pair model gets wrong on a recording of an antagonistic pair, why, and the gain.
 
-The pair counterpart of :func:`estimator.diagnosis.diagnose` for recordings with a motor command,
+The pair counterpart of :func:`estimator.offline.diagnosis.diagnose` for recordings with a motor command,
 the two proximal tensions and the distal angle only (the KAIST flexible endoscope,
-docs/findings.md). The models and effects are in :mod:`estimator.pair_models`. Held-out
+docs/findings.md). The models and effects are in :mod:`estimator.offline.pair_models`. Held-out
 discipline: model choice sees the training block only; the test block is touched once, for the
 reported figure of the chosen model (and of the seed model it is compared with).
 
@@ -18,7 +18,7 @@ reported figure of the chosen model (and of the seed model it is compared with).
    Score S = (cv rmse / cv rmse of the seed)^2.
 3. Forward selection with a price per parameter: starting from the seed, the candidate with the
    lowest S / S_chosen + PENALTY (n_params - n_params_chosen) is accepted when that is below 1
-   (PENALTY: the single-tendon diagnosis's price, :data:`estimator.diagnosis.PENALTY`); the first
+   (PENALTY: the single-tendon diagnosis's price, :data:`estimator.offline.diagnosis.PENALTY`); the first
    round offers the capstan structure (``capstan_joint``) and the seed with each effect, later
    rounds every effect that applies to the model chosen so far; at most ``max_effects`` are
    accepted, and the search stops once the chosen model's cv rmse is within STRUCTURE_RATIO
@@ -38,10 +38,10 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import least_squares
 
-from estimator.diagnosis import PENALTY, STRUCTURE_RATIO
-from estimator.diagnosis_fit import noise_level
-from estimator.pair import fit_pair
-from estimator.pair_models import (CAUSE_OF_SEED, PAIR_EFFECTS, applicable, model_id, model_params,
+from estimator.offline.diagnosis import PENALTY, STRUCTURE_RATIO
+from estimator.offline.diagnosis_fit import noise_level
+from estimator.offline.pair import fit_pair
+from estimator.offline.pair_models import (CAUSE_OF_SEED, PAIR_EFFECTS, applicable, model_id, model_params,
                                    predict_model)
 
 __all__ = ["CAPSTAN_STARTS", "MAX_NFEV", "CV_NFEV", "fit_model", "folds", "cross_validate", "diagnose_pair",
@@ -104,7 +104,7 @@ def fit_model(structure: str, effects: tuple[str, ...], rec, train: slice, test:
 
     Parameters
     ----------
-    structure, effects : the model (:mod:`estimator.pair_models`)
+    structure, effects : the model (:mod:`estimator.offline.pair_models`)
     rec : recording (time, command, T_a, T_b, angle; arrays of shape (n,))
     train, test : slices of the samples (the model runs from sample 0 in both cases)
     starts : starting values by name; a missing name takes each of its parameter's ``starts``
@@ -172,7 +172,7 @@ def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,
     Parameters
     ----------
     rec : recording with time [s], command [rad], T_a, T_b [N], angle [rad], arrays of shape (n,)
-    train, test : sample slices (KAIST: command cycle 1 and the later cycles, :func:`teleop.kaist.split`);
+    train, test : sample slices (KAIST: command cycle 1 and the later cycles, :func:`teleop.app.kaist.split`);
         the choice uses ``train`` only (module docstring), ``test`` gives the reported figures
     max_effects : most effects accepted (the capstan structure counts as one), >= 1
     progress : called with a label after every fitted model

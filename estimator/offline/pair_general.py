@@ -1,11 +1,11 @@
 """Fit once, predict new tube shapes: choice of the shared structure, uncertainty, export and prediction.
 
-The shared models of :mod:`estimator.pair_shared` hold one parameter set for every configuration
+The shared models of :mod:`estimator.offline.pair_shared` hold one parameter set for every configuration
 with K_j = K0_j + mu N (N the configuration's bend angle [rad]). This module adds what is needed to
 use that set on configurations it has never seen:
 
 * :func:`choose_shared` - the structure is chosen on the training cycles only, by
-  leave-one-configuration-out: for each candidate (:data:`estimator.pair_shared.CHOICE`, in order)
+  leave-one-configuration-out: for each candidate (:data:`estimator.offline.pair_shared.CHOICE`, in order)
   refit on the training cycles of all configurations but one and score the training cycle of the
   left-out one; forward choice with the project's price per parameter (S = (rms / rms_chosen)^2,
   accepted when S + PENALTY * extra parameters < 1).
@@ -24,10 +24,22 @@ from typing import Callable
 
 import numpy as np
 
-from estimator.diagnosis import PENALTY
-from estimator.pair_shared import SHARED_MODELS, SharedModel, config_values, fit_shared, predict_config, shared_params
+from estimator.offline.diagnosis import PENALTY
+from estimator.offline.pair_shared import (
+    CHOICE,
+    COMPARED,
+    LEAVE_ONE_OUT,
+    SHARED_MODELS,
+    SharedModel,
+    config_values,
+    fit_shared,
+    leave_one_out,
+    predict_config,
+    score,
+    shared_params,
+)
 
-__all__ = ["choose_shared", "bootstrap", "local_correlation", "export_params", "predict_shared", "CV_NFEV"]
+__all__ = ["choose_shared", "bootstrap", "local_correlation", "export_params", "predict_shared", "shared_analysis", "CV_NFEV"]
 
 #: Most residual evaluations of a leave-one-out or bootstrap refit (warm-started from the full fit).
 CV_NFEV = 40
@@ -45,7 +57,7 @@ def choose_shared(recs: list, bends: list[float], train: list, candidates: tuple
     ----------
     recs, bends : recordings and bend angles N [rad]
     train : per recording, the training samples (slice); nothing else is used
-    candidates : model names of :data:`estimator.pair_shared.SHARED_MODELS`, in forward order
+    candidates : model names of :data:`estimator.offline.pair_shared.SHARED_MODELS`, in forward order
     fitted : name -> values of each candidate fitted on ``train`` of all recordings (warm starts)
 
     Returns
@@ -190,3 +202,89 @@ def predict_shared(params: dict, rec, bend: float) -> tuple[np.ndarray, dict]:
     if missing:
         raise ValueError(f"shared parameter set ({name}): missing {', '.join(missing)}")
     return predict_config(m, values, rec, bend), config_values(m, values, rec, bend)
+
+
+def shared_analysis(recs: list, bends: list[float], train: list[slice], test: list[slice],
+                    progress: Callable[[str], None] | None = None, drift: bool = False,
+                    n_bootstrap: int = 20, blocks: list[list[slice]] | None = None) -> tuple[dict, dict]:
+    """The shared fits, the choice of the shared structure on the training cycles, its
+    leave-one-out predictions, its uncertainty, the E6 test and the exported parameter set.
+
+    Parameters
+    ----------
+    recs, bends : recordings and their bend angles N [rad]
+    train, test : per recording, the training and test sample slices (KAIST: cycle 1 and the later
+        cycles); the fits and the choice use ``train`` only; the leave-one-out refits use every
+        sample up to the end of each *other* configuration's test block
+    drift : also fit the models with parameters per configuration (``capstan, X per configuration``)
+    n_bootstrap : bootstrap draws of the exported set (0: none)
+    blocks : per recording, its cycles (for the bootstrap); default: [train, test]
+
+    Returns
+    -------
+    summary : dict, JSON-ready
+        ``models``: name -> {params {name: {value, unit}}, n_params, rmse_test_deg (all test blocks
+        pooled), configurations [per recording: rmse_train_deg, rmse_test_deg, max_abs_test_deg, K_a,
+        K_b]}; ``choice`` (:func:`estimator.offline.pair_general.choose_shared`); ``chosen`` (name);
+        ``leave_one_out``: name -> [per recording: rmse_test_deg, rmse_all_deg, params]; ``E6``:
+        {score S of capstan against mu = 0 on the pooled test rmse, price, accepted}; ``mu`` [1/rad];
+        ``params`` (the chosen set refitted on every sample of every configuration, with bootstrap
+        std / ci95: :func:`estimator.offline.pair_general.export_params`); ``uncertainty`` (bootstrap
+        correlation matrix, local correlation); ``samples`` (what was used for what).
+    details : dict of per-sample predictions [rad] (``models`` / ``leave_one_out`` -> name -> list of
+        arrays), for figures; not JSON.
+    """
+    tick = progress or (lambda label: None)
+    summary: dict = {"models": {}, "leave_one_out": {}}
+    details: dict = {"models": {}, "leave_one_out": {}}
+    fitted = {}
+    names = list(dict.fromkeys(("capstan",) + COMPARED + CHOICE))
+    names += [n for n, m in SHARED_MODELS.items() if m.per_config and drift]
+    for name in names:
+        m = SHARED_MODELS[name]
+        # variants of the angle-only capstan model start from its fit (their extra freedom at its values)
+        warm = [dict(fitted["capstan"])] if (m.structure == "capstan" and m.grows and "capstan" in fitted
+                                             and not m.tension_weight) else []
+        v = fit_shared(m, recs, bends, train, starts=warm + list(m.starts[:1]) if warm else None)
+        tick(f"shared {name}")
+        fitted[name] = v
+        rows = score(m, v, recs, bends, train, test)
+        details["models"][name] = [r.pop("angle") for r in rows]
+        err2 = [np.square(a - np.asarray(r.angle, dtype=float))[te] for a, r, te in
+                zip(details["models"][name], recs, test)]
+        units = {p.name: p.unit for p in shared_params(m, len(recs))}
+        summary["models"][name] = {"params": {k: {"value": x, "unit": units[k]} for k, x in v.items()},
+                                   "n_params": len(v), "configurations": rows,
+                                   "rmse_test_deg": math.degrees(float(np.sqrt(np.mean(np.concatenate(err2)))))}
+    choice = choose_shared(recs, bends, train, CHOICE, fitted, tick)
+    chosen = choice["chosen"]
+    summary.update(choice=choice, chosen=chosen)
+    upto = [slice(0, te.stop) for te in test]
+    for name in dict.fromkeys(LEAVE_ONE_OUT + (chosen,)):
+        rows = leave_one_out(SHARED_MODELS[name], recs, bends, upto, test, fitted[name], tick)
+        details["leave_one_out"][name] = [r.pop("angle") for r in rows]
+        summary["leave_one_out"][name] = rows
+    ms = summary["models"]
+    S = (ms["capstan"]["rmse_test_deg"] / ms["capstan, mu = 0"]["rmse_test_deg"]) ** 2
+    price = S + PENALTY * (ms["capstan"]["n_params"] - ms["capstan, mu = 0"]["n_params"])
+    summary["E6"] = {"score": S, "price": price, "accepted": price < 1.0}
+    summary["mu"] = fitted["capstan"]["mu"]
+    # the exported set: the chosen structure refitted on every sample of every configuration
+    m = SHARED_MODELS[chosen]
+    v_all, res = fit_shared(m, recs, bends, upto, starts=[fitted[chosen]], full=True)
+    tick("shared set, all samples")
+    unc = bootstrap(m, recs, bends, blocks or [[tr, te] for tr, te in zip(train, test)], v_all,
+                    n_draws=n_bootstrap) if n_bootstrap else None
+    tick("bootstrap")
+    summary["params"] = export_params(m, v_all, "every sample up to the end of the test block of "
+                                      f"{len(recs)} configurations (bends {', '.join(f'{b:.3f}' for b in bends)} rad)",
+                                      unc)
+    summary["uncertainty"] = {"bootstrap": None if unc is None else {k: unc[k] for k in ("correlation", "n_draws",
+                                                                                        "method")},
+                              "local_correlation": local_correlation(res, list(v_all))}
+    summary["samples"] = {"fit": "training block of every configuration", "choice": choice["rule"],
+                          "test": "once per model: its reported figures",
+                          "leave_one_out": "refit on every sample of the other configurations, scored on the "
+                                           "left-out configuration's test block",
+                          "params": "refit on every sample of every configuration, for new configurations"}
+    return summary, details

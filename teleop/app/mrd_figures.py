@@ -17,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
+from teleop.app.mrd import MrdRun
 from teleop.figure_files import output_dir, pyplot
-from teleop.mrd import MrdRun
 
-__all__ = ["write_mrd_figures", "write_mrd_report", "FIGURES"]
+__all__ = ["write_mrd_figures", "FIGURES"]
 
 FIGURES = ("mrd_loops.png", "mrd_residuals.png", "mrd_bands.png")
 _CREDIT = "data: MRD Lab, University of Minnesota (ODbL/DbCL)"
@@ -161,16 +161,3 @@ def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, director
     fig.savefig(paths[-1], dpi=80)
     plt.close(fig)
     return paths
-
-
-def write_mrd_report(runs: list[MrdRun], summary: dict, details: dict, directory: str | Path) -> Path:
-    """``report.md`` with the printed table and the figures in ``directory``; returns its path."""
-    from teleop.mrd_report import format_mrd
-    d = output_dir(directory, "--report")
-    figs = write_mrd_figures(runs, summary, details, d)
-    text = ["# Jaw torque of a da Vinci tool from its spindle (teleop analyze --mrd)", "",
-            f"Data: {summary['attribution']}.", "", "```", format_mrd(summary), "```", ""]
-    text += [f"![{p.stem}]({p.name})" for p in figs]
-    out = d / "report.md"
-    out.write_text("\n".join(text) + "\n")
-    return out

@@ -132,7 +132,7 @@ def fit_pair(command, T_a, T_b, angle, n_train: int, n_nodes: int = 50, *, predi
     n_train : int, training samples, in [8, n]
     predict : callable (PairParams, command, T_a, T_b, n_nodes) -> angle [rad], optional
         Another model with the same six parameters (default :func:`predict_angle`; e.g.
-        :func:`estimator.joint_batch.predict_pair_angle`, the joint estimator with its pair coupling).
+        :func:`estimator.online.joint_batch.predict_pair_angle`, the joint estimator with its pair coupling).
     name : str, the fitted model's name
 
     Raises

@@ -6,7 +6,7 @@
    its joint limit, both directions, saved as ``runs/<id>/calibration/<instrument>.yaml``;
 3. the slave (reloads that file) and the master (scripted operator: the seed paper's protocol on
    tendon a then tendon b of every joint, all joints together) as two processes over Zenoh on
-   127.0.0.1, exactly as for one tendon (:func:`teleop.demo_run.run_processes`);
+   127.0.0.1, exactly as for one tendon (:func:`teleop.app.demo_run.run_processes`);
 4. :func:`evaluate_joints` reads ``slave_joints.csv`` and computes, per joint and per pulled tendon,
    the full-scale errors of the distal joint torque (max and mean of |estimate - truth| over the
    range of the true torque in that experiment) and of the angle; ``summary.json`` has them under
@@ -24,8 +24,8 @@ from typing import Any
 import numpy as np
 
 from master.joint_operator import MARKER_PAPER_A, MARKER_PAPER_B, joint_marker
+from teleop.app.demo_run import finish, full_scale_errors, loop_lines, read_json, run_processes, verdict_lines
 from teleop.config import Config, write_config
-from teleop.demo_run import finish, full_scale_errors, loop_lines, read_json, run_processes, verdict_lines
 from teleop.errors import DataError
 
 __all__ = ["TORQUE_BOUND", "CALIBRATION_BOUND", "read_joint_csv", "evaluate_joints", "joint_checks",
@@ -174,7 +174,7 @@ def format_joint_summary(s: dict) -> str:
 def main_joint_demo(args, cfg: Config, run_dir: Path) -> int:
     """The joint-instrument demo (module docstring); 0 when it finished and every check passed."""
     from slave.calibration_file import calibration_path
-    from teleop.calibrate import run_calibrate
+    from teleop.app.calibrate import run_calibrate
     cfg = dataclasses.replace(cfg, calibration=dataclasses.replace(cfg.calibration, dir=str(run_dir / "calibration")))
     cfg_file = write_config(cfg, run_dir / "config.yaml")
     t0 = time.monotonic()

@@ -1,10 +1,10 @@
 """``teleop demo``: the whole system end to end on one machine, then an accuracy summary.
 
 1. ``runs/<id>/`` (id = timestamp) gets the resolved config; a free TCP port on 127.0.0.1 is picked.
-2. The slave (``python -m teleop.cli slave``: calibration, simulated rig, estimator, CSV + Rerun)
+2. The slave (``python -m teleop.app.cli slave``: calibration, simulated rig, estimator, CSV + Rerun)
    starts and listens there; once the port accepts connections the master (``... master``: scripted
    operator, protocols ``paper,minor``) starts and connects. Both are OS processes talking Zenoh
-   (:func:`teleop.demo_run.run_processes`, shared with the joint-instrument demo).
+   (:func:`teleop.app.demo_run.run_processes`, shared with the joint-instrument demo).
 3. When the master has finished its protocol it announces STOPPING and the slave exits too. Either
    running past ``--timeout`` is stopped with SIGTERM (recordings are flushed) and reported.
 4. :func:`evaluate` reads the slave's CSV and computes, per experiment (marker 1 = paper's,
@@ -29,8 +29,8 @@ from typing import Any
 import numpy as np
 
 from estimator.capstan import phase_formula_batch
+from teleop.app.demo_run import finish, full_scale_errors, loop_lines, read_json, run_processes, verdict_lines
 from teleop.config import Config, load_config, write_config
-from teleop.demo_run import finish, full_scale_errors, loop_lines, read_json, run_processes, verdict_lines
 from teleop.errors import DataError
 from teleop.recording import read_measured_csv
 
@@ -169,12 +169,12 @@ def format_summary(s: dict) -> str:
 
 def main_demo(args) -> int:
     """``teleop demo``: returns 0 when the run finished and every check passed, else 1."""
-    from teleop.sides import prepare_run_dir
+    from teleop.app.sides import prepare_run_dir
     cfg_path = args.config or (DEFAULT_CONFIG if DEFAULT_CONFIG.is_file() else None)
     cfg = load_config(cfg_path)
     run_dir = prepare_run_dir(args, cfg)
-    if cfg.instrument.joints:           # a joint instrument (configs/instrument-3dof.yaml): teleop/demo_joints.py
-        from teleop.demo_joints import main_joint_demo
+    if cfg.instrument.joints:           # a joint instrument (configs/instrument-3dof.yaml): teleop/app/demo_joints.py
+        from teleop.app.demo_joints import main_joint_demo
         return main_joint_demo(args, cfg, run_dir)
     # the run's own calibration file: the slave calibrates at power-up and saves it in the run
     cfg = dataclasses.replace(cfg, calibration=dataclasses.replace(cfg.calibration, dir=str(run_dir / "calibration")))
@@ -196,7 +196,7 @@ def main_demo(args) -> int:
         try:
             summary["experiments"] = evaluate(run_dir / "slave.csv", calib, cfg)
             if summary["experiments"]:
-                from teleop.demo_figures import demo_figure
+                from teleop.app.demo_figures import demo_figure
                 summary["figure"] = str(demo_figure(run_dir / "slave.csv", calib, baseline_deadband(cfg),
                                                     run_dir / "estimates.png", EXPERIMENTS))
         except DataError as e:

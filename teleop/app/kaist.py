@@ -37,8 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from estimator.pair import rmse
-from estimator.pair_general import predict_shared
+from estimator.offline.pair import rmse
+from estimator.offline.pair_general import predict_shared
 from teleop.columns import ColumnMap, parse_column_map, read_table
 from teleop.errors import DataError
 

@@ -264,7 +264,7 @@ def write_kaist_figures(recs, details: list[dict], summary: dict, directory: str
 
     Parameters
     ----------
-    recs, details, summary : what :func:`teleop.analyze.analyze_kaist` read and returned
+    recs, details, summary : what :func:`teleop.app.analyze.analyze_kaist` read and returned
     directory : output directory
 
     Returns
@@ -289,8 +289,8 @@ def write_kaist_report(recs, details: list[dict], summary: dict, directory: str 
     ConfigError
         ``directory`` cannot be created.
     """
-    from estimator.pair_models import PAIR_EFFECTS
-    from teleop.analyze import format_kaist
+    from estimator.offline.pair_models import PAIR_EFFECTS
+    from teleop.app.kaist_summary import format_kaist
 
     figs = write_kaist_figures(recs, details, summary, directory, option="--report")
     d = figs[0].parent

@@ -1,7 +1,7 @@
 """Compiled kernel of the extended profile-memory model: the base estimator plus every effect's knob.
 
 One kernel runs the tension-profile memory of :mod:`estimator.sheath` with all extensions of
-:mod:`estimator.effects` at once; an extension that is off sits at its neutral value, so the base
+:mod:`estimator.offline.effects` at once; an extension that is off sits at its neutral value, so the base
 model is the kernel with every knob neutral and extensions compose. Per sample k, with the node
 shape u_i = theta_i / theta_L in [0, 1] and weights w_i (sum 1):
 
@@ -191,7 +191,7 @@ def backlash_play(x: np.ndarray, width: float) -> np.ndarray:
 
 def route_shape(n1: int, r_1: float, r_2: float) -> np.ndarray:
     """Normalised wrap angle u(s) [-], shape (n1,), at n1 nodes equally spaced in arc length: piecewise
-    linear over three equal thirds holding the shares q1, q2, q3 of the total angle (see :data:`estimator.effects.ROUTE`)."""
+    linear over three equal thirds holding the shares q1, q2, q3 of the total angle (see :data:`estimator.offline.effects.ROUTE`)."""
     q1 = r_1
     q2 = (1.0 - r_1) * r_2
     return np.interp(np.linspace(0.0, 1.0, n1), [0.0, 1 / 3, 2 / 3, 1.0], [0.0, q1, q1 + q2, 1.0])

@@ -20,8 +20,8 @@ import argparse
 import logging
 import sys
 
+from teleop.app.sides import endpoints, run_master, run_slave
 from teleop.errors import TeleopError
-from teleop.sides import endpoints, run_master, run_slave
 
 __all__ = ["build_parser", "main", "run_slave", "run_master", "endpoints"]
 
@@ -42,11 +42,11 @@ def _inject_flag(p: argparse.ArgumentParser) -> None:
     p.add_argument("--inject", metavar="SPEC", default=None,
                    help="fault injection on this side's outgoing messages (tests), e.g. "
                         "delay=30ms,drop=0.1,dup=0.05,reorder=0.05,seed=1 or corrupt=nan,stream=command,on=usr1 "
-                        "(teleop/faults.py)")
+                        "(teleop/app/faults.py)")
 
 
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
-    """The argument parser. ``argv`` decides whether ``teleop.analyze`` is imported (only for analyze)."""
+    """The argument parser. ``argv`` decides whether ``teleop.app.analyze`` is imported (only for analyze)."""
     parser = argparse.ArgumentParser(prog=PROG, description="Haptic teleoperation of tendon-sheath instruments.")
     sub = parser.add_subparsers(dest="command",
                                 metavar="{demo,master,slave,record,router,bridge,calibrate,replay,analyze,devices}",
@@ -77,17 +77,17 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
     p.set_defaults(func=_cmd_master)
 
-    p = sub.add_parser("record", help="record every stream of the instrument over Zenoh (teleop/record.py)")
+    p = sub.add_parser("record", help="record every stream of the instrument over Zenoh (teleop/app/record.py)")
     _shared(p)
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
     p.add_argument("--exit-when-done", action="store_true", help="finish once every side seen has gone")
     p.add_argument("--rerun", choices=("save", "spawn", "off"), default=None, help="override recording.rerun")
-    p.set_defaults(func=lambda a: __import__("teleop.record", fromlist=["run_record"]).run_record(a))
+    p.set_defaults(func=lambda a: __import__("teleop.app.record", fromlist=["run_record"]).run_record(a))
 
-    p = sub.add_parser("router", help="a Zenoh router the sides and the recorder connect to (teleop/router.py)")
+    p = sub.add_parser("router", help="a Zenoh router the sides and the recorder connect to (teleop/app/router.py)")
     _shared(p)
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
-    p.set_defaults(func=lambda a: __import__("teleop.router", fromlist=["run_router"]).run_router(a))
+    p.set_defaults(func=lambda a: __import__("teleop.app.router", fromlist=["run_router"]).run_router(a))
 
     p = sub.add_parser("bridge", help="the simulated rig of --config behind the Zenoh rig interface (rig.type "
                                       "zenoh on the slave), as its own process")
@@ -97,7 +97,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
 
     p = sub.add_parser("calibrate", help="joint-limit calibration of every tendon of the instrument (both "
                                          "directions of a pair), saved as configs/calibration/<instrument>.yaml")
-    from teleop.calibrate import add_calibrate_arguments, run_calibrate
+    from teleop.app.calibrate import add_calibrate_arguments, run_calibrate
     add_calibrate_arguments(p)
     p.set_defaults(func=run_calibrate)
 
@@ -117,7 +117,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
 
     args = sys.argv[1:] if argv is None else argv
     if "analyze" in args[:1]:
-        from teleop import analyze  # lazy: only `teleop analyze` pays for it
+        from teleop.app import analyze  # lazy: only `teleop analyze` pays for it
         p = sub.add_parser("analyze", help="run the model against a recording")
         analyze.add_arguments(p)
         p.set_defaults(func=analyze.main_analyze)
@@ -131,12 +131,12 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
 # ---- subcommands ---------------------------------------------------------------------------------
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from teleop.demo import main_demo
+    from teleop.app.demo import main_demo
     return main_demo(args)
 
 
 def _cmd_bridge(args: argparse.Namespace) -> int:
-    from teleop.bridge import run_bridge
+    from teleop.app.bridge import run_bridge
     return run_bridge(args)
 
 
@@ -179,5 +179,5 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
 
-if __name__ == "__main__":  # python -m teleop.cli
+if __name__ == "__main__":  # python -m teleop.app.cli
     sys.exit(main())

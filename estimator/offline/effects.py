@@ -4,7 +4,7 @@ Base model: the profile-memory estimator (exact Coulomb memory; :mod:`estimator.
 parameters, the friction exponent K [-] and the compliance L/EA [m/N], driven by the measured
 proximal tension T_in from an unloaded tendon (initial profile 0, positions zeroed there). Each
 extension adds a few parameters to it; all of them run through one compiled kernel
-(:mod:`estimator.effects_kernels`) in which an extension that is off sits at its neutral value, so
+(:mod:`estimator.offline.effects_kernels`) in which an extension that is off sits at its neutral value, so
 extensions compose. Sensor effects act on the input (T_in corrected before the kernel); friction
 and tendon effects change the kernel. Effect numbers E1-E16 refer to the project's literature
 summary (literature.md); the causes and signatures are summarised in docs/diagnosis.md.
@@ -16,7 +16,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from estimator.effects_kernels import backlash_play, route_shape, run_extended, travel_lag
+from estimator.offline.effects_kernels import backlash_play, route_shape, run_extended, travel_lag
 
 __all__ = ["Parameter", "Effect", "VelocityFriction", "Pretension", "CurvatureDrift", "TendonStiffening", "Stiction",
            "FrictionOffset", "Presliding", "DistalBacklash", "SensorEffect", "Series", "Prediction", "CATALOGUE",
@@ -90,7 +90,7 @@ class Effect:
     it shows in data; ``extension`` the model change; ``literature`` the effect number in
     literature.md; ``parameters`` what it adds; ``primary`` the signal it changes persistently
     ("T_out", or "x_out" for effects that leave T_out alone after the first pull); ``knobs`` the
-    kernel knob of each parameter (:mod:`estimator.effects_kernels`), empty for sensor corrections.
+    kernel knob of each parameter (:mod:`estimator.offline.effects_kernels`), empty for sensor corrections.
     The rig switch of the same name is ``rig.effects.<id>`` (slave/simulated.py).
     """
 
@@ -301,7 +301,7 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
     """Outputs of the base model extended by ``effects`` over a series.
 
     Order: proximal sensor corrections (T_in, x_in: the model runs on the true inputs), the kernel
-    (:func:`estimator.effects_kernels.run_extended`), pre-sliding on T_out and the distal backlash on
+    (:func:`estimator.offline.effects_kernels.run_extended`), pre-sliding on T_out and the distal backlash on
     x_out, then the distal sensors' reading models (T_out, x_out).
 
     Parameters

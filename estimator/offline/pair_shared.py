@@ -1,6 +1,6 @@
 """One set of physical parameters across tube configurations, with K growing with the bend (E6).
 
-The per-configuration diagnosis (:mod:`estimator.pair_diagnosis`) fits every configuration on its
+The per-configuration diagnosis (:mod:`estimator.offline.pair_diagnosis`) fits every configuration on its
 own. Here one model holds for all of them: the capstan-joint pair model
 (:mod:`estimator.pair_kernels`) with the transmission G, the tendon compliance lam and the joint
 stiffness k shared, and the friction exponent of each tendon growing with the configuration's
@@ -28,7 +28,7 @@ Shared models are fitted the same way (training samples of every configuration t
   :data:`G_FIXED` (the data pin s, not G); ``G falls with N`` and ``lam grows with N`` add one slope.
 
 The structure is chosen by leave-one-configuration-out on the training cycles
-(:func:`estimator.pair_general.choose_shared`). Leave-one-configuration-out for the report: the chosen
+(:func:`estimator.offline.pair_general.choose_shared`). Leave-one-configuration-out for the report: the chosen
 model is refitted on all samples up to the end of the test block of the other configurations and
 predicts the left-out one.
 """
@@ -41,11 +41,11 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import least_squares
 
-from estimator.pair_diagnosis import MAX_NFEV
-from estimator.pair_models import Param, model_params, predict_model
+from estimator.offline.pair_diagnosis import MAX_NFEV
+from estimator.offline.pair_models import Param, model_params, predict_model
 
 __all__ = ["SharedModel", "SHARED_MODELS", "CHOICE", "COMPARED", "TENSION_WEIGHT", "LEAVE_ONE_OUT", "fit_shared",
-           "predict_config", "leave_one_out", "shared_params", "config_values", "score", "shared_analysis"]
+           "predict_config", "leave_one_out", "shared_params", "config_values", "score"]
 
 _MU = Param("mu", "1/rad", -1.0, 3.0, (0.15,), 0.02)
 _S = Param("s", "N/rad", 0.05, 100.0, (3.0,), 0.2)
@@ -117,7 +117,7 @@ SHARED_MODELS = {m.name: m for m in (
                 tension_weight=TENSION_WEIGHT, stiffness_ratio=True, fixed=(("G", G_FIXED),), lam_slope=True),
 )}
 #: Candidates of the shared structure, in the order of the forward choice by leave-one-configuration-out
-#: on the training cycles (:func:`estimator.pair_general.choose_shared`).
+#: on the training cycles (:func:`estimator.offline.pair_general.choose_shared`).
 CHOICE = ("capstan", "capstan+T", "capstan+T, G falls with N", "capstan+T, lam grows with N")
 #: Shared models refitted leaving each configuration out besides the chosen one (none: each costs five refits).
 LEAVE_ONE_OUT: tuple[str, ...] = ()
@@ -267,91 +267,3 @@ def leave_one_out(m: SharedModel, recs: list, bends: list[float], fit_on: list[s
         if progress:
             progress(f"leave out {i}")
     return out
-
-
-def shared_analysis(recs: list, bends: list[float], train: list[slice], test: list[slice],
-                    progress: Callable[[str], None] | None = None, drift: bool = False,
-                    n_bootstrap: int = 20, blocks: list[list[slice]] | None = None) -> tuple[dict, dict]:
-    """The shared fits, the choice of the shared structure on the training cycles, its
-    leave-one-out predictions, its uncertainty, the E6 test and the exported parameter set.
-
-    Parameters
-    ----------
-    recs, bends : recordings and their bend angles N [rad]
-    train, test : per recording, the training and test sample slices (KAIST: cycle 1 and the later
-        cycles); the fits and the choice use ``train`` only; the leave-one-out refits use every
-        sample up to the end of each *other* configuration's test block
-    drift : also fit the models with parameters per configuration (``capstan, X per configuration``)
-    n_bootstrap : bootstrap draws of the exported set (0: none)
-    blocks : per recording, its cycles (for the bootstrap); default: [train, test]
-
-    Returns
-    -------
-    summary : dict, JSON-ready
-        ``models``: name -> {params {name: {value, unit}}, n_params, rmse_test_deg (all test blocks
-        pooled), configurations [per recording: rmse_train_deg, rmse_test_deg, max_abs_test_deg, K_a,
-        K_b]}; ``choice`` (:func:`estimator.pair_general.choose_shared`); ``chosen`` (name);
-        ``leave_one_out``: name -> [per recording: rmse_test_deg, rmse_all_deg, params]; ``E6``:
-        {score S of capstan against mu = 0 on the pooled test rmse, price, accepted}; ``mu`` [1/rad];
-        ``params`` (the chosen set refitted on every sample of every configuration, with bootstrap
-        std / ci95: :func:`estimator.pair_general.export_params`); ``uncertainty`` (bootstrap
-        correlation matrix, local correlation); ``samples`` (what was used for what).
-    details : dict of per-sample predictions [rad] (``models`` / ``leave_one_out`` -> name -> list of
-        arrays), for figures; not JSON.
-    """
-    from estimator.diagnosis import PENALTY
-    from estimator.pair_general import bootstrap, choose_shared, export_params, local_correlation
-    tick = progress or (lambda label: None)
-    summary: dict = {"models": {}, "leave_one_out": {}}
-    details: dict = {"models": {}, "leave_one_out": {}}
-    fitted = {}
-    names = list(dict.fromkeys(("capstan",) + COMPARED + CHOICE))
-    names += [n for n, m in SHARED_MODELS.items() if m.per_config and drift]
-    for name in names:
-        m = SHARED_MODELS[name]
-        # variants of the angle-only capstan model start from its fit (their extra freedom at its values)
-        warm = [dict(fitted["capstan"])] if (m.structure == "capstan" and m.grows and "capstan" in fitted
-                                             and not m.tension_weight) else []
-        v = fit_shared(m, recs, bends, train, starts=warm + list(m.starts[:1]) if warm else None)
-        tick(f"shared {name}")
-        fitted[name] = v
-        rows = score(m, v, recs, bends, train, test)
-        details["models"][name] = [r.pop("angle") for r in rows]
-        err2 = [np.square(a - np.asarray(r.angle, dtype=float))[te] for a, r, te in
-                zip(details["models"][name], recs, test)]
-        units = {p.name: p.unit for p in shared_params(m, len(recs))}
-        summary["models"][name] = {"params": {k: {"value": x, "unit": units[k]} for k, x in v.items()},
-                                   "n_params": len(v), "configurations": rows,
-                                   "rmse_test_deg": math.degrees(float(np.sqrt(np.mean(np.concatenate(err2)))))}
-    choice = choose_shared(recs, bends, train, CHOICE, fitted, tick)
-    chosen = choice["chosen"]
-    summary.update(choice=choice, chosen=chosen)
-    upto = [slice(0, te.stop) for te in test]
-    for name in dict.fromkeys(LEAVE_ONE_OUT + (chosen,)):
-        rows = leave_one_out(SHARED_MODELS[name], recs, bends, upto, test, fitted[name], tick)
-        details["leave_one_out"][name] = [r.pop("angle") for r in rows]
-        summary["leave_one_out"][name] = rows
-    ms = summary["models"]
-    S = (ms["capstan"]["rmse_test_deg"] / ms["capstan, mu = 0"]["rmse_test_deg"]) ** 2
-    price = S + PENALTY * (ms["capstan"]["n_params"] - ms["capstan, mu = 0"]["n_params"])
-    summary["E6"] = {"score": S, "price": price, "accepted": price < 1.0}
-    summary["mu"] = fitted["capstan"]["mu"]
-    # the exported set: the chosen structure refitted on every sample of every configuration
-    m = SHARED_MODELS[chosen]
-    v_all, res = fit_shared(m, recs, bends, upto, starts=[fitted[chosen]], full=True)
-    tick("shared set, all samples")
-    unc = bootstrap(m, recs, bends, blocks or [[tr, te] for tr, te in zip(train, test)], v_all,
-                    n_draws=n_bootstrap) if n_bootstrap else None
-    tick("bootstrap")
-    summary["params"] = export_params(m, v_all, "every sample up to the end of the test block of "
-                                      f"{len(recs)} configurations (bends {', '.join(f'{b:.3f}' for b in bends)} rad)",
-                                      unc)
-    summary["uncertainty"] = {"bootstrap": None if unc is None else {k: unc[k] for k in ("correlation", "n_draws",
-                                                                                        "method")},
-                              "local_correlation": local_correlation(res, list(v_all))}
-    summary["samples"] = {"fit": "training block of every configuration", "choice": choice["rule"],
-                          "test": "once per model: its reported figures",
-                          "leave_one_out": "refit on every sample of the other configurations, scored on the "
-                                           "left-out configuration's test block",
-                          "params": "refit on every sample of every configuration, for new configurations"}
-    return summary, details

@@ -2,11 +2,11 @@
 
 The runs are given as :class:`RunData` (spindle torque and angle, the jaw truth, and the index
 from which a run is scored: after its initialisation stroke). Procedure (the held-out discipline of
-:mod:`estimator.pair_diagnosis`):
+:mod:`estimator.offline.pair_diagnosis`):
 
 1. :func:`select_extensions` - every run's first half (after its initialisation) fits, its second
    half validates. Starting from the base model (rho, Q, K_a, b), each extension of
-   :data:`estimator.spindle_fit.EXTENSIONS` not yet chosen is fitted (warm start from the chosen
+   :data:`estimator.offline.spindle_fit.EXTENSIONS` not yet chosen is fitted (warm start from the chosen
    model, the new parameter at 0) and scored S = (validation rmse / base validation rmse)^2; the
    best is accepted when S / S_chosen + PENALTY (its extra parameters) < 1, and the rounds go on
    until nothing is accepted.
@@ -21,9 +21,9 @@ from typing import Callable
 
 import numpy as np
 
-from estimator.diagnosis import PENALTY
-from estimator.spindle import Batch, SpindleParams, make_batch, predict_angle, predict_torque
-from estimator.spindle_fit import EXTENSION_STARTS, EXTENSIONS, fit_angle, fit_torque
+from estimator.offline.diagnosis import PENALTY
+from estimator.offline.spindle_fit import EXTENSION_STARTS, EXTENSIONS, fit_angle, fit_torque
+from estimator.online.spindle import Batch, SpindleParams, make_batch, predict_angle, predict_torque
 
 __all__ = ["RunData", "batch_of", "select_extensions", "shared_fit", "leave_one_out"]
 

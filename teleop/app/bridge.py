@@ -24,7 +24,7 @@ from teleop.rig_wire import RigSample, RigSetpoint
 
 __all__ = ["RigBridge", "sample_of", "run_bridge"]
 
-log = logging.getLogger("teleop.bridge")
+log = logging.getLogger("teleop.app.bridge")
 
 
 def _flat(a) -> tuple[float, ...]:
@@ -107,11 +107,11 @@ class RigBridge:
 def run_bridge(args: argparse.Namespace) -> int:
     """``teleop bridge``: serve the simulated rig of ``--config`` until stopped (module docstring)."""
     from slave.rigs import make_rig
+    from teleop.app.sides import open_session
     from teleop.config import load_config
     from teleop.keys import rig_key
     from teleop.recording import raise_on_sigterm
     from teleop.rig_wire import decode_rig, encode_rig
-    from teleop.sides import open_session
 
     cfg: Config = load_config(args.config)
     sim = dataclasses.replace(cfg, rig=dataclasses.replace(cfg.rig, type="simulated"))

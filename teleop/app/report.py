@@ -1,4 +1,4 @@
-"""Markdown report with figures of a diagnosis (:func:`estimator.diagnosis.diagnose`).
+"""Markdown report with figures of a diagnosis (:func:`estimator.offline.diagnosis.diagnose`).
 
 ``write_report(result, data, out_dir)`` writes ``out_dir/report.md`` and four PNG figures (matplotlib,
 Agg canvas, no display needed):
@@ -10,7 +10,7 @@ Agg canvas, no display needed):
 * ``candidates.png``       held-out score and gain of every extension.
 
 The report names the cause, the physical explanation and the signature from the catalogue
-(:mod:`estimator.effects`), the held-out errors, the gain and the fitted parameters with units.
+(:mod:`estimator.offline.effects`), the held-out errors, the gain and the fitted parameters with units.
 """
 from __future__ import annotations
 
@@ -20,8 +20,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from estimator.diagnosis import predictions
-from estimator.effects import CATALOGUE
+from estimator.offline.diagnosis import predictions
+from estimator.offline.effects import CATALOGUE
 from estimator.phase import Phase
 from teleop.recording import MeasuredData
 
@@ -165,7 +165,7 @@ def write_report(result: dict, data: MeasuredData, out_dir: str | Path) -> Path:
     Parameters
     ----------
     result : dict
-        What :func:`estimator.diagnosis.diagnose` returned for ``data``.
+        What :func:`estimator.offline.diagnosis.diagnose` returned for ``data``.
     data : MeasuredData
         The recording that was diagnosed.
     out_dir : str or Path

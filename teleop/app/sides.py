@@ -2,9 +2,9 @@
 
 One Zenoh session per process (:func:`open_session`), the streams of :mod:`teleop.keys` wired to a
 node (:func:`slave_links`, :func:`master_links`; ``--inject`` wraps the publishers in a
-:class:`teleop.faults.FaultInjector`), a run directory for recordings and stats
+:class:`teleop.app.faults.FaultInjector`), a run directory for recordings and stats
 (:func:`prepare_run_dir`), and the node run until it is done, stopped or out of time (``_serve``).
-:mod:`teleop.cli` parses the arguments and calls :func:`run_slave` / :func:`run_master`; the single
+:mod:`teleop.app.cli` parses the arguments and calls :func:`run_slave` / :func:`run_master`; the single
 tendon and the joint instrument share everything here but the slave's node.
 """
 from __future__ import annotations
@@ -50,13 +50,13 @@ def open_session(cfg, args: argparse.Namespace, clock):
     TransportError
         The session cannot be opened (port in use, address not resolvable).
     """
-    from teleop.discovery import side_session  # bare start: listen, or connect when taken
+    from teleop.app.discovery import side_session  # bare start: listen, or connect when taken
     return side_session(cfg, args, clock)
 
 
 def side_run_dir(args: argparse.Namespace, cfg) -> Path:
-    """A side's run directory: the session opened now, the run id agreed with the peers (teleop/discovery.py)."""
-    from teleop.discovery import side_run_dir as agreed
+    """A side's run directory: the session opened now, the run id agreed with the peers (teleop/app/discovery.py)."""
+    from teleop.app.discovery import side_run_dir as agreed
     return agreed(args, cfg)
 
 
@@ -64,10 +64,10 @@ def _injector(args: argparse.Namespace, clock):
     """The fault injector of ``--inject`` (SIGUSR1 trigger installed), or None."""
     if not getattr(args, "inject", None):
         return None
-    from teleop.faults import FaultInjector
+    from teleop.app.faults import FaultInjector
     inj = FaultInjector(args.inject, clock)
     inj.install_signal()
-    logging.getLogger("teleop.faults").warning("fault injection on: %s", args.inject)
+    logging.getLogger("teleop.app.faults").warning("fault injection on: %s", args.inject)
     return inj
 
 

@@ -56,7 +56,7 @@ Without these rules the antagonist's distal tension is unknown within its band, 
 pretension is a quarter of the full scale of the paper's protocol; with them the pretension is
 carried through (E5).
 
-The same maths over recorded arrays (compiled) is :func:`estimator.joint_batch.estimate_joint_batch`.
+The same maths over recorded arrays (compiled) is :func:`estimator.online.joint_batch.estimate_joint_batch`.
 """
 from __future__ import annotations
 
@@ -66,8 +66,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from estimator.distal import DistalEstimator
 from estimator.distal_slip import distal_clip, distal_gains, distal_tension, elongation
+from estimator.online.distal import DistalEstimator
 from estimator.phase import Phase
 from estimator.sheath import SheathModel
 
@@ -230,7 +230,7 @@ class JointEstimator:
     taut_tension : float
         Proximal tension from which a tendon's kinematic angle counts fully in (J3) [N], > 0.
     hold_rate, rate_time_constant : float
-        Phase settings of :class:`~estimator.distal.DistalEstimator` [N/s], [s].
+        Phase settings of :class:`~estimator.online.distal.DistalEstimator` [N/s], [s].
 
     Raises
     ------

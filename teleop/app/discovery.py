@@ -34,7 +34,7 @@ from teleop.transport import Session, zenoh_config
 
 __all__ = ["RunIdServer", "agree_run_id", "new_run_id", "open_auto_session", "side_run_dir", "side_session"]
 
-log = logging.getLogger("teleop.discovery")
+log = logging.getLogger("teleop.app.discovery")
 _RUN_ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}")
 _IN_USE = ("Address already in use", "os error 98", "AddrInUse")
 
@@ -161,7 +161,7 @@ def agree_run_id(session: Session, cfg: Config, role: str, given: str | None = N
     return rid
 
 
-# ---- the hooks of `teleop slave|master|record` (teleop/sides.py, teleop/record.py) ----------------
+# ---- the hooks of `teleop slave|master|record` (teleop/app/sides.py, teleop/app/record.py) ----------------
 
 _ATTR = "_teleop_session"
 
@@ -178,7 +178,7 @@ def side_session(cfg: Config, args, clock=None) -> Session:
         tuple(args.listen or ())
     connect = None if listen is None else tuple(args.connect or ())
     session, role = open_auto_session(cfg, listen, connect, clock)
-    session.lock_master = cfg.transport.lock_master     # read by teleop.sides when declaring the slave's links
+    session.lock_master = cfg.transport.lock_master     # read by teleop.app.sides when declaring the slave's links
     setattr(args, _ATTR, session)
     args._teleop_role = role
     return session

@@ -14,7 +14,7 @@ import time
 
 __all__ = ["router_config", "run_router"]
 
-log = logging.getLogger("teleop.router")
+log = logging.getLogger("teleop.app.router")
 
 
 def router_config(cfg, listen: tuple[str, ...] | None = None):

@@ -20,16 +20,24 @@ from __future__ import annotations
 import math
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
-from estimator.spindle import SpindleParams, first_reversal, make_batch, predict_angle, predict_torque, spindle_rate
-from estimator.spindle_fit import EXTENSIONS, band_centre, fit_baselines
-from estimator.spindle_shared import RunData, batch_of, leave_one_out, select_extensions, shared_fit
+from estimator.offline.spindle_fit import EXTENSIONS, band_centre, fit_baselines
+from estimator.offline.spindle_shared import RunData, batch_of, leave_one_out, select_extensions, shared_fit
+from estimator.online.spindle import (
+    SpindleParams,
+    first_reversal,
+    make_batch,
+    predict_angle,
+    predict_torque,
+    spindle_rate,
+)
+from teleop.app.mrd import ATTRIBUTION, MrdRun
 from teleop.errors import ConfigError, DataError
-from teleop.mrd import ATTRIBUTION, MrdRun
 
-__all__ = ["analyze_mrd", "format_mrd", "parse_calibration", "band_measurements", "SCORE_FROM_S"]
+__all__ = ["analyze_mrd", "format_mrd", "write_mrd_report", "parse_calibration", "band_measurements", "SCORE_FROM_S"]
 
 SCORE_FROM_S = 0.5         # the first reversal is searched after this [s] (the load motor ramps in first)
 FIT_STEP, SHARED_STEP = 10, 50      # decimation of the fits (1 kHz -> 100 Hz, 20 Hz)
@@ -297,10 +305,9 @@ def main_mrd(args) -> int:
     """``teleop analyze --mrd [DIR] [--calibration RUN|segment:SECONDS] [--json OUT] [--figures DIR]
     [--report DIR]``: load, analyse, print; one line per unreadable file. Returns 0."""
     import json
-    from pathlib import Path
 
-    from teleop.mrd import load_mrd_dir
-    from teleop.mrd_figures import write_mrd_figures, write_mrd_report
+    from teleop.app.mrd import load_mrd_dir
+    from teleop.app.mrd_figures import write_mrd_figures
 
     if args.json is not None and not Path(args.json).resolve().parent.is_dir():
         raise ConfigError(f"--json {args.json}: directory {Path(args.json).resolve().parent} does not exist")
@@ -320,3 +327,17 @@ def main_mrd(args) -> int:
                                               default=lambda o: o.item() if hasattr(o, "item") else str(o)) + "\n")
         print(f"wrote {args.json}")
     return 0
+
+
+def write_mrd_report(runs: list[MrdRun], summary: dict, details: dict, directory: str | Path) -> Path:
+    """``report.md`` with the printed table and the figures in ``directory``; returns its path."""
+    from teleop.app.mrd_figures import write_mrd_figures
+    from teleop.figure_files import output_dir
+    d = output_dir(directory, "--report")
+    figs = write_mrd_figures(runs, summary, details, d)
+    text = ["# Jaw torque of a da Vinci tool from its spindle (teleop analyze --mrd)", "",
+            f"Data: {summary['attribution']}.", "", "```", format_mrd(summary), "```", ""]
+    text += [f"![{p.stem}]({p.name})" for p in figs]
+    out = d / "report.md"
+    out.write_text("\n".join(text) + "\n")
+    return out

@@ -1,4 +1,4 @@
-"""Fitting and scoring for the diagnosis (:mod:`estimator.diagnosis` selects; docs/diagnosis.md).
+"""Fitting and scoring for the diagnosis (:mod:`estimator.offline.diagnosis` selects; docs/diagnosis.md).
 
 * :func:`prepare`: block-average the recording to about ``target_rate`` (zero phase; the noise
   drops, the rate-independent maths does not change), a 3-sample mean on T_in, velocity dx_in/dt,
@@ -22,7 +22,7 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import least_squares
 
-from estimator.effects import K_MAX, ROUTE, Effect, Parameter, Series, predict
+from estimator.offline.effects import K_MAX, ROUTE, Effect, Parameter, Series, predict
 from estimator.sheath import SheathModel
 from estimator.data import MeasuredData
 
@@ -142,7 +142,7 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
     Every start (dict of parameter values, missing ones neutral) is scored, the best
     ``max_starts`` are refined by ``scipy.optimize.least_squares`` (trust-region reflective, within
     the parameters' bounds, in variables scaled to O(1)). L/EA is solved in closed form inside
-    every residual evaluation. ``route``: fit the route shares r_1, r_2 too (estimator.effects.ROUTE);
+    every residual evaluation. ``route``: fit the route shares r_1, r_2 too (estimator.offline.effects.ROUTE);
     ``fixed``: values held (e.g. the base model's route); ``mask``: the samples of ``train`` whose
     residuals count (default all; the model always runs from the first sample). Returns (values,
     compliance [m/N], cost).

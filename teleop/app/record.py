@@ -44,7 +44,7 @@ from teleop.keys import instrument_keys, liveliness_pattern
 __all__ = ["Recorder", "decode_any", "flatten", "read_messages", "run_record", "short_names", "start_recorder",
            "summary_line"]
 
-log = logging.getLogger("teleop.record")
+log = logging.getLogger("teleop.app.record")
 _RAW = struct.Struct("<dHI")
 _STOP = object()
 _SI = {"T": "N", "x": "m", "e": "m", "t": "s"}
@@ -367,7 +367,7 @@ class Recorder:
         self._rr.close()
         s = self.summary()
         try:
-            from teleop.record_figures import streams_figure
+            from teleop.app.record_figures import streams_figure
             s["figure"] = str(streams_figure([f.path for f in self._csv.values()], self.dir / "streams.png"))
         except Exception as e:  # noqa: BLE001 - a figure problem must not lose the summary
             s["figure_error"] = repr(e)
@@ -400,8 +400,8 @@ def read_messages(path: str | Path):
 def run_record(args) -> int:
     """``teleop record``: record until Ctrl-C/SIGTERM, ``--max-duration``, or (``--exit-when-done``)
     once every side seen has gone (liveliness) for half a second."""
+    from teleop.app.discovery import side_run_dir, side_session
     from teleop.config import load_config
-    from teleop.discovery import side_run_dir, side_session
     from teleop.recording import raise_on_sigterm
 
     cfg = load_config(args.config)

@@ -3,7 +3,7 @@
 Parameters fitted: the friction exponent K = mu * sum(theta) [-] (Phee et al. 2009, eq. (2)) and
 the tendon compliance L/EA [m/N], for two estimators that share them:
 
-* ``profile``: the tension-profile memory estimator (:mod:`estimator.distal`, envelope rule)
+* ``profile``: the tension-profile memory estimator (:mod:`estimator.online.distal`, envelope rule)
       T_out_hat = T_n,   x_out_hat = x_in - (L/EA) * mean_s T(s)
 * ``phase``: the paper's phase formulas with the "tension at the last reversal" state
   (:class:`estimator.capstan.PhaseFormulaEstimator`, eqs. (1), (12), (14)-(25)).

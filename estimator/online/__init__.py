@@ -1,0 +1,8 @@
+"""The online estimator: what runs in the slave's control loop, sample by sample, from proximal sensors.
+
+:mod:`~estimator.online.distal` (one tendon: distal tension and elongation, profile memory),
+:mod:`~estimator.online.joint` and :mod:`~estimator.online.joint_batch` (an antagonistic pair: joint
+torque and angle), :mod:`~estimator.online.spindle` (a cable pair on one input spindle). They import
+only the model core at the top of :mod:`estimator` (sheath, capstan, phase, kernels), never
+:mod:`estimator.offline`.
+"""
