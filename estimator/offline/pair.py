@@ -156,6 +156,7 @@ def fit_pair(command, T_a, T_b, angle, n_train: int, n_nodes: int = 50, *, predi
             sol = lsq_linear(A, y[tr], bounds=(lo, hi))
             if best is None or sol.cost < best[0]:
                 best = (sol.cost, Ka, Kb, sol.x)
+    assert best is not None                       # _K_GRID is not empty
     _, Ka, Kb, (G, la, lb, th0) = best
 
     predict = predict or predict_angle
@@ -194,6 +195,7 @@ def fit_force_path(T_a, T_b, angle, n_train: int, n_nodes: int = 50) -> PairFit:
         sol = lsq_linear(A, y[tr], bounds=([0.0, -np.inf], [np.inf, np.inf]))
         if best is None or sol.cost < best[0]:
             best = (sol.cost, K, sol.x)
+    assert best is not None
     _, K0, (b0, t0) = best
     sol = least_squares(lambda q: q[1] * diff(q[0], tr) + q[2] - y[tr], [max(K0, 1e-3), b0, t0],
                         bounds=([0.0, 0.0, -np.inf], [K_MAX, np.inf, np.inf]), diff_step=1e-3,
@@ -250,6 +252,7 @@ def fit_play_map(command, angle, n_train: int) -> PairFit:
                             bounds=([0.0, -np.inf, 0.0], [np.inf, np.inf, np.inf]), diff_step=1e-4)
         if best is None or sol.cost < best.cost:
             best = sol
+    assert best is not None
     a, b, w = map(float, best.x)
     return PairFit("linear map + play", {"a": a, "b": b, "w": w}, play(a * c + b, w), float(best.cost))
 

@@ -68,8 +68,8 @@ class FitResult:
     """A fitted model over one recording: structure, effects, values (name -> SI value), the angle
     [rad] and (capstan) proximal tensions [N] over the whole recording, train and test rmse [rad]."""
 
-    def __init__(self, structure: str, effects: tuple[str, ...], values: dict[str, float], rec, train: slice,
-                 test: slice):
+    def __init__(self, structure: str, effects: tuple[str, ...], values: dict[str, float], rec,
+                 train: slice | np.ndarray, test: slice | np.ndarray):
         self.structure, self.effects, self.values = structure, tuple(effects), dict(values)
         self.angle, self.T_in = predict_model(structure, self.effects, self.values, rec)
         err = self.angle - np.asarray(rec.angle, dtype=float)
@@ -97,7 +97,8 @@ class FitResult:
                 "max_abs_test_deg": math.degrees(self.max_test), "rmse_T_in_N": self.rmse_T_in}
 
 
-def fit_model(structure: str, effects: tuple[str, ...], rec, train: slice, test: slice,
+def fit_model(structure: str, effects: tuple[str, ...], rec, train: slice | np.ndarray,
+              test: slice | np.ndarray,
               starts: list[dict[str, float]], max_nfev: int = MAX_NFEV) -> FitResult:
     """Fit one model on the ``train`` samples by ``least_squares`` from each start; keep the lowest
     training cost.
@@ -139,6 +140,7 @@ def fit_model(structure: str, effects: tuple[str, ...], rec, train: slice, test:
                             max_nfev=max_nfev)
         if best is None or sol.cost < best.cost:
             best = sol
+    assert best is not None                       # at least one start
     return FitResult(structure, effects, dict(zip(names, map(float, best.x))), rec, train, test)
 
 
@@ -222,7 +224,7 @@ def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,
             fx = fit_model(chosen.structure, chosen.effects + (eid,), rec, train, test, [dict(chosen.values)])
             trial[eid] = (chosen.structure, fx)
             tick(fx.id)
-        price = {}
+        price: dict[str, float] = {}
         for eid, (_, fx) in trial.items():
             fits[fx.id] = fx
             extra = PENALTY * (fx.n_params - chosen.n_params)
@@ -241,7 +243,7 @@ def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,
                                  "accepted": False, "params": {k: float(v) for k, v in fx.values.items()}}
         if not price:
             break
-        best = min(price, key=price.get)
+        best = min(price, key=lambda e: price[e])
         if price[best] >= 1.0:
             break
         chosen = trial[best][1]

@@ -237,7 +237,7 @@ def shared_analysis(recs: list, bends: list[float], train: list[slice], test: li
     tick = progress or (lambda label: None)
     summary: dict = {"models": {}, "leave_one_out": {}}
     details: dict = {"models": {}, "leave_one_out": {}}
-    fitted = {}
+    fitted: dict[str, dict[str, float]] = {}
     names = list(dict.fromkeys(("capstan",) + COMPARED + CHOICE))
     names += [n for n, m in SHARED_MODELS.items() if m.per_config and drift]
     for name in names:

@@ -212,7 +212,7 @@ def fit_shared(m: SharedModel, recs: list, bends: list[float], fit_on: list, *,
             try:
                 th, T = predict_model(m.structure, m.effects, config_values(m, v, r, b, i), r)
                 out.append(th[s] - y)
-                if w > 0:
+                if w > 0 and T is not None:
                     out.append((w * (T[s] - Ts[i])).ravel())
             except ValueError:
                 out.append(np.full(y.size * (3 if w > 0 else 1), _BAD))
@@ -225,6 +225,7 @@ def fit_shared(m: SharedModel, recs: list, bends: list[float], fit_on: list, *,
                             max_nfev=max_nfev)
         if best is None or sol.cost < best.cost:
             best = sol
+    assert best is not None                       # at least one start
     values = dict(zip(names, map(float, best.x)))
     return (values, best) if full else values
 
