@@ -14,7 +14,7 @@ from teleop.config import Config
 
 def _model() -> SheathModel:
     cfg = Config()
-    return SheathModel.from_geometry(cfg.sheath.geometry(), cfg.sheath.mu, cfg.sheath.EA)
+    return SheathModel.from_geometry(cfg.sheath.geometry(), cfg.rig.simulated.mu, cfg.sheath.EA)
 
 
 def bench_step(n_nodes: int, n: int = 50_000) -> float:

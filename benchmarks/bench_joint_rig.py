@@ -18,7 +18,7 @@ CONFIG = Path(__file__).resolve().parents[1] / "configs" / "instrument-3dof.yaml
 
 
 def bench(n_elements: int, seconds: float = 10.0, with_slave: bool = False) -> float:
-    cfg = load_config(CONFIG, {"rig.n_elements": n_elements})
+    cfg = load_config(CONFIG, {"rig.simulated.n_elements": n_elements})
     inst = SimulatedInstrument.from_config(cfg)
     dt = 1.0 / cfg.rig.rate_hz
     joints = cfg.instrument.joints

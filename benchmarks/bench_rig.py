@@ -29,7 +29,7 @@ def bench_rig(seconds: float = 20.0, tissue: bool = True) -> float:
 
 def main() -> None:
     cfg = Config()
-    print(f"simulated rig ({cfg.rig.n_elements} elements, {cfg.rig.rate_hz:.0f} Hz)")
+    print(f"simulated rig ({cfg.rig.simulated.n_elements} elements, {cfg.rig.rate_hz:.0f} Hz)")
     for tissue in (True, False):
         rtf = bench_rig(tissue=tissue)
         print(f"  tissue={'on ' if tissue else 'off'}: real-time factor {rtf:7.1f}x  "

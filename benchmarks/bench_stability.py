@@ -51,7 +51,7 @@ def run_loop(force_scale: float = 0.2, delay: float = 0.001, arm: ArmParameters 
     cfg = Config()
     dt = 1e-3
     rig = SimulatedRig.from_config(cfg)
-    model = SheathModel.from_geometry(cfg.sheath.geometry(), cfg.sheath.mu, cfg.sheath.EA)
+    model = SheathModel.from_geometry(cfg.sheath.geometry(), cfg.rig.simulated.mu, cfg.sheath.EA)
     est = DistalEstimator(model, n_nodes=cfg.estimator.n_nodes)
     op = ScriptedOperator(PROTOCOLS[protocol], arm=arm or ArmParameters(), static_arm=static_arm)
     motion = MotionMap(motion_scale)

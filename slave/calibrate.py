@@ -76,7 +76,7 @@ class JointLimitCalibration:
     ----------
     cfg : Config
         ``calibration`` (target_tension [N], speed [m/s], use_route), ``sheath`` (route -> L and wrap
-        shape, EA [N]), ``rig.load.tissue`` (restored at the end).
+        shape, EA [N]), ``rig.simulated.load.tissue`` (restored at the end).
     rig : Rig
     max_travel : float
         Give up (CalibrationError) when the pull has gone this far without reaching the target [m].
@@ -157,7 +157,7 @@ class JointLimitCalibration:
                 self._t_settle = state.t
             return self.x_cmd
         if self.stage == CalStage.SETTLE and state.t - self._t_settle >= self.settle:
-            self.rig.set_load(tissue=bool(self.cfg.rig.load.tissue))
+            self.rig.set_load(tissue=bool(self.cfg.rig.simulated.load.tissue))
             self.stage = CalStage.DONE
         return self.x_cmd
 

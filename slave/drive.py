@@ -8,7 +8,7 @@ tendons of any shape (``()`` for the single-tendon rig, ``(n_joints, 2)`` for a 
       dx = clip( (1 - e^{-2 pi f_bw h}) (x_cmd - x),  -v_max h,  +v_max h )                  [m]
 * encoder: the motor position quantised to q = 2 pi pulley_radius / encoder_lines_per_rev [m];
 * load cell: the true proximal tension plus N(0, load_cell_noise^2) [N], from one numpy Generator
-  seeded with ``rig.sensors.seed`` (drawn in blocks; the same stream whatever the shape).
+  seeded with ``rig.simulated.sensors.seed`` (drawn in blocks; the same stream whatever the shape).
 
 The settings are checked by :func:`slave.simulated.validate_drive` when a rig is built.
 """
@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from teleop.config import RigConfig
+from teleop.config import SimulatedRigConfig
 
 __all__ = ["Drive", "NOISE_BLOCK"]
 
@@ -30,9 +30,9 @@ class Drive:
 
     Parameters
     ----------
-    rig : RigConfig
-        ``rig.motor`` (bandwidth_hz, max_speed, pulley_radius, encoder_lines_per_rev) and
-        ``rig.sensors`` (load_cell_noise, seed), already validated.
+    rig : SimulatedRigConfig
+        ``rig.simulated.motor`` (bandwidth_hz, max_speed, pulley_radius, encoder_lines_per_rev) and
+        ``rig.simulated.sensors`` (load_cell_noise, seed), already validated.
     shape : tuple of int
         Shape of the tendon array; ``()`` gives Python floats in and out.
 
@@ -41,7 +41,7 @@ class Drive:
     encoder_resolution : float, q [m].
     """
 
-    def __init__(self, rig: RigConfig, shape: tuple[int, ...] = ()):
+    def __init__(self, rig: SimulatedRigConfig, shape: tuple[int, ...] = ()):
         m = rig.motor
         self.shape = tuple(shape)
         self._omega = 2.0 * math.pi * m.bandwidth_hz

@@ -14,7 +14,7 @@ from estimator.kernels import RIGID_STOP, distal_gains, load_torque, settle_join
 from slave.drive import Drive
 from slave.rig import InstrumentTruth, RigInputError, RigState
 from slave.simulated import check_setting, is_finite, validate_drive, validate_runs
-from teleop.config import Config, JointConfig, RigConfig, TendonConfig
+from teleop.config import Config, JointConfig, SimulatedRigConfig, TendonConfig
 
 __all__ = ["SimulatedInstrument", "TendonPhysics"]
 
@@ -79,15 +79,15 @@ class SimulatedInstrument:
     * Pretension P (``pretension``): both tendons start uniform at P with theta = 0, the motors at
       x_in = P L/EA (x_out = 0); P = 0: both start at zero tension.
     * Motors: the first-order position loop of :class:`~slave.simulated.SimulatedRig`
-      (``rig.motor``: bandwidth, speed limit); encoders quantised to 2 pi pulley_radius / lines.
-    * Load cells: T_in + N(0, ``rig.sensors.load_cell_noise``^2), one seeded generator.
+      (``rig.simulated.motor``: bandwidth, speed limit); encoders quantised to 2 pi pulley_radius / lines.
+    * Load cells: T_in + N(0, ``rig.simulated.sensors.load_cell_noise``^2), one seeded generator.
 
     Parameters
     ----------
     joints : sequence of JointConfig
         1 to 4 joints.
-    rig : RigConfig
-        ``n_elements`` (per tendon), ``motor``, ``sensors``.
+    rig : SimulatedRigConfig
+        ``rig.simulated``: ``n_elements`` (per tendon), ``motor``, ``sensors``.
 
     Raises
     ------
@@ -95,7 +95,7 @@ class SimulatedInstrument:
         No joints, more than 4, or a setting out of range (the message names the joint and key).
     """
 
-    def __init__(self, joints, rig: RigConfig):
+    def __init__(self, joints, rig: SimulatedRigConfig):
         joints = tuple(joints)
         _validate(joints, rig)
         self.joints = joints
@@ -117,14 +117,14 @@ class SimulatedInstrument:
 
     @classmethod
     def from_config(cls, cfg: Config) -> "SimulatedInstrument":
-        """Build from a full config (``instrument.joints`` and ``rig``).
+        """Build from a full config (``instrument.joints`` and ``rig.simulated``).
 
         Raises
         ------
         ConfigError
             ``instrument.joints`` is empty (a single-tendon config: use :class:`slave.simulated.SimulatedRig`).
         """
-        return cls(cfg.instrument.joints, cfg.rig)
+        return cls(cfg.instrument.joints, cfg.rig.simulated)
 
     # ---- model constants -------------------------------------------------------------------------
     @property
@@ -250,7 +250,7 @@ class SimulatedInstrument:
                                  j.limit_stiffness, j.load.torque))
 
 
-def _validate(joints: tuple[JointConfig, ...], rig: RigConfig) -> None:
+def _validate(joints: tuple[JointConfig, ...], rig: SimulatedRigConfig) -> None:
     """Range checks of what the simulator uses; ConfigError names the joint and the dotted key."""
     check_setting(1 <= len(joints) <= 4, "instrument.joints", "a list of 1 to 4 joints", len(joints))
     for i, j in enumerate(joints):

@@ -12,17 +12,23 @@ A recording is what a bench session with a distal load cell and a distal positio
   cell with white noise, distal position with noise and 1 um quantisation; both positions are
   zeroed at the start (the encoders are reset at rest), as on a bench.
 
-The hidden effect is one of :data:`EFFECT_IDS` with its magnitude drawn from :func:`realistic_range`
+The hidden effect is one of :func:`scenario_effects` with its magnitude drawn from :func:`realistic_range`
 (``level`` in [0, 1] picks the position in the range; random from the seed when omitted). The
 returned :class:`Recording` keeps the truth apart from the data, so a diagnosis cannot read it.
+
+The scenario table is the effect catalogue's (estimator/offline/effects.py): each entry's scenario
+knob gives its realistic range and how a level turns into the rig switch's settings
+(:func:`effects_config`); an entry without a rig switch is applied to the recorded signals here
+(pre-sliding, distal backlash, the sensor channels).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from estimator.offline.effects import ALIASES, CATALOGUE, Effect, rig_switches
 from estimator.offline.effects import EFFECT_IDS as CATALOGUE_IDS
 from estimator.offline.effects_kernels import backlash_play, travel_lag
 from estimator.sheath import SheathGeometry
@@ -30,49 +36,41 @@ from slave.simulated import EFFECT_IDS, SimulatedRig
 from teleop import config as C
 from teleop.recording import MeasuredData
 
-__all__ = ["EFFECT_IDS", "CATALOGUE_IDS", "RIG_SWITCH", "UNCATALOGUED", "Recording", "realistic_range", "effects_config", "protocol",
-           "record"]
+__all__ = ["EFFECT_IDS", "CATALOGUE_IDS", "RIG_SWITCH", "UNCATALOGUED", "Recording", "realistic_range", "effects_config",
+           "protocol", "record", "scenario_effects"]
 
 #: Effects outside the catalogue, for testing the answer ``unknown``: a slow wander of the distal
 #: load cell's zero (thermal drift of its bridge), smooth on a ~10 s scale.
 UNCATALOGUED = ("load_cell_drift", "load_cell_wander")
-#: catalogue id -> the rig switch that simulates it (the others are applied to the recorded signals:
-#: the sensor effects on their channel, pre-sliding on T_out, the distal backlash on x_out)
-RIG_SWITCH = {e: e for e in EFFECT_IDS if not e.startswith("sensor")}
-RIG_SWITCH.update({"sensor_offset:T_in": "sensor_offset", "sensor_lag:T_in": "sensor_delay",
-                   "sensor_offset": "sensor_offset", "sensor_delay": "sensor_delay"})
+#: realistic magnitude of the effects outside the catalogue (SI units): a smooth ~10 s random wander of
+#: the distal load cell's zero (the catalogue's entries carry their own ranges: ``Effect.knob``)
+_UNCATALOGUED_RANGES = {"load_cell_drift": {"amplitude": (0.3, 0.8)},         # N
+                        "load_cell_wander": {"amplitude": (0.3, 0.8)}}        # N (the contract's name for the same)
 
-# realistic magnitude of each effect: parameter -> (low, high) in its SI unit (docs/diagnosis.md). The
-# one table both simulators draw from (slave/scenarios.py and slave/lumped_scenarios.py). Offsets,
-# gains and drift rates are magnitudes: the simulator draws their sign from the seed.
-_RANGES = {
-    "velocity_friction": {"viscous": (8.0, 30.0)},               # s/m: +8..30 % friction at 10 mm/s
-    "pretension": {"tension": (1.0, 5.0)},                       # N
-    "curvature_drift": {"relative_change": (0.10, 0.30)},        # |dK| / K over the recording, either sign
-    "tendon_stiffening": {"softening": (1.0, 4.0), "toe_tension": (1.0, 3.0)},   # -, N
-    "stiction": {"static_ratio": (0.15, 0.6)},                   # mu_s / mu_k - 1
-    "friction_offset": {"distal_offset": (0.2, 1.0)},            # N: F0 = a (1 - e^-K) at the tip
-    "presliding": {"distance": (40e-6, 150e-6)},                 # m: Dahl pre-sliding travel F_c / sigma
-    "distal_backlash": {"width": (50e-6, 300e-6)},               # m: total dead zone tendon end <-> x_out
-    "sensor_offset:T_in": {"offset": (0.2, 1.0)},                # N, either sign
-    "sensor_offset:T_out": {"offset": (0.2, 1.0)},               # N, either sign
-    "sensor_gain:T_in": {"gain": (0.03, 0.10)},                  # relative scale error, either sign
-    "sensor_gain:T_out": {"gain": (0.03, 0.10)},                 # relative scale error, either sign
-    "sensor_lag:T_in": {"delay": (0.010, 0.050)},                # s, the channel lags the others
-    "sensor_lag:T_out": {"delay": (0.010, 0.050)},               # s
-    "sensor_drift:T_in": {"rate": (0.003, 0.012)},               # N/s (0.3-1 N over 90 s), either sign
-    "sensor_drift:T_out": {"rate": (0.003, 0.012)},              # N/s, either sign
-    "sensor_offset:x_in": {"offset": (20e-6, 100e-6)},           # m, either sign
-    "sensor_offset:x_out": {"offset": (20e-6, 100e-6)},          # m, either sign
-    "sensor_lag:x_in": {"delay": (0.010, 0.050)},                # s
-    "sensor_lag:x_out": {"delay": (0.010, 0.050)},               # s
-    # legacy names of the proximal load-cell effects (the rig switches rig.effects.sensor_offset/_delay)
-    "sensor_offset": {"offset": (0.2, 1.0)},                     # N, either sign
-    "sensor_delay": {"delay": (0.010, 0.050)},                   # s
-    # outside the catalogue (the answer "unknown"): a smooth ~10 s random wander of the distal load cell zero
-    "load_cell_drift": {"amplitude": (0.3, 0.8)},                # N
-    "load_cell_wander": {"amplitude": (0.3, 0.8)},               # N (the contract's name for the same)
-}
+
+def _entry(name: str) -> Effect | None:
+    """The catalogue entry of an id, a former id (ALIASES) or a rig switch key; None when none."""
+    e = CATALOGUE.get(ALIASES.get(name, name))
+    return e if e is not None else rig_switches().get(name)
+
+
+def _switch_key(name: str) -> str | None:
+    """The rig switch that simulates effect ``name`` (None: applied to the recorded signals)."""
+    e = _entry(name)
+    return None if e is None or e.switch is None else e.switch.key
+
+
+def scenario_effects() -> tuple[str, ...]:
+    """Every effect a scenario can hide (the live catalogue's entries with a scenario knob, their rig
+    switch keys, and :data:`UNCATALOGUED`)."""
+    ids = tuple(e.id for e in CATALOGUE.values() if e.knob is not None)
+    keys = tuple(k for k, e in rig_switches().items() if e.knob is not None and k not in ids)
+    return ids + keys + UNCATALOGUED
+
+
+#: catalogue id (or switch key) -> the rig switch that simulates it, at import (the others are applied
+#: to the recorded signals: the sensor effects on their channel, pre-sliding on T_out, the backlash on x_out)
+RIG_SWITCH = {e: k for e in scenario_effects() if (k := _switch_key(e)) is not None}
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,56 +88,47 @@ class Recording:
 
 
 def realistic_range(effect: str) -> dict[str, tuple[float, float]]:
-    """The magnitude range(s) of one effect's rig parameter(s), SI units.
+    """The magnitude range(s) of one effect, SI units: its catalogue entry's scenario knob.
 
     Raises
     ------
     ValueError
-        ``effect`` is neither a catalogue id nor in :data:`UNCATALOGUED`.
+        ``effect`` is neither in the catalogue (with a scenario knob) nor in :data:`UNCATALOGUED`.
     """
-    if effect not in _RANGES:
-        raise ValueError(f"unknown effect {effect!r}; expected one of {sorted(_RANGES)}")
-    return dict(_RANGES[effect])
+    e = _entry(effect)
+    if e is not None and e.knob is not None:
+        return e.knob.range()
+    if effect in _UNCATALOGUED_RANGES:
+        return dict(_UNCATALOGUED_RANGES[effect])
+    raise ValueError(f"unknown effect {effect!r}; expected one of {sorted(scenario_effects())}")
 
 
 def effects_config(effect: str | None, level: float, K: float, duration: float,
                    rng: np.random.Generator) -> tuple[C.EffectsConfig, dict[str, float]]:
     """The rig's effect switches for one hidden effect at ``level`` in [0, 1] of its range.
 
-    Returns the :class:`teleop.config.EffectsConfig` and the truth parameters (SI units). Signs of
-    the offset and the drift are drawn from ``rng``.
+    Returns the :class:`teleop.config.EffectsConfig` (the entry's switch on with its knob's values,
+    when it has one) and the truth parameters (SI units). The sign of the knob's signed magnitudes
+    (offsets, gains, drifts) is drawn from ``rng``.
+
+    Raises
+    ------
+    ValueError
+        An effect that is neither in the catalogue (with a scenario knob) nor in :data:`UNCATALOGUED`.
     """
     fx = C.EffectsConfig()
     if effect is None or effect == "none" or effect in UNCATALOGUED:
         return fx, {}
-    r = {k: lo + level * (hi - lo) for k, (lo, hi) in realistic_range(effect).items()}
+    e = _entry(effect)
+    if e is None or e.knob is None:
+        raise ValueError(f"unknown effect {effect!r}; expected one of {sorted(scenario_effects())}")
     sign = 1.0 if rng.random() < 0.5 else -1.0
-    if effect not in RIG_SWITCH:       # applied to the recorded signals by record()
-        key = next(iter(r))
-        return fx, {key: (sign if key in ("offset", "gain", "rate") else 1.0) * r[key]}
-    effect = RIG_SWITCH[effect]
-    if effect == "velocity_friction":
-        sub, p = C.VelocityFrictionConfig(True, r["viscous"]), {"viscous": r["viscous"]}
-    elif effect == "pretension":
-        sub, p = C.PretensionEffectConfig(True, r["tension"]), {"tension": r["tension"]}
-    elif effect == "curvature_drift":
-        rate = sign * r["relative_change"] * K / duration
-        sub, p = C.CurvatureDriftConfig(True, rate), {"K_rate": rate}
-    elif effect == "tendon_stiffening":
-        sub = C.TendonStiffeningConfig(True, r["softening"], r["toe_tension"])
-        p = {"softening": r["softening"], "toe_tension": r["toe_tension"]}
-    elif effect == "stiction":
-        sub, p = C.StictionConfig(True, r["static_ratio"]), {"static_ratio": r["static_ratio"]}
-    elif effect == "friction_offset":
-        a = r["distal_offset"] / -math.expm1(-K)
-        sub, p = C.FrictionOffsetConfig(True, a), {"tension_offset": a, "distal_offset": r["distal_offset"]}
-    elif effect == "sensor_offset":
-        sub, p = C.SensorOffsetConfig(True, sign * r["offset"]), {"offset": sign * r["offset"]}
-    elif effect == "sensor_delay":
-        sub, p = C.SensorDelayConfig(True, r["delay"]), {"delay": r["delay"]}
-    else:  # pragma: no cover - realistic_range raised already
-        raise ValueError(effect)
-    return replace(fx, **{effect: sub}), p
+    values = e.knob.values(level, sign, K, duration)
+    truth = e.knob.truth_of(values)
+    if e.switch is None:       # applied to the recorded signals by record()
+        return fx, truth
+    on = C.EffectSwitch(True, **{st.name: values[st.name] for st in e.switch.settings if st.name in values})
+    return fx.replace(**{e.switch.key: on}), truth
 
 
 def protocol(duration: float, rate_hz: float, x_max: float, rng: np.random.Generator,
@@ -228,7 +217,7 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     Parameters
     ----------
     effect : str, tuple of str, or None
-        A catalogue id (:data:`EFFECT_IDS`), an id of :data:`UNCATALOGUED`, several of them (all at
+        An id of :func:`scenario_effects` (catalogue ids, rig switch keys, :data:`UNCATALOGUED`), several of them (all at
         the same ``level``), or None / "none".
     seed : int
         Seeds the rig (K, EA, load), the protocol, the magnitude and every noise.
@@ -245,7 +234,7 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
         Unknown effect, ``level`` outside [0, 1], too short or too slowly sampled a recording.
     """
     hidden = () if effect in (None, "none") else (effect,) if isinstance(effect, str) else tuple(effect)
-    known = CATALOGUE_IDS + EFFECT_IDS + UNCATALOGUED
+    known = scenario_effects()
     for e in hidden:
         if e not in known:
             raise ValueError(f"unknown effect {e!r}; expected None, 'none' or one of {known}")
@@ -263,17 +252,17 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     noise_in, noise_out = float(rng.uniform(0.01, 0.03)), float(rng.uniform(0.02, 0.04))
     noise_x, q_x = 1e-6, 1e-6
     geo = SheathGeometry.uniform(L, angle)
-    sheath = C.SheathConfig(mu=K / angle, EA=EA, runs=tuple(C.RunConfig(r.length, r.radius) for r in geo.runs))
+    sheath = C.SheathConfig(EA=EA, runs=tuple(C.RunConfig(r.length, r.radius) for r in geo.runs))
     fx, params = C.EffectsConfig(), {}
     for e in hidden:
         one, p = effects_config(e, u, K, duration, rng_fx)
-        if e in RIG_SWITCH:
-            fx = replace(fx, **{RIG_SWITCH[e]: getattr(one, RIG_SWITCH[e])})
+        if (key := _switch_key(e)) is not None:
+            fx = fx.replace(**{key: one[key]})
         params.update(p)
-    rig_cfg = C.RigConfig(n_elements=100, rate_hz=rate_hz, effects=fx,
-                          load=C.LoadConfig(joint_stiffness=100.0, joint_limit=0.05, tissue_stiffness=k_tissue,
-                                            tissue_contact=0.0, tissue=True, force=0.0),
-                          sensors=C.SensorConfig(load_cell_noise=noise_in, seed=int(rng.integers(2**31))))
+    rig_cfg = C.SimulatedRigConfig(n_elements=100, mu=K / angle, effects=fx,
+                                   load=C.LoadConfig(joint_stiffness=100.0, joint_limit=0.05, tissue_stiffness=k_tissue,
+                                                     tissue_contact=0.0, tissue=True, force=0.0),
+                                   sensors=C.SensorConfig(load_cell_noise=noise_in, seed=int(rng.integers(2**31))))
     rig = SimulatedRig(sheath, rig_cfg)
     c = L / EA
     per_newton = math.exp(-K) / (100.0 + k_tissue) + c * -math.expm1(-K) / K   # x_in per T_in, pulling
@@ -326,7 +315,7 @@ def _sensor_effects(hidden, params, time, T_in, x_in, T_out, x_out):
     [s], drift [unit/s]; sign conventions of estimator.offline.effects.SensorEffect)."""
     chans = {"T_in": T_in, "x_in": x_in, "T_out": T_out, "x_out": x_out}
     for e in hidden:
-        if not e.startswith("sensor_") or ":" not in e or e in RIG_SWITCH:
+        if not e.startswith("sensor_") or ":" not in e or _switch_key(e) is not None:
             continue
         kind, ch = e[7:].split(":")
         y = chans[ch]

@@ -15,10 +15,12 @@ from estimator.sheath import Run, SheathGeometry
 from slave.drive import Drive
 from slave.rig import RigInputError, RigState, RigTruth
 from slave.simulated_effects import EFFECT_IDS, EffectSwitches, elongation_general
-from teleop.config import Config, EffectsConfig, LoadConfig, RigConfig, SheathConfig
+from teleop.config import Config, EffectsConfig, LoadConfig, SheathConfig, SimulatedRigConfig
 from teleop.errors import ConfigError
 
 __all__ = ["SimulatedRig", "EFFECT_IDS"]
+
+_SIM = "rig.simulated"     # where the simulator's settings live in the config
 
 
 
@@ -62,7 +64,8 @@ class SimulatedRig(EffectSwitches):
 
     Assumptions: rigid sheath (no axial compression), Coulomb friction with equal static and dynamic
     mu, no bending stiffness or clearance, massless tendon and distal joint - unless an effect of
-    ``rig.effects`` is switched on (each is off by default; estimator/offline/effects.py fits them back):
+    ``rig.simulated.effects`` is switched on (each is off by default; the catalogue entries of
+    estimator/offline/effects.py declare them and fit them back; the kernels are here):
 
     * velocity_friction: mu(v) = mu (1 + viscous |v|) with v the motor speed [m/s] of this step.
     * pretension: the start profile is sheath.pretension + tension [N] (see the pretension bullet).
@@ -88,9 +91,10 @@ class SimulatedRig(EffectSwitches):
     Parameters
     ----------
     sheath : SheathConfig
-        Friction coefficient mu [-], EA [N], route (runs of length [m] and radius [m]), pretension [N].
-    rig : RigConfig
-        ``n_elements``, ``motor``, ``load``, ``sensors`` settings (configs/default.yaml for units).
+        The instrument's transmission: EA [N], route (runs of length [m] and radius [m]), pretension [N].
+    rig : SimulatedRigConfig
+        ``rig.simulated``: ``n_elements``, friction ``mu`` [-], ``motor``, ``load``, ``sensors``,
+        ``effects`` (configs/default.yaml for units).
 
     Raises
     ------
@@ -98,7 +102,7 @@ class SimulatedRig(EffectSwitches):
         A setting out of range (message names the dotted key, e.g. ``sheath.runs[1].length``).
     """
 
-    def __init__(self, sheath: SheathConfig, rig: RigConfig):
+    def __init__(self, sheath: SheathConfig, rig: SimulatedRigConfig):
         _validate(sheath, rig)
         self._sheath_cfg = sheath
         self._rig_cfg = rig
@@ -106,7 +110,7 @@ class SimulatedRig(EffectSwitches):
         n = int(rig.n_elements)
         L = self.geometry.length
         self.s = np.linspace(0.0, L, n + 1)
-        self.log_gain = sheath.mu * np.asarray(self.geometry.wrap_angle(self.s), dtype=np.float64)
+        self.log_gain = rig.mu * np.asarray(self.geometry.wrap_angle(self.s), dtype=np.float64)
         self._lo = np.exp(-self.log_gain)
         self._hi = np.exp(self.log_gain)
         w = np.full(n + 1, L / (n * sheath.EA))
@@ -134,8 +138,8 @@ class SimulatedRig(EffectSwitches):
 
     @classmethod
     def from_config(cls, cfg: Config) -> "SimulatedRig":
-        """Build from a full :class:`teleop.config.Config` (its ``sheath`` and ``rig`` sections)."""
-        return cls(cfg.sheath, cfg.rig)
+        """Build from a full :class:`teleop.config.Config`: the instrument's ``sheath`` and ``rig.simulated``."""
+        return cls(cfg.sheath, cfg.rig.simulated)
 
     # ---- model constants -------------------------------------------------------------------------
     @property
@@ -281,28 +285,28 @@ def validate_runs(runs, key: str) -> None:
                f"{key}[{i}].radius", "a bend radius > 0 m (inf for straight)", r.radius)
 
 
-def validate_drive(rig: RigConfig) -> None:
-    """What every simulated rig uses of ``rig``: element count, proximal motor, load-cell sensors."""
+def validate_drive(rig: SimulatedRigConfig) -> None:
+    """What every simulated rig uses of ``rig.simulated``: element count, proximal motor, load-cell sensors."""
     n = rig.n_elements
-    check_setting(isinstance(n, int) and not isinstance(n, bool) and n >= 1, "rig.n_elements", "an integer >= 1", n)
+    check_setting(isinstance(n, int) and not isinstance(n, bool) and n >= 1, f"{_SIM}.n_elements", "an integer >= 1", n)
     m = rig.motor
-    check_setting(is_finite(m.bandwidth_hz) and m.bandwidth_hz > 0, "rig.motor.bandwidth_hz", "a finite number > 0 Hz",
+    check_setting(is_finite(m.bandwidth_hz) and m.bandwidth_hz > 0, f"{_SIM}.motor.bandwidth_hz", "a finite number > 0 Hz",
            m.bandwidth_hz)
-    check_setting(is_finite(m.max_speed) and m.max_speed > 0, "rig.motor.max_speed", "a finite speed > 0 m/s", m.max_speed)
-    check_setting(is_finite(m.pulley_radius) and m.pulley_radius > 0, "rig.motor.pulley_radius", "a finite radius > 0 m",
+    check_setting(is_finite(m.max_speed) and m.max_speed > 0, f"{_SIM}.motor.max_speed", "a finite speed > 0 m/s", m.max_speed)
+    check_setting(is_finite(m.pulley_radius) and m.pulley_radius > 0, f"{_SIM}.motor.pulley_radius", "a finite radius > 0 m",
            m.pulley_radius)
     lines = m.encoder_lines_per_rev
-    check_setting(isinstance(lines, int) and not isinstance(lines, bool) and lines >= 1, "rig.motor.encoder_lines_per_rev",
+    check_setting(isinstance(lines, int) and not isinstance(lines, bool) and lines >= 1, f"{_SIM}.motor.encoder_lines_per_rev",
            "an integer >= 1", lines)
     s = rig.sensors
-    check_setting(is_finite(s.load_cell_noise) and s.load_cell_noise >= 0, "rig.sensors.load_cell_noise",
+    check_setting(is_finite(s.load_cell_noise) and s.load_cell_noise >= 0, f"{_SIM}.sensors.load_cell_noise",
            "a finite standard deviation >= 0 N", s.load_cell_noise)
-    check_setting(isinstance(s.seed, int) and not isinstance(s.seed, bool), "rig.sensors.seed", "an integer", s.seed)
+    check_setting(isinstance(s.seed, int) and not isinstance(s.seed, bool), f"{_SIM}.sensors.seed", "an integer", s.seed)
 
 
-def _validate(sheath: SheathConfig, rig: RigConfig) -> None:
+def _validate(sheath: SheathConfig, rig: SimulatedRigConfig) -> None:
     """Range checks of every setting the simulator uses; ConfigError names the dotted key."""
-    check_setting(is_finite(sheath.mu) and sheath.mu >= 0, "sheath.mu", "a finite number >= 0", sheath.mu)
+    check_setting(is_finite(rig.mu) and rig.mu >= 0, f"{_SIM}.mu", "a finite number >= 0", rig.mu)
     check_setting(is_finite(sheath.EA) and sheath.EA > 0, "sheath.EA", "a finite number > 0 N", sheath.EA)
     check_setting(is_finite(sheath.pretension) and sheath.pretension >= 0, "sheath.pretension", "a finite number >= 0 N",
            sheath.pretension)
@@ -311,8 +315,8 @@ def _validate(sheath: SheathConfig, rig: RigConfig) -> None:
     ld = rig.load
     for key in ("joint_stiffness", "tissue_stiffness", "force", "joint_limit"):
         v = getattr(ld, key)
-        check_setting(is_finite(v) and v >= 0, f"rig.load.{key}", "a finite number >= 0", v)
-    check_setting(is_finite(ld.limit_stiffness) and ld.limit_stiffness > 0, "rig.load.limit_stiffness",
+        check_setting(is_finite(v) and v >= 0, f"{_SIM}.load.{key}", "a finite number >= 0", v)
+    check_setting(is_finite(ld.limit_stiffness) and ld.limit_stiffness > 0, f"{_SIM}.load.limit_stiffness",
            "a finite stiffness > 0 N/m", ld.limit_stiffness)
-    check_setting(is_finite(ld.tissue_contact), "rig.load.tissue_contact", "a finite position in m", ld.tissue_contact)
-    check_setting(isinstance(ld.tissue, (bool, np.bool_)), "rig.load.tissue", "true or false", ld.tissue)
+    check_setting(is_finite(ld.tissue_contact), f"{_SIM}.load.tissue_contact", "a finite position in m", ld.tissue_contact)
+    check_setting(isinstance(ld.tissue, (bool, np.bool_)), f"{_SIM}.load.tissue", "true or false", ld.tissue)

@@ -1,4 +1,8 @@
-"""The effect switches of the simulated rig (``rig.effects``): compiled step kernels and the rig's share.
+"""The effect switches of the simulated rig (``rig.simulated.effects``): compiled step kernels and the rig's share.
+
+The switches, their settings and ranges are the effect catalogue's (estimator/offline/effects.py,
+``Effect.switch``; :data:`EFFECT_IDS` is derived from it); what each one does in this rig is the
+code below (:data:`IMPLEMENTED` lists the switches this simulator has a kernel for).
 
 :class:`EffectSwitches` is mixed into :class:`slave.simulated.SimulatedRig`; it owns the effect state
 and the step with effects on, the kernels below solve it. The physics and the sliding rule are
@@ -14,15 +18,20 @@ import numpy as np
 from numba import njit
 
 from estimator.kernels import load_inverse
+from estimator.offline.effects import rig_switches
 from estimator.offline.effects_kernels import stiffening_strain as strain  # one phi(T), shared with the estimator
 from teleop.config import EffectsConfig
+from teleop.effects_config import in_range
 from teleop.errors import ConfigError
 
-__all__ = ["EFFECT_IDS", "EffectSwitches", "strain", "elongation_general", "full_slip", "advance_general"]
+__all__ = ["EFFECT_IDS", "IMPLEMENTED", "EffectSwitches", "strain", "elongation_general", "full_slip",
+           "advance_general", "validate_effects"]
 
-#: The effect switches of ``rig.effects``, named as in the catalogue (estimator/offline/effects.py).
-EFFECT_IDS = ("velocity_friction", "pretension", "curvature_drift", "tendon_stiffening", "stiction",
-              "friction_offset", "sensor_offset", "sensor_delay")
+#: The switch keys of ``rig.simulated.effects``, from the catalogue (estimator/offline/effects.py).
+EFFECT_IDS = tuple(rig_switches())
+#: The switches this simulator has a kernel for (a catalogue switch missing here fails a test).
+IMPLEMENTED = frozenset({"velocity_friction", "pretension", "curvature_drift", "tendon_stiffening", "stiction",
+                         "friction_offset", "sensor_offset", "sensor_delay"})
 _V_STOP = 2e-4   # motor speed below which a whole-tendon slide ends [m/s] (estimator.offline.effects_kernels.V_STOP)
 
 
@@ -228,7 +237,7 @@ class EffectSwitches:
 
     def _init_effects(self, fx: EffectsConfig, n: int) -> None:
         validate_effects(fx)
-        on = {name: getattr(fx, name) for name in EFFECT_IDS if getattr(fx, name).enabled}
+        on = {name: fx[name] for name in fx.enabled()}
         self._effect_ids = tuple(on)
         self._pretension = float(on["pretension"].tension) if "pretension" in on else 0.0
         self._a = float(on["friction_offset"].tension_offset) if "friction_offset" in on else 0.0
@@ -297,20 +306,19 @@ class EffectSwitches:
 
 
 def validate_effects(fx: EffectsConfig) -> None:
-    """Range checks of the effect magnitudes (only of the effects switched on); ConfigError names the key."""
-    rules = {"velocity_friction.viscous": (">=", 0.0), "pretension.tension": (">=", 0.0),
-             "curvature_drift.rate": ("any", 0.0), "tendon_stiffening.softening": (">=", 0.0),
-             "tendon_stiffening.toe_tension": (">", 0.0), "stiction.static_ratio": (">=", 0.0),
-             "stiction.slip_time": (">", 0.0), "friction_offset.tension_offset": (">=", 0.0),
-             "sensor_offset.offset": ("any", 0.0), "sensor_delay.delay": (">=", 0.0)}
-    for key, (op, bound) in rules.items():
-        name, field_name = key.split(".")
-        sub = getattr(fx, name)
-        _check(isinstance(sub.enabled, (bool, np.bool_)), f"rig.effects.{name}.enabled", "true or false",
-               sub.enabled)
-        v = getattr(sub, field_name)
-        ok = _finite(v) and (op == "any" or (v >= bound if op == ">=" else v > bound))
-        _check(ok, f"rig.effects.{key}", "a finite number" + ("" if op == "any" else f" {op} {bound:g}"), v)
+    """Range checks of every switch's settings against its catalogue entry, and that this simulator
+    has a kernel for each switch that is on; ConfigError names the key."""
+    for name, e in rig_switches().items():
+        sub = fx[name]
+        where = f"rig.simulated.effects.{name}"
+        _check(isinstance(sub.enabled, (bool, np.bool_)), f"{where}.enabled", "true or false", sub.enabled)
+        for st in e.switch.settings:
+            v = getattr(sub, st.name)
+            _check(_finite(v) and in_range(v, st.valid), f"{where}.{st.name}",
+                   "a finite number" + ("" if st.valid == "any" else f" {st.valid}") + f" [{st.unit}]", v)
+        if sub.enabled and name not in IMPLEMENTED:
+            raise ConfigError(f"{where}: the simulated rig has no kernel for this effect (it simulates: "
+                              f"{', '.join(sorted(IMPLEMENTED))})")
 
 
 def _check(ok: bool, key: str, expected: str, value: object) -> None:

@@ -15,16 +15,17 @@ from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
 
 import yaml
 
+from teleop.effects_config import in_range, merge_effects
 from teleop.errors import ConfigError
 from teleop.schema import (
+    MOVED,
     RANGES,
     CalibrationConfig,
     Config,
-    CurvatureDriftConfig,
     DeviceConfig,
     EffectsConfig,
+    EffectSwitch,
     EstimatorConfig,
-    FrictionOffsetConfig,
     InstrumentConfig,
     JointConfig,
     JointLoadConfig,
@@ -33,32 +34,26 @@ from teleop.schema import (
     MasterConfig,
     MotorConfig,
     PairControlConfig,
-    PretensionEffectConfig,
     RecordingConfig,
     RigConfig,
     RunConfig,
     SensorConfig,
-    SensorDelayConfig,
-    SensorOffsetConfig,
     SheathConfig,
+    SimulatedRigConfig,
     SlaveConfig,
-    StictionConfig,
     TendonConfig,
     TendonPairConfig,
-    TendonStiffeningConfig,
     TransportAuthConfig,
     TransportConfig,
     TransportTlsConfig,
-    VelocityFrictionConfig,
     ZenohRigConfig,
     joint_set_tension,
 )
 
 __all__ = [  # the schema's names (teleop.schema) and the loader's
     "InstrumentConfig", "RunConfig", "SheathConfig", "TendonConfig", "TendonPairConfig", "JointLoadConfig", "JointConfig",
-    "MotorConfig", "LoadConfig", "SensorConfig", "ZenohRigConfig", "RigConfig", "EffectsConfig", "VelocityFrictionConfig",
-    "PretensionEffectConfig", "CurvatureDriftConfig", "TendonStiffeningConfig", "StictionConfig",
-    "FrictionOffsetConfig", "SensorOffsetConfig", "SensorDelayConfig", "EstimatorConfig", "CalibrationConfig",
+    "MotorConfig", "LoadConfig", "SensorConfig", "ZenohRigConfig", "RigConfig", "SimulatedRigConfig", "EffectsConfig",
+    "EffectSwitch", "MOVED", "EstimatorConfig", "CalibrationConfig",
     "DeviceConfig", "MappingConfig", "MasterConfig", "SlaveConfig", "PairControlConfig", "TransportConfig",
     "TransportAuthConfig", "TransportTlsConfig", "RecordingConfig", "Config", "RANGES", "joint_set_tension",
     "load_config", "config_from_dict", "config_to_dict", "write_config", "MAX_JOINTS",
@@ -70,16 +65,6 @@ __all__ = [  # the schema's names (teleop.schema) and the loader's
 _INF_OK = {"sheath.runs[].radius", "instrument.joints[].tendons.a.runs[].radius",
            "instrument.joints[].tendons.b.runs[].radius"}
 _NON_SI = ("_mm", "_deg", "_ms", "_hz")
-
-
-def _in_range(v: float, rule: str) -> bool:
-    if rule == "any":
-        return True
-    if ".." in rule:
-        lo, hi = (float(x) for x in rule.split(".."))
-        return lo <= v <= hi
-    op, bound = rule.split()
-    return v > float(bound) if op == ">" else v >= float(bound)
 
 
 class _Loader(yaml.SafeLoader):
@@ -130,6 +115,10 @@ def _schema_keys(cls: Any, prefix: str = "") -> list[str]:
 
 
 def _unknown(ctx: _Ctx, path: str, name: str, siblings: list[str]) -> ConfigError:
+    key = re.sub(r"\[\d+\]", "[]", path)
+    if key in MOVED:
+        return ctx.error(path, f"'{path}' has moved to '{MOVED[key]}' (a rig's config holds only that rig's "
+                               f"settings; the simulator's live under rig.simulated): rename the key")
     for suf in _NON_SI:
         if name.endswith(suf) and name[: -len(suf)] in siblings:
             return ctx.error(path, f"unknown key '{path}': non-SI '{suf}' keys are accepted only where the "
@@ -180,7 +169,7 @@ def _convert(v: Any, tp: Any, path: str, ctx: _Ctx) -> Any:
     else:  # pragma: no cover - a schema type this loader does not know
         raise TypeError(f"config schema type {tp!r} of {path} is not supported")
     rule, unit = RANGES.get(rule_key, ("any", ""))
-    if not _in_range(v, rule):
+    if not in_range(v, rule):
         raise ctx.error(path, f"{path}: {v!r} is out of range: expected {rule} [{unit}]")
     return v
 
@@ -198,7 +187,9 @@ def _merge(cls: Any, base: Any, data: Any, path: str, ctx: _Ctx) -> Any:
         if name not in hints:
             raise _unknown(ctx, p, str(name), list(hints))
         tp = hints[name]
-        if dataclasses.is_dataclass(tp):
+        if tp is EffectsConfig:
+            changes[name] = merge_effects(None if base is None else getattr(base, name), v, p, ctx.error)
+        elif dataclasses.is_dataclass(tp):
             changes[name] = _merge(tp, None if base is None else getattr(base, name), v, p, ctx)
         else:
             changes[name] = _convert(v, tp, p, ctx)
@@ -374,6 +365,8 @@ def config_to_dict(cfg: Any) -> Any:
     """
     if isinstance(cfg, RunConfig):
         return {"length": cfg.length} if math.isinf(cfg.radius) else {"length": cfg.length, "radius": cfg.radius}
+    if isinstance(cfg, EffectsConfig):
+        return cfg.as_dict()
     if dataclasses.is_dataclass(cfg):
         return {f.name: config_to_dict(getattr(cfg, f.name)) for f in dataclasses.fields(cfg)}
     if isinstance(cfg, (tuple, list)):

@@ -12,12 +12,12 @@ from dataclasses import dataclass, field
 from typing import Literal, Optional
 
 from estimator.sheath import Run, SheathGeometry
+from teleop.effects_config import EffectsConfig, EffectSwitch
 
 __all__ = [
     "InstrumentConfig", "RunConfig", "SheathConfig", "TendonConfig", "TendonPairConfig", "JointLoadConfig",
-    "JointConfig", "MotorConfig", "LoadConfig", "SensorConfig", "VelocityFrictionConfig", "PretensionEffectConfig",
-    "CurvatureDriftConfig", "TendonStiffeningConfig", "StictionConfig", "FrictionOffsetConfig",
-    "SensorOffsetConfig", "SensorDelayConfig", "EffectsConfig", "ZenohRigConfig", "RigConfig", "EstimatorConfig",
+    "JointConfig", "MotorConfig", "LoadConfig", "SensorConfig", "EffectSwitch", "EffectsConfig", "SimulatedRigConfig",
+    "ZenohRigConfig", "RigConfig", "EstimatorConfig", "MOVED",
     "CalibrationConfig", "ArmConfig", "DeviceConfig", "MappingConfig", "MasterConfig", "SlaveConfig", "PairControlConfig",
     "TransportAuthConfig", "TransportTlsConfig", "TransportConfig", "RecordingConfig", "Config", "RANGES",
     "joint_set_tension",
@@ -39,7 +39,9 @@ class RunConfig:
 
 @dataclass(frozen=True)
 class SheathConfig:
-    mu: float = 0.1               # [-] >= 0
+    """The single-tendon instrument's transmission as the slave knows it (route, tendon EA, preload);
+    the friction of the simulated one is ``rig.simulated.mu``."""
+
     EA: float = 15000.0           # [N] > 0
     runs: tuple[RunConfig, ...] = (
         RunConfig(0.30), RunConfig(0.60, 0.191), RunConfig(0.30), RunConfig(0.30, 0.0955),
@@ -116,69 +118,19 @@ class SensorConfig:
     seed: int = 0
 
 
-# ---- model effects of the simulated rig (estimator/offline/effects.py has the matching extensions) -------
-# Each effect is off by default; the magnitude fields are in SI units (the range table has them).
+# ---- model effects of the simulated rig: EffectsConfig (teleop/effects_config.py), one switch per entry of
+# the effect catalogue (estimator/offline/effects.py) that has a rig switch; defaults and ranges are the entry's.
 
 @dataclass(frozen=True)
-class VelocityFrictionConfig:
-    enabled: bool = False
-    viscous: float = 15.0                 # [s/m] mu(v) = mu (1 + viscous |v|), v sliding speed
+class SimulatedRigConfig:
+    """``rig.simulated``: everything only the simulators use (slave/simulated.py, slave/joint_rig.py)."""
 
-
-@dataclass(frozen=True)
-class PretensionEffectConfig:
-    enabled: bool = False
-    tension: float = 3.0                  # [N] uniform tension at rest, added to sheath.pretension
-
-
-@dataclass(frozen=True)
-class CurvatureDriftConfig:
-    enabled: bool = False
-    rate: float = 0.002                   # [1/s] dK/dt: K(t) = K + rate t (route/mu drift)
-
-
-@dataclass(frozen=True)
-class TendonStiffeningConfig:
-    enabled: bool = False
-    softening: float = 2.0                # [-] extra compliance at zero tension: (1 + softening e^-T/T_c)/EA
-    toe_tension: float = 2.0              # [N] T_c, tension where the toe stiffens
-
-
-@dataclass(frozen=True)
-class StictionConfig:
-    enabled: bool = False
-    static_ratio: float = 0.3             # [-] mu_static / mu_kinetic - 1
-    slip_time: float = 0.02               # [s] after breakaway mu relaxes from static to kinetic (time constant)
-
-
-@dataclass(frozen=True)
-class FrictionOffsetConfig:
-    enabled: bool = False
-    tension_offset: float = 1.0           # [N] a = q / mu in dT/dtheta = -mu (T + a)
-
-
-@dataclass(frozen=True)
-class SensorOffsetConfig:
-    enabled: bool = False
-    offset: float = 0.5                   # [N] zero offset added to the proximal load-cell reading
-
-
-@dataclass(frozen=True)
-class SensorDelayConfig:
-    enabled: bool = False
-    delay: float = 0.02                   # [s] the proximal load-cell reading lags the truth
-
-
-@dataclass(frozen=True)
-class EffectsConfig:
-    velocity_friction: VelocityFrictionConfig = field(default_factory=VelocityFrictionConfig)
-    pretension: PretensionEffectConfig = field(default_factory=PretensionEffectConfig)
-    curvature_drift: CurvatureDriftConfig = field(default_factory=CurvatureDriftConfig)
-    tendon_stiffening: TendonStiffeningConfig = field(default_factory=TendonStiffeningConfig)
-    stiction: StictionConfig = field(default_factory=StictionConfig)
-    friction_offset: FrictionOffsetConfig = field(default_factory=FrictionOffsetConfig)
-    sensor_offset: SensorOffsetConfig = field(default_factory=SensorOffsetConfig)
-    sensor_delay: SensorDelayConfig = field(default_factory=SensorDelayConfig)
+    n_elements: int = 200                 # sheath elements of the distributed model (per tendon)
+    mu: float = 0.1                       # [-] friction coefficient of the simulated single-tendon sheath
+    motor: MotorConfig = field(default_factory=MotorConfig)
+    load: LoadConfig = field(default_factory=LoadConfig)
+    sensors: SensorConfig = field(default_factory=SensorConfig)
+    effects: EffectsConfig = field(default_factory=EffectsConfig)
 
 
 @dataclass(frozen=True)
@@ -191,13 +143,11 @@ class ZenohRigConfig:
 
 @dataclass(frozen=True)
 class RigConfig:
+    """``rig``: the rig's type and rate, and the settings of each rig type under its own name."""
+
     type: Literal["simulated", "zenoh"] = "simulated"
-    n_elements: int = 200
     rate_hz: float = 1000.0
-    motor: MotorConfig = field(default_factory=MotorConfig)
-    load: LoadConfig = field(default_factory=LoadConfig)
-    sensors: SensorConfig = field(default_factory=SensorConfig)
-    effects: EffectsConfig = field(default_factory=EffectsConfig)
+    simulated: SimulatedRigConfig = field(default_factory=SimulatedRigConfig)
     zenoh: ZenohRigConfig = field(default_factory=ZenohRigConfig)
 
 
@@ -336,21 +286,18 @@ class Config:
 # Valid range and unit of every numeric setting ("[]" stands for any list index). A test checks that
 # each numeric field of the schema has an entry and each entry names a field.
 RANGES: dict[str, tuple[str, str]] = {
-    "sheath.mu": (">= 0", "-"), "sheath.EA": ("> 0", "N"), "sheath.pretension": (">= 0", "N"),
+    "sheath.EA": ("> 0", "N"), "sheath.pretension": (">= 0", "N"),
     "sheath.runs[].length": ("> 0", "m"), "sheath.runs[].radius": ("> 0", "m, .inf = straight"),
-    "rig.n_elements": (">= 1", "-"), "rig.rate_hz": ("> 0", "Hz"),
-    "rig.motor.bandwidth_hz": ("> 0", "Hz"), "rig.motor.max_speed": ("> 0", "m/s"),
-    "rig.motor.pulley_radius": ("> 0", "m"), "rig.motor.encoder_lines_per_rev": (">= 1", "-"),
-    "rig.load.joint_stiffness": (">= 0", "N/m"), "rig.load.joint_limit": ("> 0", "m"),
-    "rig.load.limit_stiffness": ("> 0", "N/m"), "rig.load.tissue_stiffness": (">= 0", "N/m"),
-    "rig.load.tissue_contact": ("any", "m"), "rig.load.force": (">= 0", "N"),
-    "rig.sensors.load_cell_noise": (">= 0", "N"), "rig.sensors.seed": (">= 0", "-"),
-    "rig.zenoh.timeout_ms": ("> 0", "ms"), "rig.zenoh.wait_s": ("> 0", "s"),
-    "rig.effects.velocity_friction.viscous": (">= 0", "s/m"), "rig.effects.pretension.tension": (">= 0", "N"),
-    "rig.effects.curvature_drift.rate": ("any", "1/s"), "rig.effects.tendon_stiffening.softening": (">= 0", "-"),
-    "rig.effects.tendon_stiffening.toe_tension": ("> 0", "N"), "rig.effects.stiction.static_ratio": (">= 0", "-"),
-    "rig.effects.stiction.slip_time": ("> 0", "s"), "rig.effects.friction_offset.tension_offset": (">= 0", "N"),
-    "rig.effects.sensor_offset.offset": ("any", "N"), "rig.effects.sensor_delay.delay": (">= 0", "s"),
+    "rig.rate_hz": ("> 0", "Hz"), "rig.zenoh.timeout_ms": ("> 0", "ms"), "rig.zenoh.wait_s": ("> 0", "s"),
+    **{f"rig.simulated.{k}": v for k, v in {
+        "n_elements": (">= 1", "-"), "mu": (">= 0", "-"),
+        "motor.bandwidth_hz": ("> 0", "Hz"), "motor.max_speed": ("> 0", "m/s"),
+        "motor.pulley_radius": ("> 0", "m"), "motor.encoder_lines_per_rev": (">= 1", "-"),
+        "load.joint_stiffness": (">= 0", "N/m"), "load.joint_limit": ("> 0", "m"),
+        "load.limit_stiffness": ("> 0", "N/m"), "load.tissue_stiffness": (">= 0", "N/m"),
+        "load.tissue_contact": ("any", "m"), "load.force": (">= 0", "N"),
+        "sensors.load_cell_noise": (">= 0", "N"), "sensors.seed": (">= 0", "-")}.items()},
+    # rig.simulated.effects.*: each setting's range and unit are its catalogue entry's (effects_config.effect_ranges)
     "estimator.n_nodes": (">= 2", "-"), "estimator.hold_rate": (">= 0", "N/s"),
     "estimator.rate_time_constant": ("> 0", "s"), "estimator.profile_points": ("0..65535", "-"),
     "calibration.target_tension": ("> 0", "N"), "calibration.speed": ("> 0", "m/s"),
@@ -378,6 +325,13 @@ RANGES: dict[str, tuple[str, str]] = {
     "pair_control.switch_band": (">= 0", "rad"), "pair_control.axes[]": (">= 0", "-"),
     "recording.profile_every": (">= 1", "logs"),
     "recording.flush_interval": ("> 0", "s"), "transport.run_id_timeout": (">= 0", "s"),
+}
+
+
+#: Keys of the former layout -> where they live now (loading an old key raises one ConfigError saying so).
+MOVED: dict[str, str] = {
+    **{f"rig.{k}": f"rig.simulated.{k}" for k in ("n_elements", "motor", "load", "sensors", "effects")},
+    "sheath.mu": "rig.simulated.mu",
 }
 
 

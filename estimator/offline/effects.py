@@ -16,12 +16,15 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from estimator.offline import effect_switches as sw
+from estimator.offline.effect_switches import RigSwitch, ScenarioKnob, Setting
 from estimator.offline.effects_kernels import backlash_play, route_shape, run_extended, travel_lag
 
 __all__ = ["Parameter", "Effect", "VelocityFriction", "Pretension", "CurvatureDrift", "TendonStiffening", "Stiction",
            "FrictionOffset", "Presliding", "DistalBacklash", "SensorEffect", "Series", "Prediction", "CATALOGUE",
            "EFFECT_IDS", "ALIASES", "EQUIVALENT", "NONE", "UNKNOWN", "effect", "predict", "neutral_values",
-           "route_shape", "ROUTE", "K_MAX"]
+           "route_shape", "ROUTE", "K_MAX", "RigSwitch", "ScenarioKnob", "Setting", "register", "unregister",
+           "rig_switches"]
 
 NONE = "none"          # the base model explains the data within the noise
 UNKNOWN = "unknown"    # structure left in the residual that no extension explains
@@ -91,7 +94,8 @@ class Effect:
     literature.md; ``parameters`` what it adds; ``primary`` the signal it changes persistently
     ("T_out", or "x_out" for effects that leave T_out alone after the first pull); ``knobs`` the
     kernel knob of each parameter (:mod:`estimator.offline.effects_kernels`), empty for sensor corrections.
-    The rig switch of the same name is ``rig.effects.<id>`` (slave/simulated.py).
+    ``switch`` the simulated rig's switch (``rig.simulated.effects.<key>``, None: the rig has none) and
+    ``knob`` the scenario knob (None: no hidden-effect scenario): :mod:`estimator.offline.effect_switches`.
     """
 
     id: str = ""
@@ -104,6 +108,8 @@ class Effect:
     knobs: dict[str, str] = {}
     requires: tuple[str, ...] = ()      # distal signals the recording must have for the effect to show
     channel: str = ""                   # the sensor channel (sensor effects only)
+    switch: RigSwitch | None = None     # the simulated rig's switch
+    knob: ScenarioKnob | None = None    # how a scenario level sets it
 
     def correct_input(self, values: dict[str, float], time: np.ndarray, T_in: np.ndarray) -> np.ndarray | None:
         """The corrected proximal tension [N], shape (n,), from ``T_in`` [N] sampled at ``time`` [s];
@@ -134,6 +140,9 @@ class VelocityFriction(Effect):
     parameters = (Parameter("c_v", "s/m", 0.0, 200.0, 0.0, (5.0, 30.0),
                             "mu(v) = mu (1 + c_v |v|), v proximal sliding speed"),)
     knobs = {"c_v": "c_v"}
+    switch = RigSwitch("velocity_friction", "friction grows with sliding speed (viscous liner)", (Setting(
+        "viscous", 15.0, "s/m", ">= 0", "mu(v) = mu (1 + viscous |v|), v = sliding speed"),))
+    knob = ScenarioKnob((("viscous", 8.0, 30.0),))                   # +8..30 % friction at 10 mm/s
 
 
 class Pretension(Effect):
@@ -145,6 +154,9 @@ class Pretension(Effect):
     parameters = (Parameter("T0", "N", 0.0, 50.0, 0.0, (), "uniform tension along the tendon at the start"),)
     primary = "x_out"
     knobs = {"T0": "T0"}
+    switch = RigSwitch("pretension", "the tendon carries tension at rest (assembly preload)", (Setting(
+        "tension", 3.0, "N", ">= 0", "uniform tension at rest, added to sheath.pretension"),))
+    knob = ScenarioKnob((("tension", 1.0, 5.0),))
 
 
 class CurvatureDrift(Effect):
@@ -155,6 +167,9 @@ class CurvatureDrift(Effect):
     literature = "E6/E15/E16"
     parameters = (Parameter("K_rate", "1/s", -0.05, 0.05, 0.0, (0.0,), "K(t) = K + K_rate (t - t_0)"),)
     knobs = {"K_rate": "K_rate"}
+    switch = RigSwitch("curvature_drift", "K changes during the recording (shape change, wear, temperature)",
+                       (Setting("rate", 0.002, "1/s", "any", "dK/dt, K(t) = K + rate t"),))
+    knob = ScenarioKnob((("relative_change", 0.10, 0.30),), ("relative_change",), sw.drift_rate, ("K_rate",))  # |dK|/K
 
 
 class TendonStiffening(Effect):
@@ -168,6 +183,11 @@ class TendonStiffening(Effect):
                   Parameter("T_c", "N", 0.05, 20.0, 1.0, (1.0, 3.0), "tension scale of the toe"))
     primary = "x_out"
     knobs = {"beta": "beta", "T_c": "Tc"}
+    switch = RigSwitch("tendon_stiffening", "tendon soft at low tension (strand bedding, polymer)", (
+        Setting("softening", 2.0, "-", ">= 0", "extra compliance at zero tension: "
+                "dstrain/dT = (1 + softening e^(-T/toe_tension))/EA"),
+        Setting("toe_tension", 2.0, "N", "> 0", "tension scale of the soft toe")))
+    knob = ScenarioKnob((("softening", 1.0, 4.0), ("toe_tension", 1.0, 3.0)))
 
 
 class Stiction(Effect):
@@ -179,6 +199,10 @@ class Stiction(Effect):
     literature = "E4"
     parameters = (Parameter("r_s", "-", 0.0, 2.0, 0.0, (0.1, 0.25, 0.5, 0.9), "mu_static / mu_kinetic - 1"),)
     knobs = {"r_s": "r_s"}
+    switch = RigSwitch("stiction", "static friction above kinetic: breakaway after sticking, stick-slip when slow", (
+        Setting("static_ratio", 0.3, "-", ">= 0", "mu_static / mu_kinetic - 1"),
+        Setting("slip_time", 0.02, "s", "> 0", "after breakaway mu relaxes to kinetic with this time constant")))
+    knob = ScenarioKnob((("static_ratio", 0.15, 0.6),))
 
 
 class FrictionOffset(Effect):
@@ -190,6 +214,9 @@ class FrictionOffset(Effect):
     parameters = (Parameter("a", "N", 0.0, 20.0, 0.0, (0.5, 2.0),
                             "dT/dtheta = -mu (T + a): F0 = a (1 - e^-K) at the tip"),)
     knobs = {"a": "a"}
+    switch = RigSwitch("friction_offset", "friction that does not scale with tension (bending stiffness, clearance)",
+                       (Setting("tension_offset", 1.0, "N", ">= 0", "a in dT/dtheta = -mu (T + a)"),))
+    knob = ScenarioKnob((("distal_offset", 0.2, 1.0),), (), sw.offset_at_tip)    # N: F0 = a (1 - e^-K) at the tip
 
 
 class Presliding(Effect):
@@ -200,6 +227,7 @@ class Presliding(Effect):
                  "first-order lag in proximal travel, dF/dx = (F_memory - F) / x_p")
     literature = "E2"
     parameters = (Parameter("x_p", "m", 0.0, 1e-3, 0.0, (40e-6, 120e-6), "pre-sliding travel F_c / sigma"),)
+    knob = ScenarioKnob((("distance", 40e-6, 150e-6),))
 
 
 class DistalBacklash(Effect):
@@ -211,6 +239,7 @@ class DistalBacklash(Effect):
     parameters = (Parameter("d_b", "m", 0.0, 2e-3, 0.0, (60e-6, 200e-6), "total dead-zone width"),)
     primary = "x_out"
     requires = ("x_out",)
+    knob = ScenarioKnob((("width", 50e-6, 300e-6),))
 
 
 # per channel: kind -> (parameter prefix, unit of the parameter by channel, bounds, starts, meaning)
@@ -255,6 +284,7 @@ class SensorEffect(Effect):
         self.parameters = (Parameter(self.pname, unit, lo, hi, 0.0, starts, f"{channel} {meaning}"),)
         self.primary = "x_out" if channel[0] == "x" else "T_out"
         self.requires = ("x_out",) if channel[0] == "x" else ("T_out",) if channel == "T_out" else ()
+        self.switch, self.knob = sw.SENSOR_SWITCHES.get((kind, channel)), sw.SENSOR_KNOBS[(kind, channel[0])]
 
 
 _EFFECTS: tuple[Effect, ...] = (VelocityFriction(), Pretension(), CurvatureDrift(), TendonStiffening(), Stiction(),
@@ -289,6 +319,31 @@ def effect(name: str) -> Effect:
         return CATALOGUE[ALIASES.get(name, name)]
     except KeyError:
         raise KeyError(f"no effect {name!r} in the catalogue; known: {', '.join(EFFECT_IDS)}") from None
+
+
+def register(entry: Effect) -> Effect:
+    """Add ``entry`` to :data:`CATALOGUE` (a new effect: its entry here plus its kernel); returns it.
+
+    Raises
+    ------
+    ValueError
+        Its id or its rig switch's key is taken already.
+    """
+    keys = {e.switch.key for e in CATALOGUE.values() if e.switch}
+    if entry.id in CATALOGUE or entry.id in ALIASES or (entry.switch and entry.switch.key in keys):
+        raise ValueError(f"effect {entry.id!r}: its id or rig switch key is in the catalogue already")
+    CATALOGUE[entry.id] = entry
+    return entry
+
+
+def unregister(eid: str) -> None:
+    """Remove an entry added by :func:`register` (KeyError when absent)."""
+    del CATALOGUE[eid]
+
+
+def rig_switches() -> dict[str, Effect]:
+    """Rig switch key -> catalogue entry, catalogue order (the ``rig.simulated.effects`` block)."""
+    return {e.switch.key: e for e in CATALOGUE.values() if e.switch is not None}
 
 
 def _shift(time: np.ndarray, y: np.ndarray, tau: float) -> np.ndarray:

@@ -48,7 +48,7 @@ def baseline_deadband(cfg: Config) -> float:
     A running extremum of noisy samples sits ~3.5 sigma out and a later sample ~3.5 sigma the other
     way, so a smaller band declares reversals on noise alone and is unfair to the baseline.
     """
-    return max(0.1, 10.0 * cfg.rig.sensors.load_cell_noise)
+    return max(0.1, 10.0 * cfg.rig.simulated.sensors.load_cell_noise)
 
 
 def evaluate(csv_path: str | Path, calibration: dict, cfg: Config) -> dict:

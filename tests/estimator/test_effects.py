@@ -215,11 +215,11 @@ def test_compliance_is_fitted_by_linear_least_squares():
 # ---- cross-check: the rig's physics (driven by x_in) against the kernel (driven by the rig's T_in) --
 
 RIG_CASES = {   # rig switch, kernel values, rms tolerance on T_out [N] and on x_out [m]
-    "velocity_friction": (C.VelocityFrictionConfig(True, 20.0), {"c_v": 20.0}, 0.02, 6e-6),
-    "curvature_drift": (C.CurvatureDriftConfig(True, 0.01), {"K_rate": 0.01}, 1e-4, 1e-7),
-    "tendon_stiffening": (C.TendonStiffeningConfig(True, 2.0, 2.0), {"beta": 2.0, "T_c": 2.0}, 1e-9, 1e-7),
-    "stiction": (C.StictionConfig(True, 0.4), {"r_s": 0.4}, 1e-6, 1e-7),
-    "friction_offset": (C.FrictionOffsetConfig(True, 1.0), {"a": 1.0}, 1e-6, 1e-7),
+    "velocity_friction": (C.EffectSwitch(True, viscous=20.0), {"c_v": 20.0}, 0.02, 6e-6),
+    "curvature_drift": (C.EffectSwitch(True, rate=0.01), {"K_rate": 0.01}, 1e-4, 1e-7),
+    "tendon_stiffening": (C.EffectSwitch(True, softening=2.0, toe_tension=2.0), {"beta": 2.0, "T_c": 2.0}, 1e-9, 1e-7),
+    "stiction": (C.EffectSwitch(True, static_ratio=0.4), {"r_s": 0.4}, 1e-6, 1e-7),
+    "friction_offset": (C.EffectSwitch(True, tension_offset=1.0), {"a": 1.0}, 1e-6, 1e-7),
 }
 
 
@@ -230,10 +230,11 @@ def test_extension_reproduces_the_rig_with_the_same_effect(eid):
     kernel sees (the differenced encoder instead of the motor's step) - a few mN and um."""
     sub, values, tol_T, tol_x = RIG_CASES[eid]
     geo = SheathGeometry.uniform(L, 2 * math.pi)
-    sheath = C.SheathConfig(mu=K / (2 * math.pi), EA=EA, runs=tuple(C.RunConfig(r.length, r.radius) for r in geo.runs))
-    rig = SimulatedRig(sheath, C.RigConfig(n_elements=100, effects=C.EffectsConfig(**{eid: sub}),
-                                           sensors=C.SensorConfig(load_cell_noise=0.0),
-                                           load=C.LoadConfig(joint_limit=0.05, tissue_stiffness=2000.0)))
+    sheath = C.SheathConfig(EA=EA, runs=tuple(C.RunConfig(r.length, r.radius) for r in geo.runs))
+    rig = SimulatedRig(sheath, C.SimulatedRigConfig(n_elements=100, mu=K / (2 * math.pi),
+                                                    effects=C.EffectsConfig(**{eid: sub}),
+                                                    sensors=C.SensorConfig(load_cell_noise=0.0),
+                                                    load=C.LoadConfig(joint_limit=0.05, tissue_stiffness=2000.0)))
     rest = 0.0012 if eid == "friction_offset" else 0.0002        # taut at rest
     cmd = rig.state.truth.x_in + protocol(20.0, 1000.0, 0.006, np.random.default_rng(3), rest)
     tr = [rig.step(float(x), 1e-3).truth for x in cmd]

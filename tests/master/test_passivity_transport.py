@@ -67,7 +67,7 @@ class ArmHand:
 
 CFG = {
     "instrument": {"id": "pctx"},
-    "rig": {"load": {"tissue_stiffness": 6000.0}, "sensors": {"load_cell_noise": 0.0}},
+    "rig": {"simulated": {"load": {"tissue_stiffness": 6000.0}, "sensors": {"load_cell_noise": 0.0}}},
     "master": {"mapping": {"motion_scale": 1.0, "force_scale": 0.5, "force_limit": 20.0, "ramp_time": 0.05,
                            "force_rate_limit": 1.0e5}},
     "estimator": {"profile_points": 0},

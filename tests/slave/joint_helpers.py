@@ -21,7 +21,7 @@ def joint_config(pretension: float = 0.0, seed: int = 0, n_elements: int = 100, 
          "tendons": {"a": {"mu": 0.1}, "b": {"mu": 0.12, "runs": ROUTE_B}}}
     j.update(joint)
     return config_from_dict({"instrument": {"joints": [j]},
-                             "rig": {"n_elements": n_elements, "sensors": {"seed": seed}}})
+                             "rig": {"simulated": {"n_elements": n_elements, "sensors": {"seed": seed}}}})
 
 
 def route_model(t: TendonConfig, K: float) -> SheathModel:

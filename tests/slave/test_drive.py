@@ -10,11 +10,11 @@ import pytest
 from slave.drive import NOISE_BLOCK, Drive
 from slave.joint_rig import SimulatedInstrument
 from slave.simulated import SimulatedRig
-from teleop.config import MotorConfig, RigConfig, SensorConfig, load_config
+from teleop.config import MotorConfig, SensorConfig, SimulatedRigConfig, load_config
 
 
 def rig(noise=0.1, seed=5, **motor):
-    return RigConfig(motor=MotorConfig(**motor), sensors=SensorConfig(load_cell_noise=noise, seed=seed))
+    return SimulatedRigConfig(motor=MotorConfig(**motor), sensors=SensorConfig(load_cell_noise=noise, seed=seed))
 
 
 def test_motor_step_is_the_exact_first_order_step_and_speed_limited():

@@ -18,10 +18,9 @@ SPRING = C.LoadConfig(joint_stiffness=100.0, joint_limit=0.1, tissue_stiffness=2
 
 def make_rig(fx: C.EffectsConfig, noise=0.0, motor=FAST, pretension=0.0) -> SimulatedRig:
     g = SheathGeometry.uniform(L, ANGLE)
-    sheath = C.SheathConfig(mu=MU, EA=EA, runs=tuple(C.RunConfig(r.length, r.radius) for r in g.runs),
-                            pretension=pretension)
-    return SimulatedRig(sheath, C.RigConfig(n_elements=200, motor=motor, load=SPRING, effects=fx,
-                                            sensors=C.SensorConfig(load_cell_noise=noise, seed=1)))
+    sheath = C.SheathConfig(EA=EA, runs=tuple(C.RunConfig(r.length, r.radius) for r in g.runs), pretension=pretension)
+    return SimulatedRig(sheath, C.SimulatedRigConfig(n_elements=200, mu=MU, motor=motor, load=SPRING, effects=fx,
+                                                     sensors=C.SensorConfig(load_cell_noise=noise, seed=1)))
 
 
 def drive(rig, xs):
@@ -38,30 +37,30 @@ def ramp(a, b, speed):
 
 def test_effects_are_off_by_default_and_listed_when_on():
     assert make_rig(C.EffectsConfig()).effects == ()
-    fx = C.EffectsConfig(stiction=C.StictionConfig(enabled=True), sensor_delay=C.SensorDelayConfig(enabled=True))
+    fx = C.EffectsConfig(stiction=C.EffectSwitch(enabled=True), sensor_delay=C.EffectSwitch(enabled=True))
     assert make_rig(fx).effects == ("stiction", "sensor_delay")
     assert EFFECT_IDS == ("velocity_friction", "pretension", "curvature_drift", "tendon_stiffening", "stiction",
                           "friction_offset", "sensor_offset", "sensor_delay")
 
 
 def test_bad_effect_magnitude_names_the_key():
-    with pytest.raises(ValueError, match=r"rig\.effects\.stiction\.static_ratio"):
-        make_rig(C.EffectsConfig(stiction=C.StictionConfig(True, -0.1)))
-    with pytest.raises(ValueError, match=r"rig\.effects\.sensor_delay\.delay"):
-        make_rig(C.EffectsConfig(sensor_delay=C.SensorDelayConfig(True, math.nan)))
+    with pytest.raises(ValueError, match=r"rig\.simulated\.effects\.stiction\.static_ratio"):
+        make_rig(C.EffectsConfig(stiction=C.EffectSwitch(True, static_ratio=-0.1)))
+    with pytest.raises(ValueError, match=r"rig\.simulated\.effects\.sensor_delay\.delay"):
+        make_rig(C.EffectsConfig(sensor_delay=C.EffectSwitch(True, delay=math.nan)))
 
 
 @pytest.mark.parametrize("speed", [0.002, 0.02])
 def test_velocity_friction_slip_ratio_grows_with_speed(speed):
     c_v = 20.0
-    tr = drive(make_rig(C.EffectsConfig(velocity_friction=C.VelocityFrictionConfig(True, c_v))), ramp(0, 0.006, speed))
+    tr = drive(make_rig(C.EffectsConfig(velocity_friction=C.EffectSwitch(True, viscous=c_v))), ramp(0, 0.006, speed))
     m = tr["T_in"] > 1.0
     np.testing.assert_allclose(tr["T_out"][m] / tr["T_in"][m], math.exp(-K * (1 + c_v * speed)), rtol=0.01)
 
 
 def test_curvature_drift_changes_K_with_time():
     rate = 0.02
-    rig = make_rig(C.EffectsConfig(curvature_drift=C.CurvatureDriftConfig(True, rate)))
+    rig = make_rig(C.EffectsConfig(curvature_drift=C.EffectSwitch(True, rate=rate)))
     drive(rig, np.zeros(10000))                     # 10 s at rest
     tr = drive(rig, ramp(0, 0.006, 0.01))
     t = 10.0 + DT * np.arange(1, tr["T_in"].size + 1)
@@ -71,7 +70,7 @@ def test_curvature_drift_changes_K_with_time():
 
 def test_friction_offset_pull_and_release_lines():
     a = 1.0
-    rig = make_rig(C.EffectsConfig(friction_offset=C.FrictionOffsetConfig(True, a)))
+    rig = make_rig(C.EffectsConfig(friction_offset=C.EffectSwitch(True, tension_offset=a)))
     up = drive(rig, ramp(0, 0.007, 0.005))
     m = up["T_out"] > 0.5
     np.testing.assert_allclose(up["T_out"][m], (up["T_in"][m] + a) * math.exp(-K) - a, rtol=0.01)
@@ -87,7 +86,7 @@ def test_friction_offset_pull_and_release_lines():
 
 def test_tendon_stiffening_elongation_and_unchanged_T_out():
     beta, Tc = 3.0, 2.0
-    tr = drive(make_rig(C.EffectsConfig(tendon_stiffening=C.TendonStiffeningConfig(True, beta, Tc))),
+    tr = drive(make_rig(C.EffectsConfig(tendon_stiffening=C.EffectSwitch(True, softening=beta, toe_tension=Tc))),
                ramp(0, 0.006, 0.005))
     base = drive(make_rig(C.EffectsConfig()), ramp(0, 0.006, 0.005))
     u = np.linspace(0, 1, 2001)
@@ -107,7 +106,7 @@ def test_tendon_stiffening_elongation_and_unchanged_T_out():
 
 def test_stiction_breakaway_after_a_hold():
     r_s = 0.5
-    rig = make_rig(C.EffectsConfig(stiction=C.StictionConfig(True, r_s, 0.02)),
+    rig = make_rig(C.EffectsConfig(stiction=C.EffectSwitch(True, static_ratio=r_s, slip_time=0.02)),
                    motor=C.MotorConfig(bandwidth_hz=1e6, max_speed=10.0))
     up = drive(rig, ramp(0, 0.005, 0.005))
     drive(rig, np.full(500, 0.005))                   # hold: the tendon sticks
@@ -123,13 +122,13 @@ def test_stiction_breakaway_after_a_hold():
 
 
 def test_pretension_effect_adds_to_the_sheath_pretension():
-    rig = make_rig(C.EffectsConfig(pretension=C.PretensionEffectConfig(True, 2.5)), pretension=1.0)
+    rig = make_rig(C.EffectsConfig(pretension=C.EffectSwitch(True, tension=2.5)), pretension=1.0)
     np.testing.assert_allclose(rig.state.truth.profile, 3.5)
     assert rig.state.truth.x_out == pytest.approx(3.5 / 2100.0, rel=1e-9)
 
 
 def test_sensor_offset_and_delay_act_on_the_reading_only():
-    fx = C.EffectsConfig(sensor_offset=C.SensorOffsetConfig(True, -0.4), sensor_delay=C.SensorDelayConfig(True, 0.0125))
+    fx = C.EffectsConfig(sensor_offset=C.EffectSwitch(True, offset=-0.4), sensor_delay=C.EffectSwitch(True, delay=0.0125))
     rig, ref = make_rig(fx), make_rig(C.EffectsConfig())
     xs = 0.003 + 0.002 * np.sin(2 * math.pi * 1.0 * DT * np.arange(1, 3001))
     tr, base = drive(rig, xs), drive(ref, xs)
@@ -140,10 +139,10 @@ def test_sensor_offset_and_delay_act_on_the_reading_only():
 
 
 def test_general_solver_keeps_the_taut_invariant():
-    fx = C.EffectsConfig(friction_offset=C.FrictionOffsetConfig(True, 0.5),
-                         tendon_stiffening=C.TendonStiffeningConfig(True, 2.0, 1.5),
-                         velocity_friction=C.VelocityFrictionConfig(True, 10.0),
-                         stiction=C.StictionConfig(True, 0.3))
+    fx = C.EffectsConfig(friction_offset=C.EffectSwitch(True, tension_offset=0.5),
+                         tendon_stiffening=C.EffectSwitch(True, softening=2.0, toe_tension=1.5),
+                         velocity_friction=C.EffectSwitch(True, viscous=10.0),
+                         stiction=C.EffectSwitch(True, static_ratio=0.3))
     rig = make_rig(fx, motor=C.MotorConfig())
     rng = np.random.default_rng(4)
     cmd = np.clip(0.004 + np.cumsum(rng.normal(0, 3e-5, 4000)), 0.002, 0.009)

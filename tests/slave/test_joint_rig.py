@@ -21,11 +21,11 @@ def test_one_taut_tendon_equals_the_single_tendon_rig():
     quiet = {"n_elements": 100, "sensors": {"load_cell_noise": 0.0}}
     cfg = config_from_dict({"instrument": {"joints": [{
         "name": "j", "pulley_radius": R, "stiffness": K_J, "damping": 0.0, "limits": [-1.2, HI],
-        "limit_stiffness": K_LIM, "load": {"tissue_stiffness": K_T, "tissue_contact": T_C}}]}, "rig": quiet})
+        "limit_stiffness": K_LIM, "load": {"tissue_stiffness": K_T, "tissue_contact": T_C}}]}, "rig": {"simulated": quiet}})
     inst = SimulatedInstrument.from_config(cfg)
-    single = SimulatedRig.from_config(config_from_dict({"rig": {**quiet, "load": {
+    single = SimulatedRig.from_config(config_from_dict({"rig": {"simulated": {**quiet, "load": {
         "joint_stiffness": K_J / R ** 2, "tissue_stiffness": K_T / R ** 2, "tissue_contact": R * T_C,
-        "joint_limit": R * HI, "limit_stiffness": K_LIM / R ** 2, "tissue": True, "force": 0.0}}}))
+        "joint_limit": R * HI, "limit_stiffness": K_LIM / R ** 2, "tissue": True, "force": 0.0}}}}))
     t = np.arange(9000) * DT
     # pull (into the limit), partial release, re-pull past the peak, minor loops, release to slack
     x = np.interp(t, [0, 2, 3, 4, 5, 6, 7, 9], [0, 0.0075, 0.006, 0.0078, 0.004, 0.0065, 0.001, 0.0])
@@ -151,17 +151,17 @@ def test_bad_step_inputs_name_the_argument(cmd, dt, match):
 
 def test_config_errors_name_the_joint_and_key():
     with pytest.raises(ConfigError, match=r"instrument.joints must be a list of 1 to 4"):
-        SimulatedInstrument((), config_from_dict({}).rig)
+        SimulatedInstrument((), config_from_dict({}).rig.simulated)
     cfg = joint_config()
     bad = cfg.instrument.joints[0].__class__(name="wrist", stiffness=-1.0)
     with pytest.raises(ConfigError, match=r"instrument.joints\[0\] \(wrist\).stiffness"):
-        SimulatedInstrument((bad,), cfg.rig)
+        SimulatedInstrument((bad,), cfg.rig.simulated)
 
 
 def test_one_to_four_independent_joints():
     j = joint_config().instrument.joints[0]
     joints = [j.__class__(**{**j.__dict__, "name": f"j{i}", "pulley_radius": 0.003 + 0.001 * i}) for i in range(4)]
-    inst = SimulatedInstrument(joints, joint_config().rig)
+    inst = SimulatedInstrument(joints, joint_config().rig.simulated)
     x0 = inst.state.x_in_cmd.copy()
     for _ in range(300):
         s = inst.step(x0 + [[3e-3, -3e-3], [0, 0], [-3e-3, 3e-3], [0, 0]], DT)
@@ -169,4 +169,4 @@ def test_one_to_four_independent_joints():
     assert th[0] > 0.2 and th[2] < -0.2 and abs(th[1]) < 1e-9 and abs(th[3]) < 1e-9   # joints do not interact
     assert s.T_in.shape == (4, 2) and len(s.truth.profiles) == 8
     with pytest.raises(ConfigError, match="1 to 4"):
-        SimulatedInstrument(joints + joints[:1], joint_config().rig)
+        SimulatedInstrument(joints + joints[:1], joint_config().rig.simulated)

@@ -11,7 +11,7 @@ from scipy.optimize import brentq
 from estimator.sheath import SheathGeometry
 from slave.rig import Rig, RigState
 from slave.simulated import SimulatedRig
-from teleop.config import Config, LoadConfig, MotorConfig, RigConfig, RunConfig, SensorConfig, SheathConfig
+from teleop.config import Config, LoadConfig, MotorConfig, RunConfig, SensorConfig, SheathConfig, SimulatedRigConfig
 
 L, ANGLE, MU, EA = 1.5, 2.0 * math.pi, 0.1, 15000.0
 K = MU * ANGLE
@@ -28,11 +28,11 @@ ACTUATOR = LoadConfig(joint_stiffness=100.0, joint_limit=0.1, tissue=False, forc
 
 def uniform_sheath(**kw) -> SheathConfig:
     g = SheathGeometry.uniform(L, ANGLE)
-    return SheathConfig(mu=MU, EA=EA, runs=tuple(RunConfig(r.length, r.radius) for r in g.runs), **kw)
+    return SheathConfig(EA=EA, runs=tuple(RunConfig(r.length, r.radius) for r in g.runs), **kw)
 
 
 def make_rig(load=SPRING, sheath=None, motor=FAST, noise=0.0, seed=0, n=200) -> SimulatedRig:
-    rig = RigConfig(n_elements=n, motor=motor, load=load, sensors=SensorConfig(load_cell_noise=noise, seed=seed))
+    rig = SimulatedRigConfig(n_elements=n, mu=MU, motor=motor, load=load, sensors=SensorConfig(load_cell_noise=noise, seed=seed))
     return SimulatedRig(sheath or uniform_sheath(), rig)
 
 
@@ -138,7 +138,7 @@ def _exact_pull_compliance(runs, mu, EA):
 
 
 def test_nonuniform_route_same_ratio_different_elongation():
-    sheath = SheathConfig(mu=MU, EA=EA)  # default route: two half turns of different radius
+    sheath = SheathConfig(EA=EA)  # default route: two half turns of different radius
     total_angle = sum(0.0 if math.isinf(r.radius) else r.length / r.radius for r in sheath.runs)
     length = sum(r.length for r in sheath.runs)
     rig = make_rig(SPRING, sheath=sheath)
@@ -283,7 +283,7 @@ def test_force_reduction_from_pull_slip_rescales_the_profile():
 def test_random_history_keeps_invariants():
     rng = np.random.default_rng(3)
     rig = make_rig(LoadConfig(joint_stiffness=100.0, joint_limit=0.01, tissue_contact=0.004, force=2.0),
-                   sheath=SheathConfig(mu=MU, EA=EA), motor=MotorConfig(), n=100)
+                   sheath=SheathConfig(EA=EA), motor=MotorConfig(), n=100)
     dg = np.diff(rig.log_gain)
     cmd = 0.0
     for k in range(3000):
@@ -301,11 +301,13 @@ def test_random_history_keeps_invariants():
 def test_bad_inputs_raise_value_errors_naming_the_field():
     bad = SheathConfig(runs=(RunConfig(-1.0),))
     with pytest.raises(ValueError, match=r"sheath\.runs\[0\]\.length"):
-        SimulatedRig(bad, RigConfig())
-    with pytest.raises(ValueError, match="n_elements"):
-        SimulatedRig(SheathConfig(), RigConfig(n_elements=0))
+        SimulatedRig(bad, SimulatedRigConfig())
+    with pytest.raises(ValueError, match=r"rig\.simulated\.n_elements"):
+        SimulatedRig(SheathConfig(), SimulatedRigConfig(n_elements=0))
     with pytest.raises(ValueError, match="sheath.EA"):
-        SimulatedRig(SheathConfig(EA=0.0), RigConfig())
+        SimulatedRig(SheathConfig(EA=0.0), SimulatedRigConfig())
+    with pytest.raises(ValueError, match=r"rig\.simulated\.mu"):
+        SimulatedRig(SheathConfig(), SimulatedRigConfig(mu=-0.1))
     rig = SimulatedRig.from_config(Config())
     for x in (math.nan, math.inf):
         with pytest.raises(ValueError, match="x_in_cmd"):

@@ -33,7 +33,7 @@ def _write(tmp_path: Path, text: str, name: str = "x.yaml") -> Path:
 def test_default_yaml_is_exactly_the_dataclass_defaults():
     cfg = load_config(CONFIGS / "default.yaml")
     assert cfg == Config()
-    assert cfg.rig.load.limit_stiffness == 2.0e6          # '2.0e6' is a float, not a string
+    assert cfg.rig.simulated.load.limit_stiffness == 2.0e6          # '2.0e6' is a float, not a string
     assert isinstance(cfg.rig.rate_hz, float) and cfg.rig.rate_hz == 1000.0
     assert cfg.sheath.runs[0] == RunConfig(0.30, math.inf)
 
@@ -64,20 +64,21 @@ def test_no_file_means_defaults_and_sim_yaml_loads():
 
 
 def test_file_overrides_only_what_it_names(tmp_path):
-    p = _write(tmp_path, "rig:\n  motor:\n    max_speed: 0.02\nsheath:\n  runs:\n    - {length: 1.0, radius: 0.5}\n")
+    p = _write(tmp_path, "rig:\n  simulated:\n    motor:\n      max_speed: 0.02\n"
+                         "sheath:\n  runs:\n    - {length: 1.0, radius: 0.5}\n")
     cfg = load_config(p)
-    assert cfg.rig.motor.max_speed == 0.02
-    assert cfg.rig.motor.pulley_radius == Config().rig.motor.pulley_radius      # sibling kept
+    assert cfg.rig.simulated.motor.max_speed == 0.02
+    assert cfg.rig.simulated.motor.pulley_radius == Config().rig.simulated.motor.pulley_radius      # sibling kept
     assert cfg.rig.rate_hz == Config().rig.rate_hz
     assert cfg.sheath.runs == (RunConfig(1.0, 0.5),)                            # lists replaced whole
-    assert cfg.sheath.mu == Config().sheath.mu
+    assert cfg.sheath.EA == Config().sheath.EA and cfg.rig.simulated.mu == Config().rig.simulated.mu
 
 
 def test_overrides_apply_last_nested_or_dotted(tmp_path):
     p = _write(tmp_path, "rig:\n  rate_hz: 500\n")
-    cfg = load_config(p, {"rig": {"n_elements": 50}, "master.mapping.force_scale": 0.5,
+    cfg = load_config(p, {"rig": {"simulated": {"n_elements": 50}}, "master.mapping.force_scale": 0.5,
                           "transport.listen": ["tcp/127.0.0.1:9000"]})
-    assert cfg.rig.rate_hz == 500.0 and cfg.rig.n_elements == 50
+    assert cfg.rig.rate_hz == 500.0 and cfg.rig.simulated.n_elements == 50
     assert cfg.master.mapping.force_scale == 0.5
     assert cfg.transport.listen == ("tcp/127.0.0.1:9000",)
     with pytest.raises(ConfigError, match=r"^overrides: unknown key 'rig.moter'"):
@@ -95,10 +96,10 @@ def test_lists_become_tuples_and_runs_become_run_configs(tmp_path):
 
 
 def test_unknown_key_names_file_line_and_suggestion(tmp_path):
-    p = _write(tmp_path, "rig:\n  rate_hz: 100\n  moter:\n    max_speed: 1\n")
+    p = _write(tmp_path, "rig:\n  rate_hz: 100\n  simulated:\n    moter:\n      max_speed: 1\n")
     with pytest.raises(ConfigError) as e:
         load_config(p)
-    assert str(e.value) == f"{p}:3: unknown key 'rig.moter' (did you mean 'rig.motor'?)"
+    assert str(e.value) == f"{p}:4: unknown key 'rig.simulated.moter' (did you mean 'rig.simulated.motor'?)"
 
 
 def test_unknown_key_in_list_item_and_misplaced_key(tmp_path):
@@ -118,9 +119,13 @@ def test_non_si_suffix_only_where_the_schema_names_it(tmp_path):
 
 @pytest.mark.parametrize("text, match", [
     ("rig:\n  rate_hz: fast\n", r":2: rig.rate_hz: expected a number, got 'fast' \(str\)"),
-    ("rig:\n  n_elements: 20.5\n", r":2: rig.n_elements: expected an integer, got 20.5 \(float\)"),
-    ("rig:\n  load:\n    tissue: 1\n", r":3: rig.load.tissue: expected true or false, got 1 \(int\)"),
-    ("rig:\n  load:\n    tissue: yes\n", r"rig.load.tissue: expected true or false, got 'yes'"),
+    ("rig:\n  simulated:\n    n_elements: 20.5\n", r":3: rig.simulated.n_elements: expected an integer, got 20.5 \(float\)"),
+    ("rig:\n  simulated:\n    load:\n      tissue: 1\n", r":4: rig.simulated.load.tissue: expected true or false, got 1 \(int\)"),
+    ("rig:\n  simulated:\n    load:\n      tissue: yes\n", r"rig.simulated.load.tissue: expected true or false, got 'yes'"),
+    ("rig:\n  simulated:\n    effects:\n      stiction:\n        enabled: 1\n",
+     r":5: rig.simulated.effects.stiction.enabled: expected true or false, got 1 \(int\)"),
+    ("rig:\n  simulated:\n    effects:\n      stiction:\n        slip_time: fast\n",
+     r":5: rig.simulated.effects.stiction.slip_time: expected a number, got 'fast' \(str\)"),
     ("rig:\n  rate_hz: true\n", r"rig.rate_hz: expected a number, got True \(bool\)"),
     ("rig:\n  type: real\n", r"rig.type: expected one of 'simulated', 'zenoh', got 'real'"),
     ("recording:\n  rerun: of\n", r"recording.rerun: expected one of 'save', 'spawn', 'off', got 'of'"),
@@ -137,17 +142,23 @@ def test_wrong_types_name_key_expected_type_and_value(tmp_path, text, match):
 
 @pytest.mark.parametrize("text, match", [
     ("sheath:\n  EA: -3\n", r":2: sheath.EA: -3.0 is out of range: expected > 0 \[N\]"),
-    ("sheath:\n  mu: -0.1\n", r"sheath.mu: -0.1 is out of range: expected >= 0"),
+    ("rig:\n  simulated:\n    mu: -0.1\n", r"rig.simulated.mu: -0.1 is out of range: expected >= 0"),
     ("sheath:\n  runs:\n    - {length: 0}\n", r"sheath.runs\[0\].length: 0.0 is out of range: expected > 0 \[m\]"),
     ("sheath:\n  runs:\n    - {length: 1, radius: -2}\n", r"sheath.runs\[0\].radius: -2.0 is out of range"),
     ("sheath:\n  runs: []\n", r"sheath.runs: expected at least one run"),
     ("rig:\n  rate_hz: 0\n", r"rig.rate_hz: 0.0 is out of range: expected > 0 \[Hz\]"),
-    ("rig:\n  motor:\n    max_speed: -1\n", r"rig.motor.max_speed: -1.0 is out of range: expected > 0 \[m/s\]"),
-    ("rig:\n  load:\n    limit_stiffness: -2.0e6\n", r"rig.load.limit_stiffness: -2000000.0 is out of range"),
+    ("rig:\n  simulated:\n    motor:\n      max_speed: -1\n",
+     r"rig.simulated.motor.max_speed: -1.0 is out of range: expected > 0 \[m/s\]"),
+    ("rig:\n  simulated:\n    load:\n      limit_stiffness: -2.0e6\n",
+     r"rig.simulated.load.limit_stiffness: -2000000.0 is out of range"),
+    ("rig:\n  simulated:\n    effects:\n      stiction:\n        slip_time: 0\n",
+     r":5: rig.simulated.effects.stiction.slip_time: 0.0 is out of range: expected > 0 \[s\]"),
+    ("rig:\n  simulated:\n    effects:\n      sensor_delay: {delay: .inf}\n",
+     r"rig.simulated.effects.sensor_delay.delay: expected a finite number, got inf"),
     ("slave:\n  watchdog_ms: -5\n", r"slave.watchdog_ms: -5.0 is out of range: expected > 0 \[ms\]"),
     ("estimator:\n  profile_points: 70000\n", r"estimator.profile_points: 70000 is out of range: expected 0..65535"),
     ("sheath:\n  EA: .inf\n", r"sheath.EA: expected a finite number, got inf"),
-    ("sheath:\n  mu: .nan\n", r"sheath.mu: expected a finite number, got nan"),
+    ("rig:\n  simulated:\n    mu: .nan\n", r"rig.simulated.mu: expected a finite number, got nan"),
     ("instrument:\n  id: a/b\n", r":2: instrument.id: 'a/b' is not a valid instrument id"),
     ("transport:\n  listen: [\"127.0.0.1:7447\"]\n", r"transport.listen\[0\]: '127.0.0.1:7447' is not a zenoh endpoint"),
 ])
@@ -175,11 +186,11 @@ def test_duplicate_key_is_an_error(tmp_path):
 
 
 def test_yaml12_scalars(tmp_path):
-    cfg = load_config(_write(tmp_path, "recording:\n  rerun: off\nsheath:\n  EA: 1.5e4\n  mu: 1e-1\n"
-                                       "rig:\n  sensors:\n    seed: 010\n"))
+    cfg = load_config(_write(tmp_path, "recording:\n  rerun: off\nsheath:\n  EA: 1.5e4\n"
+                                       "rig:\n  simulated:\n    mu: 1e-1\n    sensors:\n      seed: 010\n"))
     assert cfg.recording.rerun == "off"                     # not YAML 1.1 False
-    assert cfg.sheath.EA == 15000.0 and cfg.sheath.mu == 0.1
-    assert cfg.rig.sensors.seed == 10                       # not octal
+    assert cfg.sheath.EA == 15000.0 and cfg.rig.simulated.mu == 0.1
+    assert cfg.rig.simulated.sensors.seed == 10             # not octal
 
 
 def test_empty_file_and_empty_section_mean_defaults(tmp_path):
