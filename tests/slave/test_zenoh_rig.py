@@ -75,8 +75,8 @@ class FakeSession:
 
 
 def build(**overrides):
-    cfg = load_config(None, {"instrument.id": "zr", "rig.type": "zenoh", "rig.n_elements": 50,
-                             "rig.sensors.load_cell_noise": 0.0, **overrides})
+    cfg = load_config(None, {"instrument.id": "zr", "rig.type": "zenoh", "rig.simulated.n_elements": 50,
+                             "rig.simulated.sensors.load_cell_noise": 0.0, **overrides})
     clock = FakeClock(5.0)
     session = FakeSession(clock)
     sim = SimulatedRig.from_config(cfg)
@@ -158,8 +158,8 @@ def test_registries_choose_by_type_only():
 
 
 def test_a_joint_instrument_through_the_interface():
-    cfg = load_config(JOINTS, {"instrument.id": "zj", "rig.type": "zenoh", "rig.n_elements": 30,
-                               "rig.sensors.load_cell_noise": 0.0})
+    cfg = load_config(JOINTS, {"instrument.id": "zj", "rig.type": "zenoh", "rig.simulated.n_elements": 30,
+                               "rig.simulated.sensors.load_cell_noise": 0.0})
     clock = FakeClock(1.0)
     session = FakeSession(clock)
     sim = SimulatedInstrument.from_config(cfg)
