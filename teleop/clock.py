@@ -142,6 +142,7 @@ class Pacer:
         self.skipped = 0           # deadlines dropped to resynchronise after long overruns
         self.max_lateness = 0.0    # [s] worst (return time - deadline), overruns and oversleeps alike
         self.last_lateness = 0.0   # [s]
+        self.last_overrun = False  # whether the last wait() came after its deadline
 
     @property
     def next_deadline(self) -> float:
@@ -156,8 +157,10 @@ class Pacer:
             self.clock.sleep_until(deadline)
             now = self.clock.now()
             self._next = deadline + self.period
+            self.last_overrun = False
         else:
             self.overruns += 1
+            self.last_overrun = True
             late_periods = math.floor((now - deadline) / self.period)
             self.skipped += late_periods
             self._next = deadline + (late_periods + 1) * self.period

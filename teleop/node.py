@@ -21,17 +21,23 @@ Subclasses set :attr:`side` (:class:`~teleop.messages.Side`), :attr:`log` (their
 """
 from __future__ import annotations
 
+import gc
 import json
 import logging
 import math
+import time
 from pathlib import Path
 from typing import Any
 
-from teleop.clock import Clock, Pacer
+from teleop.clock import Clock, MonotonicClock, Pacer
 from teleop.codec import next_seq, seq_newer
+from teleop.cycles import CycleStats
 from teleop.messages import Heartbeat, Side, SideState
+from teleop.realtime import IDLE, demote_threads, promote_threads
 
-__all__ = ["NodeBase"]
+__all__ = ["NodeBase", "IDLE_GUARD"]
+
+IDLE_GUARD = 1e-4    # [s] the helper threads' idle window closes this long before the loop's next deadline
 
 
 class NodeBase:
@@ -61,7 +67,9 @@ class NodeBase:
         self._t_warn = -math.inf
         self.safe_events = 0
         self.counts: dict[str, int] = dict.fromkeys(counts, 0)
-        self.pacer_stats: dict[str, float] = {}
+        self.pacer_stats: dict[str, Any] = {}
+        self.cycle_stats: CycleStats | None = None
+        self.scheduling = "not run"
 
     # ---- state and log -----------------------------------------------------------------------------
     @property
@@ -131,18 +139,51 @@ class NodeBase:
 
     # ---- running -----------------------------------------------------------------------------------
     def run(self, clock: Clock, *, max_duration: float | None = None) -> None:
-        """Pace :meth:`step` at :attr:`rate_hz` until :attr:`done` (or ``max_duration`` [s])."""
+        """Pace :meth:`step` at :attr:`rate_hz` until :attr:`done` (or ``max_duration`` [s]).
+
+        On the real clock (:class:`~teleop.clock.MonotonicClock`) the loop is prepared first: the
+        objects allocated so far are collected once and frozen out of the garbage collector's later
+        passes (:func:`gc.freeze`: a full collection then scans only what the loop allocates), the
+        threads get their real-time priorities (``<side>.realtime_priority``,
+        :func:`teleop.realtime.promote_threads`) and after every step the helper threads are told
+        until when the loop sleeps (:data:`teleop.realtime.IDLE`). Per-cycle figures:
+        :class:`teleop.cycles.CycleStats`, in the stats' ``pacer``.
+        """
+        real = isinstance(clock, MonotonicClock)
+        if real:
+            gc.collect()
+            gc.freeze()
+            self.scheduling = promote_threads(self._realtime_priority())
+            if self.scheduling.startswith("not"):
+                self.log.warning("%s loop: real-time priority %s", self.side.name.lower(), self.scheduling)
         pacer = Pacer(clock, self.rate_hz)
+        cycles = self.cycle_stats = CycleStats(self.side.name.lower())
+        perf = time.perf_counter
+        idle = IDLE.open if real else None
         t0 = clock.now()
         try:
             while not self.done:
                 now = pacer.wait()
+                state = self.state.name
+                t_step = perf()
                 self.step(now)
+                cycles.add(now, pacer.last_lateness, pacer.last_overrun, perf() - t_step, state)
+                if idle is not None:
+                    idle(pacer.next_deadline - IDLE_GUARD)
                 if max_duration is not None and now - t0 >= max_duration:
                     break
         finally:
-            self.pacer_stats = pacer.stats()
+            if real:
+                IDLE.release()
+                demote_threads()
+            self.pacer_stats = {**pacer.stats(), **cycles.stats(), "scheduling": self.scheduling}
+            cycles.dump()
             self._run_ended(clock)
+
+    def _realtime_priority(self) -> int:
+        """``<side>.realtime_priority`` of the node's config (0 without one)."""
+        section = getattr(getattr(self, "cfg", None), self.side.name.lower(), None)
+        return int(getattr(section, "realtime_priority", 0) or 0)
 
     def _run_ended(self, clock: Clock) -> None:
         """Called once when :meth:`run` returns or raises (default: nothing)."""

@@ -6,7 +6,8 @@ from the loop costs a deque append (arrays copied, a few microseconds); the Reru
 (~0.1 ms a scalar batch, ~0.5 ms a profile bar chart) run on the thread. The thread never makes the
 loop wait: if it falls more than :data:`MAX_BACKLOG` calls behind, the oldest queued calls are
 dropped and counted (:attr:`ThreadedRerunLogger.dropped`). In ``off`` mode every call returns at
-once. The process's GIL switch interval is lowered to 0.5 ms, so that a background thread in the
+once. Each call waits for the control loop's idle window (:data:`teleop.realtime.IDLE`): it runs
+while the loop sleeps, not as it wakes. The process's GIL switch interval is lowered to 0.5 ms, so that a background thread in the
 middle of pure-Python work hands the interpreter back to the woken loop within half a cycle
 (CPython's default is 5 ms).
 """
@@ -19,13 +20,16 @@ import threading
 
 import numpy as np
 
+from teleop.realtime import IDLE
 from teleop.rerun_log import RerunLogger
 
-__all__ = ["ThreadedRerunLogger", "MAX_BACKLOG", "SWITCH_INTERVAL"]
+__all__ = ["ThreadedRerunLogger", "MAX_BACKLOG", "SWITCH_INTERVAL", "PROFILE_COST", "CALL_COST"]
 
 log = logging.getLogger("teleop.rerun")
 MAX_BACKLOG = 5000
 SWITCH_INTERVAL = 0.0005     # [s] GIL switch interval of a process with writer threads beside its loop
+PROFILE_COST = 5e-4          # [s] time a profile log (bar charts, 3D route) holds the interpreter, about
+CALL_COST = 1.5e-4           # [s] the same for a scalar, phase or state log
 
 
 def lower_switch_interval() -> None:
@@ -99,8 +103,11 @@ class ThreadedRerunLogger:
 
     def _drain(self) -> None:
         q = self._queue
+        profile = self._inner.log_profile
         while q:
             fn, args, kwargs = q.popleft()
+            # run while the control loop sleeps (teleop/realtime.py), never as it wakes
+            IDLE.wait(PROFILE_COST if fn == profile else CALL_COST)
             try:
                 fn(*args, **kwargs)
             except Exception as e:  # noqa: BLE001 - a logging problem must not end the logging thread

@@ -204,6 +204,7 @@ class MasterConfig:
     mapping: MappingConfig = field(default_factory=MappingConfig)
     watchdog_ms: float = 50.0
     max_tension: float = 200.0            # [N] estimates with |T_in| or |T_out_hat| above: rejected
+    realtime_priority: int = 20           # SCHED_FIFO priority of the loop thread, 1-99 (teleop/realtime.py); 0: off
 
 
 @dataclass(frozen=True)
@@ -214,6 +215,7 @@ class SlaveConfig:
     x_in_min: float = -0.005              # [m] commands outside [x_in_min, x_in_max]: rejected
     x_in_max: float = 0.03                # [m]
     engage_tolerance: float = 0.002       # [m] (re-)engage only on a command this close to x_in
+    realtime_priority: int = 20           # SCHED_FIFO priority of the loop thread, 1-99 (teleop/realtime.py); 0: off
 
 
 @dataclass(frozen=True)
@@ -312,6 +314,7 @@ RANGES: dict[str, tuple[str, str]] = {
     "slave.relax_speed": (">= 0", "m/s"), "slave.x_in_min": ("any", "m"), "slave.x_in_max": ("any", "m"),
     "slave.engage_tolerance": ("> 0", "m"),
     "slave.watchdog_ms": ("> 0", "ms"), "slave.heartbeat_hz": ("> 0", "Hz"),
+    "master.realtime_priority": ("0..99", "-"), "slave.realtime_priority": ("0..99", "-"),
     "recording.log_every": (">= 1", "samples"),
     "instrument.joints[].pulley_radius": ("> 0", "m"), "instrument.joints[].limits[]": ("any", "rad"),
     "instrument.joints[].stiffness": (">= 0", "N m/rad"), "instrument.joints[].damping": (">= 0", "N m s/rad"),

@@ -58,12 +58,12 @@ def test_pacer_counts_an_overrun_and_catches_up_on_the_grid():
     p = Pacer(c, 100.0)                    # deadlines 0.01, 0.02, ...
     c.advance(0.013)                       # overran the first period by 3 ms
     assert p.wait() == pytest.approx(0.013)  # no sleep
-    assert p.overruns == 1 and p.skipped == 0
+    assert p.overruns == 1 and p.skipped == 0 and p.last_overrun
     assert p.max_lateness == pytest.approx(0.003)
     assert p.next_deadline == pytest.approx(0.02)   # same grid: the loop catches up
     c.advance(0.001)
     assert p.wait() == pytest.approx(0.02)
-    assert p.overruns == 1 and p.last_lateness == 0.0
+    assert p.overruns == 1 and p.last_lateness == 0.0 and not p.last_overrun
 
 
 def test_pacer_skips_whole_missed_periods_instead_of_bursting():

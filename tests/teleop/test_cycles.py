@@ -1,0 +1,51 @@
+"""Cycle statistics (teleop/cycles.py) and the loop's idle window and priorities (teleop/realtime.py)."""
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+
+from teleop.cycles import BIN, CycleStats
+from teleop.realtime import IdleWindow, promote_threads, scheduling
+
+
+def test_cycle_stats_percentiles_worst_step_and_overruns_by_state(tmp_path, monkeypatch):
+    monkeypatch.setenv("TELEOP_CYCLE_TRACE", str(tmp_path))
+    cs = CycleStats("slave")
+    for k in range(1000):                      # 990 steps of 0.1 ms, 10 of 2 ms (the overrunning ones)
+        slow = k % 100 == 0
+        cs.add(k * 1e-3, 0.3e-3 if slow else 0.0, slow, 2e-3 if slow else 0.1e-3,
+               "CALIBRATING" if k < 500 else "ENGAGED")
+    s = cs.stats()
+    assert s["step_ms"]["p50"] == (int(0.1e-3 / BIN) + 1) * BIN * 1e3      # the bin holding 0.1 ms
+    assert s["step_ms"]["p99_9"] >= 2.0 and s["step_ms"]["max"] == 2.0
+    assert s["overruns_by_state"] == {"CALIBRATING": 5, "ENGAGED": 5}
+    assert s["cycles_by_state"] == {"CALIBRATING": 500, "ENGAGED": 500}
+    path = cs.dump()
+    rows = np.load(path)["cycles"]
+    assert rows.shape == (1000, 4) and rows[:, 3].sum() == 10
+
+
+def test_cycle_stats_without_cycles_and_without_trace(monkeypatch):
+    monkeypatch.delenv("TELEOP_CYCLE_TRACE", raising=False)
+    cs = CycleStats("master")
+    assert cs.stats()["step_ms"]["p50"] is None and cs.dump() is None
+
+
+def test_idle_window_lets_work_through_only_while_the_loop_sleeps():
+    w = IdleWindow()
+    assert w.wait(1.0)                                         # no loop: always open
+    w.open(time.monotonic() - 1.0)                             # the loop is awake
+    t0 = time.monotonic()
+    assert not w.wait(1e-4, timeout=0.02)                      # gave up after its timeout
+    assert time.monotonic() - t0 >= 0.02
+    threading.Timer(0.01, lambda: w.open(time.monotonic() + 0.05)).start()
+    assert w.wait(1e-3, timeout=1.0)                           # woken by the loop's next sleep
+    w.release()
+    assert w.wait(10.0)
+
+
+def test_promote_threads_off_and_scheduling_named():
+    assert promote_threads(0) == "off"
+    assert scheduling().startswith(("SCHED_OTHER", "SCHED_FIFO", "unknown"))
