@@ -76,7 +76,8 @@ class InstrumentAxes:
         raise NotImplementedError
 
     def view(self, est: Any) -> Any:
-        """What a simulated operator watches: the proximal tension(s), None before any estimate."""
+        """What a simulated operator watches: per axis the proximal tension of each tendon (a tuple),
+        None before any estimate."""
         raise NotImplementedError
 
     def command(self, seq: int, now: float, q: list[float], engaged: bool, marker: int):
@@ -120,7 +121,7 @@ class TendonAxes(InstrumentAxes):
         return [est.axes[0].tendons[0].T_out_hat]
 
     def view(self, est: Estimate | None):
-        return None if est is None else est.axes[0].tendons[0].T_in
+        return None if est is None else [(est.axes[0].tendons[0].T_in,)]
 
     def command(self, seq: int, now: float, q: list[float], engaged: bool, marker: int) -> Command:
         return Command(seq, now, (q[0],), engaged, marker)

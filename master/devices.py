@@ -5,8 +5,8 @@ device for the configured instrument (one axis for a single tendon, one per join
 Registered here:
 
 =============  ==============================================================================
-``simulated``  a scripted operator: :class:`master.simulated.ScriptedOperator` on one tendon,
-               :class:`master.joint_operator.MultiAxisOperator` (one axis per joint) otherwise
+``simulated``  a scripted operator: :class:`master.simulated.ScriptedOperator`, one hand axis per
+               instrument axis (a single tendon: one; a joint instrument: one per joint)
 ``hid``        a USB HID device described by ``master.device.file`` (:class:`master.hid.HidDevice`;
                a joint instrument needs one position axis and one force report map per joint)
 =============  ==============================================================================
@@ -56,11 +56,9 @@ def _scripted(cfg: Config, protocol: str):
     from master.arm import ArmParameters
     clutch = cfg.master.mapping.clutch_button
     arm = ArmParameters.from_config(cfg.master.device.arm)
-    if cfg.instrument.joints:
-        from master.joint_operator import MultiAxisOperator, joint_protocols
-        return MultiAxisOperator(joint_protocols(cfg, protocol), clutch_bit=clutch, arm=arm)
-    from master.simulated import ScriptedOperator, build_protocol
-    return ScriptedOperator(build_protocol(protocol), clutch_bit=clutch, arm=arm)
+    from master.protocols import operator_protocols
+    from master.simulated import ScriptedOperator
+    return ScriptedOperator(operator_protocols(cfg, protocol), clutch_bit=clutch, arm=arm)
 
 
 def device_axes_needed(cfg: Config) -> int:

@@ -1,12 +1,16 @@
-"""A scripted operator: a simulated surgeon's hand on a simulated haptic device.
+"""A scripted operator: a simulated surgeon's hand on a simulated haptic device, one hand axis per
+instrument axis.
 
-The operator follows a *protocol*, a list of proximal-tension targets ("pull until T_in reaches
-20 N, then release until 5 N, ..."). It watches the T_in echoed in the latest Estimate (what a
-surgeon sees on the endoscope and the tension read-out), moves its intended hand position at a set
-speed toward the next target, dwells briefly at each reversal, and goes on to the next segment when
-the target is crossed. The hand is not a position source: it is a human arm as haptics models it, a
-mass-damper-spring about the intended position holding a device with its own mass and friction
-(:mod:`master.arm`; Hogan 1985, Tsuji et al. 1995)::
+Each axis follows its own *protocol* (:mod:`master.protocols`), a list of proximal-tension targets
+on one tendon of the axis at a time ("pull until T_in reaches 20 N, then release until 5 N, ..."):
+a single tendon has one axis, a joint instrument one per antagonistic pair (+ device motion pulls
+tendon a, - pulls tendon b). The axis watches the T_in of the tendon named by its segment in the
+latest Estimate (what a surgeon sees on the endoscope and the tension read-out), moves its intended
+hand position at a set speed toward the target, dwells briefly at each reversal, and goes on to the
+next segment when the target is crossed; all axes run together and the operator is finished when
+every axis is. The hand is not a position source: it is a human arm as haptics models it, a
+mass-damper-spring about the intended position holding a device with its own mass and friction,
+one per axis (:mod:`master.arm`; Hogan 1985, Tsuji et al. 1995)::
 
     (m_a + m_d) dv/dt = k_a (p_intended - p) + b_a (v_intended - v) + F_rendered - b_d v - F_c sgn(v)
 
@@ -17,68 +21,22 @@ it the passivity controller's force steps become position steps and the loop cha
 
 When the console asks to align (after a fault the hand has moved, or the slave relaxed) the
 operator clutches: it holds the clutch button (``clutch_bit``) for ``clutch_time`` and lets go, which
-re-anchors the map (:mod:`master.console`); it presses the deadman all the time.
+re-anchors the map of every axis (:mod:`master.console`); it presses the deadman all the time.
 
-Each segment carries a marker (1 = paper experiment, 2 = minor-loop experiment), which the master
-sends in ``Command.marker`` so the recordings can be cut per experiment.
+Each segment carries a marker, which the master sends in ``Command.marker`` (4 bits per axis,
+:func:`master.protocols.joint_marker`) so the recordings can be cut per experiment.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import Any
 
 from master.arm import ArmParameters, HumanArm
-from master.device import DeviceState
+from master.device import DeviceState, MultiAxisState
+from master.protocols import PROTOCOLS, Segment, build_protocol
 from teleop.errors import ConfigError
 
-__all__ = ["Segment", "PROTOCOLS", "build_protocol", "ClutchHand", "ScriptedOperator"]
-
-MARKER_PAPER = 1
-MARKER_MINOR = 2
-
-
-@dataclass(frozen=True)
-class Segment:
-    """One leg of a protocol: move until the proximal tension crosses ``target`` [N] (>= 0)."""
-
-    target: float
-    marker: int = 0
-
-
-def _segments(targets: tuple[float, ...], marker: int) -> tuple[Segment, ...]:
-    return tuple(Segment(float(t), marker) for t in targets)
-
-
-# "~0" is 0.3 N: the release ends where the tension is clearly gone without relying on noise.
-PROTOCOLS: dict[str, tuple[Segment, ...]] = {
-    # the seed paper's experiment: one full pull, one partial release, re-pull, release
-    "paper": _segments((20.0, 5.0, 20.0, 0.3), MARKER_PAPER),
-    # partial releases and re-pulls with reversals inside the 2K band (T_in0 e^-2K ~ 0.28 T_in0 at
-    # K = 0.63), then a re-pull past the first peak: the "tension at the last reversal" rule keeps
-    # T_out held until 9 e^2K ~ 32 N, the tendon's memory slips again from 16 N (literature.md s. 0)
-    "minor": _segments((16.0, 10.0, 14.0, 7.0, 13.0, 9.0, 20.0, 4.0, 0.3), MARKER_MINOR),
-    # a short protocol for tests
-    "short": _segments((6.0, 2.0, 0.3), MARKER_PAPER),
-}
-
-
-def build_protocol(names: str) -> tuple[Segment, ...]:
-    """Concatenate named protocols, e.g. ``"paper,minor"``.
-
-    Raises
-    ------
-    ConfigError
-        An unknown name (the known ones are listed) or an empty list.
-    """
-    out: list[Segment] = []
-    for name in filter(None, (n.strip() for n in names.split(","))):
-        if name not in PROTOCOLS:
-            raise ConfigError(f"protocol: unknown protocol {name!r} (expected one of {', '.join(PROTOCOLS)})")
-        out.extend(PROTOCOLS[name])
-    if not out:
-        raise ConfigError(f"protocol: {names!r} names no protocol (expected e.g. 'paper,minor')")
-    return tuple(out)
-
+__all__ = ["Segment", "PROTOCOLS", "build_protocol", "ClutchHand", "AxisScript", "ScriptedOperator"]
 
 #: Tension error [N] below which the operator slows its intention, and the slowest fraction of speed.
 APPROACH_BAND, APPROACH_MIN = 1.0, 0.15
@@ -120,19 +78,119 @@ class ClutchHand:
         return 0
 
 
-class ScriptedOperator:
-    """A :class:`~master.device.HapticDevice` and :class:`~master.device.OperatorView` driven by a script.
+
+class AxisScript:
+    """One axis of the scripted operator: its protocol and the arm holding its device axis.
 
     Parameters
     ----------
-    segments : sequence of Segment
-        The protocol, executed in order.
+    segments : sequence of Segment, the axis's protocol (not empty).
+    speed : float, intended hand speed [m/s].
+    arm : ArmParameters, the arm and device axis.
+    static_arm : bool, the massless spring instead (comparisons only).
+    dwell, start_delay, segment_timeout : float [s], as :class:`ScriptedOperator`.
+
+    Attributes
+    ----------
+    intended, velocity : the intended hand position [m] and speed [m/s].
+    force : the rendered force [N].
+    index : current segment, -1 before the start. direction : +1 raising the watched tension, -1
+    lowering it, 0 still. marker : the current (or last) segment's. finished, timeouts.
+    """
+
+    def __init__(self, segments, speed: float, arm: ArmParameters, static_arm: bool, dwell: float,
+                 start_delay: float, segment_timeout: float):
+        self.segments = tuple(segments)
+        self.speed, self.dwell, self.start_delay, self.segment_timeout = speed, dwell, start_delay, segment_timeout
+        self.k_arm = arm.stiffness
+        self.arm = HumanArm(arm)
+        self.static_arm = static_arm
+        # the hand lags its intention by ~(b_a + b_d) / k_a seconds: the operator anticipates that much
+        self._lead = 0.0 if static_arm else (arm.damping + arm.device_damping) / arm.stiffness   # [s]
+        self.intended = self.velocity = self.force = 0.0
+        self.index, self.direction, self.marker, self.timeouts = -1, 0, 0, 0
+        self.finished = False
+        self._T_last: float | None = None
+        self._rate = 0.0                         # smoothed dT_in/dt of the watched tendon [N/s]
+        self._wait_until: float | None = None    # start delay / dwell end [s]
+        self._t_segment = 0.0
+
+    def position(self, dt: float) -> float:
+        """The hand's position after ``dt`` [s] under the rendered force [m]."""
+        if self.static_arm:
+            # p_hand = p_intended + F / k_arm   (massless spring)
+            return self.intended + self.force / self.k_arm
+        # (m_a + m_d) dv/dt = k_a (p_i - p) + b_a (v_i - v) + F - b_d v - F_c sgn(v)
+        return self.arm.step(dt, self.intended, self.velocity, self.force)
+
+    def advance(self, t: float, dt: float, T_in: tuple[float, ...]) -> None:
+        """Advance the script to ``t`` [s] seeing the axis's proximal tensions ``T_in`` [N] (one per tendon)."""
+        self.velocity = 0.0                      # intended hand speed [m/s], set below while moving
+        if self.finished:
+            return
+        side = self.segments[max(self.index, 0)].side
+        T = T_in[side]
+        if self._T_last is not None and dt > 0:  # read-out rate [N/s], smoothed over RATE_TIME
+            self._rate += dt / (RATE_TIME + dt) * ((T - self._T_last) / dt - self._rate)
+        self._T_last = T
+        if self.index < 0 or self._wait_until is not None:     # waiting to start, or dwelling after a segment
+            if self._wait_until is None:
+                self._wait_until = t + self.start_delay
+            if t < self._wait_until:
+                return
+            self._wait_until = None
+            if self.index + 1 >= len(self.segments):
+                self.finished, self.direction = True, 0
+                return
+            self._start(self.index + 1, t, T_in)
+            return
+        seg = self.segments[self.index]
+        # the operator anticipates: it stops the intention when the read-out, carried on at its present
+        # rate for the hand's lag, reaches the target (a person stops early when the read-out moves fast)
+        T_seen = T + self._rate * self._lead
+        reached = T_seen >= seg.target if self.direction > 0 else T_seen <= seg.target
+        if reached or t - self._t_segment > self.segment_timeout:
+            self.timeouts += 0 if reached else 1
+            self.direction = 0
+            self._wait_until = t + self.dwell
+            return
+        # slow down near the target (a hand with mass lags its intention: stopping at full speed would
+        # carry the tendon on by ~b v / k of hand travel, several newtons where the tendon sticks);
+        # + device motion pulls tendon a (side 0), - pulls tendon b
+        sign = 1.0 if seg.side == 0 else -1.0
+        self.velocity = sign * self.direction * self.speed * approach(abs(seg.target - T_seen))
+        self.intended += self.velocity * dt
+
+    def _start(self, index: int, t: float, T_in: tuple[float, ...]) -> None:
+        seg = self.segments[index]
+        if self.index >= 0 and seg.side != self.segments[self.index].side:
+            self._T_last, self._rate = None, 0.0          # another tendon watched: its own rate
+        self.index, self.marker, self._t_segment = index, seg.marker, t
+        self.direction = 1 if seg.target > T_in[seg.side] else -1
+
+
+def _per_axis(protocols) -> list[tuple[Segment, ...]]:
+    """One protocol (a sequence of Segment: one axis) or one per axis, as a list of tuples."""
+    protocols = tuple(protocols)
+    if protocols and all(isinstance(s, Segment) for s in protocols):
+        return [protocols]
+    return [tuple(p) for p in protocols]
+
+
+class ScriptedOperator:
+    """A :class:`~master.device.HapticDevice` and :class:`~master.device.OperatorView` driven by a
+    script, one hand axis per instrument axis (module docstring).
+
+    Parameters
+    ----------
+    protocols : sequence of Segment (one axis), or one such sequence per axis (1..4)
+        Each axis's protocol, executed in order (:mod:`master.protocols`).
     speed : float
         Intended hand speed along the device axis [m/s], > 0.
     arm_stiffness : float
         Arm stiffness k_a [N/m], > 0, used when ``arm`` is None.
     arm : ArmParameters, optional
-        The arm and device (:mod:`master.arm`); default ``ArmParameters(stiffness=arm_stiffness)``.
+        The arm and device of every axis (:mod:`master.arm`); default ``ArmParameters(stiffness=arm_stiffness)``.
     static_arm : bool
         The massless spring ``p = p_intended + F / k_a`` instead (comparisons only; module docstring).
     dwell : float
@@ -142,53 +200,88 @@ class ScriptedOperator:
     segment_timeout : float
         Give up a segment that has not reached its target after this long [s], > 0 (counted in
         ``timeouts``; the script goes on with the next one).
+    clutch_bit, clutch_time
+        When the console asks to align, the operator holds the clutch button (bit ``clutch_bit``; < 0:
+        never) for ``clutch_time`` [s] and lets go, which re-anchors every axis where the hands are.
 
     Attributes
     ----------
+    axes : list of AxisScript
     finished : bool
-        The whole protocol has been executed.
+        Every axis has executed its whole protocol.
     marker : int
-        Marker of the current segment (the one moving, or the one just finished while dwelling).
+        Every axis's segment tag, 4 bits per axis (a single tendon: its segment's marker).
     timeouts : int
         Segments abandoned after ``segment_timeout``.
+
+    Raises
+    ------
+    ConfigError
+        No axes or an empty protocol, a segment with a side other than 0/1 or a negative target, or a
+        setting out of range (named).
     """
 
-    def __init__(self, segments, speed: float = 0.025, arm_stiffness: float = 300.0, dwell: float = 0.2,
+    def __init__(self, protocols, speed: float = 0.025, arm_stiffness: float = 300.0, dwell: float = 0.2,
                  start_delay: float = 0.5, segment_timeout: float = 15.0, clutch_bit: int = 1,
                  clutch_time: float = 0.05, arm: ArmParameters | None = None, static_arm: bool = False):
-        self.segments = tuple(segments)
-        if not self.segments:
-            raise ConfigError("protocol: a scripted operator needs at least one segment")
+        per_axis = _per_axis(protocols)
+        if not per_axis or any(not p for p in per_axis):
+            raise ConfigError("protocol: a scripted operator needs at least one segment on every axis")
+        for p in per_axis:
+            for seg in p:
+                if seg.side not in (0, 1) or not (math.isfinite(seg.target) and seg.target >= 0):
+                    raise ConfigError(f"protocol: segment {seg!r}: side must be 0 or 1, target a finite number >= 0 N")
         for name, v, zero_ok in (("speed", speed, False), ("arm_stiffness", arm_stiffness, False),
                                  ("dwell", dwell, True), ("start_delay", start_delay, True),
                                  ("segment_timeout", segment_timeout, False)):
             if not (math.isfinite(v) and (v >= 0 if zero_ok else v > 0)):
                 raise ConfigError(f"scripted operator: {name} must be a finite number "
                                   f"{'>= 0' if zero_ok else '> 0'}, got {v!r}")
-        self.speed, self.dwell = float(speed), float(dwell)
         self.arm_params = arm or ArmParameters(stiffness=float(arm_stiffness))
-        self.k_arm = self.arm_params.stiffness
-        self.arm = HumanArm(self.arm_params)
         self.static_arm = bool(static_arm)
-        self.start_delay, self.segment_timeout = float(start_delay), float(segment_timeout)
-        self.intended = 0.0          # [m]
-        self.velocity = 0.0          # intended speed [m/s]
-        self._T_last: float | None = None
-        self._rate = 0.0             # smoothed dT_in/dt [N/s]
-        a = self.arm_params
-        self._lead = 0.0 if static_arm else (a.damping + a.device_damping) / a.stiffness   # [s]
-        self.force = 0.0             # rendered force [N]
-        self.index = -1              # current segment; -1 before the start
-        self.direction = 0           # +1 pulling, -1 releasing, 0 still
-        self.marker = 0
-        self.finished = False
-        self.timeouts = 0
-        self._T_in: float | None = None
+        self.axes = [AxisScript(p, float(speed), self.arm_params, self.static_arm, float(dwell), float(start_delay),
+                                float(segment_timeout)) for p in per_axis]
+        self.segments = per_axis[0]
+        self.k_arm = self.arm_params.stiffness
+        self._T: list[tuple[float, ...]] | None = None
         self._engaged = False
         self._t_prev: float | None = None
-        self._wait_until: float | None = None   # start delay / dwell end [s]
-        self._t_segment = 0.0
         self.clutch = ClutchHand(clutch_bit, clutch_time)
+
+    # -- the instrument's axes ---------------------------------------------------------------------
+    @property
+    def n_axes(self) -> int:
+        return len(self.axes)
+
+    @property
+    def finished(self) -> bool:
+        return all(a.finished for a in self.axes)
+
+    @property
+    def timeouts(self) -> int:
+        return sum(a.timeouts for a in self.axes)
+
+    @property
+    def marker(self) -> int:
+        """Every axis's segment tag, 4 bits per axis (:func:`master.protocols.joint_marker`)."""
+        return sum((a.marker & 0xF) << (4 * k) for k, a in enumerate(self.axes))
+
+    # the first axis's script (a single tendon's), for logs, tests and benchmarks
+    @property
+    def index(self) -> int:
+        return self.axes[0].index
+
+    @property
+    def direction(self) -> int:
+        return self.axes[0].direction
+
+    @property
+    def intended(self) -> float:
+        return self.axes[0].intended
+
+    @property
+    def force(self) -> float:
+        return self.axes[0].force
 
     # -- OperatorView ------------------------------------------------------------------------------
     def on_console(self, status) -> None:
@@ -200,83 +293,56 @@ class ScriptedOperator:
         """Clutch presses so far."""
         return self.clutch.count
 
-    def watch(self, T_in: float | None, engaged: bool) -> None:
-        """Latest proximal tension [N] (None: none yet) and whether control is engaged."""
-        self._T_in = T_in if T_in is None or math.isfinite(T_in) else None
+    def watch(self, T_in: Any, engaged: bool) -> None:
+        """Latest proximal tensions [N] and whether control is engaged: per axis a tuple (the single
+        tendon's, or tendon a's and b's), or one float for a one-axis operator; None (or anything
+        non-finite or of another shape): none yet."""
+        if isinstance(T_in, (int, float)):
+            T_in = [(T_in,)]
+        seen = None if T_in is None else [tuple(v) if isinstance(v, (tuple, list)) else (v,) for v in T_in]
+        ok = (seen is not None and len(seen) == len(self.axes)
+              and all(len(v) > max(s.side for s in a.segments) and all(math.isfinite(x) for x in v)
+                      for v, a in zip(seen, self.axes)))
+        self._T = [tuple(float(x) for x in v) for v in seen] if ok and seen is not None else None
         self._engaged = bool(engaged)
 
     # -- HapticDevice ------------------------------------------------------------------------------
-    def read(self, t: float) -> DeviceState:
-        """Advance the script to time ``t`` [s] and return the hand position."""
+    def read(self, t: float) -> Any:
+        """Advance every axis's script to ``t`` [s]; the hand position [m] (a DeviceState for one axis,
+        a MultiAxisState for several) and the clutch button."""
         dt = 0.0 if self._t_prev is None else max(0.0, t - self._t_prev)
         self._t_prev = t
-        self.velocity = 0.0
-        if self._engaged and not self.finished and self._T_in is not None:
-            self._advance(t, dt, self._T_in)
+        for a in self.axes:
+            a.velocity = 0.0
+        if self._engaged and self._T is not None:
+            for a, T in zip(self.axes, self._T):
+                a.advance(t, dt, T)
         buttons = self.clutch.buttons(t)
-        if self.static_arm:
-            # p_hand = p_intended + F / k_arm   (massless spring)
-            p = self.intended + self.force / self.k_arm
-        else:
-            # (m_a + m_d) dv/dt = k_a (p_i - p) + b_a (v_i - v) + F - b_d v - F_c sgn(v)
-            p = self.arm.step(dt, self.intended, self.velocity, self.force)
-        return DeviceState(t=t, position=p, buttons=buttons)
+        pos = tuple(a.position(dt) for a in self.axes)
+        if len(pos) == 1:
+            return DeviceState(t=t, position=pos[0], buttons=buttons)
+        return MultiAxisState(t=t, positions=pos, buttons=buttons)
 
     def set_force(self, force: float, t: float) -> None:
-        self.force = float(force) if math.isfinite(force) else 0.0
+        """Render ``force`` [N] on the first axis (non-finite: 0)."""
+        self.set_forces([force], t)
+
+    def set_forces(self, forces, t: float) -> None:
+        """Render one force per axis [N] (non-finite: 0)."""
+        for a, f in zip(self.axes, forces):
+            a.force = float(f) if math.isfinite(f) else 0.0
 
     def close(self) -> None:
-        self.force = 0.0
-
-    # -- script ------------------------------------------------------------------------------------
-    def _advance(self, t: float, dt: float, T_in: float) -> None:
-        self.velocity = 0.0                      # intended hand speed [m/s], set below while moving
-        if self._T_last is not None and dt > 0:  # read-out rate [N/s], smoothed over RATE_TIME
-            self._rate += dt / (RATE_TIME + dt) * ((T_in - self._T_last) / dt - self._rate)
-        self._T_last = T_in
-        if self.index < 0:                       # first engaged reading: wait, then start
-            if self._wait_until is None:
-                self._wait_until = t + self.start_delay
-            if t < self._wait_until:
-                return
-            self._start(0, t, T_in)
-            return
-        if self._wait_until is not None:         # dwelling after a segment
-            if t < self._wait_until:
-                return
-            self._wait_until = None
-            if self.index + 1 >= len(self.segments):
-                self.finished, self.direction = True, 0
-                return
-            self._start(self.index + 1, t, T_in)
-            return
-        seg = self.segments[self.index]
-        # the operator anticipates: the hand lags its intention by ~(b_a + b_d) / k_a seconds, so it
-        # stops the intention when the read-out, carried on at its present rate for that long, reaches
-        # the target (a person stops early when the read-out moves fast)
-        T_seen = T_in + self._rate * self._lead
-        reached = T_seen >= seg.target if self.direction > 0 else T_seen <= seg.target
-        if reached or t - self._t_segment > self.segment_timeout:
-            self.timeouts += 0 if reached else 1
-            self.direction = 0
-            self._wait_until = t + self.dwell
-            return
-        # slow down near the target (a hand with mass lags its intention: stopping at full speed would
-        # carry the tendon on by ~b v / k of hand travel, several newtons where the tendon sticks)
-        self.velocity = self.direction * self.speed * approach(abs(seg.target - T_seen))
-        self.intended += self.velocity * dt
-
-    def _start(self, index: int, t: float, T_in: float) -> None:
-        seg = self.segments[index]
-        self.index, self.marker, self._t_segment = index, seg.marker, t
-        self._wait_until = None
-        self.direction = 1 if seg.target > T_in else -1
+        for a in self.axes:
+            a.force = 0.0
 
     @property
     def progress(self) -> str:
         """Human-readable position in the script, for logs."""
-        if self.finished:
-            return "done"
-        if self.index < 0:
-            return "waiting"
-        return f"segment {self.index + 1}/{len(self.segments)} -> {self.segments[self.index].target:g} N"
+        def one(a: AxisScript) -> str:
+            if a.finished:
+                return "done"
+            if a.index < 0:
+                return "waiting"
+            return f"segment {a.index + 1}/{len(a.segments)} -> {a.segments[a.index].target:g} N"
+        return "; ".join(one(a) for a in self.axes)

@@ -1,6 +1,6 @@
-"""What both slave nodes share (one tendon: :mod:`slave.node`; joint instrument: :mod:`slave.joint_node`).
+"""The cycle and the watchdog of the instrument side (:class:`slave.node.SlaveNode`, every instrument).
 
-The cycle and the watchdog of the instrument side, the same whatever the instrument:
+The same whatever the instrument's axes (:mod:`slave.axis`):
 
 * one cycle per :meth:`SlaveNodeBase.step` at ``rig.rate_hz``: the same instant twice does nothing;
   a cycle whose wall-clock period exceeds ``5 / rig.rate_hz`` (a stall) is counted and advances the
@@ -12,9 +12,9 @@ The cycle and the watchdog of the instrument side, the same whatever the instrum
   (hold); entering ENGAGED from another state only when the command is close to where the axes are
   (the node's ``_too_far``; refused commands counted once each), else ENGAGED. A command is accepted
   when it fits the instrument (one target per axis), is newer than the last accepted one and lies
-  within range. What each decision does to the motors is the node's: a single tendon holds and
-  relaxes toward its pretension when SAFE, the pair controllers of a joint instrument relax both
-  tendons to their set tension;
+  within range. What each decision does to the motors is each axis's: a single tendon holds and
+  relaxes toward its pretension when SAFE, the pair controller of a joint relaxes both tendons to
+  their set tension;
 * one estimate published per control cycle, a Heartbeat at ``slave.heartbeat_hz``;
 * ``calibration.json`` in the run directory, and the counters of the run summary.
 """
@@ -62,8 +62,8 @@ class SlaveLinks:
 class SlaveNodeBase(NodeBase):
     """The cycle, watchdog and summary of a slave node (module docstring).
 
-    Subclasses implement :meth:`_calibration_step`, :meth:`_control_step`, ``_in_range(cmd, now)``
-    and :meth:`_stats_detail`; ``_fits(cmd, now)`` as needed.
+    The node (:class:`slave.node.SlaveNode`) implements :meth:`_calibration_step`, :meth:`_control_step`,
+    ``_in_range(cmd, now)``, ``_fits(cmd, now)``, :meth:`_too_far` and :meth:`_stats_detail`.
 
     Parameters
     ----------

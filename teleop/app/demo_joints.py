@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from master.joint_operator import MARKER_PAPER_A, MARKER_PAPER_B, joint_marker
+from master.protocols import MARKER_PAPER_A, MARKER_PAPER_B, joint_marker
 from teleop.app.demo_run import finish, full_scale_errors, loop_lines, read_json, run_processes, verdict_lines
 from teleop.config import Config, write_config
 from teleop.errors import DataError

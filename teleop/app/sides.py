@@ -5,7 +5,7 @@ node (:func:`slave_links`, :func:`master_links`; ``--inject`` wraps the publishe
 :class:`teleop.app.faults.FaultInjector`), a run directory for recordings and stats
 (:func:`prepare_run_dir`), and the node run until it is done, stopped or out of time (``_serve``).
 :mod:`teleop.app.cli` parses the arguments and calls :func:`run_slave` / :func:`run_master`; the single
-tendon and the joint instrument share everything here but the slave's node.
+tendon and the joint instrument share everything here, the nodes included (they iterate over axes).
 """
 from __future__ import annotations
 
@@ -14,7 +14,6 @@ import contextlib
 import logging
 import time
 from pathlib import Path
-from typing import Any
 
 from teleop.config import Config
 
@@ -154,7 +153,8 @@ def _log_master_done(node) -> None:
 def run_slave(args: argparse.Namespace) -> int:
     """``teleop slave`` for any instrument: reload ``<calibration.dir>/<id>.yaml`` (or calibrate at
     power-up and save it there: missing, or ``--recalibrate``), then serve commands until stopped. One
-    path; only the node, its recording and its warm-up depend on the kind (``instrument.joints``)."""
+    path and one :class:`slave.node.SlaveNode` for every instrument (a single tendon is one axis)."""
+    from slave.node import SlaveNode, recording, warm_up
     from slave.rigs import make_rig
     from teleop.clock import MonotonicClock
     from teleop.config import load_config
@@ -163,7 +163,6 @@ def run_slave(args: argparse.Namespace) -> int:
     from teleop.rerun_thread import ThreadedRerunLogger as RerunLogger  # the loop only queues the calls
 
     cfg = load_config(args.config)
-    Node, recording, warm_up = _slave_kind(cfg)
     calibration, cal_path = load_or_recalibrate(cfg, getattr(args, "recalibrate", False))
     run_dir = side_run_dir(args, cfg)
     warm_up(cfg)  # compile the numba kernels now, not in the first real-time cycles
@@ -178,7 +177,7 @@ def run_slave(args: argparse.Namespace) -> int:
                     RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd",
                                 route=None if cfg.instrument.joints else cfg.sheath.runs) as rr:   # 3D sheath view
                 links = slave_links(session, ident, injector)
-                node = Node(cfg, rig, links, recorder=rec, rerun=rr, run_dir=run_dir,
+                node = SlaveNode(cfg, rig, links, recorder=rec, rerun=rr, run_dir=run_dir,
                             stop_on_master_stop=args.exit_on_master_stop, calibration=calibration,
                             calibration_file=cal_path)
                 _serve(node, clock, args, run_dir, "slave", injector)
@@ -186,16 +185,6 @@ def run_slave(args: argparse.Namespace) -> int:
             rig.close()
     logging.getLogger("teleop.slave").info("slave done: %s", run_dir)
     return 0
-
-
-def _slave_kind(cfg: Config) -> tuple[Any, Any, Any]:
-    """What depends on the kind of instrument in ``teleop slave``: (node class, ``recording(cfg, rig)``,
-    ``warm_up(cfg)``) of a joint instrument (one axis per antagonistic pair) or of a single tendon."""
-    if cfg.instrument.joints:
-        from slave import joint_node
-        return joint_node.JointSlaveNode, joint_node.recording, joint_node.warm_up
-    from slave import node
-    return node.SlaveNode, node.recording, node.warm_up
 
 
 def run_master(args: argparse.Namespace) -> int:

@@ -26,7 +26,7 @@ class Hands:
         self.positions, self.buttons, self.present, self.forces = [0.0, 0.0, 0.0], 0, True, []
 
     def read(self, t):
-        from master.joint_operator import MultiAxisState
+        from master.device import MultiAxisState
         return MultiAxisState(t, tuple(self.positions), self.buttons, self.present)
 
     def set_forces(self, forces, t):

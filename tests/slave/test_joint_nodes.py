@@ -1,4 +1,4 @@
-"""JointSlaveNode and the MasterNode of a joint instrument on one FakeClock, talking through in-memory topics that go
+"""The SlaveNode and the MasterNode of a joint instrument on one FakeClock, talking through in-memory topics that go
 through the codec: calibration at power-up, the paper protocol on all three joints, watchdog."""
 from __future__ import annotations
 
@@ -7,12 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from master.joint_operator import MultiAxisOperator, joint_marker, paper_protocol
 from master.node import MasterLinks, MasterNode, csv_columns
+from master.protocols import joint_marker, paper_protocol
+from master.simulated import ScriptedOperator
 from slave.calibration_file import load_calibration
-from slave.joint_node import JointSlaveNode, joint_csv_columns
 from slave.joint_rig import SimulatedInstrument
-from slave.node import SlaveLinks
+from slave.node import SlaveLinks, SlaveNode
+from slave.pair_axis import joint_csv_columns
 from slave.pair_calibrate import set_tension
 from teleop.clock import FakeClock
 from teleop.config import load_config
@@ -29,10 +30,10 @@ def build(tmp_path, calibration=None):
     cmd, est, shb, mhb = (Topic(clock, codec=True, keep=False) for _ in range(4))
     inst = SimulatedInstrument.from_config(cfg)
     rec = Rows()
-    slave = JointSlaveNode(cfg, inst, SlaveLinks(estimate=est, heartbeat=shb, command=cmd, master_heartbeat=mhb),
-                           recorder=rec, calibration=calibration, calibration_file=tmp_path / "flex3.yaml",
-                           run_dir=tmp_path, stop_on_master_stop=True)
-    op = MultiAxisOperator([paper_protocol(set_tension(cfg, j)) for j in cfg.instrument.joints])
+    slave = SlaveNode(cfg, inst, SlaveLinks(estimate=est, heartbeat=shb, command=cmd, master_heartbeat=mhb),
+                      recorder=rec, calibration=calibration, calibration_file=tmp_path / "flex3.yaml",
+                      run_dir=tmp_path, stop_on_master_stop=True)
+    op = ScriptedOperator([paper_protocol(set_tension(cfg, j)) for j in cfg.instrument.joints])
     master = MasterNode(cfg, op, MasterLinks(command=cmd, heartbeat=mhb, estimate=est, slave_heartbeat=shb),
                         recorder=Rows())
     return cfg, clock, slave, master, op, rec, (cmd, est, shb, mhb)
@@ -84,7 +85,8 @@ def test_paper_protocol_on_every_joint_within_5_percent_full_scale(demo):
             assert np.ptp(true) > 0.01
             assert np.abs(hat - true).max() / np.ptp(true) <= 0.05, (n, tag)
             pulled = "a" if tag == 1 else "b"
-            assert c[f"{n}.{pulled}.T_in"][sel].max() > 19.5
+            # the operator anticipates its hand's lag and stops its intention early (as on one tendon)
+            assert c[f"{n}.{pulled}.T_in"][sel].max() > 19.0
         assert np.abs(c[f"{n}.angle_hat"] - c[f"{n}.angle"]).max() < 0.02
     assert set(slave.stats()["side_switches"]) != {0}
     assert master.latency_stats()["n"] > 1000 and master.max_abs_force <= cfg.master.mapping.force_limit
@@ -97,16 +99,16 @@ def test_reloaded_calibration_starts_safe_and_the_watchdog_relaxes_the_joints(de
     assert slave.state == SideState.SAFE
     run(clock, slave, master, 3.0)                          # engage and pull for a while
     assert slave.state == SideState.ENGAGED and master.state == SideState.ENGAGED
-    theta = slave.inst_state.truth.theta.copy()
+    theta = slave.rig_state.truth.theta.copy()
     assert np.abs(theta).max() > 0.2
     cmd.cut = True                                          # master -> slave link cut
     run(clock, slave, master, 0.15)
     assert slave.state == SideState.SAFE and master.state == SideState.SAFE   # echo stale on the master too
     run(clock, slave, master, 3.0)
-    tr = slave.inst_state.truth
+    tr = slave.rig_state.truth
     assert np.abs(tr.theta).max() < 0.5 * np.abs(theta).max()              # relaxing toward rest
     assert np.all(tr.T_in < 2.0) and np.all(tr.T_in > 0.05)                # both tendons loose, none slack
-    assert all(c.mode == 0 for c in slave.controllers)
+    assert all(a.controller.mode == 0 for a in slave.axes)
 
 
 def test_commands_for_another_instrument_or_out_of_range_are_refused(demo, tmp_path):

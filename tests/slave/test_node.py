@@ -176,7 +176,7 @@ def test_engage_needs_the_command_close_to_x_in_and_liveliness_loss_is_safe_at_o
 
 def test_records_one_row_per_cycle_in_the_recording_columns():
     rows = Rows()
-    node, links, clock = make(rig=SimulatedRig(Config().sheath, Config().rig), recorder=rows)
+    node, links, clock = make(rig=SimulatedRig(Config().sheath, Config().rig.simulated), recorder=rows)
     for k in range(20):
         command(links, k, 1e-4 * k, marker=1)
         tick(node, clock)
@@ -222,10 +222,10 @@ def test_power_up_calibration_against_the_simulator(tmp_path):
     cal = json.loads((tmp_path / "calibration.json").read_text())
     assert cal["K"] == pytest.approx(rig.K, rel=0.05)
     assert cal["M_e_m_per_N"] == pytest.approx(rig.M_e, rel=0.02)
-    assert node.estimator.model.K == cal["K"]
+    assert node.axes[0].estimator.model.K == cal["K"]
     assert rig.state.truth.T_in < 0.5                                # released back to (near) zero tension
     # the estimator's memory matches the tendon after the replay of the routine
-    est = node.estimator
+    est = node.axes[0].estimator
     assert est.T_out == pytest.approx(rig.state.truth.T_out, abs=0.3)
     # the calibration life cycle of every instrument: saved, reloaded by the next power-up (no routine)
     saved = load_calibration(tmp_path / "cal" / "tendon0.yaml", cfg)
@@ -234,7 +234,7 @@ def test_power_up_calibration_against_the_simulator(tmp_path):
     node2 = SlaveNode(cfg, again, SlaveLinks(*(Topic(clock) for _ in range(4))), run_dir=tmp_path / "second",
                       calibration=saved, calibration_file=tmp_path / "cal" / "tendon0.yaml")
     assert node2.state == SideState.SAFE and node2.routine is None               # no routine runs
-    assert node2.estimator.model.K == saved.tendon.K and node2.estimator.model.compliance == saved.tendon.compliance
+    assert node2.axes[0].estimator.model.K == saved.tendon.K and node2.axes[0].estimator.model.compliance == saved.tendon.compliance
     cal2 = json.loads((tmp_path / "second" / "calibration.json").read_text())
     assert cal2["K"] == saved.tendon.K and cal2["loaded_from"].endswith("tendon0.yaml")
     assert node2.stats()["calibration"] == "loaded" and node.stats()["calibration"] == "power-up"

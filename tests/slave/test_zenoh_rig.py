@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from master.devices import DEVICE_TYPES, make_device
-from master.joint_operator import MultiAxisOperator
 from master.simulated import ScriptedOperator
 from slave.joint_rig import SimulatedInstrument
 from slave.rig import RigInputError
@@ -145,7 +144,7 @@ def test_registries_choose_by_type_only():
     assert isinstance(make_rig(one), SimulatedRig) and isinstance(make_rig(joints), SimulatedInstrument)
     assert isinstance(make_device(one, "paper"), ScriptedOperator)
     op = make_device(joints, "paper")
-    assert isinstance(op, MultiAxisOperator) and op.n_axes == 3
+    assert isinstance(op, ScriptedOperator) and op.n_axes == 3
     with pytest.raises(ConfigError, match="session"):
         make_rig(load_config(None, {"rig.type": "zenoh"}))
     with pytest.raises(ConfigError, match="session"):

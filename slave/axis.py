@@ -1,0 +1,126 @@
+"""One axis of an instrument, as the slave node drives it: the interface every kind of axis implements.
+
+An instrument is a list of axes (ARCHITECTURE.md): a single tendon is a one-axis instrument
+(:class:`slave.tendon_axis.TendonAxis`: a motor position command, the distal tension and the
+elongation estimated with the tension-profile memory, :mod:`estimator.online.distal`); a joint
+instrument has one axis per antagonistic pair (:class:`slave.pair_axis.PairAxis`: a joint-angle
+command through the pair controller, the distal joint torque and angle estimated by
+:mod:`estimator.online.joint`). :class:`slave.node.SlaveNode` iterates over them; all axes of one
+instrument are of one kind, because the rig's tendon shape (:mod:`slave.rig`) is ``()`` for a single
+tendon and ``(n_joints, 2)`` for pairs.
+
+Per axis (instance methods): the checks of an incoming target (:meth:`SlaveAxis.out_of_range`,
+:meth:`SlaveAxis.too_far`), the motor command of one cycle (:meth:`SlaveAxis.motor`), the estimator
+step turning the rig's proximal samples into the axis's :class:`~teleop.messages.AxisState`
+(:meth:`SlaveAxis.observe`), its Rerun series (:meth:`SlaveAxis.log_rerun`).
+
+Per kind (class methods, because the routine, the calibration file and the recording's layout are
+the instrument's): the axes of a config (:meth:`SlaveAxis.build`), the power-up calibration routine
+(:meth:`SlaveAxis.routine`) and what its end or a reloaded calibration starts
+(:meth:`SlaveAxis.finish_routine`, :meth:`SlaveAxis.start_loaded`), the rig command of the axes'
+motor commands (:meth:`SlaveAxis.rig_command`), the recording (:meth:`SlaveAxis.recording`,
+:meth:`SlaveAxis.csv_row`), the summary counters (:meth:`SlaveAxis.stats`) and the warm-up of the
+compiled kernels (:meth:`SlaveAxis.warm_up`).
+"""
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+from slave.rig import Rig, RigState
+from teleop.config import Config
+from teleop.messages import AxisState
+
+__all__ = ["SlaveAxis"]
+
+
+class SlaveAxis:
+    """One axis of the instrument on the slave (module docstring). Subclasses implement every method.
+
+    Attributes
+    ----------
+    cfg : Config
+        The run's config.
+    name : str
+        The axis's name (``tendon``, or the joint's name).
+    index : int
+        Its place in the instrument (the row of the rig's ``(n_joints, 2)`` arrays of a pair).
+    """
+
+    name = "axis"
+    index = 0
+    cfg: Config
+
+    # ---- per kind ----------------------------------------------------------------------------------
+    @classmethod
+    def build(cls, cfg: Config, rig: Rig) -> list[SlaveAxis]:
+        """The axes of the configured instrument, before any calibration."""
+        raise NotImplementedError
+
+    @classmethod
+    def routine(cls, cfg: Config, rig: Rig) -> Any:
+        """The power-up calibration routine: ``command(state, dt)`` -> the rig command, ``done``;
+        ``observe(state)`` when it keeps its own samples."""
+        raise NotImplementedError
+
+    @classmethod
+    def finish_routine(cls, axes: Sequence[SlaveAxis], routine: Any, state: RigState) -> tuple[Any, dict]:
+        """Start the axes on the routine's fit (their estimators replay its proximal samples).
+
+        Returns (:class:`~slave.calibration_file.InstrumentCalibration`, calibration.json contents)."""
+        raise NotImplementedError
+
+    @classmethod
+    def start_loaded(cls, axes: Sequence[SlaveAxis], calibration: Any, state: RigState) -> dict:
+        """Start the axes on a reloaded calibration (estimators at rest); the calibration.json contents."""
+        raise NotImplementedError
+
+    @classmethod
+    def rig_command(cls, motors: list) -> Any:
+        """The rig's command (its tendon shape) from one motor command per axis."""
+        raise NotImplementedError
+
+    @classmethod
+    def recording(cls, cfg: Config, rig: Rig) -> tuple[str, tuple[str, ...], dict[str, str]]:
+        """The slave's recording: file name, columns, metadata."""
+        raise NotImplementedError
+
+    @classmethod
+    def csv_row(cls, state: RigState, common: tuple, axes: Sequence[SlaveAxis]) -> list:
+        """One recording row: ``common`` = (marker, cmd_seq, state, t_node, t_cmd_recv)."""
+        raise NotImplementedError
+
+    @classmethod
+    def stats(cls, axes: Sequence[SlaveAxis]) -> dict[str, Any]:
+        """The kind's own counters for the run summary."""
+        raise NotImplementedError
+
+    @classmethod
+    def warm_up(cls, cfg: Config) -> None:
+        """Compile the rig's and the estimators' numba kernels with throwaway objects."""
+        raise NotImplementedError
+
+    # ---- per axis ----------------------------------------------------------------------------------
+    def out_of_range(self, target: float) -> str | None:
+        """Why ``target`` (m or rad) is outside the axis's command range, or None."""
+        raise NotImplementedError
+
+    def too_far(self, target: float, state: RigState) -> str | None:
+        """Why engaging on ``target`` would move the axis too far at once, or None."""
+        raise NotImplementedError
+
+    def motor(self, relax: bool, target: float | None, state: RigState, dt: float) -> Any:
+        """This cycle's motor command(s) [m]: ``relax`` (SAFE: the axis's safe behaviour), else
+        follow ``target`` when given (ENGAGED), else hold the last one."""
+        raise NotImplementedError
+
+    def observe(self, state: RigState) -> tuple[AxisState, tuple[float, ...]]:
+        """One estimator step on the rig's proximal samples (never the truth): the axis's state on
+        the wire and its tension profile (empty when it sends none)."""
+        raise NotImplementedError
+
+    def log_calibration(self, rerun: Any, cycles: int, log_every: int, state: RigState) -> None:
+        """Rerun series while the power-up routine runs (none by default)."""
+
+    def log_rerun(self, rerun: Any, cycles: int, state: RigState, everything: bool = False) -> None:
+        """The axis's Rerun series of this cycle (``everything``: all of them now, at set-up)."""
+        raise NotImplementedError

@@ -1,0 +1,227 @@
+"""An antagonistic tendon pair as one axis of a joint instrument: joint angle in, joint torque and angle out.
+
+* Power-up: :class:`slave.pair_calibrate.PairCalibration` pulls every tendon into its joint limit
+  (all joints at once, both directions); every joint estimator replays the routine's proximal
+  samples so that its profile memory matches the tendons'. A reloaded calibration starts the
+  estimators at rest and new pair controllers where the motors are.
+* Command: the joint angle [rad], accepted within the joint's limits widened by pi + twice the
+  stretch of its tendons at ``calibration.target_tension`` over r. The command moves the puller's
+  motor by r per radian (the joint lags by the stretch, which the estimate reports), relative to
+  where it took over (bumpless), so command and joint angle drift apart by the friction dead zones;
+  what bounds the tendons is the motors' travel: every motor command is clipped to the zero pose
+  +- (r max(|limits|) + twice that stretch + 2 mm). Engaging needs the commanded angle within
+  ``slave.engage_tolerance / r`` of the estimated one (the master anchors at the slave's angle).
+* SAFE: no command for the pair controller: both tendons relax to their set tension (rate limited
+  by ``slave.relax_speed``) and the joint returns toward rest.
+* Each cycle: the pair controller's two motor commands, then
+  :class:`~estimator.online.joint.JointEstimator` on the two load cells and encoders (never the
+  truth) -> the axis's state (effort = torque_hat [N m], position = angle_hat [rad], both tendons);
+  the joint's columns of ``slave_joints.csv`` and its Rerun series.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from typing import Any, Sequence
+
+from estimator.online.joint import JointEstimator
+from slave.axis import SlaveAxis
+from slave.calibration_file import from_results, sheath_models
+from slave.pair_calibrate import PairCalibration, set_tension
+from slave.pair_control import PairController
+from slave.rig import TENDONS, InstrumentTruth, Rig, RigState
+from teleop.config import Config, JointConfig
+from teleop.messages import AxisState, TendonState
+
+__all__ = ["PairAxis", "joint_csv_columns"]
+
+log = logging.getLogger("teleop.slave")
+
+_TENDON_COLS = ("x_in", "T_in", "x_in_cmd", "T_out_hat", "elongation_hat", "phase")
+_TENDON_TRUTH = ("T_out", "elongation")
+
+
+def joint_csv_columns(names, has_truth: bool) -> tuple[str, ...]:
+    """Columns of ``slave_joints.csv``: time (rig), marker, cmd_seq, state, t_node (the node's clock),
+    t_cmd_recv (receive time of the applied command, 0 before any), then per joint ``<name>.cmd``,
+    ``.mode``, ``.torque_hat``, ``.angle_hat`` (and ``.torque``, ``.angle`` truth) and per tendon
+    ``<name>.<a|b>.x_in``, ``.T_in``, ``.x_in_cmd``, ``.T_out_hat``, ``.elongation_hat``, ``.phase``
+    (and ``.T_out``, ``.elongation`` truth)."""
+    cols = ["time", "marker", "cmd_seq", "state", "t_node", "t_cmd_recv"]
+    for n in names:
+        cols += [f"{n}.cmd", f"{n}.mode", f"{n}.torque_hat", f"{n}.angle_hat"]
+        cols += [f"{n}.torque", f"{n}.angle"] if has_truth else []
+        for t in TENDONS:
+            cols += [f"{n}.{t}.{c}" for c in _TENDON_COLS]
+            cols += [f"{n}.{t}.{c}" for c in _TENDON_TRUTH] if has_truth else []
+    return tuple(cols)
+
+
+class PairAxis(SlaveAxis):
+    """One joint of a joint instrument, turned by an antagonistic pair (module docstring).
+
+    Parameters
+    ----------
+    cfg : Config
+        ``calibration.target_tension``, ``estimator``, ``pair_control``, ``slave`` (relax speed,
+        engage tolerance), ``recording.log_every``.
+    joint : JointConfig
+    index : int
+        The joint's row in the rig's ``(n_joints, 2)`` arrays.
+
+    Attributes
+    ----------
+    estimator : JointEstimator or None
+    controller : PairController or None
+    sample : JointSample or None
+        The last estimate.
+    hold : float or None
+        The angle command being followed [rad]; None: relax.
+    """
+
+    def __init__(self, cfg: Config, joint: JointConfig, index: int):
+        self.cfg, self.joint, self.index, self.name = cfg, joint, index, joint.name
+        self.r = float(joint.pulley_radius)
+        stretch = cfg.calibration.target_tension * max(t.geometry().length / t.EA
+                                                       for t in (joint.tendons.a, joint.tendons.b))
+        self.cmd_range = (joint.limits[0] - math.pi - 2 * stretch / self.r,
+                          joint.limits[1] + math.pi + 2 * stretch / self.r)
+        self.travel = self.r * max(abs(v) for v in joint.limits) + 2 * stretch + 0.002
+        self.estimator: JointEstimator | None = None
+        self.controller: PairController | None = None
+        self.sample: Any = None
+        self.hold: float | None = None
+
+    def start(self, models, history) -> None:
+        """The joint estimator on ``models`` (tendon a, b), the travel limits about the first sample of
+        ``history`` (power-up rest), then the replay of ``history`` [(t, x_in, T_in), ...] (rig arrays)."""
+        e, j, i = self.cfg.estimator, self.joint, self.index
+        self.estimator = JointEstimator(models[0], models[1], self.r, n_nodes=e.n_nodes, pretension=j.pretension,
+                                        hold_rate=e.hold_rate, rate_time_constant=e.rate_time_constant)
+        x0 = history[0][1]
+        assert self.controller is not None
+        self.controller.x_limits = tuple((x0[i, k] - self.travel, x0[i, k] + self.travel) for k in range(2))
+        for t, x, T in history:       # replay: the estimator's memory = its tendons' proximal history
+            self.sample = self.estimator.step(T[i, 0], x[i, 0], T[i, 1], x[i, 1], t)
+
+    # ---- per kind ----------------------------------------------------------------------------------
+    @classmethod
+    def build(cls, cfg: Config, rig: Rig) -> list[SlaveAxis]:
+        return [cls(cfg, j, i) for i, j in enumerate(cfg.instrument.joints)]
+
+    @classmethod
+    def routine(cls, cfg: Config, rig: Rig) -> PairCalibration:
+        return PairCalibration(cfg, rig)
+
+    @classmethod
+    def finish_routine(cls, axes: Sequence[SlaveAxis], routine: PairCalibration,
+                       state: RigState) -> tuple[Any, dict]:
+        cfg = axes[0].cfg
+        calibration = from_results(cfg, routine.results)
+        history = routine.history + [(state.t, state.x_in, state.T_in)]
+        for ax, ctl, models in zip(axes, routine.controllers(), sheath_models(calibration, cfg)):
+            assert isinstance(ax, PairAxis)
+            ax.controller = ctl
+            ax.start(models, history)
+        for name, tend in calibration.joints:
+            log.info("calibrated %s: K_a = %.4f, K_b = %.4f, M_e,a = %.4e, M_e,b = %.4e m/N", name,
+                     tend["a"].K, tend["b"].K, tend["a"].M_e, tend["b"].M_e)
+        return calibration, calibration.as_dict()
+
+    @classmethod
+    def start_loaded(cls, axes: Sequence[SlaveAxis], calibration: Any, state: RigState) -> dict:
+        for ax, models in zip(axes, sheath_models(calibration, axes[0].cfg)):
+            assert isinstance(ax, PairAxis)
+            pc, j = ax.cfg.pair_control, ax.joint
+            ax.controller = PairController(ax.r, set_tension(ax.cfg, j), pc.tension_gain, pc.switch_band,
+                                           ax.cfg.slave.relax_speed, tuple(state.x_in_cmd[ax.index]),
+                                           feedforward=pc.feedforward)
+            ax.start(models, [(state.t, state.x_in, state.T_in)])
+        return calibration.as_dict()
+
+    @classmethod
+    def rig_command(cls, motors: list) -> list:
+        return motors
+
+    @classmethod
+    def recording(cls, cfg: Config, rig: Rig) -> tuple[str, tuple[str, ...], dict[str, str]]:
+        """``slave_joints.csv``, :func:`joint_csv_columns` (truth columns always: a row leaves them out
+        only when the rig has no truth) and metadata."""
+        names = [j.name for j in cfg.instrument.joints]
+        meta = {"source": "teleop slave", "instrument": cfg.instrument.id, "joints": " ".join(names),
+                "truth": "torque, angle, T_out, elongation are simulator ground truth (evaluation only)"}
+        return "slave_joints.csv", joint_csv_columns(names, True), meta
+
+    @classmethod
+    def csv_row(cls, state: RigState, common: tuple, axes: Sequence[SlaveAxis]) -> list:
+        marker, cmd_seq, side_state, t_node, t_recv = common
+        tr = state.truth if isinstance(state.truth, InstrumentTruth) else None
+        row = [state.t, marker, cmd_seq, side_state, t_node, t_recv]
+        for ax in axes:
+            assert isinstance(ax, PairAxis) and ax.controller is not None
+            i, s = ax.index, ax.sample
+            row += [0.0 if ax.hold is None else ax.hold, int(ax.controller.mode), s.torque, s.angle]
+            row += [tr.torque[i], tr.theta[i]] if tr is not None else []
+            for k in range(2):
+                row += [state.x_in[i, k], state.T_in[i, k], state.x_in_cmd[i, k], s.T_out[k], s.elongation[k],
+                        int(s.phase[k])]
+                row += [tr.T_out[i, k], tr.elongation[i, k]] if tr is not None else []
+        return row
+
+    @classmethod
+    def stats(cls, axes: Sequence[SlaveAxis]) -> dict[str, Any]:
+        return {"joints": [a.name for a in axes],
+                "side_switches": [a.controller.switches for a in axes
+                                  if isinstance(a, PairAxis) and a.controller is not None]}
+
+    @classmethod
+    def warm_up(cls, cfg: Config) -> None:
+        from estimator.sheath import SheathModel
+        from slave.joint_rig import SimulatedInstrument
+
+        SimulatedInstrument(cfg.instrument.joints[:1], cfg.rig.simulated).step([[1e-4, 1e-4]], 1e-3)
+        m = SheathModel(K=0.5, compliance=1e-4)
+        JointEstimator(m, m, 0.004, n_nodes=4).step(1.0, 0.0, 0.5, 0.0, 0.0)
+
+    # ---- per axis ----------------------------------------------------------------------------------
+    def out_of_range(self, target: float) -> str | None:
+        lo, hi = self.cmd_range
+        if lo <= target <= hi:
+            return None
+        return f"{self.name} angle {target:.4g} rad outside [{lo:.3g}, {hi:.3g}] rad"
+
+    def too_far(self, target: float, state: RigState) -> str | None:
+        if abs(target - self.sample.angle) * self.r <= self.cfg.slave.engage_tolerance:
+            return None
+        return f"{self.name} angle {target:.4g} rad too far from the estimate {self.sample.angle:.4g} rad"
+
+    def motor(self, relax: bool, target: float | None, state: RigState, dt: float) -> Any:
+        if relax:
+            self.hold = None
+        elif target is not None:
+            self.hold = target
+        assert self.controller is not None
+        return self.controller.step(self.hold, state.T_in[self.index], dt, self.sample.x_out)
+
+    def observe(self, state: RigState) -> tuple[AxisState, tuple[float, ...]]:
+        assert self.estimator is not None
+        i = self.index
+        s = self.sample = self.estimator.step(state.T_in[i, 0], state.x_in[i, 0], state.T_in[i, 1],
+                                              state.x_in[i, 1], state.t)
+        tendons = tuple(TendonState(float(state.T_in[i, k]), float(state.x_in[i, k]), s.T_out[k], s.elongation[k],
+                                    s.phase[k]) for k in range(2))
+        return AxisState(s.torque, s.angle, tendons), ()
+
+    def log_rerun(self, rerun: Any, cycles: int, state: RigState, everything: bool = False) -> None:
+        """Every ``recording.log_every`` cycles the joint's torque and angle, estimate and truth (two
+        series each); the joints take turns in successive cycles so that no cycle carries more than one
+        pair of series (~0.1 ms each)."""
+        n = self.cfg.recording.log_every
+        k, i, s = cycles % n, self.index, self.sample
+        tr = state.truth if isinstance(state.truth, InstrumentTruth) else None
+        if everything or k == (2 * i) % n:
+            rerun.log_scalars(state.t, **{f"{self.name}/torque_hat": s.torque,
+                                          f"{self.name}/torque_true": None if tr is None else float(tr.torque[i])})
+        if everything or k == (2 * i + 1) % n:
+            rerun.log_scalars(state.t, **{f"{self.name}/angle_hat": s.angle,
+                                          f"{self.name}/angle_true": None if tr is None else float(tr.theta[i])})

@@ -1,0 +1,235 @@
+"""A single tendon as the one axis of an instrument: motor position in, distal tension and elongation out.
+
+* Power-up: :class:`slave.calibrate.JointLimitCalibration` pulls the tendon into its joint limit;
+  the :class:`~estimator.online.distal.DistalEstimator` built on the fitted
+  :class:`~estimator.sheath.SheathModel` replays the routine's proximal samples so that its
+  tension-profile memory matches the tendon's. A reloaded calibration starts it at rest (uniform
+  pretension).
+* Command: ``x_in_cmd`` [m], accepted within ``[slave.x_in_min, slave.x_in_max]``; engaging needs
+  ``|x_in_cmd - x_in| <= slave.engage_tolerance`` (measured x_in), so a master that has not
+  re-aligned never makes the tendon jump.
+* SAFE (the single-tendon version of "hold the joints, relax the tendons to pretension"): the motor
+  holds where it was, then moves in the release direction only, at ``slave.relax_speed``, while the
+  measured proximal tension is above ``sheath.pretension + RELAX_BAND``; it never pulls and never
+  goes below ``slave.x_in_min``. Releasing a single tendon lets its joint go back under its return
+  spring: the instrument goes limp, away from the tissue, with no stored energy; the speed bound
+  keeps that motion slow and smooth.
+* Each cycle: ``estimator.step(T_in, x_in, t)`` (proximal sensors only) -> the axis's state (effort
+  = T_out_hat [N], position = x_out_hat [m]) and the profile at ``estimator.profile_points`` points;
+  one row of ``slave.csv`` in the measured-data format (docs/formats.md), Rerun every
+  ``recording.log_every`` cycles (estimate against truth when the rig has it).
+"""
+from __future__ import annotations
+
+import logging
+from typing import Any, Sequence
+
+import numpy as np
+
+from estimator.online.distal import DistalEstimator
+from estimator.sheath import SheathModel, profile_batch
+from slave.axis import SlaveAxis
+from slave.calibrate import JointLimitCalibration
+from slave.calibration_file import from_tendon_result, tendon_model
+from slave.rig import Rig, RigState, RigTruth
+from teleop.config import Config
+from teleop.messages import AxisState, TendonState
+
+__all__ = ["TendonAxis", "CSV_COLUMNS", "CSV_TRUTH_COLUMNS", "csv_columns", "RELAX_BAND"]
+
+log = logging.getLogger("teleop.slave")
+
+#: Columns of the slave's recording (measured-data format; truth columns only with a simulated rig).
+CSV_TRUTH_COLUMNS = ("x_out", "T_out", "elongation")
+CSV_COLUMNS = ("time", "x_in", "T_in", "x_out", "T_out", "elongation", "T_out_hat", "elongation_hat",
+               "x_out_hat", "phase", "marker", "cmd_seq", "x_in_cmd", "state", "t_node", "t_cmd_recv")
+#: SAFE stops relaxing when the measured T_in is within this of the pretension [N] (load-cell noise margin).
+RELAX_BAND = 0.2
+
+
+def csv_columns(has_truth: bool) -> tuple[str, ...]:
+    """The recording's columns: :data:`CSV_COLUMNS`, without the truth ones for a hardware rig."""
+    return CSV_COLUMNS if has_truth else tuple(c for c in CSV_COLUMNS if c not in CSV_TRUTH_COLUMNS)
+
+
+class TendonAxis(SlaveAxis):
+    """The one axis of a single-tendon instrument (module docstring).
+
+    Parameters
+    ----------
+    cfg : Config
+        ``sheath`` (length, pretension), ``estimator``, ``slave`` (x_in range, relax speed, engage
+        tolerance), ``recording`` (Rerun rates).
+    state : RigState
+        The rig's present state (the motor holds there until a command comes).
+
+    Attributes
+    ----------
+    estimator : DistalEstimator or None
+        None until calibrated (or given a model).
+    x_hold : float
+        The motor command being held [m].
+    """
+
+    name = "tendon"
+
+    def __init__(self, cfg: Config, state: RigState):
+        self.cfg = cfg
+        self.index = 0
+        self.L = cfg.sheath.geometry().length
+        self.s_points = np.linspace(0.0, self.L, cfg.estimator.profile_points)
+        self.x_hold = float(state.x_in)
+        self.x_cmd = self.x_hold                 # the last motor command [m]
+        self.estimator: DistalEstimator | None = None
+        self.sample: Any = None                  # the last DistalSample
+        self.profile = np.zeros(0)
+        self.x_min, self.x_max = cfg.slave.x_in_min, cfg.slave.x_in_max
+        self.relax_speed = cfg.slave.relax_speed
+        self.relax_to = cfg.sheath.pretension + RELAX_BAND
+        self.engage_tolerance = cfg.slave.engage_tolerance
+        # load the compiled kernels now, not in the first real-time cycle
+        DistalEstimator(SheathModel(K=0.5, compliance=1e-4), n_nodes=2).step(1.0, 0.0, 0.0)
+
+    def start(self, model: SheathModel, state: RigState | None = None) -> None:
+        """The estimator on ``model``, at rest (uniform pretension); stepped once on ``state`` when given."""
+        e = self.cfg.estimator
+        self.estimator = DistalEstimator(model, n_nodes=e.n_nodes, pretension=self.cfg.sheath.pretension,
+                                         hold_rate=e.hold_rate, rate_time_constant=e.rate_time_constant)
+        if state is not None:
+            self.sample = self.estimator.step(state.T_in, state.x_in, state.t)
+            self.profile = self.estimator.profile_samples(len(self.s_points))
+
+    # ---- per kind ----------------------------------------------------------------------------------
+    @classmethod
+    def build(cls, cfg: Config, rig: Rig) -> list[SlaveAxis]:
+        return [cls(cfg, rig.state)]
+
+    @classmethod
+    def routine(cls, cfg: Config, rig: Rig) -> JointLimitCalibration:
+        return JointLimitCalibration(cfg, rig)
+
+    @classmethod
+    def finish_routine(cls, axes: Sequence[SlaveAxis], routine: JointLimitCalibration,
+                       state: RigState) -> tuple[Any, dict]:
+        ax = axes[0]
+        assert isinstance(ax, TendonAxis) and routine.result is not None
+        ax.start(routine.result.model)
+        est = ax.estimator
+        assert est is not None
+        # replay the routine (compiled batch): the estimator's memory = the tendon's proximal history
+        t_h, x_h, T_h = routine.history
+        _, _, est.profile[:] = profile_batch(est.profile, est.log_gain, est.weight, np.asarray(T_h, dtype=float))
+        ax.sample = est.step(T_h[-1], x_h[-1], t_h[-1])
+        ax.profile = est.profile_samples(len(ax.s_points))
+        ax.x_hold = routine.x_cmd
+        r = routine.result
+        log.info("calibrated: K = %.4f, M_e = %.4e m/N (knee at T_in = %.2f N)", r.K, r.M_e, r.knee_T_in)
+        return from_tendon_result(ax.cfg, r), routine.as_dict()
+
+    @classmethod
+    def start_loaded(cls, axes: Sequence[SlaveAxis], calibration: Any, state: RigState) -> dict:
+        ax = axes[0]
+        assert isinstance(ax, TendonAxis)
+        ax.start(tendon_model(calibration, ax.cfg), state)
+        t = calibration.tendon
+        return {"K": t.K, "M_e_m_per_N": t.M_e, "compliance_m_per_N": t.compliance, "knee_x_in_m": t.knee_x_in,
+                "knee_T_in_N": t.knee_T_in, "residual_rms_m": t.residual_rms, "n_samples": t.n_samples,
+                "target_tension_N": calibration.target_tension, "use_route": calibration.use_route,
+                "date": calibration.date}
+
+    @classmethod
+    def rig_command(cls, motors: list) -> float:
+        return motors[0]
+
+    @classmethod
+    def recording(cls, cfg: Config, rig: Rig) -> tuple[str, tuple[str, ...], dict[str, str]]:
+        """``slave.csv``: :func:`csv_columns` (truth only when ``rig`` has it) and metadata."""
+        has_truth = rig.state.truth is not None
+        meta = {"source": "teleop slave", "instrument": cfg.instrument.id, "rig": cfg.rig.type,
+                "truth": "x_out, T_out, elongation are simulator ground truth (evaluation only)" if has_truth
+                else "none"}
+        return "slave.csv", csv_columns(has_truth), meta
+
+    @classmethod
+    def csv_row(cls, state: RigState, common: tuple, axes: Sequence[SlaveAxis]) -> list:
+        ax = axes[0]
+        assert isinstance(ax, TendonAxis)
+        marker, cmd_seq, side_state, t_node, t_recv = common
+        tr, s = state.truth, ax.sample
+        truth = [tr.x_out, tr.T_out, tr.elongation] if tr is not None else []
+        return [state.t, state.x_in, state.T_in, *truth, s.T_out, s.elongation, s.x_out, int(s.phase), marker,
+                cmd_seq, ax.x_cmd, side_state, t_node, t_recv]
+
+    @classmethod
+    def stats(cls, axes: Sequence[SlaveAxis]) -> dict[str, Any]:
+        return {}
+
+    @classmethod
+    def warm_up(cls, cfg: Config) -> None:
+        from estimator.offline.calibration import calibrate_joint_limit  # noqa: F401  (import cost, too)
+        from slave.simulated import SimulatedRig
+
+        rig = SimulatedRig.from_config(cfg)
+        est = DistalEstimator(SheathModel(K=0.5, compliance=1e-4), n_nodes=8)
+        for k in range(4):
+            rs = rig.step(1e-4 * k, 1.0 / cfg.rig.rate_hz)
+            est.step(rs.T_in, rs.x_in, 1e-3 * k)
+        rig.set_load(tissue=not cfg.rig.simulated.load.tissue)
+        rig.close()
+
+    # ---- per axis ----------------------------------------------------------------------------------
+    def out_of_range(self, target: float) -> str | None:
+        if self.x_min <= target <= self.x_max:
+            return None
+        return f"x_in_cmd {target:.6g} m outside [{self.x_min:g}, {self.x_max:g}] m (slave.x_in_min/max)"
+
+    def too_far(self, target: float, state: RigState) -> str | None:
+        gap = abs(target - state.x_in)
+        if gap <= self.engage_tolerance:
+            return None
+        return (f"x_in_cmd {target:.6g} m is {1e3 * gap:.3g} mm from x_in "
+                f"(tolerance {1e3 * self.engage_tolerance:.3g} mm)")
+
+    def motor(self, relax: bool, target: float | None, state: RigState, dt: float) -> float:
+        if relax:
+            if self.relax_speed > 0 and state.T_in > self.relax_to and self.x_hold > self.x_min:
+                # release only, at most relax_speed dt per cycle, never below x_in_min
+                self.x_hold = max(self.x_min, self.x_hold - self.relax_speed * dt)
+        elif target is not None:
+            self.x_hold = target
+        self.x_cmd = self.x_hold
+        return self.x_hold
+
+    def observe(self, state: RigState) -> tuple[AxisState, tuple[float, ...]]:
+        assert self.estimator is not None
+        s = self.sample = self.estimator.step(state.T_in, state.x_in, state.t)
+        self.profile = self.estimator.profile_samples(len(self.s_points))
+        tendon = TendonState(state.T_in, state.x_in, s.T_out, s.elongation, s.phase)
+        return AxisState(s.T_out, s.x_out, (tendon,)), tuple(float(v) for v in self.profile)
+
+    def log_calibration(self, rerun: Any, cycles: int, log_every: int, state: RigState) -> None:
+        """The calibration pull as it happens (the CSV starts when the estimator does)."""
+        if cycles % log_every:
+            return
+        tr = state.truth
+        rerun.log_scalars(state.t, T_in=state.T_in, T_out_true=None if tr is None else tr.T_out,
+                          elongation_true=None if tr is None else tr.elongation)
+
+    def log_rerun(self, rerun: Any, cycles: int, state: RigState, everything: bool = False) -> None:
+        """Every ``log_every`` cycles the scalars and phase (~0.1 ms); every ``profile_every``-th of those
+        windows also the profile (~0.5 ms), half a window apart so that no single cycle carries both."""
+        n = self.cfg.recording.log_every
+        k = cycles % n
+        s = self.sample
+        tr = state.truth if isinstance(state.truth, RigTruth) else None
+        if (k == 0 and (cycles // n) % self.cfg.recording.profile_every == 0) or everything:
+            T_true = None
+            if tr is not None and tr.profile.size:       # a rig behind Zenoh sends no profile
+                u = np.linspace(0.0, 1.0, tr.profile.size)
+                T_true = np.interp(self.s_points / self.L, u, tr.profile)
+            rerun.log_profile(state.t, self.s_points, self.profile, T_true)
+        if k == n // 2 or everything:
+            rerun.log_scalars(state.t, T_in=state.T_in, T_out_hat=s.T_out,
+                              T_out_true=None if tr is None else tr.T_out, elongation_hat=s.elongation,
+                              elongation_true=None if tr is None else tr.elongation)
+            rerun.log_phase(state.t, s.phase.label)
