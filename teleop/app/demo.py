@@ -39,7 +39,7 @@ __all__ = ["PAPER_BOUNDS", "baseline_deadband", "evaluate", "checks", "format_su
 #: The seed paper's reported accuracy: max force error, max elongation error, mean error (full scale).
 PAPER_BOUNDS = {"force_error_max_fs": 0.07, "elongation_error_max_fs": 0.03, "mean_error_fs": 0.02}
 EXPERIMENTS = {1: "paper", 2: "minor"}
-DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "sim.yaml"
+DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "sim.yaml"
 
 
 def baseline_deadband(cfg: Config) -> float:

@@ -99,7 +99,7 @@ class KaistRecording:
 
 def default_kaist_dir() -> Path:
     """``<repo>/../shared/data/kaist-tsm``, where the project expects the data by default."""
-    return Path(__file__).resolve().parents[1].parent / "shared" / "data" / "kaist-tsm"
+    return Path(__file__).resolve().parents[2].parent / "shared" / "data" / "kaist-tsm"
 
 
 def kaist_path(directory: str | Path, config_deg: float) -> Path:
