@@ -22,6 +22,7 @@ from typing import Any, Callable, Generic, NamedTuple, TypeVar
 
 import zenoh
 
+from teleop import journal
 from teleop.clock import Clock, MonotonicClock
 from teleop.codec import Message, decode, encode
 from teleop.config import TransportConfig
@@ -223,8 +224,9 @@ class Publisher(Entity):
     that of express (ping-pong p50 0.12 ms either way, measured) but a burst fills 16 queued batches of
     many messages instead of 16 messages (100 000 puts in a tight loop: all delivered; express: 34-48 %
     dropped). With the batching time limit at 0 (:func:`zenoh_config`) nothing waits for a batch to
-    fill. That is what makes the recorder lose nothing when a side's tx thread stalls or the side is
-    killed right after a put.
+    fill. That is what makes the recorder lose nothing when a side's tx thread stalls; what a SIGKILL
+    catches still queued in the process is kept by the side's journal (:mod:`teleop.journal`), written
+    before the put.
     """
 
     def __init__(self, session: Session, key: str, *, express: bool = False,
@@ -237,7 +239,7 @@ class Publisher(Entity):
         self._source = zenoh.SourceInfo(self._handle.id, 0)   # receivers can tell the sending session
 
     def put(self, msg: Message) -> None:
-        """Encode and send ``msg``.
+        """Encode and send ``msg`` (journaled first when this process has a journal: :mod:`teleop.journal`).
 
         Raises
         ------
@@ -246,14 +248,20 @@ class Publisher(Entity):
         TransportError
             The publisher or its session is closed.
         """
-        self.put_bytes(self.encoder(msg))
-        if PUBLISH_LOG is not None:       # test-only: TELEOP_PUBLISH_LOG names a file
-            PUBLISH_LOG.note(self.key, msg)
+        payload = self.encoder(msg)
+        if PUBLISH_LOG is not None:       # test-only oracle: TELEOP_PUBLISH_LOG names a file
+            PUBLISH_LOG.begin(self.key, msg, payload)
+        self.put_bytes(payload)
+        if PUBLISH_LOG is not None:
+            PUBLISH_LOG.done(self.key, msg)
 
     def put_bytes(self, payload: bytes) -> None:
-        """Send raw bytes (tests and tools only: receivers expect codec payloads)."""
+        """Send raw bytes (tests and tools only: receivers expect codec payloads); journaled first."""
         if self._closed or self.session.closed:
             raise TransportError(f"publisher on {self.key!r} is closed")
+        j = journal.JOURNAL
+        if j is not None:                 # before zenoh: what a SIGKILL catches in zenoh's queue is kept
+            j.append(self.key, payload)
         try:
             self._handle.put(payload, source_info=self._source)
         except zenoh.ZError as e:

@@ -4,7 +4,8 @@ It subscribes to ``teleop/<id>/**`` (commands, estimates, heartbeats, anything a
 adds) and to the liveliness tokens of both sides, and writes ``<run dir>/recorder/``:
 
 * ``messages.bin``: every payload as received, ``<d t_recv [s]><H key length><I payload length>``
-  then the key and the codec bytes (the lossless record; :func:`read_messages` reads it back);
+  then the key and the codec bytes (the lossless record; :func:`read_messages` reads it back); a
+  message recovered from a journal carries its publish time instead;
 * ``<side>_<stream>.csv`` per key, in the measured-data format (``# key: value`` metadata,
   ``# units:``, header, one row per message): ``time`` is the recorder's receive time [s, monotonic],
   then every field of the message as :mod:`teleop.codec` decoded it, flattened generically over the
@@ -12,15 +13,23 @@ adds) and to the liveliness tokens of both sides, and writes ``<run dir>/recorde
   nested field keeps only its own name where that is unambiguous (:func:`short_names`), so the
   estimate file of a single tendon (``x_in``, ``T_in``) loads with
   :func:`teleop.recording.read_measured_csv`;
-* ``state_changes.csv`` (every change of a heartbeat's state) and ``liveliness.csv``;
+* ``state_changes.csv`` (every change of a heartbeat's state), ``liveliness.csv`` and ``recovered.csv``
+  (``time,side,key,seq`` of every message taken from a side's journal, see below);
 * ``record.rrd`` (Rerun, scalar fields decimated by ``recording.log_every``), and at the end
-  ``summary.json`` (per stream: count, first/last seq, seqs missing, duplicates, rate; the command
+  ``summary.json`` (per stream: count, received, recovered, first/last seq, seqs missing, duplicates, rate; the command
   -> echo delay seen here) and ``streams.png``.
 
 Nothing runs on zenoh's callback thread but a queue put: a writer thread decodes, formats and
 writes, handing the files to the OS at least every ``recording.flush_interval`` seconds, so a SIGKILL
 of the slave or the master loses nothing that reached the recorder (and a SIGKILL of the recorder
 itself at most that interval). Subscribers are reliable; the publishers drop only under congestion.
+
+What a SIGKILL catches inside a side (still in its zenoh queue) is kept by the side's write-ahead
+journal (:mod:`teleop.journal`, ``<run dir>/<side>.journal-NNN``): when a side's liveliness is lost
+and at the end, the recorder adds every journaled message it did not receive
+(:mod:`teleop.app.record_journal`), counted per stream as ``recovered`` in ``summary.json`` (with
+``received``) and listed in ``recovered.csv``. That needs the journals reachable: same machine, or a
+run directory both share (docs/formats.md).
 """
 from __future__ import annotations
 
@@ -30,22 +39,23 @@ import json
 import logging
 import os
 import queue
-import struct
 import threading
 import time
 from pathlib import Path
 
 import numpy as np
 
+from teleop.app.record_journal import JournalRecovery
 from teleop.codec import MAGIC, decode, seq_newer
 from teleop.entity import Entity
+from teleop.journal import RECORD, pack_record, read_records
 from teleop.keys import instrument_keys, liveliness_pattern
 
 __all__ = ["Recorder", "decode_any", "flatten", "read_messages", "run_record", "short_names", "start_recorder",
            "summary_line"]
 
 log = logging.getLogger("teleop.app.record")
-_RAW = struct.Struct("<dHI")
+_RAW = RECORD         # <d t><H key length><I payload length>, then key and payload (teleop/journal.py)
 _STOP = object()
 _SI = {"T": "N", "x": "m", "e": "m", "t": "s"}
 _fields_cache: dict[type, tuple[str, ...]] = {}
@@ -168,7 +178,7 @@ class _Stream:
     """Counters of one key: messages, seqs missing (gaps), duplicates or out of order, decode errors."""
 
     def __init__(self):
-        self.count = self.errors = self.missing = self.dup_or_old = 0
+        self.count = self.errors = self.missing = self.dup_or_old = self.recovered = 0
         self.first_seq = self.last_seq = None
         self.t_first = self.t_last = None
         self.type = None
@@ -187,9 +197,20 @@ class _Stream:
         else:
             self.dup_or_old += 1
 
+    def fill(self, seq, t: float) -> None:
+        """A message recovered from the sender's journal (teleop/journal.py): the tail after the last
+        received seq extends the stream, an older seq fills a gap."""
+        self.recovered += 1
+        if seq is None or self.last_seq is None or seq_newer(seq, self.last_seq):
+            self.see(seq, t)
+        else:
+            self.count += 1
+            self.missing = max(0, self.missing - 1)
+
     def summary(self) -> dict:
         span = (self.t_last - self.t_first) if self.count > 1 else 0.0
-        return {"type": self.type, "count": self.count, "first_seq": self.first_seq, "last_seq": self.last_seq,
+        return {"type": self.type, "count": self.count, "received": self.count - self.recovered,
+                "recovered": self.recovered, "first_seq": self.first_seq, "last_seq": self.last_seq,
                 "missing": self.missing, "duplicate_or_old": self.dup_or_old, "decode_errors": self.errors,
                 "rate_hz": (self.count - 1) / span if span > 0 else 0.0}
 
@@ -214,9 +235,12 @@ class Recorder:
         Created; the files of the module docstring go there.
     rerun : {'save', 'spawn', 'off'}, optional
         Overrides ``recording.rerun``.
+    journal_dir : Path, optional
+        Where the sides' journals are (default: the run directory, ``out_dir``'s parent).
     """
 
-    def __init__(self, session, cfg, out_dir: Path, *, rerun: str | None = None, run_id: str = ""):
+    def __init__(self, session, cfg, out_dir: Path, *, rerun: str | None = None, run_id: str = "",
+                 journal_dir: Path | None = None):
         self.cfg, self.dir = cfg, Path(out_dir)
         self.dir.mkdir(parents=True, exist_ok=True)
         self.clock = session.clock
@@ -234,7 +258,9 @@ class Recorder:
         self._q: queue.SimpleQueue = queue.SimpleQueue()
         self._raw = open(self.dir / "messages.bin", "wb")
         self._aux = {"state": self._aux_csv("state_changes.csv", "time,side,state,seq"),
-                     "alive": self._aux_csv("liveliness.csv", "time,side,alive")}
+                     "alive": self._aux_csv("liveliness.csv", "time,side,alive"),
+                     "recovered": self._aux_csv("recovered.csv", "time,side,key,seq")}
+        self.journals = JournalRecovery(self.dir.parent if journal_dir is None else Path(journal_dir), self.clock.now())
         from teleop.rerun_log import RerunLogger
         self._rr = RerunLogger("teleop-record", run_id or None, rerun or cfg.recording.rerun, self.dir / "record.rrd")
         self._thread = threading.Thread(target=self._writer, name="teleop-record-writer", daemon=True)
@@ -269,6 +295,8 @@ class Recorder:
                     self._handle(*item)
                 except Exception as e:  # noqa: BLE001 - one bad message must not end the recording
                     log.warning("recorder: %s on %s: %r", type(e).__name__, item[1], e)
+            for side in self.journals.due(time.monotonic()):
+                self._recover(side)
             if time.monotonic() - last_flush >= self.flush_interval:
                 self._flush()
                 last_flush = time.monotonic()
@@ -287,22 +315,34 @@ class Recorder:
             self.alive[side] = payload
             if payload:
                 self.ever_alive.add(side)
+            else:                                  # gone (killed or ended): complete it from its journal soon
+                self.journals.schedule(side, time.monotonic())
             self._aux["alive"].write(f"{t:.12g},{side},{int(payload)}\n")
             return
-        kb = key.encode()
-        self._raw.write(_RAW.pack(t, len(kb), len(payload)) + kb + payload)
+        self._record(t, key, payload, recovered=False)
+
+    def _record(self, t: float, key: str, payload: bytes, *, recovered: bool) -> None:
+        """Write one message (received, or ``recovered`` from its sender's journal) everywhere."""
         st = self.streams.get(key)
         if st is None:
             st = self.streams[key] = _Stream()
         try:
             msg = decode_any(payload)
         except Exception:  # noqa: BLE001 - CodecError: counted, kept in messages.bin
+            self._raw.write(pack_record(t, key.encode(), payload))
             st.errors += 1
             st.count += 1
             return
-        st.type = type(msg).__name__
         seq = getattr(msg, "seq", None)
-        st.see(seq, t)
+        if not self.journals.note(key, payload, recovered):
+            return                                 # arrived after it was recovered: already recorded
+        self._raw.write(pack_record(t, key.encode(), payload))
+        st.type = type(msg).__name__
+        if recovered:
+            st.fill(seq, t)
+            self._aux["recovered"].write(f"{t:.12g},{key.split('/')[2] if key.count('/') >= 3 else key},{key},{seq}\n")
+        else:
+            st.see(seq, t)
         vals: list = []
         _values(msg, vals)
         shape = (key, type(msg), len(vals))
@@ -351,14 +391,23 @@ class Recorder:
                     and "profile" not in n}
             self._rr.log_scalars(t, **vals)
 
+    def _recover(self, side: str | None) -> None:
+        """Add what ``side``'s journal (every side's: None) has and the recording has not (recovered)."""
+        for t, key, payload in self.journals.records(side):
+            try:
+                self._record(t, key, payload, recovered=True)
+            except Exception as e:  # noqa: BLE001 - one bad record must not end the recovery
+                log.warning("recorder: journal record on %s: %r", key, e)
+
     # ---- the end -------------------------------------------------------------------------------------
     def close(self) -> dict:
-        """Stop the writer after the queued messages, close the files, write ``summary.json`` and
-        ``streams.png``; returns the summary. Idempotent."""
+        """Stop the writer after the queued messages, complete the recording from the sides' journals,
+        close the files, write ``summary.json`` and ``streams.png``; returns the summary. Idempotent."""
         if self._raw.closed:
             return self.summary()
         self._q.put(_STOP)
         self._thread.join(30.0)
+        self._recover(None)
         for f in self._csv.values():
             f.fh.close()
         for fh in self._aux.values():
@@ -379,22 +428,15 @@ class Recorder:
         echo = ({"n": int(d.size), "p50_ms": float(np.percentile(d, 50)), "p99_ms": float(np.percentile(d, 99)),
                  "max_ms": float(d.max())} if d.size else {"n": 0})
         return {"instrument": self.ident, "streams": {k: s.summary() for k, s in sorted(self.streams.items())},
+                "recovered_from_journals": self.journals.summary(),
                 "files": sorted(str(f.path.name) for f in self._csv.values()),
                 "state_changes": self.state_changes, "command_to_echo_at_recorder": echo}
 
 
 def read_messages(path: str | Path):
-    """Yield ``(t_recv [s], key, payload bytes)`` from a ``messages.bin`` (a torn last record is ignored)."""
-    data = Path(path).read_bytes()
-    off = 0
-    while off + _RAW.size <= len(data):
-        t, nk, npay = _RAW.unpack_from(data, off)
-        end = off + _RAW.size + nk + npay
-        if end > len(data):
-            return
-        key = data[off + _RAW.size: off + _RAW.size + nk].decode()
-        yield t, key, data[off + _RAW.size + nk: end]
-        off = end
+    """Yield ``(t [s], key, payload bytes)`` from a ``messages.bin`` (a torn last record is ignored);
+    ``t`` is the receive time, or the publish time of a message recovered from a journal."""
+    yield from read_records(Path(path).read_bytes())[0]
 
 
 def run_record(args) -> int:

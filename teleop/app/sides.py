@@ -134,10 +134,14 @@ def master_links(session, ident: str, injector):
 
 def _serve(node, clock, args: argparse.Namespace, run_dir: Path, side: str, injector, *, close_first=None) -> None:
     """Run ``node`` until done (or ``--max-duration``); however it ends, ``close_first()`` (e.g. the
-    device), then ``<side>_stats.json`` and ``<side>_faults.json`` in ``run_dir``."""
+    device), then ``<side>_stats.json`` and ``<side>_faults.json`` in ``run_dir``. Every message the side
+    publishes is journaled in ``run_dir`` first (teleop/journal.py: the recorder recovers a SIGKILLed side's tail)."""
+    from teleop.journal import close_journal, open_journal
+    open_journal(run_dir, side)
     try:
         node.run(clock, max_duration=args.max_duration)
     finally:
+        close_journal()
         if close_first is not None:
             close_first()
         node.write_stats(run_dir / f"{side}_stats.json")

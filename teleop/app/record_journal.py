@@ -1,0 +1,102 @@
+"""The recorder's side of the sides' write-ahead journals (:mod:`teleop.journal`).
+
+``teleop record`` completes its recording from the journals in its run directory: when a side's
+liveliness is lost (after :data:`DELAY`, so that what is still on its way arrives first) and at the
+recorder's end, every journaled message the recording does not have is added to it, marked as
+recovered. A message is known by the hash of its payload bytes on its key (a message received twice
+is one message). Journal records published before the recorder started (an earlier session in the
+same run directory, or a side that started first) are left out and counted.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Iterator
+
+from teleop.journal import JournalReader, journal_segments
+
+__all__ = ["JournalRecovery", "DELAY"]
+
+DELAY = 0.3     # [s] after a side's liveliness is lost, its journal is read this much later
+
+
+def _side(key: str) -> str:
+    parts = key.split("/")
+    return parts[2] if len(parts) > 3 else key
+
+
+class JournalRecovery:
+    """Which messages the recording has, and the journal records it lacks.
+
+    Parameters
+    ----------
+    run_dir : Path
+        Where the sides write ``<side>.journal-NNN``.
+    t_start : float, optional
+        The recorder's start [s, :func:`time.monotonic`]; older journal records are left out.
+    """
+
+    def __init__(self, run_dir: Path, t_start: float | None = None):
+        self.dir = Path(run_dir)
+        self.t_start = time.monotonic() if t_start is None else t_start
+        self._readers: dict[str, JournalReader] = {}
+        self._due: dict[str, float] = {}
+        self._seen: dict[str, set[int]] = {}
+        self._recovered: dict[str, set[int]] = {}
+        self.counts: dict[str, int] = {}
+        self.before_start = 0
+        self.late = 0
+
+    def note(self, key: str, payload: bytes, recovered: bool) -> bool:
+        """Whether to record this message: a received one unless it was recovered already (it then
+        arrived late), a recovered one unless it was received."""
+        h = hash(payload)
+        seen = self._seen.get(key)
+        if seen is None:
+            seen = self._seen[key] = set()
+        if recovered:
+            if h in seen:
+                return False
+            seen.add(h)
+            self._recovered.setdefault(key, set()).add(h)
+            side = _side(key)
+            self.counts[side] = self.counts.get(side, 0) + 1
+            return True
+        if h in self._recovered.get(key, ()):
+            self.late += 1
+            return False
+        seen.add(h)
+        return True
+
+    def schedule(self, side: str, now: float) -> None:
+        """``side`` is gone at ``now`` [s, monotonic]: read its journal :data:`DELAY` later."""
+        self._due[side] = now + DELAY
+
+    def due(self, now: float) -> list[str]:
+        """The sides whose journal is due at ``now`` [s, monotonic] (each returned once)."""
+        sides = [s for s, t in self._due.items() if t <= now]
+        for s in sides:
+            del self._due[s]
+        return sides
+
+    def records(self, side: str | None) -> Iterator[tuple[float, str, bytes]]:
+        """``(t_publish, key, payload)`` of the journal records of ``side`` (all sides: None) not looked
+        at before and not received (records older than the recorder are counted and skipped)."""
+        sides = [side] if side is not None else sorted(journal_segments(self.dir))
+        for s in sides:
+            reader = self._readers.get(s)
+            if reader is None:
+                reader = self._readers[s] = JournalReader(self.dir, s)
+            for t, key, payload in reader.new_records():
+                if t < self.t_start:
+                    self.before_start += 1
+                elif hash(payload) not in self._seen.get(key, ()):
+                    yield t, key, payload
+
+    def summary(self) -> dict:
+        """``{"journal_dir", "journals": {side: segments found}, "recovered": {side: n}, "before_start",
+        "arrived_after_recovery"}``."""
+        return {"journal_dir": str(self.dir),
+                "journals": {s: len(v) for s, v in sorted(journal_segments(self.dir).items())},
+                "recovered": dict(sorted(self.counts.items())), "before_start": self.before_start,
+                "arrived_after_recovery": self.late}
