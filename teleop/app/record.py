@@ -33,8 +33,6 @@ run directory both share (docs/formats.md).
 """
 from __future__ import annotations
 
-import dataclasses
-import enum
 import json
 import logging
 import os
@@ -42,11 +40,12 @@ import queue
 import threading
 import time
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
+from teleop.app.record_files import StreamCounts, StreamCsv, decode_any, flatten, short_names, values
 from teleop.app.record_journal import JournalRecovery
-from teleop.codec import MAGIC, decode, seq_newer
 from teleop.entity import Entity
 from teleop.journal import RECORD, pack_record, read_records
 from teleop.keys import instrument_keys, liveliness_pattern
@@ -57,162 +56,6 @@ __all__ = ["Recorder", "decode_any", "flatten", "read_messages", "run_record", "
 log = logging.getLogger("teleop.app.record")
 _RAW = RECORD         # <d t><H key length><I payload length>, then key and payload (teleop/journal.py)
 _STOP = object()
-_SI = {"T": "N", "x": "m", "e": "m", "t": "s"}
-_fields_cache: dict[type, tuple[str, ...]] = {}
-
-
-_DECODERS: dict = {}   # first (magic) byte -> decoder; filled at the end of the module
-
-
-def _decoders() -> dict:
-    """Decoder by first (magic) byte: the teleop codec, and the rig interface when present."""
-    out = {MAGIC: decode}
-    try:
-        from teleop.rig_wire import RIG_MAGIC, decode_rig
-        out[RIG_MAGIC] = decode_rig
-    except ImportError:   # pragma: no cover - a build without the rig interface
-        pass
-    return out
-
-
-def decode_any(payload: bytes):
-    """Decode a payload of any byte format of this project (by its magic byte).
-
-    Raises
-    ------
-    CodecError
-        Empty, an unknown magic byte, or what the format's decoder raises.
-    """
-    fn = _DECODERS.get(payload[0]) if payload else None
-    return decode(payload) if fn is None else fn(payload)    # unknown: the codec's own error message
-
-
-def flatten(msg, prefix: str = "", out: list | None = None) -> list[tuple[str, float | int]]:
-    """``[(column name, number), ...]`` of a decoded message, generically over its dataclass fields.
-
-    Nested dataclasses join names with ``.``, tuples index with ``[i]``; enums and booleans become
-    integers. Works for whatever message types :mod:`teleop.codec` decodes.
-    """
-    out = [] if out is None else out
-    if dataclasses.is_dataclass(msg):
-        names = _fields_cache.get(type(msg))
-        if names is None:
-            names = _fields_cache[type(msg)] = tuple(f.name for f in dataclasses.fields(msg))
-        for n in names:
-            flatten(getattr(msg, n), f"{prefix}.{n}" if prefix else n, out)
-    elif isinstance(msg, (tuple, list)):
-        for i, v in enumerate(msg):
-            flatten(v, f"{prefix}[{i}]", out)
-    elif isinstance(msg, (bool, enum.Enum)):
-        out.append((prefix, int(msg)))
-    else:
-        out.append((prefix, msg))
-    return out
-
-
-def _values(x, out: list) -> None:
-    """The numbers of :func:`flatten` without the names (the writer's per-message path, ~10x faster)."""
-    if dataclasses.is_dataclass(x):
-        names = _fields_cache.get(type(x))
-        if names is None:
-            names = _fields_cache[type(x)] = tuple(f.name for f in dataclasses.fields(x))
-        for n in names:
-            _values(getattr(x, n), out)
-    elif isinstance(x, (tuple, list)):
-        if all(type(v) is float for v in x):      # a profile: one extend
-            out.extend(x)
-        else:
-            for v in x:
-                _values(v, out)
-    elif isinstance(x, (bool, enum.Enum)):
-        out.append(int(x))
-    else:
-        out.append(x)
-
-
-def short_names(names) -> tuple[str, ...]:
-    """Column names: a nested field keeps only its own name where that is unambiguous in the message
-    (``axes[0].tendons[0].T_in`` -> ``T_in`` on a single tendon, so the file loads as measured data),
-    the full path where it is not (two axes, two tendons) or would clash with another column."""
-    leaves = [n.rsplit(".", 1)[-1] for n in names]
-    count: dict[str, int] = {}
-    for x in leaves:                      # a top-level name is its own leaf: a nested namesake keeps its path
-        count[x] = count.get(x, 0) + 1
-    return tuple(leaf if "." in n and count[leaf] == 1 else n for n, leaf in zip(names, leaves))
-
-
-def _unit(name: str) -> str | None:
-    leaf = name.rsplit(".", 1)[-1].split("[")[0]
-    if leaf.startswith(("T_", "profile")):
-        return "N"
-    if leaf.startswith(("x_", "elongation")):
-        return "m"
-    if leaf.startswith("t_"):
-        return "s"
-    if leaf.startswith("angle"):
-        return "rad"
-    if leaf.startswith("torque"):
-        return "N m"
-    return None
-
-
-class _Csv:
-    """One measured-data CSV of one stream (columns fixed by its first message)."""
-
-    def __init__(self, path: Path, names: tuple[str, ...], sample: list, meta: dict[str, str]):
-        self.path, self.names = path, names
-        cols = ("time",) + names
-        units = [f"{c}={u}" for c in cols if (u := ("s" if c == "time" else _unit(c)))]
-        self.fmt = ",".join(["%.12g"] + ["%d" if isinstance(v, int) else "%.12g" for _, v in sample]) + "\n"
-        self.fh = open(path, "w", encoding="utf-8")
-        head = [f"# {k}: {v}" for k, v in meta.items()] + ["# units: " + ", ".join(units), ",".join(cols)]
-        self.fh.write("\n".join(head) + "\n")
-        self.rows = 0
-
-    def write(self, t: float, values: tuple) -> None:
-        self.fh.write(self.fmt % ((t,) + values))
-        self.rows += 1
-
-
-class _Stream:
-    """Counters of one key: messages, seqs missing (gaps), duplicates or out of order, decode errors."""
-
-    def __init__(self):
-        self.count = self.errors = self.missing = self.dup_or_old = self.recovered = 0
-        self.first_seq = self.last_seq = None
-        self.t_first = self.t_last = None
-        self.type = None
-
-    def see(self, seq, t: float) -> None:
-        self.count += 1
-        self.t_first = t if self.t_first is None else self.t_first
-        self.t_last = t
-        if seq is None:
-            return
-        if self.first_seq is None:
-            self.first_seq = self.last_seq = seq
-        elif seq_newer(seq, self.last_seq):
-            self.missing += (seq - self.last_seq) % (1 << 32) - 1
-            self.last_seq = seq
-        else:
-            self.dup_or_old += 1
-
-    def fill(self, seq, t: float) -> None:
-        """A message recovered from the sender's journal (teleop/journal.py): the tail after the last
-        received seq extends the stream, an older seq fills a gap."""
-        self.recovered += 1
-        if seq is None or self.last_seq is None or seq_newer(seq, self.last_seq):
-            self.see(seq, t)
-        else:
-            self.count += 1
-            self.missing = max(0, self.missing - 1)
-
-    def summary(self) -> dict:
-        span = (self.t_last - self.t_first) if self.count > 1 else 0.0
-        return {"type": self.type, "count": self.count, "received": self.count - self.recovered,
-                "recovered": self.recovered, "first_seq": self.first_seq, "last_seq": self.last_seq,
-                "missing": self.missing, "duplicate_or_old": self.dup_or_old, "decode_errors": self.errors,
-                "rate_hz": (self.count - 1) / span if span > 0 else 0.0}
 
 
 class _Subscription(Entity):
@@ -239,19 +82,19 @@ class Recorder:
         Where the sides' journals are (default: the run directory, ``out_dir``'s parent).
     """
 
-    def __init__(self, session, cfg, out_dir: Path, *, rerun: str | None = None, run_id: str = "",
+    def __init__(self, session, cfg, out_dir: Path, *, rerun: Literal["save", "spawn", "off"] | None = None, run_id: str = "",
                  journal_dir: Path | None = None):
         self.cfg, self.dir = cfg, Path(out_dir)
         self.dir.mkdir(parents=True, exist_ok=True)
         self.clock = session.clock
         self.ident = cfg.instrument.id
         self.flush_interval = cfg.recording.flush_interval
-        self.streams: dict[str, _Stream] = {}
+        self.streams: dict[str, StreamCounts] = {}
         self.alive: dict[str, bool] = {}
         self.ever_alive: set[str] = set()
         self.state_changes: list[dict] = []
         self._states: dict[str, int] = {}
-        self._csv: dict[tuple, _Csv] = {}          # (key, message type, value count) -> its file
+        self._csv: dict[tuple, StreamCsv] = {}          # (key, message type, value count) -> its file
         self._cmd_t: dict[int, float] = {}
         self._echo_delays: list[float] = []
         self._echoed: set[int] = set()
@@ -325,7 +168,7 @@ class Recorder:
         """Write one message (received, or ``recovered`` from its sender's journal) everywhere."""
         st = self.streams.get(key)
         if st is None:
-            st = self.streams[key] = _Stream()
+            st = self.streams[key] = StreamCounts()
         try:
             msg = decode_any(payload)
         except Exception:  # noqa: BLE001 - CodecError: counted, kept in messages.bin
@@ -344,7 +187,7 @@ class Recorder:
         else:
             st.see(seq, t)
         vals: list = []
-        _values(msg, vals)
+        values(msg, vals)
         shape = (key, type(msg), len(vals))
         f = self._csv.get(shape)
         if f is None:                             # a new message shape on this key: names, units, a file
@@ -352,7 +195,7 @@ class Recorder:
         f.write(t, tuple(vals))
         self._derived(t, key, msg, seq, f.names, vals, st.count)
 
-    def _open_csv(self, shape: tuple, flat: list) -> _Csv:
+    def _open_csv(self, shape: tuple, flat: list) -> StreamCsv:
         key = shape[0]
         parts = key.split("/")
         stem = "_".join(parts[2:]) if len(parts) > 2 else parts[-1]
@@ -360,7 +203,7 @@ class Recorder:
         path = self.dir / (f"{stem}.csv" if n == 0 else f"{stem}-{n + 1}.csv")
         meta = {"source": "teleop record", "instrument": self.ident, "key": key, "message": shape[1].__name__,
                 "time": "recorder receive time (monotonic clock of the recorder)"}
-        f = self._csv[shape] = _Csv(path, short_names([n for n, _ in flat]), flat, meta)
+        f = self._csv[shape] = StreamCsv(path, short_names([n for n, _ in flat]), flat, meta)
         return f
 
     def _derived(self, t: float, key: str, msg, seq, names: tuple, vals: list, count: int) -> None:
@@ -386,10 +229,10 @@ class Recorder:
                 self._echoed.clear()
         if count % self.cfg.recording.log_every == 0 and self._rr.enabled:
             side = key.split("/")[2]
-            vals = {f"{side}_state" if n == "state" else n.replace("[", "").replace("]", "").replace(".", "_"): float(v)
-                    for n, v in zip(names, vals) if (n == "state" or isinstance(v, float)) and not n.startswith("t_")
-                    and "profile" not in n}
-            self._rr.log_scalars(t, **vals)
+            scalars = {f"{side}_state" if n == "state" else n.replace("[", "").replace("]", "").replace(".", "_"): float(v)
+                       for n, v in zip(names, vals) if (n == "state" or isinstance(v, float)) and not n.startswith("t_")
+                       and "profile" not in n}
+            self._rr.log_scalars(t, **scalars)
 
     def _recover(self, side: str | None) -> None:
         """Add what ``side``'s journal (every side's: None) has and the recording has not (recovered)."""
@@ -504,4 +347,3 @@ def summary_line(out_dir: str | Path) -> str:
             f"{sum(v['missing'] for v in streams)} missing by seq -> {out_dir}")
 
 
-_DECODERS.update(_decoders())
