@@ -1,35 +1,28 @@
-"""``teleop demo --config configs/instrument-3dof.yaml``: a joint instrument end to end, then a summary.
+"""The evaluation of a joint instrument in ``teleop demo --config configs/instrument-3dof.yaml``.
 
-1. ``runs/<id>/config.yaml`` gets the resolved config with ``calibration.dir`` set to
-   ``runs/<id>/calibration``;
-2. ``teleop calibrate`` (in this process, simulated as fast as it computes): every tendon pulled into
-   its joint limit, both directions, saved as ``runs/<id>/calibration/<instrument>.yaml``;
-3. the slave (reloads that file) and the master (scripted operator: the seed paper's protocol on
-   tendon a then tendon b of every joint, all joints together) as two processes over Zenoh on
-   127.0.0.1, exactly as for one tendon (:func:`teleop.app.demo_run.run_processes`);
-4. :func:`evaluate_joints` reads ``slave_joints.csv`` and computes, per joint and per pulled tendon,
-   the full-scale errors of the distal joint torque (max and mean of |estimate - truth| over the
-   range of the true torque in that experiment) and of the angle; ``summary.json`` has them under
-   ``joints.<name>`` with the calibration against the simulator's K and M_e.
+The demo's flow is the one of every instrument (:func:`teleop.app.demo.main_demo`: calibration
+file, slave and master processes, summary); what is a joint instrument's own is here
+(:class:`JointDemo`): :func:`evaluate_joints` reads ``slave_joints.csv`` and computes, per joint and
+per pulled tendon (the scripted operator runs the seed paper's protocol on tendon a then tendon b
+of every joint, all joints together), the full-scale errors of the distal joint torque (max and
+mean of |estimate - truth| over the range of the true torque in that experiment) and of the angle;
+``summary.json`` has them under ``joints.<name>`` with the calibration against the simulator's K
+and M_e.
 """
 from __future__ import annotations
 
-import argparse
-import dataclasses
 import math
-import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from master.protocols import MARKER_PAPER_A, MARKER_PAPER_B, joint_marker
-from teleop.app.demo_run import finish, full_scale_errors, loop_lines, read_json, run_processes, verdict_lines
-from teleop.config import Config, write_config
+from teleop.app.demo_run import full_scale_errors
+from teleop.config import Config
 from teleop.errors import DataError
 
-__all__ = ["TORQUE_BOUND", "CALIBRATION_BOUND", "read_joint_csv", "evaluate_joints", "joint_checks",
-           "format_joint_summary", "main_joint_demo"]
+__all__ = ["TORQUE_BOUND", "CALIBRATION_BOUND", "read_joint_csv", "evaluate_joints", "joint_checks", "JointDemo"]
 
 #: Acceptance: max full-scale error of the distal joint torque on the paper's protocol, each joint.
 TORQUE_BOUND = 0.05
@@ -132,65 +125,55 @@ def joint_checks(joints: dict, calibration: dict, cfg: Config) -> dict[str, bool
     return res
 
 
-def format_joint_summary(s: dict) -> str:
-    """The printed table of a joint demo summary."""
-    L = [f"teleop demo (joint instrument {s.get('instrument')}): {s['run_dir']}", ""]
-    cal = s.get("calibration", {})
-    if cal:
-        L.append("calibration (both directions)   K   (vs simulator)      M_e [m/N] (vs simulator)")
-        for name, tend in cal.items():
-            if not isinstance(tend, dict) or "a" not in tend:
-                continue
+class JointDemo:
+    """What the demo evaluates and prints for a joint instrument (module docstring)."""
+
+    files = ("slave_joints.csv (per joint: command, mode, torque and angle estimates and truth; per tendon "
+             "x_in, T_in, estimates, truth)", "master.csv")
+
+    @staticmethod
+    def evaluate(summary: dict, run_dir: Path, cfg: Config, problems: list[str]) -> dict[str, bool]:
+        """Fill ``summary`` (calibration, joints, torque bound); the checks."""
+        from slave.calibration_file import calibration_path
+        summary["torque_bound_fs"] = TORQUE_BOUND
+        summary["protocol"] = "paper (tendon a, then b; all joints together)"
+        try:
+            summary["calibration"] = _calibration_summary(calibration_path(cfg), cfg)
+        except (OSError, ValueError) as e:
+            problems.append(f"calibration: {e}")
+            summary["calibration"] = {}
+        try:
+            summary["joints"] = evaluate_joints(read_joint_csv(run_dir / "slave_joints.csv"), cfg)
+        except DataError as e:
+            problems.append(str(e))
+            summary["joints"] = {}
+        return joint_checks(summary["joints"], summary["calibration"], cfg)
+
+    @staticmethod
+    def lines(s: dict) -> list[str]:
+        """The evaluation's lines of the printed table."""
+        L = []
+        cal = s.get("calibration", {})
+        if cal:
+            L.append("calibration (both directions)   K   (vs simulator)      M_e [m/N] (vs simulator)")
+            for name, tend in cal.items():
+                if not isinstance(tend, dict) or "a" not in tend:
+                    continue
+                for t in "ab":
+                    c = tend[t]
+                    L.append(f"  {name:10s} tendon {t}          {c['K']:.4f} ({100 * c['K_error_rel']:+6.2f} %)   "
+                             f"{c['M_e_m_per_N']:.4e} ({100 * c['M_e_error_rel']:+6.2f} %)")
+            L.append("")
+        L.append("paper protocol, per joint and pulled tendon: torque error (full scale)   angle error")
+        L.append(f"  {'joint':10s} {'pulled':6s} {'FS [N m]':>9s} {'max':>7s} {'mean':>7s}   {'max [deg]':>9s} "
+                 f"{'rms [deg]':>9s}")
+        for name, row in s.get("joints", {}).items():
             for t in "ab":
-                c = tend[t]
-                L.append(f"  {name:10s} tendon {t}          {c['K']:.4f} ({100 * c['K_error_rel']:+6.2f} %)   "
-                         f"{c['M_e_m_per_N']:.4e} ({100 * c['M_e_error_rel']:+6.2f} %)")
-        L.append("")
-    L.append("paper protocol, per joint and pulled tendon: torque error (full scale)   angle error")
-    L.append(f"  {'joint':10s} {'pulled':6s} {'FS [N m]':>9s} {'max':>7s} {'mean':>7s}   {'max [deg]':>9s} {'rms [deg]':>9s}")
-    for name, row in s.get("joints", {}).items():
-        for t in "ab":
-            r = row.get(t)
-            if r:
-                L.append(f"  {name:10s} {t:6s} {r['torque_full_scale_Nm']:9.4f} {r['torque_error_max_fs']:7.3f} "
-                         f"{r['torque_error_mean_fs']:7.3f}   {math.degrees(r['angle_error_max_rad']):9.2f} "
-                         f"{math.degrees(r['angle_error_rms_rad']):9.2f}")
-        L.append(f"  {name:10s} {'worst':6s} {'':9s} {row['torque_error_max_fs']:7.3f} {row['torque_error_mean_fs']:7.3f}"
-                 f"   (bound {TORQUE_BOUND})")
-    L.append("")
-    m = s.get("master", {})
-    if m:
-        L.append(f"master console: engaged {m.get('engage_count', 0)} time(s), clutches {m.get('clutches', 0)}, "
-                 f"align refusals {m.get('align_refusals', 0)}, safe events {m.get('safe_events', 0)}, "
-                 f"max |force| {m.get('max_abs_force', 0.0):.2f} N (limit {m.get('force_limit', 0.0):g} N)")
-    L += loop_lines(s, detailed=False)
-    L.append("")
-    L += verdict_lines(s)
-    L.append(f"recording: {s['run_dir']}/slave_joints.csv, {s['run_dir']}/master.csv, rerun: {s['run_dir']}/slave.rrd, "
-             f"summary: {s['run_dir']}/summary.json")
-    return "\n".join(L)
-
-
-def main_joint_demo(args, cfg: Config, run_dir: Path) -> int:
-    """The joint-instrument demo (module docstring); 0 when it finished and every check passed."""
-    from slave.calibration_file import calibration_path
-    from teleop.app.calibrate import run_calibrate
-    cfg = dataclasses.replace(cfg, calibration=dataclasses.replace(cfg.calibration, dir=str(run_dir / "calibration")))
-    cfg_file = write_config(cfg, run_dir / "config.yaml")
-    t0 = time.monotonic()
-    problems: list[str] = []
-    print(f"calibrating {cfg.instrument.id}: every tendon into its joint limit, both directions ...", flush=True)
-    run_calibrate(argparse.Namespace(config=str(cfg_file), out=None))
-    run_processes(args, cfg_file, run_dir, problems, bridge=cfg.rig.type == "zenoh")
-    summary: dict = {"run_dir": str(run_dir), "config": str(cfg_file), "instrument": cfg.instrument.id,
-                     "protocol": "paper (tendon a, then b; all joints together)", "torque_bound_fs": TORQUE_BOUND,
-                     "master": read_json(run_dir / "master_stats.json"),
-                     "slave": read_json(run_dir / "slave_stats.json")}
-    summary["calibration"] = _calibration_summary(calibration_path(cfg), cfg)
-    try:
-        summary["joints"] = evaluate_joints(read_joint_csv(run_dir / "slave_joints.csv"), cfg)
-    except DataError as e:
-        problems.append(str(e))
-        summary["joints"] = {}
-    return finish(summary, joint_checks(summary["joints"], summary["calibration"], cfg), problems, t0, run_dir,
-                  format_joint_summary)
+                r = row.get(t)
+                if r:
+                    L.append(f"  {name:10s} {t:6s} {r['torque_full_scale_Nm']:9.4f} {r['torque_error_max_fs']:7.3f} "
+                             f"{r['torque_error_mean_fs']:7.3f}   {math.degrees(r['angle_error_max_rad']):9.2f} "
+                             f"{math.degrees(r['angle_error_rms_rad']):9.2f}")
+            L.append(f"  {name:10s} {'worst':6s} {'':9s} {row['torque_error_max_fs']:7.3f} "
+                     f"{row['torque_error_mean_fs']:7.3f}   (bound {TORQUE_BOUND})")
+        return L

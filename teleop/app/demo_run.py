@@ -1,4 +1,4 @@
-"""What both demos share (one tendon: :mod:`teleop.app.demo`; joint instrument: :mod:`teleop.app.demo_joints`):
+"""What the demo of every instrument shares (:mod:`teleop.app.demo`; a joint instrument's evaluation: :mod:`teleop.app.demo_joints`):
 the two processes over Zenoh on 127.0.0.1, and the pieces of the summary that do not depend on the
 instrument.
 
@@ -9,7 +9,8 @@ instrument.
   With ``rig.type: zenoh`` a third process, ``teleop bridge``, runs the simulated rig behind the
   Zenoh rig interface and the slave connects to it.
 * :func:`full_scale_errors`: max and mean of |estimate - truth| over the range of the truth.
-* :func:`loop_lines`, :func:`verdict_lines`: the lines on both loops and the link, and on the checks.
+* :func:`master_console_line`, :func:`loop_lines`, :func:`verdict_lines`: the lines on the master's
+  console, on both loops and the link, and on the checks.
 * :func:`finish`: checks, problems and wall time into the summary, ``summary.json``, the printed
   table, the exit code.
 """
@@ -29,7 +30,8 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["run_processes", "read_json", "full_scale_errors", "loop_lines", "verdict_lines", "finish"]
+__all__ = ["run_processes", "read_json", "full_scale_errors", "master_console_line", "loop_lines", "verdict_lines",
+           "finish"]
 
 
 def full_scale_errors(est: np.ndarray, true: np.ndarray) -> tuple[float, float]:
@@ -50,6 +52,14 @@ def read_json(path: Path) -> dict:
         return json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         return {}
+
+
+def master_console_line(m: dict) -> str:
+    """The master's console over the run from its stats: engagements, clutches, alignment refusals,
+    safe events, the largest rendered force against the limit."""
+    return (f"master console: engaged {m.get('engage_count', 0)} time(s), clutches {m.get('clutches', 0)}, "
+            f"align refusals {m.get('align_refusals', 0)}, safe events {m.get('safe_events', 0)}, "
+            f"max |force| {m.get('max_abs_force', 0.0):.2f} N (limit {m.get('force_limit', 0.0):g} N)")
 
 
 def loop_lines(s: dict, *, detailed: bool) -> list[str]:

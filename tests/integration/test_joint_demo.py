@@ -1,5 +1,5 @@
 """The 3-joint instrument as two OS processes over Zenoh on 127.0.0.1 (``teleop demo --config
-configs/instrument-3dof.yaml``), and ``teleop calibrate`` on the command line.
+configs/instrument-3dof.yaml``: the demo of every instrument), and ``teleop calibrate`` on the command line.
 
 Deadlines only bound how long a test waits; nothing passes or fails on how fast it happened."""
 from __future__ import annotations
@@ -42,7 +42,8 @@ def test_three_joint_demo_end_to_end_over_zenoh(tmp_path):
     for name in ("bend_ud", "bend_lr", "grasp"):
         j = summary["joints"][name]
         assert j["torque_error_max_fs"] <= 0.05 and set(j) >= {"a", "b"}
-        assert j["a"]["T_in_max_N"] > 19.5 and j["b"]["T_in_max_N"] > 19.5        # the paper's 20 N both ways
+        # the paper's 20 N both ways (the operator stops its intention early, anticipating its hand's lag)
+        assert j["a"]["T_in_max_N"] > 19.0 and j["b"]["T_in_max_N"] > 19.0
         assert abs(summary["calibration"][name]["a"]["K_error_rel"]) <= 0.05
         assert f"{name:10s} worst" in proc.stdout
     assert summary["master"]["finished"] and summary["slave"]["commands_applied"] > 1000
