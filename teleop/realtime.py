@@ -6,13 +6,15 @@ loops under a load average of 8 on 2 cores). A control loop on Linux asks for ``
 instead, with three levels inside the process, highest first:
 
 * the loop thread (the caller): ``priority``;
-* the transport's threads (Zenoh's receive and transmit threads, and any other native thread of the
-  process): ``priority - 5``, so commands and estimates keep flowing under load;
 * the process's Python helper threads (CSV writer, Rerun logger: threads named in
-  :data:`HELPER_PREFIXES`): ``priority - 10`` (at least 1). They stay real-time on purpose: a helper
+  :data:`HELPER_PREFIXES`): ``priority - 10`` (at least 1). They are real-time on purpose: a helper
   at normal priority can be preempted by another process while it holds the interpreter lock, and
   the loop would then wait for the lock behind it (priority inversion). Their work is small and
-  bounded by what the loop queues.
+  bounded by what the loop queues, and they block (never spin) while waiting for it.
+
+Every other thread (Zenoh's runtime, the Rerun SDK's and numba's native threads) keeps normal
+scheduling: a native thread that polls before it parks would, at a real-time priority, keep the
+threads of its own priority off its core (``SCHED_FIFO`` does not share a core between equals).
 
 Without the privilege (``CAP_SYS_NICE`` or an ``RLIMIT_RTPRIO``) nothing changes and the reason is
 returned: the loop runs with normal scheduling. :func:`demote_threads` puts every thread back to
@@ -36,11 +38,13 @@ HELPER_PREFIXES = ("csv-writer", "rerun-logger")
 
 
 def _set_fifo(tid: int, priority: int) -> None:
-    os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(max(1, min(99, priority))))
+    # reset on fork: a thread (or process) started from a real-time thread begins with normal scheduling
+    policy = os.SCHED_FIFO | getattr(os, "SCHED_RESET_ON_FORK", 0)
+    os.sched_setscheduler(tid, policy, os.sched_param(max(1, min(99, priority))))
 
 
 def promote_threads(priority: int) -> str:
-    """Put the calling thread at ``SCHED_FIFO`` ``priority``, the other threads below it (module docstring).
+    """Put the calling thread at ``SCHED_FIFO`` ``priority``, the helper threads below it (module docstring).
 
     Parameters
     ----------
@@ -61,18 +65,12 @@ def promote_threads(priority: int) -> str:
         _set_fifo(0, priority)
     except OSError as e:
         return f"not permitted ({e.strerror}): normal scheduling"
-    helpers = {t.native_id for t in threading.enumerate() if t.name.startswith(HELPER_PREFIXES)}
-    try:
-        tids = [int(t) for t in os.listdir("/proc/self/task")]
-    except OSError:
-        tids = []
-    for tid in tids:
-        if tid == me:
-            continue
-        try:
-            _set_fifo(tid, priority - 10 if tid in helpers else priority - 5)
-        except OSError:          # a thread that has just ended
-            pass
+    for t in threading.enumerate():
+        if t.name.startswith(HELPER_PREFIXES) and t.native_id is not None and t.native_id != me:
+            try:
+                _set_fifo(t.native_id, priority - 10)
+            except OSError:      # a thread that has just ended
+                pass
     return f"SCHED_FIFO {priority}"
 
 
@@ -86,7 +84,7 @@ def demote_threads() -> None:
         tids = [0]
     for tid in tids:
         try:
-            if os.sched_getscheduler(tid) == os.SCHED_FIFO:
+            if os.sched_getscheduler(tid) & ~getattr(os, "SCHED_RESET_ON_FORK", 0) == os.SCHED_FIFO:
                 os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
         except OSError:
             pass
@@ -96,7 +94,7 @@ def scheduling() -> str:
     """The calling thread's policy and priority, e.g. ``"SCHED_FIFO 20"`` or ``"SCHED_OTHER nice 0"``."""
     if not hasattr(os, "sched_getscheduler"):
         return "unknown"
-    pol = os.sched_getscheduler(0)
+    pol = os.sched_getscheduler(0) & ~getattr(os, "SCHED_RESET_ON_FORK", 0)
     if pol == os.SCHED_FIFO:
         return f"SCHED_FIFO {os.sched_getparam(0).sched_priority}"
     return f"SCHED_OTHER nice {os.getpriority(os.PRIO_PROCESS, 0)}"

@@ -7,7 +7,8 @@ adds) and to the liveliness tokens of both sides, and writes ``<run dir>/recorde
   then the key and the codec bytes (the lossless record; :func:`read_messages` reads it back); a
   message recovered from a journal carries its publish time instead;
 * ``<side>_<stream>.csv`` per key, in the measured-data format (``# key: value`` metadata,
-  ``# units:``, header, one row per message): ``time`` is the recorder's receive time [s, monotonic],
+  ``# units:``, header, one row per message, in time order): ``time`` is the recorder's receive time
+  [s, monotonic] (a message recovered from a journal: its publish time, same clock on one machine),
   then every field of the message as :mod:`teleop.codec` decoded it, flattened generically over the
   dataclass fields (``profiles[0][3]``, ``axes[1].tendons[0].T_in``; enums and flags as integers); a
   nested field keeps only its own name where that is unambiguous (:func:`short_names`), so the
@@ -252,7 +253,7 @@ class Recorder:
         self._thread.join(30.0)
         self._recover(None)
         for f in self._csv.values():
-            f.fh.close()
+            f.close()                              # sorted by time if a recovered message filled a gap
         for fh in self._aux.values():
             fh.close()
         self._raw.close()

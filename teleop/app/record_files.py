@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import math
 from pathlib import Path
 from typing import Any
 
@@ -123,11 +124,28 @@ class StreamCsv:
         self.fh = open(path, "w", encoding="utf-8")
         head = [f"# {k}: {v}" for k, v in meta.items()] + ["# units: " + ", ".join(units), ",".join(cols)]
         self.fh.write("\n".join(head) + "\n")
+        self.head_lines = len(head)
         self.rows = 0
+        self.last_t = -math.inf
+        self.unsorted = False           # a row older than the one before it (a message recovered into a gap)
 
     def write(self, t: float, values: tuple) -> None:
         self.fh.write(self.fmt % ((t,) + values))
         self.rows += 1
+        if t <= self.last_t:
+            self.unsorted = True
+        self.last_t = max(self.last_t, t)
+
+    def close(self) -> None:
+        """Close the file; when rows came out of time order, rewrite them sorted by time (stable)."""
+        self.fh.close()
+        if not self.unsorted:
+            return
+        lines = self.path.read_text(encoding="utf-8").splitlines(keepends=True)
+        head, rows = lines[:self.head_lines], lines[self.head_lines:]
+        rows.sort(key=lambda r: float(r.split(",", 1)[0]))
+        self.path.write_text("".join(head + rows), encoding="utf-8")
+        self.unsorted = False
 
 
 class StreamCounts:

@@ -49,3 +49,29 @@ def test_idle_window_lets_work_through_only_while_the_loop_sleeps():
 def test_promote_threads_off_and_scheduling_named():
     assert promote_threads(0) == "off"
     assert scheduling().startswith(("SCHED_OTHER", "SCHED_FIFO", "unknown"))
+
+
+def test_promote_threads_puts_the_loop_above_its_helpers_and_demote_undoes_it():
+    import os
+
+    from teleop.realtime import demote_threads
+    stop = threading.Event()
+    helper = threading.Thread(target=stop.wait, name="csv-writer:test", daemon=True)
+    other = threading.Thread(target=stop.wait, name="someone-else", daemon=True)
+    helper.start()
+    other.start()
+    try:
+        got = promote_threads(20)
+        if got.startswith("SCHED_FIFO"):
+            fifo = os.SCHED_FIFO
+            mask = ~getattr(os, "SCHED_RESET_ON_FORK", 0)
+            assert os.sched_getscheduler(0) & mask == fifo and os.sched_getparam(0).sched_priority == 20
+            assert os.sched_getscheduler(helper.native_id) & mask == fifo
+            assert os.sched_getparam(helper.native_id).sched_priority == 10
+            assert os.sched_getscheduler(other.native_id) == os.SCHED_OTHER      # native/other threads untouched
+        else:
+            assert got.startswith(("not permitted", "not available"))
+    finally:
+        demote_threads()
+        stop.set()
+    assert scheduling().startswith(("SCHED_OTHER", "unknown"))
