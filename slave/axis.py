@@ -16,7 +16,8 @@ step turning the rig's proximal samples into the axis's :class:`~teleop.messages
 
 Per kind (class methods, because the routine, the calibration file and the recording's layout are
 the instrument's): the axes of a config (:meth:`SlaveAxis.build`), the power-up calibration routine
-(:meth:`SlaveAxis.routine`) and what its end or a reloaded calibration starts
+(:meth:`SlaveAxis.routine`, :meth:`SlaveAxis.routine_step`, :meth:`SlaveAxis.calibration_of`; also
+``teleop calibrate``) and what its end or a reloaded calibration starts
 (:meth:`SlaveAxis.finish_routine`, :meth:`SlaveAxis.start_loaded`), the rig command of the axes'
 motor commands (:meth:`SlaveAxis.rig_command`), the recording (:meth:`SlaveAxis.recording`,
 :meth:`SlaveAxis.csv_row`), the summary counters (:meth:`SlaveAxis.stats`) and the warm-up of the
@@ -58,8 +59,18 @@ class SlaveAxis:
 
     @classmethod
     def routine(cls, cfg: Config, rig: Rig) -> Any:
-        """The power-up calibration routine: ``command(state, dt)`` -> the rig command, ``done``;
-        ``observe(state)`` when it keeps its own samples."""
+        """The power-up calibration routine (``done`` once fitted), run by :meth:`routine_step`."""
+        raise NotImplementedError
+
+    @classmethod
+    def routine_step(cls, routine: Any, rig: Rig, state: RigState, dt: float) -> RigState:
+        """One cycle of the routine: its command to the rig for ``dt`` [s], the rig's new state (which
+        the routine sees when it keeps its own samples)."""
+        raise NotImplementedError
+
+    @classmethod
+    def calibration_of(cls, cfg: Config, routine: Any) -> Any:
+        """The finished routine's fit as calibration data (:class:`~slave.calibration_file.InstrumentCalibration`)."""
         raise NotImplementedError
 
     @classmethod

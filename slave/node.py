@@ -221,11 +221,7 @@ class SlaveNode(SlaveNodeBase):
     # ---- the cycle ---------------------------------------------------------------------------------
     def _calibration_step(self, now: float, dt: float) -> None:
         routine = self.routine
-        x = routine.command(self.rig_state, dt)
-        self.rig_state = self.rig.step(x, dt)
-        observe = getattr(routine, "observe", None)
-        if observe is not None:
-            observe(self.rig_state)
+        self.rig_state = self.kind.routine_step(routine, self.rig, self.rig_state, dt)
         if self.rerun is not None:
             for ax in self.axes:
                 ax.log_calibration(self.rerun, self.cycles, self.cfg.recording.log_every, self.rig_state)

@@ -114,10 +114,18 @@ class PairAxis(SlaveAxis):
         return PairCalibration(cfg, rig)
 
     @classmethod
+    def routine_step(cls, routine: PairCalibration, rig: Rig, state: RigState, dt: float) -> RigState:
+        return rig.step(routine.command(state, dt), dt)
+
+    @classmethod
+    def calibration_of(cls, cfg: Config, routine: PairCalibration) -> Any:
+        return from_results(cfg, routine.results)
+
+    @classmethod
     def finish_routine(cls, axes: Sequence[SlaveAxis], routine: PairCalibration,
                        state: RigState) -> tuple[Any, dict]:
         cfg = axes[0].cfg
-        calibration = from_results(cfg, routine.results)
+        calibration = cls.calibration_of(cfg, routine)
         history = routine.history + [(state.t, state.x_in, state.T_in)]
         for ax, ctl, models in zip(axes, routine.controllers(), sheath_models(calibration, cfg)):
             assert isinstance(ax, PairAxis)

@@ -109,6 +109,17 @@ class TendonAxis(SlaveAxis):
         return JointLimitCalibration(cfg, rig)
 
     @classmethod
+    def routine_step(cls, routine: JointLimitCalibration, rig: Rig, state: RigState, dt: float) -> RigState:
+        state = rig.step(routine.command(state, dt), dt)
+        routine.observe(state)
+        return state
+
+    @classmethod
+    def calibration_of(cls, cfg: Config, routine: JointLimitCalibration) -> Any:
+        assert routine.result is not None
+        return from_tendon_result(cfg, routine.result)
+
+    @classmethod
     def finish_routine(cls, axes: Sequence[SlaveAxis], routine: JointLimitCalibration,
                        state: RigState) -> tuple[Any, dict]:
         ax = axes[0]
@@ -124,7 +135,7 @@ class TendonAxis(SlaveAxis):
         ax.x_hold = routine.x_cmd
         r = routine.result
         log.info("calibrated: K = %.4f, M_e = %.4e m/N (knee at T_in = %.2f N)", r.K, r.M_e, r.knee_T_in)
-        return from_tendon_result(ax.cfg, r), routine.as_dict()
+        return cls.calibration_of(ax.cfg, routine), routine.as_dict()
 
     @classmethod
     def start_loaded(cls, axes: Sequence[SlaveAxis], calibration: Any, state: RigState) -> dict:

@@ -56,31 +56,19 @@ def _simulate(cfg: Config, source: str) -> tuple[Any, Any]:
     ConfigError
         The routine did not finish within :data:`MAX_CALIBRATION_TIME` of simulated time.
     """
-    from slave.calibration_file import from_results, from_tendon_result
+    from slave.node import axis_kind
+    from slave.rigs import RIG_TYPES
 
     dt = 1.0 / cfg.rig.rate_hz
     steps = int(MAX_CALIBRATION_TIME / dt)
-    if cfg.instrument.joints:
-        from slave.joint_rig import SimulatedInstrument
-        from slave.pair_calibrate import PairCalibration
-        inst = SimulatedInstrument.from_config(cfg)
-        routine = PairCalibration(cfg, inst)
-        st = inst.state
-        for _ in range(steps):
-            if routine.done:
-                return from_results(cfg, routine.results), inst
-            st = inst.step(routine.command(st, dt), dt)
-    else:
-        from slave.calibrate import JointLimitCalibration
-        from slave.simulated import SimulatedRig
-        rig = SimulatedRig.from_config(cfg)
-        one = JointLimitCalibration(cfg, rig)
-        rs = rig.state
-        for _ in range(steps):
-            if one.done and one.result is not None:
-                return from_tendon_result(cfg, one.result), rig
-            rs = rig.step(one.command(rs, dt), dt)
-            one.observe(rs)
+    kind = axis_kind(cfg)                       # the slave's own routine for this kind of instrument
+    sim = RIG_TYPES["simulated"](cfg, None)     # whatever rig.type says: the simulator of this instrument
+    routine = kind.routine(cfg, sim)
+    st = sim.state
+    for _ in range(steps):
+        if routine.done:
+            return kind.calibration_of(cfg, routine), sim
+        st = kind.routine_step(routine, sim, st, dt)
     raise ConfigError(f"{source}: calibration did not finish within {MAX_CALIBRATION_TIME:g} s of simulated time")
 
 
