@@ -26,6 +26,7 @@ import math
 
 import numpy as np
 
+from estimator.offline.effects import effect
 from estimator.sheath import SheathGeometry
 from slave.lumped import Load, LumpedTendon
 from slave.lumped_protocol import command
@@ -135,11 +136,12 @@ def _effect_knobs(hidden: tuple[str, ...], u: float, K: float, mu: float, geo: S
         elif e == "distal_backlash":
             sim["backlash"] = r["width"]
             p = {"width": r["width"]}
-        elif e.startswith("sensor_"):
-            name = next(iter(r))
-            val = r[name] * (sign if name in ("offset", "gain", "rate") else 1.0)
-            sensor[e] = {name: val}
-            p = {name: val}
+        elif e.startswith("sensor_"):          # the catalogue's knob: magnitude and which ones take a sign
+            knob = effect(e).knob
+            if knob is None:  # pragma: no cover - every sensor entry has one
+                raise ValueError(f"{e}: no scenario knob in the catalogue")
+            p = knob.values(u, sign, K, duration)
+            sensor[e] = dict(p)
         elif e == "load_cell_wander":
             sensor[e] = {"amplitude": r["amplitude"]}
             p = {"amplitude": r["amplitude"]}
