@@ -26,15 +26,18 @@ class TendonPhysics:
     Parameters
     ----------
     tendon : TendonConfig
+        The instrument's tendon: route and EA.
+    mu : float
+        Its simulated friction coefficient [-] (``rig.simulated.joints[].tendons``).
     n_elements : int
         Elements n (n + 1 nodes equally spaced in arc length).
     """
 
-    def __init__(self, tendon: TendonConfig, n_elements: int):
+    def __init__(self, tendon: TendonConfig, mu: float, n_elements: int):
         geom = tendon.geometry()
         self.L = geom.length
         s = np.linspace(0.0, self.L, n_elements + 1)
-        self.log_gain = tendon.mu * np.asarray(geom.wrap_angle(s), dtype=np.float64)
+        self.log_gain = mu * np.asarray(geom.wrap_angle(s), dtype=np.float64)
         self.lo = np.exp(-self.log_gain)
         self.hi = np.exp(self.log_gain)
         self.dlo, self.dhi = distal_gains(self.log_gain)
@@ -63,9 +66,9 @@ class SimulatedInstrument:
     literature.md E11 with the pair coupling E13; pretension E5):
 
     * Tendons a and b: the distributed model of :class:`slave.simulated.SimulatedRig` each (``n``
-      elements, own route, mu and EA from ``instrument.joints[i].tendons``), both tied to a distal
-      pulley of radius r: x_out,a = + r theta, x_out,b = - r theta. A tendon cannot push (slack: zero
-      tension along it).
+      elements, own route and EA from ``instrument.joints[i].tendons``, own mu from
+      ``rig.simulated.joints``), both tied to a distal pulley of radius r: x_out,a = + r theta,
+      x_out,b = - r theta. A tendon cannot push (slack: zero tension along it).
     * Joint: quasi-static torque balance with damping (first-order relaxation, implicit Euler)
 
           r (T_out,a - T_out,b) = k theta + b dtheta/dt + tau_tissue + tau_limit + tau_ext
@@ -87,7 +90,8 @@ class SimulatedInstrument:
     joints : sequence of JointConfig
         1 to 4 joints.
     rig : SimulatedRigConfig
-        ``rig.simulated``: ``n_elements`` (per tendon), ``motor``, ``sensors``.
+        ``rig.simulated``: ``n_elements`` (per tendon), ``motor``, ``sensors``, and ``joints``: each
+        joint's simulated physics (stiffness, damping, limit stiffness, load, the tendons' mu) by name.
 
     Raises
     ------
@@ -99,17 +103,19 @@ class SimulatedInstrument:
         joints = tuple(joints)
         _validate(joints, rig)
         self.joints = joints
+        self.sims = sims = tuple(rig.joint(j.name) for j in joints)     # each joint's simulated physics
         self.joint_names = tuple(j.name for j in joints)
         n = int(rig.n_elements)
-        self.tendons = [(TendonPhysics(j.tendons.a, n), TendonPhysics(j.tendons.b, n)) for j in joints]
+        self.tendons = [(TendonPhysics(j.tendons.a, s.tendons.a.mu, n), TendonPhysics(j.tendons.b, s.tendons.b.mu, n))
+                        for j, s in zip(joints, sims)]
         nj = len(joints)
         self._T = [[np.full(n + 1, float(j.pretension)), np.full(n + 1, float(j.pretension))] for j in joints]
         self._theta = np.zeros(nj)
         self._x = np.array([[float(p.w.sum() * j.pretension) for p in pair] for j, pair in zip(joints, self.tendons)])
-        self._tissue = [bool(j.load.tissue) for j in joints]
-        self._slope = np.array([j.stiffness + j.load.tissue_stiffness
+        self._tissue = [bool(s.load.tissue) for s in sims]
+        self._slope = np.array([s.stiffness + s.load.tissue_stiffness
                                 + j.pulley_radius ** 2 * (1.0 / pa.M_e + 1.0 / pb.M_e)
-                                for j, (pa, pb) in zip(joints, self.tendons)])
+                                for j, s, (pa, pb) in zip(joints, sims, self.tendons)])
         self.drive = Drive(rig, (nj, 2))        # motor loops, encoders, load cells (shared by every simulated rig)
         self.encoder_resolution = self.drive.encoder_resolution
         self._t = 0.0
@@ -174,16 +180,16 @@ class SimulatedInstrument:
         # motors: exact first-order step toward the command, speed-limited
         self._x += self.drive.move(self._x, cmd, h)
         sbx, sbF, sbs = RIGID_STOP
-        for i, j in enumerate(self.joints):
+        for i, (j, s) in enumerate(zip(self.joints, self.sims)):
             pa, pb = self.tendons[i]
             Ta, Tb = self._T[i]
-            kt = j.load.tissue_stiffness if self._tissue[i] else 0.0
+            kt = s.load.tissue_stiffness if self._tissue[i] else 0.0
             self._theta[i] = step_joint(
                 Ta, pa.lo, pa.hi, pa.dlo, pa.dhi, pa.w, pa.c_pull, pa.c_rel,
                 Tb, pb.lo, pb.hi, pb.dlo, pb.dhi, pb.w, pb.c_pull, pb.c_rel,
-                self._x[i, 0], self._x[i, 1], j.pulley_radius, self._theta[i], j.stiffness, j.damping / h,
-                kt, j.load.tissue_contact, j.limits[0], j.limits[1], j.limit_stiffness, j.load.torque,
-                self._slope[i] + j.damping / h, sbx, sbF, sbs)
+                self._x[i, 0], self._x[i, 1], j.pulley_radius, self._theta[i], s.stiffness, s.damping / h,
+                kt, s.load.tissue_contact, j.limits[0], j.limits[1], s.limit_stiffness, s.load.torque,
+                self._slope[i] + s.damping / h, sbx, sbF, sbs)
         self._t += h
         self._state = self._read(cmd)
         return self._state
@@ -205,14 +211,14 @@ class SimulatedInstrument:
         if not isinstance(tissue, (bool, np.bool_)):
             raise RigInputError(f"tissue must be True or False, got {tissue!r}")
         self._tissue = [bool(tissue)] * self.n_joints
-        for i, j in enumerate(self.joints):
+        for i, (j, s) in enumerate(zip(self.joints, self.sims)):
             pa, pb = self.tendons[i]
             Ta, Tb = self._T[i]
-            kt = j.load.tissue_stiffness if self._tissue[i] else 0.0
+            kt = s.load.tissue_stiffness if self._tissue[i] else 0.0
             self._theta[i] = settle_joint(Ta, pa.dlo, pa.dhi, pa.w, self._x[i, 0], Tb, pb.dlo, pb.dhi, pb.w,
-                                          self._x[i, 1], j.pulley_radius, self._theta[i], j.stiffness, 0.0, kt,
-                                          j.load.tissue_contact, j.limits[0], j.limits[1], j.limit_stiffness,
-                                          j.load.torque, self._slope[i])
+                                          self._x[i, 1], j.pulley_radius, self._theta[i], s.stiffness, 0.0, kt,
+                                          s.load.tissue_contact, j.limits[0], j.limits[1], s.limit_stiffness,
+                                          s.load.torque, self._slope[i])
         self._state = self._read(self._state.x_in_cmd)
 
     def close(self) -> None:
@@ -244,10 +250,10 @@ class SimulatedInstrument:
 
     def load_torque(self, i: int, theta: float) -> float:
         """Static load torque of joint ``i`` at ``theta`` [rad] with the present tissue setting [N m]."""
-        j = self.joints[i]
-        kt = j.load.tissue_stiffness if self._tissue[i] else 0.0
-        return float(load_torque(theta, j.stiffness, kt, j.load.tissue_contact, j.limits[0], j.limits[1],
-                                 j.limit_stiffness, j.load.torque))
+        j, s = self.joints[i], self.sims[i]
+        kt = s.load.tissue_stiffness if self._tissue[i] else 0.0
+        return float(load_torque(theta, s.stiffness, kt, s.load.tissue_contact, j.limits[0], j.limits[1],
+                                 s.limit_stiffness, s.load.torque))
 
 
 def _validate(joints: tuple[JointConfig, ...], rig: SimulatedRigConfig) -> None:
@@ -259,19 +265,22 @@ def _validate(joints: tuple[JointConfig, ...], rig: SimulatedRigConfig) -> None:
                j.pulley_radius)
         check_setting(len(j.limits) == 2 and j.limits[0] < 0.0 < j.limits[1], f"{p}.limits",
                "[lower, upper] with lower < 0 < upper [rad]", j.limits)
-        for key in ("stiffness", "damping", "pretension"):
-            check_setting(is_finite(getattr(j, key)) and getattr(j, key) >= 0, f"{p}.{key}", "a finite number >= 0",
-                   getattr(j, key))
-        check_setting(is_finite(j.limit_stiffness) and j.limit_stiffness > 0, f"{p}.limit_stiffness",
-               "a stiffness > 0 N m/rad", j.limit_stiffness)
-        check_setting(is_finite(j.load.tissue_stiffness) and j.load.tissue_stiffness >= 0, f"{p}.load.tissue_stiffness",
-               "a finite number >= 0 N m/rad", j.load.tissue_stiffness)
-        check_setting(is_finite(j.load.tissue_contact) and j.load.tissue_contact >= 0, f"{p}.load.tissue_contact",
-               "an angle >= 0 rad", j.load.tissue_contact)
-        check_setting(is_finite(j.load.torque), f"{p}.load.torque", "a finite torque in N m", j.load.torque)
+        check_setting(is_finite(j.pretension) and j.pretension >= 0, f"{p}.pretension", "a finite number >= 0",
+                      j.pretension)
+        s, q = rig.joint(j.name), f"rig.simulated.joints ({j.name})"
+        for key in ("stiffness", "damping"):
+            check_setting(is_finite(getattr(s, key)) and getattr(s, key) >= 0, f"{q}.{key}", "a finite number >= 0",
+                   getattr(s, key))
+        check_setting(is_finite(s.limit_stiffness) and s.limit_stiffness > 0, f"{q}.limit_stiffness",
+               "a stiffness > 0 N m/rad", s.limit_stiffness)
+        check_setting(is_finite(s.load.tissue_stiffness) and s.load.tissue_stiffness >= 0, f"{q}.load.tissue_stiffness",
+               "a finite number >= 0 N m/rad", s.load.tissue_stiffness)
+        check_setting(is_finite(s.load.tissue_contact) and s.load.tissue_contact >= 0, f"{q}.load.tissue_contact",
+               "an angle >= 0 rad", s.load.tissue_contact)
+        check_setting(is_finite(s.load.torque), f"{q}.load.torque", "a finite torque in N m", s.load.torque)
         for t in ("a", "b"):
-            td = getattr(j.tendons, t)
-            check_setting(is_finite(td.mu) and td.mu >= 0, f"{p}.tendons.{t}.mu", "a finite number >= 0", td.mu)
+            td, mu = getattr(j.tendons, t), getattr(s.tendons, t).mu
+            check_setting(is_finite(mu) and mu >= 0, f"{q}.tendons.{t}.mu", "a finite number >= 0", mu)
             check_setting(is_finite(td.EA) and td.EA > 0, f"{p}.tendons.{t}.EA", "a finite number > 0 N", td.EA)
             validate_runs(td.runs, f"{p}.tendons.{t}.runs")
     validate_drive(rig)

@@ -180,7 +180,7 @@ class PairCalibration:
         self.history.append((state.t, state.x_in.copy(), state.T_in.copy()))
         out = np.array([j.command(state.x_in[i], state.T_in[i], state.t, dt) for i, j in enumerate(self.joints)])
         if all(j.stage == PairStage.DONE for j in self.joints) and not self._done:
-            tissue = {bool(j.load.tissue) for j in self.cfg.instrument.joints}
+            tissue = {bool(self.cfg.rig.simulated.joint(j.name).load.tissue) for j in self.cfg.instrument.joints}
             self.instrument.set_load(tissue=tissue.pop() if len(tissue) == 1 else True)
             self._done = True
         return out

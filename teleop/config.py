@@ -39,7 +39,10 @@ from teleop.schema import (
     RunConfig,
     SensorConfig,
     SheathConfig,
+    SimulatedJointConfig,
     SimulatedRigConfig,
+    SimulatedTendonConfig,
+    SimulatedTendonPairConfig,
     SlaveConfig,
     TendonConfig,
     TendonPairConfig,
@@ -52,6 +55,7 @@ from teleop.schema import (
 
 __all__ = [  # the schema's names (teleop.schema) and the loader's
     "InstrumentConfig", "RunConfig", "SheathConfig", "TendonConfig", "TendonPairConfig", "JointLoadConfig", "JointConfig",
+    "SimulatedTendonConfig", "SimulatedTendonPairConfig", "SimulatedJointConfig",
     "MotorConfig", "LoadConfig", "SensorConfig", "ZenohRigConfig", "RigConfig", "SimulatedRigConfig", "EffectsConfig",
     "EffectSwitch", "MOVED", "EstimatorConfig", "CalibrationConfig",
     "DeviceConfig", "MappingConfig", "MasterConfig", "SlaveConfig", "PairControlConfig", "TransportConfig",
@@ -254,6 +258,11 @@ def _check_joints(cfg: Config, ctx: _Ctx) -> None:
             if not getattr(j.tendons, t).runs:
                 raise ctx.error(f"{where}.tendons.{t}.runs", f"{where}.tendons.{t}.runs ({j.name}): expected "
                                                              f"at least one run")
+    for i, sj in enumerate(cfg.rig.simulated.joints):
+        where = f"rig.simulated.joints[{i}].name"
+        if sj.name not in seen or any(o.name == sj.name for o in cfg.rig.simulated.joints[:i]):
+            raise ctx.error(where, f"{where}: {sj.name!r} must name a joint of instrument.joints once "
+                                   f"(joints: {', '.join(seen) or 'none'})")
     axes = cfg.pair_control.axes
     if axes and (len(axes) != len(joints) or len(set(axes)) != len(axes)):
         raise ctx.error("pair_control.axes", f"pair_control.axes: expected one distinct device axis per joint "

@@ -16,7 +16,7 @@ from teleop.effects_config import EffectsConfig, EffectSwitch
 
 __all__ = [
     "InstrumentConfig", "RunConfig", "SheathConfig", "TendonConfig", "TendonPairConfig", "JointLoadConfig",
-    "JointConfig", "MotorConfig", "LoadConfig", "SensorConfig", "EffectSwitch", "EffectsConfig", "SimulatedRigConfig",
+    "JointConfig", "SimulatedTendonConfig", "SimulatedTendonPairConfig", "SimulatedJointConfig", "MotorConfig", "LoadConfig", "SensorConfig", "EffectSwitch", "EffectsConfig", "SimulatedRigConfig",
     "ZenohRigConfig", "RigConfig", "EstimatorConfig", "MOVED",
     "CalibrationConfig", "ArmConfig", "DeviceConfig", "MappingConfig", "MasterConfig", "SlaveConfig", "PairControlConfig",
     "TransportAuthConfig", "TransportTlsConfig", "TransportConfig", "RecordingConfig", "Config", "RANGES",
@@ -27,7 +27,7 @@ __all__ = [
 @dataclass(frozen=True)
 class InstrumentConfig:
     id: str = "tsm0"
-    # empty: the single-tendon rig of `sheath` and `rig.load`; 1..4 entries: antagonistic-pair joints
+    # empty: the single tendon of `sheath`; 1..4 entries: antagonistic-pair joints
     joints: tuple[JointConfig, ...] = ()
 
 
@@ -56,9 +56,9 @@ class SheathConfig:
 
 @dataclass(frozen=True)
 class TendonConfig:
-    """One tendon-sheath transmission of a joint (its own route, friction and stiffness)."""
+    """One tendon-sheath transmission of a joint as the slave knows it (its own route and stiffness;
+    the simulated friction is ``rig.simulated.joints[].tendons``)."""
 
-    mu: float = 0.1               # [-] >= 0
     EA: float = 15000.0           # [N] > 0
     runs: tuple[RunConfig, ...] = SheathConfig.runs
 
@@ -82,15 +82,36 @@ class JointLoadConfig:
 
 @dataclass(frozen=True)
 class JointConfig:
+    """One joint of the instrument as the slave knows it (its simulated physics: ``rig.simulated.joints``)."""
+
     name: str                             # [A-Za-z0-9_-]+, unique in the instrument
     pulley_radius: float = 0.004          # [m] distal pulley: x_out,a = +r theta, x_out,b = -r theta
     limits: tuple[float, ...] = (-1.2, 1.2)  # [rad] lower < 0 < upper (0: the rest pose)
+    pretension: float = 0.0               # [N] tension of the pair at rest; 0: none (antagonist slack-free)
+    tendons: TendonPairConfig = field(default_factory=TendonPairConfig)
+
+
+@dataclass(frozen=True)
+class SimulatedTendonConfig:
+    mu: float = 0.1                       # [-] >= 0 friction coefficient tendon/sheath
+
+
+@dataclass(frozen=True)
+class SimulatedTendonPairConfig:
+    a: SimulatedTendonConfig = field(default_factory=SimulatedTendonConfig)
+    b: SimulatedTendonConfig = field(default_factory=SimulatedTendonConfig)
+
+
+@dataclass(frozen=True)
+class SimulatedJointConfig:
+    """``rig.simulated.joints[]``: the simulated physics of the instrument joint of the same name."""
+
+    name: str                             # an instrument.joints name
     stiffness: float = 0.005              # [N m/rad] joint return spring
     damping: float = 0.0002               # [N m s/rad]
     limit_stiffness: float = 50.0         # [N m/rad] stiffness of the joint limits
-    pretension: float = 0.0               # [N] tension of the pair at rest; 0: none (antagonist slack-free)
     load: JointLoadConfig = field(default_factory=JointLoadConfig)
-    tendons: TendonPairConfig = field(default_factory=TendonPairConfig)
+    tendons: SimulatedTendonPairConfig = field(default_factory=SimulatedTendonPairConfig)
 
 
 @dataclass(frozen=True)
@@ -131,6 +152,12 @@ class SimulatedRigConfig:
     load: LoadConfig = field(default_factory=LoadConfig)
     sensors: SensorConfig = field(default_factory=SensorConfig)
     effects: EffectsConfig = field(default_factory=EffectsConfig)
+    # joint instruments: per instrument joint (by name; a joint not listed takes these defaults)
+    joints: tuple[SimulatedJointConfig, ...] = ()
+
+    def joint(self, name: str) -> SimulatedJointConfig:
+        """The simulated physics of instrument joint ``name`` (the defaults when not listed)."""
+        return next((j for j in self.joints if j.name == name), SimulatedJointConfig(name))
 
 
 @dataclass(frozen=True)
@@ -317,13 +344,14 @@ RANGES: dict[str, tuple[str, str]] = {
     "master.realtime_priority": ("0..99", "-"), "slave.realtime_priority": ("0..99", "-"),
     "recording.log_every": (">= 1", "samples"),
     "instrument.joints[].pulley_radius": ("> 0", "m"), "instrument.joints[].limits[]": ("any", "rad"),
-    "instrument.joints[].stiffness": (">= 0", "N m/rad"), "instrument.joints[].damping": (">= 0", "N m s/rad"),
-    "instrument.joints[].limit_stiffness": ("> 0", "N m/rad"), "instrument.joints[].pretension": (">= 0", "N"),
-    "instrument.joints[].load.tissue_stiffness": (">= 0", "N m/rad"),
-    "instrument.joints[].load.tissue_contact": (">= 0", "rad"), "instrument.joints[].load.torque": ("any", "N m"),
+    "instrument.joints[].pretension": (">= 0", "N"),
     **{f"instrument.joints[].tendons.{t}.{k}": v for t in "ab" for k, v in (
-        ("mu", (">= 0", "-")), ("EA", ("> 0", "N")), ("runs[].length", ("> 0", "m")),
-        ("runs[].radius", ("> 0", "m, .inf = straight")))},
+        ("EA", ("> 0", "N")), ("runs[].length", ("> 0", "m")), ("runs[].radius", ("> 0", "m, .inf = straight")))},
+    "rig.simulated.joints[].stiffness": (">= 0", "N m/rad"), "rig.simulated.joints[].damping": (">= 0", "N m s/rad"),
+    "rig.simulated.joints[].limit_stiffness": ("> 0", "N m/rad"),
+    "rig.simulated.joints[].load.tissue_stiffness": (">= 0", "N m/rad"),
+    "rig.simulated.joints[].load.tissue_contact": (">= 0", "rad"), "rig.simulated.joints[].load.torque": ("any", "N m"),
+    "rig.simulated.joints[].tendons.a.mu": (">= 0", "-"), "rig.simulated.joints[].tendons.b.mu": (">= 0", "-"),
     "pair_control.min_tension": ("> 0", "N"), "pair_control.tension_gain": ("> 0", "m/(N s)"),
     "pair_control.switch_band": (">= 0", "rad"), "pair_control.axes[]": (">= 0", "-"),
     "recording.profile_every": (">= 1", "logs"),
@@ -335,6 +363,10 @@ RANGES: dict[str, tuple[str, str]] = {
 MOVED: dict[str, str] = {
     **{f"rig.{k}": f"rig.simulated.{k}" for k in ("n_elements", "motor", "load", "sensors", "effects")},
     "sheath.mu": "rig.simulated.mu",
+    **{f"instrument.joints[].{k}": f"rig.simulated.joints[].{k} (the entry with the joint's name)"
+       for k in ("stiffness", "damping", "limit_stiffness", "load")},
+    **{f"instrument.joints[].tendons.{t}.mu": f"rig.simulated.joints[].tendons.{t}.mu (the entry with the joint's name)"
+       for t in "ab"},
 }
 
 

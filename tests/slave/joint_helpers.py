@@ -15,13 +15,13 @@ DT = 1e-3
 ROUTE_B = [{"length": 0.5}, {"length": 0.8, "radius": 0.25}, {"length": 0.3, "radius": 0.1}]
 
 
-def joint_config(pretension: float = 0.0, seed: int = 0, n_elements: int = 100, **joint):
-    """One joint with different routes and mu for its two tendons; a tissue spring on both sides."""
-    j = {"name": "j", "pretension": pretension, "load": {"tissue_stiffness": 0.05},
-         "tendons": {"a": {"mu": 0.1}, "b": {"mu": 0.12, "runs": ROUTE_B}}}
-    j.update(joint)
-    return config_from_dict({"instrument": {"joints": [j]},
-                             "rig": {"simulated": {"n_elements": n_elements, "sensors": {"seed": seed}}}})
+def joint_config(pretension: float = 0.0, seed: int = 0, n_elements: int = 100, **physics):
+    """One joint with different routes and mu for its two tendons; a tissue spring on both sides;
+    ``physics``: settings of its simulated physics (rig.simulated.joints: stiffness, damping, ...)."""
+    j = {"name": "j", "pretension": pretension, "tendons": {"b": {"runs": ROUTE_B}}}
+    sim = {"name": "j", "load": {"tissue_stiffness": 0.05}, "tendons": {"a": {"mu": 0.1}, "b": {"mu": 0.12}}, **physics}
+    return config_from_dict({"instrument": {"joints": [j]}, "rig": {"simulated": {
+        "n_elements": n_elements, "sensors": {"seed": seed}, "joints": [sim]}}})
 
 
 def route_model(t: TendonConfig, K: float) -> SheathModel:

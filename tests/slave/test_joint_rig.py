@@ -1,6 +1,7 @@
 """SimulatedInstrument: cross-check with the single-tendon rig, torque balance, dead zone, pretension, inputs."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -9,7 +10,7 @@ import pytest
 from slave.joint_rig import SimulatedInstrument
 from slave.rig import RigInputError
 from slave.simulated import SimulatedRig
-from teleop.config import config_from_dict
+from teleop.config import SimulatedJointConfig, config_from_dict
 from teleop.errors import ConfigError
 from tests.slave.joint_helpers import DT, joint_config
 
@@ -20,8 +21,9 @@ def test_one_taut_tendon_equals_the_single_tendon_rig():
     """Tendon b slack: the joint is tendon a on a spring load, which SimulatedRig solves exactly."""
     quiet = {"n_elements": 100, "sensors": {"load_cell_noise": 0.0}}
     cfg = config_from_dict({"instrument": {"joints": [{
-        "name": "j", "pulley_radius": R, "stiffness": K_J, "damping": 0.0, "limits": [-1.2, HI],
-        "limit_stiffness": K_LIM, "load": {"tissue_stiffness": K_T, "tissue_contact": T_C}}]}, "rig": {"simulated": quiet}})
+        "name": "j", "pulley_radius": R, "limits": [-1.2, HI]}]}, "rig": {"simulated": {**quiet, "joints": [{
+        "name": "j", "stiffness": K_J, "damping": 0.0, "limit_stiffness": K_LIM,
+        "load": {"tissue_stiffness": K_T, "tissue_contact": T_C}}]}}})
     inst = SimulatedInstrument.from_config(cfg)
     single = SimulatedRig.from_config(config_from_dict({"rig": {"simulated": {**quiet, "load": {
         "joint_stiffness": K_J / R ** 2, "tissue_stiffness": K_T / R ** 2, "tissue_contact": R * T_C,
@@ -41,7 +43,8 @@ def test_one_taut_tendon_equals_the_single_tendon_rig():
 def test_torque_balance_holds_every_step_and_tendons_stay_lipschitz():
     cfg = joint_config(damping=0.001)
     inst = SimulatedInstrument.from_config(cfg)
-    j = cfg.instrument.joints[0]
+    j = cfg.rig.simulated.joint(cfg.instrument.joints[0].name)
+    assert j.damping == 0.001
     x0 = inst.state.x_in_cmd.copy()
     t = np.arange(3000) * DT
     u = 0.006 * np.sin(np.pi * t / 1.5) ** 2
@@ -153,9 +156,12 @@ def test_config_errors_name_the_joint_and_key():
     with pytest.raises(ConfigError, match=r"instrument.joints must be a list of 1 to 4"):
         SimulatedInstrument((), config_from_dict({}).rig.simulated)
     cfg = joint_config()
-    bad = cfg.instrument.joints[0].__class__(name="wrist", stiffness=-1.0)
-    with pytest.raises(ConfigError, match=r"instrument.joints\[0\] \(wrist\).stiffness"):
+    bad = cfg.instrument.joints[0].__class__(name="wrist", pulley_radius=-1.0)
+    with pytest.raises(ConfigError, match=r"instrument.joints\[0\] \(wrist\).pulley_radius"):
         SimulatedInstrument((bad,), cfg.rig.simulated)
+    sim = dataclasses.replace(cfg.rig.simulated, joints=(SimulatedJointConfig("j", stiffness=-1.0),))
+    with pytest.raises(ConfigError, match=r"rig.simulated.joints \(j\).stiffness"):
+        SimulatedInstrument(cfg.instrument.joints, sim)
 
 
 def test_one_to_four_independent_joints():

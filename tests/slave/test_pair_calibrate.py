@@ -110,7 +110,8 @@ def test_missing_and_broken_files(tmp_path, calibrated):
 
 
 def test_no_joint_limit_within_the_travel_is_an_error_naming_joint_and_tendon():
-    cfg = config_from_dict({"instrument": {"joints": [{"name": "wrist", "limits": [-1.2, 9.0], "stiffness": 0.0}]},
-                            "rig": {"simulated": {"n_elements": 40}}, "calibration": {"speed": 0.02}})
+    cfg = config_from_dict({"instrument": {"joints": [{"name": "wrist", "limits": [-1.2, 9.0]}]},
+                            "rig": {"simulated": {"n_elements": 40, "joints": [{"name": "wrist", "stiffness": 0.0}]}},
+                            "calibration": {"speed": 0.02}})
     with pytest.raises(CalibrationError, match=r"joint 'wrist', tendon a: pulled 30 mm without reaching"):
         run(cfg)
