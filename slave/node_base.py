@@ -105,6 +105,11 @@ class SlaveNodeBase(NodeBase):
     def rate_hz(self) -> float:
         return self.cfg.rig.rate_hz
 
+    def _cycle_source(self):
+        """The command subscriber when the master runs at the slave's rate: each cycle starts as a command
+        arrives (teleop.clock.LockedPacer), not up to a period later."""
+        return self.links.command if self.cfg.master.rate_hz == self.rate_hz else None
+
     # ---- the cycle ---------------------------------------------------------------------------------
     def _cycle_dt(self, now: float) -> float | None:
         """Start a cycle at ``now`` [s]: its time step [s] (stalls clipped to ``max_dt``), or None when

@@ -10,7 +10,7 @@ import math
 import time
 from typing import Protocol, runtime_checkable
 
-__all__ = ["Clock", "MonotonicClock", "FakeClock", "Pacer"]
+__all__ = ["Clock", "MonotonicClock", "FakeClock", "Pacer", "LockedPacer"]
 
 
 @runtime_checkable
@@ -189,3 +189,84 @@ class Pacer:
             "max_lateness": self.max_lateness,
             "overrun_fraction": self.overruns / self.ticks if self.ticks else 0.0,
         }
+
+
+class LockedPacer(Pacer):
+    """A :class:`Pacer` whose cycles start when a new message arrives: a slave locked to its master's commands.
+
+    Paced by the grid alone, a slave looks at a command up to one period after it arrived (the two
+    1 kHz loops are not in phase) and the round trip carries that wait. Here :meth:`wait` returns as
+    soon as ``source`` has received a message since the previous cycle started, but never earlier
+    than ``min_gap`` periods after it (a burst of late commands does not run cycles back to back).
+    Without a message the deadline starts the cycle as in :class:`Pacer`: ``guard`` periods later
+    than one period after a cycle a message started (its next message is due one period later, so
+    the jitter of its arrival does not let the deadline come first), on the plain grid otherwise.
+
+    An *overrun* is a :meth:`wait` called more than one period after the previous cycle started:
+    the cycle (step and everything else until the next wait) took longer than a period, the same
+    budget a grid cycle that woke on time has.
+
+    Parameters
+    ----------
+    clock : Clock
+    rate_hz : float
+        The rate of the messages and of the loop [Hz].
+    source : object with ``count`` (messages received) and ``wait(count, timeout)`` (block until
+        ``count`` messages or ``timeout`` [s] of real time; True if reached), e.g. a
+        :class:`teleop.transport.LatestSubscriber`.
+    guard, min_gap : float
+        In periods, > 0 and in (0, 1].
+
+    Attributes
+    ----------
+    locked : int
+        Cycles started by a message (the others by their deadline).
+    """
+
+    def __init__(self, clock: Clock, rate_hz: float, source, *, guard: float = 0.25, min_gap: float = 0.5):
+        if not (guard > 0 and 0 < min_gap <= 1):
+            raise ValueError(f"LockedPacer: guard must be > 0 and min_gap in (0, 1], got {guard!r}, {min_gap!r}")
+        self.source = source
+        self.guard, self.min_gap = float(guard), float(min_gap)
+        super().__init__(clock, rate_hz)
+
+    def reset(self) -> None:
+        super().reset()
+        self.locked = 0
+        self._start: float | None = None
+        self._seen = int(self.source.count)
+
+    def wait(self) -> float:
+        if self._start is None:                       # the first cycle: on the grid
+            now = super().wait()
+            self._start, self._seen = now, int(self.source.count)
+            return now
+        P = self.period
+        now = self.clock.now()
+        self.last_overrun = now > self._start + P
+        if self.last_overrun:
+            self.overruns += 1
+            self.skipped += math.floor((now - self._start - P) / P)
+        earliest = self._start + self.min_gap * P
+        if now < earliest:
+            self.clock.sleep_until(earliest)
+        deadline = self._next
+        arrived = self.source.wait(self._seen + 1, max(0.0, deadline - self.clock.now()))
+        now = self.clock.now()
+        if arrived:
+            self.locked += 1
+            lateness = 0.0
+            self._next = now + (1.0 + self.guard) * P
+        else:
+            lateness = max(0.0, now - deadline)
+            self._next = max(deadline + P, now + self.min_gap * P)
+        self._start = now
+        self._seen = int(self.source.count)
+        self.ticks += 1
+        self.last_lateness = lateness
+        self.max_lateness = max(self.max_lateness, lateness)
+        return now
+
+    def stats(self) -> dict[str, float]:
+        """:meth:`Pacer.stats` and ``locked`` (cycles a message started)."""
+        return {**super().stats(), "locked": self.locked}

@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from teleop.clock import Clock, MonotonicClock, Pacer
+from teleop.clock import Clock, LockedPacer, MonotonicClock, Pacer
 from teleop.codec import next_seq, seq_newer
 from teleop.cycles import CycleStats
 from teleop.messages import Heartbeat, Side, SideState
@@ -146,7 +146,9 @@ class NodeBase:
         passes (:func:`gc.freeze`: a full collection then scans only what the loop allocates), the
         threads get their real-time priorities (``<side>.realtime_priority``,
         :func:`teleop.realtime.promote_threads`) and after every step the helper threads are told
-        until when the loop sleeps (:data:`teleop.realtime.IDLE`). Per-cycle figures:
+        until when the loop sleeps (:data:`teleop.realtime.IDLE`); a node with a :meth:`_cycle_source`
+        (the slave: its commands) starts each cycle as a message arrives (:class:`~teleop.clock.LockedPacer`).
+        Per-cycle figures:
         :class:`teleop.cycles.CycleStats`, in the stats' ``pacer``.
         """
         real = isinstance(clock, MonotonicClock)
@@ -156,7 +158,10 @@ class NodeBase:
             self.scheduling = promote_threads(self._realtime_priority())
             if self.scheduling.startswith("not"):
                 self.log.warning("%s loop: real-time priority %s", self.side.name.lower(), self.scheduling)
-        pacer = Pacer(clock, self.rate_hz)
+        source = self._cycle_source() if real else None
+        if not (hasattr(source, "wait") and hasattr(source, "count")):
+            source = None
+        pacer = Pacer(clock, self.rate_hz) if source is None else LockedPacer(clock, self.rate_hz, source)
         cycles = self.cycle_stats = CycleStats(self.side.name.lower())
         perf = time.perf_counter
         idle = IDLE.open if real else None
@@ -179,6 +184,11 @@ class NodeBase:
             self.pacer_stats = {**pacer.stats(), **cycles.stats(), "scheduling": self.scheduling}
             cycles.dump()
             self._run_ended(clock)
+
+    def _cycle_source(self):
+        """A subscriber whose messages start the cycles (:class:`~teleop.clock.LockedPacer`), or None: the
+        fixed grid (default)."""
+        return None
 
     def _realtime_priority(self) -> int:
         """``<side>.realtime_priority`` of the node's config (0 without one)."""

@@ -5,7 +5,7 @@ import math
 
 import pytest
 
-from teleop.clock import Clock, FakeClock, MonotonicClock, Pacer
+from teleop.clock import Clock, FakeClock, LockedPacer, MonotonicClock, Pacer
 
 
 def test_clocks_satisfy_the_protocol():
@@ -106,3 +106,62 @@ def test_pacer_reset_starts_a_new_grid_and_zeroes_stats():
 def test_pacer_rejects_bad_rates(rate):
     with pytest.raises(ValueError, match="rate_hz"):
         Pacer(FakeClock(), rate)
+
+
+class _Arrivals:
+    """Messages arriving at given times on a FakeClock, with the count/wait of a LatestSubscriber."""
+
+    def __init__(self, clock, times):
+        self.clock, self.times, self.count = clock, list(times), 0
+
+    def _deliver(self):
+        while self.times and self.times[0] <= self.clock.now():
+            self.times.pop(0)
+            self.count += 1
+
+    def wait(self, count, timeout):
+        self._deliver()
+        if self.count >= count:
+            return True
+        end = self.clock.now() + timeout
+        if self.times and self.times[0] <= end:
+            self.clock.set(self.times[0])
+            self._deliver()
+            return self.count >= count
+        self.clock.set(end)
+        return False
+
+
+def test_locked_pacer_starts_each_cycle_as_its_message_arrives():
+    c = FakeClock(0.0)
+    src = _Arrivals(c, [0.0013 + 1e-3 * k for k in range(20)])   # 0.3 ms after the slave's grid
+    p = LockedPacer(c, 1000.0, src)
+    assert p.wait() == pytest.approx(0.001)                       # the first cycle: on the grid
+    starts = []
+    for _ in range(20):
+        starts.append(p.wait())
+        c.advance(2e-4)                                           # the step
+    # the first message came before half a period had passed: it starts the cycle then; locked from there on
+    assert starts == pytest.approx([0.0015] + [0.0023 + 1e-3 * k for k in range(19)])
+    assert p.locked == 20 and p.overruns == 0 and p.max_lateness == 0.0
+
+
+def test_locked_pacer_without_messages_keeps_the_grid_and_counts_overruns():
+    c = FakeClock(0.0)
+    p = LockedPacer(c, 1000.0, _Arrivals(c, []))
+    starts = [p.wait() for _ in range(4)]
+    assert starts == pytest.approx([0.001, 0.002, 0.003, 0.004]) and p.locked == 0
+    c.advance(1.5e-3)                                             # a cycle longer than a period
+    p.wait()
+    assert p.overruns == 1 and p.last_overrun and p.stats()["locked"] == 0
+
+
+def test_locked_pacer_never_runs_two_cycles_closer_than_half_a_period():
+    c = FakeClock(0.0)
+    src = _Arrivals(c, [0.0021, 0.00215, 0.0022, 0.0032])         # a burst of three, then one on time
+    p = LockedPacer(c, 1000.0, src)
+    starts = [p.wait() for _ in range(4)]
+    # grid (no message yet), grid, the burst half a period after the previous start, the next message
+    assert starts == pytest.approx([0.001, 0.002, 0.0025, 0.0032]) and p.locked == 2
+    with pytest.raises(ValueError):
+        LockedPacer(c, 1000.0, src, min_gap=0.0)
