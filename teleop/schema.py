@@ -2,8 +2,12 @@
 key, and :data:`RANGES`, the one table of each numeric setting's valid range and unit.
 
 Defaults live here (the dataclass defaults are the defaults; configs/default.yaml spells them out
-with comments). Loading, merging and checking a YAML file is :mod:`teleop.config`, which re-exports
-every name of this module.
+with comments). The exception is ``rig.simulated.effects``: its switches, defaults and ranges are
+the effect catalogue's entries (:mod:`teleop.effects_config`). A rig's section holds only that rig's
+settings: ``rig.simulated`` everything only the simulators use, ``rig.zenoh`` the bridge's; the
+instrument's own description (``instrument``, ``sheath``) is what the slave knows. :data:`MOVED` maps the
+keys of the former layout to their place. Loading, merging and checking a YAML file is
+:mod:`teleop.config`, which re-exports every name of this module.
 """
 from __future__ import annotations
 
