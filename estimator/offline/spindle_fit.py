@@ -19,6 +19,7 @@ Torque models are named by the parameters they free on top of the base (rho, Q, 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
@@ -46,7 +47,7 @@ EXTENSIONS = {
 #: (lo, hi, scale) per torque parameter.
 BOUNDS = {"rho": (0.0, 5.0, 0.1), "Q": (1e-3, 5.0, 0.05), "K_a": (0.0, 3.0, 0.1), "K_b": (0.0, 3.0, 0.1),
           "b": (-1.0, 1.0, 0.01), "rho_1": (-3.0, 3.0, 0.05), "rho_2": (-5.0, 5.0, 0.05), "k_p": (-0.2, 0.2, 0.005), "k_d": (-0.2, 0.2, 0.005), "f": (-0.1, 0.1, 0.001),
-          "f_s": (-0.2, 0.2, 0.005), "c_v": (-0.2, 0.2, 0.005),
+          "f_s": (-0.2, 0.2, 0.005), "theta_s": (0.005, 1.0, 0.02), "c_v": (-0.2, 0.2, 0.005),
           "theta_c": (0.0, 0.5, 0.01)}
 #: Start of an extension parameter when it is added to a fitted model (0 unless listed).
 EXTENSION_STARTS = {"theta_c": 0.03, "f_s": -0.01}
@@ -62,13 +63,14 @@ def band_centre(tau_p: np.ndarray) -> float:
 
 def fit_torque(bt: Batch, target: np.ndarray, free: tuple[str, ...] = (), start: SpindleParams | None = None,
                weights: np.ndarray | None = None, max_nfev: int = 300,
-               fixed: tuple[str, ...] = ()) -> tuple[SpindleParams, float]:
+               fixed: tuple[str, ...] = (), multistart: bool = False) -> tuple[SpindleParams, float]:
     """Fit the torque parameters BASE + ``free`` to ``target`` [N m], shape (n,), over a batch.
 
     ``weights`` (shape (n,), >= 0) scale the residuals (0 leaves a sample out); ``start`` gives
     one starting point (else three); at most ``max_nfev`` evaluations per start; ``fixed`` names
     base parameters held at their ``start`` values (e.g. rho from known pulley radii: with rho free,
-    K and Q are only known through rho cosh K and Q tanh K).
+    K and Q are only known through rho cosh K and Q tanh K); ``multistart`` runs the three
+    starting points from ``start`` (the fixed values kept) instead of the single one.
     Q is kept above 1.02 max |tau_p| at every start (both cables taut). Returns the parameters and
     the rms residual [N m]. Raises ValueError for an unknown parameter name or a shape mismatch.
     """
@@ -96,18 +98,23 @@ def fit_torque(bt: Batch, target: np.ndarray, free: tuple[str, ...] = (), start:
         return wts * (predict_torque(params(x), bt) - y)
 
     best = None
-    starts = [dict()] if start is not None else [dict(s) for s in _STARTS]
+    several = start is None or multistart
+    starts = [dict(s) for s in _STARTS] if several else [dict()]
     for s in starts:
-        p0 = base.with_values(**{k: (v * qmin if k == "Q" and start is None else v) for k, v in s.items()})
+        p0 = base.with_values(**{k: (v * qmin if k == "Q" and several else v) for k, v in s.items()})
         x0 = np.clip([getattr(p0, n) for n in names], lo + 1e-9, hi - 1e-9)
-        if start is None and "rho" in names:   # linear start for rho and b
+        if several and "b" in names:        # linear start for rho (unless fixed) and b
             Td = predict_torque(p0.with_values(rho=1.0, b=0.0, k_d=0.0, f=0.0), bt)
-            A = np.column_stack([Td, np.ones_like(Td)])
-            (r0, b0), *_ = np.linalg.lstsq(A, y, rcond=None)
-            x0[names.index("rho")], x0[names.index("b")] = np.clip(r0, 1e-3, 4.9), np.clip(b0, -0.9, 0.9)
+            if "rho" in names:
+                (r0, b0), *_ = np.linalg.lstsq(np.column_stack([Td, np.ones_like(Td)]), y, rcond=None)
+                x0[names.index("rho")] = np.clip(r0, 1e-3, 4.9)
+            else:
+                b0 = float(np.mean(y - p0.rho * Td))
+            x0[names.index("b")] = np.clip(b0, -0.9, 0.9)
         sol = least_squares(residual, x0, bounds=(lo, hi), x_scale=scale, diff_step=1e-4, max_nfev=max_nfev)
         if best is None or sol.cost < best.cost:
             best = sol
+    assert best is not None
     p = params(best.x)
     return p, float(np.sqrt(np.mean((predict_torque(p, bt) - y) ** 2)))
 
@@ -150,7 +157,7 @@ class Baseline:
 
     name: str
     params: dict
-    predict: object
+    predict: Callable[[Batch], tuple[np.ndarray, np.ndarray]]
 
 
 def _direction(bt: Batch) -> np.ndarray:
@@ -175,21 +182,27 @@ def fit_baselines(bt: Batch, tau_d: np.ndarray, theta_d: np.ndarray,
     the samples fitted (all by default; the phase formulas still run from the first sample)."""
     y, th = np.asarray(tau_d, dtype=float), np.asarray(theta_d, dtype=float)
     k = np.ones(y.shape, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
-    out = {}
+    out: dict[str, Baseline] = {}
     A1 = np.column_stack([bt.theta_p, np.ones_like(y)])
     (a, c), *_ = np.linalg.lstsq(A1[k], th[k], rcond=None)
     m = float(np.mean(y[k]))
-    out["constant"] = Baseline("constant", {"tau_d": m, "a": float(a), "c": float(c)},
-                               lambda b, m=m, a=a, c=c: (np.full(b.tau_p.shape, m), a * b.theta_p + c))
+
+    def pred_constant(b: Batch) -> tuple[np.ndarray, np.ndarray]:
+        return np.full(b.tau_p.shape, m), a * b.theta_p + c
+
+    out["constant"] = Baseline("constant", {"tau_d": m, "a": float(a), "c": float(c)}, pred_constant)
 
     def feats(b):
         return np.column_stack([b.tau_p, _direction(b), b.theta_p, np.ones_like(b.tau_p)])
 
     ct, *_ = np.linalg.lstsq(feats(bt)[k], y[k], rcond=None)
     ca, *_ = np.linalg.lstsq(feats(bt)[k], th[k], rcond=None)
+
+    def pred_linear(b: Batch) -> tuple[np.ndarray, np.ndarray]:
+        return feats(b) @ ct, feats(b) @ ca
+
     out["linear"] = Baseline("linear", {"torque": [float(v) for v in ct], "angle": [float(v) for v in ca],
-                                        "features": ["tau_p", "direction", "theta_p", "1"]},
-                             lambda b, ct=ct, ca=ca: (feats(b) @ ct, feats(b) @ ca))
+                                        "features": ["tau_p", "direction", "theta_p", "1"]}, pred_linear)
     qmin = 1.02 * float(np.max(np.abs(bt.tau_p)))
 
     def res(x):
@@ -202,6 +215,7 @@ def fit_baselines(bt: Batch, tau_d: np.ndarray, theta_d: np.ndarray,
                           x_scale=[0.05, 0.1, 0.1, 0.01], diff_step=1e-4, max_nfev=200)
         if best is None or s.cost < best.cost:
             best = s
+    assert best is not None
     Q, K, rho, b0 = map(float, best.x)
     _, dE = _phase(bt, Q, K)
     cang, *_ = np.linalg.lstsq(np.column_stack([bt.theta_p, -dE, np.ones_like(th)])[k], th[k], rcond=None)

@@ -6,7 +6,7 @@ torque units at the spindle (tension times the spindle radius r_p, N m), so only
 pulley radii appear::
 
     d       = theta_p - theta_ref
-    u       = tau_p - k_p d - c_v omega_p - f_s lag(tanh(omega_p / omega_s))   spindle torque on the cables [N m]
+    u       = tau_p - k_p d - c_v omega_p - f_s lag(tanh(omega_p / omega_s), theta_s)   spindle torque on the cables [N m]
     T_a,p   = (Q + u) / 2,   T_b,p = (Q - u) / 2                 the two proximal cable tensions     (S1)
     T_j,d   = profile memory of cable j, friction exponent K_j   (estimator.sheath envelope rule)    (S2)
     tau_d   = rho (1 + rho_1 d + rho_2 d^2) (T_a,d - T_b,d) + b + k_d d - f tanh(omega_p / omega_s)  (S3)
@@ -23,7 +23,7 @@ torque at zero cable torque difference [N m] (internal preload, sensor zero), k_
 elastic torque inside the proximal end (seal, spring, or the two cables' wrap angles changing in
 opposite senses with the angle; it loads the spindle, not the jaw), f_s [N m] friction at the
 spindle itself, ahead of the cables (bearings, seals; tension-independent, E8), whose direction
-term reverses over a spindle travel SPINDLE_TRAVEL (``angle_lag``: pre-sliding, E2), k_d
+term reverses over a spindle travel theta_s [rad] (default SPINDLE_TRAVEL; ``angle_lag``: pre-sliding, E2), k_d
 [N m/rad] an angle-dependent torque at the jaw side, f [N m] Coulomb friction beyond the jaw pulley
 (jaw pivot, and on this rig the load motor; E11), c_v [N m s/rad] viscous torque at the spindle
 (E3), n_k = r_p / r_d the kinematic ratio [-], lam [rad/(N m)] cable compliance seen at the
@@ -71,6 +71,7 @@ class SpindleParams:
     k_d: float = 0.0
     f: float = 0.0
     f_s: float = 0.0
+    theta_s: float = 0.05
     c_v: float = 0.0
     theta_c: float = 0.0
     n_k: float = 1.0
@@ -139,14 +140,19 @@ def make_batch(runs, centre: float, theta_ref: float, dt: float, step: int = 1) 
     sample spacing before decimation. Raises ValueError for an empty list or a run shorter than
     2 samples after decimation.
     """
-    taus, ths, oms, starts, side = [], [], [], [0], []
+    taus: list[np.ndarray] = []
+    ths: list[np.ndarray] = []
+    oms: list[np.ndarray] = []
+    starts, side = [0], []
     for tau, th in runs:
         tau, th = np.asarray(tau, dtype=float), np.asarray(th, dtype=float)
         om = spindle_rate(th, dt)
         tau, th, om = tau[::step], th[::step], om[::step]
         if tau.size < 2:
             raise ValueError("every run needs at least 2 samples after decimation")
-        taus.append(tau), ths.append(th), oms.append(om)
+        taus.append(tau)
+        ths.append(th)
+        oms.append(om)
         starts.append(starts[-1] + tau.size)
         side.append(initial_side(float(tau[0]), centre))
     if not taus:
@@ -202,7 +208,7 @@ def _cables(p: SpindleParams, bt: Batch, n_nodes: int) -> tuple[np.ndarray, np.n
     d = bt.theta_p - bt.theta_ref
     u = bt.tau_p - p.k_p * d - p.c_v * bt.omega_p
     if p.f_s != 0.0:
-        u = u - p.f_s * angle_lag(np.tanh(bt.omega_p / OMEGA_S), bt.theta_p, bt.starts, SPINDLE_TRAVEL)
+        u = u - p.f_s * angle_lag(np.tanh(bt.omega_p / OMEGA_S), bt.theta_p, bt.starts, max(p.theta_s, 1e-4))
     Td, dE = np.empty_like(u), np.empty_like(u)
     pair_kernel(np.ascontiguousarray(u), bt.starts, bt.side, float(p.Q), float(p.K_a), float(p.K_b), int(n_nodes),
                 Td, dE)

@@ -18,7 +18,10 @@ col  meaning                              file unit               here
 
 The front-end encoder and torque sensor face the jaw from the other side: their signs are flipped so
 that a positive spindle rotation and torque give a positive jaw rotation and torque (the data show
-theta_d = -0.89 theta_p + const before the flip). The sine frequency is read from the spindle
+theta_d = -0.92 theta_p + const before the flip). At BOTH ends a positive torque turns the shaft
+towards negative angles (the spindle torque is lower while its angle rises: friction opposes the
+motion), so the power into the tool is -tau_p omega_p; the model is driven by the torque and its
+signed parameters absorb this (the cable stretch shows as lam < 0, see estimator.online.spindle). The sine frequency is read from the spindle
 angle (:func:`sine_frequency`), the load level from the rank of the run's mean front-end command
 (equal to the file name's Y on the shipped folder), not from the header.
 """
@@ -84,7 +87,7 @@ class MrdRun:
 
 def default_mrd_dir() -> Path:
     """``<repo>/../shared/data/mrd-davinci``."""
-    return Path(__file__).resolve().parents[1].parent / "shared" / "data" / "mrd-davinci"
+    return Path(__file__).resolve().parents[3] / "shared" / "data" / "mrd-davinci"
 
 
 def sine_frequency(t: np.ndarray, x: np.ndarray) -> float:
@@ -96,11 +99,12 @@ def sine_frequency(t: np.ndarray, x: np.ndarray) -> float:
     m = 1 << int(math.ceil(math.log2(max(n, 2))))
     spec = np.abs(np.fft.rfft(x * np.hanning(n), 4 * m))
     k = int(np.argmax(spec[1:]) + 1)
+    peak = float(k)
     if 1 <= k < spec.size - 1:
         a, b, c = spec[k - 1], spec[k], spec[k + 1]
         den = a - 2 * b + c
-        k = k + (0.5 * (a - c) / den if den != 0 else 0.0)
-    return float(k / (4 * m * dt))
+        peak = k + (0.5 * (a - c) / den if den != 0 else 0.0)
+    return float(peak / (4 * m * dt))
 
 
 def _numbers(line: str) -> bool:

@@ -5,7 +5,8 @@
 * ``mrd_residuals.png`` torque RMSE [FS] over frequency x load: one-run calibration, the linear
   baseline, the folder model left out, and its residual against the phase of the spindle stroke;
 * ``mrd_bands.png``     model-free: spindle friction band half-width and jaw-side friction against
-  load and speed (E3, E8), the jaw angle gap between the directions (E12 / cable stretch).
+  load and speed (E3, E8), the jaw angle gap between the directions (E12 / cable stretch), and the
+  band edges against the jaw torque across loads (capstan e^(+-K) + E8, beside the encoders' ratio).
 
 Data: MRD Lab data repository, University of Minnesota (ODbL 1.0 / DbCL 1.0); the attribution is
 written into every figure and the report.
@@ -57,6 +58,30 @@ def _corners(runs: list[MrdRun]) -> list[MrdRun]:
         for lv in (ld[0], ld[-1]):
             out += [r for r in runs if round(r.frequency_hz, 2) == f and r.load_level == lv][:1]
     return out
+
+
+def _edges(ax, runs: list[MrdRun], bands: dict, sweep: dict) -> None:
+    """Spindle band edges against the jaw torque, every run; the capstan + E8 lines of the load sweep and the
+    slope the kinematic ratio would give (through the lightest slow run's centre)."""
+    j = np.array([1e3 * bands[r.name]["jaw_torque_mean_Nm"] for r in runs])
+    c = np.array([1e3 * bands[r.name]["band_centre_Nm"] for r in runs])
+    w = np.array([1e3 * bands[r.name]["band_half_width_Nm"] for r in runs])
+    ax.plot(j, c + w, "^", color="C3", ms=4, label="edge driving the load")
+    ax.plot(j, c - w, "v", color="C0", ms=4, label="edge back-driven")
+    ax.plot(j, c, ".", color="0.4", ms=4, label="band centre")
+    if sweep:
+        x = np.linspace(0.0, j.max() * 1.05, 20)
+        c0, f0 = 1e3 * sweep["centre_at_zero_jaw_torque_Nm"], 1e3 * sweep["intercept_half_width_Nm"]
+        ax.plot(x, c0 + f0 + sweep["slope_high"] * x, "-", color="C3", lw=0.8,
+                label=f"r e^K = {sweep['slope_high']:.2f} (r {sweep['r']:.2f}, K {sweep['K']:.2f})")
+        ax.plot(x, c0 - f0 + sweep["slope_low"] * x, "-", color="C0", lw=0.8, label=f"r e^-K = {sweep['slope_low']:.2f}")
+        k = int(np.argmin(j))
+        ax.plot(x, c[k] + sweep["n_k"] * (x - j[k]), "--", color="0.3", lw=0.8,
+                label=f"centre slope from the encoders, n_k = {sweep['n_k']:.3f}")
+    ax.set_xlabel("mean jaw torque [mN m]")
+    ax.set_ylabel("spindle torque [mN m]")
+    ax.set_title("capstan + E8: band edges across loads", fontsize=9)
+    ax.legend(fontsize=6)
 
 
 def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, directory: str | Path) -> list[Path]:
@@ -134,7 +159,7 @@ def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, director
     fig.savefig(paths[-1], dpi=80)
     plt.close(fig)
 
-    fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
+    fig, axes = plt.subplots(1, 4, figsize=(17, 3.6))
     bands = summary["bands"]
     freqs = sorted({round(r.frequency_hz, 2) for r in runs})
     cols = plt.cm.viridis(np.linspace(0, 0.85, len(freqs)))
@@ -155,6 +180,7 @@ def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, director
     axes[2].set_xlabel("mean jaw torque [mN m]")
     axes[2].set_ylabel("jaw angle half-gap between directions [deg]")
     axes[2].set_title("E12 / stretch: angle gap against load", fontsize=9)
+    _edges(axes[3], runs, bands, summary.get("load_sweep", {}))
     fig.suptitle(f"Model-free loop measurements, middle of the stroke ({_CREDIT})", fontsize=10)
     fig.tight_layout()
     paths.append(d / FIGURES[2])

@@ -5,8 +5,9 @@ Data: MRD Lab data repository, University of Minnesota (O'Neill, Stephens, Kowal
 
 Protocol (docs/findings.md, Finding 4):
 
-* calibration ``RUN`` (default: the slowest, lightest run) or ``segment:SECONDS`` (the first
-  SECONDS of every run, scored on the rest). The model's *inputs* are always the spindle torque
+* calibration ``RUN`` (default: the slowest, lightest run), ``kinematic:RUN`` (the same with the
+  torque scale rho fixed to 1 / n_k, the pulley radii ratio read from the calibration run's spindle
+  and jaw encoders) or ``segment:SECONDS`` (the first SECONDS of every run, scored on the rest). The model's *inputs* are always the spindle torque
   and angle; the calibration's jaw torque and angle are the fit *targets* (the spindle side alone
   cannot give the torque scale, the jaw-side offset or the friction beyond the jaw pulley; the
   JSON lists them under ``not_from_proximal``). Scored runs never contribute a distal sample.
@@ -21,11 +22,20 @@ import math
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from estimator.offline.spindle_fit import EXTENSIONS, band_centre, fit_baselines
-from estimator.offline.spindle_shared import RunData, batch_of, leave_one_out, select_extensions, shared_fit
+from estimator.offline.spindle_shared import (
+    RunData,
+    batch_of,
+    kinematic_ratio,
+    leave_one_out,
+    load_sweep,
+    select_extensions,
+    shared_fit,
+)
 from estimator.online.spindle import (
     SpindleParams,
     first_reversal,
@@ -41,6 +51,10 @@ __all__ = ["analyze_mrd", "format_mrd", "write_mrd_report", "parse_calibration",
 
 SCORE_FROM_S = 0.5         # the first reversal is searched after this [s] (the load motor ramps in first)
 FIT_STEP, SHARED_STEP = 10, 50      # decimation of the fits (1 kHz -> 100 Hz, 20 Hz)
+#: Extensions that scale with the load (band growth, torque ratio along the stroke): at one load level they
+#: trade off against the fixed torque scale and extrapolate wildly (K_b ran to its bound on run 00), so the
+#: ``kinematic:`` calibration does not offer them.
+LOAD_SCALING = ("K_b", "rho_1", "rho_2")
 NOT_FROM_PROXIMAL = {
     "rho": "torque scale (r_d / r_p times the ratio of the two sensors' gains): one run at one load level shows "
            "the load only through rho times the load; needs at least two load levels with jaw torque",
@@ -68,10 +82,11 @@ class _Progress:
             sys.stderr.write("\n")
 
 
-def parse_calibration(spec: str | None, runs: list[MrdRun]) -> tuple[str, object]:
-    """("run", names) or ("segment", seconds) from ``--calibration``: ``RUN`` or ``RUN,RUN,...``
-    (calibrate on those runs together, score the others), or ``segment:SECONDS``; default the
-    slowest, lightest run. ``names`` is the comma-separated string.
+def parse_calibration(spec: str | None, runs: list[MrdRun]) -> tuple[str, Any]:
+    """("run", names), ("kinematic", names) or ("segment", seconds) from ``--calibration``: ``RUN`` or
+    ``RUN,RUN,...`` (calibrate on those runs together, score the others), ``kinematic:RUN[,RUN...]``
+    (the same with rho = 1 / n_k from the calibration runs' encoders), or ``segment:SECONDS``; default
+    the slowest, lightest run. ``names`` is the comma-separated string.
 
     Raises ConfigError for an unknown run name, every run named, or a segment outside
     [1, half the shortest run] s.
@@ -89,13 +104,16 @@ def parse_calibration(spec: str | None, runs: list[MrdRun]) -> tuple[str, object
         if not 1.0 <= s <= 0.5 * shortest:
             raise ConfigError(f"--calibration {spec}: SECONDS must be in [1, {0.5 * shortest:.1f}]")
         return "segment", s
+    mode = "run"
+    if spec.startswith("kinematic:"):
+        mode, spec = "kinematic", spec.split(":", 1)[1]
     asked = [n.strip() for n in spec.split(",") if n.strip()]
     unknown = [n for n in asked if n not in names]
     if unknown or not asked:
         raise ConfigError(f"--calibration {spec}: no run named {', '.join(unknown) or spec!r} (runs: {', '.join(names)})")
     if len(set(asked)) == len(names):
         raise ConfigError(f"--calibration {spec}: every run is a calibration run, none is left to score")
-    return "run", ",".join(dict.fromkeys(asked))
+    return mode, ",".join(dict.fromkeys(asked))
 
 
 def band_measurements(run: MrdRun, bins_deg: float = 2.0) -> dict:
@@ -143,15 +161,20 @@ def _rundata(r: MrdRun, stop: int | None = None) -> RunData:
                    min(first_reversal(r.theta_p, r.dt, SCORE_FROM_S), n - 2), r.dt)
 
 
-def _calibrate(cal: list[RunData], tick) -> tuple[dict, dict, dict, float, float]:
-    """Base and selected models plus the baselines on calibration data; (fits, baselines, selection, centre, ref)."""
+def _calibrate(cal: list[RunData], tick, kinematic: bool = False) -> tuple[dict, dict, dict, float, float]:
+    """Base and selected models plus the baselines on calibration data; (fits, baselines, selection, centre, ref).
+    ``kinematic`` fixes rho = 1 / n_k (:func:`kinematic_ratio` of the calibration data)."""
     centre = float(np.mean([band_centre(c.tau_p) for c in cal]))
     ref = float(np.mean([np.mean(c.theta_p) for c in cal]))
-    sel = select_extensions(cal, centre, ref, FIT_STEP, progress=tick)
-    fits = {"pair": shared_fit(cal, (), centre, ref, FIT_STEP, start=SpindleParams(**sel["base"]["params"]))}
+    fixed: tuple[str, ...] = ("rho",) if kinematic else ()
+    start = SpindleParams(rho=1.0 / kinematic_ratio(cal)) if kinematic else None
+    cands = tuple(c for c in EXTENSIONS if not (kinematic and c in LOAD_SCALING))
+    sel = select_extensions(cal, centre, ref, FIT_STEP, candidates=cands, progress=tick, fixed=fixed, start=start)
+    fits = {"pair": shared_fit(cal, (), centre, ref, FIT_STEP, start=SpindleParams(**sel["base"]["params"]),
+                               fixed=fixed)}
     if sel["chosen"]:
         fits["pair+" + "+".join(sel["chosen"])] = shared_fit(cal, tuple(sel["chosen"]), centre, ref, FIT_STEP,
-                                                             start=SpindleParams(**sel["params"]))
+                                                             start=SpindleParams(**sel["params"]), fixed=fixed)
     tick("calibrated")
     bt, yt, ya, w = batch_of(cal, centre, ref, FIT_STEP)
     base = fit_baselines(bt, yt, ya, mask=w > 0)
@@ -176,21 +199,32 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
         raise DataError("no MRD runs to analyse")
     mode, cal = parse_calibration(calibration, runs)
     fs = float(max(r.tau_d.max() for r in runs) - min(r.tau_d.min() for r in runs))
-    n_cal = 1 if mode == "run" else len(runs)
+    n_cal = len(runs) if mode == "segment" else 1
     tick = _Progress(progress, n_cal * 14 + len(runs) + 14 + (len(runs) if loro else 0))
-    out = {"mode": "mrd", "full_scale_Nm": fs, "attribution": ATTRIBUTION, "not_from_proximal": NOT_FROM_PROXIMAL,
+    out: dict[str, Any] = {"mode": "mrd", "full_scale_Nm": fs, "attribution": ATTRIBUTION, "not_from_proximal": NOT_FROM_PROXIMAL,
            "scored_from": "the first reversal of the spindle after 0.5 s (the stroke before it initialises the "
                           "estimator, as the paper's calibration pull does)", "runs": {},
            "found": {r.name: {"frequency_hz": r.frequency_hz, "load_level": r.load_level,
                               "load_command_A": r.load_command, "n_samples": len(r),
                               "duration_s": float(r.time[-1])} for r in runs}}
-    details = {"pred": {}, "shared_pred": {}, "loro_pred": {}, "k0": {}}
+    details: dict[str, dict] = {"pred": {}, "shared_pred": {}, "loro_pred": {}, "k0": {}}
     cal_inputs = {"inputs": ["spindle torque", "spindle encoder"], "targets": ["jaw torque", "jaw encoder"]}
-    if mode == "run":
-        cal_names = cal.split(",")
-        fits, base, sel, centre, ref = _calibrate([_rundata(r) for r in runs if r.name in cal_names], tick)
-        out["calibration"] = {"mode": "run", "run": cal, "runs": cal_names, **cal_inputs,
+    plan: list[tuple[MrdRun, dict, dict, float, float, int]] = []
+    if mode in ("run", "kinematic"):
+        cal_names = str(cal).split(",")
+        cal_runs = [_rundata(r) for r in runs if r.name in cal_names]
+        fits, base, sel, centre, ref = _calibrate(cal_runs, tick, kinematic=mode == "kinematic")
+        out["calibration"] = {"mode": mode, "run": cal, "runs": cal_names, **cal_inputs,
                               "scored": "every other run, from its spindle signals only"}
+        if mode == "kinematic":
+            n_k = kinematic_ratio(cal_runs)
+            out["calibration"]["fixed"] = {"rho": {
+                "value": 1.0 / n_k, "n_k": n_k,
+                "from": "1 / n_k, n_k = slope of jaw encoder against spindle encoder in full motion (middle 60 % "
+                        "of the stroke, an offset per direction) of the calibration run(s): the jaw encoder is a "
+                        "distal reading of the calibration run; the pulley radii ratio r_d / r_p, equal to the "
+                        "torque scale only if both torque sensors share one gain and no power is lost in the "
+                        "band centre"}}
         plan = [(r, fits, base, centre, ref, _rundata(r).k0) for r in runs if r.name not in cal_names]
         out["parameters"] = {n: p.as_dict() for n, p in fits.items()}
         out["baseline_parameters"] = {n: b.params for n, b in base.items()}
@@ -198,9 +232,9 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
     else:
         out["calibration"] = {"mode": "segment", "seconds": cal, **cal_inputs,
                               "scored": f"t >= {cal} s of the same run, from its spindle signals only"}
-        plan, out["parameters"] = [], {}
+        out["parameters"] = {}
         for r in runs:
-            n = int(round(cal / r.dt))
+            n = int(round(float(cal) / r.dt))
             fits, base, sel, centre, ref = _calibrate([_rundata(r, n)], tick)
             plan.append((r, fits, base, centre, ref, n))
             out["parameters"][r.name] = {k: p.as_dict() for k, p in fits.items()}
@@ -212,7 +246,10 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
             models[name] = _score(pt, pa, r, k0, fs)
             details["pred"][r.name] = (pt, pa)          # the last one is the selected model
         chosen = list(fits)[-1]
-        bl = {n: _score(*m.predict(b), r, k0, fs) for n, m in base.items()}
+        bl = {}
+        for n, m in base.items():
+            bt_, ba_ = m.predict(b)
+            bl[n] = _score(bt_, ba_, r, k0, fs)
         out["runs"][r.name] = {"frequency_hz": r.frequency_hz, "load_level": r.load_level, "model": chosen,
                                **models[chosen], "models": models, "baselines": bl}
         details["k0"][r.name] = k0
@@ -225,11 +262,26 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
                       "better_than_linear_every_run": bool(all(
                           s["torque_rmse_fs"] < s["baselines"]["linear"]["torque_rmse_fs"] for s in scored))}
     out["bands"] = {r.name: band_measurements(r) for r in runs}
+    out["load_sweep"] = _load_sweep(runs)
     if folder:
         _shared(runs, out, details, fs, tick, loro)
     tick.done()
     out["elapsed_s"] = time.perf_counter() - t_start
     return out, details
+
+
+def _load_sweep(runs: list[MrdRun]) -> dict:
+    """The band edges against the jaw torque across loads (:func:`load_sweep`, one group per frequency) beside
+    the kinematic ratio n_k; {} when no frequency has two loads. A diagnosis on every run's jaw channels."""
+    groups: dict[float, list[RunData]] = {}
+    for r in runs:
+        groups.setdefault(round(r.frequency_hz, 2), []).append(_rundata(r))
+    if max(len(g) for g in groups.values()) < 2:
+        return {}
+    sw = load_sweep(list(groups.values()))
+    n_k = kinematic_ratio([d for g in groups.values() for d in g])
+    return {**sw, "n_k": n_k, "r_over_n_k": sw["r"] / n_k,
+            "uses": "jaw torque and encoder of every run (folder diagnosis, not a calibration)"}
 
 
 def _shared(runs, out, details, fs, tick, loro: bool) -> None:
@@ -241,7 +293,7 @@ def _shared(runs, out, details, fs, tick, loro: bool) -> None:
     free = tuple(sel["chosen"])
     p = shared_fit(rd, free, centre, ref, SHARED_STEP, start=SpindleParams(**sel["params"]))
     tick("shared fit")
-    sh = {"model": "pair" + "".join("+" + c for c in free), "selection": sel, "parameters": p.as_dict(),
+    sh: dict[str, Any] = {"model": "pair" + "".join("+" + c for c in free), "selection": sel, "parameters": p.as_dict(),
           "fitted_on": "every run from its first reversal (in-sample)", "runs": {}}
     for r, d in zip(runs, rd):
         b = make_batch([(r.tau_p, r.theta_p)], centre, ref, r.dt)
@@ -253,7 +305,7 @@ def _shared(runs, out, details, fs, tick, loro: bool) -> None:
     out["shared"] = sh
     if not loro:
         return
-    lo = {"model": sh["model"], "note": "extensions chosen on the time split of all runs; parameters refitted "
+    lo: dict[str, Any] = {"model": sh["model"], "note": "extensions chosen on the time split of all runs; parameters refitted "
                                         "without the scored run", "runs": {}, "parameters": {}}
     for r, d, (q, pt, pa) in zip(runs, rd, leave_one_out(rd, free, centre, ref, p, SHARED_STEP, progress=tick)):
         lo["runs"][r.name] = _score(pt, pa, r, d.k0, fs)
@@ -266,8 +318,10 @@ def _shared(runs, out, details, fs, tick, loro: bool) -> None:
 def format_mrd(s: dict) -> str:
     """The table printed by ``teleop analyze --mrd`` (RMSE and max |error| as fractions of full scale)."""
     cal = s["calibration"]
-    head = (f"calibrated on run {cal['run']}" if cal["mode"] == "run"
-            else f"calibrated on the first {cal['seconds']:g} s of each run")
+    head = (f"calibrated on the first {cal['seconds']:g} s of each run" if cal["mode"] == "segment"
+            else f"calibrated on run {cal['run']}")
+    if "fixed" in cal:
+        head += f" with rho = 1 / n_k = {cal['fixed']['rho']['value']:.3f} from its encoders"
     found = s["found"].values()
     freqs = ", ".join(f"{f:g}" for f in sorted({round(v["frequency_hz"], 2) for v in found}))
     cmds = sorted({round(v["load_command_A"], 3) for v in found})

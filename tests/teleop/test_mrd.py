@@ -14,7 +14,8 @@ from estimator.offline.spindle_fit import band_centre, fit_torque
 from teleop.errors import ConfigError, DataError
 from teleop.app.mrd import (DISTAL_COUNTS_PER_REV, DISTAL_SIGN, PROXIMAL_COUNTS_PER_REV, TORQUE_NM_PER_COUNT,
                         default_mrd_dir, load_mrd_dir, read_mrd)
-from teleop.app.mrd_report import analyze_mrd, band_measurements, parse_calibration
+from teleop.app.mrd_report import analyze_mrd, band_measurements, format_mrd, parse_calibration
+from estimator.offline.spindle_shared import RunData, kinematic_ratio, load_sweep
 
 MRD_DIR = default_mrd_dir()
 needs_mrd = pytest.mark.skipif(not MRD_DIR.is_dir(), reason=f"MRD da Vinci data not found at {MRD_DIR}: the "
@@ -125,6 +126,50 @@ def test_analysis_keys_calibration_and_what_was_fitted_on(tmp_path):
     seg, _ = analyze_mrd(runs, "segment:3", loro=False)
     assert set(seg["runs"]) == {"00", "01", "10"} and seg["calibration"]["mode"] == "segment"
     json.dumps(s, allow_nan=False)
+
+
+def test_default_folder_is_beside_the_repository():
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[2]                       # tests/teleop/ -> repository
+    assert default_mrd_dir() == root.parent / "shared" / "data" / "mrd-davinci"
+
+
+def test_kinematic_calibration_fixes_rho_from_the_encoders(tmp_path):
+    """kinematic:RUN holds rho at 1 / n_k read from the calibration run's two encoders, records where it
+    came from, and offers no load-scaling extension; n_k of a 1:1 simulator pair is close to 1."""
+    runs = _folder(tmp_path)
+    assert parse_calibration("kinematic:01", runs) == ("kinematic", "01")
+    with pytest.raises(ConfigError):
+        parse_calibration("kinematic:99", runs)
+    n_k = kinematic_ratio([RunData(r.name, r.tau_p, r.theta_p, r.tau_d, r.theta_d,
+                                   first_reversal(r.theta_p, r.dt), r.dt) for r in runs[:1]])
+    assert 0.8 < n_k < 1.05                                          # equal pulleys; the elastic joint lags
+    s, _ = analyze_mrd(runs, "kinematic:00", folder=False)
+    fixed = s["calibration"]["fixed"]["rho"]
+    assert fixed["value"] == pytest.approx(1.0 / fixed["n_k"]) and "jaw encoder" in fixed["from"]
+    for params in s["parameters"].values():
+        assert params["rho"] == pytest.approx(fixed["value"])
+    tried = {c for rnd in s["selection"]["rounds"] for c in rnd}
+    assert tried and not tried & {"K_b", "rho_1", "rho_2"}
+    assert "rho = 1 / n_k" in format_mrd(s)
+
+
+def test_load_sweep_recovers_capstan_edges():
+    """Two synthetic runs whose band edges follow tau_p = c +- F0 + r e^(+-K) tau_d: the sweep gives r, K, F0."""
+    r_true, K, F0, c = 1.1, 0.3, 0.05, -0.01
+    t = np.arange(0.0, 20.0, 0.001)
+    th = 0.5 * (1 - np.cos(2 * math.pi * 0.2 * t))
+    s = np.sign(np.sin(2 * math.pi * 0.2 * t))                      # +1 while the angle rises
+    runs = []
+    for i, load in enumerate((0.01, 0.04)):
+        td = load + 0.002 * th
+        tp = c - s * F0 + r_true * np.exp(-s * K) * td              # rising angle: back-driven edge
+        runs.append(RunData(f"0{i}", tp, th, td, th, first_reversal(th, 0.001), 0.001))
+    sw = load_sweep([runs])
+    assert sw["r"] == pytest.approx(r_true, rel=0.02) and sw["K"] == pytest.approx(K, abs=0.02)
+    assert sw["intercept_half_width_Nm"] == pytest.approx(F0, rel=0.05)
+    with pytest.raises(ValueError):
+        load_sweep([runs[:1]])
 
 
 def test_cli_mrd_prints_and_writes_json(tmp_path, capsys):
