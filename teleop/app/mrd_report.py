@@ -52,7 +52,7 @@ __all__ = ["analyze_mrd", "format_mrd", "write_mrd_report", "parse_calibration",
 SCORE_FROM_S = 0.5         # the first reversal is searched after this [s] (the load motor ramps in first)
 FIT_STEP, SHARED_STEP = 10, 50      # decimation of the fits (1 kHz -> 100 Hz, 20 Hz)
 #: Extensions that scale with the load (band growth, torque ratio along the stroke): at one load level they
-#: trade off against the fixed torque scale and extrapolate wildly (K_b ran to its bound on run 00), so the
+#: trade off against the fixed torque scale and extrapolate wildly (on run 00 K_b sent K_a to its bound), so the
 #: ``kinematic:`` calibration does not offer them.
 LOAD_SCALING = ("K_b", "rho_1", "rho_2")
 NOT_FROM_PROXIMAL = {
