@@ -121,3 +121,40 @@ def test_the_operator_holds_the_clutch_for_clutch_time_when_the_console_says_ali
     op.on_console("ALIGN")
     held = [op.read(0.002 + 0.001 * k).buttons for k in range(60)]
     assert held[:50] == [0b10] * 50 and set(held[50:]) == {0} and op.clutches == 1
+
+
+def test_one_operator_over_several_axes_pulls_each_tendon_of_each_pair_and_tags_every_axis():
+    from master.device import MultiAxisState
+    from master.protocols import joint_marker, paper_protocol
+    # two pair axes on a toy plant: + hand motion loads tendon a, - loads tendon b
+    op = ScriptedOperator([paper_protocol(0.25, (6.0, 2.0)), paper_protocol(0.25, (4.0,))], start_delay=0.0,
+                          dwell=0.05)
+    assert op.n_axes == 2
+    t, T, peaks, tags = 0.0, [(0.0, 0.0), (0.0, 0.0)], [[0.0, 0.0], [0.0, 0.0]], set()
+    while t < 30.0 and not op.finished:
+        op.watch(T, engaged=True)
+        state = op.read(t)
+        assert isinstance(state, MultiAxisState) and len(state.positions) == 2
+        T = [(STIFFNESS * max(0.0, p), STIFFNESS * max(0.0, -p)) for p in state.positions]
+        for k in range(2):
+            peaks[k] = [max(peaks[k][s], T[k][s]) for s in range(2)]
+            tags.add((k, joint_marker(op.marker, k)))
+        op.set_forces([0.0, 0.0], t)
+        t += DT
+    assert op.finished and op.timeouts == 0
+    assert peaks[0] == pytest.approx([6.0, 6.0], abs=1.0) and peaks[1] == pytest.approx([4.0, 4.0], abs=1.0)
+    assert {(0, 1), (0, 2), (1, 1), (1, 2)} <= tags              # tendon a's segments, then b's, on each axis
+
+
+def test_an_operator_of_several_axes_needs_one_valid_view_per_axis():
+    from master.protocols import Segment
+    op = ScriptedOperator([(Segment(1.0, 1, 1),), (Segment(1.0, 1),)], start_delay=0.0)
+    op.watch([(0.0,), (0.0,)], engaged=True)                     # axis 0 watches tendon b: not in this view
+    op.read(0.0)
+    assert op.read(0.1).positions == (0.0, 0.0)
+    op.watch([(0.0, float("nan")), (0.0,)], engaged=True)        # a non-finite reading: nothing seen
+    assert op.read(0.2).positions == (0.0, 0.0)
+    with pytest.raises(ConfigError, match="side"):
+        ScriptedOperator([(Segment(1.0, 1, 2),)])
+    with pytest.raises(ConfigError, match="every axis"):
+        ScriptedOperator([PROTOCOLS["short"], ()])
