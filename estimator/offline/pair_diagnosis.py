@@ -41,10 +41,10 @@ from scipy.optimize import least_squares
 from estimator.offline.diagnosis import PENALTY, STRUCTURE_RATIO
 from estimator.offline.diagnosis_fit import noise_level
 from estimator.offline.pair import fit_pair
-from estimator.offline.pair_models import (CAUSE_OF_SEED, PAIR_EFFECTS, applicable, model_id, model_params,
-                                   predict_model)
+from estimator.offline.pair_models import (CAUSE_OF_SEED, PAIR_EFFECTS, applicable, head, model_id, model_params,
+                                           predict_model)
 
-__all__ = ["CAPSTAN_STARTS", "MAX_NFEV", "CV_NFEV", "fit_model", "folds", "cross_validate", "diagnose_pair",
+__all__ = ["CAPSTAN_STARTS", "MAX_NFEV", "CV_NFEV", "FIT_TOL", "fit_model", "folds", "cross_validate", "diagnose_pair",
            "FitResult"]
 
 #: Starting points of the capstan structure (G [-], lam [rad/N], K_a, K_b [-], k [N/rad]).
@@ -56,6 +56,9 @@ _BAD = 10.0     # residual [rad] returned for a parameter set the kernels refuse
 #: Most residual evaluations of one least-squares start (bounds the run time on data far from every
 #: model; the KAIST fits converge in 30-190).
 MAX_NFEV = 200
+#: Relative tolerances (ftol, xtol) of every least-squares fit: the fits stop once the training cost
+#: changes by less than 1e-6 of itself (angle changes far below the tracker noise), not at scipy's 1e-8.
+FIT_TOL = 1e-6
 #: Most residual evaluations of a cross-validation refit (warm-started from the full training fit).
 CV_NFEV = 40
 #: A candidate whose training-error ratio alone gives a price >= 1 + SCREEN_MARGIN is not cross-validated.
@@ -121,9 +124,11 @@ def fit_model(structure: str, effects: tuple[str, ...], rec, train: slice | np.n
     hi = np.array([p.hi for p in params])
     y = np.asarray(rec.angle, dtype=float)[train]
 
+    part = head(rec, train)                       # the model is causal: run it up to the fitted samples only
+
     def residual(x: np.ndarray) -> np.ndarray:
         try:
-            th, _ = predict_model(structure, effects, dict(zip(names, map(float, x))), rec)
+            th, _ = predict_model(structure, effects, dict(zip(names, map(float, x))), part)
         except ValueError:
             return np.full(y.size, _BAD)
         return th[train] - y
@@ -137,7 +142,7 @@ def fit_model(structure: str, effects: tuple[str, ...], rec, train: slice | np.n
     best = None
     for x0 in x0s:
         sol = least_squares(residual, x0, bounds=(lo, hi), x_scale=[p.scale for p in params], diff_step=1e-3,
-                            max_nfev=max_nfev)
+                            max_nfev=max_nfev, ftol=FIT_TOL, xtol=FIT_TOL)
         if best is None or sol.cost < best.cost:
             best = sol
     assert best is not None                       # at least one start

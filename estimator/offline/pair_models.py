@@ -25,6 +25,8 @@ id                        literature   extension                                
                                        the sheath (drive, load cell, sheath compression)
 ``joint_stiffening``      E11          joint stiffness k + k2 [N/rad] beyond |theta| >    capstan
                                        theta_c [rad] (bending section stiffens)
+``tendon_toe``            E9           tendon compliance lam (1 + toe e^{-T/toe_tension}) capstan
+                                       (softer at low tension: strands bedding in)
 ========================= ============ ================================================ ==================
 
 Inputs of every model: a recording with ``time`` [s], ``command`` [rad] (motor side), ``T_a``,
@@ -43,7 +45,7 @@ from estimator.offline.pair import PairParams, mean_tension, play
 from estimator.pair_kernels import simulate_pair
 
 __all__ = ["Param", "PairEffect", "STRUCTURES", "PAIR_EFFECTS", "CAUSE_OF_SEED", "model_id", "parse_model",
-           "model_params", "applicable", "predict_model"]
+           "model_params", "applicable", "predict_model", "head"]
 
 
 @dataclass(frozen=True)
@@ -118,6 +120,12 @@ PAIR_EFFECTS: dict[str, PairEffect] = {e.id: e for e in (
                "tension keeps rising steeply", "joint stiffness k + k2 beyond |theta| > theta_c",
                (Param("k2", "N/rad", 0.0, 200.0, (3.0,), 0.5), Param("theta_c", "rad", 0.02, 1.0, (0.15,), 0.02)),
                ("capstan",)),
+    PairEffect("tendon_toe", "E9", "a tendon softer at low tension (strands bedding in, a stiffening "
+               "stress-strain law)", "the released tendon's proximal tension falls fast and then creeps toward "
+               "zero; the joint leaves the plateau after a reversal from low tension later than a linear tendon "
+               "allows", "node compliance lam (1 + toe e^{-T / toe_tension})",
+               (Param("toe", "-", 0.0, 200.0, (4.0,), 0.5), Param("toe_tension", "N", 0.1, 10.0, (1.0,), 0.1)),
+               ("capstan",)),
 )}
 
 
@@ -173,7 +181,8 @@ def predict_model(structure: str, effects: tuple[str, ...], values: dict[str, fl
         th, T_in = simulate_pair(rec.command, (float(rec.T_a[0]), float(rec.T_b[0])), v["G"], (v["lam"], v["lam"]),
                                  (v["K_a"], v["K_b"]), v["k"], lam_s=v.get("lam_s", 0.0), tau_c=v.get("tau_c", 0.0),
                                  shape=v.get("shape", 0.0), offset=a, k2=v.get("k2", 0.0),
-                                 theta_c=v.get("theta_c", 0.0), n_nodes=n_nodes)
+                                 theta_c=v.get("theta_c", 0.0), toe=v.get("toe", 0.0),
+                                 toe_tension=v.get("toe_tension", 1.0), n_nodes=n_nodes)
         theta = th + v["theta0"]
     if "joint_backlash" in effects:
         theta = play(theta, v["b"], float(theta[0]))
@@ -183,6 +192,40 @@ def predict_model(structure: str, effects: tuple[str, ...], values: dict[str, fl
     if not np.all(np.isfinite(theta)):
         raise ValueError(f"non-finite angle from {model_id(structure, effects)} at {values}")
     return theta, T_in
+
+
+#: Look-ahead kept beyond the last fitted sample by :func:`head` [s]: more than the largest sensor
+#: delay the catalogue allows (``sensor_delay``: |tau| <= 0.2 s), whose interpolation reads ahead.
+LOOKAHEAD_S = 0.25
+
+
+class _Head:
+    """The first ``n`` samples of a recording (time, command, T_a, T_b, angle)."""
+
+    def __init__(self, rec, n: int):
+        self.time = np.asarray(rec.time)[:n]
+        self.command = np.asarray(rec.command)[:n]
+        self.T_a = np.asarray(rec.T_a)[:n]
+        self.T_b = np.asarray(rec.T_b)[:n]
+        self.angle = np.asarray(rec.angle)[:n]
+
+
+def head(rec, used):
+    """The part of a recording a fit on the samples ``used`` (slice or index array) needs.
+
+    Every model here is causal (the prediction of sample i reads the inputs up to sample i, the sensor
+    delay up to :data:`LOOKAHEAD_S` later), so a fit on the first cycle need not run the model over
+    the later cycles: the predictions at the ``used`` samples are the same, bit for bit. Returns
+    ``rec`` itself when nothing can be cut.
+    """
+    t = np.asarray(rec.time, dtype=float)
+    n = t.size
+    if isinstance(used, slice):
+        last = max(range(*used.indices(n)), default=n - 1)
+    else:
+        last = int(np.max(used)) if np.size(used) else n - 1
+    stop = int(np.searchsorted(t, t[last] + LOOKAHEAD_S, side="right")) + 1
+    return rec if stop >= n else _Head(rec, stop)
 
 
 def _check() -> None:

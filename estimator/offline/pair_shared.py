@@ -25,7 +25,13 @@ Shared models are fitted the same way (training samples of every configuration t
   variants point at, as one shared slope;
 * ``capstan+T`` and its variants (:data:`CHOICE`): the measured proximal tensions enter the fit too
   (weight :data:`TENSION_WEIGHT`), s = G / lam [N/rad] is fitted in place of lam and G is held at
-  :data:`G_FIXED` (the data pin s, not G); ``G falls with N`` and ``lam grows with N`` add one slope.
+  :data:`G_FIXED` (the data pin s, not G); ``G falls with N`` and ``lam grows with N`` add one slope,
+  ``tendon toe`` the tendon softer at low tension (E9: toe, toe_tension; a tendon property, the same
+  in every shape);
+* other ``capstan+T`` variants, not in the choice by default (each went to its neutral value or lost on
+  the training cycles, docs/findings.md, Finding 3): ``one K0`` (the same base friction for both
+  tendons), ``mu per tendon``, ``pretension profile`` (E5), ``friction offset`` (E8), ``joint
+  friction`` (E11/E12).
 
 The structure is chosen by leave-one-configuration-out on the training cycles
 (:func:`estimator.offline.pair_general.choose_shared`). Leave-one-configuration-out for the report: the chosen
@@ -41,13 +47,15 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import least_squares
 
-from estimator.offline.pair_diagnosis import MAX_NFEV
-from estimator.offline.pair_models import Param, model_params, predict_model
+from estimator.offline.pair_diagnosis import FIT_TOL, MAX_NFEV
+from estimator.offline.pair_models import Param, head, model_params, predict_model
 
 __all__ = ["SharedModel", "SHARED_MODELS", "CHOICE", "COMPARED", "TENSION_WEIGHT", "LEAVE_ONE_OUT", "fit_shared",
            "predict_config", "leave_one_out", "shared_params", "config_values", "score"]
 
 _MU = Param("mu", "1/rad", -1.0, 3.0, (0.15,), 0.02)
+_MU_A = Param("mu_a", "1/rad", -1.0, 3.0, (0.15,), 0.02)
+_MU_B = Param("mu_b", "1/rad", -1.0, 3.0, (0.15,), 0.02)
 _S = Param("s", "N/rad", 0.05, 100.0, (3.0,), 0.2)
 #: Weight of the proximal-tension residual [rad/N] in the "+T" shared fits: 1 N of tension error
 #: costs as much as 0.57 deg of angle error (tension range ~10 N, angle range 20-70 deg).
@@ -85,6 +93,8 @@ class SharedModel:
     stiffness_ratio: bool = False
     fixed: tuple[tuple[str, float], ...] = ()
     lam_slope: bool = False
+    same_K0: bool = False
+    mu_per_tendon: bool = False
 
 
 SHARED_MODELS = {m.name: m for m in (
@@ -115,10 +125,33 @@ SHARED_MODELS = {m.name: m for m in (
                 ({"lam_N": 0.095, "s": 3.16, "k": 5.86, "K0_a": 0.67, "K0_b": 0.31, "mu": 0.10},
                  {"lam_N": 0.03, "s": 2.6, "k": 4.7, "K0_a": 0.55, "K0_b": 0.22, "mu": 0.12}),
                 tension_weight=TENSION_WEIGHT, stiffness_ratio=True, fixed=(("G", G_FIXED),), lam_slope=True),
+    SharedModel("capstan+T, one K0", "capstan", (), True,
+                ({"s": 2.6, "k": 5.0, "K0": 0.4, "mu": 0.14}, {"s": 3.0, "k": 4.0, "K0": 0.3, "mu": 0.12}),
+                tension_weight=TENSION_WEIGHT, stiffness_ratio=True, fixed=(("G", G_FIXED),), same_K0=True),
+    SharedModel("capstan+T, mu per tendon", "capstan", (), True,
+                ({"s": 2.6, "k": 5.0, "K0_a": 0.57, "K0_b": 0.2, "mu_a": 0.12, "mu_b": 0.16},
+                 {"s": 2.6, "k": 5.0, "K0_a": 0.6, "K0_b": 0.1, "mu_a": 0.08, "mu_b": 0.25}),
+                tension_weight=TENSION_WEIGHT, stiffness_ratio=True, fixed=(("G", G_FIXED),), mu_per_tendon=True),
+    SharedModel("capstan+T, pretension profile", "capstan", ("pretension_profile",), True,
+                ({"s": 2.6, "k": 5.0, "K0_a": 0.57, "K0_b": 0.2, "mu": 0.14, "shape": 0.5},
+                 {"s": 2.6, "k": 5.0, "K0_a": 0.57, "K0_b": 0.2, "mu": 0.14, "shape": 0.9}),
+                tension_weight=TENSION_WEIGHT, stiffness_ratio=True, fixed=(("G", G_FIXED),)),
+    SharedModel("capstan+T, friction offset", "capstan", ("friction_offset",), True,
+                ({"s": 2.6, "k": 5.0, "K0_a": 0.57, "K0_b": 0.2, "mu": 0.14, "a": 0.3},
+                 {"s": 2.6, "k": 5.0, "K0_a": 0.4, "K0_b": 0.1, "mu": 0.1, "a": 1.5}),
+                tension_weight=TENSION_WEIGHT, stiffness_ratio=True, fixed=(("G", G_FIXED),)),
+    SharedModel("capstan+T, joint friction", "capstan", ("joint_friction",), True,
+                ({"s": 2.6, "k": 5.0, "K0_a": 0.57, "K0_b": 0.2, "mu": 0.14, "tau_c": 0.2},
+                 {"s": 2.6, "k": 5.0, "K0_a": 0.5, "K0_b": 0.2, "mu": 0.1, "tau_c": 0.8}),
+                tension_weight=TENSION_WEIGHT, stiffness_ratio=True, fixed=(("G", G_FIXED),)),
+    SharedModel("capstan+T, tendon toe", "capstan", ("tendon_toe",), True,
+                ({"s": 2.6, "k": 5.0, "K0_a": 0.57, "K0_b": 0.2, "mu": 0.14, "toe": 2.0, "toe_tension": 1.0},
+                 {"s": 2.6, "k": 5.0, "K0_a": 0.57, "K0_b": 0.2, "mu": 0.14, "toe": 8.0, "toe_tension": 0.5}),
+                tension_weight=TENSION_WEIGHT, stiffness_ratio=True, fixed=(("G", G_FIXED),)),
 )}
 #: Candidates of the shared structure, in the order of the forward choice by leave-one-configuration-out
 #: on the training cycles (:func:`estimator.offline.pair_general.choose_shared`).
-CHOICE = ("capstan", "capstan+T", "capstan+T, G falls with N", "capstan+T, lam grows with N")
+CHOICE = ("capstan", "capstan+T", "capstan+T, G falls with N", "capstan+T, lam grows with N", "capstan+T, tendon toe")
 #: Shared models refitted leaving each configuration out besides the chosen one (none: each costs five refits).
 LEAVE_ONE_OUT: tuple[str, ...] = ()
 #: Shared models fitted for comparison by :func:`shared_analysis` (besides :data:`CHOICE`).
@@ -134,15 +167,18 @@ def shared_params(m: SharedModel, n_configs: int = 1) -> tuple[Param, ...]:
     for p in model_params(m.structure, m.effects):
         if p.name == "theta0" or p.name in held:
             continue
+        if m.grows and m.same_K0 and p.name == "K_b":
+            continue
         if m.grows and p.name in ("K_a", "K_b"):
-            p = Param("K0" + p.name[1:], p.unit, p.lo, p.hi, p.starts, p.scale)
+            p = Param("K0" if m.same_K0 else "K0" + p.name[1:], p.unit, p.lo, p.hi, p.starts, p.scale)
         if m.stiffness_ratio and p.name == "lam":
             p = _S
         if p.name in m.per_config:
             out += [Param(f"{p.name}[{i}]", p.unit, p.lo, p.hi, p.starts, p.scale) for i in range(n_configs)]
         else:
             out.append(p)
-    return tuple(out) + ((_MU,) if m.grows else ()) + ((_G_N,) if m.g_slope else ()) + ((_LAM_N,) if m.lam_slope else ())
+    mus = ((_MU_A, _MU_B) if m.mu_per_tendon else (_MU,)) if m.grows else ()
+    return tuple(out) + mus + ((_G_N,) if m.g_slope else ()) + ((_LAM_N,) if m.lam_slope else ())
 
 
 def config_values(m: SharedModel, values: dict[str, float], rec, bend: float, i: int = 0) -> dict[str, float]:
@@ -150,7 +186,13 @@ def config_values(m: SharedModel, values: dict[str, float], rec, bend: float, i:
     the per-configuration parameters of ``i``, theta0 from the first measured angle."""
     v = {**{k: x for k, x in values.items() if "[" not in k}, **dict(m.fixed)}
     v.update({q: values[f"{q}[{i}]"] for q in m.per_config})
-    if m.grows:
+    if m.grows and m.same_K0:
+        v["K_a"] = v["K_b"] = max(v.pop("K0") + v["mu"] * bend, 0.0)
+        v.pop("mu")
+    elif m.grows and m.mu_per_tendon:
+        for j in ("a", "b"):
+            v[f"K_{j}"] = max(v.pop(f"K0_{j}") + v.pop(f"mu_{j}") * bend, 0.0)
+    elif m.grows:
         for j in ("a", "b"):
             v[f"K_{j}"] = max(v.pop(f"K0_{j}") + v["mu"] * bend, 0.0)
         v.pop("mu")
@@ -205,10 +247,12 @@ def fit_shared(m: SharedModel, recs: list, bends: list[float], fit_on: list, *,
     w = m.tension_weight
     Ts = [np.column_stack([r.T_a, r.T_b])[s] for r, s in zip(recs, fit_on)] if w > 0 else []
 
+    parts = [head(r, s) for r, s in zip(recs, fit_on)]     # causal models: run up to the fitted samples only
+
     def residual(x: np.ndarray) -> np.ndarray:
         v = dict(zip(names, map(float, x)))
         out = []
-        for i, (r, b, s, y) in enumerate(zip(recs, bends, fit_on, ys)):
+        for i, (r, b, s, y) in enumerate(zip(parts, bends, fit_on, ys)):
             try:
                 th, T = predict_model(m.structure, m.effects, config_values(m, v, r, b, i), r)
                 out.append(th[s] - y)
@@ -222,7 +266,7 @@ def fit_shared(m: SharedModel, recs: list, bends: list[float], fit_on: list, *,
     for s in (starts or m.starts):
         x0 = np.clip([s.get(p.name, s.get(p.name.split("[")[0], p.starts[0])) for p in params], lo, hi)
         sol = least_squares(residual, x0, bounds=(lo, hi), x_scale=[p.scale for p in params], diff_step=1e-3,
-                            max_nfev=max_nfev)
+                            max_nfev=max_nfev, ftol=FIT_TOL, xtol=FIT_TOL)
         if best is None or sol.cost < best.cost:
             best = sol
     assert best is not None                       # at least one start

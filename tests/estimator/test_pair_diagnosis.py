@@ -149,6 +149,36 @@ def test_predict_model_applies_delay_and_backlash():
     assert np.max(np.abs(thb - th0)) == pytest.approx(0.05, abs=1e-3)
 
 
+def test_toe_tendon_is_neutral_when_off_converges_and_keeps_the_released_tendon_taut():
+    c = command()
+    base = simulate_pair(c, (5.0, 5.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0)
+    off = simulate_pair(c, (5.0, 5.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0, toe=0.0, toe_tension=0.3)
+    assert all(np.array_equal(x, y) for x, y in zip(base, off))              # bit for bit when off
+    tiny = simulate_pair(c, (5.0, 5.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0, toe=1e-9)
+    assert np.max(np.abs(tiny[0] - base[0])) < 1e-9                           # the toe path is the same model
+    a1, T1 = simulate_pair(c, (5.0, 5.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0, toe=5.0, toe_tension=1.0)
+    a8, T8 = simulate_pair(c, (5.0, 5.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0, toe=5.0, toe_tension=1.0, substeps=8)
+    assert np.max(np.abs(a1 - a8)) < math.radians(0.05) and np.max(np.abs(T1 - T8)) < 0.02
+    # soft at low tension: the released tendon keeps more tension, and the joint leaves a plateau later
+    assert T1.min() > base[1].min() + 0.1
+    assert np.max(np.abs(a1 - base[0])) > math.radians(0.5)
+    with pytest.raises(ValueError, match="toe_tension finite and > 0"):
+        simulate_pair(c, (5.0, 5.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0, toe=1.0, toe_tension=0.0)
+
+
+def test_fits_run_the_causal_models_only_up_to_the_fitted_samples():
+    from estimator.offline.pair_models import LOOKAHEAD_S, head
+    rec = capstan_rec()
+    part = head(rec, TRAIN)
+    assert N_CYCLE < len(part.angle) <= N_CYCLE + LOOKAHEAD_S / DT + 2 and head(rec, slice(N_CYCLE, None)) is rec
+    assert len(head(rec, np.array([3, 40, 7])).angle) < N_CYCLE
+    v = {**TRUE, "tau": -0.2, "b": 0.05}
+    for effects in ((), ("sensor_delay",), ("joint_backlash", "sensor_delay")):   # the delay reads ahead
+        full, _ = predict_model("capstan", effects, v, rec)
+        short, _ = predict_model("capstan", effects, v, part)
+        assert np.array_equal(full[TRAIN], short[TRAIN])
+
+
 # ---- the stiffening joint, the cross-validation folds, the exported shared set -------------------
 
 def test_stiffening_joint_caps_the_angle_and_folds_split_the_training_block():
