@@ -7,7 +7,12 @@ per pulled tendon (the scripted operator runs the seed paper's protocol on tendo
 of every joint, all joints together), the full-scale errors of the distal joint torque (max and
 mean of |estimate - truth| over the range of the true torque in that experiment) and of the angle;
 ``summary.json`` has them under ``joints.<name>`` with the calibration against the simulator's K
-and M_e.
+and M_e. The haptic loop of every joint is measured as a single tendon's (:mod:`teleop.loop_metrics`,
+:func:`joint_loop_metrics`): chatter of the commanded tendon displacement ``r * cmd`` and of the
+rendered force, transparency of the rendered force against the scaled true net distal tension
+``torque / r``, per joint and pulled tendon. These are figures, not checks: a joint's force can
+step by ~1 N in one cycle when the passivity controller releases what it held back (seen on the
+grasp, pulling tendon b), which the >30 Hz measure counts as chatter.
 """
 from __future__ import annotations
 
@@ -22,7 +27,8 @@ from teleop.app.demo_run import full_scale_errors
 from teleop.config import Config
 from teleop.errors import DataError
 
-__all__ = ["TORQUE_BOUND", "CALIBRATION_BOUND", "read_joint_csv", "evaluate_joints", "joint_checks", "JointDemo"]
+__all__ = ["TORQUE_BOUND", "CALIBRATION_BOUND", "read_joint_csv", "evaluate_joints", "joint_checks",
+           "joint_loop_metrics", "JointDemo"]
 
 #: Acceptance: max full-scale error of the distal joint torque on the paper's protocol, each joint.
 TORQUE_BOUND = 0.05
@@ -125,6 +131,34 @@ def joint_checks(joints: dict, calibration: dict, cfg: Config) -> dict[str, bool
     return res
 
 
+def joint_loop_metrics(run_dir: Path, cfg: Config) -> dict:
+    """Chatter and transparency of each joint's haptic loop, per pulled tendon, from ``master.csv`` and
+    ``slave_joints.csv`` (:func:`teleop.loop_metrics.loop_metrics` on the joint's columns: ``x_in`` =
+    r * the commanded angle [m], ``force`` = the joint's rendered force [N], ``T_out`` = the true
+    torque / r [N]); keys ``"<joint> (pull a)"``, ``"<joint> (pull b)"``.
+
+    Raises
+    ------
+    DataError
+        A recording is missing or lacks a column.
+    """
+    from teleop.loop_metrics import loop_metrics, read_columns
+    m, s = read_columns(run_dir / "master.csv"), read_columns(run_dir / "slave_joints.csv")
+    out: dict = {}
+    for j, joint in enumerate(cfg.instrument.joints):
+        n, r = joint.name, joint.pulley_radius
+        try:
+            master = {"time": m["time"], "x_in": r * m[f"{n}.cmd"], "force": m[f"{n}.force"], "cmd_seq": m["cmd_seq"],
+                      "state": m["state"]}
+            slave = {"t_node": s["t_node"], "T_out": s[f"{n}.torque"] / r, "cmd_seq": s["cmd_seq"],
+                     "marker": np.array([joint_marker(int(v), j) for v in s["marker"]])}
+        except KeyError as e:
+            raise DataError(f"{run_dir}: the recordings lack column {e} of joint {n}") from None
+        out.update(loop_metrics(master, slave, cfg.master.mapping.force_scale,
+                                {MARKER_PAPER_A: f"{n} (pull a)", MARKER_PAPER_B: f"{n} (pull b)"}))
+    return out
+
+
 class JointDemo:
     """What the demo evaluates and prints for a joint instrument (module docstring)."""
 
@@ -147,6 +181,10 @@ class JointDemo:
         except DataError as e:
             problems.append(str(e))
             summary["joints"] = {}
+        try:            # chatter and transparency of every joint's haptic loop: figures, not checks (yet)
+            summary["haptic_loop"] = joint_loop_metrics(run_dir, cfg)
+        except DataError as e:
+            problems.append(str(e))
         return joint_checks(summary["joints"], summary["calibration"], cfg)
 
     @staticmethod
@@ -176,4 +214,9 @@ class JointDemo:
                              f"{math.degrees(r['angle_error_rms_rad']):9.2f}")
             L.append(f"  {name:10s} {'worst':6s} {'':9s} {row['torque_error_max_fs']:7.3f} "
                      f"{row['torque_error_mean_fs']:7.3f}   (bound {TORQUE_BOUND})")
+        if s.get("haptic_loop"):
+            from teleop.loop_metrics import loop_metric_lines
+            L.append("")
+            L += loop_metric_lines(s["haptic_loop"])
+            L.append("(per joint: x_in_cmd = r * commanded angle, T_out = true torque / r; figures only, no check)")
         return L
