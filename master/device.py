@@ -12,7 +12,7 @@ namely the latest proximal tension and whether teleoperation is engaged.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 __all__ = ["DeviceState", "MultiAxisState", "HapticDevice", "OperatorView"]
 
@@ -88,6 +88,8 @@ class HapticDevice(Protocol):
 class OperatorView(Protocol):
     """Optional: a simulated operator watches the instrument like a surgeon on the endoscope."""
 
-    def watch(self, T_in: float | None, engaged: bool) -> None:
-        """Latest proximal tension [N] (None: nothing received yet) and whether control is engaged."""
+    def watch(self, T_in: Any, engaged: bool) -> None:
+        """Latest proximal tensions [N] - per instrument axis a tuple, one per tendon (a single tendon:
+        ``[(T_in,)]``; :meth:`master.axes.InstrumentAxes.view`), None: nothing received yet - and
+        whether control is engaged."""
         ...
