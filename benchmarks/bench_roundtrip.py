@@ -1,10 +1,15 @@
 """Round trip of the teleoperation link beside a bare Zenoh ping-pong, measured in the same run.
 
 1. Bare Zenoh: two processes on 127.0.0.1; the ping process publishes a 40-byte message at 1 kHz
-   (paced by :class:`teleop.clock.Pacer`, real-time priority, not express, like the nodes), the pong
-   process echoes each one from its subscriber callback; the ping measures send -> echo received.
-2. ``teleop demo --protocol short`` (recorder + slave + master as three processes, configs/sim.yaml): the
-   master's command -> estimate-echo round trip and both loops' overruns, from ``summary.json``.
+   (paced by :class:`teleop.clock.Pacer`, Zenoh priority REAL_TIME, not express, like the nodes), the
+   pong process echoes each one from its subscriber callback; the ping measures send -> echo
+   received. Both processes get the nodes' scheduling (:func:`teleop.realtime.promote_threads` at
+   ``master.realtime_priority``: the pinging thread on top, Zenoh's threads 5 below), so that the
+   two figures differ by what the teleoperation adds, not by the scheduler.
+2. ``teleop demo --protocol short`` (recorder + slave + master as three processes, configs/sim.yaml),
+   in the same run: the master's command -> estimate-echo round trip, both loops' overruns (all
+   cycles and teleoperation only), step times, scheduling and the slave's command-locked cycles,
+   from ``summary.json``.
 
 Prints the figures, never fails on time. ``python benchmarks/bench_roundtrip.py [seconds]``.
 """
@@ -25,6 +30,11 @@ ROOT = Path(__file__).resolve().parents[1]
 _MSG = struct.Struct("<Id32x")     # seq, send time [s], padding: 44 bytes like a Command
 
 
+def _priority() -> int:
+    from teleop.config import load_config
+    return load_config(ROOT / "configs" / "sim.yaml").master.realtime_priority
+
+
 def _session(listen, connect):
     from teleop.config import TransportConfig
     from teleop.transport import Session
@@ -39,6 +49,8 @@ def pong(endpoint: str, seconds: float) -> None:
         pub = z.declare_publisher("bench/pong", express=False, priority=zenoh.Priority.REAL_TIME,
                                   congestion_control=zenoh.CongestionControl.DROP)
         sub = z.declare_subscriber("bench/ping", lambda sample: pub.put(sample.payload.to_bytes()))  # noqa: F841
+        from teleop.realtime import promote_threads
+        promote_threads(_priority())              # the main thread only sleeps; Zenoh's threads echo
         print("ready", flush=True)
         time.sleep(seconds + 5.0)
 
@@ -63,18 +75,23 @@ def ping(endpoint: str, seconds: float, rate_hz: float = 1000.0) -> dict:
             pub.put(_MSG.pack(0, time.monotonic()))
             time.sleep(0.01)
         rtt.clear()
+        from teleop.realtime import demote_threads, promote_threads
+        scheduling = promote_threads(_priority())
         clock = MonotonicClock()
         pacer = Pacer(clock, rate_hz)
         n = int(seconds * rate_hz)
-        for k in range(n):
-            pacer.wait()
-            pub.put(_MSG.pack(k, time.monotonic()))
+        try:
+            for k in range(n):
+                pacer.wait()
+                pub.put(_MSG.pack(k, time.monotonic()))
+        finally:
+            demote_threads()
         time.sleep(0.2)
         stats = pacer.stats()
     d = np.asarray(rtt) * 1e3
     return {"sent": n, "echoed": int(d.size), "p50_ms": float(np.percentile(d, 50)),
             "p99_ms": float(np.percentile(d, 99)), "max_ms": float(d.max()),
-            "overrun_fraction": float(stats.get("overrun_fraction", 0.0))}
+            "overrun_fraction": float(stats.get("overrun_fraction", 0.0)), "scheduling": scheduling}
 
 
 def bare_pingpong(seconds: float) -> dict:
@@ -100,25 +117,37 @@ def demo_roundtrip(timeout: float = 120.0) -> dict:
         rec = json.loads((run / "recorder" / "summary.json").read_text()) if (run / "recorder" / "summary.json").is_file() \
             else {}
     lat = s["master"]["latency_rtt"]
+    sides = {side: s[side]["pacer"] for side in ("master", "slave")}
     return {"p50_ms": lat["p50_ms"], "p99_ms": lat["p99_ms"], "max_ms": lat["max_ms"], "n": lat["n"],
-            "master_overruns": s["master"]["pacer"]["overrun_fraction"],
-            "slave_overruns": s["slave"]["pacer"]["overrun_fraction"],
+            "master_overruns": sides["master"]["overrun_fraction"],
+            "slave_overruns": sides["slave"]["overrun_fraction"], "pacer": sides,
             "recorded_missing": sum(v["missing"] for v in rec.get("streams", {}).values()),
             "recorded": sum(v["count"] for v in rec.get("streams", {}).values())}
 
 
 def main(seconds: float = 10.0) -> None:
+    print(f"load average before the run {os.getloadavg()[0]:.1f}", flush=True)
     bare = bare_pingpong(seconds)
     demo = demo_roundtrip()
     load = os.getloadavg()[0]
     print(f"machine: {os.cpu_count()} cores, load average {load:.1f} during the run")
-    print(f"bare zenoh ping-pong, 2 processes, 1 kHz, {seconds:g} s: p50 {bare['p50_ms']:.3f} ms, "
+    print(f"bare zenoh ping-pong, 2 processes, 1 kHz, {seconds:g} s ({bare['scheduling']}): p50 {bare['p50_ms']:.3f} ms, "
           f"p99 {bare['p99_ms']:.3f} ms, max {bare['max_ms']:.2f} ms ({bare['echoed']}/{bare['sent']} echoed, "
           f"pacer overruns {100 * bare['overrun_fraction']:.2f} %)")
     print(f"teleop demo (recorder+slave+master), command -> estimate echo: p50 {demo['p50_ms']:.3f} ms, "
           f"p99 {demo['p99_ms']:.3f} ms, max {demo['max_ms']:.2f} ms over {demo['n']} echoes")
     print(f"  overruns: master {100 * demo['master_overruns']:.2f} %, slave {100 * demo['slave_overruns']:.2f} %; "
           f"recorder: {demo['recorded']} messages, {demo['recorded_missing']} missing by seq")
+    for side, pc in demo["pacer"].items():
+        cyc, ovr = pc.get("cycles_by_state", {}), pc.get("overruns_by_state", {})
+        tele = [k for k in cyc if k not in ("STARTING", "CALIBRATING")]
+        n_tele, o_tele = sum(cyc[k] for k in tele), sum(ovr.get(k, 0) for k in tele)
+        step, late = pc.get("step_ms", {}), pc.get("lateness_ms", {})
+        ms = lambda v: "-" if v is None else f"{v:.2f}"    # noqa: E731
+        print(f"  {side}: {pc.get('scheduling', '?')}, overruns outside calibration {o_tele}/{n_tele}"
+              f" ({100 * o_tele / max(n_tele, 1):.2f} %), step p50 {ms(step.get('p50'))} p99 {ms(step.get('p99'))} ms, "
+              f"lateness p99 {ms(late.get('p99'))} ms" + (f", {pc['locked']} cycles started by a command"
+                                                         if "locked" in pc else ""))
 
 
 if __name__ == "__main__":
