@@ -97,5 +97,7 @@ def test_recorder_recovers_exactly_what_was_journaled_and_not_received(tmp_path)
     assert sorted(int(r.rsplit(",", 1)[1]) for r in rows) == [*range(20, 25), *range(40, 50)]
     lines = [ln for ln in (run / "recorder" / "master_command.csv").read_text().splitlines() if not ln.startswith("#")]
     rows = [[float(v) for v in ln.split(",")] for ln in lines[1:]]             # after the header
-    assert [r[1] for r in rows] == list(range(50))                 # seq: in time order, the gap filled
+    # every seq once, the rows in time order (a recovered row carries its publish time, a received one its
+    # receive time: under load a delivery can take longer than the gap between two puts, so not seq order)
+    assert sorted(r[1] for r in rows) == list(range(50))
     assert all(a[0] < b[0] for a, b in zip(rows, rows[1:]))
