@@ -62,7 +62,11 @@ def one(case: tuple) -> dict:
             "fitted": {k: v["value"] for k, v in res["parameters"].items() if v["effect"] != "base"},
             "scores": {k: round(v["score"], 3) for k, v in res["candidates"].items()},
             "structure": max(res["structure"]["base"].values()),
-            "structure_ext": max(res["structure"]["extended"].values())}
+            "structure_ext": max(res["structure"]["extended"].values()),
+            "detail": {"structure": res["structure"], "noise": res["noise"],
+                       "candidates": {k: {m: v[m] for m in ("validation_rmse_T_out_N", "validation_rmse_x_out_m",
+                                                            "score", "penalised_score")}
+                                      for k, v in res["candidates"].items()}}}
 
 
 def _want(effect: str) -> set[str]:

@@ -15,9 +15,9 @@ on the first 35 %; the model always runs from the first sample):
   and quantum estimated from the recording itself, the load-cell noise carried through the model,
   and MODEL_RESOLUTION of the signal's range);
 * "none" when the base model's validation residual is at the floor (below STRUCTURE_RATIO times
-  it on every signal): nothing is left to explain. Otherwise an extension is accepted when
-  S + PENALTY * n_extra_parameters < 1 (relative to the model so far), a second one with it while
-  structure is left; ``unknown`` when structure is left that no extension explains (first, when
+  it on every signal) and no extension alone explains most of it (S < STRONG_SCORE). Otherwise an
+  extension is accepted when S + PENALTY * n_extra_parameters < 1 (relative to the model so far;
+  among those, the lowest log S + log(RANK_FACTOR) * n_extra wins), a second one while structure is left; ``unknown`` when structure is left that no extension explains (first, when
   more than twice the threshold is left after the accepted ones).
 
 Then the base and the chosen model are refitted on the whole training block and run once over the
@@ -34,12 +34,13 @@ from typing import Callable
 
 import numpy as np
 
-from estimator.offline.diagnosis_fit import (SIGNALS, Progress, fit_model, noise_level, prepare, quantum, raw_rmse,
-                                     rest_reading, sample_block, split_at_rest, start_points, trimmed_ms)
+from estimator.offline.diagnosis_fit import (SIGNALS, Progress, channel_choice, fit_model, look_alike, noise_level,
+                                             prepare, quantum, raw_rmse, sample_block, split_at_rest, start_points,
+                                             trimmed_ms)
 from estimator.offline.effects import CATALOGUE, EQUIVALENT, NONE, UNKNOWN, Effect, effect, predict
 from estimator.data import MeasuredData
 
-__all__ = ["diagnose", "predictions", "PENALTY", "STRUCTURE_RATIO", "VALIDATION_FRACTION"]
+__all__ = ["diagnose", "predictions", "PENALTY", "STRUCTURE_RATIO", "STRONG_SCORE", "VALIDATION_FRACTION"]
 
 PENALTY = 0.30              # price per extra parameter on the validation score S (base = 1) [-]
 STRUCTURE_RATIO = 3.0       # validation rmse / noise floor above this on a signal: structure left [-]
@@ -48,6 +49,8 @@ SECOND_ROUND = 6            # extensions tried together with the first accepted 
 MODEL_RESOLUTION = 0.003    # the base model's own resolution, share of the signal's range, in the floor [-]
 TRIM = 0.02                 # share of the largest validation residuals left out of the scores [-]
 POLISH = 3                  # best single extensions refitted with the route shares free
+RANK_FACTOR = 2.0           # among acceptable extensions, each extra parameter must divide S by this [-]
+STRONG_SCORE = 0.2          # below the structure threshold, an extension with S below this is still accepted [-]
 _UNITS = {"T_out": "N", "x_out": "m"}
 
 
@@ -66,10 +69,13 @@ class _Fit:
     """One model (a list of extensions) fitted on each fold's fit block, with its validation errors."""
 
     def __init__(self, effects: list[Effect], folds: _Folds, starts: list[dict], *, route: bool = False,
-                 fixed: dict | None = None, base: "_Fit | None" = None, floor: dict[str, float] | None = None,
-                 need: float = math.inf):
+                 fixed: dict | list[dict] | None = None, base: "_Fit | None" = None,
+                 floor: dict[str, float] | None = None, need: float = math.inf):
         self.effects = effects
-        self.values, self.compliance, self.mse = [], [], []
+        self.values: list[dict[str, float]] = []
+        self.compliance: list[float] = []
+        self.mse: list[dict[str, float]] = []
+        floor = floor or {}
         tr = folds.train
         for j, (fm, vm) in enumerate(zip(folds.fit, folds.val)):
             if j == 1 and base is not None and _score(self.mse[0], base.mse[0], floor) >= need:
@@ -135,34 +141,6 @@ def _parameters(effects: list[Effect], values: dict, compliance: float, rename: 
     return out
 
 
-def _channel_choice(data: MeasuredData, eid: str) -> str:
-    """Of two equivalent effects, the one the data point to: an offset on a position channel shows as a
-    reading away from zero at the initial rest (positions are zeroed there); a gain is reported on
-    T_out by convention (it is not separable from one on T_in)."""
-    if eid in ("sensor_offset:x_in", "sensor_offset:x_out") and data.x_out is not None:
-        return "sensor_offset:x_in" if rest_reading(data, "x_in") > rest_reading(data, "x_out") \
-            else "sensor_offset:x_out"
-    if eid in ("sensor_gain:T_in", "sensor_gain:T_out"):
-        return "sensor_gain:T_out"
-    return eid
-
-
-def _look_alike(best: str, price: dict, data: MeasuredData) -> str:
-    """Pretension and a position offset both shift x_out by a constant after the first pull (by
-    (L/EA) T0 or by b); when both explain the data about equally (price within 10 %), the initial
-    rest decides: positions are zeroed there, so an offset shows as a reading away from zero, while
-    pretension leaves them at zero."""
-    group = ("pretension", "sensor_offset:x_in")
-    if best not in group or data.x_out is None or not all(g in price for g in group):
-        return best
-    other = group[1] if best == group[0] else group[0]
-    if price[other] > 1.1 * price[best]:
-        return best
-    tol = 3.0 * max(quantum(data.x_out), quantum(data.x_in), noise_level(np.asarray(data.x_out, dtype=float)), 1e-9)
-    moved = max(rest_reading(data, "x_in"), rest_reading(data, "x_out")) > tol
-    return group[1] if moved else group[0]
-
-
 def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool | Callable = False,
              effects: tuple[str, ...] | None = None, max_effects: int = 2, n_nodes: int = 32,
              target_rate: float = 200.0, wrap_shape: np.ndarray | None = None) -> dict:
@@ -210,8 +188,8 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     names = tuple(CATALOGUE) if effects is None else tuple(effects)
     try:
         cands_all = [effect(n) for n in names]
-    except KeyError as e:
-        raise ValueError(f"unknown effect: {e.args[0]}") from None
+    except KeyError as err:
+        raise ValueError(f"unknown effect: {err.args[0]}") from None
     if max_effects < 1:
         raise ValueError(f"max_effects must be >= 1, got {max_effects!r}")
     s = prepare(data, n_nodes=n_nodes, target_rate=target_rate, wrap_shape=wrap_shape)
@@ -238,7 +216,10 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     # the floor a perfect model reaches: sensor noise and quantisation, plus the load-cell noise
     # carried through the model (all estimated from the recording itself)
     sigma_in = s.sigma_T_in
-    gain_in = {"T_out": 1.0, "x_out": base.compliance[0]}   # d(signal)/d(T_in), order of magnitude
+    # d(signal)/d(T_in): T_in e^-+K on the two branches (the memory latches the noise extremes of T_in);
+    # their rms sqrt(cosh 2K) carries sigma_in into T_out and, times L/EA, into the elongation
+    carry = math.sqrt(math.cosh(2.0 * min(base.values[0]["K"], 3.0)))
+    gain_in = {"T_out": carry, "x_out": base.compliance[0] * carry}
     # and the resolution of the model itself (MODEL_RESOLUTION of the range of T_out and of the elongation)
     span = {"T_out": float(np.ptp(s.T_out)) if s.T_out is not None else 0.0,
             "x_out": float(np.ptp(s.x_in - s.x_out)) if s.x_out is not None else 0.0}
@@ -262,9 +243,10 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     # forward selection on the validation blocks with a price per parameter, relative to the model so far
     chosen = base
     pool = dict(singles)
+    # at the floor: "none", unless one extension alone explains most of what is left (S < STRONG_SCORE)
     at_floor = max(_structure(base, noise).values()) <= STRUCTURE_RATIO
-    while len(chosen.effects) < max_effects and pool and not at_floor:   # "none": nothing to explain
-        if chosen is not base and max(_structure(chosen, noise).values()) <= STRUCTURE_RATIO:
+    while len(chosen.effects) < max_effects and pool:
+        if chosen is not base and (at_floor or max(_structure(chosen, noise).values()) <= STRUCTURE_RATIO):
             break                       # nothing left above the noise for another effect to explain
         if chosen is base:
             trial = pool
@@ -279,8 +261,12 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
                                   need=chosen.S * (1.0 - PENALTY * len(CATALOGUE[eid].parameters)))
                 bar(f"{'+'.join(chosen.ids)}+{eid}")
         price = {eid: f.S / chosen.S + PENALTY * (f.n_params - chosen.n_params) for eid, f in trial.items()}
-        best = _look_alike(min(price, key=price.get), price, data)
-        if price[best] >= 1.0:
+        # accepted by the additive price, ranked by log S with RANK_FACTOR per extra parameter
+        rank = {eid: math.log(max(f.S / chosen.S, 1e-12)) + math.log(RANK_FACTOR) * (f.n_params - chosen.n_params)
+                for eid, f in trial.items() if price[eid] < 1.0}
+        order = rank or price
+        best = look_alike(min(order, key=lambda k: order[k]), price, data)
+        if price[best] >= 1.0 or (at_floor and trial[best].S >= STRONG_SCORE):
             break
         chosen = trial[best]
         pool.pop(best)
@@ -307,7 +293,7 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     equivalent: list[str] = []
     for e in chosen.effects:
         if e.id in EQUIVALENT:
-            pick = _channel_choice(data, e.id)
+            pick = channel_choice(data, e.id)
             equivalent += [q for q in (e.id, *EQUIVALENT[e.id]) if q != pick]
             if pick != e.id:
                 other = CATALOGUE[pick]
@@ -360,6 +346,7 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         "settings": {"train_fraction": train_fraction, "validation_fraction": VALIDATION_FRACTION,
                      "n_nodes": n_nodes, "target_rate_hz": target_rate,
                      "penalty_per_parameter": PENALTY, "structure_ratio": STRUCTURE_RATIO,
+                     "strong_score": STRONG_SCORE, "rank_factor": RANK_FACTOR,
                      "model_resolution": MODEL_RESOLUTION, "trim": TRIM,
                      "wrap_shape": None if wrap_shape is None else [float(v) for v in wrap_shape]},
         "elapsed_s": _time.perf_counter() - t_start,

@@ -27,7 +27,7 @@ from estimator.sheath import SheathModel
 from estimator.data import MeasuredData
 
 __all__ = ["Progress", "trimmed_ms", "sample_block", "rest_reading", "prepare", "split_at_rest", "fit_model", "start_points", "heldout_mse", "raw_rmse", "noise_level",
-           "quantum", "SIGNALS"]
+           "quantum", "SIGNALS", "channel_choice", "look_alike"]
 
 _K = Parameter("K", "-", 0.0, K_MAX, 0.5, (), "friction exponent mu * total wrap angle")
 _SCALE = {"K": 0.1, "c_v": 10.0, "T0": 1.0, "K_rate": 1e-3, "beta": 1.0, "T_c": 1.0, "r_s": 0.1, "a": 0.5,
@@ -171,6 +171,7 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
                             max_nfev=40 * len(params))
         if best is None or sol.cost < best.cost:
             best = sol
+    assert best is not None         # max_starts >= 1 and at least one start
     vals = values(best.x)
     c = predict(effects, vals, train, fit_mask=m).compliance
     return vals, c, float(best.cost)
@@ -248,3 +249,31 @@ def rest_reading(data: MeasuredData, name: str) -> float:
     moved = np.flatnonzero(np.abs(x - x[0]) > 5e-6)
     stop = max(int(moved[0]) if moved.size else len(x), 5)
     return abs(float(np.median(np.asarray(getattr(data, name), dtype=float)[:stop])))
+
+
+def channel_choice(data: MeasuredData, eid: str) -> str:
+    """Of two equivalent effects, the one the data point to: an offset on a position channel shows as a
+    reading away from zero at the initial rest (positions are zeroed there); a gain is reported on
+    T_out by convention (it is not separable from one on T_in)."""
+    if eid in ("sensor_offset:x_in", "sensor_offset:x_out") and data.x_out is not None:
+        return "sensor_offset:x_in" if rest_reading(data, "x_in") > rest_reading(data, "x_out") \
+            else "sensor_offset:x_out"
+    if eid in ("sensor_gain:T_in", "sensor_gain:T_out"):
+        return "sensor_gain:T_out"
+    return eid
+
+
+def look_alike(best: str, price: dict, data: MeasuredData) -> str:
+    """Pretension and a position offset both shift x_out by a constant after the first pull (by
+    (L/EA) T0 or by b); when both explain the data about equally (price within 10 %), the initial
+    rest decides: positions are zeroed there, so an offset shows as a reading away from zero, while
+    pretension leaves them at zero."""
+    group = ("pretension", "sensor_offset:x_in")
+    if best not in group or data.x_out is None or not all(g in price for g in group):
+        return best
+    other = group[1] if best == group[0] else group[0]
+    if price[other] > 1.1 * price[best]:
+        return best
+    tol = 3.0 * max(quantum(data.x_out), quantum(data.x_in), noise_level(np.asarray(data.x_out, dtype=float)), 1e-9)
+    moved = max(rest_reading(data, "x_in"), rest_reading(data, "x_out")) > tol
+    return group[1] if moved else group[0]

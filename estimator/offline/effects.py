@@ -396,7 +396,9 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
             x_p = own["x_p"]
         elif isinstance(e, DistalBacklash):
             d_b = own["d_b"]
-    g = sensors.get
+
+    def g(key: str, default: float = 0.0) -> float:
+        return sensors.get(key, default)
     # proximal channels: the true input from the reading
     if g("sensor_offset:T_in"):
         T_in = T_in - g("sensor_offset:T_in")
