@@ -14,7 +14,9 @@ A record has the layout of the recorder's ``messages.bin``: ``<d t [s]><H key le
 length>``, then the key (UTF-8) and the payload (codec bytes); ``t`` is the publisher's
 :func:`time.monotonic` at the put. Segments rotate at ``segment_bytes`` and only the newest ``keep``
 stay (the journal is for the tail a crash can lose, not a second recording): at the defaults
-(8 MB, 2) at least ~15 s of a single tendon's slave at 1 kHz. Cost on the loop: ~2 us per message.
+(8 MB, 2) at least ~15 s of a single tendon's slave at 1 kHz. Cost on the loop: one ``os.write`` into
+the page cache, measured p50 5 us, p99 20 us, max 0.16 ms (28 600 writes of 550 bytes at a load
+average of 8, at the loop's real-time priority).
 
 One journal per process (:data:`JOURNAL`, set by :func:`open_journal`); without it nothing is done.
 """
