@@ -7,8 +7,10 @@ discipline: model choice sees the training block only; the test block is touched
 reported figure of the chosen model (and of the seed model it is compared with).
 
 1. Every model is fitted on the whole training block (the first command cycle) with
-   ``scipy.optimize.least_squares`` from a few starting points, and always runs from the first
-   sample, so the test block (the later cycles) starts from the state the training left.
+   ``scipy.optimize.least_squares`` from a few starting points (relative tolerances FIT_TOL), and
+   always runs from the first sample, so the test block (the later cycles) starts from the state the
+   training left. The models are causal, so a fit runs them only up to its last fitted sample
+   (:func:`estimator.offline.pair_models.head`; the same predictions there, bit for bit).
 2. Choice by time-blocked cross-validation inside the training block: the block is cut into
    CV_BLOCKS (8) contiguous time blocks, the even ones form fold 1 and the odd ones fold 2; the
    model is refitted on each fold (warm start from step 1, at most CV_NFEV evaluations, the model
