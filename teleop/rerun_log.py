@@ -40,18 +40,17 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from teleop.errors import ConfigError
-
-#: Fixed ranges of the plots (the y axes do not rescale every frame): tension [N], elongation [m].
-TENSION_RANGE, ELONGATION_RANGE = (0.0, 25.0), (0.0, 2.0e-3)
+from teleop.rerun_view import ELONGATION_RANGE, TENSION_RANGE, WALL, route_points, tension_colors
+from teleop.rerun_view import blueprint as view_blueprint
 
 if TYPE_CHECKING:
     import rerun as rr
 
-__all__ = ["RerunLogger", "signal_path", "display_available", "MODES", "route_points", "tension_colors"]
+__all__ = ["RerunLogger", "signal_path", "display_available", "MODES", "route_points", "tension_colors",
+           "TENSION_RANGE", "ELONGATION_RANGE"]
 
 MODES = ("save", "spawn", "off")
 TIMELINE = "time"
-WALL = "wall"
 _BLUE, _BLUE_SEE_THROUGH = (31, 119, 180, 255), (31, 119, 180, 110)
 _ORANGE, _GREY = (255, 127, 14, 255), (150, 150, 150, 255)
 
@@ -82,70 +81,6 @@ def display_available() -> bool:
     if sys.platform.startswith(("linux", "freebsd", "openbsd")):
         return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
     return True
-
-
-def route_points(runs, n_per_arc: int = 24) -> np.ndarray:
-    """The sheath route as a planar polyline, shape (n, 3) [m], from proximal (origin, heading +x) to
-    distal: straight runs go ahead, arcs turn left by ``length / radius``.
-
-    runs : sequence of objects with ``length`` [m] and ``radius`` [m] (inf or None = straight), or
-    (length, radius) pairs.
-    """
-    pts = [np.zeros(3)]
-    heading = 0.0
-    for r in runs:
-        length, radius = (r if isinstance(r, (tuple, list)) else (r.length, getattr(r, "radius", None)))
-        p0 = pts[-1]
-        if radius is None or not np.isfinite(radius):
-            pts.append(p0 + length * np.array([np.cos(heading), np.sin(heading), 0.0]))
-            continue
-        turn = length / radius
-        centre = p0 + radius * np.array([-np.sin(heading), np.cos(heading), 0.0])
-        for a in np.linspace(0.0, turn, n_per_arc + 1)[1:]:
-            h = heading + a
-            pts.append(centre + radius * np.array([np.sin(h), -np.cos(h), 0.0]))
-        heading += turn
-    return np.array(pts)
-
-
-def tension_colors(T: np.ndarray, vmax: float = TENSION_RANGE[1]) -> np.ndarray:
-    """RGBA colours, shape (n, 4) uint8, of tensions ``T`` [N] on a fixed scale 0..``vmax`` (blue -> red)."""
-    u = np.clip(np.asarray(T, dtype=float) / vmax, 0.0, 1.0)
-    # blue (low) -> yellow -> red (high)
-    r = np.clip(2 * u, 0, 1)
-    g = np.clip(1.6 * (1 - np.abs(2 * u - 1)), 0, 1) * 0.85 + 0.15 * (u < 0.5)
-    b = np.clip(1 - 2 * u, 0, 1)
-    return (np.stack([r, g, b, np.ones_like(u)], axis=1) * 255).astype(np.uint8)
-
-
-def _blueprint() -> object:
-    import rerun.blueprint as rrb
-
-    fixed_T = rrb.ScalarAxis(range=TENSION_RANGE, zoom_lock=False)
-    return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Vertical(
-                rrb.Spatial3DView(origin="sheath", name="Sheath route coloured by tension (0-25 N, blue -> red)"),
-                rrb.BarChartView(origin="profile", name="Tension along the sheath: T [N] vs s [m]",
-                                 plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop)),
-                row_shares=[3, 2],
-            ),
-            rrb.Vertical(
-                rrb.TimeSeriesView(origin="tension", name="Tension [N]", axis_y=fixed_T),
-                rrb.Tabs(rrb.TimeSeriesView(origin="elongation", name="Elongation [m]",
-                                            axis_y=rrb.ScalarAxis(range=ELONGATION_RANGE, zoom_lock=False)),
-                         rrb.TimeSeriesView(origin="master", name="Master: command, force, round trip"),
-                         rrb.TimeSeriesView(origin="displacement", name="Displacement [m]"),
-                         rrb.TimeSeriesView(origin="signals", name="Other signals")),
-                rrb.StateTimelineView(origin="/", contents=["/phase", "/master/console", "/experiment"],
-                                      name="Phase, console, experiment"),
-                row_shares=[4, 4, 2],
-            ),
-            column_shares=[1, 1],
-        ),
-        rrb.TimePanel(timeline=WALL),
-        auto_views=False,
-    )
 
 
 class RerunLogger:
@@ -217,7 +152,7 @@ class RerunLogger:
 
         self._rr = rr
         rec = rr.RecordingStream(application_id, recording_id=recording_id)
-        blueprint: Any = _blueprint()
+        blueprint: Any = view_blueprint()
         if mode == "spawn":
             if display_available():
                 beside = Path(sys.executable).with_name("rerun")  # venv not on PATH
