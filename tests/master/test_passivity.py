@@ -182,3 +182,31 @@ def test_reserve_does_not_switch_on_a_stick_slip_handle():
     pc.energy = 0.0                              # emptied
     out = [pc.step(1.0, 0.02 if k % 3 else 0.0, 1e-3) for k in range(300)]
     assert max(out[10:]) < 0.05 and pc.energy >= -1e-12
+
+
+def test_reserve_gives_held_back_force_back_over_the_release_time_not_in_one_sample():
+    """The grasp's 1 N step (0.86 -> 1.83 N) in the 3-joint demo: the hand gives energy back along a
+    constant 1.83 N command until the reserve holds about half of it back, dwells, then turns into the
+    force. The held-back force must come back as 1 - exp(-t / tau_r), never as a step, and E >= 0."""
+    from master.passivity import RELEASE_TIME
+    pc = PassivityController(limit=4.0, reserve=0.005)
+    out, energy = [], []
+    # along the force (+1.83 N, hand moving + at 20 mm/s): energy flows back out of the tank
+    for _ in range(150):
+        out.append(pc.step(1.83, 0.02, DT))
+        energy.append(pc.energy)
+    held = 1.83 - out[-1]
+    assert 0.3 < held < 1.8                               # the reserve is holding force back
+    for _ in range(50):                                   # dwell: the hand at rest
+        out.append(pc.step(1.83, 0.0, DT))
+    for _ in range(300):                                  # turn into the force: -20 mm/s, energy in
+        out.append(pc.step(1.83, -0.02, DT))
+        energy.append(pc.energy)
+    f = np.asarray(out)
+    assert min(energy) >= 0.0
+    steps = np.abs(np.diff(f[200:]))
+    assert steps.max() < 0.05 * held                      # at most 2 % of the held force a sample (tau_r 50 ms)
+    assert f[-1] == pytest.approx(1.83, abs=0.01)         # all of it back after 6 tau_r
+    k = 200 + int(np.argmax(f[200:] > f[199] + 1e-9))      # the release starts when the direction turns
+    rel = (1.83 - f[k + 50]) / (1.83 - f[k - 1])          # 50 ms later, exp(-1) of the held force is left
+    assert rel == pytest.approx(math.exp(-0.05 / RELEASE_TIME), abs=0.05)

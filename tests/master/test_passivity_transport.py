@@ -11,8 +11,9 @@ The coupled loop: a hand with arm impedance (mass m, spring k_h to the intended 
 b_h; Hogan's model with dynamics) holds the handle; the slave is the simulated tendon-sheath rig
 (calibrated model, estimator) pressing on stiff tissue; the master renders -force_scale T_out_hat.
 With the passivity controller off the observer at the master port sees the network generate
-energy (E < 0) and the handle oscillation grows; with it on, E >= 0 at every sample, the
-oscillation decays and the force stays within the clamp.
+energy (E < 0) and the handle oscillation grows; with it on, E >= 0 at every sample, the hand
+has no limit cycle, drifts slowly (the release time of :mod:`master.passivity`) and the force stays
+within the clamp.
 """
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ from teleop.app.faults import FaultInjector
 from teleop.clock import FakeClock
 from teleop.config import config_from_dict
 from teleop.keys import command_key, estimate_key, heartbeat_key
+from teleop.loop_metrics import chatter
 from teleop.messages import Command, Estimate, Heartbeat, Side, SideState
 from teleop.transport import Session, free_tcp_port, loopback_endpoint, zenoh_config
 
@@ -157,6 +159,12 @@ def test_with_the_passivity_controller_it_stays_passive_stable_and_clamped(runs)
     out, master, _ = runs[True]
     assert out["E"].min() >= -1e-9                   # observer energy at every sample
     assert np.abs(out["x"]).max() < 0.01             # no overshoot past the target (7.5 mm)
-    assert np.ptp(out["x"][1500:]) < 0.001           # settled: < 1 mm peak to peak in the last second
+    # no limit cycle: the hand's motion above 30 Hz in its worst 100 ms window after the first second
+    # below 20 um (8.1 um rms, 11.4 um worst; the release in one sample before the release time: 21 um)
+    late = out["t"] >= out["t"][0] + 1.0
+    assert chatter(out["t"][late], out["x"][late])[1] < 20e-6
+    # the price (TDPA's position drift): the force comes back over ~50 ms after each cut, so the hand
+    # sinks slowly into the delayed tissue, but less than halfway to its target (3.2 of 7.5 mm)
+    assert out["x"][-1] < 0.5 * 0.0075
     assert np.mean(out["state"] == 3) > 0.95 and master.safe_events == 0
     assert np.abs(out["f"]).max() <= 20.0 and master.passivity[0].stats.active_steps > 100
