@@ -12,7 +12,9 @@ each point: chatter of x_in_cmd and of the rendered force above 30 Hz (worst 100
 below :data:`teleop.loop_metrics.CHATTER_LIMITS` (20 um, 0.05 N) and the protocol finished.
 
 Usage: ``.venv/bin/python benchmarks/bench_stability.py [--quick] [--pc off|hard|reserve]``
-(prints a table; ~1 s of CPU per point).
+(prints a table; ~1 s of CPU per point). ``--joints``: the same sweep on the torque axes of the 3-joint
+instrument (benchmarks/stability_joints.py: the real slave and master nodes in one process; per
+joint the worst of its two pulls; ~7 s of CPU per point).
 """
 from __future__ import annotations
 
@@ -106,9 +108,14 @@ def main() -> None:
     ap.add_argument("--pc", default="all", choices=("off", "hard", "reserve", "all"))
     ap.add_argument("--boundary", action="store_true",
                     help="the loop without passivity control at high force scales, force limit 40 N")
+    ap.add_argument("--joints", action="store_true",
+                    help="the 3-joint instrument's torque axes (benchmarks/stability_joints.py, ~7 s CPU a point)")
     args = ap.parse_args()
     if args.boundary:
         boundary()
+        return
+    if args.joints:
+        joints(args.quick)
         return
     scales = (0.2, 0.8) if args.quick else (0.1, 0.2, 0.4, 0.8)
     delays = (0.001, 0.02) if args.quick else (0.001, 0.005, 0.02, 0.05)
@@ -135,6 +142,43 @@ def main() -> None:
                     print(f"{mode:8s} {fs:7.2f} {1e3 * d:8.0f} {k:6.0f} {str(r['stable']):>6s} "
                           f"{r['x_in_cmd_worst_um']:10.2f} {r['force_worst_N']:9.3f} {r['transparency_rms_fs']:10.3f} "
                           f"{'y' if r['finished'] else 'n':>4s}", flush=True)
+    print(f"CPU {time.process_time() - t0:.1f} s")
+
+
+def joints(quick: bool = False) -> None:
+    """The joint-axis sweep: force scale x one-way delay x arm stiffness on the 3-joint instrument, the
+    real nodes in one process (benchmarks/stability_joints.py); the release (master.passivity) on and,
+    at the defaults, off (the gain back in one sample) for the before/after."""
+    from stability_joints import arm_with, calibration, run_joints, summarize
+
+    import master.passivity as passivity
+
+    t0 = time.process_time()
+    cal = calibration()
+    print(f"calibrated at power-up in {time.process_time() - t0:.1f} s CPU")
+
+    def line(label: str, s: dict) -> None:
+        tr = " ".join(f"{v:.3f}" for v in s["transparency_rms_fs"].values())
+        print(f"{label} {str(s['stable']):>6s} {s['x_worst_um']:10.2f} {s['force_worst_N']:9.3f}   {tr}   "
+              f"{'y' if s['finished'] else 'n'} {s['safe_events']}", flush=True)
+
+    head = f"{'x_worst_um':>10s} {'F_worst_N':>9s}   transparency rms FS (bend_ud bend_lr grasp)   fin safe"
+    print(f"{'defaults (fs 0.2, 1 ms, k 300)':32s} {'stable':>6s} " + head)
+    keep = passivity.RELEASE_TIME
+    passivity.RELEASE_TIME = 1e-9
+    line(f"{'release in one sample (before)':32s}", summarize(run_joints(cal)))
+    passivity.RELEASE_TIME = keep
+    line(f"{'release tau_r 50 ms (after)':32s}", summarize(run_joints(cal)))
+    line(f"{'no passivity controller':32s}", summarize(run_joints(cal, passivity=False)))
+    print()
+    scales = (0.2, 0.8) if quick else (0.1, 0.2, 0.4, 0.8)
+    delays = (0.001, 0.02) if quick else (0.001, 0.02, 0.05)
+    stiff = (100.0, 800.0) if quick else (100.0, 300.0, 800.0)
+    print(f"{'f_scale':>7s} {'delay_ms':>8s} {'k_arm':>6s} {'stable':>6s} " + head)
+    for fs in scales:
+        for d in delays:
+            for k in stiff:
+                line(f"{fs:7.2f} {1e3 * d:8.0f} {k:6.0f}", summarize(run_joints(cal, fs, d, arm_with(k))))
     print(f"CPU {time.process_time() - t0:.1f} s")
 
 

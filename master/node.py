@@ -252,14 +252,19 @@ class MasterNode(MasterNodeBase):
         self.recorder.write(self.axes.csv_row(now, est, common, axes))
 
     def _log_rerun(self, now: float, q, marker: int) -> None:
-        """Every ``recording.log_every`` cycles: command, rendered and mapped force of axis 0, the last
-        round trip (command -> estimate echo) [s], the console state and the experiment (marker)."""
+        """Every ``recording.log_every`` cycles: command, rendered and mapped force of every axis
+        (``master/<axis>/...`` when there are several), the last round trip (command -> estimate echo)
+        [s], the console state and the experiment (marker)."""
         self._rerun_count += 1
         if self._rerun_count % self.cfg.recording.log_every:
             return
-        self.rerun.log_master(now, x_in_cmd=q[0], force=self.force[0], force_cmd=self.force_cmd[0],
-                              rtt=self.rtts[-1] if self.rtts else None, console=self.status.name,
-                              experiment=_EXPERIMENTS.get(marker & 0xF, f"marker {marker}") if marker else "none")
+        experiment = _EXPERIMENTS.get(marker & 0xF, f"marker {marker}") if marker else "none"
+        rtt = self.rtts[-1] if self.rtts else None
+        many = len(q) > 1
+        for k, name in enumerate(self.axes.names):
+            self.rerun.log_master(now, x_in_cmd=q[k], force=self.force[k], force_cmd=self.force_cmd[k],
+                                  rtt=rtt if k == 0 else None, console=self.status.name, experiment=experiment,
+                                  **({"axis": name} if many else {}))
 
     # ------------------------------------------------------------------------------------------------
     def _run_ended(self, clock: Clock) -> None:

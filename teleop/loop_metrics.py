@@ -27,14 +27,21 @@ import numpy as np
 
 from teleop.errors import DataError
 
-__all__ = ["CUTOFF_HZ", "WINDOW_S", "CHATTER_LIMITS", "chatter", "loop_metrics", "read_columns", "run_loop_metrics",
-           "chatter_checks", "loop_metric_lines"]
+__all__ = ["CUTOFF_HZ", "WINDOW_S", "CHATTER_LIMITS", "TRANSPARENCY_LIMIT_FS", "chatter", "loop_metrics", "read_columns",
+           "run_loop_metrics", "chatter_checks", "transparency_checks", "loop_metric_lines"]
 
 ENGAGED = 3          # teleop.messages.SideState.ENGAGED
 CUTOFF_HZ = 30.0
 WINDOW_S = 0.1
-#: The demo's check: worst-window chatter below these (x_in_cmd [m], force [N]).
+#: The demo's check: worst-window chatter below these (x_in_cmd [m], force [N]); docs/stability.md
+#: "The checks' limits": 20 um of tendon = 100 um of hand at motion_scale 0.2, the order of the
+#: surgeon's own physiological tremor; 0.05 N = the force JND (~10 %, Jones 1989; Pang et al. 1991)
+#: of the smallest force worth feeling through the device, 0.5 N.
 CHATTER_LIMITS = {"x_in_cmd_m": 20e-6, "force_N": 0.05}
+#: The joint demo's check: transparency RMS error below this fraction of full scale, the stiffness JND
+#: (23 %, Jones & Hunter 1990): below it the rendered tissue cannot be told from the true one by its
+#: stiffness (docs/stability.md).
+TRANSPARENCY_LIMIT_FS = 0.23
 
 
 def chatter(t: np.ndarray, y: np.ndarray, *, cutoff: float = CUTOFF_HZ, window: float = WINDOW_S,
@@ -173,6 +180,12 @@ def chatter_checks(metrics: dict) -> dict[str, bool]:
     return {f"{name}: no chatter (worst 100 ms above 30 Hz: x_in_cmd < {1e6 * lim['x_in_cmd_m']:g} um, "
             f"force < {lim['force_N']:g} N)": bool(r["chatter"]["x_in_cmd_worst_m"] < lim["x_in_cmd_m"]
                                                    and r["chatter"]["force_worst_N"] < lim["force_N"])
+            for name, r in metrics.items()}
+
+
+def transparency_checks(metrics: dict, limit: float = TRANSPARENCY_LIMIT_FS) -> dict[str, bool]:
+    """Per experiment: the transparency RMS error below ``limit`` [-, of full scale] (NaN fails)."""
+    return {f"{name}: transparency rms < {limit:g} FS": bool(r["transparency"]["force_error_rms_fs"] < limit)
             for name, r in metrics.items()}
 
 

@@ -287,9 +287,10 @@ class RerunLogger:
         rec.log(entity, self._rr.StateChange(state=label))
 
     def log_master(self, t: float, *, x_in_cmd: float, force: float, force_cmd: float, rtt: float | None,
-                   console: str, experiment: str) -> None:
+                   console: str, experiment: str, axis: str | None = None) -> None:
         """Master-side series at ``t`` [s]: command [m], rendered and mapped force [N], round trip [s]
-        (None: none yet), console state and experiment name (on change)."""
+        (None: none yet), console state and experiment name (on change). ``axis``: the instrument axis
+        the command and forces belong to (entities ``master/<axis>/...``; None: ``master/...``)."""
         rec = self._rec
         if rec is None:
             return
@@ -299,10 +300,11 @@ class RerunLogger:
         for name, v in (("x_in_cmd", x_in_cmd), ("force", force), ("force_cmd", force_cmd), ("rtt", rtt)):
             if v is None:
                 continue
-            entity = f"master/{name}"
+            entity = f"master/{name}" if axis is None or name == "rtt" else f"master/{axis}/{name}"
             if entity not in self._paths:
                 self._paths[entity] = entity
-                rec.log(entity, rr.SeriesLines(names=name, widths=1.5), static=True)
+                label = name if axis is None or name == "rtt" else f"{axis} {name}"
+                rec.log(entity, rr.SeriesLines(names=label, widths=1.5), static=True)
             rec.log(entity, rr.Scalars.from_fields(scalars=[float(v)]))
         self.log_state(t, "master/console", console)
         self.log_state(t, "experiment", experiment)

@@ -10,9 +10,9 @@ mean of |estimate - truth| over the range of the true torque in that experiment)
 and M_e. The haptic loop of every joint is measured as a single tendon's (:mod:`teleop.loop_metrics`,
 :func:`joint_loop_metrics`): chatter of the commanded tendon displacement ``r * cmd`` and of the
 rendered force, transparency of the rendered force against the scaled true net distal tension
-``torque / r``, per joint and pulled tendon. These are figures, not checks: a joint's force can
-step by ~1 N in one cycle when the passivity controller releases what it held back (seen on the
-grasp, pulling tendon b), which the >30 Hz measure counts as chatter.
+``torque / r``, per joint and pulled tendon, checked against the single tendon's chatter limits
+(:data:`teleop.loop_metrics.CHATTER_LIMITS`) and the transparency limit
+(:data:`teleop.loop_metrics.TRANSPARENCY_LIMIT_FS`); docs/stability.md says where each comes from.
 """
 from __future__ import annotations
 
@@ -181,11 +181,17 @@ class JointDemo:
         except DataError as e:
             problems.append(str(e))
             summary["joints"] = {}
-        try:            # chatter and transparency of every joint's haptic loop: figures, not checks (yet)
+        try:            # chatter and transparency of every joint's haptic loop, per pulled tendon
             summary["haptic_loop"] = joint_loop_metrics(run_dir, cfg)
         except DataError as e:
             problems.append(str(e))
-        return joint_checks(summary["joints"], summary["calibration"], cfg)
+            summary["haptic_loop"] = {}
+        from teleop.loop_metrics import chatter_checks, transparency_checks
+        loop = summary["haptic_loop"]
+        loop_ok = {f"{j.name}: haptic loop measured (pull a and b)": all(f"{j.name} (pull {t})" in loop for t in "ab")
+                   for j in cfg.instrument.joints}
+        return {**joint_checks(summary["joints"], summary["calibration"], cfg), **loop_ok, **chatter_checks(loop),
+                **transparency_checks(loop)}
 
     @staticmethod
     def lines(s: dict) -> list[str]:
@@ -218,5 +224,5 @@ class JointDemo:
             from teleop.loop_metrics import loop_metric_lines
             L.append("")
             L += loop_metric_lines(s["haptic_loop"])
-            L.append("(per joint: x_in_cmd = r * commanded angle, T_out = true torque / r; figures only, no check)")
+            L.append("(per joint: x_in_cmd = r * commanded angle, T_out = true torque / r)")
         return L

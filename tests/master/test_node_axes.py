@@ -106,3 +106,22 @@ def test_an_estimate_of_another_instrument_is_counted_and_ignored():
     clock.advance(DT)
     node.step(clock.now())
     assert node.counts["estimates_wrong_instrument"] == 1 and node.state != SideState.ENGAGED
+
+
+def test_every_axis_goes_to_the_live_view():
+    class View:
+        def __init__(self):
+            self.calls = []
+
+        def log_master(self, t, **kw):
+            self.calls.append((t, kw))
+
+    cfg, node, hands, links, clock, rec = make()
+    node.rerun = view = View()
+    hands.positions = [0.05, -0.02, 0.01]
+    run(node, links, clock, 2 * cfg.recording.log_every)
+    last = [kw for t, kw in view.calls if t == view.calls[-1][0]]
+    assert [kw["axis"] for kw in last] == ["bend_ud", "bend_lr", "grasp"]
+    assert [kw["force"] for kw in last] == node.force and [kw["x_in_cmd"] for kw in last] == pytest.approx(
+        links.command.sent[-1].targets)
+    assert last[0]["rtt"] is not None and last[1]["rtt"] is None and last[2]["console"] == "ENGAGED"

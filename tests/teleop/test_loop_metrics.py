@@ -5,7 +5,14 @@ import numpy as np
 import pytest
 
 from teleop.errors import DataError
-from teleop.loop_metrics import CHATTER_LIMITS, chatter, chatter_checks, loop_metrics
+from teleop.loop_metrics import (
+    CHATTER_LIMITS,
+    TRANSPARENCY_LIMIT_FS,
+    chatter,
+    chatter_checks,
+    loop_metrics,
+    transparency_checks,
+)
 
 
 def test_a_burst_is_found_where_it_is_and_a_slow_motion_is_quiet():
@@ -34,5 +41,10 @@ def test_loop_metrics_per_experiment_and_checks():
     assert m["minor"]["chatter"]["force_worst_N"] > CHATTER_LIMITS["force_N"]
     ok = chatter_checks(m)
     assert [v for k, v in sorted(ok.items())] == [False, True]     # minor fails, paper passes
+    tr = transparency_checks(m)
+    assert all(tr.values()) and all(f"{TRANSPARENCY_LIMIT_FS:g} FS" in k for k in tr)
+    m["paper"]["transparency"]["force_error_rms_fs"] = float("nan")    # not measured: fails
+    assert transparency_checks(m, limit=0.3) == {"paper: transparency rms < 0.3 FS": False,
+                                                 "minor: transparency rms < 0.3 FS": True}
     with pytest.raises(DataError, match="slave.csv lacks column"):
         loop_metrics(master, {k: v for k, v in slave.items() if k != "T_out"}, 0.2, {1: "paper"})
