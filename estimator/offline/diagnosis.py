@@ -50,7 +50,7 @@ MODEL_RESOLUTION = 0.003    # the base model's own resolution, share of the sign
 TRIM = 0.02                 # share of the largest validation residuals left out of the scores [-]
 POLISH = 3                  # best single extensions refitted with the route shares free
 RANK_FACTOR = 2.0           # among acceptable extensions, each extra parameter must divide S by this [-]
-STRONG_SCORE = 0.2          # below the structure threshold, an extension with S below this is still accepted [-]
+STRONG_SCORE = 0.15         # below the structure threshold, an extension with S below this is still accepted [-]
 _UNITS = {"T_out": "N", "x_out": "m"}
 
 
@@ -232,13 +232,20 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
                              floor=floor, need=1.0 - PENALTY * len(e.parameters))
         bar(e.id)
     # the best few again with the route free too (an effect the base model lacks distorts its route)
+    # a position lag skews the fitted route so far that its own fit on that route gains nothing: when
+    # no extension is acceptable yet and structure is left, the position lags get their route refit too
     if route:
-        for eid in sorted(singles, key=lambda k: singles[k].S)[:POLISH]:
+        polish = sorted(singles, key=lambda k: singles[k].S)[:POLISH]
+        if (min(f.S + PENALTY * f.n_params for f in singles.values()) >= 1.0
+                and max(_structure(base, noise).values()) > STRUCTURE_RATIO):
+            polish += [eid for eid in ("sensor_lag:x_in", "sensor_lag:x_out") if eid in singles and eid not in polish]
+        for j, eid in enumerate(polish):
             f = _Fit([CATALOGUE[eid]], folds, [singles[eid].values[0]], route=True, base=base, floor=floor,
                      need=1.0 - PENALTY * singles[eid].n_params)
             if f.S < singles[eid].S:
                 singles[eid] = f
-            bar(f"{eid}, route")
+            if j < POLISH:
+                bar(f"{eid}, route")
 
     # forward selection on the validation blocks with a price per parameter, relative to the model so far
     chosen = base
