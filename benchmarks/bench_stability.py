@@ -160,9 +160,9 @@ def joints(quick: bool = False) -> None:
     def line(label: str, s: dict) -> None:
         tr = " ".join(f"{v:.3f}" for v in s["transparency_rms_fs"].values())
         print(f"{label} {str(s['stable']):>6s} {s['x_worst_um']:10.2f} {s['force_worst_N']:9.3f}   {tr}   "
-              f"{'y' if s['finished'] else 'n'} {s['safe_events']}", flush=True)
+              f"{'y' if s['finished'] else 'n'} {s['safe_events']}   {s['worst_at']}", flush=True)
 
-    head = f"{'x_worst_um':>10s} {'F_worst_N':>9s}   transparency rms FS (bend_ud bend_lr grasp)   fin safe"
+    head = f"{'x_worst_um':>10s} {'F_worst_N':>9s}   transparency rms FS (bend_ud bend_lr grasp)   fin safe  F worst at"
     print(f"{'defaults (fs 0.2, 1 ms, k 300)':32s} {'stable':>6s} " + head)
     keep = passivity.RELEASE_TIME
     passivity.RELEASE_TIME = 1e-9

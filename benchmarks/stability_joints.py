@@ -148,13 +148,15 @@ def summarize(r: dict) -> dict:
     rows = {k: v for k, v in r.items() if isinstance(v, dict)}
     xw = max(v["chatter"]["x_in_cmd_worst_m"] for v in rows.values())
     fw = max(v["chatter"]["force_worst_N"] for v in rows.values())
+    worst_at = max(rows, key=lambda k: rows[k]["chatter"]["force_worst_N"])
     joints: dict[str, float] = {}
     for k, v in rows.items():
         j = k.split(" ")[0]
         joints[j] = max(joints.get(j, 0.0), v["transparency"]["force_error_rms_fs"])
     stable = bool(r["finished"] and r["safe_events"] == 0 and len(rows) == 6
                   and xw < CHATTER_LIMITS["x_in_cmd_m"] and fw < CHATTER_LIMITS["force_N"])
-    return {"stable": stable, "x_worst_um": 1e6 * xw, "force_worst_N": fw, "transparency_rms_fs": joints,
+    return {"stable": stable, "x_worst_um": 1e6 * xw, "force_worst_N": fw, "worst_at": worst_at,
+            "transparency_rms_fs": joints,
             "finished": r["finished"], "safe_events": r["safe_events"]}
 
 

@@ -39,19 +39,24 @@ minus.) The command is clamped to ``[-limit, limit]`` first; the damped force th
 between 0 and the clamped command (``f' v = E(k-1)/dt >= 0`` with ``|f'| <= |f|``), so the clamp holds
 with the PC active and the PC needs no force the device cannot render.
 
-Release. The reserve's gain ``g`` (the factor above, 1 when the port takes energy in) may rise no
-faster than a first-order approach to 1 of time constant ``tau_r`` (:data:`RELEASE_TIME`, 50 ms)::
+Release and fade. The reserve's gain ``g`` (the factor above, 1 when the port takes energy in) follows
+its target first-order, rising with the time constant ``tau_r`` (:data:`RELEASE_TIME`, 50 ms) and
+falling with ``tau_f`` (:data:`FADE_TIME`, 10 ms)::
 
-    g(k) = min(g_target(k), 1 - (1 - g(k-1)) exp(-dt / tau_r))     g_target = min(1, E/E_r) or 1   (release)
+    g(k) = g_t + (g(k-1) - g_t) exp(-dt / tau),   g_t = min(1, E/E_r) or 1,   tau = tau_r if g_t > g(k-1) else tau_f
 
-and falls at once. Without it the reserve handed the whole held-back force back in one sample when
-the hand turned into the force (the direction ``d`` flips, ``g`` 0.47 -> 1): a 1 N step on the grasp of
-the 3-joint instrument (0.86 -> 1.83 N), 0.12 N in the worst 100 ms window above 30 Hz. A release of
-``H`` newtons shaped so puts ~0.007 H into that window, so even the whole 4 N clamp stays below the
-demo's 0.05 N limit. A smaller ``g`` scales ``f`` toward 0 with the same sign: passivity is unchanged.
-The price is TDPA's known position drift (Artigas et al. 2010): where the network is strongly
-active (a delayed stiff wall) the force comes back over ~50 ms after each cut, and the hand sinks
-slowly into the wall instead of buzzing against it (docs/stability.md).
+Before, ``g`` jumped to its target: the whole held-back force came back in one sample when the hand
+turned into the force (the direction ``d`` flips, ``g`` 0.47 -> 1: a 1 N step on the grasp of the
+3-joint instrument, 0.86 -> 1.83 N, 0.12 N in the worst 100 ms window above 30 Hz), and at a hold with
+a long delay the direction's flips made ``g`` a relay (0.95 -> 0.63 in a sample, 0.086 N). A change of
+``H`` newtons shaped so puts ~0.007 H (rise) and ~0.033 H (fall) into that window. ``tau_f`` is short
+so that the fade still protects the tank: while ``g`` falls the port can lose at most
+``f v tau_f`` = 4 N x 0.1 m/s x 10 ms = 4 mJ < E_r, so the hard PC stays the rare backstop (with a 50 ms
+fall it ran the tank dry and switched at fs 0.4: 0.33 N). ``g`` in [0, 1] scales ``f`` toward 0 with
+the same sign, and the hard PC after it still keeps ``E(k) >= 0``: passivity is unchanged. The price
+is TDPA's known position drift (Artigas et al. 2010): where the network is strongly active (a
+delayed stiff wall) the force comes back over ~50 ms after each cut and the hand sinks slowly into
+the wall instead of buzzing against it (docs/stability.md).
 """
 from __future__ import annotations
 
@@ -69,6 +74,8 @@ RESERVE_SPEED, RESERVE_TIME = 0.002, 0.02
 #: 1 - exp(-t / tau_r). Its corner 1 / (2 pi tau_r) = 3.2 Hz lies in the hand's own band (< 10 Hz): a
 #: release of H newtons puts ~0.007 H into the worst 100 ms window above 30 Hz (a step: 0.12 H).
 RELEASE_TIME = 0.05
+#: Time constant tau_f [s] of the fade: the gain falls toward E / E_r with it (module docstring).
+FADE_TIME = 0.01
 
 
 @dataclass(frozen=True)
@@ -170,10 +177,9 @@ class PassivityController:
             self._direction = 1.0 if self._v_smooth > 0 else -1.0
         if self.enabled and self.reserve > 0.0:
             # reserve: f = f g, g = min(1, E(k-1) / E_r) while the port gives energy back, else 1;
-            # release: g rises no faster than 1 - exp(-dt / tau_r) of what is left per step
+            # release / fade: g follows its target first-order (tau_r rising, tau_f falling)
             g = min(1.0, max(self.energy, 0.0) / self.reserve) if f * self._direction > 0.0 else 1.0
-            if g > self.gain:
-                g = min(g, 1.0 - (1.0 - self.gain) * math.exp(-dt / RELEASE_TIME))
+            g += (self.gain - g) * math.exp(-dt / (RELEASE_TIME if g > self.gain else FADE_TIME))
             self.gain = g
             f *= g
         # E_cmd = E(k-1) - f v dt      (energy into the network if f is rendered unchanged)
