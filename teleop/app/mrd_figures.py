@@ -84,6 +84,15 @@ def _edges(ax, runs: list[MrdRun], bands: dict, sweep: dict) -> None:
     ax.legend(fontsize=6)
 
 
+def _save(plt, fig, title: str, path: Path) -> Path:
+    """Title, layout, write ``path`` (80 dpi) and close ``fig``; returns ``path``."""
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return path
+
+
 def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, directory: str | Path) -> list[Path]:
     """Write :data:`FIGURES` to ``directory``; returns their paths. Raises ConfigError when the
     directory cannot be created."""
@@ -119,11 +128,7 @@ def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, director
         ax.set_xlabel("time [s]")
         ax.set_ylabel("jaw torque [mN m]")
     axes[0, -1].legend(fontsize=7)
-    fig.suptitle(f"Jaw torque: measured and predicted from the spindle only ({_CREDIT})", fontsize=10)
-    fig.tight_layout()
-    paths.append(d / FIGURES[0])
-    fig.savefig(paths[-1], dpi=80)
-    plt.close(fig)
+    paths.append(_save(plt, fig, f"Jaw torque: measured and predicted from the spindle only ({_CREDIT})", d / FIGURES[0]))
 
     fig, axes = plt.subplots(1, 4, figsize=(17, 3.8))
     cal = {n: v["torque_rmse_fs"] for n, v in summary["runs"].items()}
@@ -153,11 +158,7 @@ def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, director
     ax.set_ylabel("mean residual [FS]")
     ax.set_title("folder model left out: residual over the cycle", fontsize=9)
     ax.legend(fontsize=7)
-    fig.suptitle(f"Where the jaw torque estimate fails ({_CREDIT})", fontsize=10)
-    fig.tight_layout()
-    paths.append(d / FIGURES[1])
-    fig.savefig(paths[-1], dpi=80)
-    plt.close(fig)
+    paths.append(_save(plt, fig, f"Where the jaw torque estimate fails ({_CREDIT})", d / FIGURES[1]))
 
     fig, axes = plt.subplots(1, 4, figsize=(17, 3.6))
     bands = summary["bands"]
@@ -181,9 +182,5 @@ def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, director
     axes[2].set_ylabel("jaw angle half-gap between directions [deg]")
     axes[2].set_title("E12 / stretch: angle gap against load", fontsize=9)
     _edges(axes[3], runs, bands, summary.get("load_sweep", {}))
-    fig.suptitle(f"Model-free loop measurements, middle of the stroke ({_CREDIT})", fontsize=10)
-    fig.tight_layout()
-    paths.append(d / FIGURES[2])
-    fig.savefig(paths[-1], dpi=80)
-    plt.close(fig)
+    paths.append(_save(plt, fig, f"Model-free loop measurements, middle of the stroke ({_CREDIT})", d / FIGURES[2]))
     return paths

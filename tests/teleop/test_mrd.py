@@ -176,8 +176,13 @@ def test_cli_mrd_prints_and_writes_json(tmp_path, capsys):
     from teleop.app.cli import main
     _folder(tmp_path)
     out = tmp_path / "out.json"
-    assert main(["analyze", "--mrd", str(tmp_path), "--json", str(out), "--calibration", "01"]) == 0
+    rep = tmp_path / "report"
+    assert main(["analyze", "--mrd", str(tmp_path), "--json", str(out), "--calibration", "01",
+                 "--report", str(rep)]) == 0
     text = capsys.readouterr().out
+    assert "ODbL" in (rep / "report.md").read_text()
+    from teleop.app.mrd_figures import FIGURES
+    assert all((rep / f).stat().st_size > 1000 for f in FIGURES)
     assert "ODbL" in text and "calibrated on run 01" in text
     s = json.loads(out.read_text())
     assert set(s["runs"]) == {"00", "10"} and s["calibration"]["run"] == "01"
