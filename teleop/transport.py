@@ -136,10 +136,17 @@ class Session:
     ------
     TransportError
         The session could not be opened (e.g. a listen port already in use).
+
+    Attributes
+    ----------
+    lock_master : bool
+        The slave's links on this session accept commands from one master session only
+        (``transport.lock_master``; False when built from a bare zenoh.Config).
     """
 
     def __init__(self, transport: TransportConfig | zenoh.Config, *, clock: Clock | None = None):
         zcfg = zenoh_config(transport) if isinstance(transport, TransportConfig) else transport
+        self.lock_master = transport.lock_master if isinstance(transport, TransportConfig) else False
         self.clock = clock or MonotonicClock()
         self._entities: list = []
         self._lock = threading.Lock()

@@ -34,6 +34,7 @@ import json
 import math
 import sys
 from pathlib import Path
+from typing import Any, Callable
 
 import numpy as np
 
@@ -217,6 +218,11 @@ def _kaist_one(rec: KaistRecording) -> tuple[dict, dict]:
     return summary, {"fits": fits, "cycles": (c1, c2)}
 
 
+def _labelled(tick: Callable[[str], None], prefix: str) -> Callable[[str], None]:
+    """A progress callback that prefixes each label (one per recording)."""
+    return lambda label: tick(prefix + label)
+
+
 def analyze_kaist(recs: list[KaistRecording], progress: bool = False,
                   n_bootstrap: int = 20) -> tuple[dict, list[dict]]:
     """Every KAIST configuration: the pair diagnosis, the shared fit and the Finding 1 baselines.
@@ -255,12 +261,12 @@ def analyze_kaist(recs: list[KaistRecording], progress: bool = False,
     """
     tick = _Status(progress)
     summaries, details = zip(*(_kaist_one(r) for r in recs)) if recs else ((), ())
-    out = {"mode": "kaist", "train": "command cycle 1 (from the first sample)", "test": "the later command cycles",
+    out: dict[str, Any] = {"mode": "kaist", "train": "command cycle 1 (from the first sample)", "test": "the later command cycles",
            "configurations": list(summaries)}
     train = [d["cycles"][0] for d in details]
     test = [d["cycles"][1] for d in details]
     for rec, s, d, tr, te in zip(recs, summaries, details, train, test):
-        diag, fits = diagnose_pair(rec, tr, te, progress=lambda label, n=rec.config_deg: tick(f"N = {n}: {label}"))
+        diag, fits = diagnose_pair(rec, tr, te, progress=_labelled(tick, f"N = {rec.config_deg}: "))
         s["diagnosis"], d["pair_fits"], d["extended"] = diag, fits, diag["extended"]["model"]
     Ns = [math.radians(s["config_deg"]) for s in summaries]
     if len(recs) >= 3:

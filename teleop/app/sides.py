@@ -96,7 +96,7 @@ def _side_streams(session, ident: str, injector, me: str, peer: str, out: tuple[
     from teleop.keys import heartbeat_key, liveliness_key
     from teleop.link_security import SourceLock  # slave: one master session only (transport.lock_master)
     from teleop.messages import Heartbeat
-    lock = SourceLock() if me == "slave" and getattr(session, "lock_master", False) else None
+    lock = SourceLock() if me == "slave" and session.lock_master else None
     only = {} if lock is None else {"source_lock": lock}
     watcher = session.liveliness_watcher(liveliness_key(ident, peer), None if lock is None else lock.on_liveliness)
     streams = (_publisher(session, out[0], out[1], injector),
