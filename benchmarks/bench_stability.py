@@ -147,8 +147,8 @@ def main() -> None:
 
 def joints(quick: bool = False) -> None:
     """The joint-axis sweep: force scale x one-way delay x arm stiffness on the 3-joint instrument, the
-    real nodes in one process (benchmarks/stability_joints.py); the release (master.passivity) on and,
-    at the defaults, off (the gain back in one sample) for the before/after."""
+    real nodes in one process (benchmarks/stability_joints.py); the reserve's gain shaped
+    (master.passivity: release, fade) and, at the defaults, not (the gain in one sample) for the before/after."""
     from stability_joints import arm_with, calibration, run_joints, summarize
 
     import master.passivity as passivity
@@ -164,11 +164,11 @@ def joints(quick: bool = False) -> None:
 
     head = f"{'x_worst_um':>10s} {'F_worst_N':>9s}   transparency rms FS (bend_ud bend_lr grasp)   fin safe  F worst at"
     print(f"{'defaults (fs 0.2, 1 ms, k 300)':32s} {'stable':>6s} " + head)
-    keep = passivity.RELEASE_TIME
-    passivity.RELEASE_TIME = 1e-9
-    line(f"{'release in one sample (before)':32s}", summarize(run_joints(cal)))
-    passivity.RELEASE_TIME = keep
-    line(f"{'release tau_r 50 ms (after)':32s}", summarize(run_joints(cal)))
+    keep = passivity.RELEASE_TIME, passivity.FADE_TIME
+    passivity.RELEASE_TIME = passivity.FADE_TIME = 1e-9
+    line(f"{'gain in one sample (before)':32s}", summarize(run_joints(cal)))
+    passivity.RELEASE_TIME, passivity.FADE_TIME = keep
+    line(f"{'release 50 ms, fade 10 ms (after)':32s}", summarize(run_joints(cal)))
     line(f"{'no passivity controller':32s}", summarize(run_joints(cal, passivity=False)))
     print()
     scales = (0.2, 0.8) if quick else (0.1, 0.2, 0.4, 0.8)
