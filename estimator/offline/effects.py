@@ -11,13 +11,13 @@ summary (literature.md); the causes and signatures are summarised in docs/diagno
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Iterable, Sequence
 
 import numpy as np
 
 from estimator.offline import effect_switches as sw
 from estimator.offline.effect_switches import RigSwitch, ScenarioKnob, Setting
+from estimator.offline.effect_types import K_MAX, NONE, UNKNOWN, Parameter, Prediction, Series
 from estimator.offline.effects_kernels import backlash_play, route_shape, run_extended, travel_lag
 
 __all__ = ["Parameter", "Effect", "VelocityFriction", "Pretension", "CurvatureDrift", "TendonStiffening", "Stiction",
@@ -25,66 +25,6 @@ __all__ = ["Parameter", "Effect", "VelocityFriction", "Pretension", "CurvatureDr
            "EFFECT_IDS", "ALIASES", "EQUIVALENT", "NONE", "UNKNOWN", "effect", "predict", "neutral_values",
            "route_shape", "ROUTE", "K_MAX", "RigSwitch", "ScenarioKnob", "Setting", "register", "unregister",
            "rig_switches"]
-
-NONE = "none"          # the base model explains the data within the noise
-UNKNOWN = "unknown"    # structure left in the residual that no extension explains
-K_MAX = 5.0            # upper bound of the friction exponent in fits [-]
-
-
-@dataclass(frozen=True)
-class Parameter:
-    """One fitted parameter: name (paper symbol where there is one), SI unit, bounds, neutral value
-    (the base model), typical starting values for the fit, and what it means."""
-
-    name: str
-    unit: str
-    lower: float
-    upper: float
-    neutral: float
-    starts: tuple[float, ...]
-    meaning: str
-
-
-@dataclass(frozen=True, eq=False)
-class Series:
-    """A recording prepared for fitting: arrays of shape (n,), the model's node grid and noise.
-
-    time [s], x_in [m], T_in [N], velocity dx_in/dt [m/s], T_out [N] or None, x_out [m] or None,
-    u (m + 1,) normalised wrap angle of the nodes, w (m + 1,) trapezoid weights (sum 1),
-    T_min [N] the tension below which a breakaway is lost in the load-cell noise, sigma_T_in [N]
-    the white-noise level of the prepared T_in.
-    """
-
-    time: np.ndarray
-    x_in: np.ndarray
-    T_in: np.ndarray
-    velocity: np.ndarray
-    T_out: np.ndarray | None
-    x_out: np.ndarray | None
-    u: np.ndarray
-    w: np.ndarray
-    T_min: float = 0.0
-    sigma_T_in: float = 0.0
-
-    def __len__(self) -> int:
-        return int(self.time.shape[0])
-
-    def slice(self, stop: int) -> "Series":
-        """The first ``stop`` samples (the training block)."""
-        cut = (lambda a: None if a is None else a[:stop])
-        return Series(self.time[:stop], self.x_in[:stop], self.T_in[:stop], self.velocity[:stop],
-                      cut(self.T_out), cut(self.x_out), self.u, self.w, self.T_min, self.sigma_T_in)
-
-
-@dataclass(frozen=True)
-class Prediction:
-    """Model outputs over a series: T_out [N] and x_out [m], shape (n,), and the compliance L/EA
-    [m/N] used (fitted by linear least squares on the given mask when x_out was measured)."""
-
-    T_out: np.ndarray
-    x_out: np.ndarray
-    compliance: float
-
 
 class Effect:
     """One model extension (subclasses below, one per physical effect; instances in CATALOGUE).
