@@ -103,8 +103,7 @@ class Console:
         """Decide this cycle's status from the device, the link health and the slave's ``x_in`` [m]."""
         was = self.engaged
         clutch = self.clutch_held(dev)
-        usable = math.isfinite(dev.position) and x_slave is not None and math.isfinite(x_slave)
-        if not healthy or not usable:
+        if not healthy or x_slave is None or not (math.isfinite(dev.position) and math.isfinite(x_slave)):
             status = ConsoleStatus.WAIT_SLAVE
         elif not dev.operator_present:
             status = ConsoleStatus.WAIT_OPERATOR

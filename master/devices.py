@@ -72,10 +72,14 @@ def device_axes_needed(cfg: Config) -> int:
 @register_device("hid")
 def _hid(cfg: Config, protocol: str):
     from master.hid import HidDevice, load_device_file
-    dev = load_device_file(cfg.master.device.file)
+    path = cfg.master.device.file
+    if not path:    # teleop.config checks this on load; a Config built in code may skip that check
+        raise ConfigError("master.device.file: a device file (configs/devices/*.yaml) is required when "
+                          "master.device.type is 'hid'")
+    dev = load_device_file(path)
     have, need = len(dev.input.position_axes), device_axes_needed(cfg)
     if have < need:
-        raise DeviceError(f"{cfg.master.device.file}: the device has {have} position axis(es), the instrument needs "
+        raise DeviceError(f"{path}: the device has {have} position axis(es), the instrument needs "
                           f"{need} (input.position_axes, with one force report map per axis)")
     # opens, resets and enables the actuators; raises DeviceError naming the device when absent
     return HidDevice(dev)

@@ -22,6 +22,11 @@ UDEV_RULES_FILE = "/etc/udev/rules.d/70-haptic.rules"
 NONE_FOUND = "no HID devices found"
 
 
+def _int(v: Any, missing: int) -> int:
+    """``v`` as an int, ``missing`` when hidapi gave None (0 is a real interface number)."""
+    return missing if v is None else int(v)
+
+
 def _text(v: Any) -> str:
     if isinstance(v, bytes):
         return v.decode("utf-8", "replace")
@@ -58,7 +63,7 @@ def list_devices(enumerate_fn: Callable[..., list[dict]] | None = None, vendor_i
     out = [{
         "vendor_id": int(d.get("vendor_id") or 0), "product_id": int(d.get("product_id") or 0),
         "usage_page": int(d.get("usage_page") or 0), "usage": int(d.get("usage") or 0),
-        "interface_number": int(d.get("interface_number") if d.get("interface_number") is not None else -1),
+        "interface_number": _int(d.get("interface_number"), -1),
         "manufacturer": _text(d.get("manufacturer_string")), "product": _text(d.get("product_string")),
         "serial": _text(d.get("serial_number")), "path": _text(d.get("path")),
     } for d in raw]

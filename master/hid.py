@@ -288,7 +288,7 @@ class HidDevice:
         fs = [float(f) for f in forces][:self.n_axes]
         fs += [0.0] * (self.n_axes - len(fs))
         try:
-            self._out.write(fs if self.n_axes > 1 else fs[0])
+            self._write(fs)
         except DeviceError as e:
             self._lose(str(e))
         self.forces = [_clamp(f, self._out.limit) for f in fs]
@@ -327,6 +327,14 @@ class HidDevice:
             return MultiAxisState(t, tuple(s.axes[a] for a in self.input.position_axes), s.buttons, present)
         return DeviceState(t, s.axes[self.input.position_axis], s.buttons, present)
 
+    def _write(self, forces: list[float]) -> None:
+        """Send one force per axis [N]: the PID backend drives a single axis (:func:`parse_device`), the
+        report backend takes the list (one report map per axis)."""
+        if isinstance(self._out, PidForce):
+            self._out.write(forces[0])
+        else:
+            self._out.write(forces)
+
     @property
     def closed(self) -> bool:
         return self._closed
@@ -344,7 +352,7 @@ class HidDevice:
         self._stopped = True
         self.force = 0.0
         self.forces = [0.0] * self.n_axes
-        for step in (lambda: self._out.write([0.0] * self.n_axes if self.n_axes > 1 else 0.0), self._out.stop):
+        for step in (lambda: self._write([0.0] * self.n_axes), self._out.stop):
             try:
                 step()
             except (DeviceError, OSError, ValueError):

@@ -214,20 +214,27 @@ def _tendon_values(path: Path, where: str, v) -> TendonCalibration:
     vals = {}
     for key, tp in _TENDON_KEYS.items():
         x = v.get(key)
-        ok = (not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(x)
-              and (tp is float or isinstance(x, int)))
-        if ok and key in ("M_e", "compliance"):
-            ok = x > 0
-        elif ok and key in ("K", "residual_rms"):
-            ok = x >= 0
-        elif ok and key == "n_samples":
-            ok = x >= 1
-        if not ok:
+        if not _valid_value(key, x, tp):
             raise _fail(path, f"{where}.{key}: expected {'an integer >= 1' if tp is int else 'a finite number'}"
                               f"{' > 0' if key in ('M_e', 'compliance') else ' >= 0' if key in ('K', 'residual_rms') else ''}"
                               f", got {x!r}")
         vals[key] = tp(x)
     return TendonCalibration(**vals)
+
+
+def _valid_value(key: str, x: object, tp: type) -> bool:
+    """Whether ``x`` is a finite number (an int when ``tp`` is int, never a bool) in ``key``'s range."""
+    if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+        return False
+    if tp is int and not isinstance(x, int):
+        return False
+    if key in ("M_e", "compliance"):
+        return x > 0
+    if key in ("K", "residual_rms"):
+        return x >= 0
+    if key == "n_samples":
+        return x >= 1
+    return True
 
 
 def tendon_model(cal: InstrumentCalibration, cfg: Config) -> SheathModel:

@@ -25,12 +25,15 @@ import logging
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 from teleop.codec import next_seq
 from teleop.config import Config
-from teleop.messages import Side, SideState
+from teleop.messages import Command, Side, SideState
 from teleop.node import NodeBase
+
+if TYPE_CHECKING:
+    from teleop.transport import Received
 
 __all__ = ["SlaveLinks", "SlaveNodeBase", "Decision"]
 
@@ -98,8 +101,8 @@ class SlaveNodeBase(NodeBase):
         self.cycles = 0
         self.commands_applied = 0
         self.master_stopped = False
-        self._accepted = None                  # last accepted Received command
-        self._refused = None                   # last command refused for engaging too far away
+        self._accepted: Received[Command] | None = None   # last accepted command
+        self._refused: Received[Command] | None = None    # last command refused for engaging too far away
 
     @property
     def rate_hz(self) -> float:
@@ -190,6 +193,8 @@ class SlaveNodeBase(NodeBase):
             self.marker = 0
             return Decision.SAFE, why
         rec = self._accepted
+        if rec is None:     # _command_fault answers "no command" then
+            raise RuntimeError("slave watchdog: no accepted command past the command-fault check")
         cmd = rec.message
         self.cmd_seq = cmd.seq
         if not cmd.engaged:

@@ -69,8 +69,9 @@ class _Joint:
         pc = cfg.pair_control
         self.ctl = PairController(self.r, set_tension(cfg, joint), pc.tension_gain, pc.switch_band,
                                   cfg.slave.relax_speed, x_init, feedforward=pc.feedforward)
-        elastic = [SheathModel(K=0.0, compliance=t.geometry().length / t.EA) for t in (joint.tendons.a, joint.tendons.b)]
-        self.est = JointEstimator(*elastic, self.r, pretension=joint.pretension)
+        model_a, model_b = (SheathModel(K=0.0, compliance=t.geometry().length / t.EA)
+                            for t in (joint.tendons.a, joint.tendons.b))
+        self.est = JointEstimator(model_a, model_b, self.r, pretension=joint.pretension)
         self.side = 0
         self.stage = PairStage.PULL
         self.c = 0.0

@@ -107,8 +107,8 @@ class PairController:
         """Index of the tendon in position control (0 = a, 1 = b), -1 when idle."""
         return {PairMode.IDLE: -1, PairMode.PULL_A: 0, PairMode.PULL_B: 1}[self.mode]
 
-    def _mode_for(self, c: float | None) -> PairMode:
-        if c is None or not math.isfinite(c):
+    def _mode_for(self, c: float) -> PairMode:
+        if not math.isfinite(c):
             return PairMode.IDLE
         if self.mode == PairMode.PULL_A and c > 0.5 * self.band:
             return PairMode.PULL_A
@@ -139,14 +139,15 @@ class PairController:
         x_out_hat : (float, float), optional
             Estimated distal displacements of tendons a and b [m] (for the feedforward).
         """
-        mode = self._mode_for(theta_cmd)
+        c = math.nan if theta_cmd is None else float(theta_cmd)   # None or NaN: idle
+        mode = self._mode_for(c)
         if mode != self.mode:
             self.mode = mode
             self.switches += 1
             self._ff = None
             if mode != PairMode.IDLE:
                 self._x_ref = self.x_cmd[self.pulling]
-                self._c_ref = float(theta_cmd)
+                self._c_ref = c
         p = self.pulling
         if p < 0:
             self._tension_step(0, T_in[0], dt)
@@ -154,7 +155,7 @@ class PairController:
             return self._clip()
         s = 1.0 if p == 0 else -1.0
         # pulling side: x_cmd = x_ref + s r (c - c_ref)
-        x_new = self._x_ref + s * self.r * (float(theta_cmd) - self._c_ref)
+        x_new = self._x_ref + s * self.r * (c - self._c_ref)
         self.x_cmd[p] = x_new
         q = 1 - p
         if self.feedforward and x_out_hat is not None and math.isfinite(x_out_hat[p]):

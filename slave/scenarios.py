@@ -32,6 +32,7 @@ from estimator.offline.effects import ALIASES, CATALOGUE, Effect, rig_switches
 from estimator.offline.effects import EFFECT_IDS as CATALOGUE_IDS
 from estimator.offline.effects_kernels import backlash_play, travel_lag
 from estimator.sheath import SheathGeometry
+from slave.rig import RigState, RigTruth
 from slave.simulated import EFFECT_IDS, SimulatedRig
 from teleop import config as C
 from teleop.recording import MeasuredData
@@ -266,17 +267,19 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     rig = SimulatedRig(sheath, rig_cfg)
     c = L / EA
     per_newton = math.exp(-K) / (100.0 + k_tissue) + c * -math.expm1(-K) / K   # x_in per T_in, pulling
-    x0 = rig.state.truth.x_in
+    x0 = _truth(rig.state).x_in
     x_rest = float(rng.uniform(0.1, 0.4)) * per_newton
     if "friction_offset" in hidden:   # rest where the tendon stays taut: friction holds a(e^K - 1) at the tip
         x_rest += 1.2 * params["tension_offset"] * math.expm1(K) * (1.0 / (100.0 + k_tissue) + c)
     cmd = x0 + protocol(duration, rate_hz, float(rng.uniform(12.0, 20.0)) * per_newton, rng_proto, x_rest=x_rest)
     dt = 1.0 / rate_hz
-    enc0, x_out0, x_in0 = rig.state.x_in, rig.state.truth.x_out, rig.state.truth.x_in   # at rest, before moving
+    rest = _truth(rig.state)
+    enc0, x_out0, x_in0 = rig.state.x_in, rest.x_out, rest.x_in   # at rest, before moving
     out = np.empty((cmd.size, 5))
     for k, x in enumerate(cmd):
         s = rig.step(float(x), dt)
-        out[k] = (s.x_in, s.T_in, s.truth.x_out, s.truth.T_out, s.truth.x_in)
+        tr = _truth(s)
+        out[k] = (s.x_in, s.T_in, tr.x_out, tr.T_out, tr.x_in)
     time = np.arange(1, cmd.size + 1) * dt
     T_in, x_in, T_true, x_true = out[:, 1], out[:, 0] - enc0, out[:, 3], out[:, 2] - x_out0
     T_true, x_true = _signal_effects(hidden, params, time, out[:, 1], out[:, 4] - x_in0, T_true, x_true)
@@ -299,6 +302,13 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
              "noise_x_out": noise_x,
              "signals": {"T_out": out[:, 3], "x_out": out[:, 2] - x_out0, "x_in": out[:, 4] - x_in0}}
     return Recording(data=data, truth=truth)
+
+
+def _truth(s: RigState) -> RigTruth:
+    """The single-tendon ground truth of a simulated rig's state (always there: SimulatedRig._read)."""
+    if not isinstance(s.truth, RigTruth):
+        raise RuntimeError(f"the simulated rig returned no single-tendon truth (got {type(s.truth).__name__})")
+    return s.truth
 
 
 def _signal_effects(hidden, params, time, T_in, x_in, T_out, x_out):

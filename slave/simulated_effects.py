@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
@@ -230,6 +231,20 @@ def advance_general(T, lo, hi, w, a, beta, Tc, x_in, x_out, bx, bF, bs):  # prag
 class EffectSwitches:
     """The rig's effect state and its step with effects on (mixed into SimulatedRig)."""
 
+    # the host rig's state this mixin reads and advances (set in SimulatedRig.__init__)
+    log_gain: np.ndarray                             # node log-gains mu theta(s_i) [-], shape (n + 1,)
+    _w: np.ndarray                                   # node elongation weights [m/N], shape (n + 1,)
+    _T: np.ndarray                                   # node tensions [N], shape (n + 1,)
+    _x_in: float                                     # proximal displacement [m]
+    _x_out: float                                    # distal displacement [m]
+    _graph: tuple[np.ndarray, np.ndarray, np.ndarray]  # distal load law segments (bx, bF, bs)
+    _t: float                                        # rig time [s]
+
+    if TYPE_CHECKING:
+        @property
+        def K(self) -> float:
+            """Friction exponent [-] (SimulatedRig.K)."""
+
     @property
     def effects(self) -> tuple[str, ...]:
         """Identifiers of the effects switched on (estimator/offline/effects.py names), in config order."""
@@ -309,10 +324,13 @@ def validate_effects(fx: EffectsConfig) -> None:
     """Range checks of every switch's settings against its catalogue entry, and that this simulator
     has a kernel for each switch that is on; ConfigError names the key."""
     for name, e in rig_switches().items():
+        sw = e.switch
+        if sw is None:      # rig_switches keeps only catalogue entries with a switch
+            raise RuntimeError(f"effect catalogue entry {name!r} has no rig switch")
         sub = fx[name]
         where = f"rig.simulated.effects.{name}"
         _check(isinstance(sub.enabled, (bool, np.bool_)), f"{where}.enabled", "true or false", sub.enabled)
-        for st in e.switch.settings:
+        for st in sw.settings:
             v = getattr(sub, st.name)
             _check(_finite(v) and in_range(v, st.valid), f"{where}.{st.name}",
                    "a finite number" + ("" if st.valid == "any" else f" {st.valid}") + f" [{st.unit}]", v)

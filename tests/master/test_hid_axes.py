@@ -2,6 +2,7 @@
 axis; through the device registry and the one MasterNode (fake hidapi handle)."""
 from __future__ import annotations
 
+import dataclasses
 import struct
 from pathlib import Path
 
@@ -85,3 +86,11 @@ def test_the_master_node_drives_a_three_axis_hid_device():
     m = cfg.master.mapping
     want = [max(-3.0, min(3.0, -m.force_scale * tq / rk)) for tq, rk in zip(TORQUES, r)]
     assert dev.forces[1:] == pytest.approx(want[1:]) and links.command.sent[-1].targets[1:] == pytest.approx(ANGLES[1:])
+
+
+def test_the_registry_names_a_missing_device_file_of_a_config_built_in_code():
+    cfg = load_config()
+    device = dataclasses.replace(cfg.master.device, type="hid", file=None)   # load_config would refuse this
+    cfg = dataclasses.replace(cfg, master=dataclasses.replace(cfg.master, device=device))
+    with pytest.raises(ConfigError, match=r"master\.device\.file: a device file .* required"):
+        make_device(cfg)
