@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import faulthandler
 import logging
 import time
 from pathlib import Path
@@ -19,6 +20,10 @@ from teleop.config import Config
 
 __all__ = ["run_slave", "run_master", "load_or_recalibrate", "default_run_dir",
            "prepare_run_dir", "endpoints", "open_session", "slave_links", "master_links"]
+
+
+#: [s] after the loop ends, a side still shutting down this long dumps its threads' stacks to its log
+SHUTDOWN_DUMP_S = 15.0
 
 
 def default_run_dir(base: str | Path) -> Path:
@@ -141,6 +146,8 @@ def _serve(node, clock, args: argparse.Namespace, run_dir: Path, side: str, inje
     try:
         node.run(clock, max_duration=args.max_duration)
     finally:
+        # a shutdown that takes longer than SHUTDOWN_DUMP_S leaves every thread's stack in the side's log
+        faulthandler.dump_traceback_later(SHUTDOWN_DUMP_S, exit=False)
         close_journal()
         if close_first is not None:
             close_first()
@@ -187,6 +194,7 @@ def run_slave(args: argparse.Namespace) -> int:
                 _serve(node, clock, args, run_dir, "slave", injector)
         finally:
             rig.close()
+    faulthandler.cancel_dump_traceback_later()
     logging.getLogger("teleop.slave").info("slave done: %s", run_dir)
     return 0
 
@@ -221,6 +229,7 @@ def run_master(args: argparse.Namespace) -> int:
             links = master_links(session, ident, injector)
             node = MasterNode(cfg, device, links, recorder=rec, rerun=rr)
             _serve(node, clock, args, run_dir, "master", injector, close_first=device.close)
+    faulthandler.cancel_dump_traceback_later()
     _log_master_done(node)
     return 0 if getattr(device, "finished", True) else 1
 

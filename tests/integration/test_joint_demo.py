@@ -37,7 +37,7 @@ def test_three_joint_demo_end_to_end_over_zenoh(tmp_path):
     logs = proc.stderr + (run_dir / "slave.log").read_text() + (run_dir / "master.log").read_text()
     assert "Traceback" not in logs, logs[-3000:]
     summary = json.loads((run_dir / "summary.json").read_text())
-    assert summary["problems"] == [] and proc.returncode == 0, (summary["problems"], summary["checks"])
+    assert summary["problems"] == [] and proc.returncode == 0, (summary["problems"], summary["checks"], logs[-4000:])
     assert "calibration loaded from" in (run_dir / "slave.log").read_text()       # the slave reloaded the file
     for name in ("bend_ud", "bend_lr", "grasp"):
         j = summary["joints"][name]
