@@ -1,5 +1,5 @@
 # `make demo` and `make test` create .venv on first use (and again when pyproject.toml changes).
-# `make test`: ruff (lint + import order), mypy (estimator/, teleop/), then pytest.
+# `make test`: ruff (lint + import order), mypy (estimator/, teleop/, slave/, master/), then pytest.
 PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
