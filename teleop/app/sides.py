@@ -13,6 +13,7 @@ import argparse
 import contextlib
 import faulthandler
 import logging
+import sys
 import time
 from pathlib import Path
 
@@ -24,6 +25,17 @@ __all__ = ["run_slave", "run_master", "load_or_recalibrate", "default_run_dir",
 
 #: [s] after the loop ends, a side still shutting down this long dumps its threads' stacks to its log
 SHUTDOWN_DUMP_S = 15.0
+
+
+def _arm_shutdown_dump() -> None:
+    """Arm the stack dump of a slow shutdown on the process's own stderr (fd 2; not a captured stream)."""
+    stream = sys.__stderr__
+    if stream is None:
+        return
+    try:
+        faulthandler.dump_traceback_later(SHUTDOWN_DUMP_S, exit=False, file=stream)
+    except (OSError, ValueError):      # stderr without a file descriptor: no dump, nothing else changes
+        pass
 
 
 def default_run_dir(base: str | Path) -> Path:
@@ -147,7 +159,7 @@ def _serve(node, clock, args: argparse.Namespace, run_dir: Path, side: str, inje
         node.run(clock, max_duration=args.max_duration)
     finally:
         # a shutdown that takes longer than SHUTDOWN_DUMP_S leaves every thread's stack in the side's log
-        faulthandler.dump_traceback_later(SHUTDOWN_DUMP_S, exit=False)
+        _arm_shutdown_dump()
         close_journal()
         if close_first is not None:
             close_first()
