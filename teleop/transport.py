@@ -33,7 +33,7 @@ from teleop.liveliness import LivelinessToken, LivelinessWatcher
 from teleop.publish_log import PUBLISH_LOG
 
 __all__ = [
-    "zenoh_config", "free_tcp_ports", "free_tcp_port", "loopback_endpoint", "RateLimitedLog",
+    "zenoh_config", "free_tcp_ports", "free_tcp_port", "accepts_connections", "loopback_endpoint", "RateLimitedLog",
     "Session", "Publisher", "Received", "LatestSubscriber", "LivelinessToken", "LivelinessWatcher",
 ]
 
@@ -115,6 +115,15 @@ def free_tcp_ports(n: int, host: str = "127.0.0.1") -> list[int]:
 def free_tcp_port(host: str = "127.0.0.1") -> int:
     """One free TCP port on ``host`` (see :func:`free_tcp_ports`)."""
     return free_tcp_ports(1, host)[0]
+
+
+def accepts_connections(port: int, host: str = "127.0.0.1", timeout: float = 0.2) -> bool:
+    """True when a TCP connection to ``host:port`` succeeds within ``timeout`` [s] (a peer listens there)."""
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            return True
+    except OSError:
+        return False
 
 
 def loopback_endpoint(port: int) -> str:

@@ -21,7 +21,6 @@ import json
 import math
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -104,14 +103,13 @@ def finish(summary: dict, checks: dict[str, bool], problems: list[str], t0: floa
 
 
 def _wait_listening(port: int, proc: subprocess.Popen, deadline: float) -> bool:
+    from teleop.transport import accepts_connections
     while time.monotonic() < deadline:
         if proc.poll() is not None:
             return False
-        try:
-            with socket.create_connection(("127.0.0.1", port), timeout=0.2):
-                return True
-        except OSError:
-            time.sleep(0.05)
+        if accepts_connections(port):
+            return True
+        time.sleep(0.05)
     return False
 
 

@@ -21,7 +21,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -35,7 +34,7 @@ from teleop.config import load_config
 from teleop.keys import heartbeat_key
 from teleop.messages import Heartbeat, SideState
 from teleop.recording import read_measured_csv
-from teleop.transport import Session, free_tcp_ports, loopback_endpoint, zenoh_config
+from teleop.transport import Session, accepts_connections, free_tcp_ports, loopback_endpoint, zenoh_config
 
 CONFIG = """\
 instrument:
@@ -147,14 +146,6 @@ def _observer_state(sub):
     return None if rec is None else rec.message.state
 
 
-def _listening(port: int) -> bool:
-    try:
-        with socket.create_connection(("127.0.0.1", port), timeout=0.2):
-            return True
-    except OSError:
-        return False
-
-
 def _wait(pred, timeout: float, what: str, procs) -> None:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -205,7 +196,7 @@ def run_fault(tmp: Path, name: str, *, inject: dict[str, str] | None = None, sig
             with open(logs[side], "w") as fh:
                 procs[side] = subprocess.Popen(args, stdout=fh, stderr=subprocess.STDOUT, env=env)
             if side == "slave":
-                _wait(lambda: _listening(port), 60, f"the slave to listen on {ep}", procs)
+                _wait(lambda: accepts_connections(port), 60, f"the slave to listen on {ep}", procs)
         with Session(zenoh_config(cfg.transport, listen=(), connect=(ep,))) as obs:
             beats = {s: obs.subscriber(heartbeat_key(ident, s), Heartbeat) for s in ("slave", "master")}
             DEBUG[:] = [lambda: str({s: (b.count, b.errors, _observer_state(b)) for s, b in beats.items()})]

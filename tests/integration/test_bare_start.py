@@ -7,13 +7,12 @@ from __future__ import annotations
 
 import json
 import os
-import socket
 import subprocess
 import sys
 
 import pytest
 
-from teleop.transport import free_tcp_port
+from teleop.transport import accepts_connections, free_tcp_port
 from tests.integration.processes import wait_for
 
 pytestmark = pytest.mark.integration
@@ -32,12 +31,6 @@ transport:
 """
 
 
-def _listening(port: int) -> bool:
-    with socket.socket() as s:
-        s.settimeout(0.2)
-        return s.connect_ex(("127.0.0.1", port)) == 0
-
-
 def test_bare_master_then_bare_slave_find_each_other_and_share_one_run(tmp_path):
     runs = tmp_path / "runs"
     cfg = tmp_path / "c.yaml"
@@ -49,7 +42,7 @@ def test_bare_master_then_bare_slave_find_each_other_and_share_one_run(tmp_path)
         master = subprocess.Popen(cmd + ["master", "--config", str(cfg), "--protocol", "short", "--max-duration", "60"],
                                   stdout=mlog, stderr=subprocess.STDOUT, env=env)
         # the master is first (a person opening two terminals): the slave starts once the port is taken
-        wait_for(lambda: _listening(port) or master.poll() is not None, 60, "the master to listen")
+        wait_for(lambda: accepts_connections(port) or master.poll() is not None, 60, "the master to listen")
         slave = subprocess.Popen(cmd + ["slave", "--config", str(cfg), "--exit-on-master-stop", "--max-duration", "60"],
                                  stdout=slog, stderr=subprocess.STDOUT, env=env)
         try:
