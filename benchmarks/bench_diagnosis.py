@@ -10,16 +10,22 @@ hidden effect. Two simulators, reported apart:
 * ``lumped``: the independent dynamic lumped-mass simulator (slave/lumped_scenarios.py: random
   routes of arcs and straight runs, random distal loads, 200-2000 Hz, its own noise).
 
-Seed sets: ``dev`` (effects 100+, clean 500+, uncatalogued 900+) and ``dev2`` (the same offsets +
-100000: the former final set, seen once in session 2 and so development data since) are what the
-thresholds were set on; ``final`` (the same offsets + 200000, chosen before any run of it) is run
-once with the code frozen, never tuned on.
+Seed sets: ``dev`` (effects 100+, clean 500+, uncatalogued 900+), ``dev2`` (the same offsets +
+100000: the final set of session 2, seen since) and ``dev3`` (offsets + 200000: the final set of
+session 3, seen since) are development data; ``final`` (offsets + 300000, fixed in session 4 before
+any run of it) is run once with the code frozen, never tuned on.
+Seed layout (session 4): every hidden-effect recording has its own seed, so its own simulated rig
+(route, K, EA, load, rate, noise): effect k of EFFECT_IDS, level j, repeat s uses
+base + 100 + 1000 k + 10 j + s (before session 4 every effect of a set shared the four rigs of
+base + 100 + 10 j + s, and two constant-force draws could carry most of a set's misses;
+``--shared-rigs`` reproduces that layout).
 Prints per effect and per channel: accuracy (strict, and up to the inseparable pairs of
 estimator.offline.effects.EQUIVALENT), gains, false alarms on clean data; never fails on the figures (the
 pass/fail checks are in tests/estimator/test_diagnosis.py).
 
-    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|final] [--seeds 2]
+    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|dev3|final] [--seeds 2]
         [--levels 0.2,0.8] [--clean 12] [--duration 90] [--rate 1000] [--jobs 2] [--json OUT] [--speed-only]
+        [--shared-rigs]
 """
 from __future__ import annotations
 
@@ -38,8 +44,14 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from estimator.offline.diagnosis import diagnose  # noqa: E402
 from estimator.offline.effects import EFFECT_IDS, EQUIVALENT, NONE  # noqa: E402
 
-SEED_BASE = {"dev": 0, "dev2": 100000, "final": 200000}
+SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "final": 300000}
 UNCATALOGUED = "load_cell_wander"
+
+
+def effect_seed(base: int, k: int, j: int, s: int, shared_rigs: bool = False) -> int:
+    """Seed of the recording of effect number ``k`` (in EFFECT_IDS), level number ``j``, repeat ``s``:
+    base + 100 + 1000 k + 10 j + s (its own rig), or base + 100 + 10 j + s with ``shared_rigs``."""
+    return base + 100 + (0 if shared_rigs else 1000 * k) + 10 * j + s
 
 
 def _record(sim: str):
@@ -147,6 +159,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--only", default="", help="comma-separated hidden effects (default: all, clean, unknown)")
     ap.add_argument("--json", default="", help="write every row as JSON to this file")
     ap.add_argument("--verbose", action="store_true")
+    ap.add_argument("--shared-rigs", action="store_true",
+                    help="seed layout before session 4: every effect of a set on the same four rigs")
     ap.add_argument("--speed-only", action="store_true", help="only time a 10-minute 1 kHz recording")
     args = ap.parse_args(argv)
     if args.speed_only:
@@ -158,8 +172,8 @@ def main(argv: list[str] | None = None) -> None:
     cases = []
     for sim in sims:
         rate = args.rate if args.rate or sim == "lumped" else 1000.0
-        cases += [(sim, e, lv, b + 100 + 10 * j + s, args.duration, rate)
-                  for e in EFFECT_IDS for j, lv in enumerate(levels) for s in range(args.seeds)]
+        cases += [(sim, e, lv, effect_seed(b, k, j, s, args.shared_rigs), args.duration, rate)
+                  for k, e in enumerate(EFFECT_IDS) for j, lv in enumerate(levels) for s in range(args.seeds)]
         cases += [(sim, NONE, None, b + 500 + s, args.duration, rate) for s in range(args.clean)]
         cases += [(sim, UNCATALOGUED, 1.0, b + 900 + s, args.duration, rate) for s in range(args.unknown)]
     if args.only:
