@@ -1,5 +1,8 @@
 """``teleop replay RUN``: a recorded session played back through the estimator and the Rerun view.
 
+A joint instrument's run (``slave_joints.csv``) is replayed joint by joint by
+:mod:`teleop.app.replay_joints`; the rest of this docstring is the single tendon's.
+
 RUN is a run directory (``runs/<id>/`` with ``slave.csv``, ``config.yaml`` and
 ``calibration/<instrument>.yaml`` or ``calibration.json``) or a ``slave.csv``. The proximal signals
 (``time``, ``T_in``, ``x_in``) are re-estimated with the run's own config and calibration, or with
@@ -32,6 +35,7 @@ from estimator.online.distal import estimate_batch
 from estimator.phase import Phase
 from estimator.sheath import SheathModel, profile_batch
 from teleop.app.demo_run import full_scale_errors
+from teleop.app.replay_joints import find_joint_csv, joint_table_lines, replay_joints
 from teleop.config import Config, load_config
 from teleop.errors import CalibrationError, ConfigError, DataError
 from teleop.recording import MeasuredData, read_measured_csv
@@ -58,16 +62,14 @@ def load_run(run: str | Path) -> ReplayInput:
     Raises
     ------
     DataError
-        No such directory or file, a directory without ``slave.csv`` (a joint instrument's
-        ``slave_joints.csv`` is named as not supported), or an unreadable CSV (file:line, column).
+        No such directory or file, a directory without ``slave.csv``, or an unreadable CSV (file:line,
+        column). A joint instrument's run (``slave_joints.csv``) is :func:`replay`'s other branch.
     """
     path = Path(run)
     if path.is_dir():
         csv = path / "slave.csv"
         if not csv.is_file():
-            why = ("a joint instrument's recording (slave_joints.csv): replay handles single-tendon runs"
-                   if (path / "slave_joints.csv").is_file() else "no slave.csv in it")
-            raise DataError(f"{path}: {why}")
+            raise DataError(f"{path}: no slave.csv (single tendon) or slave_joints.csv (joints) in it")
         return ReplayInput(csv, path, read_measured_csv(csv))
     if not path.exists():
         raise DataError(f"{path}: no such run directory or file")
@@ -76,12 +78,12 @@ def load_run(run: str | Path) -> ReplayInput:
     return ReplayInput(path, parent if own else None, read_measured_csv(path))
 
 
-def _config(inp: ReplayInput, config: str | Path | None) -> Config:
+def _config(run_dir: Path | None, config: str | Path | None) -> Config:
     if config is not None:
         if not Path(config).is_file():
             raise ConfigError(f"{config}: config file not found")
         return load_config(config)
-    own = inp.run_dir / "config.yaml" if inp.run_dir is not None else None
+    own = run_dir / "config.yaml" if run_dir is not None else None
     return load_config(own if own is not None and own.is_file() else None)
 
 
@@ -236,7 +238,8 @@ def _log(inp: ReplayInput, cfg: Config, model: SheathModel, new: dict[str, np.nd
 
 def replay(run: str | Path, *, config: str | Path | None = None, calibration: str | Path | None = None,
            estimator: str = "profile", speed: float = math.inf, rrd: str | Path | None = None) -> dict[str, Any]:
-    """Re-estimate a recording, log it to Rerun and compare (module docstring).
+    """Re-estimate a recording, log it to Rerun and compare (module docstring); a joint instrument's run
+    (``slave_joints.csv``) goes to :func:`teleop.app.replay_joints.replay_joints` (``estimator`` ignored).
 
     Returns
     -------
@@ -250,8 +253,13 @@ def replay(run: str | Path, *, config: str | Path | None = None, calibration: st
     DataError, ConfigError, CalibrationError
         Missing run or column, unreadable config or calibration, unknown estimator or speed.
     """
+    joint_csv = find_joint_csv(run)
+    if joint_csv is not None:
+        return replay_joints(joint_csv, _config(joint_csv.parent, config), calibration=calibration, speed=speed, rrd=rrd)
+    if estimator != "profile" and Path(run).is_dir() and not (Path(run) / "slave.csv").is_file():
+        raise ConfigError(f"--estimator {estimator}: single-tendon runs only")
     inp = load_run(run)
-    cfg = _config(inp, config)
+    cfg = _config(inp.run_dir, config)
     model, source = load_model(cfg, inp, calibration)
     t_start = time.perf_counter()
     new = reestimate(inp.data, model, cfg, estimator)
@@ -268,7 +276,9 @@ def replay(run: str | Path, *, config: str | Path | None = None, calibration: st
 
 
 def table_lines(res: dict[str, Any]) -> list[str]:
-    """The comparison as printed: one line per block and reference."""
+    """The comparison as printed: one line per block and reference (per joint for a joint run)."""
+    if res.get("kind") == "joints":
+        return joint_table_lines(res)
     lines = [f"replay {res['csv']} ({res['samples']} samples, {res['duration_s']:.1f} s) with {res['estimator']} "
              f"estimator, K={res['K']:.4g}, L/EA={res['compliance_m_per_N']:.3g} m/N from {res['calibration']}",
              f"{'block':<7} {'against':<9} {'force max':>9} {'mean':>7} {'elong max':>9} {'mean':>7}  (of full scale)"]
