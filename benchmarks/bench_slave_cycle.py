@@ -4,7 +4,7 @@ One SlaveNode of a single tendon (simulated 200-element rig, estimator, 50-point
 ramp of engaged commands through in-memory links for ``n`` cycles, once with the CSV and Rerun writes
 in the loop (:class:`teleop.recording.CsvRecorder`, :class:`teleop.rerun_log.RerunLogger`) and once
 with the writer threads of ``teleop slave`` (:class:`teleop.csv_writer.ThreadedCsvRecorder`,
-:class:`teleop.rerun_thread.ThreadedRerunLogger`); then the same node class on the 3-joint
+:class:`teleop.rerun_proc.RerunProcessLogger`: Rerun in a child process); then the same node class on the 3-joint
 instrument (configs/instrument-3dof.yaml: three pair axes, calibrated on its simulator first, each
 joint following a slow sine of angle) with the writer threads. Prints p50/p99/max of the step time
 and the share of steps over 0.8 ms (what would overrun a 1 kHz loop with 0.2 ms of wake-up and
@@ -30,7 +30,7 @@ from teleop.csv_writer import ThreadedCsvRecorder  # noqa: E402
 from teleop.messages import Command  # noqa: E402
 from teleop.recording import CsvRecorder  # noqa: E402
 from teleop.rerun_log import RerunLogger  # noqa: E402
-from teleop.rerun_thread import ThreadedRerunLogger  # noqa: E402
+from teleop.rerun_proc import RerunProcessLogger  # noqa: E402
 from teleop.transport import Received  # noqa: E402
 
 
@@ -64,7 +64,7 @@ def run(threaded: bool, n: int, tmp: Path) -> np.ndarray:
     links = SlaveLinks(*(_Topic(clock) for _ in range(4)))
     rig = SimulatedRig.from_config(cfg)
     model = SheathModel(K=rig.K, compliance=rig.M_e / rig.K if rig.K else rig.M_e)
-    csv_cls, rr_cls = (ThreadedCsvRecorder, ThreadedRerunLogger) if threaded else (CsvRecorder, RerunLogger)
+    csv_cls, rr_cls = (ThreadedCsvRecorder, RerunProcessLogger) if threaded else (CsvRecorder, RerunLogger)
     tag = "threaded" if threaded else "inloop"
     times = np.empty(n)
     with csv_cls(tmp / f"{tag}.csv", csv_columns(True), {"source": "bench"}, flush_every=500) as rec, \
@@ -101,7 +101,7 @@ def run_joints(n: int, tmp: Path) -> np.ndarray:
     name, columns, meta = recording(cfg, inst)
     times = np.empty(n)
     with ThreadedCsvRecorder(tmp / name, columns, meta, flush_every=500) as rec, \
-            ThreadedRerunLogger("bench", "joints", "save", tmp / "joints.rrd") as rr:
+            RerunProcessLogger("bench", "joints", "save", tmp / "joints.rrd") as rr:
         node = SlaveNode(cfg, inst, links, recorder=rec, rerun=rr, calibration=cal)
         for k in range(n):
             clock.t += dt

@@ -183,7 +183,7 @@ def run_slave(args: argparse.Namespace) -> int:
     from teleop.config import load_config
     from teleop.csv_writer import ThreadedCsvRecorder as CsvRecorder  # the loop only queues rows; a thread writes
     from teleop.recording import raise_on_sigterm
-    from teleop.rerun_thread import ThreadedRerunLogger as RerunLogger  # the loop only queues the calls
+    from teleop.rerun_proc import RerunProcessLogger as RerunLogger  # the loop only queues; a child process logs
 
     cfg = load_config(args.config)
     calibration, cal_path = load_or_recalibrate(cfg, getattr(args, "recalibrate", False))
@@ -219,7 +219,7 @@ def run_master(args: argparse.Namespace) -> int:
     from teleop.config import load_config
     from teleop.csv_writer import ThreadedCsvRecorder as CsvRecorder  # the loop only queues rows; a thread writes
     from teleop.recording import raise_on_sigterm
-    from teleop.rerun_thread import ThreadedRerunLogger as RerunLogger  # the loop only queues the calls
+    from teleop.rerun_proc import RerunProcessLogger as RerunLogger  # the loop only queues; a child process logs
 
     cfg = load_config(args.config)
     device = make_device(cfg, args.protocol)     # master.device.type through the registry
