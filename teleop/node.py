@@ -25,6 +25,7 @@ import gc
 import json
 import logging
 import math
+import os
 import time
 from pathlib import Path
 from typing import Any
@@ -33,11 +34,30 @@ from teleop.clock import Clock, LockedPacer, MonotonicClock, Pacer
 from teleop.codec import next_seq, seq_newer
 from teleop.cycles import CycleStats
 from teleop.messages import Heartbeat, Side, SideState
-from teleop.realtime import IDLE, demote_threads, promote_threads
+from teleop.realtime import IDLE, demote_threads, machine_steal, promote_threads
 
 __all__ = ["NodeBase", "IDLE_GUARD"]
 
 IDLE_GUARD = 1e-4    # [s] the helper threads' idle window closes this long before the loop's next deadline
+
+
+def _machine_now() -> tuple[float | None, tuple[float, float, float] | None]:
+    """(steal [s] since boot or None, load averages or None) now."""
+    try:
+        load: tuple[float, float, float] | None = os.getloadavg()
+    except OSError:
+        load = None
+    return machine_steal(), load
+
+
+def _machine_during(start: tuple, duration: float) -> dict[str, Any]:
+    """The machine during a loop that began at ``start`` (:func:`_machine_now`) and ran ``duration`` [s]:
+    ``steal_ms`` (None: unknown), ``load_start``, ``load_end`` (1-minute load averages), ``cpus``, ``loop_s``."""
+    steal0, load0 = start
+    steal1, load1 = _machine_now()
+    return {"steal_ms": None if steal0 is None or steal1 is None else 1e3 * (steal1 - steal0),
+            "load_start": None if load0 is None else load0[0], "load_end": None if load1 is None else load1[0],
+            "cpus": os.cpu_count(), "loop_s": duration}
 
 
 class NodeBase:
@@ -149,7 +169,10 @@ class NodeBase:
         until when the loop sleeps (:data:`teleop.realtime.IDLE`); a node with a :meth:`_cycle_source`
         (the slave: its commands) starts each cycle as a message arrives (:class:`~teleop.clock.LockedPacer`).
         Per-cycle figures:
-        :class:`teleop.cycles.CycleStats`, in the stats' ``pacer``.
+        :class:`teleop.cycles.CycleStats`, in the stats' ``pacer``; with them ``machine``: the load
+        average at the loop's start and end and the hypervisor's steal during the loop
+        (:func:`teleop.realtime.machine_steal`, summed over the CPUs), which tells a virtual
+        machine's stalls (every process stopped at once) from the loop's own overruns.
         """
         real = isinstance(clock, MonotonicClock)
         if real:
@@ -166,6 +189,7 @@ class NodeBase:
         perf = time.perf_counter
         idle = IDLE.open if real else None
         t0 = clock.now()
+        machine = _machine_now() if real else None
         try:
             while not self.done:
                 now = pacer.wait()
@@ -182,6 +206,8 @@ class NodeBase:
                 IDLE.release()
                 demote_threads()
             self.pacer_stats = {**pacer.stats(), **cycles.stats(), "scheduling": self.scheduling}
+            if machine is not None:
+                self.pacer_stats["machine"] = _machine_during(machine, clock.now() - t0)
             cycles.dump()
             self._run_ended(clock)
 

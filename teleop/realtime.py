@@ -31,7 +31,8 @@ import os
 import threading
 import time
 
-__all__ = ["promote_threads", "demote_threads", "IdleWindow", "IDLE", "HELPER_PREFIXES", "scheduling"]
+__all__ = ["promote_threads", "demote_threads", "IdleWindow", "IDLE", "HELPER_PREFIXES", "scheduling",
+           "machine_steal"]
 
 HELPER_PREFIXES = ("csv-writer", "rerun-logger")
 
@@ -102,6 +103,20 @@ def scheduling() -> str:
     if pol == os.SCHED_FIFO:
         return f"SCHED_FIFO {os.sched_getparam(0).sched_priority}"
     return f"SCHED_OTHER nice {os.getpriority(os.PRIO_PROCESS, 0)}"
+
+
+def machine_steal(stat: str = "/proc/stat") -> float | None:
+    """Time the hypervisor ran something else while this machine's CPUs wanted to run [s, summed
+    over the CPUs since boot]: the ``steal`` column of ``/proc/stat`` (10 ms resolution). A virtual
+    machine's stall stops every process at once, whatever their priority; its steal during a run
+    tells such stalls from the loop's own faults. None where there is no such file (not Linux).
+    """
+    try:
+        with open(stat, encoding="ascii") as fh:
+            fields = fh.readline().split()
+        return int(fields[8]) / os.sysconf("SC_CLK_TCK") if fields[0] == "cpu" and len(fields) > 8 else None
+    except (OSError, ValueError, IndexError):
+        return None
 
 
 class IdleWindow:

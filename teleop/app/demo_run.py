@@ -9,7 +9,7 @@ instrument.
   With ``rig.type: zenoh`` a third process, ``teleop bridge``, runs the simulated rig behind the
   Zenoh rig interface and the slave connects to it.
 * :func:`full_scale_errors`: max and mean of |estimate - truth| over the range of the truth.
-* :func:`master_console_line`, :func:`loop_lines`, :func:`verdict_lines`: the lines on the master's
+* :func:`master_console_line`, :func:`loop_lines`, :func:`machine_line`, :func:`verdict_lines`: the lines on the master's
   console, on both loops and the link, and on the checks.
 * :func:`finish`: checks, problems and wall time into the summary, ``summary.json``, the printed
   table, the exit code.
@@ -29,8 +29,8 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["run_processes", "read_json", "full_scale_errors", "master_console_line", "loop_lines", "verdict_lines",
-           "finish"]
+__all__ = ["run_processes", "read_json", "full_scale_errors", "master_console_line", "loop_lines", "machine_line",
+           "verdict_lines", "finish"]
 
 
 def full_scale_errors(est: np.ndarray, true: np.ndarray) -> tuple[float, float]:
@@ -72,6 +72,9 @@ def loop_lines(s: dict, *, detailed: bool) -> list[str]:
         lines.append(f"{side:6s} loop: {pc.get('ticks', 0)} cycles at {pc.get('rate_hz', 0):.0f} Hz, "
                      f"{pc.get('overruns', 0)} overruns ({100 * pc.get('overrun_fraction', 0):.2f} %), "
                      f"{worst}safe events {st.get('safe_events', 0)}")
+    line = machine_line(s)
+    if line and detailed:
+        lines.append(line)
     lat = s.get("master", {}).get("latency_rtt", {})
     if lat.get("n") and detailed:
         lines.append(f"round trip (command -> estimate echo): p50 {lat['p50_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms, "
@@ -79,6 +82,25 @@ def loop_lines(s: dict, *, detailed: bool) -> list[str]:
     elif lat.get("n"):
         lines.append(f"round trip: p50 {lat['p50_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms over {lat['n']} echoes")
     return lines
+
+
+def machine_line(s: dict) -> str | None:
+    """The machine under both loops: the hypervisor's steal during each loop (CPU time a virtual
+    machine lost to its host: stalls that stop every process at once, which no priority prevents)
+    and the load average at start and end; None when the stats have no ``pacer.machine``."""
+    parts = []
+    for side in ("master", "slave"):
+        m = s.get(side, {}).get("pacer", {}).get("machine")
+        if not m:
+            continue
+        steal = "unknown" if m.get("steal_ms") is None else f"{m['steal_ms']:.0f} ms"
+        load = "" if m.get("load_start") is None else f", load {m['load_start']:.1f} -> {m['load_end']:.1f}"
+        parts.append(f"{side} {steal} in {m.get('loop_s', 0):.1f} s{load}")
+    if not parts:
+        return None
+    cpus = next((s[k]["pacer"]["machine"].get("cpus") for k in ("master", "slave")
+                 if s.get(k, {}).get("pacer", {}).get("machine")), None)
+    return f"machine steal (VM stalls, {cpus} CPUs) during the loops: " + "; ".join(parts)
 
 
 def verdict_lines(s: dict) -> list[str]:

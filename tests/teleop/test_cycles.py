@@ -1,6 +1,7 @@
 """Cycle statistics (teleop/cycles.py) and the loop's idle window and priorities (teleop/realtime.py)."""
 from __future__ import annotations
 
+import os
 import threading
 import time
 
@@ -75,3 +76,41 @@ def test_promote_threads_puts_the_loop_above_its_helpers_and_demote_undoes_it():
         demote_threads()
         stop.set()
     assert scheduling().startswith(("SCHED_OTHER", "unknown"))
+
+
+def test_machine_steal_reads_the_steal_column_and_the_demo_prints_it(tmp_path):
+    from teleop.app.demo_run import machine_line
+    from teleop.realtime import machine_steal
+    stat = tmp_path / "stat"
+    hz = os.sysconf("SC_CLK_TCK")
+    stat.write_text(f"cpu  10 20 30 40 50 60 70 {3 * hz} 0 0\ncpu0 1 2 3 4 5 6 7 8 0 0\n")
+    assert machine_steal(str(stat)) == 3.0
+    stat.write_text("intr 1 2 3\n")
+    assert machine_steal(str(stat)) is None and machine_steal(str(tmp_path / "missing")) is None
+    m = {"steal_ms": 40.0, "load_start": 3.25, "load_end": 5.5, "cpus": 2, "loop_s": 11.0}
+    line = machine_line({"master": {"pacer": {"machine": m}}, "slave": {"pacer": {"machine": {**m, "steal_ms": None}}}})
+    assert line == ("machine steal (VM stalls, 2 CPUs) during the loops: master 40 ms in 11.0 s, load 3.2 -> 5.5; "
+                    "slave unknown in 11.0 s, load 3.2 -> 5.5")
+    assert machine_line({"master": {"pacer": {}}}) is None
+
+
+def test_a_real_clock_run_reports_the_machine_beside_the_cycles():
+    from teleop.clock import MonotonicClock
+    from teleop.messages import Side
+    from teleop.node import NodeBase
+
+    class Idle(NodeBase):
+        side = Side.MASTER
+        rate_hz = 1000.0
+        log = __import__("logging").getLogger("test")
+
+        def step(self, now):
+            self.done = self.cycles_run >= 20
+            self.cycles_run += 1
+
+    node = Idle(10.0)
+    node.cycles_run = 0
+    node.run(MonotonicClock(), max_duration=1.0)
+    m = node.pacer_stats["machine"]
+    assert node.pacer_stats["ticks"] == 21 and m["cpus"] == os.cpu_count() and 0.015 < m["loop_s"] < 1.0
+    assert m["steal_ms"] is None or m["steal_ms"] >= 0.0
