@@ -51,13 +51,13 @@ from master.device import DeviceState
 from master.mapping import ForceMap, MotionMap, clamp_force
 from master.node_base import RING_SIZE, MasterLinks, MasterNodeBase
 from master.passivity import PassivityController
+from master.protocols import experiment_label
 from teleop.clock import Clock
 from teleop.config import Config
 from teleop.messages import SideState
 
 __all__ = ["MasterLinks", "MasterNode", "RING_SIZE", "CSV_COLUMNS", "CSV_UNITS", "csv_columns", "csv_units"]
 
-_EXPERIMENTS = {1: "paper", 2: "minor"}
 _WAITING = {ConsoleStatus.WAIT_OPERATOR: "operator not present", ConsoleStatus.CLUTCH: "clutch held"}
 
 
@@ -258,7 +258,7 @@ class MasterNode(MasterNodeBase):
         self._rerun_count += 1
         if self._rerun_count % self.cfg.recording.log_every:
             return
-        experiment = _EXPERIMENTS.get(marker & 0xF, f"marker {marker}") if marker else "none"
+        experiment = experiment_label(marker, self.axes.names)
         rtt = self.rtts[-1] if self.rtts else None
         many = len(q) > 1
         for k, name in enumerate(self.axes.names):

@@ -23,7 +23,7 @@ from teleop.config import Config, joint_set_tension
 from teleop.errors import ConfigError
 
 __all__ = ["Segment", "PROTOCOLS", "build_protocol", "paper_protocol", "joint_protocols", "operator_protocols",
-           "joint_marker", "MARKER_PAPER", "MARKER_MINOR", "MARKER_PAPER_A", "MARKER_PAPER_B"]
+           "joint_marker", "experiment_label", "MARKER_PAPER", "MARKER_MINOR", "MARKER_PAPER_A", "MARKER_PAPER_B"]
 
 MARKER_PAPER = 1
 MARKER_MINOR = 2
@@ -45,6 +45,19 @@ class Segment:
 def joint_marker(marker: int, joint: int) -> int:
     """Axis (joint) ``joint``'s 4-bit tag in a command marker."""
     return (int(marker) >> (4 * joint)) & 0xF
+
+
+def experiment_label(marker: int, axes: list[str] | tuple[str, ...]) -> str:
+    """The experiment a command marker tags, as the live view and the recordings name it: ``none``; for a
+    single tendon ``paper`` or ``minor``; for a joint instrument (several ``axes``) each tagged joint's
+    ``paper_a`` / ``paper_b``, e.g. ``bend_ud paper_a``. An unknown tag is named by its number."""
+    if not marker:
+        return "none"
+    if len(axes) <= 1:
+        return {MARKER_PAPER: "paper", MARKER_MINOR: "minor"}.get(int(marker) & 0xF, f"marker {marker}")
+    names = {MARKER_PAPER_A: "paper_a", MARKER_PAPER_B: "paper_b"}
+    return ", ".join(f"{a} {names.get(tag, f'marker {tag}')}" for k, a in enumerate(axes)
+                     if (tag := joint_marker(marker, k)))
 
 
 def _segments(targets: tuple[float, ...], marker: int) -> tuple[Segment, ...]:

@@ -221,15 +221,17 @@ class PairAxis(SlaveAxis):
         return AxisState(s.torque, s.angle, tendons), ()
 
     def log_rerun(self, rerun: Any, cycles: int, state: RigState, everything: bool = False) -> None:
-        """Every ``recording.log_every`` cycles the joint's torque and angle, estimate and truth (two
-        series each); the joints take turns in successive cycles so that no cycle carries more than one
-        pair of series (~0.1 ms each)."""
+        """Every ``recording.log_every`` cycles the joint's torque and angle, estimate and truth; every
+        ``recording.profile_every`` of those also both tendons' estimated tension profiles (the 3D view).
+        The joints take turns in successive cycles so that no cycle queues more than one joint's log."""
         n = self.cfg.recording.log_every
         k, i, s = cycles % n, self.index, self.sample
+        if not (everything or k == i % n):
+            return
         tr = state.truth if isinstance(state.truth, InstrumentTruth) else None
-        if everything or k == (2 * i) % n:
-            rerun.log_scalars(state.t, **{f"{self.name}/torque_hat": s.torque,
-                                          f"{self.name}/torque_true": None if tr is None else float(tr.torque[i])})
-        if everything or k == (2 * i + 1) % n:
-            rerun.log_scalars(state.t, **{f"{self.name}/angle_hat": s.angle,
-                                          f"{self.name}/angle_true": None if tr is None else float(tr.theta[i])})
+        est = self.estimator
+        show = everything or (cycles // n) % max(1, self.cfg.recording.profile_every) == 0
+        rerun.log_joint(state.t, self.name, torque_hat=s.torque, angle_hat=s.angle,
+                        torque_true=None if tr is None else float(tr.torque[i]),
+                        angle_true=None if tr is None else float(tr.theta[i]),
+                        profiles=(est.tendons[0].profile, est.tendons[1].profile) if show and est is not None else None)

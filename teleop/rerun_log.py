@@ -19,6 +19,12 @@ master.rrd`` shows one recording)::
     master/<name>          Scalars      master-side series (command, rendered force, round trip)
     master/console, experiment  StateChange  console state and experiment marker, on change
 
+A joint instrument (``joints``: :class:`teleop.rerun_view.JointView` per joint) logs instead, per joint
+(:meth:`RerunLogger.log_joint`): ``joints/<j>/torque/{hat,true}`` and ``joints/<j>/angle/{hat,true}``
+(Scalars), ``instrument/<j>/<a|b>/route`` (static grey) and ``/tension`` (LineStrips3D coloured by the
+estimated tension along the tendon), and ``instrument/<j>/tip`` (Points3D labelled with the joint's
+estimated and true torque and angle); the pairs are stacked :data:`~teleop.rerun_view.JOINT_SPACING` apart.
+
 The bar chart is the only 0.41 view with real numeric x and y axes for non-time data (a
 ``TimeSeriesView`` always plots against a timeline; a ``Spatial2DView`` has no axis ticks and a
 downward y axis), so the profile is two bar charts overlaid in one ``BarChartView``: the truth as
@@ -40,7 +46,8 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from teleop.errors import ConfigError
-from teleop.rerun_view import ELONGATION_RANGE, TENSION_RANGE, WALL, route_points, tension_colors
+from teleop.rerun_joints import ORANGE, JointLogging, arc_length
+from teleop.rerun_view import ELONGATION_RANGE, TENSION_RANGE, WALL, route_points, route_segments, tension_colors
 from teleop.rerun_view import blueprint as view_blueprint
 
 if TYPE_CHECKING:
@@ -52,7 +59,7 @@ __all__ = ["RerunLogger", "signal_path", "display_available", "MODES", "route_po
 MODES = ("save", "spawn", "off")
 TIMELINE = "time"
 _BLUE, _BLUE_SEE_THROUGH = (31, 119, 180, 255), (31, 119, 180, 110)
-_ORANGE, _GREY = (255, 127, 14, 255), (150, 150, 150, 255)
+_ORANGE, _GREY = ORANGE, (150, 150, 150, 255)
 
 
 def signal_path(name: str) -> str:
@@ -83,7 +90,7 @@ def display_available() -> bool:
     return True
 
 
-class RerunLogger:
+class RerunLogger(JointLogging):
     """Live tension distribution, signals and phase to a Rerun recording.
 
     Parameters
@@ -121,7 +128,7 @@ class RerunLogger:
 
     def __init__(self, application_id: str, recording_id: str | None = None,
                  mode: Literal["save", "spawn", "off"] = "save", path: str | Path | None = None,
-                 *, profile_every: int = 1, route=None, wall_clock: bool = False) -> None:
+                 *, profile_every: int = 1, route=None, wall_clock: bool = False, joints=()) -> None:
         if mode not in MODES:
             raise ConfigError(f"recording.rerun: expected one of {', '.join(MODES)}, got {mode!r}")
         if mode == "save" and path is None:
@@ -144,7 +151,8 @@ class RerunLogger:
         self._wall_is_t = bool(wall_clock)
         if route is not None and len(route):
             self._route = route_points(route)
-            self._route_s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(self._route, axis=0), axis=1))]
+            self._route_s = arc_length(self._route)
+        self._init_joints(joints)
         if mode == "off":
             return
 
@@ -152,7 +160,7 @@ class RerunLogger:
 
         self._rr = rr
         rec = rr.RecordingStream(application_id, recording_id=recording_id)
-        blueprint: Any = view_blueprint()
+        blueprint: Any = view_blueprint(tuple(joints))
         if mode == "spawn":
             if display_available():
                 beside = Path(sys.executable).with_name("rerun")  # venv not on PATH
@@ -250,6 +258,7 @@ class RerunLogger:
         rec.log("profile/range", rr.BarChart.from_fields(values=np.array(TENSION_RANGE), abscissa=np.array([0.0, L]),
                                                           widths=np.array([1e-6, 1e-6]), color=(0, 0, 0, 0)),
                 static=True)
+        self._log_joint_routes()
         if self._route is not None:
             rec.log("sheath/route", rr.LineStrips3D([self._route], radii=0.002, colors=[(120, 120, 120, 255)]),
                     static=True)
@@ -262,9 +271,8 @@ class RerunLogger:
         rr, rec = self._rr, self._rec
         if rec is None or self._route is None or self._route_s is None or s.size < 2:
             return
-        u = s / s[-1] * self._route_s[-1]
-        pts = np.stack([np.interp(u, self._route_s, self._route[:, k]) for k in range(3)], axis=1)
-        segs = np.stack([pts[:-1], pts[1:]], axis=1)
+        segs = route_segments(self._route, self._route_s, s)
+        pts = segs[:, 1]
         for entity, T, dz in (("sheath/tension", est, 0.0), ("sheath/tension_true", true, 0.02)):
             if T is None:
                 continue

@@ -106,6 +106,12 @@ class ThreadedRerunLogger:
         """Queue :meth:`RerunLogger.log_state`."""
         self._put(self._inner.log_state, (t, entity, label), {})
 
+    def log_joint(self, t: float, joint: str, *, profiles=None, **values) -> None:
+        """Queue :meth:`RerunLogger.log_joint` (the profiles are copied now)."""
+        if profiles is not None:
+            values["profiles"] = tuple(np.array(p, dtype=np.float64) for p in profiles)
+        self._put(self._inner.log_joint, (t, joint), values)
+
     def _drain(self) -> None:
         q = self._queue
         profile = self._inner.log_profile

@@ -3,9 +3,42 @@ colour scale along it, the plots' fixed ranges and the blueprint of the views.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any, Sequence
+
 import numpy as np
 
-__all__ = ["TENSION_RANGE", "ELONGATION_RANGE", "WALL", "route_points", "tension_colors", "blueprint"]
+__all__ = ["TENSION_RANGE", "ELONGATION_RANGE", "WALL", "JOINT_SPACING", "JointView", "joint_views", "route_points",
+           "route_segments", "tension_colors", "blueprint"]
+
+#: Height [m] between two joints' tendon pairs in the 3D view (tendon b sits a tenth of it above a).
+JOINT_SPACING = 0.12
+
+
+@dataclass(frozen=True)
+class JointView:
+    """What the view draws of one joint: its name, the routes of tendons a and b as ``(length, radius)``
+    pairs [m] (radius inf: straight), and the fixed ranges of its torque [N m] and angle [rad] plots."""
+
+    name: str
+    route_a: tuple[tuple[float, float], ...]
+    route_b: tuple[tuple[float, float], ...]
+    torque_range: tuple[float, float]
+    angle_range: tuple[float, float]
+
+
+def joint_views(cfg: Any) -> tuple[JointView, ...]:
+    """The :class:`JointView` of every joint of ``cfg.instrument`` (empty for a single tendon); the torque
+    range is +-1.2 r ``calibration.target_tension``, the angle range the joint's limits."""
+    def runs(t: Any) -> tuple[tuple[float, float], ...]:
+        return tuple((float(r.length), float(r.radius) if r.radius is not None else float("inf")) for r in t.runs)
+
+    out = []
+    for j in cfg.instrument.joints:
+        tmax = 1.2 * float(j.pulley_radius) * float(cfg.calibration.target_tension)
+        out.append(JointView(j.name, runs(j.tendons.a), runs(j.tendons.b), (-tmax, tmax),
+                             (float(j.limits[0]), float(j.limits[1]))))
+    return tuple(out)
 
 #: Fixed ranges of the plots (the y axes do not rescale every frame): tension [N], elongation [m].
 TENSION_RANGE, ELONGATION_RANGE = (0.0, 25.0), (0.0, 2.0e-3)
@@ -36,6 +69,14 @@ def route_points(runs, n_per_arc: int = 24) -> np.ndarray:
     return np.array(pts)
 
 
+def route_segments(route: np.ndarray, route_s: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """The polyline ``route`` (shape (m, 3) [m], arc length ``route_s`` (m,)) cut at the profile's nodes
+    ``s`` (n,) [m, proximal to distal, scaled onto the route's length]: segments, shape (n - 1, 2, 3)."""
+    u = s / s[-1] * route_s[-1]
+    pts = np.stack([np.interp(u, route_s, route[:, k]) for k in range(3)], axis=1)
+    return np.stack([pts[:-1], pts[1:]], axis=1)
+
+
 def tension_colors(T: np.ndarray, vmax: float = TENSION_RANGE[1]) -> np.ndarray:
     """RGBA colours, shape (n, 4) uint8, of tensions ``T`` [N] on a fixed scale 0..``vmax`` (blue -> red)."""
     u = np.clip(np.asarray(T, dtype=float) / vmax, 0.0, 1.0)
@@ -46,11 +87,14 @@ def tension_colors(T: np.ndarray, vmax: float = TENSION_RANGE[1]) -> np.ndarray:
     return (np.stack([r, g, b, np.ones_like(u)], axis=1) * 255).astype(np.uint8)
 
 
-def blueprint() -> object:
+def blueprint(joints: Sequence[JointView] = ()) -> object:
     """The view sent at the start of a recording: the 3D sheath and the profile bar chart beside the
-    fixed-range tension and elongation plots, the master's series and the phase/console/experiment lanes."""
+    fixed-range tension and elongation plots, the master's series and the phase/console/experiment lanes;
+    for a joint instrument (``joints``) the tendon pairs in 3D beside each joint's torque and angle."""
     import rerun.blueprint as rrb
 
+    if joints:
+        return _joint_blueprint(rrb, joints)
     fixed_T = rrb.ScalarAxis(range=TENSION_RANGE, zoom_lock=False)
     return rrb.Blueprint(
         rrb.Horizontal(
@@ -72,6 +116,40 @@ def blueprint() -> object:
                 row_shares=[4, 4, 2],
             ),
             column_shares=[1, 1],
+        ),
+        rrb.TimePanel(timeline=WALL),
+        auto_views=False,
+    )
+
+
+def _joint_eye(rrb: Any, joints: Sequence[JointView]) -> object:
+    """A camera that sees every pair: from the front, above and a little behind the routes' centre."""
+    pts = np.vstack([route_points(j.route_a) - np.array([0.0, 0.0, k * JOINT_SPACING]) for k, j in enumerate(joints)])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    centre, extent = 0.5 * (lo + hi), float(np.max(hi - lo))
+    return rrb.EyeControls3D(position=centre + extent * np.array([0.0, -1.4, 1.6]), look_target=centre,
+                             eye_up=(0.0, 0.0, 1.0))
+
+
+def _joint_blueprint(rrb: Any, joints: Sequence[JointView]) -> object:
+    rows = [rrb.Horizontal(
+        rrb.TimeSeriesView(origin=f"joints/{j.name}/torque", name=f"{j.name}: torque [N m]",
+                           axis_y=rrb.ScalarAxis(range=j.torque_range, zoom_lock=False)),
+        rrb.TimeSeriesView(origin=f"joints/{j.name}/angle", name=f"{j.name}: angle [rad]",
+                           axis_y=rrb.ScalarAxis(range=j.angle_range, zoom_lock=False))) for j in joints]
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(
+                rrb.Spatial3DView(origin="instrument", eye_controls=_joint_eye(rrb, joints),
+                                  name="Tendon pairs coloured by tension (0-25 N, blue -> red), one pair per joint"),
+                rrb.StateTimelineView(origin="/", contents=["/master/console", "/experiment"],
+                                      name="Console, experiment"),
+                row_shares=[5, 1],
+            ),
+            rrb.Vertical(*rows, rrb.Tabs(rrb.TimeSeriesView(origin="master", name="Master: commands, forces, round trip"),
+                                         rrb.TimeSeriesView(origin="signals", name="Other signals")),
+                         row_shares=[3] * len(rows) + [2]),
+            column_shares=[2, 3],
         ),
         rrb.TimePanel(timeline=WALL),
         auto_views=False,

@@ -216,7 +216,8 @@ def _log(inp: ReplayInput, cfg: Config, model: SheathModel, new: dict[str, np.nd
     u, done = np.linspace(0.0, 1.0, log_gain.size), 0
     run_id = inp.run_dir.name if inp.run_dir is not None else inp.csv.stem
     wall0, t0 = time.monotonic(), float(d.time[0])
-    with RerunLogger("teleop-replay", f"{run_id}-replay", "save", rrd, route=cfg.sheath.runs) as rr:
+    with RerunLogger("teleop-replay", f"{run_id}-replay", "save", rrd, route=cfg.sheath.runs,
+                     wall_clock=True) as rr:   # the recording's time on both timelines
         for k in range(0, n, every):
             t = float(d.time[k])
             if math.isfinite(speed):

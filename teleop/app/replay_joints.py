@@ -66,7 +66,9 @@ def _calibration_file(run_dir: Path, cfg: Config, calibration: str | Path | None
 def reestimate_joints(cols: dict[str, np.ndarray], csv: Path, cfg: Config,
                       calibration: Path) -> dict[str, dict[str, np.ndarray]]:
     """New estimates per joint: ``{joint: {"torque" [N m], "angle" [rad], "T_out_a", "T_out_b" [N]}}``,
-    each shape (n_rows,), from (J1)-(J4) of :mod:`estimator.online.joint` on the recorded proximal signals.
+    each shape (n_rows,), from (J1)-(J4) of :mod:`estimator.online.joint` on the recorded proximal signals,
+    and ``profile_a``, ``profile_b``: the tendons' tension profiles [N] every :func:`_snapshot_every` rows,
+    shape (n_rows // that + 1, n_nodes + 1).
 
     Raises
     ------
@@ -85,17 +87,26 @@ def reestimate_joints(cols: dict[str, np.ndarray], csv: Path, cfg: Config,
         Tb, xb = _column(cols, csv, f"{n}.b.T_in"), _column(cols, csv, f"{n}.b.x_in")
         est = JointEstimator(ma, mb, float(joint.pulley_radius), n_nodes=e.n_nodes, pretension=joint.pretension,
                              hold_rate=e.hold_rate, rate_time_constant=e.rate_time_constant)
-        m = Ta.size
+        m, snap = Ta.size, _snapshot_every(cfg)
         torque, angle, Toa, Tob = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+        prof_a, prof_b = np.empty((m // snap + 1, e.n_nodes + 1)), np.empty((m // snap + 1, e.n_nodes + 1))
         t = cols["time"]
         for k in range(m):
             s = est.step(float(Ta[k]), float(xa[k]), float(Tb[k]), float(xb[k]), float(t[k]))
             torque[k], angle[k], Toa[k], Tob[k] = s.torque, s.angle, s.T_out[0], s.T_out[1]
+            if k % snap == 0:
+                prof_a[k // snap], prof_b[k // snap] = est.tendons[0].profile, est.tendons[1].profile
         rec = cols.get(f"{n}.angle_hat")
         if rec is not None and math.isfinite(rec[0]):
             angle += rec[0] - angle[0]     # the live estimate's pose at the first recorded row
-        out[n] = {"torque": torque, "angle": angle, "T_out_a": Toa, "T_out_b": Tob}
+        out[n] = {"torque": torque, "angle": angle, "T_out_a": Toa, "T_out_b": Tob, "profile_a": prof_a,
+                  "profile_b": prof_b}
     return out
+
+
+def _snapshot_every(cfg: Config) -> int:
+    """Rows between two tension profiles in the view: ``recording.log_every * recording.profile_every``."""
+    return max(1, cfg.recording.log_every) * max(1, cfg.recording.profile_every)
 
 
 def _errors(tq: np.ndarray, ang: np.ndarray, tq_ref: np.ndarray, ang_ref: np.ndarray) -> dict[str, float]:
@@ -128,17 +139,21 @@ def compare_joints(cols: dict[str, np.ndarray], new: dict[str, dict[str, np.ndar
 
 def _log(cols: dict[str, np.ndarray], new: dict[str, dict[str, np.ndarray]], cfg: Config, run_id: str,
          speed: float, rrd: Path) -> None:
-    """Per joint the re-estimated, recorded and true torque and angle (entities ``<joint>/...``) every
+    """Per joint the re-estimated and true torque and angle and the tendons in 3D (the live joint view,
+    :meth:`teleop.rerun_log.RerunLogger.log_joint`), the recorded estimate under ``signals/``, every
     ``recording.log_every`` rows, paced with the wall clock at ``speed`` x real time (inf: no pacing)."""
     from teleop.rerun_log import RerunLogger
+    from teleop.rerun_view import joint_views
 
     t_all = cols["time"]
     every, wall0, t0 = max(1, cfg.recording.log_every), time.monotonic(), float(t_all[0])
+    snap = _snapshot_every(cfg)
 
     def val(name: str, k: int) -> float | None:
         return float(cols[name][k]) if name in cols else None
 
-    with RerunLogger("teleop-replay", f"{run_id}-replay", "save", rrd) as rr:
+    with RerunLogger("teleop-replay", f"{run_id}-replay", "save", rrd, joints=joint_views(cfg),
+                     wall_clock=True) as rr:   # the recording's time on both timelines
         for k in range(0, t_all.size, every):
             t = float(t_all[k])
             if math.isfinite(speed):
@@ -146,12 +161,11 @@ def _log(cols: dict[str, np.ndarray], new: dict[str, dict[str, np.ndarray]], cfg
                 if wait > 0:
                     time.sleep(wait)
             for n, est in new.items():
-                rr.log_scalars(t, **{f"{n}/torque_hat": float(est["torque"][k]),
-                                     f"{n}/torque_recorded": val(f"{n}.torque_hat", k),
-                                     f"{n}/torque_true": val(f"{n}.torque", k),
-                                     f"{n}/angle_hat": float(est["angle"][k]),
-                                     f"{n}/angle_recorded": val(f"{n}.angle_hat", k),
-                                     f"{n}/angle_true": val(f"{n}.angle", k)})
+                rr.log_joint(t, n, torque_hat=float(est["torque"][k]), torque_true=val(f"{n}.torque", k),
+                             angle_hat=float(est["angle"][k]), angle_true=val(f"{n}.angle", k),
+                             profiles=(est["profile_a"][k // snap], est["profile_b"][k // snap]) if k % snap == 0 else None)
+                rr.log_scalars(t, **{f"{n}/torque_recorded": val(f"{n}.torque_hat", k),
+                                     f"{n}/angle_recorded": val(f"{n}.angle_hat", k)})
 
 
 def replay_joints(csv: Path, cfg: Config, *, calibration: str | Path | None = None, speed: float = math.inf,

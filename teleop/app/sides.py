@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 from teleop.config import Config
+from teleop.rerun_view import joint_views
 
 __all__ = ["run_slave", "run_master", "load_or_recalibrate", "default_run_dir",
            "prepare_run_dir", "endpoints", "open_session", "slave_links", "master_links"]
@@ -198,7 +199,8 @@ def run_slave(args: argparse.Namespace) -> int:
             name, columns, meta = recording(cfg, rig)
             with CsvRecorder(run_dir / name, columns, meta, flush_every=500) as rec, \
                     RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd",
-                                route=None if cfg.instrument.joints else cfg.sheath.runs) as rr:   # 3D sheath view
+                                route=None if cfg.instrument.joints else cfg.sheath.runs,   # 3D sheath view
+                                joints=joint_views(cfg)) as rr:
                 links = slave_links(session, ident, injector)
                 node = SlaveNode(cfg, rig, links, recorder=rec, rerun=rr, run_dir=run_dir,
                             stop_on_master_stop=args.exit_on_master_stop, calibration=calibration,
@@ -237,7 +239,7 @@ def run_master(args: argparse.Namespace) -> int:
         with raise_on_sigterm(), open_session(cfg, args, clock) as session, \
                 CsvRecorder(run_dir / "master.csv", csv_columns(cfg), meta, units=csv_units(cfg), flush_every=100) as rec, \
                 RerunLogger("teleop", run_dir.name, getattr(args, "rerun", None) or cfg.recording.rerun, run_dir / "master.rrd",
-                            wall_clock=True) as rr:   # master-side series; same recording id as slave.rrd
+                            wall_clock=True, joints=joint_views(cfg)) as rr:   # master-side series; same recording id
             links = master_links(session, ident, injector)
             node = MasterNode(cfg, device, links, recorder=rec, rerun=rr)
             _serve(node, clock, args, run_dir, "master", injector, close_first=device.close)

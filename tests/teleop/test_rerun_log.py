@@ -225,3 +225,37 @@ def test_sheath_view_master_series_and_states_are_logged(tmp_path):
     assert len(rows["/master/console"]) == 1 and len(rows["/master/rtt"]) == 2   # static style + one value
     c = tension_colors(np.array([0.0, 25.0, 100.0]))
     assert c[0][2] == 255 and c[1][0] == 255 and (c[1] == c[2]).all()            # blue low, red high, clipped
+
+
+def test_joint_instrument_view_logs_each_joint_and_its_tendons(tmp_path):
+    """A joint instrument's view: per joint the torque and angle series, both tendons' routes and their
+    tension in 3D, the tip labelled; an unknown joint is an error; the experiment label names each joint."""
+    from master.protocols import experiment_label
+    from teleop.config import load_config
+    from teleop.rerun_view import JOINT_SPACING, joint_views
+    cfg = load_config(Path(__file__).resolve().parents[2] / "configs" / "instrument-3dof.yaml")
+    views = joint_views(cfg)
+    assert [v.name for v in views] == ["bend_ud", "bend_lr", "grasp"]
+    assert views[0].angle_range == tuple(cfg.instrument.joints[0].limits)
+    assert views[0].torque_range[1] == pytest.approx(1.2 * 0.004 * cfg.calibration.target_tension)
+    path = tmp_path / "joints.rrd"
+    with RerunLogger("test", "joints", "save", path, joints=views) as rr:
+        rr.log_joint(0.0, "bend_ud", torque_hat=0.01, torque_true=0.012, angle_hat=0.2, angle_true=0.21,
+                     profiles=(np.linspace(8.0, 4.0, 11), np.full(11, 0.5)))
+        rr.log_joint(0.1, "grasp", torque_hat=-0.002, angle_hat=-0.1)
+        with pytest.raises(KeyError):
+            rr.log_joint(0.2, "wrist", torque_hat=0.0)
+    _, rows = _read(path)
+    for entity in ("/joints/bend_ud/torque/hat", "/joints/bend_ud/torque/true", "/joints/bend_ud/angle/hat",
+                   "/joints/grasp/torque/hat", "/instrument/bend_ud/a/tension", "/instrument/bend_ud/b/tension",
+                   "/instrument/grasp/b/route", "/instrument/bend_ud/tip"):
+        assert entity in rows, entity
+    assert "/instrument/grasp/a/tension" not in rows and "/joints/grasp/torque/true" not in rows
+    [(_, tip)] = rows["/instrument/bend_ud/tip"]
+    [label] = tip["Points3D:labels"]
+    assert label == "bend_ud, torque 0.010 (true 0.012) N m, angle 0.200 (true 0.210) rad"
+    [(_, route_a)] = rows["/instrument/grasp/a/route"]
+    z = np.asarray(route_a["LineStrips3D:strips"][0])[:, 2]
+    assert z == pytest.approx(-2 * JOINT_SPACING)                   # the third pair sits two spacings down
+    assert experiment_label(0, ("a", "b")) == "none" and experiment_label(1, ("x",)) == "paper"
+    assert experiment_label(1 | (2 << 8), ("bend_ud", "bend_lr", "grasp")) == "bend_ud paper_a, grasp paper_b"
