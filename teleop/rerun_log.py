@@ -258,7 +258,7 @@ class RerunLogger(JointLogging):
         rec.log("profile/range", rr.BarChart.from_fields(values=np.array(TENSION_RANGE), abscissa=np.array([0.0, L]),
                                                           widths=np.array([1e-6, 1e-6]), color=(0, 0, 0, 0)),
                 static=True)
-        self._log_joint_routes()
+        self._log_joint_routes(t)
         if self._route is not None:
             rec.log("sheath/route", rr.LineStrips3D([self._route], radii=0.002, colors=[(120, 120, 120, 255)]),
                     static=True)

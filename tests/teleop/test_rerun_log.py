@@ -250,7 +250,8 @@ def test_joint_instrument_view_logs_each_joint_and_its_tendons(tmp_path):
                    "/joints/grasp/torque/hat", "/instrument/bend_ud/a/tension", "/instrument/bend_ud/b/tension",
                    "/instrument/grasp/b/route", "/instrument/bend_ud/tip"):
         assert entity in rows, entity
-    assert "/instrument/grasp/a/tension" not in rows and "/joints/grasp/torque/true" not in rows
+    assert len(rows["/instrument/grasp/a/tension"]) == 1 and "/joints/grasp/torque/true" not in rows  # at rest only
+    assert len(rows["/instrument/bend_ud/a/tension"]) == 2                                         # rest, then 8-4 N
     [(_, tip)] = rows["/instrument/bend_ud/tip"]
     [label] = tip["Points3D:labels"]
     assert label == "bend_ud, torque 0.010 (true 0.012) N m, angle 0.200 (true 0.210) rad"
