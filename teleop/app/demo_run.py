@@ -5,7 +5,8 @@ instrument.
 * :func:`run_processes`: the slave (``python -m teleop.app.cli slave``) listens on a free TCP port (or
   the first ``--listen``); once the port accepts connections the master connects. When the master
   has finished its protocol it announces STOPPING and the slave exits too. Either running past
-  ``--timeout`` is stopped with SIGTERM (recordings are flushed) and reported, as is a non-zero exit.
+  ``--timeout`` is stopped with SIGTERM (recordings are flushed) and reported, as is a non-zero exit;
+  the recorder gets :data:`RECORDER_GRACE` after the sides, past ``--timeout`` if need be.
   With ``rig.type: zenoh`` a third process, ``teleop bridge``, runs the simulated rig behind the
   Zenoh rig interface and the slave connects to it.
 * :func:`full_scale_errors`: max and mean of |estimate - truth| over the range of the truth.
@@ -124,6 +125,12 @@ def finish(summary: dict, checks: dict[str, bool], problems: list[str], t0: floa
     return 0 if summary["ok"] else 1
 
 
+#: [s] once both sides have ended, the recorder gets at least this long to finish (even past ``--timeout``):
+#: it runs niced and, on a loaded machine, writes the last messages, the journals' recovery and its
+#: figure well after the sides (seen: 22 s after them with two CPU hogs and a load average of 7.7)
+RECORDER_GRACE = 20.0
+
+
 def _wait_listening(port: int, proc: subprocess.Popen, deadline: float) -> bool:
     from teleop.transport import accepts_connections
     while time.monotonic() < deadline:
@@ -198,10 +205,14 @@ def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, b
             for name, p in procs[::-1]:
                 if name == "bridge":
                     continue                 # serves until stopped below
+                wait = deadline - time.monotonic()
+                if name == "recorder":       # the sides are done; a niced recorder on a busy machine catches up
+                    wait = max(wait, RECORDER_GRACE)
                 try:
-                    rc = p.wait(max(0.1, deadline - time.monotonic()))
+                    rc = p.wait(max(0.1, wait))
                 except subprocess.TimeoutExpired:
-                    problems.append(f"the {name} did not finish within --timeout {timeout:g} s; stopped")
+                    extra = f" and {RECORDER_GRACE:g} s after the sides" if name == "recorder" else ""
+                    problems.append(f"the {name} did not finish within --timeout {timeout:g} s{extra}; stopped")
                     _stop(p)
                     rc = p.returncode
                 if rc != 0:
