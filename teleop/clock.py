@@ -149,6 +149,12 @@ class Pacer:
         """The deadline the next :meth:`wait` sleeps to [s]."""
         return self._next
 
+    @property
+    def next_wake(self) -> float:
+        """When the next :meth:`wait` is expected to return [s]: the next deadline (the loop's helper
+        threads work until then, :data:`teleop.realtime.IDLE`)."""
+        return self._next
+
     def wait(self) -> float:
         """Sleep until the next deadline (or not at all if it has passed) and return the time [s]."""
         deadline = self._next
@@ -266,6 +272,13 @@ class LockedPacer(Pacer):
         self.last_lateness = lateness
         self.max_lateness = max(self.max_lateness, lateness)
         return now
+
+    @property
+    def next_wake(self) -> float:
+        """When the next message is due [s]: one period after the previous cycle started (the deadline
+        if earlier). The deadline itself is later (``1 + guard`` periods) and a helper thread working
+        until then would hold up the cycle the next message starts."""
+        return self._next if self._start is None else min(self._next, self._start + self.period)
 
     def stats(self) -> dict[str, float]:
         """:meth:`Pacer.stats` and ``locked`` (cycles a message started)."""

@@ -198,7 +198,7 @@ class NodeBase:
                 self.step(now)
                 cycles.add(now, pacer.last_lateness, pacer.last_overrun, perf() - t_step, state)
                 if idle is not None:
-                    idle(pacer.next_deadline - IDLE_GUARD)
+                    idle(pacer.next_wake - IDLE_GUARD)
                 if max_duration is not None and now - t0 >= max_duration:
                     break
         finally:

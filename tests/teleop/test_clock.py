@@ -197,3 +197,15 @@ def test_one_long_stall_is_one_overrun_and_both_pacers_resynchronise_without_a_b
     assert q.overruns == 1 and q.skipped == 39
     gaps = np.diff(starts)                  # the next message starts the next cycle (never before half a period),
     assert gaps[0] >= 0.5e-3 and gaps[1:] == pytest.approx([1e-3] * 4)   # then one per period
+
+
+def test_the_idle_window_ends_when_the_next_message_is_due_not_at_the_locked_deadline():
+    c = FakeClock(0.0)
+    p = Pacer(c, 1000.0)
+    assert p.next_wake == p.next_deadline == pytest.approx(0.001)
+    src = _Arrivals(c, [0.0013 + 1e-3 * k for k in range(5)])
+    q = LockedPacer(c, 1000.0, src)
+    q.wait()                                                      # on the grid at 1 ms
+    start = q.wait()                                              # the message at 1.5 ms (half a period)
+    assert q.next_deadline == pytest.approx(start + 1.25e-3)      # the deadline if no message comes
+    assert q.next_wake == pytest.approx(start + 1e-3)             # but the next message is due a period later

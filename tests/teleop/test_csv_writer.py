@@ -50,3 +50,21 @@ def test_a_bad_row_is_skipped_and_counted_not_raised(tmp_path):
 def test_flush_interval_must_be_positive(tmp_path):
     with pytest.raises(ValueError, match="flush_interval must be > 0"):
         ThreadedCsvRecorder(tmp_path / "c.csv", ("time", "x_in", "T_in"), flush_interval=0.0)
+
+
+def test_wide_rows_are_formatted_in_chunks_that_each_fit_the_loops_idle_time(tmp_path, monkeypatch):
+    from teleop import csv_writer
+    from teleop.recording import CsvRecorder
+    sizes = []
+    real = CsvRecorder.write_many
+    monkeypatch.setattr(CsvRecorder, "write_many", lambda self, rows: (sizes.append(len(rows)), real(self, rows)))
+    columns = ("time", "x_in", "T_in") + tuple(f"c{k}" for k in range(69))   # the 3-joint slave's width
+    path = tmp_path / "wide.csv"
+    rec = ThreadedCsvRecorder(path, columns, flush_interval=10.0)     # only close() drains: one batch
+    for k in range(20):
+        rec.write((k * 1e-3,) + (float(k),) * 71)                    # in order, whatever the chunks
+    rec.close()
+    per_chunk = int(csv_writer.CHUNK_COST / (csv_writer.VALUE_COST * len(columns)))
+    assert sum(sizes) == 20 and max(sizes) <= per_chunk < 20 and len(sizes) >= 20 // per_chunk
+    data = read_measured_csv(path)
+    assert np.all(np.diff(data.time) > 0) and data.time.size == 20 and data.T_in == pytest.approx(np.arange(20.0))
