@@ -71,7 +71,9 @@ CV_BLOCKS = 8
 
 class FitResult:
     """A fitted model over one recording: structure, effects, values (name -> SI value), the angle
-    [rad] and (capstan) proximal tensions [N] over the whole recording, train and test rmse [rad]."""
+    [rad] and (capstan) proximal tensions [N] over the whole recording, train and test rmse [rad], and
+    (capstan) the rmse of the predicted proximal tensions [N] on the test (``rmse_T_in``) and training
+    (``rmse_T_train``) samples (None for the seed structure)."""
 
     def __init__(self, structure: str, effects: tuple[str, ...], values: dict[str, float], rec,
                  train: slice | np.ndarray, test: slice | np.ndarray):
@@ -83,6 +85,7 @@ class FitResult:
         self.max_test = float(np.max(np.abs(err[test])))
         T = np.column_stack([rec.T_a, rec.T_b])
         self.rmse_T_in = None if self.T_in is None else float(np.sqrt(np.mean((self.T_in[test] - T[test]) ** 2)))
+        self.rmse_T_train = None if self.T_in is None else float(np.sqrt(np.mean((self.T_in[train] - T[train]) ** 2)))
 
     @property
     def id(self) -> str:
@@ -104,7 +107,7 @@ class FitResult:
 
 def fit_model(structure: str, effects: tuple[str, ...], rec, train: slice | np.ndarray,
               test: slice | np.ndarray,
-              starts: list[dict[str, float]], max_nfev: int = MAX_NFEV) -> FitResult:
+              starts: list[dict[str, float]], max_nfev: int = MAX_NFEV, tension_weight: float = 0.0) -> FitResult:
     """Fit one model on the ``train`` samples by ``least_squares`` from each start; keep the lowest
     training cost.
 
@@ -115,11 +118,22 @@ def fit_model(structure: str, effects: tuple[str, ...], rec, train: slice | np.n
     train, test : slices of the samples (the model runs from sample 0 in both cases)
     starts : starting values by name; a missing name takes each of its parameter's ``starts``
     max_nfev : most residual evaluations per start
+    tension_weight : w [rad/N] >= 0; > 0 adds the measured proximal tensions to the residual of the
+        capstan structure, w (T_in,model - T_in,measured) beside the angle error (the "+T" fits of
+        :mod:`estimator.offline.pair_shared`; docs/findings.md, Finding 3). 0 (default): angle only.
+        The diagnosis itself fits on the angle only.
 
     Returns
     -------
     FitResult
+
+    Raises
+    ------
+    ValueError
+        ``tension_weight`` negative or not finite.
     """
+    if not (math.isfinite(tension_weight) and tension_weight >= 0.0):
+        raise ValueError(f"tension_weight must be finite and >= 0, got {tension_weight!r}")
     params = model_params(structure, effects)
     names = [p.name for p in params]
     lo = np.array([p.lo for p in params])
@@ -127,12 +141,16 @@ def fit_model(structure: str, effects: tuple[str, ...], rec, train: slice | np.n
     y = np.asarray(rec.angle, dtype=float)[train]
 
     part = head(rec, train)                       # the model is causal: run it up to the fitted samples only
+    w = tension_weight if structure == "capstan" else 0.0
+    T_meas = np.column_stack([rec.T_a, rec.T_b])[train] if w > 0.0 else None
 
     def residual(x: np.ndarray) -> np.ndarray:
         try:
-            th, _ = predict_model(structure, effects, dict(zip(names, map(float, x))), part)
+            th, T = predict_model(structure, effects, dict(zip(names, map(float, x))), part)
         except ValueError:
-            return np.full(y.size, _BAD)
+            return np.full(y.size * (3 if w > 0.0 else 1), _BAD)
+        if T_meas is not None and T is not None:
+            return np.concatenate([th[train] - y, (w * (T[train] - T_meas)).ravel()])
         return th[train] - y
 
     x0s = []
@@ -163,13 +181,15 @@ def folds(train: slice, n: int, blocks: int = CV_BLOCKS) -> list[tuple[np.ndarra
     return [(even, odd), (odd, even)]
 
 
-def cross_validate(fx: FitResult, rec, train: slice, max_nfev: int = CV_NFEV) -> float:
+def cross_validate(fx: FitResult, rec, train: slice, max_nfev: int = CV_NFEV, tension_weight: float = 0.0) -> float:
     """Time-blocked cross-validation rmse [rad] of a fitted model inside the training block
-    (:func:`folds`; each fold refitted from ``fx.values``, the model running from the first sample)."""
+    (:func:`folds`; each fold refitted from ``fx.values``, the model running from the first sample,
+    with the tension weight of :func:`fit_model`; the score is the angle's alone)."""
     y = np.asarray(rec.angle, dtype=float)
     sq = []
     for fit_on, score_on in folds(train, len(y)):
-        f = fit_model(fx.structure, fx.effects, rec, fit_on, score_on, [dict(fx.values)], max_nfev=max_nfev)
+        f = fit_model(fx.structure, fx.effects, rec, fit_on, score_on, [dict(fx.values)], max_nfev=max_nfev,
+                      tension_weight=tension_weight)
         sq.append(np.mean((f.angle[score_on] - y[score_on]) ** 2))
     return float(np.sqrt(np.mean(sq)))
 

@@ -208,3 +208,27 @@ def test_exported_shared_set_predicts_without_refit():
     assert np.max(np.abs(th - rec.angle)) < 1e-9
     with pytest.raises(ValueError, match="missing mu"):
         predict_shared({**p, "values": {k: x for k, x in p["values"].items() if k != "mu"}}, rec, b)
+
+
+def test_tension_weighted_fit_recovers_a_series_compliance_and_predicts_the_load_cells():
+    from estimator.offline.pair_diagnosis import cross_validate
+    true = {"G": 1.4, "lam": 0.1, "K_a": 0.9, "K_b": 0.5, "k": 6.0, "lam_s": 0.25}
+    c = command()
+    th, T = simulate_pair(c, (5.0, 5.0), true["G"], (true["lam"],) * 2, (true["K_a"], true["K_b"]), true["k"],
+                          lam_s=true["lam_s"])
+    rng = np.random.default_rng(7)
+    T = T + 0.02 * rng.standard_normal(T.shape)
+    T[0] = 5.0
+    rec = Rec(th + math.radians(0.05) * rng.standard_normal(c.size), T, c)
+    start = [{"G": 2.5, "lam": 0.3, "K_a": 0.6, "K_b": 0.3, "k": 4.0, "lam_s": 0.1}]
+    f = fit_model("capstan", ("series_compliance",), rec, TRAIN, TEST, start, tension_weight=0.01)
+    for name in ("G", "lam_s", "K_a", "K_b", "k"):
+        assert f.values[name] == pytest.approx(true[name], rel=0.1), name
+    assert f.rmse_T_train < 0.05 and f.rmse_T_in < 0.05 and math.degrees(f.rmse_test) < 0.1
+    assert 0.0 < cross_validate(f, rec, TRAIN, tension_weight=0.01) < math.radians(0.2)
+    plain = fit_model("capstan", (), rec, TRAIN, TEST, [{"G": 2.0, "lam": 0.3, "K_a": 0.3, "K_b": 0.3, "k": 2.0}])
+    zero = fit_model("capstan", (), rec, TRAIN, TEST, [{"G": 2.0, "lam": 0.3, "K_a": 0.3, "K_b": 0.3, "k": 2.0}],
+                     tension_weight=0.0)
+    assert plain.values == zero.values                                  # weight 0: the angle-only fit, unchanged
+    with pytest.raises(ValueError, match="tension_weight must be finite and >= 0"):
+        fit_model("capstan", (), rec, TRAIN, TEST, [TRUE], tension_weight=-1.0)
