@@ -47,6 +47,7 @@ distal torque of that rest, so the rest is an equilibrium. Extensions (literatur
 """
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -90,6 +91,15 @@ def tendon_arrays(K: float, lam: float, n_nodes: int = 24, lam_s: float = 0.0, n
     lo, hi = np.exp(-g), np.exp(g)
     dlo, dhi = distal_gains(g)
     return lo, hi, dlo, dhi, w, float(w @ lo) / lo[-1], float(w @ hi) / hi[-1]
+
+
+@functools.lru_cache(maxsize=256)
+def _node_arrays(K: float, lam: float, n_nodes: int, lam_s: float) -> tuple:
+    """:func:`tendon_arrays`, memoised on its exact arguments: a least-squares Jacobian perturbs one
+    parameter at a time, so most evaluations reuse both tendons' arrays (building them cost ~20 % of a
+    KAIST-length run). The kernels only read them; ``tests/estimator/test_pair_diagnosis.py`` checks
+    that a run leaves them unchanged."""
+    return tendon_arrays(K, lam, n_nodes, lam_s)
 
 
 @njit(cache=True)
@@ -260,7 +270,7 @@ def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple
         raise ValueError(f"shape must be in [0, 1], got {shape!r}")
     if not (math.isfinite(toe) and toe >= 0.0 and math.isfinite(toe_tension) and toe_tension > 0.0):
         raise ValueError(f"toe must be finite and >= 0 and toe_tension finite and > 0, got {toe!r}, {toe_tension!r}")
-    arrs = [tendon_arrays(Kj, lj, n_nodes, lam_s) for Kj, lj in zip(K, lam)]
+    arrs = [_node_arrays(float(Kj), float(lj), int(n_nodes), float(lam_s)) for Kj, lj in zip(K, lam)]
     P = [(P0 + offset) * np.exp(-shape * np.log(a[1])) for P0, a in zip(pretension, arrs)]
     theta = np.empty(c.size)
     T_in = np.empty((c.size, 2))

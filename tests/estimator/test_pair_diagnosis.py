@@ -67,6 +67,17 @@ def test_dead_zone_after_a_reversal_grows_with_K_and_tensions_follow_the_motor()
     assert zones[0] < zones[1] < zones[2] and zones[2] > 2 * zones[0]
 
 
+def test_memoised_node_arrays_are_left_unchanged_by_a_run():
+    from estimator.pair_kernels import _node_arrays, tendon_arrays
+    c = command()
+    for kw in ({}, {"toe": 5.0, "toe_tension": 1.0}, {"lam_s": 0.2, "tau_c": 0.2, "shape": 0.5}):
+        runs = [simulate_pair(c, (5.0, 4.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0, **kw) for _ in range(2)]
+        assert all(np.array_equal(x, y) for x, y in zip(*runs))
+        for K in (0.9, 0.5):                       # the kernels only read the shared node arrays
+            cached, fresh = _node_arrays(K, 0.4, 24, kw.get("lam_s", 0.0)), tendon_arrays(K, 0.4, 24, kw.get("lam_s", 0.0))
+            assert all(np.array_equal(x, y) for x, y in zip(cached, fresh))
+
+
 def test_kernel_refuses_bad_parameters():
     c = command(10)
     with pytest.raises(ValueError, match="k must be > 0"):
