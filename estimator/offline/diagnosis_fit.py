@@ -27,7 +27,7 @@ from estimator.sheath import SheathModel
 from estimator.data import MeasuredData
 
 __all__ = ["Progress", "trimmed_ms", "sample_block", "rest_reading", "prepare", "split_at_rest", "fit_model", "start_points", "heldout_mse", "raw_rmse", "noise_level",
-           "quantum", "SIGNALS", "channel_choice", "look_alike"]
+           "quantum", "SIGNALS", "channel_choice", "look_alike", "settings_keys", "predictions"]
 
 _K = Parameter("K", "-", 0.0, K_MAX, 0.5, (), "friction exponent mu * total wrap angle")
 _SCALE = {"K": 0.1, "c_v": 10.0, "T0": 1.0, "K_rate": 1e-3, "beta": 1.0, "T_c": 1.0, "r_s": 0.1, "a": 0.5,
@@ -149,7 +149,8 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
     """
     m = slice(None) if mask is None else mask
     params = _params(effects, route)
-    fixed = dict(fixed or {})
+    # an effect's form (Effect.variants: held, not fitted) travels with the first start
+    fixed = {**{k: starts[0][k] for k in settings_keys(effects) if starts and k in starts[0]}, **(fixed or {})}
     scale = np.array([_SCALE[p.name] for p in params])
     lo = np.array([p.lower for p in params]) / scale
     hi = np.array([p.upper for p in params]) / scale
@@ -177,8 +178,15 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
     return vals, c, float(best.cost)
 
 
+def settings_keys(effects: list[Effect]) -> set[str]:
+    """Names of the held settings of ``effects`` (the keys of their ``variants``)."""
+    return {k for e in effects for v in e.variants for k in v}
+
+
 def start_points(effects: list[Effect], base: dict[str, float], s: Series, fixed: dict[str, float]) -> list[dict]:
-    """Starting points: the fitted values so far, and the product of each new parameter's starts."""
+    """Starting points: the fitted values so far, and the product of each new parameter's starts
+    (the effects' held settings, e.g. the pre-sliding form, taken from ``fixed``)."""
+    held = {k: fixed[k] for k in settings_keys(effects) if k in fixed}
     grids = []
     for e in effects:
         for p in e.parameters:
@@ -188,7 +196,7 @@ def start_points(effects: list[Effect], base: dict[str, float], s: Series, fixed
                 grids.append([(p.name, max(float(np.median(s.T_in[: max(3, len(s) // 200)])), 0.1))])
             else:
                 grids.append([(p.name, v) for v in (p.starts or (p.neutral,))])
-    return [{"K": base["K"], **dict(combo)} for combo in itertools.product(*grids)]
+    return [{"K": base["K"], **held, **dict(combo)} for combo in itertools.product(*grids)]
 
 
 def heldout_mse(pr, s: Series, k: int) -> dict[str, float]:
@@ -277,3 +285,34 @@ def look_alike(best: str, price: dict, data: MeasuredData) -> str:
     tol = 3.0 * max(quantum(data.x_out), quantum(data.x_in), noise_level(np.asarray(data.x_out, dtype=float)), 1e-9)
     moved = max(rest_reading(data, "x_in"), rest_reading(data, "x_out")) > tol
     return group[1] if moved else group[0]
+
+
+def predictions(result: dict, data: MeasuredData) -> dict[str, np.ndarray | None]:
+    """Re-run the base and the extended model of a :func:`estimator.offline.diagnosis.diagnose` result on the
+    measured samples (re-exported by estimator.offline.diagnosis).
+
+    Returns
+    -------
+    dict of ndarray, shape (n_samples,) (None for a signal not recorded): ``T_out_base``,
+    ``T_out_ext`` [N], ``x_out_base``, ``x_out_ext`` [m] (interpolated from the averaged series to
+    ``data.time``), ``velocity`` [m/s] and ``phase`` (int8 codes of :class:`estimator.phase.Phase`,
+    from the base model).
+    """
+    from estimator.online.distal import estimate_batch      # local: phase classification only
+    from estimator.sheath import SheathModel
+
+    st = result["settings"]
+    shape = None if st.get("wrap_shape") is None else np.asarray(st["wrap_shape"], dtype=float)
+    s = prepare(data, n_nodes=st["n_nodes"], target_rate=st["target_rate_hz"], wrap_shape=shape)
+    out: dict[str, np.ndarray | None] = {}
+    for tag, model in (("base", result["base_model"]), ("ext", result["model"])):
+        pr = predict(model["effects"], model["values"], s, compliance=model["compliance"])
+        for name in SIGNALS:
+            out[f"{name}_{tag}"] = None if getattr(data, name) is None else np.interp(data.time, s.time,
+                                                                                     getattr(pr, name))
+    out["velocity"] = np.interp(data.time, s.time, s.velocity)
+    base = result["base_model"]
+    out["phase"] = estimate_batch(np.interp(data.time, s.time, s.T_in), data.x_in,
+                                  SheathModel(K=base["values"]["K"], compliance=max(base["compliance"], 1e-12),
+                                              wrap_shape=shape), time=data.time, n_nodes=st["n_nodes"]).phase
+    return out

@@ -20,7 +20,8 @@ import math
 from dataclasses import dataclass
 from typing import Callable, Optional
 
-__all__ = ["Setting", "RigSwitch", "ScenarioKnob", "SENSOR_KNOBS", "SENSOR_SWITCHES", "drift_rate", "offset_at_tip"]
+__all__ = ["Setting", "RigSwitch", "ScenarioKnob", "SENSOR_KNOBS", "SENSOR_SWITCHES", "drift_rate", "offset_at_tip",
+           "SENSOR_TEXT", "SENSOR_CAUSE", "SENSOR_SIGNATURE", "SENSOR_WHAT"]
 
 
 @dataclass(frozen=True)
@@ -109,3 +110,25 @@ SENSOR_SWITCHES = {
     ("lag", "T_in"): RigSwitch("sensor_delay", "the proximal load-cell channel lags the others",
                                (Setting("delay", 0.02, "s", ">= 0", "T_in reading = true T_in delay seconds ago"),)),
 }
+
+
+# the sensor entries' text and fit data (estimator.offline.effects.SensorEffect)
+# per channel: kind -> (parameter prefix, unit of the parameter by channel, bounds, starts, meaning)
+SENSOR_TEXT = {
+    "offset": ("b", {"T": ("N", -10.0, 10.0, (-0.5, 0.5)), "x": ("m", -5e-3, 5e-3, (-5e-5, 5e-5))},
+               "zero offset: reading = true + b"),
+    "gain": ("g", {"T": ("-", -0.5, 0.5, (-0.05, 0.05))}, "scale error: reading = (1 + g) true"),
+    "lag": ("tau", {"T": ("s", 0.0, 0.2, (0.01, 0.04)), "x": ("s", 0.0, 0.2, (0.01, 0.04))},
+            "time delay of the channel: reading(t) = true(t - tau)"),
+    "drift": ("d", {"T": ("N/s", -0.1, 0.1, (-0.005, 0.005))}, "linear zero drift: reading = true + d (t - t_0)"),
+}
+SENSOR_CAUSE = {"offset": "zero offset of the {what} (tare, encoder zeroed off the rest)", "gain": "scale error of the "
+                "{what} (calibration factor)", "lag": "the {what} channel lags the others (filter, bus or sampling skew)",
+                "drift": "slow zero drift of the {what} (thermal drift of the bridge)"}
+SENSOR_SIGNATURE = {"offset": "a constant residual of one sign on pull and release; a non-zero reading at the initial "
+                    "rest",
+                    "gain": "the pull and release slopes scaled together (their product is not 1)",
+                    "lag": "residual proportional to the rate of the channel; loop area grows with frequency",
+                    "drift": "residual growing linearly with time on both branches"}
+SENSOR_WHAT = {"T_in": "proximal load cell", "T_out": "distal load cell", "x_in": "proximal encoder",
+               "x_out": "distal position sensor"}

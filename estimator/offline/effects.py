@@ -19,12 +19,13 @@ from estimator.offline import effect_switches as sw
 from estimator.offline.effect_switches import RigSwitch, ScenarioKnob, Setting
 from estimator.offline.effect_types import K_MAX, NONE, UNKNOWN, Parameter, Prediction, Series
 from estimator.offline.effects_kernels import backlash_play, route_shape, run_extended, travel_lag
+from estimator.offline.presliding_kernel import NODE_FORM, node_presliding
 
 __all__ = ["Parameter", "Effect", "VelocityFriction", "Pretension", "CurvatureDrift", "TendonStiffening", "Stiction",
            "FrictionOffset", "Presliding", "DistalBacklash", "SensorEffect", "Series", "Prediction", "CATALOGUE",
            "EFFECT_IDS", "ALIASES", "EQUIVALENT", "NONE", "UNKNOWN", "effect", "predict", "neutral_values",
            "route_shape", "ROUTE", "K_MAX", "RigSwitch", "ScenarioKnob", "Setting", "register", "unregister",
-           "rig_switches"]
+           "rig_switches", "NODE_FORM"]
 
 class Effect:
     """One model extension (subclasses below, one per physical effect; instances in CATALOGUE).
@@ -50,6 +51,11 @@ class Effect:
     channel: str = ""                   # the sensor channel (sensor effects only)
     switch: RigSwitch | None = None     # the simulated rig's switch
     knob: ScenarioKnob | None = None    # how a scenario level sets it
+    variants: tuple[dict[str, float], ...] = ()   # alternative forms (settings held, not fitted); best one kept
+
+    def variant_ok(self, variant: dict[str, float], measured: list[str]) -> bool:
+        """Whether ``variant`` (one of ``variants``) can differ from the first form on a recording with ``measured``."""
+        return True
 
     def correct_input(self, values: dict[str, float], time: np.ndarray, T_in: np.ndarray) -> np.ndarray | None:
         """The corrected proximal tension [N], shape (n,), from ``T_in`` [N] sampled at ``time`` [s];
@@ -163,11 +169,16 @@ class Presliding(Effect):
     id = "presliding"
     cause = "pre-sliding: friction builds up over a small travel after a reversal (liner/asperity compliance, Dahl)"
     signature = "rounded loop corners: T_out bends gradually after a reversal instead of staying flat; relaxes in dwells"
-    extension = ("tension-scaled Dahl element: the friction T_in - T_out follows the memory model's with a "
-                 "first-order lag in proximal travel, dF/dx = (F_memory - F) / x_p")
+    extension = ("tension-scaled Dahl element, in one of two forms (the better fit is kept): the friction "
+                 "T_in - T_out lags the memory model's in proximal travel, dF/dx = (F_memory - F) / x_p; or "
+                 "per node: every segment pre-slides over its own travel x_p (estimator.offline.presliding_kernel)")
     literature = "E2"
     parameters = (Parameter("x_p", "m", 0.0, 1e-3, 0.0, (40e-6, 120e-6), "pre-sliding travel F_c / sigma"),)
     knob = ScenarioKnob((("distance", 40e-6, 150e-6),))
+    variants = ({NODE_FORM: 0.0}, {NODE_FORM: 1.0})     # lumped (travel lag), per node (needs x_out)
+
+    def variant_ok(self, variant: dict[str, float], measured: list[str]) -> bool:
+        return not variant.get(NODE_FORM) or "x_out" in measured
 
 
 class DistalBacklash(Effect):
@@ -182,26 +193,6 @@ class DistalBacklash(Effect):
     knob = ScenarioKnob((("width", 50e-6, 300e-6),))
 
 
-# per channel: kind -> (parameter prefix, unit of the parameter by channel, bounds, starts, meaning)
-_SENSOR = {
-    "offset": ("b", {"T": ("N", -10.0, 10.0, (-0.5, 0.5)), "x": ("m", -5e-3, 5e-3, (-5e-5, 5e-5))},
-               "zero offset: reading = true + b"),
-    "gain": ("g", {"T": ("-", -0.5, 0.5, (-0.05, 0.05))}, "scale error: reading = (1 + g) true"),
-    "lag": ("tau", {"T": ("s", 0.0, 0.2, (0.01, 0.04)), "x": ("s", 0.0, 0.2, (0.01, 0.04))},
-            "time delay of the channel: reading(t) = true(t - tau)"),
-    "drift": ("d", {"T": ("N/s", -0.1, 0.1, (-0.005, 0.005))}, "linear zero drift: reading = true + d (t - t_0)"),
-}
-_CAUSE = {"offset": "zero offset of the {what} (tare, encoder zeroed off the rest)", "gain": "scale error of the "
-          "{what} (calibration factor)", "lag": "the {what} channel lags the others (filter, bus or sampling skew)",
-          "drift": "slow zero drift of the {what} (thermal drift of the bridge)"}
-_SIGN = {"offset": "a constant residual of one sign on pull and release; a non-zero reading at the initial rest",
-         "gain": "the pull and release slopes scaled together (their product is not 1)",
-         "lag": "residual proportional to the rate of the channel; loop area grows with frequency",
-         "drift": "residual growing linearly with time on both branches"}
-_WHAT = {"T_in": "proximal load cell", "T_out": "distal load cell", "x_in": "proximal encoder",
-         "x_out": "distal position sensor"}
-
-
 class SensorEffect(Effect):
     """A sensor effect on one channel (E14): ``id`` = "sensor_<kind>:<channel>", e.g. "sensor_lag:T_out".
 
@@ -212,12 +203,12 @@ class SensorEffect(Effect):
     literature = "E14"
 
     def __init__(self, kind: str, channel: str):
-        prefix, units, meaning = _SENSOR[kind]
+        prefix, units, meaning = sw.SENSOR_TEXT[kind]
         unit, lo, hi, starts = units[channel[0]]
         self.kind, self.channel = kind, channel
         self.id = f"sensor_{kind}:{channel}"
-        self.cause = _CAUSE[kind].format(what=_WHAT[channel])
-        self.signature = _SIGN[kind]
+        self.cause = sw.SENSOR_CAUSE[kind].format(what=sw.SENSOR_WHAT[channel])
+        self.signature = sw.SENSOR_SIGNATURE[kind]
         self.extension = (f"{'input correction of' if channel.endswith('_in') else 'reading model of'} {channel}: "
                           f"{meaning}")
         self.pname = f"{prefix}_{channel}"
@@ -327,13 +318,14 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
     t0 = float(t[0])
     sensors: dict[str, float] = {}
     x_p = d_b = 0.0
+    node = False
     for e in fx:
         own = {p.name: float(values.get(p.name, p.neutral)) for p in e.parameters}
         knobs.update({e.knobs[k]: v for k, v in own.items() if k in e.knobs})
         if isinstance(e, SensorEffect):
             sensors[e.id] = own[e.pname]
         elif isinstance(e, Presliding):
-            x_p = own["x_p"]
+            x_p, node = own["x_p"], values.get(NODE_FORM, 0.0) > 0.5
         elif isinstance(e, DistalBacklash):
             d_b = own["d_b"]
 
@@ -353,8 +345,12 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
     if g("sensor_offset:x_in"):
         x_in = x_in - g("sensor_offset:x_in")
     u = s.u if "r_1" not in values else route_shape(s.u.shape[0], values["r_1"], values.get("r_2", 0.5))
-    T_out, E1 = run_extended(T_in, vel, t, u, s.w, T_min=s.T_min, sigma=s.sigma_T_in, **knobs)
-    if x_p > 0.0:
+    if node and x_p > 0.0 and (compliance is not None or s.x_out is not None):   # per node: K, K_rate, T0, E9 only
+        T_out, E1 = node_presliding(T_in, x_in, s.x_out, t, u, s.w, x_p=x_p, compliance=compliance,
+                                    **{k: v for k, v in knobs.items() if k in ("K", "K_rate", "T0", "beta", "Tc")})
+    else:
+        T_out, E1 = run_extended(T_in, vel, t, u, s.w, T_min=s.T_min, sigma=s.sigma_T_in, **knobs)
+    if x_p > 0.0 and not node:
         T_out = T_in - travel_lag(T_in - T_out, x_in, x_p)
     # distal channels: the reading from the true output (offset and lag are linear in L/EA)
     if g("sensor_gain:T_out"):

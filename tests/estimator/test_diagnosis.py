@@ -69,7 +69,8 @@ def test_hidden_effect_is_named_and_earns_its_gain(eid):
 # the independent lumped-mass simulator: random route of arcs and straight runs, random distal load,
 # its own noise and quantisation (seeded; development seeds)
 LUMPED = [("sensor_offset:T_in", 101), ("sensor_offset:T_out", 102), ("sensor_lag:T_in", 103),
-          ("sensor_drift:T_out", 109), ("sensor_lag:x_in", 105), ("sensor_offset:x_out", 110), ("pretension", 107)]
+          ("sensor_drift:T_out", 109), ("sensor_lag:x_in", 105), ("sensor_offset:x_out", 110), ("pretension", 107),
+          ("presliding", 109)]   # per-node pre-sliding (constant-force load): the node form, x_p within 25 %
 
 
 @pytest.mark.parametrize("eid,seed", LUMPED)
