@@ -43,7 +43,12 @@ distal torque of that rest, so the rest is an equilibrium. Extensions (literatur
   the old profile, then rerun with the secant compliance between the old and that predicted profile
   (second order; with a 40 Hz sample and T_c >= 0.3 N the result moves by < 0.05 deg against 8
   substeps, ``tests/estimator/test_pair_diagnosis.py``). The toe acts on the kernel tension (T + a
-  with an E8 offset).
+  with an E8 offset);
+* ``mu_b`` friction of the tendons in the bending section, whose wrap is the joint angle itself (E7
+  at the distal end): the joint moves only when T_d,a e^{-+mu_b |theta|} - T_d,b e^{+-mu_b |theta|} - k theta
+  - tau_0 leaves zero (signs: moving toward + / -; (P4) is the case mu_b = 0), so the joint stalls at
+  large angles while the tensions still rise (docs/findings.md, Finding 3, session 4). Not combined
+  with ``toe``, ``tau_c`` or ``k2``.
 """
 from __future__ import annotations
 
@@ -53,7 +58,7 @@ import math
 import numpy as np
 from numba import njit
 
-from estimator.distal_slip import distal_gains, elongation
+from estimator.distal_slip import distal_clip, distal_gains, distal_tension, elongation
 from estimator.kernels import advance_proximal, joint_torque_balance, settle_joint
 
 __all__ = ["tendon_arrays", "simulate_pair"]
@@ -220,10 +225,83 @@ def _simulate(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, cpa, cra, lo_b, hi_b, 
         T_in[i, 1] = Tb[0]
 
 
+@njit(cache=True)
+def _bend_balance(th, s, mub, Ta, dlo_a, dhi_a, wa, ea, xa, Tb, dlo_b, dhi_b, wb, eb, xb, k, tau0):  # pragma: no cover
+    """Torque balance [N] of the joint moving in direction s (+1 / -1) at angle ``th`` [rad] with the
+    motors held, the bending section's capstan factor e^{-+s mu_b |th|} on each distal tension."""
+    tda = distal_tension(Ta, dlo_a, dhi_a, wa, ea, xa - th)
+    tdb = distal_tension(Tb, dlo_b, dhi_b, wb, eb, xb + th)
+    b = s * mub * abs(th)
+    return tda * math.exp(-b) - tdb * math.exp(b) - k * th - tau0
+
+
+@njit(cache=True)
+def _simulate_bend(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, cpa, cra, lo_b, hi_b, dlo_b, dhi_b, wb, cpb, crb, k,
+                   mub, substeps, theta, T_in):  # pragma: no cover - compiled
+    """:func:`_simulate` with friction in the bending section (``mu_b``, module docstring): per substep
+    the motors move with the joint held, then the joint stays while the balance lies in its band and
+    otherwise moves to the first zero of the balance in the direction it points (bracket, bisection)."""
+    Ta = Pa.copy()
+    Tb = Pb.copy()
+    xa0 = elongation(Ta, wa)
+    xb0 = elongation(Tb, wb)
+    tau0 = Ta[Ta.shape[0] - 1] - Tb[Tb.shape[0] - 1]
+    sbx = np.zeros(1)
+    sbF = np.full(1, 1e200)
+    sbs = np.ones(1)
+    slope = k + 1.0 / max(elongation(lo_a, wa), 1e-9) + 1.0 / max(elongation(lo_b, wb), 1e-9)
+    th = 0.0
+    c0 = c[0]
+    prev = c[0]
+    for i in range(c.shape[0]):
+        for j in range(substeps):
+            u = prev + (c[i] - prev) * (j + 1) / substeps - c0
+            xa = xa0 + G * u
+            xb = xb0 - G * u
+            advance_proximal(Ta, lo_a, hi_a, wa, cpa, cra, xa - th, 0.0, sbx, sbF, sbs)
+            advance_proximal(Tb, lo_b, hi_b, wb, cpb, crb, xb + th, 0.0, sbx, sbF, sbs)
+            ea = elongation(Ta, wa)
+            eb = elongation(Tb, wb)
+            s = 1.0
+            f = _bend_balance(th, 1.0, mub, Ta, dlo_a, dhi_a, wa, ea, xa, Tb, dlo_b, dhi_b, wb, eb, xb, k, tau0)
+            if f <= 0.0:
+                s = -1.0
+                f = _bend_balance(th, -1.0, mub, Ta, dlo_a, dhi_a, wa, ea, xa, Tb, dlo_b, dhi_b, wb, eb, xb, k, tau0)
+                if f >= 0.0:
+                    continue                              # inside the band: the joint stays
+            x0 = th
+            h = s * max(abs(f) / slope, 1e-12)
+            x1 = th + h
+            for _ in range(200):                          # expand until the balance changes sign
+                if s * _bend_balance(x1, s, mub, Ta, dlo_a, dhi_a, wa, ea, xa, Tb, dlo_b, dhi_b, wb, eb, xb, k,
+                                     tau0) <= 0.0:
+                    break
+                x0 = x1
+                h *= 2.0
+                x1 = th + h
+            lo = min(x0, x1)
+            hi = max(x0, x1)
+            while hi - lo > 1e-13 * (1.0 + abs(hi)):       # the balance falls with theta on the bracket
+                mid = 0.5 * (lo + hi)
+                if _bend_balance(mid, s, mub, Ta, dlo_a, dhi_a, wa, ea, xa, Tb, dlo_b, dhi_b, wb, eb, xb, k,
+                                 tau0) > 0.0:
+                    lo = mid
+                else:
+                    hi = mid
+            th = 0.5 * (lo + hi)
+            distal_clip(Ta, dlo_a, dhi_a, distal_tension(Ta, dlo_a, dhi_a, wa, ea, xa - th))
+            distal_clip(Tb, dlo_b, dhi_b, distal_tension(Tb, dlo_b, dhi_b, wb, eb, xb + th))
+        prev = c[i]
+        theta[i] = th
+        T_in[i, 0] = Ta[0]
+        T_in[i, 1] = Tb[0]
+
+
 def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple[float, float],
                   K: tuple[float, float], k: float, *, lam_s: float = 0.0, tau_c: float = 0.0, shape: float = 0.0,
                   offset: float = 0.0, k2: float = 0.0, theta_c: float = 0.0, toe: float = 0.0,
-                  toe_tension: float = 1.0, n_nodes: int = 24, substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
+                  toe_tension: float = 1.0, mu_b: float = 0.0, n_nodes: int = 24,
+                  substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """Run the capstan-joint pair model (module docstring, (P1)-(P4)) over a recorded command.
 
     Parameters
@@ -241,6 +319,9 @@ def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple
     toe : extra compliance of the tendon at zero tension, as a ratio rho >= 0 (E9; none when 0: the
         kernel is then the linear one, bit for bit); toe_tension : its tension scale T_c [N] > 0. The
         tendon compliance is lam (1 + rho e^{-T/T_c}) (module docstring, ``toe``)
+    mu_b : friction coefficient of the tendons in the bending section [1/rad], >= 0; its wrap is the
+        joint angle (module docstring, ``mu_b``; none when 0: the kernel is then the plain one, bit for
+        bit); not with ``toe``, ``tau_c`` or ``k2``
     n_nodes : elements per sheath
     substeps : steps per sample; the model is rate-independent and the splitting error of one step
         per 40 Hz sample was below 1e-12 rad on the KAIST commands, so 1 is the default
@@ -253,14 +334,15 @@ def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple
     Raises
     ------
     ValueError
-        A non-finite or out-of-range parameter, or a command that is not 1-D and finite.
+        A non-finite or out-of-range parameter, a command that is not 1-D and finite, or ``mu_b`` with
+        ``toe``, ``tau_c`` or ``k2``.
     """
     c = np.ascontiguousarray(command, dtype=np.float64)
     if c.ndim != 1 or c.size == 0 or not np.all(np.isfinite(c)):
         raise ValueError("command must be a non-empty 1-D array of finite angles [rad]")
     vals = {"G": G, "lam_a": lam[0], "lam_b": lam[1], "K_a": K[0], "K_b": K[1], "k": k, "lam_s": lam_s,
             "tau_c": tau_c, "shape": shape, "offset": offset, "k2": k2, "theta_c": theta_c, "P_a": pretension[0],
-            "P_b": pretension[1]}
+            "P_b": pretension[1], "mu_b": mu_b}
     for name, v in vals.items():
         if not math.isfinite(v) or v < 0.0:
             raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
@@ -270,6 +352,9 @@ def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple
         raise ValueError(f"shape must be in [0, 1], got {shape!r}")
     if not (math.isfinite(toe) and toe >= 0.0 and math.isfinite(toe_tension) and toe_tension > 0.0):
         raise ValueError(f"toe must be finite and >= 0 and toe_tension finite and > 0, got {toe!r}, {toe_tension!r}")
+    if mu_b > 0.0 and (toe > 0.0 or tau_c > 0.0 or k2 > 0.0):
+        raise ValueError(f"mu_b (bending-section friction) is not combined with toe, tau_c or k2, got mu_b={mu_b!r}, "
+                         f"toe={toe!r}, tau_c={tau_c!r}, k2={k2!r}")
     arrs = [_node_arrays(float(Kj), float(lj), int(n_nodes), float(lam_s)) for Kj, lj in zip(K, lam)]
     P = [(P0 + offset) * np.exp(-shape * np.log(a[1])) for P0, a in zip(pretension, arrs)]
     theta = np.empty(c.size)
@@ -279,6 +364,10 @@ def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple
         _simulate_toe(c, float(G), P[0], P[1], lo_a, hi_a, dlo_a, dhi_a, wa, lo_b, hi_b, dlo_b, dhi_b, wb, float(k),
                       float(tau_c), max(int(substeps), 1), theta, T_in, float(k2),
                       float(theta_c) if k2 > 0.0 else _BIG, float(toe), float(toe_tension))
+        return theta, T_in - offset
+    if mu_b > 0.0:
+        _simulate_bend(c, float(G), P[0], P[1], *arrs[0], *arrs[1], float(k), float(mu_b), max(int(substeps), 1),
+                       theta, T_in)
         return theta, T_in - offset
     _simulate(c, float(G), P[0], P[1], *arrs[0], *arrs[1], float(k), float(tau_c), max(int(substeps), 1), theta,
               T_in, float(k2), float(theta_c) if k2 > 0.0 else _BIG)

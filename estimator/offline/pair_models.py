@@ -27,6 +27,9 @@ id                        literature   extension                                
                                        theta_c [rad] (bending section stiffens)
 ``tendon_toe``            E9           tendon compliance lam (1 + toe e^{-T/toe_tension}) capstan
                                        (softer at low tension: strands bedding in)
+``bending_friction``      E7, E13      the tendons' wrap in the bending section is the  shared models
+                                       joint angle: capstan factor e^{-+mu_b |theta|}    only (not offered
+                                       on each distal tension                           per configuration)
 ========================= ============ ================================================ ==================
 
 Inputs of every model: a recording with ``time`` [s], ``command`` [rad] (motor side), ``T_a``,
@@ -126,6 +129,13 @@ PAIR_EFFECTS: dict[str, PairEffect] = {e.id: e for e in (
                "allows", "node compliance lam (1 + toe e^{-T / toe_tension})",
                (Param("toe", "-", 0.0, 200.0, (4.0,), 0.5), Param("toe_tension", "N", 0.1, 10.0, (1.0,), 0.1)),
                ("capstan",)),
+    # no structure: a candidate of the shared models (estimator.offline.pair_shared) only; per configuration it
+    # priced out at every bend (docs/findings.md, Finding 3, session 4), so the diagnosis does not offer it
+    PairEffect("bending_friction", "E7, E13", "the tendons rub in the bending section, whose wrap angle is the "
+               "joint angle itself", "the joint stalls at large angles while the pulled tendon's tension keeps "
+               "rising; strongest where the angle range is largest (the straightest tube)",
+               "joint balance T_d,a e^{-+mu_b |theta|} - T_d,b e^{+-mu_b |theta|} = k theta + tau_0",
+               (Param("mu_b", "1/rad", 0.0, 5.0, (0.1,), 0.02),), ()),
 )}
 
 
@@ -182,7 +192,7 @@ def predict_model(structure: str, effects: tuple[str, ...], values: dict[str, fl
                                  (v["K_a"], v["K_b"]), v["k"], lam_s=v.get("lam_s", 0.0), tau_c=v.get("tau_c", 0.0),
                                  shape=v.get("shape", 0.0), offset=a, k2=v.get("k2", 0.0),
                                  theta_c=v.get("theta_c", 0.0), toe=v.get("toe", 0.0),
-                                 toe_tension=v.get("toe_tension", 1.0), n_nodes=n_nodes)
+                                 toe_tension=v.get("toe_tension", 1.0), mu_b=v.get("mu_b", 0.0), n_nodes=n_nodes)
         theta = th + v["theta0"]
     if "joint_backlash" in effects:
         theta = play(theta, v["b"], float(theta[0]))

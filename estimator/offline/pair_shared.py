@@ -31,7 +31,8 @@ Shared models are fitted the same way (training samples of every configuration t
 * other ``capstan+T`` variants, not in the choice by default (each went to its neutral value or lost on
   the training cycles, docs/findings.md, Finding 3): ``one K0`` (the same base friction for both
   tendons), ``mu per tendon``, ``pretension profile`` (E5), ``friction offset`` (E8), ``joint
-  friction`` (E11/E12).
+  friction`` (E11/E12), and from session 4 ``bending-section friction`` (the tendons' wrap in the bending
+  section is the joint angle, mu_b) and ``series compliance`` (E10, frictionless, ahead of the sheath).
 
 The structure is chosen by leave-one-configuration-out on the training cycles
 (:func:`estimator.offline.pair_general.choose_shared`). Leave-one-configuration-out for the report: the chosen
@@ -147,6 +148,14 @@ SHARED_MODELS = {m.name: m for m in (
     SharedModel("capstan+T, tendon toe", "capstan", ("tendon_toe",), True,
                 # one start: a second one (toe 8, T_c 0.5 N) ended higher on the KAIST training cycles
                 ({"s": 2.6, "k": 5.0, "K0_a": 0.57, "K0_b": 0.2, "mu": 0.14, "toe": 2.0, "toe_tension": 1.0},),
+                tension_weight=TENSION_WEIGHT, stiffness_ratio=True, fixed=(("G", G_FIXED),)),
+    SharedModel("capstan+T, bending-section friction", "capstan", ("bending_friction",), True,
+                ({"s": 2.6, "k": 5.0, "K0_a": 0.57, "K0_b": 0.2, "mu": 0.14, "mu_b": 0.2},
+                 {"s": 2.6, "k": 5.0, "K0_a": 0.57, "K0_b": 0.2, "mu": 0.14, "mu_b": 0.8}),
+                tension_weight=TENSION_WEIGHT, stiffness_ratio=True, fixed=(("G", G_FIXED),)),
+    SharedModel("capstan+T, series compliance", "capstan", ("series_compliance",), True,
+                ({"s": 2.6, "k": 5.0, "K0_a": 0.57, "K0_b": 0.2, "mu": 0.14, "lam_s": 0.5},
+                 {"s": 2.6, "k": 5.0, "K0_a": 0.57, "K0_b": 0.2, "mu": 0.14, "lam_s": 2.0}),
                 tension_weight=TENSION_WEIGHT, stiffness_ratio=True, fixed=(("G", G_FIXED),)),
 )}
 #: Candidates of the shared structure, in the order of the forward choice by leave-one-configuration-out

@@ -78,6 +78,22 @@ def test_memoised_node_arrays_are_left_unchanged_by_a_run():
             assert all(np.array_equal(x, y) for x, y in zip(cached, fresh))
 
 
+def test_bending_section_friction_stalls_the_joint_at_large_angles_and_is_neutral_when_off():
+    c = command()
+    base = simulate_pair(c, (5.0, 4.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0)
+    tiny = simulate_pair(c, (5.0, 4.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0, mu_b=1e-12)
+    assert np.max(np.abs(tiny[0] - base[0])) < 1e-9 and np.max(np.abs(tiny[1] - base[1])) < 1e-8
+    rest, _ = simulate_pair(np.zeros(30), (5.0, 4.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0, mu_b=0.5)
+    assert np.all(rest == 0.0)                                              # the rest is still an equilibrium
+    th, T = simulate_pair(c, (5.0, 4.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0, mu_b=0.5)
+    assert np.ptp(th) < 0.9 * np.ptp(base[0]) and T[:, 0].max() > base[1][:, 0].max()   # smaller range, more tension
+    with pytest.raises(ValueError, match="not combined with toe, tau_c or k2"):
+        simulate_pair(c, (5.0, 4.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0, mu_b=0.5, tau_c=0.1)
+    assert "bending_friction" not in applicable("capstan", ())             # a shared candidate only
+    m = SHARED_MODELS["capstan+T, bending-section friction"]
+    assert [p.name for p in shared_params(m)] == ["s", "K0_a", "K0_b", "k", "mu_b", "mu"]
+
+
 def test_kernel_refuses_bad_parameters():
     c = command(10)
     with pytest.raises(ValueError, match="k must be > 0"):
