@@ -10,7 +10,9 @@ Finding 1 (seed pair model against the baselines): ``kaist_rmse.png``, ``kaist_l
 * ``kaist_pair_tensions.png``   measured proximal tensions beside the extended model's prediction
   (the capstan-joint model predicts them from the command; they are not fitted);
 * ``kaist_shared.png``          K against the bend angle (shared fit, per-configuration fits,
-  model-free band) and the held-out RMSE of every model per configuration.
+  model-free band) and the held-out RMSE of every model per configuration;
+* ``kaist_tension_angle.png``   model-free: the proximal tension difference against the distal angle,
+  per configuration (Finding 3, session 4: the friction band and the stall before each reversal).
 
 The recordings have no licence: only these plots and summary numbers are written.
 """
@@ -27,7 +29,7 @@ __all__ = ["write_kaist_figures", "write_kaist_report", "FIGURES"]
 
 _MODELS = ("seed pair model", "force path", "linear map", "linear map + play")
 FIGURES = ("kaist_rmse.png", "kaist_loops.png", "kaist_residuals.png", "kaist_pair_loops.png",
-           "kaist_pair_residuals.png", "kaist_pair_tensions.png", "kaist_shared.png")
+           "kaist_pair_residuals.png", "kaist_pair_tensions.png", "kaist_shared.png", "kaist_tension_angle.png")
 
 
 def _finding1_figures(recs, details, summary, d: Path, plt) -> list[Path]:
@@ -258,6 +260,26 @@ def _pair_figures(recs, details, summary, d: Path, plt) -> list[Path]:
     return paths
 
 
+def _tension_angle_figure(recs, d: Path, plt) -> list[Path]:
+    """kaist_tension_angle.png: T_a - T_b [N] against the distal angle [deg], every sample, one panel
+    per configuration (no model): a parallelogram whose vertical sides are the friction band held
+    after each reversal and whose branches end in a rise of the tension difference while the joint
+    stalls (docs/findings.md, Finding 3, session 4)."""
+    n = len(recs)
+    fig, axes = plt.subplots(1, n, figsize=(3.4 * n, 3.6), squeeze=False)
+    for ax, rec in zip(axes[0], recs):
+        ax.plot(np.degrees(rec.angle), rec.T_a - rec.T_b, "k", lw=0.9)
+        ax.set(title=f"N = {rec.config_deg} deg", xlabel="distal angle [deg]")
+        _style(ax)
+    axes[0][0].set_ylabel("T_a - T_b, proximal [N]")
+    fig.suptitle("Model-free: proximal tension difference against the distal angle (every sample)")
+    fig.tight_layout()
+    path = d / "kaist_tension_angle.png"
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return [path]
+
+
 def write_kaist_figures(recs, details: list[dict], summary: dict, directory: str | Path,
                         option: str = "--figures") -> list[Path]:
     """Write every ``kaist_*.png`` of :data:`FIGURES` into ``directory`` (created).
@@ -278,7 +300,8 @@ def write_kaist_figures(recs, details: list[dict], summary: dict, directory: str
     """
     plt = pyplot()
     d = output_dir(directory, option)
-    return _finding1_figures(recs, details, summary, d, plt) + _pair_figures(recs, details, summary, d, plt)
+    return (_finding1_figures(recs, details, summary, d, plt) + _pair_figures(recs, details, summary, d, plt)
+            + _tension_angle_figure(recs, d, plt))
 
 
 def write_kaist_report(recs, details: list[dict], summary: dict, directory: str | Path) -> Path:
