@@ -57,6 +57,7 @@ class ThreadedCsvRecorder(CsvRecorder):
         self._queue: collections.deque = collections.deque()
         self._stop = threading.Event()
         self._io = threading.Lock()
+        self._drainer: int | None = None    # the thread inside _drain (holding _io), if any
         lower_switch_interval()             # the woken loop gets the interpreter back within 0.5 ms
         self._thread = threading.Thread(target=self._run, name=f"csv-writer:{self.path.name}", daemon=True)
         self._thread.start()
@@ -74,20 +75,25 @@ class ThreadedCsvRecorder(CsvRecorder):
         self._queue.extend(list(rows))
 
     def _drain(self) -> None:
-        rows = []
-        q = self._queue
-        while q:
-            rows.append(q.popleft())
-        if not rows:
-            return
-        per_row = VALUE_COST * len(self.columns)
-        chunk = max(1, int(CHUNK_COST / per_row))
+        """Write the queued rows in order (one thread at a time: rows are taken under the lock)."""
         with self._io:
-            for i in range(0, len(rows), chunk):
-                part = rows[i:i + chunk]
-                IDLE.wait(per_row * len(part))     # format while the control loop sleeps (teleop/realtime.py)
-                self._write_part(part)
-            CsvRecorder.flush(self)
+            self._drainer = threading.get_ident()
+            try:
+                rows = []
+                q = self._queue
+                while q:
+                    rows.append(q.popleft())
+                if not rows:
+                    return
+                per_row = VALUE_COST * len(self.columns)
+                chunk = max(1, int(CHUNK_COST / per_row))
+                for i in range(0, len(rows), chunk):
+                    part = rows[i:i + chunk]
+                    IDLE.wait(per_row * len(part))     # format while the control loop sleeps (teleop/realtime.py)
+                    self._write_part(part)
+                CsvRecorder.flush(self)
+            finally:
+                self._drainer = None
 
     def _write_part(self, rows: list) -> None:
         try:
@@ -107,8 +113,14 @@ class ThreadedCsvRecorder(CsvRecorder):
 
     def flush(self) -> None:
         """Write every queued row now and hand it to the OS."""
-        if self._fh is not None:
-            self._drain()
+        if self._fh is None:
+            return
+        if self._drainer == threading.get_ident():
+            # the base recorder's own flush (every flush_every rows) in the middle of a drain: the rows
+            # written so far go to the OS; draining again here would wait for the lock this thread holds
+            CsvRecorder.flush(self)
+            return
+        self._drain()
 
     def close(self) -> None:
         """Stop the thread, write every queued row, close; safe to call more than once."""

@@ -68,3 +68,36 @@ def test_wide_rows_are_formatted_in_chunks_that_each_fit_the_loops_idle_time(tmp
     assert sum(sizes) == 20 and max(sizes) <= per_chunk < 20 and len(sizes) >= 20 // per_chunk
     data = read_measured_csv(path)
     assert np.all(np.diff(data.time) > 0) and data.time.size == 20 and data.T_in == pytest.approx(np.arange(20.0))
+
+
+def test_a_batch_longer_than_flush_every_with_rows_arriving_meanwhile_does_not_deadlock(tmp_path, monkeypatch):
+    # the 3-joint master's rare shutdown stall: a writer thread late by more than flush_every rows (a
+    # loaded machine) made the base recorder flush in the middle of the batch; that flush drained again,
+    # found the rows the loop had queued meanwhile and waited for the lock its own thread held: the
+    # writer hung, the CSV stopped, and close() waited for the lock forever
+    import threading
+
+    from teleop import csv_writer
+    path = tmp_path / "late.csv"
+    rec = ThreadedCsvRecorder(path, ("time", "x_in", "T_in"), flush_every=5, flush_interval=60.0)
+    monkeypatch.setattr(csv_writer, "CHUNK_COST", 1e-9)              # one row per chunk
+    k = [0]
+    running = [True]
+
+    def loop_queues_a_row(need, timeout=0.05):                       # the loop runs between the chunks
+        if running[0] and k[0] < 30:
+            k[0] += 1
+            rec.write((1.0 + k[0] * 1e-3, 0.0, float(k[0])))
+        return True
+
+    monkeypatch.setattr(csv_writer.IDLE, "wait", loop_queues_a_row)
+    for i in range(12):
+        rec.write((i * 1e-3, 0.0, -1.0))
+    drainer = threading.Thread(target=rec.flush, daemon=True)
+    drainer.start()
+    drainer.join(10.0)
+    assert not drainer.is_alive(), "the drain deadlocked on its own lock"
+    running[0] = False                                               # the loop has ended
+    rec.close()
+    data = read_measured_csv(path)
+    assert k[0] > 5 and data.time.size == 12 + k[0] and np.all(np.diff(data.time) > 0)   # every row, in order
