@@ -45,6 +45,8 @@ from estimator.online.spindle import (
     spindle_rate,
 )
 from teleop.app.mrd import ATTRIBUTION, MrdRun
+from teleop.app.mrd_centre import centre_folder, centre_one_run, mid_centre_run, score_centre
+from teleop.app.mrd_text import format_mrd, write_mrd_report
 from teleop.errors import ConfigError, DataError
 
 __all__ = ["analyze_mrd", "format_mrd", "write_mrd_report", "parse_calibration", "band_measurements", "SCORE_FROM_S"]
@@ -85,7 +87,8 @@ class _Progress:
 def parse_calibration(spec: str | None, runs: list[MrdRun]) -> tuple[str, Any]:
     """("run", names), ("kinematic", names) or ("segment", seconds) from ``--calibration``: ``RUN`` or
     ``RUN,RUN,...`` (calibrate on those runs together, score the others), ``kinematic:RUN[,RUN...]``
-    (the same with rho = 1 / n_k from the calibration runs' encoders), or ``segment:SECONDS``; default
+    (the same with rho = 1 / n_k from the calibration runs' encoders), ``mid`` (the run whose spindle band
+    centre is nearest the middle of the folder's: a rule fixed before scoring), or ``segment:SECONDS``; default
     the slowest, lightest run. ``names`` is the comma-separated string.
 
     Raises ConfigError for an unknown run name, every run named, or a segment outside
@@ -105,6 +108,8 @@ def parse_calibration(spec: str | None, runs: list[MrdRun]) -> tuple[str, Any]:
             raise ConfigError(f"--calibration {spec}: SECONDS must be in [1, {0.5 * shortest:.1f}]")
         return "segment", s
     mode = "run"
+    if spec in ("mid", "kinematic:mid"):        # the run of the middle band centre (spindle torque only)
+        spec = spec.replace("mid", mid_centre_run([_rundata(r) for r in runs]))
     if spec.startswith("kinematic:"):
         mode, spec = "kinematic", spec.split(":", 1)[1]
     asked = [n.strip() for n in spec.split(",") if n.strip()]
@@ -200,7 +205,7 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
     mode, cal = parse_calibration(calibration, runs)
     fs = float(max(r.tau_d.max() for r in runs) - min(r.tau_d.min() for r in runs))
     n_cal = len(runs) if mode == "segment" else 1
-    tick = _Progress(progress, n_cal * 14 + len(runs) + 14 + (len(runs) if loro else 0))
+    tick = _Progress(progress, n_cal * 14 + len(runs) + 15 + (2 * len(runs) if loro else 0))
     out: dict[str, Any] = {"mode": "mrd", "full_scale_Nm": fs, "attribution": ATTRIBUTION, "not_from_proximal": NOT_FROM_PROXIMAL,
            "scored_from": "the first reversal of the spindle after 0.5 s (the stroke before it initialises the "
                           "estimator, as the paper's calibration pull does)", "runs": {},
@@ -214,8 +219,12 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
         cal_names = str(cal).split(",")
         cal_runs = [_rundata(r) for r in runs if r.name in cal_names]
         fits, base, sel, centre, ref = _calibrate(cal_runs, tick, kinematic=mode == "kinematic")
+        cmap, out["centre_calibration"] = centre_one_run(cal_runs, fs)
         out["calibration"] = {"mode": mode, "run": cal, "runs": cal_names, **cal_inputs,
                               "scored": "every other run, from its spindle signals only"}
+        if calibration and calibration.endswith("mid"):
+            out["calibration"]["chosen_by"] = ("the run whose band centre (spindle torque only) is nearest the middle "
+                                               "of the folder's band centres, a rule fixed before any score")
         if mode == "kinematic":
             n_k = kinematic_ratio(cal_runs)
             out["calibration"]["fixed"] = {"rho": {
@@ -252,6 +261,8 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
             bl[n] = _score(bt_, ba_, r, k0, fs)
         out["runs"][r.name] = {"frequency_hz": r.frequency_hz, "load_level": r.load_level, "model": chosen,
                                **models[chosen], "models": models, "baselines": bl}
+        if mode != "segment":
+            out["runs"][r.name]["centre"] = score_centre(cmap, _rundata(r), k0, fs)
         details["k0"][r.name] = k0
         tick(f"predict {r.name}")
     scored = list(out["runs"].values())
@@ -261,6 +272,11 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
                       "baselines": {n: _agg([s["baselines"][n] for s in scored]) for n in scored[0]["baselines"]},
                       "better_than_linear_every_run": bool(all(
                           s["torque_rmse_fs"] < s["baselines"]["linear"]["torque_rmse_fs"] for s in scored))}
+    if mode != "segment":
+        out["summary"]["centre"] = {**_agg([{**s["centre"], "angle_rmse_deg": math.nan} for s in scored]),
+                                    "better_than_linear_every_run": bool(all(s["centre"]["torque_rmse_fs"] < s[
+                                        "baselines"]["linear"]["torque_rmse_fs"] for s in scored))}
+        del out["summary"]["centre"]["median_angle_rmse_deg"]
     out["bands"] = {r.name: band_measurements(r) for r in runs}
     out["load_sweep"] = _load_sweep(runs)
     if folder:
@@ -303,6 +319,7 @@ def _shared(runs, out, details, fs, tick, loro: bool) -> None:
         details["k0"].setdefault(r.name, d.k0)
     sh["summary"] = _agg(list(sh["runs"].values()))
     out["shared"] = sh
+    out["centre_map"] = centre_folder(rd, fs, tick, loro)
     if not loro:
         return
     lo: dict[str, Any] = {"model": sh["model"], "note": "extensions chosen on the time split of all runs; parameters refitted "
@@ -313,46 +330,6 @@ def _shared(runs, out, details, fs, tick, loro: bool) -> None:
         details["loro_pred"][r.name] = (pt, pa)
     lo["summary"] = _agg(list(lo["runs"].values()))
     out["loro"] = lo
-
-
-def format_mrd(s: dict) -> str:
-    """The table printed by ``teleop analyze --mrd`` (RMSE and max |error| as fractions of full scale)."""
-    cal = s["calibration"]
-    head = (f"calibrated on the first {cal['seconds']:g} s of each run" if cal["mode"] == "segment"
-            else f"calibrated on run {cal['run']}")
-    if "fixed" in cal:
-        head += f" with rho = 1 / n_k = {cal['fixed']['rho']['value']:.3f} from its encoders"
-    found = s["found"].values()
-    freqs = ", ".join(f"{f:g}" for f in sorted({round(v["frequency_hz"], 2) for v in found}))
-    cmds = sorted({round(v["load_command_A"], 3) for v in found})
-    lines = [f"MRD da Vinci runs ({s['attribution']})",
-             f"found {len(s['found'])} runs: sine frequencies {freqs} Hz (from the spindle angle), "
-             f"{len(cmds)} load levels (front-end command {cmds[0]:g}-{cmds[-1]:g} A), "
-             f"{min(v['duration_s'] for v in found):.1f}-{max(v['duration_s'] for v in found):.1f} s each",
-             f"full scale {s['full_scale_Nm'] * 1e3:.1f} mN m; {head} (inputs spindle torque "
-             "+ encoder, targets jaw torque + encoder); scored from each run's first reversal",
-             f"{'run':>4}{'f [Hz]':>8}{'load':>5}{'RMSE':>7}{'max':>7}{'angle':>7}   constant   linear    phase"
-             f"{'shared':>8}{'LORO':>7}"]
-    for name, r in s["runs"].items():
-        bl = r["baselines"]
-        sh = s.get("shared", {}).get("runs", {}).get(name, {}).get("torque_rmse_fs", math.nan)
-        lo = s.get("loro", {}).get("runs", {}).get(name, {}).get("torque_rmse_fs", math.nan)
-        lines.append(f"{name:>4}{r['frequency_hz']:>8.3f}{r['load_level']:>5}{r['torque_rmse_fs']:>7.3f}"
-                     f"{r['torque_max_fs']:>7.3f}{r['angle_rmse_deg']:>7.2f}{bl['constant']['torque_rmse_fs']:>11.3f}"
-                     f"{bl['linear']['torque_rmse_fs']:>9.3f}{bl['phase']['torque_rmse_fs']:>9.3f}{sh:>8.3f}{lo:>7.3f}")
-    m = s["summary"]
-    lines.append(f"better than the linear baseline on every run: {m['better_than_linear_every_run']}")
-    rows = {**{f"model {n}": a for n, a in m["models"].items()}, **{f"baseline {n}": a for n, a in m["baselines"].items()}}
-    for key, label in (("shared", "one parameter set (in-sample)"), ("loro", "one parameter set, leave-one-run-out")):
-        if key in s:
-            rows[f"{label}: {s[key]['model']}"] = s[key]["summary"]
-    for n, a in rows.items():
-        lines.append(f"  {n:<58} RMSE median {a['median_torque_rmse_fs']:.3f} worst {a['max_torque_rmse_fs']:.3f}, "
-                     f"max |error| {a['max_torque_max_fs']:.3f} FS; angle median {a['median_angle_rmse_deg']:.2f} deg")
-    lines.append("not identifiable from the spindle side alone: " + ", ".join(s["not_from_proximal"]))
-    lines.append("extensions: " + "; ".join(f"{k} ({v[0]})" for k, v in EXTENSIONS.items()))
-    lines.append(f"analysed in {s['elapsed_s']:.1f} s")
-    return "\n".join(lines)
 
 
 def main_mrd(args) -> int:
@@ -381,17 +358,3 @@ def main_mrd(args) -> int:
                                               default=lambda o: o.item() if hasattr(o, "item") else str(o)) + "\n")
         print(f"wrote {args.json}")
     return 0
-
-
-def write_mrd_report(runs: list[MrdRun], summary: dict, details: dict, directory: str | Path) -> Path:
-    """``report.md`` with the printed table and the figures in ``directory``; returns its path."""
-    from teleop.app.mrd_figures import write_mrd_figures
-    from teleop.figure_files import output_dir
-    d = output_dir(directory, "--report")
-    figs = write_mrd_figures(runs, summary, details, d)
-    text = ["# Jaw torque of a da Vinci tool from its spindle (teleop analyze --mrd)", "",
-            f"Data: {summary['attribution']}.", "", "```", format_mrd(summary), "```", ""]
-    text += [f"![{p.stem}]({p.name})" for p in figs]
-    out = d / "report.md"
-    out.write_text("\n".join(text) + "\n")
-    return out

@@ -1,0 +1,75 @@
+"""The centre map (estimator.online.spindle_centre, estimator.offline.spindle_centre_fit, teleop.app.mrd_centre):
+synthetic runs whose band edges follow the capstan law c +- F0 + r e^(+-K) tau_d around a jaw torque that
+depends on the angle, the direction and the load."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from estimator.offline.spindle_centre_fit import fit_centre_map, run_centre, scale_profile
+from estimator.offline.spindle_shared import RunData
+from estimator.online.spindle import first_reversal
+from estimator.online.spindle_centre import predict_centre_map, stroke_centre
+from teleop.app.mrd_centre import centre_one_run, mid_centre_run
+
+R_TRUE, K, F0, C0, SLOPE = 1.01, 0.25, 0.05, -0.014, -0.017
+GAIN = 1.0 / (R_TRUE * math.cosh(K))          # jaw torque per band-centre torque
+
+
+def synth(name: str, load: float, freq: float = 0.3, seed: int = 0) -> RunData:
+    t = np.arange(0.0, 12.0, 0.001)
+    th = 0.5 * (1 - np.cos(2 * math.pi * freq * t))
+    s = np.sign(np.sin(2 * math.pi * freq * t))                    # +1 while the angle rises
+    td = load - 0.01 * th ** 2 + 0.002 * s                          # jaw: load, angle, direction
+    tp = C0 + SLOPE * th - s * F0 + R_TRUE * np.exp(-s * K) * td    # rising angle: the low (back-driven) edge
+    tp = tp + 5e-4 * np.random.default_rng(seed).standard_normal(t.size)
+    return RunData(name, tp, th, td, th, first_reversal(th, 0.001), 0.001)
+
+
+def _rms(p, r: RunData) -> float:
+    e = predict_centre_map(p, r.tau_p, r.theta_p, r.dt)[r.k0:] - r.tau_d[r.k0:]
+    return float(np.sqrt(np.mean(e ** 2)))
+
+
+def test_stroke_centre_is_causal_and_reads_the_band_middle():
+    r = synth("a", 0.03)
+    win = (0.1, 0.9)
+    c = stroke_centre(r.tau_p, r.theta_p, r.dt, win, (F0, 0.0), 0.0, (SLOPE, SLOPE), 0.5)
+    truth = C0 + SLOPE * 0.5 + R_TRUE * math.cosh(K) * 0.03 - 0.01 * np.mean(r.theta_p[r.k0:] ** 2) * R_TRUE * math.cosh(K)
+    assert abs(c[-1] - truth) < 0.004                                # both edges seen: the band's middle
+    cut = 7000
+    tail = r.tau_p.copy()
+    tail[cut:] += 1.0                                               # a different future
+    c2 = stroke_centre(tail, r.theta_p, r.dt, win, (F0, 0.0), 0.0, (SLOPE, SLOPE), 0.5)
+    assert np.array_equal(c[:cut - 30], c2[:cut - 30])              # causal up to the rate's 25 ms window
+    with pytest.raises(ValueError):
+        stroke_centre(r.tau_p, r.theta_p[:-1], r.dt, win, (F0, 0.0), 0.0)
+
+
+def test_load_gain_fitted_across_loads_predicts_a_new_load():
+    runs = [synth(f"{i}", load, seed=i) for i, load in enumerate((0.01, 0.025, 0.045))]
+    p, _ = fit_centre_map(runs)
+    assert p.coef[1, 0] == pytest.approx(GAIN, rel=0.08)
+    new = synth("new", 0.035, freq=0.2, seed=9)
+    assert _rms(p, new) < 0.0015                                    # 3 % of the 0.05 N m load range
+    assert run_centre(new, p.window) > run_centre(runs[0], p.window)
+
+
+def test_one_load_cannot_tell_the_gain_but_the_other_loads_can():
+    """On one run the fit cost is flat in the load gain, while the error at another load is not."""
+    cal, other = synth("cal", 0.025), synth("other", 0.045, seed=3)
+    prof = scale_profile([cal], np.array([0.7, GAIN, 1.3]))
+    costs = [rms for _, _, rms in prof]
+    errs = [_rms(p, other) for _, p, _ in prof]
+    assert max(costs) - min(costs) < 0.2 * min(errs[0], errs[2])
+    assert errs[1] < 0.5 * min(errs[0], errs[2])
+    p, rec = centre_one_run([cal], 0.05)
+    assert rec["load_gain"]["from"].startswith("1 / n_k") and len(rec["profile"]) > 3
+    assert p.coef[1, 0] == pytest.approx(1.0 / rec["load_gain"]["n_k"])
+
+
+def test_mid_centre_run_picks_the_middle_load_from_spindle_torque():
+    runs = [synth(f"{i}", load, seed=i) for i, load in enumerate((0.01, 0.045, 0.025))]
+    assert mid_centre_run(runs) == "2"
