@@ -85,6 +85,7 @@ def run_joints(n: int, tmp: Path) -> np.ndarray:
     """The 3-joint instrument's SlaveNode with the writer threads: step times [ms]."""
     from slave.node import axis_kind, recording
     from slave.rigs import RIG_TYPES
+    from teleop.rerun_view import joint_views
     cfg = load_config(Path(__file__).resolve().parents[1] / "configs" / "instrument-3dof.yaml",
                       {"recording.rerun": "save"})
     warm_up(cfg)
@@ -101,7 +102,7 @@ def run_joints(n: int, tmp: Path) -> np.ndarray:
     name, columns, meta = recording(cfg, inst)
     times = np.empty(n)
     with ThreadedCsvRecorder(tmp / name, columns, meta, flush_every=500) as rec, \
-            RerunProcessLogger("bench", "joints", "save", tmp / "joints.rrd") as rr:
+            RerunProcessLogger("bench", "joints", "save", tmp / "joints.rrd", joints=joint_views(cfg)) as rr:
         node = SlaveNode(cfg, inst, links, recorder=rec, rerun=rr, calibration=cal)
         for k in range(n):
             clock.t += dt
