@@ -53,7 +53,8 @@ def main(argv: list[str] | None = None) -> None:
         s = json.loads(out.read_text())
     print(f"teleop analyze --mrd (one thread): wall {wall:.1f} s, CPU {cpu:.1f} s, goal {GOAL_S:.0f} s -> "
           f"{'ok' if cpu < GOAL_S else 'over'}; {len(s['bands'])} runs; left-out median torque RMSE "
-          f"{s['loro']['summary']['median_torque_rmse_fs']:.3f} FS")
+          f"{s['loro']['summary']['median_torque_rmse_fs']:.3f} FS (pair model), "
+          f"{s['centre_map']['loro']['summary']['median_torque_rmse_fs']:.3f} FS (centre map)")
     t0 = time.perf_counter()
     runs, _ = load_mrd_dir(args.dir)
     t1 = time.perf_counter()

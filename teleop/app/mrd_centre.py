@@ -21,7 +21,7 @@ from estimator.offline.spindle_centre_fit import fit_centre_map, run_centre, sca
 from estimator.offline.spindle_shared import RunData, kinematic_ratio
 from estimator.online.spindle_centre import CentreParams, predict_centre_map
 
-__all__ = ["centre_folder", "centre_one_run", "mid_centre_run", "score_centre", "PROFILE_GAINS", "LOAD_SPREAD_NM"]
+__all__ = ["centre_folder", "centre_one_run", "mid_centre_run", "score_centre", "profile_on_scored", "PROFILE_GAINS", "LOAD_SPREAD_NM"]
 
 #: Load gains [-] of the calibration's cost profile.
 PROFILE_GAINS = tuple(float(v) for v in np.round(np.arange(0.6, 1.41, 0.1), 2))
@@ -91,6 +91,16 @@ def centre_one_run(cal: list[RunData], fs: float) -> tuple[CentreParams, dict]:
     rec["fit_rms_fs"] = rms / fs
     rec["parameters"] = p.as_dict()
     return p, rec
+
+
+def profile_on_scored(cal: list[RunData], scored: list[tuple[RunData, int]], fs: float, rec: dict) -> None:
+    """Diagnostic beside the calibration's cost profile (``rec["profile"]``, from :func:`centre_one_run`):
+    the scored runs' median and worst torque RMSE [FS] at each load gain. It reads the scored runs' jaw
+    torque and is never used for a choice: it shows what the flat calibration cost leaves open."""
+    for row in rec.get("profile", []):
+        p, _ = fit_centre_map(cal, scale=row["load_gain"])
+        e = [_score(p, r, k0, fs)["torque_rmse_fs"] for r, k0 in scored]
+        row["scored_median_rmse_fs"], row["scored_worst_rmse_fs"] = float(np.median(e)), float(np.max(e))
 
 
 def score_centre(p: CentreParams, r: RunData, k0: int, fs: float) -> dict:

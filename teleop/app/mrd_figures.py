@@ -6,7 +6,10 @@
   baseline, the folder model left out, and its residual against the phase of the spindle stroke;
 * ``mrd_bands.png``     model-free: spindle friction band half-width and jaw-side friction against
   load and speed (E3, E8), the jaw angle gap between the directions (E12 / cable stretch), and the
-  band edges against the jaw torque across loads (capstan e^(+-K) + E8, beside the encoders' ratio).
+  band edges against the jaw torque across loads (capstan e^(+-K) + E8, beside the encoders' ratio);
+* ``mrd_centre.png``    the centre map (load read from the spindle's band centre): leave-one-run-out
+  RMSE over frequency x load, and the one-run calibration's cost profile over the load gain beside the
+  scored runs' error at each gain (the identifiability evidence).
 
 Data: MRD Lab data repository, University of Minnesota (ODbL 1.0 / DbCL 1.0); the attribution is
 written into every figure and the report.
@@ -23,7 +26,7 @@ from teleop.figure_files import output_dir, pyplot
 
 __all__ = ["write_mrd_figures", "FIGURES"]
 
-FIGURES = ("mrd_loops.png", "mrd_residuals.png", "mrd_bands.png")
+FIGURES = ("mrd_loops.png", "mrd_residuals.png", "mrd_bands.png", "mrd_centre.png")
 _CREDIT = "data: MRD Lab, University of Minnesota (ODbL/DbCL)"
 
 
@@ -183,4 +186,33 @@ def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, director
     axes[2].set_title("E12 / stretch: angle gap against load", fontsize=9)
     _edges(axes[3], runs, bands, summary.get("load_sweep", {}))
     paths.append(_save(plt, fig, f"Model-free loop measurements, middle of the stroke ({_CREDIT})", d / FIGURES[2]))
+    paths.append(_centre(plt, runs, summary, d / FIGURES[3]))
     return paths
+
+
+def _centre(plt, runs: list[MrdRun], summary: dict, path: Path) -> Path:
+    """``mrd_centre.png`` (module docstring); empty panels say what is missing."""
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
+    lo = {n: v["torque_rmse_fs"] for n, v in summary.get("centre_map", {}).get("loro", {}).get("runs", {}).items()}
+    if lo:
+        im = _heat(axes[0], *_grid(runs, lo), "centre map, leave-one-run-out: torque RMSE [FS]", max(lo.values()))
+        fig.colorbar(im, ax=axes[0], fraction=0.046)
+    else:
+        axes[0].set_title("no leave-one-run-out run", fontsize=9)
+    ax = axes[1]
+    cal = summary.get("centre_calibration", {})
+    prof = cal.get("profile", [])
+    if prof:
+        g = [p["load_gain"] for p in prof]
+        ax.plot(g, [p["fit_rms_fs"] for p in prof], "k.-", label=f"calibration run {summary['calibration']['run']}: fit cost")
+        if "scored_median_rmse_fs" in prof[0]:
+            ax.plot(g, [p["scored_median_rmse_fs"] for p in prof], "o-", label="other runs: median RMSE")
+            ax.plot(g, [p["scored_worst_rmse_fs"] for p in prof], "s--", label="other runs: worst RMSE")
+        ax.axhline(0.03, color="0.5", lw=0.6, ls=":")
+        ax.axvline(cal["load_gain"]["value"], color="r", lw=0.8, label="1 / n_k (encoders)")
+        ax.set_xlabel("load gain: jaw torque per spindle band-centre torque [-]")
+        ax.set_ylabel("torque RMSE [FS]")
+        ax.legend(fontsize=7)
+    ax.set_title("one run: the gain is not in its own cost", fontsize=9)
+    return _save(plt, fig, f"Load level read from the spindle band centre ({_CREDIT})", path)
+

@@ -45,7 +45,7 @@ from estimator.online.spindle import (
     spindle_rate,
 )
 from teleop.app.mrd import ATTRIBUTION, MrdRun
-from teleop.app.mrd_centre import centre_folder, centre_one_run, mid_centre_run, score_centre
+from teleop.app.mrd_centre import centre_folder, centre_one_run, mid_centre_run, profile_on_scored, score_centre
 from teleop.app.mrd_text import format_mrd, write_mrd_report
 from teleop.errors import ConfigError, DataError
 
@@ -277,6 +277,7 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
                                     "better_than_linear_every_run": bool(all(s["centre"]["torque_rmse_fs"] < s[
                                         "baselines"]["linear"]["torque_rmse_fs"] for s in scored))}
         del out["summary"]["centre"]["median_angle_rmse_deg"]
+        profile_on_scored(cal_runs, [(_rundata(r), k0) for r, *_, k0 in plan], fs, out["centre_calibration"])
     out["bands"] = {r.name: band_measurements(r) for r in runs}
     out["load_sweep"] = _load_sweep(runs)
     if folder:
