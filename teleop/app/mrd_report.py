@@ -15,6 +15,10 @@ Protocol (docs/findings.md, Finding 4):
   over the folder), angle RMSE [deg], from ``SCORE_FROM_S`` on (the load motor ramps in first).
 * across the folder: model-free band measurements per run (E3 frequency, E8 load, distal-side
   friction, E12 backlash), one shared parameter set fitted on all runs and scored leave-one-run-out.
+* beside the pair model, the centre map (:mod:`teleop.app.mrd_centre`): the load level read from the
+  scored run's own spindle band centre; on the calibration (one run: gain 1 / n_k and its cost profile)
+  and over the folder (in-sample and leave-one-run-out). ``--calibration mid`` picks the run whose band
+  centre (spindle torque only) is nearest the middle of the folder's.
 """
 from __future__ import annotations
 

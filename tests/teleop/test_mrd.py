@@ -107,6 +107,9 @@ def test_analysis_keys_calibration_and_what_was_fitted_on(tmp_path):
     assert parse_calibration(None, runs) == ("run", "00")           # slowest, lightest
     assert parse_calibration("segment:2", runs) == ("segment", 2.0)
     assert parse_calibration("01,00,01", runs) == ("run", "01,00")
+    mid = parse_calibration("mid", runs)                            # band centre nearest the middle (spindle only)
+    assert mid[0] == "run" and mid[1] in {"00", "01", "10"}
+    assert parse_calibration("kinematic:mid", runs) == ("kinematic", mid[1])
     for bad in ("99", "segment:x", "segment:0.2", "00,01,10", "00,99"):
         with pytest.raises(ConfigError):
             parse_calibration(bad, runs)
@@ -118,6 +121,8 @@ def test_analysis_keys_calibration_and_what_was_fitted_on(tmp_path):
         for b in r["baselines"].values():
             assert {"torque_rmse_fs", "torque_max_fs", "angle_rmse_deg"} <= set(b)
     assert s["calibration"]["inputs"] == ["spindle torque", "spindle encoder"]
+    assert s["centre_calibration"]["targets"] == ["jaw torque"] and "profile" in s["centre_calibration"]
+    assert set(s["centre_map"]["loro"]["runs"]) == {"00", "01", "10"} and "centre" in s["summary"]
     assert "rho" in s["not_from_proximal"] and "ODbL" in s["attribution"]
     assert set(s["loro"]["runs"]) == {"00", "01", "10"}
     assert s["loro"]["summary"]["median_torque_rmse_fs"] < 0.1
