@@ -65,9 +65,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mrd", nargs="?", const="", default=None, metavar="DIR",
                         help="jaw torque and angle of a da Vinci tool from its spindle: every *.TXT run of an MRD "
                              "folder (default ../shared/data/mrd-davinci; teleop.app.mrd_report)")
-    parser.add_argument("--calibration", metavar="RUN[,RUN]|segment:SECONDS",
-                        help="MRD mode: calibrate on one run (default: the slowest, lightest), on several runs "
-                             "together, or on the first SECONDS of every run")
+    parser.add_argument("--calibration", metavar="RUN[,RUN]|mid|kinematic:RUN|segment:SECONDS",
+                        help="MRD mode: calibrate on one run (default: the slowest, lightest; mid: the run whose "
+                             "spindle band centre is nearest the folder's middle), on several runs together, "
+                             "or on the first SECONDS of every run")
     parser.add_argument("--json", metavar="OUT", help="write the result (summary numbers) as JSON to OUT")
     parser.add_argument("--report", metavar="DIR", help="write a Markdown report with PNG figures to DIR")
     parser.add_argument("--figures", metavar="DIR", help="KAIST mode: write the kaist_*.png plots to DIR")
