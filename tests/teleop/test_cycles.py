@@ -94,7 +94,9 @@ def test_machine_steal_reads_the_steal_column_and_the_demo_prints_it(tmp_path):
     assert machine_line({"master": {"pacer": {}}}) is None
 
 
-def test_a_real_clock_run_reports_the_machine_beside_the_cycles():
+def test_a_real_clock_run_reports_the_machine_beside_the_cycles(monkeypatch):
+    import gc
+    monkeypatch.setattr(gc, "freeze", lambda: None)                  # the test process keeps its collector
     from teleop.clock import MonotonicClock
     from teleop.messages import Side
     from teleop.node import NodeBase
