@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from estimator.kernels import RIGID_STOP, distal_gains, load_torque, settle_joint, step_joint
 from slave.drive import Drive
@@ -109,13 +110,18 @@ class SimulatedInstrument:
         self.tendons = [(TendonPhysics(j.tendons.a, s.tendons.a.mu, n), TendonPhysics(j.tendons.b, s.tendons.b.mu, n))
                         for j, s in zip(joints, sims)]
         nj = len(joints)
-        self._T = [[np.full(n + 1, float(j.pretension)), np.full(n + 1, float(j.pretension))] for j in joints]
+        # every tendon's node tensions [N], (n_joints, 2 tendons, n + 1 nodes), and its constant arrays
+        self._T = np.array([[np.full(n + 1, float(j.pretension))] * 2 for j in joints])
+        self._gains = np.array([[(p.lo, p.hi, p.dlo, p.dhi, p.w) for p in pair] for pair in self.tendons])
+        self._c = np.array([[(p.c_pull, p.c_rel) for p in pair] for pair in self.tendons])
         self._theta = np.zeros(nj)
         self._x = np.array([[float(p.w.sum() * j.pretension) for p in pair] for j, pair in zip(joints, self.tendons)])
         self._tissue = [bool(s.load.tissue) for s in sims]
         self._slope = np.array([s.stiffness + s.load.tissue_stiffness
                                 + j.pulley_radius ** 2 * (1.0 / pa.M_e + 1.0 / pb.M_e)
                                 for j, s, (pa, pb) in zip(joints, sims, self.tendons)])
+        self._r = np.array([float(j.pulley_radius) for j in joints])
+        self._joint_prm = self._joint_params()
         self.drive = Drive(rig, (nj, 2))        # motor loops, encoders, load cells (shared by every simulated rig)
         self.encoder_resolution = self.drive.encoder_resolution
         self._t = 0.0
@@ -179,17 +185,7 @@ class SimulatedInstrument:
             raise RigInputError(f"dt must be a finite time step > 0 s, got {dt!r}")
         # motors: exact first-order step toward the command, speed-limited
         self._x += self.drive.move(self._x, cmd, h)
-        sbx, sbF, sbs = RIGID_STOP
-        for i, (j, s) in enumerate(zip(self.joints, self.sims)):
-            pa, pb = self.tendons[i]
-            Ta, Tb = self._T[i]
-            kt = s.load.tissue_stiffness if self._tissue[i] else 0.0
-            self._theta[i] = step_joint(
-                Ta, pa.lo, pa.hi, pa.dlo, pa.dhi, pa.w, pa.c_pull, pa.c_rel,
-                Tb, pb.lo, pb.hi, pb.dlo, pb.dhi, pb.w, pb.c_pull, pb.c_rel,
-                self._x[i, 0], self._x[i, 1], j.pulley_radius, self._theta[i], s.stiffness, s.damping / h,
-                kt, s.load.tissue_contact, j.limits[0], j.limits[1], s.limit_stiffness, s.load.torque,
-                self._slope[i] + s.damping / h, sbx, sbF, sbs)
+        _step_joints(self._T, self._gains, self._c, self._x, self._theta, self._joint_prm, h, *RIGID_STOP)
         self._t += h
         self._state = self._read(cmd)
         return self._state
@@ -211,6 +207,7 @@ class SimulatedInstrument:
         if not isinstance(tissue, (bool, np.bool_)):
             raise RigInputError(f"tissue must be True or False, got {tissue!r}")
         self._tissue = [bool(tissue)] * self.n_joints
+        self._joint_prm = self._joint_params()
         for i, (j, s) in enumerate(zip(self.joints, self.sims)):
             pa, pb = self.tendons[i]
             Ta, Tb = self._T[i]
@@ -225,26 +222,21 @@ class SimulatedInstrument:
         """Nothing to release in simulation; idempotent."""
 
     # ---- internals ----------------------------------------------------------------------------------
+    def _joint_params(self) -> np.ndarray:
+        """Each joint's constants for :func:`_step_joints`, shape (n_joints, 10): r, stiffness, damping,
+        tissue stiffness (0 without contact), tissue contact angle, limits lo/hi, limit stiffness, load
+        torque, the torque balance's slope without damping."""
+        return np.array([(j.pulley_radius, s.stiffness, s.damping, s.load.tissue_stiffness if tissue else 0.0,
+                          s.load.tissue_contact, j.limits[0], j.limits[1], s.limit_stiffness, s.load.torque, slope)
+                         for j, s, tissue, slope in zip(self.joints, self.sims, self._tissue, self._slope)],
+                        dtype=np.float64)
+
     def _read(self, cmd: np.ndarray) -> RigState:
-        nj = self.n_joints
-        T_in = np.empty((nj, 2))
-        T_out = np.empty((nj, 2))
-        elong = np.empty((nj, 2))
-        profiles = []
-        for i in range(nj):
-            for k in range(2):
-                T = self._T[i][k]
-                T_in[i, k] = T[0]
-                T_out[i, k] = T[-1]
-                elong[i, k] = float(self.tendons[i][k].w @ T)
-                snap = T.copy()
-                snap.flags.writeable = False
-                profiles.append(snap)
-        r = np.array([j.pulley_radius for j in self.joints])
-        x_out = np.column_stack((r * self._theta, -r * self._theta))
-        truth = InstrumentTruth(theta=self._theta.copy(), torque=r * (T_out[:, 0] - T_out[:, 1]), T_in=T_in,
-                                T_out=T_out, x_in=self._x.copy(), x_out=x_out, elongation=elong,
-                                profiles=tuple(profiles))
+        snap = self._T.copy()
+        snap.flags.writeable = False
+        T_in, T_out, elong, x_out, torque = _truth(snap, self._gains, self._r, self._theta)
+        truth = InstrumentTruth(theta=self._theta.copy(), torque=torque, T_in=T_in, T_out=T_out, x_in=self._x.copy(),
+                                x_out=x_out, elongation=elong, profiles=tuple(snap.reshape(-1, snap.shape[2])))
         T_meas = T_in + self.drive.load_cell_noise()
         return RigState(t=self._t, x_in=self.drive.encoder(self._x), T_in=T_meas, x_in_cmd=cmd, truth=truth)
 
@@ -254,6 +246,38 @@ class SimulatedInstrument:
         kt = s.load.tissue_stiffness if self._tissue[i] else 0.0
         return float(load_torque(theta, s.stiffness, kt, s.load.tissue_contact, j.limits[0], j.limits[1],
                                  s.limit_stiffness, s.load.torque))
+
+
+@njit(cache=True, nogil=True)
+def _step_joints(T, gains, c, x, theta, prm, h, sbx, sbF, sbs):  # pragma: no cover - compiled
+    """:func:`estimator.kernels.step_joint` for every joint: T (n_joints, 2, n + 1) in place, gains
+    (n_joints, 2, 5, n + 1) lo, hi, dlo, dhi, w; c (n_joints, 2, 2) c_pull, c_rel; x motor positions
+    (n_joints, 2) [m]; theta (n_joints,) [rad] in place; prm (n_joints, 10) of :meth:`_joint_params`."""
+    for i in range(T.shape[0]):
+        a, b, p = gains[i, 0], gains[i, 1], prm[i]
+        damp_dt = p[2] / h
+        theta[i] = step_joint(T[i, 0], a[0], a[1], a[2], a[3], a[4], c[i, 0, 0], c[i, 0, 1],
+                              T[i, 1], b[0], b[1], b[2], b[3], b[4], c[i, 1, 0], c[i, 1, 1],
+                              x[i, 0], x[i, 1], p[0], theta[i], p[1], damp_dt, p[3], p[4], p[5], p[6], p[7], p[8],
+                              p[9] + damp_dt, sbx, sbF, sbs)
+
+
+@njit(cache=True, nogil=True)
+def _truth(T, gains, r, theta):  # pragma: no cover - compiled
+    """T_in, T_out, elongation w . T (numpy's dot product), x_out = (r theta, -r theta), each (n_joints, 2),
+    and the torque r (T_out,a - T_out,b), (n_joints,), of profiles T (n_joints, 2, n + 1)."""
+    nj, n = T.shape[0], T.shape[2] - 1
+    T_in, T_out, elong, x_out = np.empty((nj, 2)), np.empty((nj, 2)), np.empty((nj, 2)), np.empty((nj, 2))
+    torque = np.empty(nj)
+    for i in range(nj):
+        for k in range(2):
+            T_in[i, k] = T[i, k, 0]
+            T_out[i, k] = T[i, k, n]
+            elong[i, k] = np.dot(gains[i, k, 4], T[i, k])
+        x_out[i, 0] = r[i] * theta[i]
+        x_out[i, 1] = -r[i] * theta[i]
+        torque[i] = r[i] * (T_out[i, 0] - T_out[i, 1])
+    return T_in, T_out, elong, x_out, torque
 
 
 def _validate(joints: tuple[JointConfig, ...], rig: SimulatedRigConfig) -> None:

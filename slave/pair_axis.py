@@ -24,6 +24,8 @@ import logging
 import math
 from typing import Any, Sequence
 
+import numpy as np
+
 from estimator.online.joint import JointEstimator
 from slave.axis import SlaveAxis
 from slave.calibration_file import from_results, sheath_models
@@ -165,15 +167,17 @@ class PairAxis(SlaveAxis):
         marker, cmd_seq, side_state, t_node, t_recv = common
         tr = state.truth if isinstance(state.truth, InstrumentTruth) else None
         row = [state.t, marker, cmd_seq, side_state, t_node, t_recv]
+        x_in, T_in, x_cmd = (np.asarray(v).tolist() for v in (state.x_in, state.T_in, state.x_in_cmd))
+        if tr is not None:      # plain floats: one conversion per array, none per value
+            torque, theta, T_out, elong = (v.tolist() for v in (tr.torque, tr.theta, tr.T_out, tr.elongation))
         for ax in axes:
             assert isinstance(ax, PairAxis) and ax.controller is not None
             i, s = ax.index, ax.sample
             row += [0.0 if ax.hold is None else ax.hold, int(ax.controller.mode), s.torque, s.angle]
-            row += [tr.torque[i], tr.theta[i]] if tr is not None else []
+            row += [torque[i], theta[i]] if tr is not None else []
             for k in range(2):
-                row += [state.x_in[i, k], state.T_in[i, k], state.x_in_cmd[i, k], s.T_out[k], s.elongation[k],
-                        int(s.phase[k])]
-                row += [tr.T_out[i, k], tr.elongation[i, k]] if tr is not None else []
+                row += [x_in[i][k], T_in[i][k], x_cmd[i][k], s.T_out[k], s.elongation[k], int(s.phase[k])]
+                row += [T_out[i][k], elong[i][k]] if tr is not None else []
         return row
 
     @classmethod
@@ -189,7 +193,9 @@ class PairAxis(SlaveAxis):
 
         SimulatedInstrument(cfg.instrument.joints[:1], cfg.rig.simulated).step([[1e-4, 1e-4]], 1e-3)
         m = SheathModel(K=0.5, compliance=1e-4)
-        JointEstimator(m, m, 0.004, n_nodes=4).step(1.0, 0.0, 0.5, 0.0, 0.0)
+        est = JointEstimator(m, m, 0.004, n_nodes=4)
+        est.step(1.0, 0.0, 0.5, 0.0, 0.0)
+        est.step(1.1, 0.0, 0.5, 0.0, 1e-3)      # the compiled step (every sample after the first)
 
     # ---- per axis ----------------------------------------------------------------------------------
     def out_of_range(self, target: float) -> str | None:
@@ -213,12 +219,10 @@ class PairAxis(SlaveAxis):
 
     def observe(self, state: RigState) -> tuple[AxisState, tuple[float, ...]]:
         assert self.estimator is not None
-        i = self.index
-        s = self.sample = self.estimator.step(state.T_in[i, 0], state.x_in[i, 0], state.T_in[i, 1],
-                                              state.x_in[i, 1], state.t)
-        tendons = tuple(TendonState(float(state.T_in[i, k]), float(state.x_in[i, k]), s.T_out[k], s.elongation[k],
-                                    s.phase[k]) for k in range(2))
-        return AxisState(s.torque, s.angle, tendons), ()
+        (Ta, Tb), (xa, xb) = state.T_in[self.index].tolist(), state.x_in[self.index].tolist()
+        s = self.sample = self.estimator.step(Ta, xa, Tb, xb, state.t)
+        return AxisState(s.torque, s.angle, (TendonState(Ta, xa, s.T_out[0], s.elongation[0], s.phase[0]),
+                                             TendonState(Tb, xb, s.T_out[1], s.elongation[1], s.phase[1]))), ()
 
     def log_rerun(self, rerun: Any, cycles: int, state: RigState, everything: bool = False) -> None:
         """Every ``recording.log_every`` cycles the joint's torque and angle, estimate and truth; every

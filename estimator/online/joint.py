@@ -56,18 +56,20 @@ Without these rules the antagonist's distal tension is unknown within its band, 
 pretension is a quarter of the full scale of the paper's protocol; with them the pretension is
 carried through (E5).
 
-The same maths over recorded arrays (compiled) is :func:`estimator.online.joint_batch.estimate_joint_batch`.
+The same maths over recorded arrays (compiled) is :func:`estimator.online.joint_batch.estimate_joint_batch`;
+the kernels (and every sample after the first in one compiled call) are in :mod:`estimator.online.joint_kernels`.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
-from estimator.distal_slip import distal_clip, distal_gains, distal_tension, elongation
+from estimator.distal_slip import distal_gains
 from estimator.online.distal import DistalEstimator
+from estimator.online.joint_kernels import couple, step_pair, weighted_angle
 from estimator.phase import Phase
 from estimator.sheath import SheathModel
 
@@ -80,9 +82,8 @@ DEFAULT_PLAY = 2e-5
 KAIST_PLAY = 0.005
 
 
-@dataclass(frozen=True)
-class JointSample:
-    """One estimate of a joint.
+class JointSample(NamedTuple):
+    """One estimate of a joint (a named tuple: cheap to build every cycle).
 
     torque [N m] (J2); angle [rad] (J3); T_out, elongation, x_out: per tendon (a, b) [N], [m], [m];
     angle_a, angle_b: the kinematic angle of each tendon (J1) [rad]; phase: per tendon (a, b).
@@ -107,107 +108,6 @@ class JointBatch:
     angle: np.ndarray
     T_out: np.ndarray
     elongation: np.ndarray
-
-
-@njit(cache=True, nogil=True)
-def _stretch(T, dlo, dhi, w, K, de):  # pragma: no cover - compiled
-    """Distal end of one tendon moved: elongation change ``de`` [m], proximal node held (J4)."""
-    e = elongation(T, w)
-    Td = distal_tension(T, dlo, dhi, w, e, e + de)
-    lo = T[0] * math.exp(-K)
-    hi = T[0] * math.exp(K)
-    distal_clip(T, dlo, dhi, min(max(Td, lo), hi))
-
-
-@njit(cache=True, nogil=True)
-def _hold(T, dlo, dhi, K, Td):  # pragma: no cover - compiled
-    """Set one tendon's distal tension to ``Td`` [N] within its sliding bounds (J5)."""
-    lo = T[0] * math.exp(-K)
-    hi = T[0] * math.exp(K)
-    distal_clip(T, dlo, dhi, min(max(Td, lo), hi))
-
-
-@njit(cache=True, nogil=True)
-def couple(Pa, dloa, dhia, wa, Ka, Pb, dlob, dhib, wb, Kb, Ta_prev, Tb_prev, ua, ub, r, hw,
-           state):  # pragma: no cover - compiled
-    """Pair coupling (J4)/(J5) after the proximal updates of one sample; profiles updated in place.
-
-    Pa, Pb : float64[n + 1] profiles [N]; dlo*, dhi*, w*: distal gains and weights; K*: friction
-    exponents. Ta_prev, Tb_prev: distal tensions before this sample's proximal updates [N];
-    ua, ub: kinematic angles (J1) after them [rad]; r [m]; hw: play half-width [rad].
-    state : float64[5] (driver 0/1, play output [rad], tau_lock [N m], elongation (J5) gave the
-    driven tendon [m], direction of the last play move), updated in place; driver -1 means not
-    started (the call only sets it).
-    """
-    Ta_in = Pa[0]
-    Tb_in = Pb[0]
-    d = int(state[0])
-    if d < 0:
-        d = 0 if Ta_in >= Tb_in else 1
-        state[0] = d
-        state[1] = ua if d == 0 else ub
-        state[2] = r * (Pa[Pa.shape[0] - 1] - Pb[Pb.shape[0] - 1])
-        state[3] = 0.0
-        state[4] = 0.0
-        return
-    # driver: the tendon with the higher proximal tension, with hysteresis
-    if d == 0 and Tb_in > 1.1 * Ta_in + 0.2:
-        d = 1
-        state[1] = ub
-        state[3] = 0.0
-        state[4] = 0.0
-    elif d == 1 and Ta_in > 1.1 * Tb_in + 0.2:
-        d = 0
-        state[1] = ua
-        state[3] = 0.0
-        state[4] = 0.0
-    state[0] = d
-    u = ua if d == 0 else ub
-    y = state[1]
-    y_new = min(max(y, u - hw), u + hw)
-    delta = y_new - y
-    state[1] = y_new
-    na = Pa.shape[0] - 1
-    nb = Pb.shape[0] - 1
-    if delta != 0.0:
-        # (J4): the joint turned by delta: e_q -= s_q r delta (x_out,a = +r theta, x_out,b = -r theta),
-        # less what (J5) already gave in that direction
-        de = r * delta if d == 0 else -r * delta
-        sgn = 1.0 if delta > 0.0 else -1.0
-        # the play had to be taken up before it moved: none after a move the same way, its whole
-        # width after a reversal, half of it from the start; (J5) gave that part already
-        take = 0.0 if sgn == state[4] else (2.0 * r * hw if state[4] != 0.0 else r * hw)
-        state[4] = sgn
-        done = state[3]
-        if done * de > 0.0:
-            usable = max(0.0, abs(done) - take)
-            used = min(abs(de), usable)
-            sd = 1.0 if de > 0.0 else -1.0
-            de -= sd * used
-            state[3] = 0.0 if usable == 0.0 else done - sd * (used + take)
-        else:
-            state[3] = 0.0
-        if de != 0.0:
-            if d == 0:
-                _stretch(Pb, dlob, dhib, wb, Kb, de)
-            else:
-                _stretch(Pa, dloa, dhia, wa, Ka, de)
-    else:
-        # (J5): joint still, torque held; the tendon whose distal tension did not move absorbs
-        moved_a = Pa[na] != Ta_prev
-        moved_b = Pb[nb] != Tb_prev
-        tau = state[2]
-        if moved_a and not moved_b:
-            e0 = elongation(Pb, wb)
-            _hold(Pb, dlob, dhib, Kb, Pa[na] - tau / r)
-            if d == 0:
-                state[3] += elongation(Pb, wb) - e0
-        elif moved_b and not moved_a:
-            e0 = elongation(Pa, wa)
-            _hold(Pa, dloa, dhia, Ka, Pb[nb] + tau / r)
-            if d == 1:
-                state[3] += elongation(Pa, wa) - e0
-    state[2] = r * (Pa[na] - Pb[nb])
 
 
 class JointEstimator:
@@ -262,6 +162,14 @@ class JointEstimator:
         self._dgain = tuple(distal_gains(t.log_gain) for t in self.tendons)
         self._x0: tuple[float, float] | None = None
         self._state = np.array([-1.0, 0.0, 0.0, 0.0, 0.0])    # coupling (see couple())
+        # constants of the compiled step (joint_kernels.step_pair); the tendons' estimators step only through here
+        self._const = tuple(np.stack((t.log_gain, t.weight, *g)) for t, g in zip(self.tendons, self._dgain))
+        ta, tb = self.tendons
+        self._prm = np.array([ta.model.K, tb.model.K, ta.phase_band, tb.phase_band, ta.hold_rate, tb.hold_rate,
+                              ta.tau, tb.tau, 0.0, 0.0, self.r, self.half_width, self.taut, float(self.coupling),
+                              0.0, 0.0, 0.0, 0.0, 0.0, 0.0], dtype=np.float64)
+        self._out = np.zeros(14)
+        self._compiled = ta.phase_band > 0 and tb.phase_band > 0
 
     def reset(self) -> None:
         """Back to uniform profiles at the pretension, no angle zero (the next :meth:`step` sets it)."""
@@ -273,6 +181,7 @@ class JointEstimator:
     def zero(self, x_in_a: float, x_in_b: float) -> None:
         """Take the present pose as theta = 0: x_out,j(0) = x_in,j - e_j [m]."""
         self._x0 = (float(x_in_a) - self.tendons[0].elongation, float(x_in_b) - self.tendons[1].elongation)
+        self._prm[8], self._prm[9] = self._x0
         self._state[0] = -1.0
 
     def angles(self, x_in_a: float, x_in_b: float) -> tuple[float, float]:
@@ -292,6 +201,11 @@ class JointEstimator:
             A non-finite sample (from :meth:`DistalEstimator.step`, naming the value).
         """
         ta, tb = self.tendons
+        if (self._compiled and t is not None and self._x0 is not None and ta._t_prev is not None
+                and tb._t_prev is not None):
+            s = self._step_compiled(ta, tb, T_in_a, x_in_a, T_in_b, x_in_b, t)
+            if s is not None:
+                return s
         Ta_prev, Tb_prev = ta.T_out, tb.T_out
         sa = ta.step(T_in_a, x_in_a, t)
         sb = tb.step(T_in_b, x_in_b, t)
@@ -313,11 +227,22 @@ class JointEstimator:
                            phase=(sa.phase, sb.phase))
 
 
-@njit(cache=True, nogil=True)
-def weighted_angle(ang_a, ang_b, T_a, T_b, taut):  # pragma: no cover - compiled
-    """(J3) with the slack weights w_j = min(1, max(T_in,j, 0) / taut)."""
-    wa = min(1.0, max(T_a, 0.0) / taut)
-    wb = min(1.0, max(T_b, 0.0) / taut)
-    if wa + wb <= 0.0:
-        return 0.5 * (ang_a + ang_b)
-    return (wa * ang_a + wb * ang_b) / (wa + wb)
+    def _step_compiled(self, ta: DistalEstimator, tb: DistalEstimator, T_in_a: float, x_in_a: float,
+                       T_in_b: float, x_in_b: float, t: float) -> JointSample | None:
+        """:meth:`step` after the first sample in one compiled call (:func:`joint_kernels.step_pair`): the
+        same numbers as the tendons' own steps and :func:`couple`. None (nothing changed) if not finite."""
+        prm = self._prm
+        prm[14], prm[15], prm[16], prm[17], prm[18], prm[19] = (ta._T_prev, tb._T_prev, ta._t_prev, tb._t_prev,
+                                                                ta._rate, tb._rate)
+        (Ca, Cb), out = self._const, self._out
+        if not step_pair(ta.profile, Ca, ta._phase_state, tb.profile, Cb, tb._phase_state, prm, self._state,
+                          T_in_a, x_in_a, T_in_b, x_in_b, t, out):
+            return None
+        o = out.tolist()
+        pa, pb = _PHASES[int(o[10])], _PHASES[int(o[11])]
+        ta.T_out, tb.T_out, ta.elongation, tb.elongation, ta.phase, tb.phase = o[2], o[3], o[4], o[5], pa, pb
+        ta._T_prev, tb._T_prev, ta._t_prev, tb._t_prev, ta._rate, tb._rate = T_in_a, T_in_b, t, t, o[12], o[13]
+        return JointSample(o[0], o[1], (o[2], o[3]), (o[4], o[5]), (o[6], o[7]), o[8], o[9], (pa, pb))
+
+
+_PHASES = tuple(Phase(k) for k in range(len(Phase)))

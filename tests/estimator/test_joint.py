@@ -118,3 +118,35 @@ def test_a_slack_tendon_does_not_count_in_the_angle():
     assert s.angle == pytest.approx((s.angle_a + 0.5 * s.angle_b) / 1.5)
     s = est.step(5.0, 0.004, 3.0, -0.0036)                  # both taut: the mean (J3)
     assert s.angle == pytest.approx(0.5 * (s.angle_a + s.angle_b))
+
+
+@pytest.mark.parametrize("coupling", [True, False])
+def test_the_compiled_step_is_the_per_tendon_step_bit_for_bit(coupling):
+    """Every sample after the first runs in one compiled call (joint_kernels.step_pair): the same estimates,
+    profiles, phases, rates and coupling state as the tendons' own steps plus couple(), which the first
+    sample (and any call without a time) still takes; a non-finite sample is refused with nothing changed."""
+    ma, mb = SheathModel(K=0.9, compliance=2e-4), SheathModel(K=1.1, compliance=1.5e-4)
+    ref, new = (JointEstimator(ma, mb, 0.004, n_nodes=60, pretension=(1.0, 1.2), coupling=coupling) for _ in range(2))
+    ref._compiled = False                                           # the per-tendon path
+    rng = np.random.default_rng(3)
+    t = np.arange(4000) * 1e-3
+    c = 0.003 * np.sin(2 * np.pi * 0.7 * t) + 0.001 * np.sin(2 * np.pi * 3.1 * t)
+    Ta, Tb = 1.5 + 400 * np.maximum(c, -0.002) + rng.normal(0, 0.02, t.size), 1.5 - 300 * c + rng.normal(0, 0.02, t.size)
+    Ta[1500:1600] = -0.1                                            # tendon a slack for a while
+    xa, xb = c + 1e-4 * Ta, -c + 1e-4 * Tb
+    phases, angles = set(), []
+    for k in range(t.size):
+        tk = None if k == 2000 else t[k]
+        a, b = ref.step(Ta[k], xa[k], Tb[k], xb[k], tk), new.step(Ta[k], xa[k], Tb[k], xb[k], tk)
+        assert a == b and np.array_equal(ref._state, new._state)
+        for u, v in zip(ref.tendons, new.tendons):
+            assert np.array_equal(u.profile, v.profile) and np.array_equal(u._phase_state, v._phase_state)
+            assert (u.T_out, u.elongation, u.phase, u._rate, u._T_prev, u._t_prev) == \
+                (v.T_out, v.elongation, v.phase, v._rate, v._T_prev, v._t_prev)
+        phases.update(b.phase)
+        angles.append(b.angle)
+    assert len(phases) >= 3 and np.ptp(angles) > 0.5                # every phase law and a real stroke [rad]
+    before = new.tendons[0].profile.copy()
+    with pytest.raises(ValueError, match="finite"):
+        new.step(math.nan, 0.0, 1.0, 0.0, 6.0)
+    assert np.array_equal(new.tendons[0].profile, before)

@@ -176,3 +176,44 @@ def test_one_to_four_independent_joints():
     assert s.T_in.shape == (4, 2) and len(s.truth.profiles) == 8
     with pytest.raises(ConfigError, match="1 to 4"):
         SimulatedInstrument(joints + joints[:1], joint_config().rig.simulated)
+
+
+def test_the_step_over_all_joints_is_the_per_joint_kernel_bit_for_bit():
+    """The rig steps every joint in one compiled call and reads its truth in another: the same numbers as
+    estimator.kernels.step_joint joint by joint and numpy's sums (the per-joint loop it replaced)."""
+    from pathlib import Path
+
+    from estimator.kernels import RIGID_STOP, step_joint
+    from teleop.config import load_config
+    cfg = load_config(Path(__file__).resolve().parents[2] / "configs" / "instrument-3dof.yaml")
+    rig = SimulatedInstrument.from_config(cfg)
+    T = [[rig.state.truth.profiles[2 * i + k].copy() for k in range(2)] for i in range(rig.n_joints)]
+    theta, x0 = rig.state.truth.theta.copy(), rig.state.truth.x_in.copy()
+    for n in range(1500):
+        if n == 800:
+            rig.set_load(tissue=True)
+            T = [[rig.state.truth.profiles[2 * i + k].copy() for k in range(2)] for i in range(rig.n_joints)]
+            theta = rig.state.truth.theta.copy()
+        phase = 2 * math.pi * n * DT
+        cmd = x0 + 0.004 * np.array([[math.sin(phase), -math.sin(phase)], [math.sin(1.3 * phase), -0.8 * math.sin(phase)],
+                                     [0.5 * math.sin(phase), -math.sin(0.7 * phase)]])
+        x = rig._x + rig.drive.move(rig._x, cmd, DT)
+        for i, (j, s) in enumerate(zip(rig.joints, rig.sims)):          # the per-joint loop
+            (pa, pb), kt = rig.tendons[i], s.load.tissue_stiffness if rig.tissue[i] else 0.0
+            theta[i] = step_joint(T[i][0], pa.lo, pa.hi, pa.dlo, pa.dhi, pa.w, pa.c_pull, pa.c_rel,
+                                  T[i][1], pb.lo, pb.hi, pb.dlo, pb.dhi, pb.w, pb.c_pull, pb.c_rel, x[i, 0], x[i, 1],
+                                  j.pulley_radius, theta[i], s.stiffness, s.damping / DT, kt, s.load.tissue_contact,
+                                  j.limits[0], j.limits[1], s.limit_stiffness, s.load.torque,
+                                  rig._slope[i] + s.damping / DT, *RIGID_STOP)
+        tr = rig.step(cmd, DT).truth
+        r = np.array([j.pulley_radius for j in rig.joints])
+        assert np.array_equal(tr.theta, theta) and np.array_equal(tr.x_in, x)
+        assert all(np.array_equal(tr.profiles[2 * i + k], T[i][k]) and not tr.profiles[2 * i + k].flags.writeable
+                   for i in range(rig.n_joints) for k in range(2))
+        assert np.array_equal(tr.T_in, [[T[i][k][0] for k in range(2)] for i in range(rig.n_joints)])
+        assert np.array_equal(tr.T_out, [[T[i][k][-1] for k in range(2)] for i in range(rig.n_joints)])
+        assert np.array_equal(tr.elongation, [[float(rig.tendons[i][k].w @ T[i][k]) for k in range(2)]
+                                              for i in range(rig.n_joints)])
+        assert np.array_equal(tr.torque, r * (tr.T_out[:, 0] - tr.T_out[:, 1]))
+        assert np.array_equal(tr.x_out, np.column_stack((r * theta, -r * theta)))
+    assert np.ptp(theta) > 0.1                                          # the joints moved
