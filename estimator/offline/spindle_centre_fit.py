@@ -15,9 +15,16 @@ import numpy as np
 
 from estimator.offline.spindle_shared import RunData
 from estimator.online.spindle import spindle_rate
-from estimator.online.spindle_centre import MIN_RATE, CentreParams, centre_features, direction_state, stroke_centre
+from estimator.online.spindle_centre import (
+    MIN_RATE,
+    CentreParams,
+    centre_features,
+    centre_ready,
+    direction_state,
+    stroke_centre,
+)
 
-__all__ = ["THETA_Z_GRID", "DEGREE", "band_edges", "fit_centre_map", "scale_profile", "run_centre"]
+__all__ = ["THETA_Z_GRID", "DEGREE", "band_edges", "fit_centre_map", "scale_profile", "run_centre", "scored_start"]
 
 #: Candidate direction-state travels [rad].
 THETA_Z_GRID = (0.003, 0.006, 0.01, 0.02, 0.04, 0.08)
@@ -56,6 +63,12 @@ def _edge_slopes(runs: list[RunData], window: tuple[float, float], ref: float) -
     return out[0], out[1]
 
 
+def scored_start(r: RunData, window: tuple[float, float]) -> int:
+    """First sample the centre map is fitted and scored on: max(k0, :func:`centre_ready`) - after the pair
+    model's initialisation stroke and once the centre reading has both band edges. Spindle angle only."""
+    return max(r.k0, centre_ready(r.theta_p, r.dt, window))
+
+
 def run_centre(r: RunData, window: tuple[float, float]) -> float:
     """Band centre [N m] of a whole run (mean of its two edges, :func:`band_edges`)."""
     return float(np.mean(band_edges(r, window)))
@@ -76,11 +89,11 @@ def _setup(runs: list[RunData]) -> tuple[tuple[float, float], tuple[float, float
     return window, (float(w0), float(w1)), float(C.mean()), ref, _edge_slopes(runs, window, ref)
 
 
-def _design(runs: list[RunData], centres: list[np.ndarray], ref: float, theta_z: float, step: int):
+def _design(runs: list[RunData], centres: list[np.ndarray], starts: list[int], ref: float, theta_z: float, step: int):
     Xs, ys = [], []
-    for r, c in zip(runs, centres):
+    for r, c, k_start in zip(runs, centres, starts):
         z = direction_state(r.theta_p, r.dt, theta_z)
-        k = slice(r.k0, None, step)
+        k = slice(k_start, None, step)
         Xs.append(centre_features(r.theta_p[k], c[k], z[k], ref, DEGREE))
         ys.append(r.tau_d[k])
     return np.vstack(Xs), np.concatenate(ys)
@@ -108,9 +121,10 @@ def fit_centre_map(runs: list[RunData], scale: float | None = None, step: int = 
         raise ValueError("fit_centre_map needs at least one run")
     window, half, c0, ref, slope = _setup(runs)
     centres = [stroke_centre(r.tau_p, r.theta_p, r.dt, window, half, c0, slope, ref) for r in runs]
+    starts = [scored_start(r, window) for r in runs]          # where the centre reading has both edges
     best: tuple[float, float, np.ndarray] | None = None
     for tz in (THETA_Z_GRID if theta_z is None else (theta_z,)):
-        X, y = _design(runs, centres, ref, tz, step)
+        X, y = _design(runs, centres, starts, ref, tz, step)
         coef = _solve(X, y, scale)
         rms = float(np.sqrt(np.mean((X @ coef - y) ** 2)))
         if best is None or rms < best[0]:

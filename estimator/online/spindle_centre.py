@@ -17,7 +17,10 @@ samples in full motion (|omega_p| > MIN_RATE) inside the angle window [lo, hi], 
 MIN_SAMPLES samples (until then the previous stroke of that direction); the centre is the mean of the
 latest falling-angle (high edge) and rising-angle (low edge) means. While only one direction has been
 seen, the centre is that edge minus (high edge) or plus (low edge) the half-width w0 + w1 C of the
-calibration (solved for C); before any completed stroke it is the calibration's mean centre.
+calibration (solved for C); before any completed stroke it is the calibration's mean centre. The
+estimate is in its initialisation until the reading holds both edges (:func:`centre_ready`): fits and
+scores start there (Finding 4, session 4: the one-edge reading right after the first stroke from
+rest is the centre map's largest error).
 Inputs: spindle torque tau_p [N m] and angle theta_p [rad] only.
 """
 from __future__ import annotations
@@ -28,7 +31,8 @@ import numpy as np
 
 from estimator.online.spindle import OMEGA_S, angle_lag, spindle_rate
 
-__all__ = ["CentreParams", "MIN_RATE", "MIN_SAMPLES", "stroke_centre", "direction_state", "centre_features", "predict_centre_map"]
+__all__ = ["CentreParams", "MIN_RATE", "MIN_SAMPLES", "stroke_centre", "centre_ready", "direction_state", "centre_features",
+           "predict_centre_map"]
 
 #: Spindle speed above which a sample is in full motion (on a band edge) [rad/s].
 MIN_RATE = 0.05
@@ -103,7 +107,25 @@ def stroke_centre(tau_p: np.ndarray, theta_p: np.ndarray, dt: float, window: tup
     hi, lo = edge
     out = np.where(np.isnan(hi), (lo + w0) / (1.0 - w1), np.where(np.isnan(lo), (hi - w0) / (1.0 + w1), 0.5 * (hi + lo)))
     return np.where(np.isnan(out), float(centre0), out)
-    return out
+
+
+def centre_ready(theta_p: np.ndarray, dt: float, window: tuple[float, float]) -> int:
+    """First sample index at which (SC1) reads both band edges, each from a stroke with MIN_SAMPLES samples
+    in full motion inside ``window`` [rad] (theta_p [rad], shape (n,); spacing dt [s]); n when it never does.
+
+    Before it the centre rests on one edge and the calibration's half-width (or on centre0): the estimator
+    is still initialising, the way the first stroke initialises the pair model. Spindle angle only."""
+    th = np.asarray(theta_p, dtype=float)
+    om = spindle_rate(th, dt)
+    cuts = np.concatenate([[0], _strokes(om), [th.size]])
+    inside = (th >= window[0]) & (th <= window[1]) & (np.abs(om) > MIN_RATE)
+    seen = [th.size, th.size]
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        j = 0 if np.mean(om[a:b]) < 0 else 1
+        n = np.cumsum(inside[a:b])
+        if seen[j] == th.size and n.size and n[-1] >= MIN_SAMPLES:
+            seen[j] = int(a + np.argmax(n >= MIN_SAMPLES))
+    return max(seen)
 
 
 def direction_state(theta_p: np.ndarray, dt: float, theta_z: float) -> np.ndarray:

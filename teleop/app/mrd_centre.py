@@ -9,7 +9,12 @@ Two uses, each recording what was fitted on what:
 * :func:`centre_one_run` - the map fitted on calibration run(s) of one load level, where its load gain
   is not identifiable: held at 1 / n_k (the calibration run's encoders, the pulley ratio; a capstan pair
   with matched sensors gives 1 / (n_k cosh K) <= 1 / n_k), with the calibration's own fit cost profiled
-  over the gain (:func:`estimator.offline.spindle_centre_fit.scale_profile`).
+  over the gain (:func:`estimator.offline.spindle_centre_fit.scale_profile`);
+* :func:`centre_time_split` - its calibration-only score (first half fits, second half scores) for the
+  headline's model choice in :mod:`teleop.app.mrd_report`.
+
+Every score starts once the run's band-centre reading holds both edges
+(:func:`estimator.online.spindle_centre.centre_ready`); ``from_k0`` keeps the score from the first reversal.
 """
 from __future__ import annotations
 
@@ -19,10 +24,13 @@ import numpy as np
 
 from estimator.offline.spindle_centre_fit import fit_centre_map, run_centre, scale_profile
 from estimator.offline.spindle_shared import RunData, kinematic_ratio
-from estimator.online.spindle_centre import CentreParams, predict_centre_map
+from estimator.online.spindle_centre import CentreParams, centre_ready, predict_centre_map
 
-__all__ = ["centre_folder", "centre_one_run", "mid_centre_run", "score_centre", "profile_on_scored", "PROFILE_GAINS", "LOAD_SPREAD_NM"]
+__all__ = ["CENTRE", "model_choice", "centre_agg", "centre_folder", "centre_one_run", "centre_time_split", "mid_centre_run", "score_centre",
+           "profile_on_scored", "PROFILE_GAINS", "LOAD_SPREAD_NM"]
 
+#: The centre map's name among the headline's candidates (``model_choice``).
+CENTRE = "centre map"
 #: Load gains [-] of the calibration's cost profile.
 PROFILE_GAINS = tuple(float(v) for v in np.round(np.arange(0.6, 1.41, 0.1), 2))
 #: Band-centre spread [N m] of the calibration runs above which they count as several load levels.
@@ -30,15 +38,28 @@ LOAD_SPREAD_NM = 0.005
 
 
 def _score(p: CentreParams, r: RunData, k0: int, fs: float) -> dict:
+    """Scored from max(k0, the instant the centre reading has both band edges: centre_ready); the same
+    figures from k0 under ``from_k0`` (the one-edge initialisation included)."""
     pt = predict_centre_map(p, r.tau_p, r.theta_p, r.dt)
-    e = pt[k0:] - r.tau_d[k0:]
-    return {"torque_rmse_fs": float(np.sqrt(np.mean(e ** 2)) / fs), "torque_max_fs": float(np.max(np.abs(e)) / fs)}
+    k = max(k0, centre_ready(r.theta_p, r.dt, p.window))
+    e, e0 = pt[k:] - r.tau_d[k:], pt[k0:] - r.tau_d[k0:]
+    return {"torque_rmse_fs": float(np.sqrt(np.mean(e ** 2)) / fs), "torque_max_fs": float(np.max(np.abs(e)) / fs),
+            "scored_from_s": k * r.dt, "from_k0": {"torque_rmse_fs": float(np.sqrt(np.mean(e0 ** 2)) / fs),
+                                                   "torque_max_fs": float(np.max(np.abs(e0)) / fs)}}
 
 
 def _agg(rows: list[dict]) -> dict:
     t = [r["torque_rmse_fs"] for r in rows]
-    return {"median_torque_rmse_fs": float(np.median(t)), "max_torque_rmse_fs": float(np.max(t)),
-            "max_torque_max_fs": float(max(r["torque_max_fs"] for r in rows))}
+    out: dict[str, Any] = {"median_torque_rmse_fs": float(np.median(t)), "max_torque_rmse_fs": float(np.max(t)),
+                           "max_torque_max_fs": float(max(r["torque_max_fs"] for r in rows))}
+    if all("from_k0" in r for r in rows):
+        out["from_k0"] = _agg([r["from_k0"] for r in rows])
+    return out
+
+
+def centre_agg(rows: list[dict]) -> dict:
+    """Median and worst torque RMSE and the largest |error| [FS] of per-run centre-map scores."""
+    return _agg(rows)
 
 
 def mid_centre_run(runs: list[RunData]) -> str:
@@ -70,6 +91,47 @@ def centre_folder(runs: list[RunData], fs: float, tick: Callable[[str], None], l
     return out
 
 
+def _fit_rule(cal: list[RunData], cents: list[float]) -> tuple[CentreParams, float, bool]:
+    """The calibration rule: load gain fitted when the band centres spread over LOAD_SPREAD_NM, else 1 / n_k."""
+    if len(cal) > 1 and float(np.ptp(cents)) > LOAD_SPREAD_NM:
+        return (*fit_centre_map(cal), True)
+    return (*fit_centre_map(cal, scale=1.0 / kinematic_ratio(cal)), False)
+
+
+def centre_time_split(cal: list[RunData], fs: float) -> float:
+    """Torque RMSE [FS] of the centre map on a time split of the calibration data only: fitted (by the rule
+    of :func:`centre_one_run`) on each calibration run's first half of its scored part (k0 to the middle,
+    the split of the pair model's extension selection), scored on the second half. Jaw torque of the
+    calibration runs only; no scored run is read."""
+    first = [RunData(r.name, r.tau_p[:m], r.theta_p[:m], r.tau_d[:m], r.theta_d[:m], r.k0, r.dt)
+             for r in cal for m in [(r.k0 + r.tau_p.size) // 2]]
+    th = np.concatenate([r.theta_p[r.k0:] for r in first])
+    lo, hi = np.percentile(th, [20.0, 80.0])
+    p, _, _ = _fit_rule(first, [run_centre(r, (float(lo), float(hi))) for r in first])
+    sq, n = 0.0, 0
+    for r in cal:
+        m = max((r.k0 + r.tau_p.size) // 2, centre_ready(r.theta_p, r.dt, p.window))
+        e = predict_centre_map(p, r.tau_p, r.theta_p, r.dt)[m:] - r.tau_d[m:]
+        sq, n = sq + float(e @ e), n + e.size
+    return float(np.sqrt(sq / max(n, 1)) / fs)
+
+
+def model_choice(pair: str, pair_split_fs: float, pair_in_fs: float, cal: list[RunData], fs: float,
+                 centre_in_fs: float) -> dict:
+    """Which estimate the headline keys report, chosen on calibration data only (a rule fixed before scoring):
+    the lower torque RMSE [FS] on the calibration runs' time split. ``pair_split_fs``: the pair model's
+    extension selection's validation RMSE on that split (the split also chose its extensions: optimistic for
+    the pair model); the centre map's from :func:`centre_time_split`. The in-sample fit RMSEs ``pair_in_fs``
+    and ``centre_in_fs`` [FS] are recorded beside it, never used. Returns a JSON-ready dict."""
+    cands = {pair: pair_split_fs, CENTRE: centre_time_split(cal, fs)}
+    return {"rule": "lower jaw torque RMSE [FS] on the calibration runs' time split: fitted on the first half of "
+                    "each calibration run's scored part, scored on the second half (calibration data only)",
+            "candidates": cands, "chosen": min(cands, key=lambda n: (cands[n], n)),
+            "angle": "the pair model's (the centre map estimates torque only)",
+            "in_sample_not_used": {pair: pair_in_fs, CENTRE: centre_in_fs, "note": "fit RMSE [FS] on all the "
+                                   "calibration data; recorded beside the rule, never used by it"}}
+
+
 def centre_one_run(cal: list[RunData], fs: float) -> tuple[CentreParams, dict]:
     """The centre map calibrated on ``cal``: load gain fitted when the runs' band centres spread over more
     than LOAD_SPREAD_NM, else held at 1 / n_k of their encoders, with the cost profile over PROFILE_GAINS.
@@ -79,12 +141,11 @@ def centre_one_run(cal: list[RunData], fs: float) -> tuple[CentreParams, dict]:
     cents = [run_centre(r, (float(lo), float(hi))) for r in cal]
     rec: dict[str, Any] = {"inputs": ["spindle torque", "spindle encoder"], "targets": ["jaw torque"],
                            "band_centres_Nm": cents}
-    if len(cal) > 1 and float(np.ptp(cents)) > LOAD_SPREAD_NM:
-        p, rms = fit_centre_map(cal)
+    p, rms, several = _fit_rule(cal, cents)
+    if several:
         rec["load_gain"] = {"value": float(p.coef[1, 0]), "from": "fitted across the calibration runs' loads"}
     else:
-        n_k = kinematic_ratio(cal)
-        p, rms = fit_centre_map(cal, scale=1.0 / n_k)
+        n_k = 1.0 / float(p.coef[1, 0])
         rec["load_gain"] = {"value": 1.0 / n_k, "n_k": n_k, "from": "1 / n_k of the calibration run's encoders "
                             "(one load level: the gain is not identifiable, see profile)"}
         rec["profile"] = [{"load_gain": s, "fit_rms_fs": r / fs} for s, _, r in scale_profile(cal, np.array(PROFILE_GAINS))]

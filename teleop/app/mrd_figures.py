@@ -140,7 +140,8 @@ def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, director
     vmax = max([0.1] + [v for v in lo.values()])
     c = summary["calibration"]
     ctitle = f"calibrated on run {c['run']}" if c["mode"] == "run" else f"first {c['seconds']:g} s of each run"
-    for ax, vals, title, vm in ((axes[0], cal, f"model, {ctitle}", max(cal.values())),
+    head = next(iter(summary["runs"].values()))["model"]          # the headline's model (model_choice)
+    for ax, vals, title, vm in ((axes[0], cal, f"{head}, {ctitle}", max(cal.values())),
                                 (axes[1], lin, f"linear baseline, {ctitle}", max(lin.values())),
                                 (axes[2], lo, "folder model, leave-one-run-out", vmax)):
         im = _heat(ax, *_grid(runs, vals), f"{title}: torque RMSE [FS]", vm)

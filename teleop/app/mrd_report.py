@@ -49,7 +49,16 @@ from estimator.online.spindle import (
     spindle_rate,
 )
 from teleop.app.mrd import ATTRIBUTION, MrdRun
-from teleop.app.mrd_centre import centre_folder, centre_one_run, mid_centre_run, profile_on_scored, score_centre
+from teleop.app.mrd_centre import (
+    CENTRE,
+    centre_agg,
+    centre_folder,
+    centre_one_run,
+    mid_centre_run,
+    model_choice,
+    profile_on_scored,
+    score_centre,
+)
 from teleop.app.mrd_text import format_mrd, write_mrd_report
 from teleop.errors import ConfigError, DataError
 
@@ -212,7 +221,10 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
     tick = _Progress(progress, n_cal * 14 + len(runs) + 15 + (2 * len(runs) if loro else 0))
     out: dict[str, Any] = {"mode": "mrd", "full_scale_Nm": fs, "attribution": ATTRIBUTION, "not_from_proximal": NOT_FROM_PROXIMAL,
            "scored_from": "the first reversal of the spindle after 0.5 s (the stroke before it initialises the "
-                          "estimator, as the paper's calibration pull does)", "runs": {},
+                          "estimator, as the paper's calibration pull does); the centre map from the first sample "
+                          "after it at which its band-centre reading holds both edges (centre_ready: before, the centre "
+                          "rests on one edge and the calibration's half-width, its initialisation; the score from the "
+                          "first reversal is kept under centre.from_k0)", "runs": {},
            "found": {r.name: {"frequency_hz": r.frequency_hz, "load_level": r.load_level,
                               "load_command_A": r.load_command, "n_samples": len(r),
                               "duration_s": float(r.time[-1])} for r in runs}}
@@ -224,6 +236,10 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
         cal_runs = [_rundata(r) for r in runs if r.name in cal_names]
         fits, base, sel, centre, ref = _calibrate(cal_runs, tick, kinematic=mode == "kinematic")
         cmap, out["centre_calibration"] = centre_one_run(cal_runs, fs)
+        pin = np.concatenate([predict_torque(fits[list(fits)[-1]], make_batch([(c.tau_p, c.theta_p)], centre, ref, c.dt))[
+            c.k0:] - c.tau_d[c.k0:] for c in cal_runs])
+        out["model_choice"] = model_choice(list(fits)[-1], float(sel["rmse_val"]) / fs, float(np.sqrt(np.mean(pin ** 2))) / fs,
+                                           cal_runs, fs, out["centre_calibration"]["fit_rms_fs"])
         out["calibration"] = {"mode": mode, "run": cal, "runs": cal_names, **cal_inputs,
                               "scored": "every other run, from its spindle signals only"}
         if calibration and calibration.endswith("mid"):
@@ -243,6 +259,9 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
         out["baseline_parameters"] = {n: b.params for n, b in base.items()}
         out["selection"] = sel
     else:
+        out["model_choice"] = {"rule": "segment calibration: the pair model only (the centre map reads the load "
+                                       "level across runs; it has no per-run segment calibration)",
+                               "candidates": {"pair model (selected per run)": None}, "chosen": "pair model"}
         out["calibration"] = {"mode": "segment", "seconds": cal, **cal_inputs,
                               "scored": f"t >= {cal} s of the same run, from its spindle signals only"}
         out["parameters"] = {}
@@ -258,15 +277,19 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
             pt, pa = predict_torque(p, b), predict_angle(p, b)
             models[name] = _score(pt, pa, r, k0, fs)
             details["pred"][r.name] = (pt, pa)          # the last one is the selected model
-        chosen = list(fits)[-1]
+        pair = list(fits)[-1]
         bl = {}
         for n, m in base.items():
             bt_, ba_ = m.predict(b)
             bl[n] = _score(bt_, ba_, r, k0, fs)
-        out["runs"][r.name] = {"frequency_hz": r.frequency_hz, "load_level": r.load_level, "model": chosen,
-                               **models[chosen], "models": models, "baselines": bl}
+        row = {"frequency_hz": r.frequency_hz, "load_level": r.load_level, "model": pair, **models[pair],
+               "models": models, "baselines": bl}
         if mode != "segment":
-            out["runs"][r.name]["centre"] = score_centre(cmap, _rundata(r), k0, fs)
+            row["centre"] = score_centre(cmap, _rundata(r), k0, fs)
+            if out["model_choice"]["chosen"] == CENTRE:     # torque from the centre map; it has no angle estimate
+                row.update(model=CENTRE, angle_from=pair, torque_rmse_fs=row["centre"]["torque_rmse_fs"],
+                           torque_max_fs=row["centre"]["torque_max_fs"])
+        out["runs"][r.name] = row
         details["k0"][r.name] = k0
         tick(f"predict {r.name}")
     scored = list(out["runs"].values())
@@ -278,6 +301,7 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
                           s["torque_rmse_fs"] < s["baselines"]["linear"]["torque_rmse_fs"] for s in scored))}
     if mode != "segment":
         out["summary"]["centre"] = {**_agg([{**s["centre"], "angle_rmse_deg": math.nan} for s in scored]),
+                                    "from_k0": centre_agg([s["centre"]["from_k0"] for s in scored]),
                                     "better_than_linear_every_run": bool(all(s["centre"]["torque_rmse_fs"] < s[
                                         "baselines"]["linear"]["torque_rmse_fs"] for s in scored))}
         del out["summary"]["centre"]["median_angle_rmse_deg"]

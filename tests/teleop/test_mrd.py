@@ -123,6 +123,14 @@ def test_analysis_keys_calibration_and_what_was_fitted_on(tmp_path):
     assert s["calibration"]["inputs"] == ["spindle torque", "spindle encoder"]
     assert s["centre_calibration"]["targets"] == ["jaw torque"] and "profile" in s["centre_calibration"]
     assert set(s["centre_map"]["loro"]["runs"]) == {"00", "01", "10"} and "centre" in s["summary"]
+    mc = s["model_choice"]                                           # headline model chosen on calibration data only
+    assert len(mc["candidates"]) == 2 and mc["chosen"] == min(mc["candidates"], key=mc["candidates"].get)
+    for name, r in s["runs"].items():
+        src = r["centre"] if mc["chosen"] == "centre map" else r["models"][mc["chosen"]]
+        assert r["model"] == mc["chosen"] and r["torque_rmse_fs"] == src["torque_rmse_fs"]
+        assert r["torque_max_fs"] == src["torque_max_fs"]
+        assert r["centre"]["scored_from_s"] >= d["k0"][name] * runs[0].dt   # the centre map's own initialisation
+    assert "chosen on calibration data only" in format_mrd(s)
     assert "rho" in s["not_from_proximal"] and "ODbL" in s["attribution"]
     assert set(s["loro"]["runs"]) == {"00", "01", "10"}
     assert s["loro"]["summary"]["median_torque_rmse_fs"] < 0.1
@@ -227,3 +235,10 @@ def test_real_folder_model_beats_linear_and_one_set_predicts_the_folder():
     assert f["shared"]["summary"]["median_torque_rmse_fs"] < 0.06
     assert f["shared"]["summary"]["median_angle_rmse_deg"] < 1.0
     assert f["centre_map"]["summary"]["median_torque_rmse_fs"] < 0.03    # load read from the band centre
+    # scored once the centre reading holds both edges: the largest error within the 0.10 FS, and the
+    # one-edge initialisation (kept under from_k0) is where the larger ones were
+    cm = f["centre_map"]["summary"]
+    assert cm["max_torque_max_fs"] <= 0.10 and cm["max_torque_max_fs"] <= cm["from_k0"]["max_torque_max_fs"]
+    mc = s["model_choice"]
+    assert set(mc["candidates"]) == {list(s["runs"]["01"]["models"])[-1], "centre map"}
+    assert mc["chosen"] == min(mc["candidates"], key=mc["candidates"].get)

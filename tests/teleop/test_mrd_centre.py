@@ -11,8 +11,8 @@ import pytest
 from estimator.offline.spindle_centre_fit import fit_centre_map, run_centre, scale_profile
 from estimator.offline.spindle_shared import RunData
 from estimator.online.spindle import first_reversal
-from estimator.online.spindle_centre import predict_centre_map, stroke_centre
-from teleop.app.mrd_centre import centre_one_run, mid_centre_run
+from estimator.online.spindle_centre import MIN_SAMPLES, centre_ready, predict_centre_map, stroke_centre
+from teleop.app.mrd_centre import CENTRE, centre_one_run, centre_time_split, mid_centre_run, model_choice, score_centre
 
 R_TRUE, K, F0, C0, SLOPE = 1.01, 0.25, 0.05, -0.014, -0.017
 GAIN = 1.0 / (R_TRUE * math.cosh(K))          # jaw torque per band-centre torque
@@ -73,3 +73,32 @@ def test_one_load_cannot_tell_the_gain_but_the_other_loads_can():
 def test_mid_centre_run_picks_the_middle_load_from_spindle_torque():
     runs = [synth(f"{i}", load, seed=i) for i, load in enumerate((0.01, 0.045, 0.025))]
     assert mid_centre_run(runs) == "2"
+
+
+def test_centre_ready_is_where_the_half_width_stops_mattering():
+    """Before centre_ready the centre rests on one edge and the calibration's half-width; from it on, on both
+    edges, so two half-widths give the same reading; scores start there and keep the k0 figures apart."""
+    r = synth("a", 0.03)
+    win = (0.1, 0.9)
+    k = centre_ready(r.theta_p, r.dt, win)
+    assert r.k0 < k < r.theta_p.size
+    a, b = (stroke_centre(r.tau_p, r.theta_p, r.dt, win, (w0, 0.0), 0.0, (SLOPE, SLOPE), 0.5) for w0 in (F0, 2 * F0))
+    assert np.array_equal(a[k:], b[k:]) and a[k - 1] != b[k - 1]
+    assert centre_ready(r.theta_p[:k], r.dt, win) == k                  # causal: the future is not needed
+    assert centre_ready(np.full(3000, 0.5), r.dt, win) == 3000          # never in motion: never ready
+    assert MIN_SAMPLES > 0
+    p, _ = fit_centre_map([r])
+    sc = score_centre(p, r, r.k0, 0.05)
+    assert sc["scored_from_s"] == pytest.approx(centre_ready(r.theta_p, r.dt, p.window) * r.dt)
+    assert set(sc["from_k0"]) == {"torque_rmse_fs", "torque_max_fs"}
+
+
+def test_model_choice_takes_the_lower_calibration_split_score():
+    """The headline's model is chosen on the calibration runs' time split only; the rule and its inputs are recorded."""
+    cal = [synth("cal", 0.025, freq=0.4)]
+    split = centre_time_split(cal, 0.05)
+    assert 0.0 < split < 0.05                                           # the map fits its own second half
+    for pair_score, expect in ((10 * split, CENTRE), (0.5 * split, "pair")):
+        c = model_choice("pair", pair_score, 0.01, cal, 0.05, 0.002)
+        assert c["chosen"] == expect and c["candidates"][CENTRE] == pytest.approx(split)
+        assert "calibration data only" in c["rule"] and c["in_sample_not_used"]["pair"] == 0.01
