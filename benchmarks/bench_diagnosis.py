@@ -67,7 +67,13 @@ def one(case: tuple) -> dict:
     rec = _record(sim)(None if effect == NONE else effect, seed=seed, level=level, duration=duration,
                        **({"rate_hz": rate} if sim == "rig" or rate else {}))
     t0 = time.perf_counter()
-    res = diagnose(rec.data)
+    try:
+        res = diagnose(rec.data)
+    except Exception as err:            # a recording the diagnosis cannot take counts as a miss, the run goes on
+        return {"sim": sim, "effect": effect, "level": rec.truth["level"], "seed": seed,
+                "cause": f"error: {type(err).__name__}: {err}", "causes": ["error"], "equivalent": [], "gain": 0.0,
+                "seconds": time.perf_counter() - t0, "n": len(rec.data), "truth": rec.truth["parameters"],
+                "fitted": {}, "scores": {}, "structure": float("nan"), "structure_ext": float("nan"), "detail": {}}
     return {"sim": sim, "effect": effect, "level": rec.truth["level"], "seed": seed, "cause": res["cause"],
             "causes": res["causes"], "equivalent": res["equivalent"], "gain": res["gain"],
             "seconds": time.perf_counter() - t0, "n": len(rec.data), "truth": rec.truth["parameters"],
@@ -132,6 +138,11 @@ def table(rows: list[dict], title: str) -> None:
         print(f"held-out gain where an effect is present: median {np.median([r['gain'] for r in present]):.2f} "
               f"(all answers), {np.median([r['gain'] for r in present if _ok(r, True)] or [0]):.2f} "
               "(correct answers)")
+    errors = [r for r in rows if r["causes"] == ["error"]]
+    if errors:
+        print(f"recordings the diagnosis raised on (counted as misses): {len(errors)}: "
+              + "; ".join(f"{r['effect']} seed {r['seed']}: {r['cause']}" for r in errors))
+    clean = [r for r in clean if r["scores"]]
     if clean:
         best = [min(r["scores"].values()) for r in clean]
         print(f"clean data: lowest candidate score S {min(best):.3f} (median {np.median(best):.3f}; an extension "
