@@ -6,13 +6,14 @@ in the loop (:class:`teleop.recording.CsvRecorder`, :class:`teleop.rerun_log.Rer
 with the writer threads of ``teleop slave`` (:class:`teleop.csv_writer.ThreadedCsvRecorder`,
 :class:`teleop.rerun_proc.RerunProcessLogger`: Rerun in a child process); then the same node class on the 3-joint
 instrument (configs/instrument-3dof.yaml: three pair axes, calibrated on its simulator first, each
-joint following a slow sine of angle) with the writer threads. Prints p50/p99/max of the step time
-and the share of steps over 0.8 ms (what would overrun a 1 kHz loop with 0.2 ms of wake-up and
-transport). Never fails on time.
+joint following a slow sine of angle) with no recording (the step alone) and with the writer threads.
+Prints p50/p99/max of the step time and the share of steps over 0.8 ms (what would overrun a 1 kHz loop
+with 0.2 ms of wake-up and transport), and the load average. Never fails on time.
 """
 from __future__ import annotations
 
 import math
+import os
 import sys
 import tempfile
 import time
@@ -81,8 +82,9 @@ def run(threaded: bool, n: int, tmp: Path) -> np.ndarray:
     return times * 1e3
 
 
-def run_joints(n: int, tmp: Path) -> np.ndarray:
-    """The 3-joint instrument's SlaveNode with the writer threads: step times [ms]."""
+def run_joints(n: int, tmp: Path, record: bool = True) -> np.ndarray:
+    """The 3-joint instrument's SlaveNode with the writer threads (``record``) or with no recording at
+    all (the step in isolation): step times [ms]."""
     from slave.node import axis_kind, recording
     from slave.rigs import RIG_TYPES
     from teleop.rerun_view import joint_views
@@ -101,9 +103,8 @@ def run_joints(n: int, tmp: Path) -> np.ndarray:
     inst = RIG_TYPES["simulated"](cfg, None)
     name, columns, meta = recording(cfg, inst)
     times = np.empty(n)
-    with ThreadedCsvRecorder(tmp / name, columns, meta, flush_every=500) as rec, \
-            RerunProcessLogger("bench", "joints", "save", tmp / "joints.rrd", joints=joint_views(cfg)) as rr:
-        node = SlaveNode(cfg, inst, links, recorder=rec, rerun=rr, calibration=cal)
+
+    def loop(node: SlaveNode) -> None:
         for k in range(n):
             clock.t += dt
             a = 0.3 * math.sin(2 * math.pi * 0.25 * clock.t)
@@ -111,6 +112,13 @@ def run_joints(n: int, tmp: Path) -> np.ndarray:
             t0 = time.perf_counter()
             node.step(clock.t)
             times[k] = time.perf_counter() - t0
+
+    if not record:
+        loop(SlaveNode(cfg, inst, links, calibration=cal))
+        return times * 1e3
+    with ThreadedCsvRecorder(tmp / name, columns, meta, flush_every=500) as rec, \
+            RerunProcessLogger("bench", "joints", "save", tmp / "joints.rrd", joints=joint_views(cfg)) as rr:
+        loop(SlaveNode(cfg, inst, links, recorder=rec, rerun=rr, calibration=cal))
     return times * 1e3
 
 
@@ -121,10 +129,13 @@ def main(n: int = 5000) -> None:
             print(f"slave step, recording {'on writer threads' if threaded else 'in the loop'}: "
                   f"p50 {np.percentile(t, 50):.3f} ms, p99 {np.percentile(t, 99):.3f} ms, max {t.max():.2f} ms, "
                   f"steps > 0.8 ms {100 * np.mean(t > 0.8):.2f} %")
-        t = run_joints(n, Path(d))[200:]
-        print(f"slave step, 3-joint instrument (3 pair axes), recording on writer threads: "
-              f"p50 {np.percentile(t, 50):.3f} ms, p99 {np.percentile(t, 99):.3f} ms, max {t.max():.2f} ms, "
-              f"steps > 0.8 ms {100 * np.mean(t > 0.8):.2f} %")
+        for record in (False, True):
+            t = run_joints(n, Path(d), record)[200:]
+            print(f"slave step, 3-joint instrument (3 pair axes), "
+                  f"{'recording on writer threads' if record else 'no recording (the step alone)'}: "
+                  f"p10 {np.percentile(t, 10):.3f} ms, p50 {np.percentile(t, 50):.3f} ms, "
+                  f"p99 {np.percentile(t, 99):.3f} ms, max {t.max():.2f} ms, steps > 0.8 ms {100 * np.mean(t > 0.8):.2f} %")
+    print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
 
 
 if __name__ == "__main__":

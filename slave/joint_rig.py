@@ -179,7 +179,7 @@ class SimulatedInstrument:
         if cmd.shape != self._x.shape:
             raise RigInputError(f"x_in_cmd must have shape ({self.n_joints}, 2) [joint, tendon a/b], "
                                 f"got {cmd.shape}")
-        if not np.all(np.isfinite(cmd)):
+        if not np.isfinite(cmd).all():
             raise RigInputError(f"x_in_cmd must be finite displacements in metres, got {cmd.tolist()}")
         if not (math.isfinite(h) and h > 0.0):
             raise RigInputError(f"dt must be a finite time step > 0 s, got {dt!r}")

@@ -215,7 +215,8 @@ class PairAxis(SlaveAxis):
         elif target is not None:
             self.hold = target
         assert self.controller is not None
-        return self.controller.step(self.hold, state.T_in[self.index], dt, self.sample.x_out)
+        Ta, Tb = state.T_in[self.index].tolist()         # plain floats: cheaper arithmetic, the same values
+        return self.controller.step(self.hold, (Ta, Tb), dt, self.sample.x_out)
 
     def observe(self, state: RigState) -> tuple[AxisState, tuple[float, ...]]:
         assert self.estimator is not None
