@@ -29,7 +29,8 @@ def format_mrd(s: dict) -> str:
              f"{len(cmds)} load levels (front-end command {cmds[0]:g}-{cmds[-1]:g} A), "
              f"{min(v['duration_s'] for v in found):.1f}-{max(v['duration_s'] for v in found):.1f} s each",
              f"full scale {s['full_scale_Nm'] * 1e3:.1f} mN m; {head} (inputs spindle torque "
-             "+ encoder, targets jaw torque + encoder); scored from each run's first reversal",
+             "+ encoder, targets jaw torque + encoder); scored from each run's first reversal (the centre map once "
+             "its band reading holds both edges)",
              _choice_line(s.get("model_choice")),
              f"{'run':>4}{'f [Hz]':>8}{'load':>5}{'RMSE':>7}{'max':>7}{'angle':>7}   constant   linear    phase"
              f"{'shared':>8}{'LORO':>7}"]
@@ -66,7 +67,9 @@ def _choice_line(c: dict | None) -> str:
     """The headline's model and the calibration-only scores it was chosen by."""
     if not c:
         return "RMSE / max / angle: the pair model"
-    scores = ", ".join(f"{n} {v:.3f}" if v is not None else n for n, v in c["candidates"].items())
+    if len(c["candidates"]) < 2:
+        return f"RMSE / max / angle: {c['chosen']} ({c['rule']})"
+    scores = ", ".join(f"{n} {v:.4f}" for n, v in c["candidates"].items())
     return (f"RMSE / max: {c['chosen']}, chosen on calibration data only (time split of the calibration runs, "
             f"torque RMSE [FS]: {scores}); angle: the pair model")
 

@@ -138,6 +138,7 @@ def test_analysis_keys_calibration_and_what_was_fitted_on(tmp_path):
     assert set(two["runs"]) == {"10"} and two["calibration"]["runs"] == ["00", "01"]
     seg, _ = analyze_mrd(runs, "segment:3", loro=False)
     assert set(seg["runs"]) == {"00", "01", "10"} and seg["calibration"]["mode"] == "segment"
+    assert seg["model_choice"]["chosen"] == "pair model" and "pair model only" in format_mrd(seg)
     json.dumps(s, allow_nan=False)
 
 
