@@ -25,6 +25,7 @@ from scipy.optimize import least_squares
 from estimator.offline.effects import K_MAX, ROUTE, Effect, Parameter, Series, predict
 from estimator.sheath import SheathModel
 from estimator.data import MeasuredData
+from estimator.errors import DataError
 
 __all__ = ["Progress", "trimmed_ms", "sample_block", "rest_reading", "prepare", "split_at_rest", "fit_model", "start_points", "heldout_mse", "raw_rmse", "noise_level",
            "quantum", "SIGNALS", "channel_choice", "look_alike", "settings_keys", "predictions"]
@@ -73,9 +74,16 @@ def prepare(data: MeasuredData, *, n_nodes: int = 32, target_rate: float = 200.0
     Raises
     ------
     DataError
-        No distal column. ValueError: fewer than 400 samples after averaging.
+        No distal column, or a non-finite sample in a column. ValueError: fewer than 400 samples after
+        averaging.
     """
     data.require_distal()
+    for name in ("time", "x_in", "T_in", "x_out", "T_out"):
+        col = getattr(data, name)
+        bad = np.flatnonzero(~np.isfinite(np.asarray(col, dtype=float))) if col is not None else np.empty(0, int)
+        if bad.size:
+            raise DataError(f"{data.source}: column {name} has {bad.size} non-finite samples (first at sample "
+                            f"{int(bad[0])}); cut the recording before them or repair the column")
     t = np.asarray(data.time, dtype=float)
     fs = (t.size - 1) / max(t[-1] - t[0], 1e-12)
     m = max(1, int(fs // target_rate))

@@ -162,6 +162,14 @@ def test_distal_tension_only_and_distal_position_only():
     assert res["base"]["rmse_T_out_N"] is None and res["primary_signal"] == "x_out"
 
 
+def test_non_finite_samples_are_refused_naming_the_column():
+    rec = record(None, seed=21, duration=10.0, rate_hz=RATE)
+    T_in = rec.data.T_in.copy()
+    T_in[1234:] = np.nan              # e.g. a simulator or logger that failed part-way
+    with pytest.raises(DataError, match=r"T_in has \d+ non-finite samples \(first at sample 1234\)"):
+        diagnose(replace(rec.data, T_in=T_in))
+
+
 def test_progress_callback_and_bad_inputs():
     rec = record("sensor_offset:T_in", seed=13, duration=30.0, rate_hz=RATE)
     calls = []
