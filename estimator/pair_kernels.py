@@ -150,18 +150,24 @@ def _toe_step(Ta, Tb, lo_a, hi_a, dlo_a, dhi_a, wa, cpa, cra, lo_b, hi_b, dlo_b,
 
 
 @njit(cache=True)
+def _start(Pa, Pb, wa, wb, lo_a, lo_b, k_total):  # pragma: no cover - compiled
+    """The simulation kernels' initial state: copies of the profiles, their elongations, the distal
+    tension difference, the stick-band scratch arrays and the joint's balance slope (k_total + both
+    tendons' stiffness at their lower envelopes)."""
+    Ta = Pa.copy()
+    Tb = Pb.copy()
+    slope = k_total + 1.0 / max(elongation(lo_a, wa), 1e-9) + 1.0 / max(elongation(lo_b, wb), 1e-9)
+    return (Ta, Tb, elongation(Ta, wa), elongation(Tb, wb), Ta[Ta.shape[0] - 1] - Tb[Tb.shape[0] - 1],
+            np.zeros(1), np.full(1, 1e200), np.ones(1), slope)
+
+
+@njit(cache=True)
 def _simulate_toe(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, lo_b, hi_b, dlo_b, dhi_b, wb, k, tau_c, substeps,
                   theta, T_in, k2, thc, rho, Tc):  # pragma: no cover - compiled
     """:func:`_simulate` with the toe tendon (E9): each substep is predicted with the tangent
     compliance at the old profile, then redone with the secant compliance between the old and the
     predicted profile (second order in the step; exact when the profile does not move)."""
-    Ta = Pa.copy()
-    Tb = Pb.copy()
-    tau0 = Ta[Ta.shape[0] - 1] - Tb[Tb.shape[0] - 1]
-    sbx = np.zeros(1)
-    sbF = np.full(1, 1e200)
-    sbs = np.ones(1)
-    slope = k + k2 + 1.0 / max(elongation(lo_a, wa), 1e-9) + 1.0 / max(elongation(lo_b, wb), 1e-9)
+    Ta, Tb, _, _, tau0, sbx, sbF, sbs, slope = _start(Pa, Pb, wa, wb, lo_a, lo_b, k + k2)
     va = np.empty_like(wa)
     vb = np.empty_like(wb)
     th = 0.0
@@ -190,15 +196,7 @@ def _simulate_toe(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, lo_b, hi_b, dlo_b,
 @njit(cache=True)
 def _simulate(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, cpa, cra, lo_b, hi_b, dlo_b, dhi_b, wb, cpb, crb,
               k, tau_c, substeps, theta, T_in, k2, thc):  # pragma: no cover - compiled
-    Ta = Pa.copy()
-    Tb = Pb.copy()
-    xa0 = elongation(Ta, wa)
-    xb0 = elongation(Tb, wb)
-    tau0 = Ta[Ta.shape[0] - 1] - Tb[Tb.shape[0] - 1]
-    sbx = np.zeros(1)
-    sbF = np.full(1, 1e200)
-    sbs = np.ones(1)
-    slope = k + k2 + 1.0 / max(elongation(lo_a, wa), 1e-9) + 1.0 / max(elongation(lo_b, wb), 1e-9)
+    Ta, Tb, xa0, xb0, tau0, sbx, sbF, sbs, slope = _start(Pa, Pb, wa, wb, lo_a, lo_b, k + k2)
     th = 0.0
     c0 = c[0]
     prev = c[0]
@@ -241,15 +239,7 @@ def _simulate_bend(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, cpa, cra, lo_b, h
     """:func:`_simulate` with friction in the bending section (``mu_b``, module docstring): per substep
     the motors move with the joint held, then the joint stays while the balance lies in its band and
     otherwise moves to the first zero of the balance in the direction it points (bracket, bisection)."""
-    Ta = Pa.copy()
-    Tb = Pb.copy()
-    xa0 = elongation(Ta, wa)
-    xb0 = elongation(Tb, wb)
-    tau0 = Ta[Ta.shape[0] - 1] - Tb[Tb.shape[0] - 1]
-    sbx = np.zeros(1)
-    sbF = np.full(1, 1e200)
-    sbs = np.ones(1)
-    slope = k + 1.0 / max(elongation(lo_a, wa), 1e-9) + 1.0 / max(elongation(lo_b, wb), 1e-9)
+    Ta, Tb, xa0, xb0, tau0, sbx, sbF, sbs, slope = _start(Pa, Pb, wa, wb, lo_a, lo_b, k)
     th = 0.0
     c0 = c[0]
     prev = c[0]
