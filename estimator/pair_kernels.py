@@ -194,6 +194,18 @@ def _simulate_toe(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, lo_b, hi_b, dlo_b,
 
 
 @njit(cache=True)
+def _motor_substep(Ta, Tb, lo_a, hi_a, wa, cpa, cra, lo_b, hi_b, wb, cpb, crb, xa0, xb0, G, u, th, sbx, sbF,
+                   sbs):  # pragma: no cover - compiled
+    """One motor substep with the joint held at ``th``: the motors' positions for the command offset
+    ``u`` (``xa0 + G u``, ``xb0 - G u``) and both proximal profiles advanced to them; returns (xa, xb)."""
+    xa = xa0 + G * u
+    xb = xb0 - G * u
+    advance_proximal(Ta, lo_a, hi_a, wa, cpa, cra, xa - th, 0.0, sbx, sbF, sbs)
+    advance_proximal(Tb, lo_b, hi_b, wb, cpb, crb, xb + th, 0.0, sbx, sbF, sbs)
+    return xa, xb
+
+
+@njit(cache=True)
 def _simulate(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, cpa, cra, lo_b, hi_b, dlo_b, dhi_b, wb, cpb, crb,
               k, tau_c, substeps, theta, T_in, k2, thc):  # pragma: no cover - compiled
     Ta, Tb, xa0, xb0, tau0, sbx, sbF, sbs, slope = _start(Pa, Pb, wa, wb, lo_a, lo_b, k + k2)
@@ -202,11 +214,8 @@ def _simulate(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, cpa, cra, lo_b, hi_b, 
     prev = c[0]
     for i in range(c.shape[0]):
         for s in range(substeps):
-            u = prev + (c[i] - prev) * (s + 1) / substeps - c0
-            xa = xa0 + G * u
-            xb = xb0 - G * u
-            advance_proximal(Ta, lo_a, hi_a, wa, cpa, cra, xa - th, 0.0, sbx, sbF, sbs)
-            advance_proximal(Tb, lo_b, hi_b, wb, cpb, crb, xb + th, 0.0, sbx, sbF, sbs)
+            xa, xb = _motor_substep(Ta, Tb, lo_a, hi_a, wa, cpa, cra, lo_b, hi_b, wb, cpb, crb, xa0, xb0, G,
+                                    prev + (c[i] - prev) * (s + 1) / substeps - c0, th, sbx, sbF, sbs)
             tau = tau0
             if tau_c > 0.0:
                 f0 = joint_torque_balance(th, Ta, dlo_a, dhi_a, wa, elongation(Ta, wa), xa, Tb, dlo_b, dhi_b, wb,
@@ -245,11 +254,8 @@ def _simulate_bend(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, cpa, cra, lo_b, h
     prev = c[0]
     for i in range(c.shape[0]):
         for j in range(substeps):
-            u = prev + (c[i] - prev) * (j + 1) / substeps - c0
-            xa = xa0 + G * u
-            xb = xb0 - G * u
-            advance_proximal(Ta, lo_a, hi_a, wa, cpa, cra, xa - th, 0.0, sbx, sbF, sbs)
-            advance_proximal(Tb, lo_b, hi_b, wb, cpb, crb, xb + th, 0.0, sbx, sbF, sbs)
+            xa, xb = _motor_substep(Ta, Tb, lo_a, hi_a, wa, cpa, cra, lo_b, hi_b, wb, cpb, crb, xa0, xb0, G,
+                                    prev + (c[i] - prev) * (j + 1) / substeps - c0, th, sbx, sbF, sbs)
             ea = elongation(Ta, wa)
             eb = elongation(Tb, wb)
             s = 1.0
