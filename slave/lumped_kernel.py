@@ -66,6 +66,24 @@ def _tension(e, T, k_lin, beta, Tc):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def _load_segment(x, lx):  # pragma: no cover - compiled
+    """Index j of the piece of the load law that holds x [m] (0 left of lx[0], j right of lx[j-1])."""
+    m = lx.shape[0]
+    for j in range(m):
+        if x <= lx[j]:
+            return j
+    return m
+
+
+@njit(cache=True, nogil=True)
+def _load_piece(x, j, lx, lF, ls):  # pragma: no cover - compiled
+    """Force [N] of piece j of the load law (extended as an affine law) at x [m], and its slope."""
+    if j == 0:
+        return lF[0] + ls[0] * (x - lx[0]), ls[0]
+    return lF[j - 1] + ls[j] * (x - lx[j - 1]), ls[j]
+
+
+@njit(cache=True, nogil=True)
 def _thomas(a, b, c, d, n):  # pragma: no cover - compiled
     """Solve the tridiagonal system in place; the solution is left in d."""
     for i in range(1, n):
@@ -91,8 +109,14 @@ def simulate(xcmd, n_sub, dt, bw_alpha, vmax, u, v, e, T, z, st, s, m, dth, qds,
     speed-strengthening term implicit: taken explicitly it is an unstable damper for light nodes);
     plus visc_i v'. The stick/slip status of every node (``st``: 0, +1, -1, kept between
     substeps) is found by an active-set iteration (at most ``n_iter`` tridiagonal solves, usually
-    one); N_i, the Stribeck factor, the element stiffness and the load slope are frozen over a
-    substep; |F| is clipped to Fc when the bound drops.
+    one) together with the taut/slack state of every element at the end of the substep (taut:
+    T' = Tb + ktan dt (v_prox' - v'), Tb the tension, or ktan e for an element slack at the start;
+    slack: T' = 0) and the piece of the load law that holds the distal node at its end: contact
+    and separation are implicit (taken at the start of the substep, an element going taut in a
+    substep was stretched with no stiffness and the stiff rebound of the next pumped energy into
+    a slack tendon until it overflowed - lumped seed 316100, joint load, T_in near 0). N_i, the
+    Stribeck factor and the tangent stiffness are frozen over a substep; |F| is clipped to Fc when
+    the bound drops.
     Writes per sample k: out[k] = (x_motor, T_in, u_distal, T_out, x_joint, xp).
     """
     n = u.shape[0]
@@ -105,6 +129,10 @@ def simulate(xcmd, n_sub, dt, bw_alpha, vmax, u, v, e, T, z, st, s, m, dth, qds,
     cs = np.empty(n)
     cvs = np.empty(n)
     w = np.empty(n)
+    ktt = np.empty(n)
+    Tt = np.empty(n)
+    Tb = np.empty(n)
+    tk = np.empty(n, dtype=np.int64)
     xprev = s[0]
     for k in range(xcmd.shape[0]):
         x_goal = xcmd[k]
@@ -122,16 +150,18 @@ def simulate(xcmd, n_sub, dt, bw_alpha, vmax, u, v, e, T, z, st, s, m, dth, qds,
             mu = mu0 + mu_rate * s[3]
             if mu < 0.0:
                 mu = 0.0
-            FL, kL = load_force(u[n - 1], lx, lF, ls)
-            # element tangent stiffness (0 when slack) and each node's Coulomb bound
+            # elements: tangent stiffness and affine force base if taut at the end of the substep
+            # (T' = Tb + ktan dt (v_prox' - v')); a slack element (a tendon cannot push) has neither
             for i in range(n):
-                if e[i] >= 0.0:
-                    if beta == 0.0:
-                        ktan[i] = k_lin
-                    else:
-                        ktan[i] = k_lin / (1.0 + beta * math.exp(-T[i] / Tc))
+                if beta == 0.0:
+                    ktt[i] = k_lin
                 else:
-                    ktan[i] = 0.0
+                    ktt[i] = k_lin / (1.0 + beta * math.exp(-(T[i] if e[i] > 0.0 else 0.0) / Tc))
+                Tt[i] = T[i] if e[i] > 0.0 else ktt[i] * e[i]
+                tk[i] = 1 if e[i] >= 0.0 else 0
+                ktan[i] = ktt[i] if tk[i] == 1 else 0.0
+                Tb[i] = Tt[i] if tk[i] == 1 else 0.0
+            for i in range(n):
                 Tnext = T[i + 1] if i < n - 1 else s[4]
                 tb = 0.5 * (T[i] + Tnext)
                 if tb < 0.0:
@@ -151,12 +181,18 @@ def simulate(xcmd, n_sub, dt, bw_alpha, vmax, u, v, e, T, z, st, s, m, dth, qds,
                 Fcs[i] = Fc
                 cs[i] = Fc * dt * inv_zss
                 w[i] = v[i]
-            # proximal tendon point behind the sheath spring: v_p' = A + B v_0'
-            r = ktan[0] * inv_ks
-            A = (s[0] - s[1] - T[0] * inv_ks) / (dt * (1.0 + r))
-            B = r / (1.0 + r)
-            # active set of the elasto-plastic bristles: stick F' = F + c v', slip F' = st Fc
+            # load law: the piece that holds the distal node at the end of the substep
+            jL = _load_segment(u[n - 1], lx)
+            A = 0.0
+            B = 0.0
+            # active set, one tridiagonal solve per pass: stick/slip of every bristle (stick
+            # F' = F + c v', slip F' = st Fc), taut/slack of every element, the load law's piece
             for it in range(n_iter):
+                # proximal tendon point behind the sheath spring: v_p' = A + B v_0'
+                r = ktan[0] * inv_ks
+                A = (s[0] - s[1] - Tb[0] * inv_ks) / (dt * (1.0 + r))
+                B = r / (1.0 + r)
+                FL, kL = _load_piece(u[n - 1], jL, lx, lF, ls)
                 for i in range(n):
                     if st[i] == 0:
                         D = cs[i]
@@ -166,9 +202,9 @@ def simulate(xcmd, n_sub, dt, bw_alpha, vmax, u, v, e, T, z, st, s, m, dth, qds,
                         Fw = st[i] * Fcs[i]
                     ci = ktan[i] * dt
                     cn = ktan[i + 1] * dt if i < n - 1 else (kL * dt + b_load)
-                    Tn = T[i + 1] if i < n - 1 else FL
+                    Tn = Tb[i + 1] if i < n - 1 else FL
                     b[i] = m[i] / dt + D + visc[i] + cn + (ci * (1.0 - B) if i == 0 else ci)
-                    d[i] = m[i] / dt * v[i] + T[i] - Tn - Fw
+                    d[i] = m[i] / dt * v[i] + Tb[i] - Tn - Fw
                     if i == 0:
                         d[i] += ci * A
                         a[i] = 0.0
@@ -190,6 +226,19 @@ def simulate(xcmd, n_sub, dt, bw_alpha, vmax, u, v, e, T, z, st, s, m, dth, qds,
                     elif st[i] * trial < Fcs[i]:
                         st[i] = 0
                         changed = True
+                vp_try = A + B * d[0]
+                for i in range(n):
+                    vprox = vp_try if i == 0 else d[i - 1]
+                    want = 1 if e[i] + dt * (vprox - d[i]) > 0.0 else 0
+                    if want != tk[i]:
+                        tk[i] = want
+                        ktan[i] = ktt[i] if want == 1 else 0.0
+                        Tb[i] = Tt[i] if want == 1 else 0.0
+                        changed = True
+                jn = _load_segment(u[n - 1] + dt * d[n - 1], lx)
+                if jn != jL:
+                    jL = jn
+                    changed = True
                 if not changed:
                     break
             vp = A + B * w[0]
