@@ -157,7 +157,7 @@ def _attribute(d: Path) -> None:
         if not path.is_file():
             continue
         cy = np.load(path)["cycles"]
-        t, late, step, ov = cy.T
+        t, late, step, ov = cy.T[:4]
         idx = np.nonzero(ov > 0)[0]
         near = [min((abs(s[0] - t[i]) for s in stalls), default=np.inf) < NEAR for i in idx]
         own = idx[~np.asarray(near, dtype=bool)] if len(idx) else idx

@@ -105,13 +105,24 @@ class FakeClock:
 
 
 class Pacer:
-    """Sleeps a loop to a fixed-rate grid of deadlines and counts the ones it misses.
+    """Sleeps a loop to a fixed-rate grid of deadlines and counts the periods it misses.
 
     Deadlines are ``t0 + k / rate_hz`` with ``t0`` the time of construction (or :meth:`reset`).
-    :meth:`wait` sleeps to the next deadline. If it is called after that deadline, the period was
-    overrun: it returns at once without sleeping. If less than one period late, the next deadline
-    stays on the grid (the loop catches up); if later, the deadlines already passed are skipped
-    (no burst of catch-up cycles) and counted in ``skipped``.
+    :meth:`wait` sleeps to the next deadline and returns; the loop then runs one cycle.
+
+    **Overrun** (a missed period): the cycle did not start in its period, either because :meth:`wait`
+    was called after its deadline (the previous cycle's work, or a stall during it, ran past the
+    deadline; :meth:`wait` then returns at once) or because the sleep returned one period or more late
+    (a stall while sleeping swallowed the next deadline). Either way one overrun is counted, the
+    deadlines that passed without a cycle are counted in ``skipped``, and the grid restarts one period
+    after the late cycle's start: no catch-up cycles back to back, and the cycle after a stall has a
+    whole period, so that *one stall is one overrun* whatever its length or phase. (Catching up on the
+    old grid instead left the next cycle only the rest of a period, and a step longer than that rest
+    counted the same stall a second time.) An overrun that lost at least one whole period is also a
+    *stall* (``stalls``). A wake-up later than its deadline by less than a period whose cycle still
+    ends before the next deadline is not an overrun, and the grid stays; ``late_starts`` counts every
+    cycle that started more than half a period after its deadline, overrun or not, and
+    ``max_lateness`` keeps the worst start.
 
     Parameters
     ----------
@@ -137,9 +148,11 @@ class Pacer:
     def reset(self) -> None:
         """Start a new grid at the current time and zero the statistics."""
         self._next = self.clock.now() + self.period
-        self.ticks = 0             # wait() calls
-        self.overruns = 0          # wait() calls that came after their deadline
-        self.skipped = 0           # deadlines dropped to resynchronise after long overruns
+        self.ticks = 0             # wait() calls: cycles run
+        self.overruns = 0          # cycles that missed their period (class docstring)
+        self.stalls = 0            # overruns that lost one whole period or more
+        self.skipped = 0           # deadlines that passed without a cycle
+        self.late_starts = 0       # cycles started more than half a period after their deadline
         self.max_lateness = 0.0    # [s] worst (return time - deadline), overruns and oversleeps alike
         self.last_lateness = 0.0   # [s]
         self.last_overrun = False  # whether the last wait() came after its deadline
@@ -155,26 +168,35 @@ class Pacer:
         threads work until then, :data:`teleop.realtime.IDLE`)."""
         return self._next
 
+    def _count(self, lateness: float, missed: bool) -> None:
+        """Book one cycle that started ``lateness`` [s] after its deadline; ``missed``: an overrun."""
+        P = self.period
+        self.ticks += 1
+        self.last_overrun = missed
+        if missed:
+            self.overruns += 1
+            lost = math.floor(lateness / P)
+            if lost > 0:
+                self.skipped += lost
+                self.stalls += 1
+        if lateness > 0.5 * P:
+            self.late_starts += 1
+        self.last_lateness = lateness
+        if lateness > self.max_lateness:
+            self.max_lateness = lateness
+
     def wait(self) -> float:
         """Sleep until the next deadline (or not at all if it has passed) and return the time [s]."""
         deadline = self._next
         now = self.clock.now()
-        if now <= deadline:
+        missed = now > deadline
+        if not missed:
             self.clock.sleep_until(deadline)
             now = self.clock.now()
-            self._next = deadline + self.period
-            self.last_overrun = False
-        else:
-            self.overruns += 1
-            self.last_overrun = True
-            late_periods = math.floor((now - deadline) / self.period)
-            self.skipped += late_periods
-            self._next = deadline + (late_periods + 1) * self.period
+            missed = now - deadline >= self.period
         lateness = max(0.0, now - deadline)
-        self.ticks += 1
-        self.last_lateness = lateness
-        if lateness > self.max_lateness:
-            self.max_lateness = lateness
+        self._next = now + self.period if missed else deadline + self.period
+        self._count(lateness, missed)
         return now
 
     def stats(self) -> dict[str, float]:
@@ -183,15 +205,18 @@ class Pacer:
         Returns
         -------
         dict
-            ``rate_hz``, ``period`` [s], ``ticks``, ``overruns``, ``skipped``, ``max_lateness`` [s],
-            ``overrun_fraction`` (overruns / ticks, 0 before the first tick).
+            ``rate_hz``, ``period`` [s], ``ticks``, ``overruns``, ``stalls``, ``skipped``,
+            ``late_starts``, ``max_lateness`` [s], ``overrun_fraction`` (overruns / ticks, 0 before
+            the first tick); the definitions in the class docstring.
         """
         return {
             "rate_hz": self.rate_hz,
             "period": self.period,
             "ticks": self.ticks,
             "overruns": self.overruns,
+            "stalls": self.stalls,
             "skipped": self.skipped,
+            "late_starts": self.late_starts,
             "max_lateness": self.max_lateness,
             "overrun_fraction": self.overruns / self.ticks if self.ticks else 0.0,
         }
@@ -208,9 +233,13 @@ class LockedPacer(Pacer):
     than one period after a cycle a message started (its next message is due one period later, so
     the jitter of its arrival does not let the deadline come first), on the plain grid otherwise.
 
-    An *overrun* is a :meth:`wait` called more than one period after the previous cycle started:
-    the cycle (step and everything else until the next wait) took longer than a period, the same
-    budget a grid cycle that woke on time has.
+    An *overrun* is a cycle that missed its period: :meth:`wait` called more than one period after
+    the previous cycle started (the cycle, step and everything else until the next wait, took longer
+    than a period: the same budget a grid cycle that woke on time has), or a cycle that started one
+    period or more after its deadline (a stall while waiting: that period's message waited). One
+    overrun per stall; the periods lost since the previous cycle's period ended are ``skipped``, and
+    an overrun that lost one or more is a *stall* (``stalls``). The lateness of a cycle is its start
+    less its deadline (0 for a cycle a message started in time); ``late_starts`` as in :class:`Pacer`.
 
     Parameters
     ----------
@@ -249,26 +278,36 @@ class LockedPacer(Pacer):
             return now
         P = self.period
         now = self.clock.now()
-        self.last_overrun = now > self._start + P
-        if self.last_overrun:
-            self.overruns += 1
-            self.skipped += math.floor((now - self._start - P) / P)
+        ran_over = now > self._start + P
         earliest = self._start + self.min_gap * P
         if now < earliest:
             self.clock.sleep_until(earliest)
         deadline = self._next
         arrived = self.source.wait(self._seen + 1, max(0.0, deadline - self.clock.now()))
         now = self.clock.now()
+        lateness = max(0.0, now - deadline)
+        # a cycle that ran longer than a period, or one that started a period or more after its
+        # deadline (a stall while waiting: the messages of that period waited): one overrun, and the
+        # periods lost are counted from the previous cycle's end of period
+        missed = ran_over or lateness >= P
         if arrived:
             self.locked += 1
-            lateness = 0.0
             self._next = now + (1.0 + self.guard) * P
         else:
-            lateness = max(0.0, now - deadline)
             self._next = max(deadline + P, now + self.min_gap * P)
+        gap = now - self._start - P
         self._start = now
         self._seen = int(self.source.count)
         self.ticks += 1
+        self.last_overrun = missed
+        if missed:
+            self.overruns += 1
+            lost = math.floor(max(gap, 0.0) / P)
+            if lost > 0:
+                self.skipped += lost
+                self.stalls += 1
+        if lateness > 0.5 * P:
+            self.late_starts += 1
         self.last_lateness = lateness
         self.max_lateness = max(self.max_lateness, lateness)
         return now

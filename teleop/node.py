@@ -186,7 +186,7 @@ class NodeBase:
             source = None
         pacer = Pacer(clock, self.rate_hz) if source is None else LockedPacer(clock, self.rate_hz, source)
         cycles = self.cycle_stats = CycleStats(self.side.name.lower())
-        perf = time.perf_counter
+        perf, cpu = time.perf_counter, time.thread_time
         idle = IDLE.open if real else None
         t0 = clock.now()
         machine = _machine_now() if real else None
@@ -194,9 +194,10 @@ class NodeBase:
             while not self.done:
                 now = pacer.wait()
                 state = self.state.name
-                t_step = perf()
+                c_step, t_step = cpu(), perf()
                 self.step(now)
-                cycles.add(now, pacer.last_lateness, pacer.last_overrun, perf() - t_step, state)
+                t_end = perf()
+                cycles.add(now, pacer.last_lateness, pacer.last_overrun, t_end - t_step, state, cpu() - c_step)
                 if idle is not None:
                     idle(pacer.next_wake - IDLE_GUARD)
                 if max_duration is not None and now - t0 >= max_duration:

@@ -64,15 +64,19 @@ def master_console_line(m: dict) -> str:
 
 def loop_lines(s: dict, *, detailed: bool) -> list[str]:
     """One line per side (cycles, rate, overruns, safe events), then the round trip when echoes were
-    seen (p50, p99); ``detailed`` adds each loop's worst lateness and the round trip's maximum."""
+    seen (p50, p99); ``detailed`` adds each loop's stalls (overruns that lost a whole period: one per
+    stall, :class:`teleop.clock.Pacer`), skipped deadlines, late starts, worst lateness and the round
+    trip's maximum."""
     lines = []
     for side in ("master", "slave"):
         st = s.get(side, {})
         pc = st.get("pacer", {})
         worst = f"worst lateness {1e3 * pc.get('max_lateness', 0):.1f} ms, " if detailed else ""
+        stalls = (f"{pc['stalls']} of them stalls > 1 period ({pc.get('skipped', 0)} deadlines skipped), "
+                  f"{pc.get('late_starts', 0)} late starts > 1/2 period, " if detailed and "stalls" in pc else "")
         lines.append(f"{side:6s} loop: {pc.get('ticks', 0)} cycles at {pc.get('rate_hz', 0):.0f} Hz, "
                      f"{pc.get('overruns', 0)} overruns ({100 * pc.get('overrun_fraction', 0):.2f} %), "
-                     f"{worst}safe events {st.get('safe_events', 0)}")
+                     f"{stalls}{worst}safe events {st.get('safe_events', 0)}")
     line = machine_line(s)
     if line and detailed:
         lines.append(line)

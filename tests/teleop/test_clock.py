@@ -54,16 +54,16 @@ def test_pacer_sleeps_to_a_fixed_grid_when_on_time():
     assert s["max_lateness"] == 0.0 and s["period"] == pytest.approx(0.01)
 
 
-def test_pacer_counts_an_overrun_and_catches_up_on_the_grid():
+def test_pacer_counts_an_overrun_and_restarts_the_grid_a_period_after_the_late_start():
     c = FakeClock(0.0)
     p = Pacer(c, 100.0)                    # deadlines 0.01, 0.02, ...
     c.advance(0.013)                       # overran the first period by 3 ms
     assert p.wait() == pytest.approx(0.013)  # no sleep
-    assert p.overruns == 1 and p.skipped == 0 and p.last_overrun
+    assert p.overruns == 1 and p.skipped == 0 and p.stalls == 0 and p.last_overrun
     assert p.max_lateness == pytest.approx(0.003)
-    assert p.next_deadline == pytest.approx(0.02)   # same grid: the loop catches up
+    assert p.next_deadline == pytest.approx(0.023)  # a whole period for the late cycle's successor
     c.advance(0.001)
-    assert p.wait() == pytest.approx(0.02)
+    assert p.wait() == pytest.approx(0.023)
     assert p.overruns == 1 and p.last_lateness == 0.0 and not p.last_overrun
 
 
@@ -72,22 +72,63 @@ def test_pacer_skips_whole_missed_periods_instead_of_bursting():
     p = Pacer(c, 1000.0)                   # 1 ms period, first deadline 0.001
     c.advance(0.0045)                      # 3.5 ms late: deadlines 0.002, 0.003, 0.004 are gone
     p.wait()
-    assert p.overruns == 1 and p.skipped == 3
-    assert p.next_deadline == pytest.approx(0.005)
+    assert p.overruns == 1 and p.skipped == 3 and p.stalls == 1 and p.late_starts == 1
+    assert p.next_deadline == pytest.approx(0.0055)
     assert p.max_lateness == pytest.approx(0.0035)
     c.advance(0.0002)
-    assert p.wait() == pytest.approx(0.005)
+    assert p.wait() == pytest.approx(0.0055)
     s = p.stats()
-    assert s["ticks"] == 2 and s["overrun_fraction"] == 0.5
+    assert s["ticks"] == 2 and s["overrun_fraction"] == 0.5 and s["stalls"] == 1 and s["late_starts"] == 1
+
+
+def test_a_stall_ending_just_before_a_deadline_is_counted_once():
+    # the wait comes 6.99 periods late: on the old grid the next deadline was 0.01 periods away, and the
+    # next (ordinary) step overran it: the same stall counted twice
+    c = FakeClock(0.0)
+    p = Pacer(c, 1000.0)
+    c.advance(0.001 + 0.00699)
+    p.wait()
+    for _ in range(5):
+        c.advance(1.5e-4)                  # ordinary steps
+        p.wait()
+    assert p.overruns == 1 and p.stalls == 1 and p.skipped == 6 and p.ticks == 6
+
+
+class _StallingClock(FakeClock):
+    """A FakeClock whose next sleep returns ``extra`` seconds late (the process stalled while asleep)."""
+
+    def __init__(self):
+        super().__init__(0.0)
+        self.extra = 0.0
+
+    def sleep_until(self, t):
+        super().sleep_until(t + self.extra)
+        self.extra = 0.0
+
+
+@pytest.mark.parametrize("oversleep, overrun, late", [(2.5e-3, True, True), (0.7e-3, False, True),
+                                                     (0.9e-3, True, True), (0.2e-3, False, False)])
+def test_a_stall_while_sleeping_is_one_overrun_when_the_period_is_lost(oversleep, overrun, late):
+    c = _StallingClock()
+    p = Pacer(c, 1000.0)
+    starts = []
+    for k in range(6):
+        c.extra = oversleep if k == 2 else 0.0
+        starts.append(p.wait())
+        c.advance(1.5e-4)                  # the step
+    assert p.overruns == int(overrun) and p.late_starts == int(late)
+    assert p.stalls == int(oversleep >= 1e-3) and p.skipped == int(oversleep // 1e-3)
+    assert np.diff(starts)[3:] == pytest.approx([1e-3] * 2)   # after the late cycle(s), one per period again
+    assert p.max_lateness == pytest.approx(oversleep)
 
 
 def test_pacer_max_lateness_keeps_the_worst():
     c = FakeClock(0.0)
     p = Pacer(c, 10.0)
     c.advance(0.15)
-    p.wait()                               # 50 ms late
-    c.advance(0.11)
-    p.wait()                               # deadline 0.2, now 0.26: 60 ms late
+    p.wait()                               # 50 ms late; next deadline 0.25
+    c.advance(0.16)
+    p.wait()                               # deadline 0.25, now 0.31: 60 ms late
     c.advance(0.001)
     p.wait()
     assert p.overruns == 2
@@ -194,9 +235,26 @@ def test_one_long_stall_is_one_overrun_and_both_pacers_resynchronise_without_a_b
     for _ in range(5):
         c.advance(2e-4)
         starts.append(q.wait())
-    assert q.overruns == 1 and q.skipped == 39
+    assert q.overruns == 1 and q.skipped == 39 and q.stalls == 1
     gaps = np.diff(starts)                  # the next message starts the next cycle (never before half a period),
     assert gaps[0] >= 0.5e-3 and gaps[1:] == pytest.approx([1e-3] * 4)   # then one per period
+
+
+def test_locked_pacer_counts_a_stall_while_waiting_once():
+    # the slave stalls while waiting: the messages kept arriving, the cycle starts 5 periods late
+    c = _StallingClock()
+    src = _Arrivals(c, [0.0013 + 1e-3 * k for k in range(40)])
+    q = LockedPacer(c, 1000.0, src)
+    for _ in range(5):
+        q.wait()
+        c.advance(2e-4)
+    before = q.ticks
+    c.advance(5e-3)                          # stalled in the wait (a message arrived meanwhile)
+    q.wait()
+    for _ in range(5):
+        c.advance(2e-4)
+        q.wait()
+    assert q.ticks == before + 6 and q.overruns == 1 and q.stalls == 1 and q.skipped >= 4
 
 
 def test_the_idle_window_ends_when_the_next_message_is_due_not_at_the_locked_deadline():

@@ -17,21 +17,34 @@ def test_cycle_stats_percentiles_worst_step_and_overruns_by_state(tmp_path, monk
     for k in range(1000):                      # 990 steps of 0.1 ms, 10 of 2 ms (the overrunning ones)
         slow = k % 100 == 0
         cs.add(k * 1e-3, 0.3e-3 if slow else 0.0, slow, 2e-3 if slow else 0.1e-3,
-               "CALIBRATING" if k < 500 else "ENGAGED")
+               "CALIBRATING" if k < 500 else "ENGAGED", cpu=1.5e-3 if slow else 0.08e-3)
     s = cs.stats()
     assert s["step_ms"]["p50"] == (int(0.1e-3 / BIN) + 1) * BIN * 1e3      # the bin holding 0.1 ms
     assert s["step_ms"]["p99_9"] >= 2.0 and s["step_ms"]["max"] == 2.0
+    assert s["step_cpu_ms"]["p50"] == (int(0.08e-3 / BIN) + 1) * BIN * 1e3 and s["step_cpu_ms"]["max"] == 1.5
     assert s["overruns_by_state"] == {"CALIBRATING": 5, "ENGAGED": 5}
     assert s["cycles_by_state"] == {"CALIBRATING": 500, "ENGAGED": 500}
     path = cs.dump()
     rows = np.load(path)["cycles"]
-    assert rows.shape == (1000, 4) and rows[:, 3].sum() == 10
+    assert rows.shape == (1000, 5) and rows[:, 3].sum() == 10 and rows[:, 4].max() == 1.5e-3
+
+
+def test_cycle_stats_count_the_garbage_collectors_passes_until_closed(monkeypatch):
+    import gc
+    monkeypatch.delenv("TELEOP_CYCLE_TRACE", raising=False)
+    cs = CycleStats("master")
+    gc.collect()
+    g = cs.stats()["gc"]
+    assert g["collections"][2] >= 1 and g["max_ms"] > 0 and g["total_ms"] >= g["max_ms"]
+    cs.dump()                                  # no trace: nothing written, the collector no longer watched
+    gc.collect()
+    assert cs.stats()["gc"]["collections"] == g["collections"]
 
 
 def test_cycle_stats_without_cycles_and_without_trace(monkeypatch):
     monkeypatch.delenv("TELEOP_CYCLE_TRACE", raising=False)
     cs = CycleStats("master")
-    assert cs.stats()["step_ms"]["p50"] is None and cs.dump() is None
+    assert cs.stats()["step_ms"]["p50"] is None and cs.stats()["step_cpu_ms"]["p50"] is None and cs.dump() is None
 
 
 def test_idle_window_lets_work_through_only_while_the_loop_sleeps():
@@ -94,6 +107,16 @@ def test_machine_steal_reads_the_steal_column_and_the_demo_prints_it(tmp_path):
     assert machine_line({"master": {"pacer": {}}}) is None
 
 
+def test_the_demo_prints_overruns_with_their_stalls_skipped_deadlines_and_late_starts():
+    from teleop.app.demo_run import loop_lines
+    pc = {"ticks": 11000, "rate_hz": 1000.0, "overruns": 22, "overrun_fraction": 0.002, "stalls": 7, "skipped": 31,
+          "late_starts": 25, "max_lateness": 0.0081}
+    line = loop_lines({"master": {"pacer": pc, "safe_events": 0}}, detailed=True)[0]
+    assert line == ("master loop: 11000 cycles at 1000 Hz, 22 overruns (0.20 %), 7 of them stalls > 1 period (31 "
+                    "deadlines skipped), 25 late starts > 1/2 period, worst lateness 8.1 ms, safe events 0")
+    assert "stalls" not in loop_lines({"master": {"pacer": pc}}, detailed=False)[0]
+
+
 def test_a_real_clock_run_reports_the_machine_beside_the_cycles(monkeypatch):
     import gc
     monkeypatch.setattr(gc, "freeze", lambda: None)                  # the test process keeps its collector
@@ -115,4 +138,6 @@ def test_a_real_clock_run_reports_the_machine_beside_the_cycles(monkeypatch):
     node.run(MonotonicClock(), max_duration=1.0)
     m = node.pacer_stats["machine"]
     assert node.pacer_stats["ticks"] == 21 and m["cpus"] == os.cpu_count() and 0.015 < m["loop_s"] < 1.0
+    ps = node.pacer_stats
+    assert ps["step_cpu_ms"]["p50"] is not None and {"stalls", "late_starts", "gc"} <= set(ps)
     assert m["steal_ms"] is None or m["steal_ms"] >= 0.0
