@@ -142,10 +142,12 @@ def main(seconds: float = 10.0) -> None:
         cyc, ovr = pc.get("cycles_by_state", {}), pc.get("overruns_by_state", {})
         tele = [k for k in cyc if k not in ("STARTING", "CALIBRATING")]
         n_tele, o_tele = sum(cyc[k] for k in tele), sum(ovr.get(k, 0) for k in tele)
-        step, late = pc.get("step_ms", {}), pc.get("lateness_ms", {})
+        step, late, cpu = pc.get("step_ms", {}), pc.get("lateness_ms", {}), pc.get("step_cpu_ms", {})
         ms = lambda v: "-" if v is None else f"{v:.2f}"    # noqa: E731
         print(f"  {side}: {pc.get('scheduling', '?')}, overruns outside calibration {o_tele}/{n_tele}"
-              f" ({100 * o_tele / max(n_tele, 1):.2f} %), step p50 {ms(step.get('p50'))} p99 {ms(step.get('p99'))} ms, "
+              f" ({100 * o_tele / max(n_tele, 1):.2f} %), {pc.get('stalls', '?')} stalls > 1 period, "
+              f"{pc.get('late_starts', '?')} late starts > 1/2 period; step p50 {ms(step.get('p50'))} p99 "
+              f"{ms(step.get('p99'))} ms (its CPU time p50 {ms(cpu.get('p50'))} p99 {ms(cpu.get('p99'))} ms), "
               f"lateness p99 {ms(late.get('p99'))} ms" + (f", {pc['locked']} cycles started by a command"
                                                          if "locked" in pc else ""))
 

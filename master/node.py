@@ -122,9 +122,23 @@ class MasterNode(MasterNodeBase):
         self.status = ConsoleStatus.WAIT_SLAVE
         self.align_refusals = 0                  # engage attempts refused for a misaligned axis
         self._p_prev: list[float | None] = [None] * len(r)
+        self._period = 1.0 / cfg.master.rate_hz
         self.force_cmd = [0.0] * len(r)
         self.force = [0.0] * len(r)
         self.max_abs_force = 0.0
+
+    @property
+    def device(self):
+        """The haptic device; its optional hooks (``watch``, ``on_console``, ``set_forces``) are looked up
+        once when it is set, not every cycle."""
+        return self._device
+
+    @device.setter
+    def device(self, device) -> None:
+        self._device = device
+        self._watch = getattr(device, "watch", None)
+        self._on_console = getattr(device, "on_console", None)
+        self._set_forces = getattr(device, "set_forces", None)
 
     # ------------------------------------------------------------------------------------------------
     def _fits(self, est, now: float) -> bool:
@@ -156,13 +170,15 @@ class MasterNode(MasterNodeBase):
         """Every axis's console, then the instrument's state (module docstring, step 3)."""
         q = [None] * len(pos) if est is None else self.axes.slave_positions(est)
         for c, p, qk in zip(self.consoles, pos, q):
-            c.update(DeviceState(dev.t, p, dev.buttons, dev.operator_present), healthy, qk)
+            # a one-axis device's own state when it holds this very position (no new object per cycle)
+            d = dev if type(dev) is DeviceState and dev.position is p else \
+                DeviceState(dev.t, p, dev.buttons, dev.operator_present)
+            c.update(d, healthy, qk)
         status = min(c.status for c in self.consoles)
         self.align_refusals += status == ConsoleStatus.ALIGN and self.status != ConsoleStatus.ALIGN
         self.status = status
-        on_console = getattr(self.device, "on_console", None)
-        if on_console is not None:
-            on_console(status)
+        if self._on_console is not None:
+            self._on_console(status)
         if status == ConsoleStatus.ENGAGED:
             if self.state != SideState.ENGAGED:      # ramp and passivity observer start afresh
                 for f, pc in zip(self.forces, self.passivity):
@@ -195,9 +211,8 @@ class MasterNode(MasterNodeBase):
             return
         self._receive(now)
         est, healthy, reason = self._peer_status(now)
-        watch = getattr(self.device, "watch", None)
-        if watch is not None:
-            watch(self.axes.view(est), self.state == SideState.ENGAGED)
+        if self._watch is not None:
+            self._watch(self.axes.view(est), self.state == SideState.ENGAGED)
         dev = self.device.read(now)
         pos = self._positions(dev)
         if not self._stopping(now, bool(getattr(self.device, "finished", False))):
@@ -210,7 +225,7 @@ class MasterNode(MasterNodeBase):
         self._send_command(self.axes.command(self.seq, now, q, engaged, marker), now)
 
         # ---- forces, per axis: map (scale, ramp, clamp, slew) -> passivity controller -> clamp ----
-        dt = 1.0 / self.cfg.master.rate_hz if self._t_prev is None else now - self._t_prev
+        dt = self._period if self._t_prev is None else now - self._t_prev
         self._t_prev = now
         rendered = [math.nan] * len(pos) if est is None else self.axes.rendered(est)
         for k, (fm, pc, p, T) in enumerate(zip(self.forces, self.passivity, pos, rendered)):
@@ -233,7 +248,7 @@ class MasterNode(MasterNodeBase):
 
     def _render(self, forces: list[float], now: float) -> None:
         """Send one force per instrument axis to its device axis [N]."""
-        set_forces = getattr(self.device, "set_forces", None)
+        set_forces = self._set_forces
         if set_forces is None:
             self.device.set_force(forces[0], now)
             return

@@ -101,6 +101,7 @@ class AxisScript:
     def __init__(self, segments, speed: float, arm: ArmParameters, static_arm: bool, dwell: float,
                  start_delay: float, segment_timeout: float):
         self.segments = tuple(segments)
+        self.max_side = max(s.side for s in self.segments)     # the watched tendons an estimate must have
         self.speed, self.dwell, self.start_delay, self.segment_timeout = speed, dwell, start_delay, segment_timeout
         self.k_arm = arm.stiffness
         self.arm = HumanArm(arm)
@@ -301,8 +302,7 @@ class ScriptedOperator:
             T_in = [(T_in,)]
         seen = None if T_in is None else [tuple(v) if isinstance(v, (tuple, list)) else (v,) for v in T_in]
         ok = (seen is not None and len(seen) == len(self.axes)
-              and all(len(v) > max(s.side for s in a.segments) and all(math.isfinite(x) for x in v)
-                      for v, a in zip(seen, self.axes)))
+              and all(len(v) > a.max_side and all(math.isfinite(x) for x in v) for v, a in zip(seen, self.axes)))
         self._T = [tuple(float(x) for x in v) for v in seen] if ok and seen is not None else None
         self._engaged = bool(engaged)
 
