@@ -15,9 +15,13 @@ Runs ``teleop demo`` (any ``--config``) with the per-cycle trace of both loops (
   then stops them all for the rest of the period (up to 50 ms): a canary stall without steal while
   the CPU ran other (normal) processes is that throttling.
 
-Then every overrun of either loop is attributed: a *machine stall* when a canary was late by more
-than 0.5 ms within 3 ms of it (split by whether steal rose), else the loop's own (its step, the
-interpreter lock, the scheduler). Prints the counts, the worst stalls with what the CPU did meanwhile,
+Then every overrun of either loop is attributed: a *machine stall* when a canary was held (late by
+more than 0.5 ms) at some time from 3 ms before the previous cycle's start to 3 ms after the late
+cycle's start (split by whether steal rose), else the loop's own (its step, the interpreter lock, the
+scheduler); the loop's own are listed with the step before them, wall and CPU time (a step whose
+CPU time is far above its usual ~0.15-0.2 ms while nothing else of the loop changed is a stall the
+hypervisor did not report as steal: with paravirtual steal accounting only reported steal is taken
+out of a thread's CPU time). Prints the counts, the worst stalls with what the CPU did meanwhile,
 and the demo's own lines. Never fails on time; measured figures depend on the machine's load at the
 time (printed).
 
@@ -158,14 +162,27 @@ def _attribute(d: Path) -> None:
             continue
         cy = np.load(path)["cycles"]
         t, late, step, ov = cy.T[:4]
+        cpu = cy[:, 4] if cy.shape[1] > 4 else np.full(len(t), np.nan)
         idx = np.nonzero(ov > 0)[0]
-        near = [min((abs(s[0] - t[i]) for s in stalls), default=np.inf) < NEAR for i in idx]
+        # at a machine stall: a canary was held within NEAR of the time between the previous cycle's start
+        # and this one's (a stall while the loop slept or stepped; the late cycle starts when it ends)
+        near = [any(a <= t[i] + NEAR and a + b >= (t[i - 1] if i else t[i]) - NEAR for a, b, _ in stalls) for i in idx]
         own = idx[~np.asarray(near, dtype=bool)] if len(idx) else idx
         prev = step[np.maximum(own - 1, 0)] * 1e3 if len(own) else np.array([0.0])
+        prev_cpu = cpu[np.maximum(own - 1, 0)] * 1e3 if len(own) else np.array([0.0])
         print(f"{side}: {len(t)} cycles, {len(idx)} overruns ({100 * len(idx) / max(1, len(t)):.2f} %): "
               f"{int(np.sum(near))} at a machine stall, {len(own)} the loop's own (the step before: p50 "
-              f"{np.median(prev):.2f} ms, max {prev.max():.2f} ms); step p50 {1e3 * np.median(step):.3f} ms, "
-              f"p99 {1e3 * np.percentile(step, 99):.3f} ms")
+              f"{np.median(prev):.2f} ms, max {prev.max():.2f} ms; its CPU time p50 {np.median(prev_cpu):.2f} ms); "
+              f"step p50 {1e3 * np.median(step):.3f} ms, p99 {1e3 * np.percentile(step, 99):.3f} ms; step CPU time "
+              f"p50 {1e3 * np.nanmedian(cpu) if np.isfinite(cpu).any() else np.nan:.3f} ms, "
+              f"p99 {1e3 * np.nanpercentile(cpu, 99) if np.isfinite(cpu).any() else np.nan:.3f} ms")
+        print(f"  {side} own overruns at (s into the loop, lateness ms, step before ms / its CPU ms): "
+              + ", ".join(f"{t[i] - t[0]:.3f} {1e3 * late[i]:.2f} {1e3 * step[max(i - 1, 0)]:.2f}/"
+                          f"{1e3 * cpu[max(i - 1, 0)]:.2f}" for i in own[:12]))
+        g = np.load(path)["gc"]
+        if len(g):
+            print(f"  {side} garbage collections: {len(g)}, {1e3 * g[:, 1].sum():.2f} ms in all, longest "
+                  f"{1e3 * g[:, 1].max():.2f} ms (generation {int(g[np.argmax(g[:, 1]), 2])})")
 
 
 def main(argv: list[str]) -> None:

@@ -188,8 +188,9 @@ class NodeBase:
         cycles = self.cycle_stats = CycleStats(self.side.name.lower())
         perf, cpu = time.perf_counter, time.thread_time
         idle = IDLE.open if real else None
-        t0 = clock.now()
         machine = _machine_now() if real else None
+        pacer.reset()          # the grid starts now: the set-up above (files read, arrays made) is not in the first period
+        t0 = clock.now()
         try:
             while not self.done:
                 now = pacer.wait()
