@@ -24,7 +24,8 @@ from estimator.online.spindle_centre import (
     stroke_centre,
 )
 
-__all__ = ["THETA_Z_GRID", "DEGREE", "band_edges", "fit_centre_map", "scale_profile", "run_centre", "scored_start"]
+__all__ = ["THETA_Z_GRID", "DEGREE", "band_edges", "fit_centre_map", "scale_profile", "run_centre", "scored_start",
+           "within_run_gain"]
 
 #: Candidate direction-state travels [rad].
 THETA_Z_GRID = (0.003, 0.006, 0.01, 0.02, 0.04, 0.08)
@@ -142,3 +143,72 @@ def scale_profile(runs: list[RunData], scales: np.ndarray, step: int = 10) -> li
         p, rms = fit_centre_map(runs, scale=float(s), step=step)
         out.append((float(s), p, rms))
     return out
+
+
+def _periods(theta_p: np.ndarray, dt: float) -> np.ndarray:
+    """Period index of every sample: the number of spindle reversals before it, halved."""
+    om = spindle_rate(theta_p, dt)
+    nz = np.flatnonzero(om != 0.0)
+    flips = np.zeros(om.size, dtype=int)
+    s = np.sign(om[nz])
+    flips[nz[1:][s[1:] != s[:-1]]] = 1             # the first sample of each new stroke
+    return np.cumsum(flips) // 2
+
+
+def _shape(d: np.ndarray, up: np.ndarray, deg: int) -> np.ndarray:
+    return np.column_stack([(up == j) * d ** k for j in (False, True) for k in range(deg + 1)])
+
+
+def within_run_gain(r: RunData, deg: int = DEGREE, step: int = 10, middle: float = 0.6) -> dict:
+    """Can one run's own signals fix the load gain? The capstan pair puts the band edges at
+    c(theta, direction) + r e^(+-K) tau_d, so along a run the spindle torque follows its own jaw torque
+    with slope r e^(-+K) on each direction's edge, s = their mean ~ r cosh K = 1 / gain, *after* the shape along the stroke (spring, wrap friction: a
+    polynomial of degree ``deg`` in the spindle angle per direction, the centre map's) is taken out. Only
+    the part of the jaw torque that is not a function of (angle, direction) carries s.
+
+    Samples: full motion (|rate| > MIN_RATE) in the middle ``middle`` of the run's spindle stroke, from k0,
+    every ``step``-th. Reads the run's spindle torque and angle and its jaw torque (a calibration run's
+    target). Returns a JSON-ready dict: ``slope`` s [-], ``gain`` 1 / s, ``edge_slopes_falling_rising``, ``jackknife_se`` of s (a period
+    left out at a time; None below three periods), ``profile_ci95`` of s (profile likelihood, residual variance at n_eff = n / the
+    residual's integrated autocorrelation time), ``jaw_free_rms_Nm`` (jaw torque not explained by the
+    shape), ``jaw_rms_Nm`` (its whole variation), ``resid_rms_Nm``, ``n``, ``n_eff``, ``periods``.
+    Raises ValueError when fewer than 2 (deg + 2) samples qualify."""
+    om = spindle_rate(r.theta_p, r.dt)
+    lo, hi = np.percentile(r.theta_p[r.k0:], [50 * (1 - middle), 50 * (1 + middle)])
+    k = np.arange(r.theta_p.size)
+    idx = np.flatnonzero((k >= r.k0) & (r.theta_p > lo) & (r.theta_p < hi) & (np.abs(om) > MIN_RATE))[::step]
+    if idx.size < 2 * (deg + 2):
+        raise ValueError(f"run {r.name}: {idx.size} samples in full motion, too few for the within-run gain")
+    d, up = r.theta_p[idx] - float(np.mean(r.theta_p[idx])), om[idx] > 0
+    tp, td, per = r.tau_p[idx], r.tau_d[idx], _periods(r.theta_p, r.dt)[idx]
+
+    def fit(m: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, list[float], list[float]]:
+        free, res, ffs, slopes = np.zeros(int(m.sum())), np.zeros(int(m.sum())), [], []
+        for j in (False, True):                     # each direction its own edge slope r e^(-+K)
+            q = up[m] == j
+            N = _shape(d[m][q], up[m][q], deg)
+            f = td[m][q] - N @ np.linalg.lstsq(N, td[m][q], rcond=None)[0]
+            rest = tp[m][q] - N @ np.linalg.lstsq(N, tp[m][q], rcond=None)[0]
+            sj = float(f @ rest / (f @ f)) if f @ f > 0 else float("nan")
+            free[q], res[q] = f, rest - sj * f
+            ffs.append(float(f @ f))
+            slopes.append(sj)
+        return 0.5 * (slopes[0] + slopes[1]), free, res, ffs, slopes
+
+    s, free, res, ffs, edge = fit(np.ones(idx.size, dtype=bool))
+    ps = np.unique(per)
+    se = None                                       # the jackknife needs three periods or more
+    if ps.size > 2:
+        jk = np.array([fit(per != p)[0] for p in ps])
+        se = float(np.sqrt((jk.size - 1) / jk.size * np.sum((jk - jk.mean()) ** 2)))
+    e = res - res.mean()
+    ac = np.correlate(e, e, "full")[e.size - 1:] / (e @ e)
+    cut = int(np.argmax(ac < 0)) if np.any(ac < 0) else ac.size
+    n_eff = float(idx.size / max(1.0, 2.0 * ac[:cut].sum() - 1.0))
+    rss = float(res @ res)
+    inv = 0.25 * sum(1.0 / f if f > 0 else np.inf for f in ffs)       # variance factor of (s_1 + s_2) / 2
+    half = float(np.sqrt(rss * np.expm1(3.84 / n_eff) * inv))
+    return {"slope": s, "gain": 1.0 / s if s else float("nan"), "jackknife_se": se,
+            "profile_ci95": [s - half, s + half], "edge_slopes_falling_rising": edge, "jaw_free_rms_Nm": float(np.sqrt(np.mean(free ** 2))),
+            "jaw_rms_Nm": float(np.std(td)), "resid_rms_Nm": float(np.sqrt(rss / idx.size)), "n": int(idx.size),
+            "n_eff": n_eff, "periods": int(ps.size), "degree": deg}

@@ -65,13 +65,15 @@ def _rmse(p: SpindleParams, bt: Batch, y: np.ndarray, w: np.ndarray) -> float:
     return float(np.sqrt(np.mean(e ** 2)))
 
 
-def kinematic_ratio(runs: list[RunData], middle: float = 0.6, min_rate: float = 0.05) -> float:
+def kinematic_ratio(runs: list[RunData], middle: float = 0.6, min_rate: float = 0.05, stretch: bool = False) -> float:
     """n_k = d theta_d / d theta_p [-]: jaw angle per spindle angle in full motion (|rate| > ``min_rate``
     rad/s, the middle ``middle`` fraction of each run's spindle stroke, from k0 on), by least squares
     with an offset per run and direction (the cable stretch and jaw play shift the two directions).
     The pulley radii ratio r_p / r_d when the cable stretch does not change along the stroke.
+    ``stretch``: a cable-stretch column (the spindle torque, one compliance for all runs) is fitted beside,
+    so the ratio is the one at zero spindle torque difference (Finding 4, session 5: it moves n_k by 1-4 %).
     Raises ValueError when no sample qualifies."""
-    cols, ys, nblk = [], [], 0
+    cols, ys, taus, nblk = [], [], [], 0
     for r in runs:
         om = spindle_rate(r.theta_p, r.dt)
         lo, hi = np.percentile(r.theta_p[r.k0:], [50 * (1 - middle), 50 * (1 + middle)])
@@ -80,15 +82,18 @@ def kinematic_ratio(runs: list[RunData], middle: float = 0.6, min_rate: float = 
             if m.sum() > 10:
                 cols.append((r.theta_p[m], nblk))
                 ys.append(r.theta_d[m])
+                taus.append(r.tau_p[m])
                 nblk += 1
     if not cols:
         raise ValueError("no sample in full motion to read the kinematic ratio from")
     n = sum(c[0].size for c in cols)
-    A = np.zeros((n, 1 + nblk))
+    A = np.zeros((n, 1 + nblk + int(stretch)))
     i = 0
     for th, k in cols:
         A[i:i + th.size, 0], A[i:i + th.size, 1 + k] = th, 1.0
         i += th.size
+    if stretch:
+        A[:, -1] = np.concatenate(taus)
     coef, *_ = np.linalg.lstsq(A, np.concatenate(ys), rcond=None)
     return float(coef[0])
 

@@ -22,11 +22,11 @@ from typing import Any, Callable
 
 import numpy as np
 
-from estimator.offline.spindle_centre_fit import fit_centre_map, run_centre, scale_profile
+from estimator.offline.spindle_centre_fit import fit_centre_map, run_centre, scale_profile, within_run_gain
 from estimator.offline.spindle_shared import RunData, kinematic_ratio
 from estimator.online.spindle_centre import CentreParams, centre_ready, predict_centre_map
 
-__all__ = ["CENTRE", "model_choice", "centre_agg", "centre_folder", "centre_one_run", "centre_time_split", "mid_centre_run", "score_centre",
+__all__ = ["CENTRE", "model_choice", "gain_identifiability", "centre_agg", "centre_folder", "centre_one_run", "centre_time_split", "mid_centre_run", "score_centre",
            "profile_on_scored", "PROFILE_GAINS", "LOAD_SPREAD_NM"]
 
 #: The centre map's name among the headline's candidates (``model_choice``).
@@ -72,6 +72,34 @@ def mid_centre_run(runs: list[RunData]) -> str:
     return min(runs, key=lambda r: (abs(c[r.name] - mid), r.name)).name
 
 
+def gain_identifiability(runs: list[RunData], folder_gain: float | None = None) -> dict:
+    """Diagnostic, never used by an estimate: each run's load gain from its own signals alone
+    (:func:`estimator.offline.spindle_centre_fit.within_run_gain`, the centre map's shape taken out) with its
+    95 % profile interval, and each run's encoder ratio n_k (:func:`kinematic_ratio`). Reads every run's jaw
+    torque. ``folder_gain``: the load gain fitted across all runs' loads, recorded beside for comparison.
+    Session 5 (Finding 4): the per-run gains scatter far beyond the +-4 % the one-run line needs."""
+    rows = {r.name: {**within_run_gain(r), "n_k": kinematic_ratio([r]), "n_k_stretch": kinematic_ratio([r], stretch=True),
+                     "jaw_mean_Nm": float(np.mean(r.tau_d[r.k0:]))} for r in runs}
+    g = np.array([v["gain"] for v in rows.values()])
+    nk = np.array([v["n_k"] for v in rows.values()])
+    ns = np.array([v["n_k_stretch"] for v in rows.values()])
+    jm = np.array([v["jaw_mean_Nm"] for v in rows.values()])
+    out: dict[str, Any] = {
+        "what": "load gain 1 / s from each run alone: its spindle torque on its own jaw torque after the centre "
+                "map's shape (degree-4 polynomial of the spindle angle per direction) is taken out; n_k: jaw / "
+                "spindle angle in full motion (n_k_stretch: with a cable-stretch term in the spindle torque)", "runs": rows,
+        "summary": {"gain_median": float(np.median(g)), "gain_min": float(g.min()), "gain_max": float(g.max()),
+                    "n_k_mean": float(nk.mean()), "n_k_sd": float(nk.std()),
+                    "n_k_stretch_min": float(ns.min()), "n_k_stretch_max": float(ns.max())}}
+    if np.ptp(jm) > 0:                               # the encoders' ratio extrapolated to zero jaw torque
+        out["summary"]["n_k_at_zero_load"] = float(np.polyfit(jm, nk, 1)[1])
+        out["summary"]["n_k_stretch_at_zero_load"] = float(np.polyfit(jm, ns, 1)[1])
+    if folder_gain is not None:
+        out["summary"]["folder_gain"] = folder_gain
+        out["summary"]["runs_within_4pc_of_folder_gain"] = int(np.sum(np.abs(g / folder_gain - 1.0) <= 0.04))
+    return out
+
+
 def centre_folder(runs: list[RunData], fs: float, tick: Callable[[str], None], loro: bool = True) -> dict:
     """In-sample and leave-one-run-out scores of the centre map over a folder (JSON-ready)."""
     p, rms = fit_centre_map(runs, step=10)
@@ -79,6 +107,7 @@ def centre_folder(runs: list[RunData], fs: float, tick: Callable[[str], None], l
                                         "spindle torque", "parameters": p.as_dict(), "fit_rms_Nm": rms,
                            "runs": {r.name: _score(p, r, r.k0, fs) for r in runs}}
     out["summary"] = _agg(list(out["runs"].values()))
+    out["within_run_gain"] = gain_identifiability(runs, float(p.coef[1, 0]))
     tick("centre map")
     if loro:
         lo = {}
@@ -149,6 +178,9 @@ def centre_one_run(cal: list[RunData], fs: float) -> tuple[CentreParams, dict]:
         rec["load_gain"] = {"value": 1.0 / n_k, "n_k": n_k, "from": "1 / n_k of the calibration run's encoders "
                             "(one load level: the gain is not identifiable, see profile)"}
         rec["profile"] = [{"load_gain": s, "fit_rms_fs": r / fs} for s, _, r in scale_profile(cal, np.array(PROFILE_GAINS))]
+        rec["within_run_gain"] = {**within_run_gain(cal[0]), "used": False,
+                                  "note": "the gain from the calibration run's own signals (spindle torque on its "
+                                          "jaw torque, shape taken out), with its 95 % profile interval: not used"}
     rec["fit_rms_fs"] = rms / fs
     rec["parameters"] = p.as_dict()
     return p, rec

@@ -9,7 +9,8 @@
   band edges against the jaw torque across loads (capstan e^(+-K) + E8, beside the encoders' ratio);
 * ``mrd_centre.png``    the centre map (load read from the spindle's band centre): leave-one-run-out
   RMSE over frequency x load, and the one-run calibration's cost profile over the load gain beside the
-  scored runs' error at each gain (the identifiability evidence).
+  scored runs' error at each gain (the identifiability evidence), and each run's load gain from its own
+  signals with its 95 % profile interval beside the gain fitted across loads (session 5).
 
 Data: MRD Lab data repository, University of Minnesota (ODbL 1.0 / DbCL 1.0); the attribution is
 written into every figure and the report.
@@ -193,7 +194,7 @@ def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, director
 
 def _centre(plt, runs: list[MrdRun], summary: dict, path: Path) -> Path:
     """``mrd_centre.png`` (module docstring); empty panels say what is missing."""
-    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
+    fig, axes = plt.subplots(1, 3, figsize=(16, 3.8))
     lo = {n: v["torque_rmse_fs"] for n, v in summary.get("centre_map", {}).get("loro", {}).get("runs", {}).items()}
     if lo:
         im = _heat(axes[0], *_grid(runs, lo), "centre map, leave-one-run-out: torque RMSE [FS]", max(lo.values()))
@@ -215,5 +216,32 @@ def _centre(plt, runs: list[MrdRun], summary: dict, path: Path) -> Path:
         ax.set_ylabel("torque RMSE [FS]")
         ax.legend(fontsize=7)
     ax.set_title("one run: the gain is not in its own cost", fontsize=9)
+    _within(axes[2], runs, summary.get("centre_map", {}).get("within_run_gain", {}))
     return _save(plt, fig, f"Load level read from the spindle band centre ({_CREDIT})", path)
 
+
+
+def _within(ax, runs: list[MrdRun], wg: dict) -> None:
+    """Each run's load gain from its own signals with its 95 % profile interval, beside the folder's gain."""
+    rows = wg.get("runs", {})
+    ax.set_title("load gain from each run alone (session 5)", fontsize=9)
+    if not rows:
+        return
+    lv = {r.name: r.load_level for r in runs}
+    names = sorted(rows, key=lambda n: (lv.get(n, 0), n))
+    x = np.arange(len(names))
+    g = np.array([rows[n]["gain"] for n in names])
+    ci = np.array([[1.0 / v if v > 0 else 3.0 for v in rows[n]["profile_ci95"][::-1]] for n in names])
+    g, ci = np.nan_to_num(g, nan=0.0), np.clip(np.nan_to_num(ci, nan=0.0), 0.0, 3.0)
+    err = [np.clip(g - ci[:, 0], 0.0, None), np.clip(ci[:, 1] - g, 0.0, None)]
+    ax.errorbar(x, g, yerr=err, fmt="o", ms=4, lw=0.8, capsize=2,
+                label="one run: spindle on jaw torque, shape out (95 % profile)")
+    ax.plot(x, [1.0 / rows[n]["n_k"] for n in names], "r_", ms=10, label="1 / n_k of each run's encoders")
+    fg = wg.get("summary", {}).get("folder_gain")
+    if fg:
+        ax.axhspan(0.96 * fg, 1.04 * fg, color="0.85", label=f"fitted across loads {fg:.3f} +- 4 %")
+    ax.set_xticks(x, names, fontsize=7)
+    ax.set_xlabel("run (sorted by load level)")
+    ax.set_ylabel("load gain [-]")
+    ax.set_ylim(0.0, 2.0)
+    ax.legend(fontsize=7)

@@ -56,6 +56,17 @@ def format_mrd(s: dict) -> str:
         if a:
             lines.append(f"  {label:<58} RMSE median {a['median_torque_rmse_fs']:.3f} worst "
                          f"{a['max_torque_rmse_fs']:.3f}, max |error| {a['max_torque_max_fs']:.3f} FS")
+    wg = s.get("centre_calibration", {}).get("within_run_gain")
+    fw = s.get("centre_map", {}).get("within_run_gain", {}).get("summary")
+    if wg or fw:
+        part = []
+        if wg:
+            lo, hi = (1.0 / v if v > 0 else math.inf for v in wg["profile_ci95"][::-1])
+            part.append(f"calibration run {wg['gain']:.3f} (95 % {lo:.2f}-{hi:.2f})")
+        if fw:
+            part.append(f"over the runs {fw['gain_min']:.2f}-{fw['gain_max']:.2f} against {fw.get('folder_gain', math.nan):.3f} "
+                        f"fitted across loads ({fw.get('runs_within_4pc_of_folder_gain', 0)} of {len(s['found'])} within 4 %)")
+        lines.append("load gain from one run's own signals (not used): " + "; ".join(part))
     lines.append("not identifiable from the spindle side alone: " + ", ".join(s["not_from_proximal"]))
     lines.append("extensions: " + "; ".join(f"{k} ({v[0]})" for k, v in EXTENSIONS.items()))
     lines.append(f"analysed in {s['elapsed_s']:.1f} s")

@@ -8,21 +8,31 @@ import math
 import numpy as np
 import pytest
 
-from estimator.offline.spindle_centre_fit import fit_centre_map, run_centre, scale_profile
-from estimator.offline.spindle_shared import RunData
+from estimator.offline.spindle_centre_fit import fit_centre_map, run_centre, scale_profile, within_run_gain
+from estimator.offline.spindle_shared import RunData, kinematic_ratio
 from estimator.online.spindle import first_reversal
 from estimator.online.spindle_centre import MIN_SAMPLES, centre_ready, predict_centre_map, stroke_centre
-from teleop.app.mrd_centre import CENTRE, centre_one_run, centre_time_split, mid_centre_run, model_choice, score_centre
+from teleop.app.mrd_centre import (
+    CENTRE,
+    centre_one_run,
+    centre_time_split,
+    gain_identifiability,
+    mid_centre_run,
+    model_choice,
+    score_centre,
+)
 
 R_TRUE, K, F0, C0, SLOPE = 1.01, 0.25, 0.05, -0.014, -0.017
 GAIN = 1.0 / (R_TRUE * math.cosh(K))          # jaw torque per band-centre torque
 
 
-def synth(name: str, load: float, freq: float = 0.3, seed: int = 0) -> RunData:
+def synth(name: str, load: float, freq: float = 0.3, seed: int = 0, drift: float = 0.0) -> RunData:
+    """``drift``: a slow relative swing of the load (0.037 Hz), the part of the jaw torque that is not a
+    function of (angle, direction)."""
     t = np.arange(0.0, 12.0, 0.001)
     th = 0.5 * (1 - np.cos(2 * math.pi * freq * t))
     s = np.sign(np.sin(2 * math.pi * freq * t))                    # +1 while the angle rises
-    td = load - 0.01 * th ** 2 + 0.002 * s                          # jaw: load, angle, direction
+    td = load * (1 + drift * np.sin(2 * math.pi * 0.037 * t)) - 0.01 * th ** 2 + 0.002 * s
     tp = C0 + SLOPE * th - s * F0 + R_TRUE * np.exp(-s * K) * td    # rising angle: the low (back-driven) edge
     tp = tp + 5e-4 * np.random.default_rng(seed).standard_normal(t.size)
     return RunData(name, tp, th, td, th, first_reversal(th, 0.001), 0.001)
@@ -102,3 +112,30 @@ def test_model_choice_takes_the_lower_calibration_split_score():
         c = model_choice("pair", pair_score, 0.01, cal, 0.05, 0.002)
         assert c["chosen"] == expect and c["candidates"][CENTRE] == pytest.approx(split)
         assert "calibration data only" in c["rule"] and c["in_sample_not_used"]["pair"] == 0.01
+
+
+def test_within_run_gain_needs_jaw_torque_that_is_not_a_function_of_angle_and_direction():
+    """The gain 1 / (r cosh K) is read inside one run only from jaw torque beyond the shape along the stroke:
+    recovered with a slow load swing, unbounded without one (the MRD runs' case, Finding 4 session 5)."""
+    swing = within_run_gain(synth("swing", 0.03, drift=0.3))
+    assert swing["gain"] == pytest.approx(GAIN, rel=0.05)
+    lo, hi = swing["profile_ci95"]
+    assert lo < 1.0 / GAIN < hi and hi - lo < 0.2
+    assert swing["periods"] == 4 and swing["jackknife_se"] is not None and swing["jackknife_se"] < 0.05
+    flat = within_run_gain(synth("flat", 0.03))
+    assert flat["jaw_free_rms_Nm"] < 1e-3 * flat["jaw_rms_Nm"]
+    assert flat["profile_ci95"][1] - flat["profile_ci95"][0] > 1.0    # no information on the gain
+    with pytest.raises(ValueError):
+        within_run_gain(RunData("still", np.zeros(500), np.full(500, 0.5), np.zeros(500), np.zeros(500), 10, 0.001))
+    g = gain_identifiability([synth("a", 0.02, drift=0.3), synth("b", 0.04, seed=2, drift=0.3)], GAIN)
+    assert g["summary"]["runs_within_4pc_of_folder_gain"] == 2 and set(g["runs"]) == {"a", "b"}
+    assert g["runs"]["a"]["n_k"] == pytest.approx(1.0)                 # synth's jaw angle is the spindle's
+
+
+def test_kinematic_ratio_with_stretch_reads_the_ratio_at_zero_spindle_torque():
+    r = synth("k", 0.03)
+    n, lam = 0.9, 2.0                                                   # ratio, compliance [rad/(N m)]
+    th_d = n * (r.theta_p - lam * r.tau_p) + 0.01 * np.sign(np.gradient(r.theta_p))
+    k = RunData("k", r.tau_p, r.theta_p, r.tau_d, th_d, r.k0, r.dt)
+    assert kinematic_ratio([k], stretch=True) == pytest.approx(n, abs=0.002)
+    assert abs(kinematic_ratio([k]) - n) > 0.01                          # the stretch bends the plain ratio
