@@ -11,9 +11,11 @@ goes to its writer thread (:class:`teleop.csv_writer.ThreadedCsvRecorder`), Reru
 Prints the master step's *thread CPU time* (:func:`time.thread_time_ns`: what the step itself costs,
 not the time other processes or threads took from it; this is the figure that does not depend on the
 machine's load) and its wall time, p50 / p99 / p99.9 / max, and with ``--profile`` the functions that
-take the time (cProfile over the same run). Never fails on time.
+take the time (cProfile over the same run). ``--sleep 0.0007`` sleeps between cycles as the real loop
+does: on a machine with other work the step's own CPU time then grows (cold caches; measured 42 ->
+68 us p50 at a load average of 6.6 on 2 CPUs). Never fails on time.
 
-``python benchmarks/bench_master_cycle.py [--protocol short] [--profile] [--csv OUT]``
+``python benchmarks/bench_master_cycle.py [--protocol short] [--profile] [--sleep S] [--csv OUT]``
 """
 from __future__ import annotations
 
@@ -62,7 +64,8 @@ class _Topic:
         return math.inf if self.last is None else now - self.last.t_recv
 
 
-def run(protocol: str, profile: bool, tmp: Path, csv: Path | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
+def run(protocol: str, profile: bool, tmp: Path, csv: Path | None = None,
+        sleep: float = 0.0) -> tuple[np.ndarray, np.ndarray, dict]:
     """Master step (thread CPU time [us], wall time [us]) per cycle and the master's stats."""
     from estimator.sheath import SheathModel
     from master.devices import make_device
@@ -105,6 +108,8 @@ def run(protocol: str, profile: bool, tmp: Path, csv: Path | None = None) -> tup
             cpu.append(c1 - c0)
             wall.append(w1 - w0)
             slave.step(clock.t)
+            if sleep > 0:
+                time.sleep(sleep)
     if prof is not None:
         import pstats
         pstats.Stats(prof).sort_stats("tottime").print_stats(25)
@@ -115,16 +120,18 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--protocol", default="paper,minor")
     ap.add_argument("--profile", action="store_true")
+    ap.add_argument("--sleep", type=float, default=0.0,
+                    help="sleep this long [s] after each cycle, as the real loop does (its caches go cold)")
     ap.add_argument("--csv", type=Path, help="keep the master's recording here (two versions of the code: same file?)")
     a = ap.parse_args()
     with tempfile.TemporaryDirectory() as d:
-        cpu, wall, st = run(a.protocol, a.profile, Path(d), a.csv)
+        cpu, wall, st = run(a.protocol, a.profile, Path(d), a.csv, a.sleep)
     cpu, wall = cpu[200:], wall[200:]
 
     def pct(x: np.ndarray) -> str:
         return (f"p50 {np.percentile(x, 50):6.1f}, p99 {np.percentile(x, 99):6.1f}, p99.9 {np.percentile(x, 99.9):7.1f}, "
                 f"max {x.max():7.1f} us")
-    print(f"master step, {len(cpu)} cycles ({a.protocol}; engaged {st['engage_count']} time(s), "
+    print(f"master step, {len(cpu)} cycles ({a.protocol}, sleep {1e3 * a.sleep:g} ms between cycles; engaged {st['engage_count']} time(s), "
           f"safe events {st['safe_events']}, finished {st['finished']}):")
     print(f"  thread CPU time {pct(cpu)}  (mean {cpu.mean():.1f} us)")
     print(f"  wall time       {pct(wall)}  (mean {wall.mean():.1f} us)")
