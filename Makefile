@@ -1,5 +1,5 @@
 # `make demo` and `make test` create .venv on first use (and again when pyproject.toml changes).
-# `make test`: ruff (lint + import order), mypy (estimator/, teleop/, slave/, master/), then pytest.
+# `make test`: ruff (lint + import order), mypy (estimator/, teleop/, slave/, master/), then pytest (two passes).
 PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
@@ -15,10 +15,14 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(VENV)/bin/teleop demo
 
+# pytest runs in two passes: the CPU-bound tests on both cores (pytest-xdist, one file per worker at a
+# time), then the integration tests (real processes with 1 kHz loops over Zenoh) one at a time, alone on
+# the machine, because their timing figures are what they check.
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
-	$(VENV)/bin/python -m pytest -q
+	$(VENV)/bin/python -m pytest -q -m "not integration" -n 2 --dist loadfile
+	$(VENV)/bin/python -m pytest -q -m integration
 
 bench: $(STAMP)
 	$(VENV)/bin/python benchmarks/run_all.py
