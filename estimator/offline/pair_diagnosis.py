@@ -47,7 +47,7 @@ from estimator.offline.pair_models import (CAUSE_OF_SEED, PAIR_EFFECTS, applicab
                                            predict_model)
 
 __all__ = ["CAPSTAN_STARTS", "MAX_NFEV", "CV_NFEV", "FIT_TOL", "fit_model", "folds", "cross_validate", "diagnose_pair",
-           "FitResult"]
+           "figure_bootstrap", "FitResult"]
 
 #: Starting points of the capstan structure (G [-], lam [rad/N], K_a, K_b [-], k [N/rad]).
 CAPSTAN_STARTS = ({"G": 1.4, "lam": 0.4, "K_a": 0.8, "K_b": 0.4, "k": 4.0},
@@ -194,8 +194,37 @@ def cross_validate(fx: FitResult, rec, train: slice, max_nfev: int = CV_NFEV, te
     return float(np.sqrt(np.mean(sq)))
 
 
+def figure_bootstrap(fx: FitResult, rec, train: slice, test: slice, n_draws: int = 20, seed: int = 0) -> dict:
+    """Uncertainty of a fitted model's test figure: its training block cut into :data:`CV_BLOCKS`
+    contiguous time blocks (one command cycle: no cycles to draw), the blocks drawn with replacement,
+    the model refitted on each draw (warm start ``fx.values``, :data:`CV_NFEV` evaluations) and its
+    test-block RMSE recorded. Returns {std_deg, ci95_deg [2.5, 97.5 %], n_draws, method}.
+
+    Raises
+    ------
+    ValueError
+        ``n_draws`` < 5.
+    """
+    if n_draws < 5:
+        raise ValueError(f"n_draws must be >= 5, got {n_draws}")
+    a, b, _ = train.indices(len(rec.angle))
+    edges = np.linspace(a, b, CV_BLOCKS + 1).round().astype(int)
+    rng = np.random.default_rng(seed)
+    xs = []
+    for _ in range(n_draws):
+        pick = rng.integers(0, CV_BLOCKS, CV_BLOCKS)
+        idx = np.concatenate([np.arange(edges[k], edges[k + 1]) for k in pick])
+        f = fit_model(fx.structure, fx.effects, rec, idx, test, [dict(fx.values)], max_nfev=CV_NFEV)
+        xs.append(math.degrees(f.rmse_test))
+    return {"std_deg": float(np.std(xs, ddof=1)), "ci95_deg": [float(np.percentile(xs, 2.5)),
+                                                               float(np.percentile(xs, 97.5))],
+            "n_draws": n_draws, "method": f"the training block's {CV_BLOCKS} time blocks drawn with replacement, "
+                                          "refitted; the test block scored"}
+
+
 def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,
-                  progress: Callable[[str], None] | None = None) -> tuple[dict, dict[str, FitResult]]:
+                  progress: Callable[[str], None] | None = None,
+                  n_bootstrap: int = 0) -> tuple[dict, dict[str, FitResult]]:
     """Diagnose one pair recording: the seed model's error, the effects that explain it, the gain.
 
     Parameters
@@ -205,11 +234,14 @@ def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,
         the choice uses ``train`` only (module docstring), ``test`` gives the reported figures
     max_effects : most effects accepted (the capstan structure counts as one), >= 1
     progress : called with a label after every fitted model
+    n_bootstrap : draws of the chosen model's test-figure uncertainty (:func:`figure_bootstrap`; 0: none);
+        computed after the choice, which it does not affect
 
     Returns
     -------
     summary : dict, JSON-ready
-        ``seed`` and ``extended`` (:meth:`FitResult.summary` plus ``rmse_cv_deg``), ``cause`` (first
+        ``seed`` and ``extended`` (:meth:`FitResult.summary` plus ``rmse_cv_deg``; ``extended`` also
+        ``rmse_test_bootstrap`` when ``n_bootstrap``), ``cause`` (first
         accepted effect, "none" or "unknown"), ``causes`` (accepted in order, plus "unknown" when
         structure is left), ``gain`` (1 - extended / seed test rmse), ``candidates`` (model id ->
         rmse_cv_deg, rmse_train_deg, score S, price, accepted, round, params; no test figure),
@@ -278,8 +310,10 @@ def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,
         candidates[chosen.id]["accepted"] = True
     ratio = cv[chosen.id] / max(noise, 1e-12)
     causes = accepted + (["unknown"] if ratio > STRUCTURE_RATIO else [])
+    # the chosen model's test-figure uncertainty: after the choice, which it does not affect
+    boot = {"rmse_test_bootstrap": figure_bootstrap(chosen, rec, train, test, n_bootstrap)} if n_bootstrap else {}
     summary = {"seed": {**seed.summary(), "rmse_cv_deg": math.degrees(cv[seed.id])},
-               "extended": {**chosen.summary(), "rmse_cv_deg": math.degrees(cv[chosen.id])},
+               "extended": {**chosen.summary(), "rmse_cv_deg": math.degrees(cv[chosen.id]), **boot},
                "cause": causes[0] if causes else "none",
                "causes": causes, "gain": 1.0 - chosen.rmse_test / seed.rmse_test, "candidates": candidates,
                "noise_deg": math.degrees(noise), "structure_ratio": ratio, "n_train": n_train,

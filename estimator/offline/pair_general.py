@@ -39,7 +39,8 @@ from estimator.offline.pair_shared import (
     shared_params,
 )
 
-__all__ = ["choose_shared", "bootstrap", "local_correlation", "export_params", "predict_shared", "shared_analysis", "CV_NFEV"]
+__all__ = ["choose_shared", "bootstrap", "loco_bootstrap", "local_correlation", "export_params", "predict_shared",
+           "shared_analysis", "CV_NFEV"]
 
 #: Most residual evaluations of a leave-one-out or bootstrap refit (warm-started from the full fit).
 CV_NFEV = 40
@@ -145,6 +146,58 @@ def bootstrap(m: SharedModel, recs: list, bends: list[float], blocks: list[list[
             "method": "bootstrap over cycles: (configuration, cycle) blocks drawn with replacement, refitted"}
 
 
+def loco_bootstrap(m: SharedModel, recs: list, bends: list[float], blocks: list[list[slice]], test: list[slice],
+                   rows: list[dict], n_draws: int = 20, seed: int = 0) -> list[dict]:
+    """Uncertainty of each leave-one-configuration-out figure, by a bootstrap over cycles.
+
+    For each left-out configuration i the (configuration, cycle) blocks of the *other* configurations
+    are drawn with replacement, the shared model refitted on them (warm start: the leave-one-out fit
+    ``rows[i]["params"]``, :data:`CV_NFEV` evaluations) and configuration i predicted from its command,
+    pretension and bend; its test-block RMSE is recorded. Nothing of configuration i enters a fit.
+
+    Parameters
+    ----------
+    m, recs, bends : the shared model, recordings and bend angles [rad]
+    blocks : per recording, its cycles (sample slices) a leave-one-out fit may use
+    test : per recording, the scored samples
+    rows : :func:`estimator.offline.pair_shared.leave_one_out` output (``params`` of each refit)
+    n_draws : draws per configuration (>= 5)
+
+    Returns
+    -------
+    list (one per recording) of {std_deg, ci95_deg [2.5, 97.5 %], n_draws, method}.
+
+    Raises
+    ------
+    ValueError
+        ``n_draws`` < 5 or fewer than 2 recordings.
+    """
+    if n_draws < 5:
+        raise ValueError(f"n_draws must be >= 5, got {n_draws}")
+    if len(recs) < 2:
+        raise ValueError("a leave-one-out bootstrap needs at least 2 configurations")
+    rng = np.random.default_rng(seed)
+    out = []
+    for i, (rec, bend, te) in enumerate(zip(recs, bends, test)):
+        units = [(j, b) for j, bl in enumerate(blocks) if j != i for b in bl]
+        y = np.asarray(rec.angle, dtype=float)[te]
+        xs: list[float] = []
+        while len(xs) < n_draws:
+            pick = [units[k] for k in rng.integers(0, len(units), len(units))]
+            use = sorted({j for j, _ in pick})
+            if m.per_config and len(use) < 2:
+                continue                                  # per-configuration parameters need two configurations
+            idx = [np.concatenate([np.arange(b.start, b.stop) for j2, b in pick if j2 == j]) for j in use]
+            v = fit_shared(m, [recs[j] for j in use], [bends[j] for j in use], idx, starts=[rows[i]["params"]],
+                           max_nfev=CV_NFEV)
+            xs.append(_rmse_deg(predict_config(m, v, rec, bend)[te] - y))
+        out.append({"std_deg": float(np.std(xs, ddof=1)),
+                    "ci95_deg": [float(np.percentile(xs, 2.5)), float(np.percentile(xs, 97.5))], "n_draws": n_draws,
+                    "method": "bootstrap over the other configurations' cycles, refitted; this configuration "
+                              "predicted, its test block scored"})
+    return out
+
+
 def local_correlation(result, names: list[str]) -> dict:
     """Gauss-Newton correlation of the parameters at a least-squares optimum (``result.jac``):
     cov ~ (J^T J)^-1; {names, matrix}. A local figure (residuals are autocorrelated, so its
@@ -169,6 +222,8 @@ def export_params(m: SharedModel, values: dict, fitted_on: str, uncertainty: dic
         laws.append("G = G + G_N * N")
     if m.stiffness_ratio:
         laws.append("lam = G / s" + (" + lam_N * N" if m.lam_slope else ""))
+    if m.k_slope:
+        laws.append("k = k + k_N * N")
     laws.append("initial tensions: the recording's first sample (pretension); angle offset: its first sample")
     return {"model": {"name": m.name, "structure": m.structure, "effects": list(m.effects), "laws": laws},
             "values": vals, "fitted_on": fitted_on}
@@ -217,7 +272,8 @@ def shared_analysis(recs: list, bends: list[float], train: list[slice], test: li
         cycles); the fits and the choice use ``train`` only; the leave-one-out refits use every
         sample up to the end of each *other* configuration's test block
     drift : also fit the models with parameters per configuration (``capstan, X per configuration``)
-    n_bootstrap : bootstrap draws of the exported set (0: none)
+    n_bootstrap : bootstrap draws of the exported set and of each leave-one-out figure of the chosen
+        structure (:func:`loco_bootstrap`; 0: none)
     blocks : per recording, its cycles (for the bootstrap); default: [train, test]
 
     Returns
@@ -226,7 +282,8 @@ def shared_analysis(recs: list, bends: list[float], train: list[slice], test: li
         ``models``: name -> {params {name: {value, unit}}, n_params, rmse_test_deg (all test blocks
         pooled), configurations [per recording: rmse_train_deg, rmse_test_deg, max_abs_test_deg, K_a,
         K_b]}; ``choice`` (:func:`estimator.offline.pair_general.choose_shared`); ``chosen`` (name);
-        ``leave_one_out``: name -> [per recording: rmse_test_deg, rmse_all_deg, params]; ``E6``:
+        ``leave_one_out``: name -> [per recording: rmse_test_deg, rmse_all_deg, params and, for the chosen
+        structure with ``n_bootstrap``, ``rmse_test_bootstrap`` (:func:`loco_bootstrap`)]; ``E6``:
         {score S of capstan against mu = 0 on the pooled test rmse, price, accepted}; ``mu`` [1/rad];
         ``params`` (the chosen set refitted on every sample of every configuration, with bootstrap
         std / ci95: :func:`estimator.offline.pair_general.export_params`); ``uncertainty`` (bootstrap
@@ -260,9 +317,15 @@ def shared_analysis(recs: list, bends: list[float], train: list[slice], test: li
     chosen = choice["chosen"]
     summary.update(choice=choice, chosen=chosen)
     upto = [slice(0, te.stop) for te in test]
+    cyc = blocks or [[tr, te] for tr, te in zip(train, test)]
     for name in dict.fromkeys(LEAVE_ONE_OUT + (chosen,)):
         rows = leave_one_out(SHARED_MODELS[name], recs, bends, upto, test, fitted[name], tick)
         details["leave_one_out"][name] = [r.pop("angle") for r in rows]
+        if n_bootstrap and name == chosen:
+            for r, u in zip(rows, loco_bootstrap(SHARED_MODELS[name], recs, bends, cyc, test, rows,
+                                                 n_draws=n_bootstrap)):
+                r["rmse_test_bootstrap"] = u
+            tick("leave-one-out bootstrap")
         summary["leave_one_out"][name] = rows
     ms = summary["models"]
     S = (ms["capstan"]["rmse_test_deg"] / ms["capstan, mu = 0"]["rmse_test_deg"]) ** 2
@@ -273,8 +336,7 @@ def shared_analysis(recs: list, bends: list[float], train: list[slice], test: li
     m = SHARED_MODELS[chosen]
     v_all, res = fit_shared(m, recs, bends, upto, starts=[fitted[chosen]], full=True)
     tick("shared set, all samples")
-    unc = bootstrap(m, recs, bends, blocks or [[tr, te] for tr, te in zip(train, test)], v_all,
-                    n_draws=n_bootstrap) if n_bootstrap else None
+    unc = bootstrap(m, recs, bends, cyc, v_all, n_draws=n_bootstrap) if n_bootstrap else None
     tick("bootstrap")
     summary["params"] = export_params(m, v_all, "every sample up to the end of the test block of "
                                       f"{len(recs)} configurations (bends {', '.join(f'{b:.3f}' for b in bends)} rad)",

@@ -81,8 +81,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="KAIST mode: predict every configuration with the shared parameter set saved by "
                              "--json (its shared.params); nothing is refitted")
     parser.add_argument("--bootstrap", type=int, default=20, metavar="B",
-                        help="KAIST mode: bootstrap draws for the shared parameters' uncertainty (0: none; "
-                             "default 20)")
+                        help="KAIST mode: bootstrap draws for the uncertainty of the shared parameters and of "
+                             "every reported held-out figure (0: none; default 20)")
     parser.add_argument("--train-fraction", type=float, default=0.6, metavar="F",
                         help="CSV mode: nominal share of the duration used for fitting, in [0.3, 0.9]; the "
                              "split moves to a rest within 8%% of it (default 0.6)")
@@ -238,7 +238,8 @@ def analyze_kaist(recs: list[KaistRecording], progress: bool = False,
     ----------
     recs : recordings, one per configuration
     progress : a status line on stderr (the analysis takes a few minutes)
-    n_bootstrap : bootstrap draws of the shared set's uncertainty (0: none)
+    n_bootstrap : bootstrap draws of the shared set's uncertainty and of every reported held-out figure
+        (per configuration and leave-one-out; 0: none)
 
     Returns
     -------
@@ -267,7 +268,8 @@ def analyze_kaist(recs: list[KaistRecording], progress: bool = False,
     train = [d["cycles"][0] for d in details]
     test = [d["cycles"][1] for d in details]
     for rec, s, d, tr, te in zip(recs, summaries, details, train, test):
-        diag, fits = diagnose_pair(rec, tr, te, progress=_labelled(tick, f"N = {rec.config_deg}: "))
+        diag, fits = diagnose_pair(rec, tr, te, progress=_labelled(tick, f"N = {rec.config_deg}: "),
+                                   n_bootstrap=n_bootstrap)
         s["diagnosis"], d["pair_fits"], d["extended"] = diag, fits, diag["extended"]["model"]
     Ns = [math.radians(s["config_deg"]) for s in summaries]
     if len(recs) >= 3:

@@ -12,6 +12,12 @@ def _fmt_causes(causes: list[str]) -> str:
     return ", ".join(causes) if causes else "none"
 
 
+def _pm(row: dict) -> str:
+    """' +- std [lo-hi]' of a figure's bootstrap (``rmse_test_bootstrap``), '' when there is none."""
+    b = row.get("rmse_test_bootstrap")
+    return "" if not b else f" +- {b['std_deg']:.2f} [{b['ci95_deg'][0]:.2f}-{b['ci95_deg'][1]:.2f}]"
+
+
 def format_kaist(s: dict) -> str:
     """The tables printed for the KAIST analysis: the pair diagnosis per configuration (held-out
     angle RMSE [deg] of the seed model, the extended model, the shared fit and its leave-one-out
@@ -29,6 +35,11 @@ def format_kaist(s: dict) -> str:
     lines.append("extended: the model the diagnosis chose; shared: one parameter set for all configurations with "
                  "K = K0 + mu N; LOCO: refitted without that configuration; T_in: the extended model's prediction "
                  "of the proximal tensions (not fitted)")
+    unc = [(c["config_deg"], _pm(c["diagnosis"]["extended"])) for c in s["configurations"]]
+    if any(u for _, u in unc):
+        lines.append("extended, test RMSE +- bootstrap std [95 % interval] (training blocks redrawn, refitted): "
+                     + "; ".join(f"{n}: {c['diagnosis']['extended']['rmse_test_deg']:.2f}{u}"
+                                 for (n, u), c in zip(unc, s["configurations"])))
     if "shared" in s:
         sh = s["shared"]
         for name, m in sh["models"].items():
@@ -36,7 +47,7 @@ def format_kaist(s: dict) -> str:
             rows = " ".join(f"{r['rmse_test_deg']:.2f}" for r in m["configurations"])
             lines.append(f"shared {name:<28} test RMSE {m['rmse_test_deg']:.2f} (per configuration {rows}): {p}")
         for name, rows in sh["leave_one_out"].items():
-            lines.append(f"leave one out, {name:<20} " + " ".join(f"{r['rmse_test_deg']:.2f}" for r in rows))
+            lines.append(f"leave one out, {name:<20} " + " ".join(f"{r['rmse_test_deg']:.2f}{_pm(r)}" for r in rows))
         e6 = sh["E6"]
         lines.append(f"E6 (K grows with the bend): score {e6['score']:.3f} against mu = 0, price {e6['price']:.3f} -> "
                      f"{'accepted' if e6['accepted'] else 'rejected'}; mu = {sh['mu']:.3f} /rad")

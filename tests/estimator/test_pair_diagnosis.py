@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from estimator.offline.pair import PairParams, play, predict_angle, reversal_dead_zones
-from estimator.offline.pair_diagnosis import diagnose_pair, fit_model
+from estimator.offline.pair_diagnosis import diagnose_pair, figure_bootstrap, fit_model
+from estimator.offline.pair_general import loco_bootstrap
 from estimator.offline.pair_models import PAIR_EFFECTS, applicable, parse_model, predict_model
 from estimator.offline.pair_shared import SHARED_MODELS, fit_shared, leave_one_out, shared_params
 from estimator.pair_kernels import simulate_pair
@@ -126,6 +127,10 @@ def test_capstan_model_recovers_its_parameters():
         assert f.values[name] == pytest.approx(want, rel=0.06, abs=0.002), name
     assert math.degrees(f.rmse_test) < 0.06                            # the tracker noise, 0.05 deg
     assert f.rmse_T_in < 0.15                      # it predicts the load cells too (range 2-10 N, noise 0.02 N)
+    u = figure_bootstrap(f, rec, TRAIN, TEST, n_draws=5)               # training blocks redrawn and refitted
+    assert u["n_draws"] == 5 and 0.0 < u["std_deg"] < 0.01 and 0.04 < u["ci95_deg"][0] <= u["ci95_deg"][1] < 0.07
+    with pytest.raises(ValueError, match="n_draws"):
+        figure_bootstrap(f, rec, TRAIN, TEST, n_draws=4)
 
 
 def test_diagnosis_names_the_capstan_joint_on_its_own_data():
@@ -162,6 +167,13 @@ def test_shared_fit_recovers_mu_and_predicts_a_left_out_configuration():
         assert v[name] == pytest.approx(want, rel=0.08), name
     loo = leave_one_out(m, recs, bends, [slice(0, TEST.stop)] * 4, [TEST] * 4, v)
     assert max(r["rmse_test_deg"] for r in loo) < 0.15                  # 3x the noise, from N alone
+    # the figure's bootstrap: noise-free shapes, started at the truth, are predicted exactly from every draw
+    exact = [capstan_rec({**v0, "K_a": v0["K0_a"] + v0["mu"] * b, "K_b": v0["K0_b"] + v0["mu"] * b, "theta0": 0.0},
+                         noise_deg=0.0) for b in bends[:3]]
+    u = loco_bootstrap(m, exact, bends[:3], [[TRAIN, TEST]] * 3, [TEST] * 3, [{"params": v0}] * 3, n_draws=5)
+    assert len(u) == 3 and all(x["n_draws"] == 5 and x["ci95_deg"][1] < 1e-3 for x in u)
+    with pytest.raises(ValueError, match="n_draws"):
+        loco_bootstrap(m, exact, bends[:3], [[TRAIN]] * 3, [TEST] * 3, [{"params": v0}] * 3, n_draws=4)
     with pytest.raises(ValueError, match="equal length"):
         fit_shared(m, recs, bends[:2], [TRAIN] * 4)
 

@@ -273,3 +273,11 @@ def test_kaist_findings_hold_on_the_real_data(tmp_path, capsys):
     vals = sh["params"]["values"]
     assert 0.05 < vals["mu"]["value"] < 0.3 and vals["mu"]["std"] < 0.5 * vals["mu"]["value"]
     assert all(r["rmse_test_deg"] < 5.0 for r in sh["leave_one_out"][sh["chosen"]])
+    # every reported figure with its bootstrap uncertainty (docs/findings.md, Finding 3, session 5)
+    for r in sh["leave_one_out"][sh["chosen"]]:
+        b = r["rmse_test_bootstrap"]
+        assert b["n_draws"] == 5 and 0.0 < b["std_deg"] < r["rmse_test_deg"] and b["ci95_deg"][0] <= b["ci95_deg"][1]
+    for c in s["configurations"]:
+        b = c["diagnosis"]["extended"]["rmse_test_bootstrap"]
+        assert b["n_draws"] == 5 and 0.0 < b["std_deg"] < 0.5 * c["diagnosis"]["extended"]["rmse_test_deg"]
+    assert "+- " in capsys.readouterr().out.split("leave one out, ")[1].splitlines()[0]
