@@ -128,6 +128,12 @@ def _finding1_figures(recs, details, summary, d: Path, plt) -> list[Path]:
     return paths
 
 
+def _std(row: dict) -> float:
+    """Bootstrap std [deg] of a reported figure (``rmse_test_bootstrap``), nan when there is none."""
+    b = row.get("rmse_test_bootstrap")
+    return float(b["std_deg"]) if b else math.nan
+
+
 def _style(ax) -> None:
     ax.grid(alpha=0.3)
 
@@ -241,15 +247,22 @@ def _pair_figures(recs, details, summary, d: Path, plt) -> list[Path]:
              [r["rmse_test_deg"] for r in sh["models"]["capstan+T, G falls with N"]["configurations"]], "teal"),
             ("shared seed + backlash (E12)",
              [r["rmse_test_deg"] for r in sh["models"]["seed+joint_backlash"]["configurations"]], "tab:gray")]
+    # bootstrap std of the reported figures (rmse_test_bootstrap, when the analysis ran one): error bars
+    loco = sh["leave_one_out"].get(sh.get("chosen", ""), [])
+    errs = {1: [_std(c["diagnosis"]["extended"]) for c in confs], 3: [_std(r) for r in loco]}
     x = np.arange(len(confs))
     w = 0.8 / len(bars)
     for i, (lab, vals, col) in enumerate(bars):
-        b = ax2.bar(x + (i - (len(bars) - 1) / 2) * w, vals, w, label=lab, color=col)
+        e = errs.get(i)
+        b = ax2.bar(x + (i - (len(bars) - 1) / 2) * w, vals, w, label=lab, color=col,
+                    yerr=e if e and len(e) == len(vals) and not np.all(np.isnan(e)) else None, capsize=2,
+                    error_kw={"lw": 0.8})
         ax2.bar_label(b, fmt="%.1f", fontsize=6.5)
     mu0 = sh["models"]["capstan, mu = 0"]["rmse_test_deg"]
     ax2.set(xticks=x, xticklabels=[f"{int(N)}" for N in Ns], xlabel="configuration N [deg]",
             ylabel="distal angle RMSE on the test cycle [deg]",
-            title=f"Held-out error (shared without K growth, mu = 0: {mu0:.1f} deg overall)")
+            title=f"Held-out error (shared without K growth, mu = 0: {mu0:.1f} deg overall"
+                  + ("; error bars: bootstrap std)" if any(np.isfinite(v).any() for v in errs.values() if v) else ")"))
     ax2.legend(fontsize=8, ncol=3, loc="upper left")
     ax2.set_ylim(0, 1.35 * max(max(v) for _, v, _ in bars))
     _style(ax2)
