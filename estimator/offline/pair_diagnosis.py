@@ -322,7 +322,9 @@ def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,
                            "choice": f"time-blocked cross-validation inside the fit block: {CV_BLOCKS} contiguous "
                                      "blocks, the even ones fitted and the odd ones scored, and the reverse",
                            "test": [test.start, test.stop],
-                           "test_use": "once, for the chosen model's reported figure (and the seed's)"},
+                           "test_use": "once, for the chosen model's reported figure (and the seed's)"
+                                       + ("; after the choice, for that figure's bootstrap refits" if n_bootstrap
+                                          else "")},
                "literature": {e: PAIR_EFFECTS[e].literature for e in accepted},
                "elapsed_s": _time.perf_counter() - t0}
     return summary, fits

@@ -347,6 +347,8 @@ def shared_analysis(recs: list, bends: list[float], train: list[slice], test: li
     summary["samples"] = {"fit": "training block of every configuration", "choice": choice["rule"],
                           "test": "once per model: its reported figures",
                           "leave_one_out": "refit on every sample of the other configurations, scored on the "
-                                           "left-out configuration's test block",
+                                           "left-out configuration's test block"
+                                           + ("; its uncertainty: the other configurations' cycles redrawn and "
+                                              "refitted, the same block scored" if n_bootstrap else ""),
                           "params": "refit on every sample of every configuration, for new configurations"}
     return summary, details
