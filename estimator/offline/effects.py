@@ -21,11 +21,14 @@ from estimator.offline.effect_types import K_MAX, NONE, UNKNOWN, Parameter, Pred
 from estimator.offline.effects_kernels import backlash_play, route_shape, run_extended, travel_lag
 from estimator.offline.presliding_kernel import NODE_FORM, node_presliding
 
+#: Held setting of velocity_friction: 1 = the sliding speed is the mean of |dx_in/dt| and |dx_out/dt|.
+SPEED_FORM = "velocity_form"
+
 __all__ = ["Parameter", "Effect", "VelocityFriction", "Pretension", "CurvatureDrift", "TendonStiffening", "Stiction",
            "FrictionOffset", "Presliding", "DistalBacklash", "SensorEffect", "Series", "Prediction", "CATALOGUE",
            "EFFECT_IDS", "ALIASES", "EQUIVALENT", "NONE", "UNKNOWN", "effect", "predict", "neutral_values",
            "route_shape", "ROUTE", "K_MAX", "RigSwitch", "ScenarioKnob", "Setting", "register", "unregister",
-           "rig_switches", "NODE_FORM"]
+           "rig_switches", "NODE_FORM", "SPEED_FORM"]
 
 class Effect:
     """One model extension (subclasses below, one per physical effect; instances in CATALOGUE).
@@ -89,6 +92,13 @@ class VelocityFriction(Effect):
     switch = RigSwitch("velocity_friction", "friction grows with sliding speed (viscous liner)", (Setting(
         "viscous", 15.0, "s/m", ">= 0", "mu(v) = mu (1 + viscous |v|), v = sliding speed"),))
     knob = ScenarioKnob((("viscous", 8.0, 30.0),))                   # +8..30 % friction at 10 mm/s
+    # the speed in K(v): the proximal one, or (needs x_out) the mean of the proximal and distal speeds - where
+    # friction acts per segment on each segment's own speed, which lies between the two (the distal end of a
+    # tendon on a stiff load hardly moves while the proximal one runs on by the elongation rate)
+    variants = ({SPEED_FORM: 0.0}, {SPEED_FORM: 1.0})
+
+    def variant_ok(self, variant: dict[str, float], measured: list[str]) -> bool:
+        return not variant.get(SPEED_FORM) or "x_out" in measured
 
 
 class Pretension(Effect):
@@ -349,7 +359,10 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
         T_out, E1 = node_presliding(T_in, x_in, s.x_out, t, u, s.w, x_p=x_p, compliance=compliance,
                                     **{k: v for k, v in knobs.items() if k in ("K", "K_rate", "T0", "beta", "Tc")})
     else:
-        T_out, E1 = run_extended(T_in, vel, t, u, s.w, T_min=s.T_min, sigma=s.sigma_T_in, **knobs)
+        speed = None
+        if knobs.get("c_v") and values.get(SPEED_FORM, 0.0) > 0.5 and s.x_out is not None:
+            speed = 0.5 * (np.abs(vel) + np.abs(np.gradient(s.x_out, t)))
+        T_out, E1 = run_extended(T_in, vel, t, u, s.w, T_min=s.T_min, sigma=s.sigma_T_in, speed=speed, **knobs)
     if x_p > 0.0 and not node:
         T_out = T_in - travel_lag(T_in - T_out, x_in, x_p)
     # distal channels: the reading from the true output (offset and lag are linear in L/EA)

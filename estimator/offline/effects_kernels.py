@@ -5,7 +5,8 @@ One kernel runs the tension-profile memory of :mod:`estimator.sheath` with all e
 model is the kernel with every knob neutral and extensions compose. Per sample k, with the node
 shape u_i = theta_i / theta_L in [0, 1] and weights w_i (sum 1):
 
-    K_k   = max(K + K_rate t_k, 0) (1 + c_v |v_k|)           drift and viscous friction   (E6, E3)
+    K_k   = max(K + K_rate t_k, 0) (1 + c_v v_k)             drift and viscous friction   (E6, E3),
+            v_k the sliding speed (|dx_in/dt|, or a held mix with the distal speed)
     Y_p   = max(T_in,k, 0) + a                                 tension-independent friction (E8)
     T_out = Y_n - a
     E1    = sum_i w_i phi(Y_i - a) - phi(T0),   phi(T) = T + beta T_c (1 - e^{-T/T_c})       (E9, E5)
@@ -54,7 +55,7 @@ def stiffening_strain(T, beta, Tc):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _kernel(T_in, v, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, sigma, beta, Tc,
+def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, sigma, beta, Tc,
             T_out, E1):  # pragma: no cover - compiled
     m1 = u.shape[0]
     Y = np.full(m1, T0 + a)
@@ -75,7 +76,7 @@ def _kernel(T_in, v, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, sigma, 
             Kk = K + K_rate * (tk - t[0])
             if Kk < 0.0:
                 Kk = 0.0
-            Kk *= 1.0 + c_v * abs(v[k])
+            Kk *= 1.0 + c_v * spd[k]
         Yp = T_in[k]
         if Yp < 0.0:
             Yp = 0.0
@@ -200,7 +201,8 @@ def route_shape(n1: int, r_1: float, r_2: float) -> np.ndarray:
 def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np.ndarray, w: np.ndarray, *,
                  K: float, a: float = 0.0, T0: float = 0.0, K_rate: float = 0.0, c_v: float = 0.0,
                  r_s: float = 0.0, t_slip: float = 0.02, T_min: float = 0.0,
-                 sigma: float = 0.0, beta: float = 0.0, Tc: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+                 sigma: float = 0.0, beta: float = 0.0, Tc: float = 1.0,
+                 speed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Run the extended profile-memory model over a recording (module docstring for the equations).
 
     Parameters
@@ -227,6 +229,8 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
         sigma [N] is the noise of T_in (a turn of T_in must exceed 2 sigma to count as breakaway).
     beta, Tc : float
         Stiffening: extra compliance at zero tension [-] and its tension scale [N], > 0 (E9).
+    speed : ndarray, shape (n,), optional
+        Sliding speed [m/s] >= 0 in K (1 + c_v speed) (default |velocity|, the proximal speed).
 
     Returns
     -------
@@ -238,7 +242,9 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
     T_in = np.ascontiguousarray(T_in, dtype=np.float64)
     T_out = np.empty_like(T_in)
     E1 = np.empty_like(T_in)
-    _kernel(T_in, np.ascontiguousarray(velocity, dtype=np.float64), np.ascontiguousarray(time, dtype=np.float64),
+    vel = np.ascontiguousarray(velocity, dtype=np.float64)
+    spd = np.abs(vel) if speed is None else np.ascontiguousarray(speed, dtype=np.float64)
+    _kernel(T_in, vel, spd, np.ascontiguousarray(time, dtype=np.float64),
             np.ascontiguousarray(u, dtype=np.float64), np.ascontiguousarray(w, dtype=np.float64), float(K),
             float(a), float(T0), float(K_rate), float(c_v), float(r_s), float(t_slip), float(T_min),
             float(sigma), float(beta), float(Tc), T_out, E1)

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from estimator.offline.effects import CATALOGUE, EFFECT_IDS, Series, effect, neutral_values, predict
+from estimator.offline.effects import CATALOGUE, EFFECT_IDS, SPEED_FORM, Series, effect, neutral_values, predict
 from estimator.offline.effects_kernels import run_extended
 from estimator.online.distal import estimate_batch
 from estimator.sheath import SheathGeometry, SheathModel
@@ -108,6 +108,19 @@ def test_velocity_friction_raises_the_slip_exponent_with_speed():
     pr = predict(["velocity_friction"], {"K": K, "c_v": c_v}, s, compliance=1e-4)
     m = T_in > 1.0
     np.testing.assert_allclose(pr.T_out[m], T_in[m] * math.exp(-K * (1 + c_v * 0.005)), rtol=1e-9)
+
+
+def test_velocity_friction_distal_speed_form_uses_the_mean_of_both_ends():
+    """The second form (velocity_form 1, needs x_out): the sliding speed is the mean of |dx_in/dt| and
+    |dx_out/dt| (per-segment friction on each segment's own speed, between the two ends' speeds)."""
+    T_in, x_in = _pull()
+    c_v = 20.0
+    t = np.arange(1, T_in.size + 1) * 1e-3
+    s = series(T_in, x_in, velocity=np.full(T_in.size, 0.005), x_out=0.001 * t)     # distal end at 1 mm/s
+    pr = predict(["velocity_friction"], {"K": K, "c_v": c_v, SPEED_FORM: 1.0}, s, compliance=1e-4)
+    m = T_in > 1.0
+    np.testing.assert_allclose(pr.T_out[m], T_in[m] * math.exp(-K * (1 + c_v * 0.003)), rtol=1e-9)
+    assert CATALOGUE["velocity_friction"].variant_ok({SPEED_FORM: 1.0}, ["T_out"]) is False
 
 
 def test_curvature_drift_changes_K_linearly_in_time():
