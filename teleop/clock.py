@@ -168,14 +168,15 @@ class Pacer:
         threads work until then, :data:`teleop.realtime.IDLE`)."""
         return self._next
 
-    def _count(self, lateness: float, missed: bool) -> None:
-        """Book one cycle that started ``lateness`` [s] after its deadline; ``missed``: an overrun."""
+    def _count(self, lateness: float, missed: bool, behind: float | None = None) -> None:
+        """Book one cycle that started ``lateness`` [s] after its deadline; ``missed``: an overrun;
+        ``behind`` [s]: the time from which whole lost periods are counted (default ``lateness``)."""
         P = self.period
         self.ticks += 1
         self.last_overrun = missed
         if missed:
             self.overruns += 1
-            lost = math.floor(lateness / P)
+            lost = math.floor(max(lateness if behind is None else behind, 0.0) / P)
             if lost > 0:
                 self.skipped += lost
                 self.stalls += 1
@@ -298,18 +299,7 @@ class LockedPacer(Pacer):
         gap = now - self._start - P
         self._start = now
         self._seen = int(self.source.count)
-        self.ticks += 1
-        self.last_overrun = missed
-        if missed:
-            self.overruns += 1
-            lost = math.floor(max(gap, 0.0) / P)
-            if lost > 0:
-                self.skipped += lost
-                self.stalls += 1
-        if lateness > 0.5 * P:
-            self.late_starts += 1
-        self.last_lateness = lateness
-        self.max_lateness = max(self.max_lateness, lateness)
+        self._count(lateness, missed, behind=gap)
         return now
 
     @property
