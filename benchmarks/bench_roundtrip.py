@@ -156,4 +156,7 @@ if __name__ == "__main__":
     if len(sys.argv) > 1 and sys.argv[1] == "--pong":
         pong(sys.argv[2], float(sys.argv[3]))
     else:
-        main(float(sys.argv[1]) if len(sys.argv) > 1 else 10.0)
+        import argparse
+        ap = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
+        ap.add_argument("seconds", nargs="?", type=float, default=10.0, help="bare ping-pong duration [s]")
+        main(ap.parse_args().seconds)

@@ -139,4 +139,7 @@ def main(n: int = 5000) -> None:
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 5000)
+    import argparse
+    ap = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
+    ap.add_argument("cycles", nargs="?", type=int, default=5000, help="slave cycles to time")
+    main(ap.parse_args().cycles)
