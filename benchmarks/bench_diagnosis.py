@@ -11,9 +11,10 @@ hidden effect. Two simulators, reported apart:
   routes of arcs and straight runs, random distal loads, 200-2000 Hz, its own noise).
 
 Seed sets: ``dev`` (effects 100+, clean 500+, uncatalogued 900+), ``dev2`` (the same offsets +
-100000: the final set of session 2, seen since) and ``dev3`` (offsets + 200000: the final set of
-session 3, seen since) are development data; ``final`` (offsets + 300000, fixed in session 4 before
-any run of it) is run once with the code frozen, never tuned on.
+100000: the final set of session 2, seen since), ``dev3`` (offsets + 200000: the final set of
+session 3, seen since) and ``dev4`` (offsets + 300000: the final set of session 4, seen since) are
+development data; ``final`` (offsets + 400000, fixed in session 5 before any run of it) is run once
+with the code frozen, never tuned on.
 Seed layout (session 4): every hidden-effect recording has its own seed, so its own simulated rig
 (route, K, EA, load, rate, noise): effect k of EFFECT_IDS, level j, repeat s uses
 base + 100 + 1000 k + 10 j + s (before session 4 every effect of a set shared the four rigs of
@@ -23,7 +24,7 @@ Prints per effect and per channel: accuracy (strict, and up to the inseparable p
 estimator.offline.effects.EQUIVALENT), gains, false alarms on clean data; never fails on the figures (the
 pass/fail checks are in tests/estimator/test_diagnosis.py).
 
-    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|dev3|final] [--seeds 2]
+    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|dev3|dev4|final] [--seeds 2]
         [--levels 0.2,0.8] [--clean 12] [--duration 90] [--rate 1000] [--jobs 2] [--json OUT] [--speed-only]
         [--shared-rigs]
 """
@@ -44,7 +45,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from estimator.offline.diagnosis import WEAK_STRUCTURE, diagnose  # noqa: E402
 from estimator.offline.effects import EFFECT_IDS, EQUIVALENT, NONE  # noqa: E402
 
-SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "final": 300000}
+SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "dev4": 300000, "final": 400000}
 UNCATALOGUED = "load_cell_wander"
 
 
@@ -132,8 +133,9 @@ def table(rows: list[dict], title: str) -> None:
     print(f"\noverall accuracy (catalogue + clean): {n_ok / max(len(scored), 1):.3f} ({n_ok}/{len(scored)}); "
           f"up to the inseparable pairs {n_eq / max(len(scored), 1):.3f} ({n_eq}/{len(scored)})")
     # detectable subset (session 5, defined before its final run): hidden effects whose base structure ratio
-    # (validation rms / noise floor of the base model) is above WEAK_STRUCTURE - the clean development
-    # recordings of both simulators stay below it (at most 1.86) - plus the clean recordings; a recording
+    # (validation rms / noise floor of the base model) is above WEAK_STRUCTURE (the diagnosis' own bound of
+    # clean-looking structure: clean development recordings reached 1.86 with the session-4 simulator, one
+    # slack joint-load recording 2.37 since the session-5 slack fix) plus the clean recordings; a recording
     # the diagnosis raised on counts as detectable (a miss)
     det = [r for r in present if not r["structure"] <= WEAK_STRUCTURE] + clean
     d_ok, d_eq = sum(_ok(r) for r in det), sum(_ok(r, True) for r in det)
