@@ -37,10 +37,12 @@ with a bristle friction state per node, so that it can serve as an independent s
   of total width ``backlash``.
 * Motor: first-order position loop of bandwidth f_bw toward the command (linear between samples),
   speed-limited to v_max. Load cell T_in = T_0; encoder = motor position.
-* Integration: backward Euler on the velocities, the element stiffness, load slope and friction
-  bounds frozen per substep, the stick/slip status of every node found by an active-set
+* Integration: backward Euler on the velocities, the element tangent stiffness and friction
+  bounds frozen per substep, the stick/slip status of every node, the taut/slack state of every
+  element and the piece of the load law at the end of the substep found by an active-set
   iteration (each pass one tridiagonal solve, :mod:`slave.lumped_kernel`); stable for any
-  substep (default 10 kHz; 5 and 160 kHz agree within 0.01 N on a 40 mm/s pull).
+  substep (default 10 kHz; 5 and 160 kHz agree within 0.01 N on a 40 mm/s pull), a slack tendon
+  included (session 5: contact taken at the start of a substep overflowed on seed 316100).
 """
 from __future__ import annotations
 
