@@ -8,7 +8,17 @@ import math
 import numpy as np
 import pytest
 
-from estimator.offline.effects import CATALOGUE, EFFECT_IDS, SPEED_FORM, Series, effect, neutral_values, predict
+from estimator.offline.effects import (
+    CATALOGUE,
+    EFFECT_IDS,
+    SLACK_SIGMAS,
+    SPEED_FORM,
+    Series,
+    effect,
+    neutral_values,
+    predict,
+    slack_hold,
+)
 from estimator.offline.effects_kernels import run_extended
 from estimator.online.distal import estimate_batch
 from estimator.sheath import SheathGeometry, SheathModel
@@ -215,6 +225,26 @@ def test_presliding_rounds_the_reversal_and_backlash_holds_x_out():
     turn = int(np.argmax(ref.x_out))                   # after the tendon end turns, the joint waits for d_b
     still = (ref.x_out[turn:] > ref.x_out[turn] - d_b * 0.999)
     np.testing.assert_allclose(bl.x_out[turn:][still], bl.x_out[turn])
+
+
+def test_a_slack_tendon_holds_the_distal_end_while_the_proximal_end_moves_on():
+    # pull, release to zero tension while the proximal end goes on back (the tendon goes slack), pull again
+    T = np.concatenate((np.linspace(0, 10, 1000), np.linspace(10, 0, 1000), np.zeros(500), np.linspace(0, 10, 1000)))
+    x = np.concatenate((np.linspace(0, 3e-3, 1000), np.linspace(3e-3, 1e-3, 1000), np.linspace(1e-3, -1e-3, 500),
+                        np.linspace(-1e-3, 2e-3, 1000)))
+    sigma = 0.01
+    s = series(T, x)
+    s = Series(s.time, s.x_in, s.T_in, s.velocity, None, None, s.u, s.w, 0.0, sigma)
+    pr = predict([], {"K": K}, s, compliance=1e-4)
+    taut = T >= SLACK_SIGMAS * sigma
+    last = int(np.flatnonzero(taut[:2500])[-1])
+    np.testing.assert_allclose(pr.x_out[last:2500], pr.x_out[last])       # held where the tendon went slack
+    assert abs(pr.x_out[last] - x[last]) < 1e-5 < np.ptp(x[last:2500])      # while the proximal end moved 2 mm
+    # taut again: x_out = x_in - (L/EA) E1 as without slack; noiseless data (sigma 0) are never held
+    free = predict([], {"K": K}, series(T, x), compliance=1e-4)
+    np.testing.assert_allclose(pr.x_out[taut], free.x_out[taut], atol=1e-15)
+    assert np.ptp(free.x_out[last:2500]) > 1e-3
+    np.testing.assert_array_equal(slack_hold(T, 0.0), np.arange(T.size))
 
 
 def test_compliance_is_fitted_by_linear_least_squares():
