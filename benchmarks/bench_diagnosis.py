@@ -12,10 +12,11 @@ hidden effect. Two simulators, reported apart:
 
 Seed sets: ``dev`` (effects 100+, clean 500+, uncatalogued 900+), ``dev2`` (the same offsets +
 100000: the final set of session 2, seen since), ``dev3`` (offsets + 200000: the final set of
-session 3, seen since), ``dev4`` (offsets + 300000: the final set of session 4, seen since) and ``dev5``
-(offsets + 400000: the first final set of session 5, seen since) are development data; ``final``
-(offsets + 500000, fixed in session 5's second pass before any run of it) is run once with the code
-frozen, never tuned on.
+session 3, seen since), ``dev4`` (offsets + 300000: the final set of session 4, seen since), ``dev5``
+(offsets + 400000: the first final set of session 5, seen since) and ``dev6`` (offsets + 500000: the
+final set of session 5's second pass, run once with commit 7a1c12d, seen since) are development data.
+``final`` still names 500000+ (= dev6, SEEN): session 5's third pass changed no code, so it fixed no
+new final set; the next code change must commit a new, unused range here before any run of it.
 Seed layout (session 4): every hidden-effect recording has its own seed, so its own simulated rig
 (route, K, EA, load, rate, noise): effect k of EFFECT_IDS, level j, repeat s uses
 base + 100 + 1000 k + 10 j + s (before session 4 every effect of a set shared the four rigs of
@@ -25,7 +26,7 @@ Prints per effect and per channel: accuracy (strict, and up to the inseparable p
 estimator.offline.effects.EQUIVALENT), gains, false alarms on clean data; never fails on the figures (the
 pass/fail checks are in tests/estimator/test_diagnosis.py).
 
-    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|dev3|dev4|dev5|final] [--seeds 2]
+    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|dev3|dev4|dev5|dev6|final] [--seeds 2]
         [--levels 0.2,0.8] [--clean 12] [--duration 90] [--rate 1000] [--jobs 2] [--json OUT] [--speed-only]
         [--shared-rigs]
 """
@@ -46,7 +47,8 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from estimator.offline.diagnosis import WEAK_STRUCTURE, diagnose  # noqa: E402
 from estimator.offline.effects import EFFECT_IDS, EQUIVALENT, NONE  # noqa: E402
 
-SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "dev4": 300000, "dev5": 400000, "final": 500000}
+SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "dev4": 300000, "dev5": 400000, "dev6": 500000,
+             "final": 500000}   # final = dev6, seen (module docstring)
 UNCATALOGUED = "load_cell_wander"
 
 
