@@ -47,7 +47,7 @@ from estimator.offline.pair_models import (CAUSE_OF_SEED, PAIR_EFFECTS, applicab
                                            predict_model)
 
 __all__ = ["CAPSTAN_STARTS", "MAX_NFEV", "CV_NFEV", "FIT_TOL", "fit_model", "folds", "cross_validate", "diagnose_pair",
-           "figure_bootstrap", "FitResult"]
+           "figure_bootstrap", "spread_deg", "FitResult"]
 
 #: Starting points of the capstan structure (G [-], lam [rad/N], K_a, K_b [-], k [N/rad]).
 CAPSTAN_STARTS = ({"G": 1.4, "lam": 0.4, "K_a": 0.8, "K_b": 0.4, "k": 4.0},
@@ -216,10 +216,16 @@ def figure_bootstrap(fx: FitResult, rec, train: slice, test: slice, n_draws: int
         idx = np.concatenate([np.arange(edges[k], edges[k + 1]) for k in pick])
         f = fit_model(fx.structure, fx.effects, rec, idx, test, [dict(fx.values)], max_nfev=CV_NFEV)
         xs.append(math.degrees(f.rmse_test))
+    return spread_deg(xs, f"the training block's {CV_BLOCKS} time blocks drawn with replacement, refitted; the "
+                          "test block scored")
+
+
+def spread_deg(xs: list[float], method: str) -> dict:
+    """Summary of a bootstrap's figures ``xs`` [deg] (at least 2): {std_deg (ddof 1), ci95_deg [2.5, 97.5 %
+    percentiles], n_draws, method}."""
     return {"std_deg": float(np.std(xs, ddof=1)), "ci95_deg": [float(np.percentile(xs, 2.5)),
                                                                float(np.percentile(xs, 97.5))],
-            "n_draws": n_draws, "method": f"the training block's {CV_BLOCKS} time blocks drawn with replacement, "
-                                          "refitted; the test block scored"}
+            "n_draws": len(xs), "method": method}
 
 
 def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,

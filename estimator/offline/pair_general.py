@@ -25,6 +25,7 @@ from typing import Callable
 import numpy as np
 
 from estimator.offline.diagnosis import PENALTY
+from estimator.offline.pair_diagnosis import spread_deg
 from estimator.offline.pair_shared import (
     CHOICE,
     COMPARED,
@@ -191,10 +192,8 @@ def loco_bootstrap(m: SharedModel, recs: list, bends: list[float], blocks: list[
             v = fit_shared(m, [recs[j] for j in use], [bends[j] for j in use], idx, starts=[rows[i]["params"]],
                            max_nfev=CV_NFEV)
             xs.append(_rmse_deg(predict_config(m, v, rec, bend)[te] - y))
-        out.append({"std_deg": float(np.std(xs, ddof=1)),
-                    "ci95_deg": [float(np.percentile(xs, 2.5)), float(np.percentile(xs, 97.5))], "n_draws": n_draws,
-                    "method": "bootstrap over the other configurations' cycles, refitted; this configuration "
-                              "predicted, its test block scored"})
+        out.append(spread_deg(xs, "bootstrap over the other configurations' cycles, refitted; this configuration "
+                                  "predicted, its test block scored"))
     return out
 
 
