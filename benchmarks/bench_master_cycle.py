@@ -32,16 +32,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from teleop.clock import FakeClock  # noqa: E402
 from teleop.codec import encode  # noqa: E402
 from teleop.transport import Received  # noqa: E402
-
-
-class _Clock:
-    def __init__(self):
-        self.t = 100.0
-
-    def now(self) -> float:
-        return self.t
 
 
 class _Topic:
@@ -77,7 +70,7 @@ def run(protocol: str, profile: bool, tmp: Path, csv: Path | None = None,
 
     cfg = load_config(ROOT / "configs" / "sim.yaml", {"recording.rerun": "off"})
     warm_up(cfg)
-    clock = _Clock()
+    clock = FakeClock(100.0)
     cmd, est, mhb, shb = (_Topic(clock) for _ in range(4))
     rig = SimulatedRig.from_config(cfg)
     model = SheathModel(K=rig.K, compliance=rig.M_e / rig.K if rig.K else rig.M_e)
@@ -97,17 +90,17 @@ def run(protocol: str, profile: bool, tmp: Path, csv: Path | None = None,
         for _ in range(n_max):
             if master.done:
                 break
-            clock.t += dt
+            t = clock.advance(dt)
             if prof is not None:
                 prof.enable()
             c0, w0 = tt(), pc()
-            master.step(clock.t)
+            master.step(t)
             c1, w1 = tt(), pc()
             if prof is not None:
                 prof.disable()
             cpu.append(c1 - c0)
             wall.append(w1 - w0)
-            slave.step(clock.t)
+            slave.step(t)
             if sleep > 0:
                 time.sleep(sleep)
     if prof is not None:

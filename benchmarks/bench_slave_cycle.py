@@ -26,6 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from estimator.sheath import SheathModel  # noqa: E402
 from slave.node import SlaveLinks, SlaveNode, csv_columns, warm_up  # noqa: E402
 from slave.simulated import SimulatedRig  # noqa: E402
+from teleop.clock import FakeClock  # noqa: E402
 from teleop.config import Config, load_config  # noqa: E402
 from teleop.csv_writer import ThreadedCsvRecorder  # noqa: E402
 from teleop.messages import Command  # noqa: E402
@@ -33,14 +34,6 @@ from teleop.recording import CsvRecorder  # noqa: E402
 from teleop.rerun_log import RerunLogger  # noqa: E402
 from teleop.rerun_proc import RerunProcessLogger  # noqa: E402
 from teleop.transport import Received  # noqa: E402
-
-
-class _Clock:
-    def __init__(self):
-        self.t = 0.0
-
-    def now(self) -> float:
-        return self.t
 
 
 class _Topic:
@@ -61,7 +54,7 @@ class _Topic:
 def run(threaded: bool, n: int, tmp: Path) -> np.ndarray:
     cfg = Config()
     warm_up(cfg)
-    clock = _Clock()
+    clock = FakeClock()
     links = SlaveLinks(*(_Topic(clock) for _ in range(4)))
     rig = SimulatedRig.from_config(cfg)
     model = SheathModel(K=rig.K, compliance=rig.M_e / rig.K if rig.K else rig.M_e)
@@ -73,11 +66,11 @@ def run(threaded: bool, n: int, tmp: Path) -> np.ndarray:
         node = SlaveNode(cfg, rig, links, recorder=rec, rerun=rr, calibrate=False, model=model)
         x = 0.0
         for k in range(n):
-            clock.t += 1e-3
-            x = 0.004 * (1 - math.cos(2 * math.pi * 0.25 * clock.t))
-            links.command.put(Command(k, clock.t, (x,)))
+            t = clock.advance(1e-3)
+            x = 0.004 * (1 - math.cos(2 * math.pi * 0.25 * t))
+            links.command.put(Command(k, t, (x,)))
             t0 = time.perf_counter()
-            node.step(clock.t)
+            node.step(t)
             times[k] = time.perf_counter() - t0
     return times * 1e3
 
@@ -98,7 +91,7 @@ def run_joints(n: int, tmp: Path, record: bool = True) -> np.ndarray:
     while not routine.done:                       # the calibration the slave would reload
         st = kind.routine_step(routine, sim, st, dt)
     cal = kind.calibration_of(cfg, routine)
-    clock = _Clock()
+    clock = FakeClock()
     links = SlaveLinks(*(_Topic(clock) for _ in range(4)))
     inst = RIG_TYPES["simulated"](cfg, None)
     name, columns, meta = recording(cfg, inst)
@@ -106,11 +99,11 @@ def run_joints(n: int, tmp: Path, record: bool = True) -> np.ndarray:
 
     def loop(node: SlaveNode) -> None:
         for k in range(n):
-            clock.t += dt
-            a = 0.3 * math.sin(2 * math.pi * 0.25 * clock.t)
-            links.command.put(Command(k, clock.t, (a, -a, 0.5 * a)))
+            t = clock.advance(dt)
+            a = 0.3 * math.sin(2 * math.pi * 0.25 * t)
+            links.command.put(Command(k, t, (a, -a, 0.5 * a)))
             t0 = time.perf_counter()
-            node.step(clock.t)
+            node.step(t)
             times[k] = time.perf_counter() - t0
 
     if not record:
