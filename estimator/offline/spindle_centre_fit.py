@@ -22,6 +22,7 @@ from estimator.online.spindle_centre import (
     centre_ready,
     direction_state,
     stroke_centre,
+    stroke_starts,
 )
 
 __all__ = ["THETA_Z_GRID", "DEGREE", "band_edges", "fit_centre_map", "scale_profile", "run_centre", "scored_start",
@@ -147,11 +148,8 @@ def scale_profile(runs: list[RunData], scales: np.ndarray, step: int = 10) -> li
 
 def _periods(theta_p: np.ndarray, dt: float) -> np.ndarray:
     """Period index of every sample: the number of spindle reversals before it, halved."""
-    om = spindle_rate(theta_p, dt)
-    nz = np.flatnonzero(om != 0.0)
-    flips = np.zeros(om.size, dtype=int)
-    s = np.sign(om[nz])
-    flips[nz[1:][s[1:] != s[:-1]]] = 1             # the first sample of each new stroke
+    flips = np.zeros(theta_p.size, dtype=int)
+    flips[stroke_starts(spindle_rate(theta_p, dt))] = 1
     return np.cumsum(flips) // 2
 
 

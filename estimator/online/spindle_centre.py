@@ -31,7 +31,7 @@ import numpy as np
 
 from estimator.online.spindle import OMEGA_S, angle_lag, spindle_rate
 
-__all__ = ["CentreParams", "MIN_RATE", "MIN_SAMPLES", "stroke_centre", "centre_ready", "direction_state", "centre_features",
+__all__ = ["CentreParams", "MIN_RATE", "MIN_SAMPLES", "stroke_starts", "stroke_centre", "centre_ready", "direction_state", "centre_features",
            "predict_centre_map"]
 
 #: Spindle speed above which a sample is in full motion (on a band edge) [rad/s].
@@ -64,7 +64,7 @@ class CentreParams:
                 "centre0": self.centre0, "edge_slope": list(self.edge_slope), **self.notes}
 
 
-def _strokes(omega: np.ndarray) -> np.ndarray:
+def stroke_starts(omega: np.ndarray) -> np.ndarray:
     """Indices where the sign of the (nonzero) spindle rate changes; the first index of each new stroke."""
     nz = np.flatnonzero(omega != 0.0)
     if nz.size < 2:
@@ -89,7 +89,7 @@ def stroke_centre(tau_p: np.ndarray, theta_p: np.ndarray, dt: float, window: tup
     if abs(w1) >= 1.0:
         raise ValueError(f"stroke_centre: half-width slope w1 = {w1} must be below 1 in magnitude")
     om = spindle_rate(th, dt)
-    cuts = np.concatenate([[0], _strokes(om), [th.size]])
+    cuts = np.concatenate([[0], stroke_starts(om), [th.size]])
     inside = (th >= window[0]) & (th <= window[1]) & (np.abs(om) > MIN_RATE)
     edge = np.full((2, th.size), np.nan)            # row 0: high edge (falling angle), row 1: low edge
     last = [np.nan, np.nan]
@@ -117,7 +117,7 @@ def centre_ready(theta_p: np.ndarray, dt: float, window: tuple[float, float]) ->
     is still initialising, the way the first stroke initialises the pair model. Spindle angle only."""
     th = np.asarray(theta_p, dtype=float)
     om = spindle_rate(th, dt)
-    cuts = np.concatenate([[0], _strokes(om), [th.size]])
+    cuts = np.concatenate([[0], stroke_starts(om), [th.size]])
     inside = (th >= window[0]) & (th <= window[1]) & (np.abs(om) > MIN_RATE)
     seen = [th.size, th.size]
     for a, b in zip(cuts[:-1], cuts[1:]):
