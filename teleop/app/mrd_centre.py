@@ -48,18 +48,15 @@ def _score(p: CentreParams, r: RunData, k0: int, fs: float) -> dict:
                                                    "torque_max_fs": float(np.max(np.abs(e0)) / fs)}}
 
 
-def _agg(rows: list[dict]) -> dict:
+def centre_agg(rows: list[dict]) -> dict:
+    """Median and worst torque RMSE and the largest |error| [FS] of per-run centre-map scores (and the same
+    from k0 when every row has it)."""
     t = [r["torque_rmse_fs"] for r in rows]
     out: dict[str, Any] = {"median_torque_rmse_fs": float(np.median(t)), "max_torque_rmse_fs": float(np.max(t)),
                            "max_torque_max_fs": float(max(r["torque_max_fs"] for r in rows))}
     if all("from_k0" in r for r in rows):
-        out["from_k0"] = _agg([r["from_k0"] for r in rows])
+        out["from_k0"] = centre_agg([r["from_k0"] for r in rows])
     return out
-
-
-def centre_agg(rows: list[dict]) -> dict:
-    """Median and worst torque RMSE and the largest |error| [FS] of per-run centre-map scores."""
-    return _agg(rows)
 
 
 def mid_centre_run(runs: list[RunData]) -> str:
@@ -106,7 +103,7 @@ def centre_folder(runs: list[RunData], fs: float, tick: Callable[[str], None], l
     out: dict[str, Any] = {"fitted_on": "jaw torque of every run (in-sample); the scored run's centre from its "
                                         "spindle torque", "parameters": p.as_dict(), "fit_rms_Nm": rms,
                            "runs": {r.name: _score(p, r, r.k0, fs) for r in runs}}
-    out["summary"] = _agg(list(out["runs"].values()))
+    out["summary"] = centre_agg(list(out["runs"].values()))
     out["within_run_gain"] = gain_identifiability(runs, float(p.coef[1, 0]))
     tick("centre map")
     if loro:
@@ -116,7 +113,7 @@ def centre_folder(runs: list[RunData], fs: float, tick: Callable[[str], None], l
             lo[r.name] = {**_score(q, r, r.k0, fs), "load_gain": float(q.coef[1, 0]), "theta_z": q.theta_z}
             tick(f"centre without {r.name}")
         out["loro"] = {"fitted_on": "the other runs' jaw torque; the scored run's spindle signals only", "runs": lo,
-                       "summary": _agg(list(lo.values()))}
+                       "summary": centre_agg(list(lo.values()))}
     return out
 
 
