@@ -34,13 +34,7 @@ def load_force(x, lx, lF, ls):  # pragma: no cover - compiled
     Piecewise linear through (lx[j], lF[j]); ls[0] is the slope left of lx[0], ls[j] the slope
     right of lx[j-1] (so ls has len(lx) + 1 entries).
     """
-    m = lx.shape[0]
-    if x <= lx[0]:
-        return lF[0] + ls[0] * (x - lx[0]), ls[0]
-    for j in range(1, m):
-        if x <= lx[j]:
-            return lF[j - 1] + ls[j] * (x - lx[j - 1]), ls[j]
-    return lF[m - 1] + ls[m] * (x - lx[m - 1]), ls[m]
+    return _load_piece(x, _load_segment(x, lx), lx, lF, ls)
 
 
 @njit(cache=True, nogil=True, inline="always")
