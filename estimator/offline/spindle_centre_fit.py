@@ -4,6 +4,10 @@ Every fit maps the calibration runs' spindle signals to their jaw torque; a pred
 spindle signals only. The map is linear in its coefficients given the direction-state travel theta_z,
 which is chosen from THETA_Z_GRID by the calibration's own fit cost.
 
+Outside the spindle angles the calibration saw in each direction the shape along the stroke is *held* at its
+value at the last angle seen (:func:`held_features`, :func:`predict_held`): the degree-4 polynomial is not
+extrapolated (Finding 4, session 6: on half of a 0.1 Hz run it reached 4.8 FS beyond the data).
+
 The load gain (how the jaw torque follows the band centre, about 1 / (r cosh K)) needs calibration
 runs at two or more load levels. On runs of one load level the centre hardly changes, the gain is not
 identifiable (:func:`scale_profile` measures the flat cost), and ``scale`` must be given: the
@@ -18,15 +22,15 @@ from estimator.online.spindle import spindle_rate
 from estimator.online.spindle_centre import (
     MIN_RATE,
     CentreParams,
-    centre_features,
     centre_ready,
     direction_state,
+    predict_centre_map,
     stroke_centre,
     stroke_starts,
 )
 
 __all__ = ["THETA_Z_GRID", "DEGREE", "band_edges", "fit_centre_map", "scale_profile", "run_centre", "scored_start",
-           "within_run_gain"]
+           "within_run_gain", "shape_range", "held_features", "predict_held"]
 
 #: Candidate direction-state travels [rad].
 THETA_Z_GRID = (0.003, 0.006, 0.01, 0.02, 0.04, 0.08)
@@ -91,12 +95,55 @@ def _setup(runs: list[RunData]) -> tuple[tuple[float, float], tuple[float, float
     return window, (float(w0), float(w1)), float(C.mean()), ref, _edge_slopes(runs, window, ref)
 
 
-def _design(runs: list[RunData], centres: list[np.ndarray], starts: list[int], ref: float, theta_z: float, step: int):
+Range = tuple[tuple[float, float], tuple[float, float]]
+
+
+def shape_range(runs: list[RunData], starts: list[int], ref: float) -> Range:
+    """((lo, hi) rising, (lo, hi) falling) of d = theta_p - ``ref`` [rad] over the samples from ``starts`` on
+    with the spindle angle rising / falling: where the calibration saw the shape along the stroke.
+    Raises ValueError when a direction has no sample."""
+    out = []
+    for up in (True, False):
+        d = np.concatenate([(r.theta_p - ref)[k:][(spindle_rate(r.theta_p, r.dt)[k:] > 0) == up] for r, k in zip(runs, starts)])
+        if d.size == 0:
+            raise ValueError(f"shape_range: no sample with the spindle angle {'rising' if up else 'falling'}")
+        out.append((float(d.min()), float(d.max())))
+    return out[0], out[1]
+
+
+def held_features(theta_p: np.ndarray, centre: np.ndarray, z: np.ndarray, theta_ref: float, deg: int,
+                  rng: Range) -> np.ndarray:
+    """The design matrix of :func:`estimator.online.spindle_centre.centre_features` (columns d^k, C d^k, z d^k,
+    z C d^k) with the shape held outside ``rng`` (:func:`shape_range`): the rising branch (a + c, weight
+    (1 + z) / 2) reads d clipped to the rising range, the falling branch (a - c, weight (1 - z) / 2) d clipped
+    to the falling range. Inside both ranges it equals centre_features."""
+    d = np.asarray(theta_p, dtype=float) - theta_ref
+    pu, pd = (np.column_stack([np.clip(d, lo, hi) ** k for k in range(deg + 1)]) for lo, hi in rng)
+    wu, wd = (0.5 * (1.0 + z))[:, None], (0.5 * (1.0 - z))[:, None]
+    a, c = wu * pu + wd * pd, wu * pu - wd * pd
+    return np.hstack([a, centre[:, None] * a, c, centre[:, None] * c])
+
+
+def predict_held(p: CentreParams, tau_p: np.ndarray, theta_p: np.ndarray, dt: float) -> np.ndarray:
+    """Jaw torque [N m], shape (n,), of one run from its spindle torque [N m] and angle [rad]: the centre map
+    with its shape held outside the calibration's angle range (``p.notes["shape_range"]``, set by
+    :func:`fit_centre_map`); parameters without it give :func:`predict_centre_map`'s polynomial."""
+    if "shape_range" not in p.notes:
+        return predict_centre_map(p, tau_p, theta_p, dt)
+    c = stroke_centre(tau_p, theta_p, dt, p.window, p.half_width, p.centre0, p.edge_slope, p.theta_ref)
+    z = direction_state(theta_p, dt, p.theta_z)
+    (ul, uh), (dl, dh) = p.notes["shape_range"]
+    X = held_features(theta_p, c, z, p.theta_ref, p.coef.shape[1] - 1, ((ul, uh), (dl, dh)))
+    return X @ np.asarray(p.coef, dtype=float).ravel()
+
+
+def _design(runs: list[RunData], centres: list[np.ndarray], starts: list[int], ref: float, theta_z: float, step: int,
+            rng: Range):
     Xs, ys = [], []
     for r, c, k_start in zip(runs, centres, starts):
         z = direction_state(r.theta_p, r.dt, theta_z)
         k = slice(k_start, None, step)
-        Xs.append(centre_features(r.theta_p[k], c[k], z[k], ref, DEGREE))
+        Xs.append(held_features(r.theta_p[k], c[k], z[k], ref, DEGREE, rng))
         ys.append(r.tau_d[k])
     return np.vstack(Xs), np.concatenate(ys)
 
@@ -117,22 +164,25 @@ def fit_centre_map(runs: list[RunData], scale: float | None = None, step: int = 
                    theta_z: float | None = None) -> tuple[CentreParams, float]:
     """Fit (SC2) to the jaw torque of ``runs`` (from each run's k0, decimated by ``step``); ``scale``
     [-] fixes the load gain b_0 (needed when the runs share one load level); ``theta_z`` [rad] fixes the
-    direction-state travel (else the best of THETA_Z_GRID on the runs' fit cost). Returns the
-    parameters and the rms fit residual [N m]. Raises ValueError for no runs."""
+    direction-state travel (else the best of THETA_Z_GRID on the runs' fit cost). The fitted samples' angle
+    range per direction is kept in ``notes["shape_range"]`` (rising, falling) [rad]: :func:`predict_held` holds
+    the shape outside it. Returns the parameters and the rms fit residual [N m]. Raises ValueError for no runs."""
     if not runs:
         raise ValueError("fit_centre_map needs at least one run")
     window, half, c0, ref, slope = _setup(runs)
     centres = [stroke_centre(r.tau_p, r.theta_p, r.dt, window, half, c0, slope, ref) for r in runs]
     starts = [scored_start(r, window) for r in runs]          # where the centre reading has both edges
+    rng = shape_range(runs, starts, ref)
     best: tuple[float, float, np.ndarray] | None = None
     for tz in (THETA_Z_GRID if theta_z is None else (theta_z,)):
-        X, y = _design(runs, centres, starts, ref, tz, step)
+        X, y = _design(runs, centres, starts, ref, tz, step, rng)
         coef = _solve(X, y, scale)
         rms = float(np.sqrt(np.mean((X @ coef - y) ** 2)))
         if best is None or rms < best[0]:
             best = (rms, tz, coef)
     assert best is not None
-    notes = {"load_gain": "fixed" if scale is not None else "fitted", "degree": DEGREE}
+    notes = {"load_gain": "fixed" if scale is not None else "fitted", "degree": DEGREE,
+             "shape_range": [list(rng[0]), list(rng[1])]}
     return CentreParams(best[2].reshape(4, DEGREE + 1), ref, best[1], window, half, c0, slope, notes), best[0]
 
 
@@ -157,7 +207,7 @@ def _shape(d: np.ndarray, up: np.ndarray, deg: int) -> np.ndarray:
     return np.column_stack([(up == j) * d ** k for j in (False, True) for k in range(deg + 1)])
 
 
-def within_run_gain(r: RunData, deg: int = DEGREE, step: int = 10, middle: float = 0.6) -> dict:
+def within_run_gain(r: RunData | list[RunData], deg: int = DEGREE, step: int = 10, middle: float = 0.6) -> dict:
     """Can one run's own signals fix the load gain? The capstan pair puts the band edges at
     c(theta, direction) + r e^(+-K) tau_d, so along a run the spindle torque follows its own jaw torque
     with slope r e^(-+K) on each direction's edge, s = their mean ~ r cosh K = 1 / gain, *after* the shape along the stroke (spring, wrap friction: a
@@ -171,14 +221,21 @@ def within_run_gain(r: RunData, deg: int = DEGREE, step: int = 10, middle: float
     residual's integrated autocorrelation time), ``jaw_free_rms_Nm`` (jaw torque not explained by the
     shape), ``jaw_rms_Nm`` (its whole variation), ``resid_rms_Nm``, ``n``, ``n_eff``, ``periods``.
     Raises ValueError when fewer than 2 (deg + 2) samples qualify."""
-    om = spindle_rate(r.theta_p, r.dt)
-    lo, hi = np.percentile(r.theta_p[r.k0:], [50 * (1 - middle), 50 * (1 + middle)])
-    k = np.arange(r.theta_p.size)
-    idx = np.flatnonzero((k >= r.k0) & (r.theta_p > lo) & (r.theta_p < hi) & (np.abs(om) > MIN_RATE))[::step]
-    if idx.size < 2 * (deg + 2):
-        raise ValueError(f"run {r.name}: {idx.size} samples in full motion, too few for the within-run gain")
-    d, up = r.theta_p[idx] - float(np.mean(r.theta_p[idx])), om[idx] > 0
-    tp, td, per = r.tau_p[idx], r.tau_d[idx], _periods(r.theta_p, r.dt)[idx]
+    runs = [r] if isinstance(r, RunData) else list(r)
+    cols: list[list[np.ndarray]] = [[], [], [], [], []]
+    for i, q in enumerate(runs):
+        om = spindle_rate(q.theta_p, q.dt)
+        lo, hi = np.percentile(q.theta_p[q.k0:], [50 * (1 - middle), 50 * (1 + middle)])
+        k = np.arange(q.theta_p.size)
+        idx = np.flatnonzero((k >= q.k0) & (q.theta_p > lo) & (q.theta_p < hi) & (np.abs(om) > MIN_RATE))[::step]
+        for c, v in zip(cols, (q.theta_p[idx], om[idx] > 0, q.tau_p[idx], q.tau_d[idx],
+                               _periods(q.theta_p, q.dt)[idx] + 10_000 * i)):
+            c.append(v)
+    th, up, tp, td, per = (np.concatenate(c) for c in cols)
+    if th.size < 2 * (deg + 2):
+        raise ValueError(f"run {','.join(q.name for q in runs)}: {th.size} samples in full motion, too few for the "
+                         "within-run gain")
+    d = th - float(np.mean(th))
 
     def fit(m: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, list[float], list[float]]:
         free, res, ffs, slopes = np.zeros(int(m.sum())), np.zeros(int(m.sum())), [], []
@@ -193,7 +250,7 @@ def within_run_gain(r: RunData, deg: int = DEGREE, step: int = 10, middle: float
             slopes.append(sj)
         return 0.5 * (slopes[0] + slopes[1]), free, res, ffs, slopes
 
-    s, free, res, ffs, edge = fit(np.ones(idx.size, dtype=bool))
+    s, free, res, ffs, edge = fit(np.ones(th.size, dtype=bool))
     ps = np.unique(per)
     se = None                                       # the jackknife needs three periods or more
     if ps.size > 2:
@@ -202,11 +259,11 @@ def within_run_gain(r: RunData, deg: int = DEGREE, step: int = 10, middle: float
     e = res - res.mean()
     ac = np.correlate(e, e, "full")[e.size - 1:] / (e @ e)
     cut = int(np.argmax(ac < 0)) if np.any(ac < 0) else ac.size
-    n_eff = float(idx.size / max(1.0, 2.0 * ac[:cut].sum() - 1.0))
+    n_eff = float(th.size / max(1.0, 2.0 * ac[:cut].sum() - 1.0))
     rss = float(res @ res)
     inv = 0.25 * sum(1.0 / f if f > 0 else np.inf for f in ffs)       # variance factor of (s_1 + s_2) / 2
     half = float(np.sqrt(rss * np.expm1(3.84 / n_eff) * inv))
     return {"slope": s, "gain": 1.0 / s if s else float("nan"), "jackknife_se": se,
             "profile_ci95": [s - half, s + half], "edge_slopes_falling_rising": edge, "jaw_free_rms_Nm": float(np.sqrt(np.mean(free ** 2))),
-            "jaw_rms_Nm": float(np.std(td)), "resid_rms_Nm": float(np.sqrt(rss / idx.size)), "n": int(idx.size),
+            "jaw_rms_Nm": float(np.std(td)), "resid_rms_Nm": float(np.sqrt(rss / th.size)), "n": int(th.size),
             "n_eff": n_eff, "periods": int(ps.size), "degree": deg}

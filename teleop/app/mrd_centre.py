@@ -22,11 +22,17 @@ from typing import Any, Callable
 
 import numpy as np
 
-from estimator.offline.spindle_centre_fit import fit_centre_map, run_centre, scale_profile, within_run_gain
+from estimator.offline.spindle_centre_fit import (
+    fit_centre_map,
+    predict_held,
+    run_centre,
+    scale_profile,
+    within_run_gain,
+)
 from estimator.offline.spindle_shared import RunData, kinematic_ratio
-from estimator.online.spindle_centre import CentreParams, centre_ready, predict_centre_map
+from estimator.online.spindle_centre import CentreParams, centre_ready
 
-__all__ = ["CENTRE", "model_choice", "gain_identifiability", "centre_agg", "centre_folder", "centre_one_run", "centre_time_split", "mid_centre_run", "score_centre",
+__all__ = ["CENTRE", "model_choice", "implied_load_gain", "LOAD_RULE", "gain_identifiability", "centre_agg", "centre_folder", "centre_one_run", "centre_time_split", "mid_centre_run", "score_centre",
            "profile_on_scored", "PROFILE_GAINS", "LOAD_SPREAD_NM"]
 
 #: The centre map's name among the headline's candidates (``model_choice``).
@@ -35,12 +41,22 @@ CENTRE = "centre map"
 PROFILE_GAINS = tuple(float(v) for v in np.round(np.arange(0.6, 1.41, 0.1), 2))
 #: Band-centre spread [N m] of the calibration runs above which they count as several load levels.
 LOAD_SPREAD_NM = 0.005
+#: Uniform spindle-torque shift [N m] of :func:`implied_load_gain`.
+SHIFT_NM = 0.002
+#: The headline's eligibility rule (:func:`model_choice`; session 6, written when both candidates' scores on every
+#: calibration path were known from sessions 4-5; it reads calibration data only).
+LOAD_RULE = ("the time split cannot test the load gain (at one load level not at all), so a candidate is eligible "
+             "only if its load slope 1 / g (g: jaw torque change per N m of uniform spindle-torque shift, on the "
+             "calibration inputs) lies inside the interval of the calibration runs' own reading of it "
+             "(within_run_gain pooled over the calibration runs: spindle torque on jaw torque after the shape along "
+             "the stroke per direction; slope +- the wider of its 95 % profile half-width and 1.96 jackknife SE); "
+             "among the eligible the lower time-split RMSE, all candidates when none is eligible")
 
 
 def _score(p: CentreParams, r: RunData, k0: int, fs: float) -> dict:
     """Scored from max(k0, the instant the centre reading has both band edges: centre_ready); the same
     figures from k0 under ``from_k0`` (the one-edge initialisation included)."""
-    pt = predict_centre_map(p, r.tau_p, r.theta_p, r.dt)
+    pt = predict_held(p, r.tau_p, r.theta_p, r.dt)
     k = max(k0, centre_ready(r.theta_p, r.dt, p.window))
     e, e0 = pt[k:] - r.tau_d[k:], pt[k0:] - r.tau_d[k0:]
     return {"torque_rmse_fs": float(np.sqrt(np.mean(e ** 2)) / fs), "torque_max_fs": float(np.max(np.abs(e)) / fs),
@@ -117,9 +133,21 @@ def centre_folder(runs: list[RunData], fs: float, tick: Callable[[str], None], l
     return out
 
 
+def _centres(cal: list[RunData]) -> list[float]:
+    """Band centre [N m] of each calibration run over the runs' common 20-80 % angle window (spindle only)."""
+    th = np.concatenate([r.theta_p[r.k0:] for r in cal])
+    lo, hi = np.percentile(th, [20.0, 80.0])
+    return [run_centre(r, (float(lo), float(hi))) for r in cal]
+
+
+def _several_loads(cal: list[RunData], cents: list[float] | None = None) -> bool:
+    """True when the calibration runs' band centres spread over more than LOAD_SPREAD_NM (several load levels)."""
+    return len(cal) > 1 and float(np.ptp(_centres(cal) if cents is None else cents)) > LOAD_SPREAD_NM
+
+
 def _fit_rule(cal: list[RunData], cents: list[float]) -> tuple[CentreParams, float, bool]:
     """The calibration rule: load gain fitted when the band centres spread over LOAD_SPREAD_NM, else 1 / n_k."""
-    if len(cal) > 1 and float(np.ptp(cents)) > LOAD_SPREAD_NM:
+    if _several_loads(cal, cents):
         return (*fit_centre_map(cal), True)
     return (*fit_centre_map(cal, scale=1.0 / kinematic_ratio(cal)), False)
 
@@ -131,40 +159,67 @@ def centre_time_split(cal: list[RunData], fs: float) -> float:
     calibration runs only; no scored run is read."""
     first = [RunData(r.name, r.tau_p[:m], r.theta_p[:m], r.tau_d[:m], r.theta_d[:m], r.k0, r.dt)
              for r in cal for m in [(r.k0 + r.tau_p.size) // 2]]
-    th = np.concatenate([r.theta_p[r.k0:] for r in first])
-    lo, hi = np.percentile(th, [20.0, 80.0])
-    p, _, _ = _fit_rule(first, [run_centre(r, (float(lo), float(hi))) for r in first])
+    p, _, _ = _fit_rule(first, _centres(first))
     sq, n = 0.0, 0
     for r in cal:
         m = max((r.k0 + r.tau_p.size) // 2, centre_ready(r.theta_p, r.dt, p.window))
-        e = predict_centre_map(p, r.tau_p, r.theta_p, r.dt)[m:] - r.tau_d[m:]
+        e = predict_held(p, r.tau_p, r.theta_p, r.dt)[m:] - r.tau_d[m:]
         sq, n = sq + float(e @ e), n + e.size
     return float(np.sqrt(sq / max(n, 1)) / fs)
 
 
+def implied_load_gain(predict: Callable[[RunData, float], np.ndarray], cal: list[RunData],
+                      delta: float = SHIFT_NM) -> float:
+    """A candidate's load gain [-]: the change of its predicted jaw torque per N m of a uniform shift of the
+    spindle torque (``predict(run, shift)`` [N m]), from each calibration run's k0 on, averaged over the runs
+    (central difference over +-``delta`` [N m]). A load change moves the whole band by the same amount; this
+    is how far the candidate carries it to the jaw. Calibration runs' spindle signals only."""
+    g = [float(np.mean(predict(r, delta)[r.k0:] - predict(r, -delta)[r.k0:])) / (2.0 * delta) for r in cal]
+    return float(np.mean(g))
+
+
+def _load_check(cal: list[RunData], gains: dict[str, float]) -> dict:
+    """Which candidates' load gains agree with the calibration runs' own reading of it (LOAD_RULE)."""
+    w = within_run_gain(cal)
+    half = max(0.5 * (w["profile_ci95"][1] - w["profile_ci95"][0]), 1.96 * (w["jackknife_se"] or 0.0))
+    lo, hi = w["slope"] - half, w["slope"] + half
+    ok = {n: bool(g != 0.0 and lo <= 1.0 / g <= hi) for n, g in gains.items()}
+    return {"rule": LOAD_RULE, "implied_load_gain": gains, "slope": w["slope"], "slope_interval": [lo, hi],
+            "profile_ci95": w["profile_ci95"], "jackknife_se": w["jackknife_se"], "eligible": ok}
+
+
 def model_choice(pair: str, pair_split_fs: float, pair_in_fs: float, cal: list[RunData], fs: float,
-                 centre_in_fs: float) -> dict:
+                 centre_in_fs: float, gains: dict[str, float] | None = None) -> dict:
     """Which estimate the headline keys report, chosen on calibration data only (a rule fixed before scoring):
     the lower torque RMSE [FS] on the calibration runs' time split. ``pair_split_fs``: the pair model's
     extension selection's validation RMSE on that split (the split also chose its extensions: optimistic for
     the pair model); the centre map's from :func:`centre_time_split`. The in-sample fit RMSEs ``pair_in_fs``
-    and ``centre_in_fs`` [FS] are recorded beside it, never used. Returns a JSON-ready dict."""
+    and ``centre_in_fs`` [FS] are recorded beside it, never used.
+
+    ``gains`` (candidate -> :func:`implied_load_gain`): the time split cannot test the load gain (not at all at
+    one load level), so only candidates whose load slope 1 / gain lies inside the interval of the calibration
+    runs' own reading (:func:`within_run_gain`, pooled over the runs) are eligible (LOAD_RULE, session 6; all
+    when none is). Returns a JSON-ready dict."""
     cands = {pair: pair_split_fs, CENTRE: centre_time_split(cal, fs)}
-    return {"rule": "lower jaw torque RMSE [FS] on the calibration runs' time split: fitted on the first half of "
-                    "each calibration run's scored part, scored on the second half (calibration data only)",
-            "candidates": cands, "chosen": min(cands, key=lambda n: (cands[n], n)),
-            "angle": "the pair model's (the centre map estimates torque only)",
-            "in_sample_not_used": {pair: pair_in_fs, CENTRE: centre_in_fs, "note": "fit RMSE [FS] on all the "
-                                   "calibration data; recorded beside the rule, never used by it"}}
+    out: dict[str, Any] = {
+        "rule": "lower jaw torque RMSE [FS] on the calibration runs' time split: fitted on the first half of "
+                "each calibration run's scored part, scored on the second half (calibration data only)",
+        "candidates": cands, "angle": "the pair model's (the centre map estimates torque only)",
+        "in_sample_not_used": {pair: pair_in_fs, CENTRE: centre_in_fs, "note": "fit RMSE [FS] on all the "
+                               "calibration data; recorded beside the rule, never used by it"}}
+    eligible = list(cands)
+    if gains is not None:
+        out["load_gain_check"] = _load_check(cal, {n: gains[n] for n in cands})
+        eligible = [n for n in cands if out["load_gain_check"]["eligible"][n]] or eligible
+    out["chosen"] = min(eligible, key=lambda n: (cands[n], n))
+    return out
 
 
 def centre_one_run(cal: list[RunData], fs: float) -> tuple[CentreParams, dict]:
     """The centre map calibrated on ``cal``: load gain fitted when the runs' band centres spread over more
     than LOAD_SPREAD_NM, else held at 1 / n_k of their encoders, with the cost profile over PROFILE_GAINS.
     Returns the parameters and a JSON-ready record of what was fitted on what."""
-    th = np.concatenate([r.theta_p[r.k0:] for r in cal])
-    lo, hi = np.percentile(th, [20.0, 80.0])
-    cents = [run_centre(r, (float(lo), float(hi))) for r in cal]
+    cents = _centres(cal)
     rec: dict[str, Any] = {"inputs": ["spindle torque", "spindle encoder"], "targets": ["jaw torque"],
                            "band_centres_Nm": cents}
     p, rms, several = _fit_rule(cal, cents)

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from estimator.offline.spindle_centre_fit import predict_held
 from estimator.offline.spindle_fit import EXTENSIONS, band_centre, fit_baselines
 from estimator.offline.spindle_shared import (
     RunData,
@@ -54,6 +55,7 @@ from teleop.app.mrd_centre import (
     centre_agg,
     centre_folder,
     centre_one_run,
+    implied_load_gain,
     mid_centre_run,
     model_choice,
     profile_on_scored,
@@ -238,8 +240,12 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
         cmap, out["centre_calibration"] = centre_one_run(cal_runs, fs)
         pin = np.concatenate([predict_torque(fits[list(fits)[-1]], make_batch([(c.tau_p, c.theta_p)], centre, ref, c.dt))[
             c.k0:] - c.tau_d[c.k0:] for c in cal_runs])
+        sel_p = fits[list(fits)[-1]]
+        gains = {list(fits)[-1]: implied_load_gain(lambda c, u: predict_torque(sel_p, make_batch(
+                     [(c.tau_p + u, c.theta_p)], centre, ref, c.dt)), cal_runs),
+                 CENTRE: implied_load_gain(lambda c, u: predict_held(cmap, c.tau_p + u, c.theta_p, c.dt), cal_runs)}
         out["model_choice"] = model_choice(list(fits)[-1], float(sel["rmse_val"]) / fs, float(np.sqrt(np.mean(pin ** 2))) / fs,
-                                           cal_runs, fs, out["centre_calibration"]["fit_rms_fs"])
+                                           cal_runs, fs, out["centre_calibration"]["fit_rms_fs"], gains)
         out["calibration"] = {"mode": mode, "run": cal, "runs": cal_names, **cal_inputs,
                               "scored": "every other run, from its spindle signals only"}
         if calibration and calibration.endswith("mid"):

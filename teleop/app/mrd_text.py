@@ -81,8 +81,13 @@ def _choice_line(c: dict | None) -> str:
     if len(c["candidates"]) < 2:
         return f"RMSE / max / angle: {c['chosen']} ({c['rule']})"
     scores = ", ".join(f"{n} {v:.4f}" for n, v in c["candidates"].items())
+    check = ""
+    if "load_gain_check" in c:
+        lc = c["load_gain_check"]
+        check = "; load gain eligible (1 / gain inside the calibration runs' own reading): " + ", ".join(
+            f"{n} {g:.3f} {'yes' if lc['eligible'][n] else 'no'}" for n, g in lc["implied_load_gain"].items())
     return (f"RMSE / max: {c['chosen']}, chosen on calibration data only (time split of the calibration runs, "
-            f"torque RMSE [FS]: {scores}); angle: the pair model")
+            f"torque RMSE [FS]: {scores}{check}); angle: the pair model")
 
 
 def write_mrd_report(runs: list[MrdRun], summary: dict, details: dict, directory: str | Path) -> Path:

@@ -124,7 +124,8 @@ def test_analysis_keys_calibration_and_what_was_fitted_on(tmp_path):
     assert s["centre_calibration"]["targets"] == ["jaw torque"] and "profile" in s["centre_calibration"]
     assert set(s["centre_map"]["loro"]["runs"]) == {"00", "01", "10"} and "centre" in s["summary"]
     mc = s["model_choice"]                                           # headline model chosen on calibration data only
-    assert len(mc["candidates"]) == 2 and mc["chosen"] == min(mc["candidates"], key=mc["candidates"].get)
+    ok = [n for n in mc["candidates"] if mc.get("load_gain_check", {}).get("eligible", {}).get(n, True)]
+    assert len(mc["candidates"]) == 2 and mc["chosen"] == min(ok or mc["candidates"], key=mc["candidates"].get)
     for name, r in s["runs"].items():
         src = r["centre"] if mc["chosen"] == "centre map" else r["models"][mc["chosen"]]
         assert r["model"] == mc["chosen"] and r["torque_rmse_fs"] == src["torque_rmse_fs"]
@@ -221,7 +222,13 @@ def test_real_folder_model_beats_linear_and_one_set_predicts_the_folder():
     runs, _ = load_mrd_dir(MRD_DIR)
     s, _ = analyze_mrd(runs, folder=False)
     assert s["calibration"]["run"] == "00" and "shared" not in s
-    assert s["summary"]["better_than_linear_every_run"]
+    pair = list(s["runs"]["01"]["models"])[-1]
+    assert all(r["models"][pair]["torque_rmse_fs"] < r["baselines"]["linear"]["torque_rmse_fs"] for r in s["runs"].values())
+    # one load level: the pair model's load gain (rho ~ 0.2) lies outside the run's own 95 % reading, the centre
+    # map's 1 / n_k inside; the headline is the centre map although the pair model wins the time split
+    lc = s["model_choice"]["load_gain_check"]
+    assert not lc["eligible"][pair] and lc["eligible"]["centre map"] and s["model_choice"]["chosen"] == "centre map"
+    assert s["model_choice"]["candidates"][pair] < s["model_choice"]["candidates"]["centre map"] < 0.2   # shape held
     same_load = [r["torque_rmse_fs"] for r in s["runs"].values() if r["load_level"] == 0]
     assert len(same_load) == 4 and max(same_load) < 0.03          # at the calibration's load
     # one run: the centre map's load gain is not in the calibration's own cost (no inner minimum), while
@@ -242,7 +249,8 @@ def test_real_folder_model_beats_linear_and_one_set_predicts_the_folder():
     assert cm["max_torque_max_fs"] <= 0.10 and cm["max_torque_max_fs"] <= cm["from_k0"]["max_torque_max_fs"]
     mc = s["model_choice"]
     assert set(mc["candidates"]) == {list(s["runs"]["01"]["models"])[-1], "centre map"}
-    assert mc["chosen"] == min(mc["candidates"], key=mc["candidates"].get)
+    ok = [n for n in mc["candidates"] if mc["load_gain_check"]["eligible"][n]]
+    assert mc["chosen"] == min(ok, key=mc["candidates"].get)
 
 
 @needs_mrd

@@ -8,15 +8,29 @@ import math
 import numpy as np
 import pytest
 
-from estimator.offline.spindle_centre_fit import fit_centre_map, run_centre, scale_profile, within_run_gain
+from estimator.offline.spindle_centre_fit import (
+    fit_centre_map,
+    held_features,
+    predict_held,
+    run_centre,
+    scale_profile,
+    within_run_gain,
+)
 from estimator.offline.spindle_shared import RunData, kinematic_ratio
 from estimator.online.spindle import first_reversal
-from estimator.online.spindle_centre import MIN_SAMPLES, centre_ready, predict_centre_map, stroke_centre
+from estimator.online.spindle_centre import (
+    MIN_SAMPLES,
+    centre_features,
+    centre_ready,
+    predict_centre_map,
+    stroke_centre,
+)
 from teleop.app.mrd_centre import (
     CENTRE,
     centre_one_run,
     centre_time_split,
     gain_identifiability,
+    implied_load_gain,
     mid_centre_run,
     model_choice,
     score_centre,
@@ -39,7 +53,7 @@ def synth(name: str, load: float, freq: float = 0.3, seed: int = 0, drift: float
 
 
 def _rms(p, r: RunData) -> float:
-    e = predict_centre_map(p, r.tau_p, r.theta_p, r.dt)[r.k0:] - r.tau_d[r.k0:]
+    e = predict_held(p, r.tau_p, r.theta_p, r.dt)[r.k0:] - r.tau_d[r.k0:]
     return float(np.sqrt(np.mean(e ** 2)))
 
 
@@ -139,3 +153,39 @@ def test_kinematic_ratio_with_stretch_reads_the_ratio_at_zero_spindle_torque():
     k = RunData("k", r.tau_p, r.theta_p, r.tau_d, th_d, r.k0, r.dt)
     assert kinematic_ratio([k], stretch=True) == pytest.approx(n, abs=0.002)
     assert abs(kinematic_ratio([k]) - n) > 0.01                          # the stretch bends the plain ratio
+
+
+def test_shape_is_held_outside_the_calibration_angles():
+    """Session 6: fitted on part of the stroke, the map holds the shape at the last angle seen instead of
+    extrapolating its degree-4 polynomial; inside the range it is the plain map."""
+    full = synth("full", 0.03, freq=0.4)
+    part = RunData("part", full.tau_p, np.minimum(full.theta_p, 0.6), full.tau_d, full.theta_d, full.k0, full.dt)
+    p, _ = fit_centre_map([part], scale=GAIN)
+    (ul, uh), (dl, dh) = p.notes["shape_range"]
+    assert uh <= 0.6 - p.theta_ref + 1e-9 and dh <= 0.6 - p.theta_ref + 1e-9
+    d = np.linspace(min(ul, dl), max(uh, dh), 50) + p.theta_ref
+    z, c = np.tanh(np.linspace(-3, 3, 50)), np.full(50, 0.01)
+    inside = (d - p.theta_ref >= max(ul, dl)) & (d - p.theta_ref <= min(uh, dh))
+    assert np.allclose(held_features(d, c, z, p.theta_ref, 4, p.notes["shape_range"])[inside],
+                       centre_features(d, c, z, p.theta_ref, 4)[inside])
+    held = predict_held(p, full.tau_p, full.theta_p, full.dt)[full.k0:] - full.tau_d[full.k0:]
+    poly = predict_centre_map(p, full.tau_p, full.theta_p, full.dt)[full.k0:] - full.tau_d[full.k0:]
+    assert np.max(np.abs(held)) < 0.01 < np.max(np.abs(poly))       # the true shape moves 0.006 N m beyond 0.6
+
+
+def test_model_choice_at_one_load_keeps_only_a_load_gain_the_run_allows():
+    """Session 6: the time split cannot see the load gain; a candidate whose implied gain lies outside the
+    calibration runs' own reading of it is not eligible, whatever its split score."""
+    cal = [synth("cal", 0.025, freq=0.4, drift=0.3)]
+    p, _ = fit_centre_map(cal, scale=GAIN)
+    g = implied_load_gain(lambda r, u: predict_held(p, r.tau_p + u, r.theta_p, r.dt), cal)
+    assert g == pytest.approx(GAIN, rel=1e-6)                           # the band moves, the map carries b_0
+    split = centre_time_split(cal, 0.05)
+    for pair_gain, expect in ((0.2, CENTRE), (GAIN, "pair")):
+        c = model_choice("pair", 0.5 * split, 0.01, cal, 0.05, 0.002, {"pair": pair_gain, CENTRE: g})
+        assert c["chosen"] == expect and c["load_gain_check"]["eligible"][CENTRE]
+    none = model_choice("pair", 0.5 * split, 0.01, cal, 0.05, 0.002, {"pair": 0.2, CENTRE: 0.2})
+    assert none["chosen"] == "pair"                                     # nothing eligible: the split decides
+    two = [synth("a", 0.01, freq=0.4), synth("b", 0.04, freq=0.4, seed=2)]     # two loads: a tight reading
+    lc = model_choice("pair", 0.0, 0.01, two, 0.05, 0.002, {"pair": 0.9 * GAIN, CENTRE: GAIN})["load_gain_check"]
+    assert lc["slope"] == pytest.approx(1.0 / GAIN, rel=0.02) and lc["eligible"] == {"pair": False, CENTRE: True}
