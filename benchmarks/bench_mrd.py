@@ -61,8 +61,11 @@ def main(argv: list[str] | None = None) -> None:
           f"FS; from the first reversal {lo['from_k0']['median_torque_rmse_fs']:.3f} / {lo['from_k0']['max_torque_rmse_fs']:.3f} "
           f"/ {lo['from_k0']['max_torque_max_fs']:.3f}")
     mc = s["model_choice"]
+    lc = mc.get("load_gain_check", {})
     print(f"headline model: {mc['chosen']} (calibration time split, torque RMSE [FS]: "
           + ", ".join(f"{n} {v:.3f}" for n, v in mc["candidates"].items())
+          + "; load gain implied / eligible: "
+          + ", ".join(f"{n} {g:.3f} {'yes' if lc['eligible'][n] else 'no'}" for n, g in lc.get("implied_load_gain", {}).items())
           + f"); headline median {s['summary']['model']['median_torque_rmse_fs']:.3f} / worst "
           f"{s['summary']['model']['max_torque_rmse_fs']:.3f} / largest {s['summary']['model']['max_torque_max_fs']:.3f} FS")
     t0 = time.perf_counter()
