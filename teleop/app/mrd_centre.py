@@ -145,21 +145,24 @@ def _several_loads(cal: list[RunData], cents: list[float] | None = None) -> bool
     return len(cal) > 1 and float(np.ptp(_centres(cal) if cents is None else cents)) > LOAD_SPREAD_NM
 
 
-def _fit_rule(cal: list[RunData], cents: list[float]) -> tuple[CentreParams, float, bool]:
-    """The calibration rule: load gain fitted when the band centres spread over LOAD_SPREAD_NM, else 1 / n_k."""
+def _fit_rule(cal: list[RunData], cents: list[float], given: float | None = None) -> tuple[CentreParams, float, bool]:
+    """The calibration rule: a ``given`` load gain (a design value) when there is one; else fitted when the band
+    centres spread over LOAD_SPREAD_NM, else 1 / n_k."""
+    if given is not None:
+        return (*fit_centre_map(cal, scale=given), False)
     if _several_loads(cal, cents):
         return (*fit_centre_map(cal), True)
     return (*fit_centre_map(cal, scale=1.0 / kinematic_ratio(cal)), False)
 
 
-def centre_time_split(cal: list[RunData], fs: float) -> float:
+def centre_time_split(cal: list[RunData], fs: float, given: float | None = None) -> float:
     """Torque RMSE [FS] of the centre map on a time split of the calibration data only: fitted (by the rule
     of :func:`centre_one_run`) on each calibration run's first half of its scored part (k0 to the middle,
     the split of the pair model's extension selection), scored on the second half. Jaw torque of the
-    calibration runs only; no scored run is read."""
+    calibration runs only; no scored run is read. ``given``: a design load gain (:func:`centre_one_run`)."""
     first = [RunData(r.name, r.tau_p[:m], r.theta_p[:m], r.tau_d[:m], r.theta_d[:m], r.k0, r.dt)
              for r in cal for m in [(r.k0 + r.tau_p.size) // 2]]
-    p, _, _ = _fit_rule(first, _centres(first))
+    p, _, _ = _fit_rule(first, _centres(first), given)
     sq, n = 0.0, 0
     for r in cal:
         m = max((r.k0 + r.tau_p.size) // 2, centre_ready(r.theta_p, r.dt, p.window))
@@ -189,7 +192,7 @@ def _load_check(cal: list[RunData], gains: dict[str, float]) -> dict:
 
 
 def model_choice(pair: str, pair_split_fs: float, pair_in_fs: float, cal: list[RunData], fs: float,
-                 centre_in_fs: float, gains: dict[str, float] | None = None) -> dict:
+                 centre_in_fs: float, gains: dict[str, float] | None = None, given: float | None = None) -> dict:
     """Which estimate the headline keys report, chosen on calibration data only (a rule fixed before scoring):
     the lower torque RMSE [FS] on the calibration runs' time split. ``pair_split_fs``: the pair model's
     extension selection's validation RMSE on that split (the split also chose its extensions: optimistic for
@@ -199,8 +202,9 @@ def model_choice(pair: str, pair_split_fs: float, pair_in_fs: float, cal: list[R
     ``gains`` (candidate -> :func:`implied_load_gain`): the time split cannot test the load gain (not at all at
     one load level), so only candidates whose load slope 1 / gain lies inside the interval of the calibration
     runs' own reading (:func:`within_run_gain`, pooled over the runs) are eligible (LOAD_RULE, session 6; all
-    when none is). Returns a JSON-ready dict."""
-    cands = {pair: pair_split_fs, CENTRE: centre_time_split(cal, fs)}
+    when none is). ``given``: the centre map's design load gain, if any (:func:`centre_one_run`). Returns a
+    JSON-ready dict."""
+    cands = {pair: pair_split_fs, CENTRE: centre_time_split(cal, fs, given)}
     out: dict[str, Any] = {
         "rule": "lower jaw torque RMSE [FS] on the calibration runs' time split: fitted on the first half of "
                 "each calibration run's scored part, scored on the second half (calibration data only)",
@@ -215,15 +219,20 @@ def model_choice(pair: str, pair_split_fs: float, pair_in_fs: float, cal: list[R
     return out
 
 
-def centre_one_run(cal: list[RunData], fs: float) -> tuple[CentreParams, dict]:
+def centre_one_run(cal: list[RunData], fs: float, given: float | None = None) -> tuple[CentreParams, dict]:
     """The centre map calibrated on ``cal``: load gain fitted when the runs' band centres spread over more
-    than LOAD_SPREAD_NM, else held at 1 / n_k of their encoders, with the cost profile over PROFILE_GAINS.
+    than LOAD_SPREAD_NM, else held at 1 / n_k of their encoders, with the cost profile over PROFILE_GAINS;
+    ``given`` [-]: a design value of the load gain (jaw torque per N m of band-centre shift, about
+    1 / (r cosh K); ``--calibration gain=G:RUN``) used instead (the shape's load terms b_k, e_k are then 0).
     Returns the parameters and a JSON-ready record of what was fitted on what."""
     cents = _centres(cal)
     rec: dict[str, Any] = {"inputs": ["spindle torque", "spindle encoder"], "targets": ["jaw torque"],
                            "band_centres_Nm": cents}
-    p, rms, several = _fit_rule(cal, cents)
-    if several:
+    p, rms, several = _fit_rule(cal, cents, given)
+    if given is not None:
+        rec["load_gain"] = {"value": float(given), "from": "given (--calibration gain=G:...): a design value from "
+                            "outside the data, not fitted"}
+    elif several:
         rec["load_gain"] = {"value": float(p.coef[1, 0]), "from": "fitted across the calibration runs' loads"}
     else:
         n_k = 1.0 / float(p.coef[1, 0])
@@ -233,6 +242,8 @@ def centre_one_run(cal: list[RunData], fs: float) -> tuple[CentreParams, dict]:
         rec["within_run_gain"] = {**within_run_gain(cal[0]), "used": False,
                                   "note": "the gain from the calibration run's own signals (spindle torque on its "
                                           "jaw torque, shape taken out), with its 95 % profile interval: not used"}
+    if given is not None and not several and not _several_loads(cal, cents):
+        rec["profile"] = [{"load_gain": s, "fit_rms_fs": r / fs} for s, _, r in scale_profile(cal, np.array(PROFILE_GAINS))]
     rec["fit_rms_fs"] = rms / fs
     rec["parameters"] = p.as_dict()
     return p, rec

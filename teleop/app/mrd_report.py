@@ -64,7 +64,7 @@ from teleop.app.mrd_centre import (
 from teleop.app.mrd_text import format_mrd, write_mrd_report
 from teleop.errors import ConfigError, DataError
 
-__all__ = ["analyze_mrd", "format_mrd", "write_mrd_report", "parse_calibration", "band_measurements", "SCORE_FROM_S"]
+__all__ = ["analyze_mrd", "format_mrd", "write_mrd_report", "parse_calibration", "split_design_gain", "band_measurements", "SCORE_FROM_S"]
 
 SCORE_FROM_S = 0.5         # the first reversal is searched after this [s] (the load motor ramps in first)
 FIT_STEP, SHARED_STEP = 10, 50      # decimation of the fits (1 kHz -> 100 Hz, 20 Hz)
@@ -97,6 +97,25 @@ class _Progress:
     def done(self) -> None:
         if self.enabled:
             sys.stderr.write("\n")
+
+
+def split_design_gain(spec: str | None) -> tuple[float | None, str | None]:
+    """(design load gain, the rest of the spec) from ``--calibration gain=G:SPEC`` (G > 0: the tool's jaw torque
+    per N m of spindle band-centre shift, about 1 / (r cosh K), from its design; the centre map uses it instead of
+    1 / n_k or a fit); (None, spec) without the prefix. Raises ConfigError for a G that is not a positive number
+    or a segment calibration (the centre map has none)."""
+    if not spec or not spec.startswith("gain="):
+        return None, spec
+    head, _, rest = spec.partition(":")
+    try:
+        g = float(head[len("gain="):])
+    except ValueError:
+        raise ConfigError(f"--calibration {spec}: G in gain=G:RUN must be a number") from None
+    if not (math.isfinite(g) and g > 0.0):
+        raise ConfigError(f"--calibration {spec}: the load gain G must be positive")
+    if rest.startswith("segment:"):
+        raise ConfigError(f"--calibration {spec}: a design gain applies to run calibrations, not to segment:")
+    return g, rest
 
 
 def parse_calibration(spec: str | None, runs: list[MrdRun]) -> tuple[str, Any]:
@@ -217,6 +236,7 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
     t_start = time.perf_counter()
     if not runs:
         raise DataError("no MRD runs to analyse")
+    given, calibration = split_design_gain(calibration)
     mode, cal = parse_calibration(calibration, runs)
     fs = float(max(r.tau_d.max() for r in runs) - min(r.tau_d.min() for r in runs))
     n_cal = len(runs) if mode == "segment" else 1
@@ -237,7 +257,7 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
         cal_names = str(cal).split(",")
         cal_runs = [_rundata(r) for r in runs if r.name in cal_names]
         fits, base, sel, centre, ref = _calibrate(cal_runs, tick, kinematic=mode == "kinematic")
-        cmap, out["centre_calibration"] = centre_one_run(cal_runs, fs)
+        cmap, out["centre_calibration"] = centre_one_run(cal_runs, fs, given)
         pin = np.concatenate([predict_torque(fits[list(fits)[-1]], make_batch([(c.tau_p, c.theta_p)], centre, ref, c.dt))[
             c.k0:] - c.tau_d[c.k0:] for c in cal_runs])
         sel_p = fits[list(fits)[-1]]
@@ -245,9 +265,12 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
                      [(c.tau_p + u, c.theta_p)], centre, ref, c.dt)), cal_runs),
                  CENTRE: implied_load_gain(lambda c, u: predict_held(cmap, c.tau_p + u, c.theta_p, c.dt), cal_runs)}
         out["model_choice"] = model_choice(list(fits)[-1], float(sel["rmse_val"]) / fs, float(np.sqrt(np.mean(pin ** 2))) / fs,
-                                           cal_runs, fs, out["centre_calibration"]["fit_rms_fs"], gains)
+                                           cal_runs, fs, out["centre_calibration"]["fit_rms_fs"], gains, given)
         out["calibration"] = {"mode": mode, "run": cal, "runs": cal_names, **cal_inputs,
                               "scored": "every other run, from its spindle signals only"}
+        if given is not None:
+            out["calibration"]["design_load_gain"] = {"value": given, "from": "--calibration gain=G: a design value "
+                                                      "from outside the data (the centre map's load gain)"}
         if calibration and calibration.endswith("mid"):
             out["calibration"]["chosen_by"] = ("the run whose band centre (spindle torque only) is nearest the middle "
                                                "of the folder's band centres, a rule fixed before any score")

@@ -189,3 +189,19 @@ def test_model_choice_at_one_load_keeps_only_a_load_gain_the_run_allows():
     two = [synth("a", 0.01, freq=0.4), synth("b", 0.04, freq=0.4, seed=2)]     # two loads: a tight reading
     lc = model_choice("pair", 0.0, 0.01, two, 0.05, 0.002, {"pair": 0.9 * GAIN, CENTRE: GAIN})["load_gain_check"]
     assert lc["slope"] == pytest.approx(1.0 / GAIN, rel=0.02) and lc["eligible"] == {"pair": False, CENTRE: True}
+
+
+def test_a_design_load_gain_replaces_the_encoders_and_is_recorded():
+    """``--calibration gain=G:RUN``: the one number the one-run line lacks (Finding 4, session 6), given from outside."""
+    from teleop.app.mrd_report import split_design_gain
+    from teleop.errors import ConfigError
+    assert split_design_gain("gain=0.943:mid") == (0.943, "mid") and split_design_gain("31") == (None, "31")
+    assert split_design_gain(None) == (None, None)
+    for bad in ("gain=x:31", "gain=-1:31", "gain=0:31", "gain=0.9:segment:4"):
+        with pytest.raises(ConfigError):
+            split_design_gain(bad)
+    cal, other = synth("cal", 0.025), synth("other", 0.045, seed=3)
+    p, rec = centre_one_run([cal], 0.05, given=GAIN)
+    assert p.coef[1, 0] == GAIN and rec["load_gain"]["from"].startswith("given") and "profile" in rec
+    q, _ = centre_one_run([cal], 0.05, given=1.2 * GAIN)                # a design value 20 % off
+    assert _rms(p, other) < 0.5 * _rms(q, other)
