@@ -11,6 +11,7 @@ Protocol (docs/findings.md, Finding 4):
   and angle; the calibration's jaw torque and angle are the fit *targets* (the spindle side alone
   cannot give the torque scale, the jaw-side offset or the friction beyond the jaw pulley; the
   JSON lists them under ``not_from_proximal``). Scored runs never contribute a distal sample.
+  ``gain=G:`` before any run calibration gives the centre map a design load gain G (:func:`split_design_gain`).
 * score: torque RMSE and max |error| as fractions of full scale (range of the measured jaw torque
   over the folder), angle RMSE [deg], from ``SCORE_FROM_S`` on (the load motor ramps in first).
 * across the folder: model-free band measurements per run (E3 frequency, E8 load, distal-side
