@@ -11,7 +11,11 @@ Two uses, each recording what was fitted on what:
   with matched sensors gives 1 / (n_k cosh K) <= 1 / n_k), with the calibration's own fit cost profiled
   over the gain (:func:`estimator.offline.spindle_centre_fit.scale_profile`);
 * :func:`centre_time_split` - its calibration-only score (first half fits, second half scores) for the
-  headline's model choice in :mod:`teleop.app.mrd_report`.
+  headline's model choice in :mod:`teleop.app.mrd_report`; :func:`model_choice` admits only candidates whose
+  :func:`implied_load_gain` the calibration runs' own reading allows (LOAD_RULE, session 6).
+
+Predictions hold the shape along the stroke outside the calibration's angles
+(:func:`estimator.offline.spindle_centre_fit.predict_held`).
 
 Every score starts once the run's band-centre reading holds both edges
 (:func:`estimator.online.spindle_centre.centre_ready`); ``from_k0`` keeps the score from the first reversal.
