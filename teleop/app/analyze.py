@@ -65,10 +65,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mrd", nargs="?", const="", default=None, metavar="DIR",
                         help="jaw torque and angle of a da Vinci tool from its spindle: every *.TXT run of an MRD "
                              "folder (default ../shared/data/mrd-davinci; teleop.app.mrd_report)")
-    parser.add_argument("--calibration", metavar="RUN[,RUN]|mid|kinematic:RUN|segment:SECONDS",
+    parser.add_argument("--calibration", metavar="RUN[,RUN]|mid|kinematic:RUN|segment:SECONDS|gain=G:RUN",
                         help="MRD mode: calibrate on one run (default: the slowest, lightest; mid: the run whose "
                              "spindle band centre is nearest the folder's middle), on several runs together, "
-                             "or on the first SECONDS of every run")
+                             "or on the first SECONDS of every run; gain=G:RUN gives the one-run calibration a "
+                             "design load gain G (jaw torque per N m of spindle band-centre shift, about "
+                             "1 / (r cosh K)) in place of the encoders' 1 / n_k")
     parser.add_argument("--json", metavar="OUT", help="write the result (summary numbers) as JSON to OUT")
     parser.add_argument("--report", metavar="DIR", help="write a Markdown report with PNG figures to DIR")
     parser.add_argument("--figures", metavar="DIR", help="KAIST mode: write the kaist_*.png plots to DIR")
