@@ -14,8 +14,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from estimator.data import MeasuredData
 from estimator.offline.diagnosis import diagnose
-from estimator.offline.diagnosis_fit import prepare, split_at_rest
+from estimator.offline.diagnosis_fit import look_alike, prepare, split_at_rest
 from estimator.offline.effects import CATALOGUE, EFFECT_IDS, EQUIVALENT
 from slave import lumped_scenarios
 from slave.scenarios import record
@@ -205,3 +206,21 @@ def test_a_second_effect_is_accepted_when_it_earns_its_place():
     assert res["parameters"]["beta"]["value"] == pytest.approx(rec.truth["parameters"]["softening"], rel=0.25)
     # the pair earns both its parameters on the validation folds, and gains on the test block
     assert res["gain"] >= 0.3 and all(res["candidates"][k]["accepted"] for k in res["causes"][:2])
+
+
+def _rest_then_pull(x_in_rest: float) -> MeasuredData:
+    """A 2 s record: 0.5 s at rest (x_in reading ``x_in_rest``, x_out zero), then a pull (noise-free)."""
+    t = np.arange(2000) / 1000.0
+    ramp = np.clip(t - 0.5, 0.0, None)
+    return MeasuredData(time=t, x_in=x_in_rest + 2e-3 * ramp, T_in=1.0 + 5.0 * ramp, x_out=1e-3 * ramp,
+                        T_out=1.0 + 3.0 * ramp)
+
+
+def test_a_position_reading_away_from_zero_at_rest_names_the_offset_not_pretension():
+    # pretension fits far better (a loaded rest), but it cannot move the rest reading: an acceptable
+    # offset is named (lumped dev6 516110); with the rest at zero pretension stays; an offset that is not
+    # acceptable (price >= 1) is never named
+    price = {"pretension": 0.58, "sensor_offset:x_in": 0.955}
+    assert look_alike("pretension", price, _rest_then_pull(-84e-6)) == "sensor_offset:x_in"
+    assert look_alike("pretension", price, _rest_then_pull(0.0)) == "pretension"
+    assert look_alike("pretension", {**price, "sensor_offset:x_in": 1.02}, _rest_then_pull(-84e-6)) == "pretension"
