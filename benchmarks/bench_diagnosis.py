@@ -15,8 +15,8 @@ Seed sets: ``dev`` (effects 100+, clean 500+, uncatalogued 900+), ``dev2`` (the 
 session 3, seen since), ``dev4`` (offsets + 300000: the final set of session 4, seen since), ``dev5``
 (offsets + 400000: the first final set of session 5, seen since) and ``dev6`` (offsets + 500000: the
 final set of session 5's second pass, run once with commit 7a1c12d, seen since) are development data.
-``final`` still names 500000+ (= dev6, SEEN): session 5's third pass changed no code, so it fixed no
-new final set; the next code change must commit a new, unused range here before any run of it.
+``final`` (offsets + 600000) is the final set of session 6, fixed here before any run of it; it is run
+once, with the code frozen and committed, and becomes development data after that run.
 Seed layout (session 4): every hidden-effect recording has its own seed, so its own simulated rig
 (route, K, EA, load, rate, noise): effect k of EFFECT_IDS, level j, repeat s uses
 base + 100 + 1000 k + 10 j + s (before session 4 every effect of a set shared the four rigs of
@@ -50,7 +50,7 @@ from estimator.offline.diagnosis_fit import noise_level, quantum  # noqa: E402
 from estimator.offline.effects import EFFECT_IDS, EQUIVALENT, NONE  # noqa: E402
 
 SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "dev4": 300000, "dev5": 400000, "dev6": 500000,
-             "final": 500000}   # final = dev6, seen (module docstring)
+             "final": 600000}   # session 6's final set, unused before its one run (module docstring)
 UNCATALOGUED = "load_cell_wander"
 
 
