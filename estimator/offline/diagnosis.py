@@ -36,7 +36,7 @@ from typing import Callable
 
 import numpy as np
 
-from estimator.offline.diagnosis_fit import (SIGNALS, Progress, channel_choice, fit_model, look_alike, noise_level,
+from estimator.offline.diagnosis_fit import (SIGNALS, Progress, channel_choice, fit_model, look_alike, toe_or_play, noise_level,
                                              predictions, prepare, quantum, raw_rmse, sample_block, settings_keys, split_at_rest,
                                              start_points, trimmed_ms)
 from estimator.offline.effects import CATALOGUE, EQUIVALENT, NONE, UNKNOWN, Effect, effect, predict
@@ -292,6 +292,7 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
                 for eid, f in trial.items() if price[eid] < 1.0}
         order = rank or price
         best = look_alike(min(order, key=lambda k: order[k]), price, data)
+        best = toe_or_play(best, {eid: (f.S, f.values[0]) for eid, f in trial.items()}, price)
         if price[best] >= 1.0 or (at_floor and trial[best].S >= strong):
             break
         chosen = trial[best]

@@ -22,13 +22,13 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import least_squares
 
-from estimator.offline.effects import K_MAX, ROUTE, Effect, Parameter, Series, predict
+from estimator.offline.effects import K_MAX, ROUTE, Effect, Parameter, Series, effect, predict
 from estimator.sheath import SheathModel
 from estimator.data import MeasuredData
 from estimator.errors import DataError
 
 __all__ = ["Progress", "trimmed_ms", "sample_block", "rest_reading", "prepare", "split_at_rest", "fit_model", "start_points", "heldout_mse", "raw_rmse", "noise_level",
-           "quantum", "SIGNALS", "channel_choice", "look_alike", "settings_keys", "predictions"]
+           "quantum", "SIGNALS", "channel_choice", "look_alike", "toe_or_play", "settings_keys", "predictions"]
 
 _K = Parameter("K", "-", 0.0, K_MAX, 0.5, (), "friction exponent mu * total wrap angle")
 _SCALE = {"K": 0.1, "c_v": 10.0, "T0": 1.0, "K_rate": 1e-3, "beta": 1.0, "T_c": 1.0, "r_s": 0.1, "a": 0.5,
@@ -297,6 +297,24 @@ def look_alike(best: str, price: dict, data: MeasuredData) -> str:
     if price[other] > 1.1 * price[best]:
         return group[1] if best == group[0] and moved and price[group[1]] < 1.0 else best
     return group[1] if moved else group[0]
+
+
+def toe_or_play(best: str, fits: dict[str, tuple[float, dict[str, float]]], price: dict) -> str:
+    """Tendon stiffening and a distal backlash both bend x_out at low tension: a toe (extra compliance
+    beta below T_c) and a dead travel. When both are acceptable (price < 1), the better validation score S
+    names the cause (not the ranking's factor per extra parameter: a toe is not a backlash with one more
+    parameter), unless the fitted toe is degenerate - beta at its upper bound or T_c at its lower end,
+    i.e. all the toe's travel taken up at a tension within the noise: that is a dead travel, a backlash.
+    ``fits``: id -> (S, fitted values). Session 6, lumped dev6: 503110 (stiffening, S 0.038) was named
+    backlash (S 0.061) by the ranking; 507110 (backlash) was named stiffening at beta 20, T_c 0.08 N."""
+    group = ("tendon_stiffening", "distal_backlash")
+    if best not in group or not all(g in fits and g in price and price[g] < 1.0 for g in group):
+        return best
+    toe = fits["tendon_stiffening"][1]
+    beta, t_c = effect("tendon_stiffening").parameters
+    if toe.get("beta", 0.0) >= 0.9 * beta.upper or toe.get("T_c", math.inf) <= 2.0 * t_c.lower:
+        return "distal_backlash"
+    return min(group, key=lambda g: fits[g][0])
 
 
 def predictions(result: dict, data: MeasuredData) -> dict[str, np.ndarray | None]:

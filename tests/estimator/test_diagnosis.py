@@ -16,7 +16,7 @@ import pytest
 
 from estimator.data import MeasuredData
 from estimator.offline.diagnosis import diagnose
-from estimator.offline.diagnosis_fit import look_alike, prepare, split_at_rest
+from estimator.offline.diagnosis_fit import look_alike, prepare, split_at_rest, toe_or_play
 from estimator.offline.effects import CATALOGUE, EFFECT_IDS, EQUIVALENT
 from slave import lumped_scenarios
 from slave.scenarios import record
@@ -224,3 +224,20 @@ def test_a_position_reading_away_from_zero_at_rest_names_the_offset_not_pretensi
     assert look_alike("pretension", price, _rest_then_pull(-84e-6)) == "sensor_offset:x_in"
     assert look_alike("pretension", price, _rest_then_pull(0.0)) == "pretension"
     assert look_alike("pretension", {**price, "sensor_offset:x_in": 1.02}, _rest_then_pull(-84e-6)) == "pretension"
+
+
+def test_stiffening_or_backlash_is_named_by_the_better_score_unless_the_toe_is_a_dead_travel():
+    # both acceptable: the better validation score names the cause (lumped dev6 503110: stiffening 0.038
+    # was named backlash 0.061 by the ranking's factor per parameter); a toe at beta's upper bound or at the
+    # lower end of T_c is a dead travel (dev6 507110: backlash fitted as beta 20, T_c 0.08 N)
+    price = {"tendon_stiffening": 0.64, "distal_backlash": 0.36}
+    toe = {"beta": 3.6, "T_c": 1.5}
+    fits = {"tendon_stiffening": (0.038, toe), "distal_backlash": (0.061, {"d_b": 4e-4})}
+    assert toe_or_play("distal_backlash", fits, price) == "tendon_stiffening"
+    fits["distal_backlash"] = (0.031, {"d_b": 2e-4})
+    assert toe_or_play("tendon_stiffening", fits, price) == "distal_backlash"
+    fits["tendon_stiffening"] = (0.010, {"beta": 20.0, "T_c": 0.078})
+    assert toe_or_play("tendon_stiffening", fits, price) == "distal_backlash"
+    # not both acceptable, or another effect best: unchanged
+    assert toe_or_play("tendon_stiffening", fits, {**price, "distal_backlash": 1.05}) == "tendon_stiffening"
+    assert toe_or_play("sensor_offset:x_in", fits, price) == "sensor_offset:x_in"
