@@ -23,12 +23,16 @@ from estimator.offline.presliding_kernel import NODE_FORM, node_presliding
 
 #: Held setting of velocity_friction: 1 = the sliding speed is the mean of |dx_in/dt| and |dx_out/dt|.
 SPEED_FORM = "velocity_form"
+#: Held setting of stiction: 1 = the Stribeck form, each node's friction K (1 + r_s e^-(v/v_st)^2) by its own speed.
+STRIBECK_FORM = "stiction_form"
+#: Stribeck speed of that form [m/s], held (literature.md E3/E4 name the form, not a value; the lumped simulator uses 0.5 mm/s)
+STRIBECK_SPEED = 0.5e-3
 
 __all__ = ["Parameter", "slack_hold", "SLACK_SIGMAS", "Effect", "VelocityFriction", "Pretension", "CurvatureDrift", "TendonStiffening", "Stiction",
            "FrictionOffset", "Presliding", "DistalBacklash", "SensorEffect", "Series", "Prediction", "CATALOGUE",
            "EFFECT_IDS", "ALIASES", "EQUIVALENT", "NONE", "UNKNOWN", "effect", "predict", "neutral_values",
            "route_shape", "ROUTE", "K_MAX", "RigSwitch", "ScenarioKnob", "Setting", "register", "unregister",
-           "rig_switches", "NODE_FORM", "SPEED_FORM"]
+           "rig_switches", "NODE_FORM", "SPEED_FORM", "STRIBECK_FORM", "STRIBECK_SPEED"]
 
 class Effect:
     """One model extension (subclasses below, one per physical effect; instances in CATALOGUE).
@@ -155,6 +159,7 @@ class Stiction(Effect):
     literature = "E4"
     parameters = (Parameter("r_s", "-", 0.0, 2.0, 0.0, (0.1, 0.25, 0.5, 0.9), "mu_static / mu_kinetic - 1"),)
     knobs = {"r_s": "r_s"}
+    variants = ({STRIBECK_FORM: 0.0}, {STRIBECK_FORM: 1.0})   # breakaway at reversals; Stribeck per node
     switch = RigSwitch("stiction", "static friction above kinetic: breakaway after sticking, stick-slip when slow", (
         Setting("static_ratio", 0.3, "-", ">= 0", "mu_static / mu_kinetic - 1"),
         Setting("slip_time", 0.02, "s", "> 0", "after breakaway mu relaxes to kinetic with this time constant")))
@@ -362,7 +367,9 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
         speed = None
         if knobs.get("c_v") and values.get(SPEED_FORM, 0.0) > 0.5 and s.x_out is not None:
             speed = 0.5 * (np.abs(vel) + np.abs(np.gradient(s.x_out, t)))
-        T_out, E1 = run_extended(T_in, vel, t, u, s.w, T_min=s.T_min, sigma=s.sigma_T_in, speed=speed, **knobs)
+        v_st = STRIBECK_SPEED if values.get(STRIBECK_FORM, 0.0) > 0.5 else 0.0
+        T_out, E1 = run_extended(T_in, vel, t, u, s.w, T_min=s.T_min, sigma=s.sigma_T_in, speed=speed, v_st=v_st,
+                                 **knobs)
     if x_p > 0.0 and not node:
         T_out = T_in - travel_lag(T_in - T_out, x_in, x_p)
     # distal channels: the reading from the true output (offset and lag are linear in L/EA)

@@ -55,7 +55,55 @@ def stiffening_strain(T, beta, Tc):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, sigma, beta, Tc,
+def _stribeck_bound(Y, Yp, a, u, w, Kk, r_s, v_st, vp, dY, G):  # pragma: no cover - compiled
+    """Cumulative friction exponent G_i of a stuck tendon whose nodes near the proximal end slip (Stribeck form).
+
+    A kinetic trial update gives the slip zone and each node's change of tension dY_i; a node's sliding
+    speed is the proximal speed vp times the share of the slip zone's stretch change beyond it (the
+    distal part of the zone feeds the node's travel; 0 at the slip front and beyond). Node i's bound is
+    K (1 + r_s e^-(v_i/v_st)^2) per unit of wrap angle: static at rest, kinetic well above v_st."""
+    m1 = u.shape[0]
+    tot = 0.0
+    nf = -1
+    for i in range(m1):
+        g = math.exp(-Kk * u[i])
+        y = Y[i]
+        lo = Yp * g
+        hi = Yp / g
+        if hi < a:
+            hi = a
+        if y < lo:
+            d = lo - y
+        elif y > hi:
+            d = y - hi
+        else:
+            break
+        if d <= 0.0:
+            break
+        dY[i] = w[i] * d
+        tot += dY[i]
+        nf = i
+    beyond = 0.0
+    for i in range(m1 - 1, -1, -1):
+        vi = 0.0
+        if i <= nf and tot > 0.0:
+            vi = vp * beyond / tot
+            beyond += dY[i]
+        if i <= nf and i == 0 and tot > 0.0:
+            vi = vp
+        G[i] = Kk * (1.0 + r_s * math.exp(-(vi / v_st) ** 2))     # the node's bound, per wrap angle
+    acc = 0.0
+    prev = G[0]
+    for i in range(m1):
+        if i > 0:
+            acc += 0.5 * (G[i] + prev) * (u[i] - u[i - 1])
+        prev = G[i]
+        G[i] = acc if i > 0 else 0.0
+    return nf
+
+
+@njit(cache=True, nogil=True)
+def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, sigma, beta, Tc, v_st,
             T_out, E1):  # pragma: no cover - compiled
     m1 = u.shape[0]
     Y = np.full(m1, T0 + a)
@@ -63,6 +111,9 @@ def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, si
     E = E0
     varying = K_rate != 0.0 or c_v != 0.0
     stiction = r_s > 0.0
+    stribeck = stiction and v_st > 0.0    # the Stribeck form: static-kinetic by each node's own speed
+    dY = np.zeros(m1)
+    G = np.zeros(m1)
     g_kin = np.exp(-K * u)
     g_kin_inv = 1.0 / g_kin
     g_sta = np.exp(-K * (1.0 + r_s) * u)
@@ -85,7 +136,7 @@ def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, si
             sliding = 0             # the proximal end stopped or turned: the tendon sticks
             t_b = -math.inf
         stuck = stiction and sliding == 0
-        if stuck and k > 0 and Yp_prev - a >= T_min and abs(v[k]) > V_STOP:
+        if stuck and not stribeck and k > 0 and Yp_prev - a >= T_min and abs(v[k]) > V_STOP:
             # breakaway seen as a turn of T_in near the static threshold while the proximal end goes on
             dm = 1 if v[k] > 0.0 else -1
             yn = Y[m1 - 1]
@@ -98,7 +149,9 @@ def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, si
         Yp_prev = Yp
         if sliding != 0:
             f = Kk
-            if t_b > -math.inf:
+            if stribeck:
+                f *= 1.0 + r_s * math.exp(-(v[k] / v_st) ** 2)
+            elif t_b > -math.inf:
                 f *= 1.0 + r_s * math.exp(-(tk - t_b) / t_slip)
             g_n = math.exp(-f * sliding * u[m1 - 1])
             if tk - t_b > 5.0 * t_slip and (Yp * g_n - Y[m1 - 1]) * sliding < -2.0 * sigma * g_n:
@@ -108,7 +161,7 @@ def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, si
                 t_b = -math.inf
         if sliding != 0:
             E = 0.0
-            fixed = not varying and t_b == -math.inf      # the kinetic bound: tabulated
+            fixed = not varying and not stribeck and t_b == -math.inf      # the kinetic bound: tabulated
             for i in range(m1):
                 if fixed:
                     y = Yp * (g_kin[i] if sliding > 0 else g_kin_inv[i])
@@ -120,8 +173,12 @@ def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, si
                 E += w[i] * stiffening_strain(y - a, beta, Tc)
         else:
             bound = Kk * (1.0 + r_s) if stuck else Kk
+            if stribeck:
+                _stribeck_bound(Y, Yp, a, u, w, Kk, r_s, v_st, abs(v[k]), dY, G)
             for i in range(m1):
-                if varying:
+                if stribeck:
+                    g = math.exp(-G[i])
+                elif varying:
                     g = math.exp(-bound * u[i])
                 elif stuck:
                     g = g_sta[i]
@@ -144,7 +201,7 @@ def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, si
                 Y[i] = ny
                 if i == m1 - 1:         # the slip reached the distal end: the whole tendon slides
                     sliding = d
-                    if stuck and Yp - a >= T_min:
+                    if stuck and not stribeck and Yp - a >= T_min:
                         t_b = tk        # breakaway from static friction
         T_out[k] = Y[m1 - 1] - a
         E1[k] = E - E0
@@ -202,7 +259,7 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
                  K: float, a: float = 0.0, T0: float = 0.0, K_rate: float = 0.0, c_v: float = 0.0,
                  r_s: float = 0.0, t_slip: float = 0.02, T_min: float = 0.0,
                  sigma: float = 0.0, beta: float = 0.0, Tc: float = 1.0,
-                 speed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                 speed: np.ndarray | None = None, v_st: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Run the extended profile-memory model over a recording (module docstring for the equations).
 
     Parameters
@@ -231,6 +288,9 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
         Stiffening: extra compliance at zero tension [-] and its tension scale [N], > 0 (E9).
     speed : ndarray, shape (n,), optional
         Sliding speed [m/s] >= 0 in K (1 + c_v speed) (default |velocity|, the proximal speed).
+    v_st : float
+        Stiction in its Stribeck form when > 0 [m/s]: each node's bound is K (1 + r_s e^-(v_i/v_st)^2)
+        by its own sliding speed v_i (no breakaway rule, no relaxation); 0: the breakaway form.
 
     Returns
     -------
@@ -247,5 +307,5 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
     _kernel(T_in, vel, spd, np.ascontiguousarray(time, dtype=np.float64),
             np.ascontiguousarray(u, dtype=np.float64), np.ascontiguousarray(w, dtype=np.float64), float(K),
             float(a), float(T0), float(K_rate), float(c_v), float(r_s), float(t_slip), float(T_min),
-            float(sigma), float(beta), float(Tc), T_out, E1)
+            float(sigma), float(beta), float(Tc), float(v_st), T_out, E1)
     return T_out, E1

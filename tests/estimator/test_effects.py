@@ -13,6 +13,8 @@ from estimator.offline.effects import (
     EFFECT_IDS,
     SLACK_SIGMAS,
     SPEED_FORM,
+    STRIBECK_FORM,
+    STRIBECK_SPEED,
     Series,
     effect,
     neutral_values,
@@ -131,6 +133,37 @@ def test_velocity_friction_distal_speed_form_uses_the_mean_of_both_ends():
     m = T_in > 1.0
     np.testing.assert_allclose(pr.T_out[m], T_in[m] * math.exp(-K * (1 + c_v * 0.003)), rtol=1e-9)
     assert CATALOGUE["velocity_friction"].variant_ok({SPEED_FORM: 1.0}, ["T_out"]) is False
+
+
+def test_stiction_stribeck_form_static_when_slow_kinetic_when_fast_and_base_at_zero():
+    """Stiction's second form (stiction_form 1): each node's friction K (1 + r_s e^-(v/v_st)^2) by its own
+    speed. A slide below v_st (above V_STOP) has the Stribeck bound of its speed, far above v_st the kinetic
+    one; on the release after the pull T_out holds until T_in is below it by the proximal nodes' bound:
+    near-static when they slip slowly, kinetic when fast. At r_s = 0 it is the base model exactly."""
+    u, w = grid()
+    r_s, T0, n = 0.4, 4.0, 400
+    t = np.arange(2 * n) * 1e-3
+    T_in = np.concatenate([np.linspace(0.0, T0, n), T0 * np.exp(-np.linspace(0.0, 3.0 * K, n))])
+    out = {}
+    for name, speed in (("slow", 0.6 * STRIBECK_SPEED), ("fast", 20 * STRIBECK_SPEED)):
+        v = np.concatenate([np.full(n, speed), np.full(n, -speed)])
+        out[name] = run_extended(T_in, v, t, u, w, K=K, r_s=r_s, v_st=STRIBECK_SPEED)[0]
+        base = run_extended(T_in, v, t, u, w, K=K)
+        np.testing.assert_array_equal(run_extended(T_in, v, t, u, w, K=K, r_s=0.0, v_st=STRIBECK_SPEED)[0], base[0])
+        # release: at T_in = T_out,top e^-1.15K the slow proximal nodes (bound >= 1.28 K) still hold
+        top = out[name][n - 1]
+        k = n + int(np.searchsorted(-T_in[n:], -top * math.exp(-1.15 * K)))
+        if name == "slow":
+            assert out[name][k] == pytest.approx(top, rel=1e-9)
+        else:
+            assert out[name][k] < top * math.exp(-0.1 * K)
+    up = slice(n // 2, n)
+    np.testing.assert_allclose(out["slow"][up], T_in[up] * math.exp(-K * (1 + r_s * math.exp(-0.36))), rtol=1e-9)
+    np.testing.assert_allclose(out["fast"][up], T_in[up] * math.exp(-K), rtol=1e-9)
+    assert CATALOGUE["stiction"].variants[1] == {STRIBECK_FORM: 1.0}
+    s = series(T_in, velocity=np.concatenate([np.full(n, 0.6 * STRIBECK_SPEED), np.full(n, -0.6 * STRIBECK_SPEED)]))
+    pr = predict(["stiction"], {"K": K, "r_s": r_s, STRIBECK_FORM: 1.0}, s, compliance=1e-4)
+    np.testing.assert_allclose(pr.T_out, out["slow"], rtol=1e-9)
 
 
 def test_curvature_drift_changes_K_linearly_in_time():
