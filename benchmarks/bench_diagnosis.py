@@ -14,9 +14,10 @@ Seed sets: ``dev`` (effects 100+, clean 500+, uncatalogued 900+), ``dev2`` (the 
 100000: the final set of session 2, seen since), ``dev3`` (offsets + 200000: the final set of
 session 3, seen since), ``dev4`` (offsets + 300000: the final set of session 4, seen since), ``dev5``
 (offsets + 400000: the first final set of session 5, seen since) and ``dev6`` (offsets + 500000: the
-final set of session 5's second pass, run once with commit 7a1c12d, seen since) are development data.
-``final`` (offsets + 600000) is the final set of session 6, fixed here before any run of it; it is run
-once, with the code frozen and committed, and becomes development data after that run.
+final set of session 5's second pass, run once with commit 7a1c12d, seen since) and ``dev7`` (offsets +
+600000: the first final set of session 6, run once with commit 7fb0b75, seen since) are development data.
+``final`` (offsets + 700000) is the second final set of session 6, fixed here before any run of it; it is
+run once, with the code frozen and committed, and becomes development data after that run.
 Seed layout (session 4): every hidden-effect recording has its own seed, so its own simulated rig
 (route, K, EA, load, rate, noise): effect k of EFFECT_IDS, level j, repeat s uses
 base + 100 + 1000 k + 10 j + s (before session 4 every effect of a set shared the four rigs of
@@ -26,7 +27,7 @@ Prints per effect and per channel: accuracy (strict, and up to the inseparable p
 estimator.offline.effects.EQUIVALENT), gains, false alarms on clean data; never fails on the figures (the
 pass/fail checks are in tests/estimator/test_diagnosis.py).
 
-    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|dev3|dev4|dev5|dev6|final] [--seeds 2]
+    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|dev3|dev4|dev5|dev6|dev7|final] [--seeds 2]
         [--levels 0.2,0.8] [--clean 12] [--duration 90] [--rate 1000] [--jobs 2] [--json OUT] [--speed-only]
         [--shared-rigs]
 """
@@ -50,7 +51,7 @@ from estimator.offline.diagnosis_fit import noise_level, quantum  # noqa: E402
 from estimator.offline.effects import EFFECT_IDS, EQUIVALENT, NONE  # noqa: E402
 
 SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "dev4": 300000, "dev5": 400000, "dev6": 500000,
-             "final": 600000}   # session 6's final set, unused before its one run (module docstring)
+             "dev7": 600000, "final": 700000}   # session 6's second final set, unused before its one run (docstring)
 UNCATALOGUED = "load_cell_wander"
 
 
