@@ -149,14 +149,14 @@ def _several_loads(cal: list[RunData], cents: list[float] | None = None) -> bool
     return len(cal) > 1 and float(np.ptp(_centres(cal) if cents is None else cents)) > LOAD_SPREAD_NM
 
 
-def _fit_rule(cal: list[RunData], cents: list[float], given: float | None = None) -> tuple[CentreParams, float, bool]:
+def _fit_rule(cal: list[RunData], cents: list[float], given: float | None = None) -> tuple[CentreParams, float]:
     """The calibration rule: a ``given`` load gain (a design value) when there is one; else fitted when the band
     centres spread over LOAD_SPREAD_NM, else 1 / n_k."""
     if given is not None:
-        return (*fit_centre_map(cal, scale=given), False)
+        return fit_centre_map(cal, scale=given)
     if _several_loads(cal, cents):
-        return (*fit_centre_map(cal), True)
-    return (*fit_centre_map(cal, scale=1.0 / kinematic_ratio(cal)), False)
+        return fit_centre_map(cal)
+    return fit_centre_map(cal, scale=1.0 / kinematic_ratio(cal))
 
 
 def centre_time_split(cal: list[RunData], fs: float, given: float | None = None) -> float:
@@ -166,7 +166,7 @@ def centre_time_split(cal: list[RunData], fs: float, given: float | None = None)
     calibration runs only; no scored run is read. ``given``: a design load gain (:func:`centre_one_run`)."""
     first = [RunData(r.name, r.tau_p[:m], r.theta_p[:m], r.tau_d[:m], r.theta_d[:m], r.k0, r.dt)
              for r in cal for m in [(r.k0 + r.tau_p.size) // 2]]
-    p, _, _ = _fit_rule(first, _centres(first), given)
+    p, _ = _fit_rule(first, _centres(first), given)
     sq, n = 0.0, 0
     for r in cal:
         m = max((r.k0 + r.tau_p.size) // 2, centre_ready(r.theta_p, r.dt, p.window))
@@ -232,7 +232,8 @@ def centre_one_run(cal: list[RunData], fs: float, given: float | None = None) ->
     cents = _centres(cal)
     rec: dict[str, Any] = {"inputs": ["spindle torque", "spindle encoder"], "targets": ["jaw torque"],
                            "band_centres_Nm": cents}
-    p, rms, several = _fit_rule(cal, cents, given)
+    p, rms = _fit_rule(cal, cents, given)
+    several = _several_loads(cal, cents)
     if given is not None:
         rec["load_gain"] = {"value": float(given), "from": "given (--calibration gain=G:...): a design value from "
                             "outside the data, not fitted"}
@@ -242,12 +243,12 @@ def centre_one_run(cal: list[RunData], fs: float, given: float | None = None) ->
         n_k = 1.0 / float(p.coef[1, 0])
         rec["load_gain"] = {"value": 1.0 / n_k, "n_k": n_k, "from": "1 / n_k of the calibration run's encoders "
                             "(one load level: the gain is not identifiable, see profile)"}
+    if not several:     # one load level: the calibration's fit cost over the gain, however the gain was set
         rec["profile"] = [{"load_gain": s, "fit_rms_fs": r / fs} for s, _, r in scale_profile(cal, np.array(PROFILE_GAINS))]
+    if given is None and not several:
         rec["within_run_gain"] = {**within_run_gain(cal[0]), "used": False,
                                   "note": "the gain from the calibration run's own signals (spindle torque on its "
                                           "jaw torque, shape taken out), with its 95 % profile interval: not used"}
-    if given is not None and not several and not _several_loads(cal, cents):
-        rec["profile"] = [{"load_gain": s, "fit_rms_fs": r / fs} for s, _, r in scale_profile(cal, np.array(PROFILE_GAINS))]
     rec["fit_rms_fs"] = rms / fs
     rec["parameters"] = p.as_dict()
     return p, rec

@@ -259,13 +259,14 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
         cal_runs = [_rundata(r) for r in runs if r.name in cal_names]
         fits, base, sel, centre, ref = _calibrate(cal_runs, tick, kinematic=mode == "kinematic")
         cmap, out["centre_calibration"] = centre_one_run(cal_runs, fs, given)
-        pin = np.concatenate([predict_torque(fits[list(fits)[-1]], make_batch([(c.tau_p, c.theta_p)], centre, ref, c.dt))[
+        sel_name = list(fits)[-1]               # the pair model with the selected extensions
+        sel_p = fits[sel_name]
+        pin = np.concatenate([predict_torque(sel_p, make_batch([(c.tau_p, c.theta_p)], centre, ref, c.dt))[
             c.k0:] - c.tau_d[c.k0:] for c in cal_runs])
-        sel_p = fits[list(fits)[-1]]
-        gains = {list(fits)[-1]: implied_load_gain(lambda c, u: predict_torque(sel_p, make_batch(
+        gains = {sel_name: implied_load_gain(lambda c, u: predict_torque(sel_p, make_batch(
                      [(c.tau_p + u, c.theta_p)], centre, ref, c.dt)), cal_runs),
                  CENTRE: implied_load_gain(lambda c, u: predict_held(cmap, c.tau_p + u, c.theta_p, c.dt), cal_runs)}
-        out["model_choice"] = model_choice(list(fits)[-1], float(sel["rmse_val"]) / fs, float(np.sqrt(np.mean(pin ** 2))) / fs,
+        out["model_choice"] = model_choice(sel_name, float(sel["rmse_val"]) / fs, float(np.sqrt(np.mean(pin ** 2))) / fs,
                                            cal_runs, fs, out["centre_calibration"]["fit_rms_fs"], gains, given)
         out["calibration"] = {"mode": mode, "run": cal, "runs": cal_names, **cal_inputs,
                               "scored": "every other run, from its spindle signals only"}
