@@ -78,19 +78,15 @@ def _stribeck_bound(Y, Yp, a, u, w, Kk, r_s, v_st, vp, dY, G):  # pragma: no cov
             d = y - hi
         else:
             break
-        if d <= 0.0:
-            break
         dY[i] = w[i] * d
         tot += dY[i]
         nf = i
     beyond = 0.0
     for i in range(m1 - 1, -1, -1):
         vi = 0.0
-        if i <= nf and tot > 0.0:
-            vi = vp * beyond / tot
+        if i <= nf and tot > 0.0:       # in the slip zone; the proximal node moves with the proximal end
+            vi = vp if i == 0 else vp * beyond / tot
             beyond += dY[i]
-        if i <= nf and i == 0 and tot > 0.0:
-            vi = vp
         G[i] = Kk * (1.0 + r_s * math.exp(-(vi / v_st) ** 2))     # the node's bound, per wrap angle
     acc = 0.0
     prev = G[0]
