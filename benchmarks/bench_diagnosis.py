@@ -97,6 +97,11 @@ def footprint(data, twin) -> dict[str, float]:
     return out
 
 
+def peak_footprint(r: dict) -> float:
+    """A row's footprint (:func:`footprint`) on its most moved channel [noise sigmas]; 0 for clean rows."""
+    return max(r["footprint"].values(), default=0.0)
+
+
 def one(case: tuple) -> dict:
     sim, effect, level, seed, duration, rate = case
     kw = {"seed": seed, "level": level, "duration": duration, **({"rate_hz": rate} if sim == "rig" or rate else {})}
@@ -183,9 +188,9 @@ def table(rows: list[dict], title: str) -> None:
           "effects at or below it")
     # visible subset (session 6, model-free, defined on dev data before its final run): hidden effects whose
     # recording differs from its clean twin by more than VISIBLE_SIGMAS noise sigmas rms on some channel
-    vis = [r for r in present if max(r["footprint"].values(), default=0.0) > VISIBLE_SIGMAS] + clean
+    vis = [r for r in present if peak_footprint(r) > VISIBLE_SIGMAS] + clean
     v_ok, v_eq = sum(_ok(r) for r in vis), sum(_ok(r, True) for r in vis)
-    below = [r for r in present if max(r["footprint"].values(), default=0.0) <= VISIBLE_SIGMAS]
+    below = [r for r in present if peak_footprint(r) <= VISIBLE_SIGMAS]
     print(f"visible subset (footprint vs the clean twin > {VISIBLE_SIGMAS:g} sigma rms on some channel, and "
           f"clean): accuracy {v_ok / max(len(vis), 1):.3f} ({v_ok}/{len(vis)}); up to the inseparable pairs "
           f"{v_eq / max(len(vis), 1):.3f} ({v_eq}/{len(vis)}); {len(below)} hidden effects at or below it "
@@ -193,8 +198,7 @@ def table(rows: list[dict], title: str) -> None:
     bins = ((0.0, 3.0), (3.0, 10.0), (10.0, 30.0), (30.0, math.inf))
     print("hidden effects named right by footprint (max over channels, noise sigmas): " + "; ".join(
         f"{lo:g}-{hi:g}: {sum(_ok(r) for r in b)}/{len(b)}" for lo, hi in bins
-        for b in [[r for r in present if lo < max(r['footprint'].values(), default=0.0) <= hi or
-                   (lo == 0.0 and max(r['footprint'].values(), default=0.0) == 0.0)]]))
+        for b in [[r for r in present if (lo < peak_footprint(r) or lo == 0.0) and peak_footprint(r) <= hi]]))
     fa = sum(r["cause"] != NONE for r in clean)
     print(f"false alarms on clean data: {fa}/{len(clean)} (answers: "
           f"{dict(Counter(r['cause'] for r in clean))})")
