@@ -11,7 +11,8 @@ on the first 35 %; the model always runs from the first sample):
 
       S = sum_signals (rms_ext / floor)^2 / sum_signals (rms_base / floor)^2
 
-  (rms without the largest TRIM share of the residuals, the worse fold counts; floor = sensor noise
+  (both rms on the same samples: without the largest TRIM share of min(|residual_ext|, |residual_base|),
+  the transients neither model explains; the worse fold counts; floor = sensor noise
   and quantum estimated from the recording itself, the load-cell noise carried through the model,
   and MODEL_RESOLUTION of the signal's range);
 * "none" when the base model's validation residual is at the floor (below STRUCTURE_RATIO times
@@ -38,7 +39,7 @@ import numpy as np
 
 from estimator.offline.diagnosis_fit import (SIGNALS, Progress, channel_choice, fit_model, look_alike, toe_or_play, noise_level,
                                              predictions, prepare, quantum, raw_rmse, sample_block, settings_keys, split_at_rest,
-                                             start_points, trimmed_ms)
+                                             start_points, trimmed_ms, paired_trimmed_ms)
 from estimator.offline.effects import CATALOGUE, EQUIVALENT, NONE, UNKNOWN, Effect, effect, predict
 from estimator.data import MeasuredData
 
@@ -81,10 +82,13 @@ class _Fit:
         self.values: list[dict[str, float]] = []
         self.compliance: list[float] = []
         self.mse: list[dict[str, float]] = []
+        self.residuals: list[dict[str, np.ndarray]] = []     # validation residuals per fold and signal
+        # per fold: (this model's, the base's) mean squares on the samples kept for both (paired trim)
+        self.pairs: list[tuple[dict[str, float], dict[str, float]]] = []
         floor = floor or {}
         tr = folds.train
         for j, (fm, vm) in enumerate(zip(folds.fit, folds.val)):
-            if j == 1 and base is not None and _score(self.mse[0], base.mse[0], floor) >= need:
+            if j == 1 and base is not None and _score(*self.pairs[0], floor) >= need:
                 break           # cannot be accepted (the worse fold counts): the second fold is not needed
             vals, c, _ = fit_model(effects, tr, starts if j == 0 else [self.values[0]], route=route,
                                    fixed=fixed[j] if isinstance(fixed, list) else fixed, mask=fm,
@@ -92,10 +96,15 @@ class _Fit:
             pred = predict(effects, vals, tr, compliance=c)
             self.values.append(vals)
             self.compliance.append(c)
-            self.mse.append({n: trimmed_ms(getattr(pred, n)[vm] - getattr(tr, n)[vm], TRIM)
-                             for n in SIGNALS if getattr(tr, n) is not None})
-        # the worse fold counts: an extension must help forward and backward in time
-        self.S = 1.0 if base is None else max(_score(m, bm, floor) for m, bm in zip(self.mse, base.mse))
+            res = {n: getattr(pred, n)[vm] - getattr(tr, n)[vm] for n in SIGNALS if getattr(tr, n) is not None}
+            self.residuals.append(res)
+            self.mse.append({n: trimmed_ms(r, TRIM) for n, r in res.items()})
+            if base is not None:
+                pair = {n: paired_trimmed_ms(r, base.residuals[j][n], TRIM) for n, r in res.items()}
+                self.pairs.append(({n: v[0] for n, v in pair.items()}, {n: v[1] for n, v in pair.items()}))
+        # the worse fold counts: an extension must help forward and backward in time; each fold compares the
+        # two models on the same samples (the transients neither explains left out: paired_trimmed_ms)
+        self.S = 1.0 if base is None else max(_score(m, bm, floor) for m, bm in self.pairs)
         self.complete = len(self.mse) == len(folds.fit)
 
     @property
