@@ -40,7 +40,7 @@ import numpy as np
 from estimator.offline.diagnosis_fit import (SIGNALS, Progress, channel_choice, fit_model, look_alike, toe_or_play, noise_level,
                                              predictions, prepare, quantum, raw_rmse, sample_block, settings_keys, split_at_rest,
                                              start_points, trimmed_ms, paired_trimmed_ms)
-from estimator.offline.effects import CATALOGUE, EQUIVALENT, NONE, UNKNOWN, Effect, effect, predict
+from estimator.offline.effects import CATALOGUE, EQUIVALENT, NONE, ROUTE, UNKNOWN, Effect, effect, predict
 from estimator.data import MeasuredData
 
 __all__ = ["diagnose", "predictions", "PENALTY", "STRUCTURE_RATIO", "STRONG_SCORE", "WEAK_STRUCTURE", "MID_SCORE",
@@ -263,8 +263,14 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
             # (session 5: every candidate, not only the position lags - an x_out offset of 84 um bent the base
             # route of dev5 seed 417110 so far that the offset's fit on it scored 0.99, with the route free 1.5 um)
             polish += [eid for eid in singles if eid not in polish]
+        # from the route fitted so far and from the uniform one: the base's route, bent by what it lacks, can
+        # sit in a corner (session 7, lumped dev8 seed 707110: a 250 um distal backlash bent it to r_1 = r_2 = 0,
+        # all the wrap in the distal third; refitted from there the backlash took 189 um, S 0.26 and "unknown"
+        # first; from the uniform route 250 um, S 0.002)
+        uniform = {p.name: p.neutral for p in ROUTE}
         for j, eid in enumerate(polish):
-            f = _Fit([CATALOGUE[eid]], folds, [singles[eid].values[0]], route=True, base=base, floor=floor,
+            f = _Fit([CATALOGUE[eid]], folds, [singles[eid].values[0], {**singles[eid].values[0], **uniform}],
+                     route=True, base=base, floor=floor,
                      need=1.0 - PENALTY * singles[eid].n_params)
             if f.S < singles[eid].S:
                 singles[eid] = f

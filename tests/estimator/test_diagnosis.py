@@ -279,3 +279,12 @@ def test_lumped_lag_of_a_load_cell_that_only_steps_is_named():
     assert res["parameters"]["tau_T_out"]["value"] == pytest.approx(0.042, rel=0.1)
     assert res["gain"] > 0.5
 
+
+def test_lumped_backlash_that_bent_the_base_route_into_a_corner_is_named_alone():
+    # the base route bent to r_1 = r_2 = 0 by a 250 um backlash; the route-free refit from there kept 189 um and
+    # left structure ("unknown" first, lumped dev8 707110); from the uniform route too: 250 um, nothing left
+    rec = lumped_scenarios.record("distal_backlash", seed=707110, level=0.8, duration=60.0)
+    res = diagnose(rec.data, effects=("distal_backlash", "pretension", "sensor_offset:x_in"))
+    assert res["causes"] == ["distal_backlash"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
+    assert res["parameters"]["d_b"]["value"] == pytest.approx(250e-6, rel=0.05)
+
