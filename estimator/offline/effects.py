@@ -109,7 +109,8 @@ class Pretension(Effect):
     id = "pretension"
     cause = "the tendon carries tension at rest (assembly preload, antagonist), encoders zeroed there"
     signature = "T_in and T_out non-zero at rest; first pull from rest differs; x_out offset of (L/EA) T0"
-    extension = "initial profile uniform at T0 (not 0), elongation counted from its (L/EA) T0"
+    extension = ("initial profile at T0 (not 0), pinned at the distal end to the rest reading of T_out within the "
+                 "friction band; elongation counted from that profile")
     literature = "E5"
     parameters = (Parameter("T0", "N", 0.0, 50.0, 0.0, (), "uniform tension along the tendon at the start"),)
     primary = "x_out"
@@ -292,6 +293,17 @@ def rig_switches() -> dict[str, Effect]:
     return {e.switch.key: e for e in CATALOGUE.values() if e.switch is not None}
 
 
+def _rest_T_out(s: Series) -> float:
+    """T_out over the initial rest of a series [N] (median of the samples before x_in first moves by 5 um);
+    -1 without T_out. With pretension the distal end rests where the load holds it, which need not be the
+    preload: a constant-force load below it lets the distal part of the tendon slide back (lumped simulator)."""
+    if s.T_out is None:
+        return -1.0
+    moved = np.flatnonzero(np.abs(s.x_in - s.x_in[0]) > 5e-6)
+    stop = max(int(moved[0]) if moved.size else len(s.x_in), 3)
+    return max(float(np.median(s.T_out[:stop])), 0.0)
+
+
 def _shift(time: np.ndarray, y: np.ndarray, tau: float) -> np.ndarray:
     """y(t - tau) by linear interpolation (held at the ends)."""
     return y if tau == 0.0 else np.interp(time - tau, time, y)
@@ -369,7 +381,7 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
             speed = 0.5 * (np.abs(vel) + np.abs(np.gradient(s.x_out, t)))
         v_st = STRIBECK_SPEED if values.get(STRIBECK_FORM, 0.0) > 0.5 else 0.0
         T_out, E1 = run_extended(T_in, vel, t, u, s.w, T_min=s.T_min, sigma=s.sigma_T_in, speed=speed, v_st=v_st,
-                                 **knobs)
+                                 T0_out=_rest_T_out(s) if knobs.get("T0") else -1.0, **knobs)
     if x_p > 0.0 and not node:
         T_out = T_in - travel_lag(T_in - T_out, x_in, x_p)
     # distal channels: the reading from the true output (offset and lag are linear in L/EA)

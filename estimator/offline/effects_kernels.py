@@ -12,7 +12,9 @@ shape u_i = theta_i / theta_L in [0, 1] and weights w_i (sum 1):
     E1    = sum_i w_i phi(Y_i - a) - phi(T0),   phi(T) = T + beta T_c (1 - e^{-T/T_c})       (E9, E5)
 
 and x_out = x_in - (L/EA) E1 (a taut tendon). The profile Y_i = T_i + a starts uniform at T0
-(pretension, E5; the encoders are zeroed there) and is updated in one of two ways:
+(pretension, E5; the encoders are zeroed there) - or, given the distal rest reading T0_out, at T0 within the
+friction band around it, clip(T0, T0_out e^{-K (1 - u_i)}, T0_out e^{K (1 - u_i)}) (a load that holds less than
+the preload lets the distal part slide back) - and is updated in one of two ways:
 
 * stuck distal end (the memory rule of the base model):
       Y_i <- clip(Y_i, Y_p e^{-b u_i}, Y_p e^{+b u_i}), Y_i >= a,
@@ -100,10 +102,18 @@ def _stribeck_bound(Y, Yp, a, u, w, Kk, r_s, v_st, vp, dY, G):  # pragma: no cov
 
 @njit(cache=True, nogil=True)
 def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, sigma, beta, Tc, v_st,
-            T_out, E1):  # pragma: no cover - compiled
+            T0_out, T_out, E1):  # pragma: no cover - compiled
     m1 = u.shape[0]
     Y = np.full(m1, T0 + a)
     E0 = stiffening_strain(T0, beta, Tc)
+    if T0 > 0.0 and T0_out >= 0.0:
+        # the rest profile with its distal end at T0_out: T0 within the friction band around it (a load that
+        # cannot hold the preload let the distal part slide back to what it holds)
+        E0 = 0.0
+        for i in range(m1):
+            y = min(max(T0, T0_out * math.exp(-K * (1.0 - u[i]))), T0_out * math.exp(K * (1.0 - u[i])))
+            Y[i] = y + a
+            E0 += w[i] * stiffening_strain(y, beta, Tc)
     E = E0
     varying = K_rate != 0.0 or c_v != 0.0
     stiction = r_s > 0.0
@@ -115,7 +125,7 @@ def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, si
     g_sta = np.exp(-K * (1.0 + r_s) * u)
     sliding = 0                     # direction of the whole-tendon slide, 0 when the distal end sticks
     t_b = -math.inf
-    Yp_prev = T0 + a
+    Yp_prev = Y[0]
     for k in range(T_in.shape[0]):
         tk = t[k]
         Kk = K
@@ -255,7 +265,8 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
                  K: float, a: float = 0.0, T0: float = 0.0, K_rate: float = 0.0, c_v: float = 0.0,
                  r_s: float = 0.0, t_slip: float = 0.02, T_min: float = 0.0,
                  sigma: float = 0.0, beta: float = 0.0, Tc: float = 1.0,
-                 speed: np.ndarray | None = None, v_st: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+                 speed: np.ndarray | None = None, v_st: float = 0.0,
+                 T0_out: float = -1.0) -> tuple[np.ndarray, np.ndarray]:
     """Run the extended profile-memory model over a recording (module docstring for the equations).
 
     Parameters
@@ -287,6 +298,8 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
     v_st : float
         Stiction in its Stribeck form when > 0 [m/s]: each node's bound is K (1 + r_s e^-(v_i/v_st)^2)
         by its own sliding speed v_i (no breakaway rule, no relaxation); 0: the breakaway form.
+    T0_out : float
+        Distal tension at rest [N] the initial profile is pinned to with T0 > 0 (module docstring); < 0: uniform T0.
 
     Returns
     -------
@@ -303,5 +316,5 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
     _kernel(T_in, vel, spd, np.ascontiguousarray(time, dtype=np.float64),
             np.ascontiguousarray(u, dtype=np.float64), np.ascontiguousarray(w, dtype=np.float64), float(K),
             float(a), float(T0), float(K_rate), float(c_v), float(r_s), float(t_slip), float(T_min),
-            float(sigma), float(beta), float(Tc), float(v_st), T_out, E1)
+            float(sigma), float(beta), float(Tc), float(v_st), float(T0_out), T_out, E1)
     return T_out, E1
