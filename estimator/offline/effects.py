@@ -109,8 +109,8 @@ class Pretension(Effect):
     id = "pretension"
     cause = "the tendon carries tension at rest (assembly preload, antagonist), encoders zeroed there"
     signature = "T_in and T_out non-zero at rest; first pull from rest differs; x_out offset of (L/EA) T0"
-    extension = ("initial profile at T0 (not 0), pinned at the distal end to the rest reading of T_out within the "
-                 "friction band; elongation counted from that profile")
+    extension = ("initial profile at T0 (not 0), capped at the distal end by the friction band above the rest "
+                 "reading of T_out (a load that held less slid back); elongation counted from that profile")
     literature = "E5"
     parameters = (Parameter("T0", "N", 0.0, 50.0, 0.0, (), "uniform tension along the tendon at the start"),)
     primary = "x_out"

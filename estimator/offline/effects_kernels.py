@@ -13,8 +13,8 @@ shape u_i = theta_i / theta_L in [0, 1] and weights w_i (sum 1):
 
 and x_out = x_in - (L/EA) E1 (a taut tendon). The profile Y_i = T_i + a starts uniform at T0
 (pretension, E5; the encoders are zeroed there) - or, given the distal rest reading T0_out, at T0 within the
-friction band around it, clip(T0, T0_out e^{-K (1 - u_i)}, T0_out e^{K (1 - u_i)}) (a load that holds less than
-the preload lets the distal part slide back) - and is updated in one of two ways:
+friction band above it, min(T0, T0_out e^{K (1 - u_i)}) (a load that holds less than the preload lets the
+distal part slide back) - and is updated in one of two ways:
 
 * stuck distal end (the memory rule of the base model):
       Y_i <- clip(Y_i, Y_p e^{-b u_i}, Y_p e^{+b u_i}), Y_i >= a,
@@ -107,11 +107,11 @@ def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, si
     Y = np.full(m1, T0 + a)
     E0 = stiffening_strain(T0, beta, Tc)
     if T0 > 0.0 and T0_out >= 0.0:
-        # the rest profile with its distal end at T0_out: T0 within the friction band around it (a load that
-        # cannot hold the preload let the distal part slide back to what it holds)
+        # a load that holds less than the preload let the distal part slide back to what it holds: T0 capped by
+        # the friction band above the distal rest reading T0_out (a distal reading above T0 leaves it uniform)
         E0 = 0.0
         for i in range(m1):
-            y = min(max(T0, T0_out * math.exp(-K * (1.0 - u[i]))), T0_out * math.exp(K * (1.0 - u[i])))
+            y = min(T0, T0_out * math.exp(K * (1.0 - u[i])))
             Y[i] = y + a
             E0 += w[i] * stiffening_strain(y, beta, Tc)
     E = E0
@@ -299,7 +299,7 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
         Stiction in its Stribeck form when > 0 [m/s]: each node's bound is K (1 + r_s e^-(v_i/v_st)^2)
         by its own sliding speed v_i (no breakaway rule, no relaxation); 0: the breakaway form.
     T0_out : float
-        Distal tension at rest [N] the initial profile is pinned to with T0 > 0 (module docstring); < 0: uniform T0.
+        Distal tension at rest [N] that caps the initial profile with T0 > 0 (module docstring); < 0: uniform T0.
 
     Returns
     -------

@@ -292,7 +292,12 @@ def test_lumped_backlash_that_bent_the_base_route_into_a_corner_is_named_alone()
 def test_lumped_pretension_a_constant_force_load_cannot_hold_is_named():
     # 4.2 N of preload against a 2.6 N constant-force load: at rest T_in reads 4.2 N and T_out 2.6 N (the distal
     # part slid back); a uniform initial profile fitted T0 = 2.6 N and left 44 um on x_out, so an x_out offset
-    # was named first (lumped dev8 701110); the rest profile pinned to the rest reading of T_out fits it
+    # was named first (lumped dev8 701110); the rest profile capped by the rest reading of T_out fits it
     rec = lumped_scenarios.record("pretension", seed=701110, level=0.8, duration=60.0)
+    res = diagnose(rec.data, effects=("pretension", "sensor_offset:x_in", "distal_backlash"))
+    assert res["causes"] == ["pretension"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
+    # a rest reading above the preload (a constant-force load on its stop, lumped dev7 601100, 1.8 N at both ends)
+    # leaves the uniform profile: a profile rising toward the distal end fitted T0 = 0.65 N there
+    rec = lumped_scenarios.record("pretension", seed=601100, level=0.2, duration=60.0)
     res = diagnose(rec.data, effects=("pretension", "sensor_offset:x_in", "distal_backlash"))
     assert res["causes"] == ["pretension"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})

@@ -205,25 +205,26 @@ def test_pretension_starts_from_a_uniform_profile_and_zeroed_positions():
 
 
 
-def test_pretension_rest_profile_is_pinned_to_the_rest_reading_of_T_out():
+def test_pretension_rest_profile_is_capped_by_the_rest_reading_of_T_out():
     # a load that holds less than the preload: T_out reads 2 N at rest while T_in reads 3 N; the rest profile
-    # is T0 within the friction band around the distal reading, the distal end carries what the load holds
+    # is T0 capped by the friction band above the distal reading, the distal end carries what the load holds
     T0, T_d = 3.0, 2.0
     T_in = np.concatenate((np.full(200, T0), np.linspace(T0, 12.0, 1000)))
     x_in = np.concatenate((np.zeros(200), np.linspace(0, 0.003, 1000)))
-    pinned = predict(["pretension"], {"K": K, "T0": T0}, series(T_in, x_in, T_out=np.full(T_in.size, T_d)),
+    capped = predict(["pretension"], {"K": K, "T0": T0}, series(T_in, x_in, T_out=np.full(T_in.size, T_d)),
                      compliance=1e-4)
-    np.testing.assert_allclose(pinned.T_out[:200], T_d)
-    np.testing.assert_allclose(pinned.x_out[:200], 0.0, atol=1e-15)      # positions zeroed at that rest
+    np.testing.assert_allclose(capped.T_out[:200], T_d)
+    np.testing.assert_allclose(capped.x_out[:200], 0.0, atol=1e-15)      # positions zeroed at that rest
     # the first pull reaches the distal end at T_d e^K (not T0 e^K) and moves it less than a uniform T0 would
     uniform = predict(["pretension"], {"K": K, "T0": T0}, series(T_in, x_in), compliance=1e-4)
-    moved = pinned.T_out[200:] > T_d * 1.001
+    moved = capped.T_out[200:] > T_d * 1.001
     assert T_in[200:][moved][0] == pytest.approx(T_d * math.exp(K), rel=0.02)
-    assert pinned.x_out[-1] != pytest.approx(uniform.x_out[-1], rel=1e-3)
-    # a rest reading equal to the preload leaves the uniform profile
-    same = predict(["pretension"], {"K": K, "T0": T0}, series(T_in, x_in, T_out=np.full(T_in.size, T0)),
-                   compliance=1e-4)
-    np.testing.assert_allclose(same.x_out, uniform.x_out, atol=1e-12)
+    assert capped.x_out[-1] != pytest.approx(uniform.x_out[-1], rel=1e-3)
+    # a rest reading at or above the preload leaves the uniform profile
+    for reading in (T0, 1.5 * T0):
+        same = predict(["pretension"], {"K": K, "T0": T0}, series(T_in, x_in, T_out=np.full(T_in.size, reading)),
+                       compliance=1e-4)
+        np.testing.assert_allclose(same.x_out, uniform.x_out, atol=1e-12)
 
 def test_sensor_effects_are_input_corrections():
     T_in, x_in = _pull()
