@@ -11,11 +11,14 @@ import pytest
 from estimator.offline.effects import (
     CATALOGUE,
     EFFECT_IDS,
+    NODE_FORM,
+    PRESLIDING_MIN,
     SLACK_SIGMAS,
     SPEED_FORM,
     STRIBECK_FORM,
     STRIBECK_SPEED,
     Series,
+    below_resolution,
     effect,
     neutral_values,
     predict,
@@ -58,7 +61,10 @@ def test_catalogue_ids_parameters_and_texts():
         assert len(e.extension) > 10 and type(e).__name__ != "Effect"   # one class per effect
         assert e.primary in ("T_out", "x_out") and e.parameters
         for p in e.parameters:
-            assert p.lower <= p.neutral <= p.upper and p.unit and p.meaning
+            # the neutral value (off) inside the fitted range, except a pre-sliding travel: 0 is off, and the fit
+            # starts at PRESLIDING_MIN (a travel below it is under the floor of x_out)
+            inside = p.lower <= p.neutral <= p.upper or (eid == "presliding" and p.neutral == 0.0 < p.lower)
+            assert inside and p.unit and p.meaning
             assert all(p.lower <= s <= p.upper for s in p.starts)
         d = e.describe()
         assert d["id"] == eid and all("unit" in q and len(q["bounds"]) == 2 for q in d["parameters"])
@@ -353,3 +359,26 @@ def test_extension_reproduces_the_rig_with_the_same_effect(eid):
         assert rms(base.T_out - T_out) > 5 * rms(ext.T_out - T_out)
     else:
         assert rms(base.x_out - x_out) > 20 * rms(ext.x_out - off - x_out)
+
+
+def test_presliding_fit_keeps_a_travel_the_sensors_resolve():
+    # a base-model recording (no pre-sliding) with x_out: the per-node form, started at 1 um, may not go below
+    # PRESLIDING_MIN, where it would differ from the base model only by driving the distal end on the measured x_out
+    from estimator.offline.diagnosis_fit import fit_model
+    T = np.concatenate((np.linspace(0, 15, 600), np.linspace(15, 2, 500), np.linspace(2, 12, 500)))
+    x = np.concatenate((np.linspace(0, 0.005, 600), np.linspace(0.005, 0.001, 500), np.linspace(0.001, 0.004, 500)))
+    s0 = series(T, x)
+    ref = predict([], {"K": K}, s0, compliance=1e-4)
+    s = series(T, x, T_out=ref.T_out, x_out=ref.x_out)
+    assert 0.0 < PRESLIDING_MIN <= 0.5 * CATALOGUE["presliding"].knob.ranges[0][1]
+    vals, _, _ = fit_model([CATALOGUE["presliding"]], s, [{"K": K, "x_p": 1e-6, NODE_FORM: 1.0}], max_starts=1)
+    assert PRESLIDING_MIN <= vals["x_p"] < 1e-3 and vals[NODE_FORM] == 1.0
+
+
+def test_a_fit_at_the_smallest_resolvable_magnitude_is_below_resolution():
+    # pre-sliding at PRESLIDING_MIN (the fit's lower bound, above the neutral 0) does not count as pre-sliding;
+    # a travel in its realistic range does, and effects whose range starts at their neutral value never are
+    pre = [CATALOGUE["presliding"]]
+    assert below_resolution(pre, {"x_p": PRESLIDING_MIN}) and below_resolution(pre, {"x_p": 1.02 * PRESLIDING_MIN})
+    assert not below_resolution(pre, {"x_p": 40e-6}) and not below_resolution(pre, {})
+    assert not below_resolution([CATALOGUE["velocity_friction"], CATALOGUE["stiction"]], {"c_v": 0.0, "r_s": 0.0})
