@@ -40,7 +40,7 @@ import numpy as np
 from estimator.offline.diagnosis_fit import (SIGNALS, Progress, channel_choice, fit_model, look_alike, toe_or_play, noise_level,
                                              predictions, prepare, quantum, raw_rmse, sample_block, settings_keys, split_at_rest,
                                              start_points, trimmed_ms, paired_trimmed_ms)
-from estimator.offline.effects import CATALOGUE, EQUIVALENT, NONE, ROUTE, UNKNOWN, Effect, effect, predict
+from estimator.offline.effects import CATALOGUE, EQUIVALENT, NONE, ROUTE, UNKNOWN, Effect, below_resolution, effect, predict
 from estimator.data import MeasuredData
 
 __all__ = ["diagnose", "predictions", "PENALTY", "STRUCTURE_RATIO", "STRONG_SCORE", "WEAK_STRUCTURE", "MID_SCORE",
@@ -266,7 +266,8 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         # from the route fitted so far and from the uniform one: the base's route, bent by what it lacks, can
         # sit in a corner (session 7, lumped dev8 seed 707110: a 250 um distal backlash bent it to r_1 = r_2 = 0,
         # all the wrap in the distal third; refitted from there the backlash took 189 um, S 0.26 and "unknown"
-        # first; from the uniform route 250 um, S 0.002)
+        # first; from the uniform route 250 um, S 0.002; dev8 700111, velocity friction on a preloaded spring, base
+        # r_1 = 0.003: from it S 0.37, from the uniform route 0.15 with c_v 25.6, true 25.6)
         uniform = {p.name: p.neutral for p in ROUTE}
         for j, eid in enumerate(polish):
             f = _Fit([CATALOGUE[eid]], folds, [singles[eid].values[0], {**singles[eid].values[0], **uniform}],
@@ -302,6 +303,9 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
                                   need=chosen.S * (1.0 - PENALTY * len(CATALOGUE[eid].parameters)))
                 bar(f"{'+'.join(chosen.ids)}+{eid}")
         price = {eid: f.S / chosen.S + PENALTY * (f.n_params - chosen.n_params) for eid, f in trial.items()}
+        # an effect fitted at the smallest magnitude it can show is not that effect (effects.below_resolution)
+        price = {eid: math.inf if any(below_resolution(trial[eid].effects, v) for v in trial[eid].values) else p
+                 for eid, p in price.items()}
         # accepted by the additive price, ranked by log S with RANK_FACTOR per extra parameter
         rank = {eid: math.log(max(f.S / chosen.S, 1e-12)) + math.log(RANK_FACTOR) * (f.n_params - chosen.n_params)
                 for eid, f in trial.items() if price[eid] < 1.0}

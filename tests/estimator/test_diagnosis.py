@@ -78,7 +78,11 @@ def test_hidden_effect_is_named_and_earns_its_gain(eid):
 # its own noise and quantisation (seeded; development seeds)
 LUMPED = [("sensor_offset:T_in", 101), ("sensor_offset:T_out", 102), ("sensor_lag:T_in", 103),
           ("sensor_drift:T_out", 109), ("sensor_lag:x_in", 105), ("sensor_offset:x_out", 110), ("pretension", 107),
-          ("presliding", 109)]   # per-node pre-sliding (constant-force load): the node form, x_p within 25 %
+          ("presliding", 109),   # per-node pre-sliding (constant-force load): the node form, x_p within 25 %
+          # velocity friction on a preloaded spring (dev8 seed): the base model's route fit (r_1 ~ 0) is a local
+          # minimum, so the polished candidates also start from the uniform route; the per-node pre-sliding form at a travel
+          # of ~2 um (below the 20 um bound now) used to explain x_out better and was named instead
+          ("velocity_friction", 700111)]
 
 
 @pytest.mark.parametrize("eid,seed", LUMPED)
