@@ -210,7 +210,6 @@ def test_pretension_starts_from_a_uniform_profile_and_zeroed_positions():
     np.testing.assert_allclose(pr.T_out[200:][still], T0)
 
 
-
 def test_pretension_rest_profile_is_capped_by_the_rest_reading_of_T_out():
     # a load that holds less than the preload: T_out reads 2 N at rest while T_in reads 3 N; the rest profile
     # is T0 capped by the friction band above the distal reading, the distal end carries what the load holds
@@ -231,6 +230,7 @@ def test_pretension_rest_profile_is_capped_by_the_rest_reading_of_T_out():
         same = predict(["pretension"], {"K": K, "T0": T0}, series(T_in, x_in, T_out=np.full(T_in.size, reading)),
                        compliance=1e-4)
         np.testing.assert_allclose(same.x_out, uniform.x_out, atol=1e-12)
+
 
 def test_sensor_effects_are_input_corrections():
     T_in, x_in = _pull()
