@@ -388,8 +388,12 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
         if knobs.get("c_v") and values.get(SPEED_FORM, 0.0) > 0.5 and s.x_out is not None:
             speed = 0.5 * (np.abs(vel) + np.abs(np.gradient(s.x_out, t)))
         v_st = STRIBECK_SPEED if values.get(STRIBECK_FORM, 0.0) > 0.5 else 0.0
+        T0_out = -1.0
+        if knobs.get("T0") and (T0_out := _rest_T_out(s)) >= 0.0:
+            # the distal rest reading in true tension: through the T_out reading model fitted with it (no drift at t0)
+            T0_out = max((T0_out - g("sensor_offset:T_out")) / (1.0 + g("sensor_gain:T_out")), 0.0)
         T_out, E1 = run_extended(T_in, vel, t, u, s.w, T_min=s.T_min, sigma=s.sigma_T_in, speed=speed, v_st=v_st,
-                                 T0_out=_rest_T_out(s) if knobs.get("T0") else -1.0, **knobs)
+                                 T0_out=T0_out, **knobs)
     if x_p > 0.0 and not node:
         T_out = T_in - travel_lag(T_in - T_out, x_in, x_p)
     # distal channels: the reading from the true output (offset and lag are linear in L/EA)

@@ -230,6 +230,11 @@ def test_pretension_rest_profile_is_capped_by_the_rest_reading_of_T_out():
         same = predict(["pretension"], {"K": K, "T0": T0}, series(T_in, x_in, T_out=np.full(T_in.size, reading)),
                        compliance=1e-4)
         np.testing.assert_allclose(same.x_out, uniform.x_out, atol=1e-12)
+    # a T_out load cell reading 0.4 N high, fitted with it: the cap uses the true distal tension, not the reading
+    offset = predict(["pretension", "sensor_offset:T_out"], {"K": K, "T0": T0, "b_T_out": 0.4},
+                     series(T_in, x_in, T_out=np.full(T_in.size, T_d + 0.4)), compliance=1e-4)
+    np.testing.assert_allclose(offset.T_out, capped.T_out + 0.4, atol=1e-12)
+    np.testing.assert_allclose(offset.x_out, capped.x_out, atol=1e-15)
 
 
 def test_sensor_effects_are_input_corrections():
