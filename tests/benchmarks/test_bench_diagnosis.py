@@ -1,0 +1,40 @@
+"""The diagnosis benchmark's report helpers (benchmarks/bench_diagnosis.py)."""
+from __future__ import annotations
+
+import importlib.util
+import os
+
+import pytest
+
+_PATH = os.path.join(os.path.dirname(__file__), "..", "..", "benchmarks", "bench_diagnosis.py")
+
+
+@pytest.fixture(scope="module")
+def bench():
+    spec = importlib.util.spec_from_file_location("bench_diagnosis", _PATH)
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_accuracy_interval_is_clopper_pearson(bench):
+    # k = 0: the exact upper bound is 1 - (alpha / 2)^(1 / n); k = n mirrors it
+    lo, hi = bench.proportion_interval(0, 12)
+    assert lo == 0.0 and hi == pytest.approx(1 - 0.025 ** (1 / 12), rel=1e-6)
+    lo, hi = bench.proportion_interval(12, 12)
+    assert hi == 1.0 and lo == pytest.approx(0.025 ** (1 / 12), rel=1e-6)
+    # a set of 92 fixes an accuracy near 0.74 only to about +-0.09
+    lo, hi = bench.proportion_interval(68, 92)
+    assert lo < 68 / 92 < hi and 0.15 < hi - lo < 0.22
+    assert bench.proportion_interval(0, 0) == (0.0, 1.0)
+
+
+def test_seed_sets_do_not_overlap(bench):
+    # every seed set spans less than 100000 seeds (effects 100 + 1000 k + 10 j + s, clean 500+, other 900+)
+    bases = sorted(bench.SEED_BASE.values())
+    assert len(set(bases)) == len(bases)
+    assert all(b - a >= 100000 for a, b in zip(bases, bases[1:]))
+    n_eff = len(bench.EFFECT_IDS)
+    assert bench.effect_seed(0, n_eff - 1, 1, 1) < 100000
+    assert bench.SEED_BASE["final"] == max(bases)
