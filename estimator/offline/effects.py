@@ -18,7 +18,7 @@ import numpy as np
 from estimator.offline import effect_switches as sw
 from estimator.offline.effect_switches import RigSwitch, ScenarioKnob, Setting
 from estimator.offline.effect_types import K_MAX, NONE, UNKNOWN, Parameter, Prediction, Series
-from estimator.offline.effects_kernels import backlash_play, route_shape, run_extended, travel_lag
+from estimator.offline.effects_kernels import backlash_play, route_shape, run_extended, slack_index, travel_lag
 from estimator.offline.presliding_kernel import NODE_FORM, node_presliding
 
 #: Held setting of velocity_friction: 1 = the sliding speed is the mean of |dx_in/dt| and |dx_out/dt|.
@@ -34,7 +34,7 @@ STRIBECK_SPEED = 0.5e-3
 #: lower end of the realistic range (40-150 um, the scenario knob below); hidden travels were fitted 2-12 % off.
 PRESLIDING_MIN = 20e-6
 
-__all__ = ["Parameter", "slack_hold", "SLACK_SIGMAS", "Effect", "VelocityFriction", "Pretension", "CurvatureDrift", "TendonStiffening", "Stiction",
+__all__ = ["Parameter", "slack_hold", "SLACK_SIGMAS", "SLACK_TAUT", "SLACK_WINDOW", "SLACK_MEAN", "Effect", "VelocityFriction", "Pretension", "CurvatureDrift", "TendonStiffening", "Stiction",
            "FrictionOffset", "Presliding", "DistalBacklash", "SensorEffect", "Series", "Prediction", "CATALOGUE",
            "EFFECT_IDS", "ALIASES", "EQUIVALENT", "NONE", "UNKNOWN", "effect", "predict", "neutral_values",
            "route_shape", "ROUTE", "K_MAX", "RigSwitch", "ScenarioKnob", "Setting", "register", "unregister",
@@ -407,7 +407,7 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
     tau_x = g("sensor_lag:x_out", 0.0)
     # a slack tendon (session 5): T_in at the noise around zero - the tendon carries no compression, the
     # proximal end moves without it and the distal end stays where the last taut sample left it
-    taut = slack_hold(T_in, SLACK_SIGMAS * s.sigma_T_in)
+    taut = slack_hold(T_in, SLACK_SIGMAS * s.sigma_T_in, x_in)
     A = _shift(t, x_in[taut], tau_x) + g("sensor_offset:x_out", 0.0)
     B = _shift(t, E1[taut], tau_x)
     c = compliance
@@ -439,16 +439,36 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
 #: T_in below SLACK_SIGMAS x its noise level counts as a slack tendon: the prepared T_in of a slack
 #: lumped tendon stays below 2 sigma in 95 % of its samples (dev5 seeds 405110, 407101, 417110, dev 503)
 SLACK_SIGMAS = 3.0
+#: ... and a slack tendon is taut again before its proximal end is back where it went slack only when T_in
+#: reaches SLACK_TAUT x that threshold (6 sigma: beyond what the noise gives in a recording's slack phases)
+SLACK_TAUT = 2.0
+#: ... or when the mean of T_in over SLACK_WINDOW samples (30 ms at the prepared 200 Hz; its noise is about 0.6
+#: of one sample's after the 3-sample mean of `prepare`) is above SLACK_MEAN x the threshold (5 sigma of the
+#: mean, about 3e-7 per sample; at 0.5, 2.5 sigma, lumped dev9 805110 was unheld again within its 40 s of slack)
+SLACK_WINDOW = 6
+SLACK_MEAN = 1.0
 
 
-def slack_hold(T_in: np.ndarray, threshold: float) -> np.ndarray:
-    """Index of the last taut sample at every sample, shape (n,) (the sample itself where T_in >= ``threshold``
-    [N]; the first sample before any taut one). Indexing a position with it holds the tendon's ends while it
-    is slack: a tendon carries no compression, so a proximal end moving at zero tension leaves the rest behind."""
+def slack_hold(T_in: np.ndarray, threshold: float, x_in: np.ndarray | None = None) -> np.ndarray:
+    """Index of the last taut sample at every sample, shape (n,) (the sample itself where the tendon is taut;
+    the first sample before any taut one). Indexing a position with it holds the tendon's ends while it is
+    slack: a tendon carries no compression, so a proximal end moving at zero tension leaves the rest behind.
+
+    T_in [N], shape (n,); ``threshold`` [N] (<= 0: never slack); x_in [m], shape (n,) or None.
+    Without x_in a sample is taut where T_in >= ``threshold``. With x_in (session 8) the slack is geometric:
+    once slack, the tendon is taut again only when T_in >= ``threshold`` with the proximal end back where it
+    went slack (the paid-out length taken up) or with its mean over the last SLACK_WINDOW samples >= SLACK_MEAN x
+    ``threshold`` (a tension above zero: a taut tendon at low tension whose noise dips below the threshold, as
+    a spring load near its rest on release), or when T_in >= SLACK_TAUT x ``threshold`` anywhere. A single noise sample above ``threshold`` in a long slack phase otherwise ended
+    the hold and put x_out back on x_in (lumped dev9 805110: a 3.4 sigma blip after 0.7 s of slack, x_out
+    predicted 3 mm off for the rest of the hold, and every friction-offset fit judged on that)."""
     idx = np.arange(T_in.shape[0])
     if threshold <= 0.0:
         return idx
-    return np.maximum.accumulate(np.where(T_in >= threshold, idx, 0))
+    if x_in is None:
+        return np.maximum.accumulate(np.where(T_in >= threshold, idx, 0))
+    return slack_index(np.ascontiguousarray(T_in, dtype=np.float64), np.ascontiguousarray(x_in, dtype=np.float64),
+                       float(threshold), float(SLACK_TAUT * threshold), SLACK_WINDOW, float(SLACK_MEAN * threshold))
 
 
 def below_resolution(effects: Iterable[Effect], values: dict[str, float]) -> bool:
