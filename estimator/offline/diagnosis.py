@@ -6,8 +6,11 @@ folds inside it (fit on the first 65 % and validate on the rest; fit on the last
 on the first 35 %; the model always runs from the first sample):
 
 * the base model (profile memory with K, L/EA and the route shares r_1, r_2 of
-  :data:`estimator.offline.effects.ROUTE`) and every extension of the catalogue (:mod:`estimator.offline.effects`)
-  are fitted on each fold's fit part and scored on its validation part,
+  :data:`estimator.offline.effects.ROUTE`, the wrap angle over three thirds; when that leaves a structure
+  ratio above WEAK_STRUCTURE, over six sixths, :data:`estimator.offline.effects.ROUTE_FINE`, which becomes
+  the base when its validation score against the thirds is below ROUTE_SCORE) and every extension of the
+  catalogue (:mod:`estimator.offline.effects`) are fitted on each fold's fit part and scored on its
+  validation part,
 
       S = sum_signals (rms_ext / floor)^2 / sum_signals (rms_base / floor)^2
 
@@ -40,7 +43,8 @@ import numpy as np
 from estimator.offline.diagnosis_fit import (SIGNALS, Progress, channel_choice, fit_model, look_alike, toe_or_play, noise_level,
                                              predictions, prepare, quantum, raw_rmse, sample_block, settings_keys, split_at_rest,
                                              start_points, trimmed_ms, paired_trimmed_ms)
-from estimator.offline.effects import CATALOGUE, EQUIVALENT, NONE, ROUTE, UNKNOWN, Effect, below_resolution, effect, predict
+from estimator.offline.effects import (CATALOGUE, EQUIVALENT, NONE, ROUTE, ROUTE_FINE, ROUTE_KEYS, UNKNOWN, Effect, below_resolution,
+                                       effect, finer_route, predict)
 from estimator.data import MeasuredData
 
 __all__ = ["diagnose", "predictions", "PENALTY", "STRUCTURE_RATIO", "STRONG_SCORE", "WEAK_STRUCTURE", "MID_SCORE",
@@ -57,6 +61,7 @@ RANK_FACTOR = 2.0           # among acceptable extensions, each extra parameter 
 STRONG_SCORE = 0.15         # below the structure threshold, an extension with S below this is still accepted [-]
 WEAK_STRUCTURE = 2.0        # ... and with S below MID_SCORE when the base's structure ratio is above this [-]
 MID_SCORE = 0.5
+ROUTE_SCORE = 0.5           # the finer route replaces the thirds as the base below this validation score [-]
 DOMINANT_SCORE = 0.1        # accepted extensions with S below this are named first even with much structure left [-]
 _UNITS = {"T_out": "N", "x_out": "m"}
 
@@ -75,7 +80,7 @@ class _Folds:
 class _Fit:
     """One model (a list of extensions) fitted on each fold's fit block, with its validation errors."""
 
-    def __init__(self, effects: list[Effect], folds: _Folds, starts: list[dict], *, route: bool = False,
+    def __init__(self, effects: list[Effect], folds: _Folds, starts: list[dict], *, route: bool | str = False,
                  fixed: dict | list[dict] | None = None, base: "_Fit | None" = None,
                  floor: dict[str, float] | None = None, need: float = math.inf):
         self.effects = effects
@@ -146,7 +151,7 @@ def _gain(ext: dict, base: dict, signal: str) -> float | None:
 def _parameters(effects: list[Effect], values: dict, compliance: float, rename: dict) -> dict:
     out = {"K": {"value": values["K"], "unit": "-", "effect": "base"},
            "compliance": {"value": compliance, "unit": "m/N", "effect": "base"}}
-    for name in ("r_1", "r_2"):
+    for name in ROUTE_KEYS:
         if name in values:
             out[name] = {"value": values[name], "unit": "-", "effect": "base"}
     for e in effects:
@@ -221,7 +226,7 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     for e in cands_all:
         if all(r in measured for r in e.requires) and not any(q.id in EQUIVALENT.get(e.id, ()) for q in cands):
             cands.append(e)
-    route = wrap_shape is None
+    route: bool | str = wrap_shape is None
     n_second = min(SECOND_ROUND, max(len(cands) - 1, 0)) * (max_effects - 1)
     bar = Progress(1 + len(cands) + (POLISH if route else 0) + n_second + 2, progress)
     sensor = {n: noise_level(getattr(s, n)) for n in measured}
@@ -229,7 +234,6 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     quanta = {n: quantum(getattr(data, n)) for n in measured}
 
     base = _Fit([], folds, [{"K": K0} for K0 in (0.2, 0.6, 1.2)], route=route)
-    shape = [{k: v[k] for k in ("r_1", "r_2") if k in v} for v in base.values]
     bar("base model")
     # the floor a perfect model reaches: sensor noise and quantisation, plus the load-cell noise
     # carried through the model (all estimated from the recording itself)
@@ -244,6 +248,15 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     noise = {n: math.sqrt(v ** 2 + quanta[n] ** 2 / 12.0 + (sigma_in * gain_in[n]) ** 2
                           + (MODEL_RESOLUTION * span[n]) ** 2) for n, v in sensor.items()}
     floor = noise
+    # where along the sheath the friction sits, finer (sixths instead of thirds) when the coarse route leaves
+    # structure: adopted as the base when it removes most of it on the validation blocks (ROUTE_SCORE)
+    route_form = "thirds" if route else "held"
+    if route and max(_structure(base, noise).values()) > WEAK_STRUCTURE:
+        fine = _Fit([], folds, [{**finer_route(v), "K": v["K"]} for v in base.values[:1]], route="fine", base=base,
+                    floor=floor)
+        if fine.S < ROUTE_SCORE:
+            fine.S, base, route, route_form = 1.0, fine, "fine", "sixths"
+    shape = [{k: v[k] for k in ROUTE_KEYS if k in v} for v in base.values]
     singles: dict[str, _Fit] = {}
     for e in cands:
         # an effect with several forms (variants: held settings, e.g. where pre-sliding sits): the best is kept
@@ -268,10 +281,10 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         # all the wrap in the distal third; refitted from there the backlash took 189 um, S 0.26 and "unknown"
         # first; from the uniform route 250 um, S 0.002; dev8 700111, velocity friction on a preloaded spring, base
         # r_1 = 0.003: from it S 0.37, from the uniform route 0.15 with c_v 25.6, true 25.6)
-        uniform = {p.name: p.neutral for p in ROUTE}
+        uniform = {p.name: p.neutral for p in (ROUTE_FINE if route == "fine" else ROUTE)}
         for j, eid in enumerate(polish):
             f = _Fit([CATALOGUE[eid]], folds, [singles[eid].values[0], {**singles[eid].values[0], **uniform}],
-                     route=True, base=base, floor=floor,
+                     route=route, base=base, floor=floor,
                      need=1.0 - PENALTY * singles[eid].n_params)
             if f.S < singles[eid].S:
                 singles[eid] = f
@@ -298,7 +311,7 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
                 held = {k: v for k, v in pool[eid].values[0].items() if k in settings_keys([CATALOGUE[eid]])}
                 v0 = {**chosen.values[0], **held}
                 trial[eid] = _Fit(fx, folds, start_points(fx, v0, s, v0),
-                                  fixed=[{**{k: v[k] for k in ("r_1", "r_2") if k in v}, **held} for v in chosen.values],
+                                  fixed=[{**{k: v[k] for k in ROUTE_KEYS if k in v}, **held} for v in chosen.values],
                                   base=base, floor=floor,
                                   need=chosen.S * (1.0 - PENALTY * len(CATALOGUE[eid].parameters)))
                 bar(f"{'+'.join(chosen.ids)}+{eid}")
@@ -396,7 +409,8 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
                      "strong_score": STRONG_SCORE, "weak_structure": WEAK_STRUCTURE, "mid_score": MID_SCORE,
                      "dominant_score": DOMINANT_SCORE,
                      "rank_factor": RANK_FACTOR,
-                     "model_resolution": MODEL_RESOLUTION, "trim": TRIM,
+                     "model_resolution": MODEL_RESOLUTION, "trim": TRIM, "route_score": ROUTE_SCORE,
+                     "route_form": route_form,
                      "wrap_shape": None if wrap_shape is None else [float(v) for v in wrap_shape]},
         "elapsed_s": _time.perf_counter() - t_start,
     }

@@ -22,7 +22,7 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import least_squares
 
-from estimator.offline.effects import K_MAX, ROUTE, Effect, Parameter, Series, effect, predict
+from estimator.offline.effects import K_MAX, ROUTE, ROUTE_FINE, Effect, Parameter, Series, effect, predict
 from estimator.sheath import SheathModel
 from estimator.data import MeasuredData
 from estimator.errors import DataError
@@ -32,7 +32,7 @@ __all__ = ["Progress", "trimmed_ms", "paired_trimmed_ms", "sample_block", "rest_
 
 _K = Parameter("K", "-", 0.0, K_MAX, 0.5, (), "friction exponent mu * total wrap angle")
 _SCALE = {"K": 0.1, "c_v": 10.0, "T0": 1.0, "K_rate": 1e-3, "beta": 1.0, "T_c": 1.0, "r_s": 0.1, "a": 0.5,
-          "x_p": 2e-5, "d_b": 2e-5, "r_1": 0.1, "r_2": 0.1,
+          "x_p": 2e-5, "d_b": 2e-5, "r_1": 0.1, "r_2": 0.1, "r_3": 0.1, "r_4": 0.1, "r_5": 0.1,
           "b_T_in": 0.5, "b_T_out": 0.5, "g_T_in": 0.02, "g_T_out": 0.02, "tau_T_in": 0.01, "tau_T_out": 0.01,
           "d_T_in": 2e-3, "d_T_out": 2e-3, "b_x_in": 2e-5, "b_x_out": 2e-5, "tau_x_in": 0.01, "tau_x_out": 0.01}
 SIGNALS = ("T_out", "x_out")
@@ -129,8 +129,9 @@ def split_at_rest(s: Series, train_fraction: float) -> int:
     return k
 
 
-def _params(effects: list[Effect], route: bool = False) -> list[Parameter]:
-    return [_K] + (list(ROUTE) if route else []) + [p for e in effects for p in e.parameters]
+def _params(effects: list[Effect], route: bool | str = False) -> list[Parameter]:
+    shares = list(ROUTE_FINE) if route == "fine" else list(ROUTE) if route else []
+    return [_K] + shares + [p for e in effects for p in e.parameters]
 
 
 def _residual_scales(s: Series) -> dict[str, float]:
@@ -143,14 +144,15 @@ def _residual_scales(s: Series) -> dict[str, float]:
 
 
 def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float]], *,
-              max_starts: int = 2, route: bool = False, fixed: dict[str, float] | None = None,
+              max_starts: int = 2, route: bool | str = False, fixed: dict[str, float] | None = None,
               mask: slice | None = None) -> tuple[dict[str, float], float, float]:
     """Least-squares fit of K and the parameters of ``effects`` on a training series.
 
     Every start (dict of parameter values, missing ones neutral) is scored, the best
     ``max_starts`` are refined by ``scipy.optimize.least_squares`` (trust-region reflective, within
     the parameters' bounds, in variables scaled to O(1)). L/EA is solved in closed form inside
-    every residual evaluation. ``route``: fit the route shares r_1, r_2 too (estimator.offline.effects.ROUTE);
+    every residual evaluation. ``route``: fit the route shares r_1, r_2 too (estimator.offline.effects.ROUTE), or with
+    "fine" the sixths r_1 ... r_5 (estimator.offline.effects.ROUTE_FINE);
     ``fixed``: values held (e.g. the base model's route); ``mask``: the samples of ``train`` whose
     residuals count (default all; the model always runs from the first sample). Returns (values,
     compliance [m/N], cost).

@@ -37,7 +37,7 @@ PRESLIDING_MIN = 20e-6
 __all__ = ["Parameter", "slack_hold", "SLACK_SIGMAS", "SLACK_TAUT", "SLACK_WINDOW", "SLACK_MEAN", "Effect", "VelocityFriction", "Pretension", "CurvatureDrift", "TendonStiffening", "Stiction",
            "FrictionOffset", "Presliding", "DistalBacklash", "SensorEffect", "Series", "Prediction", "CATALOGUE",
            "EFFECT_IDS", "ALIASES", "EQUIVALENT", "NONE", "UNKNOWN", "effect", "predict", "neutral_values",
-           "route_shape", "ROUTE", "K_MAX", "RigSwitch", "ScenarioKnob", "Setting", "register", "unregister",
+           "route_shape", "ROUTE", "ROUTE_FINE", "ROUTE_KEYS", "finer_route", "K_MAX", "RigSwitch", "ScenarioKnob", "Setting", "register", "unregister",
            "rig_switches", "NODE_FORM", "SPEED_FORM", "STRIBECK_FORM", "STRIBECK_SPEED", "PRESLIDING_MIN",
            "below_resolution"]
 
@@ -260,6 +260,26 @@ EQUIVALENT = {"sensor_gain:T_in": ("sensor_gain:T_out",), "sensor_gain:T_out": (
 #: in the shares q1 = r_1, q2 = (1 - r_1) r_2, q3 = (1 - r_1)(1 - r_2); r = (1/3, 1/2) is uniform (E7)
 ROUTE = (Parameter("r_1", "-", 0.0, 1.0, 1.0 / 3.0, (1.0 / 3.0,), "share of the wrap angle in the proximal third"),
          Parameter("r_2", "-", 0.0, 1.0, 0.5, (0.5,), "share of the rest in the middle third"))
+#: the finer route (session 9): six equal sixths, q_k = r_k (1 - q_1 - ... - q_{k-1}), q_6 the rest; the
+#: thirds are the special case of pairs of equal sixths (:func:`finer_route`). A single arc over a fifth of
+#: the sheath sits inside one third's uniform spread on the coarse route and leaves an elongation residual
+#: at reversals of 10-20 um (lumped dev10 900500: x_out 5.0 x the floor; 0.84 with the true route)
+ROUTE_FINE = (Parameter("r_1", "-", 0.0, 1.0, 1.0 / 6.0, (1.0 / 6.0,), "share of the wrap angle in the first sixth"),
+              Parameter("r_2", "-", 0.0, 1.0, 0.2, (0.2,), "share of the rest in the second sixth"),
+              Parameter("r_3", "-", 0.0, 1.0, 0.25, (0.25,), "share of the rest in the third sixth"),
+              Parameter("r_4", "-", 0.0, 1.0, 1.0 / 3.0, (1.0 / 3.0,), "share of the rest in the fourth sixth"),
+              Parameter("r_5", "-", 0.0, 1.0, 0.5, (0.5,), "share of the rest in the fifth sixth"))
+ROUTE_KEYS = tuple(p.name for p in ROUTE_FINE)
+
+
+def finer_route(values: dict) -> dict[str, float]:
+    """The sixths (:data:`ROUTE_FINE`) of a route given on thirds (r_1, r_2 of :data:`ROUTE`, neutral when
+    missing): the thirds' wrap shape read at the seven sixth knots, each share taken as its part of the rest."""
+    u = route_shape(len(ROUTE_FINE) + 2, float(values.get("r_1", ROUTE[0].neutral)),
+                    float(values.get("r_2", ROUTE[1].neutral)))
+    q, left = np.diff(u), 1.0 - u[:-1]
+    return {p.name: float(min(max(q[k] / left[k], 0.0), 1.0)) if left[k] > 1e-12 else 0.5
+            for k, p in enumerate(ROUTE_FINE)}
 
 
 def effect(name: str) -> Effect:
@@ -330,8 +350,8 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
     effects : iterable of Effect or id
         The extensions switched on (none: the base model).
     values : dict
-        ``K`` [-], optionally the route shares ``r_1``, ``r_2`` (:data:`ROUTE`; default the series'
-        own node shape) and every parameter of the listed effects (names as in their Parameter lists);
+        ``K`` [-], optionally the route shares ``r_1``, ``r_2`` (:data:`ROUTE`) or ``r_1`` ... ``r_5``
+        (:data:`ROUTE_FINE`; default the series' own node shape) and every parameter of the listed effects (names as in their Parameter lists);
         missing ones take their neutral value.
     s : Series
     compliance : float, optional
@@ -379,7 +399,9 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
         x_in, vel = _shift(t, x_in, -g("sensor_lag:x_in")), _shift(t, vel, -g("sensor_lag:x_in"))
     if g("sensor_offset:x_in"):
         x_in = x_in - g("sensor_offset:x_in")
-    u = s.u if "r_1" not in values else route_shape(s.u.shape[0], values["r_1"], values.get("r_2", 0.5))
+    u = s.u if "r_1" not in values else route_shape(
+        s.u.shape[0], values["r_1"], values.get("r_2", 0.5),
+        *((values["r_3"], values["r_4"], values["r_5"]) if "r_3" in values else ()))
     if node and x_p > 0.0 and (compliance is not None or s.x_out is not None):   # per node: K, K_rate, T0, E9 only
         T_out, E1 = node_presliding(T_in, x_in, s.x_out, t, u, s.w, x_p=x_p, compliance=compliance,
                                     **{k: v for k, v in knobs.items() if k in ("K", "K_rate", "T0", "beta", "Tc")})

@@ -282,12 +282,19 @@ def backlash_play(x: np.ndarray, width: float) -> np.ndarray:
     return out
 
 
-def route_shape(n1: int, r_1: float, r_2: float) -> np.ndarray:
+def route_shape(n1: int, r_1: float, r_2: float, *finer: float) -> np.ndarray:
     """Normalised wrap angle u(s) [-], shape (n1,), at n1 nodes equally spaced in arc length: piecewise
-    linear over three equal thirds holding the shares q1, q2, q3 of the total angle (see :data:`estimator.offline.effects.ROUTE`)."""
-    q1 = r_1
-    q2 = (1.0 - r_1) * r_2
-    return np.interp(np.linspace(0.0, 1.0, n1), [0.0, 1 / 3, 2 / 3, 1.0], [0.0, q1, q1 + q2, 1.0])
+    linear over M = 3 equal thirds (r_1, r_2) or, with ``finer`` = (r_3, r_4, r_5), M = 6 equal sixths
+    holding the shares q_k = r_k (1 - q_1 - ... - q_{k-1}) of the total angle, the last share the rest
+    (see :data:`estimator.offline.effects.ROUTE` and :data:`estimator.offline.effects.ROUTE_FINE`)."""
+    r = (r_1, r_2, *finer)
+    q, left = [], 1.0
+    for v in r:
+        q.append(left * v)
+        left -= q[-1]
+    q.append(left)
+    knots = np.linspace(0.0, 1.0, len(q) + 1)
+    return np.interp(np.linspace(0.0, 1.0, n1), knots, np.concatenate([[0.0], np.cumsum(q)]))
 
 
 def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np.ndarray, w: np.ndarray, *,

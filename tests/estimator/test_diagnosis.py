@@ -317,3 +317,18 @@ def test_lumped_friction_offset_holding_a_slack_tendon_is_named():
     assert res["causes"] == ["friction_offset"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
     assert res["parameters"]["a"]["value"] == pytest.approx(rec.truth["parameters"]["tension_offset"], rel=0.1)
     assert res["gain"] > 0.5
+
+
+def test_lumped_clean_single_arc_route_takes_the_finer_route_and_gives_none():
+    # one arc of 6.6 rad over 22 % of a 1.37 m sheath (33-55 % of its length), a preloaded spring: on thirds
+    # the wrap spreads uniformly over the middle third, the elongation at reversals is 10-20 um off (x_out 5.0 x
+    # the floor) and tendon stiffening was named on clean data (lumped dev10 900500, a false alarm of session 8's
+    # final). The sixths put 90 % of the wrap in the third sixth and the residual is at the floor.
+    rec = lumped_scenarios.record(None, seed=900500, duration=60.0)
+    res = diagnose(rec.data, effects=("tendon_stiffening", "friction_offset", "sensor_offset:x_in"))
+    assert res["causes"] == [], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
+    assert res["settings"]["route_form"] == "sixths"
+    assert max(res["structure"]["base"].values()) <= res["settings"]["structure_ratio"]
+    third_sixth = res["parameters"]["r_3"]["value"] * (1.0 - res["parameters"]["r_1"]["value"]) \
+        * (1.0 - res["parameters"]["r_2"]["value"])
+    assert third_sixth > 0.6

@@ -13,6 +13,7 @@ from estimator.offline.effects import (
     EFFECT_IDS,
     NODE_FORM,
     PRESLIDING_MIN,
+    ROUTE_FINE,
     SLACK_SIGMAS,
     SLACK_TAUT,
     SLACK_WINDOW,
@@ -22,11 +23,12 @@ from estimator.offline.effects import (
     Series,
     below_resolution,
     effect,
+    finer_route,
     neutral_values,
     predict,
     slack_hold,
 )
-from estimator.offline.effects_kernels import run_extended
+from estimator.offline.effects_kernels import route_shape, run_extended
 from estimator.online.distal import estimate_batch
 from estimator.sheath import SheathGeometry, SheathModel
 from slave.scenarios import protocol
@@ -420,3 +422,17 @@ def test_a_fit_at_the_smallest_resolvable_magnitude_is_below_resolution():
     assert below_resolution(pre, {"x_p": PRESLIDING_MIN}) and below_resolution(pre, {"x_p": 1.02 * PRESLIDING_MIN})
     assert not below_resolution(pre, {"x_p": 40e-6}) and not below_resolution(pre, {})
     assert not below_resolution([CATALOGUE["velocity_friction"], CATALOGUE["stiction"]], {"c_v": 0.0, "r_s": 0.0})
+
+
+def test_the_finer_route_holds_the_thirds_as_a_special_case():
+    # sixths from thirds (each third's share split over its two sixths) give the same wrap shape
+    for r1, r2 in ((1 / 3, 0.5), (0.05, 0.95), (0.7, 0.0), (0.0, 0.0)):
+        fine = finer_route({"r_1": r1, "r_2": r2})
+        assert set(fine) == {p.name for p in ROUTE_FINE} and all(0.0 <= v <= 1.0 for v in fine.values())
+        coarse = route_shape(61, r1, r2)
+        sixths = route_shape(61, *(fine[p.name] for p in ROUTE_FINE))
+        np.testing.assert_allclose(sixths, coarse, atol=1e-12)
+    # the neutral sixths are the uniform route; a share of 1 puts the whole wrap in that sixth
+    np.testing.assert_allclose(route_shape(13, *(p.neutral for p in ROUTE_FINE)), np.linspace(0, 1, 13), atol=1e-12)
+    u = route_shape(61, 0.0, 0.0, 1.0, 0.5, 0.5)
+    assert u[20] == pytest.approx(0.0) and u[30] == pytest.approx(1.0) and u[-1] == pytest.approx(1.0)
