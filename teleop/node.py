@@ -35,6 +35,7 @@ from teleop.codec import next_seq, seq_newer
 from teleop.cycles import CycleStats
 from teleop.messages import Heartbeat, Side, SideState
 from teleop.realtime import IDLE, demote_threads, machine_steal, promote_threads
+from teleop.recording import StopAtCycleEnd, stop_at_cycle_end
 
 __all__ = ["NodeBase", "IDLE_GUARD"]
 
@@ -186,13 +187,19 @@ class NodeBase:
             source = None
         pacer = Pacer(clock, self.rate_hz) if source is None else LockedPacer(clock, self.rate_hz, source)
         cycles = self.cycle_stats = CycleStats(self.side.name.lower())
-        perf, cpu = time.perf_counter, time.thread_time
         idle = IDLE.open if real else None
         machine = _machine_now() if real else None
         pacer.reset()          # the grid starts now: the set-up above (files read, arrays made) is not in the first period
         t0 = clock.now()
+        with stop_at_cycle_end() as stop:
+            self._loop(clock, pacer, cycles, real, idle, machine, t0, max_duration, stop)
+        stop.reraise()           # Ctrl-C / SIGTERM during the loop: after the clean-up, as KeyboardInterrupt
+
+    def _loop(self, clock: Clock, pacer: Pacer, cycles: CycleStats, real: bool, idle: Any, machine: Any,
+              t0: float, max_duration: float | None, stop: StopAtCycleEnd) -> None:
+        perf, cpu = time.perf_counter, time.thread_time
         try:
-            while not self.done:
+            while not self.done and stop.pending is None:
                 now = pacer.wait()
                 state = self.state.name
                 c_step, t_step = cpu(), perf()
