@@ -43,3 +43,14 @@ def stop_all(procs) -> None:
         if p.poll() is None:
             p.kill()
             p.wait()
+
+
+def stalled_past_watchdog(stats: list[dict], watchdog_s: float = 0.050) -> bool:
+    """Whether the shared virtual machine, not the loops, stopped a side for longer than the watchdog
+    (``slave.watchdog_ms``, ``master.watchdog_ms``, 50 ms by default): some side's cycle started more than
+    ``watchdog_s`` late (``pacer.max_lateness``) while the hypervisor took at least that much from the
+    machine during its loop (``pacer.machine.steal_ms``). Only then may a run's watchdog go SAFE: the
+    watchdog doing its job on a stall no process could prevent, which a test may not count as a fault."""
+    late = max(s["pacer"]["max_lateness"] for s in stats)
+    steal = max((s["pacer"].get("machine") or {}).get("steal_ms") or 0.0 for s in stats)
+    return late > watchdog_s and 1e-3 * steal >= watchdog_s

@@ -14,7 +14,7 @@ import pytest
 
 from teleop.publish_log import read_publish_log
 from teleop.transport import free_tcp_port
-from tests.integration.processes import start, stop_all, wait_text
+from tests.integration.processes import stalled_past_watchdog, start, stop_all, wait_text
 
 pytestmark = pytest.mark.integration
 
@@ -68,7 +68,11 @@ def test_router_slave_master_recorder_as_four_processes(tmp_path):
     master_stats = json.loads((run / "master_stats.json").read_text())
     slave_stats = json.loads((run / "slave_stats.json").read_text())
     assert master_stats["finished"] and master_stats["latency_rtt"]["n"] > 100
-    assert slave_stats["commands_applied"] > 100 and slave_stats["safe_events"] == 0
+    # no SAFE event, unless the virtual machine was stopped longer than the watchdog (steal; seen in
+    # session 10: 67 ms late, 250 ms stolen, one "command stale" right after engaging, then re-engaged)
+    assert slave_stats["commands_applied"] > 100
+    assert slave_stats["safe_events"] == 0 or stalled_past_watchdog([slave_stats, master_stats]), \
+        (slave_stats["safe_events"], slave_stats["pacer"], master_stats["pacer"])
     summary = json.loads((run / "recorder" / "summary.json").read_text())
     for side in ("slave", "master"):
         for key, seqs in read_publish_log(tmp_path / f"{side}.pub").items():
