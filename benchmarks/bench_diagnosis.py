@@ -32,7 +32,7 @@ estimator.offline.effects.EQUIVALENT), gains, false alarms on clean data; never 
 pass/fail checks are in tests/estimator/test_diagnosis.py).
 
     .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|dev3|dev4|dev5|dev6|dev7|dev8|dev9|dev10|dev11|final] [--seeds 2]
-        [--levels 0.2,0.8] [--clean 12] [--duration 90] [--rate 1000] [--jobs 2] [--json OUT] [--speed-only]
+        [--levels 0.2,0.8] [--clean 12] [--duration 90] [--rate 1000] [--jobs 2] [--json OUT] [--speed-only] [--twins]
         [--shared-rigs]
 """
 from __future__ import annotations
@@ -109,12 +109,33 @@ def peak_footprint(r: dict) -> float:
     return max(r["footprint"].values(), default=0.0)
 
 
+def _load_kind(truth: dict) -> str:
+    """The distal load of a recording's rig (the lumped simulator's ``truth["load"]["kind"]``; "rig" else)."""
+    load = truth.get("load")
+    return str(load.get("kind", "?")) if isinstance(load, dict) else "rig"
+
+
+def _twin_diagnosis(data) -> dict:
+    """Diagnosis of a clean twin: its causes and base structure ratio (an error counts as an answer)."""
+    try:
+        res = diagnose(data)
+    except Exception as err:          # noqa: BLE001 - reported as the twin's answer
+        return {"twin_cause": f"error: {type(err).__name__}", "twin_causes": ["error"], "twin_structure": float("nan")}
+    return {"twin_cause": res["cause"], "twin_causes": res["causes"],
+            "twin_structure": max(res["structure"]["base"].values())}
+
+
 def one(case: tuple) -> dict:
-    sim, effect, level, seed, duration, rate = case
+    sim, effect, level, seed, duration, rate, *flags = case
     kw = {"seed": seed, "level": level, "duration": duration, **({"rate_hz": rate} if sim == "rig" or rate else {})}
     rec = _record(sim)(None if effect == NONE else effect, **kw)
-    # the clean twin of a hidden effect (same seed, level and rate): how far the effect moves the recording
-    fp = footprint(rec.data, _record(sim)(None, **kw).data) if effect in EFFECT_IDS else {}
+    # the clean twin of a hidden effect (same seed, level and rate): how far the effect moves the recording;
+    # with --twins it is diagnosed too (one more clean rig per hidden-effect recording: false alarms)
+    twin = _record(sim)(None, **kw) if effect in EFFECT_IDS else None
+    fp = footprint(rec.data, twin.data) if twin is not None else {}
+    extra = {"load": _load_kind(twin.truth if twin is not None else rec.truth)}
+    if twin is not None and flags and flags[0]:
+        extra.update(_twin_diagnosis(twin.data))
     t0 = time.perf_counter()
     try:
         res = diagnose(rec.data)
@@ -123,7 +144,7 @@ def one(case: tuple) -> dict:
                 "cause": f"error: {type(err).__name__}: {err}", "causes": ["error"], "equivalent": [], "gain": 0.0,
                 "seconds": time.perf_counter() - t0, "n": len(rec.data), "truth": rec.truth["parameters"],
                 "fitted": {}, "scores": {}, "structure": float("nan"), "structure_ext": float("nan"), "detail": {},
-                "footprint": fp}
+                "footprint": fp, **extra}
     return {"sim": sim, "effect": effect, "level": rec.truth["level"], "seed": seed, "cause": res["cause"],
             "causes": res["causes"], "equivalent": res["equivalent"], "gain": res["gain"],
             "seconds": time.perf_counter() - t0, "n": len(rec.data), "truth": rec.truth["parameters"],
@@ -131,7 +152,7 @@ def one(case: tuple) -> dict:
             "scores": {k: round(v["score"], 3) for k, v in res["candidates"].items()},
             "structure": max(res["structure"]["base"].values()),
             "structure_ext": max(res["structure"]["extended"].values()),
-            "footprint": fp,
+            "footprint": fp, **extra,
             "detail": {"structure": res["structure"], "noise": res["noise"],
                        "candidates": {k: {m: v[m] for m in ("validation_rmse_T_out_N", "validation_rmse_x_out_m",
                                                             "score", "penalised_score")}
@@ -227,6 +248,16 @@ def table(rows: list[dict], title: str) -> None:
     fa = sum(r["cause"] != NONE for r in clean)
     print(f"false alarms on clean data: {fa}/{len(clean)} ({_ci(fa, len(clean))}; answers: "
           f"{dict(Counter(r['cause'] for r in clean))})")
+    twins = [r for r in present if "twin_cause" in r]
+    if twins:
+        # session 10: the clean twin of every hidden-effect recording (its own rig: route, K, EA, load, rate,
+        # noise) diagnosed as well - seven times as many clean rigs as the clean rows
+        ft = [r for r in twins if r["twin_cause"] != NONE]
+        by_load = Counter(r["load"] for r in twins)
+        print(f"false alarms on the clean twins of the hidden-effect recordings: {len(ft)}/{len(twins)} "
+              f"({_ci(len(ft), len(twins))}; answers: {dict(Counter(r['twin_cause'] for r in ft))}; by load: "
+              + ", ".join(f"{k} {sum(r['load'] == k for r in ft)}/{n}" for k, n in sorted(by_load.items()))
+              + f"; base structure ratio max {max(r['twin_structure'] for r in twins):.2f})")
     if present:
         print(f"held-out gain where an effect is present: median {np.median([r['gain'] for r in present]):.2f} "
               f"(all answers), {np.median([r['gain'] for r in present if _ok(r, True)] or [0]):.2f} "
@@ -263,6 +294,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--only", default="", help="comma-separated hidden effects (default: all, clean, unknown)")
     ap.add_argument("--json", default="", help="write every row as JSON to this file")
     ap.add_argument("--verbose", action="store_true")
+    ap.add_argument("--twins", action="store_true",
+                    help="diagnose the clean twin of every hidden-effect recording too (false alarms on that many "
+                         "more clean rigs; about twice the run time)")
     ap.add_argument("--shared-rigs", action="store_true",
                     help="seed layout before session 4: every effect of a set on the same four rigs")
     ap.add_argument("--speed-only", action="store_true", help="only time a 10-minute 1 kHz recording")
@@ -276,7 +310,7 @@ def main(argv: list[str] | None = None) -> None:
     cases: list[tuple] = []
     for sim in sims:
         rate = args.rate if args.rate or sim == "lumped" else 1000.0
-        cases += [(sim, e, lv, effect_seed(b, k, j, s, args.shared_rigs), args.duration, rate)
+        cases += [(sim, e, lv, effect_seed(b, k, j, s, args.shared_rigs), args.duration, rate, args.twins)
                   for k, e in enumerate(EFFECT_IDS) for j, lv in enumerate(levels) for s in range(args.seeds)]
         cases += [(sim, NONE, None, b + 500 + s, args.duration, rate) for s in range(args.clean)]
         cases += [(sim, UNCATALOGUED, 1.0, b + 900 + s, args.duration, rate) for s in range(args.unknown)]
@@ -303,6 +337,10 @@ def main(argv: list[str] | None = None) -> None:
                       dict(sorted(r["scores"].items(), key=lambda kv: kv[1])[:3]),
                       f"structure {r['structure']:.1f}/{r['structure_ext']:.1f}",
                       "footprint " + " ".join(f"{k} {v:.1f}" for k, v in r["footprint"].items()))
+        for r in rows:
+            if r.get("twin_cause", NONE) != NONE:
+                print("  twin false alarm:", r["sim"], f"seed {r['seed']} (clean twin of {r['effect']}) ->",
+                      r["twin_causes"], f"load {r['load']}", f"structure {r['twin_structure']:.1f}")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(rows, fh, indent=1, default=float)

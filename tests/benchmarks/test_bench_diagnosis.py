@@ -38,3 +38,18 @@ def test_seed_sets_do_not_overlap(bench):
     n_eff = len(bench.EFFECT_IDS)
     assert bench.effect_seed(0, n_eff - 1, 1, 1) < 100000
     assert bench.SEED_BASE["final"] == max(bases)
+
+
+def test_twins_are_diagnosed_and_their_false_alarms_reported(bench, capsys):
+    # the clean twin of a hidden-effect recording (same seed: same rig, protocol and noise) is diagnosed with
+    # --twins: one more clean rig per row; the report counts its false alarms by distal load
+    row = bench.one(("lumped", "sensor_offset:T_out", 0.8, 101, 20.0, None, True))
+    assert row["twin_cause"] in ("none", "unknown") or row["twin_cause"] in bench.EFFECT_IDS
+    assert row["load"] in ("spring", "preloaded", "constant", "joint") and row["twin_structure"] > 0.0
+    assert "twin_cause" not in bench.one(("lumped", "sensor_offset:T_out", 0.8, 101, 20.0, None))
+    alarm = dict(row, twin_cause="friction_offset", twin_causes=["friction_offset"], load="constant")
+    bench.table([row, alarm], "twins")
+    out = capsys.readouterr().out
+    n_fa = 1 + (row["twin_cause"] != "none")
+    assert f"false alarms on the clean twins of the hidden-effect recordings: {n_fa}/2" in out
+    assert "constant 1/" in out
