@@ -36,11 +36,12 @@ from __future__ import annotations
 
 import math
 import time as _time
+from dataclasses import replace
 from typing import Callable
 
 import numpy as np
 
-from estimator.offline.diagnosis_fit import (SIGNALS, Progress, channel_choice, fit_model, look_alike, toe_or_play, noise_level,
+from estimator.offline.diagnosis_fit import (SIGNALS, Progress, channel_choice, distal_end_held, fit_model, look_alike, toe_or_play, noise_level,
                                              predictions, prepare, quantum, raw_rmse, sample_block, settings_keys, split_at_rest,
                                              start_points, trimmed_ms, paired_trimmed_ms)
 from estimator.offline.effects import (CATALOGUE, EQUIVALENT, NONE, ROUTE, ROUTE_FINE, ROUTE_KEYS, UNKNOWN, Effect, below_resolution,
@@ -173,7 +174,9 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     ----------
     data : MeasuredData
         time [s], x_in [m], T_in [N] and at least one of T_out [N], x_out [m]; positions zeroed at a
-        rest of the unloaded tendon (or at the preloaded rest: that is the pretension effect).
+        rest of the unloaded tendon (or at the preloaded rest: that is the pretension effect). An x_out
+        that never moves (:func:`estimator.offline.diagnosis_fit.distal_end_held`: the distal end held by a
+        stop or a load never lifted) is set aside when T_out is recorded: ``settings.distal_end_held``.
     train_fraction : float in [0.3, 0.9]
         Nominal share of the duration used for training (fit + validation); the split moves to a
         rest within 8 %. The test block after it is used once, for the reported errors and gain.
@@ -215,6 +218,10 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         raise ValueError(f"unknown effect: {err.args[0]}") from None
     if max_effects < 1:
         raise ValueError(f"max_effects must be >= 1, got {max_effects!r}")
+    # a distal end that never moved: x_out says nothing of the tendon and is set aside (settings.distal_end_held)
+    held = distal_end_held(data) if data.T_out is not None else None
+    if held is not None:
+        data = replace(data, x_out=None)
     s = prepare(data, n_nodes=n_nodes, target_rate=target_rate, wrap_shape=wrap_shape)
     kt = split_at_rest(s, train_fraction)
     kv = split_at_rest(s.slice(kt), 1.0 - VALIDATION_FRACTION)
@@ -410,7 +417,7 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
                      "dominant_score": DOMINANT_SCORE,
                      "rank_factor": RANK_FACTOR,
                      "model_resolution": MODEL_RESOLUTION, "trim": TRIM, "route_score": ROUTE_SCORE,
-                     "route_form": route_form,
+                     "route_form": route_form, "distal_end_held": held,
                      "wrap_shape": None if wrap_shape is None else [float(v) for v in wrap_shape]},
         "elapsed_s": _time.perf_counter() - t_start,
     }

@@ -17,6 +17,7 @@ from __future__ import annotations
 import itertools
 import math
 import sys
+from dataclasses import replace
 from typing import Callable
 
 import numpy as np
@@ -28,7 +29,7 @@ from estimator.data import MeasuredData
 from estimator.errors import DataError
 
 __all__ = ["Progress", "trimmed_ms", "paired_trimmed_ms", "sample_block", "rest_reading", "prepare", "split_at_rest", "fit_model", "start_points", "heldout_mse", "raw_rmse", "noise_level",
-           "quantum", "SIGNALS", "channel_choice", "look_alike", "toe_or_play", "settings_keys", "predictions"]
+           "quantum", "distal_end_held", "HELD_STEPS", "HELD_SHARE", "SIGNALS", "channel_choice", "look_alike", "toe_or_play", "settings_keys", "predictions"]
 
 _K = Parameter("K", "-", 0.0, K_MAX, 0.5, (), "friction exponent mu * total wrap angle")
 _SCALE = {"K": 0.1, "c_v": 10.0, "T0": 1.0, "K_rate": 1e-3, "beta": 1.0, "T_c": 1.0, "r_s": 0.1, "a": 0.5,
@@ -59,6 +60,30 @@ def quantum(a: np.ndarray) -> float:
     q = float(np.percentile(d, 5))
     steps = d[: 2000] / q
     return q if np.all(np.abs(steps - np.round(steps)) < 0.05) else 0.0
+
+
+#: x_out counts as held (the distal end never moved: a stop, or a load the tension never broke free) when its
+#: 0.5-99.5 % range is within HELD_STEPS resolution steps (quantum or noise) or HELD_SHARE of x_in's travel
+#: (session 10: the clean twin of lumped dev11 1019112, a preloaded spring that T_out never lifted off its
+#: stop, x_out within one 1.2 um quantum, 0.3 % of x_in's travel; among the other 183 clean dev11 rigs the
+#: least-moving x_out spans 173 quanta, 19 % of x_in's travel)
+HELD_STEPS = 4.0
+HELD_SHARE = 0.01
+
+
+def distal_end_held(data: MeasuredData) -> dict | None:
+    """Whether a recording's x_out stands still (module constants HELD_STEPS, HELD_SHARE): then it shows
+    only that the distal end was held, nothing of the tendon (no elongation, no play, no lag can be read
+    from it). Returns {"range_m", "step_m", "travel_m"} when held, None when x_out moves or is absent."""
+    if data.x_out is None:
+        return None
+    x_out = np.asarray(data.x_out, dtype=float)
+    span = float(np.percentile(x_out, 99.5) - np.percentile(x_out, 0.5))
+    step = max(quantum(x_out), noise_level(x_out))
+    travel = float(np.ptp(np.asarray(data.x_in, dtype=float)))
+    if span <= max(HELD_STEPS * step, HELD_SHARE * travel):
+        return {"range_m": span, "step_m": step, "travel_m": travel}
+    return None
 
 
 def prepare(data: MeasuredData, *, n_nodes: int = 32, target_rate: float = 200.0,
@@ -348,6 +373,8 @@ def predictions(result: dict, data: MeasuredData) -> dict[str, np.ndarray | None
 
     st = result["settings"]
     shape = None if st.get("wrap_shape") is None else np.asarray(st["wrap_shape"], dtype=float)
+    if st.get("distal_end_held"):        # x_out was not used (diagnose): no x_out prediction either
+        data = replace(data, x_out=None)
     s = prepare(data, n_nodes=st["n_nodes"], target_rate=st["target_rate_hz"], wrap_shape=shape)
     out: dict[str, np.ndarray | None] = {}
     for tag, model in (("base", result["base_model"]), ("ext", result["model"])):

@@ -188,8 +188,13 @@ def format_diagnosis(result: dict) -> str:
     fitted parameters of the extended model (SI units)."""
     pars = ", ".join(f"{k} = {p['value']:.4g}" + ("" if p["unit"] in ("", "-") else f" {p['unit']}")
                      for k, p in result["parameters"].items())
+    held = result.get("settings", {}).get("distal_end_held")
+    note = [] if not held else [
+        f"x_out set aside: it stays within {1e6 * held['range_m']:.3g} um over the recording (resolution "
+        f"{1e6 * held['step_m']:.3g} um, x_in travel {1e3 * held['travel_m']:.3g} mm) - the distal end was held "
+        "(a stop, or a load the tension never moved), so x_out shows nothing of the tendon"]
     return "\n".join([f"{result['file']}: {result['n_samples']} samples, {result['duration_s']:.1f} s "
-                      f"(diagnosed in {result['elapsed_s']:.1f} s)", split_text(result),
+                      f"(diagnosed in {result['elapsed_s']:.1f} s)", split_text(result), *note,
                       format_summary(result), f"parameters: {pars}"])
 
 

@@ -332,3 +332,37 @@ def test_lumped_clean_single_arc_route_takes_the_finer_route_and_gives_none():
     third_sixth = res["parameters"]["r_3"]["value"] * (1.0 - res["parameters"]["r_1"]["value"]) \
         * (1.0 - res["parameters"]["r_2"]["value"])
     assert third_sixth > 0.6
+
+
+def test_a_distal_end_held_on_its_stop_sets_x_out_aside_and_gives_none():
+    # a preloaded spring that T_out (at most 2.5 N) never lifted off its stop (preload 2.8 N): x_out stays within
+    # one 1.2 um quantum while x_in travels 0.36 mm. Fitting x_out bent the base's K (T_out 1.69 N against
+    # 2.45 N measured) and a 200 um play "explained" the standing x_out: distal backlash named on a clean
+    # recording (session 10: the clean twin of lumped dev11 1019112, found by diagnosing the clean twins)
+    from estimator.offline.diagnosis import predictions
+    rec = lumped_scenarios.record(None, seed=1019112, duration=60.0)
+    res = diagnose(rec.data, effects=("distal_backlash", "friction_offset", "sensor_offset:T_in"))
+    held = res["settings"]["distal_end_held"]
+    assert held is not None and held["range_m"] < 0.01 * held["travel_m"]
+    assert res["causes"] == [], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
+    assert set(res["structure"]["base"]) == {"T_out"} and res["base"]["rmse_x_out_m"] is None
+    assert "distal_backlash" not in res["candidates"]
+    assert res["parameters"]["K"]["value"] == pytest.approx(rec.truth["K"], rel=0.05)
+    assert predictions(res, rec.data)["x_out_base"] is None
+
+
+def test_distal_end_held_only_when_x_out_stands_within_its_resolution():
+    from dataclasses import replace
+
+    from estimator.offline.diagnosis_fit import HELD_STEPS, distal_end_held
+    rec = record(None, seed=21, duration=DUR, rate_hz=RATE)
+    assert distal_end_held(rec.data) is None                               # a moving distal end
+    q = 1e-6
+    n = len(rec.data)
+    still = np.round(np.random.default_rng(3).normal(0.0, 0.3e-6, n) / q) * q   # toggles by one quantum
+    held = distal_end_held(replace(rec.data, x_out=still))
+    assert held is not None and held["step_m"] == pytest.approx(q) and held["range_m"] <= HELD_STEPS * q
+    # a 40 um wander over the recording is motion (10 % of a 0.4 mm travel is far beyond the resolution)
+    moving = still + 40e-6 * np.sin(np.linspace(0.0, 6.0, n))
+    assert distal_end_held(replace(rec.data, x_out=moving, x_in=np.linspace(0.0, 4e-4, n))) is None
+    assert distal_end_held(replace(rec.data, x_out=None)) is None
