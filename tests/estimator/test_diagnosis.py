@@ -366,3 +366,25 @@ def test_distal_end_held_only_when_x_out_stands_within_its_resolution():
     moving = still + 40e-6 * np.sin(np.linspace(0.0, 6.0, n))
     assert distal_end_held(replace(rec.data, x_out=moving, x_in=np.linspace(0.0, 4e-4, n))) is None
     assert distal_end_held(replace(rec.data, x_out=None)) is None
+
+
+def test_a_tension_offset_below_twice_the_floor_is_not_resolved():
+    from estimator.offline.diagnosis import OFFSET_FLOORS, _unresolved
+    floor = {"T_out": 0.03, "x_out": 2e-6}
+    fo, tin, tout = (CATALOGUE[e] for e in ("friction_offset", "sensor_offset:T_in", "sensor_offset:T_out"))
+    # F0 = a (1 - e^-K) at the tip: a = 0.07 N on K = 1.39 is 0.052 N < 2 x 0.03 N (a constant-force twin's)
+    assert _unresolved([fo], {"K": 1.39, "a": 0.07}, floor)
+    assert not _unresolved([fo], {"K": 1.39, "a": 0.467}, floor)               # a hidden one: F0 0.35 N
+    assert _unresolved([tin], {"K": 0.8, "b_T_in": -0.018}, floor)
+    assert not _unresolved([tout], {"K": 0.8, "b_T_out": OFFSET_FLOORS * 0.031}, floor)
+    # other effects, and a recording without T_out, are not judged by it
+    assert not _unresolved([CATALOGUE["velocity_friction"]], {"K": 1.0, "c_v": 1.0}, floor)
+    assert not _unresolved([fo], {"K": 1.39, "a": 0.07}, {"x_out": 2e-6})
+
+
+def test_lumped_clean_constant_force_load_gives_none_not_a_small_offset():
+    # a constant-force load (3.5 N, K 0.81): a friction offset of a = 0.05 N (F0 1.4 x the T_out floor) and then
+    # a T_in offset of 0.018 N were named on this clean recording (the clean twin of lumped dev11 1017111)
+    rec = lumped_scenarios.record(None, seed=1017111, duration=60.0)
+    res = diagnose(rec.data, effects=("friction_offset", "sensor_offset:T_in", "sensor_offset:T_out"))
+    assert res["causes"] == [], ({k: (c["score"], c["parameters"]) for k, c in res["candidates"].items()})
