@@ -35,7 +35,7 @@ from teleop.codec import next_seq, seq_newer
 from teleop.cycles import CycleStats
 from teleop.messages import Heartbeat, Side, SideState
 from teleop.realtime import IDLE, demote_threads, machine_steal, promote_threads
-from teleop.recording import StopAtCycleEnd, stop_at_cycle_end
+from teleop.recording import stop_at_cycle_end
 
 __all__ = ["NodeBase", "IDLE_GUARD"]
 
@@ -187,38 +187,35 @@ class NodeBase:
             source = None
         pacer = Pacer(clock, self.rate_hz) if source is None else LockedPacer(clock, self.rate_hz, source)
         cycles = self.cycle_stats = CycleStats(self.side.name.lower())
+        perf, cpu = time.perf_counter, time.thread_time
         idle = IDLE.open if real else None
         machine = _machine_now() if real else None
         pacer.reset()          # the grid starts now: the set-up above (files read, arrays made) is not in the first period
         t0 = clock.now()
+        # Ctrl-C / SIGTERM are held until the running step has finished, then raised after the clean-up
         with stop_at_cycle_end() as stop:
-            self._loop(clock, pacer, cycles, real, idle, machine, t0, max_duration, stop)
-        stop.reraise()           # Ctrl-C / SIGTERM during the loop: after the clean-up, as KeyboardInterrupt
-
-    def _loop(self, clock: Clock, pacer: Pacer, cycles: CycleStats, real: bool, idle: Any, machine: Any,
-              t0: float, max_duration: float | None, stop: StopAtCycleEnd) -> None:
-        perf, cpu = time.perf_counter, time.thread_time
-        try:
-            while not self.done and stop.pending is None:
-                now = pacer.wait()
-                state = self.state.name
-                c_step, t_step = cpu(), perf()
-                self.step(now)
-                t_end = perf()
-                cycles.add(now, pacer.last_lateness, pacer.last_overrun, t_end - t_step, state, cpu() - c_step)
-                if idle is not None:
-                    idle(pacer.next_wake - IDLE_GUARD)
-                if max_duration is not None and now - t0 >= max_duration:
-                    break
-        finally:
-            if real:
-                IDLE.release()
-                demote_threads()
-            self.pacer_stats = {**pacer.stats(), **cycles.stats(), "scheduling": self.scheduling}
-            if machine is not None:
-                self.pacer_stats["machine"] = _machine_during(machine, clock.now() - t0)
-            cycles.dump()
-            self._run_ended(clock)
+            try:
+                while not self.done and stop.pending is None:
+                    now = pacer.wait()
+                    state = self.state.name
+                    c_step, t_step = cpu(), perf()
+                    self.step(now)
+                    t_end = perf()
+                    cycles.add(now, pacer.last_lateness, pacer.last_overrun, t_end - t_step, state, cpu() - c_step)
+                    if idle is not None:
+                        idle(pacer.next_wake - IDLE_GUARD)
+                    if max_duration is not None and now - t0 >= max_duration:
+                        break
+            finally:
+                if real:
+                    IDLE.release()
+                    demote_threads()
+                self.pacer_stats = {**pacer.stats(), **cycles.stats(), "scheduling": self.scheduling}
+                if machine is not None:
+                    self.pacer_stats["machine"] = _machine_during(machine, clock.now() - t0)
+                cycles.dump()
+                self._run_ended(clock)
+        stop.reraise()
 
     def _cycle_source(self):
         """A subscriber whose messages start the cycles (:class:`~teleop.clock.LockedPacer`), or None: the

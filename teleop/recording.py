@@ -304,6 +304,10 @@ class Terminated(KeyboardInterrupt):
     """Raised in the main thread by :func:`raise_on_sigterm` when SIGTERM arrives."""
 
 
+def _terminated(signum: int) -> Terminated:
+    return Terminated(f"signal {signum} (SIGTERM)")
+
+
 @contextmanager
 def raise_on_sigterm() -> Iterator[None]:
     """Within the block, SIGTERM raises :class:`Terminated` (a ``KeyboardInterrupt``), so ``with``
@@ -319,7 +323,7 @@ def raise_on_sigterm() -> Iterator[None]:
         raise RuntimeError("raise_on_sigterm() must be used in the main thread")
 
     def _handler(signum: int, frame: object) -> None:
-        raise Terminated(f"signal {signum} (SIGTERM)")
+        raise _terminated(signum)
 
     previous = signal.signal(signal.SIGTERM, _handler)
     try:
@@ -366,8 +370,7 @@ def stop_at_cycle_end() -> Iterator[StopAtCycleEnd]:
 
     def _hold(signum: int, frame: object) -> None:
         if stop.pending is None:
-            stop.pending = (Terminated(f"signal {signum} (SIGTERM)") if signum == signal.SIGTERM
-                            else KeyboardInterrupt())
+            stop.pending = _terminated(signum) if signum == signal.SIGTERM else KeyboardInterrupt()
         _restore()
 
     for sig in previous:
