@@ -133,7 +133,7 @@ def one(case: tuple) -> dict:
     # with --twins it is diagnosed too (one more clean rig per hidden-effect recording: false alarms)
     twin = _record(sim)(None, **kw) if effect in EFFECT_IDS else None
     fp = footprint(rec.data, twin.data) if twin is not None else {}
-    extra = {"load": _load_kind(twin.truth if twin is not None else rec.truth)}
+    extra = {"load": _load_kind(rec.truth)}             # the twin's rig is the recording's
     if twin is not None and flags and flags[0]:
         extra.update(_twin_diagnosis(twin.data))
     t0 = time.perf_counter()
