@@ -44,7 +44,7 @@ import numpy as np
 from estimator.offline.diagnosis_fit import (SIGNALS, Progress, channel_choice, distal_end_held, fit_model, look_alike, toe_or_play, noise_level,
                                              predictions, prepare, quantum, raw_rmse, sample_block, settings_keys, split_at_rest,
                                              start_points, trimmed_ms, paired_trimmed_ms)
-from estimator.offline.effects import (CATALOGUE, EQUIVALENT, NONE, ROUTE, ROUTE_FINE, ROUTE_KEYS, UNKNOWN, Effect, below_resolution,
+from estimator.offline.effects import (CATALOGUE, EQUIVALENT, NOISE_BAND, NONE, ROUTE, ROUTE_FINE, ROUTE_KEYS, UNKNOWN, Effect, below_resolution,
                                        effect, finer_route, predict)
 from estimator.data import MeasuredData
 
@@ -439,6 +439,7 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
                      "penalty_per_parameter": PENALTY, "structure_ratio": STRUCTURE_RATIO,
                      "strong_score": STRONG_SCORE, "weak_structure": WEAK_STRUCTURE, "mid_score": MID_SCORE,
                      "dominant_score": DOMINANT_SCORE, "offset_floors": OFFSET_FLOORS,
+                     "noise_band_sigmas": NOISE_BAND,
                      "rank_factor": RANK_FACTOR,
                      "model_resolution": MODEL_RESOLUTION, "trim": TRIM, "route_score": ROUTE_SCORE,
                      "route_form": route_form, "distal_end_held": held,

@@ -17,9 +17,13 @@ friction band above it, min(T0, T0_out e^{K (1 - u_i)}) (a load that holds less 
 distal part slide back) - and is updated in one of two ways:
 
 * stuck distal end (the memory rule of the base model):
-      Y_i <- clip(Y_i, Y_p e^{-b u_i}, Y_p e^{+b u_i}), Y_i >= a,
+      Y_i <- clip(Y_i, (Y_p - h) e^{-b u_i}, (Y_p + h) e^{+b u_i}), Y_i >= a,
   node by node from the proximal end until a node does not change, with b = K_k, or
   K_k (1 + r_s) with static friction (E4: the tendon is stuck whenever it does not slide).
+  h [N] is the noise band of the reading T_in (``band``; 0 on exact data): the rule latches
+  extremes, and on a noisy reading it would latch the noise's own (a hold of a few hundred
+  samples reaches about 3 sigma), so the profile moves only for what exceeds h; h is also a dead
+  zone, hence below the noise's extremes (estimator.offline.effects.NOISE_BAND, session 11).
   When the update reaches the distal node the whole tendon slides in that direction s;
 * sliding (s != 0, while the proximal end keeps moving that way faster than V_STOP):
       Y_i = Y_p e^{-s K_k f u_i},  f = 1 + r_s e^{-(t - t_b)/t_slip}
@@ -131,7 +135,7 @@ def _stribeck_bound(Y, Yp, a, u, w, Kk, r_s, v_st, vp, dY, G):  # pragma: no cov
 
 @njit(cache=True, nogil=True)
 def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, sigma, beta, Tc, v_st,
-            T0_out, T_out, E1):  # pragma: no cover - compiled
+            T0_out, band, T_out, E1):  # pragma: no cover - compiled
     m1 = u.shape[0]
     Y = np.full(m1, T0 + a)
     E0 = stiffening_strain(T0, beta, Tc)
@@ -220,8 +224,8 @@ def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, si
                 else:
                     g = g_kin[i]
                 y = Y[i]
-                lo = Yp * g
-                hi = Yp / g
+                lo = (Yp - band) * g
+                hi = (Yp + band) / g
                 if y < lo:
                     ny = lo
                     d = 1
@@ -302,7 +306,7 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
                  r_s: float = 0.0, t_slip: float = 0.02, T_min: float = 0.0,
                  sigma: float = 0.0, beta: float = 0.0, Tc: float = 1.0,
                  speed: np.ndarray | None = None, v_st: float = 0.0,
-                 T0_out: float = -1.0) -> tuple[np.ndarray, np.ndarray]:
+                 T0_out: float = -1.0, band: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Run the extended profile-memory model over a recording (module docstring for the equations).
 
     Parameters
@@ -336,6 +340,8 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
         by its own sliding speed v_i (no breakaway rule, no relaxation); 0: the breakaway form.
     T0_out : float
         Distal tension at rest [N] that caps the initial profile with T0 > 0 (module docstring); < 0: uniform T0.
+    band : float
+        Noise band h [N] >= 0 of the T_in reading in the stuck rule (module docstring); 0: exact T_in.
 
     Returns
     -------
@@ -352,5 +358,5 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
     _kernel(T_in, vel, spd, np.ascontiguousarray(time, dtype=np.float64),
             np.ascontiguousarray(u, dtype=np.float64), np.ascontiguousarray(w, dtype=np.float64), float(K),
             float(a), float(T0), float(K_rate), float(c_v), float(r_s), float(t_slip), float(T_min),
-            float(sigma), float(beta), float(Tc), float(v_st), float(T0_out), T_out, E1)
+            float(sigma), float(beta), float(Tc), float(v_st), float(T0_out), max(float(band), 0.0), T_out, E1)
     return T_out, E1

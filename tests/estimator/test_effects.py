@@ -8,10 +8,12 @@ import math
 import numpy as np
 import pytest
 
+from estimator.offline import effects as effects_module
 from estimator.offline.effects import (
     CATALOGUE,
     EFFECT_IDS,
     NODE_FORM,
+    NOISE_BAND,
     PRESLIDING_MIN,
     ROUTE_FINE,
     SLACK_SIGMAS,
@@ -93,6 +95,25 @@ def test_base_kernel_is_the_profile_memory_estimator():
     ref = estimate_batch(T_in, np.zeros_like(T_in), SheathModel(K=K, compliance=1.0), n_nodes=100)
     np.testing.assert_allclose(T_out, ref.T_out, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(E1, ref.elongation, rtol=1e-9, atol=1e-12)
+
+
+def test_noise_band_keeps_the_memory_from_latching_the_noise_extremes():
+    """A pull to 10 N then a 10 s hold read with 50 mN of white noise: the memory rule latches the noise's
+    largest excursion (T_out biased by about 3 sigma e^-K), the noise band h takes h e^-K of it off."""
+    u, w = grid()
+    true = np.concatenate([np.linspace(1.0, 10.0, 400), np.full(2000, 10.0)])
+    t = np.arange(true.size) * 5e-3
+    sigma, hold = 0.05, slice(600, None)
+    noisy = true + sigma * np.random.default_rng(0).standard_normal(true.size)
+    ref = run_extended(true, np.zeros_like(true), t, u, w, K=K)[0]
+    scale = sigma * math.exp(-K)
+    bias = {b: float(np.mean(run_extended(noisy, np.zeros_like(true), t, u, w, K=K, band=b * sigma)[0][hold]
+                             - ref[hold])) / scale for b in (0.0, NOISE_BAND)}
+    assert bias[0.0] > 2.0, bias
+    assert bias[NOISE_BAND] == pytest.approx(bias[0.0] - NOISE_BAND, abs=0.05), bias
+    # and on exact data the band is a dead zone: the hold sits h e^-K below the exact memory
+    exact = run_extended(true, np.zeros_like(true), t, u, w, K=K, band=NOISE_BAND * sigma)[0]
+    np.testing.assert_allclose(exact[hold], ref[hold] - NOISE_BAND * scale, rtol=1e-9)
 
 
 @pytest.mark.parametrize("eid", IDS)
@@ -297,7 +318,9 @@ def test_presliding_rounds_the_reversal_and_backlash_holds_x_out():
     np.testing.assert_allclose(bl.x_out[turn:][still], bl.x_out[turn])
 
 
-def test_a_slack_tendon_holds_the_distal_end_while_the_proximal_end_moves_on():
+def test_a_slack_tendon_holds_the_distal_end_while_the_proximal_end_moves_on(monkeypatch):
+    # exact tensions: no noise band (NOISE_BAND, a dead zone of 3 sigma on a reading), only the slack rule's sigma
+    monkeypatch.setattr(effects_module, "NOISE_BAND", 0.0)
     # pull, release to zero tension while the proximal end goes on back (the tendon goes slack), pull again
     T = np.concatenate((np.linspace(0, 10, 1000), np.linspace(10, 0, 1000), np.zeros(500), np.linspace(0, 10, 1000)))
     x = np.concatenate((np.linspace(0, 3e-3, 1000), np.linspace(3e-3, 1e-3, 1000), np.linspace(1e-3, -1e-3, 500),
@@ -368,10 +391,12 @@ RIG_CASES = {   # rig switch, kernel values, rms tolerance on T_out [N] and on x
 
 
 @pytest.mark.parametrize("eid", sorted(RIG_CASES))
-def test_extension_reproduces_the_rig_with_the_same_effect(eid):
+def test_extension_reproduces_the_rig_with_the_same_effect(eid, monkeypatch):
     """The rig (displacement-driven, 100 elements) and the kernel (driven by the rig's T_in, 32 nodes)
     agree to round-off for the rate-independent effects; viscous friction differs by the speed the
-    kernel sees (the differenced encoder instead of the motor's step) - a few mN and um."""
+    kernel sees (the differenced encoder instead of the motor's step) - a few mN and um. The rig's
+    tensions are exact: no noise band (NOISE_BAND is for a noisy reading; sigma_T_in is the breakaway's)."""
+    monkeypatch.setattr(effects_module, "NOISE_BAND", 0.0)
     sub, values, tol_T, tol_x = RIG_CASES[eid]
     geo = SheathGeometry.uniform(L, 2 * math.pi)
     sheath = C.SheathConfig(EA=EA, runs=tuple(C.RunConfig(r.length, r.radius) for r in geo.runs))
