@@ -117,13 +117,16 @@ def _load_kind(truth: dict) -> str:
 
 
 def _twin_diagnosis(data) -> dict:
-    """Diagnosis of a clean twin: its causes and base structure ratio (an error counts as an answer)."""
+    """Diagnosis of a clean twin: its causes, base structure ratio and candidate scores (an error counts as an
+    answer)."""
     try:
         res = diagnose(data)
     except Exception as err:          # noqa: BLE001 - reported as the twin's answer
-        return {"twin_cause": f"error: {type(err).__name__}", "twin_causes": ["error"], "twin_structure": float("nan")}
+        return {"twin_cause": f"error: {type(err).__name__}", "twin_causes": ["error"], "twin_structure": float("nan"),
+                "twin_scores": {}}
     return {"twin_cause": res["cause"], "twin_causes": res["causes"],
-            "twin_structure": max(res["structure"]["base"].values())}
+            "twin_structure": max(res["structure"]["base"].values()),
+            "twin_scores": {k: round(v["score"], 3) for k, v in res["candidates"].items()}}
 
 
 def one(case: tuple) -> dict:
@@ -273,6 +276,10 @@ def table(rows: list[dict], title: str) -> None:
         print(f"clean data: lowest candidate score S {min(best):.3f} (median {np.median(best):.3f}; an extension "
               f"needs S + price < 1); base structure ratio max {max(r['structure'] for r in clean):.2f}, "
               f"median {np.median([r['structure'] for r in clean]):.2f}")
+    twin_best = [min(r["twin_scores"].values()) for r in present if r.get("twin_scores")]
+    if twin_best:
+        print(f"clean twins: lowest candidate score S {min(twin_best):.3f} (median {np.median(twin_best):.3f}, "
+              f"5th percentile {np.percentile(twin_best, 5):.3f})")
     hit = [r["scores"].get(r["effect"]) for r in present if r["scores"].get(r["effect"]) is not None]
     if hit:
         print(f"hidden effects: score S of the right extension, median {np.median(hit):.3f}, "
