@@ -22,8 +22,8 @@ distal part slide back) - and is updated in one of two ways:
   K_k (1 + r_s) with static friction (E4: the tendon is stuck whenever it does not slide).
   h [N] is the noise band of the reading T_in (``band``; 0 on exact data): the rule latches
   extremes, and on a noisy reading it would latch the noise's own (a hold of a few hundred
-  samples reaches about 3 sigma), so the profile moves only for what exceeds h; h is also a dead
-  zone, hence below the noise's extremes (estimator.offline.effects.NOISE_BAND, session 11).
+  samples reaches about 3 sigma), so the profile moves only for what exceeds h; on exact data h
+  is a dead zone (estimator.offline.effects.NOISE_BAND, session 11).
   When the update reaches the distal node the whole tendon slides in that direction s;
 * sliding (s != 0, while the proximal end keeps moving that way faster than V_STOP):
       Y_i = Y_p e^{-s K_k f u_i},  f = 1 + r_s e^{-(t - t_b)/t_slip}
@@ -343,6 +343,11 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
     band : float
         Noise band h [N] >= 0 of the T_in reading in the stuck rule (module docstring); 0: exact T_in.
 
+    Raises
+    ------
+    ValueError
+        ``band`` negative or not finite.
+
     Returns
     -------
     T_out : ndarray, shape (n,)
@@ -350,6 +355,8 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
     E1 : ndarray, shape (n,)
         Elongation per compliance [N]: elongation = (L/EA) E1, zero in the initial state.
     """
+    if not (math.isfinite(band) and band >= 0.0):
+        raise ValueError(f"run_extended: band must be a finite number >= 0 N, got {band!r}")
     T_in = np.ascontiguousarray(T_in, dtype=np.float64)
     T_out = np.empty_like(T_in)
     E1 = np.empty_like(T_in)
@@ -358,5 +365,5 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
     _kernel(T_in, vel, spd, np.ascontiguousarray(time, dtype=np.float64),
             np.ascontiguousarray(u, dtype=np.float64), np.ascontiguousarray(w, dtype=np.float64), float(K),
             float(a), float(T0), float(K_rate), float(c_v), float(r_s), float(t_slip), float(T_min),
-            float(sigma), float(beta), float(Tc), float(v_st), float(T0_out), max(float(band), 0.0), T_out, E1)
+            float(sigma), float(beta), float(Tc), float(v_st), float(T0_out), float(band), T_out, E1)
     return T_out, E1

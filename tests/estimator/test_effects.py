@@ -114,6 +114,8 @@ def test_noise_band_keeps_the_memory_from_latching_the_noise_extremes():
     # and on exact data the band is a dead zone: the hold sits h e^-K below the exact memory
     exact = run_extended(true, np.zeros_like(true), t, u, w, K=K, band=NOISE_BAND * sigma)[0]
     np.testing.assert_allclose(exact[hold], ref[hold] - NOISE_BAND * scale, rtol=1e-9)
+    with pytest.raises(ValueError, match="band"):
+        run_extended(true, np.zeros_like(true), t, u, w, K=K, band=-0.01)
 
 
 @pytest.mark.parametrize("eid", IDS)
