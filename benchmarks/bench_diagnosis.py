@@ -21,8 +21,9 @@ final set of session 5's second pass, run once with commit 7a1c12d, seen since) 
 900000: the final set of session 8, run once with commit 39a70af, seen since) and ``dev11`` (offsets +
 1000000: the final set of session 9, run once with the code of commit c317239, seen since) and ``dev12``
 (offsets + 1100000: the final set of session 10, run once with the code of commit 81fdbff, seen since) are
-development data. ``final`` (offsets + 1200000) is the final set of session 11, fixed here before any run
-of it; it is run once, with the code frozen and committed, and becomes development data after that run.
+development data. ``final`` (offsets + 1200000) is the final set of session 11, fixed before any run of it
+(946828d) and run once with the code of commit 98d1964; it is development data since, and the next
+session moves it to ``dev13`` and fixes a new final range before any change.
 Seed layout (session 4): every hidden-effect recording has its own seed, so its own simulated rig
 (route, K, EA, load, rate, noise): effect k of EFFECT_IDS, level j, repeat s uses
 base + 100 + 1000 k + 10 j + s (before session 4 every effect of a set shared the four rigs of
