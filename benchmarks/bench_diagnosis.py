@@ -117,6 +117,11 @@ def _load_kind(truth: dict) -> str:
     return str(load.get("kind", "?")) if isinstance(load, dict) else "rig"
 
 
+def _scores(res: dict) -> dict[str, float]:
+    """Validation score S of every candidate of a diagnosis, rounded for the JSON."""
+    return {k: round(v["score"], 3) for k, v in res["candidates"].items()}
+
+
 def _twin_diagnosis(data) -> dict:
     """Diagnosis of a clean twin: its causes, base structure ratio and candidate scores (an error counts as an
     answer)."""
@@ -127,7 +132,7 @@ def _twin_diagnosis(data) -> dict:
                 "twin_scores": {}}
     return {"twin_cause": res["cause"], "twin_causes": res["causes"],
             "twin_structure": max(res["structure"]["base"].values()),
-            "twin_scores": {k: round(v["score"], 3) for k, v in res["candidates"].items()}}
+            "twin_scores": _scores(res)}
 
 
 def one(case: tuple) -> dict:
@@ -154,7 +159,7 @@ def one(case: tuple) -> dict:
             "causes": res["causes"], "equivalent": res["equivalent"], "gain": res["gain"],
             "seconds": time.perf_counter() - t0, "n": len(rec.data), "truth": rec.truth["parameters"],
             "fitted": {k: v["value"] for k, v in res["parameters"].items() if v["effect"] != "base"},
-            "scores": {k: round(v["score"], 3) for k, v in res["candidates"].items()},
+            "scores": _scores(res),
             "structure": max(res["structure"]["base"].values()),
             "structure_ext": max(res["structure"]["extended"].values()),
             "footprint": fp, **extra,
