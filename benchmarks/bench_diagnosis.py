@@ -20,10 +20,11 @@ final set of session 5's second pass, run once with commit 7a1c12d, seen since) 
 + 800000: the final set of session 7, run once with commit 1c2dbc3, seen since) and ``dev10`` (offsets +
 900000: the final set of session 8, run once with commit 39a70af, seen since) and ``dev11`` (offsets +
 1000000: the final set of session 9, run once with the code of commit c317239, seen since) and ``dev12``
-(offsets + 1100000: the final set of session 10, run once with the code of commit 81fdbff, seen since) are
-development data. ``final`` (offsets + 1200000) is the final set of session 11, fixed before any run of it
-(946828d) and run once with the code of commit 98d1964; it is development data since, and the next
-session moves it to ``dev13`` and fixes a new final range before any change.
+(offsets + 1100000: the final set of session 10, run once with the code of commit 81fdbff, seen since) and
+``dev13`` (offsets + 1200000: the final set of session 11, run once with the code of commit 98d1964, seen
+since) are development data. ``final`` (offsets + 1300000) is the final set of session 12, fixed before any
+change of that session and run once at its end with the code frozen; the session after moves it to
+``dev14`` and fixes a new final range before any change.
 Seed layout (session 4): every hidden-effect recording has its own seed, so its own simulated rig
 (route, K, EA, load, rate, noise): effect k of EFFECT_IDS, level j, repeat s uses
 base + 100 + 1000 k + 10 j + s (before session 4 every effect of a set shared the four rigs of
@@ -33,7 +34,7 @@ Prints per effect and per channel: accuracy (strict, and up to the inseparable p
 estimator.offline.effects.EQUIVALENT), gains, false alarms on clean data; never fails on the figures (the
 pass/fail checks are in tests/estimator/test_diagnosis.py).
 
-    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|dev3|dev4|dev5|dev6|dev7|dev8|dev9|dev10|dev11|dev12|final] [--seeds 2]
+    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|dev3|dev4|dev5|dev6|dev7|dev8|dev9|dev10|dev11|dev12|dev13|final] [--seeds 2]
         [--levels 0.2,0.8] [--clean 12] [--duration 90] [--rate 1000] [--jobs 2] [--json OUT] [--speed-only] [--twins]
         [--shared-rigs]
 """
@@ -59,8 +60,8 @@ from estimator.offline.effects import EFFECT_IDS, EQUIVALENT, NONE  # noqa: E402
 
 SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "dev4": 300000, "dev5": 400000, "dev6": 500000,
              "dev7": 600000, "dev8": 700000, "dev9": 800000,
-             "dev10": 900000, "dev11": 1000000, "dev12": 1100000,
-             "final": 1200000}   # session 11's final set, unused before its one run (docstring)
+             "dev10": 900000, "dev11": 1000000, "dev12": 1100000, "dev13": 1200000,
+             "final": 1300000}   # session 12's final set, unused before its one run (docstring)
 UNCATALOGUED = "load_cell_wander"
 
 
