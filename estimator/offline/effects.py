@@ -11,6 +11,7 @@ summary (literature.md); the causes and signatures are summarised in docs/diagno
 """
 from __future__ import annotations
 
+import math
 from typing import Iterable, Sequence
 
 import numpy as np
@@ -45,7 +46,7 @@ PRESLIDING_MIN = 20e-6
 #: alarm, 2 sigma 304 and 2, none 303 and 2; the rig's dev figures are the same for all three.
 NOISE_BAND = 3.0
 
-__all__ = ["Parameter", "slack_hold", "SLACK_SIGMAS", "SLACK_TAUT", "SLACK_WINDOW", "SLACK_MEAN", "Effect", "VelocityFriction", "Pretension", "CurvatureDrift", "TendonStiffening", "Stiction",
+__all__ = ["Parameter", "slack_hold", "SLACK_SIGMAS", "SLACK_TAUT", "SLACK_WINDOW", "SLACK_MEAN", "SLACK_HELD", "Effect", "VelocityFriction", "Pretension", "CurvatureDrift", "TendonStiffening", "Stiction",
            "FrictionOffset", "Presliding", "DistalBacklash", "SensorEffect", "Series", "Prediction", "CATALOGUE",
            "EFFECT_IDS", "ALIASES", "EQUIVALENT", "NONE", "UNKNOWN", "effect", "predict", "neutral_values",
            "route_shape", "ROUTE", "ROUTE_FINE", "ROUTE_KEYS", "finer_route", "K_MAX", "RigSwitch", "ScenarioKnob", "Setting", "register", "unregister",
@@ -480,6 +481,13 @@ SLACK_TAUT = 2.0
 #: mean, about 3e-7 per sample; at 0.5, 2.5 sigma, lumped dev9 805110 was unheld again within its 40 s of slack)
 SLACK_WINDOW = 6
 SLACK_MEAN = 1.0
+#: ... and a tendon is taut wherever the means of T_in over the SLACK_HELD samples before and after (both, so
+#: a drop to zero is slack at once) are above SLACK_SIGMAS x their own noise, sqrt(3 / (SLACK_HELD + 2)) of the
+#: threshold's sigma (the 3-sample mean of `prepare`), 1.1 sigma at 20 samples (0.1 s at the prepared 200 Hz).
+#: A taut tendon released against a weak load carries T_in = T_out e^-K, which sits below 3 sigma: lumped dev13
+#: 1208111 and 1213100 (a 117-125 N/m joint, K 1.4-1.5, T_in at 1-3 sigma on release) were held slack, x_out
+#: predicted 1-2 mm off on every release, base structure 19-24 and both clean twins false alarms (session 12)
+SLACK_HELD = 20
 
 
 def slack_hold(T_in: np.ndarray, threshold: float, x_in: np.ndarray | None = None) -> np.ndarray:
@@ -494,14 +502,23 @@ def slack_hold(T_in: np.ndarray, threshold: float, x_in: np.ndarray | None = Non
     ``threshold`` (a tension above zero: a taut tendon at low tension whose noise dips below the threshold, as
     a spring load near its rest on release), or when T_in >= SLACK_TAUT x ``threshold`` anywhere. A single noise sample above ``threshold`` in a long slack phase otherwise ended
     the hold and put x_out back on x_in (lumped dev9 805110: a 3.4 sigma blip after 0.7 s of slack, x_out
-    predicted 3 mm off for the rest of the hold, and every friction-offset fit judged on that)."""
+    predicted 3 mm off for the rest of the hold, and every friction-offset fit judged on that). With x_in a
+    sample is also taut, whatever T_in's own value, where the means of T_in over the SLACK_HELD samples before
+    it and after it both exceed ``threshold`` sqrt(3 / (SLACK_HELD + 2)) (session 12: a tendon released against a
+    weak load at T_out e^-K, under the threshold but held above zero)."""
     idx = np.arange(T_in.shape[0])
     if threshold <= 0.0:
         return idx
     if x_in is None:
         return np.maximum.accumulate(np.where(T_in >= threshold, idx, 0))
-    return slack_index(np.ascontiguousarray(T_in, dtype=np.float64), np.ascontiguousarray(x_in, dtype=np.float64),
-                       float(threshold), float(SLACK_TAUT * threshold), SLACK_WINDOW, float(SLACK_MEAN * threshold))
+    T = np.ascontiguousarray(T_in, dtype=np.float64)
+    c = np.concatenate(([0.0], np.cumsum(T)))
+    i = np.arange(T.shape[0])
+    lo_i, hi_i = np.maximum(i + 1 - SLACK_HELD, 0), np.minimum(i + SLACK_HELD, T.shape[0])
+    held = np.minimum((c[i + 1] - c[lo_i]) / (i + 1 - lo_i), (c[hi_i] - c[i]) / (hi_i - i))
+    return slack_index(T, np.ascontiguousarray(x_in, dtype=np.float64), float(threshold),
+                       float(SLACK_TAUT * threshold), SLACK_WINDOW, float(SLACK_MEAN * threshold), held,
+                       float(threshold * math.sqrt(3.0 / (SLACK_HELD + 2))))
 
 
 def below_resolution(effects: Iterable[Effect], values: dict[str, float]) -> bool:

@@ -16,6 +16,7 @@ from estimator.offline.effects import (
     NOISE_BAND,
     PRESLIDING_MIN,
     ROUTE_FINE,
+    SLACK_HELD,
     SLACK_SIGMAS,
     SLACK_TAUT,
     SLACK_WINDOW,
@@ -371,6 +372,25 @@ def test_a_noise_sample_does_not_end_a_slack_phase_a_held_tension_does():
     back = np.concatenate((T, np.full(50, 0.5 * thr), np.full(10, 1.2 * thr)))
     xb = np.concatenate((x, np.linspace(0.0, 2.5e-3, 50), np.full(10, 2.5e-3)))   # proximal end back past 2 mm
     assert slack_hold(back, thr, xb)[550] == 550
+
+
+def test_a_tendon_released_against_a_weak_load_stays_taut_under_the_threshold():
+    # lumped dev13 1213100 (session 12): a 125 N/m joint released at K 1.4 pulls the tendon back at
+    # T_in = T_out e^-K, 1-3 sigma of the reading; every sample under the 3 sigma threshold held the tendon
+    # slack and x_out 1-2 mm off. Held above zero on both sides, it is taut; a drop to zero is slack at once
+    rng = np.random.default_rng(3)
+    thr = 0.03                                                               # SLACK_SIGMAS sigma
+    sigma = thr / SLACK_SIGMAS
+    low = 0.8 * thr + sigma * rng.standard_normal(300)                       # taut, mostly below thr
+    assert np.mean(low < thr) > 0.6
+    T = np.concatenate((np.full(100, 1.0), low, sigma * rng.standard_normal(300)))
+    x = np.concatenate((np.full(100, 3e-3), np.linspace(3e-3, 1e-3, 300), np.linspace(1e-3, 0.0, 300)))
+    idx = slack_hold(T, thr, x)
+    k = np.arange(100, 400 - SLACK_HELD)
+    np.testing.assert_array_equal(idx[k], k)                                 # taut through the release
+    assert 400 - SLACK_HELD <= idx[400] < 400 and np.all(idx[400:] == idx[400])   # slack from the drop on
+    old = np.flatnonzero(low < thr)[0] + 100                                 # by the sample alone: slack at the
+    assert slack_hold(T, thr)[old] < old                                     # first dip
 
 
 def test_compliance_is_fitted_by_linear_least_squares():
