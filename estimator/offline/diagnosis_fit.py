@@ -233,6 +233,9 @@ def start_points(effects: list[Effect], base: dict[str, float], s: Series, fixed
                 grids.append([(p.name, fixed[p.name])])
             elif p.name == "T0":       # the tension read at rest before the first move
                 grids.append([(p.name, max(float(np.median(s.T_in[: max(3, len(s) // 200)])), 0.1))])
+            elif p.name == "b_T_in":   # ... also the offset of a slack tendon's reading, when beyond the starts
+                rest = float(np.median(s.T_in[: max(3, len(s) // 200)]))
+                grids.append([(p.name, v) for v in (*p.starts, *((rest,) if abs(rest) > max(p.starts) else ()))])
             else:
                 grids.append([(p.name, v) for v in (p.starts or (p.neutral,))])
     # a base model driven to K = 0 by what it lacks (lumped dev11 1001112: a 4.2 N pretension) sits where the

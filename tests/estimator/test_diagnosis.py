@@ -332,6 +332,22 @@ def test_an_extension_also_starts_from_a_typical_K_when_the_base_collapsed_to_ze
     assert [p["K"] for p in start_points([pre], {"K": 0.9}, s, {})] == [0.9]
 
 
+def test_a_proximal_offset_also_starts_from_the_rest_reading(clean_result):
+    # lumped dev13 1208111 (session 12): a -0.84 N T_in offset on a joint load fitted from the +-0.5 N starts
+    # stopped at -0.52 N (S 0.87: the slack rule on the half-corrected reading held x_out 2-3 mm off) and an
+    # x_in lag was named first; the reading at rest before the first move (a slack tendon) is the offset
+    s = prepare(clean_result[0].data)
+    off = CATALOGUE["sensor_offset:T_in"]
+    assert [p["b_T_in"] for p in start_points([off], {"K": 0.9}, s, {})] == [-0.5, 0.5]
+    shifted = replace(s, T_in=s.T_in - 0.84)
+    starts = [p["b_T_in"] for p in start_points([off], {"K": 0.9}, shifted, {})]
+    assert starts[:2] == [-0.5, 0.5] and len(starts) == 3 and abs(starts[2] + 0.84) < 0.05
+    rec = lumped_scenarios.record("sensor_offset:T_in", seed=1208111, level=0.8, duration=60.0)
+    res = diagnose(rec.data, effects=("sensor_offset:T_in", "sensor_lag:x_in"))
+    b = res["candidates"]["sensor_offset:T_in"]["parameters"]["b_T_in"]["value"]
+    assert res["causes"] == ["sensor_offset:T_in"] and b == pytest.approx(-0.84, rel=0.05), res["causes"]
+
+
 def test_lumped_friction_offset_holding_a_slack_tendon_is_named():
     # a 1.1 N friction offset holds a 1.3 N constant-force load while the proximal end pays out 3 mm at zero
     # tension: the distal end stays. One noise sample of T_in above the slack threshold ended the hold and put
