@@ -226,15 +226,15 @@ def start_points(effects: list[Effect], base: dict[str, float], s: Series, fixed
     """Starting points: the fitted values so far, and the product of each new parameter's starts
     (the effects' held settings, e.g. the pre-sliding form, taken from ``fixed``)."""
     held = {k: fixed[k] for k in settings_keys(effects) if k in fixed}
+    rest = float(np.median(s.T_in[: max(3, len(s) // 200)]))      # T_in read at rest before the first move
     grids = []
     for e in effects:
         for p in e.parameters:
             if p.name in fixed:
                 grids.append([(p.name, fixed[p.name])])
-            elif p.name == "T0":       # the tension read at rest before the first move
-                grids.append([(p.name, max(float(np.median(s.T_in[: max(3, len(s) // 200)])), 0.1))])
+            elif p.name == "T0":       # the pretension: the rest reading
+                grids.append([(p.name, max(rest, 0.1))])
             elif p.name == "b_T_in":   # ... also the offset of a slack tendon's reading, when beyond the starts
-                rest = float(np.median(s.T_in[: max(3, len(s) // 200)]))
                 grids.append([(p.name, v) for v in (*p.starts, *((rest,) if abs(rest) > max(p.starts) else ()))])
             else:
                 grids.append([(p.name, v) for v in (p.starts or (p.neutral,))])
