@@ -348,6 +348,19 @@ def test_a_proximal_offset_also_starts_from_the_rest_reading(clean_result):
     assert res["causes"] == ["sensor_offset:T_in"] and b == pytest.approx(-0.84, rel=0.05), res["causes"]
 
 
+def test_a_route_bent_by_a_pretension_is_refitted_when_no_polished_extension_explains_the_structure():
+    # lumped dev14 1301102 (session 13): a 1.8 N pretension on a constant-force load bent the base route to
+    # r_2 = 0; on that route the pretension scored 1.09 and was not among the best three refitted with the
+    # route free, so an x_in offset (S 0.10, structure left on T_out) was named with "unknown". When none of the
+    # refitted ones brings the structure under the threshold, every candidate gets its route refit.
+    rec = lumped_scenarios.record("pretension", seed=1301102, level=0.2, duration=60.0)
+    res = diagnose(rec.data, effects=("sensor_offset:x_in", "distal_backlash", "sensor_drift:T_in",
+                                      "velocity_friction", "pretension"))
+    assert res["causes"] == ["pretension"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
+    assert res["parameters"]["T0"]["value"] == pytest.approx(1.8, rel=0.05)
+    assert res["candidates"]["pretension"]["score"] < 0.05
+
+
 def test_lumped_friction_offset_holding_a_slack_tendon_is_named():
     # a 1.1 N friction offset holds a 1.3 N constant-force load while the proximal end pays out 3 mm at zero
     # tension: the distal end stays. One noise sample of T_in above the slack threshold ended the hold and put
