@@ -232,9 +232,9 @@ def start_points(effects: list[Effect], base: dict[str, float], s: Series, fixed
         for p in e.parameters:
             if p.name in fixed:
                 grids.append([(p.name, fixed[p.name])])
-            elif p.name == "T0":       # the pretension: the rest reading
+            elif p.rest == "replace":      # from the rest reading only (Parameter.rest)
                 grids.append([(p.name, max(rest, 0.1))])
-            elif p.name == "b_T_in":   # ... also the offset of a slack tendon's reading, when beyond the starts
+            elif p.rest == "extend":       # ... or also, when it lies beyond the starts
                 grids.append([(p.name, v) for v in (*p.starts, *((rest,) if abs(rest) > max(p.starts) else ()))])
             else:
                 grids.append([(p.name, v) for v in (p.starts or (p.neutral,))])

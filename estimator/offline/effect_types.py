@@ -16,7 +16,11 @@ K_MAX = 5.0            # upper bound of the friction exponent in fits [-]
 @dataclass(frozen=True)
 class Parameter:
     """One fitted parameter: name (paper symbol where there is one), SI unit, bounds, neutral value
-    (the base model), typical starting values for the fit, and what it means."""
+    (the base model), typical starting values for the fit, and what it means.
+
+    ``rest`` says whether the fit also starts from T_in read at rest before the first move [N]:
+    "" no; "replace": only from that reading (at least 0.1; the pretension); "extend": the starts plus
+    that reading when it lies beyond them (the offset of a slack tendon's reading)."""
 
     name: str
     unit: str
@@ -25,6 +29,7 @@ class Parameter:
     neutral: float
     starts: tuple[float, ...]
     meaning: str
+    rest: str = ""
 
 
 @dataclass(frozen=True, eq=False)

@@ -131,7 +131,8 @@ class Pretension(Effect):
     extension = ("initial profile at T0 (not 0), capped at the distal end by the friction band above the rest "
                  "reading of T_out (a load that held less slid back); elongation counted from that profile")
     literature = "E5"
-    parameters = (Parameter("T0", "N", 0.0, 50.0, 0.0, (), "uniform tension along the tendon at the start"),)
+    parameters = (Parameter("T0", "N", 0.0, 50.0, 0.0, (), "uniform tension along the tendon at the start",
+                            rest="replace"),)
     primary = "x_out"
     knobs = {"T0": "T0"}
     switch = RigSwitch("pretension", "the tendon carries tension at rest (assembly preload)", (Setting(
@@ -248,7 +249,9 @@ class SensorEffect(Effect):
         self.extension = (f"{'input correction of' if channel.endswith('_in') else 'reading model of'} {channel}: "
                           f"{meaning}")
         self.pname = f"{prefix}_{channel}"
-        self.parameters = (Parameter(self.pname, unit, lo, hi, 0.0, starts, f"{channel} {meaning}"),)
+        # a slack tendon reads its offset at rest: the T_in offset also starts from that reading
+        self.parameters = (Parameter(self.pname, unit, lo, hi, 0.0, starts, f"{channel} {meaning}",
+                                     rest="extend" if (kind, channel) == ("offset", "T_in") else ""),)
         self.primary = "x_out" if channel[0] == "x" else "T_out"
         self.requires = ("x_out",) if channel[0] == "x" else ("T_out",) if channel == "T_out" else ()
         self.switch, self.knob = sw.SENSOR_SWITCHES.get((kind, channel)), sw.SENSOR_KNOBS[(kind, channel[0])]
