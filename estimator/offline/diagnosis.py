@@ -41,7 +41,7 @@ from typing import Callable
 
 import numpy as np
 
-from estimator.offline.diagnosis_fit import (SIGNALS, Progress, channel_choice, distal_end_held, fit_model, look_alike, toe_or_play, noise_level,
+from estimator.offline.diagnosis_fit import (NEAR_HELD_SHARE, SIGNALS, Progress, channel_choice, distal_end_held, fit_model, look_alike, toe_or_play, noise_level,
                                              predictions, prepare, quantum, raw_rmse, sample_block, settings_keys, split_at_rest,
                                              start_points, trimmed_ms, paired_trimmed_ms)
 from estimator.offline.effects import (CATALOGUE, EQUIVALENT, NOISE_BAND, NONE, ROUTE, ROUTE_FINE, ROUTE_KEYS, UNKNOWN, Effect, below_resolution,
@@ -351,10 +351,10 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
             trial = {}
             for eid in sorted(pool, key=lambda k: pool[k].S)[:SECOND_ROUND]:
                 fx = chosen.effects + [CATALOGUE[eid]]
-                held = {k: v for k, v in pool[eid].values[0].items() if k in settings_keys([CATALOGUE[eid]])}
-                v0 = {**chosen.values[0], **held}
+                kept = {k: v for k, v in pool[eid].values[0].items() if k in settings_keys([CATALOGUE[eid]])}
+                v0 = {**chosen.values[0], **kept}
                 trial[eid] = _Fit(fx, folds, start_points(fx, v0, s, v0),
-                                  fixed=[{**{k: v[k] for k in ROUTE_KEYS if k in v}, **held} for v in chosen.values],
+                                  fixed=[{**{k: v[k] for k in ROUTE_KEYS if k in v}, **kept} for v in chosen.values],
                                   base=base, floor=floor,
                                   need=chosen.S * (1.0 - PENALTY * len(CATALOGUE[eid].parameters)))
                 bar(f"{'+'.join(chosen.ids)}+{eid}")
@@ -428,7 +428,7 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     n = len(data)
     i_t = int(np.searchsorted(data.time, t_split))
     model_values = {**final[0]}
-    return {
+    result = {
         "cause": cause, "causes": causes, "equivalent": equivalent, "base": base_raw, "extended": ext_raw,
         "gain": (_gain(ext_raw, base_raw, prim) or 0.0) if chosen.effects else 0.0, "primary_signal": prim,
         "parameters": _parameters(chosen.effects, final[0], final[1], rename), "candidates": candidates,
@@ -458,3 +458,15 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
                      "wrap_shape": None if wrap_shape is None else [float(v) for v in wrap_shape]},
         "elapsed_s": _time.perf_counter() - t_start,
     }
+    # an x_out that barely moves (a distal end pressed on a stop) and leaves structure no effect explains is set
+    # aside when the diagnosis without it leaves none (diagnosis_fit.NEAR_HELD_SHARE)
+    pressed = (distal_end_held(data, NEAR_HELD_SHARE)
+               if held is None and data.T_out is not None and UNKNOWN in causes else None)
+    if pressed is not None:
+        alt = diagnose(replace(data, x_out=None), train_fraction=train_fraction, progress=False, effects=effects,
+                       max_effects=max_effects, n_nodes=n_nodes, target_rate=target_rate, wrap_shape=wrap_shape)
+        if UNKNOWN not in alt["causes"]:
+            alt["settings"]["distal_end_held"] = {**pressed, "pressed": True}
+            alt["elapsed_s"] = _time.perf_counter() - t_start
+            return alt
+    return result

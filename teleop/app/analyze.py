@@ -190,6 +190,10 @@ def format_diagnosis(result: dict) -> str:
                      for k, p in result["parameters"].items())
     held = result.get("settings", {}).get("distal_end_held")
     note = [] if not held else [
+        f"x_out set aside: it moves {1e6 * held['range_m']:.3g} um, {100 * held['range_m'] / held['travel_m']:.2g} % of "
+        f"x_in's {1e3 * held['travel_m']:.3g} mm travel - the distal end pressed on a stop, whose deflection the base "
+        "model reads as elongation: with x_out structure was left that no effect explains, without it none"
+        if held.get("pressed") else
         f"x_out set aside: it stays within {1e6 * held['range_m']:.3g} um over the recording (resolution "
         f"{1e6 * held['step_m']:.3g} um, x_in travel {1e3 * held['travel_m']:.3g} mm) - the distal end was held "
         "(a stop, or a load the tension never moved), so x_out shows nothing of the tendon"]
