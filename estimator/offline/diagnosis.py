@@ -200,7 +200,9 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         time [s], x_in [m], T_in [N] and at least one of T_out [N], x_out [m]; positions zeroed at a
         rest of the unloaded tendon (or at the preloaded rest: that is the pretension effect). An x_out
         that never moves (:func:`estimator.offline.diagnosis_fit.distal_end_held`: the distal end held by a
-        stop or a load never lifted) is set aside when T_out is recorded: ``settings.distal_end_held``.
+        stop or a load never lifted) is set aside when T_out is recorded: ``settings.distal_end_held``; one
+        that barely moves (NEAR_HELD_SHARE of x_in's travel: pressed on a stop) is set aside when the diagnosis
+        with it leaves "unknown" and the one without it does not (``distal_end_held.pressed`` True).
     train_fraction : float in [0.3, 0.9]
         Nominal share of the duration used for training (fit + validation); the split moves to a
         rest within 8 %. The test block after it is used once, for the reported errors and gain.

@@ -66,10 +66,7 @@ def quantum(a: np.ndarray) -> float:
 #: 0.5-99.5 % range is within HELD_STEPS resolution steps (quantum or noise) or HELD_SHARE of x_in's travel
 #: (session 10: the clean twin of lumped dev11 1019112, a preloaded spring that T_out never lifted off its
 #: stop, x_out within one 1.2 um quantum, 0.3 % of x_in's travel; among the other 183 clean dev11 rigs the
-#: least-moving x_out spans 173 quanta, 19 % of x_in's travel). Session 13: a distal end pressed on a stop
-#: moves by the stop's deflection and the tendon's pre-sliding, which the base model reads as elongation
-#: (lumped dev14 1301113, a pretension holding a joint on its stop: 1.4 % of the travel, 8 um; 1302101, a
-#: preloaded spring barely lifted: 3.2 %); the next least-moving lumped dev14 x_out spans 28 % of the travel
+#: least-moving x_out spans 173 quanta, 19 % of x_in's travel)
 HELD_STEPS = 4.0
 HELD_SHARE = 0.01
 #: ... and barely moves below NEAR_HELD_SHARE of x_in's travel: a distal end pressed on a stop moves by the stop's
@@ -77,7 +74,8 @@ HELD_SHARE = 0.01
 #: when the diagnosis with it leaves structure no effect explains and the one without it does not (session 13:
 #: lumped dev14 1301113, a pretension holding a joint on its stop, x_out 1.4 % of the travel, distal backlash +
 #: pretension + unknown -> pretension; 1302101, a preloaded spring barely lifted, 3.2 %, unknown -> curvature
-#: drift; lumped dev10 901102, a pretension on a joint at 6.3 %, is named with x_out and keeps it)
+#: drift; lumped dev10 901102, a pretension on a joint at 6.3 %, is named with x_out and keeps it; in lumped dev10,
+#: dev11, dev13, dev14 no other x_out moves between 1 % and 19 % of the travel, in rig dev14 none below 45 %)
 NEAR_HELD_SHARE = 0.1
 
 
