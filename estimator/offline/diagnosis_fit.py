@@ -74,8 +74,9 @@ HELD_SHARE = 0.01
 #: when the diagnosis with it leaves structure no effect explains and the one without it does not (session 13:
 #: lumped dev14 1301113, a pretension holding a joint on its stop, x_out 1.4 % of the travel, distal backlash +
 #: pretension + unknown -> pretension; 1302101, a preloaded spring barely lifted, 3.2 %, unknown -> curvature
-#: drift; lumped dev10 901102, a pretension on a joint at 6.3 %, is named with x_out and keeps it; in lumped dev10,
-#: dev11, dev13, dev14 no other x_out moves between 1 % and 19 % of the travel, in rig dev14 none below 45 %)
+#: drift; lumped dev10 901102, a pretension on a joint at 6.3 %, and dev11 1001112, one at 1.0 %, are named with
+#: x_out and keep it; in lumped dev10, dev11, dev13, dev14 no other x_out moves between 1 % and 19 % of the
+#: travel, in rig dev14 none below 45 %)
 NEAR_HELD_SHARE = 0.1
 
 
