@@ -24,7 +24,8 @@ final set of session 5's second pass, run once with commit 7a1c12d, seen since) 
 ``dev13`` (offsets + 1200000: the final set of session 11, run once with the code of commit 98d1964, seen
 since) and ``dev14`` (offsets + 1300000: the final set of session 12, run once with the code of commit
 7588c4f, seen since) are development data. ``final`` (offsets + 1400000) is the final set of session 13,
-fixed before any change of that session and run once with the code frozen at its end.
+fixed before any change of that session (7939f06) and run once with the code of commit 1a42dcb; it is
+development data since, and the next session moves it to ``dev15`` and fixes a new final range before any change.
 Seed layout (session 4): every hidden-effect recording has its own seed, so its own simulated rig
 (route, K, EA, load, rate, noise): effect k of EFFECT_IDS, level j, repeat s uses
 base + 100 + 1000 k + 10 j + s (before session 4 every effect of a set shared the four rigs of
@@ -62,7 +63,7 @@ SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "dev4": 300000, "dev5": 4
              "dev7": 600000, "dev8": 700000, "dev9": 800000,
              "dev10": 900000, "dev11": 1000000, "dev12": 1100000, "dev13": 1200000,
              "dev14": 1300000,
-             "final": 1400000}   # session 13's final set, fixed before any change (docstring)
+             "final": 1400000}   # session 13's final set, run once at 1a42dcb, seen since (docstring)
 UNCATALOGUED = "load_cell_wander"
 
 
