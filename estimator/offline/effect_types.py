@@ -3,6 +3,7 @@ recording prepared for fitting, a model prediction, and the diagnosis's verdict 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -29,7 +30,7 @@ class Parameter:
     neutral: float
     starts: tuple[float, ...]
     meaning: str
-    rest: str = ""
+    rest: Literal["", "replace", "extend"] = ""
 
 
 @dataclass(frozen=True, eq=False)
