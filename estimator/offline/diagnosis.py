@@ -42,7 +42,7 @@ from typing import Callable
 import numpy as np
 
 from estimator.offline.diagnosis_fit import (NEAR_HELD_SHARE, SIGNALS, Progress, channel_choice, distal_end_held, fit_model, look_alike, toe_or_play, noise_level,
-                                             predictions, prepare, quantum, raw_rmse, sample_block, settings_keys, split_at_rest,
+                                             predictions, prepare, quantum, raw_rmse, rest_start, rest_window, sample_block, settings_keys, split_at_rest,
                                              start_points, trimmed_ms, paired_trimmed_ms)
 from estimator.offline.effects import (CATALOGUE, EQUIVALENT, NOISE_BAND, NONE, ROUTE, ROUTE_FINE, ROUTE_KEYS, UNKNOWN, Effect, below_resolution,
                                        effect, finer_route, predict)
@@ -316,9 +316,18 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         # r_1 = 0.003: from it S 0.37, from the uniform route 0.15 with c_v 25.6, true 25.6)
         uniform = {p.name: p.neutral for p in (ROUTE_FINE if route == "fine" else ROUTE)}
 
+        at_rest = rest_window(s)
+
         def refit(eid: str) -> None:
-            f = _Fit([CATALOGUE[eid]], folds, [singles[eid].values[0], {**singles[eid].values[0], **uniform}],
-                     route=route, base=base, floor=floor,
+            fitted = singles[eid].values[0]
+            # ... and from the uniform route with a parameter read at the initial rest (Parameter.rest; session
+            # 14, lumped dev15 1417111: an 84 um x_out offset bent the base route to r_1, r_2 < 0.01, its fit
+            # there stopped at 37 um, and from either start with the route free the fit did not move, S 0.34;
+            # from the reading of 84 um on the uniform route S 0.11)
+            read = {p.name: max(r, 0.1) if p.rest == "replace" else r for p in CATALOGUE[eid].parameters
+                    if p.rest and math.isfinite(r := rest_start(p.name, s, at_rest))}
+            starts = [fitted, {**fitted, **uniform}] + ([{**fitted, **uniform, **read}] if read else [])
+            f = _Fit([CATALOGUE[eid]], folds, starts, route=route, base=base, floor=floor,
                      need=1.0 - PENALTY * singles[eid].n_params)
             if f.S < singles[eid].S:
                 singles[eid] = f

@@ -28,7 +28,7 @@ from estimator.sheath import SheathModel
 from estimator.data import MeasuredData
 from estimator.errors import DataError
 
-__all__ = ["Progress", "trimmed_ms", "paired_trimmed_ms", "sample_block", "rest_reading", "prepare", "split_at_rest", "fit_model", "start_points", "heldout_mse", "raw_rmse", "noise_level",
+__all__ = ["Progress", "trimmed_ms", "paired_trimmed_ms", "sample_block", "rest_reading", "prepare", "split_at_rest", "fit_model", "start_points", "rest_window", "rest_start", "heldout_mse", "raw_rmse", "noise_level",
            "quantum", "distal_end_held", "HELD_STEPS", "HELD_SHARE", "NEAR_HELD_SHARE", "SIGNALS", "channel_choice", "look_alike", "toe_or_play", "settings_keys", "predictions"]
 
 _K = Parameter("K", "-", 0.0, K_MAX, 0.5, (), "friction exponent mu * total wrap angle")
@@ -236,15 +236,16 @@ def start_points(effects: list[Effect], base: dict[str, float], s: Series, fixed
     """Starting points: the fitted values so far, and the product of each new parameter's starts
     (the effects' held settings, e.g. the pre-sliding form, taken from ``fixed``)."""
     held = {k: fixed[k] for k in settings_keys(effects) if k in fixed}
-    rest = float(np.median(s.T_in[: max(3, len(s) // 200)]))      # T_in read at rest before the first move
+    first = rest_window(s)
     grids = []
     for e in effects:
         for p in e.parameters:
             if p.name in fixed:
                 grids.append([(p.name, fixed[p.name])])
             elif p.rest == "replace":      # from the rest reading only (Parameter.rest)
-                grids.append([(p.name, max(rest, 0.1))])
+                grids.append([(p.name, max(rest_start(p.name, s, first), 0.1))])
             elif p.rest == "extend":       # ... or also, when it lies beyond the starts
+                rest = rest_start(p.name, s, first)
                 grids.append([(p.name, v) for v in (*p.starts, *((rest,) if abs(rest) > max(p.starts) else ()))])
             else:
                 grids.append([(p.name, v) for v in (p.starts or (p.neutral,))])
@@ -252,6 +253,24 @@ def start_points(effects: list[Effect], base: dict[str, float], s: Series, fixed
     # noise band of the memory rule leaves K without a gradient: the extension also starts from a typical K
     ks = [base["K"]] + ([K_RESTART] if base["K"] < 0.1 * K_RESTART else [])
     return [{"K": k, **held, **dict(combo)} for k in ks for combo in itertools.product(*grids)]
+
+
+def rest_window(s: Series) -> slice:
+    """The first samples of a prepared series, taken as the initial rest before the first move (the first
+    half percent, at least 3; the start values of Parameter.rest)."""
+    return slice(0, max(3, len(s) // 200))
+
+
+def rest_start(name: str, s: Series, first: slice) -> float:
+    """The value parameter ``name`` takes if the samples ``first`` (the initial rest) read it alone: T_in
+    there for a tension (the pretension T0, the T_in offset b_T_in) [N]; x_out - x_in for the x_out offset
+    and x_in - x_out for the x_in offset (no elongation at rest without a pretension) [m]; nan without x_out."""
+    if name in ("b_x_out", "b_x_in"):
+        if s.x_out is None:
+            return float("nan")
+        d = float(np.median(s.x_out[first] - s.x_in[first]))
+        return d if name == "b_x_out" else -d
+    return float(np.median(s.T_in[first]))
 
 
 def heldout_mse(pr, s: Series, k: int) -> dict[str, float]:

@@ -19,9 +19,12 @@ class Parameter:
     """One fitted parameter: name (paper symbol where there is one), SI unit, bounds, neutral value
     (the base model), typical starting values for the fit, and what it means.
 
-    ``rest`` says whether the fit also starts from T_in read at rest before the first move [N]:
-    "" no; "replace": only from that reading (at least 0.1; the pretension); "extend": the starts plus
-    that reading when it lies beyond them (the offset of a slack tendon's reading)."""
+    ``rest`` says whether the fit also starts from the parameter read at rest before the first move
+    (:func:`estimator.offline.diagnosis_fit.rest_start`: T_in for a tension, x_out - x_in for an encoder
+    offset): "" no; "replace": only from that reading (at least 0.1; the pretension); "extend": the starts
+    plus that reading when it lies beyond them (the offset of a slack tendon's reading, an encoder offset).
+    Either way the best few extensions refitted with the route free also start from it on the uniform
+    route (diagnose)."""
 
     name: str
     unit: str

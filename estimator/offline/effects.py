@@ -249,9 +249,10 @@ class SensorEffect(Effect):
         self.extension = (f"{'input correction of' if channel.endswith('_in') else 'reading model of'} {channel}: "
                           f"{meaning}")
         self.pname = f"{prefix}_{channel}"
-        # a slack tendon reads its offset at rest: the T_in offset also starts from that reading
+        # a slack tendon reads its offset at rest: the T_in offset also starts from that reading, and an
+        # encoder offset from x_out - x_in there (diagnosis_fit.rest_start)
         self.parameters = (Parameter(self.pname, unit, lo, hi, 0.0, starts, f"{channel} {meaning}",
-                                     rest="extend" if (kind, channel) == ("offset", "T_in") else ""),)
+                                     rest="extend" if kind == "offset" and channel != "T_out" else ""),)
         self.primary = "x_out" if channel[0] == "x" else "T_out"
         self.requires = ("x_out",) if channel[0] == "x" else ("T_out",) if channel == "T_out" else ()
         self.switch, self.knob = sw.SENSOR_SWITCHES.get((kind, channel)), sw.SENSOR_KNOBS[(kind, channel[0])]
