@@ -131,6 +131,11 @@ def loopback_endpoint(port: int) -> str:
     return f"tcp/127.0.0.1:{int(port)}"
 
 
+#: Session.close waits this long [s] for zenoh's teardown (once in a CI run of session 13 a process stayed
+#: 20-30 s after its SIGINT, its files already closed; not reproduced since), then leaves it to the exit
+CLOSE_TIMEOUT_S = 5.0
+
+
 class Session:
     """One zenoh session; a context manager. Entities declared through it close with it.
 
@@ -212,18 +217,28 @@ class Session:
         return self._track(LivelinessWatcher(self, key, on_change))
 
     def close(self) -> None:
-        """Undeclare every entity, then close the session. Idempotent."""
+        """Undeclare every entity, then close the session; returns within CLOSE_TIMEOUT_S [s] whatever
+        zenoh does (the teardown goes on in a daemon thread and a warning is logged). Idempotent."""
         with self._lock:
             if self._closed:
                 return
             self._closed = True
             entities, self._entities = self._entities, []
-        for ent in reversed(entities):
-            ent.close()
-        try:
-            self._z.close()
-        except zenoh.ZError as e:   # pragma: no cover - zenoh closes cleanly in practice
-            log.warning("closing zenoh session: %s", e)
+        done = threading.Event()
+
+        def teardown() -> None:
+            try:
+                for ent in reversed(entities):
+                    ent.close()
+                self._z.close()
+            except zenoh.ZError as e:   # pragma: no cover - zenoh closes cleanly in practice
+                log.warning("closing zenoh session: %s", e)
+            finally:
+                done.set()
+
+        threading.Thread(target=teardown, name="zenoh-close", daemon=True).start()
+        if not done.wait(CLOSE_TIMEOUT_S):
+            log.warning("the zenoh session did not close within %g s; the process exit ends it", CLOSE_TIMEOUT_S)
 
     def __enter__(self) -> "Session":
         return self

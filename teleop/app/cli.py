@@ -18,7 +18,10 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
+import threading
+from typing import NoReturn
 
 from teleop.app.sides import endpoints, run_master, run_slave
 from teleop.errors import TeleopError
@@ -179,5 +182,23 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
 
+#: after main has returned (its files flushed and closed), the process ends within this many seconds [s] even
+#: if a library's teardown at interpreter exit blocks (a zenoh runtime; see teleop.transport.CLOSE_TIMEOUT_S)
+EXIT_GRACE_S = 10.0
+
+
+def run() -> NoReturn:
+    """The ``teleop`` program (console script and ``python -m teleop.app.cli``): :func:`main`, then exit with
+    its code; a watchdog ends the process with that code EXIT_GRACE_S after main returned if the interpreter's
+    own exit has not (a non-daemon thread or a native runtime that does not stop)."""
+    code = main()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    watchdog = threading.Timer(EXIT_GRACE_S, os._exit, (code,))
+    watchdog.daemon = True
+    watchdog.start()
+    sys.exit(code)
+
+
 if __name__ == "__main__":  # python -m teleop.app.cli
-    sys.exit(main())
+    run()
