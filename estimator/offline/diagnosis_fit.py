@@ -189,8 +189,9 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
     every residual evaluation. ``route``: fit the route shares r_1, r_2 too (estimator.offline.effects.ROUTE), or with
     "fine" the sixths r_1 ... r_5 (estimator.offline.effects.ROUTE_FINE);
     ``fixed``: values held (e.g. the base model's route); ``mask``: the samples of ``train`` whose
-    residuals count (default all; the model always runs from the first sample). Returns (values,
-    compliance [m/N], cost).
+    residuals count (default all; the model always runs from the first sample). A refinement that takes
+    no step at all (K on the edge of a step in the residual) is tried again with K held, then with all
+    free from there (session 14). Returns (values, compliance [m/N], cost).
     """
     m = slice(None) if mask is None else mask
     params = _params(effects, route)
@@ -215,6 +216,19 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
     for z0 in ranked[:max_starts]:
         sol = least_squares(residual, z0, bounds=(lo, hi), diff_step=1e-2, x_scale=1.0, ftol=1e-6, xtol=1e-6,
                             max_nfev=40 * len(params))
+        if np.array_equal(sol.x, z0) and len(params) > 1:
+            # not a single step taken: K sits on the edge of a step in the residual (the memory or slack rule
+            # of some sample flips just below it), every trial step lowers K and fails, and the trust region
+            # shrinks to nothing. The others are refitted with K held, then all from there.
+            def rest_of(y):
+                return residual(np.concatenate([z0[:1], y]))
+            sub = least_squares(rest_of, z0[1:], bounds=(lo[1:], hi[1:]), diff_step=1e-2, x_scale=1.0, ftol=1e-6,
+                                xtol=1e-6, max_nfev=40 * (len(params) - 1))
+            z1 = np.concatenate([z0[:1], sub.x])
+            again = least_squares(residual, z1, bounds=(lo, hi), diff_step=1e-2, x_scale=1.0, ftol=1e-6, xtol=1e-6,
+                                  max_nfev=40 * len(params))
+            if again.cost < sol.cost:
+                sol = again
         if best is None or sol.cost < best.cost:
             best = sol
     assert best is not None         # max_starts >= 1 and at least one start

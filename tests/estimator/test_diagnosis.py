@@ -370,6 +370,17 @@ def test_an_encoder_offset_starts_from_the_rest_reading_and_its_route_refit_too(
     assert res["candidates"]["sensor_offset:x_in"]["score"] < 0.2
 
 
+def test_a_fit_stuck_on_the_edge_of_a_step_in_K_refits_the_rest_with_K_held():
+    # lumped dev15 1407110 (session 14): a 250 um distal backlash on a constant-force load; the base fit left K on
+    # the edge of a step in the residual (0.0001 lower costs +0.22), so every trial step of the route-free refit
+    # failed, least_squares ended where it started (r_1, r_2 bent to 0.01) and "unknown" came first (S 0.16)
+    rec = lumped_scenarios.record("distal_backlash", seed=1407110, level=0.8, duration=60.0)
+    res = diagnose(rec.data, effects=("distal_backlash", "sensor_offset:x_in", "pretension"))
+    assert res["causes"] == ["distal_backlash"], (res["causes"], {k: c["score"] for k, c in res["candidates"].items()})
+    assert res["candidates"]["distal_backlash"]["score"] < 0.05
+    assert res["parameters"]["d_b"]["value"] == pytest.approx(rec.truth["parameters"]["width"], rel=0.25)
+
+
 def test_a_route_bent_by_a_pretension_is_refitted_when_no_polished_extension_explains_the_structure():
     # lumped dev14 1301102 (session 13): a 1.8 N pretension on a constant-force load bent the base route to
     # r_2 = 0; on that route the pretension scored 1.09 and was not among the best three refitted with the
