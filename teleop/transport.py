@@ -225,6 +225,7 @@ class Session:
             self._closed = True
             entities, self._entities = self._entities, []
         done = threading.Event()
+        failed: list[BaseException] = []
 
         def teardown() -> None:
             try:
@@ -233,12 +234,16 @@ class Session:
                 self._z.close()
             except zenoh.ZError as e:   # pragma: no cover - zenoh closes cleanly in practice
                 log.warning("closing zenoh session: %s", e)
+            except BaseException as e:  # noqa: BLE001 - raised again in the caller below
+                failed.append(e)
             finally:
                 done.set()
 
         threading.Thread(target=teardown, name="zenoh-close", daemon=True).start()
         if not done.wait(CLOSE_TIMEOUT_S):
             log.warning("the zenoh session did not close within %g s; the process exit ends it", CLOSE_TIMEOUT_S)
+        elif failed:
+            raise failed[0]
 
     def __enter__(self) -> "Session":
         return self

@@ -249,3 +249,17 @@ def test_close_returns_when_zenoh_teardown_blocks(monkeypatch, caplog):
             break
         threading.Event().wait(0.01)
     assert Blocking.closed == 1
+
+
+def test_close_raises_what_an_entity_close_raised_in_the_teardown():
+    class Broken:
+        def close(self):
+            raise RuntimeError("undeclare failed")
+
+    s = Session(_listener(free_tcp_port()))
+    s._track(Broken())
+    real = s._z
+    with pytest.raises(RuntimeError, match="undeclare failed"):
+        s.close()
+    assert s.closed
+    real.close()
