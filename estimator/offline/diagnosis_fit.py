@@ -191,7 +191,8 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
     ``fixed``: values held (e.g. the base model's route); ``mask``: the samples of ``train`` whose
     residuals count (default all; the model always runs from the first sample). A refinement that takes
     no step at all (K on the edge of a step in the residual) is tried again with K held, then with all
-    free from there (session 14). Returns (values, compliance [m/N], cost).
+    free from there, and that is kept when it costs less with the effects' parameters inside their bounds
+    (session 14). Returns (values, compliance [m/N], cost).
     """
     m = slice(None) if mask is None else mask
     params = _params(effects, route)
@@ -219,7 +220,9 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
         if np.array_equal(sol.x, z0) and len(params) > 1:
             # not a single step taken: K sits on the edge of a step in the residual (the memory or slack rule
             # of some sample flips just below it), every trial step lowers K and fails, and the trust region
-            # shrinks to nothing. The others are refitted with K held, then all from there.
+            # shrinks to nothing. The others are refitted with K held, then all from there - kept only when an
+            # effect's parameters stay inside their bounds (lumped dev14 1305113: from there a T_in gain ran
+            # to its -0.5 bound, S 0.04 -> 0.02, and displaced the friction offset that was there)
             def rest_of(y):
                 return residual(np.concatenate([z0[:1], y]))
             sub = least_squares(rest_of, z0[1:], bounds=(lo[1:], hi[1:]), diff_step=1e-2, x_scale=1.0, ftol=1e-6,
@@ -227,7 +230,10 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
             z1 = np.concatenate([z0[:1], sub.x])
             again = least_squares(residual, z1, bounds=(lo, hi), diff_step=1e-2, x_scale=1.0, ftol=1e-6, xtol=1e-6,
                                   max_nfev=40 * len(params))
-            if again.cost < sol.cost:
+            own = slice(len(_params([], route)), None)             # the effects' parameters
+            span = 1e-3 * (hi[own] - lo[own])
+            inside = bool(np.all((again.x[own] > lo[own] + span) & (again.x[own] < hi[own] - span)))
+            if again.cost < sol.cost and inside:
                 sol = again
         if best is None or sol.cost < best.cost:
             best = sol

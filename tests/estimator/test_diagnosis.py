@@ -381,6 +381,16 @@ def test_a_fit_stuck_on_the_edge_of_a_step_in_K_refits_the_rest_with_K_held():
     assert res["parameters"]["d_b"]["value"] == pytest.approx(rec.truth["parameters"]["width"], rel=0.25)
 
 
+def test_a_refinement_retried_with_K_held_is_not_kept_at_a_bound():
+    # lumped dev14 1305113 (session 14): a 1.3 N friction offset; the retry with K held let a T_in gain run to its
+    # -0.5 bound (S 0.04 -> 0.02) and displace the friction offset, so the retry is kept only inside the bounds
+    rec = lumped_scenarios.record("friction_offset", seed=1305113, level=0.8, duration=60.0)
+    res = diagnose(rec.data, effects=("friction_offset", "sensor_gain:T_in"))
+    assert res["causes"][0] == "friction_offset", (res["causes"], {k: c["score"] for k, c in res["candidates"].items()})
+    g = res["candidates"]["sensor_gain:T_in"]["parameters"]["g_T_in"]["value"]
+    assert -0.49 < g < 0.49
+
+
 def test_a_route_bent_by_a_pretension_is_refitted_when_no_polished_extension_explains_the_structure():
     # lumped dev14 1301102 (session 13): a 1.8 N pretension on a constant-force load bent the base route to
     # r_2 = 0; on that route the pretension scored 1.09 and was not among the best three refitted with the
