@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import signal
 import sys
 import threading
 from typing import NoReturn
@@ -190,7 +191,11 @@ EXIT_GRACE_S = 10.0
 def run() -> NoReturn:
     """The ``teleop`` program (console script and ``python -m teleop.app.cli``): :func:`main`, then exit with
     its code; a watchdog ends the process with that code EXIT_GRACE_S after main returned if the interpreter's
-    own exit has not (a non-daemon thread or a native runtime that does not stop)."""
+    own exit has not (a non-daemon thread or a native runtime that does not stop). SIGINT stops it cleanly
+    (KeyboardInterrupt, exit 130) even when it was started with SIGINT ignored, as a non-interactive shell
+    starts a background job (session 14: the recorder and router tests failed so when `make test` ran
+    in the background - the "flake" of session 13)."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     code = main()
     sys.stdout.flush()
     sys.stderr.flush()

@@ -1,8 +1,10 @@
 """The ``teleop`` program ends with main's exit code even when the interpreter's own exit would block."""
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
+import time
 
 # a non-daemon thread that never ends holds the interpreter's exit (as a native runtime's teardown can):
 # run() must end the process EXIT_GRACE_S after main returned, with main's code
@@ -28,3 +30,33 @@ def test_without_the_watchdog_that_thread_holds_the_exit():
     except subprocess.TimeoutExpired:
         return
     raise AssertionError("the stuck thread did not hold the exit: the first test proves nothing")
+
+
+STOPPABLE = """
+import time
+import teleop.app.cli as cli
+def fake():
+    print("ready", flush=True)
+    try:
+        time.sleep(60)
+    except KeyboardInterrupt:
+        return 130
+    return 0
+cli.main = fake
+cli.run()
+"""
+
+
+def test_sigint_stops_the_program_even_when_started_with_sigint_ignored():
+    # a non-interactive shell starts background jobs with SIGINT ignored, and Python then installs no
+    # KeyboardInterrupt handler: the recorder and the router never saw the tests' SIGINT
+    proc = subprocess.Popen([sys.executable, "-c", STOPPABLE], stdout=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+        time.sleep(0.1)
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(20) == 130
+    finally:
+        proc.kill()
+        proc.wait()
