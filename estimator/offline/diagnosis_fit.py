@@ -211,12 +211,17 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
         pr = predict(effects, values(z), train, fit_mask=m)
         return np.concatenate([(getattr(pr, k)[m][::FIT_STRIDE] - ys[k]) / v for k, v in norm.items()])
 
+    def refine(fun, z, lower, upper):
+        return least_squares(fun, z, bounds=(lower, upper), diff_step=1e-2, x_scale=1.0, ftol=1e-6, xtol=1e-6,
+                             max_nfev=40 * len(z))
+
     z_starts = [np.clip(np.array([st.get(p.name, p.neutral) for p in params]) / scale, lo, hi) for st in starts]
     ranked = sorted(z_starts, key=lambda z: float(np.sum(residual(z) ** 2)))
+    own = slice(len(_params([], route)), None)             # the effects' parameters
+    span = 1e-3 * (hi[own] - lo[own])
     best = None
     for z0 in ranked[:max_starts]:
-        sol = least_squares(residual, z0, bounds=(lo, hi), diff_step=1e-2, x_scale=1.0, ftol=1e-6, xtol=1e-6,
-                            max_nfev=40 * len(params))
+        sol = refine(residual, z0, lo, hi)
         if np.array_equal(sol.x, z0) and len(params) > 1:
             # not a single step taken: K sits on the edge of a step in the residual (the memory or slack rule
             # of some sample flips just below it), every trial step lowers K and fails, and the trust region
@@ -225,13 +230,8 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
             # to its -0.5 bound, S 0.04 -> 0.02, and displaced the friction offset that was there)
             def rest_of(y):
                 return residual(np.concatenate([z0[:1], y]))
-            sub = least_squares(rest_of, z0[1:], bounds=(lo[1:], hi[1:]), diff_step=1e-2, x_scale=1.0, ftol=1e-6,
-                                xtol=1e-6, max_nfev=40 * (len(params) - 1))
-            z1 = np.concatenate([z0[:1], sub.x])
-            again = least_squares(residual, z1, bounds=(lo, hi), diff_step=1e-2, x_scale=1.0, ftol=1e-6, xtol=1e-6,
-                                  max_nfev=40 * len(params))
-            own = slice(len(_params([], route)), None)             # the effects' parameters
-            span = 1e-3 * (hi[own] - lo[own])
+            sub = refine(rest_of, z0[1:], lo[1:], hi[1:])
+            again = refine(residual, np.concatenate([z0[:1], sub.x]), lo, hi)
             inside = bool(np.all((again.x[own] > lo[own] + span) & (again.x[own] < hi[own] - span)))
             if again.cost < sol.cost and inside:
                 sol = again
