@@ -131,8 +131,9 @@ def loopback_endpoint(port: int) -> str:
     return f"tcp/127.0.0.1:{int(port)}"
 
 
-#: Session.close waits this long [s] for zenoh's teardown (once in a CI run of session 13 a process stayed
-#: 20-30 s after its SIGINT, its files already closed; not reproduced since), then leaves it to the exit
+#: Session.close waits this long [s] for zenoh's teardown, then leaves it to the exit (a bound, added while the
+#: recorder/router test failures of sessions 13-14 were blamed on zenoh; their cause was an ignored SIGINT,
+#: see teleop.app.cli.run)
 CLOSE_TIMEOUT_S = 5.0
 
 

@@ -1,4 +1,5 @@
-"""The ``teleop`` program ends with main's exit code even when the interpreter's own exit would block."""
+"""The ``teleop`` program ends with main's exit code even when the interpreter's own exit would block, and
+SIGINT stops it even when it was started with SIGINT ignored."""
 from __future__ import annotations
 
 import signal

@@ -218,8 +218,8 @@ def test_rate_limited_log_suppresses_and_reports_the_count(caplog):
 
 
 def test_close_returns_when_zenoh_teardown_blocks(monkeypatch, caplog):
-    # session 13: once in a CI run a process stayed 20-30 s after its SIGINT with its files closed; the
-    # zenoh teardown now runs in a daemon thread and close() returns after CLOSE_TIMEOUT_S with a warning
+    # a bound on shutdown: the zenoh teardown runs in a daemon thread and close() returns after CLOSE_TIMEOUT_S
+    # with a warning
     import threading
 
     import teleop.transport as transport
