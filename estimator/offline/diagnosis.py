@@ -8,7 +8,9 @@ on the first 35 %; the model always runs from the first sample):
 * the base model (profile memory with K, L/EA and the route shares r_1, r_2 of
   :data:`estimator.offline.effects.ROUTE`, the wrap angle over three thirds; when that leaves a structure
   ratio above WEAK_STRUCTURE, over six sixths, :data:`estimator.offline.effects.ROUTE_FINE`, which becomes
-  the base when its validation score against the thirds is below ROUTE_SCORE) and every extension of the
+  the base when its validation score against the thirds is below ROUTE_SCORE; when the base so far still
+  leaves a ratio above STRUCTURE_RATIO, over twelve twelfths, :data:`estimator.offline.effects.ROUTE_TWELFTHS`,
+  by the same rule) and every extension of the
   catalogue (:mod:`estimator.offline.effects`) are fitted on each fold's fit part and scored on its
   validation part,
 
@@ -44,7 +46,7 @@ import numpy as np
 from estimator.offline.diagnosis_fit import (NEAR_HELD_SHARE, SIGNALS, Progress, channel_choice, distal_end_held, fit_model, look_alike, toe_or_play, noise_level,
                                              predictions, prepare, quantum, raw_rmse, rest_start, rest_window, sample_block, settings_keys, split_at_rest,
                                              start_points, trimmed_ms, paired_trimmed_ms)
-from estimator.offline.effects import (CATALOGUE, EQUIVALENT, NOISE_BAND, NONE, ROUTE, ROUTE_FINE, ROUTE_KEYS, UNKNOWN, Effect, below_resolution,
+from estimator.offline.effects import (CATALOGUE, EQUIVALENT, NOISE_BAND, NONE, ROUTE, ROUTE_FORMS, ROUTE_KEYS, ROUTE_TWELFTHS, UNKNOWN, Effect, below_resolution,
                                        effect, finer_route, predict)
 from estimator.data import MeasuredData
 
@@ -289,6 +291,13 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
                     floor=floor)
         if fine.S < ROUTE_SCORE:
             fine.S, base, route, route_form = 1.0, fine, "fine", "sixths"
+        # ... and twelfths when structure above the threshold is still left (session 15: short arcs across
+        # the sixths' boundaries, lumped dev16 1517111's clean twin)
+        if max(_structure(base, noise).values()) > STRUCTURE_RATIO:
+            finest = _Fit([], folds, [{**finer_route(v, ROUTE_TWELFTHS), "K": v["K"]} for v in base.values[:1]],
+                          route="twelfths", base=base, floor=floor)
+            if finest.S < ROUTE_SCORE:
+                finest.S, base, route, route_form = 1.0, finest, "twelfths", "twelfths"
     shape = [{k: v[k] for k in ROUTE_KEYS if k in v} for v in base.values]
     singles: dict[str, _Fit] = {}
     for e in cands:
@@ -314,7 +323,7 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         # all the wrap in the distal third; refitted from there the backlash took 189 um, S 0.26 and "unknown"
         # first; from the uniform route 250 um, S 0.002; dev8 700111, velocity friction on a preloaded spring, base
         # r_1 = 0.003: from it S 0.37, from the uniform route 0.15 with c_v 25.6, true 25.6)
-        uniform = {p.name: p.neutral for p in (ROUTE_FINE if route == "fine" else ROUTE)}
+        uniform = {p.name: p.neutral for p in (ROUTE_FORMS[route] if isinstance(route, str) else ROUTE)}
 
         at_rest = rest_window(s)
 

@@ -23,7 +23,7 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import least_squares
 
-from estimator.offline.effects import K_MAX, ROUTE, ROUTE_FINE, Effect, Parameter, Series, effect, predict
+from estimator.offline.effects import K_MAX, ROUTE, ROUTE_FORMS, Effect, Parameter, Series, effect, predict
 from estimator.sheath import SheathModel
 from estimator.data import MeasuredData
 from estimator.errors import DataError
@@ -33,7 +33,7 @@ __all__ = ["Progress", "trimmed_ms", "paired_trimmed_ms", "sample_block", "rest_
 
 _K = Parameter("K", "-", 0.0, K_MAX, 0.5, (), "friction exponent mu * total wrap angle")
 _SCALE = {"K": 0.1, "c_v": 10.0, "T0": 1.0, "K_rate": 1e-3, "beta": 1.0, "T_c": 1.0, "r_s": 0.1, "a": 0.5,
-          "x_p": 2e-5, "d_b": 2e-5, "r_1": 0.1, "r_2": 0.1, "r_3": 0.1, "r_4": 0.1, "r_5": 0.1,
+          "x_p": 2e-5, "d_b": 2e-5, **{f"r_{k}": 0.1 for k in range(1, 12)},
           "b_T_in": 0.5, "b_T_out": 0.5, "g_T_in": 0.02, "g_T_out": 0.02, "tau_T_in": 0.01, "tau_T_out": 0.01,
           "d_T_in": 2e-3, "d_T_out": 2e-3, "b_x_in": 2e-5, "b_x_out": 2e-5, "tau_x_in": 0.01, "tau_x_out": 0.01}
 SIGNALS = ("T_out", "x_out")
@@ -165,7 +165,7 @@ def split_at_rest(s: Series, train_fraction: float) -> int:
 
 
 def _params(effects: list[Effect], route: bool | str = False) -> list[Parameter]:
-    shares = list(ROUTE_FINE) if route == "fine" else list(ROUTE) if route else []
+    shares = list(ROUTE_FORMS[route]) if isinstance(route, str) else list(ROUTE) if route else []
     return [_K] + shares + [p for e in effects for p in e.parameters]
 
 
@@ -187,7 +187,8 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
     ``max_starts`` are refined by ``scipy.optimize.least_squares`` (trust-region reflective, within
     the parameters' bounds, in variables scaled to O(1)). L/EA is solved in closed form inside
     every residual evaluation. ``route``: fit the route shares r_1, r_2 too (estimator.offline.effects.ROUTE), or with
-    "fine" the sixths r_1 ... r_5 (estimator.offline.effects.ROUTE_FINE);
+    "fine" the sixths r_1 ... r_5 (estimator.offline.effects.ROUTE_FINE), with "twelfths" r_1 ... r_11
+    (estimator.offline.effects.ROUTE_TWELFTHS);
     ``fixed``: values held (e.g. the base model's route); ``mask``: the samples of ``train`` whose
     residuals count (default all; the model always runs from the first sample). A refinement that takes
     no step at all (K on the edge of a step in the residual) is tried again with K held, then with all

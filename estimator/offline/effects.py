@@ -49,7 +49,7 @@ NOISE_BAND = 3.0
 __all__ = ["Parameter", "slack_hold", "SLACK_SIGMAS", "SLACK_TAUT", "SLACK_WINDOW", "SLACK_MEAN", "SLACK_HELD", "Effect", "VelocityFriction", "Pretension", "CurvatureDrift", "TendonStiffening", "Stiction",
            "FrictionOffset", "Presliding", "DistalBacklash", "SensorEffect", "Series", "Prediction", "CATALOGUE",
            "EFFECT_IDS", "ALIASES", "EQUIVALENT", "NONE", "UNKNOWN", "effect", "predict", "neutral_values",
-           "route_shape", "ROUTE", "ROUTE_FINE", "ROUTE_KEYS", "finer_route", "K_MAX", "RigSwitch", "ScenarioKnob", "Setting", "register", "unregister",
+           "route_shape", "ROUTE", "ROUTE_FINE", "ROUTE_TWELFTHS", "ROUTE_FORMS", "ROUTE_KEYS", "route_values", "finer_route", "K_MAX", "RigSwitch", "ScenarioKnob", "Setting", "register", "unregister",
            "rig_switches", "NOISE_BAND", "NODE_FORM", "SPEED_FORM", "STRIBECK_FORM", "STRIBECK_SPEED", "PRESLIDING_MIN",
            "below_resolution"]
 
@@ -285,17 +285,34 @@ ROUTE_FINE = (Parameter("r_1", "-", 0.0, 1.0, 1.0 / 6.0, (1.0 / 6.0,), "share of
               Parameter("r_3", "-", 0.0, 1.0, 0.25, (0.25,), "share of the rest in the third sixth"),
               Parameter("r_4", "-", 0.0, 1.0, 1.0 / 3.0, (1.0 / 3.0,), "share of the rest in the fourth sixth"),
               Parameter("r_5", "-", 0.0, 1.0, 0.5, (0.5,), "share of the rest in the fifth sixth"))
-ROUTE_KEYS = tuple(p.name for p in ROUTE_FINE)
+_ORDINAL = ("first", "second", "third", "fourth", "fifth", "sixth", "seventh", "eighth", "ninth", "tenth", "eleventh")
+#: the finest route (session 15): twelve equal twelfths, the same share rule; the sixths are pairs of equal
+#: twelfths. Two short arcs (11 and 13 % of the sheath, 40 and 60 % of the wrap) sit across sixth boundaries
+#: and the sixths fitted on one fold's block misplace them: the clean twin of lumped dev16 1517111 kept
+#: x_out at 3.8 x the floor on thirds (1.1 with the true shape read at the sixths, 0.6 at the twelfths)
+ROUTE_TWELFTHS = tuple(Parameter(f"r_{k}", "-", 0.0, 1.0, 1.0 / (13 - k), (1.0 / (13 - k),),
+                                 f"share of the {'wrap angle' if k == 1 else 'rest'} in the {_ORDINAL[k - 1]} twelfth")
+                       for k in range(1, 12))
+ROUTE_KEYS = tuple(p.name for p in ROUTE_TWELFTHS)
+#: the route forms by name (the ``route`` argument of the fits): their shares in order
+ROUTE_FORMS = {"thirds": ROUTE, "fine": ROUTE_FINE, "twelfths": ROUTE_TWELFTHS}
 
 
-def finer_route(values: dict) -> dict[str, float]:
-    """The sixths (:data:`ROUTE_FINE`) of a route given on thirds (r_1, r_2 of :data:`ROUTE`, neutral when
-    missing): the thirds' wrap shape read at the seven sixth knots, each share taken as its part of the rest."""
-    u = route_shape(len(ROUTE_FINE) + 2, float(values.get("r_1", ROUTE[0].neutral)),
-                    float(values.get("r_2", ROUTE[1].neutral)))
+def route_values(values: dict) -> tuple[float, ...]:
+    """The route shares r_1, r_2, ... held in ``values`` in order (r_2 neutral when only r_1 is given)."""
+    r = [float(values[k]) for k in ROUTE_KEYS if k in values]
+    return tuple(r + [ROUTE[1].neutral]) if len(r) == 1 else tuple(r)
+
+
+def finer_route(values: dict, form: tuple = ROUTE_FINE) -> dict[str, float]:
+    """The shares of a finer route ``form`` (default the sixths, :data:`ROUTE_FINE`; or :data:`ROUTE_TWELFTHS`)
+    of the route held in ``values`` (its shares r_1, r_2, ..., the thirds' neutral when none): its wrap shape
+    read at the finer knots, each share taken as its part of the rest."""
+    r = route_values(values) or tuple(p.neutral for p in ROUTE)
+    u = route_shape(len(form) + 2, *r)
     q, left = np.diff(u), 1.0 - u[:-1]
     return {p.name: float(min(max(q[k] / left[k], 0.0), 1.0)) if left[k] > 1e-12 else 0.5
-            for k, p in enumerate(ROUTE_FINE)}
+            for k, p in enumerate(form)}
 
 
 def effect(name: str) -> Effect:
@@ -367,7 +384,7 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
         The extensions switched on (none: the base model).
     values : dict
         ``K`` [-], optionally the route shares ``r_1``, ``r_2`` (:data:`ROUTE`) or ``r_1`` ... ``r_5``
-        (:data:`ROUTE_FINE`; default the series' own node shape) and every parameter of the listed effects (names as in their Parameter lists);
+        (:data:`ROUTE_FINE`) or ``r_1`` ... ``r_11`` (:data:`ROUTE_TWELFTHS`; default the series' own node shape) and every parameter of the listed effects (names as in their Parameter lists);
         missing ones take their neutral value.
     s : Series
     compliance : float, optional
@@ -415,9 +432,7 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
         x_in, vel = _shift(t, x_in, -g("sensor_lag:x_in")), _shift(t, vel, -g("sensor_lag:x_in"))
     if g("sensor_offset:x_in"):
         x_in = x_in - g("sensor_offset:x_in")
-    u = s.u if "r_1" not in values else route_shape(
-        s.u.shape[0], values["r_1"], values.get("r_2", 0.5),
-        *((values["r_3"], values["r_4"], values["r_5"]) if "r_3" in values else ()))
+    u = s.u if "r_1" not in values else route_shape(s.u.shape[0], *route_values(values))
     if node and x_p > 0.0 and (compliance is not None or s.x_out is not None):   # per node: K, K_rate, T0, E9 only
         T_out, E1 = node_presliding(T_in, x_in, s.x_out, t, u, s.w, x_p=x_p, compliance=compliance,
                                     **{k: v for k, v in knobs.items() if k in ("K", "K_rate", "T0", "beta", "Tc")})

@@ -290,8 +290,8 @@ def backlash_play(x: np.ndarray, width: float) -> np.ndarray:
 
 def route_shape(n1: int, r_1: float, r_2: float, *finer: float) -> np.ndarray:
     """Normalised wrap angle u(s) [-], shape (n1,), at n1 nodes equally spaced in arc length: piecewise
-    linear over M = 3 equal thirds (r_1, r_2) or, with ``finer`` = (r_3, r_4, r_5), M = 6 equal sixths
-    holding the shares q_k = r_k (1 - q_1 - ... - q_{k-1}) of the total angle, the last share the rest
+    linear over M = 3 equal thirds (r_1, r_2) or, with ``finer`` = (r_3, ..., r_{M-1}), M equal parts (6 sixths,
+    12 twelfths) holding the shares q_k = r_k (1 - q_1 - ... - q_{k-1}) of the total angle, the last share the rest
     (see :data:`estimator.offline.effects.ROUTE` and :data:`estimator.offline.effects.ROUTE_FINE`)."""
     r = (r_1, r_2, *finer)
     q, left = [], 1.0

@@ -28,7 +28,7 @@ from estimator.offline.diagnosis_fit import (
     toe_or_play,
     trimmed_ms,
 )
-from estimator.offline.effects import CATALOGUE, EFFECT_IDS, EQUIVALENT
+from estimator.offline.effects import CATALOGUE, EFFECT_IDS, EQUIVALENT, route_shape
 from slave import lumped_scenarios
 from slave.scenarios import record
 from teleop.errors import DataError
@@ -432,6 +432,21 @@ def test_lumped_clean_single_arc_route_takes_the_finer_route_and_gives_none():
     third_sixth = res["parameters"]["r_3"]["value"] * (1.0 - res["parameters"]["r_1"]["value"]) \
         * (1.0 - res["parameters"]["r_2"]["value"])
     assert third_sixth > 0.6
+
+
+def test_lumped_clean_route_of_two_short_arcs_takes_the_twelfths_and_gives_none():
+    # two arcs of 5.0 and 7.6 rad over 13 and 11 % of a 1.63 m sheath (at 25-38 % and 64-75 % of its length),
+    # a spring: the thirds leave x_out at 3.8 x the floor and the sixths fitted on one fold's block misplace the
+    # arcs (S 0.53, not adopted): "unknown" on a clean recording (session 15: the clean twin of lumped dev16
+    # 1517111, the twin false alarm of session 14's final). The twelfths put the wrap where the arcs are.
+    rec = lumped_scenarios.record(None, seed=1517111, duration=60.0)
+    res = diagnose(rec.data, effects=("distal_backlash", "sensor_offset:x_in", "sensor_drift:T_out"))
+    assert res["causes"] == [], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
+    assert res["settings"]["route_form"] == "twelfths"
+    assert max(res["structure"]["base"].values()) <= res["settings"]["structure_ratio"]
+    u = route_shape(13, *(res["parameters"][f"r_{k}"]["value"] for k in range(1, 12)))
+    # the true wrap at the twelfths' knots: 0 up to 25 %, 0.40 from 38 % to 64 %, 1 from 75 %
+    assert u[2] < 0.1 and 0.3 < u[6] < 0.5 and u[7] < 0.5 and u[10] > 0.9
 
 
 def test_a_distal_end_held_on_its_stop_sets_x_out_aside_and_gives_none():

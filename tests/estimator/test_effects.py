@@ -16,6 +16,8 @@ from estimator.offline.effects import (
     NOISE_BAND,
     PRESLIDING_MIN,
     ROUTE_FINE,
+    ROUTE_FORMS,
+    ROUTE_TWELFTHS,
     SLACK_HELD,
     SLACK_SIGMAS,
     SLACK_TAUT,
@@ -29,6 +31,7 @@ from estimator.offline.effects import (
     finer_route,
     neutral_values,
     predict,
+    route_values,
     slack_hold,
 )
 from estimator.offline.effects_kernels import route_shape, run_extended
@@ -483,3 +486,19 @@ def test_the_finer_route_holds_the_thirds_as_a_special_case():
     np.testing.assert_allclose(route_shape(13, *(p.neutral for p in ROUTE_FINE)), np.linspace(0, 1, 13), atol=1e-12)
     u = route_shape(61, 0.0, 0.0, 1.0, 0.5, 0.5)
     assert u[20] == pytest.approx(0.0) and u[30] == pytest.approx(1.0) and u[-1] == pytest.approx(1.0)
+
+
+def test_the_twelfths_hold_the_sixths_and_the_thirds_as_special_cases():
+    # each sixth's share split over its two twelfths (and the thirds through them) gives the same wrap shape
+    for sixths in ((0.0, 0.247, 0.2, 0.253, 1.0), (1 / 6, 0.2, 0.25, 1 / 3, 0.5), (0.9, 0.0, 0.5, 0.0, 0.3)):
+        fine = finer_route(dict(zip(("r_1", "r_2", "r_3", "r_4", "r_5"), sixths)), ROUTE_TWELFTHS)
+        assert list(fine) == [p.name for p in ROUTE_TWELFTHS] and all(0.0 <= v <= 1.0 for v in fine.values())
+        np.testing.assert_allclose(route_shape(121, *route_values(fine)), route_shape(121, *sixths), atol=1e-12)
+    thirds = {"r_1": 0.05, "r_2": 0.95}
+    np.testing.assert_allclose(route_shape(121, *route_values(finer_route(thirds, ROUTE_TWELFTHS))),
+                               route_shape(121, 0.05, 0.95), atol=1e-12)
+    np.testing.assert_allclose(route_shape(25, *(p.neutral for p in ROUTE_TWELFTHS)), np.linspace(0, 1, 25), atol=1e-12)
+    # route_values reads the shares in order; r_2 is neutral when only r_1 is given; none without a route
+    assert route_values({"K": 1.0, "r_2": 0.4, "r_1": 0.2}) == (0.2, 0.4)
+    assert route_values({"r_1": 0.2}) == (0.2, 0.5) and route_values({"K": 1.0}) == ()
+    assert set(ROUTE_FORMS) == {"thirds", "fine", "twelfths"} and len(ROUTE_FORMS["twelfths"]) == 11
