@@ -480,23 +480,23 @@ def test_a_distal_end_held_on_its_stop_sets_x_out_aside_and_gives_none():
     assert predictions(res, rec.data)["x_out_base"] is None
 
 
-def test_a_distal_end_pressed_on_its_stop_by_a_pretension_sets_x_out_aside():
+def test_a_distal_end_pressed_on_its_stop_by_a_pretension_names_the_pretension():
     # lumped dev14 1301113 (session 13): a 4.2 N pretension holds a 125 N/m joint on its 1 mm stop from the
     # start; x_out moves 8 um (1.4 % of x_in's 0.59 mm travel), the stop's deflection and the tendon's
     # pre-sliding, which the base model reads as elongation: fitting x_out bent K (1.23, true 1.32) and the
-    # pretension's T_out stayed 0.5 N high (distal backlash + pretension + unknown, base structure 69).
-    # Below NEAR_HELD_SHARE of the travel x_out is set aside: pretension, T0 and K found from T_out.
-    # x_out is set aside because with it structure is left that no effect explains and without it none is
+    # pretension's T_out stayed 0.5 N high (distal backlash + pretension + unknown, base structure 69). Session 13
+    # set x_out aside (NEAR_HELD_SHARE: structure left with it, none without). Since session 15 the pretension
+    # refitted on the twelfths explains both signals with x_out kept (structure 0.5 and 0.7), so x_out stays in.
     rec = lumped_scenarios.record("pretension", seed=1301113, level=0.8, duration=60.0)
     res = diagnose(rec.data, effects=("pretension", "distal_backlash", "sensor_offset:x_in", "sensor_lag:T_in"))
-    held = res["settings"]["distal_end_held"]
-    assert held is not None and held["pressed"] and 0.01 * held["travel_m"] < held["range_m"] < 0.05 * held["travel_m"]
     assert res["causes"] == ["pretension"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
     assert res["parameters"]["T0"]["value"] == pytest.approx(4.2, rel=0.05)
     assert res["parameters"]["K"]["value"] == pytest.approx(rec.truth["K"], rel=0.03)
-    from teleop.app.analyze import format_diagnosis
-    text = format_diagnosis({**res, "file": "rec.csv", "n_samples": len(rec.data), "duration_s": rec.data.duration})
-    assert "x_out set aside" in text and "pressed on a stop" in text
+    held = res["settings"]["distal_end_held"]
+    if held is None:
+        assert max(res["structure"]["extended"].values()) <= res["settings"]["structure_ratio"]
+    else:       # set aside only as a pressed stop, within 1-5 % of the travel
+        assert held["pressed"] and 0.01 * held["travel_m"] < held["range_m"] < 0.05 * held["travel_m"]
 
 
 def test_distal_end_held_only_when_x_out_stands_within_its_resolution():
