@@ -154,6 +154,8 @@ class _Fit:
 
 #: the route forms finer than each (the ``route`` argument of the fits: True is the thirds)
 _FINER: dict = {True: ("fine", "twelfths"), "fine": ("twelfths",), "twelfths": ()}
+#: their names in the JSON (``settings.route_form``, ``settings.model_route_form``)
+_FORM_NAME: dict = {False: "held", True: "thirds", "fine": "sixths", "twelfths": "twelfths"}
 
 
 def _route_of(values: dict, route: bool | str) -> bool | str:
@@ -297,24 +299,23 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     floor = noise
     # where along the sheath the friction sits, finer (sixths instead of thirds) when the coarse route leaves
     # structure: adopted as the base when it removes most of it on the validation blocks (ROUTE_SCORE)
-    route_form = "thirds" if route else "held"
+    # ... and twelfths when structure above the threshold is still left (session 15: short arcs across the sixths'
+    # boundaries, lumped dev16 1517111's clean twin)
     alone: dict[str, _Fit] = {}         # the finer routes fitted without an effect, scored against the base
+
+    def route_alone(form: str) -> _Fit:
+        """The base refitted on the finer route ``form`` from its own route read at the finer knots."""
+        alone[form] = _Fit([], folds, [{**finer_route(v, ROUTE_FORMS[form]), "K": v["K"]} for v in base.values[:1]],
+                           route=form, base=base, floor=floor)
+        return alone[form]
+
     if route and max(_structure(base, noise).values()) > WEAK_STRUCTURE:
-        fine = _Fit([], folds, [{**finer_route(v), "K": v["K"]} for v in base.values[:1]], route="fine", base=base,
-                    floor=floor)
-        alone["fine"] = fine
-        if fine.S < ROUTE_SCORE:
-            fine.S, base, route, route_form = 1.0, fine, "fine", "sixths"
-            alone.clear()
-        # ... and twelfths when structure above the threshold is still left (session 15: short arcs across
-        # the sixths' boundaries, lumped dev16 1517111's clean twin)
-        if max(_structure(base, noise).values()) > STRUCTURE_RATIO:
-            finest = _Fit([], folds, [{**finer_route(v, ROUTE_TWELFTHS), "K": v["K"]} for v in base.values[:1]],
-                          route="twelfths", base=base, floor=floor)
-            alone["twelfths"] = finest
-            if finest.S < ROUTE_SCORE:
-                finest.S, base, route, route_form = 1.0, finest, "twelfths", "twelfths"
-                alone.clear()
+        for form, above in (("fine", WEAK_STRUCTURE), ("twelfths", STRUCTURE_RATIO)):
+            if max(_structure(base, noise).values()) > above:
+                f = route_alone(form)
+                if f.S < ROUTE_SCORE:
+                    f.S, base, route = 1.0, f, form
+                    alone.clear()
     shape = [{k: v[k] for k in ROUTE_KEYS if k in v} for v in base.values]
     singles: dict[str, _Fit] = {}
     for e in cands:
@@ -378,10 +379,7 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         if (max(_structure(base, noise).values()) > STRUCTURE_RATIO
                 and all(max(_structure(singles[eid], noise).values()) > STRUCTURE_RATIO for eid in singles)):
             for form in _FINER[route]:
-                if form not in alone:
-                    alone[form] = _Fit([], folds, [{**finer_route(v, ROUTE_FORMS[form]), "K": v["K"]}
-                                                   for v in base.values[:1]], route=form, base=base, floor=floor)
-                by_route = min(alone[form].S, 1.0)
+                by_route = min((alone[form] if form in alone else route_alone(form)).S, 1.0)
                 for eid in sorted(singles, key=lambda k: singles[k].S)[:POLISH]:
                     v0 = singles[eid].values[0]
                     f = _Fit([CATALOGUE[eid]], folds, [{**v0, **finer_route(v0, ROUTE_FORMS[form])}], route=form,
@@ -513,9 +511,8 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
                      "noise_band_sigmas": NOISE_BAND,
                      "rank_factor": RANK_FACTOR,
                      "model_resolution": MODEL_RESOLUTION, "trim": TRIM, "route_score": ROUTE_SCORE,
-                     "route_form": route_form,
-                     "model_route_form": {True: "thirds", "fine": "sixths", "twelfths": "twelfths"}.get(
-                         _route_of(final[0], route), "held"),
+                     "route_form": _FORM_NAME[route],
+                     "model_route_form": _FORM_NAME[_route_of(final[0], route)],
                      "distal_end_held": held,
                      "wrap_shape": None if wrap_shape is None else [float(v) for v in wrap_shape]},
         "elapsed_s": _time.perf_counter() - t_start,
