@@ -25,8 +25,9 @@ final set of session 5's second pass, run once with commit 7a1c12d, seen since) 
 since) and ``dev14`` (offsets + 1300000: the final set of session 12, run once with the code of commit
 7588c4f, seen since) and ``dev15`` (offsets + 1400000: the final set of session 13, run once with the code
 of commit 1a42dcb, seen since) and ``dev16`` (offsets + 1500000: the final set of session 14, run once with the
-code of commit b632d18, seen since) are development data. ``final`` (offsets + 1600000) is the final set of
-session 15, fixed before any change of that session.
+code of commit b632d18, seen since) and ``dev17`` (offsets + 1600000: the final set of session 15, run once
+with the code of commit 2594eb5, seen since) are development data. ``final`` (offsets + 1700000) is the final
+set of session 16, fixed before any change of that session.
 Seed layout (session 4): every hidden-effect recording has its own seed, so its own simulated rig
 (route, K, EA, load, rate, noise): effect k of EFFECT_IDS, level j, repeat s uses
 base + 100 + 1000 k + 10 j + s (before session 4 every effect of a set shared the four rigs of
@@ -36,7 +37,7 @@ Prints per effect and per channel: accuracy (strict, and up to the inseparable p
 estimator.offline.effects.EQUIVALENT), gains, false alarms on clean data; never fails on the figures (the
 pass/fail checks are in tests/estimator/test_diagnosis.py).
 
-    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|dev3|dev4|dev5|dev6|dev7|dev8|dev9|dev10|dev11|dev12|dev13|dev14|dev15|dev16|final] [--seeds 2]
+    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|dev3|dev4|dev5|dev6|dev7|dev8|dev9|dev10|dev11|dev12|dev13|dev14|dev15|dev16|dev17|final] [--seeds 2]
         [--levels 0.2,0.8] [--clean 12] [--duration 90] [--rate 1000] [--jobs 2] [--json OUT] [--speed-only] [--twins]
         [--shared-rigs]
 """
@@ -64,7 +65,7 @@ SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "dev4": 300000, "dev5": 4
              "dev7": 600000, "dev8": 700000, "dev9": 800000,
              "dev10": 900000, "dev11": 1000000, "dev12": 1100000, "dev13": 1200000,
              "dev14": 1300000, "dev15": 1400000, "dev16": 1500000,
-             "final": 1600000}   # session 15's final set, fixed before any change (docstring)
+             "dev17": 1600000, "final": 1700000}   # session 16's final set, fixed before any change (docstring)
 UNCATALOGUED = "load_cell_wander"
 
 
