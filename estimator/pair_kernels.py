@@ -48,7 +48,13 @@ distal torque of that rest, so the rest is an equilibrium. Extensions (literatur
   at the distal end): the joint moves only when T_d,a e^{-+mu_b |theta|} - T_d,b e^{+-mu_b |theta|} - k theta
   - tau_0 leaves zero (signs: moving toward + / -; (P4) is the case mu_b = 0), so the joint stalls at
   large angles while the tensions still rise (docs/findings.md, Finding 3, session 4). Not combined
-  with ``toe``, ``tau_c`` or ``k2``.
+  with ``toe``, ``tau_c`` or ``k2``;
+* ``observed``, ``lam_d`` the drive-side observer (E10 on the motor side; docs/findings.md, Finding 3,
+  session 8): not a property of the mechanism but an estimator that reads the *measured* proximal
+  tensions T_m,j at every sample. A frictionless compliance lam_d [rad/N] between each motor and its
+  sheath entry carries the measured tension, so the entries sit at
+  x_a = x_a0 + G (c - c_0) - lam_d (T_m,a - T_m,a(0)) and x_b = x_b0 - G (c - c_0) - lam_d (T_m,b - T_m,b(0))
+  in place of (P1). lam_d = 0 is the command-only model. Not combined with ``toe``, ``tau_c``, ``k2`` or ``mu_b``.
 """
 from __future__ import annotations
 
@@ -233,6 +239,38 @@ def _simulate(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, cpa, cra, lo_b, hi_b, 
 
 
 @njit(cache=True)
+def _simulate_observed(c, Tma, Tmb, lam_d, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, cpa, cra, lo_b, hi_b, dlo_b,
+                       dhi_b, wb, cpb, crb, k, substeps, theta, T_in):  # pragma: no cover - compiled
+    """:func:`_simulate` with the drive-side observer (module docstring, ``lam_d``): the sheath entries sit at
+    x_a = x_a0 + G (c - c_0) - lam_d (T_m,a - T_m,a(0)), x_b = x_b0 - G (c - c_0) - lam_d (T_m,b - T_m,b(0)),
+    with the measured proximal tensions ``Tma``, ``Tmb`` [N] (shape (n,)) interpolated linearly in the substeps."""
+    Ta, Tb, xa0, xb0, tau0, sbx, sbF, sbs, slope = _start(Pa, Pb, wa, wb, lo_a, lo_b, k)
+    th = 0.0
+    c0 = c[0]
+    prev = c[0]
+    pa = Tma[0]
+    pb = Tmb[0]
+    for i in range(c.shape[0]):
+        for s in range(substeps):
+            f = (s + 1) / substeps
+            u = prev + (c[i] - prev) * f - c0
+            ta = pa + (Tma[i] - pa) * f - Tma[0]
+            tb = pb + (Tmb[i] - pb) * f - Tmb[0]
+            xa = xa0 + G * u - lam_d * ta
+            xb = xb0 - G * u - lam_d * tb
+            advance_proximal(Ta, lo_a, hi_a, wa, cpa, cra, xa - th, 0.0, sbx, sbF, sbs)
+            advance_proximal(Tb, lo_b, hi_b, wb, cpb, crb, xb + th, 0.0, sbx, sbF, sbs)
+            th = settle_joint(Ta, dlo_a, dhi_a, wa, xa, Tb, dlo_b, dhi_b, wb, xb, 1.0, th, k, 0.0, 0.0, _BIG,
+                              -_BIG, _BIG, 0.0, tau0, slope)
+        prev = c[i]
+        pa = Tma[i]
+        pb = Tmb[i]
+        theta[i] = th
+        T_in[i, 0] = Ta[0]
+        T_in[i, 1] = Tb[0]
+
+
+@njit(cache=True)
 def _bend_balance(th, s, mub, Ta, dlo_a, dhi_a, wa, ea, xa, Tb, dlo_b, dhi_b, wb, eb, xb, k, tau0):  # pragma: no cover
     """Torque balance [N] of the joint moving in direction s (+1 / -1) at angle ``th`` [rad] with the
     motors held, the bending section's capstan factor e^{-+s mu_b |th|} on each distal tension."""
@@ -297,7 +335,8 @@ def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple
                   K: tuple[float, float], k: float, *, lam_s: float = 0.0, tau_c: float = 0.0, shape: float = 0.0,
                   offset: float = 0.0, k2: float = 0.0, theta_c: float = 0.0, toe: float = 0.0,
                   toe_tension: float = 1.0, mu_b: float = 0.0, n_nodes: int = 24,
-                  substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
+                  substeps: int = 1, observed: tuple[np.ndarray, np.ndarray] | None = None,
+                  lam_d: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Run the capstan-joint pair model (module docstring, (P1)-(P4)) over a recorded command.
 
     Parameters
@@ -318,6 +357,12 @@ def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple
     mu_b : friction coefficient of the tendons in the bending section [1/rad], >= 0; its wrap is the
         joint angle (module docstring, ``mu_b``; none when 0: the kernel is then the plain one, bit for
         bit); not with ``toe``, ``tau_c`` or ``k2``
+    observed : (T_a, T_b), the *measured* proximal tensions [N], each of shape (n,), or None (default: the
+        command-only model). Given, the model runs as the drive-side observer (module docstring,
+        ``lam_d``): each sheath entry sits at the motor position minus ``lam_d`` times the measured
+        tension's change since the first sample. Not combined with ``toe``, ``tau_c``, ``k2`` or ``mu_b``
+    lam_d : drive-side compliance [rad/N] >= 0 of the observer (with ``observed``; 0 gives the
+        command-only model's angle to rounding)
     n_nodes : elements per sheath
     substeps : steps per sample; the model is rate-independent and the splitting error of one step
         per 40 Hz sample was below 1e-12 rad on the KAIST commands, so 1 is the default
@@ -331,14 +376,15 @@ def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple
     ------
     ValueError
         A non-finite or out-of-range parameter, a command that is not 1-D and finite, or ``mu_b`` with
-        ``toe``, ``tau_c`` or ``k2``.
+        ``toe``, ``tau_c`` or ``k2``; ``observed`` not two finite arrays of the command's shape, or with
+        ``toe``, ``tau_c``, ``k2`` or ``mu_b``.
     """
     c = np.ascontiguousarray(command, dtype=np.float64)
     if c.ndim != 1 or c.size == 0 or not np.all(np.isfinite(c)):
         raise ValueError("command must be a non-empty 1-D array of finite angles [rad]")
     vals = {"G": G, "lam_a": lam[0], "lam_b": lam[1], "K_a": K[0], "K_b": K[1], "k": k, "lam_s": lam_s,
             "tau_c": tau_c, "shape": shape, "offset": offset, "k2": k2, "theta_c": theta_c, "P_a": pretension[0],
-            "P_b": pretension[1], "mu_b": mu_b}
+            "P_b": pretension[1], "mu_b": mu_b, "lam_d": lam_d}
     for name, v in vals.items():
         if not math.isfinite(v) or v < 0.0:
             raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
@@ -351,10 +397,21 @@ def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple
     if mu_b > 0.0 and (toe > 0.0 or tau_c > 0.0 or k2 > 0.0):
         raise ValueError(f"mu_b (bending-section friction) is not combined with toe, tau_c or k2, got mu_b={mu_b!r}, "
                          f"toe={toe!r}, tau_c={tau_c!r}, k2={k2!r}")
+    if observed is not None:
+        Tm = [np.ascontiguousarray(x, dtype=np.float64) for x in observed]
+        if len(Tm) != 2 or any(x.shape != c.shape or not np.all(np.isfinite(x)) for x in Tm):
+            raise ValueError(f"observed must be two finite arrays of the command's shape {c.shape} (the measured "
+                             "proximal tensions T_a, T_b [N])")
+        if toe > 0.0 or tau_c > 0.0 or k2 > 0.0 or mu_b > 0.0:
+            raise ValueError("the drive-side observer (observed=) is not combined with toe, tau_c, k2 or mu_b")
     arrs = [_node_arrays(float(Kj), float(lj), int(n_nodes), float(lam_s)) for Kj, lj in zip(K, lam)]
     P = [(P0 + offset) * np.exp(-shape * np.log(a[1])) for P0, a in zip(pretension, arrs)]
     theta = np.empty(c.size)
     T_in = np.empty((c.size, 2))
+    if observed is not None:
+        _simulate_observed(c, Tm[0], Tm[1], float(lam_d), float(G), P[0], P[1], *arrs[0], *arrs[1], float(k),
+                           max(int(substeps), 1), theta, T_in)
+        return theta, T_in - offset
     if toe > 0.0:
         (lo_a, hi_a, dlo_a, dhi_a, wa, _, _), (lo_b, hi_b, dlo_b, dhi_b, wb, _, _) = arrs
         _simulate_toe(c, float(G), P[0], P[1], lo_a, hi_a, dlo_a, dhi_a, wa, lo_b, hi_b, dlo_b, dhi_b, wb, float(k),

@@ -27,6 +27,17 @@ reported figure of the chosen model (and of the seed model it is compared with).
    times the tracker noise. A candidate whose *training* rmse ratio alone already prices it out
    ((rmse_train / rmse_train,chosen)^2 + PENALTY x extra parameters >= 1 + SCREEN_MARGIN) is not
    cross-validated (listed as ``screened_out``), which saves most of the refits.
+3b. Tension plausibility (session 8, docs/findings.md, Finding 3; ``tension_ratio``, default
+   :data:`TENSION_PEAK_RATIO`): the proximal tensions are measured on the training block too, and a
+   capstan-structure model predicts them. A candidate whose predicted peak proximal tension of either
+   tendon over the training block is more than ``tension_ratio`` times, or less than 1 / ``tension_ratio``
+   times, the measured peak is refused (listed with ``refused``, not cross-validated, never accepted):
+   its angle fit has run along a valley of the parameters (G against lam) that the angle of one cycle
+   does not close. When the capstan structure itself is refused in the first round, it is refitted with
+   the measured proximal tensions in the residual (weight :data:`TENSION_FIT_WEIGHT`, the shared
+   models' ``+T`` weight; id ``capstan/T``) and that fit, checked the same way, is the structure's
+   candidate; effects added later to a ``/T`` model are fitted the same way. Models are still scored
+   by the angle's cross-validation only. ``tension_ratio=None`` gives the procedure before session 8.
 4. ``unknown`` is appended when the chosen model's cv rmse is still above STRUCTURE_RATIO (3) times
    the tracker noise (robust level of the angle's second differences): structure left that no
    candidate explains. ``none`` when nothing is accepted and no structure is left.
@@ -46,7 +57,7 @@ from estimator.offline.pair import fit_pair
 from estimator.offline.pair_models import (CAUSE_OF_SEED, PAIR_EFFECTS, applicable, head, model_id, model_params,
                                            predict_model)
 
-__all__ = ["CAPSTAN_STARTS", "MAX_NFEV", "CV_NFEV", "FIT_TOL", "fit_model", "folds", "cross_validate", "diagnose_pair",
+__all__ = ["CAPSTAN_STARTS", "MAX_NFEV", "CV_NFEV", "FIT_TOL", "TENSION_PEAK_RATIO", "TENSION_FIT_WEIGHT", "fit_model", "folds", "cross_validate", "diagnose_pair",
            "figure_bootstrap", "spread_deg", "FitResult"]
 
 #: Starting points of the capstan structure (G [-], lam [rad/N], K_a, K_b [-], k [N/rad]).
@@ -67,6 +78,16 @@ CV_NFEV = 40
 SCREEN_MARGIN = 0.1
 #: Contiguous time blocks of the training block, alternately given to the two cross-validation folds.
 CV_BLOCKS = 8
+#: Tension plausibility of a capstan-structure candidate (module docstring, step 3b): its predicted peak
+#: proximal tension of each tendon over the training block must lie within this factor of the measured
+#: peak. Set in session 8 on command cycle 1 only: the angle-only capstan fits predict the peaks at
+#: 0.74-1.40x the measured ones at N = 0-180 (the model family's known tension-shape error) and at 1.64 and
+#: 1.85x at N = 240, where the fit runs along the G-lam valley (docs/findings.md, Finding 3).
+TENSION_PEAK_RATIO = 1.5
+#: Weight [rad/N] of the measured proximal tensions in the residual of a ``/T`` refit (step 3b): the
+#: shared ``+T`` models' weight (:data:`estimator.offline.pair_shared.TENSION_WEIGHT`, 1 N costs as much
+#: as 0.57 deg).
+TENSION_FIT_WEIGHT = 0.01
 
 
 class FitResult:
@@ -76,8 +97,9 @@ class FitResult:
     (``rmse_T_train``) samples (None for the seed structure)."""
 
     def __init__(self, structure: str, effects: tuple[str, ...], values: dict[str, float], rec,
-                 train: slice | np.ndarray, test: slice | np.ndarray):
+                 train: slice | np.ndarray, test: slice | np.ndarray, tension_weight: float = 0.0):
         self.structure, self.effects, self.values = structure, tuple(effects), dict(values)
+        self.tension_weight = float(tension_weight)
         self.angle, self.T_in = predict_model(structure, self.effects, self.values, rec)
         err = self.angle - np.asarray(rec.angle, dtype=float)
         self.rmse_train = float(np.sqrt(np.mean(err[train] ** 2)))
@@ -89,18 +111,36 @@ class FitResult:
 
     @property
     def id(self) -> str:
-        return model_id(self.structure, self.effects)
+        """Model id (:func:`estimator.offline.pair_models.model_id`), ``/T`` appended when the fit had the
+        measured proximal tensions in its residual."""
+        return model_id(self.structure, self.effects) + ("/T" if self.tension_weight > 0.0 else "")
+
+    def tension_peak_ratio(self, rec, train: slice | np.ndarray) -> list[float] | None:
+        """Predicted / measured peak proximal tension of tendons a and b over the ``train`` samples (None
+        for the seed structure, which takes the tensions as input). Raises ValueError when a measured peak
+        is not positive."""
+        if self.T_in is None:
+            return None
+        meas = np.max(np.column_stack([rec.T_a, rec.T_b])[train], axis=0)
+        if not np.all(meas > 0.0):
+            raise ValueError(f"measured proximal tension peaks must be > 0 N, got {meas.tolist()}")
+        return [float(x) for x in np.max(self.T_in[train], axis=0) / meas]
 
     @property
     def n_params(self) -> int:
         return len(model_params(self.structure, self.effects))
 
     def summary(self) -> dict:
-        """JSON-ready: model, params {name: {value, unit}}, rmse_train_deg, rmse_test_deg,
+        """JSON-ready: model, fit_inputs (which measured signals the fit used), params {name: {value, unit}},
+        rmse_train_deg, rmse_test_deg,
         max_abs_test_deg, rmse_T_in_N (predicted vs measured proximal tensions on the test block;
         None for the seed structure, which takes them as input)."""
         units = {p.name: p.unit for p in model_params(self.structure, self.effects)}
-        return {"model": self.id, "params": {k: {"value": float(v), "unit": units[k]} for k, v in self.values.items()},
+        return {"model": self.id, "fit_inputs": "command, measured angle" + (
+                    f" and measured proximal tensions (weight {self.tension_weight:g} rad/N)" if self.tension_weight > 0
+                    else " (proximal tensions: first sample only)" if self.structure == "capstan"
+                    else " and measured proximal tensions (model input)"),
+                "params": {k: {"value": float(v), "unit": units[k]} for k, v in self.values.items()},
                 "rmse_train_deg": math.degrees(self.rmse_train), "rmse_test_deg": math.degrees(self.rmse_test),
                 "max_abs_test_deg": math.degrees(self.max_test), "rmse_T_in_N": self.rmse_T_in}
 
@@ -166,7 +206,7 @@ def fit_model(structure: str, effects: tuple[str, ...], rec, train: slice | np.n
         if best is None or sol.cost < best.cost:
             best = sol
     assert best is not None                       # at least one start
-    return FitResult(structure, effects, dict(zip(names, map(float, best.x))), rec, train, test)
+    return FitResult(structure, effects, dict(zip(names, map(float, best.x))), rec, train, test, w)
 
 
 def folds(train: slice, n: int, blocks: int = CV_BLOCKS) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -181,10 +221,14 @@ def folds(train: slice, n: int, blocks: int = CV_BLOCKS) -> list[tuple[np.ndarra
     return [(even, odd), (odd, even)]
 
 
-def cross_validate(fx: FitResult, rec, train: slice, max_nfev: int = CV_NFEV, tension_weight: float = 0.0) -> float:
+def cross_validate(fx: FitResult, rec, train: slice, max_nfev: int = CV_NFEV,
+                   tension_weight: float | None = None) -> float:
     """Time-blocked cross-validation rmse [rad] of a fitted model inside the training block
     (:func:`folds`; each fold refitted from ``fx.values``, the model running from the first sample,
-    with the tension weight of :func:`fit_model`; the score is the angle's alone)."""
+    with the tension weight of :func:`fit_model`, by default the one ``fx`` was fitted with; the score is
+    the angle's alone)."""
+    if tension_weight is None:
+        tension_weight = fx.tension_weight
     y = np.asarray(rec.angle, dtype=float)
     sq = []
     for fit_on, score_on in folds(train, len(y)):
@@ -214,7 +258,8 @@ def figure_bootstrap(fx: FitResult, rec, train: slice, test: slice, n_draws: int
     for _ in range(n_draws):
         pick = rng.integers(0, CV_BLOCKS, CV_BLOCKS)
         idx = np.concatenate([np.arange(edges[k], edges[k + 1]) for k in pick])
-        f = fit_model(fx.structure, fx.effects, rec, idx, test, [dict(fx.values)], max_nfev=CV_NFEV)
+        f = fit_model(fx.structure, fx.effects, rec, idx, test, [dict(fx.values)], max_nfev=CV_NFEV,
+                      tension_weight=fx.tension_weight)
         xs.append(math.degrees(f.rmse_test))
     return spread_deg(xs, f"the training block's {CV_BLOCKS} time blocks drawn with replacement, refitted; the "
                           "test block scored")
@@ -230,7 +275,8 @@ def spread_deg(xs: list[float], method: str) -> dict:
 
 def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,
                   progress: Callable[[str], None] | None = None,
-                  n_bootstrap: int = 0) -> tuple[dict, dict[str, FitResult]]:
+                  n_bootstrap: int = 0,
+                  tension_ratio: float | None = TENSION_PEAK_RATIO) -> tuple[dict, dict[str, FitResult]]:
     """Diagnose one pair recording: the seed model's error, the effects that explain it, the gain.
 
     Parameters
@@ -242,6 +288,8 @@ def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,
     progress : called with a label after every fitted model
     n_bootstrap : draws of the chosen model's test-figure uncertainty (:func:`figure_bootstrap`; 0: none);
         computed after the choice, which it does not affect
+    tension_ratio : factor > 1 of the tension plausibility check (module docstring, step 3b; default
+        :data:`TENSION_PEAK_RATIO`), or None: no check and no ``/T`` refit (the procedure before session 8)
 
     Returns
     -------
@@ -250,7 +298,8 @@ def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,
         ``rmse_test_bootstrap`` when ``n_bootstrap``), ``cause`` (first
         accepted effect, "none" or "unknown"), ``causes`` (accepted in order, plus "unknown" when
         structure is left), ``gain`` (1 - extended / seed test rmse), ``candidates`` (model id ->
-        rmse_cv_deg, rmse_train_deg, score S, price, accepted, round, params; no test figure),
+        rmse_cv_deg, rmse_train_deg, score S, price, accepted, round, params, tension_peak_ratio and, when
+        the check refused it, ``refused``; no test figure), ``tension_check`` (the rule and its factor),
         ``samples`` (which samples were used for what), ``noise_deg``, ``structure_ratio``,
         ``n_train``, ``n_test``, ``elapsed_s``.
     fits : dict of model id -> FitResult (predictions for figures; not JSON)
@@ -258,11 +307,14 @@ def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,
     Raises
     ------
     ValueError
-        ``max_effects`` < 1, or a training block shorter than 16 samples.
+        ``max_effects`` < 1, a training block shorter than 16 samples, ``tension_ratio`` not None and not
+        a finite number > 1, or (with the check) a measured peak proximal tension that is not positive.
     """
     t0 = _time.perf_counter()
     if max_effects < 1:
         raise ValueError(f"max_effects must be >= 1, got {max_effects!r}")
+    if tension_ratio is not None and not (math.isfinite(tension_ratio) and tension_ratio > 1.0):
+        raise ValueError(f"tension_ratio must be None or a finite number > 1, got {tension_ratio!r}")
     n = len(rec.angle)
     n_train = len(range(*train.indices(n)))
     if n_train < 16:
@@ -276,28 +328,53 @@ def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,
     candidates: dict[str, dict] = {}
     chosen, accepted = seed, []
     noise = noise_level(np.asarray(rec.angle, dtype=float))
+
+    def implausible(fx: FitResult) -> bool:
+        if tension_ratio is None:
+            return False
+        r = fx.tension_peak_ratio(rec, train)
+        return r is not None and any(not (1.0 / tension_ratio <= x <= tension_ratio) for x in r)
+
+    def refused(fx: FitResult, eid: str, rnd: int) -> dict:
+        return {"effect": eid, "round": rnd, "rmse_cv_deg": None, "rmse_train_deg": math.degrees(fx.rmse_train),
+                "score": None, "price": None, "accepted": False, "params": {k: float(v) for k, v in fx.values.items()},
+                "tension_peak_ratio": fx.tension_peak_ratio(rec, train),
+                "refused": f"predicted peak proximal tension outside 1/{tension_ratio:g}-{tension_ratio:g} x the "
+                           "measured one on the training block"}
+
     for rnd in range(1, max_effects + 1):
         if cv[chosen.id] <= STRUCTURE_RATIO * noise:
             break                       # nothing left above the noise for another effect to explain
         trial: dict[str, tuple[str, FitResult]] = {}
         if chosen.structure == "seed":
             carried = {p.name: chosen.values[p.name] for e in chosen.effects for p in PAIR_EFFECTS[e].parameters}
-            fx = fit_model("capstan", chosen.effects, rec, train, test, [{**s, **carried} for s in CAPSTAN_STARTS])
-            trial[CAUSE_OF_SEED] = ("capstan", fx)
+            starts = [{**s, **carried} for s in CAPSTAN_STARTS]
+            fx = fit_model("capstan", chosen.effects, rec, train, test, starts)
             tick(fx.id)
+            if implausible(fx):          # step 3b: the structure refitted with the measured tensions
+                fits[fx.id] = fx
+                candidates[fx.id] = refused(fx, CAUSE_OF_SEED, rnd)
+                fx = fit_model("capstan", chosen.effects, rec, train, test, starts, tension_weight=TENSION_FIT_WEIGHT)
+                tick(fx.id)
+            trial[CAUSE_OF_SEED] = ("capstan", fx)
         for eid in applicable(chosen.structure, chosen.effects):
-            fx = fit_model(chosen.structure, chosen.effects + (eid,), rec, train, test, [dict(chosen.values)])
+            fx = fit_model(chosen.structure, chosen.effects + (eid,), rec, train, test, [dict(chosen.values)],
+                           tension_weight=chosen.tension_weight)
             trial[eid] = (chosen.structure, fx)
             tick(fx.id)
         price: dict[str, float] = {}
         for eid, (_, fx) in trial.items():
             fits[fx.id] = fx
+            if implausible(fx):
+                candidates[fx.id] = refused(fx, eid, rnd)
+                continue
             extra = PENALTY * (fx.n_params - chosen.n_params)
             if (fx.rmse_train / chosen.rmse_train) ** 2 + extra >= 1.0 + SCREEN_MARGIN:
                 # priced out on its training error alone (a cv error is not below it): no cv refits
                 candidates[fx.id] = {"effect": eid, "round": rnd, "rmse_cv_deg": None,
                                      "rmse_train_deg": math.degrees(fx.rmse_train), "score": None, "price": None,
                                      "accepted": False, "params": {k: float(v) for k, v in fx.values.items()},
+                                     "tension_peak_ratio": fx.tension_peak_ratio(rec, train),
                                      "screened_out": "training error alone prices it out"}
                 continue
             cv[fx.id] = cross_validate(fx, rec, train)
@@ -305,7 +382,8 @@ def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,
             price[eid] = S / (cv[chosen.id] / cv[seed.id]) ** 2 + PENALTY * (fx.n_params - chosen.n_params)
             candidates[fx.id] = {"effect": eid, "round": rnd, "rmse_cv_deg": math.degrees(cv[fx.id]),
                                  "rmse_train_deg": math.degrees(fx.rmse_train), "score": S, "price": price[eid],
-                                 "accepted": False, "params": {k: float(v) for k, v in fx.values.items()}}
+                                 "accepted": False, "params": {k: float(v) for k, v in fx.values.items()},
+                                 "tension_peak_ratio": fx.tension_peak_ratio(rec, train)}
         if not price:
             break
         best = min(price, key=lambda e: price[e])
@@ -332,5 +410,11 @@ def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,
                                        + ("; after the choice, for that figure's bootstrap refits" if n_bootstrap
                                           else "")},
                "literature": {e: PAIR_EFFECTS[e].literature for e in accepted},
+               "tension_check": None if tension_ratio is None else {
+                   "ratio": tension_ratio, "fit_weight_rad_per_N": TENSION_FIT_WEIGHT,
+                   "rule": "a capstan-structure candidate whose predicted peak proximal tension of either tendon on "
+                           "the training block is outside 1/ratio-ratio x the measured peak is refused; a refused "
+                           "capstan structure is refitted with the measured tensions in the residual (id '/T')",
+                   "inputs": "training block only: command, measured angle and measured proximal tensions"},
                "elapsed_s": _time.perf_counter() - t0}
     return summary, fits

@@ -136,6 +136,14 @@ PAIR_EFFECTS: dict[str, PairEffect] = {e.id: e for e in (
                "rising; strongest where the angle range is largest (the straightest tube)",
                "joint balance T_d,a e^{-+mu_b |theta|} - T_d,b e^{+-mu_b |theta|} = k theta + tau_0",
                (Param("mu_b", "1/rad", 0.0, 5.0, (0.1,), 0.02),), ()),
+    # an observer, not a property of the mechanism: it reads the measured proximal tensions at every sample
+    # (the test block's too: proximal sensors, what the product's estimator has); not offered by default
+    PairEffect("drive_observer", "E10 (drive side)", "a frictionless compliance between the motor and the sheath "
+               "entry (drive, coupling, load-cell mount) whose stretch is the proximal tension it carries",
+               "the measured proximal tensions rise gently after a reversal and steepest at the end of the stroke, "
+               "where the command-only model's rise linearly", "sheath entry at G (c - c_0) - lam_d (T_meas - "
+               "T_meas(0)), T_meas the measured proximal tension of each tendon",
+               (Param("lam_d", "rad/N", 0.0, 5.0, (0.05, 0.2), 0.02),), ()),
 )}
 
 
@@ -192,7 +200,9 @@ def predict_model(structure: str, effects: tuple[str, ...], values: dict[str, fl
                                  (v["K_a"], v["K_b"]), v["k"], lam_s=v.get("lam_s", 0.0), tau_c=v.get("tau_c", 0.0),
                                  shape=v.get("shape", 0.0), offset=a, k2=v.get("k2", 0.0),
                                  theta_c=v.get("theta_c", 0.0), toe=v.get("toe", 0.0),
-                                 toe_tension=v.get("toe_tension", 1.0), mu_b=v.get("mu_b", 0.0), n_nodes=n_nodes)
+                                 toe_tension=v.get("toe_tension", 1.0), mu_b=v.get("mu_b", 0.0), n_nodes=n_nodes,
+                                 observed=(rec.T_a, rec.T_b) if "drive_observer" in effects else None,
+                                 lam_d=v.get("lam_d", 0.0))
         theta = th + v["theta0"]
     if "joint_backlash" in effects:
         theta = play(theta, v["b"], float(theta[0]))

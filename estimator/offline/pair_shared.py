@@ -32,7 +32,10 @@ Shared models are fitted the same way (training samples of every configuration t
   friction`` (E11/E12), from session 4 ``bending-section friction`` (the tendons' wrap in the bending
   section is the joint angle, mu_b) and ``series compliance`` (E10, frictionless, ahead of the sheath),
   ``tendon toe`` (E9: toe, toe_tension; a tendon property, the same in every shape; in the choice until
-  session 4) and from session 5 ``k grows with N`` (k = k + k_N N: the bent tube loads the bending section).
+  session 4) and from session 5 ``k grows with N`` (k = k + k_N N: the bent tube loads the bending section);
+  from session 8 ``capstan+T, drive observer`` and ``capstan, drive observer`` (the sheath entries moved by a
+  drive compliance lam_d times the *measured* proximal tensions at every sample, :mod:`estimator.pair_kernels`;
+  inputs: command and measured proximal tensions; lost on the training cycles).
 
 The structure is chosen by leave-one-configuration-out on the training cycles
 (:func:`estimator.offline.pair_general.choose_shared`). Leave-one-configuration-out for the report: the chosen
@@ -164,6 +167,13 @@ SHARED_MODELS = {m.name: m for m in (
                 ({"s": 2.6, "k": 5.0, "K0_a": 0.57, "K0_b": 0.2, "mu": 0.14, "lam_s": 0.5},
                  {"s": 2.6, "k": 5.0, "K0_a": 0.57, "K0_b": 0.2, "mu": 0.14, "lam_s": 2.0}),
                 tension_weight=TENSION_WEIGHT, stiffness_ratio=True, fixed=(("G", G_FIXED),)),
+    SharedModel("capstan+T, drive observer", "capstan", ("drive_observer",), True,
+                ({"s": 2.6, "k": 5.0, "K0_a": 0.57, "K0_b": 0.2, "mu": 0.14, "lam_d": 0.1},
+                 {"s": 2.6, "k": 5.0, "K0_a": 0.57, "K0_b": 0.2, "mu": 0.14, "lam_d": 0.5}),
+                tension_weight=TENSION_WEIGHT, stiffness_ratio=True, fixed=(("G", G_FIXED),)),
+    SharedModel("capstan, drive observer", "capstan", ("drive_observer",), True,
+                ({"G": 1.4, "lam": 0.5, "k": 3.0, "K0_a": 0.6, "K0_b": 0.2, "mu": 0.13, "lam_d": 0.1},
+                 {"G": 2.5, "lam": 0.9, "k": 4.0, "K0_a": 0.6, "K0_b": 0.2, "mu": 0.13, "lam_d": 0.3})),
 )}
 #: Candidates of the shared structure, in the order of the forward choice by leave-one-configuration-out
 #: on the training cycles (:func:`estimator.offline.pair_general.choose_shared`). ``capstan+T, tendon toe``

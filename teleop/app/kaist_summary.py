@@ -34,7 +34,8 @@ def format_kaist(s: dict) -> str:
                      f"  {_fmt_causes(d['causes'])} ({d['extended']['model']})")
     lines.append("extended: the model the diagnosis chose; shared: one parameter set for all configurations with "
                  "K = K0 + mu N; LOCO: refitted without that configuration; T_in: the extended model's prediction "
-                 "of the proximal tensions (not fitted)")
+                 "of the proximal tensions on the test cycle (fitted on cycle 1 only for '/T' models, whose angle-only "
+                 "fit the tension check refused)")
     unc = [(c["config_deg"], _pm(c["diagnosis"]["extended"])) for c in s["configurations"]]
     if any(u for _, u in unc):
         lines.append("extended, test RMSE +- bootstrap std [95 % interval] (training blocks redrawn, refitted): "

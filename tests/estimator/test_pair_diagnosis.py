@@ -272,3 +272,42 @@ def test_tension_weighted_fit_recovers_a_series_compliance_and_predicts_the_load
     assert plain.values == zero.values                                  # weight 0: the angle-only fit, unchanged
     with pytest.raises(ValueError, match="tension_weight must be finite and >= 0"):
         fit_model("capstan", (), rec, TRAIN, TEST, [TRUE], tension_weight=-1.0)
+
+
+# ---- session 8: tension plausibility of the choice, the drive-side observer -----------------------
+
+def test_tension_check_refuses_a_capstan_fit_whose_tension_peaks_are_off_and_refits_it_with_the_tensions():
+    rec = capstan_rec(seed=4)
+    f = fit_model("capstan", (), rec, TRAIN, TEST, [dict(TRUE)])
+    assert f.tension_peak_ratio(rec, TRAIN) == pytest.approx([1.0, 1.0], abs=0.02)
+    T = np.column_stack([rec.T_a, rec.T_b])
+    T[1:] = 5.0 + 3.0 * (T[1:] - 5.0)            # load cells that read the motion 3x: the fit's peaks 0.5x
+    odd = Rec(rec.angle, T, rec.command)
+    s, fits = diagnose_pair(odd, TRAIN, TEST, max_effects=1)
+    assert s["candidates"]["capstan"]["refused"] and not s["candidates"]["capstan"]["accepted"]
+    assert s["extended"]["model"] == "capstan/T" and "tensions" in s["extended"]["fit_inputs"]
+    assert all(1 / 1.5 <= x <= 1.5 for x in s["candidates"]["capstan/T"]["tension_peak_ratio"])
+    assert s["tension_check"]["ratio"] == 1.5
+    s0, _ = diagnose_pair(odd, TRAIN, TEST, max_effects=1, tension_ratio=None)   # the procedure before session 8
+    assert s0["extended"]["model"] == "capstan" and s0["tension_check"] is None
+    with pytest.raises(ValueError, match="tension_ratio"):
+        diagnose_pair(odd, TRAIN, TEST, tension_ratio=0.9)
+
+
+def test_drive_observer_is_the_command_model_when_off_and_reads_the_measured_tensions():
+    rec = capstan_rec(seed=5)
+    args = (rec.command, (5.0, 5.0), TRUE["G"], (TRUE["lam"],) * 2, (TRUE["K_a"], TRUE["K_b"]), TRUE["k"])
+    base = simulate_pair(*args)
+    off = simulate_pair(*args, observed=(rec.T_a, rec.T_b), lam_d=0.0)
+    assert all(np.array_equal(x, y) for x, y in zip(base, off))
+    on = simulate_pair(*args, observed=(rec.T_a, rec.T_b), lam_d=0.05)
+    assert np.ptp(on[0]) < np.ptp(base[0])         # the entry gives way as the measured tension rises
+    flat = simulate_pair(*args, observed=(np.full_like(rec.T_a, 5.0), np.full_like(rec.T_b, 5.0)), lam_d=0.5)
+    assert np.array_equal(flat[0], base[0])        # no measured change: no correction
+    th, _ = predict_model("capstan", ("drive_observer",), {**TRUE, "lam_d": 0.05}, rec)
+    assert np.allclose(th - TRUE["theta0"], on[0])
+    with pytest.raises(ValueError, match="observed"):
+        simulate_pair(*args, observed=(rec.T_a[:-1], rec.T_b), lam_d=0.1)
+    with pytest.raises(ValueError, match="observer"):
+        simulate_pair(*args, observed=(rec.T_a, rec.T_b), lam_d=0.1, tau_c=0.1)
+    assert "drive_observer" not in applicable("capstan", ())         # not offered by default
