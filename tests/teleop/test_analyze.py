@@ -265,6 +265,8 @@ def test_kaist_findings_hold_on_the_real_data(tmp_path, capsys):
         assert g["causes"][0] == "capstan_joint" and g["extended"]["rmse_test_deg"] < 0.5 * g["seed"]["rmse_test_deg"]
         assert g["extended"]["rmse_test_deg"] < 1.5 and "test" not in str(g["candidates"])   # choice: training only
         assert g["samples"]["fit"][1] <= g["samples"]["test"][0]
+        r = g["candidates"][g["extended"]["model"]]["tension_peak_ratio"]      # session 8: tension check
+        assert g["tension_check"]["ratio"] == 1.5 and all(1 / 1.5 <= x <= 1.5 for x in r)
     assert s["shared"]["E6"]["accepted"] and 0.05 < s["shared"]["mu"] < 0.3
     ms = s["shared"]["models"]
     assert ms["capstan"]["rmse_test_deg"] < 0.5 * ms["capstan, mu = 0"]["rmse_test_deg"]      # K grows with N
