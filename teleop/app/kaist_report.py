@@ -8,7 +8,8 @@ Finding 1 (seed pair model against the baselines): ``kaist_rmse.png``, ``kaist_l
 * ``kaist_pair_residuals.png``  residual (predicted - measured) against the phase of the test
   cycle, seed and extended model, per configuration;
 * ``kaist_pair_tensions.png``   measured proximal tensions beside the extended model's prediction
-  (the capstan-joint model predicts them from the command; they are not fitted);
+  (the capstan-joint model predicts them from the command; the test cycle's are never fitted, cycle 1's only
+  for a ``/T`` model, whose angle-only fit the tension check refused);
 * ``kaist_shared.png``          K against the bend angle (shared fit, per-configuration fits,
   model-free band) and the held-out RMSE of every model per configuration;
 * ``kaist_tension_angle.png``   model-free: the proximal tension difference against the distal angle,
@@ -203,7 +204,7 @@ def _pair_figures(recs, details, summary, d: Path, plt) -> list[Path]:
             ax.plot(x, fx.T_in[te, 0], color="tab:blue", lw=1.2, label="T_a extended model")
             ax.plot(x, fx.T_in[te, 1], "--", color="tab:blue", lw=1.2, label="T_b extended model")
             r = c["diagnosis"]["extended"]["rmse_T_in_N"]
-            ax.set_title(f"N = {rec.config_deg} deg (RMSE {r:.1f} N)")
+            ax.set_title(f"N = {rec.config_deg} deg (RMSE {r:.1f} N{', /T' if fx.tension_weight > 0 else ''})")
         else:
             ax.set_title(f"N = {rec.config_deg} deg")
         ax.set_xlabel("command [deg]")
@@ -211,7 +212,7 @@ def _pair_figures(recs, details, summary, d: Path, plt) -> list[Path]:
     axes[0][0].set_ylabel("proximal tension [N]")
     axes[0][0].legend(fontsize=7, loc="upper center")
     fig.suptitle("Proximal tensions on the test cycle: measured, and predicted by the extended model from the "
-                 "command (not fitted)")
+                 "command (not fitted on this cycle; /T: fitted on cycle 1)")
     fig.tight_layout()
     paths.append(d / "kaist_pair_tensions.png")
     fig.savefig(paths[-1], dpi=100)
