@@ -137,7 +137,7 @@ def _twin_diagnosis(data) -> dict:
                 "twin_scores": {}}
     return {"twin_cause": res["cause"], "twin_causes": res["causes"],
             "twin_structure": max(res["structure"]["base"].values()),
-            "twin_scores": _scores(res)}
+            "twin_scores": _scores(res), "twin_detail": _detail(res)}
 
 
 def one(case: tuple) -> dict:
@@ -168,10 +168,15 @@ def one(case: tuple) -> dict:
             "structure": max(res["structure"]["base"].values()),
             "structure_ext": max(res["structure"]["extended"].values()),
             "footprint": fp, **extra,
-            "detail": {"structure": res["structure"], "noise": res["noise"],
-                       "candidates": {k: {m: v[m] for m in ("validation_rmse_T_out_N", "validation_rmse_x_out_m",
-                                                            "score", "penalised_score")}
-                                      for k, v in res["candidates"].items()}}}
+            "detail": _detail(res)}
+
+
+def _detail(res: dict) -> dict:
+    """A diagnosis' structure ratios, noise floors and every candidate's validation figures (for the JSON)."""
+    return {"structure": res["structure"], "noise": res["noise"],
+            "candidates": {k: {m: v[m] for m in ("validation_rmse_T_out_N", "validation_rmse_x_out_m",
+                                                 "score", "penalised_score", "fold_values")}
+                           for k, v in res["candidates"].items()}}
 
 
 def _want(effect: str) -> set[str]:

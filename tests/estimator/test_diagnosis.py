@@ -539,3 +539,29 @@ def test_lumped_clean_constant_force_load_gives_none_not_a_small_offset():
     rec = lumped_scenarios.record(None, seed=1017111, duration=60.0)
     res = diagnose(rec.data, effects=("friction_offset", "sensor_offset:T_in", "sensor_offset:T_out"))
     assert res["causes"] == [], ({k: (c["score"], c["parameters"]) for k, c in res["candidates"].items()})
+
+
+def test_an_effect_near_the_floor_that_removes_enough_of_the_base_structure_is_named():
+    # pre-sliding of 128 um on a preloaded spring: the base leaves 1.9 / 2.0 x the floor on T_out / x_out, under
+    # the structure threshold, and pre-sliding explains 61 % of it (S 0.39): B (1 - S) = 4.5 squared floors, was
+    # "none" under the STRONG_SCORE rule alone (session 17, lumped dev15 1406112)
+    rec = lumped_scenarios.record("presliding", seed=1406112, level=0.8, duration=60.0)
+    res = diagnose(rec.data, effects=("presliding", "distal_backlash", "sensor_lag:T_in"))
+    assert res["causes"] == ["presliding"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
+    base = res["structure"]["base"]
+    assert max(base.values()) <= res["settings"]["weak_structure"]
+    s = res["candidates"]["presliding"]["score"]
+    assert s > res["settings"]["strong_score"]                  # the old rule alone would say "none"
+    assert sum(v * v for v in base.values()) * (1.0 - s) >= res["settings"]["excess_min"]
+    assert res["parameters"]["x_p"]["value"] == pytest.approx(rec.truth["parameters"]["distance"], rel=0.25)
+
+
+def test_a_clean_recording_whose_best_extension_removes_less_than_the_excess_bound_gives_none():
+    # the clean lumped recording closest to EXCESS_MIN on the development sets (the clean twin of dev15 1404111,
+    # a distal backlash of 16 um at S 0.44 at base structure 0.9 / 1.9, B (1 - S) = 2.39): still "none"
+    rec = lumped_scenarios.record(None, seed=1404111, level=0.8, duration=60.0)
+    res = diagnose(rec.data, effects=("distal_backlash", "velocity_friction", "sensor_lag:T_in"))
+    assert res["causes"] == [], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
+    base = res["structure"]["base"]
+    s = res["candidates"]["distal_backlash"]["score"]
+    assert 0.0 < sum(v * v for v in base.values()) * (1.0 - s) < res["settings"]["excess_min"]
