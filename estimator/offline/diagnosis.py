@@ -70,8 +70,9 @@ MID_SCORE = 0.5
 #: the signals: B (1 - S), B = sum of the base's squared structure ratios (session 17: a structure ratio counts
 #: how far the base is from its floor, S only which share of it an extension explains; near the floor the two
 #: together say how much an extension explains. Set on lumped dev15 + dev16 + dev17, clean rows and twins: the
-#: largest values of a clean recording's best extension were 2.39 (the twin of dev15 1404111, a 16 um backlash)
-#: and 2.06 (dev17 1600503); 2.25 would have named six more hidden effects and that twin)
+#: largest values of the best extension of a clean recording the old rule left at "none" were 2.39 (the twin of
+#: dev15 1404111, a 16 um backlash) and 2.06 (dev17 1600503); 2.25 would have named four more hidden effects and
+#: that twin. The twin of dev17 1603102, named an x_out offset at S 0.13 by the old rule, reaches 3.4)
 EXCESS_MIN = 2.5
 ROUTE_SCORE = 0.5           # the finer route replaces the thirds as the base below this validation score [-]
 DOMINANT_SCORE = 0.1        # accepted extensions with S below this are named first even with much structure left [-]
