@@ -197,12 +197,6 @@ def _structure(fit: _Fit, noise: dict[str, float]) -> dict[str, float]:
     return {n: math.sqrt(v) / max(noise[n], 1e-300) for n, v in fit.val_mse().items()}
 
 
-def _excess(fit: _Fit, noise: dict[str, float]) -> float:
-    """B: the sum over signals of a model's squared structure ratios (validation mean square over the squared
-    floor, mean over the folds) [-]; B (1 - S) is what an extension with score S removes of it (EXCESS_MIN)."""
-    return sum(v * v for v in _structure(fit, noise).values())
-
-
 def _gain(ext: dict, base: dict, signal: str) -> float | None:
     b, e = base.get(f"rmse_{signal}_{_UNITS[signal]}"), ext.get(f"rmse_{signal}_{_UNITS[signal]}")
     return None if b is None or e is None or b <= 0 else 1.0 - e / b
@@ -414,10 +408,13 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     chosen = base
     pool = dict(singles)
     # at the floor: "none", unless one extension alone explains most of what is left (S < STRONG_SCORE)
-    at_floor = max(_structure(base, noise).values()) <= STRUCTURE_RATIO
+    base_structure = _structure(base, noise)
+    at_floor = max(base_structure.values()) <= STRUCTURE_RATIO
     # (no clean development recording of either simulator had a base structure ratio above 1.85: between
     # WEAK_STRUCTURE and the threshold, a weaker explanation than STRONG_SCORE is enough)
-    strong = MID_SCORE if max(_structure(base, noise).values()) > WEAK_STRUCTURE else STRONG_SCORE
+    strong = MID_SCORE if max(base_structure.values()) > WEAK_STRUCTURE else STRONG_SCORE
+    # ... or an extension that removes EXCESS_MIN squared floors of the base's validation mean square, B (1 - S)
+    base_squares = sum(v * v for v in base_structure.values())
     while len(chosen.effects) < max_effects and pool:
         if chosen is not base and (at_floor or max(_structure(chosen, noise).values()) <= STRUCTURE_RATIO):
             break                       # nothing left above the noise for another effect to explain
@@ -445,7 +442,7 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         best = look_alike(min(order, key=lambda k: order[k]), price, data)
         best = toe_or_play(best, {eid: (f.S, f.values[0]) for eid, f in trial.items()}, price)
         if price[best] >= 1.0 or (at_floor and trial[best].S >= strong
-                                  and _excess(base, noise) * (1.0 - trial[best].S) < EXCESS_MIN):
+                                  and base_squares * (1.0 - trial[best].S) < EXCESS_MIN):
             break
         chosen = trial[best]
         pool.pop(best)
