@@ -84,9 +84,9 @@ CV_BLOCKS = 8
 #: 0.74-1.40x the measured ones at N = 0-180 (the model family's known tension-shape error) and at 1.64 and
 #: 1.85x at N = 240, where the fit runs along the G-lam valley (docs/findings.md, Finding 3).
 TENSION_PEAK_RATIO = 1.5
-#: Weight [rad/N] of the measured proximal tensions in the residual of a ``/T`` refit (step 3b): the
-#: shared ``+T`` models' weight (:data:`estimator.offline.pair_shared.TENSION_WEIGHT`, 1 N costs as much
-#: as 0.57 deg).
+#: Weight [rad/N] of the measured proximal tensions in the residual of a ``/T`` refit (step 3b), also the
+#: shared ``+T`` models' weight (:data:`estimator.offline.pair_shared.TENSION_WEIGHT` is this value; 1 N
+#: costs as much as 0.57 deg).
 TENSION_FIT_WEIGHT = 0.01
 
 
@@ -329,18 +329,19 @@ def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,
     chosen, accepted = seed, []
     noise = noise_level(np.asarray(rec.angle, dtype=float))
 
-    def implausible(fx: FitResult) -> bool:
-        if tension_ratio is None:
-            return False
-        r = fx.tension_peak_ratio(rec, train)
-        return r is not None and any(not (1.0 / tension_ratio <= x <= tension_ratio) for x in r)
-
-    def refused(fx: FitResult, eid: str, rnd: int) -> dict:
+    def entry(fx: FitResult, eid: str, rnd: int) -> dict:
+        """A candidate's JSON entry before cross-validation (rmse_cv_deg, score and price None)."""
         return {"effect": eid, "round": rnd, "rmse_cv_deg": None, "rmse_train_deg": math.degrees(fx.rmse_train),
                 "score": None, "price": None, "accepted": False, "params": {k: float(v) for k, v in fx.values.items()},
-                "tension_peak_ratio": fx.tension_peak_ratio(rec, train),
-                "refused": f"predicted peak proximal tension outside 1/{tension_ratio:g}-{tension_ratio:g} x the "
-                           "measured one on the training block"}
+                "tension_peak_ratio": fx.tension_peak_ratio(rec, train)}
+
+    def implausible(ratio: list[float] | None) -> bool:
+        """Whether the tension check (step 3b) refuses a candidate with these peak ratios."""
+        return (tension_ratio is not None and ratio is not None
+                and any(not (1.0 / tension_ratio <= x <= tension_ratio) for x in ratio))
+
+    refusal = (None if tension_ratio is None else f"predicted peak proximal tension outside 1/{tension_ratio:g}-"
+               f"{tension_ratio:g} x the measured one on the training block")
 
     for rnd in range(1, max_effects + 1):
         if cv[chosen.id] <= STRUCTURE_RATIO * noise:
@@ -351,9 +352,10 @@ def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,
             starts = [{**s, **carried} for s in CAPSTAN_STARTS]
             fx = fit_model("capstan", chosen.effects, rec, train, test, starts)
             tick(fx.id)
-            if implausible(fx):          # step 3b: the structure refitted with the measured tensions
+            e = entry(fx, CAUSE_OF_SEED, rnd)
+            if implausible(e["tension_peak_ratio"]):    # step 3b: the structure refitted with the measured tensions
                 fits[fx.id] = fx
-                candidates[fx.id] = refused(fx, CAUSE_OF_SEED, rnd)
+                candidates[fx.id] = {**e, "refused": refusal}
                 fx = fit_model("capstan", chosen.effects, rec, train, test, starts, tension_weight=TENSION_FIT_WEIGHT)
                 tick(fx.id)
             trial[CAUSE_OF_SEED] = ("capstan", fx)
@@ -365,25 +367,19 @@ def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,
         price: dict[str, float] = {}
         for eid, (_, fx) in trial.items():
             fits[fx.id] = fx
-            if implausible(fx):
-                candidates[fx.id] = refused(fx, eid, rnd)
+            e = entry(fx, eid, rnd)
+            if implausible(e["tension_peak_ratio"]):
+                candidates[fx.id] = {**e, "refused": refusal}
                 continue
             extra = PENALTY * (fx.n_params - chosen.n_params)
             if (fx.rmse_train / chosen.rmse_train) ** 2 + extra >= 1.0 + SCREEN_MARGIN:
                 # priced out on its training error alone (a cv error is not below it): no cv refits
-                candidates[fx.id] = {"effect": eid, "round": rnd, "rmse_cv_deg": None,
-                                     "rmse_train_deg": math.degrees(fx.rmse_train), "score": None, "price": None,
-                                     "accepted": False, "params": {k: float(v) for k, v in fx.values.items()},
-                                     "tension_peak_ratio": fx.tension_peak_ratio(rec, train),
-                                     "screened_out": "training error alone prices it out"}
+                candidates[fx.id] = {**e, "screened_out": "training error alone prices it out"}
                 continue
             cv[fx.id] = cross_validate(fx, rec, train)
             S = (cv[fx.id] / cv[seed.id]) ** 2
-            price[eid] = S / (cv[chosen.id] / cv[seed.id]) ** 2 + PENALTY * (fx.n_params - chosen.n_params)
-            candidates[fx.id] = {"effect": eid, "round": rnd, "rmse_cv_deg": math.degrees(cv[fx.id]),
-                                 "rmse_train_deg": math.degrees(fx.rmse_train), "score": S, "price": price[eid],
-                                 "accepted": False, "params": {k: float(v) for k, v in fx.values.items()},
-                                 "tension_peak_ratio": fx.tension_peak_ratio(rec, train)}
+            price[eid] = S / (cv[chosen.id] / cv[seed.id]) ** 2 + extra
+            candidates[fx.id] = {**e, "rmse_cv_deg": math.degrees(cv[fx.id]), "score": S, "price": price[eid]}
         if not price:
             break
         best = min(price, key=lambda e: price[e])
