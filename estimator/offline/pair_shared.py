@@ -51,7 +51,7 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import least_squares
 
-from estimator.offline.pair_diagnosis import FIT_TOL, MAX_NFEV
+from estimator.offline.pair_diagnosis import FIT_TOL, MAX_NFEV, TENSION_FIT_WEIGHT
 from estimator.offline.pair_models import Param, head, model_params, predict_model
 
 __all__ = ["SharedModel", "SHARED_MODELS", "CHOICE", "COMPARED", "TENSION_WEIGHT", "LEAVE_ONE_OUT", "fit_shared",
@@ -62,8 +62,9 @@ _MU_A = Param("mu_a", "1/rad", -1.0, 3.0, (0.15,), 0.02)
 _MU_B = Param("mu_b", "1/rad", -1.0, 3.0, (0.15,), 0.02)
 _S = Param("s", "N/rad", 0.05, 100.0, (3.0,), 0.2)
 #: Weight of the proximal-tension residual [rad/N] in the "+T" shared fits: 1 N of tension error
-#: costs as much as 0.57 deg of angle error (tension range ~10 N, angle range 20-70 deg).
-TENSION_WEIGHT = 0.01
+#: costs as much as 0.57 deg of angle error (tension range ~10 N, angle range 20-70 deg). One value with the
+#: per-configuration ``/T`` refits (:data:`estimator.offline.pair_diagnosis.TENSION_FIT_WEIGHT`).
+TENSION_WEIGHT = TENSION_FIT_WEIGHT
 #: Transmission G held in the "+T" models: with the tensions in the fit the data pin s = G / lam but
 #: not G itself (bootstrap 95 % interval 3-15 when free; the held-out angle changes by < 0.3 deg for G
 #: in 3-20, docs/findings.md, Finding 3), so G is fixed and s carries the tendon compliance.
