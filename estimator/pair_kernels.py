@@ -256,10 +256,9 @@ def _simulate_observed(c, Tma, Tmb, lam_d, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, 
             u = prev + (c[i] - prev) * f - c0
             ta = pa + (Tma[i] - pa) * f - Tma[0]
             tb = pb + (Tmb[i] - pb) * f - Tmb[0]
-            xa = xa0 + G * u - lam_d * ta
-            xb = xb0 - G * u - lam_d * tb
-            advance_proximal(Ta, lo_a, hi_a, wa, cpa, cra, xa - th, 0.0, sbx, sbF, sbs)
-            advance_proximal(Tb, lo_b, hi_b, wb, cpb, crb, xb + th, 0.0, sbx, sbF, sbs)
+            # the motors' step with each entry's origin moved back by the drive's stretch
+            xa, xb = _motor_substep(Ta, Tb, lo_a, hi_a, wa, cpa, cra, lo_b, hi_b, wb, cpb, crb, xa0 - lam_d * ta,
+                                    xb0 - lam_d * tb, G, u, th, sbx, sbF, sbs)
             th = settle_joint(Ta, dlo_a, dhi_a, wa, xa, Tb, dlo_b, dhi_b, wb, xb, 1.0, th, k, 0.0, 0.0, _BIG,
                               -_BIG, _BIG, 0.0, tau0, slope)
         prev = c[i]
