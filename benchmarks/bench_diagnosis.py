@@ -28,8 +28,9 @@ of commit 1a42dcb, seen since) and ``dev16`` (offsets + 1500000: the final set o
 code of commit b632d18, seen since) and ``dev17`` (offsets + 1600000: the final set of session 15, run once
 with the code of commit 2594eb5, seen since) and ``dev18`` (offsets + 1700000: the final set of session 16,
 run once in session 17 with the code of commit 37a09a3, seen since) and ``dev19`` (offsets + 1800000: the
-final set of session 18, run once with the code of commit 8b4114e, seen since) are development data.
-``final`` (offsets + 1900000) is the final set fixed at the end of session 18 for the next session's run.
+final set of session 18, run once with the code of commit 8b4114e, seen since) and ``dev20`` (offsets + 1900000:
+the final set fixed at the end of session 18, run once in session 19 with the code of commit ecd1fa8, seen since)
+are development data. ``final`` (offsets + 2000000) is the final set fixed in session 19 for its closing run.
 Seed layout (session 4): every hidden-effect recording has its own seed, so its own simulated rig
 (route, K, EA, load, rate, noise): effect k of EFFECT_IDS, level j, repeat s uses
 base + 100 + 1000 k + 10 j + s (before session 4 every effect of a set shared the four rigs of
@@ -67,8 +68,8 @@ SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "dev4": 300000, "dev5": 4
              "dev7": 600000, "dev8": 700000, "dev9": 800000,
              "dev10": 900000, "dev11": 1000000, "dev12": 1100000, "dev13": 1200000,
              "dev14": 1300000, "dev15": 1400000, "dev16": 1500000,
-             "dev17": 1600000, "dev18": 1700000, "dev19": 1800000,
-             "final": 1900000}   # fixed at the end of session 18, before any further change (docstring)
+             "dev17": 1600000, "dev18": 1700000, "dev19": 1800000, "dev20": 1900000,
+             "final": 2000000}   # fixed in session 19, before any change (docstring)
 UNCATALOGUED = "load_cell_wander"
 
 
