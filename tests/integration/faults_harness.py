@@ -96,6 +96,7 @@ class FaultRun:
     stats: dict[str, dict] = field(default_factory=dict)
     faults: dict[str, dict] = field(default_factory=dict)
     errors: dict[str, str] = field(default_factory=dict)
+    t_stop: float = float("inf")      # when the harness sent the first SIGINT (the end of the observation)
 
     # ---- figures ------------------------------------------------------------------------------
     @property
@@ -131,9 +132,11 @@ class FaultRun:
         return bool(np.any(d.extra["state"][sel] == int(SideState.ENGAGED)))
 
     def states_after(self, side: str, t0: float):
+        """The side's recorded states from ``t0`` until the harness stopped it (rows after its SIGINT are the
+        shutdown: a side that sees its peer stop first goes SAFE there)."""
         d = getattr(self, side)
         t = d.time if side == "master" else d.extra["t_node"]
-        return d.extra["state"][t >= t0].astype(int)
+        return d.extra["state"][(t >= t0) & (t < self.t_stop)].astype(int)
 
     def max_gap(self, side: str) -> float:
         d = getattr(self, side)
@@ -162,13 +165,17 @@ def _wait(pred, timeout: float, what: str, procs) -> None:
 
 def run_fault(tmp: Path, name: str, *, inject: dict[str, str] | None = None, signal_to: str | None = None,
               sig: int | None = None, resume_after: float | None = None, observe: float = 1.0,
-              engaged_for: float = 0.6, trigger_side: str | None = None, instrument: str = "tendon") -> FaultRun:
+              engaged_for: float = 0.6, trigger_side: str | None = None, instrument: str = "tendon",
+              settle: float = 0.0) -> FaultRun:
     """Run one fault scenario; see the module docstring.
 
     inject : {"master"|"slave": spec} passed as ``--inject`` (use ``on=usr1`` to start at the fault).
     signal_to, sig : send ``sig`` to that side at the fault (SIGKILL, SIGSTOP); ``resume_after`` [s]:
         SIGCONT after this long.
     trigger_side : side whose injector is triggered by SIGUSR1 at the fault.
+    settle : after ``observe``, wait up to this long [s] for both sides to be ENGAGED again before stopping
+        them (a ride-through fault: a brief SAFE from a process stall at the end of the window is then seen
+        to recover, or seen not to; the recordings decide, this only bounds the wait).
     instrument : ``"tendon"`` or ``"3dof"`` (module docstring).
     """
     joints = instrument == "3dof"
@@ -212,6 +219,13 @@ def run_fault(tmp: Path, name: str, *, inject: dict[str, str] | None = None, sig
                 time.sleep(resume_after)
                 procs[signal_to].send_signal(signal.SIGCONT)
             time.sleep(observe)
+            if settle > 0.0:
+                deadline = time.monotonic() + settle
+                while time.monotonic() < deadline and not all(
+                        _observer_state(b) == SideState.ENGAGED for b in beats.values()):
+                    time.sleep(0.01)
+                time.sleep(0.05)      # a few rows after the last heartbeat seen
+        t_stop = time.monotonic()
         for p in procs.values():
             if p.poll() is None:
                 p.send_signal(signal.SIGINT)
@@ -227,7 +241,7 @@ def run_fault(tmp: Path, name: str, *, inject: dict[str, str] | None = None, sig
             if p.poll() is None:
                 p.kill()
                 p.wait()
-    out = FaultRun(name, t_fault, run_dir, {s: logs[s].read_text() for s in logs}, rc)
+    out = FaultRun(name, t_fault, run_dir, {s: logs[s].read_text() for s in logs}, rc, t_stop=t_stop)
     for side in ("slave", "master"):
         try:
             if joints:

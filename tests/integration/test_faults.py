@@ -8,7 +8,9 @@ other side keeps talking), the recordings are readable and continuous, no render
 ``master.mapping.force_limit`` at any sample, nothing crashes (no traceback; every exit code is the
 expected one). Faults inside the link budget (30 ms delay, 10 % loss, duplicates, reordering) must
 be ridden through: still ENGAGED at the end and > 90 % of the time after the fault (brief SAFE
-blips from a process stall on a loaded machine are counted and reported), messages counted.
+blips from a process stall on a loaded machine are counted and reported; the end is when both sides are
+ENGAGED again after the observation window, or 2 s later, and rows after the harness's SIGINT are not
+counted: a side that sees its peer stop first goes SAFE there), messages counted.
 
 ``pytest -m integration tests/integration/test_faults.py -s`` prints the table of figures that
 docs/reliability.md reports.
@@ -30,6 +32,7 @@ pytestmark = pytest.mark.integration
 LIMIT_MS = 100.0            # the acceptance: time to safe state <= 100 ms for every fault
 FORCE_LIMIT = 4.0           # master.mapping.force_limit of the default config [N]
 ENGAGED = int(SideState.ENGAGED)
+RIDE_SETTLE = 2.0           # longest wait for a ride-through run to be ENGAGED again at its end [s]
 
 # name: run_fault keywords, who must go SAFE and how the time is measured ("last": from the last
 # valid message of the other side; "fault": from the fault time), ride-through faults have none
@@ -97,7 +100,10 @@ def _counts(run) -> dict[str, int]:
 @pytest.mark.parametrize("name", list(SCENARIOS))
 def test_fault(name, instrument, tmp_path_factory):
     sc = SCENARIOS[name]
-    run = run_fault(tmp_path_factory.mktemp(instrument), name, instrument=instrument, **sc["kw"])
+    # a ride-through fault waits (up to RIDE_SETTLE) for both sides to be ENGAGED before they are stopped, so a
+    # brief SAFE that a stall puts at the very end of the window is seen to recover (or not) like any other
+    kw = dict(sc["kw"], settle=RIDE_SETTLE) if not sc["safe"] else sc["kw"]
+    run = run_fault(tmp_path_factory.mktemp(instrument), name, instrument=instrument, **kw)
     stopped_side = sc["kw"].get("signal_to")
     killed = stopped_side if sc["kw"].get("sig") == signal.SIGKILL else None
 
