@@ -131,11 +131,20 @@ def _scores(res: dict) -> dict[str, float]:
     return {k: round(v["score"], 3) for k, v in res["candidates"].items()}
 
 
-def _twin_diagnosis(data) -> dict:
-    """Diagnosis of a clean twin: its causes, base structure ratio and candidate scores (an error counts as an
-    answer)."""
+def known_route(truth: dict) -> np.ndarray | None:
+    """The route shape of a simulated rig as a user who knows the instrument's route would pass it
+    (``diagnose(..., wrap_shape=...)``, as ``teleop analyze --route CONFIG`` does): the normalised cumulative
+    wrap angle of ``truth["route"]`` ((length [m], radius [m]) pieces), shape (257,)."""
+    from estimator.sheath import SheathGeometry
+    from slave.calibrate import wrap_shape
+    return wrap_shape(SheathGeometry(truth["route"]))
+
+
+def _twin_diagnosis(data, shape: np.ndarray | None = None) -> dict:
+    """Diagnosis of a clean twin (with the route ``shape`` held when given): its causes, base structure ratio
+    and candidate scores (an error counts as an answer)."""
     try:
-        res = diagnose(data)
+        res = diagnose(data, wrap_shape=shape)
     except Exception as err:          # noqa: BLE001 - reported as the twin's answer
         return {"twin_cause": f"error: {type(err).__name__}", "twin_causes": ["error"], "twin_structure": float("nan"),
                 "twin_scores": {}}
@@ -145,7 +154,7 @@ def _twin_diagnosis(data) -> dict:
 
 
 def one(case: tuple) -> dict:
-    sim, effect, level, seed, duration, rate, *flags = case
+    sim, effect, level, seed, duration, rate, twins, route = case
     kw = {"seed": seed, "level": level, "duration": duration, **({"rate_hz": rate} if sim == "rig" or rate else {})}
     rec = _record(sim)(None if effect == NONE else effect, **kw)
     # the clean twin of a hidden effect (same seed, level and rate): how far the effect moves the recording;
@@ -153,11 +162,12 @@ def one(case: tuple) -> dict:
     twin = _record(sim)(None, **kw) if effect in EFFECT_IDS else None
     fp = footprint(rec.data, twin.data) if twin is not None else {}
     extra = {"load": _load_kind(rec.truth)}             # the twin's rig is the recording's
-    if twin is not None and flags and flags[0]:
-        extra.update(_twin_diagnosis(twin.data))
+    shape = known_route(rec.truth) if route else None   # --route-known: the route held, not fitted
+    if twin is not None and twins:
+        extra.update(_twin_diagnosis(twin.data, shape))
     t0 = time.perf_counter()
     try:
-        res = diagnose(rec.data)
+        res = diagnose(rec.data, wrap_shape=shape)
     except Exception as err:            # a recording the diagnosis cannot take counts as a miss, the run goes on
         return {"sim": sim, "effect": effect, "level": rec.truth["level"], "seed": seed,
                 "cause": f"error: {type(err).__name__}: {err}", "causes": ["error"], "equivalent": [], "gain": 0.0,
@@ -325,6 +335,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--twins", action="store_true",
                     help="diagnose the clean twin of every hidden-effect recording too (false alarms on that many "
                          "more clean rigs; about twice the run time)")
+    ap.add_argument("--route-known", action="store_true",
+                    help="give the diagnosis each rig's true route shape (a user who knows the instrument's route: "
+                         "`teleop analyze --route CONFIG`) instead of fitting where the friction sits")
     ap.add_argument("--shared-rigs", action="store_true",
                     help="seed layout before session 4: every effect of a set on the same four rigs")
     ap.add_argument("--speed-only", action="store_true", help="only time a 10-minute 1 kHz recording")
@@ -338,10 +351,13 @@ def main(argv: list[str] | None = None) -> None:
     cases: list[tuple] = []
     for sim in sims:
         rate = args.rate if args.rate or sim == "lumped" else 1000.0
-        cases += [(sim, e, lv, effect_seed(b, k, j, s, args.shared_rigs), args.duration, rate, args.twins)
+        cases += [(sim, e, lv, effect_seed(b, k, j, s, args.shared_rigs), args.duration, rate, args.twins,
+                   args.route_known)
                   for k, e in enumerate(EFFECT_IDS) for j, lv in enumerate(levels) for s in range(args.seeds)]
-        cases += [(sim, NONE, None, b + 500 + s, args.duration, rate) for s in range(args.clean)]
-        cases += [(sim, UNCATALOGUED, 1.0, b + 900 + s, args.duration, rate) for s in range(args.unknown)]
+        cases += [(sim, NONE, None, b + 500 + s, args.duration, rate, False, args.route_known)
+                  for s in range(args.clean)]
+        cases += [(sim, UNCATALOGUED, 1.0, b + 900 + s, args.duration, rate, False, args.route_known)
+                  for s in range(args.unknown)]
     if args.only:
         keep = args.only.split(",")
         cases = [c for c in cases if c[1] in keep]
@@ -351,7 +367,8 @@ def main(argv: list[str] | None = None) -> None:
     wall = time.perf_counter() - t0
     print(f"# diagnosis confusion matrix, {args.seed_set} seeds: {len(rows)} recordings of {args.duration:.0f} s, "
           f"levels {levels} x {args.seeds} seeds per effect, {args.clean} clean, {args.unknown} "
-          f"{UNCATALOGUED}; {wall:.0f} s wall on {args.jobs} processes")
+          f"{UNCATALOGUED}; {wall:.0f} s wall on {args.jobs} processes"
+          + ("; the route known (held at each rig's true shape, not fitted)" if args.route_known else ""))
     for sim in sims:
         rs = [r for r in rows if r["sim"] == sim]
         title = {"rig": "rig (slave/scenarios.py, the diagnosis' own physics)",

@@ -80,7 +80,8 @@ class Recording:
 
     data : MeasuredData with time [s], x_in [m], T_in [N], x_out [m], T_out [N] (measured, noisy).
     truth : dict with ``effect`` (id, ids joined by "+", or "none"), ``effects`` (tuple), ``parameters`` (name -> SI value), ``K`` [-],
-        ``compliance`` L/EA [m/N], ``level`` [0, 1], the noise levels and ``signals`` (noise-free
+        ``compliance`` L/EA [m/N], ``level`` [0, 1], the noise levels, ``route`` ((length [m], radius [m])
+        pieces, proximal to distal) and ``signals`` (noise-free
         T_out [N], x_out [m], x_in [m], shape (n,)); for evaluation only.
     """
 
@@ -299,7 +300,7 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
                         source=f"<scenario seed {seed}>")
     truth = {"effect": "+".join(hidden) or "none", "effects": hidden, "parameters": params, "level": u,
              "K": K, "compliance": c, "EA": EA, "noise_T_in": noise_in, "noise_T_out": noise_out,
-             "noise_x_out": noise_x,
+             "noise_x_out": noise_x, "route": tuple((r.length, r.radius) for r in geo.runs),
              "signals": {"T_out": out[:, 3], "x_out": out[:, 2] - x_out0, "x_in": out[:, 4] - x_in0}}
     return Recording(data=data, truth=truth)
 

@@ -7,7 +7,8 @@ Two modes:
   (profile memory, K and L/EA) fitted on the first part of the recording, every catalogue extension
   fitted on the same block, all scored on the held-out rest; prints the cause, the held-out errors
   and the gain (:func:`teleop.app.report.format_summary`) and the fitted parameters. A progress bar goes
-  to stderr on long recordings.
+  to stderr on long recordings. Where the friction sits along the sheath is fitted; ``--route CONFIG``
+  holds the route of CONFIG's ``sheath`` instead (an instrument whose route is known from its design).
 * ``teleop analyze --kaist [DIR]`` or ``teleop analyze .../sine_config_N.txt`` (or any FILE with
   ``--bend DEG``; other layouts with ``--columns MAP``, :mod:`teleop.columns`): every
   ``sine_config_<N>.txt`` configuration (:mod:`teleop.app.kaist`; unlicensed data read in place),
@@ -49,7 +50,7 @@ from teleop.app.report import format_summary, split_text, write_report
 from teleop.errors import ConfigError, DataError
 from teleop.recording import MeasuredData, read_measured_csv
 
-__all__ = ["add_arguments", "main_analyze", "diagnose_file", "format_diagnosis", "analyze_kaist", "format_kaist",
+__all__ = ["add_arguments", "main_analyze", "diagnose_file", "configured_route", "format_diagnosis", "analyze_kaist", "format_kaist",
            "write_kaist_figures", "PROGRESS_SAMPLES", "load_kaist_input", "predict_kaist", "format_prediction"]
 
 #: Recordings of at least this many samples get a progress bar on stderr (100 s at 1 kHz).
@@ -85,6 +86,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bootstrap", type=int, default=20, metavar="B",
                         help="KAIST mode: bootstrap draws for the uncertainty of the shared parameters and of "
                              "every reported held-out figure (0: none; default 20)")
+    parser.add_argument("--route", metavar="CONFIG",
+                        help="CSV mode: hold the route of CONFIG's sheath (its runs: where the friction sits) "
+                             "instead of fitting it; for an instrument whose route is known from its design")
     parser.add_argument("--train-fraction", type=float, default=0.6, metavar="F",
                         help="CSV mode: nominal share of the duration used for fitting, in [0.3, 0.9]; the "
                              "split moves to a rest within 8%% of it (default 0.6)")
@@ -124,7 +128,10 @@ def main_analyze(args: argparse.Namespace) -> int:
     else:
         if args.figures:
             raise ConfigError("--figures is for the KAIST analysis (--kaist); use --report DIR")
-        summary, data = diagnose_file(args.file, train_fraction=args.train_fraction)
+        shape, how = (None, None) if args.route is None else configured_route(args.route)
+        summary, data = diagnose_file(args.file, train_fraction=args.train_fraction, wrap_shape=shape)
+        if how is not None:
+            summary["route"] = how
         print(format_diagnosis(summary))
         if args.report is not None:
             print(f"wrote {write_report(summary, data, args.report)}")
@@ -146,8 +153,33 @@ def _finite(x: float) -> float | None:
 
 # ---- one tendon, measured-data CSV ------------------------------------------------------------
 
+def configured_route(path: str | Path) -> tuple[np.ndarray, str]:
+    """The route shape of the ``sheath`` of a config file, for ``diagnose(..., wrap_shape=...)``.
+
+    Returns (normalised cumulative wrap angle, shape (257,); a one-line description naming the file).
+
+    Raises
+    ------
+    ConfigError
+        The file is missing or not a valid config, or its route has no bend (no shape to hold).
+    """
+    from slave.calibrate import route_wrap_shape
+    from teleop.config import load_config
+    if not Path(path).is_file():
+        raise ConfigError(f"--route {path}: no such file")
+    cfg = load_config(path)
+    shape = route_wrap_shape(cfg)
+    geo = cfg.sheath.geometry()
+    if shape is None:
+        raise ConfigError(f"--route {path}: the sheath's route ({len(geo.runs)} runs) has no bend, so there is no "
+                          "route shape to hold")
+    bends = sum(1 for r in geo.runs if math.isfinite(r.radius))
+    return shape, (f"route held from {path}: {len(geo.runs)} runs ({bends} bent), {geo.length:.3g} m, "
+                   f"{math.degrees(geo.total_angle):.0f} deg of bend")
+
+
 def diagnose_file(path: str | Path, train_fraction: float = 0.6,
-                  progress: bool | None = None) -> tuple[dict, MeasuredData]:
+                  progress: bool | None = None, wrap_shape: np.ndarray | None = None) -> tuple[dict, MeasuredData]:
     """Diagnose one measured-data CSV (:func:`estimator.offline.diagnosis.diagnose`).
 
     Parameters
@@ -156,6 +188,7 @@ def diagnose_file(path: str | Path, train_fraction: float = 0.6,
     train_fraction : nominal share of the duration used for fitting, in [0.3, 0.9]
     progress : stderr progress bar; default: on for recordings of at least
         :data:`PROGRESS_SAMPLES` samples
+    wrap_shape : the route shape to hold (:func:`configured_route`), shape (n,); None: fitted
 
     Returns
     -------
@@ -175,7 +208,7 @@ def diagnose_file(path: str | Path, train_fraction: float = 0.6,
         raise ConfigError(f"--train-fraction must be in [0.3, 0.9], got {train_fraction!r}")
     data = read_measured_csv(path).require_distal()
     try:
-        result = diagnose(data, train_fraction=train_fraction,
+        result = diagnose(data, train_fraction=train_fraction, wrap_shape=wrap_shape,
                           progress=len(data) >= PROGRESS_SAMPLES if progress is None else progress)
     except ValueError as e:
         raise DataError(str(e) if str(e).startswith(data.source) else f"{data.source}: {e}") from None
@@ -197,6 +230,8 @@ def format_diagnosis(result: dict) -> str:
         f"x_out set aside: it stays within {1e6 * held['range_m']:.3g} um over the recording (resolution "
         f"{1e6 * held['step_m']:.3g} um, x_in travel {1e3 * held['travel_m']:.3g} mm) - the distal end was held "
         "(a stop, or a load the tension never moved), so x_out shows nothing of the tendon"]
+    if result.get("route"):
+        note.append(result["route"])
     return "\n".join([f"{result['file']}: {result['n_samples']} samples, {result['duration_s']:.1f} s "
                       f"(diagnosed in {result['elapsed_s']:.1f} s)", split_text(result), *note,
                       format_summary(result), f"parameters: {pars}"])

@@ -43,13 +43,28 @@ def test_seed_sets_do_not_overlap(bench):
 def test_twins_are_diagnosed_and_their_false_alarms_reported(bench, capsys):
     # the clean twin of a hidden-effect recording (same seed: same rig, protocol and noise) is diagnosed with
     # --twins: one more clean rig per row; the report counts its false alarms by distal load
-    row = bench.one(("lumped", "sensor_offset:T_out", 0.8, 101, 20.0, None, True))
+    row = bench.one(("lumped", "sensor_offset:T_out", 0.8, 101, 20.0, None, True, False))
     assert row["twin_cause"] in ("none", "unknown") or row["twin_cause"] in bench.EFFECT_IDS
     assert row["load"] in ("spring", "preloaded", "constant", "joint") and row["twin_structure"] > 0.0
-    assert "twin_cause" not in bench.one(("lumped", "sensor_offset:T_out", 0.8, 101, 20.0, None))
+    assert "twin_cause" not in bench.one(("lumped", "sensor_offset:T_out", 0.8, 101, 20.0, None, False, False))
     alarm = dict(row, twin_cause="friction_offset", twin_causes=["friction_offset"], load="constant")
     bench.table([row, alarm], "twins")
     out = capsys.readouterr().out
     n_fa = 1 + (row["twin_cause"] != "none")
     assert f"false alarms on the clean twins of the hidden-effect recordings: {n_fa}/2" in out
     assert "constant 1/" in out
+
+
+def test_known_route_is_the_rigs_own_wrap_shape(bench):
+    # --route-known holds each rig's true route: the lumped simulator's arcs and straight runs (flat where the
+    # route is straight, steep in its arcs) and the project rig's uniform bend (a straight line)
+    import math
+
+    import numpy as np
+    lumped = bench.known_route({"route": ((0.5, math.inf), (0.2, 0.1), (0.5, math.inf), (0.3, 0.3))})
+    s = np.linspace(0.0, 1.5, lumped.size)
+    assert lumped[0] == 0.0 and lumped[-1] == 1.0 and np.all(np.diff(lumped) >= 0.0)
+    assert np.allclose(lumped[s <= 0.5], 0.0)                       # straight first run: no wrap
+    assert abs(np.interp(0.7, s, lumped) - 2.0 / 3.0) < 1e-2        # the first arc: 2 rad of the 3
+    rig = bench.known_route({"route": ((1.2, 2.0),)})
+    assert np.allclose(rig, np.linspace(0.0, 1.0, rig.size))

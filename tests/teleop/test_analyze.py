@@ -283,3 +283,33 @@ def test_kaist_findings_hold_on_the_real_data(tmp_path, capsys):
         b = c["diagnosis"]["extended"]["rmse_test_bootstrap"]
         assert b["n_draws"] == 5 and 0.0 < b["std_deg"] < 0.5 * c["diagnosis"]["extended"]["rmse_test_deg"]
     assert "+- " in capsys.readouterr().out.split("leave one out, ")[1].splitlines()[0]
+
+
+def test_route_option_holds_the_configured_route(tmp_path, capsys):
+    # an instrument whose route is known (CONFIG's sheath.runs) is diagnosed with that route held instead of
+    # fitted: on this recording of the independent simulator (dev20 seed 1909112, a distal load-cell offset of
+    # -0.84 N; its arcs are where the fitted route can hide the offset) the held route names it
+    from slave.lumped_scenarios import record
+    from teleop.recording import write_measured_csv
+    rec = record("sensor_offset:T_out", seed=1909112, level=0.8, duration=60.0)
+    path = tmp_path / "r.csv"
+    write_measured_csv(path, rec.data)
+    runs = "\n".join(f"    - {{length: {length!r}" + ("" if math.isinf(r) else f", radius: {r!r}") + "}"
+                     for length, r in rec.truth["route"])
+    cfg = tmp_path / "route.yaml"
+    cfg.write_text(f"sheath:\n  EA: {rec.truth['EA']!r}\n  runs:\n{runs}\n")
+    out = tmp_path / "s.json"
+    assert run([str(path), "--route", str(cfg), "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert f"route held from {cfg}: {len(rec.truth['route'])} runs" in text
+    s = json.loads(out.read_text())
+    assert s["cause"] == "sensor_offset:T_out" and s["route"].startswith("route held from")
+    assert s["parameters"]["b_T_out"]["value"] == pytest.approx(rec.truth["parameters"]["offset"], rel=0.25)
+    assert not any(k.startswith("r_") for k in s["parameters"])          # no route share was fitted
+    assert len(s["settings"]["wrap_shape"]) == 257
+    straight = tmp_path / "straight.yaml"
+    straight.write_text("sheath:\n  runs:\n    - {length: 1.0}\n")
+    with pytest.raises(ConfigError, match=r"--route .*straight\.yaml: the sheath's route \(1 runs\) has no bend"):
+        run([str(path), "--route", str(straight)])
+    with pytest.raises(ConfigError, match=r"--route .*nope\.yaml: no such file"):
+        run([str(path), "--route", str(tmp_path / "nope.yaml")])
