@@ -36,6 +36,9 @@ Seed layout (session 4): every hidden-effect recording has its own seed, so its 
 base + 100 + 1000 k + 10 j + s (before session 4 every effect of a set shared the four rigs of
 base + 100 + 10 j + s, and two constant-force draws could carry most of a set's misses;
 ``--shared-rigs`` reproduces that layout).
+``--route-known`` (session 19) gives every diagnosis its rig's true route shape (``wrap_shape``), as a user who
+knows the instrument's route does with ``teleop analyze --route CONFIG``: where the friction sits is then held,
+not fitted, and the figures say what that knowledge buys.
 Prints per effect and per channel: accuracy (strict, and up to the inseparable pairs of
 estimator.offline.effects.EQUIVALENT), gains, false alarms on clean data; never fails on the figures (the
 pass/fail checks are in tests/estimator/test_diagnosis.py).
