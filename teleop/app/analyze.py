@@ -50,8 +50,9 @@ from teleop.app.report import format_summary, split_text, write_report
 from teleop.errors import ConfigError, DataError
 from teleop.recording import MeasuredData, read_measured_csv
 
-__all__ = ["add_arguments", "main_analyze", "diagnose_file", "configured_route", "format_diagnosis", "analyze_kaist", "format_kaist",
-           "write_kaist_figures", "PROGRESS_SAMPLES", "load_kaist_input", "predict_kaist", "format_prediction"]
+__all__ = ["add_arguments", "main_analyze", "diagnose_file", "configured_route", "format_diagnosis", "analyze_kaist",
+           "format_kaist", "write_kaist_figures", "PROGRESS_SAMPLES", "load_kaist_input", "predict_kaist",
+           "format_prediction"]
 
 #: Recordings of at least this many samples get a progress bar on stderr (100 s at 1 kHz).
 PROGRESS_SAMPLES = 100_000
