@@ -164,13 +164,12 @@ def configured_route(path: str | Path) -> tuple[np.ndarray, str]:
     ConfigError
         The file is missing or not a valid config, or its route has no bend (no shape to hold).
     """
-    from slave.calibrate import route_wrap_shape
+    from slave.calibrate import wrap_shape
     from teleop.config import load_config
     if not Path(path).is_file():
         raise ConfigError(f"--route {path}: no such file")
-    cfg = load_config(path)
-    shape = route_wrap_shape(cfg)
-    geo = cfg.sheath.geometry()
+    geo = load_config(path).sheath.geometry()
+    shape = wrap_shape(geo)
     if shape is None:
         raise ConfigError(f"--route {path}: the sheath's route ({len(geo.runs)} runs) has no bend, so there is no "
                           "route shape to hold")
