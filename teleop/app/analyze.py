@@ -112,6 +112,8 @@ def main_analyze(args: argparse.Namespace) -> int:
     kaist = (args.kaist is not None or is_kaist_file(args.file) or args.bend is not None
              or args.columns is not None or args.shared_params is not None)
     if kaist:
+        if args.route is not None:
+            raise ConfigError("--route is for a single-tendon CSV; the KAIST pair models have no sheath route")
         recs = load_kaist_input(args)
         if args.shared_params is not None:
             summary = predict_kaist(recs, args.shared_params)

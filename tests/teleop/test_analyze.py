@@ -313,3 +313,5 @@ def test_route_option_holds_the_configured_route(tmp_path, capsys):
         run([str(path), "--route", str(straight)])
     with pytest.raises(ConfigError, match=r"--route .*nope\.yaml: no such file"):
         run([str(path), "--route", str(tmp_path / "nope.yaml")])
+    with pytest.raises(ConfigError, match="--route is for a single-tendon CSV"):
+        run(["--kaist", str(tmp_path), "--route", str(cfg)])
