@@ -534,6 +534,7 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
                      "route_form": _FORM_NAME[route],
                      "model_route_form": _FORM_NAME[_route_of(final[0], route)],
                      "distal_end_held": held,
+                     "distal_slide_travel_m": s.slide_travel,
                      "wrap_shape": None if wrap_shape is None else [float(v) for v in wrap_shape]},
         "elapsed_s": _time.perf_counter() - t_start,
     }

@@ -96,6 +96,15 @@ def distal_end_held(data: MeasuredData, share: float = HELD_SHARE) -> dict | Non
     return None
 
 
+#: the memory reads the measured distal end (session 20): where x_out moves the way x_in does, the whole tendon
+#: slides (a stuck distal part holds the distal end), whatever the memory with the fitted K holds. Motion is
+#: x_out's travel beyond SLIDE_QUANTA quanta, SLIDE_SIGMAS x its noise and SLIDE_SHARE of x_in's range.
+SLIDE_SEEN = True
+SLIDE_QUANTA = 2.0
+SLIDE_SIGMAS = 4.0
+SLIDE_SHARE = 1e-4
+
+
 def prepare(data: MeasuredData, *, n_nodes: int = 32, target_rate: float = 200.0,
             wrap_shape: np.ndarray | None = None) -> Series:
     """Block-average a recording to about ``target_rate`` [Hz] and set up the model's node grid.
@@ -138,7 +147,12 @@ def prepare(data: MeasuredData, *, n_nodes: int = 32, target_rate: float = 200.0
     velocity = np.gradient(x_in, time)
     shape, weight = SheathModel(K=1.0, compliance=1.0, wrap_shape=wrap_shape).nodes(int(n_nodes))
     T_min = max(10.0 * sigma_in, 0.01 * float(np.ptp(T_in)))
-    return Series(time, x_in, T_in, velocity, dec(data.T_out), dec(data.x_out), shape, weight, T_min, sigma_in)
+    x_out = dec(data.x_out)
+    slide = 0.0
+    if x_out is not None and data.x_out is not None and SLIDE_SEEN:
+        slide = max(SLIDE_QUANTA * quantum(data.x_out), SLIDE_SIGMAS * noise_level(x_out),
+                    SLIDE_SHARE * float(np.ptp(x_in)))
+    return Series(time, x_in, T_in, velocity, dec(data.T_out), x_out, shape, weight, T_min, sigma_in, slide)
 
 
 def split_at_rest(s: Series, train_fraction: float) -> int:

@@ -43,7 +43,8 @@ class Series:
     time [s], x_in [m], T_in [N], velocity dx_in/dt [m/s], T_out [N] or None, x_out [m] or None,
     u (m + 1,) normalised wrap angle of the nodes, w (m + 1,) trapezoid weights (sum 1),
     T_min [N] the tension below which a breakaway is lost in the load-cell noise, sigma_T_in [N]
-    the white-noise level of the prepared T_in.
+    the white-noise level of the prepared T_in, slide_travel [m] the distal travel beyond which the measured
+    x_out counts as moving (the whole tendon slides; 0: x_out's motion not used by the memory).
     """
 
     time: np.ndarray
@@ -56,6 +57,7 @@ class Series:
     w: np.ndarray
     T_min: float = 0.0
     sigma_T_in: float = 0.0
+    slide_travel: float = 0.0
 
     def __len__(self) -> int:
         return int(self.time.shape[0])
@@ -65,7 +67,7 @@ class Series:
         T_out = None if self.T_out is None else self.T_out[:stop]
         x_out = None if self.x_out is None else self.x_out[:stop]
         return Series(self.time[:stop], self.x_in[:stop], self.T_in[:stop], self.velocity[:stop],
-                      T_out, x_out, self.u, self.w, self.T_min, self.sigma_T_in)
+                      T_out, x_out, self.u, self.w, self.T_min, self.sigma_T_in, self.slide_travel)
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,14 @@ import numpy as np
 from estimator.offline import effect_switches as sw
 from estimator.offline.effect_switches import RigSwitch, ScenarioKnob, Setting
 from estimator.offline.effect_types import K_MAX, NONE, UNKNOWN, Parameter, Prediction, Series
-from estimator.offline.effects_kernels import backlash_play, route_shape, run_extended, slack_index, travel_lag
+from estimator.offline.effects_kernels import (
+    backlash_play,
+    distal_slide,
+    route_shape,
+    run_extended,
+    slack_index,
+    travel_lag,
+)
 from estimator.offline.presliding_kernel import NODE_FORM, node_presliding
 
 #: Held setting of velocity_friction: 1 = the sliding speed is the mean of |dx_in/dt| and |dx_out/dt|.
@@ -445,8 +452,14 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
         if knobs.get("T0") and (T0_out := _rest_T_out(s)) >= 0.0:
             # the distal rest reading in true tension: through the T_out reading model fitted with it (no drift at t0)
             T0_out = max((T0_out - g("sensor_offset:T_out")) / (1.0 + g("sensor_gain:T_out")), 0.0)
+        slide = None
+        if s.slide_travel > 0.0 and s.x_out is not None:
+            # where the measured distal end moves (its lag undone) the whole tendon slides (session 20)
+            x_seen = s.x_out if not g("sensor_lag:x_out") else _shift(t, s.x_out, -g("sensor_lag:x_out"))
+            window = max(1, int(round(SLIDE_WINDOW * (t.size - 1) / max(float(t[-1] - t[0]), 1e-12))))
+            slide = distal_slide(x_seen, s.slide_travel, window)
         T_out, E1 = run_extended(T_in, vel, t, u, s.w, T_min=s.T_min, sigma=s.sigma_T_in, speed=speed, v_st=v_st,
-                                 T0_out=T0_out, band=NOISE_BAND * s.sigma_T_in, **knobs)
+                                 T0_out=T0_out, band=NOISE_BAND * s.sigma_T_in, slide=slide, **knobs)
     if x_p > 0.0 and not node:
         T_out = T_in - travel_lag(T_in - T_out, x_in, x_p)
     # distal channels: the reading from the true output (offset and lag are linear in L/EA)
@@ -488,6 +501,11 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
                     x_out = _shift(t, (x_in - c * E1)[taut] + delta, tau_x) + g("sensor_offset:x_out", 0.0)
     return Prediction(T_out=T_out, x_out=x_out, compliance=float(c))
 
+
+#: the window [s] over which the measured distal end must have moved by more than its resolution to count as moving
+#: (Series.slide_travel; :func:`estimator.offline.effects_kernels.distal_slide`): 0.2 mm/s (V_STOP) over 50 ms is
+#: 10 um, above the resolution of every simulated encoder (quanta up to 2 um)
+SLIDE_WINDOW = 0.05
 
 #: T_in below SLACK_SIGMAS x its noise level counts as a slack tendon: the prepared T_in of a slack
 #: lumped tendon stays below 2 sigma in 95 % of its samples (dev5 seeds 405110, 407101, 417110, dev 503)

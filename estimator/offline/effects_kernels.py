@@ -24,13 +24,18 @@ distal part slide back) - and is updated in one of two ways:
   extremes, and on a noisy reading it would latch the noise's own (a hold of a few hundred
   samples reaches about 3 sigma), so the profile moves only for what exceeds h; on exact data h
   is a dead zone (estimator.offline.effects.NOISE_BAND, session 11).
-  When the update reaches the distal node the whole tendon slides in that direction s;
+  When the update reaches the distal node the whole tendon slides in that direction s. It slides too where the
+  measured distal end is seen moving the way the proximal end moves (``slide``, session 20): a stuck distal
+  part holds the distal end, so a moving distal end means the slip has reached it, whatever the memory with
+  the fitted K holds (with a constant-force load the release sits on the edge of the band, and the memory
+  alone matches the load's constant T_out for any K that is too large);
 * sliding (s != 0, while the proximal end keeps moving that way faster than V_STOP):
       Y_i = Y_p e^{-s K_k f u_i},  f = 1 + r_s e^{-(t - t_b)/t_slip}
   the whole profile follows T_in at the present sliding friction (so it follows a change of
   speed or K at once); f > 1 only after a breakaway at t_b (static friction relaxing to kinetic).
   The distal end of a sliding tendon only moves on, so a T_out that would turn back by more than
-  the noise ends the slide too (a reversal shows in the averaged T_in before x_in turns), except
+  the noise ends the slide too (not on the sample where a distal end seen moving starts it: the full-slip
+  T_out may then jump either way, which is how a K that only the memory's band allowed shows) (a reversal shows in the averaged T_in before x_in turns), except
   within 5 t_slip of a breakaway, where the averaging blunts the turn of T_in.
   A breakaway is also taken when T_in turns back within BREAK_MARGIN of the static threshold
   while the proximal end keeps going (the breakaway peak, blunted by the averaging of the data),
@@ -45,7 +50,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["run_extended", "route_shape", "stiffening_strain", "travel_lag", "backlash_play", "V_STOP", "BREAK_MARGIN"]
+__all__ = ["run_extended", "distal_slide", "route_shape", "stiffening_strain", "travel_lag", "backlash_play", "V_STOP", "BREAK_MARGIN"]
 
 V_STOP = 2e-4        # proximal speed below which a slide ends (the tendon sticks) [m/s]
 BREAK_MARGIN = 0.35  # share of the kinetic-static gap within which a turn of T_in counts as breakaway [-]
@@ -137,7 +142,7 @@ def _stribeck_bound(Y, Yp, a, u, w, Kk, r_s, v_st, vp, dY, G):  # pragma: no cov
 
 @njit(cache=True, nogil=True)
 def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, sigma, beta, Tc, v_st,
-            T0_out, band, T_out, E1):  # pragma: no cover - compiled
+            T0_out, band, slide, T_out, E1):  # pragma: no cover - compiled
     m1 = u.shape[0]
     Y = np.full(m1, T0 + a)
     E0 = stiffening_strain(T0, beta, Tc)
@@ -161,6 +166,7 @@ def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, si
     sliding = 0                     # direction of the whole-tendon slide, 0 when the distal end sticks
     t_b = -math.inf
     Yp_prev = Y[0]
+    seen = slide.shape[0] > 0
     for k in range(T_in.shape[0]):
         tk = t[k]
         Kk = K
@@ -176,6 +182,9 @@ def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, si
         if sliding != 0 and v[k] * sliding <= V_STOP:
             sliding = 0             # the proximal end stopped or turned: the tendon sticks
             t_b = -math.inf
+        forced = 0
+        if seen and slide[k] != 0 and v[k] * slide[k] > V_STOP:
+            forced = slide[k]       # both ends seen moving one way: the whole tendon slides that way
         stuck = stiction and sliding == 0
         if stuck and not stribeck and k > 0 and Yp_prev - a >= T_min and abs(v[k]) > V_STOP:
             # breakaway seen as a turn of T_in near the static threshold while the proximal end goes on
@@ -188,6 +197,11 @@ def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, si
                 sliding = dm
                 t_b = t[k - 1]
         Yp_prev = Yp
+        entered = forced != 0 and sliding != forced
+        if entered:
+            if stuck and not stribeck and Yp - a >= T_min:
+                t_b = tk            # breakaway from static friction
+            sliding = forced
         if sliding != 0:
             f = Kk
             if stribeck:
@@ -195,7 +209,7 @@ def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, si
             elif t_b > -math.inf:
                 f *= 1.0 + r_s * math.exp(-(tk - t_b) / t_slip)
             g_n = math.exp(-f * sliding * u[m1 - 1])
-            if tk - t_b > 5.0 * t_slip and (Yp * g_n - Y[m1 - 1]) * sliding < -2.0 * sigma * g_n:
+            if not entered and tk - t_b > 5.0 * t_slip and (Yp * g_n - Y[m1 - 1]) * sliding < -2.0 * sigma * g_n:
                 # a sliding distal end only moves on (T_out rises pulling, falls releasing): T_in
                 # turned back beyond the noise, the tendon sticks (the averaged T_in turns before x_in)
                 sliding = 0
@@ -308,7 +322,8 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
                  r_s: float = 0.0, t_slip: float = 0.02, T_min: float = 0.0,
                  sigma: float = 0.0, beta: float = 0.0, Tc: float = 1.0,
                  speed: np.ndarray | None = None, v_st: float = 0.0,
-                 T0_out: float = -1.0, band: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+                 T0_out: float = -1.0, band: float = 0.0,
+                 slide: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Run the extended profile-memory model over a recording (module docstring for the equations).
 
     Parameters
@@ -344,6 +359,10 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
         Distal tension at rest [N] that caps the initial profile with T0 > 0 (module docstring); < 0: uniform T0.
     band : float
         Noise band h [N] >= 0 of the T_in reading in the stuck rule (module docstring); 0: exact T_in.
+    slide : ndarray of int8, shape (n,), optional
+        Direction in which the measured distal end is seen moving (+1, -1; 0 where it is not; see
+        :func:`distal_slide`). Where it moves the way the proximal end does (faster than V_STOP) the whole
+        tendon slides that way, whatever the memory holds (module docstring). None: not used.
 
     Raises
     ------
@@ -367,5 +386,32 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
     _kernel(T_in, vel, spd, np.ascontiguousarray(time, dtype=np.float64),
             np.ascontiguousarray(u, dtype=np.float64), np.ascontiguousarray(w, dtype=np.float64), float(K),
             float(a), float(T0), float(K_rate), float(c_v), float(r_s), float(t_slip), float(T_min),
-            float(sigma), float(beta), float(Tc), float(v_st), float(T0_out), float(band), T_out, E1)
+            float(sigma), float(beta), float(Tc), float(v_st), float(T0_out), float(band),
+            np.zeros(0, dtype=np.int8) if slide is None else np.ascontiguousarray(slide, dtype=np.int8), T_out, E1)
     return T_out, E1
+
+
+def distal_slide(x_out: np.ndarray, travel: float, window: int = 1) -> np.ndarray:
+    """Direction in which a measured distal end moves, shape (n,) int8: +1 (toward the actuator), -1, or 0
+    where it does not. ``x_out`` [m], shape (n,), is read through a play of half-width ``travel`` [m] > 0 (the
+    encoder's resolution: a quantum or the noise), so that noise never counts as motion, and a sample moves
+    where that play has moved by more than ``travel`` over the last ``window`` >= 1 samples (a noise maximum
+    that creeps up during a hold moves the play by a fraction of the noise now and then, not by ``travel``).
+
+    A distal end moves only when the slip has reached it (a stuck distal part holds it where it is; a
+    spring load's x_out follows T_out, which the stuck part holds): where it moves, the whole tendon slides.
+
+    Raises ValueError: ``travel`` not a finite number > 0 or ``window`` < 1."""
+    if not (math.isfinite(travel) and travel > 0.0):
+        raise ValueError(f"distal_slide: travel must be a finite number > 0 m, got {travel!r}")
+    if window < 1:
+        raise ValueError(f"distal_slide: window must be >= 1 sample, got {window!r}")
+    p = backlash_play(np.asarray(x_out, dtype=np.float64), 2.0 * travel)
+    step = np.zeros(p.shape[0])
+    step[1:] = p[1:] - p[:-1]
+    c = np.concatenate(([0.0], np.cumsum(step)))
+    i = np.arange(p.shape[0])
+    moved = c[i + 1] - c[np.maximum(i + 1 - window, 0)]
+    d = np.where(moved > travel, 1, np.where(moved < -travel, -1, 0)).astype(np.int8)
+    d[step * moved <= 0.0] = 0          # moving now, the way the window moved
+    return d

@@ -34,7 +34,7 @@ from estimator.offline.effects import (
     route_values,
     slack_hold,
 )
-from estimator.offline.effects_kernels import route_shape, run_extended
+from estimator.offline.effects_kernels import distal_slide, route_shape, run_extended
 from estimator.online.distal import estimate_batch
 from estimator.sheath import SheathGeometry, SheathModel
 from slave.scenarios import protocol
@@ -120,6 +120,47 @@ def test_noise_band_keeps_the_memory_from_latching_the_noise_extremes():
     np.testing.assert_allclose(exact[hold], ref[hold] - NOISE_BAND * scale, rtol=1e-9)
     with pytest.raises(ValueError, match="band"):
         run_extended(true, np.zeros_like(true), t, u, w, K=K, band=-0.01)
+
+
+def test_distal_slide_reads_motion_beyond_the_resolution_only():
+    rng = np.random.default_rng(3)
+    x = np.concatenate([np.zeros(200), np.linspace(0.0, 1e-3, 300), np.full(200, 1e-3), np.linspace(1e-3, 0.0, 300)])
+    d = distal_slide(x + 2e-7 * rng.standard_normal(x.size), 2e-6, 5)
+    assert not d[:200].any() and not d[505:700].any()          # rest and hold: noise (0.2 um) under 2 um
+    assert (d[220:500] == 1).mean() > 0.9 and (d[720:1000] == -1).mean() > 0.9
+    assert not (d[:500] == -1).any() and not (d[700:] == 1).any()
+    with pytest.raises(ValueError, match="travel"):
+        distal_slide(x, 0.0)
+    with pytest.raises(ValueError, match="window"):
+        distal_slide(x, 1e-6, 0)
+
+
+def test_a_distal_end_seen_moving_makes_the_whole_tendon_slide():
+    """A constant-force load F (session 20, lumped dev21 2011110): the true release sits at T_in = F e^-K, on the
+    edge of the band. With a K that is too large (here 0.9 for a true 0.7) the memory alone holds the pulled
+    T_out there (T_in stays inside its band) and matches the constant F whatever K is; the measured distal end
+    moving with the proximal one says the tendon slides, and the model's T_out is then T_in e^{K} - wrong for a
+    wrong K, which is what lets the fit find K from the release too."""
+    u, w = grid()
+    F, K_true, K_fit = 5.0, 0.7, 0.9
+    T_in = np.concatenate([np.linspace(0.5, F * math.exp(K_true), 300), np.full(500, F * math.exp(K_true)),
+                           np.linspace(F * math.exp(K_true), F * math.exp(-K_true), 100), np.full(500, F * math.exp(-K_true))])
+    x_in = np.concatenate([np.linspace(0.0, 1e-3, 300), np.linspace(1e-3, 6e-3, 500), np.full(100, 6e-3),
+                           np.linspace(6e-3, 1e-3, 500)])
+    t = np.arange(T_in.size) * 5e-3
+    v = np.gradient(x_in, t)
+    slide = np.sign(v).astype(np.int8)           # the distal end moves with the proximal one
+    slide[800:900] = 0                           # and holds while the proximal tension falls through the band
+    held = run_extended(T_in, v, t, u, w, K=K_fit)[0]
+    seen = run_extended(T_in, v, t, u, w, K=K_fit, slide=slide)[0]
+    release = slice(950, None)
+    np.testing.assert_allclose(held[release], F * math.exp(K_true - K_fit), rtol=1e-9)    # the pulled T_out held
+    np.testing.assert_allclose(seen[release], F * math.exp(K_fit - K_true), rtol=1e-9)    # full slip at T_in e^K
+    # with the right K both agree with the load: the reading of x_out changes nothing there
+    np.testing.assert_allclose(run_extended(T_in, v, t, u, w, K=K_true, slide=slide)[0][release], F, rtol=1e-9)
+    # no motion seen, or motion against the proximal end's: the memory alone
+    np.testing.assert_array_equal(run_extended(T_in, v, t, u, w, K=K_fit, slide=np.zeros_like(slide))[0], held)
+    np.testing.assert_array_equal(run_extended(T_in, v, t, u, w, K=K_fit, slide=-slide)[0], held)
 
 
 @pytest.mark.parametrize("eid", IDS)
