@@ -32,8 +32,9 @@ final set of session 18, run once with the code of commit 8b4114e, seen since) a
 the final set fixed at the end of session 18, run once in session 19 with the code of commit ecd1fa8, seen since)
 and ``dev21`` (offsets + 2000000: the final set of session 19, run once with the diagnosis of ecd1fa8, route fitted
 and held, seen since) and ``dev22`` (offsets + 2100000: the final set fixed at the end of session 19, run once at
-the start of session 20 with the code of commit 6466192, seen since) are development data. ``final`` (offsets +
-2200000) is the final set of session 20, fixed before any change and run once at its end.
+the start of session 20 with the code of commit 6466192, seen since) and ``dev23`` (offsets + 2200000: the final
+set of session 20, run once at its end with the code of commit f07db1c, seen since) are development data. ``final``
+(offsets + 2300000) is the final set fixed at the end of session 20 for the next session's run.
 Seed layout (session 4): every hidden-effect recording has its own seed, so its own simulated rig
 (route, K, EA, load, rate, noise): effect k of EFFECT_IDS, level j, repeat s uses
 base + 100 + 1000 k + 10 j + s (before session 4 every effect of a set shared the four rigs of
@@ -75,8 +76,8 @@ SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "dev4": 300000, "dev5": 4
              "dev10": 900000, "dev11": 1000000, "dev12": 1100000, "dev13": 1200000,
              "dev14": 1300000, "dev15": 1400000, "dev16": 1500000,
              "dev17": 1600000, "dev18": 1700000, "dev19": 1800000, "dev20": 1900000,
-             "dev21": 2000000, "dev22": 2100000,
-             "final": 2200000}   # fixed in session 20, before any change (docstring)
+             "dev21": 2000000, "dev22": 2100000, "dev23": 2200000,
+             "final": 2300000}   # fixed at the end of session 20, after its final run (docstring)
 UNCATALOGUED = "load_cell_wander"
 
 
