@@ -20,6 +20,7 @@ from estimator.offline import effect_switches as sw
 from estimator.offline.effect_switches import RigSwitch, ScenarioKnob, Setting
 from estimator.offline.effect_types import K_MAX, NONE, UNKNOWN, Parameter, Prediction, Series
 from estimator.offline.effects_kernels import (
+    V_STOP,
     backlash_play,
     distal_slide,
     route_shape,
@@ -440,6 +441,7 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
     if g("sensor_offset:x_in"):
         x_in = x_in - g("sensor_offset:x_in")
     u = s.u if "r_1" not in values else route_shape(s.u.shape[0], *route_values(values))
+    slide = None
     if node and x_p > 0.0 and (compliance is not None or s.x_out is not None):   # per node: K, K_rate, T0, E9 only
         T_out, E1 = node_presliding(T_in, x_in, s.x_out, t, u, s.w, x_p=x_p, compliance=compliance,
                                     **{k: v for k, v in knobs.items() if k in ("K", "K_rate", "T0", "beta", "Tc")})
@@ -452,7 +454,6 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
         if knobs.get("T0") and (T0_out := _rest_T_out(s)) >= 0.0:
             # the distal rest reading in true tension: through the T_out reading model fitted with it (no drift at t0)
             T0_out = max((T0_out - g("sensor_offset:T_out")) / (1.0 + g("sensor_gain:T_out")), 0.0)
-        slide = None
         if s.slide_travel > 0.0 and s.x_out is not None:
             # where the measured distal end moves (its lag undone) the whole tendon slides (session 20)
             x_seen = s.x_out if not g("sensor_lag:x_out") else _shift(t, s.x_out, -g("sensor_lag:x_out"))
@@ -473,7 +474,8 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
     tau_x = g("sensor_lag:x_out", 0.0)
     # a slack tendon (session 5): T_in at the noise around zero - the tendon carries no compression, the
     # proximal end moves without it and the distal end stays where the last taut sample left it
-    taut = slack_hold(T_in, SLACK_SIGMAS * s.sigma_T_in, x_in)
+    moving = None if slide is None else slide * vel > V_STOP      # the distal end carried along: taut
+    taut = slack_hold(T_in, SLACK_SIGMAS * s.sigma_T_in, x_in, moving)
     A = _shift(t, x_in[taut], tau_x) + g("sensor_offset:x_out", 0.0)
     B = _shift(t, E1[taut], tau_x)
     c = compliance
@@ -527,7 +529,8 @@ SLACK_MEAN = 1.0
 SLACK_HELD = 20
 
 
-def slack_hold(T_in: np.ndarray, threshold: float, x_in: np.ndarray | None = None) -> np.ndarray:
+def slack_hold(T_in: np.ndarray, threshold: float, x_in: np.ndarray | None = None,
+               moving: np.ndarray | None = None) -> np.ndarray:
     """Index of the last taut sample at every sample, shape (n,) (the sample itself where the tendon is taut;
     the first sample before any taut one). Indexing a position with it holds the tendon's ends while it is
     slack: a tendon carries no compression, so a proximal end moving at zero tension leaves the rest behind.
@@ -542,7 +545,9 @@ def slack_hold(T_in: np.ndarray, threshold: float, x_in: np.ndarray | None = Non
     predicted 3 mm off for the rest of the hold, and every friction-offset fit judged on that). With x_in a
     sample is also taut, whatever T_in's own value, where the means of T_in over the SLACK_HELD samples before
     it and after it both exceed ``threshold`` sqrt(3 / (SLACK_HELD + 2)) (session 12: a tendon released against a
-    weak load at T_out e^-K, under the threshold but held above zero)."""
+    weak load at T_out e^-K, under the threshold but held above zero), and wherever ``moving`` (bool, shape (n,),
+    optional) is set: the measured distal end carried along the way the proximal end moves (session 20: a joint
+    spring holding the tendon taut at a T_in of 0.4 sigma, lumped dev19 1812100's clean twin)."""
     idx = np.arange(T_in.shape[0])
     if threshold <= 0.0:
         return idx
@@ -553,6 +558,8 @@ def slack_hold(T_in: np.ndarray, threshold: float, x_in: np.ndarray | None = Non
     i = np.arange(T.shape[0])
     lo_i, hi_i = np.maximum(i + 1 - SLACK_HELD, 0), np.minimum(i + SLACK_HELD, T.shape[0])
     held = np.minimum((c[i + 1] - c[lo_i]) / (i + 1 - lo_i), (c[hi_i] - c[i]) / (hi_i - i))
+    if moving is not None:
+        held = np.where(moving, np.inf, held)
     return slack_index(T, np.ascontiguousarray(x_in, dtype=np.float64), float(threshold),
                        float(SLACK_TAUT * threshold), SLACK_WINDOW, float(SLACK_MEAN * threshold), held,
                        float(threshold * math.sqrt(3.0 / (SLACK_HELD + 2))))

@@ -25,7 +25,8 @@ distal part slide back) - and is updated in one of two ways:
   samples reaches about 3 sigma), so the profile moves only for what exceeds h; on exact data h
   is a dead zone (estimator.offline.effects.NOISE_BAND, session 11).
   When the update reaches the distal node the whole tendon slides in that direction s. It slides too where the
-  measured distal end is seen moving the way the proximal end moves (``slide``, session 20): a stuck distal
+  measured distal end is seen moving the way the proximal end moves while T_in has not turned back by more than
+  2 sigma (``slide``, session 20; at a reversal the averaged T_in turns before the distal end stops): a stuck distal
   part holds the distal end, so a moving distal end means the slip has reached it, whatever the memory with
   the fitted K holds (with a constant-force load the release sits on the edge of the band, and the memory
   alone matches the load's constant T_out for any K that is too large);
@@ -183,8 +184,8 @@ def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, si
             sliding = 0             # the proximal end stopped or turned: the tendon sticks
             t_b = -math.inf
         forced = 0
-        if seen and slide[k] != 0 and v[k] * slide[k] > V_STOP:
-            forced = slide[k]       # both ends seen moving one way: the whole tendon slides that way
+        if seen and slide[k] != 0 and v[k] * slide[k] > V_STOP and (Yp - Yp_prev) * slide[k] >= -2.0 * sigma:
+            forced = slide[k]       # both ends seen moving one way, T_in not turned back: the whole tendon slides
         stuck = stiction and sliding == 0
         if stuck and not stribeck and k > 0 and Yp_prev - a >= T_min and abs(v[k]) > V_STOP:
             # breakaway seen as a turn of T_in near the static threshold while the proximal end goes on

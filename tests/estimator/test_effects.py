@@ -437,6 +437,25 @@ def test_a_tendon_released_against_a_weak_load_stays_taut_under_the_threshold():
     assert slack_hold(T, thr)[old] < old                                     # first dip
 
 
+def test_a_tendon_whose_distal_end_is_carried_along_is_taut_at_any_tension():
+    # lumped dev19 1812100's clean twin (session 20): a 97 N/m joint released to 0.85 mm keeps the tendon taut at
+    # T_out 0.08 N, so T_in = T_out e^-1.43 = 0.012 N, 0.4 sigma of its load cell: no rule on T_in tells that from
+    # a slack tendon, and x_out was held at the stop 480 um off for a second ("unknown"). The distal end moving
+    # the way the proximal end does says the tendon carries the motion: taut
+    thr = 0.03
+    n = 300
+    T = np.concatenate((np.full(100, 1.0), np.full(n, 0.13 * thr)))          # 0.4 sigma
+    x = np.concatenate((np.full(100, 2e-3), np.linspace(2e-3, 1e-3, n)))
+    assert np.all(slack_hold(T, thr, x)[100:] == 99)                          # held slack by T_in alone
+    moving = np.zeros(T.size, dtype=bool)
+    moving[100:] = True
+    k = np.arange(100, 100 + n)
+    np.testing.assert_array_equal(slack_hold(T, thr, x, moving)[k], k)       # taut while carried along
+    moving[250:] = False                                                     # the distal end stops: slack again
+    idx = slack_hold(T, thr, x, moving)
+    assert idx[249] == 249 and np.all(idx[250:] == 249)
+
+
 def test_compliance_is_fitted_by_linear_least_squares():
     T_in, x_in = _pull()
     s = series(T_in, x_in)
