@@ -466,11 +466,12 @@ def test_an_effect_that_leaves_structure_on_the_thirds_is_refitted_on_the_finer_
     # a T_in drift of 4.8 mN/s on a joint load, the wrap in one arc at 42-71 % of the sheath: the base, bent by
     # the drift, keeps the thirds; on them the drift, route free, is fitted to 1 % but leaves x_out at 4.5 x the
     # floor (S 0.85) and the answer was "unknown" (session 15, lumped dev16 1514101). On the sixths it explains
-    # both signals, scored against the sixths without an effect (which alone do not help: S 1.10).
+    # both signals, scored against the sixths without an effect (which alone do not help: S 1.10). Since session 20
+    # (04292d8: the slack and slide rules read x_out) the drift's model goes on to the twelfths
     rec = lumped_scenarios.record("sensor_drift:T_in", seed=1514101, level=0.2, duration=60.0)
     res = diagnose(rec.data, effects=("sensor_drift:T_in", "sensor_offset:T_in", "presliding"))
     assert res["causes"] == ["sensor_drift:T_in"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
-    assert res["settings"]["route_form"] == "thirds" and res["settings"]["model_route_form"] == "sixths"
+    assert res["settings"]["route_form"] == "thirds" and res["settings"]["model_route_form"] in ("sixths", "twelfths")
     assert res["parameters"]["d_T_in"]["value"] == pytest.approx(rec.truth["parameters"]["rate"], rel=0.25)
     assert max(res["structure"]["extended"].values()) <= res["settings"]["structure_ratio"]
     assert res["gain"] >= 0.3

@@ -158,6 +158,19 @@ def test_a_distal_end_seen_moving_makes_the_whole_tendon_slide():
     np.testing.assert_allclose(seen[release], F * math.exp(K_fit - K_true), rtol=1e-9)    # full slip at T_in e^K
     # with the right K both agree with the load: the reading of x_out changes nothing there
     np.testing.assert_allclose(run_extended(T_in, v, t, u, w, K=K_true, slide=slide)[0][release], F, rtol=1e-9)
+    # a T_in that turns back while the distal end is still seen moving (the averaged T_in turns before the distal
+    # end stops at a reversal) ends the slide and starts none: T_out held at the pulled value, as without x_out
+    # (rig dev23 2204100: a slide restarted there as a breakaway put T_out 1.2 N low through the reversal)
+    turn = np.concatenate([np.linspace(0.5, 10.0, 300), np.linspace(10.0, 8.0, 20)])
+    xt = np.linspace(0.0, 2e-3, turn.size)                                   # the proximal end still pulling
+    tt = np.arange(turn.size) * 5e-3
+    vt = np.gradient(xt, tt)
+    up = np.ones(turn.size, dtype=np.int8)
+    for r_s in (0.0, 0.3):
+        alone = run_extended(turn, vt, tt, u, w, K=K_fit, r_s=r_s, sigma=0.01)[0]
+        seen_t = run_extended(turn, vt, tt, u, w, K=K_fit, r_s=r_s, sigma=0.01, slide=up)[0]
+        np.testing.assert_array_equal(seen_t[300:], alone[300:])
+        assert np.ptp(seen_t[301:]) == 0.0                                   # held through the turn
     # no motion seen, or motion against the proximal end's: the memory alone
     np.testing.assert_array_equal(run_extended(T_in, v, t, u, w, K=K_fit, slide=np.zeros_like(slide))[0], held)
     np.testing.assert_array_equal(run_extended(T_in, v, t, u, w, K=K_fit, slide=-slide)[0], held)
