@@ -23,7 +23,9 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import least_squares
 
-from estimator.offline.effects import K_MAX, ROUTE, ROUTE_FORMS, Effect, Parameter, Series, effect, predict
+from estimator.offline.effects import (K_MAX, ROUTE, ROUTE_FORMS, Effect, Parameter, Series, effect, predict,
+                                      slide_window)
+from estimator.offline.effects_kernels import distal_slide
 from estimator.sheath import SheathModel
 from estimator.data import MeasuredData
 from estimator.errors import DataError
@@ -148,11 +150,12 @@ def prepare(data: MeasuredData, *, n_nodes: int = 32, target_rate: float = 200.0
     shape, weight = SheathModel(K=1.0, compliance=1.0, wrap_shape=wrap_shape).nodes(int(n_nodes))
     T_min = max(10.0 * sigma_in, 0.01 * float(np.ptp(T_in)))
     x_out = dec(data.x_out)
-    slide = 0.0
+    travel, slide = 0.0, None
     if x_out is not None and data.x_out is not None and SLIDE_SEEN:
-        slide = max(SLIDE_QUANTA * quantum(data.x_out), SLIDE_SIGMAS * noise_level(x_out),
-                    SLIDE_SHARE * float(np.ptp(x_in)))
-    return Series(time, x_in, T_in, velocity, dec(data.T_out), x_out, shape, weight, T_min, sigma_in, slide)
+        travel = max(SLIDE_QUANTA * quantum(data.x_out), SLIDE_SIGMAS * noise_level(x_out),
+                     SLIDE_SHARE * float(np.ptp(x_in)))
+        slide = distal_slide(x_out, travel, slide_window(time))
+    return Series(time, x_in, T_in, velocity, dec(data.T_out), x_out, shape, weight, T_min, sigma_in, travel, slide)
 
 
 def split_at_rest(s: Series, train_fraction: float) -> int:

@@ -44,7 +44,8 @@ class Series:
     u (m + 1,) normalised wrap angle of the nodes, w (m + 1,) trapezoid weights (sum 1),
     T_min [N] the tension below which a breakaway is lost in the load-cell noise, sigma_T_in [N]
     the white-noise level of the prepared T_in, slide_travel [m] the distal travel beyond which the measured
-    x_out counts as moving (the whole tendon slides; 0: x_out's motion not used by the memory).
+    x_out counts as moving (the whole tendon slides; 0: x_out's motion not used by the memory) and slide, int8
+    shape (n,) or None, the direction x_out is seen moving in at each sample (effects_kernels.distal_slide).
     """
 
     time: np.ndarray
@@ -58,6 +59,7 @@ class Series:
     T_min: float = 0.0
     sigma_T_in: float = 0.0
     slide_travel: float = 0.0
+    slide: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.time.shape[0])
@@ -66,8 +68,9 @@ class Series:
         """The first ``stop`` samples (the training block)."""
         T_out = None if self.T_out is None else self.T_out[:stop]
         x_out = None if self.x_out is None else self.x_out[:stop]
+        slide = None if self.slide is None else self.slide[:stop]      # causal: the slice's own reading
         return Series(self.time[:stop], self.x_in[:stop], self.T_in[:stop], self.velocity[:stop],
-                      T_out, x_out, self.u, self.w, self.T_min, self.sigma_T_in, self.slide_travel)
+                      T_out, x_out, self.u, self.w, self.T_min, self.sigma_T_in, self.slide_travel, slide)
 
 
 @dataclass(frozen=True)

@@ -454,11 +454,10 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
         if knobs.get("T0") and (T0_out := _rest_T_out(s)) >= 0.0:
             # the distal rest reading in true tension: through the T_out reading model fitted with it (no drift at t0)
             T0_out = max((T0_out - g("sensor_offset:T_out")) / (1.0 + g("sensor_gain:T_out")), 0.0)
-        if s.slide_travel > 0.0 and s.x_out is not None:
-            # where the measured distal end moves (its lag undone) the whole tendon slides (session 20)
-            x_seen = s.x_out if not g("sensor_lag:x_out") else _shift(t, s.x_out, -g("sensor_lag:x_out"))
-            window = max(1, int(round(SLIDE_WINDOW * (t.size - 1) / max(float(t[-1] - t[0]), 1e-12))))
-            slide = distal_slide(x_seen, s.slide_travel, window)
+        # where the measured distal end moves the whole tendon slides (session 20); a fitted x_out lag undone first
+        slide = s.slide
+        if slide is not None and s.x_out is not None and g("sensor_lag:x_out"):
+            slide = distal_slide(_shift(t, s.x_out, -g("sensor_lag:x_out")), s.slide_travel, slide_window(t))
         T_out, E1 = run_extended(T_in, vel, t, u, s.w, T_min=s.T_min, sigma=s.sigma_T_in, speed=speed, v_st=v_st,
                                  T0_out=T0_out, band=NOISE_BAND * s.sigma_T_in, slide=slide, **knobs)
     if x_p > 0.0 and not node:
@@ -508,6 +507,11 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
 #: (Series.slide_travel; :func:`estimator.offline.effects_kernels.distal_slide`): 0.2 mm/s (V_STOP) over 50 ms is
 #: 10 um, above the resolution of every simulated encoder (quanta up to 2 um)
 SLIDE_WINDOW = 0.05
+
+
+def slide_window(time: np.ndarray) -> int:
+    """SLIDE_WINDOW in samples of ``time`` [s], shape (n,), n >= 2 (at least 1)."""
+    return max(1, int(round(SLIDE_WINDOW * (time.size - 1) / max(float(time[-1] - time[0]), 1e-12))))
 
 #: T_in below SLACK_SIGMAS x its noise level counts as a slack tendon: the prepared T_in of a slack
 #: lumped tendon stays below 2 sigma in 95 % of its samples (dev5 seeds 405110, 407101, 417110, dev 503)

@@ -35,9 +35,10 @@ distal part slide back) - and is updated in one of two ways:
   the whole profile follows T_in at the present sliding friction (so it follows a change of
   speed or K at once); f > 1 only after a breakaway at t_b (static friction relaxing to kinetic).
   The distal end of a sliding tendon only moves on, so a T_out that would turn back by more than
-  the noise ends the slide too (not on the sample where a distal end seen moving starts it: the full-slip
-  T_out may then jump either way, which is how a K that only the memory's band allowed shows) (a reversal shows in the averaged T_in before x_in turns), except
-  within 5 t_slip of a breakaway, where the averaging blunts the turn of T_in.
+  the noise ends the slide too (a reversal shows in the averaged T_in before x_in turns), except
+  within 5 t_slip of a breakaway, where the averaging blunts the turn of T_in, and except on the sample
+  where a distal end seen moving starts the slide (the full-slip T_out may then jump either way, which
+  is how a K that only the memory's band allowed shows).
   A breakaway is also taken when T_in turns back within BREAK_MARGIN of the static threshold
   while the proximal end keeps going (the breakaway peak, blunted by the averaging of the data),
   and below T_min it is too small to see and gets no relaxation.
@@ -51,7 +52,8 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["run_extended", "distal_slide", "route_shape", "stiffening_strain", "travel_lag", "backlash_play", "V_STOP", "BREAK_MARGIN"]
+__all__ = ["run_extended", "distal_slide", "route_shape", "stiffening_strain", "travel_lag", "backlash_play", "V_STOP",
+           "BREAK_MARGIN"]
 
 V_STOP = 2e-4        # proximal speed below which a slide ends (the tendon sticks) [m/s]
 BREAK_MARGIN = 0.35  # share of the kinetic-static gap within which a turn of T_in counts as breakaway [-]
