@@ -33,8 +33,9 @@ the final set fixed at the end of session 18, run once in session 19 with the co
 and ``dev21`` (offsets + 2000000: the final set of session 19, run once with the diagnosis of ecd1fa8, route fitted
 and held, seen since) and ``dev22`` (offsets + 2100000: the final set fixed at the end of session 19, run once at
 the start of session 20 with the code of commit 6466192, seen since) and ``dev23`` (offsets + 2200000: the final
-set of session 20, run once at its end with the code of commit f07db1c, seen since) are development data. ``final``
-(offsets + 2300000) is the final set fixed at the end of session 20 for the next session's run.
+set of session 20, run once at its end with the code of commit f07db1c, seen since) and ``dev24`` (offsets + 2300000:
+the final set fixed at the end of session 20, run once at the start of session 21 with the code of commit c1f2cce,
+seen since) are development data. ``final`` (offsets + 2400000) is the final set fixed at the start of session 21.
 Seed layout (session 4): every hidden-effect recording has its own seed, so its own simulated rig
 (route, K, EA, load, rate, noise): effect k of EFFECT_IDS, level j, repeat s uses
 base + 100 + 1000 k + 10 j + s (before session 4 every effect of a set shared the four rigs of
@@ -76,8 +77,8 @@ SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "dev4": 300000, "dev5": 4
              "dev10": 900000, "dev11": 1000000, "dev12": 1100000, "dev13": 1200000,
              "dev14": 1300000, "dev15": 1400000, "dev16": 1500000,
              "dev17": 1600000, "dev18": 1700000, "dev19": 1800000, "dev20": 1900000,
-             "dev21": 2000000, "dev22": 2100000, "dev23": 2200000,
-             "final": 2300000}   # fixed at the end of session 20, after its final run (docstring)
+             "dev21": 2000000, "dev22": 2100000, "dev23": 2200000, "dev24": 2300000,
+             "final": 2400000}   # fixed at the start of session 21, after the run of 2300000+ (docstring)
 UNCATALOGUED = "load_cell_wander"
 
 
