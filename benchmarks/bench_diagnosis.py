@@ -51,6 +51,11 @@ pass/fail checks are in tests/estimator/test_diagnosis.py).
     .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|dev3|dev4|dev5|dev6|dev7|dev8|dev9|dev10|dev11|dev12|dev13|dev14|dev15|dev16|dev17|final] [--seeds 2]
         [--levels 0.2,0.8] [--clean 12] [--duration 90] [--rate 1000] [--jobs 2] [--json OUT] [--speed-only] [--twins]
         [--shared-rigs]
+    .venv/bin/python benchmarks/bench_diagnosis.py --floor-table OUT.json [OUT.json ...]
+
+``--floor-table`` (session 21) prints estimator.offline.diagnosis.FLOOR_SCORE as computed from the clean recordings
+(and clean twins) of runs of this benchmark whose base model is at the floor (``--json`` files of development sets only), per
+effect the lowest score and the bound.
 """
 from __future__ import annotations
 
@@ -68,7 +73,7 @@ from scipy.stats import binomtest
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from estimator.offline.diagnosis import WEAK_STRUCTURE, diagnose  # noqa: E402
+from estimator.offline.diagnosis import FLOOR_FACTOR, MID_SCORE, STRUCTURE_RATIO, WEAK_STRUCTURE, diagnose, floor_scores  # noqa: E402
 from estimator.offline.diagnosis_fit import noise_level, quantum  # noqa: E402
 from estimator.offline.effects import EFFECT_IDS, EQUIVALENT, NONE  # noqa: E402
 
@@ -327,6 +332,36 @@ def table(rows: list[dict], title: str) -> None:
           f"(mean {np.mean([r['n'] for r in rows]):.0f} samples)")
 
 
+def clean_scores(rows: list[dict]) -> list[dict[str, float]]:
+    """Candidate scores of the clean recordings and clean twins of benchmark rows whose base model is at the floor
+    (structure ratio <= STRUCTURE_RATIO on every signal: where FLOOR_SCORE applies), whatever they were answered."""
+    out = [r["scores"] for r in rows if r["effect"] == NONE and r["scores"] and r["structure"] <= STRUCTURE_RATIO]
+    return out + [r["twin_scores"] for r in rows
+                  if r.get("twin_scores") and r.get("twin_structure", math.inf) <= STRUCTURE_RATIO]
+
+
+def floor_table(paths: list[str]) -> dict[str, float]:
+    """Print and return :func:`estimator.offline.diagnosis.floor_scores` of the clean rows in ``paths``
+    (benchmark ``--json`` files); ValueError naming a file that is not a list of benchmark rows."""
+    clean: list[dict[str, float]] = []
+    for path in paths:
+        with open(path) as fh:
+            rows = json.load(fh)
+        if not isinstance(rows, list) or not all(isinstance(r, dict) and "effect" in r and "cause" in r for r in rows):
+            raise ValueError(f"{path}: not a list of benchmark rows (--json output)")
+        got = clean_scores(rows)
+        print(f"{path}: {len(got)} clean recordings at the floor")
+        clean += got
+    table = floor_scores(clean)
+    low = floor_scores(clean, factor=1.0, cap=math.inf)
+    print(f"{len(clean)} clean recordings at the floor; bound = min({MID_SCORE}, {FLOOR_FACTOR} x lowest score)")
+    for eid, v in table.items():
+        print(f"  {eid:22s} lowest {low[eid]:.3f}  bound {v:.3f}")
+    # rounded down: the printed table is never looser than the computed one
+    print("FLOOR_SCORE = {" + ", ".join(f'"{k}": {math.floor(v * 100.0) / 100.0:.2f}' for k, v in table.items()) + "}")
+    return table
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sim", choices=("rig", "lumped", "both"), default="both")
@@ -350,7 +385,13 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--shared-rigs", action="store_true",
                     help="seed layout before session 4: every effect of a set on the same four rigs")
     ap.add_argument("--speed-only", action="store_true", help="only time a 10-minute 1 kHz recording")
+    ap.add_argument("--floor-table", nargs="+", default=None, metavar="JSON",
+                    help="print the per-effect floor bounds (diagnosis.FLOOR_SCORE) from the clean recordings of "
+                         "these --json files of development sets, and exit")
     args = ap.parse_args(argv)
+    if args.floor_table:
+        floor_table(args.floor_table)
+        return
     if args.speed_only:
         speed()
         return

@@ -68,3 +68,26 @@ def test_known_route_is_the_rigs_own_wrap_shape(bench):
     assert abs(np.interp(0.7, s, lumped) - 2.0 / 3.0) < 1e-2        # the first arc: 2 rad of the 3
     rig = bench.known_route({"route": ((1.2, 2.0),)})
     assert np.allclose(rig, np.linspace(0.0, 1.0, rig.size))
+
+
+def test_floor_table_reads_the_clean_rows_at_the_floor_only(bench, tmp_path, capsys):
+    import json
+    rows = [
+        {"effect": "none", "cause": "none", "structure": 1.2, "scores": {"stiction": 0.6, "sensor_lag:T_out": 0.9}},
+        # a clean recording named something at the floor still counts (a false alarm lowers the bound)
+        {"effect": "none", "cause": "stiction", "structure": 2.0, "scores": {"stiction": 0.4, "sensor_lag:T_out": 0.95}},
+        # far from the floor: FLOOR_SCORE does not apply there, its scores do not count
+        {"effect": "none", "cause": "unknown", "structure": 9.0, "scores": {"stiction": 0.1, "sensor_lag:T_out": 0.2}},
+        {"effect": "stiction", "cause": "none", "structure": 1.0, "scores": {"stiction": 0.05},
+         "twin_cause": "none", "twin_structure": 1.1, "twin_scores": {"stiction": 0.8, "sensor_lag:T_out": 0.75}},
+    ]
+    path = tmp_path / "dev.json"
+    path.write_text(json.dumps(rows))
+    table = bench.floor_table([str(path)])
+    assert table == {"sensor_lag:T_out": pytest.approx(bench.FLOOR_FACTOR * 0.75),
+                     "stiction": pytest.approx(bench.FLOOR_FACTOR * 0.4)}
+    assert "3 clean recordings at the floor" in capsys.readouterr().out
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"rows": []}))
+    with pytest.raises(ValueError, match="bad.json: not a list of benchmark rows"):
+        bench.floor_table([str(bad)])

@@ -603,3 +603,45 @@ def test_a_distal_load_cell_gain_on_a_constant_force_load_is_named_once_the_dist
     assert res["settings"]["distal_slide_travel_m"] == pytest.approx(2.0 * rec.truth["quantum_x_out"], rel=0.05)
     no_x = diagnose(replace(rec.data, x_out=None), effects=("sensor_gain:T_out",))
     assert no_x["settings"]["distal_slide_travel_m"] == 0.0
+
+
+def test_floor_scores_bound_each_effect_below_its_lowest_clean_score():
+    from estimator.offline.diagnosis import FLOOR_FACTOR, MID_SCORE, floor_scores
+    clean = [{"sensor_lag:T_out": 0.9, "stiction": 0.6}, {"sensor_lag:T_out": 0.8, "stiction": 0.43}]
+    got = floor_scores(clean)
+    assert got == {"sensor_lag:T_out": pytest.approx(min(MID_SCORE, FLOOR_FACTOR * 0.8)),
+                   "stiction": pytest.approx(FLOOR_FACTOR * 0.43)}
+    assert floor_scores(clean, factor=1.0, cap=math.inf)["stiction"] == 0.43
+    with pytest.raises(ValueError, match="at least one clean recording"):
+        floor_scores([])
+    with pytest.raises(ValueError, match=r"recording 2: score of stiction is nan"):
+        floor_scores([{"stiction": 0.5}, {"stiction": float("nan")}])
+    with pytest.raises(ValueError, match="factor"):
+        floor_scores(clean, factor=0.0)
+
+
+def test_the_floor_table_holds_every_catalogue_candidate_below_the_price():
+    # every bound lies between STRONG_SCORE's reach and the price of one parameter: the table can only add names
+    # at the floor, never accept what the price refuses
+    from estimator.offline.diagnosis import FLOOR_SCORE, MID_SCORE, PENALTY
+    assert set(FLOOR_SCORE) <= set(CATALOGUE)
+    assert all(0.0 < v <= min(MID_SCORE, 1.0 - PENALTY) for v in FLOOR_SCORE.values())
+
+
+def test_a_lag_at_the_floor_is_named_by_its_own_clean_bound(monkeypatch):
+    # lumped dev24 2313103 (session 21): an 18 ms lag on the distal load cell of a spring load. The base leaves 1.06 x
+    # the floor and the lag explains 72 % of it (S 0.28): above STRONG_SCORE and B (1 - S) under EXCESS_MIN, so
+    # "none" by the rules for all effects; a T_out lag never scored under 0.74 on a clean recording at the floor
+    from estimator.offline import diagnosis
+    rec = lumped_scenarios.record("sensor_lag:T_out", seed=2313103, level=0.2, duration=60.0)
+    cands = ("sensor_lag:T_out", "tendon_stiffening", "sensor_offset:x_in")
+    res = diagnose(rec.data, effects=cands)
+    assert res["cause"] == "sensor_lag:T_out", (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
+    base = res["structure"]["base"]
+    s = res["candidates"]["sensor_lag:T_out"]["score"]
+    assert max(base.values()) <= res["settings"]["structure_ratio"]
+    assert res["settings"]["strong_score"] < s < res["settings"]["floor_score"]["sensor_lag:T_out"]
+    assert sum(v * v for v in base.values()) * (1.0 - s) < res["settings"]["excess_min"]
+    assert res["parameters"]["tau_T_out"]["value"] == pytest.approx(rec.truth["parameters"]["delay"], rel=0.25)
+    monkeypatch.setattr(diagnosis, "FLOOR_SCORE", {})
+    assert diagnose(rec.data, effects=cands)["causes"] == []
