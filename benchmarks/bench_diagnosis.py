@@ -35,7 +35,9 @@ and held, seen since) and ``dev22`` (offsets + 2100000: the final set fixed at t
 the start of session 20 with the code of commit 6466192, seen since) and ``dev23`` (offsets + 2200000: the final
 set of session 20, run once at its end with the code of commit f07db1c, seen since) and ``dev24`` (offsets + 2300000:
 the final set fixed at the end of session 20, run once at the start of session 21 with the code of commit c1f2cce,
-seen since) are development data. ``final`` (offsets + 2400000) is the final set fixed at the start of session 21.
+seen since) and ``dev25`` (offsets + 2400000: the final set of session 21, run once at 5e1d6f1, seen since) are
+development data. ``final`` (offsets + 2500000) is the final set fixed at the end of session 21 for the next
+session's run.
 Seed layout (session 4): every hidden-effect recording has its own seed, so its own simulated rig
 (route, K, EA, load, rate, noise): effect k of EFFECT_IDS, level j, repeat s uses
 base + 100 + 1000 k + 10 j + s (before session 4 every effect of a set shared the four rigs of
@@ -48,7 +50,7 @@ Prints per effect and per channel: accuracy (strict, and up to the inseparable p
 estimator.offline.effects.EQUIVALENT), gains, false alarms on clean data; never fails on the figures (the
 pass/fail checks are in tests/estimator/test_diagnosis.py).
 
-    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|dev3|dev4|dev5|dev6|dev7|dev8|dev9|dev10|dev11|dev12|dev13|dev14|dev15|dev16|dev17|final] [--seeds 2]
+    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|...|dev25|final] [--seeds 2]
         [--levels 0.2,0.8] [--clean 12] [--duration 90] [--rate 1000] [--jobs 2] [--json OUT] [--speed-only] [--twins]
         [--shared-rigs]
     .venv/bin/python benchmarks/bench_diagnosis.py --floor-table OUT.json [OUT.json ...]
@@ -83,7 +85,8 @@ SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "dev4": 300000, "dev5": 4
              "dev14": 1300000, "dev15": 1400000, "dev16": 1500000,
              "dev17": 1600000, "dev18": 1700000, "dev19": 1800000, "dev20": 1900000,
              "dev21": 2000000, "dev22": 2100000, "dev23": 2200000, "dev24": 2300000,
-             "final": 2400000}   # fixed at the start of session 21, after the run of 2300000+ (docstring)
+             "dev25": 2400000,
+             "final": 2500000}   # fixed at the end of session 21, after its final run (docstring)
 UNCATALOGUED = "load_cell_wander"
 
 
