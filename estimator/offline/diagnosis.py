@@ -114,8 +114,9 @@ def floor_scores(clean: Iterable[Mapping[str, float]], factor: float = FLOOR_FAC
     Parameters
     ----------
     clean : iterable of mappings effect id -> validation score S [-]
-        ``candidates[id].score`` of each clean recording the diagnosis answered "none" (the benchmark's
-        ``scores``); recordings from rigs the thresholds are not judged on.
+        ``candidates[id].score`` of each clean recording whose base model is at the floor (structure ratio
+        <= STRUCTURE_RATIO on every signal), whatever it was answered (the benchmark's ``scores``;
+        ``bench_diagnosis.py --floor-table``); recordings from rigs the thresholds are not judged on.
     factor, cap : float
         The bound is min(cap, factor x the lowest S of the effect).
 
