@@ -85,8 +85,8 @@ EXCESS_MIN = 3.0
 #: Session 21: from the 1670 clean recordings at the floor diagnosed with the present base model (the distal end read,
 #: session 20): lumped dev21, dev22, dev24 with their twins (552) and 600 fresh clean rigs (dev10, dev11 seeds 500-799),
 #: rig dev23, dev24 (368) and 150 fresh ones (``bench_diagnosis.py --floor-table``). Left one set out, the bounds of
-#: the others named 15 more hidden effects right on three lumped sets of 184 (T_out lag 7, velocity friction 4, T_in
-#: gain 2, curvature drift 1, x_out lag 1; one more up to the gain pair) and stiction once on the rig, with no clean
+#: the others named 15 more hidden effects right on three lumped sets of 184 (T_out lag 7, velocity friction 5,
+#: curvature drift, x_out lag and T_out gain 1 each; a T_in gain more up to the gain pair) and stiction once on the rig, with no clean
 #: recording named; at 0.7 one clean recording was (a distal backlash at S 0.38). Older base models reached lower on
 #: clean constant-force loads (velocity friction at S 0.17-0.5) and are not used
 FLOOR_FACTOR = 0.6
