@@ -37,8 +37,9 @@ set of session 20, run once at its end with the code of commit f07db1c, seen sin
 the final set fixed at the end of session 20, run once at the start of session 21 with the code of commit c1f2cce,
 seen since) and ``dev25`` (offsets + 2400000: the final set of session 21, run once at 5e1d6f1, seen since) and
 ``dev26`` (offsets + 2500000: session 21's second final set, run once at cec3690 with the same diagnosis, seen since)
-are development data. ``final`` (offsets + 2600000) is the final set fixed at the end of session 21 for the next
-session's run.
+and ``dev27`` (offsets + 2600000: fixed at the end of session 21, run once at the start of session 22 with the code of
+commit 88295b6, seen since) are development data. ``final`` (offsets + 2700000) is the final set fixed at the start
+of session 22, before any change.
 Seed layout (session 4): every hidden-effect recording has its own seed, so its own simulated rig
 (route, K, EA, load, rate, noise): effect k of EFFECT_IDS, level j, repeat s uses
 base + 100 + 1000 k + 10 j + s (before session 4 every effect of a set shared the four rigs of
@@ -86,8 +87,8 @@ SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "dev4": 300000, "dev5": 4
              "dev14": 1300000, "dev15": 1400000, "dev16": 1500000,
              "dev17": 1600000, "dev18": 1700000, "dev19": 1800000, "dev20": 1900000,
              "dev21": 2000000, "dev22": 2100000, "dev23": 2200000, "dev24": 2300000,
-             "dev25": 2400000, "dev26": 2500000,
-             "final": 2600000}   # fixed at the end of session 21, after its second final run (docstring)
+             "dev25": 2400000, "dev26": 2500000, "dev27": 2600000,
+             "final": 2700000}   # fixed at the start of session 22, after the run of 2600000+ (docstring)
 UNCATALOGUED = "load_cell_wander"
 
 
