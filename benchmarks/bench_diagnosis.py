@@ -207,6 +207,7 @@ def one(case: tuple) -> dict:
 def _detail(res: dict) -> dict:
     """A diagnosis' structure ratios, noise floors and every candidate's validation figures (for the JSON)."""
     return {"structure": res["structure"], "noise": res["noise"],
+            "stick_slip": {k: res["stick_slip"][k] for k in ("ratio", "named")},
             "candidates": {k: {m: v[m] for m in ("validation_rmse_T_out_N", "validation_rmse_x_out_m",
                                                  "score", "penalised_score", "fold_values")}
                            for k, v in res["candidates"].items()}}
@@ -319,6 +320,17 @@ def table(rows: list[dict], title: str) -> None:
     if errors:
         print(f"recordings the diagnosis raised on (counted as misses): {len(errors)}: "
               + "; ".join(f"{r['effect']} seed {r['seed']}: {r['cause']}" for r in errors))
+    # session 22: stiction named by the stick-slip check of the proximal tension (the models named nothing)
+    def ratio(detail: dict) -> float | None:
+        return detail.get("stick_slip", {}).get("ratio")
+
+    if any("stick_slip" in r.get("detail", {}) for r in rows):
+        slip = [r for r in rows if r["detail"].get("stick_slip", {}).get("named")]
+        calm = [v for v in [ratio(r.get("detail", {})) for r in clean]
+                + [ratio(r.get("twin_detail", {})) for r in present] if v is not None]
+        print(f"stick-slip check: stiction named by it {len(slip)} (right {sum(_ok(r) for r in slip)}); proximal "
+              f"roughness ratio of clean recordings and twins max {max(calm, default=float('nan')):.2f} "
+              f"({len(calm)} readable)")
     clean = [r for r in clean if r["scores"]]
     if clean:
         best = [min(r["scores"].values()) for r in clean]

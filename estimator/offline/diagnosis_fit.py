@@ -31,7 +31,7 @@ from estimator.data import MeasuredData
 from estimator.errors import DataError
 
 __all__ = ["Progress", "trimmed_ms", "paired_trimmed_ms", "sample_block", "rest_reading", "prepare", "split_at_rest", "fit_model", "start_points", "rest_window", "rest_start", "heldout_mse", "raw_rmse", "noise_level",
-           "quantum", "distal_end_held", "HELD_STEPS", "HELD_SHARE", "NEAR_HELD_SHARE", "SIGNALS", "channel_choice", "look_alike", "toe_or_play", "settings_keys", "predictions"]
+           "quantum", "stick_slip_ratio", "STICK_SLIP_WINDOW", "STICK_SLIP_SPEED", "STICK_SLIP_MIN_MOVE", "distal_end_held", "HELD_STEPS", "HELD_SHARE", "NEAR_HELD_SHARE", "SIGNALS", "channel_choice", "look_alike", "toe_or_play", "settings_keys", "predictions"]
 
 _K = Parameter("K", "-", 0.0, K_MAX, 0.5, (), "friction exponent mu * total wrap angle")
 _SCALE = {"K": 0.1, "c_v": 10.0, "T0": 1.0, "K_rate": 1e-3, "beta": 1.0, "T_c": 1.0, "r_s": 0.1, "a": 0.5,
@@ -62,6 +62,67 @@ def quantum(a: np.ndarray) -> float:
     q = float(np.percentile(d, 5))
     steps = d[: 2000] / q
     return q if np.all(np.abs(steps - np.round(steps)) < 0.05) else 0.0
+
+
+#: Stick-slip check (:func:`stick_slip_ratio`): the smoothing window [s] (at least 7 samples), the proximal speed
+#: [m/s] above which a sample counts as a steady move (over three windows around it) and below which a hold
+STICK_SLIP_WINDOW = 0.025
+STICK_SLIP_SPEED = 1e-3
+STICK_SLIP_HOLD = 1e-5
+#: fewest samples of each kind (steady move, hold) for the ratio to be read, and the shortest time [s] of steady
+#: moves and of holds: on a second of moves the edges of the moves (the motor's acceleration, the kink where the slip
+#: reaches the distal end) weigh enough to reach 1.5-1.9 without stick-slip (lumped dev26 2501102, 2501113: 0.5-1.1 s
+#: of steady moves; the least-moving hidden stiction of dev25-dev27 that reached 1.4 moves for 8.9 s)
+STICK_SLIP_MIN_SAMPLES = 200
+STICK_SLIP_MIN_MOVE = 3.0
+STICK_SLIP_MIN_HOLD = 1.0
+
+
+def stick_slip_ratio(time: np.ndarray, x_in: np.ndarray, T_in: np.ndarray) -> float | None:
+    """How much rougher the proximal tension is in steady moves than in holds (literature.md E4: stick-slip).
+
+    A quasi-static friction law, with or without a static peak, gives a proximal tension that is smooth while the
+    proximal end moves steadily; static friction above kinetic with a falling (Stribeck) branch makes the tendon
+    stick and slip, and the proximal load cell reads the saw-tooth on top of its noise. The ratio compares the
+    high-frequency part of T_in (T_in less a quadratic Savitzky-Golay fit over STICK_SLIP_WINDOW) on samples
+    where the proximal speed stays above STICK_SLIP_SPEED for three windows with the same on holds (speed below
+    STICK_SLIP_HOLD): median absolute values, the holds' at least a quarter of T_in's quantisation step. It is
+    about 1 for white sensor noise.
+
+    Parameters
+    ----------
+    time : ndarray (n,) [s], increasing; x_in : ndarray (n,) [m]; T_in : ndarray (n,) [N]
+
+    Returns
+    -------
+    float or None
+        The ratio (dimensionless), or None when fewer than STICK_SLIP_MIN_SAMPLES steady-move or hold samples,
+        under STICK_SLIP_MIN_MOVE seconds of steady moves or under STICK_SLIP_MIN_HOLD seconds of holds exist.
+
+    Raises
+    ------
+    ValueError
+        Arrays of different lengths.
+    """
+    from scipy.ndimage import minimum_filter1d
+    from scipy.signal import savgol_filter
+
+    t, x, y = (np.asarray(a, dtype=float) for a in (time, x_in, T_in))
+    if not t.shape == x.shape == y.shape:
+        raise ValueError(f"stick_slip_ratio: time, x_in and T_in differ in length ({t.size}, {x.size}, {y.size})")
+    if t.size < 2 * STICK_SLIP_MIN_SAMPLES:
+        return None
+    dt = float(np.median(np.diff(t)))
+    w = max(7, int(round(STICK_SLIP_WINDOW / dt)) | 1)
+    v = np.abs(savgol_filter(x, w, 2, deriv=1, delta=dt))
+    moving = minimum_filter1d(v, 3 * w) > STICK_SLIP_SPEED
+    hold = v < STICK_SLIP_HOLD
+    n_move, n_hold = int(moving.sum()), int(hold.sum())
+    if (min(n_move, n_hold) < STICK_SLIP_MIN_SAMPLES or n_move * dt < STICK_SLIP_MIN_MOVE
+            or n_hold * dt < STICK_SLIP_MIN_HOLD):
+        return None
+    r = np.abs(y - savgol_filter(y, w, 2))
+    return float(np.median(r[moving]) / max(float(np.median(r[hold])), 0.25 * quantum(y), 1e-12))
 
 
 #: x_out counts as held (the distal end never moved: a stop, or a load the tension never broke free) when its
