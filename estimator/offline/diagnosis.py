@@ -317,7 +317,9 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         block; ``candidates`` id -> {validation rmse, score, penalised_score, accepted, parameters}
         (fit block only); ``split`` {fit, validation, test: {index [start, stop) of the measured
         samples, time_s [first, last], n_samples}, time_s, n_train, n_heldout, train_fraction};
-        ``noise``, ``structure`` (validation rmse / floor: base, extended), ``model`` and
+        ``noise``, ``structure`` (validation rmse / floor: base, extended), ``stick_slip`` {ratio
+        (:func:`estimator.offline.diagnosis_fit.stick_slip_ratio` on the training block, None when unreadable),
+        named (stiction named by it: the models named nothing and ratio >= STICK_SLIP_RATIO), samples}, ``model`` and
         ``base_model`` (refitted on the training block; enough to re-run both, see
         :func:`teleop.app.report.write_report`), ``settings``, ``elapsed_s``.
 

@@ -152,6 +152,11 @@ def format_summary(result: dict) -> str:
     eq = f"  (or equivalently: {', '.join(result['equivalent'])})" if result.get("equivalent") else ""
     lines = [f"cause: {result['cause']}{more}{eq}",
              f"held-out gain on {result['primary_signal']}: {result['gain']:.2f}"]
+    slip = result.get("stick_slip") or {}
+    if slip.get("named"):
+        lines.append(f"named by the stick-slip check: the proximal tension is {slip['ratio']:.2f} x rougher in "
+                     f"steady moves than in holds (bound {result['settings']['stick_slip_ratio']:g}); the models "
+                     "alone named nothing")
     for name, unit in (("T_out", "N"), ("x_out", "m")):
         key = f"rmse_{name}_{unit}"
         if b.get(key) is not None:

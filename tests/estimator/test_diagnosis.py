@@ -686,9 +686,12 @@ def test_lumped_stick_slip_the_models_leave_at_the_floor_names_stiction(monkeypa
     assert res["cause"] == "stiction", (res["stick_slip"], res["structure"])
     assert res["stick_slip"]["named"] and res["stick_slip"]["ratio"] >= res["settings"]["stick_slip_ratio"]
     assert res["stick_slip"]["samples"] == res["split"]["train"]
+    from teleop.app.report import format_summary
+    assert "stick-slip check" in format_summary(res)
     twin = lumped_scenarios.record(None, seed=2504111, level=0.8, duration=60.0)
     res_twin = diagnose(twin.data, effects=cands)
     assert res_twin["cause"] == "none" and res_twin["stick_slip"]["ratio"] < 1.2
+    assert "stick-slip" not in format_summary(res_twin)
     # without the check the models alone leave it at "none"
     monkeypatch.setattr(diagnosis, "STICK_SLIP_RATIO", math.inf)
     assert diagnose(rec.data, effects=cands)["causes"] == []
