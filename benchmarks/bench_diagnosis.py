@@ -39,7 +39,9 @@ seen since) and ``dev25`` (offsets + 2400000: the final set of session 21, run o
 ``dev26`` (offsets + 2500000: session 21's second final set, run once at cec3690 with the same diagnosis, seen since)
 and ``dev27`` (offsets + 2600000: fixed at the end of session 21, run once at the start of session 22 with the code of
 commit 88295b6, seen since) and ``dev28`` (offsets + 2700000: the final set of session 22, run once at 075d661, seen
-since) are development data. ``final`` (offsets + 2800000) is the final set fixed after that run.
+since) and ``dev29`` (offsets + 2800000: session 22's second final set, run once at 870b55d with the same diagnosis,
+seen since) are development data. ``final`` (offsets + 2900000) is the final set fixed at the end of session 22 for
+the next session's run.
 Seed layout (session 4): every hidden-effect recording has its own seed, so its own simulated rig
 (route, K, EA, load, rate, noise): effect k of EFFECT_IDS, level j, repeat s uses
 base + 100 + 1000 k + 10 j + s (before session 4 every effect of a set shared the four rigs of
@@ -88,7 +90,8 @@ SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "dev4": 300000, "dev5": 4
              "dev17": 1600000, "dev18": 1700000, "dev19": 1800000, "dev20": 1900000,
              "dev21": 2000000, "dev22": 2100000, "dev23": 2200000, "dev24": 2300000,
              "dev25": 2400000, "dev26": 2500000, "dev27": 2600000, "dev28": 2700000,
-             "final": 2800000}   # fixed in session 22, after the run of 2700000+ (docstring)
+             "dev29": 2800000,
+             "final": 2900000}   # fixed at the end of session 22, after its second final run (docstring)
 UNCATALOGUED = "load_cell_wander"
 
 
