@@ -98,8 +98,9 @@ FLOOR_SCORE: dict[str, float] = {
     "velocity_friction": 0.50}
 #: a proximal tension this much rougher in steady moves than in holds (:func:`estimator.offline.diagnosis_fit.
 #: stick_slip_ratio`, about 1 for sensor noise) is stick-slip: stiction is named when the models name nothing.
-#: Session 22, set on clean lumped rigs (dev25-dev27 twins, 480: largest 1.29) against hidden stiction (0.24-0.51
-#: static over kinetic: 1.15-2.56); see docs/diagnosis.md
+#: Session 22, on the first 60 % of the lumped recordings of dev25-dev27: clean rows and twins at most 1.26 (499 of 552
+#: readable), other hidden effects at most 1.26, hidden stiction (0.24-0.51 static over kinetic) 1.11-5.69, 16 of 22 at
+#: 1.4 or more; the project's rig at most 1.05 (docs/diagnosis.md, Session 22)
 STICK_SLIP_RATIO = 1.4
 ROUTE_SCORE = 0.5           # the finer route replaces the thirds as the base below this validation score [-]
 DOMINANT_SCORE = 0.1        # accepted extensions with S below this are named first even with much structure left [-]
@@ -519,7 +520,8 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     # stick-slip (literature.md E4): a proximal tension rougher in steady moves than in holds is the saw-tooth of a
     # tendon that sticks and slips, which no quasi-static extension reproduces; when the models name nothing (none,
     # or structure no extension explains) it names stiction (the training block only; session 22)
-    i_train = int(np.searchsorted(data.time, float(s.time[kt]) - 0.5 * (s.time[1] - s.time[0])))
+    half = 0.5 * (s.time[1] - s.time[0])
+    i_train = int(np.searchsorted(data.time, float(s.time[kt] - half)))
     chatter = stick_slip_ratio(data.time[:i_train], data.x_in[:i_train], data.T_in[:i_train])
     by_chatter = (chatter is not None and chatter >= STICK_SLIP_RATIO and not chosen.effects
                   and "stiction" in singles)
@@ -528,7 +530,6 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     left = _structure(chosen, noise)
 
     # the test block, touched once: base and chosen model refitted on the whole training block
-    half = 0.5 * (s.time[1] - s.time[0])
     t_split, t_val, t_back = (float(s.time[k] - half) for k in (kt, kv, kb))
     train_s = folds.train
     vals, c, _ = fit_model([], train_s, [base.values[0]], route=route)
