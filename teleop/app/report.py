@@ -156,7 +156,8 @@ def format_summary(result: dict) -> str:
     if slip.get("named"):
         lines.append(f"named by the stick-slip check: the proximal tension is {slip['ratio']:.2f} x rougher in "
                      f"steady moves than in holds (bound {result['settings']['stick_slip_ratio']:g}); the models "
-                     "alone named nothing")
+                     "alone named nothing; r_s below is the quasi-static extension's fit, which reads a stick-slip's "
+                     "static peak low (docs/diagnosis.md, Session 22)")
     for name, unit in (("T_out", "N"), ("x_out", "m")):
         key = f"rmse_{name}_{unit}"
         if b.get(key) is not None:
