@@ -54,7 +54,7 @@ Prints per effect and per channel: accuracy (strict, and up to the inseparable p
 estimator.offline.effects.EQUIVALENT), gains, false alarms on clean data; never fails on the figures (the
 pass/fail checks are in tests/estimator/test_diagnosis.py).
 
-    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|...|dev25|final] [--seeds 2]
+    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|...|dev29|final] [--seeds 2]
         [--levels 0.2,0.8] [--clean 12] [--duration 90] [--rate 1000] [--jobs 2] [--json OUT] [--speed-only] [--twins]
         [--shared-rigs]
     .venv/bin/python benchmarks/bench_diagnosis.py --floor-table OUT.json [OUT.json ...]
@@ -328,7 +328,7 @@ def table(rows: list[dict], title: str) -> None:
         return detail.get("stick_slip", {}).get("ratio")
 
     if any("stick_slip" in r.get("detail", {}) for r in rows):
-        slip = [r for r in rows if r["detail"].get("stick_slip", {}).get("named")]
+        slip = [r for r in rows if r.get("detail", {}).get("stick_slip", {}).get("named")]
         calm = [v for v in [ratio(r.get("detail", {})) for r in clean]
                 + [ratio(r.get("twin_detail", {})) for r in present] if v is not None]
         print(f"stick-slip check: stiction named by it {len(slip)} (right {sum(_ok(r) for r in slip)}); proximal "

@@ -525,8 +525,9 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     # tendon that sticks and slips, which no quasi-static extension reproduces; when the models name nothing (none,
     # or structure no extension explains) it names stiction (the training block only; session 22)
     half = 0.5 * (s.time[1] - s.time[0])
-    i_train = int(np.searchsorted(data.time, float(s.time[kt] - half)))
-    chatter = stick_slip_ratio(data.time[:i_train], data.x_in[:i_train], data.T_in[:i_train])
+    t_split, t_val, t_back = (float(s.time[k] - half) for k in (kt, kv, kb))
+    i_t = int(np.searchsorted(data.time, t_split))      # the measured samples of the training block: [0, i_t)
+    chatter = stick_slip_ratio(data.time[:i_t], data.x_in[:i_t], data.T_in[:i_t])
     by_chatter = (chatter is not None and chatter >= STICK_SLIP_RATIO and not chosen.effects
                   and "stiction" in singles)
     if by_chatter:
@@ -534,7 +535,6 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     left = _structure(chosen, noise)
 
     # the test block, touched once: base and chosen model refitted on the whole training block
-    t_split, t_val, t_back = (float(s.time[k] - half) for k in (kt, kv, kb))
     train_s = folds.train
     vals, c, _ = fit_model([], train_s, [base.values[0]], route=route)
     final_base = (vals, c)
@@ -586,7 +586,6 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
                                             if p.name in v} for v in f.values]}
     prim = primary(chosen.effects)
     n = len(data)
-    i_t = int(np.searchsorted(data.time, t_split))
     model_values = {**final[0]}
     result = {
         "cause": cause, "causes": causes, "equivalent": equivalent, "base": base_raw, "extended": ext_raw,
