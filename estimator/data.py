@@ -5,13 +5,25 @@ The CSV format that stores them (ARCHITECTURE.md, "Measured-data format") is rea
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from estimator.errors import DataError
 
-__all__ = ["MeasuredData"]
+__all__ = ["MeasuredData", "noise_level"]
+
+
+def noise_level(a: np.ndarray) -> float:
+    """Robust white-noise level [unit of a] of a sampled signal, shape (n,), from its second differences
+    (MAD / sqrt(6): a smooth signal's own second differences are negligible at the sample rate); 0 below 5
+    samples."""
+    a = np.asarray(a, dtype=float)
+    if a.size < 5:
+        return 0.0
+    d2 = a[2:] - 2.0 * a[1:-1] + a[:-2]
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6.0))
 
 
 @dataclass(frozen=True, eq=False)

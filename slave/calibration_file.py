@@ -23,10 +23,12 @@ A single-tendon instrument (one axis of one tendon) has ``tendon:`` instead of `
     target_tension: 20.0
     use_route: true
     tendon: {K: 0.62, M_e: 8.1e-05, compliance: 0.0001, knee_x_in: 0.0061, knee_T_in: 4.1,
-             residual_rms: 3.0e-07, n_samples: 1500}
+             residual_rms: 3.0e-07, n_samples: 1500, tension_noise: 0.02}
 
 K [-] >= 0, M_e [m/N] > 0, compliance = L/EA [m/N] > 0, knee_x_in [m], knee_T_in [N], residual_rms [m]
-(of the post-knee line x_in = M_e T_in + c) >= 0, n_samples >= 1 (samples after the knee).
+(of the post-knee line x_in = M_e T_in + c) >= 0, n_samples >= 1 (samples after the knee), and optionally
+tension_noise [N] >= 0 (the noise sigma of the pull's T_in, for the estimator's noise band; files written
+before session 23 have none: 0, no band).
 """
 from __future__ import annotations
 
@@ -52,6 +54,8 @@ METHOD = "joint-limit knee each way (Phee et al. 2009, Sec. IV); K from M_e by N
 METHOD_TENDON = "joint-limit knee (Phee et al. 2009, Sec. IV); K from M_e by Newton (eq. 13)"
 _TENDON_KEYS = {"K": float, "M_e": float, "compliance": float, "knee_x_in": float, "knee_T_in": float,
                 "residual_rms": float, "n_samples": int}
+_OPTIONAL_KEYS = {"tension_noise": float}        # missing: 0.0
+_NON_NEGATIVE = ("K", "residual_rms", "tension_noise")
 _TOP_KEYS = ("instrument", "date", "method", "target_tension", "use_route")       # + joints or tendon
 
 
@@ -66,11 +70,12 @@ class TendonCalibration:
     knee_T_in: float
     residual_rms: float
     n_samples: int
+    tension_noise: float = 0.0
 
     @classmethod
     def from_result(cls, r: CalibrationResult) -> "TendonCalibration":
         return cls(K=r.K, M_e=r.M_e, compliance=r.model.compliance, knee_x_in=r.knee_x_in, knee_T_in=r.knee_T_in,
-                   residual_rms=r.residual_rms, n_samples=r.n_samples)
+                   residual_rms=r.residual_rms, n_samples=r.n_samples, tension_noise=r.tension_noise)
 
 
 @dataclass(frozen=True)
@@ -90,9 +95,10 @@ class InstrumentCalibration:
         out = {"instrument": self.instrument, "date": self.date, "method": self.method,
                "target_tension": self.target_tension, "use_route": self.use_route}
         if self.tendon is not None:
-            out["tendon"] = {k: getattr(self.tendon, k) for k in _TENDON_KEYS}
+            out["tendon"] = {k: getattr(self.tendon, k) for k in (*_TENDON_KEYS, *_OPTIONAL_KEYS)}
         else:
-            out["joints"] = [{"name": n, **{t: {k: getattr(c[t], k) for k in _TENDON_KEYS} for t in TENDONS}}
+            out["joints"] = [{"name": n, **{t: {k: getattr(c[t], k) for k in (*_TENDON_KEYS, *_OPTIONAL_KEYS)}
+                                             for t in TENDONS}}
                              for n, c in self.joints]
         return out
 
@@ -208,15 +214,15 @@ def _tendon_values(path: Path, where: str, v) -> TendonCalibration:
     """One tendon's fitted values, checked (module docstring: ranges); ``where`` names it in errors."""
     if not isinstance(v, dict):
         raise _fail(path, f"{where}: missing or not a mapping of fitted values")
-    unknown = set(v) - set(_TENDON_KEYS)
+    unknown = set(v) - set(_TENDON_KEYS) - set(_OPTIONAL_KEYS)
     if unknown:
         raise _fail(path, f"{where}: unknown key {sorted(unknown)[0]!r}")
     vals = {}
-    for key, tp in _TENDON_KEYS.items():
+    for key, tp in {**_TENDON_KEYS, **{k: t for k, t in _OPTIONAL_KEYS.items() if k in v}}.items():
         x = v.get(key)
         if not _valid_value(key, x, tp):
             raise _fail(path, f"{where}.{key}: expected {'an integer >= 1' if tp is int else 'a finite number'}"
-                              f"{' > 0' if key in ('M_e', 'compliance') else ' >= 0' if key in ('K', 'residual_rms') else ''}"
+                              f"{' > 0' if key in ('M_e', 'compliance') else ' >= 0' if key in _NON_NEGATIVE else ''}"
                               f", got {x!r}")
         vals[key] = tp(x)
     return TendonCalibration(**vals)
@@ -230,7 +236,7 @@ def _valid_value(key: str, x: object, tp: type) -> bool:
         return False
     if key in ("M_e", "compliance"):
         return x > 0
-    if key in ("K", "residual_rms"):
+    if key in _NON_NEGATIVE:
         return x >= 0
     if key == "n_samples":
         return x >= 1

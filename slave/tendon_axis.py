@@ -27,7 +27,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from estimator.online.distal import DistalEstimator
-from estimator.sheath import SheathModel, profile_batch
+from estimator.sheath import NOISE_BAND_SIGMAS, SheathModel
 from slave.axis import SlaveAxis
 from slave.calibrate import JointLimitCalibration
 from slave.calibration_file import from_tendon_result, tendon_model
@@ -90,11 +90,21 @@ class TendonAxis(SlaveAxis):
         # load the compiled kernels now, not in the first real-time cycle
         DistalEstimator(SheathModel(K=0.5, compliance=1e-4), n_nodes=2).step(1.0, 0.0, 0.0)
 
-    def start(self, model: SheathModel, state: RigState | None = None) -> None:
-        """The estimator on ``model``, at rest (uniform pretension); stepped once on ``state`` when given."""
+    def start(self, model: SheathModel, state: RigState | None = None, tension_noise: float = 0.0) -> None:
+        """The estimator on ``model``, at rest (uniform pretension); stepped once on ``state`` when given.
+        ``tension_noise`` [N]: the calibration's noise sigma of T_in, used for the noise band unless the config's
+        ``estimator.tension_noise`` is set (0: no band)."""
         e = self.cfg.estimator
+        sigma = tension_noise if e.tension_noise is None else e.tension_noise
         self.estimator = DistalEstimator(model, n_nodes=e.n_nodes, pretension=self.cfg.sheath.pretension,
-                                         hold_rate=e.hold_rate, rate_time_constant=e.rate_time_constant)
+                                         hold_rate=e.hold_rate, rate_time_constant=e.rate_time_constant,
+                                         tension_noise=sigma)
+        if sigma > 0:
+            log.info("estimator noise band: %.3f N (T_in noise sigma %.4f N, %s)", NOISE_BAND_SIGMAS * sigma, sigma,
+                     "calibration" if e.tension_noise is None else "estimator.tension_noise")
+        else:
+            log.info("estimator without a noise band (%s)", "estimator.tension_noise = 0" if e.tension_noise == 0
+                     else "the calibration has no tension_noise: recalibrate to measure it")
         if state is not None:
             self.sample = self.estimator.step(state.T_in, state.x_in, state.t)
             self.profile = self.estimator.profile_samples(len(self.s_points))
@@ -124,12 +134,12 @@ class TendonAxis(SlaveAxis):
                        state: RigState) -> tuple[Any, dict]:
         ax = axes[0]
         assert isinstance(ax, TendonAxis) and routine.result is not None
-        ax.start(routine.result.model)
+        ax.start(routine.result.model, tension_noise=routine.result.tension_noise)
         est = ax.estimator
         assert est is not None
         # replay the routine (compiled batch): the estimator's memory = the tendon's proximal history
         t_h, x_h, T_h = routine.history
-        _, _, est.profile[:] = profile_batch(est.profile, est.log_gain, est.weight, np.asarray(T_h, dtype=float))
+        est.replay(np.asarray(t_h[:-1]), np.asarray(x_h[:-1]), np.asarray(T_h[:-1]))
         ax.sample = est.step(T_h[-1], x_h[-1], t_h[-1])
         ax.profile = est.profile_samples(len(ax.s_points))
         ax.x_hold = routine.x_cmd
@@ -141,7 +151,7 @@ class TendonAxis(SlaveAxis):
     def start_loaded(cls, axes: Sequence[SlaveAxis], calibration: Any, state: RigState) -> dict:
         ax = axes[0]
         assert isinstance(ax, TendonAxis)
-        ax.start(tendon_model(calibration, ax.cfg), state)
+        ax.start(tendon_model(calibration, ax.cfg), state, calibration.tendon.tension_noise)
         t = calibration.tendon
         return {"K": t.K, "M_e_m_per_N": t.M_e, "compliance_m_per_N": t.compliance, "knee_x_in_m": t.knee_x_in,
                 "knee_T_in_N": t.knee_T_in, "residual_rms_m": t.residual_rms, "n_samples": t.n_samples,

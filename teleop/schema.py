@@ -188,6 +188,7 @@ class EstimatorConfig:
     hold_rate: float = 0.5                # [N/s]
     rate_time_constant: float = 0.02      # [s]
     profile_points: int = 50
+    tension_noise: Optional[float] = None  # [N] noise of T_in for the banded update; None: the calibration's
 
 
 @dataclass(frozen=True)
@@ -333,6 +334,7 @@ RANGES: dict[str, tuple[str, str]] = {
     # rig.simulated.effects.*: each setting's range and unit are its catalogue entry's (effects_config.effect_ranges)
     "estimator.n_nodes": (">= 2", "-"), "estimator.hold_rate": (">= 0", "N/s"),
     "estimator.rate_time_constant": ("> 0", "s"), "estimator.profile_points": ("0..65535", "-"),
+    "estimator.tension_noise": (">= 0", "N"),
     "calibration.target_tension": ("> 0", "N"), "calibration.speed": ("> 0", "m/s"),
     "master.rate_hz": ("> 0", "Hz"), "master.watchdog_ms": ("> 0", "ms"),
     "master.mapping.motion_scale": ("> 0", "-"), "master.mapping.force_scale": (">= 0", "-"),

@@ -22,6 +22,7 @@ import numpy as np
 from scipy.optimize import newton
 
 from estimator.capstan import K_from_M_e
+from estimator.data import noise_level
 from estimator.errors import CalibrationError
 from estimator.sheath import SheathModel, pull_elongation_factor
 
@@ -33,7 +34,8 @@ class CalibrationResult:
     """Outcome of a joint-limit calibration of one tendon.
 
     K [-], M_e [m/N], knee_index (sample), knee_x_in [m], knee_T_in [N], residual_rms [m] (of the
-    post-knee line x_in = M_e T_in + c), n_samples (used after the knee), model (SheathModel).
+    post-knee line x_in = M_e T_in + c), n_samples (used after the knee), model (SheathModel), tension_noise [N]
+    (the noise sigma of the pull's T_in, :func:`estimator.data.noise_level`: the live estimator's noise band).
     """
 
     K: float
@@ -44,11 +46,12 @@ class CalibrationResult:
     residual_rms: float
     n_samples: int
     model: SheathModel
+    tension_noise: float = 0.0
 
     def as_dict(self) -> dict:
         return {"K": self.K, "M_e_m_per_N": self.M_e, "knee_index": self.knee_index, "knee_x_in_m": self.knee_x_in,
                 "knee_T_in_N": self.knee_T_in, "residual_rms_m": self.residual_rms, "n_samples": self.n_samples,
-                "compliance_m_per_N": self.model.compliance}
+                "compliance_m_per_N": self.model.compliance, "tension_noise_N": self.tension_noise}
 
 
 def detect_knee(x_in: np.ndarray, T_in: np.ndarray, max_candidates: int = 400) -> int:
@@ -148,4 +151,5 @@ def calibrate_joint_limit(x_in: np.ndarray, T_in: np.ndarray, L: float, EA: floa
         raise CalibrationError(f"calibration: {exc}") from None
     model = SheathModel(K=K, compliance=L / EA, wrap_shape=wrap_shape)
     return CalibrationResult(K=K, M_e=float(M_e), knee_index=k, knee_x_in=float(x[k]), knee_T_in=float(T[k]),
-                             residual_rms=float(np.sqrt(np.mean(resid ** 2))), n_samples=int(xs.size), model=model)
+                             residual_rms=float(np.sqrt(np.mean(resid ** 2))), n_samples=int(xs.size), model=model,
+                             tension_noise=noise_level(T))

@@ -27,7 +27,7 @@ from estimator.offline.effects import (K_MAX, ROUTE, ROUTE_FORMS, Effect, Parame
                                       slide_window)
 from estimator.offline.effects_kernels import distal_slide
 from estimator.sheath import SheathModel
-from estimator.data import MeasuredData
+from estimator.data import MeasuredData, noise_level
 from estimator.errors import DataError
 
 __all__ = ["Progress", "trimmed_ms", "paired_trimmed_ms", "sample_block", "rest_reading", "prepare", "split_at_rest", "fit_model", "start_points", "rest_window", "rest_start", "heldout_mse", "raw_rmse", "noise_level",
@@ -42,14 +42,6 @@ SIGNALS = ("T_out", "x_out")
 #: every FIT_STRIDE-th sample of the averaged series enters the least-squares residual (the model
 #: runs on all of them; the residual vector, and so the trust-region algebra, is that much shorter)
 FIT_STRIDE = 3
-
-
-def noise_level(a: np.ndarray) -> float:
-    """Robust white-noise level [unit of a] from second differences (MAD / sqrt(6))."""
-    if a.size < 5:
-        return 0.0
-    d2 = a[2:] - 2.0 * a[1:-1] + a[:-2]
-    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6.0))
 
 
 def quantum(a: np.ndarray) -> float:

@@ -31,16 +31,16 @@ from typing import Any
 import numpy as np
 
 from estimator.capstan import phase_formula_batch
-from estimator.online.distal import estimate_batch
+from estimator.online.distal import DistalEstimator, estimate_batch
 from estimator.phase import Phase
-from estimator.sheath import SheathModel, profile_batch
+from estimator.sheath import SheathModel
 from teleop.app.demo_run import full_scale_errors
 from teleop.app.replay_joints import find_joint_csv, joint_table_lines, replay_joints
 from teleop.config import Config, load_config
 from teleop.errors import CalibrationError, ConfigError, DataError
 from teleop.recording import MeasuredData, read_measured_csv
 
-__all__ = ["ReplayInput", "load_run", "load_model", "parse_speed", "reestimate", "compare", "replay",
+__all__ = ["ReplayInput", "load_run", "load_model", "tension_noise", "parse_speed", "reestimate", "compare", "replay",
            "add_arguments", "main_replay"]
 
 EXPERIMENTS = {1: "paper", 2: "minor"}  # marker codes of the operator protocols (teleop.app.demo)
@@ -129,6 +129,24 @@ def load_model(cfg: Config, inp: ReplayInput, calibration: str | Path | None = N
     return SheathModel(K=K, compliance=c, wrap_shape=shape), str(path)
 
 
+def tension_noise(cfg: Config, source: str) -> float:
+    """The noise sigma of T_in [N] for the estimator's noise band: ``cfg.estimator.tension_noise`` when set, else
+    the calibration's at ``source`` (a ``.yaml`` calibration file or a run's ``calibration.json``; 0 when it has
+    none: the estimator without a band, as before session 23)."""
+    if cfg.estimator.tension_noise is not None:
+        return float(cfg.estimator.tension_noise)
+    from slave.calibration_file import load_calibration
+
+    path = Path(source)
+    if path.suffix != ".json":
+        tendon = load_calibration(path, cfg).tendon
+        return 0.0 if tendon is None else float(tendon.tension_noise)
+    v = json.loads(path.read_text(encoding="utf-8")).get("tension_noise_N", 0.0)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
+        raise CalibrationError(f"{path}: tension_noise_N must be a number >= 0 [N], got {v!r}")
+    return float(v)
+
+
 def parse_speed(text: str) -> float:
     """``realtime`` -> 1.0, ``max`` -> inf, a number > 0 -> that factor of real time.
 
@@ -150,17 +168,19 @@ def parse_speed(text: str) -> float:
     return v
 
 
-def reestimate(data: MeasuredData, model: SheathModel, cfg: Config, estimator: str = "profile") -> dict[str, np.ndarray]:
+def reestimate(data: MeasuredData, model: SheathModel, cfg: Config, estimator: str = "profile",
+               noise: float = 0.0) -> dict[str, np.ndarray]:
     """New estimates over the recording: ``T_out`` [N], ``elongation`` [m], ``phase`` (int8), shape (n,).
 
-    ``profile``: :func:`estimate_batch` with the slave's settings (``cfg.estimator``, pretension);
+    ``profile``: :func:`estimate_batch` with the slave's settings (``cfg.estimator``, pretension, the noise band of
+    T_in's noise sigma ``noise`` [N], :func:`tension_noise`);
     ``paper``: :func:`phase_formula_batch` with the demo's deadband (10 x load-cell noise, >= 0.1 N).
     """
     if estimator == "profile":
         e = cfg.estimator
         b = estimate_batch(data.T_in, data.x_in, model, time=data.time, n_nodes=e.n_nodes,
                            pretension=cfg.sheath.pretension, hold_rate=e.hold_rate,
-                           rate_time_constant=e.rate_time_constant)
+                           rate_time_constant=e.rate_time_constant, tension_noise=noise)
         return {"T_out": b.T_out, "elongation": b.elongation, "phase": b.phase}
     if estimator == "paper":
         from teleop.app.demo import baseline_deadband
@@ -201,7 +221,7 @@ def compare(data: MeasuredData, new: dict[str, np.ndarray]) -> dict[str, dict[st
 
 
 def _log(inp: ReplayInput, cfg: Config, model: SheathModel, new: dict[str, np.ndarray], estimator: str,
-         speed: float, rrd: Path) -> None:
+         speed: float, rrd: Path, noise: float = 0.0) -> None:
     """The live view's logging (every ``log_every`` samples, a profile every ``profile_every`` of those),
     paced with the wall clock at ``speed`` x real time (inf: no pacing)."""
     from teleop.rerun_log import RerunLogger
@@ -211,9 +231,10 @@ def _log(inp: ReplayInput, cfg: Config, model: SheathModel, new: dict[str, np.nd
     rec_T, rec_e = x.get("T_out_hat"), x.get("elongation_hat")
     true_e = x["elongation"] if "elongation" in x else None if d.x_out is None else d.x_in - d.x_out
     s = np.linspace(0.0, cfg.sheath.geometry().length, cfg.estimator.profile_points)
-    log_gain, weight = model.nodes(cfg.estimator.n_nodes)
-    profile = np.full(log_gain.size, float(cfg.sheath.pretension))
-    u, done = np.linspace(0.0, 1.0, log_gain.size), 0
+    e = cfg.estimator
+    est = DistalEstimator(model, n_nodes=e.n_nodes, pretension=cfg.sheath.pretension, hold_rate=e.hold_rate,
+                          rate_time_constant=e.rate_time_constant, tension_noise=noise)
+    u, done = est.positions, 0
     run_id = inp.run_dir.name if inp.run_dir is not None else inp.csv.stem
     wall0, t0 = time.monotonic(), float(d.time[0])
     with RerunLogger("teleop-replay", f"{run_id}-replay", "save", rrd, route=cfg.sheath.runs,
@@ -225,9 +246,9 @@ def _log(inp: ReplayInput, cfg: Config, model: SheathModel, new: dict[str, np.nd
                 if wait > 0:
                     time.sleep(wait)
             if estimator == "profile" and (k // every) % cfg.recording.profile_every == 0:
-                _, _, profile = profile_batch(profile, log_gain, weight, d.T_in[done:k + 1])
+                est.replay(d.time[done:k + 1], d.x_in[done:k + 1], d.T_in[done:k + 1])
                 done = k + 1   # the estimator's memory at sample k, from the same compiled update
-                rr.log_profile(t, s, np.interp(np.linspace(0.0, 1.0, s.size), u, profile))
+                rr.log_profile(t, s, np.interp(np.linspace(0.0, 1.0, s.size), u, est.profile))
             rr.log_scalars(t, T_in=float(d.T_in[k]), T_out_hat=float(new["T_out"][k]),
                            elongation_hat=float(new["elongation"][k]),
                            T_out_recorded=None if rec_T is None else float(rec_T[k]),
@@ -262,17 +283,19 @@ def replay(run: str | Path, *, config: str | Path | None = None, calibration: st
     inp = load_run(run)
     cfg = _config(inp.run_dir, config)
     model, source = load_model(cfg, inp, calibration)
+    noise = tension_noise(cfg, source)
     t_start = time.perf_counter()
-    new = reestimate(inp.data, model, cfg, estimator)
+    new = reestimate(inp.data, model, cfg, estimator, noise)
     t_est = time.perf_counter() - t_start
     out = Path(rrd) if rrd is not None else (inp.run_dir or inp.csv.parent) / "replay.rrd"
     t_start = time.perf_counter()
-    _log(inp, cfg, model, new, estimator, speed, out)
+    _log(inp, cfg, model, new, estimator, speed, out, noise)
     n = int(inp.data.time.size)
     return {"run": str(run), "csv": str(inp.csv), "calibration": source, "estimator": estimator,
             "K": model.K, "compliance_m_per_N": model.compliance, "samples": n,
             "duration_s": float(inp.data.time[-1] - inp.data.time[0]), "estimate_s": t_est,
-            "samples_per_s": n / t_est if t_est > 0 else math.inf, "log_s": time.perf_counter() - t_start,
+            "samples_per_s": n / t_est if t_est > 0 else math.inf, "tension_noise_N": noise,
+            "log_s": time.perf_counter() - t_start,
             "rrd": str(out), "comparison": compare(inp.data, new)}
 
 

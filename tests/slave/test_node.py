@@ -1,6 +1,7 @@
 """SlaveNode.step with a FakeClock and an in-memory transport: calibration, watchdog, echo, recording."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -238,6 +239,19 @@ def test_power_up_calibration_against_the_simulator(tmp_path):
     cal2 = json.loads((tmp_path / "second" / "calibration.json").read_text())
     assert cal2["K"] == saved.tendon.K and cal2["loaded_from"].endswith("tendon0.yaml")
     assert node2.stats()["calibration"] == "loaded" and node.stats()["calibration"] == "power-up"
+    # the pull's T_in noise, measured by the routine, is the estimator's noise band, saved and reloaded with it
+    sigma = cfg.rig.simulated.sensors.load_cell_noise
+    assert cal["tension_noise_N"] == pytest.approx(sigma, rel=0.2) and est.tension_noise == cal["tension_noise_N"]
+    assert saved.tendon.tension_noise == pytest.approx(cal["tension_noise_N"])
+    assert node2.axes[0].estimator.tension_noise == saved.tendon.tension_noise
+    # the config overrides it (0: the envelope rule without a band), and a file from before it has none: 0
+    off = dataclasses.replace(cfg, estimator=dataclasses.replace(cfg.estimator, tension_noise=0.0))
+    node3 = SlaveNode(off, SimulatedRig.from_config(off), SlaveLinks(*(Topic(clock) for _ in range(4))),
+                      run_dir=tmp_path / "third", calibration=saved, calibration_file=tmp_path / "cal" / "tendon0.yaml")
+    assert node3.axes[0].estimator.tension_noise == 0.0
+    old = tmp_path / "old.yaml"
+    old.write_text((tmp_path / "cal" / "tendon0.yaml").read_text().replace("tension_noise:", "# tension_noise:"))
+    assert load_calibration(old, cfg).tendon.tension_noise == 0.0
 
 
 def test_a_command_for_another_number_of_axes_is_counted_and_ignored():

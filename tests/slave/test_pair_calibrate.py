@@ -66,7 +66,7 @@ def test_file_round_trip_and_models(calibrated, tmp_path):
     assert raw["instrument"] == "flex3" and raw["date"] == "2026-01-02T03:04:05+00:00"
     assert [j["name"] for j in raw["joints"]] == ["bend_ud", "bend_lr", "grasp"]
     assert set(raw["joints"][0]["a"]) == {"K", "M_e", "compliance", "knee_x_in", "knee_T_in", "residual_rms",
-                                          "n_samples"}
+                                          "n_samples", "tension_noise"}
     back = load_calibration(path, cfg)
     assert back == data
     models = sheath_models(back, cfg)

@@ -5,7 +5,8 @@ import dataclasses
 import math
 import re
 from pathlib import Path
-from typing import get_args, get_origin, get_type_hints
+from types import NoneType
+from typing import Union, get_args, get_origin, get_type_hints
 
 import pytest
 
@@ -220,8 +221,9 @@ def test_range_table_covers_every_numeric_field_and_nothing_else():
                 walk(get_args(tp)[0], p + "[].")      # sheath.runs, instrument.joints, ...
             elif get_origin(tp) is tuple and get_args(tp)[0] in (int, float):
                 numeric.append(p + "[]")               # joint limits, device axes
-            elif tp in (int, float):
-                numeric.append(p)
+            elif tp in (int, float) or (get_origin(tp) is Union and set(get_args(tp)) in ({int, NoneType},
+                                                                                       {float, NoneType})):
+                numeric.append(p)                      # Optional numbers too (estimator.tension_noise)
     walk(Config, "")
     assert sorted(numeric) == sorted(RANGES)
 
