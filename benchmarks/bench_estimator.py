@@ -17,8 +17,8 @@ def _model() -> SheathModel:
     return SheathModel.from_geometry(cfg.sheath.geometry(), cfg.rig.simulated.mu, cfg.sheath.EA)
 
 
-def bench_step(n_nodes: int, n: int = 50_000) -> float:
-    est = DistalEstimator(_model(), n_nodes=n_nodes)
+def bench_step(n_nodes: int, n: int = 50_000, tension_noise: float = 0.0) -> float:
+    est = DistalEstimator(_model(), n_nodes=n_nodes, tension_noise=tension_noise)
     t = np.arange(n) * 1e-3
     T_in = 12 + 8 * np.sin(2 * np.pi * 0.5 * t) + np.random.default_rng(0).normal(0, 0.02, n)
     for k in range(2000):  # warm-up (numba compile, caches)
@@ -54,6 +54,9 @@ def main() -> None:
     print("estimator (profile memory, one tendon)")
     for nodes in (50, 100, 200):
         print(f"  online step   n_nodes={nodes:4d}: {bench_step(nodes) * 1e6:7.2f} us/sample   (aim <= 10 us)")
+    for nodes in (50, 100, 200):
+        print(f"  + noise band  n_nodes={nodes:4d}: {bench_step(nodes, tension_noise=0.02) * 1e6:7.2f} us/sample   "
+              "(aim <= 10 us)")
     for nodes in (50, 100, 200):
         print(f"  batch         n_nodes={nodes:4d}: {bench_batch(nodes) / 1e6:7.2f} M samples/s (aim >= 1)")
     print(f"  paper phase formulas (compiled)   : {bench_paper() / 1e6:7.3f} M samples/s")

@@ -8,7 +8,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 BENCHES = ["bench_estimator", "bench_rig", "bench_joint_rig", "bench_codec", "bench_diagnosis", "bench_analyze",
-           "bench_lumped", "bench_slave_cycle", "bench_roundtrip", "bench_mrd", "bench_stability"]
+           "bench_lumped", "bench_slave_cycle", "bench_roundtrip", "bench_mrd", "bench_stability", "bench_noise_band"]
 
 
 def main() -> None:
