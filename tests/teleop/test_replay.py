@@ -129,3 +129,31 @@ def test_bad_input_exits_2_naming_the_problem(tmp_path, capsys, case, needle):
     assert main(["replay", *args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and needle in err[0], err
+
+
+def test_the_calibrations_noise_band_is_replayed(tmp_path):
+    """A run whose calibration measured the load cell's noise (``tension_noise_N``) was estimated with the noise band:
+    the replay uses it and reproduces the recorded estimate; a config with ``estimator.tension_noise: 0`` turns it off,
+    and a bad value is refused naming the key."""
+    run = _make_run(tmp_path)
+    cfg = load_config(None)
+    e = cfg.estimator
+    d = json.loads((run / "calibration.json").read_text())
+    (run / "calibration.json").write_text(json.dumps({**d, "tension_noise_N": 0.05}), encoding="utf-8")
+    from teleop.recording import read_measured_csv
+    data = read_measured_csv(run / "slave.csv")
+    banded = estimate_batch(data.T_in, data.x_in, SheathModel(K=K_CAL, compliance=COMPLIANCE), time=data.time,
+                            n_nodes=e.n_nodes, pretension=cfg.sheath.pretension, hold_rate=e.hold_rate,
+                            rate_time_constant=e.rate_time_constant, tension_noise=0.05)
+    data.extra["T_out_hat"], data.extra["elongation_hat"] = banded.T_out, banded.elongation
+    write_measured_csv(run / "slave.csv", data, overwrite=True)
+    rc, res = _replay(tmp_path, str(run))
+    assert rc == 0 and res["tension_noise_N"] == 0.05
+    assert res["comparison"]["all"]["vs_recorded"]["force_error_max_fs"] < 1e-6
+    off = tmp_path / "off.yaml"
+    write_config(load_config(None, {"estimator.tension_noise": 0.0}), off)
+    rc, res0 = _replay(tmp_path, str(run), "--config", str(off), "--rrd", str(tmp_path / "off.rrd"))
+    assert rc == 0 and res0["tension_noise_N"] == 0.0
+    assert res0["comparison"]["all"]["vs_recorded"]["force_error_max_fs"] > 1e-6
+    (run / "calibration.json").write_text(json.dumps({**d, "tension_noise_N": -1}), encoding="utf-8")
+    assert main(["replay", str(run), "--rrd", str(tmp_path / "bad.rrd")]) == 2
