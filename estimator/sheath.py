@@ -309,7 +309,7 @@ def profile_batch(T0: np.ndarray, log_gain: np.ndarray, weight: np.ndarray, T_in
 
 
 @njit(cache=True, nogil=True)
-def band_update(T, lo_gain, hi_gain, T_in, v, band, sigma, state):  # pragma: no cover - compiled
+def band_update(T, lo_gain, hi_gain, T_in, v, band, sigma, state, slack=False):  # pragma: no cover - compiled
     """In-place banded update of a tension profile (module docstring); returns the distal tension T[-1] [N].
 
     T : float64[n + 1] node tensions [N], modified in place.
@@ -319,6 +319,8 @@ def band_update(T, lo_gain, hi_gain, T_in, v, band, sigma, state):  # pragma: no
     state : float64[2], updated: the direction of the whole-tendon slide (+1 pulling, -1 releasing, 0 stuck) and
     the extreme of T_in in that slide so far [N] (the live data's velocity lags a reversal by its smoothing, so a
     turn of T_in by more than 2 sigma from the slide's extreme ends it too, not only a turn from the last sample).
+    slack : a released tendon near zero tension is slack (an antagonistic pair's, whose true T_in and T_out are then
+    zero): the release side's band shrinks to T_in, so that the profile falls to zero with the reading.
     With band = sigma = 0 and no slide it is the envelope rule of :func:`profile_update`.
     """
     n = T.shape[0]
@@ -336,10 +338,11 @@ def band_update(T, lo_gain, hi_gain, T_in, v, band, sigma, state):  # pragma: no
         for i in range(n):
             T[i] = T_in * (lo_gain[i] if s > 0.0 else hi_gain[i])
     else:
+        h_up = T_in if slack and T_in < band else band
         for i in range(n):
             y = T[i]
             lo = (T_in - band) * lo_gain[i]
-            hi = (T_in + band) * hi_gain[i]
+            hi = (T_in + h_up) * hi_gain[i]
             if y < lo:
                 ny = lo
                 d = 1.0
@@ -359,9 +362,9 @@ def band_update(T, lo_gain, hi_gain, T_in, v, band, sigma, state):  # pragma: no
 
 
 @njit(cache=True, nogil=True)
-def _band_batch(T, lo_gain, hi_gain, weight, T_in, v, band, sigma, state, T_out, elong):  # pragma: no cover
+def _band_batch(T, lo_gain, hi_gain, weight, T_in, v, band, sigma, state, slack, T_out, elong):  # pragma: no cover
     for k in range(T_in.shape[0]):
-        T_out[k] = band_update(T, lo_gain, hi_gain, T_in[k], v[k], band, sigma, state)
+        T_out[k] = band_update(T, lo_gain, hi_gain, T_in[k], v[k], band, sigma, state, slack)
         e = 0.0
         for i in range(T.shape[0]):
             e += weight[i] * T[i]
@@ -369,7 +372,7 @@ def _band_batch(T, lo_gain, hi_gain, weight, T_in, v, band, sigma, state, T_out,
 
 
 def band_batch(T0: np.ndarray, log_gain: np.ndarray, weight: np.ndarray, T_in: np.ndarray, velocity: np.ndarray,
-               band: float, sigma: float, slide: tuple[float, float] = (0.0, 0.0)):
+               band: float, sigma: float, slide: tuple[float, float] = (0.0, 0.0), slack: bool = False):
     """Run the banded update (:func:`band_update`) over a recorded series.
 
     Parameters
@@ -384,6 +387,8 @@ def band_batch(T0: np.ndarray, log_gain: np.ndarray, weight: np.ndarray, T_in: n
         Noise band h [N] and noise sigma [N] of T_in, both >= 0.
     slide : (float, float)
         Slide direction at the start (+1, -1, 0: stuck) and its extreme of T_in [N] (:func:`band_update`).
+    slack : bool
+        A released tendon near zero tension is slack (:func:`band_update`).
 
     Returns
     -------
@@ -413,5 +418,5 @@ def band_batch(T0: np.ndarray, log_gain: np.ndarray, weight: np.ndarray, T_in: n
     g = np.exp(np.asarray(log_gain, dtype=np.float64))
     state = np.array([float(slide[0]), float(slide[1])])
     _band_batch(T, 1.0 / g, g, np.ascontiguousarray(weight, dtype=np.float64), T_in, v, float(band), float(sigma),
-                state, T_out, elong)
+                state, bool(slack), T_out, elong)
     return T_out, elong, T, (float(state[0]), float(state[1]))

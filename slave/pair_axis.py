@@ -27,6 +27,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from estimator.online.joint import JointEstimator
+from estimator.sheath import NOISE_BAND_SIGMAS
 from slave.axis import SlaveAxis
 from slave.calibration_file import from_results, sheath_models
 from slave.pair_calibrate import PairCalibration, set_tension
@@ -94,12 +95,18 @@ class PairAxis(SlaveAxis):
         self.sample: Any = None
         self.hold: float | None = None
 
-    def start(self, models, history) -> None:
+    def start(self, models, history, tension_noise: tuple[float, float] = (0.0, 0.0)) -> None:
         """The joint estimator on ``models`` (tendon a, b), the travel limits about the first sample of
-        ``history`` (power-up rest), then the replay of ``history`` [(t, x_in, T_in), ...] (rig arrays)."""
+        ``history`` (power-up rest), then the replay of ``history`` [(t, x_in, T_in), ...] (rig arrays).
+        ``tension_noise`` [N]: the calibration's noise sigma of each tendon's T_in (the noise band), unless the
+        config's ``estimator.tension_noise`` is set."""
         e, j, i = self.cfg.estimator, self.joint, self.index
+        noise = tension_noise if e.tension_noise is None else (e.tension_noise, e.tension_noise)
         self.estimator = JointEstimator(models[0], models[1], self.r, n_nodes=e.n_nodes, pretension=j.pretension,
-                                        hold_rate=e.hold_rate, rate_time_constant=e.rate_time_constant)
+                                        hold_rate=e.hold_rate, rate_time_constant=e.rate_time_constant,
+                                        tension_noise=noise)
+        log.info("%s: estimator noise band %.3f / %.3f N (T_in noise sigma a / b, %s)", j.name,
+                 NOISE_BAND_SIGMAS * noise[0], NOISE_BAND_SIGMAS * noise[1], "calibration" if e.tension_noise is None else "estimator.tension_noise")
         x0 = history[0][1]
         assert self.controller is not None
         self.controller.x_limits = tuple((x0[i, k] - self.travel, x0[i, k] + self.travel) for k in range(2))
@@ -129,10 +136,11 @@ class PairAxis(SlaveAxis):
         cfg = axes[0].cfg
         calibration = cls.calibration_of(cfg, routine)
         history = routine.history + [(state.t, state.x_in, state.T_in)]
-        for ax, ctl, models in zip(axes, routine.controllers(), sheath_models(calibration, cfg)):
+        for ax, ctl, models, (_, tend) in zip(axes, routine.controllers(), sheath_models(calibration, cfg),
+                                              calibration.joints):
             assert isinstance(ax, PairAxis)
             ax.controller = ctl
-            ax.start(models, history)
+            ax.start(models, history, (tend["a"].tension_noise, tend["b"].tension_noise))
         for name, tend in calibration.joints:
             log.info("calibrated %s: K_a = %.4f, K_b = %.4f, M_e,a = %.4e, M_e,b = %.4e m/N", name,
                      tend["a"].K, tend["b"].K, tend["a"].M_e, tend["b"].M_e)
@@ -140,13 +148,13 @@ class PairAxis(SlaveAxis):
 
     @classmethod
     def start_loaded(cls, axes: Sequence[SlaveAxis], calibration: Any, state: RigState) -> dict:
-        for ax, models in zip(axes, sheath_models(calibration, axes[0].cfg)):
+        for ax, models, (_, tend) in zip(axes, sheath_models(calibration, axes[0].cfg), calibration.joints):
             assert isinstance(ax, PairAxis)
             pc, j = ax.cfg.pair_control, ax.joint
             ax.controller = PairController(ax.r, set_tension(ax.cfg, j), pc.tension_gain, pc.switch_band,
                                            ax.cfg.slave.relax_speed, tuple(state.x_in_cmd[ax.index]),
                                            feedforward=pc.feedforward)
-            ax.start(models, [(state.t, state.x_in, state.T_in)])
+            ax.start(models, [(state.t, state.x_in, state.T_in)], (tend["a"].tension_noise, tend["b"].tension_noise))
         return calibration.as_dict()
 
     @classmethod

@@ -80,6 +80,9 @@ class DistalEstimator:
     tension_noise : float
         Standard deviation of the T_in reading [N], >= 0: > 0 runs the banded update (module docstring;
         e.g. :func:`estimator.data.noise_level` of a calibration's T_in); 0 (default): the envelope rule.
+    released_slack : bool
+        The tendon is slack when released to near zero tension (one of an antagonistic pair): the banded update's
+        release side has no band there (:func:`estimator.sheath.band_update`, ``slack``). Default False.
 
     Raises
     ------
@@ -89,7 +92,7 @@ class DistalEstimator:
 
     def __init__(self, model: SheathModel, n_nodes: int = 100, pretension: float = 0.0,
                  hold_rate: float = 0.5, rate_time_constant: float = 0.02, phase_band: float = 0.2,
-                 tension_noise: float = 0.0):
+                 tension_noise: float = 0.0, released_slack: bool = False):
         if not (pretension >= 0 and math.isfinite(pretension)):
             raise ValueError(f"pretension must be >= 0 N, got {pretension!r}")
         if not (rate_time_constant > 0):
@@ -106,6 +109,7 @@ class DistalEstimator:
             raise ValueError(f"tension_noise must be >= 0 N, got {tension_noise!r}")
         self.tension_noise = float(tension_noise)
         self.band = NOISE_BAND_SIGMAS * self.tension_noise
+        self.released_slack = bool(released_slack)
         self._hi_gain = np.exp(self.log_gain)
         self._lo_gain = 1.0 / self._hi_gain
         self.reset(pretension)
@@ -151,7 +155,7 @@ class DistalEstimator:
         # profile update (envelope rule, or the banded one); T_out is the distal node
         if self.tension_noise > 0.0:
             self.T_out = T_out = band_update(self.profile, self._lo_gain, self._hi_gain, T_in, self.velocity,
-                                             self.band, self.tension_noise, self._slide)
+                                             self.band, self.tension_noise, self._slide, self.released_slack)
         else:
             self.T_out = T_out = profile_update(self.profile, self.log_gain, T_in)
         # elongation = (1/EA) int T ds
@@ -169,6 +173,10 @@ class DistalEstimator:
             self.phase = classify_phase(T_out - T_prev_out, T_in, self.model.K, T_out, self._rate, self.hold_rate)
         self._T_prev, self._t_prev = T_in, (t if t is not None else (self._t_prev or 0.0) + 1e-3)
         return DistalSample(T_out, e, x_in - e, self.phase)
+
+    def end_slide(self) -> None:
+        """End a whole-tendon slide of the banded update (a pair coupling that moved the distal end takes it over)."""
+        self._slide[0] = 0.0
 
     def replay(self, time: np.ndarray, x_in: np.ndarray, T_in: np.ndarray) -> None:
         """Carry the profile through a recorded proximal history (compiled; e.g. a calibration routine), from
@@ -188,7 +196,8 @@ class DistalEstimator:
         v = smoothed_velocity(t, x, self.tau, self.velocity, self._x_prev, self._t_prev)
         if self.tension_noise > 0.0:
             _, _, self.profile, s = band_batch(self.profile, self.log_gain, self.weight, T, v, self.band,
-                                               self.tension_noise, (float(self._slide[0]), float(self._slide[1])))
+                                               self.tension_noise, (float(self._slide[0]), float(self._slide[1])),
+                                               self.released_slack)
             self._slide[:] = s
         else:
             _, _, self.profile = profile_batch(self.profile, self.log_gain, self.weight, T)

@@ -131,6 +131,10 @@ class JointEstimator:
         Proximal tension from which a tendon's kinematic angle counts fully in (J3) [N], > 0.
     hold_rate, rate_time_constant : float
         Phase settings of :class:`~estimator.online.distal.DistalEstimator` [N/s], [s].
+    tension_noise : float or (float, float)
+        Noise sigma of each proximal load cell [N], >= 0: > 0 gives that tendon the noise band of
+        :class:`~estimator.online.distal.DistalEstimator` (a slide it started ends where the coupling moves its
+        distal end); the step then runs in Python, not the compiled pair step. 0 (default): the envelope rule.
 
     Raises
     ------
@@ -141,7 +145,7 @@ class JointEstimator:
     def __init__(self, model_a: SheathModel, model_b: SheathModel, pulley_radius: float, *, n_nodes: int = 100,
                  pretension: float | tuple[float, float] = 0.0, coupling: bool = True,
                  play: float = DEFAULT_PLAY, taut_tension: float = 0.1, hold_rate: float = 0.5,
-                 rate_time_constant: float = 0.02):
+                 rate_time_constant: float = 0.02, tension_noise: float | tuple[float, float] = 0.0):
         if not (math.isfinite(pulley_radius) and pulley_radius > 0):
             raise ValueError(f"pulley_radius must be > 0 m, got {pulley_radius!r}")
         if not (math.isfinite(play) and play >= 0):
@@ -156,14 +160,21 @@ class JointEstimator:
         self.coupling = bool(coupling)
         self.half_width = float(play) / self.r
         self.pretension = (float(P[0]), float(P[1]))
+        S = ((tension_noise, tension_noise) if isinstance(tension_noise, (int, float, np.number))
+             else tuple(tension_noise))
+        if len(S) != 2:
+            raise ValueError(f"tension_noise must be one sigma or one per tendon (a, b), got {tension_noise!r}")
         self.tendons = tuple(DistalEstimator(m, n_nodes=n_nodes, pretension=p, hold_rate=hold_rate,
-                                             rate_time_constant=rate_time_constant)
-                             for m, p in zip((model_a, model_b), self.pretension))
+                                             rate_time_constant=rate_time_constant, tension_noise=float(s),
+                                             released_slack=True)
+                             for m, p, s in zip((model_a, model_b), self.pretension, S))
         self._dgain = tuple(distal_gains(t.log_gain) for t in self.tendons)
         self._x0: tuple[float, float] | None = None
         self._state = np.array([-1.0, 0.0, 0.0, 0.0, 0.0])    # coupling (see couple())
         # constants of the compiled step (joint_kernels.step_pair); the tendons' estimators step only through here
-        self._const = tuple(np.stack((t.log_gain, t.weight, *g)) for t, g in zip(self.tendons, self._dgain))
+        self._const = tuple(np.stack((t.log_gain, t.weight, *g, t._lo_gain, t._hi_gain))
+                            for t, g in zip(self.tendons, self._dgain))
+        self._noise = np.zeros((2, 6))                        # the tendons' band state in the compiled step
         ta, tb = self.tendons
         self._prm = np.array([ta.model.K, tb.model.K, ta.phase_band, tb.phase_band, ta.hold_rate, tb.hold_rate,
                               ta.tau, tb.tau, 0.0, 0.0, self.r, self.half_width, self.taut, float(self.coupling),
@@ -217,6 +228,8 @@ class JointEstimator:
             couple(ta.profile, dloa, dhia, ta.weight, ta.model.K, tb.profile, dlob, dhib, tb.weight, tb.model.K,
                    Ta_prev, Tb_prev, ua, ub, self.r, self.half_width, self._state)
             for est in self.tendons:
+                if est.tension_noise > 0.0 and float(est.profile[-1]) != est.T_out:
+                    est.end_slide()          # the coupling moved the distal end: its slide is over
                 est.T_out = float(est.profile[-1])
                 est.elongation = float(est.weight @ est.profile)
         ang_a, ang_b = self.angles(x_in_a, x_in_b)
@@ -234,10 +247,15 @@ class JointEstimator:
         prm = self._prm
         prm[14], prm[15], prm[16], prm[17], prm[18], prm[19] = (ta._T_prev, tb._T_prev, ta._t_prev, tb._t_prev,
                                                                 ta._rate, tb._rate)
-        (Ca, Cb), out = self._const, self._out
-        if not step_pair(ta.profile, Ca, ta._phase_state, tb.profile, Cb, tb._phase_state, prm, self._state,
+        (Ca, Cb), out, N = self._const, self._out, self._noise
+        for k, e in enumerate((ta, tb)):      # the tendons' own state in, and back out below
+            N[k, 0], N[k, 1], N[k, 3], N[k, 4], N[k, 5] = e.band, e.tension_noise, e.velocity, e._slide[0], e._slide[1]
+            N[k, 2] = math.nan if e._x_prev is None else e._x_prev
+        if not step_pair(ta.profile, Ca, ta._phase_state, tb.profile, Cb, tb._phase_state, prm, self._state, N,
                           T_in_a, x_in_a, T_in_b, x_in_b, t, out):
             return None
+        for k, e in enumerate((ta, tb)):
+            e._x_prev, e.velocity, e._slide[0], e._slide[1] = float(N[k, 2]), float(N[k, 3]), N[k, 4], N[k, 5]
         o = out.tolist()
         pa, pb = _PHASES[int(o[10])], _PHASES[int(o[11])]
         ta.T_out, tb.T_out, ta.elongation, tb.elongation, ta.phase, tb.phase = o[2], o[3], o[4], o[5], pa, pb

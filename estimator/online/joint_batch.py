@@ -50,15 +50,19 @@ def _batch(Ta, xa, Tb, xb, Pa, Pb, ga, gb, wa, wb, dloa, dhia, dlob, dhib, r, hw
 
 def estimate_joint_batch(T_a, x_a, T_b, x_b, model_a: SheathModel, model_b: SheathModel, pulley_radius: float, *,
                          n_nodes: int = 100, pretension: float | tuple[float, float] = 0.0, coupling: bool = True,
-                         play: float = DEFAULT_PLAY, taut_tension: float = 0.1) -> JointBatch:
+                         play: float = DEFAULT_PLAY, taut_tension: float = 0.1,
+                         tension_noise: float | tuple[float, float] = 0.0, time: np.ndarray | None = None) -> JointBatch:
     """The maths of :class:`JointEstimator` over recorded arrays (compiled), zero pose at sample 0.
 
     Parameters
     ----------
     T_a, x_a, T_b, x_b : ndarray, shape (n,)
         Proximal tensions [N] and displacements [m] of tendons a and b.
-    model_a, model_b, pulley_radius, n_nodes, pretension, coupling, play, taut_tension
-        As :class:`JointEstimator`.
+    model_a, model_b, pulley_radius, n_nodes, pretension, coupling, play, taut_tension, tension_noise
+        As :class:`JointEstimator`; with a noise band (``tension_noise`` > 0) the estimator is stepped sample by sample
+        (the same numbers as its live :meth:`JointEstimator.step`).
+    time : ndarray, shape (n,), optional
+        Sample times [s] for the banded update's proximal velocities (default 1 kHz); unused without a band.
 
     Raises
     ------
@@ -74,10 +78,19 @@ def estimate_joint_batch(T_a, x_a, T_b, x_b, model_a: SheathModel, model_b: Shea
         if bad.size:
             raise ValueError(f"{name} has a non-finite value at sample {bad[0]}")
     ref = JointEstimator(model_a, model_b, pulley_radius, n_nodes=n_nodes, pretension=pretension, coupling=coupling,
-                         play=play, taut_tension=taut_tension)   # validates the settings and builds the nodes
+                         play=play, taut_tension=taut_tension, tension_noise=tension_noise)   # validates, builds nodes
     ta, tb = ref.tendons
-    (dloa, dhia), (dlob, dhib) = ref._dgain
     m = n[0]
+    if ta.tension_noise > 0.0 or tb.tension_noise > 0.0:
+        t = np.arange(m) * 1e-3 if time is None else np.asarray(time, dtype=float)
+        if t.shape != n:
+            raise ValueError(f"time must have the shape of the samples {n}, got {t.shape}")
+        Ta, xa, Tb, xb = arrs
+        out = [ref.step(float(Ta[k]), float(xa[k]), float(Tb[k]), float(xb[k]), float(t[k])) for k in range(m)]
+        return JointBatch(torque=np.array([s.torque for s in out]), angle=np.array([s.angle for s in out]),
+                          T_out=np.array([s.T_out for s in out]).reshape(m, 2),
+                          elongation=np.array([s.elongation for s in out]).reshape(m, 2))
+    (dloa, dhia), (dlob, dhib) = ref._dgain
     torque, angle = np.empty(m), np.empty(m)
     T_out, elong = np.empty((m, 2)), np.empty((m, 2))
     _batch(*arrs, ta.profile.copy(), tb.profile.copy(), ta.log_gain, tb.log_gain, ta.weight, tb.weight, dloa, dhia,

@@ -12,7 +12,7 @@ from numba import njit
 
 from estimator.distal_slip import distal_clip, distal_tension, elongation
 from estimator.phase import readable_step
-from estimator.sheath import profile_update
+from estimator.sheath import band_update, profile_update
 
 __all__ = ["couple", "weighted_angle", "step_pair"]
 
@@ -128,13 +128,28 @@ def _rate_phase(k, T_in, T_out, t, PS, prm, out):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def step_pair(Pa, Ca, PSa, Pb, Cb, PSb, prm, state, T_in_a, x_in_a, T_in_b, x_in_b, t,
+def _tendon_update(P, C, N, k, T_in, x_in, t, prm):  # pragma: no cover - compiled
+    """Tendon k's proximal update, as :meth:`DistalEstimator.step`: the smoothed velocity, then the envelope rule
+    or (N[k, 0] > 0) the banded update with a slack release side; returns T_out [N]."""
+    dt = max(t - prm[16 + k], 1e-6)
+    if not math.isnan(N[k, 2]):
+        N[k, 3] += dt / (prm[6 + k] + dt) * ((x_in - N[k, 2]) / dt - N[k, 3])
+    N[k, 2] = x_in
+    if N[k, 0] > 0.0:
+        return band_update(P, C[4], C[5], T_in, N[k, 3], N[k, 0], N[k, 1], N[k, 4:6], True)
+    return profile_update(P, C[0], T_in)
+
+
+@njit(cache=True, nogil=True)
+def step_pair(Pa, Ca, PSa, Pb, Cb, PSb, prm, state, N, T_in_a, x_in_a, T_in_b, x_in_b, t,
                out):  # pragma: no cover - compiled
     """One sample of :meth:`JointEstimator.step` after the first (both tendons, coupling, (J1)-(J3)).
 
-    Ca, Cb : float64[4, n + 1] log gain, weight, distal gains dlo, dhi of each tendon. PSa, PSb: readable
-    phase states. prm : float64[20] K a/b, band a/b, hold rate a/b, tau a/b, x0 a/b, r, play half-width,
-    taut tension, coupling flag, previous T_in a/b, previous t a/b, rate a/b.
+    Ca, Cb : float64[6, n + 1] log gain, weight, distal gains dlo, dhi, and the gains exp(-+mu theta) of each
+    tendon. PSa, PSb: readable phase states. prm : float64[20] K a/b, band a/b, hold rate a/b, tau a/b, x0 a/b, r,
+    play half-width, taut tension, coupling flag, previous T_in a/b, previous t a/b, rate a/b.
+    N : float64[2, 6] per tendon the noise band h [N] (0: the envelope rule), its sigma [N], the previous x_in [m]
+    (NaN: none), the smoothed velocity [m/s] and the banded update's slide state (direction, extreme), updated.
     out : float64[14] torque, angle, T_out a/b, e a/b, x_out a/b, angle a/b, phase a/b, rate a/b.
     Returns False (nothing changed) for a non-finite sample.
     """
@@ -142,10 +157,10 @@ def step_pair(Pa, Ca, PSa, Pb, Cb, PSb, prm, state, T_in_a, x_in_a, T_in_b, x_in
         return False
     Ta_prev = Pa[Pa.shape[0] - 1]
     Tb_prev = Pb[Pb.shape[0] - 1]
-    ga, wa = Ca[0], Ca[1]
-    gb, wb = Cb[0], Cb[1]
-    Ta_out = profile_update(Pa, ga, T_in_a)
-    Tb_out = profile_update(Pb, gb, T_in_b)
+    wa = Ca[1]
+    wb = Cb[1]
+    Ta_out = _tendon_update(Pa, Ca, N, 0, T_in_a, x_in_a, t, prm)
+    Tb_out = _tendon_update(Pb, Cb, N, 1, T_in_b, x_in_b, t, prm)
     ea = np.dot(wa, Pa)
     eb = np.dot(wb, Pb)
     _rate_phase(0, T_in_a, Ta_out, t, PSa, prm, out)
@@ -156,6 +171,10 @@ def step_pair(Pa, Ca, PSa, Pb, Cb, PSb, prm, state, T_in_a, x_in_a, T_in_b, x_in
         ub = -(x_in_b - eb - prm[9]) / r
         couple(Pa, Ca[2], Ca[3], wa, prm[0], Pb, Cb[2], Cb[3], wb, prm[1], Ta_prev, Tb_prev, ua, ub, r, prm[11],
                state)
+        if N[0, 0] > 0.0 and Pa[Pa.shape[0] - 1] != Ta_out:
+            N[0, 4] = 0.0          # the coupling moved the distal end: the slide is over
+        if N[1, 0] > 0.0 and Pb[Pb.shape[0] - 1] != Tb_out:
+            N[1, 4] = 0.0
         Ta_out = Pa[Pa.shape[0] - 1]
         Tb_out = Pb[Pb.shape[0] - 1]
         ea = np.dot(wa, Pa)

@@ -81,12 +81,14 @@ def reestimate_joints(cols: dict[str, np.ndarray], csv: Path, cfg: Config,
 
     cal = load_calibration(calibration, cfg)
     e, out = cfg.estimator, {}
-    for joint, (ma, mb) in zip(cfg.instrument.joints, sheath_models(cal, cfg)):
+    for joint, (ma, mb), (_, tend) in zip(cfg.instrument.joints, sheath_models(cal, cfg), cal.joints):
         n = joint.name
         Ta, xa = _column(cols, csv, f"{n}.a.T_in"), _column(cols, csv, f"{n}.a.x_in")
         Tb, xb = _column(cols, csv, f"{n}.b.T_in"), _column(cols, csv, f"{n}.b.x_in")
+        noise = ((tend["a"].tension_noise, tend["b"].tension_noise) if e.tension_noise is None
+                 else (e.tension_noise, e.tension_noise))
         est = JointEstimator(ma, mb, float(joint.pulley_radius), n_nodes=e.n_nodes, pretension=joint.pretension,
-                             hold_rate=e.hold_rate, rate_time_constant=e.rate_time_constant)
+                             hold_rate=e.hold_rate, rate_time_constant=e.rate_time_constant, tension_noise=noise)
         m, snap = Ta.size, _snapshot_every(cfg)
         torque, angle, Toa, Tob = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
         prof_a, prof_b = np.empty((m // snap + 1, e.n_nodes + 1)), np.empty((m // snap + 1, e.n_nodes + 1))

@@ -91,6 +91,17 @@ def test_batch_equals_online():
     assert np.allclose(b.angle, [s.angle for s in rows], rtol=0, atol=1e-12)
     assert np.allclose(b.T_out, [s.T_out for s in rows], rtol=0, atol=1e-12)
     assert np.ptp(b.angle) > 0.3
+    # with the noise band (a joint's tendons: slack release side) the batch steps the estimator: the same numbers
+    on = JointEstimator(est.tendons[0].model, est.tendons[1].model, est.r, n_nodes=40, pretension=0.3,
+                        tension_noise=0.02)
+    rows = [on.step(*v) for v in zip(Ta, xa, Tb, xb, t)]
+    bb = estimate_joint_batch(Ta, xa, Tb, xb, est.tendons[0].model, est.tendons[1].model, est.r, n_nodes=40,
+                              pretension=0.3, tension_noise=0.02, time=t)
+    assert np.array_equal(bb.torque, [s.torque for s in rows]) and np.array_equal(bb.T_out, [s.T_out for s in rows])
+    assert np.abs(bb.T_out - b.T_out).max() > 1e-3                  # and the band changed them
+    with pytest.raises(ValueError, match="time"):
+        estimate_joint_batch(Ta, xa, Tb, xb, est.tendons[0].model, est.tendons[1].model, est.r, tension_noise=0.02,
+                             time=t[:-1])
 
 
 def test_bad_arguments_are_named():
@@ -120,13 +131,15 @@ def test_a_slack_tendon_does_not_count_in_the_angle():
     assert s.angle == pytest.approx(0.5 * (s.angle_a + s.angle_b))
 
 
-@pytest.mark.parametrize("coupling", [True, False])
-def test_the_compiled_step_is_the_per_tendon_step_bit_for_bit(coupling):
+@pytest.mark.parametrize("coupling,noise", [(True, 0.0), (False, 0.0), (True, 0.02), (False, 0.02)])
+def test_the_compiled_step_is_the_per_tendon_step_bit_for_bit(coupling, noise):
     """Every sample after the first runs in one compiled call (joint_kernels.step_pair): the same estimates,
     profiles, phases, rates and coupling state as the tendons' own steps plus couple(), which the first
-    sample (and any call without a time) still takes; a non-finite sample is refused with nothing changed."""
+    sample (and any call without a time) still takes, with the noise band too (velocities and slide states);
+    a non-finite sample is refused with nothing changed."""
     ma, mb = SheathModel(K=0.9, compliance=2e-4), SheathModel(K=1.1, compliance=1.5e-4)
-    ref, new = (JointEstimator(ma, mb, 0.004, n_nodes=60, pretension=(1.0, 1.2), coupling=coupling) for _ in range(2))
+    ref, new = (JointEstimator(ma, mb, 0.004, n_nodes=60, pretension=(1.0, 1.2), coupling=coupling,
+                               tension_noise=noise) for _ in range(2))
     ref._compiled = False                                           # the per-tendon path
     rng = np.random.default_rng(3)
     t = np.arange(4000) * 1e-3
@@ -134,18 +147,21 @@ def test_the_compiled_step_is_the_per_tendon_step_bit_for_bit(coupling):
     Ta, Tb = 1.5 + 400 * np.maximum(c, -0.002) + rng.normal(0, 0.02, t.size), 1.5 - 300 * c + rng.normal(0, 0.02, t.size)
     Ta[1500:1600] = -0.1                                            # tendon a slack for a while
     xa, xb = c + 1e-4 * Ta, -c + 1e-4 * Tb
-    phases, angles = set(), []
+    phases, angles, slid = set(), [], set()
     for k in range(t.size):
         tk = None if k == 2000 else t[k]
         a, b = ref.step(Ta[k], xa[k], Tb[k], xb[k], tk), new.step(Ta[k], xa[k], Tb[k], xb[k], tk)
         assert a == b and np.array_equal(ref._state, new._state)
         for u, v in zip(ref.tendons, new.tendons):
             assert np.array_equal(u.profile, v.profile) and np.array_equal(u._phase_state, v._phase_state)
-            assert (u.T_out, u.elongation, u.phase, u._rate, u._T_prev, u._t_prev) == \
-                (v.T_out, v.elongation, v.phase, v._rate, v._T_prev, v._t_prev)
+            assert (u.T_out, u.elongation, u.phase, u._rate, u._T_prev, u._t_prev, u.velocity, u._x_prev) == \
+                (v.T_out, v.elongation, v.phase, v._rate, v._T_prev, v._t_prev, v.velocity, v._x_prev)
+            assert np.array_equal(u._slide, v._slide)
+            slid.add(float(v._slide[0]))
         phases.update(b.phase)
         angles.append(b.angle)
     assert len(phases) >= 3 and np.ptp(angles) > 0.5                # every phase law and a real stroke [rad]
+    assert slid == ({-1.0, 0.0, 1.0} if noise else {0.0})           # the band's slides both ways, or none
     before = new.tendons[0].profile.copy()
     with pytest.raises(ValueError, match="finite"):
         new.step(math.nan, 0.0, 1.0, 0.0, 6.0)

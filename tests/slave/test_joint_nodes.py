@@ -63,9 +63,13 @@ def test_power_up_calibration_is_saved_and_reloadable(demo):
     assert [n for n, _ in cal.joints] == ["bend_ud", "bend_lr", "grasp"]
     assert (tmp_path / "calibration.json").is_file()
     inst = SimulatedInstrument.from_config(cfg)
+    sigma = cfg.rig.simulated.sensors.load_cell_noise
     for i, (_, tend) in enumerate(cal.joints):
         for k, t in enumerate("ab"):
             assert tend[t].K == pytest.approx(inst.K[i, k], rel=0.05)
+            # the pull's load-cell noise, measured and saved: the joint estimator's noise band
+            assert tend[t].tension_noise == pytest.approx(sigma, rel=0.2)
+            assert slave.axes[i].estimator.tendons[k].tension_noise == tend[t].tension_noise
 
 
 def test_paper_protocol_on_every_joint_within_5_percent_full_scale(demo):
