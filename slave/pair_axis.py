@@ -105,8 +105,9 @@ class PairAxis(SlaveAxis):
         self.estimator = JointEstimator(models[0], models[1], self.r, n_nodes=e.n_nodes, pretension=j.pretension,
                                         hold_rate=e.hold_rate, rate_time_constant=e.rate_time_constant,
                                         tension_noise=noise)
-        log.info("%s: estimator noise band %.3f N on tendon a, %.3f N on b (3 x the T_in noise sigma of the %s)", j.name,
-                 NOISE_BAND_SIGMAS * noise[0], NOISE_BAND_SIGMAS * noise[1], "calibration" if e.tension_noise is None else "estimator.tension_noise")
+        log.info("%s: estimator noise band %.3f N on tendon a, %.3f N on b (T_in noise sigma from the %s)", j.name,
+                 NOISE_BAND_SIGMAS * noise[0], NOISE_BAND_SIGMAS * noise[1],
+                 "calibration" if e.tension_noise is None else "estimator.tension_noise")
         x0 = history[0][1]
         assert self.controller is not None
         self.controller.x_limits = tuple((x0[i, k] - self.travel, x0[i, k] + self.travel) for k in range(2))

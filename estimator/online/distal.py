@@ -36,7 +36,8 @@ from numba import njit
 from estimator.phase import Phase, new_phase_state, readable_step
 from estimator.sheath import NOISE_BAND_SIGMAS, SheathModel, band_batch, band_update, profile_batch, profile_update
 
-__all__ = ["DistalEstimator", "DistalSample", "BatchEstimate", "estimate_batch", "classify_phase", "smoothed_velocity"]
+__all__ = ["DistalEstimator", "DistalSample", "BatchEstimate", "estimate_batch", "classify_phase", "smoothed_velocity",
+           "velocity_step"]
 
 
 @dataclass(frozen=True)
@@ -150,7 +151,7 @@ class DistalEstimator:
         T_prev_out = self.T_out
         dt = 1e-3 if t is None or self._t_prev is None else max(t - self._t_prev, 1e-6)
         if self._x_prev is not None:
-            self.velocity += dt / (self.tau + dt) * ((x_in - self._x_prev) / dt - self.velocity)
+            self.velocity = velocity_step(self.velocity, x_in, self._x_prev, dt, self.tau)
         self._x_prev = x_in
         # profile update (envelope rule, or the banded one); T_out is the distal node
         if self.tension_noise > 0.0:
@@ -268,13 +269,20 @@ def smoothed_velocity(time: np.ndarray, x_in: np.ndarray, tau: float, v0: float 
     return out
 
 
+@njit(cache=True, nogil=True)
+def velocity_step(v, x, x_prev, dt, tau):  # pragma: no cover - compiled
+    """The smoothed proximal velocity [m/s] after one more sample: the backward difference (x - x_prev) / dt [m/s]
+    through a first-order filter of time constant ``tau`` [s] from ``v``; the one formula of the live step, the
+    batch and the compiled pair step."""
+    return v + dt / (tau + dt) * ((x - x_prev) / dt - v)
+
+
 @njit(cache=True)
 def _smooth(t, x, tau, v, x0, t0, out):  # pragma: no cover - compiled
     xp, tp = x0, t0
     for k in range(x.shape[0]):
         if not math.isnan(xp):
-            dt = 1e-3 if math.isnan(tp) else max(t[k] - tp, 1e-6)
-            v += dt / (tau + dt) * ((x[k] - xp) / dt - v)
+            v = velocity_step(v, x[k], xp, 1e-3 if math.isnan(tp) else max(t[k] - tp, 1e-6), tau)
         xp, tp = x[k], t[k]
         out[k] = v
 

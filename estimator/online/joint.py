@@ -133,8 +133,8 @@ class JointEstimator:
         Phase settings of :class:`~estimator.online.distal.DistalEstimator` [N/s], [s].
     tension_noise : float or (float, float)
         Noise sigma of each proximal load cell [N], >= 0: > 0 gives that tendon the noise band of
-        :class:`~estimator.online.distal.DistalEstimator` (a slide it started ends where the coupling moves its
-        distal end); the step then runs in Python, not the compiled pair step. 0 (default): the envelope rule.
+        :class:`~estimator.online.distal.DistalEstimator` with a slack release side (``released_slack``; a slide
+        ends where the coupling moves the distal end), in the compiled pair step too. 0 (default): the envelope rule.
 
     Raises
     ------

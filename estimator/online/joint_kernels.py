@@ -11,6 +11,7 @@ import numpy as np
 from numba import njit
 
 from estimator.distal_slip import distal_clip, distal_tension, elongation
+from estimator.online.distal import velocity_step
 from estimator.phase import readable_step
 from estimator.sheath import band_update, profile_update
 
@@ -131,9 +132,8 @@ def _rate_phase(k, T_in, T_out, t, PS, prm, out):  # pragma: no cover - compiled
 def _tendon_update(P, C, N, k, T_in, x_in, t, prm):  # pragma: no cover - compiled
     """Tendon k's proximal update, as :meth:`DistalEstimator.step`: the smoothed velocity, then the envelope rule
     or (N[k, 0] > 0) the banded update with a slack release side; returns T_out [N]."""
-    dt = max(t - prm[16 + k], 1e-6)
     if not math.isnan(N[k, 2]):
-        N[k, 3] += dt / (prm[6 + k] + dt) * ((x_in - N[k, 2]) / dt - N[k, 3])
+        N[k, 3] = velocity_step(N[k, 3], x_in, N[k, 2], max(t - prm[16 + k], 1e-6), prm[6 + k])
     N[k, 2] = x_in
     if N[k, 0] > 0.0:
         return band_update(P, C[4], C[5], T_in, N[k, 3], N[k, 0], N[k, 1], N[k, 4:6], True)
