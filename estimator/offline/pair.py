@@ -262,7 +262,8 @@ class DeadZone:
     """After one command reversal: index of the reversal sample; command_travel [rad] until the
     angle has moved by the threshold (nan if it never does); K_release, K_pull [-]: half the log
     ratio of the released / pulled tendon's proximal tension at the reversal and when the angle
-    starts to move (the capstan band is T0 e^{-+2K}, Phee et al. 2009, eqs. (14)-(25))."""
+    starts to move (the capstan band is T0 e^{-+2K}, Phee et al. 2009, eqs. (14)-(25)); nan where a
+    tension is not positive."""
 
     index: int
     command_travel: float
@@ -296,6 +297,12 @@ def reversal_dead_zones(command, angle, T_a, T_b, threshold: float = math.radian
             continue
         k = int(r + moved[0])
         rel, pul = (Ta, Tb) if c[r] > 0 else (Tb, Ta)
-        out.append(DeadZone(int(r), float(abs(c[k] - c[r])), 0.5 * math.log(rel[r] / rel[k]),
-                            0.5 * math.log(pul[k] / pul[r])))
+        out.append(DeadZone(int(r), float(abs(c[k] - c[r])), _half_log_ratio(rel[r], rel[k]),
+                            _half_log_ratio(pul[k], pul[r])))
     return out
+
+
+def _half_log_ratio(num: float, den: float) -> float:
+    """0.5 ln(num / den), nan when either tension is not positive (a load cell with an offset, or a
+    released tendon read at or below zero: no capstan ratio)."""
+    return 0.5 * math.log(num / den) if num > 0.0 and den > 0.0 else math.nan

@@ -90,6 +90,18 @@ def test_dead_zones_of_a_backlash_are_its_width():
     assert top.K_pull == pytest.approx(0.5 * math.log(Tb[k] / Tb[top.index]))
 
 
+def test_dead_zones_with_a_tension_read_at_or_below_zero_have_no_capstan_ratio():
+    """A load cell with an offset reads a released tendon below zero (the long KAIST recordings): the
+    dead zone is still measured, its log ratio is nan instead of a math domain error."""
+    t, c, Ta, Tb, _ = signals()
+    y = play(0.8 * c, 0.3)
+    zones = reversal_dead_zones(c, y, Ta - Ta.max(), Tb, threshold=1e-3)    # A never positive
+    assert len(zones) == 4 and all(math.isfinite(z.command_travel) for z in zones[:-1])
+    assert all(math.isnan(z.K_release) for z in zones if c[z.index] > 0)  # A released at a maximum
+    assert all(math.isnan(z.K_pull) for z in zones if c[z.index] < 0)     # A pulled at a minimum
+    assert all(math.isfinite(z.K_pull) for z in zones[:-1] if c[z.index] > 0)
+
+
 def test_fit_pair_rejects_bad_input():
     with pytest.raises(ValueError, match="equal length"):
         fit_pair(np.zeros(10), np.zeros(10), np.zeros(9), np.zeros(10), 8)
