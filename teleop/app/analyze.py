@@ -11,7 +11,8 @@ Two modes:
   holds the route of CONFIG's ``sheath`` instead (an instrument whose route is known from its design).
 * ``teleop analyze --kaist [DIR]`` or ``teleop analyze .../sine_config_N.txt`` (or any FILE with
   ``--bend DEG``; other layouts with ``--columns MAP``, :mod:`teleop.columns`): every
-  ``sine_config_<N>.txt`` configuration (:mod:`teleop.app.kaist`; unlicensed data read in place),
+  ``sine_config_<N>.txt`` configuration (or every ``<N>.txt`` of a clone's ``optimization/selected/``;
+  :mod:`teleop.app.kaist`; unlicensed data read in place),
   calibrated on command cycle 1 and tested on the later cycles, the model choice on cycle 1 only:
   the pair diagnosis (:mod:`estimator.offline.pair_diagnosis`: the seed pair model against the
   capstan-joint model and the pair-level effects; causes, extended model, gain), one parameter set
@@ -63,7 +64,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", nargs="?", metavar="FILE",
                         help="measured-data CSV (one tendon), or a KAIST sine_config_N.txt")
     parser.add_argument("--kaist", nargs="?", const="", default=None, metavar="DIR",
-                        help="analyse every KAIST configuration (default DIR ../shared/data/kaist-tsm)")
+                        help="analyse every KAIST configuration sine_config_<N>.txt in DIR, or every <N>.txt of the "
+                             "source repository's optimization/selected/ (default DIR ../shared/data/kaist-tsm)")
     parser.add_argument("--mrd", nargs="?", const="", default=None, metavar="DIR",
                         help="jaw torque and angle of a da Vinci tool from its spindle: every *.TXT run of an MRD "
                              "folder (default ../shared/data/mrd-davinci; teleop.app.mrd_report)")

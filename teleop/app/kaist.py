@@ -51,6 +51,8 @@ CONFIGS_DEG = (0, 60, 120, 180, 240)
 #: Rate [Hz] the recordings are analysed at (the 40 Hz of the shipped files).
 RATE_HZ = 40.0
 _NAME = re.compile(r"sine_config_(\d+(?:\.\d+)?)\.txt$")
+# the source repository's own layout (optimization/selected/<N>.txt), read when a folder has no sine_config_<N>.txt
+_BARE = re.compile(r"(\d+(?:\.\d+)?)\.txt")
 _MISSING_HINT = "these tests need the unlicensed measurements, see docs/findings.md"
 
 
@@ -117,14 +119,16 @@ def _num(text: str) -> float:
 
 
 def find_configs(directory: str | Path) -> list[tuple[float, Path]]:
-    """Every ``sine_config_<N>.txt`` in ``directory`` as (N [deg], path), sorted by N."""
+    """Every ``sine_config_<N>.txt`` in ``directory`` as (N [deg], path), sorted by N. A folder with no
+    such file is read in the source repository's layout instead (``optimization/selected/<N>.txt`` of
+    nhoyh/hysteresis_compensation_ROS, so that a clone is read in place): every ``<N>.txt``."""
     d = Path(directory)
-    found = []
-    for p in d.iterdir() if d.is_dir() else ():
-        m = _NAME.fullmatch(p.name)
-        if m and p.is_file():
-            found.append((_num(m.group(1)), p))
-    return sorted(found, key=lambda x: x[0])
+    files = [p for p in d.iterdir() if p.is_file()] if d.is_dir() else []
+    for pattern in (_NAME, _BARE):
+        found = [(_num(m.group(1)), p) for p in files if (m := pattern.fullmatch(p.name))]
+        if found:
+            return sorted(found, key=lambda x: x[0])
+    return []
 
 
 def find_kaist_dir(path: str | Path | None = None) -> Path:
@@ -138,7 +142,7 @@ def find_kaist_dir(path: str | Path | None = None) -> Path:
     Raises
     ------
     DataError
-        The directory does not exist or holds no ``sine_config_<N>.txt`` file.
+        The directory does not exist or holds no ``sine_config_<N>.txt`` (or ``<N>.txt``) file.
     """
     d = Path(path) if path is not None else default_kaist_dir()
     if not d.is_dir() or not find_configs(d):
@@ -303,7 +307,8 @@ def split(rec: KaistRecording) -> tuple[slice, slice, str]:
 # ---- the command line's KAIST input and the prediction with a saved shared set -----------------
 
 def load_kaist_input(args: argparse.Namespace) -> list[KaistRecording]:
-    """The recordings of the KAIST mode: ``--kaist [DIR]`` (every ``sine_config_<N>.txt`` in DIR), a
+    """The recordings of the KAIST mode: ``--kaist [DIR]`` (every configuration file of DIR,
+    :func:`find_configs`), a
     ``sine_config_<N>.txt`` FILE (its whole directory) or another FILE with ``--bend DEG``; read with
     ``--columns`` when given. Files that cannot be read get one line on stderr each and are left out.
 

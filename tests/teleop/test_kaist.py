@@ -178,6 +178,20 @@ def test_missing_file_and_directory_are_named(tmp_path):
         and "\n" not in problems[0]
 
 
+def test_source_repository_layout_is_read_in_place(tmp_path):
+    """A clone's optimization/selected/ names its files <N>.txt beside other recordings (conf0_60.txt):
+    read the numbered ones when the folder has no sine_config_<N>.txt; the project's names win."""
+    from teleop.app.kaist import find_configs, load_dir
+    for n in (30, 270, 90):
+        write_sine(tmp_path / f"{n}.txt", n_stamps=10)
+    write_sine(tmp_path / "conf0_60.txt", n_stamps=10)
+    assert [n for n, _ in find_configs(tmp_path)] == [30, 90, 270]
+    recs, problems = load_dir(tmp_path)
+    assert [r.config_deg for r in recs] == [30, 90, 270] and not problems
+    write_sine(tmp_path / "sine_config_0.txt", n_stamps=10)
+    assert [n for n, _ in find_configs(tmp_path)] == [0]
+
+
 def test_cycles_split_at_upward_zero_crossings(tmp_path):
     rec = read_kaist(write_sine(tmp_path / "sine_config_0.txt"))
     cs = cycles(rec)
