@@ -71,6 +71,9 @@ class Effect:
     kernel knob of each parameter (:mod:`estimator.offline.effects_kernels`), empty for sensor corrections.
     ``switch`` the simulated rig's switch (``rig.simulated.effects.<key>``, None: the rig has none) and
     ``knob`` the scenario knob (None: no hidden-effect scenario): :mod:`estimator.offline.effect_switches`.
+    ``initial_state`` True for an effect that acts through the state at the start only (a pretension whose profile a
+    first full slide erases): the diagnosis then judges it on the fold that validates on the start when the other
+    fold's base is already at its floor.
     """
 
     id: str = ""
@@ -86,6 +89,9 @@ class Effect:
     switch: RigSwitch | None = None     # the simulated rig's switch
     knob: ScenarioKnob | None = None    # how a scenario level sets it
     variants: tuple[dict[str, float], ...] = ()   # alternative forms (settings held, not fitted); best one kept
+    # the effect acts through the state at the start (before the first full slide): only a validation block that
+    # holds the start can show it (estimator.offline.diagnosis._Fit)
+    initial_state: bool = False
 
     def variant_ok(self, variant: dict[str, float], measured: list[str]) -> bool:
         """Whether ``variant`` (one of ``variants``) can differ from the first form on a recording with ``measured``."""
@@ -142,6 +148,7 @@ class Pretension(Effect):
     parameters = (Parameter("T0", "N", 0.0, 50.0, 0.0, (), "uniform tension along the tendon at the start",
                             rest="replace"),)
     primary = "x_out"
+    initial_state = True
     knobs = {"T0": "T0"}
     switch = RigSwitch("pretension", "the tendon carries tension at rest (assembly preload)", (Setting(
         "tension", 3.0, "N", ">= 0", "uniform tension at rest, added to sheath.pretension"),))

@@ -326,6 +326,20 @@ def test_lumped_pretension_a_constant_force_load_cannot_hold_is_named():
     assert res["causes"] == ["pretension"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
 
 
+def test_lumped_pretension_seen_only_before_the_first_slide_is_judged_on_the_start():
+    # 1.8 N of preload on a joint that sits on its stop from rest (lumped dev33 3201101): the first pull erases the
+    # preload's profile, so the base misses only the first 1.3 s (1.3 N on T_out) and the forward fold, validated
+    # after that, cannot show it (its base at the floor): the worse fold gave S 0.94 and "unknown". Judged on the
+    # backward fold, which holds the start (Effect.initial_state), it is named with T0 within 25 %
+    rec = lumped_scenarios.record("pretension", seed=3201101, level=0.2, duration=60.0)
+    res = diagnose(rec.data, effects=("pretension", "sensor_gain:T_in", "sensor_offset:T_out"))
+    assert res["causes"] == ["pretension"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
+    T0 = res["parameters"]["T0"]["value"]
+    assert T0 == pytest.approx(rec.truth["parameters"]["tension"], rel=0.25)
+    # an effect that is not of the starting state keeps the worse fold: the T_in gain's S stays near 1
+    assert res["candidates"]["sensor_gain:T_in"]["score"] > 0.9
+
+
 def test_an_extension_also_starts_from_a_typical_K_when_the_base_collapsed_to_zero(clean_result):
     # lumped dev11 1001112 (a 4.2 N pretension): the base model fell to K = 0, where the noise band of the memory
     # rule leaves K without a gradient, and the pretension fitted from there kept K = 0 (S 0.92, an x_in offset named)
