@@ -205,7 +205,7 @@ class _Fit:
         # alone (session 24, lumped dev33 3201101: a joint on its stop from rest, the pretension seen only in the
         # first 1.3 s, S 0.94 from the forward fold and 0.02 from the backward one)
         self.start_only = (base is not None and bool(effects) and all(e.initial_state for e in effects)
-                           and bool(floor) and _at_floor(base.mse[0], floor))
+                           and bool(floor) and max(_structure(base, floor, fold=0).values()) < STRUCTURE_RATIO)
         for j, (fm, vm) in enumerate(zip(folds.fit, folds.val)):
             if j == 1 and base is not None and not self.start_only and _score(*self.pairs[0], floor) >= need:
                 break           # cannot be accepted (the worse fold counts): the second fold is not needed
@@ -254,11 +254,6 @@ def _route_of(values: dict, route: bool | str) -> bool | str:
     return "twelfths" if n == len(ROUTE_TWELFTHS) else "fine" if n == len(ROUTE_FORMS["fine"]) else True
 
 
-def _at_floor(mse: dict[str, float], floor: dict[str, float]) -> bool:
-    """Whether a validation block's mean squares lie below STRUCTURE_RATIO times the floor on every signal."""
-    return all(math.sqrt(v) < STRUCTURE_RATIO * floor[n] for n, v in mse.items() if floor.get(n, 0.0) > 0.0)
-
-
 def _score(mse: dict, base: dict, floor: dict[str, float]) -> float:
     """Validation score relative to the base: sum over signals of (rmse / floor)^2, extension over base.
 
@@ -272,9 +267,11 @@ def _score(mse: dict, base: dict, floor: dict[str, float]) -> float:
     return num / den if den > 0 else 1.0
 
 
-def _structure(fit: _Fit, noise: dict[str, float]) -> dict[str, float]:
-    """Validation rmse / noise floor per signal on the averaged series [-] (mean over the folds)."""
-    return {n: math.sqrt(v) / max(noise[n], 1e-300) for n, v in fit.val_mse().items()}
+def _structure(fit: _Fit, noise: dict[str, float], fold: int | None = None) -> dict[str, float]:
+    """Validation rmse / noise floor per signal on the averaged series [-] (mean over the folds, or of fold
+    ``fold`` alone)."""
+    mse = fit.val_mse() if fold is None else fit.mse[fold]
+    return {n: math.sqrt(v) / max(noise[n], 1e-300) for n, v in mse.items()}
 
 
 def _gain(ext: dict, base: dict, signal: str) -> float | None:
