@@ -73,7 +73,9 @@ class Effect:
     ``knob`` the scenario knob (None: no hidden-effect scenario): :mod:`estimator.offline.effect_switches`.
     ``initial_state`` True for an effect that acts through the state at the start only (a pretension whose profile a
     first full slide erases): the diagnosis then judges it on the fold that validates on the start when the other
-    fold's base is already at its floor.
+    fold's base is already at its floor. ``from_start`` True for an effect that is zero at the start and grows with
+    time (a sensor drifting away from its zero at the start): the diagnosis judges it on the fold that validates on
+    the end when the other fold's base is at its floor.
     """
 
     id: str = ""
@@ -92,6 +94,9 @@ class Effect:
     # the effect acts through the state at the start (before the first full slide): only a validation block that
     # holds the start can show it (estimator.offline.diagnosis._Fit)
     initial_state: bool = False
+    # the effect is zero at the start and grows with time (a load cell drifting from its zero at the start): a
+    # validation block at the start shows the least of it (estimator.offline.diagnosis._Fit)
+    from_start: bool = False
 
     def variant_ok(self, variant: dict[str, float], measured: list[str]) -> bool:
         """Whether ``variant`` (one of ``variants``) can differ from the first form on a recording with ``measured``."""
@@ -271,6 +276,8 @@ class SensorEffect(Effect):
         self.primary = "x_out" if channel[0] == "x" else "T_out"
         self.requires = ("x_out",) if channel[0] == "x" else ("T_out",) if channel == "T_out" else ()
         self.switch, self.knob = sw.SENSOR_SWITCHES.get((kind, channel)), sw.SENSOR_KNOBS[(kind, channel[0])]
+        # a drift is counted from the recording's start, where the channel was zeroed: rate x (t - t_0)
+        self.from_start = kind == "drift"
 
 
 _EFFECTS: tuple[Effect, ...] = (VelocityFriction(), Pretension(), CurvatureDrift(), TendonStiffening(), Stiction(),

@@ -152,7 +152,8 @@ def test_result_keys_units_and_json(clean_result):
     assert set(res["candidates"]) == set(EFFECT_IDS) - {"sensor_gain:T_out", "sensor_offset:x_out"}
     for c in res["candidates"].values():
         assert {"validation_rmse_T_out_N", "validation_rmse_x_out_m", "score", "penalised_score", "accepted",
-                "parameters", "equivalent"} <= set(c)
+                "parameters", "equivalent", "fold_values", "fold_scores", "scored_on"} <= set(c)
+        assert 1 <= len(c["fold_scores"]) <= 2 and c["score"] in c["fold_scores"]
     assert res["parameters"]["compliance"]["unit"] == "m/N"
     assert res["candidates"]["sensor_lag:T_in"]["parameters"]["tau_T_in"]["unit"] == "s"
     again = json.loads(json.dumps(res))
@@ -338,6 +339,22 @@ def test_lumped_pretension_seen_only_before_the_first_slide_is_judged_on_the_sta
     assert T0 == pytest.approx(rec.truth["parameters"]["tension"], rel=0.25)
     # an effect that is not of the starting state keeps the worse fold: the T_in gain's S stays near 1
     assert res["candidates"]["sensor_gain:T_in"]["score"] > 0.9
+
+
+def test_lumped_drift_from_zero_at_the_start_is_judged_on_the_end():
+    # a distal load-cell drift of -0.0048 N/s (lumped dev35 3415102, 0.29 N over the minute) is zero at the start,
+    # where the channel was zeroed: the backward fold validates on the start, where it is smallest, and its base
+    # (fitted on the later part) is at the floor there (S 0.60 backward against 0.09 forward: "none"). Judged on the
+    # forward fold (Effect.from_start), it is named with its rate within 25 %
+    rec = lumped_scenarios.record("sensor_drift:T_out", seed=3415102, level=0.2, duration=60.0)
+    res = diagnose(rec.data, effects=("sensor_drift:T_out", "sensor_offset:T_out", "curvature_drift"))
+    assert res["causes"] == ["sensor_drift:T_out"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
+    assert res["parameters"]["d_T_out"]["value"] == pytest.approx(rec.truth["parameters"]["rate"], rel=0.25)
+    drift = res["candidates"]["sensor_drift:T_out"]
+    assert drift["scored_on"].startswith("the forward fold") and drift["score"] == drift["fold_scores"][0]
+    assert drift["fold_scores"][1] > 0.5
+    # a drift of K is not counted from a zero (K(t) = K + K_rate (t - t0) fits either way): the worse fold counts
+    assert res["candidates"]["curvature_drift"]["scored_on"].startswith("both")
 
 
 def test_an_extension_also_starts_from_a_typical_K_when_the_base_collapsed_to_zero(clean_result):
