@@ -46,8 +46,9 @@ once at 352bf5a, whose diagnosis is 83fefc2's, seen since) and ``dev32`` (offset
 run once at its end with the same diagnosis, seen since) and ``dev33`` (offsets + 3200000: fixed at the end of session
 23, run once at the start of session 24 with the code of commit 1bf90a2, seen since) and ``dev34`` (offsets + 3300000:
 fixed at the start of session 24, run once at 5cd5226, seen since) and ``dev35`` (offsets + 3400000: fixed at the
-end of session 24, run once at the start of session 25 with the code of commit 6be0256, seen since) are development
-data. ``final`` (offsets + 3500000) is the final set fixed at the start of session 25.
+end of session 24, run once at the start of session 25 with the code of commit 6be0256, seen since) and ``dev36``
+(offsets + 3500000: fixed at the start of session 25, run once at f1e4e54, seen since) are development data.
+``final`` (offsets + 3600000) is the final set fixed at the end of session 25.
 Seed layout (session 4): every hidden-effect recording has its own seed, so its own simulated rig
 (route, K, EA, load, rate, noise): effect k of EFFECT_IDS, level j, repeat s uses
 base + 100 + 1000 k + 10 j + s (before session 4 every effect of a set shared the four rigs of
@@ -60,7 +61,7 @@ Prints per effect and per channel: accuracy (strict, and up to the inseparable p
 estimator.offline.effects.EQUIVALENT), gains, false alarms on clean data; never fails on the figures (the
 pass/fail checks are in tests/estimator/test_diagnosis.py).
 
-    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|...|dev35|final] [--seeds 2]
+    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|...|dev36|final] [--seeds 2]
         [--levels 0.2,0.8] [--clean 12] [--duration 90] [--rate 1000] [--jobs 2] [--json OUT] [--speed-only] [--twins]
         [--shared-rigs]
     .venv/bin/python benchmarks/bench_diagnosis.py --floor-table OUT.json [OUT.json ...]
@@ -97,7 +98,7 @@ SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "dev4": 300000, "dev5": 4
              "dev21": 2000000, "dev22": 2100000, "dev23": 2200000, "dev24": 2300000,
              "dev25": 2400000, "dev26": 2500000, "dev27": 2600000, "dev28": 2700000,
              "dev29": 2800000, "dev30": 2900000, "dev31": 3000000, "dev32": 3100000, "dev33": 3200000,
-             "dev34": 3300000, "dev35": 3400000, "final": 3500000}   # fixed at the start of session 25 (docstring)
+             "dev34": 3300000, "dev35": 3400000, "dev36": 3500000, "final": 3600000}   # fixed at the end of session 25 (docstring)
 UNCATALOGUED = "load_cell_wander"
 
 
@@ -218,7 +219,7 @@ def _detail(res: dict) -> dict:
     return {"structure": res["structure"], "noise": res["noise"],
             "stick_slip": {k: res["stick_slip"][k] for k in ("ratio", "named")},
             "candidates": {k: {m: v[m] for m in ("validation_rmse_T_out_N", "validation_rmse_x_out_m",
-                                                 "score", "penalised_score", "fold_values")}
+                                                 "score", "penalised_score", "fold_values", "fold_scores")}
                            for k, v in res["candidates"].items()}}
 
 
