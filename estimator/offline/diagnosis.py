@@ -238,9 +238,9 @@ class _Fit:
                 self.pairs.append(({n: v[0] for n, v in pair.items()}, {n: v[1] for n, v in pair.items()}))
         # the worse fold counts: an extension must help forward and backward in time; each fold compares the
         # two models on the same samples (the transients neither explains left out: paired_trimmed_ms)
-        scored = self.pairs if self.sole_fold is None else self.pairs[self.sole_fold:self.sole_fold + 1]
         self.fold_S = [_score(m, bm, floor) for m, bm in self.pairs]     # forward, backward (when computed)
-        self.S = 1.0 if base is None else max(_score(m, bm, floor) for m, bm in scored)
+        scored = self.fold_S if self.sole_fold is None else self.fold_S[self.sole_fold:self.sole_fold + 1]
+        self.S = 1.0 if base is None else max(scored)
         self.complete = len(self.mse) == len(folds.fit)
 
     @property
