@@ -82,6 +82,7 @@ import sys
 import time
 from collections import Counter, defaultdict
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
 
 import numpy as np
 from scipy.stats import binomtest
@@ -186,12 +187,15 @@ def _twin_diagnosis(data, shape: np.ndarray | None = None) -> dict:
 
 
 def one(case: tuple) -> dict:
-    sim, effect, level, seed, duration, rate, twins, route = case
+    sim, effect, level, seed, duration, rate, twins, route, without = case
     kw = {"seed": seed, "level": level, "duration": duration, **({"rate_hz": rate} if sim == "rig" or rate else {})}
     rec = _record(sim)(None if effect == NONE else effect, **kw)
     # the clean twin of a hidden effect (same seed, level and rate): how far the effect moves the recording;
     # with --twins it is diagnosed too (one more clean rig per hidden-effect recording: false alarms)
     twin = _record(sim)(None, **kw) if effect in EFFECT_IDS else None
+    if without:         # --without: a rig that does not record these distal channels
+        rec = replace(rec, data=replace(rec.data, **{ch: None for ch in without}))
+        twin = replace(twin, data=replace(twin.data, **{ch: None for ch in without})) if twin is not None else None
     fp = footprint(rec.data, twin.data) if twin is not None else {}
     extra = {"load": _load_kind(rec.truth)}             # the twin's rig is the recording's
     shape = known_route(rec.truth) if route else None   # --route-known: the route held, not fitted
@@ -224,6 +228,16 @@ def _detail(res: dict) -> dict:
             "candidates": {k: {m: v[m] for m in ("validation_rmse_T_out_N", "validation_rmse_x_out_m",
                                                  "score", "penalised_score", "fold_values", "fold_scores")}
                            for k, v in res["candidates"].items()}}
+
+
+def shows_without(effect: str, without: tuple[str, ...]) -> bool:
+    """Whether a hidden effect can show in a recording without the distal channels ``without``: not when the
+    effect needs one of them (``Effect.requires``: distal backlash and the x_out sensor effects need x_out, the
+    T_out sensor effects need T_out)."""
+    if effect not in EFFECT_IDS:
+        return True
+    from estimator.offline.effects import effect as catalogue_entry
+    return not set(catalogue_entry(effect).requires) & set(without)
 
 
 def _want(effect: str) -> set[str]:
@@ -412,6 +426,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--route-known", action="store_true",
                     help="give the diagnosis each rig's true route shape (a user who knows the instrument's route: "
                          "`teleop analyze --route CONFIG`) instead of fitting where the friction sits")
+    ap.add_argument("--without", action="append", default=[], choices=("x_out", "T_out"),
+                    help="drop this distal channel from every recording (a rig without a distal encoder or load "
+                         "cell); effects that need it are left out of the set")
     ap.add_argument("--shared-rigs", action="store_true",
                     help="seed layout before session 4: every effect of a set on the same four rigs")
     ap.add_argument("--speed-only", action="store_true", help="only time a 10-minute 1 kHz recording")
@@ -427,16 +444,20 @@ def main(argv: list[str] | None = None) -> None:
         return
     levels = [float(x) for x in args.levels.split(",")]
     b = SEED_BASE[args.seed_set]
+    if len(set(args.without)) == 2:
+        ap.error("--without: a recording needs at least one distal channel (x_out or T_out)")
+    without = tuple(sorted(set(args.without)))
     sims = ("rig", "lumped") if args.sim == "both" else (args.sim,)
     cases: list[tuple] = []
     for sim in sims:
         rate = args.rate if args.rate or sim == "lumped" else 1000.0
         cases += [(sim, e, lv, effect_seed(b, k, j, s, args.shared_rigs), args.duration, rate, args.twins,
-                   args.route_known)
-                  for k, e in enumerate(EFFECT_IDS) for j, lv in enumerate(levels) for s in range(args.seeds)]
-        cases += [(sim, NONE, None, b + 500 + s, args.duration, rate, False, args.route_known)
+                   args.route_known, without)
+                  for k, e in enumerate(EFFECT_IDS) if shows_without(e, without)
+                  for j, lv in enumerate(levels) for s in range(args.seeds)]
+        cases += [(sim, NONE, None, b + 500 + s, args.duration, rate, False, args.route_known, without)
                   for s in range(args.clean)]
-        cases += [(sim, UNCATALOGUED, 1.0, b + 900 + s, args.duration, rate, False, args.route_known)
+        cases += [(sim, UNCATALOGUED, 1.0, b + 900 + s, args.duration, rate, False, args.route_known, without)
                   for s in range(args.unknown)]
     if args.only:
         keep = args.only.split(",")
@@ -448,7 +469,8 @@ def main(argv: list[str] | None = None) -> None:
     print(f"# diagnosis confusion matrix, {args.seed_set} seeds: {len(rows)} recordings of {args.duration:.0f} s, "
           f"levels {levels} x {args.seeds} seeds per effect, {args.clean} clean, {args.unknown} "
           f"{UNCATALOGUED}; {wall:.0f} s wall on {args.jobs} processes"
-          + ("; the route known (held at each rig's true shape, not fitted)" if args.route_known else ""))
+          + ("; the route known (held at each rig's true shape, not fitted)" if args.route_known else "")
+          + (f"; recorded without {' and '.join(without)} (effects that need it left out)" if without else ""))
     for sim in sims:
         rs = [r for r in rows if r["sim"] == sim]
         title = {"rig": "rig (slave/scenarios.py, the diagnosis' own physics)",

@@ -43,16 +43,29 @@ def test_seed_sets_do_not_overlap(bench):
 def test_twins_are_diagnosed_and_their_false_alarms_reported(bench, capsys):
     # the clean twin of a hidden-effect recording (same seed: same rig, protocol and noise) is diagnosed with
     # --twins: one more clean rig per row; the report counts its false alarms by distal load
-    row = bench.one(("lumped", "sensor_offset:T_out", 0.8, 101, 20.0, None, True, False))
+    row = bench.one(("lumped", "sensor_offset:T_out", 0.8, 101, 20.0, None, True, False, ()))
     assert row["twin_cause"] in ("none", "unknown") or row["twin_cause"] in bench.EFFECT_IDS
     assert row["load"] in ("spring", "preloaded", "constant", "joint") and row["twin_structure"] > 0.0
-    assert "twin_cause" not in bench.one(("lumped", "sensor_offset:T_out", 0.8, 101, 20.0, None, False, False))
+    assert "twin_cause" not in bench.one(("lumped", "sensor_offset:T_out", 0.8, 101, 20.0, None, False, False, ()))
     alarm = dict(row, twin_cause="friction_offset", twin_causes=["friction_offset"], load="constant")
     bench.table([row, alarm], "twins")
     out = capsys.readouterr().out
     n_fa = 1 + (row["twin_cause"] != "none")
     assert f"false alarms on the clean twins of the hidden-effect recordings: {n_fa}/2" in out
     assert "constant 1/" in out
+
+
+def test_without_drops_the_distal_channel_and_the_effects_that_need_it(bench):
+    # --without x_out: a rig with a distal load cell only; the row's footprint has no x_out, and effects that need
+    # x_out (backlash, the x_out sensor effects) cannot show, while a T_out effect still can
+    row = bench.one(("lumped", "sensor_offset:T_out", 0.8, 101, 20.0, None, False, False, ("x_out",)))
+    assert set(row["footprint"]) == {"T_in", "T_out", "x_in"}
+    assert row["footprint"]["T_out"] > 3.0
+    assert not bench.shows_without("distal_backlash", ("x_out",))
+    assert not bench.shows_without("sensor_lag:x_out", ("x_out",))
+    assert bench.shows_without("sensor_lag:x_out", ("T_out",))
+    assert not bench.shows_without("sensor_gain:T_out", ("T_out",))
+    assert bench.shows_without("stiction", ("x_out",)) and bench.shows_without("none", ("T_out",))
 
 
 def test_known_route_is_the_rigs_own_wrap_shape(bench):
