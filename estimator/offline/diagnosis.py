@@ -56,7 +56,7 @@ from estimator.offline.effects import (CATALOGUE, EQUIVALENT, NOISE_BAND, NONE, 
 from estimator.data import MeasuredData
 
 __all__ = ["diagnose", "predictions", "PENALTY", "STRUCTURE_RATIO", "STRONG_SCORE", "WEAK_STRUCTURE", "MID_SCORE",
-           "EXCESS_MIN", "FLOOR_SCORE", "FLOOR_FACTOR", "floor_scores",
+           "EXCESS_MIN", "FLOOR_SCORE", "FLOOR_SCORE_WITHOUT", "FLOOR_FACTOR", "floor_scores",
            "DOMINANT_SCORE", "VALIDATION_FRACTION", "STICK_SLIP_RATIO"]
 
 PENALTY = 0.30              # price per extra parameter on the validation score S (base = 1) [-]
@@ -105,6 +105,21 @@ FLOOR_SCORE: dict[str, float] = {
     "sensor_lag:T_out": 0.50, "sensor_lag:x_in": 0.45, "sensor_lag:x_out": 0.46, "sensor_offset:T_in": 0.41,
     "sensor_offset:T_out": 0.42, "sensor_offset:x_in": 0.37, "stiction": 0.42, "tendon_stiffening": 0.24,
     "velocity_friction": 0.50}
+#: ... and a recording made with one distal channel only is judged against clean recordings made the same way: keyed
+#: by the channel it lacks, the bound is the smaller of this table's and the one above (with STRONG_SCORE / MID_SCORE).
+#: Session 26 (``bench_diagnosis.py --without``): with x_out alone, 6 of 300 clean lumped recordings (dev14 seeds
+#: 500-799) were named - a distal backlash of 32-42 um on three constant-force loads (S 0.09-0.14, under STRONG_SCORE),
+#: pre-sliding twice (S 0.25-0.37) and a T_in drift (S 0.17): without T_out to pin K, the base's dead zone in x_out
+#: bends to them; none on the rig (0/300). The table is FLOOR_FACTOR x the lowest S of those 600 clean recordings
+#: (lumped 300, rig dev14 and dev15 150 each; ``--floor-table`` on ``--without T_out`` runs), rounded down. With T_out
+#: alone the two-channel bounds hold (0 of the same 600 named): a table computed the same way (lower for friction
+#: offset, velocity friction, the drifts and the T_in offset) would only have cost a right answer (lumped dev37 3602101,
+#: a curvature drift at S 0.435 against 0.43), so there is none.
+FLOOR_SCORE_WITHOUT: dict[str, dict[str, float]] = {
+    "T_out": {"curvature_drift": 0.43, "distal_backlash": 0.05, "friction_offset": 0.42, "presliding": 0.15,
+              "pretension": 0.50, "sensor_drift:T_in": 0.10, "sensor_gain:T_in": 0.42, "sensor_lag:T_in": 0.42,
+              "sensor_lag:x_in": 0.50, "sensor_lag:x_out": 0.44, "sensor_offset:T_in": 0.43, "sensor_offset:x_in": 0.45,
+              "stiction": 0.42, "tendon_stiffening": 0.38, "velocity_friction": 0.50}}
 #: a proximal tension this much rougher in steady moves than in holds (:func:`estimator.offline.diagnosis_fit.
 #: stick_slip_ratio`, about 1 for sensor noise) is stick-slip: stiction is named when the models name nothing.
 #: Session 22, on the first 60 % of the lumped recordings of dev25-dev27: clean rows and twins at most 1.26 (499 of 552
@@ -313,7 +328,8 @@ def _parameters(effects: list[Effect], values: dict, compliance: float, rename: 
 
 def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool | Callable = False,
              effects: tuple[str, ...] | None = None, max_effects: int = 2, n_nodes: int = 32,
-             target_rate: float = 200.0, wrap_shape: np.ndarray | None = None) -> dict:
+             target_rate: float = 200.0, wrap_shape: np.ndarray | None = None,
+             recorded: tuple[str, ...] | None = None) -> dict:
     """Diagnose one recording: base model error, the effect that explains it, the held-out gain.
 
     Parameters
@@ -337,6 +353,11 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     n_nodes, target_rate, wrap_shape
         Profile elements, averaging rate [Hz] and route shape, see :func:`estimator.offline.diagnosis_fit.prepare`;
         with ``wrap_shape`` given the route is held, without it the route shares are fitted.
+    recorded : tuple of "T_out", "x_out", optional
+        The distal channels the recording was made with (default: those of ``data``; a channel set aside before
+        the call may be named). With one of them only, the floor bounds of clean recordings made that way apply too
+        (FLOOR_SCORE_WITHOUT); a channel set aside by the diagnosis itself (a held distal end) does not count as
+        missing.
 
     Returns
     -------
@@ -358,7 +379,8 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     Raises
     ------
     DataError
-        No distal signal. ValueError: too short a recording, a bad fraction or an unknown effect id.
+        No distal signal. ValueError: too short a recording, a bad fraction, an unknown effect id or ``recorded``
+        naming a channel that is not distal or leaving out one the data have.
     """
     t_start = _time.perf_counter()
     names = tuple(CATALOGUE) if effects is None else tuple(effects)
@@ -368,6 +390,14 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         raise ValueError(f"unknown effect: {err.args[0]}") from None
     if max_effects < 1:
         raise ValueError(f"max_effects must be >= 1, got {max_effects!r}")
+    present = tuple(n for n in ("T_out", "x_out") if getattr(data, n) is not None)
+    if recorded is None:
+        recorded = present
+    elif not set(recorded) <= {"T_out", "x_out"} or not set(present) <= set(recorded):
+        raise ValueError(f"recorded must be distal channels (T_out, x_out) including those of the data {present!r}, "
+                         f"got {recorded!r}")
+    lacking = [n for n in ("T_out", "x_out") if n not in recorded]
+    subset_floor = FLOOR_SCORE_WITHOUT.get(lacking[0], {}) if len(lacking) == 1 else {}
     # a distal end that never moved: x_out says nothing of the tendon and is set aside (settings.distal_end_held)
     held = distal_end_held(data) if data.T_out is not None else None
     if held is not None:
@@ -513,7 +543,8 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
 
     def shown(eid: str, f: _Fit) -> bool:
         """At the floor, an extension explains enough to be named (relative to the base)."""
-        return f.S < max(strong, FLOOR_SCORE.get(eid, 0.0)) or base_squares * (1.0 - f.S) >= EXCESS_MIN
+        bound = max(strong, FLOOR_SCORE.get(eid, 0.0))
+        return f.S < min(bound, subset_floor.get(eid, bound)) or base_squares * (1.0 - f.S) >= EXCESS_MIN
 
     while len(chosen.effects) < max_effects and pool:
         if chosen is not base and (at_floor or max(_structure(chosen, noise).values()) <= STRUCTURE_RATIO):
@@ -641,7 +672,8 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
                      "n_nodes": n_nodes, "target_rate_hz": target_rate,
                      "penalty_per_parameter": PENALTY, "structure_ratio": STRUCTURE_RATIO,
                      "strong_score": STRONG_SCORE, "weak_structure": WEAK_STRUCTURE, "mid_score": MID_SCORE,
-                     "excess_min": EXCESS_MIN, "floor_score": dict(FLOOR_SCORE), "stick_slip_ratio": STICK_SLIP_RATIO,
+                     "excess_min": EXCESS_MIN, "floor_score": dict(FLOOR_SCORE),
+                     "recorded": list(recorded), "floor_score_without": dict(subset_floor), "stick_slip_ratio": STICK_SLIP_RATIO,
                      "dominant_score": DOMINANT_SCORE, "offset_floors": OFFSET_FLOORS,
                      "noise_band_sigmas": NOISE_BAND,
                      "rank_factor": RANK_FACTOR,
@@ -659,7 +691,8 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
                if held is None and data.T_out is not None and UNKNOWN in causes else None)
     if pressed is not None:
         alt = diagnose(replace(data, x_out=None), train_fraction=train_fraction, progress=False, effects=effects,
-                       max_effects=max_effects, n_nodes=n_nodes, target_rate=target_rate, wrap_shape=wrap_shape)
+                       max_effects=max_effects, n_nodes=n_nodes, target_rate=target_rate, wrap_shape=wrap_shape,
+                       recorded=recorded)
         if UNKNOWN not in alt["causes"]:
             alt["settings"]["distal_end_held"] = {**pressed, "pressed": True}
             alt["elapsed_s"] = _time.perf_counter() - t_start

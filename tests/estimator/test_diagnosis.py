@@ -17,7 +17,7 @@ import pytest
 
 from estimator.data import MeasuredData
 from estimator.offline import diagnosis_fit
-from estimator.offline.diagnosis import diagnose
+from estimator.offline.diagnosis import FLOOR_SCORE_WITHOUT, STRONG_SCORE, diagnose
 from estimator.offline.diagnosis_fit import (
     K_RESTART,
     look_alike,
@@ -355,6 +355,24 @@ def test_lumped_drift_from_zero_at_the_start_is_judged_on_the_end():
     assert drift["fold_scores"][1] > 0.5
     # a drift of K is not counted from a zero (K(t) = K + K_rate (t - t0) fits either way): the worse fold counts
     assert res["candidates"]["curvature_drift"]["scored_on"].startswith("both")
+
+
+def test_a_recording_with_x_out_alone_is_judged_against_clean_recordings_made_that_way():
+    # lumped dev38 3700501, clean, a constant-force load: with T_out it is "none"; with x_out alone nothing pins K and
+    # a distal backlash of ~50 um fits the base's dead zone at S 0.08 (under STRONG_SCORE): a false alarm, as on 6 of
+    # 300 clean lumped recordings (session 26). The bounds of clean x_out-only recordings (FLOOR_SCORE_WITHOUT) apply
+    rec = lumped_scenarios.record(None, seed=3700501, duration=60.0)
+    fx = ("distal_backlash", "presliding", "sensor_offset:x_in")
+    alone = replace(rec.data, T_out=None)
+    res = diagnose(alone, effects=fx)
+    assert res["causes"] == [] and res["settings"]["recorded"] == ["x_out"]
+    assert res["candidates"]["distal_backlash"]["score"] < STRONG_SCORE
+    assert res["settings"]["floor_score_without"] == FLOOR_SCORE_WITHOUT["T_out"]
+    # told that T_out was recorded (set aside by the caller), the two-channel bounds apply and the backlash is named
+    told = diagnose(alone, effects=fx, recorded=("T_out", "x_out"))
+    assert told["causes"] == ["distal_backlash"] and told["settings"]["floor_score_without"] == {}
+    with pytest.raises(ValueError, match="recorded must be distal channels"):
+        diagnose(alone, effects=fx, recorded=("T_out",))
 
 
 def test_an_extension_also_starts_from_a_typical_K_when_the_base_collapsed_to_zero(clean_result):
