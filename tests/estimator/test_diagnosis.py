@@ -17,7 +17,7 @@ import pytest
 
 from estimator.data import MeasuredData
 from estimator.offline import diagnosis_fit
-from estimator.offline.diagnosis import FLOOR_SCORE_WITHOUT, STRONG_SCORE, diagnose
+from estimator.offline.diagnosis import EXCESS_MIN, EXCESS_MIN_WITHOUT, FLOOR_SCORE_WITHOUT, STRONG_SCORE, diagnose
 from estimator.offline.diagnosis_fit import (
     K_RESTART,
     look_alike,
@@ -373,6 +373,16 @@ def test_a_recording_with_x_out_alone_is_judged_against_clean_recordings_made_th
     assert told["causes"] == ["distal_backlash"] and told["settings"]["floor_score_without"] == {}
     with pytest.raises(ValueError, match="recorded must be distal channels"):
         diagnose(alone, effects=fx, recorded=("T_out",))
+    # lumped dev12 1100784, clean: a distal backlash at S 0.11 on a base at 1.9 x its floor removes B (1 - S) = 3.2
+    # squared floors, over the two-channel EXCESS_MIN but not over the x_out-alone one (clean recordings reach 3.3)
+    rec = lumped_scenarios.record(None, seed=1100784, duration=60.0)
+    alone = replace(rec.data, T_out=None)
+    res = diagnose(alone, effects=fx)
+    assert res["causes"] == [] and res["settings"]["excess_min_applied"] == EXCESS_MIN_WITHOUT["T_out"]
+    S = res["candidates"]["distal_backlash"]["score"]
+    assert FLOOR_SCORE_WITHOUT["T_out"]["distal_backlash"] < S < STRONG_SCORE
+    told = diagnose(alone, effects=fx, recorded=("T_out", "x_out"))
+    assert told["causes"] == ["distal_backlash"] and told["settings"]["excess_min_applied"] == EXCESS_MIN
 
 
 def test_an_extension_also_starts_from_a_typical_K_when_the_base_collapsed_to_zero(clean_result):
