@@ -402,9 +402,9 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     elif not set(recorded) <= {"T_out", "x_out"} or not set(present) <= set(recorded):
         raise ValueError(f"recorded must be distal channels (T_out, x_out) including those of the data {present!r}, "
                          f"got {recorded!r}")
-    lacking = [n for n in ("T_out", "x_out") if n not in recorded]
-    subset_floor = FLOOR_SCORE_WITHOUT.get(lacking[0], {}) if len(lacking) == 1 else {}
-    excess_min = EXCESS_MIN_WITHOUT.get(lacking[0], EXCESS_MIN) if len(lacking) == 1 else EXCESS_MIN
+    missing = "T_out" if "T_out" not in recorded else "x_out" if "x_out" not in recorded else ""
+    subset_floor = FLOOR_SCORE_WITHOUT.get(missing, {})
+    excess_min = EXCESS_MIN_WITHOUT.get(missing, EXCESS_MIN)
     # a distal end that never moved: x_out says nothing of the tendon and is set aside (settings.distal_end_held)
     held = distal_end_held(data) if data.T_out is not None else None
     if held is not None:
