@@ -396,13 +396,13 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         raise ValueError(f"unknown effect: {err.args[0]}") from None
     if max_effects < 1:
         raise ValueError(f"max_effects must be >= 1, got {max_effects!r}")
-    present = tuple(n for n in ("T_out", "x_out") if getattr(data, n) is not None)
+    present = tuple(n for n in SIGNALS if getattr(data, n) is not None)
     if recorded is None:
         recorded = present
-    elif not set(recorded) <= {"T_out", "x_out"} or not set(present) <= set(recorded):
-        raise ValueError(f"recorded must be distal channels (T_out, x_out) including those of the data {present!r}, "
+    elif not set(recorded) <= set(SIGNALS) or not set(present) <= set(recorded):
+        raise ValueError(f"recorded must be distal channels {SIGNALS!r} including those of the data {present!r}, "
                          f"got {recorded!r}")
-    missing = "T_out" if "T_out" not in recorded else "x_out" if "x_out" not in recorded else ""
+    missing = next((n for n in SIGNALS if n not in recorded), "")
     subset_floor = FLOOR_SCORE_WITHOUT.get(missing, {})
     excess_min = EXCESS_MIN_WITHOUT.get(missing, EXCESS_MIN)
     # a distal end that never moved: x_out says nothing of the tendon and is set aside (settings.distal_end_held)
