@@ -51,8 +51,9 @@ end of session 24, run once at the start of session 25 with the code of commit 6
 3600000: run once at the end of session 25 at 4e02537, the same diagnosis, seen since) and ``dev38`` (offsets +
 3700000: fixed at the end of session 25, run once at the start of session 26 with the code of commit ac5ae15, seen
 since) and ``dev39`` (offsets + 3800000: fixed at the start of session 26, run once at its end at f59dc07, whose
-two-channel diagnosis is ac5ae15's, seen since) are development data. ``final`` (offsets + 3900000) is the final set
-fixed at the end of session 26.
+two-channel diagnosis is ac5ae15's, seen since) and ``dev40`` (offsets + 3900000: fixed at the end of session 26, run
+once at the start of session 27 with the code of commit d5ac9d0, seen since) are development data. ``final`` (offsets +
+4000000) is the final set fixed at the start of session 27.
 Seed layout (session 4): every hidden-effect recording has its own seed, so its own simulated rig
 (route, K, EA, load, rate, noise): effect k of EFFECT_IDS, level j, repeat s uses
 base + 100 + 1000 k + 10 j + s (before session 4 every effect of a set shared the four rigs of
@@ -65,7 +66,7 @@ Prints per effect and per channel: accuracy (strict, and up to the inseparable p
 estimator.offline.effects.EQUIVALENT), gains, false alarms on clean data; never fails on the figures (the
 pass/fail checks are in tests/estimator/test_diagnosis.py).
 
-    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|...|dev39|final] [--seeds 2]
+    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|...|dev40|final] [--seeds 2]
         [--levels 0.2,0.8] [--clean 12] [--duration 90] [--rate 1000] [--jobs 2] [--json OUT] [--speed-only] [--twins]
         [--shared-rigs]
     .venv/bin/python benchmarks/bench_diagnosis.py --floor-table OUT.json [OUT.json ...]
@@ -104,7 +105,8 @@ SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "dev4": 300000, "dev5": 4
              "dev25": 2400000, "dev26": 2500000, "dev27": 2600000, "dev28": 2700000,
              "dev29": 2800000, "dev30": 2900000, "dev31": 3000000, "dev32": 3100000, "dev33": 3200000,
              "dev34": 3300000, "dev35": 3400000, "dev36": 3500000, "dev37": 3600000,
-             "dev38": 3700000, "dev39": 3800000, "final": 3900000}   # fixed at the end of session 26 (docstring)
+             "dev38": 3700000, "dev39": 3800000, "dev40": 3900000,
+             "final": 4000000}   # fixed at the start of session 27 (docstring)
 UNCATALOGUED = "load_cell_wander"
 
 
