@@ -52,8 +52,9 @@ end of session 24, run once at the start of session 25 with the code of commit 6
 3700000: fixed at the end of session 25, run once at the start of session 26 with the code of commit ac5ae15, seen
 since) and ``dev39`` (offsets + 3800000: fixed at the start of session 26, run once at its end at f59dc07, whose
 two-channel diagnosis is ac5ae15's, seen since) and ``dev40`` (offsets + 3900000: fixed at the end of session 26, run
-once at the start of session 27 with the code of commit d5ac9d0, seen since) are development data. ``final`` (offsets +
-4000000) is the final set fixed at the start of session 27.
+once at the start of session 27 with the code of commit d5ac9d0, seen since) and ``dev41`` (offsets + 4000000: fixed at
+the start of session 27, run once with the same diagnosis, seen since) are development data. ``final`` (offsets +
+4100000) is the final set fixed during session 27.
 Seed layout (session 4): every hidden-effect recording has its own seed, so its own simulated rig
 (route, K, EA, load, rate, noise): effect k of EFFECT_IDS, level j, repeat s uses
 base + 100 + 1000 k + 10 j + s (before session 4 every effect of a set shared the four rigs of
@@ -66,7 +67,7 @@ Prints per effect and per channel: accuracy (strict, and up to the inseparable p
 estimator.offline.effects.EQUIVALENT), gains, false alarms on clean data; never fails on the figures (the
 pass/fail checks are in tests/estimator/test_diagnosis.py).
 
-    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|...|dev40|final] [--seeds 2]
+    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|...|dev41|final] [--seeds 2]
         [--levels 0.2,0.8] [--clean 12] [--duration 90] [--rate 1000] [--jobs 2] [--json OUT] [--speed-only] [--twins]
         [--shared-rigs]
     .venv/bin/python benchmarks/bench_diagnosis.py --floor-table OUT.json [OUT.json ...]
@@ -93,7 +94,7 @@ from scipy.stats import binomtest
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from estimator.offline.diagnosis import FLOOR_FACTOR, MID_SCORE, STRUCTURE_RATIO, WEAK_STRUCTURE, diagnose, floor_scores  # noqa: E402
-from estimator.offline.diagnosis_fit import noise_level, quantum  # noqa: E402
+from estimator.offline.diagnosis_fit import AT_END_SHARE, noise_level, quantum  # noqa: E402
 from estimator.offline.effects import CATALOGUE, EFFECT_IDS, EQUIVALENT, NONE  # noqa: E402
 
 SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "dev4": 300000, "dev5": 400000, "dev6": 500000,
@@ -106,7 +107,7 @@ SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "dev4": 300000, "dev5": 4
              "dev29": 2800000, "dev30": 2900000, "dev31": 3000000, "dev32": 3100000, "dev33": 3200000,
              "dev34": 3300000, "dev35": 3400000, "dev36": 3500000, "dev37": 3600000,
              "dev38": 3700000, "dev39": 3800000, "dev40": 3900000,
-             "final": 4000000}   # fixed at the start of session 27 (docstring)
+             "dev41": 4000000, "final": 4100000}   # fixed during session 27 (docstring)
 UNCATALOGUED = "load_cell_wander"
 
 
@@ -222,6 +223,7 @@ def one(case: tuple) -> dict:
             "scores": _scores(res),
             "structure": max(res["structure"]["base"].values()),
             "structure_ext": max(res["structure"]["extended"].values()),
+            "at_end": (res["settings"].get("distal_at_end") or {}).get("share"),
             "footprint": fp, **extra,
             "detail": _detail(res)}
 
@@ -324,6 +326,16 @@ def table(rows: list[dict], title: str) -> None:
           f"clean): accuracy {v_ok / max(len(vis), 1):.3f} ({v_ok}/{len(vis)}); up to the inseparable pairs "
           f"{v_eq / max(len(vis), 1):.3f} ({v_eq}/{len(vis)}); {len(below)} hidden effects at or below it "
           f"({sum(_ok(r) for r in below)} named right)")
+    # where the distal end sat at an end of its range for most of the proximal travel (session 27: a joint held on
+    # its stop; diagnosis_fit.distal_at_end): what such recordings can show, apart from the others
+    at_end = [r for r in present if (r.get("at_end") or 0.0) >= AT_END_SHARE]
+    if at_end:
+        rest = [r for r in present if r not in at_end]
+        print(f"hidden effects whose distal end sat at an end of its range for >= {AT_END_SHARE:g} of the proximal "
+              f"travel: {sum(_ok(r) for r in at_end)}/{len(at_end)} named right "
+              f"({sum(_ok(r, True) for r in at_end)} up to the pairs; misses "
+              f"{dict(Counter(r['effect'] for r in at_end if not _ok(r, True)))}); the others "
+              f"{sum(_ok(r) for r in rest)}/{len(rest)} ({sum(_ok(r, True) for r in rest)})")
     bins = ((0.0, 3.0), (3.0, 10.0), (10.0, 30.0), (30.0, math.inf))
     print("hidden effects named right by footprint (max over channels, noise sigmas): " + "; ".join(
         f"{lo:g}-{hi:g}: {sum(_ok(r) for r in b)}/{len(b)}" for lo, hi in bins

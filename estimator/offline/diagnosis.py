@@ -48,7 +48,7 @@ from typing import Callable, Iterable, Mapping
 
 import numpy as np
 
-from estimator.offline.diagnosis_fit import (NEAR_HELD_SHARE, SIGNALS, Progress, channel_choice, distal_end_held, fit_model, look_alike, toe_or_play, noise_level,
+from estimator.offline.diagnosis_fit import (NEAR_HELD_SHARE, SIGNALS, Progress, channel_choice, distal_at_end, distal_end_held, fit_model, look_alike, toe_or_play, noise_level,
                                              predictions, prepare, quantum, raw_rmse, rest_start, rest_window, sample_block, settings_keys, split_at_rest,
                                              start_points, stick_slip_ratio, trimmed_ms, paired_trimmed_ms)
 from estimator.offline.effects import (CATALOGUE, EQUIVALENT, NOISE_BAND, NONE, ROUTE, ROUTE_FORMS, ROUTE_KEYS, ROUTE_TWELFTHS, UNKNOWN, Effect, below_resolution,
@@ -346,7 +346,10 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         that never moves (:func:`estimator.offline.diagnosis_fit.distal_end_held`: the distal end held by a
         stop or a load never lifted) is set aside when T_out is recorded: ``settings.distal_end_held``; one
         that barely moves (NEAR_HELD_SHARE of x_in's travel: pressed on a stop) is set aside when the diagnosis
-        with it leaves "unknown" and the one without it does not (``distal_end_held.pressed`` True).
+        with it leaves "unknown" and the one without it does not (``distal_end_held.pressed`` True). One that
+        sits at an end of its range for most of the proximal travel (a joint held on its stop) cannot show a lag of
+        its own: ``settings.distal_at_end`` (:func:`estimator.offline.diagnosis_fit.distal_at_end`) gives the share
+        and the effects it hides; the answer is not changed.
     train_fraction : float in [0.3, 0.9]
         Nominal share of the duration used for training (fit + validation); the split moves to a
         rest within 8 %. The test block after it is used once, for the reported errors and gain.
@@ -409,6 +412,8 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     held = distal_end_held(data) if data.T_out is not None else None
     if held is not None:
         data = replace(data, x_out=None)
+    # how much of the proximal travel x_out spends at an end of its range: what such a recording cannot show
+    at_end = distal_at_end(data)
     s = prepare(data, n_nodes=n_nodes, target_rate=target_rate, wrap_shape=wrap_shape)
     kt = split_at_rest(s, train_fraction)
     kv = split_at_rest(s.slice(kt), 1.0 - VALIDATION_FRACTION)
@@ -689,6 +694,7 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
                      "route_form": _FORM_NAME[route],
                      "model_route_form": _FORM_NAME[_route_of(final[0], route)],
                      "distal_end_held": held,
+                     "distal_at_end": at_end,
                      "distal_slide_travel_m": s.slide_travel,
                      "wrap_shape": None if wrap_shape is None else [float(v) for v in wrap_shape]},
         "elapsed_s": _time.perf_counter() - t_start,

@@ -234,6 +234,12 @@ def format_diagnosis(result: dict) -> str:
         f"x_out set aside: it stays within {1e6 * held['range_m']:.3g} um over the recording (resolution "
         f"{1e6 * held['step_m']:.3g} um, x_in travel {1e3 * held['travel_m']:.3g} mm) - the distal end was held "
         "(a stop, or a load the tension never moved), so x_out shows nothing of the tendon"]
+    at_end = result.get("settings", {}).get("distal_at_end")
+    if at_end and at_end["hides"]:
+        note.append(f"x_out sits at an end of its {1e6 * at_end['range_m']:.3g} um range (within "
+                    f"{1e6 * at_end['band_m']:.2g} um) for {100 * at_end['share']:.0f} % of the proximal travel - a "
+                    "distal end held on a stop or a load not lifted: " + ", ".join(at_end["hides"])
+                    + " cannot show in this recording, whatever the answer")
     if result.get("route"):
         note.append(result["route"])
     return "\n".join([f"{result['file']}: {result['n_samples']} samples, {result['duration_s']:.1f} s "

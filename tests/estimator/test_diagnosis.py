@@ -586,6 +586,41 @@ def test_distal_end_held_only_when_x_out_stands_within_its_resolution():
     assert distal_end_held(replace(rec.data, x_out=None)) is None
 
 
+def test_distal_at_end_reads_how_much_of_the_proximal_travel_the_distal_end_sits_on_a_stop():
+    from estimator.offline.diagnosis_fit import AT_END_HIDES, AT_END_SHARE, distal_at_end
+    rec = record(None, seed=21, duration=DUR, rate_hz=RATE)
+    moving = distal_at_end(rec.data)
+    assert moving is not None and moving["share"] < 0.3 and moving["hides"] == []
+    # the same distal end stopped 0.2 mm above its rest: it sits on the stop whenever the tendon pulls it there
+    x_stop = float(np.percentile(rec.data.x_out, 5.0)) + 0.2e-3 * 0.02
+    stopped = distal_at_end(replace(rec.data, x_out=np.minimum(rec.data.x_out, x_stop)))
+    assert stopped is not None and stopped["share"] >= AT_END_SHARE and stopped["hides"] == list(AT_END_HIDES)
+    assert stopped["share"] > moving["share"] + 0.5
+    assert distal_at_end(replace(rec.data, x_out=None)) is None
+    assert distal_at_end(replace(rec.data, x_in=np.zeros(len(rec.data)))) is None    # no proximal travel
+    with pytest.raises(ValueError, match="7 needed"):
+        distal_at_end(rec.data.slice(0, 5))
+
+
+def test_a_joint_held_on_its_stop_is_reported_as_unable_to_show_a_lag_of_x_out():
+    # lumped dev40 3919112 (session 27): a 42 ms x_out lag on a joint driven onto its stop in the first second and
+    # held there; the lag's footprint (20 sigma on x_out against the clean twin) is that one rise, which no
+    # validation block holds: the delay fitted to 0.3 % and S 0.95. The reading says so, and the printed summary
+    from teleop.app.analyze import format_diagnosis
+    rec = lumped_scenarios.record("sensor_lag:x_out", seed=3919112, level=0.8, duration=60.0)
+    assert rec.truth["load"]["kind"] == "joint"
+    res = diagnose(rec.data, effects=("sensor_lag:x_out", "sensor_offset:x_out"))
+    at_end = res["settings"]["distal_at_end"]
+    assert at_end["share"] >= 0.9 and at_end["hides"] == ["sensor_lag:x_out"]
+    res.update({"file": "joint.csv", "n_samples": len(rec.data), "duration_s": rec.data.duration})
+    text = format_diagnosis(res)
+    assert "sensor_lag:x_out cannot show in this recording" in text and f"{100 * at_end['share']:.0f} %" in text
+    # the same lag where the distal end moves (a spring, dev40 3919101) is named, and nothing is said
+    rec = lumped_scenarios.record("sensor_lag:x_out", seed=3919101, level=0.2, duration=60.0)
+    res = diagnose(rec.data, effects=("sensor_lag:x_out", "sensor_offset:x_out"))
+    assert res["settings"]["distal_at_end"]["hides"] == [] and res["causes"] == ["sensor_lag:x_out"]
+
+
 def test_a_tension_offset_below_twice_the_floor_is_not_resolved():
     from estimator.offline.diagnosis import OFFSET_FLOORS, _unresolved
     floor = {"T_out": 0.03, "x_out": 2e-6}
