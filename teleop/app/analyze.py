@@ -236,9 +236,9 @@ def format_diagnosis(result: dict) -> str:
         "(a stop, or a load the tension never moved), so x_out shows nothing of the tendon"]
     at_end = result.get("settings", {}).get("distal_at_end")
     if at_end and at_end["hides"]:
-        note.append(f"x_out sits at an end of its {1e6 * at_end['range_m']:.3g} um range (within "
-                    f"{1e6 * at_end['band_m']:.2g} um) for {100 * at_end['share']:.0f} % of the proximal travel - a "
-                    "distal end held on a stop or a load not lifted: " + ", ".join(at_end["hides"])
+        note.append(f"x_out sits within {1e6 * at_end['band_m']:.2g} um of an end of its {1e3 * at_end['range_m']:.3g} mm "
+                    f"range for {100 * at_end['share']:.0f} % of the proximal travel (a distal end held on a stop, or "
+                    "a load not lifted): " + ", ".join(at_end["hides"])
                     + " cannot show in this recording, whatever the answer")
     if result.get("route"):
         note.append(result["route"])
