@@ -330,9 +330,10 @@ def table(rows: list[dict], title: str) -> None:
           f"({sum(_ok(r) for r in below)} named right)")
     # where the distal end sat at an end of its range for most of the proximal travel (session 27: a joint held on
     # its stop; diagnosis_fit.distal_at_end): what such recordings can show, apart from the others
-    at_end = [r for r in present if (r.get("at_end") or 0.0) >= AT_END_SHARE]
-    if at_end:
-        rest = [r for r in present if r not in at_end]
+    held = [(r.get("at_end") or 0.0) >= AT_END_SHARE for r in present]
+    if any(held):
+        at_end = [r for r, h in zip(present, held) if h]
+        rest = [r for r, h in zip(present, held) if not h]
         print(f"hidden effects whose distal end sat at an end of its range for >= {AT_END_SHARE:g} of the proximal "
               f"travel: {sum(_ok(r) for r in at_end)}/{len(at_end)} named right "
               f"({sum(_ok(r, True) for r in at_end)} up to the pairs; misses "

@@ -71,6 +71,18 @@ STICK_SLIP_MIN_MOVE = 3.0
 STICK_SLIP_MIN_HOLD = 1.0
 
 
+def _smoothed_speed(t: np.ndarray, x: np.ndarray, max_window: int | None = None) -> tuple[np.ndarray, float, int]:
+    """|dx/dt| from a quadratic Savitzky-Golay derivative over STICK_SLIP_WINDOW (at least 7 samples, odd, at most
+    ``max_window``), with the median sample interval and the window: (speed (n,) [m/s], dt [s], window [samples])."""
+    from scipy.signal import savgol_filter
+
+    dt = float(np.median(np.diff(t)))
+    w = max(7, int(round(STICK_SLIP_WINDOW / dt)) | 1)
+    if max_window is not None:
+        w = min(w, max_window - (1 - max_window % 2))
+    return np.abs(savgol_filter(x, w, 2, deriv=1, delta=dt)), dt, w
+
+
 def stick_slip_ratio(time: np.ndarray, x_in: np.ndarray, T_in: np.ndarray) -> float | None:
     """How much rougher the proximal tension is in steady moves than in holds (literature.md E4: stick-slip).
 
@@ -105,9 +117,7 @@ def stick_slip_ratio(time: np.ndarray, x_in: np.ndarray, T_in: np.ndarray) -> fl
         raise ValueError(f"stick_slip_ratio: time, x_in and T_in differ in length ({t.size}, {x.size}, {y.size})")
     if t.size < 2 * STICK_SLIP_MIN_SAMPLES:
         return None
-    dt = float(np.median(np.diff(t)))
-    w = max(7, int(round(STICK_SLIP_WINDOW / dt)) | 1)
-    v = np.abs(savgol_filter(x, w, 2, deriv=1, delta=dt))
+    v, dt, w = _smoothed_speed(t, x)
     moving = minimum_filter1d(v, 3 * w) > STICK_SLIP_SPEED
     hold = v < STICK_SLIP_HOLD
     n_move, n_hold = int(moving.sum()), int(hold.sum())
@@ -190,16 +200,12 @@ def distal_at_end(data: MeasuredData) -> dict | None:
     ValueError
         Fewer than 7 samples.
     """
-    from scipy.signal import savgol_filter
-
     if data.x_out is None:
         return None
     t, x_in, x_out = (np.asarray(a, dtype=float) for a in (data.time, data.x_in, data.x_out))
     if t.size < 7:
         raise ValueError(f"distal_at_end: {t.size} samples, at least 7 needed")
-    dt = float(np.median(np.diff(t)))
-    w = min(max(7, int(round(STICK_SLIP_WINDOW / dt)) | 1), t.size - (1 - t.size % 2))
-    speed = np.abs(savgol_filter(x_in, w, 2, deriv=1, delta=dt))
+    speed, dt, _ = _smoothed_speed(t, x_in, max_window=t.size)
     moving = speed > AT_END_SPEED
     travel = float(np.sum(speed[moving]) * dt)
     if travel <= 0.0:
