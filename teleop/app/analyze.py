@@ -74,7 +74,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "spindle band centre is nearest the folder's middle), on several runs together, "
                              "or on the first SECONDS of every run; gain=G:RUN gives the one-run calibration a "
                              "design load gain G (jaw torque per N m of spindle band-centre shift, about "
-                             "1 / (r cosh K)) in place of the encoders' 1 / n_k")
+                             "1 / (r cosh K)) in place of the encoders' 1 / n_k; G may be the JSON of "
+                             "`teleop analyze --mrd OTHER --json OUT` (OTHER's centre_map.load_gain: another tool "
+                             "of the same model, fitted across its loads)")
     parser.add_argument("--json", metavar="OUT", help="write the result (summary numbers) as JSON to OUT")
     parser.add_argument("--report", metavar="DIR", help="write a Markdown report with PNG figures to DIR")
     parser.add_argument("--figures", metavar="DIR", help="KAIST mode: write the kaist_*.png plots to DIR")

@@ -36,7 +36,7 @@ from estimator.offline.spindle_centre_fit import (
 from estimator.offline.spindle_shared import RunData, kinematic_ratio
 from estimator.online.spindle_centre import CentreParams, centre_ready
 
-__all__ = ["CENTRE", "model_choice", "implied_load_gain", "LOAD_RULE", "gain_identifiability", "centre_agg", "centre_folder", "centre_one_run", "centre_time_split", "mid_centre_run", "score_centre",
+__all__ = ["CENTRE", "model_choice", "implied_load_gain", "LOAD_RULE", "gain_identifiability", "centre_agg", "centre_folder", "centre_one_run", "centre_time_split", "folder_load_gain", "mid_centre_run", "score_centre",
            "profile_on_scored", "PROFILE_GAINS", "LOAD_SPREAD_NM"]
 
 #: The centre map's name among the headline's candidates (``model_choice``).
@@ -125,16 +125,44 @@ def centre_folder(runs: list[RunData], fs: float, tick: Callable[[str], None], l
                            "runs": {r.name: _score(p, r, r.k0, fs) for r in runs}}
     out["summary"] = centre_agg(list(out["runs"].values()))
     out["within_run_gain"] = gain_identifiability(runs, float(p.coef[1, 0]))
+    out["load_gain"] = folder_load_gain(p, runs)
     tick("centre map")
     if loro:
         lo = {}
+        implied = []
         for r in runs:
-            q, _ = fit_centre_map([s for s in runs if s is not r], step=20)
-            lo[r.name] = {**_score(q, r, r.k0, fs), "load_gain": float(q.coef[1, 0]), "theta_z": q.theta_z}
+            rest = [s for s in runs if s is not r]
+            q, _ = fit_centre_map(rest, step=20)
+            implied.append(_implied(q, rest))
+            lo[r.name] = {**_score(q, r, r.k0, fs), "load_gain": float(q.coef[1, 0]), "implied_load_gain": implied[-1],
+                          "theta_z": q.theta_z}
             tick(f"centre without {r.name}")
         out["loro"] = {"fitted_on": "the other runs' jaw torque; the scored run's spindle signals only", "runs": lo,
                        "summary": centre_agg(list(lo.values()))}
+        if len(runs) > 2 and out["load_gain"]["several_loads"]:
+            g, n = np.array(implied), len(runs)
+            out["load_gain"]["jackknife_se"] = float(np.sqrt((n - 1) / n * np.sum((g - g.mean()) ** 2)))
+            out["load_gain"]["leave_one_run_out_range"] = [float(g.min()), float(g.max())]
     return out
+
+
+def _implied(p: CentreParams, runs: list[RunData]) -> float:
+    return implied_load_gain(lambda c, u: predict_held(p, c.tau_p + u, c.theta_p, c.dt), runs)
+
+
+def folder_load_gain(p: CentreParams, runs: list[RunData]) -> dict:
+    """The folder's load gain as a one-run calibration uses it (JSON-ready): the centre map ``p`` fitted across
+    the folder's loads, its jaw-torque change per N m of uniform spindle-band shift averaged over the stroke
+    of every run (:func:`implied_load_gain`; Finding 4, session 6: 0.943 on the shipped folder), beside its value
+    b_0 at the reference angle. The number ``--calibration gain=G:RUN`` (or ``gain=THIS.json:RUN``) carries to
+    another folder - another tool of the same model - whose single calibration run cannot give it. Reads every
+    run's jaw torque (a folder diagnosis). ``several_loads`` False: the folder has one load level, where the gain is
+    not identifiable (the value is then not a measurement of it)."""
+    several = _several_loads(runs)
+    return {"value": _implied(p, runs), "b_0": float(p.coef[1, 0]), "several_loads": several,
+            "what": "jaw torque change per N m of uniform spindle-band shift, stroke-averaged over every run, of the "
+                    "centre map fitted across the folder's loads (about 1 / (r cosh K))",
+            "use": "--calibration gain=G:RUN (or gain=<this JSON>:RUN) on another tool of the same model"}
 
 
 def _centres(cal: list[RunData]) -> list[float]:

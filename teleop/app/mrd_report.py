@@ -111,12 +111,31 @@ def split_design_gain(spec: str | None) -> tuple[float | None, str | None]:
     try:
         g = float(head[len("gain="):])
     except ValueError:
-        raise ConfigError(f"--calibration {spec}: G in gain=G:RUN must be a number") from None
+        g = _gain_from_json(spec, head[len("gain="):])
     if not (math.isfinite(g) and g > 0.0):
         raise ConfigError(f"--calibration {spec}: the load gain G must be positive")
     if rest.startswith("segment:"):
         raise ConfigError(f"--calibration {spec}: a design gain applies to run calibrations, not to segment:")
     return g, rest
+
+
+def _gain_from_json(spec: str, path: str) -> float:
+    """``centre_map.load_gain.value`` of a JSON written by ``teleop analyze --mrd OTHER --json PATH`` (another
+    folder's load gain fitted across its loads). Raises ConfigError naming what is missing."""
+    import json
+    f = Path(path)
+    if not f.is_file():
+        raise ConfigError(f"--calibration {spec}: G in gain=G:RUN must be a number or the JSON of "
+                          f"`teleop analyze --mrd OTHER --json OUT` ({f} not found)")
+    try:
+        lg = json.loads(f.read_text())["centre_map"]["load_gain"]
+    except (ValueError, KeyError, TypeError):
+        raise ConfigError(f"--calibration {spec}: {f} has no centre_map.load_gain (write it with "
+                          "`teleop analyze --mrd OTHER --json OUT`, folder fit on)") from None
+    if not lg.get("several_loads", False):
+        raise ConfigError(f"--calibration {spec}: {f} comes from a folder of one load level; its load gain "
+                          "is not identified there")
+    return float(lg["value"])
 
 
 def parse_calibration(spec: str | None, runs: list[MrdRun]) -> tuple[str, Any]:
@@ -237,6 +256,7 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
     t_start = time.perf_counter()
     if not runs:
         raise DataError("no MRD runs to analyse")
+    calibration_spec = calibration or ""
     given, calibration = split_design_gain(calibration)
     mode, cal = parse_calibration(calibration, runs)
     fs = float(max(r.tau_d.max() for r in runs) - min(r.tau_d.min() for r in runs))
@@ -271,8 +291,14 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
         out["calibration"] = {"mode": mode, "run": cal, "runs": cal_names, **cal_inputs,
                               "scored": "every other run, from its spindle signals only"}
         if given is not None:
-            out["calibration"]["design_load_gain"] = {"value": given, "from": "--calibration gain=G: a design value "
-                                                      "from outside the data (the centre map's load gain)"}
+            src = calibration_spec.partition(":")[0][len("gain="):]
+            try:
+                float(src)
+                origin = "--calibration gain=G: a design value from outside the data (the centre map's load gain)"
+            except ValueError:
+                origin = (f"centre_map.load_gain of {src} (another folder's map fitted across its loads; "
+                          "--calibration gain=FILE)")
+            out["calibration"]["design_load_gain"] = {"value": given, "from": origin}
         if calibration and calibration.endswith("mid"):
             out["calibration"]["chosen_by"] = ("the run whose band centre (spindle torque only) is nearest the middle "
                                                "of the folder's band centres, a rule fixed before any score")

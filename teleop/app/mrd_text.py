@@ -58,6 +58,15 @@ def format_mrd(s: dict) -> str:
         if a:
             lines.append(f"  {label:<58} RMSE median {a['median_torque_rmse_fs']:.3f} worst "
                          f"{a['max_torque_rmse_fs']:.3f}, max |error| {a['max_torque_max_fs']:.3f} FS")
+    lg = s.get("centre_map", {}).get("load_gain")
+    if lg:
+        if lg["several_loads"]:
+            unc = (f" (jackknife SE {lg['jackknife_se']:.3f}; left out {lg['leave_one_run_out_range'][0]:.3f}-"
+                   f"{lg['leave_one_run_out_range'][1]:.3f})" if "jackknife_se" in lg else "")
+            lines.append(f"load gain across this folder's loads {lg['value']:.3f}{unc}, b_0 {lg['b_0']:.3f}: "
+                         "pass it to another tool of this model as --calibration gain=G:RUN (or gain=<this JSON>:RUN)")
+        else:
+            lines.append("load gain across this folder's loads: not identifiable (one load level)")
     wg = s.get("centre_calibration", {}).get("within_run_gain")
     fw = s.get("centre_map", {}).get("within_run_gain", {}).get("summary")
     if wg or fw:

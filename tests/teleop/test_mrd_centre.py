@@ -205,3 +205,33 @@ def test_a_design_load_gain_replaces_the_encoders_and_is_recorded():
     assert p.coef[1, 0] == GAIN and rec["load_gain"]["from"].startswith("given") and "profile" in rec
     q, _ = centre_one_run([cal], 0.05, given=1.2 * GAIN)                # a design value 20 % off
     assert _rms(p, other) < 0.5 * _rms(q, other)
+
+
+def test_a_folder_measures_its_load_gain_and_another_folder_takes_it_from_the_json(tmp_path):
+    """Session 28: the folder's load gain across its loads (the stroke-averaged number a one-run calibration
+    needs) is reported with a jackknife SE, and ``--calibration gain=OTHER.json:RUN`` reads it from another
+    folder's JSON; a folder of one load level, a missing file or a JSON without it is refused by name."""
+    import json
+
+    from teleop.app.mrd_centre import centre_folder
+    from teleop.app.mrd_report import split_design_gain
+    from teleop.errors import ConfigError
+    folder = [synth(f"{i}", load, seed=i) for i, load in enumerate((0.01, 0.02, 0.03, 0.04))]
+    rec = centre_folder(folder, 0.05, lambda _: None)
+    lg = rec["load_gain"]
+    assert lg["several_loads"] and lg["value"] == pytest.approx(GAIN, rel=0.02)
+    assert 0.0 < lg["jackknife_se"] < 0.02 and lg["leave_one_run_out_range"][0] <= lg["value"] <= lg["leave_one_run_out_range"][1]
+    out = tmp_path / "other.json"
+    out.write_text(json.dumps({"centre_map": rec}, default=float))
+    g, rest = split_design_gain(f"gain={out}:mid")
+    assert g == pytest.approx(lg["value"]) and rest == "mid"
+    cal, other = synth("cal", 0.025), synth("other", 0.045, seed=3)
+    p, _ = centre_one_run([cal], 0.05, given=g)
+    assert _rms(p, other) < 0.002                                       # the other load, from one run and the number
+    one = centre_folder([synth("a", 0.02), synth("b", 0.02, seed=1)], 0.05, lambda _: None, loro=False)
+    assert not one["load_gain"]["several_loads"]
+    (tmp_path / "one.json").write_text(json.dumps({"centre_map": one}, default=float))
+    (tmp_path / "bare.json").write_text("{}")
+    for bad, word in (("one.json", "one load level"), ("bare.json", "no centre_map.load_gain"), ("gone.json", "not found")):
+        with pytest.raises(ConfigError, match=word):
+            split_design_gain(f"gain={tmp_path / bad}:31")
