@@ -77,6 +77,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "1 / (r cosh K)) in place of the encoders' 1 / n_k; G may be the JSON of "
                              "`teleop analyze --mrd OTHER --json OUT` (OTHER's centre_map.load_gain: another tool "
                              "of the same model, fitted across its loads)")
+    parser.add_argument("--runs", metavar="GLOB",
+                        help="MRD mode: only the runs whose file name (without .TXT) matches GLOB, e.g. '1*': one "
+                             "jaw stopping position of a folder that holds several")
     parser.add_argument("--json", metavar="OUT", help="write the result (summary numbers) as JSON to OUT")
     parser.add_argument("--report", metavar="DIR", help="write a Markdown report with PNG figures to DIR")
     parser.add_argument("--figures", metavar="DIR", help="KAIST mode: write the kaist_*.png plots to DIR")

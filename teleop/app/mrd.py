@@ -27,6 +27,7 @@ angle (:func:`sine_frequency`), the load level from the rank of the run's mean f
 """
 from __future__ import annotations
 
+import fnmatch
 import math
 import re
 from dataclasses import dataclass
@@ -37,7 +38,7 @@ import numpy as np
 from teleop.errors import DataError
 
 __all__ = ["ATTRIBUTION", "MrdRun", "read_mrd", "load_mrd_dir", "default_mrd_dir", "sine_frequency", "N_COLUMNS",
-           "TORQUE_NM_PER_COUNT", "PROXIMAL_COUNTS_PER_REV", "DISTAL_COUNTS_PER_REV", "DISTAL_SIGN"]
+           "TORQUE_NM_PER_COUNT", "PROXIMAL_COUNTS_PER_REV", "stroke_groups", "STROKE_OVERLAP", "DISTAL_COUNTS_PER_REV", "DISTAL_SIGN"]
 
 #: Keep with every report (SOURCE.md: ODbL 1.0 / DbCL 1.0).
 ATTRIBUTION = ("MRD Lab data repository, University of Minnesota; O'Neill, Stephens, Kowalewski, IEEE RA-L "
@@ -157,12 +158,13 @@ def read_mrd(path: str | Path) -> MrdRun:
                   load_command=float(np.mean(a[:, 6])), source=str(p))
 
 
-def load_mrd_dir(directory: str | Path | None = None) -> tuple[list[MrdRun], list[str]]:
-    """Every ``*.TXT`` run of a folder (or of its single sub-folder holding them), sorted by name.
+def load_mrd_dir(directory: str | Path | None = None, runs: str | None = None) -> tuple[list[MrdRun], list[str]]:
+    """Every ``*.TXT`` run of a folder (or of its single sub-folder holding them), sorted by name;
+    ``runs``: only those whose file stem matches this glob (``--runs``, e.g. ``"1*"``).
 
     Returns the runs (with ``load_level`` set: rank of the distinct front-end commands, 0 =
     lightest) and one line per file that could not be read. Raises DataError when the folder does
-    not exist or no run could be read.
+    not exist, no run could be read, or no run matches ``runs``.
     """
     d = Path(directory) if directory else default_mrd_dir()
     if not d.is_dir():
@@ -173,6 +175,11 @@ def load_mrd_dir(directory: str | Path | None = None) -> tuple[list[MrdRun], lis
         if len(subs) == 1:
             files = sorted(subs[0].glob("*.TXT"))
     files = [f for f in files if f.name.lower() != "seriallog.txt"]
+    if runs is not None:
+        chosen = [f for f in files if fnmatch.fnmatchcase(f.stem, runs)]
+        if not chosen:
+            raise DataError(f"{d}: no run matches --runs {runs!r} (runs: {', '.join(f.stem for f in files)})")
+        files = chosen
     runs, bad = [], []
     for f in files:
         try:
@@ -184,3 +191,28 @@ def load_mrd_dir(directory: str | Path | None = None) -> tuple[list[MrdRun], lis
     levels = sorted({round(r.load_command, 3) for r in runs})
     runs = [MrdRun(**{**r.__dict__, "load_level": levels.index(round(r.load_command, 3))}) for r in runs]
     return runs, bad
+
+
+#: Two runs share a stroke when their spindle-angle ranges overlap by this share of the shorter one.
+STROKE_OVERLAP = 0.8
+
+
+def stroke_groups(runs: list[MrdRun]) -> list[list[str]]:
+    """Names of the runs grouped by the spindle-angle window their strokes cover (5-95 % of the angle): a run
+    joins the group of the run before it (ordered by the window's middle) when the two windows overlap by at
+    least STROKE_OVERLAP of the shorter one. One group on a folder of one protocol; a folder whose runs stop
+    the jaw at several positions (the source's roll and pitch folders, ``ZXY.TXT``) gives one group per
+    position."""
+    win = {r.name: tuple(float(v) for v in np.percentile(r.theta_p, [5.0, 95.0])) for r in runs}
+    order = sorted(win, key=lambda n: (win[n][0] + win[n][1], n))
+    groups: list[list[str]] = []
+    for n in order:
+        if groups:
+            lo, hi = win[groups[-1][-1]]
+            a, b = win[n]
+            if min(hi, b) - max(lo, a) >= STROKE_OVERLAP * min(hi - lo, b - a):
+                groups[-1].append(n)
+                continue
+        groups.append([n])
+    return [sorted(g) for g in groups]
+

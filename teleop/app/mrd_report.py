@@ -241,6 +241,28 @@ def _calibrate(cal: list[RunData], tick, kinematic: bool = False) -> tuple[dict,
     return fits, base, sel, centre, ref
 
 
+def _one_stroke(runs: list[MrdRun]) -> None:
+    """Raise DataError when the runs stroke over separate spindle-angle windows (jaw stopping positions:
+    :func:`teleop.app.mrd.stroke_groups`), naming the windows and the ``--runs`` selection of each: the centre
+    map and the pair model describe one stroke, and one window's calibration says nothing of another's."""
+    import os
+
+    from teleop.app.mrd import stroke_groups
+    groups = stroke_groups(runs)
+    if len(groups) < 2:
+        return
+    th = {r.name: r.theta_p for r in runs}
+    parts = []
+    for g in groups:
+        pre = os.path.commonprefix(g)
+        sel = f"--runs '{pre}*'" if pre and all(n in g for n in th if n.startswith(pre)) else "runs " + ",".join(g)
+        a = min(float(np.percentile(th[n], 5.0)) for n in g)
+        b = max(float(np.percentile(th[n], 95.0)) for n in g)
+        parts.append(f"{math.degrees(a):.0f}..{math.degrees(b):.0f} deg: {sel} ({len(g)} runs)")
+    raise DataError(f"the runs stroke over {len(groups)} separate spindle-angle windows (jaw stopping positions); "
+                    "the models describe one stroke, analyse one window at a time: " + "; ".join(parts))
+
+
 def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bool = False,
                 loro: bool = True, folder: bool = True) -> tuple[dict, dict]:
     """Calibrate, predict and score every run; the folder-wide diagnosis (module docstring).
@@ -256,6 +278,7 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
     t_start = time.perf_counter()
     if not runs:
         raise DataError("no MRD runs to analyse")
+    _one_stroke(runs)
     calibration_spec = calibration or ""
     given, calibration = split_design_gain(calibration)
     mode, cal = parse_calibration(calibration, runs)
@@ -428,7 +451,7 @@ def main_mrd(args) -> int:
 
     if args.json is not None and not Path(args.json).resolve().parent.is_dir():
         raise ConfigError(f"--json {args.json}: directory {Path(args.json).resolve().parent} does not exist")
-    runs, bad = load_mrd_dir(args.mrd or None)
+    runs, bad = load_mrd_dir(args.mrd or None, getattr(args, "runs", None))
     for line in bad:
         print(f"skipped: {line}")
     summary, details = analyze_mrd(runs, getattr(args, "calibration", None), progress=sys.stderr.isatty())

@@ -269,3 +269,22 @@ def test_real_runs_one_run_does_not_pin_the_load_gain():
         assert w["jaw_free_rms_Nm"] < 0.2 * w["jaw_rms_Nm"]  # the jaw torque is mostly a function of angle, direction
         assert kinematic_ratio([r], stretch=True) < 0.96
     assert abs(kinematic_ratio([rd["00"]]) - kinematic_ratio([rd["43"]])) < 0.005   # lightest vs heaviest load
+
+
+def test_runs_at_several_jaw_positions_are_named_and_selected_one_window_at_a_time(tmp_path):
+    """Session 28: the source's roll and pitch folders stop the jaw at several positions, so their runs stroke
+    over separate spindle-angle windows; the analysis names each window with its --runs selection instead of
+    failing inside a fit, and --runs analyses one."""
+    from teleop.app.mrd import stroke_groups
+    from teleop.app.mrd_report import analyze_mrd
+    for name, shift in (("000", 0.0), ("001", 0.0), ("100", 1.2), ("101", 1.2)):
+        t, c, tp, th, td = simulate(duration=4.0)
+        write_txt(tmp_path / f"{name}.TXT", t, c + shift, tp, th, td, load_cmd=0.1 + 0.1 * int(name[-1]))
+    runs, _ = load_mrd_dir(tmp_path)
+    assert stroke_groups(runs) == [["000", "001"], ["100", "101"]]
+    with pytest.raises(DataError, match=r"2 separate spindle-angle windows.*--runs '00\*' \(2 runs\).*--runs '10\*'"):
+        analyze_mrd(runs, folder=False)
+    one, _ = load_mrd_dir(tmp_path, "1*")
+    assert [r.name for r in one] == ["100", "101"] and stroke_groups(one) == [["100", "101"]]
+    with pytest.raises(DataError, match="no run matches --runs '2\\*'"):
+        load_mrd_dir(tmp_path, "2*")
