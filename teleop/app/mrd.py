@@ -158,13 +158,13 @@ def read_mrd(path: str | Path) -> MrdRun:
                   load_command=float(np.mean(a[:, 6])), source=str(p))
 
 
-def load_mrd_dir(directory: str | Path | None = None, runs: str | None = None) -> tuple[list[MrdRun], list[str]]:
+def load_mrd_dir(directory: str | Path | None = None, select: str | None = None) -> tuple[list[MrdRun], list[str]]:
     """Every ``*.TXT`` run of a folder (or of its single sub-folder holding them), sorted by name;
-    ``runs``: only those whose file stem matches this glob (``--runs``, e.g. ``"1*"``).
+    ``select``: only those whose file stem matches this glob (``--runs``, e.g. ``"1*"``).
 
     Returns the runs (with ``load_level`` set: rank of the distinct front-end commands, 0 =
     lightest) and one line per file that could not be read. Raises DataError when the folder does
-    not exist, no run could be read, or no run matches ``runs``.
+    not exist, no run could be read, or no run matches ``select``.
     """
     d = Path(directory) if directory else default_mrd_dir()
     if not d.is_dir():
@@ -175,10 +175,10 @@ def load_mrd_dir(directory: str | Path | None = None, runs: str | None = None) -
         if len(subs) == 1:
             files = sorted(subs[0].glob("*.TXT"))
     files = [f for f in files if f.name.lower() != "seriallog.txt"]
-    if runs is not None:
-        chosen = [f for f in files if fnmatch.fnmatchcase(f.stem, runs)]
+    if select is not None:
+        chosen = [f for f in files if fnmatch.fnmatchcase(f.stem, select)]
         if not chosen:
-            raise DataError(f"{d}: no run matches --runs {runs!r} (runs: {', '.join(f.stem for f in files)})")
+            raise DataError(f"{d}: no run matches --runs {select!r} (runs: {', '.join(f.stem for f in files)})")
         files = chosen
     runs, bad = [], []
     for f in files:
