@@ -22,6 +22,7 @@ Every score starts once the run's band-centre reading holds both edges
 """
 from __future__ import annotations
 
+import math
 from typing import Any, Callable
 
 import numpy as np
@@ -36,7 +37,7 @@ from estimator.offline.spindle_centre_fit import (
 from estimator.offline.spindle_shared import RunData, kinematic_ratio
 from estimator.online.spindle_centre import CentreParams, centre_ready
 
-__all__ = ["CENTRE", "model_choice", "implied_load_gain", "LOAD_RULE", "gain_identifiability", "centre_agg", "centre_folder", "centre_one_run", "centre_time_split", "folder_load_gain", "mid_centre_run", "score_centre",
+__all__ = ["CENTRE", "model_choice", "implied_load_gain", "LOAD_RULE", "LOAD_FALLBACK", "gain_identifiability", "centre_agg", "centre_folder", "centre_one_run", "centre_time_split", "folder_load_gain", "mid_centre_run", "score_centre",
            "profile_on_scored", "PROFILE_GAINS", "LOAD_SPREAD_NM"]
 
 #: The centre map's name among the headline's candidates (``model_choice``).
@@ -47,6 +48,11 @@ PROFILE_GAINS = tuple(float(v) for v in np.round(np.arange(0.6, 1.41, 0.1), 2))
 LOAD_SPREAD_NM = 0.005
 #: Uniform spindle-torque shift [N m] of :func:`implied_load_gain`.
 SHIFT_NM = 0.002
+#: When no candidate is eligible (session 28, written after the repository's fourteen other folders were run once with
+#: the rule before it: there the time split then chose a pair model whose implied load gain was 0.2-0.4, four times
+#: below the calibration run's own reading, and headline medians of 0.28-0.40 FS on 14 of 39 stroke windows).
+LOAD_FALLBACK = ("no candidate eligible: the one whose load slope 1 / g lies nearest the calibration runs' own "
+                 "interval (|log| of the ratio to its nearer end), the time split breaking a tie")
 #: The headline's eligibility rule (:func:`model_choice`; session 6, written when both candidates' scores on every
 #: calibration path were known from sessions 4-5; it reads calibration data only).
 LOAD_RULE = ("the time split cannot test the load gain (at one load level not at all), so a candidate is eligible "
@@ -233,8 +239,8 @@ def model_choice(pair: str, pair_split_fs: float, pair_in_fs: float, cal: list[R
 
     ``gains`` (candidate -> :func:`implied_load_gain`): the time split cannot test the load gain (not at all at
     one load level), so only candidates whose load slope 1 / gain lies inside the interval of the calibration
-    runs' own reading (:func:`within_run_gain`, pooled over the runs) are eligible (LOAD_RULE, session 6; all
-    when none is). ``given``: the centre map's design load gain, if any (:func:`centre_one_run`). Returns a
+    runs' own reading (:func:`within_run_gain`, pooled over the runs) are eligible (LOAD_RULE, session 6); when
+    none is, the one whose slope lies nearest that interval (LOAD_FALLBACK, session 28). ``given``: the centre map's design load gain, if any (:func:`centre_one_run`). Returns a
     JSON-ready dict."""
     cands = {pair: pair_split_fs, CENTRE: centre_time_split(cal, fs, given)}
     out: dict[str, Any] = {
@@ -245,10 +251,26 @@ def model_choice(pair: str, pair_split_fs: float, pair_in_fs: float, cal: list[R
                                "calibration data; recorded beside the rule, never used by it"}}
     eligible = list(cands)
     if gains is not None:
-        out["load_gain_check"] = _load_check(cal, {n: gains[n] for n in cands})
-        eligible = [n for n in cands if out["load_gain_check"]["eligible"][n]] or eligible
+        lc = out["load_gain_check"] = _load_check(cal, {n: gains[n] for n in cands})
+        eligible = [n for n in cands if lc["eligible"][n]]
+        if not eligible:            # session 28: the nearest to the reading, not the best split (LOAD_FALLBACK)
+            lo, hi = lc["slope_interval"]
+            far = {n: _log_distance(1.0 / gains[n] if gains[n] > 0 else math.inf, lo, hi) for n in cands}
+            lc["log_distance"], lc["fallback"] = far, LOAD_FALLBACK
+            eligible = [min(cands, key=lambda n: (far[n], cands[n], n))]
     out["chosen"] = min(eligible, key=lambda n: (cands[n], n))
     return out
+
+
+def _log_distance(slope: float, lo: float, hi: float) -> float:
+    """How far ``slope`` lies outside [lo, hi], as |log| of the ratio to the nearer end (0 inside; inf for a
+    non-positive slope or interval end)."""
+    if lo <= slope <= hi:
+        return 0.0
+    end = lo if slope < lo else hi
+    if not (slope > 0.0 and end > 0.0 and math.isfinite(slope)):
+        return math.inf
+    return abs(math.log(slope / end))
 
 
 def centre_one_run(cal: list[RunData], fs: float, given: float | None = None) -> tuple[CentreParams, dict]:

@@ -185,7 +185,12 @@ def test_model_choice_at_one_load_keeps_only_a_load_gain_the_run_allows():
         c = model_choice("pair", 0.5 * split, 0.01, cal, 0.05, 0.002, {"pair": pair_gain, CENTRE: g})
         assert c["chosen"] == expect and c["load_gain_check"]["eligible"][CENTRE]
     none = model_choice("pair", 0.5 * split, 0.01, cal, 0.05, 0.002, {"pair": 0.2, CENTRE: 0.2})
-    assert none["chosen"] == "pair"                                     # nothing eligible: the split decides
+    assert none["chosen"] == "pair"                                     # nothing eligible, equally far: the split
+    lo, hi = none["load_gain_check"]["slope_interval"]
+    near = model_choice("pair", 0.5 * split, 0.01, cal, 0.05, 0.002, {"pair": 0.2, CENTRE: 1.0 / (1.05 * hi)})
+    assert not any(near["load_gain_check"]["eligible"].values())        # session 28: nothing eligible, the
+    assert near["chosen"] == CENTRE                                     # nearest to the run's reading, not the split
+    assert near["load_gain_check"]["log_distance"][CENTRE] == pytest.approx(math.log(1.05))
     two = [synth("a", 0.01, freq=0.4), synth("b", 0.04, freq=0.4, seed=2)]     # two loads: a tight reading
     lc = model_choice("pair", 0.0, 0.01, two, 0.05, 0.002, {"pair": 0.9 * GAIN, CENTRE: GAIN})["load_gain_check"]
     assert lc["slope"] == pytest.approx(1.0 / GAIN, rel=0.02) and lc["eligible"] == {"pair": False, CENTRE: True}
