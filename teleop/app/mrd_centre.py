@@ -49,7 +49,7 @@ LOAD_SPREAD_NM = 0.005
 #: Uniform spindle-torque shift [N m] of :func:`implied_load_gain`.
 SHIFT_NM = 0.002
 #: When no candidate is eligible (session 28, written after the repository's fourteen other folders were run once with
-#: the rule before it: there the time split then chose a pair model whose implied load gain was 0.2-0.4, four times
+#: the rule before it: there the time split then chose a pair model whose implied load gain was 0.07-0.27, four or more times
 #: below the calibration run's own reading, and headline medians of 0.28-0.40 FS on 14 of 39 stroke windows).
 LOAD_FALLBACK = ("no candidate eligible: the one whose load slope 1 / g lies nearest the calibration runs' own "
                  "interval (|log| of the ratio to its nearer end), the time split breaking a tie")

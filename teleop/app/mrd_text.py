@@ -97,6 +97,8 @@ def _choice_line(c: dict | None) -> str:
         lc = c["load_gain_check"]
         check = "; load gain eligible (1 / gain inside the calibration runs' own reading): " + ", ".join(
             f"{n} {g:.3f} {'yes' if lc['eligible'][n] else 'no'}" for n, g in lc["implied_load_gain"].items())
+        if "fallback" in lc:
+            check += f"; none eligible: {c['chosen']}, the nearest to that reading"
     return (f"RMSE / max: {c['chosen']}, chosen on calibration data only (time split of the calibration runs, "
             f"torque RMSE [FS]: {scores}{check}); angle: the pair model")
 
