@@ -258,7 +258,7 @@ def _one_stroke(runs: list[MrdRun]) -> None:
         sel = f"--runs '{pre}*'" if pre and all(n in g for n in th if n.startswith(pre)) else "runs " + ",".join(g)
         a = min(float(np.percentile(th[n], 5.0)) for n in g)
         b = max(float(np.percentile(th[n], 95.0)) for n in g)
-        parts.append(f"{math.degrees(a):.0f}..{math.degrees(b):.0f} deg: {sel} ({len(g)} runs)")
+        parts.append(f"{round(math.degrees(a))}..{round(math.degrees(b))} deg: {sel} ({len(g)} runs)")
     raise DataError(f"the runs stroke over {len(groups)} separate spindle-angle windows (jaw stopping positions); "
                     "the models describe one stroke, analyse one window at a time: " + "; ".join(parts))
 
