@@ -211,7 +211,14 @@ def _centre(plt, runs: list[MrdRun], summary: dict, path: Path) -> Path:
             ax.plot(g, [p["scored_median_rmse_fs"] for p in prof], "o-", label="other runs: median RMSE")
             ax.plot(g, [p["scored_worst_rmse_fs"] for p in prof], "s--", label="other runs: worst RMSE")
         ax.axhline(0.03, color="0.5", lw=0.6, ls=":")
-        ax.axvline(cal["load_gain"]["value"], color="r", lw=0.8, label="1 / n_k (encoders)")
+        used = cal["load_gain"]
+        label = ("1 / n_k (encoders)" if "n_k" in used else
+                 f"given {used['value']:.3f} (design or another folder)" if used["from"].startswith("given") else
+                 f"fitted {used['value']:.3f}")
+        ax.axvline(used["value"], color="r", lw=0.8, label=label)
+        lg = summary.get("centre_map", {}).get("load_gain", {})
+        if lg.get("several_loads"):
+            ax.axvline(lg["value"], color="g", lw=0.8, ls="--", label=f"this folder across its loads {lg['value']:.3f}")
         ax.set_xlabel("load gain: jaw torque per spindle band-centre torque [-]")
         ax.set_ylabel("torque RMSE [FS]")
         ax.legend(fontsize=7)

@@ -315,13 +315,14 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
                               "scored": "every other run, from its spindle signals only"}
         if given is not None:
             src = calibration_spec.partition(":")[0][len("gain="):]
+            dg: dict[str, Any] = {"value": given, "from": "--calibration gain=G: a design value from outside the "
+                                  "data (the centre map's load gain)"}
             try:
                 float(src)
-                origin = "--calibration gain=G: a design value from outside the data (the centre map's load gain)"
             except ValueError:
-                origin = (f"centre_map.load_gain of {src} (another folder's map fitted across its loads; "
-                          "--calibration gain=FILE)")
-            out["calibration"]["design_load_gain"] = {"value": given, "from": origin}
+                dg.update({"from": f"centre_map.load_gain of {src} (another folder's map fitted across its loads; "
+                                   "--calibration gain=FILE)", "source": src})
+            out["calibration"]["design_load_gain"] = dg
         if calibration and calibration.endswith("mid"):
             out["calibration"]["chosen_by"] = ("the run whose band centre (spindle torque only) is nearest the middle "
                                                "of the folder's band centres, a rule fixed before any score")

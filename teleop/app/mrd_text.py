@@ -20,7 +20,9 @@ def format_mrd(s: dict) -> str:
     head = (f"calibrated on the first {cal['seconds']:g} s of each run" if cal["mode"] == "segment"
             else f"calibrated on run {cal['run']}")
     if "design_load_gain" in cal:
-        head += f", load gain {cal['design_load_gain']['value']:.3f} given (a design value, not from the data)"
+        dg = cal["design_load_gain"]
+        head += (f", load gain {dg['value']:.3f} from {dg['source']} (another folder's, not from these data)"
+                 if "source" in dg else f", load gain {dg['value']:.3f} given (a design value, not from the data)")
     if "fixed" in cal:
         head += f" with rho = 1 / n_k = {cal['fixed']['rho']['value']:.3f} from its encoders"
     found = s["found"].values()
