@@ -205,6 +205,12 @@ def test_cli_mrd_prints_and_writes_json(tmp_path, capsys):
     assert "ODbL" in text and "calibrated on run 01" in text
     s = json.loads(out.read_text())
     assert set(s["runs"]) == {"00", "10"} and s["calibration"]["run"] == "01"
+    # session 28: this folder's gain across its loads passed on as another folder's number, from its JSON
+    assert "load gain across this folder's loads" in text and s["centre_map"]["load_gain"]["several_loads"]
+    rep2 = tmp_path / "report2"
+    assert main(["analyze", "--mrd", str(tmp_path), "--calibration", f"gain={out}:00", "--report", str(rep2)]) == 0
+    assert f"from {out} (another folder's" in capsys.readouterr().out
+    assert all((rep2 / f).stat().st_size > 1000 for f in FIGURES)
 
 
 @needs_mrd
