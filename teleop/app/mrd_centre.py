@@ -37,7 +37,7 @@ from estimator.offline.spindle_centre_fit import (
 from estimator.offline.spindle_shared import RunData, kinematic_ratio
 from estimator.online.spindle_centre import CentreParams, centre_ready
 
-__all__ = ["CENTRE", "model_choice", "implied_load_gain", "LOAD_RULE", "LOAD_FALLBACK", "gain_identifiability", "centre_agg", "centre_folder", "centre_one_run", "centre_time_split", "folder_load_gain", "mid_centre_run", "score_centre",
+__all__ = ["CENTRE", "model_choice", "implied_load_gain", "LOAD_RULE", "LOAD_FALLBACK", "gain_identifiability", "centre_agg", "centre_folder", "centre_implied_gain", "centre_one_run", "centre_time_split", "folder_load_gain", "mid_centre_run", "score_centre",
            "profile_on_scored", "PROFILE_GAINS", "LOAD_SPREAD_NM"]
 
 #: The centre map's name among the headline's candidates (``model_choice``).
@@ -139,7 +139,7 @@ def centre_folder(runs: list[RunData], fs: float, tick: Callable[[str], None], l
         for r in runs:
             rest = [s for s in runs if s is not r]
             q, _ = fit_centre_map(rest, step=20)
-            implied.append(_implied(q, rest))
+            implied.append(centre_implied_gain(q, rest))
             lo[r.name] = {**_score(q, r, r.k0, fs), "load_gain": float(q.coef[1, 0]), "implied_load_gain": implied[-1],
                           "theta_z": q.theta_z}
             tick(f"centre without {r.name}")
@@ -152,7 +152,8 @@ def centre_folder(runs: list[RunData], fs: float, tick: Callable[[str], None], l
     return out
 
 
-def _implied(p: CentreParams, runs: list[RunData]) -> float:
+def centre_implied_gain(p: CentreParams, runs: list[RunData]) -> float:
+    """:func:`implied_load_gain` [-] of the centre map ``p`` (shape held outside its angles) on ``runs``."""
     return implied_load_gain(lambda c, u: predict_held(p, c.tau_p + u, c.theta_p, c.dt), runs)
 
 
@@ -165,7 +166,7 @@ def folder_load_gain(p: CentreParams, runs: list[RunData]) -> dict:
     run's jaw torque (a folder diagnosis). ``several_loads`` False: the folder has one load level, where the gain is
     not identifiable (the value is then not a measurement of it)."""
     several = _several_loads(runs)
-    return {"value": _implied(p, runs), "b_0": float(p.coef[1, 0]), "several_loads": several,
+    return {"value": centre_implied_gain(p, runs), "b_0": float(p.coef[1, 0]), "several_loads": several,
             "what": "jaw torque change per N m of uniform spindle-band shift, stroke-averaged over every run, of the "
                     "centre map fitted across the folder's loads (about 1 / (r cosh K))",
             "use": "--calibration gain=G:RUN (or gain=<this JSON>:RUN) on another tool of the same model"}

@@ -31,7 +31,6 @@ from typing import Any
 
 import numpy as np
 
-from estimator.offline.spindle_centre_fit import predict_held
 from estimator.offline.spindle_fit import EXTENSIONS, band_centre, fit_baselines
 from estimator.offline.spindle_shared import (
     RunData,
@@ -55,6 +54,7 @@ from teleop.app.mrd_centre import (
     CENTRE,
     centre_agg,
     centre_folder,
+    centre_implied_gain,
     centre_one_run,
     implied_load_gain,
     mid_centre_run,
@@ -308,7 +308,7 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
             c.k0:] - c.tau_d[c.k0:] for c in cal_runs])
         gains = {sel_name: implied_load_gain(lambda c, u: predict_torque(sel_p, make_batch(
                      [(c.tau_p + u, c.theta_p)], centre, ref, c.dt)), cal_runs),
-                 CENTRE: implied_load_gain(lambda c, u: predict_held(cmap, c.tau_p + u, c.theta_p, c.dt), cal_runs)}
+                 CENTRE: centre_implied_gain(cmap, cal_runs)}
         out["model_choice"] = model_choice(sel_name, float(sel["rmse_val"]) / fs, float(np.sqrt(np.mean(pin ** 2))) / fs,
                                            cal_runs, fs, out["centre_calibration"]["fit_rms_fs"], gains, given)
         out["calibration"] = {"mode": mode, "run": cal, "runs": cal_names, **cal_inputs,
