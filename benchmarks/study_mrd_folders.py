@@ -31,7 +31,7 @@ os.environ.update(ONE_THREAD)
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from teleop.app.mrd import default_mrd_dir, load_mrd_dir, stroke_groups  # noqa: E402
+from teleop.app.mrd import default_mrd_dir, load_mrd_dir, runs_selection, stroke_groups  # noqa: E402
 from teleop.app.mrd_report import analyze_mrd  # noqa: E402
 
 #: The one-run line of issue 11: median and worst-run torque RMSE [FS].
@@ -46,7 +46,7 @@ def _windows(folder: Path) -> list[tuple[str, list]]:
     by = {r.name: r for r in runs}
     if len(groups) == 1:
         return [(folder.name, runs)]
-    return [(f"{folder.name} [{os.path.commonprefix(g) or ','.join(g)}*]", [by[n] for n in g]) for g in groups]
+    return [(f"{folder.name} [{runs_selection(g, list(by))}]", [by[n] for n in g]) for g in groups]
 
 
 def _row(name: str, runs: list, gain: float) -> dict:
@@ -87,7 +87,7 @@ def main(argv: list[str] | None = None) -> None:
     print(f"load gain given to every one-run calibration: {gain:.4f} from {source}")
     names = args.only.split(",") if args.only else sorted(p.name for p in repo.iterdir() if p.is_dir())
     rows = []
-    print(f"{'window':<36}{'runs':>5}{'gain':>7}{'SE':>7}   one run + G: median / worst / largest, >linear"
+    print(f"{'window':<46}{'runs':>5}{'gain':>7}{'SE':>7}   one run + G: median / worst / largest, >linear"
           f"   default (chosen)         left out")
     for n in names:
         for name, runs in _windows(repo / n):
@@ -95,7 +95,7 @@ def main(argv: list[str] | None = None) -> None:
             rows.append(r)
             o, d, lo = r["one_run"], r["default"], r["left_out"]
             se = f"{r['load_gain_se']:.3f}" if r["load_gain_se"] is not None else "-"
-            print(f"{name:<36}{r['runs']:>5}{r['load_gain']:>7.3f}{se:>7}   {o['median']:.3f} / {o['worst']:.3f} / "
+            print(f"{name:<46}{r['runs']:>5}{r['load_gain']:>7.3f}{se:>7}   {o['median']:.3f} / {o['worst']:.3f} / "
                   f"{o['largest']:.3f}, {o['better_than_linear']}/{o['scored']}        {d['median']:.3f} / "
                   f"{d['worst']:.3f} ({d['chosen']})   {lo['median']:.3f} / {lo['worst']:.3f}", flush=True)
     if not rows:

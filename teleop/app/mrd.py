@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import fnmatch
 import math
+import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,7 +39,7 @@ import numpy as np
 from teleop.errors import DataError
 
 __all__ = ["ATTRIBUTION", "MrdRun", "read_mrd", "load_mrd_dir", "default_mrd_dir", "sine_frequency", "N_COLUMNS",
-           "TORQUE_NM_PER_COUNT", "PROXIMAL_COUNTS_PER_REV", "stroke_groups", "STROKE_OVERLAP", "DISTAL_COUNTS_PER_REV", "DISTAL_SIGN"]
+           "TORQUE_NM_PER_COUNT", "PROXIMAL_COUNTS_PER_REV", "stroke_groups", "stroke_window", "runs_selection", "STROKE_OVERLAP", "DISTAL_COUNTS_PER_REV", "DISTAL_SIGN"]
 
 #: Keep with every report (SOURCE.md: ODbL 1.0 / DbCL 1.0).
 ATTRIBUTION = ("MRD Lab data repository, University of Minnesota; O'Neill, Stephens, Kowalewski, IEEE RA-L "
@@ -197,13 +198,28 @@ def load_mrd_dir(directory: str | Path | None = None, select: str | None = None)
 STROKE_OVERLAP = 0.8
 
 
+def stroke_window(run: MrdRun) -> tuple[float, float]:
+    """(low, high) [rad]: the 5-95 % range of the run's spindle angle, the window its strokes cover."""
+    lo, hi = np.percentile(run.theta_p, [5.0, 95.0])
+    return float(lo), float(hi)
+
+
+def runs_selection(group: list[str], names: list[str]) -> str:
+    """How to pick ``group`` among the folder's run ``names``: ``--runs 'PREFIX*'`` when the group's common name
+    prefix selects exactly it, else the names listed."""
+    pre = os.path.commonprefix(group)
+    if pre and all(n in group for n in names if n.startswith(pre)):
+        return f"--runs '{pre}*'"
+    return "runs " + ",".join(group)
+
+
 def stroke_groups(runs: list[MrdRun]) -> list[list[str]]:
-    """Names of the runs grouped by the spindle-angle window their strokes cover (5-95 % of the angle): a run
+    """Names of the runs grouped by the spindle-angle window their strokes cover (:func:`stroke_window`): a run
     joins the group of the run before it (ordered by the window's middle) when the two windows overlap by at
     least STROKE_OVERLAP of the shorter one. One group on a folder of one protocol; a folder whose runs stop
     the jaw at several positions (the source's roll and pitch folders, ``ZXY.TXT``) gives one group per
     position."""
-    win = {r.name: tuple(float(v) for v in np.percentile(r.theta_p, [5.0, 95.0])) for r in runs}
+    win = {r.name: stroke_window(r) for r in runs}
     order = sorted(win, key=lambda n: (win[n][0] + win[n][1], n))
     groups: list[list[str]] = []
     for n in order:

@@ -245,20 +245,16 @@ def _one_stroke(runs: list[MrdRun]) -> None:
     """Raise DataError when the runs stroke over separate spindle-angle windows (jaw stopping positions:
     :func:`teleop.app.mrd.stroke_groups`), naming the windows and the ``--runs`` selection of each: the centre
     map and the pair model describe one stroke, and one window's calibration says nothing of another's."""
-    import os
-
-    from teleop.app.mrd import stroke_groups
+    from teleop.app.mrd import runs_selection, stroke_groups, stroke_window
     groups = stroke_groups(runs)
     if len(groups) < 2:
         return
-    th = {r.name: r.theta_p for r in runs}
+    win = {r.name: stroke_window(r) for r in runs}
     parts = []
     for g in groups:
-        pre = os.path.commonprefix(g)
-        sel = f"--runs '{pre}*'" if pre and all(n in g for n in th if n.startswith(pre)) else "runs " + ",".join(g)
-        a = min(float(np.percentile(th[n], 5.0)) for n in g)
-        b = max(float(np.percentile(th[n], 95.0)) for n in g)
-        parts.append(f"{round(math.degrees(a))}..{round(math.degrees(b))} deg: {sel} ({len(g)} runs)")
+        a, b = min(win[n][0] for n in g), max(win[n][1] for n in g)
+        parts.append(f"{round(math.degrees(a))}..{round(math.degrees(b))} deg: {runs_selection(g, list(win))} "
+                     f"({len(g)} runs)")
     raise DataError(f"the runs stroke over {len(groups)} separate spindle-angle windows (jaw stopping positions); "
                     "the models describe one stroke, analyse one window at a time: " + "; ".join(parts))
 
