@@ -103,20 +103,29 @@ class _Progress:
 def split_design_gain(spec: str | None) -> tuple[float | None, str | None]:
     """(design load gain, the rest of the spec) from ``--calibration gain=G:SPEC`` (G > 0: the tool's jaw torque
     per N m of spindle band-centre shift, about 1 / (r cosh K), from its design; the centre map uses it instead of
-    1 / n_k or a fit); (None, spec) without the prefix. Raises ConfigError for a G that is not a positive number
-    or a segment calibration (the centre map has none)."""
+    1 / n_k or a fit; G may be another folder's JSON, :func:`_gain_from_json`); (None, spec) without the prefix.
+    Raises ConfigError for a G that is not a positive number or such a JSON, or a segment calibration (the
+    centre map has none)."""
+    g, rest, _ = _design_gain(spec)
+    return g, rest
+
+
+def _design_gain(spec: str | None) -> tuple[float | None, str | None, str | None]:
+    """:func:`split_design_gain` and the JSON the gain was read from (None for a number or no gain)."""
     if not spec or not spec.startswith("gain="):
-        return None, spec
+        return None, spec, None
     head, _, rest = spec.partition(":")
+    source = None
     try:
         g = float(head[len("gain="):])
     except ValueError:
-        g = _gain_from_json(spec, head[len("gain="):])
+        source = head[len("gain="):]
+        g = _gain_from_json(spec, source)
     if not (math.isfinite(g) and g > 0.0):
         raise ConfigError(f"--calibration {spec}: the load gain G must be positive")
     if rest.startswith("segment:"):
         raise ConfigError(f"--calibration {spec}: a design gain applies to run calibrations, not to segment:")
-    return g, rest
+    return g, rest, source
 
 
 def _gain_from_json(spec: str, path: str) -> float:
@@ -275,8 +284,7 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
     if not runs:
         raise DataError("no MRD runs to analyse")
     _one_stroke(runs)
-    calibration_spec = calibration or ""
-    given, calibration = split_design_gain(calibration)
+    given, calibration, source = _design_gain(calibration)
     mode, cal = parse_calibration(calibration, runs)
     fs = float(max(r.tau_d.max() for r in runs) - min(r.tau_d.min() for r in runs))
     n_cal = len(runs) if mode == "segment" else 1
@@ -310,14 +318,11 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
         out["calibration"] = {"mode": mode, "run": cal, "runs": cal_names, **cal_inputs,
                               "scored": "every other run, from its spindle signals only"}
         if given is not None:
-            src = calibration_spec.partition(":")[0][len("gain="):]
             dg: dict[str, Any] = {"value": given, "from": "--calibration gain=G: a design value from outside the "
                                   "data (the centre map's load gain)"}
-            try:
-                float(src)
-            except ValueError:
-                dg.update({"from": f"centre_map.load_gain of {src} (another folder's map fitted across its loads; "
-                                   "--calibration gain=FILE)", "source": src})
+            if source is not None:
+                dg.update({"from": f"centre_map.load_gain of {source} (another folder's map fitted across its loads; "
+                                   "--calibration gain=FILE)", "source": source})
             out["calibration"]["design_load_gain"] = dg
         if calibration and calibration.endswith("mid"):
             out["calibration"]["chosen_by"] = ("the run whose band centre (spindle torque only) is nearest the middle "
