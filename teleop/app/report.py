@@ -154,10 +154,17 @@ def format_summary(result: dict) -> str:
              f"held-out gain on {result['primary_signal']}: {result['gain']:.2f}"]
     slip = result.get("stick_slip") or {}
     if slip.get("named"):
+        st = result["settings"]
+        if slip.get("weak"):
+            why = (f"below the bound {st['stick_slip_ratio']:g} but at least {st['stick_slip_weak']:g}, and the "
+                   f"stiction extension scores {result['candidates']['stiction']['score']:.2f} (below "
+                   f"{st['stick_slip_weak_score']:g}: two weak signs together; docs/diagnosis.md, Session 29)")
+        else:
+            why = f"bound {st['stick_slip_ratio']:g}"
         lines.append(f"named by the stick-slip check: the proximal tension is {slip['ratio']:.2f} x rougher in "
-                     f"steady moves than in holds (bound {result['settings']['stick_slip_ratio']:g}); the models "
-                     "alone named nothing; r_s below is the quasi-static extension's fit, which reads a stick-slip's "
-                     "static peak low (docs/diagnosis.md, Session 22)")
+                     f"steady moves than in holds ({why}); the models alone named nothing; r_s below is the "
+                     "quasi-static extension's fit, which reads a stick-slip's static peak low (docs/diagnosis.md, "
+                     "Session 22)")
     for name, unit in (("T_out", "N"), ("x_out", "m")):
         key = f"rmse_{name}_{unit}"
         if b.get(key) is not None:
