@@ -230,6 +230,11 @@ def test_a_folder_measures_its_load_gain_and_another_folder_takes_it_from_the_js
     out.write_text(json.dumps({"centre_map": rec}, default=float))
     g, rest = split_design_gain(f"gain={out}:mid")
     assert g == pytest.approx(lg["value"]) and rest == "mid"
+    colon = tmp_path / "a:b"                                            # a path with ':' in it is found whole
+    colon.mkdir()
+    (colon / "other.json").write_text(out.read_text())
+    assert split_design_gain(f"gain={colon / 'other.json'}:mid") == (g, "mid")
+    assert split_design_gain(f"gain={colon / 'other.json'}") == (g, "")
     cal, other = synth("cal", 0.025), synth("other", 0.045, seed=3)
     p, _ = centre_one_run([cal], 0.05, given=g)
     assert _rms(p, other) < 0.002                                       # the other load, from one run and the number
