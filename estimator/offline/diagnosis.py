@@ -50,7 +50,7 @@ import numpy as np
 
 from estimator.offline.diagnosis_fit import (NEAR_HELD_SHARE, SIGNALS, Progress, channel_choice, distal_at_end, distal_end_held, fit_model, look_alike, toe_or_play, noise_level,
                                              predictions, prepare, quantum, raw_rmse, rest_start, rest_window, sample_block, settings_keys, split_at_rest,
-                                             start_points, stick_slip_ratio, trimmed_ms, paired_trimmed_ms)
+                                             start_points, stick_slip_ratio, trimmed_ms, paired_trimmed_ms, holds_release)
 from estimator.offline.effects import (CATALOGUE, EQUIVALENT, NOISE_BAND, NONE, ROUTE, ROUTE_FORMS, ROUTE_KEYS, ROUTE_TWELFTHS, UNKNOWN, Effect, below_resolution,
                                        effect, finer_route, predict)
 from estimator.data import MeasuredData
@@ -215,6 +215,12 @@ class _Folds:
         self.s, self.train, self.kt = s, s.slice(kt), kt
         self.fit = (slice(0, kv), slice(kb, kt))
         self.val = (slice(kv, kt), slice(0, kb))
+        # the folds that judge (structure and scores): both, unless one fit block holds a release and the other does
+        # not - a fold fitted on one monotonic pull cannot know the route's shape, and its validation block then
+        # shows the base's extrapolation, not a missing effect (session 29, lumped dev45 4402103's clean twin: one
+        # slow pull to 18 N, released after the forward fit block: base structure 24 on x_out, "unknown")
+        held = [holds_release(s.T_in[f]) for f in self.fit]
+        self.judged: tuple[int, ...] = (held.index(True),) if sum(held) == 1 else (0, 1)
 
 
 class _Fit:
@@ -247,7 +253,9 @@ class _Fit:
         def at_floor(fold: int | None) -> bool:
             return bool(floor) and base is not None and max(_structure(base, floor, fold=fold).values()) < STRUCTURE_RATIO
         one_kind = base is not None and bool(effects)
+        self.judged = folds.judged
         self.sole_fold: int | None = (
+            folds.judged[0] if base is not None and len(folds.judged) == 1 else
             1 if one_kind and all(e.initial_state for e in effects) and at_floor(0) else
             0 if one_kind and all(e.from_start for e in effects) and at_floor(None) and at_floor(1) else None)
         for j, (fm, vm) in enumerate(zip(folds.fit, folds.val)):
@@ -281,8 +289,10 @@ class _Fit:
         return [e.id for e in self.effects]
 
     def val_mse(self) -> dict[str, float]:
-        """Mean over the folds of the validation mean square error per signal."""
-        return {n: float(np.mean([m[n] for m in self.mse])) for n in self.mse[0]}
+        """Mean over the judged folds (``_Folds.judged``; those computed) of the validation mean square error per
+        signal."""
+        use = [self.mse[j] for j in self.judged if j < len(self.mse)] or self.mse
+        return {n: float(np.mean([m[n] for m in use])) for n in use[0]}
 
 
 #: the route forms finer than each (the ``route`` argument of the fits: True is the thirds)
@@ -682,6 +692,9 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
                   "train": sample_block(data, -math.inf, t_split), "test": sample_block(data, t_split, math.inf), "time_s": t_split, "n_train": i_t,
                   "n_heldout": n - i_t, "heldout_s": float(data.time[-1] - data.time[min(i_t, n - 1)]),
                   "train_fraction": float((t_split - data.time[0]) / max(data.duration, 1e-12)),
+                  "judged_folds": (["forward", "backward"] if len(folds.judged) == 2 else
+                                   [("forward", "backward")[folds.judged[0]]
+                                    + " alone (the other fold's fit block holds no release: it cannot know the route)"]),
                   "selection": "model choice by two time-blocked folds inside the training block (fit on one "
                                "part, validate on the other, forward and backward in time; the worse fold "
                                "counts); the chosen and the base model refitted on the whole training block; "

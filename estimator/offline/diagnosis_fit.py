@@ -83,6 +83,33 @@ def _smoothed_speed(t: np.ndarray, x: np.ndarray, max_window: int | None = None)
     return np.abs(savgol_filter(x, w, 2, deriv=1, delta=dt)), dt, w
 
 
+#: a block "holds a release" when its proximal tension falls from its running maximum by at least this share of its
+#: range (:func:`holds_release`). Where the friction sits along the sheath (the route, E7) shows only while a slip
+#: front crosses the sheath after a reversal; a monotonic pull identifies the route's integral, not its shape.
+#: Session 29: on lumped dev45 183 of 184 fold fit blocks fall by 0.66-0.99 of their range; one (4402103, a single
+#: slow pull to 18 N with its release after the forward fit block) by 0.005
+RELEASE_SHARE = 0.2
+
+
+def holds_release(T_in: np.ndarray, share: float = RELEASE_SHARE) -> bool:
+    """Whether the proximal tension of a block falls from its running maximum by at least ``share`` of its range
+    (a reversal the slip front then crosses: what shows the route's shape; literature.md E7).
+
+    Parameters
+    ----------
+    T_in : ndarray (n,) [N]; share : float in (0, 1]
+
+    Returns
+    -------
+    bool (False for fewer than 2 samples or a constant block)
+    """
+    y = np.asarray(T_in, dtype=float)
+    span = float(np.ptp(y)) if y.size else 0.0
+    if y.size < 2 or not span > 0.0:
+        return False
+    return float(np.max(np.maximum.accumulate(y) - y)) >= share * span
+
+
 def stick_slip_ratio(time: np.ndarray, x_in: np.ndarray, T_in: np.ndarray) -> float | None:
     """How much rougher the proximal tension is in steady moves than in holds (literature.md E4: stick-slip).
 

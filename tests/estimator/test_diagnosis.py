@@ -813,3 +813,31 @@ def test_weak_stick_slip_with_a_stiction_fit_that_explains_a_tenth_names_stictio
     # either sign alone is not enough
     monkeypatch.setattr(diagnosis, "STICK_SLIP_WEAK_SCORE", 0.5)
     assert diagnose(rec.data, effects=cands)["causes"] == []
+
+
+def test_holds_release_reads_a_fall_from_the_running_maximum():
+    t = np.linspace(0.0, 10.0, 2001)
+    pull = 2.0 * t
+    assert not diagnosis_fit.holds_release(pull)
+    assert not diagnosis_fit.holds_release(pull + 0.01 * np.sin(50.0 * t))      # noise on a pull is no release
+    cycle = 10.0 * np.sin(0.5 * t)                                              # up to 10 N and back down
+    assert diagnosis_fit.holds_release(cycle)
+    assert not diagnosis_fit.holds_release(np.ones(50)) and not diagnosis_fit.holds_release(np.ones(1))
+
+
+def test_a_fold_fitted_on_one_pull_does_not_judge_the_route(monkeypatch):
+    # lumped dev45 4402103's clean twin (session 29): one slow pull to 18 N, released only after the forward fold's
+    # fit block. Fitted on the pull alone the route's shape is unknown and the forward validation block (the
+    # release) left x_out at 24 x its floor: "unknown", a false alarm. The backward fold, whose fit block holds the
+    # release, judges alone: "none"; the same rig with a 14 % K drift hidden is named
+    from estimator.offline import diagnosis
+    twin = lumped_scenarios.record(None, seed=4402103, level=0.2, duration=60.0)
+    res = diagnose(twin.data)
+    assert res["cause"] == "none", res["structure"]
+    assert res["split"]["judged_folds"][0].startswith("backward alone")
+    assert max(res["structure"]["base"].values()) < diagnosis.STRUCTURE_RATIO
+    drift = diagnose(lumped_scenarios.record("curvature_drift", seed=4402103, level=0.2, duration=60.0).data)
+    assert drift["cause"] == "curvature_drift" and drift["gain"] > 0.3
+    # both folds judging (as before): the extrapolation is read as structure
+    monkeypatch.setattr(diagnosis, "holds_release", lambda T_in: True)
+    assert diagnose(twin.data)["cause"] == "unknown"
