@@ -237,7 +237,8 @@ def one(case: tuple) -> dict:
 def _detail(res: dict) -> dict:
     """A diagnosis' structure ratios, noise floors and every candidate's validation figures (for the JSON)."""
     return {"structure": res["structure"], "noise": res["noise"],
-            "stick_slip": {k: res["stick_slip"][k] for k in ("ratio", "named")},
+            "stick_slip": {k: res["stick_slip"][k] for k in ("ratio", "named", "weak")},
+            "judged_folds": res["split"]["judged_folds"],
             "candidates": {k: {m: v[m] for m in ("validation_rmse_T_out_N", "validation_rmse_x_out_m",
                                                  "score", "penalised_score", "fold_values", "fold_scores")}
                            for k, v in res["candidates"].items()}}
@@ -376,9 +377,17 @@ def table(rows: list[dict], title: str) -> None:
         slip = [r for r in rows if r.get("detail", {}).get("stick_slip", {}).get("named")]
         calm = [v for v in [ratio(r.get("detail", {})) for r in clean]
                 + [ratio(r.get("twin_detail", {})) for r in present] if v is not None]
-        print(f"stick-slip check: stiction named by it {len(slip)} (right {sum(_ok(r) for r in slip)}); proximal "
+        weak = [r for r in slip if r["detail"]["stick_slip"].get("weak")]
+        print(f"stick-slip check: stiction named by it {len(slip)} (right {sum(_ok(r) for r in slip)}; by the two weak "
+              f"signs, session 29: {len(weak)}, right {sum(_ok(r) for r in weak)}); proximal "
               f"roughness ratio of clean recordings and twins max {max(calm, default=float('nan')):.2f} "
               f"({len(calm)} readable)")
+    one_fold = [r for r in rows if len(r.get("detail", {}).get("judged_folds", ())) == 1]
+    one_twin = [r for r in present if len(r.get("twin_detail", {}).get("judged_folds", ())) == 1]
+    if one_fold or one_twin:
+        print(f"judged on one fold (the other's fit block holds no release; session 29): {len(one_fold)} recordings "
+              f"(right {sum(_ok(r) for r in one_fold)}), {len(one_twin)} twins "
+              f"(named {sum(r['twin_cause'] != NONE for r in one_twin)})")
     clean = [r for r in clean if r["scores"]]
     if clean:
         best = [min(r["scores"].values()) for r in clean]
