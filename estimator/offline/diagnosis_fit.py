@@ -86,8 +86,9 @@ def _smoothed_speed(t: np.ndarray, x: np.ndarray, max_window: int | None = None)
 #: a block "holds a release" when its proximal tension falls from its running maximum by at least this share of its
 #: range (:func:`holds_release`). Where the friction sits along the sheath (the route, E7) shows only while a slip
 #: front crosses the sheath after a reversal; a monotonic pull identifies the route's integral, not its shape.
-#: Session 29: on lumped dev45 183 of 184 fold fit blocks fall by 0.66-0.99 of their range; one (4402103, a single
-#: slow pull to 18 N with its release after the forward fit block) by 0.005
+#: Session 29: on lumped dev45 the forward fit blocks of the other protocols fall by 0.66 of their maximum or more; one
+#: (4402103, a single slow pull to 18 N with its release after the forward fit block) by 0.005. Of 1302 protocols
+#: scanned (lumped dev40-dev45, the rig's dev45) it is the only one with a fold whose fit block holds no release
 RELEASE_SHARE = 0.2
 
 

@@ -142,7 +142,8 @@ def split_text(result: dict) -> str:
             f"{tr['time_s'][0]:.2f}-{tr['time_s'][1]:.2f} s, {sp['train_fraction']:.0%} of the recording) by two "
             f"time-blocked folds (fit t < {f0['fit']['time_s'][1]:.1f} s, validate after; fit t > "
             f"{f1['fit']['time_s'][0]:.1f} s, validate before); held out for the reported errors: the "
-            f"{te['n_samples']} samples from t = {te['time_s'][0]:.2f} s ({dur:.1f} s), used once.")
+            f"{te['n_samples']} samples from t = {te['time_s'][0]:.2f} s ({dur:.1f} s), used once."
+            + ("" if len(sp.get("judged_folds", ())) != 1 else f" Judged on the {sp['judged_folds'][0]}."))
 
 
 def format_summary(result: dict) -> str:

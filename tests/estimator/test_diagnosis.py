@@ -835,6 +835,8 @@ def test_a_fold_fitted_on_one_pull_does_not_judge_the_route(monkeypatch):
     res = diagnose(twin.data)
     assert res["cause"] == "none", res["structure"]
     assert res["split"]["judged_folds"][0].startswith("backward alone")
+    from teleop.app.report import split_text
+    assert "Judged on the backward alone" in split_text(res)
     assert max(res["structure"]["base"].values()) < diagnosis.STRUCTURE_RATIO
     drift = diagnose(lumped_scenarios.record("curvature_drift", seed=4402103, level=0.2, duration=60.0).data)
     assert drift["cause"] == "curvature_drift" and drift["gain"] > 0.3
