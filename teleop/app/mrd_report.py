@@ -121,10 +121,8 @@ def _design_gain(spec: str | None) -> tuple[float | None, str | None, str | None
     except ValueError:
         # a JSON path may hold ':' itself (C:\..., a:b/...): the split is after the longest prefix that is a file
         body = spec[len("gain="):]
-        cuts = [i for i, c in enumerate(body) if c == ":"]
-        at = next((i for i in reversed(cuts) if Path(body[:i]).is_file()), None)
-        if at is None and Path(body).is_file():
-            at = len(body)
+        ends = [len(body)] + [i for i in range(len(body) - 1, -1, -1) if body[i] == ":"]
+        at = next((i for i in ends if Path(body[:i]).is_file()), None)
         if at is not None:
             head, rest = "gain=" + body[:at], body[at + 1:]
         source = head[len("gain="):]
