@@ -239,7 +239,8 @@ def one(case: tuple) -> dict:
 def _detail(res: dict) -> dict:
     """A diagnosis' structure ratios, noise floors and every candidate's validation figures (for the JSON)."""
     return {"structure": res["structure"], "noise": res["noise"],
-            "stick_slip": {k: res["stick_slip"][k] for k in ("ratio", "named", "weak")},
+            "stick_slip": {k: res["stick_slip"][k] for k in ("ratio", "named", "weak", "overruled")},
+            "rest_offset": {k: res["rest_offset"][k] for k in ("reads", "named")},
             "judged_folds": res["split"]["judged_folds"],
             "candidates": {k: {m: v[m] for m in ("validation_rmse_T_out_N", "validation_rmse_x_out_m",
                                                  "score", "penalised_score", "fold_values", "fold_scores")}
@@ -380,10 +381,20 @@ def table(rows: list[dict], title: str) -> None:
         calm = [v for v in [ratio(r.get("detail", {})) for r in clean]
                 + [ratio(r.get("twin_detail", {})) for r in present] if v is not None]
         weak = [r for r in slip if r["detail"]["stick_slip"].get("weak")]
+        over = [r for r in slip if r["detail"]["stick_slip"].get("overruled")]
         print(f"stick-slip check: stiction named by it {len(slip)} (right {sum(_ok(r) for r in slip)}; by the two weak "
-              f"signs, session 29: {len(weak)}, right {sum(_ok(r) for r in weak)}); proximal "
+              f"signs, session 29: {len(weak)}, right {sum(_ok(r) for r in weak)}; over a named effect that left "
+              f"structure, session 30: {len(over)}, right {sum(_ok(r) for r in over)}); proximal "
               f"roughness ratio of clean recordings and twins max {max(calm, default=float('nan')):.2f} "
               f"({len(calm)} readable)")
+    # session 30: an encoder reading away from zero at the initial rest (named when the models name nothing)
+    if any("rest_offset" in r.get("detail", {}) for r in rows):
+        reads = [r for r in rows if r.get("detail", {}).get("rest_offset", {}).get("reads")]
+        by_rest = [r for r in reads if r["detail"]["rest_offset"]["named"]]
+        twin_reads = [r for r in present if r.get("twin_detail", {}).get("rest_offset", {}).get("reads")]
+        print(f"initial rest: an encoder off its zero read on {len(reads)} recordings (hidden x offsets among them "
+              f"{sum(r['effect'].startswith('sensor_offset:x') for r in reads)}), named by it {len(by_rest)} (right "
+              f"{sum(_ok(r) for r in by_rest)}); clean recordings and twins read {sum(1 for r in clean if r.get('detail', {}).get('rest_offset', {}).get('reads')) + len(twin_reads)}")
     one_fold = [r for r in rows if len(r.get("detail", {}).get("judged_folds", ())) == 1]
     one_twin = [r for r in present if len(r.get("twin_detail", {}).get("judged_folds", ())) == 1]
     if one_fold or one_twin:

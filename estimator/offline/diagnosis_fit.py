@@ -30,7 +30,7 @@ from estimator.sheath import SheathModel
 from estimator.data import MeasuredData, noise_level
 from estimator.errors import DataError
 
-__all__ = ["Progress", "trimmed_ms", "paired_trimmed_ms", "sample_block", "rest_reading", "prepare", "split_at_rest", "fit_model", "start_points", "rest_window", "rest_start", "heldout_mse", "raw_rmse", "noise_level",
+__all__ = ["Progress", "trimmed_ms", "paired_trimmed_ms", "sample_block", "rest_reading", "rest_offset", "REST_MIN_S", "REST_RESOLUTIONS", "prepare", "split_at_rest", "fit_model", "start_points", "rest_window", "rest_start", "heldout_mse", "raw_rmse", "noise_level",
            "quantum", "stick_slip_ratio", "STICK_SLIP_WINDOW", "STICK_SLIP_SPEED", "STICK_SLIP_MIN_MOVE", "distal_end_held", "HELD_STEPS", "HELD_SHARE", "NEAR_HELD_SHARE", "distal_at_end", "AT_END_SPEED",
            "AT_END_BAND", "AT_END_SHARE", "AT_END_HIDES", "SIGNALS", "channel_choice", "look_alike", "toe_or_play", "settings_keys", "predictions"]
 
@@ -530,6 +530,39 @@ def rest_reading(data: MeasuredData, name: str) -> float:
     moved = np.flatnonzero(np.abs(x - x[0]) > 5e-6)
     stop = max(int(moved[0]) if moved.size else len(x), 5)
     return abs(float(np.median(np.asarray(getattr(data, name), dtype=float)[:stop])))
+
+
+#: an initial rest (the samples before x_in first moves by 5 um, :func:`rest_reading`) shorter than this [s] is not
+#: read for an offset: a recording that starts in motion has no rest to be zeroed at
+REST_MIN_S = 0.1
+#: a position channel whose initial rest reads further from zero than this many resolutions (its quantum, its
+#: noise level, 1 nm) is off its zero (positions are zeroed at the initial rest, docs/formats.md)
+REST_RESOLUTIONS = 3.0
+
+
+def rest_offset(data: MeasuredData) -> str | None:
+    """The position channel that reads away from zero at the initial rest, as the catalogue id of its offset
+    (``"sensor_offset:x_in"`` or ``"sensor_offset:x_out"``; the larger reading in resolutions when both do), or None:
+    no channel does, or the recording has no initial rest of REST_MIN_S (it starts moving).
+
+    Positions are zeroed at the initial rest (docs/formats.md), and no physical effect of the catalogue moves a
+    reading there (a pretension loads the rest, it does not move the encoders): a reading away from zero is an
+    encoder's zero offset, read model-free (literature.md E14)."""
+    x = np.asarray(data.x_in, dtype=float)
+    moved = np.flatnonzero(np.abs(x - x[0]) > 5e-6)
+    stop = int(moved[0]) if moved.size else len(x)
+    if stop < 5 or data.time[stop - 1] - data.time[0] < REST_MIN_S:
+        return None
+    ratio = {}
+    for name in ("x_in", "x_out"):
+        a = getattr(data, name)
+        if a is None:
+            continue
+        a = np.asarray(a, dtype=float)
+        resolution = max(quantum(a), noise_level(a), 1e-9)
+        ratio[f"sensor_offset:{name}"] = rest_reading(data, name) / resolution
+    best = max(ratio, key=lambda k: ratio[k], default=None)
+    return best if best is not None and ratio[best] > REST_RESOLUTIONS else None
 
 
 def channel_choice(data: MeasuredData, eid: str) -> str:

@@ -162,10 +162,19 @@ def format_summary(result: dict) -> str:
                    f"{st['stick_slip_weak_score']:g}: two weak signs together; docs/diagnosis.md, Session 29)")
         else:
             why = f"bound {st['stick_slip_ratio']:g}"
+        models = ("the models alone named nothing" if not slip.get("overruled") else
+                  f"the models named {', '.join(slip['overruled'])}, which left structure it does not explain "
+                  "and has no stick-slip (docs/diagnosis.md, Session 30)")
         lines.append(f"named by the stick-slip check: the proximal tension is {slip['ratio']:.2f} x rougher in "
-                     f"steady moves than in holds ({why}); the models alone named nothing; r_s below is the "
+                     f"steady moves than in holds ({why}); {models}; r_s below is the "
                      "quasi-static extension's fit, which reads a stick-slip's static peak low (docs/diagnosis.md, "
                      "Session 22)")
+    rest = result.get("rest_offset") or {}
+    if rest.get("named"):
+        ch = rest["reads"].split(":")[1]
+        lines.append(f"named by the initial rest: {ch} reads {_fmt(rest[f'{ch}_m'], 'm')} there, where positions are "
+                     "zeroed and no physical effect moves them; the models alone named nothing (docs/diagnosis.md, "
+                     "Session 30)")
     for name, unit in (("T_out", "N"), ("x_out", "m")):
         key = f"rmse_{name}_{unit}"
         if b.get(key) is not None:
