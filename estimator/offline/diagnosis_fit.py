@@ -524,11 +524,16 @@ def sample_block(data: MeasuredData, t0: float, t1: float) -> dict:
                                           float(data.time[max(i1 - 1, i0)])], "n_samples": i1 - i0}
 
 
-def rest_reading(data: MeasuredData, name: str) -> float:
-    """|median| of a channel over the initial rest (the samples before x_in first moves by 5 um) [unit]."""
+def _rest_stop(data: MeasuredData) -> int:
+    """The end of the initial rest: the index of the first sample where x_in has moved by 5 um (len when never)."""
     x = np.asarray(data.x_in, dtype=float)
     moved = np.flatnonzero(np.abs(x - x[0]) > 5e-6)
-    stop = max(int(moved[0]) if moved.size else len(x), 5)
+    return int(moved[0]) if moved.size else len(x)
+
+
+def rest_reading(data: MeasuredData, name: str) -> float:
+    """|median| of a channel over the initial rest (the samples before x_in first moves by 5 um, at least 5) [unit]."""
+    stop = max(_rest_stop(data), 5)
     return abs(float(np.median(np.asarray(getattr(data, name), dtype=float)[:stop])))
 
 
@@ -548,9 +553,7 @@ def rest_offset(data: MeasuredData) -> str | None:
     Positions are zeroed at the initial rest (docs/formats.md), and no physical effect of the catalogue moves a
     reading there (a pretension loads the rest, it does not move the encoders): a reading away from zero is an
     encoder's zero offset, read model-free (literature.md E14)."""
-    x = np.asarray(data.x_in, dtype=float)
-    moved = np.flatnonzero(np.abs(x - x[0]) > 5e-6)
-    stop = int(moved[0]) if moved.size else len(x)
+    stop = _rest_stop(data)
     if stop < 5 or data.time[stop - 1] - data.time[0] < REST_MIN_S:
         return None
     ratio = {}
