@@ -194,13 +194,15 @@ def _tension_offsets(values: dict) -> dict[str, float]:
             "sensor_offset:T_in": abs(values.get("b_T_in", 0.0)), "sensor_offset:T_out": abs(values.get("b_T_out", 0.0))}
 
 
-def _unresolved(effects: list[Effect], values: dict, floor: dict[str, float]) -> bool:
+def _unresolved(effects: list[Effect], values: dict, floor: dict[str, float], dominant: bool = False) -> bool:
     """An effect fitted at a magnitude the recording cannot resolve: at its smallest showable value
     (:func:`estimator.offline.effects.below_resolution`), or a tension offset (friction offset at the tip, load-cell
-    offset) [N] below OFFSET_FLOORS x the T_out floor [N] (when T_out is recorded)."""
+    offset) [N] below OFFSET_FLOORS x the T_out floor [N] (when T_out is recorded) - unless ``dominant``: the base
+    leaves structure above STRUCTURE_RATIO and the effect removes nearly all of it (S < DOMINANT_SCORE), so its size
+    is read from a pattern over many samples, not from one sample's noise (session 30)."""
     if below_resolution(effects, values):
         return True
-    if "T_out" in floor:
+    if "T_out" in floor and not dominant:
         size = _tension_offsets(values)
         return any(e.id in size and size[e.id] < OFFSET_FLOORS * floor["T_out"] for e in effects)
     return False
@@ -600,7 +602,9 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
                 bar(f"{'+'.join(chosen.ids)}+{eid}")
         price = {eid: f.S / chosen.S + PENALTY * (f.n_params - chosen.n_params) for eid, f in trial.items()}
         # an effect fitted at the smallest magnitude it can show is not that effect (effects.below_resolution)
-        price = {eid: math.inf if any(_unresolved(trial[eid].effects, v, noise) for v in trial[eid].values) else p
+        price = {eid: math.inf if any(_unresolved(trial[eid].effects, v, noise,
+                                                  dominant=not at_floor and trial[eid].S < DOMINANT_SCORE)
+                                      for v in trial[eid].values) else p
                  for eid, p in price.items()}
         # accepted by the additive price, ranked by log S with RANK_FACTOR per extra parameter
         rank = {eid: math.log(max(f.S / chosen.S, 1e-12)) + math.log(RANK_FACTOR) * (f.n_params - chosen.n_params)

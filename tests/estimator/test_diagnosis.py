@@ -676,6 +676,22 @@ def test_a_tension_offset_below_twice_the_floor_is_not_resolved():
     # other effects, and a recording without T_out, are not judged by it
     assert not _unresolved([CATALOGUE["velocity_friction"]], {"K": 1.0, "c_v": 1.0}, floor)
     assert not _unresolved([fo], {"K": 1.39, "a": 0.07}, {"x_out": 2e-6})
+    # nor an offset that removes nearly all of a clear structure (session 30): its size is a pattern's
+    assert not _unresolved([fo], {"K": 1.39, "a": 0.07}, floor, dominant=True)
+    assert _unresolved([CATALOGUE["presliding"]], {"K": 1.0, "x_p": 20e-6}, floor, dominant=True)
+
+
+def test_lumped_small_friction_offset_that_removes_the_structure_is_named_not_a_gain():
+    # lumped dev48 4705100 (session 30): a friction offset on a constant force (K 1.39); the base leaves 5.0 x the
+    # T_out floor and the friction offset removes 99 % of it (S 0.01), but F0 = 0.26 N sat just under twice the
+    # carried T_out floor, so it was "unresolved" and a T_in gain of -44 % (S 0.12) was named, reported as a T_out gain
+    rec = lumped_scenarios.record("friction_offset", seed=4705100, level=0.2, duration=60.0)
+    res = diagnose(rec.data, effects=("friction_offset", "sensor_gain:T_in", "sensor_offset:T_out"))
+    assert res["causes"] == ["friction_offset"], ({k: c["score"] for k, c in res["candidates"].items()})
+    assert res["candidates"]["friction_offset"]["score"] < 0.1 and res["gain"] > 0.5
+    twin = diagnose(lumped_scenarios.record(None, seed=4705100, level=0.2, duration=60.0).data,
+                    effects=("friction_offset", "sensor_gain:T_in", "sensor_offset:T_out"))
+    assert twin["causes"] == []
 
 
 def test_lumped_clean_constant_force_load_gives_none_not_a_small_offset():
