@@ -390,13 +390,17 @@ def table(rows: list[dict], title: str) -> None:
               f"roughness ratio of clean recordings and twins max {max(calm, default=float('nan')):.2f} "
               f"({len(calm)} readable)")
     # session 30: an encoder reading away from zero at the initial rest (named when the models name nothing)
+    def off_zero(detail: dict) -> bool:
+        return bool(detail.get("rest_offset", {}).get("reads"))
+
     if any("rest_offset" in r.get("detail", {}) for r in rows):
-        reads = [r for r in rows if r.get("detail", {}).get("rest_offset", {}).get("reads")]
+        reads = [r for r in rows if off_zero(r.get("detail", {}))]
         by_rest = [r for r in reads if r["detail"]["rest_offset"]["named"]]
-        twin_reads = [r for r in present if r.get("twin_detail", {}).get("rest_offset", {}).get("reads")]
+        calm_reads = (sum(off_zero(r.get("detail", {})) for r in clean)
+                      + sum(off_zero(r.get("twin_detail", {})) for r in present))
         print(f"initial rest: an encoder off its zero read on {len(reads)} recordings (hidden x offsets among them "
               f"{sum(r['effect'].startswith('sensor_offset:x') for r in reads)}), named by it {len(by_rest)} (right "
-              f"{sum(_ok(r) for r in by_rest)}); clean recordings and twins read {sum(1 for r in clean if r.get('detail', {}).get('rest_offset', {}).get('reads')) + len(twin_reads)}")
+              f"{sum(_ok(r) for r in by_rest)}); clean recordings and twins read {calm_reads}")
     one_fold = [r for r in rows if len(r.get("detail", {}).get("judged_folds", ())) == 1]
     one_twin = [r for r in present if len(r.get("twin_detail", {}).get("judged_folds", ())) == 1]
     if one_fold or one_twin:

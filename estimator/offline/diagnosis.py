@@ -646,9 +646,9 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     off_zero = rest_offset(data)
     offset_fit = next((singles[q] for q in (off_zero, *EQUIVALENT.get(off_zero, ())) if q in singles), None) \
         if off_zero is not None else None
-    by_rest = offset_fit is not None and not chosen.effects
-    if offset_fit is not None and by_rest:
-        chosen = offset_fit
+    by_rest = False
+    if offset_fit is not None and not chosen.effects:
+        chosen, by_rest = offset_fit, True
     left = _structure(chosen, noise)
 
     # the test block, touched once: base and chosen model refitted on the whole training block
