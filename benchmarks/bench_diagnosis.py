@@ -66,7 +66,8 @@ of df5dadb, seen since) and ``dev50`` (offsets + 4900000: fixed during session 3
 seen since) and ``dev51`` (offsets + 5000000: fixed at the end of session 30, run once at the start of session 31
 with the code of commit 1529512, seen since) and ``dev52`` (offsets + 5100000: fixed at the start of session 31, run
 once with the same diagnosis at 46d6a71, seen since) and ``dev53`` (offsets + 5200000: fixed during session 31, run
-once with the same diagnosis at 2883315, seen since) are development data. ``final`` (offsets + 5300000) is the final
+once with the same diagnosis at 2883315, seen since) and ``dev54`` (offsets + 5300000: fixed during session 31, run
+once with the same diagnosis at 573f75f, seen since) are development data. ``final`` (offsets + 5400000) is the final
 set fixed at the end of session 31.
 Seed layout (session 4): every hidden-effect recording has its own seed, so its own simulated rig
 (route, K, EA, load, rate, noise): effect k of EFFECT_IDS, level j, repeat s uses
@@ -80,7 +81,7 @@ Prints per effect and per channel: accuracy (strict, and up to the inseparable p
 estimator.offline.effects.EQUIVALENT), gains, false alarms on clean data; never fails on the figures (the
 pass/fail checks are in tests/estimator/test_diagnosis.py).
 
-    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|...|dev53|final] [--seeds 2]
+    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|...|dev54|final] [--seeds 2]
         [--levels 0.2,0.8] [--clean 12] [--duration 90] [--rate 1000] [--jobs 2] [--json OUT] [--speed-only] [--twins]
         [--shared-rigs]
     .venv/bin/python benchmarks/bench_diagnosis.py --floor-table OUT.json [OUT.json ...]
@@ -122,8 +123,8 @@ SEED_BASE = {"dev": 0, "dev2": 100000, "dev3": 200000, "dev4": 300000, "dev5": 4
              "dev38": 3700000, "dev39": 3800000, "dev40": 3900000,
              "dev41": 4000000, "dev42": 4100000, "dev43": 4200000, "dev44": 4300000,
              "dev45": 4400000, "dev46": 4500000, "dev47": 4600000, "dev48": 4700000, "dev49": 4800000,
-             "dev50": 4900000, "dev51": 5000000, "dev52": 5100000, "dev53": 5200000,
-             "final": 5300000}   # fixed at the end of session 31 (docstring)
+             "dev50": 4900000, "dev51": 5000000, "dev52": 5100000, "dev53": 5200000, "dev54": 5300000,
+             "final": 5400000}   # fixed at the end of session 31 (docstring)
 UNCATALOGUED = "load_cell_wander"
 
 
