@@ -1,6 +1,6 @@
 """`teleop analyze` speed: a 10-minute 1 kHz recording with a hidden effect, diagnosed and reported.
 
-Generates the recording with :func:`slave.scenarios.record` (not timed), writes it as a measured-data
+Generates the recording with :func:`study.scenarios.record` (not timed), writes it as a measured-data
 CSV, then runs ``teleop analyze FILE --json OUT --report DIR`` as a separate process pinned to one
 thread (OMP/MKL/OpenBLAS/NUMBA threads = 1) and prints the wall time, split into reading,
 diagnosis and report from the same steps run in-process. Prints figures, never fails on them.
@@ -24,8 +24,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from estimator.offline.diagnosis import diagnose  # noqa: E402
-from slave.scenarios import record  # noqa: E402
-from teleop.app.report import write_report  # noqa: E402
+from study.report import write_report  # noqa: E402
+from study.scenarios import record  # noqa: E402
 from teleop.recording import read_measured_csv, write_measured_csv  # noqa: E402
 
 
@@ -43,7 +43,7 @@ def main(argv: list[str] | None = None) -> None:
         mb = csv.stat().st_size / 1e6
         # the CLI as a user runs it, one thread
         env = {**os.environ, **ONE_THREAD}
-        cmd = [sys.executable, "-m", "teleop.app.cli", "analyze", str(csv), "--json", str(d / "d.json"),
+        cmd = [sys.executable, "-m", "live.cli", "analyze", str(csv), "--json", str(d / "d.json"),
                "--report", str(d / "report")]
         t0 = time.perf_counter()
         proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)

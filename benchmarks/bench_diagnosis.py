@@ -1,13 +1,13 @@
 """Diagnosis benchmark: the confusion matrix on both simulators, development and final seeds; speed.
 
 Every catalogue effect is hidden at several magnitudes (positions in its realistic range,
-slave.scenarios.realistic_range) and seeds, plus clean recordings and one uncatalogued effect
+study.scenarios.realistic_range) and seeds, plus clean recordings and one uncatalogued effect
 (the answer must be ``unknown``); each recording is diagnosed and the answer compared with the
 hidden effect. Two simulators, reported apart:
 
-* ``rig``: the project's quasi-static rig (slave/scenarios.py), the one the diagnosis shares its
+* ``rig``: the project's quasi-static rig (study/scenarios.py), the one the diagnosis shares its
   physics with;
-* ``lumped``: the independent dynamic lumped-mass simulator (slave/lumped_scenarios.py: random
+* ``lumped``: the independent dynamic lumped-mass simulator (study/lumped_scenarios.py: random
   routes of arcs and straight runs, random distal loads, 200-2000 Hz, its own noise).
 
 Seed sets: ``dev`` (effects 100+, clean 500+, uncatalogued 900+), ``dev2`` (the same offsets +
@@ -136,9 +136,9 @@ def effect_seed(base: int, k: int, j: int, s: int, shared_rigs: bool = False) ->
 
 def _record(sim: str):
     if sim == "rig":
-        from slave.scenarios import record
+        from study.scenarios import record
     else:
-        from slave.lumped_scenarios import record
+        from study.lumped_scenarios import record
     return record
 
 
@@ -529,8 +529,8 @@ def main(argv: list[str] | None = None) -> None:
           + (f"; recorded without {' and '.join(without)} (effects that need it left out)" if without else ""))
     for sim in sims:
         rs = [r for r in rows if r["sim"] == sim]
-        title = {"rig": "rig (slave/scenarios.py, the diagnosis' own physics)",
-                 "lumped": "lumped (slave/lumped_scenarios.py, independent simulator)"}[sim]
+        title = {"rig": "rig (study/scenarios.py, the diagnosis' own physics)",
+                 "lumped": "lumped (study/lumped_scenarios.py, independent simulator)"}[sim]
         table(rs, f"{title}, {args.seed_set} seeds")
     if args.verbose:
         for r in rows:
@@ -551,7 +551,7 @@ def main(argv: list[str] | None = None) -> None:
 
 def speed() -> None:
     """Time one diagnosis of a 10-minute 1 kHz recording (after a warm-up that compiles the kernels)."""
-    from slave.scenarios import record
+    from study.scenarios import record
     rec = record("stiction", seed=1, level=0.5, duration=600.0, rate_hz=1000.0)
     diagnose(rec.data.slice(0, 20000))
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")

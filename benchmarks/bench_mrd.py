@@ -25,8 +25,8 @@ os.environ.update(ONE_THREAD)
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from teleop.app.mrd import default_mrd_dir, load_mrd_dir  # noqa: E402
-from teleop.app.mrd_report import analyze_mrd  # noqa: E402
+from study.mrd import default_mrd_dir, load_mrd_dir  # noqa: E402
+from study.mrd_report import analyze_mrd  # noqa: E402
 
 GOAL_S = 60.0
 
@@ -41,7 +41,7 @@ def main(argv: list[str] | None = None) -> None:
         return
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "mrd.json"
-        cmd = [sys.executable, "-m", "teleop.app.cli", "analyze", "--mrd", args.dir, "--json", str(out)]
+        cmd = [sys.executable, "-m", "live.cli", "analyze", "--mrd", args.dir, "--json", str(out)]
         if args.calibration:
             cmd += ["--calibration", args.calibration]
         before = resource.getrusage(resource.RUSAGE_CHILDREN)

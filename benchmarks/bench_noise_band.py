@@ -29,12 +29,12 @@ SETS = (("lumped", 2900500), ("lumped", 2800500), ("rig", 2900500))
 def one(sim: str, seed: int, duration: float = 60.0) -> tuple[np.ndarray, np.ndarray]:
     """(envelope, banded) x (T_out rms, T_out mean, T_out max, elongation rms) [fraction of full scale]."""
     if sim == "lumped":
-        from slave.lumped_scenarios import record
+        from study.lumped_scenarios import record
         rec = record(None, seed=seed, level=0.2, duration=duration)
         tr = rec.truth
         model = SheathModel(K=tr["K"], compliance=tr["L"] / tr["EA"], wrap_shape=known_route(tr))
     else:
-        from slave.scenarios import record
+        from study.scenarios import record
         rec = record(None, seed=seed, level=0.2, duration=duration, rate_hz=1000.0)
         tr = rec.truth
         model = SheathModel(K=tr["K"], compliance=tr["compliance"], wrap_shape=known_route(tr))

@@ -110,7 +110,7 @@ def bare_pingpong(seconds: float) -> dict:
 def demo_roundtrip(timeout: float = 120.0) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         run = Path(tmp) / "run"
-        subprocess.run([sys.executable, "-m", "teleop.app.cli", "demo", "--protocol", "short",
+        subprocess.run([sys.executable, "-m", "live.cli", "demo", "--protocol", "short",
                         "--run-dir", str(run), "--timeout", str(timeout)], check=False, cwd=ROOT, capture_output=True,
                        timeout=timeout + 30, env=dict(os.environ, PYTHONUNBUFFERED="1"))
         s = json.loads((run / "summary.json").read_text())

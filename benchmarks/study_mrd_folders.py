@@ -4,7 +4,7 @@ The study of docs/findings.md, Finding 4, session 28: the source repository (htt
 mis-tool-characterization, commit 03658b2; ODbL 1.0 / DbCL 1.0; "MRD Lab data repository, University of Minnesota";
 O'Neill, Stephens, Kowalewski, IEEE RA-L 3(4):3027-3034, 2018) holds fifteen folders of one rig; ../shared ships one.
 Point ``--repo`` at a clone's ``data/`` folder (read in place, nothing is copied). Each folder is split into its
-stroke windows (:func:`teleop.app.mrd.stroke_groups`: the roll and pitch folders stop the jaw at several positions) and
+stroke windows (:func:`study.mrd.stroke_groups`: the roll and pitch folders stop the jaw at several positions) and
 each window is analysed twice, in process and one thread:
 
 * the default calibration (the slowest, lightest run, no number from outside), with the folder fit and its
@@ -31,8 +31,8 @@ os.environ.update(ONE_THREAD)
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from teleop.app.mrd import default_mrd_dir, load_mrd_dir, runs_selection, stroke_groups  # noqa: E402
-from teleop.app.mrd_report import analyze_mrd  # noqa: E402
+from study.mrd import default_mrd_dir, load_mrd_dir, runs_selection, stroke_groups  # noqa: E402
+from study.mrd_report import analyze_mrd  # noqa: E402
 
 #: The one-run line of issue 11: median and worst-run torque RMSE [FS].
 LINE = (0.03, 0.10)

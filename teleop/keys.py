@@ -156,6 +156,6 @@ def parse_key(key_expr: str) -> tuple[str, Side, str]:
 
 def run_key(instrument: str) -> str:
     """``teleop/<instrument>/run``: queryable answering the run id the processes of a session share
-    (:mod:`teleop.app.discovery`)."""
+    (:mod:`live.discovery`)."""
     validate_instrument_id(instrument)
     return f"{ROOT}/{instrument}/run"

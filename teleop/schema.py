@@ -287,7 +287,7 @@ class TransportConfig:
     listen: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
     connect: tuple[str, ...] = ()
     multicast_scouting: bool = False
-    auto_connect: bool = True             # bare start: listen, or connect when the port is taken (teleop/app/discovery.py)
+    auto_connect: bool = True             # bare start: listen, or connect when the port is taken (live/discovery.py)
     run_id_timeout: float = 3.0           # [s] a connecting side asks its peers for the run id this long
     lock_master: bool = True              # slave: commands and master heartbeats from one master session only
     auth: TransportAuthConfig = field(default_factory=TransportAuthConfig)

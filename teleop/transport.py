@@ -133,7 +133,7 @@ def loopback_endpoint(port: int) -> str:
 
 #: Session.close waits this long [s] for zenoh's teardown, then leaves it to the exit (a bound, added while the
 #: recorder/router test failures of sessions 13-14 were blamed on zenoh; their cause was an ignored SIGINT,
-#: see teleop.app.cli.run)
+#: see live.cli.run)
 CLOSE_TIMEOUT_S = 5.0
 
 

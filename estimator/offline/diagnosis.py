@@ -409,7 +409,7 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         :func:`estimator.offline.diagnosis_fit.rest_offset`, or None), named (named by that reading: the models named
         nothing), x_in_m, x_out_m (|median| at the initial rest [m])}, ``model`` and
         ``base_model`` (refitted on the training block; enough to re-run both, see
-        :func:`teleop.app.report.write_report`), ``settings``, ``elapsed_s``.
+        :func:`study.report.write_report`), ``settings``, ``elapsed_s``.
 
     Raises
     ------

@@ -11,7 +11,7 @@ the types below, how the simulated rig switches it on and how a hidden-effect sc
   switch settings and the truth parameters of the recording (``settings``; default: as they are).
 
 The config schema and loader (teleop/effects_config.py), the default config's documentation, the
-simulated rig's switch list (slave/simulated_effects.py) and the scenario table (slave/scenarios.py)
+simulated rig's switch list (slave/simulated_effects.py) and the scenario table (study/scenarios.py)
 are derived from these; the simulators' kernels stay their own code. estimator/ imports nothing of them.
 """
 from __future__ import annotations

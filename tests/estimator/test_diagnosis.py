@@ -1,8 +1,8 @@
 """Diagnosis: recordings with one effect hidden at a seeded random magnitude in its realistic range
 must be diagnosed with the right identifier (naming the channel for the sensor effects), a held-out
 gain >= 0.3 and the magnitude within 25 %; clean recordings must give ``none``; an effect outside
-the catalogue must give ``unknown``. Two simulators: the project's rig (slave.scenarios, every
-catalogue id) and the independent lumped-mass simulator (slave.lumped_scenarios, a subset; the
+the catalogue must give ``unknown``. Two simulators: the project's rig (study.scenarios, every
+catalogue id) and the independent lumped-mass simulator (study.lumped_scenarios, a subset; the
 benchmark runs the full confusion matrix on both).
 
 Recordings are 45-60 s at 500 Hz here (the benchmark uses 90 s at 1 kHz and the lumped simulator's own
@@ -30,8 +30,8 @@ from estimator.offline.diagnosis_fit import (
     trimmed_ms,
 )
 from estimator.offline.effects import CATALOGUE, EFFECT_IDS, EQUIVALENT, route_shape
-from slave import lumped_scenarios
-from slave.scenarios import record
+from study import lumped_scenarios
+from study.scenarios import record
 from teleop.errors import DataError
 
 DUR, RATE = 45.0, 500.0
@@ -219,7 +219,7 @@ def test_progress_callback_and_bad_inputs():
 
 
 def test_report_writes_markdown_and_figures(clean_result, tmp_path):
-    from teleop.app.report import format_summary, write_report
+    from study.report import format_summary, write_report
     rec, res = clean_result
     path = write_report(res, rec.data, tmp_path / "rep")
     text = path.read_text()
@@ -289,7 +289,7 @@ def test_lumped_x_in_offset_the_models_leave_at_the_floor_is_named_by_the_initia
     assert res["rest_offset"]["named"] and res["rest_offset"]["reads"] == "sensor_offset:x_in"
     assert res["rest_offset"]["x_in_m"] == pytest.approx(rec.truth["parameters"]["offset"], rel=0.01)
     assert res["parameters"]["b_x_in"]["value"] == pytest.approx(rec.truth["parameters"]["offset"], rel=0.25)
-    from teleop.app.report import format_summary
+    from study.report import format_summary
     assert "named by the initial rest: x_in reads 36" in format_summary(res)
     twin = diagnose(lumped_scenarios.record(None, seed=4716102, level=0.2, duration=60.0).data, effects=cands)
     assert twin["cause"] == "none" and twin["rest_offset"]["reads"] is None and not twin["rest_offset"]["named"]
@@ -649,7 +649,7 @@ def test_a_joint_held_on_its_stop_is_reported_as_unable_to_show_a_lag_of_x_out()
     # lumped dev40 3919112 (session 27): a 42 ms x_out lag on a joint driven onto its stop in the first second and
     # held there; the lag's footprint (20 sigma on x_out against the clean twin) is that one rise, which no
     # validation block holds: the delay fitted to 0.3 % and S 0.95. The reading says so, and the printed summary
-    from teleop.app.analyze import format_diagnosis
+    from study.analyze import format_diagnosis
     rec = lumped_scenarios.record("sensor_lag:x_out", seed=3919112, level=0.8, duration=60.0)
     assert rec.truth["load"]["kind"] == "joint"
     res = diagnose(rec.data, effects=("sensor_lag:x_out", "sensor_offset:x_out"))
@@ -839,7 +839,7 @@ def test_lumped_stick_slip_the_models_leave_at_the_floor_names_stiction(monkeypa
     assert res["cause"] == "stiction", (res["stick_slip"], res["structure"])
     assert res["stick_slip"]["named"] and res["stick_slip"]["ratio"] >= res["settings"]["stick_slip_ratio"]
     assert res["stick_slip"]["samples"] == res["split"]["train"]
-    from teleop.app.report import format_summary
+    from study.report import format_summary
     assert "stick-slip check" in format_summary(res)
     twin = lumped_scenarios.record(None, seed=2504111, level=0.8, duration=60.0)
     res_twin = diagnose(twin.data, effects=cands)
@@ -864,7 +864,7 @@ def test_weak_stick_slip_with_a_stiction_fit_that_explains_a_tenth_names_stictio
     assert slip["named"] and slip["weak"]
     assert diagnosis.STICK_SLIP_WEAK <= slip["ratio"] < diagnosis.STICK_SLIP_RATIO
     assert res["candidates"]["stiction"]["score"] < res["settings"]["stick_slip_weak_score"]
-    from teleop.app.report import format_summary
+    from study.report import format_summary
     assert "two weak signs" in format_summary(res)
     twin = diagnose(lumped_scenarios.record(None, seed=3904113, level=0.8, duration=60.0).data, effects=cands)
     assert twin["cause"] == "none" and not twin["stick_slip"]["named"]
@@ -885,7 +885,7 @@ def test_a_clear_saw_tooth_overrules_a_named_effect_that_leaves_structure(monkey
     assert res["causes"] == ["stiction", "unknown"], slip
     assert slip["named"] and not slip["weak"] and slip["overruled"] == ["sensor_lag:T_in"]
     assert slip["ratio"] >= 3 * diagnosis.STICK_SLIP_RATIO
-    from teleop.app.report import format_summary
+    from study.report import format_summary
     assert "the models named sensor_lag:T_in, which left structure" in format_summary(res)
     twin = diagnose(lumped_scenarios.record(None, seed=4604111, level=0.8, duration=60.0).data, effects=cands)
     assert twin["causes"] == [] and twin["stick_slip"]["overruled"] == []
@@ -914,7 +914,7 @@ def test_a_fold_fitted_on_one_pull_does_not_judge_the_route(monkeypatch):
     res = diagnose(twin.data)
     assert res["cause"] == "none", res["structure"]
     assert res["split"]["judged_folds"][0].startswith("backward alone")
-    from teleop.app.report import split_text
+    from study.report import split_text
     assert "Judged on the backward alone" in split_text(res)
     assert max(res["structure"]["base"].values()) < diagnosis.STRUCTURE_RATIO
     drift = diagnose(lumped_scenarios.record("curvature_drift", seed=4402103, level=0.2, duration=60.0).data)

@@ -37,8 +37,8 @@ from estimator.offline.effects import (
 from estimator.offline.effects_kernels import distal_slide, route_shape, run_extended
 from estimator.online.distal import estimate_batch
 from estimator.sheath import SheathGeometry, SheathModel
-from slave.scenarios import protocol
 from slave.simulated import SimulatedRig
+from study.scenarios import protocol
 from teleop import config as C
 
 IDS = ("velocity_friction", "pretension", "curvature_drift", "tendon_stiffening", "stiction", "friction_offset",

@@ -11,7 +11,7 @@ import pytest
 
 from estimator.offline.pair import PairParams, fit_linear, fit_pair, predict_angle, rmse
 from estimator.online.joint_batch import predict_pair_angle
-from teleop.app.kaist import cycles, default_kaist_dir, load_all
+from study.kaist import cycles, default_kaist_dir, load_all
 
 KAIST_DIR = default_kaist_dir()
 pytestmark = [pytest.mark.kaist, pytest.mark.skipif(

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from teleop.app.cli import main as teleop_main
+from live.cli import main as teleop_main
 from teleop.config import load_config
 from teleop.keys import heartbeat_key
 from teleop.messages import Heartbeat, SideState
@@ -191,7 +191,7 @@ def run_fault(tmp: Path, name: str, *, inject: dict[str, str] | None = None, sig
     port, port_m = free_tcp_ports(2)
     ep = loopback_endpoint(port)
     inject = inject or {}
-    base = [sys.executable, "-m", "teleop.app.cli"]
+    base = [sys.executable, "-m", "live.cli"]
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     procs: dict[str, subprocess.Popen] = {}
     logs = {s: run_dir / f"{s}.log" for s in ("slave", "master")}

@@ -12,9 +12,9 @@ from pathlib import Path
 
 
 def start(args: list[str], log: Path, env: dict | None = None) -> subprocess.Popen:
-    """``python -m teleop.app.cli *args`` with stdout and stderr in ``log`` (unbuffered; ``env`` added)."""
+    """``python -m live.cli *args`` with stdout and stderr in ``log`` (unbuffered; ``env`` added)."""
     with open(log, "w") as fh:
-        return subprocess.Popen([sys.executable, "-m", "teleop.app.cli", *args], stdout=fh, stderr=subprocess.STDOUT,
+        return subprocess.Popen([sys.executable, "-m", "live.cli", *args], stdout=fh, stderr=subprocess.STDOUT,
                                 env=dict(os.environ, PYTHONUNBUFFERED="1", **(env or {})))
 
 

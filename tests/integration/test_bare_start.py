@@ -37,7 +37,7 @@ def test_bare_master_then_bare_slave_find_each_other_and_share_one_run(tmp_path)
     port = free_tcp_port()
     cfg.write_text(CONFIG.format(runs=runs, port=port), encoding="utf-8")
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    cmd = [sys.executable, "-m", "teleop.app.cli"]
+    cmd = [sys.executable, "-m", "live.cli"]
     with open(tmp_path / "master.log", "w") as mlog, open(tmp_path / "slave.log", "w") as slog:
         master = subprocess.Popen(cmd + ["master", "--config", str(cfg), "--protocol", "short", "--max-duration", "60"],
                                   stdout=mlog, stderr=subprocess.STDOUT, env=env)

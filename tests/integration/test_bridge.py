@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from teleop.app.demo import PAPER_BOUNDS
+from live.demo import PAPER_BOUNDS
 
 pytestmark = pytest.mark.integration
 SIM = Path(__file__).resolve().parents[2] / "configs" / "sim.yaml"
@@ -24,7 +24,7 @@ def test_slave_bridge_and_master_as_three_processes_complete_the_paper_protocol(
     cfg.write_text(text.replace("  type: simulated  ", "  type: zenoh      ", 1).replace("  id: sim0", "  id: itbridge")
                    .replace("  rerun: save", '  rerun: "off"'))
     run_dir = tmp_path / "run"
-    proc = subprocess.run([sys.executable, "-m", "teleop.app.cli", "demo", "--config", str(cfg), "--run-dir", str(run_dir),
+    proc = subprocess.run([sys.executable, "-m", "live.cli", "demo", "--config", str(cfg), "--run-dir", str(run_dir),
                            "--protocol", "paper", "--timeout", "60"], capture_output=True, text=True, timeout=120)
     logs = {n: (run_dir / f"{n}.log").read_text() for n in ("slave", "master", "bridge")}
     assert all("Traceback" not in v for v in logs.values()), logs

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from teleop.app.cli import build_parser, endpoints, main
+from live.cli import build_parser, endpoints, main
 
 TYPO = "rig:\n  rate_hzz: 1000\n"
 
@@ -46,7 +46,7 @@ def test_bad_endpoint(tmp_path, capsys):
 
 
 def test_analyze_missing_file(tmp_path, capsys):
-    pytest.importorskip("teleop.app.analyze", reason="teleop.app.analyze is being written by another engineer")
+    pytest.importorskip("study.analyze", reason="study.analyze is being written by another engineer")
     assert main(["analyze", str(tmp_path / "missing.csv")]) == 2
     assert "missing.csv" in one_error_line(capsys)
 
@@ -54,7 +54,7 @@ def test_analyze_missing_file(tmp_path, capsys):
 def test_console_script_exit_code_and_single_line(tmp_path):
     cfg = tmp_path / "typo.yaml"
     cfg.write_text(TYPO)
-    proc = subprocess.run([sys.executable, "-m", "teleop.app.cli", "slave", "--config", str(cfg)],
+    proc = subprocess.run([sys.executable, "-m", "live.cli", "slave", "--config", str(cfg)],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and proc.stderr.startswith("teleop: error: ") and "Traceback" not in proc.stderr

@@ -170,7 +170,7 @@ def test_config_typo_one_line_exit_2_on_both_sides(tmp_path):
     cfg = tmp_path / "typo.yaml"
     cfg.write_text("slave:\n  watchdog_mss: 50\n")
     for side in ("slave", "master"):
-        proc = subprocess.run([sys.executable, "-m", "teleop.app.cli", side, "--config", str(cfg),
+        proc = subprocess.run([sys.executable, "-m", "live.cli", side, "--config", str(cfg),
                                "--run-dir", str(tmp_path / side)], capture_output=True, text=True, timeout=60)
         assert proc.returncode == 2 and "Traceback" not in proc.stderr
         lines = proc.stderr.strip().splitlines()

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from live.cli import main
 from slave.calibration_file import load_calibration
-from teleop.app.cli import main
 from teleop.config import load_config
 from teleop.errors import CalibrationError
 
@@ -32,7 +32,7 @@ def quiet_config(tmp_path: Path, ident: str) -> Path:
 def test_three_joint_demo_end_to_end_over_zenoh(tmp_path):
     cfg = quiet_config(tmp_path, "itjoints")
     run_dir = tmp_path / "run"
-    proc = subprocess.run([sys.executable, "-m", "teleop.app.cli", "demo", "--config", str(cfg), "--run-dir", str(run_dir),
+    proc = subprocess.run([sys.executable, "-m", "live.cli", "demo", "--config", str(cfg), "--run-dir", str(run_dir),
                            "--timeout", "50"], capture_output=True, text=True, timeout=90)
     logs = proc.stderr + (run_dir / "slave.log").read_text() + (run_dir / "master.log").read_text()
     assert "Traceback" not in logs, logs[-3000:]

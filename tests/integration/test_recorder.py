@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from teleop.app.record import read_messages
+from live.record import read_messages
 from teleop.codec import decode
 from teleop.publish_log import read_publish_attempts, read_publish_log
 from teleop.recording import read_measured_csv

@@ -46,7 +46,7 @@ def write_config(tmp_path: Path, ident: str, rerun: str = "off") -> Path:
 def test_demo_runs_both_processes_and_writes_the_summary(tmp_path):
     cfg = write_config(tmp_path, "itdemo", rerun="save")
     run_dir = tmp_path / "run"
-    proc = subprocess.run([sys.executable, "-m", "teleop.app.cli", "demo", "--config", str(cfg), "--protocol", "short",
+    proc = subprocess.run([sys.executable, "-m", "live.cli", "demo", "--config", str(cfg), "--protocol", "short",
                            "--run-dir", str(run_dir), "--timeout", "40"], capture_output=True, text=True, timeout=60)
     assert proc.returncode in (0, 1), proc.stderr
     assert "Traceback" not in proc.stderr + (run_dir / "slave.log").read_text() + (run_dir / "master.log").read_text()

@@ -2,7 +2,7 @@
 
 In-process (deterministic) version of the two-process loop: a :class:`MasterNode` and a
 :class:`SlaveNode` each with its own zenoh session (peer mode, 127.0.0.1, multicast off), the
-master's commands and the slave's estimates passed through a :class:`teleop.app.faults.FaultInjector`
+master's commands and the slave's estimates passed through a :class:`live.faults.FaultInjector`
 (20 ms each way = 40 ms round trip, 10 % of the messages lost, seeded). Both nodes and both injectors
 run on one FakeClock; after each step the test waits until zenoh has delivered every message the
 injector released (it waits for delivery, never for time), so a run is the same every time.
@@ -21,11 +21,11 @@ import numpy as np
 import pytest
 
 from estimator.sheath import SheathModel
+from live.faults import FaultInjector
 from master.device import DeviceState
 from master.node import MasterLinks, MasterNode
 from slave.node import SlaveLinks, SlaveNode
 from slave.simulated import SimulatedRig
-from teleop.app.faults import FaultInjector
 from teleop.clock import FakeClock
 from teleop.config import config_from_dict
 from teleop.keys import command_key, estimate_key, heartbeat_key

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from estimator.sheath import SheathGeometry
-from slave.scenarios import EFFECT_IDS, realistic_range, record
 from slave.simulated import SimulatedRig
+from study.scenarios import EFFECT_IDS, realistic_range, record
 from teleop import config as C
 
 L, ANGLE, MU, EA = 1.5, 2.0 * math.pi, 0.1, 15000.0

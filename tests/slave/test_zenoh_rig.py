@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from live.bridge import RigBridge
 from master.devices import DEVICE_TYPES, make_device
 from master.simulated import ScriptedOperator
 from slave.joint_rig import SimulatedInstrument
@@ -15,7 +16,6 @@ from slave.rig import RigInputError
 from slave.rigs import RIG_TYPES, make_rig
 from slave.simulated import SimulatedRig
 from slave.zenoh_rig import ZenohInstrument, ZenohRig
-from teleop.app.bridge import RigBridge
 from teleop.clock import FakeClock
 from teleop.config import load_config
 from teleop.errors import ConfigError, DeviceError, TransportError

@@ -10,9 +10,9 @@ import pytest
 
 from estimator.offline import effects as catalogue
 from estimator.offline.effects import Effect, Parameter, RigSwitch, ScenarioKnob, Setting
-from slave import scenarios
 from slave.simulated import SimulatedRig
 from slave.simulated_effects import IMPLEMENTED
+from study import scenarios
 from teleop.config import Config, EffectsConfig, EffectSwitch, config_from_dict, config_to_dict, load_config
 from teleop.effects_config import effect_ranges, effects_block
 from teleop.errors import ConfigError

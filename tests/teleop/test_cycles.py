@@ -92,7 +92,7 @@ def test_promote_threads_puts_the_loop_above_its_helpers_and_demote_undoes_it():
 
 
 def test_machine_steal_reads_the_steal_column_and_the_demo_prints_it(tmp_path):
-    from teleop.app.demo_run import machine_line
+    from live.demo_run import machine_line
     from teleop.realtime import machine_steal
     stat = tmp_path / "stat"
     hz = os.sysconf("SC_CLK_TCK")
@@ -108,7 +108,7 @@ def test_machine_steal_reads_the_steal_column_and_the_demo_prints_it(tmp_path):
 
 
 def test_the_demo_prints_overruns_with_their_stalls_skipped_deadlines_and_late_starts():
-    from teleop.app.demo_run import loop_lines
+    from live.demo_run import loop_lines
     pc = {"ticks": 11000, "rate_hz": 1000.0, "overruns": 22, "overrun_fraction": 0.002, "stalls": 7, "skipped": 31,
           "late_starts": 25, "max_lateness": 0.0081}
     line = loop_lines({"master": {"pacer": pc, "safe_events": 0}}, detailed=True)[0]

@@ -1,13 +1,13 @@
 """The sides' write-ahead journal (teleop/journal.py) and the recorder completing its recording from it
-(teleop/app/record_journal.py): rotation, torn records, incremental reading, recovery of exactly what
+(live/record_journal.py): rotation, torn records, incremental reading, recovery of exactly what
 was journaled and not received, on a real zenoh session pair on 127.0.0.1 (waits bounded)."""
 from __future__ import annotations
 
 import dataclasses
 import time
 
+from live.record import Recorder, read_messages
 from teleop import journal
-from teleop.app.record import Recorder, read_messages
 from teleop.codec import decode, encode
 from teleop.config import Config, TransportConfig
 from teleop.journal import Journal, JournalReader, journal_segments, pack_record, read_records

@@ -159,11 +159,11 @@ def test_security_settings_and_their_errors(pki, tmp_path):
 
 
 def test_the_slaves_links_hear_one_master_session_and_follow_a_new_one_after_its_token_goes():
-    from teleop.app.sides import slave_links
+    from live.sides import slave_links
     from teleop.keys import liveliness_key
     port = free_tcp_port()
     with Session(TransportConfig(listen=(loopback_endpoint(port),), connect=())) as slave:
-        slave.lock_master = True                             # what teleop.app.discovery sets from transport.lock_master
+        slave.lock_master = True                             # what live.discovery sets from transport.lock_master
         links = slave_links(slave, "sec4", None)
         with Session(TransportConfig(listen=(), connect=(loopback_endpoint(port),))) as master, \
                 Session(TransportConfig(listen=(), connect=(loopback_endpoint(port),))) as intruder:
@@ -191,7 +191,7 @@ def test_the_slaves_links_hear_one_master_session_and_follow_a_new_one_after_its
 
 
 def test_a_router_with_a_credentials_dictionary_routes_only_for_authorised_clients(pki):
-    from teleop.app.router import router_config
+    from live.router import router_config
     from teleop.config import config_from_dict
     from teleop.errors import TransportError
     ep = loopback_endpoint(free_tcp_port())

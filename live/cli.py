@@ -1,0 +1,209 @@
+"""The ``teleop`` command: ``teleop demo|master|slave|bridge|calibrate|analyze|devices``.
+
+:func:`main` takes an argument list and returns an exit code; argument parsing is separate
+(:func:`build_parser`) and every subcommand is a function of the parsed arguments. Exit codes:
+
+* 0   done;
+* 1   the run finished but failed its checks (``demo``: accuracy or process failure);
+* 2   bad input: unknown option, config typo, missing file, bad CSV... one line
+      ``teleop: error: <message>`` on stderr, no traceback;
+* 130 interrupted by Ctrl-C, 143 stopped by SIGTERM; recordings are closed and flushed either way.
+
+Shared flags: ``--config FILE`` (YAML over the defaults), ``--listen EP`` / ``--connect EP``
+(repeatable Zenoh endpoints such as ``tcp/127.0.0.1:7447``; given either, they replace both
+configured lists), ``--run-dir DIR`` (where recordings and stats go; default
+``<recording.dir>/<timestamp>``).
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import sys
+import threading
+from typing import NoReturn
+
+from live.sides import endpoints, run_master, run_slave
+from teleop.errors import TeleopError
+
+__all__ = ["build_parser", "main", "run_slave", "run_master", "endpoints"]
+
+PROG = "teleop"
+
+
+def _shared(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", metavar="FILE", help="YAML config over the defaults (configs/default.yaml)")
+    p.add_argument("--listen", metavar="EP", action="append",
+                   help="Zenoh endpoint to listen on, e.g. tcp/127.0.0.1:7447 (repeatable)")
+    p.add_argument("--connect", metavar="EP", action="append",
+                   help="Zenoh endpoint to connect to (repeatable)")
+    p.add_argument("--run-dir", metavar="DIR", help="directory for recordings and stats (default runs/<timestamp>)")
+    p.add_argument("-v", "--verbose", action="store_true", help="log state changes and details")
+
+
+def _inject_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--inject", metavar="SPEC", default=None,
+                   help="fault injection on this side's outgoing messages (tests), e.g. "
+                        "delay=30ms,drop=0.1,dup=0.05,reorder=0.05,seed=1 or corrupt=nan,stream=command,on=usr1 "
+                        "(live/faults.py)")
+
+
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The argument parser. ``argv`` decides whether ``study.analyze`` is imported (only for analyze)."""
+    parser = argparse.ArgumentParser(prog=PROG, description="Haptic teleoperation of tendon-sheath instruments.")
+    sub = parser.add_subparsers(dest="command",
+                                metavar="{demo,master,slave,record,router,bridge,calibrate,replay,analyze,devices}",
+                                required=True)
+
+    p = sub.add_parser("demo", help="both sides as two processes over Zenoh on 127.0.0.1, then a summary")
+    _shared(p)
+    p.add_argument("--protocol", default="paper,minor", help="operator protocol(s) (default paper,minor)")
+    p.add_argument("--timeout", type=float, default=50.0, help="give up on the processes after this [s]")
+    p.set_defaults(func=_cmd_demo)
+
+    p = sub.add_parser("slave", help="instrument side: reload or make the calibration, then follow commands and "
+                                     "estimate")
+    _shared(p)
+    p.add_argument("--recalibrate", action="store_true",
+                   help="calibrate at power-up even when <calibration.dir>/<instrument.id>.yaml exists (and replace it)")
+    p.add_argument("--exit-on-master-stop", action="store_true", help="finish when the master announces STOPPING")
+    p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
+    p.add_argument("--rerun", choices=("save", "spawn", "off"), default=None, help="override recording.rerun")
+    _inject_flag(p)
+    p.set_defaults(func=_cmd_slave)
+
+    p = sub.add_parser("master", help="operator side: device -> commands, estimate -> force")
+    _shared(p)
+    p.add_argument("--protocol", default="paper,minor",
+                   help="scripted operator protocol(s), comma separated: paper, minor, short")
+    _inject_flag(p)
+    p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
+    p.set_defaults(func=_cmd_master)
+
+    p = sub.add_parser("record", help="record every stream of the instrument over Zenoh (live/record.py)")
+    _shared(p)
+    p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
+    p.add_argument("--exit-when-done", action="store_true", help="finish once every side seen has gone")
+    p.add_argument("--rerun", choices=("save", "spawn", "off"), default=None, help="override recording.rerun")
+    p.set_defaults(func=lambda a: __import__("live.record", fromlist=["run_record"]).run_record(a))
+
+    p = sub.add_parser("router", help="a Zenoh router the sides and the recorder connect to (live/router.py)")
+    _shared(p)
+    p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
+    p.set_defaults(func=lambda a: __import__("live.router", fromlist=["run_router"]).run_router(a))
+
+    p = sub.add_parser("bridge", help="the simulated rig of --config behind the Zenoh rig interface (rig.type "
+                                      "zenoh on the slave), as its own process")
+    _shared(p)
+    p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
+    p.set_defaults(func=_cmd_bridge)
+
+    p = sub.add_parser("calibrate", help="joint-limit calibration of every tendon of the instrument (both "
+                                         "directions of a pair), saved as configs/calibration/<instrument>.yaml")
+    from live.calibrate import add_calibrate_arguments, run_calibrate
+    add_calibrate_arguments(p)
+    p.set_defaults(func=run_calibrate)
+
+    p = sub.add_parser("replay", help="play a recorded run back through the estimator and the Rerun view, "
+                                      "compared with the recorded estimate and the truth (live/replay.py)")
+    from live import replay
+    replay.add_arguments(p)
+    p.set_defaults(func=replay.main_replay)
+
+    p = sub.add_parser("devices", help="list HID devices (vendor/product id, usage page, usage, path)")
+    if "devices" in (sys.argv[1:] if argv is None else argv)[:1]:
+        from master import devices_list  # lazy: only `teleop devices` imports hidapi
+        devices_list.add_arguments(p)
+        p.set_defaults(func=devices_list.main_devices)
+    else:
+        p.set_defaults(func=None)
+
+    args = sys.argv[1:] if argv is None else argv
+    if "analyze" in args[:1]:
+        from study import analyze  # lazy: only `teleop analyze` pays for it
+        p = sub.add_parser("analyze", help="run the model against a recording")
+        analyze.add_arguments(p)
+        p.set_defaults(func=analyze.main_analyze)
+    else:
+        p = sub.add_parser("analyze", help="run the model against a recording (see `teleop analyze -h`)",
+                           add_help=False)
+        p.set_defaults(func=None)
+    return parser
+
+
+# ---- subcommands ---------------------------------------------------------------------------------
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from live.demo import main_demo
+    return main_demo(args)
+
+
+def _cmd_bridge(args: argparse.Namespace) -> int:
+    from live.bridge import run_bridge
+    return run_bridge(args)
+
+
+def _cmd_slave(args: argparse.Namespace) -> int:
+    return run_slave(args)
+
+
+def _cmd_master(args: argparse.Namespace) -> int:
+    return run_master(args)
+
+
+# ---- entry point ---------------------------------------------------------------------------------
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``teleop`` with ``argv`` (default ``sys.argv[1:]``); returns the exit code."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        parser = build_parser(argv)
+    except ImportError as e:
+        print(f"{PROG}: error: analyze is not available ({e})", file=sys.stderr)
+        return 2
+    args = parser.parse_args(argv)
+    if args.func is None:
+        print(f"{PROG}: error: {args.command} is not available in this build", file=sys.stderr)
+        return 2
+    logging.basicConfig(level=logging.INFO if getattr(args, "verbose", False) or args.command in ("slave", "master",
+                                                                                                     "bridge")
+                        else logging.WARNING,
+                        format=f"[{args.command}] %(levelname)s %(message)s", stream=sys.stderr)
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt as e:   # Ctrl-C, or SIGTERM inside raise_on_sigterm (Terminated)
+        from teleop.recording import Terminated
+        stopped = isinstance(e, Terminated)
+        print(f"{PROG}: {'terminated' if stopped else 'interrupted'}", file=sys.stderr)
+        return 143 if stopped else 130
+    except (TeleopError, ValueError, FileNotFoundError) as e:
+        msg = " ".join(str(e).split()) or type(e).__name__
+        print(f"{PROG}: error: {msg}", file=sys.stderr)
+        return 2
+
+
+#: after main has returned (its files flushed and closed), the process ends within this many seconds [s] even
+#: if a library's teardown at interpreter exit blocks (a zenoh runtime; see teleop.transport.CLOSE_TIMEOUT_S)
+EXIT_GRACE_S = 10.0
+
+
+def run() -> NoReturn:
+    """The ``teleop`` program (console script and ``python -m live.cli``): :func:`main`, then exit with
+    its code; a watchdog ends the process with that code EXIT_GRACE_S after main returned if the interpreter's
+    own exit has not (a non-daemon thread or a native runtime that does not stop). SIGINT stops it cleanly
+    (KeyboardInterrupt, exit 130) even when it was started with SIGINT ignored, as a non-interactive shell
+    starts a background job (session 14: the recorder and router tests failed so when `make test` ran
+    in the background - the "flake" of session 13)."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    code = main()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    watchdog = threading.Timer(EXIT_GRACE_S, os._exit, (code,))
+    watchdog.daemon = True
+    watchdog.start()
+    sys.exit(code)
+
+
+if __name__ == "__main__":  # python -m live.cli
+    run()

@@ -1,0 +1,228 @@
+"""What the demo of every instrument shares (:mod:`live.demo`; a joint instrument's evaluation: :mod:`live.demo_joints`):
+the two processes over Zenoh on 127.0.0.1, and the pieces of the summary that do not depend on the
+instrument.
+
+* :func:`run_processes`: the slave (``python -m live.cli slave``) listens on a free TCP port (or
+  the first ``--listen``); once the port accepts connections the master connects. When the master
+  has finished its protocol it announces STOPPING and the slave exits too. Either running past
+  ``--timeout`` is stopped with SIGTERM (recordings are flushed) and reported, as is a non-zero exit;
+  the recorder gets :data:`RECORDER_GRACE` after the sides, past ``--timeout`` if need be.
+  With ``rig.type: zenoh`` a third process, ``teleop bridge``, runs the simulated rig behind the
+  Zenoh rig interface and the slave connects to it.
+* :func:`full_scale_errors`: max and mean of |estimate - truth| over the range of the truth.
+* :func:`master_console_line`, :func:`loop_lines`, :func:`machine_line`, :func:`verdict_lines`: the lines on the master's
+  console, on both loops and the link, and on the checks.
+* :func:`finish`: checks, problems and wall time into the summary, ``summary.json``, the printed
+  table, the exit code.
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+__all__ = ["run_processes", "read_json", "full_scale_errors", "master_console_line", "loop_lines", "machine_line",
+           "verdict_lines", "finish"]
+
+
+def full_scale_errors(est: np.ndarray, true: np.ndarray) -> tuple[float, float]:
+    """(max, mean) of ``|est - true|`` divided by the range of ``true`` [-]; NaN when the range is 0.
+
+    est, true : ndarray, shape (n_samples,), same unit.
+    """
+    fs = float(np.ptp(true))
+    if fs <= 0:
+        return math.nan, math.nan
+    err = np.abs(est - true)
+    return float(err.max() / fs), float(err.mean() / fs)
+
+
+def read_json(path: Path) -> dict:
+    """The JSON object in ``path``; {} when the file is missing (a process that did not get that far)."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return {}
+
+
+def master_console_line(m: dict) -> str:
+    """The master's console over the run from its stats: engagements, clutches, alignment refusals,
+    safe events, the largest rendered force against the limit."""
+    return (f"master console: engaged {m.get('engage_count', 0)} time(s), clutches {m.get('clutches', 0)}, "
+            f"align refusals {m.get('align_refusals', 0)}, safe events {m.get('safe_events', 0)}, "
+            f"max |force| {m.get('max_abs_force', 0.0):.2f} N (limit {m.get('force_limit', 0.0):g} N)")
+
+
+def loop_lines(s: dict, *, detailed: bool) -> list[str]:
+    """One line per side (cycles, rate, overruns, safe events), then the round trip when echoes were
+    seen (p50, p99); ``detailed`` adds each loop's stalls (overruns that lost a whole period: one per
+    stall, :class:`teleop.clock.Pacer`), skipped deadlines, late starts, worst lateness and the round
+    trip's maximum."""
+    lines = []
+    for side in ("master", "slave"):
+        st = s.get(side, {})
+        pc = st.get("pacer", {})
+        worst = f"worst lateness {1e3 * pc.get('max_lateness', 0):.1f} ms, " if detailed else ""
+        stalls = (f"{pc['stalls']} of them stalls > 1 period ({pc.get('skipped', 0)} deadlines skipped), "
+                  f"{pc.get('late_starts', 0)} late starts > 1/2 period, " if detailed and "stalls" in pc else "")
+        lines.append(f"{side:6s} loop: {pc.get('ticks', 0)} cycles at {pc.get('rate_hz', 0):.0f} Hz, "
+                     f"{pc.get('overruns', 0)} overruns ({100 * pc.get('overrun_fraction', 0):.2f} %), "
+                     f"{stalls}{worst}safe events {st.get('safe_events', 0)}")
+    line = machine_line(s)
+    if line and detailed:
+        lines.append(line)
+    lat = s.get("master", {}).get("latency_rtt", {})
+    if lat.get("n") and detailed:
+        lines.append(f"round trip (command -> estimate echo): p50 {lat['p50_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms, "
+                     f"max {lat['max_ms']:.2f} ms over {lat['n']} echoes")
+    elif lat.get("n"):
+        lines.append(f"round trip: p50 {lat['p50_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms over {lat['n']} echoes")
+    return lines
+
+
+def machine_line(s: dict) -> str | None:
+    """The machine under both loops: the hypervisor's steal during each loop (CPU time a virtual
+    machine lost to its host: stalls that stop every process at once, which no priority prevents)
+    and the load average at start and end; None when the stats have no ``pacer.machine``."""
+    parts = []
+    for side in ("master", "slave"):
+        m = s.get(side, {}).get("pacer", {}).get("machine")
+        if not m:
+            continue
+        steal = "unknown" if m.get("steal_ms") is None else f"{m['steal_ms']:.0f} ms"
+        load = "" if m.get("load_start") is None else f", load {m['load_start']:.1f} -> {m['load_end']:.1f}"
+        parts.append(f"{side} {steal} in {m.get('loop_s', 0):.1f} s{load}")
+    if not parts:
+        return None
+    cpus = next((s[k]["pacer"]["machine"].get("cpus") for k in ("master", "slave")
+                 if s.get(k, {}).get("pacer", {}).get("machine")), None)
+    return f"machine steal (VM stalls, {cpus} CPUs) during the loops: " + "; ".join(parts)
+
+
+def verdict_lines(s: dict) -> list[str]:
+    """``[PASS]``/``[FAIL]`` per check, then ``[FAIL]`` per problem."""
+    lines = [f"[{'PASS' if ok else 'FAIL'}] {name}" for name, ok in s.get("checks", {}).items()]
+    lines += [f"[FAIL] {p}" for p in s.get("problems", [])]
+    return lines
+
+
+def finish(summary: dict, checks: dict[str, bool], problems: list[str], t0: float, run_dir: Path,
+           fmt: Callable[[dict], str]) -> int:
+    """Complete ``summary`` (checks, problems, wall time since ``t0`` [s, monotonic], ok), write
+    ``run_dir/summary.json``, print ``fmt(summary)`` and the wall time; 0 when ok, else 1."""
+    summary["checks"] = checks
+    summary["problems"] = problems
+    summary["wall_time_s"] = time.monotonic() - t0
+    summary["ok"] = not problems and all(summary["checks"].values())
+    (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    print(fmt(summary))
+    print(f"wall time {summary['wall_time_s']:.1f} s")
+    return 0 if summary["ok"] else 1
+
+
+#: [s] once both sides have ended, the recorder gets at least this long to finish (even past ``--timeout``):
+#: it runs niced and, on a loaded machine, writes the last messages, the journals' recovery and its
+#: figure well after the sides (seen: 22 s after them with two CPU hogs and a load average of 7.7)
+RECORDER_GRACE = 20.0
+
+
+def _wait_listening(port: int, proc: subprocess.Popen, deadline: float) -> bool:
+    from teleop.transport import accepts_connections
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            return False
+        if accepts_connections(port):
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def _stop(proc: subprocess.Popen) -> None:
+    """SIGTERM (the child flushes its recordings), then SIGKILL after 5 s."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(5.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, bridge: bool = False) -> None:
+    """Slave and master as two processes with ``cfg_file`` (module docstring); what went wrong is
+    appended to ``problems``. ``args``: ``listen``, ``timeout`` [s], ``protocol``. ``bridge``: the rig
+    is ``rig.type: zenoh``, so ``teleop bridge`` runs the simulated rig as a third process on its own
+    loopback port, which the slave connects to (stopped once slave and master are done)."""
+    from teleop.transport import free_tcp_port, loopback_endpoint
+    if args.listen:
+        ep = args.listen[0]
+        port = int(ep.rsplit(":", 1)[1])
+    else:
+        port = free_tcp_port()
+        ep = loopback_endpoint(port)
+    timeout = float(args.timeout)
+    base = [sys.executable, "-m", "live.cli"]
+    common = ["--config", str(cfg_file), "--run-dir", str(run_dir), "--max-duration", f"{timeout:g}"]
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    deadline = time.monotonic() + timeout
+    procs: list[tuple[str, subprocess.Popen]] = []
+    rig_link: list[str] = []
+    with open(run_dir / "slave.log", "w") as slog, open(run_dir / "master.log", "w") as mlog, \
+            open(run_dir / "bridge.log", "w") if bridge else contextlib.nullcontext() as blog:
+        try:
+            from live.record import start_recorder  # `teleop record` first: it hears every message
+            recorder, rec_link = start_recorder(base, common, run_dir, env, deadline)
+            procs.append(("recorder", recorder))
+            if rec_link is None:
+                problems.append(f"the recorder did not start (see {run_dir}/recorder.log)")
+                return
+            if bridge:
+                port_b = free_tcp_port()
+                ep_b = loopback_endpoint(port_b)
+                rig = subprocess.Popen(base + ["bridge", "--listen", ep_b, "--config", str(cfg_file), "--run-dir",
+                                               str(run_dir), "--max-duration", f"{timeout:g}"],
+                                       stdout=blog, stderr=subprocess.STDOUT, env=env)
+                procs.append(("bridge", rig))
+                if not _wait_listening(port_b, rig, deadline):
+                    problems.append(f"the bridge did not listen on {ep_b} (see {run_dir}/bridge.log)")
+                    return
+                rig_link = ["--connect", ep_b]
+            slave = subprocess.Popen(base + ["slave", "--listen", ep, "--exit-on-master-stop"] + rig_link + rec_link + common,
+                                     stdout=slog, stderr=subprocess.STDOUT, env=env)
+            procs.append(("slave", slave))
+            if not _wait_listening(port, slave, deadline):
+                problems.append(f"the slave did not listen on {ep} (see {run_dir}/slave.log)")
+                return
+            master = subprocess.Popen(base + ["master", "--connect", ep, "--protocol", args.protocol] + rec_link + common,
+                                      stdout=mlog, stderr=subprocess.STDOUT, env=env)
+            procs.append(("master", master))
+            print(f"slave and master running on {ep} (calibration, then protocol {args.protocol}) ...", flush=True)
+            for name, p in procs[::-1]:
+                if name == "bridge":
+                    continue                 # serves until stopped below
+                wait = deadline - time.monotonic()
+                if name == "recorder":       # the sides are done; a niced recorder on a busy machine catches up
+                    wait = max(wait, RECORDER_GRACE)
+                try:
+                    rc = p.wait(max(0.1, wait))
+                except subprocess.TimeoutExpired:
+                    extra = f" and {RECORDER_GRACE:g} s after the sides" if name == "recorder" else ""
+                    problems.append(f"the {name} did not finish within --timeout {timeout:g} s{extra}; stopped")
+                    _stop(p)
+                    rc = p.returncode
+                if rc != 0:
+                    problems.append(f"the {name} exited with code {rc} (see {run_dir}/{name}.log)")
+            from live.record import summary_line
+            print(summary_line(run_dir / "recorder"), flush=True)
+        finally:
+            for _, p in procs:
+                _stop(p)

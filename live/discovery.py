@@ -1,0 +1,195 @@
+"""Bare start: processes of one session find each other on loopback and share one run id.
+
+``teleop slave`` and ``teleop master`` (and ``teleop record``) started without ``--listen`` or
+``--connect`` in two terminals, in either order:
+
+1. **Who listens** (:func:`open_auto_session`): the first process opens the configured
+   ``transport.listen`` endpoints (default ``tcp/127.0.0.1:7447``). A later one finds the port taken
+   ("Address already in use"), connects to those endpoints instead and listens on an ephemeral port
+   of the same kind (``tcp/127.0.0.1:0``), so that gossip scouting lets a third process (the
+   recorder) open a direct link to it too. Flags, ``transport.auto_connect: false``, a client or an
+   empty listen list: the configured endpoints as they are (a router deployment).
+2. **Which run** (:func:`agree_run_id`): every process answers the query ``teleop/<id>/run`` with its
+   run id. The one that got the port (or was given ``--run-dir``) makes the id, a timestamp; one that
+   connected asks its peers for up to ``transport.run_id_timeout`` seconds and takes their answer.
+   All of them then write into ``<recording.dir>/<run id>/`` (different file names per process).
+
+Two processes started within the same instant with nobody listening beforehand can still pick two
+ids (each asks, nobody has one yet); the listener rule makes that impossible on one machine.
+"""
+from __future__ import annotations
+
+import logging
+import re
+import time
+from pathlib import Path
+
+import zenoh
+
+from teleop.config import Config
+from teleop.entity import Entity, zenoh_error_text
+from teleop.errors import TransportError
+from teleop.keys import run_key
+from teleop.transport import Session, zenoh_config
+
+__all__ = ["RunIdServer", "agree_run_id", "new_run_id", "open_auto_session", "side_run_dir", "side_session"]
+
+log = logging.getLogger("live.discovery")
+_RUN_ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}")
+_IN_USE = ("Address already in use", "os error 98", "AddrInUse")
+
+
+def _with_port(endpoint: str, port: int) -> str:
+    head, sep, _ = endpoint.rpartition(":")
+    if not sep or "/" not in head:
+        raise TransportError(f"transport.listen: {endpoint!r} has no port to replace")
+    return f"{head}:{int(port)}"
+
+
+def _describe(listen, connect) -> str:
+    return f"listen: {', '.join(listen) or 'none'}; connect: {', '.join(connect) or 'none'}"
+
+
+def _open(cfg: Config, listen, connect, clock) -> Session:
+    try:
+        return Session(zenoh_config(cfg.transport, listen=tuple(listen), connect=tuple(connect)), clock=clock)
+    except TransportError as e:
+        raise TransportError(f"{e} ({_describe(listen, connect)})") from None
+
+
+def open_auto_session(cfg: Config, listen: tuple[str, ...] | None = None, connect: tuple[str, ...] | None = None,
+                      clock=None) -> tuple[Session, str]:
+    """Open this process's session (module docstring, step 1).
+
+    Parameters
+    ----------
+    cfg : Config
+        ``transport`` (mode, listen, connect, auto_connect, auth, tls).
+    listen, connect : tuple of str, optional
+        The ``--listen``/``--connect`` flags (either given: used as they are, no automatic choice).
+    clock : Clock, optional
+
+    Returns
+    -------
+    (Session, role)
+        ``role`` is ``"listening"`` (got the configured port), ``"connected"`` (the port was taken:
+        connected to it) or ``"configured"`` (endpoints used as given).
+
+    Raises
+    ------
+    TransportError
+        The session cannot be opened (message names the endpoints tried).
+    """
+    t = cfg.transport
+    if listen is not None or connect is not None:
+        return _open(cfg, listen or (), connect or (), clock), "configured"
+    if not t.auto_connect or t.mode != "peer" or not t.listen:
+        return _open(cfg, t.listen, t.connect, clock), "configured"
+    try:
+        return _open(cfg, t.listen, t.connect, clock), "listening"
+    except TransportError as e:
+        if not any(s in str(e) for s in _IN_USE):
+            raise
+    ephemeral = tuple(_with_port(ep, 0) for ep in t.listen)
+    log.info("%s in use: connecting to it", ", ".join(t.listen))
+    return _open(cfg, ephemeral, tuple(t.listen) + tuple(t.connect), clock), "connected"
+
+
+def new_run_id(base: str | Path) -> str:
+    """A fresh ``YYYYmmdd-HHMMSS[-n]`` id with no directory of that name in ``base`` yet."""
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    rid, n = stamp, 1
+    while (Path(base) / rid).exists():
+        rid, n = f"{stamp}-{n}", n + 1
+    return rid
+
+
+class RunIdServer(Entity):
+    """Answers queries on ``teleop/<id>/run`` with this process's run id (UTF-8)."""
+
+    def __init__(self, session: Session, instrument: str, run_id: str):
+        super().__init__(session, run_key(instrument))
+        self.run_id = run_id
+        self._declare(session.zenoh_session.declare_queryable, self.key, self._on_query)
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        try:
+            query.reply(self.key, self.run_id.encode())
+        except zenoh.ZError as e:   # pragma: no cover - the querier went away
+            log.debug("run id reply failed: %s", zenoh_error_text(e))
+
+
+def ask_run_id(session: Session, instrument: str, timeout: float) -> str | None:
+    """The run id a peer answers on ``teleop/<id>/run`` within ``timeout`` [s], or None."""
+    deadline = time.monotonic() + timeout
+    key = run_key(instrument)
+    while True:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            return None
+        for reply in session.zenoh_session.get(key, timeout=max(0.05, min(0.5, left))):
+            if reply.ok is not None:
+                rid = reply.ok.payload.to_bytes().decode("utf-8", "replace")
+                if _RUN_ID.fullmatch(rid) and ".." not in rid:
+                    return rid
+                log.warning("ignored a malformed run id %r from a peer", rid)
+        time.sleep(0.05)
+
+
+def agree_run_id(session: Session, cfg: Config, role: str, given: str | None = None) -> str:
+    """The run id of this process, served on ``teleop/<id>/run`` from now on (module docstring, step 2).
+
+    Parameters
+    ----------
+    session : Session
+    cfg : Config
+        ``instrument.id``, ``recording.dir``, ``transport.run_id_timeout`` [s].
+    role : str
+        From :func:`open_auto_session`; ``"listening"`` makes a new id without asking.
+    given : str, optional
+        An id fixed by the caller (the name of ``--run-dir``): served, never asked for.
+    """
+    ident = cfg.instrument.id
+    rid = given
+    if rid is None and role != "listening":
+        rid = ask_run_id(session, ident, cfg.transport.run_id_timeout)
+        if rid is not None:
+            log.info("joined run %s", rid)
+    if rid is None:
+        rid = new_run_id(cfg.recording.dir)
+    session._track(RunIdServer(session, ident, rid))
+    return rid
+
+
+# ---- the hooks of `teleop slave|master|record` (live/sides.py, live/record.py) ----------------
+
+_ATTR = "_teleop_session"
+
+
+def side_session(cfg: Config, args, clock=None) -> Session:
+    """The session of a side process: the one :func:`side_run_dir` opened (its clock set to ``clock``),
+    else a new one (:func:`open_auto_session` with the ``--listen``/``--connect`` flags)."""
+    session = getattr(args, _ATTR, None)
+    if session is not None and not session.closed:
+        if clock is not None:
+            session.clock = clock
+        return session
+    listen = None if getattr(args, "listen", None) is None and getattr(args, "connect", None) is None else \
+        tuple(args.listen or ())
+    connect = None if listen is None else tuple(args.connect or ())
+    session, role = open_auto_session(cfg, listen, connect, clock)
+    session.lock_master = cfg.transport.lock_master     # read by live.sides when declaring the slave's links
+    setattr(args, _ATTR, session)
+    args._teleop_role = role
+    return session
+
+
+def side_run_dir(args, cfg: Config) -> Path:
+    """Open the side's session now (:func:`side_session`), agree the run id, create and return the
+    run directory: ``--run-dir`` when given, else ``<recording.dir>/<agreed id>``."""
+    session = side_session(cfg, args)
+    given = Path(args.run_dir).name if getattr(args, "run_dir", None) else None
+    rid = agree_run_id(session, cfg, getattr(args, "_teleop_role", "configured"), given)
+    run_dir = Path(args.run_dir) if given else Path(cfg.recording.dir) / rid
+    run_dir.mkdir(parents=True, exist_ok=True)
+    return run_dir

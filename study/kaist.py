@@ -1,0 +1,391 @@
+"""Importer for the KAIST flexible-endoscope recordings (antagonistic tendon pair) and similar data.
+
+The files (``sine_config_N.txt``, N the tube configuration in degrees) are described in
+``../shared/data/kaist-tsm/SOURCE.md``. They have **no licence**: this module reads them where they
+lie (or from a directory the user gives) and the project never copies them or per-sample data
+derived from them.
+
+The 8-column files are comma separated, no header, with a trailing comma, logged at 40 Hz with each
+time stamp repeated several times; as the source says, every row whose time equals the previous
+row's is dropped, which leaves about 510 rows. The reader is :func:`study.columns.read_table`: the
+same importer reads the longer 10-column KAIST recordings (about 2 kHz, repeated stamps, all-zero
+columns, a time reset) and other labs' CSV files through a column map
+(:func:`study.columns.parse_column_map`). Recordings faster than twice :data:`RATE_HZ` are
+averaged in blocks down to :data:`RATE_HZ` (the pair models are rate-independent).
+
+==== ============================================ =============== ============================
+col  meaning (8-column KAIST map)                 file unit       here
+==== ============================================ =============== ============================
+0    time                                         s               ``time`` [s]
+1    commanded joint angle (motor side)           deg             ``command`` [rad]
+2    commanded velocity                           unknown scale   ``velocity_cmd`` (raw)
+3    measured distal bending angle (EM tracker)   deg             ``angle`` [rad]
+4    tendon A tension, proximal load cell         N               ``T_a`` [N]
+5    tendon B tension, proximal load cell         N               ``T_b`` [N]
+6, 7 motor signals (probably mA)                  unknown         ``motor_a``, ``motor_b`` (raw)
+==== ============================================ =============== ============================
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import re
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from estimator.offline.pair import rmse
+from estimator.offline.pair_general import predict_shared
+from study.columns import ColumnMap, parse_column_map, read_table
+from teleop.errors import DataError
+
+__all__ = ["CONFIGS_DEG", "RATE_HZ", "KaistRecording", "default_kaist_dir", "find_kaist_dir", "find_configs",
+           "is_kaist_file", "kaist_path", "read_kaist", "load_all", "load_dir", "resample", "cycles", "split",
+           "load_kaist_input", "predict_kaist", "format_prediction"]
+
+#: Insertion-tube configurations shipped in ../shared/data/kaist-tsm (bend angle [deg]).
+CONFIGS_DEG = (0, 60, 120, 180, 240)
+#: Rate [Hz] the recordings are analysed at (the 40 Hz of the shipped files).
+RATE_HZ = 40.0
+_NAME = re.compile(r"sine_config_(\d+(?:\.\d+)?)\.txt$")
+# the source repository's own layout (optimization/selected/<N>.txt), read when a folder has no sine_config_<N>.txt
+_BARE = re.compile(r"(\d+(?:\.\d+)?)\.txt")
+_MISSING_HINT = "these tests need the unlicensed measurements, see docs/findings.md"
+
+
+@dataclass(frozen=True, eq=False)
+class KaistRecording:
+    """One configuration's recording; every array has shape (n_samples,), float64.
+
+    Attributes
+    ----------
+    config_deg : float, insertion-tube configuration N [deg] (file name or ``--bend``); an int when whole.
+    time : ndarray [s], strictly increasing.
+    command : ndarray [rad], commanded joint angle on the motor side (the proximal reference).
+    velocity_cmd : ndarray, commanded velocity, raw file value (scale unknown; nan when not mapped).
+    angle : ndarray [rad], measured distal bending angle.
+    T_a, T_b : ndarray [N], proximal tensions of tendons A (rises with + angle) and B.
+    motor_a, motor_b : ndarray, raw motor signals (probably mA; nan when not mapped).
+    source : str, the file read.
+    notes : tuple of str, what the importer did (columns used, rows dropped, resets, resampling).
+    """
+
+    config_deg: float
+    time: np.ndarray
+    command: np.ndarray
+    velocity_cmd: np.ndarray
+    angle: np.ndarray
+    T_a: np.ndarray
+    T_b: np.ndarray
+    motor_a: np.ndarray
+    motor_b: np.ndarray
+    source: str
+    notes: tuple = field(default=())
+
+    def __len__(self) -> int:
+        return int(self.time.shape[0])
+
+    @property
+    def pretension(self) -> tuple[float, float]:
+        """Tensions of tendons A and B at the first sample [N] (the preload, about 5 N)."""
+        return float(self.T_a[0]), float(self.T_b[0])
+
+    @property
+    def rate_hz(self) -> float:
+        """Median sample rate [Hz]."""
+        return float(1.0 / np.median(np.diff(self.time)))
+
+
+def default_kaist_dir() -> Path:
+    """``<repo>/../shared/data/kaist-tsm``, where the project expects the data by default."""
+    return Path(__file__).resolve().parents[1].parent / "shared" / "data" / "kaist-tsm"
+
+
+def kaist_path(directory: str | Path, config_deg: float) -> Path:
+    """Path of configuration ``config_deg`` [deg] inside ``directory``."""
+    return Path(directory) / f"sine_config_{_fmt(config_deg)}.txt"
+
+
+def _fmt(n: float) -> str:
+    return str(int(n)) if float(n).is_integer() else str(n)
+
+
+def _num(text: str) -> float:
+    v = float(text)
+    return int(v) if v.is_integer() else v
+
+
+def find_configs(directory: str | Path) -> list[tuple[float, Path]]:
+    """Every ``sine_config_<N>.txt`` in ``directory`` as (N [deg], path), sorted by N. A folder with no
+    such file is read in the source repository's layout instead (``optimization/selected/<N>.txt`` of
+    nhoyh/hysteresis_compensation_ROS, so that a clone is read in place): every ``<N>.txt``."""
+    d = Path(directory)
+    files = [p for p in d.iterdir() if p.is_file()] if d.is_dir() else []
+    for pattern in (_NAME, _BARE):
+        found = [(_num(m.group(1)), p) for p in files if (m := pattern.fullmatch(p.name))]
+        if found:
+            return sorted(found, key=lambda x: x[0])
+    return []
+
+
+def find_kaist_dir(path: str | Path | None = None) -> Path:
+    """The directory holding the KAIST files.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        A directory given by the user; default :func:`default_kaist_dir`.
+
+    Raises
+    ------
+    DataError
+        The directory does not exist or holds no ``sine_config_<N>.txt`` (or ``<N>.txt``) file.
+    """
+    d = Path(path) if path is not None else default_kaist_dir()
+    if not d.is_dir() or not find_configs(d):
+        raise DataError(f"KAIST data not found at {d}: {_MISSING_HINT}")
+    return d
+
+
+def is_kaist_file(path: str | Path | None) -> bool:
+    """True when the file name is ``sine_config_<N>.txt`` (the name alone decides)."""
+    return path is not None and _NAME.search(Path(path).name) is not None
+
+
+def resample(rec: KaistRecording, rate_hz: float = RATE_HZ) -> KaistRecording:
+    """Block means over bins of 1 / ``rate_hz`` seconds (empty bins dropped); ``rec`` itself when it
+    is not faster than twice ``rate_hz``. The note records the rates."""
+    if len(rec) < 3 or rec.rate_hz <= 2.0 * rate_hz:
+        return rec
+    b = np.floor((rec.time - rec.time[0]) * rate_hz).astype(np.int64)
+    starts = np.flatnonzero(np.r_[True, b[1:] != b[:-1]])
+    counts = np.diff(np.r_[starts, b.size])
+
+    def mean(x):
+        return np.add.reduceat(x, starts) / counts
+
+    names = ("time", "command", "velocity_cmd", "angle", "T_a", "T_b", "motor_a", "motor_b")
+    arrays = {n: mean(getattr(rec, n)) for n in names}
+    arrays["time"][0], arrays["command"][0], arrays["angle"][0] = rec.time[0], rec.command[0], rec.angle[0]
+    arrays["T_a"][0], arrays["T_b"][0] = rec.T_a[0], rec.T_b[0]       # the rest state stays the first sample
+    note = f"resampled from {rec.rate_hz:.0f} Hz to {rate_hz:.0f} Hz (block means; first sample kept)"
+    return KaistRecording(rec.config_deg, **arrays, source=rec.source, notes=rec.notes + (note,))
+
+
+def read_kaist(path: str | Path, config_deg: float | None = None, column_map: ColumnMap | None = None,
+               rate_hz: float | None = RATE_HZ) -> KaistRecording:
+    """Read one recording; degrees become radians (unless the map says rad), tensions stay in N.
+
+    Parameters
+    ----------
+    path : str or Path
+    config_deg : float, optional
+        Configuration [deg]; default: the N of a ``sine_config_<N>.txt`` name.
+    column_map : default the 8-column KAIST map (:data:`study.columns.KAIST_MAP`)
+    rate_hz : resample faster recordings to this rate (:func:`resample`); None keeps every sample
+
+    Raises
+    ------
+    DataError
+        Missing file; a malformed row (file:line, column); a required column all zero; fewer than 2
+        distinct time stamps; no N in the name and ``config_deg`` not given.
+    """
+    path = Path(path)
+    if config_deg is None:
+        m = _NAME.search(path.name)
+        if m is None:
+            raise DataError(f"{path}: file name is not sine_config_<N>.txt and no bend was given (--bend DEG)")
+        config_deg = _num(m.group(1))
+    tab = read_table(path, column_map)
+    k = math.pi / 180.0 if tab.column_map.units == "deg" else 1.0
+    d = tab.data
+    nan = np.full(d["time"].size, np.nan)
+    rec = KaistRecording(config_deg=config_deg, time=d["time"], command=d["command"] * k,
+                         velocity_cmd=d.get("velocity_cmd", nan), angle=d["angle"] * k, T_a=d["T_a"], T_b=d["T_b"],
+                         motor_a=d.get("motor_a", nan), motor_b=d.get("motor_b", nan), source=str(path),
+                         notes=tuple(tab.notes))
+    return resample(rec, rate_hz) if rate_hz else rec
+
+
+def load_dir(path: str | Path | None = None, column_map: ColumnMap | None = None,
+             rate_hz: float | None = RATE_HZ) -> tuple[list[KaistRecording], list[str]]:
+    """Every ``sine_config_<N>.txt`` of a directory, sorted by N, and one line per file that could not
+    be read (``"<file>: <why>"``), which is left out.
+
+    Raises
+    ------
+    DataError
+        The directory does not exist or holds no such file (:func:`find_kaist_dir`).
+    """
+    d = find_kaist_dir(path)
+    recs, problems = [], []
+    for n, p in find_configs(d):
+        try:
+            recs.append(read_kaist(p, n, column_map, rate_hz))
+        except DataError as e:
+            problems.append(str(e) if str(e).startswith(str(p)) else f"{p}: {e}")
+    return recs, problems
+
+
+def load_all(path: str | Path | None = None) -> list[KaistRecording]:
+    """Every configuration of :data:`CONFIGS_DEG`, in that order (the shipped set; strict).
+
+    Raises
+    ------
+    DataError
+        Directory not found (see :func:`find_kaist_dir`), a configuration file missing (all missing
+        ones named), or a malformed file.
+    """
+    d = find_kaist_dir(path)
+    missing = [kaist_path(d, n).name for n in CONFIGS_DEG if not kaist_path(d, n).is_file()]
+    if missing:
+        raise DataError(f"{d}: missing KAIST file(s) {', '.join(missing)}")
+    return [read_kaist(kaist_path(d, n), n) for n in CONFIGS_DEG]
+
+
+def cycles(rec: KaistRecording, arm_fraction: float = 0.5) -> list[slice]:
+    """Split a recording into its complete sine cycles of the command.
+
+    A cycle starts where the command crosses zero upward (the first one at sample 0 when the
+    recording starts at rest near zero, as the KAIST runs do); a crossing counts only after the
+    command went below ``-arm_fraction`` of its amplitude, so noise near zero cannot split a cycle.
+    The tail after the last crossing (an incomplete cycle) is left out.
+
+    Parameters
+    ----------
+    rec : KaistRecording
+    arm_fraction : float, in (0, 1)
+
+    Returns
+    -------
+    list of slice
+        Sample ranges of the complete cycles, in time order (2 for the KAIST runs, ~6.28 s each).
+    """
+    c = rec.command
+    amp = float(np.max(np.abs(c)))
+    if amp == 0.0:
+        return []
+    starts: list[int] = []
+    if abs(c[0]) < 0.05 * amp and c[min(len(c) - 1, 5)] >= c[0]:
+        starts.append(0)
+    armed = not starts and c[0] < 0
+    for k in range(1, len(c)):
+        if c[k] < -arm_fraction * amp:
+            armed = True
+        elif armed and c[k - 1] < 0 <= c[k]:
+            starts.append(k)
+            armed = False
+    return [slice(a, b) for a, b in zip(starts[:-1], starts[1:])]
+
+
+def split(rec: KaistRecording) -> tuple[slice, slice, str]:
+    """Training and test samples of a recording, and how they were chosen.
+
+    With >= 2 complete command cycles (:func:`cycles`): training = from the first sample to the end of
+    cycle 1, test = the later complete cycles. Otherwise the first half of the samples and the rest
+    (a recording whose command is not a repeated cycle).
+
+    Raises
+    ------
+    DataError
+        Fewer than 16 samples.
+    """
+    n = len(rec)
+    if n < 16:
+        raise DataError(f"{rec.source}: {n} samples, too few to split into training and test")
+    cs = cycles(rec)
+    if len(cs) >= 2:
+        return slice(0, cs[0].stop), slice(cs[1].start, cs[-1].stop), \
+            f"train: command cycle 1 (t < {rec.time[cs[0].stop]:.2f} s); test: cycles 2-{len(cs)}"
+    h = n // 2
+    return slice(0, h), slice(h, n), f"{len(cs)} complete command cycle(s): train on t < {rec.time[h]:.2f} s, test after"
+
+
+# ---- the command line's KAIST input and the prediction with a saved shared set -----------------
+
+def load_kaist_input(args: argparse.Namespace) -> list[KaistRecording]:
+    """The recordings of the KAIST mode: ``--kaist [DIR]`` (every configuration file of DIR,
+    :func:`find_configs`), a
+    ``sine_config_<N>.txt`` FILE (its whole directory) or another FILE with ``--bend DEG``; read with
+    ``--columns`` when given. Files that cannot be read get one line on stderr each and are left out.
+
+    Raises
+    ------
+    DataError
+        Nothing readable (the problems named), or FILE without ``--bend`` and not named
+        ``sine_config_<N>.txt``.
+    ConfigError
+        A malformed ``--columns`` map.
+    """
+    cmap = parse_column_map(args.columns) if args.columns is not None else None
+    if args.file is not None and (args.bend is not None or not is_kaist_file(args.file)):
+        if args.bend is None:
+            raise DataError(f"{args.file}: not named sine_config_<N>.txt: give its bend with --bend DEG")
+        recs: list[KaistRecording] = [read_kaist(args.file, args.bend, cmap)]
+        problems: list[str] = []
+    else:
+        directory = Path(args.file).parent if args.kaist is None else (args.kaist or None)
+        recs, problems = load_dir(directory, cmap)
+    for line in problems:
+        print(f"skipped {line}", file=sys.stderr)
+    if not recs:
+        raise DataError("no readable KAIST recording: " + "; ".join(problems))
+    for r in recs:
+        for note in r.notes:
+            if note.startswith("WARNING") or "no column map" in note:
+                print(f"{Path(r.source).name}: {note}", file=sys.stderr)
+    return recs
+
+
+def predict_kaist(recs: list[KaistRecording], params_path: str | Path) -> dict:
+    """Predict every recording with the shared set saved by ``--json`` (``shared.params``); nothing
+    is refitted (the pretension and the angle offset are the recording's first sample).
+
+    Returns
+    -------
+    dict, JSON-ready: ``mode`` ("kaist-shared-prediction"), ``params_file``, ``model``,
+    ``shared_prediction`` {str(N): {rmse_deg (every sample), rmse_cycle_deg [per complete command
+    cycle], max_abs_deg, K_a, K_b, n_samples, source, import_notes}}.
+
+    Raises
+    ------
+    DataError
+        The parameter file is missing, not JSON, or has no usable ``shared.params``.
+    """
+    path = Path(params_path)
+    try:
+        doc = json.loads(path.read_text())
+        params = doc["shared"]["params"] if "shared" in doc else doc["params"]
+    except FileNotFoundError:
+        raise DataError(f"{path}: no such file") from None
+    except (ValueError, KeyError, TypeError) as e:
+        raise DataError(f"{path}: not a teleop analyze --kaist JSON with shared.params ({e})") from None
+    out = {"mode": "kaist-shared-prediction", "params_file": str(path), "model": params.get("model"),
+           "shared_prediction": {}}
+    for rec in recs:
+        try:
+            th, v = predict_shared(params, rec, math.radians(rec.config_deg))
+        except ValueError as e:
+            raise DataError(f"{path}: {e}") from None
+        err = th - rec.angle
+        out["shared_prediction"][str(rec.config_deg)] = {
+            "rmse_deg": math.degrees(rmse(err)), "max_abs_deg": math.degrees(float(np.max(np.abs(err)))),
+            "rmse_cycle_deg": [math.degrees(rmse(err[c])) for c in cycles(rec)],
+            "K_a": v.get("K_a"), "K_b": v.get("K_b"), "n_samples": len(rec), "source": rec.source,
+            "import_notes": list(rec.notes)}
+    return out
+
+
+def format_prediction(s: dict) -> str:
+    """The lines printed for ``--shared-params``: per configuration the RMSE over every sample and per
+    command cycle [deg]."""
+    lines = [f"shared parameter set {s['params_file']} ({(s.get('model') or {}).get('name')}): distal angle "
+             "predicted from the command, the pretension and the bend alone (RMSE [deg])",
+             f"{'config [deg]':>12}{'all':>7}{'max':>7}{'K_a':>6}{'K_b':>6}  per cycle"]
+    for n, r in s["shared_prediction"].items():
+        lines.append(f"{n:>12}{r['rmse_deg']:>7.2f}{r['max_abs_deg']:>7.2f}{r['K_a']:>6.2f}{r['K_b']:>6.2f}  "
+                     + " ".join(f"{x:.2f}" for x in r["rmse_cycle_deg"]))
+    return "\n".join(lines)
