@@ -36,6 +36,7 @@ from teleop.schema import (
     PairControlConfig,
     RecordingConfig,
     RigConfig,
+    Ros2Config,
     RunConfig,
     SensorConfig,
     SheathConfig,
@@ -59,8 +60,8 @@ __all__ = [  # the schema's names (teleop.schema) and the loader's
     "MotorConfig", "LoadConfig", "SensorConfig", "ZenohRigConfig", "RigConfig", "SimulatedRigConfig", "EffectsConfig",
     "EffectSwitch", "MOVED", "EstimatorConfig", "CalibrationConfig",
     "DeviceConfig", "MappingConfig", "MasterConfig", "SlaveConfig", "PairControlConfig", "TransportConfig",
-    "TransportAuthConfig", "TransportTlsConfig", "RecordingConfig", "Config", "RANGES", "joint_set_tension",
-    "load_config", "config_from_dict", "config_to_dict", "write_config", "MAX_JOINTS",
+    "TransportAuthConfig", "TransportTlsConfig", "RecordingConfig", "Ros2Config", "Config", "RANGES",
+    "joint_set_tension", "load_config", "config_from_dict", "config_to_dict", "write_config", "MAX_JOINTS",
 ]
 
 

@@ -23,7 +23,7 @@ __all__ = [
     "JointConfig", "SimulatedTendonConfig", "SimulatedTendonPairConfig", "SimulatedJointConfig", "MotorConfig", "LoadConfig", "SensorConfig", "EffectSwitch", "EffectsConfig", "SimulatedRigConfig",
     "ZenohRigConfig", "RigConfig", "EstimatorConfig", "MOVED",
     "CalibrationConfig", "ArmConfig", "DeviceConfig", "MappingConfig", "MasterConfig", "SlaveConfig", "PairControlConfig",
-    "TransportAuthConfig", "TransportTlsConfig", "TransportConfig", "RecordingConfig", "Config", "RANGES",
+    "TransportAuthConfig", "TransportTlsConfig", "TransportConfig", "RecordingConfig", "Ros2Config", "Config", "RANGES",
     "joint_set_tension",
 ]
 
@@ -304,6 +304,15 @@ class RecordingConfig:
 
 
 @dataclass(frozen=True)
+class Ros2Config:
+    """The CRTK topics as ROS 2 messages on Zenoh, the rmw_zenoh way (teleop/ros2_wire.py, docs/reference/crtk.md)."""
+
+    enabled: bool = False
+    domain_id: int = 0                    # ROS_DOMAIN_ID of the ROS 2 graph, 0..232
+    rate_hz: float = 100.0                # [Hz] > 0, publication rate of the CRTK topics (off the control loop)
+
+
+@dataclass(frozen=True)
 class Config:
     instrument: InstrumentConfig = field(default_factory=InstrumentConfig)
     sheath: SheathConfig = field(default_factory=SheathConfig)
@@ -315,6 +324,7 @@ class Config:
     transport: TransportConfig = field(default_factory=TransportConfig)
     recording: RecordingConfig = field(default_factory=RecordingConfig)
     pair_control: PairControlConfig = field(default_factory=PairControlConfig)
+    ros2: Ros2Config = field(default_factory=Ros2Config)
 
 
 # Valid range and unit of every numeric setting ("[]" stands for any list index). A test checks that
@@ -362,6 +372,7 @@ RANGES: dict[str, tuple[str, str]] = {
     "pair_control.switch_band": (">= 0", "rad"), "pair_control.axes[]": (">= 0", "-"),
     "recording.profile_every": (">= 1", "logs"),
     "recording.flush_interval": ("> 0", "s"), "transport.run_id_timeout": (">= 0", "s"),
+    "ros2.domain_id": ("0..232", "-"), "ros2.rate_hz": ("> 0", "Hz"),
 }
 
 
