@@ -1,0 +1,127 @@
+"""The diagnosis's answers on a fixed set of recordings stay what they are.
+
+``diagnosis_pinned.json`` beside this file holds, for short recordings of both simulators (the project's rig,
+:mod:`study.scenarios`, and the independent lumped-mass simulator, :mod:`study.lumped_scenarios`), clean ones and
+one or more per effect family, how each is made and what :func:`estimator.offline.diagnosis.diagnose` answers:
+``cause`` and ``causes`` (compared exactly) and ``gain`` (to 1e-9). The set covers the procedure's rules: the finer
+route, the rest reading, the stick-slip reading, the held distal end, an effect judged on one fold, structure no
+extension explains. A change of the code that is not meant to change an answer must leave them all; one that is
+meant to rewrites the file (``python tests/estimator/test_diagnosis_pinned.py --write``) in the same commit.
+
+The pair diagnosis (:func:`estimator.offline.pair_diagnosis.diagnose_pair`) is pinned the same way on one KAIST
+recording when the data set is present.
+"""
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from estimator.offline.diagnosis import diagnose
+from study import lumped_scenarios, scenarios
+
+PINNED = Path(__file__).with_name("diagnosis_pinned.json")
+KAIST_DIR = Path("/work/shared/data/kaist-tsm")
+
+#: name -> how the recording is made: simulator, hidden effect (None: clean), seed, level, duration [s], rate [Hz]
+#: (None: the simulator's own), candidate effects (None: the whole catalogue), a distal channel left out
+CASES: dict[str, dict] = {
+    "rig, clean": dict(sim="rig", effect=None, seed=21, level=None, duration=20.0, rate=200.0),
+    "rig, velocity friction": dict(sim="rig", effect="velocity_friction", seed=11, level=None, duration=20.0,
+                                   rate=200.0),
+    "rig, proximal load-cell offset": dict(sim="rig", effect="sensor_offset:T_in", seed=11, level=None,
+                                           duration=20.0, rate=200.0),
+    "rig, distal encoder lag": dict(sim="rig", effect="sensor_lag:x_out", seed=11, level=None, duration=20.0,
+                                    rate=200.0),
+    "rig, an effect outside the catalogue": dict(sim="rig", effect="load_cell_wander", seed=901, level=None,
+                                                 duration=15.0, rate=200.0),
+    "lumped, clean": dict(sim="lumped", effect=None, seed=501, level=None, duration=20.0, rate=200.0),
+    "lumped, an effect outside the catalogue": dict(sim="lumped", effect="load_cell_wander", seed=901, level=None,
+                                                    duration=15.0, rate=200.0),
+    "lumped, pretension": dict(sim="lumped", effect="pretension", seed=107, level=0.7, duration=20.0, rate=200.0),
+    "lumped, distal backlash bending the route": dict(
+        sim="lumped", effect="distal_backlash", seed=707110, level=0.8, duration=60.0, rate=None,
+        effects=["distal_backlash", "pretension", "sensor_offset:x_in"]),
+    "lumped, encoder off its zero at the initial rest": dict(
+        sim="lumped", effect="sensor_offset:x_in", seed=4716102, level=0.2, duration=60.0, rate=None,
+        effects=["sensor_offset:x_in", "tendon_stiffening", "friction_offset"]),
+    "lumped, clean single arc on the finer route": dict(
+        sim="lumped", effect=None, seed=900500, level=None, duration=60.0, rate=None,
+        effects=["tendon_stiffening", "friction_offset", "sensor_offset:x_in"]),
+    "lumped, clean distal end held on its stop": dict(
+        sim="lumped", effect=None, seed=1019112, level=None, duration=60.0, rate=None,
+        effects=["distal_backlash", "friction_offset", "sensor_offset:T_in"]),
+    "lumped, distal load-cell drift from zero": dict(
+        sim="lumped", effect="sensor_drift:T_out", seed=3415102, level=0.2, duration=60.0, rate=None,
+        effects=["sensor_drift:T_out", "sensor_offset:T_out", "curvature_drift"]),
+    "lumped, curvature drift with a rough proximal tension": dict(
+        sim="lumped", effect="curvature_drift", seed=4402103, level=0.2, duration=20.0, rate=200.0),
+    "lumped, distal load-cell gain on a constant force": dict(
+        sim="lumped", effect="sensor_gain:T_out", seed=2011110, level=0.8, duration=60.0, rate=None,
+        effects=["sensor_gain:T_out", "sensor_offset:T_out", "sensor_offset:T_in"]),
+}
+
+
+def answer(case: dict) -> dict:
+    """Make the recording of ``case`` and diagnose it: {cause, causes, gain}."""
+    sim = scenarios if case["sim"] == "rig" else lumped_scenarios
+    kw = {"seed": case["seed"], "level": case["level"], "duration": case["duration"]}
+    if case["rate"] is not None:
+        kw["rate_hz"] = case["rate"]
+    data = sim.record(case["effect"], **kw).data
+    if case.get("without"):
+        data = replace(data, **{case["without"]: None})
+    effects = case.get("effects")
+    res = diagnose(data, effects=None if effects is None else tuple(effects))
+    return {"cause": res["cause"], "causes": list(res["causes"]), "gain": float(res["gain"])}
+
+
+def pair_answer() -> dict:
+    """The pair diagnosis of the KAIST recording at 0 deg: {cause, causes, gain}."""
+    from estimator.offline.pair_diagnosis import diagnose_pair
+    from study import kaist
+    rec = next(r for r in kaist.load_all(KAIST_DIR) if r.config_deg == 0)
+    train, test, _ = kaist.split(rec)
+    s, _ = diagnose_pair(rec, train, test)
+    return {"cause": s["cause"], "causes": list(s["causes"]), "gain": float(s["gain"])}
+
+
+def _pinned() -> dict:
+    return json.loads(PINNED.read_text())
+
+
+def test_the_pinned_set_covers_both_simulators_clean_and_hidden_effects():
+    pinned = _pinned()["single"]
+    assert set(pinned) == set(CASES)
+    sims = {c["sim"] for c in CASES.values()}
+    assert sims == {"rig", "lumped"} and len(CASES) >= 12
+    assert any(c["effect"] is None for c in CASES.values() if c["sim"] == "rig")
+    assert any(c["effect"] is None for c in CASES.values() if c["sim"] == "lumped")
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_the_diagnosis_answers_as_pinned(name):
+    want = _pinned()["single"][name]
+    got = answer(CASES[name])
+    assert got["cause"] == want["cause"] and got["causes"] == want["causes"], (got, want)
+    assert got["gain"] == pytest.approx(want["gain"], abs=1e-9), (got, want)
+
+
+def test_the_pair_diagnosis_answers_as_pinned():
+    if not KAIST_DIR.is_dir():
+        pytest.skip(f"the KAIST data set is not at {KAIST_DIR}")
+    want = _pinned()["pair"]["KAIST 0 deg"]
+    got = pair_answer()
+    assert got["cause"] == want["cause"] and got["causes"] == want["causes"], (got, want)
+    assert got["gain"] == pytest.approx(want["gain"], abs=1e-9), (got, want)
+
+
+if __name__ == "__main__":       # rewrite the pinned answers (only when an answer is meant to change)
+    if sys.argv[1:] != ["--write"]:
+        sys.exit("usage: python tests/estimator/test_diagnosis_pinned.py --write")
+    out = {"single": {name: answer(case) for name, case in CASES.items()},
+           "pair": {"KAIST 0 deg": pair_answer()} if KAIST_DIR.is_dir() else {}}
+    PINNED.write_text(json.dumps(out, indent=1, sort_keys=True) + "\n")
