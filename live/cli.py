@@ -85,6 +85,8 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     _shared(p)
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
     p.add_argument("--exit-when-done", action="store_true", help="finish once every side seen has gone")
+    p.add_argument("--repair", metavar="RUN", help="rebuild RUN/recorder/session.mcap from messages.bin and the "
+                                                   "sides' journals (after a SIGKILL of the recorder), then exit")
     p.add_argument("--rerun", choices=("save", "spawn", "off"), default=None, help="override recording.rerun")
     p.set_defaults(func=lambda a: __import__("live.record", fromlist=["run_record"]).run_record(a))
 

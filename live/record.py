@@ -16,6 +16,9 @@ adds) and to the liveliness tokens of both sides, and writes ``<run dir>/recorde
   :func:`teleop.recording.read_measured_csv`;
 * ``state_changes.csv`` (every change of a heartbeat's state), ``liveliness.csv`` and ``recovered.csv``
   (``time,side,key,seq`` of every message taken from a side's journal, see below);
+* ``session.mcap``: every message again in one MCAP file, ROS 2 types where one exists, JSON for the
+  rest (:mod:`live.record_mcap`; ``teleop record --repair RUN`` rebuilds it after a SIGKILL of the
+  recorder, :mod:`live.record_mcap_read`);
 * ``record.rrd`` (Rerun, scalar fields decimated by ``recording.log_every``), and at the end
   ``summary.json`` (per stream: count, received, recovered, first/last seq, seqs missing, duplicates, rate; the command
   -> echo delay seen here) and ``streams.png``.
@@ -105,6 +108,9 @@ class Recorder:
                      "alive": self._aux_csv("liveliness.csv", "time,side,alive"),
                      "recovered": self._aux_csv("recovered.csv", "time,side,key,seq")}
         self.journals = JournalRecovery(self.dir.parent if journal_dir is None else Path(journal_dir), self.clock.now())
+        from live.record_mcap import MCAP_NAME, McapRecording
+        self._mcap = McapRecording(self.dir / MCAP_NAME, self.ident, time.time() - self.clock.now(),
+                                   tuple(j.name for j in cfg.instrument.joints) or ("tendon",), self.journals.t_start)
         from teleop.rerun_log import RerunLogger
         self._rr = RerunLogger("teleop-record", run_id or None, rerun or cfg.recording.rerun, self.dir / "record.rrd")
         self._thread = threading.Thread(target=self._writer, name="teleop-record-writer", daemon=True)
@@ -152,6 +158,7 @@ class Recorder:
             f.fh.flush()
         for fh in self._aux.values():
             fh.flush()
+        self._mcap.flush(time.monotonic())        # a chunk at least every record_mcap.CHUNK_INTERVAL
 
     def _handle(self, t: float, key: str, payload) -> None:
         if isinstance(payload, bool):
@@ -181,6 +188,7 @@ class Recorder:
         if not self.journals.note(key, payload, recovered):
             return                                 # arrived after it was recovered: already recorded
         self._raw.write(pack_record(t, key.encode(), payload))
+        self._mcap.write(t, key, msg)
         st.type = type(msg).__name__
         if recovered:
             st.fill(seq, t)
@@ -259,6 +267,7 @@ class Recorder:
         self._raw.close()
         self._rr.close()
         s = self.summary()
+        s["mcap"] = self._mcap.close()
         try:
             from live.record_figures import streams_figure
             s["figure"] = str(streams_figure([f.path for f in self._csv.values()], self.dir / "streams.png"))
@@ -285,7 +294,11 @@ def read_messages(path: str | Path):
 
 def run_record(args) -> int:
     """``teleop record``: record until Ctrl-C/SIGTERM, ``--max-duration``, or (``--exit-when-done``)
-    once every side seen has gone (liveliness) for half a second."""
+    once every side seen has gone (liveliness) for half a second; ``--repair RUN``: rebuild RUN's MCAP file
+    (:func:`live.record_mcap_read.repair`) and exit."""
+    if getattr(args, "repair", None):
+        from live.record_mcap_read import run_repair
+        return run_repair(args.repair)
     from live.discovery import side_run_dir, side_session
     from teleop.config import load_config
     from teleop.recording import raise_on_sigterm

@@ -57,7 +57,8 @@ class ReplayInput:
 
 
 def load_run(run: str | Path) -> ReplayInput:
-    """Find and read the recording of ``run`` (a run directory or a ``slave.csv``).
+    """Find and read the recording of ``run`` (a run directory, a ``slave.csv``, or the recorder's ``.mcap``
+    file; a run directory without ``slave.csv`` is read from its ``recorder/session.mcap``).
 
     Raises
     ------
@@ -66,10 +67,18 @@ def load_run(run: str | Path) -> ReplayInput:
         column). A joint instrument's run (``slave_joints.csv``) is :func:`replay`'s other branch.
     """
     path = Path(run)
+    if path.suffix == ".mcap" or (path.is_dir() and not (path / "slave.csv").is_file()):
+        from live.record_mcap_read import estimate_data, find_mcap, read_session
+        mcap = find_mcap(path)
+        if mcap is not None:   # the recorder's MCAP file: its estimate channel (live.record_mcap_read)
+            run_dir = mcap.parent.parent if mcap.parent.name == "recorder" else mcap.parent
+            own = any((run_dir / f).exists() for f in ("config.yaml", "calibration.json", "calibration"))
+            return ReplayInput(mcap, run_dir if own else None, estimate_data(read_session(mcap), str(mcap)))
     if path.is_dir():
         csv = path / "slave.csv"
         if not csv.is_file():
-            raise DataError(f"{path}: no slave.csv (single tendon) or slave_joints.csv (joints) in it")
+            raise DataError(f"{path}: no slave.csv (single tendon), slave_joints.csv (joints) or "
+                            f"recorder/session.mcap in it")
         return ReplayInput(csv, path, read_measured_csv(csv))
     if not path.exists():
         raise DataError(f"{path}: no such run directory or file")
@@ -317,7 +326,7 @@ def table_lines(res: dict[str, Any]) -> list[str]:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The ``teleop replay`` arguments."""
-    p.add_argument("run", metavar="RUN", help="run directory (runs/<id>) or its slave.csv")
+    p.add_argument("run", metavar="RUN", help="run directory (runs/<id>), its slave.csv, or a recorder session.mcap")
     p.add_argument("--config", metavar="FILE", help="config instead of the run's config.yaml")
     p.add_argument("--calibration", metavar="FILE",
                    help="calibration (.yaml of teleop calibrate, or a run's calibration.json) instead of the run's")

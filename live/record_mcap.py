@@ -1,0 +1,261 @@
+"""The recorder's MCAP file: every message of a session in one ``recorder/session.mcap``.
+
+Every message the recorder writes (received, or recovered from a side's journal) goes to the MCAP
+file as well, on these channels (``<base>`` is ``/teleop/<instrument>``):
+
+==================================  ========================  ===========================================
+topic                               schema (encoding)         content
+==================================  ========================  ===========================================
+``<base>/<side>/<stream>``          ``teleop.<Type>``         the whole decoded message as JSON (one per
+                                    (jsonschema, json)        key: command, estimate, heartbeat, rig)
+``<base>/slave/tendons/measured_js``  sensor_msgs/msg/JointState  per tendon: position ``x_in`` [m],
+                                    (ros2msg, cdr)            effort ``T_in`` [N] (proximal, measured)
+``<base>/slave/estimated_js``       sensor_msgs/msg/JointState  per axis: position ``position_hat`` [m
+                                                              or rad], effort ``effort_hat`` [N or N m]
+``<base>/slave/<axis>/estimated_cf``  geometry_msgs/msg/WrenchStamped  the estimated distal load of one
+                                                              axis: ``force.x`` [N] of a single tendon
+                                                              (along it), ``torque.z`` [N m] of a joint
+``<base>/master/servo_jp``          sensor_msgs/msg/JointState  the command's targets [m or rad]
+==================================  ========================  ===========================================
+
+Times: ``log_time`` is the recorder's time of the message (its receive time; a message recovered from a
+journal: its publish time), ``publish_time`` the sender's own stamp (``t_slave``, ``t_master``,
+``t_sender``, ``t``), both as Unix nanoseconds: the monotonic clocks are mapped with the offset
+``time.time() - time.monotonic()`` taken when the recorder starts (kept in the ``teleop`` metadata
+record, with the instrument, so that a reader can go back to the monotonic times of the CSVs). The
+ROS 2 header stamp is the publish time. A sender's stamp is comparable with the log time only when
+both ran on one machine (one monotonic clock).
+
+Chunks are zstd-compressed and closed every :data:`CHUNK_INTERVAL` seconds, so a SIGKILL of the recorder
+leaves a file readable up to its last closed chunk (``rerun mcap convert --recover``); ``teleop record
+--repair RUN`` (:mod:`live.record_mcap_read`) rebuilds the whole file from ``messages.bin`` and the
+sides' journals. A message recovered into a gap has an older log time than the one written before it:
+at the end the file is rewritten in log-time order (the CSVs are sorted the same way).
+"""
+from __future__ import annotations
+
+import dataclasses
+import enum
+import json
+import os
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
+from mcap_ros2._dynamic import serialize_dynamic  # the CDR encoder mcap_ros2.writer.Writer uses
+
+__all__ = ["MCAP_NAME", "CHUNK_INTERVAL", "McapRecording", "to_json", "json_schema", "ROS2_SCHEMAS"]
+
+MCAP_NAME = "session.mcap"
+CHUNK_INTERVAL = 1.0        # [s] a chunk is closed (compressed, written) at least this often
+_SEP = "=" * 80 + "\n"
+_TIME = "int32 sec\nuint32 nanosec\n"
+_HEADER = "builtin_interfaces/Time stamp\nstring frame_id\n"
+_DEPS = f"{_SEP}MSG: std_msgs/Header\n{_HEADER}{_SEP}MSG: builtin_interfaces/Time\n{_TIME}"
+_VECTOR3 = "float64 x\nfloat64 y\nfloat64 z\n"
+#: ROS 2 message definitions (ros2msg: the .msg text, then each dependency after a separator line)
+ROS2_SCHEMAS = {
+    "sensor_msgs/msg/JointState": ("std_msgs/Header header\nstring[] name\nfloat64[] position\n"
+                                   "float64[] velocity\nfloat64[] effort\n" + _DEPS),
+    "geometry_msgs/msg/WrenchStamped": ("std_msgs/Header header\ngeometry_msgs/Wrench wrench\n" + _DEPS
+                                        + f"{_SEP}MSG: geometry_msgs/Wrench\ngeometry_msgs/Vector3 force\n"
+                                        f"geometry_msgs/Vector3 torque\n{_SEP}MSG: geometry_msgs/Vector3\n{_VECTOR3}"),
+}
+_STAMPS = ("t_slave", "t_master", "t_sender", "t")
+
+
+def to_json(x: Any) -> Any:
+    """A decoded message as plain JSON values: dataclasses -> objects, tuples -> arrays, enums -> ints."""
+    if dataclasses.is_dataclass(x):
+        return {f.name: to_json(getattr(x, f.name)) for f in dataclasses.fields(x)}
+    if isinstance(x, (tuple, list)):
+        return [to_json(v) for v in x]
+    if isinstance(x, enum.Enum):
+        return int(x.value)
+    return x
+
+
+def json_schema(x: Any) -> dict:
+    """A JSON Schema (draft 2020-12) of a decoded message, from an instance (arrays: from their first item)."""
+    if dataclasses.is_dataclass(x):
+        fields = dataclasses.fields(x)
+        return {"type": "object", "title": type(x).__name__, "required": [f.name for f in fields],
+                "properties": {f.name: json_schema(getattr(x, f.name)) for f in fields}}
+    if isinstance(x, (tuple, list)):
+        return {"type": "array", "items": json_schema(x[0]) if len(x) else {}}
+    if isinstance(x, bool):
+        return {"type": "boolean"}
+    if isinstance(x, (int, enum.Enum)):
+        return {"type": "integer"}
+    return {"type": "number"}
+
+
+def _ns(t: float, offset_ns: int) -> int:
+    """Monotonic ``t`` [s] as Unix nanoseconds (>= 0); the offset is added in integers (a double near 1.7e9 s
+    resolves only 0.2 us)."""
+    return max(0, round(t * 1e9) + offset_ns)
+
+
+def _stamp(ns: int) -> dict:
+    return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
+
+
+class McapRecording:
+    """Write the recorder's messages to one MCAP file (module docstring).
+
+    Parameters
+    ----------
+    path : Path
+        The file (created, truncated).
+    instrument : str
+        ``instrument.id``: the topics' base ``/teleop/<instrument>``.
+    clock_offset : float
+        Unix time minus the recorder's monotonic clock [s].
+    axis_names : sequence of str
+        Names of the instrument's axes (joint names; ``("tendon",)`` for a single tendon).
+    t_start : float
+        The recorder's start [s, monotonic] (kept in the metadata: journals before it are not this session's).
+    """
+
+    def __init__(self, path: Path, instrument: str, clock_offset: float, axis_names=("tendon",), t_start: float = 0.0):
+        self.path, self.offset = Path(path), float(clock_offset)
+        self._offset_ns = round(self.offset * 1e9)
+        self.base = f"/teleop/{instrument}"
+        self.axis_names = tuple(axis_names)
+        self._fh = open(self.path, "wb")
+        self._w = Writer(self._fh, compression=CompressionType.ZSTD)
+        self._w.start(profile="ros2", library="tsm-teleop (mcap, mcap-ros2-support)")
+        self._w.add_metadata("teleop", {"instrument": instrument, "clock_offset_s": repr(self.offset),
+                                        "t_start_s": repr(float(t_start)),
+                                        "time": "log: recorder time; publish: sender stamp (Unix ns)"})
+        self._schemas: dict[str, int] = {}
+        self._encoders: dict[str, Callable[[Any], bytes]] = {}
+        self._channels: dict[str, int] = {}
+        self._seqs: dict[int, int] = {}
+        self.messages = 0
+        self._last_log: dict[str, int] = {}
+        self.unsorted = False
+        self._last_flush = time.monotonic()
+
+    # ---- channels ------------------------------------------------------------------------------------
+    def _ros_channel(self, topic: str, datatype: str) -> int:
+        cid = self._channels.get(topic)
+        if cid is None:
+            sid = self._schemas.get(datatype)
+            if sid is None:
+                text = ROS2_SCHEMAS[datatype]
+                sid = self._schemas[datatype] = self._w.register_schema(datatype, "ros2msg", text.encode())
+                self._encoders[datatype] = serialize_dynamic(datatype, text)[datatype]
+            cid = self._channels[topic] = self._w.register_channel(topic, "cdr", sid, {"datatype": datatype})
+        return cid
+
+    def _json_channel(self, key: str, msg: Any) -> int:
+        topic = "/" + key
+        cid = self._channels.get(topic)
+        if cid is None:
+            name = f"teleop.{type(msg).__name__}"
+            sid = self._schemas.get(name)
+            if sid is None:
+                schema = {"$schema": "https://json-schema.org/draft/2020-12/schema", **json_schema(msg)}
+                sid = self._schemas[name] = self._w.register_schema(name, "jsonschema", json.dumps(schema).encode())
+            cid = self._channels[topic] = self._w.register_channel(topic, "json", sid, {"key": key})
+        return cid
+
+    def _add(self, cid: int, log: int, pub: int, data: bytes) -> None:
+        seq = self._seqs.get(cid, 0)
+        self._seqs[cid] = seq + 1
+        self._w.add_message(cid, log_time=log, publish_time=pub, data=data, sequence=seq)
+        self.messages += 1
+
+    def _ros(self, topic: str, datatype: str, log: int, pub: int, msg: dict) -> None:
+        cid = self._ros_channel(topic, datatype)
+        self._add(cid, log, pub, self._encoders[datatype](msg))
+
+    # ---- messages ------------------------------------------------------------------------------------
+    def write(self, t: float, key: str, msg: Any) -> None:
+        """Write one decoded message of ``key`` logged at ``t`` [s, recorder's monotonic clock]."""
+        log = _ns(t, self._offset_ns)
+        stamp = next((getattr(msg, n) for n in _STAMPS if isinstance(getattr(msg, n, None), float)), None)
+        pub = log if stamp is None else _ns(stamp, self._offset_ns)
+        last = self._last_log.get(key, -1)
+        if log < last:
+            self.unsorted = True                  # a message older than one before it on its key
+        self._last_log[key] = max(last, log)
+        self._add(self._json_channel(key, msg), log, pub,
+                  json.dumps(to_json(msg), separators=(",", ":"), allow_nan=False).encode())
+        kind = type(msg).__name__
+        if kind == "Estimate":
+            self._estimate(key, log, pub, msg)
+        elif kind == "Command":
+            header = {"stamp": _stamp(pub), "frame_id": ""}
+            self._ros(f"{self.base}/master/servo_jp", "sensor_msgs/msg/JointState", log, pub,
+                      {"header": header, "name": list(self._axes(len(msg.targets))), "position": list(msg.targets),
+                       "velocity": [], "effort": []})
+
+    def _axes(self, n: int) -> tuple[str, ...]:
+        return self.axis_names if len(self.axis_names) == n else tuple(f"axis{i}" for i in range(n))
+
+    def _estimate(self, key: str, log: int, pub: int, msg: Any) -> None:
+        js = "sensor_msgs/msg/JointState"
+        header = {"stamp": _stamp(pub), "frame_id": ""}
+        names = self._axes(len(msg.axes))
+        tendons = [(f"{n}.{'ab'[i]}" if len(a.tendons) > 1 else n, t)
+                   for n, a in zip(names, msg.axes) for i, t in enumerate(a.tendons)]
+        self._ros(f"{self.base}/slave/tendons/measured_js", js, log, pub,
+                  {"header": header, "name": [n for n, _ in tendons], "position": [t.x_in for _, t in tendons],
+                   "velocity": [], "effort": [t.T_in for _, t in tendons]})
+        self._ros(f"{self.base}/slave/estimated_js", js, log, pub,
+                  {"header": header, "name": list(names), "position": [a.position_hat for a in msg.axes],
+                   "velocity": [], "effort": [a.effort_hat for a in msg.axes]})
+        for n, a in zip(names, msg.axes):
+            pair = len(a.tendons) > 1
+            force = {"x": 0.0 if pair else a.effort_hat, "y": 0.0, "z": 0.0}
+            torque = {"x": 0.0, "y": 0.0, "z": a.effort_hat if pair else 0.0}
+            self._ros(f"{self.base}/slave/{n}/estimated_cf", "geometry_msgs/msg/WrenchStamped", log, pub,
+                      {"header": {"stamp": _stamp(pub), "frame_id": n}, "wrench": {"force": force, "torque": torque}})
+
+    # ---- flushing and the end ------------------------------------------------------------------------
+    def flush(self, now: float | None = None) -> None:
+        """Close the chunk under way and hand it to the OS, when :data:`CHUNK_INTERVAL` has passed since the
+        last one (``now`` [s, :func:`time.monotonic`]) or always (``now`` None)."""
+        now_ = time.monotonic() if now is None else now
+        if now is not None and now_ - self._last_flush < CHUNK_INTERVAL:
+            return
+        self._w.flush()
+        self._last_flush = now_
+
+    def close(self) -> dict:
+        """Finish the file (summary, indexes), rewrite it in log-time order when needed; returns
+        ``{"path", "messages", "channels", "sorted_at_end"}``. Idempotent."""
+        if not self._fh.closed:
+            self._w.finish()
+            self._fh.close()
+            if self.unsorted:
+                sort_mcap(self.path)
+        return {"path": str(self.path), "messages": self.messages, "channels": len(self._channels),
+                "sorted_at_end": self.unsorted}
+
+
+def sort_mcap(path: Path) -> None:
+    """Rewrite the MCAP file at ``path`` with its messages in log-time order (records copied, not re-encoded)."""
+    tmp = Path(str(path) + ".sorting")
+    with open(path, "rb") as src, open(tmp, "wb") as dst:
+        reader = make_reader(src)
+        header = reader.get_header()
+        w = Writer(dst, compression=CompressionType.ZSTD)
+        w.start(profile=header.profile, library=header.library)
+        for meta in reader.iter_metadata():
+            w.add_metadata(meta.name, meta.metadata)
+        summary = reader.get_summary()
+        if summary is None:
+            raise OSError(f"{path}: no MCAP summary to sort by")
+        sids = {s.id: w.register_schema(s.name, s.encoding, s.data) for s in summary.schemas.values()}
+        ids = {c.id: w.register_channel(c.topic, c.message_encoding, sids[c.schema_id], dict(c.metadata))
+               for c in summary.channels.values()}
+        for _, channel, m in reader.iter_messages(log_time_order=True):
+            w.add_message(ids[channel.id], log_time=m.log_time, publish_time=m.publish_time, data=m.data,
+                          sequence=m.sequence)
+        w.finish()
+    os.replace(tmp, path)
