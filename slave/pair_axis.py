@@ -26,8 +26,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from estimator.band import NOISE_BAND_SIGMAS
 from estimator.online.joint import JointEstimator
-from estimator.sheath import NOISE_BAND_SIGMAS
 from slave.axis import SlaveAxis
 from slave.calibration_file import from_results, sheath_models
 from slave.pair_calibrate import PairCalibration, set_tension

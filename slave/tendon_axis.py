@@ -26,8 +26,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from estimator.band import NOISE_BAND_SIGMAS
 from estimator.online.distal import DistalEstimator
-from estimator.sheath import NOISE_BAND_SIGMAS, SheathModel
+from estimator.sheath import SheathModel
 from slave.axis import SlaveAxis
 from slave.calibrate import JointLimitCalibration
 from slave.calibration_file import from_tendon_result, tendon_model

@@ -16,7 +16,7 @@ eqs. (1)-(25)); for any other history (minor loops, partial releases) it keeps t
 memory that the "tension at the last reversal" rule loses (literature.md section 0).
 
 With ``tension_noise`` (the standard deviation of the T_in reading, > 0) the profile takes the banded update of
-:func:`estimator.sheath.band_update` instead: a stuck profile moves only for what exceeds NOISE_BAND_SIGMAS x the
+:func:`estimator.band.band_update` instead: a stuck profile moves only for what exceeds NOISE_BAND_SIGMAS x the
 noise, and a whole-tendon slide follows T_in exactly, so the estimate no longer latches the noise's extremes. The
 proximal velocity it needs is the derivative of x_in smoothed over ``rate_time_constant``.
 
@@ -33,8 +33,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from estimator.band import NOISE_BAND_SIGMAS, band_batch, band_update
 from estimator.phase import Phase, new_phase_state, readable_step
-from estimator.sheath import NOISE_BAND_SIGMAS, SheathModel, band_batch, band_update, profile_batch, profile_update
+from estimator.sheath import SheathModel, profile_batch, profile_update
 
 __all__ = ["DistalEstimator", "DistalSample", "BatchEstimate", "estimate_batch", "classify_phase", "smoothed_velocity",
            "velocity_step"]
@@ -83,7 +84,7 @@ class DistalEstimator:
         e.g. :func:`estimator.data.noise_level` of a calibration's T_in); 0 (default): the envelope rule.
     released_slack : bool
         The tendon is slack when released to near zero tension (one of an antagonistic pair): the banded update's
-        release side has no band there (:func:`estimator.sheath.band_update`, ``slack``). Default False.
+        release side has no band there (:func:`estimator.band.band_update`, ``slack``). Default False.
 
     Raises
     ------

@@ -72,8 +72,9 @@ def test_readable_phase_changes_only_past_the_noise():
 
 
 def test_banded_update_without_band_is_the_envelope_rule():
-    """band = sigma = 0: the slide state changes nothing, at any velocity (estimator.sheath.band_update)."""
-    from estimator.sheath import band_batch, profile_batch
+    """band = sigma = 0: the slide state changes nothing, at any velocity (estimator.band.band_update)."""
+    from estimator.band import band_batch
+    from estimator.sheath import profile_batch
     model = SheathModel.from_geometry(SheathGeometry([(0.4, math.inf), (0.6, 0.2), (0.5, 0.1)]), 0.1, 1.5e4)
     rng = np.random.default_rng(11)
     t = np.arange(4000) * 1e-3
