@@ -109,6 +109,9 @@ def run_joints(cal, force_scale: float = 0.2, delay: float = 0.001, arm: ArmPara
                   "master.watchdog_ms": wd, "slave.watchdog_ms": wd}
     if reserve is not None:
         over["master.mapping.passivity_reserve"] = reserve
+    # the study runs the loop past the hard bounds on purpose (long delays, no passivity controller, no reserve)
+    over["safety.override"] = ["master.watchdog_ms", "slave.watchdog_ms", "master.mapping.passivity",
+                               "master.mapping.passivity_reserve"]
     cfg = _config(over)
     clock = FakeClock(0.0)
     cmd, est, shb, mhb = (DelayTopic(clock, delay) for _ in range(4))

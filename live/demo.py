@@ -252,7 +252,10 @@ def main_demo(args) -> int:
     from live.sides import prepare_run_dir
     from slave.calibration_file import calibration_path
     cfg_path = args.config or (DEFAULT_CONFIG if DEFAULT_CONFIG.is_file() else None)
+    from teleop.safety_bounds import waiver_lines, waivers
     cfg = load_config(cfg_path)
+    for line in waiver_lines(cfg):
+        print(line, flush=True)
     run_dir = prepare_run_dir(args, cfg)
     kind = demo_kind(cfg)
     # the run's own calibration file, made now and reloaded by the slave
@@ -263,7 +266,8 @@ def main_demo(args) -> int:
     names = [j.name for j in cfg.instrument.joints] or ["tendon"]
     summary: dict = {"run_dir": str(run_dir), "config": str(cfg_file), "instrument": cfg.instrument.id,
                      "kind": "joints" if cfg.instrument.joints else "tendon", "axes": names,
-                     "protocol": args.protocol, "calibration_file": str(calibration_path(cfg))}
+                     "protocol": args.protocol, "calibration_file": str(calibration_path(cfg)),
+                     "safety_waivers": waivers(cfg)}   # teleop/safety_bounds.py: keys run past their hard bound
     try:
         if cfg.rig.type == "simulated":      # another rig: the slave calibrates at power-up (file missing)
             print(f"calibrating {cfg.instrument.id} ({', '.join(names)}): every tendon into its joint limit ...",

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from teleop.config import Config
 from teleop.rerun_view import joint_views
+from teleop.safety_bounds import announce_waivers
 
 __all__ = ["run_slave", "run_master", "load_or_recalibrate", "default_run_dir",
            "prepare_run_dir", "endpoints", "open_session", "slave_links", "master_links"]
@@ -150,10 +151,23 @@ def master_links(session, ident: str, injector):
                                       (estimate_key(ident), Estimate)))
 
 
-def _serve(node, clock, args: argparse.Namespace, run_dir: Path, side: str, injector, *, close_first=None) -> None:
+def _record_waivers(path: Path, waived: list[dict]) -> None:
+    """Add the config's safety waivers (teleop/safety_bounds.py) to the stats file at ``path``."""
+    import json
+    try:
+        stats = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        stats = {}
+    stats["safety_waivers"] = waived
+    path.write_text(json.dumps(stats, indent=2) + "\n", encoding="utf-8")
+
+
+def _serve(node, clock, args: argparse.Namespace, run_dir: Path, side: str, injector, *, close_first=None,
+           waived: list[dict] | None = None) -> None:
     """Run ``node`` until done (or ``--max-duration``); however it ends, ``close_first()`` (e.g. the
-    device), then ``<side>_stats.json`` and ``<side>_faults.json`` in ``run_dir``. Every message the side
-    publishes is journaled in ``run_dir`` first (teleop/journal.py: the recorder recovers a SIGKILLed side's tail)."""
+    device), then ``<side>_stats.json`` (with the safety waivers ``waived``) and ``<side>_faults.json`` in
+    ``run_dir``. Every message the side publishes is journaled in ``run_dir`` first (teleop/journal.py:
+    the recorder recovers a SIGKILLed side's tail)."""
     from teleop.journal import close_journal, open_journal
     open_journal(run_dir, side)
     try:
@@ -165,6 +179,7 @@ def _serve(node, clock, args: argparse.Namespace, run_dir: Path, side: str, inje
         if close_first is not None:
             close_first()
         node.write_stats(run_dir / f"{side}_stats.json")
+        _record_waivers(run_dir / f"{side}_stats.json", waived or [])
         _write_fault_stats(injector, run_dir / f"{side}_faults.json")
 
 
@@ -187,6 +202,7 @@ def run_slave(args: argparse.Namespace) -> int:
     from teleop.rerun_proc import RerunProcessLogger as RerunLogger  # the loop only queues; a child process logs
 
     cfg = load_config(args.config)
+    waived = announce_waivers(cfg, logging.getLogger("teleop.slave"))
     calibration, cal_path = load_or_recalibrate(cfg, getattr(args, "recalibrate", False))
     run_dir = side_run_dir(args, cfg)
     warm_up(cfg)  # compile the numba kernels now, not in the first real-time cycles
@@ -205,7 +221,7 @@ def run_slave(args: argparse.Namespace) -> int:
                 node = SlaveNode(cfg, rig, links, recorder=rec, rerun=rr, run_dir=run_dir,
                             stop_on_master_stop=args.exit_on_master_stop, calibration=calibration,
                             calibration_file=cal_path)
-                _serve(node, clock, args, run_dir, "slave", injector)
+                _serve(node, clock, args, run_dir, "slave", injector, waived=waived)
         finally:
             rig.close()
     faulthandler.cancel_dump_traceback_later()
@@ -224,6 +240,7 @@ def run_master(args: argparse.Namespace) -> int:
     from teleop.rerun_proc import RerunProcessLogger as RerunLogger  # the loop only queues; a child process logs
 
     cfg = load_config(args.config)
+    waived = announce_waivers(cfg, logging.getLogger("teleop.master"))
     device = make_device(cfg, args.protocol)     # master.device.type through the registry
     # from here on the device is closed on every exit path (HID: zero force, stop all effects,
     # disable actuators), whatever fails: session, recording, the loop, Ctrl-C or SIGTERM
@@ -242,7 +259,7 @@ def run_master(args: argparse.Namespace) -> int:
                             wall_clock=True, joints=joint_views(cfg)) as rr:   # master-side series; same recording id
             links = master_links(session, ident, injector)
             node = MasterNode(cfg, device, links, recorder=rec, rerun=rr)
-            _serve(node, clock, args, run_dir, "master", injector, close_first=device.close)
+            _serve(node, clock, args, run_dir, "master", injector, close_first=device.close, waived=waived)
     faulthandler.cancel_dump_traceback_later()
     _log_master_done(node)
     return 0 if getattr(device, "finished", True) else 1

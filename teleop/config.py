@@ -38,6 +38,7 @@ from teleop.schema import (
     RigConfig,
     Ros2Config,
     RunConfig,
+    SafetyConfig,
     SensorConfig,
     SheathConfig,
     SimulatedJointConfig,
@@ -60,7 +61,7 @@ __all__ = [  # the schema's names (teleop.schema) and the loader's
     "MotorConfig", "LoadConfig", "SensorConfig", "ZenohRigConfig", "RigConfig", "SimulatedRigConfig", "EffectsConfig",
     "EffectSwitch", "MOVED", "EstimatorConfig", "CalibrationConfig",
     "DeviceConfig", "MappingConfig", "MasterConfig", "SlaveConfig", "PairControlConfig", "TransportConfig",
-    "TransportAuthConfig", "TransportTlsConfig", "RecordingConfig", "Ros2Config", "Config", "RANGES",
+    "TransportAuthConfig", "TransportTlsConfig", "RecordingConfig", "Ros2Config", "SafetyConfig", "Config", "RANGES",
     "joint_set_tension", "load_config", "config_from_dict", "config_to_dict", "write_config", "MAX_JOINTS",
 ]
 
@@ -206,9 +207,10 @@ def _merge(cls: Any, base: Any, data: Any, path: str, ctx: _Ctx) -> Any:
     return cls(**changes)
 
 
-def _check(cfg: Config, ctx: _Ctx) -> Config:
-    """Checks beyond one value's type and range."""
+def _check(cfg: Config, ctx: _Ctx, bounds: bool = True) -> Config:
+    """Checks beyond one value's type and range; with ``bounds`` the hard bounds (teleop/safety_bounds.py)."""
     from teleop.keys import validate_instrument_id
+    from teleop.safety_bounds import check_bounds
     try:
         validate_instrument_id(cfg.instrument.id)
     except ConfigError as e:
@@ -227,6 +229,8 @@ def _check(cfg: Config, ctx: _Ctx) -> Config:
         raise ctx.error("slave.x_in_max", f"slave.x_in_max ({cfg.slave.x_in_max!r} m) must be above "
                                           f"slave.x_in_min ({cfg.slave.x_in_min!r} m)")
     _check_joints(cfg, ctx)
+    if bounds:
+        check_bounds(cfg, ctx.error)
     return cfg
 
 
@@ -362,7 +366,7 @@ def load_config(path: str | Path | None = None, overrides: dict | None = None) -
     if path is not None:
         data, lines = _read_yaml(Path(path))
         ctx = _Ctx(str(path), lines)
-        cfg = _check(_merge(Config, cfg, data, "", ctx), ctx)
+        cfg = _check(_merge(Config, cfg, data, "", ctx), ctx, bounds=not overrides)  # overrides may waive
     if overrides:
         cfg = config_from_dict(_expand_dotted(overrides), source="overrides", base=cfg)
     return cfg

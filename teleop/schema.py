@@ -23,7 +23,7 @@ __all__ = [
     "JointConfig", "SimulatedTendonConfig", "SimulatedTendonPairConfig", "SimulatedJointConfig", "MotorConfig", "LoadConfig", "SensorConfig", "EffectSwitch", "EffectsConfig", "SimulatedRigConfig",
     "ZenohRigConfig", "RigConfig", "EstimatorConfig", "MOVED",
     "CalibrationConfig", "ArmConfig", "DeviceConfig", "MappingConfig", "MasterConfig", "SlaveConfig", "PairControlConfig",
-    "TransportAuthConfig", "TransportTlsConfig", "TransportConfig", "RecordingConfig", "Ros2Config", "Config", "RANGES",
+    "TransportAuthConfig", "TransportTlsConfig", "TransportConfig", "RecordingConfig", "Ros2Config", "SafetyConfig", "Config", "RANGES",
     "joint_set_tension",
 ]
 
@@ -313,6 +313,13 @@ class Ros2Config:
 
 
 @dataclass(frozen=True)
+class SafetyConfig:
+    """``safety``: waivers of the hard bounds of :mod:`teleop.safety_bounds` (docs/reference/safety-bounds.md)."""
+
+    override: tuple[str, ...] = ()        # bounded keys allowed past their bound; announced and recorded
+
+
+@dataclass(frozen=True)
 class Config:
     instrument: InstrumentConfig = field(default_factory=InstrumentConfig)
     sheath: SheathConfig = field(default_factory=SheathConfig)
@@ -324,6 +331,7 @@ class Config:
     transport: TransportConfig = field(default_factory=TransportConfig)
     recording: RecordingConfig = field(default_factory=RecordingConfig)
     pair_control: PairControlConfig = field(default_factory=PairControlConfig)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
     ros2: Ros2Config = field(default_factory=Ros2Config)
 
 

@@ -69,7 +69,8 @@ def test_the_registry_matches_device_axes_to_the_instrument():
 
 def test_the_master_node_drives_a_three_axis_hid_device():
     cfg = load_config(ROOT / "configs" / "instrument-3dof.yaml",
-                      {"master.mapping.ramp_time": 0.0, "master.mapping.force_rate_limit": 1e6})
+                      {"master.mapping.ramp_time": 0.0, "master.mapping.force_rate_limit": 1e6,
+                       "safety.override": ["master.mapping.force_rate_limit"]})
     fake = FakeHandle()
     dev = HidDevice(load_device_file(THREE), lambda: fake)
     clock = FakeClock(1.0)

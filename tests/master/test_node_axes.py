@@ -34,7 +34,8 @@ class Hands:
 
 
 def make():
-    cfg = load_config(CONFIG, {"master.mapping.ramp_time": 0.0, "master.mapping.force_rate_limit": 1e6})
+    cfg = load_config(CONFIG, {"master.mapping.ramp_time": 0.0, "master.mapping.force_rate_limit": 1e6,
+                               "safety.override": ["master.mapping.force_rate_limit"]})
     clock = FakeClock(10.0)
     links = MasterLinks(*(Topic(clock) for _ in range(4)))
     hands, rec = Hands(), Rows()

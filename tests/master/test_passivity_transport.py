@@ -74,6 +74,9 @@ CFG = {
                            "force_rate_limit": 1.0e5}},
     "estimator": {"profile_points": 0},
     "recording": {"rerun": "off"},
+    # a stiff, fast force channel at the edge of stability: the point of the test, past the hard bounds
+    "safety": {"override": ["master.mapping.force_limit", "master.mapping.force_rate_limit",
+                            "master.mapping.passivity"]},
 }
 
 
