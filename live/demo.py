@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -52,6 +53,7 @@ from live.demo_run import (
     verdict_lines,
 )
 from teleop.config import Config, load_config, write_config
+from teleop.config_files import resolve_config, shipped_config
 from teleop.errors import DataError
 from teleop.recording import read_measured_csv
 
@@ -61,7 +63,7 @@ __all__ = ["PAPER_BOUNDS", "baseline_deadband", "evaluate", "checks", "TendonDem
 #: The seed paper's reported accuracy: max force error, max elongation error, mean error (full scale).
 PAPER_BOUNDS = {"force_error_max_fs": 0.07, "elongation_error_max_fs": 0.03, "mean_error_fs": 0.02}
 EXPERIMENTS = {1: "paper", 2: "minor"}
-DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "sim.yaml"
+DEFAULT_CONFIG = shipped_config("sim.yaml")     # configs/sim.yaml of the checkout, or of the installed package
 
 
 def baseline_deadband(cfg: Config) -> float:
@@ -221,6 +223,15 @@ def demo_kind(cfg: Config) -> Any:
     return TendonDemo
 
 
+def rerun_command() -> str:
+    """How to start the Rerun viewer installed with this package: ``rerun`` when it is on PATH, else the
+    executable beside this Python's (a virtual environment that is not activated)."""
+    if shutil.which("rerun"):
+        return "rerun"
+    beside = Path(sys.executable).parent / "rerun"
+    return str(beside) if beside.is_file() else "rerun"
+
+
 def format_summary(s: dict) -> str:
     """The printed table of a summary dict (see :func:`main_demo`), for either kind of instrument."""
     joints = s.get("kind") == "joints"
@@ -238,7 +249,7 @@ def format_summary(s: dict) -> str:
     L.append("")
     rec = s.get("master", {}).get("recording") or f"{s['run_dir']}/master.csv"
     L.append(f"recording: {s['run_dir']}/{kind.files[0]}; master: {rec}")
-    L.append(f"rerun:     open with `.venv/bin/rerun {s['run_dir']}/slave.rrd {s['run_dir']}/master.rrd` "
+    L.append(f"rerun:     open with `{rerun_command()} {s['run_dir']}/slave.rrd {s['run_dir']}/master.rrd` "
              f"(no display: README, 'Looking at a run')")
     if s.get("figure"):
         L.append(f"figure:    {s['figure']}  (distal tension and elongation: truth vs estimates)")
@@ -251,8 +262,8 @@ def main_demo(args) -> int:
     from live.calibrate import run_calibrate
     from live.sides import prepare_run_dir
     from slave.calibration_file import calibration_path
-    cfg_path = args.config or (DEFAULT_CONFIG if DEFAULT_CONFIG.is_file() else None)
     from teleop.safety_bounds import waiver_lines, waivers
+    cfg_path = resolve_config(args.config) if args.config else (DEFAULT_CONFIG if DEFAULT_CONFIG.is_file() else None)
     cfg = load_config(cfg_path)
     for line in waiver_lines(cfg):
         print(line, flush=True)

@@ -1,0 +1,38 @@
+"""Where the configuration files that come with the project are: ``configs/`` of a source checkout, or
+the copy installed with the package (``teleop/configs/``, made when the wheel is built: setup.py).
+
+``configs/`` at the top of a checkout is the folder users edit; an installed package carries the same
+files read-only, so that ``teleop demo`` and its ``--config configs/<name>.yaml`` work from any directory
+after a plain (non-editable) install.
+"""
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+__all__ = ["configs_dir", "shipped_config", "resolve_config"]
+
+
+def configs_dir() -> Path:
+    """The project's configs: the copy installed with the package when there is one, else the checkout's
+    ``configs/`` (an editable install or a source tree, where the files are edited in place)."""
+    installed = Path(str(resources.files("teleop") / "configs"))
+    if installed.is_dir():
+        return installed
+    return Path(__file__).resolve().parents[1] / "configs"
+
+
+def shipped_config(name: str) -> Path:
+    """``configs/<name>`` of the project (:func:`configs_dir`), e.g. ``shipped_config("sim.yaml")``; the
+    path is returned whether or not the file exists (reading it names the missing file)."""
+    return configs_dir() / name
+
+
+def resolve_config(path: str | Path) -> Path:
+    """``path`` itself when it is a file; otherwise a path written as ``configs/<name>`` (the form the
+    documentation uses) names the project's own file when it exists; else ``path`` unchanged."""
+    p = Path(path)
+    if p.is_file() or not p.parts or p.parts[0] != "configs":
+        return p
+    own = configs_dir().joinpath(*p.parts[1:])
+    return own if own.is_file() else p

@@ -1,0 +1,46 @@
+"""``teleop demo`` finds its configs and prints hints that work from an installed package as from a checkout."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from live.demo import DEFAULT_CONFIG, rerun_command
+from teleop.config import load_config
+from teleop.config_files import configs_dir, resolve_config, shipped_config
+
+ROOT = Path(__file__).resolve().parents[2]
+LIVE_SOURCES = sorted(p for d in ("live", "master", "slave", "teleop") for p in (ROOT / d).rglob("*.py"))
+
+
+def test_the_default_config_is_the_project_s_sim_yaml():
+    assert DEFAULT_CONFIG == shipped_config("sim.yaml") and DEFAULT_CONFIG.is_file()
+    assert load_config(DEFAULT_CONFIG).instrument.id == "sim0"
+    # every file of the checkout's configs/ is found where the package looks (its copy when installed)
+    names = {p.relative_to(ROOT / "configs") for p in (ROOT / "configs").rglob("*.yaml")}
+    assert names and all((configs_dir() / n).is_file() for n in names)
+
+
+def test_a_documented_configs_path_resolves_from_any_directory(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    own = resolve_config("configs/instrument-3dof.yaml")
+    assert own.is_absolute() and own.is_file() and own == shipped_config("instrument-3dof.yaml")
+    # a file of the user's own, even under a configs/ folder, wins; an unknown name is left for the loader
+    (tmp_path / "configs").mkdir()
+    (tmp_path / "configs" / "sim.yaml").write_text("instrument:\n  id: mine\n", encoding="utf-8")
+    assert resolve_config("configs/sim.yaml") == Path("configs/sim.yaml")
+    assert resolve_config("configs/missing.yaml") == Path("configs/missing.yaml")
+    assert resolve_config("elsewhere/instrument-3dof.yaml") == Path("elsewhere/instrument-3dof.yaml")
+
+
+def test_hints_name_no_virtual_environment_folder():
+    found = [f"{p.relative_to(ROOT)}:{i}" for p in LIVE_SOURCES
+             for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1) if ".venv" in line]
+    assert not found, f"messages must work from a pip install too: {found}"
+
+
+def test_the_rerun_hint_names_a_viewer_that_exists_or_the_plain_command(monkeypatch):
+    cmd = rerun_command()
+    assert cmd == "rerun" or (Path(cmd).is_file() and Path(cmd).parent == Path(sys.executable).parent)
+    monkeypatch.setenv("PATH", "")
+    cmd = rerun_command()
+    assert cmd == "rerun" or Path(cmd).parent == Path(sys.executable).parent
