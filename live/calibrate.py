@@ -23,7 +23,8 @@ MAX_CALIBRATION_TIME = 120.0
 
 def add_calibrate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", metavar="FILE", required=True, help="YAML config of the instrument")
-    p.add_argument("--out", metavar="FILE", help="calibration file (default <calibration.dir>/<instrument.id>.yaml)")
+    p.add_argument("--out", metavar="FILE", help="calibration file (default <calibration.dir>/<instrument.id>.yaml; "
+                                                  "calibration.dir null: $XDG_DATA_HOME/tsm-teleop/calibration)")
     p.add_argument("-v", "--verbose", action="store_true", help="log details")
 
 

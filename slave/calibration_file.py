@@ -1,4 +1,5 @@
-"""Calibration data of an instrument: ``<calibration.dir>/<instrument.id>.yaml``, written by
+"""Calibration data of an instrument: ``<calibration.dir>/<instrument.id>.yaml`` (``calibration.dir`` null:
+the per-user data directory, ``$XDG_DATA_HOME/tsm-teleop/calibration``), written by
 ``teleop calibrate`` (or the slave's power-up routine when the file is missing, or on
 ``teleop slave --recalibrate``) and reloaded by the slave: one life cycle for every instrument.
 
@@ -34,6 +35,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -47,7 +49,7 @@ from slave.rig import TENDONS
 from teleop.config import Config
 from teleop.errors import CalibrationError
 
-__all__ = ["TendonCalibration", "InstrumentCalibration", "calibration_path", "from_results", "from_tendon_result",
+__all__ = ["TendonCalibration", "InstrumentCalibration", "calibration_path", "user_calibration_dir", "APP_DATA", "from_results", "from_tendon_result",
            "save_calibration", "load_calibration", "sheath_models", "tendon_model"]
 
 METHOD = "joint-limit knee each way (Phee et al. 2009, Sec. IV); K from M_e by Newton (eq. 13)"
@@ -103,9 +105,24 @@ class InstrumentCalibration:
         return out
 
 
+#: Directory of this application's data under the per-user data directory (XDG base directory spec)
+APP_DATA = "tsm-teleop"
+
+
+def user_calibration_dir() -> Path:
+    """The per-user calibration directory: ``$XDG_DATA_HOME/tsm-teleop/calibration``, else
+    ``~/.local/share/tsm-teleop/calibration`` (an empty or relative ``XDG_DATA_HOME`` is ignored, as the
+    XDG base directory specification says)."""
+    base = os.environ.get("XDG_DATA_HOME", "")
+    root = Path(base) if base and Path(base).is_absolute() else Path.home() / ".local" / "share"
+    return root / APP_DATA / "calibration"
+
+
 def calibration_path(cfg: Config) -> Path:
-    """``<calibration.dir>/<instrument.id>.yaml``."""
-    return Path(cfg.calibration.dir) / f"{cfg.instrument.id}.yaml"
+    """``<calibration.dir>/<instrument.id>.yaml``; without ``calibration.dir`` (null, the default) the
+    file lives in :func:`user_calibration_dir`, never in the current directory."""
+    folder = Path(cfg.calibration.dir) if cfg.calibration.dir else user_calibration_dir()
+    return folder / f"{cfg.instrument.id}.yaml"
 
 
 def from_results(cfg: Config, results: list[dict[str, CalibrationResult]], date: str | None = None) -> InstrumentCalibration:

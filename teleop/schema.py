@@ -196,7 +196,7 @@ class CalibrationConfig:
     target_tension: float = 20.0          # [N]
     speed: float = 0.004                  # [m/s]
     use_route: bool = True
-    dir: str = "configs/calibration"      # joint instruments: <dir>/<instrument.id>.yaml
+    dir: Optional[str] = None             # <dir>/<instrument.id>.yaml; None: the per-user data directory
 
 
 @dataclass(frozen=True)
