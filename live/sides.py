@@ -218,6 +218,9 @@ def run_slave(args: argparse.Namespace) -> int:
                                 route=None if cfg.instrument.joints else cfg.sheath.runs,   # 3D sheath view
                                 joints=joint_views(cfg)) as rr:
                 links = slave_links(session, ident, injector)
+                if cfg.ros2.enabled:     # the CRTK topics on ROS 2 beside the loop, servo_jp in (teleop/crtk_side.py)
+                    from teleop.crtk_side import attach_slave
+                    attach_slave(session, cfg, links)
                 node = SlaveNode(cfg, rig, links, recorder=rec, rerun=rr, run_dir=run_dir,
                             stop_on_master_stop=args.exit_on_master_stop, calibration=calibration,
                             calibration_file=cal_path)
@@ -258,6 +261,9 @@ def run_master(args: argparse.Namespace) -> int:
                 RerunLogger("teleop", run_dir.name, getattr(args, "rerun", None) or cfg.recording.rerun, run_dir / "master.rrd",
                             wall_clock=True, joints=joint_views(cfg)) as rr:   # master-side series; same recording id
             links = master_links(session, ident, injector)
+            if cfg.ros2.enabled:         # the CRTK topics on ROS 2 beside the loop (teleop/crtk_side.py)
+                from teleop.crtk_side import attach_master
+                attach_master(session, cfg, links)
             node = MasterNode(cfg, device, links, recorder=rec, rerun=rr)
             _serve(node, clock, args, run_dir, "master", injector, close_first=device.close, waived=waived)
     faulthandler.cancel_dump_traceback_later()

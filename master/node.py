@@ -243,8 +243,11 @@ class MasterNode(MasterNodeBase):
         if self.rerun is not None:
             self._log_rerun(now, q, marker)
 
-        # ---- heartbeat ----
+        # ---- heartbeat, CRTK ----
         self._heartbeat(now)
+        crtk = self.links.crtk
+        if crtk is not None:
+            crtk.offer(self.state, pos, tuple(self.force))
 
     def _render(self, forces: list[float], now: float) -> None:
         """Send one force per instrument axis to its device axis [N]."""

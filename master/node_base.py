@@ -41,6 +41,8 @@ class MasterLinks:
     estimate, slave_heartbeat : latest-wins subscribers with ``latest() -> Received | None``
         (``.message``, ``.t_recv``) and ``age(now) -> float`` [s].
     slave_alive : callable returning whether the slave's liveliness token is present, or None.
+    crtk : the CRTK side (:class:`teleop.crtk_side.MasterCrtk`) or None: handed the state, the device
+        positions and the rendered forces at the end of each cycle (a thread publishes them on ROS 2).
     """
 
     command: Any
@@ -48,6 +50,7 @@ class MasterLinks:
     estimate: Any
     slave_heartbeat: Any
     slave_alive: Callable[[], bool] | None = None
+    crtk: Any = None    # with ros2.enabled: offer(state, positions, forces) each cycle (teleop/crtk_side.py)
 
 
 class MasterNodeBase(NodeBase):

@@ -53,6 +53,8 @@ class SlaveLinks:
 
     estimate, heartbeat : objects with ``put(msg)``.
     command, master_heartbeat : latest-wins subscribers with ``latest()`` and ``age(now)`` [s].
+    crtk : the CRTK side (:class:`teleop.crtk_side.SlaveCrtk`) or None: handed the state and the followed
+        command at the end of each cycle (it stores them; a thread publishes them on ROS 2).
     """
 
     estimate: Any
@@ -60,6 +62,7 @@ class SlaveLinks:
     command: Any
     master_heartbeat: Any
     master_alive: Callable[[], bool] | None = None
+    crtk: Any = None    # with ros2.enabled: offer(state, accepted command) each cycle (teleop/crtk_side.py)
 
 
 class SlaveNodeBase(NodeBase):
@@ -144,6 +147,9 @@ class SlaveNodeBase(NodeBase):
         else:
             self._control_step(now, dt)
         self._heartbeat(now)
+        crtk = self.links.crtk
+        if crtk is not None:
+            crtk.offer(self.state, self._accepted)
 
     def _calibration_step(self, now: float, dt: float) -> None:
         """One cycle of the power-up calibration routine."""
