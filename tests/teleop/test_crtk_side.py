@@ -18,8 +18,15 @@ from teleop.crtk_side import CommandMerge, attach_master, attach_slave
 from teleop.messages import SideState
 from teleop.transport import Session, free_tcp_port, loopback_endpoint
 from tests.fakes import Topic
-from tests.ros2_peer import (JOINT_STATE, OPERATING_STATE, STRING_STAMPED, WRENCH_STAMPED, RosPeer, joint_state,
-                             string_stamped)
+from tests.ros2_peer import (
+    JOINT_STATE,
+    OPERATING_STATE,
+    STRING_STAMPED,
+    WRENCH_STAMPED,
+    RosPeer,
+    joint_state,
+    string_stamped,
+)
 
 DT = 1e-3
 
