@@ -1,5 +1,6 @@
 # `make demo` and `make test` create .venv on first use (and again when pyproject.toml changes).
-# `make test`: ruff (lint + import order), mypy (estimator/, teleop/, slave/, master/), then pytest (two passes).
+# `make test`: ruff (lint + import order), mypy, the documentation site (mkdocs --strict, into the ignored site/),
+# then pytest (two passes).
 PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
@@ -21,6 +22,7 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
+	$(VENV)/bin/mkdocs build --strict --site-dir site
 	$(VENV)/bin/python -m pytest -q -m "not integration" -n 2 --dist loadfile
 	$(VENV)/bin/python -m pytest -q -m integration
 
@@ -28,4 +30,4 @@ bench: $(STAMP)
 	$(VENV)/bin/python benchmarks/run_all.py
 
 clean:
-	rm -rf $(VENV) runs .pytest_cache
+	rm -rf $(VENV) runs site .pytest_cache
