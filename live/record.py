@@ -188,7 +188,7 @@ class Recorder:
         if not self.journals.note(key, payload, recovered):
             return                                 # arrived after it was recovered: already recorded
         self._raw.write(pack_record(t, key.encode(), payload))
-        self._mcap.write(t, key, msg)
+        self._mcap.write(t, key, msg, recovered)
         st.type = type(msg).__name__
         if recovered:
             st.fill(seq, t)

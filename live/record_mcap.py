@@ -46,7 +46,8 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 from mcap_ros2._dynamic import serialize_dynamic  # the CDR encoder mcap_ros2.writer.Writer uses
 
-__all__ = ["MCAP_NAME", "CHUNK_INTERVAL", "McapRecording", "to_json", "json_schema", "ROS2_SCHEMAS"]
+__all__ = ["MCAP_NAME", "CHUNK_INTERVAL", "McapRecording", "to_json", "json_schema", "sender_stamp", "sort_mcap",
+           "ROS2_SCHEMAS"]
 
 MCAP_NAME = "session.mcap"
 CHUNK_INTERVAL = 1.0        # [s] a chunk is closed (compressed, written) at least this often
@@ -90,6 +91,11 @@ def json_schema(x: Any) -> dict:
     if isinstance(x, (int, enum.Enum)):
         return {"type": "integer"}
     return {"type": "number"}
+
+
+def sender_stamp(msg: Any) -> float | None:
+    """The sender's own time stamp of a decoded message [s, its monotonic clock], None when it has none."""
+    return next((getattr(msg, n) for n in _STAMPS if isinstance(getattr(msg, n, None), float)), None)
 
 
 def _ns(t: float, offset_ns: int) -> int:
@@ -136,6 +142,7 @@ class McapRecording:
         self._seqs: dict[int, int] = {}
         self.messages = 0
         self._last_log: dict[str, int] = {}
+        self._last_pub: dict[str, int] = {}
         self.unsorted = False
         self._last_flush = time.monotonic()
 
@@ -174,15 +181,22 @@ class McapRecording:
         self._add(cid, log, pub, self._encoders[datatype](msg))
 
     # ---- messages ------------------------------------------------------------------------------------
-    def write(self, t: float, key: str, msg: Any) -> None:
-        """Write one decoded message of ``key`` logged at ``t`` [s, recorder's monotonic clock]."""
+    def write(self, t: float, key: str, msg: Any, recovered: bool = False) -> None:
+        """Write one decoded message of ``key`` logged at ``t`` [s, recorder's monotonic clock].
+
+        A message ``recovered`` from its sender's journal (``t`` its journal time) that was published after
+        every message written on its key is logged no earlier than the last of them: its journal time
+        precedes the receive time of a message published just before it, and the log and publish times
+        of a topic must order its messages alike (``rerun mcap check``)."""
         log = _ns(t, self._offset_ns)
-        stamp = next((getattr(msg, n) for n in _STAMPS if isinstance(getattr(msg, n, None), float)), None)
+        stamp = sender_stamp(msg)
         pub = log if stamp is None else _ns(stamp, self._offset_ns)
-        last = self._last_log.get(key, -1)
+        last, last_pub = self._last_log.get(key, -1), self._last_pub.get(key, -1)
+        if recovered and pub >= last_pub:
+            log = max(log, last)
         if log < last:
             self.unsorted = True                  # a message older than one before it on its key
-        self._last_log[key] = max(last, log)
+        self._last_log[key], self._last_pub[key] = max(last, log), max(last_pub, pub)
         self._add(self._json_channel(key, msg), log, pub,
                   json.dumps(to_json(msg), separators=(",", ":"), allow_nan=False).encode())
         kind = type(msg).__name__

@@ -22,7 +22,7 @@ import numpy as np
 from estimator.data import MeasuredData
 from live.record_files import decode_any
 from live.record_journal import JournalRecovery
-from live.record_mcap import MCAP_NAME, McapRecording
+from live.record_mcap import MCAP_NAME, McapRecording, sender_stamp
 from teleop.errors import DataError
 from teleop.journal import read_records
 
@@ -171,18 +171,37 @@ def repair(rec_dir: str | Path, journal_dir: str | Path | None = None) -> dict[s
     extra = list(journals.records(None))
     tmp = d / (MCAP_NAME + ".repair")
     mc = McapRecording(tmp, ident, float(meta.get("clock_offset_s", 0.0)), _axis_names(d.parent), t_start)
-    written = 0
-    for t, key, payload in sorted(all_records + extra, key=lambda r: r[0]):
-        try:
-            msg = decode_any(payload)
-        except Exception:  # noqa: BLE001 - CodecError: the live recorder leaves it out of the MCAP too
-            continue
+    entries = _log_order(all_records, extra)
+    for t, key, msg in entries:
         mc.write(t, key, msg)
-        written += 1
     mc.close()
     os.replace(tmp, old)
-    return {"path": str(old), "messages": written, "from_messages_bin": len(all_records),
+    return {"path": str(old), "messages": len(entries), "from_messages_bin": len(all_records),
             "from_journals": len(extra), "before": before}
+
+
+def _log_order(received: list, recovered: list) -> list[tuple[float, str, Any]]:
+    """``(log time [s], key, message)`` of every decodable record, in log-time order. Per key, in the order
+    of the senders' stamps, a log time is raised to the one before it where it is earlier (a journal time
+    precedes the receive time of a message published just before it), so that log and publish times order
+    each topic alike; a record that does not decode is left out, as the live recorder leaves it out."""
+    by_key: dict[str, list[tuple[float, float, int, Any]]] = {}
+    for i, (t, key, payload) in enumerate(received + recovered):
+        try:
+            msg = decode_any(payload)
+        except Exception:  # noqa: BLE001 - CodecError
+            continue
+        stamp = sender_stamp(msg)
+        by_key.setdefault(key, []).append((t if stamp is None else stamp, t, i, msg))
+    out = []
+    for key, rows in by_key.items():
+        rows.sort(key=lambda r: (r[0], r[2]))
+        last = -np.inf
+        for _, t, _, msg in rows:
+            last = max(last, t)
+            out.append((last, key, msg))
+    out.sort(key=lambda r: r[0])
+    return out
 
 
 def run_repair(run: str | Path) -> int:

@@ -7,13 +7,18 @@ payload's CRC before the put, one after it returns, written straight to the OS, 
 none of its lines); the test compares those with what the recorder wrote, strictly: every message
 whose put returned is recorded, every recorded message was published with that very payload, none
 twice. The recorder gets what the kill caught in the side's zenoh queue from the side's journal
-(teleop/journal.py); the oracle never reads the journal. Deadlines only bound waits.
+(teleop/journal.py); the oracle never reads the journal. The MCAP file (live/record_mcap.py) holds the
+same messages as messages.bin and the CSVs and passes `rerun mcap check`; after a SIGKILL of the recorder
+itself, `teleop record --repair RUN` completes it from messages.bin and the journals, and it then holds
+every message the sides published. Deadlines only bound waits.
 """
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
+import sys
 import time
 import zlib
 from pathlib import Path
@@ -22,6 +27,7 @@ import numpy as np
 import pytest
 
 from live.record import read_messages
+from live.record_mcap_read import read_session
 from teleop.codec import decode
 from teleop.publish_log import read_publish_attempts, read_publish_log
 from teleop.recording import read_measured_csv
@@ -50,6 +56,22 @@ def recorded(rec_dir: Path) -> dict[str, list[tuple[int, int]]]:
     for _, key, payload in read_messages(rec_dir / "messages.bin"):
         out.setdefault(key, []).append((decode(payload).seq, zlib.crc32(payload)))
     return out
+
+
+def mcap_seqs(rec_dir: Path) -> dict[str, list[int]]:
+    """key -> [seq, ...] of the JSON channels of the recorder's session.mcap (read whole: not torn)."""
+    s = read_session(rec_dir / "session.mcap")
+    assert not s.torn
+    return {k: [m["seq"] for _, _, m in v] for k, v in s.messages.items()}
+
+
+def rerun_check_ok(path: Path) -> None:
+    """`rerun mcap check` finds no problem on any topic."""
+    rerun = Path(sys.executable).parent / "rerun"
+    chk = subprocess.run([str(rerun), "mcap", "check", str(path)], capture_output=True, text=True, timeout=120,
+                         env=dict(os.environ, RERUN_ANALYTICS="off"))
+    rows = [ln.split() for ln in chk.stdout.splitlines() if "/teleop/" in ln]
+    assert chk.returncode == 0 and rows and all(r[0] == "ok" for r in rows), chk.stdout + chk.stderr
 
 
 def _state_seen(rec_dir: Path, side: str, state: int) -> bool:
@@ -122,3 +144,49 @@ def test_sigkill_of_a_side_loses_no_published_message(tmp_path, victim):
     assert est.time.size == len(got[f"teleop/{ident}/slave/estimate"])
     assert np.all(np.isfinite(est.T_in)) and "T_out_hat" in est.extra and any(c.startswith("profile") for c in est.extra)
     assert (rec_dir / "streams.png").is_file()
+    in_mcap = mcap_seqs(rec_dir)                                # the MCAP file holds what the CSVs hold
+    assert {k: sorted(v) for k, v in in_mcap.items()} == {k: sorted(q for q, _ in v) for k, v in got.items()}
+    assert summary["mcap"]["messages"] > sum(len(v) for v in got.values())    # with the ROS 2 channels
+    rerun_check_ok(rec_dir / "session.mcap")
+
+
+def test_sigkill_of_the_recorder_then_repair_gives_an_mcap_file_with_every_published_message(tmp_path):
+    ident = "rkrec"
+    runs = tmp_path / "runs"
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(CONFIG.format(ident=ident, runs=runs, port=free_tcp_port()), encoding="utf-8")
+    logs = {side: tmp_path / f"{side}.pub" for side in ("slave", "master")}
+    procs: dict[str, subprocess.Popen] = {}
+    try:
+        procs["recorder"] = start(["record", "--config", str(cfg), "--max-duration", "90"], tmp_path / "record.log")
+        wait_for(lambda: "(ready)" in (tmp_path / "record.log").read_text(), 20, "the recorder to be ready")
+        for side in ("slave", "master"):
+            extra = ["--protocol", "paper"] if side == "master" else []
+            procs[side] = start([side, "--config", str(cfg), "--max-duration", "90", *extra], tmp_path / f"{side}.log",
+                                {"TELEOP_PUBLISH_LOG": str(logs[side])})
+        run_dirs = lambda: sorted(p for p in runs.glob("*") if p.is_dir())
+        wait_for(lambda: len(run_dirs()) == 1 and (run_dirs()[0] / "recorder").is_dir(), 10, "the run directory")
+        rec_dir = run_dirs()[0] / "recorder"
+        wait_for(lambda: _state_seen(rec_dir, "slave", 3), 40, "the slave to be ENGAGED")
+        time.sleep(1.5)                                         # more than one MCAP chunk written
+        procs["recorder"].send_signal(signal.SIGKILL)
+        procs["recorder"].wait(10)
+        time.sleep(0.5)                                         # the sides publish on, recorded by no one
+        for side in ("slave", "master"):
+            procs[side].send_signal(signal.SIGINT)
+            assert procs[side].wait(20) in (0, 1, 130)
+    finally:
+        stop_all(procs.values())
+    torn = read_session(rec_dir / "session.mcap")
+    assert torn.torn and torn.messages                          # readable up to its last chunk
+    rep = subprocess.run([sys.executable, "-m", "live.cli", "record", "--repair", str(rec_dir.parent)],
+                         capture_output=True, text=True, timeout=120)
+    assert rep.returncode == 0 and "from the journals" in rep.stdout, rep.stdout + rep.stderr
+    in_mcap = mcap_seqs(rec_dir)
+    for side, path in logs.items():
+        for key, seqs in read_publish_log(path).items():
+            assert len(seqs) > 10
+            assert sorted(in_mcap.get(key, [])) == sorted(seqs), (key, len(seqs), len(in_mcap.get(key, [])))
+    bin_keys = {k for _, k, _ in read_messages(rec_dir / "messages.bin")}
+    assert bin_keys <= set(in_mcap)
+    rerun_check_ok(rec_dir / "session.mcap")
