@@ -104,11 +104,11 @@ def key(domain: int, topic: str, name: str) -> str:
 
 
 class RosPeer:
-    """A ROS 2 node as rmw_zenoh makes one, on its own Zenoh session connected to ``endpoint``."""
+    """A ROS 2 node as rmw_zenoh makes one, on its own Zenoh session connected to ``endpoint`` (one or a list)."""
 
-    def __init__(self, endpoint: str, domain: int = 0, node: str = "peer"):
+    def __init__(self, endpoint: str | list[str], domain: int = 0, node: str = "peer"):
         conf = zenoh.Config()
-        for k, v in (("mode", "peer"), ("connect/endpoints", [endpoint]), ("listen/endpoints", []),
+        for k, v in (("mode", "peer"), ("connect/endpoints", [endpoint] if isinstance(endpoint, str) else endpoint), ("listen/endpoints", []),
                      ("scouting/multicast/enabled", False)):
             conf.insert_json5(k, json.dumps(v))
         self.z = zenoh.open(conf)
