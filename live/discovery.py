@@ -20,7 +20,9 @@ ids (each asks, nobody has one yet); the listener rule makes that impossible on 
 from __future__ import annotations
 
 import logging
+import os
 import re
+import socket
 import time
 from pathlib import Path
 
@@ -32,7 +34,7 @@ from teleop.errors import TransportError
 from teleop.keys import run_key
 from teleop.transport import Session, zenoh_config
 
-__all__ = ["RunIdServer", "agree_run_id", "new_run_id", "open_auto_session", "side_run_dir", "side_session"]
+__all__ = ["RunIdServer", "RoleServer", "claim_role", "agree_run_id", "new_run_id", "open_auto_session", "side_run_dir", "side_session"]
 
 log = logging.getLogger("live.discovery")
 _RUN_ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}")
@@ -161,6 +163,45 @@ def agree_run_id(session: Session, cfg: Config, role: str, given: str | None = N
     return rid
 
 
+class RoleServer(Entity):
+    """Answers queries on ``teleop/<id>/run/<role>`` with who plays ``role``: ``process <pid> on <host>
+    (run <run id>)``, so that a second process of the same role can name the one it would collide with."""
+
+    def __init__(self, session: Session, instrument: str, role: str, run_id: str):
+        super().__init__(session, f"{run_key(instrument)}/{role}")
+        self.holder = f"process {os.getpid()} on {socket.gethostname()} (run {run_id})"
+        self._declare(session.zenoh_session.declare_queryable, self.key, self._on_query)
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        try:
+            query.reply(self.key, self.holder.encode())
+        except zenoh.ZError as e:   # pragma: no cover - the querier went away
+            log.debug("role reply failed: %s", zenoh_error_text(e))
+
+
+#: [s] how long a starting side asks whether a peer already plays its role
+ROLE_QUERY_S = 0.5
+
+
+def claim_role(session: Session, cfg: Config, role: str, run_id: str, timeout: float = ROLE_QUERY_S) -> None:
+    """Serve ``role`` of this instrument from now on, unless a peer already plays it.
+
+    Raises
+    ------
+    TransportError
+        A reachable peer already plays ``role`` for ``instrument.id``: one line naming the run and the
+        process (pid, host, its run).
+    """
+    ident = cfg.instrument.id
+    key = f"{run_key(ident)}/{role}"
+    for reply in session.zenoh_session.get(key, timeout=timeout):
+        if reply.ok is not None:
+            holder = reply.ok.payload.to_bytes().decode("utf-8", "replace")[:200]
+            raise TransportError(f"run {run_id} already has a {role} of instrument {ident!r}: {holder}; stop it "
+                                 f"first, or give this {role} another instrument.id or endpoint")
+    session._track(RoleServer(session, ident, role, run_id))
+
+
 # ---- the hooks of `teleop slave|master|record` (live/sides.py, live/record.py) ----------------
 
 _ATTR = "_teleop_session"
@@ -184,12 +225,25 @@ def side_session(cfg: Config, args, clock=None) -> Session:
     return session
 
 
-def side_run_dir(args, cfg: Config) -> Path:
-    """Open the side's session now (:func:`side_session`), agree the run id, create and return the
-    run directory: ``--run-dir`` when given, else ``<recording.dir>/<agreed id>``."""
+def side_run_dir(args, cfg: Config, role: str | None = None) -> Path:
+    """Open the side's session now (:func:`side_session`), agree the run id, claim ``role`` (``slave``,
+    ``master``: :func:`claim_role`; None: no role), create and return the run directory: ``--run-dir``
+    when given, else ``<recording.dir>/<agreed id>``.
+
+    Raises
+    ------
+    TransportError
+        The session cannot be opened, or a peer already plays ``role``.
+    """
     session = side_session(cfg, args)
     given = Path(args.run_dir).name if getattr(args, "run_dir", None) else None
     rid = agree_run_id(session, cfg, getattr(args, "_teleop_role", "configured"), given)
+    if role is not None:
+        try:
+            claim_role(session, cfg, role, rid)
+        except TransportError:
+            session.close()      # refused: leave nothing declared and no runtime to wait for at exit
+            raise
     run_dir = Path(args.run_dir) if given else Path(cfg.recording.dir) / rid
     run_dir.mkdir(parents=True, exist_ok=True)
     return run_dir

@@ -72,10 +72,11 @@ def open_session(cfg, args: argparse.Namespace, clock):
     return side_session(cfg, args, clock)
 
 
-def side_run_dir(args: argparse.Namespace, cfg) -> Path:
-    """A side's run directory: the session opened now, the run id agreed with the peers (live/discovery.py)."""
+def side_run_dir(args: argparse.Namespace, cfg, role: str | None = None) -> Path:
+    """A side's run directory: the session opened now, the run id agreed with the peers, ``role`` claimed
+    (a second slave or master of the instrument is refused; live/discovery.py)."""
     from live.discovery import side_run_dir as agreed
-    return agreed(args, cfg)
+    return agreed(args, cfg, role)
 
 
 def _injector(args: argparse.Namespace, clock):
@@ -204,7 +205,7 @@ def run_slave(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
     waived = announce_waivers(cfg, logging.getLogger("teleop.slave"))
     calibration, cal_path = load_or_recalibrate(cfg, getattr(args, "recalibrate", False))
-    run_dir = side_run_dir(args, cfg)
+    run_dir = side_run_dir(args, cfg, "slave")
     warm_up(cfg)  # compile the numba kernels now, not in the first real-time cycles
     ident = cfg.instrument.id
     clock = MonotonicClock()
@@ -248,7 +249,7 @@ def run_master(args: argparse.Namespace) -> int:
     # from here on the device is closed on every exit path (HID: zero force, stop all effects,
     # disable actuators), whatever fails: session, recording, the loop, Ctrl-C or SIGTERM
     with _closing(device):
-        run_dir = side_run_dir(args, cfg)
+        run_dir = side_run_dir(args, cfg, "master")
         ident = cfg.instrument.id
         clock = MonotonicClock()
         injector = _injector(args, clock)
