@@ -9,7 +9,17 @@ Registered here:
                instrument axis (a single tendon: one; a joint instrument: one per joint)
 ``hid``        a USB HID device described by ``master.device.file`` (:class:`master.hid.HidDevice`;
                a joint instrument needs one position axis and one force report map per joint)
+``evdev``      a force-feedback joystick or wheel through Linux kernel force feedback
+               (:class:`master.evdev_device.EvdevDevice`, extra ``evdev``; ``master.device.file``
+               optional); a single-tendon instrument
+``forcedimension``  a Force Dimension device (:mod:`master.vendor_devices`, extra ``forcedimension``
+               and the vendor's DHD library); a single-tendon instrument
+``touch``      a 3D Systems Touch (:mod:`master.vendor_devices`, extra ``touch`` and the OpenHaptics
+               HD library); a single-tendon instrument
 =============  ==============================================================================
+
+An extra that is not installed, or a vendor library that is missing, raises :class:`DeviceError` with
+one line naming what to install.
 
 Another device is one :func:`register_device` call; nothing else chooses by type.
 """
@@ -83,3 +93,35 @@ def _hid(cfg: Config, protocol: str):
                           f"{need} (input.position_axes, with one force report map per axis)")
     # opens, resets and enables the actuators; raises DeviceError naming the device when absent
     return HidDevice(dev)
+
+
+def _one_axis(cfg: Config, kind: str) -> None:
+    if device_axes_needed(cfg) != 1:
+        raise DeviceError(f"master.device.type {kind}: drives one axis, the instrument needs "
+                          f"{device_axes_needed(cfg)} (use hid with one position axis per joint)")
+
+
+@register_device("evdev")
+def _evdev(cfg: Config, protocol: str):
+    from master.evdev_device import EvdevDevice, evdev_module, load_evdev_file
+    _one_axis(cfg, "evdev")
+    ev = evdev_module()                    # one line naming the extra when python-evdev is missing
+    return EvdevDevice(load_evdev_file(cfg.master.device.file), ev)
+
+
+def _vendor(cfg: Config, kind: str):
+    from master.vendor_devices import DhdAdapter, TouchAdapter, VendorDevice, load_vendor_file, sdk_module
+    _one_axis(cfg, kind)
+    sdk = sdk_module(kind)                 # one line naming the package or the vendor library when missing
+    vcfg = load_vendor_file(kind, cfg.master.device.file)
+    return VendorDevice(vcfg, DhdAdapter(sdk) if kind == "forcedimension" else TouchAdapter(sdk))
+
+
+@register_device("forcedimension")
+def _forcedimension(cfg: Config, protocol: str):
+    return _vendor(cfg, "forcedimension")
+
+
+@register_device("touch")
+def _touch(cfg: Config, protocol: str):
+    return _vendor(cfg, "touch")

@@ -211,7 +211,7 @@ class ArmConfig:                          # the simulated operator's arm + devic
 
 @dataclass(frozen=True)
 class DeviceConfig:
-    type: Literal["simulated", "hid"] = "simulated"
+    type: Literal["simulated", "hid", "evdev", "forcedimension", "touch"] = "simulated"   # master/devices.py
     file: Optional[str] = None            # device file (configs/devices/*.yaml), required when type is hid
     arm: ArmConfig = field(default_factory=ArmConfig)
 
