@@ -256,8 +256,8 @@ def attach_slave(session: Any, cfg: Any, links: Any) -> SlaveCrtk | None:
     links.estimate = crtk.tee(links.estimate)
     links.command = CommandMerge(links.command, crtk)
     master_alive = links.master_alive
-    links.master_alive = crtk.driver_alive if master_alive is None else \
-        (lambda: master_alive() or crtk.driver_alive())
+    if master_alive is not None:        # a ROS 2 driver's token counts as the master's
+        links.master_alive = lambda: master_alive() or crtk.driver_alive()
     links.crtk = crtk
     return crtk
 
