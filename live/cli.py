@@ -1,4 +1,4 @@
-"""The ``teleop`` command: ``teleop demo|master|slave|bridge|calibrate|analyze|devices``.
+"""The ``teleop`` command: ``teleop demo|master|slave|bridge|calibrate|analyze|devices``, ``teleop --version``.
 
 :func:`main` takes an argument list and returns an exit code; argument parsing is separate
 (:func:`build_parser`) and every subcommand is a function of the parsed arguments. Exit codes:
@@ -17,6 +17,7 @@ configured lists), ``--run-dir DIR`` (where recordings and stats go; default
 from __future__ import annotations
 
 import argparse
+import importlib.metadata
 import logging
 import os
 import signal
@@ -27,7 +28,7 @@ from typing import NoReturn
 from live.sides import endpoints, run_master, run_slave
 from teleop.errors import TeleopError
 
-__all__ = ["build_parser", "main", "run_slave", "run_master", "endpoints"]
+__all__ = ["build_parser", "main", "version", "run_slave", "run_master", "endpoints"]
 
 PROG = "teleop"
 
@@ -49,13 +50,31 @@ def _inject_flag(p: argparse.ArgumentParser) -> None:
                         "(live/faults.py)")
 
 
+def version() -> str:
+    """The installed version of the ``tsm-teleop`` distribution ("unknown" when it is not installed)."""
+    try:
+        return importlib.metadata.version("tsm-teleop")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
+
+
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
-    """The argument parser. ``argv`` decides whether ``study.analyze`` is imported (only for analyze)."""
+    """The argument parser. ``argv`` (default ``sys.argv[1:]``) decides whether ``study.analyze`` and the HID
+    device list are imported (only for ``analyze`` and ``devices``)."""
     parser = argparse.ArgumentParser(prog=PROG, description="Haptic teleoperation of tendon-sheath instruments.")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
     sub = parser.add_subparsers(dest="command",
                                 metavar="{demo,master,slave,record,router,bridge,calibrate,replay,analyze,devices}",
                                 required=True)
+    args = sys.argv[1:] if argv is None else argv
+    _add_sides(sub)
+    _add_services(sub)
+    _add_lazy(sub, args)
+    return parser
 
+
+def _add_sides(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
+    """The two sides and the demo that runs both."""
     p = sub.add_parser("demo", help="both sides as two processes over Zenoh on 127.0.0.1, then a summary")
     _shared(p)
     p.add_argument("--protocol", default="paper,minor", help="operator protocol(s) (default paper,minor)")
@@ -81,6 +100,9 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
     p.set_defaults(func=_cmd_master)
 
+
+def _add_services(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
+    """The processes around the sides (recorder, router, bridge) and the offline commands on the rig."""
     p = sub.add_parser("record", help="record every stream of the instrument over Zenoh (live/record.py)")
     _shared(p)
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
@@ -113,15 +135,16 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     replay.add_arguments(p)
     p.set_defaults(func=replay.main_replay)
 
-    p = sub.add_parser("devices", help="list HID devices (vendor/product id, usage page, usage, path)")
-    if "devices" in (sys.argv[1:] if argv is None else argv)[:1]:
+
+def _add_lazy(sub: "argparse._SubParsersAction[argparse.ArgumentParser]", args: list[str]) -> None:
+    """The commands whose modules load only when ``args`` name them (hidapi, the offline study)."""
+    p = sub.add_parser("devices", help="list what each device backend finds (hid, evdev, forcedimension, touch)")
+    if "devices" in args[:1]:
         from master import devices_list  # lazy: only `teleop devices` imports hidapi
         devices_list.add_arguments(p)
         p.set_defaults(func=devices_list.main_devices)
     else:
         p.set_defaults(func=None)
-
-    args = sys.argv[1:] if argv is None else argv
     if "analyze" in args[:1]:
         from study import analyze  # lazy: only `teleop analyze` pays for it
         p = sub.add_parser("analyze", help="run the model against a recording")
@@ -131,7 +154,6 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         p = sub.add_parser("analyze", help="run the model against a recording (see `teleop analyze -h`)",
                            add_help=False)
         p.set_defaults(func=None)
-    return parser
 
 
 # ---- subcommands ---------------------------------------------------------------------------------
@@ -195,8 +217,7 @@ def run() -> NoReturn:
     its code; a watchdog ends the process with that code EXIT_GRACE_S after main returned if the interpreter's
     own exit has not (a non-daemon thread or a native runtime that does not stop). SIGINT stops it cleanly
     (KeyboardInterrupt, exit 130) even when it was started with SIGINT ignored, as a non-interactive shell
-    starts a background job (session 14: the recorder and router tests failed so when `make test` ran
-    in the background - the "flake" of session 13)."""
+    starts a background job (a process that ignored SIGINT would outlive the shell's interrupt)."""
     signal.signal(signal.SIGINT, signal.default_int_handler)
     code = main()
     sys.stdout.flush()
