@@ -1,7 +1,11 @@
-"""`teleop devices`: list the HID devices hidapi sees, and check that one can be opened.
+"""`teleop devices`: what each device backend finds, and a check that a HID device can be opened.
 
-The listing shows what a device file needs (``match.vendor_id``, ``match.product_id`` or
-``match.path``). On Linux a hidraw node is usually root-only; :func:`probe_open` says which udev rule
+Backends (``--backend``, default all): ``hid`` (the HID devices hidapi sees, with what a device file
+needs: ``match.vendor_id``, ``match.product_id`` or ``match.path``), ``evdev`` (the event devices the
+user may open, and whether each has the FF_CONSTANT effect :mod:`master.evdev_device` needs),
+``forcedimension`` (the number of Force Dimension devices the DHD library sees) and ``touch`` (whether
+the OpenHaptics HD library loads). A backend whose extra or vendor library is missing says in one line
+what to install. On Linux a hidraw node is usually root-only; :func:`probe_open` says which udev rule
 gives the logged-in user access when opening fails for lack of permission.
 """
 from __future__ import annotations
@@ -16,7 +20,9 @@ from master.hid import hid_module
 from teleop.errors import DeviceError
 
 __all__ = ["list_devices", "format_devices", "probe_open", "udev_rule", "add_arguments", "main_devices",
-           "UDEV_RULES_FILE", "NONE_FOUND"]
+           "backend_lines", "BACKENDS", "UDEV_RULES_FILE", "NONE_FOUND"]
+
+BACKENDS = ("hid", "evdev", "forcedimension", "touch")
 
 UDEV_RULES_FILE = "/etc/udev/rules.d/70-haptic.rules"
 NONE_FOUND = "no HID devices found"
@@ -145,30 +151,87 @@ def probe_open(path: str, *, device_factory: Callable[[], Any] | None = None,
             pass
 
 
+def _evdev_lines(ev: Any) -> list[str]:
+    from master.evdev_device import evdev_module, ff_devices
+    try:
+        found = ff_devices(ev if ev is not None else evdev_module())
+    except DeviceError as e:
+        return [str(e)]
+    if not found:
+        return ["no event devices readable (force feedback needs read and write access to /dev/input/event*: "
+                "the input group or a udev rule)"]
+    width = max(len(n) for _, n, _ in found)
+    return [f"{p}  {n.ljust(width)}  {'FF_CONSTANT' if ok else 'no FF_CONSTANT (not usable)'}" for p, n, ok in found]
+
+
+def _vendor_lines(kind: str, importer: Callable[[str], Any] | None) -> list[str]:
+    from master.vendor_devices import sdk_module
+    try:
+        sdk = sdk_module(kind) if importer is None else sdk_module(kind, importer)
+    except DeviceError as e:
+        return [str(e)]
+    if kind == "touch":       # OpenHaptics finds a device only by opening it
+        return ["OpenHaptics HD library loaded; the Touch opens as its 'Default Device' (Touch Setup names it)"]
+    n = int(sdk.getDeviceCount())
+    return [f"{n} Force Dimension device(s) found" if n > 0 else "no Force Dimension device found "
+            "(plugged in and powered? the DHD library counts none)"]
+
+
+def backend_lines(name: str, *, enumerate_fn: Callable[..., list[dict]] | None = None, vendor_id: int = 0,
+                  product_id: int = 0, evdev: Any = None, importer: Callable[[str], Any] | None = None) -> list[str]:
+    """What backend ``name`` (one of :data:`BACKENDS`) finds: a table, or one line saying why none.
+
+    ``enumerate_fn``, ``evdev`` and ``importer`` stand in for hidapi's enumerate, python-evdev and the
+    vendor SDK import in tests. Never raises :class:`DeviceError`: its message becomes the line.
+    """
+    if name == "hid":
+        try:
+            return format_devices(list_devices(enumerate_fn, vendor_id, product_id)).splitlines()
+        except DeviceError as e:
+            return [str(e)]
+    if name == "evdev":
+        return _evdev_lines(evdev)
+    return _vendor_lines(name, importer)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``teleop devices``."""
     parser.add_argument("--vid", type=lambda s: int(s, 16), default=0, metavar="HEX",
                         help="only this vendor id (hex, e.g. 1209)")
     parser.add_argument("--pid", type=lambda s: int(s, 16), default=0, metavar="HEX",
                         help="only this product id (hex)")
+    parser.add_argument("--backend", choices=BACKENDS + ("all",), default="all",
+                        help="list one backend only (default all: hid, evdev, forcedimension, touch)")
     parser.add_argument("--probe", metavar="PATH",
                         help="try to open the device at PATH (shows the udev rule on permission errors)")
 
 
 def main_devices(args: argparse.Namespace, *, enumerate_fn: Callable[..., list[dict]] | None = None,
-                 device_factory: Callable[[], Any] | None = None, out: TextIO | None = None) -> int:
-    """Run ``teleop devices``: print the listing (or the probe result); 0 also when none are found.
+                 device_factory: Callable[[], Any] | None = None, out: TextIO | None = None, evdev: Any = None,
+                 importer: Callable[[str], Any] | None = None) -> int:
+    """Run ``teleop devices``: print what each backend finds (or the probe result); 0 also when none are found.
+
+    One backend (``--backend``) prints its listing bare; all of them print ``<backend>: <line>``, or
+    ``<backend>:`` and its table indented.
 
     Raises
     ------
     DeviceError
-        Enumeration failed, or ``--probe`` could not open the device (the CLI prints it, exit 2).
+        ``--probe`` could not open the device (the CLI prints it, exit 2).
     """
     out = out or sys.stdout
     probe = getattr(args, "probe", None)
     if probe:
         print(probe_open(probe, device_factory=device_factory, enumerate_fn=enumerate_fn), file=out)
         return 0
-    devices = list_devices(enumerate_fn, getattr(args, "vid", 0) or 0, getattr(args, "pid", 0) or 0)
-    print(format_devices(devices), file=out)
+    chosen = getattr(args, "backend", "all") or "all"
+    for name in BACKENDS if chosen == "all" else (chosen,):
+        lines = backend_lines(name, enumerate_fn=enumerate_fn, vendor_id=getattr(args, "vid", 0) or 0,
+                              product_id=getattr(args, "pid", 0) or 0, evdev=evdev, importer=importer)
+        if chosen != "all":
+            print("\n".join(lines), file=out)
+        elif len(lines) == 1:
+            print(f"{name}: {lines[0]}", file=out)
+        else:
+            print(f"{name}:\n" + "\n".join("  " + ln for ln in lines), file=out)
     return 0

@@ -68,11 +68,18 @@ def one_line(capsys) -> str:
 
 
 def test_devices_without_any_device_says_so_in_one_line_exit_0():
-    proc = subprocess.run([sys.executable, "-m", "live.cli", "devices"], capture_output=True, text=True,
-                          timeout=60)
+    proc = subprocess.run([sys.executable, "-m", "live.cli", "devices", "--backend", "hid"], capture_output=True,
+                          text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
     out = [ln for ln in proc.stdout.splitlines() if ln.strip()]
     assert out == ["no HID devices found"] and proc.stderr == ""
+
+
+def test_devices_lists_every_backend_with_what_it_found_or_why_none():
+    proc = subprocess.run([sys.executable, "-m", "live.cli", "devices"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+    heads = [ln.split(":")[0] for ln in proc.stdout.splitlines() if not ln.startswith(" ")]
+    assert heads == ["hid", "evdev", "forcedimension", "touch"]
 
 
 def test_devices_is_listed_in_the_help():

@@ -386,7 +386,7 @@ def test_listing_none_found_is_one_line_and_exit_0():
     out = io.StringIO()
     args = ArgumentParser()
     add_arguments(args)
-    assert main_devices(args.parse_args([]), enumerate_fn=lambda vid, pid: [], out=out) == 0
+    assert main_devices(args.parse_args(["--backend", "hid"]), enumerate_fn=lambda vid, pid: [], out=out) == 0
     assert out.getvalue() == "no HID devices found\n"
 
 
