@@ -10,7 +10,7 @@
 * ``mrd_centre.png``    the centre map (load read from the spindle's band centre): leave-one-run-out
   RMSE over frequency x load, and the one-run calibration's cost profile over the load gain beside the
   scored runs' error at each gain (the identifiability evidence), and each run's load gain from its own
-  signals with its 95 % profile interval beside the gain fitted across loads (session 5).
+  signals with its 95 % profile interval beside the gain fitted across loads.
 
 Data: MRD Lab data repository, University of Minnesota (ODbL 1.0 / DbCL 1.0); the attribution is
 written into every figure and the report.
@@ -231,7 +231,7 @@ def _centre(plt, runs: list[MrdRun], summary: dict, path: Path) -> Path:
 def _within(ax, runs: list[MrdRun], wg: dict) -> None:
     """Each run's load gain from its own signals with its 95 % profile interval, beside the folder's gain."""
     rows = wg.get("runs", {})
-    ax.set_title("load gain from each run alone (session 5)", fontsize=9)
+    ax.set_title("load gain from each run alone", fontsize=9)
     if not rows:
         return
     lv = {r.name: r.load_level for r in runs}
