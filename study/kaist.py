@@ -53,7 +53,7 @@ RATE_HZ = 40.0
 _NAME = re.compile(r"sine_config_(\d+(?:\.\d+)?)\.txt$")
 # the source repository's own layout (optimization/selected/<N>.txt), read when a folder has no sine_config_<N>.txt
 _BARE = re.compile(r"(\d+(?:\.\d+)?)\.txt")
-_MISSING_HINT = "these tests need the unlicensed measurements, see docs/findings.md"
+_MISSING_HINT = "these tests need the unlicensed measurements, see docs/results/kaist.md"
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,7 +1,7 @@
 """Figures and the Markdown report of ``teleop analyze --kaist`` (summary plots only, no data).
 
-Finding 1 (seed pair model against the baselines): ``kaist_rmse.png``, ``kaist_loops.png``,
-``kaist_residuals.png``. Finding 2 (the pair diagnosis and the shared fit):
+The base pair model against the baselines (docs/results/kaist.md): ``kaist_rmse.png``, ``kaist_loops.png``,
+``kaist_residuals.png``. The pair diagnosis and the shared fit:
 
 * ``kaist_pair_loops.png``      distal angle against the command on the test cycle, per
   configuration: measured, seed model, extended model, shared fit;
@@ -34,7 +34,7 @@ FIGURES = ("kaist_rmse.png", "kaist_loops.png", "kaist_residuals.png", "kaist_pa
 
 
 def _finding1_figures(recs, details, summary, d: Path, plt) -> list[Path]:
-    """kaist_rmse.png, kaist_loops.png, kaist_residuals.png (docs/findings.md, Finding 1)."""
+    """kaist_rmse.png, kaist_loops.png, kaist_residuals.png (docs/results/kaist.md)."""
     deg = np.degrees
     colors = plt.cm.viridis(np.linspace(0.0, 0.85, len(recs)))
     Ns = [c["config_deg"] for c in summary["configurations"]]
@@ -278,7 +278,7 @@ def _tension_angle_figure(recs, d: Path, plt) -> list[Path]:
     """kaist_tension_angle.png: T_a - T_b [N] against the distal angle [deg], every sample, one panel
     per configuration (no model): a parallelogram whose vertical sides are the friction band held
     after each reversal and whose branches end in a rise of the tension difference while the joint
-    stalls (docs/findings.md, Finding 3, session 4)."""
+    stalls (docs/results/kaist.md)."""
     n = len(recs)
     fig, axes = plt.subplots(1, n, figsize=(3.4 * n, 3.6), squeeze=False)
     for ax, rec in zip(axes[0], recs):

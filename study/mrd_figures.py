@@ -1,4 +1,4 @@
-"""Figures and the Markdown report of ``teleop analyze --mrd`` (summary plots, docs/findings.md Finding 4).
+"""Figures and the Markdown report of ``teleop analyze --mrd`` (summary plots, docs/results/mrd.md).
 
 * ``mrd_loops.png``     jaw torque against jaw angle, measured beside predicted (leave-one-run-out
   and calibrated on one run), for the four corner runs (slowest / fastest x lightest / heaviest);

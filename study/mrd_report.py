@@ -3,7 +3,7 @@
 Data: MRD Lab data repository, University of Minnesota (O'Neill, Stephens, Kowalewski, IEEE RA-L
 3(4):3027-3034, 2018; ODbL 1.0 / DbCL 1.0; ../shared/data/mrd-davinci/SOURCE.md).
 
-Protocol (docs/findings.md, Finding 4):
+Protocol (docs/results/mrd.md):
 
 * calibration ``RUN`` (default: the slowest, lightest run), ``kinematic:RUN`` (the same with the
   torque scale rho fixed to 1 / n_k, the pulley radii ratio read from the calibration run's spindle

@@ -114,7 +114,7 @@ def test_noise_band_stops_the_estimate_latching_load_cell_noise():
     """A noisy T_in makes the envelope rule latch the noise's extremes in every hold and partial reversal; the
     band removes most of that error. On a recording of the independent lumped simulator (clean, true K, route
     and L/EA given to the estimator, T_in's noise measured from the data) the banded estimate is at least 35 %
-    closer to the true distal tension, and its mean error is under a third of the envelope's (docs/findings.md:
+    closer to the true distal tension, and its mean error is under a third of the envelope's (docs/concepts/model.md:
     a 53 % cut and a 7x smaller bias over 24 such recordings)."""
     from estimator.data import noise_level
     from estimator.sheath import SheathGeometry as G

@@ -16,7 +16,7 @@ from study.kaist import cycles, default_kaist_dir, load_all
 KAIST_DIR = default_kaist_dir()
 pytestmark = [pytest.mark.kaist, pytest.mark.skipif(
     not KAIST_DIR.is_dir(), reason=f"KAIST data not found at {KAIST_DIR}: these tests need the unlicensed "
-                                   "measurements, see docs/findings.md")]
+                                   "measurements, see docs/results/kaist.md")]
 
 
 def test_without_friction_the_joint_estimator_is_the_seed_pair_model():

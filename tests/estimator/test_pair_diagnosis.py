@@ -1,6 +1,6 @@
 """Capstan-joint pair model, pair diagnosis and shared fit: synthetic data made by the models
-themselves (parameters recovered, the right cause named). The KAIST findings (docs/findings.md,
-Findings 2 and 3) are checked through the CLI in tests/study/test_analyze.py."""
+themselves (parameters recovered, the right cause named). The KAIST results (docs/results/kaist.md)
+are checked through the CLI in tests/study/test_analyze.py."""
 from __future__ import annotations
 
 import math

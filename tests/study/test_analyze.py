@@ -243,14 +243,14 @@ def test_kaist_bend_option_columns_and_shared_params_errors(tmp_path, monkeypatc
 
 @pytest.mark.kaist
 @pytest.mark.skipif(not KAIST_DIR.is_dir(), reason=f"KAIST data not found at {KAIST_DIR}: these tests need "
-                                                   "the unlicensed measurements, see docs/findings.md")
+                                                   "the unlicensed measurements, see docs/results/kaist.md")
 def test_kaist_findings_hold_on_the_real_data(tmp_path, capsys):
     out = tmp_path / "k.json"
     assert run(["--kaist", str(KAIST_DIR), "--json", str(out), "--bootstrap", "5"]) == 0
     s = json.loads(out.read_text())
     rm = {c["config_deg"]: {k: v["rmse_test_deg"] for k, v in c["models"].items()} for c in s["configurations"]}
     for N, r in rm.items():
-        assert r["seed pair model"] < 0.6 * r["linear map"], N          # docs/findings.md, table 1
+        assert r["seed pair model"] < 0.6 * r["linear map"], N          # docs/results/kaist.md
         assert r["linear map + play"] < 0.6 * r["seed pair model"], N
     zones = [np.mean([z["command_travel_deg"] for z in c["dead_zones"] if z["command_travel_deg"]])
              for c in s["configurations"]]
@@ -275,7 +275,7 @@ def test_kaist_findings_hold_on_the_real_data(tmp_path, capsys):
     vals = sh["params"]["values"]
     assert 0.05 < vals["mu"]["value"] < 0.3 and vals["mu"]["std"] < 0.5 * vals["mu"]["value"]
     assert all(r["rmse_test_deg"] < 5.0 for r in sh["leave_one_out"][sh["chosen"]])
-    # every reported figure with its bootstrap uncertainty (docs/findings.md, Finding 3, session 5)
+    # every reported figure with its bootstrap uncertainty (docs/results/kaist.md)
     for r in sh["leave_one_out"][sh["chosen"]]:
         b = r["rmse_test_bootstrap"]
         assert b["n_draws"] == 5 and 0.0 < b["std_deg"] < r["rmse_test_deg"] and b["ci95_deg"][0] <= b["ci95_deg"][1]

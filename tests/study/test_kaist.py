@@ -14,7 +14,7 @@ KAIST_DIR = default_kaist_dir()
 needs_kaist = pytest.mark.skipif(
     not KAIST_DIR.is_dir(),
     reason=f"KAIST data not found at {KAIST_DIR}: these tests need the unlicensed measurements, "
-           "see docs/findings.md")
+           "see docs/results/kaist.md")
 
 
 def _row(t, cmd, vel, ang, ta, tb, ma, mb):
