@@ -1,7 +1,7 @@
 """Closed forms of the seed paper for a sheath of constant curvature, vectorised over numpy arrays.
 
 Phee, Low, Valdastri, Menciassi, Dario, "Tendon sheath analysis for estimation of distal end force
-and elongation", IEEE/ASME AIM 2009. Symbols (defined in docs/model.md):
+and elongation", IEEE/ASME AIM 2009. Symbols (defined in docs/concepts/model.md):
 
     K    = mu * sum((x_i - x_{i-1}) / R_i)      friction exponent [-]                      eq. (2)
     T_in, T_out                                  proximal, distal tension [N]

@@ -1,7 +1,7 @@
 """Diagnose a recording: how far the base model is off, which physical effect explains it, and the gain.
 
     python examples/diagnose.py                     # a simulated recording with a hidden effect
-    python examples/diagnose.py rec.csv             # your own measured-data CSV (docs/formats.md)
+    python examples/diagnose.py rec.csv             # your own measured-data CSV (docs/reference/formats.md)
     python examples/diagnose.py --effect stiction   # another hidden effect of the simulated rig
 
 :func:`estimator.diagnose` fits the base model (the capstan law with profile memory) and every

@@ -4,7 +4,7 @@
     python examples/estimate_csv.py rec.csv --K 0.8 --compliance 1e-4
     python examples/estimate_csv.py rec.csv                          # K and L/EA fitted (needs T_out or x_out)
 
-The recording is a measured-data CSV (docs/formats.md: time [s], x_in [m], T_in [N], optional T_out [N]
+The recording is a measured-data CSV (docs/reference/formats.md: time [s], x_in [m], T_in [N], optional T_out [N]
 and x_out [m]). Without a file, 20 s of the simulated bench rig (study/scenarios.py) are written to a
 temporary directory first, with the rig's friction exponent K and compliance L/EA. With a file and
 without ``--K``/``--compliance`` both are fitted on the first 60 % of the recording and the error is

@@ -250,7 +250,7 @@ def format_summary(s: dict) -> str:
     rec = s.get("master", {}).get("recording") or f"{s['run_dir']}/master.csv"
     L.append(f"recording: {s['run_dir']}/{kind.files[0]}; master: {rec}")
     L.append(f"rerun:     open with `{rerun_command()} {s['run_dir']}/slave.rrd {s['run_dir']}/master.rrd` "
-             f"(no display: README, 'Looking at a run')")
+             f"(no display: docs/how-to/rerun-view.md)")
     if s.get("figure"):
         L.append(f"figure:    {s['figure']}  (distal tension and elongation: truth vs estimates)")
     L.append(f"summary:   {s['run_dir']}/summary.json")

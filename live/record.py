@@ -33,7 +33,7 @@ journal (:mod:`teleop.journal`, ``<run dir>/<side>.journal-NNN``): when a side's
 and at the end, the recorder adds every journaled message it did not receive
 (:mod:`live.record_journal`), counted per stream as ``recovered`` in ``summary.json`` (with
 ``received``) and listed in ``recovered.csv``. That needs the journals reachable: same machine, or a
-run directory both share (docs/formats.md).
+run directory both share (docs/reference/formats.md).
 """
 from __future__ import annotations
 

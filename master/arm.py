@@ -12,7 +12,7 @@ motor plan), ``F`` the rendered device force [N] (+ = along + position), ``m_a, 
 effective mass [kg], damping [N s/m] and stiffness [N/m] (Hogan 1985; Tsuji et al. 1995), ``m_d``,
 ``b_d``, ``F_c`` the device's moving mass [kg], viscous [N s/m] and Coulomb [N] friction.
 
-Typical values (docs/stability.md, with sources): hand/arm mass 1-2 kg, damping 5-30 N s/m,
+Typical values (docs/concepts/haptic-loop.md, with sources): hand/arm mass 1-2 kg, damping 5-30 N s/m,
 stiffness 100-800 N/m for a relaxed to a firm grip; a desktop haptic device 0.05-0.2 kg and
 0.05-0.3 N of friction. The defaults (1.5 kg, 15 N s/m, 300 N/m; 0.1 kg, 0.5 N s/m, 0.2 N) sit
 in the middle.
@@ -23,7 +23,7 @@ handles Coulomb friction as an impulse (Karnopp): if friction can stop the mass 
 sub-step it sticks (v = 0), else it takes ``F_c dt`` of momentum. The static arm of the first
 scripted operators (``p = p_i + F / k_a``, no mass) is the limit m, b -> 0; a time-domain
 passivity controller on such an arm is a discrete damper loop of gain ``alpha / (k_a dt)``, which
-is what made the demo chatter (docs/stability.md).
+is what made the demo chatter (docs/concepts/haptic-loop.md).
 """
 from __future__ import annotations
 

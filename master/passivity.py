@@ -32,7 +32,7 @@ creeping at a few um/s carries almost no power, and deciding on the sign of such
 force between full and zero every other sample; so did a raw-velocity threshold, as one force step
 moves the hand by ~1 mm/s within a sample. The hard PC alone switches between
 full force and the damped force from one sample to the next; on a hand of small inertia that is a
-limit cycle of its own (docs/stability.md). Scaling the force toward 0 never makes the port active
+limit cycle of its own (docs/concepts/haptic-loop.md). Scaling the force toward 0 never makes the port active
 (``|f'| <= |f|``, same sign). (Hannaford & Ryu write ``f' = f + alpha v`` with ``f`` the force
 the operator applies to the network; here ``f`` is the force applied to the operator, hence the
 minus.) The command is clamped to ``[-limit, limit]`` first; the damped force then always lies
@@ -56,7 +56,7 @@ fall it ran the tank dry and switched at fs 0.4: 0.33 N). ``g`` in [0, 1] scales
 the same sign, and the hard PC after it still keeps ``E(k) >= 0``: passivity is unchanged. The price
 is TDPA's known position drift (Artigas et al. 2010): where the network is strongly active (a
 delayed stiff wall) the force comes back over ~50 ms after each cut and the hand sinks slowly into
-the wall instead of buzzing against it (docs/stability.md).
+the wall instead of buzzing against it (docs/concepts/haptic-loop.md).
 """
 from __future__ import annotations
 

@@ -17,7 +17,7 @@ one per axis (:mod:`master.arm`; Hogan 1985, Tsuji et al. 1995)::
 so the master's force feedback acts on the motion it commands, as with a real hand. ``static_arm``
 keeps the first model, a massless spring ``p = p_intended + F / k_arm``, for comparisons only: with
 it the passivity controller's force steps become position steps and the loop chatters
-(docs/stability.md).
+(docs/concepts/haptic-loop.md).
 
 When the console asks to align (after a fault the hand has moved, or the slave relaxed) the
 operator clutches: it holds the clutch button (``clutch_bit``) for ``clutch_time`` and lets go, which

@@ -16,7 +16,7 @@
   keeps that motion slow and smooth.
 * Each cycle: ``estimator.step(T_in, x_in, t)`` (proximal sensors only) -> the axis's state (effort
   = T_out_hat [N], position = x_out_hat [m]) and the profile at ``estimator.profile_points`` points;
-  one row of ``slave.csv`` in the measured-data format (docs/formats.md), Rerun every
+  one row of ``slave.csv`` in the measured-data format (docs/reference/formats.md), Rerun every
   ``recording.log_every`` cycles (estimate against truth when the rig has it).
 """
 from __future__ import annotations

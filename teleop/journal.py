@@ -7,7 +7,7 @@ be lost on the way even though the side published them. So each side (``teleop s
 zenoh, with one ``os.write`` on an ``O_APPEND`` file: once the call returns the bytes are in the
 kernel's page cache, which a killed process cannot take back. ``teleop record`` completes its
 recording from the journals of its run directory (same machine or a shared run directory; see
-docs/formats.md): when a side's liveliness is lost and at its end it reads them and adds every
+docs/reference/formats.md): when a side's liveliness is lost and at its end it reads them and adds every
 message it did not receive, marked as recovered.
 
 A record has the layout of the recorder's ``messages.bin``: ``<d t [s]><H key length><I payload

@@ -33,14 +33,14 @@ __all__ = ["CUTOFF_HZ", "WINDOW_S", "CHATTER_LIMITS", "TRANSPARENCY_LIMIT_FS", "
 ENGAGED = 3          # teleop.messages.SideState.ENGAGED
 CUTOFF_HZ = 30.0
 WINDOW_S = 0.1
-#: The demo's check: worst-window chatter below these (x_in_cmd [m], force [N]); docs/stability.md
+#: The demo's check: worst-window chatter below these (x_in_cmd [m], force [N]); docs/concepts/haptic-loop.md
 #: "The checks' limits": 20 um of tendon = 100 um of hand at motion_scale 0.2, the order of the
 #: surgeon's own physiological tremor; 0.05 N = the force JND (~10 %, Jones 1989; Pang et al. 1991)
 #: of the smallest force worth feeling through the device, 0.5 N.
 CHATTER_LIMITS = {"x_in_cmd_m": 20e-6, "force_N": 0.05}
 #: The joint demo's check: transparency RMS error below this fraction of full scale, the stiffness JND
 #: (23 %, Jones & Hunter 1990): below it the rendered tissue cannot be told from the true one by its
-#: stiffness (docs/stability.md).
+#: stiffness (docs/concepts/haptic-loop.md).
 TRANSPARENCY_LIMIT_FS = 0.23
 
 

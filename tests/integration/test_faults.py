@@ -13,7 +13,7 @@ ENGAGED again after the observation window, or 2 s later, and rows after the har
 counted: a side that sees its peer stop first goes SAFE there), messages counted.
 
 ``pytest -m integration tests/integration/test_faults.py -s`` prints the table of figures that
-docs/reliability.md reports.
+docs/concepts/safety.md reports.
 """
 from __future__ import annotations
 

@@ -37,7 +37,7 @@ def test_three_joint_demo_end_to_end_over_zenoh(tmp_path):
     logs = proc.stderr + (run_dir / "slave.log").read_text() + (run_dir / "master.log").read_text()
     assert "Traceback" not in logs, logs[-3000:]
     summary = json.loads((run_dir / "summary.json").read_text())
-    # the failed checks first: pytest truncates a long message, and a timing check failing under load (docs/stability.md,
+    # the failed checks first: pytest truncates a long message, and a timing check failing under load (docs/concepts/haptic-loop.md,
     # the real-time-limit signature) must be told from the others
     failed = [k for k, ok in summary["checks"].items() if not ok]
     assert summary["problems"] == [] and proc.returncode == 0, (failed, summary["problems"], summary.get("haptic_loop"),
