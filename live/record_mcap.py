@@ -67,12 +67,21 @@ ROS2_SCHEMAS = {
 _STAMPS = ("t_slave", "t_master", "t_sender", "t")
 
 
+_FIELDS: dict[type, tuple[str, ...]] = {}
+
+
 def to_json(x: Any) -> Any:
     """A decoded message as plain JSON values: dataclasses -> objects, tuples -> arrays, enums -> ints."""
-    if dataclasses.is_dataclass(x):
-        return {f.name: to_json(getattr(x, f.name)) for f in dataclasses.fields(x)}
+    kind = type(x)
+    if kind is float or kind is int:
+        return x
+    names = _FIELDS.get(kind)
+    if names is None and dataclasses.is_dataclass(x):
+        names = _FIELDS[kind] = tuple(f.name for f in dataclasses.fields(x))
+    if names is not None:
+        return {n: to_json(getattr(x, n)) for n in names}
     if isinstance(x, (tuple, list)):
-        return [to_json(v) for v in x]
+        return list(x) if all(type(v) is float for v in x) else [to_json(v) for v in x]
     if isinstance(x, enum.Enum):
         return int(x.value)
     return x
