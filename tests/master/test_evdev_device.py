@@ -194,3 +194,14 @@ def test_unplugged_mid_run_stops_the_master_step_with_zero_force():
     with pytest.raises(DeviceError, match="device lost"):
         tick(node, clock)
     assert node.device.force == 0.0 and not node.device.state(clock.now()).operator_present
+
+
+def test_the_shipped_device_file_loads_and_drives_the_fake():
+    from pathlib import Path
+
+    from master.evdev_device import load_evdev_file
+    cfg = load_evdev_file(Path(__file__).resolve().parents[2] / "configs" / "devices" / "evdev_joystick.yaml")
+    assert cfg.presence_button == "BTN_TRIGGER" and cfg.direction == 0xC000 and cfg.max_force == 8.0
+    dev = EvdevDevice(cfg, FakeEvdev(FakeInput("/dev/input/event7", "stick")))
+    dev.set_force(-8.0, 0.0)
+    assert dev.dev.uploads[-1] == (3, round(4 / 8 * LEVEL_MAX), 0x4000, 200)
