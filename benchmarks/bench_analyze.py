@@ -21,12 +21,11 @@ from pathlib import Path
 ONE_THREAD = {k: "1" for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")}
 os.environ.update(ONE_THREAD)           # before numpy loads: the in-process split runs on one thread too
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-from estimator.offline.diagnosis import diagnose  # noqa: E402
-from study.report import write_report  # noqa: E402
-from study.scenarios import record  # noqa: E402
-from teleop.recording import read_measured_csv, write_measured_csv  # noqa: E402
+from estimator.offline.diagnosis import diagnose  # noqa: E402 - after the thread settings
+from study.report import write_report  # noqa: E402 - after the thread settings
+from study.scenarios import record  # noqa: E402 - after the thread settings
+from teleop.recording import read_measured_csv, write_measured_csv  # noqa: E402 - after the thread settings
 
 
 def main(argv: list[str] | None = None) -> None:

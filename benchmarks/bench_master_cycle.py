@@ -22,19 +22,17 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from teleop.clock import FakeClock
+from teleop.codec import encode
+from teleop.transport import Received
 
-from teleop.clock import FakeClock  # noqa: E402
-from teleop.codec import encode  # noqa: E402
-from teleop.transport import Received  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 
 class _Topic:

@@ -23,10 +23,9 @@ from pathlib import Path
 ONE_THREAD = {k: "1" for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")}
 os.environ.update(ONE_THREAD)
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-from study.mrd import default_mrd_dir, load_mrd_dir  # noqa: E402
-from study.mrd_report import analyze_mrd  # noqa: E402
+from study.mrd import default_mrd_dir, load_mrd_dir  # noqa: E402 - after the thread settings
+from study.mrd_report import analyze_mrd  # noqa: E402 - after the thread settings
 
 GOAL_S = 60.0
 
@@ -37,7 +36,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--calibration", default=None)
     args = ap.parse_args([] if argv is None else argv)
     if not Path(args.dir).is_dir():
-        print(f"bench_mrd: skipped, {args.dir} not found (the MRD da Vinci folder, see docs/findings.md)")
+        print(f"bench_mrd: skipped, {args.dir} not found (the MRD da Vinci folder, see docs/results/mrd.md)")
         return
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "mrd.json"
@@ -77,4 +76,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:])

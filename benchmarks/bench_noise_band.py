@@ -1,4 +1,4 @@
-"""The live estimator's noise band (docs/model.md, "On a noisy load cell"): distal-tension and elongation error of
+"""The live estimator's noise band (docs/concepts/model.md, "The noise band"): distal-tension and elongation error of
 the profile memory with and without the band, on clean recordings of the independent lumped simulator and of the
 project's rig, with the true K, route and L/EA given to the estimator (so only the memory rule is compared) and the
 noise of T_in measured from the data; and the joint torque error of the 3-joint instrument driven open loop through
@@ -14,16 +14,19 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+from estimator.data import noise_level
+from estimator.online.distal import estimate_batch
+from estimator.sheath import SheathGeometry, SheathModel
+from slave.calibrate import wrap_shape
 
-from bench_diagnosis import known_route  # noqa: E402
-
-from estimator.data import noise_level  # noqa: E402
-from estimator.online.distal import estimate_batch  # noqa: E402
-from estimator.sheath import SheathModel  # noqa: E402
-
-#: clean recordings of the two seed sets of docs/model.md: the rule was written on the first, checked on the second
+#: clean recordings (simulator, first seed): two independent seed sets of the lumped simulator and one of the rig
 SETS = (("lumped", 2900500), ("lumped", 2800500), ("rig", 2900500))
+
+
+def known_route(truth: dict) -> np.ndarray | None:
+    """The normalised cumulative wrap angle of a simulated rig's route ``truth["route"]`` ((length [m], radius [m])
+    pieces), shape (257,): the route a user who knows the instrument passes to the estimator."""
+    return wrap_shape(SheathGeometry(truth["route"]))
 
 
 def one(sim: str, seed: int, duration: float = 60.0) -> tuple[np.ndarray, np.ndarray]:

@@ -14,26 +14,23 @@ from __future__ import annotations
 
 import math
 import os
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from estimator.sheath import SheathModel  # noqa: E402
-from slave.node import SlaveLinks, SlaveNode, csv_columns, warm_up  # noqa: E402
-from slave.simulated import SimulatedRig  # noqa: E402
-from teleop.clock import FakeClock  # noqa: E402
-from teleop.config import Config, load_config  # noqa: E402
-from teleop.csv_writer import ThreadedCsvRecorder  # noqa: E402
-from teleop.messages import Command  # noqa: E402
-from teleop.recording import CsvRecorder  # noqa: E402
-from teleop.rerun_log import RerunLogger  # noqa: E402
-from teleop.rerun_proc import RerunProcessLogger  # noqa: E402
-from teleop.transport import Received  # noqa: E402
+from estimator.sheath import SheathModel
+from slave.node import SlaveLinks, SlaveNode, csv_columns, warm_up
+from slave.simulated import SimulatedRig
+from teleop.clock import FakeClock
+from teleop.config import Config, load_config
+from teleop.csv_writer import ThreadedCsvRecorder
+from teleop.messages import Command
+from teleop.recording import CsvRecorder
+from teleop.rerun_log import RerunLogger
+from teleop.rerun_proc import RerunProcessLogger
+from teleop.transport import Received
 
 
 class _Topic:

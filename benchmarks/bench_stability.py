@@ -1,6 +1,6 @@
 """Stability sweep of the haptic loop: force scale x network delay x arm stiffness -> stable or not, chatter.
 
-One process, no Zenoh: the real pieces of the loop stepped at 1 kHz on one clock (docs/stability.md)::
+One process, no Zenoh: the real pieces of the loop stepped at 1 kHz on one clock (docs/concepts/haptic-loop.md)::
 
     scripted operator + arm/device (master.arm) -> MotionMap (motion_scale) -> delay d ->
     SimulatedRig (sheath, motor, load) -> DistalEstimator (true K, L/EA, route) -> delay d ->
@@ -21,23 +21,19 @@ from __future__ import annotations
 import argparse
 import collections
 import dataclasses
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from estimator.online.distal import DistalEstimator  # noqa: E402
-from estimator.sheath import SheathModel  # noqa: E402
-from master.arm import ArmParameters  # noqa: E402
-from master.mapping import ForceMap, MotionMap, clamp_force  # noqa: E402
-from master.passivity import PassivityController  # noqa: E402
-from master.simulated import PROTOCOLS, ScriptedOperator  # noqa: E402
-from slave.simulated import SimulatedRig  # noqa: E402
-from teleop.config import Config  # noqa: E402
-from teleop.loop_metrics import CHATTER_LIMITS, chatter  # noqa: E402
+from estimator.online.distal import DistalEstimator
+from estimator.sheath import SheathModel
+from master.arm import ArmParameters
+from master.mapping import ForceMap, MotionMap, clamp_force
+from master.passivity import PassivityController
+from master.simulated import PROTOCOLS, ScriptedOperator
+from slave.simulated import SimulatedRig
+from teleop.config import Config
+from teleop.loop_metrics import CHATTER_LIMITS, chatter
 
 
 def run_loop(force_scale: float = 0.2, delay: float = 0.001, arm: ArmParameters | None = None,

@@ -1,28 +1,31 @@
-"""Run every benchmark and print its figures (`make bench`)."""
+"""Run every benchmark and print its figures (`make bench`): each one as its own process, so that the
+thread settings a benchmark makes before numpy loads hold for it."""
 from __future__ import annotations
 
-import importlib
+import subprocess
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+HERE = Path(__file__).resolve().parent
 
 BENCHES = ["bench_estimator", "bench_rig", "bench_joint_rig", "bench_codec", "bench_diagnosis", "bench_analyze",
            "bench_lumped", "bench_slave_cycle", "bench_roundtrip", "bench_mrd", "bench_stability", "bench_noise_band"]
 
 
-def main() -> None:
+def main() -> int:
+    """Run each benchmark of BENCHES that exists, in order; returns the first non-zero exit code (0 if none)."""
+    failed = 0
     for name in BENCHES:
-        try:
-            mod = importlib.import_module(name)
-        except ModuleNotFoundError as exc:
-            if exc.name != name:
-                raise
+        path = HERE / f"{name}.py"
+        if not path.exists():
             continue
-        print(f"== {name}")
-        mod.main()
-        print()
+        print(f"== {name}", flush=True)
+        code = subprocess.run([sys.executable, str(path)], check=False).returncode
+        if code and not failed:
+            failed = code
+        print(flush=True)
+    return failed
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -1,6 +1,6 @@
 """Every folder of the MRD Lab repository through `teleop analyze --mrd`, with and without a sister folder's load gain.
 
-The study of docs/findings.md, Finding 4, session 28: the source repository (https://github.com/MRDLab/
+The study behind docs/results/mrd.md: the source repository (https://github.com/MRDLab/
 mis-tool-characterization, commit 03658b2; ODbL 1.0 / DbCL 1.0; "MRD Lab data repository, University of Minnesota";
 O'Neill, Stephens, Kowalewski, IEEE RA-L 3(4):3027-3034, 2018) holds fifteen folders of one rig; ../shared ships one.
 Point ``--repo`` at a clone's ``data/`` folder (read in place, nothing is copied). Each folder is split into its
@@ -23,18 +23,16 @@ import argparse
 import json
 import os
 import statistics
-import sys
 from pathlib import Path
 
 ONE_THREAD = {k: "1" for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")}
 os.environ.update(ONE_THREAD)
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-from study.mrd import default_mrd_dir, load_mrd_dir, runs_selection, stroke_groups  # noqa: E402
-from study.mrd_report import analyze_mrd  # noqa: E402
+from study.mrd import default_mrd_dir, load_mrd_dir, runs_selection, stroke_groups  # noqa: E402 - after the thread settings
+from study.mrd_report import analyze_mrd  # noqa: E402 - after the thread settings
 
-#: The one-run line of issue 11: median and worst-run torque RMSE [FS].
+#: The one-run calibration's target: median and worst-run torque RMSE [fraction of full scale].
 LINE = (0.03, 0.10)
 
 
