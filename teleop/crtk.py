@@ -38,7 +38,7 @@ Data validity (CRTK): a value that is not valid carries a zero header stamp.
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from typing import Any, Iterator, Sequence
 
 from teleop.errors import CodecError
 from teleop.messages import Estimate, SideState
@@ -130,42 +130,41 @@ def _measured(cfg: Any, est: Estimate) -> tuple[list[float], list[float]]:
 
 
 def slave_messages(cfg: Any, t_ns: int, state: SideState, est: Estimate | None, targets: Sequence[float] | None) \
-        -> list[tuple[str, bytes]]:
-    """(topic, CDR bytes) of every slave topic for one publication at ``t_ns`` [ns, UNIX epoch].
+        -> Iterator[tuple[str, bytes]]:
+    """(topic, CDR bytes) of every slave topic for one publication at ``t_ns`` [ns, UNIX epoch], one topic
+    encoded per step of the iteration (the publisher thread encodes each in the loop's idle time).
 
     ``est``: the latest estimate (None before the first: only the operating state and an invalid
     setpoint); ``targets``: the targets followed, or None when not ENGAGED (setpoint stamp 0).
     """
     arm = slave_arm(cfg)
     names = axis_names(cfg)
-    out = [(f"/{arm}/operating_state", _operating(t_ns, state))]
-    out.append((f"/{arm}/setpoint_js", joint_state(t_ns, names, targets) if targets is not None
-                else joint_state(0, names)))
+    yield f"/{arm}/operating_state", _operating(t_ns, state)
+    yield f"/{arm}/setpoint_js", joint_state(t_ns, names, targets) if targets is not None else joint_state(0, names)
     if est is None:
-        return out
+        return
     pos, eff = _measured(cfg, est)
-    out.append((f"/{arm}/measured_js", joint_state(t_ns, names, pos, None, eff)))
-    out.append((f"/{arm}/actuators/measured_js", joint_state(t_ns, tendon_names(cfg), [t.x_in for t in est.tendons],
-                                                             None, [t.T_in for t in est.tendons])))
-    out.append((f"/{arm}/distal/measured_js", joint_state(t_ns, names, [a.position_hat for a in est.axes], None,
-                                                          [a.effort_hat for a in est.axes])))
+    yield f"/{arm}/measured_js", joint_state(t_ns, names, pos, None, eff)
+    yield f"/{arm}/actuators/measured_js", joint_state(t_ns, tendon_names(cfg), [t.x_in for t in est.tendons],
+                                                      None, [t.T_in for t in est.tendons])
+    yield f"/{arm}/distal/measured_js", joint_state(t_ns, names, [a.position_hat for a in est.axes], None,
+                                                   [a.effort_hat for a in est.axes])
     single = not cfg.instrument.joints
     for topic, a in zip(_cf_topics(cfg), est.axes):
         force, torque = ((0.0, 0.0, a.effort_hat), (0.0, 0.0, 0.0)) if single else \
             ((0.0, 0.0, 0.0), (0.0, 0.0, a.effort_hat))
-        out.append((topic, wrench_stamped(t_ns, force, torque, f"{arm}_distal")))
-    return out
+        yield topic, wrench_stamped(t_ns, force, torque, f"{arm}_distal")
 
 
 def master_messages(cfg: Any, t_ns: int, state: SideState, positions: Sequence[float] | None,
-                    forces: Sequence[float] | None) -> list[tuple[str, bytes]]:
+                    forces: Sequence[float] | None) -> Iterator[tuple[str, bytes]]:
     """(topic, CDR bytes) of the master's topics: the device position [m] and rendered force [N] per
     axis (stamp 0 and no values while a position is missing or not finite), and the operating state."""
     arm = master_arm(cfg)
     names = axis_names(cfg)
     valid = positions is not None and forces is not None and all(math.isfinite(v) for v in (*positions, *forces))
-    js = joint_state(t_ns, names, positions, None, forces) if valid else joint_state(0, names)
-    return [(f"/{arm}/measured_js", js), (f"/{arm}/operating_state", _operating(t_ns, state))]
+    yield f"/{arm}/measured_js", joint_state(t_ns, names, positions, None, forces) if valid else joint_state(0, names)
+    yield f"/{arm}/operating_state", _operating(t_ns, state)
 
 
 def servo_targets(msg: Any, names: Sequence[str]) -> tuple[float, ...]:

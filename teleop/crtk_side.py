@@ -22,7 +22,7 @@ import logging
 import math
 import threading
 import time
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 from teleop.codec import next_seq, seq_newer
 from teleop.crtk import (
@@ -62,7 +62,7 @@ class CrtkSide:
         The ROS 2 node name.
     topics : dict
         Topic -> ROS 2 type of every published topic.
-    messages : callable(t_ns, *offered) -> list of (topic, CDR bytes)
+    messages : callable(t_ns, *offered) -> iterable of (topic, CDR bytes), encoding each topic when reached
 
     Attributes
     ----------
@@ -73,7 +73,7 @@ class CrtkSide:
     """
 
     def __init__(self, session: Any, cfg: Any, node_name: str, topics: dict[str, str],
-                 messages: Callable[..., list[tuple[str, bytes]]]):
+                 messages: Callable[..., Iterable[tuple[str, bytes]]]):
         self.cfg = cfg
         self.period = 1.0 / cfg.ros2.rate_hz
         self.node = RosNode(session.zenoh_session, cfg.ros2.domain_id, node_name)
@@ -94,9 +94,13 @@ class CrtkSide:
 
     def publish_now(self, item: tuple) -> None:
         """Encode and put every topic of ``item`` (``(t_ns, *offered)``) now."""
-        for topic, cdr in self._messages(*item):
-            IDLE.wait(TOPIC_COST)
-            self.publishers[topic].put(cdr, item[0])
+        topics = iter(self._messages(*item))      # each topic is encoded as the iteration reaches it
+        while True:
+            IDLE.wait(TOPIC_COST)                  # encode and put in the loop's idle time
+            nxt = next(topics, None)
+            if nxt is None:
+                break
+            self.publishers[nxt[0]].put(nxt[1], item[0])
         self.published += 1
 
     def _run(self) -> None:
@@ -163,7 +167,7 @@ class SlaveCrtk(CrtkSide):
             f"{ADMIN_SPACE}/{d}/*/*/*/MP/*/*/*/{mangle(servo_topic)}/{dds_type_name(JOINT_STATE)}/"
             f"{type_hash(JOINT_STATE)}/*")
 
-    def _slave_messages(self, t_ns: int, state: SideState, accepted: Any) -> list[tuple[str, bytes]]:
+    def _slave_messages(self, t_ns: int, state: SideState, accepted: Any) -> Iterable[tuple[str, bytes]]:
         targets = accepted.message.targets if accepted is not None and state == SideState.ENGAGED else None
         return slave_messages(self.cfg, t_ns, state, self.estimate, targets)
 
