@@ -41,6 +41,7 @@ import json
 import logging
 import os
 import queue
+import sys
 import threading
 import time
 from pathlib import Path
@@ -54,7 +55,7 @@ from teleop.entity import Entity
 from teleop.journal import RECORD, pack_record, read_records
 from teleop.keys import instrument_keys, liveliness_pattern
 
-__all__ = ["Recorder", "decode_any", "flatten", "read_messages", "run_record", "short_names", "start_recorder",
+__all__ = ["Recorder", "decode_any", "flatten", "nothing_received_reason", "read_messages", "run_record", "short_names", "start_recorder",
            "summary_line"]
 
 log = logging.getLogger("live.record")
@@ -109,8 +110,7 @@ class Recorder:
                      "recovered": self._aux_csv("recovered.csv", "time,side,key,seq")}
         self.journals = JournalRecovery(self.dir.parent if journal_dir is None else Path(journal_dir), self.clock.now())
         from live.record_mcap import MCAP_NAME, McapRecording
-        self._mcap = McapRecording(self.dir / MCAP_NAME, self.ident, time.time() - self.clock.now(),
-                                   tuple(j.name for j in cfg.instrument.joints) or ("tendon",), self.journals.t_start)
+        self._mcap = McapRecording(self.dir / MCAP_NAME, cfg, time.time() - self.clock.now(), self.journals.t_start)
         from teleop.rerun_log import RerunLogger
         self._rr = RerunLogger("teleop-record", run_id or None, rerun or cfg.recording.rerun, self.dir / "record.rrd")
         self._thread = threading.Thread(target=self._writer, name="teleop-record-writer", daemon=True)
@@ -324,8 +324,21 @@ def run_record(args) -> int:
                 s = rec.close()
     counts = ", ".join(f"{k.rsplit('/', 2)[-2]}/{k.rsplit('/', 1)[-1]} {v['count']} (missing {v['missing']})"
                        for k, v in s["streams"].items())
-    print(f"teleop record: {counts or 'nothing received'}; {rec.dir}/summary.json", flush=True)
+    if not counts:
+        print(f"teleop record: nothing received: {nothing_received_reason(cfg.instrument.id, rec.ever_alive)}; "
+              f"{rec.dir}/summary.json", file=sys.stderr, flush=True)
+        return 1
+    print(f"teleop record: {counts}; {rec.dir}/summary.json", flush=True)
     return 0
+
+
+def nothing_received_reason(instrument: str, sides_seen) -> str:
+    """Why a recorder heard no message: no side of ``instrument`` ever appeared, or sides did but sent nothing."""
+    if not sides_seen:
+        return (f"no side of instrument {instrument!r} appeared (no liveliness token): none was running, it uses "
+                f"another instrument.id, or the link to it was refused (password, certificate, endpoint)")
+    return (f"{' and '.join(sorted(sides_seen))} appeared but published nothing on teleop/{instrument}/...: it "
+            f"stopped before its loop started")
 
 
 def start_recorder(base: list[str], common: list[str], run_dir: Path, env: dict, deadline: float):

@@ -1,22 +1,28 @@
 """The recorder's MCAP file: every message of a session in one ``recorder/session.mcap``.
 
 Every message the recorder writes (received, or recovered from a side's journal) goes to the MCAP
-file as well, on these channels (``<base>`` is ``/teleop/<instrument>``):
+file as well: the whole message as JSON on the channel of its key, and, where a standard ROS 2 type
+exists, the same content under the slave's CRTK names (:mod:`teleop.crtk`, ``<arm>`` the instrument id
+as a ROS name; docs/reference/crtk.md):
 
-==================================  ========================  ===========================================
-topic                               schema (encoding)         content
-==================================  ========================  ===========================================
-``<base>/<side>/<stream>``          ``teleop.<Type>``         the whole decoded message as JSON (one per
-                                    (jsonschema, json)        key: command, estimate, heartbeat, rig)
-``<base>/slave/tendons/measured_js``  sensor_msgs/msg/JointState  per tendon: position ``x_in`` [m],
-                                    (ros2msg, cdr)            effort ``T_in`` [N] (proximal, measured)
-``<base>/slave/estimated_js``       sensor_msgs/msg/JointState  per axis: position ``position_hat`` [m
-                                                              or rad], effort ``effort_hat`` [N or N m]
-``<base>/slave/<axis>/estimated_cf``  geometry_msgs/msg/WrenchStamped  the estimated distal load of one
-                                                              axis: ``force.x`` [N] of a single tendon
-                                                              (along it), ``torque.z`` [N m] of a joint
-``<base>/master/servo_jp``          sensor_msgs/msg/JointState  the command's targets [m or rad]
-==================================  ========================  ===========================================
+==================================  ==================================  ==========================================
+topic                               schema (encoding)                   content
+==================================  ==================================  ==========================================
+``/teleop/<id>/<side>/<stream>``    ``teleop.<Type>`` (jsonschema,      the whole decoded message (command,
+                                    json)                               estimate, heartbeat, rig messages)
+``/<arm>/measured_js``              ``sensor_msgs/msg/JointState``      per axis: a tendon's ``x_in`` [m] and ``T_in``
+                                    (ros2msg, cdr)                      [N]; a pair's angle [rad] and proximal torque
+                                                                        ``r (T_in,a - T_in,b)`` [N m]
+``/<arm>/actuators/measured_js``    ``sensor_msgs/msg/JointState``      per tendon: ``x_in`` [m], ``T_in`` [N]
+``/<arm>/distal/measured_js``       ``sensor_msgs/msg/JointState``      per axis: ``position_hat`` [m or rad],
+                                                                        ``effort_hat`` [N or N m]
+``/<arm>/measured_cf``              ``geometry_msgs/msg/WrenchStamped``  single tendon: the estimated distal tension
+                                                                        as ``force.z`` [N]
+``/<arm>/<joint>/measured_cf``      ``geometry_msgs/msg/WrenchStamped``  joint: the estimated torque as ``torque.z``
+                                                                        [N m]
+``/<arm>/servo_jp``                 ``sensor_msgs/msg/JointState``      the master's command: one target per axis
+                                                                        [m or rad]
+==================================  ==================================  ==========================================
 
 Times: ``log_time`` is the recorder's time of the message (its receive time; a message recovered from a
 journal: its publish time), ``publish_time`` the sender's own stamp (``t_slave``, ``t_master``,
@@ -117,6 +123,14 @@ def _stamp(ns: int) -> dict:
     return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
 
 
+_JS = "sensor_msgs/msg/JointState"
+
+
+def _joint_state(ns: int, names, position, effort) -> dict:
+    return {"header": {"stamp": _stamp(ns), "frame_id": ""}, "name": list(names), "position": list(position),
+            "velocity": [], "effort": list(effort)}
+
+
 class McapRecording:
     """Write the recorder's messages to one MCAP file (module docstring).
 
@@ -124,21 +138,22 @@ class McapRecording:
     ----------
     path : Path
         The file (created, truncated).
-    instrument : str
-        ``instrument.id``: the topics' base ``/teleop/<instrument>``.
+    cfg : Config
+        ``instrument``: its id, and its joints (names, pulley radii) for the CRTK channels.
     clock_offset : float
         Unix time minus the recorder's monotonic clock [s].
-    axis_names : sequence of str
-        Names of the instrument's axes (joint names; ``("tendon",)`` for a single tendon).
     t_start : float
         The recorder's start [s, monotonic] (kept in the metadata: journals before it are not this session's).
     """
 
-    def __init__(self, path: Path, instrument: str, clock_offset: float, axis_names=("tendon",), t_start: float = 0.0):
+    def __init__(self, path: Path, cfg: Any, clock_offset: float, t_start: float = 0.0):
+        from teleop.crtk import axis_names, slave_arm, tendon_names
         self.path, self.offset = Path(path), float(clock_offset)
         self._offset_ns = round(self.offset * 1e9)
-        self.base = f"/teleop/{instrument}"
-        self.axis_names = tuple(axis_names)
+        instrument = cfg.instrument.id
+        self.arm = "/" + slave_arm(cfg)
+        self.axis_names, self.tendon_names = axis_names(cfg), tendon_names(cfg)
+        self.radii = tuple(j.pulley_radius for j in cfg.instrument.joints)
         self._fh = open(self.path, "wb")
         self._w = Writer(self._fh, compression=CompressionType.ZSTD)
         self._w.start(profile="ros2", library="tsm-teleop (mcap, mcap-ros2-support)")
@@ -212,32 +227,35 @@ class McapRecording:
         if kind == "Estimate":
             self._estimate(key, log, pub, msg)
         elif kind == "Command":
-            header = {"stamp": _stamp(pub), "frame_id": ""}
-            self._ros(f"{self.base}/master/servo_jp", "sensor_msgs/msg/JointState", log, pub,
-                      {"header": header, "name": list(self._axes(len(msg.targets))), "position": list(msg.targets),
-                       "velocity": [], "effort": []})
+            self._ros(f"{self.arm}/servo_jp", _JS, log, pub,
+                      _joint_state(pub, self._names(self.axis_names, len(msg.targets)), msg.targets, ()))
 
-    def _axes(self, n: int) -> tuple[str, ...]:
-        return self.axis_names if len(self.axis_names) == n else tuple(f"axis{i}" for i in range(n))
+    @staticmethod
+    def _names(names: tuple[str, ...], n: int) -> tuple[str, ...]:
+        return names if len(names) == n else tuple(f"axis{i}" for i in range(n))
 
     def _estimate(self, key: str, log: int, pub: int, msg: Any) -> None:
-        js = "sensor_msgs/msg/JointState"
-        header = {"stamp": _stamp(pub), "frame_id": ""}
-        names = self._axes(len(msg.axes))
-        tendons = [(f"{n}.{'ab'[i]}" if len(a.tendons) > 1 else n, t)
-                   for n, a in zip(names, msg.axes) for i, t in enumerate(a.tendons)]
-        self._ros(f"{self.base}/slave/tendons/measured_js", js, log, pub,
-                  {"header": header, "name": [n for n, _ in tendons], "position": [t.x_in for _, t in tendons],
-                   "velocity": [], "effort": [t.T_in for _, t in tendons]})
-        self._ros(f"{self.base}/slave/estimated_js", js, log, pub,
-                  {"header": header, "name": list(names), "position": [a.position_hat for a in msg.axes],
-                   "velocity": [], "effort": [a.effort_hat for a in msg.axes]})
-        for n, a in zip(names, msg.axes):
-            pair = len(a.tendons) > 1
-            force = {"x": 0.0 if pair else a.effort_hat, "y": 0.0, "z": 0.0}
+        axes = self._names(self.axis_names, len(msg.axes))
+        tendons = msg.tendons
+        pair = len(self.radii) == len(msg.axes) and all(len(a.tendons) == 2 for a in msg.axes)
+        if pair:                              # a pair's angle and proximal torque r (T_in,a - T_in,b)
+            pos = [a.position_hat for a in msg.axes]
+            eff = [r * (a.tendons[0].T_in - a.tendons[1].T_in) for a, r in zip(msg.axes, self.radii)]
+        else:
+            pos, eff = [a.tendons[0].x_in for a in msg.axes], [a.tendons[0].T_in for a in msg.axes]
+        self._ros(f"{self.arm}/measured_js", _JS, log, pub, _joint_state(pub, axes, pos, eff))
+        self._ros(f"{self.arm}/actuators/measured_js", _JS, log, pub,
+                  _joint_state(pub, self._names(self.tendon_names, len(tendons)), [t.x_in for t in tendons],
+                               [t.T_in for t in tendons]))
+        self._ros(f"{self.arm}/distal/measured_js", _JS, log, pub,
+                  _joint_state(pub, axes, [a.position_hat for a in msg.axes], [a.effort_hat for a in msg.axes]))
+        frame = f"{self.arm[1:]}_distal"
+        for n, a in zip(axes, msg.axes):
+            force = {"x": 0.0, "y": 0.0, "z": 0.0 if pair else a.effort_hat}
             torque = {"x": 0.0, "y": 0.0, "z": a.effort_hat if pair else 0.0}
-            self._ros(f"{self.base}/slave/{n}/estimated_cf", "geometry_msgs/msg/WrenchStamped", log, pub,
-                      {"header": {"stamp": _stamp(pub), "frame_id": n}, "wrench": {"force": force, "torque": torque}})
+            topic = f"{self.arm}/{n}/measured_cf" if pair else f"{self.arm}/measured_cf"
+            self._ros(topic, "geometry_msgs/msg/WrenchStamped", log, pub,
+                      {"header": {"stamp": _stamp(pub), "frame_id": frame}, "wrench": {"force": force, "torque": torque}})
 
     # ---- flushing and the end ------------------------------------------------------------------------
     def flush(self, now: float | None = None) -> None:

@@ -123,13 +123,13 @@ def find_mcap(run: str | Path) -> Path | None:
     return None
 
 
-def _axis_names(run_dir: Path) -> tuple[str, ...]:
-    try:
-        from teleop.config import load_config
-        cfg = load_config(run_dir / "config.yaml") if (run_dir / "config.yaml").is_file() else None
-    except Exception:  # noqa: BLE001 - names only: the generic ones do
-        cfg = None
-    return tuple(j.name for j in cfg.instrument.joints) if cfg is not None and cfg.instrument.joints else ("tendon",)
+def _run_config(run_dir: Path, ident: str) -> Any:
+    """The run's config (``config.yaml``; the defaults when it has none), for ``ident``."""
+    import dataclasses
+
+    from teleop.config import Config, load_config
+    cfg = load_config(run_dir / "config.yaml") if (run_dir / "config.yaml").is_file() else Config()
+    return dataclasses.replace(cfg, instrument=dataclasses.replace(cfg.instrument, id=ident))
 
 
 def repair(rec_dir: str | Path, journal_dir: str | Path | None = None) -> dict[str, Any]:
@@ -170,7 +170,7 @@ def repair(rec_dir: str | Path, journal_dir: str | Path | None = None) -> dict[s
         all_records.append((t, key, payload))
     extra = list(journals.records(None))
     tmp = d / (MCAP_NAME + ".repair")
-    mc = McapRecording(tmp, ident, float(meta.get("clock_offset_s", 0.0)), _axis_names(d.parent), t_start)
+    mc = McapRecording(tmp, _run_config(d.parent, ident), float(meta.get("clock_offset_s", 0.0)), t_start)
     entries = _log_order(all_records, extra)
     for t, key, msg in entries:
         mc.write(t, key, msg)

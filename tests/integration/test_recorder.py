@@ -70,7 +70,7 @@ def rerun_check_ok(path: Path) -> None:
     rerun = Path(sys.executable).parent / "rerun"
     chk = subprocess.run([str(rerun), "mcap", "check", str(path)], capture_output=True, text=True, timeout=120,
                          env=dict(os.environ, RERUN_ANALYTICS="off"))
-    rows = [ln.split() for ln in chk.stdout.splitlines() if "/teleop/" in ln]
+    rows = [r for r in (ln.split() for ln in chk.stdout.splitlines()) if len(r) >= 4 and r[3].startswith("/")]
     assert chk.returncode == 0 and rows and all(r[0] == "ok" for r in rows), chk.stdout + chk.stderr
 
 

@@ -4,6 +4,7 @@ up to its last chunk and rebuilt from messages.bin and a journal, `rerun mcap ch
 `teleop replay` of it."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 import subprocess
@@ -42,8 +43,14 @@ def _session(n: int = 300) -> list[tuple[float, str, object]]:
     return out
 
 
-def _write(path: Path, msgs, **kw) -> dict:
-    mc = McapRecording(path, "m1", OFFSET, **kw)
+def _cfg(joints=()):
+    from teleop.config import Config
+    c = Config()
+    return dataclasses.replace(c, instrument=dataclasses.replace(c.instrument, id="m1", joints=joints))
+
+
+def _write(path: Path, msgs, cfg=None) -> dict:
+    mc = McapRecording(path, cfg or _cfg(), OFFSET)
     for t, key, m in msgs:
         mc.write(t, key, m)
     return mc.close()
@@ -54,17 +61,17 @@ def test_channels_ros2_cdr_and_json_hold_every_message(tmp_path):
     from mcap_ros2.decoder import DecoderFactory
     path = tmp_path / MCAP_NAME
     res = _write(path, _session())
-    assert res["channels"] == 7 and not res["sorted_at_end"]
+    assert res["channels"] == 8 and not res["sorted_at_end"]
     with open(path, "rb") as fh:
         reader = make_reader(fh, decoder_factories=[DecoderFactory()])
         summary = reader.get_summary()
         topics = {c.topic: (summary.schemas[c.schema_id].name, c.message_encoding) for c in summary.channels.values()}
-        assert topics["/teleop/m1/slave/tendons/measured_js"] == ("sensor_msgs/msg/JointState", "cdr")
-        assert topics["/teleop/m1/slave/tendon/estimated_cf"] == ("geometry_msgs/msg/WrenchStamped", "cdr")
+        assert topics["/m1/actuators/measured_js"] == ("sensor_msgs/msg/JointState", "cdr")
+        assert topics["/m1/measured_cf"] == ("geometry_msgs/msg/WrenchStamped", "cdr")
         assert topics["/teleop/m1/slave/estimate"] == ("teleop.Estimate", "json")
         assert summary.chunk_indexes and all(c.compression == "zstd" for c in summary.chunk_indexes)
-        js = list(reader.iter_decoded_messages(topics=["/teleop/m1/slave/tendons/measured_js"]))
-        cf = list(reader.iter_decoded_messages(topics=["/teleop/m1/slave/tendon/estimated_cf"]))
+        js = list(reader.iter_decoded_messages(topics=["/m1/measured_js"]))
+        cf = list(reader.iter_decoded_messages(topics=["/m1/measured_cf"]))
     assert len(js) == len(cf) == 300
     e = _est(123)
     _, _, m, ros = js[123]
@@ -72,7 +79,8 @@ def test_channels_ros2_cdr_and_json_hold_every_message(tmp_path):
     assert list(ros.name) == ["tendon"]
     assert ros.header.stamp.sec + ros.header.stamp.nanosec * 1e-9 == pytest.approx(OFFSET + e.t_slave, abs=1e-6)
     assert m.log_time == round((10.123 + 3e-4) * 1e9) + round(OFFSET * 1e9) and m.publish_time < m.log_time
-    assert cf[123].decoded_message.wrench.force.x == pytest.approx(e.axes[0].effort_hat)
+    assert cf[123].decoded_message.wrench.force.z == pytest.approx(e.axes[0].effort_hat)
+    assert cf[123].decoded_message.header.frame_id == "m1_distal"
     s = read_session(path)
     assert not s.torn and s.metadata["instrument"] == "m1"
     assert [d for _, _, d in s.messages["teleop/m1/slave/estimate"]] == [to_json(_est(k)) for k in range(300)]
@@ -81,18 +89,22 @@ def test_channels_ros2_cdr_and_json_hold_every_message(tmp_path):
 
 
 def test_a_joint_instrument_gets_one_tendon_per_side_of_each_pair(tmp_path):
-    td = TendonState(3.0, 1e-3, 2.5, 1e-5, Phase.HOLD)
-    m = Estimate(1, 1, 5.0, (AxisState(0.01, 0.2, (td, td)), AxisState(-0.02, 0.1, (td, td))))
-    _write(tmp_path / "j.mcap", [(5.001, "teleop/m1/slave/estimate", m)], axis_names=("wrist", "grip"))
+    from teleop.schema import JointConfig
+    ta, tb = TendonState(3.0, 1e-3, 2.5, 1e-5, Phase.HOLD), TendonState(1.0, 2e-3, 0.5, 1e-5, Phase.HOLD)
+    m = Estimate(1, 1, 5.0, (AxisState(0.01, 0.2, (ta, tb)), AxisState(-0.02, 0.1, (ta, tb))))
+    cfg = _cfg((JointConfig("wrist", pulley_radius=0.004), JointConfig("grip", pulley_radius=0.003)))
+    _write(tmp_path / "j.mcap", [(5.001, "teleop/m1/slave/estimate", m)], cfg)
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
     with open(tmp_path / "j.mcap", "rb") as fh:
         reader = make_reader(fh, decoder_factories=[DecoderFactory()])
         cdr = [c.topic for c in reader.get_summary().channels.values() if c.message_encoding == "cdr"]
         got = {x.channel.topic: x.decoded_message for x in reader.iter_decoded_messages(topics=cdr)}
-    assert list(got["/teleop/m1/slave/tendons/measured_js"].name) == ["wrist.a", "wrist.b", "grip.a", "grip.b"]
-    assert list(got["/teleop/m1/slave/estimated_js"].effort) == [0.01, -0.02]
-    assert got["/teleop/m1/slave/grip/estimated_cf"].wrench.torque.z == -0.02
+    assert list(got["/m1/actuators/measured_js"].name) == ["wrist_a", "wrist_b", "grip_a", "grip_b"]
+    assert list(got["/m1/distal/measured_js"].effort) == [0.01, -0.02]
+    assert list(got["/m1/measured_js"].position) == [0.2, 0.1]
+    assert list(got["/m1/measured_js"].effort) == pytest.approx([0.004 * 2.0, 0.003 * 2.0])
+    assert got["/m1/grip/measured_cf"].wrench.torque.z == -0.02
 
 
 def test_a_message_recovered_into_a_gap_is_sorted_at_the_end(tmp_path):
@@ -100,7 +112,7 @@ def test_a_message_recovered_into_a_gap_is_sorted_at_the_end(tmp_path):
     late = msgs.pop(203)                       # the estimate of cycle 100 arrives from a journal, last
     assert late[1].endswith("estimate") and late[2].seq == 100
     res = _write(tmp_path / "s.mcap", msgs + [late])
-    assert res["sorted_at_end"] and res["messages"] == sum(4 if "estimate" in k else 2 if "command" in k else 1
+    assert res["sorted_at_end"] and res["messages"] == sum(5 if "estimate" in k else 2 if "command" in k else 1
                                                            for _, k, _ in msgs + [late])
     s = read_session(tmp_path / "s.mcap")
     seqs = [d["seq"] for _, _, d in s.messages["teleop/m1/slave/estimate"]]
@@ -112,7 +124,7 @@ def _raw_and_torn(tmp_path: Path, msgs) -> Path:
     rec = tmp_path / "run" / "recorder"
     rec.mkdir(parents=True)
     (rec / "messages.bin").write_bytes(b"".join(pack_record(t, k.encode(), encode(m)) for t, k, m in msgs))
-    mc = McapRecording(rec / MCAP_NAME, "m1", OFFSET)
+    mc = McapRecording(rec / MCAP_NAME, _cfg(), OFFSET)
     for i, (t, key, m) in enumerate(msgs):
         mc.write(t, key, m)
         if i % 200 == 199:
@@ -156,8 +168,8 @@ def test_rerun_checks_and_converts_it_with_joint_state_plots(tmp_path):
     _write(path, _session(300))
     chk = _rerun("mcap", "check", str(path))
     assert chk.returncode == 0, chk.stderr
-    rows = [ln.split() for ln in chk.stdout.splitlines() if "/teleop/" in ln]
-    assert len(rows) == 7 and all(r[0] == "ok" for r in rows), chk.stdout
+    rows = [r for r in (ln.split() for ln in chk.stdout.splitlines()) if len(r) >= 4 and r[3].startswith("/")]
+    assert len(rows) == 8 and all(r[0] == "ok" for r in rows), chk.stdout
     conv = _rerun("mcap", "convert", str(path), "-o", str(tmp_path / "s.rrd"))
     assert conv.returncode == 0, conv.stderr
     out = _rerun("rrd", "print", str(tmp_path / "s.rrd")).stdout
@@ -166,9 +178,9 @@ def test_rerun_checks_and_converts_it_with_joint_state_plots(tmp_path):
         if "Scalars:scalars" in line:
             entity = line.split(" - ")[1].strip()
             scalars[entity] = scalars.get(entity, 0) + int(line.split(" with ")[1].split(" rows")[0])
-    assert scalars["/teleop/m1/slave/tendons/measured_js/effort"] == 300
-    assert scalars["/teleop/m1/slave/estimated_js/position"] == 300
-    assert scalars["/teleop/m1/master/servo_jp/position"] == 300
+    assert scalars["/m1/measured_js/effort"] == 300 and scalars["/m1/actuators/measured_js/position"] == 300
+    assert scalars["/m1/distal/measured_js/position"] == 300
+    assert scalars["/m1/servo_jp/position"] == 300
 
 
 def test_replay_reads_the_mcap_file_of_a_run(tmp_path):
