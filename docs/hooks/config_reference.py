@@ -157,7 +157,7 @@ def rows() -> list[tuple[str, str, str, str, str]]:
     source = schema_comments(ROOT / "teleop" / "schema.py")
     out = []
     for key, tp, default, owner in walk(schema.Config, "", schema.Config()):
-        rule, unit = ranges.get(key, ("", ""))
+        rule, unit = ranges.get(key) or ranges.get(key + "[]", ("", ""))
         plain = key.replace("[]", "")
         if owner.startswith("effect:"):
             meaning = owner[len("effect:"):]
@@ -176,11 +176,11 @@ def table() -> str:
     parts: list[str] = []
     section = None
     for key, default, unit, rule, meaning in rows():
-        top = key.strip("`").split(".")[0]
+        top, _, rest = key.strip("`").partition(".")
         if top != section:
             section = top
-            parts.append(f"\n## `{top}`\n\n| key | default | unit | range | meaning |\n|---|---|---|---|---|")
-        parts.append(f"| {key} | {default} | {unit} | {rule} | {meaning} |")
+            parts.append(f"\n## `{top}`\n\n| `{top}.` key | default | unit | range | meaning |\n|---|---|---|---|---|")
+        parts.append(f"| `{rest}` | {default} | {unit} | {rule} | {meaning} |")
     return "\n".join(parts) + "\n"
 
 
