@@ -152,16 +152,16 @@ class SlaveNode(SlaveNodeBase):
             data = self.kind.start_loaded(self.axes, calibration, self.rig_state)
             self._write_calibration_json({**data, "loaded_from": str(self.calibration_file or "")})
             self._started("loaded")
-            self._set_state(SideState.SAFE, 0.0, "calibration loaded; no command yet")
+            self._set_state(SideState.SAFE, None, "calibration loaded; no command yet")
         elif calibrate:
             self.routine = self.kind.routine(cfg, rig)
-            self._set_state(SideState.CALIBRATING, 0.0, "power-up joint-limit calibration")
+            self._set_state(SideState.CALIBRATING, None, "power-up joint-limit calibration")
         else:
             if model is None or not isinstance(self.axes[0], TendonAxis):
                 raise ValueError("SlaveNode(calibrate=False) needs a single tendon and a SheathModel in model=")
             self.axes[0].start(model)
             self.calibrated = True
-            self._set_state(SideState.SAFE, 0.0, "no command yet")
+            self._set_state(SideState.SAFE, None, "no command yet")
 
     # ------------------------------------------------------------------------------------------------
     def _started(self, how: str) -> None:
@@ -180,7 +180,7 @@ class SlaveNode(SlaveNodeBase):
         self._started("power-up")
         self._set_state(SideState.SAFE, now, "calibrated; waiting for commands")
 
-    def _set_state(self, state: SideState, now: float, why: str) -> None:
+    def _set_state(self, state: SideState, now: float | None, why: str) -> None:
         if state != self.state:
             self.last_safe_reason = why if state == SideState.SAFE else None
         super()._set_state(state, now, why)

@@ -11,7 +11,8 @@ does the same bookkeeping, kept here once:
   of the expected kind, newer than the last accepted one (uint32 wrap, :func:`teleop.codec.seq_newer`;
   duplicates and reordered old messages are counted) and within the node's bounds;
 * a Heartbeat at ``slave.heartbeat_hz`` carrying the state (both sides use that rate): the first at
-  once, then one per period without drifting and without bursts after a stall;
+  once, then one per period without drifting and without bursts after a stall; and one at every
+  state change besides, so that a state held for a single cycle still reaches the peer and the recorder;
 * pacing at a fixed rate until :attr:`done` (or a maximum duration), the pacer's figures kept for
   the stats, and the stats written as JSON.
 
@@ -91,6 +92,8 @@ class NodeBase:
         self.pacer_stats: dict[str, Any] = {}
         self.cycle_stats: CycleStats | None = None
         self.scheduling = "not run"
+        self._t_origin = 0.0                   # [s] clock reading at the loop's start (set by run)
+        self._hb_sent_at = -math.inf           # [s] time of the last heartbeat sent
 
     # ---- state and log -----------------------------------------------------------------------------
     @property
@@ -98,13 +101,22 @@ class NodeBase:
         """The rate :meth:`run` paces :meth:`step` at [Hz]."""
         raise NotImplementedError
 
-    def _set_state(self, state: SideState, now: float, why: str) -> None:
-        """Change the state (logged with the reason); ENGAGED -> SAFE counts a safe event."""
+    def _set_state(self, state: SideState, now: float | None, why: str) -> None:
+        """Change the state (logged with the reason); ENGAGED -> SAFE counts a safe event.
+
+        ``now`` [s] is the loop's clock, None before the loop runs (the constructor). The log gives the
+        time since :meth:`run` started the loop and the clock's own reading (the recordings' ``t``)."""
         if state != self.state:
-            self.log.info("%s %s -> %s at t=%.3f s: %s", self.side.name.lower(), self.state.name, state.name, now, why)
+            if now is None:
+                when = "at start-up"
+            else:
+                when = f"at t={now - self._t_origin:.3f} s (clock {now:.3f} s)"
+            self.log.info("%s %s -> %s %s: %s", self.side.name.lower(), self.state.name, state.name, when, why)
             if state == SideState.SAFE and self.state == SideState.ENGAGED:
                 self.safe_events += 1
             self.state = state
+            if now is not None:         # an event: every state reaches the peer and the recording, however short
+                self._send_heartbeat(now)
 
     def _warn(self, now: float, msg: str, *args) -> None:
         """A warning at most once per second (real-time loops never flood the log)."""
@@ -150,11 +162,17 @@ class NodeBase:
         return False
 
     # ---- outgoing ----------------------------------------------------------------------------------
+    def _send_heartbeat(self, now: float) -> None:
+        self.links.heartbeat.put(Heartbeat(self.side, self.hb_seq, now, self.state))
+        self.hb_seq = next_seq(self.hb_seq)
+        self._hb_sent_at = now
+
     def _heartbeat(self, now: float) -> None:
-        """Publish a Heartbeat when one is due (one per ``hb_period``, the first at once)."""
+        """Publish a Heartbeat when one is due (one per ``hb_period``, the first at once); a state change
+        publishes one at once besides (:meth:`_set_state`), a state sampled every period could be missed."""
         if now >= self._next_hb:
-            self.links.heartbeat.put(Heartbeat(self.side, self.hb_seq, now, self.state))
-            self.hb_seq = next_seq(self.hb_seq)
+            if self._hb_sent_at != now:          # not already sent this cycle by a state change
+                self._send_heartbeat(now)
             self._next_hb = now + self.hb_period if self._next_hb == -math.inf else max(
                 self._next_hb + self.hb_period, now)
 
@@ -191,7 +209,7 @@ class NodeBase:
         idle = IDLE.open if real else None
         machine = _machine_now() if real else None
         pacer.reset()          # the grid starts now: the set-up above (files read, arrays made) is not in the first period
-        t0 = clock.now()
+        t0 = self._t_origin = clock.now()
         # Ctrl-C / SIGTERM are held until the running step has finished, then raised after the clean-up
         with stop_at_cycle_end() as stop:
             try:

@@ -9,7 +9,7 @@ refused with one line naming the key, the value, the bound and its reason, unles
 in its stats (:func:`waivers`), and the demo's summary carries them too.
 
 Each reason comes from the physics of the default instrument and device (configs/default.yaml) or from
-what the fault suite measures (docs/reliability.md: every fault reaches the safe state within 100 ms).
+what the fault suite measures (docs/concepts/safety.md: every fault reaches the safe state within 100 ms).
 """
 from __future__ import annotations
 
@@ -48,7 +48,7 @@ class Bound:
 
 
 _WATCHDOG = ("a stale {what} would {act} for longer than the 100 ms within which the fault suite brings "
-             "every fault to the safe state (docs/reliability.md: worst measured 61 ms)")
+             "every fault to the safe state (docs/concepts/safety.md: worst measured 61 ms)")
 _TENSION = ("the slave pulls the tendon to this tension by itself; {limit} N is 0.3 % strain of the default "
             "tendon (EA 15 kN) and about a third of the breaking load of a steel cable of that stiffness "
             "(~0.4 mm, ~150 N)")
@@ -66,11 +66,11 @@ BOUNDS: tuple[Bound, ...] = (
           "0.1-0.5 mm) instead of scaling it down"),
     Bound("master.mapping.passivity", "==", True, "",
           "without the passivity controller a delayed link generates energy at the hand (-0.39 J at 20 ms "
-          "each way, a growing oscillation, docs/reliability.md)"),
+          "each way, a growing oscillation, docs/concepts/safety.md)"),
     Bound("master.mapping.passivity_reserve", ">=", 0.004, "J",
           "while the reserve's gain fades the port can give back up to 4 N x 0.1 m/s x 10 ms = 4 mJ; a "
           "smaller reserve leaves it to the hard controller, which switches the force between full and "
-          "damped from one sample to the next, a limit cycle on a light hand (docs/stability.md)"),
+          "damped from one sample to the next, a limit cycle on a light hand (docs/concepts/haptic-loop.md)"),
     Bound("master.watchdog_ms", "<=", 100.0, "ms",
           _WATCHDOG.format(what="estimate", act="keep rendering its force on the operator's hand")),
     Bound("slave.watchdog_ms", "<=", 100.0, "ms",
