@@ -103,8 +103,11 @@ def _header(t_ns: int, frame_id: str) -> Any:
     return t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec), frame_id=frame_id)
 
 
-def _array(values: Sequence[float] | None) -> np.ndarray:
-    return np.array([] if values is None else [float(v) for v in values], dtype=np.float64)
+def _array(values: Sequence[float] | None, n: int) -> np.ndarray:
+    vals = () if values is None else tuple(map(float, values))
+    if len(vals) not in (0, n) or not math.isfinite(sum(vals)):   # one sum catches NaN and inf
+        raise CodecError(f"joint state: {len(vals)} values for {n} joints, or a non-finite one")
+    return np.array(vals, dtype=np.float64)
 
 
 def joint_state(t_ns: int, names: Sequence[str], position: Sequence[float] | None = None,
@@ -118,12 +121,10 @@ def joint_state(t_ns: int, names: Sequence[str], position: Sequence[float] | Non
     CodecError
         A non-empty list of another length than ``names``, or a non-finite value.
     """
-    arrays = [_array(v) for v in (position, velocity, effort)]
-    for a in arrays:
-        if a.size not in (0, len(names)) or not np.all(np.isfinite(a)):
-            raise CodecError(f"joint state: {a.size} values for {len(names)} joints, or a non-finite one")
-    js = typestore().types[JOINT_STATE](header=_header(t_ns, frame_id), name=list(names), position=arrays[0],
-                                        velocity=arrays[1], effort=arrays[2])
+    n = len(names)
+    js = typestore().types[JOINT_STATE](header=_header(t_ns, frame_id), name=list(names),
+                                        position=_array(position, n), velocity=_array(velocity, n),
+                                        effort=_array(effort, n))
     return encode(js, JOINT_STATE)
 
 
