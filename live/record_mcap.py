@@ -45,6 +45,7 @@ import enum
 import json
 import os
 import time
+import typing
 from pathlib import Path
 from typing import Any, Callable
 
@@ -94,16 +95,30 @@ def to_json(x: Any) -> Any:
 
 
 def json_schema(x: Any) -> dict:
-    """A JSON Schema (draft 2020-12) of a decoded message, from an instance (arrays: from their first item)."""
-    if dataclasses.is_dataclass(x):
-        fields = dataclasses.fields(x)
-        return {"type": "object", "title": type(x).__name__, "required": [f.name for f in fields],
-                "properties": {f.name: json_schema(getattr(x, f.name)) for f in fields}}
-    if isinstance(x, (tuple, list)):
-        return {"type": "array", "items": json_schema(x[0]) if len(x) else {}}
-    if isinstance(x, bool):
+    """A JSON Schema (draft 2020-12) of a message class or instance, from its dataclass field types."""
+    kind = x if isinstance(x, type) else type(x)
+    return _type_schema(kind)
+
+
+def _type_schema(tp: Any) -> dict:
+    if dataclasses.is_dataclass(tp) and isinstance(tp, type):
+        hints = typing.get_type_hints(tp)
+        names = [f.name for f in dataclasses.fields(tp)]
+        return {"type": "object", "title": tp.__name__, "required": names,
+                "properties": {n: _type_schema(hints[n]) for n in names}}
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin in (tuple, list):
+        items = [a for a in args if a is not Ellipsis]
+        if len(items) > 1 and len(set(items)) == 1:      # a fixed-length tuple of one type
+            return {"type": "array", "items": _type_schema(items[0]), "minItems": len(items),
+                    "maxItems": len(items)}
+        return {"type": "array", "items": _type_schema(items[0]) if items else {}}
+    if tp is bool:
         return {"type": "boolean"}
-    if isinstance(x, (int, enum.Enum)):
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+        return {"type": "integer", "enum": [int(m.value) for m in tp], "description": ", ".join(
+            f"{int(m.value)} = {m.name}" for m in tp)}
+    if tp is int:
         return {"type": "integer"}
     return {"type": "number"}
 

@@ -69,6 +69,10 @@ def test_channels_ros2_cdr_and_json_hold_every_message(tmp_path):
         assert topics["/m1/actuators/measured_js"] == ("sensor_msgs/msg/JointState", "cdr")
         assert topics["/m1/measured_cf"] == ("geometry_msgs/msg/WrenchStamped", "cdr")
         assert topics["/teleop/m1/slave/estimate"] == ("teleop.Estimate", "json")
+        est_schema = json.loads(next(x.data for x in summary.schemas.values() if x.name == "teleop.Estimate"))
+        assert est_schema["properties"]["profiles"]["items"] == {"type": "array", "items": {"type": "number"}}
+        phase = est_schema["properties"]["axes"]["items"]["properties"]["tendons"]["items"]["properties"]["phase"]
+        assert phase["type"] == "integer" and set(phase["enum"]) == {int(p) for p in Phase}
         assert summary.chunk_indexes and all(c.compression == "zstd" for c in summary.chunk_indexes)
         js = list(reader.iter_decoded_messages(topics=["/m1/measured_js"]))
         cf = list(reader.iter_decoded_messages(topics=["/m1/measured_cf"]))
