@@ -40,7 +40,7 @@ from teleop.entity import RateLimitedLog
 from teleop.messages import Command, SideState
 from teleop.realtime import IDLE
 from teleop.rerun_thread import lower_switch_interval
-from teleop.ros2_types import JOINT_STATE, STRING_STAMPED, dds_type_name, decode, stamp_ns, type_hash
+from teleop.ros2_types import JOINT_STATE, STRING_STAMPED, dds_type_name, decode, stamp_ns, type_hash, warm_up
 from teleop.ros2_wire import ADMIN_SPACE, Attachment, RosNode, mangle
 from teleop.transport import Received
 
@@ -76,6 +76,7 @@ class CrtkSide:
                  messages: Callable[..., Iterable[tuple[str, bytes]]]):
         self.cfg = cfg
         self.period = 1.0 / cfg.ros2.rate_hz
+        warm_up()      # rosbags' generated code exists before the loop freezes its set-up out of the collector
         self.node = RosNode(session.zenoh_session, cfg.ros2.domain_id, node_name)
         self.publishers = {t: self.node.publisher(t, ty) for t, ty in topics.items()}
         self._messages = messages

@@ -26,7 +26,7 @@ from teleop.errors import CodecError
 
 __all__ = ["JOINT_STATE", "WRENCH_STAMPED", "OPERATING_STATE", "STRING_STAMPED", "TYPES", "CRTK_MSGS",
            "typestore", "dds_type_name", "type_hash", "encode", "decode", "joint_state", "wrench_stamped",
-           "operating_state", "string_stamped", "stamp_ns"]
+           "operating_state", "string_stamped", "stamp_ns", "warm_up"]
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 WRENCH_STAMPED = "geometry_msgs/msg/WrenchStamped"
@@ -154,3 +154,18 @@ def operating_state(t_ns: int, state: str, is_homed: bool, is_busy: bool) -> byt
 def string_stamped(t_ns: int, text: str) -> bytes:
     """CDR bytes of a ``crtk_msgs/msg/StringStamped`` (the CRTK ``state_command``: enable, disable, pause, resume)."""
     return encode(typestore().types[STRING_STAMPED](header=_header(t_ns, ""), string=text), STRING_STAMPED)
+
+
+def warm_up() -> None:
+    """Build the type store and rosbags' serialisers and deserialisers of :data:`TYPES` now.
+
+    rosbags generates them on first use; a process builds them before its loop starts, so that the loop's
+    garbage collector freezes them with the rest of the set-up (:meth:`teleop.node.NodeBase.run`) instead
+    of scanning them in its collections.
+    """
+    for name, data in ((JOINT_STATE, joint_state(0, ("warm",), (0.0,), None, (0.0,))),
+                       (WRENCH_STAMPED, wrench_stamped(0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))),
+                       (OPERATING_STATE, operating_state(0, "DISABLED", False, False)),
+                       (STRING_STAMPED, string_stamped(0, "enable"))):
+        decode(data, name)
+        type_hash(name)
