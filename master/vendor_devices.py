@@ -100,12 +100,17 @@ def load_vendor_file(kind: str, path: str | Path | None) -> VendorConfig:
 
 class DhdAdapter:
     """Force Dimension over ``forcedimension_core.dhd`` (calls as in its documentation: ``open`` -> id or -1,
-    ``getPosition(out=)`` [m], ``getButtonMask``, ``setForce`` [N], ``errorGetLastStr``, ``close``)."""
+    ``enableForce``, ``getPosition(out=)`` [m], ``getButtonMask``, ``setForce`` [N], ``errorGetLastStr``,
+    ``close``)."""
 
     def __init__(self, dhd: Any):
         self.dhd = dhd
         if dhd.open() < 0:
             raise DeviceError(f"Force Dimension device: open failed: {dhd.errorGetLastStr()} (see `teleop devices`)")
+        if dhd.enableForce(True) < 0:
+            msg = dhd.errorGetLastStr()
+            dhd.close()
+            raise DeviceError(f"Force Dimension device: force mode refused: {msg}")
         self._pos = [0.0, 0.0, 0.0]
 
     def position(self) -> tuple[float, float, float]:
@@ -126,7 +131,8 @@ class DhdAdapter:
 
 class TouchAdapter:
     """A 3D Systems Touch over ``pyOpenHaptics``: its servo-loop callback (the HD scheduler, 1 kHz) copies the
-    position (mm -> m) and buttons out and applies the latest force; the master's loop only exchanges them."""
+    position (the translation of ``hd.get_transform()``, mm -> m) and ``hd.get_buttons()`` out and applies the
+    latest force (``hd.set_force``); the master's loop only exchanges them."""
 
     def __init__(self, hd: Any, device_module: Any = None, callback_decorator: Any = None):
         self.hd = hd
@@ -137,7 +143,7 @@ class TouchAdapter:
 
         @deco
         def servo():
-            p = hd.get_position()
+            p = hd.get_transform()[3]            # row 3 of the 4x4 transform: the translation [mm]
             b = hd.get_buttons()
             with self._lock:
                 self._pos, self._buttons, f = (1e-3 * p[0], 1e-3 * p[1], 1e-3 * p[2]), int(b), list(self._force)

@@ -74,6 +74,10 @@ class FakeDhd:
     def open(self):
         return self.opens
 
+    def enableForce(self, on):  # noqa: N802
+        self.force_on = on
+        return 0
+
     def errorGetLastStr(self):  # noqa: N802 - the SDK's name
         return "no device found"
 
@@ -97,6 +101,7 @@ class FakeDhd:
 def test_force_dimension_through_its_sdk_position_force_and_loss():
     dhd = FakeDhd()
     dev = VendorDevice(VendorConfig("omega.3", axis=1, invert=True, limit=3.0), DhdAdapter(dhd))
+    assert dhd.force_on is True
     s = dev.read(0.5)
     assert (s.position, s.buttons, s.operator_present) == (0.02, 1, True)
     dev.set_force(5.0, 0.5)                                   # clamped to 3 N, along -y (inverted axis y)
@@ -116,7 +121,7 @@ def test_force_dimension_through_its_sdk_position_force_and_loss():
 
 def test_touch_through_its_servo_callback():
     hd = SimpleNamespace(pos=[12.0, 0.0, -5.0], buttons=2, applied=[])
-    hd.get_position = lambda: hd.pos
+    hd.get_transform = lambda: [[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 0], hd.pos + [1.0]]
     hd.get_buttons = lambda: hd.buttons
     hd.set_force = lambda f: hd.applied.append(tuple(f))
     closed = []
