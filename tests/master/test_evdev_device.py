@@ -205,3 +205,15 @@ def test_the_shipped_device_file_loads_and_drives_the_fake():
     dev = EvdevDevice(cfg, FakeEvdev(FakeInput("/dev/input/event7", "stick")))
     dev.set_force(-8.0, 0.0)
     assert dev.dev.uploads[-1] == (3, round(4 / 8 * LEVEL_MAX), 0x4000, 200)
+
+
+def test_the_effect_is_built_with_python_evdev_s_own_structures_when_installed():
+    evdev = pytest.importorskip("evdev")                     # the extra; the fake stands in for it elsewhere
+    from types import SimpleNamespace
+    fake = FakeEvdev(FakeInput("/dev/input/event7", "stick"))
+    ev = SimpleNamespace(list_devices=fake.list_devices, InputDevice=fake.InputDevice, ecodes=evdev.ecodes,
+                         ff=evdev.ff)
+    dev = EvdevDevice(EvdevConfig(), ev)
+    dev.set_force(-2.0, 0.0)
+    assert dev.dev.uploads[-1] == (3, round(2 / 8 * LEVEL_MAX), 0x4000, 200)
+    assert dev.dev.writes[-1] == (evdev.ecodes.EV_FF, 3, 1)
