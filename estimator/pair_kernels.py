@@ -2,8 +2,8 @@
 
 The seed pair model (:mod:`estimator.offline.pair`) lets the angle follow each tendon's kinematics at every
 sample, with the elongation driven by the measured tension. Here the tendons, the sheath friction
-and the joint are one mechanism, the pull-pull pair of the reference simulator (literature.md
-section 4, Agrawal et al. 2010; :mod:`estimator.kernels`), driven by the recorded motor command:
+and the joint are one mechanism, the pull-pull pair of the reference simulator (Agrawal et al. 2010;
+:mod:`estimator.kernels`), driven by the recorded motor command:
 
     x_in,a = x_in,a(0) + G (c - c_0),   x_in,b = x_in,b(0) - G (c - c_0)      motor, r = 1 units  (P1)
     T_j(s)                              tension-profile memory of tendon j, K_j, compliance lam   (P2)
@@ -16,12 +16,12 @@ stiffness k_joint [N m/rad] as a tendon-tension difference per radian), and the
 angle is in rad. One step (each sample is split into ``substeps``): the motors move with the joint
 held (slip spreads from each proximal end, :func:`estimator.kernels.advance_proximal`), then
 the joint settles with the motors held (slip spreads from each distal end and theta solves (P4),
-:func:`estimator.kernels.settle_joint`). So the joint stays put after a reversal until a slip front
+:func:`estimator.kernels.settle_joint`); the compiled loops are in :mod:`estimator.pair_loops`. So the joint stays put after a reversal until a slip front
 reaches a tip - the capstan band of each tendon acting on the joint (E1 with E11, E13) - and the
 proximal tensions are an output of the model, not an input.
 
 Both tendons start as uniform profiles at the measured pretensions (E5) with theta = 0; tau_0 is the
-distal torque of that rest, so the rest is an equilibrium. Extensions (literature.md numbers):
+distal torque of that rest, so the rest is an equilibrium. Extensions (the effect numbers of docs/concepts/effects.md):
 
 * ``lam_s``  a frictionless series compliance between motor and sheath (drive, load cell, sheath
   compression, E10): a straight run of ``n_series`` nodes with zero wrap angle ahead of the sheath;
@@ -47,12 +47,12 @@ distal torque of that rest, so the rest is an equilibrium. Extensions (literatur
 * ``mu_b`` friction of the tendons in the bending section, whose wrap is the joint angle itself (E7
   at the distal end): the joint moves only when T_d,a e^{-+mu_b |theta|} - T_d,b e^{+-mu_b |theta|} - k theta
   - tau_0 leaves zero (signs: moving toward + / -; (P4) is the case mu_b = 0), so the joint stalls at
-  large angles while the tensions still rise (docs/findings.md, Finding 3, session 4). Not combined
-  with ``toe``, ``tau_c`` or ``k2``;
-* ``observed``, ``lam_d`` the drive-side observer (E10 on the motor side; docs/findings.md, Finding 3,
-  session 8): not a property of the mechanism but an estimator that reads the *measured* proximal
-  tensions T_m,j at every sample. A frictionless compliance lam_d [rad/N] between each motor and its
-  sheath entry carries the measured tension, so the entries sit at
+  large angles while the tensions still rise (docs/results/kaist.md). Not combined with ``toe``,
+  ``tau_c`` or ``k2``;
+* ``observed``, ``lam_d`` the drive-side observer (E10 on the motor side; docs/results/kaist.md): not a
+  property of the mechanism but an estimator that reads the *measured* proximal tensions T_m,j at every
+  sample. A frictionless compliance lam_d [rad/N] between each motor and its sheath entry carries the
+  measured tension, so the entries sit at
   x_a = x_a0 + G (c - c_0) - lam_d (T_m,a - T_m,a(0)) and x_b = x_b0 - G (c - c_0) - lam_d (T_m,b - T_m,b(0))
   in place of (P1). lam_d = 0 is the command-only model. Not combined with ``toe``, ``tau_c``, ``k2`` or ``mu_b``.
 """
@@ -62,15 +62,11 @@ import functools
 import math
 
 import numpy as np
-from numba import njit
 
-from estimator.distal_slip import distal_clip, distal_gains, distal_tension, elongation
-from estimator.kernels import advance_proximal, joint_torque_balance, settle_joint
+from estimator.distal_slip import distal_gains
+from estimator.pair_loops import BIG, simulate_bend, simulate_observed, simulate_plain, simulate_toe
 
 __all__ = ["tendon_arrays", "simulate_pair"]
-
-_BIG = 1e200
-
 
 def tendon_arrays(K: float, lam: float, n_nodes: int = 24, lam_s: float = 0.0, n_series: int = 3):
     """Node arrays of one tendon (constant curvature), proximal to distal.
@@ -112,222 +108,6 @@ def _node_arrays(K: float, lam: float, n_nodes: int, lam_s: float) -> tuple:
     that a run leaves them unchanged."""
     return tendon_arrays(K, lam, n_nodes, lam_s)
 
-
-@njit(cache=True)
-def _toe_weights(T0, T1, w0, lo, hi, rho, Tc, out):  # pragma: no cover - compiled
-    """Weights [rad/N] of the toe tendon (E9) for a step from profile T0 to T1: per node the secant
-    compliance lam_i (phi(T1) - phi(T0)) / (T1 - T0) of phi(T) = T + rho Tc (1 - e^{-T/Tc}) (the
-    tangent 1 + rho e^{-T0/Tc} where T1 = T0); returns (c_pull, c_rel) of those weights."""
-    for i in range(T0.shape[0]):
-        d = T1[i] - T0[i]
-        e0 = math.exp(-T0[i] / Tc)
-        if abs(d) > 1e-9 * (1.0 + T0[i]):
-            out[i] = w0[i] * (1.0 + rho * Tc * (e0 - math.exp(-T1[i] / Tc)) / d)
-        else:
-            out[i] = w0[i] * (1.0 + rho * e0)
-    n1 = T0.shape[0]
-    cp = 0.0
-    cr = 0.0
-    for i in range(n1):
-        cp += out[i] * lo[i]
-        cr += out[i] * hi[i]
-    return cp / lo[n1 - 1], cr / hi[n1 - 1]
-
-
-@njit(cache=True)
-def _toe_step(Ta, Tb, lo_a, hi_a, dlo_a, dhi_a, wa, cpa, cra, lo_b, hi_b, dlo_b, dhi_b, wb, cpb, crb, du, th, k,
-              tau_c, tau0, k2, thc, slope, sbx, sbF, sbs):  # pragma: no cover - compiled
-    """One substep of (P1)-(P4) in relative form (the toe tendon's weights change from step to step,
-    so the motors' travel ``du`` (G times the command change) is added to the present elongation);
-    returns the new angle [rad]; the profiles are updated in place."""
-    advance_proximal(Ta, lo_a, hi_a, wa, cpa, cra, elongation(Ta, wa) + du, 0.0, sbx, sbF, sbs)
-    advance_proximal(Tb, lo_b, hi_b, wb, cpb, crb, elongation(Tb, wb) - du, 0.0, sbx, sbF, sbs)
-    xa = elongation(Ta, wa) + th
-    xb = elongation(Tb, wb) - th
-    tau = tau0
-    if tau_c > 0.0:
-        f0 = joint_torque_balance(th, Ta, dlo_a, dhi_a, wa, elongation(Ta, wa), xa, Tb, dlo_b, dhi_b, wb,
-                                  elongation(Tb, wb), xb, 1.0, th, k, 0.0, k2, thc, -_BIG, _BIG, 0.0, tau0)
-        if abs(f0) <= tau_c:
-            return th
-        tau = tau0 + (tau_c if f0 > 0.0 else -tau_c)
-    return settle_joint(Ta, dlo_a, dhi_a, wa, xa, Tb, dlo_b, dhi_b, wb, xb, 1.0, th, k, 0.0, k2, thc,
-                        -_BIG, _BIG, 0.0, tau, slope)
-
-
-@njit(cache=True)
-def _start(Pa, Pb, wa, wb, lo_a, lo_b, k_total):  # pragma: no cover - compiled
-    """The simulation kernels' initial state: copies of the profiles, their elongations, the distal
-    tension difference, the stick-band scratch arrays and the joint's balance slope (k_total + both
-    tendons' stiffness at their lower envelopes)."""
-    Ta = Pa.copy()
-    Tb = Pb.copy()
-    slope = k_total + 1.0 / max(elongation(lo_a, wa), 1e-9) + 1.0 / max(elongation(lo_b, wb), 1e-9)
-    return (Ta, Tb, elongation(Ta, wa), elongation(Tb, wb), Ta[Ta.shape[0] - 1] - Tb[Tb.shape[0] - 1],
-            np.zeros(1), np.full(1, 1e200), np.ones(1), slope)
-
-
-@njit(cache=True)
-def _simulate_toe(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, lo_b, hi_b, dlo_b, dhi_b, wb, k, tau_c, substeps,
-                  theta, T_in, k2, thc, rho, Tc):  # pragma: no cover - compiled
-    """:func:`_simulate` with the toe tendon (E9): each substep is predicted with the tangent
-    compliance at the old profile, then redone with the secant compliance between the old and the
-    predicted profile (second order in the step; exact when the profile does not move)."""
-    Ta, Tb, _, _, tau0, sbx, sbF, sbs, slope = _start(Pa, Pb, wa, wb, lo_a, lo_b, k + k2)
-    va = np.empty_like(wa)
-    vb = np.empty_like(wb)
-    th = 0.0
-    prev = c[0]
-    for i in range(c.shape[0]):
-        for s in range(substeps):
-            du = G * (c[i] - prev) / substeps
-            Ta0 = Ta.copy()
-            Tb0 = Tb.copy()
-            cpa, cra = _toe_weights(Ta0, Ta0, wa, lo_a, hi_a, rho, Tc, va)
-            cpb, crb = _toe_weights(Tb0, Tb0, wb, lo_b, hi_b, rho, Tc, vb)
-            _toe_step(Ta, Tb, lo_a, hi_a, dlo_a, dhi_a, va, cpa, cra, lo_b, hi_b, dlo_b, dhi_b, vb, cpb, crb, du,
-                      th, k, tau_c, tau0, k2, thc, slope, sbx, sbF, sbs)
-            cpa, cra = _toe_weights(Ta0, Ta, wa, lo_a, hi_a, rho, Tc, va)
-            cpb, crb = _toe_weights(Tb0, Tb, wb, lo_b, hi_b, rho, Tc, vb)
-            Ta[:] = Ta0
-            Tb[:] = Tb0
-            th = _toe_step(Ta, Tb, lo_a, hi_a, dlo_a, dhi_a, va, cpa, cra, lo_b, hi_b, dlo_b, dhi_b, vb, cpb, crb,
-                           du, th, k, tau_c, tau0, k2, thc, slope, sbx, sbF, sbs)
-        prev = c[i]
-        theta[i] = th
-        T_in[i, 0] = Ta[0]
-        T_in[i, 1] = Tb[0]
-
-
-@njit(cache=True)
-def _motor_substep(Ta, Tb, lo_a, hi_a, wa, cpa, cra, lo_b, hi_b, wb, cpb, crb, xa0, xb0, G, u, th, sbx, sbF,
-                   sbs):  # pragma: no cover - compiled
-    """One motor substep with the joint held at ``th``: the motors' positions for the command offset
-    ``u`` (``xa0 + G u``, ``xb0 - G u``) and both proximal profiles advanced to them; returns (xa, xb)."""
-    xa = xa0 + G * u
-    xb = xb0 - G * u
-    advance_proximal(Ta, lo_a, hi_a, wa, cpa, cra, xa - th, 0.0, sbx, sbF, sbs)
-    advance_proximal(Tb, lo_b, hi_b, wb, cpb, crb, xb + th, 0.0, sbx, sbF, sbs)
-    return xa, xb
-
-
-@njit(cache=True)
-def _simulate(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, cpa, cra, lo_b, hi_b, dlo_b, dhi_b, wb, cpb, crb,
-              k, tau_c, substeps, theta, T_in, k2, thc):  # pragma: no cover - compiled
-    Ta, Tb, xa0, xb0, tau0, sbx, sbF, sbs, slope = _start(Pa, Pb, wa, wb, lo_a, lo_b, k + k2)
-    th = 0.0
-    c0 = c[0]
-    prev = c[0]
-    for i in range(c.shape[0]):
-        for s in range(substeps):
-            xa, xb = _motor_substep(Ta, Tb, lo_a, hi_a, wa, cpa, cra, lo_b, hi_b, wb, cpb, crb, xa0, xb0, G,
-                                    prev + (c[i] - prev) * (s + 1) / substeps - c0, th, sbx, sbF, sbs)
-            tau = tau0
-            if tau_c > 0.0:
-                f0 = joint_torque_balance(th, Ta, dlo_a, dhi_a, wa, elongation(Ta, wa), xa, Tb, dlo_b, dhi_b, wb,
-                                          elongation(Tb, wb), xb, 1.0, th, k, 0.0, k2, thc, -_BIG, _BIG, 0.0,
-                                          tau0)
-                if abs(f0) <= tau_c:
-                    continue
-                tau = tau0 + (tau_c if f0 > 0.0 else -tau_c)
-            th = settle_joint(Ta, dlo_a, dhi_a, wa, xa, Tb, dlo_b, dhi_b, wb, xb, 1.0, th, k, 0.0, k2, thc,
-                              -_BIG, _BIG, 0.0, tau, slope)
-        prev = c[i]
-        theta[i] = th
-        T_in[i, 0] = Ta[0]
-        T_in[i, 1] = Tb[0]
-
-
-@njit(cache=True)
-def _simulate_observed(c, Tma, Tmb, lam_d, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, cpa, cra, lo_b, hi_b, dlo_b,
-                       dhi_b, wb, cpb, crb, k, substeps, theta, T_in):  # pragma: no cover - compiled
-    """:func:`_simulate` with the drive-side observer (module docstring, ``lam_d``): the sheath entries sit at
-    x_a = x_a0 + G (c - c_0) - lam_d (T_m,a - T_m,a(0)), x_b = x_b0 - G (c - c_0) - lam_d (T_m,b - T_m,b(0)),
-    with the measured proximal tensions ``Tma``, ``Tmb`` [N] (shape (n,)) interpolated linearly in the substeps."""
-    Ta, Tb, xa0, xb0, tau0, sbx, sbF, sbs, slope = _start(Pa, Pb, wa, wb, lo_a, lo_b, k)
-    th = 0.0
-    c0 = c[0]
-    prev = c[0]
-    pa = Tma[0]
-    pb = Tmb[0]
-    for i in range(c.shape[0]):
-        for s in range(substeps):
-            f = (s + 1) / substeps
-            u = prev + (c[i] - prev) * f - c0
-            ta = pa + (Tma[i] - pa) * f - Tma[0]
-            tb = pb + (Tmb[i] - pb) * f - Tmb[0]
-            # the motors' step with each entry's origin moved back by the drive's stretch
-            xa, xb = _motor_substep(Ta, Tb, lo_a, hi_a, wa, cpa, cra, lo_b, hi_b, wb, cpb, crb, xa0 - lam_d * ta,
-                                    xb0 - lam_d * tb, G, u, th, sbx, sbF, sbs)
-            th = settle_joint(Ta, dlo_a, dhi_a, wa, xa, Tb, dlo_b, dhi_b, wb, xb, 1.0, th, k, 0.0, 0.0, _BIG,
-                              -_BIG, _BIG, 0.0, tau0, slope)
-        prev = c[i]
-        pa = Tma[i]
-        pb = Tmb[i]
-        theta[i] = th
-        T_in[i, 0] = Ta[0]
-        T_in[i, 1] = Tb[0]
-
-
-@njit(cache=True)
-def _bend_balance(th, s, mub, Ta, dlo_a, dhi_a, wa, ea, xa, Tb, dlo_b, dhi_b, wb, eb, xb, k, tau0):  # pragma: no cover
-    """Torque balance [N] of the joint moving in direction s (+1 / -1) at angle ``th`` [rad] with the
-    motors held, the bending section's capstan factor e^{-+s mu_b |th|} on each distal tension."""
-    tda = distal_tension(Ta, dlo_a, dhi_a, wa, ea, xa - th)
-    tdb = distal_tension(Tb, dlo_b, dhi_b, wb, eb, xb + th)
-    b = s * mub * abs(th)
-    return tda * math.exp(-b) - tdb * math.exp(b) - k * th - tau0
-
-
-@njit(cache=True)
-def _simulate_bend(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, cpa, cra, lo_b, hi_b, dlo_b, dhi_b, wb, cpb, crb, k,
-                   mub, substeps, theta, T_in):  # pragma: no cover - compiled
-    """:func:`_simulate` with friction in the bending section (``mu_b``, module docstring): per substep
-    the motors move with the joint held, then the joint stays while the balance lies in its band and
-    otherwise moves to the first zero of the balance in the direction it points (bracket, bisection)."""
-    Ta, Tb, xa0, xb0, tau0, sbx, sbF, sbs, slope = _start(Pa, Pb, wa, wb, lo_a, lo_b, k)
-    th = 0.0
-    c0 = c[0]
-    prev = c[0]
-    for i in range(c.shape[0]):
-        for j in range(substeps):
-            xa, xb = _motor_substep(Ta, Tb, lo_a, hi_a, wa, cpa, cra, lo_b, hi_b, wb, cpb, crb, xa0, xb0, G,
-                                    prev + (c[i] - prev) * (j + 1) / substeps - c0, th, sbx, sbF, sbs)
-            ea = elongation(Ta, wa)
-            eb = elongation(Tb, wb)
-            s = 1.0
-            f = _bend_balance(th, 1.0, mub, Ta, dlo_a, dhi_a, wa, ea, xa, Tb, dlo_b, dhi_b, wb, eb, xb, k, tau0)
-            if f <= 0.0:
-                s = -1.0
-                f = _bend_balance(th, -1.0, mub, Ta, dlo_a, dhi_a, wa, ea, xa, Tb, dlo_b, dhi_b, wb, eb, xb, k, tau0)
-                if f >= 0.0:
-                    continue                              # inside the band: the joint stays
-            x0 = th
-            h = s * max(abs(f) / slope, 1e-12)
-            x1 = th + h
-            for _ in range(200):                          # expand until the balance changes sign
-                if s * _bend_balance(x1, s, mub, Ta, dlo_a, dhi_a, wa, ea, xa, Tb, dlo_b, dhi_b, wb, eb, xb, k,
-                                     tau0) <= 0.0:
-                    break
-                x0 = x1
-                h *= 2.0
-                x1 = th + h
-            lo = min(x0, x1)
-            hi = max(x0, x1)
-            while hi - lo > 1e-13 * (1.0 + abs(hi)):       # the balance falls with theta on the bracket
-                mid = 0.5 * (lo + hi)
-                if _bend_balance(mid, s, mub, Ta, dlo_a, dhi_a, wa, ea, xa, Tb, dlo_b, dhi_b, wb, eb, xb, k,
-                                 tau0) > 0.0:
-                    lo = mid
-                else:
-                    hi = mid
-            th = 0.5 * (lo + hi)
-            distal_clip(Ta, dlo_a, dhi_a, distal_tension(Ta, dlo_a, dhi_a, wa, ea, xa - th))
-            distal_clip(Tb, dlo_b, dhi_b, distal_tension(Tb, dlo_b, dhi_b, wb, eb, xb + th))
-        prev = c[i]
-        theta[i] = th
-        T_in[i, 0] = Ta[0]
-        T_in[i, 1] = Tb[0]
 
 
 def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple[float, float],
@@ -379,6 +159,35 @@ def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple
         ``toe``, ``tau_c``, ``k2`` or ``mu_b``.
     """
     c = np.ascontiguousarray(command, dtype=np.float64)
+    Tm = _check(c, pretension, G, lam, K, k, lam_s=lam_s, tau_c=tau_c, shape=shape, offset=offset, k2=k2,
+                theta_c=theta_c, toe=toe, toe_tension=toe_tension, mu_b=mu_b, observed=observed, lam_d=lam_d)
+    arrs = [_node_arrays(float(Kj), float(lj), int(n_nodes), float(lam_s)) for Kj, lj in zip(K, lam)]
+    P = [(P0 + offset) * np.exp(-shape * np.log(a[1])) for P0, a in zip(pretension, arrs)]
+    theta = np.empty(c.size)
+    T_in = np.empty((c.size, 2))
+    n_sub = max(int(substeps), 1)
+    thc = float(theta_c) if k2 > 0.0 else BIG
+    if Tm is not None:
+        simulate_observed(c, Tm[0], Tm[1], float(lam_d), float(G), P[0], P[1], *arrs[0], *arrs[1], float(k), n_sub,
+                          theta, T_in)
+    elif toe > 0.0:
+        (lo_a, hi_a, dlo_a, dhi_a, wa, _, _), (lo_b, hi_b, dlo_b, dhi_b, wb, _, _) = arrs
+        simulate_toe(c, float(G), P[0], P[1], lo_a, hi_a, dlo_a, dhi_a, wa, lo_b, hi_b, dlo_b, dhi_b, wb, float(k),
+                     float(tau_c), n_sub, theta, T_in, float(k2), thc, float(toe), float(toe_tension))
+    elif mu_b > 0.0:
+        simulate_bend(c, float(G), P[0], P[1], *arrs[0], *arrs[1], float(k), float(mu_b), n_sub, theta, T_in)
+    else:
+        simulate_plain(c, float(G), P[0], P[1], *arrs[0], *arrs[1], float(k), float(tau_c), n_sub, theta, T_in,
+                       float(k2), thc)
+    return theta, T_in - offset
+
+
+def _check(c: np.ndarray, pretension: tuple[float, float], G: float, lam: tuple[float, float],
+           K: tuple[float, float], k: float, *, lam_s: float, tau_c: float, shape: float, offset: float, k2: float,
+           theta_c: float, toe: float, toe_tension: float, mu_b: float,
+           observed: tuple[np.ndarray, np.ndarray] | None, lam_d: float) -> list[np.ndarray] | None:
+    """The arguments of :func:`simulate_pair` checked (its Raises); returns the measured tensions as
+    contiguous float arrays, or None without ``observed``."""
     if c.ndim != 1 or c.size == 0 or not np.all(np.isfinite(c)):
         raise ValueError("command must be a non-empty 1-D array of finite angles [rad]")
     vals = {"G": G, "lam_a": lam[0], "lam_b": lam[1], "K_a": K[0], "K_b": K[1], "k": k, "lam_s": lam_s,
@@ -396,31 +205,12 @@ def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple
     if mu_b > 0.0 and (toe > 0.0 or tau_c > 0.0 or k2 > 0.0):
         raise ValueError(f"mu_b (bending-section friction) is not combined with toe, tau_c or k2, got mu_b={mu_b!r}, "
                          f"toe={toe!r}, tau_c={tau_c!r}, k2={k2!r}")
-    if observed is not None:
-        Tm = [np.ascontiguousarray(x, dtype=np.float64) for x in observed]
-        if len(Tm) != 2 or any(x.shape != c.shape or not np.all(np.isfinite(x)) for x in Tm):
-            raise ValueError(f"observed must be two finite arrays of the command's shape {c.shape} (the measured "
-                             "proximal tensions T_a, T_b [N])")
-        if toe > 0.0 or tau_c > 0.0 or k2 > 0.0 or mu_b > 0.0:
-            raise ValueError("the drive-side observer (observed=) is not combined with toe, tau_c, k2 or mu_b")
-    arrs = [_node_arrays(float(Kj), float(lj), int(n_nodes), float(lam_s)) for Kj, lj in zip(K, lam)]
-    P = [(P0 + offset) * np.exp(-shape * np.log(a[1])) for P0, a in zip(pretension, arrs)]
-    theta = np.empty(c.size)
-    T_in = np.empty((c.size, 2))
-    if observed is not None:
-        _simulate_observed(c, Tm[0], Tm[1], float(lam_d), float(G), P[0], P[1], *arrs[0], *arrs[1], float(k),
-                           max(int(substeps), 1), theta, T_in)
-        return theta, T_in - offset
-    if toe > 0.0:
-        (lo_a, hi_a, dlo_a, dhi_a, wa, _, _), (lo_b, hi_b, dlo_b, dhi_b, wb, _, _) = arrs
-        _simulate_toe(c, float(G), P[0], P[1], lo_a, hi_a, dlo_a, dhi_a, wa, lo_b, hi_b, dlo_b, dhi_b, wb, float(k),
-                      float(tau_c), max(int(substeps), 1), theta, T_in, float(k2),
-                      float(theta_c) if k2 > 0.0 else _BIG, float(toe), float(toe_tension))
-        return theta, T_in - offset
-    if mu_b > 0.0:
-        _simulate_bend(c, float(G), P[0], P[1], *arrs[0], *arrs[1], float(k), float(mu_b), max(int(substeps), 1),
-                       theta, T_in)
-        return theta, T_in - offset
-    _simulate(c, float(G), P[0], P[1], *arrs[0], *arrs[1], float(k), float(tau_c), max(int(substeps), 1), theta,
-              T_in, float(k2), float(theta_c) if k2 > 0.0 else _BIG)
-    return theta, T_in - offset
+    if observed is None:
+        return None
+    Tm = [np.ascontiguousarray(x, dtype=np.float64) for x in observed]
+    if len(Tm) != 2 or any(x.shape != c.shape or not np.all(np.isfinite(x)) for x in Tm):
+        raise ValueError(f"observed must be two finite arrays of the command's shape {c.shape} (the measured "
+                         "proximal tensions T_a, T_b [N])")
+    if toe > 0.0 or tau_c > 0.0 or k2 > 0.0 or mu_b > 0.0:
+        raise ValueError("the drive-side observer (observed=) is not combined with toe, tau_c, k2 or mu_b")
+    return Tm
