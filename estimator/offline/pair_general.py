@@ -293,25 +293,9 @@ def shared_analysis(recs: list, bends: list[float], train: list[slice], test: li
     tick = progress or (lambda label: None)
     summary: dict = {"models": {}, "leave_one_out": {}}
     details: dict = {"models": {}, "leave_one_out": {}}
-    fitted: dict[str, dict[str, float]] = {}
     names = list(dict.fromkeys(("capstan",) + COMPARED + CHOICE))
     names += [n for n, m in SHARED_MODELS.items() if m.per_config and drift]
-    for name in names:
-        m = SHARED_MODELS[name]
-        # variants of the angle-only capstan model start from its fit (their extra freedom at its values)
-        warm = [dict(fitted["capstan"])] if (m.structure == "capstan" and m.grows and "capstan" in fitted
-                                             and not m.tension_weight) else []
-        v = fit_shared(m, recs, bends, train, starts=warm + list(m.starts[:1]) if warm else None)
-        tick(f"shared {name}")
-        fitted[name] = v
-        rows = score(m, v, recs, bends, train, test)
-        details["models"][name] = [r.pop("angle") for r in rows]
-        err2 = [np.square(a - np.asarray(r.angle, dtype=float))[te] for a, r, te in
-                zip(details["models"][name], recs, test)]
-        units = {p.name: p.unit for p in shared_params(m, len(recs))}
-        summary["models"][name] = {"params": {k: {"value": x, "unit": units[k]} for k, x in v.items()},
-                                   "n_params": len(v), "configurations": rows,
-                                   "rmse_test_deg": math.degrees(float(np.sqrt(np.mean(np.concatenate(err2)))))}
+    fitted = _fit_models(names, recs, bends, train, test, summary, details, tick)
     choice = choose_shared(recs, bends, train, CHOICE, fitted, tick)
     chosen = choice["chosen"]
     summary.update(choice=choice, chosen=chosen)
@@ -331,9 +315,46 @@ def shared_analysis(recs: list, bends: list[float], train: list[slice], test: li
     price = S + PENALTY * (ms["capstan"]["n_params"] - ms["capstan, mu = 0"]["n_params"])
     summary["E6"] = {"score": S, "price": price, "accepted": price < 1.0}
     summary["mu"] = fitted["capstan"]["mu"]
-    # the exported set: the chosen structure refitted on every sample of every configuration
-    m = SHARED_MODELS[chosen]
-    v_all, res = fit_shared(m, recs, bends, upto, starts=[fitted[chosen]], full=True)
+    _export(SHARED_MODELS[chosen], recs, bends, upto, cyc, fitted[chosen], n_bootstrap, summary, tick)
+    summary["samples"] = {"fit": "training block of every configuration", "choice": choice["rule"],
+                          "test": "once per model: its reported figures",
+                          "leave_one_out": "refit on every sample of the other configurations, scored on the "
+                                           "left-out configuration's test block"
+                                           + ("; its uncertainty: the other configurations' cycles redrawn and "
+                                              "refitted, the same block scored" if n_bootstrap else ""),
+                          "params": "refit on every sample of every configuration, for new configurations"}
+    return summary, details
+
+
+def _fit_models(names: list[str], recs: list, bends: list[float], train: list[slice], test: list[slice],
+                summary: dict, details: dict, tick: Callable[[str], None]) -> dict[str, dict[str, float]]:
+    """Fit each named shared model on the training slices and score it (:func:`shared_analysis`); fills
+    ``summary["models"]`` and ``details["models"]`` and returns the fitted values by name."""
+    fitted: dict[str, dict[str, float]] = {}
+    for name in names:
+        m = SHARED_MODELS[name]
+        # variants of the angle-only capstan model start from its fit (their extra freedom at its values)
+        warm = [dict(fitted["capstan"])] if (m.structure == "capstan" and m.grows and "capstan" in fitted
+                                             and not m.tension_weight) else []
+        v = fit_shared(m, recs, bends, train, starts=warm + list(m.starts[:1]) if warm else None)
+        tick(f"shared {name}")
+        fitted[name] = v
+        rows = score(m, v, recs, bends, train, test)
+        details["models"][name] = [r.pop("angle") for r in rows]
+        err2 = [np.square(a - np.asarray(r.angle, dtype=float))[te] for a, r, te in
+                zip(details["models"][name], recs, test)]
+        units = {p.name: p.unit for p in shared_params(m, len(recs))}
+        summary["models"][name] = {"params": {k: {"value": x, "unit": units[k]} for k, x in v.items()},
+                                   "n_params": len(v), "configurations": rows,
+                                   "rmse_test_deg": math.degrees(float(np.sqrt(np.mean(np.concatenate(err2)))))}
+    return fitted
+
+
+def _export(m: SharedModel, recs: list, bends: list[float], upto: list[slice], cyc: list[list[slice]],
+            start: dict[str, float], n_bootstrap: int, summary: dict, tick: Callable[[str], None]) -> None:
+    """The exported set: the chosen structure ``m`` refitted on every sample of every configuration, with
+    its bootstrap and local correlation (``summary["params"]`` and ``summary["uncertainty"]``)."""
+    v_all, res = fit_shared(m, recs, bends, upto, starts=[start], full=True)
     tick("shared set, all samples")
     unc = bootstrap(m, recs, bends, cyc, v_all, n_draws=n_bootstrap) if n_bootstrap else None
     tick("bootstrap")
@@ -343,11 +364,3 @@ def shared_analysis(recs: list, bends: list[float], train: list[slice], test: li
     summary["uncertainty"] = {"bootstrap": None if unc is None else {k: unc[k] for k in ("correlation", "n_draws",
                                                                                         "method")},
                               "local_correlation": local_correlation(res, list(v_all))}
-    summary["samples"] = {"fit": "training block of every configuration", "choice": choice["rule"],
-                          "test": "once per model: its reported figures",
-                          "leave_one_out": "refit on every sample of the other configurations, scored on the "
-                                           "left-out configuration's test block"
-                                           + ("; its uncertainty: the other configurations' cycles redrawn and "
-                                              "refitted, the same block scored" if n_bootstrap else ""),
-                          "params": "refit on every sample of every configuration, for new configurations"}
-    return summary, details
