@@ -193,6 +193,51 @@ def _span(geo: SheathGeometry, mu: float, EA: float, load: Load, sim_kw: dict, T
     return x_rest, x_top, M_e
 
 
+def _check(effect: str | tuple[str, ...] | None, seed: int, level: float | None, duration: float,
+           rate_hz: float | None) -> tuple[str, ...]:
+    """The arguments of :func:`record` checked (its Raises); returns the hidden effects' ids."""
+    hidden = () if effect in (None, "none") else (effect,) if isinstance(effect, str) else tuple(effect)
+    for e in hidden:
+        if e not in EFFECT_IDS + UNCATALOGUED:
+            raise ValueError(f"effect: unknown id {e!r}; expected None, 'none' or ids of {EFFECT_IDS + UNCATALOGUED}")
+    if len(set(hidden)) != len(hidden):
+        raise ValueError(f"effect: an id is repeated in {hidden!r}")
+    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
+        raise ValueError(f"seed must be an int >= 0, got {seed!r}")
+    if level is not None and not (isinstance(level, (int, float)) and 0.0 <= level <= 1.0):
+        raise ValueError(f"level must be in [0, 1], got {level!r}")
+    if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration >= 5.0):
+        raise ValueError(f"duration must be >= 5 s, got {duration!r}")
+    if rate_hz is not None and not (isinstance(rate_hz, (int, float)) and 100.0 <= rate_hz <= 20000.0):
+        raise ValueError(f"rate_hz must be in [100, 20000] Hz or None, got {rate_hz!r}")
+    return hidden
+
+
+def _measure(sensor: dict, t: np.ndarray, true: dict[str, np.ndarray], noise: tuple[float, float, float],
+             quanta: tuple[float, float, float], rng_noise: np.random.Generator, rng_fx: np.random.Generator,
+             duration: float, rate: float, seed: int) -> MeasuredData:
+    """What the bench's sensors read of the ``true`` signals (T_in, T_out [N], x_in, x_out [m], shape (n,)):
+    the hidden sensor effects, white noise (sigma of T_in, T_out [N], x_out [m]), a slow load-cell wander
+    when hidden, and quantisation (quanta of T [N], x_in, x_out [m])."""
+    noise_in, noise_out, noise_x = noise
+    q_T, q_in, q_out = quanta
+    n = t.size
+    T_in = _channel(sensor, "T_in", t, true["T_in"]) + noise_in * rng_noise.standard_normal(n)
+    T_out = _channel(sensor, "T_out", t, true["T_out"]) + noise_out * rng_noise.standard_normal(n)
+    if "load_cell_wander" in sensor:
+        knots = np.arange(0.0, duration + 20.0, 10.0)
+        w = np.interp(t, knots + rng_fx.uniform(-3.0, 3.0), rng_fx.uniform(-1.0, 1.0, knots.size))
+        w = np.convolve(w, np.ones(max(1, int(rate))) / max(1, int(rate)), mode="same")   # smooth corners (1 s)
+        T_out = T_out + sensor["load_cell_wander"]["amplitude"] * w / max(float(np.max(np.abs(w))), 1e-9)
+    x_in = _channel(sensor, "x_in", t, true["x_in"])
+    x_out = _channel(sensor, "x_out", t, true["x_out"]) + noise_x * rng_noise.standard_normal(n)
+    return MeasuredData(time=t, x_in=q_in * np.round(x_in / q_in), T_in=q_T * np.round(T_in / q_T),
+                        x_out=q_out * np.round(x_out / q_out), T_out=q_T * np.round(T_out / q_T),
+                        metadata={"source": "study/lumped_scenarios.py lumped-mass bench recording",
+                                  "units": "time=s, x_in=m, T_in=N, x_out=m, T_out=N"},
+                        source=f"<lumped scenario seed {seed}>")
+
+
 def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level: float | None = None,
            duration: float = 90.0, rate_hz: float | None = None) -> Recording:
     """One randomised bench recording from the lumped simulator with ``effect`` hidden.
@@ -221,20 +266,7 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     ValueError
         Unknown effect, ``seed`` not an int, ``level``, ``duration`` or ``rate_hz`` out of range.
     """
-    hidden = () if effect in (None, "none") else (effect,) if isinstance(effect, str) else tuple(effect)
-    for e in hidden:
-        if e not in EFFECT_IDS + UNCATALOGUED:
-            raise ValueError(f"effect: unknown id {e!r}; expected None, 'none' or ids of {EFFECT_IDS + UNCATALOGUED}")
-    if len(set(hidden)) != len(hidden):
-        raise ValueError(f"effect: an id is repeated in {hidden!r}")
-    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
-        raise ValueError(f"seed must be an int >= 0, got {seed!r}")
-    if level is not None and not (isinstance(level, (int, float)) and 0.0 <= level <= 1.0):
-        raise ValueError(f"level must be in [0, 1], got {level!r}")
-    if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration >= 5.0):
-        raise ValueError(f"duration must be >= 5 s, got {duration!r}")
-    if rate_hz is not None and not (isinstance(rate_hz, (int, float)) and 100.0 <= rate_hz <= 20000.0):
-        raise ValueError(f"rate_hz must be in [100, 20000] Hz or None, got {rate_hz!r}")
+    hidden = _check(effect, seed, level, duration, rate_hz)
     rng, rng_fx, rng_proto, rng_noise = (np.random.default_rng(s)
                                          for s in np.random.SeedSequence([int(seed), 8]).spawn(4))
     route, mu = draw_route(rng)
@@ -265,20 +297,8 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     t = np.arange(1, n + 1) / rate
     x_in_true = sig["x_motor"] - start["x_motor"]
     x_out_true = sig["x_joint"] - start["x_joint"]
-    T_in = _channel(sensor, "T_in", t, sig["T_in"]) + noise_in * rng_noise.standard_normal(n)
-    T_out = _channel(sensor, "T_out", t, sig["T_out"]) + noise_out * rng_noise.standard_normal(n)
-    if "load_cell_wander" in sensor:
-        knots = np.arange(0.0, duration + 20.0, 10.0)
-        w = np.interp(t, knots + rng_fx.uniform(-3.0, 3.0), rng_fx.uniform(-1.0, 1.0, knots.size))
-        w = np.convolve(w, np.ones(max(1, int(rate))) / max(1, int(rate)), mode="same")   # smooth corners (1 s)
-        T_out = T_out + sensor["load_cell_wander"]["amplitude"] * w / max(float(np.max(np.abs(w))), 1e-9)
-    x_in = _channel(sensor, "x_in", t, x_in_true)
-    x_out = _channel(sensor, "x_out", t, x_out_true) + noise_x * rng_noise.standard_normal(n)
-    data = MeasuredData(time=t, x_in=q_in * np.round(x_in / q_in), T_in=q_T * np.round(T_in / q_T),
-                        x_out=q_out * np.round(x_out / q_out), T_out=q_T * np.round(T_out / q_T),
-                        metadata={"source": "study/lumped_scenarios.py lumped-mass bench recording",
-                                  "units": "time=s, x_in=m, T_in=N, x_out=m, T_out=N"},
-                        source=f"<lumped scenario seed {seed}>")
+    data = _measure(sensor, t, {"T_in": sig["T_in"], "T_out": sig["T_out"], "x_in": x_in_true, "x_out": x_out_true},
+                    (noise_in, noise_out, noise_x), (q_T, q_in, q_out), rng_noise, rng_fx, duration, rate, seed)
     params: dict[str, float] = {}
     for e, p in by_effect.items():
         for k, val in p.items():
