@@ -212,6 +212,35 @@ def protocol(duration: float, rate_hz: float, x_max: float, rng: np.random.Gener
     return np.interp(np.arange(n) * dt, t, x)
 
 
+def _check(effect: str | tuple[str, ...] | None, level: float | None, duration: float,
+           rate_hz: float) -> tuple[str, ...]:
+    """The arguments of :func:`record` checked (its Raises); returns the hidden effects' ids."""
+    hidden = () if effect in (None, "none") else (effect,) if isinstance(effect, str) else tuple(effect)
+    known = scenario_effects()
+    for e in hidden:
+        if e not in known:
+            raise ValueError(f"unknown effect {e!r}; expected None, 'none' or one of {known}")
+    if level is not None and not 0.0 <= level <= 1.0:
+        raise ValueError(f"level must be in [0, 1], got {level!r}")
+    if not (duration >= 5.0 and rate_hz >= 100.0):
+        raise ValueError(f"need duration >= 5 s and rate_hz >= 100 Hz, got {duration!r} s, {rate_hz!r} Hz")
+    return hidden
+
+
+def _run(rig: SimulatedRig, cmd: np.ndarray, dt: float) -> tuple[np.ndarray, tuple[float, float, float]]:
+    """Step the rig through the motor command ``cmd`` [m] at ``dt`` [s] from rest. Returns per sample
+    (encoder x_in [m], T_in [N], true x_out [m], true T_out [N], true x_in [m]), shape (n, 5), and the
+    encoder, true x_out and true x_in at rest before moving [m]."""
+    rest = _truth(rig.state)
+    at_rest = (rig.state.x_in, rest.x_out, rest.x_in)
+    out = np.empty((cmd.size, 5))
+    for k, x in enumerate(cmd):
+        s = rig.step(float(x), dt)
+        tr = _truth(s)
+        out[k] = (s.x_in, s.T_in, tr.x_out, tr.T_out, tr.x_in)
+    return out, at_rest
+
+
 def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level: float | None = None, duration: float = 90.0,
            rate_hz: float = 1000.0) -> Recording:
     """Run one protocol through the simulated rig with ``effect`` hidden (None or "none": clean).
@@ -235,15 +264,7 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     ValueError
         Unknown effect, ``level`` outside [0, 1], too short or too slowly sampled a recording.
     """
-    hidden = () if effect in (None, "none") else (effect,) if isinstance(effect, str) else tuple(effect)
-    known = scenario_effects()
-    for e in hidden:
-        if e not in known:
-            raise ValueError(f"unknown effect {e!r}; expected None, 'none' or one of {known}")
-    if level is not None and not 0.0 <= level <= 1.0:
-        raise ValueError(f"level must be in [0, 1], got {level!r}")
-    if not (duration >= 5.0 and rate_hz >= 100.0):
-        raise ValueError(f"need duration >= 5 s and rate_hz >= 100 Hz, got {duration!r} s, {rate_hz!r} Hz")
+    hidden = _check(effect, level, duration, rate_hz)
     # independent streams, so that one seed gives the same rig and protocol whatever the effect
     rng, rng_fx, rng_proto, rng_noise = (np.random.default_rng(s) for s in np.random.SeedSequence([seed, 7]).spawn(4))
     u = float(rng_fx.uniform()) if level is None else float(level)
@@ -274,13 +295,7 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
         x_rest += 1.2 * params["tension_offset"] * math.expm1(K) * (1.0 / (100.0 + k_tissue) + c)
     cmd = x0 + protocol(duration, rate_hz, float(rng.uniform(12.0, 20.0)) * per_newton, rng_proto, x_rest=x_rest)
     dt = 1.0 / rate_hz
-    rest = _truth(rig.state)
-    enc0, x_out0, x_in0 = rig.state.x_in, rest.x_out, rest.x_in   # at rest, before moving
-    out = np.empty((cmd.size, 5))
-    for k, x in enumerate(cmd):
-        s = rig.step(float(x), dt)
-        tr = _truth(s)
-        out[k] = (s.x_in, s.T_in, tr.x_out, tr.T_out, tr.x_in)
+    out, (enc0, x_out0, x_in0) = _run(rig, cmd, dt)
     time = np.arange(1, cmd.size + 1) * dt
     T_in, x_in, T_true, x_true = out[:, 1], out[:, 0] - enc0, out[:, 3], out[:, 2] - x_out0
     T_true, x_true = _signal_effects(hidden, params, time, out[:, 1], out[:, 4] - x_in0, T_true, x_true)
