@@ -188,7 +188,6 @@ class Recorder:
         if not self.journals.note(key, payload, recovered):
             return                                 # arrived after it was recovered: already recorded
         self._raw.write(pack_record(t, key.encode(), payload))
-        self._mcap.write(t, key, msg, recovered)
         st.type = type(msg).__name__
         if recovered:
             st.fill(seq, t)
@@ -203,6 +202,7 @@ class Recorder:
             f = self._open_csv(shape, flatten(msg))
         f.write(t, tuple(vals))
         self._derived(t, key, msg, seq, f.names, vals, st.count)
+        self._mcap.write(t, key, msg, recovered)   # last: a problem of the MCAP file costs no other file
 
     def _open_csv(self, shape: tuple, flat: list) -> StreamCsv:
         key = shape[0]
