@@ -36,8 +36,6 @@ def _row(action: argparse.Action) -> str | None:
         value = f"`{action.metavar or action.dest.upper()}`"
         if action.nargs == "?":
             value += " (optional)"
-    if isinstance(action, argparse._AppendAction):
-        value += " (repeatable)"
     shown = "" if action.default in (None, False, argparse.SUPPRESS) or action.nargs == 0 else f"`{action.default}`"
     if action.required:
         shown = "(required)"
