@@ -141,7 +141,7 @@ def load_model(cfg: Config, inp: ReplayInput, calibration: str | Path | None = N
 def tension_noise(cfg: Config, source: str) -> float:
     """The noise sigma of T_in [N] for the estimator's noise band: ``cfg.estimator.tension_noise`` when set, else
     the calibration's at ``source`` (a ``.yaml`` calibration file or a run's ``calibration.json``; 0 when it has
-    none: the estimator without a band, as before session 23)."""
+    none: the estimator without a band)."""
     if cfg.estimator.tension_noise is not None:
         return float(cfg.estimator.tension_noise)
     from slave.calibration_file import load_calibration

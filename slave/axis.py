@@ -1,6 +1,6 @@
 """One axis of an instrument, as the slave node drives it: the interface every kind of axis implements.
 
-An instrument is a list of axes (ARCHITECTURE.md): a single tendon is a one-axis instrument
+An instrument is a list of axes (docs/concepts/architecture.md): a single tendon is a one-axis instrument
 (:class:`slave.tendon_axis.TendonAxis`: a motor position command, the distal tension and the
 elongation estimated with the tension-profile memory, :mod:`estimator.online.distal`); a joint
 instrument has one axis per antagonistic pair (:class:`slave.pair_axis.PairAxis`: a joint-angle

@@ -28,8 +28,8 @@ A single-tendon instrument (one axis of one tendon) has ``tendon:`` instead of `
 
 K [-] >= 0, M_e [m/N] > 0, compliance = L/EA [m/N] > 0, knee_x_in [m], knee_T_in [N], residual_rms [m]
 (of the post-knee line x_in = M_e T_in + c) >= 0, n_samples >= 1 (samples after the knee), and optionally
-tension_noise [N] >= 0 (the noise sigma of the pull's T_in, for the estimator's noise band; files written
-before session 23 have none: 0, no band).
+tension_noise [N] >= 0 (the noise sigma of the pull's T_in, for the estimator's noise band; a file
+without it reads as 0: no band).
 """
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Simulated instrument of 1 to 4 joints, each driven by an antagonistic pair of distributed tendons.
 
-The reference simulator of literature.md section 4 extended to a pull-pull pair (E5, E11-E13):
+The reference simulator (docs/concepts/model.md, the simulators) extended to a pull-pull pair (E5, E11-E13):
 the compiled step is in :mod:`estimator.kernels`; this module owns the state, the motors, the
 sensors and validation.
 """
@@ -64,7 +64,7 @@ class SimulatedInstrument:
     r"""An instrument of 1..4 independent joints, each turned by two tendons through their own sheaths.
 
     Model of one joint (quasi-static distributed Coulomb friction in each tendon; joint per
-    literature.md E11 with the pair coupling E13; pretension E5):
+    docs/concepts/effects.md E11 with the pair coupling E13; pretension E5):
 
     * Tendons a and b: the distributed model of :class:`slave.simulated.SimulatedRig` each (``n``
       elements, own route and EA from ``instrument.joints[i].tendons``, own mu from

@@ -11,7 +11,7 @@ Each step takes a command per tendon and returns what the proximal sensors read.
 also returns the ground truth (:class:`RigTruth` for a single tendon, :class:`InstrumentTruth` for a
 pair instrument) for evaluation; estimators and controllers must never read it.
 
-Sign convention (ARCHITECTURE.md): + = tendon drawn toward the actuator; x_in - x_out = elongation.
+Sign convention (docs/concepts/architecture.md): + = tendon drawn toward the actuator; x_in - x_out = elongation.
 At a distal pulley of radius r: x_out,a = + r theta, x_out,b = - r theta.
 """
 from __future__ import annotations

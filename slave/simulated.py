@@ -1,6 +1,6 @@
 """Simulated slave rig: distributed tendon-sheath physics, proximal motor, distal load and sensors.
 
-The reference simulator of literature.md section 4 (quasi-static distributed Coulomb model), with
+The reference simulator (docs/concepts/model.md, the simulators) (quasi-static distributed Coulomb model), with
 the distal load solved exactly at every step. The compiled kernels live in
 :mod:`estimator.kernels` (shared with the estimator); this module owns the state, the motor, the sensors and validation.
 """
@@ -32,7 +32,7 @@ class SimulatedRig(EffectSwitches):
     * Tendon: ``n`` elements, ``n + 1`` nodes at s_i = i L / n (proximal i = 0 to distal i = n), node
       wrap angle theta_i = int_0^{s_i} kappa from the route (any curvature), g_i = mu theta_i,
       K = g_n. The node tensions T_i [N] are the state (the tension-profile memory). No tendon
-      inertia: the axial wave time is far below a control period (literature.md section 4).
+      inertia: the axial wave time is far below a control period (docs/concepts/model.md, the simulators).
     * Friction bound: |ln T_{i+1} - ln T_i| <= g_{i+1} - g_i, with equality where the tendon slides.
     * Kinematics (rigid, inextensible sheath): x_in - x_out = e, e = sum_i w_i T_i, trapezoid weights
       w_i = L / (n EA) (halved at both ends).

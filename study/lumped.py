@@ -1,4 +1,4 @@
-r"""Dynamic lumped-mass tendon-sheath simulator: the second formulation of issue 8.
+r"""Dynamic lumped-mass tendon-sheath simulator: a second, independent formulation of the physics.
 
 The quasi-static rig (:mod:`slave.simulated`) solves the capstan envelope of a massless tendon with
 Coulomb friction exactly. This one integrates Newton's law for a chain of tendon masses instead,
@@ -42,7 +42,7 @@ with a bristle friction state per node, so that it can serve as an independent s
   element and the piece of the load law at the end of the substep found by an active-set
   iteration (each pass one tridiagonal solve, :mod:`study.lumped_kernel`); stable for any
   substep (default 10 kHz; 5 and 160 kHz agree within 0.01 N on a 40 mm/s pull), a slack tendon
-  included (session 5: contact taken at the start of a substep overflowed on seed 316100).
+  included (contact taken at the start of a substep instead overflows when a slack tendon snaps taut).
 """
 from __future__ import annotations
 

@@ -14,8 +14,8 @@ system is tridiagonal (a chain) and is solved by the Thomas algorithm, O(n) per 
     dth[i]       wrap angle [rad] carried by node i; qds[i] tension-independent normal load [N]
     s = [x_motor, xp, x_joint, t, T_out]  scalar state
 
-Nothing here is shared with the quasi-static rig or the estimator's kernels on purpose: it is the
-independent second formulation of issue 8.
+Nothing here is shared with the quasi-static rig or the estimator's kernels on purpose: it is an
+independent second formulation, so that a diagnosis checked on both does not fit one simulator's numerics.
 """
 from __future__ import annotations
 

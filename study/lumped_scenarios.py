@@ -1,6 +1,6 @@
 """Randomised bench recordings from the dynamic lumped-mass simulator, with hidden effects.
 
-The second simulator of issue 8 (:mod:`study.lumped`; contract in the issue's CONTRACT_SIM2): the
+The second, independent simulator (:mod:`study.lumped`; docs/concepts/model.md, the simulators): the
 same :class:`study.scenarios.Recording` and truth keys as :func:`study.scenarios.record`, but a
 different physics (tendon masses, an elasto-plastic bristle friction state per node, normal force from
 the local curvature)

@@ -1,6 +1,6 @@
 """The centre map on the MRD runs (``teleop analyze --mrd``): the load level read from the spindle's band.
 
-Finding 4: what changes from run to run and the pair model's shared set misses is the load level; the
+On the MRD runs (docs/results/mrd.md) what changes from run to run and the pair model's shared set misses is the load level; the
 scored run's own band centre (spindle torque only) reads it (:mod:`estimator.online.spindle_centre`).
 Two uses, each recording what was fitted on what:
 
@@ -12,7 +12,7 @@ Two uses, each recording what was fitted on what:
   over the gain (:func:`estimator.offline.spindle_centre_fit.scale_profile`);
 * :func:`centre_time_split` - its calibration-only score (first half fits, second half scores) for the
   headline's model choice in :mod:`study.mrd_report`; :func:`model_choice` admits only candidates whose
-  :func:`implied_load_gain` the calibration runs' own reading allows (LOAD_RULE, session 6).
+  :func:`implied_load_gain` the calibration runs' own reading allows (LOAD_RULE).
 
 Predictions hold the shape along the stroke outside the calibration's angles
 (:func:`estimator.offline.spindle_centre_fit.predict_held`).
@@ -48,13 +48,13 @@ PROFILE_GAINS = tuple(float(v) for v in np.round(np.arange(0.6, 1.41, 0.1), 2))
 LOAD_SPREAD_NM = 0.005
 #: Uniform spindle-torque shift [N m] of :func:`implied_load_gain`.
 SHIFT_NM = 0.002
-#: When no candidate is eligible (session 28, written after the repository's fourteen other folders were run once with
-#: the rule before it: there the time split then chose a pair model whose implied load gain was 0.07-0.27, four or more times
-#: below the calibration run's own reading, and headline medians of 0.28-0.40 FS on 14 of 39 stroke windows).
+#: When no candidate is eligible: the nearest to the calibration run's own reading, not the best time split (on the
+#: source repository's other folders the best split picks a pair model whose implied load gain is 0.07-0.27, four or
+#: more times below that reading, with headline medians of 0.28-0.40 FS on 14 of 39 stroke windows;
+#: docs/results/mrd.md).
 LOAD_FALLBACK = ("no candidate eligible: the one whose load slope 1 / g lies nearest the calibration runs' own "
                  "interval (|log| of the ratio to its nearer end), the time split breaking a tie")
-#: The headline's eligibility rule (:func:`model_choice`; session 6, written when both candidates' scores on every
-#: calibration path were known from sessions 4-5; it reads calibration data only).
+#: The headline's eligibility rule (:func:`model_choice`; it reads calibration data only).
 LOAD_RULE = ("the time split cannot test the load gain (at one load level not at all), so a candidate is eligible "
              "only if its load slope 1 / g (g: jaw torque change per N m of uniform spindle-torque shift, on the "
              "calibration inputs) lies inside the interval of the calibration runs' own reading of it "
@@ -100,7 +100,8 @@ def gain_identifiability(runs: list[RunData], folder_gain: float | None = None) 
     (:func:`estimator.offline.spindle_centre_fit.within_run_gain`, the centre map's shape taken out) with its
     95 % profile interval, and each run's encoder ratio n_k (:func:`kinematic_ratio`). Reads every run's jaw
     torque. ``folder_gain``: the load gain fitted across all runs' loads, recorded beside for comparison.
-    Session 5 (Finding 4): the per-run gains scatter far beyond the +-4 % the one-run line needs."""
+    On the MRD folder the per-run gains scatter far beyond the +-4 % a one-run calibration needs
+    (docs/results/mrd.md)."""
     rows = {r.name: {**within_run_gain(r), "n_k": kinematic_ratio([r]), "n_k_stretch": kinematic_ratio([r], stretch=True),
                      "jaw_mean_Nm": float(np.mean(r.tau_d[r.k0:]))} for r in runs}
     g = np.array([v["gain"] for v in rows.values()])
@@ -160,7 +161,7 @@ def centre_implied_gain(p: CentreParams, runs: list[RunData]) -> float:
 def folder_load_gain(p: CentreParams, runs: list[RunData]) -> dict:
     """The folder's load gain as a one-run calibration uses it (JSON-ready): the centre map ``p`` fitted across
     the folder's loads, its jaw-torque change per N m of uniform spindle-band shift averaged over the stroke
-    of every run (:func:`implied_load_gain`; Finding 4, session 6: 0.943 on the shipped folder), beside its value
+    of every run (:func:`implied_load_gain`; 0.943 on the shipped folder, docs/results/mrd.md), beside its value
     b_0 at the reference angle. The number ``--calibration gain=G:RUN`` (or ``gain=THIS.json:RUN``) carries to
     another folder - another tool of the same model - whose single calibration run cannot give it. Reads every
     run's jaw torque (a folder diagnosis). ``several_loads`` False: the folder has one load level, where the gain is
@@ -240,9 +241,9 @@ def model_choice(pair: str, pair_split_fs: float, pair_in_fs: float, cal: list[R
 
     ``gains`` (candidate -> :func:`implied_load_gain`): the time split cannot test the load gain (not at all at
     one load level), so only candidates whose load slope 1 / gain lies inside the interval of the calibration
-    runs' own reading (:func:`within_run_gain`, pooled over the runs) are eligible (LOAD_RULE, session 6); when
-    none is, the one whose slope lies nearest that interval (LOAD_FALLBACK, session 28). ``given``: the centre map's design load gain, if any (:func:`centre_one_run`). Returns a
-    JSON-ready dict."""
+    runs' own reading (:func:`within_run_gain`, pooled over the runs) are eligible (LOAD_RULE); when
+    none is, the one whose slope lies nearest that interval (LOAD_FALLBACK). ``given``: the centre map's design
+    load gain, if any (:func:`centre_one_run`). Returns a JSON-ready dict."""
     cands = {pair: pair_split_fs, CENTRE: centre_time_split(cal, fs, given)}
     out: dict[str, Any] = {
         "rule": "lower jaw torque RMSE [FS] on the calibration runs' time split: fitted on the first half of "
@@ -254,7 +255,7 @@ def model_choice(pair: str, pair_split_fs: float, pair_in_fs: float, cal: list[R
     if gains is not None:
         lc = out["load_gain_check"] = _load_check(cal, {n: gains[n] for n in cands})
         eligible = [n for n in cands if lc["eligible"][n]]
-        if not eligible:            # session 28: the nearest to the reading, not the best split (LOAD_FALLBACK)
+        if not eligible:            # the nearest to the reading, not the best split (LOAD_FALLBACK)
             lo, hi = lc["slope_interval"]
             far = {n: _log_distance(1.0 / gains[n] if gains[n] > 0 else math.inf, lo, hi) for n in cands}
             lc["log_distance"], lc["fallback"] = far, LOAD_FALLBACK

@@ -1,7 +1,7 @@
 """What every teleoperation node shares, master or slave, one tendon or a joint instrument.
 
 A node is a :meth:`step` callable once per cycle with the time given by the caller and a
-:meth:`NodeBase.run` that only paces it (ARCHITECTURE.md). Around the side-specific cycle every node
+:meth:`NodeBase.run` that only paces it (docs/concepts/architecture.md). Around the side-specific cycle every node
 does the same bookkeeping, kept here once:
 
 * its :class:`~teleop.messages.SideState` and the log line of every change; a change from ENGAGED

@@ -1,4 +1,4 @@
-"""Measured-data files: one tendon per CSV (ARCHITECTURE.md, "Measured-data format").
+"""Measured-data files: one tendon per CSV (docs/reference/formats.md, "Measured-data CSV").
 
 ``# key: value`` lines above the header are metadata (``# units: time=s, x_in=m, T_in=N``), other
 ``#`` lines and blank lines are skipped, then a header line of column names, then comma-separated

@@ -17,12 +17,12 @@ theta_0 [rad]. Inputs: the command and the two measured proximal tensions only. 
 (``scipy.optimize.least_squares``) uses the training samples at the start of the recording (the
 first command cycle); the model always runs from the first sample, so test samples are predicted
 with the state the training part left. Baselines: the linear map ``theta = a c + b`` (the
-uncompensated case) and, as a diagnostic for equivalent backlash (literature.md E1b/E12), that map
+uncompensated case) and, as a diagnostic for equivalent backlash (docs/concepts/effects.md E1b/E12), that map
 through a play operator of half-width w. :func:`reversal_dead_zones` measures the dead zones
 without any model.
 
 Force path (diagnostic, same profile memory used for the distal *tensions* instead of the
-elongations; the joint as an elastic load of stiffness k, literature.md E11)::
+elongations; the joint as an elastic load of stiffness k, docs/concepts/effects.md E11)::
 
     k theta = r (T_out,a - T_out,b) + k theta_0   =>   theta = beta (T_out,a - T_out,b) + theta_0
 
@@ -241,7 +241,7 @@ def play(u: np.ndarray, w: float, y0: float | None = None) -> np.ndarray:
 
 def fit_play_map(command, angle, n_train: int) -> PairFit:
     """Diagnostic map theta = P_w(a c + b): the linear map through a play of half-width w [rad]
-    (equivalent backlash, Kaneko et al. 1991; literature.md E1b/E12). Fitted on the first
+    (equivalent backlash, Kaneko et al. 1991; docs/concepts/effects.md E1b/E12). Fitted on the first
     ``n_train`` samples with ``least_squares`` from a few starting widths."""
     c, y = np.asarray(command, dtype=float), np.asarray(angle, dtype=float)
     tr = slice(0, int(n_train))

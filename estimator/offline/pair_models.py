@@ -10,7 +10,7 @@ A model is a structure plus a list of effects, written ``"capstan+joint_backlash
   by its stiffness and moved only when a slip front reaches a tip. Parameters G [-], lam [rad/N],
   K_a, K_b [-], k [N/rad], theta0 [rad]; the proximal tensions are predicted, not used.
 
-Effects (literature.md numbers; each adds the parameters listed, with bounds):
+Effects (the numbers of docs/concepts/effects.md; each adds the parameters listed, with bounds):
 
 ========================= ============ ================================================ ==================
 id                        literature   extension                                        structures
@@ -130,7 +130,7 @@ PAIR_EFFECTS: dict[str, PairEffect] = {e.id: e for e in (
                (Param("toe", "-", 0.0, 200.0, (4.0,), 0.5), Param("toe_tension", "N", 0.1, 10.0, (1.0,), 0.1)),
                ("capstan",)),
     # no structure: a candidate of the shared models (estimator.offline.pair_shared) only; per configuration it
-    # priced out at every bend (docs/findings.md, Finding 3, session 4), so the diagnosis does not offer it
+    # priced out at every bend (docs/results/kaist.md), so the diagnosis does not offer it
     PairEffect("bending_friction", "E7, E13", "the tendons rub in the bending section, whose wrap angle is the "
                "joint angle itself", "the joint stalls at large angles while the pulled tendon's tension keeps "
                "rising; strongest where the angle range is largest (the straightest tube)",

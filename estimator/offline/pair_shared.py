@@ -4,7 +4,7 @@ The per-configuration diagnosis (:mod:`estimator.offline.pair_diagnosis`) fits e
 own. Here one model holds for all of them: the capstan-joint pair model
 (:mod:`estimator.pair_kernels`) with the transmission G, the tendon compliance lam and the joint
 stiffness k shared, and the friction exponent of each tendon growing with the configuration's
-accumulated bend angle N [rad] (literature.md E6; Phee et al. 2009, eq. (2): K = mu sum(theta)):
+accumulated bend angle N [rad] (docs/concepts/effects.md E6; Phee et al. 2009, eq. (2): K = mu sum(theta)):
 
     K_j(N) = K0_j + mu N,   j = a, b                                                          (S1)
 
@@ -27,13 +27,13 @@ Shared models are fitted the same way (training samples of every configuration t
   (weight :data:`TENSION_WEIGHT`), s = G / lam [N/rad] is fitted in place of lam and G is held at
   :data:`G_FIXED` (the data pin s, not G); ``G falls with N`` and ``lam grows with N`` add one slope;
 * other ``capstan+T`` variants, not in the choice by default (each went to its neutral value or lost on
-  the training cycles, docs/findings.md, Finding 3): ``one K0`` (the same base friction for both
+  the training cycles, docs/results/kaist.md): ``one K0`` (the same base friction for both
   tendons), ``mu per tendon``, ``pretension profile`` (E5), ``friction offset`` (E8), ``joint
-  friction`` (E11/E12), from session 4 ``bending-section friction`` (the tendons' wrap in the bending
+  friction`` (E11/E12), ``bending-section friction`` (the tendons' wrap in the bending
   section is the joint angle, mu_b) and ``series compliance`` (E10, frictionless, ahead of the sheath),
-  ``tendon toe`` (E9: toe, toe_tension; a tendon property, the same in every shape; in the choice until
-  session 4) and from session 5 ``k grows with N`` (k = k + k_N N: the bent tube loads the bending section);
-  from session 8 ``capstan+T, drive observer`` and ``capstan, drive observer`` (the sheath entries moved by a
+  ``tendon toe`` (E9: toe, toe_tension; a tendon property, the same in every shape), ``k grows with N``
+  (k = k + k_N N: the bent tube loads the bending section),
+  ``capstan+T, drive observer`` and ``capstan, drive observer`` (the sheath entries moved by a
   drive compliance lam_d times the *measured* proximal tensions at every sample, :mod:`estimator.pair_kernels`;
   inputs: command and measured proximal tensions; lost on the training cycles).
 
@@ -67,7 +67,7 @@ _S = Param("s", "N/rad", 0.05, 100.0, (3.0,), 0.2)
 TENSION_WEIGHT = TENSION_FIT_WEIGHT
 #: Transmission G held in the "+T" models: with the tensions in the fit the data pin s = G / lam but
 #: not G itself (bootstrap 95 % interval 3-15 when free; the held-out angle changes by < 0.3 deg for G
-#: in 3-20, docs/findings.md, Finding 3), so G is fixed and s carries the tendon compliance.
+#: in 3-20, docs/results/kaist.md), so G is fixed and s carries the tendon compliance.
 G_FIXED = 5.0
 _G_N = Param("G_N", "1/rad", -5.0, 5.0, (0.0,), 0.02)
 _LAM_N = Param("lam_N", "rad/N/rad", -2.0, 5.0, (0.05,), 0.02)
@@ -178,9 +178,9 @@ SHARED_MODELS = {m.name: m for m in (
 )}
 #: Candidates of the shared structure, in the order of the forward choice by leave-one-configuration-out
 #: on the training cycles (:func:`estimator.offline.pair_general.choose_shared`). ``capstan+T, tendon toe``
-#: (E9) was the last one until session 5: it never passed (price 1.47 in sessions 3-4, training cycles) and its
-#: leave-one-out refits cost a fifth of the whole KAIST analysis, which now computes the uncertainty of every
-#: reported figure instead; it stays available by name.
+#: (E9) is not among them: it does not pass on the training cycles (price 1.47) and its leave-one-out refits
+#: would cost a fifth of the whole KAIST analysis, which computes the uncertainty of every reported figure
+#: instead; it stays available by name.
 CHOICE = ("capstan", "capstan+T", "capstan+T, G falls with N", "capstan+T, lam grows with N")
 #: Shared models refitted leaving each configuration out besides the chosen one (none: each costs five refits).
 LEAVE_ONE_OUT: tuple[str, ...] = ()

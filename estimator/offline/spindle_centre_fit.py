@@ -6,7 +6,7 @@ which is chosen from THETA_Z_GRID by the calibration's own fit cost.
 
 Outside the spindle angles the calibration saw in each direction the shape along the stroke is *held* at its
 value at the last angle seen (:func:`held_features`, :func:`predict_held`): the degree-4 polynomial is not
-extrapolated (Finding 4, session 6: on half of a 0.1 Hz run it reached 4.8 FS beyond the data).
+extrapolated (docs/results/mrd.md: on half of a 0.1 Hz run it reaches 4.8 FS beyond the data).
 
 The load gain (how the jaw torque follows the band centre, about 1 / (r cosh K)) needs calibration
 runs at two or more load levels. On runs of one load level the centre hardly changes, the gain is not

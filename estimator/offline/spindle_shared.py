@@ -71,7 +71,7 @@ def kinematic_ratio(runs: list[RunData], middle: float = 0.6, min_rate: float = 
     with an offset per run and direction (the cable stretch and jaw play shift the two directions).
     The pulley radii ratio r_p / r_d when the cable stretch does not change along the stroke.
     ``stretch``: a cable-stretch column (the spindle torque, one compliance for all runs) is fitted beside,
-    so the ratio is the one at zero spindle torque difference (Finding 4, session 5: it moves n_k by 1-4 %).
+    so the ratio is the one at zero spindle torque difference (docs/results/mrd.md: it moves n_k by 1-4 %).
     Raises ValueError when no sample qualifies."""
     cols, ys, taus, nblk = [], [], [], 0
     for r in runs:
@@ -121,7 +121,7 @@ def load_sweep(groups: list[list[RunData]], middle: float = 0.6, bin_rad: float 
     rad/s; the high edge is the falling angle's, as on the MRD rig, where a positive torque turns the
     shaft towards negative angles) is regressed on the jaw torque of the same direction across the
     group's runs. A capstan
-    law with tension-independent friction F0 (literature.md E8) on the load-carrying cable predicts
+    law with tension-independent friction F0 (docs/concepts/effects.md E8) on the load-carrying cable predicts
     edges tau_p = c(theta) +- F0 + r e^(+-K) tau_d, so the two slopes give r = sqrt(s_hi s_lo) (spindle
     torque per jaw torque without friction, = r_p / r_d times the sensors' gain ratio) and
     K = ln(s_hi / s_lo) / 2. Returns a JSON-ready dict: ``slope_high`` / ``slope_low`` / ``slope_centre``

@@ -13,7 +13,7 @@ and gives
 
 For a single reversal from full slip this reproduces the seed paper's phase laws (Phee et al. 2009,
 eqs. (1)-(25)); for any other history (minor loops, partial releases) it keeps the exact Coulomb
-memory that the "tension at the last reversal" rule loses (literature.md section 0).
+memory that the "tension at the last reversal" rule loses (docs/concepts/model.md, the tension-profile memory).
 
 With ``tension_noise`` (the standard deviation of the T_in reading, > 0) the profile takes the banded update of
 :func:`estimator.band.band_update` instead: a stuck profile moves only for what exceeds NOISE_BAND_SIGMAS x the

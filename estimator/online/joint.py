@@ -4,7 +4,7 @@ A joint of pulley radius r is turned by tendon a (pulling it gives + angles) and
 through its own sheath (own K, L/EA, route). Per tendon j in {a, b}, sign s_a = +1, s_b = -1:
 
     T(s)_j          tension-profile memory driven by T_in,j (envelope rule, :mod:`estimator.sheath`),
-                    from a uniform pretension P_j                                    literature.md E1, E5
+                    from a uniform pretension P_j                                    docs/concepts/effects.md E1, E5
     T_out,j         = T_n,j,    e_j = (1/EA_j) int T_j ds                         Phee et al. 2009 (1), (5)
     x_out,j         = x_in,j - e_j                                                   distal displacement
     theta_j         = s_j (x_out,j - x_out,j(0)) / r                 kinematic angle seen by tendon j  (J1)
@@ -22,7 +22,7 @@ tendon's x_in - e is not where its tip is, so each term is weighted by w_j = min
 ``taut_tension``) (T_in,j >= 0): angle_hat = (w_a theta_a + w_b theta_b) / (w_a + w_b), which is
 (J3) whenever both tendons carry at least ``taut_tension`` (the plain mean if neither does).
 
-Pair coupling (literature.md E13). A single-tendon estimator assumes the distal end stays put while
+Pair coupling (docs/concepts/effects.md E13). A single-tendon estimator assumes the distal end stays put while
 the profile near it is stuck. In a pair the two distal ends are tied: the joint turns only when the
 torque r (T_out,a - T_out,b) moves away from what its load holds at the present angle, and when it
 turns it moves both distal ends. Two rules, applied after the proximal updates of each sample:

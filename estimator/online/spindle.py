@@ -1,7 +1,7 @@
 """Distal (jaw) torque and angle of a cable pair driven by one input spindle, from the spindle alone.
 
 The spindle pair model (the seed paper's capstan law with profile memory, Phee et al. 2009, applied
-to the two cables of a pull-pull pair; literature.md E1, E5, E13). All tensions are written in
+to the two cables of a pull-pull pair; docs/concepts/effects.md E1, E5, E13). All tensions are written in
 torque units at the spindle (tension times the spindle radius r_p, N m), so only ratios of the
 pulley radii appear::
 
@@ -50,7 +50,7 @@ __all__ = ["SPINDLE_TRAVEL", "SpindleParams", "Batch", "make_batch", "pair_kerne
 #: Speed scale of the smoothed direction of motion, tanh(omega / OMEGA_S) [rad/s].
 OMEGA_S = 0.05
 #: Spindle travel over which the spindle's own friction reverses (E2 at the proximal end) [rad]: after
-#: a reversal the MRD spindle torque creeps over 2-3 deg while the jaw stands still (Finding 4).
+#: a reversal the MRD spindle torque creeps over 2-3 deg while the jaw stands still (docs/results/mrd.md).
 SPINDLE_TRAVEL = 0.05
 #: Profile elements per cable (the distal tension changes by < 1e-4 relative from 16 to 64).
 N_NODES = 16
@@ -246,7 +246,7 @@ def _angle_lag_runs(x, theta, starts, theta_c, out):  # pragma: no cover - compi
 def angle_lag(x: np.ndarray, theta: np.ndarray, starts: np.ndarray, theta_c: float) -> np.ndarray:
     """Rate-independent first-order lag of ``x`` in the travel of ``theta`` [rad], run by run:
     y approaches x by the factor 1 - exp(-|d theta| / theta_c) per sample (a Dahl-type pre-sliding
-    transition, literature.md E2, with characteristic travel ``theta_c`` [rad] > 0)."""
+    transition, docs/concepts/effects.md E2, with characteristic travel ``theta_c`` [rad] > 0)."""
     out = np.empty_like(np.asarray(x, dtype=float))
     _angle_lag_runs(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(theta, dtype=float), starts,
                     float(theta_c), out)

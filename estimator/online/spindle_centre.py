@@ -1,10 +1,11 @@
 """Jaw torque from the load level read off the spindle's friction band (the centre map).
 
-Finding 4: across the runs of one tool the jaw torque at a given spindle angle and direction follows
-the run's *band centre* (the middle of the spindle torque's hysteresis band, a proximal reading) to
+On the MRD da Vinci runs (docs/results/mrd.md), across the runs of one tool the jaw torque at a given
+spindle angle and direction follows the run's *band centre* (the middle of the spindle torque's
+hysteresis band, a proximal reading) to
 0.008 FS, while the instantaneous spindle torque on the band edge follows it only to 0.020 FS: inside
 a stroke the spindle torque drifts with friction that never reaches the jaw. The capstan law on the
-load-carrying cable with tension-independent friction (literature.md E1, E8) puts the band edges at
+load-carrying cable with tension-independent friction (docs/concepts/effects.md E1, E8) puts the band edges at
 c(theta) +- F0 + r e^(+-K) tau_d, so the centre moves as r cosh(K) tau_d: the load level is read from
 the centre and the shape along the stroke from the angle. The estimate::
 
@@ -19,7 +20,7 @@ latest falling-angle (high edge) and rising-angle (low edge) means. While only o
 seen, the centre is that edge minus (high edge) or plus (low edge) the half-width w0 + w1 C of the
 calibration (solved for C); before any completed stroke it is the calibration's mean centre. The
 estimate is in its initialisation until the reading holds both edges (:func:`centre_ready`): fits and
-scores start there (Finding 4, session 4: the one-edge reading right after the first stroke from
+scores start there (docs/results/mrd.md: the one-edge reading right after the first stroke from
 rest is the centre map's largest error).
 Inputs: spindle torque tau_p [N m] and angle theta_p [rad] only.
 """

@@ -65,7 +65,7 @@ def test_transition_elongations_meet_the_branches():
 
 
 def test_minor_loop_breaks_the_paper_rule_but_not_the_profile():
-    """literature.md section 0: K = 0.5, 0 -> 20 -> 10 -> 25 N gives T_out = 15.16 N exactly."""
+    """docs/concepts/model.md, the tension-profile memory: K = 0.5, 0 -> 20 -> 10 -> 25 N gives T_out = 15.16 N exactly."""
     K5 = 0.5
     T_in = ramp(0, 20, 10, 25)
     exact = 25 * math.exp(-K5)  # resumes the pull line at the previous peak already passed

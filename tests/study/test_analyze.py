@@ -259,18 +259,18 @@ def test_kaist_findings_hold_on_the_real_data(tmp_path, capsys):
     seed_K = [max(c["models"]["seed pair model"]["params"][k] for k in ("K_a", "K_b"))
               for c in s["configurations"]]
     assert max(seed_K) < 0.3                                           # the kinematic path finds ~no friction
-    # Finding 2: the capstan-joint model beats the seed model on every configuration; K grows with N
+    # docs/results/kaist.md: the capstan-joint model beats the seed model on every configuration; K grows with N
     for c in s["configurations"]:
         g = c["diagnosis"]
         assert g["causes"][0] == "capstan_joint" and g["extended"]["rmse_test_deg"] < 0.5 * g["seed"]["rmse_test_deg"]
         assert g["extended"]["rmse_test_deg"] < 1.5 and "test" not in str(g["candidates"])   # choice: training only
         assert g["samples"]["fit"][1] <= g["samples"]["test"][0]
-        r = g["candidates"][g["extended"]["model"]]["tension_peak_ratio"]      # session 8: tension check
+        r = g["candidates"][g["extended"]["model"]]["tension_peak_ratio"]      # the tension check
         assert g["tension_check"]["ratio"] == 1.5 and all(1 / 1.5 <= x <= 1.5 for x in r)
     assert s["shared"]["E6"]["accepted"] and 0.05 < s["shared"]["mu"] < 0.3
     ms = s["shared"]["models"]
     assert ms["capstan"]["rmse_test_deg"] < 0.5 * ms["capstan, mu = 0"]["rmse_test_deg"]      # K grows with N
-    # Finding 3: one set for all five, chosen by leave-one-out on the training cycles, with uncertainties
+    # docs/results/kaist.md: one set for all five, chosen by leave-one-out on the training cycles, with uncertainties
     sh = s["shared"]
     vals = sh["params"]["values"]
     assert 0.05 < vals["mu"]["value"] < 0.3 and vals["mu"]["std"] < 0.5 * vals["mu"]["value"]
@@ -287,7 +287,7 @@ def test_kaist_findings_hold_on_the_real_data(tmp_path, capsys):
 
 def test_route_option_holds_the_configured_route(tmp_path, capsys):
     # an instrument whose route is known (CONFIG's sheath.runs) is diagnosed with that route held instead of
-    # fitted: on this recording of the independent simulator (dev20 seed 1909112, a distal load-cell offset of
+    # fitted: on this recording of the independent simulator (seed 1909112, a distal load-cell offset of
     # -0.84 N; its arcs are where the fitted route can hide the offset) the held route names it
     from study.lumped_scenarios import record
     from teleop.recording import write_measured_csv

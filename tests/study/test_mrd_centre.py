@@ -130,7 +130,7 @@ def test_model_choice_takes_the_lower_calibration_split_score():
 
 def test_within_run_gain_needs_jaw_torque_that_is_not_a_function_of_angle_and_direction():
     """The gain 1 / (r cosh K) is read inside one run only from jaw torque beyond the shape along the stroke:
-    recovered with a slow load swing, unbounded without one (the MRD runs' case, Finding 4 session 5)."""
+    recovered with a slow load swing, unbounded without one (the MRD runs' case, docs/results/mrd.md)."""
     swing = within_run_gain(synth("swing", 0.03, drift=0.3))
     assert swing["gain"] == pytest.approx(GAIN, rel=0.05)
     lo, hi = swing["profile_ci95"]
@@ -156,7 +156,7 @@ def test_kinematic_ratio_with_stretch_reads_the_ratio_at_zero_spindle_torque():
 
 
 def test_shape_is_held_outside_the_calibration_angles():
-    """Session 6: fitted on part of the stroke, the map holds the shape at the last angle seen instead of
+    """Fitted on part of the stroke, the map holds the shape at the last angle seen instead of
     extrapolating its degree-4 polynomial; inside the range it is the plain map."""
     full = synth("full", 0.03, freq=0.4)
     part = RunData("part", full.tau_p, np.minimum(full.theta_p, 0.6), full.tau_d, full.theta_d, full.k0, full.dt)
@@ -174,7 +174,7 @@ def test_shape_is_held_outside_the_calibration_angles():
 
 
 def test_model_choice_at_one_load_keeps_only_a_load_gain_the_run_allows():
-    """Session 6: the time split cannot see the load gain; a candidate whose implied gain lies outside the
+    """The time split cannot see the load gain; a candidate whose implied gain lies outside the
     calibration runs' own reading of it is not eligible, whatever its split score."""
     cal = [synth("cal", 0.025, freq=0.4, drift=0.3)]
     p, _ = fit_centre_map(cal, scale=GAIN)
@@ -188,7 +188,7 @@ def test_model_choice_at_one_load_keeps_only_a_load_gain_the_run_allows():
     assert none["chosen"] == "pair"                                     # nothing eligible, equally far: the split
     lo, hi = none["load_gain_check"]["slope_interval"]
     near = model_choice("pair", 0.5 * split, 0.01, cal, 0.05, 0.002, {"pair": 0.2, CENTRE: 1.0 / (1.05 * hi)})
-    assert not any(near["load_gain_check"]["eligible"].values())        # session 28: nothing eligible, the
+    assert not any(near["load_gain_check"]["eligible"].values())        # nothing eligible: the
     assert near["chosen"] == CENTRE                                     # nearest to the run's reading, not the split
     assert near["load_gain_check"]["log_distance"][CENTRE] == pytest.approx(math.log(1.05))
     two = [synth("a", 0.01, freq=0.4), synth("b", 0.04, freq=0.4, seed=2)]     # two loads: a tight reading
@@ -197,7 +197,7 @@ def test_model_choice_at_one_load_keeps_only_a_load_gain_the_run_allows():
 
 
 def test_a_design_load_gain_replaces_the_encoders_and_is_recorded():
-    """``--calibration gain=G:RUN``: the one number the one-run line lacks (Finding 4, session 6), given from outside."""
+    """``--calibration gain=G:RUN``: the one number a one-run calibration lacks, given from outside."""
     from study.mrd_report import split_design_gain
     from teleop.errors import ConfigError
     assert split_design_gain("gain=0.943:mid") == (0.943, "mid") and split_design_gain("31") == (None, "31")
@@ -213,7 +213,7 @@ def test_a_design_load_gain_replaces_the_encoders_and_is_recorded():
 
 
 def test_a_folder_measures_its_load_gain_and_another_folder_takes_it_from_the_json(tmp_path):
-    """Session 28: the folder's load gain across its loads (the stroke-averaged number a one-run calibration
+    """The folder's load gain across its loads (the stroke-averaged number a one-run calibration
     needs) is reported with a jackknife SE, and ``--calibration gain=OTHER.json:RUN`` reads it from another
     folder's JSON; a folder of one load level, a missing file or a JSON without it is refused by name."""
     import json
