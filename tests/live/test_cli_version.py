@@ -26,5 +26,5 @@ def test_version_without_an_installed_distribution_says_unknown(monkeypatch):
 def test_every_subcommand_is_still_offered():
     parser = cli.build_parser(["demo"])
     sub = next(a for a in parser._actions if a.dest == "command")
-    assert {"demo", "master", "slave", "record", "router", "bridge", "calibrate", "replay",
-                                "analyze", "devices"} <= set(sub.choices)
+    assert {"demo", "master", "slave", "record", "router", "bridge", "calibrate", "replay", "analyze",
+            "devices"} <= set(sub.choices)
