@@ -30,8 +30,9 @@ import zenoh
 
 from teleop.config import Config
 from teleop.entity import Entity, zenoh_error_text
-from teleop.errors import TransportError
+from teleop.errors import ConfigError, TransportError
 from teleop.keys import run_key
+from teleop.peer_probe import no_peer_reason
 from teleop.transport import Session, zenoh_config
 
 __all__ = ["RunIdServer", "RoleServer", "claim_role", "agree_run_id", "new_run_id", "open_auto_session", "side_run_dir", "side_session"]
@@ -52,7 +53,15 @@ def _describe(listen, connect) -> str:
     return f"listen: {', '.join(listen) or 'none'}; connect: {', '.join(connect) or 'none'}"
 
 
+def _can_listen_tls(cfg: Config) -> bool:
+    return bool(cfg.transport.tls.certificate and cfg.transport.tls.private_key)
+
+
 def _open(cfg: Config, listen, connect, clock) -> Session:
+    tls_listen = [ep for ep in listen if ep.startswith("tls/")]
+    if tls_listen and not _can_listen_tls(cfg):
+        raise ConfigError(f"transport.listen: {tls_listen[0]!r} needs transport.tls.certificate and private_key (a "
+                          f"TLS listener presents them; a connector needs only root_ca: --connect {tls_listen[0]})")
     try:
         return Session(zenoh_config(cfg.transport, listen=tuple(listen), connect=tuple(connect)), clock=clock)
     except TransportError as e:
@@ -87,6 +96,10 @@ def open_auto_session(cfg: Config, listen: tuple[str, ...] | None = None, connec
         return _open(cfg, listen or (), connect or (), clock), "configured"
     if not t.auto_connect or t.mode != "peer" or not t.listen:
         return _open(cfg, t.listen, t.connect, clock), "configured"
+    if any(ep.startswith("tls/") for ep in t.listen) and not _can_listen_tls(cfg):
+        # no certificate of its own: this process cannot listen on TLS, it can only connect to the listener
+        log.info("%s: no transport.tls.certificate to listen with: connecting to it", ", ".join(t.listen))
+        return _open(cfg, (), tuple(t.listen) + tuple(t.connect), clock), "connected"
     try:
         return _open(cfg, t.listen, t.connect, clock), "listening"
     except TransportError as e:
@@ -157,6 +170,11 @@ def agree_run_id(session: Session, cfg: Config, role: str, given: str | None = N
         rid = ask_run_id(session, ident, cfg.transport.run_id_timeout)
         if rid is not None:
             log.info("joined run %s", rid)
+        elif session.zenoh_session.info.peers_zid():
+            rid = new_run_id(cfg.recording.dir)
+            log.warning("connected to a Zenoh peer, but none answered the run id of instrument %r within %g s: the "
+                        "peers serve another instrument.id or are not teleop sides; this process starts run %s alone",
+                        ident, cfg.transport.run_id_timeout, rid)
     if rid is None:
         rid = new_run_id(cfg.recording.dir)
     session._track(RunIdServer(session, ident, rid))
@@ -202,6 +220,36 @@ def claim_role(session: Session, cfg: Config, role: str, run_id: str, timeout: f
     session._track(RoleServer(session, ident, role, run_id))
 
 
+#: [s] a connecting process expects a peer this soon; then it probes the endpoints and says why not
+PEER_WAIT_S = 1.5
+
+
+def wait_for_peer(session: Session, endpoints, tls, wait: float = PEER_WAIT_S) -> None:
+    """Return once ``session`` has a peer or router; after ``wait`` [s] without one, probe ``endpoints``
+    (:func:`teleop.peer_probe.no_peer_reason`): where nothing listens yet, warn and go on (the peer may
+    start later); where a listener refused this process or is not a Zenoh peer, raise.
+
+    Raises
+    ------
+    TransportError
+        One line: what answered at each endpoint and the most likely reason no peer came.
+    """
+    if not endpoints:
+        return
+    info = session.zenoh_session.info
+    deadline = time.monotonic() + wait
+    while not (info.peers_zid() or info.routers_zid()):
+        if time.monotonic() >= deadline:
+            line, may_come = no_peer_reason(endpoints, tls, wait)
+            if info.peers_zid() or info.routers_zid():      # came while probing
+                return
+            if may_come:
+                log.warning("%s; still trying", line)
+                return
+            raise TransportError(line)
+        time.sleep(0.02)
+
+
 # ---- the hooks of `teleop slave|master|record` (live/sides.py, live/record.py) ----------------
 
 _ATTR = "_teleop_session"
@@ -219,6 +267,13 @@ def side_session(cfg: Config, args, clock=None) -> Session:
         tuple(args.listen or ())
     connect = None if listen is None else tuple(args.connect or ())
     session, role = open_auto_session(cfg, listen, connect, clock)
+    endpoints = tuple(cfg.transport.listen) + tuple(cfg.transport.connect) if role == "connected" else \
+        (tuple(cfg.transport.connect) if connect is None else connect)
+    try:
+        wait_for_peer(session, endpoints, cfg.transport.tls)
+    except TransportError:
+        session.close()          # refused: nothing declared, no runtime left to wait for at exit
+        raise
     session.lock_master = cfg.transport.lock_master     # read by live.sides when declaring the slave's links
     setattr(args, _ATTR, session)
     args._teleop_role = role
