@@ -7,7 +7,8 @@ and updates its level and direction on every change of the rendered force:
 
 * force -> effect: ``level = round(|F| / force.max_force * 0x7fff)`` (clipped), direction
   ``force.direction`` for a positive force and the opposite one (``+ 0x8000``) for a negative force
-  (Linux direction convention: 0x4000 points to -X, 0xC000 to +X, 0x8000 to +Y);
+  (the kernel's convention, Documentation/input/ff.rst: 0x4000 "left", 0xC000 "right"; which of them
+  pushes the handle toward + on its axis depends on the driver, so ``force.direction`` is a setting);
 * the effect's replay length is ``force.hold_ms`` and it is played again every ``hold_ms / 2``: a
   master that stops updating it (a hung process) loses its force after at most ``hold_ms``, in the
   kernel, with no help from user space;
