@@ -161,7 +161,7 @@ def test_master_engages_and_renders_minus_scale_times_the_estimate_through_the_e
     put_est(links, 2, T_out=10.0)
     tick(node, clock)
     assert links.command.sent[-1].targets[0] == pytest.approx(0.004 + 0.5 * 0.0035, rel=1e-3)
-    assert joy.uploads[-1][1:3] == (round(2.0 / 8.0 * LEVEL_MAX), 0x4000)    # -2 N: toward -X
+    assert joy.uploads[-1][1:3] == (round(2.0 / 8.0 * LEVEL_MAX), 0x4000)    # -2 N: the opposite direction
     put_est(links, 3, T_out=100.0)                            # -20 N asked: the 4 N clamp holds
     tick(node, clock)
     assert joy.uploads[-1][1:3] == (round(4.0 / 8.0 * LEVEL_MAX), 0x4000)
