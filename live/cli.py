@@ -124,7 +124,8 @@ def _add_services(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") ->
     p.set_defaults(func=_cmd_bridge)
 
     p = sub.add_parser("calibrate", help="joint-limit calibration of every tendon of the instrument (both "
-                                         "directions of a pair), saved as configs/calibration/<instrument>.yaml")
+                                         "directions of a pair), saved as <calibration.dir>/<instrument>.yaml "
+                                         "(default ~/.local/share/tsm-teleop/calibration)")
     from live.calibrate import add_calibrate_arguments, run_calibrate
     add_calibrate_arguments(p)
     p.set_defaults(func=run_calibrate)
