@@ -12,10 +12,12 @@ from estimator.sheath import SheathModel
 from master.node_base import MasterLinks
 from slave.node import SlaveLinks, SlaveNode
 from slave.simulated import SimulatedRig
+from teleop import ros2_types
 from teleop.clock import FakeClock
 from teleop.config import Config, Ros2Config, TransportConfig
 from teleop.crtk_side import CommandMerge, attach_master, attach_slave
-from teleop.messages import SideState
+from teleop.errors import CodecError
+from teleop.messages import Command, SideState
 from teleop.transport import Session, free_tcp_port, loopback_endpoint
 from tests.fakes import Topic
 from tests.ros2_peer import (
@@ -144,3 +146,21 @@ def test_the_masters_measured_js_and_state(wire):
              "an invalid measured_js")
     assert list(peer.messages("/tsm0_master/measured_js")[-1][1].position) == []
     wait_for(lambda: peer.messages("/tsm0_master/operating_state")[-1][1].is_busy, 5, "ENGAGED as busy")
+
+
+def test_servo_jp_commands_follow_the_masters_numbering_and_the_newest_wins(wire):
+    session, _, clock = wire
+    cfg, links, crtk, node = slave_setup(session, clock)
+    master = links.command.primary
+    master.put(Command(41, 0.0, (0.0,), True, 0))
+    assert links.command.latest() is master.latest()
+    clock.advance(DT)
+    crtk._on_servo(ros2_types.joint_state(1, ["tendon"], [0.001]), None)
+    assert crtk.servo.message.seq == 42 and crtk.servo.message.targets == (0.001,) and crtk.servo.message.engaged
+    assert links.command.latest() is crtk.servo                       # the newer of the two
+    clock.advance(DT)
+    master.put(Command(43, 0.0, (0.0,), True, 0))
+    assert links.command.latest() is master.latest()
+    with pytest.raises(CodecError):
+        crtk._on_servo(ros2_types.joint_state(1, ["wrist"], [0.001]), None)
+    assert crtk.servo_refused == 1 and crtk.servo.message.seq == 42
