@@ -16,23 +16,20 @@ import os
 import sys
 import time
 import timeit
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from estimator.sheath import SheathModel  # noqa: E402
-from slave.node import SlaveLinks, SlaveNode, warm_up  # noqa: E402
-from slave.simulated import SimulatedRig  # noqa: E402
-from teleop.clock import MonotonicClock  # noqa: E402
-from teleop.config import Config, Ros2Config, TransportConfig  # noqa: E402
-from teleop.crtk import slave_topics  # noqa: E402
-from teleop.crtk_side import attach_slave  # noqa: E402
-from teleop.messages import Command, SideState  # noqa: E402
-from teleop.realtime import IDLE  # noqa: E402
-from teleop.ros2_wire import topic_key  # noqa: E402
-from teleop.transport import Received, Session, free_tcp_port, loopback_endpoint  # noqa: E402
+from estimator.sheath import SheathModel
+from slave.node import SlaveLinks, SlaveNode, warm_up
+from slave.simulated import SimulatedRig
+from teleop.clock import MonotonicClock
+from teleop.config import Config, Ros2Config, TransportConfig
+from teleop.crtk import slave_topics
+from teleop.crtk_side import attach_slave
+from teleop.messages import Command, SideState
+from teleop.realtime import IDLE
+from teleop.ros2_wire import topic_key
+from teleop.transport import Received, Session, free_tcp_port, loopback_endpoint
 
 
 class _Topic:
