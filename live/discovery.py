@@ -275,6 +275,10 @@ def side_session(cfg: Config, args, clock=None) -> Session:
         session.close()          # refused: nothing declared, no runtime left to wait for at exit
         raise
     session.lock_master = cfg.transport.lock_master     # read by live.sides when declaring the slave's links
+    listening = tuple(cfg.transport.listen) if listen is None and role != "connected" else (listen or ())
+    if listening:                                        # each refused connection logged once, rate-limited
+        from teleop.refusal_watch import RefusalWatch
+        session._track(RefusalWatch(session, listening))
     setattr(args, _ATTR, session)
     args._teleop_role = role
     return session
