@@ -31,10 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from estimator.offline.spindle_fit import EXTENSIONS, band_centre, fit_baselines
+from estimator.offline.spindle_fit import band_centre
 from estimator.offline.spindle_shared import (
     RunData,
-    batch_of,
     kinematic_ratio,
     leave_one_out,
     load_sweep,
@@ -50,6 +49,7 @@ from estimator.online.spindle import (
     spindle_rate,
 )
 from study.mrd import ATTRIBUTION, MrdRun
+from study.mrd_calibration import SCORE_FROM_S, calibrate, design_gain, parse_calibration, run_data, split_design_gain
 from study.mrd_centre import (
     CENTRE,
     centre_agg,
@@ -57,7 +57,6 @@ from study.mrd_centre import (
     centre_implied_gain,
     centre_one_run,
     implied_load_gain,
-    mid_centre_run,
     model_choice,
     profile_on_scored,
     score_centre,
@@ -67,12 +66,8 @@ from teleop.errors import ConfigError, DataError
 
 __all__ = ["analyze_mrd", "format_mrd", "write_mrd_report", "parse_calibration", "split_design_gain", "band_measurements", "SCORE_FROM_S"]
 
-SCORE_FROM_S = 0.5         # the first reversal is searched after this [s] (the load motor ramps in first)
-FIT_STEP, SHARED_STEP = 10, 50      # decimation of the fits (1 kHz -> 100 Hz, 20 Hz)
-#: Extensions that scale with the load (band growth, torque ratio along the stroke): at one load level they
-#: trade off against the fixed torque scale and extrapolate wildly (on run 00 K_b sent K_a to its bound), so the
-#: ``kinematic:`` calibration does not offer them.
-LOAD_SCALING = ("K_b", "rho_1", "rho_2")
+_CAL_INPUTS = {"inputs": ["spindle torque", "spindle encoder"], "targets": ["jaw torque", "jaw encoder"]}
+SHARED_STEP = 50           # decimation of the folder-wide fits (1 kHz -> 20 Hz)
 NOT_FROM_PROXIMAL = {
     "rho": "torque scale (r_d / r_p times the ratio of the two sensors' gains): one run at one load level shows "
            "the load only through rho times the load; needs at least two load levels with jaw torque",
@@ -98,96 +93,6 @@ class _Progress:
     def done(self) -> None:
         if self.enabled:
             sys.stderr.write("\n")
-
-
-def split_design_gain(spec: str | None) -> tuple[float | None, str | None]:
-    """(design load gain, the rest of the spec) from ``--calibration gain=G:SPEC`` (G > 0: the tool's jaw torque
-    per N m of spindle band-centre shift, about 1 / (r cosh K), from its design; the centre map uses it instead of
-    1 / n_k or a fit; G may be another folder's JSON, :func:`_gain_from_json`); (None, spec) without the prefix.
-    Raises ConfigError for a G that is not a positive number or such a JSON, or a segment calibration (the
-    centre map has none)."""
-    g, rest, _ = _design_gain(spec)
-    return g, rest
-
-
-def _design_gain(spec: str | None) -> tuple[float | None, str | None, str | None]:
-    """:func:`split_design_gain` and the JSON the gain was read from (None for a number or no gain)."""
-    if not spec or not spec.startswith("gain="):
-        return None, spec, None
-    head, _, rest = spec.partition(":")
-    source = None
-    try:
-        g = float(head[len("gain="):])
-    except ValueError:
-        # a JSON path may hold ':' itself (C:\..., a:b/...): the split is after the longest prefix that is a file
-        body = spec[len("gain="):]
-        ends = [len(body)] + [i for i in range(len(body) - 1, -1, -1) if body[i] == ":"]
-        at = next((i for i in ends if Path(body[:i]).is_file()), None)
-        if at is not None:
-            head, rest = "gain=" + body[:at], body[at + 1:]
-        source = head[len("gain="):]
-        g = _gain_from_json(spec, source)
-    if not (math.isfinite(g) and g > 0.0):
-        raise ConfigError(f"--calibration {spec}: the load gain G must be positive")
-    if rest.startswith("segment:"):
-        raise ConfigError(f"--calibration {spec}: a design gain applies to run calibrations, not to segment:")
-    return g, rest, source
-
-
-def _gain_from_json(spec: str, path: str) -> float:
-    """``centre_map.load_gain.value`` of a JSON written by ``teleop analyze --mrd OTHER --json PATH`` (another
-    folder's load gain fitted across its loads). Raises ConfigError naming what is missing."""
-    import json
-    f = Path(path)
-    if not f.is_file():
-        raise ConfigError(f"--calibration {spec}: G in gain=G:RUN must be a number or the JSON of "
-                          f"`teleop analyze --mrd OTHER --json OUT` ({f} not found)")
-    try:
-        lg = json.loads(f.read_text())["centre_map"]["load_gain"]
-    except (ValueError, KeyError, TypeError):
-        raise ConfigError(f"--calibration {spec}: {f} has no centre_map.load_gain (write it with "
-                          "`teleop analyze --mrd OTHER --json OUT`, folder fit on)") from None
-    if not lg.get("several_loads", False):
-        raise ConfigError(f"--calibration {spec}: {f} comes from a folder of one load level; its load gain "
-                          "is not identified there")
-    return float(lg["value"])
-
-
-def parse_calibration(spec: str | None, runs: list[MrdRun]) -> tuple[str, Any]:
-    """("run", names), ("kinematic", names) or ("segment", seconds) from ``--calibration``: ``RUN`` or
-    ``RUN,RUN,...`` (calibrate on those runs together, score the others), ``kinematic:RUN[,RUN...]``
-    (the same with rho = 1 / n_k from the calibration runs' encoders), ``mid`` (the run whose spindle band
-    centre is nearest the middle of the folder's: a rule fixed before scoring), or ``segment:SECONDS``; default
-    the slowest, lightest run. ``names`` is the comma-separated string.
-
-    Raises ConfigError for an unknown run name, every run named, or a segment outside
-    [1, half the shortest run] s.
-    """
-    names = [r.name for r in runs]
-    if spec is None or spec == "":
-        r = min(runs, key=lambda r: (round(r.frequency_hz, 3), r.load_level, r.name))
-        return "run", r.name
-    if spec.startswith("segment:"):
-        try:
-            s = float(spec.split(":", 1)[1])
-        except ValueError:
-            raise ConfigError(f"--calibration {spec}: SECONDS must be a number") from None
-        shortest = min(float(r.time[-1]) for r in runs)
-        if not 1.0 <= s <= 0.5 * shortest:
-            raise ConfigError(f"--calibration {spec}: SECONDS must be in [1, {0.5 * shortest:.1f}]")
-        return "segment", s
-    mode = "run"
-    if spec in ("mid", "kinematic:mid"):        # the run of the middle band centre (spindle torque only)
-        spec = spec.replace("mid", mid_centre_run([_rundata(r) for r in runs]))
-    if spec.startswith("kinematic:"):
-        mode, spec = "kinematic", spec.split(":", 1)[1]
-    asked = [n.strip() for n in spec.split(",") if n.strip()]
-    unknown = [n for n in asked if n not in names]
-    if unknown or not asked:
-        raise ConfigError(f"--calibration {spec}: no run named {', '.join(unknown) or spec!r} (runs: {', '.join(names)})")
-    if len(set(asked)) == len(names):
-        raise ConfigError(f"--calibration {spec}: every run is a calibration run, none is left to score")
-    return mode, ",".join(dict.fromkeys(asked))
 
 
 def band_measurements(run: MrdRun, bins_deg: float = 2.0) -> dict:
@@ -229,33 +134,6 @@ def _agg(rows: list[dict]) -> dict:
             "median_angle_rmse_deg": float(np.median([r["angle_rmse_deg"] for r in rows]))}
 
 
-def _rundata(r: MrdRun, stop: int | None = None) -> RunData:
-    n = len(r) if stop is None else stop
-    return RunData(r.name, r.tau_p[:n], r.theta_p[:n], r.tau_d[:n], r.theta_d[:n],
-                   min(first_reversal(r.theta_p, r.dt, SCORE_FROM_S), n - 2), r.dt)
-
-
-def _calibrate(cal: list[RunData], tick, kinematic: bool = False) -> tuple[dict, dict, dict, float, float]:
-    """Base and selected models plus the baselines on calibration data; (fits, baselines, selection, centre, ref).
-    ``kinematic`` fixes rho = 1 / n_k (:func:`kinematic_ratio` of the calibration data)."""
-    centre = float(np.mean([band_centre(c.tau_p) for c in cal]))
-    ref = float(np.mean([np.mean(c.theta_p) for c in cal]))
-    fixed: tuple[str, ...] = ("rho",) if kinematic else ()
-    start = SpindleParams(rho=1.0 / kinematic_ratio(cal)) if kinematic else None
-    cands = tuple(c for c in EXTENSIONS if not (kinematic and c in LOAD_SCALING))
-    sel = select_extensions(cal, centre, ref, FIT_STEP, candidates=cands, progress=tick, fixed=fixed, start=start)
-    fits = {"pair": shared_fit(cal, (), centre, ref, FIT_STEP, start=SpindleParams(**sel["base"]["params"]),
-                               fixed=fixed)}
-    if sel["chosen"]:
-        fits["pair+" + "+".join(sel["chosen"])] = shared_fit(cal, tuple(sel["chosen"]), centre, ref, FIT_STEP,
-                                                             start=SpindleParams(**sel["params"]), fixed=fixed)
-    tick("calibrated")
-    bt, yt, ya, w = batch_of(cal, centre, ref, FIT_STEP)
-    base = fit_baselines(bt, yt, ya, mask=w > 0)
-    tick("baselines")
-    return fits, base, sel, centre, ref
-
-
 def _one_stroke(runs: list[MrdRun]) -> None:
     """Raise DataError when the runs stroke over separate spindle-angle windows (jaw stopping positions:
     :func:`study.mrd.stroke_groups`), naming the windows and the ``--runs`` selection of each: the centre
@@ -290,74 +168,108 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
     if not runs:
         raise DataError("no MRD runs to analyse")
     _one_stroke(runs)
-    given, calibration, source = _design_gain(calibration)
+    given, calibration, source = design_gain(calibration)
     mode, cal = parse_calibration(calibration, runs)
     fs = float(max(r.tau_d.max() for r in runs) - min(r.tau_d.min() for r in runs))
     n_cal = len(runs) if mode == "segment" else 1
     tick = _Progress(progress, n_cal * 14 + len(runs) + 15 + (2 * len(runs) if loro else 0))
-    out: dict[str, Any] = {"mode": "mrd", "full_scale_Nm": fs, "attribution": ATTRIBUTION, "not_from_proximal": NOT_FROM_PROXIMAL,
-           "scored_from": "the first reversal of the spindle after 0.5 s (the stroke before it initialises the "
-                          "estimator, as the paper's calibration pull does); the centre map from the first sample "
-                          "after it at which its band-centre reading holds both edges (centre_ready: before, the centre "
-                          "rests on one edge and the calibration's half-width, its initialisation; the score from the "
-                          "first reversal is kept under centre.from_k0)", "runs": {},
-           "found": {r.name: {"frequency_hz": r.frequency_hz, "load_level": r.load_level,
-                              "load_command_A": r.load_command, "n_samples": len(r),
-                              "duration_s": float(r.time[-1])} for r in runs}}
+    out = _header(runs, fs)
     details: dict[str, dict] = {"pred": {}, "shared_pred": {}, "loro_pred": {}, "k0": {}}
-    cal_inputs = {"inputs": ["spindle torque", "spindle encoder"], "targets": ["jaw torque", "jaw encoder"]}
-    plan: list[tuple[MrdRun, dict, dict, float, float, int]] = []
+    cmap: Any = None
+    cal_runs: list[RunData] = []
     if mode in ("run", "kinematic"):
-        cal_names = str(cal).split(",")
-        cal_runs = [_rundata(r) for r in runs if r.name in cal_names]
-        fits, base, sel, centre, ref = _calibrate(cal_runs, tick, kinematic=mode == "kinematic")
-        cmap, out["centre_calibration"] = centre_one_run(cal_runs, fs, given)
-        sel_name = list(fits)[-1]               # the pair model with the selected extensions
-        sel_p = fits[sel_name]
-        pin = np.concatenate([predict_torque(sel_p, make_batch([(c.tau_p, c.theta_p)], centre, ref, c.dt))[
-            c.k0:] - c.tau_d[c.k0:] for c in cal_runs])
-        gains = {sel_name: implied_load_gain(lambda c, u: predict_torque(sel_p, make_batch(
-                     [(c.tau_p + u, c.theta_p)], centre, ref, c.dt)), cal_runs),
-                 CENTRE: centre_implied_gain(cmap, cal_runs)}
-        out["model_choice"] = model_choice(sel_name, float(sel["rmse_val"]) / fs, float(np.sqrt(np.mean(pin ** 2))) / fs,
-                                           cal_runs, fs, out["centre_calibration"]["fit_rms_fs"], gains, given)
-        out["calibration"] = {"mode": mode, "run": cal, "runs": cal_names, **cal_inputs,
-                              "scored": "every other run, from its spindle signals only"}
-        if given is not None:
-            dg: dict[str, Any] = {"value": given, "from": "--calibration gain=G: a design value from outside the "
-                                  "data (the centre map's load gain)"}
-            if source is not None:
-                dg.update({"from": f"centre_map.load_gain of {source} (another folder's map fitted across its loads; "
-                                   "--calibration gain=FILE)", "source": source})
-            out["calibration"]["design_load_gain"] = dg
-        if calibration and calibration.endswith("mid"):
-            out["calibration"]["chosen_by"] = ("the run whose band centre (spindle torque only) is nearest the middle "
-                                               "of the folder's band centres, a rule fixed before any score")
-        if mode == "kinematic":
-            n_k = kinematic_ratio(cal_runs)
-            out["calibration"]["fixed"] = {"rho": {
-                "value": 1.0 / n_k, "n_k": n_k,
-                "from": "1 / n_k, n_k = slope of jaw encoder against spindle encoder in full motion (middle 60 % "
-                        "of the stroke, an offset per direction) of the calibration run(s): the jaw encoder is a "
-                        "distal reading of the calibration run; the pulley radii ratio r_d / r_p, equal to the "
-                        "torque scale only if both torque sensors share one gain and no power is lost in the "
-                        "band centre"}}
-        plan = [(r, fits, base, centre, ref, _rundata(r).k0) for r in runs if r.name not in cal_names]
-        out["parameters"] = {n: p.as_dict() for n, p in fits.items()}
-        out["baseline_parameters"] = {n: b.params for n, b in base.items()}
-        out["selection"] = sel
+        plan, cmap, cal_runs = _calibrate_on_runs(runs, mode, str(cal), calibration, (given, source), fs, tick, out)
     else:
-        out["model_choice"] = {"rule": "segment calibration: the pair model only (the centre map reads the load "
-                                       "level across runs; it has no per-run segment calibration)",
-                               "candidates": {"pair model (selected per run)": None}, "chosen": "pair model"}
-        out["calibration"] = {"mode": "segment", "seconds": cal, **cal_inputs,
-                              "scored": f"t >= {cal} s of the same run, from its spindle signals only"}
-        out["parameters"] = {}
-        for r in runs:
-            n = int(round(float(cal) / r.dt))
-            fits, base, sel, centre, ref = _calibrate([_rundata(r, n)], tick)
-            plan.append((r, fits, base, centre, ref, n))
-            out["parameters"][r.name] = {k: p.as_dict() for k, p in fits.items()}
+        plan = _calibrate_on_segments(runs, float(cal), tick, out)
+    _predict(plan, mode, cmap, fs, out, details, tick)
+    _summarise(out, mode, plan, cal_runs, fs)
+    out["bands"] = {r.name: band_measurements(r) for r in runs}
+    out["load_sweep"] = _load_sweep(runs)
+    if folder:
+        _shared(runs, out, details, fs, tick, loro)
+    tick.done()
+    out["elapsed_s"] = time.perf_counter() - t_start
+    return out, details
+
+
+def _header(runs: list[MrdRun], fs: float) -> dict[str, Any]:
+    """The summary's fixed entries: the folder, its full scale [N m] and attribution, and what is scored from."""
+    return {"mode": "mrd", "full_scale_Nm": fs, "attribution": ATTRIBUTION, "not_from_proximal": NOT_FROM_PROXIMAL,
+            "scored_from": "the first reversal of the spindle after 0.5 s (the stroke before it initialises the "
+                           "estimator, as the paper's calibration pull does); the centre map from the first sample "
+                           "after it at which its band-centre reading holds both edges (centre_ready: before, the centre "
+                           "rests on one edge and the calibration's half-width, its initialisation; the score from the "
+                           "first reversal is kept under centre.from_k0)", "runs": {},
+            "found": {r.name: {"frequency_hz": r.frequency_hz, "load_level": r.load_level,
+                               "load_command_A": r.load_command, "n_samples": len(r),
+                               "duration_s": float(r.time[-1])} for r in runs}}
+
+
+def _calibrate_on_runs(runs: list[MrdRun], mode: str, cal: str, calibration: str | None,
+                       gain: tuple[float | None, str | None], fs: float, tick, out: dict) -> tuple[list, Any, list]:
+    """Calibrate on the named runs (``mode`` "run" or "kinematic"), choose the headline model and record the
+    calibration in ``out``; returns the plan of the scored runs, the centre map and the calibration RunData."""
+    given, source = gain
+    cal_names = str(cal).split(",")
+    cal_runs = [run_data(r) for r in runs if r.name in cal_names]
+    fits, base, sel, centre, ref = calibrate(cal_runs, tick, kinematic=mode == "kinematic")
+    cmap, out["centre_calibration"] = centre_one_run(cal_runs, fs, given)
+    sel_name = list(fits)[-1]               # the pair model with the selected extensions
+    sel_p = fits[sel_name]
+    pin = np.concatenate([predict_torque(sel_p, make_batch([(c.tau_p, c.theta_p)], centre, ref, c.dt))[
+        c.k0:] - c.tau_d[c.k0:] for c in cal_runs])
+    gains = {sel_name: implied_load_gain(lambda c, u: predict_torque(sel_p, make_batch(
+                 [(c.tau_p + u, c.theta_p)], centre, ref, c.dt)), cal_runs),
+             CENTRE: centre_implied_gain(cmap, cal_runs)}
+    out["model_choice"] = model_choice(sel_name, float(sel["rmse_val"]) / fs, float(np.sqrt(np.mean(pin ** 2))) / fs,
+                                       cal_runs, fs, out["centre_calibration"]["fit_rms_fs"], gains, given)
+    out["calibration"] = {"mode": mode, "run": cal, "runs": cal_names, **_CAL_INPUTS,
+                          "scored": "every other run, from its spindle signals only"}
+    if given is not None:
+        dg: dict[str, Any] = {"value": given, "from": "--calibration gain=G: a design value from outside the "
+                              "data (the centre map's load gain)"}
+        if source is not None:
+            dg.update({"from": f"centre_map.load_gain of {source} (another folder's map fitted across its loads; "
+                               "--calibration gain=FILE)", "source": source})
+        out["calibration"]["design_load_gain"] = dg
+    if calibration and calibration.endswith("mid"):
+        out["calibration"]["chosen_by"] = ("the run whose band centre (spindle torque only) is nearest the middle "
+                                           "of the folder's band centres, a rule fixed before any score")
+    if mode == "kinematic":
+        n_k = kinematic_ratio(cal_runs)
+        out["calibration"]["fixed"] = {"rho": {
+            "value": 1.0 / n_k, "n_k": n_k,
+            "from": "1 / n_k, n_k = slope of jaw encoder against spindle encoder in full motion (middle 60 % "
+                    "of the stroke, an offset per direction) of the calibration run(s): the jaw encoder is a "
+                    "distal reading of the calibration run; the pulley radii ratio r_d / r_p, equal to the "
+                    "torque scale only if both torque sensors share one gain and no power is lost in the "
+                    "band centre"}}
+    plan = [(r, fits, base, centre, ref, run_data(r).k0) for r in runs if r.name not in cal_names]
+    out["parameters"] = {n: p.as_dict() for n, p in fits.items()}
+    out["baseline_parameters"] = {n: b.params for n, b in base.items()}
+    out["selection"] = sel
+    return plan, cmap, cal_runs
+
+
+def _calibrate_on_segments(runs: list[MrdRun], cal: float, tick, out: dict) -> list:
+    """Calibrate each run on its first ``cal`` seconds [s] and record the calibration in ``out``; returns the plan."""
+    plan = []
+    out["model_choice"] = {"rule": "segment calibration: the pair model only (the centre map reads the load "
+                                   "level across runs; it has no per-run segment calibration)",
+                           "candidates": {"pair model (selected per run)": None}, "chosen": "pair model"}
+    out["calibration"] = {"mode": "segment", "seconds": cal, **_CAL_INPUTS,
+                          "scored": f"t >= {cal} s of the same run, from its spindle signals only"}
+    out["parameters"] = {}
+    for r in runs:
+        n = int(round(float(cal) / r.dt))
+        fits, base, sel, centre, ref = calibrate([run_data(r, n)], tick)
+        plan.append((r, fits, base, centre, ref, n))
+        out["parameters"][r.name] = {k: p.as_dict() for k, p in fits.items()}
+    return plan
+
+
+def _predict(plan: list, mode: str, cmap: Any, fs: float, out: dict, details: dict, tick) -> None:
+    """Predict and score every planned run with each calibrated model and baseline (``out["runs"]``)."""
     for r, fits, base, centre, ref, k0 in plan:
         b = make_batch([(r.tau_p, r.theta_p)], centre, ref, r.dt)
         models = {}
@@ -373,13 +285,17 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
         row = {"frequency_hz": r.frequency_hz, "load_level": r.load_level, "model": pair, **models[pair],
                "models": models, "baselines": bl}
         if mode != "segment":
-            row["centre"] = score_centre(cmap, _rundata(r), k0, fs)
+            row["centre"] = score_centre(cmap, run_data(r), k0, fs)
             if out["model_choice"]["chosen"] == CENTRE:     # torque from the centre map; it has no angle estimate
                 row.update(model=CENTRE, angle_from=pair, torque_rmse_fs=row["centre"]["torque_rmse_fs"],
                            torque_max_fs=row["centre"]["torque_max_fs"])
         out["runs"][r.name] = row
         details["k0"][r.name] = k0
         tick(f"predict {r.name}")
+
+
+def _summarise(out: dict, mode: str, plan: list, cal_runs: list[RunData], fs: float) -> None:
+    """The scores aggregated over the scored runs (``out["summary"]``) and the centre map's cost profile."""
     scored = list(out["runs"].values())
     names = sorted({n for s in scored for n in s["models"]})
     out["summary"] = {"model": _agg(scored),
@@ -393,14 +309,7 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
                                     "better_than_linear_every_run": bool(all(s["centre"]["torque_rmse_fs"] < s[
                                         "baselines"]["linear"]["torque_rmse_fs"] for s in scored))}
         del out["summary"]["centre"]["median_angle_rmse_deg"]
-        profile_on_scored(cal_runs, [(_rundata(r), k0) for r, *_, k0 in plan], fs, out["centre_calibration"])
-    out["bands"] = {r.name: band_measurements(r) for r in runs}
-    out["load_sweep"] = _load_sweep(runs)
-    if folder:
-        _shared(runs, out, details, fs, tick, loro)
-    tick.done()
-    out["elapsed_s"] = time.perf_counter() - t_start
-    return out, details
+        profile_on_scored(cal_runs, [(run_data(r), k0) for r, *_, k0 in plan], fs, out["centre_calibration"])
 
 
 def _load_sweep(runs: list[MrdRun]) -> dict:
@@ -408,7 +317,7 @@ def _load_sweep(runs: list[MrdRun]) -> dict:
     the kinematic ratio n_k; {} when no frequency has two loads. A diagnosis on every run's jaw channels."""
     groups: dict[float, list[RunData]] = {}
     for r in runs:
-        groups.setdefault(round(r.frequency_hz, 2), []).append(_rundata(r))
+        groups.setdefault(round(r.frequency_hz, 2), []).append(run_data(r))
     if max(len(g) for g in groups.values()) < 2:
         return {}
     sw = load_sweep(list(groups.values()))
@@ -419,7 +328,7 @@ def _load_sweep(runs: list[MrdRun]) -> dict:
 
 def _shared(runs, out, details, fs, tick, loro: bool) -> None:
     """Extensions chosen on a time split of all runs, one parameter set for the folder, leave-one-run-out."""
-    rd = [_rundata(r) for r in runs]
+    rd = [run_data(r) for r in runs]
     centre = float(np.mean([band_centre(r.tau_p) for r in runs]))
     ref = float(np.mean([np.mean(r.theta_p) for r in runs]))
     sel = select_extensions(rd, centre, ref, SHARED_STEP, progress=tick)

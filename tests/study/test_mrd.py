@@ -126,7 +126,7 @@ def test_analysis_keys_calibration_and_what_was_fitted_on(tmp_path):
     mc = s["model_choice"]                                           # headline model chosen on calibration data only
     lc = mc.get("load_gain_check", {})
     ok = [n for n in mc["candidates"] if lc.get("eligible", {}).get(n, True)]
-    if not ok:      # none eligible (session 28): the one nearest the calibration run's own reading of the gain
+    if not ok:      # none eligible: the one nearest the calibration run's own reading of the gain
         ok = [min(mc["candidates"], key=lambda n: (lc["log_distance"][n], mc["candidates"][n], n))]
         assert lc["fallback"] and min(lc["log_distance"].values()) > 0.0
     assert len(mc["candidates"]) == 2 and mc["chosen"] == min(ok, key=mc["candidates"].get)
@@ -205,7 +205,7 @@ def test_cli_mrd_prints_and_writes_json(tmp_path, capsys):
     assert "ODbL" in text and "calibrated on run 01" in text
     s = json.loads(out.read_text())
     assert set(s["runs"]) == {"00", "10"} and s["calibration"]["run"] == "01"
-    # session 28: this folder's gain across its loads passed on as another folder's number, from its JSON
+    # this folder's gain across its loads passed on as another folder's number, from its JSON
     assert "load gain across this folder's loads" in text and s["centre_map"]["load_gain"]["several_loads"]
     rep2 = tmp_path / "report2"
     assert main(["analyze", "--mrd", str(tmp_path), "--calibration", f"gain={out}:00", "--report", str(rep2)]) == 0
@@ -242,7 +242,7 @@ def test_real_folder_model_beats_linear_and_one_set_predicts_the_folder():
     same_load = [r["torque_rmse_fs"] for r in s["runs"].values() if r["load_level"] == 0]
     assert len(same_load) == 4 and max(same_load) < 0.03          # at the calibration's load
     # one run: the centre map's load gain is not in the calibration's own cost (no inner minimum), while
-    # the scored runs' error depends on it strongly (Finding 4, the identifiability evidence)
+    # the scored runs' error depends on it strongly (the identifiability evidence, docs/results/mrd.md)
     prof = s["centre_calibration"]["profile"]
     cost = [p["fit_rms_fs"] for p in prof]
     scored = [p["scored_median_rmse_fs"] for p in prof]
@@ -266,12 +266,12 @@ def test_real_folder_model_beats_linear_and_one_set_predicts_the_folder():
 @needs_mrd
 @pytest.mark.mrd
 def test_real_runs_one_run_does_not_pin_the_load_gain():
-    """Finding 4, session 5: inside one run the jaw torque beyond the shape along the stroke is too small to fix
-    the load gain to the +-4 % the one-run line needs, and the encoders' ratio does not move with the load (no
+    """Inside one run the jaw torque beyond the shape along the stroke is too small to fix the load gain to the
+    +-4 % a one-run calibration needs (docs/results/mrd.md), and the encoders' ratio does not move with the load (no
     stretch to correct): corrected for stretch it still puts the gain above 1 / 0.96."""
     from estimator.offline.spindle_centre_fit import within_run_gain
-    from study.mrd_report import _rundata
-    rd = {n: _rundata(read_mrd(MRD_DIR / "Tool_4_Maryland_L_2" / f"{n}.TXT")) for n in ("00", "31", "43")}
+    from study.mrd_calibration import run_data
+    rd = {n: run_data(read_mrd(MRD_DIR / "Tool_4_Maryland_L_2" / f"{n}.TXT")) for n in ("00", "31", "43")}
     for r in rd.values():
         w = within_run_gain(r)
         lo, hi = w["profile_ci95"]
@@ -284,9 +284,9 @@ def test_real_runs_one_run_does_not_pin_the_load_gain():
 @needs_mrd
 @pytest.mark.mrd
 def test_real_folder_one_run_meets_the_line_with_a_sister_tools_load_gain(tmp_path):
-    """Issue 11's line (Finding 4, session 28): one run of the shipped folder (``mid``) and the load gain measured
+    """The one-run target (docs/results/mrd.md): one run of the shipped folder (``mid``) and the load gain measured
     across the loads of another forceps of the same model - 0.9188, ``centre_map.load_gain`` of the source
-    repository's ``Tool_5_Maryland_L_2`` (not shipped; read in place in session 28), passed as that folder's JSON -
+    repository's ``Tool_5_Maryland_L_2`` (not shipped), passed as that folder's JSON -
     give median <= 0.03 FS and worst run <= 0.10 FS, every run better than the linear baseline."""
     import json
     runs, _ = load_mrd_dir(MRD_DIR)
@@ -301,7 +301,7 @@ def test_real_folder_one_run_meets_the_line_with_a_sister_tools_load_gain(tmp_pa
 
 
 def test_runs_at_several_jaw_positions_are_named_and_selected_one_window_at_a_time(tmp_path):
-    """Session 28: the source's roll and pitch folders stop the jaw at several positions, so their runs stroke
+    """The source's roll and pitch folders stop the jaw at several positions, so their runs stroke
     over separate spindle-angle windows; the analysis names each window with its --runs selection instead of
     failing inside a fit, and --runs analyses one."""
     from study.mrd import stroke_groups

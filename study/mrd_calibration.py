@@ -1,0 +1,148 @@
+"""The calibration of ``teleop analyze --mrd``: which runs calibrate (``--calibration``), a design load gain,
+the signals each run gives the fits, and the fit of the calibration data (docs/results/mrd.md).
+
+The model's *inputs* are always the spindle torque and angle; the calibration's jaw torque and angle are
+the fit *targets*. Scored runs never contribute a distal sample.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from estimator.offline.spindle_fit import EXTENSIONS, band_centre, fit_baselines
+from estimator.offline.spindle_shared import RunData, batch_of, kinematic_ratio, select_extensions, shared_fit
+from estimator.online.spindle import SpindleParams, first_reversal
+from study.mrd import MrdRun
+from study.mrd_centre import mid_centre_run
+from teleop.errors import ConfigError
+
+__all__ = ["SCORE_FROM_S", "FIT_STEP", "LOAD_SCALING", "run_data", "split_design_gain", "design_gain",
+           "parse_calibration", "calibrate"]
+
+SCORE_FROM_S = 0.5         # the first reversal is searched after this [s] (the load motor ramps in first)
+FIT_STEP = 10              # decimation of the calibration fits (1 kHz -> 100 Hz)
+#: Extensions that scale with the load (band growth, torque ratio along the stroke): at one load level they
+#: trade off against the fixed torque scale and extrapolate wildly (on run 00 K_b sent K_a to its bound), so the
+#: ``kinematic:`` calibration does not offer them.
+LOAD_SCALING = ("K_b", "rho_1", "rho_2")
+
+def run_data(r: MrdRun, stop: int | None = None) -> RunData:
+    """The signals of run ``r`` (up to sample ``stop``) as the fits read them, scored from its first spindle
+    reversal after :data:`SCORE_FROM_S` (the load motor ramps in first)."""
+    n = len(r) if stop is None else stop
+    return RunData(r.name, r.tau_p[:n], r.theta_p[:n], r.tau_d[:n], r.theta_d[:n],
+                   min(first_reversal(r.theta_p, r.dt, SCORE_FROM_S), n - 2), r.dt)
+
+
+def split_design_gain(spec: str | None) -> tuple[float | None, str | None]:
+    """(design load gain, the rest of the spec) from ``--calibration gain=G:SPEC`` (G > 0: the tool's jaw torque
+    per N m of spindle band-centre shift, about 1 / (r cosh K), from its design; the centre map uses it instead of
+    1 / n_k or a fit; G may be another folder's JSON, :func:`_gain_from_json`); (None, spec) without the prefix.
+    Raises ConfigError for a G that is not a positive number or such a JSON, or a segment calibration (the
+    centre map has none)."""
+    g, rest, _ = design_gain(spec)
+    return g, rest
+
+
+def design_gain(spec: str | None) -> tuple[float | None, str | None, str | None]:
+    """:func:`split_design_gain` and the JSON the gain was read from (None for a number or no gain)."""
+    if not spec or not spec.startswith("gain="):
+        return None, spec, None
+    head, _, rest = spec.partition(":")
+    source = None
+    try:
+        g = float(head[len("gain="):])
+    except ValueError:
+        # a JSON path may hold ':' itself (C:\..., a:b/...): the split is after the longest prefix that is a file
+        body = spec[len("gain="):]
+        ends = [len(body)] + [i for i in range(len(body) - 1, -1, -1) if body[i] == ":"]
+        at = next((i for i in ends if Path(body[:i]).is_file()), None)
+        if at is not None:
+            head, rest = "gain=" + body[:at], body[at + 1:]
+        source = head[len("gain="):]
+        g = _gain_from_json(spec, source)
+    if not (math.isfinite(g) and g > 0.0):
+        raise ConfigError(f"--calibration {spec}: the load gain G must be positive")
+    if rest.startswith("segment:"):
+        raise ConfigError(f"--calibration {spec}: a design gain applies to run calibrations, not to segment:")
+    return g, rest, source
+
+
+def _gain_from_json(spec: str, path: str) -> float:
+    """``centre_map.load_gain.value`` of a JSON written by ``teleop analyze --mrd OTHER --json PATH`` (another
+    folder's load gain fitted across its loads). Raises ConfigError naming what is missing."""
+    import json
+    f = Path(path)
+    if not f.is_file():
+        raise ConfigError(f"--calibration {spec}: G in gain=G:RUN must be a number or the JSON of "
+                          f"`teleop analyze --mrd OTHER --json OUT` ({f} not found)")
+    try:
+        lg = json.loads(f.read_text())["centre_map"]["load_gain"]
+    except (ValueError, KeyError, TypeError):
+        raise ConfigError(f"--calibration {spec}: {f} has no centre_map.load_gain (write it with "
+                          "`teleop analyze --mrd OTHER --json OUT`, folder fit on)") from None
+    if not lg.get("several_loads", False):
+        raise ConfigError(f"--calibration {spec}: {f} comes from a folder of one load level; its load gain "
+                          "is not identified there")
+    return float(lg["value"])
+
+
+def parse_calibration(spec: str | None, runs: list[MrdRun]) -> tuple[str, Any]:
+    """("run", names), ("kinematic", names) or ("segment", seconds) from ``--calibration``: ``RUN`` or
+    ``RUN,RUN,...`` (calibrate on those runs together, score the others), ``kinematic:RUN[,RUN...]``
+    (the same with rho = 1 / n_k from the calibration runs' encoders), ``mid`` (the run whose spindle band
+    centre is nearest the middle of the folder's: a rule fixed before scoring), or ``segment:SECONDS``; default
+    the slowest, lightest run. ``names`` is the comma-separated string.
+
+    Raises ConfigError for an unknown run name, every run named, or a segment outside
+    [1, half the shortest run] s.
+    """
+    names = [r.name for r in runs]
+    if spec is None or spec == "":
+        r = min(runs, key=lambda r: (round(r.frequency_hz, 3), r.load_level, r.name))
+        return "run", r.name
+    if spec.startswith("segment:"):
+        try:
+            s = float(spec.split(":", 1)[1])
+        except ValueError:
+            raise ConfigError(f"--calibration {spec}: SECONDS must be a number") from None
+        shortest = min(float(r.time[-1]) for r in runs)
+        if not 1.0 <= s <= 0.5 * shortest:
+            raise ConfigError(f"--calibration {spec}: SECONDS must be in [1, {0.5 * shortest:.1f}]")
+        return "segment", s
+    mode = "run"
+    if spec in ("mid", "kinematic:mid"):        # the run of the middle band centre (spindle torque only)
+        spec = spec.replace("mid", mid_centre_run([run_data(r) for r in runs]))
+    if spec.startswith("kinematic:"):
+        mode, spec = "kinematic", spec.split(":", 1)[1]
+    asked = [n.strip() for n in spec.split(",") if n.strip()]
+    unknown = [n for n in asked if n not in names]
+    if unknown or not asked:
+        raise ConfigError(f"--calibration {spec}: no run named {', '.join(unknown) or spec!r} (runs: {', '.join(names)})")
+    if len(set(asked)) == len(names):
+        raise ConfigError(f"--calibration {spec}: every run is a calibration run, none is left to score")
+    return mode, ",".join(dict.fromkeys(asked))
+
+
+def calibrate(cal: list[RunData], tick, kinematic: bool = False) -> tuple[dict, dict, dict, float, float]:
+    """Base and selected models plus the baselines on calibration data; (fits, baselines, selection, centre, ref).
+    ``kinematic`` fixes rho = 1 / n_k (:func:`kinematic_ratio` of the calibration data)."""
+    centre = float(np.mean([band_centre(c.tau_p) for c in cal]))
+    ref = float(np.mean([np.mean(c.theta_p) for c in cal]))
+    fixed: tuple[str, ...] = ("rho",) if kinematic else ()
+    start = SpindleParams(rho=1.0 / kinematic_ratio(cal)) if kinematic else None
+    cands = tuple(c for c in EXTENSIONS if not (kinematic and c in LOAD_SCALING))
+    sel = select_extensions(cal, centre, ref, FIT_STEP, candidates=cands, progress=tick, fixed=fixed, start=start)
+    fits = {"pair": shared_fit(cal, (), centre, ref, FIT_STEP, start=SpindleParams(**sel["base"]["params"]),
+                               fixed=fixed)}
+    if sel["chosen"]:
+        fits["pair+" + "+".join(sel["chosen"])] = shared_fit(cal, tuple(sel["chosen"]), centre, ref, FIT_STEP,
+                                                             start=SpindleParams(**sel["params"]), fixed=fixed)
+    tick("calibrated")
+    bt, yt, ya, w = batch_of(cal, centre, ref, FIT_STEP)
+    base = fit_baselines(bt, yt, ya, mask=w > 0)
+    tick("baselines")
+    return fits, base, sel, centre, ref
