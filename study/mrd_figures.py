@@ -102,9 +102,14 @@ def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, director
     directory cannot be created."""
     plt = pyplot()
     d = output_dir(directory, "--figures")
-    paths = []
-    k0 = details["k0"]
+    return [_torque(plt, runs, details, d / FIGURES[0]), _failures(plt, runs, summary, details, d / FIGURES[1]),
+            _bands(plt, runs, summary, d / FIGURES[2]), _centre(plt, runs, summary, d / FIGURES[3])]
 
+
+def _torque(plt, runs: list[MrdRun], details: dict, path: Path) -> Path:
+    """Jaw torque of the corner runs, measured and predicted from the spindle only: against the jaw angle,
+    and over the first two cycles beside the spindle torque."""
+    k0 = details["k0"]
     corners = _corners(runs)
     fig, axes = plt.subplots(2, len(corners), figsize=(3.6 * len(corners), 6.2), squeeze=False)
     for j, r in enumerate(corners):
@@ -132,8 +137,13 @@ def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, director
         ax.set_xlabel("time [s]")
         ax.set_ylabel("jaw torque [mN m]")
     axes[0, -1].legend(fontsize=7)
-    paths.append(_save(plt, fig, f"Jaw torque: measured and predicted from the spindle only ({_CREDIT})", d / FIGURES[0]))
+    return _save(plt, fig, f"Jaw torque: measured and predicted from the spindle only ({_CREDIT})", path)
 
+
+def _failures(plt, runs: list[MrdRun], summary: dict, details: dict, path: Path) -> Path:
+    """Torque RMSE over frequency x load (headline, linear baseline, folder model left out) and the left-out
+    folder model's mean residual over the spindle cycle."""
+    k0 = details["k0"]
     fig, axes = plt.subplots(1, 4, figsize=(17, 3.8))
     cal = {n: v["torque_rmse_fs"] for n, v in summary["runs"].items()}
     lin = {n: v["baselines"]["linear"]["torque_rmse_fs"] for n, v in summary["runs"].items()}
@@ -163,8 +173,11 @@ def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, director
     ax.set_ylabel("mean residual [FS]")
     ax.set_title("folder model left out: residual over the cycle", fontsize=9)
     ax.legend(fontsize=7)
-    paths.append(_save(plt, fig, f"Where the jaw torque estimate fails ({_CREDIT})", d / FIGURES[1]))
+    return _save(plt, fig, f"Where the jaw torque estimate fails ({_CREDIT})", path)
 
+
+def _bands(plt, runs: list[MrdRun], summary: dict, path: Path) -> Path:
+    """Model-free loop measurements in the middle of the stroke: friction band, direction gaps, band edges."""
     fig, axes = plt.subplots(1, 4, figsize=(17, 3.6))
     bands = summary["bands"]
     freqs = sorted({round(r.frequency_hz, 2) for r in runs})
@@ -187,9 +200,7 @@ def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, director
     axes[2].set_ylabel("jaw angle half-gap between directions [deg]")
     axes[2].set_title("E12 / stretch: angle gap against load", fontsize=9)
     _edges(axes[3], runs, bands, summary.get("load_sweep", {}))
-    paths.append(_save(plt, fig, f"Model-free loop measurements, middle of the stroke ({_CREDIT})", d / FIGURES[2]))
-    paths.append(_centre(plt, runs, summary, d / FIGURES[3]))
-    return paths
+    return _save(plt, fig, f"Model-free loop measurements, middle of the stroke ({_CREDIT})", path)
 
 
 def _centre(plt, runs: list[MrdRun], summary: dict, path: Path) -> Path:
