@@ -159,3 +159,15 @@ def test_a_peer_of_another_instrument_is_named_in_one_warning(tmp_path, caplog):
     assert warning == ("connected to a Zenoh peer, but none answered the run id of instrument 'mine' within 0.3 s: "
                        f"the peers serve another instrument.id or are not teleop sides; this process starts run {rid} "
                        "alone")
+
+
+def test_a_mutual_tls_listener_and_a_connector_without_a_certificate(tmp_path, pki):
+    ep = f"tls/localhost:{free_tcp_port()}"
+    listener = TransportConfig(listen=(ep,), tls=TransportTlsConfig(root_ca=pki["ca"], certificate=pki["cert"],
+                                                                    private_key=pki["key"], mutual=True))
+    with Session(listener):
+        r = _side(tmp_path, f"  listen: ['{ep}']\n  tls: {{root_ca: '{pki['ca']}'}}\n")
+    line = _error_line(r)
+    assert line.startswith(f"teleop: error: no Zenoh peer answered at {ep} within 1.5 s: the TLS listener refused "
+                           f"this peer's certificate (")
+    assert line.endswith("): it expects mutual TLS, set transport.tls.certificate, private_key and mutual: true")
