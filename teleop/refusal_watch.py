@@ -8,6 +8,11 @@ on its listen ports in ``TIME_WAIT`` whose remote end never became a Zenoh link 
 name every accepted link's remote address), and logs each such connection once, through a
 :class:`~teleop.entity.RateLimitedLog`. A connection the peer closed first (a port probe, a peer that
 gave up) leaves no ``TIME_WAIT`` on this side and is not reported; a link that came up is never reported.
+
+Limits: which end closes a refused link first is a race between the two processes (zenoh sends its
+refusal, then both drop the socket); when the connector wins it, that attempt leaves nothing here.
+Zenoh retries a refused connect about once a second, so a persistent mistake is still reported within
+seconds; a single attempt may not be.
 """
 from __future__ import annotations
 
