@@ -31,8 +31,7 @@ __all__ = [
 @dataclass(frozen=True)
 class InstrumentConfig:
     id: str = "tsm0"
-    # empty: the single tendon of `sheath`; 1..4 entries: antagonistic-pair joints
-    joints: tuple[JointConfig, ...] = ()
+    joints: tuple[JointConfig, ...] = ()  # empty: the single tendon of `sheath`; 1..4: pairs (or spindle-driven)
 
 
 @dataclass(frozen=True)
@@ -93,6 +92,7 @@ class JointConfig:
     limits: tuple[float, ...] = (-1.2, 1.2)  # [rad] lower < 0 < upper (0: the rest pose)
     pretension: float = 0.0               # [N] tension of the pair at rest; 0: none (antagonist slack-free)
     tendons: TendonPairConfig = field(default_factory=TendonPairConfig)
+    spindle_radius: float = 0.0           # [m] > 0: one input spindle pulls the pair (slave/spindle_axis.py)
 
 
 @dataclass(frozen=True)
@@ -368,7 +368,7 @@ RANGES: dict[str, tuple[str, str]] = {
     "master.realtime_priority": ("0..99", "-"), "slave.realtime_priority": ("0..99", "-"),
     "recording.log_every": (">= 1", "samples"),
     "instrument.joints[].pulley_radius": ("> 0", "m"), "instrument.joints[].limits[]": ("any", "rad"),
-    "instrument.joints[].pretension": (">= 0", "N"),
+    "instrument.joints[].pretension": (">= 0", "N"), "instrument.joints[].spindle_radius": (">= 0", "m"),
     **{f"instrument.joints[].tendons.{t}.{k}": v for t in "ab" for k, v in (
         ("EA", ("> 0", "N")), ("runs[].length", ("> 0", "m")), ("runs[].radius", ("> 0", "m, .inf = straight")))},
     "rig.simulated.joints[].stiffness": (">= 0", "N m/rad"), "rig.simulated.joints[].damping": (">= 0", "N m s/rad"),
