@@ -62,7 +62,9 @@ from study.mrd_centre import (
     score_centre,
 )
 from study.mrd_text import format_mrd, write_mrd_report
+from study.mrd_tools import tool_calibration, tool_entry
 from teleop.errors import ConfigError, DataError
+from teleop.tools import Tool
 
 __all__ = ["analyze_mrd", "format_mrd", "write_mrd_report", "parse_calibration", "split_design_gain", "band_measurements", "SCORE_FROM_S"]
 
@@ -153,7 +155,7 @@ def _one_stroke(runs: list[MrdRun]) -> None:
 
 
 def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bool = False,
-                loro: bool = True, folder: bool = True) -> tuple[dict, dict]:
+                loro: bool = True, folder: bool = True, tool: Tool | None = None) -> tuple[dict, dict]:
     """Calibrate, predict and score every run; the folder-wide diagnosis (module docstring).
 
     Returns (summary, details): summary is JSON-ready (``runs.<name>.{torque_rmse_fs, torque_max_fs,
@@ -161,14 +163,15 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
     ``.baselines.<name>`` the same keys; ``shared`` / ``loro`` the folder-wide fit); details hold
     per-sample predictions for the figures (never written to JSON).
 
-    ``folder`` False skips the folder-wide selection and fit (and ``loro``).
-    Raises DataError for no runs, ConfigError for a bad ``calibration``.
+    ``folder`` False skips the folder-wide selection and fit (and ``loro``). ``tool``: the load gain of the one-run
+    calibration comes from this tool file (:func:`study.mrd_tools.tool_calibration`; ``summary["tool"]``).
+    Raises DataError for no runs, ConfigError for a bad ``calibration`` or one that gives a gain beside ``tool``.
     """
     t_start = time.perf_counter()
     if not runs:
         raise DataError("no MRD runs to analyse")
     _one_stroke(runs)
-    given, calibration, source = design_gain(calibration)
+    given, calibration, source = design_gain(tool_calibration(calibration, tool))
     mode, cal = parse_calibration(calibration, runs)
     fs = float(max(r.tau_d.max() for r in runs) - min(r.tau_d.min() for r in runs))
     n_cal = len(runs) if mode == "segment" else 1
@@ -181,6 +184,11 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
         plan, cmap, cal_runs = _calibrate_on_runs(runs, mode, str(cal), calibration, (given, source), fs, tick, out)
     else:
         plan = _calibrate_on_segments(runs, float(cal), tick, out)
+    if tool is not None:
+        out["tool"] = tool_entry(tool)
+        out["calibration"]["design_load_gain"].update({"tool": tool.name, "measured_on": tool.load_gain.measured_on,
+                                                       "uncertainty": tool.load_gain.uncertainty,
+                                                       "from": f"load_gain of the tool file {tool.name}"})
     _predict(plan, mode, cmap, fs, out, details, tick)
     _summarise(out, mode, plan, cal_runs, fs)
     out["bands"] = {r.name: band_measurements(r) for r in runs}
@@ -359,26 +367,29 @@ def _shared(runs, out, details, fs, tick, loro: bool) -> None:
 
 
 def main_mrd(args) -> int:
-    """``teleop analyze --mrd [DIR] [--calibration RUN|segment:SECONDS] [--json OUT] [--figures DIR]
-    [--report DIR]``: load, analyse, print; one line per unreadable file. Returns 0."""
+    """``teleop analyze --mrd [DIR] [--tool NAME] [--calibration RUN|segment:SECONDS] [--json OUT] [--figures DIR]
+    [--report DIR]``: load, analyse (window by window when the runs stroke over separate spindle-angle windows,
+    :mod:`study.mrd_windows`), print; one line per unreadable file. Returns 0."""
     import json
 
-    from study.mrd import load_mrd_dir
-    from study.mrd_figures import write_mrd_figures
+    from study.mrd import load_mrd_dir, stroke_groups
+    from study.mrd_windows import analyze_windows, write_outputs
+    from teleop.tools import load_tool
 
     if args.json is not None and not Path(args.json).resolve().parent.is_dir():
         raise ConfigError(f"--json {args.json}: directory {Path(args.json).resolve().parent} does not exist")
+    tool = load_tool(args.tool) if getattr(args, "tool", None) else None
     runs, bad = load_mrd_dir(args.mrd or None, getattr(args, "runs", None))
     for line in bad:
         print(f"skipped: {line}")
-    summary, details = analyze_mrd(runs, getattr(args, "calibration", None), progress=sys.stderr.isatty())
+    cal, progress = getattr(args, "calibration", None), sys.stderr.isatty()
+    if len(stroke_groups(runs)) > 1:
+        summary = analyze_windows(analyze_mrd, runs, cal, tool, progress, args)
+    else:
+        summary, details = analyze_mrd(runs, cal, progress=progress, tool=tool)
+        print(format_mrd(summary))
+        write_outputs(runs, summary, details, args)
     summary["skipped"] = bad
-    print(format_mrd(summary))
-    if getattr(args, "figures", None):
-        for p in write_mrd_figures(runs, summary, details, args.figures):
-            print(f"wrote {p}")
-    if args.report is not None:
-        print(f"wrote {write_mrd_report(runs, summary, details, args.report)}")
     if args.json is not None:
         Path(args.json).write_text(json.dumps(summary, indent=2, allow_nan=False,
                                               default=lambda o: o.item() if hasattr(o, "item") else str(o)) + "\n")

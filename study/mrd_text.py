@@ -21,8 +21,11 @@ def format_mrd(s: dict) -> str:
             else f"calibrated on run {cal['run']}")
     if "design_load_gain" in cal:
         dg = cal["design_load_gain"]
-        head += (f", load gain {dg['value']:.3f} from {dg['source']} (another folder's, not from these data)"
-                 if "source" in dg else f", load gain {dg['value']:.3f} given (a design value, not from the data)")
+        if "tool" in dg:
+            head += f", load gain {dg['value']:.3f} from tool {dg['tool']} (measured on {dg['measured_on']})"
+        else:
+            head += (f", load gain {dg['value']:.3f} from {dg['source']} (another folder's, not from these data)"
+                     if "source" in dg else f", load gain {dg['value']:.3f} given (a design value, not from the data)")
     if "fixed" in cal:
         head += f" with rho = 1 / n_k = {cal['fixed']['rho']['value']:.3f} from its encoders"
     found = s["found"].values()

@@ -57,9 +57,9 @@ from teleop.schema import (
 
 __all__ = [  # the schema's names (teleop.schema) and the loader's
     "InstrumentConfig", "RunConfig", "SheathConfig", "TendonConfig", "TendonPairConfig", "JointLoadConfig", "JointConfig",
-    "SimulatedTendonConfig", "SimulatedTendonPairConfig", "SimulatedJointConfig",
+    "SimulatedTendonConfig", "SimulatedTendonPairConfig", "SimulatedJointConfig", "read_yaml", "merge_dataclass",
     "MotorConfig", "LoadConfig", "SensorConfig", "ZenohRigConfig", "RigConfig", "SimulatedRigConfig", "EffectsConfig",
-    "EffectSwitch", "MOVED", "EstimatorConfig", "CalibrationConfig",
+    "EffectSwitch", "MOVED", "EstimatorConfig", "CalibrationConfig", "ErrorContext",
     "DeviceConfig", "MappingConfig", "MasterConfig", "SlaveConfig", "PairControlConfig", "TransportConfig",
     "TransportAuthConfig", "TransportTlsConfig", "RecordingConfig", "Ros2Config", "SafetyConfig", "Config", "RANGES",
     "joint_set_tension", "load_config", "config_from_dict", "config_to_dict", "write_config", "MAX_JOINTS",
@@ -209,12 +209,14 @@ def _merge(cls: Any, base: Any, data: Any, path: str, ctx: _Ctx) -> Any:
 
 def _check(cfg: Config, ctx: _Ctx, bounds: bool = True) -> Config:
     """Checks beyond one value's type and range; with ``bounds`` the hard bounds (teleop/safety_bounds.py)."""
+    from teleop.config_files import check_tool_file
     from teleop.keys import validate_instrument_id
     from teleop.safety_bounds import check_bounds
     try:
         validate_instrument_id(cfg.instrument.id)
     except ConfigError as e:
         raise ctx.error("instrument.id", str(e)) from None
+    check_tool_file(cfg.instrument.tool, "instrument.tool", ctx.error)
     for name in ("listen", "connect"):
         for i, ep in enumerate(getattr(cfg.transport, name)):
             if not re.fullmatch(r"[a-z0-9]+/\S+", ep):
@@ -394,3 +396,5 @@ def write_config(cfg: Config, path: str | Path) -> Path:
     text = "# resolved teleop configuration (every setting, SI units unless the key has a suffix)\n"
     path.write_text(text + yaml.safe_dump(config_to_dict(cfg), sort_keys=False), encoding="utf-8")
     return path
+
+read_yaml, merge_dataclass, ErrorContext = _read_yaml, _merge, _Ctx  # for the other strict YAML files (teleop.tools)

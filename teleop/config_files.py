@@ -7,10 +7,14 @@ after a plain (non-editable) install.
 """
 from __future__ import annotations
 
+import re
 from importlib import resources
 from pathlib import Path
+from typing import Callable
 
-__all__ = ["configs_dir", "shipped_config", "resolve_config"]
+from teleop.errors import ConfigError
+
+__all__ = ["configs_dir", "shipped_config", "resolve_config", "tool_file", "check_tool_file"]
 
 
 def configs_dir() -> Path:
@@ -36,3 +40,26 @@ def resolve_config(path: str | Path) -> Path:
         return p
     own = configs_dir().joinpath(*p.parts[1:])
     return own if own.is_file() else p
+
+
+def tool_file(name_or_path: str | Path) -> Path:
+    """The file of a tool (:mod:`teleop.tools`): ``configs/tools/<NAME>.yaml`` for a bare name (letters, digits,
+    ``_``, ``-``), else the path itself. Raises ConfigError when neither exists, listing the shipped tools."""
+    s = str(name_or_path)
+    tools = configs_dir() / "tools"
+    p = tools / f"{s}.yaml" if re.fullmatch(r"[A-Za-z0-9_-]+", s) else Path(s)
+    if not p.is_file():
+        shipped = ", ".join(sorted(f.stem for f in tools.glob("*.yaml"))) or "none"
+        raise ConfigError(f"tool {s!r}: no such tool file ({p}); shipped tools: {shipped}")
+    return p
+
+
+def check_tool_file(name: str | None, key: str, error: Callable[[str, str], ConfigError]) -> None:
+    """A config's tool (``key``, None: no tool) must name a tool file (:func:`tool_file`); ``error(key, message)``
+    builds the ConfigError raised (naming the config file and line). The file itself is read by its user."""
+    if name is None:
+        return
+    try:
+        tool_file(name)
+    except ConfigError as e:
+        raise error(key, f"{key}: {e}") from None

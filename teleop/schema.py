@@ -32,6 +32,7 @@ __all__ = [
 class InstrumentConfig:
     id: str = "tsm0"
     joints: tuple[JointConfig, ...] = ()  # empty: the single tendon of `sheath`; 1..4: pairs (or spindle-driven)
+    tool: Optional[str] = None    # the instrument's tool file: configs/tools/<NAME>.yaml or a path (teleop.tools)
 
 
 @dataclass(frozen=True)
@@ -363,8 +364,7 @@ RANGES: dict[str, tuple[str, str]] = {
     "master.device.arm.stiffness": ("> 0", "N/m"), "master.device.arm.device_mass": (">= 0", "kg"),
     "master.device.arm.device_damping": (">= 0", "N s/m"), "master.device.arm.device_friction": (">= 0", "N"),
     "slave.relax_speed": (">= 0", "m/s"), "slave.x_in_min": ("any", "m"), "slave.x_in_max": ("any", "m"),
-    "slave.engage_tolerance": ("> 0", "m"),
-    "slave.watchdog_ms": ("> 0", "ms"), "slave.heartbeat_hz": ("> 0", "Hz"),
+    "slave.engage_tolerance": ("> 0", "m"), "slave.watchdog_ms": ("> 0", "ms"), "slave.heartbeat_hz": ("> 0", "Hz"),
     "master.realtime_priority": ("0..99", "-"), "slave.realtime_priority": ("0..99", "-"),
     "recording.log_every": (">= 1", "samples"),
     "instrument.joints[].pulley_radius": ("> 0", "m"), "instrument.joints[].limits[]": ("any", "rad"),
