@@ -66,7 +66,11 @@ __all__ = ["SlaveLinks", "SlaveNode", "axis_kind", "CSV_COLUMNS", "CSV_TRUTH_COL
 
 def axis_kind(cfg: Config) -> type[SlaveAxis]:
     """The kind of axis of the configured instrument: :class:`PairAxis` when ``instrument.joints`` is
-    given, else :class:`TendonAxis` (a single tendon)."""
+    given (:class:`slave.spindle_axis.SpindleAxis` when they have a ``spindle_radius``), else
+    :class:`TendonAxis` (a single tendon)."""
+    if cfg.instrument.joints and cfg.instrument.joints[0].spindle_radius > 0:
+        from slave.spindle_axis import SpindleAxis
+        return SpindleAxis
     return PairAxis if cfg.instrument.joints else TendonAxis
 
 

@@ -51,6 +51,9 @@ def make_rig(cfg: Config, session: Any = None):
 
 @register_rig("simulated")
 def _simulated(cfg: Config, session: Any):
+    if cfg.instrument.joints and cfg.instrument.joints[0].spindle_radius > 0:
+        from slave.spindle_rig import SpindleInstrument
+        return SpindleInstrument.from_config(cfg)
     if cfg.instrument.joints:
         from slave.joint_rig import SimulatedInstrument
         return SimulatedInstrument.from_config(cfg)
