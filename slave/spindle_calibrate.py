@@ -11,6 +11,9 @@ torque of the two passes differs by the capstan band only: with the pair's prete
 
 (from T_a,p = T_a,d e^{K}, T_b,p = T_b,d e^{-K}, T_a,p + T_b,p = Q on one branch and the mirror on the
 other; Phee et al. 2009, eq. (1) per cable), so K = artanh(h / Q) with h half the difference. The
+two passes are compared at the same jaw angle, not the same spindle angle: the cables' stretch puts
+the jaw behind the spindle by lam tau_p (lam of (S4)), and a load that grows with the jaw angle would
+otherwise enter the band. Each pass's torque is a straight line fitted over +-15 % of the stroke. The
 pull-slip elongation per tension M_e follows from K, the route's wrap shape and L/EA.
 """
 from __future__ import annotations
@@ -120,17 +123,21 @@ class SpindleCalibration:
         for i, j in enumerate(self.joints):
             pts = self.points[i]
             mid = self.rest[i] + 0.5 * (pts[1] + pts[2])
-            win = 0.05 * abs(pts[2] - pts[1])
+            win = 0.15 * abs(pts[2] - pts[1])
             rate = np.gradient(x[:, i])
-            near = np.abs(x[:, i] - mid) <= win
+            c = [t.geometry().length / t.EA for t in (j.tendons.a, j.tendons.b)]
+            jaw = x[:, i] - 0.25 * (c[0] + c[1]) * tau[:, i] / j.spindle_radius ** 2    # the jaw's angle / n_k
+            near = np.abs(jaw - mid) <= win
             up, down = near & (rate > 0), near & (rate < 0)
-            if up.sum() < 3 or down.sum() < 3:
+            if up.sum() < 5 or down.sum() < 5:
                 raise CalibrationError(f"spindle calibration of {j.name}: {int(up.sum())} and {int(down.sum())} "
-                                       f"samples at the stroke's middle, need 3 each")
+                                       f"samples at the stroke's middle, need 5 each")
             Q = 2.0 * j.pretension * j.spindle_radius
-            h = 0.5 * (float(np.median(tau[up, i])) - float(np.median(tau[down, i])))
+            fits = [np.polyfit(jaw[sel] - mid, tau[sel, i], 1) for sel in (up, down)]
+            h = 0.5 * float(fits[0][1] - fits[1][1])
             K = band_to_K(h, Q)
-            noise = float(np.std(tau[up, i] - np.median(tau[up, i]))) / (math.sqrt(2.0) * j.spindle_radius)
+            resid = tau[up, i] - np.polyval(fits[0], jaw[up] - mid)
+            noise = float(np.std(resid)) / (math.sqrt(2.0) * j.spindle_radius)
             cables = {}
             for t in TENDONS:
                 tendon = getattr(j.tendons, t)
