@@ -39,31 +39,36 @@ class SpindleSample:
 
 
 @njit(cache=True, nogil=True)
-def _drag(T, hi, t_p, v):  # pragma: no cover - compiled
-    """Raise a profile from its distal end to ``v``: node j >= v hi_j / hi_n, within t_p hi_j (release slip)."""
+def _move_distal(T, lo, hi, t_p, v):  # pragma: no cover - compiled
+    """Move a profile's distal end to tension ``v`` by sliding its distal end: raised, node j >= v hi_j /
+    hi_n (release slip from the tip); lowered, node j <= v lo_j / lo_n (pull slip from the tip); both
+    within the envelope [t_p lo_j, t_p hi_j] of the proximal tension t_p."""
     n = T.shape[0]
     for j in range(n):
-        T[j] = max(T[j], min(v * hi[j] / hi[n - 1], t_p * hi[j]))
+        if v > T[n - 1]:
+            T[j] = max(T[j], min(v * hi[j] / hi[n - 1], t_p * hi[j]))
+        else:
+            T[j] = min(T[j], max(v * lo[j] / lo[n - 1], t_p * lo[j]))
 
 
 @njit(cache=True, nogil=True)
 def _cables(Ta, Tb, lo_a, hi_a, lo_b, hi_b, w, ta, tb):  # pragma: no cover - compiled
     """Both profiles' envelope update (Phee et al. 2009, eq. (1) per node) for proximal tensions ta, tb,
-    then the pair coupling (E13): a cable whose distal end slips toward the spindle (on its pull
-    envelope) turns the jaw, which drags the other cable's distal end toward the jaw; the jaw's load
-    changes little over that motion, so the dragged cable's distal tension rises as much as the puller's
-    (up to its release envelope). Returns (T_a,d, T_b,d, E_a, E_b), E the mean profile tension."""
+    then the pair coupling (E13): when one cable's distal end slips (its distal tension changes on its
+    envelope) while the other's is stuck, the jaw turns and moves the stuck cable's distal end with it;
+    the jaw's load changes little over that motion, so the stuck cable's distal tension changes by as
+    much as the slipping one's (within its own envelope). Returns (T_a,d, T_b,d, E_a, E_b), E the
+    mean profile tension."""
     n = Ta.shape[0]
     a0, b0 = Ta[n - 1], Tb[n - 1]
     for j in range(n):
         Ta[j] = envelope_clip(Ta[j], ta * lo_a[j], ta * hi_a[j])
         Tb[j] = envelope_clip(Tb[j], tb * lo_b[j], tb * hi_b[j])
-    a_pulls = Ta[n - 1] <= ta * lo_a[n - 1] * (1.0 + 1e-12)
-    b_pulls = Tb[n - 1] <= tb * lo_b[n - 1] * (1.0 + 1e-12)
-    if b_pulls and not a_pulls and Tb[n - 1] > b0:
-        _drag(Ta, hi_a, ta, Ta[n - 1] + Tb[n - 1] - b0)
-    elif a_pulls and not b_pulls and Ta[n - 1] > a0:
-        _drag(Tb, hi_b, tb, Tb[n - 1] + Ta[n - 1] - a0)
+    da, db = Ta[n - 1] - a0, Tb[n - 1] - b0
+    if da != 0.0 and db == 0.0:
+        _move_distal(Tb, lo_b, hi_b, tb, b0 + da)
+    elif db != 0.0 and da == 0.0:
+        _move_distal(Ta, lo_a, hi_a, ta, a0 + db)
     ea = 0.0
     eb = 0.0
     for j in range(n):
