@@ -125,8 +125,8 @@ class SpindleCalibration:
             mid = self.rest[i] + 0.5 * (pts[1] + pts[2])
             win = 0.15 * abs(pts[2] - pts[1])
             rate = np.gradient(x[:, i])
-            c = [t.geometry().length / t.EA for t in (j.tendons.a, j.tendons.b)]
-            jaw = x[:, i] - 0.25 * (c[0] + c[1]) * tau[:, i] / j.spindle_radius ** 2    # the jaw's angle / n_k
+            comp = [t.geometry().length / t.EA for t in (j.tendons.a, j.tendons.b)]
+            jaw = x[:, i] - 0.25 * (comp[0] + comp[1]) * tau[:, i] / j.spindle_radius ** 2    # the jaw's angle / n_k
             near = np.abs(jaw - mid) <= win
             up, down = near & (rate > 0), near & (rate < 0)
             if up.sum() < 5 or down.sum() < 5:
