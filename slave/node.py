@@ -58,6 +58,7 @@ from slave.rig import Rig, RigState
 from slave.tendon_axis import CSV_COLUMNS, CSV_TRUTH_COLUMNS, RELAX_BAND, TendonAxis, csv_columns
 from teleop.codec import seq_newer
 from teleop.config import Config
+from teleop.errors import ConfigError
 from teleop.messages import Command, Estimate, SideState
 
 __all__ = ["SlaveLinks", "SlaveNode", "axis_kind", "CSV_COLUMNS", "CSV_TRUTH_COLUMNS", "csv_columns", "RELAX_BAND",
@@ -67,8 +68,18 @@ __all__ = ["SlaveLinks", "SlaveNode", "axis_kind", "CSV_COLUMNS", "CSV_TRUTH_COL
 def axis_kind(cfg: Config) -> type[SlaveAxis]:
     """The kind of axis of the configured instrument: :class:`PairAxis` when ``instrument.joints`` is
     given (:class:`slave.spindle_axis.SpindleAxis` when they have a ``spindle_radius``), else
-    :class:`TendonAxis` (a single tendon)."""
-    if cfg.instrument.joints and cfg.instrument.joints[0].spindle_radius > 0:
+    :class:`TendonAxis` (a single tendon).
+
+    Raises
+    ------
+    ConfigError
+        Some joints have a ``spindle_radius`` and others not (all axes of an instrument are of one kind).
+    """
+    spindles = [j.spindle_radius > 0 for j in cfg.instrument.joints]
+    if any(spindles) and not all(spindles):
+        raise ConfigError("instrument.joints[].spindle_radius: every joint of an instrument is spindle-driven "
+                          "(> 0) or none is (0)")
+    if spindles and spindles[0]:
         from slave.spindle_axis import SpindleAxis
         return SpindleAxis
     return PairAxis if cfg.instrument.joints else TendonAxis

@@ -6,7 +6,8 @@ joint instrument). Registered here:
 
 =============  ==============================================================================
 ``simulated``  the in-process simulators (:class:`slave.simulated.SimulatedRig`, one tendon;
-               :class:`slave.joint_rig.SimulatedInstrument`, ``instrument.joints`` given)
+               :class:`slave.joint_rig.SimulatedInstrument`, ``instrument.joints`` given;
+               :class:`slave.spindle_rig.SpindleInstrument`, joints with a ``spindle_radius``)
 ``zenoh``      set-points out, samples in over Zenoh (:class:`slave.zenoh_rig.ZenohRig`, one tendon;
                :class:`slave.zenoh_rig.ZenohInstrument`, joints): a motor controller running
                zenoh-pico, or ``teleop bridge``
@@ -65,5 +66,8 @@ def _simulated(cfg: Config, session: Any):
 def _zenoh(cfg: Config, session: Any):
     if session is None:
         raise ConfigError("rig.type zenoh needs the slave's transport session")
+    if cfg.instrument.joints and cfg.instrument.joints[0].spindle_radius > 0:
+        raise ConfigError("rig.type zenoh drives a motor per tendon; a spindle-driven instrument "
+                          "(instrument.joints[].spindle_radius > 0) runs on rig.type simulated")
     from slave.zenoh_rig import ZenohInstrument, ZenohRig
     return ZenohInstrument(session, cfg) if cfg.instrument.joints else ZenohRig(session, cfg)

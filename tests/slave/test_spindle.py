@@ -167,3 +167,14 @@ def test_axis_checks_targets_and_relaxes_to_rest(cfg):
     for _ in range(5000):
         phi = ax.motor(True, None, rig.state, DT)
     assert phi == pytest.approx(ax.rest) and ax.hold is None
+
+
+def test_an_instrument_mixing_spindle_and_pair_joints_is_refused(cfg):
+    pair = dataclasses.replace(cfg.instrument.joints[0], name="wrist", spindle_radius=0.0)
+    mixed = dataclasses.replace(cfg, instrument=dataclasses.replace(cfg.instrument,
+                                                                    joints=(cfg.instrument.joints[0], pair)))
+    with pytest.raises(ConfigError, match="spindle_radius"):
+        axis_kind(mixed)
+    zenoh = dataclasses.replace(cfg, rig=dataclasses.replace(cfg.rig, type="zenoh"))
+    with pytest.raises(ConfigError, match="spindle"):
+        make_rig(zenoh, session=object())
