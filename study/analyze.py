@@ -40,7 +40,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from estimator.offline.diagnosis import diagnose
+from estimator.offline.diagnosis import diagnose_recording
+from estimator.offline.diagnosis_result import Diagnosis, as_diagnosis
 from estimator.offline.pair import fit_force_path, fit_linear, fit_pair, fit_play_map, reversal_dead_zones, rmse
 from estimator.offline.pair_diagnosis import diagnose_pair
 from estimator.offline.pair_general import shared_analysis
@@ -139,12 +140,13 @@ def main_analyze(args: argparse.Namespace) -> int:
         if args.figures:
             raise ConfigError("--figures is for the KAIST analysis (--kaist); use --report DIR")
         shape, how = (None, None) if args.route is None else configured_route(args.route)
-        summary, data = diagnose_file(args.file, train_fraction=args.train_fraction, wrap_shape=shape)
+        result, data = diagnose_file(args.file, train_fraction=args.train_fraction, wrap_shape=shape)
         if how is not None:
-            summary["route"] = how
-        print(format_diagnosis(summary))
+            result.extra["route"] = how
+        print(format_diagnosis(result))
         if args.report is not None:
-            print(f"wrote {write_report(summary, data, args.report)}")
+            print(f"wrote {write_report(result, data, args.report)}")
+        summary = result.to_json()
     if args.json is not None:
         Path(args.json).write_text(json.dumps(summary, indent=2, allow_nan=False, default=_nan_none) + "\n")
         print(f"wrote {args.json}")
@@ -188,8 +190,9 @@ def configured_route(path: str | Path) -> tuple[np.ndarray, str]:
 
 
 def diagnose_file(path: str | Path, train_fraction: float = 0.6,
-                  progress: bool | None = None, wrap_shape: np.ndarray | None = None) -> tuple[dict, MeasuredData]:
-    """Diagnose one measured-data CSV (:func:`estimator.offline.diagnosis.diagnose`).
+                  progress: bool | None = None,
+                  wrap_shape: np.ndarray | None = None) -> tuple[Diagnosis, MeasuredData]:
+    """Diagnose one measured-data CSV (:func:`estimator.offline.diagnosis.diagnose_recording`).
 
     Parameters
     ----------
@@ -201,9 +204,10 @@ def diagnose_file(path: str | Path, train_fraction: float = 0.6,
 
     Returns
     -------
-    result : dict
+    result : Diagnosis
         The diagnosis (cause, causes, base and extended {rmse_T_out_N, rmse_x_out_m}, gain,
-        parameters, candidates, ...; JSON-ready) plus ``file``, ``n_samples`` and ``duration_s``.
+        parameters, candidates, ...; ``.to_json()`` for the JSON) with ``file``, ``n_samples`` and
+        ``duration_s`` in its ``extra``.
     data : MeasuredData, the recording (for :func:`study.report.write_report`)
 
     Raises
@@ -217,20 +221,22 @@ def diagnose_file(path: str | Path, train_fraction: float = 0.6,
         raise ConfigError(f"--train-fraction must be in [0.3, 0.9], got {train_fraction!r}")
     data = read_measured_csv(path).require_distal()
     try:
-        result = diagnose(data, train_fraction=train_fraction, wrap_shape=wrap_shape,
-                          progress=len(data) >= PROGRESS_SAMPLES if progress is None else progress)
+        result = diagnose_recording(data, train_fraction=train_fraction, wrap_shape=wrap_shape,
+                                    progress=len(data) >= PROGRESS_SAMPLES if progress is None else progress)
     except ValueError as e:
         raise DataError(str(e) if str(e).startswith(data.source) else f"{data.source}: {e}") from None
-    result.update({"file": str(path), "n_samples": len(data), "duration_s": data.duration})
+    result.extra.update({"file": str(path), "n_samples": len(data), "duration_s": data.duration})
     return result, data
 
 
-def format_diagnosis(result: dict) -> str:
+def format_diagnosis(result: Diagnosis | dict) -> str:
     """The lines printed for one CSV: :func:`study.report.format_summary`, then the split and the
-    fitted parameters of the extended model (SI units)."""
+    fitted parameters of the extended model (SI units). ``result`` carries ``file``, ``n_samples`` and
+    ``duration_s`` (:func:`diagnose_file`), and ``route`` when the route was held."""
+    r = as_diagnosis(result)
     pars = ", ".join(f"{k} = {p['value']:.4g}" + ("" if p["unit"] in ("", "-") else f" {p['unit']}")
-                     for k, p in result["parameters"].items())
-    held = result.get("settings", {}).get("distal_end_held")
+                     for k, p in r.parameters.items())
+    held = r.settings.get("distal_end_held")
     note = [] if not held else [
         f"x_out set aside: it moves {1e6 * held['range_m']:.3g} um, {100 * held['range_m'] / held['travel_m']:.2g} % of "
         f"x_in's {1e3 * held['travel_m']:.3g} mm travel - the distal end pressed on a stop, whose deflection the base "
@@ -239,17 +245,17 @@ def format_diagnosis(result: dict) -> str:
         f"x_out set aside: it stays within {1e6 * held['range_m']:.3g} um over the recording (resolution "
         f"{1e6 * held['step_m']:.3g} um, x_in travel {1e3 * held['travel_m']:.3g} mm) - the distal end was held "
         "(a stop, or a load the tension never moved), so x_out shows nothing of the tendon"]
-    at_end = result.get("settings", {}).get("distal_at_end")
+    at_end = r.settings.get("distal_at_end")
     if at_end and at_end["hides"]:
         note.append(f"x_out sits within {1e6 * at_end['band_m']:.2g} um of an end of its {1e3 * at_end['range_m']:.3g} mm "
                     f"range for {100 * at_end['share']:.0f} % of the proximal travel (a distal end held on a stop, or "
                     "a load not lifted): " + ", ".join(at_end["hides"])
                     + " cannot show in this recording, whatever the answer")
-    if result.get("route"):
-        note.append(result["route"])
-    return "\n".join([f"{result['file']}: {result['n_samples']} samples, {result['duration_s']:.1f} s "
-                      f"(diagnosed in {result['elapsed_s']:.1f} s)", split_text(result), *note,
-                      format_summary(result), f"parameters: {pars}"])
+    if r.extra.get("route"):
+        note.append(r.extra["route"])
+    return "\n".join([f"{r.extra['file']}: {r.extra['n_samples']} samples, {r.extra['duration_s']:.1f} s "
+                      f"(diagnosed in {r.elapsed_s:.1f} s)", split_text(r), *note,
+                      format_summary(r), f"parameters: {pars}"])
 
 
 # ---- KAIST antagonistic pair ------------------------------------------------------------------

@@ -7,7 +7,7 @@ Agg canvas, no display needed):
 * ``residuals_by.png``     held-out residuals vs sliding speed |dx_in/dt|, vs T_in and by phase;
 * ``loops.png``            T_out vs T_in and elongation x_in - x_out vs T_in, measured beside the base
                            and the extended model (held-out block);
-* ``candidates.png``       held-out score and gain of every extension.
+* ``candidates.png``       validation score S of every extension and the price of its parameters.
 
 The report names the cause, the physical explanation and the signature from the catalogue
 (:mod:`estimator.offline.effects`), the held-out errors, the gain and the fitted parameters with units.
@@ -21,6 +21,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from estimator.offline.diagnosis import predictions
+from estimator.offline.diagnosis_result import Diagnosis, as_diagnosis
 from estimator.offline.effects import CATALOGUE
 from estimator.phase import Phase
 from teleop.recording import MeasuredData
@@ -109,18 +110,25 @@ def _fig_loops(data, pred, held, path) -> str:
     return _save(fig, path)
 
 
-def _fig_candidates(result, path) -> str:
-    c = result["candidates"]
-    ids = sorted(c, key=lambda k: c[k]["score"])
-    fig = Figure(figsize=(10, 0.9 + 0.22 * len(ids)), layout="constrained")
+def _fig_candidates(result: Diagnosis, path) -> str:
+    """Each candidate's validation score S (log axis, base = 1) and the price of its parameters, best at the top;
+    the axis starts below the best score, so every bar, the best included, has a visible length."""
+    c = result.candidates
+    ids = sorted(c, key=lambda k: c[k].score, reverse=True)
+    scores = np.array([max(c[k].score, 1e-6) for k in ids])
+    fig = Figure(figsize=(10, 1.3 + 0.22 * len(ids)), layout="constrained")
     ax = fig.add_subplot(1, 1, 1)
-    ax.barh(ids, [c[k]["score"] for k in ids], color=["C2" if c[k]["accepted"] else "C0" for k in ids])
-    ax.barh(ids, [c[k]["penalised_score"] - c[k]["score"] for k in ids], left=[c[k]["score"] for k in ids],
-            color="0.8", label="price of the parameters")
+    left = float(scores.min()) / 3.0 if scores.size else 0.1
+    ax.barh(ids, scores - left, left=left, color=["C2" if c[k].accepted else "C0" for k in ids],
+            label="score S (green: accepted)")
+    ax.barh(ids, [c[k].penalised_score - c[k].score for k in ids], left=scores, color="0.8",
+            label="price of the parameters")
     ax.axvline(1.0, color="k", lw=1)
-    ax.set_xlabel("validation score S (base = 1; training block only), accepted below 1 with the price")
     ax.set_xscale("log")
-    ax.legend(fontsize=8)
+    ax.set_xlim(left, max(2.0, float(max((c[k].penalised_score for k in ids), default=1.0)) * 1.2))
+    ax.set_xlabel("validation score S (base = 1; training block only), accepted below 1 with the price")
+    ax.set_title(f"candidate extensions: cause {result.cause}")
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     return _save(fig, path)
 
 
@@ -132,9 +140,9 @@ def _fmt(v, unit: str) -> str:
     return f"{v:.4g} {unit}"
 
 
-def split_text(result: dict) -> str:
+def split_text(result: Diagnosis | dict) -> str:
     """One sentence on which samples were used for what (fit/validation folds, training, test)."""
-    sp = result["split"]
+    sp = as_diagnosis(result).split
     tr, te = sp["train"], sp["test"]
     dur = te["time_s"][1] - te["time_s"][0]
     f0, f1 = sp["folds"]
@@ -146,35 +154,38 @@ def split_text(result: dict) -> str:
             + ("" if len(sp.get("judged_folds", ())) != 1 else f" Judged on the {sp['judged_folds'][0]}."))
 
 
-def format_summary(result: dict) -> str:
+def _stick_slip_line(r: Diagnosis) -> str:
+    """Why the stick-slip reading named stiction (docs/concepts/diagnosis.md, the stick-slip rule)."""
+    slip, st = r.stick_slip, r.settings
+    if slip.weak:
+        why = (f"below the bound {st['stick_slip_ratio']:g} but at least {st['stick_slip_weak']:g}, and the "
+               f"stiction extension scores {r.candidates['stiction'].score:.2f} (below "
+               f"{st['stick_slip_weak_score']:g}: two weak signs together)")
+    else:
+        why = f"bound {st['stick_slip_ratio']:g}"
+    models = ("the models alone named nothing" if not slip.overruled else
+              f"the models named {', '.join(slip.overruled)}, which left structure it does not explain "
+              "and has no stick-slip")
+    return (f"named by the stick-slip check: the proximal tension is {slip.ratio:.2f} x rougher in "
+            f"steady moves than in holds ({why}); {models}; r_s below is the quasi-static extension's fit, which "
+            "reads a stick-slip's static peak low (docs/concepts/diagnosis.md)")
+
+
+def format_summary(result: Diagnosis | dict) -> str:
     """A few plain-text lines: cause, gain, held-out errors (for a terminal)."""
-    b, e = result["base"], result["extended"]
-    more = f"  (all: {', '.join(result['causes'])})" if len(result["causes"]) > 1 else ""
-    eq = f"  (or equivalently: {', '.join(result['equivalent'])})" if result.get("equivalent") else ""
-    lines = [f"cause: {result['cause']}{more}{eq}",
-             f"held-out gain on {result['primary_signal']}: {result['gain']:.2f}"]
-    slip = result.get("stick_slip") or {}
-    if slip.get("named"):
-        st = result["settings"]
-        if slip.get("weak"):
-            why = (f"below the bound {st['stick_slip_ratio']:g} but at least {st['stick_slip_weak']:g}, and the "
-                   f"stiction extension scores {result['candidates']['stiction']['score']:.2f} (below "
-                   f"{st['stick_slip_weak_score']:g}: two weak signs together; docs/diagnosis.md, Session 29)")
-        else:
-            why = f"bound {st['stick_slip_ratio']:g}"
-        models = ("the models alone named nothing" if not slip.get("overruled") else
-                  f"the models named {', '.join(slip['overruled'])}, which left structure it does not explain "
-                  "and has no stick-slip (docs/diagnosis.md, Session 30)")
-        lines.append(f"named by the stick-slip check: the proximal tension is {slip['ratio']:.2f} x rougher in "
-                     f"steady moves than in holds ({why}); {models}; r_s below is the "
-                     "quasi-static extension's fit, which reads a stick-slip's static peak low (docs/diagnosis.md, "
-                     "Session 22)")
-    rest = result.get("rest_offset") or {}
-    if rest.get("named"):
-        ch = rest["reads"].split(":")[1]
-        lines.append(f"named by the initial rest: {ch} reads {_fmt(rest[f'{ch}_m'], 'm')} there, where positions are "
-                     "zeroed and no physical effect moves them; the models alone named nothing (docs/diagnosis.md, "
-                     "Session 30)")
+    r = as_diagnosis(result)
+    b, e = r.base, r.extended
+    more = f"  (all: {', '.join(r.causes)})" if len(r.causes) > 1 else ""
+    eq = f"  (or equivalently: {', '.join(r.equivalent)})" if r.equivalent else ""
+    lines = [f"cause: {r.cause}{more}{eq}", f"held-out gain on {r.primary_signal}: {r.gain:.2f}"]
+    if r.stick_slip.named:
+        lines.append(_stick_slip_line(r))
+    rest = r.rest_offset
+    if rest.named and rest.reads is not None:
+        ch = rest.reads.split(":")[1]
+        lines.append(f"named by the initial rest: {ch} reads {_fmt(getattr(rest, f'{ch}_m'), 'm')} there, where "
+                     "positions are zeroed and no physical effect moves them; the models alone named nothing "
+                     "(docs/concepts/diagnosis.md)")
     for name, unit in (("T_out", "N"), ("x_out", "m")):
         key = f"rmse_{name}_{unit}"
         if b.get(key) is not None:
@@ -182,13 +193,14 @@ def format_summary(result: dict) -> str:
     return "\n".join(lines)
 
 
-def write_report(result: dict, data: MeasuredData, out_dir: str | Path) -> Path:
+def write_report(result: Diagnosis | dict, data: MeasuredData, out_dir: str | Path) -> Path:
     """Write ``report.md`` and its figures for one diagnosis into ``out_dir`` (created if needed).
 
     Parameters
     ----------
-    result : dict
-        What :func:`estimator.offline.diagnosis.diagnose` returned for ``data``.
+    result : Diagnosis or dict
+        What :func:`estimator.offline.diagnosis.diagnose_recording` (or, as JSON,
+        :func:`estimator.offline.diagnosis.diagnose`) returned for ``data``.
     data : MeasuredData
         The recording that was diagnosed.
     out_dir : str or Path
@@ -204,15 +216,29 @@ def write_report(result: dict, data: MeasuredData, out_dir: str | Path) -> Path:
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    pred = predictions(result, data)
-    t_split = result["split"]["time_s"]
+    r = as_diagnosis(result)
+    pred = predictions(r.to_json(), data)
+    t_split = r.split["time_s"]
     held = data.time >= t_split
     figs = {"residuals over time": _fig_time(data, pred, t_split, out / "residuals_time.png"),
             "residuals by speed, tension and phase": _fig_by(data, pred, held, out / "residuals_by.png"),
             "loops, measured beside simulated": _fig_loops(data, pred, held, out / "loops.png"),
-            "candidates": _fig_candidates(result, out / "candidates.png")}
-    cause = result["cause"]
-    md = [f"# Diagnosis of {data.source}", "", "```", format_summary(result), "```", ""]
+            "candidates": _fig_candidates(r, out / "candidates.png")}
+    md = [f"# Diagnosis of {data.source}", "", "```", format_summary(r), "```", "", *_cause_text(r.cause)]
+    md += _tables(r)
+    md += ["", split_text(r), "Score S: validation (rmse / noise floor)^2 summed over the measured distal "
+           "signals, relative to the base model, the worse of the two folds; an extension is accepted when S plus "
+           f"{r.settings['penalty_per_parameter']} per parameter stays below 1.", ""]
+    for title, name in figs.items():
+        md += [f"## {title.capitalize()}", "", f"![{title}]({name})", ""]
+    path = out / "report.md"
+    path.write_text("\n".join(md), encoding="utf-8")
+    return path
+
+
+def _cause_text(cause: str) -> list[str]:
+    """The paragraph on the cause: the catalogue's explanation and signature, or what none and unknown mean."""
+    md: list[str] = []
     if cause in CATALOGUE:
         e = CATALOGUE[cause]
         md += [f"**{cause}** ({e.literature}): {e.cause}.", "", f"Signature in data: {e.signature}.", ""]
@@ -222,24 +248,22 @@ def write_report(result: dict, data: MeasuredData, out_dir: str | Path) -> Path:
     else:
         md += ["**unknown**: structure is left in the held-out residual (rmse well above the noise floor) "
                "that no extension of the catalogue explains.", ""]
-    md += ["## Fitted parameters", "", "| parameter | value | unit | from |", "|---|---|---|---|"]
-    md += [f"| {k} | {p['value']:.6g} | {p['unit']} | {p['effect']} |" for k, p in result["parameters"].items()]
+    return md
+
+
+def _tables(r: Diagnosis) -> list[str]:
+    """The fitted parameters and the candidates as markdown tables."""
+    md = ["## Fitted parameters", "", "| parameter | value | unit | from |", "|---|---|---|---|"]
+    md += [f"| {k} | {p['value']:.6g} | {p['unit']} | {p['effect']} |" for k, p in r.parameters.items()]
     md += ["", "## Candidates (model choice on the training block)", "",
            "| extension | score S | S + price | validation rmse T_out [N] | validation rmse x_out [um] | accepted |",
            "|---|---|---|---|---|---|"]
     g = (lambda v: "-" if v is None else f"{v:.3f}")  # noqa: E731
-    for k, c in sorted(result["candidates"].items(), key=lambda kv: kv[1]["score"]):
-        x = c["validation_rmse_x_out_m"]
-        md.append(f"| {k} | {c['score']:.3f} | {c['penalised_score']:.3f} | {g(c['validation_rmse_T_out_N'])} | "
-                  f"{'-' if x is None else f'{x * 1e6:.2f}'} | {'yes' if c['accepted'] else ''} |")
-    if result.get("equivalent"):
+    for k, c in sorted(r.candidates.items(), key=lambda kv: kv[1].score):
+        x = c.validation.get("rmse_x_out_m")
+        md.append(f"| {k} | {c.score:.3f} | {c.penalised_score:.3f} | {g(c.validation.get('rmse_T_out_N'))} | "
+                  f"{'-' if x is None else f'{x * 1e6:.2f}'} | {'yes' if c.accepted else ''} |")
+    if r.equivalent:
         md += ["", f"Equivalent explanations (the same outputs, not separable from these signals): "
-               f"{', '.join(result['equivalent'])}."]
-    md += ["", split_text(result), "Score S: validation (rmse / noise floor)^2 summed over the measured distal "
-           "signals, relative to the base model, the worse of the two folds; an extension is accepted when S plus "
-           f"{result['settings']['penalty_per_parameter']} per parameter stays below 1.", ""]
-    for title, name in figs.items():
-        md += [f"## {title.capitalize()}", "", f"![{title}]({name})", ""]
-    path = out / "report.md"
-    path.write_text("\n".join(md), encoding="utf-8")
-    return path
+               f"{', '.join(r.equivalent)}."]
+    return md

@@ -57,7 +57,7 @@ class RigSwitch:
 class ScenarioKnob:
     """How a hidden-effect scenario sets the effect from its level u in [0, 1].
 
-    ``ranges``: (name, low, high) realistic magnitudes in SI units (docs/diagnosis.md); ``signed``:
+    ``ranges``: (name, low, high) realistic magnitudes in SI units (docs/concepts/effects.md); ``signed``:
     the names whose sign the scenario draws from its seed; ``settings(m, K, duration)``: the
     magnitudes m (signed), the rig's friction exponent K [-] and the recording's duration [s] ->
     the values of the recording (switch settings by name, and truth parameters); None: m as it is;

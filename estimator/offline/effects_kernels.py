@@ -23,10 +23,10 @@ distal part slide back) - and is updated in one of two ways:
   h [N] is the noise band of the reading T_in (``band``; 0 on exact data): the rule latches
   extremes, and on a noisy reading it would latch the noise's own (a hold of a few hundred
   samples reaches about 3 sigma), so the profile moves only for what exceeds h; on exact data h
-  is a dead zone (estimator.offline.effects.NOISE_BAND, session 11).
+  is a dead zone (estimator.offline.effects.NOISE_BAND).
   When the update reaches the distal node the whole tendon slides in that direction s. It slides too where the
   measured distal end is seen moving the way the proximal end moves while T_in has not turned back by more than
-  2 sigma (``slide``, session 20; at a reversal the averaged T_in turns before the distal end stops): a stuck distal
+  2 sigma (``slide``; at a reversal the averaged T_in turns before the distal end stops): a stuck distal
   part holds the distal end, so a moving distal end means the slip has reached it, whatever the memory with
   the fitted K holds (with a constant-force load the release sits on the edge of the band, and the memory
   alone matches the load's constant T_out for any K that is too large);
@@ -52,6 +52,8 @@ import math
 import numpy as np
 from numba import njit
 
+from estimator.offline.effect_types import route_shape  # re-exported: the route's shape of the kernels' nodes
+
 __all__ = ["run_extended", "distal_slide", "route_shape", "stiffening_strain", "travel_lag", "backlash_play", "V_STOP",
            "BREAK_MARGIN"]
 
@@ -61,7 +63,7 @@ BREAK_MARGIN = 0.35  # share of the kinetic-static gap within which a turn of T_
 
 @njit(cache=True, nogil=True)
 def slack_index(T_in, x_in, lo, hi, window, mean_lo, held, held_lo):  # pragma: no cover - compiled
-    """Index of the last taut sample at every sample, shape (n,) (see effects.slack_hold). The tendon goes
+    """Index of the last taut sample at every sample, shape (n,) (see effects_predict.slack_hold). The tendon goes
     slack when T_in < lo and held < held_lo. It is taut again when T_in >= lo and either the proximal end is
     back where it went slack (x_in >= its value at the last taut sample: the paid-out length taken up) or the
     mean of T_in over the last ``window`` samples is >= mean_lo (a tension above zero, not one noise sample on
@@ -305,21 +307,6 @@ def backlash_play(x: np.ndarray, width: float) -> np.ndarray:
     return out
 
 
-def route_shape(n1: int, r_1: float, r_2: float, *finer: float) -> np.ndarray:
-    """Normalised wrap angle u(s) [-], shape (n1,), at n1 nodes equally spaced in arc length: piecewise
-    linear over M = 3 equal thirds (r_1, r_2) or, with ``finer`` = (r_3, ..., r_{M-1}), M equal parts (6 sixths,
-    12 twelfths) holding the shares q_k = r_k (1 - q_1 - ... - q_{k-1}) of the total angle, the last share the rest
-    (see :data:`estimator.offline.effects.ROUTE` and :data:`estimator.offline.effects.ROUTE_FINE`)."""
-    r = (r_1, r_2, *finer)
-    q, left = [], 1.0
-    for v in r:
-        q.append(left * v)
-        left -= q[-1]
-    q.append(left)
-    knots = np.linspace(0.0, 1.0, len(q) + 1)
-    return np.interp(np.linspace(0.0, 1.0, n1), knots, np.concatenate([[0.0], np.cumsum(q)]))
-
-
 def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np.ndarray, w: np.ndarray, *,
                  K: float, a: float = 0.0, T0: float = 0.0, K_rate: float = 0.0, c_v: float = 0.0,
                  r_s: float = 0.0, t_slip: float = 0.02, T_min: float = 0.0,
@@ -331,41 +318,29 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
 
     Parameters
     ----------
-    T_in : ndarray, shape (n,)
-        Proximal tension [N] (after any sensor correction).
-    velocity : ndarray, shape (n,)
-        Proximal velocity dx_in/dt [m/s]; |v| is the sliding speed.
-    time : ndarray, shape (n,)
-        Sample times [s], increasing.
-    u : ndarray, shape (m + 1,)
-        Normalised wrap angle of the nodes, 0 (proximal) to 1 (distal), non-decreasing.
-    w : ndarray, shape (m + 1,)
-        Trapezoid weights, sum 1.
-    K : float
-        Friction exponent [-], >= 0.
-    a : float
-        Tension offset [N], >= 0 (E8). T0 : initial uniform tension [N], >= 0 (E5).
-    K_rate : float
-        dK/dt [1/s] (E6). c_v : viscous coefficient [s/m], >= 0 (E3).
-    r_s : float
-        mu_static / mu_kinetic - 1 [-], >= 0 (E4); t_slip [s] its relaxation time after breakaway;
-        breakaways below the proximal tension T_min [N] switch to kinetic without the relaxation;
-        sigma [N] is the noise of T_in (a turn of T_in must exceed 2 sigma to count as breakaway).
+    T_in, velocity, time : ndarray, shape (n,)
+        Proximal tension [N] (after any sensor correction), proximal velocity dx_in/dt [m/s] (|v| is the sliding
+        speed), sample times [s], increasing.
+    u, w : ndarray, shape (m + 1,)
+        Normalised wrap angle of the nodes, 0 (proximal) to 1 (distal), non-decreasing; trapezoid weights, sum 1.
+    K, a, T0, K_rate, c_v : float
+        Friction exponent [-] >= 0; tension offset [N] >= 0 (E8); initial uniform tension [N] >= 0 (E5);
+        dK/dt [1/s] (E6); viscous coefficient [s/m] >= 0 (E3).
+    r_s, t_slip, T_min, sigma : float
+        mu_static / mu_kinetic - 1 [-] >= 0 (E4) and its relaxation time [s] after breakaway; breakaways below
+        the proximal tension T_min [N] switch to kinetic without the relaxation; the noise of T_in [N] (a turn
+        of T_in must exceed 2 sigma to count as breakaway).
     beta, Tc : float
         Stiffening: extra compliance at zero tension [-] and its tension scale [N], > 0 (E9).
     speed : ndarray, shape (n,), optional
         Sliding speed [m/s] >= 0 in K (1 + c_v speed) (default |velocity|, the proximal speed).
-    v_st : float
-        Stiction in its Stribeck form when > 0 [m/s]: each node's bound is K (1 + r_s e^-(v_i/v_st)^2)
-        by its own sliding speed v_i (no breakaway rule, no relaxation); 0: the breakaway form.
-    T0_out : float
-        Distal tension at rest [N] that caps the initial profile with T0 > 0 (module docstring); < 0: uniform T0.
-    band : float
-        Noise band h [N] >= 0 of the T_in reading in the stuck rule (module docstring); 0: exact T_in.
+    v_st, T0_out, band : float
+        Stiction in its Stribeck form when > 0 [m/s] (each node's bound K (1 + r_s e^-(v_i/v_st)^2) by its own
+        sliding speed, no breakaway rule; 0: the breakaway form); the distal tension at rest [N] that caps the
+        initial profile with T0 > 0 (< 0: uniform T0); the noise band h [N] >= 0 of the stuck rule (0: exact).
     slide : ndarray of int8, shape (n,), optional
-        Direction in which the measured distal end is seen moving (+1, -1; 0 where it is not; see
-        :func:`distal_slide`). Where it moves the way the proximal end does (faster than V_STOP) the whole
-        tendon slides that way, whatever the memory holds (module docstring). None: not used.
+        Direction in which the measured distal end is seen moving (+1, -1, 0; :func:`distal_slide`): where it
+        moves the way the proximal end does (faster than V_STOP) the whole tendon slides that way. None: unused.
 
     Raises
     ------

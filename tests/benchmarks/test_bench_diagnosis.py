@@ -11,11 +11,14 @@ _PATH = os.path.join(os.path.dirname(__file__), "..", "..", "benchmarks", "bench
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("bench_diagnosis", _PATH)
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    # run as a script, the benchmark imports its report module from its own folder
+    with pytest.MonkeyPatch.context() as mp:
+        mp.syspath_prepend(os.path.dirname(_PATH))
+        spec = importlib.util.spec_from_file_location("bench_diagnosis", _PATH)
+        assert spec is not None and spec.loader is not None
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        yield mod
 
 
 def test_accuracy_interval_is_clopper_pearson(bench):

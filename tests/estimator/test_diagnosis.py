@@ -16,19 +16,19 @@ import numpy as np
 import pytest
 
 from estimator.data import MeasuredData
-from estimator.offline import diagnosis_fit
+from estimator.offline import diagnosis_folds, diagnosis_readings
+from estimator.offline import diagnosis_thresholds as th
 from estimator.offline.diagnosis import EXCESS_MIN, EXCESS_MIN_WITHOUT, FLOOR_SCORE_WITHOUT, STRONG_SCORE, diagnose
 from estimator.offline.diagnosis_fit import (
-    K_RESTART,
-    look_alike,
     paired_trimmed_ms,
     prepare,
     rest_start,
     split_at_rest,
     start_points,
-    toe_or_play,
     trimmed_ms,
 )
+from estimator.offline.diagnosis_readings import look_alike, toe_or_play
+from estimator.offline.diagnosis_thresholds import K_RESTART
 from estimator.offline.effects import CATALOGUE, EFFECT_IDS, EQUIVALENT, route_shape
 from study import lumped_scenarios
 from study.scenarios import record
@@ -71,8 +71,8 @@ def clean_result():
 
 @pytest.mark.parametrize("eid", EFFECT_IDS)
 def test_hidden_effect_is_named_and_earns_its_gain(eid):
-    # magnitude at 87 % of the realistic range (seed 11); at its low end a short recording may leave a
-    # lag or a drift within the floor (answer "none"): the benchmark reports those cases
+    # magnitude at 87 % of the realistic range; at its low end a short recording may leave a lag or a drift
+    # within the floor (answer "none"): the benchmark reports those cases
     rec = record(eid, seed=11, duration=DUR, rate_hz=RATE)
     res = diagnose(rec.data)
     check_named(eid, rec, res)
@@ -83,9 +83,9 @@ def test_hidden_effect_is_named_and_earns_its_gain(eid):
 # its own noise and quantisation (seeded; development seeds)
 LUMPED = [("sensor_offset:T_in", 101), ("sensor_offset:T_out", 102), ("sensor_lag:T_in", 103),
           ("sensor_drift:T_out", 109), ("sensor_lag:x_in", 105), ("sensor_offset:x_out", 110), ("pretension", 107),
-          # velocity friction on a preloaded spring (dev8 seed): the base model's route fit (r_1 ~ 0) is a local
-          # minimum, so the polished candidates also start from the uniform route; the per-node pre-sliding form at a travel
-          # of ~2 um (below the 20 um bound now) used to explain x_out better and was named instead
+          # velocity friction on a preloaded spring: the base model's route fit (r_1 ~ 0) is a local minimum, so the
+          # polished candidates also start from the uniform route; pre-sliding below its smallest travel (PRESLIDING_MIN)
+          # cannot explain x_out in its place
           ("velocity_friction", 700111)]
 
 
@@ -97,9 +97,9 @@ def test_lumped_simulator_hidden_effect_is_named_with_its_channel(eid, seed):
 
 
 def test_lumped_presliding_is_the_best_candidate_in_its_node_form():
-    # per-node pre-sliding (117 um on a constant-force load): the node form, x_p within 25 %. It was named until
-    # session 11; the noise band of the memory rule (NOISE_BAND, a dead zone of 3 sigma of T_in) took part of its
-    # x_out signature (structure 4.2 -> 1.7), and its score 0.50 is now just above what is accepted there (MID_SCORE)
+    # per-node pre-sliding (117 um on a constant-force load): the node form, x_p within 25 %. The noise band of the
+    # memory rule (NOISE_BAND, a dead zone of 3 sigma of T_in) takes part of its x_out signature, and its score sits
+    # near what is accepted there (MID_SCORE): pre-sliding or none
     rec = lumped_scenarios.record("presliding", seed=109, duration=DUR, rate_hz=RATE, level=0.7)
     res = diagnose(rec.data)
     cand = res["candidates"]
@@ -158,6 +158,29 @@ def test_result_keys_units_and_json(clean_result):
     assert res["candidates"]["sensor_lag:T_in"]["parameters"]["tau_T_in"]["unit"] == "s"
     again = json.loads(json.dumps(res))
     assert again["cause"] == res["cause"]
+
+
+def test_the_typed_result_writes_and_reads_the_same_json_keys(clean_result):
+    from estimator.offline.diagnosis_result import Diagnosis, as_diagnosis
+    rec, res = clean_result
+    typed = Diagnosis.from_json(res)
+    assert typed.cause == res["cause"] and typed.stick_slip.ratio == res["stick_slip"]["ratio"]
+    out = typed.to_json()
+    assert list(out) == list(res) and out == res
+    assert list(out["candidates"]["stiction"]) == list(res["candidates"]["stiction"])
+    assert as_diagnosis(typed) is typed
+    # a key a caller adds (the file name) travels along, after the documented ones
+    assert list(Diagnosis.from_json({**res, "file": "run.csv"}).to_json())[-1] == "file"
+    with pytest.raises(KeyError, match="'gain' missing"):
+        Diagnosis.from_json({k: v for k, v in res.items() if k != "gain"})
+
+
+def test_a_route_the_thirds_fit_keeps_the_thirds(clean_result):
+    # the rule that refines the route reads structure the thirds leave: on a clean rig recording they leave none,
+    # and the route stays as it is
+    rec, res = clean_result
+    assert max(res["structure"]["base"].values()) <= res["settings"]["weak_structure"]
+    assert res["settings"]["route_form"] == "thirds" and "r_3" not in res["parameters"]
 
 
 def test_split_is_a_time_block_at_a_rest(clean_result):
@@ -248,9 +271,8 @@ def _rest_then_pull(x_in_rest: float) -> MeasuredData:
 
 
 def test_a_position_reading_away_from_zero_at_rest_names_the_offset_not_pretension():
-    # pretension fits far better (a loaded rest), but it cannot move the rest reading: an acceptable
-    # offset is named (lumped dev6 516110); with the rest at zero pretension stays; an offset that is not
-    # acceptable (price >= 1) is never named
+    # pretension fits far better (a loaded rest), but it cannot move the rest reading: an acceptable offset is named;
+    # with the rest at zero pretension stays; an offset that is not acceptable (price >= 1) is never named
     price = {"pretension": 0.58, "sensor_offset:x_in": 0.955}
     assert look_alike("pretension", price, _rest_then_pull(-84e-6)) == "sensor_offset:x_in"
     assert look_alike("pretension", price, _rest_then_pull(0.0)) == "pretension"
@@ -258,29 +280,29 @@ def test_a_position_reading_away_from_zero_at_rest_names_the_offset_not_pretensi
 
 
 def test_rest_offset_reads_an_encoder_away_from_zero_at_a_rest_and_nothing_without_a_rest():
-    assert diagnosis_fit.rest_offset(_rest_then_pull(0.0)) is None
-    assert diagnosis_fit.rest_offset(_rest_then_pull(-84e-6)) == "sensor_offset:x_in"
+    assert diagnosis_readings.rest_offset(_rest_then_pull(0.0)) is None
+    assert diagnosis_readings.rest_offset(_rest_then_pull(-84e-6)) == "sensor_offset:x_in"
     d = _rest_then_pull(0.0)
-    assert diagnosis_fit.rest_offset(replace(d, x_out=d.x_out + 30e-6)) == "sensor_offset:x_out"
+    assert diagnosis_readings.rest_offset(replace(d, x_out=d.x_out + 30e-6)) == "sensor_offset:x_out"
     # a reading within the channel's resolution is no offset: 1 um on an encoder of 1 um steps ...
     q = 1e-6
     coarse = replace(d, x_in=np.round((d.x_in + 1e-6) / q) * q)
-    assert diagnosis_fit.rest_offset(coarse) is None
+    assert diagnosis_readings.rest_offset(coarse) is None
     # ... nor 2 um under 1 um of noise, but 2 um under 0.1 um of noise is
     rng = np.random.default_rng(3)
     for sigma, want in ((1e-6, None), (1e-7, "sensor_offset:x_in")):
         noisy = replace(d, x_in=d.x_in + 2e-6 + sigma * rng.standard_normal(d.x_in.size))
-        assert diagnosis_fit.rest_offset(noisy) == want, sigma
+        assert diagnosis_readings.rest_offset(noisy) == want, sigma
     # a recording that starts moving has no rest to be zeroed at
     moving = MeasuredData(time=d.time, x_in=84e-6 + 2e-3 * d.time, T_in=1.0 + 5.0 * d.time, x_out=1e-3 * d.time,
                           T_out=1.0 + 3.0 * d.time)
-    assert diagnosis_fit.rest_offset(moving) is None
+    assert diagnosis_readings.rest_offset(moving) is None
 
 
 def test_lumped_x_in_offset_the_models_leave_at_the_floor_is_named_by_the_initial_rest(monkeypatch):
-    # lumped 4716102 (session 30, the final set of session 29, now development data): a 36 um x_in offset, 318
-    # sigma of x_in away from its clean twin, but the base absorbs it to 1.8 x its floor and the offset's S is 0.41:
-    # "none" before. The encoder reads 36 um at the initial rest, where positions are zeroed
+    # a 36 um x_in offset, far from its clean twin in x_in's noise, but the base absorbs it to 1.8 x its floor and the
+    # offset's S is 0.41: the models alone say "none". The encoder reads 36 um at the initial rest, where positions
+    # are zeroed: the rest reading names it; the clean twin reads zero
     from estimator.offline import diagnosis
     cands = ("sensor_offset:x_in", "tendon_stiffening", "friction_offset")
     rec = lumped_scenarios.record("sensor_offset:x_in", seed=4716102, level=0.2, duration=60.0)
@@ -300,9 +322,8 @@ def test_lumped_x_in_offset_the_models_leave_at_the_floor_is_named_by_the_initia
 
 
 def test_stiffening_or_backlash_is_named_by_the_better_score_unless_the_toe_is_a_dead_travel():
-    # both acceptable: the better validation score names the cause (lumped dev6 503110: stiffening 0.038
-    # was named backlash 0.061 by the ranking's factor per parameter); a toe at beta's upper bound or at the
-    # lower end of T_c is a dead travel (dev6 507110: backlash fitted as beta 20, T_c 0.08 N)
+    # both acceptable: the better validation score names the cause (not the ranking's factor per parameter); a toe
+    # at beta's upper bound or at the lower end of T_c is a dead travel, a backlash
     price = {"tendon_stiffening": 0.64, "distal_backlash": 0.36}
     toe = {"beta": 3.6, "T_c": 1.5}
     fits = {"tendon_stiffening": (0.038, toe), "distal_backlash": (0.061, {"d_b": 4e-4})}
@@ -336,9 +357,8 @@ def test_paired_trim_keeps_the_short_events_one_model_explains():
 
 
 def test_lumped_lag_of_a_load_cell_that_only_steps_is_named():
-    # a constant-force load: T_out steps only where the load leaves or lands on its stop, so a 42 ms lag shows
-    # in about 1 % of the samples; trimming each model's own 2 % largest residuals hid it (S 1.95, "none";
-    # lumped dev8 713111)
+    # a constant-force load: T_out steps only where the load leaves or lands on its stop, so a 42 ms lag shows in
+    # about 1 % of the samples; the paired trim keeps those samples (each model's own trim would drop them)
     rec = lumped_scenarios.record("sensor_lag:T_out", seed=713111, level=0.8, duration=60.0)
     res = diagnose(rec.data, effects=("sensor_lag:T_out", "sensor_offset:x_in", "velocity_friction"))
     assert res["cause"] == "sensor_lag:T_out", ({k: c["score"] for k, c in res["candidates"].items()})
@@ -347,8 +367,8 @@ def test_lumped_lag_of_a_load_cell_that_only_steps_is_named():
 
 
 def test_lumped_backlash_that_bent_the_base_route_into_a_corner_is_named_alone():
-    # the base route bent to r_1 = r_2 = 0 by a 250 um backlash; the route-free refit from there kept 189 um and
-    # left structure ("unknown" first, lumped dev8 707110); from the uniform route too: 250 um, nothing left
+    # a 250 um backlash bends the base route to r_1 = r_2 = 0; refitted from there the backlash leaves structure,
+    # refitted from the uniform route it takes its full width and leaves nothing
     rec = lumped_scenarios.record("distal_backlash", seed=707110, level=0.8, duration=60.0)
     res = diagnose(rec.data, effects=("distal_backlash", "pretension", "sensor_offset:x_in"))
     assert res["causes"] == ["distal_backlash"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
@@ -356,13 +376,12 @@ def test_lumped_backlash_that_bent_the_base_route_into_a_corner_is_named_alone()
 
 
 def test_lumped_pretension_a_constant_force_load_cannot_hold_is_named():
-    # 4.2 N of preload against a 2.6 N constant-force load: at rest T_in reads 4.2 N and T_out 2.6 N (the distal
-    # part slid back); a uniform initial profile fitted T0 = 2.6 N and left 44 um on x_out, so an x_out offset
-    # was named first (lumped dev8 701110); the rest profile capped by the rest reading of T_out fits it
+    # 4.2 N of preload against a 2.6 N constant-force load: at rest T_in reads 4.2 N and T_out 2.6 N (the distal part
+    # slid back); the initial profile capped by the rest reading of T_out fits it, a uniform one would leave x_out off
     rec = lumped_scenarios.record("pretension", seed=701110, level=0.8, duration=60.0)
     res = diagnose(rec.data, effects=("pretension", "sensor_offset:x_in", "distal_backlash"))
     assert res["causes"] == ["pretension"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
-    # a rest reading above the preload (a constant-force load on its stop, lumped dev7 601100, 1.8 N at both ends)
+    # a rest reading above the preload (a constant-force load on its stop, 1.8 N at both ends)
     # leaves the uniform profile: a profile rising toward the distal end fitted T0 = 0.65 N there
     rec = lumped_scenarios.record("pretension", seed=601100, level=0.2, duration=60.0)
     res = diagnose(rec.data, effects=("pretension", "sensor_offset:x_in", "distal_backlash"))
@@ -370,10 +389,9 @@ def test_lumped_pretension_a_constant_force_load_cannot_hold_is_named():
 
 
 def test_lumped_pretension_seen_only_before_the_first_slide_is_judged_on_the_start():
-    # 1.8 N of preload on a joint that sits on its stop from rest (lumped dev33 3201101): the first pull erases the
-    # preload's profile, so the base misses only the first 1.3 s (1.3 N on T_out) and the forward fold, validated
-    # after that, cannot show it (its base at the floor): the worse fold gave S 0.94 and "unknown". Judged on the
-    # backward fold, which holds the start (Effect.initial_state), it is named with T0 within 25 %
+    # 1.8 N of preload on a joint that sits on its stop from rest: the first pull erases the preload's profile, so the
+    # base misses only the first 1.3 s and the forward fold, validated after that, cannot show it (its base at the
+    # floor). Judged on the backward fold, which holds the start (Effect.initial_state), it is named with T0 within 25 %
     rec = lumped_scenarios.record("pretension", seed=3201101, level=0.2, duration=60.0)
     res = diagnose(rec.data, effects=("pretension", "sensor_gain:T_in", "sensor_offset:T_out"))
     assert res["causes"] == ["pretension"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
@@ -384,10 +402,9 @@ def test_lumped_pretension_seen_only_before_the_first_slide_is_judged_on_the_sta
 
 
 def test_lumped_drift_from_zero_at_the_start_is_judged_on_the_end():
-    # a distal load-cell drift of -0.0048 N/s (lumped dev35 3415102, 0.29 N over the minute) is zero at the start,
-    # where the channel was zeroed: the backward fold validates on the start, where it is smallest, and its base
-    # (fitted on the later part) is at the floor there (S 0.60 backward against 0.09 forward: "none"). Judged on the
-    # forward fold (Effect.from_start), it is named with its rate within 25 %
+    # a distal load-cell drift of -0.0048 N/s (0.29 N over the minute) is zero at the start, where the channel was
+    # zeroed: the backward fold validates on the start, where it is smallest, and its base is at the floor there.
+    # Judged on the forward fold (Effect.from_start), it is named with its rate within 25 %
     rec = lumped_scenarios.record("sensor_drift:T_out", seed=3415102, level=0.2, duration=60.0)
     res = diagnose(rec.data, effects=("sensor_drift:T_out", "sensor_offset:T_out", "curvature_drift"))
     assert res["causes"] == ["sensor_drift:T_out"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
@@ -400,9 +417,9 @@ def test_lumped_drift_from_zero_at_the_start_is_judged_on_the_end():
 
 
 def test_a_recording_with_x_out_alone_is_judged_against_clean_recordings_made_that_way():
-    # lumped dev38 3700501, clean, a constant-force load: with T_out it is "none"; with x_out alone nothing pins K and
-    # a distal backlash of ~50 um fits the base's dead zone at S 0.08 (under STRONG_SCORE): a false alarm, as on 6 of
-    # 300 clean lumped recordings (session 26). The bounds of clean x_out-only recordings (FLOOR_SCORE_WITHOUT) apply
+    # clean, a constant-force load: with T_out it is "none"; with x_out alone nothing pins K and a distal backlash of
+    # ~50 um fits the base's dead zone at S 0.08 (under STRONG_SCORE). The bounds of clean x_out-only recordings
+    # (FLOOR_SCORE_WITHOUT) apply
     rec = lumped_scenarios.record(None, seed=3700501, duration=60.0)
     fx = ("distal_backlash", "presliding", "sensor_offset:x_in")
     alone = replace(rec.data, T_out=None)
@@ -415,7 +432,7 @@ def test_a_recording_with_x_out_alone_is_judged_against_clean_recordings_made_th
     assert told["causes"] == ["distal_backlash"] and told["settings"]["floor_score_without"] == {}
     with pytest.raises(ValueError, match="recorded must be distal channels"):
         diagnose(alone, effects=fx, recorded=("T_out",))
-    # lumped dev12 1100784, clean: a distal backlash at S 0.11 on a base at 1.9 x its floor removes B (1 - S) = 3.2
+    # clean: a distal backlash at S 0.11 on a base at 1.9 x its floor removes B (1 - S) = 3.2
     # squared floors, over the two-channel EXCESS_MIN but not over the x_out-alone one (clean recordings reach 3.3)
     rec = lumped_scenarios.record(None, seed=1100784, duration=60.0)
     alone = replace(rec.data, T_out=None)
@@ -428,8 +445,8 @@ def test_a_recording_with_x_out_alone_is_judged_against_clean_recordings_made_th
 
 
 def test_an_extension_also_starts_from_a_typical_K_when_the_base_collapsed_to_zero(clean_result):
-    # lumped dev11 1001112 (a 4.2 N pretension): the base model fell to K = 0, where the noise band of the memory
-    # rule leaves K without a gradient, and the pretension fitted from there kept K = 0 (S 0.92, an x_in offset named)
+    # a 4.2 N pretension drives the base model to K = 0, where the noise band of the memory rule leaves K without a
+    # gradient: the extension also starts from a typical K (K_RESTART)
     s = prepare(clean_result[0].data)
     pre = CATALOGUE["pretension"]
     assert [p["K"] for p in start_points([pre], {"K": 0.0}, s, {})] == [0.0, K_RESTART]
@@ -437,9 +454,8 @@ def test_an_extension_also_starts_from_a_typical_K_when_the_base_collapsed_to_ze
 
 
 def test_a_proximal_offset_also_starts_from_the_rest_reading(clean_result):
-    # lumped dev13 1208111 (session 12): a -0.84 N T_in offset on a joint load fitted from the +-0.5 N starts
-    # stopped at -0.52 N (S 0.87: the slack rule on the half-corrected reading held x_out 2-3 mm off) and an
-    # x_in lag was named first; the reading at rest before the first move (a slack tendon) is the offset
+    # a -0.84 N T_in offset on a joint load lies beyond the +-0.5 N starts; the reading at rest before the first move
+    # (a slack tendon) is the offset, and the fit starts from it too
     s = prepare(clean_result[0].data)
     off = CATALOGUE["sensor_offset:T_in"]
     assert [p["b_T_in"] for p in start_points([off], {"K": 0.9}, s, {})] == [-0.5, 0.5]
@@ -453,10 +469,9 @@ def test_a_proximal_offset_also_starts_from_the_rest_reading(clean_result):
 
 
 def test_an_encoder_offset_starts_from_the_rest_reading_and_its_route_refit_too(clean_result):
-    # lumped dev15 1417111 (session 14): an 84 um x_out offset on a constant-force load pressing its stop at rest
-    # bent the base route to r_1, r_2 < 0.01; the offset fitted on it from the +-50 um starts stopped at 37 um
-    # and, refitted with the route free from there or from the uniform route, did not move (S 0.34, "unknown"
-    # first). x_out - x_in read at the initial rest is the offset; from it and the uniform route S 0.11.
+    # an 84 um x_out offset on a constant-force load pressing its stop at rest bends the base route to r_1, r_2 < 0.01,
+    # and from the +-50 um starts on that route the fit stops halfway. x_out - x_in read at the initial rest is the
+    # offset; the fit and its route-free refit (from the uniform route) start from it
     s = prepare(clean_result[0].data)
     assert [p["b_x_out"] for p in start_points([CATALOGUE["sensor_offset:x_out"]], {"K": 0.9}, s, {})] == [-5e-5, 5e-5]
     shifted = replace(s, x_out=s.x_out + 84e-6)
@@ -473,9 +488,9 @@ def test_an_encoder_offset_starts_from_the_rest_reading_and_its_route_refit_too(
 
 
 def test_a_fit_stuck_on_the_edge_of_a_step_in_K_refits_the_rest_with_K_held():
-    # lumped dev15 1407110 (session 14): a 250 um distal backlash on a constant-force load; the base fit left K on
-    # the edge of a step in the residual (0.0001 lower costs +0.22), so every trial step of the route-free refit
-    # failed, least_squares ended where it started (r_1, r_2 bent to 0.01) and "unknown" came first (S 0.16)
+    # a 250 um distal backlash on a constant-force load leaves the base's K on the edge of a step in the residual, so
+    # every trial step of the route-free refit fails and least_squares ends where it started; the others are refitted
+    # with K held, then all from there
     rec = lumped_scenarios.record("distal_backlash", seed=1407110, level=0.8, duration=60.0)
     res = diagnose(rec.data, effects=("distal_backlash", "sensor_offset:x_in", "pretension"))
     assert res["causes"] == ["distal_backlash"], (res["causes"], {k: c["score"] for k, c in res["candidates"].items()})
@@ -484,15 +499,14 @@ def test_a_fit_stuck_on_the_edge_of_a_step_in_K_refits_the_rest_with_K_held():
 
 
 def test_a_refinement_retried_with_K_held_is_not_kept_at_a_bound(monkeypatch):
-    # lumped dev14 1305113 (session 14): a 1.3 N friction offset; the retry with K held let a T_in gain run to its
-    # -0.5 bound (S 0.04 -> 0.02) and displace the friction offset, so the retry is kept only inside the bounds.
-    # The example needs the memory-only base (before session 20): with the distal end read, the plain fit of the
-    # gain goes to its bound by itself and the friction offset explains the recording far better (S 0.04 -> 0.001)
+    # a 1.3 N friction offset; the retry with K held can let a T_in gain run to its -0.5 bound and displace the
+    # friction offset, so the retry is kept only inside the bounds. Shown on the memory-only base (SLIDE_SEEN off):
+    # with the distal end read the friction offset explains the recording far better anyway
     rec = lumped_scenarios.record("friction_offset", seed=1305113, level=0.8, duration=60.0)
     res = diagnose(rec.data, effects=("friction_offset", "sensor_gain:T_in"))
     assert res["causes"] == ["friction_offset"], (res["causes"], {k: c["score"] for k, c in res["candidates"].items()})
     assert res["candidates"]["friction_offset"]["score"] < 0.01
-    monkeypatch.setattr(diagnosis_fit, "SLIDE_SEEN", False)
+    monkeypatch.setattr(th, "SLIDE_SEEN", False)
     res = diagnose(rec.data, effects=("friction_offset", "sensor_gain:T_in"))
     assert res["causes"][0] == "friction_offset", (res["causes"], {k: c["score"] for k, c in res["candidates"].items()})
     g = res["candidates"]["sensor_gain:T_in"]["parameters"]["g_T_in"]["value"]
@@ -500,10 +514,9 @@ def test_a_refinement_retried_with_K_held_is_not_kept_at_a_bound(monkeypatch):
 
 
 def test_a_route_bent_by_a_pretension_is_refitted_when_no_polished_extension_explains_the_structure():
-    # lumped dev14 1301102 (session 13): a 1.8 N pretension on a constant-force load bent the base route to
-    # r_2 = 0; on that route the pretension scored 1.09 and was not among the best three refitted with the
-    # route free, so an x_in offset (S 0.10, structure left on T_out) was named with "unknown". When none of the
-    # refitted ones brings the structure under the threshold, every candidate gets its route refit.
+    # a 1.8 N pretension on a constant-force load bends the base route to r_2 = 0; on that route the pretension scores
+    # above 1 and is not among the best three refitted with the route free. When none of the refitted ones brings the
+    # structure under the threshold, every candidate gets its route refit
     rec = lumped_scenarios.record("pretension", seed=1301102, level=0.2, duration=60.0)
     res = diagnose(rec.data, effects=("sensor_offset:x_in", "distal_backlash", "sensor_drift:T_in",
                                       "velocity_friction", "pretension"))
@@ -516,10 +529,9 @@ def test_a_route_bent_by_a_pretension_is_refitted_when_no_polished_extension_exp
 
 
 def test_lumped_friction_offset_holding_a_slack_tendon_is_named():
-    # a 1.1 N friction offset holds a 1.3 N constant-force load while the proximal end pays out 3 mm at zero
-    # tension: the distal end stays. One noise sample of T_in above the slack threshold ended the hold and put
-    # x_out back on x_in (3 mm off), so nothing fitted ("unknown", lumped dev9 805110); the slack now ends when
-    # the paid-out length is taken up or a tension is held
+    # a 1.1 N friction offset holds a 1.3 N constant-force load while the proximal end pays out 3 mm at zero tension:
+    # the distal end stays. The slack ends when the paid-out length is taken up or a tension is held, not on one
+    # noise sample of T_in above the slack threshold
     rec = lumped_scenarios.record("friction_offset", seed=805110, level=0.8, duration=60.0)
     res = diagnose(rec.data, effects=("friction_offset", "sensor_offset:T_out", "sensor_lag:x_in"))
     assert res["causes"] == ["friction_offset"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
@@ -528,10 +540,9 @@ def test_lumped_friction_offset_holding_a_slack_tendon_is_named():
 
 
 def test_lumped_clean_single_arc_route_takes_the_finer_route_and_gives_none():
-    # one arc of 6.6 rad over 22 % of a 1.37 m sheath (33-55 % of its length), a preloaded spring: on thirds
-    # the wrap spreads uniformly over the middle third, the elongation at reversals is 10-20 um off (x_out 5.0 x
-    # the floor) and tendon stiffening was named on clean data (lumped dev10 900500, a false alarm of session 8's
-    # final). The sixths put 90 % of the wrap in the third sixth and the residual is at the floor.
+    # one arc of 6.6 rad over 22 % of a 1.37 m sheath (33-55 % of its length), a preloaded spring: on thirds the wrap
+    # spreads uniformly over the middle third and the elongation at reversals is 10-20 um off (x_out 5 x the floor).
+    # The sixths put 90 % of the wrap in the third sixth and the residual is at the floor
     rec = lumped_scenarios.record(None, seed=900500, duration=60.0)
     res = diagnose(rec.data, effects=("tendon_stiffening", "friction_offset", "sensor_offset:x_in"))
     assert res["causes"] == [], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
@@ -543,10 +554,9 @@ def test_lumped_clean_single_arc_route_takes_the_finer_route_and_gives_none():
 
 
 def test_lumped_clean_route_of_two_short_arcs_takes_the_twelfths_and_gives_none():
-    # two arcs of 5.0 and 7.6 rad over 13 and 11 % of a 1.63 m sheath (at 25-38 % and 64-75 % of its length),
-    # a spring: the thirds leave x_out at 3.8 x the floor and the sixths fitted on one fold's block misplace the
-    # arcs (S 0.53, not adopted): "unknown" on a clean recording (session 15: the clean twin of lumped dev16
-    # 1517111, the twin false alarm of session 14's final). The twelfths put the wrap where the arcs are.
+    # two arcs of 5.0 and 7.6 rad over 13 and 11 % of a 1.63 m sheath (at 25-38 % and 64-75 % of its length), a
+    # spring: the thirds leave x_out at 3.8 x the floor and the sixths fitted on one fold's block misplace the arcs.
+    # The twelfths put the wrap where the arcs are
     rec = lumped_scenarios.record(None, seed=1517111, duration=60.0)
     res = diagnose(rec.data, effects=("distal_backlash", "sensor_offset:x_in", "sensor_drift:T_out"))
     assert res["causes"] == [], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
@@ -558,11 +568,9 @@ def test_lumped_clean_route_of_two_short_arcs_takes_the_twelfths_and_gives_none(
 
 
 def test_an_effect_that_leaves_structure_on_the_thirds_is_refitted_on_the_finer_routes():
-    # a T_in drift of 4.8 mN/s on a joint load, the wrap in one arc at 42-71 % of the sheath: the base, bent by
-    # the drift, keeps the thirds; on them the drift, route free, is fitted to 1 % but leaves x_out at 4.5 x the
-    # floor (S 0.85) and the answer was "unknown" (session 15, lumped dev16 1514101). On the sixths it explains
-    # both signals, scored against the sixths without an effect (which alone do not help: S 1.10). Since session 20
-    # (04292d8: the slack and slide rules read x_out) the drift's model goes on to the twelfths
+    # a T_in drift of 4.8 mN/s on a joint load, the wrap in one arc at 42-71 % of the sheath: the base, bent by the
+    # drift, keeps the thirds; on them the drift, route free, leaves x_out above the threshold. On the finer routes
+    # it explains both signals, scored against the finer route without an effect (which alone does not help)
     rec = lumped_scenarios.record("sensor_drift:T_in", seed=1514101, level=0.2, duration=60.0)
     res = diagnose(rec.data, effects=("sensor_drift:T_in", "sensor_offset:T_in", "presliding"))
     assert res["causes"] == ["sensor_drift:T_in"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
@@ -573,10 +581,9 @@ def test_an_effect_that_leaves_structure_on_the_thirds_is_refitted_on_the_finer_
 
 
 def test_a_distal_end_held_on_its_stop_sets_x_out_aside_and_gives_none():
-    # a preloaded spring that T_out (at most 2.5 N) never lifted off its stop (preload 2.8 N): x_out stays within
-    # one 1.2 um quantum while x_in travels 0.36 mm. Fitting x_out bent the base's K (T_out 1.69 N against
-    # 2.45 N measured) and a 200 um play "explained" the standing x_out: distal backlash named on a clean
-    # recording (session 10: the clean twin of lumped dev11 1019112, found by diagnosing the clean twins)
+    # a preloaded spring that T_out (at most 2.5 N) never lifts off its stop (preload 2.8 N): x_out stays within one
+    # 1.2 um quantum while x_in travels 0.36 mm. Fitting that x_out would bend K and let a play "explain" the standing
+    # distal end: it is set aside
     from estimator.offline.diagnosis import predictions
     rec = lumped_scenarios.record(None, seed=1019112, duration=60.0)
     res = diagnose(rec.data, effects=("distal_backlash", "friction_offset", "sensor_offset:T_in"))
@@ -590,12 +597,10 @@ def test_a_distal_end_held_on_its_stop_sets_x_out_aside_and_gives_none():
 
 
 def test_a_distal_end_pressed_on_its_stop_by_a_pretension_names_the_pretension():
-    # lumped dev14 1301113 (session 13): a 4.2 N pretension holds a 125 N/m joint on its 1 mm stop from the
-    # start; x_out moves 8 um (1.4 % of x_in's 0.59 mm travel), the stop's deflection and the tendon's
-    # pre-sliding, which the base model reads as elongation: fitting x_out bent K (1.23, true 1.32) and the
-    # pretension's T_out stayed 0.5 N high (distal backlash + pretension + unknown, base structure 69). Session 13
-    # set x_out aside (NEAR_HELD_SHARE: structure left with it, none without). Since session 15 the pretension
-    # refitted on the twelfths explains both signals with x_out kept (structure 0.5 and 0.7), so x_out stays in.
+    # a 4.2 N pretension holds a 125 N/m joint on its 1 mm stop from the start; x_out moves 8 um (1.4 % of x_in's
+    # 0.59 mm travel), the stop's deflection and the tendon's pre-sliding. The pretension (on the finer route)
+    # explains both signals with x_out kept; were structure left with x_out and none without, x_out would be set
+    # aside as pressed (NEAR_HELD_SHARE)
     rec = lumped_scenarios.record("pretension", seed=1301113, level=0.8, duration=60.0)
     res = diagnose(rec.data, effects=("pretension", "distal_backlash", "sensor_offset:x_in", "sensor_lag:T_in"))
     assert res["causes"] == ["pretension"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
@@ -611,7 +616,8 @@ def test_a_distal_end_pressed_on_its_stop_by_a_pretension_names_the_pretension()
 def test_distal_end_held_only_when_x_out_stands_within_its_resolution():
     from dataclasses import replace
 
-    from estimator.offline.diagnosis_fit import HELD_STEPS, NEAR_HELD_SHARE, distal_end_held
+    from estimator.offline.diagnosis_readings import distal_end_held
+    from estimator.offline.diagnosis_thresholds import HELD_STEPS, NEAR_HELD_SHARE
     rec = record(None, seed=21, duration=DUR, rate_hz=RATE)
     assert distal_end_held(rec.data) is None                               # a moving distal end
     q = 1e-6
@@ -629,7 +635,8 @@ def test_distal_end_held_only_when_x_out_stands_within_its_resolution():
 
 
 def test_distal_at_end_reads_how_much_of_the_proximal_travel_the_distal_end_sits_on_a_stop():
-    from estimator.offline.diagnosis_fit import AT_END_HIDES, AT_END_SHARE, distal_at_end
+    from estimator.offline.diagnosis_readings import distal_at_end
+    from estimator.offline.diagnosis_thresholds import AT_END_HIDES, AT_END_SHARE
     rec = record(None, seed=21, duration=DUR, rate_hz=RATE)
     moving = distal_at_end(rec.data)
     assert moving is not None and moving["share"] < 0.3 and moving["hides"] == []
@@ -646,9 +653,8 @@ def test_distal_at_end_reads_how_much_of_the_proximal_travel_the_distal_end_sits
 
 
 def test_a_joint_held_on_its_stop_is_reported_as_unable_to_show_a_lag_of_x_out():
-    # lumped dev40 3919112 (session 27): a 42 ms x_out lag on a joint driven onto its stop in the first second and
-    # held there; the lag's footprint (20 sigma on x_out against the clean twin) is that one rise, which no
-    # validation block holds: the delay fitted to 0.3 % and S 0.95. The reading says so, and the printed summary
+    # a 42 ms x_out lag on a joint driven onto its stop in the first second and held there: the lag's footprint is
+    # that one rise, which no validation block holds. The reading says so, and the printed summary
     from study.analyze import format_diagnosis
     rec = lumped_scenarios.record("sensor_lag:x_out", seed=3919112, level=0.8, duration=60.0)
     assert rec.truth["load"]["kind"] == "joint"
@@ -658,14 +664,15 @@ def test_a_joint_held_on_its_stop_is_reported_as_unable_to_show_a_lag_of_x_out()
     res.update({"file": "joint.csv", "n_samples": len(rec.data), "duration_s": rec.data.duration})
     text = format_diagnosis(res)
     assert "sensor_lag:x_out cannot show in this recording" in text and f"{100 * at_end['share']:.0f} %" in text
-    # the same lag where the distal end moves (a spring, dev40 3919101) is named, and nothing is said
+    # the same lag where the distal end moves (a spring) is named, and nothing is said
     rec = lumped_scenarios.record("sensor_lag:x_out", seed=3919101, level=0.2, duration=60.0)
     res = diagnose(rec.data, effects=("sensor_lag:x_out", "sensor_offset:x_out"))
     assert res["settings"]["distal_at_end"]["hides"] == [] and res["causes"] == ["sensor_lag:x_out"]
 
 
 def test_a_tension_offset_below_twice_the_floor_is_not_resolved():
-    from estimator.offline.diagnosis import OFFSET_FLOORS, _unresolved
+    from estimator.offline.diagnosis_folds import unresolved as _unresolved
+    from estimator.offline.diagnosis_thresholds import OFFSET_FLOORS
     floor = {"T_out": 0.03, "x_out": 2e-6}
     fo, tin, tout = (CATALOGUE[e] for e in ("friction_offset", "sensor_offset:T_in", "sensor_offset:T_out"))
     # F0 = a (1 - e^-K) at the tip: a = 0.07 N on K = 1.39 is 0.052 N < 2 x 0.03 N (a constant-force twin's)
@@ -676,15 +683,15 @@ def test_a_tension_offset_below_twice_the_floor_is_not_resolved():
     # other effects, and a recording without T_out, are not judged by it
     assert not _unresolved([CATALOGUE["velocity_friction"]], {"K": 1.0, "c_v": 1.0}, floor)
     assert not _unresolved([fo], {"K": 1.39, "a": 0.07}, {"x_out": 2e-6})
-    # nor an offset that removes nearly all of a clear structure (session 30): its size is a pattern's
+    # nor an offset that removes nearly all of a clear structure: its size is a pattern's
     assert not _unresolved([fo], {"K": 1.39, "a": 0.07}, floor, dominant=True)
     assert _unresolved([CATALOGUE["presliding"]], {"K": 1.0, "x_p": 20e-6}, floor, dominant=True)
 
 
 def test_lumped_small_friction_offset_that_removes_the_structure_is_named_not_a_gain():
-    # lumped dev48 4705100 (session 30): a friction offset on a constant force (K 1.39); the base leaves 5.0 x the
-    # T_out floor and the friction offset removes 99 % of it (S 0.01), but F0 = 0.26 N sat just under twice the
-    # carried T_out floor, so it was "unresolved" and a T_in gain of -44 % (S 0.12) was named, reported as a T_out gain
+    # a friction offset on a constant force (K 1.39); the base leaves 5 x the T_out floor and the friction offset
+    # removes 99 % of it (S 0.01), though F0 = 0.26 N sits just under twice the carried T_out floor: an offset that
+    # removes nearly all of a clear structure is resolved by that pattern, and a T_in gain does not take its place
     rec = lumped_scenarios.record("friction_offset", seed=4705100, level=0.2, duration=60.0)
     res = diagnose(rec.data, effects=("friction_offset", "sensor_gain:T_in", "sensor_offset:T_out"))
     assert res["causes"] == ["friction_offset"], ({k: c["score"] for k, c in res["candidates"].items()})
@@ -695,25 +702,23 @@ def test_lumped_small_friction_offset_that_removes_the_structure_is_named_not_a_
 
 
 def test_lumped_clean_constant_force_load_gives_none_not_a_small_offset():
-    # a constant-force load (3.5 N, K 0.81): a friction offset of a = 0.05 N (F0 1.4 x the T_out floor) and then
-    # a T_in offset of 0.018 N were named on this clean recording (the clean twin of lumped dev11 1017111)
+    # a clean constant-force load (3.5 N, K 0.81): a friction offset of a = 0.05 N (F0 1.4 x the T_out floor) or a
+    # T_in offset of 0.018 N fits the noise; below OFFSET_FLOORS x the floor they are not resolved
     rec = lumped_scenarios.record(None, seed=1017111, duration=60.0)
     res = diagnose(rec.data, effects=("friction_offset", "sensor_offset:T_in", "sensor_offset:T_out"))
     assert res["causes"] == [], ({k: (c["score"], c["parameters"]) for k, c in res["candidates"].items()})
 
 
 def test_an_effect_near_the_floor_that_removes_enough_of_the_base_structure_is_named(monkeypatch):
-    # pre-sliding of 128 um on a preloaded spring: the base leaves 1.9 / 2.0 x the floor on T_out / x_out, under
-    # the structure threshold, and pre-sliding explains 61 % of it (S 0.39): B (1 - S) = 4.5 squared floors, was
-    # "none" under the STRONG_SCORE rule alone (session 17, lumped dev15 1406112). With the distal end read
-    # (session 20) the same recording is far from the floor: its distal end moves before the memory's slip
-    # reaches it, which the base model cannot follow (structure 79 on T_out) - the rule is checked on the
-    # memory-only base
+    # pre-sliding of 128 um on a preloaded spring. With the distal end read the recording is far from the floor (its
+    # distal end moves before the memory's slip reaches it). On the memory-only base (SLIDE_SEEN off) the base leaves
+    # 1.9 / 2.0 x the floor on T_out / x_out and pre-sliding explains 61 % of it (S 0.39, above STRONG_SCORE):
+    # B (1 - S) = 4.5 squared floors is above EXCESS_MIN, so it is named
     rec = lumped_scenarios.record("presliding", seed=1406112, level=0.8, duration=60.0)
     res = diagnose(rec.data, effects=("presliding", "distal_backlash", "sensor_lag:T_in"))
     assert res["causes"] == ["presliding"]
     assert max(res["structure"]["base"].values()) > 10.0 * res["settings"]["structure_ratio"]
-    monkeypatch.setattr(diagnosis_fit, "SLIDE_SEEN", False)
+    monkeypatch.setattr(th, "SLIDE_SEEN", False)
     res = diagnose(rec.data, effects=("presliding", "distal_backlash", "sensor_lag:T_in"))
     assert res["causes"] == ["presliding"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
     base = res["structure"]["base"]
@@ -725,14 +730,13 @@ def test_an_effect_near_the_floor_that_removes_enough_of_the_base_structure_is_n
 
 
 def test_a_clean_recording_whose_best_extension_removes_less_than_the_excess_bound_gives_none(monkeypatch):
-    # the clean lumped recording closest to EXCESS_MIN on the development sets (the clean twin of dev18 1704102, a
-    # constant-force load: stiction at S 0.47 on a base structure of 1.97, B (1 - S) = 2.65), named stiction by
-    # session 17's bound of 2.5 on its final set: "none" at 3.0. With the distal end read (session 20) the base
-    # leaves 1.35 and stiction explains none of it; the bound is checked on the memory-only base
+    # a clean constant-force load: on the memory-only base (SLIDE_SEEN off) stiction reaches S 0.47 on a base
+    # structure of 1.97, B (1 - S) = 2.65, under EXCESS_MIN: "none". With the distal end read stiction explains none
+    # of it
     rec = lumped_scenarios.record(None, seed=1704102, level=0.2, duration=60.0)
     res = diagnose(rec.data, effects=("stiction", "distal_backlash", "sensor_drift:T_out"))
     assert res["causes"] == []
-    monkeypatch.setattr(diagnosis_fit, "SLIDE_SEEN", False)
+    monkeypatch.setattr(th, "SLIDE_SEEN", False)
     res = diagnose(rec.data, effects=("stiction", "distal_backlash", "sensor_drift:T_out"))
     assert res["causes"] == [], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
     base = res["structure"]["base"]
@@ -741,10 +745,9 @@ def test_a_clean_recording_whose_best_extension_removes_less_than_the_excess_bou
 
 
 def test_a_distal_load_cell_gain_on_a_constant_force_load_is_named_once_the_distal_end_says_it_slides():
-    # lumped dev21 2011110 (session 20): a -8.6 % T_out gain on a 5.8 N constant-force load. The true release sits
-    # at T_in = F e^-K, on the edge of the band; the memory alone held the pulled T_out there for any K that is too
-    # large and matched the constant load, so K = 0.77 (true 0.68) absorbed the gain: base structure 2.0, "none".
-    # The distal end moving with the proximal one says the tendon slides, and the release then pins K too.
+    # a -8.6 % T_out gain on a 5.8 N constant-force load. The true release sits at T_in = F e^-K, on the edge of the
+    # band; the memory alone would hold the pulled T_out there for any K that is too large, and a K too large would
+    # absorb the gain. The distal end moving with the proximal one says the tendon slides, and the release pins K
     rec = lumped_scenarios.record("sensor_gain:T_out", seed=2011110, level=0.8, duration=60.0)
     res = diagnose(rec.data, effects=("sensor_gain:T_out", "sensor_offset:T_out", "sensor_offset:T_in"))
     assert res["cause"] == "sensor_gain:T_out", (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
@@ -782,10 +785,9 @@ def test_the_floor_table_holds_every_catalogue_candidate_below_the_price():
 
 
 def test_a_lag_at_the_floor_is_named_by_its_own_clean_bound(monkeypatch):
-    # lumped dev24 2313103 (session 21): an 18 ms lag on the distal load cell of a spring load. The base leaves 1.06 x
-    # the floor and the lag explains 72 % of it (S 0.28): above STRONG_SCORE and B (1 - S) under EXCESS_MIN, so
-    # "none" by the rules for all effects; a T_out lag never scored under 0.74 on a clean recording at the floor
-    from estimator.offline import diagnosis
+    # an 18 ms lag on the distal load cell of a spring load. The base leaves 1.06 x the floor and the lag explains
+    # 72 % of it (S 0.28): above STRONG_SCORE and B (1 - S) under EXCESS_MIN, but a T_out lag never scores that low
+    # on a clean recording at the floor: its own bound (FLOOR_SCORE) names it; without the table it is "none"
     rec = lumped_scenarios.record("sensor_lag:T_out", seed=2313103, level=0.2, duration=60.0)
     cands = ("sensor_lag:T_out", "tendon_stiffening", "sensor_offset:x_in")
     res = diagnose(rec.data, effects=cands)
@@ -796,7 +798,7 @@ def test_a_lag_at_the_floor_is_named_by_its_own_clean_bound(monkeypatch):
     assert res["settings"]["strong_score"] < s < res["settings"]["floor_score"]["sensor_lag:T_out"]
     assert sum(v * v for v in base.values()) * (1.0 - s) < res["settings"]["excess_min"]
     assert res["parameters"]["tau_T_out"]["value"] == pytest.approx(rec.truth["parameters"]["delay"], rel=0.25)
-    monkeypatch.setattr(diagnosis, "FLOOR_SCORE", {})
+    monkeypatch.setattr(th, "FLOOR_SCORE", {})
     assert diagnose(rec.data, effects=cands)["causes"] == []
 
 
@@ -818,21 +820,19 @@ def test_stick_slip_ratio_is_about_one_for_sensor_noise_and_large_for_a_saw_toot
     from estimator.offline.diagnosis import STICK_SLIP_RATIO
     for rate in (200.0, 1000.0):
         t, x, T = _moves_and_holds(rate)
-        assert 0.8 < diagnosis_fit.stick_slip_ratio(t, x, T) < 1.2
+        assert 0.8 < diagnosis_readings.stick_slip_ratio(t, x, T) < 1.2
         t, x, T = _moves_and_holds(rate, chatter=0.15)
-        assert diagnosis_fit.stick_slip_ratio(t, x, T) > STICK_SLIP_RATIO
+        assert diagnosis_readings.stick_slip_ratio(t, x, T) > STICK_SLIP_RATIO
     # holds only: nothing to compare
-    assert diagnosis_fit.stick_slip_ratio(t, np.zeros_like(t), T) is None
+    assert diagnosis_readings.stick_slip_ratio(t, np.zeros_like(t), T) is None
     with pytest.raises(ValueError, match="differ in length"):
-        diagnosis_fit.stick_slip_ratio(t, x[:-1], T)
+        diagnosis_readings.stick_slip_ratio(t, x[:-1], T)
 
 
 def test_lumped_stick_slip_the_models_leave_at_the_floor_names_stiction(monkeypatch):
-    # lumped dev26 2504111 (session 22): a Stribeck peak of 0.51 on a preloaded spring; the tendon sticks and slips
-    # on the slow moves, which no quasi-static extension reproduces (stiction's S 0.64, the base at 2.2 x its floor:
-    # "none" before). On the training block the proximal tension is 1.8 x rougher in steady moves than in holds;
-    # on its clean twin about 1
-    from estimator.offline import diagnosis
+    # a Stribeck peak of 0.51 on a preloaded spring: the tendon sticks and slips on the slow moves, which no
+    # quasi-static extension reproduces (the models alone say "none"). On the training block the proximal tension is
+    # 1.8 x rougher in steady moves than in holds; on its clean twin about 1
     cands = ("stiction", "velocity_friction", "friction_offset")
     rec = lumped_scenarios.record("stiction", seed=2504111, level=0.8, duration=60.0)
     res = diagnose(rec.data, effects=cands)
@@ -846,15 +846,15 @@ def test_lumped_stick_slip_the_models_leave_at_the_floor_names_stiction(monkeypa
     assert res_twin["cause"] == "none" and res_twin["stick_slip"]["ratio"] < 1.2
     assert "stick-slip" not in format_summary(res_twin)
     # without the check (either rule) the models alone leave it at "none"
-    monkeypatch.setattr(diagnosis, "STICK_SLIP_RATIO", math.inf)
-    monkeypatch.setattr(diagnosis, "STICK_SLIP_WEAK", math.inf)
+    monkeypatch.setattr(th, "STICK_SLIP_RATIO", math.inf)
+    monkeypatch.setattr(th, "STICK_SLIP_WEAK", math.inf)
     assert diagnose(rec.data, effects=cands)["causes"] == []
 
 
 def test_weak_stick_slip_with_a_stiction_fit_that_explains_a_tenth_names_stiction(monkeypatch):
-    # lumped dev40 3904113 (session 29): a Stribeck peak of 0.51 on a soft joint; the tension is low and the
-    # saw-tooth small: T_in is 1.2 x rougher in moves than in holds (under STICK_SLIP_RATIO) and stiction's S is
-    # 0.64 (the base at its floor: "none" before). Two weak signs together name it; its clean twin shows neither
+    # a Stribeck peak of 0.51 on a soft joint: the tension is low and the saw-tooth small, T_in 1.2 x rougher in moves
+    # than in holds (under STICK_SLIP_RATIO), and stiction's S 0.64 (the base at its floor). Two weak signs together
+    # name it; its clean twin shows neither
     from estimator.offline import diagnosis
     cands = ("stiction", "velocity_friction", "friction_offset")
     rec = lumped_scenarios.record("stiction", seed=3904113, level=0.8, duration=60.0)
@@ -869,14 +869,14 @@ def test_weak_stick_slip_with_a_stiction_fit_that_explains_a_tenth_names_stictio
     twin = diagnose(lumped_scenarios.record(None, seed=3904113, level=0.8, duration=60.0).data, effects=cands)
     assert twin["cause"] == "none" and not twin["stick_slip"]["named"]
     # either sign alone is not enough
-    monkeypatch.setattr(diagnosis, "STICK_SLIP_WEAK_SCORE", 0.5)
+    monkeypatch.setattr(th, "STICK_SLIP_WEAK_SCORE", 0.5)
     assert diagnose(rec.data, effects=cands)["causes"] == []
 
 
 def test_a_clear_saw_tooth_overrules_a_named_effect_that_leaves_structure(monkeypatch):
-    # lumped dev47 4604111 (session 30): a Stribeck peak of 0.51 on a constant force; T_in is 6.5 x rougher in steady
-    # moves than in holds, but the models named a T_in lag, which left 3.7 x the floor ("unknown" after it). A sensor
-    # lag has no stick-slip: stiction is named, the lag set aside, the structure still said
+    # a Stribeck peak of 0.51 on a constant force: T_in is 6.5 x rougher in steady moves than in holds, and the models
+    # name a T_in lag that leaves 3.7 x the floor. A sensor lag has no stick-slip: stiction is named, the lag set
+    # aside, the structure still said
     from estimator.offline import diagnosis
     cands = ("stiction", "sensor_lag:T_in", "velocity_friction")
     rec = lumped_scenarios.record("stiction", seed=4604111, level=0.8, duration=60.0)
@@ -890,25 +890,25 @@ def test_a_clear_saw_tooth_overrules_a_named_effect_that_leaves_structure(monkey
     twin = diagnose(lumped_scenarios.record(None, seed=4604111, level=0.8, duration=60.0).data, effects=cands)
     assert twin["causes"] == [] and twin["stick_slip"]["overruled"] == []
     # without the check the lag stands, with the structure it leaves
-    monkeypatch.setattr(diagnosis, "STICK_SLIP_RATIO", math.inf)
+    monkeypatch.setattr(th, "STICK_SLIP_RATIO", math.inf)
     assert diagnose(rec.data, effects=cands)["causes"] == ["sensor_lag:T_in", "unknown"]
 
 
 def test_holds_release_reads_a_fall_from_the_running_maximum():
     t = np.linspace(0.0, 10.0, 2001)
     pull = 2.0 * t
-    assert not diagnosis_fit.holds_release(pull)
-    assert not diagnosis_fit.holds_release(pull + 0.01 * np.sin(50.0 * t))      # noise on a pull is no release
+    assert not diagnosis_readings.holds_release(pull)
+    assert not diagnosis_readings.holds_release(pull + 0.01 * np.sin(50.0 * t))      # noise on a pull is no release
     cycle = 10.0 * np.sin(0.5 * t)                                              # up to 10 N and back down
-    assert diagnosis_fit.holds_release(cycle)
-    assert not diagnosis_fit.holds_release(np.ones(50)) and not diagnosis_fit.holds_release(np.ones(1))
+    assert diagnosis_readings.holds_release(cycle)
+    assert not diagnosis_readings.holds_release(np.ones(50)) and not diagnosis_readings.holds_release(np.ones(1))
 
 
 def test_a_fold_fitted_on_one_pull_does_not_judge_the_route(monkeypatch):
-    # lumped dev45 4402103's clean twin (session 29): one slow pull to 18 N, released only after the forward fold's
-    # fit block. Fitted on the pull alone the route's shape is unknown and the forward validation block (the
-    # release) left x_out at 24 x its floor: "unknown", a false alarm. The backward fold, whose fit block holds the
-    # release, judges alone: "none"; the same rig with a 14 % K drift hidden is named
+    # a clean recording of one slow pull to 18 N, released only after the forward fold's fit block. Fitted on the
+    # pull alone the route's shape is unknown and the forward validation block (the release) would show the base's
+    # extrapolation. The backward fold, whose fit block holds the release, judges alone: "none"; the same rig with a
+    # 14 % K drift hidden is named
     from estimator.offline import diagnosis
     twin = lumped_scenarios.record(None, seed=4402103, level=0.2, duration=60.0)
     res = diagnose(twin.data)
@@ -919,6 +919,6 @@ def test_a_fold_fitted_on_one_pull_does_not_judge_the_route(monkeypatch):
     assert max(res["structure"]["base"].values()) < diagnosis.STRUCTURE_RATIO
     drift = diagnose(lumped_scenarios.record("curvature_drift", seed=4402103, level=0.2, duration=60.0).data)
     assert drift["cause"] == "curvature_drift" and drift["gain"] > 0.3
-    # both folds judging (as before): the extrapolation is read as structure
-    monkeypatch.setattr(diagnosis, "holds_release", lambda T_in: True)
+    # with both folds judging, the extrapolation is read as structure
+    monkeypatch.setattr(diagnosis_folds, "holds_release", lambda T_in: True)
     assert diagnose(twin.data)["cause"] == "unknown"

@@ -18,10 +18,6 @@ from estimator.offline.effects import (
     ROUTE_FINE,
     ROUTE_FORMS,
     ROUTE_TWELFTHS,
-    SLACK_HELD,
-    SLACK_SIGMAS,
-    SLACK_TAUT,
-    SLACK_WINDOW,
     SPEED_FORM,
     STRIBECK_FORM,
     STRIBECK_SPEED,
@@ -32,9 +28,9 @@ from estimator.offline.effects import (
     neutral_values,
     predict,
     route_values,
-    slack_hold,
 )
 from estimator.offline.effects_kernels import distal_slide, route_shape, run_extended
+from estimator.offline.effects_predict import SLACK_HELD, SLACK_SIGMAS, SLACK_TAUT, SLACK_WINDOW, slack_hold
 from estimator.online.distal import estimate_batch
 from estimator.sheath import SheathGeometry, SheathModel
 from slave.simulated import SimulatedRig
@@ -136,7 +132,7 @@ def test_distal_slide_reads_motion_beyond_the_resolution_only():
 
 
 def test_a_distal_end_seen_moving_makes_the_whole_tendon_slide():
-    """A constant-force load F (session 20, lumped dev21 2011110): the true release sits at T_in = F e^-K, on the
+    """A constant-force load F: the true release sits at T_in = F e^-K, on the
     edge of the band. With a K that is too large (here 0.9 for a true 0.7) the memory alone holds the pulled
     T_out there (T_in stays inside its band) and matches the constant F whatever K is; the measured distal end
     moving with the proximal one says the tendon slides, and the model's T_out is then T_in e^{K} - wrong for a
@@ -160,7 +156,7 @@ def test_a_distal_end_seen_moving_makes_the_whole_tendon_slide():
     np.testing.assert_allclose(run_extended(T_in, v, t, u, w, K=K_true, slide=slide)[0][release], F, rtol=1e-9)
     # a T_in that turns back while the distal end is still seen moving (the averaged T_in turns before the distal
     # end stops at a reversal) ends the slide and starts none: T_out held at the pulled value, as without x_out
-    # (rig dev23 2204100: a slide restarted there as a breakaway put T_out 1.2 N low through the reversal)
+    # (a slide restarted there as a breakaway would put T_out low through the reversal)
     turn = np.concatenate([np.linspace(0.5, 10.0, 300), np.linspace(10.0, 8.0, 20)])
     xt = np.linspace(0.0, 2e-3, turn.size)                                   # the proximal end still pulling
     tt = np.arange(turn.size) * 5e-3
@@ -407,9 +403,9 @@ def test_a_slack_tendon_holds_the_distal_end_while_the_proximal_end_moves_on(mon
 
 
 def test_a_noise_sample_does_not_end_a_slack_phase_a_held_tension_does():
-    # lumped dev9 805110: in a slack phase (T_in at zero) one sample of noise above the threshold put the
-    # distal end back on x_in; now the slack ends when the proximal end is back where it went slack, when the
-    # tension is held above the threshold, or at SLACK_TAUT x the threshold
+    # in a slack phase (T_in at zero) one sample of noise above the threshold does not put the distal end back on
+    # x_in: the slack ends when the proximal end is back where it went slack, when the tension is held above the
+    # threshold, or at SLACK_TAUT x the threshold
     thr = 0.03
     n = 400
     T = np.concatenate((np.full(100, 1.0), np.zeros(n)))
@@ -432,9 +428,9 @@ def test_a_noise_sample_does_not_end_a_slack_phase_a_held_tension_does():
 
 
 def test_a_tendon_released_against_a_weak_load_stays_taut_under_the_threshold():
-    # lumped dev13 1213100 (session 12): a 125 N/m joint released at K 1.4 pulls the tendon back at
-    # T_in = T_out e^-K, 1-3 sigma of the reading; every sample under the 3 sigma threshold held the tendon
-    # slack and x_out 1-2 mm off. Held above zero on both sides, it is taut; a drop to zero is slack at once
+    # a 125 N/m joint released at K 1.4 pulls the tendon back at T_in = T_out e^-K, 1-3 sigma of the reading; by
+    # the sample alone every sample under the 3 sigma threshold would be slack. Held above zero on both sides, it
+    # is taut; a drop to zero is slack at once
     rng = np.random.default_rng(3)
     thr = 0.03                                                               # SLACK_SIGMAS sigma
     sigma = thr / SLACK_SIGMAS
@@ -451,10 +447,9 @@ def test_a_tendon_released_against_a_weak_load_stays_taut_under_the_threshold():
 
 
 def test_a_tendon_whose_distal_end_is_carried_along_is_taut_at_any_tension():
-    # lumped dev19 1812100's clean twin (session 20): a 97 N/m joint released to 0.85 mm keeps the tendon taut at
-    # T_out 0.08 N, so T_in = T_out e^-1.43 = 0.012 N, 0.4 sigma of its load cell: no rule on T_in tells that from
-    # a slack tendon, and x_out was held at the stop 480 um off for a second ("unknown"). The distal end moving
-    # the way the proximal end does says the tendon carries the motion: taut
+    # a 97 N/m joint released to 0.85 mm keeps the tendon taut at T_out 0.08 N, so T_in = T_out e^-1.43 = 0.012 N,
+    # 0.4 sigma of its load cell: no rule on T_in tells that from a slack tendon. The distal end moving the way the
+    # proximal end does says the tendon carries the motion: taut
     thr = 0.03
     n = 300
     T = np.concatenate((np.full(100, 1.0), np.full(n, 0.13 * thr)))          # 0.4 sigma

@@ -274,7 +274,7 @@ def test_tension_weighted_fit_recovers_a_series_compliance_and_predicts_the_load
         fit_model("capstan", (), rec, TRAIN, TEST, [TRUE], tension_weight=-1.0)
 
 
-# ---- session 8: tension plausibility of the choice, the drive-side observer -----------------------
+# ---- tension plausibility of the choice, the drive-side observer ---------------------------------------
 
 def test_tension_check_refuses_a_capstan_fit_whose_tension_peaks_are_off_and_refits_it_with_the_tensions():
     rec = capstan_rec(seed=4)
@@ -288,7 +288,7 @@ def test_tension_check_refuses_a_capstan_fit_whose_tension_peaks_are_off_and_ref
     assert s["extended"]["model"] == "capstan/T" and "tensions" in s["extended"]["fit_inputs"]
     assert all(1 / 1.5 <= x <= 1.5 for x in s["candidates"]["capstan/T"]["tension_peak_ratio"])
     assert s["tension_check"]["ratio"] == 1.5
-    s0, _ = diagnose_pair(odd, TRAIN, TEST, max_effects=1, tension_ratio=None)   # the procedure before session 8
+    s0, _ = diagnose_pair(odd, TRAIN, TEST, max_effects=1, tension_ratio=None)   # the check off
     assert s0["extended"]["model"] == "capstan" and s0["tension_check"] is None
     with pytest.raises(ValueError, match="tension_ratio"):
         diagnose_pair(odd, TRAIN, TEST, tension_ratio=0.9)
