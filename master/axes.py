@@ -16,7 +16,9 @@ are packed. An axis k has
   that every axis is aligned to the same tendon displacement;
 * a device axis (``pair_control.axes`` for a joint instrument, default axis k; axis 0 for a tendon).
 
-:func:`instrument_axes` picks the kind from the config (``instrument.joints`` given: joints).
+:func:`instrument_axes` picks the kind from the config (``instrument.joints`` given: joints). A
+spindle-driven jaw (``spindle_radius`` > 0) is a joint here: the slave sends its jaw torque and angle
+and takes jaw-angle commands, r being its jaw pulley's radius.
 """
 from __future__ import annotations
 

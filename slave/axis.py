@@ -5,9 +5,12 @@ An instrument is a list of axes (docs/concepts/architecture.md): a single tendon
 elongation estimated with the tension-profile memory, :mod:`estimator.online.distal`); a joint
 instrument has one axis per antagonistic pair (:class:`slave.pair_axis.PairAxis`: a joint-angle
 command through the pair controller, the distal joint torque and angle estimated by
-:mod:`estimator.online.joint`). :class:`slave.node.SlaveNode` iterates over them; all axes of one
-instrument are of one kind, because the rig's tendon shape (:mod:`slave.rig`) is ``()`` for a single
-tendon and ``(n_joints, 2)`` for pairs.
+:mod:`estimator.online.joint`); a spindle instrument has one axis per spindle-driven jaw
+(:class:`slave.spindle_axis.SpindleAxis`: a jaw-angle command turning the spindle, the jaw torque and
+angle estimated from the spindle's angle and torque by the spindle pair model).
+:class:`slave.node.SlaveNode` iterates over them; all axes of one instrument are of one kind, because
+the rig's tendon shape (:mod:`slave.rig`) is ``()`` for a single tendon, ``(n_joints, 2)`` for pairs
+and ``(n_joints,)`` (one spindle each) for spindles.
 
 Per axis (instance methods): the checks of an incoming target (:meth:`SlaveAxis.out_of_range`,
 :meth:`SlaveAxis.too_far`), the motor command of one cycle (:meth:`SlaveAxis.motor`), the estimator
