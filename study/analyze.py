@@ -2,7 +2,7 @@
 
 Two modes:
 
-* ``teleop analyze FILE.csv`` (measured-data format, one tendon, docs/formats.md; T_out and x_out
+* ``teleop analyze FILE.csv`` (measured-data format, one tendon, docs/reference/formats.md; T_out and x_out
   optional, at least one): the diagnosis of :func:`estimator.offline.diagnosis.diagnose` - the base model
   (profile memory, K and L/EA) fitted on the first part of the recording, every catalogue extension
   fitted on the same block, all scored on the held-out rest; prints the cause, the held-out errors
@@ -196,7 +196,7 @@ def diagnose_file(path: str | Path, train_fraction: float = 0.6,
 
     Parameters
     ----------
-    path : the CSV (docs/formats.md): time [s], x_in [m], T_in [N], and T_out [N] and/or x_out [m]
+    path : the CSV (docs/reference/formats.md): time [s], x_in [m], T_in [N], and T_out [N] and/or x_out [m]
     train_fraction : nominal share of the duration used for fitting, in [0.3, 0.9]
     progress : stderr progress bar; default: on for recordings of at least
         :data:`PROGRESS_SAMPLES` samples
