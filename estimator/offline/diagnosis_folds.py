@@ -16,7 +16,7 @@ from estimator.offline.diagnosis_fit import SIGNALS, fit_model, paired_trimmed_m
 from estimator.offline.diagnosis_readings import holds_release
 from estimator.offline.effects import ROUTE_FORMS, ROUTE_KEYS, ROUTE_TWELFTHS, Effect, below_resolution, predict
 
-__all__ = ["Folds", "Fit", "score", "structure", "unresolved", "tension_offsets", "route_of", "gain",
+__all__ = ["Folds", "Fit", "judging_folds", "sole_fold", "score", "structure", "unresolved", "tension_offsets", "route_of", "gain",
            "parameters_table", "FINER", "FORM_NAME", "UNITS"]
 
 #: the unit of each distal signal in the JSON keys
@@ -52,11 +52,44 @@ class Folds:
         self.s, self.train, self.kt = s, s.slice(kt), kt
         self.fit = (slice(0, kv), slice(kb, kt))
         self.val = (slice(kv, kt), slice(0, kb))
-        # the folds that judge (structure and scores): both, unless one fit block holds a release and the other does
-        # not - a fold fitted on one monotonic pull cannot know the route's shape, and its validation block then
-        # shows the base's extrapolation, not a missing effect
-        held = [holds_release(s.T_in[f]) for f in self.fit]
-        self.judged: tuple[int, ...] = (held.index(True),) if sum(held) == 1 else (0, 1)
+        self.judged: tuple[int, ...] = judging_folds(s, self.fit)
+
+
+def judging_folds(s, fit: tuple[slice, slice]) -> tuple[int, ...]:
+    """The folds whose validation judges (structure and scores): both, unless one fit block holds a release of the
+    proximal tension (:func:`estimator.offline.diagnosis_readings.holds_release`) and the other does not.
+
+    Where the friction sits along the sheath shows only while a slip front crosses the sheath after a reversal: a
+    fold fitted on one monotonic pull cannot know the route's shape, and its validation block then shows the base's
+    extrapolation, not a missing effect."""
+    held = [holds_release(s.T_in[f]) for f in fit]
+    return (held.index(True),) if sum(held) == 1 else (0, 1)
+
+
+def sole_fold(effects: list[Effect], folds: Folds, base: "Fit | None", floor: dict[str, float]) -> int | None:
+    """The one fold whose score counts for a model of ``effects`` (0 forward, 1 backward), or None: the worse of both.
+
+    * Only one fold judges the recording (:func:`judging_folds`): that one.
+    * An effect that acts through the starting state only (``Effect.initial_state``: a pretension whose profile the
+      first full slide erases) cannot show on the forward fold's validation block, which lies after the start;
+      where the base already fits that block to its floor, the backward fold (validated on the start) decides.
+    * Mirrored, an effect that is zero at the start and grows with time (``Effect.from_start``: a load cell drifting
+      from its zero) shows least on the backward fold's validation block, the start, while that fold's fit block
+      absorbs part of it into the base: where the base is at its floor (both folds together and the backward one),
+      the forward fold decides. Not above the floor: there a drift fitted forward also bends to a gain whose error
+      grows with the protocol's tension.
+    """
+    def at_floor(fold: int | None) -> bool:
+        return (bool(floor) and base is not None
+                and max(structure(base, floor, fold=fold).values()) < th.STRUCTURE_RATIO)
+    one_kind = base is not None and bool(effects)
+    if base is not None and len(folds.judged) == 1:
+        return folds.judged[0]
+    if one_kind and all(e.initial_state for e in effects) and at_floor(0):
+        return 1
+    if one_kind and all(e.from_start for e in effects) and at_floor(None) and at_floor(1):
+        return 0
+    return None
 
 
 class Fit:
@@ -74,24 +107,8 @@ class Fit:
         self.pairs: list[tuple[dict[str, float], dict[str, float]]] = []
         floor = floor or {}
         tr = folds.train
-        # an effect that acts through the starting state only (Effect.initial_state: a pretension whose profile the
-        # first full slide erases) cannot show on the forward fold's validation block, which lies after the start;
-        # where the base already fits that block to its floor, the backward fold (validated on the start) decides
-        # alone
-        # mirrored, an effect that is zero at the start and grows with time (Effect.from_start: a load cell drifting
-        # from its zero) shows least on the backward fold's validation block, the start, while that fold's fit block
-        # absorbs part of it into the base: where the base is at its floor (both folds together and the backward one),
-        # the forward fold decides alone. Not above the floor: there a drift fitted forward also bends to a gain
-        # whose error grows with the protocol's tension
-        def at_floor(fold: int | None) -> bool:
-            return (bool(floor) and base is not None
-                    and max(structure(base, floor, fold=fold).values()) < th.STRUCTURE_RATIO)
-        one_kind = base is not None and bool(effects)
         self.judged = folds.judged
-        self.sole_fold: int | None = (
-            folds.judged[0] if base is not None and len(folds.judged) == 1 else
-            1 if one_kind and all(e.initial_state for e in effects) and at_floor(0) else
-            0 if one_kind and all(e.from_start for e in effects) and at_floor(None) and at_floor(1) else None)
+        self.sole_fold = sole_fold(effects, folds, base, floor)
         for j, (fm, vm) in enumerate(zip(folds.fit, folds.val)):
             if j == 1 and base is not None and self.sole_fold is None and score(*self.pairs[0], floor) >= need:
                 break           # cannot be accepted (the worse fold counts): the second fold is not needed
