@@ -922,3 +922,95 @@ def test_a_fold_fitted_on_one_pull_does_not_judge_the_route(monkeypatch):
     # with both folds judging, the extrapolation is read as structure
     monkeypatch.setattr(diagnosis_folds, "holds_release", lambda T_in: True)
     assert diagnose(twin.data)["cause"] == "unknown"
+
+
+class _StubFit:
+    """A fitted model as the rules see it: its effects, its score S and its structure ratio on T_out (floor 1)."""
+
+    def __init__(self, ids: tuple[str, ...], S: float = 1.0, ratio: float = 1.0):
+        self.effects = [CATALOGUE[i] for i in ids]
+        self.S, self._ratio = S, ratio
+
+    @property
+    def ids(self) -> list[str]:
+        return [e.id for e in self.effects]
+
+    def val_mse(self) -> dict[str, float]:
+        return {"T_out": self._ratio ** 2}
+
+
+def test_the_stick_slip_rule_names_stiction_only_on_a_rough_proximal_tension():
+    from types import SimpleNamespace
+
+    from estimator.offline.diagnosis_rules import stick_slip_rule
+    ctx = SimpleNamespace(floor={"T_out": 1.0})
+    base, stiction = _StubFit(()), _StubFit(("stiction",), S=0.95)
+    singles = {"stiction": stiction}
+    # a clear saw-tooth where the models named nothing: stiction
+    assert stick_slip_rule(ctx, base, singles, 2.0) == (stiction, True, False, [])
+    # sensor noise (a ratio near 1), or no reading: nothing
+    assert stick_slip_rule(ctx, base, singles, 1.0) == (base, False, False, [])
+    assert stick_slip_rule(ctx, base, singles, None) == (base, False, False, [])
+    # a weak roughness names it only with a stiction fit that explains a tenth of what the base leaves
+    assert stick_slip_rule(ctx, base, singles, 1.2)[1] is False
+    explains = _StubFit(("stiction",), S=0.8)
+    assert stick_slip_rule(ctx, base, {"stiction": explains}, 1.2) == (explains, True, True, [])
+    # a clear saw-tooth overrules a lag that leaves structure, not one that explains the recording
+    lag_left = _StubFit(("sensor_lag:T_in",), S=0.3, ratio=2.0 * th.STRUCTURE_RATIO)
+    assert stick_slip_rule(ctx, lag_left, singles, 2.0) == (stiction, True, False, ["sensor_lag:T_in"])
+    lag_ok = _StubFit(("sensor_lag:T_in",), S=0.05, ratio=1.0)
+    assert stick_slip_rule(ctx, lag_ok, singles, 2.0) == (lag_ok, False, False, [])
+
+
+def test_the_rest_rule_names_an_encoder_offset_only_when_the_models_named_nothing():
+    from estimator.offline.diagnosis_rules import rest_rule
+    base, offset = _StubFit(()), _StubFit(("sensor_offset:x_in",), S=0.4)
+    singles = {"sensor_offset:x_in": offset}
+    assert rest_rule(base, singles, "sensor_offset:x_in") == (offset, True)
+    # an x_out reading is named through its equivalent (x_in offset -b), the one fitted
+    assert rest_rule(base, singles, "sensor_offset:x_out") == (offset, True)
+    # no reading, or an effect the models named: unchanged
+    assert rest_rule(base, singles, None) == (base, False)
+    named = _StubFit(("pretension",), S=0.1)
+    assert rest_rule(named, singles, "sensor_offset:x_in") == (named, False)
+
+
+def test_the_verdict_puts_unknown_first_only_when_the_catalogue_missed_most_of_the_structure():
+    from estimator.offline.diagnosis_rules import verdict
+    r = th.STRUCTURE_RATIO
+    side = _StubFit(("sensor_offset:T_in",), S=0.5)
+    # more than twice the threshold left after an effect that explains only part of it: unknown first
+    assert verdict(["sensor_offset:T_in"], {"T_out": 2.5 * r}, side, False) == ["unknown", "sensor_offset:T_in"]
+    # ... unless it removed nearly all of the base's excess, or a model-free reading named it
+    cause = _StubFit(("sensor_offset:T_in",), S=0.5 * th.DOMINANT_SCORE)
+    assert verdict(["sensor_offset:T_in"], {"T_out": 2.5 * r}, cause, False) == ["sensor_offset:T_in", "unknown"]
+    assert verdict(["sensor_offset:T_in"], {"T_out": 2.5 * r}, side, True) == ["sensor_offset:T_in", "unknown"]
+    # structure between the threshold and twice it: unknown after; none left: the effect alone; nothing: none
+    assert verdict(["sensor_offset:T_in"], {"T_out": 1.5 * r}, side, False) == ["sensor_offset:T_in", "unknown"]
+    assert verdict(["sensor_offset:T_in"], {"T_out": 0.5 * r}, side, False) == ["sensor_offset:T_in"]
+    assert verdict([], {"T_out": 0.5 * r}, _StubFit(()), False) == []
+
+
+def test_at_the_floor_an_effect_is_named_by_its_bar_or_by_the_excess_it_removes():
+    from types import SimpleNamespace
+
+    from estimator.offline.diagnosis_rules import shown_at_floor
+    ctx = SimpleNamespace(floor={"T_out": 1.0}, subset_floor={}, excess_min=th.EXCESS_MIN)
+    base = _StubFit((), ratio=1.0)                          # at its floor: B = 1 squared floor
+    # an effect without its own bound: STRONG_SCORE
+    assert shown_at_floor(ctx, base, "sensor_gain:T_out", _StubFit(("sensor_gain:T_out",), S=0.1))
+    assert not shown_at_floor(ctx, base, "sensor_gain:T_out", _StubFit(("sensor_gain:T_out",), S=0.2))
+    # an effect that cannot bend to noise has its own, looser bound (FLOOR_SCORE)
+    vf = th.FLOOR_SCORE["velocity_friction"]
+    assert shown_at_floor(ctx, base, "velocity_friction", _StubFit(("velocity_friction",), S=0.9 * vf))
+    assert not shown_at_floor(ctx, base, "velocity_friction", _StubFit(("velocity_friction",), S=1.1 * vf))
+    # a base near the threshold: what an effect removes, B (1 - S), names it above EXCESS_MIN
+    near = _StubFit((), ratio=1.9)                          # B = 3.61, still under WEAK_STRUCTURE
+    assert shown_at_floor(ctx, near, "sensor_gain:T_out", _StubFit(("sensor_gain:T_out",), S=0.16))
+    assert not shown_at_floor(ctx, base, "sensor_gain:T_out", _StubFit(("sensor_gain:T_out",), S=0.16))
+    # made without T_out: the bounds of clean recordings made that way
+    alone = SimpleNamespace(floor={"T_out": 1.0}, subset_floor=th.FLOOR_SCORE_WITHOUT["T_out"],
+                            excess_min=th.EXCESS_MIN_WITHOUT["T_out"])
+    backlash = _StubFit(("distal_backlash",), S=0.1)
+    assert shown_at_floor(ctx, base, "distal_backlash", backlash)
+    assert not shown_at_floor(alone, base, "distal_backlash", backlash)
