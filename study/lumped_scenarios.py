@@ -18,7 +18,7 @@ and a different, seeded randomisation of everything a bench changes between sess
 
 Hidden effects (:data:`EFFECT_IDS`, magnitudes from :func:`study.scenarios.realistic_range` at
 ``level``) are all physics of the lumped model or of its sensor chain, never the estimator's
-kernels: see :func:`_effect_knobs` and docs/model.md ("The lumped-mass simulator").
+kernels: see :func:`_effect_knobs` and docs/concepts/model.md ("The lumped-mass simulator").
 """
 from __future__ import annotations
 
