@@ -190,6 +190,10 @@ def replay_joints(csv: Path, cfg: Config, *, calibration: str | Path | None = No
 
     if not cfg.instrument.joints:
         raise DataError(f"{csv}: a joint recording, but the config's instrument {cfg.instrument.id} has no joints")
+    spindle = [j.name for j in cfg.instrument.joints if j.spindle_radius > 0]
+    if spindle:  # its per-cable T_in columns are estimates, not load-cell readings: a replay would be silently wrong
+        raise DataError(f"{csv}: joint(s) {', '.join(spindle)} are spindle-driven; teleop replay re-estimates from "
+                        "per-cable load cells, which a spindle instrument does not have")
     cols = read_joint_csv(csv)
     _column(cols, csv, "time")
     cal = _calibration_file(csv.parent, cfg, calibration)

@@ -114,3 +114,13 @@ def test_bad_joint_run_exits_2_naming_the_problem(tmp_path, capsys, case, needle
     rc = main(["replay", str(run)])
     assert rc == 2
     assert needle in capsys.readouterr().err
+
+
+def test_a_spindle_run_is_refused_naming_its_joints(tmp_path, capsys):
+    """A spindle instrument's per-cable T_in columns are estimates: replaying them as load cells would be wrong."""
+    run, _ = _make_run(tmp_path)
+    spindle_cfg = load_config(ROOT / "configs" / "instrument-spindle.yaml")
+    write_config(spindle_cfg, run / "config.yaml")
+    rc = main(["replay", str(run)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "spindle-driven" in err and spindle_cfg.instrument.joints[0].name in err
