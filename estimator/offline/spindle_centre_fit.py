@@ -111,17 +111,32 @@ def shape_range(runs: list[RunData], starts: list[int], ref: float) -> Range:
     return out[0], out[1]
 
 
+def _powers(x: np.ndarray, deg: int) -> np.ndarray:
+    """Columns x^0 .. x^deg, shape (n, deg + 1), by repeated multiplication (a power call per sample is slower)."""
+    out = np.empty((x.size, deg + 1))
+    out[:, 0] = 1.0
+    for k in range(1, deg + 1):
+        out[:, k] = out[:, k - 1] * x
+    return out
+
+
 def held_features(theta_p: np.ndarray, centre: np.ndarray, z: np.ndarray, theta_ref: float, deg: int,
                   rng: Range) -> np.ndarray:
     """The design matrix of :func:`estimator.online.spindle_centre.centre_features` (columns d^k, C d^k, z d^k,
     z C d^k) with the shape held outside ``rng`` (:func:`shape_range`): the rising branch (a + c, weight
     (1 + z) / 2) reads d clipped to the rising range, the falling branch (a - c, weight (1 - z) / 2) d clipped
     to the falling range. Inside both ranges it equals centre_features."""
-    d = np.asarray(theta_p, dtype=float) - theta_ref
-    pu, pd = (np.column_stack([np.clip(d, lo, hi) ** k for k in range(deg + 1)]) for lo, hi in rng)
-    wu, wd = (0.5 * (1.0 + z))[:, None], (0.5 * (1.0 - z))[:, None]
-    a, c = wu * pu + wd * pd, wu * pu - wd * pd
+    a, c = _held_branches(theta_p, z, theta_ref, deg, rng)
     return np.hstack([a, centre[:, None] * a, c, centre[:, None] * c])
+
+
+def _held_branches(theta_p: np.ndarray, z: np.ndarray, theta_ref: float, deg: int,
+                   rng: Range) -> tuple[np.ndarray, np.ndarray]:
+    """The (a, c) column blocks of :func:`held_features`, each (n, deg + 1)."""
+    d = np.asarray(theta_p, dtype=float) - theta_ref
+    pu, pd = (_powers(np.clip(d, lo, hi), deg) for lo, hi in rng)
+    wu, wd = (0.5 * (1.0 + z))[:, None], (0.5 * (1.0 - z))[:, None]
+    return wu * pu + wd * pd, wu * pu - wd * pd
 
 
 def predict_held(p: CentreParams, tau_p: np.ndarray, theta_p: np.ndarray, dt: float) -> np.ndarray:
@@ -133,8 +148,9 @@ def predict_held(p: CentreParams, tau_p: np.ndarray, theta_p: np.ndarray, dt: fl
     c = stroke_centre(tau_p, theta_p, dt, p.window, p.half_width, p.centre0, p.edge_slope, p.theta_ref)
     z = direction_state(theta_p, dt, p.theta_z)
     (ul, uh), (dl, dh) = p.notes["shape_range"]
-    X = held_features(theta_p, c, z, p.theta_ref, p.coef.shape[1] - 1, ((ul, uh), (dl, dh)))
-    return X @ np.asarray(p.coef, dtype=float).ravel()
+    k = np.asarray(p.coef, dtype=float)       # rows: a, C a, c, C c of held_features, summed without the matrix
+    a, cc = _held_branches(theta_p, z, p.theta_ref, k.shape[1] - 1, ((ul, uh), (dl, dh)))
+    return a @ k[0] + c * (a @ k[1]) + cc @ k[2] + c * (cc @ k[3])
 
 
 def _design(runs: list[RunData], centres: list[np.ndarray], starts: list[int], ref: float, theta_z: float, step: int,
