@@ -27,7 +27,8 @@ Offline identification and diagnosis:
   :func:`calibrate_joint_limit`), :class:`CalibrationResult`, :func:`detect_knee`;
 * :func:`fit_single` (K and L/EA of one recording, scored on held-out data), :class:`SingleTendonFit`;
 * :func:`fit_pair`, :class:`PairParams`, :class:`PairFit` (an antagonistic pair from its motor command);
-* :func:`diagnose` (what the base model misses on a recording and which physical effect explains it).
+* :func:`diagnose` (what the base model misses on a recording and which physical effect explains it: a
+  JSON-ready dict), :func:`diagnose_recording` (the same as a typed :class:`Diagnosis`).
 
 Importing this package is cheap: each name loads its module (and the compiled kernels behind it) on
 first use (PEP 562 module ``__getattr__``), so ``import estimator`` pulls in neither numba nor scipy.
@@ -77,6 +78,8 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "PairParams": ("estimator.offline.pair", "PairParams"),
     "PairFit": ("estimator.offline.pair", "PairFit"),
     "diagnose": ("estimator.offline.diagnosis", "diagnose"),
+    "diagnose_recording": ("estimator.offline.diagnosis", "diagnose_recording"),
+    "Diagnosis": ("estimator.offline.diagnosis_result", "Diagnosis"),
 }
 
 __all__ = [
@@ -85,7 +88,7 @@ __all__ = [
     "DistalSample", "BatchEstimate", "estimate_batch", "JointEstimator", "JointSample", "JointBatch",
     "estimate_joint_batch", "SpindleParams", "spindle_batch", "spindle_torque", "spindle_angle", "calibrate",
     "calibrate_joint_limit", "CalibrationResult", "detect_knee", "fit_single", "SingleTendonFit", "fit_pair",
-    "PairParams", "PairFit", "diagnose",
+    "PairParams", "PairFit", "diagnose", "diagnose_recording", "Diagnosis",
 ]
 
 if TYPE_CHECKING:       # the same names, for type checkers and editors (nothing is imported at run time)
@@ -94,7 +97,8 @@ if TYPE_CHECKING:       # the same names, for type checkers and editors (nothing
     from estimator.errors import CalibrationError, DataError, EstimatorError
     from estimator.offline.calibration import CalibrationResult, calibrate_joint_limit, detect_knee
     from estimator.offline.calibration import calibrate_joint_limit as calibrate
-    from estimator.offline.diagnosis import diagnose
+    from estimator.offline.diagnosis import diagnose, diagnose_recording
+    from estimator.offline.diagnosis_result import Diagnosis
     from estimator.offline.fit import SingleTendonFit, fit_single
     from estimator.offline.pair import PairFit, PairParams, fit_pair
     from estimator.online.distal import BatchEstimate, DistalEstimator, DistalSample, estimate_batch

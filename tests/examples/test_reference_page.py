@@ -36,3 +36,4 @@ def test_every_snippet_runs_and_prints_what_it_claims(tmp_path):
     assert spindle_lo < jaw_lo < 0 < jaw_hi < spindle_hi      # friction takes part of the torque both ways
     m = re.search(r"cause: (\w+) \(hidden: (\w+)\)", out)
     assert m is not None and m.group(1) == m.group(2) == "velocity_friction"
+    assert "typed: cause velocity_friction" in out                # the typed result says the same
