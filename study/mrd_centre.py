@@ -29,6 +29,7 @@ import numpy as np
 
 from estimator.offline.spindle_centre_fit import (
     fit_centre_map,
+    held_parts,
     predict_held,
     run_centre,
     scale_profile,
@@ -154,8 +155,12 @@ def centre_folder(runs: list[RunData], fs: float, tick: Callable[[str], None], l
 
 
 def centre_implied_gain(p: CentreParams, runs: list[RunData]) -> float:
-    """:func:`implied_load_gain` [-] of the centre map ``p`` (shape held outside its angles) on ``runs``."""
-    return implied_load_gain(lambda c, u: predict_held(p, c.tau_p + u, c.theta_p, c.dt), runs)
+    """:func:`implied_load_gain` [-] of the centre map ``p`` (shape held outside its angles) on ``runs``; the
+    spindle-angle blocks of each run (:func:`held_parts`) are computed once for its two shifted torques."""
+    if "shape_range" not in p.notes:
+        return implied_load_gain(lambda c, u: predict_held(p, c.tau_p + u, c.theta_p, c.dt), runs)
+    parts = {id(r): held_parts(p, r.theta_p, r.dt) for r in runs}
+    return implied_load_gain(lambda c, u: predict_held(p, c.tau_p + u, c.theta_p, c.dt, parts[id(c)]), runs)
 
 
 def folder_load_gain(p: CentreParams, runs: list[RunData]) -> dict:

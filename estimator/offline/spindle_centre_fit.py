@@ -30,7 +30,8 @@ from estimator.online.spindle_centre import (
 )
 
 __all__ = ["THETA_Z_GRID", "DEGREE", "band_edges", "fit_centre_map", "scale_profile", "run_centre", "scored_start",
-           "within_run_gain", "shape_range", "held_features", "predict_held"]
+           "within_run_gain", "shape_range", "held_features", "predict_held",
+           "held_parts"]
 
 #: Candidate direction-state travels [rad].
 THETA_Z_GRID = (0.003, 0.006, 0.01, 0.02, 0.04, 0.08)
@@ -139,17 +140,25 @@ def _held_branches(theta_p: np.ndarray, z: np.ndarray, theta_ref: float, deg: in
     return wu * pu + wd * pd, wu * pu - wd * pd
 
 
-def predict_held(p: CentreParams, tau_p: np.ndarray, theta_p: np.ndarray, dt: float) -> np.ndarray:
+def held_parts(p: CentreParams, theta_p: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """The spindle-angle-only blocks (a, c) of :func:`predict_held` for one run (theta_p [rad], spacing dt [s]),
+    each (n, deg + 1): computed once, they serve every spindle torque of the run (shifted loads)."""
+    z = direction_state(theta_p, dt, p.theta_z)
+    (ul, uh), (dl, dh) = p.notes["shape_range"]
+    return _held_branches(theta_p, z, p.theta_ref, np.asarray(p.coef).shape[1] - 1, ((ul, uh), (dl, dh)))
+
+
+def predict_held(p: CentreParams, tau_p: np.ndarray, theta_p: np.ndarray, dt: float,
+                 parts: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Jaw torque [N m], shape (n,), of one run from its spindle torque [N m] and angle [rad]: the centre map
     with its shape held outside the calibration's angle range (``p.notes["shape_range"]``, set by
-    :func:`fit_centre_map`); parameters without it give :func:`predict_centre_map`'s polynomial."""
+    :func:`fit_centre_map`); parameters without it give :func:`predict_centre_map`'s polynomial. ``parts``:
+    :func:`held_parts` of this run's theta_p, when already computed."""
     if "shape_range" not in p.notes:
         return predict_centre_map(p, tau_p, theta_p, dt)
     c = stroke_centre(tau_p, theta_p, dt, p.window, p.half_width, p.centre0, p.edge_slope, p.theta_ref)
-    z = direction_state(theta_p, dt, p.theta_z)
-    (ul, uh), (dl, dh) = p.notes["shape_range"]
     k = np.asarray(p.coef, dtype=float)       # rows: a, C a, c, C c of held_features, summed without the matrix
-    a, cc = _held_branches(theta_p, z, p.theta_ref, k.shape[1] - 1, ((ul, uh), (dl, dh)))
+    a, cc = held_parts(p, theta_p, dt) if parts is None else parts
     return a @ k[0] + c * (a @ k[1]) + cc @ k[2] + c * (cc @ k[3])
 
 
