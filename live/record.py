@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import queue
 import sys
 import threading
@@ -49,6 +48,8 @@ from typing import Literal
 
 import numpy as np
 
+from live.record_budget import LOW_RATE_HZ, DiskBudget, Writes, is_low_rate
+from live.record_demo import start_recorder, summary_line
 from live.record_files import StreamCounts, StreamCsv, decode_any, flatten, short_names, values
 from live.record_journal import JournalRecovery
 from teleop.entity import Entity
@@ -61,6 +62,10 @@ __all__ = ["Recorder", "decode_any", "flatten", "nothing_received_reason", "read
 log = logging.getLogger("live.record")
 _RAW = RECORD         # <d t><H key length><I payload length>, then key and payload (teleop/journal.py)
 _STOP = object()
+
+
+def _raise(e: Exception) -> None:
+    raise e
 
 
 class _Subscription(Entity):
@@ -99,7 +104,11 @@ class Recorder:
         self.ever_alive: set[str] = set()
         self.state_changes: list[dict] = []
         self._states: dict[str, int] = {}
-        self._csv: dict[tuple, StreamCsv] = {}          # (key, message type, value count) -> its file
+        self._csv: dict[tuple, StreamCsv | None] = {}   # (key, message type, value count) -> its file (None: none)
+        self._names: dict[tuple, tuple] = {}
+        self.budget = DiskBudget(self.dir.parent, cfg.recording.max_bytes, cfg.recording.min_free_bytes)
+        self.writes = Writes()
+        self._low_t: dict[str, float] = {}             # key -> time of its last low-rate message written
         self._cmd_t: dict[int, float] = {}
         self._echo_delays: list[float] = []
         self._echoed: set[int] = set()
@@ -147,18 +156,21 @@ class Recorder:
                     log.warning("recorder: %s on %s: %r", type(e).__name__, item[1], e)
             for side in self.journals.due(time.monotonic()):
                 self._recover(side)
+            self.budget.check(time.monotonic(), self.clock.now(), measure=bool(self.streams))
             if time.monotonic() - last_flush >= self.flush_interval:
                 self._flush()
                 last_flush = time.monotonic()
         self._flush()
 
     def _flush(self) -> None:
-        self._raw.flush()
+        w = self.writes
+        w("messages.bin", self._raw.flush)
         for f in self._csv.values():
-            f.fh.flush()
+            if f is not None:
+                w(f.path.name, f.fh.flush)
         for fh in self._aux.values():
-            fh.flush()
-        self._mcap.flush(time.monotonic())        # a chunk at least every record_mcap.CHUNK_INTERVAL
+            w(Path(fh.name).name, fh.flush)
+        w("session.mcap", self._mcap.flush, time.monotonic())   # a chunk at least every record_mcap.CHUNK_INTERVAL
 
     def _handle(self, t: float, key: str, payload) -> None:
         if isinstance(payload, bool):
@@ -168,7 +180,7 @@ class Recorder:
                 self.ever_alive.add(side)
             else:                                  # gone (killed or ended): complete it from its journal soon
                 self.journals.schedule(side, time.monotonic())
-            self._aux["alive"].write(f"{t:.12g},{side},{int(payload)}\n")
+            self.writes("liveliness.csv", self._aux["alive"].write, f"{t:.12g},{side},{int(payload)}\n")
             return
         self._record(t, key, payload, recovered=False)
 
@@ -180,40 +192,67 @@ class Recorder:
         try:
             msg = decode_any(payload)
         except Exception:  # noqa: BLE001 - CodecError: counted, kept in messages.bin
-            self._raw.write(pack_record(t, key.encode(), payload))
+            self.writes("messages.bin", self._raw.write, pack_record(t, key.encode(), payload))
             st.errors += 1
             st.count += 1
             return
         seq = getattr(msg, "seq", None)
         if not self.journals.note(key, payload, recovered):
             return                                 # arrived after it was recovered: already recorded
-        self._raw.write(pack_record(t, key.encode(), payload))
         st.type = type(msg).__name__
         if recovered:
             st.fill(seq, t)
-            self._aux["recovered"].write(f"{t:.12g},{key.split('/')[2] if key.count('/') >= 3 else key},{key},{seq}\n")
         else:
             st.see(seq, t)
         vals: list = []
         values(msg, vals)
         shape = (key, type(msg), len(vals))
-        f = self._csv.get(shape)
-        if f is None:                             # a new message shape on this key: names, units, a file
-            f = self._open_csv(shape, flatten(msg))
-        f.write(t, tuple(vals))
-        self._derived(t, key, msg, seq, f.names, vals, st.count)
-        self._mcap.write(t, key, msg, recovered)   # last: a problem of the MCAP file costs no other file
+        if shape not in self._names:              # a new message shape on this key: names, units, a file
+            self._open_csv(shape, flatten(msg))
+        w, f = self.writes, self._csv[shape]
+        if self._written(t, key, msg):
+            w("messages.bin", self._raw.write, pack_record(t, key.encode(), payload))
+            if recovered:
+                w("recovered.csv", self._aux["recovered"].write, f"{t:.12g},{key.split('/')[2] if key.count('/') >= 3 else key},{key},{seq}\n")
+            if f is not None:
+                w(f.path.name, f.write, t, tuple(vals))
+            w("session.mcap", self._mcap.write, t, key, msg, recovered)   # a problem of the MCAP file costs no other file
+        else:
+            w.skip(key)
+        self._derived(t, key, msg, seq, self._names[shape], vals, st.count)
 
-    def _open_csv(self, shape: tuple, flat: list) -> StreamCsv:
+    def _written(self, t: float, key: str, msg) -> bool:
+        """Whether this message goes to the files: always below the disk budget; past it, a low-rate
+        stream's at most LOW_RATE_HZ and at every state change, a high-rate stream's never."""
+        if self.budget.reached is None:
+            return True
+        if not is_low_rate(key):
+            return False
+        state = getattr(msg, "state", None)
+        changed = state is not None and self._states.get(key.split("/")[2] if key.count("/") >= 3 else key) != int(state)
+        if changed or t - self._low_t.get(key, -float("inf")) >= 1.0 / LOW_RATE_HZ:
+            self._low_t[key] = t
+            return True
+        return False
+
+    def _open_csv(self, shape: tuple, flat: list) -> None:
+        """The column names of a new message shape, and its CSV unless ``recording.csv`` leaves it out
+        (``low_rate``: the high-rate streams are in messages.bin and session.mcap only)."""
         key = shape[0]
+        names = self._names[shape] = short_names([n for n, _ in flat])
+        self._csv[shape] = None
+        if self.cfg.recording.csv != "all" and not is_low_rate(key):
+            return
         parts = key.split("/")
         stem = "_".join(parts[2:]) if len(parts) > 2 else parts[-1]
-        n = sum(1 for s in self._csv if s[0] == key)
+        n = sum(1 for s in self._names if s[0] == key) - 1
         path = self.dir / (f"{stem}.csv" if n == 0 else f"{stem}-{n + 1}.csv")
         meta = {"source": "teleop record", "instrument": self.ident, "key": key, "message": shape[1].__name__,
                 "time": "recorder receive time (monotonic clock of the recorder)"}
-        f = self._csv[shape] = StreamCsv(path, short_names([n for n, _ in flat]), flat, meta)
-        return f
+        try:
+            self._csv[shape] = StreamCsv(path, names, flat, meta)
+        except OSError as e:
+            self.writes(path.name, _raise, e)
 
     def _derived(self, t: float, key: str, msg, seq, names: tuple, vals: list, count: int) -> None:
         """State changes, the command -> echo delay, and the decimated Rerun scalars."""
@@ -224,7 +263,7 @@ class Recorder:
                 self._states[side] = int(state)
                 name = getattr(state, "name", str(state))
                 self.state_changes.append({"time": t, "side": side, "state": name, "seq": seq})
-                self._aux["state"].write(f"{t:.12g},{side},{int(state)},{seq}\n")
+                self.writes("state_changes.csv", self._aux["state"].write, f"{t:.12g},{side},{int(state)},{seq}\n")
         if key.endswith("/command") and seq is not None:
             self._cmd_t[seq] = t
             if len(self._cmd_t) > 20000:
@@ -236,7 +275,7 @@ class Recorder:
             self._echo_delays.append(t - self._cmd_t[echo])
             if len(self._echoed) > 20000:
                 self._echoed.clear()
-        if count % self.cfg.recording.log_every == 0 and self._rr.enabled:
+        if count % self.cfg.recording.log_every == 0 and self._rr.enabled and self.budget.reached is None:
             side = key.split("/")[2]
             scalars = {f"{side}_state" if n == "state" else n.replace("[", "").replace("]", "").replace(".", "_"): float(v)
                        for n, v in zip(names, vals) if (n == "state" or isinstance(v, float)) and not n.startswith("t_")
@@ -260,20 +299,25 @@ class Recorder:
         self._q.put(_STOP)
         self._thread.join(30.0)
         self._recover(None)
-        for f in self._csv.values():
-            f.close()                              # sorted by time if a recovered message filled a gap
+        w, csvs = self.writes, [f for f in self._csv.values() if f is not None]
+        for f in csvs:
+            w(f.path.name, f.close)                # sorted by time if a recovered message filled a gap
         for fh in self._aux.values():
-            fh.close()
-        self._raw.close()
+            w(Path(fh.name).name, fh.close)
+        w("messages.bin", self._raw.close)
         self._rr.close()
+        w("session.mcap", self._mcap.close)
         s = self.summary()
-        s["mcap"] = self._mcap.close()
+        s["mcap"] = self._mcap.close() if "session.mcap" not in w.failed else {"error": w.failed["session.mcap"]}
         try:
             from live.record_figures import streams_figure
-            s["figure"] = str(streams_figure([f.path for f in self._csv.values()], self.dir / "streams.png"))
+            s["figure"] = str(streams_figure([f.path for f in csvs], self.dir / "streams.png"))
         except Exception as e:  # noqa: BLE001 - a figure problem must not lose the summary
             s["figure_error"] = repr(e)
-        (self.dir / "summary.json").write_text(json.dumps(s, indent=2) + "\n", encoding="utf-8")
+        try:
+            (self.dir / "summary.json").write_text(json.dumps(s, indent=2) + "\n", encoding="utf-8")
+        except OSError as e:
+            log.error("recorder: summary.json not written (%s); not written per file: %s", e, s["disk"]["not_written"])
         return s
 
     def summary(self) -> dict:
@@ -282,7 +326,8 @@ class Recorder:
                  "max_ms": float(d.max())} if d.size else {"n": 0})
         return {"instrument": self.ident, "streams": {k: s.summary() for k, s in sorted(self.streams.items())},
                 "recovered_from_journals": self.journals.summary(),
-                "files": sorted(str(f.path.name) for f in self._csv.values()),
+                "files": sorted(str(f.path.name) for f in self._csv.values() if f is not None),
+                "disk": {**self.budget.summary(), **self.writes.summary()},
                 "state_changes": self.state_changes, "command_to_echo_at_recorder": echo}
 
 
@@ -339,38 +384,3 @@ def nothing_received_reason(instrument: str, sides_seen) -> str:
                 f"another instrument.id, or the link to it was refused (password, certificate, endpoint)")
     return (f"{' and '.join(sorted(sides_seen))} appeared but published nothing on teleop/{instrument}/...: it "
             f"stopped before its loop started")
-
-
-def start_recorder(base: list[str], common: list[str], run_dir: Path, env: dict, deadline: float):
-    """Start ``teleop record`` for a demo beside the sides: listening on a free loopback port, exiting
-    once both sides have gone. Returns ``(process, ["--connect", endpoint])`` once it is ready (the
-    sides connect to it, so it hears every message from their first one), or ``(process, None)`` when
-    it did not become ready before ``deadline`` [s, monotonic] (see ``<run_dir>/recorder.log``)."""
-    import subprocess
-
-    from teleop.transport import free_tcp_port, loopback_endpoint
-    ep = loopback_endpoint(free_tcp_port())
-    log_path = run_dir / "recorder.log"
-    with open(log_path, "w") as fh:
-        # niceness +5: on a busy machine the two control loops get the CPU first (the recorder is buffered)
-        proc = subprocess.Popen(base + ["record", "--listen", ep, "--exit-when-done"] + common, stdout=fh,
-                                stderr=subprocess.STDOUT, env=env, preexec_fn=lambda: os.nice(5))
-    while time.monotonic() < deadline and proc.poll() is None:
-        if "(ready)" in log_path.read_text(encoding="utf-8", errors="replace"):
-            return proc, ["--connect", ep]
-        time.sleep(0.05)
-    return proc, None
-
-
-def summary_line(out_dir: str | Path) -> str:
-    """One line on a finished recording: messages, streams, seqs missing, where the files are."""
-    path = Path(out_dir) / "summary.json"
-    try:
-        s = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return f"recorder: no summary in {out_dir}"
-    streams = s.get("streams", {}).values()
-    return (f"recorder: {sum(v['count'] for v in streams)} messages on {len(s.get('streams', {}))} streams, "
-            f"{sum(v['missing'] for v in streams)} missing by seq -> {out_dir}")
-
-

@@ -7,7 +7,9 @@ seconds. A SIGKILL of the process loses at most that interval of rows (the ``tel
 process has every message anyway); every other exit (``close``, the ``with`` block, SIGTERM inside
 :func:`teleop.recording.raise_on_sigterm`) writes every row. A row the base recorder refuses (wrong
 length, a non-finite value) is skipped and counted in :attr:`ThreadedCsvRecorder.rejected` with a
-warning: the loop never dies of its own recording. The thread formats while the control loop sleeps
+warning: the loop never dies of its own recording. A write the OS refuses (``OSError``: disk full,
+file too large) ends the writing with one error line; the rows handed to the OS before stay in the
+file, and the later ones are dropped and counted in :attr:`ThreadedCsvRecorder.dropped`. The thread formats while the control loop sleeps
 (:data:`teleop.realtime.IDLE`), in chunks of rows that each hold the interpreter lock about
 :data:`CHUNK_COST` (formatting is one C call per chunk, and the loop cannot run Python during it:
 the 3-joint slave's 20-row batch of 72 columns took 0.58 ms in one piece, longer than the loop's idle
@@ -46,6 +48,10 @@ class ThreadedCsvRecorder(CsvRecorder):
     ----------
     rejected : int
         Rows refused by the base recorder (logged, not raised).
+    dropped : int
+        Rows not written after the OS refused a write (:attr:`error`, logged once, not raised).
+    error : str or None
+        The OS error that ended the writing.
     """
 
     def __init__(self, *args, flush_interval: float = 0.02, **kwargs):
@@ -53,7 +59,8 @@ class ThreadedCsvRecorder(CsvRecorder):
             raise ValueError(f"flush_interval must be > 0 s, got {flush_interval!r}")
         super().__init__(*args, **kwargs)
         self.flush_interval = float(flush_interval)
-        self.rejected = 0
+        self.rejected = self.dropped = self._taken = self._handed = 0     # rows: refused, dropped, queued, to the OS
+        self.error: str | None = None
         self._queue: collections.deque = collections.deque()
         self._stop = threading.Event()
         self._io = threading.Lock()
@@ -85,15 +92,31 @@ class ThreadedCsvRecorder(CsvRecorder):
                     rows.append(q.popleft())
                 if not rows:
                     return
+                if self.error is not None:
+                    self.dropped += len(rows)
+                    return
+                self._taken += len(rows)
                 per_row = VALUE_COST * len(self.columns)
                 chunk = max(1, int(CHUNK_COST / per_row))
-                for i in range(0, len(rows), chunk):
-                    part = rows[i:i + chunk]
-                    IDLE.wait(per_row * len(part))     # format while the control loop sleeps (teleop/realtime.py)
-                    self._write_part(part)
-                CsvRecorder.flush(self)
+                try:
+                    for i in range(0, len(rows), chunk):
+                        part = rows[i:i + chunk]
+                        IDLE.wait(per_row * len(part))     # format while the control loop sleeps (teleop/realtime.py)
+                        self._write_part(part)
+                    self._hand()
+                except OSError as e:                   # every row taken and not handed to the OS
+                    self.error = f"{type(e).__name__}: {e}"
+                    self.dropped = self._taken - self._handed - self.rejected
+                    self._pending, self._pending_rows = [], 0
+                    log.error("%s is no longer written: %s (%d rows dropped so far)", self.path.name, e, self.dropped)
             finally:
                 self._drainer = None
+
+    def _hand(self) -> None:
+        """The base recorder's flush, counting the rows it hands to the OS."""
+        n = self._pending_rows
+        CsvRecorder.flush(self)
+        self._handed += n
 
     def _write_part(self, rows: list) -> None:
         try:
@@ -118,7 +141,7 @@ class ThreadedCsvRecorder(CsvRecorder):
         if self._drainer == threading.get_ident():
             # the base recorder's own flush (every flush_every rows) in the middle of a drain: the rows
             # written so far go to the OS; draining again here would wait for the lock this thread holds
-            CsvRecorder.flush(self)
+            self._hand()
             return
         self._drain()
 
@@ -131,4 +154,8 @@ class ThreadedCsvRecorder(CsvRecorder):
             try:
                 self._drain()
             finally:
-                CsvRecorder.close(self)
+                try:
+                    CsvRecorder.close(self)
+                except OSError as e:
+                    self.error = self.error or f"{type(e).__name__}: {e}"
+                    log.error("%s: closing: %s", self.path.name, e)

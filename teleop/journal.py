@@ -22,6 +22,7 @@ One journal per process (:data:`JOURNAL`, set by :func:`open_journal`); without 
 """
 from __future__ import annotations
 
+import logging
 import os
 import re
 import struct
@@ -98,7 +99,8 @@ class Journal:
         self.side = side
         self.segment_bytes = int(segment_bytes)
         self.keep = max(1, int(keep))
-        self.records = 0
+        self.records = self.lost = 0                # records written; not written after an OSError (error)
+        self.error: str | None = None
         self._lock = threading.Lock()
         self._keys: dict[str, bytes] = {}
         old = journal_segments(self.dir, side).get(side, [])
@@ -127,13 +129,22 @@ class Journal:
             kb = self._keys[key] = key.encode()
         rec = RECORD.pack(time.monotonic(), len(kb), len(payload)) + kb + payload
         with self._lock:
-            if self._fd < 0:
+            if self._fd < 0 or self.error is not None:
+                self.lost += self.error is not None
                 return
-            if self._size + len(rec) > self.segment_bytes and self._size:
-                os.close(self._fd)
-                self._n += 1
-                self._open()
-            os.write(self._fd, rec)
+            try:
+                if self._size + len(rec) > self.segment_bytes and self._size:
+                    os.close(self._fd)
+                    self._fd, self._n = -1, self._n + 1
+                    self._open()
+                os.write(self._fd, rec)
+            except OSError as e:      # disk full, file too large: the publisher's loop goes on unjournaled
+                self.error, self.lost = f"{type(e).__name__}: {e}", self.lost + 1
+                if self._fd >= 0:
+                    os.close(self._fd)
+                    self._fd = -1
+                logging.getLogger("teleop.journal").error("journal %s is no longer written: %s", self.side, e)
+                return
             self._size += len(rec)
             self.records += 1
 

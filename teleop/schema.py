@@ -302,6 +302,9 @@ class RecordingConfig:
     log_every: int = 10
     profile_every: int = 5
     flush_interval: float = 0.02          # [s] recorder files handed to the OS at least this often
+    csv: Literal["low_rate", "all"] = "low_rate"   # recorder per-stream CSVs: heartbeats only, or every stream too
+    max_bytes: Optional[float] = 2.0e9    # [B] run directory size past which the recorder drops the high-rate streams
+    min_free_bytes: Optional[float] = 5.0e8  # [B] free disk space below which it does the same (live/record_budget.py)
 
 
 @dataclass(frozen=True)
@@ -336,8 +339,7 @@ class Config:
     ros2: Ros2Config = field(default_factory=Ros2Config)
 
 
-# Valid range and unit of every numeric setting ("[]" stands for any list index). A test checks that
-# each numeric field of the schema has an entry and each entry names a field.
+# Valid range and unit of every numeric setting ("[]" stands for any list index). A test checks that each numeric field of the schema has an entry and each entry names a field.
 RANGES: dict[str, tuple[str, str]] = {
     "sheath.EA": ("> 0", "N"), "sheath.pretension": (">= 0", "N"),
     "sheath.runs[].length": ("> 0", "m"), "sheath.runs[].radius": ("> 0", "m, .inf = straight"),
@@ -366,7 +368,6 @@ RANGES: dict[str, tuple[str, str]] = {
     "slave.relax_speed": (">= 0", "m/s"), "slave.x_in_min": ("any", "m"), "slave.x_in_max": ("any", "m"),
     "slave.engage_tolerance": ("> 0", "m"), "slave.watchdog_ms": ("> 0", "ms"), "slave.heartbeat_hz": ("> 0", "Hz"),
     "master.realtime_priority": ("0..99", "-"), "slave.realtime_priority": ("0..99", "-"),
-    "recording.log_every": (">= 1", "samples"),
     "instrument.joints[].pulley_radius": ("> 0", "m"), "instrument.joints[].limits[]": ("any", "rad"),
     "instrument.joints[].pretension": (">= 0", "N"), "instrument.joints[].spindle_radius": (">= 0", "m"),
     **{f"instrument.joints[].tendons.{t}.{k}": v for t in "ab" for k, v in (
@@ -378,8 +379,7 @@ RANGES: dict[str, tuple[str, str]] = {
     "rig.simulated.joints[].tendons.a.mu": (">= 0", "-"), "rig.simulated.joints[].tendons.b.mu": (">= 0", "-"),
     "pair_control.min_tension": ("> 0", "N"), "pair_control.tension_gain": ("> 0", "m/(N s)"),
     "pair_control.switch_band": (">= 0", "rad"), "pair_control.axes[]": (">= 0", "-"),
-    "recording.profile_every": (">= 1", "logs"),
-    "recording.flush_interval": ("> 0", "s"), "transport.run_id_timeout": (">= 0", "s"),
+    "recording.log_every": (">= 1", "samples"), "recording.profile_every": (">= 1", "logs"), "recording.flush_interval": ("> 0", "s"), "transport.run_id_timeout": (">= 0", "s"), "recording.max_bytes": ("> 0", "B"), "recording.min_free_bytes": (">= 0", "B"),
     "ros2.domain_id": ("0..232", "-"), "ros2.rate_hz": ("> 0", "Hz"),
 }
 

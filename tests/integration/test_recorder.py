@@ -45,6 +45,7 @@ calibration:
 recording:
   rerun: "off"
   dir: "{runs}"
+  csv: all
 transport:
   listen: ["tcp/127.0.0.1:{port}"]
 """

@@ -30,7 +30,7 @@ def test_flatten_names_every_field_of_nested_messages():
 def _cfg(tmp_path) -> Config:
     c = Config()
     return dataclasses.replace(c, instrument=dataclasses.replace(c.instrument, id="rec1"),
-                               recording=dataclasses.replace(c.recording, rerun="off", flush_interval=0.01))
+                               recording=dataclasses.replace(c.recording, rerun="off", flush_interval=0.01, csv="all"))
 
 
 def test_recorder_writes_every_message_per_stream_and_a_summary(tmp_path):

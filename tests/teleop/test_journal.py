@@ -61,7 +61,7 @@ def test_publisher_journals_before_the_put(tmp_path):
 def _cfg() -> Config:
     c = Config()
     return dataclasses.replace(c, instrument=dataclasses.replace(c.instrument, id="jr1"),
-                               recording=dataclasses.replace(c.recording, rerun="off", flush_interval=0.01))
+                               recording=dataclasses.replace(c.recording, rerun="off", flush_interval=0.01, csv="all"))
 
 
 def test_recorder_recovers_exactly_what_was_journaled_and_not_received(tmp_path):
