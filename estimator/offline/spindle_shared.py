@@ -86,15 +86,12 @@ def kinematic_ratio(runs: list[RunData], middle: float = 0.6, min_rate: float = 
                 nblk += 1
     if not cols:
         raise ValueError("no sample in full motion to read the kinematic ratio from")
-    n = sum(c[0].size for c in cols)
-    A = np.zeros((n, 1 + nblk + int(stretch)))
-    i = 0
-    for th, k in cols:
-        A[i:i + th.size, 0], A[i:i + th.size, 1 + k] = th, 1.0
-        i += th.size
-    if stretch:
-        A[:, -1] = np.concatenate(taus)
-    coef, *_ = np.linalg.lstsq(A, np.concatenate(ys), rcond=None)
+    # an offset per block: the same slope as one least squares with an offset column per block, from the columns
+    # with each block's mean taken out (Frisch-Waugh-Lovell), without the (n, blocks) matrix
+    def centred(parts: list[np.ndarray]) -> np.ndarray:
+        return np.concatenate([v - v.mean() for v in parts])
+    A = np.column_stack([centred([c[0] for c in cols])] + ([centred(taus)] if stretch else []))
+    coef, *_ = np.linalg.lstsq(A, centred(ys), rcond=None)
     return float(coef[0])
 
 
