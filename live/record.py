@@ -301,12 +301,12 @@ class Recorder:
         self._recover(None)
         w, csvs = self.writes, [f for f in self._csv.values() if f is not None]
         for f in csvs:
-            w(f.path.name, f.close)                # sorted by time if a recovered message filled a gap
+            w.close(f.path.name, f.close)          # sorted by time if a recovered message filled a gap
         for fh in self._aux.values():
-            w(Path(fh.name).name, fh.close)
-        w("messages.bin", self._raw.close)
+            w.close(Path(fh.name).name, fh.close)
+        w.close("messages.bin", self._raw.close)
         self._rr.close()
-        w("session.mcap", self._mcap.close)
+        w.close("session.mcap", self._mcap.close)
         s = self.summary()
         s["mcap"] = self._mcap.close() if "session.mcap" not in w.failed else {"error": w.failed["session.mcap"]}
         try:

@@ -126,7 +126,7 @@ class DiskBudget:
             return
         self.rates = {k: (owners.get(k, 0) - first.get(k, 0)) / (now - t0) for k in sorted(owners)}
         total = sum(self.rates.values())
-        parts = ", ".join(f"{k} {v / 1e3:.0f} kB/s" for k, v in self.rates.items())
+        parts = ", ".join(f"{k} {v / 1e3:.0f} kB/s" for k, v in self.rates.items() if v >= 500)
         until = ("" if self.max_bytes is None or total <= 0 else
                  f"; recording.max_bytes {self.max_bytes / 1e9:.3g} GB reached in about "
                  f"{max(0.0, self.max_bytes - self.run_bytes) / total / 60:.0f} min")
@@ -165,6 +165,15 @@ class Writes:
             self.not_written[name] = self.not_written.get(name, 0) + 1
             log.error("recorder: %s is no longer written: %s (what it holds stays readable)", name, e)
             return False
+
+    def close(self, name: str, fn: Callable) -> None:
+        """Close the file ``name`` with ``fn()``, also after an error of it (what its buffer holds is
+        handed to the OS where the OS takes it); an ``OSError`` is counted, not raised."""
+        try:
+            fn()
+        except OSError as e:
+            self.failed.setdefault(name, f"{type(e).__name__}: {e}")
+            self.not_written[name] = self.not_written.get(name, 0) + 1
 
     def skip(self, key: str) -> None:
         """One message on ``key`` not written because the budget is reached."""

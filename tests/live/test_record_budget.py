@@ -1,0 +1,156 @@
+"""The recorder's disk use (live/record_budget.py): the high-rate CSVs left out by default, the byte
+budget and the free-space floor, and writes the OS refuses (disk full) counted per file."""
+from __future__ import annotations
+
+import dataclasses
+import errno
+import json
+import time
+
+import pytest
+from mcap.reader import make_reader
+
+from live.record import Recorder, read_messages
+from live.record_budget import DiskBudget, Writes, dir_bytes, is_low_rate
+from teleop.codec import encode
+from teleop.config import Config, TransportConfig
+from teleop.keys import command_key, estimate_key, heartbeat_key
+from teleop.messages import Command, Heartbeat, Phase, Side, SideState, tendon_estimate
+from teleop.transport import Session, free_tcp_port, loopback_endpoint
+
+DEADLINE = 20.0     # [s] a condition not met by then fails the test
+
+
+def _mcap_teleop_messages(path) -> int:
+    with open(path, "rb") as fh:
+        return sum(1 for _, ch, _ in make_reader(fh).iter_messages() if ch.topic.startswith("/teleop/"))
+
+
+def _cfg(**recording) -> Config:
+    c = Config()
+    return dataclasses.replace(c, instrument=dataclasses.replace(c.instrument, id="bud1"),
+                               recording=dataclasses.replace(c.recording, rerun="off", flush_interval=0.01, **recording))
+
+
+def _session():
+    return Session(TransportConfig(listen=(loopback_endpoint(free_tcp_port()),), connect=()))
+
+
+def _estimate(k: int) -> bytes:
+    return encode(tendon_estimate(k, k, 1e-3 * k, 2.0 + k, 1e-4, 1.5, 1e-5, 1e-4, Phase.HOLD, (2.0, 1.0)))
+
+
+def _feed(rec: Recorder, n: int, states=()) -> None:
+    """``n`` estimates and commands at 1 kHz of recorder time, then one slave heartbeat per state at 50 Hz."""
+    for k in range(n):
+        rec._q.put((1.0 + 1e-3 * k, estimate_key("bud1"), _estimate(k)))
+        rec._q.put((1.0 + 1e-3 * k, command_key("bud1"), encode(Command(k, 1e-3 * k, (1e-5 * k,)))))
+    for k, state in enumerate(states):
+        rec._q.put((2.0 + 0.02 * k, heartbeat_key("bud1", "slave"), encode(Heartbeat(Side.SLAVE, k, 0.02 * k, state))))
+
+
+def test_low_rate_streams_are_the_heartbeats():
+    assert is_low_rate(heartbeat_key("x", "slave")) and is_low_rate(heartbeat_key("x", "master"))
+    assert not is_low_rate(estimate_key("x")) and not is_low_rate(command_key("x"))
+
+
+def test_default_recording_writes_no_csv_of_a_high_rate_stream_and_every_message_elsewhere(tmp_path):
+    with _session() as s:
+        rec = Recorder(s, _cfg(), tmp_path / "recorder")
+        _feed(rec, 100, (SideState.SAFE, SideState.ENGAGED))
+        out = rec.close()
+    names = {p.name for p in (tmp_path / "recorder").iterdir()}
+    assert "slave_heartbeat.csv" in names
+    assert "slave_estimate.csv" not in names and "master_command.csv" not in names
+    assert len(list(read_messages(tmp_path / "recorder" / "messages.bin"))) == 202
+    assert _mcap_teleop_messages(tmp_path / "recorder" / "session.mcap") == 202
+    assert out["disk"]["reached"] is None and out["disk"]["not_written"] == {}
+
+
+def test_past_max_bytes_the_high_rate_streams_are_counted_and_not_written(tmp_path):
+    states = [SideState.SAFE] * 60 + [SideState.ENGAGED] + [SideState.SAFE] * 9   # 1.4 s of heartbeats at 50 Hz
+    with _session() as s:
+        rec = Recorder(s, _cfg(max_bytes=1.0), tmp_path / "recorder")    # the file headers alone pass 1 byte
+        deadline = time.monotonic() + DEADLINE
+        while rec.budget.reached is None:
+            assert time.monotonic() < deadline, "the budget was not checked"
+            time.sleep(0.01)
+        _feed(rec, 100, states)
+        out = rec.close()
+    summary = json.loads((tmp_path / "recorder" / "summary.json").read_text())
+    assert "recording.max_bytes" in summary["disk"]["reached"]["reason"]
+    skipped = summary["disk"]["over_budget_not_written"]
+    assert skipped[estimate_key("bud1")] == 100 and skipped[command_key("bud1")] == 100
+    assert out["streams"][estimate_key("bud1")]["count"] == 100          # still counted
+    written = [k for _, k, _ in read_messages(tmp_path / "recorder" / "messages.bin")]
+    hb = heartbeat_key("bud1", "slave")
+    assert set(written) == {hb}
+    # heartbeats at 1 Hz over 1.38 s (t = 2.0, 3.0) and at each of the two state changes (t = 2.0, 3.2, 3.22)
+    assert len(written) == 4 and skipped[hb] == len(states) - 4
+    assert [c["state"] for c in out["state_changes"]] == ["SAFE", "ENGAGED", "SAFE"]
+
+
+class _FullFile:
+    """A file that takes ``room`` bytes and then refuses every write as a full disk does (ENOSPC)."""
+
+    def __init__(self, fh, room: int):
+        self.fh, self.room, self.name = fh, room, fh.name
+
+    def write(self, b: bytes) -> int:
+        if len(b) > self.room:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        self.room -= len(b)
+        return self.fh.write(b)
+
+    def flush(self) -> None:
+        self.fh.flush()
+
+    def close(self) -> None:
+        self.fh.close()
+
+    @property
+    def closed(self) -> bool:
+        return self.fh.closed
+
+
+def test_a_full_disk_keeps_what_was_written_and_the_summary_counts_what_was_not(tmp_path):
+    with _session() as s:
+        rec = Recorder(s, _cfg(), tmp_path / "recorder")
+        size = len(_estimate(0)) + 14 + len(estimate_key("bud1"))          # one record of messages.bin [B]
+        rec._raw = _FullFile(rec._raw, 30 * size + size // 2)                # room for 30 estimates and a half
+        for k in range(100):
+            rec._q.put((1.0 + 1e-3 * k, estimate_key("bud1"), _estimate(k)))
+        out = rec.close()
+    kept = [k for _, k, _ in read_messages(tmp_path / "recorder" / "messages.bin")]
+    assert len(kept) == 30                                                  # every one written before stays
+    assert out["disk"]["not_written"]["messages.bin"] >= 70                 # the 70 later ones (and the flushes)
+    assert "ENOSPC" in out["disk"]["write_errors"]["messages.bin"] or "No space" in out["disk"]["write_errors"]["messages.bin"]
+    assert out["streams"][estimate_key("bud1")]["count"] == 100
+    assert _mcap_teleop_messages(tmp_path / "recorder" / "session.mcap") == 100
+    assert json.loads((tmp_path / "recorder" / "summary.json").read_text())["disk"]["not_written"]["messages.bin"] >= 70
+
+
+def test_writes_stop_at_the_first_error_of_a_file_and_count_the_rest():
+    w, calls = Writes(), []
+
+    def full(x):
+        calls.append(x)
+        raise OSError(errno.EFBIG, "File too large")
+
+    assert w("a.csv", calls.append, 1) and not w("a.csv" + "x", full, 2)
+    assert not w("a.csvx", full, 3)                                          # not tried again
+    assert calls == [1, 2] and w.summary()["not_written"] == {"a.csvx": 2}
+    assert "File too large" in w.summary()["write_errors"]["a.csvx"]
+
+
+@pytest.mark.parametrize(("max_bytes", "min_free", "reason"), [
+    (10.0, None, "recording.max_bytes"), (None, 1e18, "recording.min_free_bytes"), (1e15, 0.0, None)])
+def test_the_budget_is_reached_past_either_limit(tmp_path, max_bytes, min_free, reason):
+    (tmp_path / "slave.csv").write_bytes(b"x" * 100)
+    (tmp_path / "recorder").mkdir()
+    (tmp_path / "recorder" / "messages.bin").write_bytes(b"y" * 50)
+    assert dir_bytes(tmp_path) == {"slave": 100, "recorder": 50}
+    b = DiskBudget(tmp_path, max_bytes, min_free)
+    assert b.check(0.0, 0.0) is (reason is not None)
+    assert (b.reached is None) if reason is None else reason in b.reached["reason"]
+    assert b.summary()["run_bytes"] == 150
