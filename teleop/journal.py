@@ -137,7 +137,8 @@ class Journal:
                     os.close(self._fd)
                     self._fd, self._n = -1, self._n + 1
                     self._open()
-                os.write(self._fd, rec)
+                if os.write(self._fd, rec) < len(rec):   # the disk took part of it: a torn last record
+                    raise OSError(f"short write of a {len(rec)} B record (disk full or file size limit)")
             except OSError as e:      # disk full, file too large: the publisher's loop goes on unjournaled
                 self.error, self.lost = f"{type(e).__name__}: {e}", self.lost + 1
                 if self._fd >= 0:
