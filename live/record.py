@@ -6,7 +6,7 @@ adds) and to the liveliness tokens of both sides, and writes ``<run dir>/recorde
 * ``messages.bin``: every payload as received, ``<d t_recv [s]><H key length><I payload length>``
   then the key and the codec bytes (the lossless record; :func:`read_messages` reads it back); a
   message recovered from a journal carries its publish time instead;
-* ``<side>_<stream>.csv`` per key, in the measured-data format (``# key: value`` metadata,
+* ``<side>_<stream>.csv`` per key of a heartbeat stream (with ``recording.csv: all``: of every stream), in the measured-data format (``# key: value`` metadata,
   ``# units:``, header, one row per message, in time order): ``time`` is the recorder's receive time
   [s, monotonic] (a message recovered from a journal: its publish time, same clock on one machine),
   then every field of the message as :mod:`teleop.codec` decoded it, flattened generically over the
@@ -22,6 +22,9 @@ adds) and to the liveliness tokens of both sides, and writes ``<run dir>/recorde
 * ``record.rrd`` (Rerun, scalar fields decimated by ``recording.log_every``), and at the end
   ``summary.json`` (per stream: count, received, recovered, first/last seq, seqs missing, duplicates, rate; the command
   -> echo delay seen here) and ``streams.png``.
+
+Disk use is bounded by ``recording.max_bytes`` and ``recording.min_free_bytes``, and a write the OS
+refuses costs only its own file (:mod:`live.record_budget`, ``disk`` in ``summary.json``).
 
 Nothing runs on zenoh's callback thread but a queue put: a writer thread decodes, formats and
 writes, handing the files to the OS at least every ``recording.flush_interval`` seconds, so a SIGKILL
