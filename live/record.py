@@ -3,8 +3,8 @@
 It subscribes to ``teleop/<id>/**`` (commands, estimates, heartbeats, anything a later wire version
 adds) and to the liveliness tokens of both sides, and writes ``<run dir>/recorder/``:
 
-* ``messages.bin``: every payload as received, ``<d t_recv [s]><H key length><I payload length>``
-  then the key and the codec bytes (the lossless record; :func:`read_messages` reads it back); a
+* ``messages.bin``: every payload as received, ``<d t_recv [s]><H key length><I payload length>`` then the
+  key and the codec bytes, zstd-compressed (the lossless record; :func:`read_messages` reads it back); a
   message recovered from a journal carries its publish time instead;
 * ``<side>_<stream>.csv`` per key of a heartbeat stream (with ``recording.csv: all``: of every stream), in the measured-data format (``# key: value`` metadata,
   ``# units:``, header, one row per message, in time order): ``time`` is the recorder's receive time
@@ -53,7 +53,16 @@ import numpy as np
 
 from live.record_budget import LOW_RATE_HZ, DiskBudget, Writes, is_low_rate
 from live.record_demo import start_recorder, summary_line
-from live.record_files import StreamCounts, StreamCsv, decode_any, flatten, short_names, values
+from live.record_files import (
+    StreamCounts,
+    StreamCsv,
+    ZstdStream,
+    decode_any,
+    flatten,
+    short_names,
+    stream_bytes,
+    values,
+)
 from live.record_journal import JournalRecovery
 from teleop.entity import Entity
 from teleop.journal import RECORD, pack_record, read_records
@@ -116,7 +125,7 @@ class Recorder:
         self._echo_delays: list[float] = []
         self._echoed: set[int] = set()
         self._q: queue.SimpleQueue = queue.SimpleQueue()
-        self._raw = open(self.dir / "messages.bin", "wb")
+        self._raw = ZstdStream(self.dir / "messages.bin")
         self._aux = {"state": self._aux_csv("state_changes.csv", "time,side,state,seq"),
                      "alive": self._aux_csv("liveliness.csv", "time,side,alive"),
                      "recovered": self._aux_csv("recovered.csv", "time,side,key,seq")}
@@ -337,7 +346,7 @@ class Recorder:
 def read_messages(path: str | Path):
     """Yield ``(t [s], key, payload bytes)`` from a ``messages.bin`` (a torn last record is ignored);
     ``t`` is the receive time, or the publish time of a message recovered from a journal."""
-    yield from read_records(Path(path).read_bytes())[0]
+    yield from read_records(stream_bytes(path))[0]
 
 
 def run_record(args) -> int:

@@ -10,6 +10,8 @@ import math
 from pathlib import Path
 from typing import Any
 
+import zstandard
+
 from teleop.codec import MAGIC, decode, seq_newer
 
 __all__ = ["decode_any", "flatten", "short_names", "values", "StreamCsv", "StreamCounts"]
@@ -190,3 +192,61 @@ class StreamCounts:
 
 
 _DECODERS.update(_decoders())
+
+
+ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"   # first bytes of a zstd frame
+_BLOCK = 1 << 16
+
+
+class ZstdStream:
+    """An append-only file holding one zstd stream (level 3): :meth:`flush` ends a block and hands it to
+    the OS, so a reader decodes everything up to the last flush even when the writer is killed.
+
+    Parameters
+    ----------
+    path : Path
+        Created (truncated).
+    """
+
+    def __init__(self, path: Path):
+        self.fh = open(path, "wb")
+        self.name = str(path)
+        self._c = zstandard.ZstdCompressor(level=3).compressobj()
+
+    @property
+    def closed(self) -> bool:
+        return self.fh.closed
+
+    def write(self, data: bytes) -> None:
+        """Compress ``data`` into the stream (written with the next block)."""
+        self.fh.write(self._c.compress(data))
+
+    def flush(self) -> None:
+        """End the block under way and hand the file to the OS."""
+        self.fh.write(self._c.flush(zstandard.COMPRESSOBJ_FLUSH_BLOCK))
+        self.fh.flush()
+
+    def close(self) -> None:
+        """End the frame and close the file. Idempotent."""
+        if not self.fh.closed:
+            try:
+                self.fh.write(self._c.flush())
+            finally:
+                self.fh.close()
+
+
+def stream_bytes(path: str | Path) -> bytes:
+    """The content of a file written by :class:`ZstdStream` (decoded up to its last whole block: a file cut
+    by a kill or a full disk gives what was flushed before) or of a plain file (as it is)."""
+    data = Path(path).read_bytes()
+    if not data.startswith(ZSTD_MAGIC):
+        return data
+    d, out = zstandard.ZstdDecompressor().decompressobj(), []
+    for i in range(0, len(data), _BLOCK):
+        try:
+            out.append(d.decompress(data[i:i + _BLOCK]))
+        except zstandard.ZstdError:
+            break
+        if d.eof:
+            break
+    return b"".join(out)

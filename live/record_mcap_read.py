@@ -20,7 +20,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from estimator.data import MeasuredData
-from live.record_files import decode_any
+from live.record_files import decode_any, stream_bytes
 from live.record_journal import JournalRecovery
 from live.record_mcap import MCAP_NAME, McapRecording, sender_stamp
 from teleop.errors import DataError
@@ -150,7 +150,7 @@ def repair(rec_dir: str | Path, journal_dir: str | Path | None = None) -> dict[s
     raw = d / "messages.bin"
     if not raw.is_file():
         raise DataError(f"{d}: no messages.bin to rebuild {MCAP_NAME} from")
-    records = read_records(raw.read_bytes())[0]
+    records = read_records(stream_bytes(raw))[0]
     old = d / MCAP_NAME
     meta: dict[str, str] = {}
     before = 0

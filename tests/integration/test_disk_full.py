@@ -26,7 +26,7 @@ from tests.integration.processes import start, stop_all, wait_for, wait_text
 
 pytestmark = pytest.mark.integration
 
-LIMIT = 400_000     # [B] largest file the recorder may write
+LIMIT = 150_000     # [B] largest file the recorder may write
 
 CONFIG = """\
 instrument:

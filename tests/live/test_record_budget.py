@@ -154,3 +154,24 @@ def test_the_budget_is_reached_past_either_limit(tmp_path, max_bytes, min_free, 
     assert b.check(0.0, 0.0) is (reason is not None)
     assert (b.reached is None) if reason is None else reason in b.reached["reason"]
     assert b.summary()["run_bytes"] == 150
+
+
+def test_messages_bin_is_compressed_and_reads_back_up_to_its_last_flush_when_cut(tmp_path):
+    from live.record_files import ZSTD_MAGIC, ZstdStream, stream_bytes
+    from teleop.journal import pack_record
+
+    z = ZstdStream(tmp_path / "messages.bin")
+    recs = [pack_record(1e-3 * k, estimate_key("bud1").encode(), _estimate(k)) for k in range(200)]
+    for r in recs[:150]:
+        z.write(r)
+    z.flush()
+    flushed = (tmp_path / "messages.bin").read_bytes()
+    for r in recs[150:]:
+        z.write(r)
+    z.close()
+    whole = (tmp_path / "messages.bin").read_bytes()
+    assert whole.startswith(ZSTD_MAGIC) and len(whole) < len(b"".join(recs)) / 3
+    assert stream_bytes(tmp_path / "messages.bin") == b"".join(recs)
+    (tmp_path / "cut.bin").write_bytes(flushed)                  # a kill or a full disk after the flush
+    assert stream_bytes(tmp_path / "cut.bin") == b"".join(recs[:150])
+    assert [k for _, k, _ in read_messages(tmp_path / "cut.bin")] == [estimate_key("bud1")] * 150
