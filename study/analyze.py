@@ -110,6 +110,8 @@ def main_analyze(args: argparse.Namespace) -> int:
         return main_mrd(args)
     if args.file is None and args.kaist is None:
         raise ConfigError("analyze needs FILE or --kaist [DIR]")
+    if getattr(args, "tool", None) is not None:
+        raise ConfigError(f"--tool {args.tool}: a tool's constants are for the spindle analysis (--mrd DIR)")
     if args.json is not None and not Path(args.json).resolve().parent.is_dir():
         raise ConfigError(f"--json {args.json}: directory {Path(args.json).resolve().parent} does not exist")
     for opt, d in (("--report", args.report), ("--figures", args.figures)):

@@ -315,3 +315,12 @@ def test_route_option_holds_the_configured_route(tmp_path, capsys):
         run([str(path), "--route", str(tmp_path / "nope.yaml")])
     with pytest.raises(ConfigError, match="--route is for a single-tendon CSV"):
         run(["--kaist", str(tmp_path), "--route", str(cfg)])
+
+
+def test_cli_refuses_a_tool_outside_the_spindle_analysis(tmp_path, capsys):
+    from live.cli import main
+
+    path = write_csv(tmp_path / "rec.csv")
+    assert main(["analyze", str(path), "--tool", "davinci-maryland-left"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--tool davinci-maryland-left" in err[0] and "--mrd" in err[0]
