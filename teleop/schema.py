@@ -303,7 +303,7 @@ class RecordingConfig:
     profile_every: int = 5
     flush_interval: float = 0.02          # [s] recorder files handed to the OS at least this often
     csv: Literal["low_rate", "all"] = "low_rate"   # recorder per-stream CSVs: heartbeats only, or every stream too
-    max_bytes: Optional[float] = 2.0e9    # [B] run directory size past which the recorder drops the high-rate streams
+    max_bytes: Optional[float] = 5.0e9    # [B] run directory size past which the recorder drops the high-rate streams
     min_free_bytes: Optional[float] = 5.0e8  # [B] free disk space below which it does the same (live/record_budget.py)
 
 
