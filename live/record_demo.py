@@ -31,14 +31,22 @@ def start_recorder(base: list[str], common: list[str], run_dir: Path, env: dict,
 
 
 def summary_line(out_dir: str | Path) -> str:
-    """One line on a finished recording: messages, streams, seqs missing, where the files are."""
+    """One line on a finished recording: messages, streams, seqs missing, the session's bytes per second
+    (``disk.bytes_per_second``), what the disk limits or errors kept out, where the files are."""
     path = Path(out_dir) / "summary.json"
     try:
         s = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return f"recorder: no summary in {out_dir}"
     streams = s.get("streams", {}).values()
+    disk = s.get("disk") or {}
+    rate = sum((disk.get("bytes_per_second") or {}).values())
+    extra = f", the session writes {rate / 1e3:.0f} kB/s ({rate * 3600 / 1e9:.2f} GB per hour)" if rate > 0 else ""
+    if disk.get("reached"):
+        extra += f"; {disk['reached']['reason']}: high-rate streams not written from t={disk['reached']['time']:.1f} s"
+    if disk.get("not_written"):
+        extra += "; not written (disk): " + ", ".join(f"{k} {n}" for k, n in disk["not_written"].items())
     return (f"recorder: {sum(v['count'] for v in streams)} messages on {len(s.get('streams', {}))} streams, "
-            f"{sum(v['missing'] for v in streams)} missing by seq -> {out_dir}")
+            f"{sum(v['missing'] for v in streams)} missing by seq{extra} -> {out_dir}")
 
 

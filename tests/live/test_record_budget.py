@@ -175,3 +175,15 @@ def test_messages_bin_is_compressed_and_reads_back_up_to_its_last_flush_when_cut
     (tmp_path / "cut.bin").write_bytes(flushed)                  # a kill or a full disk after the flush
     assert stream_bytes(tmp_path / "cut.bin") == b"".join(recs[:150])
     assert [k for _, k, _ in read_messages(tmp_path / "cut.bin")] == [estimate_key("bud1")] * 150
+
+
+def test_the_demo_line_says_the_rate_and_what_the_disk_kept_out(tmp_path):
+    from live.record_demo import summary_line
+
+    disk = {"bytes_per_second": {"slave": 4e5, "master": 1e5}, "not_written": {"messages.bin": 3},
+            "reached": {"reason": "free space 1.0 MB < recording.min_free_bytes 500.0 MB", "time": 12.5}}
+    streams = {"teleop/a/slave/estimate": {"count": 10, "missing": 0}}
+    (tmp_path / "summary.json").write_text(json.dumps({"streams": streams, "disk": disk}))
+    line = summary_line(tmp_path)
+    assert "500 kB/s (1.80 GB per hour)" in line and "not written (disk): messages.bin 3" in line
+    assert "recording.min_free_bytes" in line and "t=12.5 s" in line
