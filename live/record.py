@@ -52,10 +52,11 @@ from typing import Literal
 import numpy as np
 
 from live.record_budget import LOW_RATE_HZ, DiskBudget, Writes, is_low_rate
-from live.record_demo import start_recorder, summary_line
+from live.record_demo import nothing_received_reason, start_recorder, summary_line
 from live.record_files import (
     StreamCounts,
     StreamCsv,
+    StreamSample,
     ZstdStream,
     decode_any,
     flatten,
@@ -118,6 +119,7 @@ class Recorder:
         self._states: dict[str, int] = {}
         self._csv: dict[tuple, StreamCsv | None] = {}   # (key, message type, value count) -> its file (None: none)
         self._names: dict[tuple, tuple] = {}
+        self._samples: dict[tuple, StreamSample] = {}   # a stream without a CSV: its thinned rows for streams.png
         self.budget = DiskBudget(self.dir.parent, cfg.recording.max_bytes, cfg.recording.min_free_bytes)
         self.writes = Writes()
         self._low_t: dict[str, float] = {}             # key -> time of its last low-rate message written
@@ -228,6 +230,8 @@ class Recorder:
                 w("recovered.csv", self._aux["recovered"].write, f"{t:.12g},{key.split('/')[2] if key.count('/') >= 3 else key},{key},{seq}\n")
             if f is not None:
                 w(f.path.name, f.write, t, tuple(vals))
+            else:
+                self._samples[shape].write(t, vals)
             w("session.mcap", self._mcap.write, t, key, msg, recovered)   # a problem of the MCAP file costs no other file
         else:
             w.skip(key)
@@ -253,12 +257,13 @@ class Recorder:
         key = shape[0]
         names = self._names[shape] = short_names([n for n, _ in flat])
         self._csv[shape] = None
-        if self.cfg.recording.csv != "all" and not is_low_rate(key):
-            return
         parts = key.split("/")
         stem = "_".join(parts[2:]) if len(parts) > 2 else parts[-1]
         n = sum(1 for s in self._names if s[0] == key) - 1
         path = self.dir / (f"{stem}.csv" if n == 0 else f"{stem}-{n + 1}.csv")
+        if self.cfg.recording.csv != "all" and not is_low_rate(key):
+            self._samples[shape] = StreamSample(path.stem, names)
+            return
         meta = {"source": "teleop record", "instrument": self.ident, "key": key, "message": shape[1].__name__,
                 "time": "recorder receive time (monotonic clock of the recorder)"}
         try:
@@ -323,7 +328,8 @@ class Recorder:
         s["mcap"] = self._mcap.close() if "session.mcap" not in w.failed else {"error": w.failed["session.mcap"]}
         try:
             from live.record_figures import streams_figure
-            s["figure"] = str(streams_figure([f.path for f in csvs], self.dir / "streams.png"))
+            s["figure"] = str(streams_figure([f.path for f in csvs] + [x.stream() for x in self._samples.values()],
+                                             self.dir / "streams.png"))
         except Exception as e:  # noqa: BLE001 - a figure problem must not lose the summary
             s["figure_error"] = repr(e)
         try:
@@ -388,11 +394,3 @@ def run_record(args) -> int:
     print(f"teleop record: {counts}; {rec.dir}/summary.json", flush=True)
     return 0
 
-
-def nothing_received_reason(instrument: str, sides_seen) -> str:
-    """Why a recorder heard no message: no side of ``instrument`` ever appeared, or sides did but sent nothing."""
-    if not sides_seen:
-        return (f"no side of instrument {instrument!r} appeared (no liveliness token): none was running, it uses "
-                f"another instrument.id, or the link to it was refused (password, certificate, endpoint)")
-    return (f"{' and '.join(sorted(sides_seen))} appeared but published nothing on teleop/{instrument}/...: it "
-            f"stopped before its loop started")

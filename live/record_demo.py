@@ -6,7 +6,7 @@ import os
 import time
 from pathlib import Path
 
-__all__ = ["start_recorder", "summary_line"]
+__all__ = ["nothing_received_reason", "start_recorder", "summary_line"]
 
 
 def start_recorder(base: list[str], common: list[str], run_dir: Path, env: dict, deadline: float):
@@ -50,3 +50,10 @@ def summary_line(out_dir: str | Path) -> str:
             f"{sum(v['missing'] for v in streams)} missing by seq{extra} -> {out_dir}")
 
 
+def nothing_received_reason(instrument: str, sides_seen) -> str:
+    """Why a recorder heard no message: no side of ``instrument`` ever appeared, or sides did but sent nothing."""
+    if not sides_seen:
+        return (f"no side of instrument {instrument!r} appeared (no liveliness token): none was running, it uses "
+                f"another instrument.id, or the link to it was refused (password, certificate, endpoint)")
+    return (f"{' and '.join(sorted(sides_seen))} appeared but published nothing on teleop/{instrument}/...: it "
+            f"stopped before its loop started")

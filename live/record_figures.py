@@ -118,12 +118,12 @@ def _plot_states(ax, states: list[tuple[str, np.ndarray, np.ndarray]]) -> None:
 def streams_plot(paths, max_signals: int = 4):
     """The figure of :func:`streams_figure` (a matplotlib Figure, the caller closes it).
 
-    One panel per CSV in ``paths`` with signals, up to ``max_signals`` of its columns (time stamps,
+    One panel per CSV in ``paths`` (a path, or a :class:`Stream` already read) with signals, up to ``max_signals`` of its columns (time stamps,
     counters, profiles and enums left out) in at most two units, and one panel of the heartbeats' states;
     every panel on the shared time axis [s] from the first message of any stream.
     """
     plt = pyplot()
-    streams = [s for s in (read_stream(p) for p in paths) if s.data.size]
+    streams = [s for s in (p if isinstance(p, Stream) else read_stream(p) for p in paths) if s.data.size]
     pairs = _pair_axes(streams)
     t0 = min((float(s.data[0, 0]) for s in streams), default=0.0)
     panels = [(s, picked) for s in streams if (picked := _signals(s, pairs, max_signals))]

@@ -10,6 +10,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import zstandard
 
 from teleop.codec import MAGIC, decode, seq_newer
@@ -150,6 +151,32 @@ class StreamCsv:
         self.unsorted = False
 
 
+class StreamSample:
+    """A stream written to no CSV (``recording.csv: low_rate``): an evenly thinned copy of its rows, in
+    memory, for ``streams.png``. Every :data:`SAMPLE_EVERY`-th message is kept; at :data:`SAMPLE_ROWS`
+    rows every other one is dropped and the stride doubles (at most about 10 MB for a 1 kHz estimate)."""
+
+    def __init__(self, name: str, names: tuple[str, ...]):
+        self.name, self.names = name, names
+        self.rows: list[np.ndarray] = []
+        self.every, self.n = SAMPLE_EVERY, 0
+
+    def write(self, t: float, values: list) -> None:
+        if self.n % self.every == 0:
+            self.rows.append(np.asarray([t, *values], dtype=np.float64))
+            if len(self.rows) >= SAMPLE_ROWS:
+                self.rows, self.every = self.rows[::2], self.every * 2
+        self.n += 1
+
+    def stream(self):
+        """The rows as a :class:`live.record_figures.Stream` (units as a CSV's ``# units:`` line)."""
+        from live.record_figures import Stream
+        cols = ("time",) + tuple(self.names)
+        units = {c: u for c in cols if (u := ("s" if c == "time" else _unit(c)))}
+        data = np.vstack(self.rows) if self.rows else np.empty((0, 0))
+        return Stream(self.name, list(cols), data, units)
+
+
 class StreamCounts:
     """Counters of one key: messages, seqs missing (gaps), duplicates or out of order, decode errors."""
 
@@ -194,6 +221,8 @@ class StreamCounts:
 _DECODERS.update(_decoders())
 
 
+SAMPLE_EVERY = 10       # [messages] stride of a StreamSample at first
+SAMPLE_ROWS = 20000     # [rows] a StreamSample thins itself to half at this many
 ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"   # first bytes of a zstd frame
 _BLOCK = 1 << 16
 

@@ -7,6 +7,7 @@ import errno
 import json
 import time
 
+import numpy as np
 import pytest
 from mcap.reader import make_reader
 
@@ -65,6 +66,7 @@ def test_default_recording_writes_no_csv_of_a_high_rate_stream_and_every_message
     assert len(list(read_messages(tmp_path / "recorder" / "messages.bin"))) == 202
     assert _mcap_teleop_messages(tmp_path / "recorder" / "session.mcap") == 202
     assert out["disk"]["reached"] is None and out["disk"]["not_written"] == {}
+    assert "figure_error" not in out and (tmp_path / "recorder" / "streams.png").is_file()
 
 
 def test_past_max_bytes_the_high_rate_streams_are_counted_and_not_written(tmp_path):
@@ -187,3 +189,19 @@ def test_the_demo_line_says_the_rate_and_what_the_disk_kept_out(tmp_path):
     line = summary_line(tmp_path)
     assert "500 kB/s (1.80 GB per hour)" in line and "not written (disk): messages.bin 3" in line
     assert "recording.min_free_bytes" in line and "t=12.5 s" in line
+
+
+def test_a_stream_without_csv_is_thinned_in_memory_and_plotted(tmp_path, monkeypatch):
+    import live.record_files as rf
+    from live.record_figures import streams_plot
+
+    monkeypatch.setattr(rf, "SAMPLE_ROWS", 8)
+    s = rf.StreamSample("slave_estimate", ("T_in", "x_in"))
+    for k in range(200):
+        s.write(1e-3 * k, [2.0 + k, 1e-5 * k])
+    st = s.stream()
+    assert st.data.shape[1] == 3 and len(st.data) < 8 and s.every > rf.SAMPLE_EVERY
+    assert list(np.diff(st.data[:, 0])) == pytest.approx([1e-3 * s.every] * (len(st.data) - 1))
+    assert st.units == {"time": "s", "T_in": "N", "x_in": "m"}
+    fig = streams_plot([st])
+    assert [ax.get_title() for ax in fig.axes if ax.get_title()] == ["slave_estimate"]
