@@ -18,8 +18,8 @@ Online estimators (one proximal sample per call, or a whole recording in one com
   :class:`BatchEstimate`;
 * an antagonistic joint: :class:`JointEstimator` (``step``), :func:`estimate_joint_batch`,
   :class:`JointSample`, :class:`JointBatch`;
-* a cable pair on one input spindle: :class:`SpindleParams`, :func:`spindle_batch`,
-  :func:`spindle_torque`, :func:`spindle_angle`.
+* a cable pair on one input spindle: :class:`SpindleEstimator` (``step``), :class:`SpindleParams`,
+  :func:`spindle_batch`, :func:`spindle_torque`, :func:`spindle_angle`.
 
 Offline identification and diagnosis:
 
@@ -64,6 +64,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "JointBatch": ("estimator.online.joint", "JointBatch"),
     "estimate_joint_batch": ("estimator.online.joint_batch", "estimate_joint_batch"),
     "SpindleParams": ("estimator.online.spindle", "SpindleParams"),
+    "SpindleEstimator": ("estimator.online.spindle_estimator", "SpindleEstimator"),
     "spindle_batch": ("estimator.online.spindle", "make_batch"),
     "spindle_torque": ("estimator.online.spindle", "predict_torque"),
     "spindle_angle": ("estimator.online.spindle", "predict_angle"),
@@ -86,7 +87,7 @@ __all__ = [
     "Run", "SheathGeometry", "SheathModel", "Phase", "PhaseFormulaEstimator", "phase_formula_batch", "K_from_M_e",
     "MeasuredData", "noise_level", "EstimatorError", "CalibrationError", "DataError", "DistalEstimator",
     "DistalSample", "BatchEstimate", "estimate_batch", "JointEstimator", "JointSample", "JointBatch",
-    "estimate_joint_batch", "SpindleParams", "spindle_batch", "spindle_torque", "spindle_angle", "calibrate",
+    "estimate_joint_batch", "SpindleEstimator", "SpindleParams", "spindle_batch", "spindle_torque", "spindle_angle", "calibrate",
     "calibrate_joint_limit", "CalibrationResult", "detect_knee", "fit_single", "SingleTendonFit", "fit_pair",
     "PairParams", "PairFit", "diagnose", "diagnose_recording", "Diagnosis",
 ]
@@ -108,6 +109,7 @@ if TYPE_CHECKING:       # the same names, for type checkers and editors (nothing
     from estimator.online.spindle import make_batch as spindle_batch
     from estimator.online.spindle import predict_angle as spindle_angle
     from estimator.online.spindle import predict_torque as spindle_torque
+    from estimator.online.spindle_estimator import SpindleEstimator
     from estimator.phase import Phase
     from estimator.sheath import Run, SheathGeometry, SheathModel
 

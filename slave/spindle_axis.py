@@ -9,7 +9,7 @@
   clipped to the rest angle +- (max |limits| / n_k + 0.5 rad). Engaging needs the commanded angle within
   ``slave.engage_tolerance / r_d`` of the estimate (the master anchors at the slave's angle).
 * SAFE: the spindle returns toward its rest angle at ``slave.relax_speed / r_p`` [rad/s].
-* Each cycle: :class:`slave.spindle_estimator.SpindleEstimator` on the spindle's angle and torque
+* Each cycle: :class:`estimator.online.spindle_estimator.SpindleEstimator` on the spindle's angle and torque
   (never the truth) -> the axis's state (effort = jaw torque [N m], position = jaw angle [rad], per cable
   the estimated proximal tension as T_in, its distal tension, elongation and phase); the joint's
   columns of ``slave_joints.csv`` (:func:`slave.pair_axis.joint_csv_columns`; a cable's x_in is
@@ -24,13 +24,13 @@ from typing import Any, Sequence
 import numpy as np
 
 from estimator.online.spindle import SpindleParams
+from estimator.online.spindle_estimator import SpindleEstimator
 from slave.axis import SlaveAxis
 from slave.calibration_file import InstrumentCalibration
 from slave.pair_axis import joint_csv_columns
 from slave.pair_calibrate import tendon_wrap_shape
 from slave.rig import InstrumentTruth, Rig, RigState
 from slave.spindle_calibrate import SpindleCalibration
-from slave.spindle_estimator import SpindleEstimator
 from teleop.config import Config, JointConfig
 from teleop.messages import AxisState, TendonState
 

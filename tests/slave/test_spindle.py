@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from estimator.online.spindle import SpindleParams
+from estimator.online.spindle_estimator import SpindleEstimator
 from estimator.phase import Phase
 from slave.calibration_file import load_calibration, save_calibration
 from slave.node import axis_kind
@@ -16,7 +17,6 @@ from slave.rig import RigInputError
 from slave.rigs import make_rig
 from slave.spindle_axis import SpindleAxis
 from slave.spindle_calibrate import SpindleCalibration, band_to_K, pull_slip_M_e
-from slave.spindle_estimator import SpindleEstimator
 from slave.spindle_rig import SpindleInstrument
 from teleop.config import load_config
 from teleop.errors import CalibrationError, ConfigError
