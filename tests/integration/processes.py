@@ -10,6 +10,25 @@ import sys
 import time
 from pathlib import Path
 
+BARE_CONFIG = """\
+instrument:
+  id: {ident}
+calibration:
+  speed: 0.02
+  dir: "{runs}-calibration"
+recording:
+  rerun: "off"
+  dir: "{runs}"
+transport:
+  listen: ["tcp/127.0.0.1:{port}"]
+"""
+
+
+def write_bare_config(path: Path, ident: str, runs: Path, port: int) -> Path:
+    """A quiet config for sides started bare: instrument ``ident``, runs under ``runs``, listening on ``port``."""
+    path.write_text(BARE_CONFIG.format(ident=ident, runs=runs, port=port), encoding="utf-8")
+    return path
+
 
 def start(args: list[str], log: Path, env: dict | None = None) -> subprocess.Popen:
     """``python -m live.cli *args`` with stdout and stderr in ``log`` (unbuffered; ``env`` added)."""

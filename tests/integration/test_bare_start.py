@@ -13,29 +13,17 @@ import sys
 import pytest
 
 from teleop.transport import accepts_connections, free_tcp_port
-from tests.integration.processes import wait_for
+from tests.integration.processes import wait_for, write_bare_config
 
 pytestmark = pytest.mark.integration
 
-CONFIG = """\
-instrument:
-  id: itbare
-calibration:
-  speed: 0.02
-  dir: "{runs}-calibration"
-recording:
-  rerun: "off"
-  dir: "{runs}"
-transport:
-  listen: ["tcp/127.0.0.1:{port}"]
-"""
 
 
 def test_bare_master_then_bare_slave_find_each_other_and_share_one_run(tmp_path):
     runs = tmp_path / "runs"
     cfg = tmp_path / "c.yaml"
     port = free_tcp_port()
-    cfg.write_text(CONFIG.format(runs=runs, port=port), encoding="utf-8")
+    write_bare_config(cfg, "itbare", runs, port)
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     cmd = [sys.executable, "-m", "live.cli"]
     with open(tmp_path / "master.log", "w") as mlog, open(tmp_path / "slave.log", "w") as slog:

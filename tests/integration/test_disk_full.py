@@ -22,24 +22,12 @@ import pytest
 from live.record import read_messages
 from teleop.codec import decode
 from teleop.transport import free_tcp_port
-from tests.integration.processes import start, stop_all, wait_for, wait_text
+from tests.integration.processes import start, stop_all, wait_for, wait_text, write_bare_config
 
 pytestmark = pytest.mark.integration
 
 LIMIT = 150_000     # [B] largest file the recorder may write
 
-CONFIG = """\
-instrument:
-  id: dfull
-calibration:
-  speed: 0.02
-  dir: "{runs}-calibration"
-recording:
-  rerun: "off"
-  dir: "{runs}"
-transport:
-  listen: ["tcp/127.0.0.1:{port}"]
-"""
 
 
 def _limited() -> None:
@@ -55,7 +43,7 @@ def _data_rows(path: Path) -> int:
 def test_a_full_disk_under_the_recorder_keeps_what_it_wrote_and_both_loops_running(tmp_path):
     runs = tmp_path / "runs"
     cfg = tmp_path / "c.yaml"
-    cfg.write_text(CONFIG.format(runs=runs, port=free_tcp_port()), encoding="utf-8")
+    write_bare_config(cfg, "dfull", runs, free_tcp_port())
     procs: dict[str, subprocess.Popen] = {}
     try:
         with open(tmp_path / "record.log", "w") as fh:

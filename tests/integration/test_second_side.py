@@ -9,29 +9,17 @@ import sys
 import pytest
 
 from teleop.transport import free_tcp_port
-from tests.integration.processes import stop_all, wait_for
+from tests.integration.processes import stop_all, wait_for, write_bare_config
 
 pytestmark = pytest.mark.integration
 
-CONFIG = """\
-instrument:
-  id: itsecond
-calibration:
-  speed: 0.02
-  dir: "{runs}-calibration"
-recording:
-  rerun: "off"
-  dir: "{runs}"
-transport:
-  listen: ["tcp/127.0.0.1:{port}"]
-"""
 
 
 @pytest.mark.parametrize("role", ["slave", "master"])
 def test_a_second_side_of_the_same_role_is_refused_naming_the_run_and_the_first(tmp_path, role):
     runs = tmp_path / "runs"
     cfg = tmp_path / "c.yaml"
-    cfg.write_text(CONFIG.format(runs=runs, port=free_tcp_port()), encoding="utf-8")
+    write_bare_config(cfg, "itsecond", runs, free_tcp_port())
     env = dict(os.environ, PYTHONUNBUFFERED="1", XDG_DATA_HOME=str(tmp_path / "data"))
     cmd = [sys.executable, "-m", "live.cli", role, "--config", str(cfg), "--max-duration", "120"]
     with open(tmp_path / "first.log", "w") as log:
