@@ -18,6 +18,7 @@ import time
 import timeit
 
 import numpy as np
+from bench_slave_cycle import LatestTopic  # a sibling script: the benchmarks folder is the running script's own
 
 from estimator.sheath import SheathModel
 from slave.node import SlaveLinks, SlaveNode, warm_up
@@ -29,22 +30,7 @@ from teleop.crtk_side import attach_slave
 from teleop.messages import Command, SideState
 from teleop.realtime import IDLE
 from teleop.ros2_wire import topic_key
-from teleop.transport import Received, Session, free_tcp_port, loopback_endpoint
-
-
-class _Topic:
-    def __init__(self, clock):
-        self.clock, self.last, self.count = clock, None, 0
-
-    def put(self, msg) -> None:
-        self.last = Received(msg, self.clock.now())
-        self.count += 1
-
-    def latest(self):
-        return self.last
-
-    def age(self, now: float) -> float:
-        return math.inf if self.last is None else now - self.last.t_recv
+from teleop.transport import Session, free_tcp_port, loopback_endpoint
 
 
 def run(mode: str, n: int) -> tuple[np.ndarray, int, int]:
@@ -52,7 +38,7 @@ def run(mode: str, n: int) -> tuple[np.ndarray, int, int]:
     on, or path (on with the publisher thread stopped: the loop's own added work alone)."""
     cfg = Config(ros2=Ros2Config(enabled=mode != "off"))
     clock = MonotonicClock()
-    links = SlaveLinks(*(_Topic(clock) for _ in range(4)))
+    links = SlaveLinks(*(LatestTopic(clock) for _ in range(4)))
     rig = SimulatedRig.from_config(cfg)
     ep = loopback_endpoint(free_tcp_port())
     with Session(TransportConfig(listen=(ep,), connect=()), clock=clock) as session, \

@@ -33,7 +33,9 @@ from teleop.rerun_proc import RerunProcessLogger
 from teleop.transport import Received
 
 
-class _Topic:
+class LatestTopic:
+    """In-memory latest-wins topic (receive time = the clock's): the node's links without Zenoh."""
+
     def __init__(self, clock):
         self.clock, self.last, self.count = clock, None, 0
 
@@ -52,7 +54,7 @@ def run(threaded: bool, n: int, tmp: Path) -> np.ndarray:
     cfg = Config()
     warm_up(cfg)
     clock = FakeClock()
-    links = SlaveLinks(*(_Topic(clock) for _ in range(4)))
+    links = SlaveLinks(*(LatestTopic(clock) for _ in range(4)))
     rig = SimulatedRig.from_config(cfg)
     model = SheathModel(K=rig.K, compliance=rig.M_e / rig.K if rig.K else rig.M_e)
     csv_cls, rr_cls = (ThreadedCsvRecorder, RerunProcessLogger) if threaded else (CsvRecorder, RerunLogger)
@@ -89,7 +91,7 @@ def run_joints(n: int, tmp: Path, record: bool = True) -> np.ndarray:
         st = kind.routine_step(routine, sim, st, dt)
     cal = kind.calibration_of(cfg, routine)
     clock = FakeClock()
-    links = SlaveLinks(*(_Topic(clock) for _ in range(4)))
+    links = SlaveLinks(*(LatestTopic(clock) for _ in range(4)))
     inst = RIG_TYPES["simulated"](cfg, None)
     name, columns, meta = recording(cfg, inst)
     times = np.empty(n)
