@@ -4,6 +4,7 @@ Deadlines only bound waits: every wait polls a condition and gives up with a mes
 """
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -73,3 +74,30 @@ def stalled_past_watchdog(stats: list[dict], watchdog_s: float = 0.050) -> bool:
     late = max(s["pacer"]["max_lateness"] for s in stats)
     steal = max((s["pacer"].get("machine") or {}).get("steal_ms") or 0.0 for s in stats)
     return late > watchdog_s and 1e-3 * steal >= watchdog_s
+
+
+def quiet_instrument(config: Path, tmp_path: Path, shipped_id: str, ident: str, name: str = "inst.yaml") -> Path:
+    """A shipped instrument config under its own id ``ident`` (replacing ``shipped_id``), without Rerun recording,
+    with its calibration files under ``tmp_path/calibration``; written to ``tmp_path/name``."""
+    text = config.read_text().replace(f"id: {shipped_id}", f"id: {ident}").replace("rerun: save", "rerun: off")
+    text = text.replace("dir: configs/calibration", f"dir: {tmp_path / 'calibration'}")
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def run_demo(cfg: Path, run_dir: Path) -> tuple[subprocess.CompletedProcess, dict]:
+    """``teleop demo --config cfg`` as its own process; asserts no traceback, no problem, exit 0 and that the slave
+    reloaded the calibration file; returns the finished process and the run's summary.json."""
+    proc = subprocess.run([sys.executable, "-m", "live.cli", "demo", "--config", str(cfg), "--run-dir", str(run_dir),
+                           "--timeout", "50"], capture_output=True, text=True, timeout=90)
+    logs = proc.stderr + (run_dir / "slave.log").read_text() + (run_dir / "master.log").read_text()
+    assert "Traceback" not in logs, logs[-3000:]
+    summary = json.loads((run_dir / "summary.json").read_text())
+    # the failed checks first: pytest truncates a long message, and a timing check failing under load
+    # (docs/concepts/haptic-loop.md, the real-time-limit signature) must be told from the others
+    failed = [k for k, ok in summary["checks"].items() if not ok]
+    assert summary["problems"] == [] and proc.returncode == 0, (failed, summary["problems"], summary.get("haptic_loop"),
+                                                                logs[-4000:])
+    assert "calibration loaded from" in (run_dir / "slave.log").read_text()       # the slave reloaded the file
+    return proc, summary
