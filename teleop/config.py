@@ -15,6 +15,7 @@ from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
 
 import yaml
 
+from teleop.config_checks import MAX_JOINTS, check_joints
 from teleop.effects_config import in_range, merge_effects
 from teleop.errors import ConfigError
 from teleop.schema import (
@@ -230,50 +231,10 @@ def _check(cfg: Config, ctx: _Ctx, bounds: bool = True) -> Config:
     if not cfg.slave.x_in_min < cfg.slave.x_in_max:
         raise ctx.error("slave.x_in_max", f"slave.x_in_max ({cfg.slave.x_in_max!r} m) must be above "
                                           f"slave.x_in_min ({cfg.slave.x_in_min!r} m)")
-    _check_joints(cfg, ctx)
+    check_joints(cfg, ctx.error)
     if bounds:
         check_bounds(cfg, ctx.error)
     return cfg
-
-
-MAX_JOINTS = 4
-_JOINT_NAME = re.compile(r"[A-Za-z0-9_-]+")
-
-
-def _check_joints(cfg: Config, ctx: _Ctx) -> None:
-    """instrument.joints: 0 (single tendon) or 1..4 joints with unique names, limits [lower < 0 < upper],
-    non-empty tendon routes; pair_control.axes empty or one distinct axis per joint."""
-    joints = cfg.instrument.joints
-    if len(joints) > MAX_JOINTS:
-        raise ctx.error("instrument.joints", f"instrument.joints: {len(joints)} joints, an instrument has "
-                                             f"1 to {MAX_JOINTS}")
-    seen: dict[str, int] = {}
-    for i, j in enumerate(joints):
-        where = f"instrument.joints[{i}]"
-        if not _JOINT_NAME.fullmatch(j.name):
-            raise ctx.error(f"{where}.name", f"{where}.name: {j.name!r} is not a joint name (letters, digits, "
-                                             f"'_' or '-' only)")
-        if j.name in seen:
-            raise ctx.error(f"{where}.name", f"{where}.name: {j.name!r} is already the name of "
-                                             f"instrument.joints[{seen[j.name]}]")
-        seen[j.name] = i
-        lim = j.limits
-        if len(lim) != 2 or not (lim[0] < 0.0 < lim[1]):
-            raise ctx.error(f"{where}.limits", f"{where}.limits ({j.name}): expected [lower, upper] [rad] with "
-                                               f"lower < 0 < upper (0 is the rest pose), got {list(lim)}")
-        for t in ("a", "b"):
-            if not getattr(j.tendons, t).runs:
-                raise ctx.error(f"{where}.tendons.{t}.runs", f"{where}.tendons.{t}.runs ({j.name}): expected "
-                                                             f"at least one run")
-    for i, sj in enumerate(cfg.rig.simulated.joints):
-        where = f"rig.simulated.joints[{i}].name"
-        if sj.name not in seen or any(o.name == sj.name for o in cfg.rig.simulated.joints[:i]):
-            raise ctx.error(where, f"{where}: {sj.name!r} must name a joint of instrument.joints once "
-                                   f"(joints: {', '.join(seen) or 'none'})")
-    axes = cfg.pair_control.axes
-    if axes and (len(axes) != len(joints) or len(set(axes)) != len(axes)):
-        raise ctx.error("pair_control.axes", f"pair_control.axes: expected one distinct device axis per joint "
-                                             f"({len(joints)}), got {list(axes)}")
 
 
 def _line_map(node: Any, path: str, out: dict[str, int], ctx: _Ctx) -> None:
