@@ -6,7 +6,7 @@
 
 :func:`estimator.diagnose` fits the base model (the capstan law with profile memory) and every
 extension of the effect catalogue on a training block, chooses by time-blocked validation inside it
-and reports the held-out errors of the base and the chosen model on the rest (docs/diagnosis.md).
+and reports the held-out errors of the base and the chosen model on the rest (docs/concepts/diagnosis.md).
 Without a file, 30 s of the simulated bench rig are recorded with one effect hidden (velocity-dependent
 friction unless ``--effect`` names another), which the diagnosis does not see.
 """
