@@ -12,7 +12,9 @@ A segment says "move until the proximal tension of tendon ``side`` of this axis 
   ``short``; markers :data:`MARKER_PAPER_A`, :data:`MARKER_PAPER_B`.
 
 The command marker tags every axis's segment in 4 bits: bits 4 k .. 4 k + 3 hold axis k's tag
-(:func:`joint_marker`); a single tendon's marker is therefore its segment's marker.
+(:func:`joint_marker`); a single tendon's marker is therefore its segment's marker. The marker is a
+uint32 on the wire, so it tags the first :data:`MARKER_AXES` (8) axes; the axes of a larger instrument
+beyond them run their segments untagged.
 :func:`operator_protocols` picks the kind from the config.
 """
 from __future__ import annotations
@@ -23,12 +25,14 @@ from teleop.config import Config, joint_set_tension
 from teleop.errors import ConfigError
 
 __all__ = ["Segment", "PROTOCOLS", "build_protocol", "paper_protocol", "joint_protocols", "operator_protocols",
-           "joint_marker", "experiment_label", "MARKER_PAPER", "MARKER_MINOR", "MARKER_PAPER_A", "MARKER_PAPER_B"]
+           "joint_marker", "experiment_label", "MARKER_AXES", "MARKER_PAPER", "MARKER_MINOR", "MARKER_PAPER_A", "MARKER_PAPER_B"]
 
 MARKER_PAPER = 1
 MARKER_MINOR = 2
 MARKER_PAPER_A = 1
 MARKER_PAPER_B = 2
+#: Axes a command marker tags: 4 bits each in the wire's uint32 (teleop.codec)
+MARKER_AXES = 8
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,7 @@ from typing import Any
 
 from master.arm import ArmParameters, HumanArm
 from master.device import DeviceState, MultiAxisState
-from master.protocols import PROTOCOLS, Segment, build_protocol
+from master.protocols import MARKER_AXES, PROTOCOLS, Segment, build_protocol
 from teleop.errors import ConfigError
 
 __all__ = ["Segment", "PROTOCOLS", "build_protocol", "ClutchHand", "AxisScript", "ScriptedOperator"]
@@ -184,7 +184,7 @@ class ScriptedOperator:
 
     Parameters
     ----------
-    protocols : sequence of Segment (one axis), or one such sequence per axis (1..4)
+    protocols : sequence of Segment (one axis), or one such sequence per axis (1..16)
         Each axis's protocol, executed in order (:mod:`master.protocols`).
     speed : float
         Intended hand speed along the device axis [m/s], > 0.
@@ -264,8 +264,9 @@ class ScriptedOperator:
 
     @property
     def marker(self) -> int:
-        """Every axis's segment tag, 4 bits per axis (:func:`master.protocols.joint_marker`)."""
-        return sum((a.marker & 0xF) << (4 * k) for k, a in enumerate(self.axes))
+        """The segment tag of every axis up to :data:`master.protocols.MARKER_AXES`, 4 bits per axis
+        (:func:`master.protocols.joint_marker`)."""
+        return sum((a.marker & 0xF) << (4 * k) for k, a in enumerate(self.axes[:MARKER_AXES]))
 
     # the first axis's script (a single tendon's), for logs, tests and benchmarks
     @property

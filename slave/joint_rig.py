@@ -1,4 +1,4 @@
-"""Simulated instrument of 1 to 4 joints, each driven by an antagonistic pair of distributed tendons.
+"""Simulated instrument of 1 to 16 joints, each driven by an antagonistic pair of distributed tendons.
 
 The reference simulator (docs/concepts/model.md, the simulators) extended to a pull-pull pair (E5, E11-E13):
 the compiled step is in :mod:`estimator.kernels`; this module owns the state, the motors, the
@@ -15,7 +15,7 @@ from estimator.kernels import RIGID_STOP, distal_gains, load_torque, settle_join
 from slave.drive import Drive
 from slave.rig import InstrumentTruth, RigInputError, RigState
 from slave.simulated import check_setting, is_finite, validate_drive, validate_runs
-from teleop.config import Config, JointConfig, SimulatedRigConfig, TendonConfig
+from teleop.config import MAX_JOINTS, Config, JointConfig, SimulatedRigConfig, TendonConfig
 
 __all__ = ["SimulatedInstrument", "TendonPhysics"]
 
@@ -61,7 +61,7 @@ class TendonPhysics:
 
 
 class SimulatedInstrument:
-    r"""An instrument of 1..4 independent joints, each turned by two tendons through their own sheaths.
+    r"""An instrument of 1..16 independent joints, each turned by two tendons through their own sheaths.
 
     Model of one joint (quasi-static distributed Coulomb friction in each tendon; joint per
     docs/concepts/effects.md E11 with the pair coupling E13; pretension E5):
@@ -89,7 +89,7 @@ class SimulatedInstrument:
     Parameters
     ----------
     joints : sequence of JointConfig
-        1 to 4 joints.
+        1 to :data:`~teleop.config.MAX_JOINTS` (16) joints.
     rig : SimulatedRigConfig
         ``rig.simulated``: ``n_elements`` (per tendon), ``motor``, ``sensors``, and ``joints``: each
         joint's simulated physics (stiffness, damping, limit stiffness, load, the tendons' mu) by name.
@@ -97,7 +97,7 @@ class SimulatedInstrument:
     Raises
     ------
     ConfigError
-        No joints, more than 4, or a setting out of range (the message names the joint and key).
+        No joints, more than 16, or a setting out of range (the message names the joint and key).
     """
 
     def __init__(self, joints, rig: SimulatedRigConfig):
@@ -282,7 +282,7 @@ def _truth(T, gains, r, theta):  # pragma: no cover - compiled
 
 def _validate(joints: tuple[JointConfig, ...], rig: SimulatedRigConfig) -> None:
     """Range checks of what the simulator uses; ConfigError names the joint and the dotted key."""
-    check_setting(1 <= len(joints) <= 4, "instrument.joints", "a list of 1 to 4 joints", len(joints))
+    check_setting(1 <= len(joints) <= MAX_JOINTS, "instrument.joints", f"a list of 1 to {MAX_JOINTS} joints", len(joints))
     for i, j in enumerate(joints):
         p = f"instrument.joints[{i}] ({j.name})"
         check_setting(is_finite(j.pulley_radius) and j.pulley_radius > 0, f"{p}.pulley_radius", "a radius > 0 m",

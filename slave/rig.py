@@ -4,7 +4,7 @@ A rig drives the tendons of an instrument, each with its own proximal motor (pos
 encoder ``x_in``) and load cell (``T_in``). Every array of a rig has the rig's *tendon shape*:
 
 * ``()`` - a single tendon (a one-axis instrument): plain floats;
-* ``(n_joints, 2)`` - an instrument of 1 to 4 antagonistic pairs (config ``instrument.joints``),
+* ``(n_joints, 2)`` - an instrument of 1 to 16 antagonistic pairs (config ``instrument.joints``),
   indexed ``[joint, tendon]`` with tendon 0 = a (pulling it turns the joint to + angles) and 1 = b.
 
 Each step takes a command per tendon and returns what the proximal sensors read. A simulated rig

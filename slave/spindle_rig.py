@@ -32,7 +32,7 @@ __all__ = ["SpindleInstrument"]
 
 
 class SpindleInstrument:
-    """An instrument of 1..4 spindle-driven jaws (module docstring), a :class:`slave.rig.Rig`.
+    """An instrument of 1..16 spindle-driven jaws (module docstring), a :class:`slave.rig.Rig`.
 
     Parameters
     ----------

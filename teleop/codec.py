@@ -6,7 +6,7 @@ Every message is a 3-byte header followed by little-endian, fixed-layout fields:
     offset 1  uint8   WIRE_VERSION (3: one Command and one Estimate over every axis of any instrument)
     offset 2  uint8   message type: 1 Command, 2 Estimate, 3 Heartbeat
 
-    Command   (18 + 8 n bytes after the header), n = axes, 1..4
+    Command   (18 + 8 n bytes after the header), n = axes, 1..16
         uint32 seq | float64 t_master [s] | uint8 engaged (0/1) | uint32 marker | uint8 n
         | float64 target[n] [m of a tendon axis, rad of a pair]
     Estimate  (19 + sum over axes of (17 + 33 m_k) + 4 m p bytes after the header), m_k = tendons of
@@ -45,7 +45,7 @@ WIRE_VERSION = 3
 TYPE_COMMAND = 1
 TYPE_ESTIMATE = 2
 TYPE_HEARTBEAT = 3
-MAX_AXES = 4
+MAX_AXES = 16                        # uint8 count; 8 antagonistic pairs of a bimanual instrument are 16 tendons
 MAX_PROFILE_POINTS = 0xFFFF          # uint16 count
 SEQ_MODULUS = 1 << 32                # sequence numbers are uint32
 
@@ -133,7 +133,7 @@ def encode(msg: Message) -> bytes:
     ------
     CodecError
         Not a message, a non-finite float, an integer out of its wire range, an axis count outside
-        1..4, an axis of neither one nor two tendons, profiles that are not one per tendon, too long a
+        1..16, an axis of neither one nor two tendons, profiles that are not one per tendon, too long a
         profile.
     """
     if isinstance(msg, Command):
@@ -316,7 +316,7 @@ def decode(buf: bytes | bytearray | memoryview) -> Message:
     CodecError
         Shorter than a header, wrong magic, another wire version (the message names the version seen
         and the one expected), unknown message type, a length that does not match the counts (axes:
-        1..4, tendons per axis: 1 or 2), a non-finite float, an unknown enum value.
+        1..16, tendons per axis: 1 or 2), a non-finite float, an unknown enum value.
     """
     if len(buf) < _HDR:
         raise CodecError(f"message truncated: {len(buf)} bytes, a header alone is {_HDR}")

@@ -12,7 +12,7 @@ from teleop.schema import Config
 
 __all__ = ["MAX_JOINTS", "check_joints"]
 
-MAX_JOINTS = 4
+MAX_JOINTS = 16                 # one axis of the wire per joint (teleop.codec.MAX_AXES)
 _JOINT_NAME = re.compile(r"[A-Za-z0-9_-]+")
 
 

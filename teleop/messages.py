@@ -38,7 +38,7 @@ class Command:
 
     seq : int, increments by one per command (uint32 wrap).
     t_master : float [s], master monotonic clock at send (only the master compares it).
-    targets : tuple of float, one per axis (1..4): the proximal displacement command ``x_in_cmd`` [m]
+    targets : tuple of float, one per axis (1..16): the proximal displacement command ``x_in_cmd`` [m]
         of a single-tendon axis (+ = tendon drawn toward the actuator), the joint angle [rad] of a
         pair (+ turns toward tendon a).
     engaged : bool, the operator is in control (False: slave holds).
@@ -87,7 +87,7 @@ class Estimate:
     seq : int, slave cycle counter.
     cmd_seq : int, seq of the last Command the slave applied (echo, for round-trip latency).
     t_slave : float [s], slave monotonic clock.
-    axes : tuple of AxisState, one per axis (1..4), config order.
+    axes : tuple of AxisState, one per axis (1..16), config order.
     profiles : tuple of tuple of float [N], empty or one per tendon (axis 0 first tendon, ...), all of
         one length: tension along each sheath, proximal to distal (decimated).
     """

@@ -32,7 +32,7 @@ __all__ = [
 @dataclass(frozen=True)
 class InstrumentConfig:
     id: str = "tsm0"
-    joints: tuple[JointConfig, ...] = ()  # empty: the single tendon of `sheath`; 1..4: pairs (or spindle-driven)
+    joints: tuple[JointConfig, ...] = ()  # empty: the single tendon of `sheath`; 1..16: pairs (or spindle-driven)
     tool: Optional[str] = None    # the instrument's tool file: configs/tools/<NAME>.yaml or a path (teleop.tools)
 
 
@@ -57,7 +57,7 @@ class SheathConfig:
         return SheathGeometry([Run(r.length, r.radius) for r in self.runs])
 
 
-# ---- instruments of 1..4 joints, each driven by an antagonistic tendon pair (slave/joint_rig.py) --
+# ---- instruments of 1..16 joints, each driven by an antagonistic tendon pair (slave/joint_rig.py) --
 
 @dataclass(frozen=True)
 class TendonConfig:

@@ -153,7 +153,7 @@ def test_bad_step_inputs_name_the_argument(cmd, dt, match):
 
 
 def test_config_errors_name_the_joint_and_key():
-    with pytest.raises(ConfigError, match=r"instrument.joints must be a list of 1 to 4"):
+    with pytest.raises(ConfigError, match=r"instrument.joints must be a list of 1 to 16"):
         SimulatedInstrument((), config_from_dict({}).rig.simulated)
     cfg = joint_config()
     bad = cfg.instrument.joints[0].__class__(name="wrist", pulley_radius=-1.0)
@@ -174,8 +174,8 @@ def test_one_to_four_independent_joints():
     th = s.truth.theta
     assert th[0] > 0.2 and th[2] < -0.2 and abs(th[1]) < 1e-9 and abs(th[3]) < 1e-9   # joints do not interact
     assert s.T_in.shape == (4, 2) and len(s.truth.profiles) == 8
-    with pytest.raises(ConfigError, match="1 to 4"):
-        SimulatedInstrument(joints + joints[:1], joint_config().rig.simulated)
+    with pytest.raises(ConfigError, match="1 to 16"):
+        SimulatedInstrument(joints * 4 + joints[:1], joint_config().rig.simulated)
 
 
 def test_the_step_over_all_joints_is_the_per_joint_kernel_bit_for_bit():

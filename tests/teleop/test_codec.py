@@ -1,4 +1,4 @@
-"""Wire codec (version 3): round trips over random instruments of one to four axes (single tendons and
+"""Wire codec (version 3): round trips over random instruments of one to MAX_AXES (16) axes (single tendons and
 pairs), the pinned layout, every rejection named, older versions refused."""
 from __future__ import annotations
 
@@ -133,8 +133,8 @@ _T0 = _E0 + 17                                   # its first tendon
     (GOOD_CMD[:10], "Command message truncated"),
     (GOOD_CMD[:-1], "Command message truncated"),
     (GOOD_CMD + b"\x00", "Command message too long"),
-    (GOOD_CMD[:20] + b"\x00" + GOOD_CMD[21:], "Command has 0 axes: expected 1 to 4"),
-    (GOOD_CMD[:20] + b"\x05" + GOOD_CMD[21:], "Command has 5 axes"),
+    (GOOD_CMD[:20] + b"\x00" + GOOD_CMD[21:], f"Command has 0 axes: expected 1 to {MAX_AXES}"),
+    (GOOD_CMD[:20] + bytes([MAX_AXES + 1]) + GOOD_CMD[21:], f"Command has {MAX_AXES + 1} axes"),
     (GOOD_CMD[:15] + b"\x02" + GOOD_CMD[16:], "Command.engaged byte is 2"),
     (GOOD_HB[:10], "Heartbeat message truncated"),
     (GOOD_EST[:10], "Estimate message truncated"),
@@ -233,8 +233,8 @@ def test_encode_rejects_out_of_range_integers_counts_and_sizes():
         encode(Command(0, 0.0, (0.0,), True, -1))
     with pytest.raises(CodecError, match="Command has 0 axes"):
         encode(Command(1, 0.0, ()))
-    with pytest.raises(CodecError, match="Estimate has 5 axes"):
-        encode(Estimate(1, 1, 0.0, (PAIR,) * 5))
+    with pytest.raises(CodecError, match=f"Estimate has {MAX_AXES + 1} axes"):
+        encode(Estimate(1, 1, 0.0, (PAIR,) * (MAX_AXES + 1)))
     with pytest.raises(CodecError, match=r"Estimate.axes\[1\] has 3 tendons"):
         encode(Estimate(1, 1, 0.0, (PAIR, AxisState(0.0, 0.0, (T, T, T)))))
     with pytest.raises(CodecError, match="Estimate.cmd_seq is -1"):
@@ -260,3 +260,15 @@ def test_overflowing_sum_of_finite_floats_is_not_rejected():
 
 def test_max_profile_points_matches_wire_count():
     assert codec.MAX_PROFILE_POINTS == 2**16 - 1
+
+
+def test_sixteen_pair_axes_round_trip_at_the_documented_sizes():
+    """The largest instrument (MAX_AXES pairs, 2 MAX_AXES tendons): Command 21 + 8 n bytes, Estimate 22 +
+    83 n bytes without profiles (docs/reference/wire.md), and back unchanged."""
+    n = MAX_AXES
+    cmd = Command(7, 1.5, tuple(0.01 * k for k in range(n)), True, 3)
+    est = Estimate(7, 6, 1.5, tuple(AxisState(0.1 * k, -0.1 * k, (TendonState(1.0 + k, 1e-3, 0.5, 1e-4, Phase.PULL),
+                                                                  TendonState(2.0, -1e-3, 1.5, 2e-4, Phase.HOLD)))
+                                    for k in range(n)))
+    assert n == 16 and len(encode(cmd)) == 21 + 8 * n and len(encode(est)) == 22 + 83 * n
+    assert decode(encode(cmd)) == cmd and decode(encode(est)) == est

@@ -1,4 +1,4 @@
-"""instrument.joints: 1..4 joints, errors naming the file, line, joint and key; the 3-joint instrument loads."""
+"""instrument.joints: 1..16 joints, errors naming the file, line, joint and key; the 3-joint instrument loads."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -33,8 +33,8 @@ JOINT = "    - name: {name}\n      pulley_radius: 0.004\n"
 
 
 @pytest.mark.parametrize("text, match", [
-    ("instrument:\n  joints:\n" + "".join(JOINT.format(name=f"j{i}") for i in range(5)),
-     r"inst.yaml:2: instrument.joints: 5 joints, an instrument has 1 to 4"),
+    ("instrument:\n  joints:\n" + "".join(JOINT.format(name=f"j{i}") for i in range(17)),
+     r"inst.yaml:2: instrument.joints: 17 joints, an instrument has 1 to 16"),
     ("instrument:\n  joints:\n" + JOINT.format(name="a") + JOINT.format(name="a"),
      r"inst.yaml:5: instrument.joints\[1\].name: 'a' is already the name of instrument.joints\[0\]"),
     ("instrument:\n  joints:\n    - name: wrist\n      limits: [0.2, 1.0]\n",
