@@ -359,3 +359,4 @@ def write_config(cfg: Config, path: str | Path) -> Path:
     return path
 
 read_yaml, merge_dataclass, ErrorContext = _read_yaml, _merge, _Ctx  # for the other strict YAML files (teleop.tools)
+check_config = _check          # the checks of one whole config, for files that hold several (teleop.arms)
