@@ -172,10 +172,18 @@ def _cmd_bridge(args: argparse.Namespace) -> int:
 
 
 def _cmd_slave(args: argparse.Namespace) -> int:
+    from teleop.arms import is_bimanual
+    if is_bimanual(args.config):          # every arm's node in one loop (live/bimanual_sides.py)
+        from live.bimanual_sides import run_slave_group
+        return run_slave_group(args)
     return run_slave(args)
 
 
 def _cmd_master(args: argparse.Namespace) -> int:
+    from teleop.arms import is_bimanual
+    if is_bimanual(args.config):          # both hands' nodes in one loop (live/bimanual_sides.py)
+        from live.bimanual_sides import run_master_group
+        return run_master_group(args)
     return run_master(args)
 
 

@@ -264,6 +264,10 @@ def main_demo(args) -> int:
     from slave.calibration_file import calibration_path
     from teleop.safety_bounds import waiver_lines, waivers
     cfg_path = resolve_config(args.config) if args.config else (DEFAULT_CONFIG if DEFAULT_CONFIG.is_file() else None)
+    from teleop.arms import is_bimanual
+    if cfg_path is not None and is_bimanual(cfg_path):       # two arms, two hands: live/demo_bimanual.py
+        from live.demo_bimanual import main_bimanual
+        return main_bimanual(args, Path(cfg_path))
     cfg = load_config(cfg_path)
     for line in waiver_lines(cfg):
         print(line, flush=True)

@@ -157,6 +157,9 @@ def _stop(proc: subprocess.Popen) -> None:
             proc.wait()
 
 
+wait_listening, stop_process = _wait_listening, _stop     # for the other demos' processes (live.demo_bimanual)
+
+
 def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, bridge: bool = False) -> None:
     """Slave and master as two processes with ``cfg_file`` (module docstring); what went wrong is
     appended to ``problems``. ``args``: ``listen``, ``timeout`` [s], ``protocol``. ``bridge``: the rig
