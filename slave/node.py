@@ -86,8 +86,9 @@ def axis_kind(cfg: Config) -> type[SlaveAxis]:
 
 
 def recording(cfg: Config, rig: Rig) -> tuple[str, tuple[str, ...], dict[str, str]]:
-    """The slave's recording of the configured instrument: file name, columns and metadata."""
-    return axis_kind(cfg).recording(cfg, rig)
+    """The slave's recording of the configured instrument: file name, columns and metadata (of the rig's own
+    axis kind when it has one, ``rig.axis_kind``)."""
+    return (getattr(rig, "axis_kind", None) or axis_kind(cfg)).recording(cfg, rig)
 
 
 def warm_up(cfg: Config) -> None:
@@ -152,7 +153,7 @@ class SlaveNode(SlaveNodeBase):
         self.rig = rig
         self.recorder = recorder
         self.rerun = rerun
-        self.kind = axis_kind(cfg)
+        self.kind = getattr(rig, "axis_kind", None) or axis_kind(cfg)     # a rig may bring its own kind (recording)
         self.rig_state: RigState = rig.state
         self.axes: list[SlaveAxis] = self.kind.build(cfg, rig)
         self.names = tuple(a.name for a in self.axes)

@@ -66,7 +66,8 @@ from study.mrd_tools import tool_calibration, tool_entry
 from teleop.errors import ConfigError, DataError
 from teleop.tools import Tool
 
-__all__ = ["analyze_mrd", "format_mrd", "write_mrd_report", "parse_calibration", "split_design_gain", "band_measurements", "SCORE_FROM_S"]
+__all__ = ["analyze_mrd", "format_mrd", "write_mrd_report", "parse_calibration", "split_design_gain", "band_measurements", "SCORE_FROM_S",
+           "calibrate_on_runs"]
 
 _CAL_INPUTS = {"inputs": ["spindle torque", "spindle encoder"], "targets": ["jaw torque", "jaw encoder"]}
 SHARED_STEP = 50           # decimation of the folder-wide fits (1 kHz -> 20 Hz)
@@ -181,7 +182,7 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
     cmap: Any = None
     cal_runs: list[RunData] = []
     if mode in ("run", "kinematic"):
-        plan, cmap, cal_runs = _calibrate_on_runs(runs, mode, str(cal), calibration, (given, source), fs, tick, out)
+        plan, cmap, cal_runs = calibrate_on_runs(runs, mode, str(cal), calibration, (given, source), fs, tick, out)
     else:
         plan = _calibrate_on_segments(runs, float(cal), tick, out)
     if tool is not None:
@@ -213,7 +214,7 @@ def _header(runs: list[MrdRun], fs: float) -> dict[str, Any]:
                                "duration_s": float(r.time[-1])} for r in runs}}
 
 
-def _calibrate_on_runs(runs: list[MrdRun], mode: str, cal: str, calibration: str | None,
+def calibrate_on_runs(runs: list[MrdRun], mode: str, cal: str, calibration: str | None,
                        gain: tuple[float | None, str | None], fs: float, tick, out: dict) -> tuple[list, Any, list]:
     """Calibrate on the named runs (``mode`` "run" or "kinematic"), choose the headline model and record the
     calibration in ``out``; returns the plan of the scored runs, the centre map and the calibration RunData."""

@@ -18,11 +18,12 @@ from typing import Literal, Optional
 from estimator.sheath import Run, SheathGeometry
 from teleop.effects_config import EffectsConfig, EffectSwitch
 from teleop.schema_ranges import MOVED, RANGES
+from teleop.schema_recording import RecordingRigConfig
 
 __all__ = [
     "InstrumentConfig", "RunConfig", "SheathConfig", "TendonConfig", "TendonPairConfig", "JointLoadConfig",
     "JointConfig", "SimulatedTendonConfig", "SimulatedTendonPairConfig", "SimulatedJointConfig", "MotorConfig", "LoadConfig", "SensorConfig", "EffectSwitch", "EffectsConfig", "SimulatedRigConfig",
-    "ZenohRigConfig", "RigConfig", "EstimatorConfig", "MOVED",
+    "ZenohRigConfig", "RecordingRigConfig", "RigConfig", "EstimatorConfig", "MOVED",
     "CalibrationConfig", "ArmConfig", "DeviceConfig", "MappingConfig", "MasterConfig", "SlaveConfig", "PairControlConfig",
     "TransportAuthConfig", "TransportTlsConfig", "TransportConfig", "RecordingConfig", "Ros2Config", "SafetyConfig", "Config", "RANGES",
     "joint_set_tension",
@@ -178,10 +179,11 @@ class ZenohRigConfig:
 class RigConfig:
     """``rig``: the rig's type and rate, and the settings of each rig type under its own name."""
 
-    type: Literal["simulated", "zenoh"] = "simulated"
+    type: Literal["simulated", "zenoh", "recording"] = "simulated"
     rate_hz: float = 1000.0
     simulated: SimulatedRigConfig = field(default_factory=SimulatedRigConfig)
     zenoh: ZenohRigConfig = field(default_factory=ZenohRigConfig)
+    recording: RecordingRigConfig = field(default_factory=RecordingRigConfig)
 
 
 @dataclass(frozen=True)

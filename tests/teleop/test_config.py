@@ -128,7 +128,7 @@ def test_non_si_suffix_only_where_the_schema_names_it(tmp_path):
     ("rig:\n  simulated:\n    effects:\n      stiction:\n        slip_time: fast\n",
      r":5: rig.simulated.effects.stiction.slip_time: expected a number, got 'fast' \(str\)"),
     ("rig:\n  rate_hz: true\n", r"rig.rate_hz: expected a number, got True \(bool\)"),
-    ("rig:\n  type: real\n", r"rig.type: expected one of 'simulated', 'zenoh', got 'real'"),
+    ("rig:\n  type: real\n", r"rig.type: expected one of 'simulated', 'zenoh', 'recording', got 'real'"),
     ("recording:\n  rerun: of\n", r"recording.rerun: expected one of 'save', 'spawn', 'off', got 'of'"),
     ("instrument:\n  id: 7\n", r"instrument.id: expected a non-empty string, got 7 \(int\)"),
     ("rig: 5\n", r":1: rig: expected a mapping of settings, got 5 \(int\)"),
