@@ -107,10 +107,13 @@ def bare_pingpong(seconds: float) -> dict:
         proc.wait()
 
 
-def demo_roundtrip(timeout: float = 120.0) -> dict:
+def demo_roundtrip(timeout: float = 120.0, config: Path | None = None) -> dict:
+    """``teleop demo --protocol short`` (``config``: ``--config`` it) in real processes: round trip [ms],
+    overruns, the sides' pacer figures and the recorder's message counts from its summaries."""
     with tempfile.TemporaryDirectory() as tmp:
         run = Path(tmp) / "run"
-        subprocess.run([sys.executable, "-m", "live.cli", "demo", "--protocol", "short",
+        extra = [] if config is None else ["--config", str(config)]
+        subprocess.run([sys.executable, "-m", "live.cli", "demo", "--protocol", "short", *extra,
                         "--run-dir", str(run), "--timeout", str(timeout)], check=False, cwd=ROOT, capture_output=True,
                        timeout=timeout + 30, env=dict(os.environ, PYTHONUNBUFFERED="1"))
         s = json.loads((run / "summary.json").read_text())

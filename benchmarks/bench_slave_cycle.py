@@ -74,22 +74,31 @@ def run(threaded: bool, n: int, tmp: Path) -> np.ndarray:
     return times * 1e3
 
 
+def simulator_calibration(cfg: Config):
+    """The calibration the slave would reload for ``cfg``'s joint instrument: its power-up routine run
+    to the end on a simulator of the instrument (an :class:`slave.calibration_file.InstrumentCalibration`)."""
+    from slave.node import axis_kind
+    from slave.rigs import RIG_TYPES
+    kind, dt = axis_kind(cfg), 1.0 / cfg.rig.rate_hz
+    sim = RIG_TYPES["simulated"](cfg, None)
+    routine = kind.routine(cfg, sim)
+    st = sim.state
+    while not routine.done:
+        st = kind.routine_step(routine, sim, st, dt)
+    return kind.calibration_of(cfg, routine)
+
+
 def run_joints(n: int, tmp: Path, record: bool = True) -> np.ndarray:
     """The 3-joint instrument's SlaveNode with the writer threads (``record``) or with no recording at
     all (the step in isolation): step times [ms]."""
-    from slave.node import axis_kind, recording
+    from slave.node import recording
     from slave.rigs import RIG_TYPES
     from teleop.rerun_view import joint_views
     cfg = load_config(Path(__file__).resolve().parents[1] / "configs" / "instrument-3dof.yaml",
                       {"recording.rerun": "save"})
     warm_up(cfg)
-    kind, dt = axis_kind(cfg), 1.0 / cfg.rig.rate_hz
-    sim = RIG_TYPES["simulated"](cfg, None)
-    routine = kind.routine(cfg, sim)
-    st = sim.state
-    while not routine.done:                       # the calibration the slave would reload
-        st = kind.routine_step(routine, sim, st, dt)
-    cal = kind.calibration_of(cfg, routine)
+    dt = 1.0 / cfg.rig.rate_hz
+    cal = simulator_calibration(cfg)
     clock = FakeClock()
     links = SlaveLinks(*(LatestTopic(clock) for _ in range(4)))
     inst = RIG_TYPES["simulated"](cfg, None)

@@ -1,0 +1,188 @@
+"""How the live loop's cost grows with the number of tendons: slave and master step times at 2, 6, 16 and 32
+tendons, with and without the recorder, beside bare Zenoh and the teleoperation round trip in the same run.
+
+1. In one process, for instruments of 1, 3, 8 and 16 antagonistic joints (2, 6, 16, 32 tendons; the joints of
+   configs/instrument-3dof.yaml repeated under distinct names, one device axis each, the simulated rig of
+   100 elements per tendon): the instrument is calibrated on its simulator first
+   (:func:`bench_slave_cycle.simulator_calibration`), then a MasterNode (the demo's scripted operator,
+   protocol ``short`` on every joint) and a SlaveNode on that calibration step in turn on one fake clock,
+   linked by latest-wins topics that encode every message as a Zenoh publisher does
+   (:class:`bench_master_cycle._Topic`). Each step's wall time is taken; without the recorder nothing is
+   written, with it the slave writes through the writer threads of ``teleop slave``
+   (:class:`teleop.csv_writer.ThreadedCsvRecorder`, Rerun in a child process,
+   :class:`teleop.rerun_proc.RerunProcessLogger`) and the master through its CSV writer thread.
+   The cost per added tendon is the least-squares slope of p50 (and of p99) over the four sizes.
+2. In the same run, in real processes on 127.0.0.1: the bare Zenoh ping-pong of
+   :func:`bench_roundtrip.bare_pingpong` and ``teleop demo --protocol short`` (recorder + slave + master,
+   :func:`bench_roundtrip.demo_roundtrip`) at 2 and 16 tendons: the command -> estimate-echo round trip,
+   the slave's step time and both loops' overruns.
+
+Prints a table, never fails on time. ``python benchmarks/bench_scaling.py [--quick] [--cycles N] [--seconds S]``
+(``--quick``: fewer cycles and a shorter ping-pong, under a minute).
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from bench_master_cycle import _Topic  # sibling scripts: the benchmarks folder is the running script's own
+from bench_roundtrip import bare_pingpong, demo_roundtrip
+from bench_slave_cycle import simulator_calibration
+
+ROOT = Path(__file__).resolve().parents[1]
+JOINTS = (1, 3, 8, 16)                     # antagonistic joints: 2, 6, 16, 32 tendons
+DEMO_JOINTS = (1, 8)                       # the round trip in real processes: 2 and 16 tendons
+
+
+def instrument(n_joints: int, rerun: str = "save"):
+    """configs/instrument-3dof.yaml with its joints (and their simulated physics) repeated to ``n_joints``,
+    named ``<joint><k>``, device axis k for joint k; ``recording.rerun`` = ``rerun``."""
+    from teleop.config import load_config
+    cfg = load_config(ROOT / "configs" / "instrument-3dof.yaml", {"recording.rerun": rerun})
+    inst, sim = cfg.instrument.joints, cfg.rig.simulated.joints
+    joints = tuple(dataclasses.replace(inst[k % 3], name=f"{inst[k % 3].name}{k}") for k in range(n_joints))
+    sims = tuple(dataclasses.replace(sim[k % 3], name=f"{sim[k % 3].name}{k}") for k in range(n_joints))
+    return dataclasses.replace(
+        cfg, instrument=dataclasses.replace(cfg.instrument, id=f"scaling{n_joints}", joints=joints),
+        rig=dataclasses.replace(cfg.rig, simulated=dataclasses.replace(cfg.rig.simulated, joints=sims)),
+        pair_control=dataclasses.replace(cfg.pair_control, axes=tuple(range(n_joints))))
+
+
+def run_loop(cfg, cal, cycles: int, record: bool, tmp: Path) -> np.ndarray:
+    """Master and slave stepped in turn for ``cycles`` cycles (module docstring, 1.): per cycle the wall
+    time and the thread CPU time of the slave's step and of the master's [ms], shape (4, cycles)."""
+    from master.devices import make_device
+    from master.node import MasterLinks, MasterNode
+    from master.node import csv_columns as master_columns
+    from master.node import csv_units as master_units
+    from slave.node import SlaveLinks, SlaveNode, recording, warm_up
+    from slave.rigs import RIG_TYPES
+    from teleop.clock import FakeClock
+    from teleop.csv_writer import ThreadedCsvRecorder
+    from teleop.rerun_proc import RerunProcessLogger
+    from teleop.rerun_view import joint_views
+
+    warm_up(cfg)
+    clock = FakeClock(100.0)
+    cmd, est, mhb, shb = (_Topic(clock) for _ in range(4))
+    rig = RIG_TYPES["simulated"](cfg, None)
+    tag = f"{cfg.instrument.id}-{'rec' if record else 'bare'}"
+    name, columns, meta = recording(cfg, rig)
+    srec = ThreadedCsvRecorder(tmp / f"{tag}-{name}", columns, meta, flush_every=500) if record else None
+    mrec = ThreadedCsvRecorder(tmp / f"{tag}-master.csv", master_columns(cfg), {"source": "bench"},
+                               units=master_units(cfg), flush_every=500) if record else None
+    rr = RerunProcessLogger("bench", tag, "save", tmp / f"{tag}.rrd", joints=joint_views(cfg)) if record else None
+    out = np.empty((4, cycles))
+    pc, tt, dt = time.perf_counter_ns, time.thread_time_ns, 1.0 / cfg.rig.rate_hz
+    try:
+        slave = SlaveNode(cfg, rig, SlaveLinks(est, shb, cmd, mhb), recorder=srec, rerun=rr, calibration=cal)
+        master = MasterNode(cfg, make_device(cfg, "short"), MasterLinks(cmd, mhb, est, shb), recorder=mrec)
+        if rr is not None:
+            rr.flush()            # the Rerun child up and idle: its start-up is not the loop's
+        for k in range(cycles):
+            t = clock.advance(dt)
+            w0, c0 = pc(), tt()
+            master.step(t)
+            w1, c1 = pc(), tt()
+            slave.step(t)
+            w2, c2 = pc(), tt()
+            out[:, k] = w2 - w1, c2 - c1, w1 - w0, c1 - c0
+    finally:
+        for w in (srec, mrec, rr):
+            if w is not None:
+                w.close()
+    return out * 1e-6
+
+
+def slope(tendons, values) -> float:
+    """Least-squares slope of ``values`` against ``tendons`` (a first-degree fit): the cost per added tendon."""
+    return float(np.polyfit(np.asarray(tendons, dtype=float), np.asarray(values, dtype=float), 1)[0])
+
+
+def measure_steps(cycles: int, tmp: Path, joints=JOINTS) -> dict:
+    """``{(n_joints, record): (slave p50, p99, CPU p99, master p50, p99, CPU p99)}`` [ms]: wall-time p50 and
+    p99 and thread-CPU-time p99 of each side's step, after a 10 % warm-up of the loop."""
+    out = {}
+    for nj in joints:
+        cfg = instrument(nj)
+        cal = simulator_calibration(cfg)
+        for record in (False, True):
+            x = run_loop(cfg, cal, cycles, record, tmp)[:, cycles // 10:]
+            v = out[nj, record] = tuple(float(np.percentile(x[row], q)) for row in (0, 2) for q in (50, 99)
+                                        ) + tuple(float(np.percentile(x[row], 99)) for row in (1, 3))
+            v = out[nj, record] = (v[0], v[1], v[4], v[2], v[3], v[5])
+            print(f"  {2 * nj:3d} tendons, recorder {'on ' if record else 'off'}: slave p50 {v[0]:.3f} p99 {v[1]:.3f} "
+                  f"(CPU {v[2]:.3f}) ms, master p50 {v[3]:.3f} p99 {v[4]:.3f} (CPU {v[5]:.3f}) ms", flush=True)
+    return out
+
+
+def demo_config(n_joints: int, tmp: Path) -> Path:
+    """The generated instrument as a config file for ``teleop demo``, calibrating into ``tmp``."""
+    from teleop.config import write_config
+    cfg = instrument(n_joints)
+    cfg = dataclasses.replace(cfg, calibration=dataclasses.replace(cfg.calibration, dir=str(tmp / "calibration")))
+    path = tmp / f"scaling{n_joints}.yaml"
+    write_config(cfg, path)
+    return path
+
+
+def print_table(steps: dict, joints=JOINTS) -> None:
+    """The step table (markdown) and the cost per added tendon."""
+    print("| tendons | slave p50 / p99 (CPU p99) [ms] | slave + recorder | master p50 / p99 (CPU p99) [ms] "
+          "| master + recorder |")
+    print("|---:|---|---|---|---|")
+    for nj in joints:
+        cells = [f"{v[0]:.3f} / {v[1]:.3f} ({v[2]:.3f})" for side in (0, 3) for rec in (False, True)
+                 for v in [steps[nj, rec][side:side + 3]]]
+        print(f"| {2 * nj} | " + " | ".join(cells) + " |")
+    tendons = [2 * nj for nj in joints]
+    parts = []
+    for label, col in (("slave p50", 0), ("slave CPU p99", 2), ("master p50", 3), ("master CPU p99", 5)):
+        per = [slope(tendons, [steps[nj, rec][col] for nj in joints]) * 1e3 for rec in (False, True)]
+        parts.append(f"{label} {per[0]:.1f} us ({per[1]:.1f} us with the recorder)")
+    print("cost per added tendon (least-squares slope over " + ", ".join(map(str, tendons)) + " tendons): "
+          + "; ".join(parts))
+
+
+def print_roundtrips(bare: dict, demos: dict) -> None:
+    """The bare ping-pong and the demo round trips, and what the teleoperation adds to bare Zenoh."""
+    print(f"bare zenoh ping-pong, 2 processes, 1 kHz ({bare['scheduling']}): p50 {bare['p50_ms']:.3f} ms, "
+          f"p99 {bare['p99_ms']:.3f} ms ({bare['echoed']}/{bare['sent']} echoed)")
+    for nj, d in demos.items():
+        st = d["pacer"]["slave"].get("step_ms", {})
+        print(f"teleop demo, {2 * nj} tendons (recorder+slave+master processes), command -> estimate echo: "
+              f"p50 {d['p50_ms']:.3f} ms (+{d['p50_ms'] - bare['p50_ms']:.3f} over bare), p99 {d['p99_ms']:.3f} ms "
+              f"(+{d['p99_ms'] - bare['p99_ms']:.3f}); slave step p50 {st.get('p50', float('nan')):.2f} p99 "
+              f"{st.get('p99', float('nan')):.2f} ms; overruns master {100 * d['master_overruns']:.2f} %, slave "
+              f"{100 * d['slave_overruns']:.2f} %; recorder {d['recorded']} messages, {d['recorded_missing']} missing")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
+    ap.add_argument("--quick", action="store_true", help="fewer cycles and a shorter ping-pong (a smoke test)")
+    ap.add_argument("--cycles", type=int, help="cycles per size and recorder setting (default 3000, quick 400)")
+    ap.add_argument("--seconds", type=float, help="bare ping-pong duration [s] (default 8, quick 2)")
+    a = ap.parse_args()
+    cycles = a.cycles or (400 if a.quick else 3000)
+    seconds = a.seconds or (2.0 if a.quick else 8.0)
+    load0 = os.getloadavg()[0]
+    print(f"machine: {os.cpu_count()} CPUs, load average {load0:.2f} at the start", flush=True)
+    with tempfile.TemporaryDirectory() as d:
+        tmp = Path(d)
+        print(f"step times over {cycles} cycles (first 10 % left out), master + slave in one process:", flush=True)
+        steps = measure_steps(cycles, tmp)
+        bare = bare_pingpong(seconds)
+        demos = {nj: demo_roundtrip(config=demo_config(nj, tmp)) for nj in DEMO_JOINTS}
+    print()
+    print_table(steps)
+    print_roundtrips(bare, demos)
+    print(f"load average {load0:.2f} at the start, {os.getloadavg()[0]:.2f} at the end (1 min), on {os.cpu_count()} CPUs")
+
+
+if __name__ == "__main__":
+    main()
