@@ -8,6 +8,9 @@ device lost) makes that arm safe and leaves the other's cycle untouched; a lost 
 each arm's node safe by its own watchdog. An arm whose node is done is no longer stepped; the group
 is done when every arm is.
 
+A slave group's cycles start when the last arm's command arrives (:class:`teleop.clock.LockedPacer`, as a
+single slave's start on its command): the master group sends the arms' commands in arm order.
+
 The group times each arm's step (:meth:`arm_step_stats`: p50, p99, max [ms]) so the cost of each arm
 in the shared period is visible, and after the loop gives each node the loop's pacer figures, so
 each arm's stats read like a single instrument's.
@@ -80,6 +83,11 @@ class NodeGroup(NodeBase):
                 node.step(now)
                 times.append(perf() - t0)
         self.done = all(n.done for n in self.nodes)
+
+    def _cycle_source(self):
+        """The last arm's cycle source (the slave's: its command subscriber): the peer group publishes the
+        arms' messages in arm order within one cycle, so when the last arm's has arrived every arm's has."""
+        return self.nodes[-1]._cycle_source()
 
     def _run_ended(self, clock: Clock) -> None:
         for n in self.nodes:

@@ -44,7 +44,7 @@ def _cheap_bimanual(tmp_path: Path) -> Path:
     return path
 
 
-def _true_calibration(cfg, rig: SimulatedInstrument) -> InstrumentCalibration:
+def true_calibration(cfg, rig: SimulatedInstrument) -> InstrumentCalibration:
     """The simulator's own K and L/EA of every tendon as calibration data (the run skips the power-up pulls)."""
     joints = []
     for i, j in enumerate(cfg.instrument.joints):
@@ -97,7 +97,7 @@ def run(tmp_path: Path, fault: str | None):
             est_out = FaultInjector(f"corrupt=range,stream=estimate,at={T_FAULT}s", clock).wrap(est, "estimate")
         slaves.append(SlaveNode(arm.cfg, rig, SlaveLinks(estimate=est_out, heartbeat=shb, command=cmd,
                                                          master_heartbeat=mhb),
-                                calibration=_true_calibration(arm.cfg, rig), run_dir=tmp_path / arm.ident))
+                                calibration=true_calibration(arm.cfg, rig), run_dir=tmp_path / arm.ident))
         dev = make_device(arm.cfg, "paper")
         if arm.hand == "left" and fault == "device":
             dev = LostAfter(dev, T_FAULT)
