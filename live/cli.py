@@ -79,6 +79,10 @@ def _add_sides(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> No
     _shared(p)
     p.add_argument("--protocol", default="paper,minor", help="operator protocol(s) (default paper,minor)")
     p.add_argument("--timeout", type=float, default=50.0, help="give up on the processes after this [s]")
+    p.add_argument("--rig", choices=("simulated", "zenoh", "recording"), default=None, help="override rig.type")
+    p.add_argument("--recording", metavar="PATH", default=None,
+                   help="play this measured recording as the hardware (rig.type recording, rig.recording.path; an MRD "
+                        "XY.TXT run; without --config the da Vinci jaw of configs/recording-mrd.yaml)")
     p.set_defaults(func=_cmd_demo)
 
     p = sub.add_parser("slave", help="instrument side: reload or make the calibration, then follow commands and "

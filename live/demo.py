@@ -217,6 +217,9 @@ class TendonDemo:
 def demo_kind(cfg: Config) -> Any:
     """The evaluation of the configured instrument: :class:`TendonDemo`, or
     :class:`live.demo_joints.JointDemo` when ``instrument.joints`` is given."""
+    if cfg.rig.type == "recording":
+        from live.demo_recording import RecordingDemo
+        return RecordingDemo
     if cfg.instrument.joints:
         from live.demo_joints import JointDemo
         return JointDemo
@@ -237,7 +240,10 @@ def format_summary(s: dict) -> str:
     joints = s.get("kind") == "joints"
     if joints:
         from live.demo_joints import JointDemo
-    kind = JointDemo if joints else TendonDemo
+    kind: Any = JointDemo if joints else TendonDemo
+    if s.get("kind") == "recording":
+        from live.demo_recording import RecordingDemo
+        kind = RecordingDemo
     axes = ", ".join(s.get("axes", ()))
     L = [f"teleop demo ({s.get('instrument', '?')}: {axes}): {s['run_dir']}", ""]
     L += kind.lines(s)
@@ -269,6 +275,8 @@ def main_demo(args) -> int:
         from live.demo_bimanual import main_bimanual
         return main_bimanual(args, Path(cfg_path))
     cfg = load_config(cfg_path)
+    from live.demo_recording import with_recording
+    cfg = with_recording(cfg, args)     # --rig / --recording: a recording checked before any process starts
     for line in waiver_lines(cfg):
         print(line, flush=True)
     run_dir = prepare_run_dir(args, cfg)

@@ -279,6 +279,15 @@ class RecordedSpindleAxis(SpindleAxis):
         return {**calibration.as_dict(), "recorded_model": model.as_dict()}
 
     @classmethod
+    def recording(cls, cfg: Config, rig: Rig) -> tuple[str, tuple[str, ...], dict[str, str]]:
+        """``slave_joints.csv`` in the joint instrument's columns; the truth is the recording's."""
+        name, cols, meta = super().recording(cfg, rig)
+        src = cfg.rig.recording.path or ""
+        return name, cols, {**meta, "rig": f"recording {src}",
+                            "truth": "torque, angle: the recording's measured jaw torque and angle; the cables' "
+                                     "T_out and elongation are not measured (0)"}
+
+    @classmethod
     def stats(cls, axes: Sequence[SlaveAxis]) -> dict[str, Any]:
         return {"joints": [a.name for a in axes], "drive": "spindle", "rig": "recording"}
 

@@ -210,9 +210,9 @@ class RecordedSpindle:
         else:
             tr = min(t - lap * self.period, self.duration)
             th, tq, ad, td = (float(np.interp(tr, r.time, v)) for v in (r.theta_p, r.tau_p, r.theta_d, r.tau_d))
-        nan = np.full((1, 2), np.nan)
-        truth = InstrumentTruth(theta=np.array([ad]), torque=np.array([td]), T_in=nan, T_out=nan, x_in=nan,
-                                x_out=nan, elongation=nan)
+        none = np.zeros((1, 2))         # the cables' tensions and stretch are not measured on the recorded tool
+        truth = InstrumentTruth(theta=np.array([ad]), torque=np.array([td]), T_in=none, T_out=none, x_in=none,
+                                x_out=none, elongation=none)
         return RigState(t=float(t), x_in=np.array([th], dtype=float), T_in=np.array([tq], dtype=float),
                         x_in_cmd=np.array(cmd, dtype=float), truth=truth)
 

@@ -246,7 +246,11 @@ def run_master(args: argparse.Namespace) -> int:
 
     cfg = load_config(args.config)
     waived = announce_waivers(cfg, logging.getLogger("teleop.master"))
-    device = make_device(cfg, args.protocol)     # master.device.type through the registry
+    if cfg.rig.type == "recording" and cfg.master.device.type == "simulated":
+        from live.recording_operator import recorded_operator
+        device = recorded_operator(cfg)    # the scripted hand retraces the recorded jaw angle
+    else:
+        device = make_device(cfg, args.protocol)     # master.device.type through the registry
     # from here on the device is closed on every exit path (HID: zero force, stop all effects,
     # disable actuators), whatever fails: session, recording, the loop, Ctrl-C or SIGTERM
     with _closing(device):

@@ -1,0 +1,86 @@
+"""Every run of an MRD folder through the live path (``rig.type: recording``), beside ``teleop analyze --mrd``.
+
+The slave's recording rig and recorded spindle axis (live/recording_rig.py, live/recording_axis.py) play each
+run in process, one cycle per recorded sample (1 kHz), with the calibration the slave fits on start (the tool
+file's rule, ``mid``, with its load gain). The offline figure of each run is ``teleop analyze --mrd DIR --tool
+NAME``'s own (:func:`study.mrd_report.analyze_mrd`, same calibration run and load gain, the folder-wide fits
+off). Prints per run the live jaw-torque RMSE [FS], the offline one and their difference, the median and worst
+over the scored runs (the calibration run is in-sample and listed apart), and the step time of the loop (rig
+step and estimate, p50 / p99 / max, and the share over the 1 ms period). Skips (prints why) when the folder is
+absent. Data: MRD Lab data repository, University of Minnesota (ODbL 1.0 / DbCL 1.0). Prints figures, never
+fails on them.
+
+    .venv/bin/python benchmarks/bench_recording_rig.py [--dir DIR] [--tool NAME] [--runs GLOB]
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import time
+from pathlib import Path
+
+ONE_THREAD = {k: "1" for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")}
+os.environ.update(ONE_THREAD)
+ROOT = Path(__file__).resolve().parents[1]
+
+import numpy as np  # noqa: E402 - after the thread settings
+
+from live.recording_axis import fit_recorded_model  # noqa: E402
+from live.recording_score import play_run, score_run  # noqa: E402
+from study.mrd import default_mrd_dir, load_mrd_dir  # noqa: E402
+from study.mrd_report import analyze_mrd  # noqa: E402
+from teleop.config import load_config  # noqa: E402
+from teleop.tools import load_tool  # noqa: E402
+
+PERIOD_S = 1e-3
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--dir", default=str(default_mrd_dir() / "Tool_4_Maryland_L_2"))
+    ap.add_argument("--tool", default="davinci-maryland-left")
+    ap.add_argument("--runs", default=None, help="only the runs whose name matches this glob")
+    args = ap.parse_args(argv)
+    if not Path(args.dir).is_dir():
+        print(f"bench_recording_rig: skipped, {args.dir} not found (the MRD da Vinci folder, docs/results/mrd.md)")
+        return
+    runs, _ = load_mrd_dir(args.dir, args.runs)
+    base = load_config(ROOT / "configs" / "recording-mrd.yaml")
+    cfg = dataclasses.replace(base, instrument=dataclasses.replace(base.instrument, tool=args.tool),
+                              rig=dataclasses.replace(base.rig, recording=dataclasses.replace(
+                                  base.rig.recording, path=runs[0].source)))
+    t0 = time.perf_counter()
+    model = fit_recorded_model(cfg)
+    t_fit = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    offline, _ = analyze_mrd(runs, None, tool=load_tool(args.tool), folder=False, loro=False)
+    t_off = time.perf_counter() - t0
+    fs = float(offline["full_scale_Nm"])
+    cal = Path(model.run).stem
+    print(f"MRD folder {args.dir} ({len(runs)} runs), tool {args.tool}; calibrated on run {cal} (live fit {t_fit:.1f} s, "
+          f"offline analysis {t_off:.1f} s, run {offline['calibration']['run']}); torque from the {model.chosen}; "
+          f"full scale {fs * 1e3:.1f} mN m")
+    print(" run   live RMSE  offline RMSE  live-offline  angle [deg]  step p50/p99/max [ms]")
+    rows, steps = [], []
+    for r in runs:
+        played = play_run(cfg, model, r)
+        s = score_run(cfg, model, r, fs, played)
+        steps.append(played.step_s)
+        off = offline["runs"].get(r.name, {}).get("torque_rmse_fs", float("nan"))
+        d = s["live_rmse_fs"] - off
+        tag = "  (calibration run, in-sample)" if r.name == cal else ""
+        print(f"  {r.name}   {s['live_rmse_fs']:8.4f}  {off:11.4f}  {d:+12.4f}  {s['angle_rmse_deg']:10.2f}   "
+              f"{s['step_p50_s'] * 1e3:.3f}/{s['step_p99_s'] * 1e3:.3f}/{s['step_max_s'] * 1e3:.1f}{tag}")
+        if r.name != cal:
+            rows.append((s["live_rmse_fs"], off, d))
+    a = np.asarray(rows)
+    st = np.concatenate(steps)
+    print(f"scored runs {len(rows)}: live RMSE median {np.median(a[:, 0]):.4f} worst {a[:, 0].max():.4f} FS; offline median "
+          f"{np.median(a[:, 1]):.4f} worst {a[:, 1].max():.4f} FS; max |live - offline| {np.abs(a[:, 2]).max():.4f} FS")
+    print(f"step time over {st.size} cycles: p50 {np.percentile(st, 50) * 1e3:.3f} ms, p99 {np.percentile(st, 99) * 1e3:.3f} ms, "
+          f"max {st.max() * 1e3:.1f} ms; {np.mean(st > PERIOD_S) * 100:.2f} % over the {PERIOD_S * 1e3:.0f} ms period")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,140 @@
+"""The evaluation of ``teleop demo --rig recording --recording RUN``: the live estimate against the measured jaw.
+
+The demo's flow is every instrument's (:func:`live.demo.main_demo`); the recording rig (live/recording_rig.py)
+plays an MRD run as the spindle axis's hardware and the slave fits its calibration on one run of the folder at
+power-up (live/recording_axis.py). :class:`RecordingDemo` reads ``slave_joints.csv`` (a row per cycle: the rig's
+time is the recording's) and scores, over the cycles the slave ran from the run's scored start (its first
+spindle reversal after 0.5 s; with the centre map once its band reading holds both edges, as ``teleop analyze
+--mrd``):
+
+* the live jaw torque against the measured jaw torque: RMSE and max |error| over the full scale (the tool
+  file's measured output-torque range, else the run's own);
+* the same run's offline estimate, the batch model of the same calibration (:mod:`live.recording_score`), on
+  the same cycles, and the difference of the two RMSEs (the same model: it must stay within
+  :data:`AGREEMENT_FS`);
+* the live jaw angle against the measured one (RMSE [deg]).
+
+The scripted operator runs its protocol on the jaw and the master renders the estimated jaw torque; the rig
+ignores the commands (the recorded motion is the one that happened), so the haptic loop's chatter and
+transparency are not scored here.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from live.demo_joints import read_joint_csv
+from teleop.config import Config
+from teleop.errors import DataError
+
+__all__ = ["AGREEMENT_FS", "TORQUE_RMSE_BOUND", "RecordingDemo", "evaluate_recording", "with_recording"]
+
+#: Acceptance: |live - offline| jaw torque RMSE on the same cycles [FS].
+AGREEMENT_FS = 0.005
+#: Acceptance: live jaw torque RMSE against the measured one [FS] (the folder's median is 0.024).
+TORQUE_RMSE_BOUND = 0.05
+
+
+def evaluate_recording(run_dir: Path, cfg: Config) -> dict:
+    """The scores of the module docstring from ``run_dir/slave_joints.csv`` and the run's calibration files.
+
+    Raises
+    ------
+    DataError
+        No cycle of the slave reached the run's scored start, or a missing or malformed CSV.
+    """
+    from estimator.offline.spindle_centre_fit import predict_held
+    from estimator.online.spindle import make_batch, predict_torque
+    from live.recording_axis import CENTRE, full_scale, load_model, model_path
+    from live.recording_rig import read_recording_run
+    from live.recording_score import scored_from
+    run = read_recording_run(cfg)
+    model = load_model(model_path(cfg))
+    name = cfg.instrument.joints[0].name
+    cols = read_joint_csv(run_dir / "slave_joints.csv")
+    idx = np.rint(cols["time"] / run.dt).astype(int)
+    k0 = scored_from(model, run)
+    keep = (idx >= k0) & (idx < len(run))
+    if not keep.any():
+        raise DataError(f"{run_dir / 'slave_joints.csv'}: no cycle reached the scored start of {run.source} "
+                        f"({run.time[min(k0, len(run) - 1)]:.1f} s of the recording)")
+    if model.chosen == CENTRE and model.centre_map is not None:
+        offline = predict_held(model.centre_map, run.tau_p, run.theta_p, run.dt)
+    else:
+        offline = predict_torque(model.pair, make_batch([(run.tau_p, run.theta_p)], model.band_centre,
+                                                        model.theta_ref, run.dt))
+    fs = full_scale(cfg, run.tau_d)
+    i = idx[keep]
+    truth, live = run.tau_d[i], cols[f"{name}.torque_hat"][keep]
+    e, eo = live - truth, offline[i] - truth
+    ea = cols[f"{name}.angle_hat"][keep] - run.theta_d[i]
+    rmse, rmse_off = float(np.sqrt(np.mean(e ** 2)) / fs), float(np.sqrt(np.mean(eo ** 2)) / fs)
+    return {"recording": run.source, "calibration_run": model.run, "model": model.chosen, "tool": model.tool,
+            "full_scale_Nm": fs, "cycles_scored": int(keep.sum()), "scored_from_s": float(run.time[k0]),
+            "scored_to_s": float(run.time[i.max()]), "torque_rmse_fs": rmse,
+            "torque_max_fs": float(np.max(np.abs(e)) / fs), "offline_torque_rmse_fs": rmse_off,
+            "live_minus_offline_fs": rmse - rmse_off, "angle_rmse_deg": float(math.degrees(np.sqrt(np.mean(ea ** 2)))),
+            "recording_finished": bool(idx.max() >= len(run) - 1)}
+
+
+def with_recording(cfg: Config, args: Any) -> Config:
+    """``cfg`` with ``--rig`` / ``--recording PATH`` applied (``--recording`` alone means ``--rig recording``;
+    without ``--config`` the instrument is configs/recording-mrd.yaml's jaw), the recording checked against the
+    instrument before any process starts (:func:`live.recording_rig.check_recording`: one line naming the file
+    and the problem)."""
+    import dataclasses
+
+    from live.recording_rig import check_recording
+    from teleop.config import load_config
+    from teleop.config_files import shipped_config
+    rig, path = getattr(args, "rig", None), getattr(args, "recording", None)
+    if path is not None and rig in (None, "recording"):
+        if getattr(args, "config", None) is None:
+            cfg = load_config(shipped_config("recording-mrd.yaml"))
+        rec = dataclasses.replace(cfg.rig.recording, path=str(Path(path).expanduser().resolve()))
+        cfg = dataclasses.replace(cfg, rig=dataclasses.replace(cfg.rig, type="recording", recording=rec))
+    elif rig is not None:
+        cfg = dataclasses.replace(cfg, rig=dataclasses.replace(cfg.rig, type=rig))
+    if cfg.rig.type == "recording":
+        if cfg.rig.recording.path:      # the sides run from the run's config: an absolute path reads the same
+            rec = dataclasses.replace(cfg.rig.recording, path=str(Path(cfg.rig.recording.path).expanduser().resolve()))
+            cfg = dataclasses.replace(cfg, rig=dataclasses.replace(cfg.rig, recording=rec))
+        check_recording(cfg)
+    return cfg
+
+
+class RecordingDemo:
+    """The recording rig's part of ``teleop demo`` (module docstring)."""
+
+    files = ("slave_joints.csv",)
+
+    @staticmethod
+    def evaluate(summary: dict, run_dir: Path, cfg: Config, problems: list[str]) -> dict[str, bool]:
+        """Fill ``summary["recording"]``; the checks: the processes finished, the torque RMSE within
+        :data:`TORQUE_RMSE_BOUND`, live and offline within :data:`AGREEMENT_FS`."""
+        summary["kind"] = "recording"
+        try:
+            r = summary["recording"] = evaluate_recording(run_dir, cfg)
+        except (DataError, OSError, KeyError) as e:
+            problems.append(f"evaluation: {e}")
+            return {"evaluated": False}
+        return {"torque_rmse_within_bound": r["torque_rmse_fs"] <= TORQUE_RMSE_BOUND,
+                "live_agrees_with_offline": abs(r["live_minus_offline_fs"]) <= AGREEMENT_FS}
+
+    @staticmethod
+    def lines(s: dict) -> list[str]:
+        """The summary table's rows."""
+        r: Any = s.get("recording")
+        if not r:
+            return ["recording: not evaluated (see problems)"]
+        return [f"recording {r['recording']} (calibrated on {Path(r['calibration_run']).name}, tool "
+                f"{r['tool'] or 'none'}): jaw torque from the {r['model']}, full scale {r['full_scale_Nm'] * 1e3:.1f} mN m",
+                f"  scored {r['cycles_scored']} cycles, {r['scored_from_s']:.2f}-{r['scored_to_s']:.2f} s of the recording",
+                f"  jaw torque live vs measured: RMSE {r['torque_rmse_fs']:.4f} FS (bound {TORQUE_RMSE_BOUND}), max "
+                f"{r['torque_max_fs']:.3f} FS",
+                f"  offline (same model and calibration, same cycles): RMSE {r['offline_torque_rmse_fs']:.4f} FS; "
+                f"live - offline {r['live_minus_offline_fs']:+.4f} FS (bound {AGREEMENT_FS})",
+                f"  jaw angle live vs measured: RMSE {r['angle_rmse_deg']:.2f} deg"]

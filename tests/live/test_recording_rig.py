@@ -1,0 +1,148 @@
+"""rig.type recording: the rig plays a recording sample by sample, refuses bad input in one line, and its live
+estimate on an MRD run agrees with the offline analysis of the same run and calibration."""
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from estimator.online.spindle import SpindleParams
+from live.recording_axis import CENTRE, RecordedModel, load_model, save_model
+from live.recording_rig import RecordedSpindle, check_recording, recording_format
+from live.recording_score import play_run, score_run
+from slave.rig import RigInputError
+from slave.rigs import RIG_TYPES, make_rig
+from study.mrd import MrdRun, default_mrd_dir, read_mrd
+from teleop.config import load_config
+from teleop.errors import CalibrationError, ConfigError, DataError
+
+ROOT = Path(__file__).resolve().parents[2]
+FOLDER = default_mrd_dir() / "Tool_4_Maryland_L_2"
+needs_mrd = pytest.mark.skipif(not FOLDER.is_dir(), reason=f"MRD da Vinci data not found at {FOLDER}: the "
+                               "recorded-run tests need ../shared/data/mrd-davinci (see its SOURCE.md)")
+
+
+def synthetic_run(n: int = 50, dt: float = 1e-3) -> MrdRun:
+    t = np.arange(n) * dt
+    return MrdRun(name="00", time=t, theta_p=np.sin(t), tau_p=0.01 * t, theta_d=0.9 * np.sin(t), tau_d=0.02 * t,
+                  frequency_hz=0.1, load_command=0.1, source="synthetic")
+
+
+def head(run: MrdRun, n: int) -> MrdRun:
+    """The first ``n`` samples of ``run``."""
+    return MrdRun(**{**run.__dict__, **{k: getattr(run, k)[:n] for k in ("time", "theta_p", "tau_p", "theta_d", "tau_d")}})
+
+
+def mrd_config(tmp_path: Path, path: str, **rec):
+    base = load_config(ROOT / "configs" / "recording-mrd.yaml")
+    return dataclasses.replace(base, rig=dataclasses.replace(base.rig, recording=dataclasses.replace(
+        base.rig.recording, path=path, **rec)), calibration=dataclasses.replace(base.calibration, dir=str(tmp_path)))
+
+
+def test_the_rig_returns_each_recorded_sample_at_its_time_and_the_distal_signals_as_truth():
+    run = synthetic_run()
+    rig = RecordedSpindle(run)
+    assert rig.state.t == 0.0 and rig.state.x_in[0] == run.theta_p[0]
+    for k in range(1, 10):
+        st = rig.step([0.3], 1e-3)
+        assert st.t == pytest.approx(run.time[k])
+        assert st.x_in[0] == run.theta_p[k] and st.T_in[0] == run.tau_p[k]
+        assert st.truth.torque[0] == run.tau_d[k] and st.truth.theta[0] == run.theta_d[k]
+        assert st.x_in_cmd[0] == 0.3
+
+
+def test_at_end_stop_holds_the_last_sample_and_loop_starts_over():
+    run = synthetic_run(5)
+    stop, loop = RecordedSpindle(run, at_end="stop"), RecordedSpindle(run, at_end="loop")
+    for _ in range(7):
+        a, b = stop.step([0.0], 1e-3), loop.step([0.0], 1e-3)
+    assert stop.finished and a.x_in[0] == run.theta_p[-1]
+    assert not loop.finished and b.x_in[0] == run.theta_p[2] and b.t > run.time[-1]
+
+
+def test_rate_slave_resamples_the_recording_at_the_rig_time():
+    run = synthetic_run()
+    rig = RecordedSpindle(run, rate="slave")
+    st = rig.step([0.0], 2.5e-3)
+    assert st.t == pytest.approx(2.5e-3)
+    assert st.x_in[0] == pytest.approx(np.interp(2.5e-3, run.time, run.theta_p))
+
+
+def test_bad_steps_are_refused():
+    rig = RecordedSpindle(synthetic_run())
+    with pytest.raises(RigInputError, match="dt"):
+        rig.step([0.0], 0.0)
+    with pytest.raises(RigInputError, match="x_in_cmd"):
+        rig.step([math.nan], 1e-3)
+
+
+def test_recording_is_a_registered_rig_type():
+    assert "recording" in RIG_TYPES
+
+
+def test_a_missing_file_is_one_line_naming_it(tmp_path):
+    cfg = mrd_config(tmp_path, str(tmp_path / "nowhere" / "00.TXT"))
+    with pytest.raises(DataError, match=r"rig.recording.path: .*nowhere.*no such file"):
+        make_rig(cfg)
+
+
+def test_an_unreadable_format_is_one_line_naming_the_file(tmp_path):
+    f = tmp_path / "run.dat"
+    f.write_text("1,2,3\n4,5,6\n")
+    with pytest.raises(DataError, match=r"run.dat: unreadable format"):
+        recording_format(f)
+
+
+def test_a_recording_without_the_columns_the_axis_needs_is_refused(tmp_path):
+    f = tmp_path / "00.TXT"
+    f.write_text("\n".join("0.001,1,2,3,4,5,6,7" for _ in range(10)) + "\n")
+    cfg = mrd_config(tmp_path, str(f))
+    with pytest.raises(DataError, match=r"00.TXT: line 1: expected 10 comma-separated numbers, got 8"):
+        make_rig(cfg)
+
+
+def test_a_recording_of_another_axis_than_the_instrument_is_refused(tmp_path):
+    f = tmp_path / "00.TXT"
+    f.write_text("0,0,0,0,0,0,0,0,0,0\n")
+    single = load_config(ROOT / "configs" / "sim.yaml")
+    cfg = dataclasses.replace(single, rig=dataclasses.replace(single.rig, type="recording", recording=dataclasses.replace(
+        single.rig.recording, path=str(f))))
+    with pytest.raises(ConfigError, match=r"00.TXT is a MRD recording of a spindle axis; the config's instrument is "
+                                          r"a single tendon axis"):
+        check_recording(cfg)
+
+
+def test_a_kaist_recording_on_a_spindle_instrument_is_refused(tmp_path):
+    f = tmp_path / "sine_config_0.txt"
+    f.write_text("0,0,0,0,5,5,0,0,\n")
+    with pytest.raises(ConfigError, match=r"sine_config_0.txt is a KAIST recording of a pair axis"):
+        check_recording(mrd_config(tmp_path, str(f), format="auto"))
+
+
+def test_the_model_file_round_trips_and_a_missing_one_is_one_line(tmp_path):
+    m = RecordedModel("pair", "pair", SpindleParams(Q=0.4, K_a=0.1), None, 0.2, "31.TXT", "t", 0.01)
+    back = load_model(save_model(m, tmp_path / "m.json"))
+    assert back == m
+    with pytest.raises(CalibrationError, match=r"gone.json: the recorded axis's model file is missing"):
+        load_model(tmp_path / "gone.json")
+
+
+@needs_mrd
+def test_the_live_estimate_agrees_with_the_offline_analysis_on_one_run(tmp_path):
+    """The centre map fitted on run 31 (its first 8 s) with the tool's load gain (as ``teleop analyze --mrd
+    --tool``), played online over the first 7 s of run 13: its RMSE is the batch model's to within 0.005 of
+    full scale."""
+    from study.mrd_calibration import run_data
+    from study.mrd_centre import centre_one_run
+    cfg = mrd_config(tmp_path, str(FOLDER / "13.TXT"))
+    fs = 0.0519
+    cmap, _ = centre_one_run([run_data(head(read_mrd(FOLDER / "31.TXT"), 8000))], fs, 0.9427)
+    model = RecordedModel(CENTRE, "pair", SpindleParams(), cmap, 0.5, str(FOLDER / "31.TXT"))
+    run = head(read_mrd(FOLDER / "13.TXT"), 7000)
+    s = score_run(cfg, model, run, fs, play_run(cfg, model, run))
+    assert s["scored_from_s"] < 6.0
+    assert s["live_rmse_fs"] < 0.1
+    assert abs(s["difference_fs"]) <= 0.005
