@@ -281,8 +281,10 @@ def main_demo(args) -> int:
         print(line, flush=True)
     run_dir = prepare_run_dir(args, cfg)
     kind = demo_kind(cfg)
-    # the run's own calibration file, made now and reloaded by the slave
-    cfg = dataclasses.replace(cfg, calibration=dataclasses.replace(cfg.calibration, dir=str(run_dir / "calibration")))
+    # the run's own calibration file, made now and reloaded by the slave; the sides' CSVs get every cycle (the
+    # evaluation's chatter above 30 Hz needs them; the demo lasts seconds, recording.csv_every bounds long sessions)
+    cfg = dataclasses.replace(cfg, calibration=dataclasses.replace(cfg.calibration, dir=str(run_dir / "calibration")),
+                              recording=dataclasses.replace(cfg.recording, csv_every=1))
     cfg_file = write_config(cfg, run_dir / "config.yaml")
     t0 = time.monotonic()
     problems: list[str] = []

@@ -16,9 +16,9 @@ adds) and to the liveliness tokens of both sides, and writes ``<run dir>/recorde
   :func:`teleop.recording.read_measured_csv`;
 * ``state_changes.csv`` (every change of a heartbeat's state), ``liveliness.csv`` and ``recovered.csv``
   (``time,side,key,seq`` of every message taken from a side's journal, see below);
-* ``session.mcap``: every message again in one MCAP file, ROS 2 types where one exists, JSON for the
-  rest (:mod:`live.record_mcap`; ``teleop record --repair RUN`` rebuilds it after a SIGKILL of the
-  recorder, :mod:`live.record_mcap_read`);
+* ``session.mcap``: the messages again in one MCAP file (of a 1 kHz stream every ``recording.mcap_every``-th),
+  ROS 2 types where one exists, JSON for the rest (:mod:`live.record_mcap`; ``teleop record --repair RUN``
+  rebuilds it after a SIGKILL of the recorder, :mod:`live.record_mcap_read`);
 * ``record.rrd`` (Rerun, scalar fields decimated by ``recording.log_every``), and at the end
   ``summary.json`` (per stream: count, received, recovered, first/last seq, seqs missing, duplicates, rate; the command
   -> echo delay seen here) and ``streams.png``.
@@ -47,9 +47,7 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Literal
-
-import numpy as np
+from typing import Callable, Literal
 
 from live.record_budget import LOW_RATE_HZ, DiskBudget, Writes, is_low_rate
 from live.record_demo import nothing_received_reason, start_recorder, summary_line
@@ -68,6 +66,7 @@ from live.record_journal import JournalRecovery
 from teleop.entity import Entity
 from teleop.journal import RECORD, pack_record, read_records
 from teleop.keys import instrument_keys, liveliness_pattern
+from teleop.latency import LatencyHistogram
 
 __all__ = ["Recorder", "decode_any", "flatten", "nothing_received_reason", "read_messages", "run_record", "short_names", "start_recorder",
            "summary_line"]
@@ -113,18 +112,21 @@ class Recorder:
         self.ident = cfg.instrument.id
         self.flush_interval = cfg.recording.flush_interval
         self.streams: dict[str, StreamCounts] = {}
+        self._fast = 0                                  # 1 kHz streams seen (commands, estimates, rig)
         self.alive: dict[str, bool] = {}
         self.ever_alive: set[str] = set()
         self.state_changes: list[dict] = []
         self._states: dict[str, int] = {}
         self._csv: dict[tuple, StreamCsv | None] = {}   # (key, message type, value count) -> its file (None: none)
         self._names: dict[tuple, tuple] = {}
+        self._shapes: dict[tuple, tuple] = {}           # (key, message type, payload length) -> its shape
         self._samples: dict[tuple, StreamSample] = {}   # a stream without a CSV: its thinned rows for streams.png
         self.budget = DiskBudget(self.dir.parent, cfg.recording.max_bytes, cfg.recording.min_free_bytes)
+        self.budget.live = (self.dir / "live.json", lambda: {k: [s.count, s.missing] for k, s in self.streams.items()})
         self.writes = Writes()
         self._low_t: dict[str, float] = {}             # key -> time of its last low-rate message written
         self._cmd_t: dict[int, float] = {}
-        self._echo_delays: list[float] = []
+        self._echo = LatencyHistogram()                 # command -> echo delays [s], constant memory
         self._echoed: set[int] = set()
         self._q: queue.SimpleQueue = queue.SimpleQueue()
         self._raw = ZstdStream(self.dir / "messages.bin")
@@ -170,7 +172,8 @@ class Recorder:
                     log.warning("recorder: %s on %s: %r", type(e).__name__, item[1], e)
             for side in self.journals.due(time.monotonic()):
                 self._recover(side)
-            self.budget.check(time.monotonic(), self.clock.now(), measure=bool(self.streams))
+            # the session's rate is measured once both sides' 1 kHz streams flow (a slave alone writes less)
+            self.budget.check(time.monotonic(), self.clock.now(), measure=self._fast >= 2)
             if time.monotonic() - last_flush >= self.flush_interval:
                 self._flush()
                 last_flush = time.monotonic()
@@ -203,6 +206,7 @@ class Recorder:
         st = self.streams.get(key)
         if st is None:
             st = self.streams[key] = StreamCounts()
+            self._fast += not is_low_rate(key)
         try:
             msg = decode_any(payload)
         except Exception:  # noqa: BLE001 - CodecError: counted, kept in messages.bin
@@ -218,24 +222,26 @@ class Recorder:
             st.fill(seq, t)
         else:
             st.see(seq, t)
-        vals: list = []
-        values(msg, vals)
-        shape = (key, type(msg), len(vals))
-        if shape not in self._names:              # a new message shape on this key: names, units, a file
-            self._open_csv(shape, flatten(msg))
+        vals: list = []                           # the numbers, flattened only where needed (CSV, sample, Rerun)
+        numbers = lambda: vals or values(msg, vals) or vals   # noqa: E731
+        shape = self._shapes.get((key, payload[2], len(payload)))   # a codec layout's length fixes its shape
+        if shape is None:                         # a new message shape on this key: names, units, a file
+            shape = self._shapes[(key, payload[2], len(payload))] = (key, type(msg), len(numbers()))
+            if shape not in self._names:
+                self._open_csv(shape, flatten(msg))
         w, f = self.writes, self._csv[shape]
         if self._written(t, key, msg):
             w("messages.bin", self._raw.write, pack_record(t, key.encode(), payload))
             if recovered:
                 w("recovered.csv", self._aux["recovered"].write, f"{t:.12g},{key.split('/')[2] if key.count('/') >= 3 else key},{key},{seq}\n")
             if f is not None:
-                w(f.path.name, f.write, t, tuple(vals))
+                w(f.path.name, f.write, t, tuple(numbers()))
             else:
-                self._samples[shape].write(t, vals)
+                self._samples[shape].write(t, numbers)
             w("session.mcap", self._mcap.write, t, key, msg, recovered)   # a problem of the MCAP file costs no other file
         else:
             w.skip(key)
-        self._derived(t, key, msg, seq, self._names[shape], vals, st.count)
+        self._derived(t, key, msg, seq, self._names[shape], numbers, st.count)
 
     def _written(self, t: float, key: str, msg) -> bool:
         """Whether this message goes to the files: always below the disk budget; past it, a low-rate
@@ -271,8 +277,8 @@ class Recorder:
         except OSError as e:
             self.writes(path.name, _raise, e)
 
-    def _derived(self, t: float, key: str, msg, seq, names: tuple, vals: list, count: int) -> None:
-        """State changes, the command -> echo delay, and the decimated Rerun scalars."""
+    def _derived(self, t: float, key: str, msg, seq, names: tuple, vals: Callable[[], list], count: int) -> None:
+        """State changes, the command -> echo delay, and the decimated Rerun scalars (``vals()``: the numbers)."""
         state = getattr(msg, "state", None)
         if state is not None and hasattr(msg, "side"):
             side = key.split("/")[2]
@@ -289,13 +295,13 @@ class Recorder:
         echo = getattr(msg, "cmd_seq", None)
         if echo is not None and echo not in self._echoed and echo in self._cmd_t:
             self._echoed.add(echo)
-            self._echo_delays.append(t - self._cmd_t[echo])
+            self._echo.add(t - self._cmd_t[echo])
             if len(self._echoed) > 20000:
                 self._echoed.clear()
         if count % self.cfg.recording.log_every == 0 and self._rr.enabled and self.budget.reached is None:
             side = key.split("/")[2]
             scalars = {f"{side}_state" if n == "state" else n.replace("[", "").replace("]", "").replace(".", "_"): float(v)
-                       for n, v in zip(names, vals) if (n == "state" or isinstance(v, float)) and not n.startswith("t_")
+                       for n, v in zip(names, vals()) if (n == "state" or isinstance(v, float)) and not n.startswith("t_")
                        and "profile" not in n}
             self._rr.log_scalars(t, **scalars)
 
@@ -339,9 +345,7 @@ class Recorder:
         return s
 
     def summary(self) -> dict:
-        d = np.asarray(self._echo_delays) * 1e3
-        echo = ({"n": int(d.size), "p50_ms": float(np.percentile(d, 50)), "p99_ms": float(np.percentile(d, 99)),
-                 "max_ms": float(d.max())} if d.size else {"n": 0})
+        echo = self._echo.stats() if self._echo.n else {"n": 0}
         return {"instrument": self.ident, "streams": {k: s.summary() for k, s in sorted(self.streams.items())},
                 "recovered_from_journals": self.journals.summary(),
                 "files": sorted(str(f.path.name) for f in self._csv.values() if f is not None),

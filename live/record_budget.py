@@ -1,9 +1,11 @@
 """The recorder's disk use: which streams are high-rate, the byte budget, and writes that fail.
 
-A session at the default rates writes about 1 MB/s in all (docs/reference/formats.md, "Disk use"):
-most of it is the 1 kHz streams (the slave's estimate, the master's command). The recorder keeps them in
-``messages.bin`` and the zstd-compressed ``session.mcap``; their per-stream CSVs are written only with
-``recording.csv: all``. Two limits bound a run:
+A session at the default rates writes about 0.2 MB/s in all (docs/reference/formats.md, "Disk use"):
+most of it is the 1 kHz streams (the slave's estimate, the master's command). The recorder keeps every
+message of them in the zstd-compressed ``messages.bin`` and every ``recording.mcap_every``-th in
+``session.mcap``; their per-stream CSVs are written only with ``recording.csv: all``. The sides' journals
+(``<side>.journal-NNN``) are a ring of at most two 8 MB segments each: they count on the disk, not in the
+session's rate. Two limits bound a run:
 
 * ``recording.max_bytes`` [B]: the bytes of every file in the run directory (sides and recorder);
 * ``recording.min_free_bytes`` [B]: the free space of the disk that holds it.
@@ -19,10 +21,12 @@ readable.
 """
 from __future__ import annotations
 
+import json
 import logging
 import os
 import re
 import shutil
+import time
 from pathlib import Path
 from typing import Callable
 
@@ -31,7 +35,9 @@ __all__ = ["CHECK_INTERVAL", "LOW_RATE_HZ", "DiskBudget", "Writes", "is_low_rate
 log = logging.getLogger("live.record")
 CHECK_INTERVAL = 1.0    # [s] the run directory's size and the disk's free space are read this often
 LOW_RATE_HZ = 1.0       # [Hz] a heartbeat stream's rate in the recording once the budget is reached
-RATE_AFTER = 3.0        # [s] the bytes per second of the session are measured over its first this long
+RATE_AFTER = 10.0       # [s] the bytes per second of the session are measured over its first this long
+LIVE_ENV = "TELEOP_LIVE_STATS"   # environment: seconds between two writes of a process's live figures
+JOURNAL = ".journal"    # owner suffix of the sides' journal segments (a bounded ring, not in the rate)
 _LOW_RATE = ("heartbeat",)
 
 
@@ -40,10 +46,26 @@ def is_low_rate(key: str) -> bool:
     return key.rsplit("/", 1)[-1] in _LOW_RATE
 
 
+def live_interval() -> float:
+    """[s] ``TELEOP_LIVE_STATS`` of the environment: how often a process writes its live figures; 0: never."""
+    try:
+        return max(0.0, float(os.environ.get(LIVE_ENV, "0") or 0))
+    except ValueError:
+        return 0.0
+
+
+def write_live(path: Path, figures: dict) -> None:
+    """``figures`` and the time [s, monotonic] as JSON at ``path``, replaced whole (a reader never sees half)."""
+    tmp = Path(str(path) + ".tmp")
+    tmp.write_text(json.dumps({"t": time.monotonic(), **figures}) + "\n", encoding="utf-8")
+    os.replace(tmp, path)
+
+
 def dir_bytes(path: Path) -> dict[str, int]:
     """Bytes of the regular files under ``path`` per owner [B]: the top-level folder's name (``recorder``),
-    or a top-level file's name up to its first ``.``, ``_`` or ``-`` (``slave.csv``, ``slave.journal-000`` ->
-    ``slave``). Recursive; files that vanish meanwhile are skipped."""
+    or a top-level file's name up to its first ``.``, ``_`` or ``-`` (``slave.csv``, ``slave_stats.json`` ->
+    ``slave``); a side's journal segments its name and :data:`JOURNAL` (``slave.journal-000`` ->
+    ``slave.journal``). Recursive; files that vanish meanwhile are skipped."""
     total: dict[str, int] = {}
     stack = [(Path(path), "")]
     while stack:
@@ -58,6 +80,8 @@ def dir_bytes(path: Path) -> dict[str, int]:
                     stack.append((Path(e.path), owner or e.name))
                 elif e.is_file(follow_symlinks=False):
                     who = owner or re.split(r"[._-]", e.name, maxsplit=1)[0]
+                    if not owner and f"{JOURNAL}-" in e.name:
+                        who += JOURNAL
                     total[who] = total.get(who, 0) + e.stat(follow_symlinks=False).st_size
             except OSError:
                 pass
@@ -75,10 +99,14 @@ class DiskBudget:
         Bytes of the run directory past which the high-rate streams stop [B]; None: no limit.
     min_free_bytes : float or None
         Free space of the disk below which the high-rate streams stop [B]; None: no floor.
+    stops : str
+        What stops past a limit, for the one warning (default: the recorder's high-rate streams).
     """
 
-    def __init__(self, run_dir: Path, max_bytes: float | None, min_free_bytes: float | None):
+    def __init__(self, run_dir: Path, max_bytes: float | None, min_free_bytes: float | None, stops: str | None = None):
         self.dir = Path(run_dir)
+        self.stops = stops or (f"recorder: the high-rate streams are no longer written (counted only); heartbeats "
+                               f"at {LOW_RATE_HZ:g} Hz, state changes and liveliness still are")
         self.max_bytes, self.min_free_bytes = max_bytes, min_free_bytes
         self.run_bytes = 0
         self.free_bytes: int | None = None
@@ -86,6 +114,10 @@ class DiskBudget:
         self._next = -float("inf")
         self._first: tuple[float, dict[str, int]] | None = None
         self.rates: dict[str, float] | None = None  # owner -> bytes per second, measured once [B/s]
+        # TELEOP_LIVE_STATS=<s> (live/side_files.py): (file, figures()) written every that many seconds
+        self.live: tuple[Path, Callable[[], dict]] | None = None
+        self._live_every = live_interval()
+        self._next_live = 0.0
 
     def check(self, now: float, t: float, measure: bool = True) -> bool:
         """Measure when :data:`CHECK_INTERVAL` has passed since the last look (``now`` [s, monotonic]);
@@ -94,6 +126,9 @@ class DiskBudget:
         if self.reached is not None or now < self._next:
             return False
         self._next = now + CHECK_INTERVAL
+        if self.live is not None and self._live_every > 0 and now >= self._next_live:
+            self._next_live = now + self._live_every
+            write_live(self.live[0], {**self.live[1](), "run_bytes": self.run_bytes})
         owners = dir_bytes(self.dir)
         self.run_bytes = sum(owners.values())
         if measure:
@@ -112,26 +147,27 @@ class DiskBudget:
         if reason is None:
             return False
         self.reached = {"reason": reason, "time": t, "run_bytes": self.run_bytes, "free_bytes": self.free_bytes}
-        log.warning("recorder: %s: the high-rate streams are no longer written (counted only); heartbeats at "
-                    "%g Hz, state changes and liveliness still are", reason, LOW_RATE_HZ)
+        log.warning("%s: %s", reason, self.stops)
         return True
 
     def _measure(self, now: float, owners: dict[str, int]) -> None:
-        """Once :data:`RATE_AFTER` seconds of the session have passed: print its bytes per second, per owner."""
+        """Once :data:`RATE_AFTER` seconds of the session have passed: print its bytes per second, per owner
+        (the journals' bounded ring left out)."""
         if self._first is None:
             self._first = (now, owners)
             return
         t0, first = self._first
         if self.rates is not None or now - t0 < RATE_AFTER:
             return
-        self.rates = {k: (owners.get(k, 0) - first.get(k, 0)) / (now - t0) for k in sorted(owners)}
+        self.rates = {k: (owners.get(k, 0) - first.get(k, 0)) / (now - t0) for k in sorted(owners)
+                      if not k.endswith(JOURNAL)}
         total = sum(self.rates.values())
         parts = ", ".join(f"{k} {v / 1e3:.0f} kB/s" for k, v in self.rates.items() if v >= 500)
         until = ("" if self.max_bytes is None or total <= 0 else
                  f"; recording.max_bytes {self.max_bytes / 1e9:.3g} GB reached in about "
                  f"{max(0.0, self.max_bytes - self.run_bytes) / total / 60:.0f} min")
         print(f"teleop record: the session writes {total / 1e3:.0f} kB/s ({parts}), {total * 3600 / 1e9:.2f} GB "
-              f"per hour{until}", flush=True)
+              f"per hour (journals: a ring of at most 16 MB per side){until}", flush=True)
 
     def summary(self) -> dict:
         """``{"max_bytes", "min_free_bytes", "run_bytes", "free_bytes", "bytes_per_second", "reached"}`` (bytes

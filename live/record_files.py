@@ -8,7 +8,7 @@ import dataclasses
 import enum
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import zstandard
@@ -161,9 +161,10 @@ class StreamSample:
         self.rows: list[np.ndarray] = []
         self.every, self.n = SAMPLE_EVERY, 0
 
-    def write(self, t: float, values: list) -> None:
+    def write(self, t: float, values: list | Callable[[], list]) -> None:
+        """One message at ``t`` [s], its numbers (or a function giving them, called only for a kept row)."""
         if self.n % self.every == 0:
-            self.rows.append(np.asarray([t, *values], dtype=np.float64))
+            self.rows.append(np.asarray([t, *(values() if callable(values) else values)], dtype=np.float64))
             if len(self.rows) >= SAMPLE_ROWS:
                 self.rows, self.every = self.rows[::2], self.every * 2
         self.n += 1

@@ -24,6 +24,11 @@ topic                               schema (encoding)                   content
                                                                         [m or rad]
 ==================================  ==================================  ==========================================
 
+A 1 kHz stream (every stream but the heartbeats) is kept at ``recording.mcap_every``: its messages whose
+``seq`` is a multiple of it, on every channel (default 20: 50 Hz, the view a reader browses); ``messages.bin``
+holds every message, and with ``recording.mcap_every: 1`` so does this file. The heartbeats (50 Hz), the state
+changes they carry and messages without a ``seq`` are all kept.
+
 Times: ``log_time`` is the recorder's time of the message (its receive time; a message recovered from a
 journal: its publish time), ``publish_time`` the sender's own stamp (``t_slave``, ``t_master``,
 ``t_sender``, ``t``), both as Unix nanoseconds: the monotonic clocks are mapped with the offset
@@ -52,6 +57,8 @@ from typing import Any, Callable
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, IndexType, Writer
 from mcap_ros2._dynamic import serialize_dynamic  # the CDR encoder mcap_ros2.writer.Writer uses
+
+from live.record_budget import is_low_rate
 
 __all__ = ["MCAP_NAME", "CHUNK_INTERVAL", "McapRecording", "to_json", "json_schema", "sender_stamp", "sort_mcap",
            "ROS2_SCHEMAS"]
@@ -162,10 +169,13 @@ class McapRecording:
         Unix time minus the recorder's monotonic clock [s].
     t_start : float
         The recorder's start [s, monotonic] (kept in the metadata: journals before it are not this session's).
+    every : int, optional
+        ``recording.mcap_every`` (default: the config's): a 1 kHz stream's messages kept, by ``seq`` (module docstring).
     """
 
-    def __init__(self, path: Path, cfg: Any, clock_offset: float, t_start: float = 0.0):
+    def __init__(self, path: Path, cfg: Any, clock_offset: float, t_start: float = 0.0, every: int | None = None):
         from teleop.crtk import axis_names, slave_arm, tendon_names
+        self.every = max(1, int(cfg.recording.mcap_every if every is None else every))
         self.path, self.offset = Path(path), float(clock_offset)
         self._offset_ns = round(self.offset * 1e9)
         instrument = cfg.instrument.id
@@ -176,7 +186,7 @@ class McapRecording:
         self._w = Writer(self._fh, compression=CompressionType.ZSTD, index_types=INDEXES)
         self._w.start(profile="ros2", library="tsm-teleop (mcap, mcap-ros2-support)")
         self._w.add_metadata("teleop", {"instrument": instrument, "clock_offset_s": repr(self.offset),
-                                        "t_start_s": repr(float(t_start)),
+                                        "t_start_s": repr(float(t_start)), "mcap_every": str(self.every),
                                         "time": "log: recorder time; publish: sender stamp (Unix ns)"})
         self._schemas: dict[str, int] = {}
         self._encoders: dict[str, Callable[[Any], bytes]] = {}
@@ -229,7 +239,10 @@ class McapRecording:
         A message ``recovered`` from its sender's journal (``t`` its journal time) that was published after
         every message written on its key is logged no earlier than the last of them: its journal time
         precedes the receive time of a message published just before it, and the log and publish times
-        of a topic must order its messages alike (``rerun mcap check``)."""
+        of a topic must order its messages alike (``rerun mcap check``). A 1 kHz stream's message whose ``seq``
+        is not a multiple of :attr:`every` is left out (module docstring)."""
+        if self.every > 1 and not is_low_rate(key) and getattr(msg, "seq", 0) % self.every:
+            return
         log = _ns(t, self._offset_ns)
         stamp = sender_stamp(msg)
         pub = log if stamp is None else _ns(stamp, self._offset_ns)

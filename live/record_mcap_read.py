@@ -170,7 +170,8 @@ def repair(rec_dir: str | Path, journal_dir: str | Path | None = None) -> dict[s
         all_records.append((t, key, payload))
     extra = list(journals.records(None))
     tmp = d / (MCAP_NAME + ".repair")
-    mc = McapRecording(tmp, _run_config(d.parent, ident), float(meta.get("clock_offset_s", 0.0)), t_start)
+    every = int(meta["mcap_every"]) if meta.get("mcap_every", "").isdigit() else None   # as the recorder kept them
+    mc = McapRecording(tmp, _run_config(d.parent, ident), float(meta.get("clock_offset_s", 0.0)), t_start, every)
     entries = _log_order(all_records, extra)
     for t, key, msg in entries:
         mc.write(t, key, msg)

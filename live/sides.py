@@ -17,6 +17,7 @@ import sys
 import time
 from pathlib import Path
 
+from live.side_files import SideFiles
 from teleop.config import Config
 from teleop.rerun_view import joint_views
 from teleop.safety_bounds import announce_waivers
@@ -163,14 +164,28 @@ def _record_waivers(path: Path, waived: list[dict]) -> None:
     path.write_text(json.dumps(stats, indent=2) + "\n", encoding="utf-8")
 
 
+def _live(node) -> dict:
+    """The running loop's figures for ``<side>_live.json`` (live/side_files.py): cycles, overruns, messages
+    sent, a master's round-trip histogram."""
+    cs = getattr(node, "cycle_stats", None)
+    out = {"cycles": sum(dict(getattr(cs, "cycles_by_state", {})).values()),
+           "overruns": sum(dict(getattr(cs, "overruns_by_state", {})).values()), "sent": int(node.seq)}
+    rtt = getattr(node, "rtt", None)
+    if rtt is not None:
+        out["rtt"] = rtt.snapshot()
+    return out
+
+
 def _serve(node, clock, args: argparse.Namespace, run_dir: Path, side: str, injector, *, close_first=None,
-           waived: list[dict] | None = None) -> None:
+           waived: list[dict] | None = None, files=None) -> None:
     """Run ``node`` until done (or ``--max-duration``); however it ends, ``close_first()`` (e.g. the
-    device), then ``<side>_stats.json`` (with the safety waivers ``waived``) and ``<side>_faults.json`` in
-    ``run_dir``. Every message the side publishes is journaled in ``run_dir`` first (teleop/journal.py:
-    the recorder recovers a SIGKILLed side's tail)."""
+    device), then ``<side>_stats.json`` (with the safety waivers ``waived`` and the disk use of ``files``, a
+    :class:`live.side_files.SideFiles`) and ``<side>_faults.json`` in ``run_dir``. Every message the side
+    publishes is journaled in ``run_dir`` first (teleop/journal.py: the recorder recovers a SIGKILLed side's tail)."""
     from teleop.journal import close_journal, open_journal
     open_journal(run_dir, side)
+    if files is not None:
+        files.live_source = lambda: _live(node)
     try:
         node.run(clock, max_duration=args.max_duration)
     finally:
@@ -181,6 +196,10 @@ def _serve(node, clock, args: argparse.Namespace, run_dir: Path, side: str, inje
             close_first()
         node.write_stats(run_dir / f"{side}_stats.json")
         _record_waivers(run_dir / f"{side}_stats.json", waived or [])
+        if files is not None:
+            from live.side_files import add_to_stats
+            files.close()
+            add_to_stats(run_dir / f"{side}_stats.json", "disk", files.summary())
         _write_fault_stats(injector, run_dir / f"{side}_faults.json")
 
 
@@ -215,6 +234,7 @@ def run_slave(args: argparse.Namespace) -> int:
         rig = make_rig(cfg, session)     # rig.type: simulated in process, zenoh (a drive or `teleop bridge`), ...
         try:
             name, columns, meta = recording(cfg, rig)
+            files = SideFiles(run_dir, cfg, "slave", (name, "slave.rrd"))   # csv_every, max_bytes, min_free_bytes
             with CsvRecorder(run_dir / name, columns, meta, flush_every=500) as rec, \
                     RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd",
                                 route=None if cfg.instrument.joints else cfg.sheath.runs,   # 3D sheath view
@@ -223,10 +243,10 @@ def run_slave(args: argparse.Namespace) -> int:
                 if cfg.ros2.enabled:     # the CRTK topics on ROS 2 beside the loop, servo_jp in (teleop/crtk_side.py)
                     from teleop.crtk_side import attach_slave
                     attach_slave(session, cfg, links)
-                node = SlaveNode(cfg, rig, links, recorder=rec, rerun=rr, run_dir=run_dir,
+                node = SlaveNode(cfg, rig, links, recorder=files.csv(rec), rerun=files.rerun(rr), run_dir=run_dir,
                             stop_on_master_stop=args.exit_on_master_stop, calibration=calibration,
                             calibration_file=cal_path)
-                _serve(node, clock, args, run_dir, "slave", injector, waived=waived)
+                _serve(node, clock, args, run_dir, "slave", injector, waived=waived, files=files)
         finally:
             rig.close()
     faulthandler.cancel_dump_traceback_later()
@@ -270,8 +290,9 @@ def run_master(args: argparse.Namespace) -> int:
             if cfg.ros2.enabled:         # the CRTK topics on ROS 2 beside the loop (teleop/crtk_side.py)
                 from teleop.crtk_side import attach_master
                 attach_master(session, cfg, links)
-            node = MasterNode(cfg, device, links, recorder=rec, rerun=rr)
-            _serve(node, clock, args, run_dir, "master", injector, close_first=device.close, waived=waived)
+            files = SideFiles(run_dir, cfg, "master", ("master.csv", "master.rrd"))
+            node = MasterNode(cfg, device, links, recorder=files.csv(rec), rerun=files.rerun(rr))
+            _serve(node, clock, args, run_dir, "master", injector, close_first=device.close, waived=waived, files=files)
     faulthandler.cancel_dump_traceback_later()
     _log_master_done(node)
     return 0 if getattr(device, "finished", True) else 1

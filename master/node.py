@@ -277,7 +277,7 @@ class MasterNode(MasterNodeBase):
         if self._rerun_count % self.cfg.recording.log_every:
             return
         experiment = experiment_label(marker, self.axes.names)
-        rtt = self.rtts[-1] if self.rtts else None
+        rtt = self.rtt.last
         many = len(q) > 1
         for k, name in enumerate(self.axes.names):
             self.rerun.log_master(now, x_in_cmd=q[k], force=self.force[k], force_cmd=self.force_cmd[k],

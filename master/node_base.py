@@ -24,6 +24,7 @@ import numpy as np
 
 from teleop.codec import next_seq
 from teleop.config import Config
+from teleop.latency import LatencyHistogram
 from teleop.messages import Side, SideState
 from teleop.node import NodeBase
 
@@ -92,7 +93,7 @@ class MasterNodeBase(NodeBase):
         self._t_prev: float | None = None
         self._sent_seq = np.full(RING_SIZE, -1, dtype=np.int64)
         self._sent_t = np.zeros(RING_SIZE)
-        self.rtts: list[float] = []
+        self.rtt = LatencyHistogram()          # round trips [s], constant memory over any session length
         self.commands_sent = 0
         self.estimates_new = 0
         self.engage_count = 0
@@ -119,7 +120,7 @@ class MasterNodeBase(NodeBase):
         if est.cmd_seq == self._last_echo:
             return
         self._last_echo = est.cmd_seq
-        self.rtts.append(getattr(rec, "t_recv", now) - self._sent_t[i])
+        self.rtt.add(getattr(rec, "t_recv", now) - self._sent_t[i])
 
     def _peer_status(self, now: float) -> tuple[Any, bool, str]:
         """(latest accepted estimate or None, all links healthy, reason if not)."""
@@ -165,12 +166,9 @@ class MasterNodeBase(NodeBase):
 
     # ---- summary -----------------------------------------------------------------------------------
     def latency_stats(self) -> dict[str, float | int | None]:
-        """Round-trip latency from the command echo [ms]: n, p50, p99, max (None without samples)."""
-        if not self.rtts:
-            return {"n": 0, "p50_ms": None, "p99_ms": None, "max_ms": None}
-        r = np.asarray(self.rtts) * 1e3
-        return {"n": int(r.size), "p50_ms": float(np.percentile(r, 50)), "p99_ms": float(np.percentile(r, 99)),
-                "max_ms": float(r.max())}
+        """Round-trip latency from the command echo [ms]: n, p50, p99, max (None without samples;
+        :class:`teleop.latency.LatencyHistogram`)."""
+        return self.rtt.stats()
 
     def _stats_detail(self) -> dict[str, Any]:
         """The node's own counters, between the link counters and the pacer in :meth:`stats`."""

@@ -302,8 +302,10 @@ class TransportConfig:
 class RecordingConfig:
     dir: str = "runs"
     rerun: Literal["save", "spawn", "off"] = "save"
-    log_every: int = 10
-    profile_every: int = 5
+    log_every: int = 40                   # [cycles] Rerun: the signals every this many cycles (25 Hz at 1 kHz)
+    profile_every: int = 5                # [logs] of those, every n-th also the tension profile (5 Hz)
+    csv_every: int = 10                   # [cycles] the sides' per-cycle CSVs get a row every this many cycles
+    mcap_every: int = 20                  # session.mcap: a 1 kHz stream's messages whose seq is a multiple of this
     flush_interval: float = 0.02          # [s] recorder files handed to the OS at least this often
     csv: Literal["low_rate", "all"] = "low_rate"   # recorder per-stream CSVs: heartbeats only, or every stream too
     max_bytes: Optional[float] = 5.0e9    # [B] run directory size past which the recorder drops the high-rate streams

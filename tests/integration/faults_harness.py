@@ -44,6 +44,7 @@ calibration:
   dir: "{caldir}"
 recording:
   rerun: "off"
+  csv_every: 1
 """
 SAFE = int(SideState.SAFE)
 DEBUG = []
@@ -79,7 +80,8 @@ def _joint_config(run_dir: Path, ident: str) -> Path:
     cal_dir.mkdir()
     (cal_dir / f"{ident}.yaml").write_text(_JOINT_CAL["text"].replace("instrument: fjoints", f"instrument: {ident}"))
     path = run_dir / "cfg.yaml"
-    path.write_text(JOINT_CONFIG.read_text().replace("id: flex3", f"id: {ident}").replace("rerun: save", "rerun: off")
+    path.write_text(JOINT_CONFIG.read_text().replace("id: flex3", f"id: {ident}")
+                    .replace("rerun: save", "rerun: off\n  csv_every: 1")     # every cycle: the fault timing reads rows
                     .replace("dir: configs/calibration", f"dir: {cal_dir}"), encoding="utf-8")
     return path
 

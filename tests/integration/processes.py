@@ -20,6 +20,7 @@ calibration:
 recording:
   rerun: "off"
   dir: "{runs}"
+  csv_every: 1
 transport:
   listen: ["tcp/127.0.0.1:{port}"]
 """

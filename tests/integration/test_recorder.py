@@ -46,6 +46,7 @@ recording:
   rerun: "off"
   dir: "{runs}"
   csv: all
+  mcap_every: 1
 transport:
   listen: ["tcp/127.0.0.1:{port}"]
 """

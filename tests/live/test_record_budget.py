@@ -30,7 +30,8 @@ def _mcap_teleop_messages(path) -> int:
 def _cfg(**recording) -> Config:
     c = Config()
     return dataclasses.replace(c, instrument=dataclasses.replace(c.instrument, id="bud1"),
-                               recording=dataclasses.replace(c.recording, rerun="off", flush_interval=0.01, **recording))
+                               recording=dataclasses.replace(c.recording, **{"rerun": "off", "flush_interval": 0.01,
+                                                                             "mcap_every": 1, **recording}))
 
 
 def _session():
@@ -149,13 +150,14 @@ def test_writes_stop_at_the_first_error_of_a_file_and_count_the_rest():
     (10.0, None, "recording.max_bytes"), (None, 1e18, "recording.min_free_bytes"), (1e15, 0.0, None)])
 def test_the_budget_is_reached_past_either_limit(tmp_path, max_bytes, min_free, reason):
     (tmp_path / "slave.csv").write_bytes(b"x" * 100)
+    (tmp_path / "slave.journal-000").write_bytes(b"j" * 7)
     (tmp_path / "recorder").mkdir()
     (tmp_path / "recorder" / "messages.bin").write_bytes(b"y" * 50)
-    assert dir_bytes(tmp_path) == {"slave": 100, "recorder": 50}
+    assert dir_bytes(tmp_path) == {"slave": 100, "slave.journal": 7, "recorder": 50}
     b = DiskBudget(tmp_path, max_bytes, min_free)
     assert b.check(0.0, 0.0) is (reason is not None)
     assert (b.reached is None) if reason is None else reason in b.reached["reason"]
-    assert b.summary()["run_bytes"] == 150
+    assert b.summary()["run_bytes"] == 157
 
 
 def test_messages_bin_is_compressed_and_reads_back_up_to_its_last_flush_when_cut(tmp_path):

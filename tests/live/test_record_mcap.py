@@ -43,10 +43,12 @@ def _session(n: int = 300) -> list[tuple[float, str, object]]:
     return out
 
 
-def _cfg(joints=()):
+def _cfg(joints=(), mcap_every=1):
+    """Every message in the file (``recording.mcap_every: 1``) unless ``mcap_every`` says otherwise."""
     from teleop.config import Config
     c = Config()
-    return dataclasses.replace(c, instrument=dataclasses.replace(c.instrument, id="m1", joints=joints))
+    return dataclasses.replace(c, instrument=dataclasses.replace(c.instrument, id="m1", joints=joints),
+                               recording=dataclasses.replace(c.recording, mcap_every=mcap_every))
 
 
 def _write(path: Path, msgs, cfg=None) -> dict:
@@ -205,3 +207,19 @@ def test_replay_reads_the_mcap_file_of_a_run(tmp_path):
         assert "vs_recorded" in res["comparison"]["all"]
     shutil.rmtree(run / "recorder")
     assert main(["replay", str(run)]) != 0          # neither slave.csv nor an MCAP file: one line, exit 2
+
+
+def test_a_1khz_stream_keeps_the_messages_whose_seq_is_a_multiple_of_mcap_every_and_heartbeats_all(tmp_path):
+    path = tmp_path / MCAP_NAME
+    msgs = _session(300)
+    _write(path, msgs, _cfg(mcap_every=10))
+    s = read_session(path)
+    assert [d["seq"] for _, _, d in s.messages["teleop/m1/slave/estimate"]] == list(range(0, 300, 10))
+    assert [d["seq"] for _, _, d in s.messages["teleop/m1/master/command"]] == list(range(0, 300, 10))
+    beats = [m.seq for _, k, m in msgs if k.endswith("/heartbeat")]
+    assert [d["seq"] for _, _, d in s.messages["teleop/m1/slave/heartbeat"]] == beats and beats
+    assert s.metadata["mcap_every"] == "10"
+    from mcap.reader import make_reader
+    with open(path, "rb") as fh:
+        n_cf = sum(1 for _ in make_reader(fh).iter_messages(topics=["/m1/measured_cf"]))
+    assert n_cf == 30                        # the CRTK channels of a kept estimate only
