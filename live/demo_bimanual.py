@@ -40,8 +40,9 @@ from live.demo_run import (
 )
 from teleop.arms import Bimanual, load_arms
 from teleop.config import read_yaml, write_config
+from teleop.errors import DataError
 
-__all__ = ["main_bimanual", "recorder_check", "format_bimanual", "OVERRUN_TARGET"]
+__all__ = ["main_bimanual", "recorder_check", "format_bimanual", "bimanual_figure", "OVERRUN_TARGET"]
 
 #: The loops' overrun fraction the bimanual demo aims below (reported, not checked: it depends on the machine).
 OVERRUN_TARGET = 0.005
@@ -145,6 +146,39 @@ def _evaluate(bim: Bimanual, run_dir: Path, summary: dict, problems: list[str]) 
     return checks
 
 
+def bimanual_figure(bim: Bimanual, run_dir: Path, out_png: Path) -> Path:
+    """One panel per arm and joint: the true distal joint torque and the estimate from the proximal sensors
+    over the engaged run, from each arm's ``slave_joints.csv`` (matplotlib, PNG at ``out_png``).
+
+    Raises
+    ------
+    DataError
+        An arm's recording is missing or unreadable.
+    """
+    from live.demo_joints import read_joint_csv
+    from teleop.figure_files import pyplot
+    plt = pyplot()
+    n = max(len(a.cfg.instrument.joints) for a in bim.arms)
+    fig, axes = plt.subplots(len(bim.arms), n, figsize=(3.6 * n, 3.0 * len(bim.arms)), squeeze=False)
+    for r, arm in enumerate(bim.arms):
+        cols = read_joint_csv(run_dir / arm.ident / "slave_joints.csv")
+        sel = cols["state"] == 3                      # SideState.ENGAGED: the protocol's rows
+        t = cols["time"][sel] - (cols["time"][sel][0] if sel.any() else 0.0)
+        for c, j in enumerate(arm.cfg.instrument.joints):
+            ax = axes[r][c]
+            ax.plot(t, 1e3 * cols[f"{j.name}.torque"][sel], color="#1f5fa8", lw=1.2, label="true")
+            ax.plot(t, 1e3 * cols[f"{j.name}.torque_hat"][sel], color="#e07b00", lw=0.9, ls="--", label="estimated")
+            ax.set_title(f"{arm.name} arm: {j.name}", fontsize=9)
+            ax.set_xlabel("time [s]", fontsize=8)
+            ax.set_ylabel("distal torque [mN m]", fontsize=8)
+            ax.tick_params(labelsize=7)
+        axes[r][0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out_png, dpi=110)
+    plt.close(fig)
+    return Path(out_png)
+
+
 def format_bimanual(s: dict) -> str:
     """The printed table of a bimanual summary (:func:`main_bimanual`)."""
     from live.demo_joints import JointDemo
@@ -164,6 +198,8 @@ def format_bimanual(s: dict) -> str:
                                                           for n, v in steps.items()))
     L.append(f"(overrun target {100 * OVERRUN_TARGET:.1f} % of cycles, reported not checked)")
     L += ["", *verdict_lines(s), ""]
+    if s.get("figure"):
+        L.append(f"figure:     {s['figure']}  (distal torque of every joint: truth vs estimate)")
     L.append(f"recordings: {s['run_dir']}/<arm id>/ (slave_joints.csv, master.csv, recorder/); summary: "
              f"{s['run_dir']}/summary.json")
     return "\n".join(L)
@@ -191,4 +227,8 @@ def main_bimanual(args, cfg_path: Path) -> int:
         print(f"teleop demo: interrupted; partial recordings in {run_dir}", file=sys.stderr)
         raise
     checks = _evaluate(bim, run_dir, summary, problems)
+    try:
+        summary["figure"] = str(bimanual_figure(bim, run_dir, run_dir / "bimanual.png"))
+    except (DataError, KeyError, IndexError) as e:
+        problems.append(f"figure: {e}")
     return finish(summary, checks, problems, t0, run_dir, format_bimanual)
