@@ -16,14 +16,14 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(VENV)/bin/teleop demo
 
-# pytest runs in two passes: the CPU-bound tests on both cores (pytest-xdist, one file per worker at a
-# time), then the integration tests (real processes with 1 kHz loops over Zenoh) one at a time, alone on
-# the machine, because their timing figures are what they check.
+# pytest runs in two passes: the CPU-bound tests on both cores (pytest-xdist; a worker that runs out of
+# tests takes queued ones from the other, so one long file does not hold the pass), then the integration tests (real
+# processes with 1 kHz loops over Zenoh) one at a time, alone on the machine, because their timing figures are what they check.
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
-	$(VENV)/bin/python -m pytest -q -m "not integration" -n 2 --dist loadfile
+	$(VENV)/bin/python -m pytest -q -m "not integration" -n 2 --dist worksteal
 	$(VENV)/bin/python -m pytest -q -m integration
 
 bench: $(STAMP)

@@ -1,8 +1,9 @@
 """Run one fault against the two real processes (`teleop slave` + `teleop master` over Zenoh on 127.0.0.1).
 
 ``instrument="tendon"`` runs the single tendon of the default config, ``"3dof"`` the three-joint
-instrument of configs/instrument-3dof.yaml (calibrated once with ``teleop calibrate``, the file
-copied under each scenario's instrument id; the slave records ``slave_joints.csv``).
+instrument of configs/instrument-3dof.yaml and ``"spindle"`` the spindle-driven jaw of
+configs/instrument-spindle.yaml (each calibrated once with ``teleop calibrate``, the file copied under
+each scenario's instrument id; the slave records ``slave_joints.csv``).
 
 :func:`run_fault` starts both sides on a free port, waits until both are ENGAGED (seen from their
 heartbeats by an observer session), lets them run, applies the fault (a signal to one process or
@@ -48,8 +49,11 @@ recording:
 """
 SAFE = int(SideState.SAFE)
 DEBUG = []
-JOINT_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "instrument-3dof.yaml"
-_JOINT_CAL: dict[str, str] = {}          # the calibration text of the 3-joint instrument, made once
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+#: joint instrument -> (its config, its instrument id there)
+JOINT_CONFIGS = {"3dof": (CONFIGS / "instrument-3dof.yaml", "flex3"),
+                 "spindle": (CONFIGS / "instrument-spindle.yaml", "forceps1")}
+_JOINT_CAL: dict[str, str] = {}          # the calibration text of each joint instrument, made once
 
 
 class Rows:
@@ -66,21 +70,23 @@ class Rows:
             raise ValueError(f"{path}: non-finite values or time going back")
 
 
-def _joint_config(run_dir: Path, ident: str) -> Path:
-    """The 3-joint instrument under ``ident``, quiet, with its calibration file in ``run_dir``."""
+def _joint_config(run_dir: Path, ident: str, instrument: str) -> Path:
+    """The joint instrument ``instrument`` under ``ident``, quiet, with its calibration file in ``run_dir``."""
+    config, base_id = JOINT_CONFIGS[instrument]
+    text = config.read_text()
     cal_dir = run_dir / "calibration"
-    if "text" not in _JOINT_CAL:
-        tmp = run_dir.parent / "_joint_calibration"
+    if instrument not in _JOINT_CAL:
+        tmp = run_dir.parent / f"_{instrument}_calibration"
         tmp.mkdir(exist_ok=True)
         cfg = tmp / "cfg.yaml"
-        cfg.write_text(JOINT_CONFIG.read_text().replace("id: flex3", "id: fjoints").replace("rerun: save", "rerun: off")
+        cfg.write_text(text.replace(f"id: {base_id}", "id: fjoints").replace("rerun: save", "rerun: off")
                        .replace("dir: configs/calibration", f"dir: {tmp}"))
         assert teleop_main(["calibrate", "--config", str(cfg)]) == 0
-        _JOINT_CAL["text"] = (tmp / "fjoints.yaml").read_text()
+        _JOINT_CAL[instrument] = (tmp / "fjoints.yaml").read_text()
     cal_dir.mkdir()
-    (cal_dir / f"{ident}.yaml").write_text(_JOINT_CAL["text"].replace("instrument: fjoints", f"instrument: {ident}"))
+    (cal_dir / f"{ident}.yaml").write_text(_JOINT_CAL[instrument].replace("instrument: fjoints", f"instrument: {ident}"))
     path = run_dir / "cfg.yaml"
-    path.write_text(JOINT_CONFIG.read_text().replace("id: flex3", f"id: {ident}")
+    path.write_text(text.replace(f"id: {base_id}", f"id: {ident}")
                     .replace("rerun: save", "rerun: off\n  csv_every: 1")     # every cycle: the fault timing reads rows
                     .replace("dir: configs/calibration", f"dir: {cal_dir}"), encoding="utf-8")
     return path
@@ -178,14 +184,14 @@ def run_fault(tmp: Path, name: str, *, inject: dict[str, str] | None = None, sig
     settle : after ``observe``, wait up to this long [s] for both sides to be ENGAGED again before stopping
         them (a ride-through fault: a brief SAFE from a process stall at the end of the window is then seen
         to recover, or seen not to; the recordings decide, this only bounds the wait).
-    instrument : ``"tendon"`` or ``"3dof"`` (module docstring).
+    instrument : ``"tendon"``, ``"3dof"`` or ``"spindle"`` (module docstring).
     """
-    joints = instrument == "3dof"
-    ident = f"f{'j' if joints else ''}{name.replace('_', '')}"[:20]
+    joints = instrument in JOINT_CONFIGS
+    ident = f"f{instrument[0] if joints else ''}{name.replace('_', '')}"[:20]
     run_dir = tmp / name
     run_dir.mkdir(parents=True)
     if joints:
-        cfg_path = _joint_config(run_dir, ident)
+        cfg_path = _joint_config(run_dir, ident, instrument)
     else:
         cfg_path = run_dir / "cfg.yaml"
         cfg_path.write_text(CONFIG.format(ident=ident, caldir=run_dir / "calibration"), encoding="utf-8")

@@ -1,5 +1,6 @@
 """Fault-injection suite over the two real processes (slave + master over Zenoh on 127.0.0.1), on the
-single tendon and on the three-joint instrument (configs/instrument-3dof.yaml) with the same limits.
+single tendon and on the three-joint instrument (configs/instrument-3dof.yaml) with the same limits, and
+the faults that reach its own code on the spindle-driven jaw (configs/instrument-spindle.yaml).
 
 One scenario per fault (tests/integration/faults_harness.py runs it). For each: the side(s) that
 must react reach SAFE within 100 ms (measured from the recordings: the first SAFE row minus the
@@ -96,8 +97,14 @@ def _counts(run) -> dict[str, int]:
             "est_out_of_order": m.get("estimates_out_of_order", 0)}
 
 
-@pytest.mark.parametrize("instrument", ["tendon", "3dof"])
-@pytest.mark.parametrize("name", list(SCENARIOS))
+# the spindle-driven jaw shares the joint instruments' node, messages and checks: the faults that reach its own
+# code (its axis going safe when the master is lost, the master losing it, an impossible jaw estimate) run on it too
+SPINDLE_SCENARIOS = ("kill_master", "kill_slave", "range_estimate")
+CASES = [(name, inst) for inst in ("tendon", "3dof") for name in SCENARIOS] + [
+    (name, "spindle") for name in SPINDLE_SCENARIOS]
+
+
+@pytest.mark.parametrize("name,instrument", CASES)
 def test_fault(name, instrument, tmp_path_factory):
     sc = SCENARIOS[name]
     # a ride-through fault waits (up to RIDE_SETTLE) for both sides to be ENGAGED before they are stopped, so a
@@ -161,7 +168,7 @@ def test_fault(name, instrument, tmp_path_factory):
             }.get(name, ", ".join(f"{k} {v}" for k, v in counts.items() if v) or "-")
     if blips:
         note += f" ({blips} brief SAFE)"
-    RESULTS[name if instrument == "tendon" else f"{name} (3dof)"] = {
+    RESULTS[name if instrument == "tendon" else f"{name} ({instrument})"] = {
         "safe": safe, "lost": int(lost), "max_force": float(force.max()), "note": note,
         "counts": counts, "recovered": bool(sc.get("recovers"))}
 
