@@ -1,0 +1,54 @@
+"""NodeGroup (teleop/node_group.py): each arm's node stepped in one paced loop, done arms left alone, stats per arm."""
+from __future__ import annotations
+
+import pytest
+
+from teleop.clock import FakeClock
+from teleop.messages import Side
+from teleop.node import NodeBase
+from teleop.node_group import NodeGroup
+
+
+class Arm(NodeBase):
+    side = Side.SLAVE
+
+    def __init__(self, steps: int):
+        super().__init__(heartbeat_hz=50.0)
+        self.left, self.times, self.ended = steps, [], 0
+
+    @property
+    def rate_hz(self) -> float:
+        return 1000.0
+
+    def step(self, now: float) -> None:
+        self.times.append(now)
+        self.left -= 1
+        self.done = self.left <= 0
+
+    def _run_ended(self, clock) -> None:
+        self.ended += 1
+
+    def stats(self):
+        return {"steps": len(self.times), "pacer": self.pacer_stats}
+
+
+def test_group_steps_every_arm_with_one_time_until_all_are_done():
+    a, b = Arm(3), Arm(5)
+    group = NodeGroup([a, b], ["left", "right"], Side.SLAVE, 1000.0)
+    group.run(FakeClock(10.0), max_duration=1.0)
+    assert group.done and len(a.times) == 3 and len(b.times) == 5
+    assert a.times == b.times[:3]                       # the same cycle time for both arms
+    assert b.times[1] - b.times[0] == pytest.approx(1e-3)
+    st = group.stats()
+    assert set(st["arms"]) == {"left", "right"} and st["arms"]["right"]["steps"] == 5
+    assert st["arm_steps"]["left"]["cycles"] == 3 and st["arm_steps"]["right"]["cycles"] == 5
+    assert st["pacer"]["ticks"] == 5
+    # each arm gets the loop's figures and its end-of-run call
+    assert a.ended == b.ended == 1 and a.pacer_stats["ticks"] == 5
+
+
+def test_group_needs_one_name_per_node():
+    with pytest.raises(ValueError, match="one name per node"):
+        NodeGroup([Arm(1)], ["left", "right"], Side.MASTER, 1000.0)
+    with pytest.raises(ValueError):
+        NodeGroup([], [], Side.MASTER, 1000.0)
