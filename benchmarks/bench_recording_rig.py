@@ -6,11 +6,17 @@ file's rule, ``mid``, with its load gain). The offline figure of each run is ``t
 NAME``'s own (:func:`study.mrd_report.analyze_mrd`, same calibration run and load gain, the folder-wide fits
 off). Prints per run the live jaw-torque RMSE [FS], the offline one and their difference, the median and worst
 over the scored runs (the calibration run is in-sample and listed apart), and the step time of the loop (rig
-step and estimate, p50 / p99 / max, and the share over the 1 ms period). Skips (prints why) when the folder is
+step and estimate, p50 / p99 / max, and the share over the 1 ms period; wall time and the thread's CPU time, which
+leaves out what other processes take on a shared machine). Skips (prints why) when the folder is
 absent. Data: MRD Lab data repository, University of Minnesota (ODbL 1.0 / DbCL 1.0). Prints figures, never
 fails on them.
 
     .venv/bin/python benchmarks/bench_recording_rig.py [--dir DIR] [--tool NAME] [--runs GLOB]
+
+``--kaist [DIR]`` plays the KAIST recordings instead (live/recording_pair.py: the pair axis's online estimator on
+each configuration's test cycle, beside the offline seed pair model on the same cycles); ``--extended JSON`` (the
+JSON of ``teleop analyze --kaist --json OUT``) adds the offline analysis's extended model and what leaving it
+out costs in degrees.
 """
 from __future__ import annotations
 
@@ -41,7 +47,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--dir", default=str(default_mrd_dir() / "Tool_4_Maryland_L_2"))
     ap.add_argument("--tool", default="davinci-maryland-left")
     ap.add_argument("--runs", default=None, help="only the runs whose name matches this glob")
+    ap.add_argument("--kaist", nargs="?", const="", default=None, metavar="DIR")
+    ap.add_argument("--extended", default=None, metavar="JSON")
     args = ap.parse_args(argv)
+    if args.kaist is not None:
+        kaist(args.kaist or None, args.extended)
+        return
     if not Path(args.dir).is_dir():
         print(f"bench_recording_rig: skipped, {args.dir} not found (the MRD da Vinci folder, docs/results/mrd.md)")
         return
@@ -62,11 +73,12 @@ def main(argv: list[str] | None = None) -> None:
           f"offline analysis {t_off:.1f} s, run {offline['calibration']['run']}); torque from the {model.chosen}; "
           f"full scale {fs * 1e3:.1f} mN m")
     print(" run   live RMSE  offline RMSE  live-offline  angle [deg]  step p50/p99/max [ms]")
-    rows, steps = [], []
+    rows, steps, cpus = [], [], []
     for r in runs:
         played = play_run(cfg, model, r)
         s = score_run(cfg, model, r, fs, played)
         steps.append(played.step_s)
+        cpus.append(played.cpu_s)
         off = offline["runs"].get(r.name, {}).get("torque_rmse_fs", float("nan"))
         d = s["live_rmse_fs"] - off
         tag = "  (calibration run, in-sample)" if r.name == cal else ""
@@ -75,11 +87,38 @@ def main(argv: list[str] | None = None) -> None:
         if r.name != cal:
             rows.append((s["live_rmse_fs"], off, d))
     a = np.asarray(rows)
-    st = np.concatenate(steps)
+    st, cp = np.concatenate(steps), np.concatenate(cpus)
     print(f"scored runs {len(rows)}: live RMSE median {np.median(a[:, 0]):.4f} worst {a[:, 0].max():.4f} FS; offline median "
           f"{np.median(a[:, 1]):.4f} worst {a[:, 1].max():.4f} FS; max |live - offline| {np.abs(a[:, 2]).max():.4f} FS")
     print(f"step time over {st.size} cycles: p50 {np.percentile(st, 50) * 1e3:.3f} ms, p99 {np.percentile(st, 99) * 1e3:.3f} ms, "
           f"max {st.max() * 1e3:.1f} ms; {np.mean(st > PERIOD_S) * 100:.2f} % over the {PERIOD_S * 1e3:.0f} ms period")
+    print(f"CPU time per cycle (the wall time less what other processes took): p50 {np.percentile(cp, 50) * 1e3:.3f} ms, "
+          f"p99 {np.percentile(cp, 99) * 1e3:.3f} ms, max {cp.max() * 1e3:.1f} ms; "
+          f"{np.mean(cp > PERIOD_S) * 100:.3f} % over the period; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
+
+
+def kaist(directory: str | None, extended: str | None) -> None:
+    """The KAIST table (module docstring)."""
+    import json
+
+    from live.recording_pair import kaist_live
+    from study.kaist import default_kaist_dir, load_all
+    d = Path(directory) if directory else default_kaist_dir()
+    if not d.is_dir():
+        print(f"bench_recording_rig --kaist: skipped, {d} not found (docs/results/kaist.md)")
+        return
+    ext = {}
+    if extended:
+        ext = {c["config_deg"]: c["diagnosis"]["extended"]["rmse_test_deg"]
+               for c in json.loads(Path(extended).read_text())["configurations"]}
+    print(f"KAIST {d}: distal angle RMSE [deg] on command cycle 2, calibrated on cycle 1")
+    print("config  live (pair axis)  offline seed pair  live-offline  offline extended  left out costs")
+    for rec in load_all(d):
+        r = kaist_live(rec, ext.get(rec.config_deg))
+        tail = (f"  {r['extended_offline_rmse_deg']:15.2f}  {r['left_out_cost_deg']:+13.2f}"
+                if "extended_offline_rmse_deg" in r else "")
+        print(f"{rec.config_deg:6}  {r['live_rmse_deg']:16.2f}  {r['seed_offline_rmse_deg']:17.2f}  "
+              f"{r['live_rmse_deg'] - r['seed_offline_rmse_deg']:+12.2f}{tail}")
 
 
 if __name__ == "__main__":

@@ -244,7 +244,7 @@ class RecordedSpindleAxis(SpindleAxis):
                 float(np.asarray(state.T_in)[i]), self.rest, state.t))
 
     @classmethod
-    def routine(cls, cfg: Config, rig: Rig) -> RecordedCalibration:
+    def routine(cls, cfg: Config, rig: Rig) -> Any:
         return RecordedCalibration(cfg)
 
     @classmethod
@@ -252,7 +252,7 @@ class RecordedSpindleAxis(SpindleAxis):
         return rig.state
 
     @classmethod
-    def calibration_of(cls, cfg: Config, routine: RecordedCalibration) -> Any:
+    def calibration_of(cls, cfg: Config, routine: Any) -> Any:
         return model_calibration(cfg, routine.model)
 
     @classmethod

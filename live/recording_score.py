@@ -31,11 +31,13 @@ __all__ = ["Played", "play_run", "scored_from", "score_run", "score_live"]
 @dataclass(frozen=True)
 class Played:
     """The live estimates of one run, shape (n,): jaw ``torque`` [N m], ``angle`` [rad]; ``step_s`` the wall
-    time [s] of each cycle (rig step and estimate)."""
+    time [s] of each cycle (rig step and estimate), ``cpu_s`` its thread CPU time [s] (the wall time less what
+    other processes took from it on a shared machine)."""
 
     torque: np.ndarray
     angle: np.ndarray
     step_s: np.ndarray
+    cpu_s: np.ndarray
 
 
 def play_run(cfg: Config, model: RecordedModel, run: MrdRun) -> Played:
@@ -44,17 +46,17 @@ def play_run(cfg: Config, model: RecordedModel, run: MrdRun) -> Played:
     axis = RecordedSpindleAxis(cfg, cfg.instrument.joints[0], 0)
     axis.start_model(model, rig.state)
     n = len(run)
-    tq, an, dt = np.empty(n), np.empty(n), np.empty(n)
-    tq[0], an[0], dt[0] = axis.sample.torque, axis.sample.angle, 0.0
-    cmd = np.zeros(1)
-    clock = time.perf_counter
+    tq, an, dt, cpu = np.empty(n), np.empty(n), np.zeros(n), np.zeros(n)
+    tq[0], an[0] = axis.sample.torque, axis.sample.angle
+    cmd, dt_run = np.zeros(1), run.dt
+    clock, cpu_clock = time.perf_counter, time.thread_time
     for k in range(1, n):
-        t0 = clock()
-        st = rig.step(cmd, run.dt)
+        t0, c0 = clock(), cpu_clock()
+        st = rig.step(cmd, dt_run)
         a, _ = axis.observe(st)
-        dt[k] = clock() - t0
+        dt[k], cpu[k] = clock() - t0, cpu_clock() - c0
         tq[k], an[k] = a.effort_hat, a.position_hat
-    return Played(tq, an, dt[1:])
+    return Played(tq, an, dt[1:], cpu[1:])
 
 
 def scored_from(model: RecordedModel, run: MrdRun) -> int:
@@ -89,4 +91,5 @@ def score_run(cfg: Config, model: RecordedModel, run: MrdRun, fs: float, played:
             "angle_rmse_deg": float(math.degrees(np.sqrt(np.mean(ea ** 2)))) if ea.size else math.nan,
             "scored_from_s": float(run.time[k]) if k < len(run) else math.nan,
             "step_p50_s": float(np.percentile(p.step_s, 50)), "step_p99_s": float(np.percentile(p.step_s, 99)),
-            "step_max_s": float(np.max(p.step_s))}
+            "step_max_s": float(np.max(p.step_s)), "cpu_p50_s": float(np.percentile(p.cpu_s, 50)),
+            "cpu_p99_s": float(np.percentile(p.cpu_s, 99))}

@@ -146,3 +146,30 @@ def test_the_live_estimate_agrees_with_the_offline_analysis_on_one_run(tmp_path)
     assert s["scored_from_s"] < 6.0
     assert s["live_rmse_fs"] < 0.1
     assert abs(s["difference_fs"]) <= 0.005
+
+
+def test_a_kaist_recording_plays_as_a_tendon_pair_in_units_of_the_pulley_radius():
+    from live.recording_pair import RecordedPair
+    from study.kaist import KaistRecording
+    t = np.arange(6) * 0.025
+    rec = KaistRecording(config_deg=0, time=t, command=np.linspace(0, 0.5, 6), velocity_cmd=t, angle=0.8 * t,
+                         T_a=5 + t, T_b=5 - t, motor_a=t, motor_b=t, source="synthetic")
+    rig = RecordedPair(rec, G=2.0)
+    st = rig.step(np.zeros((1, 2)), 0.025)
+    assert st.t == pytest.approx(t[1])
+    assert st.x_in[0, 0] == pytest.approx(2.0 * rec.command[1]) and st.x_in[0, 1] == pytest.approx(-2.0 * rec.command[1])
+    assert st.T_in[0, 1] == rec.T_b[1] and st.truth.theta[0] == rec.angle[1]
+
+
+KAIST_FILE = Path(__file__).resolve().parents[3] / "shared" / "data" / "kaist-tsm" / "sine_config_0.txt"
+
+
+@pytest.mark.skipif(not KAIST_FILE.is_file(), reason=f"KAIST data not found at {KAIST_FILE}: these tests need the "
+                    "unlicensed measurements, see docs/results/kaist.md")
+def test_the_pair_axis_estimate_on_kaist_is_the_batch_joint_model_and_near_the_offline_seed_model():
+    from live.recording_pair import kaist_live
+    from study.kaist import read_kaist
+    r = kaist_live(read_kaist(KAIST_FILE), extended_deg=1.0)
+    assert r["live_rmse_deg"] == pytest.approx(r["live_batch_rmse_deg"], abs=1e-6)
+    assert abs(r["live_rmse_deg"] - r["seed_offline_rmse_deg"]) < 0.5
+    assert r["left_out_cost_deg"] == pytest.approx(r["live_rmse_deg"] - 1.0)
