@@ -113,6 +113,11 @@ class SlaveAxis:
         """Compile the rig's and the estimators' numba kernels with throwaway objects."""
         raise NotImplementedError
 
+    @classmethod
+    def observe_all(cls, axes: Sequence[SlaveAxis], state: RigState) -> list[tuple[AxisState, tuple[float, ...]]]:
+        """:meth:`observe` of every axis, in order (a kind may step its estimators together, the same numbers)."""
+        return [ax.observe(state) for ax in axes]
+
     # ---- per axis ----------------------------------------------------------------------------------
     def out_of_range(self, target: float) -> str | None:
         """Why ``target`` (m or rad) is outside the axis's command range, or None."""

@@ -234,7 +234,9 @@ class SimulatedInstrument:
     def _read(self, cmd: np.ndarray) -> RigState:
         snap = self._T.copy()
         snap.flags.writeable = False
-        T_in, T_out, elong, x_out, torque = _truth(snap, self._gains, self._r, self._theta)
+        nj, e = self.n_joints, np.empty
+        T_in, T_out, elong, x_out, torque = e((nj, 2)), e((nj, 2)), e((nj, 2)), e((nj, 2)), e(nj)
+        _truth(snap, self._gains, self._r, self._theta, T_in, T_out, elong, x_out, torque)   # arrays in: no boxing
         truth = InstrumentTruth(theta=self._theta.copy(), torque=torque, T_in=T_in, T_out=T_out, x_in=self._x.copy(),
                                 x_out=x_out, elongation=elong, profiles=tuple(snap.reshape(-1, snap.shape[2])))
         T_meas = T_in + self.drive.load_cell_noise()
@@ -263,12 +265,10 @@ def _step_joints(T, gains, c, x, theta, prm, h, sbx, sbF, sbs):  # pragma: no co
 
 
 @njit(cache=True, nogil=True)
-def _truth(T, gains, r, theta):  # pragma: no cover - compiled
-    """T_in, T_out, elongation w . T (numpy's dot product), x_out = (r theta, -r theta), each (n_joints, 2),
+def _truth(T, gains, r, theta, T_in, T_out, elong, x_out, torque):  # pragma: no cover - compiled
+    """Fills T_in, T_out, elongation w . T (numpy's dot product), x_out = (r theta, -r theta), each (n_joints, 2),
     and the torque r (T_out,a - T_out,b), (n_joints,), of profiles T (n_joints, 2, n + 1)."""
     nj, n = T.shape[0], T.shape[2] - 1
-    T_in, T_out, elong, x_out = np.empty((nj, 2)), np.empty((nj, 2)), np.empty((nj, 2)), np.empty((nj, 2))
-    torque = np.empty(nj)
     for i in range(nj):
         for k in range(2):
             T_in[i, k] = T[i, k, 0]
@@ -277,7 +277,6 @@ def _truth(T, gains, r, theta):  # pragma: no cover - compiled
         x_out[i, 0] = r[i] * theta[i]
         x_out[i, 1] = -r[i] * theta[i]
         torque[i] = r[i] * (T_out[i, 0] - T_out[i, 1])
-    return T_in, T_out, elong, x_out, torque
 
 
 def _validate(joints: tuple[JointConfig, ...], rig: SimulatedRigConfig) -> None:

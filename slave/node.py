@@ -248,7 +248,7 @@ class SlaveNode(SlaveNodeBase):
         self._now = now
         motors = self._motors(now, dt)
         st = self.rig_state = self.rig.step(self.kind.rig_command(motors), dt)
-        observed = [ax.observe(st) for ax in self.axes]
+        observed = self.kind.observe_all(self.axes, st)
         profiles = tuple(p for _, p in observed if p)
         self._publish(Estimate(self.seq, self.cmd_seq, now, tuple(a for a, _ in observed), profiles))
         if self.recorder is not None:

@@ -16,7 +16,9 @@
 * Each cycle: the pair controller's two motor commands, then
   :class:`~estimator.online.joint.JointEstimator` on the two load cells and encoders (never the
   truth) -> the axis's state (effort = torque_hat [N m], position = angle_hat [rad], both tendons);
-  the joint's columns of ``slave_joints.csv`` and its Rerun series.
+  the joint's columns of ``slave_joints.csv`` and its Rerun series. The estimators of all the joints
+  step in one compiled call per cycle (:class:`~estimator.online.joint_bank.JointBank`, the same numbers
+  as each joint's own step) once each has had its first sample.
 """
 from __future__ import annotations
 
@@ -27,7 +29,9 @@ from typing import Any, Sequence
 import numpy as np
 
 from estimator.band import NOISE_BAND_SIGMAS
-from estimator.online.joint import JointEstimator
+from estimator.online.joint import JointEstimator, JointSample
+from estimator.online.joint_bank import JointBank, can_bank
+from estimator.phase import Phase
 from slave.axis import SlaveAxis
 from slave.calibration_file import from_results, sheath_models
 from slave.pair_calibrate import PairCalibration, set_tension
@@ -78,6 +82,8 @@ class PairAxis(SlaveAxis):
     controller : PairController or None
     sample : JointSample or None
         The last estimate.
+    bank : JointBank or None
+        The bank stepping the estimators of all the instrument's joints (shared by its axes).
     hold : float or None
         The angle command being followed [rad]; None: relax.
     """
@@ -94,6 +100,7 @@ class PairAxis(SlaveAxis):
         self.controller: PairController | None = None
         self.sample: Any = None
         self.hold: float | None = None
+        self.bank: JointBank | None = None
 
     def start(self, models, history, tension_noise: tuple[float, float] = (0.0, 0.0)) -> None:
         """The joint estimator on ``models`` (tendon a, b), the travel limits about the first sample of
@@ -101,6 +108,8 @@ class PairAxis(SlaveAxis):
         ``tension_noise`` [N]: the calibration's noise sigma of each tendon's T_in (the noise band), unless the
         config's ``estimator.tension_noise`` is set."""
         e, j, i = self.cfg.estimator, self.joint, self.index
+        if self.bank is not None:
+            self.bank.release()
         noise = tension_noise if e.tension_noise is None else (e.tension_noise, e.tension_noise)
         self.estimator = JointEstimator(models[0], models[1], self.r, n_nodes=e.n_nodes, pretension=j.pretension,
                                         hold_rate=e.hold_rate, rate_time_constant=e.rate_time_constant,
@@ -206,6 +215,24 @@ class PairAxis(SlaveAxis):
         est.step(1.0, 0.0, 0.5, 0.0, 0.0)
         est.step(1.1, 0.0, 0.5, 0.0, 1e-3)      # the compiled step (every sample after the first)
 
+    @classmethod
+    def observe_all(cls, axes: Sequence[SlaveAxis], state: RigState) -> list[tuple[AxisState, tuple[float, ...]]]:
+        """:meth:`observe` of every joint, the estimators stepped together by their :class:`JointBank` when
+        they can be (the same numbers; module docstring)."""
+        bank = _bank_of(axes, state)
+        if bank is None:
+            return [ax.observe(state) for ax in axes]
+        out = bank.step(state.T_in, state.x_in, state.t).tolist()
+        T, X = state.T_in.tolist(), state.x_in.tolist()
+        res: list[tuple[AxisState, tuple[float, ...]]] = []
+        for ax, o, (Ta, Tb), (xa, xb) in zip(axes, out, T, X):
+            pa, pb = _PHASES[int(o[10])], _PHASES[int(o[11])]
+            assert isinstance(ax, PairAxis)
+            ax.sample = JointSample(o[0], o[1], (o[2], o[3]), (o[4], o[5]), (o[6], o[7]), o[8], o[9], (pa, pb))
+            res.append((AxisState(o[0], o[1], (TendonState(Ta, xa, o[2], o[4], pa), TendonState(Tb, xb, o[3], o[5], pb))),
+                        ()))
+        return res
+
     # ---- per axis ----------------------------------------------------------------------------------
     def out_of_range(self, target: float) -> str | None:
         lo, hi = self.cmd_range
@@ -249,3 +276,25 @@ class PairAxis(SlaveAxis):
                         torque_true=None if tr is None else float(tr.torque[i]),
                         angle_true=None if tr is None else float(tr.theta[i]),
                         profiles=(est.tendons[0].profile, est.tendons[1].profile) if show and est is not None else None)
+
+
+_PHASES = tuple(Phase(k) for k in range(len(Phase)))
+
+
+def _bank_of(axes: Sequence[SlaveAxis], state: RigState) -> JointBank | None:
+    """The active bank of ``axes`` (one per joint, rows 0..n-1 of the rig's arrays in order), built when every
+    estimator is ready for it; None while one is not (the joints step on their own)."""
+    first = axes[0]
+    if isinstance(first, PairAxis) and first.bank is not None and first.bank.active:
+        return first.bank
+    if [ax.index if isinstance(ax, PairAxis) else -1 for ax in axes] != list(range(len(axes))) \
+            or np.shape(state.T_in) != (len(axes), 2):
+        return None
+    ests = [ax.estimator for ax in axes if isinstance(ax, PairAxis) and ax.estimator is not None]
+    if len(ests) != len(axes) or not all(can_bank(e) and e._bank is None for e in ests):
+        return None
+    bank = JointBank(ests)
+    for ax in axes:
+        assert isinstance(ax, PairAxis)
+        ax.bank = bank
+    return bank

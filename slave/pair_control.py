@@ -47,6 +47,9 @@ class PairMode(IntEnum):
     PULL_B = 2
 
 
+_PULLING = {PairMode.IDLE: -1, PairMode.PULL_A: 0, PairMode.PULL_B: 1}
+
+
 class PairController:
     """Motor commands of one joint's two tendons from a joint-angle command and the two load cells.
 
@@ -105,7 +108,7 @@ class PairController:
     @property
     def pulling(self) -> int:
         """Index of the tendon in position control (0 = a, 1 = b), -1 when idle."""
-        return {PairMode.IDLE: -1, PairMode.PULL_A: 0, PairMode.PULL_B: 1}[self.mode]
+        return _PULLING[self.mode]
 
     def _mode_for(self, c: float) -> PairMode:
         if not math.isfinite(c):
@@ -170,7 +173,9 @@ class PairController:
         return self._clip()
 
     def _clip(self) -> tuple[float, float]:
+        x = self.x_cmd
         if self.x_limits is not None:
-            for j, (lo, hi) in enumerate(self.x_limits):
-                self.x_cmd[j] = min(max(self.x_cmd[j], lo), hi)
-        return self.x_cmd[0], self.x_cmd[1]
+            (lo_a, hi_a), (lo_b, hi_b) = self.x_limits
+            x[0] = min(max(x[0], lo_a), hi_a)
+            x[1] = min(max(x[1], lo_b), hi_b)
+        return x[0], x[1]

@@ -57,13 +57,14 @@ pretension is a quarter of the full scale of the paper's protocol; with them the
 carried through (E5).
 
 The same maths over recorded arrays (compiled) is :func:`estimator.online.joint_batch.estimate_joint_batch`;
-the kernels (and every sample after the first in one compiled call) are in :mod:`estimator.online.joint_kernels`.
+the kernels (and every sample after the first in one compiled call) are in :mod:`estimator.online.joint_kernels`;
+:class:`estimator.online.joint_bank.JointBank` steps the estimators of every joint of an instrument in one call.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -181,9 +182,12 @@ class JointEstimator:
                               0.0, 0.0, 0.0, 0.0, 0.0, 0.0], dtype=np.float64)
         self._out = np.zeros(14)
         self._compiled = ta.phase_band > 0 and tb.phase_band > 0
+        self._bank: Any = None        # the estimator.online.joint_bank.JointBank stepping this joint, if any
 
     def reset(self) -> None:
         """Back to uniform profiles at the pretension, no angle zero (the next :meth:`step` sets it)."""
+        if self._bank is not None:
+            self._bank.release()
         for t, p in zip(self.tendons, self.pretension):
             t.reset(p)
         self._x0 = None
@@ -191,6 +195,8 @@ class JointEstimator:
 
     def zero(self, x_in_a: float, x_in_b: float) -> None:
         """Take the present pose as theta = 0: x_out,j(0) = x_in,j - e_j [m]."""
+        if self._bank is not None:
+            self._bank.release()
         self._x0 = (float(x_in_a) - self.tendons[0].elongation, float(x_in_b) - self.tendons[1].elongation)
         self._prm[8], self._prm[9] = self._x0
         self._state[0] = -1.0
@@ -211,6 +217,8 @@ class JointEstimator:
         ValueError
             A non-finite sample (from :meth:`DistalEstimator.step`, naming the value).
         """
+        if self._bank is not None:    # stepped on its own: its state back from the bank first
+            self._bank.release()
         ta, tb = self.tendons
         if (self._compiled and t is not None and self._x0 is not None and ta._t_prev is not None
                 and tb._t_prev is not None):
