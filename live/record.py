@@ -121,7 +121,7 @@ class Recorder:
         self._names: dict[tuple, tuple] = {}
         self._shapes: dict[tuple, tuple] = {}           # (key, message type, payload length) -> its shape
         self._samples: dict[tuple, StreamSample] = {}   # a stream without a CSV: its thinned rows for streams.png
-        self.budget = DiskBudget(self.dir.parent, cfg.recording.max_bytes, cfg.recording.min_free_bytes)
+        self.budget = DiskBudget(self.dir.parent, cfg.recording.max_bytes, cfg.recording.min_free_bytes, own=self.dir.name)
         self.budget.live = (self.dir / "live.json", lambda: {k: [s.count, s.missing] for k, s in self.streams.items()})
         self.writes = Writes()
         self._low_t: dict[str, float] = {}             # key -> time of its last low-rate message written
@@ -173,7 +173,8 @@ class Recorder:
             for side in self.journals.due(time.monotonic()):
                 self._recover(side)
             # the session's rate is measured once both sides' 1 kHz streams flow (a slave alone writes less)
-            self.budget.check(time.monotonic(), self.clock.now(), measure=self._fast >= 2)
+            self.budget.check(time.monotonic(), self.clock.now(), measure=self._fast >= 2,
+                              t_data=max((s.t_last or 0.0 for s in self.streams.values()), default=None))
             if time.monotonic() - last_flush >= self.flush_interval:
                 self._flush()
                 last_flush = time.monotonic()
@@ -218,10 +219,7 @@ class Recorder:
         if not self.journals.note(key, payload, recovered):
             return                                 # arrived after it was recovered: already recorded
         st.type = type(msg).__name__
-        if recovered:
-            st.fill(seq, t)
-        else:
-            st.see(seq, t)
+        (st.fill if recovered else st.see)(seq, t)
         vals: list = []                           # the numbers, flattened only where needed (CSV, sample, Rerun)
         numbers = lambda: vals or values(msg, vals) or vals   # noqa: E731
         shape = self._shapes.get((key, payload[2], len(payload)))   # a codec layout's length fixes its shape

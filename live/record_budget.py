@@ -101,10 +101,15 @@ class DiskBudget:
         Free space of the disk below which the high-rate streams stop [B]; None: no floor.
     stops : str
         What stops past a limit, for the one warning (default: the recorder's high-rate streams).
+    own : str
+        The owner (:func:`dir_bytes`) of the files written by the process that measures, e.g. ``recorder``:
+        its rate is taken over the time its messages span (``t_data`` of :meth:`check`), so a recorder
+        catching up a backlog does not count its catching up as the session's rate.
     """
 
-    def __init__(self, run_dir: Path, max_bytes: float | None, min_free_bytes: float | None, stops: str | None = None):
-        self.dir = Path(run_dir)
+    def __init__(self, run_dir: Path, max_bytes: float | None, min_free_bytes: float | None, stops: str | None = None,
+                 own: str | None = None):
+        self.dir, self.own = Path(run_dir), own
         self.stops = stops or (f"recorder: the high-rate streams are no longer written (counted only); heartbeats "
                                f"at {LOW_RATE_HZ:g} Hz, state changes and liveliness still are")
         self.max_bytes, self.min_free_bytes = max_bytes, min_free_bytes
@@ -112,17 +117,18 @@ class DiskBudget:
         self.free_bytes: int | None = None
         self.reached: dict | None = None        # {"reason", "time", "run_bytes", "free_bytes"} once past a limit
         self._next = -float("inf")
-        self._first: tuple[float, dict[str, int]] | None = None
+        self._first: tuple[float, dict[str, int], float | None] | None = None
         self.rates: dict[str, float] | None = None  # owner -> bytes per second, measured once [B/s]
         # TELEOP_LIVE_STATS=<s> (live/side_files.py): (file, figures()) written every that many seconds
         self.live: tuple[Path, Callable[[], dict]] | None = None
         self._live_every = live_interval()
         self._next_live = 0.0
 
-    def check(self, now: float, t: float, measure: bool = True) -> bool:
+    def check(self, now: float, t: float, measure: bool = True, t_data: float | None = None) -> bool:
         """Measure when :data:`CHECK_INTERVAL` has passed since the last look (``now`` [s, monotonic]);
         True the first time a limit is passed (logged once, kept in :attr:`reached` with the recorder's
-        time ``t`` [s]). ``measure``: the session has started (its rate is measured from then on)."""
+        time ``t`` [s]). ``measure``: the session has started (its rate is measured from then on);
+        ``t_data``: the receive time of the last message written [s] (the rate of :attr:`own`'s files)."""
         if self.reached is not None or now < self._next:
             return False
         self._next = now + CHECK_INTERVAL
@@ -132,7 +138,7 @@ class DiskBudget:
         owners = dir_bytes(self.dir)
         self.run_bytes = sum(owners.values())
         if measure:
-            self._measure(now, owners)
+            self._measure(now, owners, t_data)
         try:
             self.free_bytes = shutil.disk_usage(self.dir).free
         except OSError:
@@ -150,16 +156,19 @@ class DiskBudget:
         log.warning("%s: %s", reason, self.stops)
         return True
 
-    def _measure(self, now: float, owners: dict[str, int]) -> None:
+    def _measure(self, now: float, owners: dict[str, int], t_data: float | None = None) -> None:
         """Once :data:`RATE_AFTER` seconds of the session have passed: print its bytes per second, per owner
         (the journals' bounded ring left out)."""
         if self._first is None:
-            self._first = (now, owners)
+            self._first = (now, owners, t_data)
             return
-        t0, first = self._first
+        t0, first, d0 = self._first
         if self.rates is not None or now - t0 < RATE_AFTER:
             return
-        self.rates = {k: (owners.get(k, 0) - first.get(k, 0)) / (now - t0) for k in sorted(owners)
+        span = {k: now - t0 for k in owners}
+        if self.own is not None and t_data is not None and d0 is not None and t_data > d0:
+            span[self.own] = t_data - d0             # its messages' time: a backlog written now is not the rate
+        self.rates = {k: (owners.get(k, 0) - first.get(k, 0)) / span[k] for k in sorted(owners)
                       if not k.endswith(JOURNAL)}
         total = sum(self.rates.values())
         parts = ", ".join(f"{k} {v / 1e3:.0f} kB/s" for k, v in self.rates.items() if v >= 500)

@@ -207,3 +207,16 @@ def test_a_stream_without_csv_is_thinned_in_memory_and_plotted(tmp_path, monkeyp
     assert st.units == {"time": "s", "T_in": "N", "x_in": "m"}
     fig = streams_plot([st])
     assert [ax.get_title() for ax in fig.axes if ax.get_title()] == ["slave_estimate"]
+
+
+def test_the_session_rate_leaves_the_journals_out_and_takes_the_recorder_over_its_messages_time(tmp_path, capsys):
+    from live.record_budget import RATE_AFTER
+    (tmp_path / "recorder").mkdir()
+    b = DiskBudget(tmp_path, None, None, own="recorder")
+    b.check(0.0, 0.0, t_data=100.0)
+    (tmp_path / "slave.csv").write_bytes(b"x" * 2000)                     # 2000 B in 20 s of wall time
+    (tmp_path / "slave.journal-000").write_bytes(b"j" * 10**6)            # a bounded ring: not the rate
+    (tmp_path / "recorder" / "messages.bin").write_bytes(b"y" * 4000)     # 4000 B for 40 s of messages
+    b.check(2 * RATE_AFTER, 2 * RATE_AFTER, t_data=100.0 + 4 * RATE_AFTER)
+    assert b.rates == {"recorder": 4000 / (4 * RATE_AFTER), "slave": 2000 / (2 * RATE_AFTER)}
+    assert "journals: a ring" in capsys.readouterr().out
