@@ -3,10 +3,12 @@ FakeClock with in-memory links that go through the codec, the shared foot pedal 
 
 A fault on the left arm (its estimate stream cut, its estimates carrying an impossible tension, its hand's device
 lost) makes the left arm safe within 100 ms, while the right arm's master rows are those of the same run without
-any fault, cycle for cycle: its loop is untouched. The process-level test is tests/integration/test_bimanual.py."""
+any fault, cycle for cycle: its loop is untouched. A lost master makes both arms' slaves safe. The process-level test is tests/integration/test_bimanual.py."""
 from __future__ import annotations
 
 import dataclasses
+import functools
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +22,7 @@ from master.pedal import FootPedal, PedalHand
 from slave.calibration_file import InstrumentCalibration, TendonCalibration
 from slave.joint_rig import SimulatedInstrument
 from slave.node import SlaveLinks, SlaveNode
-from teleop.arms import load_arms
+from teleop.arms import Bimanual, load_arms
 from teleop.clock import FakeClock
 from teleop.codec import decode
 from teleop.messages import Side, SideState
@@ -30,18 +32,20 @@ from tests.fakes import Rows, Topic
 
 ROOT = Path(__file__).resolve().parents[2]
 DT = 1e-3
-T_FAULT, T_END = 0.9, 1.05        # [s] the fault starts once both arms track; the run ends 150 ms later
+T_FAULT, T_END = 0.6, 0.75        # [s] the fault starts once both hands move (0.5 s); the run ends 150 ms later
 SAFE_WITHIN = 0.1                 # [s]
 
 
-def _cheap_bimanual(tmp_path: Path) -> Path:
+@functools.lru_cache(maxsize=1)
+def cheap_bimanual() -> Bimanual:
     """The shipped bimanual instrument with coarser sheaths (a short in-process run), same joints and loads."""
     data = yaml.safe_load((ROOT / "configs" / "notes-bimanual.yaml").read_text(encoding="utf-8"))
     data["rig"]["simulated"]["n_elements"] = 20
     data["estimator"] = {"n_nodes": 20}
-    path = tmp_path / "bimanual.yaml"
-    path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
-    return path
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "bimanual.yaml"
+        path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+        return load_arms(path)
 
 
 def true_calibration(cfg, rig: SimulatedInstrument) -> InstrumentCalibration:
@@ -85,7 +89,7 @@ class LostAfter:
 
 def run(tmp_path: Path, fault: str | None):
     """Both arms for T_END seconds with ``fault`` on the left arm from T_FAULT; (arms, master rows, states)."""
-    bim = load_arms(_cheap_bimanual(tmp_path))
+    bim = cheap_bimanual()
     clock = FakeClock(0.0)
     pedal = FootPedal([a.cfg.master.mapping.clutch_button for a in bim.arms])
     slaves, masters, rows, topics = [], [], [], []
@@ -117,8 +121,9 @@ def run(tmp_path: Path, fault: str | None):
         if fault == "cut" and now >= T_FAULT:
             topics[0].cut = True                         # the left arm's estimates no longer arrive
         sg.step(now)
-        mg.step(now)
-        states.append((now, masters[0].state, masters[1].state, slaves[1].state))
+        if fault != "peer" or now < T_FAULT:            # "peer": the master process is gone
+            mg.step(now)
+        states.append((now, masters[0].state, masters[1].state, slaves[1].state, slaves[0].state))
     return bim, masters, [np.array(r.rows) for r in rows], states
 
 
@@ -142,6 +147,14 @@ def test_fault_on_left_arm_makes_it_safe_and_leaves_right_arm_untouched(tmp_path
     right = rows[1]
     assert (right[:, 0] >= T_FAULT).sum() >= int((T_END - T_FAULT) / DT) - 1
     np.testing.assert_array_equal(right, rows0[1])
+
+
+def test_lost_master_makes_both_arms_safe(tmp_path):
+    _, _, _, states = run(tmp_path, "peer")
+    for k in (3, 4):                                      # the right and the left arm's slave
+        assert states[int(T_FAULT / DT) - 2][k] == SideState.ENGAGED
+        safe_at = next((s[0] for s in states if s[0] >= T_FAULT and s[k] == SideState.SAFE), None)
+        assert safe_at is not None and safe_at - T_FAULT <= SAFE_WITHIN
 
 
 def test_shared_pedal_clutches_both_hands_and_deadman_stays_per_hand():
