@@ -13,6 +13,7 @@ every arm in one loop (:class:`teleop.node_group.NodeGroup`) on one Zenoh sessio
   wrapped in :class:`master.pedal.PedalHand`, so the clutch button of either hand is the one foot pedal
   of both (:mod:`master.pedal`); each hand's deadman is its own device's, and each hand feels only its
   own arm's estimate;
+* with ``ros2.enabled`` each arm publishes its CRTK topics under its own arm name (its ``instrument.id``);
 * ``--inject SPEC`` (:mod:`live.faults`) takes ``arm=<name>`` besides its own keys: the faults then act
   on that arm's publishers only (without it, on every arm's);
 * ``<run dir>/<side>_stats.json`` holds the loop's figures, each arm's step time and each arm's stats.
@@ -77,8 +78,8 @@ def arm_dir(run_dir: Path, arm: Arm) -> Path:
 
 
 def _prepare(args: argparse.Namespace, role: str, clock):
-    """(arms, run dir, injector, arm the injector acts on) of a side: the session opened, the run id
-    agreed and ``role`` claimed for every arm's instrument."""
+    """(bimanual config, run dir, session, fault injector or None, the arm it acts on or None) of a side: the
+    session opened, the run id agreed and ``role`` claimed for every arm's instrument."""
     from live.discovery import claim_role
     bim = load_arms(args.config)
     target, spec = split_arm(getattr(args, "inject", None), bim)
@@ -155,6 +156,9 @@ def run_slave_group(args: argparse.Namespace) -> int:
             rec = stack.enter_context(CsvRecorder(arm_dir(run_dir, arm) / name, columns, meta, flush_every=500))
             rr = _rerun(stack, args.rerun or arm.cfg.recording.rerun, run_dir, arm, "slave")
             links = slave_links(session, arm.ident, injector if target in (None, arm.name) else None)
+            if arm.cfg.ros2.enabled:     # the arm's CRTK topics under its own name (teleop/crtk_side.py)
+                from teleop.crtk_side import attach_slave
+                attach_slave(session, arm.cfg, links)
             nodes.append(SlaveNode(arm.cfg, rig, links, recorder=rec, rerun=rr, run_dir=arm_dir(run_dir, arm),
                                    stop_on_master_stop=args.exit_on_master_stop, calibration=calibration,
                                    calibration_file=cal_path))
@@ -204,6 +208,9 @@ def run_master_group(args: argparse.Namespace) -> int:
                 rr = _rerun(stack, getattr(args, "rerun", None) or arm.cfg.recording.rerun, run_dir, arm, "master",
                             wall_clock=True)
                 links = master_links(session, arm.ident, injector if target in (None, arm.name) else None)
+                if arm.cfg.ros2.enabled:
+                    from teleop.crtk_side import attach_master
+                    attach_master(session, arm.cfg, links)
                 nodes.append(MasterNode(arm.cfg, dev, links, recorder=rec, rerun=rr))
             group = NodeGroup(nodes, [a.name for a in arms], Side.MASTER, arms[0].cfg.master.rate_hz, arms[0].cfg)
             _serve(group, clock, args, run_dir, "master", injector, arms, waived)
