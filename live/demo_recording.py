@@ -1,4 +1,6 @@
-"""The evaluation of ``teleop demo --rig recording --recording RUN``: the live estimate against the measured jaw.
+"""The evaluation of ``teleop demo --rig recording --recording FILE``: the live estimate against the measured one.
+
+A KAIST recording on the pair axis (:func:`evaluate_kaist`) is scored on the distal angle of its test cycles.
 
 The demo's flow is every instrument's (:func:`live.demo.main_demo`); the recording rig (live/recording_rig.py)
 plays an MRD run as the spindle axis's hardware and the slave fits its calibration on one run of the folder at
@@ -30,7 +32,8 @@ from live.demo_joints import read_joint_csv
 from teleop.config import Config
 from teleop.errors import DataError
 
-__all__ = ["AGREEMENT_FS", "TORQUE_RMSE_BOUND", "RecordingDemo", "evaluate_recording", "with_recording"]
+__all__ = ["AGREEMENT_FS", "TORQUE_RMSE_BOUND", "AGREEMENT_DEG", "ANGLE_RMSE_BOUND_DEG", "RecordingDemo",
+           "evaluate_recording", "evaluate_kaist", "with_recording"]
 
 #: Acceptance: |live - offline| jaw torque RMSE on the same cycles [FS].
 AGREEMENT_FS = 0.005
@@ -49,8 +52,10 @@ def evaluate_recording(run_dir: Path, cfg: Config) -> dict:
     from estimator.offline.spindle_centre_fit import predict_held
     from estimator.online.spindle import make_batch, predict_torque
     from live.recording_axis import CENTRE, full_scale, load_model, model_path
-    from live.recording_rig import read_recording_run
+    from live.recording_rig import check_recording, read_recording_run
     from live.recording_score import scored_from
+    if check_recording(cfg)[1] == "kaist":
+        return evaluate_kaist(run_dir, cfg)
     run = read_recording_run(cfg)
     model = load_model(model_path(cfg))
     name = cfg.instrument.joints[0].name
@@ -93,7 +98,9 @@ def with_recording(cfg: Config, args: Any) -> Config:
     rig, path = getattr(args, "rig", None), getattr(args, "recording", None)
     if path is not None and rig in (None, "recording"):
         if getattr(args, "config", None) is None:
-            cfg = load_config(shipped_config("recording-mrd.yaml"))
+            from live.recording_rig import recording_format
+            fmt = recording_format(Path(path).expanduser())
+            cfg = load_config(shipped_config("recording-kaist.yaml" if fmt == "kaist" else "recording-mrd.yaml"))
         rec = dataclasses.replace(cfg.rig.recording, path=str(Path(path).expanduser().resolve()))
         cfg = dataclasses.replace(cfg, rig=dataclasses.replace(cfg.rig, type="recording", recording=rec))
     elif rig is not None:
@@ -104,6 +111,49 @@ def with_recording(cfg: Config, args: Any) -> Config:
             cfg = dataclasses.replace(cfg, rig=dataclasses.replace(cfg.rig, recording=rec))
         check_recording(cfg)
     return cfg
+
+
+def evaluate_kaist(run_dir: Path, cfg: Config) -> dict:
+    """The pair axis on a KAIST recording: the live distal angle on the test cycles (cycle 2 on, as ``teleop
+    analyze --kaist``) against the measured one, beside the same model run offline over the recording
+    (:func:`estimator.online.joint_batch.predict_pair_angle`) and the offline seed pair model on the same
+    samples. Raises DataError when no row of the slave falls on a test sample."""
+    import json
+
+    from estimator.offline.pair import PairParams, fit_pair
+    from estimator.online.joint_batch import predict_pair_angle
+    from live.recording_pair import N_NODES, kaist_model_path
+    from live.recording_rig import check_recording
+    from study.kaist import read_kaist, split
+    rec = read_kaist(check_recording(cfg)[0])
+    model = json.loads(kaist_model_path(cfg).read_text(encoding="utf-8"))
+    name = cfg.instrument.joints[0].name
+    cols = read_joint_csv(run_dir / "slave_joints.csv")
+    c1, c2, how = split(rec)
+    t = cols["time"]
+    j = np.clip(np.searchsorted(t, rec.time), 0, t.size - 1)       # the row at (or after) each recorded sample
+    near = np.abs(t[j] - rec.time) <= 6e-4
+    keep = near & (np.arange(len(rec)) >= c2.start) & (np.arange(len(rec)) < c2.stop)
+    if not keep.any():
+        raise DataError(f"{run_dir / 'slave_joints.csv'}: no cycle of the slave on the test cycles of {rec.source}")
+    live = cols[f"{name}.angle_hat"][j[keep]]
+    truth = rec.angle[keep]
+    batch = predict_pair_angle(PairParams(**model["params"]), rec.command, rec.T_a, rec.T_b, N_NODES)[keep]
+    seed = fit_pair(rec.command, rec.T_a, rec.T_b, rec.angle, c1.stop, N_NODES).prediction[keep]
+
+    def deg(e: np.ndarray) -> float:
+        return float(math.degrees(np.sqrt(np.mean(e ** 2))))
+    return {"recording": rec.source, "format": "kaist", "calibration_run": model["run"], "split": how,
+            "samples_scored": int(keep.sum()), "angle_rmse_deg": deg(live - truth),
+            "angle_max_deg": float(math.degrees(np.max(np.abs(live - truth)))),
+            "offline_same_model_rmse_deg": deg(batch - truth), "live_minus_offline_deg": deg(live - truth) - deg(batch - truth),
+            "offline_seed_rmse_deg": deg(seed - truth)}
+
+
+#: Acceptance (KAIST): |live - offline| distal angle RMSE of the same model on the same samples [deg].
+AGREEMENT_DEG = 0.05
+#: Acceptance (KAIST): live distal angle RMSE [deg] (the seed pair model's is 3.0-3.6 on the shipped files).
+ANGLE_RMSE_BOUND_DEG = 5.0
 
 
 class RecordingDemo:
@@ -121,6 +171,9 @@ class RecordingDemo:
         except (DataError, OSError, KeyError) as e:
             problems.append(f"evaluation: {e}")
             return {"evaluated": False}
+        if r.get("format") == "kaist":
+            return {"angle_rmse_within_bound": r["angle_rmse_deg"] <= ANGLE_RMSE_BOUND_DEG,
+                    "live_agrees_with_offline": abs(r["live_minus_offline_deg"]) <= AGREEMENT_DEG}
         return {"torque_rmse_within_bound": r["torque_rmse_fs"] <= TORQUE_RMSE_BOUND,
                 "live_agrees_with_offline": abs(r["live_minus_offline_fs"]) <= AGREEMENT_FS}
 
@@ -130,6 +183,14 @@ class RecordingDemo:
         r: Any = s.get("recording")
         if not r:
             return ["recording: not evaluated (see problems)"]
+        if r.get("format") == "kaist":
+            return [f"recording {r['recording']} (pair axis, calibrated on {r['split'].split(';')[0]})",
+                    f"  scored {r['samples_scored']} recorded samples of the test cycles",
+                    f"  distal angle live vs measured: RMSE {r['angle_rmse_deg']:.2f} deg (bound {ANGLE_RMSE_BOUND_DEG}), "
+                    f"max {r['angle_max_deg']:.2f} deg",
+                    f"  offline (same model and calibration, same samples): RMSE {r['offline_same_model_rmse_deg']:.2f} "
+                    f"deg; live - offline {r['live_minus_offline_deg']:+.3f} deg (bound {AGREEMENT_DEG})",
+                    f"  offline seed pair model (teleop analyze --kaist's seed): RMSE {r['offline_seed_rmse_deg']:.2f} deg"]
         return [f"recording {r['recording']} (calibrated on {Path(r['calibration_run']).name}, tool "
                 f"{r['tool'] or 'none'}): jaw torque from the {r['model']}, full scale {r['full_scale_Nm'] * 1e3:.1f} mN m",
                 f"  scored {r['cycles_scored']} cycles, {r['scored_from_s']:.2f}-{r['scored_to_s']:.2f} s of the recording",

@@ -1,4 +1,4 @@
-"""The scripted operator of a recorded run: the hand follows the recorded jaw angle.
+"""The scripted operator of a recorded run: the hand follows the recorded jaw (or joint) angle.
 
 On ``rig.type: recording`` with the simulated device (``master.device.type: simulated``) the master's operator
 is :class:`RecordedOperator` instead of the protocol script: a protocol moves the hand until the rendered
@@ -81,8 +81,9 @@ class RecordedOperator:
 
 
 def recorded_operator(cfg: Config) -> RecordedOperator:
-    """The recorded operator of ``cfg``'s recording (errors of :func:`live.recording_rig.read_recording_run`)."""
-    from live.recording_rig import read_recording_run
-    run = read_recording_run(cfg)
+    """The recorded operator of ``cfg``'s recording, MRD or KAIST (errors of
+    :func:`live.recording_rig.recorded_distal_angle`)."""
+    from live.recording_rig import recorded_distal_angle
+    t, angle = recorded_distal_angle(cfg)
     r_d = float(cfg.instrument.joints[0].pulley_radius)
-    return RecordedOperator(run.time, run.theta_d, r_d / float(cfg.master.mapping.motion_scale))
+    return RecordedOperator(t, angle, r_d / float(cfg.master.mapping.motion_scale))

@@ -20,8 +20,12 @@ figure.
 """
 from __future__ import annotations
 
+import dataclasses
+import datetime as _dt
+import json
 import math
-from typing import Any
+from pathlib import Path
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -29,10 +33,18 @@ from estimator.offline.pair import PairParams, fit_pair
 from estimator.online.joint import KAIST_PLAY, JointEstimator
 from estimator.online.joint_batch import predict_pair_angle
 from estimator.sheath import SheathModel
-from slave.rig import InstrumentTruth, RigInputError, RigState
+from slave.axis import SlaveAxis
+from slave.calibration_file import InstrumentCalibration, TendonCalibration, calibration_path
+from slave.pair_axis import PairAxis
+from slave.pair_calibrate import set_tension
+from slave.pair_control import PairController
+from slave.rig import InstrumentTruth, Rig, RigInputError, RigState
 from study.kaist import KaistRecording, split
+from teleop.config import Config
+from teleop.errors import CalibrationError
+from teleop.messages import AxisState
 
-__all__ = ["RecordedPair", "kaist_live"]
+__all__ = ["RecordedPair", "kaist_live", "fit_kaist", "RecordedPairAxis", "kaist_model_path"]
 
 N_NODES = 50          # profile elements per tendon, as the offline pair model
 
@@ -48,12 +60,27 @@ class RecordedPair:
     joint_name : str
     """
 
-    def __init__(self, rec: KaistRecording, G: float, joint_name: str = "bend"):
-        self.rec, self.G = rec, float(G)
+    def __init__(self, rec: KaistRecording, G: float = 1.0, joint_name: str = "bend", rate: str = "recording"):
+        if rate not in ("recording", "slave"):
+            raise RigInputError(f"rig.recording.rate must be recording or slave, got {rate!r}")
+        self.rec, self.G, self.rate = rec, float(G), rate
         self.joint_names = (joint_name,)
         self.finished = False
         self._i = 0
+        self._t = float(rec.time[0])
         self._state = self._read(0, np.zeros((1, 2)))
+
+    @classmethod
+    def from_config(cls, cfg: Config, path: Path) -> "RecordedPair":
+        """The KAIST recording ``path`` for the config's one joint, x_in = the motor command (G = 1: the
+        calibration's G = g / r is applied by :class:`RecordedPairAxis`)."""
+        from study.kaist import read_kaist
+        return cls(read_kaist(path), 1.0, cfg.instrument.joints[0].name, cfg.rig.recording.rate)
+
+    @property
+    def axis_kind(self) -> Any:
+        """The slave's axis kind on this rig: :class:`RecordedPairAxis`."""
+        return RecordedPairAxis
 
     @property
     def state(self) -> RigState:
@@ -64,20 +91,30 @@ class RecordedPair:
         happened). Raises RigInputError for ``dt`` not a finite number > 0."""
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
             raise RigInputError(f"dt must be a finite time step > 0 s, got {dt!r}")
-        n = len(self.rec)
+        n, cmd = len(self.rec), np.asarray(x_in_cmd, dtype=float).reshape(1, 2)
+        if self.rate == "slave":        # resampled (linear) at the rig's time
+            self._t = min(self._t + dt, float(self.rec.time[-1]))
+            self.finished = self._t >= float(self.rec.time[-1])
+            self._state = self._read(-1, cmd)
+            return self._state
         self._i = min(self._i + 1, n - 1)
         self.finished = self._i == n - 1
-        self._state = self._read(self._i, np.asarray(x_in_cmd, dtype=float).reshape(1, 2))
+        self._state = self._read(self._i, cmd)
         return self._state
 
     def _read(self, k: int, cmd: np.ndarray) -> RigState:
+        """Sample ``k`` (>= 0), else the recording interpolated at the rig's time."""
         r = self.rec
-        x = self.G * float(r.command[k])
+        if k >= 0:
+            t, c, ta, tb, th = (float(v[k]) for v in (r.time, r.command, r.T_a, r.T_b, r.angle))
+        else:
+            t = self._t
+            c, ta, tb, th = (float(np.interp(t, r.time, v)) for v in (r.command, r.T_a, r.T_b, r.angle))
+        x = self.G * c
         none = np.zeros((1, 2))         # distal tensions and stretch are not measured on the KAIST robot
-        truth = InstrumentTruth(theta=np.array([r.angle[k]]), torque=np.zeros(1), T_in=none, T_out=none, x_in=none,
+        truth = InstrumentTruth(theta=np.array([th]), torque=np.zeros(1), T_in=none, T_out=none, x_in=none,
                                 x_out=none, elongation=none)
-        return RigState(t=float(r.time[k]), x_in=np.array([[x, -x]]), T_in=np.array([[r.T_a[k], r.T_b[k]]]),
-                        x_in_cmd=cmd, truth=truth)
+        return RigState(t=t, x_in=np.array([[x, -x]]), T_in=np.array([[ta, tb]]), x_in_cmd=cmd, truth=truth)
 
     def set_load(self, *, tissue: bool | None = None, force: float | None = None) -> None:
         """The recorded load is the one that acted: nothing to switch."""
@@ -110,11 +147,156 @@ def kaist_live(rec: KaistRecording, extended_deg: float | None = None) -> dict:
 
     def deg(e: np.ndarray) -> float:
         return float(math.degrees(np.sqrt(np.mean(e ** 2))))
-    out = {"config_deg": rec.config_deg, "split": how, "test_samples": int(c2.stop - c2.start),
-           "live_rmse_deg": deg(angle[c2] - rec.angle[c2]),
+    live = deg(angle[c2] - rec.angle[c2])
+    out: dict[str, Any] = {"config_deg": rec.config_deg, "split": how, "test_samples": int(c2.stop - c2.start),
+           "live_rmse_deg": live,
            "live_batch_rmse_deg": deg(live_fit.prediction[c2] - rec.angle[c2]),
            "seed_offline_rmse_deg": deg(seed.prediction[c2] - rec.angle[c2])}
     if extended_deg is not None:
         out["extended_offline_rmse_deg"] = float(extended_deg)
-        out["left_out_cost_deg"] = out["live_rmse_deg"] - float(extended_deg)
+        out["left_out_cost_deg"] = live - float(extended_deg)
     return out
+
+
+# ---- the slave's pair axis on a KAIST recording --------------------------------------------------------------
+
+def kaist_model_path(cfg: Config) -> Path:
+    """``<calibration.dir>/<instrument.id>.recording.json``, beside the calibration file."""
+    return calibration_path(cfg).with_suffix(".recording.json")
+
+
+def fit_kaist(cfg: Config) -> dict:
+    """The live estimator's calibration on command cycle 1 of ``rig.recording.calibration_run`` (a KAIST file),
+    else of the played recording itself, as ``teleop analyze --kaist`` calibrates: the six parameters of the
+    seed pair model fitted with the joint estimator as the model. Returns the model record (JSON-ready).
+
+    Raises
+    ------
+    DataError
+        An unreadable calibration recording, or one too short to split.
+    """
+    from study.kaist import read_kaist
+    path = Path(cfg.rig.recording.calibration_run or str(cfg.rig.recording.path)).expanduser()
+    rec = read_kaist(path)
+    c1, _, how = split(rec)
+    fit = fit_pair(rec.command, rec.T_a, rec.T_b, rec.angle, c1.stop, N_NODES, predict=predict_pair_angle,
+                   name="joint estimator")
+    return {"params": {k: float(v) for k, v in fit.params.items()}, "run": str(path), "split": how}
+
+
+class RecordedPairCalibration:
+    """The power-up "routine" on a KAIST recording: :func:`fit_kaist`, made at once; ``done`` from the start."""
+
+    def __init__(self, cfg: Config):
+        self.cfg = cfg
+        self.model = fit_kaist(cfg)
+        self.done = True
+
+
+def _calibration(cfg: Config, model: dict) -> InstrumentCalibration:
+    """The slave's calibration data of ``model``: each tendon's K, compliance 2 lam / G in the rig's units."""
+    p = PairParams(**model["params"])
+    cables = {}
+    for t, K, lam in (("a", p.K_a, p.lam_a), ("b", p.K_b, p.lam_b)):
+        c = max(2.0 * lam / max(p.G, 1e-9), 1e-12)
+        M_e = c * (1.0 - math.exp(-K)) / K if K > 1e-9 else c
+        cables[t] = TendonCalibration(K=float(K), M_e=M_e, compliance=c, knee_x_in=0.0, knee_T_in=0.0,
+                                      residual_rms=0.0, n_samples=1)
+    date = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    return InstrumentCalibration(instrument=cfg.instrument.id, date=date, target_tension=cfg.calibration.target_tension,
+                                 use_route=cfg.calibration.use_route, joints=((cfg.instrument.joints[0].name, cables),),
+                                 method=f"fitted on command cycle 1 of recorded {Path(model['run']).name} (the seed "
+                                        "pair model with the joint estimator, as teleop analyze --kaist)")
+
+
+class RecordedPairAxis(PairAxis):
+    """The pair axis on a KAIST recording: x_in is the motor command [rad] on both tendons, the estimator
+    runs in units of the pulley radius with r = 1 / G (so that G c is the kinematic angle) and adds the
+    angle offset G c_0 + theta_0 (:func:`estimator.online.joint_batch.predict_pair_angle`); the torque it
+    reports is r (T_out,a - T_out,b) with the config's pulley radius r (the master renders T_out,a - T_out,b)."""
+
+    offset = 0.0
+    torque_scale = 1.0
+
+    def start_model(self, model: dict, state: RigState) -> None:
+        """The joint estimator of ``model`` at the rig's current sample (its tensions: the pretension)."""
+        p = PairParams(**model["params"])
+        i, G = self.index, max(p.G, 1e-9)
+        pc = self.cfg.pair_control
+        self.controller = PairController(self.r, set_tension(self.cfg, self.joint), pc.tension_gain, pc.switch_band,
+                                         self.cfg.slave.relax_speed, tuple(state.x_in_cmd[i]), feedforward=pc.feedforward)
+        models = [SheathModel(K=K, compliance=max(2.0 * lam / G, 1e-12)) for K, lam in ((p.K_a, p.lam_a), (p.K_b, p.lam_b))]
+        T0 = (float(state.T_in[i, 0]), float(state.T_in[i, 1]))
+        self.estimator = JointEstimator(models[0], models[1], 1.0 / G, n_nodes=N_NODES, pretension=T0,
+                                        play=KAIST_PLAY / G)
+        self.offset = G * float(state.x_in[i, 0]) + p.theta0
+        self.torque_scale = self.r * G      # r (T_out,a - T_out,b) with the config's pulley radius r [m]
+        s = self.estimator.step(T0[0], float(state.x_in[i, 0]), T0[1], float(state.x_in[i, 1]), state.t)
+        self.sample = s._replace(angle=s.angle + self.offset, torque=s.torque * self.torque_scale)
+
+    @classmethod
+    def routine(cls, cfg: Config, rig: Rig) -> Any:
+        return RecordedPairCalibration(cfg)
+
+    @classmethod
+    def routine_step(cls, routine: Any, rig: Rig, state: RigState, dt: float) -> RigState:
+        return rig.state
+
+    @classmethod
+    def calibration_of(cls, cfg: Config, routine: Any) -> Any:
+        return _calibration(cfg, routine.model)
+
+    @classmethod
+    def finish_routine(cls, axes: Sequence[SlaveAxis], routine: Any, state: RigState) -> tuple[Any, dict]:
+        cfg, model = routine.cfg, routine.model
+        path = kaist_model_path(cfg)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(model, indent=1), encoding="utf-8")
+        for ax in axes:
+            assert isinstance(ax, RecordedPairAxis)
+            ax.start_model(model, state)
+        calibration = _calibration(cfg, model)
+        return calibration, {**calibration.as_dict(), "recorded_model": model}
+
+    @classmethod
+    def start_loaded(cls, axes: Sequence[SlaveAxis], calibration: Any, state: RigState) -> dict:
+        path = kaist_model_path(axes[0].cfg)
+        try:
+            model = json.loads(path.read_text(encoding="utf-8"))
+            PairParams(**model["params"])
+        except FileNotFoundError:
+            raise CalibrationError(f"{path}: the recorded axis's model file is missing (start the slave with "
+                                   "--recalibrate to fit it again)") from None
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            raise CalibrationError(f"{path}: not a recorded pair's model file ({type(e).__name__}: {e})") from None
+        for ax in axes:
+            assert isinstance(ax, RecordedPairAxis)
+            ax.start_model(model, state)
+        return {**calibration.as_dict(), "recorded_model": model}
+
+    @classmethod
+    def recording(cls, cfg: Config, rig: Rig) -> tuple[str, tuple[str, ...], dict[str, str]]:
+        name, cols, meta = super().recording(cfg, rig)
+        return name, cols, {**meta, "rig": f"recording {cfg.rig.recording.path}",
+                            "drive": "x_in: the KAIST motor command [rad] on both tendons (+a, -b)",
+                            "truth": "angle: the recording's measured distal angle; torque, T_out, elongation are "
+                                     "not measured (0)"}
+
+    @classmethod
+    def observe_all(cls, axes: Sequence[SlaveAxis], state: RigState) -> list[tuple[AxisState, tuple[float, ...]]]:
+        """Every joint's estimate with its angle offset (module docstring)."""
+        out = []
+        for ax in axes:
+            assert isinstance(ax, RecordedPairAxis)
+            a, extra = ax.observe(state)
+            ax.sample = ax.sample._replace(angle=ax.sample.angle + ax.offset, torque=ax.sample.torque * ax.torque_scale)
+            out.append((dataclasses.replace(a, position_hat=a.position_hat + ax.offset,
+                                            effort_hat=a.effort_hat * ax.torque_scale), extra))
+        return out
+
+    @classmethod
+    def warm_up(cls, cfg: Config) -> None:
+        m = SheathModel(K=0.5, compliance=1e-4)
+        est = JointEstimator(m, m, 1.0, n_nodes=4)
+        est.step(1.0, 0.0, 0.5, 0.0, 0.0)
+        est.step(1.1, 0.0, 0.5, 0.0, 1e-3)

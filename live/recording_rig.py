@@ -11,10 +11,10 @@ spindle-driven jaw: x_in = the spindle angle [rad], T_in = the spindle torque [N
 fitted on one named run of the recording's folder (:mod:`live.recording_axis`), because a recording
 cannot execute a calibration motion.
 
-A KAIST recording (``sine_config_N.txt``, :mod:`study.kaist`) and the project's measured-data CSV
-(:func:`teleop.recording.read_measured_csv`) are read and checked by the same readers as ``teleop analyze``;
-the rig plays MRD runs only and refuses them in one line naming the file and the ``teleop analyze`` command
-that studies them.
+A KAIST recording (``sine_config_N.txt``, :mod:`study.kaist`) drives the pair axis of an instrument of one
+antagonistic pair (:mod:`live.recording_pair`): x_in = the motor command [rad] on both tendons, T_in = the
+two proximal tensions [N], the truth's ``theta`` the measured distal angle. The project's measured-data CSV
+is refused in one line naming the file and the ``teleop analyze`` command that studies it.
 
 Layering: the readers live in :mod:`study` (floor 3) and the rig reads through them, so the rig lives
 here on floor 4 and registers itself in :data:`slave.rigs.RIG_TYPES` when this module is imported
@@ -39,7 +39,8 @@ from study.mrd import MrdRun, read_mrd
 from teleop.config import Config
 from teleop.errors import ConfigError, DataError
 
-__all__ = ["FORMATS", "recording_format", "check_recording", "read_recording_run", "RecordedSpindle"]
+__all__ = ["FORMATS", "recording_format", "check_recording", "read_recording_run", "recorded_distal_angle",
+           "RecordedSpindle"]
 
 #: The formats ``rig.recording.format`` names, and the axis each drives.
 FORMATS = {"mrd": "spindle", "kaist": "pair", "csv": "single tendon"}
@@ -95,25 +96,26 @@ def check_recording(cfg: Config) -> tuple[Path, str]:
     ------
     ConfigError
         No ``rig.recording.path``; a recording whose axis is not the instrument's (an MRD run on a
-        single tendon, ...); a format the rig does not play (KAIST, CSV: the message names the analysis
-        command); an MRD run on an instrument of more than one jaw.
+        single tendon, ...); a format the rig does not play (CSV: the message names the analysis
+        command); a recording on an instrument of more than one joint.
     DataError
         A missing or unreadable file (:func:`recording_format`).
     """
     rc = cfg.rig.recording
     if not rc.path:
-        raise ConfigError("rig.recording.path: rig.type recording needs a recording (an MRD XY.TXT run)")
+        raise ConfigError("rig.recording.path: rig.type recording needs a recording (an MRD XY.TXT run or a KAIST "
+                          "sine_config_N.txt)")
     path = Path(rc.path).expanduser()
     fmt = recording_format(path, rc.format)
     want, have = FORMATS[fmt], _instrument_axis(cfg)
     if want != have:
         raise ConfigError(f"rig.recording.path: {path} is a {fmt.upper()} recording of a {want} axis; the config's "
                           f"instrument is a {have} axis (instrument.joints): use an instrument of that axis type")
-    if fmt != "mrd":
-        raise ConfigError(f"rig.recording.path: {path}: rig.type recording plays MRD runs (spindle axis); "
-                          f"study a {fmt.upper()} recording with `{_ANALYZE[fmt]}`")
+    if fmt == "csv":
+        raise ConfigError(f"rig.recording.path: {path}: rig.type recording plays MRD runs (spindle axis) and KAIST "
+                          f"recordings (pair axis); study a CSV recording with `{_ANALYZE[fmt]}`")
     if len(cfg.instrument.joints) != 1:
-        raise ConfigError(f"rig.recording.path: {path} is one jaw's run; instrument.joints has "
+        raise ConfigError(f"rig.recording.path: {path} is one joint's recording; instrument.joints has "
                           f"{len(cfg.instrument.joints)} joints, need 1")
     return path, fmt
 
@@ -123,6 +125,17 @@ def read_recording_run(cfg: Config) -> MrdRun:
     and :func:`study.mrd.read_mrd`: one line naming the file and the problem)."""
     path, _ = check_recording(cfg)
     return read_mrd(path)
+
+
+def recorded_distal_angle(cfg: Config) -> tuple[np.ndarray, np.ndarray]:
+    """(time [s] from 0, the recorded distal angle [rad]) of ``cfg``'s recording, MRD or KAIST."""
+    path, fmt = check_recording(cfg)
+    if fmt == "kaist":
+        from study.kaist import read_kaist
+        rec = read_kaist(path)
+        return rec.time - rec.time[0], rec.angle
+    run = read_mrd(path)
+    return run.time, run.theta_d
 
 
 class RecordedSpindle:
@@ -224,5 +237,9 @@ class RecordedSpindle:
 
 
 @register_rig("recording")
-def _recording(cfg: Config, session: Any) -> RecordedSpindle:
+def _recording(cfg: Config, session: Any) -> Any:
+    path, fmt = check_recording(cfg)
+    if fmt == "kaist":
+        from live.recording_pair import RecordedPair
+        return RecordedPair.from_config(cfg, path)
     return RecordedSpindle.from_config(cfg)

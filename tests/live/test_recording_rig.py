@@ -173,3 +173,13 @@ def test_the_pair_axis_estimate_on_kaist_is_the_batch_joint_model_and_near_the_o
     assert r["live_rmse_deg"] == pytest.approx(r["live_batch_rmse_deg"], abs=1e-6)
     assert abs(r["live_rmse_deg"] - r["seed_offline_rmse_deg"]) < 0.5
     assert r["left_out_cost_deg"] == pytest.approx(r["live_rmse_deg"] - 1.0)
+
+
+def test_a_measured_data_csv_is_refused_naming_the_analysis(tmp_path):
+    f = tmp_path / "bench.csv"
+    f.write_text("time,x_in,T_in\n0,0,0\n")
+    base = load_config(ROOT / "configs" / "sim.yaml")
+    cfg = dataclasses.replace(base, rig=dataclasses.replace(base.rig, type="recording", recording=dataclasses.replace(
+        base.rig.recording, path=str(f))))
+    with pytest.raises(ConfigError, match=r"bench.csv: rig.type recording plays MRD runs .*`teleop analyze FILE`"):
+        check_recording(cfg)
