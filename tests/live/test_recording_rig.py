@@ -183,3 +183,50 @@ def test_a_measured_data_csv_is_refused_naming_the_analysis(tmp_path):
         base.rig.recording, path=str(f))))
     with pytest.raises(ConfigError, match=r"bench.csv: rig.type recording plays MRD runs .*`teleop analyze FILE`"):
         check_recording(cfg)
+
+
+def synthetic_kaist(path: Path) -> Path:
+    """A KAIST-style file of two command cycles (40 Hz, 8 columns): a sine command [deg], tensions that rise with
+    it on tendon a and fall on b, an angle that follows with hysteresis."""
+    t = np.arange(0, 12.0, 0.025)
+    c = 60.0 * np.sin(2 * np.pi * t / 6.0)
+    ta, tb = 5.0 + 0.05 * c, 5.0 - 0.04 * c
+    ang = 0.9 * c - 4.0 * np.sign(np.cos(2 * np.pi * t / 6.0))
+    rows = [f"{a:.4f},{b:.4f},0,{d:.4f},{e:.4f},{f:.4f},0,0," for a, b, d, e, f in zip(t, c, ang, ta, tb)]
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def pair_node(cfg, calibration=None, calibration_file=None):
+    from slave.node import SlaveLinks, SlaveNode
+    from teleop.clock import FakeClock
+    from tests.fakes import Topic
+    clock = FakeClock(10.0)
+    rig = make_rig(cfg)
+    links = SlaveLinks(*(Topic(clock) for _ in range(4)))
+    return SlaveNode(cfg, rig, links, calibration=calibration, calibration_file=calibration_file), clock
+
+
+def test_the_pair_axis_calibrates_on_the_recording_saves_it_and_the_reload_gives_the_same_estimates(tmp_path):
+    from slave.calibration_file import calibration_path, load_calibration
+    f = synthetic_kaist(tmp_path / "sine_config_0.txt")
+    base = load_config(ROOT / "configs" / "recording-kaist.yaml")
+    cfg = dataclasses.replace(base, rig=dataclasses.replace(base.rig, recording=dataclasses.replace(
+        base.rig.recording, path=str(f), rate="recording")), calibration=dataclasses.replace(base.calibration,
+                                                                                        dir=str(tmp_path / "cal")))
+    path = calibration_path(cfg)
+    first, clock = pair_node(cfg, calibration_file=path)
+    angles = []
+    for _ in range(40):
+        clock.advance(0.001)
+        first.step(clock.now())
+        angles.append(first.axes[0].sample.angle)
+    assert first.calibrated and path.is_file() and path.with_suffix(".recording.json").is_file()
+    again, clock = pair_node(cfg, calibration=load_calibration(path, cfg), calibration_file=path)
+    for k in range(1, 40):
+        clock.advance(0.001)
+        again.step(clock.now())
+        assert again.axes[0].sample.angle == pytest.approx(angles[k], abs=1e-9)
+    path.with_suffix(".recording.json").unlink()
+    with pytest.raises(CalibrationError, match=r"recording.json: the recorded axis's model file is missing"):
+        pair_node(cfg, calibration=load_calibration(path, cfg), calibration_file=path)
