@@ -18,7 +18,7 @@ tendons, with and without the recorder, beside bare Zenoh and the teleoperation 
    the slave's step time and both loops' overruns.
 
 Prints a table, never fails on time. ``python benchmarks/bench_scaling.py [--quick] [--cycles N] [--seconds S]``
-(``--quick``: fewer cycles and a shorter ping-pong, under a minute).
+(``--quick``: 2 and 16 tendons only, fewer cycles and a shorter ping-pong, under a minute).
 """
 from __future__ import annotations
 
@@ -53,50 +53,67 @@ def instrument(n_joints: int, rerun: str = "save"):
         pair_control=dataclasses.replace(cfg.pair_control, axes=tuple(range(n_joints))))
 
 
-def run_loop(cfg, cal, cycles: int, record: bool, tmp: Path) -> np.ndarray:
-    """Master and slave stepped in turn for ``cycles`` cycles (module docstring, 1.): per cycle the wall
-    time and the thread CPU time of the slave's step and of the master's [ms], shape (4, cycles)."""
-    from master.devices import make_device
-    from master.node import MasterLinks, MasterNode
-    from master.node import csv_columns as master_columns
-    from master.node import csv_units as master_units
-    from slave.node import SlaveLinks, SlaveNode, recording, warm_up
-    from slave.rigs import RIG_TYPES
-    from teleop.clock import FakeClock
-    from teleop.csv_writer import ThreadedCsvRecorder
-    from teleop.rerun_proc import RerunProcessLogger
-    from teleop.rerun_view import joint_views
+class Loop:
+    """A master and a slave of ``cfg``'s instrument on one fake clock (module docstring, 1.), with the recorder's
+    writers (``record``) or none; :meth:`run` steps them in turn and times each step. Close it when done."""
 
-    warm_up(cfg)
-    clock = FakeClock(100.0)
-    cmd, est, mhb, shb = (_Topic(clock) for _ in range(4))
-    rig = RIG_TYPES["simulated"](cfg, None)
-    tag = f"{cfg.instrument.id}-{'rec' if record else 'bare'}"
-    name, columns, meta = recording(cfg, rig)
-    srec = ThreadedCsvRecorder(tmp / f"{tag}-{name}", columns, meta, flush_every=500) if record else None
-    mrec = ThreadedCsvRecorder(tmp / f"{tag}-master.csv", master_columns(cfg), {"source": "bench"},
-                               units=master_units(cfg), flush_every=500) if record else None
-    rr = RerunProcessLogger("bench", tag, "save", tmp / f"{tag}.rrd", joints=joint_views(cfg)) if record else None
-    out = np.empty((4, cycles))
-    pc, tt, dt = time.perf_counter_ns, time.thread_time_ns, 1.0 / cfg.rig.rate_hz
-    try:
-        slave = SlaveNode(cfg, rig, SlaveLinks(est, shb, cmd, mhb), recorder=srec, rerun=rr, calibration=cal)
-        master = MasterNode(cfg, make_device(cfg, "short"), MasterLinks(cmd, mhb, est, shb), recorder=mrec)
+    def __init__(self, cfg, cal, record: bool, tmp: Path):
+        from master.devices import make_device
+        from master.node import MasterLinks, MasterNode
+        from master.node import csv_columns as master_columns
+        from master.node import csv_units as master_units
+        from slave.node import SlaveLinks, SlaveNode, recording, warm_up
+        from slave.rigs import RIG_TYPES
+        from teleop.clock import FakeClock
+        from teleop.csv_writer import ThreadedCsvRecorder
+        from teleop.rerun_proc import RerunProcessLogger
+        from teleop.rerun_view import joint_views
+
+        warm_up(cfg)
+        self.clock, self.dt = FakeClock(100.0), 1.0 / cfg.rig.rate_hz
+        cmd, est, mhb, shb = (_Topic(self.clock) for _ in range(4))
+        rig = RIG_TYPES["simulated"](cfg, None)
+        self.rig_cpu, rig_step = 0, rig.step
+
+        def timed_step(x_in_cmd, dt):     # the simulated instrument's share of the slave's step
+            c = time.thread_time_ns()
+            st = rig_step(x_in_cmd, dt)
+            self.rig_cpu += time.thread_time_ns() - c
+            return st
+        rig.step = timed_step
+        tag = f"{cfg.instrument.id}-{'rec' if record else 'bare'}"
+        name, columns, meta = recording(cfg, rig)
+        self.writers = (ThreadedCsvRecorder(tmp / f"{tag}-{name}", columns, meta, flush_every=500),
+                        ThreadedCsvRecorder(tmp / f"{tag}-master.csv", master_columns(cfg), {"source": "bench"},
+                                            units=master_units(cfg), flush_every=500),
+                        RerunProcessLogger("bench", tag, "save", tmp / f"{tag}.rrd", joints=joint_views(cfg))
+                        ) if record else (None, None, None)
+        srec, mrec, rr = self.writers
+        self.slave = SlaveNode(cfg, rig, SlaveLinks(est, shb, cmd, mhb), recorder=srec, rerun=rr, calibration=cal)
+        self.master = MasterNode(cfg, make_device(cfg, "short"), MasterLinks(cmd, mhb, est, shb), recorder=mrec)
         if rr is not None:
-            rr.flush()            # the Rerun child up and idle: its start-up is not the loop's
+            rr.flush()                # the Rerun child up and idle: its start-up is not the loop's
+
+    def run(self, cycles: int) -> np.ndarray:
+        """``cycles`` cycles: per cycle the wall time and the thread CPU time of the slave's step, the same of
+        the master's, and the thread CPU time of the simulated rig's step inside the slave's [ms], (5, cycles)."""
+        out = np.empty((5, cycles))
+        pc, tt, master, slave = time.perf_counter_ns, time.thread_time_ns, self.master, self.slave
         for k in range(cycles):
-            t = clock.advance(dt)
+            t = self.clock.advance(self.dt)
+            self.rig_cpu = 0
             w0, c0 = pc(), tt()
             master.step(t)
             w1, c1 = pc(), tt()
             slave.step(t)
             w2, c2 = pc(), tt()
-            out[:, k] = w2 - w1, c2 - c1, w1 - w0, c1 - c0
-    finally:
-        for w in (srec, mrec, rr):
+            out[:, k] = w2 - w1, c2 - c1, w1 - w0, c1 - c0, self.rig_cpu
+        return out * 1e-6
+
+    def close(self) -> None:
+        for w in self.writers:
             if w is not None:
                 w.close()
-    return out * 1e-6
 
 
 def slope(tendons, values) -> float:
@@ -104,20 +121,38 @@ def slope(tendons, values) -> float:
     return float(np.polyfit(np.asarray(tendons, dtype=float), np.asarray(values, dtype=float), 1)[0])
 
 
-def measure_steps(cycles: int, tmp: Path, joints=JOINTS) -> dict:
-    """``{(n_joints, record): (slave p50, p99, CPU p99, master p50, p99, CPU p99)}`` [ms]: wall-time p50 and
-    p99 and thread-CPU-time p99 of each side's step, after a 10 % warm-up of the loop."""
+#: the figures of one side's step: wall-time p50, p99 and thread-CPU-time p50, p99 [ms]
+_FIGURES = ((0, 50), (0, 99), (1, 50), (1, 99))
+
+
+def measure_steps(cycles: int, tmp: Path, joints=JOINTS, rounds: int = 10) -> dict:
+    """``{(n_joints, record): (slave wall p50, p99, CPU p50, p99, master wall p50, p99, CPU p50, p99, rig CPU p50)}``
+    [ms]. Every loop is built first (calibrated on its simulator, warmed up by a tenth of ``cycles``), then they
+    run in ``rounds`` turns of ``cycles / rounds`` cycles each, so that the machine's load falls on every size
+    alike."""
+    loops: dict[tuple[int, bool], Loop] = {}
+    x: dict[tuple[int, bool], list[np.ndarray]] = {}
+    try:
+        for nj in joints:
+            cfg = instrument(nj)
+            cal = simulator_calibration(cfg)
+            for record in (False, True):
+                loops[nj, record] = lp = Loop(cfg, cal, record, tmp)
+                lp.run(max(cycles // 10, 1))
+        for _ in range(rounds):
+            for key, lp in loops.items():
+                x.setdefault(key, []).append(lp.run(max(cycles // rounds, 1)))
+    finally:
+        for lp in loops.values():
+            lp.close()
     out = {}
-    for nj in joints:
-        cfg = instrument(nj)
-        cal = simulator_calibration(cfg)
-        for record in (False, True):
-            x = run_loop(cfg, cal, cycles, record, tmp)[:, cycles // 10:]
-            v = out[nj, record] = tuple(float(np.percentile(x[row], q)) for row in (0, 2) for q in (50, 99)
-                                        ) + tuple(float(np.percentile(x[row], 99)) for row in (1, 3))
-            v = out[nj, record] = (v[0], v[1], v[4], v[2], v[3], v[5])
-            print(f"  {2 * nj:3d} tendons, recorder {'on ' if record else 'off'}: slave p50 {v[0]:.3f} p99 {v[1]:.3f} "
-                  f"(CPU {v[2]:.3f}) ms, master p50 {v[3]:.3f} p99 {v[4]:.3f} (CPU {v[5]:.3f}) ms", flush=True)
+    for (nj, record), blocks in x.items():
+        a = np.concatenate(blocks, axis=1)
+        v = out[nj, record] = tuple(float(np.percentile(a[side + row], q)) for side in (0, 2) for row, q in _FIGURES
+                                    ) + (float(np.percentile(a[4], 50)),)
+        print(f"  {2 * nj:3d} tendons, recorder {'on ' if record else 'off'}: slave p50 {v[0]:.3f} p99 {v[1]:.3f} "
+              f"(CPU {v[2]:.3f} / {v[3]:.3f}; the simulated rig's CPU p50 {v[8]:.3f}) ms, master p50 {v[4]:.3f} "
+              f"p99 {v[5]:.3f} (CPU {v[6]:.3f} / {v[7]:.3f}) ms", flush=True)
     return out
 
 
@@ -133,16 +168,18 @@ def demo_config(n_joints: int, tmp: Path) -> Path:
 
 def print_table(steps: dict, joints=JOINTS) -> None:
     """The step table (markdown) and the cost per added tendon."""
-    print("| tendons | slave p50 / p99 (CPU p99) [ms] | slave + recorder | master p50 / p99 (CPU p99) [ms] "
-          "| master + recorder |")
-    print("|---:|---|---|---|---|")
+    print("| tendons | slave p50 / p99 (CPU p50 / p99) [ms] | slave + recorder | of which the simulated rig "
+          "(CPU p50) | master p50 / p99 (CPU p50 / p99) [ms] | master + recorder |")
+    print("|---:|---|---|---|---|---|")
     for nj in joints:
-        cells = [f"{v[0]:.3f} / {v[1]:.3f} ({v[2]:.3f})" for side in (0, 3) for rec in (False, True)
-                 for v in [steps[nj, rec][side:side + 3]]]
+        cells = [f"{v[0]:.3f} / {v[1]:.3f} ({v[2]:.3f} / {v[3]:.3f})" for side in (0, 4) for rec in (False, True)
+                 for v in [steps[nj, rec][side:side + 4]]]
+        cells.insert(2, f"{steps[nj, False][8]:.3f}")
         print(f"| {2 * nj} | " + " | ".join(cells) + " |")
     tendons = [2 * nj for nj in joints]
     parts = []
-    for label, col in (("slave p50", 0), ("slave CPU p99", 2), ("master p50", 3), ("master CPU p99", 5)):
+    for label, col in (("slave p50", 0), ("slave CPU p50", 2), ("simulated rig CPU p50", 8), ("master p50", 4),
+                       ("master CPU p50", 6)):
         per = [slope(tendons, [steps[nj, rec][col] for nj in joints]) * 1e3 for rec in (False, True)]
         parts.append(f"{label} {per[0]:.1f} us ({per[1]:.1f} us with the recorder)")
     print("cost per added tendon (least-squares slope over " + ", ".join(map(str, tendons)) + " tendons): "
@@ -156,30 +193,32 @@ def print_roundtrips(bare: dict, demos: dict) -> None:
     for nj, d in demos.items():
         st = d["pacer"]["slave"].get("step_ms", {})
         print(f"teleop demo, {2 * nj} tendons (recorder+slave+master processes), command -> estimate echo: "
-              f"p50 {d['p50_ms']:.3f} ms (+{d['p50_ms'] - bare['p50_ms']:.3f} over bare), p99 {d['p99_ms']:.3f} ms "
-              f"(+{d['p99_ms'] - bare['p99_ms']:.3f}); slave step p50 {st.get('p50', float('nan')):.2f} p99 "
+              f"p50 {d['p50_ms']:.3f} ms ({d['p50_ms'] - bare['p50_ms']:+.3f} over bare), p99 {d['p99_ms']:.3f} ms "
+              f"({d['p99_ms'] - bare['p99_ms']:+.3f}); slave step p50 {st.get('p50', float('nan')):.2f} p99 "
               f"{st.get('p99', float('nan')):.2f} ms; overruns master {100 * d['master_overruns']:.2f} %, slave "
               f"{100 * d['slave_overruns']:.2f} %; recorder {d['recorded']} messages, {d['recorded_missing']} missing")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
-    ap.add_argument("--quick", action="store_true", help="fewer cycles and a shorter ping-pong (a smoke test)")
-    ap.add_argument("--cycles", type=int, help="cycles per size and recorder setting (default 3000, quick 400)")
-    ap.add_argument("--seconds", type=float, help="bare ping-pong duration [s] (default 8, quick 2)")
+    ap.add_argument("--quick", action="store_true",
+                    help="2 and 16 tendons only, fewer cycles and a shorter ping-pong (a smoke test)")
+    ap.add_argument("--cycles", type=int, help="cycles per size and recorder setting (default 2000, quick 300)")
+    ap.add_argument("--seconds", type=float, help="bare ping-pong duration [s] (default 5, quick 2)")
     a = ap.parse_args()
-    cycles = a.cycles or (400 if a.quick else 3000)
-    seconds = a.seconds or (2.0 if a.quick else 8.0)
+    cycles = a.cycles or (300 if a.quick else 2000)
+    joints = JOINTS[::2] if a.quick else JOINTS
+    seconds = a.seconds or (2.0 if a.quick else 5.0)
     load0 = os.getloadavg()[0]
     print(f"machine: {os.cpu_count()} CPUs, load average {load0:.2f} at the start", flush=True)
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
-        print(f"step times over {cycles} cycles (first 10 % left out), master + slave in one process:", flush=True)
-        steps = measure_steps(cycles, tmp)
+        print(f"step times over {cycles} cycles per size, in turns, master + slave in one process:", flush=True)
+        steps = measure_steps(cycles, tmp, joints)
         bare = bare_pingpong(seconds)
         demos = {nj: demo_roundtrip(config=demo_config(nj, tmp)) for nj in DEMO_JOINTS}
     print()
-    print_table(steps)
+    print_table(steps, joints)
     print_roundtrips(bare, demos)
     print(f"load average {load0:.2f} at the start, {os.getloadavg()[0]:.2f} at the end (1 min), on {os.cpu_count()} CPUs")
 
