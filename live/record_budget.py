@@ -100,7 +100,7 @@ class DiskBudget:
     min_free_bytes : float or None
         Free space of the disk below which the high-rate streams stop [B]; None: no floor.
     stops : str
-        What stops past a limit, for the one warning (default: the recorder's high-rate streams).
+        The one warning past a limit, ``{reason}`` standing for the limit passed (default: the recorder's).
     own : str
         The owner (:func:`dir_bytes`) of the files written by the process that measures, e.g. ``recorder``:
         its rate is taken over the time its messages span (``t_data`` of :meth:`check`), so a recorder
@@ -110,8 +110,8 @@ class DiskBudget:
     def __init__(self, run_dir: Path, max_bytes: float | None, min_free_bytes: float | None, stops: str | None = None,
                  own: str | None = None):
         self.dir, self.own = Path(run_dir), own
-        self.stops = stops or (f"recorder: the high-rate streams are no longer written (counted only); heartbeats "
-                               f"at {LOW_RATE_HZ:g} Hz, state changes and liveliness still are")
+        self.stops = stops or (f"recorder: {{reason}}: the high-rate streams are no longer written (counted only); "
+                               f"heartbeats at {LOW_RATE_HZ:g} Hz, state changes and liveliness still are")
         self.max_bytes, self.min_free_bytes = max_bytes, min_free_bytes
         self.run_bytes = 0
         self.free_bytes: int | None = None
@@ -153,7 +153,7 @@ class DiskBudget:
         if reason is None:
             return False
         self.reached = {"reason": reason, "time": t, "run_bytes": self.run_bytes, "free_bytes": self.free_bytes}
-        log.warning("%s: %s", reason, self.stops)
+        log.warning("%s", self.stops.replace("{reason}", reason))
         return True
 
     def _measure(self, now: float, owners: dict[str, int], t_data: float | None = None) -> None:

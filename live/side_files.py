@@ -101,8 +101,8 @@ class SideFiles:
         self.side, self.dir = side, Path(run_dir)
         what = ", ".join(names) or "its high-rate files"
         self.budget = DiskBudget(self.dir, cfg.recording.max_bytes, cfg.recording.min_free_bytes,
-                                 stops=f"{side}: {what} no longer written (rows counted); its control loop, journal "
-                                       f"and stats go on")
+                                 stops=f"{side}: {{reason}}: {what} no longer written (rows counted); its control "
+                                       f"loop, journal and stats go on")
         self.every = cfg.recording.csv_every
         self.stopped = False
         self.gates: dict[str, Any] = {}
