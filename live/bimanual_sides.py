@@ -7,8 +7,9 @@ every arm in one loop (:class:`teleop.node_group.NodeGroup`) on one Zenoh sessio
   :class:`master.node.MasterNode`) with its own links on its own keys ``teleop/<arm id>/...``, its own
   liveliness token, watchdog, state and heartbeat, its own calibration file
   (``<calibration.dir>/<arm id>.yaml``) and its own recordings in ``<run dir>/<arm id>/`` (``slave_joints.csv``,
-  ``master.csv``, ``calibration.json``, ``<side>_stats.json``, with ``recording.rerun: save``
-  ``slave.rrd`` / ``master.rrd``): a fault on one arm stays on that arm;
+  ``master.csv``, ``calibration.json``, ``<side>_stats.json``): a fault on one arm stays on that arm;
+* one Rerun logger per side (``recording.rerun`` of the base; ``<run dir>/slave.rrd``, ``master.rrd``, one
+  recording): both arms' joints in one 3D view, each arm's series under its name (:class:`ArmRerun`);
 * the master's hands: each arm's device (``master.device`` of its entry, any registered type) is
   wrapped in :class:`master.pedal.PedalHand`, so the clutch button of either hand is the one foot pedal
   of both (:mod:`master.pedal`); each hand's deadman is its own device's, and each hand feels only its
@@ -96,13 +97,39 @@ def _prepare(args: argparse.Namespace, role: str, clock):
     return bim, run_dir, session, injector, target
 
 
-def _rerun(stack: contextlib.ExitStack, mode: str, run_dir: Path, arm: Arm, side: str, **kw):
-    """The arm's Rerun logger of ``side`` (``<arm dir>/<side>.rrd``, recording id ``<run>-<arm id>``), None when off."""
+class ArmRerun:
+    """One arm's view of its side's Rerun logger: the arm's joints and master axes logged under ``<arm>/<joint>``
+    (``instrument/<arm>/<joint>/...``, ``joints/<arm>/<joint>/...``, ``master/<arm>/<joint>/...``), so that both
+    arms share one recording; every other call goes to the logger as it is."""
+
+    def __init__(self, logger: Any, arm: str):
+        self.inner, self.arm = logger, arm
+
+    def log_joint(self, t: float, joint: str, **kw: Any) -> None:
+        """The arm's joint ``joint`` (:meth:`teleop.rerun_log.RerunLogger.log_joint`)."""
+        self.inner.log_joint(t, f"{self.arm}/{joint}", **kw)
+
+    def log_master(self, t: float, *, axis: str | None = None, **kw: Any) -> None:
+        """The arm's master series (:meth:`teleop.rerun_log.RerunLogger.log_master`), ``axis`` under the arm."""
+        self.inner.log_master(t, axis=self.arm if axis is None else f"{self.arm}/{axis}", **kw)
+
+    def __getattr__(self, name: str) -> Any:
+        if name == "inner":
+            raise AttributeError(name)
+        return getattr(self.inner, name)
+
+
+def _rerun(stack: contextlib.ExitStack, mode: str, run_dir: Path, bim: Bimanual, side: str, **kw) -> list[Any]:
+    """Each arm's view (:class:`ArmRerun`) of the side's one Rerun logger (``<run dir>/<side>.rrd``, recording id
+    the run's: both arms in one recording, their joints stacked in the 3D view); Nones when off."""
     if mode == "off":
-        return None
+        return [None] * len(bim.arms)
+    import dataclasses
+
     from teleop.rerun_proc import RerunProcessLogger as RerunLogger  # the loop only queues; a child process logs
-    return stack.enter_context(RerunLogger("teleop", f"{run_dir.name}-{arm.ident}", mode,
-                                           arm_dir(run_dir, arm) / f"{side}.rrd", joints=joint_views(arm.cfg), **kw))
+    views = tuple(dataclasses.replace(v, name=f"{arm.name}/{v.name}") for arm in bim.arms for v in joint_views(arm.cfg))
+    logger = stack.enter_context(RerunLogger("teleop", run_dir.name, mode, run_dir / f"{side}.rrd", joints=views, **kw))
+    return [ArmRerun(logger, arm.name) for arm in bim.arms]
 
 
 def _serve(group: NodeGroup, clock, args, run_dir: Path, side: str, injector, arms, waived) -> None:
@@ -149,12 +176,12 @@ def run_slave_group(args: argparse.Namespace) -> int:
         warm_up(a.cfg)
     with raise_on_sigterm(), session, contextlib.ExitStack() as stack:
         nodes = []
-        for arm, (calibration, cal_path) in zip(arms, cals):
+        views = _rerun(stack, args.rerun or arms[0].cfg.recording.rerun, run_dir, bim, "slave")
+        for arm, (calibration, cal_path), rr in zip(arms, cals, views):
             rig = make_rig(arm.cfg, session)
             stack.callback(rig.close)
             name, columns, meta = recording(arm.cfg, rig)
             rec = stack.enter_context(CsvRecorder(arm_dir(run_dir, arm) / name, columns, meta, flush_every=500))
-            rr = _rerun(stack, args.rerun or arm.cfg.recording.rerun, run_dir, arm, "slave")
             links = slave_links(session, arm.ident, injector if target in (None, arm.name) else None)
             if arm.cfg.ros2.enabled:     # the arm's CRTK topics under its own name (teleop/crtk_side.py)
                 from teleop.crtk_side import attach_slave
@@ -200,13 +227,13 @@ def run_master_group(args: argparse.Namespace) -> int:
         arms = bim.arms
         with raise_on_sigterm(), session, contextlib.ExitStack() as stack:
             nodes = []
-            for arm, dev in zip(arms, devices):
+            views = _rerun(stack, getattr(args, "rerun", None) or arms[0].cfg.recording.rerun, run_dir, bim, "master",
+                           wall_clock=True)
+            for arm, dev, rr in zip(arms, devices, views):
                 meta = {"source": "teleop master", "instrument": arm.ident, "device": arm.cfg.master.device.type,
                         "arm": arm.name, "hand": arm.hand}
                 rec = stack.enter_context(CsvRecorder(arm_dir(run_dir, arm) / "master.csv", csv_columns(arm.cfg), meta,
                                                       units=csv_units(arm.cfg), flush_every=100))
-                rr = _rerun(stack, getattr(args, "rerun", None) or arm.cfg.recording.rerun, run_dir, arm, "master",
-                            wall_clock=True)
                 links = master_links(session, arm.ident, injector if target in (None, arm.name) else None)
                 if arm.cfg.ros2.enabled:
                     from teleop.crtk_side import attach_master
