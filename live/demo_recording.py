@@ -92,7 +92,7 @@ def with_recording(cfg: Config, args: Any) -> Config:
     and the problem)."""
     import dataclasses
 
-    from live.recording_rig import check_recording
+    from live.recording_rig import read_recording
     from teleop.config import load_config
     from teleop.config_files import shipped_config
     rig, path = getattr(args, "rig", None), getattr(args, "recording", None)
@@ -101,7 +101,7 @@ def with_recording(cfg: Config, args: Any) -> Config:
             from live.recording_rig import recording_format
             fmt = recording_format(Path(path).expanduser())
             cfg = load_config(shipped_config("recording-kaist.yaml" if fmt == "kaist" else "recording-mrd.yaml"))
-        rec = dataclasses.replace(cfg.rig.recording, path=str(Path(path).expanduser().resolve()))
+        rec = dataclasses.replace(cfg.rig.recording, path=str(Path(path).expanduser().resolve()), format="auto")
         cfg = dataclasses.replace(cfg, rig=dataclasses.replace(cfg.rig, type="recording", recording=rec))
     elif rig is not None:
         cfg = dataclasses.replace(cfg, rig=dataclasses.replace(cfg.rig, type=rig))
@@ -109,7 +109,7 @@ def with_recording(cfg: Config, args: Any) -> Config:
         if cfg.rig.recording.path:      # the sides run from the run's config: an absolute path reads the same
             rec = dataclasses.replace(cfg.rig.recording, path=str(Path(cfg.rig.recording.path).expanduser().resolve()))
             cfg = dataclasses.replace(cfg, rig=dataclasses.replace(cfg.rig, recording=rec))
-        check_recording(cfg)
+        read_recording(cfg)
     return cfg
 
 

@@ -39,7 +39,7 @@ from study.mrd import MrdRun, read_mrd
 from teleop.config import Config
 from teleop.errors import ConfigError, DataError
 
-__all__ = ["FORMATS", "recording_format", "check_recording", "read_recording_run", "recorded_distal_angle",
+__all__ = ["FORMATS", "recording_format", "check_recording", "read_recording", "read_recording_run", "recorded_distal_angle",
            "RecordedSpindle"]
 
 #: The formats ``rig.recording.format`` names, and the axis each drives.
@@ -124,6 +124,17 @@ def read_recording_run(cfg: Config) -> MrdRun:
     """The checked recording of ``cfg`` read by :func:`study.mrd.read_mrd` (errors of :func:`check_recording`
     and :func:`study.mrd.read_mrd`: one line naming the file and the problem)."""
     path, _ = check_recording(cfg)
+    return read_mrd(path)
+
+
+def read_recording(cfg: Config) -> Any:
+    """The checked recording of ``cfg`` read whole by its format's reader (an MrdRun or a KAIST recording):
+    every problem of the file is one line naming it before anything starts (:func:`check_recording`,
+    :func:`study.mrd.read_mrd`, :func:`study.kaist.read_kaist`)."""
+    path, fmt = check_recording(cfg)
+    if fmt == "kaist":
+        from study.kaist import read_kaist
+        return read_kaist(path)
     return read_mrd(path)
 
 

@@ -230,3 +230,24 @@ def test_the_pair_axis_calibrates_on_the_recording_saves_it_and_the_reload_gives
     path.with_suffix(".recording.json").unlink()
     with pytest.raises(CalibrationError, match=r"recording.json: the recorded axis's model file is missing"):
         pair_node(cfg, calibration=load_calibration(path, cfg), calibration_file=path)
+
+
+@pytest.mark.parametrize("case", ["missing", "columns", "axis"])
+def test_the_demo_refuses_a_bad_recording_in_one_line_before_any_process_starts(tmp_path, capsys, monkeypatch, case):
+    from live.cli import main
+    monkeypatch.chdir(tmp_path)
+    if case == "missing":
+        args, words = ["--recording", str(tmp_path / "00.TXT")], "no such file"
+    elif case == "columns":
+        f = tmp_path / "00.TXT"
+        f.write_text("0,1,2,3,4,5,6,7\n")
+        args, words = ["--config", str(ROOT / "configs" / "recording-mrd.yaml"), "--recording", str(f)], "got 8"
+    else:
+        f = synthetic_kaist(tmp_path / "sine_config_0.txt")
+        args, words = ["--config", str(ROOT / "configs" / "recording-mrd.yaml"), "--recording", str(f)], \
+            "is a KAIST recording of a pair axis; the config's instrument is a spindle axis"
+    rc = main(["demo", *args])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc != 0
+    assert len(err) == 1 and words in err[0], err
+    assert not (tmp_path / "runs").exists()
