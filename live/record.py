@@ -216,7 +216,7 @@ class Recorder:
             st.count += 1
             return
         seq = getattr(msg, "seq", None)
-        if not self.journals.note(key, payload, recovered):
+        if not self.journals.note(key, payload, recovered, seq):
             return                                 # arrived after it was recovered: already recorded
         st.type = type(msg).__name__
         (st.fill if recovered else st.see)(seq, t)

@@ -3,8 +3,10 @@
 ``teleop record`` completes its recording from the journals in its run directory: when a side's
 liveliness is lost (after :data:`DELAY`, so that what is still on its way arrives first) and at the
 recorder's end, every journaled message the recording does not have is added to it, marked as
-recovered. A message is known by the hash of its payload bytes on its key (a message received twice
-is one message). Journal records published before the recorder started (an earlier session in the
+recovered. A message is known by its ``seq`` on its key (a message received twice is one message; one
+without a ``seq``: by the hash of its payload bytes). The recording's messages are remembered in constant
+memory, the newest :data:`SEEN` per key (more than a journal's ring of two 8 MB segments holds of any
+stream), so an hour at 1 kHz costs no more than a minute. Journal records published before the recorder started (an earlier session in the
 same run directory, or a side that started first) are left out and counted.
 """
 from __future__ import annotations
@@ -13,11 +15,35 @@ import time
 from pathlib import Path
 from typing import Iterator
 
+import numpy as np
+
 from teleop.journal import JournalReader, journal_segments
 
-__all__ = ["JournalRecovery", "DELAY"]
+__all__ = ["JournalRecovery", "DELAY", "SEEN"]
 
 DELAY = 0.3     # [s] after a side's liveliness is lost, its journal is read this much later
+SEEN = 1 << 19  # messages of one key remembered (a journal's 16 MB ring holds fewer: >= 60 B per record)
+
+
+class _Seen:
+    """The newest :data:`SEEN` messages of one key: seqs in a ring (slot ``seq % SEEN``, 4 MB), payload hashes
+    of messages without a seq in two generations of sets (the older dropped when the newer is full)."""
+
+    def __init__(self) -> None:
+        self.seqs = np.full(SEEN, -1, dtype=np.int64)
+        self.new: set[int] = set()
+        self.old: set[int] = set()
+
+    def has(self, seq: int | None, h: int) -> bool:
+        return (seq is not None and bool(self.seqs[seq % SEEN] == seq)) or h in self.new or h in self.old
+
+    def add(self, seq: int | None, h: int) -> None:
+        if seq is not None:
+            self.seqs[seq % SEEN] = seq
+            return
+        if len(self.new) >= SEEN // 2:
+            self.old, self.new = self.new, set()
+        self.new.add(h)
 
 
 def _side(key: str) -> str:
@@ -41,23 +67,23 @@ class JournalRecovery:
         self.t_start = time.monotonic() if t_start is None else t_start
         self._readers: dict[str, JournalReader] = {}
         self._due: dict[str, float] = {}
-        self._seen: dict[str, set[int]] = {}
+        self._seen: dict[str, _Seen] = {}
         self._recovered: dict[str, set[int]] = {}
         self.counts: dict[str, int] = {}
         self.before_start = 0
         self.late = 0
 
-    def note(self, key: str, payload: bytes, recovered: bool) -> bool:
-        """Whether to record this message: a received one unless it was recovered already (it then
-        arrived late), a recovered one unless it was received."""
+    def note(self, key: str, payload: bytes, recovered: bool, seq: int | None = None) -> bool:
+        """Whether to record this message (``seq``: its sequence number, if it has one): a received one unless
+        it was recovered already (it then arrived late), a recovered one unless it was received."""
         h = hash(payload)
         seen = self._seen.get(key)
         if seen is None:
-            seen = self._seen[key] = set()
+            seen = self._seen[key] = _Seen()
         if recovered:
-            if h in seen:
+            if seen.has(seq, h):
                 return False
-            seen.add(h)
+            seen.add(seq, h)
             self._recovered.setdefault(key, set()).add(h)
             side = _side(key)
             self.counts[side] = self.counts.get(side, 0) + 1
@@ -65,7 +91,7 @@ class JournalRecovery:
         if h in self._recovered.get(key, ()):
             self.late += 1
             return False
-        seen.add(h)
+        seen.add(seq, h)
         return True
 
     def schedule(self, side: str, now: float) -> None:
@@ -90,8 +116,20 @@ class JournalRecovery:
             for t, key, payload in reader.new_records():
                 if t < self.t_start:
                     self.before_start += 1
-                elif hash(payload) not in self._seen.get(key, ()):
+                elif not self._known(key, payload):
                     yield t, key, payload
+
+    def _known(self, key: str, payload: bytes) -> bool:
+        """Whether the message ``payload`` on ``key`` is one the recording has."""
+        seen = self._seen.get(key)
+        if seen is None:
+            return False
+        from live.record_files import decode_any
+        try:
+            seq = getattr(decode_any(payload), "seq", None)
+        except Exception:  # noqa: BLE001 - CodecError: known by its hash only
+            seq = None
+        return seen.has(seq, hash(payload))
 
     def summary(self) -> dict:
         """``{"journal_dir", "journals": {side: segments found}, "recovered": {side: n}, "before_start",
