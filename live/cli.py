@@ -205,6 +205,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.func is None:
         print(f"{PROG}: error: {args.command} is not available in this build", file=sys.stderr)
         return 2
+    if args.command in ("record", "calibrate", "bridge") and getattr(args, "config", None):
+        from teleop.arms import is_bimanual
+        if is_bimanual(args.config):      # these serve one instrument: one arm of the two
+            print(f"{PROG}: error: {args.config} is a bimanual config; teleop {args.command} takes one arm's config "
+                  f"(teleop demo writes each to runs/<id>/<arm id>/config.yaml)", file=sys.stderr)
+            return 2
     logging.basicConfig(level=logging.INFO if getattr(args, "verbose", False) or args.command in ("slave", "master",
                                                                                                      "bridge")
                         else logging.WARNING,

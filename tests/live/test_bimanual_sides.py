@@ -43,3 +43,11 @@ def test_arm_view_logs_under_the_arm_and_passes_the_rest():
     view.flush()
     assert calls == [("joint", "right/grasp", {"torque_hat": 0.01}), ("master", "right/elbow", 0.5),
                      ("master", "right", 0.2), ("flush",)]
+
+
+@pytest.mark.parametrize("command", ["record", "calibrate", "bridge"])
+def test_one_instrument_commands_refuse_a_bimanual_config_in_one_line(command, capsys):
+    from live.cli import main
+    assert main([command, "--config", str(BIMANUAL)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "bimanual config" in err and "one arm's config" in err
