@@ -1,6 +1,7 @@
 """The evaluation of ``teleop demo --rig recording --recording FILE``: the live estimate against the measured one.
 
-A KAIST recording on the pair axis (:func:`evaluate_kaist`) is scored on the distal angle of its test cycles.
+A KAIST recording on the pair axis (:func:`evaluate_kaist`) is scored on the distal angle of its test cycles, a
+tendon's CSV on the single-tendon axis (:func:`evaluate_tendon`) on the distal tension after its calibration part.
 
 The demo's flow is every instrument's (:func:`live.demo.main_demo`); the recording rig (live/recording_rig.py)
 plays an MRD run as the spindle axis's hardware and the slave fits its calibration on one run of the folder at
@@ -33,7 +34,7 @@ from teleop.config import Config
 from teleop.errors import DataError
 
 __all__ = ["AGREEMENT_FS", "TORQUE_RMSE_BOUND", "AGREEMENT_DEG", "ANGLE_RMSE_BOUND_DEG", "RecordingDemo",
-           "evaluate_recording", "evaluate_kaist", "with_recording"]
+           "evaluate_recording", "evaluate_kaist", "evaluate_tendon", "with_recording"]
 
 #: Acceptance: |live - offline| jaw torque RMSE on the same cycles [FS].
 AGREEMENT_FS = 0.005
@@ -54,8 +55,11 @@ def evaluate_recording(run_dir: Path, cfg: Config) -> dict:
     from live.recording_axis import CENTRE, full_scale, load_model, model_path
     from live.recording_rig import check_recording, read_recording_run
     from live.recording_score import scored_from
-    if check_recording(cfg)[1] == "kaist":
+    fmt = check_recording(cfg)[1]
+    if fmt == "kaist":
         return evaluate_kaist(run_dir, cfg)
+    if fmt == "csv":
+        return evaluate_tendon(run_dir, cfg)
     run = read_recording_run(cfg)
     model = load_model(model_path(cfg))
     name = cfg.instrument.joints[0].name
@@ -100,7 +104,8 @@ def with_recording(cfg: Config, args: Any) -> Config:
         if getattr(args, "config", None) is None:
             from live.recording_rig import recording_format
             fmt = recording_format(Path(path).expanduser())
-            cfg = load_config(shipped_config("recording-kaist.yaml" if fmt == "kaist" else "recording-mrd.yaml"))
+            name = {"kaist": "recording-kaist.yaml", "csv": "sim.yaml"}.get(fmt, "recording-mrd.yaml")
+            cfg = load_config(shipped_config(name))
         rec = dataclasses.replace(cfg.rig.recording, path=str(Path(path).expanduser().resolve()), format="auto")
         cfg = dataclasses.replace(cfg, rig=dataclasses.replace(cfg.rig, type="recording", recording=rec))
     elif rig is not None:
@@ -131,8 +136,7 @@ def evaluate_kaist(run_dir: Path, cfg: Config) -> dict:
     cols = read_joint_csv(run_dir / "slave_joints.csv")
     c1, c2, how = split(rec)
     t = cols["time"]
-    j = np.clip(np.searchsorted(t, rec.time), 0, t.size - 1)       # the row at (or after) each recorded sample
-    near = np.abs(t[j] - rec.time) <= 6e-4
+    j, near = _rows_at(t, rec.time)
     keep = near & (np.arange(len(rec)) >= c2.start) & (np.arange(len(rec)) < c2.stop)
     if not keep.any():
         raise DataError(f"{run_dir / 'slave_joints.csv'}: no cycle of the slave on the test cycles of {rec.source}")
@@ -148,6 +152,45 @@ def evaluate_kaist(run_dir: Path, cfg: Config) -> dict:
             "angle_max_deg": float(math.degrees(np.max(np.abs(live - truth)))),
             "offline_same_model_rmse_deg": deg(batch - truth), "live_minus_offline_deg": deg(live - truth) - deg(batch - truth),
             "offline_seed_rmse_deg": deg(seed - truth)}
+
+
+def _rows_at(t_rows: np.ndarray, t_rec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(row index at each recorded sample time, whether a row lies within 0.6 ms of it)."""
+    j = np.clip(np.searchsorted(t_rows, t_rec - 6e-4), 0, t_rows.size - 1)
+    return j, np.abs(t_rows[j] - t_rec) <= 6e-4
+
+
+def evaluate_tendon(run_dir: Path, cfg: Config) -> dict:
+    """A tendon's CSV on the single-tendon axis: the live distal tension on the held-out part (after the calibration
+    fit's 60 %) against the measured one, over the measured range (FS), beside the same estimator run offline
+    (:func:`estimator.online.distal.estimate_batch`) on the same samples. Raises DataError when the recording has no
+    T_out or no slave row falls on a held-out sample."""
+    import json
+
+    from estimator.online.distal import estimate_batch
+    from estimator.sheath import SheathModel
+    from live.recording_rig import check_recording
+    from live.recording_tendon import read_tendon_csv
+    from slave.calibration_file import calibration_path
+    d = read_tendon_csv(check_recording(cfg)[0])
+    if d.T_out is None:
+        raise DataError(f"{d.source}: no T_out column: the summary scores the distal tension")
+    model = json.loads(calibration_path(cfg).with_suffix(".recording.json").read_text(encoding="utf-8"))
+    rows = read_joint_csv(run_dir / "slave.csv")
+    j, near = _rows_at(rows["time"], d.time)
+    keep = near & (d.time >= d.time[0] + model["split_time_s"])
+    if not keep.any():
+        raise DataError(f"{run_dir / 'slave.csv'}: no cycle of the slave on the held-out part of {d.source}")
+    e = cfg.estimator
+    off = estimate_batch(d.T_in, d.x_in, SheathModel(K=model["K"], compliance=model["compliance"]), time=d.time,
+                         n_nodes=e.n_nodes, pretension=cfg.sheath.pretension, hold_rate=e.hold_rate,
+                         rate_time_constant=e.rate_time_constant).T_out[keep]
+    truth, live = d.T_out[keep], rows["T_out_hat"][j[keep]]
+    fs = float(np.ptp(truth)) or 1.0
+    rmse, rmse_off = (float(np.sqrt(np.mean((v - truth) ** 2)) / fs) for v in (live, off))
+    return {"recording": d.source, "format": "csv", "calibration_run": model["run"], "full_scale_N": fs,
+            "samples_scored": int(keep.sum()), "T_out_rmse_fs": rmse, "offline_T_out_rmse_fs": rmse_off,
+            "live_minus_offline_fs": rmse - rmse_off}
 
 
 #: Acceptance (KAIST): |live - offline| distal angle RMSE of the same model on the same samples [deg].
@@ -171,6 +214,8 @@ class RecordingDemo:
         except (DataError, OSError, KeyError) as e:
             problems.append(f"evaluation: {e}")
             return {"evaluated": False}
+        if r.get("format") == "csv":
+            return {"live_agrees_with_offline": abs(r["live_minus_offline_fs"]) <= AGREEMENT_FS}
         if r.get("format") == "kaist":
             return {"angle_rmse_within_bound": r["angle_rmse_deg"] <= ANGLE_RMSE_BOUND_DEG,
                     "live_agrees_with_offline": abs(r["live_minus_offline_deg"]) <= AGREEMENT_DEG}
@@ -183,6 +228,12 @@ class RecordingDemo:
         r: Any = s.get("recording")
         if not r:
             return ["recording: not evaluated (see problems)"]
+        if r.get("format") == "csv":
+            return [f"recording {r['recording']} (single tendon, calibrated on {Path(r['calibration_run']).name})",
+                    f"  scored {r['samples_scored']} recorded samples after the calibration fit's 60 %",
+                    f"  distal tension live vs measured: RMSE {r['T_out_rmse_fs']:.4f} FS (FS {r['full_scale_N']:.2f} N)",
+                    f"  offline (same estimator and calibration, same samples): RMSE {r['offline_T_out_rmse_fs']:.4f} FS; "
+                    f"live - offline {r['live_minus_offline_fs']:+.4f} FS (bound {AGREEMENT_FS})"]
         if r.get("format") == "kaist":
             return [f"recording {r['recording']} (pair axis, calibrated on {r['split'].split(';')[0]})",
                     f"  scored {r['samples_scored']} recorded samples of the test cycles",

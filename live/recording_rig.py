@@ -14,7 +14,8 @@ cannot execute a calibration motion.
 A KAIST recording (``sine_config_N.txt``, :mod:`study.kaist`) drives the pair axis of an instrument of one
 antagonistic pair (:mod:`live.recording_pair`): x_in = the motor command [rad] on both tendons, T_in = the
 two proximal tensions [N], the truth's ``theta`` the measured distal angle. The project's measured-data CSV
-is refused in one line naming the file and the ``teleop analyze`` command that studies it.
+(:func:`teleop.recording.read_measured_csv`) drives the single-tendon axis (:mod:`live.recording_tendon`):
+x_in, T_in proximal, T_out and x_out the truth.
 
 Layering: the readers live in :mod:`study` (floor 3) and the rig reads through them, so the rig lives
 here on floor 4 and registers itself in :data:`slave.rigs.RIG_TYPES` when this module is imported
@@ -39,12 +40,11 @@ from study.mrd import MrdRun, read_mrd
 from teleop.config import Config
 from teleop.errors import ConfigError, DataError
 
-__all__ = ["FORMATS", "recording_format", "check_recording", "read_recording", "read_recording_run", "recorded_distal_angle",
+__all__ = ["FORMATS", "recording_format", "check_recording", "read_recording", "read_recording_run", "recorded_motion",
            "RecordedSpindle"]
 
 #: The formats ``rig.recording.format`` names, and the axis each drives.
 FORMATS = {"mrd": "spindle", "kaist": "pair", "csv": "single tendon"}
-_ANALYZE = {"kaist": "teleop analyze --kaist DIR (or teleop analyze FILE)", "csv": "teleop analyze FILE"}
 
 
 def recording_format(path: Path, fmt: str = "auto") -> str:
@@ -96,15 +96,14 @@ def check_recording(cfg: Config) -> tuple[Path, str]:
     ------
     ConfigError
         No ``rig.recording.path``; a recording whose axis is not the instrument's (an MRD run on a
-        single tendon, ...); a format the rig does not play (CSV: the message names the analysis
-        command); a recording on an instrument of more than one joint.
+        single tendon, ...); an MRD or KAIST recording on an instrument of more than one joint.
     DataError
         A missing or unreadable file (:func:`recording_format`).
     """
     rc = cfg.rig.recording
     if not rc.path:
-        raise ConfigError("rig.recording.path: rig.type recording needs a recording (an MRD XY.TXT run or a KAIST "
-                          "sine_config_N.txt)")
+        raise ConfigError("rig.recording.path: rig.type recording needs a recording (an MRD XY.TXT run, a KAIST "
+                          "sine_config_N.txt or a measured-data CSV)")
     path = Path(rc.path).expanduser()
     fmt = recording_format(path, rc.format)
     want, have = FORMATS[fmt], _instrument_axis(cfg)
@@ -112,8 +111,7 @@ def check_recording(cfg: Config) -> tuple[Path, str]:
         raise ConfigError(f"rig.recording.path: {path} is a {fmt.upper()} recording of a {want} axis; the config's "
                           f"instrument is a {have} axis (instrument.joints): use an instrument of that axis type")
     if fmt == "csv":
-        raise ConfigError(f"rig.recording.path: {path}: rig.type recording plays MRD runs (spindle axis) and KAIST "
-                          f"recordings (pair axis); study a CSV recording with `{_ANALYZE[fmt]}`")
+        return path, fmt
     if len(cfg.instrument.joints) != 1:
         raise ConfigError(f"rig.recording.path: {path} is one joint's recording; instrument.joints has "
                           f"{len(cfg.instrument.joints)} joints, need 1")
@@ -135,18 +133,22 @@ def read_recording(cfg: Config) -> Any:
     if fmt == "kaist":
         from study.kaist import read_kaist
         return read_kaist(path)
+    if fmt == "csv":
+        from live.recording_tendon import read_tendon_csv
+        return read_tendon_csv(path)
     return read_mrd(path)
 
 
-def recorded_distal_angle(cfg: Config) -> tuple[np.ndarray, np.ndarray]:
-    """(time [s] from 0, the recorded distal angle [rad]) of ``cfg``'s recording, MRD or KAIST."""
+def recorded_motion(cfg: Config) -> tuple[np.ndarray, np.ndarray]:
+    """(time [s] from 0, the recorded motion the operator retraces) of ``cfg``'s recording: the distal angle [rad]
+    of an MRD or KAIST recording, the proximal displacement x_in [m] of a tendon's CSV."""
     path, fmt = check_recording(cfg)
+    rec = read_recording(cfg)
     if fmt == "kaist":
-        from study.kaist import read_kaist
-        rec = read_kaist(path)
         return rec.time - rec.time[0], rec.angle
-    run = read_mrd(path)
-    return run.time, run.theta_d
+    if fmt == "csv":
+        return rec.time - rec.time[0], rec.x_in
+    return rec.time, rec.theta_d
 
 
 class RecordedSpindle:
@@ -253,4 +255,7 @@ def _recording(cfg: Config, session: Any) -> Any:
     if fmt == "kaist":
         from live.recording_pair import RecordedPair
         return RecordedPair.from_config(cfg, path)
+    if fmt == "csv":
+        from live.recording_tendon import RecordedTendon
+        return RecordedTendon.from_config(cfg, path)
     return RecordedSpindle.from_config(cfg)

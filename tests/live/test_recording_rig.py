@@ -175,14 +175,14 @@ def test_the_pair_axis_estimate_on_kaist_is_the_batch_joint_model_and_near_the_o
     assert r["left_out_cost_deg"] == pytest.approx(r["live_rmse_deg"] - 1.0)
 
 
-def test_a_measured_data_csv_is_refused_naming_the_analysis(tmp_path):
+def test_a_tendon_csv_without_a_distal_channel_is_refused_naming_the_file(tmp_path):
     f = tmp_path / "bench.csv"
-    f.write_text("time,x_in,T_in\n0,0,0\n")
+    f.write_text("time,x_in,T_in\n0,0,0\n0.001,0,0\n")
     base = load_config(ROOT / "configs" / "sim.yaml")
     cfg = dataclasses.replace(base, rig=dataclasses.replace(base.rig, type="recording", recording=dataclasses.replace(
         base.rig.recording, path=str(f))))
-    with pytest.raises(ConfigError, match=r"bench.csv: rig.type recording plays MRD runs .*`teleop analyze FILE`"):
-        check_recording(cfg)
+    with pytest.raises(DataError, match=r"bench.csv: .*T_out"):
+        make_rig(cfg)
 
 
 def synthetic_kaist(path: Path) -> Path:
@@ -251,3 +251,38 @@ def test_the_demo_refuses_a_bad_recording_in_one_line_before_any_process_starts(
     assert rc != 0
     assert len(err) == 1 and words in err[0], err
     assert not (tmp_path / "runs").exists()
+
+
+def synthetic_tendon_csv(path: Path) -> Path:
+    """A measured-data CSV of a tendon pulled and released twice (2 s at 150 Hz): the distal tension a capstan
+    band below (pull) or above (release) the proximal one."""
+    from teleop.recording import MeasuredData, write_measured_csv
+    t = np.arange(1, 301) / 150.0
+    x = 0.002 * (1 - np.cos(2 * np.pi * t))
+    T_in = 2000.0 * x
+    T_out = T_in * np.where(np.sin(2 * np.pi * t) >= 0, 0.7, 1.2)
+    write_measured_csv(path, MeasuredData(time=t, x_in=x, T_in=T_in, x_out=x - 1e-4 * T_in, T_out=T_out))
+    return path
+
+
+def test_a_tendon_csv_plays_on_the_single_tendon_axis_and_its_calibration_reloads(tmp_path):
+    from slave.calibration_file import calibration_path, load_calibration
+    f = synthetic_tendon_csv(tmp_path / "bench.csv")
+    base = load_config(ROOT / "configs" / "sim.yaml")
+    cfg = dataclasses.replace(base, rig=dataclasses.replace(base.rig, type="recording", recording=dataclasses.replace(
+        base.rig.recording, path=str(f))), calibration=dataclasses.replace(base.calibration, dir=str(tmp_path / "cal")))
+    path = calibration_path(cfg)
+    first, clock = pair_node(cfg, calibration_file=path)
+    est = []
+    for _ in range(30):
+        clock.advance(0.002)
+        first.step(clock.now())
+        est.append(first.axes[0].sample.T_out)
+    assert first.rig.state.t == pytest.approx(30 / 150.0)     # the calibration cycle, then 29 recorded samples
+    assert first.rig.state.T_in == pytest.approx(2000.0 * 0.002 * (1 - np.cos(2 * np.pi * 30 / 150.0)))
+    assert first.rig.state.truth.T_out > 0
+    again, clock = pair_node(cfg, calibration=load_calibration(path, cfg), calibration_file=path)
+    for k in range(1, 30):
+        clock.advance(0.002)
+        again.step(clock.now())
+        assert again.axes[0].sample.T_out == pytest.approx(est[k], abs=1e-9)
