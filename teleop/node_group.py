@@ -13,7 +13,8 @@ single slave's start on its command): the master group sends the arms' commands 
 
 The group times each arm's step (:meth:`arm_step_stats`: p50, p99, max [ms]) so the cost of each arm
 in the shared period is visible, and after the loop gives each node the loop's pacer figures, so
-each arm's stats read like a single instrument's.
+each arm's stats read like a single instrument's. The group's own state, which only labels the loop's
+per-state figures, is ENGAGED while any arm is, else the first arm's.
 """
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from teleop.clock import Clock
-from teleop.messages import Side
+from teleop.messages import Side, SideState
 from teleop.node import NodeBase
 
 __all__ = ["NodeGroup"]
@@ -83,6 +84,9 @@ class NodeGroup(NodeBase):
                 node.step(now)
                 times.append(perf() - t0)
         self.done = all(n.done for n in self.nodes)
+        # the loop's figures by state (cycles, overruns) count a cycle ENGAGED when any arm is
+        engaged = any(n.state == SideState.ENGAGED for n in self.nodes)
+        self.state = SideState.ENGAGED if engaged else self.nodes[0].state
 
     def _cycle_source(self):
         """The last arm's cycle source (the slave's: its command subscriber): the peer group publishes the

@@ -4,7 +4,7 @@ from __future__ import annotations
 import pytest
 
 from teleop.clock import FakeClock
-from teleop.messages import Side
+from teleop.messages import Side, SideState
 from teleop.node import NodeBase
 from teleop.node_group import NodeGroup
 
@@ -21,6 +21,7 @@ class Arm(NodeBase):
         return 1000.0
 
     def step(self, now: float) -> None:
+        self.state = SideState.ENGAGED if len(self.times) == 1 else SideState.READY
         self.times.append(now)
         self.left -= 1
         self.done = self.left <= 0
@@ -43,6 +44,7 @@ def test_group_steps_every_arm_with_one_time_until_all_are_done():
     assert set(st["arms"]) == {"left", "right"} and st["arms"]["right"]["steps"] == 5
     assert st["arm_steps"]["left"]["cycles"] == 3 and st["arm_steps"]["right"]["cycles"] == 5
     assert st["pacer"]["ticks"] == 5
+    assert st["pacer"]["cycles_by_state"] == {"STARTING": 1, "ENGAGED": 1, "READY": 3}   # state before each step
     # each arm gets the loop's figures and its end-of-run call
     assert a.ended == b.ended == 1 and a.pacer_stats["ticks"] == 5
 
