@@ -114,6 +114,13 @@ class SlaveAxis:
         raise NotImplementedError
 
     @classmethod
+    def motor_all(cls, axes: Sequence[SlaveAxis], relax: bool, targets: Sequence[float | None], state: RigState,
+                  dt: float) -> Any:
+        """:meth:`motor` of every axis with its target, as :meth:`rig_command` takes them (a kind may step its
+        controllers together, the same numbers)."""
+        return [ax.motor(relax, t, state, dt) for ax, t in zip(axes, targets)]
+
+    @classmethod
     def observe_all(cls, axes: Sequence[SlaveAxis], state: RigState) -> list[tuple[AxisState, tuple[float, ...]]]:
         """:meth:`observe` of every axis, in order (a kind may step its estimators together, the same numbers)."""
         return [ax.observe(state) for ax in axes]

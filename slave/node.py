@@ -232,7 +232,7 @@ class SlaveNode(SlaveNodeBase):
             self.last_safe_reason = detail if decision is Decision.SAFE else "engaged command too far"
         self.marker = 0 if relax else self.marker
         targets = detail.targets if decision is Decision.ENGAGED else (None,) * len(self.axes)
-        return [ax.motor(relax, t, self.rig_state, dt) for ax, t in zip(self.axes, targets)]
+        return self.kind.motor_all(self.axes, relax, targets, self.rig_state, dt)
 
     # ---- the cycle ---------------------------------------------------------------------------------
     def _calibration_step(self, now: float, dt: float) -> None:

@@ -18,7 +18,8 @@
   truth) -> the axis's state (effort = torque_hat [N m], position = angle_hat [rad], both tendons);
   the joint's columns of ``slave_joints.csv`` and its Rerun series. The estimators of all the joints
   step in one compiled call per cycle (:class:`~estimator.online.joint_bank.JointBank`, the same numbers
-  as each joint's own step) once each has had its first sample.
+  as each joint's own step) once each has had its first sample, and so do the pair controllers
+  (:class:`~slave.pair_control_bank.PairControlBank`).
 """
 from __future__ import annotations
 
@@ -36,6 +37,7 @@ from slave.axis import SlaveAxis
 from slave.calibration_file import from_results, sheath_models
 from slave.pair_calibrate import PairCalibration, set_tension
 from slave.pair_control import PairController
+from slave.pair_control_bank import PairControlBank
 from slave.rig import TENDONS, InstrumentTruth, Rig, RigState
 from teleop.config import Config, JointConfig
 from teleop.messages import AxisState, TendonState
@@ -84,6 +86,8 @@ class PairAxis(SlaveAxis):
         The last estimate.
     bank : JointBank or None
         The bank stepping the estimators of all the instrument's joints (shared by its axes).
+    control_bank : PairControlBank or None
+        The bank stepping the pair controllers of all the instrument's joints (shared by its axes).
     hold : float or None
         The angle command being followed [rad]; None: relax.
     """
@@ -101,6 +105,7 @@ class PairAxis(SlaveAxis):
         self.sample: Any = None
         self.hold: float | None = None
         self.bank: JointBank | None = None
+        self.control_bank: PairControlBank | None = None
 
     def start(self, models, history, tension_noise: tuple[float, float] = (0.0, 0.0)) -> None:
         """The joint estimator on ``models`` (tendon a, b), the travel limits about the first sample of
@@ -188,10 +193,13 @@ class PairAxis(SlaveAxis):
         x_in, T_in, x_cmd = (np.asarray(v).tolist() for v in (state.x_in, state.T_in, state.x_in_cmd))
         if tr is not None:      # plain floats: one conversion per array, none per value
             torque, theta, T_out, elong = (v.tolist() for v in (tr.torque, tr.theta, tr.T_out, tr.elongation))
-        for ax in axes:
-            assert isinstance(ax, PairAxis) and ax.controller is not None
+        cb = _active_control_bank(axes)
+        modes = cb.mode.tolist() if cb is not None else [int(ax.controller.mode) for ax in axes
+                                                         if isinstance(ax, PairAxis) and ax.controller is not None]
+        for ax, mode in zip(axes, modes):
+            assert isinstance(ax, PairAxis)
             i, s = ax.index, ax.sample
-            row += [0.0 if ax.hold is None else ax.hold, int(ax.controller.mode), s.torque, s.angle]
+            row += [0.0 if ax.hold is None else ax.hold, mode, s.torque, s.angle]
             row += [torque[i], theta[i]] if tr is not None else []
             for k in range(2):
                 row += [x_in[i][k], T_in[i][k], x_cmd[i][k], s.T_out[k], s.elongation[k], int(s.phase[k])]
@@ -200,9 +208,10 @@ class PairAxis(SlaveAxis):
 
     @classmethod
     def stats(cls, axes: Sequence[SlaveAxis]) -> dict[str, Any]:
+        cb = _active_control_bank(axes)
         return {"joints": [a.name for a in axes],
-                "side_switches": [a.controller.switches for a in axes
-                                  if isinstance(a, PairAxis) and a.controller is not None]}
+                "side_switches": cb.switches.tolist() if cb is not None else
+                [a.controller.switches for a in axes if isinstance(a, PairAxis) and a.controller is not None]}
 
     @classmethod
     def warm_up(cls, cfg: Config) -> None:
@@ -214,6 +223,28 @@ class PairAxis(SlaveAxis):
         est = JointEstimator(m, m, 0.004, n_nodes=4)
         est.step(1.0, 0.0, 0.5, 0.0, 0.0)
         est.step(1.1, 0.0, 0.5, 0.0, 1e-3)      # the compiled step (every sample after the first)
+        JointBank([est]).step(np.array([[1.2, 0.5]]), np.zeros((1, 2)), 2e-3)     # and the banks' loops
+        PairControlBank([PairController(0.004, 0.25, 0.01, 0.01, 0.05, (0.0, 0.0))]).step(
+            np.zeros(1), np.ones((1, 2)), 1e-3, np.zeros((1, 2)))
+
+    @classmethod
+    def motor_all(cls, axes: Sequence[SlaveAxis], relax: bool, targets: Sequence[float | None], state: RigState,
+                  dt: float) -> Any:
+        """:meth:`motor` of every joint, the pair controllers stepped together by their :class:`PairControlBank`
+        when they can be (the same numbers; module docstring): the motor commands [m], shape (n_joints, 2)."""
+        bank = _control_bank_of(axes, state)
+        if bank is None:
+            return [ax.motor(relax, t, state, dt) for ax, t in zip(axes, targets)]
+        holds, x_out = [], []
+        for ax, t in zip(axes, targets):
+            assert isinstance(ax, PairAxis)
+            if relax:
+                ax.hold = None
+            elif t is not None:
+                ax.hold = t
+            holds.append(math.nan if ax.hold is None else ax.hold)
+            x_out.append(ax.sample.x_out)
+        return bank.step(np.array(holds, dtype=np.float64), state.T_in, dt, np.array(x_out, dtype=np.float64)).copy()
 
     @classmethod
     def observe_all(cls, axes: Sequence[SlaveAxis], state: RigState) -> list[tuple[AxisState, tuple[float, ...]]]:
@@ -298,3 +329,33 @@ def _bank_of(axes: Sequence[SlaveAxis], state: RigState) -> JointBank | None:
         assert isinstance(ax, PairAxis)
         ax.bank = bank
     return bank
+
+
+def _active_control_bank(axes: Sequence[SlaveAxis]) -> PairControlBank | None:
+    """The active controller bank of ``axes``, if any (its rows are the axes in order)."""
+    first = axes[0]
+    cb = first.control_bank if isinstance(first, PairAxis) else None
+    return cb if cb is not None and cb.active else None
+
+
+def _control_bank_of(axes: Sequence[SlaveAxis], state: RigState) -> PairControlBank | None:
+    """The controller bank of ``axes`` (rows 0..n-1 of the rig's arrays in order), built when every axis has a
+    controller and an estimate and none is banked; a bank of controllers the axes no longer have is released."""
+    ctls = [ax.controller for ax in axes if isinstance(ax, PairAxis)]
+    cb = _active_control_bank(axes)
+    if cb is not None:
+        if len(ctls) == len(cb.controllers) and all(a is b for a, b in zip(ctls, cb.controllers)):
+            return cb
+        cb.release()
+    if [ax.index if isinstance(ax, PairAxis) else -1 for ax in axes] != list(range(len(axes))) \
+            or np.shape(state.T_in) != (len(axes), 2):
+        return None
+    ready = [c for c, ax in zip(ctls, axes)
+             if c is not None and c._bank is None and isinstance(ax, PairAxis) and ax.sample is not None]
+    if len(ready) != len(axes):
+        return None
+    cb = PairControlBank(ready)
+    for ax in axes:
+        assert isinstance(ax, PairAxis)
+        ax.control_bank = cb
+    return cb

@@ -32,11 +32,13 @@ antagonist, instead of going slack (or being pulled tight) by the commanded trav
 Without a command (None: watchdog, not engaged) the pair goes IDLE: both tendons relax to T_set and
 the joint returns toward rest under its own spring. Every motor command is finally clipped to the
 tendon's travel limits (``x_limits``), whatever the command or the loop asks.
+:class:`slave.pair_control_bank.PairControlBank` steps the controllers of every joint in one call.
 """
 from __future__ import annotations
 
 import math
 from enum import IntEnum
+from typing import Any
 
 __all__ = ["PairMode", "PairController"]
 
@@ -104,6 +106,7 @@ class PairController:
         self.switches = 0
         self._x_ref = 0.0
         self._c_ref = 0.0
+        self._bank: Any = None     # the slave.pair_control_bank.PairControlBank stepping this controller, if any
 
     @property
     def pulling(self) -> int:
@@ -142,6 +145,8 @@ class PairController:
         x_out_hat : (float, float), optional
             Estimated distal displacements of tendons a and b [m] (for the feedforward).
         """
+        if self._bank is not None:      # stepped on its own: its state back from the bank first
+            self._bank.release()
         c = math.nan if theta_cmd is None else float(theta_cmd)   # None or NaN: idle
         mode = self._mode_for(c)
         if mode != self.mode:
