@@ -18,8 +18,9 @@ class RecordingRigConfig:
     format: how to read it (``auto``: from the file's name and first line);
     rate: ``recording`` one recorded sample per slave cycle, ``slave`` the recording resampled at the rig's time;
     at_end: ``stop`` holds the last sample and reports the end, ``loop`` starts over;
-    calibration_run: the MRD run the slave's calibration is fitted on (a path, or a run name of the
-    recording's folder); null: the tool file's ``calibration.runs`` rule over the recording's folder.
+    calibration_run: the recording the slave's calibration is fitted on: an MRD run (a path, or a run name of the
+    recording's folder; null: the tool file's ``calibration.runs`` rule over the folder), a KAIST file (its command
+    cycle 1) or a tendon's CSV (its first 60 %) (a path; null: the played recording itself).
     """
 
     path: Optional[str] = None
