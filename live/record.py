@@ -60,7 +60,7 @@ from live.record_files import (
     flatten,
     short_names,
     stream_bytes,
-    values,
+    values_of,
 )
 from live.record_journal import JournalRecovery
 from teleop.entity import Entity
@@ -221,7 +221,7 @@ class Recorder:
         st.type = type(msg).__name__
         (st.fill if recovered else st.see)(seq, t)
         vals: list = []                           # the numbers, flattened only where needed (CSV, sample, Rerun)
-        numbers = lambda: vals or values(msg, vals) or vals   # noqa: E731
+        numbers = lambda: values_of(msg, vals)   # noqa: E731
         shape = self._shapes.get((key, payload[2], len(payload)))   # a codec layout's length fixes its shape
         if shape is None:                         # a new message shape on this key: names, units, a file
             shape = self._shapes[(key, payload[2], len(payload))] = (key, type(msg), len(numbers()))

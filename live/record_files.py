@@ -15,7 +15,7 @@ import zstandard
 
 from teleop.codec import MAGIC, decode, seq_newer
 
-__all__ = ["decode_any", "flatten", "short_names", "values", "StreamCsv", "StreamCounts"]
+__all__ = ["decode_any", "flatten", "short_names", "values", "values_of", "StreamCsv", "StreamCounts"]
 
 _SI = {"T": "N", "x": "m", "e": "m", "t": "s"}
 _fields_cache: dict[type, tuple[str, ...]] = {}
@@ -88,6 +88,13 @@ def values(x, out: list) -> None:
         out.append(int(x.value) if isinstance(x, enum.Enum) else int(x))
     else:
         out.append(x)
+
+
+def values_of(x, out: list) -> list:
+    """``out``, filled with the numbers of ``x`` (:func:`values`) when it is empty (a message's numbers once)."""
+    if not out:
+        values(x, out)
+    return out
 
 
 def short_names(names) -> tuple[str, ...]:
