@@ -24,7 +24,7 @@ here on floor 4 and registers itself in :data:`slave.rigs.RIG_TYPES` when this m
 ``rig.recording.rate``: ``recording`` gives one recorded sample per step at the recording's own time;
 ``slave`` resamples the recording linearly at the rig's time (the sum of the steps' ``dt``).
 ``rig.recording.at_end``: ``stop`` holds the last sample and sets :attr:`RecordedSpindle.finished`;
-``loop`` starts over, the time running on.
+``loop`` starts an MRD run over, the time running on (a KAIST or CSV recording plays once).
 """
 from __future__ import annotations
 
@@ -96,7 +96,8 @@ def check_recording(cfg: Config) -> tuple[Path, str]:
     ------
     ConfigError
         No ``rig.recording.path``; a recording whose axis is not the instrument's (an MRD run on a
-        single tendon, ...); an MRD or KAIST recording on an instrument of more than one joint.
+        single tendon, ...); an MRD or KAIST recording on an instrument of more than one joint; ``at_end: loop``
+        on a KAIST or CSV recording.
     DataError
         A missing or unreadable file (:func:`recording_format`).
     """
@@ -110,6 +111,9 @@ def check_recording(cfg: Config) -> tuple[Path, str]:
     if want != have:
         raise ConfigError(f"rig.recording.path: {path} is a {fmt.upper()} recording of a {want} axis; the config's "
                           f"instrument is a {have} axis (instrument.joints): use an instrument of that axis type")
+    if fmt != "mrd" and rc.at_end == "loop":
+        raise ConfigError(f"rig.recording.at_end: loop replays MRD runs; a {fmt.upper()} recording plays once "
+                          "(at_end: stop)")
     if fmt == "csv":
         return path, fmt
     if len(cfg.instrument.joints) != 1:

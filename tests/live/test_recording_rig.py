@@ -286,3 +286,12 @@ def test_a_tendon_csv_plays_on_the_single_tendon_axis_and_its_calibration_reload
         clock.advance(0.002)
         again.step(clock.now())
         assert again.axes[0].sample.T_out == pytest.approx(est[k], abs=1e-9)
+
+
+def test_at_end_loop_is_refused_on_a_recording_that_plays_once(tmp_path):
+    f = synthetic_kaist(tmp_path / "sine_config_0.txt")
+    base = load_config(ROOT / "configs" / "recording-kaist.yaml")
+    cfg = dataclasses.replace(base, rig=dataclasses.replace(base.rig, recording=dataclasses.replace(
+        base.rig.recording, path=str(f), at_end="loop")))
+    with pytest.raises(ConfigError, match=r"rig.recording.at_end: loop replays MRD runs; a KAIST recording plays once"):
+        check_recording(cfg)
