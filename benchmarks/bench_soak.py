@@ -11,8 +11,10 @@ the master's round-trip histogram, the recorder's count and seq gaps per stream.
 Per ``--window`` (and at the end of the first minute, the memory baseline) it prints and appends to the
 JSON file (rewritten whole after every window, so a run cut short keeps its figures): each loop's
 overruns, the round trip's p50 and p99 in the window, the resident memory (RSS) of every process and of
-its children (the sides' Rerun logging processes), the run directory's bytes and bytes per hour, the
-messages the recorder is missing by seq. At the end, the messages lost (each side's sent count against
+its children (the sides' Rerun logging processes), the run directory's bytes and bytes per hour, how far
+the recorder is behind the sides (commands and estimates sent and not yet written) and the messages it is
+missing by seq. A recorder behind by thousands of messages is starved of CPU (it runs niced, below the two
+real-time loops): it holds the backlog in memory, and what the senders' queues drop meanwhile is lost to it. At the end, the messages lost (each side's sent count against
 what the recorder holds) and a verdict on the criteria: RSS growth after the first minute below
 :data:`RSS_GROWTH` per process, the last window's round-trip p99 within :data:`P99_DRIFT` of the first's,
 no message lost, under :data:`BYTES_PER_HOUR` of disk per hour (the growing files at their rate over the run,
@@ -194,6 +196,9 @@ def window(prev: dict, cur: dict, t0: float, t1: float) -> dict:
     streams = {k: v for k, v in rec.items() if isinstance(v, list)}
     out["recorder_messages"] = sum(v[0] for v in streams.values())
     out["missing_by_seq"] = sum(v[1] for v in streams.values())
+    sent = sum(cur["live"].get(side, {}).get("sent", 0) for side in ("master", "slave"))
+    fast = sum(v[0] for k, v in streams.items() if k.endswith(("/command", "/estimate")))
+    out["recorder_behind"] = max(0, sent - fast)      # commands and estimates sent, not yet written [messages]
     return out
 
 
@@ -203,7 +208,8 @@ def line(w: dict) -> str:
     return (f"[{w['t_start_s']:6.0f}-{w['t_end_s']:6.0f} s] overruns master {w['master_overruns']} slave "
             f"{w['slave_overruns']}; rtt p50 {w['rtt_p50_ms']} ms p99 {w['rtt_p99_ms']} ms (n {w['rtt_n']}); "
             f"RSS MB {mem}; disk {w['disk_bytes'] / 1e6:.1f} MB ({w['disk_bytes_per_hour'] / 1e9:.3f} GB/h); "
-            f"recorder {w['recorder_messages']} messages, {w['missing_by_seq']} missing by seq")
+            f"recorder {w['recorder_messages']} messages, {w['recorder_behind']} behind, {w['missing_by_seq']} missing "
+            f"by seq")
 
 
 def state(procs: dict, run_dir: Path, t0: float) -> dict:
