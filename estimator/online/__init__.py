@@ -2,7 +2,9 @@
 
 :mod:`~estimator.online.distal` (one tendon: distal tension and elongation, profile memory),
 :mod:`~estimator.online.joint` and :mod:`~estimator.online.joint_batch` (an antagonistic pair: joint
-torque and angle), :mod:`~estimator.online.spindle` (a cable pair on one input spindle). They import
+torque and angle), :mod:`~estimator.online.spindle` (a cable pair on one input spindle; per cycle
+:mod:`~estimator.online.spindle_estimator`), :mod:`~estimator.online.spindle_centre` (the jaw torque from the
+spindle's band centre; per cycle :mod:`~estimator.online.centre_estimator`). They import
 only the model core at the top of :mod:`estimator` (sheath, capstan, phase, kernels), never
 :mod:`estimator.offline`.
 """
