@@ -254,7 +254,7 @@ def format_summary(s: dict) -> str:
     L += verdict_lines(s)
     L.append("")
     rec = s.get("master", {}).get("recording") or f"{s['run_dir']}/master.csv"
-    L.append(f"recording: {s['run_dir']}/{kind.files[0]}; master: {rec}")
+    L.append(f"recording: {s['run_dir']}/{s.get('slave_file') or kind.files[0]}; master: {rec}")
     L.append(f"rerun:     open with `{rerun_command()} {s['run_dir']}/slave.rrd {s['run_dir']}/master.rrd` "
              f"(no display: docs/how-to/rerun-view.md)")
     if s.get("figure"):

@@ -209,6 +209,7 @@ class RecordingDemo:
         """Fill ``summary["recording"]``; the checks: the processes finished, the torque RMSE within
         :data:`TORQUE_RMSE_BOUND`, live and offline within :data:`AGREEMENT_FS`."""
         summary["kind"] = "recording"
+        summary["slave_file"] = "slave.csv" if not cfg.instrument.joints else "slave_joints.csv"
         try:
             r = summary["recording"] = evaluate_recording(run_dir, cfg)
         except (DataError, OSError, KeyError) as e:
