@@ -64,6 +64,8 @@ __all__ = ["PAPER_BOUNDS", "baseline_deadband", "evaluate", "checks", "TendonDem
 PAPER_BOUNDS = {"force_error_max_fs": 0.07, "elongation_error_max_fs": 0.03, "mean_error_fs": 0.02}
 EXPERIMENTS = {1: "paper", 2: "minor"}
 DEFAULT_CONFIG = shipped_config("sim.yaml")     # configs/sim.yaml of the checkout, or of the installed package
+DEFAULT_TIMEOUT = 50.0       # [s] --timeout of a simulated instrument's demo
+RECORDING_MARGIN = 120.0     # [s] --timeout past a recording's length: the slave's calibration fit and the start-up
 
 
 def baseline_deadband(cfg: Config) -> float:
@@ -271,12 +273,18 @@ def main_demo(args) -> int:
     from teleop.safety_bounds import waiver_lines, waivers
     cfg_path = resolve_config(args.config) if args.config else (DEFAULT_CONFIG if DEFAULT_CONFIG.is_file() else None)
     from teleop.arms import is_bimanual
+    timeout_given = getattr(args, "timeout", None) is not None
+    if not timeout_given:
+        args.timeout = DEFAULT_TIMEOUT
     if cfg_path is not None and is_bimanual(cfg_path):       # two arms, two hands: live/demo_bimanual.py
         from live.demo_bimanual import main_bimanual
         return main_bimanual(args, Path(cfg_path))
     cfg = load_config(cfg_path)
     from live.demo_recording import with_recording
     cfg = with_recording(cfg, args)     # --rig / --recording: a recording checked before any process starts
+    if cfg.rig.type == "recording" and not timeout_given:   # the slave plays the whole recording after its fit
+        from live.recording_rig import recorded_motion
+        args.timeout = float(recorded_motion(cfg)[0][-1]) + RECORDING_MARGIN
     for line in waiver_lines(cfg):
         print(line, flush=True)
     run_dir = prepare_run_dir(args, cfg)
@@ -298,7 +306,9 @@ def main_demo(args) -> int:
             print(f"calibrating {cfg.instrument.id} ({', '.join(names)}): every tendon into its joint limit ...",
                   flush=True)
             run_calibrate(argparse.Namespace(config=str(cfg_file), out=None))
-        run_processes(args, cfg_file, run_dir, problems, bridge=cfg.rig.type == "zenoh")
+        doing = "the slave fits its calibration (rig.recording.calibration_run), then plays the recording; the " \
+            "operator retraces its motion" if cfg.rig.type == "recording" else None
+        run_processes(args, cfg_file, run_dir, problems, bridge=cfg.rig.type == "zenoh", doing=doing)
     except KeyboardInterrupt:
         print(f"teleop demo: interrupted; partial recordings in {run_dir}", file=sys.stderr)
         raise

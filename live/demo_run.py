@@ -160,11 +160,13 @@ def _stop(proc: subprocess.Popen) -> None:
 wait_listening, stop_process = _wait_listening, _stop     # for the other demos' processes (live.demo_bimanual)
 
 
-def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, bridge: bool = False) -> None:
+def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, bridge: bool = False,
+                  doing: str | None = None) -> None:
     """Slave and master as two processes with ``cfg_file`` (module docstring); what went wrong is
     appended to ``problems``. ``args``: ``listen``, ``timeout`` [s], ``protocol``. ``bridge``: the rig
     is ``rig.type: zenoh``, so ``teleop bridge`` runs the simulated rig as a third process on its own
-    loopback port, which the slave connects to (stopped once slave and master are done)."""
+    loopback port, which the slave connects to (stopped once slave and master are done). ``doing``: what
+    the start-up line says the sides do (default: calibration, then the protocol)."""
     from teleop.transport import free_tcp_port, loopback_endpoint
     if args.listen:
         ep = args.listen[0]
@@ -208,7 +210,8 @@ def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, b
             master = subprocess.Popen(base + ["master", "--connect", ep, "--protocol", args.protocol] + rec_link + common,
                                       stdout=mlog, stderr=subprocess.STDOUT, env=env)
             procs.append(("master", master))
-            print(f"slave and master running on {ep} (calibration, then protocol {args.protocol}) ...", flush=True)
+            doing = doing or f"calibration, then protocol {args.protocol}"
+            print(f"slave and master running on {ep} ({doing}) ...", flush=True)
             for name, p in procs[::-1]:
                 if name == "bridge":
                     continue                 # serves until stopped below
