@@ -33,6 +33,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from live.side_files import SideFiles
 from live.sides import (
     SHUTDOWN_DUMP_S,
     load_or_recalibrate,
@@ -119,9 +120,10 @@ class ArmRerun:
         return getattr(self.inner, name)
 
 
-def _rerun(stack: contextlib.ExitStack, mode: str, run_dir: Path, bim: Bimanual, side: str, **kw) -> list[Any]:
+def _rerun(stack: contextlib.ExitStack, mode: str, run_dir: Path, bim: Bimanual, side: str, files, **kw) -> list[Any]:
     """Each arm's view (:class:`ArmRerun`) of the side's one Rerun logger (``<run dir>/<side>.rrd``, recording id
-    the run's: both arms in one recording, their joints stacked in the 3D view); Nones when off."""
+    the run's: both arms in one recording, their joints stacked in the 3D view), behind the side's disk gate
+    (``files``, :class:`live.side_files.SideFiles`); Nones when off."""
     if mode == "off":
         return [None] * len(bim.arms)
     import dataclasses
@@ -129,11 +131,14 @@ def _rerun(stack: contextlib.ExitStack, mode: str, run_dir: Path, bim: Bimanual,
     from teleop.rerun_proc import RerunProcessLogger as RerunLogger  # the loop only queues; a child process logs
     views = tuple(dataclasses.replace(v, name=f"{arm.name}/{v.name}") for arm in bim.arms for v in joint_views(arm.cfg))
     logger = stack.enter_context(RerunLogger("teleop", run_dir.name, mode, run_dir / f"{side}.rrd", joints=views, **kw))
-    return [ArmRerun(logger, arm.name) for arm in bim.arms]
+    gated = files.rerun(logger)
+    return [ArmRerun(gated, arm.name) for arm in bim.arms]
 
 
-def _serve(group: NodeGroup, clock, args, run_dir: Path, side: str, injector, arms, waived) -> None:
-    """Run the group until done (or ``--max-duration``); then the stats of the group and of every arm."""
+def _serve(group: NodeGroup, clock, args, run_dir: Path, side: str, injector, arms, waived, files) -> None:
+    """Run the group until done (or ``--max-duration``); then the stats of the group and of every arm, with the
+    disk use of the side's files (``files``, :class:`live.side_files.SideFiles`)."""
+    from live.side_files import add_to_stats
     from teleop.journal import close_journal, open_journal
     open_journal(run_dir, side)
     try:
@@ -148,6 +153,8 @@ def _serve(group: NodeGroup, clock, args, run_dir: Path, side: str, injector, ar
             path.write_text(json.dumps({**node.stats(), "arm": arm.name, "hand": arm.hand,
                                         "safety_waivers": waived}, indent=2) + "\n", encoding="utf-8")
         (run_dir / f"{side}_stats.json").write_text(json.dumps(group.stats(), indent=2) + "\n", encoding="utf-8")
+        files.close()
+        add_to_stats(run_dir / f"{side}_stats.json", "disk", files.summary())
         if injector is not None:
             (run_dir / f"{side}_faults.json").write_text(json.dumps(injector.stats(), indent=2) + "\n",
                                                          encoding="utf-8")
@@ -176,7 +183,9 @@ def run_slave_group(args: argparse.Namespace) -> int:
         warm_up(a.cfg)
     with raise_on_sigterm(), session, contextlib.ExitStack() as stack:
         nodes = []
-        views = _rerun(stack, args.rerun or arms[0].cfg.recording.rerun, run_dir, bim, "slave")
+        files = SideFiles(run_dir, arms[0].cfg, "slave", ("<arm>/slave_joints.csv", "slave.rrd"))   # the disk gates
+        stack.callback(files.close)
+        views = _rerun(stack, args.rerun or arms[0].cfg.recording.rerun, run_dir, bim, "slave", files)
         for arm, (calibration, cal_path), rr in zip(arms, cals, views):
             rig = make_rig(arm.cfg, session)
             stack.callback(rig.close)
@@ -186,11 +195,11 @@ def run_slave_group(args: argparse.Namespace) -> int:
             if arm.cfg.ros2.enabled:     # the arm's CRTK topics under its own name (teleop/crtk_side.py)
                 from teleop.crtk_side import attach_slave
                 attach_slave(session, arm.cfg, links)
-            nodes.append(SlaveNode(arm.cfg, rig, links, recorder=rec, rerun=rr, run_dir=arm_dir(run_dir, arm),
+            nodes.append(SlaveNode(arm.cfg, rig, links, recorder=files.csv(rec), rerun=rr, run_dir=arm_dir(run_dir, arm),
                                    stop_on_master_stop=args.exit_on_master_stop, calibration=calibration,
                                    calibration_file=cal_path))
         group = NodeGroup(nodes, [a.name for a in arms], Side.SLAVE, arms[0].cfg.rig.rate_hz, arms[0].cfg)
-        _serve(group, clock, args, run_dir, "slave", injector, arms, waived)
+        _serve(group, clock, args, run_dir, "slave", injector, arms, waived, files)
     faulthandler.cancel_dump_traceback_later()
     log.info("slave done (%s): %s", ", ".join(a.name for a in arms), run_dir)
     return 0
@@ -227,8 +236,10 @@ def run_master_group(args: argparse.Namespace) -> int:
         arms = bim.arms
         with raise_on_sigterm(), session, contextlib.ExitStack() as stack:
             nodes = []
+            files = SideFiles(run_dir, arms[0].cfg, "master", ("<arm>/master.csv", "master.rrd"))   # the disk gates
+            stack.callback(files.close)
             views = _rerun(stack, getattr(args, "rerun", None) or arms[0].cfg.recording.rerun, run_dir, bim, "master",
-                           wall_clock=True)
+                           files, wall_clock=True)
             for arm, dev, rr in zip(arms, devices, views):
                 meta = {"source": "teleop master", "instrument": arm.ident, "device": arm.cfg.master.device.type,
                         "arm": arm.name, "hand": arm.hand}
@@ -238,9 +249,9 @@ def run_master_group(args: argparse.Namespace) -> int:
                 if arm.cfg.ros2.enabled:
                     from teleop.crtk_side import attach_master
                     attach_master(session, arm.cfg, links)
-                nodes.append(MasterNode(arm.cfg, dev, links, recorder=rec, rerun=rr))
+                nodes.append(MasterNode(arm.cfg, dev, links, recorder=files.csv(rec), rerun=rr))
             group = NodeGroup(nodes, [a.name for a in arms], Side.MASTER, arms[0].cfg.master.rate_hz, arms[0].cfg)
-            _serve(group, clock, args, run_dir, "master", injector, arms, waived)
+            _serve(group, clock, args, run_dir, "master", injector, arms, waived, files)
     faulthandler.cancel_dump_traceback_later()
     for arm, node in zip(arms, nodes):
         lat = node.latency_stats()

@@ -49,10 +49,12 @@ OVERRUN_TARGET = 0.005
 
 
 def _resolved(src: Path, run_dir: Path) -> Bimanual:
-    """The bimanual file with ``calibration.dir`` = ``<run_dir>/calibration`` written to ``<run_dir>/config.yaml``,
-    loaded; each arm's config written to ``<run_dir>/<arm id>/config.yaml``."""
+    """The bimanual file with ``calibration.dir`` = ``<run_dir>/calibration`` and ``recording.csv_every`` = 1 (the
+    chatter check reads every cycle) written to ``<run_dir>/config.yaml``, loaded; each arm's config written to
+    ``<run_dir>/<arm id>/config.yaml``."""
     data, _ = read_yaml(src)
     data["calibration"] = {**(data.get("calibration") or {}), "dir": str(run_dir / "calibration")}
+    data["recording"] = {**(data.get("recording") or {}), "csv_every": 1}
     out = run_dir / "config.yaml"
     out.write_text("# resolved bimanual configuration of this run (teleop/arms.py)\n"
                    + yaml.safe_dump(data, sort_keys=False), encoding="utf-8")

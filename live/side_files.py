@@ -115,13 +115,15 @@ class SideFiles:
             self._thread.start()
 
     def csv(self, rec: Any) -> CsvGate:
-        """The gate of the per-cycle CSV recorder ``rec``."""
-        gate = self.gates["csv"] = CsvGate(rec, self.every, self)
+        """The gate of the per-cycle CSV recorder ``rec`` (a side of several arms has one per arm)."""
+        gate = CsvGate(rec, self.every, self)
+        self.gates.setdefault("csv", []).append(gate)
         return gate
 
     def rerun(self, rr: Any) -> RerunGate:
         """The gate of the Rerun logger ``rr``."""
-        gate = self.gates["rerun"] = RerunGate(rr, self)
+        gate = RerunGate(rr, self)
+        self.gates.setdefault("rerun", []).append(gate)
         return gate
 
     def check(self, now: float) -> bool:
@@ -153,11 +155,11 @@ class SideFiles:
     def summary(self) -> dict:
         """``{"csv_every", "stopped", "reached", "run_bytes", "csv_rows_written", "csv_rows_not_written",
         "rerun_calls_not_logged"}`` for the side's stats."""
-        csv, rr = self.gates.get("csv"), self.gates.get("rerun")
+        csv, rr = self.gates.get("csv", []), self.gates.get("rerun", [])
         return {"csv_every": self.every, "stopped": self.stopped, "reached": self.budget.reached,
                 "run_bytes": self.budget.run_bytes,
-                "csv_rows_written": getattr(csv, "written", 0), "csv_rows_not_written": getattr(csv, "not_written", 0),
-                "rerun_calls_not_logged": getattr(rr, "not_logged", 0)}
+                "csv_rows_written": sum(g.written for g in csv), "csv_rows_not_written": sum(g.not_written for g in csv),
+                "rerun_calls_not_logged": sum(g.not_logged for g in rr)}
 
     def close(self) -> None:
         """Stop the helper thread. Idempotent."""

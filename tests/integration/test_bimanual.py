@@ -61,7 +61,7 @@ def _tracking(path: Path, n: int = 100) -> bool:
 def _config(tmp_path: Path, port: int) -> Path:
     data = yaml.safe_load((ROOT / "configs" / "notes-bimanual.yaml").read_text(encoding="utf-8"))
     data["calibration"]["dir"] = str(tmp_path / "calibration")
-    data["recording"] = {"dir": str(tmp_path / "runs"), "rerun": "off"}
+    data["recording"] = {"dir": str(tmp_path / "runs"), "rerun": "off", "csv_every": 1}   # the timing reads every row
     data["transport"]["listen"] = [f"tcp/127.0.0.1:{port}"]
     path = tmp_path / "bimanual.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
