@@ -34,9 +34,14 @@ CASES = {
 #: (folder, line) the data do not meet, and the figure they reach.
 SHORT = {
     ("more/Tool_5_Maryland_L_2", "linear"): "4 of 19 runs at the calibration run's load level (01, 11, 21, 41): "
-                                            "0.018-0.035 against the linear baseline's 0.015-0.017 FS",
+                                            "0.018-0.035 against the linear baseline's 0.015-0.017 FS; the error is "
+                                            "one offset per run (without it 0.008-0.016 FS): the spindle band's high "
+                                            "edge scatters 3.8-4.6 mN m between runs at one jaw load and run 31 "
+                                            "reads 1.3 mN m high (docs/results/mrd.md)",
     ("more/Tool_4_Maryland_L_Roll_1", "median"): "window -30..30 deg (runs 20*) median 0.035 FS; the other four "
-                                                 "0.015-0.029, pooled 0.026",
+                                                 "0.015-0.029, pooled 0.026: a jaw-side torque ripple fixed in the jaw "
+                                                 "angle (2.9 % of the jaw torque) that the spindle-angle shape cannot "
+                                                 "follow, and a bent centre-to-jaw line (docs/results/mrd.md)",
 }
 
 
