@@ -203,10 +203,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     ap.add_argument("--quick", action="store_true",
                     help="2 and 16 tendons only, fewer cycles and a shorter ping-pong (a smoke test)")
-    ap.add_argument("--cycles", type=int, help="cycles per size and recorder setting (default 2000, quick 300)")
+    ap.add_argument("--cycles", type=int, help="cycles per size and recorder setting (default 1500, quick 300)")
     ap.add_argument("--seconds", type=float, help="bare ping-pong duration [s] (default 5, quick 2)")
     a = ap.parse_args()
-    cycles = a.cycles or (300 if a.quick else 2000)
+    cycles = a.cycles or (300 if a.quick else 1500)
     joints = JOINTS[::2] if a.quick else JOINTS
     seconds = a.seconds or (2.0 if a.quick else 5.0)
     load0 = os.getloadavg()[0]
