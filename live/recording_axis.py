@@ -32,8 +32,9 @@ from estimator.online.centre_estimator import CentreEstimator
 from estimator.online.spindle import N_NODES, SpindleParams
 from estimator.online.spindle_centre import CentreParams
 from estimator.online.spindle_estimator import SpindleEstimator
+from live.recording_routine import RecordedRoutine, recorded_model_path
 from slave.axis import SlaveAxis
-from slave.calibration_file import InstrumentCalibration, TendonCalibration, calibration_path
+from slave.calibration_file import InstrumentCalibration, TendonCalibration
 from slave.rig import Rig, RigState
 from slave.spindle_axis import SpindleAxis
 from slave.spindle_calibrate import pull_slip_M_e
@@ -166,9 +167,7 @@ def fit_recorded_model(cfg: Config, run_file: Path | None = None) -> RecordedMod
                          band_centre=float(np.mean([band_centre(c.tau_p) for c in cal])))
 
 
-def model_path(cfg: Config) -> Path:
-    """``<calibration.dir>/<instrument.id>.recording.json``, beside the calibration file."""
-    return calibration_path(cfg).with_suffix(".recording.json")
+model_path = recorded_model_path
 
 
 def save_model(model: RecordedModel, path: str | Path) -> Path:
@@ -224,10 +223,12 @@ class RecordedCalibration:
         self.done = True
 
 
-class RecordedSpindleAxis(SpindleAxis):
+class RecordedSpindleAxis(RecordedRoutine, SpindleAxis):
     """The spindle axis on a recorded run (module docstring)."""
 
     centre: CentreEstimator | None = None
+    routine_class = RecordedCalibration
+    model_calibration = staticmethod(model_calibration)
 
     def start_model(self, model: RecordedModel, state: RigState) -> None:
         """The online estimators of ``model``, at rest at the rig's current sample."""
@@ -243,17 +244,8 @@ class RecordedSpindleAxis(SpindleAxis):
             self.sample = dataclasses.replace(self.sample, torque=self.centre.step(
                 float(np.asarray(state.T_in)[i]), self.rest, state.t))
 
-    @classmethod
-    def routine(cls, cfg: Config, rig: Rig) -> Any:
-        return RecordedCalibration(cfg)
 
-    @classmethod
-    def routine_step(cls, routine: Any, rig: Rig, state: RigState, dt: float) -> RigState:
-        return rig.state
 
-    @classmethod
-    def calibration_of(cls, cfg: Config, routine: Any) -> Any:
-        return model_calibration(cfg, routine.model)
 
     @classmethod
     def finish_routine(cls, axes: Sequence[SlaveAxis], routine: Any, state: RigState) -> tuple[Any, dict]:

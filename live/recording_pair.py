@@ -33,8 +33,9 @@ from estimator.offline.pair import PairParams, fit_pair
 from estimator.online.joint import KAIST_PLAY, JointEstimator
 from estimator.online.joint_batch import predict_pair_angle
 from estimator.sheath import SheathModel
+from live.recording_routine import RecordedRoutine, recorded_model_path
 from slave.axis import SlaveAxis
-from slave.calibration_file import InstrumentCalibration, TendonCalibration, calibration_path
+from slave.calibration_file import InstrumentCalibration, TendonCalibration
 from slave.pair_axis import PairAxis
 from slave.pair_calibrate import set_tension
 from slave.pair_control import PairController
@@ -160,9 +161,7 @@ def kaist_live(rec: KaistRecording, extended_deg: float | None = None) -> dict:
 
 # ---- the slave's pair axis on a KAIST recording --------------------------------------------------------------
 
-def kaist_model_path(cfg: Config) -> Path:
-    """``<calibration.dir>/<instrument.id>.recording.json``, beside the calibration file."""
-    return calibration_path(cfg).with_suffix(".recording.json")
+kaist_model_path = recorded_model_path
 
 
 def fit_kaist(cfg: Config) -> dict:
@@ -209,7 +208,7 @@ def _calibration(cfg: Config, model: dict) -> InstrumentCalibration:
                                         "pair model with the joint estimator, as teleop analyze --kaist)")
 
 
-class RecordedPairAxis(PairAxis):
+class RecordedPairAxis(RecordedRoutine, PairAxis):
     """The pair axis on a KAIST recording: x_in is the motor command [rad] on both tendons, the estimator
     runs in units of the pulley radius with r = 1 / G (so that G c is the kinematic angle) and adds the
     angle offset G c_0 + theta_0 (:func:`estimator.online.joint_batch.predict_pair_angle`); the torque it
@@ -217,6 +216,8 @@ class RecordedPairAxis(PairAxis):
 
     offset = 0.0
     torque_scale = 1.0
+    routine_class = RecordedPairCalibration
+    model_calibration = staticmethod(_calibration)
 
     def start_model(self, model: dict, state: RigState) -> None:
         """The joint estimator of ``model`` at the rig's current sample (its tensions: the pretension)."""
@@ -234,17 +235,8 @@ class RecordedPairAxis(PairAxis):
         s = self.estimator.step(T0[0], float(state.x_in[i, 0]), T0[1], float(state.x_in[i, 1]), state.t)
         self.sample = s._replace(angle=s.angle + self.offset, torque=s.torque * self.torque_scale)
 
-    @classmethod
-    def routine(cls, cfg: Config, rig: Rig) -> Any:
-        return RecordedPairCalibration(cfg)
 
-    @classmethod
-    def routine_step(cls, routine: Any, rig: Rig, state: RigState, dt: float) -> RigState:
-        return rig.state
 
-    @classmethod
-    def calibration_of(cls, cfg: Config, routine: Any) -> Any:
-        return _calibration(cfg, routine.model)
 
     @classmethod
     def finish_routine(cls, axes: Sequence[SlaveAxis], routine: Any, state: RigState) -> tuple[Any, dict]:

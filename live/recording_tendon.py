@@ -21,8 +21,9 @@ import numpy as np
 
 from estimator.data import MeasuredData
 from estimator.sheath import SheathModel
+from live.recording_routine import RecordedRoutine, recorded_model_path
 from slave.axis import SlaveAxis
-from slave.calibration_file import InstrumentCalibration, TendonCalibration, calibration_path
+from slave.calibration_file import InstrumentCalibration, TendonCalibration
 from slave.rig import Rig, RigInputError, RigState, RigTruth
 from slave.tendon_axis import TendonAxis
 from teleop.config import Config
@@ -132,24 +133,17 @@ def _calibration(cfg: Config, model: dict) -> InstrumentCalibration:
                                         "(the profile-memory estimator, estimator.offline.fit.fit_single)")
 
 
-def _model_path(cfg: Config) -> Path:
-    return calibration_path(cfg).with_suffix(".recording.json")
+_model_path = recorded_model_path
 
 
-class RecordedTendonAxis(TendonAxis):
+class RecordedTendonAxis(RecordedRoutine, TendonAxis):
     """The single-tendon axis on a recorded tendon (module docstring)."""
 
-    @classmethod
-    def routine(cls, cfg: Config, rig: Rig) -> Any:
-        return RecordedTendonCalibration(cfg)
+    routine_class = RecordedTendonCalibration
+    model_calibration = staticmethod(_calibration)
 
-    @classmethod
-    def routine_step(cls, routine: Any, rig: Rig, state: RigState, dt: float) -> RigState:
-        return rig.state
 
-    @classmethod
-    def calibration_of(cls, cfg: Config, routine: Any) -> Any:
-        return _calibration(cfg, routine.model)
+
 
     @classmethod
     def finish_routine(cls, axes: Sequence[SlaveAxis], routine: Any, state: RigState) -> tuple[Any, dict]:
