@@ -25,7 +25,8 @@ from tests.integration.processes import start, stop_all, wait_for
 
 pytestmark = pytest.mark.integration
 
-# quick calibration pull; everything else is the simulated demo's configuration
+# quick calibration pull, the slave's CSV at every cycle (the kill test reads the rows around the fault);
+# everything else is the simulated demo's configuration
 CONFIG = """\
 instrument:
   id: {ident}
@@ -34,6 +35,7 @@ calibration:
   dir: "{caldir}"
 recording:
   rerun: "{rerun}"
+  csv_every: 1
 """
 
 
