@@ -318,8 +318,7 @@ def _bank_of(axes: Sequence[SlaveAxis], state: RigState) -> JointBank | None:
     first = axes[0]
     if isinstance(first, PairAxis) and first.bank is not None and first.bank.active:
         return first.bank
-    if [ax.index if isinstance(ax, PairAxis) else -1 for ax in axes] != list(range(len(axes))) \
-            or np.shape(state.T_in) != (len(axes), 2):
+    if not _rows_in_order(axes, state):
         return None
     ests = [ax.estimator for ax in axes if isinstance(ax, PairAxis) and ax.estimator is not None]
     if len(ests) != len(axes) or not all(can_bank(e) and e._bank is None for e in ests):
@@ -329,6 +328,12 @@ def _bank_of(axes: Sequence[SlaveAxis], state: RigState) -> JointBank | None:
         assert isinstance(ax, PairAxis)
         ax.bank = bank
     return bank
+
+
+def _rows_in_order(axes: Sequence[SlaveAxis], state: RigState) -> bool:
+    """Whether ``axes`` are pair axes on rows 0..n-1 of the rig's arrays, in order (what a bank steps)."""
+    return [ax.index if isinstance(ax, PairAxis) else -1 for ax in axes] == list(range(len(axes))) \
+        and np.shape(state.T_in) == (len(axes), 2)
 
 
 def _active_control_bank(axes: Sequence[SlaveAxis]) -> PairControlBank | None:
@@ -347,8 +352,7 @@ def _control_bank_of(axes: Sequence[SlaveAxis], state: RigState) -> PairControlB
         if len(ctls) == len(cb.controllers) and all(a is b for a, b in zip(ctls, cb.controllers)):
             return cb
         cb.release()
-    if [ax.index if isinstance(ax, PairAxis) else -1 for ax in axes] != list(range(len(axes))) \
-            or np.shape(state.T_in) != (len(axes), 2):
+    if not _rows_in_order(axes, state):
         return None
     ready = [c for c, ax in zip(ctls, axes)
              if c is not None and c._bank is None and isinstance(ax, PairAxis) and ax.sample is not None]
