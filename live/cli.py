@@ -114,6 +114,9 @@ def _add_services(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") ->
     p.add_argument("--exit-when-done", action="store_true", help="finish once every side seen has gone")
     p.add_argument("--repair", metavar="RUN", help="rebuild RUN/recorder/session.mcap from messages.bin and the "
                                                    "sides' journals (after a SIGKILL of the recorder), then exit")
+    p.add_argument("--journals", metavar="DIR", default=None,
+                   help="where the sides' write-ahead journals are (default: the run directory); the records of this "
+                        "instrument's keys complete the recording (a bimanual session: the session's run directory)")
     p.add_argument("--rerun", choices=("save", "spawn", "off"), default=None, help="override recording.rerun")
     p.set_defaults(func=lambda a: __import__("live.record", fromlist=["run_record"]).run_record(a))
 

@@ -6,7 +6,8 @@ The flow of every demo (:mod:`live.demo`) for two arms (:mod:`teleop.arms`):
    each arm's resolved config goes to ``runs/<id>/<arm id>/config.yaml``;
 2. ``teleop calibrate`` of each arm (in this process, simulated as fast as it computes): every tendon of
    every pair into its joint limit both ways, ``runs/<id>/calibration/<arm id>.yaml``, which the slave reloads;
-3. one ``teleop record`` per arm (its arm's config, into ``runs/<id>/<arm id>/recorder``), then the slave
+3. one ``teleop record`` per arm (its arm's config, into ``runs/<id>/<arm id>/recorder``, completing its recording
+   from its arm's records in the sides' journals in ``runs/<id>``, ``--journals``), then the slave
    (both arms in one loop, :mod:`live.bimanual_sides`) and the master (both hands in one loop, scripted
    operators running the paper's protocol on every joint of their arm) as two processes over Zenoh on
    127.0.0.1; the sides connect to both recorders;
@@ -89,8 +90,8 @@ def _processes(args, bim: Bimanual, run_dir: Path, problems: list[str]) -> None:
     try:
         for arm in bim.arms:
             d = run_dir / arm.ident
-            rec, link = start_recorder(base, ["--config", str(d / "config.yaml"), "--run-dir", str(d),
-                                              "--max-duration", f"{timeout:g}"], d, env, deadline)
+            rec, link = start_recorder(base, ["--config", str(d / "config.yaml"), "--run-dir", str(d), "--journals",
+                                              str(run_dir), "--max-duration", f"{timeout:g}"], d, env, deadline)
             procs.append((f"recorder of {arm.name}", rec))
             if link is None:
                 problems.append(f"the recorder of {arm.name} did not start (see {d}/recorder.log)")

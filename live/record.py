@@ -36,7 +36,8 @@ journal (:mod:`teleop.journal`, ``<run dir>/<side>.journal-NNN``): when a side's
 and at the end, the recorder adds every journaled message it did not receive
 (:mod:`live.record_journal`), counted per stream as ``recovered`` in ``summary.json`` (with
 ``received``) and listed in ``recovered.csv``. That needs the journals reachable: same machine, or a
-run directory both share (docs/reference/formats.md).
+run directory both share (docs/reference/formats.md); ``--journals DIR`` names another (a bimanual session's,
+for each arm's recorder in ``<run dir>/<arm id>``): only the records of the recorder's own keys are taken.
 """
 from __future__ import annotations
 
@@ -101,7 +102,7 @@ class Recorder:
     rerun : {'save', 'spawn', 'off'}, optional
         Overrides ``recording.rerun``.
     journal_dir : Path, optional
-        Where the sides' journals are (default: the run directory, ``out_dir``'s parent).
+        Where the sides' journals are (default: the run directory, ``out_dir``'s parent); records of ``teleop/<id>/**`` only.
     """
 
     def __init__(self, session, cfg, out_dir: Path, *, rerun: Literal["save", "spawn", "off"] | None = None, run_id: str = "",
@@ -133,7 +134,7 @@ class Recorder:
         self._aux = {"state": self._aux_csv("state_changes.csv", "time,side,state,seq"),
                      "alive": self._aux_csv("liveliness.csv", "time,side,alive"),
                      "recovered": self._aux_csv("recovered.csv", "time,side,key,seq")}
-        self.journals = JournalRecovery(self.dir.parent if journal_dir is None else Path(journal_dir), self.clock.now())
+        self.journals = JournalRecovery(Path(journal_dir or self.dir.parent), self.clock.now(), instrument_keys(self.ident))
         from live.record_mcap import MCAP_NAME, McapRecording
         self._mcap = McapRecording(self.dir / MCAP_NAME, cfg, time.time() - self.clock.now(), self.journals.t_start)
         from teleop.rerun_log import RerunLogger
@@ -363,7 +364,7 @@ def run_record(args) -> int:
     (:func:`live.record_mcap_read.repair`) and exit."""
     if getattr(args, "repair", None):
         from live.record_mcap_read import run_repair
-        return run_repair(args.repair)
+        return run_repair(args.repair, getattr(args, "journals", None))
     from live.discovery import side_run_dir, side_session
     from teleop.config import load_config
     from teleop.recording import raise_on_sigterm
@@ -373,7 +374,8 @@ def run_record(args) -> int:
         session = side_session(cfg, args)
         with session:
             run_dir = side_run_dir(args, cfg)
-            rec = Recorder(session, cfg, run_dir / "recorder", rerun=args.rerun, run_id=run_dir.name)
+            rec = Recorder(session, cfg, run_dir / "recorder", rerun=args.rerun, run_id=run_dir.name,
+                           journal_dir=getattr(args, "journals", None))
             log.info("recording %s into %s", instrument_keys(cfg.instrument.id), rec.dir)
             print(f"teleop record: {rec.dir} (ready)", flush=True)
             t0, gone_since = time.monotonic(), None

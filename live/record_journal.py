@@ -7,7 +7,9 @@ recovered. A message is known by its ``seq`` on its key (a message received twic
 without a ``seq``: by the hash of its payload bytes). The recording's messages are remembered in constant
 memory, the newest :data:`SEEN` per key (more than a journal's ring of two 8 MB segments holds of any
 stream), so an hour at 1 kHz costs no more than a minute. Journal records published before the recorder started (an earlier session in the
-same run directory, or a side that started first) are left out and counted.
+same run directory, or a side that started first) are left out and counted. So are the records of keys the
+recorder does not subscribe to (``keys``): a bimanual side journals every arm's messages in one journal
+(:mod:`live.bimanual_sides`), and each arm's recorder takes its own arm's only.
 """
 from __future__ import annotations
 
@@ -60,11 +62,18 @@ class JournalRecovery:
         Where the sides write ``<side>.journal-NNN``.
     t_start : float, optional
         The recorder's start [s, :func:`time.monotonic`]; older journal records are left out.
+    keys : str, optional
+        The Zenoh key expression the recorder subscribes to (``teleop/<id>/**``,
+        :func:`teleop.keys.instrument_keys`); journal records of keys it does not include are left out and
+        counted (default: every key).
     """
 
-    def __init__(self, run_dir: Path, t_start: float | None = None):
+    def __init__(self, run_dir: Path, t_start: float | None = None, keys: str | None = None):
         self.dir = Path(run_dir)
         self.t_start = time.monotonic() if t_start is None else t_start
+        self.keys = keys
+        self._takes: dict[str, bool] = {}
+        self.other_keys = 0
         self._readers: dict[str, JournalReader] = {}
         self._due: dict[str, float] = {}
         self._seen: dict[str, _Seen] = {}
@@ -114,10 +123,27 @@ class JournalRecovery:
             if reader is None:
                 reader = self._readers[s] = JournalReader(self.dir, s)
             for t, key, payload in reader.new_records():
-                if t < self.t_start:
+                if not self._included(key):
+                    self.other_keys += 1
+                elif t < self.t_start:
                     self.before_start += 1
                 elif not self._known(key, payload):
                     yield t, key, payload
+
+    def _included(self, key: str) -> bool:
+        """Whether ``key`` is one of :attr:`keys` (a key that is no valid key expression is not)."""
+        if self.keys is None:
+            return True
+        ok = self._takes.get(key)
+        if ok is None:
+            import zenoh
+            try:
+                ok = bool(zenoh.KeyExpr(self.keys).includes(zenoh.KeyExpr(key)))
+            except Exception:  # noqa: BLE001 - ZError: a torn or foreign key is none of the recorder's
+                ok = False
+            if len(self._takes) < 4096:        # a journal's keys are few; a corrupt one costs a lookup each
+                self._takes[key] = ok
+        return ok
 
     def _known(self, key: str, payload: bytes) -> bool:
         """Whether the message ``payload`` on ``key`` is one the recording has."""
@@ -133,8 +159,8 @@ class JournalRecovery:
 
     def summary(self) -> dict:
         """``{"journal_dir", "journals": {side: segments found}, "recovered": {side: n}, "before_start",
-        "arrived_after_recovery"}``."""
+        "other_keys", "arrived_after_recovery"}`` (``other_keys``: records of keys not recorded, left out)."""
         return {"journal_dir": str(self.dir),
                 "journals": {s: len(v) for s, v in sorted(journal_segments(self.dir).items())},
                 "recovered": dict(sorted(self.counts.items())), "before_start": self.before_start,
-                "arrived_after_recovery": self.late}
+                "other_keys": self.other_keys, "arrived_after_recovery": self.late}

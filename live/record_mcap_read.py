@@ -23,8 +23,9 @@ from estimator.data import MeasuredData
 from live.record_files import decode_any, stream_bytes
 from live.record_journal import JournalRecovery
 from live.record_mcap import MCAP_NAME, McapRecording, sender_stamp
-from teleop.errors import DataError
+from teleop.errors import ConfigError, DataError
 from teleop.journal import read_records
+from teleop.keys import instrument_keys
 
 __all__ = ["Session", "read_session", "estimate_data", "find_mcap", "repair", "run_repair"]
 
@@ -137,8 +138,9 @@ def repair(rec_dir: str | Path, journal_dir: str | Path | None = None) -> dict[s
 
     The clock offset, instrument and start time come from the old file's metadata record (a file torn
     anywhere after its first records still has it); without one, the offset is 0 and the start is the
-    first message's time. Journal records published before the start, or already in ``messages.bin``
-    (same key, same payload bytes), are left out. Returns ``{"path", "messages", "from_messages_bin",
+    first message's time. Journal records published before the start, already in ``messages.bin``
+    (same key, same payload bytes) or of another instrument's keys, are left out; the journals are in
+    ``journal_dir`` (default: ``rec_dir``'s parent). Returns ``{"path", "messages", "from_messages_bin",
     "from_journals", "before": messages the old file held}``.
 
     Raises
@@ -163,7 +165,11 @@ def repair(rec_dir: str | Path, journal_dir: str | Path | None = None) -> dict[s
     t_first = min((t for t, _, _ in records), default=0.0)
     t_start = float(meta.get("t_start_s", t_first))
     ident = meta.get("instrument") or next((k.split("/")[1] for _, k, _ in records if k.count("/") >= 3), "unknown")
-    journals = JournalRecovery(d.parent if journal_dir is None else Path(journal_dir), t_start)
+    try:
+        keys: str | None = instrument_keys(ident)          # the recorder's own keys only
+    except ConfigError:
+        keys = None
+    journals = JournalRecovery(d.parent if journal_dir is None else Path(journal_dir), t_start, keys)
     all_records = []
     for t, key, payload in records:
         journals.note(key, payload, False)
@@ -205,11 +211,12 @@ def _log_order(received: list, recovered: list) -> list[tuple[float, str, Any]]:
     return out
 
 
-def run_repair(run: str | Path) -> int:
-    """``teleop record --repair RUN``: RUN is a run directory or its ``recorder/``; prints one line."""
+def run_repair(run: str | Path, journal_dir: str | Path | None = None) -> int:
+    """``teleop record --repair RUN [--journals DIR]``: RUN is a run directory or its ``recorder/``; the
+    journals are in ``journal_dir`` (default: RUN's run directory); prints one line."""
     p = Path(run)
     rec_dir = p if (p / "messages.bin").is_file() else p / "recorder"
-    res = repair(rec_dir)
+    res = repair(rec_dir, journal_dir)
     print(f"teleop record --repair: {res['messages']} messages ({res['from_messages_bin']} from messages.bin, "
           f"{res['from_journals']} from the journals; the old file held {res['before']}) -> {res['path']}",
           flush=True)
