@@ -9,7 +9,7 @@ from typing import Any, Sequence
 import numpy as np
 
 __all__ = ["TENSION_RANGE", "ELONGATION_RANGE", "WALL", "JOINT_SPACING", "JointView", "joint_views", "route_points",
-           "route_segments", "tension_colors", "blueprint"]
+           "route_segments", "tension_colors", "blueprint", "arm_groups"]
 
 #: Height [m] between two joints' tendon pairs in the 3D view (tendon b sits a tenth of it above a).
 JOINT_SPACING = 0.12
@@ -90,9 +90,14 @@ def tension_colors(T: np.ndarray, vmax: float = TENSION_RANGE[1]) -> np.ndarray:
 def blueprint(joints: Sequence[JointView] = ()) -> object:
     """The view sent at the start of a recording: the 3D sheath and the profile bar chart beside the
     fixed-range tension and elongation plots, the master's series and the phase/console/experiment lanes;
-    for a joint instrument (``joints``) the tendon pairs in 3D beside each joint's torque and angle."""
+    for a joint instrument (``joints``) the tendon pairs in 3D beside each joint's torque and angle; when
+    every joint's name carries an arm (``<arm>/<joint>``, both arms of a bimanual platform) one column
+    per arm: that hand's rendered force, then its joints' torque and angle."""
     import rerun.blueprint as rrb
 
+    arms = arm_groups(joints)
+    if arms:
+        return _bimanual_blueprint(rrb, joints, arms)
     if joints:
         return _joint_blueprint(rrb, joints)
     fixed_T = rrb.ScalarAxis(range=TENSION_RANGE, zoom_lock=False)
@@ -131,17 +136,26 @@ def _joint_eye(rrb: Any, joints: Sequence[JointView]) -> object:
                              eye_up=(0.0, 0.0, 1.0))
 
 
-def _joint_blueprint(rrb: Any, joints: Sequence[JointView]) -> object:
-    rows = [rrb.Horizontal(
+def _joint_row(rrb: Any, j: JointView) -> object:
+    """One joint's torque [N m] and angle [rad] plots side by side, on the joint's fixed ranges."""
+    return rrb.Horizontal(
         rrb.TimeSeriesView(origin=f"joints/{j.name}/torque", name=f"{j.name}: torque [N m]",
                            axis_y=rrb.ScalarAxis(range=j.torque_range, zoom_lock=False)),
         rrb.TimeSeriesView(origin=f"joints/{j.name}/angle", name=f"{j.name}: angle [rad]",
-                           axis_y=rrb.ScalarAxis(range=j.angle_range, zoom_lock=False))) for j in joints]
+                           axis_y=rrb.ScalarAxis(range=j.angle_range, zoom_lock=False)))
+
+
+def _pairs_view(rrb: Any, joints: Sequence[JointView]) -> object:
+    return rrb.Spatial3DView(origin="instrument", eye_controls=_joint_eye(rrb, joints),
+                             name="Tendon pairs coloured by tension (0-25 N, blue -> red), one pair per joint")
+
+
+def _joint_blueprint(rrb: Any, joints: Sequence[JointView]) -> object:
+    rows = [_joint_row(rrb, j) for j in joints]
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
-                rrb.Spatial3DView(origin="instrument", eye_controls=_joint_eye(rrb, joints),
-                                  name="Tendon pairs coloured by tension (0-25 N, blue -> red), one pair per joint"),
+                _pairs_view(rrb, joints),
                 rrb.StateTimelineView(origin="/", contents=["/master/console", "/experiment"],
                                       name="Console, experiment"),
                 row_shares=[5, 1],
@@ -150,6 +164,49 @@ def _joint_blueprint(rrb: Any, joints: Sequence[JointView]) -> object:
                                          rrb.TimeSeriesView(origin="signals", name="Other signals")),
                          row_shares=[3] * len(rows) + [2]),
             column_shares=[2, 3],
+        ),
+        rrb.TimePanel(timeline=WALL),
+        auto_views=False,
+    )
+
+
+def arm_groups(joints: Sequence[JointView]) -> dict[str, tuple[str, ...]]:
+    """The joints' names grouped by arm, arms in order of first appearance: ``{arm: (joint, ...)}`` for names
+    ``<arm>/<joint>``; empty when ``joints`` is empty or any name carries no arm (a single-arm instrument)."""
+    out: dict[str, tuple[str, ...]] = {}
+    for j in joints:
+        arm, sep, joint = j.name.partition("/")
+        if not sep:
+            return {}
+        out[arm] = (*out.get(arm, ()), joint)
+    return out
+
+
+def _hand_column(rrb: Any, arm: str, names: Sequence[str], joints: Sequence[JointView]) -> object:
+    """One arm's column: the rendered force [N] of its hand on every joint axis (``master/<arm>/<joint>/force``,
+    ``master/<arm>/force`` for a one-axis hand), a tab with the hand's command and mapped force, then each
+    joint's torque and angle."""
+    forces = [f"/master/{arm}/force", *(f"/master/{arm}/{n}/force" for n in names)]
+    hand = rrb.Tabs(rrb.TimeSeriesView(origin=f"master/{arm}", contents=forces, name=f"{arm} hand: rendered force [N]"),
+                    rrb.TimeSeriesView(origin=f"master/{arm}", name=f"{arm} hand: command [m], rendered and mapped force [N]"))
+    rows = [_joint_row(rrb, j) for j in joints if j.name.partition("/")[0] == arm]
+    return rrb.Vertical(hand, *rows, row_shares=[4] + [3] * len(rows), name=f"{arm} arm")
+
+
+def _bimanual_blueprint(rrb: Any, joints: Sequence[JointView], arms: dict[str, tuple[str, ...]]) -> object:
+    """Both arms: the tendon pairs in 3D with the console lanes and the round trip, beside one column per arm."""
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(
+                _pairs_view(rrb, joints),
+                rrb.StateTimelineView(origin="/", contents=["/master/console", "/experiment"],
+                                      name="Console, experiment"),
+                rrb.Tabs(rrb.TimeSeriesView(origin="master/rtt", name="Round trip [s]"),
+                         rrb.TimeSeriesView(origin="signals", name="Other signals")),
+                row_shares=[5, 1, 2],
+            ),
+            *(_hand_column(rrb, arm, names, joints) for arm, names in arms.items()),
+            column_shares=[2] + [2] * len(arms),
         ),
         rrb.TimePanel(timeline=WALL),
         auto_views=False,
