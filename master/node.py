@@ -14,14 +14,16 @@ given the time by the caller:
    ``max(watchdog_ms, 3 heartbeat periods)``) and says READY or ENGAGED, and its liveliness token
    (when watched) is present. An estimate is accepted when its seq is newer than the last accepted
    one (duplicates and reordered ones are counted and ignored) and ``|T_in|``, ``|T_out_hat|`` are
-   below ``master.max_tension`` (else counted as rejected);
+   below ``master.max_tension`` (else counted as rejected). While the newest estimate carries a
+   tension beyond ``master.max_tension`` no command is sent (step 4): a tendon driven into its limit
+   is not held there; the slave's watchdog relaxes the instrument within ``slave.watchdog_ms``;
 3. the console of each axis (:mod:`master.console`: deadman, clutch, alignment; the deadman and the
    clutch button are shared, the alignment is checked per axis in its own unit) decides ENGAGED;
    an axis still engaged while another is not is dropped, so that it is checked again. Entering it
    re-anchors or checks the alignment and restarts the force ramp and the passivity observer.
    Leaving it because of the links or the deadman: SAFE, zero force at once, commands sent with
    ``engaged=False`` (the slave holds); clutch or misalignment: READY;
-4. publish the command (``Command(seq, t_master, targets, engaged, marker)``, one target per axis:
+4. unless the newest estimate is beyond ``master.max_tension`` (step 2), publish the command (``Command(seq, t_master, targets, engaged, marker)``, one target per axis:
    ``x_in_cmd`` of a tendon, the angle of a joint) and keep its send time by seq in a
    ring buffer; an Estimate echoing ``cmd_seq`` gives the round-trip latency;
 5. render ``-force_scale * T_k`` on each axis (``T_out_hat`` of a tendon, ``effort_hat / r`` (torque / r) of a pair) ramped, clamped, slew-limited (:class:`master.mapping.ForceMap`),
@@ -99,6 +101,8 @@ class MasterNode(MasterNodeBase):
     consoles, motion, forces, passivity : list, one per axis.
     force, force_cmd : list of float, the last rendered and mapped force per axis [N].
     status : ConsoleStatus, of the instrument (the lowest of the axes').
+    over_tension : bool, the newest estimate carries a tension beyond ``master.max_tension`` (no command
+        is sent while it does).
     """
 
     def __init__(self, cfg: Config, device, links: MasterLinks, *, stop_linger: float = 0.2, recorder=None,
@@ -126,6 +130,7 @@ class MasterNode(MasterNodeBase):
         self.force_cmd = [0.0] * len(r)
         self.force = [0.0] * len(r)
         self.max_abs_force = 0.0
+        self.over_tension = False                # the newest estimate is beyond master.max_tension: no command
 
     @property
     def device(self):
@@ -148,7 +153,8 @@ class MasterNode(MasterNodeBase):
         return False
 
     def _in_range(self, est, now: float) -> bool:
-        if all(abs(v) <= self.max_tension for v in self.axes.tensions(est)):
+        self.over_tension = not all(abs(v) <= self.max_tension for v in self.axes.tensions(est))
+        if not self.over_tension:
             return True
         self.counts["estimates_rejected_range"] += 1
         self._warn(now, "rejected estimate %d: a tension beyond master.max_tension %g N", est.seq, self.max_tension)
@@ -222,7 +228,8 @@ class MasterNode(MasterNodeBase):
         # ---- command ----
         q = [mm.command(p) if engaged else mm.last for mm, p in zip(self.motion, pos)]
         marker = int(getattr(self.device, "marker", 0)) if engaged else 0
-        self._send_command(self.axes.command(self.seq, now, q, engaged, marker), now)
+        if not self.over_tension:                # a tendon at its limit: the slave's watchdog relaxes it
+            self._send_command(self.axes.command(self.seq, now, q, engaged, marker), now)
 
         # ---- forces, per axis: map (scale, ramp, clamp, slew) -> passivity controller -> clamp ----
         dt = self._period if self._t_prev is None else now - self._t_prev

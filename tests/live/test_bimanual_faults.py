@@ -2,8 +2,10 @@
 FakeClock with in-memory links that go through the codec, the shared foot pedal on the master (master/pedal.py).
 
 A fault on the left arm (its estimate stream cut, its estimates carrying an impossible tension, its hand's device
-lost) makes the left arm safe within 100 ms, while the right arm's master rows are those of the same run without
-any fault, cycle for cycle: its loop is untouched. A lost master makes both arms' slaves safe. The process-level test is tests/integration/test_bimanual.py."""
+lost, a tendon driven by the physics past the arm's ``master.max_tension``) makes the left arm safe within 100 ms,
+while the right arm's master rows are those of the same run without any fault, cycle for cycle: its loop is
+untouched. A tendon at its limit is not held there: the left slave relaxes. A lost master makes both arms' slaves
+safe. The process-level test is tests/integration/test_bimanual.py."""
 from __future__ import annotations
 
 import dataclasses
@@ -22,6 +24,7 @@ from master.pedal import FootPedal, PedalHand
 from slave.calibration_file import InstrumentCalibration, TendonCalibration
 from slave.joint_rig import SimulatedInstrument
 from slave.node import SlaveLinks, SlaveNode
+from slave.pair_axis import joint_csv_columns
 from teleop.arms import Bimanual, load_arms
 from teleop.clock import FakeClock
 from teleop.codec import decode
@@ -32,16 +35,24 @@ from tests.fakes import Rows, Topic
 
 ROOT = Path(__file__).resolve().parents[2]
 DT = 1e-3
-T_FAULT, T_END = 0.6, 0.75        # [s] the fault starts once both hands move (0.5 s); the run ends 150 ms later
+T_FAULT, T_END = 0.6, 0.85        # [s] the fault starts once both hands move (0.5 s); the run ends 250 ms later
 SAFE_WITHIN = 0.1                 # [s]
+# [N] the left arm's master.max_tension in the "limit" run: above every tension of the arm's free motion (the
+# bending sections and the elbow stay below 1.7 N), below what the grasp's tendon a pulls once the jaws close
+# on the tissue
+LEFT_LIMIT = 2.0
 
 
-@functools.lru_cache(maxsize=1)
-def cheap_bimanual() -> Bimanual:
-    """The shipped bimanual instrument with coarser sheaths (a short in-process run), same joints and loads."""
+@functools.lru_cache(maxsize=2)
+def cheap_bimanual(left_max_tension: float | None = None) -> Bimanual:
+    """The shipped bimanual instrument with coarser sheaths (a short in-process run), same joints and loads;
+    ``left_max_tension`` [N]: the left arm's ``master.max_tension`` (its arms overlay), None: the shipped one."""
     data = yaml.safe_load((ROOT / "configs" / "notes-bimanual.yaml").read_text(encoding="utf-8"))
     data["rig"]["simulated"]["n_elements"] = 20
     data["estimator"] = {"n_nodes": 20}
+    if left_max_tension is not None:
+        left = next(a for a in data["arms"] if a["hand"] == "left")
+        left.setdefault("master", {})["max_tension"] = left_max_tension
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "bimanual.yaml"
         path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
@@ -88,19 +99,21 @@ class LostAfter:
 
 
 def run(tmp_path: Path, fault: str | None):
-    """Both arms for T_END seconds with ``fault`` on the left arm from T_FAULT; (arms, master rows, states)."""
-    bim = cheap_bimanual()
+    """Both arms for T_END seconds with ``fault`` on the left arm from T_FAULT ("limit": the left arm's
+    ``master.max_tension`` is LEFT_LIMIT throughout); (arms, masters, master rows, states, slave rows)."""
+    bim = cheap_bimanual(LEFT_LIMIT if fault == "limit" else None)
     clock = FakeClock(0.0)
     pedal = FootPedal([a.cfg.master.mapping.clutch_button for a in bim.arms])
-    slaves, masters, rows, topics = [], [], [], []
+    slaves, masters, rows, topics, slave_rows = [], [], [], [], []
     for i, arm in enumerate(bim.arms):
         cmd, est, shb, mhb = (WireTopic(clock, codec=True, keep=False) for _ in range(4))
         rig = SimulatedInstrument.from_config(arm.cfg)
         est_out = est
         if arm.hand == "left" and fault == "range":     # every estimate with T_out_hat = 1e4 N from T_FAULT
             est_out = FaultInjector(f"corrupt=range,stream=estimate,at={T_FAULT}s", clock).wrap(est, "estimate")
+        slave_rows.append(Rows())
         slaves.append(SlaveNode(arm.cfg, rig, SlaveLinks(estimate=est_out, heartbeat=shb, command=cmd,
-                                                         master_heartbeat=mhb),
+                                                         master_heartbeat=mhb), recorder=slave_rows[-1],
                                 calibration=true_calibration(arm.cfg, rig), run_dir=tmp_path / arm.ident))
         dev = make_device(arm.cfg, "paper")
         if arm.hand == "left" and fault == "device":
@@ -124,7 +137,7 @@ def run(tmp_path: Path, fault: str | None):
         if fault != "peer" or now < T_FAULT:            # "peer": the master process is gone
             mg.step(now)
         states.append((now, masters[0].state, masters[1].state, slaves[1].state, slaves[0].state))
-    return bim, masters, [np.array(r.rows) for r in rows], states
+    return bim, masters, [np.array(r.rows) for r in rows], states, [np.array(r.rows) for r in slave_rows]
 
 
 @pytest.fixture(scope="module")
@@ -134,14 +147,18 @@ def baseline(tmp_path_factory):
 
 @pytest.mark.parametrize("fault", ["cut", "range", "device"])
 def test_fault_on_left_arm_makes_it_safe_and_leaves_right_arm_untouched(tmp_path, baseline, fault):
-    _, m0, rows0, states0 = baseline
+    _, m0, rows0, states0, _ = baseline
     assert all(s[1] == SideState.ENGAGED and s[2] == SideState.ENGAGED for s in states0 if s[0] >= T_FAULT - 0.1), \
         "both arms track before the fault time"
-    bim, masters, rows, states = run(tmp_path, fault)
+    bim, masters, rows, states, _ = run(tmp_path, fault)
     safe_at = next((s[0] for s in states if s[0] >= T_FAULT and s[1] == SideState.SAFE), None)
     assert safe_at is not None and safe_at - T_FAULT <= SAFE_WITHIN
     assert masters[0].safe_events == 1
-    # the right arm: engaged throughout, never a safe event, and cycle for cycle what it was without the fault
+    assert_right_arm_untouched(masters, rows, states, rows0)
+
+
+def assert_right_arm_untouched(masters, rows, states, rows0) -> None:
+    """The right arm: engaged throughout, never a safe event, and cycle for cycle what it was without the fault."""
     assert all(s[2] == SideState.ENGAGED and s[3] == SideState.ENGAGED for s in states if s[0] >= T_FAULT)
     assert masters[1].safe_events == 0
     right = rows[1]
@@ -149,8 +166,38 @@ def test_fault_on_left_arm_makes_it_safe_and_leaves_right_arm_untouched(tmp_path
     np.testing.assert_array_equal(right, rows0[1])
 
 
+def measured_tension(bim: Bimanual, slave_rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The left arm's slave rows as (node time [s], largest measured |T_in| of its tendons [N]), one per cycle."""
+    cols = joint_csv_columns([j.name for j in bim.arms[0].cfg.instrument.joints], True)
+    t_in = [k for k, c in enumerate(cols) if c.endswith(".T_in")]
+    return slave_rows[:, cols.index("t_node")], np.abs(slave_rows[:, t_in]).max(axis=1)
+
+
+def test_a_tendon_driven_past_its_limit_makes_its_arm_safe_and_relaxes_it(tmp_path, baseline):
+    bim0, _, rows0, _, slave0 = baseline
+    t0, free = measured_tension(bim0, slave0[0])
+    assert free[t0 < T_FAULT].max() < LEFT_LIMIT < free.max(), "the free motion stays below, the grasp goes past"
+    bim, masters, rows, states, slave_rows = run(tmp_path, "limit")
+    t, peak = measured_tension(bim, slave_rows[0])
+    over = peak > LEFT_LIMIT
+    t_cross = t[np.argmax(over)]                       # the first cycle whose measured tension is past the limit
+    assert over.any() and t_cross > T_FAULT
+    assert all(s[1] == SideState.ENGAGED for s in states if T_FAULT - 0.1 <= s[0] < t_cross)
+    safe_at = next((s[0] for s in states if s[0] >= t_cross and s[1] == SideState.SAFE), None)
+    assert safe_at is not None and safe_at - t_cross <= SAFE_WITHIN
+    assert masters[0].safe_events >= 1 and masters[0].counts["estimates_rejected_range"] > 0
+    # the left slave relaxes: SAFE within the same time, its tendons back below the limit a few cycles later,
+    # and no tendon is held past the limit longer than that (every run of cycles past it is short)
+    relax_at = next((s[0] for s in states if s[0] >= t_cross and s[4] == SideState.SAFE), None)
+    assert relax_at is not None and relax_at - t_cross <= SAFE_WITHIN
+    assert peak[(t > relax_at) & (t <= relax_at + 0.01)].min() < LEFT_LIMIT
+    edges = np.flatnonzero(np.diff(np.r_[0, over.astype(int), 0]))
+    assert (edges[1::2] - edges[::2]).max() * DT <= SAFE_WITHIN
+    assert_right_arm_untouched(masters, rows, states, rows0)
+
+
 def test_lost_master_makes_both_arms_safe(tmp_path):
-    _, _, _, states = run(tmp_path, "peer")
+    _, _, _, states, _ = run(tmp_path, "peer")
     for k in (3, 4):                                      # the right and the left arm's slave
         assert states[int(T_FAULT / DT) - 2][k] == SideState.ENGAGED
         safe_at = next((s[0] for s in states if s[0] >= T_FAULT and s[k] == SideState.SAFE), None)
