@@ -21,8 +21,6 @@ The flow of every demo (:mod:`live.demo`) for two arms (:mod:`teleop.arms`):
 from __future__ import annotations
 
 import argparse
-import os
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -30,14 +28,13 @@ from pathlib import Path
 import yaml
 
 from live.demo_run import (
-    RECORDER_GRACE,
+    RecorderRun,
     finish,
     loop_lines,
     master_console_line,
     read_json,
-    stop_process,
+    run_processes,
     verdict_lines,
-    wait_listening,
 )
 from teleop.arms import Bimanual, load_arms
 from teleop.config import read_yaml, write_config
@@ -76,54 +73,14 @@ def recorder_check(out_dir: Path) -> tuple[bool, str]:
 
 def _processes(args, bim: Bimanual, run_dir: Path, problems: list[str]) -> None:
     """Two recorders, the slave and the master (module docstring, step 3); what went wrong into ``problems``."""
-    from live.record_demo import start_recorder
-    from teleop.transport import free_tcp_port, loopback_endpoint
-    port = free_tcp_port()
-    ep = loopback_endpoint(port)
-    timeout = float(args.timeout)
-    base = [sys.executable, "-m", "live.cli"]
-    common = ["--config", str(run_dir / "config.yaml"), "--run-dir", str(run_dir), "--max-duration", f"{timeout:g}"]
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    deadline = time.monotonic() + timeout
-    procs: list[tuple[str, subprocess.Popen]] = []
-    links: list[str] = []
-    try:
-        for arm in bim.arms:
-            d = run_dir / arm.ident
-            rec, link = start_recorder(base, ["--config", str(d / "config.yaml"), "--run-dir", str(d), "--journals",
-                                              str(run_dir), "--max-duration", f"{timeout:g}"], d, env, deadline)
-            procs.append((f"recorder of {arm.name}", rec))
-            if link is None:
-                problems.append(f"the recorder of {arm.name} did not start (see {d}/recorder.log)")
-                return
-            links += link
-        with open(run_dir / "slave.log", "w") as slog, open(run_dir / "master.log", "w") as mlog:
-            slave = subprocess.Popen(base + ["slave", "--listen", ep, "--exit-on-master-stop"] + links + common,
-                                     stdout=slog, stderr=subprocess.STDOUT, env=env)
-            procs.append(("slave", slave))
-            if not wait_listening(port, slave, deadline):
-                problems.append(f"the slave did not listen on {ep} (see {run_dir}/slave.log)")
-                return
-            master = subprocess.Popen(base + ["master", "--connect", ep, "--protocol", args.protocol] + links + common,
-                                      stdout=mlog, stderr=subprocess.STDOUT, env=env)
-            procs.append(("master", master))
-            print(f"slave and master of {', '.join(a.name for a in bim.arms)} running on {ep} "
-                  f"(protocol {args.protocol} on every joint) ...", flush=True)
-            for name, p in procs[::-1]:
-                wait = deadline - time.monotonic()
-                if name.startswith("recorder"):
-                    wait = max(wait, RECORDER_GRACE)
-                try:
-                    rc = p.wait(max(0.1, wait))
-                except subprocess.TimeoutExpired:
-                    problems.append(f"the {name} did not finish within --timeout {timeout:g} s; stopped")
-                    stop_process(p)
-                    rc = p.returncode
-                if rc != 0:
-                    problems.append(f"the {name} exited with code {rc}")
-    finally:
-        for _, p in procs:
-            stop_process(p)
+    timeout = f"{float(args.timeout):g}"
+    recorders = [RecorderRun(f"recorder of {arm.name}", ["--config", str(run_dir / arm.ident / "config.yaml"),
+                                                         "--run-dir", str(run_dir / arm.ident), "--journals",
+                                                         str(run_dir), "--max-duration", timeout], run_dir / arm.ident)
+                 for arm in bim.arms]
+    run_processes(args, run_dir / "config.yaml", run_dir, problems, recorders=recorders,
+                  doing=f"protocol {args.protocol} on every joint",
+                  sides=f"slave and master of {', '.join(a.name for a in bim.arms)}", report=False)
 
 
 def _evaluate(bim: Bimanual, run_dir: Path, summary: dict, problems: list[str]) -> dict[str, bool]:

@@ -6,7 +6,9 @@ instrument.
   the first ``--listen``); once the port accepts connections the master connects. When the master
   has finished its protocol it announces STOPPING and the slave exits too. Either running past
   ``--timeout`` is stopped with SIGTERM (recordings are flushed) and reported, as is a non-zero exit;
-  the recorder gets :data:`RECORDER_GRACE` after the sides, past ``--timeout`` if need be.
+  the recorder gets :data:`RECORDER_GRACE` after the sides, past ``--timeout`` if need be. The recorder
+  (``teleop record``) starts first, or several (:class:`RecorderRun`, one per arm of a bimanual instrument:
+  :mod:`live.demo_bimanual`), each ready before the sides start, which connect to all of them.
   With ``rig.type: zenoh`` a third process, ``teleop bridge``, runs the simulated rig behind the
   Zenoh rig interface and the slave connects to it.
 * :func:`full_scale_errors`: max and mean of |estimate - truth| over the range of the truth.
@@ -18,6 +20,7 @@ instrument.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import math
 import os
@@ -30,7 +33,7 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["run_processes", "read_json", "full_scale_errors", "master_console_line", "loop_lines", "machine_line",
+__all__ = ["run_processes", "RecorderRun", "read_json", "full_scale_errors", "master_console_line", "loop_lines", "machine_line",
            "verdict_lines", "finish"]
 
 
@@ -157,16 +160,73 @@ def _stop(proc: subprocess.Popen) -> None:
             proc.wait()
 
 
-wait_listening, stop_process = _wait_listening, _stop     # for the other demos' processes (live.demo_bimanual)
+@dataclasses.dataclass(frozen=True)
+class RecorderRun:
+    """One ``teleop record`` beside the sides (:func:`run_processes`).
+
+    Attributes
+    ----------
+    name : str
+        What the problems call it (``recorder``, ``recorder of left``).
+    args : list of str
+        Its arguments after ``record --listen <endpoint> --exit-when-done`` (``--config``, ``--run-dir``, ...).
+    run_dir : Path
+        Its run directory: ``recorder.log`` and ``recorder/`` go there.
+    """
+
+    name: str
+    args: list[str]
+    run_dir: Path
+
+
+def _start_recorders(base: list[str], recorders: list[RecorderRun], env: dict, deadline: float,
+                     procs: list, problems: list[str]) -> list[str] | None:
+    """Start every recorder, each ready before the next; the ``--connect`` arguments to all of them, or None
+    (into ``problems``) when one did not become ready before ``deadline`` [s, monotonic]."""
+    from live.record import start_recorder  # `teleop record` first: it hears every message
+    links: list[str] = []
+    for r in recorders:
+        proc, link = start_recorder(base, r.args, r.run_dir, env, deadline)
+        procs.append((r.name, proc, r.run_dir / "recorder.log"))
+        if link is None:
+            problems.append(f"the {r.name} did not start (see {r.run_dir}/recorder.log)")
+            return None
+        links += link
+    return links
+
+
+def _wait_all(procs: list, deadline: float, timeout: float, problems: list[str]) -> None:
+    """Wait for the processes, the last started first (the bridge serves until stopped); one past ``deadline``
+    [s, monotonic] (a recorder: past :data:`RECORDER_GRACE` after the sides, if later) is stopped; that and a
+    non-zero exit into ``problems``."""
+    for name, p, log in procs[::-1]:
+        if name == "bridge":
+            continue                 # serves until stopped below
+        wait = deadline - time.monotonic()
+        recorder = name.startswith("recorder")
+        if recorder:                 # the sides are done; a niced recorder on a busy machine catches up
+            wait = max(wait, RECORDER_GRACE)
+        try:
+            rc = p.wait(max(0.1, wait))
+        except subprocess.TimeoutExpired:
+            extra = f" and {RECORDER_GRACE:g} s after the sides" if recorder else ""
+            problems.append(f"the {name} did not finish within --timeout {timeout:g} s{extra}; stopped")
+            _stop(p)
+            rc = p.returncode
+        if rc != 0:
+            problems.append(f"the {name} exited with code {rc} (see {log})")
 
 
 def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, bridge: bool = False,
-                  doing: str | None = None) -> None:
+                  doing: str | None = None, recorders: list[RecorderRun] | None = None,
+                  sides: str = "slave and master", report: bool = True) -> None:
     """Slave and master as two processes with ``cfg_file`` (module docstring); what went wrong is
     appended to ``problems``. ``args``: ``listen``, ``timeout`` [s], ``protocol``. ``bridge``: the rig
     is ``rig.type: zenoh``, so ``teleop bridge`` runs the simulated rig as a third process on its own
     loopback port, which the slave connects to (stopped once slave and master are done). ``doing``: what
-    the start-up line says the sides do (default: calibration, then the protocol)."""
+    the start-up line says the sides do (default: calibration, then the protocol); ``sides``: what it calls
+    them. ``recorders``: the recorders started first, which the sides connect to (default: one with the
+    sides' arguments in ``run_dir``); ``report``: print each one's summary line at the end."""
     from teleop.transport import free_tcp_port, loopback_endpoint
     if args.listen:
         ep = args.listen[0]
@@ -177,18 +237,16 @@ def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, b
     timeout = float(args.timeout)
     base = [sys.executable, "-m", "live.cli"]
     common = ["--config", str(cfg_file), "--run-dir", str(run_dir), "--max-duration", f"{timeout:g}"]
+    recorders = [RecorderRun("recorder", common, run_dir)] if recorders is None else recorders
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     deadline = time.monotonic() + timeout
-    procs: list[tuple[str, subprocess.Popen]] = []
+    procs: list[tuple[str, subprocess.Popen, Path]] = []
     rig_link: list[str] = []
     with open(run_dir / "slave.log", "w") as slog, open(run_dir / "master.log", "w") as mlog, \
             open(run_dir / "bridge.log", "w") if bridge else contextlib.nullcontext() as blog:
         try:
-            from live.record import start_recorder  # `teleop record` first: it hears every message
-            recorder, rec_link = start_recorder(base, common, run_dir, env, deadline)
-            procs.append(("recorder", recorder))
+            rec_link = _start_recorders(base, recorders, env, deadline, procs, problems)
             if rec_link is None:
-                problems.append(f"the recorder did not start (see {run_dir}/recorder.log)")
                 return
             if bridge:
                 port_b = free_tcp_port()
@@ -196,39 +254,26 @@ def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, b
                 rig = subprocess.Popen(base + ["bridge", "--listen", ep_b, "--config", str(cfg_file), "--run-dir",
                                                str(run_dir), "--max-duration", f"{timeout:g}"],
                                        stdout=blog, stderr=subprocess.STDOUT, env=env)
-                procs.append(("bridge", rig))
+                procs.append(("bridge", rig, run_dir / "bridge.log"))
                 if not _wait_listening(port_b, rig, deadline):
                     problems.append(f"the bridge did not listen on {ep_b} (see {run_dir}/bridge.log)")
                     return
                 rig_link = ["--connect", ep_b]
             slave = subprocess.Popen(base + ["slave", "--listen", ep, "--exit-on-master-stop"] + rig_link + rec_link + common,
                                      stdout=slog, stderr=subprocess.STDOUT, env=env)
-            procs.append(("slave", slave))
+            procs.append(("slave", slave, run_dir / "slave.log"))
             if not _wait_listening(port, slave, deadline):
                 problems.append(f"the slave did not listen on {ep} (see {run_dir}/slave.log)")
                 return
             master = subprocess.Popen(base + ["master", "--connect", ep, "--protocol", args.protocol] + rec_link + common,
                                       stdout=mlog, stderr=subprocess.STDOUT, env=env)
-            procs.append(("master", master))
+            procs.append(("master", master, run_dir / "master.log"))
             doing = doing or f"calibration, then protocol {args.protocol}"
-            print(f"slave and master running on {ep} ({doing}) ...", flush=True)
-            for name, p in procs[::-1]:
-                if name == "bridge":
-                    continue                 # serves until stopped below
-                wait = deadline - time.monotonic()
-                if name == "recorder":       # the sides are done; a niced recorder on a busy machine catches up
-                    wait = max(wait, RECORDER_GRACE)
-                try:
-                    rc = p.wait(max(0.1, wait))
-                except subprocess.TimeoutExpired:
-                    extra = f" and {RECORDER_GRACE:g} s after the sides" if name == "recorder" else ""
-                    problems.append(f"the {name} did not finish within --timeout {timeout:g} s{extra}; stopped")
-                    _stop(p)
-                    rc = p.returncode
-                if rc != 0:
-                    problems.append(f"the {name} exited with code {rc} (see {run_dir}/{name}.log)")
+            print(f"{sides} running on {ep} ({doing}) ...", flush=True)
+            _wait_all(procs, deadline, timeout, problems)
             from live.record import summary_line
-            print(summary_line(run_dir / "recorder"), flush=True)
+            for r in recorders if report else ():
+                print(summary_line(r.run_dir / "recorder"), flush=True)
         finally:
-            for _, p in procs:
+            for _, p, _ in procs:
                 _stop(p)
