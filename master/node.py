@@ -22,7 +22,12 @@ given the time by the caller:
    an axis still engaged while another is not is dropped, so that it is checked again. Entering it
    re-anchors or checks the alignment and restarts the force ramp and the passivity observer.
    Leaving it because of the links or the deadman: SAFE, zero force at once, commands sent with
-   ``engaged=False`` (the slave holds); clutch or misalignment: READY;
+   ``engaged=False`` (the slave holds); clutch or misalignment: READY. A SAFE caused by a tension
+   (the newest estimate beyond ``master.max_tension``, or the slave going SAFE on an estimate whose
+   measured ``|T_in|`` is beyond ``slave.max_tension``) *latches*: the instrument does not engage again,
+   whatever the links and the alignment say, until the operator releases the deadman or presses the
+   clutch (:attr:`MasterNode.tension_latched`); a hand that keeps pushing does not drive the tendon
+   into its limit again;
 4. unless the newest estimate is beyond ``master.max_tension`` (step 2), publish the command (``Command(seq, t_master, targets, engaged, marker)``, one target per axis:
    ``x_in_cmd`` of a tendon, the angle of a joint) and keep its send time by seq in a
    ring buffer; an Estimate echoing ``cmd_seq`` gives the round-trip latency;
@@ -103,6 +108,8 @@ class MasterNode(MasterNodeBase):
     status : ConsoleStatus, of the instrument (the lowest of the axes').
     over_tension : bool, the newest estimate carries a tension beyond ``master.max_tension`` (no command
         is sent while it does).
+    tension_latched : bool, a SAFE caused by a tension holds until the deadman is released or the clutch
+        pressed (module docstring, step 3); ``tension_latches`` counts them.
     """
 
     def __init__(self, cfg: Config, device, links: MasterLinks, *, stop_linger: float = 0.2, recorder=None,
@@ -131,6 +138,10 @@ class MasterNode(MasterNodeBase):
         self.force = [0.0] * len(r)
         self.max_abs_force = 0.0
         self.over_tension = False                # the newest estimate is beyond master.max_tension: no command
+        self.slave_limit = cfg.slave.max_tension  # [N] the slave's own limit on a measured |T_in|
+        self.tension_latched = False             # a SAFE caused by a tension: no engaging until let go
+        self._since_safe = False                 # SAFE from ENGAGED, the deadman held since: a tension latches
+        self.tension_latches = 0
 
     @property
     def device(self):
@@ -159,6 +170,36 @@ class MasterNode(MasterNodeBase):
         self.counts["estimates_rejected_range"] += 1
         self._warn(now, "rejected estimate %d: a tension beyond master.max_tension %g N", est.seq, self.max_tension)
         return False
+
+    def _tension_caused(self, est) -> bool:
+        """Whether a SAFE now is caused by a tension: the newest estimate is beyond ``master.max_tension``,
+        or a measured ``|T_in|`` of the last accepted one is beyond ``slave.max_tension``."""
+        if self.over_tension:
+            return True
+        return est is not None and any(not abs(t.T_in) <= self.slave_limit for a in est.axes for t in a.tendons)
+
+    def _tension_latch(self, dev, healthy: bool, reason: str) -> tuple[bool, str]:
+        """The link health the consoles see: not healthy while the tension latch holds. Releasing the
+        deadman or pressing the clutch ends the latch, and ends the watch of :meth:`_latch_on_tension`."""
+        if self._since_safe and (not dev.operator_present or self.consoles[0].clutch_held(dev)):
+            self._since_safe = self.tension_latched = False
+        if self.tension_latched:
+            return False, "tension latch: release the deadman or press the clutch to engage again"
+        return healthy, reason
+
+    def _latch_on_tension(self, was_engaged: bool, est) -> None:
+        """Latch a SAFE caused by a tension (module docstring, step 3). From ENGAGED -> SAFE until the
+        operator lets go or the arm engages again, each cycle looks at the newest estimate: the slave's
+        estimate of the cycle it tripped may arrive a cycle after its heartbeat saying SAFE."""
+        if self.state == SideState.ENGAGED:
+            self._since_safe = False
+        elif was_engaged and self.state == SideState.SAFE:
+            self._since_safe = True
+        if self._since_safe and not self.tension_latched and self._tension_caused(est):
+            self.tension_latched = True
+            self.tension_latches += 1
+            self.log.warning("master SAFE on a tendon's tension (%s): engaging again needs the deadman released "
+                             "or the clutch pressed", self.last_reason)
 
     def _disengage_all(self) -> None:
         for f, c in zip(self.forces, self.consoles):
@@ -222,7 +263,10 @@ class MasterNode(MasterNodeBase):
         dev = self.device.read(now)
         pos = self._positions(dev)
         if not self._stopping(now, bool(getattr(self.device, "finished", False))):
+            healthy, reason = self._tension_latch(dev, healthy, reason)
+            was_engaged = self.state == SideState.ENGAGED
             self._consoles(now, dev, pos, healthy, reason, est)
+            self._latch_on_tension(was_engaged, est)
         engaged = self.state == SideState.ENGAGED
 
         # ---- command ----
@@ -303,6 +347,7 @@ class MasterNode(MasterNodeBase):
             "console": self.status.name,
             "clutches": max(c.clutches for c in self.consoles),     # every axis re-anchors on a release
             "align_refusals": self.align_refusals,
+            "tension_latches": self.tension_latches,
             "max_abs_force": self.max_abs_force,
             "force_limit": self.limit,
             "passivity": {"enabled": all(p.enabled for p in self.passivity),

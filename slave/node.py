@@ -25,6 +25,10 @@ caller:
   fresh, ``engaged=False``                  READY       holds the last applied target
   fresh, ``engaged=True``                   ENGAGED     follows its target (``x_in_cmd`` [m] of a
                                                         tendon, the angle [rad] of a joint)
+  any, once a measured ``|T_in|`` passed    SAFE        its safe behaviour, from the cycle
+  ``slave.max_tension``, until a fresh                  after the measurement on
+  ``engaged=False`` with every ``|T_in|``
+  back below it
   ========================================  ==========  =======================================
 
   A command is *accepted* only when it has one target per axis, is newer than the last accepted one
@@ -149,7 +153,7 @@ class SlaveNode(SlaveNodeBase):
                  calibration_file: str | Path | None = None):
         super().__init__(cfg, links, run_dir=run_dir, stop_on_master_stop=stop_on_master_stop,
                          counts=("commands_rejected_range", "commands_wrong_axes", "commands_out_of_order",
-                                 "commands_duplicate", "engage_refused"))
+                                 "commands_duplicate", "engage_refused", "tension_trips"))
         self.rig = rig
         self.recorder = recorder
         self.rerun = rerun
@@ -249,6 +253,7 @@ class SlaveNode(SlaveNodeBase):
         motors = self._motors(now, dt)
         st = self.rig_state = self.rig.step(self.kind.rig_command(motors), dt)
         observed = self.kind.observe_all(self.axes, st)
+        self._check_tension([a for a, _ in observed], now)     # past slave.max_tension: SAFE in this cycle
         profiles = tuple(p for _, p in observed if p)
         self._publish(Estimate(self.seq, self.cmd_seq, now, tuple(a for a, _ in observed), profiles))
         if self.recorder is not None:
@@ -264,6 +269,8 @@ class SlaveNode(SlaveNodeBase):
         return {
             **self.counts,
             "safe_events": self.safe_events,
+            "last_safe_reason": self.last_safe_reason,
+            "last_tension_trip": self.last_tension_trip,
             "stalls": self.stalls,
             "master_stopped": self.master_stopped,
             "calibrated": self.calibrated,

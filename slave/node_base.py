@@ -15,6 +15,15 @@ The same whatever the instrument's axes (:mod:`slave.axis`):
   within range. What each decision does to the motors is each axis's: a single tendon holds and
   relaxes toward its pretension when SAFE, the pair controller of a joint relaxes both tendons to
   their set tension;
+* the tension limit, in the node's own loop whatever the link and the master do: a cycle whose measured
+  proximal tension ``|T_in|`` of any tendon of any axis (the load cell of a tendon or of a pair; the
+  cable tension read off the spindle's torque) exceeds ``slave.max_tension`` (or reads NaN) goes SAFE
+  in that cycle (:meth:`SlaveNodeBase._check_tension`; counted as ``tension_trips``, the reason logged,
+  kept as the SAFE reason and as ``last_tension_trip`` in the stats) and relaxes from the next motor
+  command on. The SAFE holds, whatever the commands, until a fresh command with ``engaged=False``
+  arrives while every ``|T_in|`` is below :data:`REARM_FRACTION` (90 %) of the limit: the master has
+  let go (it goes SAFE when the slave's heartbeat says SAFE); the slave is then READY and engaging
+  again follows the ordinary rules;
 * one estimate published per control cycle, a Heartbeat at ``slave.heartbeat_hz``;
 * ``calibration.json`` in the run directory, and the counters of the run summary.
 """
@@ -35,7 +44,11 @@ from teleop.node import NodeBase
 if TYPE_CHECKING:
     from teleop.transport import Received
 
-__all__ = ["SlaveLinks", "SlaveNodeBase", "Decision"]
+__all__ = ["SlaveLinks", "SlaveNodeBase", "Decision", "REARM_FRACTION"]
+
+#: A tension trip ends only once every measured |T_in| is below this fraction of ``slave.max_tension``: a
+#: load cell's noise about the limit does not switch the slave between SAFE and READY from cycle to cycle.
+REARM_FRACTION = 0.9
 
 
 class Decision(Enum):
@@ -86,6 +99,7 @@ class SlaveNodeBase(NodeBase):
 
     side = Side.SLAVE
     log = logging.getLogger("teleop.slave")
+    names: tuple[str, ...] = ()             # the axes' names, in order (the node's)
 
     def __init__(self, cfg: Config, links: SlaveLinks, *, run_dir: str | Path | None, stop_on_master_stop: bool,
                  counts):
@@ -105,6 +119,10 @@ class SlaveNodeBase(NodeBase):
         self.commands_applied = 0
         self.master_stopped = False
         self._accepted: Received[Command] | None = None   # last accepted command
+        self.max_tension = cfg.slave.max_tension
+        self.tension_high = False           # the last measured |T_in| of some tendon is not below REARM_FRACTION
+        self.tension_fault: str | None = None   # why a tension trip holds SAFE, None when none does
+        self.last_tension_trip: str | None = None   # the reason of the run's last tension trip (stats)
         self._refused: Received[Command] | None = None    # last command refused for engaging too far away
 
     @property
@@ -179,6 +197,48 @@ class SlaveNodeBase(NodeBase):
             return "master liveliness token gone"
         return None
 
+    def _tension_hold(self) -> str | None:
+        """Why a tension trip still holds SAFE (with a fresh command), or None: none does, or it ends now
+        because the command is not engaged and every measured ``|T_in|`` is below :data:`REARM_FRACTION` of
+        ``slave.max_tension``."""
+        why = self.tension_fault
+        if why is None:
+            return None
+        rec = self._accepted
+        if self.tension_high or rec is None or rec.message.engaged:
+            return why
+        self.tension_fault = None
+        return None
+
+    def _check_tension(self, axes, now: float) -> None:
+        """The tension limit on this cycle's measured proximal tensions (module docstring).
+
+        Parameters
+        ----------
+        axes : sequence of AxisState
+            This cycle's state of every axis; each tendon's ``T_in`` [N] is its measured proximal tension.
+        now : float
+            The cycle's time [s].
+        """
+        limit = self.max_tension
+        peak, where = 0.0, ""                   # the largest |T_in| [N] (NaN: a failed load cell) and its tendon
+        for ax_state, name in zip(axes, self.names):
+            n = len(ax_state.tendons)
+            for k, tendon in enumerate(ax_state.tendons):
+                T = abs(tendon.T_in)
+                if not T <= peak:               # NaN wins
+                    peak, where = T, name if n == 1 else f"{name}.{'ab'[k]}"
+        self.tension_high = not peak < REARM_FRACTION * limit
+        if peak <= limit:
+            return
+        why = f"tension {peak:.4g} N of {where} beyond slave.max_tension {limit:g} N"
+        if self.tension_fault is None:
+            self.counts["tension_trips"] += 1
+            self.last_tension_trip = why
+        self.tension_fault = why
+        self.marker = 0
+        self._set_state(SideState.SAFE, now, why)
+
     def _too_far(self, cmd) -> str | None:
         """Why engaging on ``cmd`` would move the instrument too far at once (for the warning), or None."""
         raise NotImplementedError
@@ -193,7 +253,7 @@ class SlaveNodeBase(NodeBase):
             ``marker``, ``commands_applied`` and the ``engage_refused`` count are updated here.
         """
         self._accept(now)
-        why = self._command_fault(now)
+        why = self._command_fault(now) or self._tension_hold()
         if why is not None:
             self._set_state(SideState.SAFE, now, why)
             self.marker = 0

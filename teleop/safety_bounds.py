@@ -81,6 +81,10 @@ BOUNDS: tuple[Bound, ...] = (
     Bound("master.max_tension", "<=", 1000.0, "N",
           "an estimate above 1000 N is not a surgical tendon's tension (a 1 mm steel cable breaks near "
           "1 kN); accepting it lets a corrupt estimate through to the force on the hand"),
+    Bound("slave.max_tension", "<=", 100.0, "N",
+          "the slave relaxes a tendon whose measured tension passes this limit; 100 N is two thirds of the "
+          "breaking load of a steel cable of the default tendon's stiffness (~0.4 mm, ~150 N) and 0.7 % strain "
+          "of the default tendon (EA 15 kN): a higher limit lets the slave hold a tendon near its break"),
     Bound("calibration.target_tension", "<=", 50.0, "N", _TENSION.format(limit=50)),
     Bound("sheath.pretension", "<=", 50.0, "N", _TENSION.format(limit=50)),
     Bound("instrument.joints[].pretension", "<=", 50.0, "N", _TENSION.format(limit=50)),

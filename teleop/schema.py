@@ -251,6 +251,7 @@ class SlaveConfig:
     x_in_min: float = -0.005              # [m] commands outside [x_in_min, x_in_max]: rejected
     x_in_max: float = 0.03                # [m]
     engage_tolerance: float = 0.002       # [m] (re-)engage only on a command this close to x_in
+    max_tension: float = 80.0             # [N] a measured |T_in| above: SAFE in that cycle, relax (slave/node_base.py)
     realtime_priority: int = 20           # SCHED_FIFO priority of the loop thread, 1-99 (teleop/realtime.py); 0: off
 
 
