@@ -43,13 +43,17 @@ class JointLogging:
                 pts = route_points(runs) + np.array([0.0, 0.0, dz])
                 self._joint_routes[f"{name}/{side}"] = (pts, arc_length(pts))
 
-    def _log_joint_routes(self, t: float) -> None:
-        """At the first log: the tendon routes, static and grey, and every tendon at rest (0 N) at ``t`` [s],
-        so that the 3D view has its tendons from where the recording starts."""
-        self._set_time(self._rec, t)
-        for key, (pts, arc) in self._joint_routes.items():
+    def _log_joint_statics(self) -> None:
+        """The tendon routes, static and grey (at the first log and at the start of every .rrd segment)."""
+        for key, (pts, _arc) in self._joint_routes.items():
             self._rec.log(f"instrument/{key}/route",
                           self._rr.LineStrips3D([pts], radii=0.001, colors=[(120, 120, 120, 255)]), static=True)
+
+    def _log_joint_routes(self, t: float) -> None:
+        """At the first log: every tendon at rest (0 N) at ``t`` [s], so that the 3D view has its tendons from
+        where the recording starts (the grey routes: :meth:`_log_joint_statics`)."""
+        self._set_time(self._rec, t)
+        for key, (pts, arc) in self._joint_routes.items():
             segs = route_segments(pts, arc, np.linspace(0.0, 1.0, 21))
             self._rec.log(f"instrument/{key}/tension",
                           self._rr.LineStrips3D(segs, radii=0.003, colors=tension_colors(np.zeros(20))))

@@ -38,6 +38,8 @@ Saved to a file (``save``), the stream gathers each entity's rows for :data:`SAV
 them as one chunk: every chunk carries ~1.4 kB of its own (schema, metadata), so the SDK's default of a
 chunk every few hundredths of a second made the .rrd of a session two to three times the size of its
 rows. A viewer (``spawn``) gets the SDK's default, which keeps it live.
+
+A saved recording is written in .rrd segments of :data:`~teleop.rerun_segments.SEGMENT_S` (:mod:`teleop.rerun_segments`).
 """
 from __future__ import annotations
 
@@ -52,13 +54,14 @@ import numpy as np
 
 from teleop.errors import ConfigError
 from teleop.rerun_joints import ORANGE, JointLogging, arc_length
+from teleop.rerun_segments import SEGMENT_S, SegmentedSave, segment_path
 from teleop.rerun_view import ELONGATION_RANGE, TENSION_RANGE, WALL, route_points, route_segments, tension_colors
 from teleop.rerun_view import blueprint as view_blueprint
 
 if TYPE_CHECKING:
     import rerun as rr
 
-__all__ = ["RerunLogger", "signal_path", "display_available", "MODES", "route_points", "tension_colors",
+__all__ = ["RerunLogger", "signal_path", "segment_path", "SEGMENT_S", "display_available", "MODES", "route_points", "tension_colors",
            "TENSION_RANGE", "ELONGATION_RANGE"]
 
 MODES = ("save", "spawn", "off")
@@ -96,7 +99,7 @@ def display_available() -> bool:
     return True
 
 
-class RerunLogger(JointLogging):
+class RerunLogger(JointLogging, SegmentedSave):
     """Live tension distribution, signals and phase to a Rerun recording.
 
     Parameters
@@ -134,7 +137,8 @@ class RerunLogger(JointLogging):
 
     def __init__(self, application_id: str, recording_id: str | None = None,
                  mode: Literal["save", "spawn", "off"] = "save", path: str | Path | None = None,
-                 *, profile_every: int = 1, route=None, wall_clock: bool = False, joints=()) -> None:
+                 *, profile_every: int = 1, route=None, wall_clock: bool = False, joints=(),
+                 segment_s: float | None = SEGMENT_S) -> None:
         if mode not in MODES:
             raise ConfigError(f"recording.rerun: expected one of {', '.join(MODES)}, got {mode!r}")
         if mode == "save" and path is None:
@@ -155,6 +159,7 @@ class RerunLogger(JointLogging):
         self._route_s: np.ndarray | None = None
         self._started = False
         self._wall_is_t = bool(wall_clock)
+        self._init_segments(segment_s)
         if route is not None and len(route):
             self._route = route_points(route)
             self._route_s = arc_length(self._route)
@@ -184,6 +189,7 @@ class RerunLogger(JointLogging):
             assert self.path is not None
             self.path.parent.mkdir(parents=True, exist_ok=True)
             rec.save(self.path, default_blueprint=blueprint)
+            self._begin_segments(blueprint)
         self._rec = rec
 
     def _fall_back(self, application_id: str, rec: rr.RecordingStream, why: str) -> None:
@@ -252,8 +258,11 @@ class RerunLogger(JointLogging):
     def _set_time(self, rec, t: float) -> None:
         """``t`` on the ``time`` timeline and, unless the caller's ``t`` is the monotonic clock
         (``wall_clock``), the monotonic clock now on ``wall`` (where slave and master recordings line up)."""
+        now = time.monotonic()
+        if now >= self._segment_end:
+            self._next_segment(now)
         rec.set_time(TIMELINE, duration=float(t))
-        rec.set_time(WALL, duration=float(t) if self._wall_is_t else time.monotonic())
+        rec.set_time(WALL, duration=float(t) if self._wall_is_t else now)
 
     def _start(self, t: float) -> None:
         """At the first log: the static pieces (route, fixed profile range) and a rest profile at ``t``,
@@ -261,19 +270,28 @@ class RerunLogger(JointLogging):
         if self._started or self._rec is None:
             return
         self._started = True
+        self._log_statics()
+        self._log_joint_routes(t)
+        if self._route is not None:
+            L = float(self._route_s[-1]) if self._route_s is not None else 1.0
+            s = np.linspace(0.0, L, 50)
+            self.log_profile(t, s, np.zeros_like(s))          # the rest profile: bars and route at 0 N
+            self._profile_calls -= 1                           # not counted by the decimation
+
+    def _log_statics(self) -> None:
+        """The timeless pieces: the profile plot's fixed range, the sheath's and the tendons' routes."""
         rec, rr = self._rec, self._rr
+        if rec is None:
+            return
         # an invisible bar pair fixes the profile plot's y range (the bar chart view has no axis setting)
         L = float(self._route_s[-1]) if self._route_s is not None else 1.0
         rec.log("profile/range", rr.BarChart.from_fields(values=np.array(TENSION_RANGE), abscissa=np.array([0.0, L]),
                                                           widths=np.array([1e-6, 1e-6]), color=(0, 0, 0, 0)),
                 static=True)
-        self._log_joint_routes(t)
         if self._route is not None:
             rec.log("sheath/route", rr.LineStrips3D([self._route], radii=0.002, colors=[(120, 120, 120, 255)]),
                     static=True)
-            s = np.linspace(0.0, L, 50)
-            self.log_profile(t, s, np.zeros_like(s))          # the rest profile: bars and route at 0 N
-            self._profile_calls -= 1                           # not counted by the decimation
+        self._log_joint_statics()
 
     def _log_sheath(self, s: np.ndarray, est: np.ndarray, true: np.ndarray | None) -> None:
         """The route coloured by the estimated (and beside it the true) tension; the distal joint."""

@@ -260,3 +260,35 @@ def test_joint_instrument_view_logs_each_joint_and_its_tendons(tmp_path):
     assert z == pytest.approx(-2 * JOINT_SPACING)                   # the third pair sits two spacings down
     assert experiment_label(0, ("a", "b")) == "none" and experiment_label(1, ("x",)) == "paper"
     assert experiment_label(1 | (2 << 8), ("bend_ud", "bend_lr", "grasp")) == "bend_ud paper_a, grasp paper_b"
+
+
+def test_a_saved_recording_goes_on_in_segments_that_each_read_alone(tmp_path):
+    """Past its segment time a saved recording finalises its file and goes on in ``<stem>.1.rrd`` with the
+    same recording id; the new file carries the routes, series styles, profile grid and phase again."""
+    from teleop.rerun_segments import segment_path
+    path = tmp_path / "slave.rrd"
+    route = [(0.3, float("inf")), (0.3, 0.1)]
+    with RerunLogger("teleop-test", "rec-seg", "save", path, route=route, segment_s=3600.0) as logger:
+        _run(logger, n=10)
+        logger._segment_end = 0.0            # the segment's wall-clock time is over
+        s = np.linspace(0.0, 0.6, 12)
+        for i in range(10, 20):
+            t = 0.01 * i
+            logger.log_profile(t, s, np.full(12, float(i)))
+            logger.log_scalars(t, T_in=10.0 + i)
+            logger.log_phase(t, "release")
+        files = logger.segments
+    assert files == [path, segment_path(path, 1)] == [path, tmp_path / "slave.1.rrd"]
+    reader0, first = _read(path)
+    reader1, second = _read(files[1])
+    assert [e.recording_id for e in reader1.recordings()] == ["rec-seg"]
+    assert reader1.store().summary()                     # finalised (footer) like the first
+    t_first = [t for t, _ in first["/tension/T_in"] if t is not None]
+    t_second = [t for t, _ in second["/tension/T_in"] if t is not None]
+    assert t_first == [i * 10_000_000 for i in range(10)]
+    assert t_second == [i * 10_000_000 for i in range(10, 20)]   # no row in both files, none lost
+    assert any(t is None and r.get("SeriesLines:names") == ["T_in"] for t, r in second["/tension/T_in"])
+    assert any(t is None for t, _ in second["/sheath/route"])    # the route again, static
+    grid = [r for _, r in second["/profile/T_hat"] if "BarChart:abscissa" in r]
+    assert len(grid) == 1 and "BarChart:color" in grid[0]        # the profile grid again, once
+    assert [r["StateChange:state"] for _, r in second["/phase"]] == [["release"]]
