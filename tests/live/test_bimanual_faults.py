@@ -4,8 +4,9 @@ FakeClock with in-memory links that go through the codec, the shared foot pedal 
 A fault on the left arm (its estimate stream cut, its estimates carrying an impossible tension, its hand's device
 lost, a tendon driven by the physics past the arm's ``master.max_tension``) makes the left arm safe within 100 ms,
 while the right arm's master rows are those of the same run without any fault, cycle for cycle: its loop is
-untouched. A tendon at its limit is not held there: the left slave relaxes. A lost master makes both arms' slaves
-safe. The process-level test is tests/integration/test_bimanual.py."""
+untouched. A tendon at its limit is not held there: the left slave relaxes. With the limit on the slave
+(``slave.max_tension``) the left slave goes SAFE in the very cycle its measured tension passes it and the left master
+latches. A lost master makes both arms' slaves safe. The process-level test is tests/integration/test_bimanual.py."""
 from __future__ import annotations
 
 import dataclasses
@@ -100,12 +101,16 @@ class LostAfter:
 
 def run(tmp_path: Path, fault: str | None):
     """Both arms for T_END seconds with ``fault`` on the left arm from T_FAULT ("limit": the left arm's
-    ``master.max_tension`` is LEFT_LIMIT throughout); (arms, masters, master rows, states, slave rows)."""
+    ``master.max_tension`` is LEFT_LIMIT throughout; "slave_limit": its ``slave.max_tension``, which both of its
+    sides read, as from one config file); (arms, masters, master rows, states, slave rows)."""
     bim = cheap_bimanual(LEFT_LIMIT if fault == "limit" else None)
     clock = FakeClock(0.0)
     pedal = FootPedal([a.cfg.master.mapping.clutch_button for a in bim.arms])
     slaves, masters, rows, topics, slave_rows = [], [], [], [], []
     for i, arm in enumerate(bim.arms):
+        if arm.hand == "left" and fault == "slave_limit":     # a slave setting: the arms overlay has none
+            arm = dataclasses.replace(arm, cfg=dataclasses.replace(
+                arm.cfg, slave=dataclasses.replace(arm.cfg.slave, max_tension=LEFT_LIMIT)))
         cmd, est, shb, mhb = (WireTopic(clock, codec=True, keep=False) for _ in range(4))
         rig = SimulatedInstrument.from_config(arm.cfg)
         est_out = est
@@ -224,3 +229,23 @@ def test_shared_pedal_clutches_both_hands_and_deadman_stays_per_hand():
     left.buttons = 0
     assert hl.read(0.002).buttons == 0 and hr.read(0.002).buttons == 1 << 0
     assert pedal.presses == 1 and not pedal.pressed
+
+
+def test_the_left_slave_trips_its_own_limit_in_the_cycle_its_tension_passes_it(tmp_path, baseline):
+    """The left arm's slave.max_tension is LEFT_LIMIT (its master's limit the shipped 200 N): the slave goes SAFE
+    in the very cycle its measured tension first passes it, the master still commanding; the left master goes
+    SAFE on it and latches (its hand keeps its deadman pressed), so the tendon is not driven past it again."""
+    bim, masters, rows, states, slave_rows = run(tmp_path, "slave_limit")
+    t, peak = measured_tension(bim, slave_rows[0])
+    cols = joint_csv_columns([j.name for j in bim.arms[0].cfg.instrument.joints], True)
+    state = slave_rows[0][:, cols.index("state")]
+    over = peak > LEFT_LIMIT
+    k = int(np.argmax(over))
+    assert over.any() and t[k] > T_FAULT and not over[:k].any()
+    assert state[k] == int(SideState.SAFE) and state[k - 1] == int(SideState.ENGAGED)
+    assert masters[0].counts["estimates_rejected_range"] == 0          # the master's own check never fired
+    assert masters[0].tension_latched and masters[0].safe_events == 1 and masters[0].engage_count == 1
+    # relaxing brings the tendon back below within a few cycles, and the latched master never drives it past again
+    edges = np.flatnonzero(np.diff(np.r_[0, over.astype(int), 0]))
+    assert len(edges) == 2 and (edges[1] - edges[0]) * DT <= 0.01
+    assert_right_arm_untouched(masters, rows, states, rows0=baseline[2])
