@@ -12,8 +12,8 @@ instrument.
   With ``rig.type: zenoh`` a third process, ``teleop bridge``, runs the simulated rig behind the
   Zenoh rig interface and the slave connects to it.
 * :func:`full_scale_errors`: max and mean of |estimate - truth| over the range of the truth.
-* :func:`master_console_line`, :func:`loop_lines`, :func:`machine_line`, :func:`verdict_lines`: the lines on the master's
-  console, on both loops and the link, and on the checks.
+* :func:`master_console_line`, :func:`loop_lines`, :func:`machine_line`, :func:`rt_budget_lines`, :func:`verdict_lines`:
+  the lines on the master's console, on both loops, the machine and the link, and on the checks.
 * :func:`finish`: checks, problems and wall time into the summary, ``summary.json``, the printed
   table, the exit code.
 """
@@ -34,7 +34,7 @@ from typing import Callable
 import numpy as np
 
 __all__ = ["run_processes", "RecorderRun", "read_json", "full_scale_errors", "master_console_line", "loop_lines", "machine_line",
-           "verdict_lines", "finish"]
+           "rt_budget_lines", "verdict_lines", "finish"]
 
 
 def full_scale_errors(est: np.ndarray, true: np.ndarray) -> tuple[float, float]:
@@ -83,6 +83,8 @@ def loop_lines(s: dict, *, detailed: bool) -> list[str]:
     line = machine_line(s)
     if line and detailed:
         lines.append(line)
+    if detailed:
+        lines += rt_budget_lines(s)
     lat = s.get("master", {}).get("latency_rtt", {})
     if lat.get("n") and detailed:
         lines.append(f"round trip (command -> estimate echo): p50 {lat['p50_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms, "
@@ -109,6 +111,36 @@ def machine_line(s: dict) -> str | None:
     cpus = next((s[k]["pacer"]["machine"].get("cpus") for k in ("master", "slave")
                  if s.get(k, {}).get("pacer", {}).get("machine")), None)
     return f"machine steal (VM stalls, {cpus} CPUs) during the loops: " + "; ".join(parts)
+
+
+#: a loop's worst stall within these fractions of the kernel's longest real-time stop (40-60 ms for the
+#: default 50 ms) points at the kernel's throttling
+THROTTLE_WINDOW = (0.8, 1.2)
+
+
+def rt_budget_lines(s: dict) -> list[str]:
+    """The kernel's real-time budget under the loops (``pacer.rt_budget_ms``, ``pacer.rt_stop_ms``:
+    :func:`teleop.realtime.rt_budget`), then, per loop at ``SCHED_FIFO`` whose worst stall (its worst
+    lateness or longest step) lies in :data:`THROTTLE_WINDOW` of the longest stop while the budget is
+    limited, a note that the stall is likely the kernel's throttling; [] when no side reports a budget."""
+    sides = [(side, s.get(side, {}).get("pacer", {})) for side in ("master", "slave")]
+    sides = [(side, pc) for side, pc in sides if "rt_budget_ms" in pc]
+    if not sides:
+        return []
+    pc0 = sides[0][1]
+    if pc0["rt_budget_ms"] == "unlimited":
+        return ["kernel real-time budget: unlimited (sched_rt_runtime_us = -1)"]
+    stop = float(pc0.get("rt_stop_ms", 0.0))
+    lines = [f"kernel real-time budget: {float(pc0['rt_budget_ms']):.0f} ms of a CPU per second, then real-time "
+             f"threads stop for up to {stop:.0f} ms (sched_rt_runtime_us)"]
+    for side, pc in sides:
+        worst = max(1e3 * pc.get("max_lateness", 0.0), pc.get("step_ms", {}).get("max", 0.0))
+        if (str(pc.get("scheduling", "")).startswith("SCHED_FIFO") and pc["rt_budget_ms"] != "unlimited"
+                and THROTTLE_WINDOW[0] * stop <= worst <= THROTTLE_WINDOW[1] * stop):
+            lines.append(f"{side} stall of {worst:.1f} ms: likely the kernel's real-time throttling (its real-time "
+                         "threads used up the budget of a CPU), not the loop's code; "
+                         "see docs/how-to/real-time.md")
+    return lines
 
 
 def verdict_lines(s: dict) -> list[str]:

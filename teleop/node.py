@@ -35,7 +35,7 @@ from teleop.clock import Clock, LockedPacer, MonotonicClock, Pacer
 from teleop.codec import next_seq, seq_newer
 from teleop.cycles import CycleStats
 from teleop.messages import Heartbeat, Side, SideState
-from teleop.realtime import IDLE, demote_threads, machine_steal, promote_threads
+from teleop.realtime import IDLE, demote_threads, machine_steal, promote_threads, rt_budget, rt_budget_note
 from teleop.recording import stop_at_cycle_end
 
 __all__ = ["NodeBase", "IDLE_GUARD"]
@@ -191,7 +191,9 @@ class NodeBase:
         :class:`teleop.cycles.CycleStats`, in the stats' ``pacer``; with them ``machine``: the load
         average at the loop's start and end and the hypervisor's steal during the loop
         (:func:`teleop.realtime.machine_steal`, summed over the CPUs), which tells a virtual
-        machine's stalls (every process stopped at once) from the loop's own overruns.
+        machine's stalls (every process stopped at once) from the loop's own overruns; ``rt_budget_ms`` and
+        ``rt_stop_ms``: the kernel's real-time budget (:func:`teleop.realtime.rt_budget`), whose throttling
+        stops a ``SCHED_FIFO`` loop for up to ``rt_stop_ms`` (logged at the start when it applies).
         """
         real = isinstance(clock, MonotonicClock)
         if real:
@@ -200,6 +202,10 @@ class NodeBase:
             self.scheduling = promote_threads(self._realtime_priority())
             if self.scheduling.startswith("not"):
                 self.log.warning("%s loop: real-time priority %s", self.side.name.lower(), self.scheduling)
+        budget = rt_budget() if real else None
+        note = rt_budget_note(budget) if self.scheduling.startswith("SCHED_FIFO") else None
+        if note:
+            self.log.info("%s loop: %s", self.side.name.lower(), note)
         source = self._cycle_source() if real else None
         if not (hasattr(source, "wait") and hasattr(source, "count")):
             source = None
@@ -231,6 +237,8 @@ class NodeBase:
                 self.pacer_stats = {**pacer.stats(), **cycles.stats(), "scheduling": self.scheduling}
                 if machine is not None:
                     self.pacer_stats["machine"] = _machine_during(machine, clock.now() - t0)
+                if budget is not None:
+                    self.pacer_stats.update(budget.stats())
                 cycles.dump()
                 self._run_ended(clock)
         stop.reraise()

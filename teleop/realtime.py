@@ -19,6 +19,13 @@ Without the privilege (``CAP_SYS_NICE`` or an ``RLIMIT_RTPRIO``) nothing changes
 returned: the loop runs with normal scheduling. :func:`demote_threads` puts every thread back to
 normal scheduling when the loop ends (writing the stats and closing the files is no real-time work).
 
+**The kernel's real-time budget** (:func:`rt_budget`). Linux lets the real-time threads on a CPU run
+for ``sched_rt_runtime_us`` of every ``sched_rt_period_us`` (default 950 ms of every second); once a
+CPU's real-time threads have used that, the kernel stops all of them on that CPU until the period
+ends (up to 50 ms by default). A loop whose process holds about one CPU of real-time work reaches it
+and stalls for 40-60 ms; ``sched_rt_runtime_us = -1`` lifts the limit (a host setting,
+``docs/how-to/real-time.md``).
+
 **Idle window** (:data:`IDLE`). After each ``step()`` the loop announces until when it will sleep
 (its next deadline less a guard); a helper thread calls :meth:`IdleWindow.wait` with the expected
 duration of its next piece of work before doing it, so that it holds the interpreter lock while the
@@ -26,13 +33,14 @@ loop sleeps, not when the loop wakes. Without a loop (tests, tools) the window i
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import threading
 import time
 
 __all__ = ["promote_threads", "demote_threads", "IdleWindow", "IDLE", "HELPER_PREFIXES", "scheduling",
-           "machine_steal"]
+           "machine_steal", "RtBudget", "rt_budget", "rt_budget_note"]
 
 HELPER_PREFIXES = ("csv-writer", "rerun-logger")
 
@@ -117,6 +125,69 @@ def machine_steal(stat: str = "/proc/stat") -> float | None:
         return int(fields[8]) / os.sysconf("SC_CLK_TCK") if fields[0] == "cpu" and len(fields) > 8 else None
     except (OSError, ValueError, IndexError):
         return None
+
+
+@dataclasses.dataclass(frozen=True)
+class RtBudget:
+    """The kernel's budget for real-time threads on each CPU (module docstring).
+
+    Attributes
+    ----------
+    runtime_s : float or None
+        Real-time CPU time allowed per period on one CPU [s]; None: unlimited (``sched_rt_runtime_us = -1``).
+    period_s : float
+        The accounting period [s] (``sched_rt_period_us``).
+    """
+
+    runtime_s: float | None
+    period_s: float
+
+    @property
+    def limited(self) -> bool:
+        """Whether the kernel stops real-time threads that use up the budget."""
+        return self.runtime_s is not None and self.runtime_s < self.period_s
+
+    @property
+    def per_second(self) -> float:
+        """Real-time CPU time allowed per second of one CPU [s/s]; ``inf`` when unlimited."""
+        return math.inf if self.runtime_s is None else self.runtime_s / self.period_s
+
+    @property
+    def longest_stop(self) -> float:
+        """The longest stop of throttled real-time threads [s]: the period less the runtime; 0 when unlimited."""
+        return self.period_s - self.runtime_s if self.limited and self.runtime_s is not None else 0.0
+
+    def stats(self) -> dict[str, float | str]:
+        """For a side's stats: ``rt_budget_ms`` (per second of one CPU, or ``"unlimited"``) and
+        ``rt_stop_ms`` (the longest stop, 0 when unlimited)."""
+        return {"rt_budget_ms": "unlimited" if not self.limited else round(1e3 * self.per_second, 3),
+                "rt_stop_ms": round(1e3 * self.longest_stop, 3)}
+
+
+def rt_budget(kernel_dir: str = "/proc/sys/kernel") -> RtBudget | None:
+    """The kernel's real-time budget from ``sched_rt_runtime_us`` and ``sched_rt_period_us`` in
+    ``kernel_dir``; None where the files are absent or unreadable (not Linux, a container without them).
+    A negative runtime (``-1``) is unlimited."""
+    try:
+        with open(os.path.join(kernel_dir, "sched_rt_runtime_us"), encoding="ascii") as fh:
+            runtime = int(fh.read().strip())
+        with open(os.path.join(kernel_dir, "sched_rt_period_us"), encoding="ascii") as fh:
+            period = int(fh.read().strip())
+    except (OSError, ValueError):
+        return None
+    if period <= 0:
+        return None
+    return RtBudget(None if runtime < 0 else runtime * 1e-6, period * 1e-6)
+
+
+def rt_budget_note(budget: RtBudget | None) -> str | None:
+    """One line on a limited budget for a loop that runs at ``SCHED_FIFO``: what the kernel does and how
+    a dedicated control host lifts it; None when the budget is unknown or unlimited."""
+    if budget is None or not budget.limited:
+        return None
+    return (f"the kernel stops real-time threads that use more than {1e3 * budget.per_second:.0f} ms of a CPU "
+            f"in a second, for up to {1e3 * budget.longest_stop:.0f} ms (sched_rt_runtime_us); on a dedicated "
+            "control host `sysctl -w kernel.sched_rt_runtime_us=-1` lifts it (docs/how-to/real-time.md)")
 
 
 class IdleWindow:

@@ -1,0 +1,102 @@
+"""The kernel's real-time budget: reading it, the start-up note and the side's stats."""
+from __future__ import annotations
+
+import logging
+import math
+
+import pytest
+
+from teleop.realtime import RtBudget, rt_budget, rt_budget_note
+
+
+def _kernel(tmp_path, runtime: str, period: str = "1000000"):
+    (tmp_path / "sched_rt_runtime_us").write_text(runtime + "\n")
+    (tmp_path / "sched_rt_period_us").write_text(period + "\n")
+    return str(tmp_path)
+
+
+def test_the_default_budget_is_950_ms_a_second_with_stops_up_to_50_ms(tmp_path):
+    b = rt_budget(_kernel(tmp_path, "950000"))
+    assert b == RtBudget(0.95, 1.0)
+    assert b.limited and b.per_second == pytest.approx(0.95) and b.longest_stop == pytest.approx(0.05)
+    assert b.stats() == {"rt_budget_ms": 950.0, "rt_stop_ms": 50.0}
+
+
+def test_a_negative_runtime_is_unlimited(tmp_path):
+    b = rt_budget(_kernel(tmp_path, "-1"))
+    assert b is not None and not b.limited and math.isinf(b.per_second) and b.longest_stop == 0.0
+    assert b.stats() == {"rt_budget_ms": "unlimited", "rt_stop_ms": 0.0}
+    assert rt_budget_note(b) is None
+
+
+def test_a_runtime_equal_to_the_period_never_throttles(tmp_path):
+    b = rt_budget(_kernel(tmp_path, "500000", "500000"))
+    assert b is not None and not b.limited and b.stats()["rt_budget_ms"] == "unlimited"
+
+
+def test_absent_or_unreadable_files_give_none(tmp_path):
+    assert rt_budget(str(tmp_path / "missing")) is None
+    assert rt_budget(_kernel(tmp_path, "lots")) is None
+    assert rt_budget(_kernel(tmp_path, "950000", "0")) is None
+    assert rt_budget_note(None) is None
+
+
+def test_the_note_names_the_budget_the_stop_and_the_sysctl_line():
+    note = rt_budget_note(RtBudget(0.95, 1.0))
+    assert note is not None
+    assert "950 ms" in note and "up to 50 ms" in note
+    assert "sysctl -w kernel.sched_rt_runtime_us=-1" in note and "docs/how-to/real-time.md" in note
+
+
+def test_a_real_time_loop_logs_the_budget_and_reports_it_in_its_stats(monkeypatch, caplog):
+    import gc
+
+    import teleop.node as node_mod
+    from teleop.clock import MonotonicClock
+    from teleop.messages import Side
+
+    monkeypatch.setattr(gc, "freeze", lambda: None)                  # the test process keeps its collector
+    monkeypatch.setattr(node_mod, "promote_threads", lambda priority: "SCHED_FIFO 20")
+    monkeypatch.setattr(node_mod, "demote_threads", lambda: None)
+    monkeypatch.setattr(node_mod, "rt_budget", lambda: RtBudget(0.95, 1.0))
+
+    class Idle(node_mod.NodeBase):
+        side = Side.SLAVE
+        rate_hz = 1000.0
+        log = logging.getLogger("test-rt-budget")
+
+        def step(self, now):
+            self.done = True
+
+    node = Idle(10.0)
+    with caplog.at_level(logging.INFO, logger="test-rt-budget"):
+        node.run(MonotonicClock(), max_duration=1.0)
+    notes = [r.getMessage() for r in caplog.records if "sched_rt_runtime_us" in r.getMessage()]
+    assert len(notes) == 1 and notes[0].startswith("slave loop: the kernel stops real-time threads")
+    assert node.pacer_stats["rt_budget_ms"] == 950.0 and node.pacer_stats["rt_stop_ms"] == 50.0
+
+
+def test_a_loop_without_real_time_priority_logs_no_budget_note(monkeypatch, caplog):
+    import gc
+
+    import teleop.node as node_mod
+    from teleop.clock import MonotonicClock
+    from teleop.messages import Side
+
+    monkeypatch.setattr(gc, "freeze", lambda: None)
+    monkeypatch.setattr(node_mod, "promote_threads", lambda priority: "off")
+    monkeypatch.setattr(node_mod, "rt_budget", lambda: RtBudget(0.95, 1.0))
+
+    class Idle(node_mod.NodeBase):
+        side = Side.MASTER
+        rate_hz = 1000.0
+        log = logging.getLogger("test-rt-budget-off")
+
+        def step(self, now):
+            self.done = True
+
+    node = Idle(10.0)
+    with caplog.at_level(logging.INFO, logger="test-rt-budget-off"):
+        node.run(MonotonicClock(), max_duration=1.0)
+    assert not [r for r in caplog.records if "sched_rt_runtime_us" in r.getMessage()]
+    assert node.pacer_stats["rt_budget_ms"] == 950.0               # the host's budget is reported all the same
