@@ -40,15 +40,12 @@ from teleop.codec import next_seq
 from teleop.config import Config
 from teleop.messages import Command, Side, SideState
 from teleop.node import NodeBase
+from teleop.safety_bounds import REARM_FRACTION
 
 if TYPE_CHECKING:
     from teleop.transport import Received
 
 __all__ = ["SlaveLinks", "SlaveNodeBase", "Decision", "REARM_FRACTION"]
-
-#: A tension trip ends only once every measured |T_in| is below this fraction of ``slave.max_tension``: a
-#: load cell's noise about the limit does not switch the slave between SAFE and READY from cycle to cycle.
-REARM_FRACTION = 0.9
 
 
 class Decision(Enum):

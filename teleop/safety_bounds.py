@@ -20,7 +20,12 @@ from typing import Any, Callable, Iterator, Literal
 
 from teleop.errors import ConfigError
 
-__all__ = ["Bound", "BOUNDS", "bounded_keys", "check_bounds", "waivers", "waiver_lines", "announce_waivers"]
+__all__ = ["Bound", "BOUNDS", "REARM_FRACTION", "bounded_keys", "check_bounds", "waivers", "waiver_lines",
+           "announce_waivers"]
+
+#: The slave's tension trip ends only once every measured |T_in| is below this fraction of ``slave.max_tension``
+#: (slave/node_base.py): a load cell's noise about the limit does not switch SAFE and READY from cycle to cycle.
+REARM_FRACTION = 0.9
 
 
 @dataclass(frozen=True)
@@ -126,6 +131,23 @@ def _check_override(cfg: Any, error: Callable[[str, str], ConfigError]) -> None:
                                                  f"waive ({hint})")
 
 
+def _check_rest_below_limit(cfg: Any, error: Callable[[str, str], ConfigError]) -> None:
+    """Refuse a ``slave.max_tension`` whose re-arm level is not above the tensions the slave relaxes to (a
+    tension whose own bound is waived is left to the waiver)."""
+    rest = [("sheath.pretension", "sheath.pretension", cfg.sheath.pretension)]
+    for i, j in enumerate(cfg.instrument.joints):
+        rest.append((f"instrument.joints[{i}].pretension", "instrument.joints[].pretension", j.pretension)
+                    if j.pretension > 0 else ("pair_control.min_tension", "pair_control.min_tension",
+                                              cfg.pair_control.min_tension))
+    waived = set(cfg.safety.override)
+    level = REARM_FRACTION * cfg.slave.max_tension
+    for path, key, value in rest:
+        if key not in waived and not value < level:
+            raise error("slave.max_tension", f"slave.max_tension = {_show(cfg.slave.max_tension)}: a tension trip "
+                                              f"ends below {REARM_FRACTION:g} of it ({level:g} N), not above {path} = "
+                                              f"{_show(value)} N, the tension the slave relaxes to: it would stay SAFE")
+
+
 def check_bounds(cfg: Any, error: Callable[[str, str], ConfigError]) -> None:
     """Refuse a value past its hard bound unless ``safety.override`` lists its key.
 
@@ -138,7 +160,8 @@ def check_bounds(cfg: Any, error: Callable[[str, str], ConfigError]) -> None:
     Raises
     ------
     ConfigError
-        ``safety.override`` names a key without a bound, or a value is past its bound: one line
+        ``slave.max_tension`` not above the tensions the slave relaxes to (:data:`REARM_FRACTION` of it
+        at most), ``safety.override`` names a key without a bound, or a value is past its bound: one line
         ``<key> = <value>: above the hard bound <limit> <unit>: <reason> (...)``.
     """
     _check_override(cfg, error)
@@ -150,6 +173,7 @@ def check_bounds(cfg: Any, error: Callable[[str, str], ConfigError]) -> None:
             if not b.holds(value):
                 raise error(path, f"{path} = {_show(value)}: {b.describe()}: {b.reason} (to run past it "
                                   f"anyway, list '{b.key}' under safety.override)")
+    _check_rest_below_limit(cfg, error)
 
 
 def waivers(cfg: Any) -> list[dict]:

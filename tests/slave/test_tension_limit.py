@@ -166,3 +166,14 @@ def test_a_pushing_hand_trips_the_slave_once_and_the_master_latches(config, limi
     assert all(c[1] == SideState.SAFE for c in after) and master.tension_latched and master.tension_latches == 1
     assert after[-1][0] == SideState.READY and peaks[trip + 50:].max() <= limit
     assert slave.counts["tension_trips"] == 1 and master.engage_count == 1
+
+
+def test_a_limit_whose_rearm_level_is_not_above_the_rest_tension_is_refused():
+    from teleop.config import config_from_dict
+    from teleop.errors import ConfigError
+    with pytest.raises(ConfigError, match=r"^<dict>: slave.max_tension = 10: .*sheath.pretension = 9.5 N"):
+        config_from_dict({"slave": {"max_tension": 10.0}, "sheath": {"pretension": 9.5}})
+    with pytest.raises(ConfigError, match=r"instrument.joints\[0\].pretension = 12 N"):
+        config_from_dict({"slave": {"max_tension": 13.0}, "pair_control": {"axes": []},
+                          "instrument": {"joints": [{"name": "j", "pretension": 12.0}]}})
+    assert config_from_dict({"slave": {"max_tension": 10.0}, "sheath": {"pretension": 8.9}}).slave.max_tension == 10.0
