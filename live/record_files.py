@@ -161,19 +161,34 @@ class StreamCsv:
 class StreamSample:
     """A stream written to no CSV (``recording.csv: low_rate``): an evenly thinned copy of its rows, in
     memory, for ``streams.png``. Every :data:`SAMPLE_EVERY`-th message is kept; at :data:`SAMPLE_ROWS`
-    rows every other one is dropped and the stride doubles (at most about 10 MB for a 1 kHz estimate)."""
+    rows every other one is dropped and the stride doubles. The rows live in one array of
+    :data:`SAMPLE_ROWS` rows, allocated and touched at the stream's first message (8 bytes a number: about
+    10 MB for a 1 kHz estimate of 60 numbers), so the recorder's memory is at its size from the start of
+    a session, not growing over its first minutes."""
 
     def __init__(self, name: str, names: tuple[str, ...]):
         self.name, self.names = name, names
-        self.rows: list[np.ndarray] = []
+        self.data = np.full((SAMPLE_ROWS, 1 + len(names)), np.nan)   # written now: resident from the start
+        self.count = 0                      # rows kept in ``data``
         self.every, self.n = SAMPLE_EVERY, 0
 
     def write(self, t: float, values: list | Callable[[], list]) -> None:
-        """One message at ``t`` [s], its numbers (or a function giving them, called only for a kept row)."""
+        """One message at ``t`` [s], its numbers (or a function giving them, called only for a kept row).
+
+        Raises
+        ------
+        ValueError
+            The message has another count of numbers than the stream's names.
+        """
         if self.n % self.every == 0:
-            self.rows.append(np.asarray([t, *(values() if callable(values) else values)], dtype=np.float64))
-            if len(self.rows) >= SAMPLE_ROWS:
-                self.rows, self.every = self.rows[::2], self.every * 2
+            row = self.data[self.count]
+            row[0] = t
+            row[1:] = values() if callable(values) else values
+            self.count += 1
+            if self.count >= SAMPLE_ROWS:
+                half = SAMPLE_ROWS // 2
+                self.data[:half] = self.data[0:SAMPLE_ROWS:2]
+                self.count, self.every = half, self.every * 2
         self.n += 1
 
     def stream(self):
@@ -181,7 +196,7 @@ class StreamSample:
         from live.record_figures import Stream
         cols = ("time",) + tuple(self.names)
         units = {c: u for c in cols if (u := ("s" if c == "time" else _unit(c)))}
-        data = np.vstack(self.rows) if self.rows else np.empty((0, 0))
+        data = self.data[:self.count].copy() if self.count else np.empty((0, 0))
         return Stream(self.name, list(cols), data, units)
 
 
