@@ -42,15 +42,10 @@ DEMO_JOINTS = (1, 8)                       # the round trip in real processes: 2
 def instrument(n_joints: int, rerun: str = "save"):
     """configs/instrument-3dof.yaml with its joints (and their simulated physics) repeated to ``n_joints``,
     named ``<joint><k>``, device axis k for joint k; ``recording.rerun`` = ``rerun``."""
+    from teleop.arms import repeated_joints
     from teleop.config import load_config
-    cfg = load_config(ROOT / "configs" / "instrument-3dof.yaml", {"recording.rerun": rerun})
-    inst, sim = cfg.instrument.joints, cfg.rig.simulated.joints
-    joints = tuple(dataclasses.replace(inst[k % 3], name=f"{inst[k % 3].name}{k}") for k in range(n_joints))
-    sims = tuple(dataclasses.replace(sim[k % 3], name=f"{sim[k % 3].name}{k}") for k in range(n_joints))
-    return dataclasses.replace(
-        cfg, instrument=dataclasses.replace(cfg.instrument, id=f"scaling{n_joints}", joints=joints),
-        rig=dataclasses.replace(cfg.rig, simulated=dataclasses.replace(cfg.rig.simulated, joints=sims)),
-        pair_control=dataclasses.replace(cfg.pair_control, axes=tuple(range(n_joints))))
+    base = load_config(ROOT / "configs" / "instrument-3dof.yaml", {"recording.rerun": rerun})
+    return repeated_joints(base, n_joints, f"scaling{n_joints}")
 
 
 class Loop:

@@ -23,7 +23,7 @@ from typing import Any
 from teleop.config import Config, ErrorContext, check_config, merge_dataclass, read_yaml
 from teleop.errors import ConfigError
 
-__all__ = ["HANDS", "ARM_SECTIONS", "Arm", "Bimanual", "is_bimanual", "load_arms"]
+__all__ = ["HANDS", "ARM_SECTIONS", "Arm", "Bimanual", "is_bimanual", "load_arms", "repeated_joints"]
 
 #: The hands of the console, each driving exactly one arm.
 HANDS = ("left", "right")
@@ -172,3 +172,34 @@ def load_arms(path: str | Path) -> Bimanual:
                                 f"{cfg.instrument.id!r} is also arm {other.name!r}'s; each arm has its own id")
         arms.append(Arm(name, hand, cfg))
     return Bimanual(tuple(arms), source)
+
+
+def repeated_joints(cfg: Config, n: int, ident: str) -> Config:
+    """``cfg``'s joint instrument with its joints (and their simulated physics) repeated to ``n`` joints, named
+    ``<joint><k>``, instrument id ``ident``, the pair controller on every joint (device axis k for joint k): an
+    instrument of any size from one that is checked, for the scaling benchmark and the many-axis tests.
+
+    Parameters
+    ----------
+    cfg : Config
+        A joint instrument (``instrument.joints`` and ``rig.simulated.joints`` of equal length >= 1).
+    n : int
+        Joints of the result, 1..:data:`teleop.config_checks.MAX_JOINTS` (not checked here: the loader checks).
+    ident : str
+        The result's ``instrument.id``.
+
+    Raises
+    ------
+    ConfigError
+        ``cfg`` has no joints.
+    """
+    inst, sim = cfg.instrument.joints, cfg.rig.simulated.joints
+    if not inst or len(sim) != len(inst):
+        raise ConfigError(f"repeated_joints: {cfg.instrument.id!r} is not a joint instrument with simulated joints")
+    m = len(inst)
+    joints = tuple(dataclasses.replace(inst[k % m], name=f"{inst[k % m].name}{k}") for k in range(n))
+    sims = tuple(dataclasses.replace(sim[k % m], name=f"{sim[k % m].name}{k}") for k in range(n))
+    return dataclasses.replace(
+        cfg, instrument=dataclasses.replace(cfg.instrument, id=ident, joints=joints),
+        rig=dataclasses.replace(cfg.rig, simulated=dataclasses.replace(cfg.rig.simulated, joints=sims)),
+        pair_control=dataclasses.replace(cfg.pair_control, axes=tuple(range(n))))

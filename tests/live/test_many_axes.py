@@ -7,7 +7,6 @@ calibration taken from the simulator's own K and M_e (what the power-up routine 
 from __future__ import annotations
 
 import csv
-import dataclasses
 from pathlib import Path
 
 import pytest
@@ -18,6 +17,7 @@ from master.node import csv_columns as master_columns
 from slave.calibration_file import InstrumentCalibration, TendonCalibration
 from slave.node import SlaveLinks, SlaveNode, recording
 from slave.rigs import RIG_TYPES
+from teleop.arms import repeated_joints
 from teleop.clock import FakeClock
 from teleop.config import Config, load_config
 from teleop.crtk import slave_messages
@@ -31,14 +31,7 @@ CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
 def many_joints(n: int) -> Config:
     """configs/instrument-3dof.yaml with its joints repeated to ``n`` (names ``<joint><k>``), one device axis each."""
-    cfg = load_config(CONFIGS / "instrument-3dof.yaml", {"recording.rerun": "off"})
-    inst, sim = cfg.instrument.joints, cfg.rig.simulated.joints
-    joints = tuple(dataclasses.replace(inst[k % 3], name=f"{inst[k % 3].name}{k}") for k in range(n))
-    sims = tuple(dataclasses.replace(sim[k % 3], name=f"{sim[k % 3].name}{k}") for k in range(n))
-    return dataclasses.replace(
-        cfg, instrument=dataclasses.replace(cfg.instrument, id=f"many{n}", joints=joints),
-        rig=dataclasses.replace(cfg.rig, simulated=dataclasses.replace(cfg.rig.simulated, joints=sims)),
-        pair_control=dataclasses.replace(cfg.pair_control, axes=tuple(range(n))))
+    return repeated_joints(load_config(CONFIGS / "instrument-3dof.yaml", {"recording.rerun": "off"}), n, f"many{n}")
 
 
 def simulator_calibration(cfg: Config, rig) -> InstrumentCalibration:
