@@ -116,30 +116,35 @@ def machine_line(s: dict) -> str | None:
 #: a loop's worst stall within these fractions of the kernel's longest real-time stop (40-60 ms for the
 #: default 50 ms) points at the kernel's throttling
 THROTTLE_WINDOW = (0.8, 1.2)
+#: [ms] per second the fair server of Linux 6.12 and later runs ordinary tasks on a CPU held by real-time threads
+FAIR_SERVER_MS = 50.0
 
 
 def rt_budget_lines(s: dict) -> list[str]:
     """The kernel's real-time budget under the loops (``pacer.rt_budget_ms``, ``pacer.rt_stop_ms``:
     :func:`teleop.realtime.rt_budget`), then, per loop at ``SCHED_FIFO`` whose worst stall (its worst
-    lateness or longest step) lies in :data:`THROTTLE_WINDOW` of the longest stop while the budget is
-    limited, a note that the stall is likely the kernel's throttling; [] when no side reports a budget."""
+    lateness or longest step) lies in :data:`THROTTLE_WINDOW` of the kernel's longest hold (the budget's
+    stop when it is limited, else :data:`FAIR_SERVER_MS`), a note that the stall is likely the kernel
+    making room for ordinary tasks; [] when no side reports a budget."""
     sides = [(side, s.get(side, {}).get("pacer", {})) for side in ("master", "slave")]
     sides = [(side, pc) for side, pc in sides if "rt_budget_ms" in pc]
     if not sides:
         return []
     pc0 = sides[0][1]
     if pc0["rt_budget_ms"] == "unlimited":
-        return ["kernel real-time budget: unlimited (sched_rt_runtime_us = -1)"]
-    stop = float(pc0.get("rt_stop_ms", 0.0))
-    lines = [f"kernel real-time budget: {float(pc0['rt_budget_ms']):.0f} ms of a CPU per second, then real-time "
-             f"threads stop for up to {stop:.0f} ms (sched_rt_runtime_us)"]
+        stop = FAIR_SERVER_MS
+        lines = ["kernel real-time budget: unlimited (sched_rt_runtime_us = -1)"]
+    else:
+        stop = float(pc0.get("rt_stop_ms", 0.0))
+        lines = [f"kernel real-time budget: {float(pc0['rt_budget_ms']):.0f} ms of a CPU per second, then real-time "
+                 f"threads stop for up to {stop:.0f} ms (sched_rt_runtime_us)"]
     for side, pc in sides:
         worst = max(1e3 * pc.get("max_lateness", 0.0), pc.get("step_ms", {}).get("max", 0.0))
-        if (str(pc.get("scheduling", "")).startswith("SCHED_FIFO") and pc["rt_budget_ms"] != "unlimited"
+        if (str(pc.get("scheduling", "")).startswith("SCHED_FIFO")
                 and THROTTLE_WINDOW[0] * stop <= worst <= THROTTLE_WINDOW[1] * stop):
-            lines.append(f"{side} stall of {worst:.1f} ms: likely the kernel's real-time throttling (its real-time "
-                         "threads used up the budget of a CPU), not the loop's code; "
-                         "see docs/how-to/real-time.md")
+            lines.append(f"{side} stall of {worst:.1f} ms: likely the kernel holding the real-time threads back so "
+                         "that ordinary tasks run (real-time throttling, or the fair server of kernels from 6.12), "
+                         "not the loop's code; see docs/how-to/real-time.md")
     return lines
 
 
