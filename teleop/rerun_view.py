@@ -150,14 +150,18 @@ def _pairs_view(rrb: Any, joints: Sequence[JointView]) -> object:
                              name="Tendon pairs coloured by tension (0-25 N, blue -> red), one pair per joint")
 
 
+def _console_lanes(rrb: Any) -> object:
+    """The console state and the experiment marker as lanes."""
+    return rrb.StateTimelineView(origin="/", contents=["/master/console", "/experiment"], name="Console, experiment")
+
+
 def _joint_blueprint(rrb: Any, joints: Sequence[JointView]) -> object:
     rows = [_joint_row(rrb, j) for j in joints]
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
                 _pairs_view(rrb, joints),
-                rrb.StateTimelineView(origin="/", contents=["/master/console", "/experiment"],
-                                      name="Console, experiment"),
+                _console_lanes(rrb),
                 row_shares=[5, 1],
             ),
             rrb.Vertical(*rows, rrb.Tabs(rrb.TimeSeriesView(origin="master", name="Master: commands, forces, round trip"),
@@ -199,8 +203,7 @@ def _bimanual_blueprint(rrb: Any, joints: Sequence[JointView], arms: dict[str, t
         rrb.Horizontal(
             rrb.Vertical(
                 _pairs_view(rrb, joints),
-                rrb.StateTimelineView(origin="/", contents=["/master/console", "/experiment"],
-                                      name="Console, experiment"),
+                _console_lanes(rrb),
                 rrb.Tabs(rrb.TimeSeriesView(origin="master/rtt", name="Round trip [s]"),
                          rrb.TimeSeriesView(origin="signals", name="Other signals")),
                 row_shares=[5, 1, 2],

@@ -48,55 +48,43 @@ def test_the_note_names_the_budget_the_stop_and_the_sysctl_line():
     assert "sysctl -w kernel.sched_rt_runtime_us=-1" in note and "docs/how-to/real-time.md" in note
 
 
-def test_a_real_time_loop_logs_the_budget_and_reports_it_in_its_stats(monkeypatch, caplog):
+def _run_one_cycle(monkeypatch, caplog, scheduling: str, side) -> tuple[list[str], dict]:
+    """A node of ``side`` whose loop obtains ``scheduling``, on the real clock for one cycle under a 950 ms
+    budget: the log lines naming sched_rt_runtime_us and the loop's stats."""
     import gc
 
     import teleop.node as node_mod
     from teleop.clock import MonotonicClock
-    from teleop.messages import Side
 
     monkeypatch.setattr(gc, "freeze", lambda: None)                  # the test process keeps its collector
-    monkeypatch.setattr(node_mod, "promote_threads", lambda priority: "SCHED_FIFO 20")
+    monkeypatch.setattr(node_mod, "promote_threads", lambda priority: scheduling)
     monkeypatch.setattr(node_mod, "demote_threads", lambda: None)
     monkeypatch.setattr(node_mod, "rt_budget", lambda: RtBudget(0.95, 1.0))
+    name = f"test-rt-budget-{side.name.lower()}"
 
     class Idle(node_mod.NodeBase):
-        side = Side.SLAVE
         rate_hz = 1000.0
-        log = logging.getLogger("test-rt-budget")
+        log = logging.getLogger(name)
 
         def step(self, now):
             self.done = True
 
+    Idle.side = side
     node = Idle(10.0)
-    with caplog.at_level(logging.INFO, logger="test-rt-budget"):
+    with caplog.at_level(logging.INFO, logger=name):
         node.run(MonotonicClock(), max_duration=1.0)
-    notes = [r.getMessage() for r in caplog.records if "sched_rt_runtime_us" in r.getMessage()]
+    return [r.getMessage() for r in caplog.records if "sched_rt_runtime_us" in r.getMessage()], node.pacer_stats
+
+
+def test_a_real_time_loop_logs_the_budget_and_reports_it_in_its_stats(monkeypatch, caplog):
+    from teleop.messages import Side
+    notes, stats = _run_one_cycle(monkeypatch, caplog, "SCHED_FIFO 20", Side.SLAVE)
     assert len(notes) == 1 and notes[0].startswith("slave loop: the kernel stops real-time threads")
-    assert node.pacer_stats["rt_budget_ms"] == 950.0 and node.pacer_stats["rt_stop_ms"] == 50.0
+    assert stats["rt_budget_ms"] == 950.0 and stats["rt_stop_ms"] == 50.0
 
 
 def test_a_loop_without_real_time_priority_logs_no_budget_note(monkeypatch, caplog):
-    import gc
-
-    import teleop.node as node_mod
-    from teleop.clock import MonotonicClock
     from teleop.messages import Side
-
-    monkeypatch.setattr(gc, "freeze", lambda: None)
-    monkeypatch.setattr(node_mod, "promote_threads", lambda priority: "off")
-    monkeypatch.setattr(node_mod, "rt_budget", lambda: RtBudget(0.95, 1.0))
-
-    class Idle(node_mod.NodeBase):
-        side = Side.MASTER
-        rate_hz = 1000.0
-        log = logging.getLogger("test-rt-budget-off")
-
-        def step(self, now):
-            self.done = True
-
-    node = Idle(10.0)
-    with caplog.at_level(logging.INFO, logger="test-rt-budget-off"):
-        node.run(MonotonicClock(), max_duration=1.0)
-    assert not [r for r in caplog.records if "sched_rt_runtime_us" in r.getMessage()]
-    assert node.pacer_stats["rt_budget_ms"] == 950.0               # the host's budget is reported all the same
+    notes, stats = _run_one_cycle(monkeypatch, caplog, "off", Side.MASTER)
+    assert not notes
+    assert stats["rt_budget_ms"] == 950.0               # the host's budget is reported all the same
