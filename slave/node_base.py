@@ -45,7 +45,7 @@ from teleop.safety_bounds import REARM_FRACTION
 if TYPE_CHECKING:
     from teleop.transport import Received
 
-__all__ = ["SlaveLinks", "SlaveNodeBase", "Decision", "REARM_FRACTION"]
+__all__ = ["SlaveLinks", "SlaveNodeBase", "Decision"]
 
 
 class Decision(Enum):

@@ -24,7 +24,8 @@ for ``sched_rt_runtime_us`` of every ``sched_rt_period_us`` (default 950 ms of e
 CPU's real-time threads have used that, the kernel stops all of them on that CPU until the period
 ends (up to 50 ms by default). A loop whose process holds about one CPU of real-time work reaches it
 and stalls for 40-60 ms; ``sched_rt_runtime_us = -1`` lifts the limit (a host setting,
-``docs/how-to/real-time.md``).
+``docs/how-to/real-time.md``), but kernels from 6.12 on also run ordinary tasks for up to 50 ms a second on
+a CPU that real-time threads hold (the fair server), whatever that setting says.
 
 **Idle window** (:data:`IDLE`). After each ``step()`` the loop announces until when it will sleep
 (its next deadline less a guard); a helper thread calls :meth:`IdleWindow.wait` with the expected

@@ -15,13 +15,13 @@ from master.node import MasterLinks, MasterNode
 from master.protocols import paper_protocol
 from master.simulated import ScriptedOperator
 from slave.node import SlaveLinks, SlaveNode
-from slave.node_base import REARM_FRACTION
 from slave.pair_calibrate import set_tension
 from slave.rig import RigState
 from slave.rigs import make_rig
 from teleop.clock import FakeClock
 from teleop.config import Config, SlaveConfig, load_config
 from teleop.messages import Command, SideState
+from teleop.safety_bounds import REARM_FRACTION
 from tests.fakes import Rows, Topic
 
 ROOT = Path(__file__).resolve().parents[2]
