@@ -52,8 +52,9 @@ def evaluate_recording(run_dir: Path, cfg: Config) -> dict:
     """
     from estimator.offline.spindle_centre_fit import predict_held
     from estimator.online.spindle import make_batch, predict_torque
-    from live.recording_axis import CENTRE, full_scale, load_model, model_path
+    from live.recording_axis import CENTRE, full_scale, load_model
     from live.recording_rig import check_recording, read_recording_run
+    from live.recording_routine import recorded_model_path
     from live.recording_score import scored_from
     fmt = check_recording(cfg)[1]
     if fmt == "kaist":
@@ -61,7 +62,7 @@ def evaluate_recording(run_dir: Path, cfg: Config) -> dict:
     if fmt == "csv":
         return evaluate_tendon(run_dir, cfg)
     run = read_recording_run(cfg)
-    model = load_model(model_path(cfg))
+    model = load_model(recorded_model_path(cfg))
     name = cfg.instrument.joints[0].name
     cols = read_joint_csv(run_dir / "slave_joints.csv")
     idx = np.rint(cols["time"] / run.dt).astype(int)
@@ -127,11 +128,12 @@ def evaluate_kaist(run_dir: Path, cfg: Config) -> dict:
 
     from estimator.offline.pair import PairParams, fit_pair
     from estimator.online.joint_batch import predict_pair_angle
-    from live.recording_pair import N_NODES, kaist_model_path
+    from live.recording_pair import N_NODES
     from live.recording_rig import check_recording
+    from live.recording_routine import recorded_model_path
     from study.kaist import read_kaist, split
     rec = read_kaist(check_recording(cfg)[0])
-    model = json.loads(kaist_model_path(cfg).read_text(encoding="utf-8"))
+    model = json.loads(recorded_model_path(cfg).read_text(encoding="utf-8"))
     name = cfg.instrument.joints[0].name
     cols = read_joint_csv(run_dir / "slave_joints.csv")
     c1, c2, how = split(rec)

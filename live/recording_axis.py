@@ -42,7 +42,7 @@ from teleop.config import Config
 from teleop.errors import CalibrationError, ConfigError, DataError
 from teleop.messages import AxisState, TendonState
 
-__all__ = ["CENTRE", "RecordedModel", "calibration_run_path", "fit_recorded_model", "model_path", "save_model",
+__all__ = ["CENTRE", "RecordedModel", "calibration_run_path", "fit_recorded_model", "save_model",
            "load_model", "model_calibration", "RecordedCalibration", "RecordedSpindleAxis", "full_scale"]
 
 log = logging.getLogger("teleop.slave")
@@ -167,7 +167,6 @@ def fit_recorded_model(cfg: Config, run_file: Path | None = None) -> RecordedMod
                          band_centre=float(np.mean([band_centre(c.tau_p) for c in cal])))
 
 
-model_path = recorded_model_path
 
 
 def save_model(model: RecordedModel, path: str | Path) -> Path:
@@ -244,13 +243,10 @@ class RecordedSpindleAxis(RecordedRoutine, SpindleAxis):
             self.sample = dataclasses.replace(self.sample, torque=self.centre.step(
                 float(np.asarray(state.T_in)[i]), self.rest, state.t))
 
-
-
-
     @classmethod
     def finish_routine(cls, axes: Sequence[SlaveAxis], routine: Any, state: RigState) -> tuple[Any, dict]:
         cfg, model = routine.cfg, routine.model
-        save_model(model, model_path(cfg))
+        save_model(model, recorded_model_path(cfg))
         for ax in axes:
             assert isinstance(ax, RecordedSpindleAxis)
             ax.start_model(model, state)
@@ -264,7 +260,7 @@ class RecordedSpindleAxis(RecordedRoutine, SpindleAxis):
         cfg = axes[0].cfg if axes else None
         if cfg is None:
             raise ConfigError("a recorded spindle instrument needs one joint")
-        model = load_model(model_path(cfg))
+        model = load_model(recorded_model_path(cfg))
         for ax in axes:
             assert isinstance(ax, RecordedSpindleAxis)
             ax.start_model(model, state)

@@ -45,7 +45,7 @@ from teleop.config import Config
 from teleop.errors import CalibrationError
 from teleop.messages import AxisState
 
-__all__ = ["RecordedPair", "kaist_live", "fit_kaist", "RecordedPairAxis", "kaist_model_path"]
+__all__ = ["RecordedPair", "kaist_live", "fit_kaist", "RecordedPairAxis"]
 
 N_NODES = 50          # profile elements per tendon, as the offline pair model
 
@@ -161,7 +161,6 @@ def kaist_live(rec: KaistRecording, extended_deg: float | None = None) -> dict:
 
 # ---- the slave's pair axis on a KAIST recording --------------------------------------------------------------
 
-kaist_model_path = recorded_model_path
 
 
 def fit_kaist(cfg: Config) -> dict:
@@ -235,13 +234,10 @@ class RecordedPairAxis(RecordedRoutine, PairAxis):
         s = self.estimator.step(T0[0], float(state.x_in[i, 0]), T0[1], float(state.x_in[i, 1]), state.t)
         self.sample = s._replace(angle=s.angle + self.offset, torque=s.torque * self.torque_scale)
 
-
-
-
     @classmethod
     def finish_routine(cls, axes: Sequence[SlaveAxis], routine: Any, state: RigState) -> tuple[Any, dict]:
         cfg, model = routine.cfg, routine.model
-        path = kaist_model_path(cfg)
+        path = recorded_model_path(cfg)
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(model, indent=1), encoding="utf-8")
         for ax in axes:
@@ -252,7 +248,7 @@ class RecordedPairAxis(RecordedRoutine, PairAxis):
 
     @classmethod
     def start_loaded(cls, axes: Sequence[SlaveAxis], calibration: Any, state: RigState) -> dict:
-        path = kaist_model_path(axes[0].cfg)
+        path = recorded_model_path(axes[0].cfg)
         try:
             model = json.loads(path.read_text(encoding="utf-8"))
             PairParams(**model["params"])

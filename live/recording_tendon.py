@@ -133,7 +133,6 @@ def _calibration(cfg: Config, model: dict) -> InstrumentCalibration:
                                         "(the profile-memory estimator, estimator.offline.fit.fit_single)")
 
 
-_model_path = recorded_model_path
 
 
 class RecordedTendonAxis(RecordedRoutine, TendonAxis):
@@ -142,13 +141,10 @@ class RecordedTendonAxis(RecordedRoutine, TendonAxis):
     routine_class = RecordedTendonCalibration
     model_calibration = staticmethod(_calibration)
 
-
-
-
     @classmethod
     def finish_routine(cls, axes: Sequence[SlaveAxis], routine: Any, state: RigState) -> tuple[Any, dict]:
         cfg, model = routine.cfg, routine.model
-        path = _model_path(cfg)
+        path = recorded_model_path(cfg)
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(model, indent=1), encoding="utf-8")
         ax = axes[0]
@@ -161,7 +157,7 @@ class RecordedTendonAxis(RecordedRoutine, TendonAxis):
     def start_loaded(cls, axes: Sequence[SlaveAxis], calibration: Any, state: RigState) -> dict:
         ax = axes[0]
         assert isinstance(ax, TendonAxis)
-        path = _model_path(ax.cfg)
+        path = recorded_model_path(ax.cfg)
         try:
             model = json.loads(path.read_text(encoding="utf-8"))
             sheath = SheathModel(K=float(model["K"]), compliance=float(model["compliance"]))
