@@ -112,6 +112,7 @@ class AxisScript:
         self.index, self.direction, self.marker, self.timeouts = -1, 0, 0, 0
         self.finished = False
         self._T_last: float | None = None
+        self._t_read = 0.0                       # when the watched reading last changed [s]
         self._rate = 0.0                         # smoothed dT_in/dt of the watched tendon [N/s]
         self._wait_until: float | None = None    # start delay / dwell end [s]
         self._t_segment = 0.0
@@ -130,10 +131,8 @@ class AxisScript:
         if self.finished:
             return
         side = self.segments[max(self.index, 0)].side
+        self._read_rate(t, T_in[side])
         T = T_in[side]
-        if self._T_last is not None and dt > 0:  # read-out rate [N/s], smoothed over RATE_TIME
-            self._rate += dt / (RATE_TIME + dt) * ((T - self._T_last) / dt - self._rate)
-        self._T_last = T
         if self.index < 0 or self._wait_until is not None:     # waiting to start, or dwelling after a segment
             if self._wait_until is None:
                 self._wait_until = t + self.start_delay
@@ -162,10 +161,24 @@ class AxisScript:
         self.velocity = sign * self.direction * self.speed * approach(abs(seg.target - T_seen))
         self.intended += self.velocity * dt
 
+    def _read_rate(self, t: float, T: float) -> None:
+        """Update the read-out rate [N/s], smoothed over RATE_TIME, from the watched tension ``T`` [N] at ``t`` [s].
+
+        The rate is the change between two successive different readings over the time between them:
+        estimates that arrive late and then together (a stalled link or slave) read as the motion they
+        carry, not as a jump in one cycle. An unchanged reading leaves the rate as it is."""
+        if self._T_last is None:
+            self._T_last, self._t_read = T, t
+            return
+        span = t - self._t_read
+        if T == self._T_last or span <= 0.0:
+            return
+        self._rate += span / (RATE_TIME + span) * ((T - self._T_last) / span - self._rate)
+        self._T_last, self._t_read = T, t
+
     def _start(self, index: int, t: float, T_in: tuple[float, ...]) -> None:
         seg = self.segments[index]
-        if self.index >= 0 and seg.side != self.segments[self.index].side:
-            self._T_last, self._rate = None, 0.0          # another tendon watched: its own rate
+        self._T_last, self._rate = None, 0.0          # a segment starts after a pause: the rate is read anew
         self.index, self.marker, self._t_segment = index, seg.marker, t
         self.direction = 1 if seg.target > T_in[seg.side] else -1
 

@@ -158,3 +158,22 @@ def test_an_operator_of_several_axes_needs_one_valid_view_per_axis():
         ScriptedOperator([(Segment(1.0, 1, 2),)])
     with pytest.raises(ConfigError, match="every axis"):
         ScriptedOperator([PROTOCOLS["short"], ()])
+
+
+def test_readings_that_arrive_late_and_together_do_not_end_a_pull_early():
+    """Estimates held up for 50 ms and then delivered at once (a stalled slave or link) carry the motion
+    of those 50 ms: the operator still turns at the target, as with a reading every cycle."""
+    turned = {}
+    for stall in (False, True):
+        op = ScriptedOperator((Segment(20.0, 1), Segment(5.0, 1)), speed=0.025, dwell=0.3, start_delay=0.0)
+        t, T, seen, peak = 0.0, 0.0, 0.0, 0.0
+        while t < 10.0 and op.index < 1:
+            if not stall or (round(t / DT) % 100) >= 50:   # no reading in the first 50 ms of every 100
+                seen = T
+            op.watch(seen, engaged=True)
+            T = STIFFNESS * max(0.0, op.read(t).position)
+            peak = max(peak, T)
+            t += DT
+        turned[stall] = peak
+    assert turned[False] == pytest.approx(20.0, abs=1.5)
+    assert turned[True] == pytest.approx(turned[False], abs=1.5)
