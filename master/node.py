@@ -37,6 +37,9 @@ given the time by the caller:
    ``master.mapping.force_limit`` ever reaches the device;
 6. publish a Heartbeat at ``slave.heartbeat_hz`` (both sides use that rate), record one CSV row.
 
+Steps 1-4 are the cycle's first phase (:meth:`MasterNode.step_send`), 5-6 its second
+(:meth:`MasterNode.step_after`): two arms stepped in one loop send both commands before either renders.
+
 When the device reports ``finished`` (a scripted operator at the end of its protocol) the node
 disengages, announces STOPPING for ``stop_linger`` seconds and sets :attr:`done`.
 
@@ -142,6 +145,7 @@ class MasterNode(MasterNodeBase):
         self.tension_latched = False             # a SAFE caused by a tension: no engaging until let go
         self._since_safe = False                 # SAFE from ENGAGED, the deadman held since: a tension latches
         self.tension_latches = 0
+        self._cycle: tuple | None = None         # the first phase's results, until the second phase
 
     @property
     def device(self):
@@ -252,8 +256,10 @@ class MasterNode(MasterNodeBase):
         else:
             self._set_state(SideState.READY, now, self.last_reason)
 
-    def step(self, now: float) -> None:
-        """One master cycle at time ``now`` [s] (see the module docstring)."""
+    def step_send(self, now: float) -> None:
+        """A master cycle's first phase at ``now`` [s]: the estimate looked at, the device read, the
+        console, the command sent (see the module docstring)."""
+        self._cycle = None
         if self.done:
             return
         self._receive(now)
@@ -274,7 +280,13 @@ class MasterNode(MasterNodeBase):
         marker = int(getattr(self.device, "marker", 0)) if engaged else 0
         if not self.over_tension:                # a tendon at its limit: the slave's watchdog relaxes it
             self._send_command(self.axes.command(self.seq, now, q, engaged, marker), now)
+        self._cycle = (est, healthy, engaged, pos, q, marker)
 
+    def step_after(self, now: float) -> None:
+        """A master cycle's second phase at ``now`` [s]: forces rendered, recordings, heartbeat, CRTK state."""
+        if self._cycle is None:
+            return
+        (est, healthy, engaged, pos, q, marker), self._cycle = self._cycle, None
         # ---- forces, per axis: map (scale, ramp, clamp, slew) -> passivity controller -> clamp ----
         dt = self._period if self._t_prev is None else now - self._t_prev
         self._t_prev = now

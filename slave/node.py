@@ -256,6 +256,9 @@ class SlaveNode(SlaveNodeBase):
         self._check_tension([a for a, _ in observed], now)     # past slave.max_tension: SAFE in this cycle
         profiles = tuple(p for _, p in observed if p)
         self._publish(Estimate(self.seq, self.cmd_seq, now, tuple(a for a, _ in observed), profiles))
+
+    def _record_cycle(self, now: float) -> None:
+        st = self.rig_state
         if self.recorder is not None:
             common = (self.marker, self.cmd_seq, int(self.state), now,
                       0.0 if self._accepted is None else self._accepted.t_recv)

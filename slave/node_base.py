@@ -121,6 +121,7 @@ class SlaveNodeBase(NodeBase):
         self.tension_fault: str | None = None   # why a tension trip holds SAFE, None when none does
         self.last_tension_trip: str | None = None   # the reason of the run's last tension trip (stats)
         self._refused: Received[Command] | None = None    # last command refused for engaging too far away
+        self._phase: SideState | None = None   # the state a cycle's first phase ran in, until its second
 
     @property
     def rate_hz(self) -> float:
@@ -152,15 +153,25 @@ class SlaveNodeBase(NodeBase):
                 self.done = True
         return dt
 
-    def step(self, now: float) -> None:
-        """One slave cycle at time ``now`` [s] (see the module docstrings)."""
+    def step_send(self, now: float) -> None:
+        """A slave cycle's first phase at ``now`` [s]: the command applied, the rig stepped, the estimate
+        published (see the module docstrings)."""
         dt = self._cycle_dt(now)
+        self._phase = None if dt is None else self.state
         if dt is None:
             return
         if self.state == SideState.CALIBRATING:
             self._calibration_step(now, dt)
         else:
             self._control_step(now, dt)
+
+    def step_after(self, now: float) -> None:
+        """A slave cycle's second phase at ``now`` [s]: the recordings, the heartbeat and the CRTK state."""
+        phase, self._phase = self._phase, None
+        if phase is None:
+            return
+        if phase != SideState.CALIBRATING:
+            self._record_cycle(now)
         self._heartbeat(now)
         crtk = self.links.crtk
         if crtk is not None:
@@ -171,8 +182,11 @@ class SlaveNodeBase(NodeBase):
         raise NotImplementedError
 
     def _control_step(self, now: float, dt: float) -> None:
-        """One cycle following the commands: rig, estimators, :meth:`_publish`, recording."""
+        """One cycle following the commands: rig, estimators, :meth:`_publish`."""
         raise NotImplementedError
+
+    def _record_cycle(self, now: float) -> None:
+        """The cycle's rows in the recordings, after its estimate is published (default: none)."""
 
     # ---- commands and estimates --------------------------------------------------------------------
     def _accept(self, now: float) -> None:

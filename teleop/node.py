@@ -16,9 +16,16 @@ does the same bookkeeping, kept here once:
 * pacing at a fixed rate until :attr:`done` (or a maximum duration), the pacer's figures kept for
   the stats, and the stats written as JSON.
 
+A cycle has two phases: :meth:`~NodeBase.step_send`, the work up to the cycle's message sent (the
+master's command, the slave's estimate), then :meth:`~NodeBase.step_after`, what can wait (forces
+rendered, recordings, Rerun, heartbeat). :meth:`~NodeBase.step` runs both; a group of nodes stepped in
+one loop (:class:`teleop.node_group.NodeGroup`) runs every node's first phase before any node's second,
+so no arm's message waits for another arm's recording.
+
 Subclasses set :attr:`side` (:class:`~teleop.messages.Side`), :attr:`log` (their logger) and
-:attr:`rate_hz`, and provide ``step(now)``, ``stats()`` and the range check ``_in_range(msg, now)``
-(``_fits(msg, now)`` optionally); ``links.heartbeat`` takes the heartbeats.
+:attr:`rate_hz`, and provide ``step_send(now)`` (and ``step_after(now)`` when some work can wait),
+``stats()`` and the range check ``_in_range(msg, now)`` (``_fits(msg, now)`` optionally);
+``links.heartbeat`` takes the heartbeats.
 """
 from __future__ import annotations
 
@@ -256,8 +263,17 @@ class NodeBase:
     def _run_ended(self, clock: Clock) -> None:
         """Called once when :meth:`run` returns or raises (default: nothing)."""
 
-    def step(self, now: float) -> None:  # pragma: no cover - abstract
+    def step(self, now: float) -> None:
+        """One cycle at ``now`` [s]: :meth:`step_send`, then :meth:`step_after`."""
+        self.step_send(now)
+        self.step_after(now)
+
+    def step_send(self, now: float) -> None:  # pragma: no cover - abstract
+        """The cycle's first phase at ``now`` [s]: everything up to its message sent."""
         raise NotImplementedError
+
+    def step_after(self, now: float) -> None:
+        """The cycle's second phase at ``now`` [s]: what can wait until the message is sent (default: nothing)."""
 
     def stats(self) -> dict[str, Any]:  # pragma: no cover - abstract
         raise NotImplementedError

@@ -1,7 +1,9 @@
 """Several nodes of one side stepped in one loop: the arms of a bimanual instrument (:mod:`teleop.arms`).
 
 A :class:`NodeGroup` is a node (:class:`teleop.node.NodeBase`: the same pacing, real-time set-up and
-per-cycle figures) whose :meth:`~NodeGroup.step` steps each arm's node in turn with the same ``now``.
+per-cycle figures) whose :meth:`~NodeGroup.step` steps each arm's node with the same ``now``: first every
+arm's first phase (up to its command or estimate sent), then every arm's second (forces, recordings,
+Rerun, heartbeat), so the last arm's message does not wait for the first arm's recording.
 Every arm's node stays whole: its own links, watchdog, state (SAFE, READY, ENGAGED ...), heartbeat,
 recordings and counters, so a fault on one arm (its estimates stale, a tendon at its limit, its hand's
 device lost) makes that arm safe and leaves the other's cycle untouched; a lost peer process makes
@@ -71,18 +73,23 @@ class NodeGroup(NodeBase):
         """The loop's rate [Hz]."""
         return self._rate
 
-    def step(self, now: float) -> None:
-        """Step every arm's node that is not done at ``now`` [s]; done when all are."""
+    def step_send(self, now: float) -> None:
+        """Step every arm's node that is not done at ``now`` [s]: every node's first phase (its message
+        sent), then every node's second; done when all are."""
         if not self._started:
             self._started = True
             for n in self.nodes:
                 n._t_origin = self._t_origin
         perf = time.perf_counter
-        for node, times in zip(self.nodes, self._steps):
-            if not node.done:
-                t0 = perf()
-                node.step(now)
-                times.append(perf() - t0)
+        active = [(node, times) for node, times in zip(self.nodes, self._steps) if not node.done]
+        for node, times in active:
+            t0 = perf()
+            node.step_send(now)
+            times.append(perf() - t0)
+        for node, times in active:
+            t0 = perf()
+            node.step_after(now)
+            times[-1] += perf() - t0
         self.done = all(n.done for n in self.nodes)
         # the loop's figures by state (cycles, overruns) count a cycle ENGAGED when any arm is
         engaged = any(n.state == SideState.ENGAGED for n in self.nodes)

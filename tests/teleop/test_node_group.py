@@ -1,4 +1,5 @@
-"""NodeGroup (teleop/node_group.py): each arm's node stepped in one paced loop, done arms left alone, stats per arm."""
+"""NodeGroup (teleop/node_group.py): each arm's node stepped in one paced loop, every arm's message sent before
+any arm's second phase, done arms left alone, stats per arm."""
 from __future__ import annotations
 
 import pytest
@@ -12,19 +13,24 @@ from teleop.node_group import NodeGroup
 class Arm(NodeBase):
     side = Side.SLAVE
 
-    def __init__(self, steps: int):
+    def __init__(self, steps: int, name: str = "", events: list | None = None):
         super().__init__(heartbeat_hz=50.0)
         self.left, self.times, self.ended = steps, [], 0
+        self.name, self.events = name, events if events is not None else []
 
     @property
     def rate_hz(self) -> float:
         return 1000.0
 
-    def step(self, now: float) -> None:
+    def step_send(self, now: float) -> None:
         self.state = SideState.ENGAGED if len(self.times) == 1 else SideState.READY
         self.times.append(now)
+        self.events.append(("send", self.name))
         self.left -= 1
         self.done = self.left <= 0
+
+    def step_after(self, now: float) -> None:
+        self.events.append(("after", self.name))
 
     def _run_ended(self, clock) -> None:
         self.ended += 1
@@ -54,3 +60,15 @@ def test_group_needs_one_name_per_node():
         NodeGroup([Arm(1)], ["left", "right"], Side.MASTER, 1000.0)
     with pytest.raises(ValueError):
         NodeGroup([], [], Side.MASTER, 1000.0)
+
+
+def test_every_arm_sends_before_any_arm_records():
+    events: list = []
+    a, b = Arm(2, "left", events), Arm(1, "right", events)
+    group = NodeGroup([a, b], ["left", "right"], Side.MASTER, 1000.0)
+    group.run(FakeClock(10.0), max_duration=1.0)
+    assert events == [("send", "left"), ("send", "right"), ("after", "left"), ("after", "right"),
+                      ("send", "left"), ("after", "left")]      # the right arm is done after its one cycle
+    a.events.clear()
+    a.step(0.0)                                                 # a node alone: both phases in one step
+    assert events == [("send", "left"), ("after", "left")]
