@@ -26,7 +26,7 @@ caller:
   fresh, ``engaged=True``                   ENGAGED     follows its target (``x_in_cmd`` [m] of a
                                                         tendon, the angle [rad] of a joint)
   any, once a measured ``|T_in|`` passed    SAFE        its safe behaviour, from the cycle
-  ``slave.max_tension``, until a fresh                  after the measurement on
+  ``slave.max_tension``, until a fresh                  that samples it on
   ``engaged=False`` with every ``|T_in|``
   back below it
   ========================================  ==========  =======================================
@@ -39,10 +39,14 @@ caller:
   (:meth:`slave.axis.SlaveAxis.too_far`): a master that has not re-aligned never makes the
   instrument jump.
 
-  axes' motor commands -> rig.step -> each axis's estimator on the proximal sensors (never the truth)
-  -> Estimate (one AxisState per axis; the single tendon's profile at ``estimator.profile_points``
-  points) -> one CSV row per cycle (``slave.csv`` of a single tendon in the measured-data format,
-  ``slave_joints.csv`` of a joint instrument) and Rerun every ``recording.log_every`` cycles.
+  the rig's sensors as sampled at the cycle's start -> each axis's estimator on the proximal sensors
+  (never the truth) -> the tension limit -> the axes' motor commands -> Estimate (one AxisState per
+  axis; the single tendon's profile at ``estimator.profile_points`` points), published; then, in the
+  cycle's second phase, rig.step on the motor commands (the instrument moves until the next cycle
+  samples it, as a real one does between two samples) and one CSV row per cycle (``slave.csv`` of a
+  single tendon in the measured-data format, ``slave_joints.csv`` of a joint instrument) and Rerun
+  every ``recording.log_every`` cycles. The first cycle after start-up or calibration only moves the
+  rig: the estimators have already seen its last state, so it sends no estimate and records no row.
 * A Heartbeat at ``slave.heartbeat_hz`` carries the state. With ``stop_on_master_stop`` the node
   sets :attr:`done` when the master's heartbeat says STOPPING.
 
@@ -168,6 +172,9 @@ class SlaveNode(SlaveNodeBase):
         self.calibrated = False
         self._how = "given model"
         self._now = 0.0
+        self._sampled = False              # rig_state is a sample the estimators have not seen (module docstring)
+        self._observed: RigState = rig.state   # the state this cycle's estimate came from
+        self._pending: tuple | None = None     # this cycle's rig command and time step, until the second phase
         if calibration is not None:
             data = self.kind.start_loaded(self.axes, calibration, self.rig_state)
             self._write_calibration_json({**data, "loaded_from": str(self.calibration_file or "")})
@@ -250,15 +257,28 @@ class SlaveNode(SlaveNodeBase):
 
     def _control_step(self, now: float, dt: float) -> None:
         self._now = now
-        motors = self._motors(now, dt)
-        st = self.rig_state = self.rig.step(self.kind.rig_command(motors), dt)
+        if not self._sampled:
+            # the first cycle after start-up or calibration: the estimators have seen the rig's last state
+            self._pending = (self.kind.rig_command(self._motors(now, dt)), dt)
+            return
+        # the rig stepped at the end of the last cycle: its sensors as sampled at this cycle's start
+        st = self._observed = self.rig_state
         observed = self.kind.observe_all(self.axes, st)
         self._check_tension([a for a, _ in observed], now)     # past slave.max_tension: SAFE in this cycle
+        self._pending = (self.kind.rig_command(self._motors(now, dt)), dt)
         profiles = tuple(p for _, p in observed if p)
         self._publish(Estimate(self.seq, self.cmd_seq, now, tuple(a for a, _ in observed), profiles))
 
     def _record_cycle(self, now: float) -> None:
-        st = self.rig_state
+        """The rig stepped on the cycle's motor commands (the instrument moves until the next cycle samples
+        it, as a real one does), and the cycle's row of the state its estimate came from."""
+        st, recorded = self._observed, self._sampled
+        pending, self._pending = self._pending, None
+        if pending is not None:
+            self.rig_state = self.rig.step(*pending)
+            self._sampled = True
+        if not recorded:
+            return
         if self.recorder is not None:
             common = (self.marker, self.cmd_seq, int(self.state), now,
                       0.0 if self._accepted is None else self._accepted.t_recv)

@@ -85,12 +85,13 @@ def test_engaged_command_is_applied_and_echoed_without_reading_truth():
     assert node.state == SideState.ENGAGED
     assert node.rig.cmds[-1] == pytest.approx(0.009)
     est = links.estimate.sent[-1]
-    assert isinstance(est, Estimate) and est.cmd_seq == 109 and est.seq == 9
+    # the first cycle only moves the rig; each later one samples it as the previous cycle's command left it
+    assert isinstance(est, Estimate) and est.cmd_seq == 109 and est.seq == 8 and len(links.estimate.sent) == 9
     (tendon,), (profile,) = est.tendons, est.profiles          # one axis of one tendon
-    assert tendon.T_in == pytest.approx(9.0) and len(profile) == node.cfg.estimator.profile_points
-    assert tendon.T_out_hat == pytest.approx(9.0 * math.exp(-0.6), rel=1e-6)   # full pull slip
+    assert tendon.T_in == pytest.approx(8.0) and len(profile) == node.cfg.estimator.profile_points
+    assert tendon.T_out_hat == pytest.approx(8.0 * math.exp(-0.6), rel=1e-6)   # full pull slip
     assert est.axes[0].effort_hat == tendon.T_out_hat
-    assert profile[0] == pytest.approx(9.0, rel=1e-6)
+    assert profile[0] == pytest.approx(8.0, rel=1e-6)
 
 
 def test_not_engaged_is_ready_and_holds_the_last_position():
@@ -181,10 +182,11 @@ def test_records_one_row_per_cycle_in_the_recording_columns():
     for k in range(20):
         command(links, k, 1e-4 * k, marker=1)
         tick(node, clock)
-    assert len(rows.rows) == 20 and all(len(r) == len(CSV_COLUMNS) for r in rows.rows)
+    # a row per cycle after the first (which only moves the rig), each of the state its estimate came from
+    assert len(rows.rows) == 19 and all(len(r) == len(CSV_COLUMNS) for r in rows.rows)
     r = dict(zip(CSV_COLUMNS, rows.rows[-1]))
     assert r["marker"] == 1 and r["cmd_seq"] == 19 and r["state"] == int(SideState.ENGAGED)
-    assert r["x_in_cmd"] == pytest.approx(19e-4)
+    assert r["x_in_cmd"] == pytest.approx(19e-4)                      # the motor command the cycle gave
     assert np.all(np.diff([row[0] for row in rows.rows]) > 0)
     assert csv_columns(False) == tuple(c for c in CSV_COLUMNS if c not in ("x_out", "T_out", "elongation"))
 

@@ -65,13 +65,14 @@ def step(node, links, clock, seq: int, x: float, engaged: bool = True) -> None:
 
 
 def pull_past_the_limit(node, links, clock) -> int:
-    """Engaged commands 0.1 mm further each cycle until the slave trips; the seq of the last command."""
+    """Engaged commands 0.1 mm further each cycle until the slave trips; the seq of the last command. A cycle
+    samples the load cell as the previous cycle's motor command left it."""
     for seq in range(1, 200):
         x = 1e-4 * (seq - 1)
         step(node, links, clock, seq, x)
         if node.state == SideState.SAFE:
             return seq
-        assert node.state == SideState.ENGAGED and STIFFNESS * x <= LIMIT
+        assert node.state == SideState.ENGAGED and STIFFNESS * (x - 1e-4) <= LIMIT
     raise AssertionError("the slave never tripped its tension limit")
 
 
@@ -79,8 +80,9 @@ def test_single_tendon_goes_safe_in_the_cycle_the_tension_passes_the_limit_and_r
     node, links, clock, rec = tendon_node()
     seq = pull_past_the_limit(node, links, clock)
     state_col = -3                                          # recording: ..., state, t_node, t_cmd_recv
-    x_trip = node.rig.cmds[-1]
-    assert STIFFNESS * x_trip > LIMIT >= STIFFNESS * node.rig.cmds[-2]    # the first cycle past the limit
+    x_trip = node.rig.cmds[-2]                              # the position the trip cycle sampled
+    assert STIFFNESS * x_trip > LIMIT >= STIFFNESS * node.rig.cmds[-3]    # the first sample past the limit
+    assert node.rig.cmds[-1] < x_trip                                     # and that cycle's motor already releases
     assert rec.rows[-1][state_col] == int(SideState.SAFE) and rec.rows[-2][state_col] == int(SideState.ENGAGED)
     assert links.heartbeat.sent[-1].state == SideState.SAFE and links.heartbeat.sent[-1].t_sender == clock.now()
     assert node.safe_events == 1 and node.counts["tension_trips"] == 1
