@@ -3,11 +3,12 @@
 A saved recording (:class:`teleop.rerun_log.RerunLogger`, mode ``save``) is written in segments of
 :data:`SEGMENT_S` of wall-clock time: ``slave.rrd``, then
 ``slave.1.rrd``, ``slave.2.rrd``, ... (``rerun <run dir>/*.rrd`` opens them as one recording: they share
-the recording id). While it writes a file the SDK keeps per-chunk bookkeeping that it releases only when
-the file is finalised (measured: the logging process of a 1 kHz side grows about 1 MB a minute on one file,
-and stays flat within a few MB when the file changes every minute), so a session of hours would otherwise
-grow without bound. Each segment opens with the static pieces again (routes, series styles, profile grid)
-and the current phase and states at their next log, so that it also reads alone.
+the recording id). Each file is finalised when the next one starts, so a session of hours leaves files of a
+few MB that each open alone, and a crash loses at most the open one. Each segment opens with the static pieces
+again (routes, series styles, profile grid) and the current phase and states at their next log. The SDK's
+process memory is not bounded by it: a process logging at a side's rate (scalars at 100 Hz, a profile at
+10 Hz) grows 1-2 MB a minute with segments of 30 s, 60 s or 5 min alike, its Python heap flat
+(rerun-sdk 0.41; rerun-io/rerun#12623; docs/results/index.md, "An hour at 1 kHz").
 """
 from __future__ import annotations
 
