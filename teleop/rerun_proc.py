@@ -20,6 +20,12 @@ calls beyond :data:`MAX_BACKLOG` (counted in :attr:`RerunProcessLogger.dropped`)
 waits. The child finalises the .rrd when told to close and also when its stdin ends (the side was
 killed). In ``off`` mode no process is started and every call returns at once.
 
+A saved recording lives in segments (:mod:`teleop.rerun_segments`: ``slave.rrd``, ``slave.1.rrd``, ...), and
+here each segment has a child process of its own: when a segment's time is over the sender starts the next
+child on the next file (same recording id, the static pieces logged again) and tells the old one to close,
+which finalises its file and exits. The SDK's memory, which grows as long as a process logs (rerun-sdk 0.41,
+rerun-io/rerun#12623), goes back with each child: a side's Rerun memory is at most one segment's growth.
+
 Wire (parent -> child, pickles on stdin): first ``(args, kwargs)`` of the RerunLogger, then lists of
 ``(method name, args, kwargs)``, ``"flush"`` (the child answers ``flushed`` on stdout) or None
 (close). The child's first stdout line is JSON: ``{"mode": ..., "path": ...}`` (a ``spawn`` without
@@ -30,16 +36,20 @@ from __future__ import annotations
 import collections
 import json
 import logging
+import math
 import pickle
 import subprocess
 import sys
 import threading
+import time
+import uuid
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
 from teleop.realtime import IDLE
+from teleop.rerun_segments import SEGMENT_S, segment_path
 
 __all__ = ["RerunProcessLogger", "MAX_BACKLOG", "BATCH_COST", "main"]
 
@@ -81,6 +91,18 @@ class RerunProcessLogger:
         _check(mode, path)
         self._mode: str = mode
         self._path: Path | None = None if path is None else Path(path)
+        # a saved recording: one child per segment (module docstring), each on one file of its own
+        segment_s = kwargs.pop("segment_s", SEGMENT_S)
+        self._segment_s: float | None = None if mode != "save" or segment_s is None else float(segment_s)
+        recording_id = kwargs.pop("recording_id", args[1] if len(args) > 1 else None) or str(uuid.uuid4())
+        self._args = args[:1]                     # the application id; the rest goes by keyword
+        self._kwargs = {k: v for k, v in kwargs.items() if k not in ("mode", "path")}
+        self._kwargs["recording_id"] = recording_id    # every segment's child: one recording
+        self._kwargs["segment_s"] = None if mode == "save" else segment_s   # a fallback to 'save' segments itself
+        self._rotating = threading.Lock()
+        self._segments = 0
+        self._segment_end = math.inf
+        self._retired: list[subprocess.Popen] = []
         self.dropped = 0
         self._queue: collections.deque = collections.deque()
         self._wake = threading.Event()
@@ -93,13 +115,42 @@ class RerunProcessLogger:
         self._lock = threading.Lock()              # one writer of the pipe at a time (sender, flush, close)
         if mode == "off":
             return
-        self._proc = subprocess.Popen([sys.executable, "-m", "teleop.rerun_proc"], stdin=subprocess.PIPE,
-                                      stdout=subprocess.PIPE, close_fds=True)
-        self._send((args, kwargs))
-        self._reader = threading.Thread(target=self._read, name="rerun-logger-reader", daemon=True)
-        self._reader.start()
+        self._proc = self._start_child()
         self._thread = threading.Thread(target=self._run, name="rerun-logger", daemon=True)
         self._thread.start()
+
+    def _start_child(self) -> subprocess.Popen:
+        """A child logging the next segment (or, not segmented, the whole recording), its reader started."""
+        kwargs = dict(self._kwargs, mode=self._mode, path=self._path)
+        if self._segment_s is not None:
+            assert self._path is not None
+            kwargs["path"] = segment_path(self._path, self._segments)
+            self._segment_end = time.monotonic() + self._segment_s
+        self._segments += 1
+        proc = subprocess.Popen([sys.executable, "-m", "teleop.rerun_proc"], stdin=subprocess.PIPE,
+                                stdout=subprocess.PIPE, close_fds=True)
+        _write(proc, (self._args, kwargs))
+        threading.Thread(target=self._read, args=(proc, self._segments == 1), name="rerun-logger-reader",
+                         daemon=True).start()
+        return proc
+
+    def _next_segment(self) -> None:
+        """Start the next segment's child; the present one finalises its file and exits (module docstring)."""
+        new = self._start_child()
+        with self._lock:
+            old, self._proc = self._proc, new
+        self._retired = [c for c in self._retired if c.poll() is None]    # the finished ones reaped
+        if old is not None:
+            _write(old, None)
+            _close_stdin(old)
+            self._retired.append(old)
+
+    @property
+    def segments(self) -> list[Path]:
+        """The .rrd files started so far, in order ([] when not saving in segments)."""
+        if self._segment_s is None or self._path is None:
+            return []
+        return [segment_path(self._path, k) for k in range(self._segments)]
 
     # what RerunLogger reports
     @property
@@ -149,21 +200,16 @@ class RerunProcessLogger:
 
     # ---- the sender thread ---------------------------------------------------------------------------
     def _send(self, obj: Any) -> bool:
-        """Pickle ``obj`` onto the child's stdin; False once the child is gone."""
-        proc = self._proc
-        if proc is None or proc.stdin is None:
-            return False
+        """Pickle ``obj`` onto the present child's stdin; False once the child is gone."""
         data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
         with self._lock:
-            try:
-                proc.stdin.write(data)
-                proc.stdin.flush()
-                return True
-            except (BrokenPipeError, OSError, ValueError):
-                return False
+            return self._proc is not None and _write_bytes(self._proc, data)
 
     def _drain(self) -> bool:
         q = self._queue
+        with self._rotating:                   # the sender, a flush and a close may drain at once: none of them
+            if q and time.monotonic() >= self._segment_end and not self._stop:   # sends while the child changes
+                self._next_segment()
         while q:
             IDLE.wait(BATCH_COST)              # pickle while the control loop sleeps (teleop/realtime.py)
             batch, cost = [], 0
@@ -184,25 +230,27 @@ class RerunProcessLogger:
             if not self._drain():
                 return
 
-    def _read(self) -> None:
-        """The child's stdout: its first line (mode, path), then one ``flushed`` per flush."""
-        proc = self._proc
-        assert proc is not None and proc.stdout is not None
+    def _read(self, proc: subprocess.Popen, primary: bool) -> None:
+        """A child's stdout: its first line (mode, path: the first child's is the logger's), then one
+        ``flushed`` per flush; the end of the present child's stdout releases a waiting flush."""
+        assert proc.stdout is not None
         first = True
         for line in proc.stdout:
             if first:
                 first = False
-                try:
-                    self._ready = json.loads(line)
-                except ValueError:
-                    self._ready = {}
-                self._got_ready.set()
+                if primary:
+                    try:
+                        self._ready = json.loads(line)
+                    except ValueError:
+                        self._ready = {}
+                    self._got_ready.set()
             elif line.strip() == b"flushed":
                 self._flushed.set()
-        if first:
+        if first and primary:
             self._ready = {}
             self._got_ready.set()
-        self._flushed.set()
+        if proc is self._proc:
+            self._flushed.set()
 
     # ---- end -----------------------------------------------------------------------------------------
     def flush(self, timeout: float = 10.0) -> None:
@@ -228,17 +276,16 @@ class RerunProcessLogger:
         self._drain()
         self._send(None)
         with self._lock:
+            proc = self._proc
+            assert proc is not None
+            _close_stdin(proc)
+        for child in [*self._retired, proc]:     # every segment's child finalises its file
             try:
-                if proc.stdin is not None:
-                    proc.stdin.close()
-            except OSError:
-                pass
-        try:
-            proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            log.warning("rerun logging process did not finish within %g s: killed", timeout)
-            proc.kill()
-            proc.wait()
+                child.wait(timeout)
+            except subprocess.TimeoutExpired:
+                log.warning("rerun logging process did not finish within %g s: killed", timeout)
+                child.kill()
+                child.wait()
         if self.dropped:
             log.warning("rerun: %d calls dropped (the logging process fell behind)", self.dropped)
 
@@ -247,6 +294,31 @@ class RerunProcessLogger:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _write_bytes(proc: subprocess.Popen, data: bytes) -> bool:
+    """``data`` onto ``proc``'s stdin; False once the child is gone."""
+    if proc.stdin is None:
+        return False
+    try:
+        proc.stdin.write(data)
+        proc.stdin.flush()
+        return True
+    except (BrokenPipeError, OSError, ValueError):
+        return False
+
+
+def _write(proc: subprocess.Popen, obj: Any) -> bool:
+    """``obj`` pickled onto ``proc``'s stdin (the child's wire, module docstring)."""
+    return _write_bytes(proc, pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL))
+
+
+def _close_stdin(proc: subprocess.Popen) -> None:
+    try:
+        if proc.stdin is not None:
+            proc.stdin.close()
+    except OSError:
+        pass
 
 
 def _copied(v: Any) -> Any:

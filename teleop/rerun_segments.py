@@ -8,7 +8,9 @@ few MB that each open alone, and a crash loses at most the open one. Each segmen
 again (routes, series styles, profile grid) and the current phase and states at their next log. The SDK's
 process memory is not bounded by it: a process logging at a side's rate (scalars at 100 Hz, a profile at
 10 Hz) grows 1-2 MB a minute with segments of 30 s, 60 s or 5 min alike, its Python heap flat
-(rerun-sdk 0.41; rerun-io/rerun#12623; docs/results/index.md, "An hour at 1 kHz").
+(rerun-sdk 0.41; rerun-io/rerun#12623; docs/results/index.md, "An hour at 1 kHz"), so the sides and the
+recorder log through :class:`teleop.rerun_proc.RerunProcessLogger`, which gives each segment a child process of
+its own: the memory goes back when the segment's child exits.
 """
 from __future__ import annotations
 

@@ -74,3 +74,31 @@ def test_off_starts_nothing_bad_arguments_raise_and_a_full_backlog_drops_the_old
         log.log_scalars(float(k), T_in=float(k))
     assert log.dropped == 2 and [c[1][0] for c in log._queue] == [2.0, 3.0, 4.0]
     log.close()
+
+
+def test_each_segment_has_a_child_of_its_own_and_no_row_is_lost(tmp_path):
+    """A saved recording in segments: each file is written and finalised by a child of its own, which exits when
+    the next segment starts (its memory goes with it); the files share the recording id, and every call is in
+    exactly one of them."""
+    from teleop.rerun_segments import segment_path
+    path = tmp_path / "slave.rrd"
+    log = RerunProcessLogger("test", "r-seg", "save", path, segment_s=3600.0)
+    first = log._proc
+    for i in range(10):
+        log.log_scalars(0.01 * i, T_in=float(i))
+    log.flush()
+    log._segment_end = 0.0                               # the segment's time is over
+    for i in range(10, 20):
+        log.log_scalars(0.01 * i, T_in=float(i))
+    log.flush()
+    second = log._proc
+    assert second is not first and first.wait(30.0) == 0       # the first child finalised its file and exited
+    assert log.path == path and log.segments == [path, segment_path(path, 1)]
+    log.close()
+    assert second.poll() == 0
+    times = []
+    for f in log.segments:
+        reader, rows = _read(f)
+        assert [e.recording_id for e in reader.recordings()] == ["r-seg"] and reader.store().summary()
+        times.append([t for t, _ in rows["/tension/T_in"] if t is not None])
+    assert times == [[i * 10_000_000 for i in range(10)], [i * 10_000_000 for i in range(10, 20)]]
