@@ -141,12 +141,15 @@ def children(pid: int) -> list[int]:
 
 
 def memory(procs: dict[str, subprocess.Popen]) -> dict[str, int | None]:
-    """RSS [B] of every process and of its children (``<name>.child<k>``)."""
+    """RSS [B] of every process and of its live children (``<name>.child<k>``, k counting the live ones in the
+    order they started: a side's Rerun child of the present segment is ``child0`` but for the moment a segment's
+    child finishes beside the next one)."""
     out: dict[str, int | None] = {}
     for name, p in procs.items():
         out[name] = rss(p.pid)
-        for k, c in enumerate(sorted(children(p.pid))):
-            out[f"{name}.child{k}"] = rss(c)
+        live = [r for r in (rss(c) for c in sorted(children(p.pid))) if r is not None]
+        for k, r in enumerate(live):
+            out[f"{name}.child{k}"] = r
     return out
 
 

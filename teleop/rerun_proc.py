@@ -139,11 +139,12 @@ class RerunProcessLogger:
         new = self._start_child()
         with self._lock:
             old, self._proc = self._proc, new
-        self._retired = [c for c in self._retired if c.poll() is None]    # the finished ones reaped
+        self._retired = [c for c in self._retired if c.poll() is None]    # the finished ones forgotten
         if old is not None:
             _write(old, None)
             _close_stdin(old)
             self._retired.append(old)
+            threading.Thread(target=old.wait, name="rerun-logger-reap", daemon=True).start()   # no zombie left
 
     @property
     def segments(self) -> list[Path]:
