@@ -137,9 +137,8 @@ class Recorder:
         self.journals = JournalRecovery(Path(journal_dir or self.dir.parent), self.clock.now(), instrument_keys(self.ident))
         from live.record_mcap import MCAP_NAME, McapRecording
         self._mcap = McapRecording(self.dir / MCAP_NAME, cfg, time.time() - self.clock.now(), self.journals.t_start)
-        from teleop.rerun_proc import RerunProcessLogger  # the SDK's memory in a child per segment, not here
-        self._rr = RerunProcessLogger("teleop-record", run_id or None, rerun or cfg.recording.rerun,
-                                      self.dir / "record.rrd")
+        from teleop.rerun_proc import RerunProcessLogger as Rerun  # the SDK in a child per segment, not here
+        self._rr = Rerun("teleop-record", run_id or None, rerun or cfg.recording.rerun, self.dir / "record.rrd")
         self._thread = threading.Thread(target=self._writer, name="teleop-record-writer", daemon=True)
         self._thread.start()
         session._track(_Subscription(session, instrument_keys(self.ident), self._on_sample))
