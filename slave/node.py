@@ -269,7 +269,7 @@ class SlaveNode(SlaveNodeBase):
         profiles = tuple(p for _, p in observed if p)
         self._publish(Estimate(self.seq, self.cmd_seq, now, tuple(a for a, _ in observed), profiles))
 
-    def _record_cycle(self, now: float) -> None:
+    def _control_after(self, now: float) -> None:
         """The rig stepped on the cycle's motor commands (the instrument moves until the next cycle samples
         it, as a real one does), and the cycle's row of the state its estimate came from."""
         st, recorded = self._observed, self._sampled

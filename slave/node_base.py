@@ -154,8 +154,8 @@ class SlaveNodeBase(NodeBase):
         return dt
 
     def step_send(self, now: float) -> None:
-        """A slave cycle's first phase at ``now`` [s]: the command applied, the rig stepped, the estimate
-        published (see the module docstrings)."""
+        """A slave cycle's first phase at ``now`` [s]: the rig's sample estimated, the command turned into
+        motor commands, the estimate published (see the module docstrings)."""
         dt = self._cycle_dt(now)
         self._phase = None if dt is None else self.state
         if dt is None:
@@ -166,12 +166,13 @@ class SlaveNodeBase(NodeBase):
             self._control_step(now, dt)
 
     def step_after(self, now: float) -> None:
-        """A slave cycle's second phase at ``now`` [s]: the recordings, the heartbeat and the CRTK state."""
+        """A slave cycle's second phase at ``now`` [s]: the rig moved and the recordings (a control cycle),
+        the heartbeat and the CRTK state."""
         phase, self._phase = self._phase, None
         if phase is None:
             return
         if phase != SideState.CALIBRATING:
-            self._record_cycle(now)
+            self._control_after(now)
         self._heartbeat(now)
         crtk = self.links.crtk
         if crtk is not None:
@@ -182,11 +183,12 @@ class SlaveNodeBase(NodeBase):
         raise NotImplementedError
 
     def _control_step(self, now: float, dt: float) -> None:
-        """One cycle following the commands: rig, estimators, :meth:`_publish`."""
+        """A control cycle's first phase: estimators on the rig's sample, motor commands, :meth:`_publish`."""
         raise NotImplementedError
 
-    def _record_cycle(self, now: float) -> None:
-        """The cycle's rows in the recordings, after its estimate is published (default: none)."""
+    def _control_after(self, now: float) -> None:
+        """A control cycle's second phase, after its estimate is published: the rig moved on the motor
+        commands, the cycle's rows recorded (default: nothing)."""
 
     # ---- commands and estimates --------------------------------------------------------------------
     def _accept(self, now: float) -> None:

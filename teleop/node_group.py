@@ -73,7 +73,7 @@ class NodeGroup(NodeBase):
         """The loop's rate [Hz]."""
         return self._rate
 
-    def step_send(self, now: float) -> None:
+    def step(self, now: float) -> None:
         """Step every arm's node that is not done at ``now`` [s]: every node's first phase (its message
         sent), then every node's second; done when all are."""
         if not self._started:
