@@ -83,11 +83,15 @@ def test_a_ros2_peer_sees_the_tokens_and_decodes_the_slaves_topics(wire):
                        ("/tsm0/operating_state", OPERATING_STATE)):
         peer.subscribe(topic, typ)
     cfg, links, crtk, node = slave_setup(session, clock)
-    tokens = peer.tokens()
-    assert any(t.endswith("/NN/%/%/teleop_tsm0_slave") for t in tokens)
-    assert any("/MP/%/%/teleop_tsm0_slave/%tsm0%measured_cf/geometry_msgs::msg::dds_::WrenchStamped_/RIHS01_" in t
-               for t in tokens)
-    assert any("/MS/%/%/teleop_tsm0_slave/%tsm0%servo_jp/sensor_msgs::msg::dds_::JointState_/" in t for t in tokens)
+    expected = ("/NN/%/%/teleop_tsm0_slave",
+                "/MP/%/%/teleop_tsm0_slave/%tsm0%measured_cf/geometry_msgs::msg::dds_::WrenchStamped_/RIHS01_",
+                "/MS/%/%/teleop_tsm0_slave/%tsm0%servo_jp/sensor_msgs::msg::dds_::JointState_/")
+
+    def missing() -> list[str]:     # a token declared a moment ago may not have reached the peer yet
+        tokens = peer.tokens()
+        return [e for e in expected if not any(e in t for t in tokens)]
+    wait_for(lambda: not missing(), 5, "the slave's node, publisher and subscriber tokens")
+    assert any(t.endswith("/NN/%/%/teleop_tsm0_slave") for t in peer.tokens())
     tick(node, clock, 5)
     wait_for(lambda: peer.messages("/tsm0/measured_cf") and peer.messages("/tsm0/distal/measured_js"), 5,
              "the estimate on ROS 2")
