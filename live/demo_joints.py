@@ -134,7 +134,8 @@ def joint_checks(joints: dict, calibration: dict, cfg: Config) -> dict[str, bool
 def joint_loop_metrics(run_dir: Path, cfg: Config) -> dict:
     """Chatter and transparency of each joint's haptic loop, per pulled tendon, from ``master.csv`` and
     ``slave_joints.csv`` (:func:`teleop.loop_metrics.loop_metrics` on the joint's columns: ``x_in`` =
-    r * the commanded angle [m], ``force`` = the joint's rendered force [N], ``T_out`` = the true
+    r * the commanded angle [m], ``force`` = the joint's rendered force [N], ``force_cmd`` its mapped force
+    before the passivity controller [N], ``T_out`` = the true torque / r [N], ``T_out_hat`` = the estimated
     torque / r [N]); keys ``"<joint> (pull a)"``, ``"<joint> (pull b)"``.
 
     Raises
@@ -149,8 +150,9 @@ def joint_loop_metrics(run_dir: Path, cfg: Config) -> dict:
         n, r = joint.name, joint.pulley_radius
         try:
             master = {"time": m["time"], "x_in": r * m[f"{n}.cmd"], "force": m[f"{n}.force"], "cmd_seq": m["cmd_seq"],
-                      "state": m["state"]}
+                      "state": m["state"], "force_cmd": m[f"{n}.force_cmd"]}
             slave = {"t_node": s["t_node"], "T_out": s[f"{n}.torque"] / r, "cmd_seq": s["cmd_seq"],
+                     "T_out_hat": s[f"{n}.torque_hat"] / r,
                      "marker": np.array([joint_marker(int(v), j) for v in s["marker"]])}
         except KeyError as e:
             raise DataError(f"{run_dir}: the recordings lack column {e} of joint {n}") from None

@@ -14,6 +14,20 @@ ramp and passivity damping all count::
     e(t) = F(t) + force_scale T_out(t)          [N]
     rms_fs = RMS(e) / (force_scale ptp(T_out)),  max_fs = max|e| / (force_scale ptp(T_out))   [-]
 
+Where the error comes from, when the recordings carry the master's mapped force ``force_cmd`` (before
+the passivity controller) and the slave's estimate ``T_out_hat``: the error splits exactly into three
+shares, each reported as its RMS over the same full scale::
+
+    e = s (T_out - T_out_hat)          estimate: the estimator's error (no tip sensor)
+      + (force_cmd + s T_out_hat)      loop: the link's delay, the force ramp, slew and clamp, stale zeroing
+      + (F - force_cmd)                passivity: the passivity controller's cut (and the device clamp)
+
+(``s`` = force_scale; ``T_out_hat`` interpolated at the master's times like ``T_out``, so the time the
+estimate takes to reach the master is the loop's share.) A transmission with a release band shows here: at
+a joint's stop the distal torque holds while the hand draws back through the band, so rendering it on the
+hand's motion hands energy back that the operator never put in, and the passivity controller takes that
+force out (docs/concepts/haptic-loop.md).
+
 The master rows of an experiment are those whose command seq the slave recorded under the
 experiment's marker (the tendon master's CSV has no marker column). Chatter leaves out the windows
 around rows where the master was not ENGAGED (a watchdog's safe event cuts the force at once and
@@ -94,15 +108,19 @@ def loop_metrics(master: dict, slave: dict, force_scale: float, experiments: dic
 
     Parameters
     ----------
-    master : columns of ``master.csv`` (``time``, ``x_in``, ``force``, ``cmd_seq``), ndarrays (n_m,).
-    slave : columns of ``slave.csv`` (``t_node``, ``T_out``, ``marker``, ``cmd_seq``), ndarrays (n_s,).
+    master : columns of ``master.csv`` (``time``, ``x_in``, ``force``, ``cmd_seq``, ``state``; ``force_cmd``
+        optional), ndarrays (n_m,).
+    slave : columns of ``slave.csv`` (``t_node``, ``T_out``, ``marker``, ``cmd_seq``; ``T_out_hat``
+        optional), ndarrays (n_s,).
     force_scale : master.mapping.force_scale [-].
     experiments : marker -> experiment name.
 
     Returns
     -------
     dict: name -> {"chatter": {"x_in_cmd_rms_m", "x_in_cmd_worst_m", "force_rms_N", "force_worst_N",
-    "worst_window_s"}, "transparency": {"force_error_rms_fs", "force_error_max_fs", "full_scale_N"}}.
+    "worst_window_s"}, "transparency": {"force_error_rms_fs", "force_error_max_fs", "full_scale_N"[,
+    "shares_rms_fs": {"estimate", "loop", "passivity"}]}}, the shares (module docstring) when both
+    optional columns are given.
 
     Raises
     ------
@@ -132,16 +150,26 @@ def loop_metrics(master: dict, slave: dict, force_scale: float, experiments: dic
         ideal = -force_scale * np.interp(t, ts, Ts)
         fs = float(np.ptp(ideal))
         e = f - ideal
+        transparency = {"force_error_rms_fs": _rms_fs(e, fs), "force_error_max_fs": float(np.max(np.abs(e)) / fs)
+                        if fs > 0 else math.nan, "full_scale_N": fs}
+        if "force_cmd" in master and "T_out_hat" in slave:
+            hat = -force_scale * np.interp(t, ts, slave["T_out_hat"][order])
+            fc = master["force_cmd"][sel]
+            transparency["shares_rms_fs"] = {"estimate": _rms_fs(hat - ideal, fs), "loop": _rms_fs(fc - hat, fs),
+                                             "passivity": _rms_fs(f - fc, fs)}
         out[name] = {
             "chatter": {"x_in_cmd_rms_m": xr, "x_in_cmd_worst_m": xw, "force_rms_N": fr, "force_worst_N": fw,
                         "worst_window_s": tw if xw / CHATTER_LIMITS["x_in_cmd_m"] >= fw / CHATTER_LIMITS["force_N"]
                         else tf},
             "not_engaged_s": float(np.sum(np.diff(t, prepend=t[0])[off])),
-            "transparency": {"force_error_rms_fs": float(np.sqrt(np.mean(e * e)) / fs) if fs > 0 else math.nan,
-                             "force_error_max_fs": float(np.max(np.abs(e)) / fs) if fs > 0 else math.nan,
-                             "full_scale_N": fs},
+            "transparency": transparency,
         }
     return out
+
+
+def _rms_fs(e: np.ndarray, fs: float) -> float:
+    """RMS of ``e`` [N] over the full scale ``fs`` [N] (NaN when ``fs`` is not positive)."""
+    return float(np.sqrt(np.mean(e * e)) / fs) if fs > 0 else math.nan
 
 
 def read_columns(path) -> dict[str, np.ndarray]:
@@ -191,9 +219,13 @@ def transparency_checks(metrics: dict, limit: float = TRANSPARENCY_LIMIT_FS) -> 
 
 def loop_metric_lines(metrics: dict) -> list[str]:
     """Printed lines: chatter and transparency per experiment."""
-    out = [f"{'haptic loop':22s} {'chatter >30 Hz, worst 100 ms':34s} transparency (rendered vs scaled true T_out)"]
+    out = [f"{'haptic loop':22s} {'chatter >30 Hz, worst 100 ms':34s} transparency (rendered vs scaled true T_out; "
+           "RMS shares)"]
     for name, r in metrics.items():
         c, tr = r["chatter"], r["transparency"]
+        sh = tr.get("shares_rms_fs")
+        why = "" if sh is None else (f"  (estimate {sh['estimate']:.3f}, loop {sh['loop']:.3f}, "
+                                     f"passivity {sh['passivity']:.3f})")
         out.append(f"{name:22s} x_in_cmd {1e6 * c['x_in_cmd_worst_m']:6.2f} um, force {c['force_worst_N']:5.3f} N  "
-                   f"rms {tr['force_error_rms_fs']:.3f} FS, max {tr['force_error_max_fs']:.3f} FS")
+                   f"rms {tr['force_error_rms_fs']:.3f} FS, max {tr['force_error_max_fs']:.3f} FS{why}")
     return out
