@@ -39,14 +39,17 @@ caller:
   (:meth:`slave.axis.SlaveAxis.too_far`): a master that has not re-aligned never makes the
   instrument jump.
 
-  the rig's sensors as sampled at the cycle's start -> each axis's estimator on the proximal sensors
-  (never the truth) -> the tension limit -> the axes' motor commands -> Estimate (one AxisState per
-  axis; the single tendon's profile at ``estimator.profile_points`` points), published; then, in the
-  cycle's second phase, rig.step on the motor commands (the instrument moves until the next cycle
-  samples it, as a real one does between two samples) and one CSV row per cycle (``slave.csv`` of a
-  single tendon in the measured-data format, ``slave_joints.csv`` of a joint instrument) and Rerun
-  every ``recording.log_every`` cycles. The first cycle after start-up or calibration only moves the
-  rig: the estimators have already seen its last state, so it sends no estimate and records no row.
+  the rig's sensors as sampled at the cycle's start, each axis's estimator already run on them (on the
+  proximal sensors, never the truth) -> the tension limit -> the command decided -> Estimate (one
+  AxisState per axis; the single tendon's profile at ``estimator.profile_points`` points), published;
+  then, in the cycle's second phase, the axes' motor commands, rig.step on them (the instrument moves
+  until the next cycle samples it, as a real one does between two samples), one CSV row per cycle
+  (``slave.csv`` of a single tendon in the measured-data format, ``slave_joints.csv`` of a joint
+  instrument), Rerun every ``recording.log_every`` cycles, and the estimators on the new sample. Only the
+  decision and the message stand between a command's arrival and the estimate it is echoed in; the
+  numbers are those of estimating at the cycle's start. The first cycle after start-up or calibration
+  only moves the rig: the estimators have already seen its last state, so it sends no estimate and
+  records no row.
 * A Heartbeat at ``slave.heartbeat_hz`` carries the state. With ``stop_on_master_stop`` the node
   sets :attr:`done` when the master's heartbeat says STOPPING.
 
@@ -172,9 +175,9 @@ class SlaveNode(SlaveNodeBase):
         self.calibrated = False
         self._how = "given model"
         self._now = 0.0
-        self._sampled = False              # rig_state is a sample the estimators have not seen (module docstring)
         self._observed: RigState = rig.state   # the state this cycle's estimate came from
-        self._pending: tuple | None = None     # this cycle's rig command and time step, until the second phase
+        self._next: tuple | None = None        # the rig's newest sample and its estimate, for the next cycle
+        self._pending: tuple | None = None     # this cycle's (relax, targets, time step), until the second phase
         if calibration is not None:
             data = self.kind.start_loaded(self.axes, calibration, self.rig_state)
             self._write_calibration_json({**data, "loaded_from": str(self.calibration_file or "")})
@@ -234,16 +237,17 @@ class SlaveNode(SlaveNodeBase):
         far = [w for w in (ax.too_far(t, self.rig_state) for ax, t in zip(self.axes, cmd.targets)) if w is not None]
         return "; ".join(far) if far else None
 
-    def _motors(self, now: float, dt: float) -> list:
-        """The watchdog's decision on the latest accepted command (:meth:`_decide`) as each axis's motor
-        command: SAFE (also an engage refused while SAFE) -> relax, ENGAGED -> the targets, else hold."""
+    def _decision(self, now: float) -> tuple[bool, tuple]:
+        """The watchdog's decision on the latest accepted command (:meth:`_decide`) as (relax, one target
+        or None per axis): SAFE (also an engage refused while SAFE) -> relax, ENGAGED -> the targets,
+        else hold (no target)."""
         decision, detail = self._decide(now)
         relax = decision is Decision.SAFE or (decision is Decision.REFUSED and self.state == SideState.SAFE)
         if relax and self.last_safe_reason is None:
             self.last_safe_reason = detail if decision is Decision.SAFE else "engaged command too far"
         self.marker = 0 if relax else self.marker
         targets = detail.targets if decision is Decision.ENGAGED else (None,) * len(self.axes)
-        return self.kind.motor_all(self.axes, relax, targets, self.rig_state, dt)
+        return relax, targets
 
     # ---- the cycle ---------------------------------------------------------------------------------
     def _calibration_step(self, now: float, dt: float) -> None:
@@ -257,35 +261,38 @@ class SlaveNode(SlaveNodeBase):
 
     def _control_step(self, now: float, dt: float) -> None:
         self._now = now
-        if not self._sampled:
+        sample = self._next
+        if sample is None:
             # the first cycle after start-up or calibration: the estimators have seen the rig's last state
-            self._pending = (self.kind.rig_command(self._motors(now, dt)), dt)
+            self._pending = (*self._decision(now), dt)
             return
-        # the rig stepped at the end of the last cycle: its sensors as sampled at this cycle's start
-        st = self._observed = self.rig_state
-        observed = self.kind.observe_all(self.axes, st)
+        # the rig's sensors as sampled when it stepped at the end of the last cycle, already estimated there
+        self._observed, observed = sample
         self._check_tension([a for a, _ in observed], now)     # past slave.max_tension: SAFE in this cycle
-        self._pending = (self.kind.rig_command(self._motors(now, dt)), dt)
-        profiles = tuple(p for _, p in observed if p)
-        self._publish(Estimate(self.seq, self.cmd_seq, now, tuple(a for a, _ in observed), profiles))
+        self._pending = (*self._decision(now), dt)
+        self._publish(Estimate(self.seq, self.cmd_seq, now, tuple(a for a, _ in observed),
+                               tuple(p for _, p in observed if p)))
 
     def _control_after(self, now: float) -> None:
-        """The rig stepped on the cycle's motor commands (the instrument moves until the next cycle samples
-        it, as a real one does), and the cycle's row of the state its estimate came from."""
-        st, recorded = self._observed, self._sampled
+        """The cycle's motor commands and the rig stepped on them (the instrument moves until the next cycle
+        samples it, as a real one does), the cycle's row of the state its estimate came from, then the
+        estimators on the new sample, ready for the next cycle's estimate."""
+        st, recorded = self._observed, self._next is not None
         pending, self._pending = self._pending, None
         if pending is not None:
-            self.rig_state = self.rig.step(*pending)
-            self._sampled = True
-        if not recorded:
-            return
-        if self.recorder is not None:
-            common = (self.marker, self.cmd_seq, int(self.state), now,
-                      0.0 if self._accepted is None else self._accepted.t_recv)
-            self.recorder.write(self.kind.csv_row(st, common, self.axes))
-        if self.rerun is not None:
-            for ax in self.axes:
-                ax.log_rerun(self.rerun, self.cycles, st)
+            relax, targets, dt = pending
+            motors = self.kind.motor_all(self.axes, relax, targets, self.rig_state, dt)
+            self.rig_state = self.rig.step(self.kind.rig_command(motors), dt)
+        if recorded:
+            if self.recorder is not None:
+                common = (self.marker, self.cmd_seq, int(self.state), now,
+                          0.0 if self._accepted is None else self._accepted.t_recv)
+                self.recorder.write(self.kind.csv_row(st, common, self.axes))
+            if self.rerun is not None:
+                for ax in self.axes:
+                    ax.log_rerun(self.rerun, self.cycles, st)
+        if pending is not None:
+            self._next = (self.rig_state, self.kind.observe_all(self.axes, self.rig_state))
 
     # ---- summary -----------------------------------------------------------------------------------
     def _stats_detail(self) -> dict[str, Any]:

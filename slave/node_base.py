@@ -154,8 +154,8 @@ class SlaveNodeBase(NodeBase):
         return dt
 
     def step_send(self, now: float) -> None:
-        """A slave cycle's first phase at ``now`` [s]: the rig's sample estimated, the command turned into
-        motor commands, the estimate published (see the module docstrings)."""
+        """A slave cycle's first phase at ``now`` [s]: the command decided on the rig's estimated sample and the
+        estimate published (see the module docstrings)."""
         dt = self._cycle_dt(now)
         self._phase = None if dt is None else self.state
         if dt is None:
@@ -166,8 +166,8 @@ class SlaveNodeBase(NodeBase):
             self._control_step(now, dt)
 
     def step_after(self, now: float) -> None:
-        """A slave cycle's second phase at ``now`` [s]: the rig moved and the recordings (a control cycle),
-        the heartbeat and the CRTK state."""
+        """A slave cycle's second phase at ``now`` [s]: the motor commands, the rig moved, the recordings and
+        the next sample estimated (a control cycle), the heartbeat and the CRTK state."""
         phase, self._phase = self._phase, None
         if phase is None:
             return
@@ -183,12 +183,13 @@ class SlaveNodeBase(NodeBase):
         raise NotImplementedError
 
     def _control_step(self, now: float, dt: float) -> None:
-        """A control cycle's first phase: estimators on the rig's sample, motor commands, :meth:`_publish`."""
+        """A control cycle's first phase: the tension limit and the decision on the rig's estimated sample,
+        :meth:`_publish`."""
         raise NotImplementedError
 
     def _control_after(self, now: float) -> None:
-        """A control cycle's second phase, after its estimate is published: the rig moved on the motor
-        commands, the cycle's rows recorded (default: nothing)."""
+        """A control cycle's second phase, after its estimate is published: the motor commands, the rig moved
+        on them, the cycle's rows recorded, the new sample estimated (default: nothing)."""
 
     # ---- commands and estimates --------------------------------------------------------------------
     def _accept(self, now: float) -> None:
