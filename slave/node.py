@@ -67,7 +67,7 @@ from slave.node_base import Decision, SlaveLinks, SlaveNodeBase
 from slave.pair_axis import PairAxis
 from slave.rig import Rig, RigState
 from slave.tendon_axis import CSV_COLUMNS, CSV_TRUTH_COLUMNS, RELAX_BAND, TendonAxis, csv_columns
-from teleop.codec import seq_newer
+from teleop.codec import prepare_estimate, seq_newer
 from teleop.config import Config
 from teleop.errors import ConfigError
 from teleop.messages import Command, Estimate, SideState
@@ -267,11 +267,10 @@ class SlaveNode(SlaveNodeBase):
             self._pending = (*self._decision(now), dt)
             return
         # the rig's sensors as sampled when it stepped at the end of the last cycle, already estimated there
-        self._observed, observed = sample
-        self._check_tension([a for a, _ in observed], now)     # past slave.max_tension: SAFE in this cycle
+        self._observed, axes, profiles = sample
+        self._check_tension(axes, now)                  # past slave.max_tension: SAFE in this cycle
         self._pending = (*self._decision(now), dt)
-        self._publish(Estimate(self.seq, self.cmd_seq, now, tuple(a for a, _ in observed),
-                               tuple(p for _, p in observed if p)))
+        self._publish(Estimate(self.seq, self.cmd_seq, now, axes, profiles))
 
     def _control_after(self, now: float) -> None:
         """The cycle's motor commands and the rig stepped on them (the instrument moves until the next cycle
@@ -292,7 +291,10 @@ class SlaveNode(SlaveNodeBase):
                 for ax in self.axes:
                     ax.log_rerun(self.rerun, self.cycles, st)
         if pending is not None:
-            self._next = (self.rig_state, self.kind.observe_all(self.axes, self.rig_state))
+            observed = self.kind.observe_all(self.axes, self.rig_state)
+            axes, profiles = tuple(a for a, _ in observed), tuple(p for _, p in observed if p)
+            prepare_estimate(axes, profiles)        # its body encoded now: the send packs the header only
+            self._next = (self.rig_state, axes, profiles)
 
     # ---- summary -----------------------------------------------------------------------------------
     def _stats_detail(self) -> dict[str, Any]:

@@ -37,7 +37,7 @@ from teleop.messages import AxisState, Command, Estimate, Heartbeat, Side, SideS
 
 __all__ = [
     "MAGIC", "WIRE_VERSION", "TYPE_COMMAND", "TYPE_ESTIMATE", "TYPE_HEARTBEAT", "MAX_AXES", "MAX_PROFILE_POINTS",
-    "SEQ_MODULUS", "Message", "encode", "decode", "next_seq", "seq_newer",
+    "SEQ_MODULUS", "Message", "encode", "decode", "next_seq", "seq_newer", "prepare_estimate",
 ]
 
 MAGIC = 0xA7
@@ -188,13 +188,60 @@ def _name_bad_estimate(msg: Estimate) -> None:
         _name_bad_axis(i, ax)
 
 
+#: Bodies encoded ahead (:func:`prepare_estimate`): id(axes) -> (axes, profiles, body, profile points). An entry
+#: holds its tuples, so an id in it is never reused; a message whose axes and profiles are those very tuples
+#: (immutable, of frozen states) has that body. Cleared when full.
+_BODIES: dict[int, tuple[tuple, tuple, bytes, int]] = {}
+_BODIES_MAX = 8
+
+
+def prepare_estimate(axes: tuple[AxisState, ...], profiles: tuple[tuple[float, ...], ...] = ()) -> bool:
+    """Encode an Estimate's axes and profiles ahead of its send: :func:`encode` of an Estimate holding these
+    very tuples then packs only its header (sequence numbers and time). The slave encodes each cycle's
+    estimate as soon as it is estimated, before the command it answers arrives.
+
+    Parameters
+    ----------
+    axes : tuple of AxisState
+        The estimate's axes (the same tuple object must go into the Estimate).
+    profiles : tuple of tuple of float
+        Its profiles (likewise).
+
+    Returns
+    -------
+    bool
+        True when encoded; False when they do not fit the wire (then :func:`encode` raises its CodecError
+        on the message as without preparation).
+    """
+    try:
+        body, points = _estimate_body(Estimate(0, 0, 0.0, axes, profiles))
+    except CodecError:
+        return False
+    if len(_BODIES) >= _BODIES_MAX:
+        _BODIES.clear()
+    _BODIES[id(axes)] = (axes, profiles, body, points)
+    return True
+
+
 def _encode_estimate(msg: Estimate) -> bytes:
-    n = len(msg.axes)
-    _axis_count("Estimate", n)
     _check_uint("Estimate", "seq", msg.seq, 32)
     _check_uint("Estimate", "cmd_seq", msg.cmd_seq, 32)
-    parts = [b""]
-    total = msg.t_slave
+    _check_finite("Estimate", ("t_slave",), (msg.t_slave,))
+    hit = _BODIES.get(id(msg.axes))
+    if hit is not None and hit[0] is msg.axes and hit[1] is msg.profiles:
+        body, points = hit[2], hit[3]
+    else:
+        body, points = _estimate_body(msg)
+    return (_HEADER.pack(MAGIC, WIRE_VERSION, TYPE_ESTIMATE)
+            + _ESTIMATE.pack(msg.seq, msg.cmd_seq, msg.t_slave, len(msg.axes), points) + body)
+
+
+def _estimate_body(msg: Estimate) -> tuple[bytes, int]:
+    """The axes and profiles of ``msg`` on the wire, and the profile points (CodecError naming what does not fit)."""
+    n = len(msg.axes)
+    _axis_count("Estimate", n)
+    parts = []
+    total = 0.0
     m = 0
     try:
         for i, ax in enumerate(msg.axes):
@@ -224,15 +271,13 @@ def _encode_estimate(msg: Estimate) -> bytes:
                          f"got {len(profiles)}")
     if points > MAX_PROFILE_POINTS:
         raise CodecError(f"Estimate.profiles have {points} points: at most {MAX_PROFILE_POINTS} fit the wire")
-    parts[0] = _HEADER.pack(MAGIC, WIRE_VERSION, TYPE_ESTIMATE) + _ESTIMATE.pack(msg.seq, msg.cmd_seq, msg.t_slave,
-                                                                                 n, points)
     try:
         for k, p in enumerate(profiles):
             _check_profile(f"Estimate.profiles[{k}]", p)
             parts.append(_floats(points, "f").pack(*p))
     except (struct.error, TypeError, OverflowError) as e:
         raise CodecError(f"Estimate.profiles must hold finite floats within float32 range ({e})") from None
-    return b"".join(parts)
+    return b"".join(parts), points
 
 
 def _expect_len(kind: str, buf, need: int) -> None:

@@ -272,3 +272,28 @@ def test_sixteen_pair_axes_round_trip_at_the_documented_sizes():
                                     for k in range(n)))
     assert n == 16 and len(encode(cmd)) == 21 + 8 * n and len(encode(est)) == 22 + 83 * n
     assert decode(encode(cmd)) == cmd and decode(encode(est)) == est
+
+
+def test_a_prepared_body_encodes_the_same_bytes_and_a_bad_one_is_refused_as_before():
+    rng = random.Random(5)
+    for _ in range(50):
+        axes = tuple(_axis(rng, rng.choice((1, 2))) for _ in range(rng.randint(1, MAX_AXES)))
+        m = sum(len(a.tendons) for a in axes)
+        profiles = tuple(tuple(rng.uniform(-1e3, 1e3) for _ in range(20)) for _ in range(m)) if rng.random() < 0.5 else ()
+        msg = Estimate(_u32(rng), _u32(rng), _f(rng), axes, profiles)
+        plain = encode(msg)
+        assert codec.prepare_estimate(axes, profiles)
+        assert encode(msg) == plain                              # the prepared body
+        same = Estimate(msg.seq, msg.cmd_seq, msg.t_slave, tuple(list(axes)), tuple(list(profiles)))   # equal, not the same
+        assert encode(same) == plain and decode(plain) == decode(encode(msg))
+    assert len(codec._BODIES) <= codec._BODIES_MAX                # bounded, whatever was prepared
+    bad = (AxisState(1.0, math.nan, (TendonState(1.0, 0.0, 1.0, 0.0, Phase.PULL),)),)
+    assert not codec.prepare_estimate(bad)
+    with pytest.raises(CodecError, match=r"Estimate.axes\[0\].position_hat is nan"):
+        encode(Estimate(1, 1, 0.0, bad))
+    good = (AxisState(1.0, 0.0, (TendonState(1.0, 0.0, 1.0, 0.0, Phase.PULL),)),)
+    assert codec.prepare_estimate(good)
+    with pytest.raises(CodecError, match="t_slave is inf"):          # the header is still checked
+        encode(Estimate(1, 1, math.inf, good))
+    with pytest.raises(CodecError, match="seq is -1"):
+        encode(Estimate(-1, 1, 0.0, good))
