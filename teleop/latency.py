@@ -59,9 +59,10 @@ class LatencyHistogram:
     def snapshot(self) -> dict:
         """``{"bin_s", "n", "max_s", "bins": {index: count}}`` (non-empty bins; index :data:`SPAN` / BIN is the
         overflow): two snapshots' differences give a window's percentiles (:func:`bin_percentile`)."""
-        nz = np.flatnonzero(self.counts)
-        return {"bin_s": BIN, "n": self.n, "max_s": None if self.n == 0 else self.max,
-                "bins": {int(i): int(self.counts[i]) for i in nz}}
+        counts = self.counts.copy()      # the loop thread may add a sample while another thread snapshots
+        nz = np.flatnonzero(counts)
+        return {"bin_s": BIN, "n": int(counts.sum()), "max_s": None if self.n == 0 else self.max,
+                "bins": {int(i): int(counts[i]) for i in nz}}
 
 
 def bin_percentile(counts: np.ndarray, q: float) -> float | None:
