@@ -36,6 +36,7 @@ ramps it in again: a step, not a limit cycle); ``not_engaged_s`` reports how lon
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -150,8 +151,9 @@ def loop_metrics(master: dict, slave: dict, force_scale: float, experiments: dic
         ideal = -force_scale * np.interp(t, ts, Ts)
         fs = float(np.ptp(ideal))
         e = f - ideal
-        transparency = {"force_error_rms_fs": _rms_fs(e, fs), "force_error_max_fs": float(np.max(np.abs(e)) / fs)
-                        if fs > 0 else math.nan, "full_scale_N": fs}
+        transparency: dict[str, Any] = {
+            "force_error_rms_fs": _rms_fs(e, fs),
+            "force_error_max_fs": float(np.max(np.abs(e)) / fs) if fs > 0 else math.nan, "full_scale_N": fs}
         if "force_cmd" in master and "T_out_hat" in slave:
             hat = -force_scale * np.interp(t, ts, slave["T_out_hat"][order])
             fc = master["force_cmd"][sel]
