@@ -14,7 +14,8 @@ below :data:`teleop.loop_metrics.CHATTER_LIMITS` (20 um, 0.05 N) and the protoco
 Usage: ``.venv/bin/python benchmarks/bench_stability.py [--quick] [--pc off|hard|reserve]``
 (prints a table; ~1 s of CPU per point). ``--joints``: the same sweep on the torque axes of the 3-joint
 instrument (benchmarks/stability_joints.py: the real slave and master nodes in one process; per
-joint the worst of its two pulls; ~7 s of CPU per point).
+joint the worst of its two pulls; ~7 s of CPU per point); ``--joints --backlash-compensation``: that sweep
+with the slave's backlash compensation on (``pair_control.backlash_compensation``, slave/pair_control.py).
 """
 from __future__ import annotations
 
@@ -106,12 +107,14 @@ def main() -> None:
                     help="the loop without passivity control at high force scales, force limit 40 N")
     ap.add_argument("--joints", action="store_true",
                     help="the 3-joint instrument's torque axes (benchmarks/stability_joints.py, ~7 s CPU a point)")
+    ap.add_argument("--backlash-compensation", action="store_true",
+                    help="with --joints: the sweep with pair_control.backlash_compensation on")
     args = ap.parse_args()
     if args.boundary:
         boundary()
         return
     if args.joints:
-        joints(args.quick)
+        joints(args.quick, args.backlash_compensation)
         return
     scales = (0.2, 0.8) if args.quick else (0.1, 0.2, 0.4, 0.8)
     delays = (0.001, 0.02) if args.quick else (0.001, 0.005, 0.02, 0.05)
@@ -141,10 +144,11 @@ def main() -> None:
     print(f"CPU {time.process_time() - t0:.1f} s")
 
 
-def joints(quick: bool = False) -> None:
+def joints(quick: bool = False, backlash: bool = False) -> None:
     """The joint-axis sweep: force scale x one-way delay x arm stiffness on the 3-joint instrument, the
     real nodes in one process (benchmarks/stability_joints.py); the reserve's gain shaped
-    (master.passivity: release, fade) and, at the defaults, not (the gain in one sample) for the before/after."""
+    (master.passivity: release, fade) and, at the defaults, not (the gain in one sample) for the before/after,
+    and with the slave's backlash compensation (slave/pair_control.py); ``backlash``: the sweep with it."""
     from stability_joints import arm_with, calibration, run_joints, summarize
 
     import master.passivity as passivity
@@ -166,7 +170,11 @@ def joints(quick: bool = False) -> None:
     passivity.RELEASE_TIME, passivity.FADE_TIME = keep
     line(f"{'release 50 ms, fade 10 ms (after)':32s}", summarize(run_joints(cal)))
     line(f"{'no passivity controller':32s}", summarize(run_joints(cal, passivity=False)))
+    comp = {"pair_control.backlash_compensation": True}
+    line(f"{'backlash compensation':32s}", summarize(run_joints(cal, overrides=comp)))
     print()
+    if backlash:
+        print("with backlash compensation (pair_control.backlash_compensation):")
     scales = (0.2, 0.8) if quick else (0.1, 0.2, 0.4, 0.8)
     delays = (0.001, 0.02) if quick else (0.001, 0.02, 0.05)
     stiff = (100.0, 800.0) if quick else (100.0, 300.0, 800.0)
@@ -174,7 +182,8 @@ def joints(quick: bool = False) -> None:
     for fs in scales:
         for d in delays:
             for k in stiff:
-                line(f"{fs:7.2f} {1e3 * d:8.0f} {k:6.0f}", summarize(run_joints(cal, fs, d, arm_with(k))))
+                line(f"{fs:7.2f} {1e3 * d:8.0f} {k:6.0f}",
+                     summarize(run_joints(cal, fs, d, arm_with(k), overrides=comp if backlash else None)))
     print(f"CPU {time.process_time() - t0:.1f} s")
 
 

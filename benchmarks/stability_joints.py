@@ -97,8 +97,10 @@ def calibration(path: Path | None = None):
 
 
 def run_joints(cal, force_scale: float = 0.2, delay: float = 0.001, arm: ArmParameters | None = None,
-               passivity: bool = True, reserve: float | None = None, t_max: float = 40.0) -> dict:
+               passivity: bool = True, reserve: float | None = None, t_max: float = 40.0,
+               overrides: dict | None = None) -> dict:
     """One closed-loop run of the 3-joint instrument; per joint and pulled tendon the loop metrics.
+    ``overrides``: further config keys (dotted), e.g. ``{"pair_control.backlash_compensation": True}``.
 
     Returns ``{"finished", "safe_events", "duration_s", "<joint> (pull a|b)": loop_metrics row}``.
     """
@@ -109,6 +111,7 @@ def run_joints(cal, force_scale: float = 0.2, delay: float = 0.001, arm: ArmPara
                   "master.watchdog_ms": wd, "slave.watchdog_ms": wd}
     if reserve is not None:
         over["master.mapping.passivity_reserve"] = reserve
+    over.update(overrides or {})
     # the study runs the loop past the hard bounds on purpose (long delays, no passivity controller, no reserve)
     over["safety.override"] = ["master.watchdog_ms", "slave.watchdog_ms", "master.mapping.passivity",
                                "master.mapping.passivity_reserve"]

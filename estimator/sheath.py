@@ -212,11 +212,29 @@ class SheathModel:
         """
         return self.compliance * pull_elongation_factor(self.K, self.wrap_shape)
 
+    @property
+    def reversal_compliance(self) -> float:
+        """Proximal travel per newton of reversal tension that crosses the release band [m/N].
+
+        After a pull to ``T_in0`` the distal tension holds until ``T_in`` has fallen to ``T_in0 e^-2K``
+        (Phee et al. 2009, Sec. III); meanwhile the distal end stands still and the proximal end moves
+        by the change of elongation between the two profiles, ``T_in0 e^-K(s)`` and
+        ``T_in0 e^-2K e^+K(s)``::
+
+            dx = T_in0 (1/EA) int_0^L (e^-mu theta(s) - e^-2K e^+mu theta(s)) ds = c_rev T_in0
+
+        so the joint's dead zone after a reversal is ``c_rev T_in0``; for constant curvature
+        ``c_rev = M_e (1 - e^-K) = L (1 - e^-K)^2 / (EA K)`` (0 at K = 0: no friction, no band).
+        """
+        return self.compliance * (pull_elongation_factor(self.K, self.wrap_shape)
+                                  - math.exp(-2.0 * self.K) * pull_elongation_factor(-self.K, self.wrap_shape))
+
 
 def pull_elongation_factor(K: float, wrap_shape: np.ndarray | None = None) -> float:
-    """(1/L) int_0^L exp(-K * shape(s)) ds [-]; (1 - e^-K)/K for constant curvature (1 at K = 0)."""
+    """(1/L) int_0^L exp(-K * shape(s)) ds [-]; (1 - e^-K)/K for constant curvature (1 at K = 0; a
+    negative K gives the release profile's factor, (e^|K| - 1)/|K|)."""
     if wrap_shape is None:
-        return 1.0 if K < 1e-12 else -math.expm1(-K) / K
+        return 1.0 if abs(K) < 1e-12 else -math.expm1(-K) / K
     w = np.asarray(wrap_shape, dtype=float)
     f = np.exp(-K * w)
     return float(np.sum(0.5 * (f[1:] + f[:-1])) / (len(w) - 1))

@@ -124,6 +124,12 @@ class PairAxis(SlaveAxis):
                  "calibration" if e.tension_noise is None else "estimator.tension_noise")
         x0 = history[0][1]
         assert self.controller is not None
+        if self.cfg.pair_control.backlash_compensation:      # the dead zone paid out from the calibrated models
+            self.controller.band_compliance = (models[0].reversal_compliance, models[1].reversal_compliance)
+            self.controller.band_width = self.cfg.pair_control.backlash_width
+            self.controller.friction_exponent = (models[0].K, models[1].K)
+            log.info("%s: backlash compensation, reversal compliance %.3e m/N (a), %.3e m/N (b) over +/- %g rad",
+                     j.name, *self.controller.band_compliance, self.controller.band_width)
         self.controller.x_limits = tuple((x0[i, k] - self.travel, x0[i, k] + self.travel) for k in range(2))
         for t, x, T in history:       # replay: the estimator's memory = its tendons' proximal history
             self.sample = self.estimator.step(T[i, 0], x[i, 0], T[i, 1], x[i, 1], t)
@@ -354,8 +360,8 @@ def _control_bank_of(axes: Sequence[SlaveAxis], state: RigState) -> PairControlB
         cb.release()
     if not _rows_in_order(axes, state):
         return None
-    ready = [c for c, ax in zip(ctls, axes)
-             if c is not None and c._bank is None and isinstance(ax, PairAxis) and ax.sample is not None]
+    ready = [c for c, ax in zip(ctls, axes) if c is not None and c._bank is None and c.band_compliance is None
+             and isinstance(ax, PairAxis) and ax.sample is not None]
     if len(ready) != len(axes):
         return None
     cb = PairControlBank(ready)

@@ -32,7 +32,31 @@ antagonist, instead of going slack (or being pulled tight) by the commanded trav
 Without a command (None: watchdog, not engaged) the pair goes IDLE: both tendons relax to T_set and
 the joint returns toward rest under its own spring. Every motor command is finally clipped to the
 tendon's travel limits (``x_limits``), whatever the command or the loop asks.
-:class:`slave.pair_control_bank.PairControlBank` steps the controllers of every joint in one call.
+
+Backlash compensation (``band_compliance``, off by default). When the command turns back, the puller's
+distal end holds until its proximal tension has crossed the release band, ``T_in0 -> T_in0 e^-2K``
+(Phee et al. 2009, Sec. III): a dead zone of ``c_rev T_in0`` of proximal travel
+(:attr:`estimator.sheath.SheathModel.reversal_compliance`), during which the command moves and the joint
+does not. With compensation the puller pays that travel out as the command turns back, spread over a
+play of half-width ``w`` (``band_width``) on the command, so the joint follows the command's reversal
+instead of waiting in the band. Past the band the distal tension follows ``T_out = T_in e^K``, so the
+pull-branch tension that would hold the same distal tension is ``T_in e^2K``; the travel to pay out is
+the band at that tension, which falls to 0 with it (a constant ``c_rev T_in0`` would leave the tendon
+slack by that much at the end of a release)::
+
+    y   <- clip(y, c - w, c + w)                  (play on the command; y = c - s w on entering the mode)
+    u    = s (c - y) / w                          in [-1, 1]: +1 while pulling, -1 once turned back by 2 w
+    T0   = T_eq = T_in,p while u = 1              (the tension the reversal starts from)
+    T_eq <- T_eq + (1 - e^(-dt/tau)) (min(T0, T_in,p e^2K) - T_eq)     otherwise (tau = 10 ms)
+    x_cmd,p = x_ref + s r (c - c_ref) - c_rev,p T_eq (1 - u) / 2
+
+Inside the band ``T_in e^2K >= T0``, so ``T_eq = T0`` and nothing feeds back; past it the payout
+shrinks as the tension falls, a negative feedback of loop gain ``e^K - 1`` that the 10 ms filter keeps
+smooth. A pull after a release takes the travel back over the same play, so a small jitter of the
+command moves the tendon by ``c_rev T_eq / (2 w)`` per radian and never ratchets. The compensation only
+pays out (at most ``c_rev T_in0``, under a millimetre at the instrument's tensions); it never pulls
+beyond where the uncompensated command would, and the travel clip and the slave's tension limit still
+apply.
 """
 from __future__ import annotations
 
@@ -50,6 +74,8 @@ class PairMode(IntEnum):
 
 
 _PULLING = {PairMode.IDLE: -1, PairMode.PULL_A: 0, PairMode.PULL_B: 1}
+#: Time constant [s] of the backlash compensation's tension filter (module docstring).
+BAND_TIME = 0.01
 
 
 class PairController:
@@ -75,6 +101,13 @@ class PairController:
         Half-width of the play on that motion [m], >= 0 (keeps estimate noise out).
     x_limits : ((float, float), (float, float)), optional
         Travel limits [m] of the motor commands of tendons a and b, (low, high) each.
+    band_compliance : (float, float), optional
+        Reversal compliance ``c_rev`` [m/N] of tendons a and b, each finite and >= 0: backlash
+        compensation on (module docstring); None: off.
+    band_width : float
+        Half-width ``w`` [rad] > 0 of the play on the command over which the compensation is applied.
+    friction_exponent : (float, float)
+        ``K`` [-] of tendons a and b, finite and >= 0 (the compensation's ``e^2K``; module docstring).
 
     Raises
     ------
@@ -83,10 +116,17 @@ class PairController:
     """
 
     def __init__(self, pulley_radius: float, set_tension: float, gain: float, band: float, max_speed: float,
-                 x_init: tuple[float, float], feedforward: bool = True, play: float = 5e-6, x_limits=None):
+                 x_init: tuple[float, float], feedforward: bool = True, play: float = 5e-6, x_limits=None,
+                 band_compliance: tuple[float, float] | None = None, band_width: float = 0.005,
+                 friction_exponent: tuple[float, float] = (0.0, 0.0)):
+        comp = () if band_compliance is None else tuple(band_compliance)
+        if band_compliance is not None and len(comp) != 2:
+            raise ValueError(f"pair control: band_compliance must be (c_rev,a, c_rev,b) [m/N], got {band_compliance!r}")
         for name, v, lo_ok in (("pulley_radius", pulley_radius, False), ("set_tension", set_tension, False),
                                ("gain", gain, False), ("band", band, True), ("max_speed", max_speed, False),
-                               ("play", play, True)):
+                               ("play", play, True), ("band_width", band_width, False),
+                               *((f"band_compliance[{k}]", c, True) for k, c in enumerate(comp)),
+                               *((f"friction_exponent[{k}]", K, True) for k, K in enumerate(friction_exponent))):
             if not (isinstance(v, (int, float)) and math.isfinite(v) and (v >= 0 if lo_ok else v > 0)):
                 raise ValueError(f"pair control: {name} must be a finite number {'>= 0' if lo_ok else '> 0'}, "
                                  f"got {v!r}")
@@ -107,6 +147,12 @@ class PairController:
         self._x_ref = 0.0
         self._c_ref = 0.0
         self._bank: Any = None     # the slave.pair_control_bank.PairControlBank stepping this controller, if any
+        self.band_compliance = None if band_compliance is None else (float(comp[0]), float(comp[1]))
+        self.band_width = float(band_width)
+        self._y = 0.0              # the compensation's play output on the command [rad]
+        self.friction_exponent = (float(friction_exponent[0]), float(friction_exponent[1]))
+        self._T0 = 0.0             # the tension its reversal starts from [N]
+        self._T_eq = 0.0           # the pull-branch tension of the present distal tension [N] (filtered)
 
     @property
     def pulling(self) -> int:
@@ -156,6 +202,8 @@ class PairController:
             if mode != PairMode.IDLE:
                 self._x_ref = self.x_cmd[self.pulling]
                 self._c_ref = c
+                self._y = c - (1.0 if mode == PairMode.PULL_A else -1.0) * self.band_width
+                self._T0 = self._T_eq = float(T_in[self.pulling])
         p = self.pulling
         if p < 0:
             self._tension_step(0, T_in[0], dt)
@@ -164,6 +212,8 @@ class PairController:
         s = 1.0 if p == 0 else -1.0
         # pulling side: x_cmd = x_ref + s r (c - c_ref)
         x_new = self._x_ref + s * self.r * (c - self._c_ref)
+        if self.band_compliance is not None:
+            x_new -= self._payout(p, s, c, float(T_in[p]), dt)
         self.x_cmd[p] = x_new
         q = 1 - p
         if self.feedforward and x_out_hat is not None and math.isfinite(x_out_hat[p]):
@@ -176,6 +226,19 @@ class PairController:
             self._ff = y
         self._tension_step(q, T_in[q], dt)
         return self._clip()
+
+    def _payout(self, p: int, s: float, c: float, T: float, dt: float) -> float:
+        """The backlash compensation's payout [m] >= 0 of the puller ``p`` (module docstring)."""
+        w = self.band_width          # the play on the command, its position u, then T_eq
+        self._y = min(max(self._y, c - w), c + w)
+        u = min(1.0, s * (c - self._y) / w)
+        if u > 1.0 - 1e-9:                       # pulling (rounding of c - (c - w) aside)
+            self._T0 = self._T_eq = T
+            return 0.0
+        target = min(self._T0, T * math.exp(2.0 * self.friction_exponent[p]))
+        self._T_eq += -math.expm1(-dt / BAND_TIME) * (target - self._T_eq)
+        assert self.band_compliance is not None
+        return self.band_compliance[p] * max(self._T_eq, 0.0) * 0.5 * (1.0 - u)
 
     def _clip(self) -> tuple[float, float]:
         x = self.x_cmd

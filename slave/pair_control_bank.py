@@ -99,7 +99,8 @@ class PairControlBank:
     Parameters
     ----------
     controllers : sequence of PairController
-        One per joint, in the row order of :meth:`step`'s arrays; none already in a bank.
+        One per joint, in the row order of :meth:`step`'s arrays; none already in a bank, none with backlash
+        compensation (those step on their own, :meth:`PairController.step`).
 
     Attributes
     ----------
@@ -112,13 +113,14 @@ class PairControlBank:
     Raises
     ------
     ValueError
-        No controller, or one already in a bank.
+        No controller, one already in a bank, or one with backlash compensation.
     """
 
     def __init__(self, controllers: Sequence[PairController]):
         ctls = tuple(controllers)
-        if not ctls or any(c._bank is not None for c in ctls):
-            raise ValueError("PairControlBank: expected one or more pair controllers, none already in a bank")
+        if not ctls or any(c._bank is not None or c.band_compliance is not None for c in ctls):
+            raise ValueError("PairControlBank: expected one or more pair controllers, none already in a bank and "
+                             "none with backlash compensation (stepped on their own)")
         n = len(ctls)
         self.controllers = ctls
         self.X = np.array([c.x_cmd for c in ctls], dtype=np.float64).reshape(n, 2)

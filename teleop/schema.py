@@ -263,6 +263,8 @@ class PairControlConfig:
     tension_gain: float = 0.01            # [m/(N s)] integral gain of the antagonist's tension loop
     switch_band: float = 0.01             # [rad] |command| below: both tendons hold their set tension
     feedforward: bool = True              # antagonist pays out the pulling side's commanded travel
+    backlash_compensation: bool = False   # puller pays out the reversal band when the command turns back
+    backlash_width: float = 0.005         # [rad] half-width of the command play that compensation spreads over
     axes: tuple[int, ...] = ()            # master: device axis of each joint; empty: joint i on axis i
 
 

@@ -47,7 +47,8 @@ RANGES: dict[str, tuple[str, str]] = {
     "rig.simulated.joints[].load.tissue_contact": (">= 0", "rad"), "rig.simulated.joints[].load.torque": ("any", "N m"),
     "rig.simulated.joints[].tendons.a.mu": (">= 0", "-"), "rig.simulated.joints[].tendons.b.mu": (">= 0", "-"),
     "pair_control.min_tension": ("> 0", "N"), "pair_control.tension_gain": ("> 0", "m/(N s)"),
-    "pair_control.switch_band": (">= 0", "rad"), "pair_control.axes[]": (">= 0", "-"),
+    "pair_control.switch_band": (">= 0", "rad"), "pair_control.backlash_width": ("> 0", "rad"),
+    "pair_control.axes[]": (">= 0", "-"),
     "recording.log_every": (">= 1", "samples"), "recording.profile_every": (">= 1", "logs"), "recording.csv_every": (">= 1", "cycles"), "recording.mcap_every": (">= 1", "messages"), "recording.flush_interval": ("> 0", "s"), "transport.run_id_timeout": (">= 0", "s"), "recording.max_bytes": ("> 0", "B"), "recording.min_free_bytes": (">= 0", "B"),
     "ros2.domain_id": ("0..232", "-"), "ros2.rate_hz": ("> 0", "Hz"),
 }

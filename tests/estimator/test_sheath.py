@@ -53,6 +53,19 @@ def test_M_e_general_form_matches_constant_curvature_closed_form():
     assert pull_elongation_factor(0.0) == 1.0
 
 
+def test_reversal_compliance_is_the_elongation_change_across_the_release_band():
+    K, L, EA = 0.7, 1.5, 15000.0
+    uniform = SheathModel.from_geometry(SheathGeometry.uniform(L, K / 0.1), 0.1, EA)
+    assert uniform.reversal_compliance == pytest.approx(uniform.M_e * (1 - math.exp(-K)), rel=1e-4)
+    # from the profiles themselves: T0 e^-K(s) before the band, T0 e^-2K e^+K(s) after, distal end held
+    T0 = 10.0
+    K_s, w = uniform.nodes(400)
+    before, after = T0 * np.exp(-K_s), T0 * math.exp(-2 * K) * np.exp(K_s)
+    assert after[-1] == pytest.approx(before[-1])                     # the distal tension holds
+    assert float(np.sum(w * (before - after))) == pytest.approx(uniform.reversal_compliance * T0, rel=1e-3)
+    assert SheathModel(K=0.0, compliance=1e-4).reversal_compliance == 0.0
+
+
 def test_profile_update_is_the_play_operator_at_the_distal_node():
     K = 0.5
     log_gain = np.linspace(0, K, 51)

@@ -10,7 +10,7 @@ import pytest
 from master.node import MasterLinks, MasterNode, csv_columns
 from master.protocols import joint_marker, paper_protocol
 from master.simulated import ScriptedOperator
-from slave.calibration_file import load_calibration
+from slave.calibration_file import load_calibration, sheath_models
 from slave.joint_rig import SimulatedInstrument
 from slave.node import SlaveLinks, SlaveNode
 from slave.pair_axis import joint_csv_columns
@@ -24,8 +24,8 @@ CONFIG = Path(__file__).resolve().parents[2] / "configs" / "instrument-3dof.yaml
 DT = 1e-3
 
 
-def build(tmp_path, calibration=None):
-    cfg = load_config(CONFIG, {"calibration.speed": 0.01})
+def build(tmp_path, calibration=None, **overrides):
+    cfg = load_config(CONFIG, {"calibration.speed": 0.01, **overrides})
     clock = FakeClock(0.0)
     cmd, est, shb, mhb = (Topic(clock, codec=True, keep=False) for _ in range(4))
     inst = SimulatedInstrument.from_config(cfg)
@@ -143,3 +143,26 @@ def test_the_joint_master_reports_its_console_and_records_every_cycle(demo):
         assert np.abs(c[f"{j.name}.force"]).max() <= cfg.master.mapping.force_limit + 1e-12
         cmd, angle = c[f"{j.name}.cmd"][engaged], c[f"{j.name}.slave"][engaged]
         assert np.ptp(cmd) > 0.1 and np.corrcoef(cmd, angle)[0, 1] > 0.9      # the joint follows (with its lag)
+
+
+def test_backlash_compensation_runs_the_paper_protocol_from_the_calibrated_bands(tmp_path):
+    cfg, clock, slave, master, op, rec, _ = build(tmp_path, **{"pair_control.backlash_compensation": True})
+    run(clock, slave, master, 60.0, until=lambda: master.done and slave.done)
+    assert op.finished and op.timeouts == 0 and master.safe_events == 0 and slave.safe_events == 0
+    cal = load_calibration(tmp_path / "flex3.yaml", cfg)
+    for ax, models in zip(slave.axes, sheath_models(cal, cfg)):
+        ctl = ax.controller
+        assert ctl is not None and ctl._bank is None                    # stepped on its own, not by the bank
+        for k, m in enumerate(models):                                   # c_rev of the calibrated models
+            assert ctl.band_compliance[k] == pytest.approx(m.reversal_compliance) and 0 < m.reversal_compliance
+            assert m.reversal_compliance < m.M_e                         # a share of the pull's elongation
+    cols = joint_csv_columns([j.name for j in cfg.instrument.joints], True)
+    data = np.array(rec.rows)
+    c = {name: data[:, k] for k, name in enumerate(cols)}
+    for j, joint in enumerate(cfg.instrument.joints):
+        n = joint.name
+        tags = np.array([joint_marker(int(m), j) for m in c["marker"]])
+        for tag in (1, 2):
+            sel = tags == tag
+            true, hat = c[f"{n}.torque"][sel], c[f"{n}.torque_hat"][sel]
+            assert np.abs(hat - true).max() / np.ptp(true) <= 0.05, (n, tag)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from slave.pair_control import PairController, PairMode
-from tests.slave.joint_helpers import DT, Loop, joint_config
+from tests.slave.joint_helpers import DT, Loop, joint_config, route_model
 
 
 def make(**kw):
@@ -89,3 +89,91 @@ def test_travel_limits_clip_every_motor_command():
     assert xb == -1e-3
     with pytest.raises(ValueError, match="x_limits"):
         make(x_limits=((1.0, 0.0), (0.0, 1.0)))
+
+
+def test_backlash_compensation_pays_out_the_band_over_the_play_and_takes_it_back():
+    c = make(band_compliance=(1e-4, 2e-4), band_width=0.005, friction_exponent=(0.5, 0.5))
+    ref = make()
+    for cmd, T in ((0.02, 0.25), (0.10, 6.0), (0.20, 10.0)):      # pulling: the same commands as uncompensated
+        assert c.step(cmd, (T, 0.25), DT)[0] == pytest.approx(ref.step(cmd, (T, 0.25), DT)[0])
+    # turned back by 2 w: tendon a pays out c_rev,a T0 (T0 the tension where the command turned), linear in
+    # between; inside the band (T_in e^2K >= T0) the payout does not depend on the tension
+    for back, share in ((0.0025, 0.25), (0.005, 0.5), (0.010, 1.0), (0.05, 1.0)):
+        xa, xr = c.step(0.20 - back, (8.0, 0.25), DT)[0], ref.step(0.20 - back, (8.0, 0.25), DT)[0]
+        assert xr - xa == pytest.approx(share * 1e-4 * 10.0)
+    # past the band the payout follows the band at the pull-branch tension T_in e^2K, filtered: 0 when slack
+    for _ in range(100):                                           # 10 time constants
+        xa, xr = c.step(0.14, (2.0, 0.25), DT)[0], ref.step(0.14, (2.0, 0.25), DT)[0]
+    assert xr - xa == pytest.approx(1e-4 * 2.0 * math.e, rel=1e-3)
+    for _ in range(100):
+        xa, xr = c.step(0.13, (0.0, 0.25), DT)[0], ref.step(0.13, (0.0, 0.25), DT)[0]
+    assert 0.0 <= xr - xa < 1e-4 * 2.0 * math.e * 1e-4
+    # a pull after the release takes the same travel back over the same play: no ratchet
+    rng = np.random.default_rng(1)
+    for cmd in 0.15 + 0.004 * rng.standard_normal(200):          # jitter of the hand about one command
+        c.step(cmd, (8.0, 0.25), DT)
+        ref.step(cmd, (8.0, 0.25), DT)
+    xa, xr = c.step(0.30, (9.0, 0.25), DT)[0], ref.step(0.30, (9.0, 0.25), DT)[0]
+    assert xa == pytest.approx(xr)
+    # tendon b pulling (- commands): the same, on b
+    c.step(-0.05, (0.25, 0.25), DT), ref.step(-0.05, (0.25, 0.25), DT)
+    c.step(-0.20, (0.25, 7.0), DT), ref.step(-0.20, (0.25, 7.0), DT)
+    xb, xr = c.step(-0.18, (0.25, 6.0), DT)[1], ref.step(-0.18, (0.25, 6.0), DT)[1]
+    assert xr - xb == pytest.approx(2e-4 * 7.0)
+    with pytest.raises(ValueError, match="band_width"):
+        make(band_compliance=(1e-4, 1e-4), band_width=0.0)
+    with pytest.raises(ValueError, match="band_compliance"):
+        make(band_compliance=(1e-4, -1e-4))
+    with pytest.raises(ValueError, match="friction_exponent"):
+        make(band_compliance=(1e-4, 1e-4), friction_exponent=(math.nan, 0.5))
+
+
+def _dead_zone(loop: Loop) -> tuple[float, float, float]:
+    """Pull tendon a to 15 N into the tissue, then turn the command back at 0.5 rad/s: the command travel [rad]
+    before the joint has turned back 0.5 mrad, the tension the reversal started from [N], the command then [rad]."""
+    c = 0.0
+    while loop.state.T_in[0, 0] < 15.0:
+        c += 1.25 * DT
+        loop.step(c)
+    for _ in range(200):
+        loop.step(c)
+    T0, theta0, c0 = loop.state.T_in[0, 0], loop.state.truth.theta[0], c
+    while loop.state.truth.theta[0] > theta0 - 5e-4:
+        c -= 0.5 * DT
+        loop.step(c)
+    return c0 - c, T0, c
+
+
+def _release(loop: Loop, c: float) -> tuple[float, float]:
+    """The command from ``c`` back to 0.02 rad at 0.5 rad/s, then held 0.3 s: the least tension of tendon a
+    [N] on the way, and the joint angle at the end [rad]."""
+    low = math.inf
+    while c > 0.02:
+        c -= 0.5 * DT
+        loop.step(c)
+        low = min(low, loop.state.truth.T_in[0, 0])
+    for _ in range(300):
+        loop.step(c)
+    return low, loop.state.truth.theta[0]
+
+
+def test_the_reversal_band_predicts_the_dead_zone_and_compensation_removes_it():
+    cfg = joint_config()
+    plain = Loop(cfg)
+    j, K = plain.joint, plain.rig.K[0]
+    model_a = route_model(j.tendons.a, K[0])
+    dz, T0, c = _dead_zone(plain)
+    low, theta_end = _release(plain, c)
+    predicted = model_a.reversal_compliance * T0 / j.pulley_radius
+    print(f"dead zone {dz:.4f} rad, predicted {predicted:.4f} rad")
+    assert 0.9 * predicted < dz < 1.2 * predicted, (dz, predicted)     # + the tissue spring, the 0.5 mrad
+    comp = Loop(cfg)
+    comp.ctl.band_compliance = (model_a.reversal_compliance, route_model(j.tendons.b, K[1]).reversal_compliance)
+    comp.ctl.friction_exponent = (K[0], K[1])
+    dz_comp, _, c = _dead_zone(comp)
+    low_comp, theta_end_comp = _release(comp, c)
+    print(f"with compensation {dz_comp:.4f} rad; tension a at least {low:.3f} / {low_comp:.3f} N, "
+          f"end angle {theta_end:.4f} / {theta_end_comp:.4f} rad")
+    assert dz_comp < 0.15 * dz, (dz_comp, dz)                             # what is left: the play, 2 w
+    # the payout shrinks with the tension: the released tendon is never slack, the joint ends where it would
+    assert low_comp > 0.5 * low and abs(theta_end_comp - theta_end) < 0.01

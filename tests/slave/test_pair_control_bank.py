@@ -69,3 +69,7 @@ def test_a_controller_stepped_on_its_own_releases_its_bank_and_a_banked_one_is_r
     assert not bank.active and all(c._bank is None for c in ctls) and ctls[0].switches == 1
     with pytest.raises(ValueError, match="released"):
         bank.step(np.zeros(4), np.ones((4, 2)), 1e-3, np.zeros((4, 2)))
+    compensated = _controllers()[:1]
+    compensated[0].band_compliance = (1e-4, 1e-4)
+    with pytest.raises(ValueError, match="backlash compensation"):
+        PairControlBank(compensated)
