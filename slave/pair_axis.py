@@ -360,8 +360,8 @@ def _control_bank_of(axes: Sequence[SlaveAxis], state: RigState) -> PairControlB
         cb.release()
     if not _rows_in_order(axes, state):
         return None
-    ready = [c for c, ax in zip(ctls, axes) if c is not None and c._bank is None and c.band_compliance is None
-             and isinstance(ax, PairAxis) and ax.sample is not None]
+    ready = [c for c, ax in zip(ctls, axes)
+             if c is not None and c._bank is None and isinstance(ax, PairAxis) and ax.sample is not None]
     if len(ready) != len(axes):
         return None
     cb = PairControlBank(ready)

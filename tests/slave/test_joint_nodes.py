@@ -152,7 +152,7 @@ def test_backlash_compensation_runs_the_paper_protocol_from_the_calibrated_bands
     cal = load_calibration(tmp_path / "flex3.yaml", cfg)
     for ax, models in zip(slave.axes, sheath_models(cal, cfg)):
         ctl = ax.controller
-        assert ctl is not None and ctl._bank is None                    # stepped on its own, not by the bank
+        assert ctl is not None and ctl._bank is not None                # stepped by the compiled bank
         for k, m in enumerate(models):                                   # c_rev of the calibrated models
             assert ctl.band_compliance[k] == pytest.approx(m.reversal_compliance) and 0 < m.reversal_compliance
             assert m.reversal_compliance < m.M_e                         # a share of the pull's elongation

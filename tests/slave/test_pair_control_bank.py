@@ -13,10 +13,12 @@ from slave.pair_control_bank import PairControlBank
 
 
 def _controllers() -> list[PairController]:
-    """Four joints: with and without feedforward and travel limits, different gains and bands."""
-    return [PairController(0.004, 0.25, 0.01, 0.01, 0.05, (0.001, -0.002), x_limits=((-0.004, 0.006), (-0.01, 0.01))),
+    """Four joints: with and without feedforward, travel limits and backlash compensation, different gains and
+    bands."""
+    return [PairController(0.004, 0.25, 0.01, 0.01, 0.05, (0.001, -0.002), x_limits=((-0.004, 0.006), (-0.01, 0.01)),
+                           band_compliance=(4e-5, 6e-5), band_width=0.004, friction_exponent=(0.6, 0.7)),
             PairController(0.003, 0.5, 0.02, 0.0, 0.04, (0.0, 0.0), feedforward=False),
-            PairController(0.002, 1.0, 0.005, 0.05, 0.02, (-0.003, 0.003), play=0.0),
+            PairController(0.002, 1.0, 0.005, 0.05, 0.02, (-0.003, 0.003), play=0.0, band_compliance=(1e-4, 0.0)),
             PairController(0.005, 0.3, 0.01, 0.02, 0.05, (0.0, 0.001), x_limits=((-1e-3, 1e-3), (-1e-3, 2e-3)))]
 
 
@@ -48,11 +50,13 @@ def test_the_bank_gives_each_controllers_own_commands_bit_for_bit_and_its_state_
         for i, c in enumerate(alone):
             assert tuple(out[i]) == _own(c, theta[k, i], T[k, i], X[k, i], none=i % 2 == 0)
     assert bank.switches.tolist() == [c.switches for c in alone] and min(bank.switches) > 10
+    assert alone[0]._T_eq != alone[0]._T0 and alone[2]._T_eq != alone[2]._T0      # the compensation was at work
     assert bank.mode.tolist() == [int(c.mode) for c in alone]
     bank.release()
     for a, b in zip(banked, alone):
         assert (a.x_cmd, a.mode, a.switches, a._x_ref, a._c_ref, a._ff) == (b.x_cmd, b.mode, b.switches, b._x_ref,
                                                                             b._c_ref, b._ff)
+        assert (a._y, a._T0, a._T_eq) == (b._y, b._T0, b._T_eq)
         assert a._bank is None
     for k in range(2500, 3000):             # and on their own again, still the same
         for i in range(4):
@@ -69,7 +73,4 @@ def test_a_controller_stepped_on_its_own_releases_its_bank_and_a_banked_one_is_r
     assert not bank.active and all(c._bank is None for c in ctls) and ctls[0].switches == 1
     with pytest.raises(ValueError, match="released"):
         bank.step(np.zeros(4), np.ones((4, 2)), 1e-3, np.zeros((4, 2)))
-    compensated = _controllers()[:1]
-    compensated[0].band_compliance = (1e-4, 1e-4)
-    with pytest.raises(ValueError, match="backlash compensation"):
-        PairControlBank(compensated)
+
