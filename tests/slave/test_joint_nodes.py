@@ -49,6 +49,20 @@ def run(clock, slave, master, seconds, until=None):
             break
 
 
+def _columns(cfg, rec) -> dict:
+    """The slave's recorded rows by column name."""
+    data = np.array(rec.rows)
+    return {name: data[:, k] for k, name in enumerate(joint_csv_columns([j.name for j in cfg.instrument.joints], True))}
+
+
+def _pulls(cfg, c: dict):
+    """(joint name, tag, rows) of every joint's protocol on tendon a (tag 1), then on b (2)."""
+    for j, joint in enumerate(cfg.instrument.joints):
+        tags = np.array([joint_marker(int(m), j) for m in c["marker"]])
+        for tag in (1, 2):
+            yield joint.name, tag, tags == tag
+
+
 @pytest.fixture(scope="module")
 def demo(tmp_path_factory):
     tmp_path = tmp_path_factory.mktemp("joint_nodes")
@@ -76,21 +90,17 @@ def test_paper_protocol_on_every_joint_within_5_percent_full_scale(demo):
     cfg, slave, master, op, rec, _ = demo
     assert op.finished and op.timeouts == 0 and master.done and slave.done
     assert master.safe_events == 0 and slave.safe_events == 0 and master.engage_count == 1
-    cols = joint_csv_columns([j.name for j in cfg.instrument.joints], True)
-    data = np.array(rec.rows)
-    c = {name: data[:, k] for k, name in enumerate(cols)}
-    for j, joint in enumerate(cfg.instrument.joints):
+    c = _columns(cfg, rec)
+    for n, tag, sel in _pulls(cfg, c):                      # tendon a's protocol, then b's, per joint
+        assert sel.sum() > 1000
+        true, hat = c[f"{n}.torque"][sel], c[f"{n}.torque_hat"][sel]
+        assert np.ptp(true) > 0.01
+        assert np.abs(hat - true).max() / np.ptp(true) <= 0.05, (n, tag)
+        pulled = "a" if tag == 1 else "b"
+        # the operator anticipates its hand's lag and stops its intention early (as on one tendon)
+        assert c[f"{n}.{pulled}.T_in"][sel].max() > 19.0
+    for joint in cfg.instrument.joints:
         n = joint.name
-        tags = np.array([joint_marker(int(m), j) for m in c["marker"]])
-        for tag in (1, 2):                                  # tendon a's protocol, then b's
-            sel = tags == tag
-            assert sel.sum() > 1000
-            true, hat = c[f"{n}.torque"][sel], c[f"{n}.torque_hat"][sel]
-            assert np.ptp(true) > 0.01
-            assert np.abs(hat - true).max() / np.ptp(true) <= 0.05, (n, tag)
-            pulled = "a" if tag == 1 else "b"
-            # the operator anticipates its hand's lag and stops its intention early (as on one tendon)
-            assert c[f"{n}.{pulled}.T_in"][sel].max() > 19.0
         assert np.abs(c[f"{n}.angle_hat"] - c[f"{n}.angle"]).max() < 0.02
     assert set(slave.stats()["side_switches"]) != {0}
     assert master.latency_stats()["n"] > 1000 and master.max_abs_force <= cfg.master.mapping.force_limit
@@ -156,13 +166,8 @@ def test_backlash_compensation_runs_the_paper_protocol_from_the_calibrated_bands
         for k, m in enumerate(models):                                   # c_rev of the calibrated models
             assert ctl.band_compliance[k] == pytest.approx(m.reversal_compliance) and 0 < m.reversal_compliance
             assert m.reversal_compliance < m.M_e                         # a share of the pull's elongation
-    cols = joint_csv_columns([j.name for j in cfg.instrument.joints], True)
-    data = np.array(rec.rows)
-    c = {name: data[:, k] for k, name in enumerate(cols)}
-    for j, joint in enumerate(cfg.instrument.joints):
-        n = joint.name
-        tags = np.array([joint_marker(int(m), j) for m in c["marker"]])
-        for tag in (1, 2):
-            sel = tags == tag
-            true, hat = c[f"{n}.torque"][sel], c[f"{n}.torque_hat"][sel]
-            assert np.abs(hat - true).max() / np.ptp(true) <= 0.05, (n, tag)
+    c = _columns(cfg, rec)
+    for n, tag, sel in _pulls(cfg, c):
+        true, hat = c[f"{n}.torque"][sel], c[f"{n}.torque_hat"][sel]
+        assert np.abs(hat - true).max() / np.ptp(true) <= 0.05, (n, tag)
+        assert np.abs(c[f"{n}.angle_hat"][sel] - c[f"{n}.angle"][sel]).max() < 0.02     # the tendons never slack
