@@ -157,6 +157,16 @@ def _release(loop: Loop, c: float) -> tuple[float, float]:
     return low, loop.state.truth.theta[0]
 
 
+def _compensated(cfg, k_factor: float = 1.0) -> Loop:
+    """The joint's loop with backlash compensation from models of its tendons with K times ``k_factor``."""
+    loop = Loop(cfg)
+    K, j = loop.rig.K[0], loop.joint
+    ma, mb = route_model(j.tendons.a, K[0] * k_factor), route_model(j.tendons.b, K[1] * k_factor)
+    loop.ctl.band_compliance = (ma.reversal_compliance, mb.reversal_compliance)
+    loop.ctl.friction_exponent = (ma.K, mb.K)
+    return loop
+
+
 def test_the_reversal_band_predicts_the_dead_zone_and_compensation_removes_it():
     cfg = joint_config()
     plain = Loop(cfg)
@@ -167,13 +177,24 @@ def test_the_reversal_band_predicts_the_dead_zone_and_compensation_removes_it():
     predicted = model_a.reversal_compliance * T0 / j.pulley_radius
     print(f"dead zone {dz:.4f} rad, predicted {predicted:.4f} rad")
     assert 0.9 * predicted < dz < 1.2 * predicted, (dz, predicted)     # + the tissue spring, the 0.5 mrad
-    comp = Loop(cfg)
-    comp.ctl.band_compliance = (model_a.reversal_compliance, route_model(j.tendons.b, K[1]).reversal_compliance)
-    comp.ctl.friction_exponent = (K[0], K[1])
+    comp = _compensated(cfg)
     dz_comp, _, c = _dead_zone(comp)
     low_comp, theta_end_comp = _release(comp, c)
     print(f"with compensation {dz_comp:.4f} rad; tension a at least {low:.3f} / {low_comp:.3f} N, "
           f"end angle {theta_end:.4f} / {theta_end_comp:.4f} rad")
     assert dz_comp < 0.15 * dz, (dz_comp, dz)                             # what is left: the play, 2 w
     # the payout shrinks with the tension: the released tendon is never slack, the joint ends where it would
+    assert low_comp > 0.5 * low and abs(theta_end_comp - theta_end) < 0.01
+
+
+@pytest.mark.parametrize("k_factor, dz_share", [(0.7, 0.6), (1.5, 0.15)])
+def test_a_miscalibrated_band_still_shortens_the_dead_zone_and_never_slackens_the_tendon(k_factor, dz_share):
+    cfg = joint_config()
+    plain = Loop(cfg)
+    dz, _, c = _dead_zone(plain)
+    low, theta_end = _release(plain, c)
+    comp = _compensated(cfg, k_factor)      # K off by k_factor: c_rev and e^2K of the wrong friction
+    dz_comp, _, c = _dead_zone(comp)
+    low_comp, theta_end_comp = _release(comp, c)
+    assert dz_comp < dz_share * dz, (dz_comp, dz)
     assert low_comp > 0.5 * low and abs(theta_end_comp - theta_end) < 0.01
