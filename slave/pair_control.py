@@ -38,31 +38,22 @@ distal end holds until its proximal tension has crossed the release band, ``T_in
 (Phee et al. 2009, Sec. III): a dead zone of ``c_rev T_in0`` of proximal travel
 (:attr:`estimator.sheath.SheathModel.reversal_compliance`), during which the command moves and the joint
 does not. With compensation the puller pays that travel out as the command turns back, spread over a
-play of half-width ``w`` (``band_width``) on the command, so the joint follows the command's reversal
-instead of waiting in the band. Past the band the distal tension follows ``T_out = T_in e^K``, so the
-pull-branch tension that would hold the same distal tension is ``T_in e^2K``; the travel to pay out is
-the band at that tension, which falls to 0 with it (a constant ``c_rev T_in0`` would leave the tendon
-slack by that much at the end of a release)::
+play of half-width ``w`` (``band_width``) on the command, and shrinking with the tension past the band
+(:func:`slave.backlash.band_payout`, ``s`` = +1 for tendon a, -1 for b)::
 
-    y   <- clip(y, c - w, c + w)                  (play on the command; y = c - s w on entering the mode)
-    u    = s (c - y) / w                          in [-1, 1]: +1 while pulling, -1 once turned back by 2 w
-    T0   = T_eq = T_in,p while u = 1              (the tension the reversal starts from)
-    T_eq <- T_eq + (1 - e^(-dt/tau)) (min(T0, T_in,p e^2K) - T_eq)     otherwise (tau = 10 ms)
-    x_cmd,p = x_ref + s r (c - c_ref) - c_rev,p T_eq (1 - u) / 2
+    x_cmd,p = x_ref + s r (c - c_ref) - payout
 
-Inside the band ``T_in e^2K >= T0``, so ``T_eq = T0`` and nothing feeds back; past it the payout
-shrinks as the tension falls, a negative feedback of loop gain ``e^K - 1`` that the 10 ms filter keeps
-smooth. A pull after a release takes the travel back over the same play, so a small jitter of the
-command moves the tendon by ``c_rev T_eq / (2 w)`` per radian and never ratchets. The compensation only
-pays out (at most ``c_rev T_in0``, under a millimetre at the instrument's tensions); it never pulls
-beyond where the uncompensated command would, and the travel clip and the slave's tension limit still
-apply.
+so the joint follows the command's reversal instead of waiting in the band. The play restarts with each
+pulling mode (``y = c - s w``, ``T0 = T_eq = T_in,p``); the travel clip and the slave's tension limit
+still apply.
 """
 from __future__ import annotations
 
 import math
 from enum import IntEnum
 from typing import Any
+
+from slave.backlash import band_payout
 
 __all__ = ["PairMode", "PairController"]
 
@@ -74,8 +65,6 @@ class PairMode(IntEnum):
 
 
 _PULLING = {PairMode.IDLE: -1, PairMode.PULL_A: 0, PairMode.PULL_B: 1}
-#: Time constant [s] of the backlash compensation's tension filter (module docstring).
-BAND_TIME = 0.01
 
 
 class PairController:
@@ -228,17 +217,12 @@ class PairController:
         return self._clip()
 
     def _payout(self, p: int, s: float, c: float, T: float, dt: float) -> float:
-        """The backlash compensation's payout [m] >= 0 of the puller ``p`` (module docstring)."""
-        w = self.band_width          # the play on the command, its position u, then T_eq
-        self._y = min(max(self._y, c - w), c + w)
-        u = min(1.0, s * (c - self._y) / w)
-        if u > 1.0 - 1e-9:                       # pulling (rounding of c - (c - w) aside)
-            self._T0 = self._T_eq = T
-            return 0.0
-        target = min(self._T0, T * math.exp(2.0 * self.friction_exponent[p]))
-        self._T_eq += -math.expm1(-dt / BAND_TIME) * (target - self._T_eq)
+        """The backlash compensation's payout [m] >= 0 of the puller ``p`` (:func:`slave.backlash.band_payout`)."""
         assert self.band_compliance is not None
-        return self.band_compliance[p] * max(self._T_eq, 0.0) * 0.5 * (1.0 - u)
+        out, self._y, self._T0, self._T_eq = band_payout(c, s, T, dt, self._y, self._T0, self._T_eq,
+                                                         self.band_compliance[p], self.friction_exponent[p],
+                                                         self.band_width)
+        return out
 
     def _clip(self) -> tuple[float, float]:
         x = self.x_cmd

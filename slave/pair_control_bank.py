@@ -19,7 +19,8 @@ from typing import Sequence
 import numpy as np
 from numba import njit
 
-from slave.pair_control import BAND_TIME, PairController, PairMode
+from slave.backlash import BAND_TIME
+from slave.pair_control import PairController, PairMode
 
 __all__ = ["PairControlBank"]
 
