@@ -10,7 +10,7 @@ HERE = Path(__file__).resolve().parent
 
 BENCHES = ["bench_estimator", "bench_rig", "bench_joint_rig", "bench_codec", "bench_diagnosis", "bench_analyze",
            "bench_lumped", "bench_slave_cycle", "bench_roundtrip", "bench_mrd", "bench_stability", "bench_noise_band",
-           "bench_crtk", "bench_record_mcap", "bench_scaling"]
+           "bench_crtk", "bench_record_mcap", "bench_scaling", "bench_bimanual_arms"]
 
 
 def main() -> int:

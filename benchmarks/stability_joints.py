@@ -33,7 +33,7 @@ from slave.node import SlaveLinks, SlaveNode
 from slave.pair_axis import joint_csv_columns
 from slave.pair_calibrate import set_tension
 from teleop.clock import FakeClock
-from teleop.config import load_config
+from teleop.config import Config, load_config, with_overrides
 from teleop.transport import Received
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "instrument-3dof.yaml"
@@ -75,8 +75,18 @@ class _Rows:
         self.rows.append(tuple(row))
 
 
+_BASE: Config | None = None      # the instrument's config (use_instrument); None: configs/instrument-3dof.yaml
+
+
+def use_instrument(cfg: Config | None) -> None:
+    """Run the loop on ``cfg``'s joint instrument (an arm of a bimanual config, say); None: the 3-joint one."""
+    global _BASE
+    _BASE = cfg
+
+
 def _config(overrides: dict | None = None):
-    return load_config(CONFIG, {"calibration.speed": 0.01, **(overrides or {})})
+    over = {"calibration.speed": 0.01, **(overrides or {})}
+    return load_config(CONFIG, over) if _BASE is None else with_overrides(_BASE, over)
 
 
 def calibration(path: Path | None = None):
@@ -87,13 +97,13 @@ def calibration(path: Path | None = None):
     topics = [DelayTopic(clock, 0.0) for _ in range(4)]
     slave = SlaveNode(cfg, SimulatedInstrument.from_config(cfg),
                       SlaveLinks(estimate=topics[0], heartbeat=topics[1], command=topics[2], master_heartbeat=topics[3]),
-                      calibration_file=d / "flex3.yaml", run_dir=d)
+                      calibration_file=d / f"{cfg.instrument.id}.yaml", run_dir=d)
     for _ in range(int(120.0 / DT)):
         clock.advance(DT)
         slave.step(clock.now())
-        if (d / "flex3.yaml").is_file():
+        if (d / f"{cfg.instrument.id}.yaml").is_file():
             break
-    return load_calibration(d / "flex3.yaml", cfg)
+    return load_calibration(d / f"{cfg.instrument.id}.yaml", cfg)
 
 
 def run_joints(cal, force_scale: float = 0.2, delay: float = 0.001, arm: ArmParameters | None = None,
@@ -139,9 +149,9 @@ def run_joints(cal, force_scale: float = 0.2, delay: float = 0.001, arm: ArmPara
     for j, joint in enumerate(cfg.instrument.joints):
         n, r = joint.name, joint.pulley_radius
         m = {"time": mc["time"], "x_in": r * mc[f"{n}.cmd"], "force": mc[f"{n}.force"], "cmd_seq": mc["cmd_seq"],
-             "state": mc["state"]}
+             "state": mc["state"], "force_cmd": mc[f"{n}.force_cmd"]}
         s = {"t_node": sc["t_node"], "T_out": sc[f"{n}.torque"] / r, "cmd_seq": sc["cmd_seq"],
-             "marker": np.array([joint_marker(int(v), j) for v in sc["marker"]])}
+             "T_out_hat": sc[f"{n}.torque_hat"] / r, "marker": np.array([joint_marker(int(v), j) for v in sc["marker"]])}
         out.update(loop_metrics(m, s, force_scale, {MARKER_PAPER_A: f"{n} (pull a)", MARKER_PAPER_B: f"{n} (pull b)"}))
     return out
 

@@ -300,6 +300,18 @@ def config_from_dict(data: dict | None, *, source: str = "<dict>", base: Config 
     return _check(_merge(Config, base or Config(), data, "", ctx), ctx)
 
 
+def with_overrides(cfg: Config, overrides: dict) -> Config:
+    """``cfg`` with dotted ``overrides`` applied (``{"pair_control.backlash_compensation": True}``), checked as
+    :func:`load_config` checks its overrides.
+
+    Raises
+    ------
+    ConfigError
+        Unknown key, wrong type, value out of range or past a hard bound without its waiver.
+    """
+    return config_from_dict(_expand_dotted(overrides), source="overrides", base=cfg)
+
+
 def load_config(path: str | Path | None = None, overrides: dict | None = None) -> Config:
     """Load a YAML config over the defaults, then apply ``overrides``.
 
@@ -331,7 +343,7 @@ def load_config(path: str | Path | None = None, overrides: dict | None = None) -
         ctx = _Ctx(str(path), lines)
         cfg = _check(_merge(Config, cfg, data, "", ctx), ctx, bounds=not overrides)  # overrides may waive
     if overrides:
-        cfg = config_from_dict(_expand_dotted(overrides), source="overrides", base=cfg)
+        cfg = with_overrides(cfg, overrides)
     return cfg
 
 
