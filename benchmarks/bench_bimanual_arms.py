@@ -13,16 +13,13 @@ Usage: ``.venv/bin/python benchmarks/bench_bimanual_arms.py [--config FILE] [--d
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
+from stability_joints import calibration, run_joints, use_instrument
+
+from teleop.arms import load_arms
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "benchmarks"))
-
-from stability_joints import calibration, run_joints, use_instrument  # noqa: E402
-
-from teleop.arms import load_arms  # noqa: E402
 
 
 def _line(label: str, row: dict) -> str:
