@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from stability_joints import calibration, run_joints, use_instrument
+from stability_joints import calibration, run_joints
 
 from teleop.arms import load_arms
 
@@ -36,10 +36,10 @@ def main() -> None:
     ap.add_argument("--delay", type=float, default=1.0, help="one-way delay of the links [ms] (default 1)")
     args = ap.parse_args()
     for arm in load_arms(args.config).arms:
-        use_instrument(arm.cfg)
-        cal = calibration()
+        cal = calibration(base=arm.cfg)
         for comp in (False, True):
-            r = run_joints(cal, delay=1e-3 * args.delay, overrides={"pair_control.backlash_compensation": comp})
+            r = run_joints(cal, delay=1e-3 * args.delay, overrides={"pair_control.backlash_compensation": comp},
+                           base=arm.cfg)
             rows = {k: v for k, v in r.items() if isinstance(v, dict)}
             print(f"== arm {arm.name} ({arm.hand} hand), backlash compensation {'on' if comp else 'off'}: "
                   f"protocol {'finished' if r['finished'] else 'NOT finished'}, safe events {r['safe_events']}")
@@ -47,7 +47,6 @@ def main() -> None:
                 print(_line(name, row))
             worst = max(v["transparency"]["force_error_rms_fs"] for v in rows.values())
             print(f"worst transparency rms {worst:.3f} FS over {len(rows)} pulls", flush=True)
-    use_instrument(None)
 
 
 if __name__ == "__main__":

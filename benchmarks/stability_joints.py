@@ -75,23 +75,16 @@ class _Rows:
         self.rows.append(tuple(row))
 
 
-_BASE: Config | None = None      # the instrument's config (use_instrument); None: configs/instrument-3dof.yaml
-
-
-def use_instrument(cfg: Config | None) -> None:
-    """Run the loop on ``cfg``'s joint instrument (an arm of a bimanual config, say); None: the 3-joint one."""
-    global _BASE
-    _BASE = cfg
-
-
-def _config(overrides: dict | None = None):
+def _config(overrides: dict | None = None, base: Config | None = None):
+    """``base`` (a joint instrument's config; None: configs/instrument-3dof.yaml) with ``overrides``."""
     over = {"calibration.speed": 0.01, **(overrides or {})}
-    return load_config(CONFIG, over) if _BASE is None else with_overrides(_BASE, over)
+    return load_config(CONFIG, over) if base is None else with_overrides(base, over)
 
 
-def calibration(path: Path | None = None):
-    """Calibrate the simulated instrument at power-up once (in-process) and return the calibration."""
-    cfg = _config()
+def calibration(path: Path | None = None, base: Config | None = None):
+    """Calibrate the simulated instrument of ``base`` (None: the 3-joint one) at power-up once (in-process) and
+    return the calibration."""
+    cfg = _config(base=base)
     d = Path(tempfile.mkdtemp(prefix="bench_joints_")) if path is None else path
     clock = FakeClock(0.0)
     topics = [DelayTopic(clock, 0.0) for _ in range(4)]
@@ -108,9 +101,10 @@ def calibration(path: Path | None = None):
 
 def run_joints(cal, force_scale: float = 0.2, delay: float = 0.001, arm: ArmParameters | None = None,
                passivity: bool = True, reserve: float | None = None, t_max: float = 40.0,
-               overrides: dict | None = None) -> dict:
-    """One closed-loop run of the 3-joint instrument; per joint and pulled tendon the loop metrics.
-    ``overrides``: further config keys (dotted), e.g. ``{"pair_control.backlash_compensation": True}``.
+               overrides: dict | None = None, base: Config | None = None) -> dict:
+    """One closed-loop run of the 3-joint instrument (or of ``base``'s joint instrument, an arm of a bimanual
+    config, say); per joint and pulled tendon the loop metrics. ``overrides``: further config keys (dotted),
+    e.g. ``{"pair_control.backlash_compensation": True}``.
 
     Returns ``{"finished", "safe_events", "duration_s", "<joint> (pull a|b)": loop_metrics row}``.
     """
@@ -125,7 +119,7 @@ def run_joints(cal, force_scale: float = 0.2, delay: float = 0.001, arm: ArmPara
     # the study runs the loop past the hard bounds on purpose (long delays, no passivity controller, no reserve)
     over["safety.override"] = ["master.watchdog_ms", "slave.watchdog_ms", "master.mapping.passivity",
                                "master.mapping.passivity_reserve"]
-    cfg = _config(over)
+    cfg = _config(over, base)
     clock = FakeClock(0.0)
     cmd, est, shb, mhb = (DelayTopic(clock, delay) for _ in range(4))
     srows, mrows = _Rows(), _Rows()

@@ -46,6 +46,7 @@ play of half-width ``w`` (``band_width``) on the command, and shrinking with the
 so the joint follows the command's reversal instead of waiting in the band. The play restarts with each
 pulling mode (``y = c - s w``, ``T0 = T_eq = T_in,p``); the travel clip and the slave's tension limit
 still apply.
+:class:`slave.pair_control_bank.PairControlBank` steps the controllers of every joint in one call.
 """
 from __future__ import annotations
 
