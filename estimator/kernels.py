@@ -52,7 +52,7 @@ from numba import njit
 from estimator.distal_slip import distal_clip, distal_gains, distal_tension, elongation
 
 __all__ = ["advance_proximal", "settle_distal", "load_inverse", "load_on_line", "RIGID_STOP", "load_torque",
-           "joint_torque_balance", "settle_joint", "step_joint", "elongation", "distal_tension", "distal_clip",
+           "joint_torque_balance", "settle_joint", "BALANCE_TOL", "step_joint", "elongation", "distal_tension", "distal_clip",
            "distal_gains"]
 
 
@@ -243,6 +243,10 @@ def settle_distal(T, lo, hi, w, x_in, x_out, bx, bF, bs):  # pragma: no cover - 
 #: tension below 1e200 N. With x_out = 0 and x_in = e wanted, the kernel returns the held profile.
 RIGID_STOP = (np.zeros(1), np.full(1, 1e200), np.ones(1))
 
+#: The joint's torque balance is solved to this fraction of its torque scale [-] (:func:`settle_joint`): a few
+#: units of round-off of the sum r (T_d,a - T_d,b) - tau, well below any physical torque of the joint.
+BALANCE_TOL = 1e-13
+
 
 @njit(cache=True, nogil=True)
 def load_torque(theta, k, tissue_k, tissue_c, lim_lo, lim_hi, k_lim, tau_ext):  # pragma: no cover - compiled
@@ -275,22 +279,27 @@ def settle_joint(Ta, dlo_a, dhi_a, wa, xa_in, Tb, dlo_b, dhi_b, wb, xb_in, r, th
                  tissue_k, tissue_c, lim_lo, lim_hi, k_lim, tau_ext, slope):  # pragma: no cover - compiled
     """Step B: the joint angle [rad] with the motors held; both profiles updated in place.
 
-    ``slope`` [N m/rad] > 0 scales the first bracket step (an upper estimate of -df/dtheta).
+    ``slope`` [N m/rad] > 0 scales the first bracket step (an upper estimate of -df/dtheta). The root
+    is taken where |f| <= :data:`BALANCE_TOL` times the torque scale r (T_d,a + T_d,b) + |tau(theta_prev)|
+    of the profiles before the step, the round-off level of f (once both ends of the bracket lie on the
+    root's linear piece, the secant lands there in one step).
     """
     ea = elongation(Ta, wa)
     eb = elongation(Tb, wb)
     args = (Ta, dlo_a, dhi_a, wa, ea, xa_in, Tb, dlo_b, dhi_b, wb, eb, xb_in, r, theta_prev, k, damp_dt,
             tissue_k, tissue_c, lim_lo, lim_hi, k_lim, tau_ext)
     f0 = joint_torque_balance(theta_prev, *args)
+    tol = BALANCE_TOL * (r * (Ta[Ta.shape[0] - 1] + Tb[Tb.shape[0] - 1])
+                         + abs(load_torque(theta_prev, k, tissue_k, tissue_c, lim_lo, lim_hi, k_lim, tau_ext)))
     theta = theta_prev
-    if f0 != 0.0:
+    if abs(f0) > tol:
         # expanding bracket from theta_prev in the direction of the torque imbalance
         h = f0 / slope
         x0, y0 = theta_prev, f0
         x1 = theta_prev + h
         y1 = joint_torque_balance(x1, *args)
         for _ in range(200):
-            if (y1 > 0.0) != (f0 > 0.0) or y1 == 0.0:
+            if (y1 > 0.0) != (f0 > 0.0) or abs(y1) <= tol:
                 break
             x0, y0 = x1, y1
             h *= 2.0
@@ -300,12 +309,12 @@ def settle_joint(Ta, dlo_a, dhi_a, wa, xa_in, Tb, dlo_b, dhi_b, wb, xb_in, r, th
         if x0 > x1:
             x0, x1, y0, y1 = x1, x0, y1, y0
         side = 0
-        theta = x1 if y1 == 0.0 else x0
+        theta = x1 if abs(y1) <= tol else x0
         for _ in range(200):
-            if y0 == 0.0:
+            if abs(y0) <= tol:
                 theta = x0
                 break
-            if y1 == 0.0:
+            if abs(y1) <= tol:
                 theta = x1
                 break
             if x1 - x0 <= 1e-15 * (1.0 + abs(x1)):
@@ -316,7 +325,7 @@ def settle_joint(Ta, dlo_a, dhi_a, wa, xa_in, Tb, dlo_b, dhi_b, wb, xb_in, r, th
                 x = 0.5 * (x0 + x1)
             y = joint_torque_balance(x, *args)
             theta = x
-            if y == 0.0:
+            if abs(y) <= tol:
                 break
             if (y > 0.0) == (y0 > 0.0):
                 x0, y0 = x, y

@@ -217,3 +217,51 @@ def test_the_step_over_all_joints_is_the_per_joint_kernel_bit_for_bit():
         assert np.array_equal(tr.torque, r * (tr.T_out[:, 0] - tr.T_out[:, 1]))
         assert np.array_equal(tr.x_out, np.column_stack((r * theta, -r * theta)))
     assert np.ptp(theta) > 0.1                                          # the joints moved
+
+
+def test_the_joint_settles_on_the_root_of_its_torque_balance():
+    """Each step's angle is the root of the torque balance f(theta) (estimator.kernels.settle_joint) to round-off:
+    within a few ulps of the angle a plain bisection of the same f finds, |f| at round-off of the torque scale; over
+    pulls into tissue, reversals inside the band and releases to slack."""
+    from estimator.kernels import (
+        BALANCE_TOL,
+        RIGID_STOP,
+        advance_proximal,
+        elongation,
+        joint_torque_balance,
+        load_torque,
+        settle_joint,
+    )
+    cfg = joint_config(damping=0.001)
+    rig = SimulatedInstrument.from_config(cfg)
+    j, s = rig.joints[0], rig.sims[0]
+    (pa, pb), r, kt = rig.tendons[0], j.pulley_radius, s.load.tissue_stiffness if rig.tissue[0] else 0.0
+    Ta, Tb = (p.copy() for p in rig.state.truth.profiles)
+    theta, x, worst, moved, resid = 0.0, rig.state.truth.x_in[0].copy(), 0.0, 0, 0.0
+    start = x.copy()
+    t = np.arange(4000) * DT
+    u = 0.007 * np.sin(np.pi * t / 1.3) ** 2 * np.where(t > 2.6, -0.3, 1.0)
+    for uu in u:
+        x = x + rig.drive.move(x, start + [uu, -0.8 * uu], DT)
+        advance_proximal(Ta, pa.lo, pa.hi, pa.w, pa.c_pull, pa.c_rel, x[0] - r * theta, 0.0, *RIGID_STOP)
+        advance_proximal(Tb, pb.lo, pb.hi, pb.w, pb.c_pull, pb.c_rel, x[1] + r * theta, 0.0, *RIGID_STOP)
+        law = (s.stiffness, s.damping / DT, kt, s.load.tissue_contact, j.limits[0], j.limits[1], s.limit_stiffness,
+               s.load.torque)
+        args = (Ta.copy(), pa.dlo, pa.dhi, pa.w, elongation(Ta, pa.w), x[0], Tb.copy(), pb.dlo, pb.dhi, pb.w,
+                elongation(Tb, pb.w), x[1], r, theta, *law)
+        scale = r * (Ta[-1] + Tb[-1]) + abs(load_torque(theta, law[0], *law[2:]))
+        new = settle_joint(Ta, pa.dlo, pa.dhi, pa.w, x[0], Tb, pb.dlo, pb.dhi, pb.w, x[1], r, theta, *law,
+                           rig._slope[0] + s.damping / DT)
+        if scale > 0.0:
+            resid = max(resid, abs(joint_torque_balance(new, *args)) / scale)
+        lo, hi = new - 0.1, new + 0.1                      # f falls with theta: bisection on the same function
+        assert joint_torque_balance(lo, *args) > 0 > joint_torque_balance(hi, *args)
+        for _ in range(200):
+            mid = 0.5 * (lo + hi)
+            if mid in (lo, hi):
+                break
+            lo, hi = (mid, hi) if joint_torque_balance(mid, *args) > 0 else (lo, mid)
+        worst = max(worst, abs(new - 0.5 * (lo + hi)))
+        moved += new != theta
+        theta = new
+    assert worst < 1e-12 and resid < 100 * BALANCE_TOL and moved > 3000
