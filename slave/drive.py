@@ -55,12 +55,16 @@ class Drive:
     def move(self, x, cmd, h: float):
         """Motor displacement over ``h`` [s] from ``x`` toward ``cmd`` [m] (module docstring); float or
         ndarray of :attr:`shape`."""
-        gain = -math.expm1(-self._omega * h)
-        vmax_dt = self._vmax * h
+        gain, vmax_dt = self.motor_step(h)
         if not self.shape:
             dx = gain * (cmd - x)
             return vmax_dt if dx > vmax_dt else -vmax_dt if dx < -vmax_dt else dx
         return np.clip(gain * (cmd - x), -vmax_dt, vmax_dt)
+
+    def motor_step(self, h: float) -> tuple[float, float]:
+        """The motor loop's exact step over ``h`` [s]: (gain 1 - e^{-2 pi f_bw h}, speed limit v_max h [m]);
+        :meth:`move` is ``clip(gain (cmd - x), -v_max h, v_max h)``."""
+        return -math.expm1(-self._omega * h), self._vmax * h
 
     def encoder(self, x):
         """Encoder reading of motor position ``x`` [m]: ``q round(x / q)``."""

@@ -19,6 +19,8 @@ from teleop.config import MAX_JOINTS, Config, JointConfig, SimulatedRigConfig, T
 
 __all__ = ["SimulatedInstrument", "TendonPhysics"]
 
+_STOP_X, _STOP_F, _STOP_S = RIGID_STOP       # the rigid distal stop of step A, constants of the compiled step
+
 
 
 class TendonPhysics:
@@ -179,15 +181,18 @@ class SimulatedInstrument:
         if cmd.shape != self._x.shape:
             raise RigInputError(f"x_in_cmd must have shape ({self.n_joints}, 2) [joint, tendon a/b], "
                                 f"got {cmd.shape}")
-        if not np.isfinite(cmd).all():
+        if not math.isfinite(float(cmd.sum())) and not np.isfinite(cmd).all():
             raise RigInputError(f"x_in_cmd must be finite displacements in metres, got {cmd.tolist()}")
         if not (math.isfinite(h) and h > 0.0):
             raise RigInputError(f"dt must be a finite time step > 0 s, got {dt!r}")
-        # motors: exact first-order step toward the command, speed-limited
-        self._x += self.drive.move(self._x, cmd, h)
-        _step_joints(self._T, self._gains, self._c, self._x, self._theta, self._joint_prm, h, *RIGID_STOP)
+        # the motors' exact first-order step toward the command (speed-limited), every joint's physics, the truth
+        # and the sensors in one compiled call
+        gain, vmax_dt = self.drive.motor_step(h)
+        snap, out, ang = np.empty_like(self._T), np.empty((7, *self._x.shape)), np.empty((2, self.n_joints))
+        _step_read(self._T, self._gains, self._c, self._x, cmd, self._theta, self._joint_prm, h, gain, vmax_dt,
+                   self.encoder_resolution, self.drive.load_cell_noise(), snap, out, ang)
         self._t += h
-        self._state = self._read(cmd)
+        self._state = self._state_of(snap, out, ang, cmd)
         return self._state
 
     def set_load(self, *, tissue: bool | None = None, force: float | None = None) -> None:
@@ -232,15 +237,19 @@ class SimulatedInstrument:
                         dtype=np.float64)
 
     def _read(self, cmd: np.ndarray) -> RigState:
-        snap = self._T.copy()
+        """The present state (the start, or after :meth:`set_load`): truth and a new sensor sample."""
+        snap, out, ang = self._T.copy(), np.empty((7, *self._x.shape)), np.empty((2, self.n_joints))
+        _read_all(snap, self._gains, self._r, self._x, self._theta, self.encoder_resolution,
+                  self.drive.load_cell_noise(), out, ang)
+        return self._state_of(snap, out, ang, cmd)
+
+    def _state_of(self, snap: np.ndarray, out: np.ndarray, ang: np.ndarray, cmd: np.ndarray) -> RigState:
+        """RigState of the compiled readout: profiles ``snap`` (n_joints, 2, n + 1); ``out`` (7, n_joints, 2): T_in,
+        T_out, elongation, x_out, load cells, encoders, motor positions; ``ang`` (2, n_joints): theta, torque."""
         snap.flags.writeable = False
-        nj, e = self.n_joints, np.empty
-        T_in, T_out, elong, x_out, torque = e((nj, 2)), e((nj, 2)), e((nj, 2)), e((nj, 2)), e(nj)
-        _truth(snap, self._gains, self._r, self._theta, T_in, T_out, elong, x_out, torque)   # arrays in: no boxing
-        truth = InstrumentTruth(theta=self._theta.copy(), torque=torque, T_in=T_in, T_out=T_out, x_in=self._x.copy(),
-                                x_out=x_out, elongation=elong, profiles=tuple(snap.reshape(-1, snap.shape[2])))
-        T_meas = T_in + self.drive.load_cell_noise()
-        return RigState(t=self._t, x_in=self.drive.encoder(self._x), T_in=T_meas, x_in_cmd=cmd, truth=truth)
+        truth = InstrumentTruth(theta=ang[0], torque=ang[1], T_in=out[0], T_out=out[1], x_in=out[6], x_out=out[3],
+                                elongation=out[2], profiles=tuple(snap.reshape(-1, snap.shape[2])))
+        return RigState(t=self._t, x_in=out[5], T_in=out[4], x_in_cmd=cmd, truth=truth)
 
     def load_torque(self, i: int, theta: float) -> float:
         """Static load torque of joint ``i`` at ``theta`` [rad] with the present tissue setting [N m]."""
@@ -251,32 +260,49 @@ class SimulatedInstrument:
 
 
 @njit(cache=True, nogil=True)
-def _step_joints(T, gains, c, x, theta, prm, h, sbx, sbF, sbs):  # pragma: no cover - compiled
-    """:func:`estimator.kernels.step_joint` for every joint: T (n_joints, 2, n + 1) in place, gains
-    (n_joints, 2, 5, n + 1) lo, hi, dlo, dhi, w; c (n_joints, 2, 2) c_pull, c_rel; x motor positions
-    (n_joints, 2) [m]; theta (n_joints,) [rad] in place; prm (n_joints, 10) of :meth:`_joint_params`."""
-    for i in range(T.shape[0]):
+def _step_read(T, gains, c, x, cmd, theta, prm, h, gain, vmax_dt, q, noise, snap, out, ang):  # pragma: no cover - compiled
+    """One step of every joint, then its readout (:func:`_read_all`). T (n_joints, 2, n + 1) node tensions [N] and
+    theta (n_joints,) [rad] in place; gains (n_joints, 2, 5, n + 1) lo, hi, dlo, dhi, w; c (n_joints, 2, 2) c_pull,
+    c_rel; x (n_joints, 2) motor positions [m], moved in place toward cmd by the drive's exact step
+    ``clip(gain (cmd - x), -vmax_dt, vmax_dt)`` (:meth:`slave.drive.Drive.move`); prm (n_joints, 10) of
+    :meth:`SimulatedInstrument._joint_params`; then each joint's :func:`estimator.kernels.step_joint`, the profiles
+    copied into ``snap`` and their readout into ``out`` and ``ang`` (:func:`_read_all`: q [m] the encoder resolution,
+    noise (n_joints, 2) the load cells' noise [N])."""
+    nj = T.shape[0]
+    for i in range(nj):
+        for k in range(2):
+            dx = gain * (cmd[i, k] - x[i, k])
+            x[i, k] += min(max(dx, -vmax_dt), vmax_dt)
+    for i in range(nj):
         a, b, p = gains[i, 0], gains[i, 1], prm[i]
         damp_dt = p[2] / h
         theta[i] = step_joint(T[i, 0], a[0], a[1], a[2], a[3], a[4], c[i, 0, 0], c[i, 0, 1],
                               T[i, 1], b[0], b[1], b[2], b[3], b[4], c[i, 1, 0], c[i, 1, 1],
                               x[i, 0], x[i, 1], p[0], theta[i], p[1], damp_dt, p[3], p[4], p[5], p[6], p[7], p[8],
-                              p[9] + damp_dt, sbx, sbF, sbs)
+                              p[9] + damp_dt, _STOP_X, _STOP_F, _STOP_S)
+    snap[:] = T
+    _read_all(snap, gains, prm[:, 0], x, theta, q, noise, out, ang)
 
 
 @njit(cache=True, nogil=True)
-def _truth(T, gains, r, theta, T_in, T_out, elong, x_out, torque):  # pragma: no cover - compiled
-    """Fills T_in, T_out, elongation w . T (numpy's dot product), x_out = (r theta, -r theta), each (n_joints, 2),
-    and the torque r (T_out,a - T_out,b), (n_joints,), of profiles T (n_joints, 2, n + 1)."""
+def _read_all(T, gains, r, x, theta, q, noise, out, ang):  # pragma: no cover - compiled
+    """The readout of profiles T (n_joints, 2, n + 1): out (7, n_joints, 2) T_in, T_out, elongation w . T (numpy's dot
+    product), x_out = (r theta, -r theta), the load cells T_in + noise [N], the encoders q rint(x / q) [m]
+    (:meth:`slave.drive.Drive.encoder`), the motor positions x [m]; ang (2, n_joints): theta [rad] and the torque
+    r (T_out,a - T_out,b) [N m]."""
     nj, n = T.shape[0], T.shape[2] - 1
     for i in range(nj):
         for k in range(2):
-            T_in[i, k] = T[i, k, 0]
-            T_out[i, k] = T[i, k, n]
-            elong[i, k] = np.dot(gains[i, k, 4], T[i, k])
-        x_out[i, 0] = r[i] * theta[i]
-        x_out[i, 1] = -r[i] * theta[i]
-        torque[i] = r[i] * (T_out[i, 0] - T_out[i, 1])
+            out[0, i, k] = T[i, k, 0]
+            out[1, i, k] = T[i, k, n]
+            out[2, i, k] = np.dot(gains[i, k, 4], T[i, k])
+            out[4, i, k] = T[i, k, 0] + noise[i, k]
+            out[5, i, k] = q * np.rint(x[i, k] / q)
+            out[6, i, k] = x[i, k]
+        out[3, i, 0] = r[i] * theta[i]
+        out[3, i, 1] = -r[i] * theta[i]
+        ang[0, i] = theta[i]
+        ang[1, i] = r[i] * (out[1, i, 0] - out[1, i, 1])
 
 
 def _validate(joints: tuple[JointConfig, ...], rig: SimulatedRigConfig) -> None:
