@@ -4,6 +4,10 @@
 PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
+# numba caches a compiled function beside its module and checks only that module's file: a caller compiled in another
+# module keeps the old code of a kernel edited since. Editing any module with compiled code clears every cache.
+NUMBA_SOURCES := $(shell grep -rl --include='*.py' njit estimator slave master teleop live study benchmarks 2>/dev/null)
+NUMBA_STAMP := .numba-sources
 
 .PHONY: demo test bench clean
 
@@ -13,21 +17,26 @@ $(STAMP): pyproject.toml
 	$(VENV)/bin/python -m pip install --quiet -e '.[test]'
 	touch $(STAMP)
 
-demo: $(STAMP)
+$(NUMBA_STAMP): $(NUMBA_SOURCES)
+	find . -path ./$(VENV) -prune -o \( -name '*.nbi' -o -name '*.nbc' \) -type f -exec rm -f {} +
+	touch $(NUMBA_STAMP)
+
+demo: $(STAMP) $(NUMBA_STAMP)
 	$(VENV)/bin/teleop demo
 
 # pytest runs in two passes: the CPU-bound tests on both cores (pytest-xdist; a worker that runs out of
 # tests takes queued ones from the other, so one long file does not hold the pass), then the integration tests (real
 # processes with 1 kHz loops over Zenoh) one at a time, alone on the machine, because their timing figures are what they check.
-test: $(STAMP)
+test: $(STAMP) $(NUMBA_STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
 	$(VENV)/bin/python -m pytest -q -m "not integration" -n 2 --dist worksteal
 	$(VENV)/bin/python -m pytest -q -m integration
 
-bench: $(STAMP)
+bench: $(STAMP) $(NUMBA_STAMP)
 	$(VENV)/bin/python benchmarks/run_all.py
 
 clean:
-	rm -rf $(VENV) runs site .pytest_cache
+	rm -rf $(VENV) runs site .pytest_cache $(NUMBA_STAMP)
+	find . \( -name '*.nbi' -o -name '*.nbc' \) -type f -exec rm -f {} +
