@@ -122,7 +122,6 @@ class SimulatedInstrument:
         self._slope = np.array([s.stiffness + s.load.tissue_stiffness
                                 + j.pulley_radius ** 2 * (1.0 / pa.M_e + 1.0 / pb.M_e)
                                 for j, s, (pa, pb) in zip(joints, sims, self.tendons)])
-        self._r = np.array([float(j.pulley_radius) for j in joints])
         self._joint_prm = self._joint_params()
         self.drive = Drive(rig, (nj, 2))        # motor loops, encoders, load cells (shared by every simulated rig)
         self.encoder_resolution = self.drive.encoder_resolution
@@ -181,7 +180,7 @@ class SimulatedInstrument:
         if cmd.shape != self._x.shape:
             raise RigInputError(f"x_in_cmd must have shape ({self.n_joints}, 2) [joint, tendon a/b], "
                                 f"got {cmd.shape}")
-        if not math.isfinite(float(cmd.sum())) and not np.isfinite(cmd).all():
+        if not np.isfinite(cmd).all():
             raise RigInputError(f"x_in_cmd must be finite displacements in metres, got {cmd.tolist()}")
         if not (math.isfinite(h) and h > 0.0):
             raise RigInputError(f"dt must be a finite time step > 0 s, got {dt!r}")
@@ -239,7 +238,7 @@ class SimulatedInstrument:
     def _read(self, cmd: np.ndarray) -> RigState:
         """The present state (the start, or after :meth:`set_load`): truth and a new sensor sample."""
         snap, out, ang = self._T.copy(), np.empty((7, *self._x.shape)), np.empty((2, self.n_joints))
-        _read_all(snap, self._gains, self._r, self._x, self._theta, self.encoder_resolution,
+        _read_all(snap, self._gains, self._joint_prm[:, 0], self._x, self._theta, self.encoder_resolution,
                   self.drive.load_cell_noise(), out, ang)
         return self._state_of(snap, out, ang, cmd)
 
