@@ -6,7 +6,7 @@ in-memory latest-wins topics;
 each cycle the master steps, then the slave (the command-locked order of the demo); every message
 is encoded as it is put, as a Zenoh publisher does (the Zenoh put itself, ~25-40 us with one remote
 subscriber on this machine, is not in these figures). The master's CSV
-goes to its writer thread (:class:`teleop.csv_writer.ThreadedCsvRecorder`), Rerun is off.
+goes to its writing process (:class:`teleop.csv_proc.ProcessCsvRecorder`), Rerun is off.
 
 Prints the master step's *thread CPU time* (:func:`time.thread_time_ns`: what the step itself costs,
 not the time other processes or threads took from it; this is the figure that does not depend on the
@@ -64,7 +64,7 @@ def run(protocol: str, profile: bool, tmp: Path, csv: Path | None = None,
     from slave.node import SlaveLinks, SlaveNode, warm_up
     from slave.simulated import SimulatedRig
     from teleop.config import load_config
-    from teleop.csv_writer import ThreadedCsvRecorder
+    from teleop.csv_proc import ProcessCsvRecorder
 
     cfg = load_config(ROOT / "configs" / "sim.yaml", {"recording.rerun": "off"})
     warm_up(cfg)
@@ -80,7 +80,7 @@ def run(protocol: str, profile: bool, tmp: Path, csv: Path | None = None,
     if profile:
         import cProfile
         prof = cProfile.Profile()
-    with ThreadedCsvRecorder(csv or tmp / "master.csv", csv_columns(cfg), {"source": "bench"}, units=csv_units(cfg),
+    with ProcessCsvRecorder(csv or tmp / "master.csv", csv_columns(cfg), {"source": "bench"}, units=csv_units(cfg),
                              flush_every=100) as rec:
         master = MasterNode(cfg, device, MasterLinks(cmd, mhb, est, shb), recorder=rec)
         tt, pc = time.thread_time_ns, time.perf_counter_ns

@@ -8,9 +8,9 @@ tendons, with and without the recorder, beside bare Zenoh and the teleoperation 
    protocol ``short`` on every joint) and a SlaveNode on that calibration step in turn on one fake clock,
    linked by latest-wins topics that encode every message as a Zenoh publisher does
    (:class:`bench_master_cycle._Topic`). Each step's wall time is taken; without the recorder nothing is
-   written, with it the slave writes through the writer threads of ``teleop slave``
-   (:class:`teleop.csv_writer.ThreadedCsvRecorder`, Rerun in a child process,
-   :class:`teleop.rerun_proc.RerunProcessLogger`) and the master through its CSV writer thread.
+   written, with it the sides write as ``teleop slave`` and ``teleop master`` do: each CSV through a child
+   process (:class:`teleop.csv_proc.ProcessCsvRecorder`), the slave's Rerun through another
+   (:class:`teleop.rerun_proc.RerunProcessLogger`).
    The cost per added tendon is the least-squares slope of p50 (and of p99) over the four sizes.
 2. In the same run, in real processes on 127.0.0.1: the bare Zenoh ping-pong of
    :func:`bench_roundtrip.bare_pingpong` and ``teleop demo --protocol short`` (recorder + slave + master,
@@ -60,7 +60,7 @@ class Loop:
         from slave.node import SlaveLinks, SlaveNode, recording, warm_up
         from slave.rigs import RIG_TYPES
         from teleop.clock import FakeClock
-        from teleop.csv_writer import ThreadedCsvRecorder
+        from teleop.csv_proc import ProcessCsvRecorder
         from teleop.rerun_proc import RerunProcessLogger
         from teleop.rerun_view import joint_views
 
@@ -78,9 +78,9 @@ class Loop:
         rig.step = timed_step
         tag = f"{cfg.instrument.id}-{'rec' if record else 'bare'}"
         name, columns, meta = recording(cfg, rig)
-        self.writers = (ThreadedCsvRecorder(tmp / f"{tag}-{name}", columns, meta, flush_every=500),
-                        ThreadedCsvRecorder(tmp / f"{tag}-master.csv", master_columns(cfg), {"source": "bench"},
-                                            units=master_units(cfg), flush_every=500),
+        self.writers = (ProcessCsvRecorder(tmp / f"{tag}-{name}", columns, meta, flush_every=500),
+                        ProcessCsvRecorder(tmp / f"{tag}-master.csv", master_columns(cfg), {"source": "bench"},
+                                           units=master_units(cfg), flush_every=500),
                         RerunProcessLogger("bench", tag, "save", tmp / f"{tag}.rrd", joints=joint_views(cfg))
                         ) if record else (None, None, None)
         srec, mrec, rr = self.writers

@@ -3,10 +3,10 @@
 One SlaveNode of a single tendon (simulated 200-element rig, estimator, 50-point profile) follows a
 ramp of engaged commands through in-memory links for ``n`` cycles, once with the CSV and Rerun writes
 in the loop (:class:`teleop.recording.CsvRecorder`, :class:`teleop.rerun_log.RerunLogger`) and once
-with the writer threads of ``teleop slave`` (:class:`teleop.csv_writer.ThreadedCsvRecorder`,
-:class:`teleop.rerun_proc.RerunProcessLogger`: Rerun in a child process); then the same node class on the 3-joint
+off the loop as ``teleop slave`` writes them (:class:`teleop.csv_proc.ProcessCsvRecorder`,
+:class:`teleop.rerun_proc.RerunProcessLogger`: each in a child process); then the same node class on the 3-joint
 instrument (configs/instrument-3dof.yaml: three pair axes, calibrated on its simulator first, each
-joint following a slow sine of angle) with no recording (the step alone) and with the writer threads.
+joint following a slow sine of angle) with no recording (the step alone) and with the recording off the loop.
 Prints p50/p99/max of the step time and the share of steps over 0.8 ms (what would overrun a 1 kHz loop
 with 0.2 ms of wake-up and transport), and the load average. Never fails on time.
 """
@@ -25,7 +25,7 @@ from slave.node import SlaveLinks, SlaveNode, csv_columns, warm_up
 from slave.simulated import SimulatedRig
 from teleop.clock import FakeClock
 from teleop.config import Config, load_config
-from teleop.csv_writer import ThreadedCsvRecorder
+from teleop.csv_proc import ProcessCsvRecorder
 from teleop.messages import Command
 from teleop.recording import CsvRecorder
 from teleop.rerun_log import RerunLogger
@@ -57,8 +57,8 @@ def run(threaded: bool, n: int, tmp: Path) -> np.ndarray:
     links = SlaveLinks(*(LatestTopic(clock) for _ in range(4)))
     rig = SimulatedRig.from_config(cfg)
     model = SheathModel(K=rig.K, compliance=rig.M_e / rig.K if rig.K else rig.M_e)
-    csv_cls, rr_cls = (ThreadedCsvRecorder, RerunProcessLogger) if threaded else (CsvRecorder, RerunLogger)
-    tag = "threaded" if threaded else "inloop"
+    csv_cls, rr_cls = (ProcessCsvRecorder, RerunProcessLogger) if threaded else (CsvRecorder, RerunLogger)
+    tag = "offloop" if threaded else "inloop"
     times = np.empty(n)
     with csv_cls(tmp / f"{tag}.csv", csv_columns(True), {"source": "bench"}, flush_every=500) as rec, \
             rr_cls("bench", tag, "save", tmp / f"{tag}.rrd") as rr:
@@ -89,7 +89,7 @@ def simulator_calibration(cfg: Config):
 
 
 def run_joints(n: int, tmp: Path, record: bool = True) -> np.ndarray:
-    """The 3-joint instrument's SlaveNode with the writer threads (``record``) or with no recording at
+    """The 3-joint instrument's SlaveNode with the recording off the loop (``record``) or with no recording at
     all (the step in isolation): step times [ms]."""
     from slave.node import recording
     from slave.rigs import RIG_TYPES
@@ -117,7 +117,7 @@ def run_joints(n: int, tmp: Path, record: bool = True) -> np.ndarray:
     if not record:
         loop(SlaveNode(cfg, inst, links, calibration=cal))
         return times * 1e3
-    with ThreadedCsvRecorder(tmp / name, columns, meta, flush_every=500) as rec, \
+    with ProcessCsvRecorder(tmp / name, columns, meta, flush_every=500) as rec, \
             RerunProcessLogger("bench", "joints", "save", tmp / "joints.rrd", joints=joint_views(cfg)) as rr:
         loop(SlaveNode(cfg, inst, links, recorder=rec, rerun=rr, calibration=cal))
     return times * 1e3
@@ -127,13 +127,13 @@ def main(n: int = 5000) -> None:
     with tempfile.TemporaryDirectory() as d:
         for threaded in (False, True):
             t = run(threaded, n, Path(d))[200:]
-            print(f"slave step, recording {'on writer threads' if threaded else 'in the loop'}: "
+            print(f"slave step, recording {'off the loop (child processes)' if threaded else 'in the loop'}: "
                   f"p50 {np.percentile(t, 50):.3f} ms, p99 {np.percentile(t, 99):.3f} ms, max {t.max():.2f} ms, "
                   f"steps > 0.8 ms {100 * np.mean(t > 0.8):.2f} %")
         for record in (False, True):
             t = run_joints(n, Path(d), record)[200:]
             print(f"slave step, 3-joint instrument (3 pair axes), "
-                  f"{'recording on writer threads' if record else 'no recording (the step alone)'}: "
+                  f"{'recording off the loop' if record else 'no recording (the step alone)'}: "
                   f"p10 {np.percentile(t, 10):.3f} ms, p50 {np.percentile(t, 50):.3f} ms, "
                   f"p99 {np.percentile(t, 99):.3f} ms, max {t.max():.2f} ms, steps > 0.8 ms {100 * np.mean(t > 0.8):.2f} %")
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")

@@ -170,7 +170,7 @@ def run_slave_group(args: argparse.Namespace) -> int:
     from slave.node import SlaveNode, recording, warm_up
     from slave.rigs import make_rig
     from teleop.clock import MonotonicClock
-    from teleop.csv_writer import ThreadedCsvRecorder as CsvRecorder
+    from teleop.csv_proc import ProcessCsvRecorder as CsvRecorder
     from teleop.recording import raise_on_sigterm
 
     log = logging.getLogger("teleop.slave")
@@ -223,7 +223,7 @@ def run_master_group(args: argparse.Namespace) -> int:
     """``teleop master --config <bimanual>``: both hands' master nodes in one loop (module docstring)."""
     from master.node import MasterNode, csv_columns, csv_units
     from teleop.clock import MonotonicClock
-    from teleop.csv_writer import ThreadedCsvRecorder as CsvRecorder
+    from teleop.csv_proc import ProcessCsvRecorder as CsvRecorder
     from teleop.recording import raise_on_sigterm
 
     log = logging.getLogger("teleop.master")

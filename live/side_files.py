@@ -36,7 +36,7 @@ class CsvGate:
     Parameters
     ----------
     rec : object with ``write(row)``
-        The CSV recorder (:class:`teleop.csv_writer.ThreadedCsvRecorder`).
+        The CSV recorder (:class:`teleop.csv_proc.ProcessCsvRecorder`).
     every : int
         Rows offered per row written, >= 1 (``recording.csv_every``).
     files : SideFiles

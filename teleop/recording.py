@@ -19,7 +19,7 @@ import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
-from typing import IO
+from typing import IO, Self
 
 import numpy as np
 
@@ -208,6 +208,8 @@ class CsvRecorder:
         a wrong row length or a non-finite value, or the recorder is closed.
     """
 
+    _fh: IO[str] | None
+
     def __init__(self, path: str | Path, columns: Sequence[str],
                  metadata: Mapping[str, str] | None = None, *,
                  units: Mapping[str, str] | None = None, flush_every: int = 100,
@@ -225,17 +227,33 @@ class CsvRecorder:
                              f"standard columns are SI)")
         all_units = {c: SI_UNITS[c] for c in self.columns if c in SI_UNITS}
         all_units.update({c: u for c, u in (units or {}).items() if c in self.columns})
+        self._start(flush_every)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fh = open(self.path, "w" if overwrite else "x", encoding="utf-8")
+        self._fh = fh
+        head = [f"# {k}: {v}" for k, v in metadata.items()]
+        if all_units:
+            head.append("# units: " + ", ".join(f"{c}={u}" for c, u in all_units.items()))
+        fh.write("\n".join(head + [",".join(self.columns)]) + "\n")
+        fh.flush()
+
+    def _start(self, flush_every: int) -> None:
         self.flush_every, self.rows_written = int(flush_every), 0
         self._line = ",".join("%.12g" if c == "time" else "%.9g" for c in self.columns) + "\n"
         self._pending: list[str] = []  # formatted whole lines not yet handed to the OS
         self._pending_rows = 0
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._fh: IO[str] | None = open(self.path, "w" if overwrite else "x", encoding="utf-8")
-        head = [f"# {k}: {v}" for k, v in metadata.items()]
-        if all_units:
-            head.append("# units: " + ", ".join(f"{c}={u}" for c, u in all_units.items()))
-        self._fh.write("\n".join(head + [",".join(self.columns)]) + "\n")
-        self._fh.flush()
+        self._fh = None
+
+    @classmethod
+    def reopen(cls, path: str | Path, columns: Sequence[str], *, flush_every: int = 100) -> Self:
+        """Go on writing rows at the end of ``path``, a recording whose header a recorder with the same
+        ``columns`` wrote (:class:`teleop.csv_proc.ProcessCsvRecorder`'s writing process). Raises ``OSError``
+        when the file cannot be opened for appending."""
+        self = cls.__new__(cls)
+        self.path, self.columns = Path(path), tuple(columns)
+        self._start(flush_every)
+        self._fh = open(self.path, "a", encoding="utf-8")
+        return self
 
     @property
     def closed(self) -> bool:

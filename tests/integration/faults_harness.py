@@ -32,6 +32,7 @@ import numpy as np
 
 from live.cli import main as teleop_main
 from teleop.config import load_config
+from teleop.csv_proc import wait_written
 from teleop.keys import heartbeat_key
 from teleop.messages import Heartbeat, SideState
 from teleop.recording import read_measured_csv
@@ -252,10 +253,9 @@ def run_fault(tmp: Path, name: str, *, inject: dict[str, str] | None = None, sig
     out = FaultRun(name, t_fault, run_dir, {s: logs[s].read_text() for s in logs}, rc, t_stop=t_stop)
     for side in ("slave", "master"):
         try:
-            if joints:
-                setattr(out, side, Rows(run_dir / ("slave_joints.csv" if side == "slave" else "master.csv")))
-            else:
-                setattr(out, side, read_measured_csv(run_dir / f"{side}.csv"))
+            path = run_dir / (("slave_joints.csv" if side == "slave" else "master.csv") if joints else f"{side}.csv")
+            wait_written(path)          # a killed side's CSV process writes the rows it received, then lets go
+            setattr(out, side, Rows(path) if joints else read_measured_csv(path))
         except Exception as e:  # noqa: BLE001 - reported by the test
             out.errors[side] = f"{type(e).__name__}: {e}"
         for kind in ("stats", "faults"):

@@ -1,4 +1,4 @@
-"""A side's files on a full disk: the threaded CSV writer (teleop/csv_writer.py) and the write-ahead
+"""A side's files on a full disk: the CSV writing process (teleop/csv_proc.py) and the write-ahead
 journal (teleop/journal.py) keep what they handed to the OS, drop and count the rest, and never raise
 into the caller (the control loop). Run in a subprocess under a file-size limit (RLIMIT_FSIZE, SIGXFSZ
 ignored: a write past it fails with EFBIG, as a write to a full disk fails with ENOSPC)."""
@@ -18,10 +18,10 @@ SCRIPT = textwrap.dedent("""
     from pathlib import Path
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
     resource.setrlimit(resource.RLIMIT_FSIZE, ({limit}, {limit}))
-    from teleop.csv_writer import ThreadedCsvRecorder
+    from teleop.csv_proc import ProcessCsvRecorder
     from teleop.journal import Journal, JournalReader
     d = Path(sys.argv[1])
-    rec = ThreadedCsvRecorder(d / "side.csv", ["time", "x_in"], flush_interval=0.001)
+    rec = ProcessCsvRecorder(d / "side.csv", ["time", "x_in"], flush_interval=0.001)
     j = Journal(d, "slave")
     for k in range(2000):                      # the loop's calls: none may raise
         rec.write((1e-3 * k, 1e-5 * k))
