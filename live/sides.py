@@ -218,7 +218,7 @@ def run_slave(args: argparse.Namespace) -> int:
     from slave.rigs import make_rig
     from teleop.clock import MonotonicClock
     from teleop.config import load_config
-    from teleop.csv_proc import ProcessCsvRecorder as CsvRecorder  # the loop only queues rows; a thread writes
+    from teleop.csv_proc import ProcessCsvRecorder as CsvRecorder  # the loop only queues rows; a child process writes
     from teleop.recording import raise_on_sigterm
     from teleop.rerun_proc import RerunProcessLogger as RerunLogger  # the loop only queues; a child process logs
 
@@ -260,7 +260,7 @@ def run_master(args: argparse.Namespace) -> int:
     from master.node import MasterNode, csv_columns, csv_units
     from teleop.clock import MonotonicClock
     from teleop.config import load_config
-    from teleop.csv_proc import ProcessCsvRecorder as CsvRecorder  # the loop only queues rows; a thread writes
+    from teleop.csv_proc import ProcessCsvRecorder as CsvRecorder  # the loop only queues rows; a child process writes
     from teleop.recording import raise_on_sigterm
     from teleop.rerun_proc import RerunProcessLogger as RerunLogger  # the loop only queues; a child process logs
 
