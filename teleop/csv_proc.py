@@ -52,6 +52,7 @@ from typing import IO, Any, Mapping, Sequence
 
 import numpy as np
 
+from teleop.child_pipe import close_stdin, write_pickle
 from teleop.realtime import IDLE
 from teleop.recording import CsvRecorder
 from teleop.rerun_thread import lower_switch_interval
@@ -116,7 +117,7 @@ class ProcessCsvRecorder:
         lower_switch_interval()                       # the woken loop gets the interpreter back within 0.5 ms
         self._proc = subprocess.Popen([sys.executable, "-m", "teleop.csv_proc"], stdin=subprocess.PIPE,
                                       stdout=subprocess.PIPE, close_fds=True, process_group=0)
-        self._pipe_ok = _write(self._proc, (str(self.path), self.columns, self.flush_every))
+        self._pipe_ok = write_pickle(self._proc, (str(self.path), self.columns, self.flush_every))
         name = self.path.name
         self._reader = threading.Thread(target=self._read, name=f"csv-writer-reader:{name}", daemon=True)
         self._reader.start()
@@ -166,7 +167,7 @@ class ProcessCsvRecorder:
         """Pickle ``msg`` onto the child's stdin (the caller holds ``_io``); once the child is gone, its rows
         are counted as lost (one error line)."""
         if self._pipe_ok:
-            self._pipe_ok = _write(self._proc, msg)
+            self._pipe_ok = write_pickle(self._proc, msg)
         if not self._pipe_ok:
             self._lost += rows
             if self.error is None:
@@ -217,7 +218,7 @@ class ProcessCsvRecorder:
         self._drain()
         with self._io:
             self._send(None)
-            _close_stdin(self._proc)
+            close_stdin(self._proc)
         try:
             self._proc.wait(timeout)
         except subprocess.TimeoutExpired:
@@ -247,26 +248,6 @@ def wait_written(path: str | Path, timeout: float = 10.0) -> bool:
                 if time.monotonic() >= deadline:
                     return False
                 time.sleep(0.005)
-
-
-def _write(proc: subprocess.Popen, obj: Any) -> bool:
-    """``obj`` pickled onto ``proc``'s stdin; False once the child is gone."""
-    if proc.stdin is None:
-        return False
-    try:
-        proc.stdin.write(pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL))
-        proc.stdin.flush()
-        return True
-    except (BrokenPipeError, OSError, ValueError):
-        return False
-
-
-def _close_stdin(proc: subprocess.Popen) -> None:
-    try:
-        if proc.stdin is not None:
-            proc.stdin.close()
-    except OSError:
-        pass
 
 
 # ---- the child ----------------------------------------------------------------------------------------------

@@ -48,6 +48,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from teleop.child_pipe import close_stdin, write_bytes, write_pickle
 from teleop.realtime import IDLE
 from teleop.rerun_segments import SEGMENT_S, segment_path
 
@@ -129,7 +130,7 @@ class RerunProcessLogger:
         self._segments += 1
         proc = subprocess.Popen([sys.executable, "-m", "teleop.rerun_proc"], stdin=subprocess.PIPE,
                                 stdout=subprocess.PIPE, close_fds=True)
-        _write(proc, (self._args, kwargs))
+        write_pickle(proc, (self._args, kwargs))
         threading.Thread(target=self._read, args=(proc, self._segments == 1), name="rerun-logger-reader",
                          daemon=True).start()
         return proc
@@ -141,8 +142,8 @@ class RerunProcessLogger:
             old, self._proc = self._proc, new
         self._retired = [c for c in self._retired if c.poll() is None]    # the finished ones forgotten
         if old is not None:
-            _write(old, None)
-            _close_stdin(old)
+            write_pickle(old, None)
+            close_stdin(old)
             self._retired.append(old)
             threading.Thread(target=old.wait, name="rerun-logger-reap", daemon=True).start()   # no zombie left
 
@@ -204,7 +205,7 @@ class RerunProcessLogger:
         """Pickle ``obj`` onto the present child's stdin; False once the child is gone."""
         data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
         with self._lock:
-            return self._proc is not None and _write_bytes(self._proc, data)
+            return self._proc is not None and write_bytes(self._proc, data)
 
     def _drain(self) -> bool:
         q = self._queue
@@ -279,7 +280,7 @@ class RerunProcessLogger:
         with self._lock:
             proc = self._proc
             assert proc is not None
-            _close_stdin(proc)
+            close_stdin(proc)
         for child in [*self._retired, proc]:     # every segment's child finalises its file
             try:
                 child.wait(timeout)
@@ -295,31 +296,6 @@ class RerunProcessLogger:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def _write_bytes(proc: subprocess.Popen, data: bytes) -> bool:
-    """``data`` onto ``proc``'s stdin; False once the child is gone."""
-    if proc.stdin is None:
-        return False
-    try:
-        proc.stdin.write(data)
-        proc.stdin.flush()
-        return True
-    except (BrokenPipeError, OSError, ValueError):
-        return False
-
-
-def _write(proc: subprocess.Popen, obj: Any) -> bool:
-    """``obj`` pickled onto ``proc``'s stdin (the child's wire, module docstring)."""
-    return _write_bytes(proc, pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL))
-
-
-def _close_stdin(proc: subprocess.Popen) -> None:
-    try:
-        if proc.stdin is not None:
-            proc.stdin.close()
-    except OSError:
-        pass
 
 
 def _copied(v: Any) -> Any:
