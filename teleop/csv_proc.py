@@ -13,8 +13,10 @@ real-time budget (docs/how-to/real-time.md). :class:`ProcessCsvRecorder` moves i
   :data:`CHUNK_COST` (pickling costs :data:`VALUE_COST` a value, about 1.3 us for a 95-column row), and writes
   them to the stdin pipe of a child process (``python -m teleop.csv_proc``);
 * the child, with normal scheduling, on its own interpreter lock, checks and formats the rows exactly as
-  :class:`~teleop.recording.CsvRecorder` does and hands them to the OS every ``flush_every`` rows, on
-  :meth:`~ProcessCsvRecorder.flush` and at the end.
+  :class:`~teleop.recording.CsvRecorder` does and hands them to the OS after every batch it receives (so a
+  row reaches the file within about ``flush_interval``; ``flush_every`` rows at most in one hand-over), on
+  :meth:`~ProcessCsvRecorder.flush` and at the end. The constructor returns once the child has opened the
+  file (about 0.15 s: an interpreter and numpy), so that its start-up is not the control loop's.
 
 Nothing is lost on an exit path: :meth:`~ProcessCsvRecorder.close` (the ``with`` block, SIGTERM inside
 :func:`teleop.recording.raise_on_sigterm`) sends every queued row and waits for the child to close the file.
@@ -33,7 +35,7 @@ counted in :attr:`~ProcessCsvRecorder.dropped`, as are the rows the child never 
 
 Wire: parent -> child, pickles on stdin: ``(path, columns, flush_every)``, then lists of rows, ``"flush"``, and
 None (close). Child -> parent, one JSON line per report on stdout: ``{"event", "written", "rejected", "dropped",
-"error", "warning"}`` with ``event`` one of ``flushed``, ``warning``, ``error``, ``closed``.
+"error", "warning"}`` with ``event`` one of ``ready``, ``flushed``, ``warning``, ``error``, ``closed``.
 """
 from __future__ import annotations
 
@@ -63,6 +65,7 @@ log = logging.getLogger("teleop.recording")
 VALUE_COST = 1.5e-8     # [s] pickling one value of a row, about (1.3 us for 95 columns)
 CHUNK_COST = 1e-4       # [s] the rows pickled in one piece hold the interpreter about this long
 MAX_WARNINGS = 3        # skipped rows said one by one; the rest only counted
+READY_TIMEOUT = 30.0    # [s] longest wait in the constructor for the child to have opened the file
 
 
 class ProcessCsvRecorder:
@@ -72,10 +75,10 @@ class ProcessCsvRecorder:
     ----------
     path, columns, metadata, units, flush_every, overwrite
         As :class:`~teleop.recording.CsvRecorder`: the file (its parent directories are created), the column
-        names, the ``# key: value`` lines, the units of non-standard columns, the rows between hand-overs to
-        the OS (in the child) and whether an existing file is replaced.
+        names, the ``# key: value`` lines, the units of non-standard columns, the most rows the child hands
+        to the OS at once and whether an existing file is replaced.
     flush_interval : float
-        Longest time a queued row waits before it is sent to the child [s], > 0.
+        Longest time a queued row waits before it is sent to the child, which writes it at once [s], > 0.
 
     Attributes
     ----------
@@ -114,6 +117,7 @@ class ProcessCsvRecorder:
         self._stop = threading.Event()
         self._io = threading.Lock()                   # one writer of the pipe at a time: sender, flush, close
         self._flushed = threading.Event()
+        self._ready = threading.Event()
         lower_switch_interval()                       # the woken loop gets the interpreter back within 0.5 ms
         self._proc = subprocess.Popen([sys.executable, "-m", "teleop.csv_proc"], stdin=subprocess.PIPE,
                                       stdout=subprocess.PIPE, close_fds=True, process_group=0)
@@ -123,6 +127,7 @@ class ProcessCsvRecorder:
         self._reader.start()
         self._thread = threading.Thread(target=self._run, name=f"csv-writer:{name}", daemon=True)
         self._thread.start()
+        self._ready.wait(READY_TIMEOUT)               # its start-up (an interpreter, numpy) before the loop's
 
     @property
     def closed(self) -> bool:
@@ -192,7 +197,10 @@ class ProcessCsvRecorder:
                           self.dropped)
             if r.get("event") == "flushed":
                 self._flushed.set()
+            elif r.get("event") == "ready":
+                self._ready.set()
         self._flushed.set()
+        self._ready.set()
 
     # ---- end ----------------------------------------------------------------------------------------------
     def flush(self, timeout: float = 10.0) -> None:
@@ -276,6 +284,7 @@ class _Writer:
             fcntl.flock(rec._fh.fileno(), fcntl.LOCK_EX)          # released when the file is closed
         except OSError as e:
             self._fail(e)
+        self.report("ready")
 
     def rows(self, rows: list) -> None:
         self.taken += len(rows)
@@ -312,7 +321,8 @@ class _Writer:
     def written(self) -> int:
         return 0 if self.rec is None else self.rec.handed
 
-    def _hand(self) -> None:
+    def hand(self) -> None:
+        """Hand the rows written so far to the OS."""
         if self.rec is not None and self.error is None:
             try:
                 self.rec.flush()
@@ -320,11 +330,11 @@ class _Writer:
                 self._fail(e)
 
     def flush(self) -> None:
-        self._hand()
+        self.hand()
         self.report("flushed")
 
     def close(self) -> None:
-        self._hand()
+        self.hand()
         if self.rec is not None:
             try:
                 self.rec.close()
@@ -364,6 +374,7 @@ def main() -> int:
                 w.flush()
             else:
                 w.rows(msg)
+                w.hand()                      # each batch on disk: a row waits at most flush_interval
     finally:
         w.close()
     return 0

@@ -36,11 +36,11 @@ def _wait_rows(path, n: int, timeout: float = 10.0) -> int:
 
 def test_rows_are_written_in_order_without_close_then_all_on_close(tmp_path):
     path = tmp_path / "a.csv"
-    rec = ProcessCsvRecorder(path, COLUMNS, {"source": "test"}, flush_every=50, flush_interval=0.01)
+    rec = ProcessCsvRecorder(path, COLUMNS, {"source": "test"}, flush_every=100_000, flush_interval=0.01)
     assert path.read_text().startswith("# source: test\n")          # the header is written before any row
     for k in range(500):
         rec.write((k * 1e-3, 1e-5 * k, 0.5 * k))
-    assert _wait_rows(path, 500) == 500                             # the child writes, no close needed
+    assert _wait_rows(path, 500) == 500               # the child writes each batch it receives: no close needed
     assert not wait_written(path, timeout=0.05)                     # and holds the file while open
     rec.write_many(np.array([[0.5, 0.0, 1.0], [0.501, 0.0, 2.0]]))
     rec.close()
@@ -157,6 +157,6 @@ def test_the_reports_of_the_child_are_json_lines(tmp_path):
                                               "flush", [(2e-3, 0.0, 2.0)], None])
     out, _ = proc.communicate(wire, timeout=60)
     reports = [json.loads(ln) for ln in out.splitlines()]
-    assert [r["event"] for r in reports] == ["warning", "flushed", "closed"]
-    assert reports[1]["written"] == 1 and reports[-1] == {"event": "closed", "written": 2, "rejected": 1,
+    assert [r["event"] for r in reports] == ["ready", "warning", "flushed", "closed"]
+    assert reports[2]["written"] == 1 and reports[-1] == {"event": "closed", "written": 2, "rejected": 1,
                                                            "dropped": 0, "error": None}
