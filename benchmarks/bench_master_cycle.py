@@ -81,7 +81,7 @@ def run(protocol: str, profile: bool, tmp: Path, csv: Path | None = None,
         import cProfile
         prof = cProfile.Profile()
     with ProcessCsvRecorder(csv or tmp / "master.csv", csv_columns(cfg), {"source": "bench"}, units=csv_units(cfg),
-                             flush_every=100) as rec:
+                            flush_every=100) as rec:
         master = MasterNode(cfg, device, MasterLinks(cmd, mhb, est, shb), recorder=rec)
         tt, pc = time.thread_time_ns, time.perf_counter_ns
         n_max = int(600 * cfg.master.rate_hz)

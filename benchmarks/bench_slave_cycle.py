@@ -50,15 +50,15 @@ class LatestTopic:
         return math.inf if self.last is None else now - self.last.t_recv
 
 
-def run(threaded: bool, n: int, tmp: Path) -> np.ndarray:
+def run(off_loop: bool, n: int, tmp: Path) -> np.ndarray:
     cfg = Config()
     warm_up(cfg)
     clock = FakeClock()
     links = SlaveLinks(*(LatestTopic(clock) for _ in range(4)))
     rig = SimulatedRig.from_config(cfg)
     model = SheathModel(K=rig.K, compliance=rig.M_e / rig.K if rig.K else rig.M_e)
-    csv_cls, rr_cls = (ProcessCsvRecorder, RerunProcessLogger) if threaded else (CsvRecorder, RerunLogger)
-    tag = "offloop" if threaded else "inloop"
+    csv_cls, rr_cls = (ProcessCsvRecorder, RerunProcessLogger) if off_loop else (CsvRecorder, RerunLogger)
+    tag = "offloop" if off_loop else "inloop"
     times = np.empty(n)
     with csv_cls(tmp / f"{tag}.csv", csv_columns(True), {"source": "bench"}, flush_every=500) as rec, \
             rr_cls("bench", tag, "save", tmp / f"{tag}.rrd") as rr:
@@ -125,9 +125,9 @@ def run_joints(n: int, tmp: Path, record: bool = True) -> np.ndarray:
 
 def main(n: int = 5000) -> None:
     with tempfile.TemporaryDirectory() as d:
-        for threaded in (False, True):
-            t = run(threaded, n, Path(d))[200:]
-            print(f"slave step, recording {'off the loop (child processes)' if threaded else 'in the loop'}: "
+        for off_loop in (False, True):
+            t = run(off_loop, n, Path(d))[200:]
+            print(f"slave step, recording {'off the loop (child processes)' if off_loop else 'in the loop'}: "
                   f"p50 {np.percentile(t, 50):.3f} ms, p99 {np.percentile(t, 99):.3f} ms, max {t.max():.2f} ms, "
                   f"steps > 0.8 ms {100 * np.mean(t > 0.8):.2f} %")
         for record in (False, True):
