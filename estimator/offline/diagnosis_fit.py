@@ -182,7 +182,7 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
         return np.concatenate([(getattr(pr, k)[m][::FIT_STRIDE] - ys[k]) / v for k, v in norm.items()])
 
     def refine(fun, z, lower, upper):
-        return least_squares(fun, z, bounds=(lower, upper), diff_step=1e-2, x_scale=1.0, ftol=1e-6, xtol=1e-6,
+        return least_squares(fun, z, bounds=(lower, upper), diff_step=1e-2, x_scale=1.0, ftol=th.FIT_TOL, xtol=th.FIT_TOL,
                              max_nfev=40 * len(z))
 
     z_starts = [np.clip(np.array([st.get(p.name, p.neutral) for p in params]) / scale, lo, hi) for st in starts]

@@ -80,3 +80,6 @@ SLIDE_SHARE = 1e-4          # [-] ... and beyond this share of x_in's range
 K_RESTART = 0.6             # [-] second start of K when the base's K fell below a tenth of it
 REST_MIN_S = 0.1            # [s] an initial rest shorter than this is not read for an offset
 REST_RESOLUTIONS = 3.0      # [resolutions] a position reading further from zero than this at rest is off its zero
+
+# ---- the fits ---------------------------------------------------------------------------------------------------
+FIT_TOL = 1e-6              # [-] relative ftol and xtol of every least-squares refinement (diagnosis_fit.fit_model)
