@@ -11,7 +11,8 @@
   what bounds the tendons is the motors' travel: every motor command is clipped to the zero pose
   +- (r max(|limits|) + twice that stretch + 2 mm). Engaging needs the commanded angle within
   ``slave.engage_tolerance / r`` of the estimated one (the master anchors at the slave's angle).
-* SAFE: no command for the pair controller: both tendons relax to their set tension (rate limited
+* SAFE: no command for the pair controller: both motors hold where they are measured to be when SAFE begins
+  (never where the last command was taking them), then both tendons relax to their set tension (rate limited
   by ``slave.relax_speed``) and the joint returns toward rest.
 * Each cycle: the pair controller's two motor commands, then
   :class:`~estimator.online.joint.JointEstimator` on the two load cells and encoders (never the
@@ -245,6 +246,8 @@ class PairAxis(SlaveAxis):
         for ax, t in zip(axes, targets):
             assert isinstance(ax, PairAxis)
             if relax:
+                if ax.hold is not None:         # SAFE begins: the motors from their measured positions
+                    bank.X[ax.index] = state.x_in[ax.index]
                 ax.hold = None
             elif t is not None:
                 ax.hold = t
@@ -283,11 +286,13 @@ class PairAxis(SlaveAxis):
         return f"{self.name} angle {target:.4g} rad too far from the estimate {self.sample.angle:.4g} rad"
 
     def motor(self, relax: bool, target: float | None, state: RigState, dt: float) -> Any:
+        assert self.controller is not None
         if relax:
+            if self.hold is not None:           # SAFE begins: the motors from their measured positions
+                self.controller.x_cmd = [float(x) for x in state.x_in[self.index]]
             self.hold = None
         elif target is not None:
             self.hold = target
-        assert self.controller is not None
         Ta, Tb = state.T_in[self.index].tolist()         # plain floats: cheaper arithmetic, the same values
         return self.controller.step(self.hold, (Ta, Tb), dt, self.sample.x_out)
 

@@ -180,6 +180,8 @@ class SpindleAxis(SlaveAxis):
 
     def motor(self, relax: bool, target: float | None, state: RigState, dt: float) -> float:
         if relax:
+            if self.hold is not None:           # SAFE begins: from the measured spindle angle, not the last target
+                self.phi_cmd = float(state.x_in[self.index])
             self.hold, self.anchor = None, None
             step = self.cfg.slave.relax_speed / self.r_p * dt
             d = self.rest - self.phi_cmd

@@ -9,7 +9,7 @@
   ``|x_in_cmd - x_in| <= slave.engage_tolerance`` (measured x_in), so a master that has not
   re-aligned never makes the tendon jump.
 * SAFE (the single-tendon version of "hold the joints, relax the tendons to pretension"): the motor
-  holds where it was, then moves in the release direction only, at ``slave.relax_speed``, while the
+  holds where it is measured to be when SAFE begins (never where the last command was taking it), then moves in the release direction only, at ``slave.relax_speed``, while the
   measured proximal tension is above ``sheath.pretension + RELAX_BAND``; it never pulls and never
   goes below ``slave.x_in_min``. Releasing a single tendon lets its joint go back under its return
   spring: the instrument goes limp, away from the tissue, with no stored energy; the speed bound
@@ -81,6 +81,7 @@ class TendonAxis(SlaveAxis):
         self.s_points = np.linspace(0.0, self.L, cfg.estimator.profile_points)
         self.x_hold = float(state.x_in)
         self.x_cmd = self.x_hold                 # the last motor command [m]
+        self.relaxing = False                    # SAFE: the motor held at the measured x_in, then released
         self.estimator: DistalEstimator | None = None
         self.sample: Any = None                  # the last DistalSample
         self.profile = np.zeros(0)
@@ -214,11 +215,15 @@ class TendonAxis(SlaveAxis):
 
     def motor(self, relax: bool, target: float | None, state: RigState, dt: float) -> float:
         if relax:
+            if not self.relaxing:               # SAFE begins: hold the measured position, not the last target
+                self.relaxing, self.x_hold = True, float(state.x_in)
             if self.relax_speed > 0 and state.T_in > self.relax_to and self.x_hold > self.x_min:
                 # release only, at most relax_speed dt per cycle, never below x_in_min
                 self.x_hold = max(self.x_min, self.x_hold - self.relax_speed * dt)
-        elif target is not None:
-            self.x_hold = target
+        else:
+            self.relaxing = False
+            if target is not None:
+                self.x_hold = target
         self.x_cmd = self.x_hold
         return self.x_hold
 

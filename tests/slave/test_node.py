@@ -117,6 +117,38 @@ def test_stale_command_goes_safe_after_watchdog_ms_and_holds():
     assert node.state == SideState.ENGAGED and node.rig.cmds[-1] == 0.0025
 
 
+class LagRig(EchoRig):
+    """A motor slower than the commands: it moves toward the command at ``speed`` [m/s] at most."""
+
+    def __init__(self, speed):
+        super().__init__()
+        self.speed, self.x = speed, 0.0
+
+    def step(self, x_in_cmd, dt):
+        self.t += dt
+        self.cmds.append(x_in_cmd)
+        self.x += max(-self.speed * dt, min(self.speed * dt, x_in_cmd - self.x))
+        self.state = RigState(self.t, self.x, 1000.0 * self.x, self.x, Untouchable())
+        return self.state
+
+
+def test_a_stale_command_during_a_pull_stops_the_tendon_where_it_is():
+    """The motor lags a fast pull; when the commands stop, SAFE holds the measured position: the tendon goes
+    no further toward the last target (hold only: relax_speed 0)."""
+    node, links, clock = make(rig=LagRig(0.005), slave={"relax_speed": 0.0})
+    for k in range(1, 301):               # the command pulls at 20 mm/s to 6 mm; the motor follows at 5 mm/s
+        command(links, k, 2e-5 * k)
+        tick(node, clock)
+    assert node.state == SideState.ENGAGED
+    tick(node, clock, 51)                 # stale: SAFE
+    assert node.state == SideState.SAFE and node.last_safe_reason == "command stale"
+    x_safe = node.rig.x
+    assert x_safe < 0.5 * 6e-3            # far behind the last target when SAFE begins
+    tick(node, clock, 500)
+    assert node.rig.x == pytest.approx(x_safe, abs=0.005 * DT)     # held: at most one motor step further
+    assert max(node.rig.cmds[-500:]) <= x_safe + 0.005 * DT
+
+
 def test_safe_relaxes_at_the_relax_speed_down_to_the_pretension_and_never_pulls():
     node, links, clock = make(slave={"relax_speed": 0.01})
     for k in range(1, 21):                # walk up to 2 mm (T_in = 2 N on the echo rig)

@@ -169,6 +169,17 @@ def test_axis_checks_targets_and_relaxes_to_rest(cfg):
     assert phi == pytest.approx(ax.rest) and ax.hold is None
 
 
+def test_safe_starts_from_the_measured_spindle_angle_not_the_last_target(cfg):
+    rig = SpindleInstrument.from_config(cfg)
+    ax = SpindleAxis.build(cfg, rig)[0]
+    ax.start((0.28, 0.28), [(0.0, np.zeros(1), np.zeros(1))])
+    ax.motor(False, 0.0, rig.state, DT)
+    assert ax.motor(False, 0.4, rig.state, DT) == pytest.approx(0.4 / ax.n_k)   # the spindle has not moved yet
+    measured = float(rig.state.x_in[0])
+    step = cfg.slave.relax_speed / ax.r_p * DT
+    assert abs(ax.motor(True, None, rig.state, DT) - measured) <= step + 1e-12
+
+
 def test_an_instrument_mixing_spindle_and_pair_joints_is_refused(cfg):
     pair = dataclasses.replace(cfg.instrument.joints[0], name="wrist", spindle_radius=0.0)
     mixed = dataclasses.replace(cfg, instrument=dataclasses.replace(cfg.instrument,
