@@ -1,0 +1,175 @@
+"""The measured-data CSV of one tendon (docs/reference/formats.md, "Measured-data CSV"): its columns and
+units, and the reader.
+
+``# key: value`` lines above the header are metadata (``# units: time=s, x_in=m, T_in=N``), other
+``#`` lines and blank lines are skipped, then a header line of column names, then comma-separated
+plain numbers (no quoting). Columns ``time`` [s], ``x_in`` [m], ``T_in`` [N] are required, ``x_out``
+[m] and ``T_out`` [N] optional, others kept in :attr:`MeasuredData.extra`. Every problem raises
+:class:`~teleop.errors.DataError` with a one-line message naming file, line (1-based) and column.
+The writer is :class:`teleop.recording.CsvRecorder`; :mod:`teleop.recording` re-exports the reader.
+"""
+from __future__ import annotations
+
+import re
+import warnings
+from collections.abc import Iterator
+from pathlib import Path
+from typing import IO
+
+import numpy as np
+
+from estimator.data import MeasuredData  # the data type lives in the estimator (floor 0)
+from teleop.errors import DataError
+
+__all__ = ["REQUIRED_COLUMNS", "OPTIONAL_COLUMNS", "SI_UNITS", "META_LINE", "COLUMN_NAME", "MeasuredData", "parse_units",
+           "read_measured_csv"]
+
+REQUIRED_COLUMNS = ("time", "x_in", "T_in")
+OPTIONAL_COLUMNS = ("x_out", "T_out")
+#: SI unit of each standard column, written as ``# units:`` metadata and checked on load.
+SI_UNITS = {"time": "s", "x_in": "m", "T_in": "N", "x_out": "m", "T_out": "N"}
+
+#: a ``# key: value`` metadata line
+META_LINE = re.compile(r"#\s*([A-Za-z_][\w.\-]*)\s*:\s?(.*)$")
+#: a column name
+COLUMN_NAME = re.compile(r"[A-Za-z_][\w.\-\[\]]*$")
+
+
+def parse_units(text: str, where: str) -> dict[str, str]:
+    """The ``column=unit, ...`` of a ``# units:`` line as a dict; DataError naming ``where`` for a malformed item."""
+    units: dict[str, str] = {}
+    for item in filter(None, (p.strip() for p in text.split(","))):
+        name, eq, unit = item.partition("=")
+        if not eq or not name.strip() or not unit.strip():
+            raise DataError(f"{where}: units: expected 'column=unit', got '{item}'")
+        units[name.strip()] = unit.strip()
+    return units
+
+
+def _read_head(fh: IO[str], src: str) -> tuple[dict[str, str], list[str], int]:
+    """Read metadata and the header line; return (metadata, column names, header line number)."""
+    metadata: dict[str, str] = {}
+    lineno = 0
+    for raw in iter(fh.readline, ""):
+        lineno += 1
+        line = raw.strip()
+        if not line:
+            continue
+        if line.startswith("#"):
+            m = META_LINE.match(line)
+            if m:
+                key, value = m.group(1), m.group(2).strip()
+                if key in metadata:
+                    raise DataError(f"{src}:{lineno}: metadata key '{key}' given twice")
+                metadata[key] = value
+            continue
+        names = [c.strip() for c in line.split(",")]
+        try:
+            float(names[0])
+        except ValueError:
+            pass
+        else:
+            raise DataError(f"{src}:{lineno}: expected a header line of column names, got numbers")
+        for j, name in enumerate(names):
+            if not name:
+                raise DataError(f"{src}:{lineno}: header column {j + 1} is empty")
+            if names.index(name) != j:
+                raise DataError(f"{src}:{lineno}: header column {j + 1}: '{name}' appears twice")
+        return metadata, names, lineno
+    raise DataError(f"{src}: empty file (expected a header line of column names)")
+
+
+def _data_lines(path: Path, header_line: int) -> Iterator[tuple[int, str]]:
+    """(line number, stripped text) of every data line after the header (slow path, errors only)."""
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        for lineno, raw in enumerate(fh, start=1):
+            line = raw.strip()
+            if lineno > header_line and line and not line.startswith("#"):
+                yield lineno, line
+
+
+def _locate_parse_error(path: Path, src: str, header_line: int, names: list[str]) -> DataError:
+    for lineno, line in _data_lines(path, header_line):
+        fields = line.split(",")
+        if len(fields) != len(names):
+            return DataError(f"{src}:{lineno}: expected {len(names)} values "
+                             f"({', '.join(names)}), found {len(fields)}")
+        for j, text in enumerate(fields):
+            try:
+                float(text.replace("_", "x"))  # numpy rejects 1_000, Python accepts it
+            except ValueError:
+                return DataError(f"{src}:{lineno}: column {j + 1} ('{names[j]}'): expected a "
+                                 f"number, got '{text.strip()}'")
+    return DataError(f"{src}: could not parse the data rows")
+
+
+def _line_of_row(path: Path, header_line: int, row: int) -> int:
+    return next((ln for k, (ln, _) in enumerate(_data_lines(path, header_line)) if k == row), -1)
+
+
+def read_measured_csv(path: str | Path) -> MeasuredData:
+    """Read one tendon's measured-data CSV.
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file (format in the module docstring).
+
+    Returns
+    -------
+    MeasuredData
+        Arrays of shape (n_samples,), n_samples >= 2, all finite, ``time`` strictly increasing.
+
+    Raises
+    ------
+    DataError
+        Missing or empty file, no header, missing required column, non-SI ``# units:`` for a
+        standard column, wrong field count or non-numeric value (file:line, column), NaN or inf
+        (file:line, column), time not strictly increasing (file:line, both values), fewer than
+        two rows.
+    """
+    path, src = Path(path), str(path)
+    if not path.is_file():
+        raise DataError(f"{src}: no such file")
+    with open(path, encoding="utf-8") as fh:
+        metadata, names, header_line = _read_head(fh, src)
+        missing = [c for c in REQUIRED_COLUMNS if c not in names]
+        if missing:
+            raise DataError(f"{src}: missing column '{missing[0]}' (have: {', '.join(names)})")
+        if "units" in metadata:
+            units = parse_units(metadata["units"], src)
+            for col, unit in units.items():
+                if col in SI_UNITS and col in names and unit != SI_UNITS[col]:
+                    raise DataError(f"{src}: units: column '{col}' is in '{unit}', expected "
+                                    f"'{SI_UNITS[col]}' (convert to SI before loading)")
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
+                table = np.loadtxt(fh, delimiter=",", comments="#", ndmin=2, dtype=np.float64)
+        except ValueError:
+            raise _locate_parse_error(path, src, header_line, names) from None
+    n_rows = table.shape[0]
+    if n_rows and table.shape[1] != len(names):
+        raise _locate_parse_error(path, src, header_line, names)
+    if n_rows < 2:
+        raise DataError(f"{src}: {n_rows} data row(s), need at least 2")
+    bad = ~np.isfinite(table)
+    if bad.any():
+        r_bad, c_bad = (int(i) for i in np.argwhere(bad)[0])
+        line = _line_of_row(path, header_line, r_bad)
+        raise DataError(f"{src}:{line}: column {c_bad + 1} ('{names[c_bad]}'): expected a finite "
+                        f"number, got {float(table[r_bad, c_bad])!r}")
+    cols = {name: np.ascontiguousarray(table[:, j]) for j, name in enumerate(names)}
+    t = cols["time"]
+    step = np.diff(t)
+    if not (step > 0).all():
+        row = int(np.argmax(~(step > 0))) + 1
+        line = _line_of_row(path, header_line, row)
+        raise DataError(f"{src}:{line}: column {names.index('time') + 1} ('time'): time "
+                        f"{float(t[row])!r} s is not after the previous {float(t[row - 1])!r} s "
+                        f"(must be strictly increasing)")
+    known = set(REQUIRED_COLUMNS + OPTIONAL_COLUMNS)
+    return MeasuredData(time=t, x_in=cols["x_in"], T_in=cols["T_in"],
+                        x_out=cols.get("x_out"), T_out=cols.get("T_out"),
+                        extra={k: v for k, v in cols.items() if k not in known},
+                        metadata=metadata, source=src)
