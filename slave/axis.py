@@ -48,10 +48,14 @@ class SlaveAxis:
         The axis's name (``tendon``, or the joint's name).
     index : int
         Its place in the instrument (the row of the rig's ``(n_joints, 2)`` arrays of a pair).
+    tendon_per_unit : float
+        Tendon travel per unit of the axis's target [m per m, or m/rad: the distal pulley's radius]: the
+        scale of ``slave.engage_tolerance``, ``slave.max_step`` and ``slave.max_speed`` on this axis.
     """
 
     name = "axis"
     index = 0
+    tendon_per_unit = 1.0
     cfg: Config
 
     # ---- per kind ----------------------------------------------------------------------------------

@@ -160,7 +160,8 @@ class SlaveNode(SlaveNodeBase):
                  calibration_file: str | Path | None = None):
         super().__init__(cfg, links, run_dir=run_dir, stop_on_master_stop=stop_on_master_stop,
                          counts=("commands_rejected_range", "commands_wrong_axes", "commands_out_of_order",
-                                 "commands_duplicate", "engage_refused", "tension_trips"))
+                                 "commands_duplicate", "commands_step_refused", "commands_speed_limited",
+                                 "engage_refused", "tension_trips"))
         self.rig = rig
         self.recorder = recorder
         self.rerun = rerun
@@ -169,6 +170,8 @@ class SlaveNode(SlaveNodeBase):
         self.axes: list[SlaveAxis] = self.kind.build(cfg, rig)
         self.names = tuple(a.name for a in self.axes)
         self.last_safe_reason: str | None = None
+        self.max_step, self.max_speed = cfg.slave.max_step, cfg.slave.max_speed   # [m], [m/s] of tendon travel
+        self._followed: tuple | None = None    # the targets followed in the last ENGAGED cycle (speed limit)
         self.calibration_file = None if calibration_file is None else Path(calibration_file)
         self.calibration: InstrumentCalibration | None = calibration
         self.routine: Any = None
@@ -231,23 +234,61 @@ class SlaveNode(SlaveNodeBase):
                 self.counts["commands_rejected_range"] += 1
                 self._warn(now, "rejected command %d: %s", cmd.seq, why)
                 return False
+        return self._step_within(cmd, now)
+
+    def _step_within(self, cmd: Command, now: float) -> bool:
+        """Whether every target of ``cmd`` lies within ``slave.max_step`` of tendon travel of the last accepted
+        command's when both are engaged (counted as ``commands_step_refused`` if not). A command not engaged
+        moves nothing; after one, or after a gap longer than ``slave.watchdog_ms``, there is nothing to step
+        from: the engage check (:meth:`_too_far`) judges the command against the measured axes instead."""
+        rec = self._accepted
+        if rec is None or now - rec.t_recv > self.watchdog or not (cmd.engaged and rec.message.engaged):
+            return True
+        for ax, target, before in zip(self.axes, cmd.targets, rec.message.targets):
+            step = abs(target - before) * ax.tendon_per_unit
+            if not step <= self.max_step:
+                self.counts["commands_step_refused"] += 1
+                self._warn(now, "refused command %d: %s would move a tendon %.3g mm at once (slave.max_step %.3g mm)",
+                           cmd.seq, ax.name, 1e3 * step, 1e3 * self.max_step)
+                return False
         return True
+
+    def _speed_limited(self, targets: tuple, dt: float) -> tuple:
+        """The targets the axes follow this cycle: each moves from the last followed one toward the command's
+        by at most ``slave.max_speed dt`` of tendon travel (counted as ``commands_speed_limited`` cycles)."""
+        prev, self._followed = self._followed, targets
+        if prev is None:
+            return targets
+        out, limited = [], False
+        for ax, t, p in zip(self.axes, targets, prev):
+            lim = self.max_speed * dt / ax.tendon_per_unit
+            if abs(t - p) <= lim:
+                out.append(t)
+            else:
+                out.append(p + lim if t > p else p - lim)
+                limited = True
+        if limited:
+            self.counts["commands_speed_limited"] += 1
+            self._followed = tuple(out)
+        return self._followed
 
     def _too_far(self, cmd: Command) -> str | None:
         far = [w for w in (ax.too_far(t, self.rig_state) for ax, t in zip(self.axes, cmd.targets)) if w is not None]
         return "; ".join(far) if far else None
 
-    def _decision(self, now: float) -> tuple[bool, tuple]:
+    def _decision(self, now: float, dt: float) -> tuple[bool, tuple]:
         """The watchdog's decision on the latest accepted command (:meth:`_decide`) as (relax, one target
-        or None per axis): SAFE (also an engage refused while SAFE) -> relax, ENGAGED -> the targets,
-        else hold (no target)."""
+        or None per axis): SAFE (also an engage refused while SAFE) -> relax, ENGAGED -> the targets (speed
+        limited, :meth:`_speed_limited`), else hold (no target)."""
         decision, detail = self._decide(now)
         relax = decision is Decision.SAFE or (decision is Decision.REFUSED and self.state == SideState.SAFE)
         if relax and self.last_safe_reason is None:
             self.last_safe_reason = detail if decision is Decision.SAFE else "engaged command too far"
         self.marker = 0 if relax else self.marker
-        targets = detail.targets if decision is Decision.ENGAGED else (None,) * len(self.axes)
-        return relax, targets
+        if decision is Decision.ENGAGED:
+            return relax, self._speed_limited(detail.targets, dt)
+        self._followed = None
+        return relax, (None,) * len(self.axes)
 
     # ---- the cycle ---------------------------------------------------------------------------------
     def _calibration_step(self, now: float, dt: float) -> None:
@@ -264,12 +305,12 @@ class SlaveNode(SlaveNodeBase):
         sample = self._next
         if sample is None:
             # the first cycle after start-up or calibration: the estimators have seen the rig's last state
-            self._pending = (*self._decision(now), dt)
+            self._pending = (*self._decision(now, dt), dt)
             return
         # the rig's sensors as sampled when it stepped at the end of the last cycle, already estimated there
         self._observed, axes, profiles = sample
         self._check_tension(axes, now)                  # past slave.max_tension: SAFE in this cycle
-        self._pending = (*self._decision(now), dt)
+        self._pending = (*self._decision(now, dt), dt)
         self._publish(Estimate(self.seq, self.cmd_seq, now, axes, profiles))
 
     def _control_after(self, now: float) -> None:

@@ -95,7 +95,7 @@ class PairAxis(SlaveAxis):
 
     def __init__(self, cfg: Config, joint: JointConfig, index: int):
         self.cfg, self.joint, self.index, self.name = cfg, joint, index, joint.name
-        self.r = float(joint.pulley_radius)
+        self.r = self.tendon_per_unit = float(joint.pulley_radius)
         stretch = cfg.calibration.target_tension * max(t.geometry().length / t.EA
                                                        for t in (joint.tendons.a, joint.tendons.b))
         self.cmd_range = (joint.limits[0] - math.pi - 2 * stretch / self.r,

@@ -64,6 +64,7 @@ class SpindleAxis(SlaveAxis):
         self.cfg, self.joint, self.index, self.name = cfg, joint, index, joint.name
         self.r_p, self.r_d = float(joint.spindle_radius), float(joint.pulley_radius)
         self.n_k = self.r_p / self.r_d
+        self.tendon_per_unit = self.r_d
         self.cmd_range = (joint.limits[0] - math.pi, joint.limits[1] + math.pi)
         self.travel = max(abs(v) for v in joint.limits) / self.n_k + 0.5
         self.estimator: SpindleEstimator | None = None

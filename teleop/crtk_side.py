@@ -7,7 +7,8 @@ the newest tuple, encodes the topics of :mod:`teleop.crtk` in CDR and puts them 
 way (:mod:`teleop.ros2_wire`); each encoding is done while the loop sleeps
 (:data:`teleop.realtime.IDLE`), so the thread holds the interpreter lock only in the loop's idle time.
 
-The slave also subscribes to ``servo_jp`` and ``state_command`` (:class:`SlaveCrtk`): a valid
+With ``ros2.accept_commands`` (off by default: publishing only) the slave also subscribes to ``servo_jp`` and
+``state_command`` (:class:`SlaveCrtk`): a valid
 ``servo_jp`` becomes an engaged :class:`~teleop.messages.Command` that :class:`CommandMerge` offers to
 the node beside the master's commands (the newest wins), so a ROS 2 node drives the instrument under
 the same watchdog, range and engage rules as the project's master. A ROS 2 driver must stream
@@ -159,7 +160,11 @@ class SlaveCrtk(CrtkSide):
         self.servo: Received[Command] | None = None
         self.servo_admitted = True
         self.servo_refused = 0
+        self.state_commands_refused = 0
         self._seq = 0
+        self.driver = None
+        if not cfg.ros2.accept_commands:
+            return
         servo_topic, state_topic = command_topics(cfg)
         self.node.subscription(servo_topic, JOINT_STATE, self._on_servo)
         self.node.subscription(state_topic, STRING_STAMPED, self._on_state_command)
@@ -195,13 +200,17 @@ class SlaveCrtk(CrtkSide):
     def _on_state_command(self, cdr: bytes, att: Attachment | None) -> None:
         text = str(decode(cdr, STRING_STAMPED).string).strip().lower()
         if text not in STATE_COMMANDS:
+            self.state_commands_refused += 1
             raise ValueError(f"state_command {text!r} is not one of {', '.join(STATE_COMMANDS)}")
-        self.servo_admitted = STATE_COMMANDS[text]
-        log.info("state_command %s: servo_jp %s", text, "admitted" if self.servo_admitted else "refused")
+        admitted = STATE_COMMANDS[text]
+        if admitted != self.servo_admitted:     # each change logged once; a repeated command changes nothing
+            log.info("state_command %s: servo_jp %s", text, "admitted" if admitted else "refused")
+        self.servo_admitted = admitted
 
     def driver_alive(self) -> bool:
-        """A ROS 2 publisher of ``servo_jp`` is present (its liveliness token)."""
-        return self.driver.alive
+        """A ROS 2 publisher of ``servo_jp`` is present (its liveliness token); never without
+        ``ros2.accept_commands``."""
+        return self.driver is not None and self.driver.alive
 
 
 class _Tee:
@@ -253,17 +262,20 @@ class CommandMerge:
 
 def attach_slave(session: Any, cfg: Any, links: Any) -> SlaveCrtk | None:
     """With ``ros2.enabled``, the slave's CRTK side wired into ``links`` (a
-    :class:`~slave.node_base.SlaveLinks`): estimates teed, ``servo_jp`` merged into the commands, a
-    ROS 2 driver's liveliness counted as the master's, ``links.crtk`` set. None when disabled."""
+    :class:`~slave.node_base.SlaveLinks`): estimates teed, ``links.crtk`` set; with ``ros2.accept_commands`` also
+    ``servo_jp`` merged into the commands and a ROS 2 driver's liveliness counted as the master's. None when
+    disabled."""
     if not cfg.ros2.enabled:
         return None
     crtk = SlaveCrtk(session, cfg, links.command)
     links.estimate = crtk.tee(links.estimate)
+    links.crtk = crtk
+    if not cfg.ros2.accept_commands:    # publishing only: no ROS 2 node moves the instrument
+        return crtk
     links.command = CommandMerge(links.command, crtk)
     master_alive = links.master_alive
     if master_alive is not None:        # a ROS 2 driver's token counts as the master's
         links.master_alive = lambda: master_alive() or crtk.driver_alive()
-    links.crtk = crtk
     return crtk
 
 

@@ -45,9 +45,12 @@ from teleop.messages import Heartbeat, Side, SideState
 from teleop.realtime import IDLE, demote_threads, machine_steal, promote_threads, rt_budget, rt_budget_note
 from teleop.recording import stop_at_cycle_end
 
-__all__ = ["NodeBase", "IDLE_GUARD"]
+__all__ = ["NodeBase", "IDLE_GUARD", "RESYNC"]
 
 IDLE_GUARD = 1e-4    # [s] the helper threads' idle window closes this long before the loop's next deadline
+#: Messages in a row older than the last accepted one, each newer than the one before, that resynchronise a
+#: stream to them (:meth:`NodeBase._newer`): a restarted peer, or a forged sequence number far ahead.
+RESYNC = 3
 
 
 def _machine_now() -> tuple[float | None, tuple[float, float, float] | None]:
@@ -93,6 +96,7 @@ class NodeBase:
         self.hb_seq = 0
         self._next_hb = -math.inf
         self._seen = None                      # last Received object looked at
+        self._behind: dict[str, tuple[int, int]] = {}   # noun -> (messages in a row behind the last accepted, seq)
         self._t_warn = -math.inf
         self.safe_events = 0
         self.counts: dict[str, int] = dict.fromkeys(counts, 0)
@@ -162,10 +166,26 @@ class NodeBase:
 
     def _newer(self, seq: int, last: int | None, noun: str) -> bool:
         """Whether ``seq`` is newer than ``last`` (the last accepted one, None before any); if not,
-        counted as ``<noun>_duplicate`` or ``<noun>_out_of_order``."""
+        counted as ``<noun>_duplicate`` or ``<noun>_out_of_order``.
+
+        :data:`RESYNC` messages in a row older than ``last``, each newer than the one before, are a stream that
+        restarted, or a ``last`` far ahead of the stream (a forged or corrupt sequence number): the last of them
+        is taken as newer and counted as ``<noun>_resync``, so such a ``last`` holds the real stream back for
+        ``RESYNC - 1`` messages, not for the rest of the run."""
         if seq_newer(seq, last):
+            self._behind.pop(noun, None)
             return True
-        self.counts[f"{noun}_duplicate" if seq == last else f"{noun}_out_of_order"] += 1
+        if seq == last:
+            self.counts[f"{noun}_duplicate"] += 1
+            return False
+        run = self._behind.get(noun)
+        n = run[0] + 1 if run is not None and seq_newer(seq, run[1]) else 1
+        if n >= RESYNC:
+            self._behind.pop(noun, None)
+            self.counts[f"{noun}_resync"] = self.counts.get(f"{noun}_resync", 0) + 1
+            return True
+        self._behind[noun] = (n, seq)
+        self.counts[f"{noun}_out_of_order"] += 1
         return False
 
     # ---- outgoing ----------------------------------------------------------------------------------

@@ -90,6 +90,13 @@ BOUNDS: tuple[Bound, ...] = (
           "the slave relaxes a tendon whose measured tension passes this limit; 100 N is two thirds of the "
           "breaking load of a steel cable of the default tendon's stiffness (~0.4 mm, ~150 N) and 0.7 % strain "
           "of the default tendon (EA 15 kN): a higher limit lets the slave hold a tendon near its break"),
+    Bound("slave.max_step", "<=", 0.005, "m",
+          "one command may move a tendon by this much at once; 5 mm is a quarter of the default joint's 20 mm "
+          "travel, which the motor covers in 0.1 s at its 50 mm/s: a forged or corrupt command beyond it is a jump, "
+          "not a motion of the hand (25 mm/s at most, 0.1 mm per 1 ms command at motion scale 0.2)"),
+    Bound("slave.max_speed", "<=", 0.1, "m/s",
+          "the followed target moves no faster than this; 0.1 m/s is twice the default motor's speed limit and 20 "
+          "times the fastest hand motion at motion scale 0.2 (25 mm/s x 0.2): a faster target is not an operator's"),
     Bound("calibration.target_tension", "<=", 50.0, "N", _TENSION.format(limit=50)),
     Bound("sheath.pretension", "<=", 50.0, "N", _TENSION.format(limit=50)),
     Bound("instrument.joints[].pretension", "<=", 50.0, "N", _TENSION.format(limit=50)),

@@ -251,6 +251,8 @@ class SlaveConfig:
     x_in_min: float = -0.005              # [m] commands outside [x_in_min, x_in_max]: rejected
     x_in_max: float = 0.03                # [m]
     engage_tolerance: float = 0.002       # [m] (re-)engage only on a command this close to x_in
+    max_step: float = 0.001               # [m] tendon travel: a command further from the last accepted one is refused
+    max_speed: float = 0.05               # [m/s] tendon travel: the followed target moves no faster
     max_tension: float = 80.0             # [N] a measured |T_in| above: SAFE in that cycle, relax (slave/node_base.py)
     realtime_priority: int = 20           # SCHED_FIFO priority of the loop thread, 1-99 (teleop/realtime.py); 0: off
 
@@ -320,6 +322,7 @@ class Ros2Config:
     """The CRTK topics as ROS 2 messages on Zenoh, the rmw_zenoh way (teleop/ros2_wire.py, docs/reference/crtk.md)."""
 
     enabled: bool = False
+    accept_commands: bool = False         # the slave takes servo_jp and state_command from ROS 2 (else publishes only)
     domain_id: int = 0                    # ROS_DOMAIN_ID of the ROS 2 graph, 0..232
     rate_hz: float = 100.0                # [Hz] > 0, publication rate of the CRTK topics (off the control loop)
 

@@ -35,7 +35,7 @@ RANGES: dict[str, tuple[str, str]] = {
     "master.device.arm.device_damping": (">= 0", "N s/m"), "master.device.arm.device_friction": (">= 0", "N"),
     "slave.relax_speed": (">= 0", "m/s"), "slave.x_in_min": ("any", "m"), "slave.x_in_max": ("any", "m"),
     "slave.engage_tolerance": ("> 0", "m"), "slave.watchdog_ms": ("> 0", "ms"), "slave.heartbeat_hz": ("> 0", "Hz"),
-    "slave.max_tension": ("> 0", "N"),
+    "slave.max_tension": ("> 0", "N"), "slave.max_step": ("> 0", "m"), "slave.max_speed": ("> 0", "m/s"),
     "master.realtime_priority": ("0..99", "-"), "slave.realtime_priority": ("0..99", "-"),
     "instrument.joints[].pulley_radius": ("> 0", "m"), "instrument.joints[].limits[]": ("any", "rad"),
     "instrument.joints[].pretension": (">= 0", "N"), "instrument.joints[].spindle_radius": (">= 0", "m"),

@@ -35,6 +35,7 @@ recording:
   rerun: "off"
 ros2:
   enabled: true
+  accept_commands: true
   domain_id: 7
 """
 

@@ -342,6 +342,22 @@ def test_estimates_out_of_order_duplicate_or_impossible_are_ignored():
     assert node.tension_latched and node.last_reason.startswith("tension latch")   # a tension's SAFE latches
 
 
+def test_a_forged_sequence_far_ahead_resynchronises_within_three_estimates():
+    node, hand, links, clock = make()
+    engage(node, links, clock)
+    run(node, links, clock, 5)
+    n = node._last_est_seq
+    slave_beat(links, clock)
+    put_est(links, n + 4_000_000)                        # one estimate with a seq far ahead of the stream
+    tick(node, clock)
+    for k in range(1, 30):                               # the real stream goes on
+        slave_beat(links, clock)
+        put_est(links, n + k)
+        tick(node, clock)
+    assert node.counts["estimates_out_of_order"] == 2 and node.counts["estimates_resync"] == 1
+    assert node._last_est_seq == n + 29 and node.state == SideState.ENGAGED
+
+
 def test_a_late_echo_trips_the_round_trip_watchdog():
     node, hand, links, clock = make(watchdog_ms=50.0)
     engage(node, links, clock)

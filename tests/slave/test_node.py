@@ -51,8 +51,13 @@ class EchoRig:
         pass
 
 
+#: The echo rig's commands step up to 0.1 mm a cycle (100 mm/s) and 3 mm at once: the command limits are loosened
+#: for the tests that are not about them (test_commands_beyond_the_step_or_speed_limit_...).
+LOOSE = {"max_step": 0.005, "max_speed": 1.0}
+
+
 def make(rig=None, calibrate=False, watchdog_ms=50.0, slave=None, **kw):
-    cfg = Config(slave=SlaveConfig(watchdog_ms=watchdog_ms, **(slave or {})))
+    cfg = Config(slave=SlaveConfig(watchdog_ms=watchdog_ms, **{**LOOSE, **(slave or {})}))
     clock = FakeClock(10.0)
     links = SlaveLinks(*(Topic(clock) for _ in range(4)))
     node = SlaveNode(cfg, rig or EchoRig(), links, calibrate=calibrate, model=None if calibrate else MODEL, **kw)
@@ -78,7 +83,7 @@ def test_no_command_is_safe_and_holds():
 
 
 def test_engaged_command_is_applied_and_echoed_without_reading_truth():
-    node, links, clock = make()
+    node, links, clock = make(slave={"max_step": 0.002, "max_speed": 2.0})   # 1 mm a cycle (limits: below)
     for k in range(10):
         command(links, 100 + k, 0.001 * k, marker=2)
         tick(node, clock)
@@ -307,3 +312,34 @@ def test_calibration_without_a_joint_limit_fails_with_a_message():
             state = rig.step(cal.command(state, DT), DT)
             cal.observe(state)
     assert cal.stage == CalStage.PULL
+
+
+def test_commands_beyond_the_step_or_speed_limit_are_refused_or_slowed_and_counted():
+    node, links, clock = make(slave={"max_step": 0.001, "max_speed": 0.05})
+    command(links, 1, 0.0005)
+    tick(node, clock)
+    assert node.state == SideState.ENGAGED and node.rig.cmds[-1] == 0.0005
+    command(links, 2, 0.0025)                  # a 2 mm jump: refused, the last accepted target still followed
+    tick(node, clock)
+    assert node.counts["commands_step_refused"] == 1 and node.rig.cmds[-1] == 0.0005
+    for k in range(3, 23):                     # 0.5 mm a cycle (500 mm/s): each step accepted, the motion slowed
+        command(links, k, 0.0005 + 0.0005 * (k - 2))
+        tick(node, clock)
+    cmds = np.diff(node.rig.cmds[-21:])
+    assert node.counts["commands_step_refused"] == 1 and node.counts["commands_speed_limited"] == 20
+    assert np.all(cmds <= 0.05 * DT * (1 + 1e-9)) and cmds[-1] == pytest.approx(0.05 * DT)
+    assert node.stats()["commands_step_refused"] == 1
+
+
+def test_a_sequence_number_far_ahead_holds_the_real_commands_back_for_two_messages_only():
+    node, links, clock = make()
+    for k in range(1, 6):
+        command(links, k, 0.0001 * k)
+        tick(node, clock)
+    command(links, 4_000_000, 0.0006)          # forged (or corrupt) seq far ahead, a plausible target
+    tick(node, clock)
+    for k in range(6, 12):                     # the real stream goes on
+        command(links, k, 0.0001 * k)
+        tick(node, clock)
+    assert node.counts["commands_out_of_order"] == 2 and node.counts["commands_resync"] == 1
+    assert node.cmd_seq == 11 and node.rig.cmds[-1] == pytest.approx(0.0011)

@@ -48,7 +48,8 @@ class SpringRig:
 
 
 def tendon_node(relax_speed: float = 0.005):
-    cfg = Config(slave=SlaveConfig(max_tension=LIMIT, relax_speed=relax_speed))
+    # the pulls step 0.1 mm a cycle (100 mm/s): above slave.max_speed, which tests/slave/test_node.py tests
+    cfg = Config(slave=SlaveConfig(max_tension=LIMIT, relax_speed=relax_speed, max_speed=1.0))
     clock = FakeClock(10.0)
     links = SlaveLinks(*(Topic(clock) for _ in range(4)))
     rec = Rows()

@@ -55,7 +55,7 @@ def wire():
 
 
 def slave_setup(session, clock, **ros2):
-    cfg = Config(ros2=Ros2Config(enabled=True, **ros2))
+    cfg = Config(ros2=Ros2Config(enabled=True, **{"accept_commands": True, **ros2}))
     links = SlaveLinks(*(Topic(clock) for _ in range(4)))
     crtk = attach_slave(session, cfg, links)
     rig = SimulatedRig.from_config(cfg)
@@ -132,6 +132,20 @@ def test_servo_jp_from_a_ros2_node_moves_the_simulated_instrument(wire):
     wait_for(lambda: crtk.servo_refused > refused, 5, "the refused servo_jp")
     tick(node, clock, 80)
     assert node.state == SideState.SAFE
+
+
+def test_without_accept_commands_a_ros2_node_cannot_move_or_pause_the_instrument(wire):
+    session, peer, clock = wire
+    cfg, links, crtk, node = slave_setup(session, clock, accept_commands=False)
+    assert not isinstance(links.command, CommandMerge) and not crtk.driver_alive()
+    servo = peer.publisher("/tsm0/servo_jp", JOINT_STATE)
+    peer.publisher("/tsm0/state_command", STRING_STAMPED, eid=11)(string_stamped("pause"))
+    for k in range(20):
+        servo(joint_state(1_700_000_000 + k, ["tendon"], [node.rig_state.x_in + 1e-4 * k]))
+        time.sleep(0.01)
+        tick(node, clock, 5)
+    assert crtk.servo is None and crtk.servo_admitted and node.state == SideState.SAFE
+    assert node.commands_applied == 0 and not any("servo_jp" in t for t in peer.tokens() if "/MS/" in t)
 
 
 def test_the_masters_measured_js_and_state(wire):
