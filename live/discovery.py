@@ -278,7 +278,7 @@ def side_session(cfg: Config, args, clock=None) -> Session:
     listening = tuple(cfg.transport.listen) if listen is None and role != "connected" else (listen or ())
     if listening:                                        # each refused connection logged once, rate-limited
         from teleop.refusal_watch import RefusalWatch
-        session._track(RefusalWatch(session, listening))
+        session.refusal_watch = session._track(RefusalWatch(session, listening))   # counted in the side's stats
     setattr(args, _ATTR, session)
     args._teleop_role = role
     return session

@@ -137,8 +137,12 @@ def slave_links(session, ident: str, injector):
     from teleop.messages import Command
 
     # SlaveLinks' fields in order: estimate, heartbeat, command, master_heartbeat, master_alive
-    return SlaveLinks(*_side_streams(session, ident, injector, "slave", "master", (estimate_key(ident), "estimate"),
-                                     (command_key(ident), Command)))
+    links = SlaveLinks(*_side_streams(session, ident, injector, "slave", "master", (estimate_key(ident), "estimate"),
+                                      (command_key(ident), Command)))
+    watch = getattr(session, "refusal_watch", None)     # connections refused for their credentials (live/discovery.py)
+    if watch is not None:
+        links.refused_links = lambda: int(watch.refused)
+    return links
 
 
 def master_links(session, ident: str, injector):

@@ -161,7 +161,7 @@ class SlaveNode(SlaveNodeBase):
         super().__init__(cfg, links, run_dir=run_dir, stop_on_master_stop=stop_on_master_stop,
                          counts=("commands_rejected_range", "commands_wrong_axes", "commands_out_of_order",
                                  "commands_duplicate", "commands_step_refused", "commands_speed_limited",
-                                 "engage_refused", "tension_trips"))
+                                 "commands_stale", "engage_refused", "tension_trips"))
         self.rig = rig
         self.recorder = recorder
         self.rerun = rerun

@@ -65,6 +65,7 @@ class SlaveLinks:
     command, master_heartbeat : latest-wins subscribers with ``latest()`` and ``age(now)`` [s].
     crtk : the CRTK side (:class:`teleop.crtk_side.SlaveCrtk`) or None: handed the state and the followed
         command at the end of each cycle (it stores them; a thread publishes them on ROS 2).
+    refused_links : callable returning the number of connections the side's listener refused, or None.
     """
 
     estimate: Any
@@ -73,6 +74,7 @@ class SlaveLinks:
     master_heartbeat: Any
     master_alive: Callable[[], bool] | None = None
     crtk: Any = None    # with ros2.enabled: offer(state, accepted command) each cycle (teleop/crtk_side.py)
+    refused_links: Callable[[], int] | None = None   # connections the listener refused (credentials, certificate)
 
 
 class SlaveNodeBase(NodeBase):
@@ -269,6 +271,8 @@ class SlaveNodeBase(NodeBase):
         self._accept(now)
         why = self._command_fault(now) or self._tension_hold()
         if why is not None:
+            if why == "command stale" and self.state != SideState.SAFE:
+                self.counts["commands_stale"] += 1
             self._set_state(SideState.SAFE, now, why)
             self.marker = 0
             return Decision.SAFE, why
@@ -310,6 +314,26 @@ class SlaveNodeBase(NodeBase):
         """The node's own counters, between the command counters and the pacer in :meth:`stats`."""
         raise NotImplementedError
 
+    def refusals(self) -> dict[str, int]:
+        """Every command-class message refused, by reason (the stats' ``refusals``): ``foreign_source`` (another
+        session than the locked master's, :class:`teleop.link_security.SourceLock`), ``decode_error`` (commands
+        and master heartbeats that did not decode), ``wrong_axes``, ``out_of_range``, ``step``
+        (``slave.max_step``), ``out_of_order``, ``duplicate``, ``engage_too_far``, ``stale`` (the command stream
+        went stale: SAFE), ``ros2_servo`` and ``ros2_state_command`` (refused ROS 2 commands), and
+        ``no_credentials``: connections the side's listener refused for a wrong user/password or certificate
+        (:class:`teleop.refusal_watch.RefusalWatch`, 0 without one)."""
+        cmd, hb, crtk, c = self.links.command, self.links.master_heartbeat, self.links.crtk, self.counts
+        lock = getattr(getattr(cmd, "primary", cmd), "source_lock", None)
+        return {"foreign_source": 0 if lock is None else int(lock.foreign),
+                "decode_error": int(getattr(cmd, "errors", 0)) + int(getattr(hb, "errors", 0)),
+                "wrong_axes": c["commands_wrong_axes"], "out_of_range": c["commands_rejected_range"],
+                "step": c["commands_step_refused"], "out_of_order": c["commands_out_of_order"],
+                "duplicate": c["commands_duplicate"], "engage_too_far": c["engage_refused"],
+                "stale": c["commands_stale"],
+                "ros2_servo": int(getattr(crtk, "servo_refused", 0)),
+                "ros2_state_command": int(getattr(crtk, "state_commands_refused", 0)),
+                "no_credentials": 0 if self.links.refused_links is None else self.links.refused_links()}
+
     def stats(self) -> dict[str, Any]:
         """Counters for the run summary (JSON-serialisable)."""
         cmd = self.links.command
@@ -322,5 +346,6 @@ class SlaveNodeBase(NodeBase):
             "command_decode_errors": int(getattr(cmd, "errors", 0)),
             "commands_applied": self.commands_applied,
             **self._stats_detail(),
+            "refusals": self.refusals(),
             "pacer": dict(self.pacer_stats),
         }

@@ -157,11 +157,14 @@ class Session:
     lock_master : bool
         The slave's links on this session accept commands from one master session only
         (``transport.lock_master``; False when built from a bare zenoh.Config).
+    refusal_watch : teleop.refusal_watch.RefusalWatch or None
+        The watch of the connections its listener refused, when a side set one (live/discovery.py).
     """
 
     def __init__(self, transport: TransportConfig | zenoh.Config, *, clock: Clock | None = None):
         zcfg = zenoh_config(transport) if isinstance(transport, TransportConfig) else transport
         self.lock_master = transport.lock_master if isinstance(transport, TransportConfig) else False
+        self.refusal_watch: Any = None
         self.clock = clock or MonotonicClock()
         self._entities: list = []
         self._lock = threading.Lock()
@@ -340,6 +343,8 @@ class LatestSubscriber(Entity, Generic[M]):
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         if self.source_lock is not None and not self.source_lock.admit(sample):
+            self._log.warning("dropped a message on %s from another session than the admitted one "
+                              "(transport.lock_master; counted as foreign_source)", self.key)
             return
         try:
             msg = self.decoder(sample.payload.to_bytes())

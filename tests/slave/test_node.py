@@ -328,7 +328,13 @@ def test_commands_beyond_the_step_or_speed_limit_are_refused_or_slowed_and_count
     cmds = np.diff(node.rig.cmds[-21:])
     assert node.counts["commands_step_refused"] == 1 and node.counts["commands_speed_limited"] == 20
     assert np.all(cmds <= 0.05 * DT * (1 + 1e-9)) and cmds[-1] == pytest.approx(0.05 * DT)
-    assert node.stats()["commands_step_refused"] == 1
+    refusals = node.stats()["refusals"]
+    assert set(refusals) == {"foreign_source", "decode_error", "wrong_axes", "out_of_range", "step", "out_of_order",
+                             "duplicate", "engage_too_far", "stale", "ros2_servo", "ros2_state_command",
+                             "no_credentials"}
+    assert refusals["step"] == 1 and sum(refusals.values()) == 1
+    tick(node, clock, 60)                      # the commands stop: stale, counted once
+    assert node.stats()["refusals"]["stale"] == 1
 
 
 def test_a_sequence_number_far_ahead_holds_the_real_commands_back_for_two_messages_only():
