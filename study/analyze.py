@@ -51,6 +51,7 @@ from study.kaist_summary import format_kaist
 from study.report import format_summary, split_text, write_report
 from teleop.errors import ConfigError, DataError
 from teleop.recording import MeasuredData, read_measured_csv
+from teleop.text_files import check_text_head, require_file
 
 __all__ = ["add_arguments", "main_analyze", "diagnose_file", "configured_route", "format_diagnosis", "analyze_kaist",
            "format_kaist", "write_kaist_figures", "PROGRESS_SAMPLES", "load_kaist_input", "predict_kaist",
@@ -117,8 +118,8 @@ def main_analyze(args: argparse.Namespace) -> int:
     for opt, d in (("--report", args.report), ("--figures", args.figures)):
         if d is not None and Path(d).exists() and not Path(d).is_dir():
             raise ConfigError(f"{opt} {d}: exists and is not a directory")
-    if args.file is not None and not Path(args.file).is_file():
-        raise DataError(f"{args.file}: no such file")
+    if args.file is not None:
+        require_file(args.file)
     kaist = (args.kaist is not None or is_kaist_file(args.file) or args.bend is not None
              or args.columns is not None or args.shared_params is not None)
     if kaist:
@@ -175,12 +176,15 @@ def configured_route(path: str | Path) -> tuple[np.ndarray, str]:
     Raises
     ------
     ConfigError
-        The file is missing or not a valid config, or its route has no bend (no shape to hold).
+        The file is missing, a directory, not UTF-8 text or not a valid config, or its route has no bend (no
+        shape to hold).
     """
     from slave.calibrate import wrap_shape
     from teleop.config import load_config
-    if not Path(path).is_file():
-        raise ConfigError(f"--route {path}: no such file")
+    try:
+        check_text_head(require_file(path))
+    except DataError as e:
+        raise ConfigError(f"--route {e}") from None
     geo = load_config(path).sheath.geometry()
     shape = wrap_shape(geo)
     if shape is None:

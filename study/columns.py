@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from teleop.errors import ConfigError, DataError
+from teleop.text_files import read_text
 
 __all__ = ["REQUIRED", "OPTIONAL", "KAIST_MAP", "ColumnMap", "parse_column_map", "Table", "read_table",
            "CUT_FRACTION"]
@@ -136,12 +137,7 @@ def _to_floats(fields: list[str], src: str, lineno: int) -> list[float]:
 def _rows(path: Path) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """All numeric rows (n, m), their 1-based line numbers, notes (header skipped)."""
     src = str(path)
-    try:
-        text = path.read_text(encoding="utf-8", errors="replace")
-    except FileNotFoundError:
-        raise DataError(f"{src}: no such file") from None
-    except OSError as exc:
-        raise DataError(f"{src}: cannot read ({exc.strerror})") from None
+    text = read_text(path, replace=True)
     notes: list[str] = []
     sep: str | None = None
     width = None
@@ -235,8 +231,9 @@ def read_table(path: str | Path, column_map: ColumnMap | None = None) -> Table:
     Raises
     ------
     DataError
-        Missing or unreadable file, a malformed row (file:line, column), a mapped column beyond the
-        row width, a required column all zero, fewer than 2 distinct time stamps.
+        Missing or unreadable file, a directory, a file that is not text (UTF-16, binary data: at which byte),
+        a malformed row (file:line, column), a mapped column beyond the row width, a required column all
+        zero, fewer than 2 distinct time stamps.
     """
     path = Path(path)
     src = str(path)

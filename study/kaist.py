@@ -41,6 +41,7 @@ from estimator.offline.pair import rmse
 from estimator.offline.pair_general import predict_shared
 from study.columns import ColumnMap, parse_column_map, read_table
 from teleop.errors import DataError
+from teleop.text_files import read_text
 
 __all__ = ["CONFIGS_DEG", "RATE_HZ", "KaistRecording", "default_kaist_dir", "find_kaist_dir", "find_configs",
            "is_kaist_file", "kaist_path", "read_kaist", "load_all", "load_dir", "resample", "cycles", "split",
@@ -142,9 +143,12 @@ def find_kaist_dir(path: str | Path | None = None) -> Path:
     Raises
     ------
     DataError
-        The directory does not exist or holds no ``sine_config_<N>.txt`` (or ``<N>.txt``) file.
+        A file, or a directory that does not exist or holds no ``sine_config_<N>.txt`` (or ``<N>.txt``) file.
     """
     d = Path(path) if path is not None else default_kaist_dir()
+    if d.is_file():
+        raise DataError(f"{d}: a file, not a folder: --kaist takes the folder of the sine_config_<N>.txt files "
+                        "(one file: teleop analyze FILE [--bend DEG])")
     if not d.is_dir() or not find_configs(d):
         raise DataError(f"KAIST data not found at {d}: {_MISSING_HINT}")
     return d
@@ -329,10 +333,10 @@ def load_kaist_input(args: argparse.Namespace) -> list[KaistRecording]:
     else:
         directory = Path(args.file).parent if args.kaist is None else (args.kaist or None)
         recs, problems = load_dir(directory, cmap)
+    if not recs:                     # the error names every problem, in one line
+        raise DataError("no readable KAIST recording: " + "; ".join(problems))
     for line in problems:
         print(f"skipped {line}", file=sys.stderr)
-    if not recs:
-        raise DataError("no readable KAIST recording: " + "; ".join(problems))
     for r in recs:
         for note in r.notes:
             if note.startswith("WARNING") or "no column map" in note:
@@ -353,14 +357,13 @@ def predict_kaist(recs: list[KaistRecording], params_path: str | Path) -> dict:
     Raises
     ------
     DataError
-        The parameter file is missing, not JSON, or has no usable ``shared.params``.
+        The parameter file is missing, a directory, not UTF-8 text, not JSON, or has no usable ``shared.params``.
     """
     path = Path(params_path)
+    text = read_text(path)
     try:
-        doc = json.loads(path.read_text())
+        doc = json.loads(text)
         params = doc["shared"]["params"] if "shared" in doc else doc["params"]
-    except FileNotFoundError:
-        raise DataError(f"{path}: no such file") from None
     except (ValueError, KeyError, TypeError) as e:
         raise DataError(f"{path}: not a teleop analyze --kaist JSON with shared.params ({e})") from None
     out = {"mode": "kaist-shared-prediction", "params_file": str(path), "model": params.get("model"),

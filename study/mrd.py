@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from teleop.errors import DataError
+from teleop.text_files import read_text
 
 __all__ = ["ATTRIBUTION", "MrdRun", "read_mrd", "load_mrd_dir", "default_mrd_dir", "sine_frequency", "N_COLUMNS",
            "TORQUE_NM_PER_COUNT", "PROXIMAL_COUNTS_PER_REV", "stroke_groups", "stroke_window", "runs_selection", "STROKE_OVERLAP", "DISTAL_COUNTS_PER_REV", "DISTAL_SIGN"]
@@ -123,35 +124,34 @@ def read_mrd(path: str | Path) -> MrdRun:
     Raises
     ------
     DataError
-        Missing file, a data row without 10 numbers, non-finite values, non-increasing time, or
-        fewer than MIN_ROWS rows (a truncated file); the message names the file (and the line).
+        Missing file, a directory, a file that is not text (UTF-16, binary data: at which byte), a data row
+        without 10 numbers, a value that is not a number or not finite, non-increasing time, or fewer than
+        MIN_ROWS rows (a truncated file); the message names the file, and the line and column (0-based, as in
+        SOURCE.md) where there is one.
     """
     p = Path(path)
-    if not p.is_file():
-        raise DataError(f"{p}: no such file")
-    try:
-        text = p.read_text(errors="replace")
-    except OSError as e:
-        raise DataError(f"{p}: cannot read ({e.strerror})") from None
+    text = read_text(p, replace=True)
     lines = text.splitlines()
     first = next((i for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("%")), len(lines))
-    body = [ln.strip().rstrip(",") for ln in lines[first:] if ln.strip()]
-    for i, ln in enumerate(body):
+    rows = [(i + 1, ln.strip().rstrip(",")) for i, ln in enumerate(lines) if i >= first and ln.strip()]
+    for lineno, ln in rows:
         if ln.count(",") != N_COLUMNS - 1:
-            raise DataError(f"{p}: line {first + i + 1}: expected {N_COLUMNS} comma-separated numbers, "
-                            f"got {ln.count(',') + 1}")
-    if len(body) < MIN_ROWS:
-        raise DataError(f"{p}: {len(body)} data rows, need at least {MIN_ROWS} (truncated file?)")
+            raise DataError(f"{p}:{lineno}: expected {N_COLUMNS} comma-separated numbers, got {ln.count(',') + 1}")
+    if len(rows) < MIN_ROWS:
+        raise DataError(f"{p}: {len(rows)} data rows, need at least {MIN_ROWS} (truncated file?)")
     try:
-        a = np.array(",".join(body).split(","), dtype=float).reshape(-1, N_COLUMNS)
+        a = np.array(",".join(ln for _, ln in rows).split(","), dtype=float).reshape(-1, N_COLUMNS)
     except ValueError:
-        bad = next(i for i, ln in enumerate(body) if not _numbers(ln))
-        raise DataError(f"{p}: line {first + bad + 1}: not a number in {body[bad][:60]!r}") from None
+        lineno, ln = next((k, ln) for k, ln in rows if not _numbers(ln))
+        raise DataError(f"{p}:{lineno}: not a number in {ln[:60]!r}") from None
     if not np.all(np.isfinite(a)):
-        raise DataError(f"{p}: non-finite value in the data rows")
+        r, c = (int(i) for i in np.argwhere(~np.isfinite(a))[0])
+        raise DataError(f"{p}:{rows[r][0]}: column {c}: expected a finite number, got {float(a[r, c])!r}")
     t = a[:, 0]
     if np.any(np.diff(t) <= 0):
-        raise DataError(f"{p}: time is not strictly increasing (row {int(np.argmax(np.diff(t) <= 0)) + 2})")
+        k = int(np.argmax(np.diff(t) <= 0)) + 1
+        raise DataError(f"{p}:{rows[k][0]}: column 0: time {float(t[k])!r} is not after the previous "
+                        f"{float(t[k - 1])!r} (must be strictly increasing)")
     theta_p = a[:, 1] * 2 * math.pi / PROXIMAL_COUNTS_PER_REV
     return MrdRun(name=p.stem, time=t - t[0], theta_p=theta_p, tau_p=a[:, 2] * TORQUE_NM_PER_COUNT,
                   theta_d=DISTAL_SIGN * a[:, 4] * 2 * math.pi / DISTAL_COUNTS_PER_REV,
@@ -168,6 +168,9 @@ def load_mrd_dir(directory: str | Path | None = None, select: str | None = None)
     not exist, no run could be read, or no run matches ``select``.
     """
     d = Path(directory) if directory else default_mrd_dir()
+    if d.is_file():
+        raise DataError(f"{d}: a file, not an MRD folder: give the folder that holds the *.TXT runs "
+                        f"(--runs {d.stem} picks this one)")
     if not d.is_dir():
         raise DataError(f"{d}: MRD folder not found")
     files = sorted(f for f in d.glob("*.TXT") if f.is_file())

@@ -17,7 +17,8 @@ from estimator.offline.spindle_shared import RunData, batch_of, kinematic_ratio,
 from estimator.online.spindle import SpindleParams, first_reversal
 from study.mrd import MrdRun
 from study.mrd_centre import mid_centre_run
-from teleop.errors import ConfigError
+from teleop.errors import ConfigError, DataError
+from teleop.text_files import read_text
 
 __all__ = ["SCORE_FROM_S", "FIT_STEP", "LOAD_SCALING", "run_data", "split_design_gain", "design_gain",
            "parse_calibration", "calibrate"]
@@ -76,11 +77,13 @@ def _gain_from_json(spec: str, path: str) -> float:
     folder's load gain fitted across its loads). Raises ConfigError naming what is missing."""
     import json
     f = Path(path)
-    if not f.is_file():
-        raise ConfigError(f"--calibration {spec}: G in gain=G:RUN must be a number or the JSON of "
-                          f"`teleop analyze --mrd OTHER --json OUT` ({f} not found)")
     try:
-        lg = json.loads(f.read_text())["centre_map"]["load_gain"]
+        text = read_text(f)
+    except DataError as e:
+        raise ConfigError(f"--calibration {spec}: G in gain=G:RUN must be a number or the JSON of "
+                          f"`teleop analyze --mrd OTHER --json OUT` ({e})") from None
+    try:
+        lg = json.loads(text)["centre_map"]["load_gain"]
     except (ValueError, KeyError, TypeError):
         raise ConfigError(f"--calibration {spec}: {f} has no centre_map.load_gain (write it with "
                           "`teleop analyze --mrd OTHER --json OUT`, folder fit on)") from None

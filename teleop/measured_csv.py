@@ -5,7 +5,8 @@ units, and the reader.
 ``#`` lines and blank lines are skipped, then a header line of column names, then comma-separated
 plain numbers (no quoting). Columns ``time`` [s], ``x_in`` [m], ``T_in`` [N] are required, ``x_out``
 [m] and ``T_out`` [N] optional, others kept in :attr:`MeasuredData.extra`. Every problem raises
-:class:`~teleop.errors.DataError` with a one-line message naming file, line (1-based) and column.
+:class:`~teleop.errors.DataError` with a one-line message naming file, line (1-based) and column; a path that
+is no file and a file that is not UTF-8 text are named as such (:mod:`teleop.text_files`).
 The writer is :class:`teleop.recording.CsvRecorder`; :mod:`teleop.recording` re-exports the reader.
 """
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 
 from estimator.data import MeasuredData  # the data type lives in the estimator (floor 0)
 from teleop.errors import DataError
+from teleop.text_files import check_text_head, not_text_error, require_file
 
 __all__ = ["REQUIRED_COLUMNS", "OPTIONAL_COLUMNS", "SI_UNITS", "META_LINE", "COLUMN_NAME", "MeasuredData", "parse_units",
            "read_measured_csv"]
@@ -81,7 +83,7 @@ def _read_head(fh: IO[str], src: str) -> tuple[dict[str, str], list[str], int]:
 
 def _data_lines(path: Path, header_line: int) -> Iterator[tuple[int, str]]:
     """(line number, stripped text) of every data line after the header (slow path, errors only)."""
-    with open(path, encoding="utf-8", errors="replace") as fh:
+    with open(path, encoding="utf-8-sig", errors="replace") as fh:
         for lineno, raw in enumerate(fh, start=1):
             line = raw.strip()
             if lineno > header_line and line and not line.startswith("#"):
@@ -113,7 +115,7 @@ def read_measured_csv(path: str | Path) -> MeasuredData:
     Parameters
     ----------
     path : str or Path
-        The CSV file (format in the module docstring).
+        The CSV file (format in the module docstring), UTF-8 text (a UTF-8 byte-order mark is skipped).
 
     Returns
     -------
@@ -123,31 +125,18 @@ def read_measured_csv(path: str | Path) -> MeasuredData:
     Raises
     ------
     DataError
-        Missing or empty file, no header, missing required column, non-SI ``# units:`` for a
+        Missing file, a directory, a file that is not UTF-8 text (what it looks like: UTF-16, binary data; at
+        which byte), an empty file, no header, missing required column, non-SI ``# units:`` for a
         standard column, wrong field count or non-numeric value (file:line, column), NaN or inf
         (file:line, column), time not strictly increasing (file:line, both values), fewer than
         two rows.
     """
-    path, src = Path(path), str(path)
-    if not path.is_file():
-        raise DataError(f"{src}: no such file")
-    with open(path, encoding="utf-8") as fh:
-        metadata, names, header_line = _read_head(fh, src)
-        missing = [c for c in REQUIRED_COLUMNS if c not in names]
-        if missing:
-            raise DataError(f"{src}: missing column '{missing[0]}' (have: {', '.join(names)})")
-        if "units" in metadata:
-            units = parse_units(metadata["units"], src)
-            for col, unit in units.items():
-                if col in SI_UNITS and col in names and unit != SI_UNITS[col]:
-                    raise DataError(f"{src}: units: column '{col}' is in '{unit}', expected "
-                                    f"'{SI_UNITS[col]}' (convert to SI before loading)")
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
-                table = np.loadtxt(fh, delimiter=",", comments="#", ndmin=2, dtype=np.float64)
-        except ValueError:
-            raise _locate_parse_error(path, src, header_line, names) from None
+    path, src = require_file(path), str(path)
+    check_text_head(path)
+    try:
+        metadata, names, header_line, table = _read_table(path, src)
+    except UnicodeDecodeError:
+        raise not_text_error(path) from None
     n_rows = table.shape[0]
     if n_rows and table.shape[1] != len(names):
         raise _locate_parse_error(path, src, header_line, names)
@@ -173,3 +162,28 @@ def read_measured_csv(path: str | Path) -> MeasuredData:
                         x_out=cols.get("x_out"), T_out=cols.get("T_out"),
                         extra={k: v for k, v in cols.items() if k not in known},
                         metadata=metadata, source=src)
+
+
+def _read_table(path: Path, src: str) -> tuple[dict[str, str], list[str], int, np.ndarray]:
+    """(metadata, column names, header line number, the numbers (n_rows, n_columns)) of the file; DataError for
+    the head, the units and a row that does not parse; ``UnicodeDecodeError`` for bytes that are not UTF-8."""
+    with open(path, encoding="utf-8-sig") as fh:
+        metadata, names, header_line = _read_head(fh, src)
+        missing = [c for c in REQUIRED_COLUMNS if c not in names]
+        if missing:
+            raise DataError(f"{src}: missing column '{missing[0]}' (have: {', '.join(names)})")
+        if "units" in metadata:
+            units = parse_units(metadata["units"], src)
+            for col, unit in units.items():
+                if col in SI_UNITS and col in names and unit != SI_UNITS[col]:
+                    raise DataError(f"{src}: units: column '{col}' is in '{unit}', expected "
+                                    f"'{SI_UNITS[col]}' (convert to SI before loading)")
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
+                table = np.loadtxt(fh, delimiter=",", comments="#", ndmin=2, dtype=np.float64)
+        except UnicodeDecodeError:
+            raise
+        except ValueError:
+            raise _locate_parse_error(path, src, header_line, names) from None
+    return metadata, names, header_line, table

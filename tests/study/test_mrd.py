@@ -86,7 +86,7 @@ def test_bad_and_truncated_files_are_one_line_each(tmp_path):
     runs, bad = load_mrd_dir(tmp_path)
     assert [r.name for r in runs] == ["00"]
     assert len(bad) == 2 and "01.TXT" in bad[0] and "truncated" in bad[0]
-    assert "02.TXT" in bad[1] and "line 2" in bad[1] and "\n" not in "".join(bad)
+    assert "02.TXT:2: expected 10 comma-separated numbers" in bad[1] and "\n" not in "".join(bad)
     with pytest.raises(DataError, match="not found"):
         load_mrd_dir(tmp_path / "nowhere")
     (tmp_path / "00.TXT").unlink()

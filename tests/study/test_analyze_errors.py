@@ -1,0 +1,88 @@
+"""`teleop analyze` on input that is wrong: every error is one line on stderr naming the file (and the line and
+column where there is one), exit status 2."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from live.cli import main
+
+ROWS = 50
+
+
+def csv_text(n: int = ROWS) -> str:
+    t = np.arange(n) * 1e-3
+    rows = "".join(f"{t[i]:.3f},{1e-4 * i:.6g},{5 + 0.01 * i:.6g},{1e-4 * i:.6g},{4 + 0.01 * i:.6g}\n"
+                   for i in range(n))
+    return "# rig: synthetic\ntime,x_in,T_in,x_out,T_out\n" + rows
+
+
+def refused(argv: list[str], capsys) -> str:
+    """The one line ``teleop analyze ARGV`` prints on stderr before it exits with status 2 (nothing on stdout)."""
+    assert main(["analyze", *argv]) == 2
+    cap = capsys.readouterr()
+    lines = cap.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("teleop: error: ") and cap.out == "", cap.err
+    return lines[0].removeprefix("teleop: error: ")
+
+
+def test_a_directory_says_it_is_a_directory(tmp_path, capsys):
+    assert refused([str(tmp_path)], capsys) == f"{tmp_path}: is a directory, not a file"
+    assert refused([str(tmp_path / "none.csv")], capsys) == f"{tmp_path / 'none.csv'}: no such file"
+    assert refused(["--kaist", str(tmp_path), "--shared-params", str(tmp_path)], capsys).startswith(
+        "KAIST data not found at")
+    f = tmp_path / "r.csv"
+    f.write_text(csv_text())
+    assert refused(["--kaist", str(f)], capsys).startswith(f"{f}: a file, not a folder: --kaist takes the folder")
+    assert refused(["--mrd", str(f)], capsys).startswith(f"{f}: a file, not an MRD folder")
+    assert refused([str(f), "--route", str(tmp_path)], capsys) == f"--route {tmp_path}: is a directory, not a file"
+
+
+@pytest.mark.parametrize("encode, what", [
+    (lambda s: s.encode("utf-16"), "looks like UTF-16 text, byte-order mark at byte 0); save it as UTF-8"),
+    (lambda s: s.encode("utf-16-le"), "looks like UTF-16 text, NUL bytes at every other byte from byte 1); save it"),
+    (lambda s: bytes(range(256)) * 4, "looks like binary data, byte 0x00 at byte 0); the reader takes text"),
+])
+def test_utf16_and_binary_files_are_named_as_such(tmp_path, capsys, encode, what):
+    f = tmp_path / "sine_config_60.txt"
+    f.write_bytes(encode(csv_text()))
+    assert refused([str(f.with_name("r.csv"))], capsys).endswith("no such file")
+    f.with_name("r.csv").write_bytes(f.read_bytes())
+    expected = f"{f.with_name('r.csv')}: not a UTF-8 text file ({what}"
+    assert refused([str(f.with_name("r.csv"))], capsys).startswith(expected)
+    assert refused([str(f.with_name("r.csv")), "--route", str(f.with_name("r.csv"))], capsys).startswith(
+        f"--route {expected}")
+    assert refused([str(f.with_name("r.csv")), "--bend", "60"], capsys).startswith(expected)
+    assert refused(["--kaist", str(tmp_path)], capsys).startswith(
+        f"no readable KAIST recording: {f}: not a UTF-8 text file ({what}")
+
+
+def test_a_byte_of_another_encoding_names_its_line(tmp_path, capsys):
+    f = tmp_path / "r.csv"
+    lines = csv_text().encode().splitlines(keepends=True)
+    lines[7] = lines[7].replace(b"\n", b"\xb0\n")
+    f.write_bytes(b"".join(lines))
+    assert refused([str(f)], capsys) == (
+        f"{f}:8: not a UTF-8 text file (byte 0xb0 at byte {sum(map(len, lines[:8])) - 2} is not UTF-8: text in "
+        "another encoding such as Latin-1?); save it as UTF-8")
+    f.write_bytes(b"\xef\xbb\xbf" + csv_text(3000).encode())      # a UTF-8 byte-order mark is read past
+    assert main(["analyze", str(f)]) == 0 and capsys.readouterr().out.startswith(f"{f}: 3000 samples")
+
+
+def test_mrd_runs_that_are_not_text_or_not_finite_are_named_with_their_line(tmp_path):
+    from study.mrd import read_mrd
+    from teleop.errors import DataError
+    f = tmp_path / "00.TXT"
+    rows = [f"{0.001 * i:.3f},{i},0,0,{i},0,0.1,0,0,0" for i in range(2100)]
+    f.write_text("%header\n" + "\n".join(rows) + "\n")
+    f.write_bytes(f.read_text().encode("utf-16"))
+    with pytest.raises(DataError, match=r"00\.TXT: not a UTF-8 text file \(looks like UTF-16 text"):
+        read_mrd(f)
+    rows[5] = rows[5].replace(",0.1,", ",inf,")
+    f.write_text("%header\n" + "\n".join(rows) + "\n")
+    with pytest.raises(DataError, match=r"00\.TXT:7: column 6: expected a finite number, got inf$"):
+        read_mrd(f)
+    rows[5], rows[9] = rows[5].replace(",inf,", ",0.1,"), "0.001" + rows[9][rows[9].index(","):]
+    f.write_text("%header\n" + "\n".join(rows) + "\n")
+    with pytest.raises(DataError, match=r"00\.TXT:11: column 0: time 0\.001 is not after the previous 0\.008"):
+        read_mrd(f)
