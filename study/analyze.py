@@ -50,6 +50,7 @@ from study.kaist_report import write_kaist_figures, write_kaist_report
 from study.kaist_summary import format_kaist
 from study.report import format_summary, split_text, write_report
 from teleop.errors import ConfigError, DataError
+from teleop.measured_csv import values_error
 from teleop.recording import MeasuredData, read_measured_csv
 from teleop.text_files import check_text_head, require_file
 
@@ -219,7 +220,8 @@ def diagnose_file(path: str | Path, train_fraction: float = 0.6,
     Raises
     ------
     DataError
-        Missing or malformed file, neither T_out nor x_out, a recording too short to diagnose.
+        Missing or malformed file, neither T_out nor x_out, a recording too short to diagnose, values that make
+        the diagnosis' arithmetic fail (the line and column of the value farthest out of its column).
     ConfigError
         ``train_fraction`` outside [0.3, 0.9].
     """
@@ -229,7 +231,11 @@ def diagnose_file(path: str | Path, train_fraction: float = 0.6,
     try:
         result = diagnose_recording(data, train_fraction=train_fraction, wrap_shape=wrap_shape,
                                     progress=len(data) >= PROGRESS_SAMPLES if progress is None else progress)
+    except ArithmeticError as e:                     # a division by zero, an overflow: values far out of range
+        raise values_error(data, e) from None
     except ValueError as e:
+        if "infs or NaNs" in str(e):                 # an overflow that reached a linear-algebra routine as inf
+            raise values_error(data, e) from None
         raise DataError(str(e) if str(e).startswith(data.source) else f"{data.source}: {e}") from None
     result.extra.update({"file": str(path), "n_samples": len(data), "duration_s": data.duration})
     return result, data

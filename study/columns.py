@@ -49,6 +49,11 @@ REQUIRED = ("time", "command", "angle", "T_a", "T_b")
 OPTIONAL = ("velocity_cmd", "motor_a", "motor_b")
 #: A trailing segment after a time reset is cut off when it holds at most this share of the rows.
 CUT_FRACTION = 0.2
+#: Largest |value| of each required field (angles in degrees; a ``units=rad`` map's are converted): beyond it the
+#: value is no time stamp [s], joint angle or tension [N] of an instrument (a corrupt row), and it would overflow
+#: the analysis' arithmetic.
+MAX_MAGNITUDE = {"time": 1e10, "command": 1e4, "angle": 1e4, "T_a": 1e6, "T_b": 1e6}
+_KIND = {"time": "time stamp", "command": "joint angle", "angle": "joint angle", "T_a": "tension", "T_b": "tension"}
 
 
 @dataclass(frozen=True)
@@ -213,6 +218,18 @@ def _clean_time(a: np.ndarray, lines: np.ndarray, src: str, notes: list[str]) ->
     return a
 
 
+def _check_magnitude(a: np.ndarray, lines: np.ndarray, cmap: ColumnMap, src: str) -> None:
+    """DataError naming the line and column of the first value of a required field beyond :data:`MAX_MAGNITUDE`."""
+    for name in REQUIRED:
+        col, unit = cmap.columns[name], {"time": "s", "T_a": "N", "T_b": "N"}.get(name, cmap.units)
+        limit = MAX_MAGNITUDE[name] * (math.pi / 180.0 if unit == "rad" else 1.0)
+        big = np.flatnonzero(np.abs(a[:, col]) > limit)
+        if big.size:
+            raise DataError(f"{src}:{lines[big[0]]}: column {col} ({name}): {float(a[big[0], col])!r} {unit} is "
+                            f"beyond any {_KIND[name]} (|{name}| <= {limit:g} {unit}): a corrupt row or another unit; "
+                            "fix or remove that row")
+
+
 def read_table(path: str | Path, column_map: ColumnMap | None = None) -> Table:
     """Read a numeric table of an antagonistic-pair recording with a column map.
 
@@ -232,8 +249,9 @@ def read_table(path: str | Path, column_map: ColumnMap | None = None) -> Table:
     ------
     DataError
         Missing or unreadable file, a directory, a file that is not text (UTF-16, binary data: at which byte),
-        a malformed row (file:line, column), a mapped column beyond the row width, a required column all
-        zero, fewer than 2 distinct time stamps.
+        a malformed row (file:line, column), a mapped column beyond the row width, a required field's value
+        beyond :data:`MAX_MAGNITUDE` (file:line, column), a required column all zero, fewer than 2 distinct
+        time stamps.
     """
     path = Path(path)
     src = str(path)
@@ -250,6 +268,7 @@ def read_table(path: str | Path, column_map: ColumnMap | None = None) -> Table:
     if too_far:
         raise DataError(f"{src}: the rows have {width} columns; the column map asks for "
                         + ", ".join(f"{k}={v}" for k, v in too_far.items()))
+    _check_magnitude(a, lines, cmap, src)
     a = _clean_time(a, lines, src, notes)
     zero = [j for j in range(width) if not np.any(a[:, j])]
     if zero:

@@ -23,13 +23,18 @@ from estimator.data import MeasuredData  # the data type lives in the estimator 
 from teleop.errors import DataError
 from teleop.text_files import check_text_head, not_text_error, require_file
 
-__all__ = ["REQUIRED_COLUMNS", "OPTIONAL_COLUMNS", "SI_UNITS", "META_LINE", "COLUMN_NAME", "MeasuredData", "parse_units",
-           "read_measured_csv"]
+__all__ = ["REQUIRED_COLUMNS", "OPTIONAL_COLUMNS", "SI_UNITS", "MAX_MAGNITUDE", "META_LINE", "COLUMN_NAME", "MeasuredData", "parse_units",
+           "read_measured_csv", "values_error"]
 
 REQUIRED_COLUMNS = ("time", "x_in", "T_in")
 OPTIONAL_COLUMNS = ("x_out", "T_out")
 #: SI unit of each standard column, written as ``# units:`` metadata and checked on load.
 SI_UNITS = {"time": "s", "x_in": "m", "T_in": "N", "x_out": "m", "T_out": "N"}
+
+#: Largest |value| of each standard column, in its SI unit: beyond it the value is no time stamp, tendon position
+#: or tension of an instrument (another unit, a corrupt row), and it would overflow the diagnosis' arithmetic.
+MAX_MAGNITUDE = {"time": 1e10, "x_in": 10.0, "T_in": 1e6, "x_out": 10.0, "T_out": 1e6}
+_KIND = {"s": "time stamp", "m": "tendon position", "N": "tension"}
 
 #: a ``# key: value`` metadata line
 META_LINE = re.compile(r"#\s*([A-Za-z_][\w.\-]*)\s*:\s?(.*)$")
@@ -120,7 +125,8 @@ def read_measured_csv(path: str | Path) -> MeasuredData:
     Returns
     -------
     MeasuredData
-        Arrays of shape (n_samples,), n_samples >= 2, all finite, ``time`` strictly increasing.
+        Arrays of shape (n_samples,), n_samples >= 2, all finite, the standard columns within
+        :data:`MAX_MAGNITUDE` [SI], ``time`` strictly increasing.
 
     Raises
     ------
@@ -128,8 +134,8 @@ def read_measured_csv(path: str | Path) -> MeasuredData:
         Missing file, a directory, a file that is not UTF-8 text (what it looks like: UTF-16, binary data; at
         which byte), an empty file, no header, missing required column, non-SI ``# units:`` for a
         standard column, wrong field count or non-numeric value (file:line, column), NaN or inf
-        (file:line, column), time not strictly increasing (file:line, both values), fewer than
-        two rows.
+        (file:line, column), a standard column's value beyond :data:`MAX_MAGNITUDE` (file:line, column),
+        time not strictly increasing (file:line, both values), fewer than two rows.
     """
     path, src = require_file(path), str(path)
     check_text_head(path)
@@ -142,12 +148,7 @@ def read_measured_csv(path: str | Path) -> MeasuredData:
         raise _locate_parse_error(path, src, header_line, names)
     if n_rows < 2:
         raise DataError(f"{src}: {n_rows} data row(s), need at least 2")
-    bad = ~np.isfinite(table)
-    if bad.any():
-        r_bad, c_bad = (int(i) for i in np.argwhere(bad)[0])
-        line = _line_of_row(path, header_line, r_bad)
-        raise DataError(f"{src}:{line}: column {c_bad + 1} ('{names[c_bad]}'): expected a finite "
-                        f"number, got {float(table[r_bad, c_bad])!r}")
+    _check_values(table, names, path, src, header_line)
     cols = {name: np.ascontiguousarray(table[:, j]) for j, name in enumerate(names)}
     t = cols["time"]
     step = np.diff(t)
@@ -162,6 +163,23 @@ def read_measured_csv(path: str | Path) -> MeasuredData:
                         x_out=cols.get("x_out"), T_out=cols.get("T_out"),
                         extra={k: v for k, v in cols.items() if k not in known},
                         metadata=metadata, source=src)
+
+
+def _check_values(table: np.ndarray, names: list[str], path: Path, src: str, header_line: int) -> None:
+    """DataError naming the line and column of the first value that is not finite, or beyond
+    :data:`MAX_MAGNITUDE` in a standard column."""
+    limit = np.array([MAX_MAGNITUDE.get(n, np.inf) for n in names])
+    bad = ~np.isfinite(table) | (np.abs(table) > limit)
+    if not bad.any():
+        return
+    r, c = (int(i) for i in np.argwhere(bad)[0])
+    v, name = float(table[r, c]), names[c]
+    where = f"{src}:{_line_of_row(path, header_line, r)}: column {c + 1} ('{name}')"
+    if not np.isfinite(v):
+        raise DataError(f"{where}: expected a finite number, got {v!r}")
+    unit = SI_UNITS[name]
+    raise DataError(f"{where}: {v!r} {unit} is beyond any {_KIND[unit]} (|{name}| <= {limit[c]:g} {unit}): a value "
+                    "in other units or a corrupt row; fix or remove that row")
 
 
 def _read_table(path: Path, src: str) -> tuple[dict[str, str], list[str], int, np.ndarray]:
@@ -187,3 +205,32 @@ def _read_table(path: Path, src: str) -> tuple[dict[str, str], list[str], int, n
         except ValueError:
             raise _locate_parse_error(path, src, header_line, names) from None
     return metadata, names, header_line, table
+
+
+def values_error(data: MeasuredData, exc: BaseException) -> DataError:
+    """The DataError for a recording whose values make a computation on it fail (``exc``: an overflow, a division
+    by zero, an inf where a finite number was needed), naming the file and the line and column of the value
+    farthest out of its column (distance from the column's median in units of its median absolute deviation, or
+    of its range where that is 0), as the value to look at."""
+    cols = {k: np.asarray(a) for k, a in data.columns().items() if k in SI_UNITS and k != "time"}
+    what = f"the diagnosis fails on this file's values ({type(exc).__name__}: {' '.join(str(exc).split())})"
+    if not cols:
+        return DataError(f"{data.source}: {what}")
+    score, row, name = max((*_outlier(a), k) for k, a in cols.items())
+    v, unit = float(cols[name][row]), SI_UNITS[name]
+    try:
+        with open(data.source, encoding="utf-8-sig", errors="replace") as fh:
+            _, names, header_line = _read_head(fh, data.source)
+        where = f"{data.source}:{_line_of_row(Path(data.source), header_line, row)}: column {names.index(name) + 1}"
+    except (OSError, ValueError):
+        where = f"{data.source}: data row {row + 1}, column"
+    return DataError(f"{where} ('{name}'): {what}; {name} = {v:g} {unit} here stands {score:.3g} times the "
+                     "column's spread from its median: fix or remove that row")
+
+
+def _outlier(a: np.ndarray) -> tuple[float, int]:
+    """(how far out, row) of the value of ``a`` farthest from its median, in units of the column's spread."""
+    dev = np.abs(a - np.median(a))
+    spread = float(np.median(dev)) or float(np.ptp(a)) or 1.0
+    row = int(np.argmax(dev))
+    return float(dev[row]) / spread, row

@@ -27,15 +27,22 @@ def refused(argv: list[str], capsys) -> str:
 
 
 def test_a_directory_says_it_is_a_directory(tmp_path, capsys):
-    assert refused([str(tmp_path)], capsys) == f"{tmp_path}: is a directory, not a file"
-    assert refused([str(tmp_path / "none.csv")], capsys) == f"{tmp_path / 'none.csv'}: no such file"
-    assert refused(["--kaist", str(tmp_path), "--shared-params", str(tmp_path)], capsys).startswith(
-        "KAIST data not found at")
+    from study.analyze import configured_route
+    from study.kaist import find_kaist_dir
+    from study.mrd import load_mrd_dir
+    from teleop.errors import ConfigError, DataError
+    msg = refused([str(tmp_path)], capsys)             # the CLI's own check of its path arguments may come first
+    assert str(tmp_path) in msg and "is a directory" in msg
+    assert refused([str(tmp_path / "none.csv")], capsys).endswith(f"{tmp_path / 'none.csv'}: no such file")
     f = tmp_path / "r.csv"
     f.write_text(csv_text())
-    assert refused(["--kaist", str(f)], capsys).startswith(f"{f}: a file, not a folder: --kaist takes the folder")
-    assert refused(["--mrd", str(f)], capsys).startswith(f"{f}: a file, not an MRD folder")
-    assert refused([str(f), "--route", str(tmp_path)], capsys) == f"--route {tmp_path}: is a directory, not a file"
+    with pytest.raises(DataError, match=r"r\.csv: a file, not a folder: --kaist takes the folder"):
+        find_kaist_dir(f)
+    with pytest.raises(DataError, match=r"r\.csv: a file, not an MRD folder: give the folder that holds the \*\.TXT "
+                                        r"runs \(--runs r picks this one\)$"):
+        load_mrd_dir(f)
+    with pytest.raises(ConfigError, match=rf"^--route {tmp_path}: is a directory, not a file$"):
+        configured_route(tmp_path)
 
 
 @pytest.mark.parametrize("encode, what", [
@@ -86,3 +93,58 @@ def test_mrd_runs_that_are_not_text_or_not_finite_are_named_with_their_line(tmp_
     f.write_text("%header\n" + "\n".join(rows) + "\n")
     with pytest.raises(DataError, match=r"00\.TXT:11: column 0: time 0\.001 is not after the previous 0\.008"):
         read_mrd(f)
+
+
+def with_value(text: str, row: int, col: int, value: str) -> str:
+    """``text`` (a CSV made by csv_text) with data row ``row`` (0-based; line row + 3) column ``col`` set."""
+    lines = text.splitlines()
+    fields = lines[row + 2].split(",")
+    fields[col] = value
+    lines[row + 2] = ",".join(fields)
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("col, value, words", [
+    (2, "1e308", "column 3 ('T_in'): 1e+308 N is beyond any tension (|T_in| <= 1e+06 N): a value in other units "
+                 "or a corrupt row; fix or remove that row"),
+    (4, "-1e200", "column 5 ('T_out'): -1e+200 N is beyond any tension (|T_out| <= 1e+06 N)"),
+    (1, "100", "column 2 ('x_in'): 100.0 m is beyond any tendon position (|x_in| <= 10 m)"),
+    (0, "1e308", "column 1 ('time'): 1e+308 s is beyond any time stamp (|time| <= 1e+10 s)"),
+    (2, "inf", "column 3 ('T_in'): expected a finite number, got inf"),
+    (3, "-Infinity", "column 4 ('x_out'): expected a finite number, got -inf"),
+])
+def test_a_value_out_of_range_names_its_line_and_column(tmp_path, capsys, col, value, words):
+    f = tmp_path / "r.csv"
+    f.write_text(with_value(csv_text(), 20, col, value))
+    assert refused([str(f)], capsys).startswith(f"{f}:23: {words}")
+
+
+def test_values_that_break_the_diagnosis_name_the_farthest_value(tmp_path, capsys, monkeypatch):
+    """Values within range that still make the arithmetic fail (an overflow, a division by zero) are named by the
+    value farthest out of its column."""
+    from study import analyze
+    f = tmp_path / "r.csv"
+    f.write_text(with_value(csv_text(), 30, 4, "9e5"))
+    for exc in (ZeroDivisionError("division by zero"), ValueError("array must not contain infs or NaNs"),
+                OverflowError((34, "Numerical result out of range"))):
+        def fail(*args, exc=exc, **kw):
+            raise exc
+        monkeypatch.setattr(analyze, "diagnose_recording", fail)
+        msg = refused([str(f)], capsys)
+        assert msg.startswith(f"{f}:33: column 5 ('T_out'): the diagnosis fails on this file's values "
+                              f"({type(exc).__name__}: {' '.join(str(exc).split())}); T_out = 900000 N here stands ")
+        assert msg.endswith("times the column's spread from its median: fix or remove that row")
+
+
+def test_a_kaist_value_out_of_range_names_its_line_and_column(tmp_path, capsys):
+    f = tmp_path / "pair.txt"
+    rows = [f"{0.01 * i:.2f}, {i % 7}, 0, {i % 5}, 5, 5, 0, 0" for i in range(40)]
+    rows[12] = rows[12].replace(", 5, 5,", ", 5, 1e300,")
+    f.write_text("\n".join(rows) + "\n")
+    assert refused([str(f), "--bend", "0"], capsys) == (
+        f"{f}:13: column 5 (T_b): 1e+300 N is beyond any tension (|T_b| <= 1e+06 N): a corrupt row or another "
+        "unit; fix or remove that row")
+    f.write_text("\n".join(rows).replace(", 1e300,", ", 5,").replace("0.12, 5", "0.12, 2e4") + "\n")
+    assert refused([str(f), "--bend", "0", "--columns", "time=0,command=1,angle=3,T_a=4,T_b=5,units=rad"],
+                   capsys) == (f"{f}:13: column 1 (command): 20000.0 rad is beyond any joint angle (|command| <= "
+                               "174.533 rad): a corrupt row or another unit; fix or remove that row")
