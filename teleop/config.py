@@ -1,6 +1,7 @@
 """Strict YAML loading of the configuration (the schema and the range table are :mod:`teleop.schema`).
 
-Loading merges a file over the defaults and rejects unknown keys, wrong types and out-of-range
+Loading reads a file with :func:`teleop.config_yaml.read_yaml` (YAML 1.2 core scalars, limits on size,
+nesting and aliases), merges it over the defaults and rejects unknown keys, wrong types and out-of-range
 values with a :class:`ConfigError` that names the file and the dotted key. Every schema name is
 re-exported here, so ``from teleop.config import Config, RigConfig, ...`` keeps working.
 """
@@ -16,6 +17,7 @@ from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
 import yaml
 
 from teleop.config_checks import MAX_JOINTS, check_joints
+from teleop.config_yaml import read_yaml
 from teleop.effects_config import in_range, merge_effects
 from teleop.errors import ConfigError
 from teleop.schema import (
@@ -72,25 +74,6 @@ __all__ = [  # the schema's names (teleop.schema) and the loader's
 _INF_OK = {"sheath.runs[].radius", "instrument.joints[].tendons.a.runs[].radius",
            "instrument.joints[].tendons.b.runs[].radius"}
 _NON_SI = ("_mm", "_deg", "_ms", "_hz")
-
-
-class _Loader(yaml.SafeLoader):
-    """YAML 1.2 core scalars: ``2.0e6`` and ``1e-3`` are floats, only true/false are booleans
-    (``off``, ``no`` stay strings), integers are decimal (``010`` is ten)."""
-
-
-_Loader.yaml_implicit_resolvers = {
-    ch: [(tag, rx) for tag, rx in rs if tag not in ("tag:yaml.org,2002:bool", "tag:yaml.org,2002:float",
-                                                   "tag:yaml.org,2002:int")]
-    for ch, rs in yaml.SafeLoader.yaml_implicit_resolvers.items()}
-_Loader.add_implicit_resolver("tag:yaml.org,2002:bool", re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"),
-                              list("tTfF"))
-_Loader.add_implicit_resolver("tag:yaml.org,2002:int", re.compile(r"^[-+]?[0-9]+$"), list("-+0123456789"))
-_Loader.add_implicit_resolver(
-    "tag:yaml.org,2002:float",
-    re.compile(r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?"
-               r"|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$"), list("-+0123456789."))
-_Loader.add_constructor("tag:yaml.org,2002:int", lambda loader, node: int(loader.construct_scalar(node), 10))
 
 
 class _Ctx:
@@ -237,42 +220,6 @@ def _check(cfg: Config, ctx: _Ctx, bounds: bool = True) -> Config:
     return cfg
 
 
-def _line_map(node: Any, path: str, out: dict[str, int], ctx: _Ctx) -> None:
-    """Record the line of each dotted key; reject duplicate keys (PyYAML keeps the last silently)."""
-    if isinstance(node, yaml.MappingNode):
-        seen = set()
-        for k, v in node.value:
-            p = f"{path}.{k.value}" if path else str(k.value)
-            if k.value in seen:
-                raise ConfigError(f"{ctx.source}:{k.start_mark.line + 1}: duplicate key '{p}'")
-            seen.add(k.value)
-            out[p] = k.start_mark.line + 1
-            _line_map(v, p, out, ctx)
-    elif isinstance(node, yaml.SequenceNode):
-        for i, item in enumerate(node.value):
-            out[f"{path}[{i}]"] = item.start_mark.line + 1
-            _line_map(item, f"{path}[{i}]", out, ctx)
-
-
-def _read_yaml(path: Path) -> tuple[Any, dict[str, int]]:
-    source = str(path)
-    if not path.is_file():
-        raise ConfigError(f"{source}: config file not found (looked for {path.resolve()})")
-    try:
-        text = path.read_text(encoding="utf-8")
-        lines: dict[str, int] = {}
-        node = yaml.compose(text, Loader=_Loader)
-        _line_map(node, "", lines, _Ctx(source))
-        return yaml.load(text, Loader=_Loader), lines
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None) or getattr(e, "context_mark", None)
-        where = f"{source}:{mark.line + 1}:{mark.column + 1}" if mark else source
-        problem = getattr(e, "problem", None) or str(e)
-        raise ConfigError(f"{where}: YAML syntax error: {problem}") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ConfigError(f"{source}: cannot read config file ({e})") from None
-
-
 def _expand_dotted(overrides: dict) -> dict:
     """``{"rig.rate_hz": 500}`` -> ``{"rig": {"rate_hz": 500}}``, deep-merged with nested entries."""
     out: dict = {}
@@ -333,13 +280,14 @@ def load_config(path: str | Path | None = None, overrides: dict | None = None) -
     Raises
     ------
     ConfigError
-        Missing or unreadable file; YAML syntax error (file, line, column); duplicate key; unknown key
-        (with the closest known key); wrong type (key, expected type, value); value out of range (key,
-        range, unit); invalid instrument id or endpoint. Messages start with ``<file>:<line>:``.
+        Missing, unreadable or oversized file, or a directory; YAML syntax error or a limit of
+        :mod:`teleop.config_yaml` passed (file, line, column); duplicate key; unknown key (with the closest
+        known key); wrong type (key, expected type, value); value out of range (key, range, unit); invalid
+        instrument id or endpoint. Messages start with ``<file>:<line>:``.
     """
     cfg = Config()
     if path is not None:
-        data, lines = _read_yaml(Path(path))
+        data, lines = read_yaml(Path(path))
         ctx = _Ctx(str(path), lines)
         cfg = _check(_merge(Config, cfg, data, "", ctx), ctx, bounds=not overrides)  # overrides may waive
     if overrides:
@@ -370,5 +318,5 @@ def write_config(cfg: Config, path: str | Path) -> Path:
     path.write_text(text + yaml.safe_dump(config_to_dict(cfg), sort_keys=False), encoding="utf-8")
     return path
 
-read_yaml, merge_dataclass, ErrorContext = _read_yaml, _merge, _Ctx  # for the other strict YAML files (teleop.tools)
+merge_dataclass, ErrorContext = _merge, _Ctx  # for the other strict YAML files (teleop.tools; read_yaml: teleop.config_yaml)
 check_config = _check          # the checks of one whole config, for files that hold several (teleop.arms)

@@ -171,8 +171,8 @@ def test_out_of_range_values_name_key_and_range(tmp_path, text, match):
 def test_missing_file_names_the_path(tmp_path):
     with pytest.raises(ConfigError, match=re.escape(f"{tmp_path / 'nope.yaml'}: config file not found")):
         load_config(tmp_path / "nope.yaml")
-    with pytest.raises(ConfigError, match="config file not found"):
-        load_config(tmp_path)                                       # a directory
+    with pytest.raises(ConfigError, match=re.escape(f"{tmp_path}: is a directory; expected a config file")):
+        load_config(tmp_path)
 
 
 def test_yaml_syntax_error_names_file_and_line(tmp_path):
