@@ -195,6 +195,43 @@ def _cmd_master(args: argparse.Namespace) -> int:
     return run_master(args)
 
 
+# ---- path arguments ------------------------------------------------------------------------------
+
+#: (argument's dest, its flag, "file" read or written / "dir" written into or read from, the commands it has
+#: that meaning in: None every command that has it)
+PATH_ARGS: tuple[tuple[str, str, str, tuple[str, ...] | None], ...] = (
+    ("config", "--config", "file", None), ("run_dir", "--run-dir", "dir", None),
+    ("recording", "--recording", "file", None), ("journals", "--journals", "dir", None),
+    ("repair", "--repair", "dir", None), ("out", "--out", "file", None), ("rrd", "--rrd", "file", None),
+    ("json", "--json", "file", None), ("calibration", "--calibration", "file", ("replay",)),
+    ("file", "FILE", "file", ("analyze",)), ("route", "--route", "file", ("analyze",)),
+    ("kaist", "--kaist", "dir", ("analyze",)), ("mrd", "--mrd", "dir", ("analyze",)),
+    ("report", "--report", "dir", ("analyze",)), ("figures", "--figures", "dir", ("analyze",)))
+
+
+def path_args_problem(args: argparse.Namespace) -> str | None:
+    """The first argument of ``args`` that cannot be right, as ``<flag> <value>: <what is wrong>``; None: none.
+
+    A duration (``--max-duration``, ``--timeout``) that is negative or not a number, and a path argument of
+    :data:`PATH_ARGS` of the wrong kind (a directory for a file, a file for a directory:
+    :func:`teleop.config_paths.path_problem`)."""
+    import math
+
+    from teleop.config_paths import path_problem
+    for dest, flag in (("max_duration", "--max-duration"), ("timeout", "--timeout")):
+        seconds = getattr(args, dest, None)
+        if isinstance(seconds, float) and (math.isnan(seconds) or seconds < 0):
+            return f"{flag} {seconds!r}: expected a number of seconds >= 0"
+    for dest, flag, want, commands in PATH_ARGS:
+        value = getattr(args, dest, None)
+        if not isinstance(value, str) or not value or (commands is not None and args.command not in commands):
+            continue
+        problem = path_problem(value, "file" if want == "file" else "dir")
+        if problem is not None:
+            return f"{flag} {value}: {problem}"
+    return None
+
+
 # ---- entry point ---------------------------------------------------------------------------------
 
 def main(argv: list[str] | None = None) -> int:
@@ -208,6 +245,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.func is None:
         print(f"{PROG}: error: {args.command} is not available in this build", file=sys.stderr)
+        return 2
+    problem = path_args_problem(args)       # before any config is read or any process started
+    if problem is not None:
+        print(f"{PROG}: error: {problem}", file=sys.stderr)
         return 2
     if args.command in ("record", "calibrate", "bridge") and getattr(args, "config", None):
         from teleop.arms import is_bimanual

@@ -1,8 +1,9 @@
 """Strict YAML loading of the configuration (the schema and the range table are :mod:`teleop.schema`).
 
 Loading reads a file with :func:`teleop.config_yaml.read_yaml` (YAML 1.2 core scalars, limits on size,
-nesting and aliases), merges it over the defaults and rejects unknown keys, wrong types and out-of-range
-values with a :class:`ConfigError` that names the file and the dotted key. Every schema name is
+nesting and aliases), merges it over the defaults and rejects unknown keys, wrong types, out-of-range
+values and paths of the wrong kind (:mod:`teleop.config_paths`) with a :class:`ConfigError` that names the
+file and the dotted key. Every schema name is
 re-exported here, so ``from teleop.config import Config, RigConfig, ...`` keeps working.
 """
 from __future__ import annotations
@@ -194,6 +195,7 @@ def _merge(cls: Any, base: Any, data: Any, path: str, ctx: _Ctx) -> Any:
 def _check(cfg: Config, ctx: _Ctx, bounds: bool = True) -> Config:
     """Checks beyond one value's type and range; with ``bounds`` the hard bounds (teleop/safety_bounds.py)."""
     from teleop.config_files import check_tool_file
+    from teleop.config_paths import check_paths
     from teleop.keys import validate_instrument_id
     from teleop.safety_bounds import check_bounds
     try:
@@ -201,6 +203,7 @@ def _check(cfg: Config, ctx: _Ctx, bounds: bool = True) -> Config:
     except ConfigError as e:
         raise ctx.error("instrument.id", str(e)) from None
     check_tool_file(cfg.instrument.tool, "instrument.tool", ctx.error)
+    check_paths(cfg, ctx.error)
     for name in ("listen", "connect"):
         for i, ep in enumerate(getattr(cfg.transport, name)):
             if not re.fullmatch(r"[a-z0-9]+/\S+", ep):
@@ -283,7 +286,8 @@ def load_config(path: str | Path | None = None, overrides: dict | None = None) -
         Missing, unreadable or oversized file, or a directory; YAML syntax error or a limit of
         :mod:`teleop.config_yaml` passed (file, line, column); duplicate key; unknown key (with the closest
         known key); wrong type (key, expected type, value); value out of range (key, range, unit); invalid
-        instrument id or endpoint. Messages start with ``<file>:<line>:``.
+        instrument id or endpoint; a path of the wrong kind (a directory for a file or a file for a
+        directory). Messages start with ``<file>:<line>:``.
     """
     cfg = Config()
     if path is not None:

@@ -48,6 +48,8 @@ def tool_file(name_or_path: str | Path) -> Path:
     s = str(name_or_path)
     tools = configs_dir() / "tools"
     p = tools / f"{s}.yaml" if re.fullmatch(r"[A-Za-z0-9_-]+", s) else Path(s)
+    if p.is_dir():
+        raise ConfigError(f"tool {s!r}: is a directory; expected a tool file (configs/tools/<NAME>.yaml)")
     if not p.is_file():
         shipped = ", ".join(sorted(f.stem for f in tools.glob("*.yaml"))) or "none"
         raise ConfigError(f"tool {s!r}: no such tool file ({p}); shipped tools: {shipped}")

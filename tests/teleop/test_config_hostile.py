@@ -1,5 +1,6 @@
 """Hostile and absurd config files end in one ConfigError line naming the file (and its line, column and key where
-there is one) within a second: the reader's limits (teleop/config_yaml.py).
+there is one) within a second: the reader's limits (teleop/config_yaml.py) and the kinds of the path keys
+(teleop/config_paths.py).
 
 The elapsed time of each load is asserted below a second: the limits apply while the file is read, so that is a
 property of the limits, not a benchmark."""
@@ -13,6 +14,7 @@ import pytest
 
 from teleop.arms import is_bimanual, load_arms
 from teleop.config import load_config
+from teleop.config_paths import DIR_KEYS, FILE_KEYS
 from teleop.config_yaml import MAX_ALIASES, MAX_BYTES, MAX_DEPTH, MAX_INT_DIGITS, MAX_NODES
 from teleop.errors import ConfigError
 
@@ -137,3 +139,28 @@ def test_a_file_above_the_size_cap_is_refused_before_parsing(tmp_path, size):
 def test_the_costliest_files_under_the_cap_end_within_a_second(tmp_path, text):
     assert len(text.encode()) <= MAX_BYTES
     _refused(_write(tmp_path, text))
+
+
+def _nested(key: str, value: str) -> str:
+    """``a.b.c`` = value as block YAML."""
+    parts = key.split(".")
+    return "".join(f"{'  ' * i}{k}:\n" for i, k in enumerate(parts[:-1])) + f"{'  ' * (len(parts) - 1)}{parts[-1]}: {value}\n"
+
+
+@pytest.mark.parametrize("key", DIR_KEYS)
+def test_a_file_where_a_directory_is_written(tmp_path, key):
+    f = tmp_path / "a-file"
+    f.write_text("x")
+    for value, problem in ((f, "is a file, not a directory"), (f / "sub", f"cannot be made: '{f}' is a file")):
+        p = _write(tmp_path, _nested(key, str(value)))
+        line = len(key.split("."))
+        assert _refused(p).startswith(f"{p}:{line}: {key}: '{value}' {problem}; expected a directory")
+
+
+@pytest.mark.parametrize("key", FILE_KEYS + ("instrument.tool",))
+def test_a_directory_where_a_file_is_read(tmp_path, key):
+    d = tmp_path / "a-dir"
+    d.mkdir()
+    p = _write(tmp_path, _nested(key, str(d)))
+    msg = _refused(p)
+    assert msg.startswith(f"{p}:{len(key.split('.'))}: {key}: ") and "is a directory; expected a" in msg
