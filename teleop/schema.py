@@ -324,7 +324,7 @@ class Ros2Config:
     enabled: bool = False
     accept_commands: bool = False         # the slave takes servo_jp and state_command from ROS 2 (else publishes only)
     domain_id: int = 0                    # ROS_DOMAIN_ID of the ROS 2 graph, 0..232
-    rate_hz: float = 100.0                # [Hz] > 0, publication rate of the CRTK topics (off the control loop)
+    rate_hz: float = 100.0                # [Hz] 1..1000, publication rate of the CRTK topics (off the control loop)
 
 
 @dataclass(frozen=True)

@@ -5,13 +5,19 @@ layout to their place (loading an old key raises one ConfigError saying so).
 """
 from __future__ import annotations
 
-__all__ = ["RANGES", "MOVED"]
+__all__ = ["RANGES", "MOVED", "LOOP_RATE"]
+
+#: The control loops' rate range [Hz] (``rig.rate_hz``, ``master.rate_hz``): from a 100 ms period, the longest a
+#: loop may sleep between two looks at its stop request, to a 100 us one, below a cycle's own work. The rates and
+#: waits below are bounded alike: each is a sleep or a timeout of a thread, which a value past its range would
+#: make endless (a period of days) or a busy loop (a period of nothing), or past the platform's largest timeout.
+LOOP_RATE = "10..10000"
 
 # Valid range and unit of every numeric setting ("[]" stands for any list index). A test checks that each numeric field of the schema has an entry and each entry names a field.
 RANGES: dict[str, tuple[str, str]] = {
     "sheath.EA": ("> 0", "N"), "sheath.pretension": (">= 0", "N"),
     "sheath.runs[].length": ("> 0", "m"), "sheath.runs[].radius": ("> 0", "m, .inf = straight"),
-    "rig.rate_hz": ("> 0", "Hz"), "rig.zenoh.timeout_ms": ("> 0", "ms"), "rig.zenoh.wait_s": ("> 0", "s"),
+    "rig.rate_hz": (LOOP_RATE, "Hz"), "rig.zenoh.timeout_ms": ("> 0", "ms"), "rig.zenoh.wait_s": ("0.01..3600", "s"),
     **{f"rig.simulated.{k}": v for k, v in {
         "n_elements": (">= 1", "-"), "mu": (">= 0", "-"),
         "motor.bandwidth_hz": ("> 0", "Hz"), "motor.max_speed": ("> 0", "m/s"),
@@ -25,7 +31,7 @@ RANGES: dict[str, tuple[str, str]] = {
     "estimator.rate_time_constant": ("> 0", "s"), "estimator.profile_points": ("0..65535", "-"),
     "estimator.tension_noise": (">= 0", "N"),
     "calibration.target_tension": ("> 0", "N"), "calibration.speed": ("> 0", "m/s"),
-    "master.rate_hz": ("> 0", "Hz"), "master.watchdog_ms": ("> 0", "ms"),
+    "master.rate_hz": (LOOP_RATE, "Hz"), "master.watchdog_ms": ("> 0", "ms"),
     "master.mapping.motion_scale": ("> 0", "-"), "master.mapping.force_scale": (">= 0", "-"),
     "master.mapping.force_limit": (">= 0", "N"), "master.mapping.ramp_time": (">= 0", "s"),
     "master.mapping.force_rate_limit": ("> 0", "N/s"), "master.mapping.align_tolerance": ("> 0", "m"),
@@ -34,7 +40,7 @@ RANGES: dict[str, tuple[str, str]] = {
     "master.device.arm.stiffness": ("> 0", "N/m"), "master.device.arm.device_mass": (">= 0", "kg"),
     "master.device.arm.device_damping": (">= 0", "N s/m"), "master.device.arm.device_friction": (">= 0", "N"),
     "slave.relax_speed": (">= 0", "m/s"), "slave.x_in_min": ("any", "m"), "slave.x_in_max": ("any", "m"),
-    "slave.engage_tolerance": ("> 0", "m"), "slave.watchdog_ms": ("> 0", "ms"), "slave.heartbeat_hz": ("> 0", "Hz"),
+    "slave.engage_tolerance": ("> 0", "m"), "slave.watchdog_ms": ("> 0", "ms"), "slave.heartbeat_hz": ("1..1000", "Hz"),
     "slave.max_tension": ("> 0", "N"), "slave.max_step": ("> 0", "m"), "slave.max_speed": ("> 0", "m/s"),
     "master.realtime_priority": ("0..99", "-"), "slave.realtime_priority": ("0..99", "-"),
     "instrument.joints[].pulley_radius": ("> 0", "m"), "instrument.joints[].limits[]": ("any", "rad"),
@@ -49,8 +55,8 @@ RANGES: dict[str, tuple[str, str]] = {
     "pair_control.min_tension": ("> 0", "N"), "pair_control.tension_gain": ("> 0", "m/(N s)"),
     "pair_control.switch_band": (">= 0", "rad"), "pair_control.backlash_width": ("> 0", "rad"),
     "pair_control.axes[]": (">= 0", "-"),
-    "recording.log_every": (">= 1", "samples"), "recording.profile_every": (">= 1", "logs"), "recording.csv_every": (">= 1", "cycles"), "recording.mcap_every": (">= 1", "messages"), "recording.flush_interval": ("> 0", "s"), "transport.run_id_timeout": (">= 0", "s"), "recording.max_bytes": ("> 0", "B"), "recording.min_free_bytes": (">= 0", "B"),
-    "ros2.domain_id": ("0..232", "-"), "ros2.rate_hz": ("> 0", "Hz"),
+    "recording.log_every": (">= 1", "samples"), "recording.profile_every": (">= 1", "logs"), "recording.csv_every": (">= 1", "cycles"), "recording.mcap_every": (">= 1", "messages"), "recording.flush_interval": ("0.001..10", "s"), "transport.run_id_timeout": ("0..60", "s"), "recording.max_bytes": ("> 0", "B"), "recording.min_free_bytes": (">= 0", "B"),
+    "ros2.domain_id": ("0..232", "-"), "ros2.rate_hz": ("1..1000", "Hz"),
 }
 
 

@@ -147,7 +147,7 @@ def test_wrong_types_name_key_expected_type_and_value(tmp_path, text, match):
     ("sheath:\n  runs:\n    - {length: 0}\n", r"sheath.runs\[0\].length: 0.0 is out of range: expected > 0 \[m\]"),
     ("sheath:\n  runs:\n    - {length: 1, radius: -2}\n", r"sheath.runs\[0\].radius: -2.0 is out of range"),
     ("sheath:\n  runs: []\n", r"sheath.runs: expected at least one run"),
-    ("rig:\n  rate_hz: 0\n", r"rig.rate_hz: 0.0 is out of range: expected > 0 \[Hz\]"),
+    ("rig:\n  rate_hz: 0\n", r"rig.rate_hz: 0.0 is out of range: expected 10..10000 \[Hz\]"),
     ("rig:\n  simulated:\n    motor:\n      max_speed: -1\n",
      r"rig.simulated.motor.max_speed: -1.0 is out of range: expected > 0 \[m/s\]"),
     ("rig:\n  simulated:\n    load:\n      limit_stiffness: -2.0e6\n",

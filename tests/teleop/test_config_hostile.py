@@ -1,6 +1,6 @@
 """Hostile and absurd config files end in one ConfigError line naming the file (and its line, column and key where
-there is one) within a second: the reader's limits (teleop/config_yaml.py) and the kinds of the path keys
-(teleop/config_paths.py).
+there is one) within a second: the reader's limits (teleop/config_yaml.py), the kinds of the path keys
+(teleop/config_paths.py) and the bounded rates and waits (teleop/schema_ranges.py).
 
 The elapsed time of each load is asserted below a second: the limits apply while the file is read, so that is a
 property of the limits, not a benchmark."""
@@ -164,3 +164,17 @@ def test_a_directory_where_a_file_is_read(tmp_path, key):
     p = _write(tmp_path, _nested(key, str(d)))
     msg = _refused(p)
     assert msg.startswith(f"{p}:{len(key.split('.'))}: {key}: ") and "is a directory; expected a" in msg
+
+
+@pytest.mark.parametrize("key, value, expected", [
+    ("rig.rate_hz", "1e-6", "10..10000"), ("rig.rate_hz", "1e300", "10..10000"),
+    ("master.rate_hz", "1e-6", "10..10000"), ("master.rate_hz", "100000", "10..10000"),
+    ("slave.heartbeat_hz", "1e-6", "1..1000"), ("ros2.rate_hz", "1e300", "1..1000"),
+    ("rig.zenoh.wait_s", "1e300", "0.01..3600"), ("transport.run_id_timeout", "1e300", "0..60"),
+    ("recording.flush_interval", "1e300", "0.001..10"),
+])
+def test_rates_and_waits_are_bounded(tmp_path, key, value, expected):
+    p = _write(tmp_path, _nested(key, value))
+    line = len(key.split("."))
+    assert re.fullmatch(re.escape(f"{p}:{line}: {key}: ") + r"\S+ is out of range: expected "
+                        + re.escape(expected) + r" \[\w+\]", _refused(p))
