@@ -96,9 +96,13 @@ class RigBridge:
         """Pace :meth:`step` at ``rate_hz`` until ``max_duration`` [s] (or an interrupt); pacer stats."""
         pacer = Pacer(clock, self.rate_hz)
         t0 = clock.now()
+        over = None if max_duration is None else (lambda: clock.now() - t0 >= max_duration)  # ends a long sleep
         try:
             while max_duration is None or clock.now() - t0 < max_duration:
-                self.step(pacer.wait())
+                now = pacer.wait(over)
+                if pacer.halted:
+                    break
+                self.step(now)
         finally:
             stats = pacer.stats()
         return stats

@@ -8,9 +8,14 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Protocol, runtime_checkable
+from typing import Callable, Protocol, runtime_checkable
 
-__all__ = ["Clock", "MonotonicClock", "FakeClock", "Pacer", "LockedPacer"]
+__all__ = ["Clock", "MonotonicClock", "FakeClock", "Pacer", "LockedPacer", "MAX_SLEEP"]
+
+#: [s] the longest a pacer sleeps (or waits for a message) at once: a longer wait is made of such slices, and
+#: between two the pacer asks its caller whether to stop (``halt``), so a stop request or a maximum duration
+#: ends the wait within this time whatever the period
+MAX_SLEEP = 0.1
 
 
 @runtime_checkable
@@ -108,7 +113,8 @@ class Pacer:
     """Sleeps a loop to a fixed-rate grid of deadlines and counts the periods it misses.
 
     Deadlines are ``t0 + k / rate_hz`` with ``t0`` the time of construction (or :meth:`reset`).
-    :meth:`wait` sleeps to the next deadline and returns; the loop then runs one cycle.
+    :meth:`wait` sleeps to the next deadline and returns; the loop then runs one cycle. A sleep longer than
+    :data:`MAX_SLEEP` is sliced and ends early when ``halt()`` says so (:attr:`halted`; no cycle is counted).
 
     **Overrun** (a missed period): the cycle did not start in its period, either because :meth:`wait`
     was called after its deadline (the previous cycle's work, or a stall during it, ran past the
@@ -156,6 +162,7 @@ class Pacer:
         self.max_lateness = 0.0    # [s] worst (return time - deadline), overruns and oversleeps alike
         self.last_lateness = 0.0   # [s]
         self.last_overrun = False  # whether the last wait() came after its deadline
+        self.halted = False        # whether the last wait() ended early on its halt() (no cycle to run)
 
     @property
     def next_deadline(self) -> float:
@@ -186,13 +193,31 @@ class Pacer:
         if lateness > self.max_lateness:
             self.max_lateness = lateness
 
-    def wait(self) -> float:
-        """Sleep until the next deadline (or not at all if it has passed) and return the time [s]."""
+    def _sleep_until(self, t: float, halt: Callable[[], bool] | None) -> bool:
+        """Sleep until ``t`` [s] in slices of at most :data:`MAX_SLEEP`, asking ``halt()`` after each slice
+        that leaves time to sleep; False (and :attr:`halted` set) when it said to stop."""
+        while True:
+            now = self.clock.now()
+            if t - now <= MAX_SLEEP:
+                self.clock.sleep_until(t)
+                return True
+            self.clock.sleep_until(now + MAX_SLEEP)
+            if halt is not None and halt():
+                self.halted = True
+                return False
+
+    def wait(self, halt: Callable[[], bool] | None = None) -> float:
+        """Sleep until the next deadline (or not at all if it has passed) and return the time [s].
+
+        ``halt``: asked between the slices of a sleep longer than :data:`MAX_SLEEP`; when it returns True the
+        wait returns at once with :attr:`halted` set, counting no cycle."""
+        self.halted = False
         deadline = self._next
         now = self.clock.now()
         missed = now > deadline
         if not missed:
-            self.clock.sleep_until(deadline)
+            if not self._sleep_until(deadline, halt):
+                return self.clock.now()
             now = self.clock.now()
             missed = now - deadline >= self.period
         lateness = max(0.0, now - deadline)
@@ -272,19 +297,28 @@ class LockedPacer(Pacer):
         self._start: float | None = None
         self._seen = int(self.source.count)
 
-    def wait(self) -> float:
+    def wait(self, halt: Callable[[], bool] | None = None) -> float:
         if self._start is None:                       # the first cycle: on the grid
-            now = super().wait()
-            self._start, self._seen = now, int(self.source.count)
+            now = super().wait(halt)
+            if not self.halted:
+                self._start, self._seen = now, int(self.source.count)
             return now
+        self.halted = False
         P = self.period
         now = self.clock.now()
         ran_over = now > self._start + P
         earliest = self._start + self.min_gap * P
-        if now < earliest:
-            self.clock.sleep_until(earliest)
+        if now < earliest and not self._sleep_until(earliest, halt):
+            return self.clock.now()
         deadline = self._next
-        arrived = self.source.wait(self._seen + 1, max(0.0, deadline - self.clock.now()))
+        while True:                                   # the message, or the deadline, in slices of MAX_SLEEP
+            left = deadline - self.clock.now()
+            arrived = self.source.wait(self._seen + 1, max(0.0, min(left, MAX_SLEEP)))
+            if arrived or left <= MAX_SLEEP:
+                break
+            if halt is not None and halt():
+                self.halted = True
+                return self.clock.now()
         now = self.clock.now()
         lateness = max(0.0, now - deadline)
         # a cycle that ran longer than a period, or one that started a period or more after its

@@ -221,6 +221,8 @@ class NodeBase:
         machine's stalls (every process stopped at once) from the loop's own overruns; ``rt_budget_ms`` and
         ``rt_stop_ms``: the kernel's real-time budget (:func:`teleop.realtime.rt_budget`), whose throttling
         stops a ``SCHED_FIFO`` loop for up to ``rt_stop_ms`` (logged at the start when it applies).
+        Ctrl-C, SIGTERM and ``max_duration`` end the loop between two steps, and within
+        :data:`teleop.clock.MAX_SLEEP` of their time while it sleeps, whatever its period.
         """
         real = isinstance(clock, MonotonicClock)
         if real:
@@ -245,9 +247,14 @@ class NodeBase:
         t0 = self._t_origin = clock.now()
         # Ctrl-C / SIGTERM are held until the running step has finished, then raised after the clean-up
         with stop_at_cycle_end() as stop:
+            def halt() -> bool:        # asked while the pacer sleeps: a long period still ends on time
+                return stop.pending is not None or (max_duration is not None and clock.now() - t0 >= max_duration)
+
             try:
                 while not self.done and stop.pending is None:
-                    now = pacer.wait()
+                    now = pacer.wait(halt)
+                    if pacer.halted:
+                        break
                     state = self.state.name
                     c_step, t_step = cpu(), perf()
                     self.step(now)
