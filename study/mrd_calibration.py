@@ -101,9 +101,16 @@ def parse_calibration(spec: str | None, runs: list[MrdRun]) -> tuple[str, Any]:
     the slowest, lightest run. ``names`` is the comma-separated string.
 
     Raises ConfigError for an unknown run name, every run named, or a segment outside
-    [1, half the shortest run] s.
+    [1, half the shortest run] s; DataError for a run calibration of a single run (the folder's only usable
+    run, or the one --runs picks): no run would be left to score, and the message names the segment calibration
+    that analyses it.
     """
     names = [r.name for r in runs]
+    if len(runs) == 1 and not (spec or "").startswith("segment:"):
+        seconds = max(1, int(0.4 * float(runs[0].time[-1])))
+        raise DataError(f"{Path(runs[0].source).parent}: one run to analyse ({names[0]}), and a run calibration "
+                        "scores the other runs: give a folder of two runs or more, or calibrate on the run's first "
+                        f"seconds and score the rest with --calibration segment:SECONDS (e.g. segment:{seconds})")
     if spec is None or spec == "":
         r = min(runs, key=lambda r: (round(r.frequency_hz, 3), r.load_level, r.name))
         return "run", r.name

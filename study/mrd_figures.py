@@ -172,7 +172,8 @@ def _failures(plt, runs: list[MrdRun], summary: dict, details: dict, path: Path)
     ax.set_xlabel("phase of the spindle sine [deg]")
     ax.set_ylabel("mean residual [FS]")
     ax.set_title("folder model left out: residual over the cycle", fontsize=9)
-    ax.legend(fontsize=7)
+    if ax.get_lines()[:-1]:         # a folder model was left out (two runs or more): one line per corner run
+        ax.legend(fontsize=7)
     return _save(plt, fig, f"Where the jaw torque estimate fails ({_CREDIT})", path)
 
 

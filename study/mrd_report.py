@@ -164,7 +164,7 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
     ``.baselines.<name>`` the same keys; ``shared`` / ``loro`` the folder-wide fit); details hold
     per-sample predictions for the figures (never written to JSON).
 
-    ``folder`` False skips the folder-wide selection and fit (and ``loro``). ``tool``: the load gain of the one-run
+    ``folder`` False, or a single run, skips the folder-wide selection and fit (and ``loro``). ``tool``: the load gain of the one-run
     calibration comes from this tool file (:func:`study.mrd_tools.tool_calibration`; ``summary["tool"]``).
     Raises DataError for no runs, ConfigError for a bad ``calibration`` or one that gives a gain beside ``tool``.
     """
@@ -194,7 +194,7 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
     _summarise(out, mode, plan, cal_runs, fs)
     out["bands"] = {r.name: band_measurements(r) for r in runs}
     out["load_sweep"] = _load_sweep(runs)
-    if folder:
+    if folder and len(runs) > 1:     # one parameter set across runs, scored leave-one-run-out: two runs or more
         _shared(runs, out, details, fs, tick, loro)
     tick.done()
     out["elapsed_s"] = time.perf_counter() - t_start

@@ -81,8 +81,9 @@ def format_across(s: dict) -> str:
              f"{a['max_torque_rmse_fs']:.3f}, max |error| {a['max_torque_max_fs']:.3f} FS; better than the linear "
              f"baseline on every run: {a['better_than_linear_every_run']}"]
     for w, m, x in zip(s["windows"], a["window_medians"], a["window_worst"]):
-        lines.append(f"  window {w['label']:<32} calibrated on {w['summary']['calibration']['run']:<6} "
-                     f"RMSE median {m:.3f} worst {x:.3f}")
+        cal = w["summary"]["calibration"]
+        on = cal["run"] if "run" in cal else f"the first {cal['seconds']:g} s of each run"
+        lines.append(f"  window {w['label']:<32} calibrated on {on:<6} RMSE median {m:.3f} worst {x:.3f}")
     return "\n".join(lines)
 
 

@@ -2,6 +2,8 @@
 column where there is one), exit status 2."""
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -148,3 +150,37 @@ def test_a_kaist_value_out_of_range_names_its_line_and_column(tmp_path, capsys):
     assert refused([str(f), "--bend", "0", "--columns", "time=0,command=1,angle=3,T_a=4,T_b=5,units=rad"],
                    capsys) == (f"{f}:13: column 1 (command): 20000.0 rad is beyond any joint angle (|command| <= "
                                "174.533 rad): a corrupt row or another unit; fix or remove that row")
+
+
+def test_an_mrd_folder_of_one_run_says_why_a_run_calibration_cannot_score_it(tmp_path, capsys):
+    """One usable run: the run calibration (default) has nothing left to score, said in one line; the segment
+    calibration analyses the run (no folder-wide fit, which needs two runs)."""
+    from tests.study.test_mrd import simulate, write_txt
+    d = tmp_path / "Tool_X"
+    d.mkdir()
+    t, c, tp, th, td = simulate(freq=0.5, duration=6.0)
+    write_txt(d / "00.TXT", t, c, tp, th, td)
+    assert refused(["--mrd", str(d)], capsys) == (
+        f"{d}: one run to analyse (00), and a run calibration scores the other runs: give a folder of two runs or "
+        "more, or calibrate on the run's first seconds and score the rest with --calibration segment:SECONDS (e.g. "
+        "segment:2)")
+    assert refused(["--mrd", str(d), "--calibration", "kinematic:00"], capsys).startswith(
+        f"{d}: one run to analyse (00)")
+    out = tmp_path / "one.json"
+    assert main(["analyze", "--mrd", str(d), "--calibration", "segment:2", "--json", str(out)]) == 0
+    cap = capsys.readouterr()
+    assert "found 1 runs" in cap.out and "calibrated on the first 2 s of each run" in cap.out and cap.err == ""
+    summary = json.loads(out.read_text())
+    assert set(summary["runs"]) == {"00"} and "shared" not in summary and "loro" not in summary
+
+
+def test_the_windows_summary_of_a_segment_calibration_says_what_it_calibrated_on():
+    from study.mrd_windows import format_across
+    across = {"windows": 2, "scored_runs": 4, "median_torque_rmse_fs": 0.02, "max_torque_rmse_fs": 0.05,
+              "max_torque_max_fs": 0.2, "better_than_linear_every_run": True, "window_medians": [0.02, 0.03],
+              "window_worst": [0.04, 0.05]}
+    windows = [{"label": "0..60 deg (--runs '1*')", "summary": {"calibration": {"mode": "segment", "seconds": 5.0}}},
+               {"label": "30..90 deg (--runs '0*')", "summary": {"calibration": {"mode": "run", "run": "00"}}}]
+    lines = format_across({"across": across, "windows": windows}).splitlines()
+    assert "calibrated on the first 5 s of each run RMSE median 0.020 worst 0.040" in lines[1]
+    assert "calibrated on 00     RMSE median 0.030 worst 0.050" in lines[2]
