@@ -109,7 +109,13 @@ def main_analyze(args: argparse.Namespace) -> int:
     """Run the subcommand; returns the exit code (0). Raises DataError / ConfigError on bad input."""
     if getattr(args, "mrd", None) is not None:
         from study.mrd_report import main_mrd  # lazy: the MRD analysis and its figures
-        return main_mrd(args)
+        try:
+            return main_mrd(args)
+        except (ArithmeticError, ValueError) as e:   # not one of ours: a fit the runs' values spoiled
+            if isinstance(e, (DataError, ConfigError)):
+                raise
+            from study.mrd import load_mrd_dir, values_error
+            raise values_error(load_mrd_dir(args.mrd or None, getattr(args, "runs", None))[0], e) from None
     if args.file is None and args.kaist is None:
         raise ConfigError("analyze needs FILE or --kaist [DIR]")
     if getattr(args, "tool", None) is not None:

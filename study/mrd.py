@@ -40,7 +40,8 @@ from teleop.errors import DataError
 from teleop.text_files import read_text
 
 __all__ = ["ATTRIBUTION", "MrdRun", "read_mrd", "load_mrd_dir", "default_mrd_dir", "sine_frequency", "N_COLUMNS",
-           "TORQUE_NM_PER_COUNT", "PROXIMAL_COUNTS_PER_REV", "stroke_groups", "stroke_window", "runs_selection", "STROKE_OVERLAP", "DISTAL_COUNTS_PER_REV", "DISTAL_SIGN"]
+           "TORQUE_NM_PER_COUNT", "PROXIMAL_COUNTS_PER_REV", "stroke_groups", "stroke_window", "runs_selection", "STROKE_OVERLAP", "DISTAL_COUNTS_PER_REV", "DISTAL_SIGN",
+           "MAX_MAGNITUDE", "values_error"]
 
 #: Keep with every report (SOURCE.md: ODbL 1.0 / DbCL 1.0).
 ATTRIBUTION = ("MRD Lab data repository, University of Minnesota; O'Neill, Stephens, Kowalewski, IEEE RA-L "
@@ -51,6 +52,11 @@ PROXIMAL_COUNTS_PER_REV = 8192.0
 DISTAL_COUNTS_PER_REV = 4000.0
 DISTAL_SIGN = -1.0
 MIN_ROWS = 2000           # 2 s at 1 kHz: shorter files are truncated
+#: Largest |value| of each column the analysis reads (SOURCE.md's units: s, counts, A): beyond it the value is
+#: no time stamp, encoder angle (over a thousand turns), torque (over 400 N m) or motor current of the rig (a
+#: corrupt row), and it would overflow the analysis' arithmetic.
+MAX_MAGNITUDE = {0: (1e10, "s"), 1: (1e7, "counts"), 2: (1e7, "counts"), 4: (1e7, "counts"), 5: (1e7, "counts"),
+                 6: (1e3, "A")}
 _NAME = re.compile(r"^(\d)(\d)\.TXT$", re.IGNORECASE)
 
 
@@ -118,18 +124,9 @@ def _numbers(line: str) -> bool:
     return True
 
 
-def read_mrd(path: str | Path) -> MrdRun:
-    """Read one ``XY.TXT`` run.
-
-    Raises
-    ------
-    DataError
-        Missing file, a directory, a file that is not text (UTF-16, binary data: at which byte), a data row
-        without 10 numbers, a value that is not a number or not finite, non-increasing time, or fewer than
-        MIN_ROWS rows (a truncated file); the message names the file, and the line and column (0-based, as in
-        SOURCE.md) where there is one.
-    """
-    p = Path(path)
+def _table(p: Path) -> tuple[list[tuple[int, str]], np.ndarray]:
+    """(line number, text) of every data row of a run's file and its numbers, shape (n, N_COLUMNS); DataError as
+    :func:`read_mrd` for every check but the time's."""
     text = read_text(p, replace=True)
     lines = text.splitlines()
     first = next((i for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("%")), len(lines))
@@ -147,6 +144,27 @@ def read_mrd(path: str | Path) -> MrdRun:
     if not np.all(np.isfinite(a)):
         r, c = (int(i) for i in np.argwhere(~np.isfinite(a))[0])
         raise DataError(f"{p}:{rows[r][0]}: column {c}: expected a finite number, got {float(a[r, c])!r}")
+    for c, (limit, unit) in MAX_MAGNITUDE.items():
+        big = np.flatnonzero(np.abs(a[:, c]) > limit)
+        if big.size:
+            raise DataError(f"{p}:{rows[big[0]][0]}: column {c}: {float(a[big[0], c])!r} {unit} is beyond anything "
+                            f"the rig reads (|value| <= {limit:g} {unit}): a corrupt row; fix or remove that row")
+    return rows, a
+
+
+def read_mrd(path: str | Path) -> MrdRun:
+    """Read one ``XY.TXT`` run.
+
+    Raises
+    ------
+    DataError
+        Missing file, a directory, a file that is not text (UTF-16, binary data: at which byte), a data row
+        without 10 numbers, a value that is not a number, not finite or beyond :data:`MAX_MAGNITUDE`,
+        non-increasing time, or fewer than MIN_ROWS rows (a truncated file); the message names the file, and the
+        line and column (0-based, as in SOURCE.md) where there is one.
+    """
+    p = Path(path)
+    rows, a = _table(p)
     t = a[:, 0]
     if np.any(np.diff(t) <= 0):
         k = int(np.argmax(np.diff(t) <= 0)) + 1
@@ -157,6 +175,33 @@ def read_mrd(path: str | Path) -> MrdRun:
                   theta_d=DISTAL_SIGN * a[:, 4] * 2 * math.pi / DISTAL_COUNTS_PER_REV,
                   tau_d=DISTAL_SIGN * a[:, 5] * TORQUE_NM_PER_COUNT, frequency_hz=sine_frequency(t, theta_p),
                   load_command=float(np.mean(a[:, 6])), source=str(p))
+
+
+#: A value farther than this many times its column's spread (median absolute deviation) from the column's median
+#: is named by :func:`values_error` as the one to look at.
+OUTLIER_SPREADS = 100.0
+
+
+def values_error(runs: list[MrdRun], exc: BaseException) -> DataError:
+    """The DataError for an analysis of ``runs`` that failed on their values (``exc``: a fit whose bounds or
+    samples the values spoiled, an overflow): the folder, the failure, and the file, line and column of the value
+    farthest out of its column (its distance from the column's median in column spreads) when it stands more
+    than :data:`OUTLIER_SPREADS` out."""
+    best: tuple[float, str] = (0.0, "")
+    for r in runs:
+        rows, a = _table(Path(r.source))
+        for c, (_, unit) in MAX_MAGNITUDE.items():
+            dev = np.abs(a[:, c] - np.median(a[:, c]))
+            k = int(np.argmax(dev))
+            score = float(dev[k]) / (float(np.median(dev)) or float(np.ptp(a[:, c])) or 1.0)
+            if score > best[0]:
+                best = (score, f"{r.source}:{rows[k][0]}: column {c} = {float(a[k, c]):g} {unit}, {score:.3g} "
+                               "times the column's spread from its median")
+    what = f"the analysis fails on the runs' values ({type(exc).__name__}: {' '.join(str(exc).split())})"
+    folder = Path(runs[0].source).parent if runs else "MRD"
+    hint = (f"the value farthest out is at {best[1]}: fix or remove that row" if best[0] > OUTLIER_SPREADS else
+            "no value stands out of its column: plot the runs' signals (--figures DIR with fewer --runs)")
+    return DataError(f"{folder}: {what}; {hint}")
 
 
 def load_mrd_dir(directory: str | Path | None = None, select: str | None = None) -> tuple[list[MrdRun], list[str]]:

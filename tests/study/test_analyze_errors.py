@@ -184,3 +184,34 @@ def test_the_windows_summary_of_a_segment_calibration_says_what_it_calibrated_on
     lines = format_across({"across": across, "windows": windows}).splitlines()
     assert "calibrated on the first 5 s of each run RMSE median 0.020 worst 0.040" in lines[1]
     assert "calibrated on 00     RMSE median 0.030 worst 0.050" in lines[2]
+
+
+def test_an_mrd_value_out_of_range_and_a_fit_it_spoils_are_named(tmp_path, capsys, monkeypatch):
+    """A value beyond anything the rig reads is refused with its line and column; a fit that fails on values
+    within range names the value farthest out of its column."""
+    from study import mrd_report
+    from tests.study.test_mrd import simulate, write_txt
+    d = tmp_path / "Tool_X"
+    d.mkdir()
+    t, c, tp, th, td = simulate(freq=0.5, duration=3.0)
+    write_txt(d / "00.TXT", t, c, tp, th, td)
+    lines = write_txt(d / "01.TXT", t, c, tp, th, td).read_text().splitlines()
+    fields = lines[701].split(",")                      # line 702: data row 700 after the two header lines
+    fields[2] = "2e7"
+    (d / "01.TXT").write_text("\n".join(lines[:701] + [",".join(fields)] + lines[702:]) + "\n")
+    from study.mrd import read_mrd
+    from teleop.errors import DataError
+    with pytest.raises(DataError, match=r"01\.TXT:702: column 2: 20000000\.0 counts is beyond anything the rig "
+                                        r"reads \(\|value\| <= 1e\+07 counts\): a corrupt row; fix or remove that row$"):
+        read_mrd(d / "01.TXT")
+    fields[2] = "9e6"
+    (d / "01.TXT").write_text("\n".join(lines[:701] + [",".join(fields)] + lines[702:]) + "\n")
+
+    def spoiled(args):
+        raise ValueError("Each lower bound must be strictly less than each upper bound.")
+    monkeypatch.setattr(mrd_report, "main_mrd", spoiled)
+    msg = refused(["--mrd", str(d)], capsys)
+    assert msg.startswith(f"{d}: the analysis fails on the runs' values (ValueError: Each lower bound must be "
+                          f"strictly less than each upper bound.); the value farthest out is at {d / '01.TXT'}:702: "
+                          "column 2 = 9e+06 counts, ")
+    assert msg.endswith(" times the column's spread from its median: fix or remove that row")
