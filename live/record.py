@@ -19,9 +19,9 @@ adds) and to the liveliness tokens of both sides, and writes ``<run dir>/recorde
 * ``session.mcap``: the messages again in one MCAP file (of a 1 kHz stream every ``recording.mcap_every``-th),
   ROS 2 types where one exists, JSON for the rest (:mod:`live.record_mcap`; ``teleop record --repair RUN``
   rebuilds it after a SIGKILL of the recorder, :mod:`live.record_mcap_read`);
-* ``record.rrd`` (Rerun, scalar fields decimated by ``recording.log_every``), and at the end
-  ``summary.json`` (per stream: count, received, recovered, first/last seq, seqs missing, duplicates, rate; the command
-  -> echo delay seen here) and ``streams.png``.
+* ``record.rrd`` (Rerun, scalar fields decimated by ``recording.log_every``), and at the end ``summary.json`` (per
+  stream: count, received, recovered, first/last seq, seqs missing, messages not written, duplicates, rate; the
+  command -> echo delay seen here; its streams' counts are the last line printed) and ``streams.png``.
 
 Disk use is bounded by ``recording.max_bytes`` and ``recording.min_free_bytes``, and a write the OS
 refuses costs only its own file (:mod:`live.record_budget`, ``disk`` in ``summary.json``).
@@ -44,14 +44,13 @@ from __future__ import annotations
 import json
 import logging
 import queue
-import sys
 import threading
 import time
 from pathlib import Path
 from typing import Callable, Literal
 
 from live.record_budget import LOW_RATE_HZ, DiskBudget, Writes, is_low_rate
-from live.record_demo import nothing_received_reason, start_recorder, summary_line
+from live.record_demo import nothing_received_reason, print_last_line, start_recorder, summary_line
 from live.record_files import (
     StreamCounts,
     StreamCsv,
@@ -183,7 +182,7 @@ class Recorder:
 
     def _flush(self) -> None:
         w = self.writes
-        w("messages.bin", self._raw.flush)
+        w.flush_record(self._raw.flush)
         for f in self._csv.values():
             if f is not None:
                 w(f.path.name, f.fh.flush)
@@ -212,7 +211,7 @@ class Recorder:
         try:
             msg = decode_any(payload)
         except Exception:  # noqa: BLE001 - CodecError: counted, kept in messages.bin
-            self.writes("messages.bin", self._raw.write, pack_record(t, key.encode(), payload))
+            self.writes.message(key, self._raw.write, pack_record(t, key.encode(), payload))
             st.errors += 1
             st.count += 1
             return
@@ -230,7 +229,7 @@ class Recorder:
                 self._open_csv(shape, flatten(msg))
         w, f = self.writes, self._csv[shape]
         if self._written(t, key, msg):
-            w("messages.bin", self._raw.write, pack_record(t, key.encode(), payload))
+            w.message(key, self._raw.write, pack_record(t, key.encode(), payload))
             if recovered:
                 w("recovered.csv", self._aux["recovered"].write, f"{t:.12g},{key.split('/')[2] if key.count('/') >= 3 else key},{key},{seq}\n")
             if f is not None:
@@ -345,7 +344,8 @@ class Recorder:
 
     def summary(self) -> dict:
         echo = self._echo.stats() if self._echo.n else {"n": 0}
-        return {"instrument": self.ident, "streams": {k: s.summary() for k, s in sorted(self.streams.items())},
+        return {"instrument": self.ident, "streams": {k: {**s.summary(), "not_written": self.writes.messages_not_written(k)}
+                                                      for k, s in sorted(self.streams.items())},
                 "recovered_from_journals": self.journals.summary(),
                 "files": sorted(str(f.path.name) for f in self._csv.values() if f is not None),
                 "disk": {**self.budget.summary(), **self.writes.summary()},
@@ -387,14 +387,7 @@ def run_record(args) -> int:
                         gone_since = None if anyone else (gone_since or time.monotonic())
                         if gone_since is not None and time.monotonic() - gone_since > 0.5:
                             break
-            finally:
-                s = rec.close()
-    counts = ", ".join(f"{k.rsplit('/', 2)[-2]}/{k.rsplit('/', 1)[-1]} {v['count']} (missing {v['missing']})"
-                       for k, v in s["streams"].items())
-    if not counts:
-        print(f"teleop record: nothing received: {nothing_received_reason(cfg.instrument.id, rec.ever_alive)}; "
-              f"{rec.dir}/summary.json", file=sys.stderr, flush=True)
-        return 1
-    print(f"teleop record: {counts}; {rec.dir}/summary.json", flush=True)
-    return 0
+            finally:                       # the last line on every way out, Ctrl-C and SIGTERM included
+                code = print_last_line(rec.close(), rec.dir, cfg.instrument.id, rec.ever_alive)
+    return code
 

@@ -186,16 +186,22 @@ class DiskBudget:
 
 
 class Writes:
-    """Runs the recorder's file writes; counts, per file, the writes an ``OSError`` kept out.
+    """Runs the recorder's file writes; counts, per file, the writes an ``OSError`` kept out, and per stream the
+    messages that are not in the lossless record (``record``, ``messages.bin``).
 
     After the first error of a file its later writes are not tried (counted): a file whose buffer
-    could not be handed to the OS is cut there, and what it held before stays readable.
+    could not be handed to the OS is cut there, and what it held before stays readable. A message handed to
+    the record is written once a flush (or the close) of the record succeeds after it; the record's first error
+    cuts the ones handed to it since its last flush, which count as not written with those refused after it.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, record: str = "messages.bin") -> None:
+        self.record = record
         self.failed: dict[str, str] = {}       # file name -> its first error
         self.not_written: dict[str, int] = {}  # file name -> writes not done
         self.skipped: dict[str, int] = {}      # stream key -> messages not written past the budget
+        self.lost: dict[str, int] = {}         # stream key -> messages a write error kept out of the record
+        self._pending: dict[str, int] = {}     # stream key -> messages handed to the record since its last flush
 
     def __call__(self, name: str, fn: Callable, *args) -> bool:
         """``fn(*args)`` for the file ``name``; False (counted) when it failed now or before."""
@@ -208,8 +214,33 @@ class Writes:
         except OSError as e:
             self.failed[name] = f"{type(e).__name__}: {e}"
             self.not_written[name] = self.not_written.get(name, 0) + 1
+            self._cut(name)
             log.error("recorder: %s is no longer written: %s (what it holds stays readable)", name, e)
             return False
+
+    def message(self, key: str, fn: Callable, *args) -> bool:
+        """Hand one message on the stream ``key`` to the record with ``fn(*args)``; False (counted as not
+        written on ``key``) when the record failed now or before."""
+        if self(self.record, fn, *args):
+            self._pending[key] = self._pending.get(key, 0) + 1
+            return True
+        self.lost[key] = self.lost.get(key, 0) + 1
+        return False
+
+    def flush_record(self, fn: Callable) -> bool:
+        """Flush the record with ``fn()``: the messages handed to it since its last flush are written once it
+        succeeds. False when it failed now or before."""
+        if self(self.record, fn):
+            self._pending.clear()
+            return True
+        return False
+
+    def _cut(self, name: str) -> None:
+        """The record's first error: the messages handed to it since its last flush are not written."""
+        if name == self.record:
+            for key, n in self._pending.items():
+                self.lost[key] = self.lost.get(key, 0) + n
+            self._pending.clear()
 
     def close(self, name: str, fn: Callable) -> None:
         """Close the file ``name`` with ``fn()``, also after an error of it (what its buffer holds is
@@ -219,10 +250,20 @@ class Writes:
         except OSError as e:
             self.failed.setdefault(name, f"{type(e).__name__}: {e}")
             self.not_written[name] = self.not_written.get(name, 0) + 1
+            self._cut(name)
+        else:
+            if name == self.record and name not in self.failed:
+                self._pending.clear()           # the close handed the last block to the OS
 
     def skip(self, key: str) -> None:
         """One message on ``key`` not written because the budget is reached."""
         self.skipped[key] = self.skipped.get(key, 0) + 1
+
+    def messages_not_written(self, key: str) -> int:
+        """Messages of the stream ``key`` not in the record: kept out by a write error (or cut by one, see the
+        class docstring) and left out past the disk budget. The one count of them, for ``summary.json``'s
+        streams and the recorder's last line."""
+        return self.lost.get(key, 0) + self.skipped.get(key, 0)
 
     def summary(self) -> dict:
         """``{"write_errors": {file: error}, "not_written": {file: n}, "over_budget_not_written": {key: n}}``."""

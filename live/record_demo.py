@@ -1,12 +1,14 @@
-"""What a demo asks of ``teleop record``: start it beside the sides, and one line on what it wrote."""
+"""What a demo asks of ``teleop record`` (start it beside the sides, one line on what it wrote) and the last line
+``teleop record`` prints."""
 from __future__ import annotations
 
 import json
 import os
+import sys
 import time
 from pathlib import Path
 
-__all__ = ["nothing_received_reason", "start_recorder", "summary_line"]
+__all__ = ["final_line", "nothing_received_reason", "print_last_line", "start_recorder", "summary_line"]
 
 
 def start_recorder(base: list[str], common: list[str], run_dir: Path, env: dict, deadline: float):
@@ -30,8 +32,32 @@ def start_recorder(base: list[str], common: list[str], run_dir: Path, env: dict,
     return proc, None
 
 
+def final_line(s: dict, out_dir: str | Path) -> str:
+    """The last line of ``teleop record``, from its summary ``s`` (what it writes as ``summary.json``): per stream
+    the messages counted, the seqs missing and the messages not written (``not_written``: a write error, the disk
+    budget), the files a write error stopped, and where the summary is."""
+    counts = ", ".join(f"{k.rsplit('/', 2)[-2]}/{k.rsplit('/', 1)[-1]} {v['count']} (missing {v['missing']}, "
+                       f"not written {v['not_written']})" for k, v in s["streams"].items())
+    failed = (s.get("disk") or {}).get("write_errors") or {}
+    stopped = f"; stopped by a write error: {', '.join(f'{n} ({e})' for n, e in failed.items())}" if failed else ""
+    return f"teleop record: {counts}{stopped}; {Path(out_dir) / 'summary.json'}"
+
+
+def print_last_line(s: dict, out_dir: str | Path, instrument: str, sides_seen) -> int:
+    """Print the last line of ``teleop record`` for its summary ``s``: :func:`final_line` on stdout, or why
+    nothing was received on stderr (:func:`nothing_received_reason`). Returns the exit code (0, or 1: nothing
+    received) of a recording that ended by itself."""
+    if not s["streams"]:
+        print(f"teleop record: nothing received: {nothing_received_reason(instrument, sides_seen)}; "
+              f"{Path(out_dir) / 'summary.json'}", file=sys.stderr, flush=True)
+        return 1
+    print(final_line(s, out_dir), flush=True)
+    return 0
+
+
 def summary_line(out_dir: str | Path) -> str:
-    """One line on a finished recording: messages, streams, seqs missing, the session's bytes per second
+    """One line on a finished recording: messages, streams, seqs missing, messages not written (summary.json's
+    streams, as :func:`final_line`), the session's bytes per second
     (``disk.bytes_per_second``), what the disk limits or errors kept out, where the files are."""
     path = Path(out_dir) / "summary.json"
     try:
@@ -47,7 +73,8 @@ def summary_line(out_dir: str | Path) -> str:
     if disk.get("not_written"):
         extra += "; not written (disk): " + ", ".join(f"{k} {n}" for k, n in disk["not_written"].items())
     return (f"recorder: {sum(v['count'] for v in streams)} messages on {len(s.get('streams', {}))} streams, "
-            f"{sum(v['missing'] for v in streams)} missing by seq{extra} -> {out_dir}")
+            f"{sum(v['missing'] for v in streams)} missing by seq, {sum(v.get('not_written', 0) for v in streams)} "
+            f"not written{extra} -> {out_dir}")
 
 
 def nothing_received_reason(instrument: str, sides_seen) -> str:

@@ -4,7 +4,8 @@ write to a full disk fails with ENOSPC).
 
 What the recorder handed to the OS before the limit stays readable (every record of messages.bin
 decodes, each stream's seqs without a gap), both sides run on and end cleanly, and summary.json names
-the files that stopped and counts what they did not get. Deadlines only bound waits.
+the files that stopped and counts what they did not get; the recorder's last line counts the messages not
+written per stream as summary.json does. Deadlines only bound waits.
 """
 from __future__ import annotations
 
@@ -77,5 +78,13 @@ def test_a_full_disk_under_the_recorder_keeps_what_it_wrote_and_both_loops_runni
         assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), key
     assert summary["streams"][est]["count"] > len(kept[est])    # counted past the limit, not written
     assert summary["streams"][est]["missing"] == 0
+    *_, last, interrupted = (tmp_path / "record.log").read_text().strip().splitlines()
+    assert interrupted == "teleop: interrupted"                 # Ctrl-C: the counts are the last line before it
+    for key, v in summary["streams"].items():                   # the last line and summary.json count alike
+        side, stream = key.split("/")[-2:]
+        assert f"{side}/{stream} {v['count']} (missing {v['missing']}, not written {v['not_written']})" in last
+        assert v["count"] - v["not_written"] <= len(kept.get(key, ()))     # what counts as written reads back
+    assert summary["streams"][est]["not_written"] >= summary["streams"][est]["count"] - len(kept[est]) > 0
+    assert last.startswith("teleop record: ") and "stopped by a write error: messages.bin (" in last
     assert _data_rows(run / "slave.csv") > len(kept[est])       # the slave's loop and recording went on
     wait_for(lambda: (run / "slave_stats.json").is_file(), 5, "the slave's stats")

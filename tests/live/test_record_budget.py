@@ -220,3 +220,70 @@ def test_the_session_rate_leaves_the_journals_out_and_takes_the_recorder_over_it
     b.check(2 * RATE_AFTER, 2 * RATE_AFTER, t_data=100.0 + 4 * RATE_AFTER)
     assert b.rates == {"recorder": 4000 / (4 * RATE_AFTER), "slave": 2000 / (2 * RATE_AFTER)}
     assert "journals: a ring" in capsys.readouterr().out
+
+
+class _DiskGone(_FullFile):
+    """A full disk as the OS gives it: after the first refused write, every flush and the close are refused too,
+    so what the stream held unflushed never reaches the file."""
+
+    def write(self, b: bytes) -> int:
+        if self.room < 0:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        try:
+            return super().write(b)
+        except OSError:
+            self.room = -1
+            raise
+
+    def flush(self) -> None:
+        if self.room < 0:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        super().flush()
+
+    def close(self) -> None:
+        if self.room < 0:
+            self.fh.fh.close()                     # the zstd stream's file, its last block never handed out
+            raise OSError(errno.ENOSPC, "No space left on device")
+        super().close()
+
+
+def test_the_last_line_and_the_summary_count_what_a_write_error_kept_out_alike(tmp_path):
+    """Every stream's messages not written (refused after the error, and those the error cut since the last flush)
+    are counted once: summary.json's streams and the recorder's last line say the same, and what is counted as
+    written reads back from messages.bin."""
+    from live.record_demo import final_line
+    est, cmd = estimate_key("bud1"), command_key("bud1")
+    with _session() as s:
+        rec = Recorder(s, _cfg(), tmp_path / "recorder")
+        size = len(_estimate(0)) + 14 + len(est)
+        rec._raw = _DiskGone(rec._raw, 40 * size)
+        _feed(rec, 100, (SideState.SAFE, SideState.ENGAGED))
+        out = rec.close()
+    on_disk = json.loads((tmp_path / "recorder" / "summary.json").read_text())
+    kept = [k for _, k, _ in read_messages(tmp_path / "recorder" / "messages.bin")]
+    assert len(kept) < 40
+    hb = heartbeat_key("bud1", "slave")
+    for key, n in ((est, 100), (cmd, 100), (hb, 2)):
+        v = on_disk["streams"][key]
+        assert v["count"] == n and v["not_written"] == n - kept.count(key) > 0, key
+        assert v == out["streams"][key]
+    line = final_line(out, tmp_path / "recorder")
+    assert line.startswith("teleop record: ")
+    assert f"slave/estimate 100 (missing 0, not written {100 - kept.count(est)})" in line
+    assert f"master/command 100 (missing 0, not written {100 - kept.count(cmd)})" in line
+    assert "slave/heartbeat 2 (missing 0, not written 2)" in line
+    assert "stopped by a write error: messages.bin (OSError: [Errno 28] No space left on device)" in line
+    assert line.endswith(f"; {tmp_path / 'recorder' / 'summary.json'}") and "\n" not in line
+    from live.record_demo import summary_line
+    assert f"{202 - len(kept)} not written" in summary_line(tmp_path / "recorder")
+
+
+def test_a_recording_without_errors_says_not_written_0(tmp_path):
+    from live.record_demo import final_line
+    with _session() as s:
+        rec = Recorder(s, _cfg(), tmp_path / "recorder")
+        _feed(rec, 20)
+        out = rec.close()
+    assert all(v["not_written"] == 0 for v in out["streams"].values())
+    assert final_line(out, tmp_path) == ("teleop record: master/command 20 (missing 0, not written 0), slave/estimate 20 "
+                                         f"(missing 0, not written 0); {tmp_path / 'summary.json'}")
