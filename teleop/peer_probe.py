@@ -5,9 +5,12 @@ CA does not sign): the session opens and no peer ever appears. What a process ca
 endpoint itself, so :func:`probe_endpoint` opens one TCP connection to it and reads what answers:
 
 * the connection is refused: nothing listens there;
-* ``tls/`` endpoints: a TLS handshake with this process's ``transport.tls`` files; a certificate the
-  configured ``root_ca`` does not sign (named by its subject and issuer), a listener that demands a
-  client certificate (mutual TLS), a listener that does not speak TLS at all;
+* ``tls/`` endpoints: a TLS handshake with this process's ``transport.tls`` files; a listener certificate
+  the configured ``root_ca`` does not sign (named by its subject and issuer); a mutual TLS listener that
+  got no client certificate (the settings missing are named) or one it does not trust (its alert: an
+  unknown CA; this process's certificate named); a listener that does not speak TLS at all (a plain
+  Zenoh TCP listener waits for the rest of a frame: the handshake times out);
+* ``tcp/`` endpoints to a TLS listener: it answers the line of text below with a TLS alert record;
 * a listener that talks first, or answers a line of text, is not a Zenoh peer (a Zenoh listener
   says nothing until it has a whole frame): its first line is quoted (``SSH-2.0-...``, ``HTTP/1.1 400``);
 * a listener that accepts the connection and says nothing is most likely a Zenoh peer that refused
@@ -28,6 +31,8 @@ __all__ = ["Finding", "probe_endpoint", "no_peer_reason", "split_endpoint"]
 #: [s] connect, handshake and read timeouts of one probe
 PROBE_TIMEOUT_S = 0.25
 _TEXT_PROBE = b"\r\n\r\nHEAD / HTTP/1.0\r\n\r\n"
+#: the first byte of a TLS record (the second is 3, the protocol's major version) -> what it is
+_TLS_RECORDS = {b"\x15": "alert", b"\x16": "handshake"}
 
 
 @dataclass(frozen=True)
@@ -35,8 +40,9 @@ class Finding:
     """What :func:`probe_endpoint` found: ``kind`` and a phrase for the user.
 
     ``kind``: ``nothing`` (connection refused or unreachable), ``not_zenoh`` (something else answered),
-    ``tls`` (a TLS problem the phrase names), ``silent`` (a listener that accepted and said nothing:
-    a Zenoh peer that refused this one, most likely), ``bad_endpoint``.
+    ``tls`` (a TLS problem the phrase names), ``tls_port`` (a ``tcp/`` endpoint whose listener speaks TLS),
+    ``not_tls`` (a ``tls/`` endpoint whose listener does not), ``silent`` (a listener that accepted and said
+    nothing: a Zenoh peer that refused this one, most likely), ``bad_endpoint``.
     """
 
     kind: str
@@ -117,6 +123,43 @@ def _peer_certificate(host: str, port: int, timeout: float) -> bytes | None:
         return None
 
 
+def _own_certificate(tls) -> str:
+    """`` (subject, issued by issuer)`` of this process's ``transport.tls.certificate``, else ''."""
+    try:
+        info = ssl._ssl._test_decode_cert(tls.certificate)  # type: ignore[attr-defined]
+        return f" ({_rdn(info['subject'])}, issued by {_rdn(info['issuer'])})"
+    except Exception:  # noqa: BLE001 - a name is a courtesy: an odd certificate gives none
+        return ""
+
+
+def _missing_client_files(tls) -> str:
+    """``transport.tls`` settings this process lacks to present a client certificate, e.g. ``certificate,
+    private_key and mutual: true``."""
+    missing = [n for n, v in (("certificate", tls.certificate), ("private_key", tls.private_key)) if not v]
+    missing += [] if tls.mutual else ["mutual: true"]
+    return ", ".join(missing[:-1]) + (" and " if len(missing) > 1 else "") + missing[-1] if missing else ""
+
+
+def _refused_certificate(tls, reason: str) -> Finding:
+    """The finding for a TLS listener that refused this peer's client certificate (alert ``reason``)."""
+    presented = bool(tls.mutual and tls.certificate and tls.private_key)
+    low = reason.lower()
+    if not presented or "certificate_required" in low:
+        missing = _missing_client_files(tls) or "certificate, private_key and mutual: true"
+        return Finding("tls", f"the TLS listener requires a client certificate (mutual TLS) and this peer presented "
+                              f"none ({reason}): set transport.tls.{missing}")
+    names = _own_certificate(tls)
+    if "unknown_ca" in low:
+        return Finding("tls", f"the TLS listener does not trust this peer's certificate{names}: it is not signed by "
+                              f"the CA of the listener's transport.tls.root_ca (unknown CA, {reason}); give "
+                              f"transport.tls.certificate a certificate of that CA")
+    if "expired" in low or "revoked" in low:
+        return Finding("tls", f"the TLS listener refused this peer's certificate{names} ({reason}): renew "
+                              f"transport.tls.certificate")
+    return Finding("tls", f"the TLS listener refused this peer's certificate{names} ({reason}): it takes an X.509 "
+                          f"v3 certificate signed by the CA of its transport.tls.root_ca")
+
+
 def _tls_probe(endpoint: str, host: str, port: int, tls, timeout: float) -> Finding | None:
     """A TLS handshake as this process would make it; None when it succeeds."""
     ctx = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
@@ -140,13 +183,19 @@ def _tls_probe(endpoint: str, host: str, port: int, tls, timeout: float) -> Find
         return Finding("tls", f"certificate not trusted: the listener's certificate{names} is not signed by {ca} "
                               f"({e.verify_message})")
     except ssl.SSLError as e:
-        reason = (e.reason or str(e)).lower()
-        if "certificate required" in reason or "handshake failure" in reason or "alert" in reason:
-            return Finding("tls", f"the TLS listener refused this peer's certificate ({e.reason}): it expects mutual "
-                                  f"TLS, set transport.tls.certificate, private_key and mutual: true")
-        if "wrong version" in reason or "record layer" in reason or "packet length" in reason:
-            return Finding("not_zenoh", f"the listener does not speak TLS ({e.reason}): a plain TCP listener?")
-        return Finding("tls", f"the TLS handshake failed: {e.reason or e}")
+        reason = str(e.reason or e)
+        low = reason.lower()
+        if "certificate" in low or "unknown_ca" in low or "decrypt" in low:
+            return _refused_certificate(tls, reason)
+        if "wrong version" in low or "record layer" in low or "packet length" in low:
+            return Finding("not_zenoh", f"the listener does not speak TLS ({reason}): a plain TCP listener? "
+                                        f"(then the endpoint is tcp/{endpoint.split('/', 1)[1]})")
+        if "handshake failure" in low or "alert" in low:
+            return _refused_certificate(tls, reason)
+        return Finding("tls", f"the TLS handshake failed: {reason}")
+    except TimeoutError:                 # a plain Zenoh TCP listener waits for the rest of a frame that never comes
+        return Finding("not_tls", f"the listener does not answer a TLS handshake within {timeout:g} s: it does not "
+                                  f"speak TLS (a plain TCP Zenoh listener: the endpoint is tcp/{endpoint.split('/', 1)[1]})")
     except OSError:
         return None
 
@@ -174,12 +223,15 @@ def probe_endpoint(endpoint: str, tls=None, timeout: float = PROBE_TIMEOUT_S) ->
                                  "level: most likely a wrong transport.auth user/password, or it is not a teleop side")
     with sock:
         data = _listen_talk(sock, timeout)
-    if data and data[:1] == b"\x16":
-        return Finding("not_zenoh", f"the listener answers with TLS: use tls/{endpoint.split('/', 1)[1]}")
+    record = _TLS_RECORDS.get(data[:1]) if data and data[1:2] == b"\x03" else None
+    if record is not None:
+        return Finding("tls_port", f"the port speaks TLS (it answered plain TCP with a TLS {record}): the endpoint is "
+                                   f"tls/{endpoint.split('/', 1)[1]}, with transport.tls.root_ca (and the certificate "
+                                   "of a mutual TLS listener)")
     if data:
         return Finding("not_zenoh", f"the listener is not a Zenoh peer: it answered {_first_line(data)!r}")
     return Finding("silent", "the listener accepted the connection but no Zenoh session came up: it refused this "
-                             "peer (wrong transport.auth user/password, or it expects TLS) or it is not a teleop side")
+                             "peer (wrong transport.auth user/password) or it is not a teleop side")
 
 
 def no_peer_reason(endpoints, tls, waited: float, timeout: float = PROBE_TIMEOUT_S) -> tuple[str, bool]:

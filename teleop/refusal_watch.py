@@ -6,13 +6,20 @@ table of its TCP sockets (Linux: ``/proc/net/tcp``, ``/proc/net/tcp6``): a conne
 itself stays in ``TIME_WAIT`` for a minute afterwards. :class:`RefusalWatch` polls that table for sockets
 on its listen ports in ``TIME_WAIT`` whose remote end never became a Zenoh link (zenoh's link events
 name every accepted link's remote address), and logs each such connection once, through a
-:class:`~teleop.entity.RateLimitedLog`. A connection the peer closed first (a port probe, a peer that
-gave up) leaves no ``TIME_WAIT`` on this side and is not reported; a link that came up is never reported.
+:class:`~teleop.entity.RateLimitedLog` (a peer that retries every second gives one line per ``log_interval``,
+with the count of those suppressed), with the causes a listener on that port's protocol refuses
+(:data:`CAUSES`): which one it was, only the connecting side can tell (:mod:`teleop.peer_probe`), or
+zenoh's own log on stdout (``RUST_LOG=zenoh_link_tls=warn,zenoh_transport::unicast::establishment=debug``).
+A connection the peer closed first (a port probe, a peer that gave up) leaves no ``TIME_WAIT`` on this
+side and is not reported; a link that came up is never reported.
 
 Limits: which end closes a refused link first is a race between the two processes (zenoh sends its
 refusal, then both drop the socket); when the connector wins it, that attempt leaves nothing here.
 Zenoh retries a refused connect about once a second, so a persistent mistake is still reported within
-seconds; a single attempt may not be.
+seconds; a single attempt may not be. A TLS handshake zenoh refuses to another zenoh (a client certificate
+of another CA, none, plain TCP) ends in a reset, as the connector has sent more than the listener read,
+and a reset leaves no ``TIME_WAIT``: what is seen of those is the probe a refused teleop side makes of the
+endpoint (:func:`teleop.peer_probe.probe_endpoint`), which the listener closes.
 """
 from __future__ import annotations
 
@@ -25,9 +32,16 @@ from pathlib import Path
 from teleop.entity import Entity, RateLimitedLog
 from teleop.peer_probe import split_endpoint
 
-__all__ = ["RefusalWatch", "time_wait_remotes"]
+__all__ = ["CAUSES", "RefusalWatch", "time_wait_remotes"]
 
 log = logging.getLogger("teleop.refusals")
+#: What a listener on each protocol refuses before a Zenoh session comes up, as the listening side can only
+#: list it: zenoh does not tell the application which it was (the connecting side's probe does,
+#: :mod:`teleop.peer_probe`).
+CAUSES = {"tls": "a client certificate missing or not signed by transport.tls.root_ca (mutual TLS), a tcp/ "
+                 "endpoint pointed at this TLS port, or a wrong transport.auth user/password",
+          "tcp": "a wrong transport.auth user/password, a tls/ endpoint pointed at this plain TCP port, or not a Zenoh "
+                 "peer"}
 _TIME_WAIT = "06"
 _TABLES = (Path("/proc/net/tcp"), Path("/proc/net/tcp6"))
 
@@ -77,14 +91,14 @@ class RefusalWatch(Entity):
 
     def __init__(self, session, listen, interval: float = 0.5, log_interval: float = 5.0):
         super().__init__(session, "refusals")
-        self.ports = set()
+        self.ports: dict[int, str] = {}           # port -> its protocol (tcp, tls)
         for ep in listen:
             try:
                 proto, _, port = split_endpoint(ep)
             except ValueError:
                 continue
             if proto in ("tcp", "tls") and port:
-                self.ports.add(port)
+                self.ports[port] = proto
         self.refused = 0
         self._linked: set[tuple[str, int]] = set()
         self._reported: set[tuple[str, int, int]] = set()
@@ -115,9 +129,10 @@ class RefusalWatch(Entity):
                 continue
             new += 1
             self.refused += 1
-            self._log.warning("refused a connection from %s:%d on port %d: it closed before a Zenoh session came "
-                              "up (wrong transport.auth user/password or certificate, another deployment, or not a "
-                              "Zenoh peer)", rip, rport, lport)
+            proto = self.ports.get(lport, "tcp")
+            self._log.warning("refused a connection from %s:%d on %s port %d: it closed before a Zenoh session came "
+                              "up: %s; the connecting process's error line names which", rip, rport, proto.upper(),
+                              lport, CAUSES[proto])
         return new
 
     def _run(self, interval: float) -> None:

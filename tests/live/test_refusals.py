@@ -43,8 +43,13 @@ def pki(tmp_path_factory) -> dict[str, str]:
     (d / "ext.cnf").write_text("subjectAltName=DNS:localhost,IP:127.0.0.1\n")
     _openssl(d, "x509", "-req", "-in", "srv.csr", "-CA", "ca-one.pem", "-CAkey", "ca-one.key", "-CAcreateserial",
              "-out", "srv.pem", "-days", "1", "-extfile", "ext.cnf")
+    _openssl(d, "req", "-newkey", "rsa:2048", "-nodes", "-keyout", "cli.key", "-out", "cli.csr", "-subj", "/CN=client")
+    for ca in ("ca-one", "ca-other"):               # a client certificate of each CA, on one key
+        _openssl(d, "x509", "-req", "-in", "cli.csr", "-CA", f"{ca}.pem", "-CAkey", f"{ca}.key", "-CAcreateserial",
+                 "-out", f"cli-{ca}.pem", "-days", "1", "-extfile", "ext.cnf")          # X.509 v3
     return {"ca": str(d / "ca-one.pem"), "other_ca": str(d / "ca-other.pem"), "cert": str(d / "srv.pem"),
-            "key": str(d / "srv.key")}
+            "key": str(d / "srv.key"), "client_cert": str(d / "cli-ca-one.pem"),
+            "other_client_cert": str(d / "cli-ca-other.pem"), "client_key": str(d / "cli.key")}
 
 
 def _side(tmp_path: Path, transport: str) -> subprocess.CompletedProcess:
@@ -73,7 +78,7 @@ def test_wrong_password(tmp_path):
         r = _side(tmp_path, f"  listen: ['{ep}']\n  auth: {{user: surgeon, password: wrong}}\n")
     assert _error_line(r) == (f"teleop: error: no Zenoh peer answered at {ep} within 1.5 s: the listener accepted "
                               f"the connection but no Zenoh session came up: it refused this peer (wrong "
-                              f"transport.auth user/password, or it expects TLS) or it is not a teleop side")
+                              f"transport.auth user/password) or it is not a teleop side")
 
 
 def test_certificate_not_trusted_names_the_listeners_certificate(tmp_path, pki):
@@ -168,6 +173,65 @@ def test_a_mutual_tls_listener_and_a_connector_without_a_certificate(tmp_path, p
     with Session(listener):
         r = _side(tmp_path, f"  listen: ['{ep}']\n  tls: {{root_ca: '{pki['ca']}'}}\n")
     line = _error_line(r)
-    assert line.startswith(f"teleop: error: no Zenoh peer answered at {ep} within 1.5 s: the TLS listener refused "
-                           f"this peer's certificate (")
-    assert line.endswith("): it expects mutual TLS, set transport.tls.certificate, private_key and mutual: true")
+    assert line.startswith(f"teleop: error: no Zenoh peer answered at {ep} within 1.5 s: the TLS listener requires "
+                           f"a client certificate (mutual TLS) and this peer presented none (")
+    assert line.endswith("): set transport.tls.certificate, private_key and mutual: true")
+
+
+def _mutual_listener(pki, ep: str, auth: TransportAuthConfig | None = None) -> TransportConfig:
+    return TransportConfig(listen=(ep,), auth=auth or TransportAuthConfig(),
+                           tls=TransportTlsConfig(root_ca=pki["ca"], certificate=pki["cert"], private_key=pki["key"],
+                                                  mutual=True))
+
+
+def test_a_client_certificate_of_another_ca_is_named_as_not_signed_by_the_listeners_root_ca(tmp_path, pki):
+    ep = f"tls/localhost:{free_tcp_port()}"
+    with Session(_mutual_listener(pki, ep)):
+        r = _side(tmp_path, f"  listen: ['{ep}']\n  tls: {{root_ca: '{pki['ca']}', certificate: "
+                            f"'{pki['other_client_cert']}', private_key: '{pki['client_key']}', mutual: true}}\n")
+    assert _error_line(r) == (f"teleop: error: no Zenoh peer answered at {ep} within 1.5 s: the TLS listener does "
+                              f"not trust this peer's certificate (CN=client, issued by CN=ca-other): it is not "
+                              f"signed by the CA of the listener's transport.tls.root_ca (unknown CA, "
+                              f"TLSV1_ALERT_UNKNOWN_CA); give transport.tls.certificate a certificate of that CA")
+
+
+def test_plain_tcp_to_a_tls_port_is_told_the_port_speaks_tls(tmp_path, pki):
+    port = free_tcp_port()
+    with Session(_mutual_listener(pki, f"tls/localhost:{port}")):
+        r = _side(tmp_path, f"  listen: ['tcp/localhost:{port}']\n")
+    assert _error_line(r) == (f"teleop: error: no Zenoh peer answered at tcp/localhost:{port} within 1.5 s: the port "
+                              f"speaks TLS (it answered plain TCP with a TLS alert): the endpoint is "
+                              f"tls/localhost:{port}, with transport.tls.root_ca (and the certificate of a mutual "
+                              f"TLS listener)")
+
+
+def test_each_refusal_of_a_tls_listener_is_named_by_the_probe(tmp_path, pki):
+    """The four refusals of a mutual TLS listener with a user/password, probed as a connecting side probes them,
+    and a tls/ endpoint pointed at a plain TCP listener."""
+    from teleop.peer_probe import probe_endpoint
+    users = tmp_path / "users.txt"
+    users.write_text("slave:s3cret\nsurgeon:right\n")
+    port = free_tcp_port()
+    ep = f"tls/localhost:{port}"
+    mine = TransportTlsConfig(root_ca=pki["ca"], certificate=pki["client_cert"], private_key=pki["client_key"],
+                              mutual=True)
+    with Session(_mutual_listener(pki, ep, TransportAuthConfig(user="slave", password="s3cret",
+                                                               dictionary_file=str(users)))):
+        unknown_ca = probe_endpoint(ep, TransportTlsConfig(root_ca=pki["ca"], certificate=pki["other_client_cert"],
+                                                           private_key=pki["client_key"], mutual=True))
+        no_certificate = probe_endpoint(ep, TransportTlsConfig(root_ca=pki["ca"], certificate=pki["client_cert"],
+                                                               private_key=pki["client_key"]))
+        handshake_ok = probe_endpoint(ep, mine)          # a wrong password shows only at the Zenoh level
+        plain = probe_endpoint(f"tcp/localhost:{port}", None)
+    assert unknown_ca.kind == "tls" and "does not trust this peer's certificate (CN=client, issued by CN=ca-other)" \
+        in unknown_ca.text and "(unknown CA, TLSV1_ALERT_UNKNOWN_CA)" in unknown_ca.text
+    assert no_certificate.kind == "tls" and no_certificate.text.startswith(
+        "the TLS listener requires a client certificate (mutual TLS) and this peer presented none (")
+    assert no_certificate.text.endswith("): set transport.tls.mutual: true")           # certificate and key are set
+    assert handshake_ok.kind == "silent" and "most likely a wrong transport.auth user/password" in handshake_ok.text
+    assert plain.kind == "tls_port" and f"the endpoint is tls/localhost:{port}" in plain.text
+    tcp = f"tcp/localhost:{free_tcp_port()}"
+    with Session(TransportConfig(listen=(tcp,))):
+        not_tls = probe_endpoint("tls" + tcp[3:], mine)
+    assert not_tls.kind == "not_tls" and not_tls.text.endswith(
+        f"it does not speak TLS (a plain TCP Zenoh listener: the endpoint is {tcp})")

@@ -4,9 +4,10 @@ from __future__ import annotations
 import logging
 import time
 
-from teleop.config import TransportAuthConfig, TransportConfig
-from teleop.refusal_watch import RefusalWatch, _address, time_wait_remotes
+from teleop.config import TransportAuthConfig, TransportConfig, TransportTlsConfig
+from teleop.refusal_watch import CAUSES, RefusalWatch, _address, time_wait_remotes
 from teleop.transport import Session, free_tcp_port
+from tests.live.test_refusals import pki  # noqa: F401 - the certificates, a pytest fixture
 
 DEADLINE = 30.0   # [s] bound of the wait for zenoh's retries (about one a second; see the module's limits)
 
@@ -33,8 +34,8 @@ def test_a_wrong_password_is_reported_and_the_authorised_peer_is_not(tmp_path, c
                 g.zenoh_session.info.peers_zid()
                 time.sleep(0.01)
             good_port = int(str(next(iter(lis.zenoh_session.info.links())).dst).rsplit(":", 1)[1])
-            with Session(bad):
-                deadline = time.monotonic() + DEADLINE
+            with Session(bad), Session(bad), Session(bad):    # three retrying peers: each attempt is a race
+                deadline = time.monotonic() + DEADLINE          # which end closes first (module limits)
                 while watch.refused == 0 and time.monotonic() < deadline:
                     watch.poll()
                     time.sleep(0.05)
@@ -43,9 +44,50 @@ def test_a_wrong_password_is_reported_and_the_authorised_peer_is_not(tmp_path, c
     reported = [r for r in caplog.records if r.name == "teleop.refusals"]
     assert len(reported) == 1                                     # rate-limited: one record per 5 s
     assert reported[0].getMessage().startswith("refused a connection from 127.0.0.1:")
+    assert f" on TCP port {int(ep.rsplit(':', 1)[1])}: it closed before a Zenoh session came up: {CAUSES['tcp']}" \
+        in reported[0].getMessage()
     named = int(reported[0].getMessage().split("127.0.0.1:", 1)[1].split(" ", 1)[0])
     assert named != good_port and ("127.0.0.1", good_port) in watch._linked
 
 
 def test_no_table_no_report(tmp_path):
     assert time_wait_remotes({7447}, tables=(tmp_path / "missing",)) == set()
+
+
+def test_a_tls_listener_names_what_it_refuses_once_per_interval(pki, caplog):  # noqa: F811 - the fixture
+    """A mutual TLS listener refusing the probes of refused sides (a client certificate of another CA, none; the
+    listener closes them, zenoh's own refused handshakes end in a reset and leave nothing to see): one line for
+    all of them (rate-limited) with the causes a TLS port refuses; once the interval has passed, the next line
+    counts those suppressed."""
+    from teleop.peer_probe import probe_endpoint
+    port = free_tcp_port()
+    ep = f"tls/localhost:{port}"
+    tls = TransportTlsConfig(root_ca=pki["ca"], certificate=pki["cert"], private_key=pki["key"], mutual=True)
+    other_ca = TransportTlsConfig(root_ca=pki["ca"], certificate=pki["other_client_cert"],
+                                  private_key=pki["client_key"], mutual=True)
+    none = TransportTlsConfig(root_ca=pki["ca"])
+    with caplog.at_level(logging.WARNING, logger="teleop.refusals"), \
+            Session(TransportConfig(listen=(ep,), tls=tls)) as lis:
+        watch = RefusalWatch(lis, (ep,), interval=3600.0, log_interval=3600.0)     # polled by hand below
+        for probe in (other_ca, none, other_ca):         # what a refused side does before it says why
+            assert probe_endpoint(ep, probe).kind == "tls"
+        _poll_until(watch, 3)
+        watch._log.interval = 0.0                        # the interval has passed: the next refusal is logged
+        probe_endpoint(ep, none)
+        _poll_until(watch, 4)
+        watch.close()
+    first, second = [r.getMessage() for r in caplog.records if r.name == "teleop.refusals"]
+    assert first.startswith("refused a connection from 127.0.0.1:")
+    assert first.endswith(f" on TLS port {port}: it closed before a Zenoh session came up: {CAUSES['tls']}; the "
+                          "connecting process's error line names which")
+    assert CAUSES["tls"] == ("a client certificate missing or not signed by transport.tls.root_ca (mutual TLS), a "
+                             "tcp/ endpoint pointed at this TLS port, or a wrong transport.auth user/password")
+    assert second.endswith(" (2 similar suppressed)")
+
+
+def _poll_until(watch: RefusalWatch, n: int) -> None:
+    deadline = time.monotonic() + DEADLINE
+    while watch.refused < n:
+        assert time.monotonic() < deadline, f"{watch.refused} refusals seen, {n} expected"
+        watch.poll()
+        time.sleep(0.05)
