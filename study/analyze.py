@@ -50,7 +50,7 @@ from study.kaist_report import write_kaist_figures, write_kaist_report
 from study.kaist_summary import format_kaist
 from study.report import format_summary, split_text, write_report
 from teleop.errors import ConfigError, DataError
-from teleop.measured_csv import values_error
+from teleop.measured_csv import MAX_MAGNITUDE, values_error
 from teleop.recording import MeasuredData, read_measured_csv
 from teleop.text_files import check_text_head, require_file
 
@@ -226,14 +226,15 @@ def diagnose_file(path: str | Path, train_fraction: float = 0.6,
     Raises
     ------
     DataError
-        Missing or malformed file, neither T_out nor x_out, a recording too short to diagnose, values that make
-        the diagnosis' arithmetic fail (the line and column of the value farthest out of its column).
+        Missing or malformed file, neither T_out nor x_out, a recording too short to diagnose, a value beyond
+        :data:`teleop.measured_csv.MAX_MAGNITUDE` (its line and column), values that make the diagnosis'
+        arithmetic fail (the line and column of the value farthest out of its column).
     ConfigError
         ``train_fraction`` outside [0.3, 0.9].
     """
     if not 0.3 <= train_fraction <= 0.9:
         raise ConfigError(f"--train-fraction must be in [0.3, 0.9], got {train_fraction!r}")
-    data = read_measured_csv(path).require_distal()
+    data = read_measured_csv(path, limits=MAX_MAGNITUDE).require_distal()
     try:
         result = diagnose_recording(data, train_fraction=train_fraction, wrap_shape=wrap_shape,
                                     progress=len(data) >= PROGRESS_SAMPLES if progress is None else progress)

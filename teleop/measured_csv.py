@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import re
 import warnings
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import IO
 
@@ -31,8 +31,9 @@ OPTIONAL_COLUMNS = ("x_out", "T_out")
 #: SI unit of each standard column, written as ``# units:`` metadata and checked on load.
 SI_UNITS = {"time": "s", "x_in": "m", "T_in": "N", "x_out": "m", "T_out": "N"}
 
-#: Largest |value| of each standard column, in its SI unit: beyond it the value is no time stamp, tendon position
-#: or tension of an instrument (another unit, a corrupt row), and it would overflow the diagnosis' arithmetic.
+#: Largest |value| of each standard column, in its SI unit, that ``teleop analyze`` takes (``limits`` of
+#: :func:`read_measured_csv`): beyond it the value is no time stamp, tendon position or tension of an instrument
+#: (another unit, a corrupt row), and it would overflow the diagnosis' arithmetic.
 MAX_MAGNITUDE = {"time": 1e10, "x_in": 10.0, "T_in": 1e6, "x_out": 10.0, "T_out": 1e6}
 _KIND = {"s": "time stamp", "m": "tendon position", "N": "tension"}
 
@@ -114,19 +115,22 @@ def _line_of_row(path: Path, header_line: int, row: int) -> int:
     return next((ln for k, (ln, _) in enumerate(_data_lines(path, header_line)) if k == row), -1)
 
 
-def read_measured_csv(path: str | Path) -> MeasuredData:
+def read_measured_csv(path: str | Path, limits: Mapping[str, float] | None = None) -> MeasuredData:
     """Read one tendon's measured-data CSV.
 
     Parameters
     ----------
     path : str or Path
         The CSV file (format in the module docstring), UTF-8 text (a UTF-8 byte-order mark is skipped).
+    limits : mapping of column name -> largest |value| [SI], optional
+        Values beyond are refused with their line (:data:`MAX_MAGNITUDE`, for the analysis); None: any finite
+        value.
 
     Returns
     -------
     MeasuredData
-        Arrays of shape (n_samples,), n_samples >= 2, all finite, the standard columns within
-        :data:`MAX_MAGNITUDE` [SI], ``time`` strictly increasing.
+        Arrays of shape (n_samples,), n_samples >= 2, all finite (and within ``limits``), ``time`` strictly
+        increasing.
 
     Raises
     ------
@@ -134,7 +138,7 @@ def read_measured_csv(path: str | Path) -> MeasuredData:
         Missing file, a directory, a file that is not UTF-8 text (what it looks like: UTF-16, binary data; at
         which byte), an empty file, no header, missing required column, non-SI ``# units:`` for a
         standard column, wrong field count or non-numeric value (file:line, column), NaN or inf
-        (file:line, column), a standard column's value beyond :data:`MAX_MAGNITUDE` (file:line, column),
+        (file:line, column), a value beyond ``limits`` (file:line, column),
         time not strictly increasing (file:line, both values), fewer than two rows.
     """
     path, src = require_file(path), str(path)
@@ -148,7 +152,7 @@ def read_measured_csv(path: str | Path) -> MeasuredData:
         raise _locate_parse_error(path, src, header_line, names)
     if n_rows < 2:
         raise DataError(f"{src}: {n_rows} data row(s), need at least 2")
-    _check_values(table, names, path, src, header_line)
+    _check_values(table, names, path, src, header_line, limits or {})
     cols = {name: np.ascontiguousarray(table[:, j]) for j, name in enumerate(names)}
     t = cols["time"]
     step = np.diff(t)
@@ -165,10 +169,11 @@ def read_measured_csv(path: str | Path) -> MeasuredData:
                         metadata=metadata, source=src)
 
 
-def _check_values(table: np.ndarray, names: list[str], path: Path, src: str, header_line: int) -> None:
-    """DataError naming the line and column of the first value that is not finite, or beyond
-    :data:`MAX_MAGNITUDE` in a standard column."""
-    limit = np.array([MAX_MAGNITUDE.get(n, np.inf) for n in names])
+def _check_values(table: np.ndarray, names: list[str], path: Path, src: str, header_line: int,
+                  limits: Mapping[str, float]) -> None:
+    """DataError naming the line and column of the first value that is not finite, or beyond its column's entry
+    of ``limits``."""
+    limit = np.array([limits.get(n, np.inf) for n in names])
     bad = ~np.isfinite(table) | (np.abs(table) > limit)
     if not bad.any():
         return
