@@ -215,3 +215,13 @@ def test_an_mrd_value_out_of_range_and_a_fit_it_spoils_are_named(tmp_path, capsy
                           f"strictly less than each upper bound.); the value farthest out is at {d / '01.TXT'}:702: "
                           "column 2 = 9e+06 counts, ")
     assert msg.endswith(" times the column's spread from its median: fix or remove that row")
+
+
+def test_the_physical_bounds_are_the_analysis_not_every_readers(tmp_path, capsys):
+    from teleop.measured_csv import MAX_MAGNITUDE, read_measured_csv
+    f = tmp_path / "r.csv"
+    f.write_text(with_value(csv_text(), 20, 1, "100"))
+    assert read_measured_csv(f).x_in[20] == 100.0                      # a synthetic or replayed CSV reads
+    with pytest.raises(ValueError, match=r"r\.csv:23: column 2 \('x_in'\): 100\.0 m is beyond any tendon position"):
+        read_measured_csv(f, limits=MAX_MAGNITUDE)
+    assert refused([str(f)], capsys).startswith(f"{f}:23: column 2 ('x_in'): 100.0 m is beyond")
