@@ -138,6 +138,12 @@ def _add_services(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") ->
     add_calibrate_arguments(p)
     p.set_defaults(func=run_calibrate)
 
+    p = sub.add_parser("keys", help="the installation's credentials every process authenticates with: where they "
+                                    "are (made if missing), --renew, --export DIR (live/keys.py)")
+    from live import keys
+    keys.add_arguments(p)
+    p.set_defaults(func=keys.main_keys)
+
     p = sub.add_parser("replay", help="play a recorded run back through the estimator and the Rerun view, "
                                       "compared with the recorded estimate and the truth (live/replay.py)")
     from live import replay

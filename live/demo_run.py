@@ -10,7 +10,9 @@ instrument.
   (``teleop record``) starts first, or several (:class:`RecorderRun`, one per arm of a bimanual instrument:
   :mod:`live.demo_bimanual`), each ready before the sides start, which connect to all of them.
   With ``rig.type: zenoh`` a third process, ``teleop bridge``, runs the simulated rig behind the
-  Zenoh rig interface and the slave connects to it.
+  Zenoh rig interface and the slave connects to it. The processes authenticate with credentials of their own
+  (:mod:`teleop.credentials`), made for the run in a temporary folder and removed when it ends: no other
+  process, whatever credentials it holds, links to the demo's session.
 * :func:`full_scale_errors`: max and mean of |estimate - truth| over the range of the truth.
 * :func:`master_console_line`, :func:`loop_lines`, :func:`machine_line`, :func:`rt_budget_lines`, :func:`verdict_lines`:
   the lines on the master's console, on both loops, the machine and the link, and on the checks.
@@ -24,9 +26,11 @@ import dataclasses
 import json
 import math
 import os
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Callable
@@ -275,7 +279,8 @@ def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, b
     base = [sys.executable, "-m", "live.cli"]
     common = ["--config", str(cfg_file), "--run-dir", str(run_dir), "--max-duration", f"{timeout:g}"]
     recorders = [RecorderRun("recorder", common, run_dir)] if recorders is None else recorders
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    keys = Path(tempfile.mkdtemp(prefix="tsm-teleop-demo-"))   # the run's own credentials (teleop/credentials.py)
+    env = dict(os.environ, PYTHONUNBUFFERED="1", TSM_TELEOP_KEYS=str(keys / "keys"))
     deadline = time.monotonic() + timeout
     procs: list[tuple[str, subprocess.Popen, Path]] = []
     rig_link: list[str] = []
@@ -314,3 +319,4 @@ def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, b
         finally:
             for _, p, _ in procs:
                 _stop(p)
+            shutil.rmtree(keys, ignore_errors=True)

@@ -57,19 +57,32 @@ def _can_listen_tls(cfg: Config) -> bool:
     return bool(cfg.transport.tls.certificate and cfg.transport.tls.private_key)
 
 
-def _open(cfg: Config, listen, connect, clock) -> Session:
+#: The credentials role (teleop/credentials.py) of each ``teleop`` command that opens a session.
+COMMAND_ROLES = {"slave": "slave", "master": "master", "bridge": "rig", "calibrate": "slave", "record": "observer",
+                 "router": "observer"}
+
+
+def credentials_role(args) -> str | None:
+    """The credentials role of the process running ``args``: its ``teleop`` command's (observer for a command
+    not in :data:`COMMAND_ROLES`), None for arguments of no command (a library caller: no credentials)."""
+    command = getattr(args, "command", None)
+    return None if command is None else COMMAND_ROLES.get(command, "observer")
+
+
+def _open(cfg: Config, listen, connect, clock, role: str | None) -> Session:
     tls_listen = [ep for ep in listen if ep.startswith("tls/")]
     if tls_listen and not _can_listen_tls(cfg):
         raise ConfigError(f"transport.listen: {tls_listen[0]!r} needs transport.tls.certificate and private_key (a "
                           f"TLS listener presents them; a connector needs only root_ca: --connect {tls_listen[0]})")
     try:
-        return Session(zenoh_config(cfg.transport, listen=tuple(listen), connect=tuple(connect)), clock=clock)
+        return Session(zenoh_config(cfg.transport, listen=tuple(listen), connect=tuple(connect), role=role),
+                       clock=clock)
     except TransportError as e:
         raise TransportError(f"{e} ({_describe(listen, connect)})") from None
 
 
 def open_auto_session(cfg: Config, listen: tuple[str, ...] | None = None, connect: tuple[str, ...] | None = None,
-                      clock=None) -> tuple[Session, str]:
+                      clock=None, credentials: str | None = None) -> tuple[Session, str]:
     """Open this process's session (module docstring, step 1).
 
     Parameters
@@ -79,6 +92,8 @@ def open_auto_session(cfg: Config, listen: tuple[str, ...] | None = None, connec
     listen, connect : tuple of str, optional
         The ``--listen``/``--connect`` flags (either given: used as they are, no automatic choice).
     clock : Clock, optional
+    credentials : str, optional
+        The process's credentials role (:data:`COMMAND_ROLES`; None: no installation credentials).
 
     Returns
     -------
@@ -93,21 +108,21 @@ def open_auto_session(cfg: Config, listen: tuple[str, ...] | None = None, connec
     """
     t = cfg.transport
     if listen is not None or connect is not None:
-        return _open(cfg, listen or (), connect or (), clock), "configured"
+        return _open(cfg, listen or (), connect or (), clock, credentials), "configured"
     if not t.auto_connect or t.mode != "peer" or not t.listen:
-        return _open(cfg, t.listen, t.connect, clock), "configured"
+        return _open(cfg, t.listen, t.connect, clock, credentials), "configured"
     if any(ep.startswith("tls/") for ep in t.listen) and not _can_listen_tls(cfg):
         # no certificate of its own: this process cannot listen on TLS, it can only connect to the listener
         log.info("%s: no transport.tls.certificate to listen with: connecting to it", ", ".join(t.listen))
-        return _open(cfg, (), tuple(t.listen) + tuple(t.connect), clock), "connected"
+        return _open(cfg, (), tuple(t.listen) + tuple(t.connect), clock, credentials), "connected"
     try:
-        return _open(cfg, t.listen, t.connect, clock), "listening"
+        return _open(cfg, t.listen, t.connect, clock, credentials), "listening"
     except TransportError as e:
         if not any(s in str(e) for s in _IN_USE):
             raise
     ephemeral = tuple(_with_port(ep, 0) for ep in t.listen)
     log.info("%s in use: connecting to it", ", ".join(t.listen))
-    return _open(cfg, ephemeral, tuple(t.listen) + tuple(t.connect), clock), "connected"
+    return _open(cfg, ephemeral, tuple(t.listen) + tuple(t.connect), clock, credentials), "connected"
 
 
 def new_run_id(base: str | Path) -> str:
@@ -266,7 +281,7 @@ def side_session(cfg: Config, args, clock=None) -> Session:
     listen = None if getattr(args, "listen", None) is None and getattr(args, "connect", None) is None else \
         tuple(args.listen or ())
     connect = None if listen is None else tuple(args.connect or ())
-    session, role = open_auto_session(cfg, listen, connect, clock)
+    session, role = open_auto_session(cfg, listen, connect, clock, credentials_role(args))
     endpoints = tuple(cfg.transport.listen) + tuple(cfg.transport.connect) if role == "connected" else \
         (tuple(cfg.transport.connect) if connect is None else connect)
     try:

@@ -17,8 +17,10 @@ __all__ = ["router_config", "run_router"]
 log = logging.getLogger("live.router")
 
 
-def router_config(cfg, listen: tuple[str, ...] | None = None):
-    """The zenoh.Config of a router on ``listen`` (default ``cfg.transport.listen``), auth/TLS included.
+def router_config(cfg, listen: tuple[str, ...] | None = None, role: str | None = None):
+    """The zenoh.Config of a router on ``listen`` (default ``cfg.transport.listen``), auth/TLS included; with
+    ``role`` (``teleop router``: observer) the installation's credentials and access control
+    (:func:`teleop.transport.zenoh_config`).
 
     Raises
     ------
@@ -26,7 +28,8 @@ def router_config(cfg, listen: tuple[str, ...] | None = None):
         An endpoint or security setting zenoh rejects (named).
     """
     from teleop.transport import zenoh_config
-    zcfg = zenoh_config(cfg.transport, listen=tuple(cfg.transport.listen if listen is None else listen), connect=())
+    zcfg = zenoh_config(cfg.transport, listen=tuple(cfg.transport.listen if listen is None else listen), connect=(),
+                        role=role)
     zcfg.insert_json5("mode", json.dumps("router"))
     return zcfg
 
@@ -39,7 +42,7 @@ def run_router(args) -> int:
 
     cfg = load_config(args.config)
     listen = tuple(args.listen) if args.listen else None
-    with raise_on_sigterm(), Session(router_config(cfg, listen)) as session:
+    with raise_on_sigterm(), Session(router_config(cfg, listen, role="observer")) as session:
         eps = ", ".join(listen or cfg.transport.listen)
         print(f"teleop router: {session.zenoh_session.zid()} listening on {eps} (ready)", flush=True)
         t0 = time.monotonic()

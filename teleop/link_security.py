@@ -11,8 +11,10 @@ Two layers, both from the config (``transport.tls``, ``transport.auth``, ``trans
 * **Session lock** (:class:`SourceLock`): every :class:`teleop.transport.Publisher` stamps its puts
   with its zenoh entity id (``source_info``); the slave's command and master-heartbeat subscribers
   share one lock that admits only the session of the first master heard from, until that master's
-  liveliness token disappears. A second authorised process publishing commands is counted and
-  ignored.
+  liveliness token disappears. A second copy of the operator's own program publishing commands is
+  counted (``foreign_source``) and ignored. The id is written by the sender and can be copied: the lock
+  is no authentication. Who may put commands at all is decided by the installation's credentials and
+  Zenoh's access control (:mod:`teleop.credentials`).
 """
 from __future__ import annotations
 

@@ -97,6 +97,10 @@ BOUNDS: tuple[Bound, ...] = (
     Bound("slave.max_speed", "<=", 0.1, "m/s",
           "the followed target moves no faster than this; 0.1 m/s is twice the default motor's speed limit and 20 "
           "times the fastest hand motion at motion scale 0.2 (25 mm/s x 0.2): a faster target is not an operator's"),
+    Bound("transport.auth.installation", "==", True, "",
+          "without the installation's credentials any process that reaches the session (another user's on the "
+          "same host, a peer on the network) links to the sides and can command the instrument and forge its "
+          "estimates (docs/concepts/security.md)"),
     Bound("calibration.target_tension", "<=", 50.0, "N", _TENSION.format(limit=50)),
     Bound("sheath.pretension", "<=", 50.0, "N", _TENSION.format(limit=50)),
     Bound("instrument.joints[].pretension", "<=", 50.0, "N", _TENSION.format(limit=50)),

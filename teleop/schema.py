@@ -274,6 +274,7 @@ class PairControlConfig:
 class TransportAuthConfig:
     """Zenoh user/password authentication of every link (teleop/link_security.py); null: none."""
 
+    installation: bool = True             # no user given: each process uses its role's installation credentials
     user: Optional[str] = None            # this process's user name
     password: Optional[str] = None        # its password (prefer password_file outside tests)
     password_file: Optional[str] = None   # file holding the password (first line)

@@ -26,6 +26,7 @@ from teleop import journal
 from teleop.clock import Clock, MonotonicClock
 from teleop.codec import Message, decode, encode
 from teleop.config import TransportConfig
+from teleop.credentials import ensure_credentials
 from teleop.entity import Entity, RateLimitedLog, zenoh_error_text
 from teleop.errors import CodecError, ConfigError, TransportError
 from teleop.link_security import link_security_settings
@@ -49,7 +50,7 @@ def _insert(cfg: zenoh.Config, key: str, value, where: str, shown=None) -> None:
 
 
 def zenoh_config(transport: TransportConfig, *, listen: tuple[str, ...] | None = None,
-                 connect: tuple[str, ...] | None = None) -> zenoh.Config:
+                 connect: tuple[str, ...] | None = None, role: str | None = None) -> zenoh.Config:
     """Build the zenoh configuration of one process.
 
     Parameters
@@ -60,6 +61,11 @@ def zenoh_config(transport: TransportConfig, *, listen: tuple[str, ...] | None =
     listen, connect : tuple of str, optional
         Replace the configured endpoints (the CLI's ``--listen``/``--connect``; in one config both
         sides cannot listen on the same port, so one side usually overrides ``listen=()``).
+    role : str, optional
+        The process's role in a live session (:data:`teleop.credentials.ROLES`): with
+        ``transport.auth.installation`` and no ``transport.auth.user``, its links are authenticated with the
+        installation's credentials of that role and the access-control rules apply
+        (:mod:`teleop.credentials`). None (a library or test session): no installation credentials.
 
     Returns
     -------
@@ -69,7 +75,8 @@ def zenoh_config(transport: TransportConfig, *, listen: tuple[str, ...] | None =
     Raises
     ------
     ConfigError
-        An endpoint zenoh does not accept (names ``transport.listen[i]`` / ``transport.connect[i]``).
+        An endpoint zenoh does not accept (names ``transport.listen[i]`` / ``transport.connect[i]``); the
+        installation's credentials cannot be read or created.
     """
     listen = tuple(transport.listen if listen is None else listen)
     connect = tuple(transport.connect if connect is None else connect)
@@ -89,7 +96,11 @@ def zenoh_config(transport: TransportConfig, *, listen: tuple[str, ...] | None =
     # a batch is never held back waiting for more messages (default 1 ms): what a side published is on the
     # socket at once, so a SIGKILL right after a put loses nothing that was put (tests/integration/test_recorder.py)
     _insert(cfg, "transport/link/tx/queue/batching/time_limit", 0, "transport/link/tx/queue/batching/time_limit")
-    for k, v in link_security_settings(transport).items():   # TLS, user/password (teleop/link_security.py)
+    settings = link_security_settings(transport)   # TLS, user/password (teleop/link_security.py)
+    auth = transport.auth
+    if role is not None and auth.installation and auth.user is None and auth.dictionary_file is None:
+        settings.update(ensure_credentials(role).zenoh_settings())   # the role's installation credentials
+    for k, v in settings.items():
         _insert(cfg, k, v, k.replace("/", "."), shown="***" if k.endswith("password") else None)
     return cfg
 

@@ -13,6 +13,8 @@ import time
 import zenoh
 from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 
+from teleop.credentials import ensure_credentials
+
 JOINT_STATE = "sensor_msgs/msg/JointState"
 WRENCH_STAMPED = "geometry_msgs/msg/WrenchStamped"
 OPERATING_STATE = "crtk_msgs/msg/OperatingState"
@@ -106,11 +108,16 @@ def key(domain: int, topic: str, name: str) -> str:
 class RosPeer:
     """A ROS 2 node as rmw_zenoh makes one, on its own Zenoh session connected to ``endpoint`` (one or a list)."""
 
-    def __init__(self, endpoint: str | list[str], domain: int = 0, node: str = "peer"):
+    def __init__(self, endpoint: str | list[str], domain: int = 0, node: str = "peer", credentials: str | None = None):
         conf = zenoh.Config()
         for k, v in (("mode", "peer"), ("connect/endpoints", [endpoint] if isinstance(endpoint, str) else endpoint), ("listen/endpoints", []),
                      ("scouting/multicast/enabled", False)):
             conf.insert_json5(k, json.dumps(v))
+        if credentials is not None:      # a live session's processes admit only the installation's users
+            cred = ensure_credentials(credentials)
+            conf.insert_json5("transport/auth/usrpwd/user", json.dumps(cred.role))
+            conf.insert_json5("transport/auth/usrpwd/password",
+                              json.dumps(cred.password_file.read_text(encoding="utf-8").strip()))
         self.z = zenoh.open(conf)
         self.domain, self.node, self.zid = domain, node, str(self.z.info.zid())
         self.received: dict[str, list] = {}

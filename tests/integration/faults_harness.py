@@ -213,7 +213,7 @@ def run_fault(tmp: Path, name: str, *, inject: dict[str, str] | None = None, sig
                 procs[side] = subprocess.Popen(args, stdout=fh, stderr=subprocess.STDOUT, env=env)
             if side == "slave":
                 _wait(lambda: accepts_connections(port), 60, f"the slave to listen on {ep}", procs)
-        with Session(zenoh_config(cfg.transport, listen=(), connect=(ep,))) as obs:
+        with Session(zenoh_config(cfg.transport, listen=(), connect=(ep,), role="observer")) as obs:
             beats = {s: obs.subscriber(heartbeat_key(ident, s), Heartbeat) for s in ("slave", "master")}
             DEBUG[:] = [lambda: str({s: (b.count, b.errors, _observer_state(b)) for s, b in beats.items()})]
             _wait(lambda: all(_observer_state(b) == SideState.ENGAGED for b in beats.values()), 60,

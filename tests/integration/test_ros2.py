@@ -72,7 +72,7 @@ def test_a_ros2_node_reads_the_crtk_topics_of_slave_and_master(tmp_path):
     slave = start(["slave", "--config", str(cfg_path), "--listen", ep, "--run-dir", str(run_dir),
                    "--max-duration", "60", "--exit-on-master-stop"], tmp_path / "slave.log")
     master = None
-    peer = RosPeer([ep, ep_master], domain=7, node="crtk_console")    # as rmw_zenoh peers meet through a router
+    peer = RosPeer([ep, ep_master], domain=7, node="crtk_console", credentials="observer")    # as rmw_zenoh peers meet through a router
     try:
         for topic, typ in (("/itros/distal/measured_js", JOINT_STATE), ("/itros/measured_js", JOINT_STATE),
                            ("/itros/measured_cf", WRENCH_STAMPED), ("/itros/operating_state", OPERATING_STATE),
@@ -139,7 +139,7 @@ def test_servo_jp_from_a_ros2_node_drives_the_instrument_without_a_master(tmp_pa
     run_dir = tmp_path / "run"
     slave = start(["slave", "--config", str(cfg_path), "--listen", ep, "--run-dir", str(run_dir),
                    "--max-duration", "60"], tmp_path / "slave.log")
-    peer = RosPeer(ep, domain=7, node="teleop_mtm")
+    peer = RosPeer(ep, domain=7, node="teleop_mtm", credentials="master")
     stop = threading.Event()
     target = [None]
     try:

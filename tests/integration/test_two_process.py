@@ -77,7 +77,7 @@ def test_killing_the_master_makes_the_slave_go_safe(tmp_path):
                    "--max-duration", "60"], tmp_path / "slave.log")
     master = None
     try:
-        with Session(zenoh_config(cfg.transport, listen=(), connect=(ep,))) as session:
+        with Session(zenoh_config(cfg.transport, listen=(), connect=(ep,), role="observer")) as session:
             beats = session.subscriber(heartbeat_key(ident, "slave"), Heartbeat)
             estimates = session.subscriber(estimate_key(ident), Estimate)
 
