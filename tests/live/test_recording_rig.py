@@ -100,7 +100,7 @@ def test_a_recording_without_the_columns_the_axis_needs_is_refused(tmp_path):
     f = tmp_path / "00.TXT"
     f.write_text("\n".join("0.001,1,2,3,4,5,6,7" for _ in range(10)) + "\n")
     cfg = mrd_config(tmp_path, str(f))
-    with pytest.raises(DataError, match=r"00.TXT: line 1: expected 10 comma-separated numbers, got 8"):
+    with pytest.raises(DataError, match=r"00.TXT:1: expected 10 comma-separated numbers, got 8"):
         make_rig(cfg)
 
 

@@ -242,6 +242,6 @@ def test_a_folder_measures_its_load_gain_and_another_folder_takes_it_from_the_js
     assert not one["load_gain"]["several_loads"]
     (tmp_path / "one.json").write_text(json.dumps({"centre_map": one}, default=float))
     (tmp_path / "bare.json").write_text("{}")
-    for bad, word in (("one.json", "one load level"), ("bare.json", "no centre_map.load_gain"), ("gone.json", "not found")):
+    for bad, word in (("one.json", "one load level"), ("bare.json", "no centre_map.load_gain"), ("gone.json", "no such file")):
         with pytest.raises(ConfigError, match=word):
             split_design_gain(f"gain={tmp_path / bad}:31")
