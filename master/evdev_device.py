@@ -37,9 +37,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from master.device import DeviceState
+from teleop.config_yaml import read_yaml
 from teleop.errors import ConfigError, DeviceError
 
 __all__ = ["EvdevConfig", "EvdevDevice", "parse_evdev", "load_evdev_file", "evdev_module", "ff_devices", "LEVEL_MAX"]
@@ -146,10 +145,7 @@ def load_evdev_file(path: str | Path | None) -> EvdevConfig:
     """
     if path is None:
         return EvdevConfig()
-    try:
-        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError) as e:
-        raise ConfigError(f"{path}: cannot read the device file ({e})") from None
+    data = read_yaml(Path(path), hex_integers=True)[0]     # bounded: size, nesting, aliases (teleop/config_yaml.py)
     return parse_evdev(data, str(path))
 
 

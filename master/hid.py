@@ -35,12 +35,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
-import yaml
-
 from master.device import DeviceState, MultiAxisState
 from master.hid_pid import PidConfig, PidForce, parse_pid
 from master.hid_reports import InputMap, InputSample, OutputMap, Section, parse_input, parse_output, send_report
-from teleop.errors import ConfigError, DeviceError
+from teleop.config_yaml import read_yaml
+from teleop.errors import DeviceError
 
 __all__ = ["Match", "HidDeviceConfig", "HidDevice", "load_device_file", "parse_device", "hid_module"]
 
@@ -146,14 +145,7 @@ def load_device_file(path: str | Path) -> HidDeviceConfig:
         Missing or unreadable file, YAML syntax error, or any error of :func:`parse_device`.
     """
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise ConfigError(f"{path}: cannot read device file ({e.strerror or e})") from None
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        where = f"{path}:{mark.line + 1}" if mark else str(path)
-        raise ConfigError(f"{where}: YAML syntax error: {getattr(e, 'problem', None) or e}") from None
+    data = read_yaml(path, hex_integers=True)[0]     # bounded: size, nesting, aliases (teleop/config_yaml.py)
     return parse_device(data, str(path))
 
 

@@ -26,9 +26,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from master.device import DeviceState
+from teleop.config_yaml import read_yaml
 from teleop.errors import ConfigError, DeviceError
 
 __all__ = ["VendorConfig", "VendorDevice", "DhdAdapter", "TouchAdapter", "load_vendor_file", "sdk_module",
@@ -84,10 +83,7 @@ def load_vendor_file(kind: str, path: str | Path | None) -> VendorConfig:
     """
     if path is None:
         return VendorConfig(kind)
-    try:
-        data = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
-    except (OSError, yaml.YAMLError) as e:
-        raise ConfigError(f"{path}: cannot read the device file ({e})") from None
+    data = read_yaml(Path(path), hex_integers=True)[0] or {}     # bounded: size, nesting, aliases (teleop/config_yaml.py)
     i, f = data.get("input") or {}, data.get("force") or {}
     axis = i.get("axis", "x")
     if axis not in _AXES:

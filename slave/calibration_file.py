@@ -47,7 +47,8 @@ from slave.calibrate import route_wrap_shape
 from slave.pair_calibrate import tendon_wrap_shape
 from slave.rig import TENDONS
 from teleop.config import Config
-from teleop.errors import CalibrationError
+from teleop.config_yaml import read_yaml
+from teleop.errors import CalibrationError, ConfigError
 
 __all__ = ["TendonCalibration", "InstrumentCalibration", "calibration_path", "user_calibration_dir", "APP_DATA", "from_results", "from_tendon_result",
            "save_calibration", "load_calibration", "sheath_models", "tendon_model"]
@@ -170,14 +171,12 @@ def load_calibration(path: str | Path, cfg: Config) -> InstrumentCalibration:
         the file name and names the key.
     """
     path = Path(path)
+    if not path.exists():
+        raise _fail(path, "calibration file not found (run `teleop calibrate --config ...`)")
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise _fail(path, "calibration file not found (run `teleop calibrate --config ...`)") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise _fail(path, f"cannot read the calibration file ({e})") from None
-    except yaml.YAMLError as e:
-        raise _fail(path, f"YAML syntax error: {getattr(e, 'problem', None) or e}") from None
+        data = read_yaml(path)[0]           # bounded: size, nesting, aliases (teleop/config_yaml.py)
+    except ConfigError as e:
+        raise CalibrationError(str(e)) from None
     kind = "joints" if cfg.instrument.joints else "tendon"
     keys = _TOP_KEYS + (kind,)
     if not isinstance(data, dict):

@@ -161,6 +161,24 @@ _Loader.add_implicit_resolver(
 _Loader.add_constructor("tag:yaml.org,2002:int", _int)
 
 
+class _HexLoader(_Loader):
+    """:class:`_Loader` that also reads hexadecimal integers (``0xC000``: the usages and reports of device files)."""
+
+
+def _hex_or_decimal(loader: _Loader, node: ScalarNode) -> int:
+    text = str(loader.construct_scalar(node))
+    if text.lstrip("+-")[:2].lower() != "0x":
+        return _int(loader, node)
+    if len(text) > MAX_INT_DIGITS:
+        raise ValueError(f"an integer of {len(text)} characters; expected at most {MAX_INT_DIGITS}")
+    return int(text, 16)
+
+
+_HexLoader.yaml_implicit_resolvers = {ch: list(rs) for ch, rs in _Loader.yaml_implicit_resolvers.items()}
+_HexLoader.add_implicit_resolver("tag:yaml.org,2002:int", re.compile(r"^[-+]?0[xX][0-9a-fA-F]+$"), list("-+0"))
+_HexLoader.add_constructor("tag:yaml.org,2002:int", _hex_or_decimal)
+
+
 def _line_map(root: Node | None, source: str) -> tuple[dict[str, int], dict[int, str]]:
     """(line of each dotted key, dotted key of each node by id); a duplicate key is refused (PyYAML keeps the
     last silently). The walk is bounded by the limits the composer kept (:data:`MAX_NODES`, :data:`MAX_DEPTH`)."""
@@ -211,8 +229,9 @@ def _open_text(path: Path) -> str:
         raise ConfigError(f"{source}: cannot read config file ({e})") from None
 
 
-def read_yaml(path: Path) -> tuple[Any, dict[str, int]]:
-    """Read the YAML file at ``path`` under the limits of the module docstring.
+def read_yaml(path: Path, *, hex_integers: bool = False) -> tuple[Any, dict[str, int]]:
+    """Read the YAML file at ``path`` under the limits of the module docstring; ``hex_integers``: ``0x...`` is an
+    integer too (device files), else a string.
 
     Returns
     -------
@@ -229,7 +248,7 @@ def read_yaml(path: Path) -> tuple[Any, dict[str, int]]:
     """
     source = str(path)
     text = _open_text(path)
-    loader = _Loader(text)
+    loader = (_HexLoader if hex_integers else _Loader)(text)
     keys: dict[int, str] = {}
     try:
         root = loader.get_single_node()

@@ -360,11 +360,11 @@ def test_device_file_errors_name_file_and_key(data, match):
 
 
 def test_device_file_read_errors(tmp_path):
-    with pytest.raises(ConfigError, match="nope.yaml: cannot read device file"):
+    with pytest.raises(ConfigError, match="nope.yaml: config file not found"):
         load_device_file(tmp_path / "nope.yaml")
     bad = tmp_path / "bad.yaml"
     bad.write_text("match: {vendor_id: 1\ninput: [\n")
-    with pytest.raises(ConfigError, match=r"bad\.yaml:\d+: YAML syntax error"):
+    with pytest.raises(ConfigError, match=r"bad\.yaml:\d+:\d+: YAML syntax error"):
         load_device_file(bad)
 
 
