@@ -19,7 +19,7 @@ RANGES: dict[str, tuple[str, str]] = {
     "sheath.runs[].length": ("> 0", "m"), "sheath.runs[].radius": ("> 0", "m, .inf = straight"),
     "rig.rate_hz": (LOOP_RATE, "Hz"), "rig.zenoh.timeout_ms": ("> 0", "ms"), "rig.zenoh.wait_s": ("0.01..3600", "s"),
     **{f"rig.simulated.{k}": v for k, v in {
-        "n_elements": (">= 1", "-"), "mu": (">= 0", "-"),
+        "n_elements": ("1..10000", "-"), "mu": (">= 0", "-"),
         "motor.bandwidth_hz": ("> 0", "Hz"), "motor.max_speed": ("> 0", "m/s"),
         "motor.pulley_radius": ("> 0", "m"), "motor.encoder_lines_per_rev": (">= 1", "-"),
         "load.joint_stiffness": (">= 0", "N/m"), "load.joint_limit": ("> 0", "m"),
@@ -27,7 +27,7 @@ RANGES: dict[str, tuple[str, str]] = {
         "load.tissue_contact": ("any", "m"), "load.force": (">= 0", "N"),
         "sensors.load_cell_noise": (">= 0", "N"), "sensors.seed": (">= 0", "-")}.items()},
     # rig.simulated.effects.*: each setting's range and unit are its catalogue entry's (effects_config.effect_ranges)
-    "estimator.n_nodes": (">= 2", "-"), "estimator.hold_rate": (">= 0", "N/s"),
+    "estimator.n_nodes": ("2..10000", "-"), "estimator.hold_rate": (">= 0", "N/s"),
     "estimator.rate_time_constant": ("> 0", "s"), "estimator.profile_points": ("0..65535", "-"),
     "estimator.tension_noise": (">= 0", "N"),
     "calibration.target_tension": ("> 0", "N"), "calibration.speed": ("> 0", "m/s"),
