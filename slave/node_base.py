@@ -178,7 +178,7 @@ class SlaveNodeBase(NodeBase):
         self._heartbeat(now)
         crtk = self.links.crtk
         if crtk is not None:
-            crtk.offer(self.state, self._accepted)
+            crtk.offer(self.state, self._accepted, self.tension_fault is not None)
 
     def _calibration_step(self, now: float, dt: float) -> None:
         """One cycle of the power-up calibration routine."""

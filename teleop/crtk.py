@@ -53,11 +53,12 @@ from teleop.ros2_types import (
 )
 from teleop.ros2_wire import ros_name
 
-__all__ = ["OPERATING", "STATE_COMMANDS", "slave_arm", "master_arm", "axis_names", "tendon_names",
+__all__ = ["OPERATING", "FAULT", "STATE_COMMANDS", "slave_arm", "master_arm", "axis_names", "tendon_names",
            "slave_topics", "command_topics", "master_topics", "slave_messages", "master_messages", "servo_targets"]
 
 #: SideState -> (CRTK state, is_homed, is_busy). SAFE (no fresh command, or the link lost: the axes hold,
-#: then relax) is PAUSED: powered, not moving on commands, left by the next valid command.
+#: then relax) is PAUSED: powered, not moving on commands, left by the next valid command. A SAFE held by a
+#: tension trip is FAULT instead (:data:`FAULT`): latched until the operator lets go (slave/node_base.py).
 OPERATING: dict[SideState, tuple[str, bool, bool]] = {
     SideState.STARTING: ("DISABLED", False, False),
     SideState.CALIBRATING: ("ENABLED", False, True),
@@ -66,6 +67,8 @@ OPERATING: dict[SideState, tuple[str, bool, bool]] = {
     SideState.SAFE: ("PAUSED", True, False),
     SideState.STOPPING: ("DISABLED", True, False),
 }
+#: The slave's state while a tension trip holds it SAFE: CRTK's FAULT, homed, not busy.
+FAULT = ("FAULT", True, False)
 #: state_command strings -> whether servo_jp is admitted afterwards
 STATE_COMMANDS = {"enable": True, "resume": True, "disable": False, "pause": False}
 
@@ -115,8 +118,8 @@ def master_topics(cfg: Any) -> dict[str, str]:
     return {f"/{arm}/measured_js": JOINT_STATE, f"/{arm}/operating_state": OPERATING_STATE}
 
 
-def _operating(t_ns: int, state: SideState) -> bytes:
-    name, homed, busy = OPERATING.get(state, ("FAULT", False, False))
+def _operating(t_ns: int, state: SideState, fault: bool = False) -> bytes:
+    name, homed, busy = FAULT if fault else OPERATING.get(state, ("FAULT", False, False))
     return operating_state(t_ns, name, homed, busy)
 
 
@@ -129,17 +132,18 @@ def _measured(cfg: Any, est: Estimate) -> tuple[list[float], list[float]]:
             [r * (a.tendons[0].T_in - a.tendons[1].T_in) for a, r in zip(est.axes, radii)])
 
 
-def slave_messages(cfg: Any, t_ns: int, state: SideState, est: Estimate | None, targets: Sequence[float] | None) \
-        -> Iterator[tuple[str, bytes]]:
+def slave_messages(cfg: Any, t_ns: int, state: SideState, est: Estimate | None, targets: Sequence[float] | None,
+                   fault: bool = False) -> Iterator[tuple[str, bytes]]:
     """(topic, CDR bytes) of every slave topic for one publication at ``t_ns`` [ns, UNIX epoch], one topic
     encoded per step of the iteration (the publisher thread encodes each in the loop's idle time).
 
     ``est``: the latest estimate (None before the first: only the operating state and an invalid
-    setpoint); ``targets``: the targets followed, or None when not ENGAGED (setpoint stamp 0).
+    setpoint); ``targets``: the targets followed, or None when not ENGAGED (setpoint stamp 0); ``fault``: a
+    tension trip holds the slave SAFE (operating state FAULT).
     """
     arm = slave_arm(cfg)
     names = axis_names(cfg)
-    yield f"/{arm}/operating_state", _operating(t_ns, state)
+    yield f"/{arm}/operating_state", _operating(t_ns, state, fault)
     yield f"/{arm}/setpoint_js", joint_state(t_ns, names, targets) if targets is not None else joint_state(0, names)
     if est is None:
         return

@@ -173,9 +173,10 @@ class SlaveCrtk(CrtkSide):
             f"{ADMIN_SPACE}/{d}/*/*/*/MP/*/*/*/{mangle(servo_topic)}/{dds_type_name(JOINT_STATE)}/"
             f"{type_hash(JOINT_STATE)}/*")
 
-    def _slave_messages(self, t_ns: int, state: SideState, accepted: Any) -> Iterable[tuple[str, bytes]]:
+    def _slave_messages(self, t_ns: int, state: SideState, accepted: Any, fault: bool = False) \
+            -> Iterable[tuple[str, bytes]]:
         targets = accepted.message.targets if accepted is not None and state == SideState.ENGAGED else None
-        return slave_messages(self.cfg, t_ns, state, self.estimate, targets)
+        return slave_messages(self.cfg, t_ns, state, self.estimate, targets, fault)
 
     def tee(self, publisher: Any) -> "_Tee":
         """The estimate publisher ``publisher`` wrapped so that each estimate put is also kept here."""

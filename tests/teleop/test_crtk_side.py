@@ -182,3 +182,15 @@ def test_servo_jp_commands_follow_the_masters_numbering_and_the_newest_wins(wire
     with pytest.raises(CodecError):
         crtk._on_servo(ros2_types.joint_state(1, ["wrist"], [0.001]), None)
     assert crtk.servo_refused == 1 and crtk.servo.message.seq == 42
+
+
+def test_a_tension_trip_is_a_fault_and_a_stale_link_a_pause():
+    from teleop.crtk import slave_messages
+    cfg = Config(ros2=Ros2Config(enabled=True))
+
+    def state(**kw):
+        topic, cdr = next(iter(slave_messages(cfg, 1, SideState.SAFE, None, None, **kw)))
+        msg = ros2_types.decode(cdr, OPERATING_STATE)
+        return topic, msg.state, msg.is_homed, msg.is_busy
+    assert state() == ("/tsm0/operating_state", "PAUSED", True, False)
+    assert state(fault=True) == ("/tsm0/operating_state", "FAULT", True, False)
