@@ -209,8 +209,10 @@ def _serve(node, clock, args: argparse.Namespace, run_dir: Path, side: str, inje
 
 def _log_master_done(node) -> None:
     lat = node.latency_stats()
+    def ms(v) -> str:
+        return "n/a" if v is None else f"{v:.3f}"
     logging.getLogger("teleop.master").info("master done: %s commands, rtt p50 %s ms, p99 %s ms",
-                                            node.commands_sent, lat["p50_ms"], lat["p99_ms"])
+                                            node.commands_sent, ms(lat["p50_ms"]), ms(lat["p99_ms"]))
 
 
 def run_slave(args: argparse.Namespace) -> int:
