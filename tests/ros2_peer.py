@@ -10,10 +10,9 @@ import struct
 import threading
 import time
 
-import zenoh
 from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 
-from teleop.credentials import ensure_credentials
+from tests.zenoh_peer import raw_peer
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 WRENCH_STAMPED = "geometry_msgs/msg/WrenchStamped"
@@ -109,16 +108,7 @@ class RosPeer:
     """A ROS 2 node as rmw_zenoh makes one, on its own Zenoh session connected to ``endpoint`` (one or a list)."""
 
     def __init__(self, endpoint: str | list[str], domain: int = 0, node: str = "peer", credentials: str | None = None):
-        conf = zenoh.Config()
-        for k, v in (("mode", "peer"), ("connect/endpoints", [endpoint] if isinstance(endpoint, str) else endpoint), ("listen/endpoints", []),
-                     ("scouting/multicast/enabled", False)):
-            conf.insert_json5(k, json.dumps(v))
-        if credentials is not None:      # a live session's processes admit only the installation's users
-            cred = ensure_credentials(credentials)
-            conf.insert_json5("transport/auth/usrpwd/user", json.dumps(cred.role))
-            conf.insert_json5("transport/auth/usrpwd/password",
-                              json.dumps(cred.password_file.read_text(encoding="utf-8").strip()))
-        self.z = zenoh.open(conf)
+        self.z = raw_peer(endpoint, role=credentials)    # a live session admits only the installation's users
         self.domain, self.node, self.zid = domain, node, str(self.z.info.zid())
         self.received: dict[str, list] = {}
         self._lock = threading.Lock()

@@ -26,38 +26,16 @@ import zenoh
 
 from teleop.codec import encode
 from teleop.config import load_config
-from teleop.credentials import ensure_credentials
 from teleop.keys import command_key, estimate_key, liveliness_key
 from teleop.messages import AxisState, Command, Estimate, TendonState
 from teleop.recording import read_measured_csv
 from teleop.transport import free_tcp_ports, loopback_endpoint
-from tests.integration.processes import start, stop_all, wait_for
+from tests.integration.processes import start, stop_all, wait_for, write_bare_config
+from tests.zenoh_peer import raw_peer
 
 pytestmark = pytest.mark.integration
 
-CONFIG = """\
-instrument:
-  id: {ident}
-calibration:
-  speed: 0.02
-  dir: "{caldir}"
-recording:
-  rerun: "off"
-  csv_every: 1
-"""
 ATTACK_TARGET = 0.028          # [m] the hostile commands' target: inside slave.x_in_max, far from the operator's
-
-
-def _peer(eps: list[str], role: str | None) -> zenoh.Session:
-    conf = zenoh.Config()
-    for k, v in (("mode", "peer"), ("connect/endpoints", eps), ("listen/endpoints", []),
-                 ("scouting/multicast/enabled", False)):
-        conf.insert_json5(k, json.dumps(v))
-    if role is not None:
-        cred = ensure_credentials(role)
-        conf.insert_json5("transport/auth/usrpwd/user", json.dumps(role))
-        conf.insert_json5("transport/auth/usrpwd/password", json.dumps(cred.password_file.read_text().strip()))
-    return zenoh.open(conf)
 
 
 def _forged_estimate(seq: int, T: float) -> bytes:
@@ -69,7 +47,7 @@ class Attack:
     """One hostile peer's loop until stopped: what it tried, what it saw."""
 
     def __init__(self, eps: list[str], ident: str, role: str | None):
-        self.z, self.ident, self.role = _peer(eps, role), ident, role
+        self.z, self.ident, self.role = raw_peer(eps, role=role), ident, role
         self.source_info = None
         self.sent = 0
         self.stop = threading.Event()
@@ -110,10 +88,10 @@ class Attack:
 
 def test_hostile_peers_do_not_move_the_instrument_or_the_hand(tmp_path: Path):
     ident = "ithostile"
-    cfg_path = tmp_path / "hostile.yaml"
-    cfg_path.write_text(CONFIG.format(ident=ident, caldir=tmp_path / "calibration"), encoding="utf-8")
+    port, port_master = free_tcp_ports(2)
+    ep, ep_master = loopback_endpoint(port), loopback_endpoint(port_master)
+    cfg_path = write_bare_config(tmp_path / "hostile.yaml", ident, tmp_path / "runs", port)
     cfg = load_config(cfg_path)
-    ep, ep_master = (loopback_endpoint(p) for p in free_tcp_ports(2))
     run_dir = tmp_path / "run"
     slave = start(["slave", "--config", str(cfg_path), "--listen", ep, "--run-dir", str(run_dir),
                    "--exit-on-master-stop", "--max-duration", "90"], tmp_path / "slave.log")

@@ -2,19 +2,18 @@
 authentication and access control on loopback refusing a process without them and a role putting another's keys."""
 from __future__ import annotations
 
-import json
 import multiprocessing
 import os
 import stat
 import time
 
 import pytest
-import zenoh
 
 from teleop.config import TransportConfig
 from teleop.credentials import ROLES, access_control, ensure_credentials, renew_credentials
 from teleop.errors import ConfigError
 from teleop.transport import Session, free_tcp_port, loopback_endpoint, zenoh_config
+from tests.zenoh_peer import raw_peer
 
 
 def _make(folder: str) -> str:
@@ -60,17 +59,6 @@ def test_the_rules_deny_each_role_the_keys_of_the_others():
     assert all(r["permission"] == "deny" and r["flows"] == ["ingress"] for r in rules.values())
 
 
-def _raw(ep: str, user: str | None = None, password: str | None = None) -> zenoh.Session:
-    conf = zenoh.Config()
-    for k, v in (("mode", "peer"), ("connect/endpoints", [ep]), ("listen/endpoints", []),
-                 ("scouting/multicast/enabled", False)):
-        conf.insert_json5(k, json.dumps(v))
-    if user is not None:
-        conf.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
-        conf.insert_json5("transport/auth/usrpwd/password", json.dumps(password))
-    return zenoh.open(conf)
-
-
 def test_zenoh_refuses_a_process_without_credentials_and_a_role_putting_the_masters_keys(tmp_path, monkeypatch):
     monkeypatch.setenv("TSM_TELEOP_KEYS", str(tmp_path / "keys"))
     ep = loopback_endpoint(free_tcp_port())
@@ -82,7 +70,7 @@ def test_zenoh_refuses_a_process_without_credentials_and_a_role_putting_the_mast
         for who, user, password in (("anonymous", None, None), ("wrong password", "master", "guess"),
                                     ("observer", "observer", pw["observer"]), ("rig", "rig", pw["rig"]),
                                     ("master", "master", pw["master"])):
-            z = _raw(ep, user, password)
+            z = raw_peer(ep, user, password)
             deadline = time.monotonic() + 2.0
             while not list(z.info.peers_zid()) and time.monotonic() < deadline and user == who:
                 time.sleep(0.02)
