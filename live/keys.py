@@ -9,6 +9,7 @@ them. A second machine of the same session needs the same folder: ``teleop keys 
 from __future__ import annotations
 
 import argparse
+import json
 import shutil
 import sys
 from pathlib import Path
@@ -22,10 +23,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="replace every role's password (running processes keep their links until they reconnect)")
     p.add_argument("--export", metavar="DIR", default=None,
                    help="write a copy of the credentials to DIR (must not exist) for another machine")
+    p.add_argument("--zenoh-config", metavar="ROLE", default=None, choices=("master", "slave", "rig", "observer"),
+                   help="print the Zenoh config entries of ROLE (user, password, dictionary, access control) as JSON, "
+                        "to merge into another Zenoh program's config (rmw_zenoh's router and nodes: "
+                        "docs/how-to/ros2.md)")
 
 
 def main_keys(args: argparse.Namespace) -> int:
-    """``teleop keys``: print the folder and its roles; ``--renew`` first renews them, ``--export DIR`` copies them.
+    """``teleop keys``: print the folder and its roles; ``--renew`` first renews them, ``--export DIR`` copies them,
+    ``--zenoh-config ROLE`` prints that role's Zenoh settings as JSON instead.
 
     Raises
     ------
@@ -38,6 +44,9 @@ def main_keys(args: argparse.Namespace) -> int:
     if args.renew:
         renew_credentials(folder)
     creds = [ensure_credentials(role, folder) for role in ROLES]
+    if args.zenoh_config:
+        print(json.dumps(_nested(ensure_credentials(args.zenoh_config, folder).zenoh_settings()), indent=2))
+        return 0
     print(f"installation credentials: {folder}")
     for c in creds:
         print(f"  {c.role:<9} user {c.role!r}, password in {c.password_file.name}")
@@ -51,3 +60,15 @@ def main_keys(args: argparse.Namespace) -> int:
         print(f"copied to {out}: on the other machine set TSM_TELEOP_KEYS={out} (or move it to {folder})")
     sys.stdout.flush()
     return 0
+
+
+def _nested(settings: dict[str, object]) -> dict[str, object]:
+    """``{"transport/auth/usrpwd/user": u}`` -> ``{"transport": {"auth": {"usrpwd": {"user": u}}}}``."""
+    out: dict[str, object] = {}
+    for path, value in settings.items():
+        *parents, last = path.split("/")
+        node = out
+        for p in parents:
+            node = node.setdefault(p, {})      # type: ignore[assignment]
+        node[last] = value
+    return out
