@@ -77,7 +77,9 @@ def _add_sides(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> No
     """The two sides and the demo that runs both."""
     p = sub.add_parser("demo", help="both sides as two processes over Zenoh on 127.0.0.1, then a summary")
     _shared(p)
-    p.add_argument("--protocol", default="paper,minor", help="operator protocol(s) (default paper,minor)")
+    p.add_argument("--protocol", default="paper,minor",
+                   help="scripted operator protocol(s), comma separated: paper, minor, short (a joint instrument: "
+                        "paper or short); checked before anything starts (default paper,minor)")
     p.add_argument("--timeout", type=float, default=None,
                    help="give up on the processes after this [s] (default 50; with a recording its length + 120)")
     p.add_argument("--rig", choices=("simulated", "zenoh", "recording"), default=None, help="override rig.type")

@@ -44,6 +44,7 @@ import numpy as np
 
 from estimator.capstan import phase_formula_batch
 from live.demo_run import (
+    check_protocol,
     finish,
     full_scale_errors,
     loop_lines,
@@ -282,6 +283,7 @@ def main_demo(args) -> int:
     cfg = load_config(cfg_path)
     from live.demo_recording import with_recording
     cfg = with_recording(cfg, args)     # --rig / --recording: a recording checked before any process starts
+    check_protocol(cfg, args.protocol)
     if cfg.rig.type == "recording" and not timeout_given:   # the slave plays the whole recording after its fit
         from live.recording_rig import recorded_motion
         args.timeout = float(recorded_motion(cfg)[0][-1]) + RECORDING_MARGIN

@@ -29,6 +29,7 @@ import yaml
 
 from live.demo_run import (
     RecorderRun,
+    check_protocol,
     finish,
     loop_lines,
     master_console_line,
@@ -170,6 +171,8 @@ def main_bimanual(args, cfg_path: Path) -> int:
     from live.calibrate import run_calibrate
     from live.sides import prepare_run_dir
     bim = load_arms(cfg_path)
+    for arm in bim.arms:
+        check_protocol(arm.cfg, args.protocol)
     run_dir = prepare_run_dir(args, bim.arms[0].cfg).resolve()
     bim = _resolved(Path(cfg_path), run_dir)
     t0 = time.monotonic()

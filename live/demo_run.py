@@ -18,6 +18,7 @@ instrument.
   the lines on the master's console, on both loops, the machine and the link, and on the checks.
 * :func:`finish`: checks, problems and wall time into the summary, ``summary.json``, the printed
   table, the exit code.
+* :func:`check_protocol`: ``--protocol`` checked against the instrument before anything starts.
 """
 from __future__ import annotations
 
@@ -33,12 +34,29 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
+if TYPE_CHECKING:
+    from teleop.config import Config
+
 __all__ = ["run_processes", "RecorderRun", "read_json", "full_scale_errors", "master_console_line", "loop_lines", "machine_line",
-           "rt_budget_lines", "verdict_lines", "finish"]
+           "rt_budget_lines", "verdict_lines", "finish", "check_protocol"]
+
+
+def check_protocol(cfg: Config, protocol: str) -> None:
+    """Raise ConfigError (one line: ``--protocol <value>: <the name that is wrong> (<the valid ones>)``) when the
+    scripted operator of ``cfg`` (``master.device.type: simulated``) has no protocol ``protocol``: the master
+    would refuse it only after the calibration and the start of both sides (:func:`master.protocols.operator_protocols`)."""
+    from master.protocols import operator_protocols
+    from teleop.errors import ConfigError
+    if cfg.master.device.type != "simulated":       # a hand on a device: no scripted protocol
+        return
+    try:
+        operator_protocols(cfg, protocol)
+    except ConfigError as e:
+        raise ConfigError(f"--protocol {protocol}: {str(e).removeprefix('protocol: ')}") from None
 
 
 def full_scale_errors(est: np.ndarray, true: np.ndarray) -> tuple[float, float]:
