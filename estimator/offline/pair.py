@@ -12,7 +12,7 @@ which, with g, r and L/EA not separately observable, is fitted as
 
     theta = G c - lam_a (E_a - E_a(0)) + lam_b (E_b - E_b(0)) + theta_0,    E_j = mean_s T_j(s)  [N]
 
-Parameters: G = g / r >= 0 [-], K_a, K_b in [0, 5] [-], lam_j = (L/EA)_j / (2 r) >= 0 [rad/N],
+Parameters: G = g / r >= 0 [-], K_a, K_b in 0..5 [-], lam_j = (L/EA)_j / (2 r) >= 0 [rad/N],
 theta_0 [rad]. Inputs: the command and the two measured proximal tensions only. The fit
 (``scipy.optimize.least_squares``) uses the training samples at the start of the recording (the
 first command cycle); the model always runs from the first sample, so test samples are predicted
