@@ -174,6 +174,17 @@ class MasterNodeBase(NodeBase):
         """The node's own counters, between the link counters and the pacer in :meth:`stats`."""
         raise NotImplementedError
 
+    def refusals(self) -> dict[str, int]:
+        """Every estimate-class message refused, by reason (the stats' ``refusals``): ``decode_error`` (estimates
+        and slave heartbeats that did not decode), ``wrong_instrument``, ``out_of_range`` (a tension beyond
+        ``master.max_tension``), ``out_of_order``, ``duplicate``. A peer without the installation's credentials
+        never links (teleop/credentials.py)."""
+        c = self.counts
+        return {"decode_error": int(getattr(self.links.estimate, "errors", 0))
+                + int(getattr(self.links.slave_heartbeat, "errors", 0)),
+                "wrong_instrument": c["estimates_wrong_instrument"], "out_of_range": c["estimates_rejected_range"],
+                "out_of_order": c["estimates_out_of_order"], "duplicate": c["estimates_duplicate"]}
+
     def stats(self) -> dict[str, Any]:
         """Counters for the run summary (JSON-serialisable)."""
         est_sub = self.links.estimate
@@ -188,6 +199,7 @@ class MasterNodeBase(NodeBase):
             "safe_events": self.safe_events,
             "last_reason": self.last_reason,
             **self._stats_detail(),
+            "refusals": self.refusals(),
             "pacer": dict(self.pacer_stats),
             "operator_timeouts": int(getattr(self.device, "timeouts", 0)),
             "finished": bool(getattr(self.device, "finished", False)),

@@ -333,6 +333,8 @@ def test_estimates_out_of_order_duplicate_or_impossible_are_ignored():
     tick(node, clock)
     assert node.counts == {"estimates_rejected_range": 1, "estimates_out_of_order": 2, "estimates_duplicate": 0,
                            "estimates_wrong_instrument": 0}
+    assert node.stats()["refusals"] == {"decode_error": 0, "wrong_instrument": 0, "out_of_range": 1,
+                                        "out_of_order": 2, "duplicate": 0}
     assert hand.forces[-1] == pytest.approx(-2.0) and node._last_est_seq == n
     for _ in range(60):                                  # only impossible estimates: stale, SAFE
         slave_beat(links, clock)
