@@ -151,8 +151,3 @@ class SourceLock:
 
     def __repr__(self) -> str:
         return f"SourceLock(owner={self.owner!r}, foreign={self.foreign})"
-
-
-def settings_json(transport) -> str:
-    """:func:`link_security_settings` as a JSON object (logs, tests)."""
-    return json.dumps(link_security_settings(transport), sort_keys=True)
