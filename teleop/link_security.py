@@ -18,7 +18,6 @@ Two layers, both from the config (``transport.tls``, ``transport.auth``, ``trans
 """
 from __future__ import annotations
 
-import json
 import threading
 from collections.abc import Callable
 from pathlib import Path
