@@ -1,21 +1,26 @@
-"""``teleop calibrate``: the joint-limit calibration of any instrument, saved as its calibration data.
+"""``teleop calibrate``: the power-up calibration of any instrument, saved as its calibration data.
 
 One life cycle for every instrument (:mod:`slave.calibration_file`): ``teleop calibrate`` (or the
 slave's power-up routine when ``<calibration.dir>/<instrument.id>.yaml`` is missing, or on
-``teleop slave --recalibrate``) pulls every tendon into its joint limit - both directions for each
-antagonistic pair (:class:`slave.pair_calibrate.PairCalibration`), the one tendon of a single-tendon
-instrument once (:class:`slave.calibrate.JointLimitCalibration`) - fits K and M_e (Phee et al. 2009,
-Sec. IV; K from M_e by Newton, eq. 13) and writes the file the slave reloads.
+``teleop slave --recalibrate``) runs the instrument's routine: every tendon pulled into its joint limit -
+both directions for each antagonistic pair (:class:`slave.pair_calibrate.PairCalibration`), the one tendon
+of a single-tendon instrument once (:class:`slave.calibrate.JointLimitCalibration`), fitting K and M_e
+(Phee et al. 2009, Sec. IV; K from M_e by Newton, eq. 13) - or every spindle stroked over the open side of
+its jaw (:class:`slave.spindle_calibrate.SpindleCalibration`, K from the spindle torque band); then it
+writes the file the slave reloads: ``<calibration.dir>/<instrument.id>.yaml``, by default in the per-user
+data directory (``$XDG_DATA_HOME/tsm-teleop/calibration``), or ``--out FILE``. The project's ``configs/``
+(``configs/calibration/`` holds a read-only example) is never a destination.
 """
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import Any
 
 from teleop.config import Config
 from teleop.errors import ConfigError
 
-__all__ = ["add_calibrate_arguments", "run_calibrate", "calibration_report"]
+__all__ = ["add_calibrate_arguments", "destination", "run_calibrate", "calibration_report"]
 
 #: Simulated time the routine may take before it is declared stuck [s].
 MAX_CALIBRATION_TIME = 120.0
@@ -39,9 +44,11 @@ def calibration_report(cal, instrument=None) -> str:
     else:
         rows = [(name, t, tend[t], None if instrument is None else (instrument.K[i, k], instrument.M_e[i, k]))
                 for i, (name, tend) in enumerate(cal.joints) for k, t in enumerate("ab")]
+    from slave.spindle_calibrate import METHOD_SPINDLE
+    stroke = cal.method == METHOD_SPINDLE       # a spindle's stroke: no knee, no knee fit
     for name, t, c, true in rows:
-        row = (f"{name:10s} {t:6s} {c.K:8.4f} {c.M_e:11.4e} {c.knee_T_in:14.2f} {c.residual_rms:13.2e} "
-               f"{c.n_samples:8d}")
+        knee, resid = (f"{'-':>14s}", f"{'-':>13s}") if stroke else (f"{c.knee_T_in:14.2f}", f"{c.residual_rms:13.2e}")
+        row = f"{name:10s} {t:6s} {c.K:8.4f} {c.M_e:11.4e} {knee} {resid} {c.n_samples:8d}"
         if true is not None:
             row += f"   {100 * (c.K / true[0] - 1):+7.2f} %  {100 * (c.M_e / true[1] - 1):+7.2f} %"
         lines.append(row)
@@ -73,17 +80,41 @@ def _simulate(cfg: Config, source: str) -> tuple[Any, Any]:
     raise ConfigError(f"{source}: calibration did not finish within {MAX_CALIBRATION_TIME:g} s of simulated time")
 
 
+def destination(cfg: Config, out: str | None) -> Path:
+    """Where ``teleop calibrate`` writes: ``out``, else the file the slave reloads
+    (:func:`slave.calibration_file.calibration_path`).
+
+    Raises
+    ------
+    ConfigError
+        The destination is inside the project's configs (:func:`teleop.config_files.configs_dir`): its files
+        are read-only examples.
+    """
+    from slave.calibration_file import calibration_path, user_calibration_dir
+    from teleop.config_files import configs_dir
+    path = Path(out) if out else calibration_path(cfg)
+    shipped = configs_dir().resolve()
+    if path.resolve().is_relative_to(shipped):
+        what = f"--out {out}" if out else f"calibration.dir {cfg.calibration.dir}"
+        raise ConfigError(f"{what}: {path} is inside the project's configs ({shipped}), whose files are read-only "
+                          f"examples; expected a path elsewhere (default calibration.dir: {user_calibration_dir()})")
+    return path
+
+
 def run_calibrate(args: argparse.Namespace) -> int:
-    """``teleop calibrate --config FILE``: the joint-limit calibration of every tendon of the simulated
-    instrument (module docstring), saved as calibration data. The simulation runs as fast as it
-    computes (it has no real time to keep); on hardware the same routine is paced by the slave's loop
-    (``teleop slave --recalibrate``)."""
+    """``teleop calibrate --config FILE``: the power-up routine of the simulated instrument (module docstring),
+    saved as calibration data where :func:`destination` says, checked before it runs. The simulation runs as
+    fast as it computes (it has no real time to keep); on hardware the same routine is paced by the slave's
+    loop (``teleop slave --recalibrate``)."""
     from slave.calibration_file import calibration_path, save_calibration
     from teleop.config import load_config
 
     cfg = load_config(args.config)
+    out = destination(cfg, args.out)
     cal, sim = _simulate(cfg, args.config)
-    path = save_calibration(cal, args.out or calibration_path(cfg))
+    path = save_calibration(cal, out)
     print(calibration_report(cal, sim))
-    print(f"wrote {path}")
+    reload = calibration_path(cfg)
+    print(f"wrote {path}" + ("" if path.resolve() == reload.resolve() else
+                             f" (the slave of this config reloads {reload}, not this file)"))
     return 0

@@ -133,9 +133,10 @@ def _add_services(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") ->
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
     p.set_defaults(func=_cmd_bridge)
 
-    p = sub.add_parser("calibrate", help="joint-limit calibration of every tendon of the instrument (both "
-                                         "directions of a pair), saved as <calibration.dir>/<instrument>.yaml "
-                                         "(default ~/.local/share/tsm-teleop/calibration)")
+    p = sub.add_parser("calibrate", help="the instrument's power-up calibration (tendons pulled into their joint "
+                                         "limits, a pair both ways; spindles stroked over their open jaws) on its "
+                                         "simulator, saved where the slave reloads it: <calibration.dir>/<instrument>"
+                                         ".yaml (default ~/.local/share/tsm-teleop/calibration)")
     from live.calibrate import add_calibrate_arguments, run_calibrate
     add_calibrate_arguments(p)
     p.set_defaults(func=run_calibrate)

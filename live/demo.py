@@ -6,8 +6,9 @@ both (:class:`slave.node.SlaveNode`, :class:`master.node.MasterNode` over the in
 
 1. ``runs/<id>/`` (id = timestamp) gets the resolved config with ``calibration.dir`` set to
    ``runs/<id>/calibration``;
-2. ``teleop calibrate`` (in this process, simulated as fast as it computes) pulls every tendon
-   into its joint limit (a pair: both directions) and writes ``runs/<id>/calibration/<id>.yaml``:
+2. ``teleop calibrate`` (in this process, simulated as fast as it computes) runs the instrument's
+   power-up routine (a tendon pulled into its joint limit, a pair both directions, a spindle over its
+   stroke) and writes ``runs/<id>/calibration/<id>.yaml``:
    the calibration life cycle of every instrument, the slave reloads that file at start. With
    another rig (``rig.type: zenoh``, e.g. ``teleop bridge``) the file is missing and the slave
    calibrates at power-up through the rig, then saves it there;
@@ -305,8 +306,8 @@ def main_demo(args) -> int:
                      "safety_waivers": waivers(cfg)}   # teleop/safety_bounds.py: keys run past their hard bound
     try:
         if cfg.rig.type == "simulated":      # another rig: the slave calibrates at power-up (file missing)
-            print(f"calibrating {cfg.instrument.id} ({', '.join(names)}): every tendon into its joint limit ...",
-                  flush=True)
+            from slave.node import axis_kind
+            print(f"calibrating {cfg.instrument.id} ({', '.join(names)}): {axis_kind(cfg).routine_text} ...", flush=True)
             run_calibrate(argparse.Namespace(config=str(cfg_file), out=None))
         doing = "the slave fits its calibration (rig.recording.calibration_run), then plays the recording; the " \
             "operator retraces its motion" if cfg.rig.type == "recording" else None

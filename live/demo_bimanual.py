@@ -170,6 +170,7 @@ def main_bimanual(args, cfg_path: Path) -> int:
     """``teleop demo`` of the bimanual config at ``cfg_path``: 0 when every arm's checks passed, else 1."""
     from live.calibrate import run_calibrate
     from live.sides import prepare_run_dir
+    from slave.node import axis_kind
     bim = load_arms(cfg_path)
     for arm in bim.arms:
         check_protocol(arm.cfg, args.protocol)
@@ -182,7 +183,7 @@ def main_bimanual(args, cfg_path: Path) -> int:
     try:
         for arm in bim.arms:
             names = ", ".join(j.name for j in arm.cfg.instrument.joints)
-            print(f"calibrating {arm.ident} ({arm.hand} hand: {names}): every tendon into its joint limit ...",
+            print(f"calibrating {arm.ident} ({arm.hand} hand: {names}): {axis_kind(arm.cfg).routine_text} ...",
                   flush=True)
             run_calibrate(argparse.Namespace(config=str(run_dir / arm.ident / "config.yaml"), out=None))
         _processes(args, bim, run_dir, problems)

@@ -56,6 +56,8 @@ class SlaveAxis:
     name = "axis"
     index = 0
     tendon_per_unit = 1.0
+    #: What the kind's power-up routine does to the instrument, for the messages that announce it.
+    routine_text = "the power-up calibration routine"
     cfg: Config
 
     # ---- per kind ----------------------------------------------------------------------------------

@@ -7,7 +7,7 @@ caller:
 
 * CALIBRATING (from power-up, when no calibration was given; the life cycle of
   :mod:`slave.calibration_file`): the kind's routine drives the rig (one tendon into its joint limit,
-  or every tendon of every pair, both directions); no command is accepted and no estimate is sent.
+  every tendon of every pair both directions, or every spindle over its stroke); no command is accepted and no estimate is sent.
   When it is done, the axes' estimators are built on the fit and replay the routine's proximal
   samples so that their tension-profile memory matches the tendons'; the fit is saved as
   calibration data (``calibration_file``) and ``calibration.json`` is written. With a calibration
@@ -188,7 +188,7 @@ class SlaveNode(SlaveNodeBase):
             self._set_state(SideState.SAFE, None, "calibration loaded; no command yet")
         elif calibrate:
             self.routine = self.kind.routine(cfg, rig)
-            self._set_state(SideState.CALIBRATING, None, "power-up joint-limit calibration")
+            self._set_state(SideState.CALIBRATING, None, "power-up calibration")
         else:
             if model is None or not isinstance(self.axes[0], TendonAxis):
                 raise ValueError("SlaveNode(calibrate=False) needs a single tendon and a SheathModel in model=")

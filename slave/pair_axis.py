@@ -93,6 +93,8 @@ class PairAxis(SlaveAxis):
         The angle command being followed [rad]; None: relax.
     """
 
+    routine_text = "every tendon pulled into its joint limit, both directions of each pair"
+
     def __init__(self, cfg: Config, joint: JointConfig, index: int):
         self.cfg, self.joint, self.index, self.name = cfg, joint, index, joint.name
         self.r = self.tendon_per_unit = float(joint.pulley_radius)

@@ -60,6 +60,8 @@ class SpindleAxis(SlaveAxis):
         The jaw's place in the rig's ``(n_joints,)`` arrays.
     """
 
+    routine_text = "every spindle stroked over the open side of its jaw and back"
+
     def __init__(self, cfg: Config, joint: JointConfig, index: int):
         self.cfg, self.joint, self.index, self.name = cfg, joint, index, joint.name
         self.r_p, self.r_d = float(joint.spindle_radius), float(joint.pulley_radius)

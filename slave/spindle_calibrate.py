@@ -1,11 +1,13 @@
 """Power-up calibration of a spindle-driven jaw from its proximal signals only (spindle angle and torque).
 
 The routine strokes every spindle at ``calibration.speed`` (as cable travel, [m/s]) over the open side
-of its jaw: rest -> A -> B -> A -> rest, with the jaw angles A = 0.1 and B = 0.9 of the lower limit
-turned into spindle angles by the kinematic ratio n_k = r_p / r_d. On the way B -> A cable a pulls, on
-A -> B cable b; both cables are in full slip at the stroke's middle M = (A + B) / 2. There the spindle
-torque of the two passes differs by the capstan band only: with the pair's pretension torque Q =
-2 P r_p (the sum of the proximal cable torques) and equal friction exponents K on both cables,
+of its jaw: rest -> A -> B -> A -> rest, with the jaw angles A = 0.1 and B = 0.9 of the jaw's lower angle
+limit (``limits[0]``) turned into spindle angles by the kinematic ratio n_k = r_p / r_d. The stroke stays
+inside the jaw's range: nothing is pulled against a stop and there is no knee to find, unlike the
+joint-limit calibration of a tendon. On the way B -> A cable a pulls, on A -> B cable b; both cables
+are in full slip at the stroke's middle M = (A + B) / 2. There the spindle torque of the two passes
+differs by the capstan band only: with the pair's pretension torque Q = 2 P r_p (the sum of the
+proximal cable torques) and equal friction exponents K on both cables,
 
     tau_up(M) - tau_down(M) = 2 Q tanh K                         (the jaw's load cancels at the same angle)
 
@@ -32,7 +34,7 @@ from teleop.errors import CalibrationError
 __all__ = ["METHOD_SPINDLE", "SpindleCalibration", "stroke_points", "band_to_K", "pull_slip_M_e"]
 
 METHOD_SPINDLE = "spindle stroke over the open jaw; K = artanh(half torque band / Q), M_e from K and the route"
-#: Jaw angles of the stroke as fractions of the lower limit: rest -> A -> B -> A -> rest.
+#: Jaw angles of the stroke as fractions of the jaw's lower angle limit: rest -> A -> B -> A -> rest.
 STROKE = (0.1, 0.9)
 
 

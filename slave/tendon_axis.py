@@ -73,6 +73,7 @@ class TendonAxis(SlaveAxis):
     """
 
     name = "tendon"
+    routine_text = "the tendon pulled into its joint limit"
 
     def __init__(self, cfg: Config, state: RigState):
         self.cfg = cfg

@@ -81,7 +81,7 @@ def _joint_config(run_dir: Path, ident: str, instrument: str) -> Path:
         tmp.mkdir(exist_ok=True)
         cfg = tmp / "cfg.yaml"
         cfg.write_text(text.replace(f"id: {base_id}", "id: fjoints").replace("rerun: save", "rerun: off")
-                       .replace("dir: configs/calibration", f"dir: {tmp}"))
+                       .replace("\ncalibration:\n", f"\ncalibration:\n  dir: {tmp}\n"))
         assert teleop_main(["calibrate", "--config", str(cfg)]) == 0
         _JOINT_CAL[instrument] = (tmp / "fjoints.yaml").read_text()
     cal_dir.mkdir()
@@ -89,7 +89,7 @@ def _joint_config(run_dir: Path, ident: str, instrument: str) -> Path:
     path = run_dir / "cfg.yaml"
     path.write_text(text.replace(f"id: {base_id}", f"id: {ident}")
                     .replace("rerun: save", "rerun: off\n  csv_every: 1")     # every cycle: the fault timing reads rows
-                    .replace("dir: configs/calibration", f"dir: {cal_dir}"), encoding="utf-8")
+                    .replace("\ncalibration:\n", f"\ncalibration:\n  dir: {cal_dir}\n"), encoding="utf-8")
     return path
 
 

@@ -81,7 +81,7 @@ def quiet_instrument(config: Path, tmp_path: Path, shipped_id: str, ident: str, 
     """A shipped instrument config under its own id ``ident`` (replacing ``shipped_id``), without Rerun recording,
     with its calibration files under ``tmp_path/calibration``; written to ``tmp_path/name``."""
     text = config.read_text().replace(f"id: {shipped_id}", f"id: {ident}").replace("rerun: save", "rerun: off")
-    text = text.replace("dir: configs/calibration", f"dir: {tmp_path / 'calibration'}")
+    text = text.replace("\ncalibration:\n", f"\ncalibration:\n  dir: {tmp_path / 'calibration'}\n")
     path = tmp_path / name
     path.write_text(text)
     return path
