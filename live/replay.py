@@ -14,9 +14,15 @@ estimate is compared with the recorded one (``T_out_hat``, ``elongation_hat``) a
 errors as fractions of the full scale (range) of the reference, over the whole run and per
 experiment (``marker``), as ``teleop demo`` reports them.
 
+The comparison with the recorded estimate is made on the recording's own samples, at its own rate (a
+``slave.csv`` every ``recording.csv_every`` cycles, the MCAP estimate channel at its own rate): the
+re-estimate runs on those samples only, so a decimated stream gives a different figure from the
+live 1 kHz estimate's; the table prints each figure's sample count and the recording's rate.
+
 The Rerun view is written with :class:`teleop.rerun_log.RerunLogger` (the live view's helpers: route
-in 3D, profile, series, phase) into ``RUN/replay.rrd`` by default; ``--speed realtime`` (or a factor)
-paces that logging with the wall clock, ``max`` runs as fast as possible.
+in 3D, profile, series, phase) into ``RUN/replay.rrd`` by default, never over an existing file
+without ``--force`` (nor ``--json``'s); ``--speed realtime`` (or a factor) paces that logging with the wall
+clock, ``max`` runs as fast as possible.
 """
 from __future__ import annotations
 
@@ -35,7 +41,7 @@ from estimator.online.distal import DistalEstimator, estimate_batch
 from estimator.phase import Phase
 from estimator.sheath import SheathModel
 from live.demo_run import full_scale_errors
-from live.replay_joints import find_joint_csv, joint_table_lines, replay_joints
+from live.replay_joints import find_joint_csv, joint_table_lines, new_output, rate_hz, replay_joints, samples_at
 from teleop.config import Config, load_config
 from teleop.errors import CalibrationError, ConfigError, DataError
 from teleop.recording import MeasuredData, read_measured_csv
@@ -204,7 +210,7 @@ def _errors(T: np.ndarray, e: np.ndarray, T_ref: np.ndarray, e_ref: np.ndarray) 
     emax, emean = full_scale_errors(e, e_ref)
     return {"force_error_max_fs": fmax, "force_error_mean_fs": fmean, "elongation_error_max_fs": emax,
             "elongation_error_mean_fs": emean, "force_full_scale_N": float(np.ptp(T_ref)),
-            "elongation_full_scale_m": float(np.ptp(e_ref))}
+            "elongation_full_scale_m": float(np.ptp(e_ref)), "samples": int(T.size)}
 
 
 def compare(data: MeasuredData, new: dict[str, np.ndarray]) -> dict[str, dict[str, dict[str, float]]]:
@@ -268,7 +274,8 @@ def _log(inp: ReplayInput, cfg: Config, model: SheathModel, new: dict[str, np.nd
 
 
 def replay(run: str | Path, *, config: str | Path | None = None, calibration: str | Path | None = None,
-           estimator: str = "profile", speed: float = math.inf, rrd: str | Path | None = None) -> dict[str, Any]:
+           estimator: str = "profile", speed: float = math.inf, rrd: str | Path | None = None,
+           force: bool = False) -> dict[str, Any]:
     """Re-estimate a recording, log it to Rerun and compare (module docstring); a joint instrument's run
     (``slave_joints.csv``) goes to :func:`live.replay_joints.replay_joints` (``estimator`` ignored).
 
@@ -276,32 +283,35 @@ def replay(run: str | Path, *, config: str | Path | None = None, calibration: st
     -------
     dict
         ``run``, ``csv``, ``calibration``, ``estimator``, ``K``, ``compliance_m_per_N``, ``samples``,
-        ``duration_s``, ``estimate_s`` (batch re-estimation time), ``samples_per_s`` (of it),
-        ``log_s`` (Rerun logging, paced), ``rrd``, ``comparison`` (:func:`compare`).
+        ``rate_hz`` (the recording's), ``duration_s``, ``estimate_s`` (batch re-estimation time),
+        ``samples_per_s`` (of it), ``log_s`` (Rerun logging, paced), ``rrd``, ``comparison`` (:func:`compare`).
 
     Raises
     ------
     DataError, ConfigError, CalibrationError
-        Missing run or column, unreadable config or calibration, unknown estimator or speed.
+        Missing run or column, unreadable config or calibration, unknown estimator or speed; the Rerun file
+        exists and not ``force`` (:func:`live.replay_joints.new_output`, before the re-estimation).
     """
     joint_csv = find_joint_csv(run)
     if joint_csv is not None:
-        return replay_joints(joint_csv, _config(joint_csv.parent, config), calibration=calibration, speed=speed, rrd=rrd)
+        return replay_joints(joint_csv, _config(joint_csv.parent, config), calibration=calibration, speed=speed,
+                             rrd=rrd, force=force)
     if estimator != "profile" and Path(run).is_dir() and not (Path(run) / "slave.csv").is_file():
         raise ConfigError(f"--estimator {estimator}: single-tendon runs only")
     inp = load_run(run)
+    out = new_output(Path(rrd) if rrd is not None else (inp.run_dir or inp.csv.parent) / "replay.rrd", rrd is not None,
+                     force)
     cfg = _config(inp.run_dir, config)
     model, source = load_model(cfg, inp, calibration)
     noise = tension_noise(cfg, source)
     t_start = time.perf_counter()
     new = reestimate(inp.data, model, cfg, estimator, noise)
     t_est = time.perf_counter() - t_start
-    out = Path(rrd) if rrd is not None else (inp.run_dir or inp.csv.parent) / "replay.rrd"
     t_start = time.perf_counter()
     _log(inp, cfg, model, new, estimator, speed, out, noise)
     n = int(inp.data.time.size)
     return {"run": str(run), "csv": str(inp.csv), "calibration": source, "estimator": estimator,
-            "K": model.K, "compliance_m_per_N": model.compliance, "samples": n,
+            "K": model.K, "compliance_m_per_N": model.compliance, "samples": n, "rate_hz": rate_hz(inp.data.time),
             "duration_s": float(inp.data.time[-1] - inp.data.time[0]), "estimate_s": t_est,
             "samples_per_s": n / t_est if t_est > 0 else math.inf, "tension_noise_N": noise,
             "log_s": time.perf_counter() - t_start,
@@ -312,13 +322,17 @@ def table_lines(res: dict[str, Any]) -> list[str]:
     """The comparison as printed: one line per block and reference (per joint for a joint run)."""
     if res.get("kind") == "joints":
         return joint_table_lines(res)
-    lines = [f"replay {res['csv']} ({res['samples']} samples, {res['duration_s']:.1f} s) with {res['estimator']} "
-             f"estimator, K={res['K']:.4g}, L/EA={res['compliance_m_per_N']:.3g} m/N from {res['calibration']}",
-             f"{'block':<7} {'against':<9} {'force max':>9} {'mean':>7} {'elong max':>9} {'mean':>7}  (of full scale)"]
+    rate = samples_at(res)
+    lines = [f"replay {res['csv']} ({res['samples']} samples at {rate}, {res['duration_s']:.1f} s) with "
+             f"{res['estimator']} estimator, K={res['K']:.4g}, L/EA={res['compliance_m_per_N']:.3g} m/N from "
+             f"{res['calibration']}",
+             f"{'block':<7} {'against':<9} {'force max':>9} {'mean':>7} {'elong max':>9} {'mean':>7} {'samples':>8}"
+             f"  (of full scale)"]
     for block, refs in res["comparison"].items():
         for ref, e in refs.items():
             lines.append(f"{block:<7} {ref[3:]:<9} {e['force_error_max_fs']:9.4f} {e['force_error_mean_fs']:7.4f} "
-                         f"{e['elongation_error_max_fs']:9.4f} {e['elongation_error_mean_fs']:7.4f}")
+                         f"{e['elongation_error_max_fs']:9.4f} {e['elongation_error_mean_fs']:7.4f} "
+                         f"{e['samples']:8d} at {rate}")
     lines.append(f"re-estimated at {res['samples_per_s']:.3g} samples/s; Rerun view in {res['rrd']} "
                  f"({res['log_s']:.2f} s)")
     return lines
@@ -333,15 +347,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--estimator", choices=ESTIMATORS, default="profile",
                    help="profile: the slave's profile-memory estimator (default); paper: the paper's phase formulas")
     p.add_argument("--speed", default="max", help="realtime, max (default) or a factor of real time")
-    p.add_argument("--rrd", metavar="OUT", help="Rerun recording to write (default RUN/replay.rrd)")
-    p.add_argument("--json", metavar="OUT", help="write the result and comparison as JSON")
+    p.add_argument("--rrd", metavar="OUT", help="Rerun recording to write (default RUN/replay.rrd); an existing "
+                                                "file is refused without --force")
+    p.add_argument("--json", metavar="OUT", help="write the result and comparison as JSON (an existing file is "
+                                                 "refused without --force)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --rrd (or the default) and --json")
 
 
 def main_replay(args: argparse.Namespace) -> int:
     """``teleop replay``: prints the comparison table; errors propagate to the CLI (exit 2)."""
     speed = parse_speed(args.speed)
+    if args.json and Path(args.json).exists() and not args.force:
+        raise DataError(f"--json {args.json}: already exists; give a new path, or --force to overwrite it")
     res = replay(args.run, config=args.config, calibration=args.calibration, estimator=args.estimator,
-                 speed=speed, rrd=args.rrd)
+                 speed=speed, rrd=args.rrd, force=args.force)
     print("\n".join(table_lines(res)))
     if args.json:
         Path(args.json).write_text(json.dumps(res, indent=2, allow_nan=True) + "\n", encoding="utf-8")

@@ -28,7 +28,8 @@ from live.demo_run import full_scale_errors
 from teleop.config import Config
 from teleop.errors import CalibrationError, DataError
 
-__all__ = ["JOINT_CSV", "find_joint_csv", "reestimate_joints", "compare_joints", "replay_joints", "joint_table_lines"]
+__all__ = ["JOINT_CSV", "find_joint_csv", "reestimate_joints", "compare_joints", "replay_joints", "joint_table_lines",
+           "rate_hz", "new_output"]
 
 JOINT_CSV = "slave_joints.csv"
 #: the joint's 4-bit marker tags of the joint protocols (master.protocols.MARKER_PAPER_A / _B)
@@ -43,6 +44,27 @@ def find_joint_csv(run: str | Path) -> Path | None:
     if p.is_file() and p.name.endswith("joints.csv"):
         return p
     return None
+
+
+def rate_hz(time_s: np.ndarray) -> float:
+    """The recording's sample rate [Hz]: 1 / the median interval of ``time_s`` [s]; NaN with fewer than two rows."""
+    d = np.diff(np.asarray(time_s, dtype=float))
+    d = d[d > 0]
+    return float(1.0 / np.median(d)) if d.size else math.nan
+
+
+def new_output(path: Path, given: bool, force: bool) -> Path:
+    """``path``, which the replay will write; ``given``: named by ``--rrd`` (else the default ``RUN/replay.rrd``).
+
+    Raises
+    ------
+    DataError
+        ``path`` exists and not ``force`` (one line: the file, and the way out).
+    """
+    if path.exists() and not force:
+        what = f"--rrd {path}" if given else f"{path} (the default --rrd, RUN/replay.rrd)"
+        raise DataError(f"{what}: already exists; give --rrd with a new path, or --force to overwrite it")
+    return path
 
 
 def _column(cols: dict[str, np.ndarray], csv: Path, name: str) -> np.ndarray:
@@ -115,7 +137,8 @@ def _errors(tq: np.ndarray, ang: np.ndarray, tq_ref: np.ndarray, ang_ref: np.nda
     fmax, fmean = full_scale_errors(tq, tq_ref)
     d = ang - ang_ref
     return {"torque_error_max_fs": fmax, "torque_error_mean_fs": fmean, "torque_full_scale_Nm": float(np.ptp(tq_ref)),
-            "angle_error_max_rad": float(np.abs(d).max()), "angle_error_rms_rad": float(np.sqrt(np.mean(d ** 2)))}
+            "angle_error_max_rad": float(np.abs(d).max()), "angle_error_rms_rad": float(np.sqrt(np.mean(d ** 2))),
+            "samples": int(tq.size)}
 
 
 def compare_joints(cols: dict[str, np.ndarray], new: dict[str, dict[str, np.ndarray]],
@@ -171,23 +194,25 @@ def _log(cols: dict[str, np.ndarray], new: dict[str, dict[str, np.ndarray]], cfg
 
 
 def replay_joints(csv: Path, cfg: Config, *, calibration: str | Path | None = None, speed: float = math.inf,
-                  rrd: str | Path | None = None) -> dict[str, Any]:
+                  rrd: str | Path | None = None, force: bool = False) -> dict[str, Any]:
     """Re-estimate a joint recording, log it to Rerun and compare (module docstring).
 
     Returns
     -------
     dict
         ``kind`` ("joints"), ``run``, ``csv``, ``calibration``, ``estimator`` ("joint"), ``joints`` (names),
-        ``samples``, ``duration_s``, ``estimate_s``, ``samples_per_s``, ``log_s``, ``rrd``, ``comparison``
-        (:func:`compare_joints`).
+        ``samples``, ``rate_hz`` (the recording's, :func:`rate_hz`), ``duration_s``, ``estimate_s``,
+        ``samples_per_s``, ``log_s``, ``rrd``, ``comparison`` (:func:`compare_joints`).
 
     Raises
     ------
     DataError, CalibrationError
-        Unreadable CSV or missing column; no or a wrong calibration.
+        Unreadable CSV or missing column; no or a wrong calibration; the Rerun file exists and not ``force``
+        (:func:`new_output`, checked first).
     """
     from live.demo_joints import read_joint_csv
 
+    out = new_output(Path(rrd) if rrd is not None else csv.parent / "replay.rrd", rrd is not None, force)
     if not cfg.instrument.joints:
         raise DataError(f"{csv}: a joint recording, but the config's instrument {cfg.instrument.id} has no joints")
     spindle = [j.name for j in cfg.instrument.joints if j.spindle_radius > 0]
@@ -200,28 +225,35 @@ def replay_joints(csv: Path, cfg: Config, *, calibration: str | Path | None = No
     t_start = time.perf_counter()
     new = reestimate_joints(cols, csv, cfg, cal)
     t_est = time.perf_counter() - t_start
-    out = Path(rrd) if rrd is not None else csv.parent / "replay.rrd"
     t_start = time.perf_counter()
     _log(cols, new, cfg, csv.parent.name, speed, out)
     n = int(cols["time"].size)
     return {"kind": "joints", "run": str(csv.parent), "csv": str(csv), "calibration": str(cal), "estimator": "joint",
-            "joints": list(new), "samples": n, "duration_s": float(cols["time"][-1] - cols["time"][0]),
+            "joints": list(new), "samples": n, "rate_hz": rate_hz(cols["time"]),
+            "duration_s": float(cols["time"][-1] - cols["time"][0]),
             "estimate_s": t_est, "samples_per_s": n / t_est if t_est > 0 else math.inf,
             "log_s": time.perf_counter() - t_start, "rrd": str(out), "comparison": compare_joints(cols, new, cfg)}
 
 
+def samples_at(res: dict[str, Any]) -> str:
+    """The recording's rate as printed next to each figure, e.g. ``100 Hz`` (``? Hz`` when unknown)."""
+    r = res.get("rate_hz", math.nan)
+    return f"{r:.4g} Hz" if math.isfinite(r) else "? Hz"
+
+
 def joint_table_lines(res: dict[str, Any]) -> list[str]:
     """The joint comparison as printed: one line per joint, block and reference."""
-    lines = [f"replay {res['csv']} ({res['samples']} samples, {res['duration_s']:.1f} s) with the joint estimator, "
-             f"calibration {res['calibration']}",
+    rate = samples_at(res)
+    lines = [f"replay {res['csv']} ({res['samples']} samples at {rate}, {res['duration_s']:.1f} s) with the joint "
+             f"estimator, calibration {res['calibration']}",
              f"{'joint':<9} {'block':<8} {'against':<9} {'torque max':>10} {'mean':>7} {'angle max':>10} "
-             f"{'rms':>8}  (torque of full scale, angle in rad)"]
+             f"{'rms':>8} {'samples':>8}  (torque of full scale, angle in rad)"]
     for joint, blocks in res["comparison"].items():
         for block, refs in blocks.items():
             for ref, e in refs.items():
                 lines.append(f"{joint:<9} {block:<8} {ref[3:]:<9} {e['torque_error_max_fs']:10.4f} "
                              f"{e['torque_error_mean_fs']:7.4f} {e['angle_error_max_rad']:10.4f} "
-                             f"{e['angle_error_rms_rad']:8.4f}")
+                             f"{e['angle_error_rms_rad']:8.4f} {e['samples']:8d} at {rate}")
     lines.append(f"re-estimated at {res['samples_per_s']:.3g} samples/s; Rerun view in {res['rrd']} "
                  f"({res['log_s']:.2f} s)")
     return lines

@@ -51,6 +51,7 @@ def _make_run(root: Path) -> Path:
 
 def _replay(tmp_path: Path, *args: str) -> tuple[int, dict]:
     out = tmp_path / "replay.json"
+    out.unlink(missing_ok=True)         # the previous call's: --json refuses an existing file
     rc = main(["replay", *args, "--json", str(out)])
     return rc, json.loads(out.read_text()) if rc == 0 else {}
 
@@ -157,3 +158,39 @@ def test_the_calibrations_noise_band_is_replayed(tmp_path):
     assert res0["comparison"]["all"]["vs_recorded"]["force_error_max_fs"] > 1e-6
     (run / "calibration.json").write_text(json.dumps({**d, "tension_noise_N": -1}), encoding="utf-8")
     assert main(["replay", str(run), "--rrd", str(tmp_path / "bad.rrd")]) == 2
+
+
+def test_an_existing_output_is_refused_unless_force(tmp_path, capsys):
+    run = _make_run(tmp_path)
+    rrd, js = run / "replay.rrd", tmp_path / "out.json"
+    assert main(["replay", str(run), "--json", str(js)]) == 0
+    before = rrd.read_bytes()
+    capsys.readouterr()
+    for args, named in (([str(run)], f"{rrd} (the default --rrd"), ([str(run), "--rrd", str(rrd)], f"--rrd {rrd}:"),
+                        ([str(run), "--rrd", str(tmp_path / "new.rrd"), "--json", str(js)], f"--json {js}:")):
+        assert main(["replay", *args]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and named in err[0] and "already exists" in err[0] and "--force" in err[0], err
+    assert rrd.read_bytes() == before and not (tmp_path / "new.rrd").exists()
+    assert main(["replay", str(run), "--json", str(js), "--force"]) == 0
+    assert json.loads(js.read_text())["rrd"] == str(rrd)
+
+
+def test_the_recorded_figure_names_its_samples_and_the_recordings_rate(tmp_path, capsys):
+    run = _make_run(tmp_path)
+    rc, full = _replay(tmp_path, str(run), "--rrd", str(tmp_path / "full.rrd"))
+    assert rc == 0 and full["rate_hz"] == pytest.approx(1000.0)
+    assert full["comparison"]["all"]["vs_recorded"]["samples"] == 2000
+    assert full["comparison"]["paper"]["vs_recorded"]["samples"] == 1000
+    row = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("all     recorded"))
+    assert row.endswith(" 2000 at 1000 Hz")
+    lines = (run / "slave.csv").read_text().splitlines()          # every 10th row: a 100 Hz recording
+    head = next(k for k, ln in enumerate(lines) if ln.startswith("time,")) + 1
+    (run / "slave.csv").write_text("\n".join(lines[:head] + lines[head::10]) + "\n")
+    rc, dec = _replay(tmp_path, str(run), "--rrd", str(tmp_path / "dec.rrd"))
+    assert rc == 0 and dec["rate_hz"] == pytest.approx(100.0) and dec["samples"] == 200
+    row = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("all     recorded"))
+    assert row.endswith("  200 at 100 Hz")
+    # the re-estimate sees only the decimated samples: it no longer reproduces the live 1 kHz estimate
+    assert dec["comparison"]["all"]["vs_recorded"]["force_error_max_fs"] > 1e-3 > \
+        full["comparison"]["all"]["vs_recorded"]["force_error_max_fs"]

@@ -76,6 +76,7 @@ def _make_run(root: Path) -> tuple[Path, object]:
 
 def _replay(tmp_path: Path, *args: str) -> tuple[int, dict]:
     out = tmp_path / "replay.json"
+    out.unlink(missing_ok=True)         # the previous call's: --json refuses an existing file
     rc = main(["replay", *args, "--json", str(out)])
     return rc, json.loads(out.read_text()) if rc == 0 else {}
 
@@ -124,3 +125,18 @@ def test_a_spindle_run_is_refused_naming_its_joints(tmp_path, capsys):
     rc = main(["replay", str(run)])
     err = capsys.readouterr().err
     assert rc == 2 and "spindle-driven" in err and spindle_cfg.instrument.joints[0].name in err
+
+
+def test_a_joint_replay_refuses_an_existing_rrd_and_prints_its_samples_and_rate(tmp_path, capsys):
+    run, cfg = _make_run(tmp_path)
+    rc, res = _replay(tmp_path, str(run))
+    assert rc == 0 and res["rate_hz"] > 0
+    joint = cfg.instrument.joints[0].name
+    row = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith(f"{joint:<9} all      recorded"))
+    assert row.endswith(f" {res['comparison'][joint]['all']['vs_recorded']['samples']:8d} at {res['rate_hz']:.4g} Hz")
+    before = (run / "replay.rrd").read_bytes()
+    assert main(["replay", str(run)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "replay.rrd (the default --rrd" in err[0] and "--force" in err[0]
+    assert (run / "replay.rrd").read_bytes() == before
+    assert main(["replay", str(run), "--force"]) == 0
