@@ -7,7 +7,8 @@ NAME``'s own (:func:`study.mrd_report.analyze_mrd`, same calibration run and loa
 off). Prints per run the live jaw-torque RMSE [FS], the offline one and their difference, the median and worst
 over the scored runs (the calibration run is in-sample and listed apart), and the step time of the loop (rig
 step and estimate, p50 / p99 / max, and the share over the 1 ms period; wall time and the thread's CPU time, which
-leaves out what other processes take on a shared machine). Skips (prints why) when the folder is
+leaves out what other processes take on a shared machine). DIR defaults to the folder Tool_4_Maryland_L_2 of the
+data folder (``TSM_TELEOP_DATA``, docs/how-to/get-the-data.md); skips (prints why and what to do) when it is
 absent. Data: MRD Lab data repository, University of Minnesota (ODbL 1.0 / DbCL 1.0). Prints figures, never
 fails on them.
 
@@ -34,7 +35,9 @@ import numpy as np  # noqa: E402 - after the thread settings
 
 from live.recording_axis import fit_recorded_model  # noqa: E402
 from live.recording_score import play_run, score_run  # noqa: E402
-from study.mrd import default_mrd_dir, load_mrd_dir  # noqa: E402
+from study.datasets import KAIST, MRD, skip_reason  # noqa: E402
+from study.mrd import load_mrd_dir  # noqa: E402
+from study.mrd_files import DEFAULT_FOLDER, mrd_folder  # noqa: E402
 from study.mrd_report import analyze_mrd  # noqa: E402
 from teleop.config import load_config  # noqa: E402
 from teleop.tools import load_tool  # noqa: E402
@@ -44,7 +47,7 @@ PERIOD_S = 1e-3
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--dir", default=str(default_mrd_dir() / "Tool_4_Maryland_L_2"))
+    ap.add_argument("--dir", default=str(mrd_folder(DEFAULT_FOLDER)))
     ap.add_argument("--tool", default="davinci-maryland-left")
     ap.add_argument("--runs", default=None, help="only the runs whose name matches this glob")
     ap.add_argument("--kaist", nargs="?", const="", default=None, metavar="DIR")
@@ -54,7 +57,7 @@ def main(argv: list[str] | None = None) -> None:
         kaist(args.kaist or None, args.extended)
         return
     if not Path(args.dir).is_dir():
-        print(f"bench_recording_rig: skipped, {args.dir} not found (the MRD da Vinci folder, docs/results/mrd.md)")
+        print(f"bench_recording_rig: skipped, {skip_reason(MRD, args.dir)}")
         return
     runs, _ = load_mrd_dir(args.dir, args.runs)
     base = load_config(ROOT / "configs" / "recording-mrd.yaml")
@@ -102,10 +105,10 @@ def kaist(directory: str | None, extended: str | None) -> None:
     import json
 
     from live.recording_pair import kaist_live
-    from study.kaist import default_kaist_dir, load_all
+    from study.kaist import default_kaist_dir, find_configs, load_all
     d = Path(directory) if directory else default_kaist_dir()
-    if not d.is_dir():
-        print(f"bench_recording_rig --kaist: skipped, {d} not found (docs/results/kaist.md)")
+    if not find_configs(d):
+        print(f"bench_recording_rig --kaist: skipped, {skip_reason(KAIST, d)}")
         return
     ext = {}
     if extended:

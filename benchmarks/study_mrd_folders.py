@@ -2,8 +2,8 @@
 
 The study behind docs/results/mrd.md: the source repository (https://github.com/MRDLab/
 mis-tool-characterization, commit 03658b2; ODbL 1.0 / DbCL 1.0; "MRD Lab data repository, University of Minnesota";
-O'Neill, Stephens, Kowalewski, IEEE RA-L 3(4):3027-3034, 2018) holds fifteen folders of one rig; ../shared ships one.
-Point ``--repo`` at a clone's ``data/`` folder (read in place, nothing is copied). Each folder is split into its
+O'Neill, Stephens, Kowalewski, IEEE RA-L 3(4):3027-3034, 2018) holds fifteen folders of one rig. Point ``--repo`` at
+a clone (its root or its ``data/`` folder; docs/how-to/get-the-data.md), read in place, nothing copied. Each folder is split into its
 stroke windows (:func:`study.mrd.stroke_groups`: the roll and pitch folders stop the jaw at several positions) and
 each window is analysed twice, in process and one thread:
 
@@ -15,7 +15,7 @@ each window is analysed twice, in process and one thread:
 Prints one row per window and the pooled lines; ``--json OUT`` keeps the rows. Prints figures, never fails on them.
 About 25 min on one thread for all fifteen folders (the two 50-run folders take 2 min per pass).
 
-    .venv/bin/python benchmarks/study_mrd_folders.py --repo CLONE/data [--only NAME,NAME] [--gain JSON] [--json OUT]
+    .venv/bin/python benchmarks/study_mrd_folders.py --repo CLONE [--only NAME,NAME] [--gain JSON] [--json OUT]
 """
 from __future__ import annotations
 
@@ -29,6 +29,7 @@ ONE_THREAD = {k: "1" for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_N
 os.environ.update(ONE_THREAD)
 ROOT = Path(__file__).resolve().parents[1]
 
+from study.datasets import MRD, skip_reason  # noqa: E402 - after the thread settings
 from study.mrd import default_mrd_dir, load_mrd_dir, runs_selection, stroke_groups  # noqa: E402 - after the thread settings
 from study.mrd_report import analyze_mrd  # noqa: E402 - after the thread settings
 
@@ -65,15 +66,16 @@ def _row(name: str, runs: list, gain: float) -> dict:
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repo", required=True, help="a clone's data/ folder (one sub-folder per tool and setting)")
+    ap.add_argument("--repo", required=True, help="a clone (its root or data/: one sub-folder per tool and setting)")
     ap.add_argument("--only", default=None, help="comma-separated folder names (default: every sub-folder)")
     ap.add_argument("--gain", default=None, help="JSON of `teleop analyze --mrd OTHER --json JSON` (its load gain)")
     ap.add_argument("--gain-value", type=float, default=None, help="the load gain itself")
     ap.add_argument("--json", default=None, help="write the rows here")
     args = ap.parse_args(argv)
     repo = Path(args.repo)
+    repo = repo / "data" if (repo / "data").is_dir() else repo
     if not repo.is_dir():
-        print(f"study_mrd_folders: skipped, {repo} not found (a clone's data/ folder, see the docstring)")
+        print(f"study_mrd_folders: skipped, {skip_reason(MRD, repo)}")
         return
     if args.gain_value is not None:
         gain, source = args.gain_value, "--gain-value"

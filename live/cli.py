@@ -84,8 +84,9 @@ def _add_sides(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> No
                    help="give up on the processes after this [s] (default 50; with a recording its length + 120)")
     p.add_argument("--rig", choices=("simulated", "zenoh", "recording"), default=None, help="override rig.type")
     p.add_argument("--recording", metavar="PATH", default=None,
-                   help="play this measured recording as the hardware (rig.type recording, rig.recording.path; an MRD "
-                        "XY.TXT run; without --config the da Vinci jaw of configs/recording-mrd.yaml)")
+                   help="play this measured recording as the hardware (rig.type recording, rig.recording.path): an "
+                        "MRD run, a KAIST recording or a measured-data CSV, told apart by its content; without "
+                        "--config the instrument of configs/recording-mrd.yaml, recording-kaist.yaml or sim.yaml")
     p.set_defaults(func=_cmd_demo)
 
     p = sub.add_parser("slave", help="instrument side: reload or make the calibration, then follow commands and "

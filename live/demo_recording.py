@@ -92,9 +92,10 @@ def evaluate_recording(run_dir: Path, cfg: Config) -> dict:
 
 def with_recording(cfg: Config, args: Any) -> Config:
     """``cfg`` with ``--rig`` / ``--recording PATH`` applied (``--recording`` alone means ``--rig recording``;
-    without ``--config`` the instrument is configs/recording-mrd.yaml's jaw), the recording checked against the
-    instrument before any process starts (:func:`live.recording_rig.check_recording`: one line naming the file
-    and the problem)."""
+    without ``--config`` the instrument is the shipped one of the format the file's content shows:
+    configs/recording-mrd.yaml's jaw, recording-kaist.yaml's joint or sim.yaml's tendon), the recording checked
+    against the instrument before any process starts (:func:`live.recording_rig.check_recording`: one line naming
+    the file and the problem)."""
     import dataclasses
 
     from live.recording_rig import read_recording
@@ -131,8 +132,8 @@ def evaluate_kaist(run_dir: Path, cfg: Config) -> dict:
     from live.recording_pair import N_NODES
     from live.recording_rig import check_recording
     from live.recording_routine import recorded_model_path
-    from study.kaist import read_kaist, split
-    rec = read_kaist(check_recording(cfg)[0])
+    from study.kaist import read_kaist_recording, split
+    rec = read_kaist_recording(check_recording(cfg)[0])
     model = json.loads(recorded_model_path(cfg).read_text(encoding="utf-8"))
     name = cfg.instrument.joints[0].name
     cols = read_joint_csv(run_dir / "slave_joints.csv")

@@ -1,9 +1,10 @@
 """A KAIST recording played as an antagonistic pair, estimated by the pair axis's online estimator.
 
-The KAIST robot (``sine_config_N.txt``, :mod:`study.kaist`) turns one motor that draws tendon a in and lets
-tendon b out: x_in,a = +g c, x_in,b = -g c for the motor command c [rad]; the proximal load cells give T_a, T_b
-[N]; an EM tracker measures the distal bending angle, the truth. The pulley radius r, g and the tendons'
-compliances are not separately observable from these signals, so the rig speaks in units of r (r = 1):
+The KAIST robot (``sine_config_N.txt`` or a clone's ``N.txt``, :mod:`study.kaist`) turns one motor that draws
+tendon a in and lets tendon b out: x_in,a = +g c, x_in,b = -g c for the motor command c [rad]; the proximal
+load cells give T_a, T_b [N]; an EM tracker measures the distal bending angle, the truth. The pulley radius r,
+g and the tendons' compliances are not separately observable from these signals, so the rig speaks in units of
+r (r = 1):
 x_in = (G c, -G c) with G = g / r, L/EA_j = 2 lam_j [rad/N] (as :func:`estimator.online.joint_batch.predict_pair_angle`).
 
 :class:`RecordedPair` is the rig (:class:`slave.rig.Rig` of one joint, one recorded sample per step).
@@ -75,8 +76,8 @@ class RecordedPair:
     def from_config(cls, cfg: Config, path: Path) -> "RecordedPair":
         """The KAIST recording ``path`` for the config's one joint, x_in = the motor command (G = 1: the
         calibration's G = g / r is applied by :class:`RecordedPairAxis`)."""
-        from study.kaist import read_kaist
-        return cls(read_kaist(path), 1.0, cfg.instrument.joints[0].name, cfg.rig.recording.rate)
+        from study.kaist import read_kaist_recording
+        return cls(read_kaist_recording(path), 1.0, cfg.instrument.joints[0].name, cfg.rig.recording.rate)
 
     @property
     def axis_kind(self) -> Any:
@@ -173,9 +174,9 @@ def fit_kaist(cfg: Config) -> dict:
     DataError
         An unreadable calibration recording, or one too short to split.
     """
-    from study.kaist import read_kaist
+    from study.kaist import read_kaist_recording
     path = Path(cfg.rig.recording.calibration_run or str(cfg.rig.recording.path)).expanduser()
-    rec = read_kaist(path)
+    rec = read_kaist_recording(path)
     c1, _, how = split(rec)
     fit = fit_pair(rec.command, rec.T_a, rec.T_b, rec.angle, c1.stop, N_NODES, predict=predict_pair_angle,
                    name="joint estimator")

@@ -5,17 +5,18 @@ and torque sensor read) and keeps the recorded *distal* signals as the ground tr
 simulators' truth: the estimators never read it). The commands the slave sends are recorded in the state
 and otherwise ignored: the recording's motion is the one that happened.
 
-An MRD da Vinci run (``XY.TXT``, :mod:`study.mrd`) drives the spindle axis of an instrument of one
-spindle-driven jaw: x_in = the spindle angle [rad], T_in = the spindle torque [N m], the truth's
-``torque`` and ``theta`` the measured jaw torque [N m] and angle [rad]. The calibration the slave needs is
-fitted on one named run of the recording's folder (:mod:`live.recording_axis`), because a recording
-cannot execute a calibration motion.
+The format of a recording (``rig.recording.format: auto``) is read from its first lines, never from its
+name (:mod:`live.recording_formats`). An MRD da Vinci run (``XY.TXT``, :mod:`study.mrd`) drives the spindle
+axis of an instrument of one spindle-driven jaw: x_in = the spindle angle [rad], T_in = the spindle torque
+[N m], the truth's ``torque`` and ``theta`` the measured jaw torque [N m] and angle [rad]. The calibration the
+slave needs is fitted on one named run of the recording's folder (:mod:`live.recording_axis`), because a
+recording cannot execute a calibration motion.
 
-A KAIST recording (``sine_config_N.txt``, :mod:`study.kaist`) drives the pair axis of an instrument of one
-antagonistic pair (:mod:`live.recording_pair`): x_in = the motor command [rad] on both tendons, T_in = the
-two proximal tensions [N], the truth's ``theta`` the measured distal angle. The project's measured-data CSV
-(:func:`teleop.recording.read_measured_csv`) drives the single-tendon axis (:mod:`live.recording_tendon`):
-x_in, T_in proximal, T_out and x_out the truth.
+A KAIST recording (``sine_config_N.txt``, or ``optimization/selected/N.txt`` of a clone; :mod:`study.kaist`)
+drives the pair axis of an instrument of one antagonistic pair (:mod:`live.recording_pair`): x_in = the motor
+command [rad] on both tendons, T_in = the two proximal tensions [N], the truth's ``theta`` the measured distal
+angle. The project's measured-data CSV (:func:`teleop.recording.read_measured_csv`) drives the single-tendon
+axis (:mod:`live.recording_tendon`): x_in, T_in proximal, T_out and x_out the truth.
 
 Layering: the readers live in :mod:`study` (floor 3) and the rig reads through them, so the rig lives
 here on floor 4 and registers itself in :data:`slave.rigs.RIG_TYPES` when this module is imported
@@ -34,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from live.recording_formats import detect_format
 from slave.rig import InstrumentTruth, RigInputError, RigState
 from slave.rigs import register_rig
 from study.mrd import MrdRun, read_mrd
@@ -48,37 +50,19 @@ FORMATS = {"mrd": "spindle", "kaist": "pair", "csv": "single tendon"}
 
 
 def recording_format(path: Path, fmt: str = "auto") -> str:
-    """The format of the recording ``path``: ``fmt`` unless ``auto``; else from its name (``XY.TXT``: mrd,
-    ``sine_config_N.txt``: kaist, ``*.csv``: csv), then from its first data line (10 numbers: mrd, 8: kaist).
+    """The format of the recording ``path``: ``fmt`` unless ``auto``; else the one its first lines show
+    (:func:`live.recording_formats.detect_format`: the project's CSV header, 8 numbers a row: kaist, 10: mrd).
 
     Raises
     ------
     DataError
-        The file does not exist, or neither its name nor its first line says which format it is.
+        The file does not exist, or its first lines are of no known format (the file and the formats tried).
     """
     if not path.is_file():
         raise DataError(f"rig.recording.path: {path}: no such file")
     if fmt != "auto":
         return fmt
-    name = path.name
-    if len(name) == 6 and name[:2].isdigit() and name.upper().endswith(".TXT"):
-        return "mrd"
-    if name.startswith("sine_config_") and name.endswith(".txt"):
-        return "kaist"
-    if name.lower().endswith(".csv"):
-        return "csv"
-    try:
-        with path.open(errors="replace") as f:
-            line = next((ln for ln in f if ln.strip() and not ln.lstrip().startswith(("%", "#"))), "")
-    except OSError as e:
-        raise DataError(f"rig.recording.path: {path}: cannot read ({e.strerror})") from None
-    n = line.strip().rstrip(",").count(",") + 1 if line.strip() else 0
-    if n == 10:
-        return "mrd"
-    if n == 8:
-        return "kaist"
-    raise DataError(f"rig.recording.path: {path}: unreadable format (not an MRD XY.TXT run, a KAIST "
-                    f"sine_config_N.txt or a measured-data CSV; first data line has {n} fields); set rig.recording.format")
+    return detect_format(path)
 
 
 def _instrument_axis(cfg: Config) -> str:
@@ -104,7 +88,7 @@ def check_recording(cfg: Config) -> tuple[Path, str]:
     rc = cfg.rig.recording
     if not rc.path:
         raise ConfigError("rig.recording.path: rig.type recording needs a recording (an MRD XY.TXT run, a KAIST "
-                          "sine_config_N.txt or a measured-data CSV)")
+                          "recording or a measured-data CSV; docs/how-to/get-the-data.md)")
     path = Path(rc.path).expanduser()
     fmt = recording_format(path, rc.format)
     want, have = FORMATS[fmt], _instrument_axis(cfg)
@@ -135,8 +119,8 @@ def read_recording(cfg: Config) -> Any:
     :func:`study.mrd.read_mrd`, :func:`study.kaist.read_kaist`)."""
     path, fmt = check_recording(cfg)
     if fmt == "kaist":
-        from study.kaist import read_kaist
-        return read_kaist(path)
+        from study.kaist import read_kaist_recording
+        return read_kaist_recording(path)
     if fmt == "csv":
         from live.recording_tendon import read_tendon_csv
         return read_tendon_csv(path)

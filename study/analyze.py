@@ -10,9 +10,9 @@ Two modes:
   to stderr on long recordings. Where the friction sits along the sheath is fitted; ``--route CONFIG``
   holds the route of CONFIG's ``sheath`` instead (an instrument whose route is known from its design).
 * ``teleop analyze --kaist [DIR]`` or ``teleop analyze .../sine_config_N.txt`` (or any FILE with
-  ``--bend DEG``; other layouts with ``--columns MAP``, :mod:`study.columns`): every
-  ``sine_config_<N>.txt`` configuration (or every ``<N>.txt`` of a clone's ``optimization/selected/``;
-  :mod:`study.kaist`; unlicensed data read in place),
+  ``--bend DEG``; other layouts with ``--columns MAP``, :mod:`study.columns`): every configuration under DIR
+  (``sine_config_<N>.txt``, or ``optimization/selected/<N>.txt`` of a clone given by its root or that folder,
+  :mod:`study.kaist_files`; ``--configs`` picks some; default DIR in ``TSM_TELEOP_DATA``; read in place),
   calibrated on command cycle 1 and tested on the later cycles, the model choice on cycle 1 only:
   the pair diagnosis (:mod:`estimator.offline.pair_diagnosis`: the seed pair model against the
   capstan-joint model and the pair-level effects; causes, extended model, gain), one parameter set
@@ -67,11 +67,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", nargs="?", metavar="FILE",
                         help="measured-data CSV (one tendon), or a KAIST sine_config_N.txt")
     parser.add_argument("--kaist", nargs="?", const="", default=None, metavar="DIR",
-                        help="analyse every KAIST configuration sine_config_<N>.txt in DIR, or every <N>.txt of the "
-                             "source repository's optimization/selected/ (default DIR ../shared/data/kaist-tsm)")
+                        help="analyse every KAIST configuration in DIR: sine_config_<N>.txt, or a clone of the source "
+                             "repository (its root or optimization/selected/) (default DIR: kaist-tsm or "
+                             "hysteresis_compensation_ROS in $TSM_TELEOP_DATA, docs/how-to/get-the-data.md)")
+    parser.add_argument("--configs", metavar="N[,N...]",
+                        help="KAIST mode: only these configurations (bend N [deg]), e.g. 0,60,120,180,240")
     parser.add_argument("--mrd", nargs="?", const="", default=None, metavar="DIR",
-                        help="jaw torque and angle of a da Vinci tool from its spindle: every *.TXT run of an MRD "
-                             "folder (default ../shared/data/mrd-davinci; study.mrd_report)")
+                        help="jaw torque and angle of a da Vinci tool from its spindle: every *.TXT run of a folder, "
+                             "a Tool_ folder or a clone of the source repository (its root or data/: "
+                             "Tool_4_Maryland_L_2) (default DIR: the MRD data in $TSM_TELEOP_DATA)")
     parser.add_argument("--calibration", metavar="RUN[,RUN]|mid|kinematic:RUN|segment:SECONDS|gain=G:RUN",
                         help="MRD mode: calibrate on one run (default: the slowest, lightest; mid: the run whose "
                              "spindle band centre is nearest the folder's middle), on several runs together, "
@@ -127,8 +131,8 @@ def main_analyze(args: argparse.Namespace) -> int:
             raise ConfigError(f"{opt} {d}: exists and is not a directory")
     if args.file is not None:
         require_file(args.file)
-    kaist = (args.kaist is not None or is_kaist_file(args.file) or args.bend is not None
-             or args.columns is not None or args.shared_params is not None)
+    kaist = (args.kaist is not None or is_kaist_file(args.file) or args.bend is not None or args.columns is not None
+             or args.shared_params is not None or getattr(args, "configs", None) is not None)
     if kaist:
         if args.route is not None:
             raise ConfigError("--route is for a single-tendon CSV; the KAIST pair models have no sheath route")

@@ -1,9 +1,10 @@
 """Importer for the KAIST flexible-endoscope recordings (antagonistic tendon pair) and similar data.
 
-The files (``sine_config_N.txt``, N the tube configuration in degrees) are described in
-``../shared/data/kaist-tsm/SOURCE.md``. They have **no licence**: this module reads them where they
-lie (or from a directory the user gives) and the project never copies them or per-sample data
-derived from them.
+The files (``sine_config_N.txt`` in the project's folder ``kaist-tsm``, ``optimization/selected/N.txt`` in a
+clone of the source repository; N the tube configuration in degrees) are described in the folder's
+``SOURCE.md`` and in docs/how-to/get-the-data.md; :mod:`study.kaist_files` finds them in either layout. They
+have **no licence**: this module reads them where they lie (the data folder, ``TSM_TELEOP_DATA``, or a
+directory the user gives) and the project never copies them or per-sample data derived from them.
 
 The 8-column files are comma separated, no header, with a trailing comma, logged at 40 Hz with each
 time stamp repeated several times; as the source says, every row whose time equals the previous
@@ -30,7 +31,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,21 +40,19 @@ import numpy as np
 from estimator.offline.pair import rmse
 from estimator.offline.pair_general import predict_shared
 from study.columns import ColumnMap, parse_column_map, read_table
-from teleop.errors import DataError
+from study.kaist_files import config_of, default_kaist_dir, find_configs, find_kaist_dir, is_kaist_file, kaist_path
+from teleop.errors import ConfigError, DataError
 from teleop.text_files import read_text
 
 __all__ = ["CONFIGS_DEG", "RATE_HZ", "KaistRecording", "default_kaist_dir", "find_kaist_dir", "find_configs",
-           "is_kaist_file", "kaist_path", "read_kaist", "load_all", "load_dir", "resample", "cycles", "split",
-           "load_kaist_input", "predict_kaist", "format_prediction"]
+           "is_kaist_file", "kaist_path", "read_kaist", "read_kaist_recording", "load_all", "load_dir", "resample", "cycles", "split",
+           "parse_configs", "load_kaist_input", "predict_kaist", "format_prediction"]
 
-#: Insertion-tube configurations shipped in ../shared/data/kaist-tsm (bend angle [deg]).
+#: Insertion-tube configurations [deg] of the project's folder kaist-tsm and of the results pages (a clone of the
+#: source repository holds these and five more: 30, 90, 150, 210, 270).
 CONFIGS_DEG = (0, 60, 120, 180, 240)
 #: Rate [Hz] the recordings are analysed at (the 40 Hz of the shipped files).
 RATE_HZ = 40.0
-_NAME = re.compile(r"sine_config_(\d+(?:\.\d+)?)\.txt$")
-# the source repository's own layout (optimization/selected/<N>.txt), read when a folder has no sine_config_<N>.txt
-_BARE = re.compile(r"(\d+(?:\.\d+)?)\.txt")
-_MISSING_HINT = "these tests need the unlicensed measurements, see docs/results/kaist.md"
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,65 +98,6 @@ class KaistRecording:
         return float(1.0 / np.median(np.diff(self.time)))
 
 
-def default_kaist_dir() -> Path:
-    """``<repo>/../shared/data/kaist-tsm``, where the project expects the data by default."""
-    return Path(__file__).resolve().parents[1].parent / "shared" / "data" / "kaist-tsm"
-
-
-def kaist_path(directory: str | Path, config_deg: float) -> Path:
-    """Path of configuration ``config_deg`` [deg] inside ``directory``."""
-    return Path(directory) / f"sine_config_{_fmt(config_deg)}.txt"
-
-
-def _fmt(n: float) -> str:
-    return str(int(n)) if float(n).is_integer() else str(n)
-
-
-def _num(text: str) -> float:
-    v = float(text)
-    return int(v) if v.is_integer() else v
-
-
-def find_configs(directory: str | Path) -> list[tuple[float, Path]]:
-    """Every ``sine_config_<N>.txt`` in ``directory`` as (N [deg], path), sorted by N. A folder with no
-    such file is read in the source repository's layout instead (``optimization/selected/<N>.txt`` of
-    nhoyh/hysteresis_compensation_ROS, so that a clone is read in place): every ``<N>.txt``."""
-    d = Path(directory)
-    files = [p for p in d.iterdir() if p.is_file()] if d.is_dir() else []
-    for pattern in (_NAME, _BARE):
-        found = [(_num(m.group(1)), p) for p in files if (m := pattern.fullmatch(p.name))]
-        if found:
-            return sorted(found, key=lambda x: x[0])
-    return []
-
-
-def find_kaist_dir(path: str | Path | None = None) -> Path:
-    """The directory holding the KAIST files.
-
-    Parameters
-    ----------
-    path : str or Path, optional
-        A directory given by the user; default :func:`default_kaist_dir`.
-
-    Raises
-    ------
-    DataError
-        A file, or a directory that does not exist or holds no ``sine_config_<N>.txt`` (or ``<N>.txt``) file.
-    """
-    d = Path(path) if path is not None else default_kaist_dir()
-    if d.is_file():
-        raise DataError(f"{d}: a file, not a folder: --kaist takes the folder of the sine_config_<N>.txt files "
-                        "(one file: teleop analyze FILE [--bend DEG])")
-    if not d.is_dir() or not find_configs(d):
-        raise DataError(f"KAIST data not found at {d}: {_MISSING_HINT}")
-    return d
-
-
-def is_kaist_file(path: str | Path | None) -> bool:
-    """True when the file name is ``sine_config_<N>.txt`` (the name alone decides)."""
-    return path is not None and _NAME.search(Path(path).name) is not None
-
-
 def resample(rec: KaistRecording, rate_hz: float = RATE_HZ) -> KaistRecording:
     """Block means over bins of 1 / ``rate_hz`` seconds (empty bins dropped); ``rec`` itself when it
     is not faster than twice ``rate_hz``. The note records the rates."""
@@ -187,7 +126,8 @@ def read_kaist(path: str | Path, config_deg: float | None = None, column_map: Co
     ----------
     path : str or Path
     config_deg : float, optional
-        Configuration [deg]; default: the N of a ``sine_config_<N>.txt`` name.
+        Configuration [deg]; default: the N of the file's name (``sine_config_<N>.txt``, or ``<N>.txt`` in a
+        clone's ``optimization/selected``; :func:`study.kaist_files.config_of`).
     column_map : default the 8-column KAIST map (:data:`study.columns.KAIST_MAP`)
     rate_hz : resample faster recordings to this rate (:func:`resample`); None keeps every sample
 
@@ -199,10 +139,10 @@ def read_kaist(path: str | Path, config_deg: float | None = None, column_map: Co
     """
     path = Path(path)
     if config_deg is None:
-        m = _NAME.search(path.name)
-        if m is None:
-            raise DataError(f"{path}: file name is not sine_config_<N>.txt and no bend was given (--bend DEG)")
-        config_deg = _num(m.group(1))
+        config_deg = config_of(path)
+        if config_deg is None:
+            raise DataError(f"{path}: file name is not sine_config_<N>.txt and no bend was given (--bend DEG); a "
+                            "clone's optimization/selected/<N>.txt names it too")
     tab = read_table(path, column_map)
     k = math.pi / 180.0 if tab.column_map.units == "deg" else 1.0
     d = tab.data
@@ -214,19 +154,36 @@ def read_kaist(path: str | Path, config_deg: float | None = None, column_map: Co
     return resample(rec, rate_hz) if rate_hz else rec
 
 
+def read_kaist_recording(path: str | Path) -> KaistRecording:
+    """A KAIST recording whose format its content showed (the recording rig): :func:`read_kaist` with the
+    configuration its name gives (:func:`study.kaist_files.config_of`), else nan (the rig needs none)."""
+    n = config_of(path)
+    return read_kaist(path, math.nan if n is None else n)
+
+
 def load_dir(path: str | Path | None = None, column_map: ColumnMap | None = None,
-             rate_hz: float | None = RATE_HZ) -> tuple[list[KaistRecording], list[str]]:
-    """Every ``sine_config_<N>.txt`` of a directory, sorted by N, and one line per file that could not
-    be read (``"<file>: <why>"``), which is left out.
+             rate_hz: float | None = RATE_HZ, configs: tuple[float, ...] | None = None
+             ) -> tuple[list[KaistRecording], list[str]]:
+    """Every configuration under a directory (either layout, :func:`study.kaist_files.kaist_files`), sorted by
+    N, or only those of ``configs``; and one line per file that could not be read (``"<file>: <why>"``), which
+    is left out.
 
     Raises
     ------
     DataError
-        The directory does not exist or holds no such file (:func:`find_kaist_dir`).
+        The directory does not exist or holds no configuration (:func:`find_kaist_dir`), or a configuration of
+        ``configs`` is not there (the ones there named).
     """
     d = find_kaist_dir(path)
+    found = find_configs(d)
+    if configs is not None:
+        absent = [n for n in configs if n not in {m for m, _ in found}]
+        if absent:
+            raise DataError(f"{d}: no configuration {', '.join(f'{n:g}' for n in absent)} (--configs); the folder "
+                            f"holds {', '.join(f'{n:g}' for n, _ in found)}")
+        found = [(n, p) for n, p in found if n in configs]
     recs, problems = [], []
-    for n, p in find_configs(d):
+    for n, p in found:
         try:
             recs.append(read_kaist(p, n, column_map, rate_hz))
         except DataError as e:
@@ -310,19 +267,30 @@ def split(rec: KaistRecording) -> tuple[slice, slice, str]:
 
 # ---- the command line's KAIST input and the prediction with a saved shared set -----------------
 
+def parse_configs(text: str | None) -> tuple[float, ...] | None:
+    """The configurations [deg] of ``--configs N[,N...]`` (None: every one). Raises ConfigError when malformed."""
+    if text is None:
+        return None
+    try:
+        return tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise ConfigError(f"--configs {text}: expected bend angles N [deg] separated by commas, e.g. "
+                          "0,60,120,180,240") from None
+
+
 def load_kaist_input(args: argparse.Namespace) -> list[KaistRecording]:
-    """The recordings of the KAIST mode: ``--kaist [DIR]`` (every configuration file of DIR,
-    :func:`find_configs`), a
-    ``sine_config_<N>.txt`` FILE (its whole directory) or another FILE with ``--bend DEG``; read with
-    ``--columns`` when given. Files that cannot be read get one line on stderr each and are left out.
+    """The recordings of the KAIST mode: ``--kaist [DIR]`` (every configuration under DIR in either layout,
+    :func:`load_dir`, or those of ``--configs``), a FILE whose name gives its configuration (its whole
+    directory, :func:`study.kaist_files.config_of`) or another FILE with ``--bend DEG``; read with ``--columns``
+    when given. Files that cannot be read get one line on stderr each and are left out.
 
     Raises
     ------
     DataError
-        Nothing readable (the problems named), or FILE without ``--bend`` and not named
-        ``sine_config_<N>.txt``.
+        Nothing found or nothing readable (the problems named), a configuration of ``--configs`` absent, or
+        FILE without ``--bend`` and not named for its configuration.
     ConfigError
-        A malformed ``--columns`` map.
+        A malformed ``--columns`` map or ``--configs`` list.
     """
     cmap = parse_column_map(args.columns) if args.columns is not None else None
     if args.file is not None and (args.bend is not None or not is_kaist_file(args.file)):
@@ -332,7 +300,7 @@ def load_kaist_input(args: argparse.Namespace) -> list[KaistRecording]:
         problems: list[str] = []
     else:
         directory = Path(args.file).parent if args.kaist is None else (args.kaist or None)
-        recs, problems = load_dir(directory, cmap)
+        recs, problems = load_dir(directory, cmap, configs=parse_configs(getattr(args, "configs", None)))
     if not recs:                     # the error names every problem, in one line
         raise DataError("no readable KAIST recording: " + "; ".join(problems))
     for line in problems:

@@ -1,7 +1,9 @@
 """Importer for the MRD Lab da Vinci tool characterisation runs (``XY.TXT``, torque and angle at both ends).
 
-Data: ``../shared/data/mrd-davinci`` (SOURCE.md there: MRD Lab data repository, University of
-Minnesota; O'Neill, Stephens, Kowalewski, IEEE RA-L 3(4):3027-3034, 2018; ODbL 1.0 / DbCL 1.0).
+Data: the MRD folder of the data folder (``mrd-davinci`` or a clone of the source repository,
+``TSM_TELEOP_DATA``; :mod:`study.mrd_files` finds the runs in either layout, docs/how-to/get-the-data.md; MRD
+Lab data repository, University of Minnesota; O'Neill, Stephens, Kowalewski, IEEE RA-L 3(4):3027-3034, 2018;
+ODbL 1.0 / DbCL 1.0).
 Lines starting with ``%`` are a header (hand-edited, not trusted); then comma-separated rows of 10
 numbers at 1 kHz:
 
@@ -31,11 +33,13 @@ import fnmatch
 import math
 import os
 import re
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from study.mrd_files import default_mrd_dir, find_mrd_folder
 from teleop.errors import DataError
 from teleop.text_files import read_text
 
@@ -92,11 +96,6 @@ class MrdRun:
     def peak_speed(self) -> float:
         """2 pi f times half the spindle angle range [rad/s]."""
         return 2.0 * math.pi * self.frequency_hz * 0.5 * float(np.ptp(self.theta_p))
-
-
-def default_mrd_dir() -> Path:
-    """``<repo>/../shared/data/mrd-davinci``."""
-    return Path(__file__).resolve().parents[2] / "shared" / "data" / "mrd-davinci"
 
 
 def sine_frequency(t: np.ndarray, x: np.ndarray) -> float:
@@ -205,25 +204,18 @@ def values_error(runs: list[MrdRun], exc: BaseException) -> DataError:
 
 
 def load_mrd_dir(directory: str | Path | None = None, select: str | None = None) -> tuple[list[MrdRun], list[str]]:
-    """Every ``*.TXT`` run of a folder (or of its single sub-folder holding them), sorted by name;
-    ``select``: only those whose file stem matches this glob (``--runs``, e.g. ``"1*"``).
+    """Every run of the folder ``directory`` means (a folder of runs, one ``Tool_`` folder, the project's MRD
+    folder, a clone's root or its ``data/``: :func:`study.mrd_files.find_mrd_folder`; default the data
+    folder's), sorted by name; ``select``: only those whose file stem matches this glob (``--runs``, e.g.
+    ``"1*"``). A note naming the folder chosen among several goes to stderr.
 
     Returns the runs (with ``load_level`` set: rank of the distinct front-end commands, 0 =
-    lightest) and one line per file that could not be read. Raises DataError when the folder does
-    not exist, no run could be read, or no run matches ``select``.
+    lightest) and one line per file that could not be read. Raises DataError when no run is found (what is
+    expected, and where to get the data), no run could be read, or no run matches ``select``.
     """
-    d = Path(directory) if directory else default_mrd_dir()
-    if d.is_file():
-        raise DataError(f"{d}: a file, not an MRD folder: give the folder that holds the *.TXT runs "
-                        f"(--runs {d.stem} picks this one)")
-    if not d.is_dir():
-        raise DataError(f"{d}: MRD folder not found")
-    files = sorted(f for f in d.glob("*.TXT") if f.is_file())
-    if not files:
-        subs = [s for s in sorted(d.iterdir()) if s.is_dir() and any(s.glob("*.TXT"))]
-        if len(subs) == 1:
-            files = sorted(subs[0].glob("*.TXT"))
-    files = [f for f in files if f.name.lower() != "seriallog.txt"]
+    d, files, note = find_mrd_folder(directory)
+    if note:
+        print(note, file=sys.stderr)
     if select is not None:
         chosen = [f for f in files if fnmatch.fnmatchcase(f.stem, select)]
         if not chosen:

@@ -1,7 +1,7 @@
 """``teleop analyze --mrd DIR``: the spindle pair model against measured jaw torque and angle.
 
 Data: MRD Lab data repository, University of Minnesota (O'Neill, Stephens, Kowalewski, IEEE RA-L
-3(4):3027-3034, 2018; ODbL 1.0 / DbCL 1.0; ../shared/data/mrd-davinci/SOURCE.md).
+3(4):3027-3034, 2018; ODbL 1.0 / DbCL 1.0; docs/how-to/get-the-data.md).
 
 Protocol (docs/results/mrd.md):
 

@@ -1,7 +1,7 @@
 """The printed table and ``report.md`` of ``teleop analyze --mrd`` (:mod:`study.mrd_report`).
 
 Data: MRD Lab data repository, University of Minnesota (O'Neill, Stephens, Kowalewski, IEEE RA-L
-3(4):3027-3034, 2018; ODbL 1.0 / DbCL 1.0; ../shared/data/mrd-davinci/SOURCE.md).
+3(4):3027-3034, 2018; ODbL 1.0 / DbCL 1.0; docs/how-to/get-the-data.md).
 """
 from __future__ import annotations
 

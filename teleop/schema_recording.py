@@ -14,8 +14,8 @@ __all__ = ["RecordingRigConfig"]
 class RecordingRigConfig:
     """``rig.recording`` (configs/default.yaml spells every key out with its comment).
 
-    path: the recording (a project CSV, a KAIST ``sine_config_N.txt``, an MRD ``XY.TXT`` run);
-    format: how to read it (``auto``: from the file's name and first line);
+    path: the recording (a project CSV, a KAIST recording, an MRD ``XY.TXT`` run);
+    format: how to read it (``auto``: from the file's first lines, never its name);
     rate: ``recording`` one recorded sample per slave cycle, ``slave`` the recording resampled at the rig's time;
     at_end: ``stop`` holds the last sample and reports the end, ``loop`` starts over;
     calibration_run: the recording the slave's calibration is fitted on: an MRD run (a path, or a run name of the

@@ -24,10 +24,11 @@ import pytest
 from estimator.offline import diagnosis_thresholds as th
 from estimator.offline.diagnosis import diagnose
 from estimator.offline.diagnosis_pair_fit import FIT_TOL as PAIR_FIT_TOL
-from study import lumped_scenarios, scenarios
+from study import kaist_files, lumped_scenarios, scenarios
+from study.datasets import KAIST, skip_reason
 
 PINNED = Path(__file__).with_name("diagnosis_pinned.json")
-KAIST_DIR = Path("/work/shared/data/kaist-tsm")
+KAIST_DIR = kaist_files.default_kaist_dir()
 
 #: Tolerance of a pinned held-out gain [-]. Every fit behind a gain stops on a relative change of its training
 #: cost below ftol (diagnosis_thresholds.FIT_TOL of the single tendon, pair_diagnosis.FIT_TOL of the pair: 1e-6).
@@ -122,8 +123,8 @@ def test_the_diagnosis_answers_as_pinned(name):
 
 
 def test_the_pair_diagnosis_answers_as_pinned():
-    if not KAIST_DIR.is_dir():
-        pytest.skip(f"the KAIST data set is not at {KAIST_DIR}")
+    if not kaist_files.find_configs(KAIST_DIR):
+        pytest.skip(skip_reason(KAIST, KAIST_DIR))
     want = _pinned()["pair"]["KAIST 0 deg"]
     got = pair_answer()
     assert got["cause"] == want["cause"] and got["causes"] == want["causes"], (got, want)
@@ -134,5 +135,5 @@ if __name__ == "__main__":       # rewrite the pinned answers (only when an answ
     if sys.argv[1:] != ["--write"]:
         sys.exit("usage: python tests/estimator/test_diagnosis_pinned.py --write")
     out = {"single": {name: answer(case) for name, case in CASES.items()},
-           "pair": {"KAIST 0 deg": pair_answer()} if KAIST_DIR.is_dir() else {}}
+           "pair": {"KAIST 0 deg": pair_answer()} if kaist_files.find_configs(KAIST_DIR) else {}}
     PINNED.write_text(json.dumps(out, indent=1, sort_keys=True) + "\n")

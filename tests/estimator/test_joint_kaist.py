@@ -11,12 +11,11 @@ import pytest
 
 from estimator.offline.pair import PairParams, fit_linear, fit_pair, predict_angle, rmse
 from estimator.online.joint_batch import predict_pair_angle
-from study.kaist import cycles, default_kaist_dir, load_all
+from study.datasets import KAIST, skip_reason
+from study.kaist import cycles, default_kaist_dir, find_configs, load_all
 
 KAIST_DIR = default_kaist_dir()
-pytestmark = [pytest.mark.kaist, pytest.mark.skipif(
-    not KAIST_DIR.is_dir(), reason=f"KAIST data not found at {KAIST_DIR}: these tests need the unlicensed "
-                                   "measurements, see docs/results/kaist.md")]
+pytestmark = [pytest.mark.kaist, pytest.mark.skipif(not find_configs(KAIST_DIR), reason=skip_reason(KAIST, KAIST_DIR))]
 
 
 def test_without_friction_the_joint_estimator_is_the_seed_pair_model():

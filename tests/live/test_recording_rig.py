@@ -15,14 +15,16 @@ from live.recording_rig import RecordedSpindle, check_recording, recording_forma
 from live.recording_score import play_run, score_run
 from slave.rig import RigInputError
 from slave.rigs import RIG_TYPES, make_rig
-from study.mrd import MrdRun, default_mrd_dir, read_mrd
+from study.datasets import KAIST, MRD, skip_reason
+from study.kaist_files import default_kaist_dir, kaist_path
+from study.mrd import MrdRun, read_mrd
+from study.mrd_files import DEFAULT_FOLDER, mrd_folder
 from teleop.config import load_config
 from teleop.errors import CalibrationError, ConfigError, DataError
 
 ROOT = Path(__file__).resolve().parents[2]
-FOLDER = default_mrd_dir() / "Tool_4_Maryland_L_2"
-needs_mrd = pytest.mark.skipif(not FOLDER.is_dir(), reason=f"MRD da Vinci data not found at {FOLDER}: the "
-                               "recorded-run tests need ../shared/data/mrd-davinci (see its SOURCE.md)")
+FOLDER = mrd_folder(DEFAULT_FOLDER)
+needs_mrd = pytest.mark.skipif(not FOLDER.is_dir(), reason=skip_reason(MRD, FOLDER))
 
 
 def synthetic_run(n: int = 50, dt: float = 1e-3) -> MrdRun:
@@ -92,7 +94,8 @@ def test_a_missing_file_is_one_line_naming_it(tmp_path):
 def test_an_unreadable_format_is_one_line_naming_the_file(tmp_path):
     f = tmp_path / "run.dat"
     f.write_text("1,2,3\n4,5,6\n")
-    with pytest.raises(DataError, match=r"run.dat: unreadable format"):
+    with pytest.raises(DataError, match=r"run.dat: not a recording of a known format \(its first data rows hold 3 "
+                                        r"comma-separated numbers\); tried csv .*kaist .*mrd "):
         recording_format(f)
 
 
@@ -161,11 +164,10 @@ def test_a_kaist_recording_plays_as_a_tendon_pair_in_units_of_the_pulley_radius(
     assert st.T_in[0, 1] == rec.T_b[1] and st.truth.theta[0] == rec.angle[1]
 
 
-KAIST_FILE = Path(__file__).resolve().parents[3] / "shared" / "data" / "kaist-tsm" / "sine_config_0.txt"
+KAIST_FILE = kaist_path(default_kaist_dir(), 0)
 
 
-@pytest.mark.skipif(not KAIST_FILE.is_file(), reason=f"KAIST data not found at {KAIST_FILE}: these tests need the "
-                    "unlicensed measurements, see docs/results/kaist.md")
+@pytest.mark.skipif(not KAIST_FILE.is_file(), reason=skip_reason(KAIST, KAIST_FILE))
 def test_the_pair_axis_estimate_on_kaist_is_the_batch_joint_model_and_near_the_offline_seed_model():
     from live.recording_pair import kaist_live
     from study.kaist import read_kaist
@@ -238,10 +240,11 @@ def test_the_demo_refuses_a_bad_recording_in_one_line_before_any_process_starts(
     monkeypatch.chdir(tmp_path)
     if case == "missing":
         args, words = ["--recording", str(tmp_path / "00.TXT")], "no such file"
-    elif case == "columns":
+    elif case == "columns":                      # named like an MRD run, 8 numbers a row: a KAIST recording
         f = tmp_path / "00.TXT"
         f.write_text("0,1,2,3,4,5,6,7\n")
-        args, words = ["--config", str(ROOT / "configs" / "recording-mrd.yaml"), "--recording", str(f)], "got 8"
+        args, words = ["--config", str(ROOT / "configs" / "recording-mrd.yaml"), "--recording", str(f)], \
+            "00.TXT is a KAIST recording of a pair axis; the config's instrument is a spindle axis"
     else:
         f = synthetic_kaist(tmp_path / "sine_config_0.txt")
         args, words = ["--config", str(ROOT / "configs" / "recording-mrd.yaml"), "--recording", str(f)], \

@@ -10,7 +10,8 @@ import pytest
 
 from estimator.offline.fit import predict
 from study import analyze
-from study.kaist import CONFIGS_DEG, default_kaist_dir
+from study.datasets import KAIST, skip_reason
+from study.kaist import CONFIGS_DEG, default_kaist_dir, find_configs
 from teleop.errors import ConfigError, DataError
 
 KAIST_DIR = default_kaist_dir()
@@ -97,7 +98,7 @@ def test_errors(tmp_path):
         run([str(tmp_path / "r.csv"), "--report", str(tmp_path / "r.csv")])
     with pytest.raises(ConfigError, match=r"--train-fraction must be in \[0.3, 0.9\]"):
         run([str(tmp_path / "r.csv"), "--train-fraction", "0.95"])
-    with pytest.raises(DataError, match="KAIST data not found at"):
+    with pytest.raises(DataError, match="no KAIST recordings found under"):
         run(["--kaist", str(tmp_path / "nowhere")])
     bad = tmp_path / "bad.csv"
     bad.write_text("time,x_in,T_in,T_out\n0,0,1,1\n0.001,0,x,1\n0.002,0,1,1\n")
@@ -242,11 +243,11 @@ def test_kaist_bend_option_columns_and_shared_params_errors(tmp_path, monkeypatc
 
 
 @pytest.mark.kaist
-@pytest.mark.skipif(not KAIST_DIR.is_dir(), reason=f"KAIST data not found at {KAIST_DIR}: these tests need "
-                                                   "the unlicensed measurements, see docs/results/kaist.md")
+@pytest.mark.skipif(not find_configs(KAIST_DIR), reason=skip_reason(KAIST, KAIST_DIR))
 def test_kaist_findings_hold_on_the_real_data(tmp_path, capsys):
     out = tmp_path / "k.json"
-    assert run(["--kaist", str(KAIST_DIR), "--json", str(out), "--bootstrap", "5"]) == 0
+    five = ",".join(str(n) for n in CONFIGS_DEG)                       # a clone holds five more
+    assert run(["--kaist", str(KAIST_DIR), "--configs", five, "--json", str(out), "--bootstrap", "5"]) == 0
     s = json.loads(out.read_text())
     rm = {c["config_deg"]: {k: v["rmse_test_deg"] for k, v in c["models"].items()} for c in s["configurations"]}
     for N, r in rm.items():

@@ -7,14 +7,12 @@ import numpy as np
 import pytest
 
 from teleop.errors import DataError
-from study.kaist import (CONFIGS_DEG, cycles, default_kaist_dir, find_kaist_dir, is_kaist_file,
+from study.datasets import KAIST, skip_reason
+from study.kaist import (CONFIGS_DEG, cycles, default_kaist_dir, find_configs, find_kaist_dir, is_kaist_file,
                           load_all, read_kaist)
 
 KAIST_DIR = default_kaist_dir()
-needs_kaist = pytest.mark.skipif(
-    not KAIST_DIR.is_dir(),
-    reason=f"KAIST data not found at {KAIST_DIR}: these tests need the unlicensed measurements, "
-           "see docs/results/kaist.md")
+needs_kaist = pytest.mark.skipif(not find_configs(KAIST_DIR), reason=skip_reason(KAIST, KAIST_DIR))
 
 
 def _row(t, cmd, vel, ang, ta, tb, ma, mb):
@@ -157,7 +155,8 @@ def test_missing_file_and_directory_are_named(tmp_path):
     from study.kaist import find_configs, load_dir
     with pytest.raises(DataError, match=r"sine_config_0\.txt: no such file"):
         read_kaist(tmp_path / "sine_config_0.txt")
-    with pytest.raises(DataError, match=r"KAIST data not found at .*these tests need the unlicensed"):
+    with pytest.raises(DataError, match=r"no KAIST recordings found under .*nowhere \(no such folder\): expected "
+                                        r"optimization/selected/<N>\.txt .*see docs/how-to/get-the-data\.md"):
         find_kaist_dir(tmp_path / "nowhere")
     write_sine(tmp_path / "sine_config_0.txt", n_stamps=10)
     write_sine(tmp_path / "sine_config_120.txt", n_stamps=10)

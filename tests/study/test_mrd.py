@@ -1,5 +1,6 @@
 """MRD da Vinci importer and analysis: synthetic runs from the project's pair simulator, bad files,
-the CLI, and the real folder when it is present (../shared/data/mrd-davinci, ODbL/DbCL)."""
+the CLI, and the real folder when it is present (the MRD data of TSM_TELEOP_DATA, ODbL/DbCL;
+docs/how-to/get-the-data.md)."""
 from __future__ import annotations
 
 import json
@@ -17,9 +18,11 @@ from study.mrd import (DISTAL_COUNTS_PER_REV, DISTAL_SIGN, PROXIMAL_COUNTS_PER_R
 from study.mrd_report import analyze_mrd, band_measurements, format_mrd, parse_calibration
 from estimator.offline.spindle_shared import RunData, kinematic_ratio, load_sweep
 
+from study.datasets import MRD, skip_reason
+from study.mrd_files import DEFAULT_FOLDER, mrd_folder
+
 MRD_DIR = default_mrd_dir()
-needs_mrd = pytest.mark.skipif(not MRD_DIR.is_dir(), reason=f"MRD da Vinci data not found at {MRD_DIR}: the "
-                               "real-folder tests need ../shared/data/mrd-davinci (see its SOURCE.md)")
+needs_mrd = pytest.mark.skipif(not mrd_folder(DEFAULT_FOLDER).is_dir(), reason=skip_reason(MRD, MRD_DIR))
 
 R = 0.005            # pulley radius of spindle and jaw [m] (rho = 1)
 K_TRUE, P_TRUE = 0.2, 8.0
@@ -87,7 +90,8 @@ def test_bad_and_truncated_files_are_one_line_each(tmp_path):
     assert [r.name for r in runs] == ["00"]
     assert len(bad) == 2 and "01.TXT" in bad[0] and "truncated" in bad[0]
     assert "02.TXT:2: expected 10 comma-separated numbers" in bad[1] and "\n" not in "".join(bad)
-    with pytest.raises(DataError, match="not found"):
+    with pytest.raises(DataError, match=r"no MRD recordings found under .*nowhere \(no such folder\): expected "
+                                        r"data/Tool_<\.\.\.>/<NN>\.TXT runs .*see docs/how-to/get-the-data\.md"):
         load_mrd_dir(tmp_path / "nowhere")
     (tmp_path / "00.TXT").unlink()
     with pytest.raises(DataError, match="no readable run"):
@@ -147,10 +151,13 @@ def test_analysis_keys_calibration_and_what_was_fitted_on(tmp_path):
     json.dumps(s, allow_nan=False)
 
 
-def test_default_folder_is_beside_the_repository():
+def test_default_folder_is_in_the_data_folder_beside_the_repository_unless_the_setting_names_one(monkeypatch, tmp_path):
     from pathlib import Path
-    root = Path(__file__).resolve().parents[2]                       # tests/teleop/ -> repository
-    assert default_mrd_dir() == root.parent / "shared" / "data" / "mrd-davinci"
+    root = Path(__file__).resolve().parents[2]                       # tests/study/ -> repository
+    monkeypatch.delenv("TSM_TELEOP_DATA", raising=False)
+    assert default_mrd_dir().parent == root.parent / "shared" / "data"
+    monkeypatch.setenv("TSM_TELEOP_DATA", str(tmp_path))
+    assert default_mrd_dir() == tmp_path / "mrd-davinci"
 
 
 def test_kinematic_calibration_fixes_rho_from_the_encoders(tmp_path):
@@ -271,7 +278,7 @@ def test_real_runs_one_run_does_not_pin_the_load_gain():
     stretch to correct): corrected for stretch it still puts the gain above 1 / 0.96."""
     from estimator.offline.spindle_centre_fit import within_run_gain
     from study.mrd_calibration import run_data
-    rd = {n: run_data(read_mrd(MRD_DIR / "Tool_4_Maryland_L_2" / f"{n}.TXT")) for n in ("00", "31", "43")}
+    rd = {n: run_data(read_mrd(mrd_folder(DEFAULT_FOLDER) / f"{n}.TXT")) for n in ("00", "31", "43")}
     for r in rd.values():
         w = within_run_gain(r)
         lo, hi = w["profile_ci95"]

@@ -1,5 +1,5 @@
-"""The tool files on the MRD folders (../shared/data/mrd-davinci, MRD Lab data repository, University of Minnesota,
-ODbL 1.0 / DbCL 1.0): one calibration run of each folder plus the tool's load gain, ``teleop analyze --mrd DIR
+"""The tool files on the MRD folders (the MRD data of TSM_TELEOP_DATA, docs/how-to/get-the-data.md; MRD Lab data
+repository, University of Minnesota, ODbL 1.0 / DbCL 1.0): one calibration run of each folder plus the tool's load gain, ``teleop analyze --mrd DIR
 --tool NAME``, meet the line of docs/how-to/tools.md: jaw-torque RMSE median <= 0.03 and worst run <= 0.10 of
 full scale, every scored run better than the linear baseline; the roll folder window by window.
 
@@ -15,7 +15,9 @@ from contextlib import redirect_stdout
 
 import pytest
 
+from study.datasets import MRD, skip_reason
 from study.mrd import default_mrd_dir, load_mrd_dir, stroke_groups
+from study.mrd_files import mrd_folder
 from study.mrd_report import analyze_mrd
 from study.mrd_windows import analyze_windows
 from teleop.tools import load_tool
@@ -24,7 +26,8 @@ pytestmark = pytest.mark.mrd
 ROOT = default_mrd_dir()
 MEDIAN, WORST = 0.03, 0.10
 
-#: folder under ROOT -> the tool it is scored with (measured on the folder named in the tool file).
+#: folder under ROOT (the project's layout; a clone's data/<name> is found by its name) -> the tool it is scored
+#: with (measured on the folder named in the tool file).
 CASES = {
     "more/Tool_5_Maryland_L_2": "davinci-maryland-left",         # constants of Tool_4_Maryland_L_2
     "more/Tool_4_Maryland_R_5": "davinci-maryland-right",        # constants of this folder (the only right jaw)
@@ -47,9 +50,9 @@ SHORT = {
 
 def _windows(folder: str) -> list[dict]:
     """The summary of each stroke window of ``folder`` scored with its tool (one window for most folders)."""
-    d = ROOT / folder
+    d = mrd_folder(folder.split("/")[-1], ROOT)
     if not d.is_dir():
-        pytest.skip(f"MRD folder {d} not found: the tool tests need ../shared/data/mrd-davinci (see its SOURCE.md)")
+        pytest.skip(skip_reason(MRD, d))
     runs, _ = load_mrd_dir(d)
     tool = load_tool(CASES[folder])
     assert tool.load_gain.measured_on != d.name or folder.endswith("R_5")
