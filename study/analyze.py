@@ -89,7 +89,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "jaw stopping position of a folder that holds several")
     parser.add_argument("--json", metavar="OUT", help="write the result (summary numbers) as JSON to OUT")
     parser.add_argument("--report", metavar="DIR", help="write a Markdown report with PNG figures to DIR")
-    parser.add_argument("--figures", metavar="DIR", help="KAIST mode: write the kaist_*.png plots to DIR")
+    parser.add_argument("--figures", metavar="DIR",
+                        help="write the plots to DIR (kaist_*.png with --kaist, mrd_*.png with --mrd)")
     parser.add_argument("--bend", type=float, metavar="DEG",
                         help="KAIST mode: bend angle N [deg] of a FILE not named sine_config_<N>.txt")
     parser.add_argument("--columns", metavar="MAP",
