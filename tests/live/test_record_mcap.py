@@ -199,9 +199,9 @@ def test_replay_reads_the_mcap_file_of_a_run(tmp_path):
     _write(run / "recorder" / MCAP_NAME, _session(400))
     data = estimate_data(read_session(run / "recorder" / MCAP_NAME))
     assert data.time.size == 400 and data.T_in[5] == _est(5).axes[0].tendons[0].T_in
-    for target in (run, run / "recorder" / MCAP_NAME):
-        out = tmp_path / "r.json"
-        assert main(["replay", str(target), "--json", str(out), "--rrd", str(tmp_path / "r.rrd")]) == 0
+    for k, target in enumerate((run, run / "recorder" / MCAP_NAME)):
+        out = tmp_path / f"r{k}.json"
+        assert main(["replay", str(target), "--json", str(out), "--rrd", str(tmp_path / f"r{k}.rrd")]) == 0
         res = json.loads(out.read_text())
         assert res["samples"] == 400 and res["csv"].endswith(MCAP_NAME) and res["calibration"].endswith(".json")
         assert "vs_recorded" in res["comparison"]["all"]
