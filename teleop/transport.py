@@ -90,6 +90,13 @@ def zenoh_config(transport: TransportConfig, *, listen: tuple[str, ...] | None =
             "transport.multicast_scouting")
     _insert(cfg, "scouting/gossip/enabled", True, "scouting/gossip/enabled")
     _insert(cfg, "scouting/gossip/multihop", False, "scouting/gossip/multihop")
+    # two peers that learn of each other by gossip (both connected to a third, e.g. the recorder) dial each other at
+    # once; with user/password authentication such a crossed open can leave them with no link at all. Of two
+    # listening peers only the one with the greater zenoh id dials; a peer that listens nowhere cannot be dialled,
+    # so it dials always
+    _insert(cfg, "scouting/gossip/autoconnect_strategy",
+            {"peer": {"to_router": "always", "to_peer": "greater-zid" if listen else "always"}},
+            "scouting/gossip/autoconnect_strategy")
     # 16 queued tx batches (zenoh's default is 2, 16 its maximum): a stall of zenoh's tx thread fills them before
     # anything is dropped (a loaded 2-core machine does stall for tens of ms)
     _insert(cfg, "transport/link/tx/queue/size/real_time", 16, "transport/link/tx/queue/size/real_time")
