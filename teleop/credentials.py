@@ -40,7 +40,8 @@ from typing import Any
 
 from teleop.errors import ConfigError
 
-__all__ = ["ROLES", "KEYS_ENV", "Credentials", "keys_dir", "ensure_credentials", "renew_credentials", "access_control"]
+__all__ = ["ROLES", "KEYS_ENV", "Credentials", "keys_dir", "ensure_credentials", "renew_credentials", "access_control",
+           "installation_settings"]
 
 #: The roles of a live session, each a Zenoh user of the installation's dictionary.
 ROLES = ("master", "slave", "rig", "observer")
@@ -172,6 +173,21 @@ def ensure_credentials(role: str, folder: Path | None = None) -> Credentials:
                               f"{KEYS_ENV} to a folder of your own") from None
     _check_folder(folder)
     return Credentials(role, folder / f"{role}.password", folder / "dictionary")
+
+
+def installation_settings(auth: Any, role: str | None) -> dict[str, object]:
+    """Zenoh config entries of ``role``'s installation credentials (:meth:`Credentials.zenoh_settings`) when they
+    apply: a role given (a live session's process), ``auth.installation`` on, and neither ``auth.user`` nor
+    ``auth.dictionary_file`` set (explicit credentials win); else none.
+
+    Raises
+    ------
+    ConfigError
+        As :func:`ensure_credentials`.
+    """
+    if role is None or not auth.installation or auth.user is not None or auth.dictionary_file is not None:
+        return {}
+    return ensure_credentials(role).zenoh_settings()
 
 
 def renew_credentials(folder: Path | None = None) -> Path:

@@ -26,7 +26,7 @@ from teleop import journal
 from teleop.clock import Clock, MonotonicClock
 from teleop.codec import Message, decode, encode
 from teleop.config import TransportConfig
-from teleop.credentials import ensure_credentials
+from teleop.credentials import installation_settings
 from teleop.entity import Entity, RateLimitedLog, zenoh_error_text
 from teleop.errors import CodecError, ConfigError, TransportError
 from teleop.link_security import link_security_settings
@@ -62,10 +62,8 @@ def zenoh_config(transport: TransportConfig, *, listen: tuple[str, ...] | None =
         Replace the configured endpoints (the CLI's ``--listen``/``--connect``; in one config both
         sides cannot listen on the same port, so one side usually overrides ``listen=()``).
     role : str, optional
-        The process's role in a live session (:data:`teleop.credentials.ROLES`): with
-        ``transport.auth.installation`` and no ``transport.auth.user``, its links are authenticated with the
-        installation's credentials of that role and the access-control rules apply
-        (:mod:`teleop.credentials`). None (a library or test session): no installation credentials.
+        The process's role in a live session: its installation credentials and access control
+        (:func:`teleop.credentials.installation_settings`); None (a library or test session): none.
 
     Returns
     -------
@@ -90,10 +88,9 @@ def zenoh_config(transport: TransportConfig, *, listen: tuple[str, ...] | None =
             "transport.multicast_scouting")
     _insert(cfg, "scouting/gossip/enabled", True, "scouting/gossip/enabled")
     _insert(cfg, "scouting/gossip/multihop", False, "scouting/gossip/multihop")
-    # two peers that learn of each other by gossip (both connected to a third, e.g. the recorder) dial each other at
-    # once; with user/password authentication such a crossed open can leave them with no link at all. Of two
-    # listening peers only the one with the greater zenoh id dials; a peer that listens nowhere cannot be dialled,
-    # so it dials always
+    # two peers that learn of each other by gossip dial each other at once, and with user/password authentication
+    # such a crossed open can leave no link: of two listening peers only the greater zenoh id dials (a peer that
+    # listens nowhere cannot be dialled: it dials always)
     _insert(cfg, "scouting/gossip/autoconnect_strategy",
             {"peer": {"to_router": "always", "to_peer": "greater-zid" if listen else "always"}},
             "scouting/gossip/autoconnect_strategy")
@@ -103,11 +100,8 @@ def zenoh_config(transport: TransportConfig, *, listen: tuple[str, ...] | None =
     # a batch is never held back waiting for more messages (default 1 ms): what a side published is on the
     # socket at once, so a SIGKILL right after a put loses nothing that was put (tests/integration/test_recorder.py)
     _insert(cfg, "transport/link/tx/queue/batching/time_limit", 0, "transport/link/tx/queue/batching/time_limit")
-    settings = link_security_settings(transport)   # TLS, user/password (teleop/link_security.py)
-    auth = transport.auth
-    if role is not None and auth.installation and auth.user is None and auth.dictionary_file is None:
-        settings.update(ensure_credentials(role).zenoh_settings())   # the role's installation credentials
-    for k, v in settings.items():
+    # TLS, explicit user/password (teleop/link_security.py), or the role's installation credentials
+    for k, v in {**link_security_settings(transport), **installation_settings(transport.auth, role)}.items():
         _insert(cfg, k, v, k.replace("/", "."), shown="***" if k.endswith("password") else None)
     return cfg
 
