@@ -28,6 +28,7 @@ from yaml.events import AliasEvent, CollectionStartEvent
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from teleop.errors import ConfigError
+from teleop.text_files import text_problem
 
 __all__ = ["MAX_BYTES", "MAX_DEPTH", "MAX_ALIASES", "MAX_NODES", "MAX_INT_DIGITS", "read_yaml"]
 
@@ -224,9 +225,14 @@ def _open_text(path: Path) -> str:
             raw = f.read(MAX_BYTES + 1)     # a file that grew since: still no more than the cap
         if len(raw) > MAX_BYTES:
             raise ConfigError(f"{source}: more than {MAX_BYTES} bytes; a config file is at most {MAX_BYTES} bytes")
-        return raw.decode("utf-8")
-    except (OSError, UnicodeDecodeError) as e:
+    except OSError as e:
         raise ConfigError(f"{source}: cannot read config file ({e})") from None
+    problem = text_problem(raw)         # UTF-16, binary data, another encoding: named with the byte and line
+    if problem is not None:
+        what, line = problem
+        raise ConfigError(f"{source}{'' if line is None else f':{line}'}: not a UTF-8 text file ({what}); "
+                          "save it as UTF-8")
+    return raw.decode("utf-8")
 
 
 def read_yaml(path: Path, *, hex_integers: bool = False) -> tuple[Any, dict[str, int]]:

@@ -178,3 +178,12 @@ def test_rates_and_waits_are_bounded(tmp_path, key, value, expected):
     line = len(key.split("."))
     assert re.fullmatch(re.escape(f"{p}:{line}: {key}: ") + r"\S+ is out of range: expected "
                         + re.escape(expected) + r" \[\w+\]", _refused(p))
+
+
+def test_a_config_saved_as_utf16_or_latin1_is_named_as_such(tmp_path):
+    p = tmp_path / "u16.yaml"
+    p.write_text("rig:\n  rate_hz: 500\n", encoding="utf-16")
+    assert "not a UTF-8 text file (looks like UTF-16 text, byte-order mark at byte 0)" in _refused(p)
+    p = tmp_path / "latin1.yaml"
+    p.write_bytes("# 90\xb0 bend\nrig:\n  rate_hz: 500\n".encode("latin-1"))
+    assert _refused(p).startswith(f"{p}:1: not a UTF-8 text file (byte 0xb0 at byte 4 is not UTF-8")
