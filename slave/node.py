@@ -256,21 +256,15 @@ class SlaveNode(SlaveNodeBase):
     def _speed_limited(self, targets: tuple, dt: float) -> tuple:
         """The targets the axes follow this cycle: each moves from the last followed one toward the command's
         by at most ``slave.max_speed dt`` of tendon travel (counted as ``commands_speed_limited`` cycles)."""
-        prev, self._followed = self._followed, targets
-        if prev is None:
-            return targets
-        out, limited = [], False
-        for ax, t, p in zip(self.axes, targets, prev):
-            lim = self.max_speed * dt / ax.tendon_per_unit
-            if abs(t - p) <= lim:
-                out.append(t)
-            else:
-                out.append(p + lim if t > p else p - lim)
-                limited = True
-        if limited:
-            self.counts["commands_speed_limited"] += 1
-            self._followed = tuple(out)
-        return self._followed
+        prev, out = self._followed, targets
+        if prev is not None:
+            lims = [self.max_speed * dt / ax.tendon_per_unit for ax in self.axes]
+            out = tuple(t if abs(t - p) <= lim else (p + lim if t > p else p - lim)
+                        for t, p, lim in zip(targets, prev, lims))
+            if out != tuple(targets):
+                self.counts["commands_speed_limited"] += 1
+        self._followed = out
+        return out
 
     def _too_far(self, cmd: Command) -> str | None:
         far = [w for w in (ax.too_far(t, self.rig_state) for ax, t in zip(self.axes, cmd.targets)) if w is not None]
