@@ -36,13 +36,14 @@ def router_config(cfg, listen: tuple[str, ...] | None = None, role: str | None =
 
 def run_router(args) -> int:
     """``teleop router``: open the router, print where it listens, serve until stopped."""
+    from live.discovery import credentials_role
     from teleop.config import load_config
     from teleop.recording import raise_on_sigterm
     from teleop.transport import Session
 
     cfg = load_config(args.config)
     listen = tuple(args.listen) if args.listen else None
-    with raise_on_sigterm(), Session(router_config(cfg, listen, role="observer")) as session:
+    with raise_on_sigterm(), Session(router_config(cfg, listen, role=credentials_role(args))) as session:
         eps = ", ".join(listen or cfg.transport.listen)
         print(f"teleop router: {session.zenoh_session.zid()} listening on {eps} (ready)", flush=True)
         t0 = time.monotonic()
