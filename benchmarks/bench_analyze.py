@@ -22,10 +22,11 @@ ONE_THREAD = {k: "1" for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_N
 os.environ.update(ONE_THREAD)           # before numpy loads: the in-process split runs on one thread too
 ROOT = Path(__file__).resolve().parents[1]
 
-from estimator.offline.diagnosis import diagnose  # noqa: E402 - after the thread settings
+from estimator.offline.diagnosis.selection import diagnose  # noqa: E402 - after the thread settings
 from study.report import write_report  # noqa: E402 - after the thread settings
 from study.scenarios import record  # noqa: E402 - after the thread settings
-from teleop.recording import read_measured_csv, write_measured_csv  # noqa: E402 - after the thread settings
+from teleop.recording.measured import write_measured_csv  # noqa: E402 - after the thread settings
+from teleop.recording.measured_csv import read_measured_csv  # noqa: E402 - after the thread settings
 
 
 def main(argv: list[str] | None = None) -> None:

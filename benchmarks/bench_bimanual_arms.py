@@ -4,7 +4,7 @@ The live demo (``teleop demo --config configs/notes-bimanual.yaml``) runs on rea
 add to the loop's figures. Here each arm's own config (teleop/arms.py) runs through the real slave and master
 nodes on one fake clock at 1 kHz (benchmarks/stability_joints.py): calibration at power-up, then the paper's
 protocol on every joint by the scripted hand, a one-way delay of ``--delay`` ms. Per joint and pulled tendon it
-prints the transparency RMS and its three shares (estimate, loop, passivity; teleop/loop_metrics.py) and the
+prints the transparency RMS and its three shares (estimate, loop, passivity; teleop/timing/loop_metrics.py) and the
 worst force chatter, without and with ``pair_control.backlash_compensation``. Deterministic: the same figures on
 any machine.
 

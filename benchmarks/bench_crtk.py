@@ -2,8 +2,8 @@
 
 One SlaveNode of a single tendon (simulated rig, estimator, no recording) follows engaged commands
 through in-memory links, paced at 1 kHz on the real clock as ``teleop slave`` paces it: after each step
-the loop opens the idle window (:data:`teleop.realtime.IDLE`) until its next deadline less 0.1 ms and
-sleeps. With ``ros2`` on, the CRTK side (:mod:`teleop.crtk_side`) is attached on a loopback Zenoh
+the loop opens the idle window (:data:`teleop.timing.realtime.IDLE`) until its next deadline less 0.1 ms and
+sleeps. With ``ros2`` on, the CRTK side (:mod:`teleop.ros2.side`) is attached on a loopback Zenoh
 session with a ROS 2 subscriber of every topic, and its thread publishes the 7 topics at
 ``ros2.rate_hz`` (100 Hz); ``path`` is ``on`` with that thread stopped (what the loop itself adds: the
 hook, the estimate tee, the merged command source). Prints p50/p99/max of the step time, the overruns of the 1 kHz grid, the
@@ -21,16 +21,17 @@ import numpy as np
 from bench_slave_cycle import LatestTopic  # a sibling script: the benchmarks folder is the running script's own
 
 from estimator.sheath import SheathModel
-from slave.node import SlaveLinks, SlaveNode, warm_up
+from slave.node import SlaveNode, warm_up
+from slave.node_base import SlaveLinks
 from slave.simulated import SimulatedRig
-from teleop.clock import MonotonicClock
-from teleop.config import Config, Ros2Config, TransportConfig
-from teleop.crtk import slave_topics
-from teleop.crtk_side import attach_slave
-from teleop.messages import Command, SideState
-from teleop.realtime import IDLE
-from teleop.ros2_wire import topic_key
-from teleop.transport import Session, free_tcp_port, loopback_endpoint
+from teleop.config.schema import Config, Ros2Config, TransportConfig
+from teleop.ros2.crtk import slave_topics
+from teleop.ros2.side import attach_slave
+from teleop.ros2.wire import topic_key
+from teleop.session.transport import Session, free_tcp_port, loopback_endpoint
+from teleop.timing.clock import MonotonicClock
+from teleop.timing.realtime import IDLE
+from teleop.wire.messages import Command, SideState
 
 
 def run(mode: str, n: int) -> tuple[np.ndarray, int, int]:
@@ -83,7 +84,7 @@ def main() -> None:
         print(f"  ros2 {mode:4s}: p50 {np.percentile(ms, 50):.3f} ms, p99 {np.percentile(ms, 99):.3f} ms, "
               f"max {ms.max():.3f} ms, overruns {overruns}/{n}, CRTK publications {published}")
 
-    from teleop.crtk_side import CrtkSide
+    from teleop.ros2.side import CrtkSide
     side = CrtkSide.__new__(CrtkSide)
     side._slot = None
     per = min(timeit.repeat(lambda: side.offer(SideState.ENGAGED, None), number=100000, repeat=5)) / 100000

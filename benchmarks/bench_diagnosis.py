@@ -19,7 +19,7 @@ effect of a set on the four rigs base + 100 + 10 j + s).
 knows the instrument's route does with ``teleop analyze --route CONFIG``: where the friction sits is then held,
 not fitted, and the figures say what that knowledge buys.
 Prints per effect and per channel: accuracy (strict, and up to the inseparable pairs of
-estimator.offline.effects.EQUIVALENT), gains, false alarms on clean data; never fails on the figures (the
+estimator.offline.effects.catalogue.EQUIVALENT), gains, false alarms on clean data; never fails on the figures (the
 pass/fail checks are in tests/estimator/test_diagnosis.py).
 
     .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|...|dev54|final] [--seeds 2]
@@ -27,7 +27,7 @@ pass/fail checks are in tests/estimator/test_diagnosis.py).
         [--shared-rigs]
     .venv/bin/python benchmarks/bench_diagnosis.py --floor-table OUT.json [OUT.json ...]
 
-``--floor-table`` prints estimator.offline.diagnosis.FLOOR_SCORE as computed from the clean recordings
+``--floor-table`` prints estimator.offline.diagnosis.thresholds.FLOOR_SCORE as computed from the clean recordings
 (and clean twins) of runs of this benchmark whose base model is at the floor (``--json`` files of development sets only), per
 effect the lowest score and the bound.
 """
@@ -44,9 +44,12 @@ from dataclasses import replace
 import numpy as np
 from diagnosis_tables import UNCATALOGUED, named_right, proportion_interval, table  # noqa: F401 - re-exported
 
-from estimator.offline.diagnosis import FLOOR_FACTOR, MID_SCORE, STRUCTURE_RATIO, diagnose, floor_scores
-from estimator.offline.diagnosis_fit import noise_level, quantum
-from estimator.offline.effects import CATALOGUE, EFFECT_IDS, NONE
+from estimator.data import noise_level
+from estimator.offline.diagnosis.fit import quantum
+from estimator.offline.diagnosis.selection import diagnose, floor_scores
+from estimator.offline.diagnosis.thresholds import FLOOR_FACTOR, MID_SCORE, STRUCTURE_RATIO
+from estimator.offline.effects.catalogue import CATALOGUE, EFFECT_IDS
+from estimator.offline.effects.types import NONE
 
 #: seed offset of each set: ``dev``, ``dev2`` ... ``dev54`` (development data) and ``final`` (held out)
 SEED_BASE = {"dev": 0, **{f"dev{k}": 100000 * (k - 1) for k in range(2, 55)}, "final": 5400000}
@@ -184,7 +187,7 @@ def clean_scores(rows: list[dict]) -> list[dict[str, float]]:
 
 
 def floor_table(paths: list[str]) -> dict[str, float]:
-    """Print and return :func:`estimator.offline.diagnosis.floor_scores` of the clean rows in ``paths``
+    """Print and return :func:`estimator.offline.diagnosis.selection.floor_scores` of the clean rows in ``paths``
     (benchmark ``--json`` files); ValueError naming a file that is not a list of benchmark rows."""
     clean: list[dict[str, float]] = []
     for path in paths:

@@ -9,7 +9,7 @@ import numpy as np
 from estimator.capstan import phase_formula_batch
 from estimator.online.distal import DistalEstimator, estimate_batch
 from estimator.sheath import SheathModel
-from teleop.config import Config
+from teleop.config.schema import Config
 
 
 def _model() -> SheathModel:

@@ -8,11 +8,11 @@ from pathlib import Path
 
 import numpy as np
 
-from estimator.online.joint import JointEstimator
+from estimator.online.pair import PairEstimator
 from estimator.sheath import SheathModel
-from slave.joint_rig import SimulatedInstrument
 from slave.pair_control import PairController
-from teleop.config import load_config
+from slave.pair_rig import SimulatedInstrument
+from teleop.config.load import load_config
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "instrument-3dof.yaml"
 
@@ -24,7 +24,7 @@ def bench(n_elements: int, seconds: float = 10.0, with_slave: bool = False) -> f
     joints = cfg.instrument.joints
     st = inst.state
     ctls = [PairController(j.pulley_radius, 0.25, 0.01, 0.01, 0.05, tuple(st.x_in[i])) for i, j in enumerate(joints)]
-    ests = [JointEstimator(*(SheathModel(K=k, compliance=1e-4) for k in inst.K[i]), j.pulley_radius)
+    ests = [PairEstimator(*(SheathModel(K=k, compliance=1e-4) for k in inst.K[i]), j.pulley_radius)
             for i, j in enumerate(joints)]
     n = int(seconds / dt)
     t = np.arange(n) * dt

@@ -6,7 +6,7 @@ in-memory latest-wins topics;
 each cycle the master steps, then the slave (the command-locked order of the demo); every message
 is encoded as it is put, as a Zenoh publisher does (the Zenoh put itself, ~25-40 us with one remote
 subscriber on this machine, is not in these figures). The master's CSV
-goes to its writing process (:class:`teleop.csv_proc.ProcessCsvRecorder`), Rerun is off.
+goes to its writing process (:class:`teleop.recording.csv_proc.ProcessCsvRecorder`), Rerun is off.
 
 Prints the master step's *thread CPU time* (:func:`time.thread_time_ns`: what the step itself costs,
 not the time other processes or threads took from it; this is the figure that does not depend on the
@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from teleop.clock import FakeClock
-from teleop.codec import encode
-from teleop.transport import Received
+from teleop.session.transport import Received
+from teleop.timing.clock import FakeClock
+from teleop.wire.codec import encode
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -60,11 +60,13 @@ def run(protocol: str, profile: bool, tmp: Path, csv: Path | None = None,
     """Master step (thread CPU time [us], wall time [us]) per cycle and the master's stats."""
     from estimator.sheath import SheathModel
     from master.devices import make_device
-    from master.node import MasterLinks, MasterNode, csv_columns, csv_units
-    from slave.node import SlaveLinks, SlaveNode, warm_up
+    from master.node import MasterNode, csv_columns, csv_units
+    from master.node_base import MasterLinks
+    from slave.node import SlaveNode, warm_up
+    from slave.node_base import SlaveLinks
     from slave.simulated import SimulatedRig
-    from teleop.config import load_config
-    from teleop.csv_proc import ProcessCsvRecorder
+    from teleop.config.load import load_config
+    from teleop.recording.csv_proc import ProcessCsvRecorder
 
     cfg = load_config(ROOT / "configs" / "sim.yaml", {"recording.rerun": "off"})
     warm_up(cfg)

@@ -25,7 +25,8 @@ os.environ.update(ONE_THREAD)
 ROOT = Path(__file__).resolve().parents[1]
 
 from study.datasets import MRD, skip_reason  # noqa: E402 - after the thread settings
-from study.mrd import default_mrd_dir, load_mrd_dir  # noqa: E402 - after the thread settings
+from study.mrd import load_mrd_dir  # noqa: E402 - after the thread settings
+from study.mrd_files import default_mrd_dir  # noqa: E402 - after the thread settings
 from study.mrd_report import analyze_mrd  # noqa: E402 - after the thread settings
 
 GOAL_S = 60.0

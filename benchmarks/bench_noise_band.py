@@ -59,9 +59,9 @@ def one(sim: str, seed: int, duration: float = 60.0) -> tuple[np.ndarray, np.nda
 def joints(profile: int, seconds: float = 20.0) -> list[tuple[str, float, float]]:
     """Per joint of configs/instrument-3dof.yaml: torque rms [fraction of full scale] without and with the band,
     the instrument driven open loop (both tendons of every joint +-4 mm per rad of command) through ``profile``."""
-    from estimator.online.joint import JointEstimator
-    from slave.joint_rig import SimulatedInstrument
-    from teleop.config import load_config
+    from estimator.online.pair import PairEstimator
+    from slave.pair_rig import SimulatedInstrument
+    from teleop.config.load import load_config
     cfg = load_config(Path(__file__).resolve().parents[1] / "configs" / "instrument-3dof.yaml")
     inst = SimulatedInstrument.from_config(cfg)
     dt, js, st = 1.0 / cfg.rig.rate_hz, cfg.instrument.joints, inst.state
@@ -82,7 +82,7 @@ def joints(profile: int, seconds: float = 20.0) -> list[tuple[str, float, float]
                   for k, tg in enumerate((j.tendons.a, j.tendons.b))]
         rms = []
         for noise in (0.0, (noise_level(T[:, i, 0]), noise_level(T[:, i, 1]))):
-            e = JointEstimator(models[0], models[1], j.pulley_radius, pretension=j.pretension, tension_noise=noise)
+            e = PairEstimator(models[0], models[1], j.pulley_radius, pretension=j.pretension, tension_noise=noise)
             tq = np.array([e.step(float(T[k, i, 0]), float(X[k, i, 0]), float(T[k, i, 1]), float(X[k, i, 1]),
                                   float(tt[k])).torque for k in range(tt.size)])
             rms.append(float(np.sqrt(np.mean((tq - TQ[:, i]) ** 2)) / np.ptp(TQ[:, i])))

@@ -13,9 +13,9 @@ import time
 from pathlib import Path
 
 from estimator.phase import Phase
-from live.record_mcap import McapRecording
-from teleop.config import Config
-from teleop.messages import Command, Heartbeat, Side, SideState, tendon_estimate
+from live.record.mcap_file import McapRecording
+from teleop.config.schema import Config
+from teleop.wire.messages import Command, Heartbeat, Side, SideState, tendon_estimate
 
 
 def session(cycles: int) -> list:

@@ -39,8 +39,8 @@ from study.datasets import KAIST, MRD, skip_reason  # noqa: E402
 from study.mrd import load_mrd_dir  # noqa: E402
 from study.mrd_files import DEFAULT_FOLDER, mrd_folder  # noqa: E402
 from study.mrd_report import analyze_mrd  # noqa: E402
-from teleop.config import load_config  # noqa: E402
-from teleop.tools import load_tool  # noqa: E402
+from teleop.config.load import load_config  # noqa: E402
+from teleop.config.tools import load_tool  # noqa: E402
 
 PERIOD_S = 1e-3
 
@@ -105,7 +105,8 @@ def kaist(directory: str | None, extended: str | None) -> None:
     import json
 
     from live.recording_pair import kaist_live
-    from study.kaist import default_kaist_dir, find_configs, load_all
+    from study.kaist import load_all
+    from study.kaist_files import default_kaist_dir, find_configs
     d = Path(directory) if directory else default_kaist_dir()
     if not find_configs(d):
         print(f"bench_recording_rig --kaist: skipped, {skip_reason(KAIST, d)}")

@@ -6,7 +6,7 @@ import time
 import numpy as np
 
 from slave.simulated import SimulatedRig
-from teleop.config import Config
+from teleop.config.schema import Config
 
 
 def bench_rig(seconds: float = 20.0, tissue: bool = True) -> float:

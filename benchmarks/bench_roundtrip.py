@@ -1,9 +1,9 @@
 """Round trip of the teleoperation link beside a bare Zenoh ping-pong, measured in the same run.
 
 1. Bare Zenoh: two processes on 127.0.0.1; the ping process publishes a 40-byte message at 1 kHz
-   (paced by :class:`teleop.clock.Pacer`, Zenoh priority REAL_TIME, not express, like the nodes), the
+   (paced by :class:`teleop.timing.clock.Pacer`, Zenoh priority REAL_TIME, not express, like the nodes), the
    pong process echoes each one from its subscriber callback; the ping measures send -> echo
-   received. Both processes get the nodes' scheduling (:func:`teleop.realtime.promote_threads` at
+   received. Both processes get the nodes' scheduling (:func:`teleop.timing.realtime.promote_threads` at
    ``master.realtime_priority``: the pinging thread on top, Zenoh's threads 5 below), so that the
    two figures differ by what the teleoperation adds, not by the scheduler.
 2. ``teleop demo --protocol short`` (recorder + slave + master as three processes, configs/sim.yaml),
@@ -31,13 +31,13 @@ _MSG = struct.Struct("<Id32x")     # seq, send time [s], padding: 44 bytes like 
 
 
 def _priority() -> int:
-    from teleop.config import load_config
+    from teleop.config.load import load_config
     return load_config(ROOT / "configs" / "sim.yaml").master.realtime_priority
 
 
 def _session(listen, connect):
-    from teleop.config import TransportConfig
-    from teleop.transport import Session
+    from teleop.config.schema import TransportConfig
+    from teleop.session.transport import Session
     return Session(TransportConfig(listen=tuple(listen), connect=tuple(connect)))
 
 
@@ -49,7 +49,7 @@ def pong(endpoint: str, seconds: float) -> None:
         pub = z.declare_publisher("bench/pong", express=False, priority=zenoh.Priority.REAL_TIME,
                                   congestion_control=zenoh.CongestionControl.DROP)
         sub = z.declare_subscriber("bench/ping", lambda sample: pub.put(sample.payload.to_bytes()))  # noqa: F841
-        from teleop.realtime import promote_threads
+        from teleop.timing.realtime import promote_threads
         promote_threads(_priority())              # the main thread only sleeps; Zenoh's threads echo
         print("ready", flush=True)
         time.sleep(seconds + 5.0)
@@ -59,7 +59,7 @@ def ping(endpoint: str, seconds: float, rate_hz: float = 1000.0) -> dict:
     """Publish at ``rate_hz`` for ``seconds``; round-trip statistics [ms] of the echoes."""
     import zenoh
 
-    from teleop.clock import MonotonicClock, Pacer
+    from teleop.timing.clock import MonotonicClock, Pacer
     rtt: list[float] = []
     with _session([], [endpoint]) as s:
         z = s.zenoh_session
@@ -75,7 +75,7 @@ def ping(endpoint: str, seconds: float, rate_hz: float = 1000.0) -> dict:
             pub.put(_MSG.pack(0, time.monotonic()))
             time.sleep(0.01)
         rtt.clear()
-        from teleop.realtime import demote_threads, promote_threads
+        from teleop.timing.realtime import demote_threads, promote_threads
         scheduling = promote_threads(_priority())
         clock = MonotonicClock()
         pacer = Pacer(clock, rate_hz)
@@ -95,7 +95,7 @@ def ping(endpoint: str, seconds: float, rate_hz: float = 1000.0) -> dict:
 
 
 def bare_pingpong(seconds: float) -> dict:
-    from teleop.transport import free_tcp_port, loopback_endpoint
+    from teleop.session.transport import free_tcp_port, loopback_endpoint
     ep = loopback_endpoint(free_tcp_port())
     proc = subprocess.Popen([sys.executable, __file__, "--pong", ep, str(seconds)], stdout=subprocess.PIPE, text=True,
                             cwd=ROOT)

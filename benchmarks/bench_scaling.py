@@ -9,8 +9,8 @@ tendons, with and without the recorder, beside bare Zenoh and the teleoperation 
    linked by latest-wins topics that encode every message as a Zenoh publisher does
    (:class:`bench_master_cycle._Topic`). Each step's wall time is taken; without the recorder nothing is
    written, with it the sides write as ``teleop slave`` and ``teleop master`` do: each CSV through a child
-   process (:class:`teleop.csv_proc.ProcessCsvRecorder`), the slave's Rerun through another
-   (:class:`teleop.rerun_proc.RerunProcessLogger`).
+   process (:class:`teleop.recording.csv_proc.ProcessCsvRecorder`), the slave's Rerun through another
+   (:class:`teleop.rerun.process.RerunProcessLogger`).
    The cost per added tendon is the least-squares slope of p50 (and of p99) over the four sizes.
 2. In the same run, in real processes on 127.0.0.1: the bare Zenoh ping-pong of
    :func:`bench_roundtrip.bare_pingpong` and ``teleop demo --protocol short`` (recorder + slave + master,
@@ -43,7 +43,7 @@ def instrument(n_joints: int, rerun: str = "save"):
     """configs/instrument-3dof.yaml with its joints (and their simulated physics) repeated to ``n_joints``,
     named ``<joint><k>``, device axis k for joint k; ``recording.rerun`` = ``rerun``."""
     from teleop.arms import repeated_joints
-    from teleop.config import load_config
+    from teleop.config.load import load_config
     base = load_config(ROOT / "configs" / "instrument-3dof.yaml", {"recording.rerun": rerun})
     return repeated_joints(base, n_joints, f"scaling{n_joints}")
 
@@ -54,15 +54,17 @@ class Loop:
 
     def __init__(self, cfg, cal, record: bool, tmp: Path):
         from master.devices import make_device
-        from master.node import MasterLinks, MasterNode
+        from master.node import MasterNode
         from master.node import csv_columns as master_columns
         from master.node import csv_units as master_units
-        from slave.node import SlaveLinks, SlaveNode, recording, warm_up
+        from master.node_base import MasterLinks
+        from slave.node import SlaveNode, recording, warm_up
+        from slave.node_base import SlaveLinks
         from slave.rigs import RIG_TYPES
-        from teleop.clock import FakeClock
-        from teleop.csv_proc import ProcessCsvRecorder
-        from teleop.rerun_proc import RerunProcessLogger
-        from teleop.rerun_view import joint_views
+        from teleop.recording.csv_proc import ProcessCsvRecorder
+        from teleop.rerun.layout import joint_views
+        from teleop.rerun.process import RerunProcessLogger
+        from teleop.timing.clock import FakeClock
 
         warm_up(cfg)
         self.clock, self.dt = FakeClock(100.0), 1.0 / cfg.rig.rate_hz
@@ -153,7 +155,7 @@ def measure_steps(cycles: int, tmp: Path, joints=JOINTS, rounds: int = 10) -> di
 
 def demo_config(n_joints: int, tmp: Path) -> Path:
     """The generated instrument as a config file for ``teleop demo``, calibrating into ``tmp``."""
-    from teleop.config import write_config
+    from teleop.config.load import write_config
     cfg = instrument(n_joints)
     cfg = dataclasses.replace(cfg, calibration=dataclasses.replace(cfg.calibration, dir=str(tmp / "calibration")))
     path = tmp / f"scaling{n_joints}.yaml"

@@ -2,9 +2,9 @@
 
 One SlaveNode of a single tendon (simulated 200-element rig, estimator, 50-point profile) follows a
 ramp of engaged commands through in-memory links for ``n`` cycles, once with the CSV and Rerun writes
-in the loop (:class:`teleop.recording.CsvRecorder`, :class:`teleop.rerun_log.RerunLogger`) and once
-off the loop as ``teleop slave`` writes them (:class:`teleop.csv_proc.ProcessCsvRecorder`,
-:class:`teleop.rerun_proc.RerunProcessLogger`: each in a child process); then the same node class on the 3-joint
+in the loop (:class:`teleop.recording.measured.CsvRecorder`, :class:`teleop.rerun.logger.RerunLogger`) and once
+off the loop as ``teleop slave`` writes them (:class:`teleop.recording.csv_proc.ProcessCsvRecorder`,
+:class:`teleop.rerun.process.RerunProcessLogger`: each in a child process); then the same node class on the 3-joint
 instrument (configs/instrument-3dof.yaml: three pair axes, calibrated on its simulator first, each
 joint following a slow sine of angle) with no recording (the step alone) and with the recording off the loop.
 Prints p50/p99/max of the step time and the share of steps over 0.8 ms (what would overrun a 1 kHz loop
@@ -21,16 +21,19 @@ from pathlib import Path
 import numpy as np
 
 from estimator.sheath import SheathModel
-from slave.node import SlaveLinks, SlaveNode, csv_columns, warm_up
+from slave.node import SlaveNode, warm_up
+from slave.node_base import SlaveLinks
 from slave.simulated import SimulatedRig
-from teleop.clock import FakeClock
-from teleop.config import Config, load_config
-from teleop.csv_proc import ProcessCsvRecorder
-from teleop.messages import Command
-from teleop.recording import CsvRecorder
-from teleop.rerun_log import RerunLogger
-from teleop.rerun_proc import RerunProcessLogger
-from teleop.transport import Received
+from slave.tendon_axis import csv_columns
+from teleop.config.load import load_config
+from teleop.config.schema import Config
+from teleop.recording.csv_proc import ProcessCsvRecorder
+from teleop.recording.measured import CsvRecorder
+from teleop.rerun.logger import RerunLogger
+from teleop.rerun.process import RerunProcessLogger
+from teleop.session.transport import Received
+from teleop.timing.clock import FakeClock
+from teleop.wire.messages import Command
 
 
 class LatestTopic:
@@ -93,7 +96,7 @@ def run_joints(n: int, tmp: Path, record: bool = True) -> np.ndarray:
     all (the step in isolation): step times [ms]."""
     from slave.node import recording
     from slave.rigs import RIG_TYPES
-    from teleop.rerun_view import joint_views
+    from teleop.rerun.layout import joint_views
     cfg = load_config(Path(__file__).resolve().parents[1] / "configs" / "instrument-3dof.yaml",
                       {"recording.rerun": "save"})
     warm_up(cfg)

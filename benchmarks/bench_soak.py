@@ -39,8 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
-from live.record_budget import JOURNAL, LIVE_ENV, dir_bytes
-from teleop.latency import BIN, SPAN, bin_percentile
+from live.record.budget import JOURNAL, LIVE_ENV, dir_bytes
+from teleop.timing.latency import BIN, SPAN, bin_percentile
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -67,7 +67,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def prepare(args: argparse.Namespace) -> tuple[Path, Path]:
     """The run directory, its resolved config (calibration in the run directory) and the calibration file."""
-    from teleop.config import load_config, write_config
+    from teleop.config.load import load_config, write_config
     cfg = load_config(args.config)
     run_dir = Path(args.run_dir or Path(cfg.recording.dir) / time.strftime("soak-%Y%m%d-%H%M%S"))
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -81,8 +81,8 @@ def prepare(args: argparse.Namespace) -> tuple[Path, Path]:
 
 def launch(run_dir: Path, cfg_file: Path, duration: float) -> dict[str, subprocess.Popen]:
     """Recorder, slave (listening on a free loopback port) and master; {} when one did not start."""
-    from live.record_demo import start_recorder
-    from teleop.transport import accepts_connections, free_tcp_port, loopback_endpoint
+    from live.record.beside_demo import start_recorder
+    from teleop.session.transport import accepts_connections, free_tcp_port, loopback_endpoint
     base = [sys.executable, "-m", "live.cli"]
     env = dict(os.environ, PYTHONUNBUFFERED="1", **{LIVE_ENV: f"{LIVE_EVERY:g}"})
     common = ["--config", str(cfg_file), "--run-dir", str(run_dir)]
@@ -293,7 +293,7 @@ def run(args: argparse.Namespace) -> int:
         data["windows"].append(w)
         _save(out, data)
         prev = cur
-    for name, p in procs.items():
+    for _name, p in procs.items():
         try:
             p.wait(120.0)
         except subprocess.TimeoutExpired:

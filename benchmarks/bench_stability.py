@@ -8,8 +8,8 @@ One process, no Zenoh: the real pieces of the loop stepped at 1 kHz on one clock
 
 The protocol is the paper's (pull to 20 N, release to 5 N, pull to 20 N, release to 0.3 N). For
 each point: chatter of x_in_cmd and of the rendered force above 30 Hz (worst 100 ms window,
-:mod:`teleop.loop_metrics`) and the transparency RMS. A point is *stable* when both worst windows are
-below :data:`teleop.loop_metrics.CHATTER_LIMITS` (20 um, 0.05 N) and the protocol finished.
+:mod:`teleop.timing.loop_metrics`) and the transparency RMS. A point is *stable* when both worst windows are
+below :data:`teleop.timing.loop_metrics.CHATTER_LIMITS` (20 um, 0.05 N) and the protocol finished.
 
 Usage: ``.venv/bin/python benchmarks/bench_stability.py [--quick] [--pc off|hard|reserve]``
 (prints a table; ~1 s of CPU per point). ``--joints``: the same sweep on the torque axes of the 3-joint
@@ -31,10 +31,11 @@ from estimator.sheath import SheathModel
 from master.arm import ArmParameters
 from master.mapping import ForceMap, MotionMap, clamp_force
 from master.passivity import PassivityController
-from master.simulated import PROTOCOLS, ScriptedOperator
+from master.protocols import PROTOCOLS
+from master.simulated import ScriptedOperator
 from slave.simulated import SimulatedRig
-from teleop.config import Config
-from teleop.loop_metrics import CHATTER_LIMITS, chatter
+from teleop.config.schema import Config
+from teleop.timing.loop_metrics import CHATTER_LIMITS, chatter
 
 
 def run_loop(force_scale: float = 0.2, delay: float = 0.001, arm: ArmParameters | None = None,

@@ -1,7 +1,7 @@
 """Where the demo's overruns come from: the loops' own work, or stalls of the whole machine.
 
 Runs ``teleop demo`` (any ``--config``) with the per-cycle trace of both loops (``TELEOP_CYCLE_TRACE``,
-:mod:`teleop.cycles`) and, beside it, three witnesses that sample the machine:
+:mod:`teleop.timing.cycles`) and, beside it, three witnesses that sample the machine:
 
 * a *canary* per CPU: a 1 kHz sleeper pinned to that CPU at ``SCHED_FIFO`` 50 (above every thread of
   the demo; it uses ~1 % of a CPU) that records each wake-up later than 0.5 ms. Nothing in the guest but

@@ -8,9 +8,9 @@ from collections import Counter, defaultdict
 import numpy as np
 from scipy.stats import binomtest
 
-from estimator.offline.diagnosis import WEAK_STRUCTURE
-from estimator.offline.diagnosis_thresholds import AT_END_SHARE
-from estimator.offline.effects import EFFECT_IDS, EQUIVALENT, NONE
+from estimator.offline.diagnosis.thresholds import AT_END_SHARE, WEAK_STRUCTURE
+from estimator.offline.effects.catalogue import EFFECT_IDS, EQUIVALENT
+from estimator.offline.effects.types import NONE
 
 __all__ = ["UNCATALOGUED", "VISIBLE_SIGMAS", "table", "proportion_interval", "peak_footprint", "named_right"]
 
@@ -108,8 +108,8 @@ def _subsets(present: list[dict], clean: list[dict]) -> None:
           f"({sum(named_right(r) for r in below)} named right)")
     held = [(r.get("at_end") or 0.0) >= AT_END_SHARE for r in present]
     if any(held):
-        at_end = [r for r, h in zip(present, held) if h]
-        rest = [r for r, h in zip(present, held) if not h]
+        at_end = [r for r, h in zip(present, held, strict=False) if h]
+        rest = [r for r, h in zip(present, held, strict=False) if not h]
         print(f"hidden effects whose distal end sat at an end of its range for >= {AT_END_SHARE:g} of the proximal "
               f"travel: {sum(named_right(r) for r in at_end)}/{len(at_end)} named right "
               f"({sum(named_right(r, True) for r in at_end)} up to the pairs; misses "

@@ -9,7 +9,7 @@ joints together. The links are in-memory topics that deliver each message ``dela
 it was put (each way). The calibration is made once at power-up (:func:`calibration`) and reloaded
 for every point, as the demo does.
 
-Per joint and pulled tendon: chatter and transparency from :func:`teleop.loop_metrics.loop_metrics`
+Per joint and pulled tendon: chatter and transparency from :func:`teleop.timing.loop_metrics.loop_metrics`
 on the joint's columns (``x_in`` = r * the commanded angle, ``force`` = the rendered force,
 ``T_out`` = true torque / r), as the demo computes them.
 """
@@ -24,17 +24,20 @@ from pathlib import Path
 import numpy as np
 
 from master.arm import ArmParameters
-from master.node import MasterLinks, MasterNode
+from master.node import MasterNode
+from master.node_base import MasterLinks
 from master.protocols import MARKER_PAPER_A, MARKER_PAPER_B, joint_marker, paper_protocol
 from master.simulated import ScriptedOperator
 from slave.calibration_file import load_calibration
-from slave.joint_rig import SimulatedInstrument
-from slave.node import SlaveLinks, SlaveNode
+from slave.node import SlaveNode
+from slave.node_base import SlaveLinks
 from slave.pair_axis import joint_csv_columns
 from slave.pair_calibrate import set_tension
-from teleop.clock import FakeClock
-from teleop.config import Config, load_config, with_overrides
-from teleop.transport import Received
+from slave.pair_rig import SimulatedInstrument
+from teleop.config.load import load_config, with_overrides
+from teleop.config.schema import Config
+from teleop.session.transport import Received
+from teleop.timing.clock import FakeClock
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "instrument-3dof.yaml"
 DT = 1e-3
@@ -108,7 +111,7 @@ def run_joints(cal, force_scale: float = 0.2, delay: float = 0.001, arm: ArmPara
 
     Returns ``{"finished", "safe_events", "duration_s", "<joint> (pull a|b)": loop_metrics row}``.
     """
-    from teleop.loop_metrics import loop_metrics
+    from teleop.timing.loop_metrics import loop_metrics
     # the watchdogs allow the injected delay (estimate age d, command echo 2 d + a period)
     wd = 50.0 + 2e3 * delay
     over: dict = {"master.mapping.force_scale": force_scale, "master.mapping.passivity": passivity,
@@ -137,8 +140,8 @@ def run_joints(cal, force_scale: float = 0.2, delay: float = 0.001, arm: ArmPara
         slave.step(now)
         master.step(now)
     names = [j.name for j in cfg.instrument.joints]
-    sc = dict(zip(joint_csv_columns(names, True), np.array(srows.rows, float).T))
-    mc = dict(zip(master.axes.csv_columns(), np.array(mrows.rows, float).T))
+    sc = dict(zip(joint_csv_columns(names, True), np.array(srows.rows, float).T, strict=False))
+    mc = dict(zip(master.axes.csv_columns(), np.array(mrows.rows, float).T, strict=False))
     out: dict = {"finished": bool(op.finished), "safe_events": master.safe_events, "duration_s": clock.now()}
     for j, joint in enumerate(cfg.instrument.joints):
         n, r = joint.name, joint.pulley_radius
@@ -152,9 +155,9 @@ def run_joints(cal, force_scale: float = 0.2, delay: float = 0.001, arm: ArmPara
 
 def summarize(r: dict) -> dict:
     """One sweep point: stable (finished, no safe event, every joint's worst windows below
-    :data:`teleop.loop_metrics.CHATTER_LIMITS`), the worst windows and per joint the worst
+    :data:`teleop.timing.loop_metrics.CHATTER_LIMITS`), the worst windows and per joint the worst
     transparency RMS over its two pulls."""
-    from teleop.loop_metrics import CHATTER_LIMITS
+    from teleop.timing.loop_metrics import CHATTER_LIMITS
     rows = {k: v for k, v in r.items() if isinstance(v, dict)}
     xw = max(v["chatter"]["x_in_cmd_worst_m"] for v in rows.values())
     fw = max(v["chatter"]["force_worst_N"] for v in rows.values())

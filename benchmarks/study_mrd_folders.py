@@ -30,7 +30,8 @@ os.environ.update(ONE_THREAD)
 ROOT = Path(__file__).resolve().parents[1]
 
 from study.datasets import MRD, skip_reason  # noqa: E402 - after the thread settings
-from study.mrd import default_mrd_dir, load_mrd_dir, runs_selection, stroke_groups  # noqa: E402 - after the thread settings
+from study.mrd import load_mrd_dir, runs_selection, stroke_groups  # noqa: E402 - after the thread settings
+from study.mrd_files import default_mrd_dir  # noqa: E402 - after the thread settings
 from study.mrd_report import analyze_mrd  # noqa: E402 - after the thread settings
 
 #: The one-run calibration's target: median and worst-run torque RMSE [fraction of full scale].

@@ -16,8 +16,8 @@ Online estimators (one proximal sample per call, or a whole recording in one com
 
 * one tendon: :class:`DistalEstimator` (``step``), :func:`estimate_batch`, :class:`DistalSample`,
   :class:`BatchEstimate`;
-* an antagonistic joint: :class:`JointEstimator` (``step``), :func:`estimate_joint_batch`,
-  :class:`JointSample`, :class:`JointBatch`;
+* an antagonistic joint: :class:`PairEstimator` (``step``), :func:`estimate_pair_batch`,
+  :class:`PairSample`, :class:`PairBatch`;
 * a cable pair on one input spindle: :class:`SpindleEstimator` (``step``), :class:`SpindleParams`,
   :func:`spindle_batch`, :func:`spindle_torque`, :func:`spindle_angle`.
 
@@ -59,10 +59,10 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "DistalSample": ("estimator.online.distal", "DistalSample"),
     "BatchEstimate": ("estimator.online.distal", "BatchEstimate"),
     "estimate_batch": ("estimator.online.distal", "estimate_batch"),
-    "JointEstimator": ("estimator.online.joint", "JointEstimator"),
-    "JointSample": ("estimator.online.joint", "JointSample"),
-    "JointBatch": ("estimator.online.joint", "JointBatch"),
-    "estimate_joint_batch": ("estimator.online.joint_batch", "estimate_joint_batch"),
+    "PairEstimator": ("estimator.online.pair", "PairEstimator"),
+    "PairSample": ("estimator.online.pair", "PairSample"),
+    "PairBatch": ("estimator.online.pair", "PairBatch"),
+    "estimate_pair_batch": ("estimator.online.pair_batch", "estimate_pair_batch"),
     "SpindleParams": ("estimator.online.spindle", "SpindleParams"),
     "SpindleEstimator": ("estimator.online.spindle_estimator", "SpindleEstimator"),
     "spindle_batch": ("estimator.online.spindle", "make_batch"),
@@ -75,19 +75,19 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "detect_knee": ("estimator.offline.calibration", "detect_knee"),
     "fit_single": ("estimator.offline.fit", "fit_single"),
     "SingleTendonFit": ("estimator.offline.fit", "SingleTendonFit"),
-    "fit_pair": ("estimator.offline.pair", "fit_pair"),
-    "PairParams": ("estimator.offline.pair", "PairParams"),
-    "PairFit": ("estimator.offline.pair", "PairFit"),
-    "diagnose": ("estimator.offline.diagnosis", "diagnose"),
-    "diagnose_recording": ("estimator.offline.diagnosis", "diagnose_recording"),
-    "Diagnosis": ("estimator.offline.diagnosis_result", "Diagnosis"),
+    "fit_pair": ("estimator.offline.pair.fit", "fit_pair"),
+    "PairParams": ("estimator.offline.pair.fit", "PairParams"),
+    "PairFit": ("estimator.offline.pair.fit", "PairFit"),
+    "diagnose": ("estimator.offline.diagnosis.selection", "diagnose"),
+    "diagnose_recording": ("estimator.offline.diagnosis.selection", "diagnose_recording"),
+    "Diagnosis": ("estimator.offline.diagnosis.result", "Diagnosis"),
 }
 
 __all__ = [
     "Run", "SheathGeometry", "SheathModel", "Phase", "PhaseFormulaEstimator", "phase_formula_batch", "K_from_M_e",
     "MeasuredData", "noise_level", "EstimatorError", "CalibrationError", "DataError", "DistalEstimator",
-    "DistalSample", "BatchEstimate", "estimate_batch", "JointEstimator", "JointSample", "JointBatch",
-    "estimate_joint_batch", "SpindleEstimator", "SpindleParams", "spindle_batch", "spindle_torque", "spindle_angle", "calibrate",
+    "DistalSample", "BatchEstimate", "estimate_batch", "PairEstimator", "PairSample", "PairBatch",
+    "estimate_pair_batch", "SpindleEstimator", "SpindleParams", "spindle_batch", "spindle_torque", "spindle_angle", "calibrate",
     "calibrate_joint_limit", "CalibrationResult", "detect_knee", "fit_single", "SingleTendonFit", "fit_pair",
     "PairParams", "PairFit", "diagnose", "diagnose_recording", "Diagnosis",
 ]
@@ -98,13 +98,13 @@ if TYPE_CHECKING:       # the same names, for type checkers and editors (nothing
     from estimator.errors import CalibrationError, DataError, EstimatorError
     from estimator.offline.calibration import CalibrationResult, calibrate_joint_limit, detect_knee
     from estimator.offline.calibration import calibrate_joint_limit as calibrate
-    from estimator.offline.diagnosis import diagnose, diagnose_recording
-    from estimator.offline.diagnosis_result import Diagnosis
+    from estimator.offline.diagnosis.result import Diagnosis
+    from estimator.offline.diagnosis.selection import diagnose, diagnose_recording
     from estimator.offline.fit import SingleTendonFit, fit_single
-    from estimator.offline.pair import PairFit, PairParams, fit_pair
+    from estimator.offline.pair.fit import PairFit, PairParams, fit_pair
     from estimator.online.distal import BatchEstimate, DistalEstimator, DistalSample, estimate_batch
-    from estimator.online.joint import JointBatch, JointEstimator, JointSample
-    from estimator.online.joint_batch import estimate_joint_batch
+    from estimator.online.pair import PairBatch, PairEstimator, PairSample
+    from estimator.online.pair_batch import estimate_pair_batch
     from estimator.online.spindle import SpindleParams
     from estimator.online.spindle import make_batch as spindle_batch
     from estimator.online.spindle import predict_angle as spindle_angle

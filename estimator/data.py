@@ -1,7 +1,7 @@
 """Measured data of one tendon: the arrays of a recording, in SI units (no file I/O here).
 
 The CSV format that stores them (docs/reference/formats.md, "Measured-data CSV") is read and written by
-:mod:`teleop.recording`, which re-exports :class:`MeasuredData`.
+:mod:`teleop.recording.measured`.
 """
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Errors raised by the estimator (floor 0: it imports nothing else of this project).
 
 Both subclass :class:`ValueError`, so callers that only know the builtin still catch them;
-:mod:`teleop.errors` re-exports them beside the rest of the project's hierarchy.
+the rest of the project's hierarchy is :mod:`teleop.errors`.
 """
 from __future__ import annotations
 

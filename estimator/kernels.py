@@ -1,10 +1,9 @@
 """The tendon-sheath kernels shared by the estimator's models and the simulated rigs (one copy).
 
 Compiled (numba) numerics on float64 arrays of the n + 1 nodes of a tendon, proximal to distal.
-The simulators (:mod:`slave.simulated`, :mod:`slave.joint_rig`) and the capstan-joint pair model of
+The simulators (:mod:`slave.simulated`, :mod:`slave.pair_rig`) and the capstan-joint pair model of
 the offline diagnosis (:mod:`estimator.pair_kernels`) call the same functions; the distal-slip
-kernels of the online estimator (:mod:`estimator.distal_slip`) are re-exported here so that a
-simulator needs this module only. Notation (per node ``i = 0..n``):
+kernels of the online estimator are :mod:`estimator.distal_slip`. Notation (per node ``i = 0..n``):
 
     T[i]          node tension [N] (the tension-profile memory, modified in place)
     lo[i], hi[i]  exp(-mu theta_i), exp(+mu theta_i) [-], theta_i cumulative wrap angle [rad]
@@ -49,11 +48,12 @@ import math
 import numpy as np
 from numba import njit
 
-from estimator.distal_slip import distal_clip, distal_gains, distal_tension, elongation
+from estimator.distal_slip import distal_clip, distal_tension, elongation
 
-__all__ = ["advance_proximal", "settle_distal", "load_inverse", "load_on_line", "RIGID_STOP", "load_torque",
-           "joint_torque_balance", "settle_joint", "BALANCE_TOL", "step_joint", "elongation", "distal_tension", "distal_clip",
-           "distal_gains"]
+__all__ = [
+    "advance_proximal", "settle_distal", "load_inverse", "load_on_line", "RIGID_STOP", "load_torque",
+    "joint_torque_balance", "settle_joint", "BALANCE_TOL", "step_joint",
+]
 
 
 @njit(cache=True, nogil=True)

@@ -1,6 +1,6 @@
 """The capstan-joint pair model: two distributed Coulomb tendons on one elastic joint, driven by the motor.
 
-The seed pair model (:mod:`estimator.offline.pair`) lets the angle follow each tendon's kinematics at every
+The seed pair model (:mod:`estimator.offline.pair.fit`) lets the angle follow each tendon's kinematics at every
 sample, with the elongation driven by the measured tension. Here the tendons, the sheath friction
 and the joint are one mechanism, the pull-pull pair of the reference simulator (Agrawal et al. 2010;
 :mod:`estimator.kernels`), driven by the recorded motor command:
@@ -161,8 +161,8 @@ def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple
     c = np.ascontiguousarray(command, dtype=np.float64)
     Tm = _check(c, pretension, G, lam, K, k, lam_s=lam_s, tau_c=tau_c, shape=shape, offset=offset, k2=k2,
                 theta_c=theta_c, toe=toe, toe_tension=toe_tension, mu_b=mu_b, observed=observed, lam_d=lam_d)
-    arrs = [_node_arrays(float(Kj), float(lj), int(n_nodes), float(lam_s)) for Kj, lj in zip(K, lam)]
-    P = [(P0 + offset) * np.exp(-shape * np.log(a[1])) for P0, a in zip(pretension, arrs)]
+    arrs = [_node_arrays(float(Kj), float(lj), int(n_nodes), float(lam_s)) for Kj, lj in zip(K, lam, strict=False)]
+    P = [(P0 + offset) * np.exp(-shape * np.log(a[1])) for P0, a in zip(pretension, arrs, strict=False)]
     theta = np.empty(c.size)
     T_in = np.empty((c.size, 2))
     n_sub = max(int(substeps), 1)

@@ -96,7 +96,7 @@ def simulate_toe(c, G, Pa, Pb, lo_a, hi_a, dlo_a, dhi_a, wa, lo_b, hi_b, dlo_b, 
     th = 0.0
     prev = c[0]
     for i in range(c.shape[0]):
-        for s in range(substeps):
+        for _s in range(substeps):
             du = G * (c[i] - prev) / substeps
             Ta0 = Ta.copy()
             Tb0 = Tb.copy()

@@ -21,27 +21,17 @@ The banded form of the rule, for noisy readings, is :mod:`estimator.band`.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Iterable
 
 import numpy as np
 from numba import njit
 
 # the banded update lives in its own module; its names stay importable from here
-from estimator.band import NOISE_BAND_SIGMAS, SLIDE_STOP_SPEED, band_batch, band_update
 
 __all__ = [
-    "Run",
-    "SheathGeometry",
-    "SheathModel",
-    "envelope_clip",
-    "profile_update",
-    "profile_batch",
+    "Run", "SheathGeometry", "SheathModel", "envelope_clip", "profile_update", "profile_batch",
     "pull_elongation_factor",
-    "band_update",
-    "band_batch",
-    "SLIDE_STOP_SPEED",
-    "NOISE_BAND_SIGMAS",
 ]
 
 
@@ -97,7 +87,7 @@ class SheathGeometry:
         self._angles = np.array([r.angle for r in pieces])
 
     @classmethod
-    def uniform(cls, length: float, total_angle: float) -> "SheathGeometry":
+    def uniform(cls, length: float, total_angle: float) -> SheathGeometry:
         """One arc of constant curvature (or a straight run when ``total_angle`` is 0) [m, rad]."""
         if total_angle < 0:
             raise ValueError(f"total bend angle must be >= 0 rad, got {total_angle}")
@@ -166,7 +156,7 @@ class SheathModel:
                 raise ValueError("wrap_shape must be a monotone 1-D array from 0 to 1 with at least 2 points")
 
     @classmethod
-    def from_geometry(cls, geometry: SheathGeometry, mu: float, EA: float) -> "SheathModel":
+    def from_geometry(cls, geometry: SheathGeometry, mu: float, EA: float) -> SheathModel:
         """Model of a known route with friction coefficient ``mu`` [-] and axial stiffness ``EA`` [N]."""
         if not (mu >= 0 and math.isfinite(mu)):
             raise ValueError(f"friction coefficient mu must be >= 0, got {mu!r}")
@@ -178,7 +168,7 @@ class SheathModel:
             shape = geometry.wrap_angle(s) / geometry.total_angle
         return cls(K=mu * geometry.total_angle, compliance=geometry.length / EA, wrap_shape=shape)
 
-    def with_K(self, K: float) -> "SheathModel":
+    def with_K(self, K: float) -> SheathModel:
         """The same route and compliance with another friction exponent."""
         return SheathModel(K=K, compliance=self.compliance, wrap_shape=self.wrap_shape)
 

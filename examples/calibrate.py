@@ -16,7 +16,7 @@ import numpy as np
 from estimator import DistalEstimator, calibrate
 from slave.calibrate import route_wrap_shape
 from slave.simulated import SimulatedRig
-from teleop.config import load_config
+from teleop.config.load import load_config
 
 DT = 1e-3       # rig step [s]
 
@@ -41,7 +41,7 @@ def main() -> int:
     print(f"calibrated M_e = {res.M_e * 1e6:.3f} um/N (rig {rig.M_e * 1e6:.3f} um/N, "
           f"error {100 * (res.M_e / rig.M_e - 1):+.2f} %)")
     est = DistalEstimator(res.model, tension_noise=res.tension_noise)
-    hat = np.array([est.step(Ti, xi, k * DT).T_out for k, (Ti, xi) in enumerate(zip(T, x))])
+    hat = np.array([est.step(Ti, xi, k * DT).T_out for k, (Ti, xi) in enumerate(zip(T, x, strict=False))])
     err = hat - np.asarray(T_out)
     print(f"distal tension of the pull with the calibrated model: rms error {np.sqrt(np.mean(err ** 2)):.3f} N, "
           f"max {np.abs(err).max():.3f} N (true peak {max(T_out):.2f} N)")

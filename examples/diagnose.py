@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 
 from estimator import MeasuredData, diagnose
-from teleop.recording import read_measured_csv
+from teleop.recording.measured_csv import read_measured_csv
 
 
 def simulated(effect: str) -> tuple[MeasuredData, str]:

@@ -19,7 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from estimator import SheathModel, estimate_batch, fit_single
-from teleop.recording import MeasuredData, read_measured_csv, write_measured_csv
+from estimator.data import MeasuredData
+from teleop.recording.measured import write_measured_csv
+from teleop.recording.measured_csv import read_measured_csv
 
 
 def simulated_recording(folder: Path) -> tuple[Path, float, float]:

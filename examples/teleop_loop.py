@@ -23,9 +23,9 @@ from master.devices import make_device
 from master.node import MasterNode
 from slave.node import SlaveNode, warm_up
 from slave.simulated import SimulatedRig
-from teleop.clock import MonotonicClock
-from teleop.config import load_config
-from teleop.transport import Session, free_tcp_port, loopback_endpoint, zenoh_config
+from teleop.config.load import load_config
+from teleop.session.transport import Session, free_tcp_port, loopback_endpoint, zenoh_config
+from teleop.timing.clock import MonotonicClock
 
 MAX_SECONDS = 12.0     # the protocol takes about 6 s once both sides are up
 

@@ -44,9 +44,9 @@ from live.sides import (
 )
 from teleop.arms import Arm, Bimanual, load_arms
 from teleop.errors import ConfigError
-from teleop.messages import Side
 from teleop.node_group import NodeGroup
-from teleop.rerun_view import joint_views
+from teleop.rerun.layout import joint_views
+from teleop.wire.messages import Side
 
 __all__ = ["split_arm", "run_slave_group", "run_master_group", "arm_dir"]
 
@@ -107,11 +107,11 @@ class ArmRerun:
         self.inner, self.arm = logger, arm
 
     def log_joint(self, t: float, joint: str, **kw: Any) -> None:
-        """The arm's joint ``joint`` (:meth:`teleop.rerun_log.RerunLogger.log_joint`)."""
+        """The arm's joint ``joint`` (:meth:`teleop.rerun.logger.RerunLogger.log_joint`)."""
         self.inner.log_joint(t, f"{self.arm}/{joint}", **kw)
 
     def log_master(self, t: float, *, axis: str | None = None, **kw: Any) -> None:
-        """The arm's master series (:meth:`teleop.rerun_log.RerunLogger.log_master`), ``axis`` under the arm."""
+        """The arm's master series (:meth:`teleop.rerun.logger.RerunLogger.log_master`), ``axis`` under the arm."""
         self.inner.log_master(t, axis=self.arm if axis is None else f"{self.arm}/{axis}", **kw)
 
     def __getattr__(self, name: str) -> Any:
@@ -128,7 +128,7 @@ def _rerun(stack: contextlib.ExitStack, mode: str, run_dir: Path, bim: Bimanual,
         return [None] * len(bim.arms)
     import dataclasses
 
-    from teleop.rerun_proc import RerunProcessLogger as RerunLogger  # the loop only queues; a child process logs
+    from teleop.rerun.process import RerunProcessLogger as RerunLogger  # the loop only queues; a child process logs
     views = tuple(dataclasses.replace(v, name=f"{arm.name}/{v.name}") for arm in bim.arms for v in joint_views(arm.cfg))
     logger = stack.enter_context(RerunLogger("teleop", run_dir.name, mode, run_dir / f"{side}.rrd", joints=views, **kw))
     gated = files.rerun(logger)
@@ -139,7 +139,7 @@ def _serve(group: NodeGroup, clock, args, run_dir: Path, side: str, injector, ar
     """Run the group until done (or ``--max-duration``); then the stats of the group and of every arm, with the
     disk use of the side's files (``files``, :class:`live.side_files.SideFiles`)."""
     from live.side_files import add_to_stats
-    from teleop.journal import close_journal, open_journal
+    from teleop.recording.journal import close_journal, open_journal
     open_journal(run_dir, side)
     try:
         group.run(clock, max_duration=args.max_duration)
@@ -148,7 +148,7 @@ def _serve(group: NodeGroup, clock, args, run_dir: Path, side: str, injector, ar
             with contextlib.suppress(OSError, ValueError):
                 faulthandler.dump_traceback_later(SHUTDOWN_DUMP_S, exit=False, file=sys.__stderr__)
         close_journal()
-        for arm, node in zip(arms, group.nodes):
+        for arm, node in zip(arms, group.nodes, strict=False):
             path = arm_dir(run_dir, arm) / f"{side}_stats.json"
             path.write_text(json.dumps({**node.stats(), "arm": arm.name, "hand": arm.hand,
                                         "safety_waivers": waived}, indent=2) + "\n", encoding="utf-8")
@@ -161,7 +161,7 @@ def _serve(group: NodeGroup, clock, args, run_dir: Path, side: str, injector, ar
 
 
 def _waivers(arms, log: logging.Logger) -> list[dict]:
-    from teleop.safety_bounds import announce_waivers
+    from teleop.config.bounds import announce_waivers
     return [dict(w, arm=a.name) for a in arms for w in announce_waivers(a.cfg, log)]
 
 
@@ -169,9 +169,9 @@ def run_slave_group(args: argparse.Namespace) -> int:
     """``teleop slave --config <bimanual>``: every arm's slave node in one loop (module docstring)."""
     from slave.node import SlaveNode, recording, warm_up
     from slave.rigs import make_rig
-    from teleop.clock import MonotonicClock
-    from teleop.csv_proc import ProcessCsvRecorder as CsvRecorder
-    from teleop.recording import raise_on_sigterm
+    from teleop.recording.csv_proc import ProcessCsvRecorder as CsvRecorder
+    from teleop.recording.measured import raise_on_sigterm
+    from teleop.timing.clock import MonotonicClock
 
     log = logging.getLogger("teleop.slave")
     clock = MonotonicClock()
@@ -186,14 +186,14 @@ def run_slave_group(args: argparse.Namespace) -> int:
         files = SideFiles(run_dir, arms[0].cfg, "slave", ("<arm>/slave_joints.csv", "slave.rrd"))   # the disk gates
         stack.callback(files.close)
         views = _rerun(stack, args.rerun or arms[0].cfg.recording.rerun, run_dir, bim, "slave", files)
-        for arm, (calibration, cal_path), rr in zip(arms, cals, views):
+        for arm, (calibration, cal_path), rr in zip(arms, cals, views, strict=False):
             rig = make_rig(arm.cfg, session)
             stack.callback(rig.close)
             name, columns, meta = recording(arm.cfg, rig)
             rec = stack.enter_context(CsvRecorder(arm_dir(run_dir, arm) / name, columns, meta, flush_every=500))
             links = slave_links(session, arm.ident, injector if target in (None, arm.name) else None)
-            if arm.cfg.ros2.enabled:     # the arm's CRTK topics under its own name (teleop/crtk_side.py)
-                from teleop.crtk_side import attach_slave
+            if arm.cfg.ros2.enabled:     # the arm's CRTK topics under its own name (teleop/ros2/side.py)
+                from teleop.ros2.side import attach_slave
                 attach_slave(session, arm.cfg, links)
             nodes.append(SlaveNode(arm.cfg, rig, links, recorder=files.csv(rec), rerun=rr, run_dir=arm_dir(run_dir, arm),
                                    stop_on_master_stop=args.exit_on_master_stop, calibration=calibration,
@@ -222,9 +222,9 @@ def _devices(bim: Bimanual, protocol: str, stack: contextlib.ExitStack) -> list[
 def run_master_group(args: argparse.Namespace) -> int:
     """``teleop master --config <bimanual>``: both hands' master nodes in one loop (module docstring)."""
     from master.node import MasterNode, csv_columns, csv_units
-    from teleop.clock import MonotonicClock
-    from teleop.csv_proc import ProcessCsvRecorder as CsvRecorder
-    from teleop.recording import raise_on_sigterm
+    from teleop.recording.csv_proc import ProcessCsvRecorder as CsvRecorder
+    from teleop.recording.measured import raise_on_sigterm
+    from teleop.timing.clock import MonotonicClock
 
     log = logging.getLogger("teleop.master")
     clock = MonotonicClock()
@@ -240,20 +240,20 @@ def run_master_group(args: argparse.Namespace) -> int:
             stack.callback(files.close)
             views = _rerun(stack, getattr(args, "rerun", None) or arms[0].cfg.recording.rerun, run_dir, bim, "master",
                            files, wall_clock=True)
-            for arm, dev, rr in zip(arms, devices, views):
+            for arm, dev, rr in zip(arms, devices, views, strict=False):
                 meta = {"source": "teleop master", "instrument": arm.ident, "device": arm.cfg.master.device.type,
                         "arm": arm.name, "hand": arm.hand}
                 rec = stack.enter_context(CsvRecorder(arm_dir(run_dir, arm) / "master.csv", csv_columns(arm.cfg), meta,
                                                       units=csv_units(arm.cfg), flush_every=100))
                 links = master_links(session, arm.ident, injector if target in (None, arm.name) else None)
                 if arm.cfg.ros2.enabled:
-                    from teleop.crtk_side import attach_master
+                    from teleop.ros2.side import attach_master
                     attach_master(session, arm.cfg, links)
                 nodes.append(MasterNode(arm.cfg, dev, links, recorder=files.csv(rec), rerun=rr))
             group = NodeGroup(nodes, [a.name for a in arms], Side.MASTER, arms[0].cfg.master.rate_hz, arms[0].cfg)
             _serve(group, clock, args, run_dir, "master", injector, arms, waived, files)
     faulthandler.cancel_dump_traceback_later()
-    for arm, node in zip(arms, nodes):
+    for arm, node in zip(arms, nodes, strict=False):
         lat = node.latency_stats()
         log.info("master %s done: %s commands, rtt p50 %s ms, p99 %s ms", arm.name, node.commands_sent,
                  lat["p50_ms"], lat["p99_ms"])

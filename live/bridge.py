@@ -3,7 +3,7 @@
 The process a motor controller would be (one tendon, or every tendon of a joint instrument): it subscribes to the set-points on
 ``teleop/<instrument>/rig/setpoint`` and, at ``rig.rate_hz``, moves the simulated motor toward the
 newest one and publishes a sample (encoder, load cell, applied set-point and the simulator's truth)
-on ``teleop/<instrument>/rig/sample`` (:mod:`teleop.rig_wire`). Set-points older than
+on ``teleop/<instrument>/rig/sample`` (:mod:`teleop.wire.rig`). Set-points older than
 ``rig.zenoh.timeout_ms`` are not followed: the motor holds where it is (a drive's own watchdog).
 A slave with ``rig.type: zenoh`` (same instrument id, reachable endpoints) then runs exactly as with
 the in-process rig. The rig is the one ``rig.type: simulated`` builds from the same file.
@@ -17,10 +17,10 @@ from typing import Any
 
 import numpy as np
 
-from teleop.clock import Clock, MonotonicClock, Pacer
-from teleop.codec import next_seq
-from teleop.config import Config
-from teleop.rig_wire import RigSample, RigSetpoint
+from teleop.config.schema import Config
+from teleop.timing.clock import Clock, MonotonicClock, Pacer
+from teleop.wire.codec import next_seq
+from teleop.wire.rig import RigSample, RigSetpoint
 
 __all__ = ["RigBridge", "sample_of", "run_bridge"]
 
@@ -38,7 +38,7 @@ def sample_of(state, seq: int, setpoint_seq: int) -> RigSample:
     truth: tuple = ()
     if tr is not None:
         cols = [_flat(getattr(tr, k)) for k in ("T_in", "T_out", "x_in", "x_out", "elongation")]
-        truth = tuple(zip(*cols))
+        truth = tuple(zip(*cols, strict=False))
     return RigSample(seq, setpoint_seq, state.t, _flat(state.x_in), _flat(state.T_in), _flat(state.x_in_cmd), truth)
 
 
@@ -112,10 +112,10 @@ def run_bridge(args: argparse.Namespace) -> int:
     """``teleop bridge``: serve the simulated rig of ``--config`` until stopped (module docstring)."""
     from live.sides import open_session
     from slave.rigs import make_rig
-    from teleop.config import load_config
-    from teleop.keys import rig_key
-    from teleop.recording import raise_on_sigterm
-    from teleop.rig_wire import decode_rig, encode_rig
+    from teleop.config.load import load_config
+    from teleop.recording.measured import raise_on_sigterm
+    from teleop.wire.keys import rig_key
+    from teleop.wire.rig import decode_rig, encode_rig
 
     cfg: Config = load_config(args.config)
     sim = dataclasses.replace(cfg, rig=dataclasses.replace(cfg.rig, type="simulated"))

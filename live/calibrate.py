@@ -17,7 +17,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from teleop.config import Config
+from teleop.config.schema import Config
 from teleop.errors import ConfigError
 
 __all__ = ["add_calibrate_arguments", "destination", "run_calibrate", "calibration_report"]
@@ -87,11 +87,11 @@ def destination(cfg: Config, out: str | None) -> Path:
     Raises
     ------
     ConfigError
-        The destination is inside the project's configs (:func:`teleop.config_files.configs_dir`): its files
+        The destination is inside the project's configs (:func:`teleop.config.files.configs_dir`): its files
         are read-only examples.
     """
     from slave.calibration_file import calibration_path, user_calibration_dir
-    from teleop.config_files import configs_dir
+    from teleop.config.files import configs_dir
     path = Path(out) if out else calibration_path(cfg)
     shipped = configs_dir().resolve()
     if path.resolve().is_relative_to(shipped):
@@ -107,7 +107,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     fast as it computes (it has no real time to keep); on hardware the same routine is paced by the slave's
     loop (``teleop slave --recalibrate``)."""
     from slave.calibration_file import calibration_path, save_calibration
-    from teleop.config import load_config
+    from teleop.config.load import load_config
 
     cfg = load_config(args.config)
     out = destination(cfg, args.out)

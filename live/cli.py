@@ -25,10 +25,10 @@ import sys
 import threading
 from typing import NoReturn
 
-from live.sides import endpoints, run_master, run_slave
+from live.sides import run_master, run_slave
 from teleop.errors import TeleopError
 
-__all__ = ["build_parser", "main", "version", "run_slave", "run_master", "endpoints"]
+__all__ = ["build_parser", "main", "version"]
 
 PROG = "teleop"
 
@@ -73,7 +73,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     return parser
 
 
-def _add_sides(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
+def _add_sides(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """The two sides and the demo that runs both."""
     p = sub.add_parser("demo", help="both sides as two processes over Zenoh on 127.0.0.1, then a summary")
     _shared(p)
@@ -109,9 +109,9 @@ def _add_sides(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> No
     p.set_defaults(func=_cmd_master)
 
 
-def _add_services(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
+def _add_services(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """The processes around the sides (recorder, router, bridge) and the offline commands on the rig."""
-    p = sub.add_parser("record", help="record every stream of the instrument over Zenoh (live/record.py)")
+    p = sub.add_parser("record", help="record every stream of the instrument over Zenoh (live/record/recorder.py)")
     _shared(p)
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
     p.add_argument("--exit-when-done", action="store_true", help="finish once every side seen has gone")
@@ -121,7 +121,7 @@ def _add_services(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") ->
                    help="where the sides' write-ahead journals are (default: the run directory); the records of this "
                         "instrument's keys complete the recording (a bimanual session: the session's run directory)")
     p.add_argument("--rerun", choices=("save", "spawn", "off"), default=None, help="override recording.rerun")
-    p.set_defaults(func=lambda a: __import__("live.record", fromlist=["run_record"]).run_record(a))
+    p.set_defaults(func=lambda a: __import__("live.record.recorder", fromlist=["run_record"]).run_record(a))
 
     p = sub.add_parser("router", help="a Zenoh router the sides and the recorder connect to (live/router.py)")
     _shared(p)
@@ -149,13 +149,13 @@ def _add_services(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") ->
     p.set_defaults(func=keys.main_keys)
 
     p = sub.add_parser("replay", help="play a recorded run back through the estimator and the Rerun view, "
-                                      "compared with the recorded estimate and the truth (live/replay.py)")
-    from live import replay
+                                      "compared with the recorded estimate and the truth (live/replay/main.py)")
+    from live.replay import main as replay
     replay.add_arguments(p)
     p.set_defaults(func=replay.main_replay)
 
 
-def _add_lazy(sub: "argparse._SubParsersAction[argparse.ArgumentParser]", args: list[str]) -> None:
+def _add_lazy(sub: argparse._SubParsersAction[argparse.ArgumentParser], args: list[str]) -> None:
     """The commands whose modules load only when ``args`` name them (hidapi, the offline study)."""
     p = sub.add_parser("devices", help="list what each device backend finds (hid, evdev, forcedimension, touch)")
     if "devices" in args[:1]:
@@ -180,7 +180,7 @@ def _add_lazy(sub: "argparse._SubParsersAction[argparse.ArgumentParser]", args: 
 # ---- subcommands ---------------------------------------------------------------------------------
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from live.demo import main_demo
+    from live.demo.main import main_demo
     return main_demo(args)
 
 
@@ -224,10 +224,10 @@ def path_args_problem(args: argparse.Namespace) -> str | None:
 
     A duration (``--max-duration``, ``--timeout``) that is negative or not a number, and a path argument of
     :data:`PATH_ARGS` of the wrong kind (a directory for a file, a file for a directory:
-    :func:`teleop.config_paths.path_problem`)."""
+    :func:`teleop.config.paths.path_problem`)."""
     import math
 
-    from teleop.config_paths import path_problem
+    from teleop.config.paths import path_problem
     for dest, flag in (("max_duration", "--max-duration"), ("timeout", "--timeout")):
         seconds = getattr(args, dest, None)
         if isinstance(seconds, float) and (math.isnan(seconds) or seconds < 0):
@@ -273,7 +273,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt as e:   # Ctrl-C, or SIGTERM inside raise_on_sigterm (Terminated)
-        from teleop.recording import Terminated
+        from teleop.recording.measured import Terminated
         stopped = isinstance(e, Terminated)
         print(f"{PROG}: {'terminated' if stopped else 'interrupted'}", file=sys.stderr)
         return 143 if stopped else 130
@@ -284,7 +284,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 #: after main has returned (its files flushed and closed), the process ends within this many seconds [s] even
-#: if a library's teardown at interpreter exit blocks (a zenoh runtime; see teleop.transport.CLOSE_TIMEOUT_S)
+#: if a library's teardown at interpreter exit blocks (a zenoh runtime; see teleop.session.transport.CLOSE_TIMEOUT_S)
 EXIT_GRACE_S = 10.0
 
 

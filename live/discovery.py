@@ -28,12 +28,12 @@ from pathlib import Path
 
 import zenoh
 
-from teleop.config import Config
-from teleop.entity import Entity, zenoh_error_text
+from teleop.config.schema import Config
 from teleop.errors import ConfigError, TransportError
-from teleop.keys import run_key
-from teleop.peer_probe import no_peer_reason
-from teleop.transport import Session, zenoh_config
+from teleop.session.entity import Entity, zenoh_error_text
+from teleop.session.peer_probe import no_peer_reason
+from teleop.session.transport import Session, zenoh_config
+from teleop.wire.keys import run_key
 
 __all__ = ["RunIdServer", "RoleServer", "claim_role", "agree_run_id", "new_run_id", "open_auto_session", "side_run_dir", "side_session"]
 
@@ -57,7 +57,7 @@ def _can_listen_tls(cfg: Config) -> bool:
     return bool(cfg.transport.tls.certificate and cfg.transport.tls.private_key)
 
 
-#: The credentials role (teleop/credentials.py) of each ``teleop`` command that opens a session.
+#: The credentials role (teleop/session/credentials.py) of each ``teleop`` command that opens a session.
 COMMAND_ROLES = {"slave": "slave", "master": "master", "bridge": "rig", "calibrate": "slave", "record": "observer",
                  "router": "observer"}
 
@@ -241,7 +241,7 @@ PEER_WAIT_S = 1.5
 
 def wait_for_peer(session: Session, endpoints, tls, wait: float = PEER_WAIT_S) -> None:
     """Return once ``session`` has a peer or router; after ``wait`` [s] without one, probe ``endpoints``
-    (:func:`teleop.peer_probe.no_peer_reason`): where nothing listens yet, warn and go on (the peer may
+    (:func:`teleop.session.peer_probe.no_peer_reason`): where nothing listens yet, warn and go on (the peer may
     start later); where a listener refused this process or is not a Zenoh peer, raise.
 
     Raises
@@ -265,7 +265,7 @@ def wait_for_peer(session: Session, endpoints, tls, wait: float = PEER_WAIT_S) -
         time.sleep(0.02)
 
 
-# ---- the hooks of `teleop slave|master|record` (live/sides.py, live/record.py) ----------------
+# ---- the hooks of `teleop slave|master|record` (live/sides.py, live/record/recorder.py) ----------------
 
 _ATTR = "_teleop_session"
 
@@ -292,7 +292,7 @@ def side_session(cfg: Config, args, clock=None) -> Session:
     session.lock_master = cfg.transport.lock_master     # read by live.sides when declaring the slave's links
     listening = tuple(cfg.transport.listen) if listen is None and role != "connected" else (listen or ())
     if listening:                                        # each refused connection logged once, rate-limited
-        from teleop.refusal_watch import RefusalWatch
+        from teleop.session.refusal_watch import RefusalWatch
         session.refusal_watch = session._track(RefusalWatch(session, listening))   # counted in the side's stats
     setattr(args, _ATTR, session)
     args._teleop_role = role

@@ -1,6 +1,6 @@
 """Fault injection on the outgoing messages of one process: delay, loss, duplication, reordering, corruption.
 
-A :class:`FaultInjector` wraps the :class:`teleop.transport.Publisher` objects of a process (the CLI's
+A :class:`FaultInjector` wraps the :class:`teleop.session.transport.Publisher` objects of a process (the CLI's
 ``--inject SPEC`` on ``teleop master`` or ``teleop slave``; tests build one directly). Every message
 put on a wrapped publisher passes through it; while the fault is active each one is, in this order:
 
@@ -16,7 +16,7 @@ put on a wrapped publisher passes through it; while the fault is active each one
 
 Delayed and held messages wait in a queue that is pumped on every put (the nodes publish at 1 kHz,
 so the delay resolution is one cycle) and by :meth:`FaultInjector.pump`. Everything runs on the
-injector's clock, so a :class:`teleop.clock.FakeClock` makes it deterministic; random choices come
+injector's clock, so a :class:`teleop.timing.clock.FakeClock` makes it deterministic; random choices come
 from a numpy Generator seeded with ``seed``.
 
 Spec strings (``--inject``), comma-separated ``key=value``::
@@ -43,10 +43,10 @@ from typing import Any
 
 import numpy as np
 
-from teleop.clock import Clock, MonotonicClock
-from teleop.codec import WIRE_VERSION, decode, encode
 from teleop.errors import ConfigError
-from teleop.messages import Command, Estimate, Heartbeat
+from teleop.timing.clock import Clock, MonotonicClock
+from teleop.wire.codec import WIRE_VERSION, decode, encode
+from teleop.wire.messages import Command, Estimate, Heartbeat
 
 __all__ = ["FaultSpec", "parse_fault_spec", "FaultInjector", "FaultyPublisher", "corrupt_payload", "STREAMS",
            "CORRUPTIONS"]
@@ -199,12 +199,12 @@ class FaultInjector:
         self.t_fault: float | None = None
         self._t0: float | None = None
         self._signalled: float | None = None
-        self._queue: list[tuple[float, int, "FaultyPublisher", bytes]] = []
+        self._queue: list[tuple[float, int, FaultyPublisher, bytes]] = []
         self._held: dict[int, tuple[float, bytes, FaultyPublisher]] = {}
         self._order = 0
         self._lock = threading.Lock()
 
-    def wrap(self, publisher: Any, stream: str) -> "FaultyPublisher":
+    def wrap(self, publisher: Any, stream: str) -> FaultyPublisher:
         """A publisher that sends through this injector; ``stream`` is one of :data:`STREAMS`."""
         if stream not in STREAMS:
             raise ValueError(f"unknown stream {stream!r}: expected one of {', '.join(STREAMS)}")
@@ -230,7 +230,7 @@ class FaultInjector:
             self.t_fault = start
         return True
 
-    def send(self, pub: "FaultyPublisher", payload: bytes, now: float) -> None:
+    def send(self, pub: FaultyPublisher, payload: bytes, now: float) -> None:
         """Pass one encoded message of ``pub`` through the fault (module docstring order)."""
         with self._lock:
             self._pump(now)
@@ -273,7 +273,7 @@ class FaultInjector:
         return {"spec": self.spec.text, **self.counts, "t_fault": self.t_fault, "pending": self.pending()}
 
     # ---- internals ---------------------------------------------------------------------------------
-    def _emit(self, pub: "FaultyPublisher", payload: bytes, due: float, now: float) -> None:
+    def _emit(self, pub: FaultyPublisher, payload: bytes, due: float, now: float) -> None:
         if due <= now and not self._queue:
             pub.inner.put_bytes(payload)
             self.counts["passed"] += 1

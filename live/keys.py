@@ -1,4 +1,4 @@
-"""``teleop keys``: the installation's credentials (teleop/credentials.py): where they are, made if missing,
+"""``teleop keys``: the installation's credentials (teleop/session/credentials.py): where they are, made if missing,
 renewed on request, copied for another machine.
 
 The sides, the recorder, the bridge and the router make the credentials on first use; this command shows
@@ -38,8 +38,8 @@ def main_keys(args: argparse.Namespace) -> int:
     ConfigError
         The folder cannot be made or read, is open to other users, or ``--export`` names an existing path.
     """
-    from teleop.credentials import ROLES, ensure_credentials, keys_dir, renew_credentials
     from teleop.errors import ConfigError
+    from teleop.session.credentials import ROLES, ensure_credentials, keys_dir, renew_credentials
     folder = keys_dir()
     if args.renew:
         renew_credentials(folder)

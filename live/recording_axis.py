@@ -22,12 +22,14 @@ import dataclasses
 import datetime as _dt
 import json
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
+from estimator.errors import CalibrationError, DataError
 from estimator.online.centre_estimator import CentreEstimator
 from estimator.online.spindle import N_NODES, SpindleParams
 from estimator.online.spindle_centre import CentreParams
@@ -38,9 +40,9 @@ from slave.calibration_file import InstrumentCalibration, TendonCalibration
 from slave.rig import Rig, RigState
 from slave.spindle_axis import SpindleAxis
 from slave.spindle_calibrate import pull_slip_M_e
-from teleop.config import Config
-from teleop.errors import CalibrationError, ConfigError, DataError
-from teleop.messages import AxisState, TendonState
+from teleop.config.schema import Config
+from teleop.errors import ConfigError
+from teleop.wire.messages import AxisState, TendonState
 
 __all__ = ["CENTRE", "RecordedModel", "calibration_run_path", "fit_recorded_model", "save_model",
            "load_model", "model_calibration", "RecordedCalibration", "RecordedSpindleAxis", "full_scale"]
@@ -79,7 +81,7 @@ class RecordedModel:
                 "band_centre": self.band_centre}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "RecordedModel":
+    def from_dict(cls, d: dict) -> RecordedModel:
         """Raises KeyError or TypeError on a malformed record (:func:`load_model` turns them into one line)."""
         c = d["centre_map"]
         cmap = None if c is None else CentreParams(np.asarray(c["coef"], dtype=float), float(c["theta_ref"]),
@@ -90,7 +92,7 @@ class RecordedModel:
 
 
 def _tool(cfg: Config):
-    from teleop.tools import load_tool
+    from teleop.config.tools import load_tool
     return load_tool(cfg.instrument.tool) if cfg.instrument.tool else None
 
 
@@ -145,7 +147,7 @@ def fit_recorded_model(cfg: Config, run_file: Path | None = None) -> RecordedMod
     CalibrationError
         A fit that fails on this run (the message names the run).
     """
-    from estimator.offline.spindle_fit import band_centre
+    from estimator.offline.spindle.fit import band_centre
     from study.mrd import read_mrd
     from study.mrd_report import calibrate_on_runs
     path = run_file or calibration_run_path(cfg)
@@ -197,7 +199,7 @@ def load_model(path: str | Path) -> RecordedModel:
 
 def model_calibration(cfg: Config, model: RecordedModel, date: str | None = None) -> InstrumentCalibration:
     """The slave's calibration data of ``model``: each cable's K of the pair fit, M_e from it and the route."""
-    date = date or _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    date = date or _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     joint = cfg.instrument.joints[0]
     cables = {}
     for t, K in (("a", model.pair.K_a), ("b", model.pair.K_b)):

@@ -4,7 +4,7 @@ A file's name says nothing here (a clone's ``optimization/selected/60.txt`` is a
 named ``00.TXT`` or ``sine_config_0.txt`` may hold anything): :func:`detect_format` reads the head of the file.
 
 * ``csv``: the project's measured-data CSV (docs/reference/formats.md): after ``#`` lines, a header line naming
-  ``time``, ``x_in`` and ``T_in`` (:data:`teleop.measured_csv.REQUIRED_COLUMNS`);
+  ``time``, ``x_in`` and ``T_in`` (:data:`teleop.recording.measured_csv.REQUIRED_COLUMNS`);
 * ``kaist``: rows of 8 comma-separated numbers (a trailing comma allowed), no header (the KAIST robot's log);
 * ``mrd``: rows of 10 comma-separated numbers, after ``%`` header lines when there are any (an MRD Lab run).
 
@@ -15,9 +15,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from teleop.errors import DataError
-from teleop.measured_csv import REQUIRED_COLUMNS
-from teleop.text_files import HEAD_BYTES, text_problem
+from estimator.errors import DataError
+from teleop.recording.measured_csv import REQUIRED_COLUMNS
+from teleop.recording.text_files import HEAD_BYTES, text_problem
 
 __all__ = ["ROWS_CHECKED", "TRIED", "detect_format"]
 

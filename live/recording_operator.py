@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from master.device import MultiAxisState
-from teleop.config import Config
+from teleop.config.schema import Config
 
 __all__ = ["RecordedOperator", "recorded_operator"]
 

@@ -5,13 +5,13 @@ tendon a in and lets tendon b out: x_in,a = +g c, x_in,b = -g c for the motor co
 load cells give T_a, T_b [N]; an EM tracker measures the distal bending angle, the truth. The pulley radius r,
 g and the tendons' compliances are not separately observable from these signals, so the rig speaks in units of
 r (r = 1):
-x_in = (G c, -G c) with G = g / r, L/EA_j = 2 lam_j [rad/N] (as :func:`estimator.online.joint_batch.predict_pair_angle`).
+x_in = (G c, -G c) with G = g / r, L/EA_j = 2 lam_j [rad/N] (as :func:`estimator.online.pair_batch.predict_pair_angle`).
 
 :class:`RecordedPair` is the rig (:class:`slave.rig.Rig` of one joint, one recorded sample per step).
 :func:`kaist_live` calibrates on command cycle 1 (as ``teleop analyze --kaist``), plays every sample through
-the rig and the pair axis's :class:`estimator.online.joint.JointEstimator` (the seed pair model with the pair
+the rig and the pair axis's :class:`estimator.online.pair.PairEstimator` (the seed pair model with the pair
 coupling, J1-J5), and scores the live angle on cycle 2 beside the offline seed pair model
-(:func:`estimator.offline.pair.fit_pair`) on the same cycles. The calibration of the live estimator is the same
+(:func:`estimator.offline.pair.fit.fit_pair`) on the same cycles. The calibration of the live estimator is the same
 six parameters fitted with the estimator itself as the model (``fit_pair(..., predict=predict_pair_angle)``).
 
 The offline analysis's headline (the *extended* model its diagnosis chooses, a capstan joint model: the joint's
@@ -25,14 +25,16 @@ import dataclasses
 import datetime as _dt
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
-from estimator.offline.pair import PairParams, fit_pair
-from estimator.online.joint import KAIST_PLAY, JointEstimator
-from estimator.online.joint_batch import predict_pair_angle
+from estimator.errors import CalibrationError
+from estimator.offline.pair.fit import PairParams, fit_pair
+from estimator.online.pair import KAIST_PLAY, PairEstimator
+from estimator.online.pair_batch import predict_pair_angle
 from estimator.sheath import SheathModel
 from live.recording_routine import RecordedRoutine, recorded_model_path
 from slave.axis import SlaveAxis
@@ -42,9 +44,8 @@ from slave.pair_calibrate import set_tension
 from slave.pair_control import PairController
 from slave.rig import InstrumentTruth, Rig, RigInputError, RigState
 from study.kaist import KaistRecording, split
-from teleop.config import Config
-from teleop.errors import CalibrationError
-from teleop.messages import AxisState
+from teleop.config.schema import Config
+from teleop.wire.messages import AxisState
 
 __all__ = ["RecordedPair", "kaist_live", "fit_kaist", "RecordedPairAxis"]
 
@@ -73,7 +74,7 @@ class RecordedPair:
         self._state = self._read(0, np.zeros((1, 2)))
 
     @classmethod
-    def from_config(cls, cfg: Config, path: Path) -> "RecordedPair":
+    def from_config(cls, cfg: Config, path: Path) -> RecordedPair:
         """The KAIST recording ``path`` for the config's one joint, x_in = the motor command (G = 1: the
         calibration's G = g / r is applied by :class:`RecordedPairAxis`)."""
         from study.kaist import read_kaist_recording
@@ -136,7 +137,7 @@ def kaist_live(rec: KaistRecording, extended_deg: float | None = None) -> dict:
     p = PairParams(**live_fit.params)
     rig = RecordedPair(rec, p.G)
     models = [SheathModel(K=K, compliance=max(2.0 * lam, 1e-12)) for K, lam in ((p.K_a, p.lam_a), (p.K_b, p.lam_b))]
-    est = JointEstimator(models[0], models[1], 1.0, n_nodes=N_NODES, pretension=(float(rec.T_a[0]), float(rec.T_b[0])),
+    est = PairEstimator(models[0], models[1], 1.0, n_nodes=N_NODES, pretension=(float(rec.T_a[0]), float(rec.T_b[0])),
                          play=KAIST_PLAY)
     offset = p.G * float(rec.command[0]) + p.theta0
     angle = np.empty(len(rec))
@@ -201,7 +202,7 @@ def _calibration(cfg: Config, model: dict) -> InstrumentCalibration:
         M_e = c * (1.0 - math.exp(-K)) / K if K > 1e-9 else c
         cables[t] = TendonCalibration(K=float(K), M_e=M_e, compliance=c, knee_x_in=0.0, knee_T_in=0.0,
                                       residual_rms=0.0, n_samples=1)
-    date = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    date = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     return InstrumentCalibration(instrument=cfg.instrument.id, date=date, target_tension=cfg.calibration.target_tension,
                                  use_route=cfg.calibration.use_route, joints=((cfg.instrument.joints[0].name, cables),),
                                  method=f"fitted on command cycle 1 of recorded {Path(model['run']).name} (the seed "
@@ -211,7 +212,7 @@ def _calibration(cfg: Config, model: dict) -> InstrumentCalibration:
 class RecordedPairAxis(RecordedRoutine, PairAxis):
     """The pair axis on a KAIST recording: x_in is the motor command [rad] on both tendons, the estimator
     runs in units of the pulley radius with r = 1 / G (so that G c is the kinematic angle) and adds the
-    angle offset G c_0 + theta_0 (:func:`estimator.online.joint_batch.predict_pair_angle`); the torque it
+    angle offset G c_0 + theta_0 (:func:`estimator.online.pair_batch.predict_pair_angle`); the torque it
     reports is r (T_out,a - T_out,b) with the config's pulley radius r (the master renders T_out,a - T_out,b)."""
 
     offset = 0.0
@@ -228,7 +229,7 @@ class RecordedPairAxis(RecordedRoutine, PairAxis):
                                          self.cfg.slave.relax_speed, tuple(state.x_in_cmd[i]), feedforward=pc.feedforward)
         models = [SheathModel(K=K, compliance=max(2.0 * lam / G, 1e-12)) for K, lam in ((p.K_a, p.lam_a), (p.K_b, p.lam_b))]
         T0 = (float(state.T_in[i, 0]), float(state.T_in[i, 1]))
-        self.estimator = JointEstimator(models[0], models[1], 1.0 / G, n_nodes=N_NODES, pretension=T0,
+        self.estimator = PairEstimator(models[0], models[1], 1.0 / G, n_nodes=N_NODES, pretension=T0,
                                         play=KAIST_PLAY / G)
         self.offset = G * float(state.x_in[i, 0]) + p.theta0
         self.torque_scale = self.r * G      # r (T_out,a - T_out,b) with the config's pulley radius r [m]
@@ -286,6 +287,6 @@ class RecordedPairAxis(RecordedRoutine, PairAxis):
     @classmethod
     def warm_up(cls, cfg: Config) -> None:
         m = SheathModel(K=0.5, compliance=1e-4)
-        est = JointEstimator(m, m, 1.0, n_nodes=4)
+        est = PairEstimator(m, m, 1.0, n_nodes=4)
         est.step(1.0, 0.0, 0.5, 0.0, 0.0)
         est.step(1.1, 0.0, 0.5, 0.0, 1e-3)

@@ -15,7 +15,7 @@ recording cannot execute a calibration motion.
 A KAIST recording (``sine_config_N.txt``, or ``optimization/selected/N.txt`` of a clone; :mod:`study.kaist`)
 drives the pair axis of an instrument of one antagonistic pair (:mod:`live.recording_pair`): x_in = the motor
 command [rad] on both tendons, T_in = the two proximal tensions [N], the truth's ``theta`` the measured distal
-angle. The project's measured-data CSV (:func:`teleop.recording.read_measured_csv`) drives the single-tendon
+angle. The project's measured-data CSV (:func:`teleop.recording.measured_csv.read_measured_csv`) drives the single-tendon
 axis (:mod:`live.recording_tendon`): x_in, T_in proximal, T_out and x_out the truth.
 
 Layering: the readers live in :mod:`study` (floor 3) and the rig reads through them, so the rig lives
@@ -35,12 +35,13 @@ from typing import Any
 
 import numpy as np
 
+from estimator.errors import DataError
 from live.recording_formats import detect_format
 from slave.rig import InstrumentTruth, RigInputError, RigState
 from slave.rigs import register_rig
 from study.mrd import MrdRun, read_mrd
-from teleop.config import Config
-from teleop.errors import ConfigError, DataError
+from teleop.config.schema import Config
+from teleop.errors import ConfigError
 
 __all__ = ["FORMATS", "recording_format", "check_recording", "read_recording", "read_recording_run", "recorded_motion",
            "RecordedSpindle"]
@@ -170,7 +171,7 @@ class RecordedSpindle:
         self._state = self._read(0.0, 0, np.zeros(1))
 
     @classmethod
-    def from_config(cls, cfg: Config) -> "RecordedSpindle":
+    def from_config(cls, cfg: Config) -> RecordedSpindle:
         """The recording of ``rig.recording`` for the config's one jaw (errors of :func:`read_recording_run`)."""
         rc = cfg.rig.recording
         return cls(read_recording_run(cfg), cfg.instrument.joints[0].name, rc.rate, rc.at_end)

@@ -14,7 +14,7 @@ from typing import Any, ClassVar
 
 from slave.calibration_file import calibration_path
 from slave.rig import Rig, RigState
-from teleop.config import Config
+from teleop.config.schema import Config
 
 __all__ = ["RecordedRoutine", "recorded_model_path"]
 

@@ -23,7 +23,7 @@ from live.recording_rig import RecordedSpindle
 from study.mrd import MrdRun
 from study.mrd_calibration import run_data
 from study.mrd_centre import score_centre
-from teleop.config import Config
+from teleop.config.schema import Config
 
 __all__ = ["Played", "play_run", "scored_from", "score_run", "score_live"]
 

@@ -1,7 +1,7 @@
 """A measured-data CSV (one tendon) played as the single-tendon axis's hardware.
 
 The project's measured-data CSV (docs/reference/formats.md: time [s], x_in [m], T_in [N] and the distal T_out [N]
-and/or x_out [m]; :func:`teleop.recording.read_measured_csv`, the reader of ``teleop analyze FILE``) gives the
+and/or x_out [m]; :func:`teleop.recording.measured_csv.read_measured_csv`, the reader of ``teleop analyze FILE``) gives the
 proximal signals each cycle (x_in, T_in) and its distal channels as the truth. :class:`RecordedTendon` is the rig
 (one recorded sample per step, or resampled at the rig's time); :class:`RecordedTendonAxis` the single-tendon axis
 on it: its calibration is the profile-memory estimator's K and L/EA fitted on the first 60 % of the calibration
@@ -14,27 +14,28 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
 from estimator.data import MeasuredData
+from estimator.errors import CalibrationError
 from estimator.sheath import SheathModel
 from live.recording_routine import RecordedRoutine, recorded_model_path
 from slave.axis import SlaveAxis
 from slave.calibration_file import InstrumentCalibration, TendonCalibration
 from slave.rig import Rig, RigInputError, RigState, RigTruth
 from slave.tendon_axis import TendonAxis
-from teleop.config import Config
-from teleop.errors import CalibrationError
+from teleop.config.schema import Config
 
 __all__ = ["RecordedTendon", "fit_tendon", "RecordedTendonAxis", "read_tendon_csv"]
 
 
 def read_tendon_csv(path: str | Path) -> MeasuredData:
     """The CSV with a distal channel (T_out or x_out). Raises DataError naming the file and the problem."""
-    from teleop.recording import read_measured_csv
+    from teleop.recording.measured_csv import read_measured_csv
     return read_measured_csv(path).require_distal()
 
 
@@ -51,7 +52,7 @@ class RecordedTendon:
         self._state = self._read(0, 0.0)
 
     @classmethod
-    def from_config(cls, cfg: Config, path: Path) -> "RecordedTendon":
+    def from_config(cls, cfg: Config, path: Path) -> RecordedTendon:
         return cls(read_tendon_csv(path), cfg.rig.recording.rate)
 
     @property
@@ -124,7 +125,7 @@ class RecordedTendonCalibration:
 
 def _calibration(cfg: Config, model: dict) -> InstrumentCalibration:
     K, c = model["K"], model["compliance"]
-    date = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    date = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     tendon = TendonCalibration(K=K, M_e=c * (1.0 - math.exp(-K)) / K if K > 1e-9 else c, compliance=c, knee_x_in=0.0,
                                knee_T_in=0.0, residual_rms=0.0, n_samples=1)
     return InstrumentCalibration(instrument=cfg.instrument.id, date=date, target_tension=cfg.calibration.target_tension,

@@ -20,14 +20,14 @@ log = logging.getLogger("live.router")
 def router_config(cfg, listen: tuple[str, ...] | None = None, role: str | None = None):
     """The zenoh.Config of a router on ``listen`` (default ``cfg.transport.listen``), auth/TLS included; with
     ``role`` (``teleop router``: observer) the installation's credentials and access control
-    (:func:`teleop.transport.zenoh_config`).
+    (:func:`teleop.session.transport.zenoh_config`).
 
     Raises
     ------
     ConfigError
         An endpoint or security setting zenoh rejects (named).
     """
-    from teleop.transport import zenoh_config
+    from teleop.session.transport import zenoh_config
     zcfg = zenoh_config(cfg.transport, listen=tuple(cfg.transport.listen if listen is None else listen), connect=(),
                         role=role)
     zcfg.insert_json5("mode", json.dumps("router"))
@@ -37,9 +37,9 @@ def router_config(cfg, listen: tuple[str, ...] | None = None, role: str | None =
 def run_router(args) -> int:
     """``teleop router``: open the router, print where it listens, serve until stopped."""
     from live.discovery import credentials_role
-    from teleop.config import load_config
-    from teleop.recording import raise_on_sigterm
-    from teleop.transport import Session
+    from teleop.config.load import load_config
+    from teleop.recording.measured import raise_on_sigterm
+    from teleop.session.transport import Session
 
     cfg = load_config(args.config)
     listen = tuple(args.listen) if args.listen else None

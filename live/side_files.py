@@ -5,8 +5,8 @@ A side (``teleop slave``, ``teleop master``) writes two high-rate files: its per
 in front of each (:meth:`SideFiles.csv`, :meth:`SideFiles.rerun`): the CSV gets one row every
 ``recording.csv_every`` cycles (every control cycle with 1: the 1 kHz record is ``messages.bin`` of
 ``teleop record``), and both stop once the run directory holds ``recording.max_bytes`` or its disk has less
-than ``recording.min_free_bytes`` free (:class:`live.record_budget.DiskBudget`, looked at every
-:data:`~live.record_budget.CHECK_INTERVAL` seconds by a helper thread, never by the control loop). Past
+than ``recording.min_free_bytes`` free (:class:`live.record.budget.DiskBudget`, looked at every
+:data:`~live.record.budget.CHECK_INTERVAL` seconds by a helper thread, never by the control loop). Past
 either limit the side says so once, counts the rows and Rerun calls it leaves out, and keeps the
 low-rate files: its stats, its journal (a bounded ring) and its log; the control loop goes on as before
 (a gate's call costs it one attribute test).
@@ -22,12 +22,13 @@ import json
 import logging
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
-from live.record_budget import CHECK_INTERVAL, LIVE_ENV, DiskBudget, live_interval, write_live
+from live.record.budget import CHECK_INTERVAL, DiskBudget, live_interval, write_live
 
-__all__ = ["SideFiles", "CsvGate", "RerunGate", "LIVE_ENV", "add_to_stats"]
+__all__ = ["SideFiles", "CsvGate", "RerunGate", "add_to_stats"]
 
 
 class CsvGate:
@@ -36,7 +37,7 @@ class CsvGate:
     Parameters
     ----------
     rec : object with ``write(row)``
-        The CSV recorder (:class:`teleop.csv_proc.ProcessCsvRecorder`).
+        The CSV recorder (:class:`teleop.recording.csv_proc.ProcessCsvRecorder`).
     every : int
         Rows offered per row written, >= 1 (``recording.csv_every``).
     files : SideFiles

@@ -1,6 +1,6 @@
 """The two side processes of ``teleop``: ``slave`` and ``master`` of any instrument, and what they share.
 
-One Zenoh session per process (:func:`open_session`), the streams of :mod:`teleop.keys` wired to a
+One Zenoh session per process (:func:`open_session`), the streams of :mod:`teleop.wire.keys` wired to a
 node (:func:`slave_links`, :func:`master_links`; ``--inject`` wraps the publishers in a
 :class:`live.faults.FaultInjector`), a run directory for recordings and stats
 (:func:`prepare_run_dir`), and the node run until it is done, stopped or out of time (``_serve``).
@@ -18,9 +18,9 @@ import time
 from pathlib import Path
 
 from live.side_files import SideFiles
-from teleop.config import Config
-from teleop.rerun_view import joint_views
-from teleop.safety_bounds import announce_waivers
+from teleop.config.bounds import announce_waivers
+from teleop.config.schema import Config
+from teleop.rerun.layout import joint_views
 
 __all__ = ["run_slave", "run_master", "load_or_recalibrate", "default_run_dir",
            "prepare_run_dir", "endpoints", "open_session", "slave_links", "master_links"]
@@ -114,9 +114,9 @@ def _side_streams(session, ident: str, injector, me: str, peer: str, out: tuple[
     publisher ``out = (key, stream name)`` and the heartbeat (``--inject`` faults on both), the
     incoming subscriber ``incoming = (key, message type)`` and the peer's heartbeat; then the own
     liveliness token. Returns (outgoing, heartbeat, incoming, peer heartbeat, peer alive)."""
-    from teleop.keys import heartbeat_key, liveliness_key
-    from teleop.link_security import SourceLock  # slave: one master session only (transport.lock_master)
-    from teleop.messages import Heartbeat
+    from teleop.session.link_security import SourceLock  # slave: one master session only (transport.lock_master)
+    from teleop.wire.keys import heartbeat_key, liveliness_key
+    from teleop.wire.messages import Heartbeat
     lock = SourceLock() if me == "slave" and session.lock_master else None
     only = {} if lock is None else {"source_lock": lock}
     watcher = session.liveliness_watcher(liveliness_key(ident, peer), None if lock is None else lock.on_liveliness)
@@ -133,8 +133,8 @@ def slave_links(session, ident: str, injector):
     """The slave's links on ``session`` (:func:`_side_streams`): estimates out, commands in (any
     other message on the command key is dropped by the subscriber)."""
     from slave.node_base import SlaveLinks
-    from teleop.keys import command_key, estimate_key
-    from teleop.messages import Command
+    from teleop.wire.keys import command_key, estimate_key
+    from teleop.wire.messages import Command
 
     # SlaveLinks' fields in order: estimate, heartbeat, command, master_heartbeat, master_alive
     links = SlaveLinks(*_side_streams(session, ident, injector, "slave", "master", (estimate_key(ident), "estimate"),
@@ -149,8 +149,8 @@ def master_links(session, ident: str, injector):
     """The master's links on ``session`` (:func:`_side_streams`): commands out, estimates in (any
     other message on the estimate key is dropped by the subscriber)."""
     from master.node_base import MasterLinks
-    from teleop.keys import command_key, estimate_key
-    from teleop.messages import Estimate
+    from teleop.wire.keys import command_key, estimate_key
+    from teleop.wire.messages import Estimate
 
     # MasterLinks' fields in order: command, heartbeat, estimate, slave_heartbeat, slave_alive
     return MasterLinks(*_side_streams(session, ident, injector, "master", "slave", (command_key(ident), "command"),
@@ -158,7 +158,7 @@ def master_links(session, ident: str, injector):
 
 
 def _record_waivers(path: Path, waived: list[dict]) -> None:
-    """Add the config's safety waivers (teleop/safety_bounds.py) to the stats file at ``path``."""
+    """Add the config's safety waivers (teleop/config/bounds.py) to the stats file at ``path``."""
     import json
     try:
         stats = json.loads(path.read_text(encoding="utf-8"))
@@ -185,8 +185,8 @@ def _serve(node, clock, args: argparse.Namespace, run_dir: Path, side: str, inje
     """Run ``node`` until done (or ``--max-duration``); however it ends, ``close_first()`` (e.g. the
     device), then ``<side>_stats.json`` (with the safety waivers ``waived`` and the disk use of ``files``, a
     :class:`live.side_files.SideFiles`) and ``<side>_faults.json`` in ``run_dir``. Every message the side
-    publishes is journaled in ``run_dir`` first (teleop/journal.py: the recorder recovers a SIGKILLed side's tail)."""
-    from teleop.journal import close_journal, open_journal
+    publishes is journaled in ``run_dir`` first (teleop/recording/journal.py: the recorder recovers a SIGKILLed side's tail)."""
+    from teleop.recording.journal import close_journal, open_journal
     open_journal(run_dir, side)
     if files is not None:
         files.live_source = lambda: _live(node)
@@ -222,11 +222,13 @@ def run_slave(args: argparse.Namespace) -> int:
     import live.recording_rig  # noqa: F401  (registers rig.type recording: it reads through study/, floor 4)
     from slave.node import SlaveNode, recording, warm_up
     from slave.rigs import make_rig
-    from teleop.clock import MonotonicClock
-    from teleop.config import load_config
-    from teleop.csv_proc import ProcessCsvRecorder as CsvRecorder  # the loop only queues rows; a child process writes
-    from teleop.recording import raise_on_sigterm
-    from teleop.rerun_proc import RerunProcessLogger as RerunLogger  # the loop only queues; a child process logs
+    from teleop.config.load import load_config
+    from teleop.recording.csv_proc import (
+        ProcessCsvRecorder as CsvRecorder,  # the loop only queues rows; a child process writes
+    )
+    from teleop.recording.measured import raise_on_sigterm
+    from teleop.rerun.process import RerunProcessLogger as RerunLogger  # the loop only queues; a child process logs
+    from teleop.timing.clock import MonotonicClock
 
     cfg = load_config(args.config)
     waived = announce_waivers(cfg, logging.getLogger("teleop.slave"))
@@ -246,8 +248,8 @@ def run_slave(args: argparse.Namespace) -> int:
                                 route=None if cfg.instrument.joints else cfg.sheath.runs,   # 3D sheath view
                                 joints=joint_views(cfg)) as rr:
                 links = slave_links(session, ident, injector)
-                if cfg.ros2.enabled:     # the CRTK topics on ROS 2 beside the loop, servo_jp in (teleop/crtk_side.py)
-                    from teleop.crtk_side import attach_slave
+                if cfg.ros2.enabled:     # the CRTK topics on ROS 2 beside the loop, servo_jp in (teleop/ros2/side.py)
+                    from teleop.ros2.side import attach_slave
                     attach_slave(session, cfg, links)
                 node = SlaveNode(cfg, rig, links, recorder=files.csv(rec), rerun=files.rerun(rr), run_dir=run_dir,
                             stop_on_master_stop=args.exit_on_master_stop, calibration=calibration,
@@ -264,11 +266,13 @@ def run_master(args: argparse.Namespace) -> int:
     """``teleop master``: run the operator side of any instrument until the device's protocol is finished."""
     from master.devices import make_device
     from master.node import MasterNode, csv_columns, csv_units
-    from teleop.clock import MonotonicClock
-    from teleop.config import load_config
-    from teleop.csv_proc import ProcessCsvRecorder as CsvRecorder  # the loop only queues rows; a child process writes
-    from teleop.recording import raise_on_sigterm
-    from teleop.rerun_proc import RerunProcessLogger as RerunLogger  # the loop only queues; a child process logs
+    from teleop.config.load import load_config
+    from teleop.recording.csv_proc import (
+        ProcessCsvRecorder as CsvRecorder,  # the loop only queues rows; a child process writes
+    )
+    from teleop.recording.measured import raise_on_sigterm
+    from teleop.rerun.process import RerunProcessLogger as RerunLogger  # the loop only queues; a child process logs
+    from teleop.timing.clock import MonotonicClock
 
     cfg = load_config(args.config)
     waived = announce_waivers(cfg, logging.getLogger("teleop.master"))
@@ -293,8 +297,8 @@ def run_master(args: argparse.Namespace) -> int:
                 RerunLogger("teleop", run_dir.name, getattr(args, "rerun", None) or cfg.recording.rerun, run_dir / "master.rrd",
                             wall_clock=True, joints=joint_views(cfg)) as rr:   # master-side series; same recording id
             links = master_links(session, ident, injector)
-            if cfg.ros2.enabled:         # the CRTK topics on ROS 2 beside the loop (teleop/crtk_side.py)
-                from teleop.crtk_side import attach_master
+            if cfg.ros2.enabled:         # the CRTK topics on ROS 2 beside the loop (teleop/ros2/side.py)
+                from teleop.ros2.side import attach_master
                 attach_master(session, cfg, links)
             files = SideFiles(run_dir, cfg, "master", ("master.csv", "master.rrd"))
             node = MasterNode(cfg, device, links, recorder=files.csv(rec), rerun=files.rerun(rr))

@@ -61,7 +61,7 @@ class ArmParameters:
                                   f"got {v!r}")
 
     @classmethod
-    def from_config(cls, arm) -> "ArmParameters":
+    def from_config(cls, arm) -> ArmParameters:
         """From the ``master.device.arm`` section (any object with the same field names)."""
         return cls(**{k: float(getattr(arm, k)) for k in cls.__dataclass_fields__})
 

@@ -24,8 +24,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from teleop.config import Config
-from teleop.messages import Command, Estimate
+from teleop.config.schema import Config
+from teleop.wire.messages import Command, Estimate
 
 __all__ = ["InstrumentAxes", "TendonAxes", "JointAxes", "instrument_axes", "TENDON_CSV_COLUMNS", "TENDON_CSV_UNITS"]
 
@@ -169,7 +169,7 @@ class JointAxes(InstrumentAxes):
         return [a.position_hat for a in est.axes]
 
     def rendered(self, est: Estimate) -> list[float]:
-        return [a.effort_hat / r for a, r in zip(est.axes, self.radius)]
+        return [a.effort_hat / r for a, r in zip(est.axes, self.radius, strict=False)]
 
     def view(self, est: Estimate | None):
         return None if est is None else [(a.tendons[0].T_in, a.tendons[1].T_in) for a in est.axes]

@@ -25,9 +25,10 @@ Another device is one :func:`register_device` call; nothing else chooses by type
 """
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
-from teleop.config import Config
+from teleop.config.schema import Config
 from teleop.errors import ConfigError, DeviceError
 
 __all__ = ["DEVICE_TYPES", "register_device", "make_device", "device_axes_needed"]
@@ -83,7 +84,7 @@ def device_axes_needed(cfg: Config) -> int:
 def _hid(cfg: Config, protocol: str):
     from master.hid import HidDevice, load_device_file
     path = cfg.master.device.file
-    if not path:    # teleop.config checks this on load; a Config built in code may skip that check
+    if not path:    # teleop.config.load checks this on load; a Config built in code may skip that check
         raise ConfigError("master.device.file: a device file (configs/devices/*.yaml) is required when "
                           "master.device.type is 'hid'")
     dev = load_device_file(path)

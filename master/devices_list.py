@@ -14,7 +14,8 @@ import argparse
 import errno
 import os
 import sys
-from typing import Any, Callable, TextIO
+from collections.abc import Callable
+from typing import Any, TextIO
 
 from master.hid import hid_module
 from teleop.errors import DeviceError
@@ -86,7 +87,7 @@ def format_devices(devices: list[dict]) -> str:
                      f"{d['usage_page']:04x}:{d['usage']:04x}",
                      d["manufacturer"] or "-", d["product"] or "-", d["path"]))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]) - 1)]
-    lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths)) + "  " + r[-1] for r in rows]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=False)) + "  " + r[-1] for r in rows]
     return "\n".join(line.rstrip() for line in lines)
 
 

@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from master.device import DeviceState
-from teleop.config_yaml import read_yaml
+from teleop.config.reader import read_yaml
 from teleop.errors import ConfigError, DeviceError
 
 __all__ = ["EvdevConfig", "EvdevDevice", "parse_evdev", "load_evdev_file", "evdev_module", "ff_devices", "LEVEL_MAX"]
@@ -145,7 +145,7 @@ def load_evdev_file(path: str | Path | None) -> EvdevConfig:
     """
     if path is None:
         return EvdevConfig()
-    data = read_yaml(Path(path), hex_integers=True)[0]     # bounded: size, nesting, aliases (teleop/config_yaml.py)
+    data = read_yaml(Path(path), hex_integers=True)[0]     # bounded: size, nesting, aliases (teleop/config/reader.py)
     return parse_evdev(data, str(path))
 
 
@@ -308,7 +308,7 @@ class EvdevDevice:
         except OSError:
             pass
 
-    def __enter__(self) -> "EvdevDevice":
+    def __enter__(self) -> EvdevDevice:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -31,14 +31,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from master.device import DeviceState, MultiAxisState
 from master.hid_pid import PidConfig, PidForce, parse_pid
 from master.hid_reports import InputMap, InputSample, OutputMap, Section, parse_input, parse_output, send_report
-from teleop.config_yaml import read_yaml
+from teleop.config.reader import read_yaml
 from teleop.errors import DeviceError
 
 __all__ = ["Match", "HidDeviceConfig", "HidDevice", "load_device_file", "parse_device", "hid_module"]
@@ -145,7 +146,7 @@ def load_device_file(path: str | Path) -> HidDeviceConfig:
         Missing or unreadable file, YAML syntax error, or any error of :func:`parse_device`.
     """
     path = Path(path)
-    data = read_yaml(path, hex_integers=True)[0]     # bounded: size, nesting, aliases (teleop/config_yaml.py)
+    data = read_yaml(path, hex_integers=True)[0]     # bounded: size, nesting, aliases (teleop/config/reader.py)
     return parse_device(data, str(path))
 
 
@@ -163,7 +164,7 @@ class _ReportForce:
 
     def write(self, force) -> None:
         forces = [force] if not isinstance(force, (list, tuple)) else list(force)
-        for om, f in zip(self.omaps, forces + [0.0] * (len(self.omaps) - len(forces))):
+        for om, f in zip(self.omaps, forces + [0.0] * (len(self.omaps) - len(forces)), strict=False):
             send_report(self.handle, om.kind, om.encode(f), "force")
 
     def stop(self) -> None:
@@ -221,7 +222,7 @@ class HidDevice:
             raise
 
     @classmethod
-    def from_file(cls, path: str | Path, handle_factory: Callable[[], Any] | None = None) -> "HidDevice":
+    def from_file(cls, path: str | Path, handle_factory: Callable[[], Any] | None = None) -> HidDevice:
         """Open the device described by a device file (:func:`load_device_file`)."""
         return cls(load_device_file(path), handle_factory)
 
@@ -299,7 +300,7 @@ class HidDevice:
             except (OSError, ValueError):
                 pass
 
-    def __enter__(self) -> "HidDevice":
+    def __enter__(self) -> HidDevice:
         return self
 
     def __exit__(self, *exc: object) -> None:

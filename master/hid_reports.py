@@ -71,7 +71,7 @@ class Section:
             return default
         return self.data[name]
 
-    def sub(self, name: str, default: Any = ...) -> "Section":
+    def sub(self, name: str, default: Any = ...) -> Section:
         return Section(self.raw(name, default), self.source, self.key(name))
 
     def int(self, name: str, default: Any = ..., lo: int | None = None, hi: int | None = None) -> Any:

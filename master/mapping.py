@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 
-from teleop.config import MappingConfig
+from teleop.config.schema import MappingConfig
 from teleop.errors import ConfigError
 
 __all__ = ["clamp_force", "MotionMap", "ForceMap"]
@@ -138,7 +138,7 @@ class ForceMap:
         self._t_last: float | None = None
 
     @classmethod
-    def from_config(cls, cfg: MappingConfig) -> "ForceMap":
+    def from_config(cls, cfg: MappingConfig) -> ForceMap:
         """Build from the ``master.mapping`` section."""
         return cls(cfg.force_scale, cfg.force_limit, cfg.ramp_time, cfg.force_rate_limit)
 

@@ -2,7 +2,7 @@
 
 An instrument is a list of axes (:mod:`master.axes`): one for a single tendon (positions in m),
 one per antagonistic pair for a joint instrument (angles in rad); both speak the one Command and
-Estimate of :mod:`teleop.messages` with one entry per axis. Every axis gets the whole console, the force map and a passivity controller; the
+Estimate of :mod:`teleop.wire.messages` with one entry per axis. Every axis gets the whole console, the force map and a passivity controller; the
 node is ENGAGED only while every axis's console is. One :meth:`MasterNode.step` per cycle (1 kHz),
 given the time by the caller:
 
@@ -53,20 +53,18 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from master.axes import TENDON_CSV_COLUMNS as CSV_COLUMNS
-from master.axes import TENDON_CSV_UNITS as CSV_UNITS
 from master.axes import InstrumentAxes, instrument_axes
 from master.console import Console, ConsoleStatus
 from master.device import DeviceState
 from master.mapping import ForceMap, MotionMap, clamp_force
-from master.node_base import RING_SIZE, MasterLinks, MasterNodeBase
+from master.node_base import MasterLinks, MasterNodeBase
 from master.passivity import PassivityController
 from master.protocols import experiment_label
-from teleop.clock import Clock
-from teleop.config import Config
-from teleop.messages import SideState
+from teleop.config.schema import Config
+from teleop.timing.clock import Clock
+from teleop.wire.messages import SideState
 
-__all__ = ["MasterLinks", "MasterNode", "RING_SIZE", "CSV_COLUMNS", "CSV_UNITS", "csv_columns", "csv_units"]
+__all__ = ["MasterNode", "csv_columns", "csv_units"]
 
 _WAITING = {ConsoleStatus.WAIT_OPERATOR: "operator not present", ConsoleStatus.CLUTCH: "clutch held"}
 
@@ -96,11 +94,11 @@ class MasterNode(MasterNodeBase):
     links : MasterLinks
     stop_linger : float
         Time the STOPPING state is announced before :attr:`done` [s].
-    recorder : object with ``write(row)`` (a :class:`teleop.recording.CsvRecorder` with
+    recorder : object with ``write(row)`` (a :class:`teleop.recording.measured.CsvRecorder` with
         :func:`csv_columns`), or None.
     axes : InstrumentAxes, optional
         The instrument's axes (default :func:`master.axes.instrument_axes` of ``cfg``).
-    rerun : object with ``log_master`` (a :class:`teleop.rerun_log.RerunLogger` made with
+    rerun : object with ``log_master`` (a :class:`teleop.rerun.logger.RerunLogger` made with
         ``wall_clock=True``), or None: master-side series for the live view every ``recording.log_every``
         cycles.
 
@@ -129,7 +127,7 @@ class MasterNode(MasterNodeBase):
         self.motion = [MotionMap(m.motion_scale / rk) for rk in r]
         self.forces = [ForceMap.from_config(m) for _ in r]
         self.consoles = [Console(mm, m.align_tolerance / rk, m.clutch_button, unit_length=rk)
-                         for mm, rk in zip(self.motion, r)]
+                         for mm, rk in zip(self.motion, r, strict=False)]
         self.passivity = [PassivityController(m.force_limit, enabled=m.passivity, reserve=m.passivity_reserve)
                           for _ in r]
         self.limit = m.force_limit
@@ -206,7 +204,7 @@ class MasterNode(MasterNodeBase):
                              "or the clutch pressed", self.last_reason)
 
     def _disengage_all(self) -> None:
-        for f, c in zip(self.forces, self.consoles):
+        for f, c in zip(self.forces, self.consoles, strict=False):
             f.disengage()
             c.stop()
         self.status = ConsoleStatus.STOPPING
@@ -220,7 +218,7 @@ class MasterNode(MasterNodeBase):
     def _consoles(self, now: float, dev, pos: list[float], healthy: bool, reason: str, est) -> None:
         """Every axis's console, then the instrument's state (module docstring, step 3)."""
         q = [None] * len(pos) if est is None else self.axes.slave_positions(est)
-        for c, p, qk in zip(self.consoles, pos, q):
+        for c, p, qk in zip(self.consoles, pos, q, strict=False):
             # a one-axis device's own state when it holds this very position (no new object per cycle)
             d = dev if type(dev) is DeviceState and dev.position is p else \
                 DeviceState(dev.t, p, dev.buttons, dev.operator_present)
@@ -232,13 +230,13 @@ class MasterNode(MasterNodeBase):
             self._on_console(status)
         if status == ConsoleStatus.ENGAGED:
             if self.state != SideState.ENGAGED:      # ramp and passivity observer start afresh
-                for f, pc in zip(self.forces, self.passivity):
+                for f, pc in zip(self.forces, self.passivity, strict=False):
                     f.engage()
                     pc.reset()
                 self.engage_count += 1
                 self._set_state(SideState.ENGAGED, now, "slave ready, links fresh, aligned")
             return
-        for c, f in zip(self.consoles, self.forces):
+        for c, f in zip(self.consoles, self.forces, strict=False):
             if self.state == SideState.ENGAGED:
                 f.disengage()
             c.drop()                                  # an engaged axis is checked again with the others
@@ -276,7 +274,7 @@ class MasterNode(MasterNodeBase):
         engaged = self.state == SideState.ENGAGED
 
         # ---- command ----
-        q = [mm.command(p) if engaged else mm.last for mm, p in zip(self.motion, pos)]
+        q = [mm.command(p) if engaged else mm.last for mm, p in zip(self.motion, pos, strict=False)]
         marker = int(getattr(self.device, "marker", 0)) if engaged else 0
         if not self.over_tension:                # a tendon at its limit: the slave's watchdog relaxes it
             self._send_command(self.axes.command(self.seq, now, q, engaged, marker), now)
@@ -291,7 +289,7 @@ class MasterNode(MasterNodeBase):
         dt = self._period if self._t_prev is None else now - self._t_prev
         self._t_prev = now
         rendered = [math.nan] * len(pos) if est is None else self.axes.rendered(est)
-        for k, (fm, pc, p, T) in enumerate(zip(self.forces, self.passivity, pos, rendered)):
+        for k, (fm, pc, p, T) in enumerate(zip(self.forces, self.passivity, pos, rendered, strict=False)):
             self.force_cmd[k] = fm.step(T, now, fresh=engaged and healthy)
             prev = self._p_prev[k]
             p = p if math.isfinite(p) else math.nan
@@ -319,7 +317,7 @@ class MasterNode(MasterNodeBase):
             self.device.set_force(forces[0], now)
             return
         out = [0.0] * (max(self.axes.device_axes, default=-1) + 1)
-        for a, f in zip(self.axes.device_axes, forces):
+        for a, f in zip(self.axes.device_axes, forces, strict=False):
             out[a] = f
         set_forces(out, now)
 
@@ -329,7 +327,7 @@ class MasterNode(MasterNodeBase):
                   -1.0 if self._t_echo is None else now - self._t_echo, self.seq - 1 & 0xFFFFFFFF, marker)
         slave = [math.nan] * len(q) if est is None else self.axes.slave_positions(est)
         axes = [(qk, _fin(sk), _fin(p), _fin(T), fc, f, pc.energy) for qk, sk, p, T, fc, f, pc in
-                zip(q, slave, pos, rendered, self.force_cmd, self.force, self.passivity)]
+                zip(q, slave, pos, rendered, self.force_cmd, self.force, self.passivity, strict=False)]
         self.recorder.write(self.axes.csv_row(now, est, common, axes))
 
     def _log_rerun(self, now: float, q, marker: int) -> None:

@@ -17,16 +17,17 @@ The link side of the master, the same whatever it renders:
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
-from teleop.codec import next_seq
-from teleop.config import Config
-from teleop.latency import LatencyHistogram
-from teleop.messages import Side, SideState
+from teleop.config.schema import Config
 from teleop.node import NodeBase
+from teleop.timing.latency import LatencyHistogram
+from teleop.wire.codec import next_seq
+from teleop.wire.messages import Side, SideState
 
 __all__ = ["MasterLinks", "MasterNodeBase", "RING_SIZE"]
 
@@ -36,13 +37,13 @@ _SLAVE_OK = (SideState.READY, SideState.ENGAGED)
 
 @dataclass
 class MasterLinks:
-    """The master's side of the transport (real: :mod:`teleop.transport`; tests: in-memory fakes).
+    """The master's side of the transport (real: :mod:`teleop.session.transport`; tests: in-memory fakes).
 
     command, heartbeat : objects with ``put(msg)``.
     estimate, slave_heartbeat : latest-wins subscribers with ``latest() -> Received | None``
         (``.message``, ``.t_recv``) and ``age(now) -> float`` [s].
     slave_alive : callable returning whether the slave's liveliness token is present, or None.
-    crtk : the CRTK side (:class:`teleop.crtk_side.MasterCrtk`) or None: handed the state, the device
+    crtk : the CRTK side (:class:`teleop.ros2.side.MasterCrtk`) or None: handed the state, the device
         positions and the rendered forces at the end of each cycle (a thread publishes them on ROS 2).
     """
 
@@ -51,7 +52,7 @@ class MasterLinks:
     estimate: Any
     slave_heartbeat: Any
     slave_alive: Callable[[], bool] | None = None
-    crtk: Any = None    # with ros2.enabled: offer(state, positions, forces) each cycle (teleop/crtk_side.py)
+    crtk: Any = None    # with ros2.enabled: offer(state, positions, forces) each cycle (teleop/ros2/side.py)
 
 
 class MasterNodeBase(NodeBase):
@@ -167,7 +168,7 @@ class MasterNodeBase(NodeBase):
     # ---- summary -----------------------------------------------------------------------------------
     def latency_stats(self) -> dict[str, float | int | None]:
         """Round-trip latency from the command echo [ms]: n, p50, p99, max (None without samples;
-        :class:`teleop.latency.LatencyHistogram`)."""
+        :class:`teleop.timing.latency.LatencyHistogram`)."""
         return self.rtt.stats()
 
     def _stats_detail(self) -> dict[str, Any]:
@@ -178,7 +179,7 @@ class MasterNodeBase(NodeBase):
         """Every estimate-class message refused, by reason (the stats' ``refusals``): ``decode_error`` (estimates
         and slave heartbeats that did not decode), ``wrong_instrument``, ``out_of_range`` (a tension beyond
         ``master.max_tension``), ``out_of_order``, ``duplicate``. A peer without the installation's credentials
-        never links (teleop/credentials.py)."""
+        never links (teleop/session/credentials.py)."""
         c = self.counts
         return {"decode_error": int(getattr(self.links.estimate, "errors", 0))
                 + int(getattr(self.links.slave_heartbeat, "errors", 0)),

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from teleop.config import Config, joint_set_tension
+from teleop.config.schema import Config, joint_set_tension
 from teleop.errors import ConfigError
 
 __all__ = ["Segment", "PROTOCOLS", "build_protocol", "paper_protocol", "joint_protocols", "operator_protocols",
@@ -31,7 +31,7 @@ MARKER_PAPER = 1
 MARKER_MINOR = 2
 MARKER_PAPER_A = 1
 MARKER_PAPER_B = 2
-#: Axes a command marker tags: 4 bits each in the wire's uint32 (teleop.codec)
+#: Axes a command marker tags: 4 bits each in the wire's uint32 (teleop.wire.codec)
 MARKER_AXES = 8
 
 

@@ -33,10 +33,10 @@ from typing import Any
 
 from master.arm import ArmParameters, HumanArm
 from master.device import DeviceState, MultiAxisState
-from master.protocols import MARKER_AXES, PROTOCOLS, Segment, build_protocol
+from master.protocols import MARKER_AXES, Segment
 from teleop.errors import ConfigError
 
-__all__ = ["Segment", "PROTOCOLS", "build_protocol", "ClutchHand", "AxisScript", "ScriptedOperator"]
+__all__ = ["ClutchHand", "AxisScript", "ScriptedOperator"]
 
 #: Tension error [N] below which the operator slows its intention, and the slowest fraction of speed.
 APPROACH_BAND, APPROACH_MIN = 1.0, 0.15
@@ -316,7 +316,7 @@ class ScriptedOperator:
             T_in = [(T_in,)]
         seen = None if T_in is None else [tuple(v) if isinstance(v, (tuple, list)) else (v,) for v in T_in]
         ok = (seen is not None and len(seen) == len(self.axes)
-              and all(len(v) > a.max_side and all(math.isfinite(x) for x in v) for v, a in zip(seen, self.axes)))
+              and all(len(v) > a.max_side and all(math.isfinite(x) for x in v) for v, a in zip(seen, self.axes, strict=False)))
         self._T = [tuple(float(x) for x in v) for v in seen] if ok and seen is not None else None
         self._engaged = bool(engaged)
 
@@ -329,7 +329,7 @@ class ScriptedOperator:
         for a in self.axes:
             a.velocity = 0.0
         if self._engaged and self._T is not None:
-            for a, T in zip(self.axes, self._T):
+            for a, T in zip(self.axes, self._T, strict=False):
                 a.advance(t, dt, T)
         buttons = self.clutch.buttons(t)
         pos = tuple(a.position(dt) for a in self.axes)
@@ -343,7 +343,7 @@ class ScriptedOperator:
 
     def set_forces(self, forces, t: float) -> None:
         """Render one force per axis [N] (non-finite: 0)."""
-        for a, f in zip(self.axes, forces):
+        for a, f in zip(self.axes, forces, strict=False):
             a.force = float(f) if math.isfinite(f) else 0.0
 
     def close(self) -> None:

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from master.device import DeviceState
-from teleop.config_yaml import read_yaml
+from teleop.config.reader import read_yaml
 from teleop.errors import ConfigError, DeviceError
 
 __all__ = ["VendorConfig", "VendorDevice", "DhdAdapter", "TouchAdapter", "load_vendor_file", "sdk_module",
@@ -83,7 +83,7 @@ def load_vendor_file(kind: str, path: str | Path | None) -> VendorConfig:
     """
     if path is None:
         return VendorConfig(kind)
-    data = read_yaml(Path(path), hex_integers=True)[0] or {}     # bounded: size, nesting, aliases (teleop/config_yaml.py)
+    data = read_yaml(Path(path), hex_integers=True)[0] or {}     # bounded: size, nesting, aliases (teleop/config/reader.py)
     i, f = data.get("input") or {}, data.get("force") or {}
     axis = i.get("axis", "x")
     if axis not in _AXES:
@@ -225,7 +225,7 @@ class VendorDevice:
                 pass
         self.force = 0.0
 
-    def __enter__(self) -> "VendorDevice":
+    def __enter__(self) -> VendorDevice:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -5,7 +5,7 @@ An instrument is a list of axes (docs/concepts/architecture.md): a single tendon
 elongation estimated with the tension-profile memory, :mod:`estimator.online.distal`); a joint
 instrument has one axis per antagonistic pair (:class:`slave.pair_axis.PairAxis`: a joint-angle
 command through the pair controller, the distal joint torque and angle estimated by
-:mod:`estimator.online.joint`); a spindle instrument has one axis per spindle-driven jaw
+:mod:`estimator.online.pair`); a spindle instrument has one axis per spindle-driven jaw
 (:class:`slave.spindle_axis.SpindleAxis`: a jaw-angle command turning the spindle, the jaw torque and
 angle estimated from the spindle's angle and torque by the spindle pair model).
 :class:`slave.node.SlaveNode` iterates over them; all axes of one instrument are of one kind, because
@@ -14,7 +14,7 @@ and ``(n_joints,)`` (one spindle each) for spindles.
 
 Per axis (instance methods): the checks of an incoming target (:meth:`SlaveAxis.out_of_range`,
 :meth:`SlaveAxis.too_far`), the motor command of one cycle (:meth:`SlaveAxis.motor`), the estimator
-step turning the rig's proximal samples into the axis's :class:`~teleop.messages.AxisState`
+step turning the rig's proximal samples into the axis's :class:`~teleop.wire.messages.AxisState`
 (:meth:`SlaveAxis.observe`), its Rerun series (:meth:`SlaveAxis.log_rerun`).
 
 Per kind (class methods, because the routine, the calibration file and the recording's layout are
@@ -28,11 +28,12 @@ compiled kernels (:meth:`SlaveAxis.warm_up`).
 """
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 from slave.rig import Rig, RigState
-from teleop.config import Config
-from teleop.messages import AxisState
+from teleop.config.schema import Config
+from teleop.wire.messages import AxisState
 
 __all__ = ["SlaveAxis"]
 
@@ -124,7 +125,7 @@ class SlaveAxis:
                   dt: float) -> Any:
         """:meth:`motor` of every axis with its target, as :meth:`rig_command` takes them (a kind may step its
         controllers together, the same numbers)."""
-        return [ax.motor(relax, t, state, dt) for ax, t in zip(axes, targets)]
+        return [ax.motor(relax, t, state, dt) for ax, t in zip(axes, targets, strict=False)]
 
     @classmethod
     def observe_all(cls, axes: Sequence[SlaveAxis], state: RigState) -> list[tuple[AxisState, tuple[float, ...]]]:

@@ -23,10 +23,10 @@ from enum import Enum
 
 import numpy as np
 
+from estimator.errors import CalibrationError
 from estimator.offline.calibration import CalibrationResult, calibrate_joint_limit
 from slave.rig import Rig, RigState
-from teleop.config import Config
-from teleop.errors import CalibrationError
+from teleop.config.schema import Config
 
 __all__ = ["CalStage", "JointLimitCalibration", "route_wrap_shape", "wrap_shape", "check_settings"]
 

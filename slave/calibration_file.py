@@ -41,14 +41,15 @@ from pathlib import Path
 
 import yaml
 
+from estimator.errors import CalibrationError
 from estimator.offline.calibration import CalibrationResult
 from estimator.sheath import SheathModel
 from slave.calibrate import route_wrap_shape
 from slave.pair_calibrate import tendon_wrap_shape
 from slave.rig import TENDONS
-from teleop.config import Config
-from teleop.config_yaml import read_yaml
-from teleop.errors import CalibrationError, ConfigError
+from teleop.config.reader import read_yaml
+from teleop.config.schema import Config
+from teleop.errors import ConfigError
 
 __all__ = ["TendonCalibration", "InstrumentCalibration", "calibration_path", "user_calibration_dir", "APP_DATA", "from_results", "from_tendon_result",
            "save_calibration", "load_calibration", "sheath_models", "tendon_model"]
@@ -76,7 +77,7 @@ class TendonCalibration:
     tension_noise: float = 0.0
 
     @classmethod
-    def from_result(cls, r: CalibrationResult) -> "TendonCalibration":
+    def from_result(cls, r: CalibrationResult) -> TendonCalibration:
         return cls(K=r.K, M_e=r.M_e, compliance=r.model.compliance, knee_x_in=r.knee_x_in, knee_T_in=r.knee_T_in,
                    residual_rms=r.residual_rms, n_samples=r.n_samples, tension_noise=r.tension_noise)
 
@@ -128,9 +129,9 @@ def calibration_path(cfg: Config) -> Path:
 
 def from_results(cfg: Config, results: list[dict[str, CalibrationResult]], date: str | None = None) -> InstrumentCalibration:
     """The calibration data of a finished :class:`~slave.pair_calibrate.PairCalibration` (date: now, UTC)."""
-    date = date or _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    date = date or _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     joints = tuple((j.name, {t: TendonCalibration.from_result(res[t]) for t in TENDONS})
-                   for j, res in zip(cfg.instrument.joints, results))
+                   for j, res in zip(cfg.instrument.joints, results, strict=False))
     return InstrumentCalibration(instrument=cfg.instrument.id, date=date, target_tension=cfg.calibration.target_tension,
                                  use_route=cfg.calibration.use_route, joints=joints)
 
@@ -138,7 +139,7 @@ def from_results(cfg: Config, results: list[dict[str, CalibrationResult]], date:
 def from_tendon_result(cfg: Config, result: CalibrationResult, date: str | None = None) -> InstrumentCalibration:
     """The calibration data of a single tendon's finished :class:`~slave.calibrate.JointLimitCalibration`
     (date: now, UTC)."""
-    date = date or _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    date = date or _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     return InstrumentCalibration(instrument=cfg.instrument.id, date=date, target_tension=cfg.calibration.target_tension,
                                  use_route=cfg.calibration.use_route, method=METHOD_TENDON,
                                  tendon=TendonCalibration.from_result(result))
@@ -174,7 +175,7 @@ def load_calibration(path: str | Path, cfg: Config) -> InstrumentCalibration:
     if not path.exists():
         raise _fail(path, "calibration file not found (run `teleop calibrate --config ...`)")
     try:
-        data = read_yaml(path)[0]           # bounded: size, nesting, aliases (teleop/config_yaml.py)
+        data = read_yaml(path)[0]           # bounded: size, nesting, aliases (teleop/config/reader.py)
     except ConfigError as e:
         raise CalibrationError(str(e)) from None
     kind = "joints" if cfg.instrument.joints else "tendon"
@@ -278,7 +279,7 @@ def sheath_models(cal: InstrumentCalibration, cfg: Config) -> list[tuple[SheathM
     """Per joint, the estimator's models of tendons a and b: calibrated K and L/EA, and the route shape
     when the calibration used it."""
     out = []
-    for (name, tend), joint in zip(cal.joints, cfg.instrument.joints):
+    for (_name, tend), joint in zip(cal.joints, cfg.instrument.joints, strict=False):
         pair = []
         for t in TENDONS:
             shape = tendon_wrap_shape(getattr(joint.tendons, t)) if cal.use_route else None

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from teleop.config import SimulatedRigConfig
+from teleop.config.schema import SimulatedRigConfig
 
 __all__ = ["Drive", "NOISE_BLOCK"]
 

@@ -66,14 +66,13 @@ from slave.calibration_file import InstrumentCalibration, save_calibration
 from slave.node_base import Decision, SlaveLinks, SlaveNodeBase
 from slave.pair_axis import PairAxis
 from slave.rig import Rig, RigState
-from slave.tendon_axis import CSV_COLUMNS, CSV_TRUTH_COLUMNS, RELAX_BAND, TendonAxis, csv_columns
-from teleop.codec import prepare_estimate, seq_newer
-from teleop.config import Config
+from slave.tendon_axis import TendonAxis
+from teleop.config.schema import Config
 from teleop.errors import ConfigError
-from teleop.messages import Command, Estimate, SideState
+from teleop.wire.codec import prepare_estimate
+from teleop.wire.messages import Command, Estimate, SideState
 
-__all__ = ["SlaveLinks", "SlaveNode", "axis_kind", "CSV_COLUMNS", "CSV_TRUTH_COLUMNS", "csv_columns", "RELAX_BAND",
-           "seq_newer", "recording", "warm_up"]
+__all__ = ["SlaveNode", "axis_kind", "recording", "warm_up"]
 
 
 def axis_kind(cfg: Config) -> type[SlaveAxis]:
@@ -121,9 +120,9 @@ class SlaveNode(SlaveNodeBase):
     rig : Rig
         Of the instrument's tendon shape (:mod:`slave.rig`).
     links : SlaveLinks
-    recorder : object with ``write(row)`` (a :class:`teleop.recording.CsvRecorder` with the columns of
+    recorder : object with ``write(row)`` (a :class:`teleop.recording.measured.CsvRecorder` with the columns of
         :func:`recording`), or None.
-    rerun : a :class:`teleop.rerun_log.RerunLogger`, or None.
+    rerun : a :class:`teleop.rerun.logger.RerunLogger`, or None.
     run_dir : Path or None
         Where calibration.json goes.
     stop_on_master_stop : bool
@@ -228,7 +227,7 @@ class SlaveNode(SlaveNodeBase):
         return False
 
     def _in_range(self, cmd: Command, now: float) -> bool:
-        for ax, target in zip(self.axes, cmd.targets):
+        for ax, target in zip(self.axes, cmd.targets, strict=False):
             why = ax.out_of_range(target)
             if why is not None:
                 self.counts["commands_rejected_range"] += 1
@@ -244,7 +243,7 @@ class SlaveNode(SlaveNodeBase):
         rec = self._accepted
         if rec is None or now - rec.t_recv > self.watchdog or not (cmd.engaged and rec.message.engaged):
             return True
-        for ax, target, before in zip(self.axes, cmd.targets, rec.message.targets):
+        for ax, target, before in zip(self.axes, cmd.targets, rec.message.targets, strict=False):
             step = abs(target - before) * ax.tendon_per_unit
             if not step <= self.max_step:
                 self.counts["commands_step_refused"] += 1
@@ -260,14 +259,14 @@ class SlaveNode(SlaveNodeBase):
         if prev is not None:
             lims = [self.max_speed * dt / ax.tendon_per_unit for ax in self.axes]
             out = tuple(t if abs(t - p) <= lim else (p + lim if t > p else p - lim)
-                        for t, p, lim in zip(targets, prev, lims))
+                        for t, p, lim in zip(targets, prev, lims, strict=False))
             if out != tuple(targets):
                 self.counts["commands_speed_limited"] += 1
         self._followed = out
         return out
 
     def _too_far(self, cmd: Command) -> str | None:
-        far = [w for w in (ax.too_far(t, self.rig_state) for ax, t in zip(self.axes, cmd.targets)) if w is not None]
+        far = [w for w in (ax.too_far(t, self.rig_state) for ax, t in zip(self.axes, cmd.targets, strict=False)) if w is not None]
         return "; ".join(far) if far else None
 
     def _decision(self, now: float, dt: float) -> tuple[bool, tuple]:

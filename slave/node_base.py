@@ -31,19 +31,20 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any
 
-from teleop.codec import next_seq
-from teleop.config import Config
-from teleop.messages import Command, Side, SideState
+from teleop.config.bounds import REARM_FRACTION
+from teleop.config.schema import Config
 from teleop.node import NodeBase
-from teleop.safety_bounds import REARM_FRACTION
+from teleop.wire.codec import next_seq
+from teleop.wire.messages import Command, Side, SideState
 
 if TYPE_CHECKING:
-    from teleop.transport import Received
+    from teleop.session.transport import Received
 
 __all__ = ["SlaveLinks", "SlaveNodeBase", "Decision"]
 
@@ -59,11 +60,11 @@ class Decision(Enum):
 
 @dataclass
 class SlaveLinks:
-    """The slave's side of the transport (real: :mod:`teleop.transport`; tests: in-memory fakes).
+    """The slave's side of the transport (real: :mod:`teleop.session.transport`; tests: in-memory fakes).
 
     estimate, heartbeat : objects with ``put(msg)``.
     command, master_heartbeat : latest-wins subscribers with ``latest()`` and ``age(now)`` [s].
-    crtk : the CRTK side (:class:`teleop.crtk_side.SlaveCrtk`) or None: handed the state and the followed
+    crtk : the CRTK side (:class:`teleop.ros2.side.SlaveCrtk`) or None: handed the state and the followed
         command at the end of each cycle (it stores them; a thread publishes them on ROS 2).
     refused_links : callable returning the number of connections the side's listener refused, or None.
     """
@@ -73,7 +74,7 @@ class SlaveLinks:
     command: Any
     master_heartbeat: Any
     master_alive: Callable[[], bool] | None = None
-    crtk: Any = None    # with ros2.enabled: offer(state, accepted command) each cycle (teleop/crtk_side.py)
+    crtk: Any = None    # with ros2.enabled: offer(state, accepted command) each cycle (teleop/ros2/side.py)
     refused_links: Callable[[], int] | None = None   # connections the listener refused (credentials, certificate)
 
 
@@ -131,7 +132,7 @@ class SlaveNodeBase(NodeBase):
 
     def _cycle_source(self):
         """The command subscriber when the master runs at the slave's rate: each cycle starts as a command
-        arrives (teleop.clock.LockedPacer), not up to a period later."""
+        arrives (teleop.timing.clock.LockedPacer), not up to a period later."""
         return self.links.command if self.cfg.master.rate_hz == self.rate_hz else None
 
     # ---- the cycle ---------------------------------------------------------------------------------
@@ -238,7 +239,7 @@ class SlaveNodeBase(NodeBase):
         """
         limit = self.max_tension
         peak, where = 0.0, ""                   # the largest |T_in| [N] (NaN: a failed load cell) and its tendon
-        for ax_state, name in zip(axes, self.names):
+        for ax_state, name in zip(axes, self.names, strict=False):
             n = len(ax_state.tendons)
             for k, tendon in enumerate(ax_state.tendons):
                 T = abs(tendon.T_in)
@@ -316,12 +317,12 @@ class SlaveNodeBase(NodeBase):
 
     def refusals(self) -> dict[str, int]:
         """Every command-class message refused, by reason (the stats' ``refusals``): ``foreign_source`` (another
-        session than the locked master's, :class:`teleop.link_security.SourceLock`), ``decode_error`` (commands
+        session than the locked master's, :class:`teleop.session.link_security.SourceLock`), ``decode_error`` (commands
         and master heartbeats that did not decode), ``wrong_axes``, ``out_of_range``, ``step``
         (``slave.max_step``), ``out_of_order``, ``duplicate``, ``engage_too_far``, ``stale`` (the command stream
         went stale: SAFE), ``ros2_servo`` and ``ros2_state_command`` (refused ROS 2 commands), and
         ``no_credentials``: connections the side's listener refused for a wrong user/password or certificate
-        (:class:`teleop.refusal_watch.RefusalWatch`, 0 without one)."""
+        (:class:`teleop.session.refusal_watch.RefusalWatch`, 0 without one)."""
         cmd, hb, crtk, c = self.links.command, self.links.master_heartbeat, self.links.crtk, self.counts
         lock = getattr(getattr(cmd, "primary", cmd), "source_lock", None)
         return {"foreign_source": 0 if lock is None else int(lock.foreign),

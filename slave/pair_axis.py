@@ -15,10 +15,10 @@
   (never where the last command was taking them), then both tendons relax to their set tension (rate limited
   by ``slave.relax_speed``) and the joint returns toward rest.
 * Each cycle: the pair controller's two motor commands, then
-  :class:`~estimator.online.joint.JointEstimator` on the two load cells and encoders (never the
+  :class:`~estimator.online.pair.PairEstimator` on the two load cells and encoders (never the
   truth) -> the axis's state (effort = torque_hat [N m], position = angle_hat [rad], both tendons);
   the joint's columns of ``slave_joints.csv`` and its Rerun series. The estimators of all the joints
-  step in one compiled call per cycle (:class:`~estimator.online.joint_bank.JointBank`, the same numbers
+  step in one compiled call per cycle (:class:`~estimator.online.pair_bank.PairBank`, the same numbers
   as each joint's own step) once each has had its first sample, and so do the pair controllers
   (:class:`~slave.pair_control_bank.PairControlBank`).
 """
@@ -26,13 +26,14 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
 from estimator.band import NOISE_BAND_SIGMAS
-from estimator.online.joint import JointEstimator, JointSample
-from estimator.online.joint_bank import JointBank, can_bank
+from estimator.online.pair import PairEstimator, PairSample
+from estimator.online.pair_bank import PairBank, can_bank
 from estimator.phase import Phase
 from slave.axis import SlaveAxis
 from slave.calibration_file import from_results, sheath_models
@@ -40,8 +41,8 @@ from slave.pair_calibrate import PairCalibration, set_tension
 from slave.pair_control import PairController
 from slave.pair_control_bank import PairControlBank
 from slave.rig import TENDONS, InstrumentTruth, Rig, RigState
-from teleop.config import Config, JointConfig
-from teleop.messages import AxisState, TendonState
+from teleop.config.schema import Config, JointConfig
+from teleop.wire.messages import AxisState, TendonState
 
 __all__ = ["PairAxis", "joint_csv_columns"]
 
@@ -81,11 +82,11 @@ class PairAxis(SlaveAxis):
 
     Attributes
     ----------
-    estimator : JointEstimator or None
+    estimator : PairEstimator or None
     controller : PairController or None
-    sample : JointSample or None
+    sample : PairSample or None
         The last estimate.
-    bank : JointBank or None
+    bank : PairBank or None
         The bank stepping the estimators of all the instrument's joints (shared by its axes).
     control_bank : PairControlBank or None
         The bank stepping the pair controllers of all the instrument's joints (shared by its axes).
@@ -103,11 +104,11 @@ class PairAxis(SlaveAxis):
         self.cmd_range = (joint.limits[0] - math.pi - 2 * stretch / self.r,
                           joint.limits[1] + math.pi + 2 * stretch / self.r)
         self.travel = self.r * max(abs(v) for v in joint.limits) + 2 * stretch + 0.002
-        self.estimator: JointEstimator | None = None
+        self.estimator: PairEstimator | None = None
         self.controller: PairController | None = None
         self.sample: Any = None
         self.hold: float | None = None
-        self.bank: JointBank | None = None
+        self.bank: PairBank | None = None
         self.control_bank: PairControlBank | None = None
 
     def start(self, models, history, tension_noise: tuple[float, float] = (0.0, 0.0)) -> None:
@@ -119,7 +120,7 @@ class PairAxis(SlaveAxis):
         if self.bank is not None:
             self.bank.release()
         noise = tension_noise if e.tension_noise is None else (e.tension_noise, e.tension_noise)
-        self.estimator = JointEstimator(models[0], models[1], self.r, n_nodes=e.n_nodes, pretension=j.pretension,
+        self.estimator = PairEstimator(models[0], models[1], self.r, n_nodes=e.n_nodes, pretension=j.pretension,
                                         hold_rate=e.hold_rate, rate_time_constant=e.rate_time_constant,
                                         tension_noise=noise)
         log.info("%s: estimator noise band %.3f N on tendon a, %.3f N on b (T_in noise sigma from the %s)", j.name,
@@ -161,7 +162,7 @@ class PairAxis(SlaveAxis):
         calibration = cls.calibration_of(cfg, routine)
         history = routine.history + [(state.t, state.x_in, state.T_in)]
         for ax, ctl, models, (_, tend) in zip(axes, routine.controllers(), sheath_models(calibration, cfg),
-                                              calibration.joints):
+                                              calibration.joints, strict=False):
             assert isinstance(ax, PairAxis)
             ax.controller = ctl
             ax.start(models, history, (tend["a"].tension_noise, tend["b"].tension_noise))
@@ -172,7 +173,7 @@ class PairAxis(SlaveAxis):
 
     @classmethod
     def start_loaded(cls, axes: Sequence[SlaveAxis], calibration: Any, state: RigState) -> dict:
-        for ax, models, (_, tend) in zip(axes, sheath_models(calibration, axes[0].cfg), calibration.joints):
+        for ax, models, (_, tend) in zip(axes, sheath_models(calibration, axes[0].cfg), calibration.joints, strict=False):
             assert isinstance(ax, PairAxis)
             pc, j = ax.cfg.pair_control, ax.joint
             ax.controller = PairController(ax.r, set_tension(ax.cfg, j), pc.tension_gain, pc.switch_band,
@@ -205,7 +206,7 @@ class PairAxis(SlaveAxis):
         cb = _active_control_bank(axes)
         modes = cb.mode.tolist() if cb is not None else [int(ax.controller.mode) for ax in axes
                                                          if isinstance(ax, PairAxis) and ax.controller is not None]
-        for ax, mode in zip(axes, modes):
+        for ax, mode in zip(axes, modes, strict=False):
             assert isinstance(ax, PairAxis)
             i, s = ax.index, ax.sample
             row += [0.0 if ax.hold is None else ax.hold, mode, s.torque, s.angle]
@@ -225,14 +226,14 @@ class PairAxis(SlaveAxis):
     @classmethod
     def warm_up(cls, cfg: Config) -> None:
         from estimator.sheath import SheathModel
-        from slave.joint_rig import SimulatedInstrument
+        from slave.pair_rig import SimulatedInstrument
 
         SimulatedInstrument(cfg.instrument.joints[:1], cfg.rig.simulated).step([[1e-4, 1e-4]], 1e-3)
         m = SheathModel(K=0.5, compliance=1e-4)
-        est = JointEstimator(m, m, 0.004, n_nodes=4)
+        est = PairEstimator(m, m, 0.004, n_nodes=4)
         est.step(1.0, 0.0, 0.5, 0.0, 0.0)
         est.step(1.1, 0.0, 0.5, 0.0, 1e-3)      # the compiled step (every sample after the first)
-        JointBank([est]).step(np.array([[1.2, 0.5]]), np.zeros((1, 2)), 2e-3)     # and the banks' loops
+        PairBank([est]).step(np.array([[1.2, 0.5]]), np.zeros((1, 2)), 2e-3)     # and the banks' loops
         PairControlBank([PairController(0.004, 0.25, 0.01, 0.01, 0.05, (0.0, 0.0))]).step(
             np.zeros(1), np.ones((1, 2)), 1e-3, np.zeros((1, 2)))
 
@@ -243,9 +244,9 @@ class PairAxis(SlaveAxis):
         when they can be (the same numbers; module docstring): the motor commands [m], shape (n_joints, 2)."""
         bank = _control_bank_of(axes, state)
         if bank is None:
-            return [ax.motor(relax, t, state, dt) for ax, t in zip(axes, targets)]
+            return [ax.motor(relax, t, state, dt) for ax, t in zip(axes, targets, strict=False)]
         holds, x_out = [], []
-        for ax, t in zip(axes, targets):
+        for ax, t in zip(axes, targets, strict=False):
             assert isinstance(ax, PairAxis)
             if relax:
                 if ax.hold is not None:         # SAFE begins: the motors from their measured positions
@@ -259,7 +260,7 @@ class PairAxis(SlaveAxis):
 
     @classmethod
     def observe_all(cls, axes: Sequence[SlaveAxis], state: RigState) -> list[tuple[AxisState, tuple[float, ...]]]:
-        """:meth:`observe` of every joint, the estimators stepped together by their :class:`JointBank` when
+        """:meth:`observe` of every joint, the estimators stepped together by their :class:`PairBank` when
         they can be (the same numbers; module docstring)."""
         bank = _bank_of(axes, state)
         if bank is None:
@@ -267,10 +268,10 @@ class PairAxis(SlaveAxis):
         out = bank.step(state.T_in, state.x_in, state.t).tolist()
         T, X = state.T_in.tolist(), state.x_in.tolist()
         res: list[tuple[AxisState, tuple[float, ...]]] = []
-        for ax, o, (Ta, Tb), (xa, xb) in zip(axes, out, T, X):
+        for ax, o, (Ta, Tb), (xa, xb) in zip(axes, out, T, X, strict=False):
             pa, pb = _PHASES[int(o[10])], _PHASES[int(o[11])]
             assert isinstance(ax, PairAxis)
-            ax.sample = JointSample(o[0], o[1], (o[2], o[3]), (o[4], o[5]), (o[6], o[7]), o[8], o[9], (pa, pb))
+            ax.sample = PairSample(o[0], o[1], (o[2], o[3]), (o[4], o[5]), (o[6], o[7]), o[8], o[9], (pa, pb))
             res.append((AxisState(o[0], o[1], (TendonState(Ta, xa, o[2], o[4], pa), TendonState(Tb, xb, o[3], o[5], pb))),
                         ()))
         return res
@@ -325,7 +326,7 @@ class PairAxis(SlaveAxis):
 _PHASES = tuple(Phase(k) for k in range(len(Phase)))
 
 
-def _bank_of(axes: Sequence[SlaveAxis], state: RigState) -> JointBank | None:
+def _bank_of(axes: Sequence[SlaveAxis], state: RigState) -> PairBank | None:
     """The active bank of ``axes`` (one per joint, rows 0..n-1 of the rig's arrays in order), built when every
     estimator is ready for it; None while one is not (the joints step on their own)."""
     first = axes[0]
@@ -336,7 +337,7 @@ def _bank_of(axes: Sequence[SlaveAxis], state: RigState) -> JointBank | None:
     ests = [ax.estimator for ax in axes if isinstance(ax, PairAxis) and ax.estimator is not None]
     if len(ests) != len(axes) or not all(can_bank(e) and e._bank is None for e in ests):
         return None
-    bank = JointBank(ests)
+    bank = PairBank(ests)
     for ax in axes:
         assert isinstance(ax, PairAxis)
         ax.bank = bank
@@ -362,12 +363,12 @@ def _control_bank_of(axes: Sequence[SlaveAxis], state: RigState) -> PairControlB
     ctls = [ax.controller for ax in axes if isinstance(ax, PairAxis)]
     cb = _active_control_bank(axes)
     if cb is not None:
-        if len(ctls) == len(cb.controllers) and all(a is b for a, b in zip(ctls, cb.controllers)):
+        if len(ctls) == len(cb.controllers) and all(a is b for a, b in zip(ctls, cb.controllers, strict=False)):
             return cb
         cb.release()
     if not _rows_in_order(axes, state):
         return None
-    ready = [c for c, ax in zip(ctls, axes)
+    ready = [c for c, ax in zip(ctls, axes, strict=False)
              if c is not None and c._bank is None and isinstance(ax, PairAxis) and ax.sample is not None]
     if len(ready) != len(axes):
         return None

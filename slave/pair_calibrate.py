@@ -25,14 +25,14 @@ from enum import Enum
 
 import numpy as np
 
+from estimator.errors import CalibrationError
 from estimator.offline.calibration import CalibrationResult, calibrate_joint_limit
-from estimator.online.joint import JointEstimator
+from estimator.online.pair import PairEstimator
 from estimator.sheath import SheathModel
 from slave.calibrate import check_settings, wrap_shape
 from slave.pair_control import PairController
 from slave.rig import TENDONS, Rig, RigState
-from teleop.config import Config, JointConfig, TendonConfig, joint_set_tension
-from teleop.errors import CalibrationError
+from teleop.config.schema import Config, JointConfig, TendonConfig, joint_set_tension
 
 __all__ = ["PairStage", "tendon_wrap_shape", "set_tension", "PairCalibration"]
 
@@ -50,7 +50,7 @@ def tendon_wrap_shape(tendon: TendonConfig, n_points: int = 257) -> np.ndarray |
 
 
 def set_tension(cfg: Config, joint: JointConfig) -> float:
-    """The antagonist's set tension of a joint [N] (:func:`teleop.config.joint_set_tension`)."""
+    """The antagonist's set tension of a joint [N] (:func:`teleop.config.schema.joint_set_tension`)."""
     return joint_set_tension(cfg, joint)
 
 
@@ -71,7 +71,7 @@ class _Joint:
                                   cfg.slave.relax_speed, x_init, feedforward=pc.feedforward)
         model_a, model_b = (SheathModel(K=0.0, compliance=t.geometry().length / t.EA)
                             for t in (joint.tendons.a, joint.tendons.b))
-        self.est = JointEstimator(model_a, model_b, self.r, pretension=joint.pretension)
+        self.est = PairEstimator(model_a, model_b, self.r, pretension=joint.pretension)
         self.side = 0
         self.stage = PairStage.PULL
         self.c = 0.0
@@ -112,7 +112,7 @@ class _Joint:
     def _fit(self) -> None:
         name = TENDONS[self.side]
         tendon = getattr(self.joint.tendons, name)
-        x, T = (np.asarray(v) for v in zip(*self.pull)) if self.pull else (np.zeros(0), np.zeros(0))
+        x, T = (np.asarray(v) for v in zip(*self.pull, strict=False)) if self.pull else (np.zeros(0), np.zeros(0))
         # tendon b is pulled by turning the joint to - angles: its x_in still grows (+ = toward the actuator)
         try:
             self.results[name] = calibrate_joint_limit(x, T, L=tendon.geometry().length, EA=tendon.EA,

@@ -17,7 +17,7 @@ At a distal pulley of radius r: x_out,a = + r theta, x_out,b = - r theta.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Protocol, Union, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -98,7 +98,7 @@ class InstrumentTruth:
 
 
 #: A value per tendon: a float for a single tendon, an ndarray of shape (n_joints, 2) for pairs.
-Tendons = Union[float, np.ndarray]
+Tendons = float | np.ndarray
 
 
 @dataclass(frozen=True)

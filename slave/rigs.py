@@ -6,7 +6,7 @@ joint instrument). Registered here:
 
 =============  ==============================================================================
 ``simulated``  the in-process simulators (:class:`slave.simulated.SimulatedRig`, one tendon;
-               :class:`slave.joint_rig.SimulatedInstrument`, ``instrument.joints`` given;
+               :class:`slave.pair_rig.SimulatedInstrument`, ``instrument.joints`` given;
                :class:`slave.spindle_rig.SpindleInstrument`, joints with a ``spindle_radius``)
 ``zenoh``      set-points out, samples in over Zenoh (:class:`slave.zenoh_rig.ZenohRig`, one tendon;
                :class:`slave.zenoh_rig.ZenohInstrument`, joints): a motor controller running
@@ -17,9 +17,10 @@ Another rig is one :func:`register_rig` call; nothing else chooses by type.
 """
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
-from teleop.config import Config
+from teleop.config.schema import Config
 from teleop.errors import ConfigError
 
 __all__ = ["RIG_TYPES", "register_rig", "make_rig"]
@@ -56,7 +57,7 @@ def _simulated(cfg: Config, session: Any):
         from slave.spindle_rig import SpindleInstrument
         return SpindleInstrument.from_config(cfg)
     if cfg.instrument.joints:
-        from slave.joint_rig import SimulatedInstrument
+        from slave.pair_rig import SimulatedInstrument
         return SimulatedInstrument.from_config(cfg)
     from slave.simulated import SimulatedRig
     return SimulatedRig.from_config(cfg)

@@ -14,11 +14,12 @@ from estimator.kernels import advance_proximal, load_inverse, settle_distal
 from estimator.sheath import Run, SheathGeometry
 from slave.drive import Drive
 from slave.rig import RigInputError, RigState, RigTruth
-from slave.simulated_effects import EFFECT_IDS, EffectSwitches, elongation_general
-from teleop.config import Config, EffectsConfig, LoadConfig, SheathConfig, SimulatedRigConfig
+from slave.simulated_effects import EffectSwitches, elongation_general
+from teleop.config.effects import EffectsConfig
+from teleop.config.schema import Config, LoadConfig, SheathConfig, SimulatedRigConfig
 from teleop.errors import ConfigError
 
-__all__ = ["SimulatedRig", "EFFECT_IDS"]
+__all__ = ["SimulatedRig"]
 
 _SIM = "rig.simulated"     # where the simulator's settings live in the config
 
@@ -65,7 +66,7 @@ class SimulatedRig(EffectSwitches):
     Assumptions: rigid sheath (no axial compression), Coulomb friction with equal static and dynamic
     mu, no bending stiffness or clearance, massless tendon and distal joint - unless an effect of
     ``rig.simulated.effects`` is switched on (each is off by default; the catalogue entries of
-    estimator/offline/effects.py declare them and fit them back; the kernels are here):
+    estimator/offline/effects/catalogue.py declare them and fit them back; the kernels are here):
 
     * velocity_friction: mu(v) = mu (1 + viscous |v|) with v the motor speed [m/s] of this step.
     * pretension: the start profile is sheath.pretension + tension [N] (see the pretension bullet).
@@ -137,8 +138,8 @@ class SimulatedRig(EffectSwitches):
         self._state = self._read(self._x_in)
 
     @classmethod
-    def from_config(cls, cfg: Config) -> "SimulatedRig":
-        """Build from a full :class:`teleop.config.Config`: the instrument's ``sheath`` and ``rig.simulated``."""
+    def from_config(cls, cfg: Config) -> SimulatedRig:
+        """Build from a full :class:`teleop.config.load.Config`: the instrument's ``sheath`` and ``rig.simulated``."""
         return cls(cfg.sheath, cfg.rig.simulated)
 
     # ---- model constants -------------------------------------------------------------------------

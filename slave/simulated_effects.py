@@ -1,12 +1,12 @@
 """The effect switches of the simulated rig (``rig.simulated.effects``): compiled step kernels and the rig's share.
 
-The switches, their settings and ranges are the effect catalogue's (estimator/offline/effects.py,
+The switches, their settings and ranges are the effect catalogue's (estimator/offline/effects/catalogue.py,
 ``Effect.switch``; :data:`EFFECT_IDS` is derived from it); what each one does in this rig is the
 code below (:data:`IMPLEMENTED` lists the switches this simulator has a kernel for).
 
 :class:`EffectSwitches` is mixed into :class:`slave.simulated.SimulatedRig`; it owns the effect state
 and the step with effects on, the kernels below solve it. The physics and the sliding rule are
-described in the SimulatedRig docstring; estimator/offline/effects_kernels.py runs the same rules driven by
+described in the SimulatedRig docstring; estimator/offline/effects/kernels.py runs the same rules driven by
 T_in instead of x_in.
 """
 from __future__ import annotations
@@ -19,21 +19,22 @@ import numpy as np
 from numba import njit
 
 from estimator.kernels import load_inverse
-from estimator.offline.effects import rig_switches
-from estimator.offline.effects_kernels import stiffening_strain as strain  # one phi(T), shared with the estimator
-from teleop.config import EffectsConfig
-from teleop.effects_config import in_range
+from estimator.offline.effects.catalogue import rig_switches
+from estimator.offline.effects.kernels import stiffening_strain as strain  # one phi(T), shared with the estimator
+from teleop.config.effects import EffectsConfig, in_range
 from teleop.errors import ConfigError
 
-__all__ = ["EFFECT_IDS", "IMPLEMENTED", "EffectSwitches", "strain", "elongation_general", "full_slip",
-           "advance_general", "validate_effects"]
+__all__ = [
+    "EFFECT_IDS", "IMPLEMENTED", "EffectSwitches", "elongation_general", "full_slip", "advance_general",
+    "validate_effects",
+]
 
-#: The switch keys of ``rig.simulated.effects``, from the catalogue (estimator/offline/effects.py).
+#: The switch keys of ``rig.simulated.effects``, from the catalogue (estimator/offline/effects/catalogue.py).
 EFFECT_IDS = tuple(rig_switches())
 #: The switches this simulator has a kernel for (a catalogue switch missing here fails a test).
 IMPLEMENTED = frozenset({"velocity_friction", "pretension", "curvature_drift", "tendon_stiffening", "stiction",
                          "friction_offset", "sensor_offset", "sensor_delay"})
-_V_STOP = 2e-4   # motor speed below which a whole-tendon slide ends [m/s] (estimator.offline.effects_kernels.V_STOP)
+_V_STOP = 2e-4   # motor speed below which a whole-tendon slide ends [m/s] (estimator.offline.effects.kernels.V_STOP)
 
 
 # ---- general step for the effect switches (friction offset, stiffening, varying bounds) -----------
@@ -247,7 +248,7 @@ class EffectSwitches:
 
     @property
     def effects(self) -> tuple[str, ...]:
-        """Identifiers of the effects switched on (estimator/offline/effects.py names), in config order."""
+        """Identifiers of the effects switched on (estimator/offline/effects/catalogue.py names), in config order."""
         return self._effect_ids
 
     def _init_effects(self, fx: EffectsConfig, n: int) -> None:

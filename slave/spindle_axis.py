@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -31,8 +32,8 @@ from slave.pair_axis import joint_csv_columns
 from slave.pair_calibrate import tendon_wrap_shape
 from slave.rig import InstrumentTruth, Rig, RigState
 from slave.spindle_calibrate import SpindleCalibration
-from teleop.config import Config, JointConfig
-from teleop.messages import AxisState, TendonState
+from teleop.config.schema import Config, JointConfig
+from teleop.wire.messages import AxisState, TendonState
 
 __all__ = ["SpindleAxis", "spindle_params"]
 
@@ -113,7 +114,7 @@ class SpindleAxis(SlaveAxis):
                        state: RigState) -> tuple[Any, dict]:
         calibration = routine.calibration()
         history = routine.history + [(state.t, np.array(state.x_in), np.array(state.T_in))]
-        for ax, (name, cables) in zip(axes, calibration.joints):
+        for ax, (name, cables) in zip(axes, calibration.joints, strict=False):
             assert isinstance(ax, SpindleAxis)
             ax.start((cables["a"].K, cables["b"].K), history)
             log.info("calibrated %s: K_a = %.4f, K_b = %.4f (spindle torque band)", name, cables["a"].K, cables["b"].K)
@@ -121,7 +122,7 @@ class SpindleAxis(SlaveAxis):
 
     @classmethod
     def start_loaded(cls, axes: Sequence[SlaveAxis], calibration: InstrumentCalibration, state: RigState) -> dict:
-        for ax, (_, cables) in zip(axes, calibration.joints):
+        for ax, (_, cables) in zip(axes, calibration.joints, strict=False):
             assert isinstance(ax, SpindleAxis)
             ax.start((cables["a"].K, cables["b"].K), [(state.t, np.array(state.x_in), np.array(state.T_in))])
         return calibration.as_dict()

@@ -25,11 +25,11 @@ import math
 
 import numpy as np
 
+from estimator.errors import CalibrationError
 from slave.calibration_file import InstrumentCalibration, TendonCalibration
 from slave.pair_calibrate import tendon_wrap_shape
 from slave.rig import TENDONS, Rig, RigState
-from teleop.config import Config, JointConfig
-from teleop.errors import CalibrationError
+from teleop.config.schema import Config, JointConfig
 
 __all__ = ["METHOD_SPINDLE", "SpindleCalibration", "stroke_points", "band_to_K", "pull_slip_M_e"]
 
@@ -118,7 +118,7 @@ class SpindleCalibration:
         CalibrationError
             Too few samples at the stroke's middle, or a band out of range (:func:`band_to_K`).
         """
-        date = date or _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+        date = date or _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
         x = np.array([h[1] for h in self.history])
         tau = np.array([h[2] for h in self.history])
         out = []

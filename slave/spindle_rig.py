@@ -5,7 +5,7 @@ spindle, radius r_p) winds cable a on and cable b off as it turns by phi, so the
 move by x_in,a = x_a0 + r_p phi and x_in,b = x_b0 - r_p phi; the cables run along the shaft and over its
 pulleys (their routes in ``instrument.joints[].tendons``, friction mu in ``rig.simulated.joints``) to the
 jaw pulley of radius r_d, where a grasped object loads the jaw (``rig.simulated.joints[].load``: the
-tissue contact). The cable physics are the house's: :class:`slave.joint_rig.SimulatedInstrument`
+tissue contact). The cable physics are the house's: :class:`slave.pair_rig.SimulatedInstrument`
 (distributed Coulomb friction with the capstan law in each cable, pretension, jaw torque balance),
 driven here through the spindle's kinematics.
 
@@ -23,10 +23,10 @@ import math
 
 import numpy as np
 
-from slave.joint_rig import SimulatedInstrument
+from slave.pair_rig import SimulatedInstrument
 from slave.rig import RigInputError, RigState
 from slave.simulated import check_setting, is_finite
-from teleop.config import Config, SimulatedRigConfig
+from teleop.config.schema import Config, SimulatedRigConfig
 
 __all__ = ["SpindleInstrument"]
 
@@ -39,7 +39,7 @@ class SpindleInstrument:
     joints : sequence of JointConfig
         Each with ``spindle_radius`` > 0 and ``pretension`` > 0 (a pull-pull pair needs it).
     rig : SimulatedRigConfig
-        ``rig.simulated`` (as :class:`~slave.joint_rig.SimulatedInstrument`).
+        ``rig.simulated`` (as :class:`~slave.pair_rig.SimulatedInstrument`).
 
     Raises
     ------
@@ -66,7 +66,7 @@ class SpindleInstrument:
         self._state = self._read(np.zeros(len(joints)))
 
     @classmethod
-    def from_config(cls, cfg: Config) -> "SpindleInstrument":
+    def from_config(cls, cfg: Config) -> SpindleInstrument:
         """Build from a full config (``instrument.joints`` and ``rig.simulated``)."""
         return cls(cfg.instrument.joints, cfg.rig.simulated)
 

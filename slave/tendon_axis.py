@@ -22,7 +22,8 @@
 from __future__ import annotations
 
 import logging
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -33,8 +34,8 @@ from slave.axis import SlaveAxis
 from slave.calibrate import JointLimitCalibration
 from slave.calibration_file import from_tendon_result, tendon_model
 from slave.rig import Rig, RigState, RigTruth
-from teleop.config import Config
-from teleop.messages import AxisState, TendonState
+from teleop.config.schema import Config
+from teleop.wire.messages import AxisState, TendonState
 
 __all__ = ["TendonAxis", "CSV_COLUMNS", "CSV_TRUTH_COLUMNS", "csv_columns", "RELAX_BAND"]
 

@@ -3,7 +3,7 @@
 ``rig.type: zenoh``. Whatever drives the motors - a motor controller running zenoh-pico, or
 ``teleop bridge`` running the simulated rig as its own process - subscribes to the set-points on
 ``teleop/<instrument>/rig/setpoint`` and publishes one sample per cycle on
-``teleop/<instrument>/rig/sample`` (byte format: :mod:`teleop.rig_wire`). :meth:`ZenohRig.step`
+``teleop/<instrument>/rig/sample`` (byte format: :mod:`teleop.wire.rig`). :meth:`ZenohRig.step`
 publishes the new set-point and returns the newest sample received (one cycle behind, as a real
 drive's sensors are), time-stamped on the slave's clock from the start (the two loops are not
 in lock step: a sample may be read twice, ``repeats`` counts it, and the slave's time stays strictly
@@ -22,13 +22,13 @@ import math
 import numpy as np
 
 from slave.rig import InstrumentTruth, RigInputError, RigState, RigTruth
-from teleop.clock import MonotonicClock
-from teleop.codec import next_seq
-from teleop.config import Config
-from teleop.entity import RateLimitedLog
+from teleop.config.schema import Config
 from teleop.errors import TransportError
-from teleop.keys import rig_key
-from teleop.rig_wire import RigSample, RigSetpoint, decode_rig, encode_rig
+from teleop.session.entity import RateLimitedLog
+from teleop.timing.clock import MonotonicClock
+from teleop.wire.codec import next_seq
+from teleop.wire.keys import rig_key
+from teleop.wire.rig import RigSample, RigSetpoint, decode_rig, encode_rig
 
 __all__ = ["ZenohRig", "ZenohInstrument", "state_from_sample", "instrument_state_from_sample"]
 
@@ -135,7 +135,7 @@ class ZenohRig(_ZenohLink):
 
     Parameters
     ----------
-    session : teleop.transport.Session
+    session : teleop.session.transport.Session
         The slave's session (its endpoints reach the rig).
     cfg : Config
         ``instrument.id`` (keys), ``rig.zenoh`` (timeout_ms, wait_s).

@@ -1,9 +1,11 @@
 """``teleop analyze``: what the model gets wrong on a measured recording, why, and what fixes it.
 
+Over 400 lines: the three modes of one command share its argument checks, output paths and messages.
+
 Two modes:
 
 * ``teleop analyze FILE.csv`` (measured-data format, one tendon, docs/reference/formats.md; T_out and x_out
-  optional, at least one): the diagnosis of :func:`estimator.offline.diagnosis.diagnose` - the base model
+  optional, at least one): the diagnosis of :func:`estimator.offline.diagnosis.selection.diagnose` - the base model
   (profile memory, K and L/EA) fitted on the first part of the recording, every catalogue extension
   fitted on the same block, all scored on the held-out rest; prints the cause, the held-out errors
   and the gain (:func:`study.report.format_summary`) and the fitted parameters. A progress bar goes
@@ -14,12 +16,12 @@ Two modes:
   (``sine_config_<N>.txt``, or ``optimization/selected/<N>.txt`` of a clone given by its root or that folder,
   :mod:`study.kaist_files`; ``--configs`` picks some; default DIR in ``TSM_TELEOP_DATA``; read in place),
   calibrated on command cycle 1 and tested on the later cycles, the model choice on cycle 1 only:
-  the pair diagnosis (:mod:`estimator.offline.pair_diagnosis`: the seed pair model against the
+  the pair diagnosis (:mod:`estimator.offline.pair.diagnosis`: the seed pair model against the
   capstan-joint model and the pair-level effects; causes, extended model, gain), one parameter set
   for all configurations with K growing with the bend, its structure chosen by leave-one-
   configuration-out on the training cycles, its leave-one-out predictions and its bootstrap
-  uncertainty, saved under ``shared.params`` (:mod:`estimator.offline.pair_shared`,
-  :mod:`estimator.offline.pair_general`), and the Finding 1 baselines (force path, linear map, linear map
+  uncertainty, saved under ``shared.params`` (:mod:`estimator.offline.pair.shared`,
+  :mod:`estimator.offline.pair.general`), and the Finding 1 baselines (force path, linear map, linear map
   through a play operator, model-free reversal dead zones). A few minutes.
 * ``teleop analyze --kaist DIR2 --shared-params OUT``: every configuration of DIR2 predicted with the
   set saved by ``--json OUT``, nothing refitted (``shared_prediction.<N>.rmse_deg``).
@@ -35,28 +37,32 @@ import argparse
 import json
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
-from estimator.offline.diagnosis import diagnose_recording
-from estimator.offline.diagnosis_result import Diagnosis, as_diagnosis
-from estimator.offline.pair import fit_force_path, fit_linear, fit_pair, fit_play_map, reversal_dead_zones, rmse
-from estimator.offline.pair_diagnosis import diagnose_pair
-from estimator.offline.pair_general import shared_analysis
-from study.kaist import KaistRecording, format_prediction, is_kaist_file, load_kaist_input, predict_kaist, split
+from estimator.data import MeasuredData
+from estimator.errors import DataError
+from estimator.offline.diagnosis.result import Diagnosis, as_diagnosis
+from estimator.offline.diagnosis.selection import diagnose_recording
+from estimator.offline.pair.diagnosis import diagnose_pair
+from estimator.offline.pair.fit import fit_force_path, fit_linear, fit_pair, fit_play_map, reversal_dead_zones, rmse
+from estimator.offline.pair.general import shared_analysis
+from study.kaist import KaistRecording, format_prediction, load_kaist_input, predict_kaist, split
+from study.kaist_files import is_kaist_file
 from study.kaist_report import write_kaist_figures, write_kaist_report
 from study.kaist_summary import format_kaist
 from study.report import format_summary, split_text, write_report
-from teleop.errors import ConfigError, DataError
-from teleop.measured_csv import MAX_MAGNITUDE, values_error
-from teleop.recording import MeasuredData, read_measured_csv
-from teleop.text_files import check_text_head, require_file
+from teleop.errors import ConfigError
+from teleop.recording.measured_csv import MAX_MAGNITUDE, read_measured_csv, values_error
+from teleop.recording.text_files import check_text_head, require_file
 
-__all__ = ["add_arguments", "main_analyze", "diagnose_file", "configured_route", "format_diagnosis", "analyze_kaist",
-           "format_kaist", "write_kaist_figures", "PROGRESS_SAMPLES", "load_kaist_input", "predict_kaist",
-           "format_prediction"]
+__all__ = [
+    "add_arguments", "main_analyze", "diagnose_file", "configured_route", "format_diagnosis", "analyze_kaist",
+    "PROGRESS_SAMPLES",
+]
 
 #: Recordings of at least this many samples get a progress bar on stderr (100 s at 1 kHz).
 PROGRESS_SAMPLES = 100_000
@@ -192,7 +198,7 @@ def configured_route(path: str | Path) -> tuple[np.ndarray, str]:
         shape to hold).
     """
     from slave.calibrate import wrap_shape
-    from teleop.config import load_config
+    from teleop.config.load import load_config
     try:
         check_text_head(require_file(path))
     except DataError as e:
@@ -210,7 +216,7 @@ def configured_route(path: str | Path) -> tuple[np.ndarray, str]:
 def diagnose_file(path: str | Path, train_fraction: float = 0.6,
                   progress: bool | None = None,
                   wrap_shape: np.ndarray | None = None) -> tuple[Diagnosis, MeasuredData]:
-    """Diagnose one measured-data CSV (:func:`estimator.offline.diagnosis.diagnose_recording`).
+    """Diagnose one measured-data CSV (:func:`estimator.offline.diagnosis.selection.diagnose_recording`).
 
     Parameters
     ----------
@@ -232,7 +238,7 @@ def diagnose_file(path: str | Path, train_fraction: float = 0.6,
     ------
     DataError
         Missing or malformed file, neither T_out nor x_out, a recording too short to diagnose, a value beyond
-        :data:`teleop.measured_csv.MAX_MAGNITUDE` (its line and column), values that make the diagnosis'
+        :data:`teleop.recording.measured_csv.MAX_MAGNITUDE` (its line and column), values that make the diagnosis'
         arithmetic fail (the line and column of the value farthest out of its column).
     ConfigError
         ``train_fraction`` outside [0.3, 0.9].
@@ -321,9 +327,9 @@ def analyze_kaist(recs: list[KaistRecording], progress: bool = False,
 
     Per configuration (train on command cycle 1, test on cycle 2): the seed pair model beside the
     force path, the linear map and the linear map + play, the model-free reversal dead zones, and
-    the pair diagnosis (:func:`estimator.offline.pair_diagnosis.diagnose_pair`: the seed model against the
+    the pair diagnosis (:func:`estimator.offline.pair.diagnosis.diagnose_pair`: the seed model against the
     capstan-joint model and the pair-level effects). Across configurations: one set of physical
-    parameters with K growing with the bend angle (:func:`estimator.offline.pair_general.shared_analysis`).
+    parameters with K growing with the bend angle (:func:`estimator.offline.pair.general.shared_analysis`).
 
     Parameters
     ----------
@@ -353,12 +359,12 @@ def analyze_kaist(recs: list[KaistRecording], progress: bool = False,
         A recording without two complete command cycles.
     """
     tick = _Status(progress)
-    summaries, details = zip(*(_kaist_one(r) for r in recs)) if recs else ((), ())
+    summaries, details = zip(*(_kaist_one(r) for r in recs), strict=False) if recs else ((), ())
     out: dict[str, Any] = {"mode": "kaist", "train": "command cycle 1 (from the first sample)", "test": "the later command cycles",
            "configurations": list(summaries)}
     train = [d["cycles"][0] for d in details]
     test = [d["cycles"][1] for d in details]
-    for rec, s, d, tr, te in zip(recs, summaries, details, train, test):
+    for rec, s, d, tr, te in zip(recs, summaries, details, train, test, strict=False):
         diag, fits = diagnose_pair(rec, tr, te, progress=_labelled(tick, f"N = {rec.config_deg}: "),
                                    n_bootstrap=n_bootstrap)
         s["diagnosis"], d["pair_fits"], d["extended"] = diag, fits, diag["extended"]["model"]
@@ -367,7 +373,7 @@ def analyze_kaist(recs: list[KaistRecording], progress: bool = False,
         shared, sdet = shared_analysis(list(recs), Ns, train, test, progress=tick, n_bootstrap=n_bootstrap)
         out["shared"] = shared
         ch = shared["chosen"]
-        for i, (s, d) in enumerate(zip(summaries, details)):
+        for i, (s, d) in enumerate(zip(summaries, details, strict=False)):
             row = shared["models"][ch]["configurations"][i]
             s["shared"] = {"model": ch, "rmse_test_deg": row["rmse_test_deg"], "K_a": row["K_a"], "K_b": row["K_b"],
                            "leave_one_out_rmse_test_deg": shared["leave_one_out"][ch][i]["rmse_test_deg"]}

@@ -39,8 +39,9 @@ from pathlib import Path
 
 import numpy as np
 
-from teleop.errors import ConfigError, DataError
-from teleop.text_files import read_text
+from estimator.errors import DataError
+from teleop.errors import ConfigError
+from teleop.recording.text_files import read_text
 
 __all__ = ["REQUIRED", "OPTIONAL", "KAIST_MAP", "ColumnMap", "parse_column_map", "Table", "read_table",
            "CUT_FRACTION"]
@@ -195,7 +196,7 @@ def _clean_time(a: np.ndarray, lines: np.ndarray, src: str, notes: list[str]) ->
     back = np.flatnonzero(np.diff(t) < 0) + 1
     if back.size:
         bounds = [0, *back.tolist(), t.size]
-        segs = [slice(b0, b1) for b0, b1 in zip(bounds[:-1], bounds[1:])]
+        segs = [slice(b0, b1) for b0, b1 in zip(bounds[:-1], bounds[1:], strict=False)]
         steps = np.diff(t)
         dt = float(np.median(steps[steps > 0])) if np.any(steps > 0) else 1.0
         last = segs[-1]

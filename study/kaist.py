@@ -37,16 +37,18 @@ from pathlib import Path
 
 import numpy as np
 
-from estimator.offline.pair import rmse
-from estimator.offline.pair_general import predict_shared
+from estimator.errors import DataError
+from estimator.offline.pair.fit import rmse
+from estimator.offline.pair.general import predict_shared
 from study.columns import ColumnMap, parse_column_map, read_table
-from study.kaist_files import config_of, default_kaist_dir, find_configs, find_kaist_dir, is_kaist_file, kaist_path
-from teleop.errors import ConfigError, DataError
-from teleop.text_files import read_text
+from study.kaist_files import config_of, find_configs, find_kaist_dir, is_kaist_file, kaist_path
+from teleop.errors import ConfigError
+from teleop.recording.text_files import read_text
 
-__all__ = ["CONFIGS_DEG", "RATE_HZ", "KaistRecording", "default_kaist_dir", "find_kaist_dir", "find_configs",
-           "is_kaist_file", "kaist_path", "read_kaist", "read_kaist_recording", "load_all", "load_dir", "resample", "cycles", "split",
-           "parse_configs", "load_kaist_input", "predict_kaist", "format_prediction"]
+__all__ = [
+    "CONFIGS_DEG", "RATE_HZ", "KaistRecording", "read_kaist", "read_kaist_recording", "load_all", "load_dir",
+    "resample", "cycles", "split", "parse_configs", "load_kaist_input", "predict_kaist", "format_prediction",
+]
 
 #: Insertion-tube configurations [deg] of the project's folder kaist-tsm and of the results pages (a clone of the
 #: source repository holds these and five more: 30, 90, 150, 210, 270).
@@ -239,7 +241,7 @@ def cycles(rec: KaistRecording, arm_fraction: float = 0.5) -> list[slice]:
         elif armed and c[k - 1] < 0 <= c[k]:
             starts.append(k)
             armed = False
-    return [slice(a, b) for a, b in zip(starts[:-1], starts[1:])]
+    return [slice(a, b) for a, b in zip(starts[:-1], starts[1:], strict=False)]
 
 
 def split(rec: KaistRecording) -> tuple[slice, slice, str]:

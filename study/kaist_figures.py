@@ -38,7 +38,7 @@ def rmse_figure(recs, details, summary, d: Path, plt) -> Path:
     ax1.set(xticks=x, xticklabels=[str(n) for n in Ns], xlabel="configuration N [deg]",
             ylabel="distal angle RMSE on cycle 2 [deg]", title="Held-out error (calibrated on cycle 1)")
     ax1.legend(fontsize=8)
-    for c, n in zip(summary["configurations"], Ns):
+    for c, n in zip(summary["configurations"], Ns, strict=False):
         for q in c["dead_zones"]:
             if q["command_travel_deg"] is None:
                 continue
@@ -75,7 +75,7 @@ def loops_figure(recs, details, summary, d: Path, plt) -> Path:
     """kaist_loops.png: distal angle against the command on cycle 2, measured and three models."""
     deg = np.degrees
     fig, axes = plt.subplots(1, len(recs), figsize=(3.3 * len(recs), 3.7), squeeze=False)
-    for ax, rec, det in zip(axes[0], recs, details):
+    for ax, rec, det in zip(axes[0], recs, details, strict=False):
         c2 = det["cycles"][1]
         ax.plot(deg(rec.command[c2]), deg(rec.angle[c2]), "k", lw=1.6, label="measured")
         ax.plot(deg(rec.command[c2]), deg(det["fits"]["seed pair model"].prediction[c2]), "r", lw=1, label="seed pair")
@@ -99,7 +99,7 @@ def residuals_figure(recs, details, summary, d: Path, plt) -> Path:
     deg = np.degrees
     colors = plt.cm.viridis(np.linspace(0.0, 0.85, len(recs)))
     fig, ax = plt.subplots(2, 2, figsize=(11, 7.5))
-    for col, rec, det in zip(colors, recs, details):
+    for col, rec, det in zip(colors, recs, details, strict=False):
         c2 = det["cycles"][1]
         r = deg(det["fits"]["seed pair model"].prediction[c2] - rec.angle[c2])
         t = rec.time[c2] - rec.time[c2.start]
@@ -135,7 +135,7 @@ def tension_angle_figure(recs, details, summary, d: Path, plt) -> Path:
     stalls (docs/results/kaist.md)."""
     n = len(recs)
     fig, axes = plt.subplots(1, n, figsize=(3.4 * n, 3.6), squeeze=False)
-    for ax, rec in zip(axes[0], recs):
+    for ax, rec in zip(axes[0], recs, strict=False):
         ax.plot(np.degrees(rec.angle), rec.T_a - rec.T_b, "k", lw=0.9)
         ax.set(title=f"N = {rec.config_deg} deg", xlabel="distal angle [deg]")
         _style(ax)

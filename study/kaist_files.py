@@ -14,8 +14,8 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from estimator.errors import DataError
 from study.datasets import KAIST, dataset_dir, not_found
-from teleop.errors import DataError
 
 __all__ = ["SELECTED", "default_kaist_dir", "kaist_files", "find_configs", "find_kaist_dir", "config_of",
            "is_kaist_file", "kaist_path"]

@@ -38,7 +38,7 @@ def pair_loops_figure(recs, details, summary, d: Path, plt) -> Path:
     confs = summary["configurations"]
     n = len(recs)
     fig, axes = plt.subplots(1, n, figsize=(3.6 * n, 4.4), squeeze=False)
-    for ax, rec, det, c in zip(axes[0], recs, details, confs):
+    for ax, rec, det, c in zip(axes[0], recs, details, confs, strict=False):
         te = det["cycles"][1]
         x = deg(rec.command[te])
         dg = c["diagnosis"]
@@ -71,7 +71,7 @@ def pair_residuals_figure(recs, details, summary, d: Path, plt) -> Path:
     deg = np.degrees
     n = len(recs)
     fig, axes = plt.subplots(1, n, figsize=(3.6 * n, 3.6), squeeze=False, sharey=True)
-    for ax, rec, det in zip(axes[0], recs, details):
+    for ax, rec, det in zip(axes[0], recs, details, strict=False):
         te = det["cycles"][1]
         t = rec.time[te] - rec.time[te.start]
         ph = 360.0 * t / (rec.time[te.stop] - rec.time[te.start])
@@ -98,7 +98,7 @@ def pair_tensions_figure(recs, details, summary, d: Path, plt) -> Path:
     confs = summary["configurations"]
     n = len(recs)
     fig, axes = plt.subplots(1, n, figsize=(3.6 * n, 3.8), squeeze=False, sharey=True)
-    for ax, rec, det, c in zip(axes[0], recs, details, confs):
+    for ax, rec, det, c in zip(axes[0], recs, details, confs, strict=False):
         te = det["cycles"][1]
         x = deg(rec.command[te])
         fx = det["pair_fits"][det["extended"]]
@@ -150,7 +150,7 @@ def _K_panel(ax, sh: dict, confs: list[dict], Ns: np.ndarray) -> None:
         ax.plot(nn, p[f"K0_{j}"] + p["mu"] * np.radians(nn), color=col, lw=2,
                  label=f"shared fit: K_{j} = {p[f'K0_{j}']:.2f} + {p['mu']:.3f} N")
         ext = [c["diagnosis"]["extended"]["params"].get(f"K_{j}", {}).get("value") for c in confs]
-        ax.plot([N for N, k in zip(Ns, ext) if k is not None], [k for k in ext if k is not None], "o", color=col,
+        ax.plot([N for N, k in zip(Ns, ext, strict=False) if k is not None], [k for k in ext if k is not None], "o", color=col,
                  mfc="none", ms=8, label=f"K_{j} fitted per configuration")
     kr = [np.mean([z["K_release"] for z in c["dead_zones"] if z["K_release"] is not None] or [np.nan])
           for c in confs]

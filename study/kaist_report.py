@@ -24,7 +24,7 @@ from pathlib import Path
 
 from study.kaist_figures import loops_figure, residuals_figure, rmse_figure, tension_angle_figure
 from study.kaist_pair_figures import pair_loops_figure, pair_residuals_figure, pair_tensions_figure, shared_figure
-from teleop.figure_files import output_dir, pyplot
+from teleop.recording.figures import output_dir, pyplot
 
 __all__ = ["write_kaist_figures", "write_kaist_report", "FIGURES"]
 
@@ -67,7 +67,7 @@ def write_kaist_report(recs, details: list[dict], summary: dict, directory: str 
     ConfigError
         ``directory`` cannot be created.
     """
-    from estimator.offline.pair_models import PAIR_EFFECTS
+    from estimator.offline.pair.models import PAIR_EFFECTS
     from study.kaist_summary import format_kaist
 
     figs = write_kaist_figures(recs, details, summary, directory, option="--report")

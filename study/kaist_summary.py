@@ -40,7 +40,7 @@ def format_kaist(s: dict) -> str:
     if any(u for _, u in unc):
         lines.append("extended, test RMSE +- bootstrap std [95 % interval] (training blocks redrawn, refitted): "
                      + "; ".join(f"{n}: {c['diagnosis']['extended']['rmse_test_deg']:.2f}{u}"
-                                 for (n, u), c in zip(unc, s["configurations"])))
+                                 for (n, u), c in zip(unc, s["configurations"], strict=False)))
     if "shared" in s:
         sh = s["shared"]
         for name, m in sh["models"].items():

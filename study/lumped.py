@@ -114,7 +114,7 @@ class Load:
             pts, sl = [(0.0, 0.0), (self.limit, k * self.limit)], [S, k, S]
         else:
             pts, sl = [(0.0, 0.0)], [S, S]
-        lx, lF = (np.array(c, dtype=float) for c in zip(*pts))
+        lx, lF = (np.array(c, dtype=float) for c in zip(*pts, strict=False))
         return lx, lF, np.array(sl, dtype=float)
 
     def position_at(self, force: float) -> float:

@@ -181,7 +181,7 @@ def simulate(xcmd, n_sub, dt, bw_alpha, vmax, u, v, e, T, z, st, s, m, dth, qds,
             B = 0.0
             # active set, one tridiagonal solve per pass: stick/slip of every bristle (stick
             # F' = F + c v', slip F' = st Fc), taut/slack of every element, the load law's piece
-            for it in range(n_iter):
+            for _it in range(n_iter):
                 # proximal tendon point behind the sheath spring: v_p' = A + B v_0'
                 r = ktan[0] * inv_ks
                 A = (s[0] - s[1] - Tb[0] * inv_ks) / (dt * (1.0 + r))

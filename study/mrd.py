@@ -39,13 +39,15 @@ from pathlib import Path
 
 import numpy as np
 
-from study.mrd_files import default_mrd_dir, find_mrd_folder
-from teleop.errors import DataError
-from teleop.text_files import read_text
+from estimator.errors import DataError
+from study.mrd_files import find_mrd_folder
+from teleop.recording.text_files import read_text
 
-__all__ = ["ATTRIBUTION", "MrdRun", "read_mrd", "load_mrd_dir", "default_mrd_dir", "sine_frequency", "N_COLUMNS",
-           "TORQUE_NM_PER_COUNT", "PROXIMAL_COUNTS_PER_REV", "stroke_groups", "stroke_window", "runs_selection", "STROKE_OVERLAP", "DISTAL_COUNTS_PER_REV", "DISTAL_SIGN",
-           "MAX_MAGNITUDE", "values_error"]
+__all__ = [
+    "ATTRIBUTION", "MrdRun", "read_mrd", "load_mrd_dir", "sine_frequency", "N_COLUMNS", "TORQUE_NM_PER_COUNT",
+    "PROXIMAL_COUNTS_PER_REV", "stroke_groups", "stroke_window", "runs_selection", "STROKE_OVERLAP",
+    "DISTAL_COUNTS_PER_REV", "DISTAL_SIGN", "MAX_MAGNITUDE", "values_error",
+]
 
 #: Keep with every report (SOURCE.md: ODbL 1.0 / DbCL 1.0).
 ATTRIBUTION = ("MRD Lab data repository, University of Minnesota; O'Neill, Stephens, Kowalewski, IEEE RA-L "

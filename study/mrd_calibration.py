@@ -12,13 +12,14 @@ from typing import Any
 
 import numpy as np
 
-from estimator.offline.spindle_fit import EXTENSIONS, band_centre, fit_baselines
-from estimator.offline.spindle_shared import RunData, batch_of, kinematic_ratio, select_extensions, shared_fit
+from estimator.errors import DataError
+from estimator.offline.spindle.fit import EXTENSIONS, band_centre, fit_baselines
+from estimator.offline.spindle.shared import RunData, batch_of, kinematic_ratio, select_extensions, shared_fit
 from estimator.online.spindle import SpindleParams, first_reversal
 from study.mrd import MrdRun
 from study.mrd_centre import mid_centre_run
-from teleop.errors import ConfigError, DataError
-from teleop.text_files import read_text
+from teleop.errors import ConfigError
+from teleop.recording.text_files import read_text
 
 __all__ = ["SCORE_FROM_S", "FIT_STEP", "LOAD_SCALING", "run_data", "split_design_gain", "design_gain",
            "parse_calibration", "calibrate"]

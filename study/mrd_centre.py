@@ -9,13 +9,13 @@ Two uses, each recording what was fitted on what:
 * :func:`centre_one_run` - the map fitted on calibration run(s) of one load level, where its load gain
   is not identifiable: held at 1 / n_k (the calibration run's encoders, the pulley ratio; a capstan pair
   with matched sensors gives 1 / (n_k cosh K) <= 1 / n_k), with the calibration's own fit cost profiled
-  over the gain (:func:`estimator.offline.spindle_centre_fit.scale_profile`);
+  over the gain (:func:`estimator.offline.spindle.centre_fit.scale_profile`);
 * :func:`centre_time_split` - its calibration-only score (first half fits, second half scores) for the
   headline's model choice in :mod:`study.mrd_report`; :func:`model_choice` admits only candidates whose
   :func:`implied_load_gain` the calibration runs' own reading allows (LOAD_RULE).
 
 Predictions hold the shape along the stroke outside the calibration's angles
-(:func:`estimator.offline.spindle_centre_fit.predict_held`).
+(:func:`estimator.offline.spindle.centre_fit.predict_held`).
 
 Every score starts once the run's band-centre reading holds both edges
 (:func:`estimator.online.spindle_centre.centre_ready`); ``from_k0`` keeps the score from the first reversal.
@@ -23,11 +23,12 @@ Every score starts once the run's band-centre reading holds both edges
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
-from estimator.offline.spindle_centre_fit import (
+from estimator.offline.spindle.centre_fit import (
     fit_centre_map,
     held_parts,
     predict_held,
@@ -35,7 +36,7 @@ from estimator.offline.spindle_centre_fit import (
     scale_profile,
     within_run_gain,
 )
-from estimator.offline.spindle_shared import RunData, kinematic_ratio
+from estimator.offline.spindle.shared import RunData, kinematic_ratio
 from estimator.online.spindle_centre import CentreParams, centre_ready
 
 __all__ = ["CENTRE", "model_choice", "implied_load_gain", "LOAD_RULE", "LOAD_FALLBACK", "gain_identifiability", "centre_agg", "centre_folder", "centre_implied_gain", "centre_one_run", "centre_time_split", "folder_load_gain", "mid_centre_run", "score_centre",
@@ -98,7 +99,7 @@ def mid_centre_run(runs: list[RunData]) -> str:
 
 def gain_identifiability(runs: list[RunData], folder_gain: float | None = None) -> dict:
     """Diagnostic, never used by an estimate: each run's load gain from its own signals alone
-    (:func:`estimator.offline.spindle_centre_fit.within_run_gain`, the centre map's shape taken out) with its
+    (:func:`estimator.offline.spindle.centre_fit.within_run_gain`, the centre map's shape taken out) with its
     95 % profile interval, and each run's encoder ratio n_k (:func:`kinematic_ratio`). Reads every run's jaw
     torque. ``folder_gain``: the load gain fitted across all runs' loads, recorded beside for comparison.
     On the MRD folder the per-run gains scatter far beyond the +-4 % a one-run calibration needs

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from study.mrd import MrdRun
-from teleop.figure_files import output_dir, pyplot
+from teleop.recording.figures import output_dir, pyplot
 
 __all__ = ["write_mrd_figures", "FIGURES"]
 
@@ -183,7 +183,7 @@ def _bands(plt, runs: list[MrdRun], summary: dict, path: Path) -> Path:
     bands = summary["bands"]
     freqs = sorted({round(r.frequency_hz, 2) for r in runs})
     cols = plt.cm.viridis(np.linspace(0, 0.85, len(freqs)))
-    for f, col in zip(freqs, cols):
+    for f, col in zip(freqs, cols, strict=False):
         rs = sorted([r for r in runs if round(r.frequency_hz, 2) == f], key=lambda r: r.load_level)
         x = [1e3 * bands[r.name]["jaw_torque_mean_Nm"] for r in rs]
         axes[0].plot(x, [1e3 * bands[r.name]["band_half_width_Nm"] for r in rs], "o-", color=col, label=f"{f:g} Hz")

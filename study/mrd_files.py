@@ -14,8 +14,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from estimator.errors import DataError
 from study.datasets import MRD, dataset_dir, not_found
-from teleop.errors import DataError
 
 __all__ = ["DEFAULT_FOLDER", "default_mrd_dir", "run_files", "run_folders", "find_mrd_folder", "mrd_folder"]
 

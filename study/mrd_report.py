@@ -31,8 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from estimator.offline.spindle_fit import band_centre
-from estimator.offline.spindle_shared import (
+from estimator.errors import DataError
+from estimator.offline.spindle.fit import band_centre
+from estimator.offline.spindle.shared import (
     RunData,
     kinematic_ratio,
     leave_one_out,
@@ -49,7 +50,7 @@ from estimator.online.spindle import (
     spindle_rate,
 )
 from study.mrd import ATTRIBUTION, MrdRun
-from study.mrd_calibration import SCORE_FROM_S, calibrate, design_gain, parse_calibration, run_data, split_design_gain
+from study.mrd_calibration import SCORE_FROM_S, calibrate, design_gain, parse_calibration, run_data
 from study.mrd_centre import (
     CENTRE,
     centre_agg,
@@ -61,13 +62,12 @@ from study.mrd_centre import (
     profile_on_scored,
     score_centre,
 )
-from study.mrd_text import format_mrd, write_mrd_report
+from study.mrd_text import format_mrd
 from study.mrd_tools import tool_calibration, tool_entry
-from teleop.errors import ConfigError, DataError
-from teleop.tools import Tool
+from teleop.config.tools import Tool
+from teleop.errors import ConfigError
 
-__all__ = ["analyze_mrd", "format_mrd", "write_mrd_report", "parse_calibration", "split_design_gain", "band_measurements", "SCORE_FROM_S",
-           "calibrate_on_runs"]
+__all__ = ["analyze_mrd", "band_measurements", "calibrate_on_runs"]
 
 _CAL_INPUTS = {"inputs": ["spindle torque", "spindle encoder"], "targets": ["jaw torque", "jaw encoder"]}
 SHARED_STEP = 50           # decimation of the folder-wide fits (1 kHz -> 20 Hz)
@@ -109,7 +109,7 @@ def band_measurements(run: MrdRun, bins_deg: float = 2.0) -> dict:
     lo, hi = np.percentile(th, [20, 80])
     edges = np.arange(lo, hi, math.radians(bins_deg))
     rows = []
-    for a, b in zip(edges[:-1], edges[1:]):
+    for a, b in zip(edges[:-1], edges[1:], strict=False):
         m = (th >= a) & (th < b)
         up, dn = m & (om > 0.05), m & (om < -0.05)
         if up.sum() > 5 and dn.sum() > 5:
@@ -346,7 +346,7 @@ def _shared(runs, out, details, fs, tick, loro: bool) -> None:
     tick("shared fit")
     sh: dict[str, Any] = {"model": "pair" + "".join("+" + c for c in free), "selection": sel, "parameters": p.as_dict(),
           "fitted_on": "every run from its first reversal (in-sample)", "runs": {}}
-    for r, d in zip(runs, rd):
+    for r, d in zip(runs, rd, strict=False):
         b = make_batch([(r.tau_p, r.theta_p)], centre, ref, r.dt)
         pt, pa = predict_torque(p, b), predict_angle(p, b)
         sh["runs"][r.name] = _score(pt, pa, r, d.k0, fs)
@@ -359,7 +359,7 @@ def _shared(runs, out, details, fs, tick, loro: bool) -> None:
         return
     lo: dict[str, Any] = {"model": sh["model"], "note": "extensions chosen on the time split of all runs; parameters refitted "
                                         "without the scored run", "runs": {}, "parameters": {}}
-    for r, d, (q, pt, pa) in zip(runs, rd, leave_one_out(rd, free, centre, ref, p, SHARED_STEP, progress=tick)):
+    for r, d, (q, pt, pa) in zip(runs, rd, leave_one_out(rd, free, centre, ref, p, SHARED_STEP, progress=tick), strict=False):
         lo["runs"][r.name] = _score(pt, pa, r, d.k0, fs)
         lo["parameters"][r.name] = q.as_dict()
         details["loro_pred"][r.name] = (pt, pa)
@@ -375,7 +375,7 @@ def main_mrd(args) -> int:
 
     from study.mrd import load_mrd_dir, stroke_groups
     from study.mrd_windows import analyze_windows, write_outputs
-    from teleop.tools import load_tool
+    from teleop.config.tools import load_tool
 
     if args.json is not None and not Path(args.json).resolve().parent.is_dir():
         raise ConfigError(f"--json {args.json}: directory {Path(args.json).resolve().parent} does not exist")

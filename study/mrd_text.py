@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from estimator.offline.spindle_fit import EXTENSIONS
+from estimator.offline.spindle.fit import EXTENSIONS
 from study.mrd import MrdRun
 
 __all__ = ["format_mrd", "write_mrd_report"]
@@ -111,7 +111,7 @@ def _choice_line(c: dict | None) -> str:
 def write_mrd_report(runs: list[MrdRun], summary: dict, details: dict, directory: str | Path) -> Path:
     """``report.md`` with the printed table and the figures in ``directory``; returns its path."""
     from study.mrd_figures import write_mrd_figures
-    from teleop.figure_files import output_dir
+    from teleop.recording.figures import output_dir
     d = output_dir(directory, "--report")
     figs = write_mrd_figures(runs, summary, details, d)
     text = ["# Jaw torque of a da Vinci tool from its spindle (teleop analyze --mrd)", "",

@@ -1,7 +1,7 @@
 """``teleop analyze --mrd DIR --tool NAME``: the tool file's constants where one calibration run cannot give them.
 
 One run at one load shows the load only through the load gain times the load (docs/how-to/tools.md), so the
-one-run calibration of the centre map takes the load gain from the tool (:mod:`teleop.tools`): ``--tool NAME``
+one-run calibration of the centre map takes the load gain from the tool (:mod:`teleop.config.tools`): ``--tool NAME``
 is ``--calibration gain=G:RULE`` with G the tool's ``load_gain.value`` and RULE the ``--calibration`` given, else
 the tool's ``calibration.runs``.
 """
@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from teleop.config.tools import Tool
 from teleop.errors import ConfigError
-from teleop.tools import Tool
 
 __all__ = ["add_tool_argument", "tool_calibration", "tool_entry"]
 

@@ -10,14 +10,15 @@ a summary across them (every scored run of every window).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from study.mrd import ATTRIBUTION, MrdRun, runs_selection, stroke_groups, stroke_window
 from study.mrd_text import format_mrd, write_mrd_report
-from teleop.tools import Tool
+from teleop.config.tools import Tool
 
 __all__ = ["analyze_windows", "format_across", "write_outputs"]
 
@@ -80,7 +81,7 @@ def format_across(s: dict) -> str:
              f"window's full scale): torque RMSE median {a['median_torque_rmse_fs']:.3f} worst "
              f"{a['max_torque_rmse_fs']:.3f}, max |error| {a['max_torque_max_fs']:.3f} FS; better than the linear "
              f"baseline on every run: {a['better_than_linear_every_run']}"]
-    for w, m, x in zip(s["windows"], a["window_medians"], a["window_worst"]):
+    for w, m, x in zip(s["windows"], a["window_medians"], a["window_worst"], strict=False):
         cal = w["summary"]["calibration"]
         on = cal["run"] if "run" in cal else f"the first {cal['seconds']:g} s of each run"
         lines.append(f"  window {w['label']:<32} calibrated on {on:<6} RMSE median {m:.3f} worst {x:.3f}")

@@ -1,4 +1,4 @@
-"""Markdown report with figures of a diagnosis (:func:`estimator.offline.diagnosis.diagnose`).
+"""Markdown report with figures of a diagnosis (:func:`estimator.offline.diagnosis.selection.diagnose`).
 
 ``write_report(result, data, out_dir)`` writes ``out_dir/report.md`` and four PNG figures (matplotlib,
 Agg canvas, no display needed):
@@ -10,7 +10,7 @@ Agg canvas, no display needed):
 * ``candidates.png``       validation score S of every extension and the price of its parameters.
 
 The report names the cause, the physical explanation and the signature from the catalogue
-(:mod:`estimator.offline.effects`), the held-out errors, the gain and the fitted parameters with units.
+(:mod:`estimator.offline.effects.catalogue`), the held-out errors, the gain and the fitted parameters with units.
 """
 from __future__ import annotations
 
@@ -20,11 +20,11 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from estimator.offline.diagnosis import predictions
-from estimator.offline.diagnosis_result import Diagnosis, as_diagnosis
-from estimator.offline.effects import CATALOGUE
+from estimator.data import MeasuredData
+from estimator.offline.diagnosis.fit import predictions
+from estimator.offline.diagnosis.result import Diagnosis, as_diagnosis
+from estimator.offline.effects.catalogue import CATALOGUE
 from estimator.phase import Phase
-from teleop.recording import MeasuredData
 
 __all__ = ["write_report", "format_summary", "split_text"]
 
@@ -199,8 +199,8 @@ def write_report(result: Diagnosis | dict, data: MeasuredData, out_dir: str | Pa
     Parameters
     ----------
     result : Diagnosis or dict
-        What :func:`estimator.offline.diagnosis.diagnose_recording` (or, as JSON,
-        :func:`estimator.offline.diagnosis.diagnose`) returned for ``data``.
+        What :func:`estimator.offline.diagnosis.selection.diagnose_recording` (or, as JSON,
+        :func:`estimator.offline.diagnosis.selection.diagnose`) returned for ``data``.
     data : MeasuredData
         The recording that was diagnosed.
     out_dir : str or Path

@@ -16,7 +16,7 @@ The hidden effect is one of :func:`scenario_effects` with its magnitude drawn fr
 (``level`` in [0, 1] picks the position in the range; random from the seed when omitted). The
 returned :class:`Recording` keeps the truth apart from the data, so a diagnosis cannot read it.
 
-The scenario table is the effect catalogue's (estimator/offline/effects.py): each entry's scenario
+The scenario table is the effect catalogue's (estimator/offline/effects/catalogue.py): each entry's scenario
 knob gives its realistic range and how a level turns into the rig switch's settings
 (:func:`effects_config`); an entry without a rig switch is applied to the recorded signals here
 (pre-sliding, distal backlash, the sensor channels).
@@ -28,17 +28,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from estimator.offline.effects import ALIASES, CATALOGUE, Effect, rig_switches
-from estimator.offline.effects import EFFECT_IDS as CATALOGUE_IDS
-from estimator.offline.effects_kernels import backlash_play, travel_lag
+from estimator.data import MeasuredData
+from estimator.offline.effects.catalogue import ALIASES, CATALOGUE, Effect, rig_switches
+from estimator.offline.effects.kernels import backlash_play, travel_lag
 from estimator.sheath import SheathGeometry
 from slave.rig import RigState, RigTruth
-from slave.simulated import EFFECT_IDS, SimulatedRig
-from teleop import config as C
-from teleop.recording import MeasuredData
+from slave.simulated import SimulatedRig
+from teleop.config.effects import EffectsConfig, EffectSwitch
+from teleop.config.schema import LoadConfig, RunConfig, SensorConfig, SheathConfig, SimulatedRigConfig
 
-__all__ = ["EFFECT_IDS", "CATALOGUE_IDS", "RIG_SWITCH", "UNCATALOGUED", "Recording", "realistic_range", "effects_config",
-           "protocol", "record", "scenario_effects"]
+__all__ = [
+    "RIG_SWITCH", "UNCATALOGUED", "Recording", "realistic_range", "effects_config", "protocol", "record",
+    "scenario_effects",
+]
 
 #: Effects outside the catalogue, for testing the answer ``unknown``: a slow wander of the distal
 #: load cell's zero (thermal drift of its bridge), smooth on a ~10 s scale.
@@ -106,10 +108,10 @@ def realistic_range(effect: str) -> dict[str, tuple[float, float]]:
 
 
 def effects_config(effect: str | None, level: float, K: float, duration: float,
-                   rng: np.random.Generator) -> tuple[C.EffectsConfig, dict[str, float]]:
+                   rng: np.random.Generator) -> tuple[EffectsConfig, dict[str, float]]:
     """The rig's effect switches for one hidden effect at ``level`` in [0, 1] of its range.
 
-    Returns the :class:`teleop.config.EffectsConfig` (the entry's switch on with its knob's values,
+    Returns the :class:`teleop.config.load.EffectsConfig` (the entry's switch on with its knob's values,
     when it has one) and the truth parameters (SI units). The sign of the knob's signed magnitudes
     (offsets, gains, drifts) is drawn from ``rng``.
 
@@ -118,7 +120,7 @@ def effects_config(effect: str | None, level: float, K: float, duration: float,
     ValueError
         An effect that is neither in the catalogue (with a scenario knob) nor in :data:`UNCATALOGUED`.
     """
-    fx = C.EffectsConfig()
+    fx = EffectsConfig()
     if effect is None or effect == "none" or effect in UNCATALOGUED:
         return fx, {}
     e = _entry(effect)
@@ -129,7 +131,7 @@ def effects_config(effect: str | None, level: float, K: float, duration: float,
     truth = e.knob.truth_of(values)
     if e.switch is None:       # applied to the recorded signals by record()
         return fx, truth
-    on = C.EffectSwitch(True, **{st.name: values[st.name] for st in e.switch.settings if st.name in values})
+    on = EffectSwitch(True, **{st.name: values[st.name] for st in e.switch.settings if st.name in values})
     return fx.replace(**{e.switch.key: on}), truth
 
 
@@ -275,17 +277,17 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     noise_in, noise_out = float(rng.uniform(0.01, 0.03)), float(rng.uniform(0.02, 0.04))
     noise_x, q_x = 1e-6, 1e-6
     geo = SheathGeometry.uniform(L, angle)
-    sheath = C.SheathConfig(EA=EA, runs=tuple(C.RunConfig(r.length, r.radius) for r in geo.runs))
-    fx, params = C.EffectsConfig(), {}
+    sheath = SheathConfig(EA=EA, runs=tuple(RunConfig(r.length, r.radius) for r in geo.runs))
+    fx, params = EffectsConfig(), {}
     for e in hidden:
         one, p = effects_config(e, u, K, duration, rng_fx)
         if (key := _switch_key(e)) is not None:
             fx = fx.replace(**{key: one[key]})
         params.update(p)
-    rig_cfg = C.SimulatedRigConfig(n_elements=100, mu=K / angle, effects=fx,
-                                   load=C.LoadConfig(joint_stiffness=100.0, joint_limit=0.05, tissue_stiffness=k_tissue,
+    rig_cfg = SimulatedRigConfig(n_elements=100, mu=K / angle, effects=fx,
+                                   load=LoadConfig(joint_stiffness=100.0, joint_limit=0.05, tissue_stiffness=k_tissue,
                                                      tissue_contact=0.0, tissue=True, force=0.0),
-                                   sensors=C.SensorConfig(load_cell_noise=noise_in, seed=int(rng.integers(2**31))))
+                                   sensors=SensorConfig(load_cell_noise=noise_in, seed=int(rng.integers(2**31))))
     rig = SimulatedRig(sheath, rig_cfg)
     c = L / EA
     per_newton = math.exp(-K) / (100.0 + k_tissue) + c * -math.expm1(-K) / K   # x_in per T_in, pulling
@@ -338,7 +340,7 @@ def _signal_effects(hidden, params, time, T_in, x_in, T_out, x_out):
 
 def _sensor_effects(hidden, params, time, T_in, x_in, T_out, x_out):
     """The sensor effects on the recorded channels other than the rig's load cell (offset, gain, lag
-    [s], drift [unit/s]; sign conventions of estimator.offline.effects.SensorEffect)."""
+    [s], drift [unit/s]; sign conventions of estimator.offline.effects.catalogue.SensorEffect)."""
     chans = {"T_in": T_in, "x_in": x_in, "T_out": T_out, "x_out": x_out}
     for e in hidden:
         if not e.startswith("sensor_") or ":" not in e or _switch_key(e) is not None:

@@ -6,7 +6,7 @@ setting the arms share: rate, estimator, calibration, watchdogs, transport, reco
 ``right``) and overlays the base with its own sections: ``instrument`` (its own ``id``, so its own
 Zenoh keys ``teleop/<id>/...`` and its own CRTK arm name), ``rig`` (its simulated physics),
 ``pair_control`` and ``master`` (that hand's device and mapping). Loading gives one ordinary
-:class:`~teleop.config.Config` per arm, checked as any config is (:func:`teleop.config.load_config`),
+:class:`~teleop.config.load.Config` per arm, checked as any config is (:func:`teleop.config.load.load_config`),
 so every tool of a single instrument (calibration, recorder, evaluation) works on each arm as it is.
 
 Both sides run both arms in one loop (one process per side), so the arms share the loop rate
@@ -20,7 +20,9 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
-from teleop.config import Config, ErrorContext, check_config, merge_dataclass, read_yaml
+from teleop.config.load import ErrorContext, check_config, merge_dataclass
+from teleop.config.reader import read_yaml
+from teleop.config.schema import Config
 from teleop.errors import ConfigError
 
 __all__ = ["HANDS", "ARM_SECTIONS", "Arm", "Bimanual", "is_bimanual", "load_arms", "repeated_joints"]
@@ -137,7 +139,7 @@ def load_arms(path: str | Path) -> Bimanual:
     Raises
     ------
     ConfigError
-        Everything :func:`teleop.config.load_config` refuses (in the base or in an arm), and: no ``arms``
+        Everything :func:`teleop.config.load.load_config` refuses (in the base or in an arm), and: no ``arms``
         list or not two arms; an unknown key in an arm; duplicate arm names or instrument ids; a hand
         driving two arms or a hand driving none; an arm overriding a shared setting (:data:`SHARED`).
         The message starts with ``<file>:<line>:``.
@@ -184,7 +186,7 @@ def repeated_joints(cfg: Config, n: int, ident: str) -> Config:
     cfg : Config
         A joint instrument (``instrument.joints`` and ``rig.simulated.joints`` of equal length >= 1).
     n : int
-        Joints of the result, 1..:data:`teleop.config_checks.MAX_JOINTS` (not checked here: the loader checks).
+        Joints of the result, 1..:data:`teleop.config.checks.MAX_JOINTS` (not checked here: the loader checks).
     ident : str
         The result's ``instrument.id``.
 

@@ -3,14 +3,11 @@
 Every error subclasses a builtin so callers that only know the builtin still catch it.
 The CLI turns any :class:`TeleopError` (and any ValueError) into a one-line message and exit code 2.
 :class:`DataError` and :class:`CalibrationError` are defined by the estimator (floor 0, which imports
-nothing of the rest) and re-exported here; they subclass ``ValueError`` like the others.
+nothing of the rest) in :mod:`estimator.errors`; they subclass ``ValueError`` like the others.
 """
 from __future__ import annotations
 
-from estimator.errors import CalibrationError, DataError, EstimatorError
-
-__all__ = ["TeleopError", "ConfigError", "DataError", "CalibrationError", "EstimatorError", "CodecError",
-           "DeviceError", "TransportError"]
+__all__ = ["TeleopError", "ConfigError", "CodecError", "DeviceError", "TransportError"]
 
 
 class TeleopError(Exception):

@@ -4,11 +4,11 @@ A node is a :meth:`step` callable once per cycle with the time given by the call
 :meth:`NodeBase.run` that only paces it (docs/concepts/architecture.md). Around the side-specific cycle every node
 does the same bookkeeping, kept here once:
 
-* its :class:`~teleop.messages.SideState` and the log line of every change; a change from ENGAGED
+* its :class:`~teleop.wire.messages.SideState` and the log line of every change; a change from ENGAGED
   to SAFE counts as a *safe event*;
 * warnings at most once per second (a real-time loop never floods the log);
 * the look at the newest message of a latest-wins subscriber, once per message: accepted when it is
-  of the expected kind, newer than the last accepted one (uint32 wrap, :func:`teleop.codec.seq_newer`;
+  of the expected kind, newer than the last accepted one (uint32 wrap, :func:`teleop.wire.codec.seq_newer`;
   duplicates and reordered old messages are counted) and within the node's bounds;
 * a Heartbeat at ``slave.heartbeat_hz`` carrying the state (both sides use that rate): the first at
   once, then one per period without drifting and without bursts after a stall; and one at every
@@ -22,7 +22,7 @@ rendered, recordings, Rerun, heartbeat). :meth:`~NodeBase.step` runs both; a gro
 one loop (:class:`teleop.node_group.NodeGroup`) runs every node's first phase before any node's second,
 so no arm's message waits for another arm's recording.
 
-Subclasses set :attr:`side` (:class:`~teleop.messages.Side`), :attr:`log` (their logger) and
+Subclasses set :attr:`side` (:class:`~teleop.wire.messages.Side`), :attr:`log` (their logger) and
 :attr:`rate_hz`, and provide ``step_send(now)`` (and ``step_after(now)`` when some work can wait),
 ``stats()`` and the range check ``_in_range(msg, now)`` (``_fits(msg, now)`` optionally);
 ``links.heartbeat`` takes the heartbeats.
@@ -38,12 +38,12 @@ import time
 from pathlib import Path
 from typing import Any
 
-from teleop.clock import Clock, LockedPacer, MonotonicClock, Pacer
-from teleop.codec import next_seq, seq_newer
-from teleop.cycles import CycleStats
-from teleop.messages import Heartbeat, Side, SideState
-from teleop.realtime import IDLE, demote_threads, machine_steal, promote_threads, rt_budget, rt_budget_note
-from teleop.recording import stop_at_cycle_end
+from teleop.recording.measured import stop_at_cycle_end
+from teleop.timing.clock import Clock, LockedPacer, MonotonicClock, Pacer
+from teleop.timing.cycles import CycleStats
+from teleop.timing.realtime import IDLE, demote_threads, machine_steal, promote_threads, rt_budget, rt_budget_note
+from teleop.wire.codec import next_seq, seq_newer
+from teleop.wire.messages import Heartbeat, Side, SideState
 
 __all__ = ["NodeBase", "IDLE_GUARD", "RESYNC"]
 
@@ -207,22 +207,22 @@ class NodeBase:
     def run(self, clock: Clock, *, max_duration: float | None = None) -> None:
         """Pace :meth:`step` at :attr:`rate_hz` until :attr:`done` (or ``max_duration`` [s]).
 
-        On the real clock (:class:`~teleop.clock.MonotonicClock`) the loop is prepared first: the
+        On the real clock (:class:`~teleop.timing.clock.MonotonicClock`) the loop is prepared first: the
         objects allocated so far are collected once and frozen out of the garbage collector's later
         passes (:func:`gc.freeze`: a full collection then scans only what the loop allocates), the
         threads get their real-time priorities (``<side>.realtime_priority``,
-        :func:`teleop.realtime.promote_threads`) and after every step the helper threads are told
-        until when the loop sleeps (:data:`teleop.realtime.IDLE`); a node with a :meth:`_cycle_source`
-        (the slave: its commands) starts each cycle as a message arrives (:class:`~teleop.clock.LockedPacer`).
+        :func:`teleop.timing.realtime.promote_threads`) and after every step the helper threads are told
+        until when the loop sleeps (:data:`teleop.timing.realtime.IDLE`); a node with a :meth:`_cycle_source`
+        (the slave: its commands) starts each cycle as a message arrives (:class:`~teleop.timing.clock.LockedPacer`).
         Per-cycle figures:
-        :class:`teleop.cycles.CycleStats`, in the stats' ``pacer``; with them ``machine``: the load
+        :class:`teleop.timing.cycles.CycleStats`, in the stats' ``pacer``; with them ``machine``: the load
         average at the loop's start and end and the hypervisor's steal during the loop
-        (:func:`teleop.realtime.machine_steal`, summed over the CPUs), which tells a virtual
+        (:func:`teleop.timing.realtime.machine_steal`, summed over the CPUs), which tells a virtual
         machine's stalls (every process stopped at once) from the loop's own overruns; ``rt_budget_ms`` and
-        ``rt_stop_ms``: the kernel's real-time budget (:func:`teleop.realtime.rt_budget`), whose throttling
+        ``rt_stop_ms``: the kernel's real-time budget (:func:`teleop.timing.realtime.rt_budget`), whose throttling
         stops a ``SCHED_FIFO`` loop for up to ``rt_stop_ms`` (logged at the start when it applies).
         Ctrl-C, SIGTERM and ``max_duration`` end the loop between two steps, and within
-        :data:`teleop.clock.MAX_SLEEP` of their time while it sleeps, whatever its period.
+        :data:`teleop.timing.clock.MAX_SLEEP` of their time while it sleeps, whatever its period.
         """
         real = isinstance(clock, MonotonicClock)
         if real:
@@ -278,7 +278,7 @@ class NodeBase:
         stop.reraise()
 
     def _cycle_source(self):
-        """A subscriber whose messages start the cycles (:class:`~teleop.clock.LockedPacer`), or None: the
+        """A subscriber whose messages start the cycles (:class:`~teleop.timing.clock.LockedPacer`), or None: the
         fixed grid (default)."""
         return None
 

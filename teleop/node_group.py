@@ -10,7 +10,7 @@ device lost) makes that arm safe and leaves the other's cycle untouched; a lost 
 each arm's node safe by its own watchdog. An arm whose node is done is no longer stepped; the group
 is done when every arm is.
 
-A slave group's cycles start when the last arm's command arrives (:class:`teleop.clock.LockedPacer`, as a
+A slave group's cycles start when the last arm's command arrives (:class:`teleop.timing.clock.LockedPacer`, as a
 single slave's start on its command): the master group sends the arms' commands in arm order.
 
 The group times each arm's step (:meth:`arm_step_stats`: p50, p99, max [ms]) so the cost of each arm
@@ -23,13 +23,14 @@ from __future__ import annotations
 import logging
 import time
 from array import array
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
-from teleop.clock import Clock
-from teleop.messages import Side, SideState
 from teleop.node import NodeBase
+from teleop.timing.clock import Clock
+from teleop.wire.messages import Side, SideState
 
 __all__ = ["NodeGroup"]
 
@@ -81,7 +82,7 @@ class NodeGroup(NodeBase):
             for n in self.nodes:
                 n._t_origin = self._t_origin
         perf = time.perf_counter
-        active = [(node, times) for node, times in zip(self.nodes, self._steps) if not node.done]
+        active = [(node, times) for node, times in zip(self.nodes, self._steps, strict=False) if not node.done]
         for node, times in active:
             t0 = perf()
             node.step_send(now)
@@ -109,7 +110,7 @@ class NodeGroup(NodeBase):
     def arm_step_stats(self) -> dict[str, dict[str, float]]:
         """Per arm: ``{"cycles", "p50_ms", "p99_ms", "max_ms"}`` of its node's step time."""
         out = {}
-        for name, times in zip(self.names, self._steps):
+        for name, times in zip(self.names, self._steps, strict=False):
             a = np.frombuffer(times, dtype=float) if len(times) else np.zeros(1)
             out[name] = {"cycles": len(times), "p50_ms": float(1e3 * np.percentile(a, 50)),
                          "p99_ms": float(1e3 * np.percentile(a, 99)), "max_ms": float(1e3 * a.max())}
@@ -117,6 +118,6 @@ class NodeGroup(NodeBase):
 
     def stats(self) -> dict[str, Any]:
         """The loop's figures (``pacer``), each arm's step time (``arm_steps``) and each arm's own stats (``arms``)."""
-        return {"side": self.side.name.lower(), "arms": {n: node.stats() for n, node in zip(self.names, self.nodes)},
+        return {"side": self.side.name.lower(), "arms": {n: node.stats() for n, node in zip(self.names, self.nodes, strict=False)},
                 "arm_steps": self.arm_step_stats(), "pacer": dict(self.pacer_stats),
                 "safe_events": sum(getattr(n, "safe_events", 0) for n in self.nodes)}

@@ -1,4 +1,4 @@
-"""Every test, and every process a test starts, uses installation credentials of its own (teleop/credentials.py):
+"""Every test, and every process a test starts, uses installation credentials of its own (teleop/session/credentials.py):
 a folder per test worker, never the user's ``~/.config/tsm-teleop/keys``."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from teleop.credentials import KEYS_ENV
+from teleop.session.credentials import KEYS_ENV
 
 _ROOT = Path(tempfile.mkdtemp(prefix="tsm-teleop-test-keys-"))
 os.environ[KEYS_ENV] = str(_ROOT / "keys")

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import math
 
-from teleop.codec import decode, encode
-from teleop.transport import Received
+from teleop.session.transport import Received
+from teleop.wire.codec import decode, encode
 
 
 class Topic:

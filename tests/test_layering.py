@@ -15,9 +15,9 @@ Floors, each importing only the floors under it:
    to ``study/``.
 
 No two modules import each other, directly or round a circle, and no module imports another module's
-private (``_name``) helper. Modules keep to 400 lines and functions to 80; the compiled kernels named
-in ``LONG_KERNELS`` are the exceptions, each with its reason. No package, benchmark or example puts
-anything on ``sys.path``: they import the installed package.
+private (``_name``) helper. Modules keep to 600 lines (past 400 the docstring says why) and functions to
+80; the compiled kernels named in ``LONG_KERNELS`` are the exceptions, each with its reason. No package,
+benchmark or example puts anything on ``sys.path``: they import the installed package.
 """
 from __future__ import annotations
 
@@ -133,7 +133,7 @@ def test_every_source_parses():
 
 
 def test_the_walk_sees_the_packages():
-    assert {"estimator.sheath", "estimator.online.distal", "estimator.offline.diagnosis", "teleop.messages",
+    assert {"estimator.sheath", "estimator.online.distal", "estimator.offline.diagnosis.selection", "teleop.wire.messages",
             "live.cli", "slave.node", "master.node"} <= set(GRAPH)
     assert any(dep == "estimator.sheath" for dep, _, _ in GRAPH["slave.simulated"])
 
@@ -197,14 +197,17 @@ def test_no_private_helper_imported_across_modules():
 #: Compiled (numba) kernels allowed past the 80-line bound: one loop over samples whose state lives in
 #: local variables, where splitting would cost a call per sample inside the compiled loop.
 LONG_KERNELS: dict[str, str] = {
-    "estimator.offline.effects_kernels._kernel": "one compiled pass of every catalogue effect per sample",
-    "estimator.offline.presliding_kernel._node_kernel": "one compiled pass over the sheath nodes per sample",
+    "estimator.offline.effects.kernels._kernel": "one compiled pass of every catalogue effect per sample",
+    "estimator.offline.effects.presliding_kernel._node_kernel": "one compiled pass over the sheath nodes per sample",
     "study.lumped_kernel.simulate": "the lumped simulator's compiled integration loop",
 }
 
 #: Where the size bounds and the sys.path rule are checked: the packages, the benchmarks and the examples.
 SOURCE_DIRS = PACKAGES + ("benchmarks", "examples")
-MODULE_LINES, FUNCTION_LINES = 400, 80
+#: A module is cut by concept: up to ``MODULE_LINES``; past ``EXPLAINED_LINES`` its docstring says why in one line
+#: that starts with ``Over 400 lines:`` (one concept that does not split cleanly, and what it is).
+EXPLAINED_LINES, MODULE_LINES, FUNCTION_LINES = 400, 600, 80
+WHY = "Over 400 lines:"
 
 
 def _sources():
@@ -212,10 +215,21 @@ def _sources():
         yield from sorted((ROOT / d).rglob("*.py"))
 
 
-def test_modules_keep_to_400_lines():
+def test_modules_keep_to_600_lines():
     long = [f"{p.relative_to(ROOT)}: {n}" for p in _sources()
             if (n := p.read_text(encoding="utf-8").count("\n")) > MODULE_LINES]
     assert not long, f"modules over {MODULE_LINES} lines: {long}"
+
+
+def test_a_module_over_400_lines_says_why():
+    unexplained = []
+    for p in _sources():
+        text = p.read_text(encoding="utf-8")
+        if text.count("\n") > EXPLAINED_LINES:
+            doc = ast.get_docstring(ast.parse(text)) or ""
+            if not any(line.strip().startswith(WHY) for line in doc.splitlines()):
+                unexplained.append(str(p.relative_to(ROOT)))
+    assert not unexplained, f"modules over {EXPLAINED_LINES} lines whose docstring has no '{WHY}' line: {unexplained}"
 
 
 def test_functions_keep_to_80_lines():

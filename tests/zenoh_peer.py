@@ -5,7 +5,7 @@ import json
 
 import zenoh
 
-from teleop.credentials import ensure_credentials
+from teleop.session.credentials import ensure_credentials
 
 
 def raw_peer(endpoints: str | list[str], user: str | None = None, password: str | None = None, *,

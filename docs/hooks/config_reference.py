@@ -3,9 +3,9 @@
 A page holding the line ``<!-- config-reference -->`` gets, in its place, one table per top-level
 section of the configuration: every key (``[]`` stands for any list index), its default, unit,
 valid range and meaning. The keys, defaults and types come from the dataclasses of
-:mod:`teleop.schema`, the ranges and units from ``teleop.schema.RANGES`` and the effect catalogue
-(:func:`teleop.effects_config.effect_ranges`), the meanings from the comments of
-``configs/default.yaml`` (else the field's comment in ``teleop/schema.py``). Nothing is written by
+:mod:`teleop.config.schema`, the ranges and units from ``teleop.config.ranges.RANGES`` and the effect catalogue
+(:func:`teleop.config.effects.effect_ranges`), the meanings from the comments of
+``configs/default.yaml`` (else the field's comment in ``teleop/config/schema.py``). Nothing is written by
 hand, so the page cannot drift from the code: a key added to the schema appears on the next build.
 """
 from __future__ import annotations
@@ -14,8 +14,9 @@ import dataclasses
 import math
 import re
 import typing
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 MARKER = "<!-- config-reference -->"
 ROOT = Path(__file__).resolve().parents[2]
@@ -96,7 +97,7 @@ def _default(f: dataclasses.Field, owner: Any) -> Any:
 
 def walk(cls: type, prefix: str, owner: Any) -> Iterator[tuple[str, Any, Any, str]]:
     """(dotted key, type, default, schema class name) of every leaf setting under ``cls``."""
-    from teleop.effects_config import EffectsConfig
+    from teleop.config.effects import EffectsConfig
     hints = typing.get_type_hints(cls)
     for f in dataclasses.fields(cls):
         key, tp = f"{prefix}{f.name}", hints[f.name]
@@ -115,7 +116,7 @@ def walk(cls: type, prefix: str, owner: Any) -> Iterator[tuple[str, Any, Any, st
 
 
 def _effects(key: str) -> Iterator[tuple[str, Any, Any, str]]:
-    from teleop.effects_config import switch_entries
+    from teleop.config.effects import switch_entries
     for name, entry in switch_entries().items():
         yield f"{key}.{name}.enabled", bool, False, f"effect:{entry.switch.summary}"
         for s in entry.switch.settings:
@@ -150,11 +151,12 @@ def _cell(text: str) -> str:
 
 def rows() -> list[tuple[str, str, str, str, str]]:
     """(key, default, unit, range, meaning) of every setting, in schema order."""
-    from teleop import schema
-    from teleop.effects_config import effect_ranges
-    ranges = {**schema.RANGES, **effect_ranges()}
+    from teleop.config import schema
+    from teleop.config.effects import effect_ranges
+    from teleop.config.ranges import RANGES
+    ranges = {**RANGES, **effect_ranges()}
     yaml = yaml_comments(ROOT / "configs" / "default.yaml")
-    source = schema_comments(ROOT / "teleop" / "schema.py")
+    source = schema_comments(ROOT / "teleop" / "config" / "schema.py")
     out = []
     for key, tp, default, owner in walk(schema.Config, "", schema.Config()):
         rule, unit = ranges.get(key) or ranges.get(key + "[]", ("", ""))

@@ -2,9 +2,9 @@
 
 Identification: :mod:`~estimator.offline.calibration` (the seed paper's joint-limit initialisation, run
 by the slave before the loop starts, never inside it), :mod:`~estimator.offline.fit`,
-:mod:`~estimator.offline.pair`, :mod:`~estimator.offline.spindle_fit`. Diagnosis and the effect
-catalogue: :mod:`~estimator.offline.effects`, :mod:`~estimator.offline.diagnosis`,
-:mod:`~estimator.offline.pair_diagnosis`, shared parameter sets across configurations or runs:
-:mod:`~estimator.offline.pair_shared`, :mod:`~estimator.offline.pair_general`,
-:mod:`~estimator.offline.spindle_shared`. They may import the online estimator and the model core.
+:mod:`~estimator.offline.pair.fit`, :mod:`~estimator.offline.spindle.fit`. Diagnosis and the effect
+catalogue: :mod:`~estimator.offline.effects.catalogue`, :mod:`~estimator.offline.diagnosis.selection`,
+:mod:`~estimator.offline.pair.diagnosis`, shared parameter sets across configurations or runs:
+:mod:`~estimator.offline.pair.shared`, :mod:`~estimator.offline.pair.general`,
+:mod:`~estimator.offline.spindle.shared`. They may import the online estimator and the model core.
 """

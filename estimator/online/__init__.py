@@ -1,7 +1,7 @@
 """The online estimator: what runs in the slave's control loop, sample by sample, from proximal sensors.
 
 :mod:`~estimator.online.distal` (one tendon: distal tension and elongation, profile memory),
-:mod:`~estimator.online.joint` and :mod:`~estimator.online.joint_batch` (an antagonistic pair: joint
+:mod:`~estimator.online.pair` and :mod:`~estimator.online.pair_batch` (an antagonistic pair: joint
 torque and angle), :mod:`~estimator.online.spindle` (a cable pair on one input spindle; per cycle
 :mod:`~estimator.online.spindle_estimator`), :mod:`~estimator.online.spindle_centre` (the jaw torque from the
 spindle's band centre; per cycle :mod:`~estimator.online.centre_estimator`). They import

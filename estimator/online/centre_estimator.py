@@ -1,7 +1,7 @@
 """The centre map of :mod:`estimator.online.spindle_centre`, one sample at a time (the slave's rate).
 
 The same (SC1) band-centre reading and (SC2) torque map as the batch :func:`predict_centre_map` (with the
-shape held outside the calibration's angle range, as :func:`estimator.offline.spindle_centre_fit.predict_held`),
+shape held outside the calibration's angle range, as :func:`estimator.offline.spindle.centre_fit.predict_held`),
 carried forward one cycle with the state kept between calls: the last ``2 HALF_WINDOW`` spindle angles (the
 rate), the running edge means of the stroke under way and the last completed stroke of each direction, and
 the lagged direction state z.

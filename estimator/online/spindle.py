@@ -82,7 +82,7 @@ class SpindleParams:
     def as_dict(self) -> dict[str, float]:
         return {k: float(v) for k, v in asdict(self).items()}
 
-    def with_values(self, **kw) -> "SpindleParams":
+    def with_values(self, **kw) -> SpindleParams:
         return replace(self, **{k: float(v) for k, v in kw.items()})
 
 

@@ -95,7 +95,7 @@ def stroke_centre(tau_p: np.ndarray, theta_p: np.ndarray, dt: float, window: tup
     edge = np.full((2, th.size), np.nan)            # row 0: high edge (falling angle), row 1: low edge
     last = [np.nan, np.nan]
     flat = [tau - edge_slope[0] * (th - theta_ref), tau - edge_slope[1] * (th - theta_ref)]
-    for a, b in zip(cuts[:-1], cuts[1:]):
+    for a, b in zip(cuts[:-1], cuts[1:], strict=False):
         m = inside[a:b]
         j = 0 if np.mean(om[a:b]) < 0 else 1
         edge[:, a:b] = np.array(last)[:, None]
@@ -121,7 +121,7 @@ def centre_ready(theta_p: np.ndarray, dt: float, window: tuple[float, float]) ->
     cuts = np.concatenate([[0], stroke_starts(om), [th.size]])
     inside = (th >= window[0]) & (th <= window[1]) & (np.abs(om) > MIN_RATE)
     seen = [th.size, th.size]
-    for a, b in zip(cuts[:-1], cuts[1:]):
+    for a, b in zip(cuts[:-1], cuts[1:], strict=False):
         j = 0 if np.mean(om[a:b]) < 0 else 1
         n = np.cumsum(inside[a:b])
         if seen[j] == th.size and n.size and n[-1] >= MIN_SAMPLES:

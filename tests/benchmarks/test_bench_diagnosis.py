@@ -37,7 +37,7 @@ def test_seed_sets_do_not_overlap(bench):
     # every seed set spans less than 100000 seeds (effects 100 + 1000 k + 10 j + s, clean 500+, other 900+)
     bases = sorted(bench.SEED_BASE.values())
     assert len(set(bases)) == len(bases)
-    assert all(b - a >= 100000 for a, b in zip(bases, bases[1:]))
+    assert all(b - a >= 100000 for a, b in zip(bases, bases[1:], strict=False))
     n_eff = len(bench.EFFECT_IDS)
     assert bench.effect_seed(0, n_eff - 1, 1, 1) < 100000
     assert bench.SEED_BASE["final"] == max(bases)

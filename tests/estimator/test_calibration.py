@@ -4,9 +4,9 @@ import math
 import numpy as np
 import pytest
 
+from estimator.errors import CalibrationError
 from estimator.offline.calibration import calibrate_joint_limit, detect_knee
 from estimator.sheath import Run, SheathGeometry, SheathModel
-from teleop.errors import CalibrationError
 
 L, EA = 1.5, 15000.0
 

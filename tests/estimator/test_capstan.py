@@ -15,7 +15,7 @@ MODEL = SheathModel(K=K, compliance=C)
 
 def ramp(*points, n=4000):
     return np.concatenate([np.linspace(a, b, n)[1:] if i else np.linspace(a, b, n)
-                           for i, (a, b) in enumerate(zip(points[:-1], points[1:]))])
+                           for i, (a, b) in enumerate(zip(points[:-1], points[1:], strict=False))])
 
 
 def test_pull_and_release_ratios():
@@ -83,7 +83,7 @@ def test_phase_labels_follow_the_cycle():
     # sustained phases (>= 20 ms); the smoothed rate lags a reversal by a few samples
     change = np.flatnonzero(np.diff(ph)) + 1
     starts, ends = np.r_[0, change], np.r_[change, ph.size]
-    seq = [Phase(ph[a]) for a, b in zip(starts, ends) if b - a >= 20]
+    seq = [Phase(ph[a]) for a, b in zip(starts, ends, strict=False) if b - a >= 20]
     assert seq[0] == Phase.HOLD and T_in[change[0]] == pytest.approx(0.2, abs=0.02)  # readable: past the 0.2 N band
     assert seq[1:] == [Phase.PULL, Phase.PULL_TO_RELEASE, Phase.RELEASE, Phase.RELEASE_TO_PULL, Phase.PULL]
     # the pull->release band ends where T_in = 20 e^-2K

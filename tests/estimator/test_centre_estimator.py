@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimator.offline.spindle_centre_fit import predict_held
+from estimator.offline.spindle.centre_fit import predict_held
 from estimator.online.centre_estimator import CentreEstimator
 from estimator.online.spindle_centre import CentreParams
 
@@ -30,7 +30,7 @@ def test_the_online_centre_map_is_the_batch_one_within_its_rate_delay(shape_rang
     t, theta, tau = run()
     p = params(shape_range)
     est = CentreEstimator(p)
-    online = np.array([est.step(a, b, c) for a, b, c in zip(tau, theta, t)])
+    online = np.array([est.step(a, b, c) for a, b, c in zip(tau, theta, t, strict=False)])
     batch = predict_held(p, tau, theta, 1e-3)
     scale = np.ptp(batch)
     late = t > 4.0                      # both readings hold both band edges

@@ -16,10 +16,11 @@ import numpy as np
 import pytest
 
 from estimator.data import MeasuredData
-from estimator.offline import diagnosis_folds, diagnosis_readings
-from estimator.offline import diagnosis_thresholds as th
-from estimator.offline.diagnosis import EXCESS_MIN, EXCESS_MIN_WITHOUT, FLOOR_SCORE_WITHOUT, STRONG_SCORE, diagnose
-from estimator.offline.diagnosis_fit import (
+from estimator.errors import DataError
+from estimator.offline.diagnosis import folds as diagnosis_folds
+from estimator.offline.diagnosis import readings as diagnosis_readings
+from estimator.offline.diagnosis import thresholds as th
+from estimator.offline.diagnosis.fit import (
     paired_trimmed_ms,
     prepare,
     rest_start,
@@ -27,12 +28,19 @@ from estimator.offline.diagnosis_fit import (
     start_points,
     trimmed_ms,
 )
-from estimator.offline.diagnosis_readings import look_alike, toe_or_play
-from estimator.offline.diagnosis_thresholds import K_RESTART
-from estimator.offline.effects import CATALOGUE, EFFECT_IDS, EQUIVALENT, route_shape
+from estimator.offline.diagnosis.readings import look_alike, toe_or_play
+from estimator.offline.diagnosis.selection import diagnose
+from estimator.offline.diagnosis.thresholds import (
+    EXCESS_MIN,
+    EXCESS_MIN_WITHOUT,
+    FLOOR_SCORE_WITHOUT,
+    K_RESTART,
+    STRONG_SCORE,
+)
+from estimator.offline.effects.catalogue import CATALOGUE, EFFECT_IDS, EQUIVALENT
+from estimator.offline.effects.types import route_shape
 from study import lumped_scenarios
 from study.scenarios import record
-from teleop.errors import DataError
 
 DUR, RATE = 45.0, 500.0
 # rig parameter -> fitted parameter (physical effects; a sensor effect's one parameter is its own)
@@ -161,7 +169,7 @@ def test_result_keys_units_and_json(clean_result):
 
 
 def test_the_typed_result_writes_and_reads_the_same_json_keys(clean_result):
-    from estimator.offline.diagnosis_result import Diagnosis, as_diagnosis
+    from estimator.offline.diagnosis.result import Diagnosis, as_diagnosis
     rec, res = clean_result
     typed = Diagnosis.from_json(res)
     assert typed.cause == res["cause"] and typed.stick_slip.ratio == res["stick_slip"]["ratio"]
@@ -303,7 +311,7 @@ def test_lumped_x_in_offset_the_models_leave_at_the_floor_is_named_by_the_initia
     # a 36 um x_in offset, far from its clean twin in x_in's noise, but the base absorbs it to 1.8 x its floor and the
     # offset's S is 0.41: the models alone say "none". The encoder reads 36 um at the initial rest, where positions
     # are zeroed: the rest reading names it; the clean twin reads zero
-    from estimator.offline import diagnosis
+    from estimator.offline.diagnosis import selection as diagnosis
     cands = ("sensor_offset:x_in", "tendon_stiffening", "friction_offset")
     rec = lumped_scenarios.record("sensor_offset:x_in", seed=4716102, level=0.2, duration=60.0)
     res = diagnose(rec.data, effects=cands)
@@ -584,7 +592,7 @@ def test_a_distal_end_held_on_its_stop_sets_x_out_aside_and_gives_none():
     # a preloaded spring that T_out (at most 2.5 N) never lifts off its stop (preload 2.8 N): x_out stays within one
     # 1.2 um quantum while x_in travels 0.36 mm. Fitting that x_out would bend K and let a play "explain" the standing
     # distal end: it is set aside
-    from estimator.offline.diagnosis import predictions
+    from estimator.offline.diagnosis.fit import predictions
     rec = lumped_scenarios.record(None, seed=1019112, duration=60.0)
     res = diagnose(rec.data, effects=("distal_backlash", "friction_offset", "sensor_offset:T_in"))
     held = res["settings"]["distal_end_held"]
@@ -616,8 +624,8 @@ def test_a_distal_end_pressed_on_its_stop_by_a_pretension_names_the_pretension()
 def test_distal_end_held_only_when_x_out_stands_within_its_resolution():
     from dataclasses import replace
 
-    from estimator.offline.diagnosis_readings import distal_end_held
-    from estimator.offline.diagnosis_thresholds import HELD_STEPS, NEAR_HELD_SHARE
+    from estimator.offline.diagnosis.readings import distal_end_held
+    from estimator.offline.diagnosis.thresholds import HELD_STEPS, NEAR_HELD_SHARE
     rec = record(None, seed=21, duration=DUR, rate_hz=RATE)
     assert distal_end_held(rec.data) is None                               # a moving distal end
     q = 1e-6
@@ -635,8 +643,8 @@ def test_distal_end_held_only_when_x_out_stands_within_its_resolution():
 
 
 def test_distal_at_end_reads_how_much_of_the_proximal_travel_the_distal_end_sits_on_a_stop():
-    from estimator.offline.diagnosis_readings import distal_at_end
-    from estimator.offline.diagnosis_thresholds import AT_END_HIDES, AT_END_SHARE
+    from estimator.offline.diagnosis.readings import distal_at_end
+    from estimator.offline.diagnosis.thresholds import AT_END_HIDES, AT_END_SHARE
     rec = record(None, seed=21, duration=DUR, rate_hz=RATE)
     moving = distal_at_end(rec.data)
     assert moving is not None and moving["share"] < 0.3 and moving["hides"] == []
@@ -671,8 +679,8 @@ def test_a_joint_held_on_its_stop_is_reported_as_unable_to_show_a_lag_of_x_out()
 
 
 def test_a_tension_offset_below_twice_the_floor_is_not_resolved():
-    from estimator.offline.diagnosis_folds import unresolved as _unresolved
-    from estimator.offline.diagnosis_thresholds import OFFSET_FLOORS
+    from estimator.offline.diagnosis.folds import unresolved as _unresolved
+    from estimator.offline.diagnosis.thresholds import OFFSET_FLOORS
     floor = {"T_out": 0.03, "x_out": 2e-6}
     fo, tin, tout = (CATALOGUE[e] for e in ("friction_offset", "sensor_offset:T_in", "sensor_offset:T_out"))
     # F0 = a (1 - e^-K) at the tip: a = 0.07 N on K = 1.39 is 0.052 N < 2 x 0.03 N (a constant-force twin's)
@@ -762,7 +770,8 @@ def test_a_distal_load_cell_gain_on_a_constant_force_load_is_named_once_the_dist
 
 
 def test_floor_scores_bound_each_effect_below_its_lowest_clean_score():
-    from estimator.offline.diagnosis import FLOOR_FACTOR, MID_SCORE, floor_scores
+    from estimator.offline.diagnosis.selection import floor_scores
+    from estimator.offline.diagnosis.thresholds import FLOOR_FACTOR, MID_SCORE
     clean = [{"sensor_lag:T_out": 0.9, "stiction": 0.6}, {"sensor_lag:T_out": 0.8, "stiction": 0.43}]
     got = floor_scores(clean)
     assert got == {"sensor_lag:T_out": pytest.approx(min(MID_SCORE, FLOOR_FACTOR * 0.8)),
@@ -779,7 +788,7 @@ def test_floor_scores_bound_each_effect_below_its_lowest_clean_score():
 def test_the_floor_table_holds_every_catalogue_candidate_below_the_price():
     # every bound lies between STRONG_SCORE's reach and the price of one parameter: the table can only add names
     # at the floor, never accept what the price refuses
-    from estimator.offline.diagnosis import FLOOR_SCORE, MID_SCORE, PENALTY
+    from estimator.offline.diagnosis.thresholds import FLOOR_SCORE, MID_SCORE, PENALTY
     assert set(FLOOR_SCORE) <= set(CATALOGUE)
     assert all(0.0 < v <= min(MID_SCORE, 1.0 - PENALTY) for v in FLOOR_SCORE.values())
 
@@ -817,7 +826,7 @@ def _moves_and_holds(rate=500.0, seed=0, chatter=0.0):
 
 
 def test_stick_slip_ratio_is_about_one_for_sensor_noise_and_large_for_a_saw_tooth():
-    from estimator.offline.diagnosis import STICK_SLIP_RATIO
+    from estimator.offline.diagnosis.thresholds import STICK_SLIP_RATIO
     for rate in (200.0, 1000.0):
         t, x, T = _moves_and_holds(rate)
         assert 0.8 < diagnosis_readings.stick_slip_ratio(t, x, T) < 1.2
@@ -855,14 +864,13 @@ def test_weak_stick_slip_with_a_stiction_fit_that_explains_a_tenth_names_stictio
     # a Stribeck peak of 0.51 on a soft joint: the tension is low and the saw-tooth small, T_in 1.2 x rougher in moves
     # than in holds (under STICK_SLIP_RATIO), and stiction's S 0.64 (the base at its floor). Two weak signs together
     # name it; its clean twin shows neither
-    from estimator.offline import diagnosis
     cands = ("stiction", "velocity_friction", "friction_offset")
     rec = lumped_scenarios.record("stiction", seed=3904113, level=0.8, duration=60.0)
     res = diagnose(rec.data, effects=cands)
     slip = res["stick_slip"]
     assert res["cause"] == "stiction", (slip, res["candidates"]["stiction"]["score"])
     assert slip["named"] and slip["weak"]
-    assert diagnosis.STICK_SLIP_WEAK <= slip["ratio"] < diagnosis.STICK_SLIP_RATIO
+    assert th.STICK_SLIP_WEAK <= slip["ratio"] < th.STICK_SLIP_RATIO
     assert res["candidates"]["stiction"]["score"] < res["settings"]["stick_slip_weak_score"]
     from study.report import format_summary
     assert "two weak signs" in format_summary(res)
@@ -877,14 +885,13 @@ def test_a_clear_saw_tooth_overrules_a_named_effect_that_leaves_structure(monkey
     # a Stribeck peak of 0.51 on a constant force: T_in is 6.5 x rougher in steady moves than in holds, and the models
     # name a T_in lag that leaves 3.7 x the floor. A sensor lag has no stick-slip: stiction is named, the lag set
     # aside, the structure still said
-    from estimator.offline import diagnosis
     cands = ("stiction", "sensor_lag:T_in", "velocity_friction")
     rec = lumped_scenarios.record("stiction", seed=4604111, level=0.8, duration=60.0)
     res = diagnose(rec.data, effects=cands)
     slip = res["stick_slip"]
     assert res["causes"] == ["stiction", "unknown"], slip
     assert slip["named"] and not slip["weak"] and slip["overruled"] == ["sensor_lag:T_in"]
-    assert slip["ratio"] >= 3 * diagnosis.STICK_SLIP_RATIO
+    assert slip["ratio"] >= 3 * th.STICK_SLIP_RATIO
     from study.report import format_summary
     assert "the models named sensor_lag:T_in, which left structure" in format_summary(res)
     twin = diagnose(lumped_scenarios.record(None, seed=4604111, level=0.8, duration=60.0).data, effects=cands)
@@ -909,14 +916,13 @@ def test_a_fold_fitted_on_one_pull_does_not_judge_the_route(monkeypatch):
     # pull alone the route's shape is unknown and the forward validation block (the release) would show the base's
     # extrapolation. The backward fold, whose fit block holds the release, judges alone: "none"; the same rig with a
     # 14 % K drift hidden is named
-    from estimator.offline import diagnosis
     twin = lumped_scenarios.record(None, seed=4402103, level=0.2, duration=60.0)
     res = diagnose(twin.data)
     assert res["cause"] == "none", res["structure"]
     assert res["split"]["judged_folds"][0].startswith("backward alone")
     from study.report import split_text
     assert "Judged on the backward alone" in split_text(res)
-    assert max(res["structure"]["base"].values()) < diagnosis.STRUCTURE_RATIO
+    assert max(res["structure"]["base"].values()) < th.STRUCTURE_RATIO
     drift = diagnose(lumped_scenarios.record("curvature_drift", seed=4402103, level=0.2, duration=60.0).data)
     assert drift["cause"] == "curvature_drift" and drift["gain"] > 0.3
     # with both folds judging, the extrapolation is read as structure
@@ -942,7 +948,7 @@ class _StubFit:
 def test_the_stick_slip_rule_names_stiction_only_on_a_rough_proximal_tension():
     from types import SimpleNamespace
 
-    from estimator.offline.diagnosis_rules import stick_slip_rule
+    from estimator.offline.diagnosis.rules import stick_slip_rule
     ctx = SimpleNamespace(floor={"T_out": 1.0})
     base, stiction = _StubFit(()), _StubFit(("stiction",), S=0.95)
     singles = {"stiction": stiction}
@@ -963,7 +969,7 @@ def test_the_stick_slip_rule_names_stiction_only_on_a_rough_proximal_tension():
 
 
 def test_the_rest_rule_names_an_encoder_offset_only_when_the_models_named_nothing():
-    from estimator.offline.diagnosis_rules import rest_rule
+    from estimator.offline.diagnosis.rules import rest_rule
     base, offset = _StubFit(()), _StubFit(("sensor_offset:x_in",), S=0.4)
     singles = {"sensor_offset:x_in": offset}
     assert rest_rule(base, singles, "sensor_offset:x_in") == (offset, True)
@@ -976,7 +982,7 @@ def test_the_rest_rule_names_an_encoder_offset_only_when_the_models_named_nothin
 
 
 def test_the_verdict_puts_unknown_first_only_when_the_catalogue_missed_most_of_the_structure():
-    from estimator.offline.diagnosis_rules import verdict
+    from estimator.offline.diagnosis.rules import verdict
     r = th.STRUCTURE_RATIO
     side = _StubFit(("sensor_offset:T_in",), S=0.5)
     # more than twice the threshold left after an effect that explains only part of it: unknown first
@@ -994,7 +1000,7 @@ def test_the_verdict_puts_unknown_first_only_when_the_catalogue_missed_most_of_t
 def test_at_the_floor_an_effect_is_named_by_its_bar_or_by_the_excess_it_removes():
     from types import SimpleNamespace
 
-    from estimator.offline.diagnosis_rules import shown_at_floor
+    from estimator.offline.diagnosis.rules import shown_at_floor
     ctx = SimpleNamespace(floor={"T_out": 1.0}, subset_floor={}, excess_min=th.EXCESS_MIN)
     base = _StubFit((), ratio=1.0)                          # at its floor: B = 1 squared floor
     # an effect without its own bound: STRONG_SCORE

@@ -2,14 +2,14 @@
 
 ``diagnosis_pinned.json`` beside this file holds, for short recordings of both simulators (the project's rig,
 :mod:`study.scenarios`, and the independent lumped-mass simulator, :mod:`study.lumped_scenarios`), clean ones and
-one or more per effect family, how each is made and what :func:`estimator.offline.diagnosis.diagnose` answers:
+one or more per effect family, how each is made and what :func:`estimator.offline.diagnosis.selection.diagnose` answers:
 ``cause`` and ``causes`` (compared exactly) and ``gain`` (to :data:`GAIN_TOL`, derived from the fits' own
 tolerance: the same answers on any CPU, whatever its vector width or its order of floating-point sums). The set covers the procedure's rules: the finer
 route, the rest reading, the stick-slip reading, the held distal end, an effect judged on one fold, structure no
 extension explains. A change of the code that is not meant to change an answer must leave them all; one that is
 meant to rewrites the file (``python tests/estimator/test_diagnosis_pinned.py --write``) in the same commit.
 
-The pair diagnosis (:func:`estimator.offline.pair_diagnosis.diagnose_pair`) is pinned the same way on one KAIST
+The pair diagnosis (:func:`estimator.offline.pair.diagnosis.diagnose_pair`) is pinned the same way on one KAIST
 recording when the data set is present.
 """
 from __future__ import annotations
@@ -21,9 +21,9 @@ from pathlib import Path
 
 import pytest
 
-from estimator.offline import diagnosis_thresholds as th
-from estimator.offline.diagnosis import diagnose
-from estimator.offline.diagnosis_pair_fit import FIT_TOL as PAIR_FIT_TOL
+from estimator.offline.diagnosis import thresholds as th
+from estimator.offline.diagnosis.selection import diagnose
+from estimator.offline.pair.diagnosis_fit import FIT_TOL as PAIR_FIT_TOL
 from study import kaist_files, lumped_scenarios, scenarios
 from study.datasets import KAIST, skip_reason
 
@@ -93,7 +93,7 @@ def answer(case: dict) -> dict:
 
 def pair_answer() -> dict:
     """The pair diagnosis of the KAIST recording at 0 deg: {cause, causes, gain}."""
-    from estimator.offline.pair_diagnosis import diagnose_pair
+    from estimator.offline.pair.diagnosis import diagnose_pair
     from study import kaist
     rec = next(r for r in kaist.load_all(KAIST_DIR) if r.config_deg == 0)
     train, test, _ = kaist.split(rec)

@@ -8,34 +8,38 @@ import math
 import numpy as np
 import pytest
 
-from estimator.offline import effects as effects_module
-from estimator.offline.effects import (
+from estimator.offline.effects import catalogue as effects_module
+from estimator.offline.effects.catalogue import (
     CATALOGUE,
     EFFECT_IDS,
-    NODE_FORM,
     NOISE_BAND,
     PRESLIDING_MIN,
-    ROUTE_FINE,
-    ROUTE_FORMS,
-    ROUTE_TWELFTHS,
     SPEED_FORM,
     STRIBECK_FORM,
     STRIBECK_SPEED,
-    Series,
     below_resolution,
     effect,
-    finer_route,
     neutral_values,
     predict,
+)
+from estimator.offline.effects.kernels import distal_slide, run_extended
+from estimator.offline.effects.predict import SLACK_HELD, SLACK_SIGMAS, SLACK_TAUT, SLACK_WINDOW, slack_hold
+from estimator.offline.effects.presliding_kernel import NODE_FORM
+from estimator.offline.effects.types import (
+    ROUTE_FINE,
+    ROUTE_FORMS,
+    ROUTE_TWELFTHS,
+    Series,
+    finer_route,
+    route_shape,
     route_values,
 )
-from estimator.offline.effects_kernels import distal_slide, route_shape, run_extended
-from estimator.offline.effects_predict import SLACK_HELD, SLACK_SIGMAS, SLACK_TAUT, SLACK_WINDOW, slack_hold
 from estimator.online.distal import estimate_batch
 from estimator.sheath import SheathGeometry, SheathModel
 from slave.simulated import SimulatedRig
 from study.scenarios import protocol
-from teleop import config as C
+from teleop.config.effects import EffectsConfig, EffectSwitch
+from teleop.config.schema import LoadConfig, RunConfig, SensorConfig, SheathConfig, SimulatedRigConfig
 
 IDS = ("velocity_friction", "pretension", "curvature_drift", "tendon_stiffening", "stiction", "friction_offset",
        "presliding", "distal_backlash",
@@ -475,11 +479,11 @@ def test_compliance_is_fitted_by_linear_least_squares():
 # ---- cross-check: the rig's physics (driven by x_in) against the kernel (driven by the rig's T_in) --
 
 RIG_CASES = {   # rig switch, kernel values, rms tolerance on T_out [N] and on x_out [m]
-    "velocity_friction": (C.EffectSwitch(True, viscous=20.0), {"c_v": 20.0}, 0.02, 6e-6),
-    "curvature_drift": (C.EffectSwitch(True, rate=0.01), {"K_rate": 0.01}, 1e-4, 1e-7),
-    "tendon_stiffening": (C.EffectSwitch(True, softening=2.0, toe_tension=2.0), {"beta": 2.0, "T_c": 2.0}, 1e-9, 1e-7),
-    "stiction": (C.EffectSwitch(True, static_ratio=0.4), {"r_s": 0.4}, 1e-6, 1e-7),
-    "friction_offset": (C.EffectSwitch(True, tension_offset=1.0), {"a": 1.0}, 1e-6, 1e-7),
+    "velocity_friction": (EffectSwitch(True, viscous=20.0), {"c_v": 20.0}, 0.02, 6e-6),
+    "curvature_drift": (EffectSwitch(True, rate=0.01), {"K_rate": 0.01}, 1e-4, 1e-7),
+    "tendon_stiffening": (EffectSwitch(True, softening=2.0, toe_tension=2.0), {"beta": 2.0, "T_c": 2.0}, 1e-9, 1e-7),
+    "stiction": (EffectSwitch(True, static_ratio=0.4), {"r_s": 0.4}, 1e-6, 1e-7),
+    "friction_offset": (EffectSwitch(True, tension_offset=1.0), {"a": 1.0}, 1e-6, 1e-7),
 }
 
 
@@ -492,11 +496,11 @@ def test_extension_reproduces_the_rig_with_the_same_effect(eid, monkeypatch):
     monkeypatch.setattr(effects_module, "NOISE_BAND", 0.0)
     sub, values, tol_T, tol_x = RIG_CASES[eid]
     geo = SheathGeometry.uniform(L, 2 * math.pi)
-    sheath = C.SheathConfig(EA=EA, runs=tuple(C.RunConfig(r.length, r.radius) for r in geo.runs))
-    rig = SimulatedRig(sheath, C.SimulatedRigConfig(n_elements=100, mu=K / (2 * math.pi),
-                                                    effects=C.EffectsConfig(**{eid: sub}),
-                                                    sensors=C.SensorConfig(load_cell_noise=0.0),
-                                                    load=C.LoadConfig(joint_limit=0.05, tissue_stiffness=2000.0)))
+    sheath = SheathConfig(EA=EA, runs=tuple(RunConfig(r.length, r.radius) for r in geo.runs))
+    rig = SimulatedRig(sheath, SimulatedRigConfig(n_elements=100, mu=K / (2 * math.pi),
+                                                    effects=EffectsConfig(**{eid: sub}),
+                                                    sensors=SensorConfig(load_cell_noise=0.0),
+                                                    load=LoadConfig(joint_limit=0.05, tissue_stiffness=2000.0)))
     rest = 0.0012 if eid == "friction_offset" else 0.0002        # taut at rest
     cmd = rig.state.truth.x_in + protocol(20.0, 1000.0, 0.006, np.random.default_rng(3), rest)
     tr = [rig.step(float(x), 1e-3).truth for x in cmd]
@@ -522,7 +526,7 @@ def test_extension_reproduces_the_rig_with_the_same_effect(eid, monkeypatch):
 def test_presliding_fit_keeps_a_travel_the_sensors_resolve():
     # a base-model recording (no pre-sliding) with x_out: the per-node form, started at 1 um, may not go below
     # PRESLIDING_MIN, where it would differ from the base model only by driving the distal end on the measured x_out
-    from estimator.offline.diagnosis_fit import fit_model
+    from estimator.offline.diagnosis.fit import fit_model
     T = np.concatenate((np.linspace(0, 15, 600), np.linspace(15, 2, 500), np.linspace(2, 12, 500)))
     x = np.concatenate((np.linspace(0, 0.005, 600), np.linspace(0.005, 0.001, 500), np.linspace(0.001, 0.004, 500)))
     s0 = series(T, x)
@@ -559,7 +563,7 @@ def test_the_finer_route_holds_the_thirds_as_a_special_case():
 def test_the_twelfths_hold_the_sixths_and_the_thirds_as_special_cases():
     # each sixth's share split over its two twelfths (and the thirds through them) gives the same wrap shape
     for sixths in ((0.0, 0.247, 0.2, 0.253, 1.0), (1 / 6, 0.2, 0.25, 1 / 3, 0.5), (0.9, 0.0, 0.5, 0.0, 0.3)):
-        fine = finer_route(dict(zip(("r_1", "r_2", "r_3", "r_4", "r_5"), sixths)), ROUTE_TWELFTHS)
+        fine = finer_route(dict(zip(("r_1", "r_2", "r_3", "r_4", "r_5"), sixths, strict=False)), ROUTE_TWELFTHS)
         assert list(fine) == [p.name for p in ROUTE_TWELFTHS] and all(0.0 <= v <= 1.0 for v in fine.values())
         np.testing.assert_allclose(route_shape(121, *route_values(fine)), route_shape(121, *sixths), atol=1e-12)
     thirds = {"r_1": 0.05, "r_2": 0.95}

@@ -1,4 +1,4 @@
-"""JointEstimator against the simulated pair: torque (J2) and angle (J3) vs truth, pair coupling, batch = online."""
+"""PairEstimator against the simulated pair: torque (J2) and angle (J3) vs truth, pair coupling, batch = online."""
 from __future__ import annotations
 
 import math
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from estimator.distal_slip import distal_clip, distal_gains, distal_tension, elongation
-from estimator.online.joint import JointEstimator
-from estimator.online.joint_batch import estimate_joint_batch
+from estimator.online.pair import PairEstimator
+from estimator.online.pair_batch import estimate_pair_batch
 from estimator.sheath import SheathModel, profile_update
 from tests.slave.joint_helpers import Loop, joint_config, max_fs
 
@@ -56,9 +56,9 @@ def test_torque_and_angle_track_the_simulator_on_the_paper_protocol(paper_runs):
 
 def test_pair_coupling_is_what_keeps_the_antagonist_right(paper_runs):
     """Without (J4)-(J6) the loose tendon's distal tension is off by its capstan band most of the run."""
-    for side, (with_c, without) in enumerate(zip(paper_runs[True][:2], paper_runs[False][:2])):
+    for side, (with_c, without) in enumerate(zip(paper_runs[True][:2], paper_runs[False][:2], strict=False)):
         _, true, est = ANTAGONIST[side]
-        err = lambda r: np.abs(r[:, est] - r[:, true]).mean()   # noqa: E731
+        err = lambda r, est=est, true=true: np.abs(r[:, est] - r[:, true]).mean()   # noqa: E731
         assert err(with_c) < 0.3 * err(without)
         assert max_fs(with_c) < max_fs(without)
 
@@ -83,45 +83,45 @@ def test_batch_equals_online():
     Tb = 0.3 + rng.normal(0, 0.02, n)
     xa = 1e-3 * np.sin(t * 3) + 6e-5 * Ta
     xb = -1e-3 * np.sin(t * 3)
-    on = JointEstimator(est.tendons[0].model, est.tendons[1].model, est.r, n_nodes=40, pretension=0.3)
-    rows = [on.step(*v) for v in zip(Ta, xa, Tb, xb)]
-    b = estimate_joint_batch(Ta, xa, Tb, xb, est.tendons[0].model, est.tendons[1].model, est.r, n_nodes=40,
+    on = PairEstimator(est.tendons[0].model, est.tendons[1].model, est.r, n_nodes=40, pretension=0.3)
+    rows = [on.step(*v) for v in zip(Ta, xa, Tb, xb, strict=False)]
+    b = estimate_pair_batch(Ta, xa, Tb, xb, est.tendons[0].model, est.tendons[1].model, est.r, n_nodes=40,
                              pretension=0.3)
     assert np.allclose(b.torque, [s.torque for s in rows], rtol=0, atol=1e-12)
     assert np.allclose(b.angle, [s.angle for s in rows], rtol=0, atol=1e-12)
     assert np.allclose(b.T_out, [s.T_out for s in rows], rtol=0, atol=1e-12)
     assert np.ptp(b.angle) > 0.3
     # with the noise band (a joint's tendons: slack release side) the batch steps the estimator: the same numbers
-    on = JointEstimator(est.tendons[0].model, est.tendons[1].model, est.r, n_nodes=40, pretension=0.3,
+    on = PairEstimator(est.tendons[0].model, est.tendons[1].model, est.r, n_nodes=40, pretension=0.3,
                         tension_noise=0.02)
-    rows = [on.step(*v) for v in zip(Ta, xa, Tb, xb, t)]
-    bb = estimate_joint_batch(Ta, xa, Tb, xb, est.tendons[0].model, est.tendons[1].model, est.r, n_nodes=40,
+    rows = [on.step(*v) for v in zip(Ta, xa, Tb, xb, t, strict=False)]
+    bb = estimate_pair_batch(Ta, xa, Tb, xb, est.tendons[0].model, est.tendons[1].model, est.r, n_nodes=40,
                               pretension=0.3, tension_noise=0.02, time=t)
     assert np.array_equal(bb.torque, [s.torque for s in rows]) and np.array_equal(bb.T_out, [s.T_out for s in rows])
     assert np.abs(bb.T_out - b.T_out).max() > 1e-3                  # and the band changed them
     with pytest.raises(ValueError, match="time"):
-        estimate_joint_batch(Ta, xa, Tb, xb, est.tendons[0].model, est.tendons[1].model, est.r, tension_noise=0.02,
+        estimate_pair_batch(Ta, xa, Tb, xb, est.tendons[0].model, est.tendons[1].model, est.r, tension_noise=0.02,
                              time=t[:-1])
 
 
 def test_bad_arguments_are_named():
     m = SheathModel(K=0.5, compliance=1e-4)
     with pytest.raises(ValueError, match="pulley_radius"):
-        JointEstimator(m, m, 0.0)
+        PairEstimator(m, m, 0.0)
     with pytest.raises(ValueError, match="play"):
-        JointEstimator(m, m, 0.004, play=-1.0)
+        PairEstimator(m, m, 0.004, play=-1.0)
     with pytest.raises(ValueError, match="pretension"):
-        JointEstimator(m, m, 0.004, pretension=(1.0, 2.0, 3.0))
+        PairEstimator(m, m, 0.004, pretension=(1.0, 2.0, 3.0))
     with pytest.raises(ValueError, match="x_b has a non-finite value at sample 2"):
-        estimate_joint_batch(np.ones(3), np.zeros(3), np.ones(3), [0, 0, math.nan], m, m, 0.004)
-    est = JointEstimator(m, m, 0.004)
+        estimate_pair_batch(np.ones(3), np.zeros(3), np.ones(3), [0, 0, math.nan], m, m, 0.004)
+    est = PairEstimator(m, m, 0.004)
     with pytest.raises(ValueError, match="finite"):
         est.step(math.nan, 0.0, 1.0, 0.0)
 
 
 def test_a_slack_tendon_does_not_count_in_the_angle():
     m = SheathModel(K=0.5, compliance=1e-4)
-    est = JointEstimator(m, m, 0.004, pretension=0.25)
+    est = PairEstimator(m, m, 0.004, pretension=0.25)
     est.step(0.25, 0.0, 0.25, 0.0)                           # zero pose
     s = est.step(5.0, 0.004, 0.0, -0.009)                   # b slack: its motor paid out far too much
     assert s.angle == pytest.approx(s.angle_a) and abs(s.angle_b - s.angle_a) > 0.5
@@ -138,7 +138,7 @@ def test_the_compiled_step_is_the_per_tendon_step_bit_for_bit(coupling, noise):
     sample (and any call without a time) still takes, with the noise band too (velocities and slide states);
     a non-finite sample is refused with nothing changed."""
     ma, mb = SheathModel(K=0.9, compliance=2e-4), SheathModel(K=1.1, compliance=1.5e-4)
-    ref, new = (JointEstimator(ma, mb, 0.004, n_nodes=60, pretension=(1.0, 1.2), coupling=coupling,
+    ref, new = (PairEstimator(ma, mb, 0.004, n_nodes=60, pretension=(1.0, 1.2), coupling=coupling,
                                tension_noise=noise) for _ in range(2))
     ref._compiled = False                                           # the per-tendon path
     rng = np.random.default_rng(3)
@@ -152,7 +152,7 @@ def test_the_compiled_step_is_the_per_tendon_step_bit_for_bit(coupling, noise):
         tk = None if k == 2000 else t[k]
         a, b = ref.step(Ta[k], xa[k], Tb[k], xb[k], tk), new.step(Ta[k], xa[k], Tb[k], xb[k], tk)
         assert a == b and np.array_equal(ref._state, new._state)
-        for u, v in zip(ref.tendons, new.tendons):
+        for u, v in zip(ref.tendons, new.tendons, strict=False):
             assert np.array_equal(u.profile, v.profile) and np.array_equal(u._phase_state, v._phase_state)
             assert (u.T_out, u.elongation, u.phase, u._rate, u._T_prev, u._t_prev, u.velocity, u._x_prev) == \
                 (v.T_out, v.elongation, v.phase, v._rate, v._T_prev, v._t_prev, v.velocity, v._x_prev)

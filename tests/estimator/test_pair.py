@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from estimator.offline.pair import (
+from estimator.offline.pair.fit import (
     PairParams,
     distal_tension,
     fit_force_path,

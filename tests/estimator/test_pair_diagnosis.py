@@ -8,11 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from estimator.offline.pair import PairParams, play, predict_angle, reversal_dead_zones
-from estimator.offline.pair_diagnosis import diagnose_pair, figure_bootstrap, fit_model
-from estimator.offline.pair_general import loco_bootstrap
-from estimator.offline.pair_models import PAIR_EFFECTS, applicable, parse_model, predict_model
-from estimator.offline.pair_shared import SHARED_MODELS, fit_shared, leave_one_out, shared_params
+from estimator.offline.pair.diagnosis import diagnose_pair
+from estimator.offline.pair.diagnosis_fit import figure_bootstrap, fit_model
+from estimator.offline.pair.fit import PairParams, play, predict_angle, reversal_dead_zones
+from estimator.offline.pair.general import loco_bootstrap
+from estimator.offline.pair.models import PAIR_EFFECTS, applicable, parse_model, predict_model
+from estimator.offline.pair.shared import SHARED_MODELS, fit_shared, leave_one_out, shared_params
 from estimator.pair_kernels import simulate_pair
 
 DT = 0.025                                   # 40 Hz, as the KAIST recordings
@@ -73,10 +74,10 @@ def test_memoised_node_arrays_are_left_unchanged_by_a_run():
     c = command()
     for kw in ({}, {"toe": 5.0, "toe_tension": 1.0}, {"lam_s": 0.2, "tau_c": 0.2, "shape": 0.5}):
         runs = [simulate_pair(c, (5.0, 4.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0, **kw) for _ in range(2)]
-        assert all(np.array_equal(x, y) for x, y in zip(*runs))
+        assert all(np.array_equal(x, y) for x, y in zip(*runs, strict=False))
         for K in (0.9, 0.5):                       # the kernels only read the shared node arrays
             cached, fresh = _node_arrays(K, 0.4, 24, kw.get("lam_s", 0.0)), tendon_arrays(K, 0.4, 24, kw.get("lam_s", 0.0))
-            assert all(np.array_equal(x, y) for x, y in zip(cached, fresh))
+            assert all(np.array_equal(x, y) for x, y in zip(cached, fresh, strict=False))
 
 
 def test_bending_section_friction_stalls_the_joint_at_large_angles_and_is_neutral_when_off():
@@ -192,7 +193,7 @@ def test_toe_tendon_is_neutral_when_off_converges_and_keeps_the_released_tendon_
     c = command()
     base = simulate_pair(c, (5.0, 5.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0)
     off = simulate_pair(c, (5.0, 5.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0, toe=0.0, toe_tension=0.3)
-    assert all(np.array_equal(x, y) for x, y in zip(base, off))              # bit for bit when off
+    assert all(np.array_equal(x, y) for x, y in zip(base, off, strict=False))              # bit for bit when off
     tiny = simulate_pair(c, (5.0, 5.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0, toe=1e-9)
     assert np.max(np.abs(tiny[0] - base[0])) < 1e-9                           # the toe path is the same model
     a1, T1 = simulate_pair(c, (5.0, 5.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0, toe=5.0, toe_tension=1.0)
@@ -206,7 +207,7 @@ def test_toe_tendon_is_neutral_when_off_converges_and_keeps_the_released_tendon_
 
 
 def test_fits_run_the_causal_models_only_up_to_the_fitted_samples():
-    from estimator.offline.pair_models import LOOKAHEAD_S, head
+    from estimator.offline.pair.models import LOOKAHEAD_S, head
     rec = capstan_rec()
     part = head(rec, TRAIN)
     assert N_CYCLE < len(part.angle) <= N_CYCLE + LOOKAHEAD_S / DT + 2 and head(rec, slice(N_CYCLE, None)) is rec
@@ -221,7 +222,7 @@ def test_fits_run_the_causal_models_only_up_to_the_fitted_samples():
 # ---- the stiffening joint, the cross-validation folds, the exported shared set -------------------
 
 def test_stiffening_joint_caps_the_angle_and_folds_split_the_training_block():
-    from estimator.offline.pair_diagnosis import folds
+    from estimator.offline.pair.diagnosis_fit import folds
     c = command()
     th0, _ = simulate_pair(c, (5.0, 5.0), 1.4, (0.4, 0.4), (0.5, 0.5), 4.0)
     th1, _ = simulate_pair(c, (5.0, 5.0), 1.4, (0.4, 0.4), (0.5, 0.5), 4.0, k2=40.0, theta_c=0.1)
@@ -234,7 +235,7 @@ def test_stiffening_joint_caps_the_angle_and_folds_split_the_training_block():
 
 
 def test_exported_shared_set_predicts_without_refit():
-    from estimator.offline.pair_general import export_params, predict_shared
+    from estimator.offline.pair.general import export_params, predict_shared
     m = SHARED_MODELS["capstan+T"]
     v = {"s": 12.5, "k": 4.0, "K0_a": 0.6, "K0_b": 0.3, "mu": 0.15}                 # G held at 5: lam = 5 / 12.5
     b = math.radians(150)
@@ -250,7 +251,7 @@ def test_exported_shared_set_predicts_without_refit():
 
 
 def test_tension_weighted_fit_recovers_a_series_compliance_and_predicts_the_load_cells():
-    from estimator.offline.pair_diagnosis import cross_validate
+    from estimator.offline.pair.diagnosis_fit import cross_validate
     true = {"G": 1.4, "lam": 0.1, "K_a": 0.9, "K_b": 0.5, "k": 6.0, "lam_s": 0.25}
     c = command()
     th, T = simulate_pair(c, (5.0, 5.0), true["G"], (true["lam"],) * 2, (true["K_a"], true["K_b"]), true["k"],
@@ -299,7 +300,7 @@ def test_drive_observer_is_the_command_model_when_off_and_reads_the_measured_ten
     args = (rec.command, (5.0, 5.0), TRUE["G"], (TRUE["lam"],) * 2, (TRUE["K_a"], TRUE["K_b"]), TRUE["k"])
     base = simulate_pair(*args)
     off = simulate_pair(*args, observed=(rec.T_a, rec.T_b), lam_d=0.0)
-    assert all(np.array_equal(x, y) for x, y in zip(base, off))
+    assert all(np.array_equal(x, y) for x, y in zip(base, off, strict=False))
     on = simulate_pair(*args, observed=(rec.T_a, rec.T_b), lam_d=0.05)
     assert np.ptp(on[0]) < np.ptp(base[0])         # the entry gives way as the measured tension rises
     flat = simulate_pair(*args, observed=(np.full_like(rec.T_a, 5.0), np.full_like(rec.T_b, 5.0)), lam_d=0.5)

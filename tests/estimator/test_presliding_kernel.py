@@ -1,11 +1,12 @@
-"""Per-node pre-sliding kernel (estimator.offline.presliding_kernel): its Coulomb limit is the base
+"""Per-node pre-sliding kernel (estimator.offline.effects.presliding_kernel): its Coulomb limit is the base
 model's memory, a larger pre-sliding tension narrows the friction loop, and bad inputs are refused."""
 import numpy as np
 import pytest
 
-from estimator.offline.effects import NODE_FORM, Series, predict
-from estimator.offline.effects_kernels import run_extended
-from estimator.offline.presliding_kernel import T_P_MIN, node_presliding, run_node_presliding
+from estimator.offline.effects.catalogue import predict
+from estimator.offline.effects.kernels import run_extended
+from estimator.offline.effects.presliding_kernel import NODE_FORM, T_P_MIN, node_presliding, run_node_presliding
+from estimator.offline.effects.types import Series
 from estimator.sheath import SheathModel
 
 
@@ -34,7 +35,7 @@ def test_larger_presliding_tension_narrows_the_loop_and_rounds_its_corners():
         rising = np.gradient(T_in, t) > 0
         mid = late & (np.abs(T_in - 6.0) < 0.3)
         widths.append(float(np.mean(T_out[mid & ~rising]) - np.mean(T_out[mid & rising])))
-    assert all(a > b for a, b in zip(widths, widths[1:])), widths
+    assert all(a > b for a, b in zip(widths, widths[1:], strict=False)), widths
     assert widths[-1] > 0.0          # still a friction loop
 
 

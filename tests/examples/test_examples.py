@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from study.scenarios import record
-from teleop.recording import write_measured_csv
+from teleop.recording.measured import write_measured_csv
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from estimator.phase import Phase
-from live.record_mcap import MCAP_NAME, McapRecording
-from teleop.config import load_config
-from teleop.messages import tendon_estimate
+from live.record.mcap_file import MCAP_NAME, McapRecording
+from teleop.config.load import load_config
+from teleop.wire.messages import tendon_estimate
 
 ROOT = Path(__file__).resolve().parents[2]
 PAGE = ROOT / "docs" / "reference" / "mcap.md"

@@ -27,7 +27,7 @@ def test_the_short_names_are_the_library_s_functions():
 
 def test_an_unknown_name_is_an_attribute_error():
     with pytest.raises(AttributeError, match="no attribute 'DistalEstimater'"):
-        getattr(estimator, "DistalEstimater")
+        _ = estimator.DistalEstimater
     assert set(estimator.__all__) <= set(dir(estimator))
 
 

@@ -31,12 +31,12 @@ from pathlib import Path
 import numpy as np
 
 from live.cli import main as teleop_main
-from teleop.config import load_config
-from teleop.csv_proc import wait_written
-from teleop.keys import heartbeat_key
-from teleop.messages import Heartbeat, SideState
-from teleop.recording import read_measured_csv
-from teleop.transport import Session, accepts_connections, free_tcp_ports, loopback_endpoint, zenoh_config
+from teleop.config.load import load_config
+from teleop.recording.csv_proc import wait_written
+from teleop.recording.measured_csv import read_measured_csv
+from teleop.session.transport import Session, accepts_connections, free_tcp_ports, loopback_endpoint, zenoh_config
+from teleop.wire.keys import heartbeat_key
+from teleop.wire.messages import Heartbeat, SideState
 
 CONFIG = """\
 instrument:

@@ -12,7 +12,7 @@ import sys
 
 import pytest
 
-from teleop.transport import accepts_connections, free_tcp_port
+from teleop.session.transport import accepts_connections, free_tcp_port
 from tests.integration.processes import wait_for, write_bare_config
 
 pytestmark = pytest.mark.integration

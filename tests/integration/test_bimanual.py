@@ -15,10 +15,10 @@ import pytest
 import yaml
 
 from slave.calibration_file import calibration_path, save_calibration
-from slave.joint_rig import SimulatedInstrument
+from slave.pair_rig import SimulatedInstrument
 from teleop.arms import load_arms
-from teleop.messages import SideState
-from teleop.transport import free_tcp_port
+from teleop.session.transport import free_tcp_port
+from teleop.wire.messages import SideState
 from tests.integration.processes import start, stop_all, wait_for
 from tests.live.test_bimanual_faults import true_calibration
 

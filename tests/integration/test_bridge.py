@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from live.demo import PAPER_BOUNDS
+from live.demo.main import PAPER_BOUNDS
 
 pytestmark = pytest.mark.integration
 SIM = Path(__file__).resolve().parents[2] / "configs" / "sim.yaml"

@@ -6,7 +6,8 @@ import sys
 
 import pytest
 
-from live.cli import build_parser, endpoints, main
+from live.cli import build_parser, main
+from live.sides import endpoints
 
 TYPO = "rig:\n  rate_hzz: 1000\n"
 

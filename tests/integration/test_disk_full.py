@@ -20,9 +20,9 @@ from pathlib import Path
 
 import pytest
 
-from live.record import read_messages
-from teleop.codec import decode
-from teleop.transport import free_tcp_port
+from live.record.recorder import read_messages
+from teleop.session.transport import free_tcp_port
+from teleop.wire.codec import decode
 from tests.integration.processes import start, stop_all, wait_for, wait_text, write_bare_config
 
 pytestmark = pytest.mark.integration

@@ -25,7 +25,7 @@ import sys
 import numpy as np
 import pytest
 
-from teleop.messages import SideState
+from teleop.wire.messages import SideState
 from tests.integration.faults_harness import SAFE, run_fault
 
 pytestmark = pytest.mark.integration

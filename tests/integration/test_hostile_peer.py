@@ -24,12 +24,12 @@ import numpy as np
 import pytest
 import zenoh
 
-from teleop.codec import encode
-from teleop.config import load_config
-from teleop.keys import command_key, estimate_key, liveliness_key
-from teleop.messages import AxisState, Command, Estimate, TendonState
-from teleop.recording import read_measured_csv
-from teleop.transport import free_tcp_ports, loopback_endpoint
+from teleop.config.load import load_config
+from teleop.recording.measured_csv import read_measured_csv
+from teleop.session.transport import free_tcp_ports, loopback_endpoint
+from teleop.wire.codec import encode
+from teleop.wire.keys import command_key, estimate_key, liveliness_key
+from teleop.wire.messages import AxisState, Command, Estimate, TendonState
 from tests.integration.processes import start, stop_all, wait_for, write_bare_config
 from tests.zenoh_peer import raw_peer
 

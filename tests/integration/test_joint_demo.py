@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
+from estimator.errors import CalibrationError
 from live.cli import main
 from slave.calibration_file import load_calibration
-from teleop.config import load_config
-from teleop.errors import CalibrationError
+from teleop.config.load import load_config
 from tests.integration.processes import quiet_instrument, run_demo
 
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "instrument-3dof.yaml"

@@ -2,12 +2,12 @@
 
 The three are started bare (no --listen/--connect) on a config whose listen port is a free one: the
 recorder gets the port, the sides find it taken and connect, and all three agree one run id. Each
-side logs every message it publishes (TELEOP_PUBLISH_LOG, teleop/publish_log.py: a line with the
+side logs every message it publishes (TELEOP_PUBLISH_LOG, teleop/recording/publish_log.py: a line with the
 payload's CRC before the put, one after it returns, written straight to the OS, so the kill loses
 none of its lines); the test compares those with what the recorder wrote, strictly: every message
 whose put returned is recorded, every recorded message was published with that very payload, none
 twice. The recorder gets what the kill caught in the side's zenoh queue from the side's journal
-(teleop/journal.py); the oracle never reads the journal. The MCAP file (live/record_mcap.py) holds the
+(teleop/recording/journal.py); the oracle never reads the journal. The MCAP file (live/record/mcap_file.py) holds the
 same messages as messages.bin and the CSVs and passes `rerun mcap check`; after a SIGKILL of the recorder
 itself, `teleop record --repair RUN` completes it from messages.bin and the journals, and it then holds
 every message the sides published. Deadlines only bound waits.
@@ -26,12 +26,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from live.record import read_messages
-from live.record_mcap_read import read_session
-from teleop.codec import decode
-from teleop.publish_log import read_publish_attempts, read_publish_log
-from teleop.recording import read_measured_csv
-from teleop.transport import free_tcp_port
+from live.record.mcap_read import read_session
+from live.record.recorder import read_messages
+from teleop.recording.measured_csv import read_measured_csv
+from teleop.recording.publish_log import read_publish_attempts, read_publish_log
+from teleop.session.transport import free_tcp_port
+from teleop.wire.codec import decode
 from tests.integration.processes import start, stop_all, wait_for
 
 pytestmark = pytest.mark.integration
@@ -185,7 +185,7 @@ def test_sigkill_of_the_recorder_then_repair_gives_an_mcap_file_with_every_publi
                          capture_output=True, text=True, timeout=120)
     assert rep.returncode == 0 and "from the journals" in rep.stdout, rep.stdout + rep.stderr
     in_mcap = mcap_seqs(rec_dir)
-    for side, path in logs.items():
+    for path in logs.values():
         for key, seqs in read_publish_log(path).items():
             assert len(seqs) > 10
             assert sorted(in_mcap.get(key, [])) == sorted(seqs), (key, len(seqs), len(in_mcap.get(key, [])))

@@ -15,11 +15,11 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from teleop.codec import decode
-from teleop.config import load_config
-from teleop.keys import estimate_key
-from teleop.messages import Estimate
-from teleop.transport import free_tcp_port, free_tcp_ports, loopback_endpoint
+from teleop.config.load import load_config
+from teleop.session.transport import free_tcp_port, free_tcp_ports, loopback_endpoint
+from teleop.wire.codec import decode
+from teleop.wire.keys import estimate_key
+from teleop.wire.messages import Estimate
 from tests.integration.processes import start, stop_all, wait_for
 from tests.ros2_peer import JOINT_STATE, OPERATING_STATE, WRENCH_STAMPED, RosPeer, joint_state
 

@@ -12,8 +12,8 @@ import subprocess
 
 import pytest
 
-from teleop.publish_log import read_publish_log
-from teleop.transport import free_tcp_port
+from teleop.recording.publish_log import read_publish_log
+from teleop.session.transport import free_tcp_port
 from tests.integration.processes import stalled_past_watchdog, start, stop_all, wait_text
 
 pytestmark = pytest.mark.integration

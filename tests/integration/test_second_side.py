@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from teleop.transport import free_tcp_port
+from teleop.session.transport import free_tcp_port
 from tests.integration.processes import stop_all, wait_for, write_bare_config
 
 pytestmark = pytest.mark.integration

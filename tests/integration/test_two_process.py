@@ -15,12 +15,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from slave.node import RELAX_BAND
-from teleop.config import load_config
-from teleop.keys import estimate_key, heartbeat_key
-from teleop.messages import Estimate, Heartbeat, SideState
-from teleop.recording import read_measured_csv
-from teleop.transport import Session, free_tcp_port, loopback_endpoint, zenoh_config
+from slave.tendon_axis import RELAX_BAND
+from teleop.config.load import load_config
+from teleop.recording.measured_csv import read_measured_csv
+from teleop.session.transport import Session, free_tcp_port, loopback_endpoint, zenoh_config
+from teleop.wire.keys import estimate_key, heartbeat_key
+from teleop.wire.messages import Estimate, Heartbeat, SideState
 from tests.integration.processes import start, stop_all, wait_for
 
 pytestmark = pytest.mark.integration

@@ -20,18 +20,20 @@ import yaml
 
 from live.faults import FaultInjector
 from master.devices import make_device
-from master.node import MasterLinks, MasterNode
+from master.node import MasterNode
+from master.node_base import MasterLinks
 from master.pedal import FootPedal, PedalHand
 from slave.calibration_file import InstrumentCalibration, TendonCalibration
-from slave.joint_rig import SimulatedInstrument
-from slave.node import SlaveLinks, SlaveNode
+from slave.node import SlaveNode
+from slave.node_base import SlaveLinks
 from slave.pair_axis import joint_csv_columns
+from slave.pair_rig import SimulatedInstrument
 from teleop.arms import Bimanual, load_arms
-from teleop.clock import FakeClock
-from teleop.codec import decode
-from teleop.messages import Side, SideState
 from teleop.node_group import NodeGroup
-from teleop.transport import Received
+from teleop.session.transport import Received
+from teleop.timing.clock import FakeClock
+from teleop.wire.codec import decode
+from teleop.wire.messages import Side, SideState
 from tests.fakes import Rows, Topic
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -8,8 +8,8 @@ import pytest
 
 from live.calibrate import destination
 from live.cli import main
-from teleop.config import config_from_dict, load_config
-from teleop.config_files import configs_dir
+from teleop.config.files import configs_dir
+from teleop.config.load import config_from_dict, load_config
 from teleop.errors import ConfigError
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"

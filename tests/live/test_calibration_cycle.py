@@ -6,10 +6,10 @@ import dataclasses
 
 import pytest
 
+from estimator.errors import CalibrationError
 from live.sides import load_or_recalibrate
 from slave.calibration_file import InstrumentCalibration, TendonCalibration, save_calibration
-from teleop.config import Config, InstrumentConfig
-from teleop.errors import CalibrationError
+from teleop.config.schema import Config, InstrumentConfig
 
 TENDON = TendonCalibration(K=0.6, M_e=8e-5, compliance=1e-4, knee_x_in=0.006, knee_T_in=4.0, residual_rms=3e-7,
                            n_samples=1500)

@@ -7,7 +7,7 @@ from pathlib import Path
 from live.calibrate import calibration_report
 from slave.node import axis_kind
 from slave.rigs import RIG_TYPES
-from teleop.config import load_config
+from teleop.config.load import load_config
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 

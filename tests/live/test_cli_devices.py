@@ -15,7 +15,7 @@ import pytest
 
 import master.hid
 from live.cli import main
-from teleop.transport import free_tcp_port, loopback_endpoint
+from teleop.session.transport import free_tcp_port, loopback_endpoint
 
 DEVICE_FILE = Path(__file__).resolve().parents[2] / "configs" / "devices" / "generic_pid_joystick.yaml"
 ZERO, STOP_ALL, DISABLE = bytes.fromhex("05 01 00 00"), bytes.fromhex("0c 03"), bytes.fromhex("0c 02")

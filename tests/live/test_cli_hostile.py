@@ -14,14 +14,14 @@ from pathlib import Path
 
 import pytest
 
-import live.demo  # noqa: F401  (the imports each side makes before it reads its config)
+import live.demo.main  # noqa: F401  (the imports each side makes before it reads its config)
 import live.recording_rig  # noqa: F401
 import slave.node  # noqa: F401
 from live.cli import main
-from teleop.config_yaml import MAX_BYTES
+from teleop.config.reader import MAX_BYTES
 
 BOMB = 'a: &a ["x","x","x","x","x","x","x","x","x"]\n' + "".join(
-    f"{c}: &{c} [" + ",".join([f"*{p}"] * 9) + "]\n" for p, c in zip("abcdefgh", "bcdefghi"))
+    f"{c}: &{c} [" + ",".join([f"*{p}"] * 9) + "]\n" for p, c in zip("abcdefgh", "bcdefghi", strict=False))
 
 
 @pytest.fixture(autouse=True)

@@ -4,9 +4,9 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from live.demo import DEFAULT_CONFIG, rerun_command
-from teleop.config import load_config
-from teleop.config_files import configs_dir, resolve_config, shipped_config
+from live.demo.main import DEFAULT_CONFIG, rerun_command
+from teleop.config.files import configs_dir, resolve_config, shipped_config
+from teleop.config.load import load_config
 
 ROOT = Path(__file__).resolve().parents[2]
 LIVE_SOURCES = sorted(p for d in ("live", "master", "slave", "teleop") for p in (ROOT / d).rglob("*.py"))

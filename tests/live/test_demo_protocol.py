@@ -28,7 +28,7 @@ def test_an_unknown_protocol_exits_2_before_anything_starts(tmp_path, capsys, co
 
 
 def test_a_valid_protocol_passes_the_check() -> None:
-    from live.demo_run import check_protocol
-    from teleop.config import load_config
+    from live.demo.run import check_protocol
+    from teleop.config.load import load_config
     check_protocol(load_config(None), "paper,minor")
     check_protocol(load_config(CONFIGS / "instrument-3dof.yaml"), "short")

@@ -1,8 +1,8 @@
 """The recording demo's checks read as sentences with the figure and the bound, on each recording format."""
 from __future__ import annotations
 
-from live.demo_recording import AGREEMENT_DEG, AGREEMENT_FS, ANGLE_RMSE_BOUND_DEG, TORQUE_RMSE_BOUND, recording_checks
-from live.demo_run import verdict_lines
+from live.demo.recording import AGREEMENT_DEG, AGREEMENT_FS, ANGLE_RMSE_BOUND_DEG, TORQUE_RMSE_BOUND, recording_checks
+from live.demo.run import verdict_lines
 
 
 def test_mrd_checks_name_the_figures_and_the_bounds() -> None:

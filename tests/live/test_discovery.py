@@ -8,9 +8,10 @@ import re
 import pytest
 
 from live.discovery import agree_run_id, ask_run_id, open_auto_session, side_run_dir, side_session
-from teleop.config import Config, config_from_dict
+from teleop.config.load import config_from_dict
+from teleop.config.schema import Config
 from teleop.errors import TransportError
-from teleop.transport import free_tcp_port
+from teleop.session.transport import free_tcp_port
 
 
 def _cfg(tmp_path, port: int, **transport) -> Config:

@@ -10,10 +10,10 @@ import pytest
 
 from estimator.phase import Phase
 from live.faults import FaultInjector, corrupt_payload, parse_fault_spec
-from teleop.clock import FakeClock
-from teleop.codec import WIRE_VERSION, decode, encode
 from teleop.errors import CodecError, ConfigError
-from teleop.messages import AxisState, Command, Estimate, Heartbeat, Side, SideState, TendonState, tendon_estimate
+from teleop.timing.clock import FakeClock
+from teleop.wire.codec import WIRE_VERSION, decode, encode
+from teleop.wire.messages import AxisState, Command, Estimate, Heartbeat, Side, SideState, TendonState, tendon_estimate
 
 DT = 1e-3
 
@@ -80,7 +80,7 @@ def test_duplicates_and_reorders_are_counted_and_happen():
     inj, wire, _ = run("dup=0.1,reorder=0.1,seed=2", n=2000)
     seqs = wire.seqs()
     dups = len(seqs) - len(set(seqs))
-    back = sum(1 for a, b in zip(seqs, seqs[1:]) if b < a)
+    back = sum(1 for a, b in zip(seqs, seqs[1:], strict=False) if b < a)
     assert dups == inj.counts["duplicated"] > 100
     assert back == inj.counts["reordered"] > 100
     assert sorted(set(seqs)) == list(range(2000))              # nothing lost

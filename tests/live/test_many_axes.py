@@ -12,17 +12,20 @@ from pathlib import Path
 import pytest
 
 from master.devices import make_device
-from master.node import MasterLinks, MasterNode
+from master.node import MasterNode
 from master.node import csv_columns as master_columns
+from master.node_base import MasterLinks
 from slave.calibration_file import InstrumentCalibration, TendonCalibration
-from slave.node import SlaveLinks, SlaveNode, recording
+from slave.node import SlaveNode, recording
+from slave.node_base import SlaveLinks
 from slave.rigs import RIG_TYPES
 from teleop.arms import repeated_joints
-from teleop.clock import FakeClock
-from teleop.config import Config, load_config
-from teleop.crtk import slave_messages
-from teleop.messages import Estimate, SideState
-from teleop.recording import CsvRecorder
+from teleop.config.load import load_config
+from teleop.config.schema import Config
+from teleop.recording.measured import CsvRecorder
+from teleop.ros2.crtk import slave_messages
+from teleop.timing.clock import FakeClock
+from teleop.wire.messages import Estimate, SideState
 from tests.fakes import Topic
 from tests.ros2_peer import JOINT_STATE, WRENCH_STAMPED, independent_decoder
 
@@ -93,8 +96,9 @@ def test_the_mcap_recording_names_every_tendon_of_many_joints(n, tmp_path):
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
-    from live.record_mcap import McapRecording
-    from teleop.messages import AxisState, Phase, TendonState
+    from estimator.phase import Phase
+    from live.record.mcap_file import McapRecording
+    from teleop.wire.messages import AxisState, TendonState
     cfg = many_joints(n)
     axes = tuple(AxisState(0.01 * k, 0.1 * k, (TendonState(1.0 + k, 1e-3, 0.5, 1e-5, Phase.PULL),
                                                 TendonState(2.0, -1e-3, 1.5, 1e-5, Phase.HOLD))) for k in range(n))

@@ -7,13 +7,14 @@ import json
 import time
 
 from estimator.phase import Phase
-from live.record import Recorder, flatten, read_messages
-from teleop.codec import decode, encode
-from teleop.config import Config
-from teleop.keys import command_key, estimate_key, heartbeat_key
-from teleop.messages import AxisState, Command, Estimate, Heartbeat, Side, SideState, TendonState, tendon_estimate
-from teleop.recording import read_measured_csv
-from teleop.transport import Session, free_tcp_port, loopback_endpoint
+from live.record.files import flatten
+from live.record.recorder import Recorder, read_messages
+from teleop.config.schema import Config
+from teleop.recording.measured_csv import read_measured_csv
+from teleop.session.transport import Session, free_tcp_port, loopback_endpoint
+from teleop.wire.codec import decode, encode
+from teleop.wire.keys import command_key, estimate_key, heartbeat_key
+from teleop.wire.messages import AxisState, Command, Estimate, Heartbeat, Side, SideState, TendonState, tendon_estimate
 
 DEADLINE = 5.0
 
@@ -35,7 +36,7 @@ def _cfg(tmp_path) -> Config:
 
 def test_recorder_writes_every_message_per_stream_and_a_summary(tmp_path):
     port = free_tcp_port()
-    from teleop.config import TransportConfig
+    from teleop.config.schema import TransportConfig
     with Session(TransportConfig(listen=(loopback_endpoint(port),), connect=())) as rs, \
             Session(TransportConfig(listen=(), connect=(loopback_endpoint(port),))) as side:
         rec = Recorder(rs, _cfg(tmp_path), tmp_path / "recorder")
@@ -74,7 +75,7 @@ def test_recorder_writes_every_message_per_stream_and_a_summary(tmp_path):
 
 
 def test_read_messages_ignores_a_torn_last_record(tmp_path):
-    from live.record import _RAW
+    from live.record.recorder import _RAW
     p = tmp_path / "m.bin"
     one = encode(Command(1, 0.0, (0.0,)))
     rec = _RAW.pack(1.5, 3, len(one)) + b"a/b" + one
@@ -83,8 +84,8 @@ def test_read_messages_ignores_a_torn_last_record(tmp_path):
 
 
 def test_rig_interface_payloads_are_decoded_too():
-    from live.record import decode_any
-    from teleop.rig_wire import RigSample, encode_rig
+    from live.record.files import decode_any
+    from teleop.wire.rig import RigSample, encode_rig
     m = RigSample(4, 3, 0.5, (0.001,), (2.0,), (0.0011,), ((2.0, 1.5, 0.001, 0.0009, 1e-4),))
     flat = dict(flatten(decode_any(encode_rig(m))))
     assert flat["seq"] == 4 and flat["T_in[0]"] == 2.0 and flat["truth[0][1]"] == 1.5
@@ -92,7 +93,7 @@ def test_rig_interface_payloads_are_decoded_too():
 
 
 def test_short_names_where_unambiguous():
-    from live.record import short_names
+    from live.record.files import short_names
     one = ["seq", "axes[0].effort_hat", "axes[0].tendons[0].T_in", "axes[0].tendons[0].x_in", "profiles[0][1]"]
     assert short_names(one) == ("seq", "effort_hat", "T_in", "x_in", "profiles[0][1]")
     two = ["seq", "axes[0].tendons[0].T_in", "axes[0].tendons[1].T_in", "axes[1].seq"]

@@ -1,4 +1,4 @@
-"""The recorder's disk use (live/record_budget.py): the high-rate CSVs left out by default, the byte
+"""The recorder's disk use (live/record/budget.py): the high-rate CSVs left out by default, the byte
 budget and the free-space floor, and writes the OS refuses (disk full) counted per file."""
 from __future__ import annotations
 
@@ -11,13 +11,14 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from live.record import Recorder, read_messages
-from live.record_budget import DiskBudget, Writes, dir_bytes, is_low_rate
-from teleop.codec import encode
-from teleop.config import Config, TransportConfig
-from teleop.keys import command_key, estimate_key, heartbeat_key
-from teleop.messages import Command, Heartbeat, Phase, Side, SideState, tendon_estimate
-from teleop.transport import Session, free_tcp_port, loopback_endpoint
+from estimator.phase import Phase
+from live.record.budget import DiskBudget, Writes, dir_bytes, is_low_rate
+from live.record.recorder import Recorder, read_messages
+from teleop.config.schema import Config, TransportConfig
+from teleop.session.transport import Session, free_tcp_port, loopback_endpoint
+from teleop.wire.codec import encode
+from teleop.wire.keys import command_key, estimate_key, heartbeat_key
+from teleop.wire.messages import Command, Heartbeat, Side, SideState, tendon_estimate
 
 DEADLINE = 20.0     # [s] a condition not met by then fails the test
 
@@ -161,8 +162,8 @@ def test_the_budget_is_reached_past_either_limit(tmp_path, max_bytes, min_free, 
 
 
 def test_messages_bin_is_compressed_and_reads_back_up_to_its_last_flush_when_cut(tmp_path):
-    from live.record_files import ZSTD_MAGIC, ZstdStream, stream_bytes
-    from teleop.journal import pack_record
+    from live.record.files import ZSTD_MAGIC, ZstdStream, stream_bytes
+    from teleop.recording.journal import pack_record
 
     z = ZstdStream(tmp_path / "messages.bin")
     recs = [pack_record(1e-3 * k, estimate_key("bud1").encode(), _estimate(k)) for k in range(200)]
@@ -182,7 +183,7 @@ def test_messages_bin_is_compressed_and_reads_back_up_to_its_last_flush_when_cut
 
 
 def test_the_demo_line_says_the_rate_and_what_the_disk_kept_out(tmp_path):
-    from live.record_demo import summary_line
+    from live.record.beside_demo import summary_line
 
     disk = {"bytes_per_second": {"slave": 4e5, "master": 1e5}, "not_written": {"messages.bin": 3},
             "reached": {"reason": "free space 1.0 MB < recording.min_free_bytes 500.0 MB", "time": 12.5}}
@@ -194,8 +195,8 @@ def test_the_demo_line_says_the_rate_and_what_the_disk_kept_out(tmp_path):
 
 
 def test_a_stream_without_csv_is_thinned_in_memory_and_plotted(tmp_path, monkeypatch):
-    import live.record_files as rf
-    from live.record_figures import streams_plot
+    import live.record.files as rf
+    from live.record.figures import streams_plot
 
     monkeypatch.setattr(rf, "SAMPLE_ROWS", 8)
     s = rf.StreamSample("slave_estimate", ("T_in", "x_in"))
@@ -210,7 +211,7 @@ def test_a_stream_without_csv_is_thinned_in_memory_and_plotted(tmp_path, monkeyp
 
 
 def test_the_session_rate_leaves_the_journals_out_and_takes_the_recorder_over_its_messages_time(tmp_path, capsys):
-    from live.record_budget import RATE_AFTER
+    from live.record.budget import RATE_AFTER
     (tmp_path / "recorder").mkdir()
     b = DiskBudget(tmp_path, None, None, own="recorder")
     b.check(0.0, 0.0, t_data=100.0)
@@ -251,7 +252,7 @@ def test_the_last_line_and_the_summary_count_what_a_write_error_kept_out_alike(t
     """Every stream's messages not written (refused after the error, and those the error cut since the last flush)
     are counted once: summary.json's streams and the recorder's last line say the same, and what is counted as
     written reads back from messages.bin."""
-    from live.record_demo import final_line
+    from live.record.beside_demo import final_line
     est, cmd = estimate_key("bud1"), command_key("bud1")
     with _session() as s:
         rec = Recorder(s, _cfg(), tmp_path / "recorder")
@@ -274,12 +275,12 @@ def test_the_last_line_and_the_summary_count_what_a_write_error_kept_out_alike(t
     assert "slave/heartbeat 2 (missing 0, not written 2)" in line
     assert "stopped by a write error: messages.bin (OSError: [Errno 28] No space left on device)" in line
     assert line.endswith(f"; {tmp_path / 'recorder' / 'summary.json'}") and "\n" not in line
-    from live.record_demo import summary_line
+    from live.record.beside_demo import summary_line
     assert f"{202 - len(kept)} not written" in summary_line(tmp_path / "recorder")
 
 
 def test_a_recording_without_errors_says_not_written_0(tmp_path):
-    from live.record_demo import final_line
+    from live.record.beside_demo import final_line
     with _session() as s:
         rec = Recorder(s, _cfg(), tmp_path / "recorder")
         _feed(rec, 20)

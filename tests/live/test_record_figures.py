@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from live.record_figures import read_stream, streams_figure, streams_plot
-from teleop.figure_files import pyplot
-from teleop.messages import SideState
+from live.record.figures import read_stream, streams_figure, streams_plot
+from teleop.recording.figures import pyplot
+from teleop.wire.messages import SideState
 
 
 def write_stream(path, names, rows, units):

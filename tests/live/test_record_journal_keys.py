@@ -7,14 +7,14 @@ from __future__ import annotations
 import dataclasses
 
 from estimator.phase import Phase
-from live.record import Recorder
-from live.record_journal import JournalRecovery
-from teleop.codec import encode
-from teleop.config import Config, TransportConfig
-from teleop.journal import Journal
-from teleop.keys import estimate_key, instrument_keys
-from teleop.messages import tendon_estimate
-from teleop.transport import Session, free_tcp_port, loopback_endpoint
+from live.record.journal import JournalRecovery
+from live.record.recorder import Recorder
+from teleop.config.schema import Config, TransportConfig
+from teleop.recording.journal import Journal
+from teleop.session.transport import Session, free_tcp_port, loopback_endpoint
+from teleop.wire.codec import encode
+from teleop.wire.keys import estimate_key, instrument_keys
+from teleop.wire.messages import tendon_estimate
 
 ARMS = ("notes_left", "notes_right")
 
@@ -46,7 +46,7 @@ def test_recovery_for_one_arm_adds_only_that_arms_missing_messages(tmp_path):
     found = list(rec.records("slave"))
     assert [(k, p) for _, k, p in found] == [(left, sent["notes_left"][s]) for s in (7, 8, 9)]
     assert rec.other_keys == 10                           # the right arm's records: left out, counted
-    for seq, (_, key, payload) in zip((7, 8, 9), found):
+    for seq, (_, key, payload) in zip((7, 8, 9), found, strict=False):
         assert rec.note(key, payload, True, seq)
     assert rec.counts == {"slave": 3}
     assert rec.summary()["other_keys"] == 10

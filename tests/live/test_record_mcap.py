@@ -1,4 +1,4 @@
-"""The recorder's MCAP file (live/record_mcap.py, live/record_mcap_read.py): channels, ROS 2 CDR decoded by
+"""The recorder's MCAP file (live/record/mcap_file.py, live/record/mcap_read.py): channels, ROS 2 CDR decoded by
 mcap-ros2-support's own decoder, JSON equal to the messages, log-time order after a gap is filled, a torn file read
 up to its last chunk and rebuilt from messages.bin and a journal, `rerun mcap check` and `convert` on it, and
 `teleop replay` of it."""
@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 
 from estimator.phase import Phase
-from live.record_mcap import MCAP_NAME, McapRecording, to_json
-from live.record_mcap_read import estimate_data, read_session, repair
-from teleop.codec import encode
-from teleop.journal import pack_record
-from teleop.messages import AxisState, Command, Estimate, Heartbeat, Side, SideState, TendonState, tendon_estimate
+from live.record.mcap_file import MCAP_NAME, McapRecording, to_json
+from live.record.mcap_read import estimate_data, read_session, repair
+from teleop.recording.journal import pack_record
+from teleop.wire.codec import encode
+from teleop.wire.messages import AxisState, Command, Estimate, Heartbeat, Side, SideState, TendonState, tendon_estimate
 
 OFFSET = 1.7e9                      # [s] Unix minus monotonic
 RERUN = Path(sys.executable).parent / "rerun"
@@ -45,7 +45,7 @@ def _session(n: int = 300) -> list[tuple[float, str, object]]:
 
 def _cfg(joints=(), mcap_every=1):
     """Every message in the file (``recording.mcap_every: 1``) unless ``mcap_every`` says otherwise."""
-    from teleop.config import Config
+    from teleop.config.schema import Config
     c = Config()
     return dataclasses.replace(c, instrument=dataclasses.replace(c.instrument, id="m1", joints=joints),
                                recording=dataclasses.replace(c.recording, mcap_every=mcap_every))
@@ -95,7 +95,7 @@ def test_channels_ros2_cdr_and_json_hold_every_message(tmp_path):
 
 
 def test_a_joint_instrument_gets_one_tendon_per_side_of_each_pair(tmp_path):
-    from teleop.schema import JointConfig
+    from teleop.config.schema import JointConfig
     ta, tb = TendonState(3.0, 1e-3, 2.5, 1e-5, Phase.HOLD), TendonState(1.0, 2e-3, 0.5, 1e-5, Phase.HOLD)
     m = Estimate(1, 1, 5.0, (AxisState(0.01, 0.2, (ta, tb)), AxisState(-0.02, 0.1, (ta, tb))))
     cfg = _cfg((JointConfig("wrist", pulley_radius=0.004), JointConfig("grip", pulley_radius=0.003)))
@@ -148,7 +148,7 @@ def test_a_torn_file_reads_up_to_its_last_chunk_and_repair_completes_it(tmp_path
     n_torn = len(s.messages["teleop/m1/slave/estimate"])
     assert s.torn and 0 < n_torn < 300
     # the slave journaled 20 more estimates the recorder never received (it was killed)
-    from teleop.journal import Journal
+    from teleop.recording.journal import Journal
     tail = [_est(k) for k in range(300, 320)]
     j = Journal(rec.parent, "slave")
     for m in tail:
@@ -191,7 +191,7 @@ def test_rerun_checks_and_converts_it_with_joint_state_plots(tmp_path):
 
 def test_replay_reads_the_mcap_file_of_a_run(tmp_path):
     from live.cli import main
-    from teleop.config import load_config, write_config
+    from teleop.config.load import load_config, write_config
     run = tmp_path / "runs" / "r1"
     (run / "recorder").mkdir(parents=True)
     write_config(load_config(None), run / "config.yaml")

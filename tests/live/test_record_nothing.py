@@ -4,8 +4,8 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from live.record import nothing_received_reason
-from teleop.transport import free_tcp_port, loopback_endpoint
+from live.record.beside_demo import nothing_received_reason
+from teleop.session.transport import free_tcp_port, loopback_endpoint
 
 
 def test_a_recorder_that_received_nothing_exits_1_with_one_line(tmp_path):

@@ -1,8 +1,8 @@
-"""The recorder remembers what it has in constant memory (live/record_journal.py): by seq in a ring, and the
+"""The recorder remembers what it has in constant memory (live/record/journal.py): by seq in a ring, and the
 messages without a seq in two bounded generations of hashes; a journal record it has is not recovered again."""
 from __future__ import annotations
 
-from live.record_journal import SEEN, JournalRecovery
+from live.record.journal import SEEN, JournalRecovery
 
 
 def test_received_seqs_are_kept_in_a_fixed_ring_and_recovery_skips_them_only(tmp_path):

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from estimator.errors import CalibrationError, DataError
 from estimator.online.spindle import SpindleParams
 from live.recording_axis import CENTRE, RecordedModel, load_model, save_model
 from live.recording_rig import RecordedSpindle, check_recording, recording_format
@@ -19,8 +20,8 @@ from study.datasets import KAIST, MRD, skip_reason
 from study.kaist_files import default_kaist_dir, kaist_path
 from study.mrd import MrdRun, read_mrd
 from study.mrd_files import DEFAULT_FOLDER, mrd_folder
-from teleop.config import load_config
-from teleop.errors import CalibrationError, ConfigError, DataError
+from teleop.config.load import load_config
+from teleop.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[2]
 FOLDER = mrd_folder(DEFAULT_FOLDER)
@@ -194,14 +195,15 @@ def synthetic_kaist(path: Path) -> Path:
     c = 60.0 * np.sin(2 * np.pi * t / 6.0)
     ta, tb = 5.0 + 0.05 * c, 5.0 - 0.04 * c
     ang = 0.9 * c - 4.0 * np.sign(np.cos(2 * np.pi * t / 6.0))
-    rows = [f"{a:.4f},{b:.4f},0,{d:.4f},{e:.4f},{f:.4f},0,0," for a, b, d, e, f in zip(t, c, ang, ta, tb)]
+    rows = [f"{a:.4f},{b:.4f},0,{d:.4f},{e:.4f},{f:.4f},0,0," for a, b, d, e, f in zip(t, c, ang, ta, tb, strict=False)]
     path.write_text("\n".join(rows) + "\n")
     return path
 
 
 def pair_node(cfg, calibration=None, calibration_file=None):
-    from slave.node import SlaveLinks, SlaveNode
-    from teleop.clock import FakeClock
+    from slave.node import SlaveNode
+    from slave.node_base import SlaveLinks
+    from teleop.timing.clock import FakeClock
     from tests.fakes import Topic
     clock = FakeClock(10.0)
     rig = make_rig(cfg)
@@ -259,7 +261,8 @@ def test_the_demo_refuses_a_bad_recording_in_one_line_before_any_process_starts(
 def synthetic_tendon_csv(path: Path) -> Path:
     """A measured-data CSV of a tendon pulled and released twice (2 s at 150 Hz): the distal tension a capstan
     band below (pull) or above (release) the proximal one."""
-    from teleop.recording import MeasuredData, write_measured_csv
+    from estimator.data import MeasuredData
+    from teleop.recording.measured import write_measured_csv
     t = np.arange(1, 301) / 150.0
     x = 0.002 * (1 - np.cos(2 * np.pi * t))
     T_in = 2000.0 * x

@@ -16,8 +16,9 @@ from pathlib import Path
 import pytest
 
 from live.discovery import open_auto_session, wait_for_peer
-from teleop.config import TransportAuthConfig, TransportConfig, TransportTlsConfig, config_from_dict
-from teleop.transport import Session, free_tcp_port
+from teleop.config.load import config_from_dict
+from teleop.config.schema import TransportAuthConfig, TransportConfig, TransportTlsConfig
+from teleop.session.transport import Session, free_tcp_port
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -208,7 +209,7 @@ def test_plain_tcp_to_a_tls_port_is_told_the_port_speaks_tls(tmp_path, pki):
 def test_each_refusal_of_a_tls_listener_is_named_by_the_probe(tmp_path, pki):
     """The four refusals of a mutual TLS listener with a user/password, probed as a connecting side probes them,
     and a tls/ endpoint pointed at a plain TCP listener."""
-    from teleop.peer_probe import probe_endpoint
+    from teleop.session.peer_probe import probe_endpoint
     users = tmp_path / "users.txt"
     users.write_text("slave:s3cret\nsurgeon:right\n")
     port = free_tcp_port()

@@ -1,4 +1,4 @@
-"""teleop replay (live/replay.py): a synthetic run (truth from the estimator with K_TRUE, recorded estimate with the
+"""teleop replay (live/replay/main.py): a synthetic run (truth from the estimator with K_TRUE, recorded estimate with the
 run's calibration K_CAL) replayed with its own calibration, another one, and bad inputs."""
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ from estimator.data import MeasuredData
 from estimator.online.distal import estimate_batch
 from estimator.sheath import SheathModel
 from live.cli import main
-from teleop.config import load_config, write_config
-from teleop.recording import write_measured_csv
+from teleop.config.load import load_config, write_config
+from teleop.recording.measured import write_measured_csv
 
 K_TRUE, K_CAL, K_OTHER, COMPLIANCE = 0.62, 0.55, 0.80, 1.0e-4
 
@@ -141,7 +141,7 @@ def test_the_calibrations_noise_band_is_replayed(tmp_path):
     e = cfg.estimator
     d = json.loads((run / "calibration.json").read_text())
     (run / "calibration.json").write_text(json.dumps({**d, "tension_noise_N": 0.05}), encoding="utf-8")
-    from teleop.recording import read_measured_csv
+    from teleop.recording.measured_csv import read_measured_csv
     data = read_measured_csv(run / "slave.csv")
     banded = estimate_batch(data.T_in, data.x_in, SheathModel(K=K_CAL, compliance=COMPLIANCE), time=data.time,
                             n_nodes=e.n_nodes, pretension=cfg.sheath.pretension, hold_rate=e.hold_rate,

@@ -1,4 +1,4 @@
-"""teleop replay of a joint instrument's run (live/replay_joints.py): a synthetic 3-joint run whose
+"""teleop replay of a joint instrument's run (live/replay/joints.py): a synthetic 3-joint run whose
 recorded estimate used the run's calibration (K_CAL) and whose truth follows K_TRUE, replayed with its own
 calibration (it must reproduce the recorded estimate), with the true one (it must move onto the truth) and
 with bad inputs."""
@@ -10,12 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimator.online.joint import JointEstimator
+from estimator.online.pair import PairEstimator
 from estimator.sheath import SheathModel
 from live.cli import main
 from slave.calibration_file import InstrumentCalibration, TendonCalibration, save_calibration
 from slave.pair_axis import joint_csv_columns
-from teleop.config import load_config, write_config
+from teleop.config.load import load_config, write_config
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "configs" / "instrument-3dof.yaml"
@@ -33,7 +33,7 @@ def _calibration(cfg, path: Path, K: float) -> Path:
 def _estimate(cfg, joint, K, Ta, xa, Tb, xb, t):
     m = SheathModel(K=K, compliance=COMPLIANCE)
     e = cfg.estimator
-    est = JointEstimator(m, m, joint.pulley_radius, n_nodes=e.n_nodes, pretension=joint.pretension,
+    est = PairEstimator(m, m, joint.pulley_radius, n_nodes=e.n_nodes, pretension=joint.pretension,
                          hold_rate=e.hold_rate, rate_time_constant=e.rate_time_constant)
     return np.array([(s.torque, s.angle, s.T_out[0], s.elongation[0], s.T_out[1], s.elongation[1])
                      for s in (est.step(Ta[k], xa[k], Tb[k], xb[k], t[k]) for k in range(t.size))])

@@ -1,7 +1,7 @@
 """The demo summary's line on the kernel's real-time budget and its note on throttling stalls."""
 from __future__ import annotations
 
-from live.demo_run import loop_lines, rt_budget_lines
+from live.demo.run import loop_lines, rt_budget_lines
 
 
 def _pc(worst_lateness_s: float, budget="limited", scheduling="SCHED_FIFO 20", step_max_ms=0.3) -> dict:

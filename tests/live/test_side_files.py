@@ -7,8 +7,8 @@ import json
 import logging
 
 from live.side_files import SideFiles, add_to_stats
-from teleop.config import Config
-from teleop.latency import EXACT, LatencyHistogram, bin_percentile
+from teleop.config.schema import Config
+from teleop.timing.latency import EXACT, LatencyHistogram, bin_percentile
 
 
 class _Rows:

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from live import record_files
-from live.record_files import StreamSample
+from live.record import files as record_files
+from live.record.files import StreamSample
 
 
 def test_rows_are_evenly_thinned_in_one_array_of_fixed_size(monkeypatch):

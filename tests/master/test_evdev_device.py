@@ -9,11 +9,12 @@ import pytest
 
 from master.device import HapticDevice
 from master.evdev_device import LEVEL_MAX, EvdevConfig, EvdevDevice, parse_evdev
-from master.node import MasterLinks, MasterNode
-from teleop.clock import FakeClock
-from teleop.config import Config, MappingConfig, MasterConfig
+from master.node import MasterNode
+from master.node_base import MasterLinks
+from teleop.config.schema import Config, MappingConfig, MasterConfig
 from teleop.errors import ConfigError, DeviceError
-from teleop.messages import SideState
+from teleop.timing.clock import FakeClock
+from teleop.wire.messages import SideState
 from tests.fakes import Topic
 from tests.master.fake_evdev import FakeEvdev, FakeInput, ecodes
 from tests.master.test_node import put_est, slave_beat, tick
@@ -71,7 +72,7 @@ def test_unchanged_force_is_not_uploaded_again_and_the_effect_is_replayed_within
         dev.set_force(1.0, 1e-3 * k)
         played += [k] * (joy.writes[n:] == [(EV_FF, 3, 1)])
     assert len(joy.uploads) == 2                              # the zero at start, then 1 N once
-    gaps = [b - a for a, b in zip(played, played[1:] + [1000])]
+    gaps = [b - a for a, b in zip(played, played[1:] + [1000], strict=False)]
     assert played[0] == 0 and max(gaps) <= 101 and min(gaps[:-1]) >= 100    # replayed every hold / 2 [ms]
 
 

@@ -12,11 +12,12 @@ import yaml
 from master.device import MultiAxisState
 from master.devices import device_axes_needed, make_device
 from master.hid import HidDevice, load_device_file, parse_device
-from master.node import MasterLinks, MasterNode
-from teleop.clock import FakeClock
-from teleop.config import load_config
+from master.node import MasterNode
+from master.node_base import MasterLinks
+from teleop.config.load import load_config
 from teleop.errors import ConfigError, DeviceError
-from teleop.messages import Heartbeat, Side, SideState
+from teleop.timing.clock import FakeClock
+from teleop.wire.messages import Heartbeat, Side, SideState
 from tests.fakes import Topic
 from tests.master.test_hid import FakeHandle
 from tests.master.test_node_axes import ANGLES, TORQUES, estimate
@@ -85,7 +86,7 @@ def test_the_master_node_drives_a_three_axis_hid_device():
     assert node.state == SideState.ENGAGED
     r = [j.pulley_radius for j in cfg.instrument.joints]
     m = cfg.master.mapping
-    want = [max(-3.0, min(3.0, -m.force_scale * tq / rk)) for tq, rk in zip(TORQUES, r)]
+    want = [max(-3.0, min(3.0, -m.force_scale * tq / rk)) for tq, rk in zip(TORQUES, r, strict=False)]
     assert dev.forces[1:] == pytest.approx(want[1:]) and links.command.sent[-1].targets[1:] == pytest.approx(ANGLES[1:])
 
 

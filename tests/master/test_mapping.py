@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from master.mapping import ForceMap, MotionMap, clamp_force
-from teleop.config import MappingConfig
+from teleop.config.schema import MappingConfig
 from teleop.errors import ConfigError
 
 DT = 1e-3

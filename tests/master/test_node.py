@@ -8,10 +8,11 @@ import pytest
 
 from estimator.phase import Phase
 from master.device import DeviceState
-from master.node import MasterLinks, MasterNode
-from teleop.clock import FakeClock
-from teleop.config import Config, MappingConfig, MasterConfig
-from teleop.messages import Heartbeat, Side, SideState, tendon_estimate
+from master.node import MasterNode
+from master.node_base import MasterLinks
+from teleop.config.schema import Config, MappingConfig, MasterConfig
+from teleop.timing.clock import FakeClock
+from teleop.wire.messages import Heartbeat, Side, SideState, tendon_estimate
 from tests.fakes import Topic
 
 DT = 1e-3
@@ -381,15 +382,16 @@ def test_one_csv_row_per_cycle_with_force_and_state():
     node.recorder = type("R", (), {"write": lambda self, r: rows.append(tuple(r))})()
     engage(node, links, clock)
     run(node, links, clock, 20)
-    from master.node import CSV_COLUMNS
+    from master.axes import TENDON_CSV_COLUMNS as CSV_COLUMNS
     assert len(rows) == 22 and all(len(r) == len(CSV_COLUMNS) for r in rows)
-    last = dict(zip(CSV_COLUMNS, rows[-1]))
+    last = dict(zip(CSV_COLUMNS, rows[-1], strict=False))
     assert last["state"] == int(SideState.ENGAGED) and last["force"] == pytest.approx(-2.0)
     assert last["time"] == pytest.approx(clock.now()) and 0 <= last["echo_age"] < 0.01
 
 
 def test_scripted_operator_clutches_when_asked_to_align_and_control_resumes():
-    from master.simulated import ScriptedOperator, build_protocol
+    from master.protocols import build_protocol
+    from master.simulated import ScriptedOperator
     node, _, links, clock = make(motion_scale=0.5, align_tolerance=0.001)
     op = ScriptedOperator(build_protocol("short"), start_delay=0.0)
     node.device = op

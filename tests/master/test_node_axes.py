@@ -7,10 +7,11 @@ from pathlib import Path
 import pytest
 
 from estimator.phase import Phase
-from master.node import MasterLinks, MasterNode, csv_columns
-from teleop.clock import FakeClock
-from teleop.config import load_config
-from teleop.messages import AxisState, Command, Estimate, Heartbeat, Side, SideState, TendonState
+from master.node import MasterNode, csv_columns
+from master.node_base import MasterLinks
+from teleop.config.load import load_config
+from teleop.timing.clock import FakeClock
+from teleop.wire.messages import AxisState, Command, Estimate, Heartbeat, Side, SideState, TendonState
 from tests.fakes import Rows, Topic
 
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "instrument-3dof.yaml"
@@ -44,10 +45,12 @@ def make():
 
 def estimate(seq, cmd_seq, angles=ANGLES):
     t = TendonState(10.0, 0.004, 9.0, 1e-4, Phase.PULL)
-    return Estimate(seq, cmd_seq, 0.0, tuple(AxisState(tq, a, (t, t)) for tq, a in zip(TORQUES, angles)))
+    return Estimate(seq, cmd_seq, 0.0, tuple(AxisState(tq, a, (t, t)) for tq, a in zip(TORQUES, angles, strict=False)))
 
 
-def run(node, links, clock, n, seq=[0]):
+def run(node, links, clock, n, seq=None):
+    if seq is None:
+        seq = [0]
     for _ in range(n):
         links.slave_heartbeat.put(Heartbeat(Side.SLAVE, 0, clock.now(), SideState.READY))
         seq[0] += 1
@@ -66,14 +69,14 @@ def test_every_axis_is_anchored_commanded_and_rendered_through_its_pulley():
     r = [j.pulley_radius for j in cfg.instrument.joints]
     m = cfg.master.mapping
     # rendered with the hands still: -force_scale torque / r, within the clamp
-    expected = [max(-m.force_limit, min(m.force_limit, -m.force_scale * tq / rk)) for tq, rk in zip(TORQUES, r)]
+    expected = [max(-m.force_limit, min(m.force_limit, -m.force_scale * tq / rk)) for tq, rk in zip(TORQUES, r, strict=False)]
     assert hands.forces[-1] == pytest.approx(expected, abs=1e-9) and max(map(abs, expected)) > 0.3
     hands.positions[1] += 0.01                          # 10 mm on axis 1 (bend_lr, r = 3.5 mm)
     run(node, links, clock, 1)
     assert links.command.sent[-1].targets[1] == pytest.approx(ANGLES[1] + m.motion_scale * 0.01 / r[1])
     cols = csv_columns(cfg)
     assert len(rec.rows[-1]) == len(cols) and "grasp.force" in cols
-    row = dict(zip(cols, rec.rows[-1]))
+    row = dict(zip(cols, rec.rows[-1], strict=False))
     assert row["bend_lr.cmd"] == pytest.approx(links.command.sent[-1].targets[1])
     assert row["grasp.slave"] == pytest.approx(ANGLES[2]) and row["state"] == SideState.ENGAGED
 

@@ -70,7 +70,7 @@ def test_random_inputs_stay_clamped_passive_and_never_amplify():
     pc = PassivityController(limit=3.0)
     v_all = rng.normal(0, 0.05, 20000)
     f_all = rng.uniform(-6, 6, 20000) + 60.0 * v_all          # biased to push along v: generates energy
-    for f, v, dt in zip(f_all, v_all, rng.uniform(5e-4, 2e-3, 20000)):
+    for f, v, dt in zip(f_all, v_all, rng.uniform(5e-4, 2e-3, 20000), strict=False):
         out = pc.step(f, v, dt)
         clipped = min(max(f, -3.0), 3.0)
         assert abs(out) <= 3.0 and pc.energy >= -1e-12
@@ -165,7 +165,7 @@ def test_reserve_eases_the_force_off_smoothly_where_the_hard_controller_switches
         pc = PassivityController(4.0, reserve=reserve)
         pc.step(-1.0, 0.02, dt * 400)          # 8 mJ in: pushing against the force
         fs = []
-        for k in range(2000):
+        for _k in range(2000):
             fs.append(pc.step(1.0, 0.02, dt))   # force along the motion: energy out
             assert pc.energy >= -1e-12
         out[reserve] = np.array(fs)
@@ -183,7 +183,7 @@ def test_reserve_does_not_switch_on_a_stick_slip_handle():
     out = [pc.step(1.0, 0.02 if k % 3 else 0.0, 1e-3) for k in range(300)]
     # the gain fades to E/E_r = 0 with tau_f (10 ms): after 5 tau_f no force comes back at a stick
     assert max(out[50:]) < 0.05 and pc.energy >= -1e-12
-    assert all(a >= b - 1e-12 for a, b in zip(out[2::3], out[5::3]))     # the sticks' force only falls
+    assert all(a >= b - 1e-12 for a, b in zip(out[2::3], out[5::3], strict=False))     # the sticks' force only falls
 
 
 def test_reserve_gives_held_back_force_back_over_the_release_time_not_in_one_sample():

@@ -23,15 +23,17 @@ import pytest
 from estimator.sheath import SheathModel
 from live.faults import FaultInjector
 from master.device import DeviceState
-from master.node import MasterLinks, MasterNode
-from slave.node import SlaveLinks, SlaveNode
+from master.node import MasterNode
+from master.node_base import MasterLinks
+from slave.node import SlaveNode
+from slave.node_base import SlaveLinks
 from slave.simulated import SimulatedRig
-from teleop.clock import FakeClock
-from teleop.config import config_from_dict
-from teleop.keys import command_key, estimate_key, heartbeat_key
-from teleop.loop_metrics import CHATTER_LIMITS, chatter
-from teleop.messages import Command, Estimate, Heartbeat, Side, SideState
-from teleop.transport import Session, free_tcp_port, loopback_endpoint, zenoh_config
+from teleop.config.load import config_from_dict
+from teleop.session.transport import Session, free_tcp_port, loopback_endpoint, zenoh_config
+from teleop.timing.clock import FakeClock
+from teleop.timing.loop_metrics import CHATTER_LIMITS, chatter
+from teleop.wire.keys import command_key, estimate_key, heartbeat_key
+from teleop.wire.messages import Command, Estimate, Heartbeat, Side, SideState
 
 DT = 1e-3
 DELAY, LOSS = "20ms", 0.1

@@ -4,7 +4,8 @@ from __future__ import annotations
 import pytest
 
 from master.device import HapticDevice, OperatorView
-from master.simulated import PROTOCOLS, ScriptedOperator, Segment, build_protocol
+from master.protocols import PROTOCOLS, Segment, build_protocol
+from master.simulated import ScriptedOperator
 from teleop.errors import ConfigError
 
 DT = 1e-3
@@ -113,7 +114,8 @@ def test_build_protocol():
 
 
 def test_the_operator_holds_the_clutch_for_clutch_time_when_the_console_says_align():
-    from master.simulated import ScriptedOperator, build_protocol
+    from master.protocols import build_protocol
+    from master.simulated import ScriptedOperator
     op = ScriptedOperator(build_protocol("short"), clutch_bit=1, clutch_time=0.05)
     assert op.read(0.0).buttons == 0
     op.on_console("ENGAGED")

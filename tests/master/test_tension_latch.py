@@ -4,8 +4,8 @@ when the operator releases the deadman (then presses it again) or clutches. Othe
 from __future__ import annotations
 
 from master.node import MasterNode
-from teleop.config import Config, SlaveConfig
-from teleop.messages import SideState
+from teleop.config.schema import Config, SlaveConfig
+from teleop.wire.messages import SideState
 from tests.master.test_node import engage, make, put_est, run, slave_beat, tick
 
 

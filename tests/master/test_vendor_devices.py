@@ -12,7 +12,7 @@ import pytest
 
 from master.devices import make_device
 from master.vendor_devices import DhdAdapter, TouchAdapter, VendorConfig, VendorDevice, load_vendor_file, sdk_module
-from teleop.config import Config
+from teleop.config.schema import Config
 from teleop.errors import ConfigError, DeviceError
 
 
@@ -58,7 +58,7 @@ def test_teleop_master_without_the_extra_exits_non_zero_with_one_line(tmp_path, 
 
 
 def test_make_device_refuses_a_joint_instrument_for_a_one_axis_device():
-    from teleop.config import load_config
+    from teleop.config.load import load_config
     cfg = load_config("configs/instrument-3dof.yaml")
     cfg = dataclasses.replace(cfg, master=dataclasses.replace(
         cfg.master, device=dataclasses.replace(cfg.master.device, type="touch")))

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimator.online.joint import JointEstimator
+from estimator.online.pair import PairEstimator
 from estimator.sheath import SheathModel
-from slave.joint_rig import SimulatedInstrument
 from slave.pair_control import PairController
-from teleop.config import TendonConfig, config_from_dict
+from slave.pair_rig import SimulatedInstrument
+from teleop.config.load import config_from_dict
+from teleop.config.schema import TendonConfig
 
 DT = 1e-3
 ROUTE_B = [{"length": 0.5}, {"length": 0.8, "radius": 0.25}, {"length": 0.3, "radius": 0.1}]
@@ -39,7 +40,7 @@ class Loop:
         j = cfg.instrument.joints[0]
         self.joint = j
         K = self.rig.K[0] if K is None else K
-        self.est = JointEstimator(route_model(j.tendons.a, K[0]), route_model(j.tendons.b, K[1]), j.pulley_radius,
+        self.est = PairEstimator(route_model(j.tendons.a, K[0]), route_model(j.tendons.b, K[1]), j.pulley_radius,
                                   pretension=j.pretension, coupling=coupling)
         self.T_set = j.pretension if j.pretension > 0 else min_tension
         st = self.rig.state

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from slave.calibration_file import calibration_path, user_calibration_dir
-from teleop.config import config_from_dict
+from teleop.config.load import config_from_dict
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from slave.drive import NOISE_BLOCK, Drive
-from slave.joint_rig import SimulatedInstrument
+from slave.pair_rig import SimulatedInstrument
 from slave.simulated import SimulatedRig
-from teleop.config import MotorConfig, SensorConfig, SimulatedRigConfig, load_config
+from teleop.config.load import load_config
+from teleop.config.schema import MotorConfig, SensorConfig, SimulatedRigConfig
 
 
 def rig(noise=0.1, seed=5, **motor):

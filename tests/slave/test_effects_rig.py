@@ -6,21 +6,23 @@ import pytest
 
 from estimator.sheath import SheathGeometry
 from slave.simulated import SimulatedRig
-from study.scenarios import EFFECT_IDS, realistic_range, record
-from teleop import config as C
+from slave.simulated_effects import EFFECT_IDS
+from study.scenarios import realistic_range, record
+from teleop.config.effects import EffectsConfig, EffectSwitch
+from teleop.config.schema import LoadConfig, MotorConfig, RunConfig, SensorConfig, SheathConfig, SimulatedRigConfig
 
 L, ANGLE, MU, EA = 1.5, 2.0 * math.pi, 0.1, 15000.0
 K = MU * ANGLE
 DT = 1e-3
-FAST = C.MotorConfig(bandwidth_hz=1e6, max_speed=10.0)
-SPRING = C.LoadConfig(joint_stiffness=100.0, joint_limit=0.1, tissue_stiffness=2000.0, tissue=True)
+FAST = MotorConfig(bandwidth_hz=1e6, max_speed=10.0)
+SPRING = LoadConfig(joint_stiffness=100.0, joint_limit=0.1, tissue_stiffness=2000.0, tissue=True)
 
 
-def make_rig(fx: C.EffectsConfig, noise=0.0, motor=FAST, pretension=0.0) -> SimulatedRig:
+def make_rig(fx: EffectsConfig, noise=0.0, motor=FAST, pretension=0.0) -> SimulatedRig:
     g = SheathGeometry.uniform(L, ANGLE)
-    sheath = C.SheathConfig(EA=EA, runs=tuple(C.RunConfig(r.length, r.radius) for r in g.runs), pretension=pretension)
-    return SimulatedRig(sheath, C.SimulatedRigConfig(n_elements=200, mu=MU, motor=motor, load=SPRING, effects=fx,
-                                                     sensors=C.SensorConfig(load_cell_noise=noise, seed=1)))
+    sheath = SheathConfig(EA=EA, runs=tuple(RunConfig(r.length, r.radius) for r in g.runs), pretension=pretension)
+    return SimulatedRig(sheath, SimulatedRigConfig(n_elements=200, mu=MU, motor=motor, load=SPRING, effects=fx,
+                                                     sensors=SensorConfig(load_cell_noise=noise, seed=1)))
 
 
 def drive(rig, xs):
@@ -36,8 +38,8 @@ def ramp(a, b, speed):
 
 
 def test_effects_are_off_by_default_and_listed_when_on():
-    assert make_rig(C.EffectsConfig()).effects == ()
-    fx = C.EffectsConfig(stiction=C.EffectSwitch(enabled=True), sensor_delay=C.EffectSwitch(enabled=True))
+    assert make_rig(EffectsConfig()).effects == ()
+    fx = EffectsConfig(stiction=EffectSwitch(enabled=True), sensor_delay=EffectSwitch(enabled=True))
     assert make_rig(fx).effects == ("stiction", "sensor_delay")
     assert EFFECT_IDS == ("velocity_friction", "pretension", "curvature_drift", "tendon_stiffening", "stiction",
                           "friction_offset", "sensor_offset", "sensor_delay")
@@ -45,22 +47,22 @@ def test_effects_are_off_by_default_and_listed_when_on():
 
 def test_bad_effect_magnitude_names_the_key():
     with pytest.raises(ValueError, match=r"rig\.simulated\.effects\.stiction\.static_ratio"):
-        make_rig(C.EffectsConfig(stiction=C.EffectSwitch(True, static_ratio=-0.1)))
+        make_rig(EffectsConfig(stiction=EffectSwitch(True, static_ratio=-0.1)))
     with pytest.raises(ValueError, match=r"rig\.simulated\.effects\.sensor_delay\.delay"):
-        make_rig(C.EffectsConfig(sensor_delay=C.EffectSwitch(True, delay=math.nan)))
+        make_rig(EffectsConfig(sensor_delay=EffectSwitch(True, delay=math.nan)))
 
 
 @pytest.mark.parametrize("speed", [0.002, 0.02])
 def test_velocity_friction_slip_ratio_grows_with_speed(speed):
     c_v = 20.0
-    tr = drive(make_rig(C.EffectsConfig(velocity_friction=C.EffectSwitch(True, viscous=c_v))), ramp(0, 0.006, speed))
+    tr = drive(make_rig(EffectsConfig(velocity_friction=EffectSwitch(True, viscous=c_v))), ramp(0, 0.006, speed))
     m = tr["T_in"] > 1.0
     np.testing.assert_allclose(tr["T_out"][m] / tr["T_in"][m], math.exp(-K * (1 + c_v * speed)), rtol=0.01)
 
 
 def test_curvature_drift_changes_K_with_time():
     rate = 0.02
-    rig = make_rig(C.EffectsConfig(curvature_drift=C.EffectSwitch(True, rate=rate)))
+    rig = make_rig(EffectsConfig(curvature_drift=EffectSwitch(True, rate=rate)))
     drive(rig, np.zeros(10000))                     # 10 s at rest
     tr = drive(rig, ramp(0, 0.006, 0.01))
     t = 10.0 + DT * np.arange(1, tr["T_in"].size + 1)
@@ -70,7 +72,7 @@ def test_curvature_drift_changes_K_with_time():
 
 def test_friction_offset_pull_and_release_lines():
     a = 1.0
-    rig = make_rig(C.EffectsConfig(friction_offset=C.EffectSwitch(True, tension_offset=a)))
+    rig = make_rig(EffectsConfig(friction_offset=EffectSwitch(True, tension_offset=a)))
     up = drive(rig, ramp(0, 0.007, 0.005))
     m = up["T_out"] > 0.5
     np.testing.assert_allclose(up["T_out"][m], (up["T_in"][m] + a) * math.exp(-K) - a, rtol=0.01)
@@ -86,9 +88,9 @@ def test_friction_offset_pull_and_release_lines():
 
 def test_tendon_stiffening_elongation_and_unchanged_T_out():
     beta, Tc = 3.0, 2.0
-    tr = drive(make_rig(C.EffectsConfig(tendon_stiffening=C.EffectSwitch(True, softening=beta, toe_tension=Tc))),
+    tr = drive(make_rig(EffectsConfig(tendon_stiffening=EffectSwitch(True, softening=beta, toe_tension=Tc))),
                ramp(0, 0.006, 0.005))
-    base = drive(make_rig(C.EffectsConfig()), ramp(0, 0.006, 0.005))
+    base = drive(make_rig(EffectsConfig()), ramp(0, 0.006, 0.005))
     u = np.linspace(0, 1, 2001)
     for k in (200, tr["T_in"].size - 1):
         prof = tr["T_in"][k] * np.exp(-K * u)
@@ -106,8 +108,8 @@ def test_tendon_stiffening_elongation_and_unchanged_T_out():
 
 def test_stiction_breakaway_after_a_hold():
     r_s = 0.5
-    rig = make_rig(C.EffectsConfig(stiction=C.EffectSwitch(True, static_ratio=r_s, slip_time=0.02)),
-                   motor=C.MotorConfig(bandwidth_hz=1e6, max_speed=10.0))
+    rig = make_rig(EffectsConfig(stiction=EffectSwitch(True, static_ratio=r_s, slip_time=0.02)),
+                   motor=MotorConfig(bandwidth_hz=1e6, max_speed=10.0))
     up = drive(rig, ramp(0, 0.005, 0.005))
     drive(rig, np.full(500, 0.005))                   # hold: the tendon sticks
     T_out0 = rig.state.truth.T_out
@@ -122,14 +124,14 @@ def test_stiction_breakaway_after_a_hold():
 
 
 def test_pretension_effect_adds_to_the_sheath_pretension():
-    rig = make_rig(C.EffectsConfig(pretension=C.EffectSwitch(True, tension=2.5)), pretension=1.0)
+    rig = make_rig(EffectsConfig(pretension=EffectSwitch(True, tension=2.5)), pretension=1.0)
     np.testing.assert_allclose(rig.state.truth.profile, 3.5)
     assert rig.state.truth.x_out == pytest.approx(3.5 / 2100.0, rel=1e-9)
 
 
 def test_sensor_offset_and_delay_act_on_the_reading_only():
-    fx = C.EffectsConfig(sensor_offset=C.EffectSwitch(True, offset=-0.4), sensor_delay=C.EffectSwitch(True, delay=0.0125))
-    rig, ref = make_rig(fx), make_rig(C.EffectsConfig())
+    fx = EffectsConfig(sensor_offset=EffectSwitch(True, offset=-0.4), sensor_delay=EffectSwitch(True, delay=0.0125))
+    rig, ref = make_rig(fx), make_rig(EffectsConfig())
     xs = 0.003 + 0.002 * np.sin(2 * math.pi * 1.0 * DT * np.arange(1, 3001))
     tr, base = drive(rig, xs), drive(ref, xs)
     np.testing.assert_array_equal(tr["T_out"], base["T_out"])
@@ -139,11 +141,11 @@ def test_sensor_offset_and_delay_act_on_the_reading_only():
 
 
 def test_general_solver_keeps_the_taut_invariant():
-    fx = C.EffectsConfig(friction_offset=C.EffectSwitch(True, tension_offset=0.5),
-                         tendon_stiffening=C.EffectSwitch(True, softening=2.0, toe_tension=1.5),
-                         velocity_friction=C.EffectSwitch(True, viscous=10.0),
-                         stiction=C.EffectSwitch(True, static_ratio=0.3))
-    rig = make_rig(fx, motor=C.MotorConfig())
+    fx = EffectsConfig(friction_offset=EffectSwitch(True, tension_offset=0.5),
+                         tendon_stiffening=EffectSwitch(True, softening=2.0, toe_tension=1.5),
+                         velocity_friction=EffectSwitch(True, viscous=10.0),
+                         stiction=EffectSwitch(True, static_ratio=0.3))
+    rig = make_rig(fx, motor=MotorConfig())
     rng = np.random.default_rng(4)
     cmd = np.clip(0.004 + np.cumsum(rng.normal(0, 3e-5, 4000)), 0.002, 0.009)
     for x in cmd:

@@ -7,17 +7,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from master.node import MasterLinks, MasterNode, csv_columns
+from master.node import MasterNode, csv_columns
+from master.node_base import MasterLinks
 from master.protocols import joint_marker, paper_protocol
 from master.simulated import ScriptedOperator
 from slave.calibration_file import load_calibration, sheath_models
-from slave.joint_rig import SimulatedInstrument
-from slave.node import SlaveLinks, SlaveNode
+from slave.node import SlaveNode
+from slave.node_base import SlaveLinks
 from slave.pair_axis import joint_csv_columns
 from slave.pair_calibrate import set_tension
-from teleop.clock import FakeClock
-from teleop.config import load_config
-from teleop.messages import Command, SideState
+from slave.pair_rig import SimulatedInstrument
+from teleop.config.load import load_config
+from teleop.timing.clock import FakeClock
+from teleop.wire.messages import Command, SideState
 from tests.fakes import Rows, Topic
 
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "instrument-3dof.yaml"
@@ -128,7 +130,7 @@ def test_reloaded_calibration_starts_safe_and_the_watchdog_relaxes_the_joints(de
 def test_commands_for_another_instrument_or_out_of_range_are_refused(demo, tmp_path):
     cal = load_calibration(demo[5] / "flex3.yaml", demo[0])
     cfg, clock, slave, master, op, rec, (cmd, est, shb, mhb) = build(tmp_path, calibration=cal)
-    for k, c in enumerate((Command(1, 0.0, (0.0, 0.0)), Command(2, 0.0, (0.0, 0.0, 20.0)),
+    for _k, c in enumerate((Command(1, 0.0, (0.0, 0.0)), Command(2, 0.0, (0.0, 0.0, 20.0)),
                            Command(3, 0.0, (0.0, 0.0, 0.0)), Command(3, 0.0, (0.0, 0.0, 0.0)))):
         cmd.put(c)
         clock.advance(DT)
@@ -160,7 +162,7 @@ def test_backlash_compensation_runs_the_paper_protocol_from_the_calibrated_bands
     run(clock, slave, master, 60.0, until=lambda: master.done and slave.done)
     assert op.finished and op.timeouts == 0 and master.safe_events == 0 and slave.safe_events == 0
     cal = load_calibration(tmp_path / "flex3.yaml", cfg)
-    for ax, models in zip(slave.axes, sheath_models(cal, cfg)):
+    for ax, models in zip(slave.axes, sheath_models(cal, cfg), strict=False):
         ctl = ax.controller
         assert ctl is not None and ctl._bank is not None                # stepped by the compiled bank
         for k, m in enumerate(models):                                   # c_rev of the calibrated models

@@ -7,10 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from slave.joint_rig import SimulatedInstrument
+from slave.pair_rig import SimulatedInstrument
 from slave.rig import RigInputError
 from slave.simulated import SimulatedRig
-from teleop.config import SimulatedJointConfig, config_from_dict
+from teleop.config.load import config_from_dict
+from teleop.config.schema import SimulatedJointConfig
 from teleop.errors import ConfigError
 from tests.slave.joint_helpers import DT, joint_config
 
@@ -49,13 +50,13 @@ def test_torque_balance_holds_every_step_and_tendons_stay_lipschitz():
     t = np.arange(3000) * DT
     u = 0.006 * np.sin(np.pi * t / 1.5) ** 2
     theta_prev = 0.0
-    for k, uu in enumerate(u):
+    for _k, uu in enumerate(u):
         tr = inst.step(x0 + [[uu + 1e-4, -0.8 * uu + 1e-4]], DT).truth
         th = tr.theta[0]
         load = inst.load_torque(0, th) + j.damping * (th - theta_prev) / DT
         assert tr.torque[0] == pytest.approx(load, abs=1e-9)
         theta_prev = th
-        for p, pair in zip(tr.profiles, inst.tendons[0]):
+        for p, pair in zip(tr.profiles, inst.tendons[0], strict=False):
             g = pair.log_gain
             lp = np.log(np.maximum(p, 1e-300))
             if p.min() > 0:
@@ -115,7 +116,7 @@ def test_one_rig_protocol_over_arrays_of_tendons():
     arrays have the rig's tendon shape: () and (n_joints, 2)."""
     from slave.rig import Rig, RigState
     from slave.simulated import SimulatedRig
-    from teleop.config import Config
+    from teleop.config.schema import Config
     inst, one = SimulatedInstrument.from_config(joint_config()), SimulatedRig.from_config(Config())
     for rig, shape in ((inst, (len(inst.joint_names), 2)), (one, ())):
         st = rig.step(rig.state.x_in_cmd, DT)
@@ -130,7 +131,7 @@ def test_sensors_are_seeded_noisy_and_quantised():
     ra = [a.step(x0 + 1e-4, DT) for _ in range(50)]
     rb = [b.step(x0 + 1e-4, DT) for _ in range(50)]
     rc = [c.step(x0 + 1e-4, DT) for _ in range(50)]
-    assert all(np.array_equal(p.T_in, q.T_in) for p, q in zip(ra, rb))
+    assert all(np.array_equal(p.T_in, q.T_in) for p, q in zip(ra, rb, strict=False))
     assert not np.array_equal(ra[-1].T_in, rc[-1].T_in)
     noise = np.array([s.T_in - s.truth.T_in for s in ra])
     assert 0.01 < noise.std() < 0.03
@@ -184,7 +185,7 @@ def test_the_step_over_all_joints_is_the_per_joint_kernel_bit_for_bit():
     from pathlib import Path
 
     from estimator.kernels import RIGID_STOP, step_joint
-    from teleop.config import load_config
+    from teleop.config.load import load_config
     cfg = load_config(Path(__file__).resolve().parents[2] / "configs" / "instrument-3dof.yaml")
     rig = SimulatedInstrument.from_config(cfg)
     T = [[rig.state.truth.profiles[2 * i + k].copy() for k in range(2)] for i in range(rig.n_joints)]
@@ -198,7 +199,7 @@ def test_the_step_over_all_joints_is_the_per_joint_kernel_bit_for_bit():
         cmd = x0 + 0.004 * np.array([[math.sin(phase), -math.sin(phase)], [math.sin(1.3 * phase), -0.8 * math.sin(phase)],
                                      [0.5 * math.sin(phase), -math.sin(0.7 * phase)]])
         x = rig._x + rig.drive.move(rig._x, cmd, DT)
-        for i, (j, s) in enumerate(zip(rig.joints, rig.sims)):          # the per-joint loop
+        for i, (j, s) in enumerate(zip(rig.joints, rig.sims, strict=False)):          # the per-joint loop
             (pa, pb), kt = rig.tendons[i], s.load.tissue_stiffness if rig.tissue[i] else 0.0
             theta[i] = step_joint(T[i][0], pa.lo, pa.hi, pa.dlo, pa.dhi, pa.w, pa.c_pull, pa.c_rel,
                                   T[i][1], pb.lo, pb.hi, pb.dlo, pb.dhi, pb.w, pb.c_pull, pb.c_rel, x[i, 0], x[i, 1],
@@ -223,11 +224,11 @@ def test_the_joint_settles_on_the_root_of_its_torque_balance():
     """Each step's angle is the root of the torque balance f(theta) (estimator.kernels.settle_joint) to round-off:
     within a few ulps of the angle a plain bisection of the same f finds, |f| at round-off of the torque scale; over
     pulls into tissue, reversals inside the band and releases to slack."""
+    from estimator.distal_slip import elongation
     from estimator.kernels import (
         BALANCE_TOL,
         RIGID_STOP,
         advance_proximal,
-        elongation,
         joint_torque_balance,
         load_torque,
         settle_joint,

@@ -8,16 +8,18 @@ import math
 import numpy as np
 import pytest
 
+from estimator.errors import CalibrationError
 from estimator.sheath import SheathModel
 from slave.calibrate import CalStage, JointLimitCalibration
 from slave.calibration_file import load_calibration
-from slave.node import CSV_COLUMNS, SlaveLinks, SlaveNode, csv_columns
+from slave.node import SlaveNode
+from slave.node_base import SlaveLinks
 from slave.rig import RigState
 from slave.simulated import SimulatedRig
-from teleop.clock import FakeClock
-from teleop.config import CalibrationConfig, Config, SlaveConfig
-from teleop.errors import CalibrationError
-from teleop.messages import Command, Estimate, Heartbeat, Side, SideState
+from slave.tendon_axis import CSV_COLUMNS, csv_columns
+from teleop.config.schema import CalibrationConfig, Config, SlaveConfig
+from teleop.timing.clock import FakeClock
+from teleop.wire.messages import Command, Estimate, Heartbeat, Side, SideState
 from tests.fakes import Rows, Topic
 
 DT = 1e-3
@@ -192,7 +194,7 @@ def test_duplicates_old_and_out_of_range_commands_are_ignored_and_counted():
 
 
 def test_sequence_numbers_wrap():
-    from slave.node import seq_newer
+    from teleop.wire.codec import seq_newer
     assert seq_newer(0, 2**32 - 1) and not seq_newer(2**32 - 1, 0) and seq_newer(5, None)
     assert not seq_newer(5, 5) and seq_newer(6, 5) and not seq_newer(4, 5)
 
@@ -221,7 +223,7 @@ def test_records_one_row_per_cycle_in_the_recording_columns():
         tick(node, clock)
     # a row per cycle after the first (which only moves the rig), each of the state its estimate came from
     assert len(rows.rows) == 19 and all(len(r) == len(CSV_COLUMNS) for r in rows.rows)
-    r = dict(zip(CSV_COLUMNS, rows.rows[-1]))
+    r = dict(zip(CSV_COLUMNS, rows.rows[-1], strict=False))
     assert r["marker"] == 1 and r["cmd_seq"] == 19 and r["state"] == int(SideState.ENGAGED)
     assert r["x_in_cmd"] == pytest.approx(19e-4)                      # the motor command the cycle gave
     assert np.all(np.diff([row[0] for row in rows.rows]) > 0)

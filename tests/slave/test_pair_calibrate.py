@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import yaml
 
+from estimator.errors import CalibrationError
 from slave.calibration_file import (
     calibration_path,
     from_results,
@@ -15,10 +16,9 @@ from slave.calibration_file import (
     sheath_models,
     user_calibration_dir,
 )
-from slave.joint_rig import SimulatedInstrument
 from slave.pair_calibrate import PairCalibration
-from teleop.config import config_from_dict, load_config
-from teleop.errors import CalibrationError
+from slave.pair_rig import SimulatedInstrument
+from teleop.config.load import config_from_dict, load_config
 
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "instrument-3dof.yaml"
 DT = 1e-3

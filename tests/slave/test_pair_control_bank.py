@@ -53,7 +53,7 @@ def test_the_bank_gives_each_controllers_own_commands_bit_for_bit_and_its_state_
     assert alone[0]._T_eq != alone[0]._T0 and alone[2]._T_eq != alone[2]._T0      # the compensation was at work
     assert bank.mode.tolist() == [int(c.mode) for c in alone]
     bank.release()
-    for a, b in zip(banked, alone):
+    for a, b in zip(banked, alone, strict=False):
         assert (a.x_cmd, a.mode, a.switches, a._x_ref, a._c_ref, a._ff) == (b.x_cmd, b.mode, b.switches, b._x_ref,
                                                                             b._c_ref, b._ff)
         assert (a._y, a._T0, a._T_eq) == (b._y, b._T0, b._T_eq)

@@ -11,7 +11,15 @@ from scipy.optimize import brentq
 from estimator.sheath import SheathGeometry
 from slave.rig import Rig, RigState
 from slave.simulated import SimulatedRig
-from teleop.config import Config, LoadConfig, MotorConfig, RunConfig, SensorConfig, SheathConfig, SimulatedRigConfig
+from teleop.config.schema import (
+    Config,
+    LoadConfig,
+    MotorConfig,
+    RunConfig,
+    SensorConfig,
+    SheathConfig,
+    SimulatedRigConfig,
+)
 
 L, ANGLE, MU, EA = 1.5, 2.0 * math.pi, 0.1, 15000.0
 K = MU * ANGLE

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from estimator.errors import CalibrationError
 from estimator.online.spindle import SpindleParams
 from estimator.online.spindle_estimator import SpindleEstimator
 from estimator.phase import Phase
@@ -18,8 +19,8 @@ from slave.rigs import make_rig
 from slave.spindle_axis import SpindleAxis
 from slave.spindle_calibrate import SpindleCalibration, band_to_K, pull_slip_M_e
 from slave.spindle_rig import SpindleInstrument
-from teleop.config import load_config
-from teleop.errors import CalibrationError, ConfigError
+from teleop.config.load import load_config
+from teleop.errors import ConfigError
 
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "instrument-spindle.yaml"
 DT = 1e-3

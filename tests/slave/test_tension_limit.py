@@ -11,17 +11,20 @@ import numpy as np
 import pytest
 
 from estimator.sheath import SheathModel
-from master.node import MasterLinks, MasterNode
+from master.node import MasterNode
+from master.node_base import MasterLinks
 from master.protocols import paper_protocol
 from master.simulated import ScriptedOperator
-from slave.node import SlaveLinks, SlaveNode
+from slave.node import SlaveNode
+from slave.node_base import SlaveLinks
 from slave.pair_calibrate import set_tension
 from slave.rig import RigState
 from slave.rigs import make_rig
-from teleop.clock import FakeClock
-from teleop.config import Config, SlaveConfig, load_config
-from teleop.messages import Command, SideState
-from teleop.safety_bounds import REARM_FRACTION
+from teleop.config.bounds import REARM_FRACTION
+from teleop.config.load import load_config
+from teleop.config.schema import Config, SlaveConfig
+from teleop.timing.clock import FakeClock
+from teleop.wire.messages import Command, SideState
 from tests.fakes import Rows, Topic
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -172,7 +175,7 @@ def test_a_pushing_hand_trips_the_slave_once_and_the_master_latches(config, limi
 
 
 def test_a_limit_whose_rearm_level_is_not_above_the_rest_tension_is_refused():
-    from teleop.config import config_from_dict
+    from teleop.config.load import config_from_dict
     from teleop.errors import ConfigError
     with pytest.raises(ConfigError, match=r"^<dict>: slave.max_tension = 10: .*sheath.pretension = 9.5 N"):
         config_from_dict({"slave": {"max_tension": 10.0}, "sheath": {"pretension": 9.5}})

@@ -11,17 +11,17 @@ import pytest
 from live.bridge import RigBridge
 from master.devices import DEVICE_TYPES, make_device
 from master.simulated import ScriptedOperator
-from slave.joint_rig import SimulatedInstrument
+from slave.pair_rig import SimulatedInstrument
 from slave.rig import RigInputError
 from slave.rigs import RIG_TYPES, make_rig
 from slave.simulated import SimulatedRig
 from slave.zenoh_rig import ZenohInstrument, ZenohRig
-from teleop.clock import FakeClock
-from teleop.config import load_config
+from teleop.config.load import load_config
 from teleop.errors import ConfigError, DeviceError, TransportError
-from teleop.keys import rig_key
-from teleop.rig_wire import decode_rig, encode_rig
-from teleop.transport import Received
+from teleop.session.transport import Received
+from teleop.timing.clock import FakeClock
+from teleop.wire.keys import rig_key
+from teleop.wire.rig import decode_rig, encode_rig
 
 JOINTS = Path(__file__).resolve().parents[2] / "configs" / "instrument-3dof.yaml"
 DT = 1e-3

@@ -8,11 +8,13 @@ import math
 import numpy as np
 import pytest
 
+from estimator.errors import DataError
 from estimator.offline.fit import predict
 from study import analyze
 from study.datasets import KAIST, skip_reason
-from study.kaist import CONFIGS_DEG, default_kaist_dir, find_configs
-from teleop.errors import ConfigError, DataError
+from study.kaist import CONFIGS_DEG
+from study.kaist_files import default_kaist_dir, find_configs
+from teleop.errors import ConfigError
 
 KAIST_DIR = default_kaist_dir()
 
@@ -40,7 +42,7 @@ def write_csv(path, n=4000, distal=("x_out", "T_out"), K=0.5, c=1e-4):
 def offset_csv(tmp_path_factory):
     """A simulated bench recording (study.scenarios) with tension-independent friction hidden in it."""
     from study.scenarios import record
-    from teleop.recording import write_measured_csv
+    from teleop.recording.measured import write_measured_csv
     rec = record("friction_offset", seed=3, level=1.0, duration=45.0)
     path = tmp_path_factory.mktemp("scenario") / "offset.csv"
     write_measured_csv(path, rec.data)
@@ -193,7 +195,7 @@ def test_kaist_mode_on_synthetic_files(tmp_path, capsys):
     assert "shared parameter set" in capsys.readouterr().out
     assert sh["models"]["capstan, mu = 0"]["rmse_test_deg"] > 5 * sh["models"]["capstan"]["rmse_test_deg"]
     zones = [np.nanmean([z["command_travel_deg"] or np.nan for z in c["dead_zones"]]) for c in s["configurations"]]
-    assert all(a < b for a, b in zip(zones, zones[1:]))                 # model-free: dead zone grows with N
+    assert all(a < b for a, b in zip(zones, zones[1:], strict=False))                 # model-free: dead zone grows with N
     assert longest_list(s) < 50                                         # summary numbers, no per-sample arrays
     names = {p.name for p in (tmp_path / "rep").iterdir()}
     assert names == set(FIGURES) | {"report.md"}
@@ -255,7 +257,7 @@ def test_kaist_findings_hold_on_the_real_data(tmp_path, capsys):
         assert r["linear map + play"] < 0.6 * r["seed pair model"], N
     zones = [np.mean([z["command_travel_deg"] for z in c["dead_zones"] if z["command_travel_deg"]])
              for c in s["configurations"]]
-    assert all(a < b for a, b in zip(zones, zones[1:]))                 # dead zone grows with N
+    assert all(a < b for a, b in zip(zones, zones[1:], strict=False))                 # dead zone grows with N
     assert 0.1 < s["trend"]["K_release_per_rad"] < 0.25                # mu of the added bends
     seed_K = [max(c["models"]["seed pair model"]["params"][k] for k in ("K_a", "K_b"))
               for c in s["configurations"]]
@@ -291,7 +293,7 @@ def test_route_option_holds_the_configured_route(tmp_path, capsys):
     # fitted: on this recording of the independent simulator (seed 1909112, a distal load-cell offset of
     # -0.84 N; its arcs are where the fitted route can hide the offset) the held route names it
     from study.lumped_scenarios import record
-    from teleop.recording import write_measured_csv
+    from teleop.recording.measured import write_measured_csv
     rec = record("sensor_offset:T_out", seed=1909112, level=0.8, duration=60.0)
     path = tmp_path / "r.csv"
     write_measured_csv(path, rec.data)

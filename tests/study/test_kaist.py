@@ -6,10 +6,13 @@ import math
 import numpy as np
 import pytest
 
-from teleop.errors import DataError
+from estimator.errors import DataError
 from study.datasets import KAIST, skip_reason
-from study.kaist import (CONFIGS_DEG, cycles, default_kaist_dir, find_configs, find_kaist_dir, is_kaist_file,
-                          load_all, read_kaist)
+from study.kaist import CONFIGS_DEG, cycles, load_all, read_kaist
+from study.kaist_files import default_kaist_dir
+from study.kaist_files import find_configs
+from study.kaist_files import find_kaist_dir
+from study.kaist_files import is_kaist_file
 
 KAIST_DIR = default_kaist_dir()
 needs_kaist = pytest.mark.skipif(not find_configs(KAIST_DIR), reason=skip_reason(KAIST, KAIST_DIR))
@@ -135,7 +138,7 @@ def test_generic_csv_with_header_and_column_map(tmp_path):
     p = tmp_path / "lab.csv"
     t = np.arange(0, 2.0, 0.01)
     p.write_text("t;T_A;T_B;cmd_rad;tip_rad\n" + "".join(
-        f"{a:.3f};{d:.3f};{e:.3f};{b:.5f};{c:.5f}\n" for a, b, c, d, e in zip(t, np.sin(t), 0.4 * np.sin(t), 5 + t, 5 - t)))
+        f"{a:.3f};{d:.3f};{e:.3f};{b:.5f};{c:.5f}\n" for a, b, c, d, e in zip(t, np.sin(t), 0.4 * np.sin(t), 5 + t, 5 - t, strict=False)))
     rec = read_kaist(p, 30, parse_column_map("time=0,T_a=1,T_b=2,command=3,angle=4,units=rad"), rate_hz=None)
     assert rec.config_deg == 30 and len(rec) == t.size
     np.testing.assert_allclose(rec.command, np.sin(t), atol=1e-5)
@@ -152,7 +155,8 @@ def test_generic_csv_with_header_and_column_map(tmp_path):
 
 
 def test_missing_file_and_directory_are_named(tmp_path):
-    from study.kaist import find_configs, load_dir
+    from study.kaist import load_dir
+    from study.kaist_files import find_configs
     with pytest.raises(DataError, match=r"sine_config_0\.txt: no such file"):
         read_kaist(tmp_path / "sine_config_0.txt")
     with pytest.raises(DataError, match=r"no KAIST recordings found under .*nowhere \(no such folder\): expected "
@@ -180,7 +184,8 @@ def test_missing_file_and_directory_are_named(tmp_path):
 def test_source_repository_layout_is_read_in_place(tmp_path):
     """A clone's optimization/selected/ names its files <N>.txt beside other recordings (conf0_60.txt):
     read the numbered ones when the folder has no sine_config_<N>.txt; the project's names win."""
-    from study.kaist import find_configs, load_dir
+    from study.kaist import load_dir
+    from study.kaist_files import find_configs
     for n in (30, 270, 90):
         write_sine(tmp_path / f"{n}.txt", n_stamps=10)
     write_sine(tmp_path / "conf0_60.txt", n_stamps=10)
@@ -217,4 +222,4 @@ def test_real_data_five_configurations():
         assert all(r.time[s.stop - 1] - r.time[s.start] == pytest.approx(6.28, abs=0.1) for s in cs)
     # the distal range shrinks as the tube bends more (SOURCE.md): ~37 deg at N=0, ~10 deg at N=240
     ranges = [np.degrees(np.ptp(r.angle)) / 2 for r in recs]
-    assert all(a > b for a, b in zip(ranges, ranges[1:]))
+    assert all(a > b for a, b in zip(ranges, ranges[1:], strict=False))

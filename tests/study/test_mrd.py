@@ -11,12 +11,15 @@ import pytest
 
 from estimator.pair_kernels import simulate_pair
 from estimator.online.spindle import SpindleParams, first_reversal, make_batch, predict_torque
-from estimator.offline.spindle_fit import band_centre, fit_torque
-from teleop.errors import ConfigError, DataError
-from study.mrd import (DISTAL_COUNTS_PER_REV, DISTAL_SIGN, PROXIMAL_COUNTS_PER_REV, TORQUE_NM_PER_COUNT,
-                        default_mrd_dir, load_mrd_dir, read_mrd)
-from study.mrd_report import analyze_mrd, band_measurements, format_mrd, parse_calibration
-from estimator.offline.spindle_shared import RunData, kinematic_ratio, load_sweep
+from estimator.offline.spindle.fit import band_centre, fit_torque
+from teleop.errors import ConfigError
+from estimator.errors import DataError
+from study.mrd import DISTAL_COUNTS_PER_REV, DISTAL_SIGN, PROXIMAL_COUNTS_PER_REV, TORQUE_NM_PER_COUNT, load_mrd_dir, read_mrd
+from study.mrd_files import default_mrd_dir
+from study.mrd_report import analyze_mrd, band_measurements
+from study.mrd_text import format_mrd
+from study.mrd_calibration import parse_calibration
+from estimator.offline.spindle.shared import RunData, kinematic_ratio, load_sweep
 
 from study.datasets import MRD, skip_reason
 from study.mrd_files import DEFAULT_FOLDER, mrd_folder
@@ -276,7 +279,7 @@ def test_real_runs_one_run_does_not_pin_the_load_gain():
     """Inside one run the jaw torque beyond the shape along the stroke is too small to fix the load gain to the
     +-4 % a one-run calibration needs (docs/results/mrd.md), and the encoders' ratio does not move with the load (no
     stretch to correct): corrected for stretch it still puts the gain above 1 / 0.96."""
-    from estimator.offline.spindle_centre_fit import within_run_gain
+    from estimator.offline.spindle.centre_fit import within_run_gain
     from study.mrd_calibration import run_data
     rd = {n: run_data(read_mrd(mrd_folder(DEFAULT_FOLDER) / f"{n}.TXT")) for n in ("00", "31", "43")}
     for r in rd.values():

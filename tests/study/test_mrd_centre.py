@@ -1,4 +1,4 @@
-"""The centre map (estimator.online.spindle_centre, estimator.offline.spindle_centre_fit, study.mrd_centre):
+"""The centre map (estimator.online.spindle_centre, estimator.offline.spindle.centre_fit, study.mrd_centre):
 synthetic runs whose band edges follow the capstan law c +- F0 + r e^(+-K) tau_d around a jaw torque that
 depends on the angle, the direction and the load."""
 from __future__ import annotations
@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from estimator.offline.spindle_centre_fit import (
+from estimator.offline.spindle.centre_fit import (
     fit_centre_map,
     held_features,
     predict_held,
@@ -16,7 +16,7 @@ from estimator.offline.spindle_centre_fit import (
     scale_profile,
     within_run_gain,
 )
-from estimator.offline.spindle_shared import RunData, kinematic_ratio
+from estimator.offline.spindle.shared import RunData, kinematic_ratio
 from estimator.online.spindle import first_reversal
 from estimator.online.spindle_centre import (
     MIN_SAMPLES,
@@ -198,7 +198,7 @@ def test_model_choice_at_one_load_keeps_only_a_load_gain_the_run_allows():
 
 def test_a_design_load_gain_replaces_the_encoders_and_is_recorded():
     """``--calibration gain=G:RUN``: the one number a one-run calibration lacks, given from outside."""
-    from study.mrd_report import split_design_gain
+    from study.mrd_calibration import split_design_gain
     from teleop.errors import ConfigError
     assert split_design_gain("gain=0.943:mid") == (0.943, "mid") and split_design_gain("31") == (None, "31")
     assert split_design_gain(None) == (None, None)
@@ -218,8 +218,8 @@ def test_a_folder_measures_its_load_gain_and_another_folder_takes_it_from_the_js
     folder's JSON; a folder of one load level, a missing file or a JSON without it is refused by name."""
     import json
 
+    from study.mrd_calibration import split_design_gain
     from study.mrd_centre import centre_folder
-    from study.mrd_report import split_design_gain
     from teleop.errors import ConfigError
     folder = [synth(f"{i}", load, seed=i) for i, load in enumerate((0.01, 0.02, 0.03, 0.04))]
     rec = centre_folder(folder, 0.05, lambda _: None)

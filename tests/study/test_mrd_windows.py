@@ -34,7 +34,7 @@ def test_a_folder_of_two_stroke_windows_gets_a_table_per_window_and_a_summary(tm
     assert "window 1 of 2" in printed and "window 2 of 2" in printed and "across 2 stroke windows" in printed
     s = analyze_windows(analyze_mrd, runs, None, None, False)
     assert s["mode"] == "mrd-windows" and len(s["windows"]) == 2
-    for w, names in zip(s["windows"], (("000", "001"), ("100", "101"))):
+    for w, names in zip(s["windows"], (("000", "001"), ("100", "101")), strict=False):
         assert w["runs"] == list(names)
         assert set(w["summary"]["runs"]) | {w["summary"]["calibration"]["run"]} == set(names)
     lo0, hi0 = s["windows"][0]["spindle_window_deg"]

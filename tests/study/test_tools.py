@@ -1,4 +1,4 @@
-"""Tool files (configs/tools/, teleop.tools): the shipped tools load, the loader refuses bad files in one line
+"""Tool files (configs/tools/, teleop.config.tools): the shipped tools load, the loader refuses bad files in one line
 naming the file and key, a config names its tool, and ``--tool`` turns into the one-run calibration's load gain."""
 from __future__ import annotations
 
@@ -7,10 +7,10 @@ from pathlib import Path
 import pytest
 
 from study.mrd_tools import tool_calibration, tool_entry
-from teleop.config import load_config
-from teleop.config_files import tool_file
+from teleop.config.files import tool_file
+from teleop.config.load import load_config
+from teleop.config.tools import TOOL_RANGES, Tool, load_tool, tool_names, tools_dir
 from teleop.errors import ConfigError
-from teleop.tools import TOOL_RANGES, Tool, load_tool, tool_names, tools_dir
 
 LEFT = "davinci-maryland-left"
 

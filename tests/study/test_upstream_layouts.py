@@ -17,8 +17,9 @@ from pathlib import Path
 
 import pytest
 
+from estimator.errors import DataError
 from live.cli import main
-from live.demo_recording import with_recording
+from live.demo.recording import with_recording
 from live.recording_rig import recording_format
 from study import analyze
 from study.datasets import DATA_ENV, GUIDE, KAIST, MRD, data_root, dataset_dir, skip_reason
@@ -27,8 +28,8 @@ from study.kaist_files import config_of, default_kaist_dir, find_kaist_dir, kais
 from study.mrd import MIN_ROWS, load_mrd_dir
 from study.mrd_files import default_mrd_dir, find_mrd_folder, mrd_folder
 from study.mrd_tools import add_tool_argument
-from teleop.config import load_config
-from teleop.errors import ConfigError, DataError
+from teleop.config.load import load_config
+from teleop.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[2]
 KAIST_CONFIGS = (0, 60, 120, 180, 240)

@@ -7,7 +7,7 @@ import pytest
 import yaml
 
 from teleop.arms import is_bimanual, load_arms
-from teleop.config import load_config
+from teleop.config.load import load_config
 from teleop.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from teleop.clock import Clock, FakeClock, LockedPacer, MonotonicClock, Pacer
+from teleop.timing.clock import Clock, FakeClock, LockedPacer, MonotonicClock, Pacer
 
 
 def test_clocks_satisfy_the_protocol():

@@ -9,20 +9,11 @@ import struct
 import numpy as np
 import pytest
 
-from teleop import codec
-from teleop.codec import MAGIC, MAX_AXES, WIRE_VERSION, decode, encode, next_seq
+from estimator.phase import Phase
 from teleop.errors import CodecError
-from teleop.messages import (
-    AxisState,
-    Command,
-    Estimate,
-    Heartbeat,
-    Phase,
-    Side,
-    SideState,
-    TendonState,
-    tendon_estimate,
-)
+from teleop.wire import codec
+from teleop.wire.codec import MAGIC, MAX_AXES, WIRE_VERSION, decode, encode, next_seq
+from teleop.wire.messages import AxisState, Command, Estimate, Heartbeat, Side, SideState, TendonState, tendon_estimate
 
 N_RANDOM = 300
 
@@ -164,7 +155,7 @@ def test_other_wire_versions_are_refused_naming_both(version):
 
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
 def test_non_finite_floats_are_named_both_ways(bad):
-    for k, name in enumerate(("t_master",)):
+    for name in ("t_master",):
         raw = bytearray(GOOD_CMD)
         struct.pack_into("<d", raw, 3 + 4, bad)
         with pytest.raises(CodecError, match=f"Command.{name} is"):

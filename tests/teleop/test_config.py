@@ -4,22 +4,16 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+import types
 from pathlib import Path
 from types import NoneType
 from typing import Union, get_args, get_origin, get_type_hints
 
 import pytest
 
-from teleop.config import (
-    RANGES,
-    Config,
-    RunConfig,
-    TransportConfig,
-    config_from_dict,
-    config_to_dict,
-    load_config,
-    write_config,
-)
+from teleop.config.load import config_from_dict, config_to_dict, load_config, write_config
+from teleop.config.ranges import RANGES
+from teleop.config.schema import Config, RunConfig, TransportConfig
 from teleop.errors import ConfigError
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
@@ -221,7 +215,7 @@ def test_range_table_covers_every_numeric_field_and_nothing_else():
                 walk(get_args(tp)[0], p + "[].")      # sheath.runs, instrument.joints, ...
             elif get_origin(tp) is tuple and get_args(tp)[0] in (int, float):
                 numeric.append(p + "[]")               # joint limits, device axes
-            elif tp in (int, float) or (get_origin(tp) is Union and set(get_args(tp)) in ({int, NoneType},
+            elif tp in (int, float) or (get_origin(tp) in (Union, types.UnionType) and set(get_args(tp)) in ({int, NoneType},
                                                                                        {float, NoneType})):
                 numeric.append(p)                      # Optional numbers too (estimator.tension_noise)
     walk(Config, "")

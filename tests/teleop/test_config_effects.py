@@ -8,13 +8,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimator.offline import effects as catalogue
-from estimator.offline.effects import Effect, Parameter, RigSwitch, ScenarioKnob, Setting
+from estimator.offline.effects import catalogue
+from estimator.offline.effects.catalogue import Effect
+from estimator.offline.effects.switches import RigSwitch, ScenarioKnob, Setting
+from estimator.offline.effects.types import Parameter
 from slave.simulated import SimulatedRig
 from slave.simulated_effects import IMPLEMENTED
 from study import scenarios
-from teleop.config import Config, EffectsConfig, EffectSwitch, config_from_dict, config_to_dict, load_config
-from teleop.effects_config import effect_ranges, effects_block
+from teleop.config.effects import EffectsConfig, EffectSwitch, effect_ranges, effects_block
+from teleop.config.load import config_from_dict, config_to_dict, load_config
+from teleop.config.schema import Config
 from teleop.errors import ConfigError
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
@@ -80,7 +83,7 @@ def test_the_toy_is_gone_after_unregister():
 
 def test_default_yaml_documents_the_effects_as_the_catalogue_says():
     text = (CONFIGS / "default.yaml").read_text()
-    assert effects_block(6) in text, "regenerate the rig.simulated.effects block: teleop.effects_config.effects_block(6)"
+    assert effects_block(6) in text, "regenerate the rig.simulated.effects block: teleop.config.effects.effects_block(6)"
 
 
 def test_every_catalogue_switch_has_a_kernel_in_the_simulated_rig():

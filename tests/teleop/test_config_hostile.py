@@ -1,6 +1,6 @@
 """Hostile and absurd config files end in one ConfigError line naming the file (and its line, column and key where
-there is one) within a second: the reader's limits (teleop/config_yaml.py), the kinds of the path keys
-(teleop/config_paths.py) and the bounded rates and waits (teleop/schema_ranges.py).
+there is one) within a second: the reader's limits (teleop/config/reader.py), the kinds of the path keys
+(teleop/config/paths.py) and the bounded rates and waits (teleop/config/ranges.py).
 
 The elapsed time of each load is asserted below a second: the limits apply while the file is read, so that is a
 property of the limits, not a benchmark."""
@@ -13,14 +13,14 @@ from pathlib import Path
 import pytest
 
 from teleop.arms import is_bimanual, load_arms
-from teleop.config import load_config
-from teleop.config_paths import DIR_KEYS, FILE_KEYS
-from teleop.config_yaml import MAX_ALIASES, MAX_BYTES, MAX_DEPTH, MAX_INT_DIGITS, MAX_NODES
+from teleop.config.load import load_config
+from teleop.config.paths import DIR_KEYS, FILE_KEYS
+from teleop.config.reader import MAX_ALIASES, MAX_BYTES, MAX_DEPTH, MAX_INT_DIGITS, MAX_NODES
 from teleop.errors import ConfigError
 
 #: a 9-level "billion laughs": 324 bytes that expand to 9^9 (387 million) strings
 BOMB = 'a: &a ["x","x","x","x","x","x","x","x","x"]\n' + "".join(
-    f"{c}: &{c} [" + ",".join([f"*{p}"] * 9) + "]\n" for p, c in zip("abcdefgh", "bcdefghi"))
+    f"{c}: &{c} [" + ",".join([f"*{p}"] * 9) + "]\n" for p, c in zip("abcdefgh", "bcdefghi", strict=False))
 
 
 def _refused(path: Path, loader=load_config) -> str:

@@ -5,7 +5,8 @@ from pathlib import Path
 
 import pytest
 
-from teleop.config import Config, config_from_dict, config_to_dict, load_config
+from teleop.config.load import config_from_dict, config_to_dict, load_config
+from teleop.config.schema import Config
 from teleop.errors import ConfigError
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"

@@ -1,4 +1,4 @@
-"""The installation's credentials (teleop/credentials.py): files made once and private, and Zenoh's own
+"""The installation's credentials (teleop/session/credentials.py): files made once and private, and Zenoh's own
 authentication and access control on loopback refusing a process without them and a role putting another's keys."""
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ import time
 
 import pytest
 
-from teleop.config import TransportConfig
-from teleop.credentials import ROLES, access_control, ensure_credentials, renew_credentials
+from teleop.config.schema import TransportConfig
 from teleop.errors import ConfigError
-from teleop.transport import Session, free_tcp_port, loopback_endpoint, zenoh_config
+from teleop.session.credentials import ROLES, access_control, ensure_credentials, renew_credentials
+from teleop.session.transport import Session, free_tcp_port, loopback_endpoint, zenoh_config
 from tests.zenoh_peer import raw_peer
 
 

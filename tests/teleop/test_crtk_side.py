@@ -10,15 +10,16 @@ import pytest
 
 from estimator.sheath import SheathModel
 from master.node_base import MasterLinks
-from slave.node import SlaveLinks, SlaveNode
+from slave.node import SlaveNode
+from slave.node_base import SlaveLinks
 from slave.simulated import SimulatedRig
-from teleop import ros2_types
-from teleop.clock import FakeClock
-from teleop.config import Config, Ros2Config, TransportConfig
-from teleop.crtk_side import CommandMerge, attach_master, attach_slave
+from teleop.config.schema import Config, Ros2Config, TransportConfig
 from teleop.errors import CodecError
-from teleop.messages import Command, SideState
-from teleop.transport import Session, free_tcp_port, loopback_endpoint
+from teleop.ros2 import types as ros2_types
+from teleop.ros2.side import CommandMerge, attach_master, attach_slave
+from teleop.session.transport import Session, free_tcp_port, loopback_endpoint
+from teleop.timing.clock import FakeClock
+from teleop.wire.messages import Command, SideState
 from tests.fakes import Topic
 from tests.ros2_peer import (
     JOINT_STATE,
@@ -119,7 +120,7 @@ def test_servo_jp_from_a_ros2_node_moves_the_simulated_instrument(wire):
     targets = [x0 + 0.0005 * k for k in range(1, 11)]     # 5 mm in 0.5 mm steps, each within the engage tolerance
     for k, x in enumerate(targets):
         servo(joint_state(1_700_000_000 + k, ["tendon"], [x]))
-        wait_for(lambda: crtk.servo is not None and crtk.servo.message.targets == (x,), 5, f"servo_jp {k}")
+        wait_for(lambda x=x: crtk.servo is not None and crtk.servo.message.targets == (x,), 5, f"servo_jp {k}")
         tick(node, clock, 30)
         assert node.state == SideState.ENGAGED
     assert node.rig_state.x_in == pytest.approx(targets[-1], abs=2e-4)
@@ -185,7 +186,7 @@ def test_servo_jp_commands_follow_the_masters_numbering_and_the_newest_wins(wire
 
 
 def test_a_tension_trip_is_a_fault_and_a_stale_link_a_pause():
-    from teleop.crtk import slave_messages
+    from teleop.ros2.crtk import slave_messages
     cfg = Config(ros2=Ros2Config(enabled=True))
 
     def state(**kw):

@@ -16,9 +16,9 @@ import time
 import numpy as np
 import pytest
 
-from teleop import csv_proc
-from teleop.csv_proc import ProcessCsvRecorder, wait_written
-from teleop.recording import read_measured_csv
+from teleop.recording import csv_proc
+from teleop.recording.csv_proc import ProcessCsvRecorder, wait_written
+from teleop.recording.measured_csv import read_measured_csv
 
 COLUMNS = ("time", "x_in", "T_in")
 
@@ -130,7 +130,7 @@ def test_the_child_ignores_ctrl_c_and_a_child_gone_is_an_error_line_and_counted_
 
 KILLED = textwrap.dedent("""
     import os, signal, sys
-    from teleop.csv_proc import ProcessCsvRecorder, wait_written
+    from teleop.recording.csv_proc import ProcessCsvRecorder, wait_written
     rec = ProcessCsvRecorder(sys.argv[1], ("time", "x_in", "T_in"), flush_every=100_000, flush_interval=0.001)
     for k in range(300):
         rec.write((k * 1e-3, 0.0, float(k)))
@@ -151,7 +151,7 @@ def test_a_killed_side_loses_no_row_the_child_received(tmp_path):
 def test_the_reports_of_the_child_are_json_lines(tmp_path):
     path = tmp_path / "w.csv"
     ProcessCsvRecorder(path, COLUMNS).close()                       # the header; the child appends
-    proc = subprocess.Popen([sys.executable, "-m", "teleop.csv_proc"], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+    proc = subprocess.Popen([sys.executable, "-m", "teleop.recording.csv_proc"], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
     import pickle
     wire = b"".join(pickle.dumps(m) for m in [(str(path), COLUMNS, 100), [(0.0, 0.0, 1.0), (1e-3, math.inf, 0.0)],
                                               "flush", [(2e-3, 0.0, 2.0)], None])

@@ -1,4 +1,4 @@
-"""Cycle statistics (teleop/cycles.py) and the loop's idle window and priorities (teleop/realtime.py)."""
+"""Cycle statistics (teleop/timing/cycles.py) and the loop's idle window and priorities (teleop/timing/realtime.py)."""
 from __future__ import annotations
 
 import os
@@ -7,8 +7,8 @@ import time
 
 import numpy as np
 
-from teleop.cycles import BIN, CycleStats
-from teleop.realtime import IdleWindow, promote_threads, scheduling
+from teleop.timing.cycles import BIN, CycleStats
+from teleop.timing.realtime import IdleWindow, promote_threads, scheduling
 
 
 def test_cycle_stats_percentiles_worst_step_and_overruns_by_state(tmp_path, monkeypatch):
@@ -68,7 +68,7 @@ def test_promote_threads_off_and_scheduling_named():
 def test_promote_threads_puts_the_loop_above_its_helpers_and_demote_undoes_it():
     import os
 
-    from teleop.realtime import demote_threads
+    from teleop.timing.realtime import demote_threads
     stop = threading.Event()
     helper = threading.Thread(target=stop.wait, name="csv-writer:test", daemon=True)
     other = threading.Thread(target=stop.wait, name="someone-else", daemon=True)
@@ -92,8 +92,8 @@ def test_promote_threads_puts_the_loop_above_its_helpers_and_demote_undoes_it():
 
 
 def test_machine_steal_reads_the_steal_column_and_the_demo_prints_it(tmp_path):
-    from live.demo_run import machine_line
-    from teleop.realtime import machine_steal
+    from live.demo.run import machine_line
+    from teleop.timing.realtime import machine_steal
     stat = tmp_path / "stat"
     hz = os.sysconf("SC_CLK_TCK")
     stat.write_text(f"cpu  10 20 30 40 50 60 70 {3 * hz} 0 0\ncpu0 1 2 3 4 5 6 7 8 0 0\n")
@@ -108,7 +108,7 @@ def test_machine_steal_reads_the_steal_column_and_the_demo_prints_it(tmp_path):
 
 
 def test_the_demo_prints_overruns_with_their_stalls_skipped_deadlines_and_late_starts():
-    from live.demo_run import loop_lines
+    from live.demo.run import loop_lines
     pc = {"ticks": 11000, "rate_hz": 1000.0, "overruns": 22, "overrun_fraction": 0.002, "stalls": 7, "skipped": 31,
           "late_starts": 25, "max_lateness": 0.0081}
     line = loop_lines({"master": {"pacer": pc, "safe_events": 0}}, detailed=True)[0]
@@ -120,9 +120,9 @@ def test_the_demo_prints_overruns_with_their_stalls_skipped_deadlines_and_late_s
 def test_a_real_clock_run_reports_the_machine_beside_the_cycles(monkeypatch):
     import gc
     monkeypatch.setattr(gc, "freeze", lambda: None)                  # the test process keeps its collector
-    from teleop.clock import MonotonicClock
-    from teleop.messages import Side
     from teleop.node import NodeBase
+    from teleop.timing.clock import MonotonicClock
+    from teleop.wire.messages import Side
 
     class Idle(NodeBase):
         side = Side.MASTER
@@ -154,9 +154,9 @@ def test_ctrl_c_inside_a_step_ends_the_loop_after_that_step_and_then_raises(monk
     import pytest
 
     monkeypatch.setattr(gc, "freeze", lambda: None)
-    from teleop.clock import MonotonicClock
-    from teleop.messages import Side
     from teleop.node import NodeBase
+    from teleop.timing.clock import MonotonicClock
+    from teleop.wire.messages import Side
 
     class Interrupted(NodeBase):
         side = Side.MASTER
@@ -189,7 +189,7 @@ def test_sigterm_inside_a_step_is_held_as_terminated():
 
     import pytest
 
-    from teleop.recording import Terminated, raise_on_sigterm, stop_at_cycle_end
+    from teleop.recording.measured import Terminated, raise_on_sigterm, stop_at_cycle_end
 
     with raise_on_sigterm():
         outer = signal.getsignal(signal.SIGTERM)

@@ -1,5 +1,5 @@
-"""A side's files on a full disk: the CSV writing process (teleop/csv_proc.py) and the write-ahead
-journal (teleop/journal.py) keep what they handed to the OS, drop and count the rest, and never raise
+"""A side's files on a full disk: the CSV writing process (teleop/recording/csv_proc.py) and the write-ahead
+journal (teleop/recording/journal.py) keep what they handed to the OS, drop and count the rest, and never raise
 into the caller (the control loop). Run in a subprocess under a file-size limit (RLIMIT_FSIZE, SIGXFSZ
 ignored: a write past it fails with EFBIG, as a write to a full disk fails with ENOSPC)."""
 from __future__ import annotations
@@ -18,8 +18,8 @@ SCRIPT = textwrap.dedent("""
     from pathlib import Path
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
     resource.setrlimit(resource.RLIMIT_FSIZE, ({limit}, {limit}))
-    from teleop.csv_proc import ProcessCsvRecorder
-    from teleop.journal import Journal, JournalReader
+    from teleop.recording.csv_proc import ProcessCsvRecorder
+    from teleop.recording.journal import Journal, JournalReader
     d = Path(sys.argv[1])
     rec = ProcessCsvRecorder(d / "side.csv", ["time", "x_in"], flush_interval=0.001)
     j = Journal(d, "slave")

@@ -1,19 +1,19 @@
-"""The sides' write-ahead journal (teleop/journal.py) and the recorder completing its recording from it
-(live/record_journal.py): rotation, torn records, incremental reading, recovery of exactly what
+"""The sides' write-ahead journal (teleop/recording/journal.py) and the recorder completing its recording from it
+(live/record/journal.py): rotation, torn records, incremental reading, recovery of exactly what
 was journaled and not received, on a real zenoh session pair on 127.0.0.1 (waits bounded)."""
 from __future__ import annotations
 
 import dataclasses
 import time
 
-from live.record import Recorder, read_messages
-from teleop import journal
-from teleop.codec import decode, encode
-from teleop.config import Config, TransportConfig
-from teleop.journal import Journal, JournalReader, journal_segments, pack_record, read_records
-from teleop.keys import command_key
-from teleop.messages import Command
-from teleop.transport import Session, free_tcp_port, loopback_endpoint
+from live.record.recorder import Recorder, read_messages
+from teleop.config.schema import Config, TransportConfig
+from teleop.recording import journal
+from teleop.recording.journal import Journal, JournalReader, journal_segments, pack_record, read_records
+from teleop.session.transport import Session, free_tcp_port, loopback_endpoint
+from teleop.wire.codec import decode, encode
+from teleop.wire.keys import command_key
+from teleop.wire.messages import Command
 
 
 def test_journal_rotates_keeps_the_newest_segments_and_reads_incrementally(tmp_path):
@@ -100,4 +100,4 @@ def test_recorder_recovers_exactly_what_was_journaled_and_not_received(tmp_path)
     # every seq once, the rows in time order (a recovered row carries its publish time, a received one its
     # receive time: under load a delivery can take longer than the gap between two puts, so not seq order)
     assert sorted(r[1] for r in rows) == list(range(50))
-    assert all(a[0] < b[0] for a, b in zip(rows, rows[1:]))
+    assert all(a[0] < b[0] for a, b in zip(rows, rows[1:], strict=False))

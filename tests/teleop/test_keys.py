@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import pytest
 
-from teleop import keys
 from teleop.errors import ConfigError
-from teleop.messages import Side
+from teleop.wire import keys
+from teleop.wire.messages import Side
 
 
 def test_stream_keys():

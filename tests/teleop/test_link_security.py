@@ -14,13 +14,14 @@ from pathlib import Path
 
 import pytest
 
-from teleop.codec import decode
-from teleop.config import TransportAuthConfig, TransportConfig, TransportTlsConfig
+from estimator.phase import Phase
+from teleop.config.schema import TransportAuthConfig, TransportConfig, TransportTlsConfig
 from teleop.errors import ConfigError
-from teleop.keys import command_key, estimate_key
-from teleop.link_security import SourceLock, link_security_settings
-from teleop.messages import Command, Estimate, Phase, tendon_estimate
-from teleop.transport import Session, free_tcp_port, loopback_endpoint
+from teleop.session.link_security import SourceLock, link_security_settings
+from teleop.session.transport import Session, free_tcp_port, loopback_endpoint
+from teleop.wire.codec import decode
+from teleop.wire.keys import command_key, estimate_key
+from teleop.wire.messages import Command, Estimate, tendon_estimate
 
 DEADLINE = 5.0   # [s] bound of any wait
 
@@ -159,7 +160,7 @@ def test_security_settings_and_their_errors(pki, tmp_path):
 
 def test_the_slaves_links_hear_one_master_session_and_follow_a_new_one_after_its_token_goes():
     from live.sides import slave_links
-    from teleop.keys import liveliness_key
+    from teleop.wire.keys import liveliness_key
     port = free_tcp_port()
     with Session(TransportConfig(listen=(loopback_endpoint(port),), connect=())) as slave:
         slave.lock_master = True                             # what live.discovery sets from transport.lock_master
@@ -191,7 +192,7 @@ def test_the_slaves_links_hear_one_master_session_and_follow_a_new_one_after_its
 
 def test_a_router_with_a_credentials_dictionary_routes_only_for_authorised_clients(pki):
     from live.router import router_config
-    from teleop.config import config_from_dict
+    from teleop.config.load import config_from_dict
     from teleop.errors import TransportError
     ep = loopback_endpoint(free_tcp_port())
     router_cfg = config_from_dict({"transport": {"listen": [ep], "auth": {"user": "router", "password": "s3cret",

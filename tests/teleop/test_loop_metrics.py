@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from teleop.errors import DataError
-from teleop.loop_metrics import (
+from estimator.errors import DataError
+from teleop.timing.loop_metrics import (
     CHATTER_LIMITS,
     TRANSPARENCY_LIMIT_FS,
     chatter,

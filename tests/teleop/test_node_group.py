@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from teleop.clock import FakeClock
-from teleop.messages import Side, SideState
 from teleop.node import NodeBase
 from teleop.node_group import NodeGroup
+from teleop.timing.clock import FakeClock
+from teleop.wire.messages import Side, SideState
 
 
 class Arm(NodeBase):

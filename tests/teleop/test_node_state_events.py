@@ -5,8 +5,8 @@ from __future__ import annotations
 import logging
 from types import SimpleNamespace
 
-from teleop.messages import Side, SideState
 from teleop.node import NodeBase
+from teleop.wire.messages import Side, SideState
 
 
 class _Sent:

@@ -1,5 +1,5 @@
 """A loop of any period ends within MAX_SLEEP of a stop request or of its maximum duration: the pacers sleep and
-wait for messages in slices (teleop/clock.py) and the node's loop asks between them (teleop/node.py).
+wait for messages in slices (teleop/timing/clock.py) and the node's loop asks between them (teleop/node.py).
 
 The process-level tests run a node whose period is 11 days (1e-6 Hz, past what a config accepts: the pacer's own
 robustness) on the real clock in a child process, and check that SIGTERM, Ctrl-C and the maximum duration end it
@@ -13,7 +13,7 @@ import time
 
 import pytest
 
-from teleop.clock import MAX_SLEEP, FakeClock, LockedPacer, Pacer
+from teleop.timing.clock import MAX_SLEEP, FakeClock, LockedPacer, Pacer
 
 
 class _Silent:
@@ -64,10 +64,10 @@ def test_the_locked_pacer_waits_for_messages_in_slices_and_ends_on_halt():
 
 NODE = """
 import logging, sys
-from teleop.clock import MonotonicClock
-from teleop.messages import Side
+from teleop.timing.clock import MonotonicClock
+from teleop.wire.messages import Side
 from teleop.node import NodeBase
-from teleop.recording import Terminated
+from teleop.recording.measured import Terminated
 
 class Slow(NodeBase):
     side = Side.SLAVE

@@ -10,15 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from teleop.errors import DataError
-from teleop.recording import (
-    CsvRecorder,
-    MeasuredData,
-    Terminated,
-    raise_on_sigterm,
-    read_measured_csv,
-    write_measured_csv,
-)
+from estimator.data import MeasuredData
+from estimator.errors import DataError
+from teleop.recording.measured import CsvRecorder, Terminated, raise_on_sigterm, write_measured_csv
+from teleop.recording.measured_csv import read_measured_csv
 
 
 def _write(path: Path, text: str) -> Path:
@@ -218,7 +213,7 @@ def test_recorder_flushed_when_process_gets_sigterm(tmp_path):
     path = tmp_path / "child.csv"
     script = textwrap.dedent(f"""
         import sys
-        from teleop.recording import CsvRecorder, Terminated, raise_on_sigterm
+        from teleop.recording.measured import CsvRecorder, Terminated, raise_on_sigterm
         try:
             with raise_on_sigterm(), CsvRecorder({str(path)!r}, {COLS!r}, flush_every=1000) as rec:
                 for i in range(5):

@@ -4,9 +4,9 @@ from __future__ import annotations
 import logging
 import time
 
-from teleop.config import TransportAuthConfig, TransportConfig, TransportTlsConfig
-from teleop.refusal_watch import CAUSES, RefusalWatch, _address, time_wait_remotes
-from teleop.transport import Session, free_tcp_port
+from teleop.config.schema import TransportAuthConfig, TransportConfig, TransportTlsConfig
+from teleop.session.refusal_watch import CAUSES, RefusalWatch, _address, time_wait_remotes
+from teleop.session.transport import Session, free_tcp_port
 from tests.live.test_refusals import pki  # noqa: F401 - the certificates, a pytest fixture
 
 DEADLINE = 30.0   # [s] bound of the wait for zenoh's retries (about one a second; see the module's limits)
@@ -59,7 +59,7 @@ def test_a_tls_listener_names_what_it_refuses_once_per_interval(pki, caplog):  #
     listener closes them, zenoh's own refused handshakes end in a reset and leave nothing to see): one line for
     all of them (rate-limited) with the causes a TLS port refuses; once the interval has passed, the next line
     counts those suppressed."""
-    from teleop.peer_probe import probe_endpoint
+    from teleop.session.peer_probe import probe_endpoint
     port = free_tcp_port()
     ep = f"tls/localhost:{port}"
     tls = TransportTlsConfig(root_ca=pki["ca"], certificate=pki["cert"], private_key=pki["key"], mutual=True)

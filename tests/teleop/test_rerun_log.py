@@ -14,7 +14,7 @@ from rerun.chunk import RrdReader  # noqa: E402
 
 from estimator.phase import Phase  # noqa: E402
 from teleop.errors import ConfigError  # noqa: E402
-from teleop.rerun_log import RerunLogger, signal_path  # noqa: E402
+from teleop.rerun.logger import RerunLogger, signal_path  # noqa: E402
 
 
 def _read(path: Path) -> tuple[RrdReader, dict[str, list[tuple[int | None, dict]]]]:
@@ -78,7 +78,7 @@ def test_save_writes_rrd_that_reads_back(tmp_path):
 
     profile = [(t, r) for t, r in rows["/profile/T_hat"] if "BarChart:values" in r]
     assert [t for t, _ in profile] == [i * 10_000_000 for i in range(20)]
-    for (_, r), hat in zip(profile, hats):
+    for (_, r), hat in zip(profile, hats, strict=False):
         np.testing.assert_array_equal(_tensor(r["BarChart:values"]), hat)
     first = profile[0][1]
     np.testing.assert_array_equal(_tensor(first["BarChart:abscissa"]), s)
@@ -152,7 +152,7 @@ def test_spawn_failure_falls_back_to_save(tmp_path, monkeypatch, capsys):
     def no_viewer(**kwargs):
         raise RuntimeError("Failed to find Rerun Viewer executable")
 
-    monkeypatch.setattr("teleop.rerun_log.display_available", lambda: True)
+    monkeypatch.setattr("teleop.rerun.logger.display_available", lambda: True)
     monkeypatch.setattr(rerun, "spawn", no_viewer)
     with RerunLogger("teleop-test", "rec-nospawn", "spawn", tmp_path / "f.rrd") as logger:
         assert logger.mode == "save"
@@ -196,7 +196,7 @@ def test_signal_paths():
 
 
 def test_route_geometry_follows_the_config_runs():
-    from teleop.rerun_log import route_points
+    from teleop.rerun.layout import route_points
     runs = [(0.3, float("inf")), (0.6, 0.191), (0.3, float("inf"))]
     p = route_points(runs)
     length = np.linalg.norm(np.diff(p, axis=0), axis=1).sum()
@@ -207,7 +207,7 @@ def test_route_geometry_follows_the_config_runs():
 
 
 def test_sheath_view_master_series_and_states_are_logged(tmp_path):
-    from teleop.rerun_log import tension_colors
+    from teleop.rerun.layout import tension_colors
     path = tmp_path / "view.rrd"
     with RerunLogger("test", "view", "save", path, route=[(0.5, float("inf")), (0.5, 0.2)]) as rr:
         rr.log_scalars(0.0, T_in=0.0)                             # first log: route, range, rest profile
@@ -231,8 +231,8 @@ def test_joint_instrument_view_logs_each_joint_and_its_tendons(tmp_path):
     """A joint instrument's view: per joint the torque and angle series, both tendons' routes and their
     tension in 3D, the tip labelled; an unknown joint is an error; the experiment label names each joint."""
     from master.protocols import experiment_label
-    from teleop.config import load_config
-    from teleop.rerun_view import JOINT_SPACING, joint_views
+    from teleop.config.load import load_config
+    from teleop.rerun.layout import JOINT_SPACING, joint_views
     cfg = load_config(Path(__file__).resolve().parents[2] / "configs" / "instrument-3dof.yaml")
     views = joint_views(cfg)
     assert [v.name for v in views] == ["bend_ud", "bend_lr", "grasp"]
@@ -265,7 +265,7 @@ def test_joint_instrument_view_logs_each_joint_and_its_tendons(tmp_path):
 def test_a_saved_recording_goes_on_in_segments_that_each_read_alone(tmp_path):
     """Past its segment time a saved recording finalises its file and goes on in ``<stem>.1.rrd`` with the
     same recording id; the new file carries the routes, series styles, profile grid and phase again."""
-    from teleop.rerun_segments import segment_path
+    from teleop.rerun.segments import segment_path
     path = tmp_path / "slave.rrd"
     route = [(0.3, float("inf")), (0.3, 0.1)]
     with RerunLogger("teleop-test", "rec-seg", "save", path, route=route, segment_s=3600.0) as logger:

@@ -10,9 +10,9 @@ import pytest
 
 pytest.importorskip("rerun")
 
-from teleop import rerun_proc  # noqa: E402
 from teleop.errors import ConfigError  # noqa: E402
-from teleop.rerun_proc import RerunProcessLogger  # noqa: E402
+from teleop.rerun import process as rerun_proc  # noqa: E402
+from teleop.rerun.process import RerunProcessLogger  # noqa: E402
 from tests.teleop.test_rerun_log import _read, _tensor  # noqa: E402
 
 
@@ -80,7 +80,7 @@ def test_each_segment_has_a_child_of_its_own_and_no_row_is_lost(tmp_path):
     """A saved recording in segments: each file is written and finalised by a child of its own, which exits when
     the next segment starts (its memory goes with it); the files share the recording id, and every call is in
     exactly one of them."""
-    from teleop.rerun_segments import segment_path
+    from teleop.rerun.segments import segment_path
     path = tmp_path / "slave.rrd"
     log = RerunProcessLogger("test", "r-seg", "save", path, segment_s=3600.0)
     first = log._proc

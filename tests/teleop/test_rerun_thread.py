@@ -6,8 +6,8 @@ import sys
 
 import numpy as np
 
-from teleop import rerun_thread
-from teleop.rerun_thread import ThreadedRerunLogger
+from teleop.rerun import thread as rerun_thread
+from teleop.rerun.thread import ThreadedRerunLogger
 
 
 def test_calls_run_on_the_thread_in_order_and_the_file_is_written(tmp_path, monkeypatch):

@@ -1,4 +1,4 @@
-"""The Rerun view's blueprint (teleop/rerun_view.py): one column per arm for a bimanual joint list, the single-arm
+"""The Rerun view's blueprint (teleop/rerun/layout.py): one column per arm for a bimanual joint list, the single-arm
 layout for joints without an arm."""
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from teleop.config import load_config
-from teleop.rerun_view import arm_groups, blueprint, joint_views
+from teleop.config.load import load_config
+from teleop.rerun.layout import arm_groups, blueprint, joint_views
 
 
 def _views(item) -> list:
@@ -53,7 +53,7 @@ def test_bimanual_blueprint_has_one_force_panel_per_hand_beside_its_joints(joint
         assert {f"/master/{arm}/{j.name}/force" for j in joints} <= set(forces)
     columns = root.contents[1:]
     assert [str(c.name) for c in columns] == ["left arm", "right arm"]
-    for arm, column in zip(("left", "right"), columns):
+    for arm, column in zip(("left", "right"), columns, strict=False):
         origins = [str(v.origin) for v in _views(column)]
         assert origins[0] == f"master/{arm}"
         torques = [o for o in origins if o.endswith("/torque")]

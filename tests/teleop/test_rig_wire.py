@@ -1,14 +1,14 @@
-"""The rig interface's byte format (teleop.rig_wire): round trip, and every refusal named."""
+"""The rig interface's byte format (teleop.wire.rig): round trip, and every refusal named."""
 from __future__ import annotations
 
 import math
 
 import pytest
 
-from teleop.codec import encode
 from teleop.errors import CodecError
-from teleop.messages import Command
-from teleop.rig_wire import MAX_TENDONS, RigSample, RigSetpoint, decode_rig, encode_rig
+from teleop.wire.codec import encode
+from teleop.wire.messages import Command
+from teleop.wire.rig import MAX_TENDONS, RigSample, RigSetpoint, decode_rig, encode_rig
 
 
 def test_round_trip_with_and_without_truth():

@@ -12,12 +12,13 @@ import struct
 
 import pytest
 
-from teleop.config import Config, JointConfig
-from teleop.crtk import OPERATING, servo_targets, slave_messages, slave_topics
+from estimator.phase import Phase
+from teleop.config.schema import Config, JointConfig
 from teleop.errors import CodecError, ConfigError
-from teleop.messages import AxisState, Estimate, Phase, SideState, TendonState, tendon_estimate
-from teleop.ros2_types import JOINT_STATE, OPERATING_STATE, STRING_STAMPED, WRENCH_STAMPED, decode, type_hash
-from teleop.ros2_wire import decode_attachment, encode_attachment, entity_token, gid, node_token, ros_name, topic_key
+from teleop.ros2.crtk import OPERATING, servo_targets, slave_messages, slave_topics
+from teleop.ros2.types import JOINT_STATE, OPERATING_STATE, STRING_STAMPED, WRENCH_STAMPED, decode, type_hash
+from teleop.ros2.wire import decode_attachment, encode_attachment, entity_token, gid, node_token, ros_name, topic_key
+from teleop.wire.messages import AxisState, Estimate, SideState, TendonState, tendon_estimate
 from tests.ros2_peer import independent_decoder, rihs01
 
 #: quoted in rmw_zenoh 0.2.5 docs/design.md ("chatter" topic example)

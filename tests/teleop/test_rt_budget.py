@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from teleop.realtime import RtBudget, rt_budget, rt_budget_note
+from teleop.timing.realtime import RtBudget, rt_budget, rt_budget_note
 
 
 def _kernel(tmp_path, runtime: str, period: str = "1000000"):
@@ -54,7 +54,7 @@ def _run_one_cycle(monkeypatch, caplog, scheduling: str, side) -> tuple[list[str
     import gc
 
     import teleop.node as node_mod
-    from teleop.clock import MonotonicClock
+    from teleop.timing.clock import MonotonicClock
 
     monkeypatch.setattr(gc, "freeze", lambda: None)                  # the test process keeps its collector
     monkeypatch.setattr(node_mod, "promote_threads", lambda priority: scheduling)
@@ -77,14 +77,14 @@ def _run_one_cycle(monkeypatch, caplog, scheduling: str, side) -> tuple[list[str
 
 
 def test_a_real_time_loop_logs_the_budget_and_reports_it_in_its_stats(monkeypatch, caplog):
-    from teleop.messages import Side
+    from teleop.wire.messages import Side
     notes, stats = _run_one_cycle(monkeypatch, caplog, "SCHED_FIFO 20", Side.SLAVE)
     assert len(notes) == 1 and notes[0].startswith("slave loop: the kernel stops real-time threads")
     assert stats["rt_budget_ms"] == 950.0 and stats["rt_stop_ms"] == 50.0
 
 
 def test_a_loop_without_real_time_priority_logs_no_budget_note(monkeypatch, caplog):
-    from teleop.messages import Side
+    from teleop.wire.messages import Side
     notes, stats = _run_one_cycle(monkeypatch, caplog, "off", Side.MASTER)
     assert not notes
     assert stats["rt_budget_ms"] == 950.0               # the host's budget is reported all the same

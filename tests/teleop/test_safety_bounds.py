@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from teleop.config import load_config
+from teleop.config.bounds import BOUNDS, Bound, bounded_keys, waiver_lines, waivers
+from teleop.config.load import load_config
 from teleop.errors import ConfigError
-from teleop.safety_bounds import BOUNDS, Bound, bounded_keys, waiver_lines, waivers
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -60,7 +60,7 @@ def test_every_bound_refuses_a_value_past_it_and_its_waiver_admits_it(bound):
     if bound.key.startswith("instrument.joints"):
         data["pair_control"] = {"axes": []}
     path = bound.key.replace("[]", "[0]")
-    from teleop.config import config_from_dict
+    from teleop.config.load import config_from_dict
     with pytest.raises(ConfigError, match="^<dict>: " + re.escape(f"{path} = ")):
         config_from_dict(data)
     cfg = config_from_dict({**data, "safety": {"override": [bound.key]}})
@@ -70,7 +70,7 @@ def test_every_bound_refuses_a_value_past_it_and_its_waiver_admits_it(bound):
 
 
 def test_a_value_within_its_bound_passes_and_a_waiver_of_it_says_so():
-    from teleop.config import config_from_dict
+    from teleop.config.load import config_from_dict
     cfg = config_from_dict({"safety": {"override": ["slave.watchdog_ms"]}})
     (w,) = waivers(cfg)
     assert not w["past_bound"] and "within its hard bound" in waiver_lines(cfg)[0]
@@ -92,10 +92,10 @@ def test_overrides_cannot_pass_a_bound_without_the_waiver_and_can_with_it(tmp_pa
 
 
 def test_every_bound_names_a_schema_key_once_with_a_reason():
-    from teleop.config import config_from_dict
+    from teleop.config.load import config_from_dict
     cfg = config_from_dict({"instrument": {"joints": [{"name": "j0"}]}, "safety": {"override": bounded_keys()}})
     assert len(set(bounded_keys())) == len(BOUNDS) == len(waivers(cfg))
-    for b, w in zip(BOUNDS, waivers(cfg)):
+    for b, w in zip(BOUNDS, waivers(cfg), strict=False):
         assert len(w["values"]) == 1 and not w["past_bound"] and len(b.reason) > 40
 
 
@@ -111,7 +111,7 @@ def test_the_cli_refuses_an_unsafe_config_with_exit_status_2(tmp_path):
 
 
 def test_a_waived_run_announces_and_records_the_waiver(tmp_path):
-    from teleop.transport import free_tcp_port, loopback_endpoint
+    from teleop.session.transport import free_tcp_port, loopback_endpoint
     path = _yaml(tmp_path, "master:\n  mapping:\n    force_limit: 1.0e6\nsafety:\n  override: "
                            "[master.mapping.force_limit]\nrecording:\n  rerun: 'off'\n")
     run = tmp_path / "run"

@@ -1,12 +1,19 @@
-"""teleop.text_files: a path that is no file, and bytes that are not UTF-8 text, named in one line."""
+"""teleop.recording.text_files: a path that is no file, and bytes that are not UTF-8 text, named in one line."""
 from __future__ import annotations
 
 import codecs
 
 import pytest
 
-from teleop.errors import DataError
-from teleop.text_files import HEAD_BYTES, check_text_head, not_text_error, read_text, require_file, text_problem
+from estimator.errors import DataError
+from teleop.recording.text_files import (
+    HEAD_BYTES,
+    check_text_head,
+    not_text_error,
+    read_text,
+    require_file,
+    text_problem,
+)
 
 CSV = "time,x_in,T_in\n0,0,1\n0.001,0,1\n"
 

@@ -11,12 +11,14 @@ import math
 
 import pytest
 
-from teleop.clock import FakeClock
-from teleop.config import TransportConfig
+from estimator.phase import Phase
+from teleop.config.schema import TransportConfig
 from teleop.errors import CodecError, ConfigError, TransportError
-from teleop.keys import command_key, estimate_key, liveliness_key, liveliness_pattern
-from teleop.messages import Command, Estimate, Phase, Side, tendon_estimate
-from teleop.transport import RateLimitedLog, Session, free_tcp_port, free_tcp_ports, loopback_endpoint, zenoh_config
+from teleop.session.entity import RateLimitedLog
+from teleop.session.transport import Session, free_tcp_port, free_tcp_ports, loopback_endpoint, zenoh_config
+from teleop.timing.clock import FakeClock
+from teleop.wire.keys import command_key, estimate_key, liveliness_key, liveliness_pattern
+from teleop.wire.messages import Command, Estimate, Side, tendon_estimate
 
 DEADLINE = 5.0     # [s] upper bound of any wait; the waits return as soon as the event happens
 
@@ -102,7 +104,7 @@ def test_garbage_is_counted_not_raised_and_subscriber_survives(pair, caplog):
     sub = a.subscriber(command_key("t3"), expect=Command)
     pub = b.publisher(command_key("t3"))
     assert _publish_until_received(pub, sub, Command(1, 0.0, (0.0,)))
-    with caplog.at_level(logging.WARNING, logger="teleop.transport"):
+    with caplog.at_level(logging.WARNING, logger="teleop.session.transport"):
         pub.put_bytes(b"\x00garbage")
         pub.put_bytes(b"\xa7\x03\x01" + bytes(25))                       # a future wire version
         assert sub.wait_errors(2, timeout=DEADLINE)
@@ -222,7 +224,7 @@ def test_close_returns_when_zenoh_teardown_blocks(monkeypatch, caplog):
     # with a warning
     import threading
 
-    import teleop.transport as transport
+    import teleop.session.transport as transport
 
     release = threading.Event()
 
@@ -237,7 +239,7 @@ def test_close_returns_when_zenoh_teardown_blocks(monkeypatch, caplog):
     real = s._z
     s._z = Blocking()
     monkeypatch.setattr(transport, "CLOSE_TIMEOUT_S", 0.2)
-    with caplog.at_level(logging.WARNING, logger="teleop.transport"):
+    with caplog.at_level(logging.WARNING, logger="teleop.session.transport"):
         s.close()
     assert s.closed and Blocking.closed == 0
     assert "did not close within 0.2 s" in caplog.text
