@@ -1,7 +1,7 @@
 """Build hook: the wheel carries a copy of ``configs/`` as ``teleop/configs/`` (package data).
 
 Everything else about the build is in pyproject.toml. ``configs/`` stays the top-level folder users edit;
-the copy lets an installed (non-editable) package find its defaults (teleop/config_files.py).
+the copy lets an installed (non-editable) package find its defaults (teleop/config/files.py).
 """
 from __future__ import annotations
 
