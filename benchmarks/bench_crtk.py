@@ -6,8 +6,8 @@ the loop opens the idle window (:data:`teleop.timing.realtime.IDLE`) until its n
 sleeps. With ``ros2`` on, the CRTK side (:mod:`teleop.ros2.side`) is attached on a loopback Zenoh
 session with a ROS 2 subscriber of every topic, and its thread publishes the 7 topics at
 ``ros2.rate_hz`` (100 Hz); ``path`` is ``on`` with that thread stopped (what the loop itself adds: the
-hook, the estimate tee, the merged command source). Prints p50/p99/max of the step time, the overruns of the 1 kHz grid, the
-publications done, and the cost of one ``offer`` call alone. Never fails on time.
+hook, the estimate tee, the merged command source). Prints p50/p99/max of the step time, the overruns of the 1 kHz grid,
+the publications done, and the cost of one ``offer`` call alone. Never fails on time.
 """
 from __future__ import annotations
 

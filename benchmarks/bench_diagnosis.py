@@ -28,8 +28,8 @@ pass/fail checks are in tests/estimator/test_diagnosis.py).
     .venv/bin/python benchmarks/bench_diagnosis.py --floor-table OUT.json [OUT.json ...]
 
 ``--floor-table`` prints estimator.offline.diagnosis.thresholds.FLOOR_SCORE as computed from the clean recordings
-(and clean twins) of runs of this benchmark whose base model is at the floor (``--json`` files of development sets only), per
-effect the lowest score and the bound.
+(and clean twins) of runs of this benchmark whose base model is at the floor (``--json`` files of development sets
+only), per effect the lowest score and the bound.
 """
 from __future__ import annotations
 

@@ -3,8 +3,8 @@
 Runs ``teleop analyze --mrd DIR --json OUT`` as a separate process pinned to one thread
 (OMP/MKL/OpenBLAS/NUMBA threads = 1) and prints its wall and CPU time against the 60 s goal of the
 issue; then the import and the analysis timed in-process. DIR defaults to the MRD data of the data folder
-(``TSM_TELEOP_DATA``, docs/how-to/get-the-data.md); skips (prints why and what to do) when it is absent. Data: MRD Lab data repository, University of Minnesota
-(ODbL 1.0 / DbCL 1.0). Prints figures, never fails on them.
+(``TSM_TELEOP_DATA``, docs/how-to/get-the-data.md); skips (prints why and what to do) when it is absent. Data: MRD Lab
+data repository, University of Minnesota (ODbL 1.0 / DbCL 1.0). Prints figures, never fails on them.
 
     .venv/bin/python benchmarks/bench_mrd.py [--dir DIR] [--calibration RUN|segment:SECONDS]
 """
@@ -24,9 +24,9 @@ ONE_THREAD = {k: "1" for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_N
 os.environ.update(ONE_THREAD)
 ROOT = Path(__file__).resolve().parents[1]
 
-from study.datasets import MRD, skip_reason  # noqa: E402 - after the thread settings
-from study.mrd import load_mrd_dir  # noqa: E402 - after the thread settings
-from study.mrd_files import default_mrd_dir  # noqa: E402 - after the thread settings
+from datasets.folders import MRD, skip_reason  # noqa: E402 - after the thread settings
+from datasets.mrd import load_mrd_dir  # noqa: E402 - after the thread settings
+from datasets.mrd_files import default_mrd_dir  # noqa: E402 - after the thread settings
 from study.mrd_report import analyze_mrd  # noqa: E402 - after the thread settings
 
 GOAL_S = 60.0

@@ -1,6 +1,6 @@
 """Every run of an MRD folder through the live path (``rig.type: recording``), beside ``teleop analyze --mrd``.
 
-The slave's recording rig and recorded spindle axis (live/recording_rig.py, live/recording_axis.py) play each
+The slave's recording rig and recorded spindle axis (slave/recording/rig.py, slave/recording/spindle.py) play each
 run in process, one cycle per recorded sample (1 kHz), with the calibration the slave fits on start (the tool
 file's rule, ``mid``, with its load gain). The offline figure of each run is ``teleop analyze --mrd DIR --tool
 NAME``'s own (:func:`study.mrd_report.analyze_mrd`, same calibration run and load gain, the folder-wide fits
@@ -14,7 +14,7 @@ fails on them.
 
     .venv/bin/python benchmarks/bench_recording_rig.py [--dir DIR] [--tool NAME] [--runs GLOB]
 
-``--kaist [DIR]`` plays the KAIST recordings instead (live/recording_pair.py: the pair axis's online estimator on
+``--kaist [DIR]`` plays the KAIST recordings instead (slave/recording/pair.py: the pair axis's online estimator on
 each configuration's test cycle, beside the offline seed pair model on the same cycles); ``--extended JSON`` (the
 JSON of ``teleop analyze --kaist --json OUT``) adds the offline analysis's extended model and what leaving it
 out costs in degrees.
@@ -33,11 +33,11 @@ ROOT = Path(__file__).resolve().parents[1]
 
 import numpy as np  # noqa: E402 - after the thread settings
 
-from live.recording_axis import fit_recorded_model  # noqa: E402
-from live.recording_score import play_run, score_run  # noqa: E402
-from study.datasets import KAIST, MRD, skip_reason  # noqa: E402
-from study.mrd import load_mrd_dir  # noqa: E402
-from study.mrd_files import DEFAULT_FOLDER, mrd_folder  # noqa: E402
+from slave.recording.spindle import fit_recorded_model  # noqa: E402
+from live.demo.recording_score import play_run, score_run  # noqa: E402
+from datasets.folders import KAIST, MRD, skip_reason  # noqa: E402
+from datasets.mrd import load_mrd_dir  # noqa: E402
+from datasets.mrd_files import DEFAULT_FOLDER, mrd_folder  # noqa: E402
 from study.mrd_report import analyze_mrd  # noqa: E402
 from teleop.config.load import load_config  # noqa: E402
 from teleop.config.tools import load_tool  # noqa: E402
@@ -104,9 +104,9 @@ def kaist(directory: str | None, extended: str | None) -> None:
     """The KAIST table (module docstring)."""
     import json
 
-    from live.recording_pair import kaist_live
-    from study.kaist import load_all
-    from study.kaist_files import default_kaist_dir, find_configs
+    from slave.recording.pair import kaist_live
+    from datasets.kaist import load_all
+    from datasets.kaist_files import default_kaist_dir, find_configs
     d = Path(directory) if directory else default_kaist_dir()
     if not find_configs(d):
         print(f"bench_recording_rig --kaist: skipped, {skip_reason(KAIST, d)}")

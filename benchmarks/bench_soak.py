@@ -14,8 +14,9 @@ overruns, the round trip's p50 and p99 in the window, the resident memory (RSS) 
 its children (the sides' Rerun logging processes), the run directory's bytes and bytes per hour, how far
 the recorder is behind the sides (commands and estimates sent and not yet written) and the messages it is
 missing by seq. A recorder behind by thousands of messages is starved of CPU (it runs niced, below the two
-real-time loops): it holds the backlog in memory, and what the senders' queues drop meanwhile is lost to it. At the end, the messages lost (each side's sent count against
-what the recorder holds) and a verdict on the criteria: RSS growth after the first minute below
+real-time loops): it holds the backlog in memory, and what the senders' queues drop meanwhile is lost to it. At the end,
+the messages lost (each side's sent count against what the recorder holds) and a verdict on the criteria: RSS growth
+after the first minute below
 :data:`RSS_GROWTH` per process, the last window's round-trip p99 within :data:`P99_DRIFT` of the first's,
 no message lost, under :data:`BYTES_PER_HOUR` of disk per hour (the growing files at their rate over the run,
 the journals' ring of at most 16 MB per side once).

@@ -20,7 +20,8 @@ The four phases and their laws (full slip after a reversal from full slip):
 The transition elongations follow from the profile min(T_in0 e^{-ks}, T_in e^{+ks}) (and its mirror)
 with k = K/L. These formulas are exact for one reversal from full slip; :class:`PhaseFormulaEstimator`
 chains them with the paper's "tension at the last reversal" state, which is wrong after minor loops
-(docs/concepts/model.md, the tension-profile memory) - the profile-memory estimator in :mod:`estimator.online.distal` is not.
+(docs/concepts/model.md, the tension-profile memory) - the profile-memory estimator in :mod:`estimator.online.distal` is
+not.
 """
 from __future__ import annotations
 

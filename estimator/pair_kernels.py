@@ -16,9 +16,9 @@ stiffness k_joint [N m/rad] as a tendon-tension difference per radian), and the
 angle is in rad. One step (each sample is split into ``substeps``): the motors move with the joint
 held (slip spreads from each proximal end, :func:`estimator.kernels.advance_proximal`), then
 the joint settles with the motors held (slip spreads from each distal end and theta solves (P4),
-:func:`estimator.kernels.settle_joint`); the compiled loops are in :mod:`estimator.pair_loops`. So the joint stays put after a reversal until a slip front
-reaches a tip - the capstan band of each tendon acting on the joint (E1 with E11, E13) - and the
-proximal tensions are an output of the model, not an input.
+:func:`estimator.kernels.settle_joint`); the compiled loops are in :mod:`estimator.pair_loops`. So the joint stays put
+after a reversal until a slip front reaches a tip - the capstan band of each tendon acting on the joint (E1 with E11,
+E13) - and the proximal tensions are an output of the model, not an input.
 
 Both tendons start as uniform profiles at the measured pretensions (E5) with theta = 0; tau_0 is the
 distal torque of that rest, so the rest is an equilibrium. Extensions (the effect numbers of docs/concepts/effects.md):

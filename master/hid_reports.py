@@ -203,7 +203,8 @@ class InputMap:
     report_id: int | None
     axes: dict[str, Field]
     position_axis: str
-    position_axes: tuple[str, ...] = ()            # several device axes (one per instrument axis); () = (position_axis,)
+    # several device axes (one per instrument axis); () = (position_axis,)
+    position_axes: tuple[str, ...] = ()
     buttons: Field | None = None
     button_masks: tuple[int, ...] = ()
     presence: Field | None = None

@@ -2,9 +2,9 @@
 
 An instrument is a list of axes (:mod:`master.axes`): one for a single tendon (positions in m),
 one per antagonistic pair for a joint instrument (angles in rad); both speak the one Command and
-Estimate of :mod:`teleop.wire.messages` with one entry per axis. Every axis gets the whole console, the force map and a passivity controller; the
-node is ENGAGED only while every axis's console is. One :meth:`MasterNode.step` per cycle (1 kHz),
-given the time by the caller:
+Estimate of :mod:`teleop.wire.messages` with one entry per axis. Every axis gets the whole console, the force map and a
+passivity controller; the node is ENGAGED only while every axis's console is. One :meth:`MasterNode.step` per cycle (1
+kHz), given the time by the caller:
 
 1. show the operator the latest proximal tension (simulated operators only), read the device;
 2. link health: the last *accepted* estimate is fresh (younger than ``master.watchdog_ms``), the
@@ -28,13 +28,13 @@ given the time by the caller:
    whatever the links and the alignment say, until the operator releases the deadman or presses the
    clutch (:attr:`MasterNode.tension_latched`); a hand that keeps pushing does not drive the tendon
    into its limit again;
-4. unless the newest estimate is beyond ``master.max_tension`` (step 2), publish the command (``Command(seq, t_master, targets, engaged, marker)``, one target per axis:
-   ``x_in_cmd`` of a tendon, the angle of a joint) and keep its send time by seq in a
-   ring buffer; an Estimate echoing ``cmd_seq`` gives the round-trip latency;
-5. render ``-force_scale * T_k`` on each axis (``T_out_hat`` of a tendon, ``effort_hat / r`` (torque / r) of a pair) ramped, clamped, slew-limited (:class:`master.mapping.ForceMap`),
-   then through the passivity controller (:mod:`master.passivity`, velocity from successive device
-   positions; ``master.mapping.passivity``), then clamped again: no force above
-   ``master.mapping.force_limit`` ever reaches the device;
+4. unless the newest estimate is beyond ``master.max_tension`` (step 2), publish the command (``Command(seq, t_master,
+   targets, engaged, marker)``, one target per axis: ``x_in_cmd`` of a tendon, the angle of a joint) and keep its send
+   time by seq in a ring buffer; an Estimate echoing ``cmd_seq`` gives the round-trip latency;
+5. render ``-force_scale * T_k`` on each axis (``T_out_hat`` of a tendon, ``effort_hat / r`` (torque / r) of a pair)
+   ramped, clamped, slew-limited (:class:`master.mapping.ForceMap`), then through the passivity controller
+   (:mod:`master.passivity`, velocity from successive device positions; ``master.mapping.passivity``), then clamped
+   again: no force above ``master.mapping.force_limit`` ever reaches the device;
 6. publish a Heartbeat at ``slave.heartbeat_hz`` (both sides use that rate), record one CSV row.
 
 Steps 1-4 are the cycle's first phase (:meth:`MasterNode.step_send`), 5-6 its second

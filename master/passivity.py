@@ -27,12 +27,12 @@ the controller first eases the force off smoothly while the port gives energy ba
 
 so the stored energy decays like ``dE/dt = -(E/E_r) |f v|`` instead of running into the hard
 correction, which then only catches what the scaling misses. The direction ``d`` is the handle's
-last clear motion (its velocity smoothed over 20 ms beyond v_d = 2 mm/s): a handle held by the device's friction (v = 0 between slips) or
-creeping at a few um/s carries almost no power, and deciding on the sign of such a v switched the
-force between full and zero every other sample; so did a raw-velocity threshold, as one force step
-moves the hand by ~1 mm/s within a sample. The hard PC alone switches between
-full force and the damped force from one sample to the next; on a hand of small inertia that is a
-limit cycle of its own (docs/concepts/haptic-loop.md). Scaling the force toward 0 never makes the port active
+last clear motion (its velocity smoothed over 20 ms beyond v_d = 2 mm/s): a handle held by the device's friction (v = 0
+between slips) or creeping at a few um/s carries almost no power, and deciding on the sign of such a v switched the
+force between full and zero every other sample; so did a raw-velocity threshold, as one force step moves the hand by ~1
+mm/s within a sample. The hard PC alone switches between full force and the damped force from one sample to the next; on
+a hand of small inertia that is a limit cycle of its own (docs/concepts/haptic-loop.md). Scaling the force toward 0
+never makes the port active
 (``|f'| <= |f|``, same sign). (Hannaford & Ryu write ``f' = f + alpha v`` with ``f`` the force
 the operator applies to the network; here ``f`` is the force applied to the operator, hence the
 minus.) The command is clamped to ``[-limit, limit]`` first; the damped force then always lies

@@ -74,7 +74,8 @@ PROTOCOLS: dict[str, tuple[Segment, ...]] = {
     "paper": _segments((20.0, 5.0, 20.0, 0.3), MARKER_PAPER),
     # partial releases and re-pulls with reversals inside the 2K band (T_in0 e^-2K ~ 0.28 T_in0 at
     # K = 0.63), then a re-pull past the first peak: the "tension at the last reversal" rule keeps
-    # T_out held until 9 e^2K ~ 32 N, the tendon's memory slips again from 16 N (docs/concepts/model.md, the tension-profile memory)
+    # T_out held until 9 e^2K ~ 32 N, the tendon's memory slips again from 16 N (docs/concepts/model.md, the
+    # tension-profile memory)
     "minor": _segments((16.0, 10.0, 14.0, 7.0, 13.0, 9.0, 20.0, 4.0, 0.3), MARKER_MINOR),
     # a short protocol for tests
     "short": _segments((6.0, 2.0, 0.3), MARKER_PAPER),

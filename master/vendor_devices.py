@@ -83,7 +83,8 @@ def load_vendor_file(kind: str, path: str | Path | None) -> VendorConfig:
     """
     if path is None:
         return VendorConfig(kind)
-    data = read_yaml(Path(path), hex_integers=True)[0] or {}     # bounded: size, nesting, aliases (teleop/config/reader.py)
+    # bounded: size, nesting, aliases (teleop/config/reader.py)
+    data = read_yaml(Path(path), hex_integers=True)[0] or {}
     i, f = data.get("input") or {}, data.get("force") or {}
     axis = i.get("axis", "x")
     if axis not in _AXES:

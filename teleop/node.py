@@ -243,7 +243,8 @@ class NodeBase:
         perf, cpu = time.perf_counter, time.thread_time
         idle = IDLE.open if real else None
         machine = _machine_now() if real else None
-        pacer.reset()          # the grid starts now: the set-up above (files read, arrays made) is not in the first period
+        # the grid starts now: the set-up above (files read, arrays made) is not in the first period
+        pacer.reset()
         t0 = self._t_origin = clock.now()
         # Ctrl-C / SIGTERM are held until the running step has finished, then raised after the clean-up
         with stop_at_cycle_end() as stop:

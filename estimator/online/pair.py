@@ -48,9 +48,9 @@ turns it moves both distal ends. Two rules, applied after the proximal updates o
   clipped to the same sliding bounds. Once it reaches a bound the torque can no longer be held; the
   joint turns, which the play sees a few micrometres later. tau_lock follows the estimate after every
   sample. The elongation change (J5) gives the absorbing tendon is the joint motion it implies; it
-  is kept (signed) and subtracted from the next motion (J4) in the same direction. (J5) is exact for a load whose stiffness is small next to the antagonist's capstan band
-  (a joint spring, tissue); against a hard stop it may move the other tendon's distal tension by up
-  to its band, T_in (e^K - e^-K), which the torque estimate then carries.
+  is kept (signed) and subtracted from the next motion (J4) in the same direction. (J5) is exact for a load whose
+  stiffness is small next to the antagonist's capstan band (a joint spring, tissue); against a hard stop it may move the
+  other tendon's distal tension by up to its band, T_in (e^K - e^-K), which the torque estimate then carries.
 
 Without these rules the antagonist's distal tension is unknown within its band, which at a 2 N
 pretension is a quarter of the full scale of the paper's protocol; with them the pretension is

@@ -1,6 +1,7 @@
 """Measured-data files: one tendon per CSV (docs/reference/formats.md, "Measured-data CSV").
 
-The format and its reader are in :mod:`teleop.recording.measured_csv` (:func:`~teleop.recording.measured_csv.read_measured_csv`).
+The format and its reader are in :mod:`teleop.recording.measured_csv`
+(:func:`~teleop.recording.measured_csv.read_measured_csv`).
 
 Writing goes through :class:`CsvRecorder`, which streams rows and is closed and flushed on every
 exit path of its ``with`` block; wrap it in :func:`raise_on_sigterm` so that SIGTERM unwinds the

@@ -5,30 +5,32 @@ CRTK (the Collaborative Robotics Toolkit, collaborative-robotics/documentation: 
 
 * the slave, arm ``<instrument>`` (:func:`slave_arm`), per cycle's latest :class:`~teleop.wire.messages.Estimate`:
 
-  ==================================  ===================================  ================================================
+  ==================================  ===================================  =============================================
   topic                               type                                 content, per instrument axis
-  ==================================  ===================================  ================================================
+  ==================================  ===================================  =============================================
   ``/<arm>/measured_js``              ``sensor_msgs/msg/JointState``       the axis in ``servo_jp``'s space: a tendon's
                                                                            encoder ``x_in`` [m] and load cell ``T_in``
                                                                            [N]; a pair's joint angle [rad] (from its
                                                                            encoders less the estimated elongation, the
                                                                            only reading of a pair's angle) and its
                                                                            proximal torque ``r (T_in,a - T_in,b)`` [N m]
-  ``/<arm>/actuators/measured_js``    ``sensor_msgs/msg/JointState``       one entry per tendon: ``x_in`` [m], ``T_in`` [N]
+  ``/<arm>/actuators/measured_js``    ``sensor_msgs/msg/JointState``       one entry per tendon: ``x_in`` [m],
+                                                                           ``T_in`` [N]
   ``/<arm>/distal/measured_js``       ``sensor_msgs/msg/JointState``       the estimate: ``position_hat`` [m or rad],
                                                                            ``effort_hat`` (``T_out_hat`` [N], or the
                                                                            joint torque [N m])
   ``/<arm>/setpoint_js``              ``sensor_msgs/msg/JointState``       the targets being followed (ENGAGED); stamp 0
                                                                            (invalid) otherwise
-  ``/<arm>/measured_cf``              ``geometry_msgs/msg/WrenchStamped``  single tendon: the estimated distal tension as
-                                                                           force z [N] (+ = pulled toward the actuator)
+  ``/<arm>/measured_cf``              ``geometry_msgs/msg/WrenchStamped``  single tendon: the estimated distal tension
+                                                                           as force z [N] (+ = pulled toward the
+                                                                           actuator)
   ``/<arm>/<joint>/measured_cf``      ``geometry_msgs/msg/WrenchStamped``  joint instrument: the estimated joint torque
                                                                            as torque z [N m] (+ turns toward tendon a)
   ``/<arm>/operating_state``          ``crtk_msgs/msg/OperatingState``     :data:`OPERATING` of the slave's state
   ``/<arm>/servo_jp`` (in)            ``sensor_msgs/msg/JointState``       targets, one per axis (:func:`servo_targets`)
   ``/<arm>/state_command`` (in)       ``crtk_msgs/msg/StringStamped``      enable / resume admit ``servo_jp``,
                                                                            disable / pause refuse it
-  ==================================  ===================================  ================================================
+  ==================================  ===================================  =============================================
 
 * the master, arm ``<instrument>_master``: ``measured_js`` (the device position of each instrument
   axis [m] and the force rendered on it [N]) and ``operating_state``.

@@ -3,9 +3,10 @@
 A token disappears for the watchers of a matching key expression when it is closed or when its
 session ends. Both sides declare one and watch the other's; the nodes' own heartbeat watchdogs stay
 the fast safety stop (docs/concepts/architecture.md). Declared through
-:meth:`teleop.session.transport.Session.liveliness_token` and :meth:`~teleop.session.transport.Session.liveliness_watcher`
-(both classes are importable from :mod:`teleop.session.transport` too; they build on :class:`teleop.session.entity.Entity`). The watcher's callback never lets an
-exception escape into zenoh's thread: it is logged at a limited rate.
+:meth:`teleop.session.transport.Session.liveliness_token` and
+:meth:`~teleop.session.transport.Session.liveliness_watcher` (both classes build on
+:class:`teleop.session.entity.Entity`). The watcher's callback never
+lets an exception escape into zenoh's thread: it is logged at a limited rate.
 """
 from __future__ import annotations
 

@@ -275,7 +275,8 @@ def test_a_prepared_body_encodes_the_same_bytes_and_a_bad_one_is_refused_as_befo
         plain = encode(msg)
         assert codec.prepare_estimate(axes, profiles)
         assert encode(msg) == plain                              # the prepared body
-        same = Estimate(msg.seq, msg.cmd_seq, msg.t_slave, tuple(list(axes)), tuple(list(profiles)))   # equal, not the same
+        # equal, not the same
+        same = Estimate(msg.seq, msg.cmd_seq, msg.t_slave, tuple(list(axes)), tuple(list(profiles)))
         assert encode(same) == plain and decode(plain) == decode(encode(msg))
     assert len(codec._BODIES) <= codec._BODIES_MAX                # bounded, whatever was prepared
     bad = (AxisState(1.0, math.nan, (TendonState(1.0, 0.0, 1.0, 0.0, Phase.PULL),)),)

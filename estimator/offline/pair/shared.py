@@ -280,7 +280,8 @@ def fit_shared(m: SharedModel, recs: list, bends: list[float], fit_on: list, *,
     w = m.tension_weight
     Ts = [np.column_stack([r.T_a, r.T_b])[s] for r, s in zip(recs, fit_on, strict=False)] if w > 0 else []
 
-    parts = [head(r, s) for r, s in zip(recs, fit_on, strict=False)]     # causal models: run up to the fitted samples only
+    # causal models: run up to the fitted samples only
+    parts = [head(r, s) for r, s in zip(recs, fit_on, strict=False)]
 
     def residual(x: np.ndarray) -> np.ndarray:
         v = dict(zip(names, map(float, x), strict=False))

@@ -235,16 +235,17 @@ def _shape(d: np.ndarray, up: np.ndarray, deg: int) -> np.ndarray:
 def within_run_gain(r: RunData | list[RunData], deg: int = DEGREE, step: int = 10, middle: float = 0.6) -> dict:
     """Can one run's own signals fix the load gain? The capstan pair puts the band edges at
     c(theta, direction) + r e^(+-K) tau_d, so along a run the spindle torque follows its own jaw torque
-    with slope r e^(-+K) on each direction's edge, s = their mean ~ r cosh K = 1 / gain, *after* the shape along the stroke (spring, wrap friction: a
-    polynomial of degree ``deg`` in the spindle angle per direction, the centre map's) is taken out. Only
-    the part of the jaw torque that is not a function of (angle, direction) carries s.
+    with slope r e^(-+K) on each direction's edge, s = their mean ~ r cosh K = 1 / gain, *after* the shape along the
+    stroke (spring, wrap friction: a polynomial of degree ``deg`` in the spindle angle per direction, the centre map's)
+    is taken out. Only the part of the jaw torque that is not a function of (angle, direction) carries s.
 
     Samples: full motion (|rate| > MIN_RATE) in the middle ``middle`` of the run's spindle stroke, from k0,
     every ``step``-th. Reads the run's spindle torque and angle and its jaw torque (a calibration run's
-    target). Returns a JSON-ready dict: ``slope`` s [-], ``gain`` 1 / s, ``edge_slopes_falling_rising``, ``jackknife_se`` of s (a period
-    left out at a time; None below three periods), ``profile_ci95`` of s (profile likelihood, residual variance at n_eff = n / the
-    residual's integrated autocorrelation time), ``jaw_free_rms_Nm`` (jaw torque not explained by the
-    shape), ``jaw_rms_Nm`` (its whole variation), ``resid_rms_Nm``, ``n``, ``n_eff``, ``periods``.
+    target). Returns a JSON-ready dict: ``slope`` s [-], ``gain`` 1 / s, ``edge_slopes_falling_rising``,
+    ``jackknife_se`` of s (a period left out at a time; None below three periods), ``profile_ci95`` of s (profile
+    likelihood, residual variance at n_eff = n / the residual's integrated autocorrelation time), ``jaw_free_rms_Nm``
+    (jaw torque not explained by the shape), ``jaw_rms_Nm`` (its whole variation), ``resid_rms_Nm``, ``n``, ``n_eff``,
+    ``periods``.
     Raises ValueError when fewer than 2 (deg + 2) samples qualify."""
     runs = [r] if isinstance(r, RunData) else list(r)
     cols: list[list[np.ndarray]] = [[], [], [], [], []]
