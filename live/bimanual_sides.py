@@ -130,7 +130,9 @@ def _rerun(stack: contextlib.ExitStack, mode: str, run_dir: Path, bim: Bimanual,
 
     from teleop.rerun.process import RerunProcessLogger as RerunLogger  # the loop only queues; a child process logs
     views = tuple(dataclasses.replace(v, name=f"{arm.name}/{v.name}") for arm in bim.arms for v in joint_views(arm.cfg))
-    logger = stack.enter_context(RerunLogger("teleop", run_dir.name, mode, run_dir / f"{side}.rrd", joints=views, **kw))
+    from teleop.rerun.serve import serve_spec
+    logger = stack.enter_context(RerunLogger("teleop", run_dir.name, mode, run_dir / f"{side}.rrd", joints=views,
+                                             serve=serve_spec(bim.arms[0].cfg, side), **kw))
     gated = files.rerun(logger)
     return [ArmRerun(gated, arm.name) for arm in bim.arms]
 

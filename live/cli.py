@@ -1,4 +1,4 @@
-"""The ``teleop`` command: ``teleop demo|master|slave|bridge|calibrate|analyze|devices``, ``teleop --version``.
+"""The ``teleop`` command: ``teleop demo|master|slave|view|bridge|calibrate|analyze|devices``, ``teleop --version``.
 
 :func:`main` takes an argument list and returns an exit code; argument parsing is separate
 (:func:`build_parser`) and every subcommand is a function of the parsed arguments. Exit codes:
@@ -43,6 +43,11 @@ def _shared(p: argparse.ArgumentParser) -> None:
     p.add_argument("-v", "--verbose", action="store_true", help="log state changes and details")
 
 
+def _rerun_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--rerun", choices=("save", "spawn", "serve", "off"), default=None,
+                   help="override recording.rerun (serve: the live view served to `teleop view` and browsers)")
+
+
 def _inject_flag(p: argparse.ArgumentParser) -> None:
     p.add_argument("--inject", metavar="SPEC", default=None,
                    help="fault injection on this side's outgoing messages (tests), e.g. "
@@ -64,7 +69,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=PROG, description="Haptic teleoperation of tendon-sheath instruments.")
     parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
     sub = parser.add_subparsers(dest="command",
-                                metavar="{demo,master,slave,record,router,bridge,calibrate,replay,analyze,devices}",
+                                metavar="{demo,master,slave,view,record,router,bridge,calibrate,replay,analyze,devices}",
                                 required=True)
     args = sys.argv[1:] if argv is None else argv
     _add_sides(sub)
@@ -87,6 +92,7 @@ def _add_sides(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="play this measured recording as the hardware (rig.type recording, rig.recording.path): an "
                         "MRD run, a KAIST recording or a measured-data CSV, told apart by its content; without "
                         "--config the instrument of configs/recording-mrd.yaml, recording-kaist.yaml or sim.yaml")
+    _rerun_flag(p)
     p.set_defaults(func=_cmd_demo)
 
     p = sub.add_parser("slave", help="instrument side: reload or make the calibration, then follow commands and "
@@ -96,7 +102,7 @@ def _add_sides(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="calibrate at power-up even when <calibration.dir>/<instrument.id>.yaml exists (and replace it)")
     p.add_argument("--exit-on-master-stop", action="store_true", help="finish when the master announces STOPPING")
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
-    p.add_argument("--rerun", choices=("save", "spawn", "off"), default=None, help="override recording.rerun")
+    _rerun_flag(p)
     _inject_flag(p)
     p.set_defaults(func=_cmd_slave)
 
@@ -104,6 +110,7 @@ def _add_sides(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     _shared(p)
     p.add_argument("--protocol", default="paper,minor",
                    help="scripted operator protocol(s), comma separated: paper, minor, short")
+    _rerun_flag(p)
     _inject_flag(p)
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
     p.set_defaults(func=_cmd_master)
@@ -148,6 +155,19 @@ def _add_services(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     keys.add_arguments(p)
     p.set_defaults(func=keys.main_keys)
 
+    p = sub.add_parser("view", help="watch a session served with recording.rerun: serve (slave and master) from "
+                                    "this or another machine: the desktop viewer, or --web for a browser's URL")
+    p.add_argument("--config", metavar="FILE", help="the session's config: its recording.rerun_serve ports")
+    p.add_argument("--slave", metavar="HOST", default=None,
+                   help="address of the slave's machine (default recording.rerun_serve.bind)")
+    p.add_argument("--master", metavar="HOST", default=None,
+                   help="address of the master's machine (default recording.rerun_serve.bind)")
+    p.add_argument("--web", action="store_true", help="print the web viewer's URL for a browser instead")
+    p.add_argument("--screenshot-to", metavar="PNG", default=None,
+                   help="save a picture of the view and quit (at 2 pixels per point of --window-size)")
+    p.add_argument("--window-size", metavar="WxH", default=None, help="the viewer's window size in points")
+    p.set_defaults(func=_cmd_view)
+
     p = sub.add_parser("replay", help="play a recorded run back through the estimator and the Rerun view, "
                                       "compared with the recorded estimate and the truth (live/replay/main.py)")
     from live.replay import main as replay
@@ -189,6 +209,30 @@ def _cmd_bridge(args: argparse.Namespace) -> int:
     return run_bridge(args)
 
 
+def _cmd_view(args: argparse.Namespace) -> int:
+    """``teleop view``: the desktop viewer on both sides' streams (its exit code), or with ``--web`` the URLs."""
+    import subprocess
+
+    from teleop.config.load import load_config
+    from teleop.rerun.serve import session_streams, viewer_command, viewer_env, web_url
+    cfg = load_config(args.config)
+    streams = session_streams(cfg, args.slave, args.master)
+    serve = cfg.recording.rerun_serve
+    if args.web:
+        if not (serve.slave_web_port or serve.master_web_port):
+            raise ValueError("recording.rerun_serve: slave_web_port and master_web_port are 0: no web viewer")
+        for side, host, port in (("slave", args.slave, serve.slave_web_port),
+                                 ("master", args.master, serve.master_web_port)):
+            if port:
+                print(f"{side}'s web viewer, both sides: {web_url(host or serve.bind, port, streams)}")
+        return 0
+    cmd = viewer_command(streams, args.screenshot_to, args.window_size)
+    try:
+        return subprocess.run(cmd, env=viewer_env(), check=False).returncode
+    except OSError as e:
+        raise ValueError(f"the Rerun viewer {cmd[0]} cannot start ({e.strerror}): install rerun-sdk") from None
+
+
 def _cmd_slave(args: argparse.Namespace) -> int:
     from teleop.arms import is_bimanual
     if is_bimanual(args.config):          # every arm's node in one loop (live/bimanual_sides.py)
@@ -216,7 +260,8 @@ PATH_ARGS: tuple[tuple[str, str, str, tuple[str, ...] | None], ...] = (
     ("json", "--json", "file", None), ("calibration", "--calibration", "file", ("replay",)),
     ("file", "FILE", "file", ("analyze",)), ("route", "--route", "file", ("analyze",)),
     ("kaist", "--kaist", "dir", ("analyze",)), ("mrd", "--mrd", "dir", ("analyze",)),
-    ("report", "--report", "dir", ("analyze",)), ("figures", "--figures", "dir", ("analyze",)))
+    ("report", "--report", "dir", ("analyze",)), ("figures", "--figures", "dir", ("analyze",)),
+    ("screenshot_to", "--screenshot-to", "file", ("view",)))
 
 
 def path_args_problem(args: argparse.Namespace) -> str | None:

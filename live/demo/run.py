@@ -320,13 +320,16 @@ def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, b
                     problems.append(f"the bridge did not listen on {ep_b} (see {run_dir}/bridge.log)")
                     return
                 rig_link = ["--connect", ep_b]
-            slave = subprocess.Popen(base + ["slave", "--listen", ep, "--exit-on-master-stop"] + rig_link + rec_link + common,
+            view = ["--rerun", args.rerun] if getattr(args, "rerun", None) else []     # the sides' view, not the recorder's
+            slave = subprocess.Popen(base + ["slave", "--listen", ep, "--exit-on-master-stop"] + rig_link + rec_link
+                                     + view + common,
                                      stdout=slog, stderr=subprocess.STDOUT, env=env)
             procs.append(("slave", slave, run_dir / "slave.log"))
             if not _wait_listening(port, slave, deadline):
                 problems.append(f"the slave did not listen on {ep} (see {run_dir}/slave.log)")
                 return
-            master = subprocess.Popen(base + ["master", "--connect", ep, "--protocol", args.protocol] + rec_link + common,
+            master = subprocess.Popen(base + ["master", "--connect", ep, "--protocol", args.protocol] + rec_link + view
+                                      + common,
                                       stdout=mlog, stderr=subprocess.STDOUT, env=env)
             procs.append(("master", master, run_dir / "master.log"))
             doing = doing or f"calibration, then protocol {args.protocol}"

@@ -35,7 +35,7 @@ class Bound:
 
     key: str
     op: Literal["<=", ">=", "=="]
-    limit: float | bool
+    limit: float | bool | str
     unit: str
     reason: str
 
@@ -102,6 +102,14 @@ BOUNDS: tuple[Bound, ...] = (
           "without the installation's credentials any process that reaches the session (another user's on the "
           "same host, a peer on the network) links to the sides and can command the instrument and forge its "
           "estimates (docs/concepts/security.md)"),
+    Bound("recording.rerun_serve.bind", "==", "127.0.0.1", "",
+          "a served Rerun stream carries the whole live view (tensions, commands, the console's state, the "
+          "run id) to anyone who reaches the port, without authentication or encryption; on loopback only "
+          "this machine's users see it (docs/how-to/rerun-view.md)"),
+    Bound("recording.rerun_serve.memory_limit", "<=", 1.0e9, "B",
+          "a side's Rerun server keeps this much of the stream in the memory of the machine that runs the "
+          "1 kHz loop; past 1 GB a long session pushes that machine toward swapping, and a loop that waits "
+          "on a page fault misses its deadlines"),
     Bound("calibration.target_tension", "<=", 50.0, "N", _TENSION.format(limit=50)),
     Bound("sheath.pretension", "<=", 50.0, "N", _TENSION.format(limit=50)),
     Bound("instrument.joints[].pretension", "<=", 50.0, "N", _TENSION.format(limit=50)),
@@ -130,6 +138,8 @@ def _values(obj: Any, key: str, prefix: str = "") -> Iterator[tuple[str, Any]]:
 
 
 def _show(value: Any) -> str:
+    if isinstance(value, str):
+        return value
     return str(value).lower() if isinstance(value, bool) else f"{value:g}"
 
 
@@ -214,8 +224,8 @@ def waiver_lines(cfg: Any) -> list[str]:
     for w in waivers(cfg):
         vals = ", ".join(f"{p} = {_show(v)}" for p, v in w["values"].items()) or "no entries"
         state = "PAST its hard bound" if w["past_bound"] else "within its hard bound"
-        lines.append(f"SAFETY WAIVER (safety.override): {vals} {w['unit']}, {state} {w['bound']} {w['unit']}: "
-                     f"{w['reason']}".replace("  ", " "))
+        value, bound = f"{vals} {w['unit']}".rstrip(), f"{w['bound']} {w['unit']}".rstrip()
+        lines.append(f"SAFETY WAIVER (safety.override): {value}, {state} {bound}: {w['reason']}".replace("  ", " "))
     return lines
 
 

@@ -4,13 +4,14 @@
 """
 from __future__ import annotations
 
+import ipaddress
 import re
 from collections.abc import Callable
 
 from teleop.config.schema import Config
 from teleop.errors import ConfigError
 
-__all__ = ["MAX_JOINTS", "check_joints"]
+__all__ = ["MAX_JOINTS", "check_joints", "check_rerun_serve"]
 
 MAX_JOINTS = 16                 # one axis of the wire per joint (teleop.wire.codec.MAX_AXES)
 _JOINT_NAME = re.compile(r"[A-Za-z0-9_-]+")
@@ -50,3 +51,23 @@ def check_joints(cfg: Config, error: Callable[[str, str], ConfigError]) -> None:
     if axes and (len(axes) != len(joints) or len(set(axes)) != len(axes)):
         raise error("pair_control.axes", f"pair_control.axes: expected one distinct device axis per joint "
                                              f"({len(joints)}), got {list(axes)}")
+
+
+def check_rerun_serve(cfg: Config, error: Callable[[str, str], ConfigError]) -> None:
+    """recording.rerun_serve: ``bind`` an IP address (not a host name), the ports of the streams and web viewers
+    distinct (a web port of 0 serves no web viewer)."""
+    serve = cfg.recording.rerun_serve
+    try:
+        ipaddress.ip_address(serve.bind)
+    except ValueError:
+        raise error("recording.rerun_serve.bind", f"recording.rerun_serve.bind: {serve.bind!r} is not an IP "
+                                                  f"address (expected e.g. 127.0.0.1)") from None
+    seen: dict[int, str] = {}
+    for key in ("slave_port", "master_port", "slave_web_port", "master_web_port"):
+        port = getattr(serve, key)
+        if port == 0 and key.endswith("web_port"):
+            continue
+        if port in seen:
+            raise error(f"recording.rerun_serve.{key}", f"recording.rerun_serve.{key}: port {port} is already "
+                                                        f"recording.rerun_serve.{seen[port]}")
+        seen[port] = key

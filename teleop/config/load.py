@@ -18,7 +18,7 @@ from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
 
 import yaml
 
-from teleop.config.checks import check_joints
+from teleop.config.checks import check_joints, check_rerun_serve
 from teleop.config.effects import EffectsConfig, in_range, merge_effects
 from teleop.config.ranges import MOVED, RANGES
 from teleop.config.reader import read_yaml
@@ -181,6 +181,7 @@ def _check(cfg: Config, ctx: _Ctx, bounds: bool = True) -> Config:
         raise ctx.error("slave.x_in_max", f"slave.x_in_max ({cfg.slave.x_in_max!r} m) must be above "
                                           f"slave.x_in_min ({cfg.slave.x_in_min!r} m)")
     check_joints(cfg, ctx.error)
+    check_rerun_serve(cfg, ctx.error)
     if bounds:
         check_bounds(cfg, ctx.error)
     return cfg

@@ -56,6 +56,9 @@ RANGES: dict[str, tuple[str, str]] = {
     "pair_control.switch_band": (">= 0", "rad"), "pair_control.backlash_width": ("> 0", "rad"),
     "pair_control.axes[]": (">= 0", "-"),
     "recording.log_every": (">= 1", "samples"), "recording.profile_every": (">= 1", "logs"), "recording.csv_every": (">= 1", "cycles"), "recording.mcap_every": (">= 1", "messages"), "recording.flush_interval": ("0.001..10", "s"), "transport.run_id_timeout": ("0..60", "s"), "recording.max_bytes": ("> 0", "B"), "recording.min_free_bytes": (">= 0", "B"),
+    **{f"recording.rerun_serve.{k}": ("1..65535", "-") for k in ("slave_port", "master_port")},
+    **{f"recording.rerun_serve.{k}": ("0..65535", "-") for k in ("slave_web_port", "master_web_port")},
+    "recording.rerun_serve.memory_limit": (">= 1.0e6", "B"),
     "ros2.domain_id": ("0..232", "-"), "ros2.rate_hz": ("1..1000", "Hz"),
 }
 

@@ -24,7 +24,8 @@ __all__ = [
     "JointConfig", "SimulatedTendonConfig", "SimulatedTendonPairConfig", "SimulatedJointConfig", "MotorConfig",
     "LoadConfig", "SensorConfig", "SimulatedRigConfig", "ZenohRigConfig", "RigConfig", "EstimatorConfig",
     "CalibrationConfig", "ArmConfig", "DeviceConfig", "MappingConfig", "MasterConfig", "SlaveConfig",
-    "PairControlConfig", "TransportAuthConfig", "TransportTlsConfig", "TransportConfig", "RecordingConfig",
+    "PairControlConfig", "TransportAuthConfig", "TransportTlsConfig", "TransportConfig", "RerunServeConfig",
+    "RecordingConfig",
     "Ros2Config", "SafetyConfig", "Config", "joint_set_tension",
 ]
 
@@ -304,9 +305,22 @@ class TransportConfig:
 
 
 @dataclass(frozen=True)
+class RerunServeConfig:
+    """``recording.rerun: serve``: where each side serves its live Rerun stream (gRPC) and the web viewer (HTTP)."""
+
+    bind: str = "127.0.0.1"               # address both servers listen on; another one is a safety waiver
+    slave_port: int = 9877                # gRPC port of the slave's stream
+    master_port: int = 9878               # gRPC port of the master's stream
+    slave_web_port: int = 9097            # HTTP port of the web viewer the slave serves; 0: none
+    master_web_port: int = 9098           # the same for the master
+    memory_limit: float = 2.56e8          # [B] a side's server keeps this much of the recent stream for late viewers
+
+
+@dataclass(frozen=True)
 class RecordingConfig:
     dir: str = "runs"
-    rerun: Literal["save", "spawn", "off"] = "save"
+    rerun: Literal["save", "spawn", "serve", "off"] = "save"
+    rerun_serve: RerunServeConfig = field(default_factory=RerunServeConfig)
     log_every: int = 40                   # [cycles] Rerun: the signals every this many cycles (25 Hz at 1 kHz)
     profile_every: int = 5                # [logs] of those, every n-th also the tension profile (5 Hz)
     csv_every: int = 10                   # [cycles] the sides' per-cycle CSVs get a row every this many cycles

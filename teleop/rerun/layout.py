@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["TENSION_RANGE", "ELONGATION_RANGE", "WALL", "JOINT_SPACING", "JointView", "joint_views", "route_points",
+__all__ = ["TENSION_RANGE", "ELONGATION_RANGE", "SESSION", "JOINT_SPACING", "JointView", "joint_views", "route_points",
            "route_segments", "tension_colors", "blueprint", "arm_groups"]
 
 #: Height [m] between two joints' tendon pairs in the 3D view (tendon b sits a tenth of it above a).
@@ -43,7 +43,8 @@ def joint_views(cfg: Any) -> tuple[JointView, ...]:
 
 #: Fixed ranges of the plots (the y axes do not rescale every frame): tension [N], elongation [m].
 TENSION_RANGE, ELONGATION_RANGE = (0.0, 25.0), (0.0, 2.0e-3)
-WALL = "wall"          # the timeline the time panel shows (monotonic clock: slave.rrd and master.rrd line up)
+#: The timeline the time panel shows: the session's time [s] since the run began (teleop.rerun.logger: timelines).
+SESSION = "session"
 
 
 def route_points(runs, n_per_arc: int = 24) -> np.ndarray:
@@ -89,11 +90,14 @@ def tension_colors(T: np.ndarray, vmax: float = TENSION_RANGE[1]) -> np.ndarray:
 
 
 def blueprint(joints: Sequence[JointView] = ()) -> object:
-    """The view sent at the start of a recording: the 3D sheath and the profile bar chart beside the
-    fixed-range tension and elongation plots, the master's series and the phase/console/experiment lanes;
-    for a joint instrument (``joints``) the tendon pairs in 3D beside each joint's torque and angle; when
-    every joint's name carries an arm (``<arm>/<joint>``, both arms of a bimanual platform) one column
-    per arm: that hand's rendered force, then its joints' torque and angle."""
+    """The view of the session, sent by every mode (save, spawn, serve): the slave's columns beside the master's.
+
+    The slave: the 3D sheath (or the tendon pairs of a joint instrument, one per joint) and the profile bar chart,
+    the tension [N] (or each joint's torque [N m] and angle [rad]), elongation [m], displacement [m] and the phase
+    lane. The master: the hand's rendered and mapped force [N], its command [m], the round trip [s] and the lane of
+    the operator's state at the console (deadman, clutch, engaged) and the experiment. When every joint's name
+    carries an arm (``<arm>/<joint>``, a bimanual platform) one column per arm. Every plot holds one unit, named
+    in its title; the time axis is the ``session`` timeline [s]."""
     import rerun.blueprint as rrb
 
     arms = arm_groups(joints)
@@ -105,30 +109,58 @@ def blueprint(joints: Sequence[JointView] = ()) -> object:
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
-                rrb.Spatial3DView(origin="sheath", name="Sheath route coloured by tension (0-25 N, blue -> red)"),
-                rrb.BarChartView(origin="profile", name="Tension along the sheath: T [N] vs s [m]",
+                rrb.Spatial3DView(origin="sheath",
+                                  name="Slave: sheath route coloured by tension (0-25 N, blue -> red)"),
+                rrb.BarChartView(origin="profile", name="Slave: tension along the sheath, T [N] vs s [m]",
                                  plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop)),
-                row_shares=[3, 2],
+                row_shares=[3, 2], name="Slave",
             ),
             rrb.Vertical(
-                rrb.TimeSeriesView(origin="tension", name="Tension [N]", axis_y=fixed_T),
-                rrb.Tabs(rrb.TimeSeriesView(origin="elongation", name="Elongation [m]",
+                rrb.TimeSeriesView(origin="tension", name="Slave: tension [N]", axis_y=fixed_T),
+                rrb.Tabs(rrb.TimeSeriesView(origin="elongation", name="Slave: elongation [m]",
                                             axis_y=rrb.ScalarAxis(range=ELONGATION_RANGE, zoom_lock=False)),
-                         rrb.TimeSeriesView(origin="master", name="Master: command, force, round trip"),
-                         rrb.TimeSeriesView(origin="displacement", name="Displacement [m]"),
-                         rrb.TimeSeriesView(origin="signals", name="Other signals")),
-                rrb.StateTimelineView(origin="/", contents=["/phase", "/master/console", "/experiment"],
-                                      name="Phase, console, experiment"),
-                row_shares=[4, 4, 2],
+                         rrb.TimeSeriesView(origin="displacement", name="Slave: displacement [m]"),
+                         rrb.TimeSeriesView(origin="signals", name="Slave: other signals")),
+                _phase_lane(rrb),
+                row_shares=[4, 4, 1], name="Slave signals",
             ),
-            column_shares=[1, 1],
+            _master_column(rrb, ("",)),
+            column_shares=[3, 3, 2],
         ),
-        rrb.TimePanel(timeline=WALL),
+        rrb.TimePanel(timeline=SESSION),
         auto_views=False,
     )
 
 
-def _joint_eye(rrb: Any, joints: Sequence[JointView]) -> object:
+def _phase_lane(rrb: Any) -> Any:
+    return rrb.StateTimelineView(origin="/", contents=["/phase"], name="Slave: transmission phase")
+
+
+def _console_lane(rrb: Any) -> Any:
+    """The operator's state at the console (deadman, clutch, engaged) and the experiment marker, as lanes."""
+    return rrb.StateTimelineView(origin="/", contents=["/master/console", "/experiment"],
+                                 name="Master: operator (deadman, clutch, engaged), experiment")
+
+
+def _master_column(rrb: Any, axes: Sequence[str], arm: str = "") -> Any:
+    """The master's column: rendered and mapped force [N] and command [m] of every axis in ``axes`` (entities
+    ``master/[<arm>/][<axis>/]<name>``; "" for the axis of a single tendon), the round trip [s] and the
+    console lane (none under an arm: the bimanual view has one for both)."""
+    def paths(*names: str) -> list[str]:
+        base = "/master" + (f"/{arm}" if arm else "")
+        return [f"{base}{'/' + a if a else ''}/{n}" for a in axes for n in names]
+
+    who = f"{arm} hand" if arm else "Master"
+    views = [rrb.TimeSeriesView(origin="/", contents=paths("force", "force_cmd"),
+                                name=f"{who}: rendered and mapped force [N]"),
+             rrb.TimeSeriesView(origin="/", contents=paths("x_in_cmd"), name=f"{who}: command [m]")]
+    if arm:
+        return rrb.Vertical(*views, row_shares=[1, 1], name=who)
+    return rrb.Vertical(*views, rrb.TimeSeriesView(origin="/", contents=["/master/rtt"], name="Master: round trip [s]"),
+                        _console_lane(rrb), row_shares=[3, 3, 2, 2], name="Master")
+
+
+def _joint_eye(rrb: Any, joints: Sequence[JointView]) -> Any:
     """A camera that sees every pair: from the front, above and a little behind the routes' centre."""
     pts = np.vstack([route_points(j.route_a) - np.array([0.0, 0.0, k * JOINT_SPACING]) for k, j in enumerate(joints)])
     lo, hi = pts.min(axis=0), pts.max(axis=0)
@@ -137,40 +169,32 @@ def _joint_eye(rrb: Any, joints: Sequence[JointView]) -> object:
                              eye_up=(0.0, 0.0, 1.0))
 
 
-def _joint_row(rrb: Any, j: JointView) -> object:
-    """One joint's torque [N m] and angle [rad] plots side by side, on the joint's fixed ranges."""
+def _joint_row(rrb: Any, j: JointView) -> Any:
+    """One joint's torque [N m] and angle [rad] plots side by side: the torque on its fixed range, the angle's range
+    from the data (a recorded run's joint may go past the configured limits)."""
     return rrb.Horizontal(
         rrb.TimeSeriesView(origin=f"joints/{j.name}/torque", name=f"{j.name}: torque [N m]",
                            axis_y=rrb.ScalarAxis(range=j.torque_range, zoom_lock=False)),
-        rrb.TimeSeriesView(origin=f"joints/{j.name}/angle", name=f"{j.name}: angle [rad]",
-                           axis_y=rrb.ScalarAxis(range=j.angle_range, zoom_lock=False)))
+        rrb.TimeSeriesView(origin=f"joints/{j.name}/angle", name=f"{j.name}: angle [rad]"))
 
 
-def _pairs_view(rrb: Any, joints: Sequence[JointView]) -> object:
+def _pairs_view(rrb: Any, joints: Sequence[JointView]) -> Any:
     return rrb.Spatial3DView(origin="instrument", eye_controls=_joint_eye(rrb, joints),
                              name="Tendon pairs coloured by tension (0-25 N, blue -> red), one pair per joint")
 
 
-def _console_lanes(rrb: Any) -> object:
-    """The console state and the experiment marker as lanes."""
-    return rrb.StateTimelineView(origin="/", contents=["/master/console", "/experiment"], name="Console, experiment")
-
-
 def _joint_blueprint(rrb: Any, joints: Sequence[JointView]) -> object:
     rows = [_joint_row(rrb, j) for j in joints]
+    names = [j.name for j in joints]
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Vertical(
-                _pairs_view(rrb, joints),
-                _console_lanes(rrb),
-                row_shares=[5, 1],
-            ),
-            rrb.Vertical(*rows, rrb.Tabs(rrb.TimeSeriesView(origin="master", name="Master: commands, forces, round trip"),
-                                         rrb.TimeSeriesView(origin="signals", name="Other signals")),
-                         row_shares=[3] * len(rows) + [2]),
-            column_shares=[2, 3],
+            rrb.Vertical(_pairs_view(rrb, joints), rrb.TimeSeriesView(origin="signals", name="Slave: other signals"),
+                         row_shares=[4, 1], name="Slave"),
+            rrb.Vertical(*rows, row_shares=[1] * len(rows), name="Slave: joints"),
+            _master_column(rrb, names if len(names) > 1 else ("",)),
+            column_shares=[3, 3, 2],
         ),
-        rrb.TimePanel(timeline=WALL),
+        rrb.TimePanel(timeline=SESSION),
         auto_views=False,
     )
 
@@ -187,15 +211,12 @@ def arm_groups(joints: Sequence[JointView]) -> dict[str, tuple[str, ...]]:
     return out
 
 
-def _hand_column(rrb: Any, arm: str, names: Sequence[str], joints: Sequence[JointView]) -> object:
-    """One arm's column: the rendered force [N] of its hand on every joint axis (``master/<arm>/<joint>/force``,
-    ``master/<arm>/force`` for a one-axis hand), a tab with the hand's command and mapped force, then each
-    joint's torque and angle."""
-    forces = [f"/master/{arm}/force", *(f"/master/{arm}/{n}/force" for n in names)]
-    hand = rrb.Tabs(rrb.TimeSeriesView(origin=f"master/{arm}", contents=forces, name=f"{arm} hand: rendered force [N]"),
-                    rrb.TimeSeriesView(origin=f"master/{arm}", name=f"{arm} hand: command [m], rendered and mapped force [N]"))
+def _hand_column(rrb: Any, arm: str, names: Sequence[str], joints: Sequence[JointView]) -> Any:
+    """One arm's column: its joints' torque and angle, then its hand's forces [N] and commands [m] on every joint
+    axis (``master/<arm>/<joint>/...``)."""
     rows = [_joint_row(rrb, j) for j in joints if j.name.partition("/")[0] == arm]
-    return rrb.Vertical(hand, *rows, row_shares=[4] + [3] * len(rows), name=f"{arm} arm")
+    hand = _master_column(rrb, ("", *names), arm)      # "": a one-axis hand logs master/<arm>/<name>
+    return rrb.Vertical(*rows, hand, row_shares=[3] * len(rows) + [4], name=f"{arm} arm")
 
 
 def _bimanual_blueprint(rrb: Any, joints: Sequence[JointView], arms: dict[str, tuple[str, ...]]) -> object:
@@ -204,14 +225,14 @@ def _bimanual_blueprint(rrb: Any, joints: Sequence[JointView], arms: dict[str, t
         rrb.Horizontal(
             rrb.Vertical(
                 _pairs_view(rrb, joints),
-                _console_lanes(rrb),
-                rrb.Tabs(rrb.TimeSeriesView(origin="master/rtt", name="Round trip [s]"),
-                         rrb.TimeSeriesView(origin="signals", name="Other signals")),
+                _console_lane(rrb),
+                rrb.Tabs(rrb.TimeSeriesView(origin="/", contents=["/master/rtt"], name="Master: round trip [s]"),
+                         rrb.TimeSeriesView(origin="signals", name="Slave: other signals")),
                 row_shares=[5, 1, 2],
             ),
             *(_hand_column(rrb, arm, names, joints) for arm, names in arms.items()),
             column_shares=[2] + [2] * len(arms),
         ),
-        rrb.TimePanel(timeline=WALL),
+        rrb.TimePanel(timeline=SESSION),
         auto_views=False,
     )

@@ -1,9 +1,16 @@
 """Rerun logging of the live tendon-sheath state (rerun-sdk 0.41, one explicit RecordingStream).
 
-Entity layout (timeline ``time``, a duration in seconds: the caller's time, the rig's on the slave;
-timeline ``wall``: the monotonic clock, on which the slave's ``slave.rrd`` and the master's
-``master.rrd`` line up - both use the same application and recording id, so ``rerun slave.rrd
-master.rrd`` shows one recording)::
+Over 400 lines: one logger of every mode (save, spawn, serve), its timelines and the entity layout it writes.
+
+Timelines (durations in seconds): ``session``, the time since the run began, the one the view shows: the wall
+clock (``time.time``) since the time stamp of the run id (``YYYYmmdd-HHMMSS[-n]``, the recording id every process
+of the run shares), so that slave and master line up, on one machine or on two with synchronised clocks; when the
+recording id is not a run id, since the logger's first log (``wall_clock``: the caller's clock since its first
+``t``, a replay's recording time). ``time``: the caller's ``t`` where it is a clock of its own (the rig's time
+on the slave). The slave's ``slave.rrd`` and the master's ``master.rrd`` share the application and recording id,
+so ``rerun slave.rrd master.rrd`` shows one recording.
+
+Entity layout::
 
     profile/T_hat          BarChart  tension along the sheath [N] over arc length [m], estimated
     profile/T_true         BarChart  the same, ground truth (simulation or instrumented rig)
@@ -16,8 +23,9 @@ master.rrd`` shows one recording)::
     sheath/tension         LineStrips3D the route coloured by the estimated tension along it [N]
     sheath/tension_true    LineStrips3D the same from the truth, drawn beside it
     sheath/distal          Points3D     the distal joint: estimated and true T_out in its label
-    master/<name>          Scalars      master-side series (command, rendered force, round trip)
-    master/console, experiment  StateChange  console state and experiment marker, on change
+    master/<name>          Scalars      master-side series: x_in_cmd [m], force and force_cmd [N], rtt [s]
+    master/console, experiment  StateChange  the operator's state at the console (WAIT_OPERATOR: deadman open,
+                                         CLUTCH, ENGAGED, ...) and the experiment marker, on change
 
 A joint instrument (``joints``: :class:`teleop.rerun.layout.JointView` per joint) logs instead, per joint
 (:meth:`RerunLogger.log_joint`): ``joints/<j>/torque/{hat,true}`` and ``joints/<j>/angle/{hat,true}``
@@ -37,9 +45,14 @@ A bar-chart log costs ~0.1 ms (tensor conversion in the SDK), a scalar ~0.02 ms;
 Saved to a file (``save``), the stream gathers each entity's rows for :data:`SAVE_FLUSH` before it writes
 them as one chunk: every chunk carries ~1.4 kB of its own (schema, metadata), so the SDK's default of a
 chunk every few hundredths of a second made the .rrd of a session two to three times the size of its
-rows. A viewer (``spawn``) gets the SDK's default, which keeps it live.
+rows. A viewer (``spawn``) and a served stream (``serve``) get the SDK's default, which keeps them live.
 
-A saved recording is written in .rrd segments of :data:`~teleop.rerun.segments.SEGMENT_S` (:mod:`teleop.rerun.segments`).
+Served (``serve``, :mod:`teleop.rerun.serve`), the stream goes to a gRPC server in this process (bounded memory,
+for late viewers) and, with a path, to the .rrd file too, one file for the whole session (not segmented: the
+server's port stays the same from the first log to the last); the web viewer runs as a child process.
+
+A saved recording is written in .rrd segments of :data:`~teleop.rerun.segments.SEGMENT_S`
+(:mod:`teleop.rerun.segments`).
 """
 from __future__ import annotations
 
@@ -54,16 +67,17 @@ import numpy as np
 
 from teleop.errors import ConfigError
 from teleop.rerun.joints import ORANGE, JointLogging, arc_length
-from teleop.rerun.layout import TENSION_RANGE, WALL, route_points, route_segments, tension_colors
+from teleop.rerun.layout import SESSION, TENSION_RANGE, route_points, route_segments, tension_colors
 from teleop.rerun.layout import blueprint as view_blueprint
 from teleop.rerun.segments import SEGMENT_S, SegmentedSave
+from teleop.rerun.serve import ServeSpec, start_web_viewer
 
 if TYPE_CHECKING:
     import rerun as rr
 
-__all__ = ["RerunLogger", "signal_path", "display_available", "MODES"]
+__all__ = ["RerunLogger", "signal_path", "display_available", "session_origin", "MODES"]
 
-MODES = ("save", "spawn", "off")
+MODES = ("save", "spawn", "serve", "off")
 SAVE_FLUSH = 2.0            # [s] an .rrd file's chunks gather this long of each entity's rows
 TIMELINE = "time"
 _BLUE, _BLUE_SEE_THROUGH = (31, 119, 180, 255), (31, 119, 180, 110)
@@ -91,6 +105,18 @@ def _series_color(name: str) -> tuple[int, int, int, int] | None:
     return None  # let the viewer pick
 
 
+def session_origin(recording_id: str | None) -> float | None:
+    """The start of the run [s since the epoch] from a run id ``YYYYmmdd-HHMMSS[-n]`` (local time, as
+    ``live.sides.default_run_dir`` names it); None for any other id."""
+    import re
+    if not recording_id or not re.fullmatch(r"\d{8}-\d{6}(-\d+)?", recording_id):
+        return None
+    try:
+        return time.mktime(time.strptime(recording_id[:15], "%Y%m%d-%H%M%S"))
+    except (ValueError, OverflowError):
+        return None
+
+
 def display_available() -> bool:
     """Whether a viewer window can open here (X11 or Wayland on Linux/BSD; assumed elsewhere)."""
     if sys.platform.startswith(("linux", "freebsd", "openbsd")):
@@ -107,10 +133,11 @@ class RerunLogger(JointLogging, SegmentedSave):
         Rerun application id (groups recordings and blueprints in the viewer).
     recording_id : str or None
         Rerun recording id; None picks a fresh random one. Two loggers with different ids coexist.
-    mode : {'save', 'spawn', 'off'}
+    mode : {'save', 'spawn', 'serve', 'off'}
         'save' writes an .rrd file at ``path``; 'spawn' opens a viewer when a display exists and
         otherwise saves (to ``path``, or ``<tmp>/<application_id>-<recording_id>.rrd``) after a
-        note on stderr; 'off' makes every method a no-op and does not import rerun.
+        note on stderr; 'serve' serves the stream as ``serve`` says (and writes ``path`` when given);
+        'off' makes every method a no-op and does not import rerun.
     path : Path or None
         The .rrd file for 'save' (required) and for the 'spawn' fallback.
     profile_every : int
@@ -118,8 +145,12 @@ class RerunLogger(JointLogging, SegmentedSave):
     route : sequence of runs (``length`` [m], ``radius`` [m] or inf), optional
         The sheath route (``cfg.sheath.runs``): draws ``sheath/*`` in 3D, coloured by the tension.
     wall_clock : bool
-        The caller's ``t`` is the monotonic clock (the master): it goes on the ``wall`` timeline as
-        given; otherwise (the slave, whose ``t`` is the rig's time) ``wall`` is the clock at the call.
+        The caller's ``t`` is a clock of the caller's (the master's monotonic clock, a replay's recording
+        time), not a timeline of its own: ``session`` is ``t`` mapped onto the run's start (module docstring);
+        otherwise (the slave, whose ``t`` is the rig's time) ``t`` goes on ``time`` and ``session`` is the
+        wall clock at the call.
+    serve : ServeSpec, optional
+        Where 'serve' serves the stream and the web viewer (:func:`teleop.rerun.serve.serve_spec`).
 
     Attributes
     ----------
@@ -131,17 +162,21 @@ class RerunLogger(JointLogging, SegmentedSave):
     Raises
     ------
     ConfigError
-        Unknown mode, 'save' without a path, or ``profile_every`` < 1.
+        Unknown mode, 'save' without a path, 'serve' without ``serve``, or ``profile_every`` < 1.
+    OSError
+        'serve': the port is taken or the address cannot be bound.
     """
 
     def __init__(self, application_id: str, recording_id: str | None = None,
                  mode: Literal["save", "spawn", "off"] = "save", path: str | Path | None = None,
                  *, profile_every: int = 1, route=None, wall_clock: bool = False, joints=(),
-                 segment_s: float | None = SEGMENT_S) -> None:
+                 segment_s: float | None = SEGMENT_S, serve: ServeSpec | None = None) -> None:
         if mode not in MODES:
             raise ConfigError(f"recording.rerun: expected one of {', '.join(MODES)}, got {mode!r}")
         if mode == "save" and path is None:
             raise ConfigError("recording.rerun: mode 'save' needs a path for the .rrd file")
+        if mode == "serve" and serve is None:
+            raise ConfigError("recording.rerun: mode 'serve' needs recording.rerun_serve (address, ports)")
         if int(profile_every) < 1:
             raise ConfigError(f"RerunLogger: profile_every must be >= 1, got {profile_every}")
         self.mode: str = mode
@@ -158,7 +193,10 @@ class RerunLogger(JointLogging, SegmentedSave):
         self._route_s: np.ndarray | None = None
         self._started = False
         self._wall_is_t = bool(wall_clock)
-        self._init_segments(segment_s)
+        self._origin = session_origin(recording_id)        # [s since the epoch] of the run's start, or None
+        self._t_offset: float | None = None                 # session = t - offset (wall_clock), set at the first log
+        self.web_viewer: Any = None                         # 'serve': the web viewer's process
+        self._init_segments(None if mode == "serve" else segment_s)
         if route is not None and len(route):
             self._route = route_points(route)
             self._route_s = arc_length(self._route)
@@ -184,12 +222,29 @@ class RerunLogger(JointLogging, SegmentedSave):
                     self._fall_back(application_id, rec, f"could not spawn the viewer ({exc})")
             else:
                 self._fall_back(application_id, rec, "no display (DISPLAY/WAYLAND_DISPLAY unset)")
+        if mode == "serve":
+            assert serve is not None
+            self._serve(rec, serve, blueprint)
         if self.mode == "save":
             assert self.path is not None
             self.path.parent.mkdir(parents=True, exist_ok=True)
             rec.save(self.path, default_blueprint=blueprint)
             self._begin_segments(blueprint)
         self._rec = rec
+
+    def _serve(self, rec: rr.RecordingStream, spec: ServeSpec, blueprint: Any) -> None:
+        """The stream to a gRPC server on ``spec`` (and the .rrd at ``path``, if any); the web viewer started."""
+        rr = self._rr
+        sinks: list[Any] = [rr.GrpcServerSink(bind_ip=spec.bind, port=spec.port,
+                                              server_memory_limit=f"{int(spec.memory_limit)}B")]
+        if self.path is not None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            sinks.append(rr.FileSink(str(self.path)))
+        try:
+            rec.set_sinks(*sinks, default_blueprint=blueprint)
+        except Exception as exc:         # the SDK's own error types: the port taken, the address not local
+            raise OSError(f"recording.rerun: serve: cannot serve on {spec.bind}:{spec.port} ({exc})") from exc
+        self.web_viewer = start_web_viewer(spec)
 
     def _fall_back(self, application_id: str, rec: rr.RecordingStream, why: str) -> None:
         if self.path is None:
@@ -243,11 +298,11 @@ class RerunLogger(JointLogging, SegmentedSave):
         self._log_sheath(s, est, true)
         if self._abscissa is None or not np.array_equal(self._abscissa, s):
             # The grid rarely changes: send it only then (temporal: earlier profiles keep theirs).
-            first, self._abscissa = self._abscissa is None, s.copy()
+            self._abscissa = s.copy()
             ds = np.abs(np.gradient(s)) if s.size >= 2 else np.ones_like(s)
             for entity, w, color in (("profile/T_hat", 0.45, _ORANGE),
                                      ("profile/T_true", 0.9, _BLUE_SEE_THROUGH)):
-                self._grid[entity] = dict(abscissa=s, widths=w * ds, color=color if first else None)
+                self._grid[entity] = dict(abscissa=s, widths=w * ds, color=color)
         for entity, values in (("profile/T_hat", est), ("profile/T_true", true)):
             if values is None:
                 continue
@@ -255,13 +310,19 @@ class RerunLogger(JointLogging, SegmentedSave):
             rec.log(entity, rr.BarChart.from_fields(values=values, **(grid or {})))
 
     def _set_time(self, rec, t: float) -> None:
-        """``t`` on the ``time`` timeline and, unless the caller's ``t`` is the monotonic clock
-        (``wall_clock``), the monotonic clock now on ``wall`` (where slave and master recordings line up)."""
+        """The ``session`` timeline at this log and, unless the caller's ``t`` is a clock of its own
+        (``wall_clock``), ``t`` on ``time`` (module docstring: timelines)."""
         now = time.monotonic()
         if now >= self._segment_end:
             self._next_segment(now)
+        if self._t_offset is None:         # the first log: where the session's time starts
+            since = 0.0 if self._origin is None else time.time() - self._origin
+            self._t_offset = (float(t) if self._wall_is_t else time.time()) - since
+        if self._wall_is_t:
+            rec.set_time(SESSION, duration=float(t) - self._t_offset)
+            return
         rec.set_time(TIMELINE, duration=float(t))
-        rec.set_time(WALL, duration=float(t) if self._wall_is_t else now)
+        rec.set_time(SESSION, duration=time.time() - self._t_offset)
 
     def _start(self, t: float) -> None:
         """At the first log: the static pieces (route, fixed profile range) and a rest profile at ``t``,
@@ -390,6 +451,14 @@ class RerunLogger(JointLogging, SegmentedSave):
         if rec is not None:
             rec.flush()
             rec.disconnect()
+        viewer, self.web_viewer = self.web_viewer, None
+        if viewer is not None:
+            viewer.terminate()
+            try:
+                viewer.wait(5.0)
+            except Exception:  # noqa: BLE001 - subprocess.TimeoutExpired: it is killed
+                viewer.kill()
+                viewer.wait()
 
     def __enter__(self) -> RerunLogger:
         return self

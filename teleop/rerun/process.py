@@ -327,7 +327,11 @@ def main() -> int:
         args, kwargs = pickle.load(inp)
     except EOFError:
         return 0
-    logger = RerunLogger(*args, **kwargs)
+    try:
+        logger = RerunLogger(*args, **kwargs)
+    except OSError as e:                 # 'serve': the port taken; the side goes on without its view
+        print(f"rerun: {e}", file=sys.stderr)
+        return 1
     out.write(json.dumps({"mode": logger.mode, "path": None if logger.path is None else str(logger.path)}).encode()
               + b"\n")
     out.flush()

@@ -7,9 +7,9 @@ from the loop costs a deque append (arrays copied, a few microseconds); the Reru
 loop wait: if it falls more than :data:`MAX_BACKLOG` calls behind, the oldest queued calls are
 dropped and counted (:attr:`ThreadedRerunLogger.dropped`). In ``off`` mode every call returns at
 once. Each call waits for the control loop's idle window (:data:`teleop.timing.realtime.IDLE`): it runs
-while the loop sleeps, not as it wakes. The process's GIL switch interval is lowered to 0.5 ms, so that a background thread in the
-middle of pure-Python work hands the interpreter back to the woken loop within half a cycle
-(CPython's default is 5 ms).
+while the loop sleeps, not as it wakes. The process's GIL switch interval is lowered to 0.5 ms, so that a
+background thread in the middle of pure-Python work hands the interpreter back to the woken loop within half
+a cycle (CPython's default is 5 ms).
 
 The sides (``teleop slave``, ``teleop master``) no longer use this class: the Rerun SDK holds the
 interpreter lock inside its calls (a profile log 1.7 ms at the median, up to 41 ms, on 2 loaded

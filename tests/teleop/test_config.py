@@ -98,7 +98,8 @@ def test_unknown_key_names_file_line_and_suggestion(tmp_path):
 
 
 def test_unknown_key_in_list_item_and_misplaced_key(tmp_path):
-    with pytest.raises(ConfigError, match=r"unknown key 'sheath.runs\[1\].lenght' \(did you mean 'sheath.runs\[1\].length'"):
+    with pytest.raises(ConfigError, match=r"unknown key 'sheath.runs\[1\].lenght' "
+                                          r"\(did you mean 'sheath.runs\[1\].length'"):
         load_config(_write(tmp_path, "sheath:\n  runs:\n    - {length: 1}\n    - {lenght: 1}\n"))
     with pytest.raises(ConfigError, match=r":1: unknown key 'watchdog_ms' \(did you mean '(master|slave).watchdog_ms'"):
         load_config(_write(tmp_path, "watchdog_ms: 20\n"))
@@ -106,7 +107,8 @@ def test_unknown_key_in_list_item_and_misplaced_key(tmp_path):
 
 def test_non_si_suffix_only_where_the_schema_names_it(tmp_path):
     assert load_config(_write(tmp_path, "slave:\n  watchdog_ms: 20\n")).slave.watchdog_ms == 20.0
-    with pytest.raises(ConfigError, match=r":3: unknown key 'sheath.runs\[0\].length_mm': non-SI '_mm' .* give 'length'"):
+    with pytest.raises(ConfigError, match=r":3: unknown key 'sheath.runs\[0\].length_mm': "
+                                          r"non-SI '_mm' .* give 'length'"):
         load_config(_write(tmp_path, "sheath:\n  runs:\n    - {length_mm: 300}\n"))
     with pytest.raises(ConfigError, match="unknown key 'master.mapping.ramp_time_ms'"):
         load_config(_write(tmp_path, "master:\n  mapping:\n    ramp_time_ms: 500\n"))
@@ -114,16 +116,19 @@ def test_non_si_suffix_only_where_the_schema_names_it(tmp_path):
 
 @pytest.mark.parametrize("text, match", [
     ("rig:\n  rate_hz: fast\n", r":2: rig.rate_hz: expected a number, got 'fast' \(str\)"),
-    ("rig:\n  simulated:\n    n_elements: 20.5\n", r":3: rig.simulated.n_elements: expected an integer, got 20.5 \(float\)"),
-    ("rig:\n  simulated:\n    load:\n      tissue: 1\n", r":4: rig.simulated.load.tissue: expected true or false, got 1 \(int\)"),
-    ("rig:\n  simulated:\n    load:\n      tissue: yes\n", r"rig.simulated.load.tissue: expected true or false, got 'yes'"),
+    ("rig:\n  simulated:\n    n_elements: 20.5\n",
+     r":3: rig.simulated.n_elements: expected an integer, got 20.5 \(float\)"),
+    ("rig:\n  simulated:\n    load:\n      tissue: 1\n",
+     r":4: rig.simulated.load.tissue: expected true or false, got 1 \(int\)"),
+    ("rig:\n  simulated:\n    load:\n      tissue: yes\n",
+     r"rig.simulated.load.tissue: expected true or false, got 'yes'"),
     ("rig:\n  simulated:\n    effects:\n      stiction:\n        enabled: 1\n",
      r":5: rig.simulated.effects.stiction.enabled: expected true or false, got 1 \(int\)"),
     ("rig:\n  simulated:\n    effects:\n      stiction:\n        slip_time: fast\n",
      r":5: rig.simulated.effects.stiction.slip_time: expected a number, got 'fast' \(str\)"),
     ("rig:\n  rate_hz: true\n", r"rig.rate_hz: expected a number, got True \(bool\)"),
     ("rig:\n  type: real\n", r"rig.type: expected one of 'simulated', 'zenoh', 'recording', got 'real'"),
-    ("recording:\n  rerun: of\n", r"recording.rerun: expected one of 'save', 'spawn', 'off', got 'of'"),
+    ("recording:\n  rerun: of\n", r"recording.rerun: expected one of 'save', 'spawn', 'serve', 'off', got 'of'"),
     ("instrument:\n  id: 7\n", r"instrument.id: expected a non-empty string, got 7 \(int\)"),
     ("rig: 5\n", r":1: rig: expected a mapping of settings, got 5 \(int\)"),
     ("transport:\n  listen: tcp/127.0.0.1:1\n", r"transport.listen: expected a list, got 'tcp/"),
@@ -155,7 +160,8 @@ def test_wrong_types_name_key_expected_type_and_value(tmp_path, text, match):
     ("sheath:\n  EA: .inf\n", r"sheath.EA: expected a finite number, got inf"),
     ("rig:\n  simulated:\n    mu: .nan\n", r"rig.simulated.mu: expected a finite number, got nan"),
     ("instrument:\n  id: a/b\n", r":2: instrument.id: 'a/b' is not a valid instrument id"),
-    ("transport:\n  listen: [\"127.0.0.1:7447\"]\n", r"transport.listen\[0\]: '127.0.0.1:7447' is not a zenoh endpoint"),
+    ("transport:\n  listen: [\"127.0.0.1:7447\"]\n",
+     r"transport.listen\[0\]: '127.0.0.1:7447' is not a zenoh endpoint"),
 ])
 def test_out_of_range_values_name_key_and_range(tmp_path, text, match):
     with pytest.raises(ConfigError, match=match):
@@ -215,8 +221,8 @@ def test_range_table_covers_every_numeric_field_and_nothing_else():
                 walk(get_args(tp)[0], p + "[].")      # sheath.runs, instrument.joints, ...
             elif get_origin(tp) is tuple and get_args(tp)[0] in (int, float):
                 numeric.append(p + "[]")               # joint limits, device axes
-            elif tp in (int, float) or (get_origin(tp) in (Union, types.UnionType) and set(get_args(tp)) in ({int, NoneType},
-                                                                                       {float, NoneType})):
+            elif tp in (int, float) or (get_origin(tp) in (Union, types.UnionType)
+                                        and set(get_args(tp)) in ({int, NoneType}, {float, NoneType})):
                 numeric.append(p)                      # Optional numbers too (estimator.tension_noise)
     walk(Config, "")
     assert sorted(numeric) == sorted(RANGES)

@@ -175,7 +175,7 @@ def test_close_is_idempotent_and_later_calls_are_noops(tmp_path):
 
 
 def test_bad_arguments(tmp_path):
-    with pytest.raises(ConfigError, match="expected one of save, spawn, off, got 'file'"):
+    with pytest.raises(ConfigError, match="expected one of save, spawn, serve, off, got 'file'"):
         RerunLogger("a", "b", "file", tmp_path / "x.rrd")
     with pytest.raises(ConfigError, match="mode 'save' needs a path"):
         RerunLogger("a", "b", "save", None)
