@@ -33,11 +33,11 @@ ROOT = Path(__file__).resolve().parents[1]
 
 import numpy as np  # noqa: E402 - after the thread settings
 
-from slave.recording.spindle import fit_recorded_model  # noqa: E402
-from live.demo.recording_score import play_run, score_run  # noqa: E402
 from datasets.folders import KAIST, MRD, skip_reason  # noqa: E402
 from datasets.mrd import load_mrd_dir  # noqa: E402
 from datasets.mrd_files import DEFAULT_FOLDER, mrd_folder  # noqa: E402
+from live.demo.recording_score import play_run, score_run  # noqa: E402
+from slave.recording.spindle import fit_recorded_model  # noqa: E402
 from study.mrd_report import analyze_mrd  # noqa: E402
 from teleop.config.load import load_config  # noqa: E402
 from teleop.config.tools import load_tool  # noqa: E402
@@ -104,9 +104,9 @@ def kaist(directory: str | None, extended: str | None) -> None:
     """The KAIST table (module docstring)."""
     import json
 
-    from slave.recording.pair import kaist_live
     from datasets.kaist import load_all
     from datasets.kaist_files import default_kaist_dir, find_configs
+    from slave.recording.pair import kaist_live
     d = Path(directory) if directory else default_kaist_dir()
     if not find_configs(d):
         print(f"bench_recording_rig --kaist: skipped, {skip_reason(KAIST, d)}")

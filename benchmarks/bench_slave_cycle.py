@@ -80,7 +80,7 @@ def run(off_loop: bool, n: int, tmp: Path) -> np.ndarray:
 def simulator_calibration(cfg: Config):
     """The calibration the slave would reload for ``cfg``'s joint instrument: its power-up routine run
     to the end on a simulator of the instrument (an :class:`slave.calibration_file.InstrumentCalibration`)."""
-    from slave.node import axis_kind
+    from slave.kinds import axis_kind
     from slave.rigs import RIG_TYPES
     kind, dt = axis_kind(cfg), 1.0 / cfg.rig.rate_hz
     sim = RIG_TYPES["simulated"](cfg, None)

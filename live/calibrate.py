@@ -64,7 +64,7 @@ def _simulate(cfg: Config, source: str) -> tuple[Any, Any]:
     ConfigError
         The routine did not finish within :data:`MAX_CALIBRATION_TIME` of simulated time.
     """
-    from slave.node import axis_kind
+    from slave.kinds import axis_kind
     from slave.rigs import RIG_TYPES
 
     dt = 1.0 / cfg.rig.rate_hz

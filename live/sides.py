@@ -219,7 +219,6 @@ def run_slave(args: argparse.Namespace) -> int:
     """``teleop slave`` for any instrument: reload ``<calibration.dir>/<id>.yaml`` (or calibrate at
     power-up and save it there: missing, or ``--recalibrate``), then serve commands until stopped. One
     path and one :class:`slave.node.SlaveNode` for every instrument (a single tendon is one axis)."""
-    import live.recording_rig  # noqa: F401  (registers rig.type recording: it reads through study/, floor 4)
     from slave.node import SlaveNode, recording, warm_up
     from slave.rigs import make_rig
     from teleop.config.load import load_config
@@ -277,7 +276,7 @@ def run_master(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
     waived = announce_waivers(cfg, logging.getLogger("teleop.master"))
     if cfg.rig.type == "recording" and cfg.master.device.type == "simulated":
-        from live.recording_operator import recorded_operator
+        from master.recording_operator import recorded_operator
         device = recorded_operator(cfg)    # the scripted hand retraces the recorded jaw angle
     else:
         device = make_device(cfg, args.protocol)     # master.device.type through the registry

@@ -63,36 +63,15 @@ from typing import Any
 
 from slave.axis import SlaveAxis
 from slave.calibration_file import InstrumentCalibration, save_calibration
+from slave.kinds import axis_kind
 from slave.node_base import Decision, SlaveLinks, SlaveNodeBase
-from slave.pair_axis import PairAxis
 from slave.rig import Rig, RigState
 from slave.tendon_axis import TendonAxis
 from teleop.config.schema import Config
-from teleop.errors import ConfigError
 from teleop.wire.codec import prepare_estimate
 from teleop.wire.messages import Command, Estimate, SideState
 
-__all__ = ["SlaveNode", "axis_kind", "recording", "warm_up"]
-
-
-def axis_kind(cfg: Config) -> type[SlaveAxis]:
-    """The kind of axis of the configured instrument: :class:`PairAxis` when ``instrument.joints`` is
-    given (:class:`slave.spindle_axis.SpindleAxis` when they have a ``spindle_radius``), else
-    :class:`TendonAxis` (a single tendon).
-
-    Raises
-    ------
-    ConfigError
-        Some joints have a ``spindle_radius`` and others not (all axes of an instrument are of one kind).
-    """
-    spindles = [j.spindle_radius > 0 for j in cfg.instrument.joints]
-    if any(spindles) and not all(spindles):
-        raise ConfigError("instrument.joints[].spindle_radius: every joint of an instrument is spindle-driven "
-                          "(> 0) or none is (0)")
-    if spindles and spindles[0]:
-        from slave.spindle_axis import SpindleAxis
-        return SpindleAxis
-    return PairAxis if cfg.instrument.joints else TendonAxis
+__all__ = ["SlaveNode", "recording", "warm_up"]
 
 
 def recording(cfg: Config, rig: Rig) -> tuple[str, tuple[str, ...], dict[str, str]]:

@@ -5,12 +5,11 @@ a :class:`slave.rig.Rig` (one protocol over arrays of tendons: a single tendon, 
 joint instrument). Registered here:
 
 =============  ==============================================================================
-``simulated``  the in-process simulators (:class:`slave.simulated.SimulatedRig`, one tendon;
-               :class:`slave.pair_rig.SimulatedInstrument`, ``instrument.joints`` given;
-               :class:`slave.spindle_rig.SpindleInstrument`, joints with a ``spindle_radius``)
-``zenoh``      set-points out, samples in over Zenoh (:class:`slave.zenoh_rig.ZenohRig`, one tendon;
-               :class:`slave.zenoh_rig.ZenohInstrument`, joints): a motor controller running
-               zenoh-pico, or ``teleop bridge``
+``simulated``  the in-process simulator of the instrument's kind (:mod:`slave.kinds`)
+``zenoh``      set-points out, samples in over Zenoh (the kind's networked rig, :mod:`slave.kinds`):
+               a motor controller running zenoh-pico, or ``teleop bridge``
+``recording``  a measured recording played as the hardware (:mod:`slave.recording.rig`; the recording's
+               format chooses the rig)
 =============  ==============================================================================
 
 Another rig is one :func:`register_rig` call; nothing else chooses by type.
@@ -20,6 +19,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from slave.kinds import slave_kind
+from teleop.config.kinds import instrument_kind
 from teleop.config.schema import Config
 from teleop.errors import ConfigError
 
@@ -53,22 +54,17 @@ def make_rig(cfg: Config, session: Any = None):
 
 @register_rig("simulated")
 def _simulated(cfg: Config, session: Any):
-    if cfg.instrument.joints and cfg.instrument.joints[0].spindle_radius > 0:
-        from slave.spindle_rig import SpindleInstrument
-        return SpindleInstrument.from_config(cfg)
-    if cfg.instrument.joints:
-        from slave.pair_rig import SimulatedInstrument
-        return SimulatedInstrument.from_config(cfg)
-    from slave.simulated import SimulatedRig
-    return SimulatedRig.from_config(cfg)
+    return slave_kind(instrument_kind(cfg)).simulated(cfg)
 
 
 @register_rig("zenoh")
 def _zenoh(cfg: Config, session: Any):
     if session is None:
         raise ConfigError("rig.type zenoh needs the slave's transport session")
-    if cfg.instrument.joints and cfg.instrument.joints[0].spindle_radius > 0:
-        raise ConfigError("rig.type zenoh drives a motor per tendon; a spindle-driven instrument "
-                          "(instrument.joints[].spindle_radius > 0) runs on rig.type simulated")
-    from slave.zenoh_rig import ZenohInstrument, ZenohRig
-    return ZenohInstrument(session, cfg) if cfg.instrument.joints else ZenohRig(session, cfg)
+    return slave_kind(instrument_kind(cfg)).networked(session, cfg)
+
+
+@register_rig("recording")
+def _recording(cfg: Config, session: Any):
+    from slave.recording.rig import recording_rig
+    return recording_rig(cfg)

@@ -12,9 +12,9 @@ Two modes:
   to stderr on long recordings. Where the friction sits along the sheath is fitted; ``--route CONFIG``
   holds the route of CONFIG's ``sheath`` instead (an instrument whose route is known from its design).
 * ``teleop analyze --kaist [DIR]`` or ``teleop analyze .../sine_config_N.txt`` (or any FILE with
-  ``--bend DEG``; other layouts with ``--columns MAP``, :mod:`study.columns`): every configuration under DIR
+  ``--bend DEG``; other layouts with ``--columns MAP``, :mod:`datasets.columns`): every configuration under DIR
   (``sine_config_<N>.txt``, or ``optimization/selected/<N>.txt`` of a clone given by its root or that folder,
-  :mod:`study.kaist_files`; ``--configs`` picks some; default DIR in ``TSM_TELEOP_DATA``; read in place),
+  :mod:`datasets.kaist_files`; ``--configs`` picks some; default DIR in ``TSM_TELEOP_DATA``; read in place),
   calibrated on command cycle 1 and tested on the later cycles, the model choice on cycle 1 only:
   the pair diagnosis (:mod:`estimator.offline.pair.diagnosis`: the seed pair model against the
   capstan-joint model and the pair-level effects; causes, extended model, gain), one parameter set
@@ -43,6 +43,8 @@ from typing import Any
 
 import numpy as np
 
+from datasets.kaist import KaistRecording, split
+from datasets.kaist_files import is_kaist_file
 from estimator.data import MeasuredData
 from estimator.errors import DataError
 from estimator.offline.diagnosis.result import Diagnosis, as_diagnosis
@@ -50,8 +52,7 @@ from estimator.offline.diagnosis.selection import diagnose_recording
 from estimator.offline.pair.diagnosis import diagnose_pair
 from estimator.offline.pair.fit import fit_force_path, fit_linear, fit_pair, fit_play_map, reversal_dead_zones, rmse
 from estimator.offline.pair.general import shared_analysis
-from study.kaist import KaistRecording, format_prediction, load_kaist_input, predict_kaist, split
-from study.kaist_files import is_kaist_file
+from study.kaist_input import format_prediction, load_kaist_input, predict_kaist
 from study.kaist_report import write_kaist_figures, write_kaist_report
 from study.kaist_summary import format_kaist
 from study.report import format_summary, split_text, write_report
@@ -125,7 +126,7 @@ def main_analyze(args: argparse.Namespace) -> int:
         except (ArithmeticError, ValueError) as e:   # not one of ours: a fit the runs' values spoiled
             if isinstance(e, (DataError, ConfigError)):
                 raise
-            from study.mrd import load_mrd_dir, values_error
+            from datasets.mrd import load_mrd_dir, values_error
             raise values_error(load_mrd_dir(args.mrd or None, getattr(args, "runs", None))[0], e) from None
     if args.file is None and args.kaist is None:
         raise ConfigError("analyze needs FILE or --kaist [DIR]")

@@ -16,7 +16,7 @@ Protocol (docs/results/mrd.md):
   over the folder), angle RMSE [deg], from ``SCORE_FROM_S`` on (the load motor ramps in first).
 * across the folder: model-free band measurements per run (E3 frequency, E8 load, distal-side
   friction, E12 backlash), one shared parameter set fitted on all runs and scored leave-one-run-out.
-* beside the pair model, the centre map (:mod:`study.mrd_centre`): the load level read from the
+* beside the pair model, the centre map (:mod:`datasets.mrd_centre`): the load level read from the
   scored run's own spindle band centre; on the calibration (one run: gain 1 / n_k and its cost profile)
   and over the folder (in-sample and leave-one-run-out). ``--calibration mid`` picks the run whose band
   centre (spindle torque only) is nearest the middle of the folder's.
@@ -31,6 +31,23 @@ from typing import Any
 
 import numpy as np
 
+from datasets.mrd import ATTRIBUTION, MrdRun
+from datasets.mrd_calibration import (
+    CAL_INPUTS,
+    SCORE_FROM_S,
+    calibrate,
+    calibrate_on_runs,
+    design_gain,
+    parse_calibration,
+    run_data,
+)
+from datasets.mrd_centre import (
+    CENTRE,
+    centre_agg,
+    centre_folder,
+    profile_on_scored,
+    score_centre,
+)
 from estimator.errors import DataError
 from estimator.offline.spindle.fit import band_centre
 from estimator.offline.spindle.shared import (
@@ -49,27 +66,13 @@ from estimator.online.spindle import (
     predict_torque,
     spindle_rate,
 )
-from study.mrd import ATTRIBUTION, MrdRun
-from study.mrd_calibration import SCORE_FROM_S, calibrate, design_gain, parse_calibration, run_data
-from study.mrd_centre import (
-    CENTRE,
-    centre_agg,
-    centre_folder,
-    centre_implied_gain,
-    centre_one_run,
-    implied_load_gain,
-    model_choice,
-    profile_on_scored,
-    score_centre,
-)
 from study.mrd_text import format_mrd
 from study.mrd_tools import tool_calibration, tool_entry
 from teleop.config.tools import Tool
 from teleop.errors import ConfigError
 
-__all__ = ["analyze_mrd", "band_measurements", "calibrate_on_runs"]
+__all__ = ["analyze_mrd", "band_measurements"]
 
-_CAL_INPUTS = {"inputs": ["spindle torque", "spindle encoder"], "targets": ["jaw torque", "jaw encoder"]}
 SHARED_STEP = 50           # decimation of the folder-wide fits (1 kHz -> 20 Hz)
 NOT_FROM_PROXIMAL = {
     "rho": "torque scale (r_d / r_p times the ratio of the two sensors' gains): one run at one load level shows "
@@ -139,9 +142,9 @@ def _agg(rows: list[dict]) -> dict:
 
 def _one_stroke(runs: list[MrdRun]) -> None:
     """Raise DataError when the runs stroke over separate spindle-angle windows (jaw stopping positions:
-    :func:`study.mrd.stroke_groups`), naming the windows and the ``--runs`` selection of each: the centre
+    :func:`datasets.mrd.stroke_groups`), naming the windows and the ``--runs`` selection of each: the centre
     map and the pair model describe one stroke, and one window's calibration says nothing of another's."""
-    from study.mrd import runs_selection, stroke_groups, stroke_window
+    from datasets.mrd import runs_selection, stroke_groups, stroke_window
     groups = stroke_groups(runs)
     if len(groups) < 2:
         return
@@ -214,59 +217,13 @@ def _header(runs: list[MrdRun], fs: float) -> dict[str, Any]:
                                "duration_s": float(r.time[-1])} for r in runs}}
 
 
-def calibrate_on_runs(runs: list[MrdRun], mode: str, cal: str, calibration: str | None,
-                       gain: tuple[float | None, str | None], fs: float, tick, out: dict) -> tuple[list, Any, list]:
-    """Calibrate on the named runs (``mode`` "run" or "kinematic"), choose the headline model and record the
-    calibration in ``out``; returns the plan of the scored runs, the centre map and the calibration RunData."""
-    given, source = gain
-    cal_names = str(cal).split(",")
-    cal_runs = [run_data(r) for r in runs if r.name in cal_names]
-    fits, base, sel, centre, ref = calibrate(cal_runs, tick, kinematic=mode == "kinematic")
-    cmap, out["centre_calibration"] = centre_one_run(cal_runs, fs, given)
-    sel_name = list(fits)[-1]               # the pair model with the selected extensions
-    sel_p = fits[sel_name]
-    pin = np.concatenate([predict_torque(sel_p, make_batch([(c.tau_p, c.theta_p)], centre, ref, c.dt))[
-        c.k0:] - c.tau_d[c.k0:] for c in cal_runs])
-    gains = {sel_name: implied_load_gain(lambda c, u: predict_torque(sel_p, make_batch(
-                 [(c.tau_p + u, c.theta_p)], centre, ref, c.dt)), cal_runs),
-             CENTRE: centre_implied_gain(cmap, cal_runs)}
-    out["model_choice"] = model_choice(sel_name, float(sel["rmse_val"]) / fs, float(np.sqrt(np.mean(pin ** 2))) / fs,
-                                       cal_runs, fs, out["centre_calibration"]["fit_rms_fs"], gains, given)
-    out["calibration"] = {"mode": mode, "run": cal, "runs": cal_names, **_CAL_INPUTS,
-                          "scored": "every other run, from its spindle signals only"}
-    if given is not None:
-        dg: dict[str, Any] = {"value": given, "from": "--calibration gain=G: a design value from outside the "
-                              "data (the centre map's load gain)"}
-        if source is not None:
-            dg.update({"from": f"centre_map.load_gain of {source} (another folder's map fitted across its loads; "
-                               "--calibration gain=FILE)", "source": source})
-        out["calibration"]["design_load_gain"] = dg
-    if calibration and calibration.endswith("mid"):
-        out["calibration"]["chosen_by"] = ("the run whose band centre (spindle torque only) is nearest the middle "
-                                           "of the folder's band centres, a rule fixed before any score")
-    if mode == "kinematic":
-        n_k = kinematic_ratio(cal_runs)
-        out["calibration"]["fixed"] = {"rho": {
-            "value": 1.0 / n_k, "n_k": n_k,
-            "from": "1 / n_k, n_k = slope of jaw encoder against spindle encoder in full motion (middle 60 % "
-                    "of the stroke, an offset per direction) of the calibration run(s): the jaw encoder is a "
-                    "distal reading of the calibration run; the pulley radii ratio r_d / r_p, equal to the "
-                    "torque scale only if both torque sensors share one gain and no power is lost in the "
-                    "band centre"}}
-    plan = [(r, fits, base, centre, ref, run_data(r).k0) for r in runs if r.name not in cal_names]
-    out["parameters"] = {n: p.as_dict() for n, p in fits.items()}
-    out["baseline_parameters"] = {n: b.params for n, b in base.items()}
-    out["selection"] = sel
-    return plan, cmap, cal_runs
-
-
 def _calibrate_on_segments(runs: list[MrdRun], cal: float, tick, out: dict) -> list:
     """Calibrate each run on its first ``cal`` seconds [s] and record the calibration in ``out``; returns the plan."""
     plan = []
     out["model_choice"] = {"rule": "segment calibration: the pair model only (the centre map reads the load "
                                    "level across runs; it has no per-run segment calibration)",
                            "candidates": {"pair model (selected per run)": None}, "chosen": "pair model"}
-    out["calibration"] = {"mode": "segment", "seconds": cal, **_CAL_INPUTS,
+    out["calibration"] = {"mode": "segment", "seconds": cal, **CAL_INPUTS,
                           "scored": f"t >= {cal} s of the same run, from its spindle signals only"}
     out["parameters"] = {}
     for r in runs:
@@ -373,7 +330,7 @@ def main_mrd(args) -> int:
     :mod:`study.mrd_windows`), print; one line per unreadable file. Returns 0."""
     import json
 
-    from study.mrd import load_mrd_dir, stroke_groups
+    from datasets.mrd import load_mrd_dir, stroke_groups
     from study.mrd_windows import analyze_windows, write_outputs
     from teleop.config.tools import load_tool
 

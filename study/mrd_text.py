@@ -8,8 +8,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from datasets.mrd import MrdRun
 from estimator.offline.spindle.fit import EXTENSIONS
-from study.mrd import MrdRun
 
 __all__ = ["format_mrd", "write_mrd_report"]
 

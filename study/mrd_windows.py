@@ -3,7 +3,7 @@
 The source repository's roll and pitch folders stop the jaw at several positions (runs ``ZXY.TXT``, Z the
 position): the runs of one position stroke over one window of the spindle angle, and a calibration at one
 position says nothing of the friction path at another. Such a folder is split into its windows
-(:func:`study.mrd.stroke_groups`) and each window is analysed on its own, with its own calibration run chosen by
+(:func:`datasets.mrd.stroke_groups`) and each window is analysed on its own, with its own calibration run chosen by
 the same rule (``--calibration`` is applied to every window) and its own full scale: one table per window, then
 a summary across them (every scored run of every window).
 """
@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from study.mrd import ATTRIBUTION, MrdRun, runs_selection, stroke_groups, stroke_window
+from datasets.mrd import ATTRIBUTION, MrdRun, runs_selection, stroke_groups, stroke_window
 from study.mrd_text import format_mrd, write_mrd_report
 from teleop.config.tools import Tool
 

@@ -171,7 +171,7 @@ def main_bimanual(args, cfg_path: Path) -> int:
     """``teleop demo`` of the bimanual config at ``cfg_path``: 0 when every arm's checks passed, else 1."""
     from live.calibrate import run_calibrate
     from live.sides import prepare_run_dir
-    from slave.node import axis_kind
+    from slave.kinds import axis_kind
     bim = load_arms(cfg_path)
     for arm in bim.arms:
         check_protocol(arm.cfg, args.protocol)

@@ -287,7 +287,7 @@ def main_demo(args) -> int:
     cfg = with_recording(cfg, args)     # --rig / --recording: a recording checked before any process starts
     check_protocol(cfg, args.protocol)
     if cfg.rig.type == "recording" and not timeout_given:   # the slave plays the whole recording after its fit
-        from live.recording_rig import recorded_motion
+        from datasets.recording import recorded_motion
         args.timeout = float(recorded_motion(cfg)[0][-1]) + RECORDING_MARGIN
     for line in waiver_lines(cfg):
         print(line, flush=True)
@@ -307,7 +307,7 @@ def main_demo(args) -> int:
                      "safety_waivers": waivers(cfg)}   # teleop/config/bounds.py: keys run past their hard bound
     try:
         if cfg.rig.type == "simulated":      # another rig: the slave calibrates at power-up (file missing)
-            from slave.node import axis_kind
+            from slave.kinds import axis_kind
             print(f"calibrating {cfg.instrument.id} ({', '.join(names)}): {axis_kind(cfg).routine_text} ...", flush=True)
             run_calibrate(argparse.Namespace(config=str(cfg_file), out=None))
         doing = "the slave fits its calibration (rig.recording.calibration_run), then plays the recording; the " \

@@ -3,16 +3,16 @@
 A KAIST recording on the pair axis (:func:`evaluate_kaist`) is scored on the distal angle of its test cycles, a
 tendon's CSV on the single-tendon axis (:func:`evaluate_tendon`) on the distal tension after its calibration part.
 
-The demo's flow is every instrument's (:func:`live.demo.main.main_demo`); the recording rig (live/recording_rig.py)
+The demo's flow is every instrument's (:func:`live.demo.main.main_demo`); the recording rig (slave/recording/rig.py)
 plays an MRD run as the spindle axis's hardware and the slave fits its calibration on one run of the folder at
-power-up (live/recording_axis.py). :class:`RecordingDemo` reads ``slave_joints.csv`` (a row per cycle: the rig's
+power-up (slave/recording/spindle.py). :class:`RecordingDemo` reads ``slave_joints.csv`` (a row per cycle: the rig's
 time is the recording's) and scores, over the cycles the slave ran from the run's scored start (its first
 spindle reversal after 0.5 s; with the centre map once its band reading holds both edges, as ``teleop analyze
 --mrd``):
 
 * the live jaw torque against the measured jaw torque: RMSE and max |error| over the full scale (the tool
   file's measured output-torque range, else the run's own);
-* the same run's offline estimate, the batch model of the same calibration (:mod:`live.recording_score`), on
+* the same run's offline estimate, the batch model of the same calibration (:mod:`live.demo.recording_score`), on
   the same cycles, and the difference of the two RMSEs (the same model: it must stay within
   :data:`AGREEMENT_FS`);
 * the live jaw angle against the measured one (RMSE [deg]).
@@ -50,12 +50,12 @@ def evaluate_recording(run_dir: Path, cfg: Config) -> dict:
     DataError
         No cycle of the slave reached the run's scored start, or a missing or malformed CSV.
     """
+    from datasets.recording import check_recording, read_recording_run
     from estimator.offline.spindle.centre_fit import predict_held
     from estimator.online.spindle import make_batch, predict_torque
-    from live.recording_axis import CENTRE, full_scale, load_model
-    from live.recording_rig import check_recording, read_recording_run
-    from live.recording_routine import recorded_model_path
-    from live.recording_score import scored_from
+    from live.demo.recording_score import scored_from
+    from slave.recording.routine import recorded_model_path
+    from slave.recording.spindle import CENTRE, full_scale, load_model
     fmt = check_recording(cfg)[1]
     if fmt == "kaist":
         return evaluate_kaist(run_dir, cfg)
@@ -94,17 +94,17 @@ def with_recording(cfg: Config, args: Any) -> Config:
     """``cfg`` with ``--rig`` / ``--recording PATH`` applied (``--recording`` alone means ``--rig recording``;
     without ``--config`` the instrument is the shipped one of the format the file's content shows:
     configs/recording-mrd.yaml's jaw, recording-kaist.yaml's joint or sim.yaml's tendon), the recording checked
-    against the instrument before any process starts (:func:`live.recording_rig.check_recording`: one line naming
+    against the instrument before any process starts (:func:`datasets.recording.check_recording`: one line naming
     the file and the problem)."""
     import dataclasses
 
-    from live.recording_rig import read_recording
+    from datasets.recording import read_recording
     from teleop.config.files import shipped_config
     from teleop.config.load import load_config
     rig, path = getattr(args, "rig", None), getattr(args, "recording", None)
     if path is not None and rig in (None, "recording"):
         if getattr(args, "config", None) is None:
-            from live.recording_rig import recording_format
+            from datasets.recording import recording_format
             fmt = recording_format(Path(path).expanduser())
             name = {"kaist": "recording-kaist.yaml", "csv": "sim.yaml"}.get(fmt, "recording-mrd.yaml")
             cfg = load_config(shipped_config(name))
@@ -127,12 +127,12 @@ def evaluate_kaist(run_dir: Path, cfg: Config) -> dict:
     samples. Raises DataError when no row of the slave falls on a test sample."""
     import json
 
+    from datasets.kaist import read_kaist_recording, split
+    from datasets.recording import check_recording
     from estimator.offline.pair.fit import PairParams, fit_pair
     from estimator.online.pair_batch import predict_pair_angle
-    from live.recording_pair import N_NODES
-    from live.recording_rig import check_recording
-    from live.recording_routine import recorded_model_path
-    from study.kaist import read_kaist_recording, split
+    from slave.recording.pair import N_NODES
+    from slave.recording.routine import recorded_model_path
     rec = read_kaist_recording(check_recording(cfg)[0])
     model = json.loads(recorded_model_path(cfg).read_text(encoding="utf-8"))
     name = cfg.instrument.joints[0].name
@@ -170,10 +170,9 @@ def evaluate_tendon(run_dir: Path, cfg: Config) -> dict:
     T_out or no slave row falls on a held-out sample."""
     import json
 
+    from datasets.recording import check_recording, read_tendon_csv
     from estimator.online.distal import estimate_batch
     from estimator.sheath import SheathModel
-    from live.recording_rig import check_recording
-    from live.recording_tendon import read_tendon_csv
     from slave.calibration_file import calibration_path
     d = read_tendon_csv(check_recording(cfg)[0])
     if d.T_out is None:

@@ -1,6 +1,6 @@
 """``rig.recording``: the settings of the ``recording`` rig (a measured recording played as the hardware).
 
-The rig itself is :mod:`live.recording_rig`; :mod:`teleop.config.schema` holds this section under ``rig.recording``.
+The rig itself is :mod:`slave.recording.rig`; :mod:`teleop.config.schema` holds this section under ``rig.recording``.
 """
 from __future__ import annotations
 

@@ -21,11 +21,12 @@ from pathlib import Path
 
 import pytest
 
+from datasets import kaist_files
+from datasets.folders import KAIST, skip_reason
 from estimator.offline.diagnosis import thresholds as th
 from estimator.offline.diagnosis.selection import diagnose
 from estimator.offline.pair.diagnosis_fit import FIT_TOL as PAIR_FIT_TOL
-from study import kaist_files, lumped_scenarios, scenarios
-from study.datasets import KAIST, skip_reason
+from study import lumped_scenarios, scenarios
 
 PINNED = Path(__file__).with_name("diagnosis_pinned.json")
 KAIST_DIR = kaist_files.default_kaist_dir()
@@ -93,8 +94,8 @@ def answer(case: dict) -> dict:
 
 def pair_answer() -> dict:
     """The pair diagnosis of the KAIST recording at 0 deg: {cause, causes, gain}."""
+    from datasets import kaist
     from estimator.offline.pair.diagnosis import diagnose_pair
-    from study import kaist
     rec = next(r for r in kaist.load_all(KAIST_DIR) if r.config_deg == 0)
     train, test, _ = kaist.split(rec)
     s, _ = diagnose_pair(rec, train, test)

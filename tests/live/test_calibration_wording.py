@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from live.calibrate import calibration_report
-from slave.node import axis_kind
+from slave.kinds import axis_kind
 from slave.rigs import RIG_TYPES
 from teleop.config.load import load_config
 

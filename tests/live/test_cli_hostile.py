@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 
 import live.demo.main  # noqa: F401  (the imports each side makes before it reads its config)
-import live.recording_rig  # noqa: F401
 import slave.node  # noqa: F401
+import slave.recording.rig  # noqa: F401
 from live.cli import main
 from teleop.config.reader import MAX_BYTES
 

@@ -13,7 +13,7 @@ from estimator.online.spindle import SpindleParams
 from estimator.online.spindle_estimator import SpindleEstimator
 from estimator.phase import Phase
 from slave.calibration_file import load_calibration, save_calibration
-from slave.node import axis_kind
+from slave.kinds import axis_kind
 from slave.rig import RigInputError
 from slave.rigs import make_rig
 from slave.spindle_axis import SpindleAxis

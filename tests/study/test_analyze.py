@@ -8,12 +8,12 @@ import math
 import numpy as np
 import pytest
 
+from datasets.folders import KAIST, skip_reason
+from datasets.kaist import CONFIGS_DEG
+from datasets.kaist_files import default_kaist_dir, find_configs
 from estimator.errors import DataError
 from estimator.offline.fit import predict
 from study import analyze
-from study.datasets import KAIST, skip_reason
-from study.kaist import CONFIGS_DEG
-from study.kaist_files import default_kaist_dir, find_configs
 from teleop.errors import ConfigError
 
 KAIST_DIR = default_kaist_dir()

@@ -29,10 +29,10 @@ def refused(argv: list[str], capsys) -> str:
 
 
 def test_a_directory_says_it_is_a_directory(tmp_path, capsys):
+    from datasets.kaist_files import find_kaist_dir
+    from datasets.mrd import load_mrd_dir
     from estimator.errors import DataError
     from study.analyze import configured_route
-    from study.kaist_files import find_kaist_dir
-    from study.mrd import load_mrd_dir
     from teleop.errors import ConfigError
     msg = refused([str(tmp_path)], capsys)             # the CLI's own check of its path arguments may come first
     assert str(tmp_path) in msg and "is a directory" in msg
@@ -80,8 +80,8 @@ def test_a_byte_of_another_encoding_names_its_line(tmp_path, capsys):
 
 
 def test_mrd_runs_that_are_not_text_or_not_finite_are_named_with_their_line(tmp_path):
+    from datasets.mrd import read_mrd
     from estimator.errors import DataError
-    from study.mrd import read_mrd
     f = tmp_path / "00.TXT"
     rows = [f"{0.001 * i:.3f},{i},0,0,{i},0,0.1,0,0,0" for i in range(2100)]
     f.write_text("%header\n" + "\n".join(rows) + "\n")
@@ -200,8 +200,8 @@ def test_an_mrd_value_out_of_range_and_a_fit_it_spoils_are_named(tmp_path, capsy
     fields = lines[701].split(",")                      # line 702: data row 700 after the two header lines
     fields[2] = "2e7"
     (d / "01.TXT").write_text("\n".join(lines[:701] + [",".join(fields)] + lines[702:]) + "\n")
+    from datasets.mrd import read_mrd
     from estimator.errors import DataError
-    from study.mrd import read_mrd
     with pytest.raises(DataError, match=r"01\.TXT:702: column 2: 20000000\.0 counts is beyond anything the rig "
                                         r"reads \(\|value\| <= 1e\+07 counts\): a corrupt row; fix or remove that row$"):
         read_mrd(d / "01.TXT")

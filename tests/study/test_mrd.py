@@ -14,15 +14,15 @@ from estimator.online.spindle import SpindleParams, first_reversal, make_batch, 
 from estimator.offline.spindle.fit import band_centre, fit_torque
 from teleop.errors import ConfigError
 from estimator.errors import DataError
-from study.mrd import DISTAL_COUNTS_PER_REV, DISTAL_SIGN, PROXIMAL_COUNTS_PER_REV, TORQUE_NM_PER_COUNT, load_mrd_dir, read_mrd
-from study.mrd_files import default_mrd_dir
+from datasets.mrd import DISTAL_COUNTS_PER_REV, DISTAL_SIGN, PROXIMAL_COUNTS_PER_REV, TORQUE_NM_PER_COUNT, load_mrd_dir, read_mrd
+from datasets.mrd_files import default_mrd_dir
 from study.mrd_report import analyze_mrd, band_measurements
 from study.mrd_text import format_mrd
-from study.mrd_calibration import parse_calibration
+from datasets.mrd_calibration import parse_calibration
 from estimator.offline.spindle.shared import RunData, kinematic_ratio, load_sweep
 
-from study.datasets import MRD, skip_reason
-from study.mrd_files import DEFAULT_FOLDER, mrd_folder
+from datasets.folders import MRD, skip_reason
+from datasets.mrd_files import DEFAULT_FOLDER, mrd_folder
 
 MRD_DIR = default_mrd_dir()
 needs_mrd = pytest.mark.skipif(not mrd_folder(DEFAULT_FOLDER).is_dir(), reason=skip_reason(MRD, MRD_DIR))
@@ -280,7 +280,7 @@ def test_real_runs_one_run_does_not_pin_the_load_gain():
     +-4 % a one-run calibration needs (docs/results/mrd.md), and the encoders' ratio does not move with the load (no
     stretch to correct): corrected for stretch it still puts the gain above 1 / 0.96."""
     from estimator.offline.spindle.centre_fit import within_run_gain
-    from study.mrd_calibration import run_data
+    from datasets.mrd_calibration import run_data
     rd = {n: run_data(read_mrd(mrd_folder(DEFAULT_FOLDER) / f"{n}.TXT")) for n in ("00", "31", "43")}
     for r in rd.values():
         w = within_run_gain(r)
@@ -314,7 +314,7 @@ def test_runs_at_several_jaw_positions_are_named_and_selected_one_window_at_a_ti
     """The source's roll and pitch folders stop the jaw at several positions, so their runs stroke
     over separate spindle-angle windows; the analysis names each window with its --runs selection instead of
     failing inside a fit, and --runs analyses one."""
-    from study.mrd import stroke_groups
+    from datasets.mrd import stroke_groups
     from study.mrd_report import analyze_mrd
     for name, shift in (("000", 0.0), ("001", 0.0), ("100", 1.2), ("101", 1.2)):
         t, c, tp, th, td = simulate(duration=4.0)

@@ -15,9 +15,9 @@ from contextlib import redirect_stdout
 
 import pytest
 
-from study.datasets import MRD, skip_reason
-from study.mrd import load_mrd_dir, stroke_groups
-from study.mrd_files import default_mrd_dir, mrd_folder
+from datasets.folders import MRD, skip_reason
+from datasets.mrd import load_mrd_dir, stroke_groups
+from datasets.mrd_files import default_mrd_dir, mrd_folder
 from study.mrd_report import analyze_mrd
 from study.mrd_windows import analyze_windows
 from teleop.config.tools import load_tool

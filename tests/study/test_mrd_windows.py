@@ -6,7 +6,7 @@ import argparse
 
 import numpy as np
 
-from study.mrd import load_mrd_dir, stroke_groups
+from datasets.mrd import load_mrd_dir, stroke_groups
 from study.mrd_report import analyze_mrd, main_mrd
 from study.mrd_windows import analyze_windows
 from tests.study.test_mrd import simulate, write_txt

@@ -6,21 +6,20 @@ simulators' truth: the estimators never read it). The commands the slave sends a
 and otherwise ignored: the recording's motion is the one that happened.
 
 The format of a recording (``rig.recording.format: auto``) is read from its first lines, never from its
-name (:mod:`live.recording_formats`). An MRD da Vinci run (``XY.TXT``, :mod:`study.mrd`) drives the spindle
+name (:mod:`datasets.formats`). An MRD da Vinci run (``XY.TXT``, :mod:`datasets.mrd`) drives the spindle
 axis of an instrument of one spindle-driven jaw: x_in = the spindle angle [rad], T_in = the spindle torque
 [N m], the truth's ``torque`` and ``theta`` the measured jaw torque [N m] and angle [rad]. The calibration the
-slave needs is fitted on one named run of the recording's folder (:mod:`live.recording_axis`), because a
+slave needs is fitted on one named run of the recording's folder (:mod:`slave.recording.spindle`), because a
 recording cannot execute a calibration motion.
 
-A KAIST recording (``sine_config_N.txt``, or ``optimization/selected/N.txt`` of a clone; :mod:`study.kaist`)
-drives the pair axis of an instrument of one antagonistic pair (:mod:`live.recording_pair`): x_in = the motor
+A KAIST recording (``sine_config_N.txt``, or ``optimization/selected/N.txt`` of a clone; :mod:`datasets.kaist`)
+drives the pair axis of an instrument of one antagonistic pair (:mod:`slave.recording.pair`): x_in = the motor
 command [rad] on both tendons, T_in = the two proximal tensions [N], the truth's ``theta`` the measured distal
 angle. The project's measured-data CSV (:func:`teleop.recording.measured_csv.read_measured_csv`) drives the single-tendon
-axis (:mod:`live.recording_tendon`): x_in, T_in proximal, T_out and x_out the truth.
+axis (:mod:`slave.recording.tendon`): x_in, T_in proximal, T_out and x_out the truth.
 
-Layering: the readers live in :mod:`study` (floor 3) and the rig reads through them, so the rig lives
-here on floor 4 and registers itself in :data:`slave.rigs.RIG_TYPES` when this module is imported
-(:mod:`live.sides` imports it before the slave builds its rig); :mod:`slave` stays free of the study.
+The recording is read and checked against the instrument by :mod:`datasets.recording`; the rig is registered
+in :mod:`slave.rigs` as every rig (``rig.type: recording``, :func:`recording_rig`).
 
 ``rig.recording.rate``: ``recording`` gives one recorded sample per step at the recording's own time;
 ``slave`` resamples the recording linearly at the rig's time (the sum of the steps' ``dt``).
@@ -30,114 +29,17 @@ here on floor 4 and registers itself in :data:`slave.rigs.RIG_TYPES` when this m
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from estimator.errors import DataError
-from live.recording_formats import detect_format
+from datasets.mrd import MrdRun
+from datasets.recording import check_recording, read_recording_run
 from slave.rig import InstrumentTruth, RigInputError, RigState
-from slave.rigs import register_rig
-from study.mrd import MrdRun, read_mrd
 from teleop.config.schema import Config
 from teleop.errors import ConfigError
 
-__all__ = ["FORMATS", "recording_format", "check_recording", "read_recording", "read_recording_run", "recorded_motion",
-           "RecordedSpindle"]
-
-#: The formats ``rig.recording.format`` names, and the axis each drives.
-FORMATS = {"mrd": "spindle", "kaist": "pair", "csv": "single tendon"}
-
-
-def recording_format(path: Path, fmt: str = "auto") -> str:
-    """The format of the recording ``path``: ``fmt`` unless ``auto``; else the one its first lines show
-    (:func:`live.recording_formats.detect_format`: the project's CSV header, 8 numbers a row: kaist, 10: mrd).
-
-    Raises
-    ------
-    DataError
-        The file does not exist, or its first lines are of no known format (the file and the formats tried).
-    """
-    if not path.is_file():
-        raise DataError(f"rig.recording.path: {path}: no such file")
-    if fmt != "auto":
-        return fmt
-    return detect_format(path)
-
-
-def _instrument_axis(cfg: Config) -> str:
-    """The config's axis type, in the words of :data:`FORMATS`."""
-    joints = cfg.instrument.joints
-    if not joints:
-        return "single tendon"
-    return "spindle" if joints[0].spindle_radius > 0 else "pair"
-
-
-def check_recording(cfg: Config) -> tuple[Path, str]:
-    """The recording's path and format, checked against the instrument before anything starts.
-
-    Raises
-    ------
-    ConfigError
-        No ``rig.recording.path``; a recording whose axis is not the instrument's (an MRD run on a
-        single tendon, ...); an MRD or KAIST recording on an instrument of more than one joint; ``at_end: loop``
-        on a KAIST or CSV recording.
-    DataError
-        A missing or unreadable file (:func:`recording_format`).
-    """
-    rc = cfg.rig.recording
-    if not rc.path:
-        raise ConfigError("rig.recording.path: rig.type recording needs a recording (an MRD XY.TXT run, a KAIST "
-                          "recording or a measured-data CSV; docs/how-to/get-the-data.md)")
-    path = Path(rc.path).expanduser()
-    fmt = recording_format(path, rc.format)
-    want, have = FORMATS[fmt], _instrument_axis(cfg)
-    if want != have:
-        raise ConfigError(f"rig.recording.path: {path} is a {fmt.upper()} recording of a {want} axis; the config's "
-                          f"instrument is a {have} axis (instrument.joints): use an instrument of that axis type")
-    if fmt != "mrd" and rc.at_end == "loop":
-        raise ConfigError(f"rig.recording.at_end: loop replays MRD runs; a {fmt.upper()} recording plays once "
-                          "(at_end: stop)")
-    if fmt == "csv":
-        return path, fmt
-    if len(cfg.instrument.joints) != 1:
-        raise ConfigError(f"rig.recording.path: {path} is one joint's recording; instrument.joints has "
-                          f"{len(cfg.instrument.joints)} joints, need 1")
-    return path, fmt
-
-
-def read_recording_run(cfg: Config) -> MrdRun:
-    """The checked recording of ``cfg`` read by :func:`study.mrd.read_mrd` (errors of :func:`check_recording`
-    and :func:`study.mrd.read_mrd`: one line naming the file and the problem)."""
-    path, _ = check_recording(cfg)
-    return read_mrd(path)
-
-
-def read_recording(cfg: Config) -> Any:
-    """The checked recording of ``cfg`` read whole by its format's reader (an MrdRun or a KAIST recording):
-    every problem of the file is one line naming it before anything starts (:func:`check_recording`,
-    :func:`study.mrd.read_mrd`, :func:`study.kaist.read_kaist`)."""
-    path, fmt = check_recording(cfg)
-    if fmt == "kaist":
-        from study.kaist import read_kaist_recording
-        return read_kaist_recording(path)
-    if fmt == "csv":
-        from live.recording_tendon import read_tendon_csv
-        return read_tendon_csv(path)
-    return read_mrd(path)
-
-
-def recorded_motion(cfg: Config) -> tuple[np.ndarray, np.ndarray]:
-    """(time [s] from 0, the recorded motion the operator retraces) of ``cfg``'s recording: the distal angle [rad]
-    of an MRD or KAIST recording, the proximal displacement x_in [m] of a tendon's CSV."""
-    path, fmt = check_recording(cfg)
-    rec = read_recording(cfg)
-    if fmt == "kaist":
-        return rec.time - rec.time[0], rec.angle
-    if fmt == "csv":
-        return rec.time - rec.time[0], rec.x_in
-    return rec.time, rec.theta_d
+__all__ = ["RecordedSpindle", "recording_rig"]
 
 
 class RecordedSpindle:
@@ -178,8 +80,8 @@ class RecordedSpindle:
 
     @property
     def axis_kind(self) -> Any:
-        """The slave's axis kind on this rig: :class:`live.recording_axis.RecordedSpindleAxis`."""
-        from live.recording_axis import RecordedSpindleAxis
+        """The slave's axis kind on this rig: :class:`slave.recording.spindle.RecordedSpindleAxis`."""
+        from slave.recording.spindle import RecordedSpindleAxis
         return RecordedSpindleAxis
 
     @property
@@ -238,13 +140,14 @@ class RecordedSpindle:
         """Nothing to release; idempotent."""
 
 
-@register_rig("recording")
-def _recording(cfg: Config, session: Any) -> Any:
+def recording_rig(cfg: Config) -> Any:
+    """The rig of ``rig.recording``: the recording's format chooses it (:func:`datasets.recording.check_recording`:
+    one line naming the file and the problem on a recording that does not fit the instrument)."""
     path, fmt = check_recording(cfg)
     if fmt == "kaist":
-        from live.recording_pair import RecordedPair
+        from slave.recording.pair import RecordedPair
         return RecordedPair.from_config(cfg, path)
     if fmt == "csv":
-        from live.recording_tendon import RecordedTendon
+        from slave.recording.tendon import RecordedTendon
         return RecordedTendon.from_config(cfg, path)
     return RecordedSpindle.from_config(cfg)

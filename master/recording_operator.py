@@ -81,9 +81,9 @@ class RecordedOperator:
 
 
 def recorded_operator(cfg: Config) -> RecordedOperator:
-    """The recorded operator of ``cfg``'s recording (errors of :func:`live.recording_rig.recorded_motion`); on a
+    """The recorded operator of ``cfg``'s recording (errors of :func:`datasets.recording.recorded_motion`); on a
     single tendon the handle retraces the recorded x_in (the master commands x_in = anchor + s (p - p_anchor))."""
-    from live.recording_rig import recorded_motion
+    from datasets.recording import recorded_motion
     t, motion = recorded_motion(cfg)
     r = float(cfg.instrument.joints[0].pulley_radius) if cfg.instrument.joints else 1.0   # a tendon: x_in itself
     return RecordedOperator(t, motion, r / float(cfg.master.mapping.motion_scale))

@@ -1,8 +1,8 @@
 """What the recorded axes share: their power-up "routine" is the offline fit of the calibration recording, made
 at once, and the fitted model lives beside the calibration file.
 
-A recorded axis (:class:`live.recording_axis.RecordedSpindleAxis`, :class:`live.recording_pair.RecordedPairAxis`,
-:class:`live.recording_tendon.RecordedTendonAxis`) puts :class:`RecordedRoutine` first among its bases and names
+A recorded axis (:class:`slave.recording.spindle.RecordedSpindleAxis`, :class:`slave.recording.pair.RecordedPairAxis`,
+:class:`slave.recording.tendon.RecordedTendonAxis`) puts :class:`RecordedRoutine` first among its bases and names
 its routine class (``routine_class``: built from the config, it fits in its constructor and holds ``model``,
 ``done`` True from the start) and the calibration of a model (``model_calibration(cfg, model)``). The rig cannot
 run a calibration motion: the routine's step returns the rig's state unchanged.

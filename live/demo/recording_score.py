@@ -1,11 +1,11 @@
 """Scores of the live estimate on a recorded MRD run, beside the offline analysis of the same run.
 
 :func:`play_run` drives the recording rig and the recorded spindle axis in process (no transport): one
-:meth:`~live.recording_rig.RecordedSpindle.step` and one :meth:`~live.recording_axis.RecordedSpindleAxis.observe`
+:meth:`~slave.recording.rig.RecordedSpindle.step` and one :meth:`~slave.recording.spindle.RecordedSpindleAxis.observe`
 per recorded sample, each timed. :func:`score_run` scores the live jaw torque the way ``teleop analyze --mrd``
 scores its own (:mod:`study.mrd_report`): RMSE over the full scale from the first spindle reversal after
 0.5 s, for the centre map from the first sample at which its band reading holds both edges; and the offline
-figure of the same run and calibration (the batch model: :func:`study.mrd_centre.score_centre` for the
+figure of the same run and calibration (the batch model: :func:`datasets.mrd_centre.score_centre` for the
 centre map, :func:`estimator.online.spindle.predict_torque` for a pair model).
 """
 from __future__ import annotations
@@ -16,13 +16,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from datasets.mrd import MrdRun
+from datasets.mrd_calibration import run_data
+from datasets.mrd_centre import score_centre
 from estimator.online.spindle import make_batch, predict_torque
 from estimator.online.spindle_centre import centre_ready
-from live.recording_axis import CENTRE, RecordedModel, RecordedSpindleAxis
-from live.recording_rig import RecordedSpindle
-from study.mrd import MrdRun
-from study.mrd_calibration import run_data
-from study.mrd_centre import score_centre
+from slave.recording.rig import RecordedSpindle
+from slave.recording.spindle import CENTRE, RecordedModel, RecordedSpindleAxis
 from teleop.config.schema import Config
 
 __all__ = ["Played", "play_run", "scored_from", "score_run", "score_live"]

@@ -20,23 +20,18 @@ from typing import Any
 
 import numpy as np
 
+from datasets.recording import read_tendon_csv
 from estimator.data import MeasuredData
 from estimator.errors import CalibrationError
 from estimator.sheath import SheathModel
-from live.recording_routine import RecordedRoutine, recorded_model_path
 from slave.axis import SlaveAxis
 from slave.calibration_file import InstrumentCalibration, TendonCalibration
+from slave.recording.routine import RecordedRoutine, recorded_model_path
 from slave.rig import Rig, RigInputError, RigState, RigTruth
 from slave.tendon_axis import TendonAxis
 from teleop.config.schema import Config
 
-__all__ = ["RecordedTendon", "fit_tendon", "RecordedTendonAxis", "read_tendon_csv"]
-
-
-def read_tendon_csv(path: str | Path) -> MeasuredData:
-    """The CSV with a distal channel (T_out or x_out). Raises DataError naming the file and the problem."""
-    from teleop.recording.measured_csv import read_measured_csv
-    return read_measured_csv(path).require_distal()
+__all__ = ["RecordedTendon", "fit_tendon", "RecordedTendonAxis"]
 
 
 class RecordedTendon:

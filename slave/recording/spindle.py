@@ -2,7 +2,7 @@
 
 A recording cannot execute the spindle's calibration stroke, so the calibration is the one ``teleop analyze
 --mrd`` makes on one run: :func:`fit_recorded_model` calls the analysis's own one-run calibration
-(:func:`study.mrd_report.calibrate_on_runs`: the pair model with its extensions selected on the calibration
+(:func:`datasets.mrd_calibration.calibrate_on_runs`: the pair model with its extensions selected on the calibration
 run, the centre map with the tool file's load gain, and the headline's model choice between them). The
 result is saved as the slave's calibration file ``<calibration.dir>/<instrument.id>.yaml`` (the cables'
 friction exponents of the pair fit, in the format of every spindle calibration) and, beside it, the full
@@ -34,9 +34,9 @@ from estimator.online.centre_estimator import CentreEstimator
 from estimator.online.spindle import N_NODES, SpindleParams
 from estimator.online.spindle_centre import CentreParams
 from estimator.online.spindle_estimator import SpindleEstimator
-from live.recording_routine import RecordedRoutine, recorded_model_path
 from slave.axis import SlaveAxis
 from slave.calibration_file import InstrumentCalibration, TendonCalibration
+from slave.recording.routine import RecordedRoutine, recorded_model_path
 from slave.rig import Rig, RigState
 from slave.spindle_axis import SpindleAxis
 from slave.spindle_calibrate import pull_slip_M_e
@@ -49,7 +49,7 @@ __all__ = ["CENTRE", "RecordedModel", "calibration_run_path", "fit_recorded_mode
 
 log = logging.getLogger("teleop.slave")
 
-#: The centre map's name among the models (as :data:`study.mrd_centre.CENTRE`).
+#: The centre map's name among the models (as :data:`datasets.mrd_centre.CENTRE`).
 CENTRE = "centre map"
 METHOD_RECORDED = "fitted on recorded run {run} (the one-run calibration of teleop analyze --mrd{tool})"
 
@@ -116,7 +116,7 @@ def calibration_run_path(cfg: Config) -> Path:
     DataError
         No such run in the folder (the message lists the folder's runs).
     """
-    from study.mrd import load_mrd_dir
+    from datasets.mrd import load_mrd_dir
     rc = cfg.rig.recording
     folder = Path(str(rc.path)).expanduser().parent
     tool = _tool(cfg)
@@ -125,8 +125,8 @@ def calibration_run_path(cfg: Config) -> Path:
     if as_path.is_file():
         return as_path
     if name == "mid":
-        from study.mrd_calibration import run_data
-        from study.mrd_centre import mid_centre_run
+        from datasets.mrd_calibration import run_data
+        from datasets.mrd_centre import mid_centre_run
         runs, _ = load_mrd_dir(folder)
         name = mid_centre_run([run_data(r) for r in runs])
     for ext in (".TXT", ".txt"):
@@ -143,13 +143,13 @@ def fit_recorded_model(cfg: Config, run_file: Path | None = None) -> RecordedMod
     Raises
     ------
     DataError
-        An unreadable calibration run (:func:`study.mrd.read_mrd`).
+        An unreadable calibration run (:func:`datasets.mrd.read_mrd`).
     CalibrationError
         A fit that fails on this run (the message names the run).
     """
+    from datasets.mrd import read_mrd
+    from datasets.mrd_calibration import calibrate_on_runs
     from estimator.offline.spindle.fit import band_centre
-    from study.mrd import read_mrd
-    from study.mrd_report import calibrate_on_runs
     path = run_file or calibration_run_path(cfg)
     run = read_mrd(path)
     tool = _tool(cfg)

@@ -1,4 +1,4 @@
-"""The calibration of ``teleop analyze --mrd``: which runs calibrate (``--calibration``), a design load gain,
+"""The calibration of a spindle-driven pair on recorded MRD runs (``teleop analyze --mrd``, the recording rig): which runs calibrate (``--calibration``), a design load gain,
 the signals each run gives the fits, and the fit of the calibration data (docs/results/mrd.md).
 
 The model's *inputs* are always the spindle torque and angle; the calibration's jaw torque and angle are
@@ -12,17 +12,24 @@ from typing import Any
 
 import numpy as np
 
+from datasets.mrd import MrdRun
+from datasets.mrd_centre import (
+    CENTRE,
+    centre_implied_gain,
+    centre_one_run,
+    implied_load_gain,
+    mid_centre_run,
+    model_choice,
+)
 from estimator.errors import DataError
 from estimator.offline.spindle.fit import EXTENSIONS, band_centre, fit_baselines
 from estimator.offline.spindle.shared import RunData, batch_of, kinematic_ratio, select_extensions, shared_fit
-from estimator.online.spindle import SpindleParams, first_reversal
-from study.mrd import MrdRun
-from study.mrd_centre import mid_centre_run
+from estimator.online.spindle import SpindleParams, first_reversal, make_batch, predict_torque
 from teleop.errors import ConfigError
 from teleop.recording.text_files import read_text
 
 __all__ = ["SCORE_FROM_S", "FIT_STEP", "LOAD_SCALING", "run_data", "split_design_gain", "design_gain",
-           "parse_calibration", "calibrate"]
+           "parse_calibration", "calibrate", "CAL_INPUTS", "calibrate_on_runs"]
 
 SCORE_FROM_S = 0.5         # the first reversal is searched after this [s] (the load motor ramps in first)
 FIT_STEP = 10              # decimation of the calibration fits (1 kHz -> 100 Hz)
@@ -30,6 +37,8 @@ FIT_STEP = 10              # decimation of the calibration fits (1 kHz -> 100 Hz
 #: trade off against the fixed torque scale and extrapolate wildly (on run 00 K_b sent K_a to its bound), so the
 #: ``kinematic:`` calibration does not offer them.
 LOAD_SCALING = ("K_b", "rho_1", "rho_2")
+#: The signals a calibration reads as the model's inputs and as its fit targets.
+CAL_INPUTS = {"inputs": ["spindle torque", "spindle encoder"], "targets": ["jaw torque", "jaw encoder"]}
 
 def run_data(r: MrdRun, stop: int | None = None) -> RunData:
     """The signals of run ``r`` (up to sample ``stop``) as the fits read them, scored from its first spindle
@@ -157,3 +166,49 @@ def calibrate(cal: list[RunData], tick, kinematic: bool = False) -> tuple[dict, 
     base = fit_baselines(bt, yt, ya, mask=w > 0)
     tick("baselines")
     return fits, base, sel, centre, ref
+
+
+def calibrate_on_runs(runs: list[MrdRun], mode: str, cal: str, calibration: str | None,
+                       gain: tuple[float | None, str | None], fs: float, tick, out: dict) -> tuple[list, Any, list]:
+    """Calibrate on the named runs (``mode`` "run" or "kinematic"), choose the headline model and record the
+    calibration in ``out``; returns the plan of the scored runs, the centre map and the calibration RunData."""
+    given, source = gain
+    cal_names = str(cal).split(",")
+    cal_runs = [run_data(r) for r in runs if r.name in cal_names]
+    fits, base, sel, centre, ref = calibrate(cal_runs, tick, kinematic=mode == "kinematic")
+    cmap, out["centre_calibration"] = centre_one_run(cal_runs, fs, given)
+    sel_name = list(fits)[-1]               # the pair model with the selected extensions
+    sel_p = fits[sel_name]
+    pin = np.concatenate([predict_torque(sel_p, make_batch([(c.tau_p, c.theta_p)], centre, ref, c.dt))[
+        c.k0:] - c.tau_d[c.k0:] for c in cal_runs])
+    gains = {sel_name: implied_load_gain(lambda c, u: predict_torque(sel_p, make_batch(
+                 [(c.tau_p + u, c.theta_p)], centre, ref, c.dt)), cal_runs),
+             CENTRE: centre_implied_gain(cmap, cal_runs)}
+    out["model_choice"] = model_choice(sel_name, float(sel["rmse_val"]) / fs, float(np.sqrt(np.mean(pin ** 2))) / fs,
+                                       cal_runs, fs, out["centre_calibration"]["fit_rms_fs"], gains, given)
+    out["calibration"] = {"mode": mode, "run": cal, "runs": cal_names, **CAL_INPUTS,
+                          "scored": "every other run, from its spindle signals only"}
+    if given is not None:
+        dg: dict[str, Any] = {"value": given, "from": "--calibration gain=G: a design value from outside the "
+                              "data (the centre map's load gain)"}
+        if source is not None:
+            dg.update({"from": f"centre_map.load_gain of {source} (another folder's map fitted across its loads; "
+                               "--calibration gain=FILE)", "source": source})
+        out["calibration"]["design_load_gain"] = dg
+    if calibration and calibration.endswith("mid"):
+        out["calibration"]["chosen_by"] = ("the run whose band centre (spindle torque only) is nearest the middle "
+                                           "of the folder's band centres, a rule fixed before any score")
+    if mode == "kinematic":
+        n_k = kinematic_ratio(cal_runs)
+        out["calibration"]["fixed"] = {"rho": {
+            "value": 1.0 / n_k, "n_k": n_k,
+            "from": "1 / n_k, n_k = slope of jaw encoder against spindle encoder in full motion (middle 60 % "
+                    "of the stroke, an offset per direction) of the calibration run(s): the jaw encoder is a "
+                    "distal reading of the calibration run; the pulley radii ratio r_d / r_p, equal to the "
+                    "torque scale only if both torque sensors share one gain and no power is lost in the "
+                    "band centre"}}
+    plan = [(r, fits, base, centre, ref, run_data(r).k0) for r in runs if r.name not in cal_names]
+    out["parameters"] = {n: p.as_dict() for n, p in fits.items()}
+    out["baseline_parameters"] = {n: b.params for n, b in base.items()}
+    out["selection"] = sel
+    return plan, cmap, cal_runs

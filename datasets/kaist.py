@@ -2,16 +2,16 @@
 
 The files (``sine_config_N.txt`` in the project's folder ``kaist-tsm``, ``optimization/selected/N.txt`` in a
 clone of the source repository; N the tube configuration in degrees) are described in the folder's
-``SOURCE.md`` and in docs/how-to/get-the-data.md; :mod:`study.kaist_files` finds them in either layout. They
+``SOURCE.md`` and in docs/how-to/get-the-data.md; :mod:`datasets.kaist_files` finds them in either layout. They
 have **no licence**: this module reads them where they lie (the data folder, ``TSM_TELEOP_DATA``, or a
 directory the user gives) and the project never copies them or per-sample data derived from them.
 
 The 8-column files are comma separated, no header, with a trailing comma, logged at 40 Hz with each
 time stamp repeated several times; as the source says, every row whose time equals the previous
-row's is dropped, which leaves about 510 rows. The reader is :func:`study.columns.read_table`: the
+row's is dropped, which leaves about 510 rows. The reader is :func:`datasets.columns.read_table`: the
 same importer reads the longer 10-column KAIST recordings (about 2 kHz, repeated stamps, all-zero
 columns, a time reset) and other labs' CSV files through a column map
-(:func:`study.columns.parse_column_map`). Recordings faster than twice :data:`RATE_HZ` are
+(:func:`datasets.columns.parse_column_map`). Recordings faster than twice :data:`RATE_HZ` are
 averaged in blocks down to :data:`RATE_HZ` (the pair models are rate-independent).
 
 ==== ============================================ =============== ============================
@@ -28,26 +28,19 @@ col  meaning (8-column KAIST map)                 file unit       here
 """
 from __future__ import annotations
 
-import argparse
-import json
 import math
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from datasets.columns import ColumnMap, read_table
+from datasets.kaist_files import config_of, find_configs, find_kaist_dir, kaist_path
 from estimator.errors import DataError
-from estimator.offline.pair.fit import rmse
-from estimator.offline.pair.general import predict_shared
-from study.columns import ColumnMap, parse_column_map, read_table
-from study.kaist_files import config_of, find_configs, find_kaist_dir, is_kaist_file, kaist_path
-from teleop.errors import ConfigError
-from teleop.recording.text_files import read_text
 
 __all__ = [
     "CONFIGS_DEG", "RATE_HZ", "KaistRecording", "read_kaist", "read_kaist_recording", "load_all", "load_dir",
-    "resample", "cycles", "split", "parse_configs", "load_kaist_input", "predict_kaist", "format_prediction",
+    "resample", "cycles", "split",
 ]
 
 #: Insertion-tube configurations [deg] of the project's folder kaist-tsm and of the results pages (a clone of the
@@ -129,8 +122,8 @@ def read_kaist(path: str | Path, config_deg: float | None = None, column_map: Co
     path : str or Path
     config_deg : float, optional
         Configuration [deg]; default: the N of the file's name (``sine_config_<N>.txt``, or ``<N>.txt`` in a
-        clone's ``optimization/selected``; :func:`study.kaist_files.config_of`).
-    column_map : default the 8-column KAIST map (:data:`study.columns.KAIST_MAP`)
+        clone's ``optimization/selected``; :func:`datasets.kaist_files.config_of`).
+    column_map : default the 8-column KAIST map (:data:`datasets.columns.KAIST_MAP`)
     rate_hz : resample faster recordings to this rate (:func:`resample`); None keeps every sample
 
     Raises
@@ -158,7 +151,7 @@ def read_kaist(path: str | Path, config_deg: float | None = None, column_map: Co
 
 def read_kaist_recording(path: str | Path) -> KaistRecording:
     """A KAIST recording whose format its content showed (the recording rig): :func:`read_kaist` with the
-    configuration its name gives (:func:`study.kaist_files.config_of`), else nan (the rig needs none)."""
+    configuration its name gives (:func:`datasets.kaist_files.config_of`), else nan (the rig needs none)."""
     n = config_of(path)
     return read_kaist(path, math.nan if n is None else n)
 
@@ -166,7 +159,7 @@ def read_kaist_recording(path: str | Path) -> KaistRecording:
 def load_dir(path: str | Path | None = None, column_map: ColumnMap | None = None,
              rate_hz: float | None = RATE_HZ, configs: tuple[float, ...] | None = None
              ) -> tuple[list[KaistRecording], list[str]]:
-    """Every configuration under a directory (either layout, :func:`study.kaist_files.kaist_files`), sorted by
+    """Every configuration under a directory (either layout, :func:`datasets.kaist_files.kaist_files`), sorted by
     N, or only those of ``configs``; and one line per file that could not be read (``"<file>: <why>"``), which
     is left out.
 
@@ -265,100 +258,3 @@ def split(rec: KaistRecording) -> tuple[slice, slice, str]:
             f"train: command cycle 1 (t < {rec.time[cs[0].stop]:.2f} s); test: cycles 2-{len(cs)}"
     h = n // 2
     return slice(0, h), slice(h, n), f"{len(cs)} complete command cycle(s): train on t < {rec.time[h]:.2f} s, test after"
-
-
-# ---- the command line's KAIST input and the prediction with a saved shared set -----------------
-
-def parse_configs(text: str | None) -> tuple[float, ...] | None:
-    """The configurations [deg] of ``--configs N[,N...]`` (None: every one). Raises ConfigError when malformed."""
-    if text is None:
-        return None
-    try:
-        return tuple(float(v) for v in text.split(","))
-    except ValueError:
-        raise ConfigError(f"--configs {text}: expected bend angles N [deg] separated by commas, e.g. "
-                          "0,60,120,180,240") from None
-
-
-def load_kaist_input(args: argparse.Namespace) -> list[KaistRecording]:
-    """The recordings of the KAIST mode: ``--kaist [DIR]`` (every configuration under DIR in either layout,
-    :func:`load_dir`, or those of ``--configs``), a FILE whose name gives its configuration (its whole
-    directory, :func:`study.kaist_files.config_of`) or another FILE with ``--bend DEG``; read with ``--columns``
-    when given. Files that cannot be read get one line on stderr each and are left out.
-
-    Raises
-    ------
-    DataError
-        Nothing found or nothing readable (the problems named), a configuration of ``--configs`` absent, or
-        FILE without ``--bend`` and not named for its configuration.
-    ConfigError
-        A malformed ``--columns`` map or ``--configs`` list.
-    """
-    cmap = parse_column_map(args.columns) if args.columns is not None else None
-    if args.file is not None and (args.bend is not None or not is_kaist_file(args.file)):
-        if args.bend is None:
-            raise DataError(f"{args.file}: not named sine_config_<N>.txt: give its bend with --bend DEG")
-        recs: list[KaistRecording] = [read_kaist(args.file, args.bend, cmap)]
-        problems: list[str] = []
-    else:
-        directory = Path(args.file).parent if args.kaist is None else (args.kaist or None)
-        recs, problems = load_dir(directory, cmap, configs=parse_configs(getattr(args, "configs", None)))
-    if not recs:                     # the error names every problem, in one line
-        raise DataError("no readable KAIST recording: " + "; ".join(problems))
-    for line in problems:
-        print(f"skipped {line}", file=sys.stderr)
-    for r in recs:
-        for note in r.notes:
-            if note.startswith("WARNING") or "no column map" in note:
-                print(f"{Path(r.source).name}: {note}", file=sys.stderr)
-    return recs
-
-
-def predict_kaist(recs: list[KaistRecording], params_path: str | Path) -> dict:
-    """Predict every recording with the shared set saved by ``--json`` (``shared.params``); nothing
-    is refitted (the pretension and the angle offset are the recording's first sample).
-
-    Returns
-    -------
-    dict, JSON-ready: ``mode`` ("kaist-shared-prediction"), ``params_file``, ``model``,
-    ``shared_prediction`` {str(N): {rmse_deg (every sample), rmse_cycle_deg [per complete command
-    cycle], max_abs_deg, K_a, K_b, n_samples, source, import_notes}}.
-
-    Raises
-    ------
-    DataError
-        The parameter file is missing, a directory, not UTF-8 text, not JSON, or has no usable ``shared.params``.
-    """
-    path = Path(params_path)
-    text = read_text(path)
-    try:
-        doc = json.loads(text)
-        params = doc["shared"]["params"] if "shared" in doc else doc["params"]
-    except (ValueError, KeyError, TypeError) as e:
-        raise DataError(f"{path}: not a teleop analyze --kaist JSON with shared.params ({e})") from None
-    out = {"mode": "kaist-shared-prediction", "params_file": str(path), "model": params.get("model"),
-           "shared_prediction": {}}
-    for rec in recs:
-        try:
-            th, v = predict_shared(params, rec, math.radians(rec.config_deg))
-        except ValueError as e:
-            raise DataError(f"{path}: {e}") from None
-        err = th - rec.angle
-        out["shared_prediction"][str(rec.config_deg)] = {
-            "rmse_deg": math.degrees(rmse(err)), "max_abs_deg": math.degrees(float(np.max(np.abs(err)))),
-            "rmse_cycle_deg": [math.degrees(rmse(err[c])) for c in cycles(rec)],
-            "K_a": v.get("K_a"), "K_b": v.get("K_b"), "n_samples": len(rec), "source": rec.source,
-            "import_notes": list(rec.notes)}
-    return out
-
-
-def format_prediction(s: dict) -> str:
-    """The lines printed for ``--shared-params``: per configuration the RMSE over every sample and per
-    command cycle [deg]."""
-    lines = [f"shared parameter set {s['params_file']} ({(s.get('model') or {}).get('name')}): distal angle "
-             "predicted from the command, the pretension and the bend alone (RMSE [deg])",
-             f"{'config [deg]':>12}{'all':>7}{'max':>7}{'K_a':>6}{'K_b':>6}  per cycle"]
-    for n, r in s["shared_prediction"].items():
-        lines.append(f"{n:>12}{r['rmse_deg']:>7.2f}{r['max_abs_deg']:>7.2f}{r['K_a']:>6.2f}{r['K_b']:>6.2f}  "
-                     + " ".join(f"{x:.2f}" for x in r["rmse_cycle_deg"]))
-    return "\n".join(lines)
