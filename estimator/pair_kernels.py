@@ -60,13 +60,58 @@ from __future__ import annotations
 
 import functools
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
+import estimator.pair_loops as pl
 from estimator.distal_slip import distal_gains
-from estimator.pair_loops import BIG, simulate_bend, simulate_observed, simulate_plain, simulate_toe
 
-__all__ = ["tendon_arrays", "simulate_pair"]
+__all__ = ["STRUCTURE_PARAMS", "EFFECT_PARAMS", "EFFECT_STRUCTURES", "PairState", "PairKernel", "tendon_arrays",
+           "pair_kernel", "simulate_pair"]
+
+#: Parameter names (SI units) of each structure of the pair models, in the order of the offline catalogue
+#: (:mod:`estimator.offline.pair.models` adds bounds and start values; tests/estimator/test_pair_model_live.py
+#: keeps the two the same). ``seed``: the seed pair model on the measured tensions; ``capstan``: (P1)-(P4).
+STRUCTURE_PARAMS: dict[str, tuple[str, ...]] = {
+    "seed": ("G", "K_a", "K_b", "lam_a", "lam_b", "theta0"),
+    "capstan": ("G", "lam", "K_a", "K_b", "k", "theta0"),
+}
+
+#: Parameter names of each pair effect (the effect ids of the offline catalogue; E-numbers of
+#: docs/concepts/effects.md): b [rad], tau [s], a [N], shape [-], tau_c [N], lam_s [rad/N], k2 [N/rad],
+#: theta_c [rad], toe [-], toe_tension [N], mu_b [1/rad], lam_d [rad/N].
+EFFECT_PARAMS: dict[str, tuple[str, ...]] = {
+    "capstan_joint": (),
+    "joint_backlash": ("b",),
+    "sensor_delay": ("tau",),
+    "friction_offset": ("a",),
+    "pretension_profile": ("shape",),
+    "joint_friction": ("tau_c",),
+    "series_compliance": ("lam_s",),
+    "joint_stiffening": ("k2", "theta_c"),
+    "tendon_toe": ("toe", "toe_tension"),
+    "bending_friction": ("mu_b",),
+    "drive_observer": ("lam_d",),
+}
+
+#: The structures each effect's model runs on (``capstan_joint`` is the step from the seed structure to the
+#: capstan structure itself). The offline catalogue offers a subset (``bending_friction`` and
+#: ``drive_observer`` only in the shared models or on request).
+EFFECT_STRUCTURES: dict[str, tuple[str, ...]] = {
+    "capstan_joint": ("seed",),
+    "joint_backlash": ("seed", "capstan"),
+    "sensor_delay": ("seed", "capstan"),
+    "friction_offset": ("seed", "capstan"),
+    "pretension_profile": ("capstan",),
+    "joint_friction": ("capstan",),
+    "series_compliance": ("capstan",),
+    "joint_stiffening": ("capstan",),
+    "tendon_toe": ("capstan",),
+    "bending_friction": ("capstan",),
+    "drive_observer": ("capstan",),
+}
+
 
 def tendon_arrays(K: float, lam: float, n_nodes: int = 24, lam_s: float = 0.0, n_series: int = 3):
     """Node arrays of one tendon (constant curvature), proximal to distal.
@@ -108,6 +153,93 @@ def _node_arrays(K: float, lam: float, n_nodes: int, lam_s: float) -> tuple:
     that a run leaves them unchanged."""
     return tendon_arrays(K, lam, n_nodes, lam_s)
 
+
+
+@dataclass
+class PairState:
+    """The state of one run of the model (:mod:`estimator.pair_loops`, module docstring): the profiles ``prof``
+    (2, m) [N], the scalars ``st`` (N_ST,) and the rigid stop ``band`` (3, 1)."""
+
+    prof: np.ndarray
+    st: np.ndarray
+    band: np.ndarray
+
+
+@dataclass(frozen=True)
+class PairKernel:
+    """One parameter set of the model, checked and laid out for :func:`estimator.pair_loops.run_pair`.
+
+    Attributes
+    ----------
+    kind : the variant, one of the ``KIND_*`` of :mod:`estimator.pair_loops`
+    nodes : ndarray, shape (2, 5, m), node arrays of tendons a and b (lo, hi, dlo, dhi, w), read only
+    par : ndarray, shape (N_PAR,), the parameters at the ``P_*`` indices
+    P : ndarray, shape (2, m), initial profiles [N] (kernel tension: T + a with the E8 offset a)
+    substeps : steps per sample, >= 1
+    offset : the E8 offset a [N], subtracted from the kernel's proximal tensions
+    """
+
+    kind: int
+    nodes: np.ndarray
+    par: np.ndarray
+    P: np.ndarray
+    substeps: int
+    offset: float
+
+    def start(self, c0: float, ma0: float = 0.0, mb0: float = 0.0) -> PairState:
+        """A fresh state at rest for a run whose first command is ``c0`` [rad] (theta = 0, uniform or shaped
+        profiles, (P4) at rest); ``ma0``, ``mb0`` [N]: the first measured proximal tensions (observer only)."""
+        m = self.nodes.shape[2]
+        s = PairState(np.empty((2, m)), np.empty(pl.N_ST), np.empty((3, 1)))
+        pl.start_pair(float(c0), float(ma0), float(mb0), self.P, self.nodes, self.par, s.prof, s.st, s.band)
+        return s
+
+    def run(self, state: PairState, c: np.ndarray, Tm: np.ndarray, i0: int, i1: int, theta: np.ndarray,
+            T_in: np.ndarray) -> None:
+        """Advance ``state`` over the samples [i0, i1) of ``c`` [rad], shape (n,) (``Tm`` [N], shape (n, 2) or
+        (0, 2) without the observer), writing ``theta`` [rad] (n,) and the kernel's proximal tensions ``T_in``
+        [N] (n, 2) (the E8 offset not yet subtracted)."""
+        pl.run_pair(self.kind, c, Tm, i0, i1, self.substeps, self.nodes, self.par, state.prof, state.st, state.band,
+                 theta, T_in)
+
+
+def pair_kernel(pretension: tuple[float, float], G: float, lam: tuple[float, float], K: tuple[float, float],
+                k: float, *, lam_s: float = 0.0, tau_c: float = 0.0, shape: float = 0.0, offset: float = 0.0,
+                k2: float = 0.0, theta_c: float = 0.0, toe: float = 0.0, toe_tension: float = 1.0, mu_b: float = 0.0,
+                n_nodes: int = 24, substeps: int = 1, observed: bool = False, lam_d: float = 0.0) -> PairKernel:
+    """The model (module docstring, (P1)-(P4)) for one parameter set, checked and laid out for the compiled loop.
+
+    The parameters are those of :func:`simulate_pair` (same units and ranges); ``observed`` True selects the
+    drive-side observer, which then reads the measured proximal tensions at every sample.
+
+    Raises
+    ------
+    ValueError
+        A non-finite or out-of-range parameter, ``mu_b`` with ``toe``, ``tau_c`` or ``k2``, or the observer
+        with ``toe``, ``tau_c``, ``k2`` or ``mu_b``.
+    """
+    _check_params(pretension, G, lam, K, k, lam_s=lam_s, tau_c=tau_c, shape=shape, offset=offset, k2=k2,
+                  theta_c=theta_c, toe=toe, toe_tension=toe_tension, mu_b=mu_b, lam_d=lam_d)
+    if observed and (toe > 0.0 or tau_c > 0.0 or k2 > 0.0 or mu_b > 0.0):
+        raise ValueError("the drive-side observer (observed=) is not combined with toe, tau_c, k2 or mu_b")
+    arrs = [_node_arrays(float(Kj), float(lj), int(n_nodes), float(lam_s)) for Kj, lj in zip(K, lam, strict=True)]
+    P = np.array([(P0 + offset) * np.exp(-shape * np.log(a[1])) for P0, a in zip(pretension, arrs, strict=True)])
+    nodes = np.array([a[:5] for a in arrs])
+    par = np.zeros(pl.N_PAR)
+    par[pl.P_G], par[pl.P_K], par[pl.P_TAU_C], par[pl.P_K2] = float(G), float(k), float(tau_c), float(k2)
+    par[pl.P_THC] = float(theta_c) if k2 > 0.0 else pl.BIG
+    par[pl.P_RHO], par[pl.P_TC] = float(toe), float(toe_tension)
+    par[pl.P_MUB], par[pl.P_LAM_D] = float(mu_b), float(lam_d)
+    par[pl.P_CPA], par[pl.P_CRA], par[pl.P_CPB], par[pl.P_CRB] = arrs[0][5], arrs[0][6], arrs[1][5], arrs[1][6]
+    if observed:
+        kind = pl.KIND_OBSERVED
+    elif toe > 0.0:
+        kind = pl.KIND_TOE
+    elif mu_b > 0.0:
+        kind = pl.KIND_BEND
+    else:
+        kind = pl.KIND_PLAIN
+    return PairKernel(kind, nodes, par, P, max(int(substeps), 1), float(offset))
 
 
 def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple[float, float],
@@ -159,37 +291,29 @@ def simulate_pair(command, pretension: tuple[float, float], G: float, lam: tuple
         ``toe``, ``tau_c``, ``k2`` or ``mu_b``.
     """
     c = np.ascontiguousarray(command, dtype=np.float64)
-    Tm = _check(c, pretension, G, lam, K, k, lam_s=lam_s, tau_c=tau_c, shape=shape, offset=offset, k2=k2,
-                theta_c=theta_c, toe=toe, toe_tension=toe_tension, mu_b=mu_b, observed=observed, lam_d=lam_d)
-    arrs = [_node_arrays(float(Kj), float(lj), int(n_nodes), float(lam_s)) for Kj, lj in zip(K, lam, strict=False)]
-    P = [(P0 + offset) * np.exp(-shape * np.log(a[1])) for P0, a in zip(pretension, arrs, strict=False)]
+    if c.ndim != 1 or c.size == 0 or not np.all(np.isfinite(c)):
+        raise ValueError("command must be a non-empty 1-D array of finite angles [rad]")
+    kern = pair_kernel(pretension, G, lam, K, k, lam_s=lam_s, tau_c=tau_c, shape=shape, offset=offset, k2=k2,
+                       theta_c=theta_c, toe=toe, toe_tension=toe_tension, mu_b=mu_b, n_nodes=n_nodes,
+                       substeps=substeps, observed=observed is not None, lam_d=lam_d)
+    Tm = np.zeros((0, 2))
+    if observed is not None:
+        parts = [np.asarray(x, dtype=np.float64) for x in observed]
+        if len(parts) != 2 or any(x.shape != c.shape or not np.all(np.isfinite(x)) for x in parts):
+            raise ValueError(f"observed must be two finite arrays of the command's shape {c.shape} (the measured "
+                             "proximal tensions T_a, T_b [N])")
+        Tm = np.stack(parts, axis=1)
     theta = np.empty(c.size)
     T_in = np.empty((c.size, 2))
-    n_sub = max(int(substeps), 1)
-    thc = float(theta_c) if k2 > 0.0 else BIG
-    if Tm is not None:
-        simulate_observed(c, Tm[0], Tm[1], float(lam_d), float(G), P[0], P[1], *arrs[0], *arrs[1], float(k), n_sub,
-                          theta, T_in)
-    elif toe > 0.0:
-        (lo_a, hi_a, dlo_a, dhi_a, wa, _, _), (lo_b, hi_b, dlo_b, dhi_b, wb, _, _) = arrs
-        simulate_toe(c, float(G), P[0], P[1], lo_a, hi_a, dlo_a, dhi_a, wa, lo_b, hi_b, dlo_b, dhi_b, wb, float(k),
-                     float(tau_c), n_sub, theta, T_in, float(k2), thc, float(toe), float(toe_tension))
-    elif mu_b > 0.0:
-        simulate_bend(c, float(G), P[0], P[1], *arrs[0], *arrs[1], float(k), float(mu_b), n_sub, theta, T_in)
-    else:
-        simulate_plain(c, float(G), P[0], P[1], *arrs[0], *arrs[1], float(k), float(tau_c), n_sub, theta, T_in,
-                       float(k2), thc)
+    state = kern.start(c[0], *(Tm[0] if observed is not None else (0.0, 0.0)))
+    kern.run(state, c, Tm, 0, c.size, theta, T_in)
     return theta, T_in - offset
 
 
-def _check(c: np.ndarray, pretension: tuple[float, float], G: float, lam: tuple[float, float],
-           K: tuple[float, float], k: float, *, lam_s: float, tau_c: float, shape: float, offset: float, k2: float,
-           theta_c: float, toe: float, toe_tension: float, mu_b: float,
-           observed: tuple[np.ndarray, np.ndarray] | None, lam_d: float) -> list[np.ndarray] | None:
-    """The arguments of :func:`simulate_pair` checked (its Raises); returns the measured tensions as
-    contiguous float arrays, or None without ``observed``."""
-    if c.ndim != 1 or c.size == 0 or not np.all(np.isfinite(c)):
-        raise ValueError("command must be a non-empty 1-D array of finite angles [rad]")
+def _check_params(pretension: tuple[float, float], G: float, lam: tuple[float, float], K: tuple[float, float],
+                  k: float, *, lam_s: float, tau_c: float, shape: float, offset: float, k2: float, theta_c: float,
+                  toe: float, toe_tension: float, mu_b: float, lam_d: float) -> None:
+    """The parameters of :func:`pair_kernel` checked (its Raises)."""
     vals = {"G": G, "lam_a": lam[0], "lam_b": lam[1], "K_a": K[0], "K_b": K[1], "k": k, "lam_s": lam_s,
             "tau_c": tau_c, "shape": shape, "offset": offset, "k2": k2, "theta_c": theta_c, "P_a": pretension[0],
             "P_b": pretension[1], "mu_b": mu_b, "lam_d": lam_d}
@@ -205,12 +329,3 @@ def _check(c: np.ndarray, pretension: tuple[float, float], G: float, lam: tuple[
     if mu_b > 0.0 and (toe > 0.0 or tau_c > 0.0 or k2 > 0.0):
         raise ValueError(f"mu_b (bending-section friction) is not combined with toe, tau_c or k2, got mu_b={mu_b!r}, "
                          f"toe={toe!r}, tau_c={tau_c!r}, k2={k2!r}")
-    if observed is None:
-        return None
-    Tm = [np.ascontiguousarray(x, dtype=np.float64) for x in observed]
-    if len(Tm) != 2 or any(x.shape != c.shape or not np.all(np.isfinite(x)) for x in Tm):
-        raise ValueError(f"observed must be two finite arrays of the command's shape {c.shape} (the measured "
-                         "proximal tensions T_a, T_b [N])")
-    if toe > 0.0 or tau_c > 0.0 or k2 > 0.0 or mu_b > 0.0:
-        raise ValueError("the drive-side observer (observed=) is not combined with toe, tau_c, k2 or mu_b")
-    return Tm
