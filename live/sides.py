@@ -17,8 +17,10 @@ import sys
 import time
 from pathlib import Path
 
+from live.kinds import kind_of
 from live.side_files import SideFiles
 from teleop.config.bounds import announce_waivers
+from teleop.config.kinds import instrument_kind
 from teleop.config.schema import Config
 from teleop.rerun.layout import joint_views
 
@@ -244,7 +246,7 @@ def run_slave(args: argparse.Namespace) -> int:
             files = SideFiles(run_dir, cfg, "slave", (name, "slave.rrd"))   # csv_every, max_bytes, min_free_bytes
             with CsvRecorder(run_dir / name, columns, meta, flush_every=500) as rec, \
                     RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd",
-                                route=None if cfg.instrument.joints else cfg.sheath.runs,   # 3D sheath view
+                                route=cfg.sheath.runs if kind_of(cfg).sheath_view else None,   # 3D sheath view
                                 joints=joint_views(cfg)) as rr:
                 links = slave_links(session, ident, injector)
                 if cfg.ros2.enabled:     # the CRTK topics on ROS 2 beside the loop, servo_jp in (teleop/ros2/side.py)
@@ -264,6 +266,7 @@ def run_slave(args: argparse.Namespace) -> int:
 def run_master(args: argparse.Namespace) -> int:
     """``teleop master``: run the operator side of any instrument until the device's protocol is finished."""
     from master.devices import make_device
+    from master.kinds import master_kind
     from master.node import MasterNode, csv_columns, csv_units
     from teleop.config.load import load_config
     from teleop.recording.csv_proc import (
@@ -288,9 +291,7 @@ def run_master(args: argparse.Namespace) -> int:
         clock = MonotonicClock()
         injector = _injector(args, clock)
         meta = {"source": "teleop master", "instrument": ident, "device": cfg.master.device.type,
-                "columns": "x_in = command sent, T_in = slave's latest proximal tension, force = rendered"
-                if not cfg.instrument.joints else "per joint: cmd, slave angle [rad], device position [m], "
-                "rendered tension torque_hat / r [N], forces [N], passivity energy [J]"}
+                "columns": master_kind(instrument_kind(cfg)).columns}
         with raise_on_sigterm(), open_session(cfg, args, clock) as session, \
                 CsvRecorder(run_dir / "master.csv", csv_columns(cfg), meta, units=csv_units(cfg), flush_every=100) as rec, \
                 RerunLogger("teleop", run_dir.name, getattr(args, "rerun", None) or cfg.recording.rerun, run_dir / "master.rrd",

@@ -16,7 +16,7 @@ are packed. An axis k has
   that every axis is aligned to the same tendon displacement;
 * a device axis (``pair_control.axes`` for a joint instrument, default axis k; axis 0 for a tendon).
 
-:func:`instrument_axes` picks the kind from the config (``instrument.joints`` given: joints). A
+:func:`master.kinds.instrument_axes` picks them by the instrument's kind (:mod:`master.kinds`). A
 spindle-driven jaw (``spindle_radius`` > 0) is a joint here: the slave sends its jaw torque and angle
 and takes jaw-angle commands, r being its jaw pulley's radius.
 """
@@ -27,7 +27,7 @@ from typing import Any
 from teleop.config.schema import Config
 from teleop.wire.messages import Command, Estimate
 
-__all__ = ["InstrumentAxes", "TendonAxes", "JointAxes", "instrument_axes", "TENDON_CSV_COLUMNS", "TENDON_CSV_UNITS"]
+__all__ = ["InstrumentAxes", "TendonAxes", "JointAxes", "TENDON_CSV_COLUMNS", "TENDON_CSV_UNITS"]
 
 #: The single tendon's master recording, one row per cycle (measured-data format: x_in is the command
 #: sent, T_in the slave's latest accepted proximal tension, 0 before any).
@@ -137,8 +137,8 @@ class TendonAxes(InstrumentAxes):
     def csv_row(self, now: float, est: Estimate | None, common: tuple, axes: list[tuple]) -> tuple:
         cmd, _, p, T, f_cmd, f, energy = axes[0]
         state, console, t_recv, echo_age, cmd_seq, _ = common
-        return (now, cmd, 0.0 if est is None else est.axes[0].tendons[0].T_in, p, T, f_cmd, f, energy, state, console, t_recv,
-                echo_age, cmd_seq)
+        T_in = 0.0 if est is None else est.axes[0].tendons[0].T_in
+        return (now, cmd, T_in, p, T, f_cmd, f, energy, state, console, t_recv, echo_age, cmd_seq)
 
 
 class JointAxes(InstrumentAxes):
@@ -190,10 +190,3 @@ class JointAxes(InstrumentAxes):
 
     def csv_row(self, now: float, est: Estimate | None, common: tuple, axes: list[tuple]) -> tuple:
         return (now, *common, *(v for a in axes for v in a))
-
-
-def instrument_axes(cfg: Config) -> InstrumentAxes:
-    """The master's view of the configured instrument: :class:`JointAxes` when ``instrument.joints`` is
-    given, else :class:`TendonAxes`."""
-    return JointAxes(cfg) if cfg.instrument.joints else TendonAxes()
-

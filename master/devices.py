@@ -28,6 +28,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from teleop.config.kinds import instrument_kind
 from teleop.config.schema import Config
 from teleop.errors import ConfigError, DeviceError
 
@@ -67,7 +68,7 @@ def _scripted(cfg: Config, protocol: str):
     from master.arm import ArmParameters
     clutch = cfg.master.mapping.clutch_button
     arm = ArmParameters.from_config(cfg.master.device.arm)
-    from master.protocols import operator_protocols
+    from master.kinds import operator_protocols
     from master.simulated import ScriptedOperator
     return ScriptedOperator(operator_protocols(cfg, protocol), clutch_bit=clutch, arm=arm)
 
@@ -75,9 +76,8 @@ def _scripted(cfg: Config, protocol: str):
 def device_axes_needed(cfg: Config) -> int:
     """How many device axes the instrument needs: 1 for a tendon, else the highest ``pair_control.axes``
     entry + 1 (default one per joint)."""
-    if not cfg.instrument.joints:
-        return 1
-    return max(cfg.pair_control.axes) + 1 if cfg.pair_control.axes else len(cfg.instrument.joints)
+    from master.kinds import master_kind
+    return master_kind(instrument_kind(cfg)).device_axes(cfg)
 
 
 @register_device("hid")

@@ -53,9 +53,10 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from master.axes import InstrumentAxes, instrument_axes
+from master.axes import InstrumentAxes
 from master.console import Console, ConsoleStatus
 from master.device import DeviceState
+from master.kinds import instrument_axes
 from master.mapping import ForceMap, MotionMap, clamp_force
 from master.node_base import MasterLinks, MasterNodeBase
 from master.passivity import PassivityController

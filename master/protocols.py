@@ -24,8 +24,9 @@ from dataclasses import dataclass
 from teleop.config.schema import Config, joint_set_tension
 from teleop.errors import ConfigError
 
-__all__ = ["Segment", "PROTOCOLS", "build_protocol", "paper_protocol", "joint_protocols", "operator_protocols",
-           "joint_marker", "experiment_label", "MARKER_AXES", "MARKER_PAPER", "MARKER_MINOR", "MARKER_PAPER_A", "MARKER_PAPER_B"]
+__all__ = ["Segment", "PROTOCOLS", "build_protocol", "paper_protocol", "joint_protocols",
+           "joint_marker", "experiment_label", "MARKER_AXES", "MARKER_PAPER", "MARKER_MINOR", "MARKER_PAPER_A",
+           "MARKER_PAPER_B"]
 
 MARKER_PAPER = 1
 MARKER_MINOR = 2
@@ -125,15 +126,3 @@ def joint_protocols(cfg: Config, names: str) -> list[tuple[Segment, ...]]:
     if targets is None:
         raise ConfigError(f"protocol: {names!r} is not a joint-instrument protocol (expected 'paper' or 'short')")
     return [paper_protocol(joint_set_tension(cfg, j), targets) for j in cfg.instrument.joints]
-
-
-def operator_protocols(cfg: Config, names: str) -> list[tuple[Segment, ...]]:
-    """The protocols of the configured instrument, one per axis: :func:`joint_protocols` when
-    ``instrument.joints`` is given, else ``[build_protocol(names)]``.
-
-    Raises
-    ------
-    ConfigError
-        A name that is not a protocol of this kind of instrument.
-    """
-    return joint_protocols(cfg, names) if cfg.instrument.joints else [build_protocol(names)]

@@ -85,5 +85,5 @@ def recorded_operator(cfg: Config) -> RecordedOperator:
     single tendon the handle retraces the recorded x_in (the master commands x_in = anchor + s (p - p_anchor))."""
     from datasets.recording import recorded_motion
     t, motion = recorded_motion(cfg)
-    r = float(cfg.instrument.joints[0].pulley_radius) if cfg.instrument.joints else 1.0   # a tendon: x_in itself
+    r = float(next((j.pulley_radius for j in cfg.instrument.joints), 1.0))   # a tendon: x_in itself
     return RecordedOperator(t, motion, r / float(cfg.master.mapping.motion_scale))

@@ -47,6 +47,7 @@ from estimator.sheath import SheathModel
 from slave.calibrate import route_wrap_shape
 from slave.pair_calibrate import tendon_wrap_shape
 from slave.rig import TENDONS
+from teleop.config.kinds import instrument_kind
 from teleop.config.reader import read_yaml
 from teleop.config.schema import Config
 from teleop.errors import ConfigError
@@ -178,7 +179,7 @@ def load_calibration(path: str | Path, cfg: Config) -> InstrumentCalibration:
         data = read_yaml(path)[0]           # bounded: size, nesting, aliases (teleop/config/reader.py)
     except ConfigError as e:
         raise CalibrationError(str(e)) from None
-    kind = "joints" if cfg.instrument.joints else "tendon"
+    kind = "tendon" if instrument_kind(cfg) == "tendon" else "joints"
     keys = _TOP_KEYS + (kind,)
     if not isinstance(data, dict):
         raise _fail(path, "expected a mapping with keys " + ", ".join(keys))

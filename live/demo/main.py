@@ -55,6 +55,7 @@ from live.demo.run import (
     run_processes,
     verdict_lines,
 )
+from live.kinds import kind_of
 from teleop.config.files import resolve_config, shipped_config
 from teleop.config.load import load_config, write_config
 from teleop.config.schema import Config
@@ -221,11 +222,11 @@ class TendonDemo:
 
 def demo_kind(cfg: Config) -> Any:
     """The evaluation of the configured instrument: :class:`TendonDemo`, or
-    :class:`live.demo.joints.JointDemo` when ``instrument.joints`` is given."""
+    :class:`live.demo.joints.JointDemo`: the instrument kind's (:mod:`live.kinds`), a recording's own."""
     if cfg.rig.type == "recording":
         from live.demo.recording import RecordingDemo
         return RecordingDemo
-    if cfg.instrument.joints:
+    if kind_of(cfg).demo == "joints":
         from live.demo.joints import JointDemo
         return JointDemo
     return TendonDemo
@@ -302,7 +303,7 @@ def main_demo(args) -> int:
     problems: list[str] = []
     names = [j.name for j in cfg.instrument.joints] or ["tendon"]
     summary: dict = {"run_dir": str(run_dir), "config": str(cfg_file), "instrument": cfg.instrument.id,
-                     "kind": "joints" if cfg.instrument.joints else "tendon", "axes": names,
+                     "kind": kind_of(cfg).summary, "axes": names,
                      "protocol": args.protocol, "calibration_file": str(calibration_path(cfg)),
                      "safety_waivers": waivers(cfg)}   # teleop/config/bounds.py: keys run past their hard bound
     try:

@@ -31,6 +31,7 @@ import numpy as np
 
 from estimator.errors import DataError
 from live.demo.joints import read_joint_csv
+from live.kinds import kind_of
 from teleop.config.schema import Config
 
 __all__ = ["AGREEMENT_FS", "TORQUE_RMSE_BOUND", "AGREEMENT_DEG", "ANGLE_RMSE_BOUND_DEG", "RecordingDemo",
@@ -229,7 +230,7 @@ class RecordingDemo:
     def evaluate(summary: dict, run_dir: Path, cfg: Config, problems: list[str]) -> dict[str, bool]:
         """Fill ``summary["recording"]``; the checks of :func:`recording_checks`."""
         summary["kind"] = "recording"
-        summary["slave_file"] = "slave.csv" if not cfg.instrument.joints else "slave_joints.csv"
+        summary["slave_file"] = kind_of(cfg).slave_file
         try:
             r = summary["recording"] = evaluate_recording(run_dir, cfg)
         except (DataError, OSError, KeyError) as e:

@@ -50,7 +50,7 @@ def check_protocol(cfg: Config, protocol: str) -> None:
     """Raise ConfigError (one line: ``--protocol <value>: <the name that is wrong> (<the valid ones>)``) when the
     scripted operator of ``cfg`` (``master.device.type: simulated``) has no protocol ``protocol``: the master
     would refuse it only after the calibration and the start of both sides (:func:`master.protocols.operator_protocols`)."""
-    from master.protocols import operator_protocols
+    from master.kinds import operator_protocols
     from teleop.errors import ConfigError
     if cfg.master.device.type != "simulated":       # a hand on a device: no scripted protocol
         return

@@ -26,6 +26,7 @@ import numpy as np
 from estimator.errors import CalibrationError, DataError
 from estimator.online.pair import PairEstimator
 from live.demo.run import full_scale_errors
+from live.kinds import kind_of
 from teleop.config.schema import Config
 
 __all__ = ["JOINT_CSV", "find_joint_csv", "reestimate_joints", "compare_joints", "replay_joints", "joint_table_lines",
@@ -213,12 +214,12 @@ def replay_joints(csv: Path, cfg: Config, *, calibration: str | Path | None = No
     from live.demo.joints import read_joint_csv
 
     out = new_output(Path(rrd) if rrd is not None else csv.parent / "replay.rrd", rrd is not None, force)
-    if not cfg.instrument.joints:
+    kind = kind_of(cfg)
+    if kind.replay != "joints":
         raise DataError(f"{csv}: a joint recording, but the config's instrument {cfg.instrument.id} has no joints")
-    spindle = [j.name for j in cfg.instrument.joints if j.spindle_radius > 0]
-    if spindle:  # its per-cable T_in columns are estimates, not load-cell readings: a replay would be silently wrong
-        raise DataError(f"{csv}: joint(s) {', '.join(spindle)} are spindle-driven; teleop replay re-estimates from "
-                        "per-cable load cells, which a spindle instrument does not have")
+    if kind.replay_refusal:  # its per-cable T_in columns are estimates, not load-cell readings: a replay would be wrong
+        raise DataError(f"{csv}: joint(s) {', '.join(j.name for j in cfg.instrument.joints)} are "
+                        f"{kind.replay_refusal}")
     cols = read_joint_csv(csv)
     _column(cols, csv, "time")
     cal = _calibration_file(csv.parent, cfg, calibration)

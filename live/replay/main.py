@@ -43,6 +43,7 @@ from estimator.online.distal import DistalEstimator, estimate_batch
 from estimator.phase import Phase
 from estimator.sheath import SheathModel
 from live.demo.run import full_scale_errors
+from live.kinds import kind_of
 from live.replay.joints import find_joint_csv, joint_table_lines, new_output, rate_hz, replay_joints, samples_at
 from teleop.config.load import load_config
 from teleop.config.schema import Config
@@ -120,7 +121,7 @@ def load_model(cfg: Config, inp: ReplayInput, calibration: str | Path | None = N
     from slave.calibrate import route_wrap_shape
     from slave.calibration_file import load_calibration, tendon_model
 
-    if cfg.instrument.joints:
+    if kind_of(cfg).replay != "tendon":
         raise ConfigError(f"instrument {cfg.instrument.id} has joints: replay handles single-tendon runs")
     if calibration is None:
         if inp.run_dir is None:

@@ -43,6 +43,7 @@ import math
 from collections.abc import Iterator, Sequence
 from typing import Any
 
+from teleop.config.kinds import instrument_kind
 from teleop.errors import CodecError
 from teleop.ros2.types import (
     JOINT_STATE,
@@ -127,7 +128,7 @@ def _operating(t_ns: int, state: SideState, fault: bool = False) -> bytes:
 
 
 def _measured(cfg: Any, est: Estimate) -> tuple[list[float], list[float]]:
-    if not cfg.instrument.joints:
+    if instrument_kind(cfg) == "tendon":
         t = est.axes[0].tendons[0]
         return [t.x_in], [t.T_in]
     radii = [j.pulley_radius for j in cfg.instrument.joints]
@@ -156,7 +157,7 @@ def slave_messages(cfg: Any, t_ns: int, state: SideState, est: Estimate | None, 
                                                       None, [t.T_in for t in est.tendons])
     yield f"/{arm}/distal/measured_js", joint_state(t_ns, names, [a.position_hat for a in est.axes], None,
                                                    [a.effort_hat for a in est.axes])
-    single = not cfg.instrument.joints
+    single = instrument_kind(cfg) == "tendon"
     for topic, a in zip(_cf_topics(cfg), est.axes, strict=False):
         force, torque = ((0.0, 0.0, a.effort_hat), (0.0, 0.0, 0.0)) if single else \
             ((0.0, 0.0, 0.0), (0.0, 0.0, a.effort_hat))
