@@ -8,6 +8,8 @@ import numpy as np
 
 from estimator.capstan import phase_formula_batch
 from estimator.online.distal import DistalEstimator, estimate_batch
+from estimator.online.pair_model import PairModelEstimator
+from estimator.pair_kernels import EFFECT_PARAMS
 from estimator.sheath import SheathModel
 from teleop.config.schema import Config
 
@@ -50,6 +52,33 @@ def bench_paper(n: int = 200_000) -> float:
     return n / (time.perf_counter() - t0)
 
 
+#: the capstan-joint pair model's parameters (KAIST-like, SI; estimator.offline.pair.models) and its effects' values
+PAIR = {"G": 1.4, "lam": 0.4, "K_a": 0.9, "K_b": 0.5, "k": 4.0, "theta0": 0.0}
+PAIR_EXTRA = {"b": 0.01, "tau": 0.02, "lam_s": 0.1, "lam_d": 0.05, "toe": 4.0, "toe_tension": 1.0}
+PAIR_MODELS = ((), ("series_compliance",), ("joint_backlash", "sensor_delay"), ("drive_observer",), ("tendon_toe",))
+
+
+def bench_pair_model(effects: tuple[str, ...], n_nodes: int = 24, n: int = 20_000) -> float:
+    """Seconds per :meth:`PairModelEstimator.step` (one joint, one 1 kHz sample) of the capstan-joint pair model."""
+    values = PAIR | {p: PAIR_EXTRA[p] for e in effects for p in EFFECT_PARAMS[e]}
+    t = np.arange(n) * 1e-3
+    c = 1.0 * np.sin(2 * np.pi * 0.5 * t)
+    rng = np.random.default_rng(0)
+    Ta = 5 + 3 * c + rng.normal(0, 0.02, n)
+    Tb = 5 - 3 * c + rng.normal(0, 0.02, n)
+    best = math.inf
+    for _ in range(3):
+        est = PairModelEstimator("capstan", effects, values, (5.0, 5.0), n_nodes=n_nodes)
+        for k in range(200):   # warm-up (numba compile, caches)
+            est.step(c[k], Ta[k], Tb[k], t[k])
+        est.reset()
+        t0 = time.perf_counter()
+        for k in range(n):
+            est.step(c[k], Ta[k], Tb[k], t[k])
+        best = min(best, (time.perf_counter() - t0) / n)
+    return best
+
+
 def main() -> None:
     print("estimator (profile memory, one tendon)")
     for nodes in (50, 100, 200):
@@ -60,6 +89,10 @@ def main() -> None:
     for nodes in (50, 100, 200):
         print(f"  batch         n_nodes={nodes:4d}: {bench_batch(nodes) / 1e6:7.2f} M samples/s (aim >= 1)")
     print(f"  paper phase formulas (compiled)   : {bench_paper() / 1e6:7.3f} M samples/s")
+    print("capstan-joint pair model per cycle (one joint, n_nodes=24)")
+    for effects in PAIR_MODELS:
+        name = "+".join(("capstan", *effects))
+        print(f"  {name:40s}: {bench_pair_model(effects) * 1e6:7.2f} us/step   (aim <= 50 us)")
 
 
 if __name__ == "__main__":
