@@ -16,7 +16,9 @@ stiffness k_joint [N m/rad] as a tendon-tension difference per radian), and the
 angle is in rad. One step (each sample is split into ``substeps``): the motors move with the joint
 held (slip spreads from each proximal end, :func:`estimator.kernels.advance_proximal`), then
 the joint settles with the motors held (slip spreads from each distal end and theta solves (P4),
-:func:`estimator.kernels.settle_joint`); the compiled loops are in :mod:`estimator.pair_loops`. So the joint stays put
+:func:`estimator.kernels.settle_joint`); the compiled sample loop is :mod:`estimator.pair_loops`, which the batch
+model (:func:`simulate_pair`) and the per-cycle form (:class:`estimator.online.pair_model.PairModelEstimator`) both
+run on a state laid out by :func:`pair_kernel`. So the joint stays put
 after a reversal until a slip front reaches a tip - the capstan band of each tendon acting on the joint (E1 with E11,
 E13) - and the proximal tensions are an output of the model, not an input.
 
