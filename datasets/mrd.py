@@ -23,8 +23,8 @@ that a positive spindle rotation and torque give a positive jaw rotation and tor
 theta_d = -0.92 theta_p + const before the flip). At BOTH ends a positive torque turns the shaft
 towards negative angles (the spindle torque is lower while its angle rises: friction opposes the
 motion), so the power into the tool is -tau_p omega_p; the model is driven by the torque and its
-signed parameters absorb this (the cable stretch shows as lam < 0, see estimator.online.spindle). The sine frequency is read from the spindle
-angle (:func:`sine_frequency`), the load level from the rank of the run's mean front-end command
+signed parameters absorb this (the cable stretch shows as lam < 0, see estimator.online.spindle). The sine frequency is
+read from the spindle angle (:func:`sine_frequency`), the load level from the rank of the run's mean front-end command
 (equal to the file name's Y on the shipped folder), not from the header.
 """
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """The centre map on the MRD runs (``teleop analyze --mrd``): the load level read from the spindle's band.
 
-On the MRD runs (docs/results/mrd.md) what changes from run to run and the pair model's shared set misses is the load level; the
-scored run's own band centre (spindle torque only) reads it (:mod:`estimator.online.spindle_centre`).
-Two uses, each recording what was fitted on what:
+On the MRD runs (docs/results/mrd.md) what changes from run to run and the pair model's shared set misses is the load
+level; the scored run's own band centre (spindle torque only) reads it (:mod:`estimator.online.spindle_centre`). Two
+uses, each recording what was fitted on what:
 
 * :func:`centre_folder` - the map fitted on all runs (in-sample) and refitted without each run
   (leave-one-run-out);

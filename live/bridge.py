@@ -1,12 +1,12 @@
 """``teleop bridge --config FILE``: the simulated rig behind the Zenoh rig interface, as its own process.
 
-The process a motor controller would be (one tendon, or every tendon of a joint instrument): it subscribes to the set-points on
-``teleop/<instrument>/rig/setpoint`` and, at ``rig.rate_hz``, moves the simulated motor toward the
-newest one and publishes a sample (encoder, load cell, applied set-point and the simulator's truth)
-on ``teleop/<instrument>/rig/sample`` (:mod:`teleop.wire.rig`). Set-points older than
-``rig.zenoh.timeout_ms`` are not followed: the motor holds where it is (a drive's own watchdog).
-A slave with ``rig.type: zenoh`` (same instrument id, reachable endpoints) then runs exactly as with
-the in-process rig. The rig is the one ``rig.type: simulated`` builds from the same file.
+The process a motor controller would be (one tendon, or every tendon of a joint instrument): it subscribes to the
+set-points on ``teleop/<instrument>/rig/setpoint`` and, at ``rig.rate_hz``, moves the simulated motor toward the newest
+one and publishes a sample (encoder, load cell, applied set-point and the simulator's truth) on
+``teleop/<instrument>/rig/sample`` (:mod:`teleop.wire.rig`). Set-points older than ``rig.zenoh.timeout_ms`` are not
+followed: the motor holds where it is (a drive's own watchdog). A slave with ``rig.type: zenoh`` (same instrument id,
+reachable endpoints) then runs exactly as with the in-process rig. The rig is the one ``rig.type: simulated`` builds
+from the same file.
 """
 from __future__ import annotations
 

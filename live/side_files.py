@@ -11,10 +11,10 @@ either limit the side says so once, counts the rows and Rerun calls it leaves ou
 low-rate files: its stats, its journal (a bounded ring) and its log; the control loop goes on as before
 (a gate's call costs it one attribute test).
 
-``TELEOP_LIVE_STATS=<s>`` (:data:`LIVE_ENV`) in the environment (a diagnostic for long runs, e.g. ``benchmarks/bench_soak.py``)
-also makes the thread write ``<side>_live.json`` every that many seconds: the loop's cycles and overruns so
-far, the messages it sent, the round trip's histogram of a master (:meth:`SideFiles.live`), replaced
-atomically.
+``TELEOP_LIVE_STATS=<s>`` (:data:`LIVE_ENV`) in the environment (a diagnostic for long runs, e.g.
+``benchmarks/bench_soak.py``) also makes the thread write ``<side>_live.json`` every that many seconds: the loop's
+cycles and overruns so far, the messages it sent, the round trip's histogram of a master (:meth:`SideFiles.live`),
+replaced atomically.
 """
 from __future__ import annotations
 

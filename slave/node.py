@@ -7,12 +7,12 @@ caller:
 
 * CALIBRATING (from power-up, when no calibration was given; the life cycle of
   :mod:`slave.calibration_file`): the kind's routine drives the rig (one tendon into its joint limit,
-  every tendon of every pair both directions, or every spindle over its stroke); no command is accepted and no estimate is sent.
-  When it is done, the axes' estimators are built on the fit and replay the routine's proximal
-  samples so that their tension-profile memory matches the tendons'; the fit is saved as
-  calibration data (``calibration_file``) and ``calibration.json`` is written. With a calibration
-  (reloaded from ``<calibration.dir>/<instrument>.yaml``, by default in the per-user data directory)
-  the node starts SAFE at once, its estimators at rest, and ``calibration.json`` holds the reloaded values.
+  every tendon of every pair both directions, or every spindle over its stroke); no command is accepted and no estimate
+  is sent. When it is done, the axes' estimators are built on the fit and replay the routine's proximal samples so that
+  their tension-profile memory matches the tendons'; the fit is saved as calibration data (``calibration_file``) and
+  ``calibration.json`` is written. With a calibration (reloaded from ``<calibration.dir>/<instrument>.yaml``, by default
+  in the per-user data directory) the node starts SAFE at once, its estimators at rest, and ``calibration.json`` holds
+  the reloaded values.
 * Then, each cycle, the latest Command decides (latest wins; the watchdog rules are
   :meth:`slave.node_base.SlaveNodeBase._decide`):
 

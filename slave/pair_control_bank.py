@@ -3,13 +3,13 @@
 :class:`PairControlBank` takes over the :class:`~slave.pair_control.PairController` of each joint and runs
 :meth:`PairController.step`'s arithmetic (modes with hysteresis, the puller's position from its bumpless
 reference and its backlash compensation, the antagonist's feedforward through the play and its rate-limited
-tension loop, the travel clip; :mod:`slave.pair_control`) for all of them in one compiled loop: the same operations in the same
-order, ``min``/``max`` with Python's tie rule, so every motor command is the controller's own, bit for bit.
+tension loop, the travel clip; :mod:`slave.pair_control`) for all of them in one compiled loop: the same operations in
+the same order, ``min``/``max`` with Python's tie rule, so every motor command is the controller's own, bit for bit.
 What it saves is the Python of each joint's call (~5 us a joint on a 2-core machine).
 
 While the bank steps them the controllers' state (motor commands, mode, switch count, references, the
-plays' outputs, the compensation's tensions) lives in the bank's arrays; :meth:`PairControlBank.release` writes it back, and a
-controller of a bank that is stepped on its own releases its bank first.
+plays' outputs, the compensation's tensions) lives in the bank's arrays; :meth:`PairControlBank.release` writes it back,
+and a controller of a bank that is stepped on its own releases its bank first.
 """
 from __future__ import annotations
 

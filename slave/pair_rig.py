@@ -261,7 +261,8 @@ class SimulatedInstrument:
 
 
 @njit(cache=True, nogil=True)
-def _step_read(T, gains, c, x, cmd, theta, prm, h, gain, vmax_dt, q, noise, snap, out, ang):  # pragma: no cover - compiled
+# pragma: no cover - compiled
+def _step_read(T, gains, c, x, cmd, theta, prm, h, gain, vmax_dt, q, noise, snap, out, ang):
     """One step of every joint, then its readout (:func:`_read_all`). T (n_joints, 2, n + 1) node tensions [N] and
     theta (n_joints,) [rad] in place; gains (n_joints, 2, 5, n + 1) lo, hi, dlo, dhi, w; c (n_joints, 2, 2) c_pull,
     c_rel; x (n_joints, 2) motor positions [m], moved in place toward cmd by the drive's exact step

@@ -9,11 +9,11 @@
   ``|x_in_cmd - x_in| <= slave.engage_tolerance`` (measured x_in), so a master that has not
   re-aligned never makes the tendon jump.
 * SAFE (the single-tendon version of "hold the joints, relax the tendons to pretension"): the motor
-  holds where it is measured to be when SAFE begins (never where the last command was taking it), then moves in the release direction only, at ``slave.relax_speed``, while the
-  measured proximal tension is above ``sheath.pretension + RELAX_BAND``; it never pulls and never
-  goes below ``slave.x_in_min``. Releasing a single tendon lets its joint go back under its return
-  spring: the instrument goes limp, away from the tissue, with no stored energy; the speed bound
-  keeps that motion slow and smooth.
+  holds where it is measured to be when SAFE begins (never where the last command was taking it), then moves in the
+  release direction only, at ``slave.relax_speed``, while the measured proximal tension is above ``sheath.pretension +
+  RELAX_BAND``; it never pulls and never goes below ``slave.x_in_min``. Releasing a single tendon lets its joint go back
+  under its return spring: the instrument goes limp, away from the tissue, with no stored energy; the speed bound keeps
+  that motion slow and smooth.
 * Each cycle: ``estimator.step(T_in, x_in, t)`` (proximal sensors only) -> the axis's state (effort
   = T_out_hat [N], position = x_out_hat [m]) and the profile at ``estimator.profile_points`` points;
   one row of ``slave.csv`` in the measured-data format (docs/reference/formats.md), Rerun every

@@ -7,8 +7,9 @@
 publishes the new set-point and returns the newest sample received (one cycle behind, as a real
 drive's sensors are), time-stamped on the slave's clock from the start (the two loops are not
 in lock step: a sample may be read twice, ``repeats`` counts it, and the slave's time stays strictly
-increasing); the slave node's watchdogs and calibration see it as any other :class:`slave.rig.Rig`. A sample older than ``rig.zenoh.timeout_ms`` is counted (``stale``) and
-logged at a limited rate; the rig side holds its motors when the set-points stop (the bridge does).
+increasing); the slave node's watchdogs and calibration see it as any other :class:`slave.rig.Rig`. A sample older than
+``rig.zenoh.timeout_ms`` is counted (``stale``) and logged at a limited rate; the rig side holds its motors when the
+set-points stop (the bridge does).
 
 :class:`ZenohRig` is the single tendon (n = 1), :class:`ZenohInstrument` a joint instrument (n = 2 per
 joint, in the order joint 0 a, joint 0 b, joint 1 a, ...); the samples' truth, when present, gives

@@ -7,11 +7,11 @@ Protocol (docs/results/mrd.md):
 
 * calibration ``RUN`` (default: the slowest, lightest run), ``kinematic:RUN`` (the same with the
   torque scale rho fixed to 1 / n_k, the pulley radii ratio read from the calibration run's spindle
-  and jaw encoders) or ``segment:SECONDS`` (the first SECONDS of every run, scored on the rest). The model's *inputs* are always the spindle torque
-  and angle; the calibration's jaw torque and angle are the fit *targets* (the spindle side alone
-  cannot give the torque scale, the jaw-side offset or the friction beyond the jaw pulley; the
-  JSON lists them under ``not_from_proximal``). Scored runs never contribute a distal sample.
-  ``gain=G:`` before any run calibration gives the centre map a design load gain G (:func:`split_design_gain`).
+  and jaw encoders) or ``segment:SECONDS`` (the first SECONDS of every run, scored on the rest). The model's *inputs*
+  are always the spindle torque and angle; the calibration's jaw torque and angle are the fit *targets* (the spindle
+  side alone cannot give the torque scale, the jaw-side offset or the friction beyond the jaw pulley; the JSON lists
+  them under ``not_from_proximal``). Scored runs never contribute a distal sample. ``gain=G:`` before any run
+  calibration gives the centre map a design load gain G (:func:`split_design_gain`).
 * score: torque RMSE and max |error| as fractions of full scale (range of the measured jaw torque
   over the folder), angle RMSE [deg], from ``SCORE_FROM_S`` on (the load motor ramps in first).
 * across the folder: model-free band measurements per run (E3 frequency, E8 load, distal-side
@@ -167,9 +167,10 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
     ``.baselines.<name>`` the same keys; ``shared`` / ``loro`` the folder-wide fit); details hold
     per-sample predictions for the figures (never written to JSON).
 
-    ``folder`` False, or a single run, skips the folder-wide selection and fit (and ``loro``). ``tool``: the load gain of the one-run
-    calibration comes from this tool file (:func:`study.mrd_tools.tool_calibration`; ``summary["tool"]``).
-    Raises DataError for no runs, ConfigError for a bad ``calibration`` or one that gives a gain beside ``tool``.
+    ``folder`` False, or a single run, skips the folder-wide selection and fit (and ``loro``). ``tool``: the load gain
+    of the one-run calibration comes from this tool file (:func:`study.mrd_tools.tool_calibration`;
+    ``summary["tool"]``). Raises DataError for no runs, ConfigError for a bad ``calibration`` or one that gives a gain
+    beside ``tool``.
     """
     t_start = time.perf_counter()
     if not runs:

@@ -81,7 +81,8 @@ class Recording:
     """A simulated recording and its hidden truth.
 
     data : MeasuredData with time [s], x_in [m], T_in [N], x_out [m], T_out [N] (measured, noisy).
-    truth : dict with ``effect`` (id, ids joined by "+", or "none"), ``effects`` (tuple), ``parameters`` (name -> SI value), ``K`` [-],
+    truth : dict with ``effect`` (id, ids joined by "+", or "none"), ``effects`` (tuple), ``parameters`` (name -> SI
+    value), ``K`` [-],
         ``compliance`` L/EA [m/N], ``level`` [0, 1], the noise levels, ``route`` ((length [m], radius [m])
         pieces, proximal to distal) and ``signals`` (noise-free
         T_out [N], x_out [m], x_in [m], shape (n,)); for evaluation only.
@@ -250,8 +251,8 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     Parameters
     ----------
     effect : str, tuple of str, or None
-        An id of :func:`scenario_effects` (catalogue ids, rig switch keys, :data:`UNCATALOGUED`), several of them (all at
-        the same ``level``), or None / "none".
+        An id of :func:`scenario_effects` (catalogue ids, rig switch keys, :data:`UNCATALOGUED`), several of them (all
+        at the same ``level``), or None / "none".
     seed : int
         Seeds the rig (K, EA, load), the protocol, the magnitude and every noise.
     level : float in [0, 1], optional

@@ -298,7 +298,8 @@ def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, b
     base = [sys.executable, "-m", "live.cli"]
     common = ["--config", str(cfg_file), "--run-dir", str(run_dir), "--max-duration", f"{timeout:g}"]
     recorders = [RecorderRun("recorder", common, run_dir)] if recorders is None else recorders
-    keys = Path(tempfile.mkdtemp(prefix="tsm-teleop-demo-"))   # the run's own credentials (teleop/session/credentials.py)
+    # the run's own credentials (teleop/session/credentials.py)
+    keys = Path(tempfile.mkdtemp(prefix="tsm-teleop-demo-"))
     env = dict(os.environ, PYTHONUNBUFFERED="1", TSM_TELEOP_KEYS=str(keys / "keys"))
     deadline = time.monotonic() + timeout
     procs: list[tuple[str, subprocess.Popen, Path]] = []
@@ -320,7 +321,8 @@ def run_processes(args, cfg_file: Path, run_dir: Path, problems: list[str], *, b
                     problems.append(f"the bridge did not listen on {ep_b} (see {run_dir}/bridge.log)")
                     return
                 rig_link = ["--connect", ep_b]
-            view = ["--rerun", args.rerun] if getattr(args, "rerun", None) else []     # the sides' view, not the recorder's
+            # the sides' view, not the recorder's
+            view = ["--rerun", args.rerun] if getattr(args, "rerun", None) else []
             slave = subprocess.Popen(base + ["slave", "--listen", ep, "--exit-on-master-stop"] + rig_link + rec_link
                                      + view + common,
                                      stdout=slog, stderr=subprocess.STDOUT, env=env)

@@ -118,9 +118,9 @@ def _plot_states(ax, states: list[tuple[str, np.ndarray, np.ndarray]]) -> None:
 def streams_plot(paths, max_signals: int = 4):
     """The figure of :func:`streams_figure` (a matplotlib Figure, the caller closes it).
 
-    One panel per CSV in ``paths`` (a path, or a :class:`Stream` already read) with signals, up to ``max_signals`` of its columns (time stamps,
-    counters, profiles and enums left out) in at most two units, and one panel of the heartbeats' states;
-    every panel on the shared time axis [s] from the first message of any stream.
+    One panel per CSV in ``paths`` (a path, or a :class:`Stream` already read) with signals, up to ``max_signals`` of
+    its columns (time stamps, counters, profiles and enums left out) in at most two units, and one panel of the
+    heartbeats' states; every panel on the shared time axis [s] from the first message of any stream.
     """
     plt = pyplot()
     streams = [s for s in (p if isinstance(p, Stream) else read_stream(p) for p in paths) if s.data.size]

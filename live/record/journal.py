@@ -6,9 +6,9 @@ recorder's end, every journaled message the recording does not have is added to 
 recovered. A message is known by its ``seq`` on its key (a message received twice is one message; one
 without a ``seq``: by the hash of its payload bytes). The recording's messages are remembered in constant
 memory, the newest :data:`SEEN` per key (more than a journal's ring of two 8 MB segments holds of any
-stream), so an hour at 1 kHz costs no more than a minute. Journal records published before the recorder started (an earlier session in the
-same run directory, or a side that started first) are left out and counted. So are the records of keys the
-recorder does not subscribe to (``keys``): a bimanual side journals every arm's messages in one journal
+stream), so an hour at 1 kHz costs no more than a minute. Journal records published before the recorder started (an
+earlier session in the same run directory, or a side that started first) are left out and counted. So are the records of
+keys the recorder does not subscribe to (``keys``): a bimanual side journals every arm's messages in one journal
 (:mod:`live.bimanual_sides`), and each arm's recorder takes its own arm's only.
 """
 from __future__ import annotations

@@ -6,13 +6,13 @@ adds) and to the liveliness tokens of both sides, and writes ``<run dir>/recorde
 * ``messages.bin``: every payload as received, ``<d t_recv [s]><H key length><I payload length>`` then the
   key and the codec bytes, zstd-compressed (the lossless record; :func:`read_messages` reads it back); a
   message recovered from a journal carries its publish time instead;
-* ``<side>_<stream>.csv`` per key of a heartbeat stream (with ``recording.csv: all``: of every stream), in the measured-data format (``# key: value`` metadata,
-  ``# units:``, header, one row per message, in time order): ``time`` is the recorder's receive time
-  [s, monotonic] (a message recovered from a journal: its publish time, same clock on one machine),
-  then every field of the message as :mod:`teleop.wire.codec` decoded it, flattened generically over the
-  dataclass fields (``profiles[0][3]``, ``axes[1].tendons[0].T_in``; enums and flags as integers); a
-  nested field keeps only its own name where that is unambiguous (:func:`short_names`), so the
-  estimate file of a single tendon (``x_in``, ``T_in``) loads with
+* ``<side>_<stream>.csv`` per key of a heartbeat stream (with ``recording.csv: all``: of every stream), in the
+  measured-data format (``# key: value`` metadata, ``# units:``, header, one row per message, in time order): ``time``
+  is the recorder's receive time [s, monotonic] (a message recovered from a journal: its publish time, same clock on one
+  machine), then every field of the message as :mod:`teleop.wire.codec` decoded it, flattened generically over the
+  dataclass fields (``profiles[0][3]``, ``axes[1].tendons[0].T_in``; enums and flags as integers); a nested field keeps
+  only its own name where that is unambiguous (:func:`short_names`), so the estimate file of a single tendon (``x_in``,
+  ``T_in``) loads with
   :func:`teleop.recording.measured_csv.read_measured_csv`;
 * ``state_changes.csv`` (every change of a heartbeat's state), ``liveliness.csv`` and ``recovered.csv``
   (``time,side,key,seq`` of every message taken from a side's journal, see below);
@@ -101,7 +101,8 @@ class Recorder:
     rerun : {'save', 'spawn', 'off'}, optional
         Overrides ``recording.rerun``.
     journal_dir : Path, optional
-        Where the sides' journals are (default: the run directory, ``out_dir``'s parent); records of ``teleop/<id>/**`` only.
+        Where the sides' journals are (default: the run directory, ``out_dir``'s parent); records of ``teleop/<id>/**``
+        only.
     """
 
     def __init__(self, session, cfg, out_dir: Path, *, rerun: Literal["save", "spawn", "off"] | None = None, run_id: str = "",
@@ -236,7 +237,8 @@ class Recorder:
                 w(f.path.name, f.write, t, tuple(numbers()))
             else:
                 self._samples[shape].write(t, numbers)
-            w("session.mcap", self._mcap.write, t, key, msg, recovered)   # a problem of the MCAP file costs no other file
+            # a problem of the MCAP file costs no other file
+            w("session.mcap", self._mcap.write, t, key, msg, recovered)
         else:
             w.skip(key)
         self._derived(t, key, msg, seq, self._names[shape], numbers, st.count)

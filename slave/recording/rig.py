@@ -15,8 +15,8 @@ recording cannot execute a calibration motion.
 A KAIST recording (``sine_config_N.txt``, or ``optimization/selected/N.txt`` of a clone; :mod:`datasets.kaist`)
 drives the pair axis of an instrument of one antagonistic pair (:mod:`slave.recording.pair`): x_in = the motor
 command [rad] on both tendons, T_in = the two proximal tensions [N], the truth's ``theta`` the measured distal
-angle. The project's measured-data CSV (:func:`teleop.recording.measured_csv.read_measured_csv`) drives the single-tendon
-axis (:mod:`slave.recording.tendon`): x_in, T_in proximal, T_out and x_out the truth.
+angle. The project's measured-data CSV (:func:`teleop.recording.measured_csv.read_measured_csv`) drives the
+single-tendon axis (:mod:`slave.recording.tendon`): x_in, T_in proximal, T_out and x_out the truth.
 
 The recording is read and checked against the instrument by :mod:`datasets.recording`; the rig is registered
 in :mod:`slave.rigs` as every rig (``rig.type: recording``, :func:`recording_rig`).

@@ -1,13 +1,13 @@
 """A measured-data CSV (one tendon) played as the single-tendon axis's hardware.
 
 The project's measured-data CSV (docs/reference/formats.md: time [s], x_in [m], T_in [N] and the distal T_out [N]
-and/or x_out [m]; :func:`teleop.recording.measured_csv.read_measured_csv`, the reader of ``teleop analyze FILE``) gives the
-proximal signals each cycle (x_in, T_in) and its distal channels as the truth. :class:`RecordedTendon` is the rig
-(one recorded sample per step, or resampled at the rig's time); :class:`RecordedTendonAxis` the single-tendon axis
-on it: its calibration is the profile-memory estimator's K and L/EA fitted on the first 60 % of the calibration
-recording (``rig.recording.calibration_run``, else the played one) by :func:`estimator.offline.fit.fit_single`, the
-fit of ``examples/estimate_csv.py``, saved as the calibration file and ``<instrument.id>.recording.json`` and
-reloaded. The estimate is :class:`estimator.online.distal.DistalEstimator`, the axis's own.
+and/or x_out [m]; :func:`teleop.recording.measured_csv.read_measured_csv`, the reader of ``teleop analyze FILE``) gives
+the proximal signals each cycle (x_in, T_in) and its distal channels as the truth. :class:`RecordedTendon` is the rig
+(one recorded sample per step, or resampled at the rig's time); :class:`RecordedTendonAxis` the single-tendon axis on
+it: its calibration is the profile-memory estimator's K and L/EA fitted on the first 60 % of the calibration recording
+(``rig.recording.calibration_run``, else the played one) by :func:`estimator.offline.fit.fit_single`, the fit of
+``examples/estimate_csv.py``, saved as the calibration file and ``<instrument.id>.recording.json`` and reloaded. The
+estimate is :class:`estimator.online.distal.DistalEstimator`, the axis's own.
 """
 from __future__ import annotations
 

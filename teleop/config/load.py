@@ -286,5 +286,6 @@ def write_config(cfg: Config, path: str | Path) -> Path:
     path.write_text(text + yaml.safe_dump(config_to_dict(cfg), sort_keys=False), encoding="utf-8")
     return path
 
-merge_dataclass, ErrorContext = _merge, _Ctx  # for the other strict YAML files (teleop.config.tools; read_yaml: teleop.config.reader)
+# for the other strict YAML files (teleop.config.tools; read_yaml: teleop.config.reader)
+merge_dataclass, ErrorContext = _merge, _Ctx
 check_config = _check          # the checks of one whole config, for files that hold several (teleop.arms)

@@ -13,7 +13,8 @@ __all__ = ["RANGES", "MOVED", "LOOP_RATE"]
 #: make endless (a period of days) or a busy loop (a period of nothing), or past the platform's largest timeout.
 LOOP_RATE = "10..10000"
 
-# Valid range and unit of every numeric setting ("[]" stands for any list index). A test checks that each numeric field of the schema has an entry and each entry names a field.
+# Valid range and unit of every numeric setting ("[]" stands for any list index). A test checks that each numeric field
+# of the schema has an entry and each entry names a field.
 RANGES: dict[str, tuple[str, str]] = {
     "sheath.EA": ("> 0", "N"), "sheath.pretension": (">= 0", "N"),
     "sheath.runs[].length": ("> 0", "m"), "sheath.runs[].radius": ("> 0", "m, .inf = straight"),

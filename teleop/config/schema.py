@@ -147,7 +147,8 @@ class SensorConfig:
 
 
 # ---- model effects of the simulated rig: EffectsConfig (teleop/config/effects.py), one switch per entry of
-# the effect catalogue (estimator/offline/effects/catalogue.py) that has a rig switch; defaults and ranges are the entry's.
+# the effect catalogue (estimator/offline/effects/catalogue.py) that has a rig switch; defaults and ranges are the
+# entry's.
 
 @dataclass(frozen=True)
 class SimulatedRigConfig:
@@ -240,7 +241,8 @@ class MasterConfig:
     mapping: MappingConfig = field(default_factory=MappingConfig)
     watchdog_ms: float = 50.0
     max_tension: float = 200.0            # [N] estimates with |T_in| or |T_out_hat| above: rejected
-    realtime_priority: int = 20           # SCHED_FIFO priority of the loop thread, 1-99 (teleop/timing/realtime.py); 0: off
+    # SCHED_FIFO priority of the loop thread, 1-99 (teleop/timing/realtime.py); 0: off
+    realtime_priority: int = 20
 
 
 @dataclass(frozen=True)
@@ -254,7 +256,8 @@ class SlaveConfig:
     max_step: float = 0.001               # [m] tendon travel: a command further from the last accepted one is refused
     max_speed: float = 0.05               # [m/s] tendon travel: the followed target moves no faster
     max_tension: float = 80.0             # [N] a measured |T_in| above: SAFE in that cycle, relax (slave/node_base.py)
-    realtime_priority: int = 20           # SCHED_FIFO priority of the loop thread, 1-99 (teleop/timing/realtime.py); 0: off
+    # SCHED_FIFO priority of the loop thread, 1-99 (teleop/timing/realtime.py); 0: off
+    realtime_priority: int = 20
 
 
 @dataclass(frozen=True)
