@@ -183,8 +183,11 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
     def values(z):
         return {**fixed, **{p.name: float(v) for p, v in zip(params, z * scale, strict=False)}}
 
+    # the forward fold's residuals end where its fit block does: the model runs no further than they need
+    stop = m.stop if isinstance(m, slice) and m.stop is not None and 0 < m.stop < len(train) else None
+
     def residual(z):
-        pr = predict(effects, values(z), train, fit_mask=m)
+        pr = predict(effects, values(z), train, fit_mask=m, stop=stop)
         return np.concatenate([(getattr(pr, k)[m][::FIT_STRIDE] - ys[k]) / v for k, v in norm.items()])
 
     def refine(fun, z, lower, upper):
@@ -215,7 +218,7 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
             best = sol
     assert best is not None         # max_starts >= 1 and at least one start
     vals = values(best.x)
-    c = predict(effects, vals, train, fit_mask=m).compliance
+    c = predict(effects, vals, train, fit_mask=m, stop=stop).compliance
     return vals, c, float(best.cost)
 
 

@@ -339,7 +339,8 @@ def _knobs(fx: Sequence[Effect], values: dict[str, float]) -> tuple[dict, dict, 
 
 
 def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series, *,
-            compliance: float | None = None, fit_mask: slice | np.ndarray | None = None) -> Prediction:
+            compliance: float | None = None, fit_mask: slice | np.ndarray | None = None,
+            stop: int | None = None) -> Prediction:
     """Outputs of the base model extended by ``effects`` over a series.
 
     Order (:func:`estimator.offline.effects.predict.run_model`): proximal sensor corrections (the model runs on
@@ -358,6 +359,9 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
     compliance : float, optional
         L/EA [m/N]. Without it and with a measured x_out it is fitted by linear least squares on
         ``fit_mask`` (default all samples): x_in - x_out = (L/EA) E1 through the linear reading models.
+    stop : int, optional
+        Only the first ``stop`` samples are wanted (``fit_mask`` within them): the model runs over the samples
+        they depend on, with the same outputs, and the prediction holds those ``stop`` samples.
 
     Returns
     -------
@@ -374,7 +378,7 @@ def predict(effects: Iterable[Effect | str], values: dict[str, float], s: Series
     return run_model(s, knobs, sensors, u, x_p=x_p, d_b=d_b, node=node, compliance=compliance, fit_mask=fit_mask,
                      speed_form=values.get(SPEED_FORM, 0.0) > 0.5,
                      v_st=STRIBECK_SPEED if values.get(STRIBECK_FORM, 0.0) > 0.5 else 0.0,
-                     band=NOISE_BAND * s.sigma_T_in)
+                     band=NOISE_BAND * s.sigma_T_in, stop=stop)
 
 
 def below_resolution(effects: Iterable[Effect], values: dict[str, float]) -> bool:

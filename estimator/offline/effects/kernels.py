@@ -61,37 +61,6 @@ BREAK_MARGIN = 0.35  # share of the kinetic-static gap within which a turn of T_
 
 
 @njit(cache=True, nogil=True)
-def slack_index(T_in, x_in, lo, hi, window, mean_lo, held, held_lo):  # pragma: no cover - compiled
-    """Index of the last taut sample at every sample, shape (n,) (see effects_predict.slack_hold). The tendon goes
-    slack when T_in < lo and held < held_lo. It is taut again when T_in >= lo and either the proximal end is
-    back where it went slack (x_in >= its value at the last taut sample: the paid-out length taken up) or the
-    mean of T_in over the last ``window`` samples is >= mean_lo (a tension above zero, not one noise sample on
-    a zero), or at once when T_in >= hi or held >= held_lo (``held``, shape (n,): the smaller of the means of
-    T_in over the samples before and after, a low tension the noise cannot give)."""
-    n = T_in.shape[0]
-    out = np.empty(n, np.int64)
-    last = 0
-    slack = True
-    acc = 0.0
-    for i in range(n):
-        T = T_in[i]
-        acc += T
-        if i >= window:
-            acc -= T_in[i - window]
-        if slack:
-            if T >= hi or held[i] >= held_lo or (
-                    T >= lo and (i == 0 or x_in[i] >= x_in[last] or acc >= mean_lo * min(i + 1, window))):
-                slack = False
-                last = i
-        elif T >= lo or held[i] >= held_lo:
-            last = i
-        else:
-            slack = True
-        out[i] = last
-    return out
-
-
-@njit(cache=True, nogil=True)
 def stiffening_strain(T, beta, Tc):  # pragma: no cover - compiled
     """phi(T) [N]: tension-equivalent strain of a stiffening tendon, T + beta T_c (1 - e^{-T/T_c})
     (T when beta = 0); elongation = (L/EA) int phi(T) ds. Used by the estimator and the simulated rig."""

@@ -1,10 +1,11 @@
 """The batch prediction of the base model extended by catalogue effects (:func:`run_model`), and the slack rule.
 
-:func:`run_model` (called by :func:`estimator.offline.effects.catalogue.predict`) runs, in order: the proximal sensors' corrections (the model runs on the true inputs), the compiled
-kernel (:func:`estimator.offline.effects.kernels.run_extended`, or the per-node pre-sliding kernel), pre-sliding on
+:func:`run_model` (called by :func:`estimator.offline.effects.catalogue.predict`) runs, in order: the proximal
+sensors' corrections (the model runs on the true inputs), the compiled kernel
+(:func:`estimator.offline.effects.kernels.run_extended`, or the per-node pre-sliding kernel), pre-sliding on
 T_out and the distal backlash on x_out, then the distal sensors' reading models. :func:`slack_hold` holds the
-tendon's ends while it is slack (a tendon carries no compression). Re-exported by :mod:`estimator.offline.effects.catalogue`;
-this module imports nothing of it.
+tendon's ends while it is slack (a tendon carries no compression). Used by
+:mod:`estimator.offline.effects.catalogue`; this module imports nothing of it.
 """
 from __future__ import annotations
 
@@ -18,14 +19,14 @@ from estimator.offline.effects.kernels import (
     backlash_play,
     distal_slide,
     run_extended,
-    slack_index,
     travel_lag,
 )
 from estimator.offline.effects.presliding_kernel import node_presliding
+from estimator.offline.effects.slack_kernel import held_tension, slack_index
 from estimator.offline.effects.types import Prediction, Series
 
-__all__ = ["run_model", "slack_hold", "slide_window", "SLIDE_WINDOW", "SLACK_SIGMAS", "SLACK_TAUT", "SLACK_WINDOW",
-           "SLACK_MEAN", "SLACK_HELD"]
+__all__ = ["run_model", "lookahead", "slack_hold", "slide_window", "SLIDE_WINDOW", "SLACK_SIGMAS", "SLACK_TAUT",
+           "SLACK_WINDOW", "SLACK_MEAN", "SLACK_HELD"]
 
 #: the window [s] over which the measured distal end must have moved by more than its resolution to count as moving
 #: (Series.slide_travel; :func:`estimator.offline.effects.kernels.distal_slide`): 0.2 mm/s (V_STOP) over 50 ms is
@@ -90,12 +91,17 @@ def _true_inputs(s: Series, g: Callable) -> tuple[np.ndarray, np.ndarray, np.nda
 
 
 def _memory(s: Series, knobs: dict, g: Callable, T_in, x_in, vel, u, x_p: float, node: bool,
-            compliance: float | None, speed_form: bool, v_st: float, band: float):
-    """The profile memory over the series: (T_out [N], E1 [N], the distal slide directions or None)."""
+            compliance: float | None, speed_form: bool, v_st: float, band: float, whole: tuple | None):
+    """The profile memory over the series: (T_out [N], E1 [N], the distal slide directions or None). ``whole``: the
+    uncut series and its true inputs (T_in, x_in) when ``s`` is its first samples (run_model's ``stop``)."""
     t = s.time
     if node and x_p > 0.0 and (compliance is not None or s.x_out is not None):   # per node: K, K_rate, T0, E9 only
-        T_out, E1 = node_presliding(T_in, x_in, s.x_out, t, u, s.w, x_p=x_p, compliance=compliance,
-                                    **{k: v for k, v in knobs.items() if k in ("K", "K_rate", "T0", "beta", "Tc")})
+        kw = {k: v for k, v in knobs.items() if k in ("K", "K_rate", "T0", "beta", "Tc")}
+        if whole is None:
+            return (*node_presliding(T_in, x_in, s.x_out, t, u, s.w, x_p=x_p, compliance=compliance, **kw), None)
+        full, T_in_full, x_in_full = whole      # L/EA estimated on the uncut series: the same pass as without stop
+        T_out, E1 = node_presliding(T_in_full, x_in_full, full.x_out, full.time, u, s.w, x_p=x_p,
+                                    compliance=compliance, stop=len(s), **kw)
         return T_out, E1, None
     speed = None
     if knobs.get("c_v") and speed_form and s.x_out is not None:
@@ -150,20 +156,27 @@ def _x_out(s: Series, g: Callable, x_in, E1, taut, d_b: float, compliance: float
 def run_model(s: Series, knobs: dict[str, float], sensors: dict[str, float], u: np.ndarray, *, x_p: float = 0.0,
               d_b: float = 0.0, node: bool = False, compliance: float | None = None,
               fit_mask: slice | np.ndarray | None = None, speed_form: bool = False, v_st: float = 0.0,
-              band: float = 0.0) -> Prediction:
+              band: float = 0.0, stop: int | None = None) -> Prediction:
     """The model's outputs over a series (:func:`estimator.offline.effects.catalogue.predict` sets the arguments).
 
     ``knobs``: the kernel's knobs (K and the physical effects'); ``sensors``: sensor effect id -> its value;
     ``u``: the nodes' wrap shape; ``x_p`` [m] pre-sliding travel (per node with ``node``); ``d_b`` [m] the distal
     backlash; ``compliance`` L/EA [m/N] (None: fitted on ``fit_mask`` when x_out is measured); ``speed_form``: the
     sliding speed is the mean of the proximal and the distal one; ``v_st`` [m/s] the Stribeck speed (0: the
-    breakaway form); ``band`` [N] the memory's noise band.
+    breakaway form); ``band`` [N] the memory's noise band; ``stop``: the outputs are wanted on the first ``stop``
+    samples only (None: all). The model then runs over the samples those depend on (:func:`lookahead`), with the
+    same outputs there as over the whole series; ``fit_mask`` must lie within them.
     """
     def g(key: str, default: float = 0.0) -> float:
         return sensors.get(key, default)
     T_in, x_in, vel = _true_inputs(s, g)
+    whole = None
+    if stop is not None and (n := lookahead(s, sensors, stop)) < len(s):
+        whole = (s, T_in, x_in)
+        s, T_in, x_in, vel = s.slice(n), T_in[:n], x_in[:n], vel[:n]
     t = s.time
-    T_out, E1, slide = _memory(s, knobs, g, T_in, x_in, vel, u, x_p, node, compliance, speed_form, v_st, band)
+    T_out, E1, slide = _memory(s, knobs, g, T_in, x_in, vel, u, x_p, node, compliance, speed_form, v_st, band,
+                               whole)
     if x_p > 0.0 and not node:
         T_out = T_in - travel_lag(T_in - T_out, x_in, x_p)
     # distal channels: the reading from the true output
@@ -179,7 +192,20 @@ def run_model(s: Series, knobs: dict[str, float], sensors: dict[str, float], u: 
     moving = None if slide is None else slide * vel > V_STOP      # the distal end carried along: taut
     taut = slack_hold(T_in, SLACK_SIGMAS * s.sigma_T_in, x_in, moving)
     x_out, c = _x_out(s, g, x_in, E1, taut, d_b, compliance, fit_mask)
+    if stop is not None:
+        T_out, x_out = T_out[:stop], x_out[:stop]
     return Prediction(T_out=T_out, x_out=x_out, compliance=float(c))
+
+
+def lookahead(s: Series, sensors: dict[str, float], stop: int) -> int:
+    """How many first samples of ``s`` the model's outputs on its first ``stop`` samples depend on (at most
+    ``len(s)``): the model runs forward in time, and only three of its steps read later samples - undoing a lag
+    of a proximal channel or of x_out (its value at t + tau), the slack rule (the mean of T_in over the
+    SLACK_HELD samples from each sample on) and the distal speed (a central difference)."""
+    n = len(s)
+    tau = max(sensors.get(f"sensor_lag:{c}", 0.0) for c in ("T_in", "x_in", "x_out"))
+    last = s.time[min(stop + SLACK_HELD, n - 1)] + max(tau, 0.0)
+    return min(int(np.searchsorted(s.time, last, side="right")) + 2, n)
 
 
 def slack_hold(T_in: np.ndarray, threshold: float, x_in: np.ndarray | None = None,
@@ -206,12 +232,9 @@ def slack_hold(T_in: np.ndarray, threshold: float, x_in: np.ndarray | None = Non
     if x_in is None:
         return np.maximum.accumulate(np.where(T_in >= threshold, idx, 0))
     T = np.ascontiguousarray(T_in, dtype=np.float64)
-    c = np.concatenate(([0.0], np.cumsum(T)))
-    i = np.arange(T.shape[0])
-    lo_i, hi_i = np.maximum(i + 1 - SLACK_HELD, 0), np.minimum(i + SLACK_HELD, T.shape[0])
-    held = np.minimum((c[i + 1] - c[lo_i]) / (i + 1 - lo_i), (c[hi_i] - c[i]) / (hi_i - i))
+    held = held_tension(T, SLACK_HELD)
     if moving is not None:
-        held = np.where(moving, np.inf, held)
+        held[moving] = np.inf
     return slack_index(T, np.ascontiguousarray(x_in, dtype=np.float64), float(threshold),
                        float(SLACK_TAUT * threshold), SLACK_WINDOW, float(SLACK_MEAN * threshold), held,
                        float(threshold * math.sqrt(3.0 / (SLACK_HELD + 2))))

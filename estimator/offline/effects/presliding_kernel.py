@@ -56,14 +56,16 @@ def _node_kernel(T_in, t, u, w, K, K_rate, T_p, r, T0, beta, Tc, xd, T_out, E1):
     E0 = stiffening_strain(T0, beta, Tc)
     use_xd = xd.shape[0] == T_in.shape[0]
     for k in range(T_in.shape[0]):
-        Kk = K + K_rate * (t[k] - t[0])
-        if Kk < 0.0:
-            Kk = 0.0
+        if k == 0 or K_rate != 0.0:         # the segments' capstan ratios change only with a drifting K
+            Kk = K + K_rate * (t[k] - t[0])
+            if Kk < 0.0:
+                Kk = 0.0
+            for i in range(m):
+                bet[i] = 2.0 * math.tanh(0.5 * Kk * (u[i + 1] - u[i]))
         Tp = T_in[k]
         if Tp < 0.0:
             Tp = 0.0
         for i in range(m):
-            bet[i] = 2.0 * math.tanh(0.5 * Kk * (u[i + 1] - u[i]))
             B = 0.5 * bet[i] * (T[i] + T[i + 1])
             ki = 2.0 * B / T_p
             if ki * ds > 2.0:
@@ -139,8 +141,8 @@ def _node_kernel(T_in, t, u, w, K, K_rate, T_p, r, T0, beta, Tc, xd, T_out, E1):
 
 
 def run_node_presliding(T_in: np.ndarray, time: np.ndarray, u: np.ndarray, w: np.ndarray, *, K: float,
-                        T_p: float, r: float = 0.0, distal: np.ndarray | None = None, K_rate: float = 0.0, T0: float = 0.0, beta: float = 0.0,
-                        Tc: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+                        T_p: float, r: float = 0.0, distal: np.ndarray | None = None, K_rate: float = 0.0,
+                        T0: float = 0.0, beta: float = 0.0, Tc: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Run the per-node pre-sliding model over a recording (module docstring for the equations).
 
     Parameters
@@ -185,13 +187,16 @@ def run_node_presliding(T_in: np.ndarray, time: np.ndarray, u: np.ndarray, w: np
 
 def node_presliding(T_in: np.ndarray, x_in: np.ndarray, x_out: np.ndarray | None, time: np.ndarray, u: np.ndarray,
                     w: np.ndarray, *, x_p: float, compliance: float | None, K: float, K_rate: float = 0.0,
-                    T0: float = 0.0, beta: float = 0.0, Tc: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+                    T0: float = 0.0, beta: float = 0.0, Tc: float = 1.0,
+                    stop: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per-node pre-sliding over a recording with the pre-sliding travel ``x_p`` [m] as its parameter.
 
     T_p = x_p / (L/EA), and the distal end travels as the measured ``x_out`` [m] (the distal load's
     own law, whatever it is; None: a fixed end). Without a known ``compliance`` L/EA [m/N] it is
-    estimated from the Coulomb memory (T_p -> 0) by linear least squares of x_in - x_out on E1; it
-    sets T_p and the distal travel of the pass that is returned (the caller refits L/EA on its E1). Arrays shape (n,); u, w the node grid. Returns (T_out [N], E1 [N]).
+    estimated from the Coulomb memory (T_p -> 0) by linear least squares of x_in - x_out on E1 over the whole
+    recording; it sets T_p and the distal travel of the pass that is returned (the caller refits L/EA on its E1).
+    Arrays shape (n,); u, w the node grid. ``stop``: the returned pass runs over the first ``stop`` samples only
+    (the same values there). Returns (T_out [N], E1 [N]), shape (stop,) (default (n,)).
 
     Raises
     ------
@@ -203,16 +208,36 @@ def node_presliding(T_in: np.ndarray, x_in: np.ndarray, x_out: np.ndarray | None
     if compliance is None and x_out is None:
         raise ValueError("node pre-sliding needs the compliance L/EA or a measured x_out")
     kw = {"K": K, "K_rate": K_rate, "T0": T0, "beta": beta, "Tc": Tc}
+    n = T_in.shape[0] if stop is None else min(stop, T_in.shape[0])
 
     def run(c: float) -> tuple[np.ndarray, np.ndarray]:
         c = max(c, 1e-12)
-        distal = None if x_out is None else (x_out - x_out[0]) / c
-        return run_node_presliding(T_in, time, u, w, T_p=max(x_p / c, T_P_MIN), distal=distal, **kw)
+        distal = None if x_out is None else (x_out[:n] - x_out[0]) / c
+        return run_node_presliding(T_in[:n], time[:n], u, w, T_p=max(x_p / c, T_P_MIN), distal=distal, **kw)
 
     if compliance is not None:
         return run(compliance)
     assert x_out is not None
-    y = x_in - x_out
+    return run(_coulomb_compliance(T_in, x_in, x_out, time, u, w, kw))
+
+
+#: the last few Coulomb-memory compliances of :func:`node_presliding`: (inputs, L/EA [m/N])
+_COULOMB: list[tuple[tuple, float]] = []
+
+
+def _coulomb_compliance(T_in: np.ndarray, x_in: np.ndarray, x_out: np.ndarray, time: np.ndarray, u: np.ndarray,
+                        w: np.ndarray, kw: dict) -> float:
+    """L/EA [m/N] of the Coulomb memory (T_p = T_P_MIN, a fixed end) by linear least squares of x_in - x_out on its
+    E1. A fit varies x_p far more often than the memory's own parameters: the last few are kept, by the identity
+    of the (read-only) input arrays and the values of the others."""
+    arrays = (T_in, x_in, x_out, time, w)
+    key = (u.tobytes(), tuple(sorted(kw.items())))
+    for inputs, c in _COULOMB:
+        if inputs[1] == key and all(a is b for a, b in zip(inputs[0], arrays, strict=True)):
+            return c
     _, E = run_node_presliding(T_in, time, u, w, T_p=T_P_MIN, distal=None, **kw)
     den = float(E @ E)
-    return run(float(E @ y) / den if den > 0 else 0.0)
+    c = float(E @ (x_in - x_out)) / den if den > 0 else 0.0
+    _COULOMB.insert(0, ((arrays, key), c))
+    del _COULOMB[4:]
+    return c
