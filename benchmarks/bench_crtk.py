@@ -50,7 +50,8 @@ def run(mode: str, n: int) -> tuple[np.ndarray, int, int]:
             crtk._stop.set()
         received = [0]
         for topic, typ in slave_topics(cfg).items():
-            ros.zenoh_session.declare_subscriber(topic_key(0, topic, typ), lambda s: received.__setitem__(0, received[0] + 1))
+            ros.zenoh_session.declare_subscriber(topic_key(0, topic, typ),
+                                                 lambda s: received.__setitem__(0, received[0] + 1))
         node = SlaveNode(cfg, rig, links, calibrate=False, model=SheathModel(K=rig.K, compliance=rig.M_e))
         times, overruns = np.empty(n), 0
         t_next = time.monotonic()

@@ -122,10 +122,10 @@ def main() -> None:
     cpu, wall = cpu[200:], wall[200:]
 
     def pct(x: np.ndarray) -> str:
-        return (f"p50 {np.percentile(x, 50):6.1f}, p99 {np.percentile(x, 99):6.1f}, p99.9 {np.percentile(x, 99.9):7.1f}, "
-                f"max {x.max():7.1f} us")
-    print(f"master step, {len(cpu)} cycles ({a.protocol}, sleep {1e3 * a.sleep:g} ms between cycles; engaged {st['engage_count']} time(s), "
-          f"safe events {st['safe_events']}, finished {st['finished']}):")
+        return (f"p50 {np.percentile(x, 50):6.1f}, p99 {np.percentile(x, 99):6.1f}, "
+                f"p99.9 {np.percentile(x, 99.9):7.1f}, max {x.max():7.1f} us")
+    print(f"master step, {len(cpu)} cycles ({a.protocol}, sleep {1e3 * a.sleep:g} ms between cycles; "
+          f"engaged {st['engage_count']} time(s), safe events {st['safe_events']}, finished {st['finished']}):")
     print(f"  thread CPU time {pct(cpu)}  (mean {cpu.mean():.1f} us)")
     print(f"  wall time       {pct(wall)}  (mean {wall.mean():.1f} us)")
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")

@@ -58,17 +58,20 @@ def main(argv: list[str] | None = None) -> None:
           f"{s['centre_map']['loro']['summary']['median_torque_rmse_fs']:.3f} FS (centre map)")
     lo = s["centre_map"]["loro"]["summary"]
     print(f"centre map left out (scored once its band-centre reading holds both edges): median "
-          f"{lo['median_torque_rmse_fs']:.3f} / worst {lo['max_torque_rmse_fs']:.3f} / largest {lo['max_torque_max_fs']:.3f} "
-          f"FS; from the first reversal {lo['from_k0']['median_torque_rmse_fs']:.3f} / {lo['from_k0']['max_torque_rmse_fs']:.3f} "
+          f"{lo['median_torque_rmse_fs']:.3f} / worst {lo['max_torque_rmse_fs']:.3f} / "
+          f"largest {lo['max_torque_max_fs']:.3f} FS; from the first reversal "
+          f"{lo['from_k0']['median_torque_rmse_fs']:.3f} / {lo['from_k0']['max_torque_rmse_fs']:.3f} "
           f"/ {lo['from_k0']['max_torque_max_fs']:.3f}")
     mc = s["model_choice"]
     lc = mc.get("load_gain_check", {})
     print(f"headline model: {mc['chosen']} (calibration time split, torque RMSE [FS]: "
           + ", ".join(f"{n} {v:.3f}" for n, v in mc["candidates"].items())
           + "; load gain implied / eligible: "
-          + ", ".join(f"{n} {g:.3f} {'yes' if lc['eligible'][n] else 'no'}" for n, g in lc.get("implied_load_gain", {}).items())
+          + ", ".join(f"{n} {g:.3f} {'yes' if lc['eligible'][n] else 'no'}"
+                      for n, g in lc.get("implied_load_gain", {}).items())
           + f"); headline median {s['summary']['model']['median_torque_rmse_fs']:.3f} / worst "
-          f"{s['summary']['model']['max_torque_rmse_fs']:.3f} / largest {s['summary']['model']['max_torque_max_fs']:.3f} FS")
+          f"{s['summary']['model']['max_torque_rmse_fs']:.3f} / largest "
+          f"{s['summary']['model']['max_torque_max_fs']:.3f} FS")
     t0 = time.perf_counter()
     runs, _ = load_mrd_dir(args.dir)
     t1 = time.perf_counter()

@@ -67,9 +67,11 @@ def joints(profile: int, seconds: float = 20.0) -> list[tuple[str, float, float]
     dt, js, st = 1.0 / cfg.rig.rate_hz, cfg.instrument.joints, inst.state
     t = np.arange(int(seconds / dt)) * dt
     if profile == 0:      # swings through both sides with minor loops and a step
-        cmd = 0.6 * np.sin(2 * np.pi * 0.2 * t) + 0.05 * np.sin(2 * np.pi * 1.3 * t) + 0.1 * (np.sin(2 * np.pi * 0.05 * t) > 0)
+        cmd = (0.6 * np.sin(2 * np.pi * 0.2 * t) + 0.05 * np.sin(2 * np.pi * 1.3 * t)
+               + 0.1 * (np.sin(2 * np.pi * 0.05 * t) > 0))
     else:                 # smaller, faster swings on a slow drift
-        cmd = 0.3 * np.sin(2 * np.pi * 0.5 * t) + 0.15 * np.sin(2 * np.pi * 0.11 * t) + 0.02 * np.sin(2 * np.pi * 3.0 * t)
+        cmd = (0.3 * np.sin(2 * np.pi * 0.5 * t) + 0.15 * np.sin(2 * np.pi * 0.11 * t)
+               + 0.02 * np.sin(2 * np.pi * 3.0 * t))
     x0, rows = st.x_in_cmd.copy(), []
     for c in cmd:
         st = inst.step(x0 + np.array([[0.004 * c, -0.004 * c]] * len(js)), dt)

@@ -117,8 +117,8 @@ def demo_roundtrip(timeout: float = 120.0, config: Path | None = None) -> dict:
                         "--run-dir", str(run), "--timeout", str(timeout)], check=False, cwd=ROOT, capture_output=True,
                        timeout=timeout + 30, env=dict(os.environ, PYTHONUNBUFFERED="1"))
         s = json.loads((run / "summary.json").read_text())
-        rec = json.loads((run / "recorder" / "summary.json").read_text()) if (run / "recorder" / "summary.json").is_file() \
-            else {}
+        rec_summary = run / "recorder" / "summary.json"
+        rec = json.loads(rec_summary.read_text()) if rec_summary.is_file() else {}
     lat = s["master"]["latency_rtt"]
     sides = {side: s[side]["pacer"] for side in ("master", "slave")}
     return {"p50_ms": lat["p50_ms"], "p99_ms": lat["p99_ms"], "max_ms": lat["max_ms"], "n": lat["n"],
@@ -134,7 +134,8 @@ def main(seconds: float = 10.0) -> None:
     demo = demo_roundtrip()
     load = os.getloadavg()[0]
     print(f"machine: {os.cpu_count()} cores, load average {load:.1f} during the run")
-    print(f"bare zenoh ping-pong, 2 processes, 1 kHz, {seconds:g} s ({bare['scheduling']}): p50 {bare['p50_ms']:.3f} ms, "
+    print(f"bare zenoh ping-pong, 2 processes, 1 kHz, {seconds:g} s ({bare['scheduling']}): "
+          f"p50 {bare['p50_ms']:.3f} ms, "
           f"p99 {bare['p99_ms']:.3f} ms, max {bare['max_ms']:.2f} ms ({bare['echoed']}/{bare['sent']} echoed, "
           f"pacer overruns {100 * bare['overrun_fraction']:.2f} %)")
     print(f"teleop demo (recorder+slave+master), command -> estimate echo: p50 {demo['p50_ms']:.3f} ms, "

@@ -217,7 +217,8 @@ def main() -> None:
     print()
     print_table(steps, joints)
     print_roundtrips(bare, demos)
-    print(f"load average {load0:.2f} at the start, {os.getloadavg()[0]:.2f} at the end (1 min), on {os.cpu_count()} CPUs")
+    print(f"load average {load0:.2f} at the start, {os.getloadavg()[0]:.2f} at the end (1 min), "
+          f"on {os.cpu_count()} CPUs")
 
 
 if __name__ == "__main__":

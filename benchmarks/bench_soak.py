@@ -278,8 +278,9 @@ def run(args: argparse.Namespace) -> int:
         return 2
     t0 = time.monotonic()
     prev = state(procs, run_dir, t0)
+    n_windows = int(math.ceil(args.duration / args.window))
     marks = sorted({min(BASELINE, args.duration)} | {min(args.duration, args.window * k)
-                                                     for k in range(1, int(math.ceil(args.duration / args.window)) + 1)})
+                                                     for k in range(1, n_windows + 1)})
     base = prev
     for mark in marks:
         _wait(procs, mark - 0.5, t0)              # the figures of the last LIVE_EVERY before the mark

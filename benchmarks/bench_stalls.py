@@ -44,7 +44,8 @@ ROOT = Path(__file__).resolve().parents[1]
 LATE = 0.5e-3            # [s] a canary wake-up this late is a stall of its CPU
 NEAR = 3e-3              # [s] an overrun this close to a canary stall is attributed to it
 SCHED_DEBUG = Path("/sys/kernel/debug/sched/debug")
-_RT = re.compile(r"rt_rq\[(\d+)\]:/\n\s+\.rt_nr_running\s+: (\d+)\n\s+\.rt_throttled\s+: (\d+)\n\s+\.rt_time\s+: ([\d.]+)")
+_RT = re.compile(r"rt_rq\[(\d+)\]:/\n\s+\.rt_nr_running\s+: (\d+)\n"
+                 r"\s+\.rt_throttled\s+: (\d+)\n\s+\.rt_time\s+: ([\d.]+)")
 
 
 # ---- the witnesses (each runs as its own process: python bench_stalls.py --witness KIND OUT [CPU]) ----
@@ -85,7 +86,8 @@ def proc_stat(out: str) -> None:
     while not stop[0]:
         with open("/proc/stat") as fh:
             lines = fh.read().split("\n")
-        rows.append([[int(x) for x in ln.split()[1:9]] for ln in lines if ln.startswith("cpu") and not ln.startswith("cpu ")])
+        rows.append([[int(x) for x in ln.split()[1:9]] for ln in lines
+                     if ln.startswith("cpu") and not ln.startswith("cpu ")])
         ts.append(time.monotonic())
         time.sleep(0.002)
     np.savez(out, t=np.asarray(ts), cpu=np.asarray(rows))

@@ -159,10 +159,10 @@ def _readings(rows: list[dict], present: list[dict], clean: list[dict]) -> None:
                 + [ratio(r.get("twin_detail", {})) for r in present] if v is not None]
         weak = [r for r in slip if r["detail"]["stick_slip"].get("weak")]
         over = [r for r in slip if r["detail"]["stick_slip"].get("overruled")]
-        print(f"stick-slip check: stiction named by it {len(slip)} (right {sum(named_right(r) for r in slip)}; by the two weak "
-              f"signs: {len(weak)}, right {sum(named_right(r) for r in weak)}; over a named effect that left "
-              f"structure: {len(over)}, right {sum(named_right(r) for r in over)}); proximal "
-              f"roughness ratio of clean recordings and twins max {max(calm, default=float('nan')):.2f} "
+        print(f"stick-slip check: stiction named by it {len(slip)} (right {sum(named_right(r) for r in slip)}; "
+              f"by the two weak signs: {len(weak)}, right {sum(named_right(r) for r in weak)}; "
+              f"over a named effect that left structure: {len(over)}, right {sum(named_right(r) for r in over)}); "
+              f"proximal roughness ratio of clean recordings and twins max {max(calm, default=float('nan')):.2f} "
               f"({len(calm)} readable)")
     if any("rest_offset" in r.get("detail", {}) for r in rows):
         reads = [r for r in rows if off_zero(r.get("detail", {}))]

@@ -92,7 +92,8 @@ def calibration(path: Path | None = None, base: Config | None = None):
     clock = FakeClock(0.0)
     topics = [DelayTopic(clock, 0.0) for _ in range(4)]
     slave = SlaveNode(cfg, SimulatedInstrument.from_config(cfg),
-                      SlaveLinks(estimate=topics[0], heartbeat=topics[1], command=topics[2], master_heartbeat=topics[3]),
+                      SlaveLinks(estimate=topics[0], heartbeat=topics[1], command=topics[2],
+                                 master_heartbeat=topics[3]),
                       calibration_file=d / f"{cfg.instrument.id}.yaml", run_dir=d)
     for _ in range(int(120.0 / DT)):
         clock.advance(DT)
@@ -148,7 +149,8 @@ def run_joints(cal, force_scale: float = 0.2, delay: float = 0.001, arm: ArmPara
         m = {"time": mc["time"], "x_in": r * mc[f"{n}.cmd"], "force": mc[f"{n}.force"], "cmd_seq": mc["cmd_seq"],
              "state": mc["state"], "force_cmd": mc[f"{n}.force_cmd"]}
         s = {"t_node": sc["t_node"], "T_out": sc[f"{n}.torque"] / r, "cmd_seq": sc["cmd_seq"],
-             "T_out_hat": sc[f"{n}.torque_hat"] / r, "marker": np.array([joint_marker(int(v), j) for v in sc["marker"]])}
+             "T_out_hat": sc[f"{n}.torque_hat"] / r,
+             "marker": np.array([joint_marker(int(v), j) for v in sc["marker"]])}
         out.update(loop_metrics(m, s, force_scale, {MARKER_PAPER_A: f"{n} (pull a)", MARKER_PAPER_B: f"{n} (pull b)"}))
     return out
 

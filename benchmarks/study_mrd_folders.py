@@ -108,7 +108,8 @@ def main(argv: list[str] | None = None) -> None:
     print(f"one run + G: the line (median <= {LINE[0]}, worst <= {LINE[1]} FS) met on {len(met)} of {len(rows)}, "
           f"with every scored run better than linear on "
           f"{sum(r['one_run']['better_than_linear'] == r['one_run']['scored'] for r in met)}")
-    print(f"default: median {min(r['default']['median'] for r in rows):.3f}-{max(r['default']['median'] for r in rows):.3f}"
+    print(f"default: median {min(r['default']['median'] for r in rows):.3f}-"
+          f"{max(r['default']['median'] for r in rows):.3f}"
           f" FS; left out: median {min(r['left_out']['median'] for r in rows):.3f}-"
           f"{max(r['left_out']['median'] for r in rows):.3f} FS")
     if args.json:

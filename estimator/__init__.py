@@ -87,9 +87,9 @@ __all__ = [
     "Run", "SheathGeometry", "SheathModel", "Phase", "PhaseFormulaEstimator", "phase_formula_batch", "K_from_M_e",
     "MeasuredData", "noise_level", "EstimatorError", "CalibrationError", "DataError", "DistalEstimator",
     "DistalSample", "BatchEstimate", "estimate_batch", "PairEstimator", "PairSample", "PairBatch",
-    "estimate_pair_batch", "SpindleEstimator", "SpindleParams", "spindle_batch", "spindle_torque", "spindle_angle", "calibrate",
-    "calibrate_joint_limit", "CalibrationResult", "detect_knee", "fit_single", "SingleTendonFit", "fit_pair",
-    "PairParams", "PairFit", "diagnose", "diagnose_recording", "Diagnosis",
+    "estimate_pair_batch", "SpindleEstimator", "SpindleParams", "spindle_batch", "spindle_torque", "spindle_angle",
+    "calibrate", "calibrate_joint_limit", "CalibrationResult", "detect_knee", "fit_single", "SingleTendonFit",
+    "fit_pair", "PairParams", "PairFit", "diagnose", "diagnose_recording", "Diagnosis",
 ]
 
 if TYPE_CHECKING:       # the same names, for type checkers and editors (nothing is imported at run time)

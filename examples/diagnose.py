@@ -37,7 +37,8 @@ def main(argv: list[str] | None = None) -> int:
         data = read_measured_csv(args.csv)
         print(f"recording: {args.csv}, {data.time.size} samples over {data.time[-1] - data.time[0]:.1f} s")
     d = diagnose(data)
-    print(f"cause: {d['cause']}" + (f" (explains it as well: {', '.join(d['equivalent'])})" if d.get("equivalent") else ""))
+    also = f" (explains it as well: {', '.join(d['equivalent'])})" if d.get("equivalent") else ""
+    print(f"cause: {d['cause']}" + also)
     for key, label, unit, scale in (("rmse_T_out_N", "distal tension", "N", 1.0),
                                     ("rmse_x_out_m", "distal displacement", "um", 1e6)):
         base, ext = d["base"].get(key), d["extended"].get(key)

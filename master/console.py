@@ -152,8 +152,8 @@ class Console:
         """One line for the operator about the present status."""
         if self.status == ConsoleStatus.ALIGN:
             way = "release (push)" if self.misalignment > 0 else "pull"
-            return (f"align: the handle maps {1e3 * abs(self.misalignment) * self.unit_length:.2f} mm of tendon away from the "
-                    f"instrument; {way} back or clutch to re-anchor")
+            return (f"align: the handle maps {1e3 * abs(self.misalignment) * self.unit_length:.2f} mm of tendon "
+                    f"away from the instrument; {way} back or clutch to re-anchor")
         return {ConsoleStatus.WAIT_SLAVE: "waiting for the slave", ConsoleStatus.WAIT_OPERATOR: "hold the deadman",
                 ConsoleStatus.CLUTCH: "clutch: handle free, instrument held", ConsoleStatus.ENGAGED: "engaged",
                 ConsoleStatus.STOPPING: "stopping"}[self.status]

@@ -243,8 +243,9 @@ class MasterNode(MasterNodeBase):
             c.drop()                                  # an engaged axis is checked again with the others
         worst = next(c for c in self.consoles if c.status == status)
         many = len(self.consoles) > 1
+        axis = f"{self.axes.names[self.consoles.index(worst)]}: " if many else ""
         self.last_reason = (reason if not healthy else "no slave position") if status == ConsoleStatus.WAIT_SLAVE \
-            else _WAITING.get(status) or (f"{self.axes.names[self.consoles.index(worst)]}: " if many else "") + worst.prompt()
+            else _WAITING.get(status) or axis + worst.prompt()
         if status == ConsoleStatus.ALIGN:
             self._warn(now, "master: %s", self.last_reason)
         if status in (ConsoleStatus.WAIT_SLAVE, ConsoleStatus.WAIT_OPERATOR):

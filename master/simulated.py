@@ -316,7 +316,8 @@ class ScriptedOperator:
             T_in = [(T_in,)]
         seen = None if T_in is None else [tuple(v) if isinstance(v, (tuple, list)) else (v,) for v in T_in]
         ok = (seen is not None and len(seen) == len(self.axes)
-              and all(len(v) > a.max_side and all(math.isfinite(x) for x in v) for v, a in zip(seen, self.axes, strict=False)))
+              and all(len(v) > a.max_side and all(math.isfinite(x) for x in v)
+                      for v, a in zip(seen, self.axes, strict=False)))
         self._T = [tuple(float(x) for x in v) for v in seen] if ok and seen is not None else None
         self._engaged = bool(engaged)
 

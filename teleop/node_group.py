@@ -118,6 +118,7 @@ class NodeGroup(NodeBase):
 
     def stats(self) -> dict[str, Any]:
         """The loop's figures (``pacer``), each arm's step time (``arm_steps``) and each arm's own stats (``arms``)."""
-        return {"side": self.side.name.lower(), "arms": {n: node.stats() for n, node in zip(self.names, self.nodes, strict=False)},
+        return {"side": self.side.name.lower(),
+                "arms": {n: node.stats() for n, node in zip(self.names, self.nodes, strict=False)},
                 "arm_steps": self.arm_step_stats(), "pacer": dict(self.pacer_stats),
                 "safe_events": sum(getattr(n, "safe_events", 0) for n in self.nodes)}

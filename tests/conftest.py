@@ -1,5 +1,5 @@
-"""Every test, and every process a test starts, uses installation credentials of its own (teleop/session/credentials.py):
-a folder per test worker, never the user's ``~/.config/tsm-teleop/keys``."""
+"""Every test, and every process a test starts, uses installation credentials of its own
+(teleop/session/credentials.py): a folder per test worker, never the user's ``~/.config/tsm-teleop/keys``."""
 from __future__ import annotations
 
 import atexit

@@ -164,7 +164,8 @@ def rows() -> list[tuple[str, str, str, str, str]]:
         if owner.startswith("effect:"):
             meaning = owner[len("effect:"):]
         else:
-            meaning = yaml.get(plain) or _tidy(source.get((owner, key.rsplit(".", 1)[-1]), "")) or _mirrored(plain, yaml)
+            meaning = (yaml.get(plain) or _tidy(source.get((owner, key.rsplit(".", 1)[-1]), ""))
+                       or _mirrored(plain, yaml))
         if not unit:
             m = _UNIT.search(meaning)
             unit = m.group(1) if m and "-Z" not in m.group(1) else ""

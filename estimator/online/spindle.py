@@ -6,7 +6,8 @@ torque units at the spindle (tension times the spindle radius r_p, N m), so only
 pulley radii appear::
 
     d       = theta_p - theta_ref
-    u       = tau_p - k_p d - c_v omega_p - f_s lag(tanh(omega_p / omega_s), theta_s)   spindle torque on the cables [N m]
+    u       = tau_p - k_p d - c_v omega_p - f_s lag(tanh(omega_p / omega_s), theta_s)
+                                                                 spindle torque on the cables [N m]
     T_a,p   = (Q + u) / 2,   T_b,p = (Q - u) / 2                 the two proximal cable tensions     (S1)
     T_j,d   = profile memory of cable j, friction exponent K_j   (estimator.sheath envelope rule)    (S2)
     tau_d   = rho (1 + rho_1 d + rho_2 d^2) (T_a,d - T_b,d) + b + k_d d - f tanh(omega_p / omega_s)  (S3)
@@ -16,8 +17,8 @@ pulley radii appear::
 
 Parameters (SI): rho = r_d / r_p scaled by the sensors [-] (distal torque per unit of cable torque
 difference), rho_1 [1/rad], rho_2 [1/rad^2] its change with the angle (the cable's lever arm at the
-jaw, E7), theta_c [rad] the travel of the E2 lag, Q = (T_a + T_b) r_p the pretension torque [N m] (>= max |u|, else a cable goes
-slack), K_a, K_b the friction exponents of the two cables' paths over the shaft pulleys [-]
+jaw, E7), theta_c [rad] the travel of the E2 lag, Q = (T_a + T_b) r_p the pretension torque [N m] (>= max |u|,
+else a cable goes slack), K_a, K_b the friction exponents of the two cables' paths over the shaft pulleys [-]
 (equal for a symmetric routing; K_a != K_b makes the band grow with the load, E13), b the distal
 torque at zero cable torque difference [N m] (internal preload, sensor zero), k_p [N m/rad] an
 elastic torque inside the proximal end (seal, spring, or the two cables' wrap angles changing in
@@ -45,7 +46,8 @@ from numba import njit
 from estimator.sheath import envelope_clip
 
 __all__ = ["SPINDLE_TRAVEL", "SpindleParams", "Batch", "make_batch", "pair_kernel", "predict_torque", "predict_angle",
-           "play_batch", "angle_lag", "elongation_difference", "spindle_rate", "initial_side", "first_reversal", "OMEGA_S", "N_NODES"]
+           "play_batch", "angle_lag", "elongation_difference", "spindle_rate", "initial_side", "first_reversal",
+           "OMEGA_S", "N_NODES"]
 
 #: Speed scale of the smoothed direction of motion, tanh(omega / OMEGA_S) [rad/s].
 OMEGA_S = 0.05

@@ -32,8 +32,8 @@ import numpy as np
 
 from estimator.online.spindle import OMEGA_S, angle_lag, spindle_rate
 
-__all__ = ["CentreParams", "MIN_RATE", "MIN_SAMPLES", "stroke_starts", "stroke_centre", "centre_ready", "direction_state", "centre_features",
-           "predict_centre_map"]
+__all__ = ["CentreParams", "MIN_RATE", "MIN_SAMPLES", "stroke_starts", "stroke_centre", "centre_ready",
+           "direction_state", "centre_features", "predict_centre_map"]
 
 #: Spindle speed above which a sample is in full motion (on a band edge) [rad/s].
 MIN_RATE = 0.05
@@ -106,7 +106,8 @@ def stroke_centre(tau_p: np.ndarray, theta_p: np.ndarray, dt: float, window: tup
             edge[j, a:b][ok] = part[ok]
             last[j] = float(part[-1])
     hi, lo = edge
-    out = np.where(np.isnan(hi), (lo + w0) / (1.0 - w1), np.where(np.isnan(lo), (hi - w0) / (1.0 + w1), 0.5 * (hi + lo)))
+    out = np.where(np.isnan(hi), (lo + w0) / (1.0 - w1),
+                   np.where(np.isnan(lo), (hi - w0) / (1.0 + w1), 0.5 * (hi + lo)))
     return np.where(np.isnan(out), float(centre0), out)
 
 

@@ -154,14 +154,16 @@ class SpindleEstimator:
         d = theta_p - self.theta_ref
         u = tau_p - p.k_p * d - p.c_v * self.omega
         if p.f_s != 0.0:
-            self._dir += (math.tanh(self.omega / OMEGA_S) - self._dir) * (1.0 - math.exp(-travel / max(p.theta_s, 1e-4)))
+            blend = 1.0 - math.exp(-travel / max(p.theta_s, 1e-4))
+            self._dir += (math.tanh(self.omega / OMEGA_S) - self._dir) * blend
             u -= p.f_s * self._dir
         ta, tb = max(0.5 * (p.Q + u), 0.0), max(0.5 * (p.Q - u), 0.0)
         Tad, Tbd, ea, eb = _cables(self.Ta, self.Tb, self.lo_a, self.hi_a, self.lo_b, self.hi_b, self.w, ta, tb)
         tau = p.rho * (1.0 + (p.rho_1 + p.rho_2 * d) * d) * (Tad - Tbd) + p.b + p.k_d * d
         tau -= p.f * math.tanh(self.omega / OMEGA_S)
         if p.theta_c > 1e-6:
-            self._lag = tau if self._lag is None else self._lag + (tau - self._lag) * (1.0 - math.exp(-travel / p.theta_c))
+            self._lag = (tau if self._lag is None
+                         else self._lag + (tau - self._lag) * (1.0 - math.exp(-travel / p.theta_c)))
             tau = self._lag
         ang = p.n_k * (theta_p - p.lam * (ea - eb)) + p.theta0
         if p.beta > 0:

@@ -1,5 +1,6 @@
-"""The parent's end of a child process's stdin pipe (the CSV and Rerun processes of a side: teleop/recording/csv_proc.py,
-teleop/rerun/process.py): pickles written whole, and a child that is gone reported as False, never raised."""
+"""The parent's end of a child process's stdin pipe (the CSV and Rerun processes of a side:
+teleop/recording/csv_proc.py, teleop/rerun/process.py): pickles written whole, and a child that is gone reported as
+False, never raised."""
 from __future__ import annotations
 
 import pickle

@@ -158,7 +158,8 @@ class ProcessCsvRecorder:
             self._drain()
 
     def _drain(self) -> None:
-        """Send the queued rows in order, in chunks pickled while the control loop sleeps (teleop/timing/realtime.py)."""
+        """Send the queued rows in order, in chunks pickled while the control loop sleeps
+        (teleop/timing/realtime.py)."""
         q = self._queue
         per_row = VALUE_COST * len(self.columns)
         chunk = max(1, int(CHUNK_COST / per_row))

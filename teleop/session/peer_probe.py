@@ -195,7 +195,8 @@ def _tls_probe(endpoint: str, host: str, port: int, tls, timeout: float) -> Find
         return Finding("tls", f"the TLS handshake failed: {reason}")
     except TimeoutError:                 # a plain Zenoh TCP listener waits for the rest of a frame that never comes
         return Finding("not_tls", f"the listener does not answer a TLS handshake within {timeout:g} s: it does not "
-                                  f"speak TLS (a plain TCP Zenoh listener: the endpoint is tcp/{endpoint.split('/', 1)[1]})")
+                                  f"speak TLS (a plain TCP Zenoh listener: the endpoint is "
+                                  f"tcp/{endpoint.split('/', 1)[1]})")
     except OSError:
         return None
 

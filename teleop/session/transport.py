@@ -49,7 +49,8 @@ def _insert(cfg: zenoh.Config, key: str, value, where: str, shown=None) -> None:
     try:
         cfg.insert_json5(key, json.dumps(value))
     except zenoh.ZError as e:
-        raise ConfigError(f"{where}: {value if shown is None else shown!r} rejected by zenoh: {zenoh_error_text(e)}") from None
+        raise ConfigError(f"{where}: {value if shown is None else shown!r} rejected by zenoh: "
+                          f"{zenoh_error_text(e)}") from None
 
 
 def zenoh_config(transport: TransportConfig, *, listen: tuple[str, ...] | None = None,

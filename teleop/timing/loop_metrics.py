@@ -42,8 +42,8 @@ import numpy as np
 
 from estimator.errors import DataError
 
-__all__ = ["CUTOFF_HZ", "WINDOW_S", "CHATTER_LIMITS", "TRANSPARENCY_LIMIT_FS", "chatter", "loop_metrics", "read_columns",
-           "run_loop_metrics", "chatter_checks", "transparency_checks", "loop_metric_lines"]
+__all__ = ["CUTOFF_HZ", "WINDOW_S", "CHATTER_LIMITS", "TRANSPARENCY_LIMIT_FS", "chatter", "loop_metrics",
+           "read_columns", "run_loop_metrics", "chatter_checks", "transparency_checks", "loop_metric_lines"]
 
 ENGAGED = 3          # teleop.wire.messages.SideState.ENGAGED
 CUTOFF_HZ = 30.0

@@ -162,7 +162,8 @@ def _encode_command(msg: Command) -> bytes:
     _check_uint("Command", "marker", msg.marker, 32)
     try:
         return (_HEADER.pack(MAGIC, WIRE_VERSION, TYPE_COMMAND)
-                + _COMMAND.pack(msg.seq, msg.t_master, bool(msg.engaged), msg.marker, n) + _floats(n).pack(*msg.targets))
+                + _COMMAND.pack(msg.seq, msg.t_master, bool(msg.engaged), msg.marker, n)
+                + _floats(n).pack(*msg.targets))
     except struct.error:
         raise CodecError(f"Command fields do not fit the wire format: {msg!r}") from None
 

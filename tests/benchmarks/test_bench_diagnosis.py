@@ -91,7 +91,8 @@ def test_floor_table_reads_the_clean_rows_at_the_floor_only(bench, tmp_path, cap
     rows = [
         {"effect": "none", "cause": "none", "structure": 1.2, "scores": {"stiction": 0.6, "sensor_lag:T_out": 0.9}},
         # a clean recording named something at the floor still counts (a false alarm lowers the bound)
-        {"effect": "none", "cause": "stiction", "structure": 2.0, "scores": {"stiction": 0.4, "sensor_lag:T_out": 0.95}},
+        {"effect": "none", "cause": "stiction", "structure": 2.0,
+         "scores": {"stiction": 0.4, "sensor_lag:T_out": 0.95}},
         # far from the floor: FLOOR_SCORE does not apply there, its scores do not count
         {"effect": "none", "cause": "unknown", "structure": 9.0, "scores": {"stiction": 0.1, "sensor_lag:T_out": 0.2}},
         {"effect": "stiction", "cause": "none", "structure": 1.0, "scores": {"stiction": 0.05},

@@ -65,7 +65,8 @@ def test_transition_elongations_meet_the_branches():
 
 
 def test_minor_loop_breaks_the_paper_rule_but_not_the_profile():
-    """docs/concepts/model.md, the tension-profile memory: K = 0.5, 0 -> 20 -> 10 -> 25 N gives T_out = 15.16 N exactly."""
+    """docs/concepts/model.md, the tension-profile memory:
+    K = 0.5, 0 -> 20 -> 10 -> 25 N gives T_out = 15.16 N exactly."""
     K5 = 0.5
     T_in = ramp(0, 20, 10, 25)
     exact = 25 * math.exp(-K5)  # resumes the pull line at the previous peak already passed
@@ -95,7 +96,8 @@ def test_phase_labels_follow_the_cycle():
 def test_compiled_batch_equals_online_state_machine(K_):
     """phase_formula_batch is a compiled twin of PhaseFormulaEstimator.step: keep them equal."""
     t = np.arange(6000) * 1e-3
-    T_in = 10 + 8 * np.sin(2 * np.pi * 0.8 * t) * np.sin(2 * np.pi * 0.13 * t) + np.random.default_rng(3).normal(0, 0.05, t.size)
+    noise = np.random.default_rng(3).normal(0, 0.05, t.size)
+    T_in = 10 + 8 * np.sin(2 * np.pi * 0.8 * t) * np.sin(2 * np.pi * 0.13 * t) + noise
     T_b, e_b, ph_b = capstan.phase_formula_batch(T_in, K_, 2e-4, deadband=0.1, T0=T_in[0])
     est = capstan.PhaseFormulaEstimator(K_, 2e-4, deadband=0.1, T0=T_in[0])
     for k, T in enumerate(T_in):

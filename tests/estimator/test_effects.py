@@ -144,7 +144,8 @@ def test_a_distal_end_seen_moving_makes_the_whole_tendon_slide():
     u, w = grid()
     F, K_true, K_fit = 5.0, 0.7, 0.9
     T_in = np.concatenate([np.linspace(0.5, F * math.exp(K_true), 300), np.full(500, F * math.exp(K_true)),
-                           np.linspace(F * math.exp(K_true), F * math.exp(-K_true), 100), np.full(500, F * math.exp(-K_true))])
+                           np.linspace(F * math.exp(K_true), F * math.exp(-K_true), 100),
+                           np.full(500, F * math.exp(-K_true))])
     x_in = np.concatenate([np.linspace(0.0, 1e-3, 300), np.linspace(1e-3, 6e-3, 500), np.full(100, 6e-3),
                            np.linspace(6e-3, 1e-3, 500)])
     t = np.arange(T_in.size) * 5e-3
@@ -340,7 +341,8 @@ def test_distal_sensor_effects_are_reading_models():
     s = series(T, x)
     ref = predict([], {"K": K}, s, compliance=1e-4)
     t = s.time
-    cases = {"sensor_offset:T_out": (0.3, ref.T_out + 0.3, ref.x_out), "sensor_gain:T_out": (0.05, 1.05 * ref.T_out, ref.x_out),
+    cases = {"sensor_offset:T_out": (0.3, ref.T_out + 0.3, ref.x_out),
+             "sensor_gain:T_out": (0.05, 1.05 * ref.T_out, ref.x_out),
              "sensor_drift:T_out": (0.01, ref.T_out + 0.01 * (t - t[0]), ref.x_out),
              "sensor_lag:T_out": (0.02, np.interp(t - 0.02, t, ref.T_out), ref.x_out),
              "sensor_offset:x_out": (4e-5, ref.T_out, ref.x_out + 4e-5),

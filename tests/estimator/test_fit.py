@@ -12,7 +12,8 @@ K_TRUE, C_TRUE = 0.45, 8e-5        # [-], L/EA [m/N]
 def history(n=20000, dt=1e-3):
     """Proximal tension with reversals and minor loops, and a displacement [N], [m]."""
     t = np.arange(n) * dt
-    T_in = 6 + 4 * np.sin(2 * np.pi * 0.25 * t) + 1.5 * np.sin(2 * np.pi * 1.3 * t + 1) + 0.4 * np.sin(2 * np.pi * 3.7 * t)
+    T_in = (6 + 4 * np.sin(2 * np.pi * 0.25 * t) + 1.5 * np.sin(2 * np.pi * 1.3 * t + 1)
+            + 0.4 * np.sin(2 * np.pi * 3.7 * t))
     x_in = 2e-3 * np.sin(2 * np.pi * 0.25 * t) + 1e-4 * T_in
     return t, T_in, x_in
 

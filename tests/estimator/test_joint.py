@@ -144,7 +144,8 @@ def test_the_compiled_step_is_the_per_tendon_step_bit_for_bit(coupling, noise):
     rng = np.random.default_rng(3)
     t = np.arange(4000) * 1e-3
     c = 0.003 * np.sin(2 * np.pi * 0.7 * t) + 0.001 * np.sin(2 * np.pi * 3.1 * t)
-    Ta, Tb = 1.5 + 400 * np.maximum(c, -0.002) + rng.normal(0, 0.02, t.size), 1.5 - 300 * c + rng.normal(0, 0.02, t.size)
+    Ta = 1.5 + 400 * np.maximum(c, -0.002) + rng.normal(0, 0.02, t.size)
+    Tb = 1.5 - 300 * c + rng.normal(0, 0.02, t.size)
     Ta[1500:1600] = -0.1                                            # tendon a slack for a while
     xa, xb = c + 1e-4 * Ta, -c + 1e-4 * Tb
     phases, angles, slid = set(), [], set()

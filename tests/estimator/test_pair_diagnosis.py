@@ -76,7 +76,8 @@ def test_memoised_node_arrays_are_left_unchanged_by_a_run():
         runs = [simulate_pair(c, (5.0, 4.0), 1.4, (0.4, 0.4), (0.9, 0.5), 4.0, **kw) for _ in range(2)]
         assert all(np.array_equal(x, y) for x, y in zip(*runs, strict=False))
         for K in (0.9, 0.5):                       # the kernels only read the shared node arrays
-            cached, fresh = _node_arrays(K, 0.4, 24, kw.get("lam_s", 0.0)), tendon_arrays(K, 0.4, 24, kw.get("lam_s", 0.0))
+            lam_s = kw.get("lam_s", 0.0)
+            cached, fresh = _node_arrays(K, 0.4, 24, lam_s), tendon_arrays(K, 0.4, 24, lam_s)
             assert all(np.array_equal(x, y) for x, y in zip(cached, fresh, strict=False))
 
 

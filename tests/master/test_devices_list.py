@@ -21,7 +21,8 @@ def _no_package(module: str):
 
 
 def test_evdev_lists_each_device_and_whether_it_can_render_a_constant_force():
-    ev = FakeEvdev(FakeInput("/dev/input/event7", "FF joystick"), FakeInput("/dev/input/event2", "keyboard", ff_codes=()))
+    ev = FakeEvdev(FakeInput("/dev/input/event7", "FF joystick"),
+                   FakeInput("/dev/input/event2", "keyboard", ff_codes=()))
     lines = backend_lines("evdev", evdev=ev)
     assert [ln.split()[0] for ln in lines] == ["/dev/input/event2", "/dev/input/event7"]
     assert lines[0].endswith("no FF_CONSTANT (not usable)") and lines[1].endswith("FF_CONSTANT")

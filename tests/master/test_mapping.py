@@ -128,8 +128,10 @@ def test_time_going_back_never_increases_the_force():
     assert f == f_before
 
 
-@pytest.mark.parametrize("kw, key", [(dict(force_limit=0.0), "force_limit"), (dict(force_rate_limit=-1.0), "force_rate_limit"),
-                                     (dict(ramp_time=math.nan), "ramp_time"), (dict(force_scale=math.inf), "force_scale")])
+@pytest.mark.parametrize("kw, key", [(dict(force_limit=0.0), "force_limit"),
+                                     (dict(force_rate_limit=-1.0), "force_rate_limit"),
+                                     (dict(ramp_time=math.nan), "ramp_time"),
+                                     (dict(force_scale=math.inf), "force_scale")])
 def test_bad_parameters_name_the_key(kw, key):
     with pytest.raises(ConfigError, match=f"master.mapping.{key}"):
         engaged_map(**kw)

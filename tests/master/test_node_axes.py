@@ -69,7 +69,8 @@ def test_every_axis_is_anchored_commanded_and_rendered_through_its_pulley():
     r = [j.pulley_radius for j in cfg.instrument.joints]
     m = cfg.master.mapping
     # rendered with the hands still: -force_scale torque / r, within the clamp
-    expected = [max(-m.force_limit, min(m.force_limit, -m.force_scale * tq / rk)) for tq, rk in zip(TORQUES, r, strict=False)]
+    expected = [max(-m.force_limit, min(m.force_limit, -m.force_scale * tq / rk))
+                for tq, rk in zip(TORQUES, r, strict=False)]
     assert hands.forces[-1] == pytest.approx(expected, abs=1e-9) and max(map(abs, expected)) > 0.3
     hands.positions[1] += 0.01                          # 10 mm on axis 1 (bend_lr, r = 3.5 mm)
     run(node, links, clock, 1)

@@ -102,7 +102,8 @@ def run_loop(passivity: bool, T: float = 3.0, seed: int = 1):
             Session(zenoh_config(cfg.transport, listen=(), connect=(ep,)), clock=clock) as zm:
         inj_m = FaultInjector(f"delay={DELAY},drop={LOSS},seed={seed},stream=command", clock)
         inj_s = FaultInjector(f"delay={DELAY},drop={LOSS},seed={seed + 100},stream=estimate", clock)
-        s_cmd, s_hb = zs.subscriber(command_key(ident), Command), zs.subscriber(heartbeat_key(ident, "master"), Heartbeat)
+        s_cmd = zs.subscriber(command_key(ident), Command)
+        s_hb = zs.subscriber(heartbeat_key(ident, "master"), Heartbeat)
         m_est = zm.subscriber(estimate_key(ident), Estimate)
         m_hb = zm.subscriber(heartbeat_key(ident, "slave"), Heartbeat)
         slave = SlaveNode(cfg, rig, SlaveLinks(inj_s.wrap(zs.publisher(estimate_key(ident)), "estimate"),

@@ -69,7 +69,8 @@ def test_make_device_refuses_a_joint_instrument_for_a_one_axis_device():
 
 class FakeDhd:
     def __init__(self, opens=0):
-        self.opens, self.pos, self.mask, self.forces, self.closed, self.fail = opens, [0.01, -0.02, 0.03], 0b1, [], 0, False
+        self.opens, self.pos, self.mask = opens, [0.01, -0.02, 0.03], 0b1
+        self.forces, self.closed, self.fail = [], 0, False
 
     def open(self):
         return self.opens

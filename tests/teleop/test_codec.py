@@ -270,7 +270,8 @@ def test_a_prepared_body_encodes_the_same_bytes_and_a_bad_one_is_refused_as_befo
     for _ in range(50):
         axes = tuple(_axis(rng, rng.choice((1, 2))) for _ in range(rng.randint(1, MAX_AXES)))
         m = sum(len(a.tendons) for a in axes)
-        profiles = tuple(tuple(rng.uniform(-1e3, 1e3) for _ in range(20)) for _ in range(m)) if rng.random() < 0.5 else ()
+        profiles = (tuple(tuple(rng.uniform(-1e3, 1e3) for _ in range(20)) for _ in range(m))
+                    if rng.random() < 0.5 else ())
         msg = Estimate(_u32(rng), _u32(rng), _f(rng), axes, profiles)
         plain = encode(msg)
         assert codec.prepare_estimate(axes, profiles)

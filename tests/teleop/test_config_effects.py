@@ -83,7 +83,8 @@ def test_the_toy_is_gone_after_unregister():
 
 def test_default_yaml_documents_the_effects_as_the_catalogue_says():
     text = (CONFIGS / "default.yaml").read_text()
-    assert effects_block(6) in text, "regenerate the rig.simulated.effects block: teleop.config.effects.effects_block(6)"
+    assert effects_block(6) in text, ("regenerate the rig.simulated.effects block: "
+                                      "teleop.config.effects.effects_block(6)")
 
 
 def test_every_catalogue_switch_has_a_kernel_in_the_simulated_rig():

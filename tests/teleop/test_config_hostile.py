@@ -144,7 +144,8 @@ def test_the_costliest_files_under_the_cap_end_within_a_second(tmp_path, text):
 def _nested(key: str, value: str) -> str:
     """``a.b.c`` = value as block YAML."""
     parts = key.split(".")
-    return "".join(f"{'  ' * i}{k}:\n" for i, k in enumerate(parts[:-1])) + f"{'  ' * (len(parts) - 1)}{parts[-1]}: {value}\n"
+    parents = "".join(f"{'  ' * i}{k}:\n" for i, k in enumerate(parts[:-1]))
+    return parents + f"{'  ' * (len(parts) - 1)}{parts[-1]}: {value}\n"
 
 
 @pytest.mark.parametrize("key", DIR_KEYS)

@@ -49,7 +49,8 @@ JOINT = "    - name: {name}\n      pulley_radius: 0.004\n"
     ("instrument:\n  joints:\n    - pulley_radius: 0.004\n",
      r"instrument.joints\[0\]: missing key 'name'"),
     ("instrument:\n  joints:\n    - name: 'wr ist'\n", r"instrument.joints\[0\].name: 'wr ist' is not a joint name"),
-    ("instrument:\n  joints:\n    - name: w\nrig:\n  simulated:\n    joints:\n      - {name: w, load: {tissue_contact: -0.1}}\n",
+    ("instrument:\n  joints:\n    - name: w\n"
+     "rig:\n  simulated:\n    joints:\n      - {name: w, load: {tissue_contact: -0.1}}\n",
      r"rig.simulated.joints\[0\].load.tissue_contact: -0.1 is out of range: expected >= 0 \[rad\]"),
     ("instrument:\n  joints:\n    - name: w\n      load: {tissue_contact: 0.1}\n",
      r"inst.yaml:4: 'instrument.joints\[0\].load' has moved to 'rig.simulated.joints\[\].load \(the entry with"),

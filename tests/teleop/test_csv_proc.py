@@ -151,7 +151,8 @@ def test_a_killed_side_loses_no_row_the_child_received(tmp_path):
 def test_the_reports_of_the_child_are_json_lines(tmp_path):
     path = tmp_path / "w.csv"
     ProcessCsvRecorder(path, COLUMNS).close()                       # the header; the child appends
-    proc = subprocess.Popen([sys.executable, "-m", "teleop.recording.csv_proc"], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+    proc = subprocess.Popen([sys.executable, "-m", "teleop.recording.csv_proc"], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE)
     import pickle
     wire = b"".join(pickle.dumps(m) for m in [(str(path), COLUMNS, 100), [(0.0, 0.0, 1.0), (1e-3, math.inf, 0.0)],
                                               "flush", [(2e-3, 0.0, 2.0)], None])

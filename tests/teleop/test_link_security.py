@@ -38,7 +38,8 @@ def pki(tmp_path_factory) -> dict[str, str]:
     d = tmp_path_factory.mktemp("pki")
     _openssl(d, "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "ca.key", "-out", "ca.pem", "-days", "1",
              "-subj", "/CN=teleop-test-ca")
-    _openssl(d, "req", "-newkey", "rsa:2048", "-nodes", "-keyout", "srv.key", "-out", "srv.csr", "-subj", "/CN=localhost")
+    _openssl(d, "req", "-newkey", "rsa:2048", "-nodes", "-keyout", "srv.key", "-out", "srv.csr",
+             "-subj", "/CN=localhost")
     (d / "ext.cnf").write_text("subjectAltName=DNS:localhost,IP:127.0.0.1\n")
     _openssl(d, "x509", "-req", "-in", "srv.csr", "-CA", "ca.pem", "-CAkey", "ca.key", "-CAcreateserial", "-out",
              "srv.pem", "-days", "1", "-extfile", "ext.cnf")
@@ -64,7 +65,8 @@ def test_wrong_password_peer_can_neither_command_nor_read_estimates(pki):
     ep = f"tls/localhost:{free_tcp_port()}"
     slave_cfg = TransportConfig(listen=(ep,), connect=(),
                                 auth=TransportAuthConfig(user="slave", password="s3cret", dictionary_file=pki["users"]),
-                                tls=TransportTlsConfig(root_ca=pki["ca"], certificate=pki["cert"], private_key=pki["key"]))
+                                tls=TransportTlsConfig(root_ca=pki["ca"], certificate=pki["cert"],
+                                                       private_key=pki["key"]))
     with Session(slave_cfg) as slave, Session(_peer(ep, "surgeon", "right", pki["ca"])) as master, \
             Session(_peer(ep, "surgeon", "wrong", pki["ca"])) as rogue:
         commands = slave.subscriber(command_key("sec1"), Command)
@@ -94,11 +96,12 @@ def test_wrong_password_peer_can_neither_command_nor_read_estimates(pki):
 
 
 def test_a_certificate_from_another_ca_is_refused(pki, tmp_path):
-    _openssl(tmp_path, "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "o.key", "-out", "other.pem", "-days",
-             "1", "-subj", "/CN=other-ca")
+    _openssl(tmp_path, "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "o.key", "-out", "other.pem",
+             "-days", "1", "-subj", "/CN=other-ca")
     ep = f"tls/localhost:{free_tcp_port()}"
-    listener = TransportConfig(listen=(ep,), connect=(), tls=TransportTlsConfig(root_ca=pki["ca"], certificate=pki["cert"],
-                                                                                private_key=pki["key"]))
+    listener = TransportConfig(listen=(ep,), connect=(),
+                               tls=TransportTlsConfig(root_ca=pki["ca"], certificate=pki["cert"],
+                                                      private_key=pki["key"]))
     with Session(listener) as a, Session(TransportConfig(listen=(), connect=(ep,), tls=TransportTlsConfig(
             root_ca=str(tmp_path / "other.pem")))) as b:
         sub = a.subscriber(command_key("sec2"))
@@ -208,5 +211,5 @@ def test_a_router_with_a_credentials_dictionary_routes_only_for_authorised_clien
         with pytest.raises(TransportError, match="Unable to connect"):   # a client with a wrong password: no session
             Session(client("surgeon", "guess"))
         assert _until(master.publisher(command_key("sec5")), Command(1, 0.0, (0.001,)), commands)
-        assert _until(slave.publisher(estimate_key("sec5")), tendon_estimate(1, 1, 0.0, 2.0, 0.0, 1.5, 0.0, 0.0, Phase.HOLD),
-                      good_est)
+        assert _until(slave.publisher(estimate_key("sec5")),
+                      tendon_estimate(1, 1, 0.0, 2.0, 0.0, 1.5, 0.0, 0.0, Phase.HOLD), good_est)

@@ -93,8 +93,8 @@ except KeyboardInterrupt as e:
 
 
 def _started(max_duration: float | None) -> tuple[subprocess.Popen, float]:
-    proc = subprocess.Popen([sys.executable, "-c", NODE.replace("MAX_DURATION", repr(max_duration))], stdout=subprocess.PIPE,
-                            text=True)
+    proc = subprocess.Popen([sys.executable, "-c", NODE.replace("MAX_DURATION", repr(max_duration))],
+                            stdout=subprocess.PIPE, text=True)
     assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
     return proc, time.monotonic()
 

@@ -88,7 +88,8 @@ def test_the_slave_topics_decode_independently_to_the_estimate():
     js, wr, op = (independent_decoder(n) for n in (JOINT_STATE, WRENCH_STAMPED, OPERATING_STATE))
     measured = js(msgs["/tsm0/measured_js"])
     assert (measured.header.stamp.sec, measured.header.stamp.nanosec) == (1_700_000_000, 250_000_000)
-    assert list(measured.name) == ["tendon"] and list(measured.position) == [0.0031] and list(measured.effort) == [12.25]
+    assert list(measured.name) == ["tendon"]
+    assert list(measured.position) == [0.0031] and list(measured.effort) == [12.25]
     distal = js(msgs["/tsm0/distal/measured_js"])
     assert list(distal.position) == [0.0027] and list(distal.effort) == [9.5]
     assert list(js(msgs["/tsm0/setpoint_js"]).position) == [0.003]

@@ -51,8 +51,9 @@ from collections.abc import Callable
 import numpy as np
 
 from estimator.data import noise_level
-from estimator.offline.pair.diagnosis_fit import (CAPSTAN_STARTS, CV_BLOCKS, SCREEN_MARGIN, TENSION_FIT_WEIGHT, TENSION_PEAK_RATIO, FitResult,
-                                                  cross_validate, figure_bootstrap, fit_model)
+from estimator.offline.pair.diagnosis_fit import (CAPSTAN_STARTS, CV_BLOCKS, SCREEN_MARGIN, TENSION_FIT_WEIGHT,
+                                                  TENSION_PEAK_RATIO, FitResult, cross_validate, figure_bootstrap,
+                                                  fit_model)
 from estimator.offline.diagnosis.thresholds import PENALTY, STRUCTURE_RATIO
 from estimator.offline.pair.fit import fit_pair
 from estimator.offline.pair.models import CAUSE_OF_SEED, PAIR_EFFECTS, applicable

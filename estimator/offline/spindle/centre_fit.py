@@ -105,7 +105,8 @@ def shape_range(runs: list[RunData], starts: list[int], ref: float) -> Range:
     Raises ValueError when a direction has no sample."""
     out = []
     for up in (True, False):
-        d = np.concatenate([(r.theta_p - ref)[k:][(spindle_rate(r.theta_p, r.dt)[k:] > 0) == up] for r, k in zip(runs, starts, strict=False)])
+        d = np.concatenate([(r.theta_p - ref)[k:][(spindle_rate(r.theta_p, r.dt)[k:] > 0) == up]
+                            for r, k in zip(runs, starts, strict=False)])
         if d.size == 0:
             raise ValueError(f"shape_range: no sample with the spindle angle {'rising' if up else 'falling'}")
         out.append((float(d.min()), float(d.max())))
@@ -290,6 +291,7 @@ def within_run_gain(r: RunData | list[RunData], deg: int = DEGREE, step: int = 1
     inv = 0.25 * sum(1.0 / f if f > 0 else np.inf for f in ffs)       # variance factor of (s_1 + s_2) / 2
     half = float(np.sqrt(rss * np.expm1(3.84 / n_eff) * inv))
     return {"slope": s, "gain": 1.0 / s if s else float("nan"), "jackknife_se": se,
-            "profile_ci95": [s - half, s + half], "edge_slopes_falling_rising": edge, "jaw_free_rms_Nm": float(np.sqrt(np.mean(free ** 2))),
+            "profile_ci95": [s - half, s + half], "edge_slopes_falling_rising": edge,
+            "jaw_free_rms_Nm": float(np.sqrt(np.mean(free ** 2))),
             "jaw_rms_Nm": float(np.std(td)), "resid_rms_Nm": float(np.sqrt(rss / th.size)), "n": int(th.size),
             "n_eff": n_eff, "periods": int(ps.size), "degree": deg}

@@ -27,8 +27,8 @@ from scipy.optimize import least_squares, minimize_scalar
 from estimator.capstan import phase_formula_batch
 from estimator.online.spindle import OMEGA_S, Batch, SpindleParams, elongation_difference, play_batch, predict_torque
 
-__all__ = ["BASE", "EXTENSIONS", "EXTENSION_STARTS", "BOUNDS", "fit_torque", "fit_angle", "fit_model", "fit_baselines", "Baseline",
-           "band_centre"]
+__all__ = ["BASE", "EXTENSIONS", "EXTENSION_STARTS", "BOUNDS", "fit_torque", "fit_angle", "fit_model", "fit_baselines",
+           "Baseline", "band_centre"]
 
 BASE = ("rho", "Q", "K_a", "b")
 #: Extension parameter -> (literature number, what it stands for).
@@ -46,7 +46,8 @@ EXTENSIONS = {
 }
 #: (lo, hi, scale) per torque parameter.
 BOUNDS = {"rho": (0.0, 5.0, 0.1), "Q": (1e-3, 5.0, 0.05), "K_a": (0.0, 3.0, 0.1), "K_b": (0.0, 3.0, 0.1),
-          "b": (-1.0, 1.0, 0.01), "rho_1": (-3.0, 3.0, 0.05), "rho_2": (-5.0, 5.0, 0.05), "k_p": (-0.2, 0.2, 0.005), "k_d": (-0.2, 0.2, 0.005), "f": (-0.1, 0.1, 0.001),
+          "b": (-1.0, 1.0, 0.01), "rho_1": (-3.0, 3.0, 0.05), "rho_2": (-5.0, 5.0, 0.05), "k_p": (-0.2, 0.2, 0.005),
+          "k_d": (-0.2, 0.2, 0.005), "f": (-0.1, 0.1, 0.001),
           "f_s": (-0.2, 0.2, 0.005), "theta_s": (0.005, 1.0, 0.02), "c_v": (-0.2, 0.2, 0.005),
           "theta_c": (0.0, 0.5, 0.01)}
 #: Start of an extension parameter when it is added to a fitted model (0 unless listed).

@@ -218,7 +218,8 @@ def leave_one_out(runs: list[RunData], free: tuple[str, ...], centre: float, the
     tick = progress or (lambda label: None)
     out = []
     for r in runs:
-        q = shared_fit([s for s in runs if s is not r], free, centre, theta_ref, step, start=start, max_nfev=60, fixed=fixed)
+        others = [s for s in runs if s is not r]
+        q = shared_fit(others, free, centre, theta_ref, step, start=start, max_nfev=60, fixed=fixed)
         b = make_batch([(r.tau_p, r.theta_p)], centre, theta_ref, r.dt)
         out.append((q, predict_torque(q, b), predict_angle(q, b)))
         tick(f"leave out {r.name}")
