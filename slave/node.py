@@ -58,6 +58,7 @@ changes and pacing, shared with every node: :mod:`teleop.node`.
 """
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import Any
 
@@ -65,13 +66,15 @@ from slave.axis import SlaveAxis
 from slave.calibration_file import InstrumentCalibration, save_calibration
 from slave.kinds import axis_kind
 from slave.node_base import Decision, SlaveLinks, SlaveNodeBase
-from slave.rig import Rig, RigState
+from slave.rig import Rig, RigState, sensor_fault
 from slave.tendon_axis import TendonAxis
 from teleop.config.schema import Config
 from teleop.wire.codec import prepare_estimate
 from teleop.wire.messages import Command, Estimate, SideState
 
 __all__ = ["SlaveNode", "recording", "warm_up"]
+
+log = logging.getLogger(__name__)
 
 
 def recording(cfg: Config, rig: Rig) -> tuple[str, tuple[str, ...], dict[str, str]]:
@@ -139,7 +142,7 @@ class SlaveNode(SlaveNodeBase):
         super().__init__(cfg, links, run_dir=run_dir, stop_on_master_stop=stop_on_master_stop,
                          counts=("commands_rejected_range", "commands_wrong_axes", "commands_out_of_order",
                                  "commands_duplicate", "commands_step_refused", "commands_speed_limited",
-                                 "commands_stale", "engage_refused", "tension_trips"))
+                                 "commands_stale", "engage_refused", "tension_trips", "sensor_faults"))
         self.rig = rig
         self.recorder = recorder
         self.rerun = rerun
@@ -159,6 +162,7 @@ class SlaveNode(SlaveNodeBase):
         self._observed: RigState = rig.state   # the state this cycle's estimate came from
         self._next: tuple | None = None        # the rig's newest sample and its estimate, for the next cycle
         self._pending: tuple | None = None     # this cycle's (relax, targets, time step), until the second phase
+        self._rig_command: Any = None          # the last motor commands sent: held while a sensor is at fault
         if calibration is not None:
             data = self.kind.start_loaded(self.axes, calibration, self.rig_state)
             self._write_calibration_json({**data, "loaded_from": str(self.calibration_file or "")})
@@ -293,8 +297,15 @@ class SlaveNode(SlaveNodeBase):
         pending, self._pending = self._pending, None
         if pending is not None:
             relax, targets, dt = pending
-            motors = self.kind.motor_all(self.axes, relax, targets, self.rig_state, dt)
-            self.rig_state = self.rig.step(self.kind.rig_command(motors), dt)
+            if self.sensor_faulty and self._rig_command is not None:
+                command = self._rig_command         # no reading to control on: the motors hold where they are
+            else:
+                command = self.kind.rig_command(self.kind.motor_all(self.axes, relax, targets, self.rig_state, dt))
+            self._rig_command = command
+            self.rig_state = self.rig.step(command, dt)
+            if self._sensor_check(now):
+                self._next = None                   # nothing estimated on it, no estimate sent next cycle
+                return
         if recorded:
             if self.recorder is not None:
                 common = (self.marker, self.cmd_seq, int(self.state), now,
@@ -308,6 +319,21 @@ class SlaveNode(SlaveNodeBase):
             axes, profiles = tuple(a for a, _ in observed), tuple(p for _, p in observed if p)
             prepare_estimate(axes, profiles)        # its body encoded now: the send packs the header only
             self._next = (self.rig_state, axes, profiles)
+
+    def _sensor_check(self, now: float) -> bool:
+        """Whether the rig's newest sample is at fault (:func:`slave.rig.sensor_fault`); the first faulty
+        sample of a fault counts (``sensor_faults``), is logged and holds SAFE until :meth:`_sensor_hold`
+        releases it."""
+        why = sensor_fault(self.rig_state)
+        self.sensor_faulty = why is not None
+        if why is None:
+            return False
+        if self.sensor_fault is None:
+            self.counts["sensor_faults"] += 1
+            log.error("sensor fault: %s; motors held, SAFE until the readings are good and the operator lets go",
+                      why)
+        self.sensor_fault = why
+        return True
 
     # ---- summary -----------------------------------------------------------------------------------
     def _stats_detail(self) -> dict[str, Any]:

@@ -122,6 +122,8 @@ class SlaveNodeBase(NodeBase):
         self.max_tension = cfg.slave.max_tension
         self.tension_high = False           # the last measured |T_in| of some tendon is not below REARM_FRACTION
         self.tension_fault: str | None = None   # why a tension trip holds SAFE, None when none does
+        self.sensor_faulty = False          # the rig's newest sample is not one to estimate or control on
+        self.sensor_fault: str | None = None    # why a sensor fault holds SAFE, None when none does
         self.last_tension_trip: str | None = None   # the reason of the run's last tension trip (stats)
         self._refused: Received[Command] | None = None    # last command refused for engaging too far away
         self._phase: SideState | None = None   # the state a cycle's first phase ran in, until its second
@@ -227,6 +229,18 @@ class SlaveNodeBase(NodeBase):
         self.tension_fault = None
         return None
 
+    def _sensor_hold(self) -> str | None:
+        """Why a sensor fault still holds SAFE, or None: none does, or it ends now because the readings are
+        good again and the latest command is not engaged (the operator let go, as after a tension trip)."""
+        why = self.sensor_fault
+        if why is None:
+            return None
+        rec = self._accepted
+        if self.sensor_faulty or rec is None or rec.message.engaged:
+            return why
+        self.sensor_fault = None
+        return None
+
     def _check_tension(self, axes, now: float) -> None:
         """The tension limit on this cycle's measured proximal tensions (module docstring).
 
@@ -270,7 +284,7 @@ class SlaveNodeBase(NodeBase):
             ``marker``, ``commands_applied`` and the ``engage_refused`` count are updated here.
         """
         self._accept(now)
-        why = self._command_fault(now) or self._tension_hold()
+        why = self._command_fault(now) or self._tension_hold() or self._sensor_hold()
         if why is not None:
             if why == "command stale" and self.state != SideState.SAFE:
                 self.counts["commands_stale"] += 1

@@ -23,7 +23,7 @@ import numpy as np
 
 from teleop.errors import TeleopError
 
-__all__ = ["TENDONS", "RigTruth", "InstrumentTruth", "RigState", "Rig", "RigInputError"]
+__all__ = ["TENDONS", "RigTruth", "InstrumentTruth", "RigState", "sensor_fault", "Rig", "RigInputError"]
 
 #: Tendon labels of a pair, in array order.
 TENDONS = ("a", "b")
@@ -117,6 +117,9 @@ class RigState:
         The displacement commands applied in this step [m].
     truth : RigTruth, InstrumentTruth or None
         Ground truth of a simulated rig; ``None`` on hardware.
+    fault : str or None
+        Why the rig itself does not vouch for this sample (e.g. a sample over Zenoh older than its timeout),
+        or ``None``. The slave treats a flagged sample as a sensor fault (:func:`sensor_fault`).
     """
 
     t: float
@@ -124,6 +127,23 @@ class RigState:
     T_in: Any
     x_in_cmd: Any
     truth: RigTruth | InstrumentTruth | None = None
+    fault: str | None = None
+
+
+def sensor_fault(state: RigState) -> str | None:
+    """Why the slave must not estimate or control on ``state``, or ``None`` when it may: the rig's own
+    ``fault``, or an encoder or load-cell reading that is not finite (a failed sensor or a broken cable).
+
+    The slave holds its motor commands, sends no estimate (so the master's force fades out on the stale
+    estimate) and stays SAFE until the readings are good and the operator lets go (docs/concepts/safety.md).
+    """
+    if state.fault is not None:
+        return state.fault
+    for name, value in (("x_in", state.x_in), ("T_in", state.T_in)):
+        v = np.asarray(value, dtype=float)
+        if not np.all(np.isfinite(v)):
+            return f"rig reading {name} not finite ({np.count_nonzero(~np.isfinite(v))} of {v.size})"
+    return None
 
 
 @runtime_checkable

@@ -8,8 +8,9 @@ publishes the new set-point and returns the newest sample received (one cycle be
 drive's sensors are), time-stamped on the slave's clock from the start (the two loops are not
 in lock step: a sample may be read twice, ``repeats`` counts it, and the slave's time stays strictly
 increasing); the slave node's watchdogs and calibration see it as any other :class:`slave.rig.Rig`. A sample older than
-``rig.zenoh.timeout_ms`` is counted (``stale``) and logged at a limited rate; the rig side holds its motors when the
-set-points stop (the bridge does).
+``rig.zenoh.timeout_ms`` is counted (``stale``), logged at a limited rate and flagged (``RigState.fault``): the
+slave holds its motors and goes SAFE on it (:func:`slave.rig.sensor_fault`); the rig side holds its motors when
+the set-points stop (the bridge does).
 
 :class:`ZenohRig` is the single tendon (n = 1), :class:`ZenohInstrument` a joint instrument (n = 2 per
 joint, in the order joint 0 a, joint 0 b, joint 1 a, ...); the samples' truth, when present, gives
@@ -17,6 +18,7 @@ the joint angle theta = x_out,a / r and torque r (T_out,a - T_out,b) of each joi
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 
@@ -101,12 +103,15 @@ class _ZenohLink:
         now = self.clock.now()
         rec = self._sub.latest()
         age = self._sub.age(now)
+        fault = None
         if age > self.timeout:
             self.stale += 1
-            self._log.warning("rig sample %.1f ms old (rig.zenoh.timeout_ms %g)", 1e3 * age, self.timeout * 1e3)
+            fault = f"rig sample {1e3 * age:.1f} ms old (rig.zenoh.timeout_ms {self.timeout * 1e3:g})"
+            self._log.warning("%s", fault)
         self.repeats += rec is self._seen
         self._seen = rec
-        self._state = self._convert(rec.message, max(now - self._t0, self._state.t + 1e-9))
+        state = self._convert(rec.message, max(now - self._t0, self._state.t + 1e-9))
+        self._state = state if fault is None else dataclasses.replace(state, fault=fault)
         return self._state
 
     def set_load(self, *, tissue: bool | None = None, force: float | None = None) -> None:

@@ -131,11 +131,16 @@ def test_stale_set_points_hold_the_motor_and_stale_samples_are_counted():
         bridge.step(clock.now())
     assert bridge.held > 40 and abs(sim.state.truth.x_in - x) < 1e-4     # held (after the 50 ms timeout)
     session.wires[rig_key("zr", "sample")].cut = True       # and the samples stop
-    times = []
+    times, faults = [], []
     for _ in range(60):
         clock.advance(DT)
-        times.append(rig.step(0.003, DT).t)
+        st = rig.step(0.003, DT)
+        times.append(st.t)
+        faults.append(st.fault)
     assert rig.stale > 0 and rig.repeats >= 60 and np.all(np.diff(times) > 0)     # time still increases
+    # a sample past rig.zenoh.timeout_ms is flagged: the slave goes SAFE on it (tests/slave/test_sensor_fault.py)
+    flagged = [f for f in faults if f is not None]
+    assert len(flagged) == rig.stale and "rig.zenoh.timeout_ms 50" in flagged[-1] and faults[0] is None
 
 
 def test_registries_choose_by_type_only():
