@@ -2,8 +2,9 @@
 there is one) within a second: the reader's limits (teleop/config/reader.py), the kinds of the path keys
 (teleop/config/paths.py) and the bounded rates and waits (teleop/config/ranges.py).
 
-The elapsed time of each load is asserted below a second: the limits apply while the file is read, so that is a
-property of the limits, not a benchmark."""
+The processor time of each load (``time.process_time``: this process's own, whatever else runs on the machine) is
+asserted below a second: the limits apply while the file is read, so that is a property of the limits (an alias bomb
+without them takes hours), not a benchmark."""
 from __future__ import annotations
 
 import re
@@ -24,11 +25,12 @@ BOMB = 'a: &a ["x","x","x","x","x","x","x","x","x"]\n' + "".join(
 
 
 def _refused(path: Path, loader=load_config) -> str:
-    """The one-line message of the ConfigError that loading ``path`` raises, checked to take under a second."""
-    t0 = time.perf_counter()
+    """The one-line message of the ConfigError that loading ``path`` raises, checked to take under a second of this
+    process's processor time."""
+    t0 = time.process_time()
     with pytest.raises(ConfigError) as e:
         loader(path)
-    elapsed = time.perf_counter() - t0
+    elapsed = time.process_time() - t0
     msg = str(e.value)
     assert elapsed < 1.0, f"{elapsed:.2f} s to refuse {path.name}: {msg[:200]}"
     assert "\n" not in msg and msg.startswith(str(path)), msg
@@ -50,9 +52,9 @@ def test_alias_bomb_ends_at_the_node_budget(tmp_path):
 
 def test_alias_bomb_is_refused_by_the_bimanual_check_too(tmp_path):
     p = _write(tmp_path, BOMB)
-    t0 = time.perf_counter()
+    t0 = time.process_time()
     assert is_bimanual(p) is False             # the ordinary loader then says what is wrong
-    assert time.perf_counter() - t0 < 1.0
+    assert time.process_time() - t0 < 1.0
     _refused(p, load_arms)
 
 
