@@ -92,8 +92,8 @@ def test_hidden_effect_is_named_and_earns_its_gain(eid):
 LUMPED = [("sensor_offset:T_in", 101), ("sensor_offset:T_out", 102), ("sensor_lag:T_in", 103),
           ("sensor_drift:T_out", 109), ("sensor_lag:x_in", 105), ("sensor_offset:x_out", 110), ("pretension", 107),
           # velocity friction on a preloaded spring: the base model's route fit (r_1 ~ 0) is a local minimum, so the
-          # polished candidates also start from the uniform route; pre-sliding below its smallest travel (PRESLIDING_MIN)
-          # cannot explain x_out in its place
+          # polished candidates also start from the uniform route; pre-sliding below its smallest travel
+          # (PRESLIDING_MIN) cannot explain x_out in its place
           ("velocity_friction", 700111)]
 
 

@@ -4,10 +4,11 @@
 :mod:`study.scenarios`, and the independent lumped-mass simulator, :mod:`study.lumped_scenarios`), clean ones and
 one or more per effect family, how each is made and what :func:`estimator.offline.diagnosis.selection.diagnose` answers:
 ``cause`` and ``causes`` (compared exactly) and ``gain`` (to :data:`GAIN_TOL`, derived from the fits' own
-tolerance: the same answers on any CPU, whatever its vector width or its order of floating-point sums). The set covers the procedure's rules: the finer
-route, the rest reading, the stick-slip reading, the held distal end, an effect judged on one fold, structure no
-extension explains. A change of the code that is not meant to change an answer must leave them all; one that is
-meant to rewrites the file (``python tests/estimator/test_diagnosis_pinned.py --write``) in the same commit.
+tolerance: the same answers on any CPU, whatever its vector width or its order of floating-point sums). The set covers
+the procedure's rules: the finer route, the rest reading, the stick-slip reading, the held distal end, an effect judged
+on one fold, structure no extension explains. A change of the code that is not meant to change an answer must leave them
+all; one that is meant to rewrites the file (``python tests/estimator/test_diagnosis_pinned.py --write``) in the same
+commit.
 
 The pair diagnosis (:func:`estimator.offline.pair.diagnosis.diagnose_pair`) is pinned the same way on one KAIST
 recording when the data set is present.

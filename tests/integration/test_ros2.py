@@ -72,7 +72,8 @@ def test_a_ros2_node_reads_the_crtk_topics_of_slave_and_master(tmp_path):
     slave = start(["slave", "--config", str(cfg_path), "--listen", ep, "--run-dir", str(run_dir),
                    "--max-duration", "60", "--exit-on-master-stop"], tmp_path / "slave.log")
     master = None
-    peer = RosPeer([ep, ep_master], domain=7, node="crtk_console", credentials="observer")    # as rmw_zenoh peers meet through a router
+    # as rmw_zenoh peers meet through a router
+    peer = RosPeer([ep, ep_master], domain=7, node="crtk_console", credentials="observer")
     try:
         for topic, typ in (("/itros/distal/measured_js", JOINT_STATE), ("/itros/measured_js", JOINT_STATE),
                            ("/itros/measured_cf", WRENCH_STAMPED), ("/itros/operating_state", OPERATING_STATE),

@@ -1,6 +1,6 @@
 """`teleop` on hostile and absurd input: one line ``teleop: error: <file>:<line>...`` on stderr, exit code 2, within a
-second of processor time (``time.process_time``: this process's own, whatever else runs), before any process starts (the config reader's limits, the kinds of the config's paths and of the path
-arguments, the bounded rates).
+second of processor time (``time.process_time``: this process's own, whatever else runs), before any process starts (the
+config reader's limits, the kinds of the config's paths and of the path arguments, the bounded rates).
 
 The modules the sides load before reading their config are imported here first, so that the second each case is
 given is the reading's, not the imports'."""

@@ -103,7 +103,8 @@ def test_the_mcap_recording_names_every_tendon_of_many_joints(n, tmp_path):
     axes = tuple(AxisState(0.01 * k, 0.1 * k, (TendonState(1.0 + k, 1e-3, 0.5, 1e-5, Phase.PULL),
                                                 TendonState(2.0, -1e-3, 1.5, 1e-5, Phase.HOLD))) for k in range(n))
     mc = McapRecording(tmp_path / "s.mcap", cfg, 1.7e9)
-    mc.write(5.001, f"teleop/{cfg.instrument.id}/slave/estimate", Estimate(0, 1, 5.0, axes))   # seq 0: kept at any mcap_every
+    # seq 0: kept at any mcap_every
+    mc.write(5.001, f"teleop/{cfg.instrument.id}/slave/estimate", Estimate(0, 1, 5.0, axes))
     mc.close()
     with open(tmp_path / "s.mcap", "rb") as fh:
         reader = make_reader(fh, decoder_factories=[DecoderFactory()])

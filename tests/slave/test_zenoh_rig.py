@@ -108,7 +108,8 @@ def test_the_slave_sees_the_simulated_rig_through_the_interface_one_cycle_behind
             assert st.truth.T_out == prev.truth.T_out and st.truth.elongation == prev.truth.elongation
         prev = sim.state
     assert np.ptp(cmds) > 0.003 and sim.state.x_in_cmd == pytest.approx(cmds[-1])
-    assert bridge.followed == len(cmds) and rig.stale == 0 and rig.repeats == 1   # the first step reads the sample seen at start
+    # the first step reads the sample seen at start
+    assert bridge.followed == len(cmds) and rig.stale == 0 and rig.repeats == 1
     rig.set_load(tissue=False)                              # forwarded with the next set-point
     cycle(clock, rig, bridge, cmds[-1])
     assert sim.tissue is False

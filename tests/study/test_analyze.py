@@ -195,7 +195,8 @@ def test_kaist_mode_on_synthetic_files(tmp_path, capsys):
     assert "shared parameter set" in capsys.readouterr().out
     assert sh["models"]["capstan, mu = 0"]["rmse_test_deg"] > 5 * sh["models"]["capstan"]["rmse_test_deg"]
     zones = [np.nanmean([z["command_travel_deg"] or np.nan for z in c["dead_zones"]]) for c in s["configurations"]]
-    assert all(a < b for a, b in zip(zones, zones[1:], strict=False))                 # model-free: dead zone grows with N
+    # model-free: dead zone grows with N
+    assert all(a < b for a, b in zip(zones, zones[1:], strict=False))
     assert longest_list(s) < 50                                         # summary numbers, no per-sample arrays
     names = {p.name for p in (tmp_path / "rep").iterdir()}
     assert names == set(FIGURES) | {"report.md"}

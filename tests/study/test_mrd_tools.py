@@ -1,5 +1,6 @@
 """The tool files on the MRD folders (the MRD data of TSM_TELEOP_DATA, docs/how-to/get-the-data.md; MRD Lab data
-repository, University of Minnesota, ODbL 1.0 / DbCL 1.0): one calibration run of each folder plus the tool's load gain, ``teleop analyze --mrd DIR
+repository, University of Minnesota, ODbL 1.0 / DbCL 1.0): one calibration run of each folder plus the tool's load gain,
+``teleop analyze --mrd DIR
 --tool NAME``, meet the line of docs/how-to/tools.md: jaw-torque RMSE median <= 0.03 and worst run <= 0.10 of
 full scale, every scored run better than the linear baseline; the roll folder window by window.
 
