@@ -285,10 +285,14 @@ def raw_rmse(pr, s: Series, data: MeasuredData, t_split: float) -> dict[str, flo
 
 
 class Progress:
-    """A one-line stderr bar (``enabled`` True), a callback(done, total, label), or nothing."""
+    """A one-line stderr bar (``enabled`` True), a callback(done, total, label), or nothing.
+
+    The bar redraws itself with carriage returns, which only a terminal shows as one line: when stderr is not a
+    terminal (a log file, a pipe) it writes nothing."""
 
     def __init__(self, total: int, enabled: bool | Callable):
-        self.total, self.done, self.enabled = total, 0, enabled
+        self.total, self.done = total, 0
+        self.enabled = enabled if callable(enabled) else bool(enabled) and _is_terminal(sys.stderr)
 
     def __call__(self, label: str) -> None:
         self.done = min(self.done + 1, self.total)
@@ -304,6 +308,12 @@ class Progress:
     def finish(self) -> None:
         while self.done < self.total:       # the steps that were not needed
             self("done")
+
+
+def _is_terminal(stream) -> bool:
+    """Whether ``stream`` is a terminal (False for a stream without ``isatty``)."""
+    isatty = getattr(stream, "isatty", None)
+    return bool(isatty()) if callable(isatty) else False
 
 
 def trimmed_ms(r: np.ndarray, trim: float) -> float:

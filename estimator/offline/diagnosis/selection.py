@@ -114,7 +114,8 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         Nominal share of the duration used for training (fit + validation); the split moves to a
         rest within 8 %. The test block after it is used once, for the reported errors and gain.
     progress : bool or callable(done, total, label)
-        A stderr progress bar, or a callback per fitted model.
+        A stderr progress bar (drawn on a terminal only: nothing when stderr is a file or a pipe), or a callback
+        per fitted model.
     effects : tuple of ids, optional
         Candidate extensions (default: the whole catalogue).
     max_effects : int
