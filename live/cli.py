@@ -48,6 +48,12 @@ def _rerun_flag(p: argparse.ArgumentParser) -> None:
                    help="override recording.rerun (serve: the live view served to `teleop view` and browsers)")
 
 
+def _model_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--model", metavar="PATH", default=None,
+                   help="run this model file in the live estimator (estimator.model; `teleop analyze --model-out` "
+                        "writes one); checked against the instrument before anything starts")
+
+
 def _inject_flag(p: argparse.ArgumentParser) -> None:
     p.add_argument("--inject", metavar="SPEC", default=None,
                    help="fault injection on this side's outgoing messages (tests), e.g. "
@@ -92,6 +98,7 @@ def _add_sides(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="play this measured recording as the hardware (rig.type recording, rig.recording.path): an "
                         "MRD run, a KAIST recording or a measured-data CSV, told apart by its content; without "
                         "--config the instrument of configs/recording-mrd.yaml, recording-kaist.yaml or sim.yaml")
+    _model_flag(p)
     _rerun_flag(p)
     p.set_defaults(func=_cmd_demo)
 
@@ -102,6 +109,7 @@ def _add_sides(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="calibrate at power-up even when <calibration.dir>/<instrument.id>.yaml exists (and replace it)")
     p.add_argument("--exit-on-master-stop", action="store_true", help="finish when the master announces STOPPING")
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
+    _model_flag(p)
     _rerun_flag(p)
     _inject_flag(p)
     p.set_defaults(func=_cmd_slave)
@@ -236,6 +244,8 @@ def _cmd_view(args: argparse.Namespace) -> int:
 def _cmd_slave(args: argparse.Namespace) -> int:
     from teleop.arms import is_bimanual
     if is_bimanual(args.config):          # every arm's node in one loop (live/bimanual_sides.py)
+        if getattr(args, "model", None):
+            raise ValueError(f"--model {args.model}: {args.config} is bimanual; set estimator.model in an arm's config")
         from live.bimanual_sides import run_slave_group
         return run_slave_group(args)
     return run_slave(args)
@@ -258,6 +268,7 @@ PATH_ARGS: tuple[tuple[str, str, str, tuple[str, ...] | None], ...] = (
     ("recording", "--recording", "file", None), ("journals", "--journals", "dir", None),
     ("repair", "--repair", "dir", None), ("out", "--out", "file", None), ("rrd", "--rrd", "file", None),
     ("json", "--json", "file", None), ("calibration", "--calibration", "file", ("replay",)),
+    ("model", "--model", "file", None), ("model_out", "--model-out", "dir", ("analyze",)),
     ("file", "FILE", "file", ("analyze",)), ("route", "--route", "file", ("analyze",)),
     ("kaist", "--kaist", "dir", ("analyze",)), ("mrd", "--mrd", "dir", ("analyze",)),
     ("report", "--report", "dir", ("analyze",)), ("figures", "--figures", "dir", ("analyze",)),

@@ -221,6 +221,7 @@ def run_slave(args: argparse.Namespace) -> int:
     """``teleop slave`` for any instrument: reload ``<calibration.dir>/<id>.yaml`` (or calibrate at
     power-up and save it there: missing, or ``--recalibrate``), then serve commands until stopped. One
     path and one :class:`slave.node.SlaveNode` for every instrument (a single tendon is one axis)."""
+    from slave.estimator_model import configured_model, with_model
     from slave.node import SlaveNode, recording, warm_up
     from slave.rigs import make_rig
     from teleop.config.load import load_config
@@ -231,7 +232,8 @@ def run_slave(args: argparse.Namespace) -> int:
     from teleop.rerun.process import RerunProcessLogger as RerunLogger  # the loop only queues; a child process logs
     from teleop.timing.clock import MonotonicClock
 
-    cfg = load_config(args.config)
+    cfg = with_model(load_config(args.config), getattr(args, "model", None))   # --model over estimator.model
+    configured_model(cfg)       # the model file checked before anything starts (one line, exit 2)
     waived = announce_waivers(cfg, logging.getLogger("teleop.slave"))
     calibration, cal_path = load_or_recalibrate(cfg, getattr(args, "recalibrate", False))
     run_dir = side_run_dir(args, cfg, "slave")

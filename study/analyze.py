@@ -28,7 +28,9 @@ Two modes:
 
 ``--json OUT`` writes the result (summary numbers, never per-sample data); ``--report DIR`` a
 Markdown report with PNG figures (:func:`study.report.write_report`,
-:func:`study.kaist_report.write_kaist_report`); ``--figures DIR`` the KAIST plots ``kaist_*.png``.
+:func:`study.kaist_report.write_kaist_report`); ``--figures DIR`` the KAIST plots ``kaist_*.png``;
+``--model-out OUTDIR`` the chosen model of each configuration as a model file the live estimator runs
+(:mod:`study.kaist_model`; ``--mrd``: :mod:`study.mrd_model`).
 Bad input raises DataError / ConfigError (one line, exit 2).
 """
 from __future__ import annotations
@@ -96,6 +98,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "jaw stopping position of a folder that holds several")
     parser.add_argument("--json", metavar="OUT", help="write the result (summary numbers) as JSON to OUT")
     parser.add_argument("--report", metavar="DIR", help="write a Markdown report with PNG figures to DIR")
+    parser.add_argument("--model-out", metavar="OUTDIR",
+                        help="write the chosen model as a model file the live estimator runs (estimator.model, "
+                             "--model): --kaist: OUTDIR/<recording stem>.model.yaml per configuration; --mrd: "
+                             "OUTDIR/<folder name>.model.yaml (docs/reference/formats.md, \"Model file\")")
     parser.add_argument("--figures", metavar="DIR",
                         help="write the plots to DIR (kaist_*.png with --kaist, mrd_*.png with --mrd)")
     parser.add_argument("--bend", type=float, metavar="DEG",
@@ -134,13 +140,17 @@ def main_analyze(args: argparse.Namespace) -> int:
         raise ConfigError(f"--tool {args.tool}: a tool's constants are for the spindle analysis (--mrd DIR)")
     if args.json is not None and not Path(args.json).resolve().parent.is_dir():
         raise ConfigError(f"--json {args.json}: directory {Path(args.json).resolve().parent} does not exist")
-    for opt, d in (("--report", args.report), ("--figures", args.figures)):
+    for opt, d in (("--report", args.report), ("--figures", args.figures),
+                   ("--model-out", getattr(args, "model_out", None))):
         if d is not None and Path(d).exists() and not Path(d).is_dir():
             raise ConfigError(f"{opt} {d}: exists and is not a directory")
     if args.file is not None:
         require_file(args.file)
     kaist = (args.kaist is not None or is_kaist_file(args.file) or args.bend is not None or args.columns is not None
              or args.shared_params is not None or getattr(args, "configs", None) is not None)
+    if getattr(args, "model_out", None) is not None and (not kaist or args.shared_params is not None):
+        raise ConfigError(f"--model-out {args.model_out}: model files are written by the KAIST diagnosis (--kaist) "
+                          "and the MRD analysis (--mrd DIR --tool T)")
     if kaist:
         if args.route is not None:
             raise ConfigError("--route is for a single-tendon CSV; the KAIST pair models have no sheath route")
@@ -158,6 +168,10 @@ def main_analyze(args: argparse.Namespace) -> int:
                     print(f"wrote {p}")
             if args.report is not None:
                 print(f"wrote {write_kaist_report(recs, fits, summary, args.report)}")
+            if getattr(args, "model_out", None) is not None:
+                from study.kaist_model import write_kaist_models
+                for p in write_kaist_models(recs, summary, fits, args.model_out):
+                    print(f"wrote {p}")
     else:
         if args.figures:
             raise ConfigError("--figures is for the KAIST analysis (--kaist); use --report DIR")

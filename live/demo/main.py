@@ -281,11 +281,16 @@ def main_demo(args) -> int:
     if not timeout_given:
         args.timeout = DEFAULT_TIMEOUT
     if cfg_path is not None and is_bimanual(cfg_path):       # two arms, two hands: live/demo/bimanual.py
+        if getattr(args, "model", None):
+            raise ValueError(f"--model {args.model}: {cfg_path} is bimanual; set estimator.model in an arm's config")
         from live.demo.bimanual import main_bimanual
         return main_bimanual(args, Path(cfg_path))
     cfg = load_config(cfg_path)
     from live.demo.recording import with_recording
     cfg = with_recording(cfg, args)     # --rig / --recording: a recording checked before any process starts
+    from slave.estimator_model import configured_model, with_model
+    cfg = with_model(cfg, getattr(args, "model", None))     # --model over estimator.model
+    model = configured_model(cfg)       # the model file checked before any process starts (one line, exit 2)
     check_protocol(cfg, args.protocol)
     if cfg.rig.type == "recording" and not timeout_given:   # the slave plays the whole recording after its fit
         from datasets.recording import recorded_motion
@@ -305,7 +310,9 @@ def main_demo(args) -> int:
     summary: dict = {"run_dir": str(run_dir), "config": str(cfg_file), "instrument": cfg.instrument.id,
                      "kind": kind_of(cfg).summary, "axes": names,
                      "protocol": args.protocol, "calibration_file": str(calibration_path(cfg)),
-                     "safety_waivers": waivers(cfg)}   # teleop/config/bounds.py: keys run past their hard bound
+                     "safety_waivers": waivers(cfg),   # teleop/config/bounds.py: keys run past their hard bound
+                     "model": None if model is None else {"id": model.model_id, "sha256": model.sha256,
+                                                          "path": model.path}}
     try:
         if cfg.rig.type == "simulated":      # another rig: the slave calibrates at power-up (file missing)
             from slave.kinds import axis_kind

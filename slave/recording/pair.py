@@ -14,9 +14,14 @@ coupling, J1-J5), and scores the live angle on cycle 2 beside the offline seed p
 (:func:`estimator.offline.pair.fit.fit_pair`) on the same cycles. The calibration of the live estimator is the same
 six parameters fitted with the estimator itself as the model (``fit_pair(..., predict=predict_pair_angle)``).
 
-The offline analysis's headline (the *extended* model its diagnosis chooses, a capstan joint model: the joint's
-own friction and stiffness, docs/results/kaist.md) is not an online estimator: the live estimator leaves out
-what the extension adds, and :func:`kaist_live` reports what that costs in degrees when given the analysis's
+The offline analysis's headline (the *extended* model its diagnosis chooses, a capstan-joint model,
+docs/results/kaist.md) runs live from its model file (``estimator.model``, ``--model``; ``teleop analyze --kaist DIR
+--model-out OUTDIR`` writes one per configuration): :class:`RecordedPairAxis` then steps
+:class:`estimator.online.pair_model.PairModelEstimator` each cycle, driven by the measured motor position (x_in of
+tendon a: the rig's G is 1) and the measured tensions, beside the base estimator. The model's angle is the
+estimate; in a cycle where its prediction leaves the physical range (:func:`model_out_of_range`) the base
+estimator's stands in, counted (``model.fallbacks`` of the slave's stats) and logged the first time. Without a
+model file :func:`kaist_live` reports what leaving the extension out costs in degrees when given the analysis's
 figure.
 """
 from __future__ import annotations
@@ -24,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 import datetime as _dt
 import json
+import logging
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -39,15 +45,19 @@ from estimator.online.pair_batch import predict_pair_angle
 from estimator.sheath import SheathModel
 from slave.axis import SlaveAxis
 from slave.calibration_file import InstrumentCalibration, TendonCalibration
+from slave.estimator_model import configured_model, pair_model_estimator
 from slave.pair_axis import PairAxis
 from slave.pair_calibrate import set_tension
 from slave.pair_control import PairController
 from slave.recording.routine import RecordedRoutine, recorded_model_path
 from slave.rig import InstrumentTruth, Rig, RigInputError, RigState
+from teleop.config.model_file import ModelFile
 from teleop.config.schema import Config
 from teleop.wire.messages import AxisState
 
-__all__ = ["RecordedPair", "kaist_live", "fit_kaist", "RecordedPairAxis"]
+__all__ = ["RecordedPair", "kaist_live", "fit_kaist", "RecordedPairAxis", "model_out_of_range"]
+
+log = logging.getLogger("teleop.slave")
 
 N_NODES = 50          # profile elements per tendon, as the offline pair model
 
@@ -161,6 +171,18 @@ def kaist_live(rec: KaistRecording, extended_deg: float | None = None) -> dict:
     return out
 
 
+def model_out_of_range(s: Any, structure: str) -> str | None:
+    """Why a model's step ``s`` (:class:`estimator.online.pair_model.PairModelSample`) leaves the physical range, or
+    None: a non-finite angle, or (the capstan structure, which predicts them) a proximal tension that is negative or
+    not finite."""
+    if not math.isfinite(s.angle):
+        return f"angle {s.angle!r}"
+    if structure == "capstan" and not (math.isfinite(s.T_a) and math.isfinite(s.T_b) and s.T_a >= 0.0
+                                       and s.T_b >= 0.0):
+        return f"predicted proximal tensions {s.T_a:.4g}, {s.T_b:.4g} N"
+    return None
+
+
 # ---- the slave's pair axis on a KAIST recording --------------------------------------------------------------
 
 
@@ -219,6 +241,10 @@ class RecordedPairAxis(RecordedRoutine, PairAxis):
     torque_scale = 1.0
     routine_class = RecordedPairCalibration
     model_calibration = staticmethod(_calibration)
+    model_file: ModelFile | None = None     # the model file it runs (estimator.model), or None: the base estimator
+    pair_model: Any = None                  # its PairModelEstimator
+    model_cycles = 0                        # cycles the model was stepped
+    fallbacks = 0                           # of them, cycles the base estimator's angle stood in
 
     def start_model(self, model: dict, state: RigState) -> None:
         """The joint estimator of ``model`` at the rig's current sample (its tensions: the pretension)."""
@@ -235,6 +261,48 @@ class RecordedPairAxis(RecordedRoutine, PairAxis):
         self.torque_scale = self.r * G      # r (T_out,a - T_out,b) with the config's pulley radius r [m]
         s = self.estimator.step(T0[0], float(state.x_in[i, 0]), T0[1], float(state.x_in[i, 1]), state.t)
         self.sample = s._replace(angle=s.angle + self.offset, torque=s.torque * self.torque_scale)
+        mf = configured_model(self.cfg)
+        if mf is not None:
+            self.start_pair_model(mf, state, T0)
+
+    def start_pair_model(self, mf: ModelFile, state: RigState, T0: tuple[float, float]) -> None:
+        """Run the model file ``mf`` from the rig's current sample (its proximal tensions ``T0`` [N]: the
+        pretension): its angle replaces the base estimator's, except in the cycles where its prediction leaves the
+        physical range (:func:`model_out_of_range`)."""
+        self.model_file, self.model_cycles, self.fallbacks = mf, 0, 0
+        self.pair_model = pair_model_estimator(mf, T0)
+        log.info("%s: estimator model %s (sha256 %s...) from %s, driven by the measured motor position; held-out "
+                 "%.2f %s where it was fitted (base %.2f)", self.name, mf.model_id, mf.sha256[:12], mf.path,
+                 mf.gain["extended"], mf.gain["unit"], mf.gain["base"])
+        self.sample = self.sample._replace(angle=self.model_angle(state, self.sample.angle))
+
+    def model_angle(self, state: RigState, base_angle: float) -> float:
+        """One step of the model file's estimator on the rig's sample: its distal angle [rad], or ``base_angle`` [rad]
+        (the base estimator's) when its prediction leaves the physical range; counted, and logged the first time."""
+        i = self.index
+        Ta, Tb = state.T_in[i].tolist()
+        self.model_cycles += 1
+        try:
+            s = self.pair_model.step(float(state.x_in[i, 0]), Ta, Tb, state.t)
+            why = model_out_of_range(s, self.pair_model.structure)
+        except ValueError as e:         # an input the model cannot read (non-finite, time not increasing)
+            why = str(e)
+        if why is None:
+            return s.angle
+        self.fallbacks += 1
+        if self.fallbacks == 1:
+            log.warning("%s: the model's prediction leaves the physical range at t = %.3f s (%s): the base estimator's "
+                        "angle stands in for every such cycle (counted as model.fallbacks in slave_stats.json)",
+                        self.name, state.t, why)
+        return base_angle
+
+    def model_stats(self) -> dict | None:
+        """The model file's entry of the slave's stats: id, sha256, path, cycles run, fallbacks; None without one."""
+        mf = self.model_file
+        if mf is None:
+            return None
+        return {"id": mf.model_id, "sha256": mf.sha256, "path": mf.path, "cycles": self.model_cycles,
+                "fallbacks": self.fallbacks, "gain": dict(mf.gain)}
 
     @classmethod
     def finish_routine(cls, axes: Sequence[SlaveAxis], routine: Any, state: RigState) -> tuple[Any, dict]:
@@ -279,10 +347,18 @@ class RecordedPairAxis(RecordedRoutine, PairAxis):
         for ax in axes:
             assert isinstance(ax, RecordedPairAxis)
             a, extra = ax.observe(state)
-            ax.sample = ax.sample._replace(angle=ax.sample.angle + ax.offset, torque=ax.sample.torque * ax.torque_scale)
-            out.append((dataclasses.replace(a, position_hat=a.position_hat + ax.offset,
-                                            effort_hat=a.effort_hat * ax.torque_scale), extra))
+            angle = ax.sample.angle + ax.offset
+            if ax.pair_model is not None:
+                angle = ax.model_angle(state, angle)
+            ax.sample = ax.sample._replace(angle=angle, torque=ax.sample.torque * ax.torque_scale)
+            out.append((dataclasses.replace(a, position_hat=angle, effort_hat=a.effort_hat * ax.torque_scale), extra))
         return out
+
+    @classmethod
+    def stats(cls, axes: Sequence[SlaveAxis]) -> dict[str, Any]:
+        """The pair axis's counters and ``model``: the model file's entry (:meth:`model_stats`), None without one."""
+        models = [ax.model_stats() for ax in axes if isinstance(ax, RecordedPairAxis)]
+        return {**super().stats(axes), "model": models[0] if models else None}
 
     @classmethod
     def warm_up(cls, cfg: Config) -> None:

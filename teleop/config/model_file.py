@@ -6,7 +6,8 @@ the slave run it (docs/reference/formats.md, "Model file"). A file holds:
 * ``format`` (:data:`FORMAT`) and ``version`` (:data:`VERSION`; another version is refused, never guessed);
 * ``axis``: the axis kind the model is for (:data:`AXIS_KINDS`), and ``instrument``: the instrument's id;
 * ``structure``: the base model it extends (``profile_memory`` for one tendon, ``capstan`` or ``seed`` for an
-  antagonistic pair, ``spindle`` for a spindle-driven pair) with its ``base`` calibration (SI values);
+  antagonistic pair, ``spindle`` for a spindle-driven pair) with its ``base`` calibration: each parameter an SI
+  value, or (value, unit, range) as an extension's parameter, its value then checked within its range;
 * ``extensions``: the catalogue entries it adds, each with its fitted ``parameters`` (value, unit and the
   range the catalogue allows);
 * ``per_cycle``: the per-cycle form the live estimator runs it as;
@@ -24,7 +25,7 @@ from __future__ import annotations
 import hashlib
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +35,7 @@ from teleop.config.reader import read_yaml
 from teleop.errors import ConfigError
 
 __all__ = ["FORMAT", "VERSION", "AXIS_KINDS", "STRUCTURES", "ModelParameter", "ModelExtension", "ModelFile",
-           "load_model", "save_model", "check_runnable", "check_instrument", "file_sha256"]
+           "load_model", "save_model", "check_runnable", "check_instrument", "file_sha256", "project_version"]
 
 FORMAT = "tsm-teleop model"
 VERSION = 1
@@ -77,7 +78,8 @@ class ModelExtension:
 class ModelFile:
     """A model file as read (:func:`load_model`) or to be written (:func:`save_model`).
 
-    ``base`` maps the base model's parameter names to SI values; ``gain`` holds ``base`` and ``extended``
+    ``base`` maps the base model's parameter names to SI values, ``base_ranges`` those written with their unit and
+    range to (unit, low, high); ``gain`` holds ``base`` and ``extended``
     (held-out errors, in ``unit``); ``provenance`` the recording, its ``sha256``, ``span_s`` [s, s], the
     ``project_version`` and the ``written`` date. ``sha256`` is the file's own digest (empty before it is
     written); :attr:`model_id` names the model in logs, stats and summaries.
@@ -92,6 +94,7 @@ class ModelFile:
     provenance: dict[str, Any]
     sha256: str = ""
     path: str = ""
+    base_ranges: dict[str, tuple[str, float, float]] = field(default_factory=dict)
 
     @property
     def model_id(self) -> str:
@@ -104,6 +107,16 @@ class ModelFile:
         for e in self.extensions:
             out.update(e.values())
         return out
+
+
+def project_version() -> str:
+    """The installed version of the ``tsm-teleop`` distribution, as provenance writes it ("unknown" when it is
+    not installed)."""
+    import importlib.metadata
+    try:
+        return importlib.metadata.version("tsm-teleop")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
 
 
 def file_sha256(path: str | Path) -> str:
@@ -208,10 +221,13 @@ def load_model(path: str | Path) -> ModelFile:
         raise ConfigError(f"{_where(p, lines, 'structure')}: {structure!r} is no base model of a {axis} axis "
                           f"(expected one of {', '.join(STRUCTURES[axis])})")
     base = _mapping(d["base"], tuple(d["base"]) if isinstance(d["base"], dict) else (), p, lines, "base")
+    ranged = {str(k): _parameter(str(k), v, p, lines, f"base.{k}") for k, v in base.items() if isinstance(v, dict)}
     gain = _mapping(d["gain"], _GAIN, p, lines, "gain")
     prov = _mapping(d["provenance"], _PROVENANCE, p, lines, "provenance")
     return ModelFile(axis=axis, instrument=_text(d["instrument"], p, lines, "instrument"), structure=structure,
-                     base={str(k): _number(v, p, lines, f"base.{k}") for k, v in base.items()},
+                     base={str(k): ranged[str(k)].value if str(k) in ranged else _number(v, p, lines, f"base.{k}")
+                           for k, v in base.items()},
+                     base_ranges={k: (q.unit, q.lo, q.hi) for k, q in ranged.items()},
                      extensions=_extensions(d["extensions"], p, lines),
                      per_cycle=_text(d["per_cycle"], p, lines, "per_cycle"),
                      gain={"base": _number(gain["base"], p, lines, "gain.base"),
@@ -220,10 +236,18 @@ def load_model(path: str | Path) -> ModelFile:
                      provenance=dict(prov), sha256=file_sha256(p), path=str(p))
 
 
+def _base_entry(model: ModelFile, name: str, value: float) -> Any:
+    """A base parameter as written: the SI value, or {value, unit, range} when ``base_ranges`` has it."""
+    if name not in model.base_ranges:
+        return float(value)
+    unit, lo, hi = model.base_ranges[name]
+    return {"value": float(value), "unit": unit, "range": [float(lo), float(hi)]}
+
+
 def _plain(model: ModelFile) -> dict[str, Any]:
     return {
         "format": FORMAT, "version": VERSION, "axis": model.axis, "instrument": model.instrument,
-        "structure": model.structure, "base": {k: float(v) for k, v in model.base.items()},
+        "structure": model.structure, "base": {k: _base_entry(model, k, v) for k, v in model.base.items()},
         "extensions": [{"id": e.id, "parameters": {
             q.name: {"value": float(q.value), "unit": q.unit, "range": [float(q.lo), float(q.hi)]}
             for q in e.parameters}} for e in model.extensions],

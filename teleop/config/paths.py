@@ -21,11 +21,12 @@ __all__ = ["FILE_KEYS", "DIR_KEYS", "path_problem", "check_paths"]
 #: :func:`teleop.config.files.check_tool_file`, a bare name being a shipped tool).
 FILE_KEYS: tuple[str, ...] = (
     "rig.recording.path", "master.device.file", "transport.tls.root_ca", "transport.tls.certificate",
-    "transport.tls.private_key", "transport.auth.password_file", "transport.auth.dictionary_file")
+    "transport.tls.private_key", "transport.auth.password_file", "transport.auth.dictionary_file",
+    "estimator.model")
 #: Config keys naming a directory that files are written into (made when missing).
 DIR_KEYS: tuple[str, ...] = ("recording.dir", "calibration.dir")
 #: Keys whose users expand a leading ``~`` (the others take the path as written).
-_EXPANDED = frozenset({"rig.recording.path"})
+_EXPANDED = frozenset({"rig.recording.path", "estimator.model"})
 
 
 def path_problem(path: str | Path, want: Literal["file", "dir"]) -> str | None:

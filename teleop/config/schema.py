@@ -194,6 +194,7 @@ class EstimatorConfig:
     rate_time_constant: float = 0.02      # [s]
     profile_points: int = 50
     tension_noise: float | None = None  # [N] noise of T_in for the banded update; None: the calibration's
+    model: str | None = None              # model file the live estimator runs (teleop analyze --model-out)
 
 
 @dataclass(frozen=True)
