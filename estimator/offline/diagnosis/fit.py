@@ -186,9 +186,17 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
     # the forward fold's residuals end where its fit block does: the model runs no further than they need
     stop = m.stop if isinstance(m, slice) and m.stop is not None and 0 < m.stop < len(train) else None
 
+    # every point evaluated, by its bytes: (residual, L/EA). The starts are ranked and then refined from, and the
+    # solution's L/EA is that of its last evaluation: none is run twice
+    seen: dict[bytes, tuple[np.ndarray, float]] = {}
+
     def residual(z):
-        pr = predict(effects, values(z), train, fit_mask=m, stop=stop)
-        return np.concatenate([(getattr(pr, k)[m][::FIT_STRIDE] - ys[k]) / v for k, v in norm.items()])
+        key = np.asarray(z, dtype=float).tobytes()
+        if key not in seen:
+            pr = predict(effects, values(z), train, fit_mask=m, stop=stop)
+            seen[key] = (np.concatenate([(getattr(pr, k)[m][::FIT_STRIDE] - ys[k]) / v for k, v in norm.items()]),
+                         pr.compliance)
+        return seen[key][0].copy()
 
     def refine(fun, z, lower, upper):
         return least_squares(fun, z, bounds=(lower, upper), diff_step=1e-2, x_scale=1.0, ftol=th.FIT_TOL, xtol=th.FIT_TOL,
@@ -218,7 +226,8 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
             best = sol
     assert best is not None         # max_starts >= 1 and at least one start
     vals = values(best.x)
-    c = predict(effects, vals, train, fit_mask=m, stop=stop).compliance
+    key = np.asarray(best.x, dtype=float).tobytes()
+    c = seen[key][1] if key in seen else predict(effects, vals, train, fit_mask=m, stop=stop).compliance
     return vals, c, float(best.cost)
 
 

@@ -114,9 +114,35 @@ def _memory(s: Series, knobs: dict, g: Callable, T_in, x_in, vel, u, x_p: float,
     slide = s.slide
     if slide is not None and s.x_out is not None and g("sensor_lag:x_out"):
         slide = distal_slide(_shift(t, s.x_out, -g("sensor_lag:x_out")), s.slide_travel, slide_window(t))
-    T_out, E1 = run_extended(T_in, vel, t, u, s.w, T_min=s.T_min, sigma=s.sigma_T_in, speed=speed, v_st=v_st,
-                             T0_out=T0_out, band=band, slide=slide, **knobs)
+    T_out, E1 = _recent_run(T_in, vel, t, u, s.w, slide, speed, dict(T_min=s.T_min, sigma=s.sigma_T_in, v_st=v_st,
+                                                                      T0_out=T0_out, band=band, **knobs))
     return T_out, E1, slide
+
+
+#: the last few runs of the kernel: (where its arrays lie and the numbers, the arrays kept alive, (T_out, E1))
+_RUNS: list[tuple[tuple, tuple, tuple[np.ndarray, np.ndarray]]] = []
+
+
+def _where(a: np.ndarray | None) -> tuple | None:
+    return None if a is None else (a.__array_interface__["data"][0], a.shape, a.strides, a.dtype.str)
+
+
+def _recent_run(T_in, vel, t, u, w, slide, speed, numbers: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The kernel's (T_out, E1), read-only. A fit varies the parameters that act outside the kernel (the distal
+    sensors' reading models, an x_in offset, the backlash, pre-sliding's travel lag) as often as the others, and
+    those leave the kernel's run as it was: the last few runs are kept, by where their (read-only) input arrays lie
+    and the values of the numbers."""
+    arrays = (T_in, vel, t, w, slide, speed)
+    key = (tuple(_where(a) for a in arrays), u.tobytes(), tuple(sorted(numbers.items())))
+    for k, _, out in _RUNS:
+        if k == key:
+            return out
+    out = run_extended(T_in, vel, t, u, w, speed=speed, slide=slide, **numbers)
+    for a in out:
+        a.flags.writeable = False
+    _RUNS.insert(0, (key, arrays, out))
+    del _RUNS[4:]
+    return out
 
 
 def _x_out(s: Series, g: Callable, x_in, E1, taut, d_b: float, compliance: float | None,

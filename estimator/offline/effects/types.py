@@ -47,6 +47,8 @@ class Series:
     the white-noise level of the prepared T_in, slide_travel [m] the distal travel beyond which the measured
     x_out counts as moving (the whole tendon slides; 0: x_out's motion not used by the memory) and slide, int8
     shape (n,) or None, the direction x_out is seen moving in at each sample (effects_kernels.distal_slide).
+    Its arrays are read, never written: a prediction reuses the last few runs of the model's kernel on the same
+    arrays (:mod:`estimator.offline.effects.predict`).
     """
 
     time: np.ndarray
