@@ -7,6 +7,8 @@ off the loop as ``teleop slave`` writes them (:class:`teleop.recording.csv_proc.
 :class:`teleop.rerun.process.RerunProcessLogger`: each in a child process); then the same node class on the 3-joint
 instrument (configs/instrument-3dof.yaml: three pair axes, calibrated on its simulator first, each
 joint following a slow sine of angle) with no recording (the step alone) and with the recording off the loop.
+Then the single tendon's step with the recording off the loop saving the Rerun view (``save``) and serving it
+(``serve``: gRPC on loopback, :mod:`teleop.rerun.serve`), and the difference of their p50s.
 Prints p50/p99/max of the step time and the share of steps over 0.8 ms (what would overrun a 1 kHz loop
 with 0.2 ms of wake-up and transport), and the load average. Never fails on time.
 """
@@ -53,7 +55,7 @@ class LatestTopic:
         return math.inf if self.last is None else now - self.last.t_recv
 
 
-def run(off_loop: bool, n: int, tmp: Path) -> np.ndarray:
+def run(off_loop: bool, n: int, tmp: Path, mode: str = "save") -> np.ndarray:
     cfg = Config()
     warm_up(cfg)
     clock = FakeClock()
@@ -61,10 +63,15 @@ def run(off_loop: bool, n: int, tmp: Path) -> np.ndarray:
     rig = SimulatedRig.from_config(cfg)
     model = SheathModel(K=rig.K, compliance=rig.M_e / rig.K if rig.K else rig.M_e)
     csv_cls, rr_cls = (ProcessCsvRecorder, RerunProcessLogger) if off_loop else (CsvRecorder, RerunLogger)
-    tag = "offloop" if off_loop else "inloop"
+    tag = ("offloop" if off_loop else "inloop") + f"-{mode}"
+    serve = None
+    if mode == "serve":              # the stream served on free loopback ports (teleop.rerun.serve), no web viewer
+        from teleop.rerun.serve import ServeSpec
+        from teleop.session.transport import free_tcp_port
+        serve = ServeSpec("127.0.0.1", free_tcp_port(), 0, int(Config().recording.rerun_serve.memory_limit))
     times = np.empty(n)
     with csv_cls(tmp / f"{tag}.csv", csv_columns(True), {"source": "bench"}, flush_every=500) as rec, \
-            rr_cls("bench", tag, "save", tmp / f"{tag}.rrd") as rr:
+            rr_cls("bench", tag, mode, tmp / f"{tag}.rrd", serve=serve) as rr:
         node = SlaveNode(cfg, rig, links, recorder=rec, rerun=rr, calibrate=False, model=model)
         x = 0.0
         for k in range(n):
@@ -133,12 +140,21 @@ def main(n: int = 5000) -> None:
             print(f"slave step, recording {'off the loop (child processes)' if off_loop else 'in the loop'}: "
                   f"p50 {np.percentile(t, 50):.3f} ms, p99 {np.percentile(t, 99):.3f} ms, max {t.max():.2f} ms, "
                   f"steps > 0.8 ms {100 * np.mean(t > 0.8):.2f} %")
+        p50 = {}
+        (Path(d) / "serving").mkdir()
+        for mode in ("save", "serve"):
+            t = run(True, n, Path(d) / "serving", mode)[200:]
+            p50[mode] = np.percentile(t, 50)
+            print(f"slave step, recording off the loop, Rerun {mode}{' (gRPC on loopback)' if mode == 'serve' else ''}: "
+                  f"p50 {p50[mode]:.4f} ms, p99 {np.percentile(t, 99):.3f} ms, max {t.max():.2f} ms")
+        print(f"serving costs the slave's step {1e3 * (p50['serve'] - p50['save']):+.1f} us at p50 (goal <= 50 us)")
         for record in (False, True):
             t = run_joints(n, Path(d), record)[200:]
             print(f"slave step, 3-joint instrument (3 pair axes), "
                   f"{'recording off the loop' if record else 'no recording (the step alone)'}: "
                   f"p10 {np.percentile(t, 10):.3f} ms, p50 {np.percentile(t, 50):.3f} ms, "
-                  f"p99 {np.percentile(t, 99):.3f} ms, max {t.max():.2f} ms, steps > 0.8 ms {100 * np.mean(t > 0.8):.2f} %")
+                  f"p99 {np.percentile(t, 99):.3f} ms, max {t.max():.2f} ms, "
+                  f"steps > 0.8 ms {100 * np.mean(t > 0.8):.2f} %")
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
 
 

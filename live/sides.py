@@ -23,6 +23,7 @@ from teleop.config.bounds import announce_waivers
 from teleop.config.kinds import instrument_kind
 from teleop.config.schema import Config
 from teleop.rerun.layout import joint_views
+from teleop.rerun.serve import serve_spec
 
 __all__ = ["run_slave", "run_master", "load_or_recalibrate", "default_run_dir",
            "prepare_run_dir", "endpoints", "open_session", "slave_links", "master_links"]
@@ -249,7 +250,7 @@ def run_slave(args: argparse.Namespace) -> int:
             with CsvRecorder(run_dir / name, columns, meta, flush_every=500) as rec, \
                     RerunLogger("teleop", run_dir.name, args.rerun or cfg.recording.rerun, run_dir / "slave.rrd",
                                 route=cfg.sheath.runs if kind_of(cfg).sheath_view else None,   # 3D sheath view
-                                joints=joint_views(cfg)) as rr:
+                                joints=joint_views(cfg), serve=serve_spec(cfg, "slave")) as rr:
                 links = slave_links(session, ident, injector)
                 if cfg.ros2.enabled:     # the CRTK topics on ROS 2 beside the loop, servo_jp in (teleop/ros2/side.py)
                     from teleop.ros2.side import attach_slave
@@ -297,7 +298,8 @@ def run_master(args: argparse.Namespace) -> int:
         with raise_on_sigterm(), open_session(cfg, args, clock) as session, \
                 CsvRecorder(run_dir / "master.csv", csv_columns(cfg), meta, units=csv_units(cfg), flush_every=100) as rec, \
                 RerunLogger("teleop", run_dir.name, getattr(args, "rerun", None) or cfg.recording.rerun, run_dir / "master.rrd",
-                            wall_clock=True, joints=joint_views(cfg)) as rr:   # master-side series; same recording id
+                            wall_clock=True, joints=joint_views(cfg),
+                            serve=serve_spec(cfg, "master")) as rr:   # master-side series; same recording id
             links = master_links(session, ident, injector)
             if cfg.ros2.enabled:         # the CRTK topics on ROS 2 beside the loop (teleop/ros2/side.py)
                 from teleop.ros2.side import attach_master
