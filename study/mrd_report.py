@@ -337,17 +337,24 @@ def main_mrd(args) -> int:
 
     if args.json is not None and not Path(args.json).resolve().parent.is_dir():
         raise ConfigError(f"--json {args.json}: directory {Path(args.json).resolve().parent} does not exist")
+    from study.mrd_model import check_model_out, write_mrd_model
+    check_model_out(args)
     tool = load_tool(args.tool) if getattr(args, "tool", None) else None
     runs, bad = load_mrd_dir(args.mrd or None, getattr(args, "runs", None))
     for line in bad:
         print(f"skipped: {line}")
     cal, progress = getattr(args, "calibration", None), sys.stderr.isatty()
     if len(stroke_groups(runs)) > 1:
+        if getattr(args, "model_out", None) is not None:
+            raise ConfigError(f"--model-out {args.model_out}: the runs stroke over separate spindle-angle windows; "
+                              "choose one window's runs with --runs GLOB")
         summary = analyze_windows(analyze_mrd, runs, cal, tool, progress, args)
     else:
         summary, details = analyze_mrd(runs, cal, progress=progress, tool=tool)
         print(format_mrd(summary))
         write_outputs(runs, summary, details, args)
+        if getattr(args, "model_out", None) is not None:
+            print(f"wrote {write_mrd_model(args, runs, summary)}")
     summary["skipped"] = bad
     if args.json is not None:
         Path(args.json).write_text(json.dumps(summary, indent=2, allow_nan=False,

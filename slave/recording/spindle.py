@@ -10,6 +10,10 @@ model ``<instrument.id>.recording.json`` (the pair model's parameters, the centr
 the torque); the next start reloads both (:meth:`RecordedSpindleAxis.start_loaded`), as every axis reloads
 its calibration.
 
+With a model file (``estimator.model``, ``--model``; ``teleop analyze --mrd DIR --tool T --model-out OUTDIR`` writes
+one, :mod:`slave.recording.spindle_model`) the model is the file's, not fitted (:func:`file_model`), at power-up and
+on a reloaded calibration alike; the stats name it (id, sha256).
+
 Per cycle the axis runs the same models online: :class:`estimator.online.centre_estimator.CentreEstimator`
 (the jaw torque, when the calibration chose the centre map) and
 :class:`estimator.online.spindle_estimator.SpindleEstimator` with the fitted pair parameters (the jaw
@@ -40,11 +44,12 @@ from slave.recording.routine import RecordedRoutine, recorded_model_path
 from slave.rig import Rig, RigState
 from slave.spindle_axis import SpindleAxis
 from slave.spindle_calibrate import pull_slip_M_e
+from teleop.config.model_file import ModelFile
 from teleop.config.schema import Config
 from teleop.errors import ConfigError
 from teleop.wire.messages import AxisState, TendonState
 
-__all__ = ["CENTRE", "RecordedModel", "calibration_run_path", "fit_recorded_model", "save_model",
+__all__ = ["CENTRE", "RecordedModel", "calibration_run_path", "fit_recorded_model", "file_model", "save_model",
            "load_model", "model_calibration", "RecordedCalibration", "RecordedSpindleAxis", "full_scale"]
 
 log = logging.getLogger("teleop.slave")
@@ -220,19 +225,38 @@ class RecordedCalibration:
 
     def __init__(self, cfg: Config):
         self.cfg = cfg
-        self.model = fit_recorded_model(cfg)
+        self.model = file_model(cfg) or fit_recorded_model(cfg)
         self.done = True
+
+
+def file_model(cfg: Config) -> RecordedModel | None:
+    """The recorded model of the model file ``estimator.model`` (checked, :func:`slave.estimator_model.configured_model`;
+    its calibration run in the played run's folder), or None without one: the model is then fitted."""
+    from slave.estimator_model import configured_model
+    from slave.recording.spindle_model import recorded_model_dict
+    mf = configured_model(cfg)
+    if mf is None:
+        return None
+    folder = Path(str(cfg.rig.recording.path)).expanduser().parent
+    tool = _tool(cfg)
+    return RecordedModel.from_dict(recorded_model_dict(mf, folder, "" if tool is None else tool.name))
 
 
 class RecordedSpindleAxis(RecordedRoutine, SpindleAxis):
     """The spindle axis on a recorded run (module docstring)."""
 
     centre: CentreEstimator | None = None
+    model_file: ModelFile | None = None       # the model file it runs (estimator.model), or None: fitted at power-up
     routine_class = RecordedCalibration
     model_calibration = staticmethod(model_calibration)
 
     def start_model(self, model: RecordedModel, state: RigState) -> None:
         """The online estimators of ``model``, at rest at the rig's current sample."""
+        from slave.estimator_model import configured_model
+        mf = self.model_file = configured_model(self.cfg)
+        if mf is not None:
+            log.info("%s: estimator model %s (sha256 %s...) from %s: torque from the %s", self.name, mf.model_id,
+                     mf.sha256[:12], mf.path, model.chosen if model.chosen == CENTRE else "spindle pair model")
         j, i = self.joint, self.index
         self.rest = self.phi_cmd = float(np.asarray(state.x_in)[i])
         c = tuple(t.geometry().length / t.EA for t in (j.tendons.a, j.tendons.b))
@@ -262,7 +286,7 @@ class RecordedSpindleAxis(RecordedRoutine, SpindleAxis):
         cfg = axes[0].cfg if axes else None
         if cfg is None:
             raise ConfigError("a recorded spindle instrument needs one joint")
-        model = load_model(recorded_model_path(cfg))
+        model = file_model(cfg) or load_model(recorded_model_path(cfg))
         for ax in axes:
             assert isinstance(ax, RecordedSpindleAxis)
             ax.start_model(model, state)
@@ -279,7 +303,10 @@ class RecordedSpindleAxis(RecordedRoutine, SpindleAxis):
 
     @classmethod
     def stats(cls, axes: Sequence[SlaveAxis]) -> dict[str, Any]:
-        return {"joints": [a.name for a in axes], "drive": "spindle", "rig": "recording"}
+        """The axis's entries and ``model``: the model file's id, sha256 and path (None without one)."""
+        mf = next((ax.model_file for ax in axes if isinstance(ax, RecordedSpindleAxis)), None)
+        return {"joints": [a.name for a in axes], "drive": "spindle", "rig": "recording",
+                "model": None if mf is None else {"id": mf.model_id, "sha256": mf.sha256, "path": mf.path}}
 
     def observe(self, state: RigState) -> tuple[AxisState, tuple[float, ...]]:
         assert self.estimator is not None

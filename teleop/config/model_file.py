@@ -9,7 +9,7 @@ the slave run it (docs/reference/formats.md, "Model file"). A file holds:
   antagonistic pair, ``spindle`` for a spindle-driven pair) with its ``base`` calibration: each parameter an SI
   value, or (value, unit, range) as an extension's parameter, its value then checked within its range;
 * ``extensions``: the catalogue entries it adds, each with its fitted ``parameters`` (value, unit and the
-  range the catalogue allows);
+  range the catalogue allows, ``null`` for a coefficient the catalogue leaves unbounded);
 * ``per_cycle``: the per-cycle form the live estimator runs it as;
 * ``gain``: the held-out errors of the base and the extended model where it was fitted, and their unit;
 * ``provenance``: the recording's file name and SHA-256, the span fitted on [s], the project's version and the
@@ -55,7 +55,8 @@ _PROVENANCE = ("recording", "sha256", "span_s", "project_version", "written")
 
 @dataclass(frozen=True)
 class ModelParameter:
-    """One fitted parameter: its value in ``unit`` (SI), within the catalogue's closed range [lo, hi]."""
+    """One fitted parameter: its value in ``unit`` (SI), within the catalogue's closed range [lo, hi] (-inf, inf when the
+    catalogue leaves it unbounded)."""
     name: str
     value: float
     unit: str
@@ -166,8 +167,10 @@ def _parameter(name: str, v: Any, path: Path, lines: dict[str, int], key: str) -
     if not isinstance(unit, str):
         raise ConfigError(f"{_where(path, lines, key + '.unit')}: expected a unit string, got {unit!r}")
     rng = d["range"]
+    if rng is None:                 # no range in the catalogue (an unbounded least-squares coefficient)
+        return ModelParameter(name, value, unit, -math.inf, math.inf)
     if not (isinstance(rng, list) and len(rng) == 2):
-        raise ConfigError(f"{_where(path, lines, key + '.range')}: expected [low, high], got {rng!r}")
+        raise ConfigError(f"{_where(path, lines, key + '.range')}: expected [low, high] or null, got {rng!r}")
     lo, hi = (_number(x, path, lines, f"{key}.range") for x in rng)
     if not lo <= value <= hi:
         raise ConfigError(f"{_where(path, lines, key + '.value')}: {value:g} {unit} is outside its range "
@@ -241,7 +244,12 @@ def _base_entry(model: ModelFile, name: str, value: float) -> Any:
     if name not in model.base_ranges:
         return float(value)
     unit, lo, hi = model.base_ranges[name]
-    return {"value": float(value), "unit": unit, "range": [float(lo), float(hi)]}
+    return {"value": float(value), "unit": unit, "range": _range(lo, hi)}
+
+
+def _range(lo: float, hi: float) -> list[float] | None:
+    """A parameter's range as written: [low, high], or None (null) for a parameter the catalogue leaves unbounded."""
+    return None if math.isinf(lo) and math.isinf(hi) else [float(lo), float(hi)]
 
 
 def _plain(model: ModelFile) -> dict[str, Any]:
@@ -249,7 +257,7 @@ def _plain(model: ModelFile) -> dict[str, Any]:
         "format": FORMAT, "version": VERSION, "axis": model.axis, "instrument": model.instrument,
         "structure": model.structure, "base": {k: _base_entry(model, k, v) for k, v in model.base.items()},
         "extensions": [{"id": e.id, "parameters": {
-            q.name: {"value": float(q.value), "unit": q.unit, "range": [float(q.lo), float(q.hi)]}
+            q.name: {"value": float(q.value), "unit": q.unit, "range": _range(q.lo, q.hi)}
             for q in e.parameters}} for e in model.extensions],
         "per_cycle": model.per_cycle,
         "gain": {"base": float(model.gain["base"]), "extended": float(model.gain["extended"]),
