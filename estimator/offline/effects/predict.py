@@ -119,30 +119,42 @@ def _memory(s: Series, knobs: dict, g: Callable, T_in, x_in, vel, u, x_p: float,
     return T_out, E1, slide
 
 
-#: the last few runs of the kernel: (where its arrays lie and the numbers, the arrays kept alive, (T_out, E1))
-_RUNS: list[tuple[tuple, tuple, tuple[np.ndarray, np.ndarray]]] = []
-
-
 def _where(a: np.ndarray | None) -> tuple | None:
     return None if a is None else (a.__array_interface__["data"][0], a.shape, a.strides, a.dtype.str)
 
 
+class _Recent:
+    """The last few results of a pure function of arrays and numbers, by where the (read-only) arrays lie and the
+    numbers' values; the arrays are kept alive with them, and the results are made read-only. A fit varies the
+    parameters that act outside the kernel (the distal sensors' reading models, an x_in offset, the backlash,
+    pre-sliding's travel lag) as often as the others, and those leave the kernel's run and the slack rule as they
+    were."""
+
+    def __init__(self, size: int = 4):
+        self.size = size
+        self.kept: list[tuple[tuple, tuple, tuple]] = []
+
+    def __call__(self, compute: Callable, arrays: tuple, numbers: tuple) -> tuple:
+        key = (tuple(_where(a) for a in arrays), numbers)
+        for k, _, out in self.kept:
+            if k == key:
+                return out
+        out = compute()
+        for a in out:
+            a.flags.writeable = False
+        self.kept.insert(0, (key, arrays, out))
+        del self.kept[self.size:]
+        return out
+
+
+_RUNS = _Recent()       # the kernel's (T_out, E1)
+_TAUT = _Recent()       # the slack rule's last taut sample, (index,)
+
+
 def _recent_run(T_in, vel, t, u, w, slide, speed, numbers: dict) -> tuple[np.ndarray, np.ndarray]:
-    """The kernel's (T_out, E1), read-only. A fit varies the parameters that act outside the kernel (the distal
-    sensors' reading models, an x_in offset, the backlash, pre-sliding's travel lag) as often as the others, and
-    those leave the kernel's run as it was: the last few runs are kept, by where their (read-only) input arrays lie
-    and the values of the numbers."""
-    arrays = (T_in, vel, t, w, slide, speed)
-    key = (tuple(_where(a) for a in arrays), u.tobytes(), tuple(sorted(numbers.items())))
-    for k, _, out in _RUNS:
-        if k == key:
-            return out
-    out = run_extended(T_in, vel, t, u, w, speed=speed, slide=slide, **numbers)
-    for a in out:
-        a.flags.writeable = False
-    _RUNS.insert(0, (key, arrays, out))
-    del _RUNS[4:]
-    return out
+    """The kernel's (T_out, E1) (:func:`estimator.offline.effects.kernels.run_extended`), read-only."""
+    return _RUNS(lambda: run_extended(T_in, vel, t, u, w, speed=speed, slide=slide, **numbers),
+                 (T_in, vel, t, w, slide, speed), (u.tobytes(), tuple(sorted(numbers.items()))))
 
 
 def _x_out(s: Series, g: Callable, x_in, E1, taut, d_b: float, compliance: float | None,
@@ -215,8 +227,10 @@ def run_model(s: Series, knobs: dict[str, float], sensors: dict[str, float], u: 
     T_out = _shift(t, T_out, g("sensor_lag:T_out", 0.0))
     # a slack tendon: T_in at the noise around zero - the tendon carries no compression, the proximal end moves
     # without it and the distal end stays where the last taut sample left it
-    moving = None if slide is None else slide * vel > V_STOP      # the distal end carried along: taut
-    taut = slack_hold(T_in, SLACK_SIGMAS * s.sigma_T_in, x_in, moving)
+    def taut_at() -> tuple[np.ndarray]:
+        moving = None if slide is None else slide * vel > V_STOP      # the distal end carried along: taut
+        return (slack_hold(T_in, SLACK_SIGMAS * s.sigma_T_in, x_in, moving),)
+    taut = _TAUT(taut_at, (T_in, x_in, slide, vel), (s.sigma_T_in,))[0]
     x_out, c = _x_out(s, g, x_in, E1, taut, d_b, compliance, fit_mask)
     if stop is not None:
         T_out, x_out = T_out[:stop], x_out[:stop]

@@ -73,8 +73,10 @@ def _node_kernel(T_in, t, u, w, K, K_rate, T_p, r, T0, beta, Tc, xd, T_out, E1):
             kk[i] = ki
             cc[i] = B
         dT0 = Tp - T[0]
+        top = m - 1                     # the most distal segment whose status changed: the shot starts there
         for _ in range(8):
-            # shoot from the distal end: (dT_i, d_i) = (aT + bT x, ad + bd x)
+            # shoot from the distal end: (dT_i, d_i) = (aT + bT x, ad + bd x); the nodes beyond ``top`` are as
+            # the last pass left them
             aT[m] = 0.0
             if use_xd:
                 bT[m] = 1.0
@@ -84,7 +86,7 @@ def _node_kernel(T_in, t, u, w, K, K_rate, T_p, r, T0, beta, Tc, xd, T_out, E1):
                 bT[m] = 1.0 - r
                 ad[m] = 0.0
                 bd[m] = r
-            for i in range(m - 1, -1, -1):
+            for i in range(top, -1, -1):
                 if st[i] == 0:
                     # dT_i - dT_{i+1} = k d_{i+1} + (k ds / 4)(dT_i + dT_{i+1})
                     h = 0.25 * kk[i] * ds
@@ -101,7 +103,7 @@ def _node_kernel(T_in, t, u, w, K, K_rate, T_p, r, T0, beta, Tc, xd, T_out, E1):
                 ad[i] = ad[i + 1] + 0.5 * ds * (aT[i] + aT[i + 1])
                 bd[i] = bd[i + 1] + 0.5 * ds * (bT[i] + bT[i + 1])
             x = (dT0 - aT[0]) / bT[0] if bT[0] != 0.0 else 0.0
-            changed = False
+            top = -1
             for i in range(m):
                 dTi = aT[i] + bT[i] * x
                 dTn = aT[i + 1] + bT[i + 1] * x
@@ -111,14 +113,14 @@ def _node_kernel(T_in, t, u, w, K, K_rate, T_p, r, T0, beta, Tc, xd, T_out, E1):
                     Fn = F[i] + kk[i] * trav
                     if Fn > Bn and trav > 0.0:
                         st[i] = 1
-                        changed = True
+                        top = i
                     elif Fn < -Bn and trav < 0.0:
                         st[i] = -1
-                        changed = True
+                        top = i
                 elif trav * st[i] < 0.0:
                     st[i] = 0
-                    changed = True
-            if not changed:
+                    top = i
+            if top < 0:
                 break
         E = 0.0
         for i in range(m1):
