@@ -288,8 +288,11 @@ class RecordingDemo:
                     f"  offline (same model and calibration, same samples): RMSE {r['offline_same_model_rmse_deg']:.2f} "
                     f"deg; live - offline {r['live_minus_offline_deg']:+.3f} deg (bound {_bounds(r)[1]})",
                     f"  offline seed pair model (teleop analyze --kaist's seed): RMSE {r['offline_seed_rmse_deg']:.2f} deg"]
+        m = s.get("model")
         return [f"recording {r['recording']} (calibrated on {Path(r['calibration_run']).name}, tool "
                 f"{r['tool'] or 'none'}): jaw torque from the {r['model']}, full scale {r['full_scale_Nm'] * 1e3:.1f} mN m",
+                *([f"  model {m['id']} (sha256 {m['sha256'][:12]}..., {Path(m['path']).name}): the model file's, not "
+                   "fitted at power-up"] if m else []),
                 f"  scored {r['cycles_scored']} cycles, {r['scored_from_s']:.2f}-{r['scored_to_s']:.2f} s of the recording",
                 f"  jaw torque live vs measured: RMSE {r['torque_rmse_fs']:.4f} FS (bound {TORQUE_RMSE_BOUND}), max "
                 f"{r['torque_max_fs']:.3f} FS",
