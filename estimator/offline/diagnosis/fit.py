@@ -1,4 +1,5 @@
-"""Fitting and scoring for the diagnosis (:mod:`estimator.offline.diagnosis.selection` selects; docs/concepts/diagnosis.md).
+"""Fitting and scoring for the diagnosis (:mod:`estimator.offline.diagnosis.selection` selects;
+docs/concepts/diagnosis.md).
 
 * :func:`prepare`: block-average the recording to about ``target_rate`` (zero phase; the noise
   drops, the rate-independent maths does not change), a 3-sample mean on T_in, velocity dx_in/dt,
@@ -161,8 +162,8 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
     Every start (dict of parameter values, missing ones neutral) is scored, the best
     ``max_starts`` are refined by ``scipy.optimize.least_squares`` (trust-region reflective, within
     the parameters' bounds, in variables scaled to O(1)). L/EA is solved in closed form inside
-    every residual evaluation. ``route``: fit the route shares r_1, r_2 too (estimator.offline.effects.types.ROUTE), or with
-    "fine" the sixths r_1 ... r_5 (estimator.offline.effects.types.ROUTE_FINE), with "twelfths" r_1 ... r_11
+    every residual evaluation. ``route``: fit the route shares r_1, r_2 too (estimator.offline.effects.types.ROUTE),
+    or with "fine" the sixths r_1 ... r_5 (estimator.offline.effects.types.ROUTE_FINE), with "twelfths" r_1 ... r_11
     (estimator.offline.effects.types.ROUTE_TWELFTHS);
     ``fixed``: values held (e.g. the base model's route); ``mask``: the samples of ``train`` whose
     residuals count (default all; the model always runs from the first sample). A refinement that takes
@@ -199,8 +200,8 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
         return seen[key][0].copy()
 
     def refine(fun, z, lower, upper):
-        return least_squares(fun, z, bounds=(lower, upper), diff_step=1e-2, x_scale=1.0, ftol=th.FIT_TOL, xtol=th.FIT_TOL,
-                             max_nfev=40 * len(z))
+        return least_squares(fun, z, bounds=(lower, upper), diff_step=1e-2, x_scale=1.0, ftol=th.FIT_TOL,
+                             xtol=th.FIT_TOL, max_nfev=40 * len(z))
 
     z_starts = [np.clip(np.array([st.get(p.name, p.neutral) for p in params]) / scale, lo, hi) for st in starts]
     ranked = sorted(z_starts, key=lambda z: float(np.sum(residual(z) ** 2)))

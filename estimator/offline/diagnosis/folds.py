@@ -17,8 +17,8 @@ from estimator.offline.diagnosis.readings import holds_release
 from estimator.offline.effects.catalogue import Effect, below_resolution, predict
 from estimator.offline.effects.types import ROUTE_FORMS, ROUTE_KEYS, ROUTE_TWELFTHS
 
-__all__ = ["Folds", "Fit", "judging_folds", "sole_fold", "score", "structure", "unresolved", "tension_offsets", "route_of", "gain",
-           "parameters_table", "FINER", "FORM_NAME", "UNITS"]
+__all__ = ["Folds", "Fit", "judging_folds", "sole_fold", "score", "structure", "unresolved", "tension_offsets",
+           "route_of", "gain", "parameters_table", "FINER", "FORM_NAME", "UNITS"]
 
 #: the unit of each distal signal in the JSON keys
 UNITS = {"T_out": "N", "x_out": "m"}
@@ -27,15 +27,16 @@ UNITS = {"T_out": "N", "x_out": "m"}
 def tension_offsets(values: dict) -> dict[str, float]:
     """The tension offsets [N] of a fitted model (see OFFSET_FLOORS) by effect id."""
     return {"friction_offset": values.get("a", 0.0) * (1.0 - math.exp(-values.get("K", 0.0))),
-            "sensor_offset:T_in": abs(values.get("b_T_in", 0.0)), "sensor_offset:T_out": abs(values.get("b_T_out", 0.0))}
+            "sensor_offset:T_in": abs(values.get("b_T_in", 0.0)),
+            "sensor_offset:T_out": abs(values.get("b_T_out", 0.0))}
 
 
 def unresolved(effects: list[Effect], values: dict, floor: dict[str, float], dominant: bool = False) -> bool:
     """An effect fitted at a magnitude the recording cannot resolve: at its smallest showable value
-    (:func:`estimator.offline.effects.catalogue.below_resolution`), or a tension offset (friction offset at the tip, load-cell
-    offset) [N] below OFFSET_FLOORS x the T_out floor [N] (when T_out is recorded) - unless ``dominant``: the base
-    leaves structure above STRUCTURE_RATIO and the effect removes nearly all of it (S < DOMINANT_SCORE), so its size
-    is read from a pattern over many samples, not from one sample's noise."""
+    (:func:`estimator.offline.effects.catalogue.below_resolution`), or a tension offset (friction offset at the tip,
+    load-cell offset) [N] below OFFSET_FLOORS x the T_out floor [N] (when T_out is recorded) - unless ``dominant``:
+    the base leaves structure above STRUCTURE_RATIO and the effect removes nearly all of it (S < DOMINANT_SCORE), so
+    its size is read from a pattern over many samples, not from one sample's noise."""
     if below_resolution(effects, values):
         return True
     if "T_out" in floor and not dominant:

@@ -189,8 +189,8 @@ def rest_offset(data: MeasuredData) -> str | None:
     (``"sensor_offset:x_in"`` or ``"sensor_offset:x_out"``; the larger reading in resolutions when both do), or None:
     no channel does, or the recording has no initial rest of REST_MIN_S (it starts moving).
 
-    Positions are zeroed at the initial rest (docs/reference/formats.md), and no physical effect of the catalogue moves a
-    reading there (a pretension loads the rest, it does not move the encoders): a reading away from zero is an
+    Positions are zeroed at the initial rest (docs/reference/formats.md), and no physical effect of the catalogue
+    moves a reading there (a pretension loads the rest, it does not move the encoders): a reading away from zero is an
     encoder's zero offset, read model-free (docs/concepts/effects.md)."""
     stop = _rest_stop(data)
     if stop < 5 or data.time[stop - 1] - data.time[0] < th.REST_MIN_S:

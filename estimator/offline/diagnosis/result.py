@@ -1,8 +1,9 @@
 """The result of a single-tendon diagnosis as typed objects, and their JSON form.
 
-:class:`Diagnosis` is what :func:`estimator.offline.diagnosis.selection.diagnose_recording` returns; :meth:`Diagnosis.to_json`
-writes the JSON object of :func:`estimator.offline.diagnosis.selection.diagnose` (the keys documented there, which
-``teleop analyze`` prints and saves) and :meth:`Diagnosis.from_json` reads one back (a saved ``diagnosis.json``).
+:class:`Diagnosis` is what :func:`estimator.offline.diagnosis.selection.diagnose_recording` returns;
+:meth:`Diagnosis.to_json` writes the JSON object of :func:`estimator.offline.diagnosis.selection.diagnose` (the keys
+documented there, which ``teleop analyze`` prints and saves) and :meth:`Diagnosis.from_json` reads one back (a saved
+``diagnosis.json``).
 """
 from __future__ import annotations
 
@@ -78,7 +79,8 @@ class RestOffset:
 @dataclass
 class Model:
     """A model refitted on the training block: its extension ids, values (K, route shares, parameters, held
-    settings) and compliance L/EA [m/N]; enough to run it again (:func:`estimator.offline.diagnosis.fit.predictions`)."""
+    settings) and compliance L/EA [m/N]; enough to run it again
+    (:func:`estimator.offline.diagnosis.fit.predictions`)."""
 
     effects: list[str]
     values: dict[str, float]

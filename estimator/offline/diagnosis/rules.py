@@ -1,4 +1,5 @@
-"""The steps and rules of the single-tendon diagnosis (:func:`estimator.offline.diagnosis.selection.diagnose_recording`).
+"""The steps and rules of the single-tendon diagnosis
+(:func:`estimator.offline.diagnosis.selection.diagnose_recording`).
 
 Each function is one step of the procedure or one rule: its docstring says what physical symptom it reads and why
 that symptom points where it does. The numbers are in :mod:`estimator.offline.diagnosis.thresholds` (``th``);

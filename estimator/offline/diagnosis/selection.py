@@ -147,8 +147,8 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         structure above STRUCTURE_RATIO and ratio >= STICK_SLIP_RATIO), weak (named by the second rule), overruled
         (the ids the models named that the third rule set aside), samples},
         ``rest_offset`` {reads (the offset id whose encoder reads away from zero at the initial rest,
-        :func:`estimator.offline.diagnosis.readings.rest_offset`, or None), named (named by that reading: the models named
-        nothing), x_in_m, x_out_m (|median| at the initial rest [m])}, ``model`` and
+        :func:`estimator.offline.diagnosis.readings.rest_offset`, or None), named (named by that reading: the models
+        named nothing), x_in_m, x_out_m (|median| at the initial rest [m])}, ``model`` and
         ``base_model`` (refitted on the training block; enough to re-run both, see
         :func:`study.report.write_report`), ``settings``, ``elapsed_s``.
 

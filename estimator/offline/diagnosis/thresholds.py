@@ -1,7 +1,7 @@
 """Every tuned number of the single-tendon diagnosis, with its unit and meaning.
 
-The procedure that uses them is :func:`estimator.offline.diagnosis.selection.diagnose`; where each number comes from and on
-which recordings it was checked is in the thresholds table of docs/concepts/diagnosis.md. The rules read them as
+The procedure that uses them is :func:`estimator.offline.diagnosis.selection.diagnose`; where each number comes from
+and on which recordings it was checked is in the thresholds table of docs/concepts/diagnosis.md. The rules read them as
 attributes of this module at call time (``thresholds.STRUCTURE_RATIO``), so a test may set one with ``monkeypatch``.
 """
 from __future__ import annotations

@@ -31,7 +31,8 @@ from estimator.offline.effects.types import (
 SPEED_FORM = "velocity_form"
 #: Held setting of stiction: 1 = the Stribeck form, each node's friction K (1 + r_s e^-(v/v_st)^2) by its own speed.
 STRIBECK_FORM = "stiction_form"
-#: Stribeck speed of that form [m/s], held (docs/concepts/effects.md names the form, not a value; the lumped simulator uses 0.5 mm/s)
+#: Stribeck speed of that form [m/s], held (docs/concepts/effects.md names the form, not a value; the lumped simulator
+#: uses 0.5 mm/s)
 STRIBECK_SPEED = 0.5e-3
 #: Smallest pre-sliding travel x_p the fit may use [m] (its neutral, off, is 0): below a few um the rounding is under
 #: the floor of x_out and the per-node form differs from the base only by running on the measured x_out. Half the
@@ -211,10 +212,12 @@ class FrictionOffset(Effect):
 class Presliding(Effect):
     id = "presliding"
     cause = "pre-sliding: friction builds up over a small travel after a reversal (liner/asperity compliance, Dahl)"
-    signature = "rounded loop corners: T_out bends gradually after a reversal instead of staying flat; relaxes in dwells"
+    signature = ("rounded loop corners: T_out bends gradually after a reversal instead of staying flat; relaxes in "
+                 "dwells")
     extension = ("tension-scaled Dahl element, in one of two forms (the better fit is kept): the friction "
                  "T_in - T_out lags the memory model's in proximal travel, dF/dx = (F_memory - F) / x_p; or "
-                 "per node: every segment pre-slides over its own travel x_p (estimator.offline.effects.presliding_kernel)")
+                 "per node: every segment pre-slides over its own travel x_p "
+                 "(estimator.offline.effects.presliding_kernel)")
     literature = "E2"
     parameters = (Parameter("x_p", "m", PRESLIDING_MIN, 1e-3, 0.0, (40e-6, 120e-6),
                             "pre-sliding travel F_c / sigma (neutral 0: off, below the fitted range)"),)
@@ -270,7 +273,8 @@ class SensorEffect(Effect):
 _EFFECTS: tuple[Effect, ...] = (VelocityFriction(), Pretension(), CurvatureDrift(), TendonStiffening(), Stiction(),
                                 FrictionOffset(), Presliding(), DistalBacklash(),
                                 *(SensorEffect(k, c) for k, chans in (("offset", "TT"), ("gain", "TT"), ("lag", "TT"),
-                                  ("drift", "TT"), ("offset", "xx"), ("lag", "xx")) for c in (f"{chans[0]}_in", f"{chans[0]}_out")))
+                                  ("drift", "TT"), ("offset", "xx"), ("lag", "xx"))
+                                  for c in (f"{chans[0]}_in", f"{chans[0]}_out")))
 
 CATALOGUE: dict[str, Effect] = {e.id: e for e in _EFFECTS}
 EFFECT_IDS: tuple[str, ...] = tuple(CATALOGUE)

@@ -1,4 +1,5 @@
-"""The rig switch and the scenario knob of a catalogue entry (:mod:`estimator.offline.effects.catalogue`), as plain data.
+"""The rig switch and the scenario knob of a catalogue entry (:mod:`estimator.offline.effects.catalogue`), as plain
+data.
 
 An effect of the catalogue is one entry: its model extension (parameters with fit bounds) and, with
 the types below, how the simulated rig switches it on and how a hidden-effect scenario sets it:
@@ -122,8 +123,9 @@ SENSOR_TEXT = {
             "time delay of the channel: reading(t) = true(t - tau)"),
     "drift": ("d", {"T": ("N/s", -0.1, 0.1, (-0.005, 0.005))}, "linear zero drift: reading = true + d (t - t_0)"),
 }
-SENSOR_CAUSE = {"offset": "zero offset of the {what} (tare, encoder zeroed off the rest)", "gain": "scale error of the "
-                "{what} (calibration factor)", "lag": "the {what} channel lags the others (filter, bus or sampling skew)",
+SENSOR_CAUSE = {"offset": "zero offset of the {what} (tare, encoder zeroed off the rest)",
+                "gain": "scale error of the {what} (calibration factor)",
+                "lag": "the {what} channel lags the others (filter, bus or sampling skew)",
                 "drift": "slow zero drift of the {what} (thermal drift of the bridge)"}
 SENSOR_SIGNATURE = {"offset": "a constant residual of one sign on pull and release; a non-zero reading at the initial "
                     "rest",
