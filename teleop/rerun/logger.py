@@ -240,9 +240,13 @@ class RerunLogger(JointLogging, SegmentedSave):
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             sinks.append(rr.FileSink(str(self.path)))
-        try:
+        import socket
+        try:                             # the SDK only logs a port it cannot listen on: try it here first
+            with socket.socket(socket.AF_INET6 if ":" in spec.bind else socket.AF_INET) as probe:
+                probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                probe.bind((spec.bind, spec.port))
             rec.set_sinks(*sinks, default_blueprint=blueprint)
-        except Exception as exc:         # the SDK's own error types: the port taken, the address not local
+        except Exception as exc:         # OSError, or the SDK's own error types
             raise OSError(f"recording.rerun: serve: cannot serve on {spec.bind}:{spec.port} ({exc})") from exc
         self.web_viewer = start_web_viewer(spec)
 
