@@ -20,7 +20,7 @@ import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 from urllib.parse import quote
 
 __all__ = ["ServeSpec", "serve_spec", "grpc_url", "web_url", "rerun_executable", "start_web_viewer", "viewer_env",
@@ -47,8 +47,16 @@ class ServeSpec:
         return grpc_url(self.bind, self.port)
 
 
-def serve_spec(cfg: Any, side: Literal["slave", "master"]) -> ServeSpec:
-    """The :class:`ServeSpec` of ``side`` from ``cfg.recording.rerun_serve``."""
+def serve_spec(cfg: Any, side: str) -> ServeSpec:
+    """The :class:`ServeSpec` of ``side`` (``slave`` or ``master``) from ``cfg.recording.rerun_serve``.
+
+    Raises
+    ------
+    ValueError
+        ``side`` is neither.
+    """
+    if side not in ("slave", "master"):
+        raise ValueError(f"serve_spec: side {side!r} is neither 'slave' nor 'master'")
     s = cfg.recording.rerun_serve
     return ServeSpec(str(s.bind), int(getattr(s, f"{side}_port")), int(getattr(s, f"{side}_web_port")),
                      int(s.memory_limit))
