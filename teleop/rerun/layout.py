@@ -142,8 +142,9 @@ def _console_lane(rrb: Any) -> Any:
                                  name="Master: operator (deadman, clutch, engaged), experiment")
 
 
-def _master_column(rrb: Any, axes: Sequence[str], arm: str = "") -> Any:
-    """The master's column: rendered and mapped force [N] and command [m] of every axis in ``axes`` (entities
+def _master_column(rrb: Any, axes: Sequence[str], arm: str = "", unit: str = "m") -> Any:
+    """The master's column: rendered and mapped force [N] and command [``unit``: m of tendon, rad of joint angle]
+    of every axis in ``axes`` (entities
     ``master/[<arm>/][<axis>/]<name>``; "" for the axis of a single tendon), the round trip [s] and the
     console lane (none under an arm: the bimanual view has one for both)."""
     def paths(*names: str) -> list[str]:
@@ -153,7 +154,7 @@ def _master_column(rrb: Any, axes: Sequence[str], arm: str = "") -> Any:
     who = f"{arm} hand" if arm else "Master"
     views = [rrb.TimeSeriesView(origin="/", contents=paths("force", "force_cmd"),
                                 name=f"{who}: rendered and mapped force [N]"),
-             rrb.TimeSeriesView(origin="/", contents=paths("x_in_cmd"), name=f"{who}: command [m]")]
+             rrb.TimeSeriesView(origin="/", contents=paths("x_in_cmd"), name=f"{who}: command [{unit}]")]
     if arm:
         return rrb.Vertical(*views, row_shares=[1, 1], name=who)
     return rrb.Vertical(*views, rrb.TimeSeriesView(origin="/", contents=["/master/rtt"], name="Master: round trip [s]"),
@@ -191,7 +192,7 @@ def _joint_blueprint(rrb: Any, joints: Sequence[JointView]) -> object:
             rrb.Vertical(_pairs_view(rrb, joints), rrb.TimeSeriesView(origin="signals", name="Slave: other signals"),
                          row_shares=[4, 1], name="Slave"),
             rrb.Vertical(*rows, row_shares=[1] * len(rows), name="Slave: joints"),
-            _master_column(rrb, names if len(names) > 1 else ("",)),
+            _master_column(rrb, names if len(names) > 1 else ("",), unit="rad"),
             column_shares=[3, 3, 2],
         ),
         rrb.TimePanel(timeline=SESSION),
@@ -215,7 +216,7 @@ def _hand_column(rrb: Any, arm: str, names: Sequence[str], joints: Sequence[Join
     """One arm's column: its joints' torque and angle, then its hand's forces [N] and commands [m] on every joint
     axis (``master/<arm>/<joint>/...``)."""
     rows = [_joint_row(rrb, j) for j in joints if j.name.partition("/")[0] == arm]
-    hand = _master_column(rrb, ("", *names), arm)      # "": a one-axis hand logs master/<arm>/<name>
+    hand = _master_column(rrb, ("", *names), arm, unit="rad")   # "": a one-axis hand logs master/<arm>/<name>
     return rrb.Vertical(*rows, hand, row_shares=[3] * len(rows) + [4], name=f"{arm} arm")
 
 

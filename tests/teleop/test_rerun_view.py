@@ -71,6 +71,7 @@ def test_single_arm_blueprint_puts_the_slave_beside_the_master(joints):
     assert {f"/master/{j.name}/force" for j in joints} <= set(contents)
     assert {f"/master/{j.name}/x_in_cmd" for j in joints} <= set(contents)
     assert "/master/rtt" in contents and "/master/console" in contents
+    assert "Master: command [rad]" in {str(v.name) for v in master}          # a joint's command is its angle
     assert [str(v.origin) for v in _views(blueprint())][:2] == ["sheath", "profile"]     # a single tendon
 
 
