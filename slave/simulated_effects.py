@@ -18,9 +18,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from estimator.extended_loop import stiffening_strain as strain  # one phi(T), shared with the estimator
 from estimator.kernels import load_inverse
 from estimator.offline.effects.catalogue import rig_switches
-from estimator.offline.effects.kernels import stiffening_strain as strain  # one phi(T), shared with the estimator
 from teleop.config.effects import EffectsConfig, in_range
 from teleop.errors import ConfigError
 
@@ -34,7 +34,7 @@ EFFECT_IDS = tuple(rig_switches())
 #: The switches this simulator has a kernel for (a catalogue switch missing here fails a test).
 IMPLEMENTED = frozenset({"velocity_friction", "pretension", "curvature_drift", "tendon_stiffening", "stiction",
                          "friction_offset", "sensor_offset", "sensor_delay"})
-_V_STOP = 2e-4   # motor speed below which a whole-tendon slide ends [m/s] (estimator.offline.effects.kernels.V_STOP)
+_V_STOP = 2e-4   # motor speed below which a whole-tendon slide ends [m/s] (estimator.extended_loop.V_STOP)
 
 
 # ---- general step for the effect switches (friction offset, stiffening, varying bounds) -----------

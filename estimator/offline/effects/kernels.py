@@ -43,7 +43,9 @@ distal part slide back) - and is updated in one of two ways:
   while the proximal end keeps going (the breakaway peak, blunted by the averaging of the data),
   and below T_min it is too small to see and gets no relaxation.
 
-The simulated rig (slave/simulated.py) follows the same rules, there driven by displacement.
+The sample loop is :func:`estimator.extended_loop.run_span` (with V_STOP, BREAK_MARGIN and phi there), which the
+per-cycle estimator (:class:`estimator.online.extended.ExtendedEstimator`) runs one sample at a time on the same
+state. The simulated rig (slave/simulated.py) follows the same rules, there driven by displacement.
 """
 from __future__ import annotations
 
@@ -52,187 +54,43 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = [
-    "run_extended", "distal_slide", "stiffening_strain", "travel_lag", "backlash_play", "V_STOP", "BREAK_MARGIN",
-]
+from estimator.extended_loop import (
+    N_PAR,
+    N_ST,
+    P_A,
+    P_BAND,
+    P_BETA,
+    P_C_V,
+    P_K,
+    P_K_RATE,
+    P_R_S,
+    P_SIGMA,
+    P_T0,
+    P_T_MIN,
+    P_T_SLIP,
+    P_TC,
+    P_V_ST,
+    run_span,
+    start_extended,
+)
 
-V_STOP = 2e-4        # proximal speed below which a slide ends (the tendon sticks) [m/s]
-BREAK_MARGIN = 0.35  # share of the kinetic-static gap within which a turn of T_in counts as breakaway [-]
-
-
-@njit(cache=True, nogil=True)
-def stiffening_strain(T, beta, Tc):  # pragma: no cover - compiled
-    """phi(T) [N]: tension-equivalent strain of a stiffening tendon, T + beta T_c (1 - e^{-T/T_c})
-    (T when beta = 0); elongation = (L/EA) int phi(T) ds. Used by the estimator and the simulated rig."""
-    if beta == 0.0:
-        return T
-    return T - beta * Tc * math.expm1(-T / Tc)
-
-
-@njit(cache=True, nogil=True)
-def _stribeck_bound(Y, Yp, a, u, w, Kk, r_s, v_st, vp, dY, G):  # pragma: no cover - compiled
-    """Cumulative friction exponent G_i of a stuck tendon whose nodes near the proximal end slip (Stribeck form).
-
-    A kinetic trial update gives the slip zone and each node's change of tension dY_i; a node's sliding
-    speed is the proximal speed vp times the share of the slip zone's stretch change beyond it (the
-    distal part of the zone feeds the node's travel; 0 at the slip front and beyond). Node i's bound is
-    K (1 + r_s e^-(v_i/v_st)^2) per unit of wrap angle: static at rest, kinetic well above v_st."""
-    m1 = u.shape[0]
-    tot = 0.0
-    nf = -1
-    for i in range(m1):
-        g = math.exp(-Kk * u[i])
-        y = Y[i]
-        lo = Yp * g
-        hi = Yp / g
-        if hi < a:
-            hi = a
-        if y < lo:
-            d = lo - y
-        elif y > hi:
-            d = y - hi
-        else:
-            break
-        dY[i] = w[i] * d
-        tot += dY[i]
-        nf = i
-    beyond = 0.0
-    for i in range(m1 - 1, -1, -1):
-        vi = 0.0
-        if i <= nf and tot > 0.0:       # in the slip zone; the proximal node moves with the proximal end
-            vi = vp if i == 0 else vp * beyond / tot
-            beyond += dY[i]
-        G[i] = Kk * (1.0 + r_s * math.exp(-(vi / v_st) ** 2))     # the node's bound, per wrap angle
-    acc = 0.0
-    prev = G[0]
-    for i in range(m1):
-        if i > 0:
-            acc += 0.5 * (G[i] + prev) * (u[i] - u[i - 1])
-        prev = G[i]
-        G[i] = acc if i > 0 else 0.0
-    return nf
+__all__ = ["run_extended", "distal_slide", "travel_lag", "backlash_play"]
 
 
 @njit(cache=True, nogil=True)
 def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, sigma, beta, Tc, v_st,
             T0_out, band, slide, T_out, E1):  # pragma: no cover - compiled
+    """The whole recording through the shared sample loop (:func:`estimator.extended_loop.run_span`) from rest."""
     m1 = u.shape[0]
-    Y = np.full(m1, T0 + a)
-    E0 = stiffening_strain(T0, beta, Tc)
-    if T0 > 0.0 and T0_out >= 0.0:
-        # a load that holds less than the preload let the distal part slide back to what it holds: T0 capped by
-        # the friction band above the distal rest reading T0_out (a distal reading above T0 leaves it uniform)
-        E0 = 0.0
-        for i in range(m1):
-            y = min(T0, T0_out * math.exp(K * (1.0 - u[i])))
-            Y[i] = y + a
-            E0 += w[i] * stiffening_strain(y, beta, Tc)
-    E = E0
-    varying = K_rate != 0.0 or c_v != 0.0
-    stiction = r_s > 0.0
-    stribeck = stiction and v_st > 0.0    # the Stribeck form: static-kinetic by each node's own speed
-    dY = np.zeros(m1)
-    G = np.zeros(m1)
-    g_kin = np.exp(-K * u)
-    g_kin_inv = 1.0 / g_kin
-    g_sta = np.exp(-K * (1.0 + r_s) * u)
-    sliding = 0                     # direction of the whole-tendon slide, 0 when the distal end sticks
-    t_b = -math.inf
-    Yp_prev = Y[0]
-    seen = slide.shape[0] > 0
-    for k in range(T_in.shape[0]):
-        tk = t[k]
-        Kk = K
-        if varying:
-            Kk = K + K_rate * (tk - t[0])
-            if Kk < 0.0:
-                Kk = 0.0
-            Kk *= 1.0 + c_v * spd[k]
-        Yp = T_in[k]
-        if Yp < 0.0:
-            Yp = 0.0
-        Yp += a
-        if sliding != 0 and v[k] * sliding <= V_STOP:
-            sliding = 0             # the proximal end stopped or turned: the tendon sticks
-            t_b = -math.inf
-        forced = 0
-        if seen and slide[k] != 0 and v[k] * slide[k] > V_STOP and (Yp - Yp_prev) * slide[k] >= -2.0 * sigma:
-            forced = slide[k]       # both ends seen moving one way, T_in not turned back: the whole tendon slides
-        stuck = stiction and sliding == 0
-        if stuck and not stribeck and k > 0 and Yp_prev - a >= T_min and abs(v[k]) > V_STOP:
-            # breakaway seen as a turn of T_in near the static threshold while the proximal end goes on
-            dm = 1 if v[k] > 0.0 else -1
-            yn = Y[m1 - 1]
-            gk = math.exp(-Kk * u[m1 - 1] * dm)
-            gs = math.exp(-Kk * (1.0 + r_s) * u[m1 - 1] * dm)
-            near = yn / gk + (1.0 - BREAK_MARGIN) * (yn / gs - yn / gk)
-            if (Yp_prev - near) * dm >= 0.0 and (Yp_prev - Yp) * dm > 2.0 * sigma:
-                sliding = dm
-                t_b = t[k - 1]
-        Yp_prev = Yp
-        entered = forced != 0 and sliding != forced
-        if entered:
-            if stuck and not stribeck and Yp - a >= T_min:
-                t_b = tk            # breakaway from static friction
-            sliding = forced
-        if sliding != 0:
-            f = Kk
-            if stribeck:
-                f *= 1.0 + r_s * math.exp(-(v[k] / v_st) ** 2)
-            elif t_b > -math.inf:
-                f *= 1.0 + r_s * math.exp(-(tk - t_b) / t_slip)
-            g_n = math.exp(-f * sliding * u[m1 - 1])
-            if not entered and tk - t_b > 5.0 * t_slip and (Yp * g_n - Y[m1 - 1]) * sliding < -2.0 * sigma * g_n:
-                # a sliding distal end only moves on (T_out rises pulling, falls releasing): T_in
-                # turned back beyond the noise, the tendon sticks (the averaged T_in turns before x_in)
-                sliding = 0
-                t_b = -math.inf
-        if sliding != 0:
-            E = 0.0
-            fixed = not varying and not stribeck and t_b == -math.inf      # the kinetic bound: tabulated
-            for i in range(m1):
-                if fixed:
-                    y = Yp * (g_kin[i] if sliding > 0 else g_kin_inv[i])
-                else:
-                    y = Yp * math.exp(-f * sliding * u[i])
-                if y < a:
-                    y = a
-                Y[i] = y
-                E += w[i] * stiffening_strain(y - a, beta, Tc)
-        else:
-            bound = Kk * (1.0 + r_s) if stuck else Kk
-            if stribeck:
-                _stribeck_bound(Y, Yp, a, u, w, Kk, r_s, v_st, abs(v[k]), dY, G)
-            for i in range(m1):
-                if stribeck:
-                    g = math.exp(-G[i])
-                elif varying:
-                    g = math.exp(-bound * u[i])
-                elif stuck:
-                    g = g_sta[i]
-                else:
-                    g = g_kin[i]
-                y = Y[i]
-                lo = (Yp - band) * g
-                hi = (Yp + band) / g
-                if y < lo:
-                    ny = lo
-                    d = 1
-                elif y > hi:
-                    ny = hi if hi > a else a
-                    d = -1
-                else:
-                    break
-                if ny == y:
-                    break
-                E += w[i] * (stiffening_strain(ny - a, beta, Tc) - stiffening_strain(y - a, beta, Tc))
-                Y[i] = ny
-                if i == m1 - 1:         # the slip reached the distal end: the whole tendon slides
-                    sliding = d
-                    if stuck and not stribeck and Yp - a >= T_min:
-                        t_b = tk        # breakaway from static friction
-        T_out[k] = Y[m1 - 1] - a
-        E1[k] = E - E0
+    par = np.empty(N_PAR)
+    par[P_K], par[P_A], par[P_T0], par[P_K_RATE], par[P_C_V], par[P_R_S] = K, a, T0, K_rate, c_v, r_s
+    par[P_T_SLIP], par[P_T_MIN], par[P_SIGMA], par[P_BETA], par[P_TC] = t_slip, T_min, sigma, beta, Tc
+    par[P_V_ST], par[P_BAND] = v_st, band
+    Y = np.empty(m1)
+    st = np.empty(N_ST)
+    tab = np.empty((3, m1))
+    start_extended(u, w, par, T0_out, Y, st, tab)
+    run_span(T_in, v, spd, t, slide, 0, T_in.shape[0], u, w, par, Y, st, tab, np.zeros(m1), np.zeros(m1), T_out, E1)
 
 
 @njit(cache=True, nogil=True)

@@ -14,8 +14,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from estimator.extended_loop import V_STOP
 from estimator.offline.effects.kernels import (
-    V_STOP,
     backlash_play,
     distal_slide,
     run_extended,

@@ -29,7 +29,7 @@ import math
 import numpy as np
 from numba import njit
 
-from estimator.offline.effects.kernels import stiffening_strain
+from estimator.extended_loop import stiffening_strain
 
 __all__ = ["run_node_presliding", "node_presliding", "T_P_MIN", "NODE_FORM"]
 
