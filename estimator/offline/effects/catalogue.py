@@ -26,6 +26,7 @@ from estimator.offline.effects.types import (
     route_shape,
     route_values,
 )
+from estimator.online.extended import PER_CYCLE
 
 #: Held setting of velocity_friction: 1 = the sliding speed is the mean of |dx_in/dt| and |dx_out/dt|.
 SPEED_FORM = "velocity_form"
@@ -99,10 +100,17 @@ class Effect:
         """The base model's batch prediction extended by this effect (see :func:`predict`)."""
         return predict([self], values, s, compliance=compliance)
 
+    @property
+    def per_cycle(self) -> tuple[bool, str]:
+        """Whether the live loop runs this entry, and how it runs there or why it cannot
+        (:data:`estimator.online.extended.PER_CYCLE`; an entry added by :func:`register` has none)."""
+        return PER_CYCLE.get(self.id, (False, "an entry added to the catalogue has no per-cycle form"))
+
     def describe(self) -> dict:
-        """JSON-ready summary: id, cause, signature, extension, literature, parameters with units and bounds."""
+        """JSON-ready summary: id, cause, signature, extension, literature, parameters with units and bounds,
+        per_cycle (whether the live loop runs it, and how or why not)."""
         return {"id": self.id, "cause": self.cause, "signature": self.signature, "extension": self.extension,
-                "literature": self.literature, "primary_signal": self.primary,
+                "literature": self.literature, "primary_signal": self.primary, "per_cycle": list(self.per_cycle),
                 "parameters": [{"name": p.name, "unit": p.unit, "bounds": [p.lower, p.upper], "meaning": p.meaning}
                                for p in self.parameters]}
 
