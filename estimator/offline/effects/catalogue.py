@@ -1,5 +1,8 @@
 """The catalogue of model extensions: one small class per physical effect the base model misses.
 
+Over 400 lines: one class per catalogue entry with its texts, switches and per-cycle form, and the one prediction
+over them; the entries are the catalogue and do not split.
+
 Base model: the profile-memory estimator (exact Coulomb memory; :mod:`estimator.sheath`) with two
 parameters, the friction exponent K [-] and the compliance L/EA [m/N], driven by the measured
 proximal tension T_in from an unloaded tendon (initial profile 0, positions zeroed there). Each
