@@ -17,7 +17,9 @@ Which axes run a model file, per axis kind:
   :data:`estimator.online.pair_model.PER_CYCLE`);
 * ``spindle``: the recording rig's spindle axis (:class:`slave.recording.spindle.RecordedSpindleAxis`) runs the
   spindle pair model and, when the file chose it, the centre map (:mod:`study.mrd_model` writes them);
-* ``tendon``: no axis runs a model file yet.
+* ``tendon``: the single-tendon axis (:class:`slave.tendon_axis.TendonAxis`, on any rig) runs
+  :class:`estimator.online.extended.ExtendedEstimator` beside the base estimator (:mod:`slave.tendon_model`: the
+  checks, the fallback where the extended estimate leaves the physical range).
 """
 from __future__ import annotations
 
@@ -115,6 +117,9 @@ def configured_model(cfg: Config) -> ModelFile | None:
         _check_pair(model, cfg)
     elif kind == "spindle":
         _check_spindle(model, cfg)
+    elif kind == "tendon":
+        from slave.tendon_model import check_tendon
+        check_tendon(model)
     else:
         raise ConfigError(f"{model.path}: axis: the {kind} axis runs no model file yet")
     return model

@@ -14,6 +14,9 @@
   RELAX_BAND``; it never pulls and never goes below ``slave.x_in_min``. Releasing a single tendon lets its joint go back
   under its return spring: the instrument goes limp, away from the tissue, with no stored energy; the speed bound keeps
   that motion slow and smooth.
+* A model file (``estimator.model``, ``--model``; :mod:`slave.tendon_model`): its per-cycle estimator runs beside
+  the base one from the same start and gives the axis's estimate, except in the cycles where it leaves the
+  physical range, where the base estimator's stands in (counted as ``model.fallbacks`` in the stats, logged once).
 * Each cycle: ``estimator.step(T_in, x_in, t)`` (proximal sensors only) -> the axis's state (effort
   = T_out_hat [N], position = x_out_hat [m]) and the profile at ``estimator.profile_points`` points;
   one row of ``slave.csv`` in the measured-data format (docs/reference/formats.md), Rerun every
@@ -23,7 +26,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -33,9 +36,13 @@ from estimator.sheath import SheathModel
 from slave.axis import SlaveAxis
 from slave.calibrate import JointLimitCalibration
 from slave.calibration_file import from_tendon_result, tendon_model
+from slave.estimator_model import configured_model
 from slave.rig import Rig, RigState, RigTruth
 from teleop.config.schema import Config
 from teleop.wire.messages import AxisState, TendonState
+
+if TYPE_CHECKING:
+    from slave.tendon_model import ModelRunner
 
 __all__ = ["TendonAxis", "CSV_COLUMNS", "CSV_TRUTH_COLUMNS", "csv_columns", "RELAX_BAND"]
 
@@ -91,6 +98,7 @@ class TendonAxis(SlaveAxis):
         self.relax_speed = cfg.slave.relax_speed
         self.relax_to = cfg.sheath.pretension + RELAX_BAND
         self.engage_tolerance = cfg.slave.engage_tolerance
+        self.runner: ModelRunner | None = None   # the model file's estimator (estimator.model), or None
         # load the compiled kernels now, not in the first real-time cycle
         DistalEstimator(SheathModel(K=0.5, compliance=1e-4), n_nodes=2).step(1.0, 0.0, 0.0)
 
@@ -109,9 +117,25 @@ class TendonAxis(SlaveAxis):
         else:
             log.info("estimator without a noise band (%s)", "estimator.tension_noise = 0" if e.tension_noise == 0
                      else "the calibration has no tension_noise: recalibrate to measure it")
+        mf = configured_model(self.cfg)
+        self.runner = None
+        if mf is not None:
+            from slave.tendon_model import ModelRunner, tendon_model_estimator  # the catalogue: with a model only
+            est = tendon_model_estimator(mf, sigma, e.rate_time_constant, self.cfg.rig.rate_hz)
+            self.runner = ModelRunner(mf, est, self.name)
         if state is not None:
-            self.sample = self.estimator.step(state.T_in, state.x_in, state.t)
+            self._estimate(state.T_in, state.x_in, state.t)
+
+    def _estimate(self, T_in: float, x_in: float, t: float) -> None:
+        """One cycle of the base estimator and, with a model file, its estimator: the axis's sample and profile."""
+        assert self.estimator is not None
+        self.sample = self.estimator.step(T_in, x_in, t)
+        if self.runner is None:
             self.profile = self.estimator.profile_samples(len(self.s_points))
+            return
+        self.sample = self.runner.step(T_in, x_in, t, self.sample)
+        prof = self.runner.estimator.profile
+        self.profile = np.interp(np.linspace(0.0, 1.0, len(self.s_points)), np.linspace(0.0, 1.0, prof.size), prof)
 
     # ---- per kind ----------------------------------------------------------------------------------
     @classmethod
@@ -144,8 +168,10 @@ class TendonAxis(SlaveAxis):
         # replay the routine (compiled batch): the estimator's memory = the tendon's proximal history
         t_h, x_h, T_h = routine.history
         est.replay(np.asarray(t_h[:-1]), np.asarray(x_h[:-1]), np.asarray(T_h[:-1]))
-        ax.sample = est.step(T_h[-1], x_h[-1], t_h[-1])
-        ax.profile = est.profile_samples(len(ax.s_points))
+        if ax.runner is not None:       # the model's estimator through the same history, one cycle at a time
+            for T, x, t in zip(T_h[:-1], x_h[:-1], t_h[:-1], strict=True):
+                ax.runner.estimator.step(T, x, t)
+        ax._estimate(T_h[-1], x_h[-1], t_h[-1])
         ax.x_hold = routine.x_cmd
         r = routine.result
         log.info("calibrated: K = %.4f, M_e = %.4e m/N (knee at T_in = %.2f N)", r.K, r.M_e, r.knee_T_in)
@@ -187,7 +213,9 @@ class TendonAxis(SlaveAxis):
 
     @classmethod
     def stats(cls, axes: Sequence[SlaveAxis]) -> dict[str, Any]:
-        return {}
+        """``model``: the model file's entry (:meth:`slave.tendon_model.ModelRunner.stats`), when one runs."""
+        runners = [ax.runner for ax in axes if isinstance(ax, TendonAxis) and ax.runner is not None]
+        return {"model": runners[0].stats()} if runners else {}
 
     @classmethod
     def warm_up(cls, cfg: Config) -> None:
@@ -230,9 +258,8 @@ class TendonAxis(SlaveAxis):
         return self.x_hold
 
     def observe(self, state: RigState) -> tuple[AxisState, tuple[float, ...]]:
-        assert self.estimator is not None
-        s = self.sample = self.estimator.step(state.T_in, state.x_in, state.t)
-        self.profile = self.estimator.profile_samples(len(self.s_points))
+        self._estimate(state.T_in, state.x_in, state.t)
+        s = self.sample
         tendon = TendonState(state.T_in, state.x_in, s.T_out, s.elongation, s.phase)
         return AxisState(s.T_out, s.x_out, (tendon,)), tuple(float(v) for v in self.profile)
 

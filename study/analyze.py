@@ -30,7 +30,8 @@ Two modes:
 Markdown report with PNG figures (:func:`study.report.write_report`,
 :func:`study.kaist_report.write_kaist_report`); ``--figures DIR`` the KAIST plots ``kaist_*.png``;
 ``--model-out OUTDIR`` the chosen model of each configuration as a model file the live estimator runs
-(:mod:`study.kaist_model`; ``--mrd``: :mod:`study.mrd_model`).
+(:mod:`study.kaist_model`; ``--mrd``: :mod:`study.mrd_model`; FILE.csv: the one file OUT.yaml with ``--instrument ID``,
+:mod:`study.tendon_model`).
 Bad input raises DataError / ConfigError (one line, exit 2).
 """
 from __future__ import annotations
@@ -98,10 +99,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "jaw stopping position of a folder that holds several")
     parser.add_argument("--json", metavar="OUT", help="write the result (summary numbers) as JSON to OUT")
     parser.add_argument("--report", metavar="DIR", help="write a Markdown report with PNG figures to DIR")
-    parser.add_argument("--model-out", metavar="OUTDIR",
+    parser.add_argument("--model-out", metavar="OUT",
                         help="write the chosen model as a model file the live estimator runs (estimator.model, "
-                             "--model): --kaist: OUTDIR/<recording stem>.model.yaml per configuration; --mrd: "
-                             "OUTDIR/<folder name>.model.yaml (docs/reference/formats.md, \"Model file\")")
+                             "--model): FILE.csv: the file OUT (.yaml); --kaist: OUT/<recording stem>.model.yaml per "
+                             "configuration; --mrd: OUT/<folder name>.model.yaml (docs/reference/formats.md, "
+                             "\"Model file\")")
+    parser.add_argument("--instrument", metavar="ID",
+                        help="CSV mode with --model-out: the instrument id the model file is for (default: the "
+                             "default config's instrument.id)")
     parser.add_argument("--figures", metavar="DIR",
                         help="write the plots to DIR (kaist_*.png with --kaist, mrd_*.png with --mrd)")
     parser.add_argument("--bend", type=float, metavar="DEG",
@@ -140,17 +145,20 @@ def main_analyze(args: argparse.Namespace) -> int:
         raise ConfigError(f"--tool {args.tool}: a tool's constants are for the spindle analysis (--mrd DIR)")
     if args.json is not None and not Path(args.json).resolve().parent.is_dir():
         raise ConfigError(f"--json {args.json}: directory {Path(args.json).resolve().parent} does not exist")
+    kaist = (args.kaist is not None or is_kaist_file(args.file) or args.bend is not None or args.columns is not None
+             or args.shared_params is not None or getattr(args, "configs", None) is not None)
     for opt, d in (("--report", args.report), ("--figures", args.figures),
-                   ("--model-out", getattr(args, "model_out", None))):
+                   ("--model-out", getattr(args, "model_out", None) if kaist else None)):
         if d is not None and Path(d).exists() and not Path(d).is_dir():
             raise ConfigError(f"{opt} {d}: exists and is not a directory")
     if args.file is not None:
         require_file(args.file)
-    kaist = (args.kaist is not None or is_kaist_file(args.file) or args.bend is not None or args.columns is not None
-             or args.shared_params is not None or getattr(args, "configs", None) is not None)
-    if getattr(args, "model_out", None) is not None and (not kaist or args.shared_params is not None):
-        raise ConfigError(f"--model-out {args.model_out}: model files are written by the KAIST diagnosis (--kaist) "
-                          "and the MRD analysis (--mrd DIR --tool T)")
+    if getattr(args, "model_out", None) is not None and kaist and args.shared_params is not None:
+        raise ConfigError(f"--model-out {args.model_out}: model files are written by a diagnosis (FILE.csv, --kaist) "
+                          "and the MRD analysis (--mrd DIR --tool T), not by --shared-params")
+    if getattr(args, "instrument", None) is not None and (kaist or getattr(args, "model_out", None) is None):
+        raise ConfigError(f"--instrument {args.instrument}: names the instrument of a single-tendon model file "
+                          "(FILE.csv --model-out OUT.yaml)")
     if kaist:
         if args.route is not None:
             raise ConfigError("--route is for a single-tendon CSV; the KAIST pair models have no sheath route")
@@ -175,6 +183,9 @@ def main_analyze(args: argparse.Namespace) -> int:
     else:
         if args.figures:
             raise ConfigError("--figures is for the KAIST analysis (--kaist); use --report DIR")
+        if getattr(args, "model_out", None) is not None:
+            from study.tendon_model import check_model_out
+            check_model_out(args.model_out, args.instrument, args.route)
         shape, how = (None, None) if args.route is None else configured_route(args.route)
         result, data = diagnose_file(args.file, train_fraction=args.train_fraction, wrap_shape=shape)
         if how is not None:
@@ -182,6 +193,9 @@ def main_analyze(args: argparse.Namespace) -> int:
         print(format_diagnosis(result))
         if args.report is not None:
             print(f"wrote {write_report(result, data, args.report)}")
+        if getattr(args, "model_out", None) is not None:
+            from study.tendon_model import write_model_out
+            print(f"wrote {write_model_out(result, data, args.file, args.model_out, args.instrument, args.route)}")
         summary = result.to_json()
     if args.json is not None:
         Path(args.json).write_text(json.dumps(summary, indent=2, allow_nan=False, default=_nan_none) + "\n")

@@ -6,8 +6,10 @@ readings T_in [N], x_in [m] and the time t [s] and returns the distal tension an
 
 1. the proximal sensors' corrections (the model runs on the true inputs), as the batch model's:
    T = (T_in - b_T) / (1 + g_T) - d_T (t - t_0),  x = x_in - b_x,  t_0 the first step's time;
-2. the proximal velocity v, the backward difference of x smoothed over ``rate_time_constant``
-   (:func:`estimator.online.distal.velocity_step`, the base estimator's), and the sliding speed |v| (or, with
+2. with ``average`` n > 1, T the mean of the last n corrected readings and the proximal velocity v the slope of x
+   across them (the fit's block mean at its sample rate, run causally: n = the live rate / the fit's rate); with
+   n = 1 each reading as it is and v the backward difference of x smoothed over ``rate_time_constant``
+   (:func:`estimator.online.distal.velocity_step`, the base estimator's); the sliding speed |v| (or, with
    ``velocity_form`` 1, the mean of |v| and the speed of the estimate's own distal end);
 3. one sample of the compiled loop of the batch model (:func:`estimator.extended_loop.run_span`) on the kept
    profile: friction exponent K (1 + c_v speed) + K_rate (t - t_0), static friction r_s (breakaway or Stribeck
@@ -111,8 +113,9 @@ _O_STEPS, _O_T0, _O_V, _O_X_PREV, _O_T_PREV, _O_V_OUT, _O_XO_PREV, _O_LAG, _O_PL
 
 
 class ExtendedSample(NamedTuple):
-    """One step's output: distal tension T_out [N], elongation [m], distal end x_out [m], the friction exponent
-    K_now [-] of the step (drift and speed included) and the corrected proximal tension T_in [N]."""
+    """One step's output: distal tension T_out [N], elongation [m], distal end x_out [m], the largest friction
+    exponent K_now [-] of the step (drift, speed and static friction included: K (1 + c_v v) (1 + r_s)) and the
+    corrected proximal tension T_in [N]."""
 
     T_out: float
     elongation: float
@@ -122,7 +125,8 @@ class ExtendedSample(NamedTuple):
 
 
 @njit(cache=True, nogil=True)
-def _step(T_raw, x_raw, t, q, par, u, w, Y, st, tab, dY, G, io, slide, one_T, one_E, o, out):  # pragma: no cover
+def _step(T_raw, x_raw, t, q, par, u, w, Y, st, tab, dY, G, io, slide, one_T, one_E, o, ring,
+          out):  # pragma: no cover - compiled
     """One sample (module docstring, steps 1-4) on the kept state; writes ``out`` = (T_out, elongation, x_out,
     K_now, T_in)."""
     first = o[_O_STEPS] == 0.0
@@ -133,6 +137,19 @@ def _step(T_raw, x_raw, t, q, par, u, w, Y, st, tab, dY, G, io, slide, one_T, on
     dt = 1e-3
     if not first:
         dt = max(t - o[_O_T_PREV], 1e-6)
+    n = ring.shape[1]
+    if n > 1:                       # the mean of T over the window, the slope of x across it
+        k = int(o[_O_STEPS])
+        j = k % n
+        ring[0, j], ring[1, j], ring[2, j] = T, x, t
+        m = min(k + 1, n)
+        acc = 0.0
+        for i in range(m):
+            acc += ring[0, i]
+        T = acc / m
+        old = (j + 1) % n if k + 1 >= n else 0
+        o[_O_V] = 0.0 if m == 1 else (x - ring[1, old]) / max(t - ring[2, old], 1e-6)
+    elif not first:
         o[_O_V] = velocity_step(o[_O_V], x, o[_O_X_PREV], dt, q[_Q_TAU])
     v = o[_O_V]
     spd = abs(v)
@@ -172,7 +189,7 @@ def _step(T_raw, x_raw, t, q, par, u, w, Y, st, tab, dY, G, io, slide, one_T, on
     out[0] = T_out
     out[1] = c * E1
     out[2] = x_out
-    out[3] = (Kk if Kk > 0.0 else 0.0) * (1.0 + par[P_C_V] * spd)
+    out[3] = (Kk if Kk > 0.0 else 0.0) * (1.0 + par[P_C_V] * spd) * (1.0 + par[P_R_S])
     out[4] = T
 
 
@@ -187,9 +204,14 @@ class ExtendedEstimator:
         shape (m + 1,), m >= 1: the node grid the parameters were fitted on
     compliance : L/EA [m/N] >= 0
     tension_noise : standard deviation of the T_in reading [N] >= 0: the memory's noise band is
-        NOISE_BAND_SIGMAS times it, and a turn of T_in must exceed 2 of it to count as a breakaway (0: exact)
+        NOISE_BAND_SIGMAS times that of the averaged T_in, and a turn of T_in must exceed 2 of it to count as a
+        breakaway (0: exact)
     T_min : proximal tension [N] below which a breakaway gets no relaxation (None: 10 ``tension_noise``)
-    rate_time_constant : time constant of the smoothed proximal velocity [s] > 0
+    rate_time_constant : time constant of the smoothed proximal velocity [s] > 0 (``average`` 1)
+    average : the readings averaged per step, >= 1: T_in is the mean of the last ``average`` corrected readings and
+        the velocity the slope of x_in across them (their noise: ``tension_noise`` / sqrt(``average``)); the fit's
+        sample interval at the live rate runs the model on what it was fitted on (1: each reading as it is, the
+        velocity smoothed over ``rate_time_constant``)
 
     Raises
     ------
@@ -200,7 +222,8 @@ class ExtendedEstimator:
     """
 
     def __init__(self, values: Mapping[str, float], u: np.ndarray, w: np.ndarray, compliance: float, *,
-                 tension_noise: float = 0.0, T_min: float | None = None, rate_time_constant: float = 0.02):
+                 tension_noise: float = 0.0, T_min: float | None = None, rate_time_constant: float = 0.02,
+                 average: int = 1):
         v = _checked(values)
         self.values = v
         self.u = np.ascontiguousarray(u, dtype=np.float64)
@@ -213,6 +236,11 @@ class ExtendedEstimator:
                             ("rate_time_constant", rate_time_constant, rate_time_constant > 0.0)):
             if not (math.isfinite(x) and ok):
                 raise ValueError(f"{name} out of range: {x!r}")
+        if not (isinstance(average, int) and 1 <= average <= 1000):
+            raise ValueError(f"average must be a whole number of samples in [1, 1000], got {average!r}")
+        self.average = average
+        self._ring = np.zeros((3, average))
+        tension_noise = tension_noise / math.sqrt(average)     # the noise of the averaged T_in
         T_min = 10.0 * tension_noise if T_min is None else T_min
         if not (math.isfinite(T_min) and T_min >= 0.0):
             raise ValueError(f"T_min must be a finite tension >= 0 N, got {T_min!r}")
@@ -241,6 +269,7 @@ class ExtendedEstimator:
         middle and the velocity start there)."""
         start_extended(self.u, self.w, self._par, -1.0, self._Y, self._st, self._tab)
         self._o[:] = 0.0
+        self._ring[:] = 0.0
         T0 = self.values["T0"]
         self.sample = ExtendedSample(T0, 0.0, 0.0, self.values["K"], T0)
 
@@ -260,20 +289,21 @@ class ExtendedEstimator:
         if not (math.isfinite(T_in) and math.isfinite(x_in) and math.isfinite(t)):
             raise ValueError(f"proximal sample must be finite, got T_in={T_in!r} N, x_in={x_in!r} m, t={t!r} s")
         _step(float(T_in), float(x_in), float(t), self._q, self._par, self.u, self.w, self._Y, self._st, self._tab,
-              self._dY, self._G, self._io, self._slide, self._one_T, self._one_E, self._o, self._out)
+              self._dY, self._G, self._io, self._slide, self._one_T, self._one_E, self._o, self._ring, self._out)
         o = self._out
         self.sample = s = ExtendedSample(float(o[0]), float(o[1]), float(o[2]), float(o[3]), float(o[4]))
         return s
 
     def out_of_range(self, s: ExtendedSample) -> str | None:
         """Why ``s`` leaves the physical range, or None: a negative distal tension, or a distal tension above the
-        proximal one by more than e^K (the friction's bound, with the noise band: T_out > (max(T_in, 0) + band)
-        e^K_now + 1 mN), or an output that is not finite."""
+        proximal one by more than e^K (the friction's bound on T + a, with the noise band h: T_out > (max(T_in, 0) +
+        h + a) e^K_now - a + 1 mN), or an output that is not finite."""
         if not (math.isfinite(s.T_out) and math.isfinite(s.x_out)):
             return "a non-finite estimate"
         if s.T_out < 0.0:
             return f"T_out = {s.T_out:.3g} N < 0"
-        bound = (max(s.T_in, 0.0) + self.band) * math.exp(s.K_now) + 1e-3
+        a = self.values["a"]
+        bound = (max(s.T_in, 0.0) + self.band + a) * math.exp(s.K_now) - a + 1e-3
         if s.T_out > bound:
             return f"T_out = {s.T_out:.3g} N above T_in e^K = {bound:.3g} N"
         return None

@@ -75,12 +75,18 @@ def test_a_missing_model_file_is_one_line(tmp_path, capsys):
     assert code == 2 and "\n" not in err and "none.model.yaml" in err
 
 
-def test_model_out_is_refused_for_a_single_tendon_csv(tmp_path, capsys):
+@pytest.mark.parametrize("extra, message", [
+    (["--model-out", "{tmp}"], "the single-tendon model is one file (OUT.yaml) in an existing folder"),
+    (["--model-out", "{tmp}/m.yaml", "--route", "{csv}"], "with --route the model runs on the held route's shape"),
+    (["--model-out", "{tmp}/m.yaml", "--instrument", "x/y"], "'x/y' is not a valid instrument id"),
+    (["--instrument", "tsm0"], "--instrument tsm0: names the instrument of a single-tendon model file"),
+])
+def test_model_out_for_a_single_tendon_csv_is_checked_before_the_diagnosis(tmp_path, capsys, extra, message):
     csv = tmp_path / "r.csv"
-    csv.write_text("time,x_in,T_in,T_out\n0,0,1,1\n0.001,0,1,1\n")
-    assert main(["analyze", str(csv), "--model-out", str(tmp_path / "out")]) == 2
+    csv.write_text("time,x_in,T_in,T_out\n0,0,1,1\n0.001,0,1,1\n")     # too short to diagnose: refused before
+    assert main(["analyze", str(csv), *(a.format(tmp=tmp_path, csv=csv) for a in extra)]) == 2
     err = capsys.readouterr().err.strip()
-    assert "\n" not in err and "--model-out" in err and "--kaist" in err
+    assert "\n" not in err and message in err
 
 
 class Rec:
