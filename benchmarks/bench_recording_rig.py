@@ -72,9 +72,9 @@ def main(argv: list[str] | None = None) -> None:
     t_off = time.perf_counter() - t0
     fs = float(offline["full_scale_Nm"])
     cal = Path(model.run).stem
-    print(f"MRD folder {args.dir} ({len(runs)} runs), tool {args.tool}; calibrated on run {cal} (live fit {t_fit:.1f} s, "
-          f"offline analysis {t_off:.1f} s, run {offline['calibration']['run']}); torque from the {model.chosen}; "
-          f"full scale {fs * 1e3:.1f} mN m")
+    print(f"MRD folder {args.dir} ({len(runs)} runs), tool {args.tool}; calibrated on run {cal} "
+          f"(live fit {t_fit:.1f} s, offline analysis {t_off:.1f} s, run {offline['calibration']['run']}); "
+          f"torque from the {model.chosen}; full scale {fs * 1e3:.1f} mN m")
     print(" run   live RMSE  offline RMSE  live-offline  angle [deg]  step p50/p99/max [ms]")
     rows, steps, cpus = [], [], []
     for r in runs:
@@ -91,13 +91,16 @@ def main(argv: list[str] | None = None) -> None:
             rows.append((s["live_rmse_fs"], off, d))
     a = np.asarray(rows)
     st, cp = np.concatenate(steps), np.concatenate(cpus)
-    print(f"scored runs {len(rows)}: live RMSE median {np.median(a[:, 0]):.4f} worst {a[:, 0].max():.4f} FS; offline median "
-          f"{np.median(a[:, 1]):.4f} worst {a[:, 1].max():.4f} FS; max |live - offline| {np.abs(a[:, 2]).max():.4f} FS")
-    print(f"step time over {st.size} cycles: p50 {np.percentile(st, 50) * 1e3:.3f} ms, p99 {np.percentile(st, 99) * 1e3:.3f} ms, "
+    print(f"scored runs {len(rows)}: live RMSE median {np.median(a[:, 0]):.4f} worst {a[:, 0].max():.4f} FS; "
+          f"offline median {np.median(a[:, 1]):.4f} worst {a[:, 1].max():.4f} FS; "
+          f"max |live - offline| {np.abs(a[:, 2]).max():.4f} FS")
+    print(f"step time over {st.size} cycles: p50 {np.percentile(st, 50) * 1e3:.3f} ms, "
+          f"p99 {np.percentile(st, 99) * 1e3:.3f} ms, "
           f"max {st.max() * 1e3:.1f} ms; {np.mean(st > PERIOD_S) * 100:.2f} % over the {PERIOD_S * 1e3:.0f} ms period")
-    print(f"CPU time per cycle (the wall time less what other processes took): p50 {np.percentile(cp, 50) * 1e3:.3f} ms, "
-          f"p99 {np.percentile(cp, 99) * 1e3:.3f} ms, max {cp.max() * 1e3:.1f} ms; "
-          f"{np.mean(cp > PERIOD_S) * 100:.3f} % over the period; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
+    print(f"CPU time per cycle (the wall time less what other processes took): "
+          f"p50 {np.percentile(cp, 50) * 1e3:.3f} ms, p99 {np.percentile(cp, 99) * 1e3:.3f} ms, "
+          f"max {cp.max() * 1e3:.1f} ms; {np.mean(cp > PERIOD_S) * 100:.3f} % over the period; "
+          f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
 
 
 def kaist(directory: str | None, extended: str | None) -> None:

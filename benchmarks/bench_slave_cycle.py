@@ -145,7 +145,8 @@ def main(n: int = 5000) -> None:
         for mode in ("save", "serve"):
             t = run(True, n, Path(d) / "serving", mode)[200:]
             p50[mode] = np.percentile(t, 50)
-            print(f"slave step, recording off the loop, Rerun {mode}{' (gRPC on loopback)' if mode == 'serve' else ''}: "
+            print(f"slave step, recording off the loop, Rerun {mode}"
+                  f"{' (gRPC on loopback)' if mode == 'serve' else ''}: "
                   f"p50 {p50[mode]:.4f} ms, p99 {np.percentile(t, 99):.3f} ms, max {t.max():.2f} ms")
         print(f"serving costs the slave's step {1e3 * (p50['serve'] - p50['save']):+.1f} us at p50 (goal <= 50 us)")
         for record in (False, True):

@@ -257,4 +257,5 @@ def split(rec: KaistRecording) -> tuple[slice, slice, str]:
         return slice(0, cs[0].stop), slice(cs[1].start, cs[-1].stop), \
             f"train: command cycle 1 (t < {rec.time[cs[0].stop]:.2f} s); test: cycles 2-{len(cs)}"
     h = n // 2
-    return slice(0, h), slice(h, n), f"{len(cs)} complete command cycle(s): train on t < {rec.time[h]:.2f} s, test after"
+    return slice(0, h), slice(h, n), \
+        f"{len(cs)} complete command cycle(s): train on t < {rec.time[h]:.2f} s, test after"

@@ -1,5 +1,6 @@
-"""The calibration of a spindle-driven pair on recorded MRD runs (``teleop analyze --mrd``, the recording rig): which runs calibrate (``--calibration``), a design load gain,
-the signals each run gives the fits, and the fit of the calibration data (docs/results/mrd.md).
+"""The calibration of a spindle-driven pair on recorded MRD runs (``teleop analyze --mrd``, the recording rig):
+which runs calibrate (``--calibration``), a design load gain, the signals each run gives the fits, and the fit
+of the calibration data (docs/results/mrd.md).
 
 The model's *inputs* are always the spindle torque and angle; the calibration's jaw torque and angle are
 the fit *targets*. Scored runs never contribute a distal sample.
@@ -141,7 +142,8 @@ def parse_calibration(spec: str | None, runs: list[MrdRun]) -> tuple[str, Any]:
     asked = [n.strip() for n in spec.split(",") if n.strip()]
     unknown = [n for n in asked if n not in names]
     if unknown or not asked:
-        raise ConfigError(f"--calibration {spec}: no run named {', '.join(unknown) or spec!r} (runs: {', '.join(names)})")
+        raise ConfigError(f"--calibration {spec}: no run named {', '.join(unknown) or spec!r} "
+                          f"(runs: {', '.join(names)})")
     if len(set(asked)) == len(names):
         raise ConfigError(f"--calibration {spec}: every run is a calibration run, none is left to score")
     return mode, ",".join(dict.fromkeys(asked))

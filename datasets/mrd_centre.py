@@ -39,7 +39,9 @@ from estimator.offline.spindle.centre_fit import (
 from estimator.offline.spindle.shared import RunData, kinematic_ratio
 from estimator.online.spindle_centre import CentreParams, centre_ready
 
-__all__ = ["CENTRE", "model_choice", "implied_load_gain", "LOAD_RULE", "LOAD_FALLBACK", "gain_identifiability", "centre_agg", "centre_folder", "centre_implied_gain", "centre_one_run", "centre_time_split", "folder_load_gain", "mid_centre_run", "score_centre",
+__all__ = ["CENTRE", "model_choice", "implied_load_gain", "LOAD_RULE", "LOAD_FALLBACK", "gain_identifiability",
+           "centre_agg", "centre_folder", "centre_implied_gain", "centre_one_run", "centre_time_split",
+           "folder_load_gain", "mid_centre_run", "score_centre",
            "profile_on_scored", "PROFILE_GAINS", "LOAD_SPREAD_NM"]
 
 #: The centre map's name among the headline's candidates (``model_choice``).
@@ -104,7 +106,8 @@ def gain_identifiability(runs: list[RunData], folder_gain: float | None = None) 
     torque. ``folder_gain``: the load gain fitted across all runs' loads, recorded beside for comparison.
     On the MRD folder the per-run gains scatter far beyond the +-4 % a one-run calibration needs
     (docs/results/mrd.md)."""
-    rows = {r.name: {**within_run_gain(r), "n_k": kinematic_ratio([r]), "n_k_stretch": kinematic_ratio([r], stretch=True),
+    rows = {r.name: {**within_run_gain(r), "n_k": kinematic_ratio([r]),
+                     "n_k_stretch": kinematic_ratio([r], stretch=True),
                      "jaw_mean_Nm": float(np.mean(r.tau_d[r.k0:]))} for r in runs}
     g = np.array([v["gain"] for v in rows.values()])
     nk = np.array([v["n_k"] for v in rows.values()])
@@ -113,7 +116,8 @@ def gain_identifiability(runs: list[RunData], folder_gain: float | None = None) 
     out: dict[str, Any] = {
         "what": "load gain 1 / s from each run alone: its spindle torque on its own jaw torque after the centre "
                 "map's shape (degree-4 polynomial of the spindle angle per direction) is taken out; n_k: jaw / "
-                "spindle angle in full motion (n_k_stretch: with a cable-stretch term in the spindle torque)", "runs": rows,
+                "spindle angle in full motion (n_k_stretch: with a cable-stretch term in the spindle torque)",
+        "runs": rows,
         "summary": {"gain_median": float(np.median(g)), "gain_min": float(g.min()), "gain_max": float(g.max()),
                     "n_k_mean": float(nk.mean()), "n_k_sd": float(nk.std()),
                     "n_k_stretch_min": float(ns.min()), "n_k_stretch_max": float(ns.max())}}
@@ -302,7 +306,8 @@ def centre_one_run(cal: list[RunData], fs: float, given: float | None = None) ->
         rec["load_gain"] = {"value": 1.0 / n_k, "n_k": n_k, "from": "1 / n_k of the calibration run's encoders "
                             "(one load level: the gain is not identifiable, see profile)"}
     if not several:     # one load level: the calibration's fit cost over the gain, however the gain was set
-        rec["profile"] = [{"load_gain": s, "fit_rms_fs": r / fs} for s, _, r in scale_profile(cal, np.array(PROFILE_GAINS))]
+        rec["profile"] = [{"load_gain": s, "fit_rms_fs": r / fs}
+                          for s, _, r in scale_profile(cal, np.array(PROFILE_GAINS))]
     if given is None and not several:
         rec["within_run_gain"] = {**within_run_gain(cal[0]), "used": False,
                                   "note": "the gain from the calibration run's own signals (spindle torque on its "

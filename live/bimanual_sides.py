@@ -197,7 +197,8 @@ def run_slave_group(args: argparse.Namespace) -> int:
             if arm.cfg.ros2.enabled:     # the arm's CRTK topics under its own name (teleop/ros2/side.py)
                 from teleop.ros2.side import attach_slave
                 attach_slave(session, arm.cfg, links)
-            nodes.append(SlaveNode(arm.cfg, rig, links, recorder=files.csv(rec), rerun=rr, run_dir=arm_dir(run_dir, arm),
+            nodes.append(SlaveNode(arm.cfg, rig, links, recorder=files.csv(rec), rerun=rr,
+                                   run_dir=arm_dir(run_dir, arm),
                                    stop_on_master_stop=args.exit_on_master_stop, calibration=calibration,
                                    calibration_file=cal_path))
         group = NodeGroup(nodes, [a.name for a in arms], Side.SLAVE, arms[0].cfg.rig.rate_hz, arms[0].cfg)

@@ -35,7 +35,8 @@ from teleop.session.peer_probe import no_peer_reason
 from teleop.session.transport import Session, zenoh_config
 from teleop.wire.keys import run_key
 
-__all__ = ["RunIdServer", "RoleServer", "claim_role", "agree_run_id", "new_run_id", "open_auto_session", "side_run_dir", "side_session"]
+__all__ = ["RunIdServer", "RoleServer", "claim_role", "agree_run_id", "new_run_id", "open_auto_session", "side_run_dir",
+           "side_session"]
 
 log = logging.getLogger("live.discovery")
 _RUN_ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}")

@@ -159,7 +159,8 @@ class SideFiles:
         csv, rr = self.gates.get("csv", []), self.gates.get("rerun", [])
         return {"csv_every": self.every, "stopped": self.stopped, "reached": self.budget.reached,
                 "run_bytes": self.budget.run_bytes,
-                "csv_rows_written": sum(g.written for g in csv), "csv_rows_not_written": sum(g.not_written for g in csv),
+                "csv_rows_written": sum(g.written for g in csv),
+                "csv_rows_not_written": sum(g.not_written for g in csv),
                 "rerun_calls_not_logged": sum(g.not_logged for g in rr)}
 
     def close(self) -> None:

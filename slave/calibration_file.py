@@ -52,7 +52,8 @@ from teleop.config.reader import read_yaml
 from teleop.config.schema import Config
 from teleop.errors import ConfigError
 
-__all__ = ["TendonCalibration", "InstrumentCalibration", "calibration_path", "user_calibration_dir", "APP_DATA", "from_results", "from_tendon_result",
+__all__ = ["TendonCalibration", "InstrumentCalibration", "calibration_path", "user_calibration_dir", "APP_DATA",
+           "from_results", "from_tendon_result",
            "save_calibration", "load_calibration", "sheath_models", "tendon_model"]
 
 METHOD = "joint-limit knee each way (Phee et al. 2009, Sec. IV); K from M_e by Newton (eq. 13)"
@@ -128,7 +129,8 @@ def calibration_path(cfg: Config) -> Path:
     return folder / f"{cfg.instrument.id}.yaml"
 
 
-def from_results(cfg: Config, results: list[dict[str, CalibrationResult]], date: str | None = None) -> InstrumentCalibration:
+def from_results(cfg: Config, results: list[dict[str, CalibrationResult]],
+                 date: str | None = None) -> InstrumentCalibration:
     """The calibration data of a finished :class:`~slave.pair_calibrate.PairCalibration` (date: now, UTC)."""
     date = date or _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     joints = tuple((j.name, {t: TendonCalibration.from_result(res[t]) for t in TENDONS})
@@ -186,7 +188,8 @@ def load_calibration(path: str | Path, cfg: Config) -> InstrumentCalibration:
     other = "tendon" if kind == "joints" else "joints"
     if other in data:
         raise _fail(path, f"{other}: this is the calibration of a {'single-tendon' if other == 'tendon' else 'joint'} "
-                          f"instrument, the config's is a {'joint' if kind == 'joints' else 'single-tendon'} instrument")
+                          f"instrument, the config's is a {'joint' if kind == 'joints' else 'single-tendon'} "
+                          "instrument")
     for k in data:
         if k not in keys:
             raise _fail(path, f"unknown key {k!r} (expected {', '.join(keys)})")

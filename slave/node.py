@@ -249,7 +249,8 @@ class SlaveNode(SlaveNodeBase):
         return out
 
     def _too_far(self, cmd: Command) -> str | None:
-        far = [w for w in (ax.too_far(t, self.rig_state) for ax, t in zip(self.axes, cmd.targets, strict=False)) if w is not None]
+        far = [w for w in (ax.too_far(t, self.rig_state) for ax, t in zip(self.axes, cmd.targets, strict=False))
+               if w is not None]
         return "; ".join(far) if far else None
 
     def _decision(self, now: float, dt: float) -> tuple[bool, tuple]:

@@ -173,7 +173,8 @@ class PairAxis(SlaveAxis):
 
     @classmethod
     def start_loaded(cls, axes: Sequence[SlaveAxis], calibration: Any, state: RigState) -> dict:
-        for ax, models, (_, tend) in zip(axes, sheath_models(calibration, axes[0].cfg), calibration.joints, strict=False):
+        for ax, models, (_, tend) in zip(axes, sheath_models(calibration, axes[0].cfg), calibration.joints,
+                                         strict=False):
             assert isinstance(ax, PairAxis)
             pc, j = ax.cfg.pair_control, ax.joint
             ax.controller = PairController(ax.r, set_tension(ax.cfg, j), pc.tension_gain, pc.switch_band,
@@ -272,8 +273,8 @@ class PairAxis(SlaveAxis):
             pa, pb = _PHASES[int(o[10])], _PHASES[int(o[11])]
             assert isinstance(ax, PairAxis)
             ax.sample = PairSample(o[0], o[1], (o[2], o[3]), (o[4], o[5]), (o[6], o[7]), o[8], o[9], (pa, pb))
-            res.append((AxisState(o[0], o[1], (TendonState(Ta, xa, o[2], o[4], pa), TendonState(Tb, xb, o[3], o[5], pb))),
-                        ()))
+            tendons = (TendonState(Ta, xa, o[2], o[4], pa), TendonState(Tb, xb, o[3], o[5], pb))
+            res.append((AxisState(o[0], o[1], tendons), ()))
         return res
 
     # ---- per axis ----------------------------------------------------------------------------------

@@ -57,7 +57,8 @@ def set_tension(cfg: Config, joint: JointConfig) -> float:
 class _Joint:
     """The routine of one joint (both directions)."""
 
-    def __init__(self, cfg: Config, joint: JointConfig, x_init, release_factor: float, settle: float, max_travel: float):
+    def __init__(self, cfg: Config, joint: JointConfig, x_init, release_factor: float, settle: float,
+                 max_travel: float):
         c = cfg.calibration
         self.joint = joint
         self.r = joint.pulley_radius
@@ -92,8 +93,9 @@ class _Joint:
             elif abs(self.c) * self.r > self.max_travel:
                 name = self.joint.name
                 raise CalibrationError(
-                    f"calibration of joint {name!r}, tendon {TENDONS[self.side]}: pulled {self.max_travel * 1e3:.0f} mm "
-                    f"without reaching calibration.target_tension = {self.target:g} N (T_in = {T_in[self.side]:.2f} N); "
+                    f"calibration of joint {name!r}, tendon {TENDONS[self.side]}: "
+                    f"pulled {self.max_travel * 1e3:.0f} mm without reaching "
+                    f"calibration.target_tension = {self.target:g} N (T_in = {T_in[self.side]:.2f} N); "
                     f"no joint limit found")
             else:
                 self.c += sgn * self.rate * dt

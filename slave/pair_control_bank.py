@@ -181,7 +181,8 @@ class PairControlBank:
             return
         self.active = False
         for c, x, m, sw, (x_ref, c_ref, ff, y, T0, T_eq) in zip(self.controllers, self.X.tolist(), self.mode.tolist(),
-                                                                self.switches.tolist(), self.ref.tolist(), strict=False):
+                                                                self.switches.tolist(), self.ref.tolist(),
+                                                                strict=False):
             c.x_cmd, c.mode, c.switches = [x[0], x[1]], _MODES[m], sw
             c._x_ref, c._c_ref, c._ff = x_ref, c_ref, None if math.isnan(ff) else ff
             c._y, c._T0, c._T_eq = y, T0, T_eq

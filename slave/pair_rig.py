@@ -119,7 +119,8 @@ class SimulatedInstrument:
         self._gains = np.array([[(p.lo, p.hi, p.dlo, p.dhi, p.w) for p in pair] for pair in self.tendons])
         self._c = np.array([[(p.c_pull, p.c_rel) for p in pair] for pair in self.tendons])
         self._theta = np.zeros(nj)
-        self._x = np.array([[float(p.w.sum() * j.pretension) for p in pair] for j, pair in zip(joints, self.tendons, strict=False)])
+        self._x = np.array([[float(p.w.sum() * j.pretension) for p in pair]
+                            for j, pair in zip(joints, self.tendons, strict=False)])
         self._tissue = [bool(s.load.tissue) for s in sims]
         self._slope = np.array([s.stiffness + s.load.tissue_stiffness
                                 + j.pulley_radius ** 2 * (1.0 / pa.M_e + 1.0 / pb.M_e)
@@ -234,7 +235,8 @@ class SimulatedInstrument:
         torque, the torque balance's slope without damping."""
         return np.array([(j.pulley_radius, s.stiffness, s.damping, s.load.tissue_stiffness if tissue else 0.0,
                           s.load.tissue_contact, j.limits[0], j.limits[1], s.limit_stiffness, s.load.torque, slope)
-                         for j, s, tissue, slope in zip(self.joints, self.sims, self._tissue, self._slope, strict=False)],
+                         for j, s, tissue, slope in zip(self.joints, self.sims, self._tissue, self._slope,
+                                                        strict=False)],
                         dtype=np.float64)
 
     def _read(self, cmd: np.ndarray) -> RigState:
@@ -309,7 +311,8 @@ def _read_all(T, gains, r, x, theta, q, noise, out, ang):  # pragma: no cover - 
 
 def _validate(joints: tuple[JointConfig, ...], rig: SimulatedRigConfig) -> None:
     """Range checks of what the simulator uses; ConfigError names the joint and the dotted key."""
-    check_setting(1 <= len(joints) <= MAX_JOINTS, "instrument.joints", f"a list of 1 to {MAX_JOINTS} joints", len(joints))
+    check_setting(1 <= len(joints) <= MAX_JOINTS, "instrument.joints", f"a list of 1 to {MAX_JOINTS} joints",
+                  len(joints))
     for i, j in enumerate(joints):
         p = f"instrument.joints[{i}] ({j.name})"
         check_setting(is_finite(j.pulley_radius) and j.pulley_radius > 0, f"{p}.pulley_radius", "a radius > 0 m",

@@ -291,26 +291,28 @@ def validate_drive(rig: SimulatedRigConfig) -> None:
     n = rig.n_elements
     check_setting(isinstance(n, int) and not isinstance(n, bool) and n >= 1, f"{_SIM}.n_elements", "an integer >= 1", n)
     m = rig.motor
-    check_setting(is_finite(m.bandwidth_hz) and m.bandwidth_hz > 0, f"{_SIM}.motor.bandwidth_hz", "a finite number > 0 Hz",
-           m.bandwidth_hz)
-    check_setting(is_finite(m.max_speed) and m.max_speed > 0, f"{_SIM}.motor.max_speed", "a finite speed > 0 m/s", m.max_speed)
-    check_setting(is_finite(m.pulley_radius) and m.pulley_radius > 0, f"{_SIM}.motor.pulley_radius", "a finite radius > 0 m",
-           m.pulley_radius)
+    check_setting(is_finite(m.bandwidth_hz) and m.bandwidth_hz > 0, f"{_SIM}.motor.bandwidth_hz",
+                  "a finite number > 0 Hz", m.bandwidth_hz)
+    check_setting(is_finite(m.max_speed) and m.max_speed > 0, f"{_SIM}.motor.max_speed", "a finite speed > 0 m/s",
+                  m.max_speed)
+    check_setting(is_finite(m.pulley_radius) and m.pulley_radius > 0, f"{_SIM}.motor.pulley_radius",
+                  "a finite radius > 0 m", m.pulley_radius)
     lines = m.encoder_lines_per_rev
-    check_setting(isinstance(lines, int) and not isinstance(lines, bool) and lines >= 1, f"{_SIM}.motor.encoder_lines_per_rev",
-           "an integer >= 1", lines)
+    check_setting(isinstance(lines, int) and not isinstance(lines, bool) and lines >= 1,
+                  f"{_SIM}.motor.encoder_lines_per_rev", "an integer >= 1", lines)
     s = rig.sensors
     check_setting(is_finite(s.load_cell_noise) and s.load_cell_noise >= 0, f"{_SIM}.sensors.load_cell_noise",
            "a finite standard deviation >= 0 N", s.load_cell_noise)
-    check_setting(isinstance(s.seed, int) and not isinstance(s.seed, bool), f"{_SIM}.sensors.seed", "an integer", s.seed)
+    check_setting(isinstance(s.seed, int) and not isinstance(s.seed, bool), f"{_SIM}.sensors.seed", "an integer",
+                  s.seed)
 
 
 def _validate(sheath: SheathConfig, rig: SimulatedRigConfig) -> None:
     """Range checks of every setting the simulator uses; ConfigError names the dotted key."""
     check_setting(is_finite(rig.mu) and rig.mu >= 0, f"{_SIM}.mu", "a finite number >= 0", rig.mu)
     check_setting(is_finite(sheath.EA) and sheath.EA > 0, "sheath.EA", "a finite number > 0 N", sheath.EA)
-    check_setting(is_finite(sheath.pretension) and sheath.pretension >= 0, "sheath.pretension", "a finite number >= 0 N",
-           sheath.pretension)
+    check_setting(is_finite(sheath.pretension) and sheath.pretension >= 0, "sheath.pretension",
+                  "a finite number >= 0 N", sheath.pretension)
     validate_runs(sheath.runs, "sheath.runs")
     validate_drive(rig)
     ld = rig.load
@@ -319,5 +321,6 @@ def _validate(sheath: SheathConfig, rig: SimulatedRigConfig) -> None:
         check_setting(is_finite(v) and v >= 0, f"{_SIM}.load.{key}", "a finite number >= 0", v)
     check_setting(is_finite(ld.limit_stiffness) and ld.limit_stiffness > 0, f"{_SIM}.load.limit_stiffness",
            "a finite stiffness > 0 N/m", ld.limit_stiffness)
-    check_setting(is_finite(ld.tissue_contact), f"{_SIM}.load.tissue_contact", "a finite position in m", ld.tissue_contact)
+    check_setting(is_finite(ld.tissue_contact), f"{_SIM}.load.tissue_contact", "a finite position in m",
+                  ld.tissue_contact)
     check_setting(isinstance(ld.tissue, (bool, np.bool_)), f"{_SIM}.load.tissue", "true or false", ld.tissue)

@@ -150,8 +150,8 @@ def _K_panel(ax, sh: dict, confs: list[dict], Ns: np.ndarray) -> None:
         ax.plot(nn, p[f"K0_{j}"] + p["mu"] * np.radians(nn), color=col, lw=2,
                  label=f"shared fit: K_{j} = {p[f'K0_{j}']:.2f} + {p['mu']:.3f} N")
         ext = [c["diagnosis"]["extended"]["params"].get(f"K_{j}", {}).get("value") for c in confs]
-        ax.plot([N for N, k in zip(Ns, ext, strict=False) if k is not None], [k for k in ext if k is not None], "o", color=col,
-                 mfc="none", ms=8, label=f"K_{j} fitted per configuration")
+        ax.plot([N for N, k in zip(Ns, ext, strict=False) if k is not None], [k for k in ext if k is not None], "o",
+                 color=col, mfc="none", ms=8, label=f"K_{j} fitted per configuration")
     kr = [np.mean([z["K_release"] for z in c["dead_zones"] if z["K_release"] is not None] or [np.nan])
           for c in confs]
     ax.plot(Ns, kr, "ks", ms=6, label="model-free K_release (tension ratios)")

@@ -74,7 +74,8 @@ def format_kaist(s: dict) -> str:
         m = {k: v["rmse_test_deg"] for k, v in c["models"].items()}
         dz = [z["command_travel_deg"] for z in c["dead_zones"] if z["command_travel_deg"] is not None]
         kr = [z["K_release"] for z in c["dead_zones"] if z["K_release"] is not None]
-        lines.append(f"{c['config_deg']:>12}{m['force path']:>12.2f}{m['linear map']:>9.2f}{m['linear map + play']:>10.2f}"
+        lines.append(f"{c['config_deg']:>12}{m['force path']:>12.2f}{m['linear map']:>9.2f}"
+                     f"{m['linear map + play']:>10.2f}"
                      f"{np.mean(dz) if dz else math.nan:>11.1f}{np.mean(kr) if kr else math.nan:>11.2f}"
                      f"{c['models']['force path']['params']['K']:>9.2f}")
     if "trend" in s:

@@ -290,7 +290,8 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
                                by_effect.get("friction_offset", {}).get("tension_offset", 0.0))
     tl.run(np.full(int(round(_SETTLE * rate)), tl.state[0]), rate)   # settle at rest, not recorded
     tl.state[3] = 0.0
-    start = {k: float(v) for k, v in zip(("x_motor", "x_joint", "x_end"), (tl.state[0], tl.state[2], tl.u[-1]), strict=False)}
+    start = {k: float(v) for k, v in zip(("x_motor", "x_joint", "x_end"), (tl.state[0], tl.state[2], tl.u[-1]),
+                                         strict=False)}
     cmd = start["x_motor"] + command(duration, rate, x_rest, x_top, rng_proto)
     sig = tl.run(cmd, rate)
     n = cmd.size

@@ -78,7 +78,8 @@ def _edges(ax, runs: list[MrdRun], bands: dict, sweep: dict) -> None:
         c0, f0 = 1e3 * sweep["centre_at_zero_jaw_torque_Nm"], 1e3 * sweep["intercept_half_width_Nm"]
         ax.plot(x, c0 + f0 + sweep["slope_high"] * x, "-", color="C3", lw=0.8,
                 label=f"r e^K = {sweep['slope_high']:.2f} (r {sweep['r']:.2f}, K {sweep['K']:.2f})")
-        ax.plot(x, c0 - f0 + sweep["slope_low"] * x, "-", color="C0", lw=0.8, label=f"r e^-K = {sweep['slope_low']:.2f}")
+        ax.plot(x, c0 - f0 + sweep["slope_low"] * x, "-", color="C0", lw=0.8,
+                label=f"r e^-K = {sweep['slope_low']:.2f}")
         k = int(np.argmin(j))
         ax.plot(x, c[k] + sweep["n_k"] * (x - j[k]), "--", color="0.3", lw=0.8,
                 label=f"centre slope from the encoders, n_k = {sweep['n_k']:.3f}")
@@ -121,7 +122,8 @@ def _torque(plt, runs: list[MrdRun], details: dict, path: Path) -> Path:
             ax.plot(np.degrees(pa[k:]), 1e3 * pt[k:], color="tab:orange", lw=0.6, label="folder model, left out")
         if r.name in details["pred"]:
             pt, pa = details["pred"][r.name]
-            ax.plot(np.degrees(pa[k:]), 1e3 * pt[k:], color="tab:blue", lw=0.5, alpha=0.6, label="calibrated on one run")
+            ax.plot(np.degrees(pa[k:]), 1e3 * pt[k:], color="tab:blue", lw=0.5, alpha=0.6,
+                    label="calibrated on one run")
         ax.set_title(f"run {r.name}: {r.frequency_hz:.1f} Hz, load {r.load_level}", fontsize=9)
         ax.set_xlabel("jaw angle [deg]")
         ax.set_ylabel("jaw torque [mN m]")
@@ -218,7 +220,8 @@ def _centre(plt, runs: list[MrdRun], summary: dict, path: Path) -> Path:
     prof = cal.get("profile", [])
     if prof:
         g = [p["load_gain"] for p in prof]
-        ax.plot(g, [p["fit_rms_fs"] for p in prof], "k.-", label=f"calibration run {summary['calibration']['run']}: fit cost")
+        ax.plot(g, [p["fit_rms_fs"] for p in prof], "k.-",
+                label=f"calibration run {summary['calibration']['run']}: fit cost")
         if "scored_median_rmse_fs" in prof[0]:
             ax.plot(g, [p["scored_median_rmse_fs"] for p in prof], "o-", label="other runs: median RMSE")
             ax.plot(g, [p["scored_worst_rmse_fs"] for p in prof], "s--", label="other runs: worst RMSE")

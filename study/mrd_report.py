@@ -210,9 +210,9 @@ def _header(runs: list[MrdRun], fs: float) -> dict[str, Any]:
     return {"mode": "mrd", "full_scale_Nm": fs, "attribution": ATTRIBUTION, "not_from_proximal": NOT_FROM_PROXIMAL,
             "scored_from": "the first reversal of the spindle after 0.5 s (the stroke before it initialises the "
                            "estimator, as the paper's calibration pull does); the centre map from the first sample "
-                           "after it at which its band-centre reading holds both edges (centre_ready: before, the centre "
-                           "rests on one edge and the calibration's half-width, its initialisation; the score from the "
-                           "first reversal is kept under centre.from_k0)", "runs": {},
+                           "after it at which its band-centre reading holds both edges (centre_ready: before, "
+                           "the centre rests on one edge and the calibration's half-width, its initialisation; "
+                           "the score from the first reversal is kept under centre.from_k0)", "runs": {},
             "found": {r.name: {"frequency_hz": r.frequency_hz, "load_level": r.load_level,
                                "load_command_A": r.load_command, "n_samples": len(r),
                                "duration_s": float(r.time[-1])} for r in runs}}
@@ -315,9 +315,11 @@ def _shared(runs, out, details, fs, tick, loro: bool) -> None:
     out["centre_map"] = centre_folder(rd, fs, tick, loro)
     if not loro:
         return
-    lo: dict[str, Any] = {"model": sh["model"], "note": "extensions chosen on the time split of all runs; parameters refitted "
-                                        "without the scored run", "runs": {}, "parameters": {}}
-    for r, d, (q, pt, pa) in zip(runs, rd, leave_one_out(rd, free, centre, ref, p, SHARED_STEP, progress=tick), strict=False):
+    lo: dict[str, Any] = {"model": sh["model"],
+                          "note": "extensions chosen on the time split of all runs; parameters refitted "
+                                  "without the scored run", "runs": {}, "parameters": {}}
+    for r, d, (q, pt, pa) in zip(runs, rd, leave_one_out(rd, free, centre, ref, p, SHARED_STEP, progress=tick),
+                                 strict=False):
         lo["runs"][r.name] = _score(pt, pa, r, d.k0, fs)
         lo["parameters"][r.name] = q.as_dict()
         details["loro_pred"][r.name] = (pt, pa)

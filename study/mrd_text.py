@@ -50,7 +50,8 @@ def format_mrd(s: dict) -> str:
                      f"{bl['linear']['torque_rmse_fs']:>9.3f}{bl['phase']['torque_rmse_fs']:>9.3f}{sh:>8.3f}{lo:>7.3f}")
     m = s["summary"]
     lines.append(f"better than the linear baseline on every run: {m['better_than_linear_every_run']}")
-    rows = {**{f"model {n}": a for n, a in m["models"].items()}, **{f"baseline {n}": a for n, a in m["baselines"].items()}}
+    rows = {**{f"model {n}": a for n, a in m["models"].items()},
+            **{f"baseline {n}": a for n, a in m["baselines"].items()}}
     for key, label in (("shared", "one parameter set (in-sample)"), ("loro", "one parameter set, leave-one-run-out")):
         if key in s:
             rows[f"{label}: {s[key]['model']}"] = s[key]["summary"]
@@ -80,8 +81,9 @@ def format_mrd(s: dict) -> str:
             lo, hi = (1.0 / v if v > 0 else math.inf for v in wg["profile_ci95"][::-1])
             part.append(f"calibration run {wg['gain']:.3f} (95 % {lo:.2f}-{hi:.2f})")
         if fw:
-            part.append(f"over the runs {fw['gain_min']:.2f}-{fw['gain_max']:.2f} against {fw.get('folder_gain', math.nan):.3f} "
-                        f"fitted across loads ({fw.get('runs_within_4pc_of_folder_gain', 0)} of {len(s['found'])} within 4 %)")
+            part.append(f"over the runs {fw['gain_min']:.2f}-{fw['gain_max']:.2f} "
+                        f"against {fw.get('folder_gain', math.nan):.3f} fitted across loads "
+                        f"({fw.get('runs_within_4pc_of_folder_gain', 0)} of {len(s['found'])} within 4 %)")
         lines.append("load gain from one run's own signals (not used): " + "; ".join(part))
     lines.append("not identifiable from the spindle side alone: " + ", ".join(s["not_from_proximal"]))
     lines.append("extensions: " + "; ".join(f"{k} ({v[0]})" for k, v in EXTENSIONS.items()))

@@ -244,8 +244,8 @@ def _run(rig: SimulatedRig, cmd: np.ndarray, dt: float) -> tuple[np.ndarray, tup
     return out, at_rest
 
 
-def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level: float | None = None, duration: float = 90.0,
-           rate_hz: float = 1000.0) -> Recording:
+def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level: float | None = None,
+           duration: float = 90.0, rate_hz: float = 1000.0) -> Recording:
     """Run one protocol through the simulated rig with ``effect`` hidden (None or "none": clean).
 
     Parameters

@@ -70,7 +70,8 @@ def recorder_check(out_dir: Path) -> tuple[bool, str]:
     s = read_json(out_dir / "summary.json")
     streams = s.get("streams", {}).values()
     count, missing = sum(v.get("count", 0) for v in streams), sum(v.get("missing", 0) for v in streams)
-    return bool(count > 0 and missing == 0), f"{count} messages on {len(s.get('streams', {}))} streams, {missing} missing"
+    return bool(count > 0 and missing == 0), \
+        f"{count} messages on {len(s.get('streams', {}))} streams, {missing} missing"
 
 
 def _processes(args, bim: Bimanual, run_dir: Path, problems: list[str]) -> None:

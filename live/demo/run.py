@@ -1,6 +1,6 @@
-"""What the demo of every instrument shares (:mod:`live.demo.main`; a joint instrument's evaluation: :mod:`live.demo.joints`):
-the two processes over Zenoh on 127.0.0.1, and the pieces of the summary that do not depend on the
-instrument.
+"""What the demo of every instrument shares (:mod:`live.demo.main`; a joint instrument's evaluation:
+:mod:`live.demo.joints`): the two processes over Zenoh on 127.0.0.1, and the pieces of the summary that
+do not depend on the instrument.
 
 * :func:`run_processes`: the slave (``python -m live.cli slave``) listens on a free TCP port (or
   the first ``--listen``); once the port accepts connections the master connects. When the master
@@ -42,14 +42,15 @@ import numpy as np
 if TYPE_CHECKING:
     from teleop.config.schema import Config
 
-__all__ = ["run_processes", "RecorderRun", "read_json", "full_scale_errors", "master_console_line", "loop_lines", "machine_line",
-           "rt_budget_lines", "verdict_lines", "finish", "check_protocol"]
+__all__ = ["run_processes", "RecorderRun", "read_json", "full_scale_errors", "master_console_line", "loop_lines",
+           "machine_line", "rt_budget_lines", "verdict_lines", "finish", "check_protocol"]
 
 
 def check_protocol(cfg: Config, protocol: str) -> None:
     """Raise ConfigError (one line: ``--protocol <value>: <the name that is wrong> (<the valid ones>)``) when the
     scripted operator of ``cfg`` (``master.device.type: simulated``) has no protocol ``protocol``: the master
-    would refuse it only after the calibration and the start of both sides (:func:`master.protocols.operator_protocols`)."""
+    would refuse it only after the calibration and the start of both sides
+    (:func:`master.protocols.operator_protocols`)."""
     from master.kinds import operator_protocols
     from teleop.errors import ConfigError
     if cfg.master.device.type != "simulated":       # a hand on a device: no scripted protocol

@@ -267,5 +267,6 @@ class Writes:
 
     def summary(self) -> dict:
         """``{"write_errors": {file: error}, "not_written": {file: n}, "over_budget_not_written": {key: n}}``."""
-        return {"write_errors": dict(sorted(self.failed.items())), "not_written": dict(sorted(self.not_written.items())),
+        return {"write_errors": dict(sorted(self.failed.items())),
+                "not_written": dict(sorted(self.not_written.items())),
                 "over_budget_not_written": dict(sorted(self.skipped.items()))}

@@ -97,7 +97,8 @@ def _plot_signals(ax, stream: Stream, t: np.ndarray, picked: list[tuple[int, str
     handles = []
     for k, (i, u) in enumerate(picked):
         label, scale = _SHOWN.get(u, (u, 1.0))
-        handles += axes[u].plot(t, stream.data[:, i] * scale, lw=0.8, color=f"C{k}", label=f"{stream.names[i]} [{label}]",
+        handles += axes[u].plot(t, stream.data[:, i] * scale, lw=0.8, color=f"C{k}",
+                                label=f"{stream.names[i]} [{label}]",
                                 ls="-" if u == units[0] else "--")      # dashed: read on the right-hand axis
     for u, a in axes.items():
         a.set_ylabel(f"[{_SHOWN.get(u, (u, 1.0))[0]}]")

@@ -287,7 +287,8 @@ class McapRecording:
             torque = {"x": 0.0, "y": 0.0, "z": a.effort_hat if pair else 0.0}
             topic = f"{self.arm}/{n}/measured_cf" if pair else f"{self.arm}/measured_cf"
             self._ros(topic, "geometry_msgs/msg/WrenchStamped", log, pub,
-                      {"header": {"stamp": _stamp(pub), "frame_id": frame}, "wrench": {"force": force, "torque": torque}})
+                      {"header": {"stamp": _stamp(pub), "frame_id": frame},
+                       "wrench": {"force": force, "torque": torque}})
 
     # ---- flushing and the end ------------------------------------------------------------------------
     def flush(self, now: float | None = None) -> None:

@@ -105,8 +105,8 @@ class Recorder:
         only.
     """
 
-    def __init__(self, session, cfg, out_dir: Path, *, rerun: Literal["save", "spawn", "off"] | None = None, run_id: str = "",
-                 journal_dir: Path | None = None):
+    def __init__(self, session, cfg, out_dir: Path, *, rerun: Literal["save", "spawn", "off"] | None = None,
+                 run_id: str = "", journal_dir: Path | None = None):
         self.cfg, self.dir = cfg, Path(out_dir)
         self.dir.mkdir(parents=True, exist_ok=True)
         self.clock = session.clock
@@ -122,7 +122,8 @@ class Recorder:
         self._names: dict[tuple, tuple] = {}
         self._shapes: dict[tuple, tuple] = {}           # (key, message type, payload length) -> its shape
         self._samples: dict[tuple, StreamSample] = {}   # a stream without a CSV: its thinned rows for streams.png
-        self.budget = DiskBudget(self.dir.parent, cfg.recording.max_bytes, cfg.recording.min_free_bytes, own=self.dir.name)
+        self.budget = DiskBudget(self.dir.parent, cfg.recording.max_bytes, cfg.recording.min_free_bytes,
+                                 own=self.dir.name)
         self.budget.live = (self.dir / "live.json", lambda: {k: [s.count, s.missing] for k, s in self.streams.items()})
         self.writes = Writes()
         self._low_t: dict[str, float] = {}             # key -> time of its last low-rate message written
@@ -134,7 +135,8 @@ class Recorder:
         self._aux = {"state": self._aux_csv("state_changes.csv", "time,side,state,seq"),
                      "alive": self._aux_csv("liveliness.csv", "time,side,alive"),
                      "recovered": self._aux_csv("recovered.csv", "time,side,key,seq")}
-        self.journals = JournalRecovery(Path(journal_dir or self.dir.parent), self.clock.now(), instrument_keys(self.ident))
+        self.journals = JournalRecovery(Path(journal_dir or self.dir.parent), self.clock.now(),
+                                        instrument_keys(self.ident))
         from live.record.mcap_file import MCAP_NAME, McapRecording
         self._mcap = McapRecording(self.dir / MCAP_NAME, cfg, time.time() - self.clock.now(), self.journals.t_start)
         from teleop.rerun.process import RerunProcessLogger as Rerun  # the SDK in a child per segment, not here
@@ -232,7 +234,8 @@ class Recorder:
         if self._written(t, key, msg):
             w.message(key, self._raw.write, pack_record(t, key.encode(), payload))
             if recovered:
-                w("recovered.csv", self._aux["recovered"].write, f"{t:.12g},{key.split('/')[2] if key.count('/') >= 3 else key},{key},{seq}\n")
+                side = key.split("/")[2] if key.count("/") >= 3 else key
+                w("recovered.csv", self._aux["recovered"].write, f"{t:.12g},{side},{key},{seq}\n")
             if f is not None:
                 w(f.path.name, f.write, t, tuple(numbers()))
             else:
@@ -251,7 +254,8 @@ class Recorder:
         if not is_low_rate(key):
             return False
         state = getattr(msg, "state", None)
-        changed = state is not None and self._states.get(key.split("/")[2] if key.count("/") >= 3 else key) != int(state)
+        side = key.split("/")[2] if key.count("/") >= 3 else key
+        changed = state is not None and self._states.get(side) != int(state)
         if changed or t - self._low_t.get(key, -float("inf")) >= 1.0 / LOW_RATE_HZ:
             self._low_t[key] = t
             return True
@@ -300,9 +304,9 @@ class Recorder:
                 self._echoed.clear()
         if count % self.cfg.recording.log_every == 0 and self._rr.enabled and self.budget.reached is None:
             side = key.split("/")[2]
-            scalars = {f"{side}_state" if n == "state" else n.replace("[", "").replace("]", "").replace(".", "_"): float(v)
-                       for n, v in zip(names, vals(), strict=False) if (n == "state" or isinstance(v, float)) and not n.startswith("t_")
-                       and "profile" not in n}
+            scalars = {f"{side}_state" if n == "state" else n.replace("[", "").replace("]", "").replace(".", "_"):
+                       float(v) for n, v in zip(names, vals(), strict=False)
+                       if (n == "state" or isinstance(v, float)) and not n.startswith("t_") and "profile" not in n}
             self._rr.log_scalars(t, **scalars)
 
     def _recover(self, side: str | None) -> None:
@@ -346,8 +350,9 @@ class Recorder:
 
     def summary(self) -> dict:
         echo = self._echo.stats() if self._echo.n else {"n": 0}
-        return {"instrument": self.ident, "streams": {k: {**s.summary(), "not_written": self.writes.messages_not_written(k)}
-                                                      for k, s in sorted(self.streams.items())},
+        return {"instrument": self.ident,
+                "streams": {k: {**s.summary(), "not_written": self.writes.messages_not_written(k)}
+                            for k, s in sorted(self.streams.items())},
                 "recovered_from_journals": self.journals.summary(),
                 "files": sorted(str(f.path.name) for f in self._csv.values() if f is not None),
                 "disk": {**self.budget.summary(), **self.writes.summary()},

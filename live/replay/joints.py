@@ -158,7 +158,8 @@ def compare_joints(cols: dict[str, np.ndarray], new: dict[str, dict[str, np.ndar
         if "marker" in cols:
             tags = np.array([joint_marker(int(m), j) for m in cols["marker"]])
             blocks.update({name: tags == tag for tag, name in JOINT_EXPERIMENTS.items() if (tags == tag).sum() >= 2})
-        out[n] = {b: {k: _errors(est["torque"][sel], est["angle"][sel], tq[sel], ang[sel]) for k, (tq, ang) in refs.items()}
+        out[n] = {b: {k: _errors(est["torque"][sel], est["angle"][sel], tq[sel], ang[sel])
+                      for k, (tq, ang) in refs.items()}
                   for b, sel in blocks.items()}
     return out
 
@@ -189,7 +190,8 @@ def _log(cols: dict[str, np.ndarray], new: dict[str, dict[str, np.ndarray]], cfg
             for n, est in new.items():
                 rr.log_joint(t, n, torque_hat=float(est["torque"][k]), torque_true=val(f"{n}.torque", k),
                              angle_hat=float(est["angle"][k]), angle_true=val(f"{n}.angle", k),
-                             profiles=(est["profile_a"][k // snap], est["profile_b"][k // snap]) if k % snap == 0 else None)
+                             profiles=(est["profile_a"][k // snap], est["profile_b"][k // snap])
+                             if k % snap == 0 else None)
                 rr.log_scalars(t, **{f"{n}/torque_recorded": val(f"{n}.torque_hat", k),
                                      f"{n}/angle_recorded": val(f"{n}.angle_hat", k)})
 

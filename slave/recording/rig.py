@@ -61,7 +61,8 @@ class RecordedSpindle:
 
     def __init__(self, run: MrdRun, joint_name: str = "jaw", rate: str = "recording", at_end: str = "stop"):
         if rate not in ("recording", "slave") or at_end not in ("stop", "loop"):
-            raise ConfigError(f"rig.recording: rate {rate!r} must be recording or slave, at_end {at_end!r} stop or loop")
+            raise ConfigError(f"rig.recording: rate {rate!r} must be recording or slave, "
+                              f"at_end {at_end!r} stop or loop")
         self.run, self.rate, self.at_end = run, rate, at_end
         self.joint_names = (joint_name,)
         self.n_joints = 1

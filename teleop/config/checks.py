@@ -1,4 +1,5 @@
-"""Checks of the instrument's joints beyond one value's type and range (:func:`teleop.config.load.load_config` runs them).
+"""Checks of the instrument's joints beyond one value's type and range
+(:func:`teleop.config.load.load_config` runs them).
 
 ``error(path, message)`` builds the :class:`~teleop.errors.ConfigError` that names the file and line of ``path``.
 """

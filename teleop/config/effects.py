@@ -195,7 +195,8 @@ def merge_effects(base: EffectsConfig | None, data: Any, path: str,
         if key not in entries:
             near = difflib.get_close_matches(str(key), list(entries), 1, 0.6)
             hint = f"did you mean '{path}.{near[0]}'?" if near else f"expected one of: {', '.join(entries)}"
-            raise error(p, f"unknown key '{p}' ({hint}; effects are the catalogue's, estimator/offline/effects/catalogue.py)")
+            raise error(p, f"unknown key '{p}' ({hint}; effects are the catalogue's, "
+                           "estimator/offline/effects/catalogue.py)")
         if sub is None:
             sub = {}
         if not isinstance(sub, Mapping):

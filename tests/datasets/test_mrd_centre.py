@@ -61,7 +61,8 @@ def test_stroke_centre_is_causal_and_reads_the_band_middle():
     r = synth("a", 0.03)
     win = (0.1, 0.9)
     c = stroke_centre(r.tau_p, r.theta_p, r.dt, win, (F0, 0.0), 0.0, (SLOPE, SLOPE), 0.5)
-    truth = C0 + SLOPE * 0.5 + R_TRUE * math.cosh(K) * 0.03 - 0.01 * np.mean(r.theta_p[r.k0:] ** 2) * R_TRUE * math.cosh(K)
+    truth = (C0 + SLOPE * 0.5 + R_TRUE * math.cosh(K) * 0.03
+             - 0.01 * np.mean(r.theta_p[r.k0:] ** 2) * R_TRUE * math.cosh(K))
     assert abs(c[-1] - truth) < 0.004                                # both edges seen: the band's middle
     cut = 7000
     tail = r.tau_p.copy()
@@ -225,7 +226,8 @@ def test_a_folder_measures_its_load_gain_and_another_folder_takes_it_from_the_js
     rec = centre_folder(folder, 0.05, lambda _: None)
     lg = rec["load_gain"]
     assert lg["several_loads"] and lg["value"] == pytest.approx(GAIN, rel=0.02)
-    assert 0.0 < lg["jackknife_se"] < 0.02 and lg["leave_one_run_out_range"][0] <= lg["value"] <= lg["leave_one_run_out_range"][1]
+    assert (0.0 < lg["jackknife_se"] < 0.02
+            and lg["leave_one_run_out_range"][0] <= lg["value"] <= lg["leave_one_run_out_range"][1])
     out = tmp_path / "other.json"
     out.write_text(json.dumps({"centre_map": rec}, default=float))
     g, rest = split_design_gain(f"gain={out}:mid")
@@ -242,6 +244,7 @@ def test_a_folder_measures_its_load_gain_and_another_folder_takes_it_from_the_js
     assert not one["load_gain"]["several_loads"]
     (tmp_path / "one.json").write_text(json.dumps({"centre_map": one}, default=float))
     (tmp_path / "bare.json").write_text("{}")
-    for bad, word in (("one.json", "one load level"), ("bare.json", "no centre_map.load_gain"), ("gone.json", "no such file")):
+    for bad, word in (("one.json", "one load level"), ("bare.json", "no centre_map.load_gain"),
+                      ("gone.json", "no such file")):
         with pytest.raises(ConfigError, match=word):
             split_design_gain(f"gain={tmp_path / bad}:31")

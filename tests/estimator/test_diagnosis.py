@@ -379,7 +379,8 @@ def test_lumped_backlash_that_bent_the_base_route_into_a_corner_is_named_alone()
     # refitted from the uniform route it takes its full width and leaves nothing
     rec = lumped_scenarios.record("distal_backlash", seed=707110, level=0.8, duration=60.0)
     res = diagnose(rec.data, effects=("distal_backlash", "pretension", "sensor_offset:x_in"))
-    assert res["causes"] == ["distal_backlash"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
+    assert res["causes"] == ["distal_backlash"], (res["structure"],
+                                                  {k: c["score"] for k, c in res["candidates"].items()})
     assert res["parameters"]["d_b"]["value"] == pytest.approx(250e-6, rel=0.05)
 
 
@@ -415,7 +416,8 @@ def test_lumped_drift_from_zero_at_the_start_is_judged_on_the_end():
     # Judged on the forward fold (Effect.from_start), it is named with its rate within 25 %
     rec = lumped_scenarios.record("sensor_drift:T_out", seed=3415102, level=0.2, duration=60.0)
     res = diagnose(rec.data, effects=("sensor_drift:T_out", "sensor_offset:T_out", "curvature_drift"))
-    assert res["causes"] == ["sensor_drift:T_out"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
+    assert res["causes"] == ["sensor_drift:T_out"], (res["structure"],
+                                                     {k: c["score"] for k, c in res["candidates"].items()})
     assert res["parameters"]["d_T_out"]["value"] == pytest.approx(rec.truth["parameters"]["rate"], rel=0.25)
     drift = res["candidates"]["sensor_drift:T_out"]
     assert drift["scored_on"].startswith("the forward fold") and drift["score"] == drift["fold_scores"][0]
@@ -491,7 +493,8 @@ def test_an_encoder_offset_starts_from_the_rest_reading_and_its_route_refit_too(
     assert starts[:2] == [-5e-5, 5e-5] and len(starts) == 3 and starts[2] == pytest.approx(-84e-6, abs=3e-6)
     rec = lumped_scenarios.record("sensor_offset:x_out", seed=1417111, level=0.8, duration=60.0)
     res = diagnose(rec.data, effects=("sensor_offset:x_in", "distal_backlash", "curvature_drift"))
-    assert res["causes"][0] == "sensor_offset:x_out", (res["causes"], {k: c["score"] for k, c in res["candidates"].items()})
+    assert res["causes"][0] == "sensor_offset:x_out", (res["causes"],
+                                                       {k: c["score"] for k, c in res["candidates"].items()})
     assert res["candidates"]["sensor_offset:x_in"]["score"] < 0.2
 
 
@@ -542,7 +545,8 @@ def test_lumped_friction_offset_holding_a_slack_tendon_is_named():
     # noise sample of T_in above the slack threshold
     rec = lumped_scenarios.record("friction_offset", seed=805110, level=0.8, duration=60.0)
     res = diagnose(rec.data, effects=("friction_offset", "sensor_offset:T_out", "sensor_lag:x_in"))
-    assert res["causes"] == ["friction_offset"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
+    assert res["causes"] == ["friction_offset"], (res["structure"],
+                                                  {k: c["score"] for k, c in res["candidates"].items()})
     assert res["parameters"]["a"]["value"] == pytest.approx(rec.truth["parameters"]["tension_offset"], rel=0.1)
     assert res["gain"] > 0.5
 
@@ -581,7 +585,8 @@ def test_an_effect_that_leaves_structure_on_the_thirds_is_refitted_on_the_finer_
     # it explains both signals, scored against the finer route without an effect (which alone does not help)
     rec = lumped_scenarios.record("sensor_drift:T_in", seed=1514101, level=0.2, duration=60.0)
     res = diagnose(rec.data, effects=("sensor_drift:T_in", "sensor_offset:T_in", "presliding"))
-    assert res["causes"] == ["sensor_drift:T_in"], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
+    assert res["causes"] == ["sensor_drift:T_in"], (res["structure"],
+                                                    {k: c["score"] for k, c in res["candidates"].items()})
     assert res["settings"]["route_form"] == "thirds" and res["settings"]["model_route_form"] in ("sixths", "twelfths")
     assert res["parameters"]["d_T_in"]["value"] == pytest.approx(rec.truth["parameters"]["rate"], rel=0.25)
     assert max(res["structure"]["extended"].values()) <= res["settings"]["structure_ratio"]
@@ -758,7 +763,8 @@ def test_a_distal_load_cell_gain_on_a_constant_force_load_is_named_once_the_dist
     # absorb the gain. The distal end moving with the proximal one says the tendon slides, and the release pins K
     rec = lumped_scenarios.record("sensor_gain:T_out", seed=2011110, level=0.8, duration=60.0)
     res = diagnose(rec.data, effects=("sensor_gain:T_out", "sensor_offset:T_out", "sensor_offset:T_in"))
-    assert res["cause"] == "sensor_gain:T_out", (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
+    assert res["cause"] == "sensor_gain:T_out", (res["structure"],
+                                                 {k: c["score"] for k, c in res["candidates"].items()})
     assert res["structure"]["base"]["T_out"] > 3.0 * res["settings"]["structure_ratio"]
     assert res["parameters"]["g_T_out"]["value"] == pytest.approx(rec.truth["parameters"]["gain"], rel=0.25)
     assert res["parameters"]["K"]["value"] == pytest.approx(rec.truth["K"], rel=0.05)

@@ -85,7 +85,8 @@ def _joint_config(run_dir: Path, ident: str, instrument: str) -> Path:
         assert teleop_main(["calibrate", "--config", str(cfg)]) == 0
         _JOINT_CAL[instrument] = (tmp / "fjoints.yaml").read_text()
     cal_dir.mkdir()
-    (cal_dir / f"{ident}.yaml").write_text(_JOINT_CAL[instrument].replace("instrument: fjoints", f"instrument: {ident}"))
+    cal = _JOINT_CAL[instrument].replace("instrument: fjoints", f"instrument: {ident}")
+    (cal_dir / f"{ident}.yaml").write_text(cal)
     path = run_dir / "cfg.yaml"
     path.write_text(text.replace(f"id: {base_id}", f"id: {ident}")
                     .replace("rerun: save", "rerun: off\n  csv_every: 1")     # every cycle: the fault timing reads rows
@@ -206,7 +207,9 @@ def run_fault(tmp: Path, name: str, *, inject: dict[str, str] | None = None, sig
     logs = {s: run_dir / f"{s}.log" for s in ("slave", "master")}
     t_fault = None
     try:
-        for side, extra in (("slave", ["--listen", ep]), ("master", ["--connect", ep, "--listen", loopback_endpoint(port_m), "--protocol", "paper"])):
+        for side, extra in (("slave", ["--listen", ep]),
+                            ("master", ["--connect", ep, "--listen", loopback_endpoint(port_m),
+                                        "--protocol", "paper"])):
             args = base + [side, "--config", str(cfg_path), "--run-dir", str(run_dir), "--max-duration", "60",
                            *extra] + (["--inject", inject[side]] if side in inject else [])
             with open(logs[side], "w") as fh:

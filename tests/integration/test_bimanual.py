@@ -89,7 +89,8 @@ def test_stale_estimate_on_left_arm_makes_it_safe_and_right_arm_keeps_tracking(t
         t_signal = time.monotonic()     # the clock of the recordings' time column (one machine)
         slave.send_signal(signal.SIGUSR1)
         right_csv = run / "notes_right" / "master.csv"
-        wait_for(lambda: _last_time(right_csv) >= t_signal + WINDOW_S + 0.2, 10.0, "the right arm's rows past the window")
+        wait_for(lambda: _last_time(right_csv) >= t_signal + WINDOW_S + 0.2, 10.0,
+                 "the right arm's rows past the window")
         for p in (master, slave):
             p.send_signal(signal.SIGINT)
         for p in (master, slave):

@@ -134,7 +134,8 @@ def test_fault(name, instrument, tmp_path_factory):
         fig = run.slave_safe() if side == "slave" else run.master_safe()
         assert fig is not None, f"the {side} never went SAFE after {name}"
         ms = fig["from_last_msg_ms"] if how == "last" else fig["from_fault_ms"]
-        assert 0.0 <= ms <= LIMIT_MS, f"{side} SAFE {ms:.1f} ms after {'its last message' if how == 'last' else 'the fault'}"
+        after = "its last message" if how == "last" else "the fault"
+        assert 0.0 <= ms <= LIMIT_MS, f"{side} SAFE {ms:.1f} ms after {after}"
         if side == "master":          # the master renders zero force from its first SAFE sample on
             t, st = run.master.time, run.master.extra["state"]
             first = np.flatnonzero((t >= fig["t_safe"]) & (st == SAFE))[0]
@@ -163,7 +164,8 @@ def test_fault(name, instrument, tmp_path_factory):
     lost = counts["dropped"] + counts["cmd_decode_errors"] + counts["cmd_rejected"] + counts["est_decode_errors"] \
         + counts["est_rejected"]
     s_log, m_log = run.logs["slave"], run.logs["master"]
-    note = {"kill_master": "slave: " + ("liveliness token gone" if "liveliness token gone" in s_log else "command stale"),
+    note = {"kill_master": "slave: " + ("liveliness token gone" if "liveliness token gone" in s_log
+                                        else "command stale"),
             "kill_slave": "master: " + ("liveliness token gone" if "slave liveliness token gone" in m_log else "stale"),
             }.get(name, ", ".join(f"{k} {v}" for k, v in counts.items() if v) or "-")
     if blips:

@@ -144,7 +144,8 @@ def test_sigkill_of_a_side_loses_no_published_message(tmp_path, victim):
         assert states.index(("slave", "SAFE"), states.index(("slave", "ENGAGED"))) > 0
     est = read_measured_csv(rec_dir / "slave_estimate.csv")     # the measured-data format
     assert est.time.size == len(got[f"teleop/{ident}/slave/estimate"])
-    assert np.all(np.isfinite(est.T_in)) and "T_out_hat" in est.extra and any(c.startswith("profile") for c in est.extra)
+    assert (np.all(np.isfinite(est.T_in)) and "T_out_hat" in est.extra
+            and any(c.startswith("profile") for c in est.extra))
     assert (rec_dir / "streams.png").is_file()
     in_mcap = mcap_seqs(rec_dir)                                # the MCAP file holds what the CSVs hold
     assert {k: sorted(v) for k, v in in_mcap.items()} == {k: sorted(q for q, _ in v) for k, v in got.items()}

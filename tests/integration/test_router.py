@@ -42,7 +42,8 @@ def test_router_slave_master_recorder_as_four_processes(tmp_path):
     cfg.write_text(CLIENT.format(runs=runs, port=port), encoding="utf-8")
     procs: list[subprocess.Popen] = []
     try:
-        procs.append(start(["router", "--config", str(cfg), "--listen", f"tcp/127.0.0.1:{port}", "--max-duration", "90"],
+        procs.append(start(["router", "--config", str(cfg), "--listen", f"tcp/127.0.0.1:{port}",
+                            "--max-duration", "90"],
                            tmp_path / "router.log"))
         wait_text(tmp_path / "router.log", "(ready)", 20)
         recorder = start(["record", "--config", str(cfg), "--exit-when-done", "--max-duration", "90"],

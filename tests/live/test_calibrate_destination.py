@@ -51,5 +51,6 @@ def test_another_out_says_which_file_the_slave_reloads(tmp_path, monkeypatch, ca
     out = tmp_path / "elsewhere.yaml"
     assert main(["calibrate", "--config", str(CONFIGS / "instrument-spindle.yaml"), "--out", str(out)]) == 0
     reload = tmp_path / "data" / "tsm-teleop" / "calibration" / "forceps1.yaml"
-    assert capsys.readouterr().out.splitlines()[-1] == f"wrote {out} (the slave of this config reloads {reload}, not this file)"
+    assert capsys.readouterr().out.splitlines()[-1] == \
+        f"wrote {out} (the slave of this config reloads {reload}, not this file)"
     assert out.is_file() and not reload.exists()

@@ -55,10 +55,12 @@ def _case(tmp_path: Path, name: str) -> tuple[Path, str]:
         "20000-deep nesting": ("[" * 20_000 + "]" * 20_000 + "\n", r":1:\d+: .*nested deeper than \d+ levels"),
         "list as a key": ("? [a, b]\n: 1\n", r":1:3: a list as a key"),
         "flow list as a key": ("{[1]: 2}\n", r":1:2: a list as a key"),
-        "5000-digit integer": ("rig:\n  rate_hz: " + "9" * 5000 + "\n", r":2:12: rig.rate_hz: an integer of 5000 digits"),
+        "5000-digit integer": ("rig:\n  rate_hz: " + "9" * 5000 + "\n",
+                               r":2:12: rig.rate_hz: an integer of 5000 digits"),
         "recording.dir a file": (f"recording:\n  dir: {a_file}\n", r":2: recording.dir: .* is a file"),
         "calibration.dir a file": (f"calibration:\n  dir: {a_file}\n", r":2: calibration.dir: .* is a file"),
-        "device file a directory": (f"master:\n  device:\n    file: {a_dir}\n", r":3: master.device.file: .* is a directory"),
+        "device file a directory": (f"master:\n  device:\n    file: {a_dir}\n",
+                                    r":3: master.device.file: .* is a directory"),
         "rate 1e-6": ("rig:\n  rate_hz: 1e-6\n", r":2: rig.rate_hz: 1e-06 is out of range: expected 10..10000"),
         "rate 1e300": ("rig:\n  rate_hz: 1e300\n", r":2: rig.rate_hz: 1e\+300 is out of range: expected 10..10000"),
         "5 MB file": ("sheath:\n  runs:\n" + "    - {length: 0.1}\n" * (5 * 2 ** 20 // 20),
@@ -85,12 +87,14 @@ def test_hostile_config_ends_in_one_line_naming_file_and_line(tmp_path, capsys, 
 
 @pytest.mark.parametrize("side", ["slave", "master", "demo", "record", "bridge", "calibrate"])
 def test_a_directory_as_config_says_it_is_a_directory(tmp_path, capsys, side):
-    assert _error_line(capsys, [side, "--config", str(tmp_path)]) == f"--config {tmp_path}: is a directory; expected a file"
+    assert _error_line(capsys, [side, "--config", str(tmp_path)]) == \
+        f"--config {tmp_path}: is a directory; expected a file"
 
 
 @pytest.mark.parametrize("argv, expected", [
     (["slave", "--run-dir", "{file}"], "--run-dir {file}: is a file, not a directory; expected a directory"),
-    (["master", "--run-dir", "{file}/run"], "--run-dir {file}/run: cannot be made: '{file}' is a file; expected a directory"),
+    (["master", "--run-dir", "{file}/run"],
+     "--run-dir {file}/run: cannot be made: '{file}' is a file; expected a directory"),
     (["demo", "--recording", "{dir}"], "--recording {dir}: is a directory; expected a file"),
     (["record", "--journals", "{file}"], "--journals {file}: is a file, not a directory; expected a directory"),
     (["slave", "--max-duration", "nan"], "--max-duration nan: expected a number of seconds >= 0"),

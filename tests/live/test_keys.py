@@ -31,7 +31,8 @@ def test_a_roles_zenoh_entries_are_printed_as_json(tmp_path, monkeypatch, capsys
     assert main(["keys", "--zenoh-config", "master"]) == 0
     cfg = json.loads(capsys.readouterr().out)
     usrpwd = cfg["transport"]["auth"]["usrpwd"]
-    assert usrpwd["user"] == "master" and usrpwd["password"] == (tmp_path / "keys" / "master.password").read_text().strip()
+    assert (usrpwd["user"] == "master"
+            and usrpwd["password"] == (tmp_path / "keys" / "master.password").read_text().strip())
     assert cfg["access_control"]["enabled"] and usrpwd["dictionary_file"] == str(tmp_path / "keys" / "dictionary")
     with pytest.raises(SystemExit):
         main(["keys", "--zenoh-config", "surgeon"])

@@ -79,7 +79,8 @@ def test_master_and_slave_of_many_joints_run_record_and_publish_every_axis(n, tm
         assert rows[0] == list(cols) and len(rows) > 500 and all(len(r) == len(cols) for r in rows[1:])
     assert len(columns) == 6 + n * (6 + 2 * 8) and f"{cfg.instrument.joints[-1].name}.b.T_out_hat" in columns
     head, body = _rows(tmp_path / name)[0], _rows(tmp_path / name)[-1]
-    assert float(body[head.index(f"{cfg.instrument.joints[-1].name}.torque_hat")]) == pytest.approx(last.axes[-1].effort_hat, rel=1e-9)
+    assert float(body[head.index(f"{cfg.instrument.joints[-1].name}.torque_hat")]) == \
+        pytest.approx(last.axes[-1].effort_hat, rel=1e-9)
 
     msgs = dict(slave_messages(cfg, 1, SideState.ENGAGED, last, cmd.last.message.targets))
     js, wr = independent_decoder(JOINT_STATE), independent_decoder(WRENCH_STAMPED)

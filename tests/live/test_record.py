@@ -68,8 +68,8 @@ def test_recorder_writes_every_message_per_stream_and_a_summary(tmp_path):
     assert data.metadata["key"] == "teleop/rec1/slave/estimate"
     raw = list(read_messages(tmp_path / "recorder" / "messages.bin"))
     assert len(raw) == 200 + 199 + 3 + 1 and sum(p == b"\x00garbage" for _, _, p in raw) == 1
-    assert decode(raw[0][2]) in (Command(0, 0.0, (0.0,)), tendon_estimate(0, 0, 0.0, 2.0, 1e-4, 1.5, 1e-5, 1e-4, Phase.HOLD,
-                                                               (2.0, 1.0)))
+    assert decode(raw[0][2]) in (Command(0, 0.0, (0.0,)),
+                                 tendon_estimate(0, 0, 0.0, 2.0, 1e-4, 1.5, 1e-5, 1e-4, Phase.HOLD, (2.0, 1.0)))
     assert json.loads((tmp_path / "recorder" / "summary.json").read_text())["streams"] == streams
     assert (tmp_path / "recorder" / "streams.png").is_file()
 

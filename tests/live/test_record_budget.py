@@ -128,7 +128,8 @@ def test_a_full_disk_keeps_what_was_written_and_the_summary_counts_what_was_not(
     kept = [k for _, k, _ in read_messages(tmp_path / "recorder" / "messages.bin")]
     assert len(kept) == 30                                                  # every one written before stays
     assert out["disk"]["not_written"]["messages.bin"] >= 70                 # the 70 later ones (and the flushes)
-    assert "ENOSPC" in out["disk"]["write_errors"]["messages.bin"] or "No space" in out["disk"]["write_errors"]["messages.bin"]
+    error = out["disk"]["write_errors"]["messages.bin"]
+    assert "ENOSPC" in error or "No space" in error
     assert out["streams"][estimate_key("bud1")]["count"] == 100
     assert _mcap_teleop_messages(tmp_path / "recorder" / "session.mcap") == 100
     assert json.loads((tmp_path / "recorder" / "summary.json").read_text())["disk"]["not_written"]["messages.bin"] >= 70
@@ -286,5 +287,5 @@ def test_a_recording_without_errors_says_not_written_0(tmp_path):
         _feed(rec, 20)
         out = rec.close()
     assert all(v["not_written"] == 0 for v in out["streams"].values())
-    assert final_line(out, tmp_path) == ("teleop record: master/command 20 (missing 0, not written 0), slave/estimate 20 "
-                                         f"(missing 0, not written 0); {tmp_path / 'summary.json'}")
+    assert final_line(out, tmp_path) == ("teleop record: master/command 20 (missing 0, not written 0), "
+                                         f"slave/estimate 20 (missing 0, not written 0); {tmp_path / 'summary.json'}")

@@ -40,7 +40,8 @@ def pki(tmp_path_factory) -> dict[str, str]:
     d = tmp_path_factory.mktemp("pki")
     _ca(d, "ca-one")
     _ca(d, "ca-other")
-    _openssl(d, "req", "-newkey", "rsa:2048", "-nodes", "-keyout", "srv.key", "-out", "srv.csr", "-subj", "/CN=localhost")
+    _openssl(d, "req", "-newkey", "rsa:2048", "-nodes", "-keyout", "srv.key", "-out", "srv.csr",
+             "-subj", "/CN=localhost")
     (d / "ext.cnf").write_text("subjectAltName=DNS:localhost,IP:127.0.0.1\n")
     _openssl(d, "x509", "-req", "-in", "srv.csr", "-CA", "ca-one.pem", "-CAkey", "ca-one.key", "-CAcreateserial",
              "-out", "srv.pem", "-days", "1", "-extfile", "ext.cnf")

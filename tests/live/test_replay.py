@@ -1,5 +1,5 @@
-"""teleop replay (live/replay/main.py): a synthetic run (truth from the estimator with K_TRUE, recorded estimate with the
-run's calibration K_CAL) replayed with its own calibration, another one, and bad inputs."""
+"""teleop replay (live/replay/main.py): a synthetic run (truth from the estimator with K_TRUE, recorded estimate
+with the run's calibration K_CAL) replayed with its own calibration, another one, and bad inputs."""
 from __future__ import annotations
 
 import json

@@ -26,7 +26,8 @@ def _calibration(cfg, path: Path, K: float) -> Path:
     tc = TendonCalibration(K=K, M_e=float(COMPLIANCE * (1 - np.exp(-K)) / K), compliance=COMPLIANCE, knee_x_in=0.005,
                            knee_T_in=4.0, residual_rms=1e-6, n_samples=300)
     cal = InstrumentCalibration(instrument=cfg.instrument.id, date="2026-01-01T00:00:00+00:00", target_tension=20.0,
-                                use_route=False, joints=tuple((j.name, {"a": tc, "b": tc}) for j in cfg.instrument.joints))
+                                use_route=False,
+                                joints=tuple((j.name, {"a": tc, "b": tc}) for j in cfg.instrument.joints))
     return save_calibration(cal, path)
 
 

@@ -196,7 +196,8 @@ def test_the_step_over_all_joints_is_the_per_joint_kernel_bit_for_bit():
             T = [[rig.state.truth.profiles[2 * i + k].copy() for k in range(2)] for i in range(rig.n_joints)]
             theta = rig.state.truth.theta.copy()
         phase = 2 * math.pi * n * DT
-        cmd = x0 + 0.004 * np.array([[math.sin(phase), -math.sin(phase)], [math.sin(1.3 * phase), -0.8 * math.sin(phase)],
+        cmd = x0 + 0.004 * np.array([[math.sin(phase), -math.sin(phase)],
+                                     [math.sin(1.3 * phase), -0.8 * math.sin(phase)],
                                      [0.5 * math.sin(phase), -math.sin(0.7 * phase)]])
         x = rig._x + rig.drive.move(rig._x, cmd, DT)
         for i, (j, s) in enumerate(zip(rig.joints, rig.sims, strict=False)):          # the per-joint loop

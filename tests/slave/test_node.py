@@ -277,7 +277,8 @@ def test_power_up_calibration_against_the_simulator(tmp_path):
     node2 = SlaveNode(cfg, again, SlaveLinks(*(Topic(clock) for _ in range(4))), run_dir=tmp_path / "second",
                       calibration=saved, calibration_file=tmp_path / "cal" / "tendon0.yaml")
     assert node2.state == SideState.SAFE and node2.routine is None               # no routine runs
-    assert node2.axes[0].estimator.model.K == saved.tendon.K and node2.axes[0].estimator.model.compliance == saved.tendon.compliance
+    assert (node2.axes[0].estimator.model.K == saved.tendon.K
+            and node2.axes[0].estimator.model.compliance == saved.tendon.compliance)
     cal2 = json.loads((tmp_path / "second" / "calibration.json").read_text())
     assert cal2["K"] == saved.tendon.K and cal2["loaded_from"].endswith("tendon0.yaml")
     assert node2.stats()["calibration"] == "loaded" and node.stats()["calibration"] == "power-up"

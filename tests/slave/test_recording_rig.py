@@ -37,7 +37,8 @@ def synthetic_run(n: int = 50, dt: float = 1e-3) -> MrdRun:
 
 def head(run: MrdRun, n: int) -> MrdRun:
     """The first ``n`` samples of ``run``."""
-    return MrdRun(**{**run.__dict__, **{k: getattr(run, k)[:n] for k in ("time", "theta_p", "tau_p", "theta_d", "tau_d")}})
+    return MrdRun(**{**run.__dict__,
+                     **{k: getattr(run, k)[:n] for k in ("time", "theta_p", "tau_p", "theta_d", "tau_d")}})
 
 
 def mrd_config(tmp_path: Path, path: str, **rec):
@@ -113,8 +114,8 @@ def test_a_recording_of_another_axis_than_the_instrument_is_refused(tmp_path):
     f = tmp_path / "00.TXT"
     f.write_text("0,0,0,0,0,0,0,0,0,0\n")
     single = load_config(ROOT / "configs" / "sim.yaml")
-    cfg = dataclasses.replace(single, rig=dataclasses.replace(single.rig, type="recording", recording=dataclasses.replace(
-        single.rig.recording, path=str(f))))
+    recording = dataclasses.replace(single.rig.recording, path=str(f))
+    cfg = dataclasses.replace(single, rig=dataclasses.replace(single.rig, type="recording", recording=recording))
     with pytest.raises(ConfigError, match=r"00.TXT is a MRD recording of a spindle axis; the config's instrument is "
                                           r"a single tendon axis"):
         check_recording(cfg)
@@ -162,7 +163,8 @@ def test_a_kaist_recording_plays_as_a_tendon_pair_in_units_of_the_pulley_radius(
     rig = RecordedPair(rec, G=2.0)
     st = rig.step(np.zeros((1, 2)), 0.025)
     assert st.t == pytest.approx(t[1])
-    assert st.x_in[0, 0] == pytest.approx(2.0 * rec.command[1]) and st.x_in[0, 1] == pytest.approx(-2.0 * rec.command[1])
+    assert (st.x_in[0, 0] == pytest.approx(2.0 * rec.command[1])
+            and st.x_in[0, 1] == pytest.approx(-2.0 * rec.command[1]))
     assert st.T_in[0, 1] == rec.T_b[1] and st.truth.theta[0] == rec.angle[1]
 
 

@@ -40,7 +40,8 @@ def uniform_sheath(**kw) -> SheathConfig:
 
 
 def make_rig(load=SPRING, sheath=None, motor=FAST, noise=0.0, seed=0, n=200) -> SimulatedRig:
-    rig = SimulatedRigConfig(n_elements=n, mu=MU, motor=motor, load=load, sensors=SensorConfig(load_cell_noise=noise, seed=seed))
+    rig = SimulatedRigConfig(n_elements=n, mu=MU, motor=motor, load=load,
+                             sensors=SensorConfig(load_cell_noise=noise, seed=seed))
     return SimulatedRig(sheath or uniform_sheath(), rig)
 
 

@@ -203,7 +203,8 @@ def test_an_mrd_value_out_of_range_and_a_fit_it_spoils_are_named(tmp_path, capsy
     from datasets.mrd import read_mrd
     from estimator.errors import DataError
     with pytest.raises(DataError, match=r"01\.TXT:702: column 2: 20000000\.0 counts is beyond anything the rig "
-                                        r"reads \(\|value\| <= 1e\+07 counts\): a corrupt row; fix or remove that row$"):
+                                        r"reads \(\|value\| <= 1e\+07 counts\): a corrupt row; "
+                                        r"fix or remove that row$"):
         read_mrd(d / "01.TXT")
     fields[2] = "9e6"
     (d / "01.TXT").write_text("\n".join(lines[:701] + [",".join(fields)] + lines[702:]) + "\n")

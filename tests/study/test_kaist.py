@@ -138,7 +138,8 @@ def test_generic_csv_with_header_and_column_map(tmp_path):
     p = tmp_path / "lab.csv"
     t = np.arange(0, 2.0, 0.01)
     p.write_text("t;T_A;T_B;cmd_rad;tip_rad\n" + "".join(
-        f"{a:.3f};{d:.3f};{e:.3f};{b:.5f};{c:.5f}\n" for a, b, c, d, e in zip(t, np.sin(t), 0.4 * np.sin(t), 5 + t, 5 - t, strict=False)))
+        f"{a:.3f};{d:.3f};{e:.3f};{b:.5f};{c:.5f}\n"
+        for a, b, c, d, e in zip(t, np.sin(t), 0.4 * np.sin(t), 5 + t, 5 - t, strict=False)))
     rec = read_kaist(p, 30, parse_column_map("time=0,T_a=1,T_b=2,command=3,angle=4,units=rad"), rate_hz=None)
     assert rec.config_deg == 30 and len(rec) == t.size
     np.testing.assert_allclose(rec.command, np.sin(t), atol=1e-5)

@@ -14,7 +14,14 @@ from estimator.online.spindle import SpindleParams, first_reversal, make_batch, 
 from estimator.offline.spindle.fit import band_centre, fit_torque
 from teleop.errors import ConfigError
 from estimator.errors import DataError
-from datasets.mrd import DISTAL_COUNTS_PER_REV, DISTAL_SIGN, PROXIMAL_COUNTS_PER_REV, TORQUE_NM_PER_COUNT, load_mrd_dir, read_mrd
+from datasets.mrd import (
+    DISTAL_COUNTS_PER_REV,
+    DISTAL_SIGN,
+    PROXIMAL_COUNTS_PER_REV,
+    TORQUE_NM_PER_COUNT,
+    load_mrd_dir,
+    read_mrd,
+)
 from datasets.mrd_files import default_mrd_dir
 from study.mrd_report import analyze_mrd, band_measurements
 from study.mrd_text import format_mrd
@@ -42,7 +49,8 @@ def simulate(freq=0.5, amp=0.8, duration=6.0, dt=0.001, K=K_TRUE, P=P_TRUE, k=5.
 
 
 def write_txt(path, t, theta_p, tau_p, theta_d, tau_d, load_cmd=0.1, header=True, rows=None):
-    lines = ["%synthetic run from estimator.pair_kernels.simulate_pair", "%header may be wrong: 9.99 Hz"] if header else []
+    lines = (["%synthetic run from estimator.pair_kernels.simulate_pair", "%header may be wrong: 9.99 Hz"]
+             if header else [])
     for i in range(t.size if rows is None else rows):
         lines.append(f"{t[i]:.3f},{theta_p[i] * PROXIMAL_COUNTS_PER_REV / (2 * math.pi):.2f},"
                      f"{tau_p[i] / TORQUE_NM_PER_COUNT:.2f},0.0,"
@@ -243,7 +251,8 @@ def test_real_folder_model_beats_linear_and_one_set_predicts_the_folder():
     s, _ = analyze_mrd(runs, folder=False)
     assert s["calibration"]["run"] == "00" and "shared" not in s
     pair = list(s["runs"]["01"]["models"])[-1]
-    assert all(r["models"][pair]["torque_rmse_fs"] < r["baselines"]["linear"]["torque_rmse_fs"] for r in s["runs"].values())
+    assert all(r["models"][pair]["torque_rmse_fs"] < r["baselines"]["linear"]["torque_rmse_fs"]
+               for r in s["runs"].values())
     # one load level: the pair model's load gain (rho ~ 0.2) lies outside the run's own 95 % reading, the centre
     # map's 1 / n_k inside; the headline is the centre map although the pair model wins the time split
     lc = s["model_choice"]["load_gain_check"]

@@ -162,8 +162,9 @@ def test_the_mrd_resolver_takes_a_clones_root_its_data_or_one_tool_folder(tmp_pa
     assert [r.name for r in runs] == ["00", "01", "10"] and bad == [] and [r.load_level for r in runs] == [0, 1, 2]
     assert "reading" in capsys.readouterr().err
     (data / "Tool_4_Maryland_L_2").rename(data / "Tool_4_Maryland_L_3")   # several folders, none the default
-    with pytest.raises(DataError, match=r": 3 folders of runs \(data/Tool_4_Maryland_L_3, data/Tool_4_Maryland_L_Roll_1, "
-                                        r"data/Tool_5_Maryland_L_2\): give one of them$"):
+    with pytest.raises(DataError, match=r": 3 folders of runs \(data/Tool_4_Maryland_L_3, "
+                                        r"data/Tool_4_Maryland_L_Roll_1, data/Tool_5_Maryland_L_2\): "
+                                        r"give one of them$"):
         find_mrd_folder(root)
     with pytest.raises(DataError, match=r"no MRD recordings found under .*: expected data/Tool_<\.\.\.>/<NN>\.TXT"):
         find_mrd_folder(root / "RAL-2018")
