@@ -316,7 +316,8 @@ def main_demo(args) -> int:
     try:
         if cfg.rig.type == "simulated":      # another rig: the slave calibrates at power-up (file missing)
             from slave.kinds import axis_kind
-            print(f"calibrating {cfg.instrument.id} ({', '.join(names)}): {axis_kind(cfg).routine_text} ...", flush=True)
+            print(f"calibrating {cfg.instrument.id} ({', '.join(names)}): {axis_kind(cfg).routine_text} ...",
+                  flush=True)
             run_calibrate(argparse.Namespace(config=str(cfg_file), out=None))
         doing = "the slave fits its calibration (rig.recording.calibration_run), then plays the recording; the " \
             "operator retraces its motion" if cfg.rig.type == "recording" else None

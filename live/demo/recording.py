@@ -162,7 +162,8 @@ def evaluate_kaist(run_dir: Path, cfg: Config) -> dict:
     return {"recording": rec.source, "format": "kaist", "calibration_run": model["run"], "split": how,
             "samples_scored": int(keep.sum()), "angle_rmse_deg": deg(live - truth),
             "angle_max_deg": float(math.degrees(np.max(np.abs(live - truth)))),
-            "offline_same_model_rmse_deg": deg(batch - truth), "live_minus_offline_deg": deg(live - truth) - deg(batch - truth),
+            "offline_same_model_rmse_deg": deg(batch - truth),
+            "live_minus_offline_deg": deg(live - truth) - deg(batch - truth),
             "offline_seed_rmse_deg": deg(seed - truth),
             "model": None if mf is None else {"id": mf.model_id, "sha256": mf.sha256, "path": mf.path,
                                               "held_out_deg": mf.gain["extended"], "base_deg": mf.gain["base"]}}
@@ -276,8 +277,10 @@ class RecordingDemo:
         if r.get("format") == "csv":
             return [f"recording {r['recording']} (single tendon, calibrated on {Path(r['calibration_run']).name})",
                     f"  scored {r['samples_scored']} recorded samples after the calibration fit's 60 %",
-                    f"  distal tension live vs measured: RMSE {r['T_out_rmse_fs']:.4f} FS (FS {r['full_scale_N']:.2f} N)",
-                    f"  offline (same estimator and calibration, same samples): RMSE {r['offline_T_out_rmse_fs']:.4f} FS; "
+                    f"  distal tension live vs measured: RMSE {r['T_out_rmse_fs']:.4f} FS "
+                    f"(FS {r['full_scale_N']:.2f} N)",
+                    f"  offline (same estimator and calibration, same samples): "
+                    f"RMSE {r['offline_T_out_rmse_fs']:.4f} FS; "
                     f"live - offline {r['live_minus_offline_fs']:+.4f} FS (bound {AGREEMENT_FS})"]
         if r.get("format") == "kaist":
             return [f"recording {r['recording']} (pair axis, calibrated on {r['split'].split(';')[0]})",
@@ -285,15 +288,19 @@ class RecordingDemo:
                     f"  scored {r['samples_scored']} recorded samples of the test cycles",
                     f"  distal angle live vs measured: RMSE {r['angle_rmse_deg']:.2f} deg (bound {_bounds(r)[0]}), "
                     f"max {r['angle_max_deg']:.2f} deg",
-                    f"  offline (same model and calibration, same samples): RMSE {r['offline_same_model_rmse_deg']:.2f} "
+                    f"  offline (same model and calibration, same samples): "
+                    f"RMSE {r['offline_same_model_rmse_deg']:.2f} "
                     f"deg; live - offline {r['live_minus_offline_deg']:+.3f} deg (bound {_bounds(r)[1]})",
-                    f"  offline seed pair model (teleop analyze --kaist's seed): RMSE {r['offline_seed_rmse_deg']:.2f} deg"]
+                    f"  offline seed pair model (teleop analyze --kaist's seed): "
+                    f"RMSE {r['offline_seed_rmse_deg']:.2f} deg"]
         m = s.get("model")
         return [f"recording {r['recording']} (calibrated on {Path(r['calibration_run']).name}, tool "
-                f"{r['tool'] or 'none'}): jaw torque from the {r['model']}, full scale {r['full_scale_Nm'] * 1e3:.1f} mN m",
+                f"{r['tool'] or 'none'}): jaw torque from the {r['model']}, "
+                f"full scale {r['full_scale_Nm'] * 1e3:.1f} mN m",
                 *([f"  model {m['id']} (sha256 {m['sha256'][:12]}..., {Path(m['path']).name}): the model file's, not "
                    "fitted at power-up"] if m else []),
-                f"  scored {r['cycles_scored']} cycles, {r['scored_from_s']:.2f}-{r['scored_to_s']:.2f} s of the recording",
+                f"  scored {r['cycles_scored']} cycles, {r['scored_from_s']:.2f}-{r['scored_to_s']:.2f} s "
+                f"of the recording",
                 f"  jaw torque live vs measured: RMSE {r['torque_rmse_fs']:.4f} FS (bound {TORQUE_RMSE_BOUND}), max "
                 f"{r['torque_max_fs']:.3f} FS",
                 f"  offline (same model and calibration, same cycles): RMSE {r['offline_torque_rmse_fs']:.4f} FS; "
