@@ -272,6 +272,7 @@ class ExtendedEstimator:
         self._ring[:] = 0.0
         T0 = self.values["T0"]
         self.sample = ExtendedSample(T0, 0.0, 0.0, self.values["K"], T0)
+        self._K_max = self.values["K"] * (1.0 + self.values["r_s"])   # the largest friction exponent of the run
 
     @property
     def steps(self) -> int:
@@ -292,18 +293,21 @@ class ExtendedEstimator:
               self._dY, self._G, self._io, self._slide, self._one_T, self._one_E, self._o, self._ring, self._out)
         o = self._out
         self.sample = s = ExtendedSample(float(o[0]), float(o[1]), float(o[2]), float(o[3]), float(o[4]))
+        if s.K_now > self._K_max:
+            self._K_max = s.K_now
         return s
 
     def out_of_range(self, s: ExtendedSample) -> str | None:
         """Why ``s`` leaves the physical range, or None: a negative distal tension, or a distal tension above the
         proximal one by more than e^K (the friction's bound on T + a, with the noise band h: T_out > (max(T_in, 0) +
-        h + a) e^K_now - a + 1 mN), or an output that is not finite."""
+        h + a) e^K - a + 1 mN, K the larger of ``s.K_now`` and the largest of the run's steps: a profile set at a
+        higher speed or before a drift keeps that friction's tensions), or an output that is not finite."""
         if not (math.isfinite(s.T_out) and math.isfinite(s.x_out)):
             return "a non-finite estimate"
         if s.T_out < 0.0:
             return f"T_out = {s.T_out:.3g} N < 0"
         a = self.values["a"]
-        bound = (max(s.T_in, 0.0) + self.band + a) * math.exp(s.K_now) - a + 1e-3
+        bound = (max(s.T_in, 0.0) + self.band + a) * math.exp(max(s.K_now, self._K_max)) - a + 1e-3
         if s.T_out > bound:
             return f"T_out = {s.T_out:.3g} N above T_in e^K = {bound:.3g} N"
         return None
