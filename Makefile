@@ -6,7 +6,7 @@ VENV := .venv
 STAMP := $(VENV)/.installed
 # numba caches a compiled function beside its module and checks only that module's file: a caller compiled in another
 # module keeps the old code of a kernel edited since. Editing any module with compiled code clears every cache.
-NUMBA_SOURCES := $(shell grep -rl --include='*.py' njit estimator datasets slave master teleop live study benchmarks 2>/dev/null)
+NUMBA_SOURCES := $(shell grep -rl --include='*.py' njit estimator recorded slave master teleop live study benchmarks 2>/dev/null)
 NUMBA_STAMP := .numba-sources
 
 .PHONY: demo test bench clean

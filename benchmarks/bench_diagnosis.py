@@ -7,7 +7,7 @@ hidden effect. Two simulators, reported apart:
 
 * ``rig``: the project's quasi-static rig (study/scenarios.py), the one the diagnosis shares its
   physics with;
-* ``lumped``: the independent dynamic lumped-mass simulator (study/lumped_scenarios.py: random
+* ``lumped``: the independent dynamic lumped-mass simulator (study/lumped/scenarios.py: random
   routes of arcs and straight runs, random distal loads, 200-2000 Hz, its own noise).
 
 Seed sets (``SEED_BASE``): ``dev`` (effects 100+, clean 500+, uncatalogued 900+), ``dev2`` ... ``dev54`` (the
@@ -65,7 +65,7 @@ def _record(sim: str):
     if sim == "rig":
         from study.scenarios import record
     else:
-        from study.lumped_scenarios import record
+        from study.lumped.scenarios import record
     return record
 
 
@@ -306,7 +306,7 @@ def main(argv: list[str] | None = None) -> None:
     for sim in _sims(args):
         rs = [r for r in rows if r["sim"] == sim]
         title = {"rig": "rig (study/scenarios.py, the diagnosis' own physics)",
-                 "lumped": "lumped (study/lumped_scenarios.py, independent simulator)"}[sim]
+                 "lumped": "lumped (study/lumped/scenarios.py, independent simulator)"}[sim]
         table(rs, f"{title}, {args.seed_set} seeds")
     if args.verbose:
         _print_misses(rows)

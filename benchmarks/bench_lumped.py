@@ -1,5 +1,5 @@
 """Lumped-mass simulator speed: real-time factor of the chain alone and of whole 90 s recordings
-(study.lumped_scenarios.record, randomised rate, route and load). CPU time of this process, one
+(study.lumped.scenarios.record, randomised rate, route and load). CPU time of this process, one
 thread; prints figures, never fails on time (aim: a 90 s recording in a few seconds)."""
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import time
 import numpy as np
 
 from estimator.sheath import SheathGeometry
-from study.lumped import Load, LumpedTendon
-from study.lumped_scenarios import record
+from study.lumped.scenarios import record
+from study.lumped.simulator import Load, LumpedTendon
 
 
 def bench_chain(seconds: float = 30.0, rate_hz: float = 1000.0, substep_hz: float = 10000.0,

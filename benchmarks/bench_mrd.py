@@ -24,10 +24,10 @@ ONE_THREAD = {k: "1" for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_N
 os.environ.update(ONE_THREAD)
 ROOT = Path(__file__).resolve().parents[1]
 
-from datasets.folders import MRD, skip_reason  # noqa: E402 - after the thread settings
-from datasets.mrd import load_mrd_dir  # noqa: E402 - after the thread settings
-from datasets.mrd_files import default_mrd_dir  # noqa: E402 - after the thread settings
-from study.mrd_report import analyze_mrd  # noqa: E402 - after the thread settings
+from recorded.folders import MRD, skip_reason  # noqa: E402 - after the thread settings
+from recorded.mrd import load_mrd_dir  # noqa: E402 - after the thread settings
+from recorded.mrd_files import default_mrd_dir  # noqa: E402 - after the thread settings
+from study.mrd.report import analyze_mrd  # noqa: E402 - after the thread settings
 
 GOAL_S = 60.0
 

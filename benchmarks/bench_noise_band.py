@@ -32,7 +32,7 @@ def known_route(truth: dict) -> np.ndarray | None:
 def one(sim: str, seed: int, duration: float = 60.0) -> tuple[np.ndarray, np.ndarray]:
     """(envelope, banded) x (T_out rms, T_out mean, T_out max, elongation rms) [fraction of full scale]."""
     if sim == "lumped":
-        from study.lumped_scenarios import record
+        from study.lumped.scenarios import record
         rec = record(None, seed=seed, level=0.2, duration=duration)
         tr = rec.truth
         model = SheathModel(K=tr["K"], compliance=tr["L"] / tr["EA"], wrap_shape=known_route(tr))

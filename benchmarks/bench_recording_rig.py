@@ -3,7 +3,7 @@
 The slave's recording rig and recorded spindle axis (slave/recording/rig.py, slave/recording/spindle.py) play each
 run in process, one cycle per recorded sample (1 kHz), with the calibration the slave fits on start (the tool
 file's rule, ``mid``, with its load gain). The offline figure of each run is ``teleop analyze --mrd DIR --tool
-NAME``'s own (:func:`study.mrd_report.analyze_mrd`, same calibration run and load gain, the folder-wide fits
+NAME``'s own (:func:`study.mrd.report.analyze_mrd`, same calibration run and load gain, the folder-wide fits
 off). Prints per run the live jaw-torque RMSE [FS], the offline one and their difference, the median and worst
 over the scored runs (the calibration run is in-sample and listed apart), and the step time of the loop (rig
 step and estimate, p50 / p99 / max, and the share over the 1 ms period; wall time and the thread's CPU time, which
@@ -33,12 +33,12 @@ ROOT = Path(__file__).resolve().parents[1]
 
 import numpy as np  # noqa: E402 - after the thread settings
 
-from datasets.folders import KAIST, MRD, skip_reason  # noqa: E402
-from datasets.mrd import load_mrd_dir  # noqa: E402
-from datasets.mrd_files import DEFAULT_FOLDER, mrd_folder  # noqa: E402
 from live.demo.recording_score import play_run, score_run  # noqa: E402
+from recorded.folders import KAIST, MRD, skip_reason  # noqa: E402
+from recorded.mrd import load_mrd_dir  # noqa: E402
+from recorded.mrd_files import DEFAULT_FOLDER, mrd_folder  # noqa: E402
 from slave.recording.spindle import fit_recorded_model  # noqa: E402
-from study.mrd_report import analyze_mrd  # noqa: E402
+from study.mrd.report import analyze_mrd  # noqa: E402
 from teleop.config.load import load_config  # noqa: E402
 from teleop.config.tools import load_tool  # noqa: E402
 
@@ -107,8 +107,8 @@ def kaist(directory: str | None, extended: str | None) -> None:
     """The KAIST table (module docstring)."""
     import json
 
-    from datasets.kaist import load_all
-    from datasets.kaist_files import default_kaist_dir, find_configs
+    from recorded.kaist import load_all
+    from recorded.kaist_files import default_kaist_dir, find_configs
     from slave.recording.pair import kaist_live
     d = Path(directory) if directory else default_kaist_dir()
     if not find_configs(d):

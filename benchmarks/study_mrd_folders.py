@@ -4,7 +4,7 @@ The study behind docs/results/mrd.md: the source repository (https://github.com/
 mis-tool-characterization, commit 03658b2; ODbL 1.0 / DbCL 1.0; "MRD Lab data repository, University of Minnesota";
 O'Neill, Stephens, Kowalewski, IEEE RA-L 3(4):3027-3034, 2018) holds fifteen folders of one rig. Point ``--repo`` at
 a clone (its root or its ``data/`` folder; docs/how-to/get-the-data.md), read in place, nothing copied. Each folder is
-split into its stroke windows (:func:`datasets.mrd.stroke_groups`: the roll and pitch folders stop the jaw at several
+split into its stroke windows (:func:`recorded.mrd.stroke_groups`: the roll and pitch folders stop the jaw at several
 positions) and each window is analysed twice, in process and one thread:
 
 * the default calibration (the slowest, lightest run, no number from outside), with the folder fit and its
@@ -29,10 +29,10 @@ ONE_THREAD = {k: "1" for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_N
 os.environ.update(ONE_THREAD)
 ROOT = Path(__file__).resolve().parents[1]
 
-from datasets.folders import MRD, skip_reason  # noqa: E402 - after the thread settings
-from datasets.mrd import load_mrd_dir, runs_selection, stroke_groups  # noqa: E402 - after the thread settings
-from datasets.mrd_files import default_mrd_dir  # noqa: E402 - after the thread settings
-from study.mrd_report import analyze_mrd  # noqa: E402 - after the thread settings
+from recorded.folders import MRD, skip_reason  # noqa: E402 - after the thread settings
+from recorded.mrd import load_mrd_dir, runs_selection, stroke_groups  # noqa: E402 - after the thread settings
+from recorded.mrd_files import default_mrd_dir  # noqa: E402 - after the thread settings
+from study.mrd.report import analyze_mrd  # noqa: E402 - after the thread settings
 
 #: The one-run calibration's target: median and worst-run torque RMSE [fraction of full scale].
 LINE = (0.03, 0.10)

@@ -196,7 +196,7 @@ def _add_lazy(sub: argparse._SubParsersAction[argparse.ArgumentParser], args: li
         from study import analyze  # lazy: only `teleop analyze` pays for it
         p = sub.add_parser("analyze", help="run the model against a recording")
         analyze.add_arguments(p)
-        from study.mrd_tools import add_tool_argument
+        from study.mrd.tools import add_tool_argument
         add_tool_argument(p)
         p.set_defaults(func=analyze.main_analyze)
     else:

@@ -81,9 +81,9 @@ class RecordedOperator:
 
 
 def recorded_operator(cfg: Config) -> RecordedOperator:
-    """The recorded operator of ``cfg``'s recording (errors of :func:`datasets.recording.recorded_motion`); on a
+    """The recorded operator of ``cfg``'s recording (errors of :func:`recorded.detect.recorded_motion`); on a
     single tendon the handle retraces the recorded x_in (the master commands x_in = anchor + s (p - p_anchor))."""
-    from datasets.recording import recorded_motion
+    from recorded.detect import recorded_motion
     t, motion = recorded_motion(cfg)
     r = float(next((j.pulley_radius for j in cfg.instrument.joints), 1.0))   # a tendon: x_in itself
     return RecordedOperator(t, motion, r / float(cfg.master.mapping.motion_scale))

@@ -16,7 +16,7 @@ Which axes run a model file, per axis kind:
   :class:`estimator.online.pair_model.PairModelEstimator` (structure ``capstan`` or ``seed`` with the pair effects of
   :data:`estimator.online.pair_model.PER_CYCLE`);
 * ``spindle``: the recording rig's spindle axis (:class:`slave.recording.spindle.RecordedSpindleAxis`) runs the
-  spindle pair model and, when the file chose it, the centre map (:mod:`study.mrd_model` writes them);
+  spindle pair model and, when the file chose it, the centre map (:mod:`study.mrd.model_file` writes them);
 * ``tendon``: the single-tendon axis (:class:`slave.tendon_axis.TendonAxis`, on any rig) runs
   :class:`estimator.online.extended.ExtendedEstimator` beside the base estimator (:mod:`slave.tendon_model`: the
   checks, the fallback where the extended estimate leaves the physical range).

@@ -12,9 +12,9 @@ Two modes:
   to stderr on long recordings. Where the friction sits along the sheath is fitted; ``--route CONFIG``
   holds the route of CONFIG's ``sheath`` instead (an instrument whose route is known from its design).
 * ``teleop analyze --kaist [DIR]`` or ``teleop analyze .../sine_config_N.txt`` (or any FILE with
-  ``--bend DEG``; other layouts with ``--columns MAP``, :mod:`datasets.columns`): every configuration under DIR
+  ``--bend DEG``; other layouts with ``--columns MAP``, :mod:`recorded.columns`): every configuration under DIR
   (``sine_config_<N>.txt``, or ``optimization/selected/<N>.txt`` of a clone given by its root or that folder,
-  :mod:`datasets.kaist_files`; ``--configs`` picks some; default DIR in ``TSM_TELEOP_DATA``; read in place),
+  :mod:`recorded.kaist_files`; ``--configs`` picks some; default DIR in ``TSM_TELEOP_DATA``; read in place),
   calibrated on command cycle 1 and tested on the later cycles, the model choice on cycle 1 only:
   the pair diagnosis (:mod:`estimator.offline.pair.diagnosis`: the seed pair model against the
   capstan-joint model and the pair-level effects; causes, extended model, gain), one parameter set
@@ -28,9 +28,9 @@ Two modes:
 
 ``--json OUT`` writes the result (summary numbers, never per-sample data); ``--report DIR`` a
 Markdown report with PNG figures (:func:`study.report.write_report`,
-:func:`study.kaist_report.write_kaist_report`); ``--figures DIR`` the KAIST plots ``kaist_*.png``;
+:func:`study.kaist.report.write_kaist_report`); ``--figures DIR`` the KAIST plots ``kaist_*.png``;
 ``--model-out OUTDIR`` the chosen model of each configuration as a model file the live estimator runs
-(:mod:`study.kaist_model`; ``--mrd``: :mod:`study.mrd_model`; FILE.csv: the one file OUT.yaml with ``--instrument ID``,
+(:mod:`study.kaist.model_file`; ``--mrd``: :mod:`study.mrd.model_file`; FILE.csv: the one file OUT.yaml with ``--instrument ID``,
 :mod:`study.tendon_model`).
 Bad input raises DataError / ConfigError (one line, exit 2).
 """
@@ -46,8 +46,6 @@ from typing import Any
 
 import numpy as np
 
-from datasets.kaist import KaistRecording, split
-from datasets.kaist_files import is_kaist_file
 from estimator.data import MeasuredData
 from estimator.errors import DataError
 from estimator.offline.diagnosis.result import Diagnosis, as_diagnosis
@@ -55,9 +53,11 @@ from estimator.offline.diagnosis.selection import diagnose_recording
 from estimator.offline.pair.diagnosis import diagnose_pair
 from estimator.offline.pair.fit import fit_force_path, fit_linear, fit_pair, fit_play_map, reversal_dead_zones, rmse
 from estimator.offline.pair.general import shared_analysis
-from study.kaist_input import format_prediction, load_kaist_input, predict_kaist
-from study.kaist_report import write_kaist_figures, write_kaist_report
-from study.kaist_summary import format_kaist
+from recorded.kaist import KaistRecording, split
+from recorded.kaist_files import is_kaist_file
+from study.kaist.inputs import format_prediction, load_kaist_input, predict_kaist
+from study.kaist.report import write_kaist_figures, write_kaist_report
+from study.kaist.summary import format_kaist
 from study.report import format_summary, split_text, write_report
 from teleop.errors import ConfigError
 from teleop.recording.measured_csv import MAX_MAGNITUDE, read_measured_csv, values_error
@@ -131,13 +131,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def main_analyze(args: argparse.Namespace) -> int:
     """Run the subcommand; returns the exit code (0). Raises DataError / ConfigError on bad input."""
     if getattr(args, "mrd", None) is not None:
-        from study.mrd_report import main_mrd  # lazy: the MRD analysis and its figures
+        from study.mrd.report import main_mrd  # lazy: the MRD analysis and its figures
         try:
             return main_mrd(args)
         except (ArithmeticError, ValueError) as e:   # not one of ours: a fit the runs' values spoiled
             if isinstance(e, (DataError, ConfigError)):
                 raise
-            from datasets.mrd import load_mrd_dir, values_error
+            from recorded.mrd import load_mrd_dir, values_error
             raise values_error(load_mrd_dir(args.mrd or None, getattr(args, "runs", None))[0], e) from None
     if args.file is None and args.kaist is None:
         raise ConfigError("analyze needs FILE or --kaist [DIR]")
@@ -177,7 +177,7 @@ def main_analyze(args: argparse.Namespace) -> int:
             if args.report is not None:
                 print(f"wrote {write_kaist_report(recs, fits, summary, args.report)}")
             if getattr(args, "model_out", None) is not None:
-                from study.kaist_model import write_kaist_models
+                from study.kaist.model_file import write_kaist_models
                 for p in write_kaist_models(recs, summary, fits, args.model_out):
                     print(f"wrote {p}")
     else:

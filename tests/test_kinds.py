@@ -44,7 +44,7 @@ def test_the_pattern_finds_a_branch():
 
 def test_no_module_outside_the_registries_branches_on_the_kind():
     found = []
-    for pkg in ("estimator", "teleop", "datasets", "slave", "master", "study", "live"):
+    for pkg in ("estimator", "teleop", "recorded", "slave", "master", "study", "live"):
         for p in sorted((ROOT / pkg).rglob("*.py")):
             rel = p.relative_to(ROOT).as_posix()
             if any(rel == r or rel.startswith(r + "/") for r in REGISTRIES):

@@ -8,7 +8,7 @@ Floors, each importing only the floors under it:
    ``__init__`` is the library's public face, not part of the core: it names the public classes and
    functions of all three (loaded on first use) and nothing inside ``estimator/`` imports it.
 1. ``teleop/``: what every process shares (messages, codec, keys, transport, config, clocks, recording).
-2. ``datasets/``: the readers of measured data sets (KAIST, MRD, a recording's format) and the calibration on
+2. ``recorded/``: the readers of measured data sets (KAIST, MRD, a recording's format) and the calibration on
    recorded MRD runs; it imports ``estimator/`` and ``teleop/`` only.
 3. ``slave/`` and ``master/``: one side each; they never import each other.
 4. ``study/``: the offline study (analyses, reports, scenario generators, the lumped simulator); it may use the
@@ -29,7 +29,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("estimator", "teleop", "datasets", "slave", "master", "study", "live")
+PACKAGES = ("estimator", "teleop", "recorded", "slave", "master", "study", "live")
 
 #: Import circles that exist today (each set is one strongly connected component allowed to remain,
 #: or to shrink). A new circle, or a module joining one of these, fails the test.
@@ -118,13 +118,13 @@ def _floor(mod: str) -> str:
 
 #: For each floor, the floors it must not import.
 FORBIDDEN = {
-    "estimator": {FACE, "estimator.online", "estimator.offline", "teleop", "datasets", "slave", "master", "study",
+    "estimator": {FACE, "estimator.online", "estimator.offline", "teleop", "recorded", "slave", "master", "study",
                   "live"},
-    "estimator.online": {FACE, "estimator.offline", "teleop", "datasets", "slave", "master", "study", "live"},
-    "estimator.offline": {FACE, "teleop", "datasets", "slave", "master", "study", "live"},
-    FACE: {"teleop", "datasets", "slave", "master", "study", "live"},
-    "teleop": {"datasets", "slave", "master", "study", "live"},
-    "datasets": {"slave", "master", "study", "live"},
+    "estimator.online": {FACE, "estimator.offline", "teleop", "recorded", "slave", "master", "study", "live"},
+    "estimator.offline": {FACE, "teleop", "recorded", "slave", "master", "study", "live"},
+    FACE: {"teleop", "recorded", "slave", "master", "study", "live"},
+    "teleop": {"recorded", "slave", "master", "study", "live"},
+    "recorded": {"slave", "master", "study", "live"},
     "slave": {"master", "study", "live"},
     "master": {"slave", "study", "live"},
     "study": {"master", "live"},
@@ -203,7 +203,7 @@ def test_no_private_helper_imported_across_modules():
 LONG_KERNELS: dict[str, str] = {
     "estimator.extended_loop.run_span": "one compiled pass of every catalogue effect per sample (batch and per cycle)",
     "estimator.offline.effects.presliding_kernel._node_kernel": "one compiled pass over the sheath nodes per sample",
-    "study.lumped_kernel.simulate": "the lumped simulator's compiled integration loop",
+    "study.lumped.kernel.simulate": "the lumped simulator's compiled integration loop",
 }
 
 #: Where the size bounds and the sys.path rule are checked: the packages, the benchmarks and the examples.

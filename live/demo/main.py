@@ -293,7 +293,7 @@ def main_demo(args) -> int:
     model = configured_model(cfg)       # the model file checked before any process starts (one line, exit 2)
     check_protocol(cfg, args.protocol)
     if cfg.rig.type == "recording" and not timeout_given:   # the slave plays the whole recording after its fit
-        from datasets.recording import recorded_motion
+        from recorded.detect import recorded_motion
         args.timeout = float(recorded_motion(cfg)[0][-1]) + RECORDING_MARGIN
     for line in waiver_lines(cfg):
         print(line, flush=True)

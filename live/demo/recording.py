@@ -52,10 +52,10 @@ def evaluate_recording(run_dir: Path, cfg: Config) -> dict:
     DataError
         No cycle of the slave reached the run's scored start, or a missing or malformed CSV.
     """
-    from datasets.recording import check_recording, read_recording_run
     from estimator.offline.spindle.centre_fit import predict_held
     from estimator.online.spindle import make_batch, predict_torque
     from live.demo.recording_score import scored_from
+    from recorded.detect import check_recording, read_recording_run
     from slave.recording.routine import recorded_model_path
     from slave.recording.spindle import CENTRE, full_scale, load_model
     fmt = check_recording(cfg)[1]
@@ -96,17 +96,17 @@ def with_recording(cfg: Config, args: Any) -> Config:
     """``cfg`` with ``--rig`` / ``--recording PATH`` applied (``--recording`` alone means ``--rig recording``;
     without ``--config`` the instrument is the shipped one of the format the file's content shows:
     configs/recording-mrd.yaml's jaw, recording-kaist.yaml's joint or sim.yaml's tendon), the recording checked
-    against the instrument before any process starts (:func:`datasets.recording.check_recording`: one line naming
+    against the instrument before any process starts (:func:`recorded.detect.check_recording`: one line naming
     the file and the problem)."""
     import dataclasses
 
-    from datasets.recording import read_recording
+    from recorded.detect import read_recording
     from teleop.config.files import shipped_config
     from teleop.config.load import load_config
     rig, path = getattr(args, "rig", None), getattr(args, "recording", None)
     if path is not None and rig in (None, "recording"):
         if getattr(args, "config", None) is None:
-            from datasets.recording import recording_format
+            from recorded.detect import recording_format
             fmt = recording_format(Path(path).expanduser())
             name = {"kaist": "recording-kaist.yaml", "csv": "sim.yaml"}.get(fmt, "recording-mrd.yaml")
             cfg = load_config(shipped_config(name))
@@ -130,11 +130,11 @@ def evaluate_kaist(run_dir: Path, cfg: Config) -> dict:
     samples. Raises DataError when no row of the slave falls on a test sample."""
     import json
 
-    from datasets.kaist import read_kaist_recording, split
-    from datasets.recording import check_recording
     from estimator.offline.pair.fit import PairParams, fit_pair
     from estimator.offline.pair.models import predict_model
     from estimator.online.pair_batch import predict_pair_angle
+    from recorded.detect import check_recording
+    from recorded.kaist import read_kaist_recording, split
     from slave.estimator_model import configured_model
     from slave.recording.pair import N_NODES
     from slave.recording.routine import recorded_model_path
@@ -197,9 +197,9 @@ def evaluate_tendon(run_dir: Path, cfg: Config) -> dict:
     T_out or no slave row falls on a held-out sample."""
     import json
 
-    from datasets.recording import check_recording, read_tendon_csv
     from estimator.online.distal import estimate_batch
     from estimator.sheath import SheathModel
+    from recorded.detect import check_recording, read_tendon_csv
     from slave.calibration_file import calibration_path
     d = read_tendon_csv(check_recording(cfg)[0])
     if d.T_out is None:

@@ -3,9 +3,9 @@
 :func:`play_run` drives the recording rig and the recorded spindle axis in process (no transport): one
 :meth:`~slave.recording.rig.RecordedSpindle.step` and one :meth:`~slave.recording.spindle.RecordedSpindleAxis.observe`
 per recorded sample, each timed. :func:`score_run` scores the live jaw torque the way ``teleop analyze --mrd``
-scores its own (:mod:`study.mrd_report`): RMSE over the full scale from the first spindle reversal after
+scores its own (:mod:`study.mrd.report`): RMSE over the full scale from the first spindle reversal after
 0.5 s, for the centre map from the first sample at which its band reading holds both edges; and the offline
-figure of the same run and calibration (the batch model: :func:`datasets.mrd_centre.score_centre` for the
+figure of the same run and calibration (the batch model: :func:`recorded.mrd_centre.score_centre` for the
 centre map, :func:`estimator.online.spindle.predict_torque` for a pair model).
 """
 from __future__ import annotations
@@ -16,11 +16,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from datasets.mrd import MrdRun
-from datasets.mrd_calibration import run_data
-from datasets.mrd_centre import score_centre
 from estimator.online.spindle import make_batch, predict_torque
 from estimator.online.spindle_centre import centre_ready
+from recorded.mrd import MrdRun
+from recorded.mrd_calibration import run_data
+from recorded.mrd_centre import score_centre
 from slave.recording.rig import RecordedSpindle
 from slave.recording.spindle import CENTRE, RecordedModel, RecordedSpindleAxis
 from teleop.config.schema import Config

@@ -2,5 +2,5 @@
 and the recorded axis of each kind, whose calibration is fitted on a recording (``spindle``, ``pair``, ``tendon``;
 ``routine`` what they share).
 
-It imports ``estimator/``, ``teleop/``, ``datasets/`` (the readers) and the rest of ``slave/``.
+It imports ``estimator/``, ``teleop/``, ``recorded/`` (the readers) and the rest of ``slave/``.
 """

@@ -1,6 +1,6 @@
 """A KAIST recording played as an antagonistic pair, estimated by the pair axis's online estimator.
 
-The KAIST robot (``sine_config_N.txt`` or a clone's ``N.txt``, :mod:`datasets.kaist`) turns one motor that draws
+The KAIST robot (``sine_config_N.txt`` or a clone's ``N.txt``, :mod:`recorded.kaist`) turns one motor that draws
 tendon a in and lets tendon b out: x_in,a = +g c, x_in,b = -g c for the motor command c [rad]; the proximal
 load cells give T_a, T_b [N]; an EM tracker measures the distal bending angle, the truth. The pulley radius r,
 g and the tendons' compliances are not separately observable from these signals, so the rig speaks in units of
@@ -37,12 +37,12 @@ from typing import Any
 
 import numpy as np
 
-from datasets.kaist import KaistRecording, split
 from estimator.errors import CalibrationError
 from estimator.offline.pair.fit import PairParams, fit_pair
 from estimator.online.pair import KAIST_PLAY, PairEstimator
 from estimator.online.pair_batch import predict_pair_angle
 from estimator.sheath import SheathModel
+from recorded.kaist import KaistRecording, split
 from slave.axis import SlaveAxis
 from slave.calibration_file import InstrumentCalibration, TendonCalibration
 from slave.estimator_model import configured_model, pair_model_estimator
@@ -87,7 +87,7 @@ class RecordedPair:
     def from_config(cls, cfg: Config, path: Path) -> RecordedPair:
         """The KAIST recording ``path`` for the config's one joint, x_in = the motor command (G = 1: the
         calibration's G = g / r is applied by :class:`RecordedPairAxis`)."""
-        from datasets.kaist import read_kaist_recording
+        from recorded.kaist import read_kaist_recording
         return cls(read_kaist_recording(path), 1.0, cfg.instrument.joints[0].name, cfg.rig.recording.rate)
 
     @property
@@ -197,7 +197,7 @@ def fit_kaist(cfg: Config) -> dict:
     DataError
         An unreadable calibration recording, or one too short to split.
     """
-    from datasets.kaist import read_kaist_recording
+    from recorded.kaist import read_kaist_recording
     path = Path(cfg.rig.recording.calibration_run or str(cfg.rig.recording.path)).expanduser()
     rec = read_kaist_recording(path)
     c1, _, how = split(rec)

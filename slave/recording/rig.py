@@ -6,19 +6,19 @@ simulators' truth: the estimators never read it). The commands the slave sends a
 and otherwise ignored: the recording's motion is the one that happened.
 
 The format of a recording (``rig.recording.format: auto``) is read from its first lines, never from its
-name (:mod:`datasets.formats`). An MRD da Vinci run (``XY.TXT``, :mod:`datasets.mrd`) drives the spindle
+name (:mod:`recorded.formats`). An MRD da Vinci run (``XY.TXT``, :mod:`recorded.mrd`) drives the spindle
 axis of an instrument of one spindle-driven jaw: x_in = the spindle angle [rad], T_in = the spindle torque
 [N m], the truth's ``torque`` and ``theta`` the measured jaw torque [N m] and angle [rad]. The calibration the
 slave needs is fitted on one named run of the recording's folder (:mod:`slave.recording.spindle`), because a
 recording cannot execute a calibration motion.
 
-A KAIST recording (``sine_config_N.txt``, or ``optimization/selected/N.txt`` of a clone; :mod:`datasets.kaist`)
+A KAIST recording (``sine_config_N.txt``, or ``optimization/selected/N.txt`` of a clone; :mod:`recorded.kaist`)
 drives the pair axis of an instrument of one antagonistic pair (:mod:`slave.recording.pair`): x_in = the motor
 command [rad] on both tendons, T_in = the two proximal tensions [N], the truth's ``theta`` the measured distal
 angle. The project's measured-data CSV (:func:`teleop.recording.measured_csv.read_measured_csv`) drives the
 single-tendon axis (:mod:`slave.recording.tendon`): x_in, T_in proximal, T_out and x_out the truth.
 
-The recording is read and checked against the instrument by :mod:`datasets.recording`; the rig is registered
+The recording is read and checked against the instrument by :mod:`recorded.detect`; the rig is registered
 in :mod:`slave.rigs` as every rig (``rig.type: recording``, :func:`recording_rig`).
 
 ``rig.recording.rate``: ``recording`` gives one recorded sample per step at the recording's own time;
@@ -33,8 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from datasets.mrd import MrdRun
-from datasets.recording import check_recording, read_recording_run
+from recorded.detect import check_recording, read_recording_run
+from recorded.mrd import MrdRun
 from slave.rig import InstrumentTruth, RigInputError, RigState
 from teleop.config.schema import Config
 from teleop.errors import ConfigError
@@ -142,7 +142,7 @@ class RecordedSpindle:
 
 
 def recording_rig(cfg: Config) -> Any:
-    """The rig of ``rig.recording``: the recording's format chooses it (:func:`datasets.recording.check_recording`:
+    """The rig of ``rig.recording``: the recording's format chooses it (:func:`recorded.detect.check_recording`:
     one line naming the file and the problem on a recording that does not fit the instrument)."""
     path, fmt = check_recording(cfg)
     if fmt == "kaist":

@@ -2,7 +2,7 @@
 
 A recording cannot execute the spindle's calibration stroke, so the calibration is the one ``teleop analyze
 --mrd`` makes on one run: :func:`fit_recorded_model` calls the analysis's own one-run calibration
-(:func:`datasets.mrd_calibration.calibrate_on_runs`: the pair model with its extensions selected on the calibration
+(:func:`recorded.mrd_calibration.calibrate_on_runs`: the pair model with its extensions selected on the calibration
 run, the centre map with the tool file's load gain, and the headline's model choice between them). The
 result is saved as the slave's calibration file ``<calibration.dir>/<instrument.id>.yaml`` (the cables'
 friction exponents of the pair fit, in the format of every spindle calibration) and, beside it, the full
@@ -54,7 +54,7 @@ __all__ = ["CENTRE", "RecordedModel", "calibration_run_path", "fit_recorded_mode
 
 log = logging.getLogger("teleop.slave")
 
-#: The centre map's name among the models (as :data:`datasets.mrd_centre.CENTRE`).
+#: The centre map's name among the models (as :data:`recorded.mrd_centre.CENTRE`).
 CENTRE = "centre map"
 METHOD_RECORDED = "fitted on recorded run {run} (the one-run calibration of teleop analyze --mrd{tool})"
 
@@ -121,7 +121,7 @@ def calibration_run_path(cfg: Config) -> Path:
     DataError
         No such run in the folder (the message lists the folder's runs).
     """
-    from datasets.mrd import load_mrd_dir
+    from recorded.mrd import load_mrd_dir
     rc = cfg.rig.recording
     folder = Path(str(rc.path)).expanduser().parent
     tool = _tool(cfg)
@@ -130,8 +130,8 @@ def calibration_run_path(cfg: Config) -> Path:
     if as_path.is_file():
         return as_path
     if name == "mid":
-        from datasets.mrd_calibration import run_data
-        from datasets.mrd_centre import mid_centre_run
+        from recorded.mrd_calibration import run_data
+        from recorded.mrd_centre import mid_centre_run
         runs, _ = load_mrd_dir(folder)
         name = mid_centre_run([run_data(r) for r in runs])
     for ext in (".TXT", ".txt"):
@@ -148,13 +148,13 @@ def fit_recorded_model(cfg: Config, run_file: Path | None = None) -> RecordedMod
     Raises
     ------
     DataError
-        An unreadable calibration run (:func:`datasets.mrd.read_mrd`).
+        An unreadable calibration run (:func:`recorded.mrd.read_mrd`).
     CalibrationError
         A fit that fails on this run (the message names the run).
     """
-    from datasets.mrd import read_mrd
-    from datasets.mrd_calibration import calibrate_on_runs
     from estimator.offline.spindle.fit import band_centre
+    from recorded.mrd import read_mrd
+    from recorded.mrd_calibration import calibrate_on_runs
     path = run_file or calibration_run_path(cfg)
     run = read_mrd(path)
     tool = _tool(cfg)

@@ -1,6 +1,6 @@
 """The recorded spindle axis's model (:class:`slave.recording.spindle.RecordedModel`) as a model file and back
 (:mod:`teleop.config.model_file`; ``teleop analyze --mrd DIR --tool T --model-out OUTDIR`` writes one,
-:mod:`study.mrd_model`).
+:mod:`study.mrd.model_file`).
 
 A spindle model file: structure ``spindle``, its ``base`` the spindle pair model's parameters
 (:class:`estimator.online.spindle.SpindleParams`, with the ranges of the torque fit,
@@ -19,10 +19,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from datasets.mrd_centre import CENTRE
 from estimator.offline.spindle.fit import BOUNDS
 from estimator.online.spindle import SpindleParams
 from estimator.online.spindle_centre import CentreParams
+from recorded.mrd_centre import CENTRE
 from teleop.config.model_file import ModelExtension, ModelFile, ModelParameter, file_sha256, project_version
 
 if TYPE_CHECKING:

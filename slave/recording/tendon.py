@@ -20,10 +20,10 @@ from typing import Any
 
 import numpy as np
 
-from datasets.recording import read_tendon_csv
 from estimator.data import MeasuredData
 from estimator.errors import CalibrationError
 from estimator.sheath import SheathModel
+from recorded.detect import read_tendon_csv
 from slave.axis import SlaveAxis
 from slave.calibration_file import InstrumentCalibration, TendonCalibration
 from slave.recording.routine import RecordedRoutine, recorded_model_path

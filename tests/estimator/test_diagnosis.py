@@ -2,7 +2,7 @@
 must be diagnosed with the right identifier (naming the channel for the sensor effects), a held-out
 gain >= 0.3 and the magnitude within 25 %; clean recordings must give ``none``; an effect outside
 the catalogue must give ``unknown``. Two simulators: the project's rig (study.scenarios, every
-catalogue id) and the independent lumped-mass simulator (study.lumped_scenarios, a subset; the
+catalogue id) and the independent lumped-mass simulator (study.lumped.scenarios, a subset; the
 benchmark runs the full confusion matrix on both).
 
 Recordings are 45-60 s at 500 Hz here (the benchmark uses 90 s at 1 kHz and the lumped simulator's own
@@ -39,7 +39,7 @@ from estimator.offline.diagnosis.thresholds import (
 )
 from estimator.offline.effects.catalogue import CATALOGUE, EFFECT_IDS, EQUIVALENT
 from estimator.offline.effects.types import route_shape
-from study import lumped_scenarios
+from study.lumped import scenarios as lumped_scenarios
 from study.scenarios import record
 
 DUR, RATE = 45.0, 500.0

@@ -1,7 +1,7 @@
 """The diagnosis's answers on a fixed set of recordings stay what they are.
 
 ``diagnosis_pinned.json`` beside this file holds, for short recordings of both simulators (the project's rig,
-:mod:`study.scenarios`, and the independent lumped-mass simulator, :mod:`study.lumped_scenarios`), clean ones and
+:mod:`study.scenarios`, and the independent lumped-mass simulator, :mod:`study.lumped.scenarios`), clean ones and
 one or more per effect family, how each is made and what :func:`estimator.offline.diagnosis.selection.diagnose` answers:
 ``cause`` and ``causes`` (compared exactly) and ``gain`` (to :data:`GAIN_TOL`, derived from the fits' own
 tolerance: the same answers on any CPU, whatever its vector width or its order of floating-point sums). The set covers
@@ -22,12 +22,13 @@ from pathlib import Path
 
 import pytest
 
-from datasets import kaist_files
-from datasets.folders import KAIST, skip_reason
 from estimator.offline.diagnosis import thresholds as th
 from estimator.offline.diagnosis.selection import diagnose
 from estimator.offline.pair.diagnosis_fit import FIT_TOL as PAIR_FIT_TOL
-from study import lumped_scenarios, scenarios
+from recorded import kaist_files
+from recorded.folders import KAIST, skip_reason
+from study import scenarios
+from study.lumped import scenarios as lumped_scenarios
 
 PINNED = Path(__file__).with_name("diagnosis_pinned.json")
 KAIST_DIR = kaist_files.default_kaist_dir()
@@ -95,8 +96,8 @@ def answer(case: dict) -> dict:
 
 def pair_answer() -> dict:
     """The pair diagnosis of the KAIST recording at 0 deg: {cause, causes, gain}."""
-    from datasets import kaist
     from estimator.offline.pair.diagnosis import diagnose_pair
+    from recorded import kaist
     rec = next(r for r in kaist.load_all(KAIST_DIR) if r.config_deg == 0)
     train, test, _ = kaist.split(rec)
     s, _ = diagnose_pair(rec, train, test)

@@ -119,7 +119,7 @@ def test_noise_band_stops_the_estimate_latching_load_cell_noise():
     from estimator.data import noise_level
     from estimator.sheath import SheathGeometry as G
     from slave.calibrate import wrap_shape
-    from study.lumped_scenarios import record
+    from study.lumped.scenarios import record
     rec = record(None, seed=2900508, level=0.2, duration=30.0)
     tr, d = rec.truth, rec.data
     model = SheathModel(K=tr["K"], compliance=tr["L"] / tr["EA"], wrap_shape=wrap_shape(G(tr["route"])))

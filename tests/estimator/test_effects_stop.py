@@ -11,7 +11,7 @@ import pytest
 from estimator.offline.diagnosis.fit import prepare
 from estimator.offline.effects.catalogue import PRESLIDING_MIN, SPEED_FORM, STRIBECK_FORM, predict
 from estimator.offline.effects.presliding_kernel import NODE_FORM
-from study import lumped_scenarios
+from study.lumped import scenarios as lumped_scenarios
 
 #: effect ids and values, each a different part of the model: the kernel's knobs, every lag (the steps that read
 #: later samples), the per-node pre-sliding with its L/EA estimated on the whole series, the backlash's L/EA refits

@@ -9,11 +9,11 @@ import math
 import numpy as np
 import pytest
 
-from datasets.folders import KAIST, skip_reason
-from datasets.kaist import cycles, load_all
-from datasets.kaist_files import default_kaist_dir, find_configs
 from estimator.offline.pair.fit import PairParams, fit_linear, fit_pair, predict_angle, rmse
 from estimator.online.pair_batch import predict_pair_angle
+from recorded.folders import KAIST, skip_reason
+from recorded.kaist import cycles, load_all
+from recorded.kaist_files import default_kaist_dir, find_configs
 
 KAIST_DIR = default_kaist_dir()
 pytestmark = [pytest.mark.kaist, pytest.mark.skipif(not find_configs(KAIST_DIR), reason=skip_reason(KAIST, KAIST_DIR))]

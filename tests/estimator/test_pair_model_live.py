@@ -15,14 +15,14 @@ import math
 import numpy as np
 import pytest
 
-from datasets.folders import KAIST, skip_reason
-from datasets.kaist import read_kaist, split
-from datasets.kaist_files import default_kaist_dir, find_configs, find_kaist_dir, kaist_path
 from estimator.offline.pair.diagnosis_fit import CAPSTAN_STARTS, fit_model
 from estimator.offline.pair.fit import fit_pair
 from estimator.offline.pair.models import PAIR_EFFECTS, STRUCTURES, model_params, predict_model
 from estimator.online.pair_model import PER_CYCLE, PairModelEstimator
 from estimator.pair_kernels import EFFECT_PARAMS, EFFECT_STRUCTURES, STRUCTURE_PARAMS, simulate_pair
+from recorded.folders import KAIST, skip_reason
+from recorded.kaist import read_kaist, split
+from recorded.kaist_files import default_kaist_dir, find_configs, find_kaist_dir, kaist_path
 
 #: live - batch [rad] (module docstring)
 TOL = 1e-9

@@ -14,7 +14,7 @@ import pytest
 from estimator.offline.pair.diagnosis_fit import FitResult
 from live.cli import main
 from slave.estimator_model import configured_model, with_model
-from study.kaist_model import kaist_model
+from study.kaist.model_file import kaist_model
 from teleop.config.load import load_config
 from teleop.config.model_file import ModelExtension, ModelFile, ModelParameter, load_model, save_model
 

@@ -12,11 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from datasets.folders import KAIST, skip_reason
-from datasets.kaist import read_kaist_recording, split
-from datasets.kaist_files import default_kaist_dir, kaist_path
 from estimator.offline.pair.models import predict_model
 from estimator.online.pair_model import PairModelSample
+from recorded.folders import KAIST, skip_reason
+from recorded.kaist import read_kaist_recording, split
+from recorded.kaist_files import default_kaist_dir, kaist_path
 from slave.recording.pair import RecordedPairAxis, model_out_of_range
 from slave.recording.rig import recording_rig
 from teleop.config.load import load_config

@@ -9,14 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from datasets.folders import KAIST, MRD, skip_reason
-from datasets.kaist_files import default_kaist_dir, kaist_path
-from datasets.mrd import MrdRun, read_mrd
-from datasets.mrd_files import DEFAULT_FOLDER, mrd_folder
-from datasets.recording import check_recording, recording_format
 from estimator.errors import CalibrationError, DataError
 from estimator.online.spindle import SpindleParams
 from live.demo.recording_score import play_run, score_run
+from recorded.detect import check_recording, recording_format
+from recorded.folders import KAIST, MRD, skip_reason
+from recorded.kaist_files import default_kaist_dir, kaist_path
+from recorded.mrd import MrdRun, read_mrd
+from recorded.mrd_files import DEFAULT_FOLDER, mrd_folder
 from slave.recording.rig import RecordedSpindle
 from slave.recording.spindle import CENTRE, RecordedModel, load_model, save_model
 from slave.rig import RigInputError
@@ -141,8 +141,8 @@ def test_the_live_estimate_agrees_with_the_offline_analysis_on_one_run(tmp_path)
     """The centre map fitted on run 31 (its first 8 s) with the tool's load gain (as ``teleop analyze --mrd
     --tool``), played online over the first 7 s of run 13: its RMSE is the batch model's to within 0.005 of
     full scale."""
-    from datasets.mrd_calibration import run_data
-    from datasets.mrd_centre import centre_one_run
+    from recorded.mrd_calibration import run_data
+    from recorded.mrd_centre import centre_one_run
     cfg = mrd_config(tmp_path, str(FOLDER / "13.TXT"))
     fs = 0.0519
     cmap, _ = centre_one_run([run_data(head(read_mrd(FOLDER / "31.TXT"), 8000))], fs, 0.9427)
@@ -155,7 +155,7 @@ def test_the_live_estimate_agrees_with_the_offline_analysis_on_one_run(tmp_path)
 
 
 def test_a_kaist_recording_plays_as_a_tendon_pair_in_units_of_the_pulley_radius():
-    from datasets.kaist import KaistRecording
+    from recorded.kaist import KaistRecording
     from slave.recording.pair import RecordedPair
     t = np.arange(6) * 0.025
     rec = KaistRecording(config_deg=0, time=t, command=np.linspace(0, 0.5, 6), velocity_cmd=t, angle=0.8 * t,
@@ -173,7 +173,7 @@ KAIST_FILE = kaist_path(default_kaist_dir(), 0)
 
 @pytest.mark.skipif(not KAIST_FILE.is_file(), reason=skip_reason(KAIST, KAIST_FILE))
 def test_the_pair_axis_estimate_on_kaist_is_the_batch_joint_model_and_near_the_offline_seed_model():
-    from datasets.kaist import read_kaist
+    from recorded.kaist import read_kaist
     from slave.recording.pair import kaist_live
     r = kaist_live(read_kaist(KAIST_FILE), extended_deg=1.0)
     assert r["live_rmse_deg"] == pytest.approx(r["live_batch_rmse_deg"], abs=1e-6)

@@ -8,11 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from datasets.folders import KAIST, skip_reason
-from datasets.kaist import CONFIGS_DEG
-from datasets.kaist_files import default_kaist_dir, find_configs
 from estimator.errors import DataError
 from estimator.offline.fit import predict
+from recorded.folders import KAIST, skip_reason
+from recorded.kaist import CONFIGS_DEG
+from recorded.kaist_files import default_kaist_dir, find_configs
 from study import analyze
 from teleop.errors import ConfigError
 
@@ -159,7 +159,7 @@ def longest_list(obj) -> int:
 
 
 def test_kaist_mode_on_synthetic_files(tmp_path, capsys):
-    from study.kaist_report import FIGURES
+    from study.kaist.report import FIGURES
     d = write_kaist_dir(tmp_path / "kaist", configs=(0, 120, 240))
     out = tmp_path / "k.json"
     assert run(["--kaist", str(d), "--json", str(out), "--report", str(tmp_path / "rep"), "--bootstrap", "5"]) == 0
@@ -293,7 +293,7 @@ def test_route_option_holds_the_configured_route(tmp_path, capsys):
     # an instrument whose route is known (CONFIG's sheath.runs) is diagnosed with that route held instead of
     # fitted: on this recording of the independent simulator (seed 1909112, a distal load-cell offset of
     # -0.84 N; its arcs are where the fitted route can hide the offset) the held route names it
-    from study.lumped_scenarios import record
+    from study.lumped.scenarios import record
     from teleop.recording.measured import write_measured_csv
     rec = record("sensor_offset:T_out", seed=1909112, level=0.8, duration=60.0)
     path = tmp_path / "r.csv"

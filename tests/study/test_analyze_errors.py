@@ -29,9 +29,9 @@ def refused(argv: list[str], capsys) -> str:
 
 
 def test_a_directory_says_it_is_a_directory(tmp_path, capsys):
-    from datasets.kaist_files import find_kaist_dir
-    from datasets.mrd import load_mrd_dir
     from estimator.errors import DataError
+    from recorded.kaist_files import find_kaist_dir
+    from recorded.mrd import load_mrd_dir
     from study.analyze import configured_route
     from teleop.errors import ConfigError
     msg = refused([str(tmp_path)], capsys)             # the CLI's own check of its path arguments may come first
@@ -80,8 +80,8 @@ def test_a_byte_of_another_encoding_names_its_line(tmp_path, capsys):
 
 
 def test_mrd_runs_that_are_not_text_or_not_finite_are_named_with_their_line(tmp_path):
-    from datasets.mrd import read_mrd
     from estimator.errors import DataError
+    from recorded.mrd import read_mrd
     f = tmp_path / "00.TXT"
     rows = [f"{0.001 * i:.3f},{i},0,0,{i},0,0.1,0,0,0" for i in range(2100)]
     f.write_text("%header\n" + "\n".join(rows) + "\n")
@@ -176,7 +176,7 @@ def test_an_mrd_folder_of_one_run_says_why_a_run_calibration_cannot_score_it(tmp
 
 
 def test_the_windows_summary_of_a_segment_calibration_says_what_it_calibrated_on():
-    from study.mrd_windows import format_across
+    from study.mrd.windows import format_across
     across = {"windows": 2, "scored_runs": 4, "median_torque_rmse_fs": 0.02, "max_torque_rmse_fs": 0.05,
               "max_torque_max_fs": 0.2, "better_than_linear_every_run": True, "window_medians": [0.02, 0.03],
               "window_worst": [0.04, 0.05]}
@@ -190,7 +190,7 @@ def test_the_windows_summary_of_a_segment_calibration_says_what_it_calibrated_on
 def test_an_mrd_value_out_of_range_and_a_fit_it_spoils_are_named(tmp_path, capsys, monkeypatch):
     """A value beyond anything the rig reads is refused with its line and column; a fit that fails on values
     within range names the value farthest out of its column."""
-    from study import mrd_report
+    from study.mrd import report as mrd_report
     from tests.study.test_mrd import simulate, write_txt
     d = tmp_path / "Tool_X"
     d.mkdir()
@@ -200,8 +200,8 @@ def test_an_mrd_value_out_of_range_and_a_fit_it_spoils_are_named(tmp_path, capsy
     fields = lines[701].split(",")                      # line 702: data row 700 after the two header lines
     fields[2] = "2e7"
     (d / "01.TXT").write_text("\n".join(lines[:701] + [",".join(fields)] + lines[702:]) + "\n")
-    from datasets.mrd import read_mrd
     from estimator.errors import DataError
+    from recorded.mrd import read_mrd
     with pytest.raises(DataError, match=r"01\.TXT:702: column 2: 20000000\.0 counts is beyond anything the rig "
                                         r"reads \(\|value\| <= 1e\+07 counts\): a corrupt row; "
                                         r"fix or remove that row$"):

@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from estimator.errors import DataError
-from datasets.folders import KAIST, skip_reason
-from datasets.kaist import CONFIGS_DEG, cycles, load_all, read_kaist
-from datasets.kaist_files import default_kaist_dir
-from datasets.kaist_files import find_configs
-from datasets.kaist_files import find_kaist_dir
-from datasets.kaist_files import is_kaist_file
+from recorded.folders import KAIST, skip_reason
+from recorded.kaist import CONFIGS_DEG, cycles, load_all, read_kaist
+from recorded.kaist_files import default_kaist_dir
+from recorded.kaist_files import find_configs
+from recorded.kaist_files import find_kaist_dir
+from recorded.kaist_files import is_kaist_file
 
 KAIST_DIR = default_kaist_dir()
 needs_kaist = pytest.mark.skipif(not find_configs(KAIST_DIR), reason=skip_reason(KAIST, KAIST_DIR))
@@ -110,7 +110,7 @@ def write_long(path, rate=2000.0, seconds=13.0, reset_at=12.5, repeats=2, zero_c
 
 
 def test_long_10_column_recording_read_with_the_same_importer(tmp_path):
-    from datasets.columns import parse_column_map
+    from recorded.columns import parse_column_map
     p = write_long(tmp_path / "sine_config_90.txt")
     rec = read_kaist(p)                                       # no map: the 8-column KAIST map, a note says so
     assert rec.config_deg == 90
@@ -134,7 +134,7 @@ def test_long_10_column_recording_read_with_the_same_importer(tmp_path):
 
 
 def test_generic_csv_with_header_and_column_map(tmp_path):
-    from datasets.columns import parse_column_map
+    from recorded.columns import parse_column_map
     p = tmp_path / "lab.csv"
     t = np.arange(0, 2.0, 0.01)
     p.write_text("t;T_A;T_B;cmd_rad;tip_rad\n" + "".join(
@@ -156,8 +156,8 @@ def test_generic_csv_with_header_and_column_map(tmp_path):
 
 
 def test_missing_file_and_directory_are_named(tmp_path):
-    from datasets.kaist import load_dir
-    from datasets.kaist_files import find_configs
+    from recorded.kaist import load_dir
+    from recorded.kaist_files import find_configs
     with pytest.raises(DataError, match=r"sine_config_0\.txt: no such file"):
         read_kaist(tmp_path / "sine_config_0.txt")
     with pytest.raises(DataError, match=r"no KAIST recordings found under .*nowhere \(no such folder\): expected "
@@ -185,8 +185,8 @@ def test_missing_file_and_directory_are_named(tmp_path):
 def test_source_repository_layout_is_read_in_place(tmp_path):
     """A clone's optimization/selected/ names its files <N>.txt beside other recordings (conf0_60.txt):
     read the numbered ones when the folder has no sine_config_<N>.txt; the project's names win."""
-    from datasets.kaist import load_dir
-    from datasets.kaist_files import find_configs
+    from recorded.kaist import load_dir
+    from recorded.kaist_files import find_configs
     for n in (30, 270, 90):
         write_sine(tmp_path / f"{n}.txt", n_stamps=10)
     write_sine(tmp_path / "conf0_60.txt", n_stamps=10)

@@ -1,4 +1,4 @@
-"""The lumped-mass simulator (study.lumped) against the closed forms of Phee et al. (2009) in the
+"""The lumped-mass simulator (study.lumped.simulator) against the closed forms of Phee et al. (2009) in the
 quasi-static limit and against the estimator's profile memory (estimator.sheath), plus its own
 physics switches. Tolerances: capstan ratios 2 %, elongation 3 %, profile memory 1 % of the peak
 distal tension (stated per test)."""
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from estimator.sheath import SheathGeometry, SheathModel, profile_batch
-from study.lumped import Load, LumpedTendon
+from study.lumped.simulator import Load, LumpedTendon
 
 L, ANGLE, K, EA = 1.5, 2.0 * math.pi, 0.8, 15000.0
 MU = K / ANGLE

@@ -1,4 +1,4 @@
-"""study.lumped_scenarios.record (the contract API for the diagnosis) and the documented signature of
+"""study.lumped.scenarios.record (the contract API for the diagnosis) and the documented signature of
 every hidden effect in the lumped formulation. Sensor effects are checked against the clean
 recording of the same seed (same rig, protocol and noise); physical effects on the simulator
 itself, where the signature has a closed form."""
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from estimator.sheath import SheathGeometry, SheathModel
-from study.lumped import Load, LumpedTendon
-from study.lumped_scenarios import EFFECT_IDS, UNCATALOGUED, record
+from study.lumped.scenarios import EFFECT_IDS, UNCATALOGUED, record
+from study.lumped.simulator import Load, LumpedTendon
 from study.scenarios import Recording
 
 SEED, DUR = 11, 20.0

@@ -14,7 +14,7 @@ from estimator.online.spindle import SpindleParams, first_reversal, make_batch, 
 from estimator.offline.spindle.fit import band_centre, fit_torque
 from teleop.errors import ConfigError
 from estimator.errors import DataError
-from datasets.mrd import (
+from recorded.mrd import (
     DISTAL_COUNTS_PER_REV,
     DISTAL_SIGN,
     PROXIMAL_COUNTS_PER_REV,
@@ -22,14 +22,14 @@ from datasets.mrd import (
     load_mrd_dir,
     read_mrd,
 )
-from datasets.mrd_files import default_mrd_dir
-from study.mrd_report import analyze_mrd, band_measurements
-from study.mrd_text import format_mrd
-from datasets.mrd_calibration import parse_calibration
+from recorded.mrd_files import default_mrd_dir
+from study.mrd.report import analyze_mrd, band_measurements
+from study.mrd.text import format_mrd
+from recorded.mrd_calibration import parse_calibration
 from estimator.offline.spindle.shared import RunData, kinematic_ratio, load_sweep
 
-from datasets.folders import MRD, skip_reason
-from datasets.mrd_files import DEFAULT_FOLDER, mrd_folder
+from recorded.folders import MRD, skip_reason
+from recorded.mrd_files import DEFAULT_FOLDER, mrd_folder
 
 MRD_DIR = default_mrd_dir()
 needs_mrd = pytest.mark.skipif(not mrd_folder(DEFAULT_FOLDER).is_dir(), reason=skip_reason(MRD, MRD_DIR))
@@ -218,7 +218,7 @@ def test_cli_mrd_prints_and_writes_json(tmp_path, capsys):
                  "--report", str(rep)]) == 0
     text = capsys.readouterr().out
     assert "ODbL" in (rep / "report.md").read_text()
-    from study.mrd_figures import FIGURES
+    from study.mrd.figures import FIGURES
     assert all((rep / f).stat().st_size > 1000 for f in FIGURES)
     assert "ODbL" in text and "calibrated on run 01" in text
     s = json.loads(out.read_text())
@@ -289,7 +289,7 @@ def test_real_runs_one_run_does_not_pin_the_load_gain():
     +-4 % a one-run calibration needs (docs/results/mrd.md), and the encoders' ratio does not move with the load (no
     stretch to correct): corrected for stretch it still puts the gain above 1 / 0.96."""
     from estimator.offline.spindle.centre_fit import within_run_gain
-    from datasets.mrd_calibration import run_data
+    from recorded.mrd_calibration import run_data
     rd = {n: run_data(read_mrd(mrd_folder(DEFAULT_FOLDER) / f"{n}.TXT")) for n in ("00", "31", "43")}
     for r in rd.values():
         w = within_run_gain(r)
@@ -323,8 +323,8 @@ def test_runs_at_several_jaw_positions_are_named_and_selected_one_window_at_a_ti
     """The source's roll and pitch folders stop the jaw at several positions, so their runs stroke
     over separate spindle-angle windows; the analysis names each window with its --runs selection instead of
     failing inside a fit, and --runs analyses one."""
-    from datasets.mrd import stroke_groups
-    from study.mrd_report import analyze_mrd
+    from recorded.mrd import stroke_groups
+    from study.mrd.report import analyze_mrd
     for name, shift in (("000", 0.0), ("001", 0.0), ("100", 1.2), ("101", 1.2)):
         t, c, tp, th, td = simulate(duration=4.0)
         write_txt(tmp_path / f"{name}.TXT", t, c + shift, tp, th, td, load_cmd=0.1 + 0.1 * int(name[-1]))

@@ -16,11 +16,11 @@ from contextlib import redirect_stdout
 
 import pytest
 
-from datasets.folders import MRD, skip_reason
-from datasets.mrd import load_mrd_dir, stroke_groups
-from datasets.mrd_files import default_mrd_dir, mrd_folder
-from study.mrd_report import analyze_mrd
-from study.mrd_windows import analyze_windows
+from recorded.folders import MRD, skip_reason
+from recorded.mrd import load_mrd_dir, stroke_groups
+from recorded.mrd_files import default_mrd_dir, mrd_folder
+from study.mrd.report import analyze_mrd
+from study.mrd.windows import analyze_windows
 from teleop.config.tools import load_tool
 
 pytestmark = pytest.mark.mrd

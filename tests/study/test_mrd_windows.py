@@ -1,14 +1,14 @@
 """A folder whose runs stroke over separate spindle-angle windows is analysed window by window by
-``teleop analyze --mrd`` (study.mrd_windows), on synthetic runs of the pair simulator."""
+``teleop analyze --mrd`` (study.mrd.windows), on synthetic runs of the pair simulator."""
 from __future__ import annotations
 
 import argparse
 
 import numpy as np
 
-from datasets.mrd import load_mrd_dir, stroke_groups
-from study.mrd_report import analyze_mrd, main_mrd
-from study.mrd_windows import analyze_windows
+from recorded.mrd import load_mrd_dir, stroke_groups
+from study.mrd.report import analyze_mrd, main_mrd
+from study.mrd.windows import analyze_windows
 from tests.study.test_mrd import simulate, write_txt
 
 OFFSET = 1.5          # [rad] spindle-angle shift of the second window, beyond the stroke (0.8 rad)

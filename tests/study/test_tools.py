@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from study.mrd_tools import tool_calibration, tool_entry
+from study.mrd.tools import tool_calibration, tool_entry
 from teleop.config.files import tool_file
 from teleop.config.load import load_config
 from teleop.config.tools import TOOL_RANGES, Tool, load_tool, tool_names, tools_dir

@@ -17,17 +17,17 @@ from pathlib import Path
 
 import pytest
 
-from datasets.folders import DATA_ENV, GUIDE, KAIST, MRD, data_root, dataset_dir, skip_reason
-from datasets.kaist_files import config_of, default_kaist_dir, find_kaist_dir, kaist_files
-from datasets.mrd import MIN_ROWS, load_mrd_dir
-from datasets.mrd_files import default_mrd_dir, find_mrd_folder, mrd_folder
-from datasets.recording import recording_format
 from estimator.errors import DataError
 from live.cli import main
 from live.demo.recording import with_recording
+from recorded.detect import recording_format
+from recorded.folders import DATA_ENV, GUIDE, KAIST, MRD, data_root, dataset_dir, skip_reason
+from recorded.kaist_files import config_of, default_kaist_dir, find_kaist_dir, kaist_files
+from recorded.mrd import MIN_ROWS, load_mrd_dir
+from recorded.mrd_files import default_mrd_dir, find_mrd_folder, mrd_folder
 from study import analyze
-from study.kaist_input import parse_configs
-from study.mrd_tools import add_tool_argument
+from study.kaist.inputs import parse_configs
+from study.mrd.tools import add_tool_argument
 from teleop.config.load import load_config
 from teleop.errors import ConfigError
 

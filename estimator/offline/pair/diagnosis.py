@@ -70,7 +70,7 @@ def diagnose_pair(rec, train: slice, test: slice, *, max_effects: int = 2,
     Parameters
     ----------
     rec : recording with time [s], command [rad], T_a, T_b [N], angle [rad], arrays of shape (n,)
-    train, test : sample slices (KAIST: command cycle 1 and the later cycles, :func:`datasets.kaist.split`);
+    train, test : sample slices (KAIST: command cycle 1 and the later cycles, :func:`recorded.kaist.split`);
         the choice uses ``train`` only (module docstring), ``test`` gives the reported figures
     max_effects : most effects accepted (the capstan structure counts as one), >= 1
     progress : called with a label after every fitted model

@@ -35,7 +35,7 @@ id                        literature   extension                                
 Inputs of every model: a recording with ``time`` [s], ``command`` [rad] (motor side), ``T_a``,
 ``T_b`` [N] (proximal tensions; the capstan structure uses only their first values, the measured
 pretension) and ``angle`` [rad] (the target), all of shape (n,) (e.g.
-:class:`datasets.kaist.KaistRecording`).
+:class:`recorded.kaist.KaistRecording`).
 """
 from __future__ import annotations
 

@@ -4,8 +4,8 @@
 folder (``kaist-tsm/``, ``mrd-davinci/``) or as a plain clone of its public repository
 (``hysteresis_compensation_ROS/``, ``mis-tool-characterization/``). Unset or empty, the data folder is
 ``../shared/data`` beside the checkout. docs/how-to/get-the-data.md gives the ``git clone`` commands and the
-licences. Each dataset's own layout (which files, named how) is resolved by :mod:`datasets.kaist_files` and
-:mod:`datasets.mrd_files`.
+licences. Each dataset's own layout (which files, named how) is resolved by :mod:`recorded.kaist_files` and
+:mod:`recorded.mrd_files`.
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The printed table and ``report.md`` of ``teleop analyze --mrd`` (:mod:`study.mrd_report`).
+"""The printed table and ``report.md`` of ``teleop analyze --mrd`` (:mod:`study.mrd.report`).
 
 Data: MRD Lab data repository, University of Minnesota (O'Neill, Stephens, Kowalewski, IEEE RA-L
 3(4):3027-3034, 2018; ODbL 1.0 / DbCL 1.0; docs/how-to/get-the-data.md).
@@ -8,8 +8,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from datasets.mrd import MrdRun
 from estimator.offline.spindle.fit import EXTENSIONS
+from recorded.mrd import MrdRun
 
 __all__ = ["format_mrd", "write_mrd_report"]
 
@@ -112,7 +112,7 @@ def _choice_line(c: dict | None) -> str:
 
 def write_mrd_report(runs: list[MrdRun], summary: dict, details: dict, directory: str | Path) -> Path:
     """``report.md`` with the printed table and the figures in ``directory``; returns its path."""
-    from study.mrd_figures import write_mrd_figures
+    from study.mrd.figures import write_mrd_figures
     from teleop.recording.figures import output_dir
     d = output_dir(directory, "--report")
     figs = write_mrd_figures(runs, summary, details, d)

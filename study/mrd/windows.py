@@ -3,7 +3,7 @@
 The source repository's roll and pitch folders stop the jaw at several positions (runs ``ZXY.TXT``, Z the
 position): the runs of one position stroke over one window of the spindle angle, and a calibration at one
 position says nothing of the friction path at another. Such a folder is split into its windows
-(:func:`datasets.mrd.stroke_groups`) and each window is analysed on its own, with its own calibration run chosen by
+(:func:`recorded.mrd.stroke_groups`) and each window is analysed on its own, with its own calibration run chosen by
 the same rule (``--calibration`` is applied to every window) and its own full scale: one table per window, then
 a summary across them (every scored run of every window).
 """
@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from datasets.mrd import ATTRIBUTION, MrdRun, runs_selection, stroke_groups, stroke_window
-from study.mrd_text import format_mrd, write_mrd_report
+from recorded.mrd import ATTRIBUTION, MrdRun, runs_selection, stroke_groups, stroke_window
+from study.mrd.text import format_mrd, write_mrd_report
 from teleop.config.tools import Tool
 
 __all__ = ["analyze_windows", "format_across", "write_outputs"]
@@ -34,7 +34,7 @@ def _window(group: list[str], runs: list[MrdRun]) -> dict[str, Any]:
 
 def analyze_windows(analyze: Callable[..., tuple[dict, dict]], runs: list[MrdRun], calibration: str | None,
                     tool: Tool | None, progress: bool, outputs: Any = None) -> dict[str, Any]:
-    """Analyse each stroke window of ``runs`` (``analyze``: :func:`study.mrd_report.analyze_mrd`, on its runs),
+    """Analyse each stroke window of ``runs`` (``analyze``: :func:`study.mrd.report.analyze_mrd`, on its runs),
     print its table, write its figures and report (``outputs``: the parsed arguments, :func:`write_outputs`) and
     return the JSON-ready summary: ``windows`` (one entry per window, its whole summary under ``summary``) and
     ``across``.
@@ -91,7 +91,7 @@ def format_across(s: dict) -> str:
 def write_outputs(runs: list[MrdRun], summary: dict, details: dict, args: Any, sub: str | None = None) -> None:
     """The figures (``args.figures``) and Markdown report (``args.report``) of one analysis, in ``DIR/sub`` when
     ``sub`` is given (one sub-folder per window)."""
-    from study.mrd_figures import write_mrd_figures
+    from study.mrd.figures import write_mrd_figures
     figures, report = getattr(args, "figures", None), getattr(args, "report", None)
     if figures:
         for p in write_mrd_figures(runs, summary, details, Path(figures) / sub if sub else Path(figures)):

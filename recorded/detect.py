@@ -1,8 +1,8 @@
 """A recording read for ``rig.type: recording``: its format (read from its content, never its name), the check of
 its axis against the instrument's kind, and the reader of each format.
 
-* ``mrd``: an MRD da Vinci run (``XY.TXT``, :mod:`datasets.mrd`), the recording of a spindle-driven jaw;
-* ``kaist``: a KAIST recording (:mod:`datasets.kaist`), one antagonistic pair;
+* ``mrd``: an MRD da Vinci run (``XY.TXT``, :mod:`recorded.mrd`), the recording of a spindle-driven jaw;
+* ``kaist``: a KAIST recording (:mod:`recorded.kaist`), one antagonistic pair;
 * ``csv``: the project's measured-data CSV (:func:`teleop.recording.measured_csv.read_measured_csv`), one tendon.
 
 The rig that plays a recording is :mod:`slave.recording.rig`; the scripted operator that follows it
@@ -15,11 +15,11 @@ from typing import Any
 
 import numpy as np
 
-from datasets.formats import detect_format
-from datasets.kaist import read_kaist_recording
-from datasets.mrd import MrdRun, read_mrd
 from estimator.data import MeasuredData
 from estimator.errors import DataError
+from recorded.formats import detect_format
+from recorded.kaist import read_kaist_recording
+from recorded.mrd import MrdRun, read_mrd
 from teleop.config.kinds import instrument_kind
 from teleop.config.schema import Config
 from teleop.errors import ConfigError
@@ -43,7 +43,7 @@ FORMATS = {"mrd": "spindle", "kaist": "pair", "csv": "tendon"}
 
 def recording_format(path: Path, fmt: str = "auto") -> str:
     """The format of the recording ``path``: ``fmt`` unless ``auto``; else the one its first lines show
-    (:func:`datasets.formats.detect_format`: the project's CSV header, 8 numbers a row: kaist, 10: mrd).
+    (:func:`recorded.formats.detect_format`: the project's CSV header, 8 numbers a row: kaist, 10: mrd).
 
     Raises
     ------
@@ -91,8 +91,8 @@ def check_recording(cfg: Config) -> tuple[Path, str]:
 
 
 def read_recording_run(cfg: Config) -> MrdRun:
-    """The checked recording of ``cfg`` read by :func:`datasets.mrd.read_mrd` (errors of :func:`check_recording`
-    and :func:`datasets.mrd.read_mrd`: one line naming the file and the problem)."""
+    """The checked recording of ``cfg`` read by :func:`recorded.mrd.read_mrd` (errors of :func:`check_recording`
+    and :func:`recorded.mrd.read_mrd`: one line naming the file and the problem)."""
     path, _ = check_recording(cfg)
     return read_mrd(path)
 
@@ -100,7 +100,7 @@ def read_recording_run(cfg: Config) -> MrdRun:
 def read_recording(cfg: Config) -> Any:
     """The checked recording of ``cfg`` read whole by its format's reader (an MrdRun or a KAIST recording):
     every problem of the file is one line naming it before anything starts (:func:`check_recording`,
-    :func:`datasets.mrd.read_mrd`, :func:`datasets.kaist.read_kaist`)."""
+    :func:`recorded.mrd.read_mrd`, :func:`recorded.kaist.read_kaist`)."""
     path, fmt = check_recording(cfg)
     if fmt == "kaist":
         return read_kaist_recording(path)

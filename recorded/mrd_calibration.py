@@ -13,8 +13,12 @@ from typing import Any
 
 import numpy as np
 
-from datasets.mrd import MrdRun
-from datasets.mrd_centre import (
+from estimator.errors import DataError
+from estimator.offline.spindle.fit import EXTENSIONS, band_centre, fit_baselines
+from estimator.offline.spindle.shared import RunData, batch_of, kinematic_ratio, select_extensions, shared_fit
+from estimator.online.spindle import SpindleParams, first_reversal, make_batch, predict_torque
+from recorded.mrd import MrdRun
+from recorded.mrd_centre import (
     CENTRE,
     centre_implied_gain,
     centre_one_run,
@@ -22,10 +26,6 @@ from datasets.mrd_centre import (
     mid_centre_run,
     model_choice,
 )
-from estimator.errors import DataError
-from estimator.offline.spindle.fit import EXTENSIONS, band_centre, fit_baselines
-from estimator.offline.spindle.shared import RunData, batch_of, kinematic_ratio, select_extensions, shared_fit
-from estimator.online.spindle import SpindleParams, first_reversal, make_batch, predict_torque
 from teleop.errors import ConfigError
 from teleop.recording.text_files import read_text
 

@@ -40,7 +40,7 @@ with a bristle friction state per node, so that it can serve as an independent s
 * Integration: backward Euler on the velocities, the element tangent stiffness and friction
   bounds frozen per substep, the stick/slip status of every node, the taut/slack state of every
   element and the piece of the load law at the end of the substep found by an active-set
-  iteration (each pass one tridiagonal solve, :mod:`study.lumped_kernel`); stable for any
+  iteration (each pass one tridiagonal solve, :mod:`study.lumped.kernel`); stable for any
   substep (default 10 kHz; 5 and 160 kHz agree within 0.01 N on a 40 mm/s pull), a slack tendon
   included (contact taken at the start of a substep instead overflows when a slack tendon snaps taut).
 """
@@ -52,7 +52,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from estimator.sheath import SheathGeometry
-from study.lumped_kernel import simulate
+from study.lumped.kernel import simulate
 
 __all__ = ["Load", "LumpedTendon", "LOAD_KINDS"]
 
@@ -173,7 +173,7 @@ class LumpedTendon:
             except (TypeError, ValueError) as exc:
                 raise ValueError(f"route must be a SheathGeometry or (length, radius) pairs: {exc}") from None
         load = Load() if load is None else load
-        _check(isinstance(load, Load), "load", "a study.lumped.Load", load)
+        _check(isinstance(load, Load), "load", "a study.lumped.simulator.Load", load)
         _check(_nonneg(mu), "mu", "a number >= 0", mu)
         _check(_pos(EA), "EA", "a number > 0 N", EA)
         _check(isinstance(n_nodes, int) and not isinstance(n_nodes, bool) and n_nodes >= 4, "n_nodes",

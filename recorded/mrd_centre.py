@@ -11,7 +11,7 @@ uses, each recording what was fitted on what:
   with matched sensors gives 1 / (n_k cosh K) <= 1 / n_k), with the calibration's own fit cost profiled
   over the gain (:func:`estimator.offline.spindle.centre_fit.scale_profile`);
 * :func:`centre_time_split` - its calibration-only score (first half fits, second half scores) for the
-  headline's model choice in :mod:`study.mrd_report`; :func:`model_choice` admits only candidates whose
+  headline's model choice in :mod:`study.mrd.report`; :func:`model_choice` admits only candidates whose
   :func:`implied_load_gain` the calibration runs' own reading allows (LOAD_RULE).
 
 Predictions hold the shape along the stroke outside the calibration's angles

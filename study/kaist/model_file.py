@@ -15,9 +15,9 @@ from __future__ import annotations
 import datetime as _dt
 from pathlib import Path
 
-from datasets.kaist import KaistRecording
 from estimator.offline.pair.models import STRUCTURES, model_params
 from estimator.online.pair_model import PER_CYCLE
+from recorded.kaist import KaistRecording
 from teleop.config.files import shipped_config
 from teleop.config.load import load_config
 from teleop.config.model_file import (

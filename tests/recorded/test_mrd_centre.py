@@ -1,4 +1,4 @@
-"""The centre map (estimator.online.spindle_centre, estimator.offline.spindle.centre_fit, datasets.mrd_centre):
+"""The centre map (estimator.online.spindle_centre, estimator.offline.spindle.centre_fit, recorded.mrd_centre):
 synthetic runs whose band edges follow the capstan law c +- F0 + r e^(+-K) tau_d around a jaw torque that
 depends on the angle, the direction and the load."""
 from __future__ import annotations
@@ -8,16 +8,6 @@ import math
 import numpy as np
 import pytest
 
-from datasets.mrd_centre import (
-    CENTRE,
-    centre_one_run,
-    centre_time_split,
-    gain_identifiability,
-    implied_load_gain,
-    mid_centre_run,
-    model_choice,
-    score_centre,
-)
 from estimator.offline.spindle.centre_fit import (
     fit_centre_map,
     held_features,
@@ -34,6 +24,16 @@ from estimator.online.spindle_centre import (
     centre_ready,
     predict_centre_map,
     stroke_centre,
+)
+from recorded.mrd_centre import (
+    CENTRE,
+    centre_one_run,
+    centre_time_split,
+    gain_identifiability,
+    implied_load_gain,
+    mid_centre_run,
+    model_choice,
+    score_centre,
 )
 
 R_TRUE, K, F0, C0, SLOPE = 1.01, 0.25, 0.05, -0.014, -0.017
@@ -199,7 +199,7 @@ def test_model_choice_at_one_load_keeps_only_a_load_gain_the_run_allows():
 
 def test_a_design_load_gain_replaces_the_encoders_and_is_recorded():
     """``--calibration gain=G:RUN``: the one number a one-run calibration lacks, given from outside."""
-    from datasets.mrd_calibration import split_design_gain
+    from recorded.mrd_calibration import split_design_gain
     from teleop.errors import ConfigError
     assert split_design_gain("gain=0.943:mid") == (0.943, "mid") and split_design_gain("31") == (None, "31")
     assert split_design_gain(None) == (None, None)
@@ -219,8 +219,8 @@ def test_a_folder_measures_its_load_gain_and_another_folder_takes_it_from_the_js
     folder's JSON; a folder of one load level, a missing file or a JSON without it is refused by name."""
     import json
 
-    from datasets.mrd_calibration import split_design_gain
-    from datasets.mrd_centre import centre_folder
+    from recorded.mrd_calibration import split_design_gain
+    from recorded.mrd_centre import centre_folder
     from teleop.errors import ConfigError
     folder = [synth(f"{i}", load, seed=i) for i, load in enumerate((0.01, 0.02, 0.03, 0.04))]
     rec = centre_folder(folder, 0.05, lambda _: None)

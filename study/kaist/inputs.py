@@ -1,6 +1,6 @@
 """The KAIST input of ``teleop analyze --kaist``: the recordings the command line names (``--kaist [DIR]``,
 FILE, ``--bend``, ``--configs``, ``--columns``) and the prediction of every recording with a saved shared set
-(``--shared-params``). The recordings are read by :mod:`datasets.kaist`.
+(``--shared-params``). The recordings are read by :mod:`recorded.kaist`.
 """
 from __future__ import annotations
 
@@ -12,12 +12,12 @@ from pathlib import Path
 
 import numpy as np
 
-from datasets.columns import parse_column_map
-from datasets.kaist import KaistRecording, cycles, load_dir, read_kaist
-from datasets.kaist_files import is_kaist_file
 from estimator.errors import DataError
 from estimator.offline.pair.fit import rmse
 from estimator.offline.pair.general import predict_shared
+from recorded.columns import parse_column_map
+from recorded.kaist import KaistRecording, cycles, load_dir, read_kaist
+from recorded.kaist_files import is_kaist_file
 from teleop.errors import ConfigError
 from teleop.recording.text_files import read_text
 
@@ -37,8 +37,8 @@ def parse_configs(text: str | None) -> tuple[float, ...] | None:
 
 def load_kaist_input(args: argparse.Namespace) -> list[KaistRecording]:
     """The recordings of the KAIST mode: ``--kaist [DIR]`` (every configuration under DIR in either layout,
-    :func:`datasets.kaist.load_dir`, or those of ``--configs``), a FILE whose name gives its configuration (its whole
-    directory, :func:`datasets.kaist_files.config_of`) or another FILE with ``--bend DEG``; read with ``--columns``
+    :func:`recorded.kaist.load_dir`, or those of ``--configs``), a FILE whose name gives its configuration (its whole
+    directory, :func:`recorded.kaist_files.config_of`) or another FILE with ``--bend DEG``; read with ``--columns``
     when given. Files that cannot be read get one line on stderr each and are left out.
 
     Raises

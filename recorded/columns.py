@@ -15,7 +15,7 @@ field           required  meaning
 
 Written ``time=0,command=1,angle=3,T_a=4,T_b=5`` (0-based columns), optionally with ``units=rad``
 (default ``deg``, the KAIST files). :data:`KAIST_MAP` is the map of the 8-column KAIST files
-(:mod:`datasets.kaist`, docs/how-to/get-the-data.md); files with more columns and no map given are read with it
+(:mod:`recorded.kaist`, docs/how-to/get-the-data.md); files with more columns and no map given are read with it
 (a note says so).
 
 :func:`read_table` is robust to what long logger files carry, and says what it did in ``notes``:

@@ -16,7 +16,7 @@ Protocol (docs/results/mrd.md):
   over the folder), angle RMSE [deg], from ``SCORE_FROM_S`` on (the load motor ramps in first).
 * across the folder: model-free band measurements per run (E3 frequency, E8 load, distal-side
   friction, E12 backlash), one shared parameter set fitted on all runs and scored leave-one-run-out.
-* beside the pair model, the centre map (:mod:`datasets.mrd_centre`): the load level read from the
+* beside the pair model, the centre map (:mod:`recorded.mrd_centre`): the load level read from the
   scored run's own spindle band centre; on the calibration (one run: gain 1 / n_k and its cost profile)
   and over the folder (in-sample and leave-one-run-out). ``--calibration mid`` picks the run whose band
   centre (spindle torque only) is nearest the middle of the folder's.
@@ -31,23 +31,6 @@ from typing import Any
 
 import numpy as np
 
-from datasets.mrd import ATTRIBUTION, MrdRun
-from datasets.mrd_calibration import (
-    CAL_INPUTS,
-    SCORE_FROM_S,
-    calibrate,
-    calibrate_on_runs,
-    design_gain,
-    parse_calibration,
-    run_data,
-)
-from datasets.mrd_centre import (
-    CENTRE,
-    centre_agg,
-    centre_folder,
-    profile_on_scored,
-    score_centre,
-)
 from estimator.errors import DataError
 from estimator.offline.spindle.fit import band_centre
 from estimator.offline.spindle.shared import (
@@ -66,8 +49,25 @@ from estimator.online.spindle import (
     predict_torque,
     spindle_rate,
 )
-from study.mrd_text import format_mrd
-from study.mrd_tools import tool_calibration, tool_entry
+from recorded.mrd import ATTRIBUTION, MrdRun
+from recorded.mrd_calibration import (
+    CAL_INPUTS,
+    SCORE_FROM_S,
+    calibrate,
+    calibrate_on_runs,
+    design_gain,
+    parse_calibration,
+    run_data,
+)
+from recorded.mrd_centre import (
+    CENTRE,
+    centre_agg,
+    centre_folder,
+    profile_on_scored,
+    score_centre,
+)
+from study.mrd.text import format_mrd
+from study.mrd.tools import tool_calibration, tool_entry
 from teleop.config.tools import Tool
 from teleop.errors import ConfigError
 
@@ -142,9 +142,9 @@ def _agg(rows: list[dict]) -> dict:
 
 def _one_stroke(runs: list[MrdRun]) -> None:
     """Raise DataError when the runs stroke over separate spindle-angle windows (jaw stopping positions:
-    :func:`datasets.mrd.stroke_groups`), naming the windows and the ``--runs`` selection of each: the centre
+    :func:`recorded.mrd.stroke_groups`), naming the windows and the ``--runs`` selection of each: the centre
     map and the pair model describe one stroke, and one window's calibration says nothing of another's."""
-    from datasets.mrd import runs_selection, stroke_groups, stroke_window
+    from recorded.mrd import runs_selection, stroke_groups, stroke_window
     groups = stroke_groups(runs)
     if len(groups) < 2:
         return
@@ -168,7 +168,7 @@ def analyze_mrd(runs: list[MrdRun], calibration: str | None = None, progress: bo
     per-sample predictions for the figures (never written to JSON).
 
     ``folder`` False, or a single run, skips the folder-wide selection and fit (and ``loro``). ``tool``: the load gain
-    of the one-run calibration comes from this tool file (:func:`study.mrd_tools.tool_calibration`;
+    of the one-run calibration comes from this tool file (:func:`study.mrd.tools.tool_calibration`;
     ``summary["tool"]``). Raises DataError for no runs, ConfigError for a bad ``calibration`` or one that gives a gain
     beside ``tool``.
     """
@@ -330,16 +330,16 @@ def _shared(runs, out, details, fs, tick, loro: bool) -> None:
 def main_mrd(args) -> int:
     """``teleop analyze --mrd [DIR] [--tool NAME] [--calibration RUN|segment:SECONDS] [--json OUT] [--figures DIR]
     [--report DIR]``: load, analyse (window by window when the runs stroke over separate spindle-angle windows,
-    :mod:`study.mrd_windows`), print; one line per unreadable file. Returns 0."""
+    :mod:`study.mrd.windows`), print; one line per unreadable file. Returns 0."""
     import json
 
-    from datasets.mrd import load_mrd_dir, stroke_groups
-    from study.mrd_windows import analyze_windows, write_outputs
+    from recorded.mrd import load_mrd_dir, stroke_groups
+    from study.mrd.windows import analyze_windows, write_outputs
     from teleop.config.tools import load_tool
 
     if args.json is not None and not Path(args.json).resolve().parent.is_dir():
         raise ConfigError(f"--json {args.json}: directory {Path(args.json).resolve().parent} does not exist")
-    from study.mrd_model import check_model_out, write_mrd_model
+    from study.mrd.model_file import check_model_out, write_mrd_model
     check_model_out(args)
     tool = load_tool(args.tool) if getattr(args, "tool", None) else None
     runs, bad = load_mrd_dir(args.mrd or None, getattr(args, "runs", None))

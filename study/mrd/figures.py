@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from datasets.mrd import MrdRun
+from recorded.mrd import MrdRun
 from teleop.recording.figures import output_dir, pyplot
 
 __all__ = ["write_mrd_figures", "FIGURES"]

@@ -14,7 +14,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from datasets.mrd import MrdRun
+from recorded.mrd import MrdRun
 from slave.recording.spindle import fit_recorded_model
 from slave.recording.spindle_model import spindle_model_file
 from teleop.config.files import shipped_config

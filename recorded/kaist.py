@@ -2,16 +2,16 @@
 
 The files (``sine_config_N.txt`` in the project's folder ``kaist-tsm``, ``optimization/selected/N.txt`` in a
 clone of the source repository; N the tube configuration in degrees) are described in the folder's
-``SOURCE.md`` and in docs/how-to/get-the-data.md; :mod:`datasets.kaist_files` finds them in either layout. They
+``SOURCE.md`` and in docs/how-to/get-the-data.md; :mod:`recorded.kaist_files` finds them in either layout. They
 have **no licence**: this module reads them where they lie (the data folder, ``TSM_TELEOP_DATA``, or a
 directory the user gives) and the project never copies them or per-sample data derived from them.
 
 The 8-column files are comma separated, no header, with a trailing comma, logged at 40 Hz with each
 time stamp repeated several times; as the source says, every row whose time equals the previous
-row's is dropped, which leaves about 510 rows. The reader is :func:`datasets.columns.read_table`: the
+row's is dropped, which leaves about 510 rows. The reader is :func:`recorded.columns.read_table`: the
 same importer reads the longer 10-column KAIST recordings (about 2 kHz, repeated stamps, all-zero
 columns, a time reset) and other labs' CSV files through a column map
-(:func:`datasets.columns.parse_column_map`). Recordings faster than twice :data:`RATE_HZ` are
+(:func:`recorded.columns.parse_column_map`). Recordings faster than twice :data:`RATE_HZ` are
 averaged in blocks down to :data:`RATE_HZ` (the pair models are rate-independent).
 
 ==== ============================================ =============== ============================
@@ -34,9 +34,9 @@ from pathlib import Path
 
 import numpy as np
 
-from datasets.columns import ColumnMap, read_table
-from datasets.kaist_files import config_of, find_configs, find_kaist_dir, kaist_path
 from estimator.errors import DataError
+from recorded.columns import ColumnMap, read_table
+from recorded.kaist_files import config_of, find_configs, find_kaist_dir, kaist_path
 
 __all__ = [
     "CONFIGS_DEG", "RATE_HZ", "KaistRecording", "read_kaist", "read_kaist_recording", "load_all", "load_dir",
@@ -122,8 +122,8 @@ def read_kaist(path: str | Path, config_deg: float | None = None, column_map: Co
     path : str or Path
     config_deg : float, optional
         Configuration [deg]; default: the N of the file's name (``sine_config_<N>.txt``, or ``<N>.txt`` in a
-        clone's ``optimization/selected``; :func:`datasets.kaist_files.config_of`).
-    column_map : default the 8-column KAIST map (:data:`datasets.columns.KAIST_MAP`)
+        clone's ``optimization/selected``; :func:`recorded.kaist_files.config_of`).
+    column_map : default the 8-column KAIST map (:data:`recorded.columns.KAIST_MAP`)
     rate_hz : resample faster recordings to this rate (:func:`resample`); None keeps every sample
 
     Raises
@@ -151,7 +151,7 @@ def read_kaist(path: str | Path, config_deg: float | None = None, column_map: Co
 
 def read_kaist_recording(path: str | Path) -> KaistRecording:
     """A KAIST recording whose format its content showed (the recording rig): :func:`read_kaist` with the
-    configuration its name gives (:func:`datasets.kaist_files.config_of`), else nan (the rig needs none)."""
+    configuration its name gives (:func:`recorded.kaist_files.config_of`), else nan (the rig needs none)."""
     n = config_of(path)
     return read_kaist(path, math.nan if n is None else n)
 
@@ -159,7 +159,7 @@ def read_kaist_recording(path: str | Path) -> KaistRecording:
 def load_dir(path: str | Path | None = None, column_map: ColumnMap | None = None,
              rate_hz: float | None = RATE_HZ, configs: tuple[float, ...] | None = None
              ) -> tuple[list[KaistRecording], list[str]]:
-    """Every configuration under a directory (either layout, :func:`datasets.kaist_files.kaist_files`), sorted by
+    """Every configuration under a directory (either layout, :func:`recorded.kaist_files.kaist_files`), sorted by
     N, or only those of ``configs``; and one line per file that could not be read (``"<file>: <why>"``), which
     is left out.
 

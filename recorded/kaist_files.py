@@ -7,15 +7,15 @@ its configuration N (the insertion tube's bend [deg]).
   not configurations.
 
 :func:`kaist_files` takes either folder, or the clone's root, and returns the folder and its configurations;
-the default folder is the data folder's (:func:`datasets.folders.dataset_dir`, ``TSM_TELEOP_DATA``).
+the default folder is the data folder's (:func:`recorded.folders.dataset_dir`, ``TSM_TELEOP_DATA``).
 """
 from __future__ import annotations
 
 import re
 from pathlib import Path
 
-from datasets.folders import KAIST, dataset_dir, not_found
 from estimator.errors import DataError
+from recorded.folders import KAIST, dataset_dir, not_found
 
 __all__ = ["SELECTED", "default_kaist_dir", "kaist_files", "find_configs", "find_kaist_dir", "config_of",
            "is_kaist_file", "kaist_path"]
@@ -28,7 +28,7 @@ _BARE = re.compile(r"(\d+(?:\.\d+)?)\.txt")
 
 def default_kaist_dir() -> Path:
     """The KAIST folder of the data folder: ``kaist-tsm`` or a clone ``hysteresis_compensation_ROS``
-    (:func:`datasets.folders.dataset_dir`)."""
+    (:func:`recorded.folders.dataset_dir`)."""
     return dataset_dir(KAIST)
 
 

@@ -1,7 +1,7 @@
 """Importer for the MRD Lab da Vinci tool characterisation runs (``XY.TXT``, torque and angle at both ends).
 
 Data: the MRD folder of the data folder (``mrd-davinci`` or a clone of the source repository,
-``TSM_TELEOP_DATA``; :mod:`datasets.mrd_files` finds the runs in either layout, docs/how-to/get-the-data.md; MRD
+``TSM_TELEOP_DATA``; :mod:`recorded.mrd_files` finds the runs in either layout, docs/how-to/get-the-data.md; MRD
 Lab data repository, University of Minnesota; O'Neill, Stephens, Kowalewski, IEEE RA-L 3(4):3027-3034, 2018;
 ODbL 1.0 / DbCL 1.0).
 Lines starting with ``%`` are a header (hand-edited, not trusted); then comma-separated rows of 10
@@ -39,8 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
-from datasets.mrd_files import find_mrd_folder
 from estimator.errors import DataError
+from recorded.mrd_files import find_mrd_folder
 from teleop.recording.text_files import read_text
 
 __all__ = [
@@ -207,7 +207,7 @@ def values_error(runs: list[MrdRun], exc: BaseException) -> DataError:
 
 def load_mrd_dir(directory: str | Path | None = None, select: str | None = None) -> tuple[list[MrdRun], list[str]]:
     """Every run of the folder ``directory`` means (a folder of runs, one ``Tool_`` folder, the project's MRD
-    folder, a clone's root or its ``data/``: :func:`datasets.mrd_files.find_mrd_folder`; default the data
+    folder, a clone's root or its ``data/``: :func:`recorded.mrd_files.find_mrd_folder`; default the data
     folder's), sorted by name; ``select``: only those whose file stem matches this glob (``--runs``, e.g.
     ``"1*"``). A note naming the folder chosen among several goes to stderr.
 

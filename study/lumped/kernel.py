@@ -1,4 +1,4 @@
-"""Compiled step of the dynamic lumped-mass tendon-sheath simulator (:mod:`study.lumped` explains it).
+"""Compiled step of the dynamic lumped-mass tendon-sheath simulator (:mod:`study.lumped.simulator` explains it).
 
 One substep of length ``dt`` is backward (implicit) Euler on the node velocities with the element
 stiffness, the load slope and the friction linearised at the start of the substep; the linear

@@ -1,6 +1,6 @@
 """Randomised bench recordings from the dynamic lumped-mass simulator, with hidden effects.
 
-The second, independent simulator (:mod:`study.lumped`; docs/concepts/model.md, the simulators): the
+The second, independent simulator (:mod:`study.lumped.simulator`; docs/concepts/model.md, the simulators): the
 same :class:`study.scenarios.Recording` and truth keys as :func:`study.scenarios.record`, but a
 different physics (tendon masses, an elasto-plastic bristle friction state per node, normal force from
 the local curvature)
@@ -13,7 +13,7 @@ and a different, seeded randomisation of everything a bench changes between sess
 * sample rate 200-2000 Hz (log-uniform) unless given, motor bandwidth 30-80 Hz;
 * sensors: load-cell noise 0.01-0.04 N (proximal) and 0.01-0.05 N (distal), load-cell resolution
   1-5 mN, encoder quantum 0.2-1 um, distal position noise 0-0.5 um and quantum 0.5-2 um;
-* protocol (:mod:`study.lumped_protocol`): peak proximal tension 8-20 N, shuffled slow and fast
+* protocol (:mod:`study.lumped.protocol`): peak proximal tension 8-20 N, shuffled slow and fast
   cycles, minor loops, dwells, small oscillations and triangle waves.
 
 Hidden effects (:data:`EFFECT_IDS`, magnitudes from :func:`study.scenarios.realistic_range` at
@@ -29,8 +29,8 @@ import numpy as np
 from estimator.data import MeasuredData
 from estimator.offline.effects.catalogue import effect
 from estimator.sheath import SheathGeometry
-from study.lumped import Load, LumpedTendon
-from study.lumped_protocol import command
+from study.lumped.protocol import command
+from study.lumped.simulator import Load, LumpedTendon
 from study.scenarios import Recording, realistic_range
 
 __all__ = ["EFFECT_IDS", "UNCATALOGUED", "record", "draw_route", "draw_load"]
@@ -233,7 +233,7 @@ def _measure(sensor: dict, t: np.ndarray, true: dict[str, np.ndarray], noise: tu
     x_out = _channel(sensor, "x_out", t, true["x_out"]) + noise_x * rng_noise.standard_normal(n)
     return MeasuredData(time=t, x_in=q_in * np.round(x_in / q_in), T_in=q_T * np.round(T_in / q_T),
                         x_out=q_out * np.round(x_out / q_out), T_out=q_T * np.round(T_out / q_T),
-                        metadata={"source": "study/lumped_scenarios.py lumped-mass bench recording",
+                        metadata={"source": "study/lumped/scenarios.py lumped-mass bench recording",
                                   "units": "time=s, x_in=m, T_in=N, x_out=m, T_out=N"},
                         source=f"<lumped scenario seed {seed}>")
 

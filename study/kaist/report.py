@@ -1,7 +1,7 @@
 """Figures and the Markdown report of ``teleop analyze --kaist`` (summary plots only, no data).
 
-The base pair model against the baselines (docs/results/kaist.md; :mod:`study.kaist_figures`): ``kaist_rmse.png``,
-``kaist_loops.png``, ``kaist_residuals.png``. The pair diagnosis and the shared fit (:mod:`study.kaist_pair_figures`):
+The base pair model against the baselines (docs/results/kaist.md; :mod:`study.kaist.figures`): ``kaist_rmse.png``,
+``kaist_loops.png``, ``kaist_residuals.png``. The pair diagnosis and the shared fit (:mod:`study.kaist.pair_figures`):
 
 * ``kaist_pair_loops.png``      distal angle against the command on the test cycle, per
   configuration: measured, seed model, extended model, shared fit;
@@ -22,8 +22,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from study.kaist_figures import loops_figure, residuals_figure, rmse_figure, tension_angle_figure
-from study.kaist_pair_figures import pair_loops_figure, pair_residuals_figure, pair_tensions_figure, shared_figure
+from study.kaist.figures import loops_figure, residuals_figure, rmse_figure, tension_angle_figure
+from study.kaist.pair_figures import pair_loops_figure, pair_residuals_figure, pair_tensions_figure, shared_figure
 from teleop.recording.figures import output_dir, pyplot
 
 __all__ = ["write_kaist_figures", "write_kaist_report", "FIGURES"]
@@ -68,7 +68,7 @@ def write_kaist_report(recs, details: list[dict], summary: dict, directory: str 
         ``directory`` cannot be created.
     """
     from estimator.offline.pair.models import PAIR_EFFECTS
-    from study.kaist_summary import format_kaist
+    from study.kaist.summary import format_kaist
 
     figs = write_kaist_figures(recs, details, summary, directory, option="--report")
     d = figs[0].parent

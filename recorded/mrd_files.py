@@ -8,14 +8,14 @@
 A run is a ``*.TXT`` file of its folder (the folder's ``SerialLog.txt`` and ``ReadME.txt`` are not runs) and is
 named by its file stem (``"00"``). :func:`find_mrd_folder` takes a folder of runs, one ``Tool_`` folder, the
 project's folder, a clone's root or its ``data/`` and returns the folder of runs it means; the default is the
-data folder's (:func:`datasets.folders.dataset_dir`, ``TSM_TELEOP_DATA``).
+data folder's (:func:`recorded.folders.dataset_dir`, ``TSM_TELEOP_DATA``).
 """
 from __future__ import annotations
 
 from pathlib import Path
 
-from datasets.folders import MRD, dataset_dir, not_found
 from estimator.errors import DataError
+from recorded.folders import MRD, dataset_dir, not_found
 
 __all__ = ["DEFAULT_FOLDER", "default_mrd_dir", "run_files", "run_folders", "find_mrd_folder", "mrd_folder"]
 
@@ -30,7 +30,7 @@ _NOT_RUNS = {"seriallog.txt", "readme.txt"}
 
 def default_mrd_dir() -> Path:
     """The MRD folder of the data folder: ``mrd-davinci`` or a clone ``mis-tool-characterization``
-    (:func:`datasets.folders.dataset_dir`)."""
+    (:func:`recorded.folders.dataset_dir`)."""
     return dataset_dir(MRD)
 
 
