@@ -106,8 +106,8 @@ def _ratio(live: float, off: float) -> str:
 
 def table(rows: list[dict]) -> str:
     lines = ["| effect (rig switch) | diagnosis names | RMSE T_out live base / extended [N] | live gain [N] | "
-             "offline held-out gain [N] | live / offline gain (primary signal) | x_out live base / extended [um] | x_out gain live / "
-             "offline [um] | fallbacks |",
+             "offline held-out gain [N] | live / offline gain (primary signal) | x_out live base / extended [um] | "
+             "x_out gain live / offline [um] | fallbacks |",
              "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if "T_base" not in r:

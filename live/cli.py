@@ -75,7 +75,8 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=PROG, description="Haptic teleoperation of tendon-sheath instruments.")
     parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
     sub = parser.add_subparsers(dest="command",
-                                metavar="{demo,master,slave,view,record,router,bridge,calibrate,replay,analyze,devices}",
+                                metavar="{demo,master,slave,view,record,router,bridge,calibrate,replay,analyze,"
+                                        "devices}",
                                 required=True)
     args = sys.argv[1:] if argv is None else argv
     _add_sides(sub)
@@ -106,7 +107,8 @@ def _add_sides(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                                      "estimate")
     _shared(p)
     p.add_argument("--recalibrate", action="store_true",
-                   help="calibrate at power-up even when <calibration.dir>/<instrument.id>.yaml exists (and replace it)")
+                   help="calibrate at power-up even when <calibration.dir>/<instrument.id>.yaml exists "
+                        "(and replace it)")
     p.add_argument("--exit-on-master-stop", action="store_true", help="finish when the master announces STOPPING")
     p.add_argument("--max-duration", type=float, default=None, metavar="S", help="stop after this long [s]")
     _model_flag(p)

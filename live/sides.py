@@ -188,7 +188,8 @@ def _serve(node, clock, args: argparse.Namespace, run_dir: Path, side: str, inje
     """Run ``node`` until done (or ``--max-duration``); however it ends, ``close_first()`` (e.g. the
     device), then ``<side>_stats.json`` (with the safety waivers ``waived`` and the disk use of ``files``, a
     :class:`live.side_files.SideFiles`) and ``<side>_faults.json`` in ``run_dir``. Every message the side
-    publishes is journaled in ``run_dir`` first (teleop/recording/journal.py: the recorder recovers a SIGKILLed side's tail)."""
+    publishes is journaled in ``run_dir`` first (teleop/recording/journal.py: the recorder recovers a SIGKILLed side's
+    tail)."""
     from teleop.recording.journal import close_journal, open_journal
     open_journal(run_dir, side)
     if files is not None:
@@ -296,8 +297,10 @@ def run_master(args: argparse.Namespace) -> int:
         meta = {"source": "teleop master", "instrument": ident, "device": cfg.master.device.type,
                 "columns": master_kind(instrument_kind(cfg)).columns}
         with raise_on_sigterm(), open_session(cfg, args, clock) as session, \
-                CsvRecorder(run_dir / "master.csv", csv_columns(cfg), meta, units=csv_units(cfg), flush_every=100) as rec, \
-                RerunLogger("teleop", run_dir.name, getattr(args, "rerun", None) or cfg.recording.rerun, run_dir / "master.rrd",
+                CsvRecorder(run_dir / "master.csv", csv_columns(cfg), meta, units=csv_units(cfg),
+                            flush_every=100) as rec, \
+                RerunLogger("teleop", run_dir.name, getattr(args, "rerun", None) or cfg.recording.rerun,
+                            run_dir / "master.rrd",
                             wall_clock=True, joints=joint_views(cfg),
                             serve=serve_spec(cfg, "master")) as rr:   # master-side series; same recording id
             links = master_links(session, ident, injector)

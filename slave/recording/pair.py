@@ -252,8 +252,10 @@ class RecordedPairAxis(RecordedRoutine, PairAxis):
         i, G = self.index, max(p.G, 1e-9)
         pc = self.cfg.pair_control
         self.controller = PairController(self.r, set_tension(self.cfg, self.joint), pc.tension_gain, pc.switch_band,
-                                         self.cfg.slave.relax_speed, tuple(state.x_in_cmd[i]), feedforward=pc.feedforward)
-        models = [SheathModel(K=K, compliance=max(2.0 * lam / G, 1e-12)) for K, lam in ((p.K_a, p.lam_a), (p.K_b, p.lam_b))]
+                                         self.cfg.slave.relax_speed, tuple(state.x_in_cmd[i]),
+                                         feedforward=pc.feedforward)
+        models = [SheathModel(K=K, compliance=max(2.0 * lam / G, 1e-12))
+                  for K, lam in ((p.K_a, p.lam_a), (p.K_b, p.lam_b))]
         T0 = (float(state.T_in[i, 0]), float(state.T_in[i, 1]))
         self.estimator = PairEstimator(models[0], models[1], 1.0 / G, n_nodes=N_NODES, pretension=T0,
                                         play=KAIST_PLAY / G)

@@ -230,8 +230,9 @@ class RecordedCalibration:
 
 
 def file_model(cfg: Config) -> RecordedModel | None:
-    """The recorded model of the model file ``estimator.model`` (checked, :func:`slave.estimator_model.configured_model`;
-    its calibration run in the played run's folder), or None without one: the model is then fitted."""
+    """The recorded model of the model file ``estimator.model`` (checked,
+    :func:`slave.estimator_model.configured_model`; its calibration run in the played run's folder), or None without
+    one: the model is then fitted."""
     from slave.estimator_model import configured_model
     from slave.recording.spindle_model import recorded_model_dict
     mf = configured_model(cfg)

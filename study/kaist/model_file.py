@@ -73,7 +73,8 @@ def kaist_model(rec: KaistRecording, summary: dict, fit, instrument: str) -> Mod
     return model
 
 
-def write_kaist_models(recs: list[KaistRecording], summary: dict, details: list[dict], out_dir: str | Path) -> list[Path]:
+def write_kaist_models(recs: list[KaistRecording], summary: dict, details: list[dict],
+                       out_dir: str | Path) -> list[Path]:
     """Write ``<out_dir>/<recording stem>.model.yaml`` for every recording (``summary``, ``details``: what
     :func:`study.analyze.analyze_kaist` returned); returns the paths written.
 

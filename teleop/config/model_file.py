@@ -55,8 +55,8 @@ _PROVENANCE = ("recording", "sha256", "span_s", "project_version", "written")
 
 @dataclass(frozen=True)
 class ModelParameter:
-    """One fitted parameter: its value in ``unit`` (SI), within the catalogue's closed range [lo, hi] (-inf, inf when the
-    catalogue leaves it unbounded)."""
+    """One fitted parameter: its value in ``unit`` (SI), within the catalogue's closed range [lo, hi] (-inf, inf when
+    the catalogue leaves it unbounded)."""
     name: str
     value: float
     unit: str

@@ -37,7 +37,8 @@ class HeadlessChromium:
 
         self.proc = subprocess.Popen(
             [executable, "--headless=new", "--no-sandbox", "--remote-debugging-pipe", "--use-angle=swiftshader",
-             "--enable-unsafe-swiftshader", "--ignore-gpu-blocklist", "--no-first-run", f"--window-size={width},{height}",
+             "--enable-unsafe-swiftshader", "--ignore-gpu-blocklist", "--no-first-run",
+             f"--window-size={width},{height}",
              "about:blank"], close_fds=False, preexec_fn=on_fds_3_and_4, stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         os.close(to_browser)

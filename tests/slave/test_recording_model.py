@@ -37,8 +37,10 @@ AGREEMENT_DEG = 0.1
 
 def model_file(tmp_path: Path) -> Path:
     return save_model(ModelFile(
-        axis="pair", instrument="kaist-bend", structure="capstan", base={k: v for k, v in VALUES.items() if k != "lam_s"},
-        extensions=(ModelExtension("series_compliance", (ModelParameter("lam_s", VALUES["lam_s"], "rad/N", 0.0, 5.0),)),),
+        axis="pair", instrument="kaist-bend", structure="capstan",
+        base={k: v for k, v in VALUES.items() if k != "lam_s"},
+        extensions=(ModelExtension("series_compliance",
+                                   (ModelParameter("lam_s", VALUES["lam_s"], "rad/N", 0.0, 5.0),)),),
         per_cycle="estimator.online.pair_model.PairModelEstimator capstan+series_compliance",
         gain={"base": 3.3, "extended": 1.0, "unit": "deg"},
         provenance={"recording": KAIST_FILE.name, "sha256": "ab" * 32, "span_s": [0.0, 6.3], "project_version": "0",
@@ -49,7 +51,8 @@ def kaist_config(tmp_path: Path, model: Path | None):
     cfg = load_config(ROOT / "configs" / "recording-kaist.yaml")
     rec = dataclasses.replace(cfg.rig.recording, path=str(KAIST_FILE))
     return dataclasses.replace(cfg, rig=dataclasses.replace(cfg.rig, recording=rec),
-                               estimator=dataclasses.replace(cfg.estimator, model=None if model is None else str(model)),
+                               estimator=dataclasses.replace(cfg.estimator,
+                                                             model=None if model is None else str(model)),
                                calibration=dataclasses.replace(cfg.calibration, dir=str(tmp_path)))
 
 

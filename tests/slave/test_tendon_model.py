@@ -53,14 +53,14 @@ def test_analyze_writes_a_model_the_slave_runs_and_it_beats_the_base_estimator(t
     b = mf.extensions[0].values()["b_T_in"]
     truth = rec.truth["parameters"]["offset"]                       # signed [N]
     assert abs(b - truth) < 0.1 * abs(truth)
-    assert mf.provenance["recording"] == "s.csv" and mf.provenance["span_s"][1] == pytest.approx(diag["split"]["time_s"],
-                                                                                                  abs=0.01)
+    assert mf.provenance["recording"] == "s.csv"
+    assert mf.provenance["span_s"][1] == pytest.approx(diag["split"]["time_s"], abs=0.01)
     d = rec.data
     sigma = noise_level(np.asarray(d.T_in))
     runner = ModelRunner(mf, tendon_model_estimator(mf, sigma, 0.02, 1000.0))
     assert runner.estimator.average == 5 == live_average(mf, 1000.0)
-    base = DistalEstimator(SheathModel(K=diag["base_model"]["values"]["K"], compliance=diag["base_model"]["compliance"]),
-                           n_nodes=32, tension_noise=sigma)
+    fitted = SheathModel(K=diag["base_model"]["values"]["K"], compliance=diag["base_model"]["compliance"])
+    base = DistalEstimator(fitted, n_nodes=32, tension_noise=sigma)
     est = np.array([(s.T_out, runner.step(T, x, t, s).T_out) for T, x, t in zip(d.T_in, d.x_in, d.time, strict=True)
                     for s in (base.step(T, x, t),)])
     test = d.time >= diag["split"]["time_s"]
@@ -108,7 +108,8 @@ def test_the_tendon_axis_runs_the_model_and_counts_a_fallback_once(tmp_path, cap
             x = 1e-4 * math.sin(0.05 * k)
             ax.observe(RigState(t=1e-3 * k, x_in=x, T_in=1.0 + 5e3 * max(x, 0.0), x_in_cmd=x))
         ax.runner.estimator.out_of_range = lambda s: "forced"          # the physical range left twice
-        base_T = [ax.observe(RigState(t=0.2 + 1e-3 * k, x_in=0.0, T_in=1.0, x_in_cmd=0.0))[0].effort_hat for k in range(2)]
+        base_T = [ax.observe(RigState(t=0.2 + 1e-3 * k, x_in=0.0, T_in=1.0, x_in_cmd=0.0))[0].effort_hat
+                  for k in range(2)]
     stats = TendonAxis.stats([ax])["model"]
     assert stats["id"] == "tsm0/tendon/profile_memory+friction_offset" and stats["cycles"] == 202
     assert stats["fallbacks"] == 2 and base_T[-1] == ax.estimator.T_out

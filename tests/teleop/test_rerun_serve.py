@@ -38,7 +38,8 @@ def test_each_side_serves_on_its_own_ports_from_the_config():
 @pytest.mark.parametrize("serve, match", [
     ({"bind": "lab-pc"}, r"recording.rerun_serve.bind: 'lab-pc' is not an IP address"),
     ({"bind": "0.0.0.0"}, r"recording.rerun_serve.bind = 0.0.0.0: the hard bound is 127.0.0.1: .*safety.override"),
-    ({"master_port": 9877}, r"recording.rerun_serve.master_port: port 9877 is already recording.rerun_serve.slave_port"),
+    ({"master_port": 9877},
+     r"recording.rerun_serve.master_port: port 9877 is already recording.rerun_serve.slave_port"),
     ({"memory_limit": 4e9}, r"recording.rerun_serve.memory_limit = 4e\+09: above the hard bound 1e\+09 B"),
     ({"memory_limit": 10.0}, r"recording.rerun_serve.memory_limit: 10.0 is out of range"),
     ({"slave_port": 0}, r"recording.rerun_serve.slave_port: 0 is out of range"),
@@ -57,7 +58,8 @@ def test_another_bind_address_is_a_waiver():
 def test_the_session_starts_at_the_run_ids_time_stamp():
     assert session_origin("20260102-030405") == time.mktime((2026, 1, 2, 3, 4, 5, 0, 0, -1))
     assert session_origin("20260102-030405-2") == session_origin("20260102-030405")
-    assert session_origin("bench") is None and session_origin(None) is None and session_origin("20261399-000000") is None
+    assert session_origin("bench") is None and session_origin(None) is None
+    assert session_origin("20261399-000000") is None
 
 
 def test_viewer_env_keeps_the_hosts_warnings_out_of_the_view_and_keeps_a_users_choice():
