@@ -252,3 +252,46 @@ def test_nothing_edits_sys_path():
     found = [str(p.relative_to(ROOT)) for p in _sources() if "sys.path.insert" in p.read_text(encoding="utf-8")
              or "sys.path.append" in p.read_text(encoding="utf-8")]
     assert not found, f"sys.path edited in {found}: import the installed package instead"
+
+
+def test_every_package_says_what_it_holds():
+    """Each package's ``__init__`` has a docstring: the room it is and what it may import."""
+    bare = [str(p.relative_to(ROOT)) for pkg in PACKAGES for p in (ROOT / pkg).rglob("__init__.py")
+            if len((ast.get_docstring(ast.parse(p.read_text(encoding="utf-8"))) or "").split()) < 8]
+    assert not bare, f"packages without a docstring saying what they hold: {bare}"
+
+
+def _top_level_names(mod: str) -> tuple[set[str], set[str]]:
+    """(names a module defines at its top level, names it imports there) of one project module."""
+    defined, imported = set(), set()
+    for node in ast.parse(FILES[mod].read_text(encoding="utf-8")).body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            defined.add(node.name)
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            defined |= {n.id for t in targets for n in ast.walk(t) if isinstance(n, ast.Name)}
+        elif isinstance(node, (ast.Import, ast.ImportFrom)):
+            imported |= {a.asname or a.name.split(".")[0] for a in node.names}
+    return defined, imported
+
+
+def test_every_name_has_one_import_path():
+    """No module other than a package's ``__init__`` hands on a name it imported: a name is imported from the
+    module that defines it, and ``__all__`` lists only what its module defines."""
+    passed_on = []
+    for mod, edges in GRAPH.items():
+        for dep, name, _ in edges:
+            if name is None or dep not in FILES or FILES[dep].name == "__init__.py" or name.startswith("_"):
+                continue
+            defined, imported = _top_level_names(dep)
+            if name not in defined and name in imported:
+                passed_on.append(f"{mod} imports {name} from {dep}")
+    for mod, path in FILES.items():
+        if path.name == "__init__.py":
+            continue
+        defined, _ = _top_level_names(mod)
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+            if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "__all__" for t in node.targets):
+                listed = [e.value for e in getattr(node.value, "elts", ()) if isinstance(e, ast.Constant)]
+                passed_on += [f"{mod}.__all__ lists {n}, defined elsewhere" for n in listed if n not in defined]
+    assert not passed_on, "re-exports outside package __init__s: " + "; ".join(sorted(passed_on))
