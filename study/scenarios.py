@@ -6,8 +6,11 @@ A recording is what a bench session with a distal load cell and a distal positio
   fast (12-25 mm/s) pull/release cycle of random amplitude, minor loops (partial release, re-pull past the old
   peak), staircases with holds, and small oscillations around a mid level (0.5-2 Hz); every block
   starts and ends at rest, so a time split at a block boundary holds out whole cycles;
+* or, with ``motion="hand"``, operator-like motion over the same span (:func:`study.motion.hand_motion`:
+  band-limited random moves with holds and part-way reversals, speeds up to 25 mm/s);
 * the rig of :mod:`slave.simulated` (quasi-static distributed Coulomb tendon, 100 elements, motor
-  with 40 Hz bandwidth, tissue spring at the tip) with randomised K, EA and load stiffness;
+  with 40 Hz bandwidth, a tissue spring at the tip, or with ``load`` nonlinear tissue or free space then contact)
+  with randomised K, EA and load stiffness;
 * sensors: proximal load cell with white noise, motor encoder quantised at 0.47 um, distal load
   cell with white noise, distal position with noise and 1 um quantisation; both positions are
   zeroed at the start (the encoders are reset at rest), as on a bench.
@@ -20,6 +23,8 @@ The scenario table is the effect catalogue's (estimator/offline/effects/catalogu
 knob gives its realistic range and how a level turns into the rig switch's settings
 (:func:`effects_config`); an entry without a rig switch is applied to the recorded signals here
 (pre-sliding, distal backlash, the sensor channels).
+
+Over 400 lines: the rig's scenario table, its loads and its sensor chain belong together as one generator.
 """
 from __future__ import annotations
 
@@ -34,14 +39,20 @@ from estimator.offline.effects.kernels import backlash_play, travel_lag
 from estimator.sheath import SheathGeometry
 from slave.rig import RigState, RigTruth
 from slave.simulated import SimulatedRig
+from study.motion import hand_motion
 from teleop.config.effects import EffectsConfig, EffectSwitch
 from teleop.config.schema import LoadConfig, RunConfig, SensorConfig, SheathConfig, SimulatedRigConfig
 
 __all__ = [
-    "RIG_SWITCH", "UNCATALOGUED", "Recording", "realistic_range", "effects_config", "protocol", "record",
+    "LOADS", "MOTIONS", "RIG_SWITCH", "UNCATALOGUED", "Recording", "realistic_range", "effects_config", "protocol", "record",
     "scenario_effects",
 ]
 
+#: the proximal motions of :func:`record`: the bench protocol (:func:`protocol`) or an operator's hand
+#: (:func:`study.motion.hand_motion`)
+MOTIONS = ("protocol", "hand")
+#: the distal loads of :func:`record`: a linear spring, nonlinear (stiffening) tissue, free space then contact
+LOADS = ("spring", "tissue", "contact")
 #: Effects outside the catalogue, for testing the answer ``unknown``: a slow wander of the distal
 #: load cell's zero (thermal drift of its bridge), smooth on a ~10 s scale.
 UNCATALOGUED = ("load_cell_drift", "load_cell_wander")
@@ -245,8 +256,9 @@ def _run(rig: SimulatedRig, cmd: np.ndarray, dt: float) -> tuple[np.ndarray, tup
 
 
 def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level: float | None = None,
-           duration: float = 90.0, rate_hz: float = 1000.0) -> Recording:
-    """Run one protocol through the simulated rig with ``effect`` hidden (None or "none": clean).
+           duration: float = 90.0, rate_hz: float = 1000.0, motion: str = "protocol",
+           load: str = "spring") -> Recording:
+    """Run one motion through the simulated rig with ``effect`` hidden (None or "none": clean).
 
     Parameters
     ----------
@@ -261,13 +273,23 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
         Length [s], >= 5.
     rate_hz : float
         Sampling and control rate [Hz], >= 100.
+    motion : "protocol" or "hand"
+        The bench protocol (:func:`protocol`) or operator-like motion (:func:`study.motion.hand_motion`: random
+        moves with holds, speeds up to 25 mm/s) over the same span.
+    load : "spring", "tissue" or "contact"
+        The distal load: a joint spring in series with a linear tissue spring (1-3 kN/m); nonlinear tissue (a
+        stiffening law of three pieces, 300-800, then 1.3-3.3, then 4.3-11 kN/m); or free space then contact (a
+        20-100 N/m joint spring for 1-4 mm, then tissue of 1-3 kN/m). The rig and the protocol of a seed are those
+        of the default spring whatever ``motion`` and ``load``; the load's own draws come from a separate stream.
 
     Raises
     ------
     ValueError
-        Unknown effect, ``level`` outside [0, 1], too short or too slowly sampled a recording.
+        Unknown effect, motion or load, ``level`` outside [0, 1], too short or too slowly sampled a recording.
     """
     hidden = _check(effect, level, duration, rate_hz)
+    if motion not in MOTIONS or load not in LOADS:
+        raise ValueError(f"motion must be one of {MOTIONS} and load one of {LOADS}, got {motion!r}, {load!r}")
     # independent streams, so that one seed gives the same rig and protocol whatever the effect
     rng, rng_fx, rng_proto, rng_noise = (np.random.default_rng(s) for s in np.random.SeedSequence([seed, 7]).spawn(4))
     u = float(rng_fx.uniform()) if level is None else float(level)
@@ -285,18 +307,25 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
         if (key := _switch_key(e)) is not None:
             fx = fx.replace(**{key: one[key]})
         params.update(p)
-    rig_cfg = SimulatedRigConfig(n_elements=100, mu=K / angle, effects=fx,
-                                   load=LoadConfig(joint_stiffness=100.0, joint_limit=0.05, tissue_stiffness=k_tissue,
-                                                     tissue_contact=0.0, tissue=True, force=0.0),
+    load_cfg = _load(load, k_tissue, np.random.default_rng(np.random.SeedSequence([seed, 7, 1])))
+    rig_cfg = SimulatedRigConfig(n_elements=100, mu=K / angle, effects=fx, load=load_cfg,
                                    sensors=SensorConfig(load_cell_noise=noise_in, seed=int(rng.integers(2**31))))
     rig = SimulatedRig(sheath, rig_cfg)
     c = L / EA
     per_newton = math.exp(-K) / (100.0 + k_tissue) + c * -math.expm1(-K) / K   # x_in per T_in, pulling
     x0 = _truth(rig.state).x_in
-    x_rest = float(rng.uniform(0.1, 0.4)) * per_newton
-    if "friction_offset" in hidden:   # rest where the tendon stays taut: friction holds a(e^K - 1) at the tip
-        x_rest += 1.2 * params["tension_offset"] * math.expm1(K) * (1.0 / (100.0 + k_tissue) + c)
-    cmd = x0 + protocol(duration, rate_hz, float(rng.uniform(12.0, 20.0)) * per_newton, rng_proto, x_rest=x_rest)
+    u_rest, u_top = float(rng.uniform(0.1, 0.4)), float(rng.uniform(12.0, 20.0))
+    taut = 1.2 * params["tension_offset"] * math.expm1(K) if "friction_offset" in hidden else 0.0
+    if load == "spring":
+        x_rest, x_top = u_rest * per_newton, u_top * per_newton
+        # rest where the tendon stays taut: friction holds a(e^K - 1) at the tip
+        x_rest += taut * (1.0 / (100.0 + k_tissue) + c)
+    else:
+        x_rest, x_top = _reach(load_cfg, K, c, u_rest + taut), _reach(load_cfg, K, c, u_top)
+    if motion == "hand":
+        cmd = x0 + hand_motion(duration, rate_hz, x_rest, max(x_top, 1.5 * x_rest), rng_proto)
+    else:
+        cmd = x0 + protocol(duration, rate_hz, x_top, rng_proto, x_rest=x_rest)
     dt = 1.0 / rate_hz
     out, (enc0, x_out0, x_in0) = _run(rig, cmd, dt)
     time = np.arange(1, cmd.size + 1) * dt
@@ -319,8 +348,38 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     truth = {"effect": "+".join(hidden) or "none", "effects": hidden, "parameters": params, "level": u,
              "K": K, "compliance": c, "EA": EA, "noise_T_in": noise_in, "noise_T_out": noise_out,
              "noise_x_out": noise_x, "route": tuple((r.length, r.radius) for r in geo.runs),
+             "motion": motion, "load": {"kind": load, **_load_truth(load_cfg)},
              "signals": {"T_out": out[:, 3], "x_out": out[:, 2] - x_out0, "x_in": out[:, 4] - x_in0}}
     return Recording(data=data, truth=truth)
+
+
+def _load(kind: str, k_tissue: float, rng: np.random.Generator) -> LoadConfig:
+    """The rig's distal load of ``kind`` (:func:`record`'s ``load``); ``k_tissue`` [N/m] the spring's tissue."""
+    if kind == "tissue":              # stiffening: three pieces of rising slope
+        k1, x1, x2 = float(rng.uniform(300.0, 800.0)), float(rng.uniform(1e-3, 3e-3)), float(rng.uniform(1e-3, 3e-3))
+        return LoadConfig(joint_stiffness=k1, tissue_contact=x1, tissue_stiffness=float(rng.uniform(1000.0, 2500.0)),
+                          joint_limit=x1 + x2, limit_stiffness=float(rng.uniform(3000.0, 8000.0)), tissue=True)
+    if kind == "contact":             # free space on a soft joint spring, then tissue
+        return LoadConfig(joint_stiffness=float(rng.uniform(20.0, 100.0)), tissue_contact=float(rng.uniform(1e-3, 4e-3)),
+                          tissue_stiffness=float(rng.uniform(1000.0, 3000.0)), joint_limit=0.05, tissue=True)
+    return LoadConfig(joint_stiffness=100.0, joint_limit=0.05, tissue_stiffness=k_tissue, tissue_contact=0.0,
+                      tissue=True, force=0.0)
+
+
+def _load_truth(ld: LoadConfig) -> dict[str, float]:
+    """The load's law for the truth: slopes [N/m] and where they start [m]."""
+    return {"joint_stiffness": ld.joint_stiffness, "tissue_contact": ld.tissue_contact,
+            "tissue_stiffness": ld.tissue_stiffness, "joint_limit": ld.joint_limit,
+            "limit_stiffness": ld.limit_stiffness}
+
+
+def _reach(ld: LoadConfig, K: float, c: float, T_in: float) -> float:
+    """Proximal travel [m] that pulls the tendon to ``T_in`` [N] from slack: the load's travel to T_in e^-K plus
+    the elongation c T_in (1 - e^-K) / K (``c`` = L/EA [m/N])."""
+    x = np.linspace(0.0, 0.05, 20001)
+    springs = ((0.0, ld.joint_stiffness), (ld.tissue_contact, ld.tissue_stiffness), (ld.joint_limit, ld.limit_stiffness))
+    F = sum(k * np.maximum(0.0, x - x0) for x0, k in springs)
+    return float(np.interp(T_in * math.exp(-K), F, x)) + c * T_in * -math.expm1(-K) / K
 
 
 def _truth(s: RigState) -> RigTruth:

@@ -14,7 +14,9 @@ and a different, seeded randomisation of everything a bench changes between sess
 * sensors: load-cell noise 0.01-0.04 N (proximal) and 0.01-0.05 N (distal), load-cell resolution
   1-5 mN, encoder quantum 0.2-1 um, distal position noise 0-0.5 um and quantum 0.5-2 um;
 * protocol (:mod:`study.lumped.protocol`): peak proximal tension 8-20 N, shuffled slow and fast
-  cycles, minor loops, dwells, small oscillations and triangle waves.
+  cycles, minor loops, dwells, small oscillations and triangle waves; or (``motion="hand"``) operator-like
+  motion over the same span (:mod:`study.motion`);
+* on request (``load``) nonlinear stiffening tissue or free space then contact as the distal load.
 
 Hidden effects (:data:`EFFECT_IDS`, magnitudes from :func:`study.scenarios.realistic_range` at
 ``level``) are all physics of the lumped model or of its sensor chain, never the estimator's
@@ -31,9 +33,10 @@ from estimator.offline.effects.catalogue import effect
 from estimator.sheath import SheathGeometry
 from study.lumped.protocol import command
 from study.lumped.simulator import Load, LumpedTendon
-from study.scenarios import Recording, realistic_range
+from study.motion import hand_motion
+from study.scenarios import MOTIONS, Recording, realistic_range
 
-__all__ = ["EFFECT_IDS", "UNCATALOGUED", "record", "draw_route", "draw_load"]
+__all__ = ["EFFECT_IDS", "LOADS", "UNCATALOGUED", "record", "draw_route", "draw_load"]
 
 _SENSOR = tuple(f"sensor_{kind}:{ch}" for kind, chans in
                 (("offset", ("T_in", "T_out", "x_in", "x_out")), ("gain", ("T_in", "T_out")),
@@ -41,6 +44,8 @@ _SENSOR = tuple(f"sensor_{kind}:{ch}" for kind, chans in
 #: Effect ids of the contract with the diagnosis (physical first, then one per sensor channel).
 EFFECT_IDS: tuple[str, ...] = ("velocity_friction", "pretension", "curvature_drift", "tendon_stiffening",
                                "stiction", "friction_offset", "presliding", "distal_backlash") + _SENSOR
+#: distal loads :func:`record` can be asked for: the seed's own kinds and nonlinear tissue, free space then contact
+LOADS: tuple[str, ...] = ("spring", "preloaded", "constant", "joint", "tissue", "contact")
 #: Outside the catalogue: a smooth ~10 s random wander of the distal load cell zero.
 UNCATALOGUED: tuple[str, ...] = ("load_cell_wander",)
 
@@ -78,8 +83,9 @@ def draw_route(rng: np.random.Generator) -> tuple[tuple[tuple[float, float], ...
 
 
 def draw_load(rng: np.random.Generator, kind: str | None = None, K: float = 0.8) -> Load:
-    """A random distal load of ``kind`` (random among spring, preloaded, constant, joint if None);
-    a constant force is drawn so that the proximal tension while it slides, P e^K, is 4-12 N."""
+    """A random distal load of ``kind`` (random among spring, preloaded, constant, joint if None; "tissue" and
+    "contact" only when asked: :data:`LOADS`); a constant force is drawn so that the proximal tension while it slides,
+    P e^K, is 4-12 N."""
     kind = kind or str(rng.choice(["spring", "preloaded", "constant", "joint"]))
     mass, damping = rng.uniform(0.002, 0.010), rng.uniform(0.2, 1.0)
     logu = (lambda lo, hi: float(math.exp(rng.uniform(math.log(lo), math.log(hi)))))
@@ -93,6 +99,12 @@ def draw_load(rng: np.random.Generator, kind: str | None = None, K: float = 0.8)
     if kind == "joint":
         return Load("joint", stiffness=rng.uniform(50.0, 300.0), limit=rng.uniform(1e-3, 4e-3),
                     stop=logu(1e5, 1e6), mass=mass, damping=damping)
+    if kind == "tissue":              # exponential stiffening over 1-3 mm, 0.2-1 kN/m at first touch
+        return Load("tissue", stiffness=logu(200.0, 1000.0), limit=rng.uniform(1e-3, 3e-3), mass=mass,
+                    damping=damping)
+    if kind == "contact":             # 1-4 mm of free space on a soft spring, then tissue
+        return Load("contact", stiffness=rng.uniform(20.0, 100.0), limit=rng.uniform(1e-3, 4e-3),
+                    contact_stiffness=logu(500.0, 5000.0), mass=mass, damping=damping)
     return Load(kind, mass=mass, damping=damping)
 
 
@@ -239,7 +251,8 @@ def _measure(sensor: dict, t: np.ndarray, true: dict[str, np.ndarray], noise: tu
 
 
 def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level: float | None = None,
-           duration: float = 90.0, rate_hz: float | None = None) -> Recording:
+           duration: float = 90.0, rate_hz: float | None = None, motion: str = "protocol",
+           load: str | None = None) -> Recording:
     """One randomised bench recording from the lumped simulator with ``effect`` hidden.
 
     Parameters
@@ -253,6 +266,11 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
         Position of each magnitude in its realistic range; uniform random from the seed if None.
     duration : float >= 5 [s]
     rate_hz : float in [100, 20000] [Hz], optional; log-uniform in [200, 2000] from the seed if None.
+    motion : "protocol" (:func:`study.lumped.protocol.command`) or "hand" (operator-like motion over the same span,
+        :func:`study.motion.hand_motion`: random moves with holds, speeds up to 25 mm/s).
+    load : None (the seed's own among spring, preloaded, constant, joint) or a kind of :data:`LOADS` ("tissue":
+        nonlinear stiffening tissue; "contact": free space then contact), drawn from a separate stream: the rig's
+        other draws are the seed's whatever ``load``.
 
     Returns
     -------
@@ -264,16 +282,19 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     Raises
     ------
     ValueError
-        Unknown effect, ``seed`` not an int, ``level``, ``duration`` or ``rate_hz`` out of range.
+        Unknown effect, motion or load, ``seed`` not an int, ``level``, ``duration`` or ``rate_hz`` out of range.
     """
     hidden = _check(effect, seed, level, duration, rate_hz)
+    if motion not in MOTIONS or (load is not None and load not in LOADS):
+        raise ValueError(f"motion must be one of {MOTIONS} and load None or one of {LOADS}, got {motion!r}, {load!r}")
     rng, rng_fx, rng_proto, rng_noise = (np.random.default_rng(s)
                                          for s in np.random.SeedSequence([int(seed), 8]).spawn(4))
     route, mu = draw_route(rng)
     geo = SheathGeometry(route)
     K, L = mu * geo.total_angle, geo.length
     EA = float(rng.uniform(6e3, 25e3))
-    load = draw_load(rng, K=K)
+    drawn = draw_load(rng, K=K)
+    dist = draw_load(np.random.default_rng(np.random.SeedSequence([int(seed), 8, 1])), load, K) if load else drawn
     rate = float(round(math.exp(rng.uniform(math.log(200.0), math.log(2000.0)))))   # drawn always: same rig
     rate = rate if rate_hz is None else float(rate_hz)
     noise_in, noise_out = float(rng.uniform(0.01, 0.04)), float(rng.uniform(0.01, 0.05))
@@ -285,14 +306,15 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     travel = float(rng.uniform(2e-3, 6e-3))
     u = float(rng_fx.uniform()) if level is None else float(level)
     sim_kw, sensor, by_effect = _effect_knobs(hidden, u, K, mu, geo, duration, rng_fx)
-    tl = LumpedTendon(geo, mu, EA, load, motor_bandwidth_hz=bw, motor_max_speed=vmax, **sim_kw)
-    x_rest, x_top, M_e = _span(geo, mu, EA, load, sim_kw, T_rest, T_peak, travel,
+    tl = LumpedTendon(geo, mu, EA, dist, motor_bandwidth_hz=bw, motor_max_speed=vmax, **sim_kw)
+    x_rest, x_top, M_e = _span(geo, mu, EA, dist, sim_kw, T_rest, T_peak, travel,
                                by_effect.get("friction_offset", {}).get("tension_offset", 0.0))
     tl.run(np.full(int(round(_SETTLE * rate)), tl.state[0]), rate)   # settle at rest, not recorded
     tl.state[3] = 0.0
     start = {k: float(v) for k, v in zip(("x_motor", "x_joint", "x_end"), (tl.state[0], tl.state[2], tl.u[-1]),
                                          strict=False)}
-    cmd = start["x_motor"] + command(duration, rate, x_rest, x_top, rng_proto)
+    move = hand_motion if motion == "hand" else command
+    cmd = start["x_motor"] + move(duration, rate, x_rest, x_top, rng_proto)
     sig = tl.run(cmd, rate)
     n = cmd.size
     t = np.arange(1, n + 1) / rate
@@ -308,7 +330,7 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
              "parameters_by_effect": by_effect, "level": u, "K": K, "mu": mu, "compliance": L / EA, "EA": EA,
              "L": L, "M_e": M_e, "noise_T_in": noise_in, "noise_T_out": noise_out, "noise_x_out": noise_x,
              "quantum_T": q_T, "quantum_x_in": q_in, "quantum_x_out": q_out, "simulator": "lumped",
-             "route": route, "rate_hz": rate, "load": load.describe(), "motor_bandwidth_hz": bw,
+             "route": route, "rate_hz": rate, "load": dist.describe(), "motion": motion, "motor_bandwidth_hz": bw,
              "signals": {"T_out": sig["T_out"].copy(), "T_in": sig["T_in"].copy(), "x_out": x_out_true,
                          "x_in": x_in_true, "x_end": sig["x_end"] - start["x_end"]}}
     return Recording(data=data, truth=truth)

@@ -56,7 +56,8 @@ from study.lumped.kernel import simulate
 
 __all__ = ["Load", "LumpedTendon", "LOAD_KINDS"]
 
-LOAD_KINDS = ("spring", "preloaded", "constant", "joint", "fixed")
+LOAD_KINDS = ("spring", "preloaded", "constant", "joint", "fixed", "tissue", "contact")
+_TISSUE_KNOTS = 9          # breakpoints of the piecewise-linear exponential tissue law, 0 to 4 stiffening lengths
 _GRAVITY = 9.81  # m/s^2
 
 
@@ -79,7 +80,10 @@ class Load:
 
     kind : "spring" F = k x; "preloaded" F = P + k x on a lower stop at 0; "constant" F = P on a
     lower stop at 0; "joint" F = k x up to ``limit`` [m], then a hard stop; "fixed" a hard stop
-    at 0 (stiffness ``stop``). mass [kg] and damping [N s/m] of the load.
+    at 0 (stiffness ``stop``); "tissue" nonlinear (stiffening) tissue F = k l (e^{x/l} - 1), l = ``limit``,
+    piecewise linear through 9 points from 0 to 4 l, on a lower stop at 0; "contact" free space on a spring
+    F = k x up to the contact at ``limit`` [m], then tissue of ``contact_stiffness`` [N/m] in parallel.
+    mass [kg] and damping [N s/m] of the load.
     """
 
     kind: str = "fixed"
@@ -89,6 +93,7 @@ class Load:
     stop: float = 2e6
     mass: float = 0.005
     damping: float = 2.0
+    contact_stiffness: float = 0.0
 
     def __post_init__(self) -> None:
         _check(self.kind in LOAD_KINDS, "load.kind", f"one of {LOAD_KINDS}", self.kind)
@@ -98,8 +103,11 @@ class Load:
         _check(_pos(self.stop), "load.stop", "a number > 0 N/m", self.stop)
         _check(_nonneg(self.mass), "load.mass", "a number >= 0 kg", self.mass)
         _check(_nonneg(self.damping), "load.damping", "a number >= 0 N s/m", self.damping)
-        if self.kind in ("spring", "joint"):
+        _check(_nonneg(self.contact_stiffness), "load.contact_stiffness", "a number >= 0 N/m", self.contact_stiffness)
+        if self.kind in ("spring", "joint", "tissue", "contact"):
             _check(self.stiffness > 0, "load.stiffness", f"> 0 N/m for a {self.kind} load", self.stiffness)
+        if self.kind in ("tissue", "contact"):
+            _check(self.limit > 0, "load.limit", f"> 0 m for a {self.kind} load", self.limit)
 
     def graph(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Breakpoints lx [m], forces lF [N] and slopes ls [N/m] (len(lx) + 1) of the force law."""
@@ -112,6 +120,13 @@ class Load:
             pts, sl = [(0.0, P)], [S, 0.0]
         elif self.kind == "joint":
             pts, sl = [(0.0, 0.0), (self.limit, k * self.limit)], [S, k, S]
+        elif self.kind == "tissue":
+            knots = np.linspace(0.0, 4.0 * self.limit, _TISSUE_KNOTS)
+            forces = k * self.limit * np.expm1(knots / self.limit)
+            pts = list(zip(knots.tolist(), forces.tolist(), strict=True))
+            sl = [S, *(np.diff(forces) / np.diff(knots)).tolist(), k * math.exp(4.0)]
+        elif self.kind == "contact":
+            pts, sl = [(0.0, 0.0), (self.limit, k * self.limit)], [S, k, k + self.contact_stiffness]
         else:
             pts, sl = [(0.0, 0.0)], [S, S]
         lx, lF = (np.array(c, dtype=float) for c in zip(*pts, strict=False))
