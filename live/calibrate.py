@@ -30,6 +30,18 @@ def add_calibrate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", metavar="FILE", required=True, help="YAML config of the instrument")
     p.add_argument("--out", metavar="FILE", help="calibration file (default <calibration.dir>/<instrument.id>.yaml; "
                                                   "calibration.dir null: $XDG_DATA_HOME/tsm-teleop/calibration)")
+    p.add_argument("--diagnose", action="store_true",
+                   help="single tendon: after the calibration, an excitation motion through the slave's checks, the "
+                        "diagnosis of its recording and the model file the slave runs (live/diagnose.py)")
+    p.add_argument("--model-out", metavar="FILE", default=None,
+                   help="--diagnose: the model file (default beside the calibration: <stem>.model.yaml)")
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="--diagnose: the excitation's length [s] (default 60)")
+    p.add_argument("--seed", type=int, default=None, help="--diagnose: seeds the excitation's motion (default 0)")
+    p.add_argument("--listen", metavar="EP", action="append",
+                   help="--diagnose on rig.type zenoh: Zenoh endpoint to listen on (repeatable)")
+    p.add_argument("--connect", metavar="EP", action="append",
+                   help="--diagnose on rig.type zenoh: Zenoh endpoint to connect to (repeatable)")
     p.add_argument("-v", "--verbose", action="store_true", help="log details")
 
 
@@ -109,6 +121,10 @@ def run_calibrate(args: argparse.Namespace) -> int:
     from slave.calibration_file import calibration_path, save_calibration
     from teleop.config.load import load_config
 
+    for flag, dest in (("--model-out", "model_out"), ("--duration", "duration"), ("--seed", "seed"),
+                       ("--listen", "listen"), ("--connect", "connect")):
+        if getattr(args, dest, None) is not None:
+            raise ConfigError(f"{flag}: for --diagnose")
     cfg = load_config(args.config)
     out = destination(cfg, args.out)
     cal, sim = _simulate(cfg, args.config)

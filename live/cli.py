@@ -155,9 +155,9 @@ def _add_services(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
                                          "limits, a pair both ways; spindles stroked over their open jaws) on its "
                                          "simulator, saved where the slave reloads it: <calibration.dir>/<instrument>"
                                          ".yaml (default ~/.local/share/tsm-teleop/calibration)")
-    from live.calibrate import add_calibrate_arguments, run_calibrate
+    from live.calibrate import add_calibrate_arguments
     add_calibrate_arguments(p)
-    p.set_defaults(func=run_calibrate)
+    p.set_defaults(func=_cmd_calibrate)
 
     p = sub.add_parser("keys", help="the installation's credentials every process authenticates with: where they "
                                     "are (made if missing), --renew, --export DIR (live/keys.py)")
@@ -212,6 +212,16 @@ def _add_lazy(sub: argparse._SubParsersAction[argparse.ArgumentParser], args: li
 def _cmd_demo(args: argparse.Namespace) -> int:
     from live.demo.main import main_demo
     return main_demo(args)
+
+
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    """``teleop calibrate``: the power-up calibration (live/calibrate.py), or with ``--diagnose`` the single tendon's
+    calibration, excitation, diagnosis and model file (live/diagnose.py)."""
+    if args.diagnose:
+        from live.diagnose import run_diagnose
+        return run_diagnose(args)
+    from live.calibrate import run_calibrate
+    return run_calibrate(args)
 
 
 def _cmd_bridge(args: argparse.Namespace) -> int:
@@ -271,6 +281,7 @@ PATH_ARGS: tuple[tuple[str, str, str, tuple[str, ...] | None], ...] = (
     ("repair", "--repair", "dir", None), ("out", "--out", "file", None), ("rrd", "--rrd", "file", None),
     ("json", "--json", "file", None), ("calibration", "--calibration", "file", ("replay",)),
     ("model", "--model", "file", None), ("model_out", "--model-out", "dir", ("analyze",)),
+    ("model_out", "--model-out", "file", ("calibrate",)),
     ("file", "FILE", "file", ("analyze",)), ("route", "--route", "file", ("analyze",)),
     ("kaist", "--kaist", "dir", ("analyze",)), ("mrd", "--mrd", "dir", ("analyze",)),
     ("report", "--report", "dir", ("analyze",)), ("figures", "--figures", "dir", ("analyze",)),
