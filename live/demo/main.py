@@ -125,7 +125,8 @@ def evaluate(csv_path: str | Path, calibration: dict, cfg: Config) -> dict:
             fmax, fmean = full_scale_errors(T_hat, T)
             emax, emean = full_scale_errors(e_hat, e)
             row[est] = {"force_error_max_fs": fmax, "force_error_mean_fs": fmean,
-                        "elongation_error_max_fs": emax, "elongation_error_mean_fs": emean}
+                        "elongation_error_max_fs": emax, "elongation_error_mean_fs": emean,
+                        "force_rmse_N": float(np.sqrt(np.mean((T_hat - T) ** 2)))}
         out[name] = row
     return out
 
@@ -213,11 +214,28 @@ class TendonDemo:
             L.append(f"{'':22s} {'paper reports':16s} {0.07:9.3f} {'<0.02':>11s} {0.03:10.3f} {'<0.02':>11s}")
         L.append(f"(full scale = range of the true signal in the experiment; paper-formula reversal deadband "
                  f"{s.get('baseline_deadband_N', float('nan')):.2f} N)")
+        L += _tension_rmse_lines(s)
         if s.get("haptic_loop"):
             from teleop.timing.loop_metrics import loop_metric_lines
             L.append("")
             L += loop_metric_lines(s["haptic_loop"])
         return L
+
+
+def _tension_rmse_lines(s: dict) -> list[str]:
+    """The live estimate's distal-tension RMSE against the simulator's truth per experiment and, with a model file,
+    its id, hash and run: the figures two runs (with and without a model) compare."""
+    rows = [f"{name} {row['profile_memory']['force_rmse_N']:.4f} N" for name, row in s.get("experiments", {}).items()
+            if "force_rmse_N" in row.get("profile_memory", {})]
+    m, ran = s.get("model"), s.get("slave", {}).get("model")
+    L = [f"distal tension RMSE, live estimate vs truth: {', '.join(rows)}"] if rows else []
+    if m:
+        runs = "" if not ran else f"; {ran['cycles']} cycles, {ran['fallbacks']} fell back to the base estimator"
+        L.append(f"model {m['id']} (sha256 {m['sha256'][:12]}..., {Path(m['path']).name}): the live estimate is "
+                 f"the model file's{runs}")
+    else:
+        L.append("model: none (the base estimator)")
+    return L
 
 
 def demo_kind(cfg: Config) -> Any:
