@@ -55,8 +55,9 @@ def check_diagnose(cfg: Config, source: str, duration: float) -> None:
     """
     kind = instrument_kind(cfg)
     if kind != "tendon":
-        raise ConfigError(f"--diagnose: {source} is a {KINDS[kind]} instrument; --diagnose supports the single "
-                          "tendon (instrument.joints empty)")
+        what = KINDS[kind]
+        raise ConfigError(f"--diagnose: {source} is {'an' if what[0] in 'aeiou' else 'a'} {what} instrument; "
+                          "--diagnose supports the single tendon (instrument.joints empty)")
     if cfg.rig.type not in DIAGNOSE_RIGS:
         raise ConfigError(f"--diagnose: rig.type {cfg.rig.type} of {source} is not an instrument to move; "
                           f"--diagnose runs on rig.type {' or '.join(DIAGNOSE_RIGS)}")
@@ -159,7 +160,7 @@ def _excite(node, rig, cfg: Config, args: argparse.Namespace, csv: Path, tick: C
     if bench is None:
         raise ConfigError(f"--diagnose: the rig of {args.config} (rig.type {cfg.rig.type}) gives no distal reading; "
                           "the diagnosis needs a calibration bench's distal load cell or position sensor in the rig's "
-                          "samples (T_out, x_out; docs/how-to/live-session.md)")
+                          "samples (T_out, x_out; docs/how-to/analyse-recording.md)")
     meta = {"source": "teleop calibrate --diagnose", "instrument": cfg.instrument.id, "rig": cfg.rig.type,
             "distal": bench.name}
     motion = ExcitationMotion(cfg, float(node.rig_state.x_in), args.duration, args.seed)
