@@ -7,7 +7,10 @@ Each reads one physical symptom straight from the measured samples, without a fi
 * :func:`distal_end_held`, :func:`distal_at_end`: a distal end that never moves, or sits on a stop;
 * :func:`rest_reading`, :func:`rest_offset`: an encoder reading away from zero at the initial rest;
 * :func:`channel_choice`, :func:`look_alike`, :func:`toe_or_play`: which of two look-alike effects the data
-  point to.
+  point to;
+* :func:`rest_tension`: a tension both load cells read alike at the initial rest (a pretension, not an encoder);
+* :func:`speed_or_lag`: whether the distal tension's departure in slip grows with the sliding speed (velocity
+  friction) or follows its own rate of change a fixed time late (a load-cell lag).
 
 The numbers they use are in :mod:`estimator.offline.diagnosis.thresholds`.
 """
@@ -23,7 +26,7 @@ from estimator.offline.diagnosis.fit import quantum
 from estimator.offline.effects.catalogue import effect
 
 __all__ = ["holds_release", "stick_slip_ratio", "distal_end_held", "distal_at_end", "sample_block", "rest_reading",
-           "rest_offset", "channel_choice", "look_alike", "toe_or_play"]
+           "rest_offset", "channel_choice", "look_alike", "toe_or_play", "rest_tension", "speed_or_lag"]
 
 
 def _smoothed_speed(t: np.ndarray, x: np.ndarray, max_window: int | None = None) -> tuple[np.ndarray, float, int]:
@@ -254,3 +257,99 @@ def toe_or_play(best: str, fits: dict[str, tuple[float, dict[str, float]]], pric
         return "distal_backlash"
     return min(group, key=lambda g: fits[g][0])
 
+
+
+def rest_tension(data: MeasuredData) -> dict | None:
+    """What the two load cells read at the initial rest, and whether it is a pretension.
+
+    A pretension is tension the tendon carries at rest, so both load cells read it (alike, or within the capstan
+    ratio e^K that friction holds when the load settled against the preload) while the encoders, zeroed at that
+    rest, read zero. An encoder offset moves no tension and shifts its position channel at every tension, the rest
+    included; a load-cell offset reads on one channel only. The reading: the medians of T_in and T_out over the initial rest (the samples before
+    x_in first moves by 5 um) in their noise sigmas (noise or quantisation, whichever is larger).
+
+    Parameters
+    ----------
+    data : MeasuredData with time [s], T_in [N] and T_out [N]
+
+    Returns
+    -------
+    dict or None
+        {"T_in_N", "T_out_N": the rest medians [N], "sigmas": the smaller of the two in its noise sigmas [-],
+        "pretension": both at least REST_TENSION_SIGMAS and within a factor REST_TENSION_RATIO of each other};
+        None without T_out or without an initial rest of REST_MIN_S.
+    """
+    if data.T_out is None:
+        return None
+    stop = _rest_stop(data)
+    if stop < 5 or data.time[stop - 1] - data.time[0] < th.REST_MIN_S:
+        return None
+    med, sig = {}, {}
+    for name in ("T_in", "T_out"):
+        a = np.asarray(getattr(data, name), dtype=float)
+        med[name] = float(np.median(a[:stop]))
+        sig[name] = max(noise_level(a), quantum(a), 1e-9)
+    sigmas = min(med[n] / sig[n] for n in med)
+    agree = max(med["T_in"], med["T_out"]) <= th.REST_TENSION_RATIO * min(med["T_in"], med["T_out"])
+    return {"T_in_N": med["T_in"], "T_out_N": med["T_out"], "sigmas": sigmas,
+            "pretension": bool(sigmas >= th.REST_TENSION_SIGMAS and agree)}
+
+
+def speed_or_lag(data: MeasuredData) -> dict | None:
+    """Whether the distal tension's departure from the capstan ratio in slip grows with the sliding speed or lags.
+
+    In slip the capstan law holds z = s (ln T_in - ln T_out) = K on both branches (s the sign of the proximal
+    motion: the pull and the release). Velocity friction, mu (1 + c_v |v|), adds K c_v |v|: it grows with the
+    sliding speed and vanishes at rest, whatever the tension does. A distal load cell late by tau reads T_out(t - tau)
+    and adds tau |d ln T_out / dt|: every change read a fixed time late, whatever the speed - on a stiff load a small
+    move late by tau departs as much as a fast one on a soft load, and at the tension of a constant load nothing
+    departs at any speed. Both grow with speed on one load, but in proportion to |v| against |v| k / T (k the load's
+    stiffness): over the tensions and loads of a recording they separate. The reading regresses z on the
+    slip samples (|v| above HAND_SLIP_SPEED, T_in and T_out moving with the proximal end, the distal
+    rate within a factor 2 of the proximal one, both tensions above 10 noise sigmas; weights T_out / sigma) on a
+    constant per branch, |v| and |d ln T_out / dt| (Savitzky-Golay derivatives over HAND_WINDOW).
+
+    Parameters
+    ----------
+    data : MeasuredData with time [s], x_in [m], T_in [N], T_out [N]
+
+    Returns
+    -------
+    dict or None
+        {"speed": c_v K [s/m], "delay": tau [s], "K": the mean of the two intercepts [-], "n": slip samples,
+        "moving_s": their time [s]}; None without T_out or with fewer than HAND_MIN_SLIP_S seconds of slip.
+    """
+    from scipy.signal import savgol_filter
+
+    if data.T_out is None:
+        return None
+    t, x, T_in, T_out = (np.asarray(a, dtype=float) for a in (data.time, data.x_in, data.T_in, data.T_out))
+    if t.size < 50:
+        return None
+    dt = float(np.median(np.diff(t)))
+    w = max(7, int(round(th.HAND_WINDOW / dt)) | 1)
+    if w >= t.size:
+        return None
+    sig_in = max(noise_level(T_in), quantum(T_in), 1e-9)
+    sig_out = max(noise_level(T_out), quantum(T_out), 1e-9)
+    Ti, To = savgol_filter(T_in, w, 2), savgol_filter(T_out, w, 2)
+    v = savgol_filter(x, w, 2, deriv=1, delta=dt)
+    di, do = savgol_filter(T_in, w, 2, deriv=1, delta=dt), savgol_filter(T_out, w, 2, deriv=1, delta=dt)
+    s = np.sign(v)
+    ok = ((np.abs(v) > th.HAND_SLIP_SPEED) & (Ti > 10.0 * sig_in) & (To > 10.0 * sig_out)
+          & (np.sign(di) == s) & (np.sign(do) == s))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = (do / To) / (di / Ti)
+    ok &= (ratio > 0.5) & (ratio < 2.0)
+    n = int(ok.sum())
+    if n * dt < th.HAND_MIN_SLIP_S:
+        return None
+    z = s[ok] * (np.log(Ti[ok]) - np.log(To[ok]))
+    pull = (s[ok] > 0).astype(float)
+    A = np.column_stack((pull, 1.0 - pull, np.abs(v[ok]), np.abs(do[ok] / To[ok])))
+    keep = A[:, :2].sum(axis=0) > 0
+    A = np.column_stack((A[:, :2][:, keep], A[:, 2:]))
+    wt = To[ok] / sig_out
+    coef, *_ = np.linalg.lstsq(A * wt[:, None], z * wt, rcond=None)
+    return {"speed": float(coef[-2]), "delay": float(coef[-1]), "K": float(np.mean(coef[:-2])), "n": n,
+            "moving_s": n * dt}

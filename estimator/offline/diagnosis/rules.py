@@ -16,12 +16,20 @@ from estimator.data import MeasuredData, noise_level
 from estimator.offline.diagnosis import thresholds as th
 from estimator.offline.diagnosis.fit import Progress, quantum, rest_start, rest_window, settings_keys, start_points
 from estimator.offline.diagnosis.folds import FINER, Fit, Folds, structure, unresolved
-from estimator.offline.diagnosis.readings import channel_choice, look_alike, toe_or_play
+from estimator.offline.diagnosis.readings import (
+    channel_choice,
+    look_alike,
+    rest_offset,
+    rest_tension,
+    speed_or_lag,
+    toe_or_play,
+)
 from estimator.offline.effects.catalogue import CATALOGUE, EQUIVALENT, Effect
 from estimator.offline.effects.types import ROUTE, ROUTE_FORMS, ROUTE_KEYS, UNKNOWN, Series, finer_route
 
 __all__ = ["Context", "noise_floors", "candidate_effects", "refine_route", "fit_candidates", "refit_routes",
-           "select", "shown_at_floor", "stick_slip_rule", "rest_rule", "report_channels", "verdict"]
+           "select", "shown_at_floor", "stick_slip_rule", "rest_rule", "report_channels", "verdict",
+           "pretension_at_rest", "speed_or_delay"]
 
 
 @dataclass
@@ -246,11 +254,58 @@ def select(ctx: Context, base: Fit, singles: dict[str, Fit], max_effects: int, d
             order = {eid: v for eid, v in order.items() if shown_at_floor(ctx, base, eid, trial[eid])} or order
         best = look_alike(min(order, key=lambda k: order[k]), price, data)
         best = toe_or_play(best, {eid: (f.S, f.values[0]) for eid, f in trial.items()}, price)
+        best = pretension_at_rest(best, price, data)
+        best = speed_or_delay(best, price, _training(ctx, data))
         if price[best] >= 1.0 or (at_floor and not shown_at_floor(ctx, base, best, trial[best])):
             break
         chosen = trial[best]
         pool.pop(best)
     return chosen
+
+
+def _training(ctx: Context, data: MeasuredData) -> MeasuredData:
+    """The raw samples of the training block (up to the last sample of the prepared training block)."""
+    return data.slice(0, int(np.searchsorted(data.time, ctx.folds.train.time[-1], side="right")))
+
+
+_ENCODER_OFFSETS = ("sensor_offset:x_in", "sensor_offset:x_out")
+_SPEED_OR_LAG = ("velocity_friction", "sensor_lag:T_out")
+
+
+def pretension_at_rest(best: str, price: dict[str, float], data: MeasuredData) -> str:
+    """Pretension or an encoder offset: what each does at rest.
+
+    Symptom: an encoder offset is the best fit, but both load cells read a tension at the initial rest
+    (:func:`estimator.offline.diagnosis.readings.rest_tension`) and neither encoder reads off its zero there
+    (:func:`estimator.offline.diagnosis.readings.rest_offset`). A pretension is tension the tendon carries at rest,
+    read by both load cells, and it moves no encoder; an encoder offset shifts its position by the same amount at
+    every tension, the rest included, and loads nothing. Under operator-like motion the two bend the elongation alike
+    (a pretension changes the tension at which the distal end starts to move, which an offset of x imitates on a
+    spring load), and the fit may prefer the offset: the rest decides. Named when the pretension is acceptable
+    (price < 1)."""
+    if best not in _ENCODER_OFFSETS or price.get("pretension", math.inf) >= 1.0:
+        return best
+    rest = rest_tension(data)
+    if rest is None or not rest["pretension"] or rest_offset(data) is not None:
+        return best
+    return "pretension"
+
+
+def speed_or_delay(best: str, price: dict[str, float], data: MeasuredData) -> str:
+    """Velocity friction or a lag of the distal load cell: what each does with speed and at reversals.
+
+    Symptom: one of the two is the best fit and the other is acceptable (price < 1). Both widen the loop with the
+    speed of a move; velocity friction by K c_v |v| in ln(T_in / T_out), whatever the tension's rate, vanishing at
+    rest; a lag by tau |d ln T_out / dt|, every change read tau late whatever the speed, so that at a reversal the
+    distal tension turns tau after the proximal one. The reading
+    (:func:`estimator.offline.diagnosis.readings.speed_or_lag`, on the training block) separates the two terms over
+    the slip samples: a delay of at least HAND_LAG_MIN names the lag, a smaller one velocity friction."""
+    if best not in _SPEED_OR_LAG or not all(price.get(e, math.inf) < 1.0 for e in _SPEED_OR_LAG):
+        return best
+    reading = speed_or_lag(data)
+    if reading is None:
+        return best
+    return "sensor_lag:T_out" if reading["delay"] >= th.HAND_LAG_MIN else "velocity_friction"
 
 
 def stick_slip_rule(ctx: Context, chosen: Fit, singles: dict[str, Fit], chatter: float | None

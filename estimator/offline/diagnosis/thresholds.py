@@ -13,7 +13,8 @@ __all__ = ["PENALTY", "STRUCTURE_RATIO", "VALIDATION_FRACTION", "SECOND_ROUND", 
            "STICK_SLIP_SPEED", "STICK_SLIP_HOLD", "STICK_SLIP_MIN_SAMPLES", "STICK_SLIP_MIN_MOVE",
            "STICK_SLIP_MIN_HOLD", "RELEASE_SHARE", "HELD_STEPS", "HELD_SHARE", "NEAR_HELD_SHARE", "AT_END_SPEED",
            "AT_END_BAND", "AT_END_SHARE", "AT_END_HIDES", "SLIDE_SEEN", "SLIDE_QUANTA", "SLIDE_SIGMAS",
-           "SLIDE_SHARE", "K_RESTART", "REST_MIN_S", "REST_RESOLUTIONS"]
+           "SLIDE_SHARE", "K_RESTART", "REST_MIN_S", "REST_RESOLUTIONS", "REST_TENSION_SIGMAS",
+           "REST_TENSION_RATIO", "HAND_WINDOW", "HAND_SLIP_SPEED", "HAND_MIN_SLIP_S", "HAND_LAG_MIN"]
 
 # ---- model choice: the split, the scores, the price ------------------------------------------------------------
 VALIDATION_FRACTION = 0.35  # [-] share of the training block each fold validates on
@@ -83,3 +84,11 @@ REST_RESOLUTIONS = 3.0      # [resolutions] a position reading further from zero
 
 # ---- the fits ---------------------------------------------------------------------------------------------------
 FIT_TOL = 1e-6              # [-] relative ftol and xtol of every least-squares refinement (diagnosis_fit.fit_model)
+
+# ---- hand motion: the rest tension and the speed-or-lag readings (estimator.offline.diagnosis.readings) ----------
+REST_TENSION_SIGMAS = 10.0  # [noise sigmas] both load cells reading at least this at the initial rest: tension there
+REST_TENSION_RATIO = 5.0    # [-] ... within this factor of each other (friction holds up to e^K, K <= 1.6, at rest)
+HAND_WINDOW = 0.05          # [s] Savitzky-Golay window of the speed-or-lag reading's smoothing and derivatives
+HAND_SLIP_SPEED = 1e-3      # [m/s] proximal speed above which a sample can be slip for the speed-or-lag reading
+HAND_MIN_SLIP_S = 2.0       # [s] least slip time for the speed-or-lag reading to be read
+HAND_LAG_MIN = 0.004        # [s] a delay of T_out behind the capstan ratio from this up is a lag, below it none
