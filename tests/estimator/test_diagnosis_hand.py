@@ -94,3 +94,19 @@ def test_the_rules_name_what_the_readings_show():
     assert speed_or_delay("sensor_lag:T_out", {**price, "velocity_friction": 1.1}, _capstan(t, x, c_v=20.0)) \
         == "sensor_lag:T_out"
     assert speed_or_delay("pretension", price, _capstan(t, x, c_v=20.0)) == "pretension"
+
+
+def test_at_the_floor_the_reading_and_a_weak_fit_together_name_the_effect():
+    from types import SimpleNamespace
+
+    from estimator.offline.diagnosis.rules import speed_or_delay_alone
+    t, x = _moves(6)
+    base = SimpleNamespace(S=1.0)
+    singles = {"velocity_friction": SimpleNamespace(S=0.8), "sensor_lag:T_out": SimpleNamespace(S=0.85)}
+    assert speed_or_delay_alone(base, base, singles, _capstan(t, x, c_v=20.0)) is singles["velocity_friction"]
+    assert speed_or_delay_alone(base, base, singles, _capstan(t, x, lag=0.02)) is singles["sensor_lag:T_out"]
+    assert speed_or_delay_alone(base, base, singles, _capstan(t, x)) is base                 # clean: neither sign
+    weak = {k: SimpleNamespace(S=0.95) for k in singles}                                      # the fit explains little
+    assert speed_or_delay_alone(base, base, weak, _capstan(t, x, c_v=20.0)) is base
+    named = SimpleNamespace(S=0.3)
+    assert speed_or_delay_alone(named, base, singles, _capstan(t, x, c_v=20.0)) is named     # the models named one

@@ -29,7 +29,7 @@ from estimator.offline.effects.types import ROUTE, ROUTE_FORMS, ROUTE_KEYS, UNKN
 
 __all__ = ["Context", "noise_floors", "candidate_effects", "refine_route", "fit_candidates", "refit_routes",
            "select", "shown_at_floor", "stick_slip_rule", "rest_rule", "report_channels", "verdict",
-           "pretension_at_rest", "speed_or_delay"]
+           "pretension_at_rest", "speed_or_delay", "speed_or_delay_alone"]
 
 
 @dataclass
@@ -260,7 +260,7 @@ def select(ctx: Context, base: Fit, singles: dict[str, Fit], max_effects: int, d
             break
         chosen = trial[best]
         pool.pop(best)
-    return chosen
+    return speed_or_delay_alone(chosen, base, singles, _training(ctx, data)) if chosen is base else chosen
 
 
 def _training(ctx: Context, data: MeasuredData) -> MeasuredData:
@@ -306,6 +306,29 @@ def speed_or_delay(best: str, price: dict[str, float], data: MeasuredData) -> st
     if reading is None:
         return best
     return "sensor_lag:T_out" if reading["delay"] >= th.HAND_LAG_MIN else "velocity_friction"
+
+
+def speed_or_delay_alone(chosen: Fit, base: Fit, singles: dict[str, Fit], data: MeasuredData) -> Fit:
+    """Velocity friction or a distal load-cell lag at the floor, where the models named nothing: two signs together.
+
+    Symptom: the speed-or-lag reading (:func:`estimator.offline.diagnosis.readings.speed_or_lag`, training block)
+    shows a friction rising with sliding speed (c_v = speed / K of at least HAND_SPEED_MIN, a delay under
+    HAND_LAG_MIN) or a delay of at least HAND_LAG_MIN with no such rise, and that effect's extension explains a tenth
+    of what the base leaves (S < HAND_WEAK_SCORE). A soft or stopped load makes either small beside the noise: the
+    fit alone cannot name it, but the reading separates the two terms over every slip sample of the block, and a
+    clean recording shows neither. Returns the named single or ``chosen``."""
+    if chosen is not base or not all(e in singles for e in _SPEED_OR_LAG):
+        return chosen
+    reading = speed_or_lag(data)
+    if reading is None:
+        return chosen
+    if reading["delay"] >= th.HAND_LAG_MIN:
+        eid = "sensor_lag:T_out"
+    elif reading["speed"] >= th.HAND_SPEED_MIN * max(reading["K"], 0.05):
+        eid = "velocity_friction"
+    else:
+        return chosen
+    return singles[eid] if singles[eid].S < th.HAND_WEAK_SCORE else chosen
 
 
 def stick_slip_rule(ctx: Context, chosen: Fit, singles: dict[str, Fit], chatter: float | None
