@@ -11,8 +11,16 @@ hidden effect. Two simulators, reported apart:
   routes of arcs and straight runs, random distal loads, 200-2000 Hz, its own noise).
 
 Seed sets (``SEED_BASE``): ``dev`` (effects 100+, clean 500+, uncatalogued 900+), ``dev2`` ... ``dev54`` (the
-same offsets + 100000 each) and ``final`` (offsets + 5400000). The ``dev`` sets are development data; ``final`` is
-held out. Every hidden-effect recording has its own seed, so its own simulated rig (route, K, EA, load, rate,
+same offsets + 100000 each), ``final`` (offsets + 5400000) and ``final57`` (offsets + 5700000). The ``dev`` sets are
+development data; ``final`` and ``final57`` were held out, each run once.
+
+``--family`` chooses what is hidden: ``catalogue`` (default: every catalogue effect, clean, uncatalogued), ``step``
+(the friction step, :data:`STEP_FAMILY`, beside its look-alike, a steady drift of K, and clean recordings: right is
+the friction step named first with its instant within :data:`INSTANT_TOL` of the truth, the drift named a drift) or
+``compound`` (two physical causes at once, :data:`COMPOUND`: right is both named, neither after ``unknown``). A
+family's effect k, level j, repeat s uses base + 60000 + 1000 k + 10 j + s, its clean recordings base + 60500 + s.
+
+Every hidden-effect recording has its own seed, so its own simulated rig (route, K, EA, load, rate,
 noise): effect k of EFFECT_IDS, level j, repeat s uses base + 100 + 1000 k + 10 j + s (``--shared-rigs``: every
 effect of a set on the four rigs base + 100 + 10 j + s).
 ``--route-known`` gives every diagnosis its rig's true route shape (``wrap_shape``), as a user who
@@ -24,7 +32,7 @@ pass/fail checks are in tests/estimator/test_diagnosis.py).
 
     .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|dev2|...|dev54|final] [--seeds 2]
         [--levels 0.2,0.8] [--clean 12] [--duration 90] [--rate 1000] [--jobs 2] [--json OUT] [--speed-only] [--twins]
-        [--shared-rigs]
+        [--shared-rigs] [--family catalogue|step|compound]
     .venv/bin/python benchmarks/bench_diagnosis.py --floor-table OUT.json [OUT.json ...]
 
 ``--floor-table`` prints estimator.offline.diagnosis.thresholds.FLOOR_SCORE as computed from the clean recordings
@@ -42,7 +50,15 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 
 import numpy as np
-from diagnosis_tables import UNCATALOGUED, named_right, proportion_interval, table  # noqa: F401 - re-exported
+from diagnosis_tables import (  # noqa: F401 - re-exported
+    INSTANT_TOL,
+    UNCATALOGUED,
+    family_right,
+    family_table,
+    named_right,
+    proportion_interval,
+    table,
+)
 
 from estimator.data import noise_level
 from estimator.offline.diagnosis.fit import quantum
@@ -52,7 +68,12 @@ from estimator.offline.effects.catalogue import CATALOGUE, EFFECT_IDS
 from estimator.offline.effects.types import NONE
 
 #: seed offset of each set: ``dev``, ``dev2`` ... ``dev54`` (development data) and ``final`` (held out)
-SEED_BASE = {"dev": 0, **{f"dev{k}": 100000 * (k - 1) for k in range(2, 55)}, "final": 5400000}
+SEED_BASE = {"dev": 0, **{f"dev{k}": 100000 * (k - 1) for k in range(2, 55)}, "final": 5400000, "final57": 5700000}
+#: the change-point family: the friction step and its look-alike, a steady drift of K
+STEP_FAMILY = ("friction_step", "curvature_drift")
+#: the compound family: two physical causes at once (ids joined by "+")
+COMPOUND = ("pretension+curvature_drift", "velocity_friction+sensor_offset:T_in",
+            "velocity_friction+sensor_offset:T_out")
 
 
 def effect_seed(base: int, k: int, j: int, s: int, shared_rigs: bool = False) -> int:
@@ -126,10 +147,10 @@ def _twin_diagnosis(data, shape: np.ndarray | None = None) -> dict:
 def one(case: tuple) -> dict:
     sim, effect, level, seed, duration, rate, twins, route, without = case
     kw = {"seed": seed, "level": level, "duration": duration, **({"rate_hz": rate} if sim == "rig" or rate else {})}
-    rec = _record(sim)(None if effect == NONE else effect, **kw)
+    rec = _record(sim)(None if effect == NONE else tuple(effect.split("+")) if "+" in effect else effect, **kw)
     # the clean twin of a hidden effect (same seed, level and rate): how far the effect moves the recording;
     # with --twins it is diagnosed too (one more clean rig per hidden-effect recording: false alarms)
-    twin = _record(sim)(None, **kw) if effect in EFFECT_IDS else None
+    twin = _record(sim)(None, **kw) if effect in EFFECT_IDS or "+" in effect else None
     if without:         # --without: a rig that does not record these distal channels
         dropped = {ch: None for ch in without}
         rec = replace(rec, data=replace(rec.data, **dropped))
@@ -151,6 +172,7 @@ def one(case: tuple) -> dict:
     return {"sim": sim, "effect": effect, "level": rec.truth["level"], "seed": seed, "cause": res["cause"],
             "causes": res["causes"], "equivalent": res["equivalent"], "gain": res["gain"],
             "seconds": time.perf_counter() - t0, "n": len(rec.data), "truth": rec.truth["parameters"],
+            "t_first": float(rec.data.time[0]),
             "fitted": {k: v["value"] for k, v in res["parameters"].items() if v["effect"] != "base"},
             "scores": _scores(res),
             "structure": max(res["structure"]["base"].values()),
@@ -234,6 +256,8 @@ def _parser() -> argparse.ArgumentParser:
                          "cell); effects that need it are left out of the set")
     ap.add_argument("--shared-rigs", action="store_true",
                     help="every effect of a set on the same four rigs (seed base + 100 + 10 j + s)")
+    ap.add_argument("--family", choices=("catalogue", "step", "compound"), default="catalogue",
+                    help="what is hidden: every catalogue effect, the friction step beside a drift, or two causes")
     ap.add_argument("--speed-only", action="store_true", help="only time a 10-minute 1 kHz recording")
     ap.add_argument("--floor-table", nargs="+", default=None, metavar="JSON",
                     help="print the per-effect floor bounds (diagnosis.FLOOR_SCORE) from the clean recordings of "
@@ -245,6 +269,15 @@ def _cases(args, levels: list[float], without: tuple[str, ...]) -> list[tuple]:
     """The recordings of a run: every effect at every level and seed, the clean and the uncatalogued ones."""
     b = SEED_BASE[args.seed_set]
     cases: list[tuple] = []
+    if args.family != "catalogue":
+        hidden = STEP_FAMILY if args.family == "step" else COMPOUND
+        for sim in _sims(args):
+            rate = args.rate if args.rate or sim == "lumped" else 1000.0
+            cases += [(sim, e, lv, b + 60000 + 1000 * k + 10 * j + s, args.duration, rate, False, args.route_known,
+                       without) for k, e in enumerate(hidden) for j, lv in enumerate(levels) for s in range(args.seeds)]
+            cases += [(sim, NONE, None, b + 60500 + s, args.duration, rate, False, args.route_known, without)
+                      for s in range(args.clean)]
+        return cases
     for sim in _sims(args):
         rate = args.rate if args.rate or sim == "lumped" else 1000.0
         cases += [(sim, e, lv, effect_seed(b, k, j, s, args.shared_rigs), args.duration, rate, args.twins,
@@ -268,7 +301,7 @@ def _sims(args) -> tuple[str, ...]:
 def _print_misses(rows: list[dict]) -> None:
     """Every wrong answer and every false alarm on a clean twin, one line each (``--verbose``)."""
     for r in rows:
-        if not named_right(r):
+        if not family_right(r):
             print("  miss:", r["sim"], r["effect"], f"level {r['level']:.2f} seed {r['seed']} ->", r["causes"],
                   f"gain {r['gain']:.2f}", r["truth"], r["fitted"],
                   dict(sorted(r["scores"].items(), key=lambda kv: kv[1])[:3]),
@@ -307,7 +340,10 @@ def main(argv: list[str] | None = None) -> None:
         rs = [r for r in rows if r["sim"] == sim]
         title = {"rig": "rig (study/scenarios.py, the diagnosis' own physics)",
                  "lumped": "lumped (study/lumped/scenarios.py, independent simulator)"}[sim]
-        table(rs, f"{title}, {args.seed_set} seeds")
+        if args.family == "catalogue":
+            table(rs, f"{title}, {args.seed_set} seeds")
+        else:
+            family_table(rs, f"{title}, {args.family} family, {args.seed_set} seeds")
     if args.verbose:
         _print_misses(rows)
     if args.json:

@@ -6,8 +6,8 @@ every call updates in place: the offline study's batch kernel (``estimator.offli
 runs it once over a recording, the per-cycle estimator (:class:`estimator.online.extended.ExtendedEstimator`) once
 per sample on the same state, so the two give the same numbers to the last bit on the same inputs. The equations
 (the memory rule, the whole-tendon slide, static friction and its breakaway, drift, viscous friction, the
-tension-independent friction a, pretension, the stiffening strain phi) are those of the batch kernel's docstring
-(docs/concepts/effects.md, E3-E6, E8, E9).
+tension-independent friction a, pretension, the stiffening strain phi, the friction step) are those of the batch
+kernel's docstring (docs/concepts/effects.md, E3-E6, E8, E9).
 
 State layout (m1 nodes, proximal to distal):
 
@@ -27,15 +27,17 @@ from numba import njit
 
 __all__ = ["V_STOP", "BREAK_MARGIN", "stiffening_strain", "start_extended", "run_span", "N_PAR", "N_ST", "P_K",
            "P_A", "P_T0", "P_K_RATE", "P_C_V", "P_R_S", "P_T_SLIP", "P_T_MIN", "P_SIGMA", "P_BETA", "P_TC", "P_V_ST",
-           "P_BAND", "S_E", "S_E0", "S_SLIDING", "S_T_B", "S_YP_PREV", "S_T_ORIGIN", "S_T_PREV", "S_COUNT"]
+           "P_BAND", "P_K_STEP", "P_T_STEP",
+           "S_E", "S_E0", "S_SLIDING", "S_T_B", "S_YP_PREV", "S_T_ORIGIN", "S_T_PREV", "S_COUNT"]
 
 V_STOP = 2e-4        # proximal speed below which a slide ends (the tendon sticks) [m/s]
 BREAK_MARGIN = 0.35  # share of the kinetic-static gap within which a turn of T_in counts as breakaway [-]
 
 #: indices of ``par``: K [-], a [N], T0 [N], K_rate [1/s], c_v [s/m], r_s [-], t_slip [s], T_min [N], sigma [N],
-#: beta [-], Tc [N], v_st [m/s], band [N]
-P_K, P_A, P_T0, P_K_RATE, P_C_V, P_R_S, P_T_SLIP, P_T_MIN, P_SIGMA, P_BETA, P_TC, P_V_ST, P_BAND = range(13)
-N_PAR = 13
+#: beta [-], Tc [N], v_st [m/s], band [N], the friction step dK [-] and its instant t_s [s] from the first sample run
+(P_K, P_A, P_T0, P_K_RATE, P_C_V, P_R_S, P_T_SLIP, P_T_MIN, P_SIGMA, P_BETA, P_TC, P_V_ST, P_BAND, P_K_STEP,
+ P_T_STEP) = range(15)
+N_PAR = 15
 #: indices of ``st``: the running sum E [N] and its start E0 [N], the slide direction (-1, 0, +1), the breakaway
 #: time t_b [s] (-inf: none), the previous proximal Y_p [N] and time [s], the drift's time origin [s], samples run
 S_E, S_E0, S_SLIDING, S_T_B, S_YP_PREV, S_T_ORIGIN, S_T_PREV, S_COUNT = range(8)
@@ -135,7 +137,7 @@ def run_span(T_in, v, spd, t, slide, i0, i1, u, w, par, Y, st, tab, dY, G, T_out
     m1 = u.shape[0]
     K, a, K_rate, c_v, r_s = par[P_K], par[P_A], par[P_K_RATE], par[P_C_V], par[P_R_S]
     t_slip, T_min, sigma, beta, Tc = par[P_T_SLIP], par[P_T_MIN], par[P_SIGMA], par[P_BETA], par[P_TC]
-    v_st, band = par[P_V_ST], par[P_BAND]
+    v_st, band, K_step, t_step = par[P_V_ST], par[P_BAND], par[P_K_STEP], par[P_T_STEP]
     g_kin, g_kin_inv, g_sta = tab[0], tab[1], tab[2]
     E, E0 = st[S_E], st[S_E0]
     sliding = int(st[S_SLIDING])
@@ -144,7 +146,7 @@ def run_span(T_in, v, spd, t, slide, i0, i1, u, w, par, Y, st, tab, dY, G, T_out
     if count == 0 and i1 > i0:
         st[S_T_ORIGIN] = t[i0]          # the drift counts from the first sample run
     t0 = st[S_T_ORIGIN]
-    varying = K_rate != 0.0 or c_v != 0.0
+    varying = K_rate != 0.0 or c_v != 0.0 or K_step != 0.0
     stiction = r_s > 0.0
     stribeck = stiction and v_st > 0.0    # the Stribeck form: static-kinetic by each node's own speed
     seen = slide.shape[0] > 0
@@ -153,6 +155,8 @@ def run_span(T_in, v, spd, t, slide, i0, i1, u, w, par, Y, st, tab, dY, G, T_out
         Kk = K
         if varying:
             Kk = K + K_rate * (tk - t0)
+            if tk - t0 >= t_step:
+                Kk += K_step        # the friction step: K before t_s, K + dK from t_s on
             if Kk < 0.0:
                 Kk = 0.0
             Kk *= 1.0 + c_v * spd[k]

@@ -71,6 +71,7 @@ class SimulatedRig(EffectSwitches):
     * velocity_friction: mu(v) = mu (1 + viscous |v|) with v the motor speed [m/s] of this step.
     * pretension: the start profile is sheath.pretension + tension [N] (see the pretension bullet).
     * curvature_drift: K(t) = K + rate t [1/s] (all node gains scaled, route shape kept).
+    * friction_step: K(t) = K + change from ``time`` [s] on (the sheath reshaped at one instant).
     * tendon_stiffening: element strain phi(T)/EA, phi(T) = T + softening T_c (1 - e^{-T/T_c}).
     * stiction: whenever the tendon does not slide it is stuck and the bound is mu (1 +
       static_ratio); when the slip front reaches the distal end it breaks away and slides with

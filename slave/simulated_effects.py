@@ -32,7 +32,8 @@ __all__ = [
 #: The switch keys of ``rig.simulated.effects``, from the catalogue (estimator/offline/effects/catalogue.py).
 EFFECT_IDS = tuple(rig_switches())
 #: The switches this simulator has a kernel for (a catalogue switch missing here fails a test).
-IMPLEMENTED = frozenset({"velocity_friction", "pretension", "curvature_drift", "tendon_stiffening", "stiction",
+IMPLEMENTED = frozenset({"velocity_friction", "pretension", "curvature_drift", "friction_step", "tendon_stiffening",
+                         "stiction",
                          "friction_offset", "sensor_offset", "sensor_delay"})
 _V_STOP = 2e-4   # motor speed below which a whole-tendon slide ends [m/s] (estimator.extended_loop.V_STOP)
 
@@ -261,6 +262,8 @@ class EffectSwitches:
         self._beta, self._Tc = (float(st.softening), float(st.toe_tension)) if st else (0.0, 1.0)
         self._viscous = float(on["velocity_friction"].viscous) if "velocity_friction" in on else 0.0
         self._K_rate = float(on["curvature_drift"].rate) if "curvature_drift" in on else 0.0
+        step = on.get("friction_step")
+        self._K_step, self._t_step = (float(step.change), float(step.time)) if step else (0.0, math.inf)
         sc = on.get("stiction")
         self._static = 1.0 + float(sc.static_ratio) if sc else 1.0
         self._slip_time = float(sc.slip_time) if sc else 1.0
@@ -268,7 +271,8 @@ class EffectSwitches:
         self._offset = float(on["sensor_offset"].offset) if "sensor_offset" in on else 0.0
         self._delay = float(on["sensor_delay"].delay) if "sensor_delay" in on else 0.0
         self._history: deque[tuple[float, float]] = deque()
-        self._general = any(k in on for k in ("velocity_friction", "curvature_drift", "tendon_stiffening",
+        self._general = any(k in on for k in ("velocity_friction", "curvature_drift", "friction_step",
+                                              "tendon_stiffening",
                                               "stiction", "friction_offset"))
         K = float(self.log_gain[-1])
         # node gain per unit K (the route shape); a straight sheath drifts as if uniformly curved
@@ -284,7 +288,8 @@ class EffectSwitches:
 
     def _advance_effects(self, v: float, t: float) -> None:
         """One proximal step with the effect switches (class docstring); v [m/s], t [s] after the step."""
-        K_kin = max(self.K + self._K_rate * t, 0.0) * (1.0 + self._viscous * abs(v))
+        K_now = self.K + self._K_rate * t + (self._K_step if t >= self._t_step else 0.0)   # drift, step (E6)
+        K_kin = max(K_now, 0.0) * (1.0 + self._viscous * abs(v))
         args = (self._w, self._a, self._beta, self._Tc)
         if self._dir and v * self._dir <= _V_STOP:     # the motor stopped or turned: the tendon sticks
             self._dir, self._t_break = 0, -math.inf

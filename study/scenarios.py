@@ -139,7 +139,8 @@ def effects_config(effect: str | None, level: float, K: float, duration: float,
     if e is None or e.knob is None:
         raise ValueError(f"unknown effect {effect!r}; expected one of {sorted(scenario_effects())}")
     sign = 1.0 if rng.random() < 0.5 else -1.0
-    values = e.knob.values(level, sign, K, duration)
+    draw = float(rng.random()) if e.knob.drawn else 0.5       # the instant of a step, apart from its size
+    values = e.knob.values(level, sign, K, duration, draw)
     truth = e.knob.truth_of(values)
     if e.switch is None:       # applied to the recorded signals by record()
         return fx, truth

@@ -12,8 +12,9 @@ readings T_in [N], x_in [m] and the time t [s] and returns the distal tension an
    (:func:`estimator.online.distal.velocity_step`, the base estimator's); the sliding speed |v| (or, with
    ``velocity_form`` 1, the mean of |v| and the speed of the estimate's own distal end);
 3. one sample of the compiled loop of the batch model (:func:`estimator.extended_loop.run_span`) on the kept
-   profile: friction exponent K (1 + c_v speed) + K_rate (t - t_0), static friction r_s (breakaway or Stribeck
-   form), the tension-independent friction a, the pretension T0, the stiffening strain phi (beta, T_c);
+   profile: friction exponent (K + K_rate (t - t_0) + dK [t - t_0 >= t_s]) (1 + c_v speed), static friction r_s
+   (breakaway or Stribeck form), the tension-independent friction a, the pretension T0, the stiffening strain phi
+   (beta, T_c);
 4. the lumped pre-sliding (a Dahl lag of the friction T - T_out in proximal travel, x_p), the elongation
    (L/EA) E1 and the distal end x - (L/EA) E1 through the distal backlash's play (d_b).
 
@@ -45,11 +46,13 @@ from estimator.extended_loop import (
     P_C_V,
     P_K,
     P_K_RATE,
+    P_K_STEP,
     P_R_S,
     P_SIGMA,
     P_T0,
     P_T_MIN,
     P_T_SLIP,
+    P_T_STEP,
     P_TC,
     P_V_ST,
     run_span,
@@ -73,6 +76,10 @@ PER_CYCLE: dict[str, tuple[bool, str]] = {
     "pretension": (True, "the initial profile, uniform at T0 (the batch caps it by the distal rest reading, which the "
                          "live loop does not have)"),
     "curvature_drift": (True, "K + K_rate (t - t_0) in the compiled sample loop, t_0 the first step"),
+    "friction_step": (True, "the fitted levels K and K + dK in the compiled sample loop, the step at the fitted "
+                            "instant t_s after the first step (the batch form); a session whose sheath was reshaped "
+                            "at another instant is the fallback's: the physical-range check sees the distal "
+                            "estimate leave the friction's bound"),
     "tendon_stiffening": (True, "phi(T) in the elongation sum of the compiled sample loop"),
     "stiction": (True, "the static bound and its breakaway (or the Stribeck form) in the compiled sample loop"),
     "friction_offset": (True, "the capstan law on T + a in the compiled sample loop"),
@@ -98,10 +105,10 @@ PER_CYCLE: dict[str, tuple[bool, str]] = {
 #: The parameters :class:`ExtendedEstimator` runs, by the catalogue's names (SI units), with their neutral values:
 #: K [-], T0 [N], c_v [s/m], velocity_form (0 proximal speed, 1 the mean with the distal one), K_rate [1/s],
 #: beta [-], T_c [N], r_s [-], v_st [m/s] (the Stribeck speed; 0: the breakaway form), a [N], x_p [m] (0: off),
-#: d_b [m], b_T_in [N], g_T_in [-], d_T_in [N/s], b_x_in [m].
+#: d_b [m], b_T_in [N], g_T_in [-], d_T_in [N/s], b_x_in [m], the friction step dK [-] at t_s [s] after the first step.
 PARAMETERS: dict[str, float] = {"K": math.nan, "T0": 0.0, "c_v": 0.0, "velocity_form": 0.0, "K_rate": 0.0,
                                 "beta": 0.0, "T_c": 1.0, "r_s": 0.0, "v_st": 0.0, "a": 0.0, "x_p": 0.0, "d_b": 0.0,
-                                "b_T_in": 0.0, "g_T_in": 0.0, "d_T_in": 0.0, "b_x_in": 0.0}
+                                "b_T_in": 0.0, "g_T_in": 0.0, "d_T_in": 0.0, "b_x_in": 0.0, "dK": 0.0, "t_s": 0.0}
 #: a sensor parameter's prefix -> the kind of its catalogue entry (sensor_<kind>:<channel>)
 _KIND = {"b": "offset", "g": "gain", "d": "drift", "tau": "lag"}
 #: relaxation time of static friction after a breakaway [s] (the batch kernel's)
@@ -186,6 +193,8 @@ def _step(T_raw, x_raw, t, q, par, u, w, Y, st, tab, dY, G, io, slide, one_T, on
     o[_O_T_PREV] = t
     o[_O_STEPS] += 1.0
     Kk = par[P_K] + par[P_K_RATE] * (t - o[_O_T0])
+    if t - o[_O_T0] >= par[P_T_STEP]:
+        Kk += par[P_K_STEP]
     out[0] = T_out
     out[1] = c * E1
     out[2] = x_out
@@ -217,7 +226,7 @@ class ExtendedEstimator:
     ------
     ValueError
         K missing, a name that is no parameter of :data:`PARAMETERS` (with the reason of its entry), a value not
-        finite or out of range (K, compliance, T0, c_v, a, x_p, d_b, r_s, v_st, beta >= 0; T_c > 0; g_T_in > -1),
+        finite or out of range (K, compliance, T0, c_v, a, x_p, d_b, r_s, v_st, beta, t_s >= 0; T_c > 0; g_T_in > -1),
         or a node grid of another shape.
     """
 
@@ -250,6 +259,7 @@ class ExtendedEstimator:
         par[P_K], par[P_A], par[P_T0], par[P_K_RATE], par[P_C_V] = v["K"], v["a"], v["T0"], v["K_rate"], v["c_v"]
         par[P_R_S], par[P_T_SLIP], par[P_T_MIN], par[P_SIGMA] = v["r_s"], T_SLIP, T_min, self.tension_noise
         par[P_BETA], par[P_TC], par[P_V_ST], par[P_BAND] = v["beta"], v["T_c"], v["v_st"], self.band
+        par[P_K_STEP], par[P_T_STEP] = v["dK"], v["t_s"]
         self._par = par
         q = np.zeros(9)
         q[_Q_B_T], q[_Q_G_T], q[_Q_D_T], q[_Q_B_X] = v["b_T_in"], v["g_T_in"], v["d_T_in"], v["b_x_in"]
@@ -319,15 +329,15 @@ def _checked(values: Mapping[str, float]) -> dict[str, float]:
     if extra:
         prefix, _, channel = extra[0].partition("_")
         eid = f"sensor_{_KIND.get(prefix, '')}:{channel}"
-        raise ValueError(f"{extra[0]!r} is no parameter the per-cycle estimator runs ("
-                         + (f"{eid}: {PER_CYCLE[eid][1]})" if eid in PER_CYCLE else f"it runs {', '.join(PARAMETERS)})"))
+        reason = f"{eid}: {PER_CYCLE[eid][1]})" if eid in PER_CYCLE else f"it runs {', '.join(PARAMETERS)})"
+        raise ValueError(f"{extra[0]!r} is no parameter the per-cycle estimator runs (" + reason)
     if "K" not in values:
         raise ValueError("K (the friction exponent) is required")
     v = {k: float(values.get(k, d)) for k, d in PARAMETERS.items()}
     for k, x in v.items():
         if not math.isfinite(x):
             raise ValueError(f"{k} must be finite, got {x!r}")
-    for k in ("K", "T0", "c_v", "a", "x_p", "d_b", "r_s", "v_st", "beta"):
+    for k in ("K", "T0", "c_v", "a", "x_p", "d_b", "r_s", "v_st", "beta", "t_s"):
         if v[k] < 0.0:
             raise ValueError(f"{k} must be >= 0, got {v[k]!r}")
     if v["T_c"] <= 0.0 or v["g_T_in"] <= -1.0:

@@ -42,8 +42,9 @@ _SENSOR = tuple(f"sensor_{kind}:{ch}" for kind, chans in
                 (("offset", ("T_in", "T_out", "x_in", "x_out")), ("gain", ("T_in", "T_out")),
                  ("lag", ("T_in", "T_out", "x_in", "x_out")), ("drift", ("T_in", "T_out"))) for ch in chans)
 #: Effect ids of the contract with the diagnosis (physical first, then one per sensor channel).
-EFFECT_IDS: tuple[str, ...] = ("velocity_friction", "pretension", "curvature_drift", "tendon_stiffening",
-                               "stiction", "friction_offset", "presliding", "distal_backlash") + _SENSOR
+EFFECT_IDS: tuple[str, ...] = ("velocity_friction", "pretension", "curvature_drift", "friction_step",
+                               "tendon_stiffening", "stiction", "friction_offset", "presliding",
+                               "distal_backlash") + _SENSOR
 #: distal loads :func:`record` can be asked for: the seed's own kinds and nonlinear tissue, free space then contact
 LOADS: tuple[str, ...] = ("spring", "preloaded", "constant", "joint", "tissue", "contact")
 #: Outside the catalogue: a smooth ~10 s random wander of the distal load cell zero.
@@ -128,6 +129,12 @@ def _effect_knobs(hidden: tuple[str, ...], u: float, K: float, mu: float, geo: S
         elif e == "curvature_drift":           # mu(t) = mu + mu_rate t, route kept
             sim["mu_rate"] = sign * r["relative_change"] * mu / duration
             p = {"K_rate": sign * r["relative_change"] * K / duration, "relative_change": sign * r["relative_change"]}
+        elif e == "friction_step":             # mu -> mu (1 + relative_step) at t_s (the run split there)
+            step_knob = effect(e).knob
+            if step_knob is None:  # pragma: no cover - the entry has one
+                raise ValueError(f"{e}: no scenario knob in the catalogue")
+            p = step_knob.values(u, sign, K, duration, float(rng.random()))
+            sim["step_time"], sim["step_mu"] = p["t_s"], mu * p["relative_step"]
         elif e == "tendon_stiffening":
             sim["softening"], sim["toe_tension"] = r["softening"], r["toe_tension"]
             p = {"softening": r["softening"], "toe_tension": r["toe_tension"]}
@@ -203,6 +210,18 @@ def _span(geo: SheathGeometry, mu: float, EA: float, load: Load, sim_kw: dict, T
     x_rest = max(reach(T_low) - base, 0.0)
     x_top = max(reach(max(T_peak, T_low + 2.0)) - base, 0.0) + (travel if load.kind == "constant" else 0.0)
     return x_rest, x_top, M_e
+
+
+def _run(tl: LumpedTendon, cmd: np.ndarray, rate: float, step: tuple[float, float] | None) -> dict[str, np.ndarray]:
+    """The run over ``cmd``; with a friction ``step`` (t_s [s], d mu [-]) split at the first sample at or after t_s,
+    mu stepped there (the sheath reshaped at one instant)."""
+    if step is None:
+        return tl.run(cmd, rate)
+    k = min(max(int(math.ceil(step[0] * rate)) - 1, 0), cmd.size)
+    first = tl.run(cmd[:k], rate)
+    tl.mu += step[1]
+    second = tl.run(cmd[k:], rate)
+    return {name: np.concatenate([first[name], second[name]]) for name in first}
 
 
 def _check(effect: str | tuple[str, ...] | None, seed: int, level: float | None, duration: float,
@@ -306,6 +325,7 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     travel = float(rng.uniform(2e-3, 6e-3))
     u = float(rng_fx.uniform()) if level is None else float(level)
     sim_kw, sensor, by_effect = _effect_knobs(hidden, u, K, mu, geo, duration, rng_fx)
+    step = (sim_kw.pop("step_time"), sim_kw.pop("step_mu")) if "step_time" in sim_kw else None
     tl = LumpedTendon(geo, mu, EA, dist, motor_bandwidth_hz=bw, motor_max_speed=vmax, **sim_kw)
     x_rest, x_top, M_e = _span(geo, mu, EA, dist, sim_kw, T_rest, T_peak, travel,
                                by_effect.get("friction_offset", {}).get("tension_offset", 0.0))
@@ -315,7 +335,7 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
                                          strict=False)}
     move = hand_motion if motion == "hand" else command
     cmd = start["x_motor"] + move(duration, rate, x_rest, x_top, rng_proto)
-    sig = tl.run(cmd, rate)
+    sig = _run(tl, cmd, rate, step)
     n = cmd.size
     t = np.arange(1, n + 1) / rate
     x_in_true = sig["x_motor"] - start["x_motor"]

@@ -45,7 +45,7 @@ IDS = ("velocity_friction", "pretension", "curvature_drift", "tendon_stiffening"
        "presliding", "distal_backlash",
        "sensor_offset:T_in", "sensor_offset:T_out", "sensor_gain:T_in", "sensor_gain:T_out", "sensor_lag:T_in",
        "sensor_lag:T_out", "sensor_drift:T_in", "sensor_drift:T_out", "sensor_offset:x_in", "sensor_offset:x_out",
-       "sensor_lag:x_in", "sensor_lag:x_out")
+       "sensor_lag:x_in", "sensor_lag:x_out", "friction_step")
 K, L, EA = 0.7, 1.5, 15000.0
 NODES = 32
 
@@ -80,7 +80,7 @@ def test_catalogue_ids_parameters_and_texts():
         assert d["id"] == eid and all("unit" in q and len(q["bounds"]) == 2 for q in d["parameters"])
     assert effect("stiction") is CATALOGUE["stiction"]
     assert effect("sensor_delay") is CATALOGUE["sensor_lag:T_in"]          # former ids
-    for eid in IDS[8:]:                                                    # sensor ids name their channel
+    for eid in IDS[8:-1]:                                                  # sensor ids name their channel
         e = CATALOGUE[eid]
         assert e.channel == eid.split(":")[1] and e.parameters[0].name.endswith(e.channel)
     with pytest.raises(KeyError, match="known: velocity_friction"):

@@ -23,6 +23,7 @@ MODELS = {
     "velocity_friction": {"K": 0.7, "c_v": 25.0},
     "pretension": {"K": 0.7, "T0": 2.0},
     "curvature_drift": {"K": 0.7, "K_rate": 0.01},
+    "friction_step": {"K": 0.7, "dK": -0.25, "t_s": 3.5},
     "tendon_stiffening": {"K": 0.7, "beta": 2.0, "T_c": 1.5},
     "stiction": {"K": 0.7, "r_s": 0.4},
     "stiction_stribeck": {"K": 0.7, "r_s": 0.4, "v_st": 5e-4},
@@ -51,6 +52,8 @@ def _batch(values: dict, t: np.ndarray, x: np.ndarray, T: np.ndarray, u: np.ndar
     x_true = x - g["b_x_in"]
     v = smoothed_velocity(t, x_true, TAU)
     knobs = {k: values[k] for k in ("T0", "c_v", "K_rate", "beta", "r_s", "a", "v_st") if k in values}
+    if "dK" in values:
+        knobs["K_step"], knobs["t_step"] = values["dK"], values["t_s"]
     if "T_c" in values:
         knobs["Tc"] = values["T_c"]
     T_out, E1 = run_extended(T_true, v, t, u, w, K=values["K"], sigma=SIGMA, T_min=10 * SIGMA,

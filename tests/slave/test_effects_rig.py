@@ -42,7 +42,7 @@ def test_effects_are_off_by_default_and_listed_when_on():
     fx = EffectsConfig(stiction=EffectSwitch(enabled=True), sensor_delay=EffectSwitch(enabled=True))
     assert make_rig(fx).effects == ("stiction", "sensor_delay")
     assert EFFECT_IDS == ("velocity_friction", "pretension", "curvature_drift", "tendon_stiffening", "stiction",
-                          "friction_offset", "sensor_offset", "sensor_delay")
+                          "friction_offset", "sensor_offset", "sensor_delay", "friction_step")
 
 
 def test_bad_effect_magnitude_names_the_key():
@@ -68,6 +68,19 @@ def test_curvature_drift_changes_K_with_time():
     t = 10.0 + DT * np.arange(1, tr["T_in"].size + 1)
     m = tr["T_in"] > 1.0
     np.testing.assert_allclose(tr["T_out"][m] / tr["T_in"][m], np.exp(-(K + rate * t[m])), rtol=0.01)
+
+
+def test_friction_step_changes_K_at_its_instant_and_keeps_it():
+    change, at = -0.2, 10.0
+    rig = make_rig(EffectsConfig(friction_step=EffectSwitch(True, change=change, time=at)))
+    before = drive(rig, ramp(0, 0.006, 0.01))        # pulled before the instant: K
+    m = before["T_in"] > 1.0
+    np.testing.assert_allclose(before["T_out"][m] / before["T_in"][m], math.exp(-K), rtol=0.01)
+    drive(rig, ramp(0.006, 0.0, 0.01))
+    drive(rig, np.zeros(10000))                     # past the instant at rest
+    after = drive(rig, ramp(0, 0.006, 0.01))
+    m = after["T_in"] > 1.0
+    np.testing.assert_allclose(after["T_out"][m] / after["T_in"][m], math.exp(-(K + change)), rtol=0.01)
 
 
 def test_friction_offset_pull_and_release_lines():

@@ -25,6 +25,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from estimator.offline.diagnosis import thresholds as th
+from estimator.offline.diagnosis.instant import profile_discrete
 from estimator.offline.effects.catalogue import Effect, predict
 from estimator.offline.effects.types import K_MAX
 from estimator.offline.effects.types import ROUTE
@@ -46,7 +47,8 @@ _K = Parameter("K", "-", 0.0, K_MAX, 0.5, (), "friction exponent mu * total wrap
 _SCALE = {"K": 0.1, "c_v": 10.0, "T0": 1.0, "K_rate": 1e-3, "beta": 1.0, "T_c": 1.0, "r_s": 0.1, "a": 0.5,
           "x_p": 2e-5, "d_b": 2e-5, **{f"r_{k}": 0.1 for k in range(1, 12)},
           "b_T_in": 0.5, "b_T_out": 0.5, "g_T_in": 0.02, "g_T_out": 0.02, "tau_T_in": 0.01, "tau_T_out": 0.01,
-          "d_T_in": 2e-3, "d_T_out": 2e-3, "b_x_in": 2e-5, "b_x_out": 2e-5, "tau_x_in": 0.01, "tau_x_out": 0.01}
+          "d_T_in": 2e-3, "d_T_out": 2e-3, "b_x_in": 2e-5, "b_x_out": 2e-5, "tau_x_in": 0.01, "tau_x_out": 0.01,
+          "dK": 0.1}
 SIGNALS = ("T_out", "x_out")
 #: every FIT_STRIDE-th sample of the averaged series enters the least-squares residual (the model
 #: runs on all of them; the residual vector, and so the trust-region algebra, is that much shorter)
@@ -142,7 +144,7 @@ def split_at_rest(s: Series, train_fraction: float) -> int:
 
 def _params(effects: list[Effect], route: bool | str = False) -> list[Parameter]:
     shares = list(ROUTE_FORMS[route]) if isinstance(route, str) else list(ROUTE) if route else []
-    return [_K] + shares + [p for e in effects for p in e.parameters]
+    return [_K] + shares + [p for e in effects for p in e.parameters if not p.discrete]
 
 
 def _residual_scales(s: Series) -> dict[str, float]:
@@ -169,6 +171,9 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
     residuals count (default all; the model always runs from the first sample). A refinement that takes
     no step at all (K on the edge of a step in the residual) is tried again with K held, then with all
     free from there, and that is kept when it costs less with the effects' parameters inside their bounds.
+    A discrete parameter (``Parameter.discrete``: the instant of a step) not in ``fixed`` is fitted first by a
+    profile over candidate instants in the fit block from the best start
+    (:func:`estimator.offline.diagnosis.instant.profile_discrete`) and then held.
     Returns (values, compliance [m/N], cost).
     """
     m = slice(None) if mask is None else mask
@@ -187,12 +192,16 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
     # the forward fold's residuals end where its fit block does: the model runs no further than they need
     stop = m.stop if isinstance(m, slice) and m.stop is not None and 0 < m.stop < len(train) else None
 
-    # every point evaluated, by its bytes: (residual, L/EA). The starts are ranked and then refined from, and the
-    # solution's L/EA is that of its last evaluation: none is run twice
+    # every point evaluated, by its bytes and the held discrete values: (residual, L/EA). The starts are ranked and
+    # then refined from, and the solution's L/EA is that of its last evaluation: none is run twice
     seen: dict[bytes, tuple[np.ndarray, float]] = {}
+    discrete = [p for e in effects for p in e.parameters if p.discrete and p.name not in fixed]
+
+    def key_of(z) -> bytes:
+        return np.asarray(z, dtype=float).tobytes() + repr([fixed.get(p.name) for p in discrete]).encode()
 
     def residual(z):
-        key = np.asarray(z, dtype=float).tobytes()
+        key = key_of(z)
         if key not in seen:
             pr = predict(effects, values(z), train, fit_mask=m, stop=stop)
             seen[key] = (np.concatenate([(getattr(pr, k)[m][::FIT_STRIDE] - ys[k]) / v for k, v in norm.items()]),
@@ -204,6 +213,9 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
                              xtol=th.FIT_TOL, max_nfev=40 * len(z))
 
     z_starts = [np.clip(np.array([st.get(p.name, p.neutral) for p in params]) / scale, lo, hi) for st in starts]
+    if discrete:
+        z_starts = profile_discrete(discrete[0], effects, params, scale, fixed, residual, z_starts, lo, hi,
+                                    train.time, m)
     ranked = sorted(z_starts, key=lambda z: float(np.sum(residual(z) ** 2)))
     own = slice(len(_params([], route)), None)             # the effects' parameters
     span = 1e-3 * (hi[own] - lo[own])
@@ -227,7 +239,7 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
             best = sol
     assert best is not None         # max_starts >= 1 and at least one start
     vals = values(best.x)
-    key = np.asarray(best.x, dtype=float).tobytes()
+    key = key_of(best.x)
     c = seen[key][1] if key in seen else predict(effects, vals, train, fit_mask=m, stop=stop).compliance
     return vals, c, float(best.cost)
 

@@ -13,11 +13,13 @@ import numpy as np
 
 from estimator.offline.diagnosis import thresholds as th
 from estimator.offline.diagnosis.fit import SIGNALS, fit_model, paired_trimmed_ms, settings_keys, trimmed_ms
+from estimator.offline.diagnosis.instant import PROFILE_MARGIN
 from estimator.offline.diagnosis.readings import holds_release
 from estimator.offline.effects.catalogue import Effect, below_resolution, predict
 from estimator.offline.effects.types import ROUTE_FORMS, ROUTE_KEYS, ROUTE_TWELFTHS
 
-__all__ = ["Folds", "Fit", "judging_folds", "sole_fold", "score", "structure", "unresolved", "tension_offsets",
+__all__ = ["Folds", "Fit", "judging_folds", "sole_fold", "step_fold", "score", "structure", "unresolved",
+           "tension_offsets",
            "route_of", "gain", "parameters_table", "FINER", "FORM_NAME", "UNITS"]
 
 #: the unit of each distal signal in the JSON keys
@@ -94,6 +96,26 @@ def sole_fold(effects: list[Effect], folds: Folds, base: Fit | None, floor: dict
     return None
 
 
+def step_fold(folds: Folds, instants: list[float]) -> int | None:
+    """The one fold that judges a model with a step at an instant (``Parameter.discrete``; fitted per fold, [s] from
+    the first sample), or None: both.
+
+    A step shows only to a fold whose fit block holds both sides of it: one the forward fold's fit block ends before
+    (the backward fold's instant after it) shows on the backward fold alone, one before the backward fold's fit block
+    on the forward fold alone; the other fold saw one level only and its validation block shows the base's
+    extrapolation, not the step."""
+    if len(instants) < 2:
+        return None
+    t = folds.train.time
+    fwd_end = float(t[folds.fit[0].stop - 1] - t[0])
+    back_start = float(t[folds.fit[1].start] - t[0])
+    if instants[1] > fwd_end - PROFILE_MARGIN:
+        return 1
+    if instants[0] < back_start + PROFILE_MARGIN:
+        return 0
+    return None
+
+
 class Fit:
     """One model (a list of extensions) fitted on each fold's fit block, with its validation errors."""
 
@@ -111,8 +133,10 @@ class Fit:
         tr = folds.train
         self.judged = folds.judged
         self.sole_fold = sole_fold(effects, folds, base, floor)
+        instant = next((p.name for e in effects for p in e.parameters if p.discrete), None)
         for j, (fm, vm) in enumerate(zip(folds.fit, folds.val, strict=False)):
-            if j == 1 and base is not None and self.sole_fold is None and score(*self.pairs[0], floor) >= need:
+            if (j == 1 and base is not None and self.sole_fold is None and instant is None
+                    and score(*self.pairs[0], floor) >= need):
                 break           # cannot be accepted (the worse fold counts): the second fold is not needed
             vals, c, _ = fit_model(effects, tr, starts if j == 0 else [self.values[0]], route=route,
                                    fixed=fixed[j] if isinstance(fixed, list) else fixed, mask=fm,
@@ -129,6 +153,10 @@ class Fit:
         # the worse fold counts: an extension must help forward and backward in time; each fold compares the
         # two models on the same samples (the transients neither explains left out: paired_trimmed_ms)
         self.fold_S = [score(m, bm, floor) for m, bm in self.pairs]     # forward, backward (when computed)
+        if instant is not None and self.sole_fold is None and base is not None:
+            self.sole_fold = step_fold(folds, [v[instant] for v in self.values])
+            if self.sole_fold is not None:      # the other fold saw one level only: it judges no structure either
+                self.judged = (self.sole_fold,)
         scored = self.fold_S if self.sole_fold is None else self.fold_S[self.sole_fold:self.sole_fold + 1]
         self.S = 1.0 if base is None else max(scored)
         self.complete = len(self.mse) == len(folds.fit)

@@ -13,7 +13,8 @@
 
        S = sum_signals (rms_ext / floor)^2 / sum_signals (rms_base / floor)^2;
 
-6. selection by a price per parameter, with the rules at the floor and the model-free readings (stick-slip, the
+6. selection by a price per parameter, with the rules at the floor, pairs of the strongest candidates where one
+   leaves structure (:mod:`estimator.offline.diagnosis.pairs`), and the model-free readings (stick-slip, the
    encoder reading at the initial rest);
 7. the chosen and the base model refitted on the whole training block;
 8. the test block, used once, for the reported errors and the gain.
@@ -37,6 +38,7 @@ from estimator.offline.diagnosis.fit import SIGNALS, Progress, fit_model, prepar
 from estimator.data import noise_level
 from estimator.offline.diagnosis.folds import (FORM_NAME, UNITS, Fit, Folds, gain, parameters_table, route_of,
                                                structure)
+from estimator.offline.diagnosis.pairs import consider_pairs
 from estimator.offline.diagnosis.readings import (distal_at_end, distal_end_held, rest_offset, rest_reading,
                                                   sample_block, stick_slip_ratio)
 from estimator.offline.diagnosis.result import Candidate, Diagnosis, Model, RestOffset, StickSlip
@@ -188,6 +190,8 @@ def diagnose_recording(data: MeasuredData, *, train_fraction: float = 0.6, progr
     refit_routes(ctx, singles, base, alone)
     # 6. selection, then the model-free readings: stick-slip on the training block, the encoders at the initial rest
     chosen = select(ctx, base, singles, max_effects, used)
+    if max_effects >= 2:
+        chosen = consider_pairs(ctx, base, singles, chosen)
     i_t = blocks.n_train(used)
     chatter = stick_slip_ratio(used.time[:i_t], used.x_in[:i_t], used.T_in[:i_t])
     chosen, by_chatter, weak, overruled = stick_slip_rule(ctx, chosen, singles, chatter)

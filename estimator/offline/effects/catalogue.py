@@ -47,7 +47,7 @@ PRESLIDING_MIN = 20e-6
 NOISE_BAND = 3.0
 
 __all__ = [
-    "Effect", "VelocityFriction", "Pretension", "CurvatureDrift", "TendonStiffening", "Stiction",
+    "Effect", "VelocityFriction", "Pretension", "CurvatureDrift", "FrictionStep", "TendonStiffening", "Stiction",
     "FrictionOffset", "Presliding", "DistalBacklash", "SensorEffect", "CATALOGUE", "EFFECT_IDS", "ALIASES",
     "EQUIVALENT", "effect", "predict", "neutral_values", "register", "unregister", "rig_switches", "NOISE_BAND",
     "SPEED_FORM", "STRIBECK_FORM", "STRIBECK_SPEED", "PRESLIDING_MIN", "below_resolution",
@@ -172,6 +172,27 @@ class CurvatureDrift(Effect):
     knob = ScenarioKnob((("relative_change", 0.10, 0.30),), ("relative_change",), sw.drift_rate, ("K_rate",))  # |dK|/K
 
 
+class FrictionStep(Effect):
+    id = "friction_step"
+    cause = "the sheath reshaped at one instant (an endoscope moved, the insertion tube bent): K steps up or down"
+    signature = ("the branch slopes e^-+K and the band width change at one instant and stay: the residual of a steady "
+                 "K is a step in time, not a ramp")
+    extension = ("K(t) = K before t_s, K + dK from t_s on, route shape kept; t_s fitted by a profile over candidate "
+                 "instants, both levels by least squares")
+    literature = "E6"
+    parameters = (Parameter("t_s", "s", 0.0, 1e6, 0.0, (), "the instant K steps, from the first sample",
+                            discrete=True),
+                  Parameter("dK", "-", -2.0, 2.0, 0.0, (0.0,), "K steps to K + dK at t_s"))
+    knobs = {"dK": "K_step", "t_s": "t_step"}
+    switch = RigSwitch("friction_step", "friction steps at one instant (the sheath reshaped: an endoscope moved)", (
+        Setting("change", 0.1, "-", "any", "dK: K becomes K + change at the instant"),
+        Setting("time", 30.0, "s", ">= 0", "the instant, from the start of the run")))
+    # a relative step of K (either sign) at an instant drawn apart from the size, within the training block
+    knob = ScenarioKnob((("relative_step", 0.15, 0.40),), ("relative_step",), sw.step_at, ("t_s", "dK",
+                                                                                          "relative_step"),
+                        drawn=(("instant_share", 0.15, 0.5),))
+
+
 class TendonStiffening(Effect):
     id = "tendon_stiffening"
     cause = "the tendon is soft at low tension (strands bedding in, polymer), stiff above a toe"
@@ -281,11 +302,12 @@ class SensorEffect(Effect):
         self.from_start = kind == "drift"
 
 
+# the friction step comes last: the benchmark's seeds follow the catalogue's order
 _EFFECTS: tuple[Effect, ...] = (VelocityFriction(), Pretension(), CurvatureDrift(), TendonStiffening(), Stiction(),
                                 FrictionOffset(), Presliding(), DistalBacklash(),
                                 *(SensorEffect(k, c) for k, chans in (("offset", "TT"), ("gain", "TT"), ("lag", "TT"),
                                   ("drift", "TT"), ("offset", "xx"), ("lag", "xx"))
-                                  for c in (f"{chans[0]}_in", f"{chans[0]}_out")))
+                                  for c in (f"{chans[0]}_in", f"{chans[0]}_out")), FrictionStep())
 
 CATALOGUE: dict[str, Effect] = {e.id: e for e in _EFFECTS}
 EFFECT_IDS: tuple[str, ...] = tuple(CATALOGUE)

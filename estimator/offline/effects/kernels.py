@@ -5,8 +5,9 @@ One kernel runs the tension-profile memory of :mod:`estimator.sheath` with all e
 model is the kernel with every knob neutral and extensions compose. Per sample k, with the node
 shape u_i = theta_i / theta_L in [0, 1] and weights w_i (sum 1):
 
-    K_k   = max(K + K_rate t_k, 0) (1 + c_v v_k)             drift and viscous friction   (E6, E3),
-            v_k the sliding speed (|dx_in/dt|, or a held mix with the distal speed)
+    K_k   = max(K + K_rate t_k + dK [t_k >= t_s], 0) (1 + c_v v_k)   drift, step, viscous friction (E6, E3),
+            v_k the sliding speed (|dx_in/dt|, or a held mix with the distal speed), t_k counted from the
+            first sample, [.] 1 where true (the friction steps by dK at the instant t_s: a reshaped sheath)
     Y_p   = max(T_in,k, 0) + a                                 tension-independent friction (E8)
     T_out = Y_n - a
     E1    = sum_i w_i phi(Y_i - a) - phi(T0),   phi(T) = T + beta T_c (1 - e^{-T/T_c})       (E9, E5)
@@ -63,11 +64,13 @@ from estimator.extended_loop import (
     P_C_V,
     P_K,
     P_K_RATE,
+    P_K_STEP,
     P_R_S,
     P_SIGMA,
     P_T0,
     P_T_MIN,
     P_T_SLIP,
+    P_T_STEP,
     P_TC,
     P_V_ST,
     run_span,
@@ -79,13 +82,13 @@ __all__ = ["run_extended", "distal_slide", "travel_lag", "backlash_play"]
 
 @njit(cache=True, nogil=True)
 def _kernel(T_in, v, spd, t, u, w, K, a, T0, K_rate, c_v, r_s, t_slip, T_min, sigma, beta, Tc, v_st,
-            T0_out, band, slide, T_out, E1):  # pragma: no cover - compiled
+            T0_out, band, K_step, t_step, slide, T_out, E1):  # pragma: no cover - compiled
     """The whole recording through the shared sample loop (:func:`estimator.extended_loop.run_span`) from rest."""
     m1 = u.shape[0]
     par = np.empty(N_PAR)
     par[P_K], par[P_A], par[P_T0], par[P_K_RATE], par[P_C_V], par[P_R_S] = K, a, T0, K_rate, c_v, r_s
     par[P_T_SLIP], par[P_T_MIN], par[P_SIGMA], par[P_BETA], par[P_TC] = t_slip, T_min, sigma, beta, Tc
-    par[P_V_ST], par[P_BAND] = v_st, band
+    par[P_V_ST], par[P_BAND], par[P_K_STEP], par[P_T_STEP] = v_st, band, K_step, t_step
     Y = np.empty(m1)
     st = np.empty(N_ST)
     tab = np.empty((3, m1))
@@ -138,7 +141,7 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
                  r_s: float = 0.0, t_slip: float = 0.02, T_min: float = 0.0,
                  sigma: float = 0.0, beta: float = 0.0, Tc: float = 1.0,
                  speed: np.ndarray | None = None, v_st: float = 0.0,
-                 T0_out: float = -1.0, band: float = 0.0,
+                 T0_out: float = -1.0, band: float = 0.0, K_step: float = 0.0, t_step: float = 0.0,
                  slide: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Run the extended profile-memory model over a recording (module docstring for the equations).
 
@@ -164,6 +167,8 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
         Stiction in its Stribeck form when > 0 [m/s] (each node's bound K (1 + r_s e^-(v_i/v_st)^2) by its own
         sliding speed, no breakaway rule; 0: the breakaway form); the distal tension at rest [N] that caps the
         initial profile with T0 > 0 (< 0: uniform T0); the noise band h [N] >= 0 of the stuck rule (0: exact).
+    K_step, t_step : float
+        The friction step (a reshaped sheath): K is K + K_step [-] from ``t_step`` [s] after the first sample on.
     slide : ndarray of int8, shape (n,), optional
         Direction in which the measured distal end is seen moving (+1, -1, 0; :func:`distal_slide`): where it
         moves the way the proximal end does (faster than V_STOP) the whole tendon slides that way. None: unused.
@@ -190,7 +195,8 @@ def run_extended(T_in: np.ndarray, velocity: np.ndarray, time: np.ndarray, u: np
     _kernel(T_in, vel, spd, np.ascontiguousarray(time, dtype=np.float64),
             np.ascontiguousarray(u, dtype=np.float64), np.ascontiguousarray(w, dtype=np.float64), float(K),
             float(a), float(T0), float(K_rate), float(c_v), float(r_s), float(t_slip), float(T_min),
-            float(sigma), float(beta), float(Tc), float(v_st), float(T0_out), float(band),
+            float(sigma), float(beta), float(Tc), float(v_st), float(T0_out), float(band), float(K_step),
+            float(t_step),
             np.zeros(0, dtype=np.int8) if slide is None else np.ascontiguousarray(slide, dtype=np.int8), T_out, E1)
     return T_out, E1
 

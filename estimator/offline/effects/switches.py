@@ -22,6 +22,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 __all__ = ["Setting", "RigSwitch", "ScenarioKnob", "SENSOR_KNOBS", "SENSOR_SWITCHES", "drift_rate", "offset_at_tip",
+           "step_at",
            "SENSOR_TEXT", "SENSOR_CAUSE", "SENSOR_SIGNATURE", "SENSOR_WHAT"]
 
 
@@ -62,21 +63,25 @@ class ScenarioKnob:
     the names whose sign the scenario draws from its seed; ``settings(m, K, duration)``: the
     magnitudes m (signed), the rig's friction exponent K [-] and the recording's duration [s] ->
     the values of the recording (switch settings by name, and truth parameters); None: m as it is;
-    ``truth``: the names reported as the recording's truth (empty: all of them).
+    ``truth``: the names reported as the recording's truth (empty: all of them); ``drawn``: (name, low, high)
+    values placed by a second uniform draw of the scenario, apart from the level (the instant of a step).
     """
 
     ranges: tuple[tuple[str, float, float], ...]
     signed: tuple[str, ...] = ()
     settings: Callable[[dict[str, float], float, float], dict[str, float]] | None = None
     truth: tuple[str, ...] = ()
+    drawn: tuple[tuple[str, float, float], ...] = ()
 
     def range(self) -> dict[str, tuple[float, float]]:
         """Name -> (low, high) of the realistic magnitudes, SI units."""
         return {n: (lo, hi) for n, lo, hi in self.ranges}
 
-    def values(self, level: float, sign: float, K: float, duration: float) -> dict[str, float]:
-        """Every value of a recording at ``level`` in [0, 1]; ``sign`` (+-1) applies to :attr:`signed`."""
+    def values(self, level: float, sign: float, K: float, duration: float, draw: float = 0.5) -> dict[str, float]:
+        """Every value of a recording at ``level`` in [0, 1]; ``sign`` (+-1) applies to :attr:`signed`; ``draw`` in
+        [0, 1] places the :attr:`drawn` values in their ranges."""
         m = {n: (sign if n in self.signed else 1.0) * (lo + level * (hi - lo)) for n, lo, hi in self.ranges}
+        m.update({n: lo + draw * (hi - lo) for n, lo, hi in self.drawn})
         return m if self.settings is None else self.settings(m, K, duration)
 
     def truth_of(self, values: dict[str, float]) -> dict[str, float]:
@@ -88,6 +93,13 @@ def drift_rate(m: dict[str, float], K: float, duration: float) -> dict[str, floa
     """Curvature drift: a relative change of K over the recording -> dK/dt [1/s]."""
     rate = m["relative_change"] * K / duration
     return {"K_rate": rate, "rate": rate, "relative_change": m["relative_change"]}
+
+
+def step_at(m: dict[str, float], K: float, duration: float) -> dict[str, float]:
+    """Friction step: a relative step of K at a share of the recording -> dK [-] and the instant t_s [s] (the rig
+    switch's ``change`` and ``time``)."""
+    dK, t_s = m["relative_step"] * K, m["instant_share"] * duration
+    return {"dK": dK, "change": dK, "t_s": t_s, "time": t_s, "relative_step": m["relative_step"]}
 
 
 def offset_at_tip(m: dict[str, float], K: float, duration: float) -> dict[str, float]:

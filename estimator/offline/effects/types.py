@@ -25,7 +25,11 @@ class Parameter:
     offset): "" no; "replace": only from that reading (at least 0.1; the pretension); "extend": the starts
     plus that reading when it lies beyond them (the offset of a slack tendon's reading, an encoder offset).
     Either way the best few extensions refitted with the route free also start from it on the uniform
-    route (diagnose)."""
+    route (diagnose).
+
+    ``discrete`` marks a parameter the least-squares fit does not move (the instant of a step, on which the
+    residual depends in steps): it is fitted by a profile over candidate values
+    (:func:`estimator.offline.diagnosis.instant.profile_instant`) and then held; it counts in the price."""
 
     name: str
     unit: str
@@ -35,6 +39,7 @@ class Parameter:
     starts: tuple[float, ...]
     meaning: str
     rest: Literal["", "replace", "extend"] = ""
+    discrete: bool = False
 
 
 @dataclass(frozen=True, eq=False)

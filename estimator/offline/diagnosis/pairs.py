@@ -1,0 +1,77 @@
+"""Two causes at once: pairs of the strongest single candidates, where the model chosen so far leaves structure.
+
+A step of :func:`estimator.offline.diagnosis.selection.diagnose_recording` after the forward selection
+(:func:`estimator.offline.diagnosis.rules.select`): :func:`consider_pairs` (its docstring gives the rule; the
+numbers are PENALTY, RANK_FACTOR, DOMINANT_SCORE and STRUCTURE_RATIO of :mod:`estimator.offline.diagnosis.thresholds`,
+and the run-time bound :data:`PAIR_POOL`).
+"""
+from __future__ import annotations
+
+import math
+
+from estimator.offline.diagnosis import thresholds as th
+from estimator.offline.diagnosis.fit import settings_keys, start_points
+from estimator.offline.diagnosis.folds import Fit, unresolved
+from estimator.offline.diagnosis.rules import Context, worst
+from estimator.offline.effects.catalogue import CATALOGUE
+from estimator.offline.effects.types import ROUTE_KEYS
+
+__all__ = ["consider_pairs", "PAIR_POOL"]
+
+#: [count] the strongest single candidates (lowest S), and the strongest physical ones, whose pairs are fitted when
+#: the model so far leaves structure: a run-time bound (at most 15 pair fits), not tuned
+PAIR_POOL = 3
+
+
+def _rank(f: Fit) -> float:
+    """log S + log(RANK_FACTOR) per parameter: the forward selection's rank of a model against the base."""
+    return math.log(max(f.S, 1e-12)) + math.log(th.RANK_FACTOR) * f.n_params
+
+
+def _pair_fit(ctx: Context, base: Fit, singles: dict[str, Fit], a: str, b: str) -> Fit:
+    """Two candidates fitted together on each fold: from both single fits' values (the first one's route held)."""
+    fx = [CATALOGUE[a], CATALOGUE[b]]
+    v0 = {**singles[b].values[0], **singles[a].values[0]}
+    kept = {k: v for k, v in v0.items() if k in settings_keys(fx)}
+    n = sum(len(e.parameters) for e in fx)
+    per_fold = singles[a].values + singles[a].values[-1:] * (len(ctx.folds.fit) - len(singles[a].values))
+    return Fit(fx, ctx.folds, start_points(fx, v0, ctx.s, v0),
+               fixed=[{**{k: v[k] for k in ROUTE_KEYS if k in v}, **kept} for v in per_fold],
+               base=base, floor=ctx.floor, need=1.0 - th.PENALTY * n)
+
+
+def consider_pairs(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fit) -> Fit:
+    """Two causes at once: where the model chosen so far leaves structure (above STRUCTURE_RATIO on a signal, the base
+    above it too), the pairs of the PAIR_POOL strongest single candidates and the PAIR_POOL strongest physical ones
+    (not sensor effects), at least one of each pair physical, are fitted together and scored against the base on the
+    same validation blocks.
+
+    Two effects at once bend each other's single fits: each alone explains part of the residual, and the one the
+    forward selection takes first may not be one of them, so that no second effect fits beside it; a sensor offset
+    beside a physical effect explains most of the residual alone and hides the physical one among the sensor
+    effects that explain the same offset a little worse. A pair is
+    acceptable with the same price as any model, S + PENALTY x (its parameters) < 1, and only when each of its two
+    effects earns its own parameters against the other alone (S_pair / S_single + PENALTY x (the other's parameters)
+    < 1; neither fitted at a magnitude the recording cannot resolve); among the acceptable ones and the model so far,
+    the lowest log S + log(RANK_FACTOR) x (parameters) is kept. Returns the model kept (``chosen`` when no pair does
+    better)."""
+    if (worst(chosen, ctx.floor) <= th.STRUCTURE_RATIO or worst(base, ctx.floor) <= th.STRUCTURE_RATIO
+            or len(singles) < 2):
+        return chosen
+    ranked = sorted((eid for eid in singles if singles[eid].S < 1.0), key=lambda k: singles[k].S)
+    physical = [eid for eid in ranked if not CATALOGUE[eid].channel]
+    pool = ranked[:PAIR_POOL] + [eid for eid in physical[:PAIR_POOL] if eid not in ranked[:PAIR_POOL]]
+    best, best_rank = chosen, _rank(chosen) if chosen.effects else 0.0
+    for i, a in enumerate(pool):
+        for b in pool[i + 1:]:
+            if {a, b} == set(chosen.ids) or (CATALOGUE[a].channel and CATALOGUE[b].channel):
+                continue        # the model so far, or two sensor effects: a pair names a physical cause
+            f = _pair_fit(ctx, base, singles, a, b)
+            if not f.complete and f.sole_fold is None:
+                continue        # stopped after one fold: it cannot be accepted
+            own = all(f.S / singles[e].S + th.PENALTY * (f.n_params - singles[e].n_params) < 1.0 for e in (a, b))
+            if (f.S + th.PENALTY * f.n_params < 1.0 and own and _rank(f) < best_rank
+                    and not any(unresolved(f.effects, v, ctx.floor, dominant=f.S < th.DOMINANT_SCORE)
+                                for v in f.values)):
+                best, best_rank = f, _rank(f)
+    return best

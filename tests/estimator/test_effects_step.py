@@ -1,0 +1,48 @@
+"""The friction step (a reshaped sheath): the kernel's step of K at its instant, the instant fitted by a profile,
+the fold that judges a step, and the diagnosis telling a step from a drift."""
+from __future__ import annotations
+
+import numpy as np
+
+from estimator.offline.diagnosis.fit import fit_model
+from estimator.offline.diagnosis.folds import Folds, step_fold
+from estimator.offline.diagnosis.instant import PROFILE_MARGIN
+from estimator.offline.effects.catalogue import effect, predict
+from estimator.offline.effects.types import Series
+from tests.estimator.test_effects import K, _pull, series
+
+
+def test_friction_step_changes_K_at_its_instant_only():
+    T_in, x_in = _pull()
+    s = series(T_in, x_in)
+    t_s = 0.4 * float(s.time[-1] - s.time[0])
+    pr = predict(["friction_step"], {"K": K, "dK": -0.3, "t_s": t_s}, s, compliance=1e-4)
+    base = predict([], {"K": K}, s, compliance=1e-4)
+    after = s.time - s.time[0] >= t_s
+    m = T_in > 1.0
+    np.testing.assert_array_equal(pr.T_out[~after], base.T_out[~after])
+    # a sliding pull follows the lower friction at once
+    np.testing.assert_allclose(pr.T_out[m & after], T_in[m & after] * np.exp(-(K - 0.3)), rtol=1e-9)
+
+
+def test_friction_step_instant_is_profiled_not_a_gradient():
+    # a pull-release series whose friction steps at 13 s: the fit finds the instant by its profile and both levels
+    t = np.arange(0.0, 30.0, 0.005)
+    x_in = 2e-3 * np.sin(2 * np.pi * t / 4.0) ** 2
+    T_in = 1.0 + 5e3 * x_in
+    s = series(T_in, x_in, dt=0.005)
+    truth = predict(["friction_step"], {"K": K, "dK": -0.2, "t_s": 13.0}, s, compliance=1e-4)
+    s = Series(s.time, s.x_in, s.T_in, s.velocity, truth.T_out, truth.x_out, s.u, s.w)
+    vals, _, _ = fit_model([effect("friction_step")], s, [{"K": 0.5, "dK": 0.0}])
+    assert abs(vals["t_s"] - 13.0) < 1.0          # the pulls are 2 s apart: the instant lies between two of them
+    assert abs(vals["dK"] + 0.2) < 0.01 and abs(vals["K"] - K) < 0.01
+
+
+def test_a_step_is_judged_by_the_fold_whose_fit_block_holds_both_sides():
+    t = np.arange(0.0, 100.0, 0.01)
+    s = series(np.ones_like(t), dt=0.01)
+    folds = Folds(s, kb=3000, kv=6000, kt=9000)     # forward fit [0, 60 s), backward fit [30, 90 s)
+    assert step_fold(folds, [20.0, 70.0]) == 1      # after the forward fit block: only the backward fold saw it
+    assert step_fold(folds, [10.0, 40.0]) == 0      # before the backward fit block: only the forward fold saw it
+    assert step_fold(folds, [45.0, 45.0]) is None   # inside both: the worse fold counts
+    assert step_fold(folds, [45.0, 60.0 - 0.5 * PROFILE_MARGIN]) == 1
