@@ -65,7 +65,8 @@ def one(case: tuple) -> dict:
     return {"sim": sim, "family": family, "effect": effect, "level": rec.truth["level"], "seed": seed,
             "motion": motion, "load": load or "", "cause": cause, "causes": causes,
             "seconds": time.perf_counter() - t0, "truth": rec.truth["parameters"],
-            "hand": res.get("settings", {}).get("hand_motion")}
+            "scores": {k: round(v["score"], 3) for k, v in res.get("candidates", {}).items()},
+            "structure": res.get("structure", {})}
 
 
 def cases(sims: tuple[str, ...], seed_set: str, seeds: int, levels: list[float], clean: int,
