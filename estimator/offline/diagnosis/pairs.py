@@ -7,16 +7,17 @@ and the run-time bound :data:`PAIR_POOL`).
 """
 from __future__ import annotations
 
+import copy
 import math
 
 from estimator.offline.diagnosis import thresholds as th
 from estimator.offline.diagnosis.fit import settings_keys, start_points
 from estimator.offline.diagnosis.folds import Fit, unresolved
-from estimator.offline.diagnosis.rules import Context, worst
+from estimator.offline.diagnosis.rules import Context, shown_at_floor, worst
 from estimator.offline.effects.catalogue import CATALOGUE
 from estimator.offline.effects.types import ROUTE_KEYS
 
-__all__ = ["consider_pairs", "PAIR_POOL"]
+__all__ = ["consider_pairs", "second_at_floor", "PAIR_POOL"]
 
 #: [count] the strongest single candidates (lowest S), and the strongest physical ones, whose pairs are fitted when
 #: the model so far leaves structure: a run-time bound (at most 15 pair fits), not tuned
@@ -40,6 +41,13 @@ def _pair_fit(ctx: Context, base: Fit, singles: dict[str, Fit], a: str, b: str) 
                base=base, floor=ctx.floor, need=1.0 - th.PENALTY * n)
 
 
+def _pool(singles: dict[str, Fit], out: list[str]) -> list[str]:
+    """The PAIR_POOL strongest single candidates (S < 1) and the PAIR_POOL strongest physical ones, without ``out``."""
+    ranked = sorted((eid for eid in singles if singles[eid].S < 1.0 and eid not in out), key=lambda k: singles[k].S)
+    physical = [eid for eid in ranked if not CATALOGUE[eid].channel]
+    return ranked[:PAIR_POOL] + [eid for eid in physical[:PAIR_POOL] if eid not in ranked[:PAIR_POOL]]
+
+
 def consider_pairs(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fit) -> Fit:
     """Two causes at once: where the model chosen so far leaves structure (above STRUCTURE_RATIO on a signal, the base
     above it too), the pairs of the PAIR_POOL strongest single candidates and the PAIR_POOL strongest physical ones
@@ -58,9 +66,7 @@ def consider_pairs(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fit
     if (worst(chosen, ctx.floor) <= th.STRUCTURE_RATIO or worst(base, ctx.floor) <= th.STRUCTURE_RATIO
             or len(singles) < 2):
         return chosen
-    ranked = sorted((eid for eid in singles if singles[eid].S < 1.0), key=lambda k: singles[k].S)
-    physical = [eid for eid in ranked if not CATALOGUE[eid].channel]
-    pool = ranked[:PAIR_POOL] + [eid for eid in physical[:PAIR_POOL] if eid not in ranked[:PAIR_POOL]]
+    pool = _pool(singles, [])
     best, best_rank = chosen, _rank(chosen) if chosen.effects else 0.0
     for i, a in enumerate(pool):
         for b in pool[i + 1:]:
@@ -74,4 +80,47 @@ def consider_pairs(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fit
                     and not any(unresolved(f.effects, v, ctx.floor, dominant=f.S < th.DOMINANT_SCORE)
                                 for v in f.values)):
                 best, best_rank = f, _rank(f)
+    return best
+
+
+def second_at_floor(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fit) -> Fit:
+    """A second cause under the first: where the base leaves structure and one effect brings it to the floor
+    (STRUCTURE_RATIO or less), a second effect is named when, beside the first, it passes the bars at the floor with
+    the first effect's model as the base.
+
+    A sensor offset or a pretension explains most of what the base leaves; a velocity friction or a drift of K beside
+    it leaves the first model near its floor, where the forward selection tries no second effect. At the floor the
+    rules name an effect on a clean recording (:func:`estimator.offline.diagnosis.rules.shown_at_floor`: S below the
+    effect's own bar, or B (1 - S) of at least EXCESS_MIN squared floors); with the first effect explained the
+    residual is such a recording's, so the same bars apply to the pair's S relative to the first model. The partners
+    are every physical candidate and, beside a physical first effect, the PAIR_POOL strongest singles: a second
+    effect's single fit is bent by the first, so its S alone does not say what it adds beside it (a drift of K
+    beside a pretension ranks below the encoder offsets and the play that mimic the pretension). A partner must pay
+    its parameters (S_rel + PENALTY x its parameters < 1) and be resolved; among those
+    the lowest log S_rel + log(RANK_FACTOR) x (its parameters) is kept. Returns ``chosen`` or the pair."""
+    if (len(chosen.effects) != 1 or worst(base, ctx.floor) <= th.STRUCTURE_RATIO
+            or worst(chosen, ctx.floor) > th.STRUCTURE_RATIO):
+        return chosen
+    first = chosen.effects[0]
+    best, best_rank = chosen, 0.0
+    partners = [eid for eid in singles if not CATALOGUE[eid].channel and eid != first.id]
+    if not first.channel:
+        partners += [eid for eid in _pool(singles, chosen.ids)[:PAIR_POOL] if eid not in partners]
+    for eid in partners:
+        e = CATALOGUE[eid]
+        fx = [first, e]
+        kept = {k: v for k, v in singles[eid].values[0].items() if k in settings_keys([e])}
+        v0 = {**chosen.values[0], **kept}
+        n = len(e.parameters)
+        f = Fit(fx, ctx.folds, start_points(fx, v0, ctx.s, v0),
+                fixed=[{**{k: v[k] for k in ROUTE_KEYS if k in v}, **kept} for v in chosen.values],
+                base=base, floor=ctx.floor, need=chosen.S * (1.0 - th.PENALTY * n))
+        if not f.complete and f.sole_fold is None:
+            continue
+        rel = copy.copy(f)
+        rel.S = f.S / max(chosen.S, 1e-12)
+        rank = math.log(max(rel.S, 1e-12)) + math.log(th.RANK_FACTOR) * n
+        if (rel.S + th.PENALTY * n < 1.0 and rank < best_rank and shown_at_floor(ctx, chosen, eid, rel)
+                and not any(unresolved(f.effects, v, ctx.floor) for v in f.values)):
+            best, best_rank = f, rank
     return best
