@@ -228,8 +228,10 @@ def protocol(duration: float, rate_hz: float, x_max: float, rng: np.random.Gener
 
 
 def _check(effect: str | tuple[str, ...] | None, level: float | None, duration: float,
-           rate_hz: float) -> tuple[str, ...]:
+           rate_hz: float, motion: str = "protocol", load: str = "spring") -> tuple[str, ...]:
     """The arguments of :func:`record` checked (its Raises); returns the hidden effects' ids."""
+    if motion not in MOTIONS or load not in LOADS:
+        raise ValueError(f"motion must be one of {MOTIONS} and load one of {LOADS}, got {motion!r}, {load!r}")
     hidden = () if effect in (None, "none") else (effect,) if isinstance(effect, str) else tuple(effect)
     known = scenario_effects()
     for e in hidden:
@@ -274,23 +276,17 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
         Length [s], >= 5.
     rate_hz : float
         Sampling and control rate [Hz], >= 100.
-    motion : "protocol" or "hand"
-        The bench protocol (:func:`protocol`) or operator-like motion (:func:`study.motion.hand_motion`: random
-        moves with holds, speeds up to 25 mm/s) over the same span.
+    motion : "protocol" (:func:`protocol`) or "hand" (:func:`study.motion.hand_motion`, operator-like), same span.
     load : "spring", "tissue" or "contact"
-        The distal load: a joint spring in series with a linear tissue spring (1-3 kN/m); nonlinear tissue (a
-        stiffening law of three pieces, 300-800, then 1.3-3.3, then 4.3-11 kN/m); or free space then contact (a
-        20-100 N/m joint spring for 1-4 mm, then tissue of 1-3 kN/m). The rig and the protocol of a seed are those
-        of the default spring whatever ``motion`` and ``load``; the load's own draws come from a separate stream.
+        A linear spring (1.1-3.1 kN/m), nonlinear tissue (three pieces, 0.3-0.8, 1.3-3.3, 4.3-11 kN/m) or free
+        space then contact (20-100 N/m for 1-4 mm, then 1-3 kN/m): :func:`_load`, from its own random stream.
 
     Raises
     ------
     ValueError
         Unknown effect, motion or load, ``level`` outside [0, 1], too short or too slowly sampled a recording.
     """
-    hidden = _check(effect, level, duration, rate_hz)
-    if motion not in MOTIONS or load not in LOADS:
-        raise ValueError(f"motion must be one of {MOTIONS} and load one of {LOADS}, got {motion!r}, {load!r}")
+    hidden = _check(effect, level, duration, rate_hz, motion, load)
     # independent streams, so that one seed gives the same rig and protocol whatever the effect
     rng, rng_fx, rng_proto, rng_noise = (np.random.default_rng(s) for s in np.random.SeedSequence([seed, 7]).spawn(4))
     u = float(rng_fx.uniform()) if level is None else float(level)
@@ -313,16 +309,10 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
                                    sensors=SensorConfig(load_cell_noise=noise_in, seed=int(rng.integers(2**31))))
     rig = SimulatedRig(sheath, rig_cfg)
     c = L / EA
-    per_newton = math.exp(-K) / (100.0 + k_tissue) + c * -math.expm1(-K) / K   # x_in per T_in, pulling
     x0 = _truth(rig.state).x_in
     u_rest, u_top = float(rng.uniform(0.1, 0.4)), float(rng.uniform(12.0, 20.0))
     taut = 1.2 * params["tension_offset"] * math.expm1(K) if "friction_offset" in hidden else 0.0
-    if load == "spring":
-        x_rest, x_top = u_rest * per_newton, u_top * per_newton
-        # rest where the tendon stays taut: friction holds a(e^K - 1) at the tip
-        x_rest += taut * (1.0 / (100.0 + k_tissue) + c)
-    else:
-        x_rest, x_top = _reach(load_cfg, K, c, u_rest + taut), _reach(load_cfg, K, c, u_top)
+    x_rest, x_top = _span(load_cfg, load == "spring", K, c, taut, u_rest, u_top)
     if motion == "hand":
         cmd = x0 + hand_motion(duration, rate_hz, x_rest, max(x_top, 1.5 * x_rest), rng_proto)
     else:
@@ -336,12 +326,7 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     x_out = q_x * np.round((x_true + noise_x * rng_noise.standard_normal(cmd.size)) / q_x)
     T_in, x_in, T_out, x_out = _sensor_effects(hidden, params, time, T_in, x_in, T_out, x_out)
     if "load_cell_drift" in hidden or "load_cell_wander" in hidden:
-        amp = realistic_range("load_cell_wander")["amplitude"]
-        amplitude = amp[0] + u * (amp[1] - amp[0])
-        knots = np.arange(0.0, duration + 20.0, 10.0)
-        wander = np.interp(np.arange(cmd.size) * dt, knots, rng_fx.uniform(-1.0, 1.0, knots.size))
-        T_out = T_out + amplitude * wander / max(np.max(np.abs(wander)), 1e-9)
-        params["amplitude"] = amplitude
+        T_out = T_out + _wander(u, duration, np.arange(time.size) * dt, rng_fx, params)
     data = MeasuredData(time=time, x_in=x_in, T_in=T_in, x_out=x_out, T_out=T_out,
                         metadata={"source": "study/scenarios.py simulated bench recording",
                                   "units": "time=s, x_in=m, T_in=N, x_out=m, T_out=N"},
@@ -372,6 +357,28 @@ def _load_truth(ld: LoadConfig) -> dict[str, float]:
     return {"joint_stiffness": ld.joint_stiffness, "tissue_contact": ld.tissue_contact,
             "tissue_stiffness": ld.tissue_stiffness, "joint_limit": ld.joint_limit,
             "limit_stiffness": ld.limit_stiffness}
+
+
+def _wander(u: float, duration: float, t: np.ndarray, rng: np.random.Generator, params: dict) -> np.ndarray:
+    """The uncatalogued slow wander of the distal load cell's zero at ``u`` of its range [N], shape of ``t`` [s] (its
+    amplitude kept in ``params``)."""
+    amp = realistic_range("load_cell_wander")["amplitude"]
+    amplitude = amp[0] + u * (amp[1] - amp[0])
+    knots = np.arange(0.0, duration + 20.0, 10.0)
+    wander = np.interp(t, knots, rng.uniform(-1.0, 1.0, knots.size))
+    params["amplitude"] = amplitude
+    return amplitude * wander / max(np.max(np.abs(wander)), 1e-9)
+
+
+def _span(ld: LoadConfig, spring: bool, K: float, c: float, taut: float, u_rest: float,
+          u_top: float) -> tuple[float, float]:
+    """Rest and top positions of the motion [m]: the travel that pulls the tendon to ``u_rest`` (plus ``taut``, the
+    tension that keeps a tendon with a friction offset taut at the tip) and ``u_top`` [N] of proximal tension."""
+    if spring:
+        per_newton = math.exp(-K) / (ld.joint_stiffness + ld.tissue_stiffness) + c * -math.expm1(-K) / K
+        # rest where the tendon stays taut: friction holds a(e^K - 1) at the tip
+        return u_rest * per_newton + taut * (1.0 / (ld.joint_stiffness + ld.tissue_stiffness) + c), u_top * per_newton
+    return _reach(ld, K, c, u_rest + taut), _reach(ld, K, c, u_top)
 
 
 def _reach(ld: LoadConfig, K: float, c: float, T_in: float) -> float:

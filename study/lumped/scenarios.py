@@ -225,8 +225,10 @@ def _run(tl: LumpedTendon, cmd: np.ndarray, rate: float, step: tuple[float, floa
 
 
 def _check(effect: str | tuple[str, ...] | None, seed: int, level: float | None, duration: float,
-           rate_hz: float | None) -> tuple[str, ...]:
+           rate_hz: float | None, motion: str = "protocol", load: str | None = None) -> tuple[str, ...]:
     """The arguments of :func:`record` checked (its Raises); returns the hidden effects' ids."""
+    if motion not in MOTIONS or (load is not None and load not in LOADS):
+        raise ValueError(f"motion must be one of {MOTIONS} and load None or one of {LOADS}, got {motion!r}, {load!r}")
     hidden = () if effect in (None, "none") else (effect,) if isinstance(effect, str) else tuple(effect)
     for e in hidden:
         if e not in EFFECT_IDS + UNCATALOGUED:
@@ -269,6 +271,15 @@ def _measure(sensor: dict, t: np.ndarray, true: dict[str, np.ndarray], noise: tu
                         source=f"<lumped scenario seed {seed}>")
 
 
+def _flat(by_effect: dict) -> dict[str, float]:
+    """The truth parameters of every hidden effect in one dict (a name two effects share prefixed by the second's id)."""
+    params: dict[str, float] = {}
+    for e, p in by_effect.items():
+        for k, val in p.items():
+            params[k if k not in params else f"{e}.{k}"] = float(val)
+    return params
+
+
 def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level: float | None = None,
            duration: float = 90.0, rate_hz: float | None = None, motion: str = "protocol",
            load: str | None = None) -> Recording:
@@ -303,9 +314,7 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     ValueError
         Unknown effect, motion or load, ``seed`` not an int, ``level``, ``duration`` or ``rate_hz`` out of range.
     """
-    hidden = _check(effect, seed, level, duration, rate_hz)
-    if motion not in MOTIONS or (load is not None and load not in LOADS):
-        raise ValueError(f"motion must be one of {MOTIONS} and load None or one of {LOADS}, got {motion!r}, {load!r}")
+    hidden = _check(effect, seed, level, duration, rate_hz, motion, load)
     rng, rng_fx, rng_proto, rng_noise = (np.random.default_rng(s)
                                          for s in np.random.SeedSequence([int(seed), 8]).spawn(4))
     route, mu = draw_route(rng)
@@ -342,10 +351,7 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     x_out_true = sig["x_joint"] - start["x_joint"]
     data = _measure(sensor, t, {"T_in": sig["T_in"], "T_out": sig["T_out"], "x_in": x_in_true, "x_out": x_out_true},
                     (noise_in, noise_out, noise_x), (q_T, q_in, q_out), rng_noise, rng_fx, duration, rate, seed)
-    params: dict[str, float] = {}
-    for e, p in by_effect.items():
-        for k, val in p.items():
-            params[k if k not in params else f"{e}.{k}"] = float(val)
+    params = _flat(by_effect)
     truth = {"effect": "+".join(hidden) or "none", "effects": hidden, "parameters": params,
              "parameters_by_effect": by_effect, "level": u, "K": K, "mu": mu, "compliance": L / EA, "EA": EA,
              "L": L, "M_e": M_e, "noise_T_in": noise_in, "noise_T_out": noise_out, "noise_x_out": noise_x,
