@@ -3,12 +3,15 @@ the fold that judges a step, and the diagnosis telling a step from a drift."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from estimator.offline.diagnosis.fit import fit_model
 from estimator.offline.diagnosis.folds import Folds, step_fold
 from estimator.offline.diagnosis.instant import PROFILE_MARGIN
+from estimator.offline.diagnosis.selection import diagnose
 from estimator.offline.effects.catalogue import effect, predict
 from estimator.offline.effects.types import Series
+from study import scenarios
 from tests.estimator.test_effects import K, _pull, series
 
 
@@ -46,3 +49,23 @@ def test_a_step_is_judged_by_the_fold_whose_fit_block_holds_both_sides():
     assert step_fold(folds, [10.0, 40.0]) == 0      # before the backward fit block: only the forward fold saw it
     assert step_fold(folds, [45.0, 45.0]) is None   # inside both: the worse fold counts
     assert step_fold(folds, [45.0, 60.0 - 0.5 * PROFILE_MARGIN]) == 1
+
+
+@pytest.mark.parametrize("hidden", ["friction_step", "curvature_drift"])
+def test_a_step_is_named_a_step_and_a_ramp_a_drift(hidden):
+    # the same rig with K stepping at one instant or drifting: the residual of a steady K is a step or a ramp
+    rec = scenarios.record(hidden, seed=3, level=0.8, duration=40.0, rate_hz=200.0)
+    d = diagnose(rec.data)
+    assert d["cause"] == hidden
+    if hidden == "friction_step":
+        fitted = d["parameters"]["t_s"]["value"] + float(rec.data.time[0])
+        assert abs(fitted - rec.truth["parameters"]["t_s"]) < 2.0
+        assert abs(d["parameters"]["dK"]["value"] - rec.truth["parameters"]["dK"]) < 0.2 * abs(
+            rec.truth["parameters"]["dK"])
+
+
+@pytest.mark.parametrize("pair", [("pretension", "curvature_drift"), ("velocity_friction", "sensor_offset:T_out")])
+def test_two_causes_at_once_are_both_named(pair):
+    rec = scenarios.record(pair, seed=3, level=0.8, duration=40.0, rate_hz=200.0)
+    causes = diagnose(rec.data)["causes"]
+    assert set(pair) <= set(causes[:2])

@@ -51,15 +51,15 @@ def _pool(singles: dict[str, Fit], out: list[str]) -> list[str]:
 def consider_pairs(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fit) -> Fit:
     """Two causes at once: where the model chosen so far leaves structure (above STRUCTURE_RATIO on a signal, the base
     above it too), the pairs of the PAIR_POOL strongest single candidates and the PAIR_POOL strongest physical ones
-    (not sensor effects), at least one of each pair physical, are fitted together and scored against the base on the
-    same validation blocks.
+    (not sensor effects), and the strongest single beside every other physical candidate, at least one of each pair
+    physical, are fitted together and scored against the base on the same validation blocks.
 
     Two effects at once bend each other's single fits: each alone explains part of the residual, and the one the
     forward selection takes first may not be one of them, so that no second effect fits beside it; a sensor offset
     beside a physical effect explains most of the residual alone and hides the physical one among the sensor
-    effects that explain the same offset a little worse. A pair is
-    acceptable with the same price as any model, S + PENALTY x (its parameters) < 1, and only when each of its two
-    effects earns its own parameters against the other alone (S_pair / S_single + PENALTY x (the other's parameters)
+    effects that explain the same offset a little worse. A pair is acceptable with the same price as any model,
+    S + PENALTY x (its parameters) < 1, and only when each of its two effects earns its own parameters against the
+    other alone (S_pair / S_single + PENALTY x (the other's parameters)
     < 1; neither fitted at a magnitude the recording cannot resolve); among the acceptable ones and the model so far,
     the lowest log S + log(RANK_FACTOR) x (parameters) is kept. Returns the model kept (``chosen`` when no pair does
     better)."""
@@ -67,19 +67,21 @@ def consider_pairs(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fit
             or len(singles) < 2):
         return chosen
     pool = _pool(singles, [])
+    pairs = [(a, b) for i, a in enumerate(pool) for b in pool[i + 1:]]
+    if pool:        # the strongest single beside every physical candidate (its own single fit bent by the first)
+        pairs += [(pool[0], b) for b in singles if not CATALOGUE[b].channel and b not in pool]
     best, best_rank = chosen, _rank(chosen) if chosen.effects else 0.0
-    for i, a in enumerate(pool):
-        for b in pool[i + 1:]:
-            if {a, b} == set(chosen.ids) or (CATALOGUE[a].channel and CATALOGUE[b].channel):
-                continue        # the model so far, or two sensor effects: a pair names a physical cause
-            f = _pair_fit(ctx, base, singles, a, b)
-            if not f.complete and f.sole_fold is None:
-                continue        # stopped after one fold: it cannot be accepted
-            own = all(f.S / singles[e].S + th.PENALTY * (f.n_params - singles[e].n_params) < 1.0 for e in (a, b))
-            if (f.S + th.PENALTY * f.n_params < 1.0 and own and _rank(f) < best_rank
-                    and not any(unresolved(f.effects, v, ctx.floor, dominant=f.S < th.DOMINANT_SCORE)
-                                for v in f.values)):
-                best, best_rank = f, _rank(f)
+    for a, b in pairs:
+        if {a, b} == set(chosen.ids) or (CATALOGUE[a].channel and CATALOGUE[b].channel):
+            continue        # the model so far, or two sensor effects: a pair names a physical cause
+        f = _pair_fit(ctx, base, singles, a, b)
+        if not f.complete and f.sole_fold is None:
+            continue        # stopped after one fold: it cannot be accepted
+        own = all(f.S / singles[e].S + th.PENALTY * (f.n_params - singles[e].n_params) < 1.0 for e in (a, b))
+        if (f.S + th.PENALTY * f.n_params < 1.0 and own and _rank(f) < best_rank
+                and not any(unresolved(f.effects, v, ctx.floor, dominant=f.S < th.DOMINANT_SCORE)
+                            for v in f.values)):
+            best, best_rank = f, _rank(f)
     return best
 
 
