@@ -30,8 +30,8 @@ Two modes:
 Markdown report with PNG figures (:func:`study.report.write_report`,
 :func:`study.kaist.report.write_kaist_report`); ``--figures DIR`` the KAIST plots ``kaist_*.png``;
 ``--model-out OUTDIR`` the chosen model of each configuration as a model file the live estimator runs
-(:mod:`study.kaist.model_file`; ``--mrd``: :mod:`study.mrd.model_file`; FILE.csv: the one file OUT.yaml with ``--instrument ID``,
-:mod:`study.tendon_model`).
+(:mod:`study.kaist.model_file`; ``--mrd``: :mod:`study.mrd.model_file`; FILE.csv: the one file OUT.yaml
+with ``--instrument ID``, :mod:`study.tendon_model`).
 Bad input raises DataError / ConfigError (one line, exit 2).
 """
 from __future__ import annotations
@@ -297,7 +297,8 @@ def format_diagnosis(result: Diagnosis | dict) -> str:
                      for k, p in r.parameters.items())
     held = r.settings.get("distal_end_held")
     note = [] if not held else [
-        f"x_out set aside: it moves {1e6 * held['range_m']:.3g} um, {100 * held['range_m'] / held['travel_m']:.2g} % of "
+        f"x_out set aside: it moves {1e6 * held['range_m']:.3g} um, "
+        f"{100 * held['range_m'] / held['travel_m']:.2g} % of "
         f"x_in's {1e3 * held['travel_m']:.3g} mm travel - the distal end pressed on a stop, whose deflection the base "
         "model reads as elongation: with x_out structure was left that no effect explains, without it none"
         if held.get("pressed") else
@@ -306,7 +307,8 @@ def format_diagnosis(result: Diagnosis | dict) -> str:
         "(a stop, or a load the tension never moved), so x_out shows nothing of the tendon"]
     at_end = r.settings.get("distal_at_end")
     if at_end and at_end["hides"]:
-        note.append(f"x_out sits within {1e6 * at_end['band_m']:.2g} um of an end of its {1e3 * at_end['range_m']:.3g} mm "
+        note.append(f"x_out sits within {1e6 * at_end['band_m']:.2g} um of an end of its "
+                    f"{1e3 * at_end['range_m']:.3g} mm "
                     f"range for {100 * at_end['share']:.0f} % of the proximal travel (a distal end held on a stop, or "
                     "a load not lifted): " + ", ".join(at_end["hides"])
                     + " cannot show in this recording, whatever the answer")
@@ -389,8 +391,8 @@ def analyze_kaist(recs: list[KaistRecording], progress: bool = False,
     """
     tick = _Status(progress)
     summaries, details = zip(*(_kaist_one(r) for r in recs), strict=False) if recs else ((), ())
-    out: dict[str, Any] = {"mode": "kaist", "train": "command cycle 1 (from the first sample)", "test": "the later command cycles",
-           "configurations": list(summaries)}
+    out: dict[str, Any] = {"mode": "kaist", "train": "command cycle 1 (from the first sample)",
+                           "test": "the later command cycles", "configurations": list(summaries)}
     train = [d["cycles"][0] for d in details]
     test = [d["cycles"][1] for d in details]
     for rec, s, d, tr, te in zip(recs, summaries, details, train, test, strict=False):
