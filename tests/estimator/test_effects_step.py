@@ -49,6 +49,9 @@ def test_a_step_is_judged_by_the_fold_whose_fit_block_holds_both_sides():
     assert step_fold(folds, [10.0, 40.0]) == 0      # before the backward fit block: only the forward fold saw it
     assert step_fold(folds, [45.0, 45.0]) is None   # inside both: the worse fold counts
     assert step_fold(folds, [45.0, 60.0 - 0.5 * PROFILE_MARGIN]) == 1
+    # each fold's instant beyond the other's fit block: the fold whose step explains its validation block judges
+    assert step_fold(folds, [10.0, 70.0], [0.05, 0.97]) == 0
+    assert step_fold(folds, [10.0, 70.0], [0.98, 0.04]) == 1
 
 
 @pytest.mark.parametrize("hidden", ["friction_step", "curvature_drift"])

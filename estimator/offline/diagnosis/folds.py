@@ -96,22 +96,27 @@ def sole_fold(effects: list[Effect], folds: Folds, base: Fit | None, floor: dict
     return None
 
 
-def step_fold(folds: Folds, instants: list[float]) -> int | None:
+def step_fold(folds: Folds, instants: list[float], fold_S: list[float] | None = None) -> int | None:
     """The one fold that judges a model with a step at an instant (``Parameter.discrete``; fitted per fold, [s] from
     the first sample), or None: both.
 
     A step shows only to a fold whose fit block holds both sides of it: one the forward fold's fit block ends before
     (the backward fold's instant after it) shows on the backward fold alone, one before the backward fold's fit block
     on the forward fold alone; the other fold saw one level only and its validation block shows the base's
-    extrapolation, not the step."""
+    extrapolation, not the step. When both hold (one fold fitted the step, the other a step of nothing where the
+    first cannot look), the fold whose step explains more of its validation block (the lower of ``fold_S``, the
+    folds' scores) judges."""
     if len(instants) < 2:
         return None
     t = folds.train.time
     fwd_end = float(t[folds.fit[0].stop - 1] - t[0])
     back_start = float(t[folds.fit[1].start] - t[0])
-    if instants[1] > fwd_end - PROFILE_MARGIN:
+    late, early = instants[1] > fwd_end - PROFILE_MARGIN, instants[0] < back_start + PROFILE_MARGIN
+    if late and early and fold_S is not None and len(fold_S) == 2:
+        return int(np.argmin(fold_S))
+    if late:
         return 1
-    if instants[0] < back_start + PROFILE_MARGIN:
+    if early:
         return 0
     return None
 
@@ -154,7 +159,7 @@ class Fit:
         # two models on the same samples (the transients neither explains left out: paired_trimmed_ms)
         self.fold_S = [score(m, bm, floor) for m, bm in self.pairs]     # forward, backward (when computed)
         if instant is not None and self.sole_fold is None and base is not None:
-            self.sole_fold = step_fold(folds, [v[instant] for v in self.values])
+            self.sole_fold = step_fold(folds, [v[instant] for v in self.values], self.fold_S)
             if self.sole_fold is not None:      # the other fold saw one level only: it judges no structure either
                 self.judged = (self.sole_fold,)
         scored = self.fold_S if self.sole_fold is None else self.fold_S[self.sole_fold:self.sole_fold + 1]
