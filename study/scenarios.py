@@ -44,7 +44,8 @@ from teleop.config.effects import EffectsConfig, EffectSwitch
 from teleop.config.schema import LoadConfig, RunConfig, SensorConfig, SheathConfig, SimulatedRigConfig
 
 __all__ = [
-    "LOADS", "MOTIONS", "RIG_SWITCH", "UNCATALOGUED", "Recording", "realistic_range", "effects_config", "protocol", "record",
+    "LOADS", "MOTIONS", "RIG_SWITCH", "UNCATALOGUED", "Recording", "realistic_range", "effects_config", "protocol",
+    "record",
     "scenario_effects",
 ]
 
@@ -346,7 +347,8 @@ def _load(kind: str, k_tissue: float, rng: np.random.Generator) -> LoadConfig:
         return LoadConfig(joint_stiffness=k1, tissue_contact=x1, tissue_stiffness=float(rng.uniform(1000.0, 2500.0)),
                           joint_limit=x1 + x2, limit_stiffness=float(rng.uniform(3000.0, 8000.0)), tissue=True)
     if kind == "contact":             # free space on a soft joint spring, then tissue
-        return LoadConfig(joint_stiffness=float(rng.uniform(20.0, 100.0)), tissue_contact=float(rng.uniform(1e-3, 4e-3)),
+        return LoadConfig(joint_stiffness=float(rng.uniform(20.0, 100.0)),
+                          tissue_contact=float(rng.uniform(1e-3, 4e-3)),
                           tissue_stiffness=float(rng.uniform(1000.0, 3000.0)), joint_limit=0.05, tissue=True)
     return LoadConfig(joint_stiffness=100.0, joint_limit=0.05, tissue_stiffness=k_tissue, tissue_contact=0.0,
                       tissue=True, force=0.0)
@@ -385,7 +387,8 @@ def _reach(ld: LoadConfig, K: float, c: float, T_in: float) -> float:
     """Proximal travel [m] that pulls the tendon to ``T_in`` [N] from slack: the load's travel to T_in e^-K plus
     the elongation c T_in (1 - e^-K) / K (``c`` = L/EA [m/N])."""
     x = np.linspace(0.0, 0.05, 20001)
-    springs = ((0.0, ld.joint_stiffness), (ld.tissue_contact, ld.tissue_stiffness), (ld.joint_limit, ld.limit_stiffness))
+    springs = ((0.0, ld.joint_stiffness), (ld.tissue_contact, ld.tissue_stiffness),
+               (ld.joint_limit, ld.limit_stiffness))
     F = sum(k * np.maximum(0.0, x - x0) for x0, k in springs)
     return float(np.interp(T_in * math.exp(-K), F, x)) + c * T_in * -math.expm1(-K) / K
 

@@ -291,7 +291,8 @@ def test_every_name_has_one_import_path():
             continue
         defined, _ = _top_level_names(mod)
         for node in ast.parse(path.read_text(encoding="utf-8")).body:
-            if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "__all__" for t in node.targets):
+            if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "__all__"
+                                                    for t in node.targets):
                 listed = [e.value for e in getattr(node.value, "elts", ()) if isinstance(e, ast.Constant)]
                 passed_on += [f"{mod}.__all__ lists {n}, defined elsewhere" for n in listed if n not in defined]
     assert not passed_on, "re-exports outside package __init__s: " + "; ".join(sorted(passed_on))

@@ -272,7 +272,8 @@ def _measure(sensor: dict, t: np.ndarray, true: dict[str, np.ndarray], noise: tu
 
 
 def _flat(by_effect: dict) -> dict[str, float]:
-    """The truth parameters of every hidden effect in one dict (a name two effects share prefixed by the second's id)."""
+    """The truth parameters of every hidden effect in one dict (a name two effects share prefixed by the second's
+    id)."""
     params: dict[str, float] = {}
     for e, p in by_effect.items():
         for k, val in p.items():

@@ -265,8 +265,9 @@ def rest_tension(data: MeasuredData) -> dict | None:
     A pretension is tension the tendon carries at rest, so both load cells read it (alike, or within the capstan
     ratio e^K that friction holds when the load settled against the preload) while the encoders, zeroed at that
     rest, read zero. An encoder offset moves no tension and shifts its position channel at every tension, the rest
-    included; a load-cell offset reads on one channel only. The reading: the medians of T_in and T_out over the initial rest (the samples before
-    x_in first moves by 5 um) in their noise sigmas (noise or quantisation, whichever is larger).
+    included; a load-cell offset reads on one channel only. The reading: the medians of T_in and T_out over the initial
+    rest (the samples before x_in first moves by 5 um) in their noise sigmas (noise or quantisation, whichever is
+    larger).
 
     Parameters
     ----------
