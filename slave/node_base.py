@@ -216,30 +216,26 @@ class SlaveNodeBase(NodeBase):
             return "master liveliness token gone"
         return None
 
+    def _operator_let_go(self, still: bool) -> bool:
+        """Whether a latched fault ends now: its condition is gone (``still`` false) and the latest command is
+        not engaged (the operator let go)."""
+        rec = self._accepted
+        return not still and rec is not None and not rec.message.engaged
+
     def _tension_hold(self) -> str | None:
         """Why a tension trip still holds SAFE (with a fresh command), or None: none does, or it ends now
         because the command is not engaged and every measured ``|T_in|`` is below :data:`REARM_FRACTION` of
         ``slave.max_tension``."""
-        why = self.tension_fault
-        if why is None:
-            return None
-        rec = self._accepted
-        if self.tension_high or rec is None or rec.message.engaged:
-            return why
-        self.tension_fault = None
-        return None
+        if self.tension_fault is not None and self._operator_let_go(self.tension_high):
+            self.tension_fault = None
+        return self.tension_fault
 
     def _sensor_hold(self) -> str | None:
         """Why a sensor fault still holds SAFE, or None: none does, or it ends now because the readings are
         good again and the latest command is not engaged (the operator let go, as after a tension trip)."""
-        why = self.sensor_fault
-        if why is None:
-            return None
-        rec = self._accepted
-        if self.sensor_faulty or rec is None or rec.message.engaged:
-            return why
-        self.sensor_fault = None
-        return None
+        if self.sensor_fault is not None and self._operator_let_go(self.sensor_faulty):
+            self.sensor_fault = None
+        return self.sensor_fault
 
     def _check_tension(self, axes, now: float) -> None:
         """The tension limit on this cycle's measured proximal tensions (module docstring).
