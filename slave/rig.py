@@ -45,14 +45,16 @@ class RigTruth:
     T_in : float
         True proximal tension [N], >= 0.
     T_out : float
-        True distal tension [N], >= 0.
+        True distal tension [N], >= 0 (with the simulated rig's presliding switch: T_in less the lagged friction).
     x_in : float
         True proximal tendon displacement [m] (motor position).
     x_out : float
-        True distal tendon displacement [m], >= 0 (0 = joint against its lower stop).
+        True distal displacement [m], >= 0 (0 = joint against its lower stop): the tendon's distal end, or with the
+        simulated rig's distal_backlash switch the position behind its play.
     elongation : float
         Tendon elongation (1/EA) int_0^L T(s) ds [m]. Equals ``x_in - x_out`` while the tendon is
-        taut; larger when it is slack (the proximal end pushed past the point of zero tension).
+        taut (without a distal play); larger when it is slack (the proximal end pushed past the point of zero
+        tension).
     profile : ndarray, shape (n_elements + 1,)
         Node tensions from the proximal to the distal end [N], equally spaced in arc length;
         read-only snapshot.

@@ -79,8 +79,15 @@ class SimulatedRig(EffectSwitches):
       0.2 mm/s it sticks again at once, which gives stick-slip on slow ramps.
     * friction_offset: dT/dtheta = -mu (T + a) sgn(v), a = tension_offset [N] (bending stiffness,
       clearance): the envelope rule on T + a, T >= 0.
-    * sensor_offset: the load cell reads T_in + offset [N]; sensor_delay: it reads T_in(t - delay)
-      (linear interpolation of the history).
+    * presliding (the catalogue's lumped form): the distal tension the load cell sees is T_in - F, the
+      friction F lagging the profile's T_0 - T_n in proximal travel, dF/ds = (T_0 - T_n - F) / distance
+      (:meth:`~slave.simulated_effects.EffectSwitches._advance_distal`); the profile and the tendon end follow
+      the memory model.
+    * distal_backlash: the distal position (``truth.x_out``) sits behind a play of total ``width`` [m] from the
+      tendon end, which carries the load: it stays until the end has crossed the gap, then follows it.
+    * sensor_offset: the load cell reads T_in + offset [N]; sensor_gain: (1 + gain) T_in; sensor_drift:
+      T_in + rate t [N/s], t from the start; sensor_delay: T_in(t - delay) (linear interpolation of the
+      history). encoder_offset: the encoder reads x_in + offset [m] (its count of the rest reads offset).
 
     With the tendon effects (all but pretension and the sensor ones) a step is one of two: while
     the whole tendon slides and the motor keeps going that way (faster than 0.2 mm/s) the profile
@@ -131,6 +138,7 @@ class SimulatedRig(EffectSwitches):
         self._T = np.full(n + 1, P)
         self._x_out = float(load_inverse(P, *self._graph)[0])
         self._x_in = self._x_out + elongation_general(self._T, self._w, self._beta, self._Tc)
+        self._start_distal()
 
         self.drive = Drive(rig)                 # motor loop, encoder, load cell (shared by every simulated rig)
         self.encoder_resolution = self.drive.encoder_resolution
@@ -201,6 +209,7 @@ class SimulatedRig(EffectSwitches):
         else:
             self._x_out = advance_proximal(self._T, self._lo, self._hi, self._w, self._c_pull, self._c_rel,
                                            self._x_in, self._x_out, *self._graph)
+        self._advance_distal(dx)
         self._t += h
         self._state = self._read(cmd)
         return self._state
@@ -227,6 +236,7 @@ class SimulatedRig(EffectSwitches):
             self._force = f
         self._graph = _load_graph(self._rig_cfg.load, self._tissue, self._force)
         self._x_out = settle_distal(self._T, self._lo, self._hi, self._w, self._x_in, self._x_out, *self._graph)
+        self._advance_distal(0.0)
         self._state = self._read(self._state.x_in_cmd)
 
     def close(self) -> None:
@@ -239,10 +249,11 @@ class SimulatedRig(EffectSwitches):
         profile = T.copy()
         profile.flags.writeable = False
         e = elongation_general(T, self._w, self._beta, self._Tc)
-        truth = RigTruth(T_in=float(T[0]), T_out=float(T[-1]), x_in=self._x_in, x_out=self._x_out,
-                         elongation=e, profile=profile)
+        T_out, x_out = self._distal()
+        truth = RigTruth(T_in=float(T[0]), T_out=T_out, x_in=self._x_in, x_out=x_out, elongation=e, profile=profile)
         T_meas = self._load_cell(float(T[0])) + self.drive.load_cell_noise()
-        return RigState(t=self._t, x_in=self.drive.encoder(self._x_in), T_in=T_meas, x_in_cmd=cmd, truth=truth)
+        return RigState(t=self._t, x_in=self.drive.encoder(self._x_in) + self._encoder_offset, T_in=T_meas,
+                        x_in_cmd=cmd, truth=truth)
 
 
 def _load_graph(load: LoadConfig, tissue: bool, force: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

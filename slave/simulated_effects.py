@@ -33,8 +33,8 @@ __all__ = [
 EFFECT_IDS = tuple(rig_switches())
 #: The switches this simulator has a kernel for (a catalogue switch missing here fails a test).
 IMPLEMENTED = frozenset({"velocity_friction", "pretension", "curvature_drift", "friction_step", "tendon_stiffening",
-                         "stiction",
-                         "friction_offset", "sensor_offset", "sensor_delay"})
+                         "stiction", "friction_offset", "presliding", "distal_backlash", "sensor_offset",
+                         "sensor_gain", "sensor_delay", "sensor_drift", "encoder_offset"})
 _V_STOP = 2e-4   # motor speed below which a whole-tendon slide ends [m/s] (estimator.extended_loop.V_STOP)
 
 
@@ -270,6 +270,11 @@ class EffectSwitches:
         self._t_break, self._dir = -math.inf, 0
         self._offset = float(on["sensor_offset"].offset) if "sensor_offset" in on else 0.0
         self._delay = float(on["sensor_delay"].delay) if "sensor_delay" in on else 0.0
+        self._gain = float(on["sensor_gain"].gain) if "sensor_gain" in on else 0.0
+        self._drift = float(on["sensor_drift"].rate) if "sensor_drift" in on else 0.0
+        self._encoder_offset = float(on["encoder_offset"].offset) if "encoder_offset" in on else 0.0
+        self._x_p = float(on["presliding"].distance) if "presliding" in on else 0.0
+        self._half_play = 0.5 * float(on["distal_backlash"].width) if "distal_backlash" in on else 0.0
         self._history: deque[tuple[float, float]] = deque()
         self._general = any(k in on for k in ("velocity_friction", "curvature_drift", "friction_step",
                                               "tendon_stiffening",
@@ -310,8 +315,44 @@ class EffectSwitches:
                 if stuck:
                     self._t_break = t              # breakaway from static friction
 
+    def _start_distal(self) -> None:
+        """The distal state of the switches at rest (after the start profile is laid down): the pre-sliding friction
+        at the memory model's, the measured distal position at the tendon end (the middle of the play)."""
+        self._friction = self._lag = float(self._T[0] - self._T[-1])
+        self._joint = self._x_out
+
+    def _advance_distal(self, dx: float) -> None:
+        """The distal state after a step of ``dx`` [m] of proximal travel (0: a load change at rest).
+
+        Pre-sliding (E2, the catalogue's lumped form): the friction F = T_in - T_out the load cell sees lags the
+        memory model's M = T_0 - T_n in proximal travel s, dF/ds = (M - F) / x_p, solved exactly over the step with M
+        linear in s from its value before the step (M_0) to the one after (M_1), r = |dx| / x_p:
+        F <- M_1 + (F - M_0) e^-r - (M_1 - M_0) (1 - e^-r) / r.
+        Distal backlash (E12): the measured distal position stays until the tendon end is more than half the width
+        from it, then follows at that distance."""
+        if self._x_p > 0.0:
+            m0, m1 = self._friction, float(self._T[0] - self._T[-1])
+            r = abs(dx) / self._x_p
+            if r > 0.0:
+                self._lag = m1 + (self._lag - m0) * math.exp(-r) + (m1 - m0) * math.expm1(-r) / r
+            self._friction = m1
+        h = self._half_play
+        if h > 0.0:
+            if self._x_out - self._joint > h:
+                self._joint = self._x_out - h
+            elif self._joint - self._x_out > h:
+                self._joint = self._x_out + h
+
+    def _distal(self) -> tuple[float, float]:
+        """The distal tension [N] and position [m] as the distal load cell and position sensor see them (before
+        noise): the tendon end's, or with pre-sliding T_in - F (>= 0: the tendon cannot push), with the backlash the
+        position behind the play."""
+        T_out = max(float(self._T[0]) - self._lag, 0.0) if self._x_p > 0.0 else float(self._T[-1])
+        return T_out, self._joint if self._half_play > 0.0 else self._x_out
+
     def _load_cell(self, T_true: float) -> float:
-        """The load-cell signal before noise: delayed and offset as the sensor effects say [N]."""
+        """The load-cell signal before noise [N]: delayed, scaled, offset and drifting as the sensor effects say,
+        (1 + gain) T(t - delay) + offset + rate t."""
         if self._delay > 0.0:
             h = self._history
             h.append((self._t, T_true))
@@ -323,7 +364,7 @@ class EffectSwitches:
                 T_true = v0
             else:
                 T_true = v0 + (v1 - v0) * min(1.0, (t_read - t0) / (t1 - t0))
-        return T_true + self._offset
+        return (1.0 + self._gain) * T_true + self._offset + self._drift * self._t
 
 
 def validate_effects(fx: EffectsConfig) -> None:

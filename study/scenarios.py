@@ -21,8 +21,8 @@ returned :class:`Recording` keeps the truth apart from the data, so a diagnosis 
 
 The scenario table is the effect catalogue's (estimator/offline/effects/catalogue.py): each entry's scenario
 knob gives its realistic range and how a level turns into the rig switch's settings
-(:func:`effects_config`); an entry without a rig switch is applied to the recorded signals here
-(pre-sliding, distal backlash, the sensor channels).
+(:func:`effects_config`); an entry without a rig switch is applied to the recorded signals here (the sensor
+channels the rig has no switch for).
 
 Over 400 lines: the rig's scenario table, its loads and its sensor chain belong together as one generator.
 """
@@ -35,7 +35,6 @@ import numpy as np
 
 from estimator.data import MeasuredData
 from estimator.offline.effects.catalogue import ALIASES, CATALOGUE, Effect, rig_switches
-from estimator.offline.effects.kernels import backlash_play, travel_lag
 from estimator.sheath import SheathGeometry
 from slave.rig import RigState, RigTruth
 from slave.simulated import SimulatedRig
@@ -83,8 +82,8 @@ def scenario_effects() -> tuple[str, ...]:
     return ids + keys + UNCATALOGUED
 
 
-#: catalogue id (or switch key) -> the rig switch that simulates it, at import (the others are applied
-#: to the recorded signals: the sensor effects on their channel, pre-sliding on T_out, the backlash on x_out)
+#: catalogue id (or switch key) -> the rig switch that simulates it, at import (the others, sensor effects, are
+#: applied to the recorded signals on their channel)
 RIG_SWITCH = {e: k for e in scenario_effects() if (k := _switch_key(e)) is not None}
 
 
@@ -248,9 +247,10 @@ def _check(effect: str | tuple[str, ...] | None, level: float | None, duration: 
 def _run(rig: SimulatedRig, cmd: np.ndarray, dt: float) -> tuple[np.ndarray, tuple[float, float, float]]:
     """Step the rig through the motor command ``cmd`` [m] at ``dt`` [s] from rest. Returns per sample
     (encoder x_in [m], T_in [N], true x_out [m], true T_out [N], true x_in [m]), shape (n, 5), and the
-    encoder, true x_out and true x_in at rest before moving [m]."""
+    encoder's count of the rest position (the zero the bench sets there; the rig's encoder_offset switch reads off
+    it), true x_out and true x_in at rest before moving [m]."""
     rest = _truth(rig.state)
-    at_rest = (rig.state.x_in, rest.x_out, rest.x_in)
+    at_rest = (rig.drive.encoder(rest.x_in), rest.x_out, rest.x_in)
     out = np.empty((cmd.size, 5))
     for k, x in enumerate(cmd):
         s = rig.step(float(x), dt)
@@ -322,7 +322,6 @@ def record(effect: str | tuple[str, ...] | None = None, *, seed: int = 0, level:
     out, (enc0, x_out0, x_in0) = _run(rig, cmd, dt)
     time = np.arange(1, cmd.size + 1) * dt
     T_in, x_in, T_true, x_true = out[:, 1], out[:, 0] - enc0, out[:, 3], out[:, 2] - x_out0
-    T_true, x_true = _signal_effects(hidden, params, time, out[:, 1], out[:, 4] - x_in0, T_true, x_true)
     T_out = T_true + noise_out * rng_noise.standard_normal(cmd.size)
     x_out = q_x * np.round((x_true + noise_x * rng_noise.standard_normal(cmd.size)) / q_x)
     T_in, x_in, T_out, x_out = _sensor_effects(hidden, params, time, T_in, x_in, T_out, x_out)
@@ -398,15 +397,6 @@ def _truth(s: RigState) -> RigTruth:
     if not isinstance(s.truth, RigTruth):
         raise RuntimeError(f"the simulated rig returned no single-tendon truth (got {type(s.truth).__name__})")
     return s.truth
-
-
-def _signal_effects(hidden, params, time, T_in, x_in, T_out, x_out):
-    """Pre-sliding on T_out (a Dahl lag of the friction in proximal travel) and the distal backlash on x_out."""
-    if "presliding" in hidden:
-        T_out = T_in - travel_lag(T_in - T_out, x_in, params["distance"])
-    if "distal_backlash" in hidden:
-        x_out = backlash_play(x_out, params["width"])
-    return T_out, x_out
 
 
 def _sensor_effects(hidden, params, time, T_in, x_in, T_out, x_out):

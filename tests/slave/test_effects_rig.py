@@ -42,7 +42,8 @@ def test_effects_are_off_by_default_and_listed_when_on():
     fx = EffectsConfig(stiction=EffectSwitch(enabled=True), sensor_delay=EffectSwitch(enabled=True))
     assert make_rig(fx).effects == ("stiction", "sensor_delay")
     assert EFFECT_IDS == ("velocity_friction", "pretension", "curvature_drift", "tendon_stiffening", "stiction",
-                          "friction_offset", "sensor_offset", "sensor_delay", "friction_step")
+                          "friction_offset", "presliding", "distal_backlash", "sensor_offset", "sensor_gain",
+                          "sensor_delay", "sensor_drift", "encoder_offset", "friction_step")
 
 
 def test_bad_effect_magnitude_names_the_key():
@@ -50,6 +51,11 @@ def test_bad_effect_magnitude_names_the_key():
         make_rig(EffectsConfig(stiction=EffectSwitch(True, static_ratio=-0.1)))
     with pytest.raises(ValueError, match=r"rig\.simulated\.effects\.sensor_delay\.delay"):
         make_rig(EffectsConfig(sensor_delay=EffectSwitch(True, delay=math.nan)))
+    for key, setting, bad in (("sensor_gain", "gain", -0.6), ("sensor_drift", "rate", 0.2),
+                              ("encoder_offset", "offset", 0.01), ("presliding", "distance", 0.0),
+                              ("distal_backlash", "width", -1e-4)):
+        with pytest.raises(ValueError, match=rf"rig\.simulated\.effects\.{key}\.{setting} must be"):
+            make_rig(EffectsConfig(**{key: EffectSwitch(True, **{setting: bad})}))
 
 
 @pytest.mark.parametrize("speed", [0.002, 0.02])
@@ -153,6 +159,58 @@ def test_sensor_offset_and_delay_act_on_the_reading_only():
     np.testing.assert_allclose(tr["reading"][100:], expected[100:], atol=1e-9)
 
 
+def test_load_cell_gain_drift_and_encoder_offset_act_on_the_readings_only():
+    fx = EffectsConfig(sensor_gain=EffectSwitch(True, gain=0.07), sensor_drift=EffectSwitch(True, rate=-0.01),
+                       encoder_offset=EffectSwitch(True, offset=-4e-5))
+    rig, ref = make_rig(fx), make_rig(EffectsConfig())
+    assert rig.state.x_in == pytest.approx(ref.state.x_in - 4e-5, abs=1e-12)        # the rest reads the offset
+    xs = 0.003 + 0.002 * np.sin(2 * math.pi * 1.0 * DT * np.arange(1, 3001))
+    states, base = [rig.step(float(x), DT) for x in xs], [ref.step(float(x), DT) for x in xs]
+    t = DT * np.arange(1, xs.size + 1)
+    T_ref = np.array([s.T_in for s in base])                                         # no noise: the true T_in
+    np.testing.assert_allclose([s.T_in for s in states], 1.07 * T_ref - 0.01 * t, atol=1e-9)
+    np.testing.assert_allclose([s.x_in for s in states], np.array([s.x_in for s in base]) - 4e-5, atol=1e-12)
+    for k in ("T_out", "x_out", "T_in"):
+        np.testing.assert_array_equal([getattr(s.truth, k) for s in states], [getattr(s.truth, k) for s in base])
+
+
+def test_distal_backlash_holds_the_distal_position_across_the_gap():
+    width = 2e-4
+    rig, ref = make_rig(EffectsConfig(distal_backlash=EffectSwitch(True, width=width))), make_rig(EffectsConfig())
+    pull, release = ramp(0.0, 0.006, 0.005), ramp(0.006, 0.002, 0.005)
+    xs = np.concatenate([pull, release, ramp(0.002, 0.006, 0.005)])
+    tr, base = drive(rig, xs), drive(ref, xs)
+    np.testing.assert_array_equal(tr["T_out"], base["T_out"])                      # the tendon end carries the load
+    gap = tr["x_out"] - base["x_out"]
+    assert np.all(np.abs(gap) <= 0.5 * width + 1e-15)
+    up, down = pull.size - 1, pull.size + release.size - 1                           # the ends of pull and release
+    assert gap[up] == pytest.approx(-0.5 * width, rel=1e-9)                          # the play trails the end
+    turn = np.argmax(base["x_out"][up:] < base["x_out"][up] - 0.9 * width) + up       # the end crossed 0.9 of it
+    assert np.ptp(tr["x_out"][up:turn + 1]) == 0.0                                    # the distal position stayed
+    assert gap[down] == pytest.approx(0.5 * width, rel=1e-9)                         # then leads it on release
+
+
+def test_presliding_lags_the_friction_in_proximal_travel():
+    x_p = 1e-4
+    rig, ref = make_rig(EffectsConfig(presliding=EffectSwitch(True, distance=x_p))), make_rig(EffectsConfig())
+    xs = np.concatenate([ramp(0.0, 0.006, 0.002), ramp(0.006, 0.004, 0.002)])
+    tr, base = drive(rig, xs), drive(ref, xs)
+    np.testing.assert_array_equal(tr["x_out"], base["x_out"])
+    np.testing.assert_array_equal(tr["T_in"], base["T_in"])
+    F, M = tr["T_in"] - tr["T_out"], base["T_in"] - base["T_out"]                  # friction: lagged, memory's
+    ds = np.abs(np.diff(xs, prepend=0.0))[1:]
+    # dF/ds = (M - F) / x_p, step by step (midpoint of each step: the rig solves it exactly over the step)
+    rhs = 0.5 * (M[1:] + M[:-1] - F[1:] - F[:-1]) / x_p
+    np.testing.assert_allclose(np.diff(F) / ds, rhs, rtol=0, atol=1e-3 * np.max(np.abs(rhs)))
+    up = np.argmax(xs)                                                               # end of the pull
+    slope = (M[up] - M[up - 100]) / (xs[up] - xs[up - 100])
+    assert M[up] - F[up] == pytest.approx(x_p * slope, rel=0.02)                     # a steady lag of x_p dM/ds
+    back = np.searchsorted(-xs[up:], -(xs[up] - 0.5 * x_p)) + up                     # half x_p into the release
+    assert F[back] - M[back] > 0.5 * (M[up] - M[back])         # the lagged friction keeps over half the memory's drop
+    slope = (M[-1] - M[-101]) / abs(xs[-1] - xs[-101])                               # per unit of travel
+    assert M[-1] - F[-1] == pytest.approx(x_p * slope, rel=0.02)                     # and trails it again
+
+
 def test_general_solver_keeps_the_taut_invariant():
     fx = EffectsConfig(friction_offset=EffectSwitch(True, tension_offset=0.5),
                          tendon_stiffening=EffectSwitch(True, softening=2.0, toe_tension=1.5),
@@ -186,3 +244,27 @@ def test_scenario_recordings_look_like_a_bench():
     assert "offset" not in str(d.metadata)
     with pytest.raises(ValueError, match="unknown effect"):
         record("backlash")
+
+
+@pytest.mark.parametrize("key", ["sensor_gain", "sensor_drift", "encoder_offset", "presliding", "distal_backlash"])
+def test_scenario_records_each_switch_at_its_level(key):
+    rec = record(key, seed=5, level=0.5, duration=10.0, rate_hz=500.0)
+    clean = record(None, seed=5, level=0.5, duration=10.0, rate_hz=500.0)     # same rig, protocol and noise
+    (name, (lo, hi)), = realistic_range(key).items()
+    m = rec.truth["parameters"][name]
+    assert abs(m) == pytest.approx(lo + 0.5 * (hi - lo), rel=1e-12)
+    d, c, tr, tc = rec.data, clean.data, rec.truth["signals"], clean.truth["signals"]
+    np.testing.assert_array_equal(tr["x_in"], tc["x_in"])
+    if key == "sensor_gain":
+        np.testing.assert_allclose(d.T_in - c.T_in, m * c.T_in, atol=6 * abs(m) * rec.truth["noise_T_in"])
+    elif key == "sensor_drift":
+        np.testing.assert_allclose(d.T_in - c.T_in, m * d.time, atol=1e-9)
+    elif key == "encoder_offset":
+        np.testing.assert_allclose(d.x_in - c.x_in, m, atol=1e-12)
+    elif key == "presliding":
+        np.testing.assert_array_equal(tr["x_out"], tc["x_out"])
+        assert np.max(np.abs(tr["T_out"] - tc["T_out"])) > 0.1                     # rounded corners on T_out
+    else:
+        np.testing.assert_array_equal(tr["T_out"], tc["T_out"])
+        gap = tr["x_out"] - tc["x_out"]
+        assert np.max(gap) == pytest.approx(0.5 * m, rel=1e-6) and np.min(gap) == pytest.approx(-0.5 * m, rel=1e-6)

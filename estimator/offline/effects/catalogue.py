@@ -253,6 +253,9 @@ class Presliding(Effect):
     literature = "E2"
     parameters = (Parameter("x_p", "m", PRESLIDING_MIN, 1e-3, 0.0, (40e-6, 120e-6),
                             "pre-sliding travel F_c / sigma (neutral 0: off, below the fitted range)"),)
+    switch = RigSwitch("presliding", "friction builds up over a small travel after a reversal (the lumped form)", (
+        Setting("distance", 80e-6, "m", "> 0", "x_p: T_in - T_out lags the memory model's friction over this "
+                "proximal travel"),))
     knob = ScenarioKnob((("distance", 40e-6, 150e-6),))
     variants = ({NODE_FORM: 0.0}, {NODE_FORM: 1.0})     # lumped (travel lag), per node (needs x_out)
 
@@ -269,6 +272,9 @@ class DistalBacklash(Effect):
     parameters = (Parameter("d_b", "m", 0.0, 2e-3, 0.0, (60e-6, 200e-6), "total dead-zone width"),)
     primary = "x_out"
     requires = ("x_out",)
+    switch = RigSwitch("distal_backlash", "play between the tendon's distal end and the measured distal position", (
+        Setting("width", 1e-4, "m", ">= 0", "total width d_b of the play behind which the distal position "
+                "sits"),))
     knob = ScenarioKnob((("width", 50e-6, 300e-6),))
 
 

@@ -116,12 +116,20 @@ SENSOR_KNOBS = {
     ("offset", "x"): ScenarioKnob((("offset", 20e-6, 100e-6),), ("offset",)),              # m
     ("lag", "x"): ScenarioKnob((("delay", 0.010, 0.050),)),                                # s
 }
-#: the simulated rig's switches of sensor effects: (kind, channel) -> switch (the proximal load cell)
+#: the simulated rig's switches of sensor effects: (kind, channel) -> switch (the proximal load cell and encoder)
 SENSOR_SWITCHES = {
     ("offset", "T_in"): RigSwitch("sensor_offset", "zero offset of the proximal load cell",
                                   (Setting("offset", 0.5, "N", "any", "added to the T_in reading"),)),
+    ("gain", "T_in"): RigSwitch("sensor_gain", "scale error of the proximal load cell (calibration factor)",
+                                (Setting("gain", 0.05, "-", "-0.5..0.5", "T_in reading = (1 + gain) true T_in"),)),
     ("lag", "T_in"): RigSwitch("sensor_delay", "the proximal load-cell channel lags the others",
                                (Setting("delay", 0.02, "s", ">= 0", "T_in reading = true T_in delay seconds ago"),)),
+    ("drift", "T_in"): RigSwitch("sensor_drift", "slow zero drift of the proximal load cell (bridge temperature)",
+                                 (Setting("rate", 0.005, "N/s", "-0.1..0.1", "added to the T_in reading: rate t "
+                                          "(t from the start)"),)),
+    ("offset", "x_in"): RigSwitch("encoder_offset", "zero offset of the proximal encoder (zeroed off the rest)",
+                                  (Setting("offset", 5e-5, "m", "-0.005..0.005", "added to the x_in reading (read at "
+                                           "the rest too)"),)),
 }
 
 
