@@ -7,7 +7,8 @@ beside the base estimator that stands in where its estimate leaves the physical 
   parameter lies within the catalogue's range, and the per-cycle estimator accepts the values;
 * :func:`tendon_model_estimator`: the :class:`estimator.online.extended.ExtendedEstimator` of a model file (its
   node grid, route, parameters; the noise band from the live reading's noise; the readings averaged over the fitted
-  sample interval, :func:`live_average`);
+  sample interval, :func:`live_average`; friction that changed in the recording tracked online,
+  :data:`estimator.online.extended.TRACKED`);
 * :class:`ModelRunner`: one step of the model beside the base estimator's sample; where the model's estimate leaves
   the physical range (a negative distal tension, a distal tension above the proximal one by more than e^K:
   :meth:`estimator.online.extended.ExtendedEstimator.out_of_range`) the base estimator's sample stands in, counted
@@ -23,7 +24,7 @@ import numpy as np
 from estimator.offline.effects.catalogue import CATALOGUE
 from estimator.offline.effects.types import ROUTE_KEYS, route_shape, route_values
 from estimator.online.distal import DistalSample
-from estimator.online.extended import PER_CYCLE, ExtendedEstimator
+from estimator.online.extended import PER_CYCLE, TRACKED, ExtendedEstimator
 from estimator.sheath import SheathModel
 from teleop.config.model_file import ModelFile, check_runnable
 from teleop.errors import ConfigError
@@ -104,16 +105,20 @@ def live_average(model: ModelFile, rate_hz: float) -> int:
 
 
 def tendon_model_estimator(model: ModelFile, tension_noise: float = 0.0, rate_time_constant: float = 0.02,
-                           rate_hz: float = 0.0) -> ExtendedEstimator:
+                           rate_hz: float = 0.0, track_friction: bool | None = None) -> ExtendedEstimator:
     """The per-cycle estimator of a single-tendon model file, at rest; ``tension_noise`` [N] the live T_in reading's
     noise sigma (the noise band), ``rate_time_constant`` [s] the velocity's smoothing when it averages nothing,
-    ``rate_hz`` [Hz] the live rate (:func:`live_average`; 0: no averaging).
+    ``rate_hz`` [Hz] the live rate (:func:`live_average`; 0: no averaging), ``track_friction`` the friction tracked
+    online (None: where the model names a friction that changes, :data:`estimator.online.extended.TRACKED`; False:
+    the fitted change replayed, the batch model's form).
     Raises ConfigError (``<file>: <why>``) when it refuses the model's values."""
     u, w, _ = base_of(model)
     try:
         return ExtendedEstimator(_values(model), u, w, model.base["compliance"], tension_noise=tension_noise,
                                  T_min=model.base.get("T_min"), rate_time_constant=rate_time_constant,
-                                 average=live_average(model, rate_hz))
+                                 average=live_average(model, rate_hz),
+                                 track_friction=any(e.id in TRACKED for e in model.extensions)
+                                 if track_friction is None else track_friction)
     except ValueError as e:
         raise ConfigError(f"{model.path}: the per-cycle estimator refuses this model: {e}") from None
 
@@ -151,8 +156,13 @@ class ModelRunner:
         return base
 
     def stats(self) -> dict[str, Any]:
-        """The model's entry of the slave's stats: id, sha256, path, cycles run, fallbacks, the held-out gain."""
-        m = self.model
-        return {"id": m.model_id, "sha256": m.sha256, "path": m.path, "cycles": self.cycles,
-                "fallbacks": self.fallbacks, "gain": dict(m.gain),
-                "fallback_share": self.fallbacks / self.cycles if self.cycles else 0.0}
+        """The model's entry of the slave's stats: id, sha256, path, cycles run, fallbacks, the held-out gain and,
+        where the friction is tracked, its last value K [-] and the branch estimates it came from."""
+        m, est = self.model, self.estimator
+        out = {"id": m.model_id, "sha256": m.sha256, "path": m.path, "cycles": self.cycles,
+               "fallbacks": self.fallbacks, "gain": dict(m.gain),
+               "fallback_share": self.fallbacks / self.cycles if self.cycles else 0.0}
+        if est.tracker is not None:
+            out["friction"] = {"tracked": True, "K": est.friction, "K_fitted": est.values["K"],
+                               "estimates": est.tracker.estimates, "bias": est.tracker.bias}
+        return out

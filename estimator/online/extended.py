@@ -55,12 +55,15 @@ from estimator.extended_loop import (
     P_T_STEP,
     P_TC,
     P_V_ST,
+    S_SLIDING,
+    S_T_ORIGIN,
     run_span,
     start_extended,
 )
 from estimator.online.distal import velocity_step
+from estimator.online.friction_observer import FrictionObserver, FrictionTracker
 
-__all__ = ["PER_CYCLE", "PARAMETERS", "T_SLIP", "ExtendedSample", "ExtendedEstimator"]
+__all__ = ["PER_CYCLE", "TRACKED", "PARAMETERS", "T_SLIP", "ExtendedSample", "ExtendedEstimator"]
 
 _DISTAL_READING = ("a reading model of the distal {what}: it says what the bench's distal sensor read, not what the "
                    "tendon does; the live loop has no distal sensor and estimates the true distal value")
@@ -75,11 +78,12 @@ PER_CYCLE: dict[str, tuple[bool, str]] = {
                                 "own distal end (the measured one is not there live)"),
     "pretension": (True, "the initial profile, uniform at T0 (the batch caps it by the distal rest reading, which the "
                          "live loop does not have)"),
-    "curvature_drift": (True, "K + K_rate (t - t_0) in the compiled sample loop, t_0 the first step"),
-    "friction_step": (True, "the fitted levels K and K + dK in the compiled sample loop, the step at the fitted "
-                            "instant t_s after the first step (the batch form); a session whose sheath was reshaped "
-                            "at another instant is the fallback's: the physical-range check sees the distal "
-                            "estimate leave the friction's bound"),
+    "curvature_drift": (True, "tracked online: K from the proximal loop's width, one estimate per branch of full slip "
+                              "(estimator.online.friction_observer), drifting at the fitted K_rate from the last "
+                              "estimate on"),
+    "friction_step": (True, "tracked online: K from the proximal loop's width, one estimate per branch of full slip "
+                            "(estimator.online.friction_observer), so a sheath reshaped at any instant of the session "
+                            "is followed; the fitted instant t_s is not replayed"),
     "tendon_stiffening": (True, "phi(T) in the elongation sum of the compiled sample loop"),
     "stiction": (True, "the static bound and its breakaway (or the Stribeck form) in the compiled sample loop"),
     "friction_offset": (True, "the capstan law on T + a in the compiled sample loop"),
@@ -102,6 +106,10 @@ PER_CYCLE: dict[str, tuple[bool, str]] = {
     "sensor_lag:x_out": (False, _DISTAL_READING.format(what="position sensor")),
 }
 
+#: The entries whose per-cycle form tracks the friction online (``ExtendedEstimator(track_friction=True)``): friction
+#: that changes during the recording changes in the session too, at its own instants and rates.
+TRACKED = ("curvature_drift", "friction_step")
+
 #: The parameters :class:`ExtendedEstimator` runs, by the catalogue's names (SI units), with their neutral values:
 #: K [-], T0 [N], c_v [s/m], velocity_form (0 proximal speed, 1 the mean with the distal one), K_rate [1/s],
 #: beta [-], T_c [N], r_s [-], v_st [m/s] (the Stribeck speed; 0: the breakaway form), a [N], x_p [m] (0: off),
@@ -111,6 +119,8 @@ PARAMETERS: dict[str, float] = {"K": math.nan, "T0": 0.0, "c_v": 0.0, "velocity_
                                 "b_T_in": 0.0, "g_T_in": 0.0, "d_T_in": 0.0, "b_x_in": 0.0, "dK": 0.0, "t_s": 0.0}
 #: a sensor parameter's prefix -> the kind of its catalogue entry (sensor_<kind>:<channel>)
 _KIND = {"b": "offset", "g": "gain", "d": "drift", "tau": "lag"}
+#: the largest friction exponent the tracked friction takes [-] (the fits' bound, ``K_MAX`` of the offline models)
+_K_MAX = 5.0
 #: relaxation time of static friction after a breakaway [s] (the batch kernel's)
 T_SLIP = 0.02
 
@@ -221,6 +231,10 @@ class ExtendedEstimator:
         the velocity the slope of x_in across them (their noise: ``tension_noise`` / sqrt(``average``)); the fit's
         sample interval at the live rate runs the model on what it was fitted on (1: each reading as it is, the
         velocity smoothed over ``rate_time_constant``)
+    track_friction : friction that changes during the session tracked online
+        (:mod:`estimator.online.friction_observer`): the step dK at t_s is not replayed, and K (with the drift K_rate
+        from the last estimate on) follows the proximal loop's width, one estimate per branch of full slip (False:
+        the fitted change replayed from the first step, the batch model's form)
 
     Raises
     ------
@@ -232,7 +246,7 @@ class ExtendedEstimator:
 
     def __init__(self, values: Mapping[str, float], u: np.ndarray, w: np.ndarray, compliance: float, *,
                  tension_noise: float = 0.0, T_min: float | None = None, rate_time_constant: float = 0.02,
-                 average: int = 1):
+                 average: int = 1, track_friction: bool = False):
         v = _checked(values)
         self.values = v
         self.u = np.ascontiguousarray(u, dtype=np.float64)
@@ -259,8 +273,9 @@ class ExtendedEstimator:
         par[P_K], par[P_A], par[P_T0], par[P_K_RATE], par[P_C_V] = v["K"], v["a"], v["T0"], v["K_rate"], v["c_v"]
         par[P_R_S], par[P_T_SLIP], par[P_T_MIN], par[P_SIGMA] = v["r_s"], T_SLIP, T_min, self.tension_noise
         par[P_BETA], par[P_TC], par[P_V_ST], par[P_BAND] = v["beta"], v["T_c"], v["v_st"], self.band
-        par[P_K_STEP], par[P_T_STEP] = v["dK"], v["t_s"]
+        par[P_K_STEP], par[P_T_STEP] = (0.0, 0.0) if track_friction else (v["dK"], v["t_s"])
         self._par = par
+        self.track_friction = bool(track_friction)
         q = np.zeros(9)
         q[_Q_B_T], q[_Q_G_T], q[_Q_D_T], q[_Q_B_X] = v["b_T_in"], v["g_T_in"], v["d_T_in"], v["b_x_in"]
         q[_Q_X_P], q[_Q_D_B], q[_Q_C], q[_Q_TAU] = v["x_p"], v["d_b"], self.compliance, rate_time_constant
@@ -277,8 +292,11 @@ class ExtendedEstimator:
     def reset(self) -> None:
         """Back to rest: the profile uniform at T0, nothing stepped (the next step is the first: t_0, the play's
         middle and the velocity start there)."""
+        self._par[P_K] = self.values["K"]
         start_extended(self.u, self.w, self._par, -1.0, self._Y, self._st, self._tab)
         self._o[:] = 0.0
+        self.observer = FrictionObserver(self.values["a"], self._par[P_T_MIN]) if self.track_friction else None
+        self.tracker = FrictionTracker(K_max=_K_MAX) if self.track_friction else None
         self._ring[:] = 0.0
         T0 = self.values["T0"]
         self.sample = ExtendedSample(T0, 0.0, 0.0, self.values["K"], T0)
@@ -305,7 +323,33 @@ class ExtendedEstimator:
         self.sample = s = ExtendedSample(float(o[0]), float(o[1]), float(o[2]), float(o[3]), float(o[4]))
         if s.K_now > self._K_max:
             self._K_max = s.K_now
+        if self.observer is not None:
+            self._track(s, float(t))
         return s
+
+    @property
+    def friction(self) -> float:
+        """The friction exponent K [-] at the last step (tracked, or the fitted K, its drift and step)."""
+        since = max(self._o[_O_T_PREV] - self._st[S_T_ORIGIN], 0.0) if self.steps else 0.0
+        step = self._par[P_K_STEP] if self.steps and since >= self._par[P_T_STEP] else 0.0
+        return float(self._par[P_K] + self._par[P_K_RATE] * since + step)
+
+    def _track(self, s: ExtendedSample, t: float) -> None:
+        """One sample into the friction observer; a branch's estimate sets K (``track_friction``)."""
+        assert self.observer is not None and self.tracker is not None
+        speed = 1.0 + self.values["c_v"] * abs(self._o[_O_V])
+        K_branch = self.observer.observe(s.T_in, s.x_out, int(self._st[S_SLIDING]), speed)
+        if K_branch is None:
+            return
+        drift = self._par[P_K_RATE] * (t - self._st[S_T_ORIGIN])
+        K = self.tracker.update(K_branch, self._par[P_K] + drift)
+        if K is None:
+            return
+        par, u = self._par, self.u
+        par[P_K] = K - drift                        # K + K_rate (t' - t_0) = K at t, drifting on from there
+        self._tab[0, :] = np.exp(-par[P_K] * u)
+        self._tab[1, :] = 1.0 / self._tab[0]
+        self._tab[2, :] = np.exp(-par[P_K] * (1.0 + par[P_R_S]) * u)
 
     def out_of_range(self, s: ExtendedSample) -> str | None:
         """Why ``s`` leaves the physical range, or None: a negative distal tension, or a distal tension above the

@@ -116,3 +116,26 @@ def test_the_tendon_axis_runs_the_model_and_counts_a_fallback_once(tmp_path, cap
     said = [r for r in caplog.records if "leaves the physical range" in r.getMessage()]
     assert len(said) == 1
     assert any("estimator model tsm0/tendon/profile_memory+friction_offset" in r.getMessage() for r in caplog.records)
+
+
+def test_a_model_with_a_friction_step_tracks_the_friction_and_the_stats_say_so(tmp_path):
+    step = ext("friction_step", t_s=(30.0, "s", 0.0, 1e6), dK=(-0.2, "-", -2.0, 2.0))
+    mf = configured_model(with_model(Config(), str(save_model(tendon_file((step,)), tmp_path / "m.model.yaml"))))
+    assert mf is not None
+    est = tendon_model_estimator(mf, 0.01, 0.02, 1000.0)
+    replayed = tendon_model_estimator(mf, 0.01, 0.02, 1000.0, track_friction=False)
+    assert est.track_friction and not replayed.track_friction
+    runner = ModelRunner(mf, est, "t")
+    base = DistalEstimator(SheathModel(K=0.6, compliance=1e-4), n_nodes=16)
+    for i in range(16000):                    # capstan loops on a spring, the sheath reshaped at 6 s, not at 30 s
+        t = 1e-3 * i
+        K = 0.6 if t < 6.0 else 0.45
+        x_out = 1e-3 + 2e-3 * (1.0 - math.cos(2.0 * math.pi * t / 1.2))
+        s = 1.0 if math.sin(2.0 * math.pi * t / 1.2) >= 0.0 else -1.0
+        T_out = 2000.0 * x_out
+        T_in = T_out * math.exp(s * K)
+        x_in = x_out + 1e-4 * T_out * math.expm1(s * K) / (s * K)      # + L/EA times the mean of the profile
+        runner.step(T_in, x_in, t, base.step(T_in, x_in, t))
+    friction = runner.stats()["friction"]
+    assert friction["tracked"] and friction["estimates"] >= 10 and friction["K_fitted"] == 0.6
+    assert friction["K"] == pytest.approx(0.45, abs=0.01)
