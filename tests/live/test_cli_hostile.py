@@ -97,6 +97,9 @@ def test_a_directory_as_config_says_it_is_a_directory(tmp_path, capsys, side):
      "--run-dir {file}/run: cannot be made: '{file}' is a file; expected a directory"),
     (["demo", "--recording", "{dir}"], "--recording {dir}: is a directory; expected a file"),
     (["record", "--journals", "{file}"], "--journals {file}: is a file, not a directory; expected a directory"),
+    (["analyze", "--kaist", "{dir}", "--model-out", "{file}"],
+     "--model-out {file}: is a file, not a directory; expected a directory"),
+    (["analyze", "{dir}", "--model-out", "{file}"], "FILE {dir}: is a directory; expected a file"),
     (["slave", "--max-duration", "nan"], "--max-duration nan: expected a number of seconds >= 0"),
     (["master", "--max-duration", "-1"], "--max-duration -1.0: expected a number of seconds >= 0"),
 ])
@@ -116,3 +119,18 @@ def test_the_console_script_ends_an_alias_bomb_in_one_line(tmp_path, monkeypatch
                           text=True, timeout=60)
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
     assert re.match(r"teleop: error: " + re.escape(str(p)) + r":\d+:\d+: ", proc.stderr)
+
+
+def test_a_model_file_may_be_written_over(tmp_path):
+    """FILE.csv --model-out OUT.yaml writes one file: an existing one is no directory to refuse."""
+    import argparse
+
+    from live.cli import path_args_problem
+    out = tmp_path / "m.model.yaml"
+    out.write_text("x")
+    csv = tmp_path / "r.csv"
+    csv.write_text("x")
+    args = argparse.Namespace(command="analyze", file=str(csv), model_out=str(out))
+    assert path_args_problem(args) is None
+    args.file = None
+    assert "expected a directory" in (path_args_problem(args) or "")
