@@ -6,21 +6,34 @@ Per effect: :func:`study.scenarios.record` runs the simulated rig (quasi-static 
 elements, tissue load) through its motion protocol at 1 kHz with the effect's switch on at ``--level`` of its
 realistic range, and writes the recording (measured-data CSV: T_in, x_in and the distal load cell's T_out and
 position x_out, with their noise). ``teleop analyze FILE --model-out OUT.yaml --json OUT.json`` diagnoses it (a
-subprocess: the command a lab runs). The session is then run again through the slave's per-cycle path: the rig's
-proximal readings, sample by sample, into the base estimator (:class:`estimator.online.distal.DistalEstimator` on
-the base model the diagnosis refitted on the training block) and, beside it, the model file's estimator
-(:class:`slave.tendon_model.ModelRunner`, the tendon axis's code; its fallbacks counted). The session is position
-commanded: the estimate is not in the rig's loop, so the same command gives the same readings.
+subprocess: the command a lab runs). The session is then run again through the slave's per-cycle path, the rig's
+proximal readings sample by sample into three estimators:
 
-Scored on the diagnosis's test block (the last ~40 % of the session, never fitted on), against the measured
-distal load cell, like the offline held-out errors: distal-tension RMSE [N] live, base and extended, their
-difference (the live gain) beside the offline held-out gain (the same difference from ``teleop analyze``); for
-the effects whose primary signal is the distal position the position RMSE [um] too. Prints a Markdown table and
-the command line with its conditions; never fails on the figures.
+* the slave's base estimator, what it runs without a model file (:class:`estimator.online.distal.DistalEstimator` on
+  the raw readings, on the base model the diagnosis refitted on the training block);
+* the model file's estimator (:class:`slave.tendon_model.ModelRunner`, the tendon axis's code; its fallbacks
+  counted);
+* the model's base form: the same model file with every extension removed (its K, L/EA, route and node grid, the
+  same averaging of the readings, the same :class:`~estimator.online.extended.ExtendedEstimator` and runner).
+
+The session is position commanded: the estimate is not in the rig's loop, so the same command gives the same
+readings.
+
+Scored on the diagnosis's test block (the last ~40 % of the session, never fitted on), against the measured distal
+load cell, like the offline held-out errors: distal-tension RMSE [N] live of the three; the gain over the slave's
+base estimator (what the operator's hand feels); the extension's gain over its own base form, live and offline (the
+base form's batch prediction, :func:`offline_form`, against the diagnosis's extended held-out error), and their ratio
+on the effect's primary signal (the distal position RMSE [um] for the effects whose primary signal it is). The ratio
+compares like with like: both sides run the same parameters with and without the extension, where the slave's base
+estimator differs from the model's form in more than the extension (raw 1 kHz readings, its own fit) and the
+diagnosis's held-out gain (beside it in brackets) is over a base refitted without the extension, whose K and L/EA
+absorb part of the effect.
+Prints a Markdown table and the command line with its conditions; never fails on the figures.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import subprocess
@@ -32,7 +45,8 @@ from pathlib import Path
 import numpy as np
 
 from estimator.data import noise_level
-from estimator.offline.effects.catalogue import rig_switches
+from estimator.offline.diagnosis.fit import prepare
+from estimator.offline.effects.catalogue import predict, rig_switches
 from estimator.offline.effects.types import route_shape, route_values
 from estimator.online.distal import DistalEstimator
 from estimator.sheath import SheathModel
@@ -50,13 +64,16 @@ def _rmse(a: np.ndarray) -> float:
 
 
 def live_run(rec, diagnosis: dict, model_path: Path) -> dict:
-    """The session through the base estimator and the model file's, per cycle: test-block RMSE [N], [m]."""
+    """The session through the slave's base estimator, the model file's and the model's base form, per cycle:
+    test-block RMSE [N], [m] of each, fallbacks of the two model runners."""
     d = rec.data
     sigma = noise_level(np.asarray(d.T_in))
     mf = load_model(model_path)
     check_tendon(mf, sigma)
     rate = (len(d.time) - 1) / float(d.time[-1] - d.time[0])
     runner = ModelRunner(mf, tendon_model_estimator(mf, sigma, RATE_TIME_CONSTANT, rate), "bench")
+    bare = dataclasses.replace(mf, extensions=())          # the model's base form: every extension removed
+    form = ModelRunner(bare, tendon_model_estimator(bare, sigma, RATE_TIME_CONSTANT, rate), "bench base form")
     b = diagnosis["base_model"]
     r = route_values(b["values"])
     shape = route_shape(257, *r) if r else None
@@ -64,18 +81,38 @@ def live_run(rec, diagnosis: dict, model_path: Path) -> dict:
                            n_nodes=int(mf.base.get("n_nodes", 32)), tension_noise=sigma,
                            rate_time_constant=RATE_TIME_CONSTANT)
     n = len(d.time)
-    out = np.empty((n, 4))
+    out = np.empty((n, 6))
     t0 = time.perf_counter()
     for k in range(n):
-        s = base.step(float(d.T_in[k]), float(d.x_in[k]), float(d.time[k]))
-        m = runner.step(float(d.T_in[k]), float(d.x_in[k]), float(d.time[k]), s)
-        out[k] = (s.T_out, m.T_out, s.x_out, m.x_out)
+        T, x, t = float(d.T_in[k]), float(d.x_in[k]), float(d.time[k])
+        s = base.step(T, x, t)
+        m = runner.step(T, x, t, s)
+        f = form.step(T, x, t, s)
+        out[k] = (s.T_out, f.T_out, m.T_out, s.x_out, f.x_out, m.x_out)
     per_step = (time.perf_counter() - t0) / n
     test = np.asarray(d.time) >= diagnosis["split"]["time_s"]
     T_out, x_out = np.asarray(d.T_out)[test], np.asarray(d.x_out)[test]
-    return {"T_base": _rmse(out[test, 0] - T_out), "T_ext": _rmse(out[test, 1] - T_out),
-            "x_base": _rmse(out[test, 2] - x_out), "x_ext": _rmse(out[test, 3] - x_out),
-            "fallbacks": runner.fallbacks, "cycles": runner.cycles, "us_per_step": 1e6 * per_step}
+    return {"T_base": _rmse(out[test, 0] - T_out), "T_form": _rmse(out[test, 1] - T_out),
+            "T_ext": _rmse(out[test, 2] - T_out), "x_base": _rmse(out[test, 3] - x_out),
+            "x_form": _rmse(out[test, 4] - x_out), "x_ext": _rmse(out[test, 5] - x_out),
+            "fallbacks": runner.fallbacks, "form_fallbacks": form.fallbacks, "cycles": runner.cycles,
+            "us_per_step": 1e6 * per_step}
+
+
+def offline_form(rec, diagnosis: dict, model_path: Path) -> dict:
+    """The model's base form run offline, as ``teleop analyze`` scores a model: the batch prediction on the recording
+    block-averaged to the model's fitted rate, interpolated to the measured samples, RMSE [N], [m] on the test block.
+    The same call with the model's extensions gives the diagnosis's extended held-out errors."""
+    mf = load_model(model_path)
+    d = rec.data
+    s = prepare(d, n_nodes=int(mf.base.get("n_nodes", 32)), target_rate=float(mf.base["rate_hz"]))
+    values = mf.values()
+    compliance = values.pop("compliance")
+    p = predict([], values, s, compliance=compliance)
+    test = np.asarray(d.time) >= diagnosis["split"]["time_s"]
+    T_out = np.interp(d.time, s.time, p.T_out)[test] - np.asarray(d.T_out)[test]
+    x_out = np.interp(d.time, s.time, p.x_out)[test] - np.asarray(d.x_out)[test]
+    return {"off_T_form": _rmse(T_out), "off_x_form": _rmse(x_out)}
 
 
 def one(key: str, seed: int, level: float, duration: float, work: Path) -> dict:
@@ -95,6 +132,7 @@ def one(key: str, seed: int, level: float, duration: float, work: Path) -> dict:
                 "off_x_base": diag["base"]["rmse_x_out_m"], "off_x_ext": diag["extended"]["rmse_x_out_m"]})
     try:
         row.update(live_run(rec, diag, yaml_out))
+        row.update(offline_form(rec, diag, yaml_out))
     except Exception as e:          # a model the slave refuses: reported in the table, never hidden
         row["error"] = f"{type(e).__name__}: {e}"
     return row
@@ -105,22 +143,28 @@ def _ratio(live: float, off: float) -> str:
 
 
 def table(rows: list[dict]) -> str:
-    lines = ["| effect (rig switch) | diagnosis names | RMSE T_out live base / extended [N] | live gain [N] | "
-             "offline held-out gain [N] | live / offline gain (primary signal) | x_out live base / extended [um] | "
-             "x_out gain live / offline [um] | fallbacks |",
+    """The Markdown table of the rows (module docstring): RMSE of the slave's base estimator, the model's base form
+    and the model; the gain over the slave's base; the gain over the base form live and offline and their ratio."""
+    lines = ["| effect (rig switch) | diagnosis names | T_out RMSE live: slave base / base form / extended [N] | "
+             "gain over slave base [N] | gain over base form live / offline (offline over the refitted base) [N] | "
+             "live / offline (primary signal) | "
+             "x_out RMSE live: slave base / base form / extended [um] | x_out gain over base form live / offline "
+             "[um] | fallbacks extended / base form |",
              "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if "T_base" not in r:
             lines.append(f"| `{r['effect']}` | {'+'.join(r.get('effects', [])) or r.get('cause', '-')} | "
                          f"not run: {r.get('error', '-')} | | | | | | |")
             continue
-        g_live, g_off = r["T_base"] - r["T_ext"], r["off_T_base"] - r["off_T_ext"]
-        gx_live, gx_off = 1e6 * (r["x_base"] - r["x_ext"]), 1e6 * (r["off_x_base"] - r["off_x_ext"])
+        g_live, g_off = r["T_form"] - r["T_ext"], r["off_T_form"] - r["off_T_ext"]
+        gx_live, gx_off = 1e6 * (r["x_form"] - r["x_ext"]), 1e6 * (r["off_x_form"] - r["off_x_ext"])
         ratio = _ratio(gx_live, gx_off) + " (x_out)" if r["primary"] == "x_out" else _ratio(g_live, g_off)
-        lines.append(f"| `{r['effect']}` | {'+'.join(r['effects']) or 'none'} | {r['T_base']:.4f} / {r['T_ext']:.4f} | "
-                     f"{g_live:+.4f} | {g_off:+.4f} | {ratio} | "
-                     f"{1e6 * r['x_base']:.2f} / {1e6 * r['x_ext']:.2f} | {gx_live:+.2f} / {gx_off:+.2f} | "
-                     f"{r['fallbacks']} of {r['cycles']} |")
+        refit = r["off_T_base"] - r["off_T_ext"]
+        lines.append(f"| `{r['effect']}` | {'+'.join(r['effects']) or 'none'} | "
+                     f"{r['T_base']:.4f} / {r['T_form']:.4f} / {r['T_ext']:.4f} | {r['T_base'] - r['T_ext']:+.4f} | "
+                     f"{g_live:+.4f} / {g_off:+.4f} ({refit:+.4f}) | {ratio} | "
+                     f"{1e6 * r['x_base']:.2f} / {1e6 * r['x_form']:.2f} / {1e6 * r['x_ext']:.2f} | "
+                     f"{gx_live:+.2f} / {gx_off:+.2f} | {r['fallbacks']} / {r['form_fallbacks']} of {r['cycles']} |")
     return "\n".join(lines)
 
 
