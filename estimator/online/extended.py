@@ -338,7 +338,7 @@ class ExtendedEstimator:
         """One sample into the friction observer; a branch's estimate sets K (``track_friction``)."""
         assert self.observer is not None and self.tracker is not None
         speed = 1.0 + self.values["c_v"] * abs(self._o[_O_V])
-        K_branch = self.observer.observe(s.T_in, s.x_out, int(self._st[S_SLIDING]), speed)
+        K_branch = self.observer.observe(s.T_in, s.x_out, int(self._st[S_SLIDING]), speed, self.friction)
         if K_branch is None:
             return
         drift = self._par[P_K_RATE] * (t - self._st[S_T_ORIGIN])

@@ -13,7 +13,8 @@ so over the distal positions x_out both branches cover
 sums weigh each position by its tension, so the few newtons near rest, where noise and slack dominate, weigh little):
 x_out is the estimator's own distal end (x_in minus the estimated elongation). :class:`FrictionObserver` keeps each
 branch of full slip (the samples between two reversals where the estimator says the whole tendon slides), decimated to
-points at least ``spacing`` apart in x_out, and when a branch ends compares it with the last branch of the other
+points at least ``spacing`` apart in x_out (a branch ends where the slide turns, or where Y_in has turned back from its
+extreme by more than e^K), and when a branch ends compares it with the last branch of the other
 direction over the distal positions both cover (at least :data:`OVERLAP` of the longer one's span): one estimate of
 K per branch (half-cycle). The first branch after a
 change of friction compares the new level with a branch of the old one and sees their mean; the next sees the new
@@ -60,25 +61,40 @@ class FrictionObserver:
                              f"spacing={spacing!r} m, min_points={min_points!r}")
         self.a, self.T_min, self.spacing, self.min_points = float(a), float(T_min), float(spacing), int(min_points)
         self.direction = 0
+        self._extreme = 0.0                 # the branch's largest (pulling) or smallest (releasing) Y_in [N]
         self._x: list[float] = []
         self._Y: list[float] = []
         self._f: list[float] = []
         #: the last complete branch of each direction: (x sorted, Y [N], f), by direction +1 / -1
         self._last: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
-    def observe(self, T_in: float, x_out: float, sliding: int, speed_factor: float = 1.0) -> float | None:
+    def observe(self, T_in: float, x_out: float, sliding: int, speed_factor: float = 1.0,
+                K: float | None = None) -> float | None:
         """One sample: proximal tension T_in [N], the estimated distal end x_out [m], the estimator's slide direction
-        (+1, -1, 0: stuck) and the speed factor f [-] >= 1 of the sample's friction. Returns a branch's estimate of K
-        when this sample ends a branch (the slide turned), else None."""
-        if sliding == 0:
-            return None
+        (+1, -1, 0: stuck), the speed factor f [-] >= 1 of the sample's friction and the estimator's friction exponent
+        K [-] (None: not known). Returns a branch's estimate of K when this sample ends a branch, else None.
+
+        A branch ends when the estimator slides the other way, or when Y_in has turned back from the branch's
+        extreme by more than e^K (a reversal beyond half the friction band, which a wobble does not reach): an
+        estimator whose K is too high sees the release as stuck until its end, and the turn still closes the branch.
+        """
+        Y = T_in + self.a
         estimate = None
-        if sliding != self.direction:
-            estimate = self._close()
-            self.direction = sliding
-        if T_in >= self.T_min and (not self._x or abs(x_out - self._x[-1]) >= self.spacing):
+        s = self.direction
+        if s != 0:
+            if s * (Y - self._extreme) > 0.0:
+                self._extreme = Y
+            turned = (K is not None and Y > 0.0 and self._extreme > 0.0
+                      and s * math.log(Y / self._extreme) < -K)
+            if sliding == -s or turned:
+                estimate = self._close()
+                self.direction, self._extreme = -s, Y
+        elif sliding != 0:
+            self.direction, self._extreme = sliding, Y
+        if (sliding != 0 and sliding == self.direction and T_in >= self.T_min
+                and (not self._x or abs(x_out - self._x[-1]) >= self.spacing)):
             self._x.append(x_out)
-            self._Y.append(T_in + self.a)
+            self._Y.append(Y)
             self._f.append(speed_factor)
         return estimate
 
@@ -112,19 +128,21 @@ class FrictionTracker:
     """The friction exponent K [-] of a session tracked from the branch estimates of a :class:`FrictionObserver`
     (module docstring). The first ``reference`` estimates read the model's own K at their instants (the session starts
     with the friction the model was fitted on): their mean difference is the observer's bias (the load's own
-    hysteresis). From then on each estimate gives K = K_branch - bias, clamped to [0, ``K_max``].
+    hysteresis). From then on each estimate gives K_branch - bias, clamped to [0, ``K_max``], and the tracked K is the
+    median of the last ``median`` of them: one branch far off (a part-way loop, a load that moved) is held out, a
+    step is followed once two branches agree.
 
-    Raises ValueError: ``reference`` < 1, K_max not finite or < 0.
+    Raises ValueError: ``reference`` < 1, ``median`` < 1, K_max not finite or < 0.
     """
 
-    def __init__(self, reference: int = 2, K_max: float = 5.0, smoothing: float = 1.0):
-        if not (reference >= 1 and math.isfinite(K_max) and K_max >= 0.0 and 0.0 < smoothing <= 1.0):
+    def __init__(self, reference: int = 2, K_max: float = 5.0, median: int = 3):
+        if not (reference >= 1 and math.isfinite(K_max) and K_max >= 0.0 and median >= 1):
             raise ValueError(f"friction tracker settings out of range: reference={reference!r}, K_max={K_max!r}, "
-                             f"smoothing={smoothing!r}")
-        self.reference, self.K_max, self.smoothing = int(reference), float(K_max), float(smoothing)
+                             f"median={median!r}")
+        self.reference, self.K_max, self.median = int(reference), float(K_max), int(median)
         self.estimates = 0
         self._bias: list[float] = []
-        self._K: float | None = None
+        self._recent: list[float] = []
 
     @property
     def bias(self) -> float | None:
@@ -142,6 +160,6 @@ class FrictionTracker:
             return None
         bias = self.bias
         assert bias is not None
-        K = min(max(K_branch - bias, 0.0), self.K_max)
-        self._K = K if self._K is None else self._K + self.smoothing * (K - self._K)
-        return self._K
+        keep = self._recent[max(len(self._recent) - self.median + 1, 0):]
+        self._recent = [*keep, min(max(K_branch - bias, 0.0), self.K_max)]
+        return float(np.median(self._recent))

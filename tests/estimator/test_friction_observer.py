@@ -62,10 +62,18 @@ def test_the_tracker_cancels_a_load_hysteresis_and_clamps():
     assert tr.bias == pytest.approx(0.5 * math.log(1.05 / 0.95), abs=2e-3)
     assert out[-1] == pytest.approx(0.9, abs=2e-3)
     assert FrictionTracker(K_max=1.0, reference=1).update(0.5, 0.0) is None
-    t = FrictionTracker(K_max=1.0, reference=1)
+    t = FrictionTracker(K_max=1.0, reference=1, median=1)
     t.update(0.5, 0.5)
     assert t.update(9.0, 0.5) == 1.0 and t.update(-3.0, 0.5) == 0.0
     assert t.update(math.nan, 0.5) is None
+
+
+def test_the_tracker_passes_a_step_and_rejects_a_single_outlier():
+    t = FrictionTracker(reference=1, median=3)
+    t.update(0.7, 0.7)
+    out = [t.update(k, 0.7) for k in (0.7, 0.7, 0.4, 0.7, 0.7, 0.5, 0.45, 0.45, 0.45)]
+    assert out[3] == 0.7                        # one branch far off: held
+    assert out[-1] == 0.45 and out[-3] == 0.5   # a step: followed once two branches agree
 
 
 def _run(rec, values, track):
