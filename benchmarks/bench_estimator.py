@@ -81,14 +81,15 @@ def bench_pair_model(effects: tuple[str, ...], n_nodes: int = 24, n: int = 20_00
 
 
 #: extended single-tendon models (catalogue names, SI) timed per cycle: the base model through the shared loop, one
-#: effect, and every per-cycle form at once
-EXTENDED = (("base", {"K": 0.7}), ("stiction", {"K": 0.7, "r_s": 0.4}),
+#: effect, every per-cycle form at once, and the friction step with K tracked online (True: ``track_friction``)
+EXTENDED = (("base", {"K": 0.7}, False), ("stiction", {"K": 0.7, "r_s": 0.4}, False),
             ("all forms", {"K": 0.7, "c_v": 15.0, "K_rate": 0.002, "r_s": 0.3, "a": 0.5, "T0": 1.0, "beta": 1.0,
                            "x_p": 60e-6, "d_b": 100e-6, "b_T_in": 0.2, "g_T_in": 0.03, "d_T_in": 0.005,
-                           "b_x_in": 2e-5}))
+                           "b_x_in": 2e-5}, False),
+            ("friction step, K tracked online", {"K": 0.7, "dK": 0.2, "t_s": 20.0}, True))
 
 
-def bench_extended(values: dict, n_nodes: int = 32, average: int = 5, n: int = 50_000) -> float:
+def bench_extended(values: dict, track: bool = False, n_nodes: int = 32, average: int = 5, n: int = 50_000) -> float:
     """Seconds per :meth:`ExtendedEstimator.step` (one tendon, one 1 kHz sample, the readings averaged over 5)."""
     u, w = SheathModel(K=1.0, compliance=1.0).nodes(n_nodes)
     t = np.arange(n) * 1e-3
@@ -96,7 +97,7 @@ def bench_extended(values: dict, n_nodes: int = 32, average: int = 5, n: int = 5
     T_in = 1.0 + 6e3 * x + np.random.default_rng(0).normal(0, 0.02, n)
     best = math.inf
     for _ in range(3):
-        est = ExtendedEstimator(values, u, w, 1e-4, tension_noise=0.02, average=average)
+        est = ExtendedEstimator(values, u, w, 1e-4, tension_noise=0.02, average=average, track_friction=track)
         for k in range(200):   # warm-up (numba compile, caches)
             est.step(T_in[k], x[k], t[k])
         est.reset()
@@ -118,8 +119,8 @@ def main() -> None:
         print(f"  batch         n_nodes={nodes:4d}: {bench_batch(nodes) / 1e6:7.2f} M samples/s (aim >= 1)")
     print(f"  paper phase formulas (compiled)   : {bench_paper() / 1e6:7.3f} M samples/s")
     print("extended single-tendon model per cycle (one tendon, n_nodes=32, readings averaged over 5)")
-    for name, values in EXTENDED:
-        print(f"  {name:40s}: {bench_extended(values) * 1e6:7.2f} us/step   (aim <= 10 us)")
+    for name, values, track in EXTENDED:
+        print(f"  {name:40s}: {bench_extended(values, track) * 1e6:7.2f} us/step   (aim <= 10 us)")
     print("capstan-joint pair model per cycle (one joint, n_nodes=24)")
     for effects in PAIR_MODELS:
         name = "+".join(("capstan", *effects))

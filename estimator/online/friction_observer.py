@@ -20,10 +20,13 @@ K per branch (half-cycle). The first branch after a
 change of friction compares the new level with a branch of the old one and sees their mean; the next sees the new
 level.
 
-A load with hysteresis of its own (viscoelastic tissue) adds 1/2 ln(T_out+ / T_out-) to every estimate: a bias that
-stays while the load does. :class:`FrictionTracker` therefore tracks the change from the session's start: the first
-``reference`` branch estimates are taken to be the fitted K (the session starts with the friction the model was fitted
-on), their difference from it is the bias, and the tracked exponent is K_branch - bias from then on.
+A load with hysteresis of its own (viscoelastic tissue) adds 1/2 ln(T_out+ / T_out-) to every estimate: the loop width
+of the load reads as friction. :class:`FrictionTracker` takes the estimates as they are by default (an elastic load:
+the simulated rig's loads, springs and stiffening tissue, bias the estimate by less than 0.03), so a session that starts
+with another friction than the model's first level (a sheath already reshaped, a level fitted off by a start
+transient) is corrected from its first estimates. With ``reference`` n > 0 it reads the first n estimates as the
+model's own K instead (the session then has to start with the fitted friction) and subtracts their mean difference,
+the load's bias, from every later one.
 """
 from __future__ import annotations
 
@@ -126,17 +129,17 @@ class FrictionObserver:
 
 class FrictionTracker:
     """The friction exponent K [-] of a session tracked from the branch estimates of a :class:`FrictionObserver`
-    (module docstring). The first ``reference`` estimates read the model's own K at their instants (the session starts
-    with the friction the model was fitted on): their mean difference is the observer's bias (the load's own
-    hysteresis). From then on each estimate gives K_branch - bias, clamped to [0, ``K_max``], and the tracked K is the
-    median of the last ``median`` of them: one branch far off (a part-way loop, a load that moved) is held out, a
-    step is followed once two branches agree.
+    (module docstring). Each estimate, less the bias, clamped to [0, ``K_max``], enters the median of the last
+    ``median`` of them, the tracked K: one branch far off (a part-way loop, a load that moved) is held out, a step is
+    followed once two branches agree. The bias is 0 (``reference`` 0: the estimates as they are), or, with
+    ``reference`` n > 0, the mean difference between the first n estimates and the model's K at their instants (the
+    load's own hysteresis, the session starting with the friction the model was fitted on).
 
-    Raises ValueError: ``reference`` < 1, ``median`` < 1, K_max not finite or < 0.
+    Raises ValueError: ``reference`` < 0, ``median`` < 1, K_max not finite or < 0.
     """
 
-    def __init__(self, reference: int = 2, K_max: float = 5.0, median: int = 3):
-        if not (reference >= 1 and math.isfinite(K_max) and K_max >= 0.0 and median >= 1):
+    def __init__(self, reference: int = 0, K_max: float = 5.0, median: int = 3):
+        if not (reference >= 0 and math.isfinite(K_max) and K_max >= 0.0 and median >= 1):
             raise ValueError(f"friction tracker settings out of range: reference={reference!r}, K_max={K_max!r}, "
                              f"median={median!r}")
         self.reference, self.K_max, self.median = int(reference), float(K_max), int(median)
@@ -146,7 +149,10 @@ class FrictionTracker:
 
     @property
     def bias(self) -> float | None:
-        """The observer's bias [-] (the mean of the first estimates less the model's K), None before."""
+        """The observer's bias [-] (the mean of the first ``reference`` estimates less the model's K; 0 without a
+        reference), None before they have come."""
+        if self.reference == 0:
+            return 0.0
         return float(np.mean(self._bias)) if len(self._bias) >= self.reference else None
 
     def update(self, K_branch: float, K_model: float) -> float | None:

@@ -89,9 +89,12 @@ def _run(rec, values, track):
 
 
 def test_a_sheath_reshaped_at_another_instant_is_followed_on_the_simulated_rig():
+    """The tracked K starts from the model's first level and corrects it from the first estimates, then follows the
+    step where the rig's sheath is reshaped, not where the model's was."""
     rec = record("friction_step", seed=5, level=0.7, duration=40.0)
     p, K = rec.truth["parameters"], rec.truth["K"]
-    fitted_elsewhere = {"K": K, "dK": p["dK"], "t_s": p["t_s"] + 12.0}   # a model fitted on another session
+    # a model fitted on another session: its first level 15 % high, its step 12 s late
+    fitted_elsewhere = {"K": 1.15 * K, "dK": p["dK"], "t_s": p["t_s"] + 12.0}
     tracked, out_t, K_t = _run(rec, fitted_elsewhere, True)
     _, out_r, _ = _run(rec, fitted_elsewhere, False)
     d = rec.data
