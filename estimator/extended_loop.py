@@ -85,8 +85,9 @@ def start_extended(u, w, par, T0_out, Y, st, tab):  # pragma: no cover - compile
 
 
 @njit(cache=True, nogil=True)
-def _stribeck_bound(Y, Yp, a, u, w, Kk, r_s, v_st, vp, dY, G):  # pragma: no cover - compiled
-    """Cumulative friction exponent G_i of a stuck tendon whose nodes near the proximal end slip (Stribeck form).
+def _stribeck_bound(Y, Yp, a, u, w, Kk, r_s, v_st, vp, dY, G, g_kin, varying):  # pragma: no cover - compiled
+    """Cumulative friction exponent G_i of a stuck tendon whose nodes near the proximal end slip (Stribeck form);
+    ``g_kin`` the tabulated kinetic bounds e^{-K u_i}, used where K does not vary (``varying`` False).
 
     A kinetic trial update gives the slip zone and each node's change of tension dY_i; a node's sliding
     speed is the proximal speed vp times the share of the slip zone's stretch change beyond it (the
@@ -96,7 +97,7 @@ def _stribeck_bound(Y, Yp, a, u, w, Kk, r_s, v_st, vp, dY, G):  # pragma: no cov
     tot = 0.0
     nf = -1
     for i in range(m1):
-        g = math.exp(-Kk * u[i])
+        g = math.exp(-Kk * u[i]) if varying else g_kin[i]
         y = Y[i]
         lo = Yp * g
         hi = Yp / g
@@ -112,12 +113,14 @@ def _stribeck_bound(Y, Yp, a, u, w, Kk, r_s, v_st, vp, dY, G):  # pragma: no cov
         tot += dY[i]
         nf = i
     beyond = 0.0
+    still = Kk * (1.0 + r_s)            # the bound of a node at rest (e^-0 = 1)
     for i in range(m1 - 1, -1, -1):
-        vi = 0.0
         if i <= nf and tot > 0.0:       # in the slip zone; the proximal node moves with the proximal end
             vi = vp if i == 0 else vp * beyond / tot
             beyond += dY[i]
-        G[i] = Kk * (1.0 + r_s * math.exp(-(vi / v_st) ** 2))     # the node's bound, per wrap angle
+            G[i] = Kk * (1.0 + r_s * math.exp(-(vi / v_st) ** 2))     # the node's bound, per wrap angle
+        else:
+            G[i] = still
     acc = 0.0
     prev = G[0]
     for i in range(m1):
@@ -216,7 +219,7 @@ def run_span(T_in, v, spd, t, slide, i0, i1, u, w, par, Y, st, tab, dY, G, T_out
         else:
             bound = Kk * (1.0 + r_s) if stuck else Kk
             if stribeck:
-                _stribeck_bound(Y, Yp, a, u, w, Kk, r_s, v_st, abs(v[k]), dY, G)
+                _stribeck_bound(Y, Yp, a, u, w, Kk, r_s, v_st, abs(v[k]), dY, G, g_kin, varying)
             for i in range(m1):
                 if stribeck:
                     g = math.exp(-G[i])

@@ -97,11 +97,13 @@ def _memory(s: Series, knobs: dict, g: Callable, T_in, x_in, vel, u, x_p: float,
     t = s.time
     if node and x_p > 0.0 and (compliance is not None or s.x_out is not None):   # per node: K, K_rate, T0, E9 only
         kw = {k: v for k, v in knobs.items() if k in ("K", "K_rate", "T0", "beta", "Tc")}
-        if whole is None:
-            return (*node_presliding(T_in, x_in, s.x_out, t, u, s.w, x_p=x_p, compliance=compliance, **kw), None)
-        full, T_in_full, x_in_full = whole      # L/EA estimated on the uncut series: the same pass as without stop
-        T_out, E1 = node_presliding(T_in_full, x_in_full, full.x_out, full.time, u, s.w, x_p=x_p,
-                                    compliance=compliance, stop=len(s), **kw)
+        # L/EA estimated on the uncut series: the same pass as without stop
+        full, T_in_full, x_in_full = (s, T_in, x_in) if whole is None else whole
+        stop = None if whole is None else len(s)
+        T_out, E1 = _NODE(lambda: node_presliding(T_in_full, x_in_full, full.x_out, full.time, u, s.w, x_p=x_p,
+                                                  compliance=compliance, stop=stop, **kw),
+                          (T_in_full, x_in_full, full.x_out, full.time, s.w),
+                          (u.tobytes(), x_p, compliance, stop, tuple(sorted(kw.items()))))
         return T_out, E1, None
     speed = None
     if knobs.get("c_v") and speed_form and s.x_out is not None:
@@ -127,8 +129,8 @@ class _Recent:
     """The last few results of a pure function of arrays and numbers, by where the (read-only) arrays lie and the
     numbers' values; the arrays are kept alive with them, and the results are made read-only. A fit varies the
     parameters that act outside the kernel (the distal sensors' reading models, an x_in offset, the backlash,
-    pre-sliding's travel lag) as often as the others, and those leave the kernel's run and the slack rule as they
-    were."""
+    pre-sliding's travel lag, and beside per-node pre-sliding every knob it does not read) as often as the others,
+    and those leave the kernel's run and the slack rule as they were."""
 
     def __init__(self, size: int = 4):
         self.size = size
@@ -148,7 +150,8 @@ class _Recent:
 
 
 _RUNS = _Recent()       # the kernel's (T_out, E1)
-_TAUT = _Recent()       # the slack rule's last taut sample, (index,)
+_NODE = _Recent()       # per-node pre-sliding's (T_out, E1)
+_TAUT = _Recent()       # the slack rule's last taut sample and x_in there, (index, x_in[index])
 
 
 def _recent_run(T_in, vel, t, u, w, slide, speed, numbers: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -157,23 +160,27 @@ def _recent_run(T_in, vel, t, u, w, slide, speed, numbers: dict) -> tuple[np.nda
                  (T_in, vel, t, w, slide, speed), (u.tobytes(), tuple(sorted(numbers.items()))))
 
 
-def _x_out(s: Series, g: Callable, x_in, E1, taut, d_b: float, compliance: float | None,
+def _x_out(s: Series, g: Callable, x_in, E1, taut, x_held, d_b: float, compliance: float | None,
            fit_mask: slice | np.ndarray | None) -> tuple[np.ndarray, float]:
     """The distal position reading and L/EA [m/N] (fitted by linear least squares when not given and x_out is
-    measured; offset and lag are linear in it): a taut tendon's end, through the distal backlash's play."""
+    measured; offset and lag are linear in it): a taut tendon's end, through the distal backlash's play.
+    ``x_held`` is x_in at the last taut sample, ``x_in[taut]``."""
     t = s.time
     tau_x = g("sensor_lag:x_out", 0.0)
-    A = _shift(t, x_in[taut], tau_x) + g("sensor_offset:x_out", 0.0)
+    A = _shift(t, x_held, tau_x)
+    if g("sensor_offset:x_out"):
+        A = A + g("sensor_offset:x_out")
     B = _shift(t, E1[taut], tau_x)
     c = compliance
     if c is None:
         c = 0.0
         if s.x_out is not None:
             m = slice(None) if fit_mask is None else fit_mask
-            a, b = B[m], (A - s.x_out)[m]
+            a, b = B[m], A[m] - s.x_out[m]
             den = float(a @ a)
             c = max(float(a @ b) / den, 0.0) if den > 0 else 0.0
-    x_out = A - c * B
+    x_out = np.multiply(B, c)
+    np.subtract(A, x_out, out=x_out)
     if d_b > 0.0:       # the joint through its play; L/EA refined on the samples in contact
         for _ in range(3 if compliance is None and s.x_out is not None else 1):
             x_end = (x_in - c * E1)[taut]
@@ -227,11 +234,12 @@ def run_model(s: Series, knobs: dict[str, float], sensors: dict[str, float], u: 
     T_out = _shift(t, T_out, g("sensor_lag:T_out", 0.0))
     # a slack tendon: T_in at the noise around zero - the tendon carries no compression, the proximal end moves
     # without it and the distal end stays where the last taut sample left it
-    def taut_at() -> tuple[np.ndarray]:
+    def taut_at() -> tuple[np.ndarray, np.ndarray]:
         moving = None if slide is None else slide * vel > V_STOP      # the distal end carried along: taut
-        return (slack_hold(T_in, SLACK_SIGMAS * s.sigma_T_in, x_in, moving),)
-    taut = _TAUT(taut_at, (T_in, x_in, slide, vel), (s.sigma_T_in,))[0]
-    x_out, c = _x_out(s, g, x_in, E1, taut, d_b, compliance, fit_mask)
+        taut = slack_hold(T_in, SLACK_SIGMAS * s.sigma_T_in, x_in, moving)
+        return taut, x_in[taut]
+    taut, x_held = _TAUT(taut_at, (T_in, x_in, slide, vel), (s.sigma_T_in,))
+    x_out, c = _x_out(s, g, x_in, E1, taut, x_held, d_b, compliance, fit_mask)
     if stop is not None:
         T_out, x_out = T_out[:stop], x_out[:stop]
     return Prediction(T_out=T_out, x_out=x_out, compliance=float(c))

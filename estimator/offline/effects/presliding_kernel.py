@@ -90,16 +90,16 @@ def _node_kernel(T_in, t, u, w, K, K_rate, T_p, r, T0, beta, Tc, xd, T_out, E1):
                 if st[i] == 0:
                     # dT_i - dT_{i+1} = k d_{i+1} + (k ds / 4)(dT_i + dT_{i+1})
                     h = 0.25 * kk[i] * ds
-                    den = 1.0 - h
-                    aT[i] = ((1.0 + h) * aT[i + 1] + kk[i] * ad[i + 1]) / den
-                    bT[i] = ((1.0 + h) * bT[i + 1] + kk[i] * bd[i + 1]) / den
+                    den = 1.0 / (1.0 - h)       # a reciprocal: the shot's chain of dependent steps holds no division
+                    aT[i] = ((1.0 + h) * aT[i + 1] + kk[i] * ad[i + 1]) * den
+                    bT[i] = ((1.0 + h) * bT[i + 1] + kk[i] * bd[i + 1]) * den
                 else:
                     # F_i + dF_i = s beta (Tbar + dTbar): dT_i (1 - s beta/2) = dT_{i+1} (1 + s beta/2) + c
                     sb = 0.5 * st[i] * bet[i]
                     c = st[i] * cc[i] - F[i]
-                    den = 1.0 - sb
-                    aT[i] = ((1.0 + sb) * aT[i + 1] + c) / den
-                    bT[i] = (1.0 + sb) * bT[i + 1] / den
+                    den = 1.0 / (1.0 - sb)
+                    aT[i] = ((1.0 + sb) * aT[i + 1] + c) * den
+                    bT[i] = (1.0 + sb) * bT[i + 1] * den
                 ad[i] = ad[i + 1] + 0.5 * ds * (aT[i] + aT[i + 1])
                 bd[i] = bd[i + 1] + 0.5 * ds * (bT[i] + bT[i + 1])
             x = (dT0 - aT[0]) / bT[0] if bT[0] != 0.0 else 0.0
