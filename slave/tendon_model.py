@@ -133,9 +133,10 @@ class ModelRunner:
     def __init__(self, model: ModelFile, estimator: ExtendedEstimator, name: str = "tendon"):
         self.model, self.estimator, self.name = model, estimator, name
         self.cycles = self.fallbacks = 0
-        log.info("%s: estimator model %s (sha256 %s...) from %s, driven by the measured proximal tension and position; "
-                 "held-out %.4g %s where it was fitted (base %.4g)", name, model.model_id, model.sha256[:12],
-                 model.path, model.gain["extended"], model.gain["unit"], model.gain["base"])
+        tracked = ", its friction tracked online from the proximal loop's width" if estimator.track_friction else ""
+        log.info("%s: estimator model %s (sha256 %s...) from %s, driven by the measured proximal tension and "
+                 "position%s; held-out %.4g %s where it was fitted (base %.4g)", name, model.model_id,
+                 model.sha256[:12], model.path, tracked, model.gain["extended"], model.gain["unit"], model.gain["base"])
 
     def step(self, T_in: float, x_in: float, t: float, base: DistalSample) -> DistalSample:
         """The model's estimate of this cycle as a :class:`DistalSample` (the base sample's phase), or ``base`` where
