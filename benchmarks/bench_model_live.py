@@ -101,18 +101,27 @@ def live_run(rec, diagnosis: dict, model_path: Path) -> dict:
 
 def offline_form(rec, diagnosis: dict, model_path: Path) -> dict:
     """The model's base form run offline, as ``teleop analyze`` scores a model: the batch prediction on the recording
-    block-averaged to the model's fitted rate, interpolated to the measured samples, RMSE [N], [m] on the test block.
-    The same call with the model's extensions gives the diagnosis's extended held-out errors."""
+    block-averaged to the model's fitted rate, interpolated to the measured samples, RMSE [N], [m] on the test block
+    (the same call with the model's extensions gives the diagnosis's extended held-out errors); and the base form and
+    the model on the proximal readings alone (``prox_*``): the batch prediction without the rule that starts a
+    whole-tendon slide where the measured distal end is seen moving, the inputs the live loop has."""
     mf = load_model(model_path)
     d = rec.data
     s = prepare(d, n_nodes=int(mf.base.get("n_nodes", 32)), target_rate=float(mf.base["rate_hz"]))
     values = mf.values()
     compliance = values.pop("compliance")
-    p = predict([], values, s, compliance=compliance)
     test = np.asarray(d.time) >= diagnosis["split"]["time_s"]
-    T_out = np.interp(d.time, s.time, p.T_out)[test] - np.asarray(d.T_out)[test]
-    x_out = np.interp(d.time, s.time, p.x_out)[test] - np.asarray(d.x_out)[test]
-    return {"off_T_form": _rmse(T_out), "off_x_form": _rmse(x_out)}
+
+    def scored(effects: list[str], series) -> tuple[float, float]:
+        p = predict(effects, values, series, compliance=compliance)
+        return (_rmse(np.interp(d.time, series.time, p.T_out)[test] - np.asarray(d.T_out)[test]),
+                _rmse(np.interp(d.time, series.time, p.x_out)[test] - np.asarray(d.x_out)[test]))
+
+    out = dict(zip(("off_T_form", "off_x_form"), scored([], s), strict=True))
+    alone = dataclasses.replace(s, slide=None, slide_travel=0.0)     # no measured distal end: the live loop's inputs
+    out.update(zip(("prox_T_form", "prox_x_form"), scored([], alone), strict=True))
+    out.update(zip(("prox_T_ext", "prox_x_ext"), scored([e.id for e in mf.extensions], alone), strict=True))
+    return out
 
 
 def one(key: str, seed: int, level: float, duration: float, work: Path) -> dict:
@@ -147,7 +156,7 @@ def table(rows: list[dict]) -> str:
     and the model; the gain over the slave's base; the gain over the base form live and offline and their ratio."""
     lines = ["| effect (rig switch) | diagnosis names | T_out RMSE live: slave base / base form / extended [N] | "
              "gain over slave base [N] | gain over base form live / offline (offline over the refitted base) [N] | "
-             "live / offline (primary signal) | "
+             "live / offline (primary signal): as the diagnosis scores / proximal readings alone | "
              "x_out RMSE live: slave base / base form / extended [um] | x_out gain over base form live / offline "
              "[um] | fallbacks extended / base form |",
              "|---|---|---|---|---|---|---|---|---|"]
@@ -158,7 +167,9 @@ def table(rows: list[dict]) -> str:
             continue
         g_live, g_off = r["T_form"] - r["T_ext"], r["off_T_form"] - r["off_T_ext"]
         gx_live, gx_off = 1e6 * (r["x_form"] - r["x_ext"]), 1e6 * (r["off_x_form"] - r["off_x_ext"])
-        ratio = _ratio(gx_live, gx_off) + " (x_out)" if r["primary"] == "x_out" else _ratio(g_live, g_off)
+        gp, gxp = r["prox_T_form"] - r["prox_T_ext"], 1e6 * (r["prox_x_form"] - r["prox_x_ext"])
+        ratio = (f"{_ratio(gx_live, gx_off)} / {_ratio(gx_live, gxp)} (x_out)" if r["primary"] == "x_out"
+                 else f"{_ratio(g_live, g_off)} / {_ratio(g_live, gp)}")
         refit = r["off_T_base"] - r["off_T_ext"]
         lines.append(f"| `{r['effect']}` | {'+'.join(r['effects']) or 'none'} | "
                      f"{r['T_base']:.4f} / {r['T_form']:.4f} / {r['T_ext']:.4f} | {r['T_base'] - r['T_ext']:+.4f} | "
