@@ -13,12 +13,11 @@ so over the distal positions x_out both branches cover
 sums weigh each position by its tension, so the few newtons near rest, where noise and slack dominate, weigh little):
 x_out is the estimator's own distal end (x_in minus the estimated elongation). :class:`FrictionObserver` keeps each
 branch of full slip (the samples between two reversals where the estimator says the whole tendon slides), decimated to
-points at least ``spacing`` apart in x_out (a branch ends where the slide turns, or where Y_in has turned back from its
-extreme by more than e^K), and when a branch ends compares it with the last branch of the other
-direction over the distal positions both cover (at least :data:`OVERLAP` of the longer one's span): one estimate of
-K per branch (half-cycle). The first branch after a
-change of friction compares the new level with a branch of the old one and sees their mean; the next sees the new
-level.
+points at least ``spacing`` apart in x_out. A branch ends where the slide turns, or where Y_in has turned back from its
+extreme by more than e^K; it is then compared with the last branch of the other direction over the distal positions
+both cover (at least :data:`OVERLAP` of the longer one's span): one estimate of K per branch (half-cycle). The first
+branch after a change of friction compares the new level with a branch of the old one and sees their mean; the next
+sees the new level.
 
 A load with hysteresis of its own (viscoelastic tissue) adds 1/2 ln(T_out+ / T_out-) to every estimate: the loop width
 of the load reads as friction. :class:`FrictionTracker` takes the estimates as they are by default (an elastic load:
@@ -47,7 +46,7 @@ class FrictionObserver:
     Parameters
     ----------
     a : the tension-independent friction [N] >= 0 (Y = T + a)
-    T_min : proximal tension [N] below which a sample is not used (the noise dominates its logarithm), >= 0
+    T_min : proximal tension [N] below which a sample is not used (noise and slack dominate it), >= 0
     spacing : the least distal travel [m] between two kept points of a branch, > 0
     min_points : the least number of points of a branch, and of the positions two branches share, for an estimate
 
