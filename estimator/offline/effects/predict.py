@@ -182,14 +182,16 @@ def _x_out(s: Series, g: Callable, x_in, E1, taut, x_held, d_b: float, complianc
     x_out = np.multiply(B, c)
     np.subtract(A, x_out, out=x_out)
     if d_b > 0.0:       # the joint through its play; L/EA refined on the samples in contact
+        fitted = np.ones(x_in.size, dtype=bool)
+        if fit_mask is not None:
+            fitted[:] = False
+            fitted[fit_mask] = True
         for _ in range(3 if compliance is None and s.x_out is not None else 1):
             x_end = (x_in - c * E1)[taut]
             delta = backlash_play(x_end, d_b) - x_end                 # +-d_b/2 in contact
             x_out = _shift(t, x_end + delta, tau_x) + g("sensor_offset:x_out", 0.0)
             if compliance is None and s.x_out is not None:
-                on = np.abs(np.abs(delta) - 0.5 * d_b) < 1e-3 * d_b
-                if fit_mask is not None:
-                    on &= np.isin(np.arange(on.size), np.arange(on.size)[fit_mask])
+                on = (np.abs(np.abs(delta) - 0.5 * d_b) < 1e-3 * d_b) & fitted
                 a = B[on]
                 den = float(a @ a)
                 if den > 0:
