@@ -106,7 +106,57 @@ def test_at_the_floor_the_reading_and_a_weak_fit_together_name_the_effect():
     assert speed_or_delay_alone(base, base, singles, _capstan(t, x, c_v=20.0)) is singles["velocity_friction"]
     assert speed_or_delay_alone(base, base, singles, _capstan(t, x, lag=0.02)) is singles["sensor_lag:T_out"]
     assert speed_or_delay_alone(base, base, singles, _capstan(t, x)) is base                 # clean: neither sign
-    weak = {k: SimpleNamespace(S=0.95) for k in singles}                                      # the fit explains little
+    weak = {k: SimpleNamespace(S=1.02) for k in singles}                                      # the fit explains nothing
     assert speed_or_delay_alone(base, base, weak, _capstan(t, x, c_v=20.0)) is base
     named = SimpleNamespace(S=0.3)
     assert speed_or_delay_alone(named, base, singles, _capstan(t, x, c_v=20.0)) is named     # the models named one
+
+
+def _mostly_holds(seed: int, duration: float = 40.0) -> tuple[np.ndarray, np.ndarray]:
+    """Time [s] and a proximal position [m]: a 1 s rest, then short moves at 3-25 mm/s between holds of 2-4 s."""
+    rng = np.random.default_rng(seed)
+    dt, parts, x = 1.0 / RATE, [np.zeros(int(RATE))], 0.0
+    while sum(p.size for p in parts) < duration * RATE:
+        x1, v = rng.uniform(1e-3, 12e-3), math.exp(rng.uniform(math.log(3e-3), math.log(25e-3)))
+        m = int(1.875 * abs(x1 - x) / v / dt) + 1
+        tau = np.arange(1, m + 1) / m
+        parts += [x + (x1 - x) * (10 * tau ** 3 - 15 * tau ** 4 + 6 * tau ** 5),
+                  np.full(int(rng.uniform(2.0, 4.0) * RATE), x1)]
+        x = x1
+    xs = np.concatenate(parts)[:int(duration * RATE)]
+    return np.arange(xs.size) / RATE, xs
+
+
+@pytest.mark.parametrize("seed", [7, 8, 9])
+def test_velocity_friction_on_a_few_seconds_of_slip_stands_out_of_its_standard_error(seed):
+    t, x = _mostly_holds(seed)
+    r = speed_or_lag(_capstan(t, x, c_v=8.0, seed=seed))
+    assert r is not None and r["moving_s"] < 0.2 * t[-1]             # most of the recording holds
+    assert r["speed"] == pytest.approx(0.6 * 8.0, rel=0.1) and r["speed_t"] >= th.HAND_T_MIN
+    clean = speed_or_lag(_capstan(t, x, seed=seed))
+    assert clean is not None and abs(clean["speed_t"]) < th.HAND_T_MIN and abs(clean["delay_t"]) < th.HAND_T_MIN
+
+
+def test_a_speed_term_within_its_standard_error_names_nothing_at_the_floor(monkeypatch):
+    from types import SimpleNamespace
+
+    from estimator.offline.diagnosis import rules
+    t, x = _mostly_holds(10)
+    base = SimpleNamespace(S=1.0)
+    singles = {"velocity_friction": SimpleNamespace(S=0.97), "sensor_lag:T_out": SimpleNamespace(S=0.99)}
+    shown = _capstan(t, x, c_v=8.0)
+    assert rules.speed_or_delay_alone(base, base, singles, shown) is singles["velocity_friction"]
+    assert rules.speed_or_delay_alone(base, base, singles, _capstan(t, x)) is base
+    r = speed_or_lag(shown)
+    monkeypatch.setattr(rules, "speed_or_lag", lambda data: {**r, "speed_t": 0.9 * th.HAND_T_MIN})
+    assert rules.speed_or_delay_alone(base, base, singles, shown) is base   # as large, but within its noise
+
+
+@pytest.mark.parametrize("hidden", ["velocity_friction", None])
+def test_velocity_friction_on_a_joint_under_hand_motion_is_read_from_its_slip(hidden):
+    # the independent simulator's per-node velocity friction at its low level on a joint the hand mostly holds: under
+    # 2 s of slip in the training block, where the fit explains 3 % of what the base leaves; its clean twin reads none
+    from estimator.offline.diagnosis.selection import diagnose
+    from study.lumped.scenarios import record
+    rec = record(hidden, seed=7501000, level=0.2, duration=60.0, motion="hand")
+    assert diagnose(rec.data)["cause"] == (hidden or "none")

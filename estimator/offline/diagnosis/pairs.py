@@ -1,23 +1,29 @@
 """Two causes at once: pairs of the strongest single candidates, where the model chosen so far leaves structure.
 
 A step of :func:`estimator.offline.diagnosis.selection.diagnose_recording` after the forward selection
-(:func:`estimator.offline.diagnosis.rules.select`): :func:`consider_pairs` (its docstring gives the rule; the
+(:func:`estimator.offline.diagnosis.rules.select`): :func:`consider_pairs`, :func:`second_at_floor` and
+:func:`speed_beside_offset` (their docstrings give the rules; the
 numbers are PENALTY, RANK_FACTOR, DOMINANT_SCORE and STRUCTURE_RATIO of :mod:`estimator.offline.diagnosis.thresholds`,
 and the run-time bound :data:`PAIR_POOL`).
 """
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 
+import numpy as np
+
+from estimator.data import MeasuredData
 from estimator.offline.diagnosis import thresholds as th
 from estimator.offline.diagnosis.fit import settings_keys, start_points
 from estimator.offline.diagnosis.folds import Fit, unresolved
+from estimator.offline.diagnosis.readings import speed_or_lag
 from estimator.offline.diagnosis.rules import Context, shown_at_floor, worst
 from estimator.offline.effects.catalogue import CATALOGUE
 from estimator.offline.effects.types import ROUTE_KEYS
 
-__all__ = ["consider_pairs", "second_at_floor", "PAIR_POOL"]
+__all__ = ["consider_pairs", "second_at_floor", "speed_beside_offset", "PAIR_POOL"]
 
 #: [count] the strongest single candidates (lowest S), and the strongest physical ones, whose pairs are fitted when
 #: the model so far leaves structure: a run-time bound (at most 15 pair fits), not tuned
@@ -126,3 +132,36 @@ def second_at_floor(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fi
                 and not any(unresolved(f.effects, v, ctx.floor) for v in f.values)):
             best, best_rank = f, rank
     return best
+
+
+_TENSION_OFFSETS = ("sensor_offset:T_in", "sensor_offset:T_out")
+
+
+def speed_beside_offset(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fit, data: MeasuredData) -> Fit:
+    """Velocity friction beside a load-cell offset: the speed term read once the offset is taken off its channel.
+
+    Symptom: the chosen model holds an offset of T_in or T_out and no velocity friction, and the speed-or-lag reading
+    (:func:`estimator.offline.diagnosis.readings.speed_or_lag`) of ``data`` (the training block's raw samples) with
+    the fitted offset taken off its channel shows a friction rising with sliding speed: c_v = speed / K of at least
+    HAND_SPEED_MIN, at least HAND_T_MIN standard errors from zero, a delay under HAND_LAG_MIN. An offset explains most
+    of what the base leaves and bends every other single fit; the second effect fitted beside it is then whichever
+    widens the loop best (stiction, a distal lag) or none. The offset alone adds no speed term (it shifts ln T_in -
+    ln T_out by an amount that depends on the tension, not on the speed); velocity friction grows with the sliding
+    speed and vanishes at rest. The offset and velocity friction are fitted together and named when velocity friction
+    explains some of what the offset leaves (S below the offset's alone) and is resolved. Returns the pair or
+    ``chosen``."""
+    first = next((e for e in chosen.effects if e.id in _TENSION_OFFSETS), None)
+    if first is None or "velocity_friction" in chosen.ids or "velocity_friction" not in singles \
+            or first.id not in singles:
+        return chosen
+    channel = first.id.split(":")[1]
+    taken = dataclasses.replace(data, **{channel: np.asarray(getattr(data, channel), dtype=float)
+                                         - chosen.values[0][first.parameters[0].name]})
+    reading = speed_or_lag(taken)
+    if (reading is None or reading["delay"] >= th.HAND_LAG_MIN or reading["speed_t"] < th.HAND_T_MIN
+            or reading["speed"] < th.HAND_SPEED_MIN * max(reading["K"], 0.05)):
+        return chosen
+    f = _pair_fit(ctx, base, singles, first.id, "velocity_friction")
+    if f.S < singles[first.id].S and not any(unresolved(f.effects, v, ctx.floor) for v in f.values):
+        return f
+    return chosen

@@ -318,7 +318,10 @@ def speed_or_lag(data: MeasuredData) -> dict | None:
     -------
     dict or None
         {"speed": c_v K [s/m], "delay": tau [s], "K": the mean of the two intercepts [-], "n": slip samples,
-        "moving_s": their time [s]}; None without T_out or with fewer than HAND_MIN_SLIP_S seconds of slip.
+        "moving_s": their time [s], "speed_t", "delay_t": each term over its standard error [-]}; None without T_out
+        or with fewer than HAND_MIN_SLIP_S seconds of slip. The standard errors treat each stretch of slip (runs of
+        slip samples less than a window apart) as one observation: the smoothing and the load's own motion correlate
+        the samples of one move, not those of two.
     """
     from scipy.signal import savgol_filter
 
@@ -351,6 +354,21 @@ def speed_or_lag(data: MeasuredData) -> dict | None:
     keep = A[:, :2].sum(axis=0) > 0
     A = np.column_stack((A[:, :2][:, keep], A[:, 2:]))
     wt = To[ok] / sig_out
-    coef, *_ = np.linalg.lstsq(A * wt[:, None], z * wt, rcond=None)
+    X, y = A * wt[:, None], z * wt
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    se = _stretch_errors(X, y - X @ coef, np.flatnonzero(ok), w)
     return {"speed": float(coef[-2]), "delay": float(coef[-1]), "K": float(np.mean(coef[:-2])), "n": n,
-            "moving_s": n * dt}
+            "moving_s": n * dt, "speed_t": float(coef[-2] / se[-2]), "delay_t": float(coef[-1] / se[-1])}
+
+
+def _stretch_errors(X: np.ndarray, e: np.ndarray, index: np.ndarray, gap: int) -> np.ndarray:
+    """Standard errors of a least-squares fit whose residuals ``e`` correlate within a stretch of samples: the
+    sandwich estimate with one cluster per stretch (sample indices ``index`` less than ``gap`` apart), scaled by
+    G / (G - 1) for G stretches. (p,) [units of the coefficients]; inf where a coefficient is not determined."""
+    stretch = np.concatenate(([0], np.cumsum(np.diff(index) >= gap)))
+    bread = np.linalg.pinv(X.T @ X)
+    scores = np.zeros((int(stretch[-1]) + 1, X.shape[1]))
+    np.add.at(scores, stretch, X * e[:, None])
+    groups = scores.shape[0]
+    var = np.diag(bread @ (scores.T @ scores) @ bread) * groups / max(groups - 1, 1)
+    return np.where(var > 0.0, np.sqrt(np.maximum(var, 0.0)), np.inf)

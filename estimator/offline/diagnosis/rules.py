@@ -299,11 +299,12 @@ def speed_or_delay(best: str, price: dict[str, float], data: MeasuredData) -> st
     rest; a lag by tau |d ln T_out / dt|, every change read tau late whatever the speed, so that at a reversal the
     distal tension turns tau after the proximal one. The reading
     (:func:`estimator.offline.diagnosis.readings.speed_or_lag`, on the training block) separates the two terms over
-    the slip samples: a delay of at least HAND_LAG_MIN names the lag, a smaller one velocity friction."""
+    the slip samples: a delay of at least HAND_LAG_MIN names the lag, a smaller one velocity friction; the reading
+    decides only where its delay or its speed term stands HAND_T_MIN standard errors from zero."""
     if best not in _SPEED_OR_LAG or not all(price.get(e, math.inf) < 1.0 for e in _SPEED_OR_LAG):
         return best
     reading = speed_or_lag(data)
-    if reading is None:
+    if reading is None or max(reading["delay_t"], reading["speed_t"]) < th.HAND_T_MIN:
         return best
     return "sensor_lag:T_out" if reading["delay"] >= th.HAND_LAG_MIN else "velocity_friction"
 
@@ -313,18 +314,20 @@ def speed_or_delay_alone(chosen: Fit, base: Fit, singles: dict[str, Fit], data: 
 
     Symptom: the speed-or-lag reading (:func:`estimator.offline.diagnosis.readings.speed_or_lag`, training block)
     shows a friction rising with sliding speed (c_v = speed / K of at least HAND_SPEED_MIN, a delay under
-    HAND_LAG_MIN) or a delay of at least HAND_LAG_MIN with no such rise, and that effect's extension explains a tenth
-    of what the base leaves (S < HAND_WEAK_SCORE). A soft or stopped load makes either small beside the noise: the
-    fit alone cannot name it, but the reading separates the two terms over every slip sample of the block, and a
-    clean recording shows neither. Returns the named single or ``chosen``."""
+    HAND_LAG_MIN) or a delay of at least HAND_LAG_MIN with no such rise, that term at least HAND_T_MIN standard errors
+    from zero, and that effect's extension fits the validation blocks better than the base (S < HAND_WEAK_SCORE).
+    Velocity friction acts only while the tendon slides, so on a load that stops the distal end or under motion that
+    mostly holds it shows on a few seconds of slip: there the reading measures it over every slip sample, while the
+    fit's score, over every sample of the blocks, is diluted by the holds where both models agree. A clean recording
+    shows neither term. Returns the named single or ``chosen``."""
     if chosen is not base or not all(e in singles for e in _SPEED_OR_LAG):
         return chosen
     reading = speed_or_lag(data)
     if reading is None:
         return chosen
-    if reading["delay"] >= th.HAND_LAG_MIN:
+    if reading["delay"] >= th.HAND_LAG_MIN and reading["delay_t"] >= th.HAND_T_MIN:
         eid = "sensor_lag:T_out"
-    elif reading["speed"] >= th.HAND_SPEED_MIN * max(reading["K"], 0.05):
+    elif reading["speed"] >= th.HAND_SPEED_MIN * max(reading["K"], 0.05) and reading["speed_t"] >= th.HAND_T_MIN:
         eid = "velocity_friction"
     else:
         return chosen

@@ -38,7 +38,7 @@ from estimator.offline.diagnosis.fit import SIGNALS, Progress, fit_model, prepar
 from estimator.data import noise_level
 from estimator.offline.diagnosis.folds import (FORM_NAME, UNITS, Fit, Folds, gain, parameters_table, route_of,
                                                structure)
-from estimator.offline.diagnosis.pairs import consider_pairs, second_at_floor
+from estimator.offline.diagnosis.pairs import consider_pairs, second_at_floor, speed_beside_offset
 from estimator.offline.diagnosis.readings import (distal_at_end, distal_end_held, rest_offset, rest_reading,
                                                   sample_block, stick_slip_ratio)
 from estimator.offline.diagnosis.result import Candidate, Diagnosis, Model, RestOffset, StickSlip
@@ -192,6 +192,7 @@ def diagnose_recording(data: MeasuredData, *, train_fraction: float = 0.6, progr
     chosen = select(ctx, base, singles, max_effects, used)
     if max_effects >= 2:
         chosen = second_at_floor(ctx, base, singles, consider_pairs(ctx, base, singles, chosen))
+        chosen = speed_beside_offset(ctx, base, singles, chosen, used.slice(0, blocks.n_train(used)))
     i_t = blocks.n_train(used)
     chatter = stick_slip_ratio(used.time[:i_t], used.x_in[:i_t], used.T_in[:i_t])
     chosen, by_chatter, weak, overruled = stick_slip_rule(ctx, chosen, singles, chatter)

@@ -15,7 +15,7 @@ __all__ = ["PENALTY", "STRUCTURE_RATIO", "VALIDATION_FRACTION", "SECOND_ROUND", 
            "AT_END_BAND", "AT_END_SHARE", "AT_END_HIDES", "SLIDE_SEEN", "SLIDE_QUANTA", "SLIDE_SIGMAS",
            "SLIDE_SHARE", "K_RESTART", "REST_MIN_S", "REST_RESOLUTIONS", "REST_TENSION_SIGMAS",
            "REST_TENSION_RATIO", "HAND_WINDOW", "HAND_SLIP_SPEED", "HAND_MIN_SLIP_S", "HAND_LAG_MIN",
-           "HAND_SPEED_MIN", "HAND_WEAK_SCORE"]
+           "HAND_SPEED_MIN", "HAND_T_MIN", "HAND_WEAK_SCORE"]
 
 # ---- model choice: the split, the scores, the price ------------------------------------------------------------
 VALIDATION_FRACTION = 0.35  # [-] share of the training block each fold validates on
@@ -91,7 +91,8 @@ REST_TENSION_SIGMAS = 10.0  # [noise sigmas] both load cells reading at least th
 REST_TENSION_RATIO = 5.0    # [-] ... within this factor of each other (friction holds up to e^K, K <= 1.6, at rest)
 HAND_WINDOW = 0.05          # [s] Savitzky-Golay window of the speed-or-lag reading's smoothing and derivatives
 HAND_SLIP_SPEED = 1e-3      # [m/s] proximal speed above which a sample can be slip for the speed-or-lag reading
-HAND_MIN_SLIP_S = 2.0       # [s] least slip time for the speed-or-lag reading to be read
+HAND_MIN_SLIP_S = 0.5       # [s] least slip time for the speed-or-lag reading to be read
 HAND_LAG_MIN = 0.004        # [s] a delay of T_out behind the capstan ratio from this up is a lag, below it none
 HAND_SPEED_MIN = 4.0        # [s/m] c_v = speed term / K from this up: friction rising with sliding speed
-HAND_WEAK_SCORE = 0.9       # [-] at the floor, the reading names its effect when that extension's S is below this
+HAND_T_MIN = 3.0            # [-] a term of the speed-or-lag reading this many standard errors from zero is read
+HAND_WEAK_SCORE = 1.0       # [-] at the floor, the reading names its effect when that extension's S is below this
