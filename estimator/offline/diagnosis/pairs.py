@@ -155,8 +155,9 @@ def speed_beside_offset(ctx: Context, base: Fit, singles: dict[str, Fit], chosen
             or first.id not in singles:
         return chosen
     channel = first.id.split(":")[1]
-    taken = dataclasses.replace(data, **{channel: np.asarray(getattr(data, channel), dtype=float)
-                                         - chosen.values[0][first.parameters[0].name]})
+    corrected = np.asarray(getattr(data, channel), dtype=float) - chosen.values[0][first.parameters[0].name]
+    taken = (dataclasses.replace(data, T_in=corrected) if channel == "T_in"
+             else dataclasses.replace(data, T_out=corrected))
     reading = speed_or_lag(taken)
     if (reading is None or reading["delay"] >= th.HAND_LAG_MIN or reading["speed_t"] < th.HAND_T_MIN
             or reading["speed"] < th.HAND_SPEED_MIN * max(reading["K"], 0.05)):
