@@ -306,7 +306,7 @@ def path_args_problem(args: argparse.Namespace) -> str | None:
         if not isinstance(value, str) or not value or (commands is not None and args.command not in commands):
             continue
         if dest == "model_out" and args.command == "analyze" and getattr(args, "file", None):
-            want = "file"               # FILE.csv --model-out OUT.yaml: one model file, not a directory of them
+            continue        # FILE.csv --model-out OUT.yaml: one file, checked by study.tendon_model.check_model_out
         problem = path_problem(value, "file" if want == "file" else "dir")
         if problem is not None:
             return f"{flag} {value}: {problem}"
