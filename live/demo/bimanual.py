@@ -119,7 +119,7 @@ def bimanual_figure(bim: Bimanual, run_dir: Path, out_png: Path) -> Path:
         An arm's recording is missing or unreadable.
     """
     from live.demo.joints import read_joint_csv
-    from teleop.recording.figures import pyplot
+    from teleop.recording.figures import pyplot, save_figure
     plt = pyplot()
     n = max(len(a.cfg.instrument.joints) for a in bim.arms)
     fig, axes = plt.subplots(len(bim.arms), n, figsize=(3.6 * n, 3.0 * len(bim.arms)), squeeze=False)
@@ -136,10 +136,7 @@ def bimanual_figure(bim: Bimanual, run_dir: Path, out_png: Path) -> Path:
             ax.set_ylabel("distal torque [mN m]", fontsize=8)
             ax.tick_params(labelsize=7)
         axes[r][0].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(out_png, dpi=110)
-    plt.close(fig)
-    return Path(out_png)
+    return save_figure(fig, out_png, 110)
 
 
 def format_bimanual(s: dict) -> str:

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from estimator.capstan import phase_formula_batch
-from teleop.recording.figures import pyplot
+from teleop.recording.figures import pyplot, save_figure
 from teleop.recording.measured_csv import read_measured_csv
 
 __all__ = ["demo_figure"]
@@ -62,8 +62,4 @@ def demo_figure(csv_path: str | Path, calibration: dict, deadband: float, out_pn
             ax.grid(alpha=0.3)
             ax.legend(fontsize=8, loc="upper left")
     fig.suptitle("Distal estimates from proximal sensors: truth (simulated rig) vs profile memory vs paper formulas")
-    fig.tight_layout()
-    out = Path(out_png)
-    fig.savefig(out, dpi=90)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out_png, 90)

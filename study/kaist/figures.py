@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from teleop.recording.figures import save_figure
+
 __all__ = ["rmse_figure", "loops_figure", "residuals_figure", "tension_angle_figure", "MODELS"]
 
 #: the base pair model and its baselines, in the order of the figures' bars
@@ -64,11 +66,7 @@ def rmse_figure(recs, details, summary, d: Path, plt) -> Path:
     ax3.legend(fontsize=7, loc="upper left")
     for a in (ax2, ax3):
         a.grid(alpha=0.3)
-    fig.tight_layout()
-    path = d / "kaist_rmse.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, d / "kaist_rmse.png", 110)
 
 
 def loops_figure(recs, details, summary, d: Path, plt) -> Path:
@@ -87,11 +85,7 @@ def loops_figure(recs, details, summary, d: Path, plt) -> Path:
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("distal angle [deg]")
     axes[0][0].legend(fontsize=7)
-    fig.tight_layout()
-    path = d / "kaist_loops.png"
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, d / "kaist_loops.png", 100)
 
 
 def residuals_figure(recs, details, summary, d: Path, plt) -> Path:
@@ -121,11 +115,7 @@ def residuals_figure(recs, details, summary, d: Path, plt) -> Path:
     ax[1, 1].set(ylabel="distal angle [deg]", title="Measured (solid) and seed pair (dotted)")
     for a in ax.ravel():
         a.grid(alpha=0.3)
-    fig.tight_layout()
-    path = d / "kaist_residuals.png"
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save_figure(fig, d / "kaist_residuals.png", 90)
 
 
 def tension_angle_figure(recs, details, summary, d: Path, plt) -> Path:
@@ -141,8 +131,4 @@ def tension_angle_figure(recs, details, summary, d: Path, plt) -> Path:
         _style(ax)
     axes[0][0].set_ylabel("T_a - T_b, proximal [N]")
     fig.suptitle("Model-free: proximal tension difference against the distal angle (every sample)")
-    fig.tight_layout()
-    path = d / "kaist_tension_angle.png"
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save_figure(fig, d / "kaist_tension_angle.png", 90)

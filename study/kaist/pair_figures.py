@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from teleop.recording.figures import save_figure
+
 __all__ = ["pair_loops_figure", "pair_residuals_figure", "pair_tensions_figure", "shared_figure"]
 
 
@@ -59,11 +61,7 @@ def pair_loops_figure(recs, details, summary, d: Path, plt) -> Path:
     h, lab = axes[0][0].get_legend_handles_labels()
     fig.legend(h, lab, loc="lower center", ncol=len(lab), fontsize=9, frameon=False)
     fig.suptitle("Test cycle (command cycle 2): measured distal angle against the models")
-    fig.tight_layout(rect=(0, 0.07, 1, 1))
-    path = d / "kaist_pair_loops.png"
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, d / "kaist_pair_loops.png", 100, rect=(0, 0.07, 1, 1))
 
 
 def pair_residuals_figure(recs, details, summary, d: Path, plt) -> Path:
@@ -85,11 +83,7 @@ def pair_residuals_figure(recs, details, summary, d: Path, plt) -> Path:
     axes[0][0].set_ylabel("residual, predicted - measured [deg]")
     axes[0][0].legend(fontsize=8)
     fig.suptitle("Residuals on the test cycle (dashed: command reversals)")
-    fig.tight_layout()
-    path = d / "kaist_pair_residuals.png"
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, d / "kaist_pair_residuals.png", 100)
 
 
 def pair_tensions_figure(recs, details, summary, d: Path, plt) -> Path:
@@ -117,11 +111,7 @@ def pair_tensions_figure(recs, details, summary, d: Path, plt) -> Path:
     axes[0][0].legend(fontsize=7, loc="upper center")
     fig.suptitle("Proximal tensions on the test cycle: measured, and predicted by the extended model from the "
                  "command (not fitted on this cycle; /T: fitted on cycle 1)")
-    fig.tight_layout()
-    path = d / "kaist_pair_tensions.png"
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, d / "kaist_pair_tensions.png", 100)
 
 
 def shared_figure(recs, details, summary, d: Path, plt) -> Path | None:
@@ -135,11 +125,7 @@ def shared_figure(recs, details, summary, d: Path, plt) -> Path | None:
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(15, 5.0), gridspec_kw={"width_ratios": [1, 1.6]})
     _K_panel(ax1, sh, confs, Ns)
     _rmse_panel(ax2, sh, confs, Ns)
-    fig.tight_layout()
-    path = d / "kaist_shared.png"
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, d / "kaist_shared.png", 100)
 
 
 def _K_panel(ax, sh: dict, confs: list[dict], Ns: np.ndarray) -> None:

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from recorded.mrd import MrdRun
-from teleop.recording.figures import output_dir, pyplot
+from teleop.recording.figures import output_dir, pyplot, save_figure
 
 __all__ = ["write_mrd_figures", "FIGURES"]
 
@@ -92,10 +92,7 @@ def _edges(ax, runs: list[MrdRun], bands: dict, sweep: dict) -> None:
 def _save(plt, fig, title: str, path: Path) -> Path:
     """Title, layout, write ``path`` (80 dpi) and close ``fig``; returns ``path``."""
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, 80)
 
 
 def write_mrd_figures(runs: list[MrdRun], summary: dict, details: dict, directory: str | Path) -> list[Path]:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from teleop.errors import ConfigError
 
-__all__ = ["pyplot", "output_dir"]
+__all__ = ["pyplot", "output_dir", "save_figure"]
 
 
 def pyplot():
@@ -31,3 +31,17 @@ def output_dir(directory: str | Path, option: str) -> Path:
     except OSError as e:
         raise ConfigError(f"{option} {d}: cannot create the directory ({e.strerror})") from None
     return d
+
+
+def save_figure(fig, path: str | Path, dpi: int, rect: tuple[float, float, float, float] | None = None) -> Path:
+    """Lay ``fig`` out (``rect``: the area of the figure the axes keep, for a legend or title below or above them),
+    write it to ``path`` at ``dpi`` and close it; returns ``path`` as a Path. Raises OSError when it cannot be
+    written."""
+    if rect is None:
+        fig.tight_layout()
+    else:
+        fig.tight_layout(rect=rect)
+    out = Path(path)
+    fig.savefig(out, dpi=dpi)
+    pyplot().close(fig)
+    return out
