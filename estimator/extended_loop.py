@@ -25,9 +25,9 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["V_STOP", "BREAK_MARGIN", "stiffening_strain", "start_extended", "run_span", "N_PAR", "N_ST", "P_K",
-           "P_A", "P_T0", "P_K_RATE", "P_C_V", "P_R_S", "P_T_SLIP", "P_T_MIN", "P_SIGMA", "P_BETA", "P_TC", "P_V_ST",
-           "P_BAND", "P_K_STEP", "P_T_STEP",
+__all__ = ["V_STOP", "BREAK_MARGIN", "stiffening_strain", "friction_bounds", "start_extended", "run_span", "N_PAR",
+           "N_ST", "P_K", "P_A", "P_T0", "P_K_RATE", "P_C_V", "P_R_S", "P_T_SLIP", "P_T_MIN", "P_SIGMA", "P_BETA",
+           "P_TC", "P_V_ST", "P_BAND", "P_K_STEP", "P_T_STEP",
            "S_E", "S_E0", "S_SLIDING", "S_T_B", "S_YP_PREV", "S_T_ORIGIN", "S_T_PREV", "S_COUNT"]
 
 V_STOP = 2e-4        # proximal speed below which a slide ends (the tendon sticks) [m/s]
@@ -54,6 +54,16 @@ def stiffening_strain(T, beta, Tc):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def friction_bounds(u, K, r_s, tab):  # pragma: no cover - compiled
+    """Fill ``tab`` (3, m1) with the kinetic and static bounds of the friction exponent ``K`` [-] at the nodes'
+    normalised wrap angle ``u`` (m1,): e^{-K u_i}, e^{+K u_i}, e^{-K (1 + r_s) u_i} (module docstring)."""
+    g_kin = np.exp(-K * u)          # the batch kernel's own array expressions: the same bits
+    tab[0, :] = g_kin
+    tab[1, :] = 1.0 / g_kin
+    tab[2, :] = np.exp(-K * (1.0 + r_s) * u)
+
+
+@njit(cache=True, nogil=True)
 def start_extended(u, w, par, T0_out, Y, st, tab):  # pragma: no cover - compiled
     """Fill the state (module docstring) at rest: the profile uniform at T0 [N], or, given the distal rest reading
     ``T0_out`` [N] >= 0 with T0 > 0, capped by the friction band above it, min(T0, T0_out e^{K (1 - u_i)}) (< 0:
@@ -70,10 +80,7 @@ def start_extended(u, w, par, T0_out, Y, st, tab):  # pragma: no cover - compile
             y = min(T0, T0_out * math.exp(K * (1.0 - u[i])))
             Y[i] = y + a
             E0 += w[i] * stiffening_strain(y, beta, Tc)
-    g_kin = np.exp(-K * u)          # the batch kernel's own array expressions: the same bits
-    tab[0, :] = g_kin
-    tab[1, :] = 1.0 / g_kin
-    tab[2, :] = np.exp(-K * (1.0 + r_s) * u)
+    friction_bounds(u, K, r_s, tab)
     st[S_E] = E0
     st[S_E0] = E0
     st[S_SLIDING] = 0.0

@@ -57,6 +57,7 @@ from estimator.extended_loop import (
     P_V_ST,
     S_SLIDING,
     S_T_ORIGIN,
+    friction_bounds,
     run_span,
     start_extended,
 )
@@ -337,19 +338,18 @@ class ExtendedEstimator:
     def _track(self, s: ExtendedSample, t: float) -> None:
         """One sample into the friction observer; a branch's estimate sets K (``track_friction``)."""
         assert self.observer is not None and self.tracker is not None
+        par = self._par
         speed = 1.0 + self.values["c_v"] * abs(self._o[_O_V])
-        K_branch = self.observer.observe(s.T_in, s.x_out, int(self._st[S_SLIDING]), speed, self.friction)
+        drift = par[P_K_RATE] * (t - self._st[S_T_ORIGIN])
+        K_now = par[P_K] + drift                    # the step is not replayed while tracking: K and its drift
+        K_branch = self.observer.observe(s.T_in, s.x_out, int(self._st[S_SLIDING]), speed, K_now)
         if K_branch is None:
             return
-        drift = self._par[P_K_RATE] * (t - self._st[S_T_ORIGIN])
-        K = self.tracker.update(K_branch, self._par[P_K] + drift)
+        K = self.tracker.update(K_branch, K_now)
         if K is None:
             return
-        par, u = self._par, self.u
         par[P_K] = K - drift                        # K + K_rate (t' - t_0) = K at t, drifting on from there
-        self._tab[0, :] = np.exp(-par[P_K] * u)
-        self._tab[1, :] = 1.0 / self._tab[0]
-        self._tab[2, :] = np.exp(-par[P_K] * (1.0 + par[P_R_S]) * u)
+        friction_bounds(self.u, par[P_K], par[P_R_S], self._tab)
 
     def out_of_range(self, s: ExtendedSample) -> str | None:
         """Why ``s`` leaves the physical range, or None: a negative distal tension, or a distal tension above the
