@@ -70,3 +70,17 @@ def test_bad_inputs_are_refused():
         node_presliding(T_in, T_in, None, t, u, w, x_p=0.0, compliance=1e-4, K=0.9)
     with pytest.raises(ValueError, match="compliance"):
         node_presliding(T_in, T_in, None, t, u, w, x_p=1e-4, compliance=None, K=0.9)
+
+
+def test_the_coulomb_compliance_of_the_node_form_is_that_of_the_base_memory():
+    """The node form's L/EA without a known compliance comes from the base model's memory (the node kernel's
+    T_p -> 0 limit): it agrees with the node kernel's own at T_P_MIN to 1e-3."""
+    t, T_in, u, w = _drive()
+    c = 8e-5
+    _, E_node = run_node_presliding(T_in, t, u, w, K=0.9, T_p=T_P_MIN)
+    x_in = 1e-4 * np.minimum(t, 1.0) + c * E_node
+    x_out = x_in - c * E_node
+    node_presliding(T_in, x_in, x_out, t, u, w, x_p=1e-6, compliance=None, K=0.9)
+    from estimator.offline.effects.presliding_kernel import _COULOMB
+    fitted = _COULOMB[0][1]
+    assert fitted == pytest.approx(c, rel=1e-3)
