@@ -92,6 +92,14 @@ def start_extended(u, w, par, T0_out, Y, st, tab):  # pragma: no cover - compile
 
 
 @njit(cache=True, nogil=True)
+def _write_slide(Y, Yp, g, a):  # pragma: no cover - compiled
+    """The profile of a whole-tendon slide at the tabulated bound ``g`` (m1,): Y_i = max(Y_p g_i, a)."""
+    for i in range(Y.shape[0]):
+        y = Yp * g[i]
+        Y[i] = y if y >= a else a
+
+
+@njit(cache=True, nogil=True)
 def _stribeck_bound(Y, Yp, a, u, w, Kk, r_s, v_st, vp, dY, G, g_kin, varying):  # pragma: no cover - compiled
     """Cumulative friction exponent G_i of a stuck tendon whose nodes near the proximal end slip (Stribeck form);
     ``g_kin`` the tabulated kinetic bounds e^{-K u_i}, used where K does not vary (``varying`` False).
@@ -160,6 +168,17 @@ def run_span(T_in, v, spd, t, slide, i0, i1, u, w, par, Y, st, tab, dY, G, T_out
     stiction = r_s > 0.0
     stribeck = stiction and v_st > 0.0    # the Stribeck form: static-kinetic by each node's own speed
     seen = slide.shape[0] > 0
+    # a slide at the tabulated kinetic bound without stiffening: the profile is Y_p times the bound, so E is Y_p times
+    # the bounds' weighted sum (no node loop); the profile itself is written when the slide ends (``lazy``, pending)
+    flat = not varying and not stribeck and beta == 0.0
+    sw_pull, sw_release, w_sum = 0.0, 0.0, 0.0
+    if flat:
+        for i in range(m1):
+            sw_pull += w[i] * g_kin[i]
+            sw_release += w[i] * g_kin_inv[i]
+            w_sum += w[i]
+    lazy = 0
+    lazy_Yp = 0.0
     for k in range(i0, i1):
         tk = t[k]
         Kk = K
@@ -211,6 +230,20 @@ def run_span(T_in, v, spd, t, slide, i0, i1, u, w, par, Y, st, tab, dY, G, T_out
                 # turned back beyond the noise, the tendon sticks (the averaged T_in turns before x_in)
                 sliding = 0
                 t_b = -math.inf
+        if sliding != 0 and flat and t_b == -math.inf and (sliding < 0 or Yp * g_kin[m1 - 1] >= a):
+            lazy, lazy_Yp = sliding, Yp     # no node below a: sum_i w_i (Y_p g_i - a) in closed form
+            if sliding > 0:
+                E = Yp * sw_pull - a * w_sum
+                Y[m1 - 1] = Yp * g_kin[m1 - 1]
+            else:
+                E = Yp * sw_release - a * w_sum
+                Y[m1 - 1] = Yp * g_kin_inv[m1 - 1]
+            T_out[k] = Y[m1 - 1] - a
+            E1[k] = E - E0
+            continue
+        if lazy != 0:
+            _write_slide(Y, lazy_Yp, g_kin if lazy > 0 else g_kin_inv, a)
+            lazy = 0
         if sliding != 0:
             E = 0.0
             fixed = not varying and not stribeck and t_b == -math.inf      # the kinetic bound: tabulated
@@ -257,6 +290,8 @@ def run_span(T_in, v, spd, t, slide, i0, i1, u, w, par, Y, st, tab, dY, G, T_out
                         t_b = tk        # breakaway from static friction
         T_out[k] = Y[m1 - 1] - a
         E1[k] = E - E0
+    if lazy != 0:
+        _write_slide(Y, lazy_Yp, g_kin if lazy > 0 else g_kin_inv, a)
     st[S_E] = E
     st[S_SLIDING] = float(sliding)
     st[S_T_B] = t_b
