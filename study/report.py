@@ -32,6 +32,14 @@ _MAX_POINTS = 20000
 _SIG = (("T_out", "N", 1.0, "N"), ("x_out", "m", 1e6, "um"))   # name, SI unit, plot scale, plot unit
 
 
+def _figure(width: float, height: float, **margins: float) -> Figure:
+    """A figure with fixed margins [share of the figure] (a layout engine would draw every figure twice: on a long
+    recording that doubles the report's time, not its content)."""
+    fig = Figure(figsize=(width, height))
+    fig.subplots_adjust(**margins)
+    return fig
+
+
 def _save(fig: Figure, path: Path) -> str:
     FigureCanvasAgg(fig)
     fig.savefig(path, dpi=110)
@@ -44,7 +52,8 @@ def _every(n: int) -> slice:
 
 def _fig_time(data, pred, t_split, path) -> str:
     sigs = [s for s in _SIG if getattr(data, s[0]) is not None]
-    fig = Figure(figsize=(11, 2.6 * len(sigs) + 0.6), layout="constrained")
+    h = 2.6 * len(sigs) + 0.6
+    fig = _figure(11, h, left=0.08, right=0.98, top=1 - 0.2 / h, bottom=0.55 / h, hspace=0.25)
     ev = _every(len(data))
     for i, (name, _, k, unit) in enumerate(sigs):
         ax = fig.add_subplot(len(sigs), 1, i + 1)
@@ -61,7 +70,8 @@ def _fig_time(data, pred, t_split, path) -> str:
 
 def _fig_by(data, pred, held, path) -> str:
     sigs = [s for s in _SIG if getattr(data, s[0]) is not None]
-    fig = Figure(figsize=(12, 2.8 * len(sigs) + 0.6), layout="constrained")
+    h = 2.8 * len(sigs) + 0.6
+    fig = _figure(12, h, left=0.07, right=0.99, top=1 - 0.45 / h, bottom=0.75 / h, hspace=0.55, wspace=0.3)
     ev = _every(int(held.sum()))
     speed = np.abs(pred["velocity"][held])[ev] * 1e3
     T_in = data.T_in[held][ev]
@@ -96,7 +106,8 @@ def _fig_loops(data, pred, held, path) -> str:
         e = data.x_in - data.x_out
         panels.append(("elongation x_in - x_out [mm]", 1e3 * e, 1e3 * (data.x_in - pred["x_out_base"]),
                        1e3 * (data.x_in - pred["x_out_ext"])))
-    fig = Figure(figsize=(12, 3.6 * len(panels)), layout="constrained")
+    h = 3.6 * len(panels)
+    fig = _figure(12, h, left=0.07, right=0.99, top=1 - 0.6 / h, bottom=0.5 / h, hspace=0.45, wspace=0.3)
     ev = _every(int(held.sum()))
     T_in = data.T_in[held][ev]
     for i, (label, meas, base, ext) in enumerate(panels):
@@ -116,7 +127,8 @@ def _fig_candidates(result: Diagnosis, path) -> str:
     c = result.candidates
     ids = sorted(c, key=lambda k: c[k].score, reverse=True)
     scores = np.array([max(c[k].score, 1e-6) for k in ids])
-    fig = Figure(figsize=(10, 1.3 + 0.22 * len(ids)), layout="constrained")
+    h = 1.3 + 0.22 * len(ids)
+    fig = _figure(10, h, left=0.2, right=0.74, top=1 - 0.35 / h, bottom=0.6 / h)
     ax = fig.add_subplot(1, 1, 1)
     left = float(scores.min()) / 3.0 if scores.size else 0.1
     ax.barh(ids, scores - left, left=left, color=["C2" if c[k].accepted else "C0" for k in ids],
