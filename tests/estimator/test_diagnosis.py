@@ -19,9 +19,11 @@ from estimator.data import MeasuredData
 from estimator.errors import DataError
 from estimator.offline.diagnosis import folds as diagnosis_folds
 from estimator.offline.diagnosis import readings as diagnosis_readings
+from estimator.offline.diagnosis import selection
 from estimator.offline.diagnosis import thresholds as th
 from estimator.offline.diagnosis.fit import (
     paired_trimmed_ms,
+    predictions,
     prepare,
     rest_start,
     split_at_rest,
@@ -597,7 +599,6 @@ def test_a_distal_end_held_on_its_stop_sets_x_out_aside_and_gives_none():
     # a preloaded spring that T_out (at most 2.5 N) never lifts off its stop (preload 2.8 N): x_out stays within one
     # 1.2 um quantum while x_in travels 0.36 mm. Fitting that x_out would bend K and let a play "explain" the standing
     # distal end: it is set aside
-    from estimator.offline.diagnosis.fit import predictions
     rec = lumped_scenarios.record(None, seed=1019112, duration=60.0)
     res = diagnose(rec.data, effects=("distal_backlash", "friction_offset", "sensor_offset:T_in"))
     held = res["settings"]["distal_end_held"]
@@ -1026,3 +1027,20 @@ def test_at_the_floor_an_effect_is_named_by_its_bar_or_by_the_excess_it_removes(
     backlash = _StubFit(("distal_backlash",), S=0.1)
     assert shown_at_floor(ctx, base, "distal_backlash", backlash)
     assert not shown_at_floor(alone, base, "distal_backlash", backlash)
+
+
+def test_a_long_recording_is_chosen_on_a_coarser_series_and_judged_at_the_full_rate(monkeypatch, clean_result):
+    """Above SELECTION_SAMPLES the model choice runs on a series averaged further (not below SELECTION_RATE_MIN);
+    the chosen model is refitted and tested at the full rate: the cause is the same, the settings say both rates."""
+    _, clean = clean_result
+    assert clean["settings"]["selection_rate_hz"] == pytest.approx(250.0, rel=1e-3)    # 500 Hz in pairs: below it
+    rec = record("velocity_friction", seed=11, duration=DUR, rate_hz=RATE)
+    monkeypatch.setattr(selection, "SELECTION_SAMPLES", 3000)        # 45 s at 250 Hz: 11250 samples
+    res = diagnose(rec.data)
+    assert res["settings"]["selection_rate_hz"] == pytest.approx(100.0, rel=1e-3)   # 66.7 Hz raised to the floor
+    assert res["settings"]["target_rate_hz"] == 200.0
+    check_named("velocity_friction", rec, res)
+    pred = predictions(res, rec.data)               # the model re-runs at the rate it was refitted at
+    held = rec.data.time >= res["split"]["time_s"]
+    rmse = float(np.sqrt(np.mean((pred["T_out_ext"][held] - rec.data.T_out[held]) ** 2)))
+    assert rmse == pytest.approx(res["extended"]["rmse_T_out_N"], rel=1e-6)

@@ -48,13 +48,24 @@ from estimator.offline.diagnosis.rules import (Context, candidate_effects, fit_c
 from estimator.offline.diagnosis.thresholds import (FLOOR_FACTOR,
                                                     MID_SCORE)
 from estimator.offline.effects.catalogue import CATALOGUE, EQUIVALENT, NOISE_BAND, Effect, effect, predict
-from estimator.offline.effects.types import NONE
+from estimator.offline.effects.types import NONE, Series
 from estimator.offline.effects.types import UNKNOWN
 
 __all__ = ["diagnose", "diagnose_recording", "floor_scores"]
 
 #: the base model's starts of K [-]
 BASE_STARTS = (0.2, 0.6, 1.2)
+
+#: [samples] the most samples of the averaged series that the model choice (steps 2-6) runs on: a longer recording
+#: is averaged further for it, to target_rate x SELECTION_SAMPLES / its samples but not below SELECTION_RATE_MIN;
+#: the chosen and the base model are then refitted and tested at ``target_rate`` (steps 7-8). A run-time bound (the
+#: choice's cost grows with the samples, what it reads does not), not tuned: every pinned and benchmark recording of
+#: up to two minutes at 200 Hz is below it.
+SELECTION_SAMPLES = 24000
+#: [Hz] the lowest averaging rate of the model choice: blocks of at most 10 ms, the shortest sensor delay the
+#: catalogue names (a delay within one block shows as a blur, and velocity friction's rise with speed then reads as
+#: a delay of the distal load cell)
+SELECTION_RATE_MIN = 100.0
 
 
 def floor_scores(clean: Iterable[Mapping[str, float]], factor: float = FLOOR_FACTOR,
@@ -174,7 +185,7 @@ def diagnose_recording(data: MeasuredData, *, train_fraction: float = 0.6, progr
     t_start = _time.perf_counter()
     catalogue, channels, missing = _check_inputs(data, effects, max_effects, recorded)
     # 1. split: a distal end that never moved set aside, the training and test blocks, the two folds
-    used, held, at_end, blocks = _split(data, train_fraction, n_nodes, target_rate, wrap_shape)
+    used, held, at_end, blocks, full = _split(data, train_fraction, n_nodes, target_rate, wrap_shape)
     signals = [n for n in SIGNALS if getattr(used, n) is not None]
     cands = candidate_effects(catalogue, signals)
     bar = _progress_bar(len(cands), wrap_shape is None, max_effects, progress)
@@ -198,16 +209,17 @@ def diagnose_recording(data: MeasuredData, *, train_fraction: float = 0.6, progr
     chosen, by_chatter, weak, overruled = stick_slip_rule(ctx, chosen, singles, chatter)
     chosen, by_rest = rest_rule(chosen, singles, off_zero := rest_offset(used))
     # 7-8. the base and the chosen model refitted on the training block, the test block used once
-    final_base, final = _refit(ctx, base, chosen)
+    final_base, final = _refit(ctx, base, chosen, full.slice(int(np.searchsorted(full.time, blocks.t_split))))
     ids, equivalent, rename = report_channels(chosen, used)
     left = structure(chosen, ctx.floor)
     causes = verdict(ids, left, chosen, by_chatter or by_rest)
-    result = _result(ctx, used, blocks, base, chosen, singles, final_base, final, causes, equivalent, rename)
+    result = _result(ctx, full, used, blocks, base, chosen, singles, final_base, final, causes, equivalent, rename)
     result.stick_slip = StickSlip(chatter, by_chatter, weak, overruled, blocks.train_block(used))
     result.rest_offset = RestOffset(off_zero, by_rest, rest_reading(used, "x_in"),
                                     None if used.x_out is None else rest_reading(used, "x_out"))
     result.settings.update(_settings(ctx, train_fraction, n_nodes, target_rate, channels, final[0], held, at_end,
                                      wrap_shape))
+    result.settings["selection_rate_hz"] = float((len(blocks.s) - 1) / max(blocks.s.time[-1] - blocks.s.time[0], 1e-12))
     result.elapsed_s = _time.perf_counter() - t_start
     if held is None and used.T_out is not None and UNKNOWN in causes:
         return _without_pressed_distal_end(result, used, t_start, dict(
@@ -276,17 +288,21 @@ class _Blocks:
 
 
 def _split(data: MeasuredData, train_fraction: float, n_nodes: int, target_rate: float,
-           wrap_shape: np.ndarray | None) -> tuple[MeasuredData, dict | None, dict | None, _Blocks]:
+           wrap_shape: np.ndarray | None) -> tuple[MeasuredData, dict | None, dict | None, _Blocks, Series]:
     """Step 1. A distal end that never moved (held by a stop, or a load never lifted) says nothing of the tendon:
     x_out is set aside when T_out is recorded. Then what share of the proximal travel x_out spends at an end of its
     range (what such a recording cannot show), the prepared series and its blocks. Returns (the data used, the held
-    reading or None, the at-end reading or None, the blocks)."""
+    reading or None, the at-end reading or None, the blocks of the model choice, the series at ``target_rate``: the
+    blocks' own unless it holds more than SELECTION_SAMPLES, when the choice runs on a further averaged one)."""
     held = distal_end_held(data) if data.T_out is not None else None
     if held is not None:
         data = replace(data, x_out=None)
     at_end = distal_at_end(data)
-    s = prepare(data, n_nodes=n_nodes, target_rate=target_rate, wrap_shape=wrap_shape)
-    return data, held, at_end, _Blocks(s, train_fraction)
+    full = prepare(data, n_nodes=n_nodes, target_rate=target_rate, wrap_shape=wrap_shape)
+    rate = max(target_rate * SELECTION_SAMPLES / len(full), min(SELECTION_RATE_MIN, target_rate))
+    s = full if len(full) <= SELECTION_SAMPLES or rate >= target_rate else prepare(
+        data, n_nodes=n_nodes, target_rate=rate, wrap_shape=wrap_shape)
+    return data, held, at_end, _Blocks(s, train_fraction), full
 
 
 def _progress_bar(n_cands: int, route: bool, max_effects: int, progress: bool | Callable) -> Progress:
@@ -295,9 +311,9 @@ def _progress_bar(n_cands: int, route: bool, max_effects: int, progress: bool | 
     return Progress(1 + n_cands + (th.POLISH if route else 0) + n_second + 2, progress)
 
 
-def _refit(ctx: Context, base: Fit, chosen: Fit) -> tuple[tuple[dict, float], tuple[dict, float]]:
-    """Step 7: the base and the chosen model refitted on the whole training block: ((values, L/EA) of each)."""
-    train = ctx.folds.train
+def _refit(ctx: Context, base: Fit, chosen: Fit, train: Series) -> tuple[tuple[dict, float], tuple[dict, float]]:
+    """Step 7: the base and the chosen model refitted on the whole training block ``train`` (at the full rate, from
+    the model choice's values): ((values, L/EA) of each)."""
     vals, c, _ = fit_model([], train, [base.values[0]], route=ctx.route)
     final_base = (vals, c)
     ctx.bar("base model, training block")
@@ -323,12 +339,13 @@ def _candidate(f: Fit, accepted: bool) -> Candidate:
                       + " alone (the other fold's base at its floor)"))
 
 
-def _result(ctx: Context, data: MeasuredData, blocks: _Blocks, base: Fit, chosen: Fit, singles: dict[str, Fit],
-            final_base: tuple[dict, float], final: tuple[dict, float], causes: list[str], equivalent: list[str],
-            rename: dict) -> Diagnosis:
-    """Step 8 and the result: both refitted models run once over the test block (measured samples), the gain on the
-    chosen model's primary signal; the readings and settings are filled in by the caller."""
-    s, t_split = ctx.s, blocks.t_split
+def _result(ctx: Context, s: Series, data: MeasuredData, blocks: _Blocks, base: Fit, chosen: Fit,
+            singles: dict[str, Fit], final_base: tuple[dict, float], final: tuple[dict, float], causes: list[str],
+            equivalent: list[str], rename: dict) -> Diagnosis:
+    """Step 8 and the result: both refitted models run once over the series ``s`` at the full rate, judged on the test
+    block (measured samples), the gain on the chosen model's primary signal; the readings and settings are filled in
+    by the caller."""
+    t_split = blocks.t_split
     base_raw = raw_rmse(predict([], final_base[0], s, compliance=final_base[1]), s, data, t_split)
     ext_raw = raw_rmse(predict(chosen.effects, final[0], s, compliance=final[1]), s, data, t_split) \
         if chosen.effects else dict(base_raw)
