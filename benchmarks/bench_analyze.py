@@ -62,7 +62,9 @@ def main(argv: list[str] | None = None) -> None:
         t3 = time.perf_counter()
     n = len(rec.data)
     print(f"teleop analyze, {args.minutes:g} min at {args.rate:g} Hz ({n} samples, {mb:.0f} MB CSV, hidden "
-          f"{args.effect}): {wall:.1f} s wall on one thread, cause {res['cause']}, gain {res['gain']:.2f}")
+          f"{args.effect}): {wall:.1f} s wall on one thread, cause {res['cause']}, gain {res['gain']:.2f} "
+          f"(model choice at {res['settings']['selection_rate_hz']:.0f} Hz, refit and test at "
+          f"{res['settings']['target_rate_hz']:.0f} Hz)")
     print(f"  in-process split: read {t1 - t0:.1f} s, diagnose {t2 - t1:.1f} s, report {t3 - t2:.1f} s")
 
 

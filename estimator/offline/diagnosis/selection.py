@@ -134,7 +134,9 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
     max_effects : int
         Most extensions accepted together, >= 1.
     n_nodes, target_rate, wrap_shape
-        Profile elements, averaging rate [Hz] and route shape, see :func:`estimator.offline.diagnosis.fit.prepare`;
+        Profile elements, averaging rate [Hz] (of the models refitted and tested; the model choice of a recording
+        longer than SELECTION_SAMPLES at it runs at a lower rate, not below SELECTION_RATE_MIN) and route shape, see
+        :func:`estimator.offline.diagnosis.fit.prepare`;
         with ``wrap_shape`` given the route is held, without it the route shares are fitted.
     recorded : tuple of "T_out", "x_out", optional
         The distal channels the recording was made with (default: those of ``data``; a channel set aside before
@@ -163,7 +165,8 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         :func:`estimator.offline.diagnosis.readings.rest_offset`, or None), named (named by that reading: the models
         named nothing), x_in_m, x_out_m (|median| at the initial rest [m])}, ``model`` and
         ``base_model`` (refitted on the training block; enough to re-run both, see
-        :func:`study.report.write_report`), ``settings``, ``elapsed_s``.
+        :func:`study.report.write_report`), ``settings`` (the arguments, the thresholds, ``selection_rate_hz`` the
+        averaging rate of steps 2-6: ``target_rate`` or, beyond SELECTION_SAMPLES, lower), ``elapsed_s``.
 
     Raises
     ------
