@@ -25,12 +25,18 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["V_STOP", "BREAK_MARGIN", "stiffening_strain", "friction_bounds", "start_extended", "run_span", "N_PAR",
-           "N_ST", "P_K", "P_A", "P_T0", "P_K_RATE", "P_C_V", "P_R_S", "P_T_SLIP", "P_T_MIN", "P_SIGMA", "P_BETA",
-           "P_TC", "P_V_ST", "P_BAND", "P_K_STEP", "P_T_STEP",
+__all__ = ["V_STOP", "NODE_ROUNDING", "BREAK_MARGIN", "stiffening_strain", "friction_bounds", "start_extended",
+           "run_span", "N_PAR", "N_ST", "P_K", "P_A", "P_T0", "P_K_RATE", "P_C_V", "P_R_S", "P_T_SLIP", "P_T_MIN",
+           "P_SIGMA", "P_BETA", "P_TC", "P_V_ST", "P_BAND", "P_K_STEP", "P_T_STEP",
            "S_E", "S_E0", "S_SLIDING", "S_T_B", "S_YP_PREV", "S_T_ORIGIN", "S_T_PREV", "S_COUNT"]
 
 V_STOP = 2e-4        # proximal speed below which a slide ends (the tendon sticks) [m/s]
+#: [-] a node of a stuck tendon whose bound it would move to lies within this share of its tension does not move.
+#: A node latched on its bound sits there to rounding, and the bound computed again (e^{-K u} tabulated, or from a
+#: drifting K) may fall an ulp either side of it: without the margin an ulp decides whether the slip reaches the distal
+#: end and the whole tendon slides, so the model jumps between K_rate = 0 and any K_rate near it (the drift's fit,
+#: started at 0, then sees no gradient)
+NODE_ROUNDING = 1e-12
 BREAK_MARGIN = 0.35  # share of the kinetic-static gap within which a turn of T_in counts as breakaway [-]
 
 #: indices of ``par``: K [-], a [N], T0 [N], K_rate [1/s], c_v [s/m], r_s [-], t_slip [s], T_min [N], sigma [N],
@@ -280,8 +286,8 @@ def run_span(T_in, v, spd, t, slide, i0, i1, u, w, par, Y, st, tab, dY, G, T_out
                     d = -1
                 else:
                     break
-                if ny == y:
-                    break
+                if abs(ny - y) <= NODE_ROUNDING * y:
+                    break           # on its bound to rounding (NODE_ROUNDING): the node does not move
                 E += w[i] * (stiffening_strain(ny - a, beta, Tc) - stiffening_strain(y - a, beta, Tc))
                 Y[i] = ny
                 if i == m1 - 1:         # the slip reached the distal end: the whole tendon slides

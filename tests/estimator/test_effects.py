@@ -267,6 +267,21 @@ def test_curvature_drift_changes_K_linearly_in_time():
     np.testing.assert_allclose(pr.T_out[m], T_in[m] * np.exp(-(K + rate * (s.time[m] - s.time[0]))), rtol=1e-9)
 
 
+def test_the_memory_is_continuous_in_a_drift_or_step_of_K_at_zero():
+    """A node latched on its bound sits there to rounding; the bound computed from a drifting K must not let an ulp
+    decide that the slip reached the distal end (NODE_ROUNDING). On this recording it did: K_rate = 0 and 1e-12 gave
+    distal tensions 8 mN apart, and the drift's fit started at 0 saw no gradient."""
+    from estimator.offline.diagnosis.fit import prepare
+    from study.lumped.scenarios import record
+    s = prepare(record(("pretension", "curvature_drift"), seed=5860000, level=0.2, duration=60.0).data)
+    kw = dict(K=0.7345, slide=s.slide, sigma=s.sigma_T_in, T_min=s.T_min, band=0.01)
+    T0, E0 = run_extended(s.T_in, s.velocity, s.time, s.u, s.w, **kw)
+    for near in (dict(K_rate=1e-12), dict(K_step=1e-12, t_step=30.0)):
+        T1, E1 = run_extended(s.T_in, s.velocity, s.time, s.u, s.w, **kw, **near)
+        assert np.max(np.abs(T1 - T0)) < 1e-8 * np.ptp(T0), near
+        assert np.max(np.abs(E1 - E0)) < 1e-8 * np.ptp(E0), near
+
+
 def test_tendon_stiffening_elongation_closed_form_and_T_out_unchanged():
     T_in, x_in = _pull()
     beta, Tc = 3.0, 2.0

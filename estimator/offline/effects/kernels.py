@@ -19,7 +19,8 @@ distal part slide back) - and is updated in one of two ways:
 
 * stuck distal end (the memory rule of the base model):
       Y_i <- clip(Y_i, (Y_p - h) e^{-b u_i}, (Y_p + h) e^{+b u_i}), Y_i >= a,
-  node by node from the proximal end until a node does not change, with b = K_k, or
+  node by node from the proximal end until a node does not change (by more than NODE_ROUNDING of its tension: a
+  node latched on its bound sits there to rounding), with b = K_k, or
   K_k (1 + r_s) with static friction (E4: the tendon is stuck whenever it does not slide).
   h [N] is the noise band of the reading T_in (``band``; 0 on exact data): the rule latches
   extremes, and on a noisy reading it would latch the noise's own (a hold of a few hundred
