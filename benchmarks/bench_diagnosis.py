@@ -64,8 +64,8 @@ from diagnosis_tables import (  # noqa: F401 - re-exported
 
 from estimator.data import noise_level
 from estimator.offline.diagnosis.fit import quantum
-from estimator.offline.diagnosis.selection import diagnose, floor_scores
-from estimator.offline.diagnosis.thresholds import FLOOR_FACTOR, MID_SCORE, STRUCTURE_RATIO
+from estimator.offline.diagnosis.selection import diagnose
+from estimator.offline.diagnosis.thresholds import FLOOR_FACTOR, MID_SCORE, STRUCTURE_RATIO, floor_scores
 from estimator.offline.effects.catalogue import CATALOGUE, EFFECT_IDS
 from estimator.offline.effects.types import NONE
 
@@ -212,7 +212,7 @@ def clean_scores(rows: list[dict]) -> list[dict[str, float]]:
 
 
 def floor_table(paths: list[str]) -> dict[str, float]:
-    """Print and return :func:`estimator.offline.diagnosis.selection.floor_scores` of the clean rows in ``paths``
+    """Print and return :func:`estimator.offline.diagnosis.thresholds.floor_scores` of the clean rows in ``paths``
     (benchmark ``--json`` files); ValueError naming a file that is not a list of benchmark rows."""
     clean: list[dict[str, float]] = []
     for path in paths:

@@ -777,8 +777,7 @@ def test_a_distal_load_cell_gain_on_a_constant_force_load_is_named_once_the_dist
 
 
 def test_floor_scores_bound_each_effect_below_its_lowest_clean_score():
-    from estimator.offline.diagnosis.selection import floor_scores
-    from estimator.offline.diagnosis.thresholds import FLOOR_FACTOR, MID_SCORE
+    from estimator.offline.diagnosis.thresholds import FLOOR_FACTOR, MID_SCORE, floor_scores
     clean = [{"sensor_lag:T_out": 0.9, "stiction": 0.6}, {"sensor_lag:T_out": 0.8, "stiction": 0.43}]
     got = floor_scores(clean)
     assert got == {"sensor_lag:T_out": pytest.approx(min(MID_SCORE, FLOOR_FACTOR * 0.8)),

@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 import time as _time
 from dataclasses import replace
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable
 
 import numpy as np
 
@@ -45,13 +45,11 @@ from estimator.offline.diagnosis.result import Candidate, Diagnosis, Model, Rest
 from estimator.offline.diagnosis.rules import (Context, candidate_effects, fit_candidates, noise_floors,
                                                refine_route, refit_routes, rest_rule, select, stick_slip_rule,
                                                report_channels, verdict)
-from estimator.offline.diagnosis.thresholds import (FLOOR_FACTOR,
-                                                    MID_SCORE)
 from estimator.offline.effects.catalogue import CATALOGUE, EQUIVALENT, NOISE_BAND, Effect, effect, predict
 from estimator.offline.effects.types import NONE, Series
 from estimator.offline.effects.types import UNKNOWN
 
-__all__ = ["diagnose", "diagnose_recording", "floor_scores"]
+__all__ = ["diagnose", "diagnose_recording"]
 
 #: the base model's starts of K [-]
 BASE_STARTS = (0.2, 0.6, 1.2)
@@ -66,43 +64,6 @@ SELECTION_SAMPLES = 24000
 #: catalogue names (a delay within one block shows as a blur, and velocity friction's rise with speed then reads as
 #: a delay of the distal load cell)
 SELECTION_RATE_MIN = 100.0
-
-
-def floor_scores(clean: Iterable[Mapping[str, float]], factor: float = FLOOR_FACTOR,
-                 cap: float = MID_SCORE) -> dict[str, float]:
-    """Per-effect bounds of FLOOR_SCORE from the candidate scores of clean recordings.
-
-    Parameters
-    ----------
-    clean : iterable of mappings effect id -> validation score S [-]
-        ``candidates[id].score`` of each clean recording whose base model is at the floor (structure ratio
-        <= STRUCTURE_RATIO on every signal), whatever it was answered (the benchmark's ``scores``;
-        ``bench_diagnosis.py --floor-table``).
-    factor, cap : float
-        The bound is min(cap, factor x the lowest S of the effect).
-
-    Returns
-    -------
-    dict effect id -> bound [-], sorted by id.
-
-    Raises
-    ------
-    ValueError
-        No clean recording, a factor outside (0, 1] or a score that is not a finite number >= 0 (naming the effect).
-    """
-    if not 0.0 < factor <= 1.0:
-        raise ValueError(f"factor must be in (0, 1], got {factor!r}")
-    low: dict[str, float] = {}
-    n = 0
-    for scores in clean:
-        n += 1
-        for eid, v in scores.items():
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0.0):
-                raise ValueError(f"clean recording {n}: score of {eid} is {v!r}, not a finite number >= 0")
-            low[eid] = min(low.get(eid, math.inf), float(v))
-    if n == 0:
-        raise ValueError("floor_scores needs at least one clean recording")
-    return {eid: min(cap, factor * low[eid]) for eid in sorted(low)}
 
 
 def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool | Callable = False,

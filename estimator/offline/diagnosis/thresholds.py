@@ -1,4 +1,5 @@
-"""Every tuned number of the single-tendon diagnosis, with its unit and meaning.
+"""Every tuned number of the single-tendon diagnosis, with its unit and meaning, and how the per-effect bars at the
+floor are computed from clean recordings (:func:`floor_scores`).
 
 The procedure that uses them is :func:`estimator.offline.diagnosis.selection.diagnose`; where each number comes from
 and on which recordings it was checked is in the thresholds table of docs/concepts/diagnosis.md. The rules read them as
@@ -6,9 +7,12 @@ attributes of this module at call time (``thresholds.STRUCTURE_RATIO``), so a te
 """
 from __future__ import annotations
 
-__all__ = ["PENALTY", "STRUCTURE_RATIO", "VALIDATION_FRACTION", "SECOND_ROUND", "MODEL_RESOLUTION", "TRIM", "POLISH",
-           "RANK_FACTOR", "STRONG_SCORE", "WEAK_STRUCTURE", "MID_SCORE", "EXCESS_MIN", "FLOOR_FACTOR", "FLOOR_SCORE",
-           "FLOOR_SCORE_WITHOUT", "EXCESS_MIN_WITHOUT", "STICK_SLIP_RATIO", "STICK_SLIP_WEAK",
+import math
+from collections.abc import Iterable, Mapping
+
+__all__ = ["floor_scores", "PENALTY", "STRUCTURE_RATIO", "VALIDATION_FRACTION", "SECOND_ROUND", "MODEL_RESOLUTION",
+           "TRIM", "POLISH", "RANK_FACTOR", "STRONG_SCORE", "WEAK_STRUCTURE", "MID_SCORE", "EXCESS_MIN", "FLOOR_FACTOR",
+           "FLOOR_SCORE", "FLOOR_SCORE_WITHOUT", "EXCESS_MIN_WITHOUT", "STICK_SLIP_RATIO", "STICK_SLIP_WEAK",
            "STICK_SLIP_WEAK_SCORE", "ROUTE_SCORE", "DOMINANT_SCORE", "OFFSET_FLOORS", "STICK_SLIP_WINDOW",
            "STICK_SLIP_SPEED", "STICK_SLIP_HOLD", "STICK_SLIP_MIN_SAMPLES", "STICK_SLIP_MIN_MOVE",
            "STICK_SLIP_MIN_HOLD", "RELEASE_SHARE", "HELD_STEPS", "HELD_SHARE", "NEAR_HELD_SHARE", "AT_END_SPEED",
@@ -96,3 +100,40 @@ HAND_LAG_MIN = 0.004        # [s] a delay of T_out behind the capstan ratio from
 HAND_SPEED_MIN = 4.0        # [s/m] c_v = speed term / K from this up: friction rising with sliding speed
 HAND_T_MIN = 3.0            # [-] a term of the speed-or-lag reading this many standard errors from zero is read
 HAND_WEAK_SCORE = 1.0       # [-] at the floor, the reading names its effect when that extension's S is below this
+
+
+def floor_scores(clean: Iterable[Mapping[str, float]], factor: float = FLOOR_FACTOR,
+                 cap: float = MID_SCORE) -> dict[str, float]:
+    """Per-effect bounds of FLOOR_SCORE from the candidate scores of clean recordings.
+
+    Parameters
+    ----------
+    clean : iterable of mappings effect id -> validation score S [-]
+        ``candidates[id].score`` of each clean recording whose base model is at the floor (structure ratio
+        <= STRUCTURE_RATIO on every signal), whatever it was answered (the benchmark's ``scores``;
+        ``bench_diagnosis.py --floor-table``).
+    factor, cap : float
+        The bound is min(cap, factor x the lowest S of the effect).
+
+    Returns
+    -------
+    dict effect id -> bound [-], sorted by id.
+
+    Raises
+    ------
+    ValueError
+        No clean recording, a factor outside (0, 1] or a score that is not a finite number >= 0 (naming the effect).
+    """
+    if not 0.0 < factor <= 1.0:
+        raise ValueError(f"factor must be in (0, 1], got {factor!r}")
+    low: dict[str, float] = {}
+    n = 0
+    for scores in clean:
+        n += 1
+        for eid, v in scores.items():
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"clean recording {n}: score of {eid} is {v!r}, not a finite number >= 0")
+            low[eid] = min(low.get(eid, math.inf), float(v))
+    if n == 0:
+        raise ValueError("floor_scores needs at least one clean recording")
+    return {eid: min(cap, factor * low[eid]) for eid in sorted(low)}
