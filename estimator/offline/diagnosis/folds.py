@@ -124,13 +124,13 @@ def step_fold(folds: Folds, instants: list[float], fold_S: list[float] | None = 
 class Fit:
     """One model (a list of extensions) fitted on each fold's fit block, with its validation errors.
 
-    The forward fold is fitted from the least costly of ``starts`` (:func:`estimator.offline.diagnosis.fit.fit_model`
-    ranks them by their cost), the backward fold from the forward fold's values. Refining the second least costly start
-    as well took a third of the diagnosis and changed no cause on the development sets (docs/results/diagnosis.md)."""
+    The forward fold is refined from the ``refined`` least costly of ``starts``
+    (:func:`estimator.offline.diagnosis.fit.fit_model` ranks them by their cost), the backward fold from the forward
+    fold's values."""
 
     def __init__(self, effects: list[Effect], folds: Folds, starts: list[dict], *, route: bool | str = False,
                  fixed: dict | list[dict] | None = None, base: Fit | None = None,
-                 floor: dict[str, float] | None = None, need: float = math.inf):
+                 floor: dict[str, float] | None = None, need: float = math.inf, refined: int = 2):
         self.effects = effects
         self.values: list[dict[str, float]] = []
         self.compliance: list[float] = []
@@ -149,7 +149,7 @@ class Fit:
                 break           # cannot be accepted (the worse fold counts): the second fold is not needed
             vals, c, _ = fit_model(effects, tr, starts if j == 0 else [self.values[0]], route=route,
                                    fixed=fixed[j] if isinstance(fixed, list) else fixed, mask=fm,
-                                   max_starts=1)
+                                   max_starts=refined if j == 0 else 1)
             pred = predict(effects, vals, tr, compliance=c)
             self.values.append(vals)
             self.compliance.append(c)

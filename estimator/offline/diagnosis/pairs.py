@@ -23,11 +23,15 @@ from estimator.offline.diagnosis.rules import Context, shown_at_floor, worst
 from estimator.offline.effects.catalogue import CATALOGUE
 from estimator.offline.effects.types import ROUTE_KEYS
 
-__all__ = ["consider_pairs", "second_at_floor", "speed_beside_offset", "PAIR_POOL"]
+__all__ = ["consider_pairs", "second_at_floor", "speed_beside_offset", "PAIR_POOL", "PAIR_REFINED"]
 
 #: [count] the strongest single candidates (lowest S), and the strongest physical ones, whose pairs are fitted when
 #: the model so far leaves structure: a run-time bound (at most 15 pair fits), not tuned
 PAIR_POOL = 3
+#: [count] starts refined on the forward fold of a pair fit. The pair starts from both single fits' values (or the
+#: first model's), already near the minimum: refining the second least costly start as well takes a third of a long
+#: recording's diagnosis and names the same causes on the development sets (docs/results/diagnosis.md)
+PAIR_REFINED = 1
 
 
 def _rank(f: Fit) -> float:
@@ -44,7 +48,7 @@ def _pair_fit(ctx: Context, base: Fit, singles: dict[str, Fit], a: str, b: str) 
     per_fold = singles[a].values + singles[a].values[-1:] * (len(ctx.folds.fit) - len(singles[a].values))
     return Fit(fx, ctx.folds, start_points(fx, v0, ctx.s, v0),
                fixed=[{**{k: v[k] for k in ROUTE_KEYS if k in v}, **kept} for v in per_fold],
-               base=base, floor=ctx.floor, need=1.0 - th.PENALTY * n)
+               base=base, floor=ctx.floor, need=1.0 - th.PENALTY * n, refined=PAIR_REFINED)
 
 
 def _pool(singles: dict[str, Fit], out: list[str]) -> list[str]:
@@ -122,7 +126,7 @@ def second_at_floor(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fi
         n = len(e.parameters)
         f = Fit(fx, ctx.folds, start_points(fx, v0, ctx.s, v0),
                 fixed=[{**{k: v[k] for k in ROUTE_KEYS if k in v}, **kept} for v in chosen.values],
-                base=base, floor=ctx.floor, need=chosen.S * (1.0 - th.PENALTY * n))
+                base=base, floor=ctx.floor, need=chosen.S * (1.0 - th.PENALTY * n), refined=PAIR_REFINED)
         if not f.complete and f.sole_fold is None:
             continue
         rel = copy.copy(f)
