@@ -175,14 +175,11 @@ def run_span(T_in, v, spd, t, slide, i0, i1, u, w, par, Y, st, tab, dY, G, T_out
     stribeck = stiction and v_st > 0.0    # the Stribeck form: static-kinetic by each node's own speed
     seen = slide.shape[0] > 0
     # a slide at the tabulated kinetic bound without stiffening: the profile is Y_p times the bound, so E is Y_p times
-    # the bounds' weighted sum (no node loop); the profile itself is written when the slide ends (``lazy``, pending)
+    # the bounds' weighted sum (no node loop; the sums taken at the span's first such slide, so that a span without
+    # one, as most one-sample spans of the per-cycle form are, pays nothing); the profile itself is written when the
+    # slide ends (``lazy``, pending)
     flat = not varying and not stribeck and beta == 0.0
-    sw_pull, sw_release, w_sum = 0.0, 0.0, 0.0
-    if flat:
-        for i in range(m1):
-            sw_pull += w[i] * g_kin[i]
-            sw_release += w[i] * g_kin_inv[i]
-            w_sum += w[i]
+    sw_pull, sw_release, w_sum = 0.0, 0.0, -1.0
     lazy = 0
     lazy_Yp = 0.0
     for k in range(i0, i1):
@@ -238,6 +235,12 @@ def run_span(T_in, v, spd, t, slide, i0, i1, u, w, par, Y, st, tab, dY, G, T_out
                 t_b = -math.inf
         if sliding != 0 and flat and t_b == -math.inf and (sliding < 0 or Yp * g_kin[m1 - 1] >= a):
             lazy, lazy_Yp = sliding, Yp     # no node below a: sum_i w_i (Y_p g_i - a) in closed form
+            if w_sum < 0.0:
+                w_sum = 0.0
+                for i in range(m1):
+                    sw_pull += w[i] * g_kin[i]
+                    sw_release += w[i] * g_kin_inv[i]
+                    w_sum += w[i]
             if sliding > 0:
                 E = Yp * sw_pull - a * w_sum
                 Y[m1 - 1] = Yp * g_kin[m1 - 1]
