@@ -183,7 +183,6 @@ def diagnose_recording(data: MeasuredData, *, train_fraction: float = 0.6, progr
                                     None if used.x_out is None else rest_reading(used, "x_out"))
     result.settings.update(_settings(ctx, train_fraction, n_nodes, target_rate, channels, final[0], held, at_end,
                                      wrap_shape))
-    result.settings["selection_rate_hz"] = float((len(blocks.s) - 1) / max(blocks.s.time[-1] - blocks.s.time[0], 1e-12))
     result.elapsed_s = _time.perf_counter() - t_start
     if held is None and used.T_out is not None and UNKNOWN in causes:
         return _without_pressed_distal_end(result, used, t_start, dict(
@@ -333,7 +332,7 @@ def _result(ctx: Context, s: Series, data: MeasuredData, blocks: _Blocks, base: 
 def _settings(ctx: Context, train_fraction: float, n_nodes: int, target_rate: float, recorded: tuple[str, ...],
               model_values: dict, held: dict | None, at_end: dict | None, wrap_shape: np.ndarray | None) -> dict:
     """The ``settings`` object of the result: the arguments, every threshold applied, the route forms, the readings
-    of the distal end."""
+    of the distal end, the averaging rate of the model choice (``ctx.s``)."""
     return {"train_fraction": train_fraction, "validation_fraction": th.VALIDATION_FRACTION,
             "n_nodes": n_nodes, "target_rate_hz": target_rate,
             "penalty_per_parameter": th.PENALTY, "structure_ratio": th.STRUCTURE_RATIO,
@@ -347,6 +346,7 @@ def _settings(ctx: Context, train_fraction: float, n_nodes: int, target_rate: fl
             "model_resolution": th.MODEL_RESOLUTION, "trim": th.TRIM, "route_score": th.ROUTE_SCORE,
             "route_form": FORM_NAME[ctx.route], "model_route_form": FORM_NAME[route_of(model_values, ctx.route)],
             "distal_end_held": held, "distal_at_end": at_end, "distal_slide_travel_m": ctx.s.slide_travel,
+            "selection_rate_hz": float((len(ctx.s) - 1) / max(ctx.s.time[-1] - ctx.s.time[0], 1e-12)),
             "wrap_shape": None if wrap_shape is None else [float(v) for v in wrap_shape]}
 
 
