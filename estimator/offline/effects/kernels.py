@@ -217,12 +217,36 @@ def distal_slide(x_out: np.ndarray, travel: float, window: int = 1) -> np.ndarra
         raise ValueError(f"distal_slide: travel must be a finite number > 0 m, got {travel!r}")
     if window < 1:
         raise ValueError(f"distal_slide: window must be >= 1 sample, got {window!r}")
-    p = backlash_play(np.asarray(x_out, dtype=np.float64), 2.0 * travel)
-    step = np.zeros(p.shape[0])
-    step[1:] = p[1:] - p[:-1]
-    c = np.concatenate(([0.0], np.cumsum(step)))
-    i = np.arange(p.shape[0])
-    moved = c[i + 1] - c[np.maximum(i + 1 - window, 0)]
-    d = np.where(moved > travel, 1, np.where(moved < -travel, -1, 0)).astype(np.int8)
-    d[step * moved <= 0.0] = 0          # moving now, the way the window moved
+    x = np.ascontiguousarray(x_out, dtype=np.float64)
+    d = np.empty(x.shape[0], dtype=np.int8)
+    _slide(x, float(travel), int(window), d)
     return d
+
+
+@njit(cache=True, nogil=True)
+def _slide(x, travel, window, d):  # pragma: no cover - compiled
+    """distal_slide's loop: the play of half-width ``travel``, its travel summed from the start (c) and differenced
+    over ``window`` samples, in the order numpy's cumulative sum adds."""
+    n = x.shape[0]
+    c = np.empty(n + 1)
+    c[0] = 0.0
+    c[1] = 0.0
+    p = x[0]
+    for k in range(n):
+        prev = p
+        if x[k] - p > travel:
+            p = x[k] - travel
+        elif p - x[k] > travel:
+            p = x[k] + travel
+        step = p - prev if k > 0 else 0.0
+        if k > 0:
+            c[k + 1] = c[k] + step
+        moved = c[k + 1] - c[max(k + 1 - window, 0)]
+        if step * moved <= 0.0:
+            d[k] = 0
+        elif moved > travel:
+            d[k] = 1
+        elif moved < -travel:
+            d[k] = -1
+        else:
+            d[k] = 0
