@@ -12,7 +12,7 @@ from estimator.offline.diagnosis.selection import diagnose
 from estimator.offline.effects.catalogue import effect, predict
 from estimator.offline.effects.types import Series
 from study import scenarios
-from tests.estimator.test_effects import K, _pull, series
+from tests.estimator.effects_series import K, _pull, series
 
 
 def test_friction_step_changes_K_at_its_instant_only():
