@@ -203,7 +203,6 @@ def test_no_private_helper_imported_across_modules():
 LONG_KERNELS: dict[str, str] = {
     "estimator.extended_loop.run_span": "one compiled pass of every catalogue effect per sample (batch and per cycle)",
     "estimator.offline.effects.presliding_kernel._node_kernel": "one compiled pass over the sheath nodes per sample",
-    "study.lumped.kernel.simulate": "the lumped simulator's compiled integration loop",
 }
 
 #: Where the size bounds and the sys.path rule are checked: the packages, the benchmarks and the examples.
