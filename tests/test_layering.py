@@ -202,7 +202,6 @@ def test_no_private_helper_imported_across_modules():
 #: local variables, where splitting would cost a call per sample inside the compiled loop.
 LONG_KERNELS: dict[str, str] = {
     "estimator.extended_loop.run_span": "one compiled pass of every catalogue effect per sample (batch and per cycle)",
-    "estimator.offline.effects.presliding_kernel._node_kernel": "one compiled pass over the sheath nodes per sample",
 }
 
 #: Where the size bounds and the sys.path rule are checked: the packages, the benchmarks and the examples.

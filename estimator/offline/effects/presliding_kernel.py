@@ -39,8 +39,118 @@ NODE_FORM = "presliding_form"
 T_P_MIN = 1e-3   # smallest pre-sliding tension [N]; a segment stiffer than the grid resolves is rigid-plastic
 
 
+# The steps of a sample borrow the kernel's arrays and allocate none: compiled without reference counting
+# (_nrt=False), a call costs no atomic increment and decrement per array argument.
+@njit(cache=True, nogil=True, _nrt=False)
+def _capstan_ratios(bet, u, Kk, m):  # pragma: no cover - compiled
+    """Bound ratio beta_i = 2 tanh(K (u_{i+1} - u_i) / 2) of every segment at the friction exponent Kk [-]."""
+    for i in range(m):
+        bet[i] = 2.0 * math.tanh(0.5 * Kk * (u[i + 1] - u[i]))
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _segment_slopes(T, bet, T_p, ds, kk, cc, m):  # pragma: no cover - compiled
+    """Coulomb bound cc = B_i [N] of every segment at the sample's start tensions and its pre-sliding slope
+    kk = 2 B_i / T_p [N per tension unit of travel], capped at 2 / ds (a segment stiffer than the grid resolves
+    is rigid-plastic and the shot's elastic step keeps 1 - k ds / 4 >= 1/2)."""
+    for i in range(m):
+        B = 0.5 * bet[i] * (T[i] + T[i + 1])
+        ki = 2.0 * B / T_p
+        if ki * ds > 2.0:
+            ki = 2.0 / ds
+        kk[i] = ki
+        cc[i] = B
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _distal_end(k, xd, use_xd, r, aT, bT, ad, bd, m):  # pragma: no cover - compiled
+    """Increments (dT_m, d_m) = (aT_m + bT_m x, ad_m + bd_m x) of the distal node at sample k, affine in the one
+    unknown x: the distal end travels as measured (xd) or its load yields by the compliance share r."""
+    aT[m] = 0.0
+    if use_xd:
+        bT[m] = 1.0
+        ad[m] = xd[k] - xd[k - 1] if k > 0 else 0.0
+        bd[m] = 0.0
+    else:
+        bT[m] = 1.0 - r
+        ad[m] = 0.0
+        bd[m] = r
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _shoot(top, st, kk, cc, bet, F, ds, aT, bT, ad, bd):  # pragma: no cover - compiled
+    """Shoot from the distal end: the increments (dT_i, d_i) = (aT_i + bT_i x, ad_i + bd_i x) of the nodes through
+    the segments ``top`` down to 0, elastic or at their bound; the nodes beyond ``top`` are as the last pass left
+    them."""
+    for i in range(top, -1, -1):
+        if st[i] == 0:
+            # dT_i - dT_{i+1} = k d_{i+1} + (k ds / 4)(dT_i + dT_{i+1})
+            h = 0.25 * kk[i] * ds
+            den = 1.0 / (1.0 - h)       # a reciprocal: the shot's chain of dependent steps holds no division
+            aT[i] = ((1.0 + h) * aT[i + 1] + kk[i] * ad[i + 1]) * den
+            bT[i] = ((1.0 + h) * bT[i + 1] + kk[i] * bd[i + 1]) * den
+        else:
+            # F_i + dF_i = s beta (Tbar + dTbar): dT_i (1 - s beta/2) = dT_{i+1} (1 + s beta/2) + c
+            sb = 0.5 * st[i] * bet[i]
+            c = st[i] * cc[i] - F[i]
+            den = 1.0 / (1.0 - sb)
+            aT[i] = ((1.0 + sb) * aT[i + 1] + c) * den
+            bT[i] = (1.0 + sb) * bT[i + 1] * den
+        ad[i] = ad[i + 1] + 0.5 * ds * (aT[i] + aT[i + 1])
+        bd[i] = bd[i + 1] + 0.5 * ds * (bT[i] + bT[i + 1])
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _segment_status(x, T, F, st, kk, bet, aT, bT, ad, bd, m):  # pragma: no cover - compiled
+    """Move each segment between elastic and at its bound by its travel and trial friction under the shot's x: an
+    elastic segment past its bound in the direction it moves reaches it, one at the bound that moves back sticks.
+    Returns the most distal segment whose status changed (-1: none)."""
+    top = -1
+    for i in range(m):
+        dTi = aT[i] + bT[i] * x
+        dTn = aT[i + 1] + bT[i + 1] * x
+        trav = 0.5 * (ad[i] + ad[i + 1] + (bd[i] + bd[i + 1]) * x)
+        Bn = 0.5 * bet[i] * (T[i] + dTi + T[i + 1] + dTn)
+        if st[i] == 0:
+            Fn = F[i] + kk[i] * trav
+            if Fn > Bn and trav > 0.0:
+                st[i] = 1
+                top = i
+            elif Fn < -Bn and trav < 0.0:
+                st[i] = -1
+                top = i
+        elif trav * st[i] < 0.0:
+            st[i] = 0
+            top = i
+    return top
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _apply_increments(x, T, F, aT, bT, bet, w, beta, Tc, m):  # pragma: no cover - compiled
+    """Take the sample's increments: node tensions (a tendon cannot push), segment frictions clipped to their new
+    bounds. Returns the weighted strain sum_i w_i phi(T_i) [N]."""
+    E = 0.0
+    for i in range(m + 1):
+        Ti = T[i] + aT[i] + bT[i] * x
+        if Ti < 0.0:
+            Ti = 0.0
+        T[i] = Ti
+    for i in range(m):
+        Bn = 0.5 * bet[i] * (T[i] + T[i + 1])
+        f = T[i] - T[i + 1]
+        if f > Bn:
+            f = Bn
+        elif f < -Bn:
+            f = -Bn
+        F[i] = f
+    for i in range(m + 1):
+        E += w[i] * stiffening_strain(T[i], beta, Tc)
+    return E
+
+
 @njit(cache=True, nogil=True)
 def _node_kernel(T_in, t, u, w, K, K_rate, T_p, r, T0, beta, Tc, xd, T_out, E1):  # pragma: no cover - compiled
+    """Per-node pre-sliding over the samples of ``T_in`` (module docstring): T_out [N] and E1 [N] of each sample."""
     m1 = u.shape[0]
     m = m1 - 1
     T = np.full(m1, T0)
@@ -61,84 +171,21 @@ def _node_kernel(T_in, t, u, w, K, K_rate, T_p, r, T0, beta, Tc, xd, T_out, E1):
             Kk = K + K_rate * (t[k] - t[0])
             if Kk < 0.0:
                 Kk = 0.0
-            for i in range(m):
-                bet[i] = 2.0 * math.tanh(0.5 * Kk * (u[i + 1] - u[i]))
+            _capstan_ratios(bet, u, Kk, m)
         Tp = T_in[k]
         if Tp < 0.0:
             Tp = 0.0
-        for i in range(m):
-            B = 0.5 * bet[i] * (T[i] + T[i + 1])
-            ki = 2.0 * B / T_p
-            if ki * ds > 2.0:
-                ki = 2.0 / ds
-            kk[i] = ki
-            cc[i] = B
+        _segment_slopes(T, bet, T_p, ds, kk, cc, m)
         dT0 = Tp - T[0]
         top = m - 1                     # the most distal segment whose status changed: the shot starts there
         for _ in range(8):
-            # shoot from the distal end: (dT_i, d_i) = (aT + bT x, ad + bd x); the nodes beyond ``top`` are as
-            # the last pass left them
-            aT[m] = 0.0
-            if use_xd:
-                bT[m] = 1.0
-                ad[m] = xd[k] - xd[k - 1] if k > 0 else 0.0
-                bd[m] = 0.0
-            else:
-                bT[m] = 1.0 - r
-                ad[m] = 0.0
-                bd[m] = r
-            for i in range(top, -1, -1):
-                if st[i] == 0:
-                    # dT_i - dT_{i+1} = k d_{i+1} + (k ds / 4)(dT_i + dT_{i+1})
-                    h = 0.25 * kk[i] * ds
-                    den = 1.0 / (1.0 - h)       # a reciprocal: the shot's chain of dependent steps holds no division
-                    aT[i] = ((1.0 + h) * aT[i + 1] + kk[i] * ad[i + 1]) * den
-                    bT[i] = ((1.0 + h) * bT[i + 1] + kk[i] * bd[i + 1]) * den
-                else:
-                    # F_i + dF_i = s beta (Tbar + dTbar): dT_i (1 - s beta/2) = dT_{i+1} (1 + s beta/2) + c
-                    sb = 0.5 * st[i] * bet[i]
-                    c = st[i] * cc[i] - F[i]
-                    den = 1.0 / (1.0 - sb)
-                    aT[i] = ((1.0 + sb) * aT[i + 1] + c) * den
-                    bT[i] = (1.0 + sb) * bT[i + 1] * den
-                ad[i] = ad[i + 1] + 0.5 * ds * (aT[i] + aT[i + 1])
-                bd[i] = bd[i + 1] + 0.5 * ds * (bT[i] + bT[i + 1])
+            _distal_end(k, xd, use_xd, r, aT, bT, ad, bd, m)
+            _shoot(top, st, kk, cc, bet, F, ds, aT, bT, ad, bd)
             x = (dT0 - aT[0]) / bT[0] if bT[0] != 0.0 else 0.0
-            top = -1
-            for i in range(m):
-                dTi = aT[i] + bT[i] * x
-                dTn = aT[i + 1] + bT[i + 1] * x
-                trav = 0.5 * (ad[i] + ad[i + 1] + (bd[i] + bd[i + 1]) * x)
-                Bn = 0.5 * bet[i] * (T[i] + dTi + T[i + 1] + dTn)
-                if st[i] == 0:
-                    Fn = F[i] + kk[i] * trav
-                    if Fn > Bn and trav > 0.0:
-                        st[i] = 1
-                        top = i
-                    elif Fn < -Bn and trav < 0.0:
-                        st[i] = -1
-                        top = i
-                elif trav * st[i] < 0.0:
-                    st[i] = 0
-                    top = i
+            top = _segment_status(x, T, F, st, kk, bet, aT, bT, ad, bd, m)
             if top < 0:
                 break
-        E = 0.0
-        for i in range(m1):
-            Ti = T[i] + aT[i] + bT[i] * x
-            if Ti < 0.0:
-                Ti = 0.0
-            T[i] = Ti
-        for i in range(m):
-            Bn = 0.5 * bet[i] * (T[i] + T[i + 1])
-            f = T[i] - T[i + 1]
-            if f > Bn:
-                f = Bn
-            elif f < -Bn:
-                f = -Bn
-            F[i] = f
-        for i in range(m1):
-            E += w[i] * stiffening_strain(T[i], beta, Tc)
+        E = _apply_increments(x, T, F, aT, bT, bet, w, beta, Tc, m)
         T_out[k] = T[m]
         E1[k] = E - E0
 
