@@ -32,6 +32,7 @@ import numpy as np
 
 from live.cli import main as teleop_main
 from teleop.config.load import load_config
+from teleop.config.schema import Config
 from teleop.recording.csv_proc import wait_written
 from teleop.recording.measured_csv import read_measured_csv
 from teleop.session.transport import Session, accepts_connections, free_tcp_ports, loopback_endpoint, zenoh_config
@@ -173,6 +174,100 @@ def _wait(pred, timeout: float, what: str, procs) -> None:
 
 
 
+def _run_config(run_dir: Path, ident: str, instrument: str) -> Path:
+    """The run's config in ``run_dir``: the joint instrument's (:func:`_joint_config`) or the default tendon's."""
+    if instrument in JOINT_CONFIGS:
+        return _joint_config(run_dir, ident, instrument)
+    path = run_dir / "cfg.yaml"
+    path.write_text(CONFIG.format(ident=ident, caldir=run_dir / "calibration"), encoding="utf-8")
+    return path
+
+
+def _start_sides(cfg_path: Path, run_dir: Path, port: int, port_m: int, inject: dict[str, str],
+                 logs: dict[str, Path], procs: dict[str, subprocess.Popen]) -> None:
+    """Start the slave listening on ``port`` (waited for until it accepts connections), then the master connected to
+    it and listening on ``port_m``; each process goes into ``procs`` as it starts, so that the caller can kill what
+    runs."""
+    ep = loopback_endpoint(port)
+    base = [sys.executable, "-m", "live.cli"]
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    for side, extra in (("slave", ["--listen", ep]),
+                        ("master", ["--connect", ep, "--listen", loopback_endpoint(port_m),
+                                    "--protocol", "paper"])):
+        args = base + [side, "--config", str(cfg_path), "--run-dir", str(run_dir), "--max-duration", "60",
+                       *extra] + (["--inject", inject[side]] if side in inject else [])
+        with open(logs[side], "w") as fh:
+            procs[side] = subprocess.Popen(args, stdout=fh, stderr=subprocess.STDOUT, env=env)
+        if side == "slave":
+            _wait(lambda: accepts_connections(port), 60, f"the slave to listen on {ep}", procs)
+
+
+def _fault_window(cfg: Config, ident: str, port: int, procs: dict[str, subprocess.Popen], *, signal_to: str | None,
+                  sig: int | None, resume_after: float | None, observe: float, engaged_for: float,
+                  trigger_side: str | None, settle: float) -> float:
+    """Watch both sides' heartbeats until both are ENGAGED, let them run ``engaged_for`` [s], apply the fault,
+    observe it (and wait up to ``settle`` for both to be ENGAGED again). Returns the fault time (CLOCK_MONOTONIC)."""
+    ep = loopback_endpoint(port)
+    with Session(zenoh_config(cfg.transport, listen=(), connect=(ep,), role="observer")) as obs:
+        beats = {s: obs.subscriber(heartbeat_key(ident, s), Heartbeat) for s in ("slave", "master")}
+        DEBUG[:] = [lambda: str({s: (b.count, b.errors, _observer_state(b)) for s, b in beats.items()})]
+        _wait(lambda: all(_observer_state(b) == SideState.ENGAGED for b in beats.values()), 60,
+              "both sides ENGAGED", procs)
+        time.sleep(engaged_for)
+        t_fault = time.monotonic()
+        if signal_to is not None:
+            procs[signal_to].send_signal(sig)
+        if trigger_side is not None:
+            procs[trigger_side].send_signal(signal.SIGUSR1)
+        if resume_after is not None:
+            time.sleep(resume_after)
+            procs[signal_to].send_signal(signal.SIGCONT)
+        time.sleep(observe)
+        if settle > 0.0:
+            deadline = time.monotonic() + settle
+            while time.monotonic() < deadline and not all(
+                    _observer_state(b) == SideState.ENGAGED for b in beats.values()):
+                time.sleep(0.01)
+            time.sleep(0.05)      # a few rows after the last heartbeat seen
+    return t_fault
+
+
+def _stop_sides(procs: dict[str, subprocess.Popen]) -> dict[str, int | None]:
+    """SIGINT to every side still running (its recordings flushed); returns each side's exit code (killed after
+    20 s)."""
+    for p in procs.values():
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+    rc: dict[str, int | None] = {}
+    for s, p in procs.items():
+        try:
+            rc[s] = p.wait(20)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            rc[s] = p.wait()
+    return rc
+
+
+def _read_run(out: FaultRun, joints: bool) -> None:
+    """Fill ``out`` from its run directory: each side's recording (or the error reading it), its stats and faults,
+    and the injector's fault time where one reports it."""
+    for side in ("slave", "master"):
+        try:
+            name = ("slave_joints.csv" if side == "slave" else "master.csv") if joints else f"{side}.csv"
+            path = out.run_dir / name
+            wait_written(path)          # a killed side's CSV process writes the rows it received, then lets go
+            setattr(out, side, Rows(path) if joints else read_measured_csv(path))
+        except Exception as e:  # noqa: BLE001 - reported by the test
+            out.errors[side] = f"{type(e).__name__}: {e}"
+        for kind in ("stats", "faults"):
+            path = out.run_dir / f"{side}_{kind}.json"
+            if path.is_file():
+                getattr(out, kind)[side] = json.loads(path.read_text())
+    inj = [f.get("t_fault") for f in out.faults.values() if f.get("t_fault") is not None]
+    if inj:
+        out.t_fault = float(min(inj))
+
+
 def run_fault(tmp: Path, name: str, *, inject: dict[str, str] | None = None, signal_to: str | None = None,
               sig: int | None = None, resume_after: float | None = None, observe: float = 1.0,
               engaged_for: float = 0.6, trigger_side: str | None = None, instrument: str = "tendon",
@@ -192,80 +287,22 @@ def run_fault(tmp: Path, name: str, *, inject: dict[str, str] | None = None, sig
     ident = f"f{instrument[0] if joints else ''}{name.replace('_', '')}"[:20]
     run_dir = tmp / name
     run_dir.mkdir(parents=True)
-    if joints:
-        cfg_path = _joint_config(run_dir, ident, instrument)
-    else:
-        cfg_path = run_dir / "cfg.yaml"
-        cfg_path.write_text(CONFIG.format(ident=ident, caldir=run_dir / "calibration"), encoding="utf-8")
+    cfg_path = _run_config(run_dir, ident, instrument)
     cfg = load_config(cfg_path)
     port, port_m = free_tcp_ports(2)
-    ep = loopback_endpoint(port)
-    inject = inject or {}
-    base = [sys.executable, "-m", "live.cli"]
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
     procs: dict[str, subprocess.Popen] = {}
     logs = {s: run_dir / f"{s}.log" for s in ("slave", "master")}
-    t_fault = None
     try:
-        for side, extra in (("slave", ["--listen", ep]),
-                            ("master", ["--connect", ep, "--listen", loopback_endpoint(port_m),
-                                        "--protocol", "paper"])):
-            args = base + [side, "--config", str(cfg_path), "--run-dir", str(run_dir), "--max-duration", "60",
-                           *extra] + (["--inject", inject[side]] if side in inject else [])
-            with open(logs[side], "w") as fh:
-                procs[side] = subprocess.Popen(args, stdout=fh, stderr=subprocess.STDOUT, env=env)
-            if side == "slave":
-                _wait(lambda: accepts_connections(port), 60, f"the slave to listen on {ep}", procs)
-        with Session(zenoh_config(cfg.transport, listen=(), connect=(ep,), role="observer")) as obs:
-            beats = {s: obs.subscriber(heartbeat_key(ident, s), Heartbeat) for s in ("slave", "master")}
-            DEBUG[:] = [lambda: str({s: (b.count, b.errors, _observer_state(b)) for s, b in beats.items()})]
-            _wait(lambda: all(_observer_state(b) == SideState.ENGAGED for b in beats.values()), 60,
-                  "both sides ENGAGED", procs)
-            time.sleep(engaged_for)
-            t_fault = time.monotonic()
-            if signal_to is not None:
-                procs[signal_to].send_signal(sig)
-            if trigger_side is not None:
-                procs[trigger_side].send_signal(signal.SIGUSR1)
-            if resume_after is not None:
-                time.sleep(resume_after)
-                procs[signal_to].send_signal(signal.SIGCONT)
-            time.sleep(observe)
-            if settle > 0.0:
-                deadline = time.monotonic() + settle
-                while time.monotonic() < deadline and not all(
-                        _observer_state(b) == SideState.ENGAGED for b in beats.values()):
-                    time.sleep(0.01)
-                time.sleep(0.05)      # a few rows after the last heartbeat seen
+        _start_sides(cfg_path, run_dir, port, port_m, inject or {}, logs, procs)
+        t_fault = _fault_window(cfg, ident, port, procs, signal_to=signal_to, sig=sig, resume_after=resume_after,
+                                observe=observe, engaged_for=engaged_for, trigger_side=trigger_side, settle=settle)
         t_stop = time.monotonic()
-        for p in procs.values():
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-        rc = {}
-        for s, p in procs.items():
-            try:
-                rc[s] = p.wait(20)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                rc[s] = p.wait()
+        rc = _stop_sides(procs)
     finally:
         for p in procs.values():
             if p.poll() is None:
                 p.kill()
                 p.wait()
     out = FaultRun(name, t_fault, run_dir, {s: logs[s].read_text() for s in logs}, rc, t_stop=t_stop)
-    for side in ("slave", "master"):
-        try:
-            path = run_dir / (("slave_joints.csv" if side == "slave" else "master.csv") if joints else f"{side}.csv")
-            wait_written(path)          # a killed side's CSV process writes the rows it received, then lets go
-            setattr(out, side, Rows(path) if joints else read_measured_csv(path))
-        except Exception as e:  # noqa: BLE001 - reported by the test
-            out.errors[side] = f"{type(e).__name__}: {e}"
-        for kind in ("stats", "faults"):
-            path = run_dir / f"{side}_{kind}.json"
-            if path.is_file():
-                getattr(out, kind)[side] = json.loads(path.read_text())
-    inj = [f.get("t_fault") for f in out.faults.values() if f.get("t_fault") is not None]
-    if inj:
-        out.t_fault = float(min(inj))
+    _read_run(out, joints)
     return out
