@@ -29,7 +29,7 @@ knows the instrument's route does with ``teleop analyze --route CONFIG``: where 
 not fitted, and the figures say what that knowledge buys.
 Prints per effect and per channel: accuracy (strict, and up to the inseparable pairs of
 estimator.offline.effects.catalogue.EQUIVALENT), gains, false alarms on clean data; never fails on the figures (the
-pass/fail checks are in tests/estimator/test_diagnosis.py).
+pass/fail checks are in tests/estimator/test_diagnosis*.py).
 
     .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|...|dev54|final|final3]
         [--seeds 2]
