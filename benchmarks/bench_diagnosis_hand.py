@@ -16,8 +16,9 @@ base + 600 + s (tissue), base + 700 + s (contact).
     .venv/bin/python benchmarks/bench_diagnosis_hand.py [--sim rig|lumped|both] [--set hdev|hdev2|hdev3|hfinal|hfinal2]
         [--seeds 4] [--levels 0.2,0.8] [--clean 4] [--duration 60] [--jobs 2] [--only ID,...] [--json OUT]
 
-Prints per family and hidden effect the share named right with its 95 % interval and what was named; never fails
-on the figures.
+Prints per family and hidden effect the share named right with its 95 % interval and what was named, and for a
+hidden effect the share among the visible recordings (footprint against the clean twin) and the misses' footprints;
+never fails on the figures.
 """
 from __future__ import annotations
 
@@ -28,7 +29,8 @@ import time
 from collections import Counter, defaultdict
 from concurrent.futures import ProcessPoolExecutor
 
-from diagnosis_tables import proportion_interval
+from bench_diagnosis import footprint
+from diagnosis_tables import VISIBLE_SIGMAS, peak_footprint, proportion_interval
 
 from estimator.offline.diagnosis.selection import diagnose
 from estimator.offline.effects.types import NONE
@@ -56,6 +58,8 @@ def one(case: tuple) -> dict:
     if sim == "rig":
         kw["rate_hz"] = 1000.0
     rec = _record(sim)(None if effect == NONE else effect, **kw)
+    # the clean twin (same seed, rig, motion and noise): how far the hidden effect moves the recording
+    fp = {} if effect == NONE else footprint(rec.data, _record(sim)(None, **kw).data)
     t0 = time.perf_counter()
     try:
         res = diagnose(rec.data)
@@ -67,7 +71,7 @@ def one(case: tuple) -> dict:
             "motion": motion, "load": load or "", "cause": cause, "causes": causes,
             "seconds": time.perf_counter() - t0, "truth": rec.truth["parameters"],
             "scores": {k: round(v["score"], 3) for k, v in res.get("candidates", {}).items()},
-            "structure": res.get("structure", {})}
+            "structure": res.get("structure", {}), "footprint": fp}
 
 
 def cases(sims: tuple[str, ...], seed_set: str, seeds: int, levels: list[float], clean: int,
@@ -86,7 +90,9 @@ def cases(sims: tuple[str, ...], seed_set: str, seeds: int, levels: list[float],
 
 
 def report(rows: list[dict]) -> None:
-    """Per simulator, family and hidden effect: right / n, the 95 % interval and the answers."""
+    """Per simulator, family and hidden effect: right / n, the 95 % interval and the answers; for a hidden effect
+    also right / n among the visible recordings (footprint against the clean twin above VISIBLE_SIGMAS noise sigmas
+    on some channel) and each miss's footprint."""
     by: dict[tuple, list[dict]] = defaultdict(list)
     for r in rows:
         by[(r["sim"], r["family"], r["effect"])].append(r)
@@ -94,8 +100,14 @@ def report(rows: list[dict]) -> None:
         k = sum(r["cause"] == eff for r in rs)
         lo, hi = proportion_interval(k, len(rs))
         answers = Counter(r["cause"] for r in rs if r["cause"] != eff)
-        print(f"{sim:6s} {fam:8s} {eff:20s} {k:3d} / {len(rs):3d}  ({lo:.2f}-{hi:.2f})  "
-              + ", ".join(f"{a} {n}" for a, n in answers.most_common()))
+        line = (f"{sim:6s} {fam:8s} {eff:20s} {k:3d} / {len(rs):3d}  ({lo:.2f}-{hi:.2f})  "
+                + ", ".join(f"{a} {n}" for a, n in answers.most_common()))
+        if eff != NONE:
+            vis = [r for r in rs if peak_footprint(r) > VISIBLE_SIGMAS]
+            misses = ", ".join(f"{peak_footprint(r):.1f}" for r in rs if r["cause"] != eff)
+            line += (f"; visible {sum(r['cause'] == eff for r in vis)} / {len(vis)}"
+                     + (f", misses' footprints [sigma] {misses}" if misses else ""))
+        print(line)
 
 
 def main(argv: list[str] | None = None) -> None:
