@@ -15,16 +15,18 @@ The report names the cause, the physical explanation and the signature from the 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 from estimator.data import MeasuredData
 from estimator.offline.diagnosis.fit import predictions
 from estimator.offline.diagnosis.result import Diagnosis, as_diagnosis
 from estimator.offline.effects.catalogue import CATALOGUE
 from estimator.phase import Phase
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = ["write_report", "format_summary", "split_text"]
 
@@ -35,12 +37,16 @@ _SIG = (("T_out", "N", 1.0, "N"), ("x_out", "m", 1e6, "um"))   # name, SI unit, 
 def _figure(width: float, height: float, **margins: float) -> Figure:
     """A figure with fixed margins [share of the figure] (a layout engine would draw every figure twice: on a long
     recording that doubles the report's time, not its content)."""
+    from matplotlib.figure import Figure  # lazy: `teleop analyze` without --report does not load matplotlib
+
     fig = Figure(figsize=(width, height))
     fig.subplots_adjust(**margins)
     return fig
 
 
 def _save(fig: Figure, path: Path) -> str:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
     FigureCanvasAgg(fig)
     fig.savefig(path, dpi=110)
     return path.name
