@@ -8,12 +8,12 @@ Families, each scored per simulator (``study/scenarios.py`` the rig, ``study/lum
 * ``tissue``, ``contact``: clean recordings on nonlinear (stiffening) tissue and on free space then contact, under
   the protocol and under hand motion (answer ``none``).
 
-Seed sets (``SEED_BASE``): ``hdev``, ``hdev2``, ``hdev3`` and ``hfinal`` (held out once, run once) are development
-data; ``hfinal2`` is held out. Effect k
+Seed sets (``SEED_BASE``): ``hdev``, ``hdev2``, ``hdev3``, ``hfinal`` and ``hfinal2`` (each of the last two held out
+and run once) are development data; ``hfinal3`` is held out. Effect k
 of :data:`HAND_EFFECTS`, level j, repeat s uses base + 1000 k + 10 j + s; clean recordings base + 500 + s (hand),
 base + 600 + s (tissue), base + 700 + s (contact).
 
-    .venv/bin/python benchmarks/bench_diagnosis_hand.py [--sim rig|lumped|both] [--set hdev|hdev2|hdev3|hfinal|hfinal2]
+    .venv/bin/python benchmarks/bench_diagnosis_hand.py [--sim rig|lumped|both] [--set hdev|...|hfinal3]
         [--seeds 4] [--levels 0.2,0.8] [--clean 4] [--duration 60] [--jobs 2] [--only ID,...] [--json OUT]
 
 Prints per family and hidden effect the share named right with its 95 % interval and what was named, and for a
@@ -35,8 +35,9 @@ from diagnosis_tables import VISIBLE_SIGMAS, peak_footprint, proportion_interval
 from estimator.offline.diagnosis.selection import diagnose
 from estimator.offline.effects.types import NONE
 
-#: seed offset of each set: ``hdev`` ... ``hdev3``, ``hfinal`` (development data) and ``hfinal2`` (held out)
-SEED_BASE = {"hdev": 7000000, "hdev2": 7100000, "hdev3": 7200000, "hfinal": 7500000, "hfinal2": 8600000}
+#: seed offset of each set: ``hdev`` ... ``hfinal2`` (development data) and ``hfinal3`` (held out)
+SEED_BASE = {"hdev": 7000000, "hdev2": 7100000, "hdev3": 7200000, "hfinal": 7500000, "hfinal2": 8600000,
+             "hfinal3": 8700000}
 #: hidden effects under hand motion: the acceptance pair first, then their look-alikes under that motion
 HAND_EFFECTS = ("pretension", "velocity_friction", "sensor_offset:x_in", "sensor_lag:T_out")
 

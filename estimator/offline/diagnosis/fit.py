@@ -26,6 +26,7 @@ from scipy.optimize import least_squares
 
 from estimator.offline.diagnosis import thresholds as th
 from estimator.offline.diagnosis.instant import profile_discrete
+from estimator.offline.diagnosis.refinement import refine_best
 from estimator.offline.effects.catalogue import Effect, predict
 from estimator.offline.effects.types import K_MAX
 from estimator.offline.effects.types import ROUTE
@@ -156,35 +157,6 @@ def _residual_scales(s: Series) -> dict[str, float]:
     return out
 
 
-def _refine_best(starts: list[np.ndarray], residual, refine, lo: np.ndarray, hi: np.ndarray, own: slice):
-    """The least-cost refinement (scipy's OptimizeResult) from each of ``starts`` (scaled parameter vectors, K
-    first); ``own`` the effects' parameters within them.
-
-    A refinement that takes not a single step means K sits on the edge of a step in the residual (the memory or
-    slack rule of some sample flips just below it): every trial step lowers K and fails, and the trust region
-    shrinks to nothing. The others are then refitted with K held, then all from there - kept only when an effect's
-    parameters stay inside their bounds (a parameter run to its bound from there bends to noise and displaces the
-    effect that is there).
-    """
-    span = 1e-3 * (hi[own] - lo[own])
-    best = None
-    for z0 in starts:
-        sol = refine(residual, z0, lo, hi)
-        if np.array_equal(sol.x, z0) and len(z0) > 1:
-            def rest_of(y, z0=z0):
-                return residual(np.concatenate([z0[:1], y]))
-            sub = refine(rest_of, z0[1:], lo[1:], hi[1:])
-            again = refine(residual, np.concatenate([z0[:1], sub.x]), lo, hi)
-            inside = bool(np.all((again.x[own] > lo[own] + span) & (again.x[own] < hi[own] - span)))
-            if again.cost < sol.cost and inside:
-                sol = again
-        if best is None or sol.cost < best.cost:
-            best = sol
-    if best is None:
-        raise ValueError("fit_model: no start to refine from (max_starts >= 1 and at least one start)")
-    return best
-
-
 def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float]], *,
               max_starts: int = 2, route: bool | str = False, fixed: dict[str, float] | None = None,
               mask: slice | None = None) -> tuple[dict[str, float], float, float]:
@@ -247,7 +219,7 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
                                     train.time, m)
     ranked = sorted(z_starts, key=lambda z: float(np.sum(residual(z) ** 2)))
     own = slice(len(_params([], route)), None)             # the effects' parameters
-    best = _refine_best(ranked[:max_starts], residual, refine, lo, hi, own)
+    best = refine_best(ranked[:max_starts], residual, refine, lo, hi, own)
     vals = values(best.x)
     key = key_of(best.x)
     c = seen[key][1] if key in seen else predict(effects, vals, train, fit_mask=m, stop=stop).compliance

@@ -17,7 +17,7 @@ __all__ = ["floor_scores", "PENALTY", "STRUCTURE_RATIO", "VALIDATION_FRACTION", 
            "STICK_SLIP_SPEED", "STICK_SLIP_HOLD", "STICK_SLIP_MIN_SAMPLES", "STICK_SLIP_MIN_MOVE",
            "STICK_SLIP_MIN_HOLD", "RELEASE_SHARE", "HELD_STEPS", "HELD_SHARE", "NEAR_HELD_SHARE", "AT_END_SPEED",
            "AT_END_BAND", "AT_END_SHARE", "AT_END_HIDES", "SLIDE_SEEN", "SLIDE_QUANTA", "SLIDE_SIGMAS",
-           "SLIDE_SHARE", "K_RESTART", "REST_MIN_S", "REST_RESOLUTIONS", "REST_TENSION_SIGMAS",
+           "SLIDE_SHARE", "K_RESTART", "PLATEAU_BISECTIONS", "REST_MIN_S", "REST_RESOLUTIONS", "REST_TENSION_SIGMAS",
            "REST_TENSION_RATIO", "HAND_WINDOW", "HAND_SLIP_SPEED", "HAND_MIN_SLIP_S", "HAND_LAG_MIN",
            "HAND_SPEED_MIN", "HAND_T_MIN", "HAND_WEAK_SCORE"]
 
@@ -89,6 +89,7 @@ REST_RESOLUTIONS = 3.0      # [resolutions] a position reading further from zero
 
 # ---- the fits ---------------------------------------------------------------------------------------------------
 FIT_TOL = 1e-6              # [-] relative ftol and xtol of every least-squares refinement (diagnosis_fit.fit_model)
+PLATEAU_BISECTIONS = 12     # [count] halvings locating the edge of a plateau in K (refinement.below_plateau)
 
 # ---- hand motion: the rest tension and the speed-or-lag readings (estimator.offline.diagnosis.readings) ----------
 REST_TENSION_SIGMAS = 10.0  # [noise sigmas] both load cells reading at least this at the initial rest: tension there
