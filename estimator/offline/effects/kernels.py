@@ -230,17 +230,15 @@ def _slide(x, travel, window, d):  # pragma: no cover - compiled
     n = x.shape[0]
     c = np.empty(n + 1)
     c[0] = 0.0
-    c[1] = 0.0
-    p = x[0]
+    p = x[0]                # the play starts on the first sample: its first step is 0
     for k in range(n):
         prev = p
         if x[k] - p > travel:
             p = x[k] - travel
         elif p - x[k] > travel:
             p = x[k] + travel
-        step = p - prev if k > 0 else 0.0
-        if k > 0:
-            c[k + 1] = c[k] + step
+        step = p - prev
+        c[k + 1] = c[k] + step
         moved = c[k + 1] - c[max(k + 1 - window, 0)]
         if step * moved <= 0.0:
             d[k] = 0
