@@ -27,7 +27,7 @@ def below_plateau(sol, z0: np.ndarray, residual, refine, lo: np.ndarray, hi: np.
     jac = getattr(sol, "jac", None)
     if jac is None or np.any(jac[:, 0] != 0.0) or not z0[0] < sol.x[0]:
         return sol
-    flat = residual(sol.x)
+    flat = sol.fun          # the residual at the solution, on the plateau
     off, on = float(z0[0]), float(sol.x[0])
     if np.array_equal(residual(np.concatenate([[off], sol.x[1:]])), flat):
         return sol          # the start's K is on the plateau too (with the solution's other parameters)
