@@ -66,7 +66,7 @@ class MasterNodeBase(NodeBase):
     ----------
     cfg : Config
         ``master`` (rate, watchdog, max_tension) and ``slave.heartbeat_hz`` are used here.
-    device : the haptic device (``finished``, ``timeouts`` read when present).
+    device : the haptic device (``finished``, ``timeouts``, ``segment_events`` read when present).
     links : MasterLinks
     stop_linger : float
         Time the STOPPING state is announced before :attr:`done` [s].
@@ -203,5 +203,6 @@ class MasterNodeBase(NodeBase):
             "refusals": self.refusals(),
             "pacer": dict(self.pacer_stats),
             "operator_timeouts": int(getattr(self.device, "timeouts", 0)),
+            "operator_segments": getattr(self.device, "segment_events", []),
             "finished": bool(getattr(self.device, "finished", False)),
         }

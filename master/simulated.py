@@ -6,11 +6,13 @@ on one tendon of the axis at a time ("pull until T_in reaches 20 N, then release
 a single tendon has one axis, a joint instrument one per antagonistic pair (+ device motion pulls
 tendon a, - pulls tendon b). The axis watches the T_in of the tendon named by its segment in the
 latest Estimate (what a surgeon sees on the endoscope and the tension read-out), moves its intended
-hand position at a set speed toward the target, dwells briefly at each reversal, and goes on to the
-next segment when the target is crossed; all axes run together and the operator is finished when
-every axis is. The hand is not a position source: it is a human arm as haptics models it, a
-mass-damper-spring about the intended position holding a device with its own mass and friction,
-one per axis (:mod:`master.arm`; Hogan 1985, Tsuji et al. 1995)::
+hand position at a set speed toward the target, stops when the read-out carried on at its rate for the
+hand's lag crosses the target, dwells briefly, and goes on to the next segment, or pulls on in the same
+one when the read-out settled more than ``APPROACH_BAND`` short of the target (a rate that collapsed
+at the end of a capstan dead zone, where the tension moves fast and the tip does not); all axes run
+together and the operator is finished when every axis is. The hand is not a position source: it is a
+human arm as haptics models it, a mass-damper-spring about the intended position holding a device
+with its own mass and friction, one per axis (:mod:`master.arm`; Hogan 1985, Tsuji et al. 1995)::
 
     (m_a + m_d) dv/dt = k_a (p_intended - p) + b_a (v_intended - v) + F_rendered - b_d v - F_c sgn(v)
 
@@ -28,6 +30,7 @@ Each segment carries a marker, which the master sends in ``Command.marker`` (4 b
 """
 from __future__ import annotations
 
+import logging
 import math
 from typing import Any
 
@@ -37,6 +40,8 @@ from master.protocols import MARKER_AXES, Segment
 from teleop.errors import ConfigError
 
 __all__ = ["ClutchHand", "AxisScript", "ScriptedOperator"]
+
+log = logging.getLogger("teleop.master")
 
 #: Tension error [N] below which the operator slows its intention, and the slowest fraction of speed.
 APPROACH_BAND, APPROACH_MIN = 1.0, 0.15
@@ -96,6 +101,12 @@ class AxisScript:
     force : the rendered force [N].
     index : current segment, -1 before the start. direction : +1 raising the watched tension, -1
     lowering it, 0 still. marker : the current (or last) segment's. finished, timeouts.
+    events : list of dict, one per stop: ``segment`` (1-based), ``side`` (0 = a, 1 = b), ``target`` [N],
+    ``t_start``, ``t_end`` [s], ``T_in`` (the reading [N]) and ``T_seen`` (the reading carried on at its rate
+    for the hand's lag [N]) at the stop, ``reached`` (False: ``segment_timeout``), ``resumed`` (the reading
+    settled more than APPROACH_BAND short of the target during the dwell and the segment went on); each
+    is also logged.
+    name : str, the axis's name in those log lines.
     """
 
     def __init__(self, segments, speed: float, arm: ArmParameters, static_arm: bool, dwell: float,
@@ -116,6 +127,9 @@ class AxisScript:
         self._rate = 0.0                         # smoothed dT_in/dt of the watched tendon [N/s]
         self._wait_until: float | None = None    # start delay / dwell end [s]
         self._t_segment = 0.0
+        self._stopped = 0                        # direction of a segment stopped as reached, until its dwell ends
+        self.events: list[dict[str, Any]] = []
+        self.name = "axis"
 
     def position(self, dt: float) -> float:
         """The hand's position after ``dt`` [s] under the rendered force [m]."""
@@ -139,6 +153,8 @@ class AxisScript:
             if t < self._wait_until:
                 return
             self._wait_until = None
+            if self._short_of_target(T):
+                return
             if self.index + 1 >= len(self.segments):
                 self.finished, self.direction = True, 0
                 return
@@ -151,6 +167,8 @@ class AxisScript:
         reached = T_seen >= seg.target if self.direction > 0 else T_seen <= seg.target
         if reached or t - self._t_segment > self.segment_timeout:
             self.timeouts += 0 if reached else 1
+            self._ended(seg, t, T, T_seen, reached)
+            self._stopped = self.direction if reached else 0
             self.direction = 0
             self._wait_until = t + self.dwell
             return
@@ -160,6 +178,31 @@ class AxisScript:
         sign = 1.0 if seg.side == 0 else -1.0
         self.velocity = sign * self.direction * self.speed * approach(abs(seg.target - T_seen))
         self.intended += self.velocity * dt
+
+    def _short_of_target(self, T: float) -> bool:
+        """After a segment's dwell: whether the read-out ``T`` [N] settled more than APPROACH_BAND short of the
+        target the operator stopped for (the anticipation misjudged a rate that collapsed, e.g. a capstan dead
+        zone ending); if so the operator pulls on in the same segment, its timeout still counting."""
+        if self.index < 0 or not self._stopped:
+            return False
+        target = self.segments[self.index].target
+        if self._stopped * (target - T) <= APPROACH_BAND:
+            return False
+        self.direction, self._stopped = self._stopped, 0
+        self._T_last, self._rate = None, 0.0
+        self.events[-1]["resumed"] = True
+        log.info("operator %s: segment %d/%d: T_in settled at %.2f N, short of %g N: pulling on", self.name,
+                 self.index + 1, len(self.segments), T, target)
+        return True
+
+    def _ended(self, seg: Segment, t: float, T: float, T_seen: float, reached: bool) -> None:
+        """Record and log the end of the current segment at ``t`` [s] with the reading ``T`` and ``T_seen`` [N]."""
+        ev = {"segment": self.index + 1, "side": seg.side, "target": seg.target, "t_start": self._t_segment,
+              "t_end": t, "T_in": T, "T_seen": T_seen, "reached": bool(reached), "resumed": False}
+        self.events.append(ev)
+        log.info("operator %s: segment %d/%d (tendon %s to %g N) %s at t=%.3f s after %.3f s: T_in %.2f N, "
+                 "seen %.2f N", self.name, ev["segment"], len(self.segments), "ab"[seg.side], seg.target,
+                 "reached" if reached else "timed out", t, t - self._t_segment, T, T_seen)
 
     def _read_rate(self, t: float, T: float) -> None:
         """Update the read-out rate [N/s], smoothed over RATE_TIME, from the watched tension ``T`` [N] at ``t`` [s].
@@ -255,6 +298,8 @@ class ScriptedOperator:
         self.static_arm = bool(static_arm)
         self.axes = [AxisScript(p, float(speed), self.arm_params, self.static_arm, float(dwell), float(start_delay),
                                 float(segment_timeout)) for p in per_axis]
+        for k, a in enumerate(self.axes):
+            a.name = str(k)
         self.segments = per_axis[0]
         self.k_arm = self.arm_params.stiffness
         self._T: list[tuple[float, ...]] | None = None
@@ -274,6 +319,11 @@ class ScriptedOperator:
     @property
     def timeouts(self) -> int:
         return sum(a.timeouts for a in self.axes)
+
+    @property
+    def segment_events(self) -> list[list[dict[str, Any]]]:
+        """Per axis, the ended segments (:attr:`AxisScript.events`)."""
+        return [list(a.events) for a in self.axes]
 
     @property
     def marker(self) -> int:

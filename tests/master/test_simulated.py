@@ -179,3 +179,43 @@ def test_readings_that_arrive_late_and_together_do_not_end_a_pull_early():
         turned[stall] = peak
     assert turned[False] == pytest.approx(20.0, abs=1.5)
     assert turned[True] == pytest.approx(turned[False], abs=1.5)
+
+
+
+def _dead_zone_plant(pos: float) -> float:
+    """Play, a capstan dead zone, free travel, then a load: the read-out stays at 12 N over the first 1 mm of hand
+    travel (the hand up to speed), races to 15.3 N over the next 0.8 mm (the tendon stretching, its tip stuck:
+    ~100 N/s at 25 mm/s), stays there for 3 mm (the tip swinging free), then rises 500 N/m (the tip on the
+    load) [N]."""
+    p = max(0.0, pos - 1e-3)
+    return 12.0 + 3.3 * min(p, 8e-4) / 8e-4 + 500.0 * max(0.0, p - 3.8e-3)
+
+
+def _pull(op: ScriptedOperator, plant, T0: float) -> float:
+    """Close the loop on ``plant`` until the operator starts its second segment; the peak read-out [N]."""
+    t, T, peak = 0.0, T0, T0
+    while t < 10.0 and op.index < 1:
+        op.watch(T, engaged=True)
+        T = plant(op.read(t).position)
+        peak = max(peak, T)
+        t += DT
+    return peak
+
+
+def test_a_pull_stopped_in_a_dead_zone_short_of_its_target_pulls_on_after_the_dwell():
+    """Carried on at the dead zone's rate for the hand's lag, the read-out crosses 20 N at ~15 N and the operator
+    stops; looking again after the dwell it finds the read-out more than APPROACH_BAND short of the target and
+    pulls on in the same segment, turning at 20 N."""
+    op = ScriptedOperator((Segment(20.0, 1), Segment(12.5, 1)), speed=0.025, dwell=0.2, start_delay=0.0)
+    peak = _pull(op, _dead_zone_plant, 12.0)
+    first = op.axes[0].events
+    assert op.index == 1 and op.timeouts == 0
+    assert first[0]["T_in"] < 17.0 and first[0]["resumed"]       # stopped by the rate, then went on
+    assert not first[-1]["resumed"] and peak == pytest.approx(20.0, abs=1.5)
+
+
+def test_a_pull_that_settles_within_the_approach_band_goes_on_to_the_next_segment():
+    op = ScriptedOperator((Segment(20.0, 1), Segment(5.0, 1)), speed=0.025, dwell=0.2, start_delay=0.0)
+    peak = _pull(op, lambda p: 500.0 * max(0.0, p), 0.0)
+    assert op.index == 1 and [e["resumed"] for e in op.axes[0].events] == [False]
+    assert peak == pytest.approx(20.0, abs=1.0)
