@@ -35,11 +35,12 @@ import math
 from typing import Any
 
 from master.arm import ArmParameters, HumanArm
+from master.clutch_hand import ClutchHand
 from master.device import DeviceState, MultiAxisState
 from master.protocols import MARKER_AXES, Segment
 from teleop.errors import ConfigError
 
-__all__ = ["ClutchHand", "AxisScript", "ScriptedOperator"]
+__all__ = ["AxisScript", "ScriptedOperator"]
 
 log = logging.getLogger("teleop.master")
 
@@ -53,35 +54,6 @@ def approach(error: float) -> float:
     """Fraction of the set speed at ``error`` [N] from the target: 1 beyond APPROACH_BAND, down to
     APPROACH_MIN at the target (an operator slows down as the read-out nears the target)."""
     return min(1.0, max(APPROACH_MIN, error / APPROACH_BAND))
-
-
-class ClutchHand:
-    """The scripted hand's clutch button: when the console asks to align (status ALIGN), the hand
-    presses button ``bit`` for ``hold`` [s] and lets go, which re-anchors the master where the hand
-    is. A negative ``bit``: the hand never clutches. ``count`` is the number of presses."""
-
-    def __init__(self, bit: int, hold: float):
-        self.bit, self.hold = int(bit), float(hold)
-        self.count = 0
-        self._wanted = False
-        self._until: float | None = None    # [s] end of the press under way
-
-    def on_console(self, status) -> None:
-        """ALIGN asks for one press (not while one is under way)."""
-        if getattr(status, "name", status) == "ALIGN" and self._until is None and self.bit >= 0:
-            self._wanted = True
-
-    def buttons(self, t: float) -> int:
-        """The button bits at time ``t`` [s]: ``1 << bit`` while pressed, else 0."""
-        if self._wanted:
-            self._wanted, self._until = False, t + self.hold
-            self.count += 1
-        if self._until is not None:
-            if t < self._until:
-                return 1 << self.bit
-            self._until = None
-        return 0
-
 
 
 class AxisScript:
