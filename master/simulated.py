@@ -74,10 +74,10 @@ class AxisScript:
     index : current segment, -1 before the start. direction : +1 raising the watched tension, -1
     lowering it, 0 still. marker : the current (or last) segment's. finished, timeouts.
     events : list of dict, one per stop: ``segment`` (1-based), ``side`` (0 = a, 1 = b), ``target`` [N],
-    ``t_start``, ``t_end`` [s], ``T_in`` (the reading [N]) and ``T_seen`` (the reading carried on at its rate
-    for the hand's lag [N]) at the stop, ``reached`` (False: ``segment_timeout``), ``resumed`` (the reading
-    settled more than APPROACH_BAND short of the target during the dwell and the segment went on); each
-    is also logged.
+    ``t_start``, ``t_end`` [s] (the device's clock), ``T_in`` (the reading [N]) and ``T_seen`` (the reading
+    carried on at its rate for the hand's lag [N]) at the stop, ``reached`` (False: ``segment_timeout``),
+    ``resumed`` (the reading settled more than APPROACH_BAND short of the target during the dwell and the
+    segment went on); each is also logged.
     name : str, the axis's name in those log lines.
     """
 
@@ -172,7 +172,7 @@ class AxisScript:
         ev = {"segment": self.index + 1, "side": seg.side, "target": seg.target, "t_start": self._t_segment,
               "t_end": t, "T_in": T, "T_seen": T_seen, "reached": bool(reached), "resumed": False}
         self.events.append(ev)
-        log.info("operator %s: segment %d/%d (tendon %s to %g N) %s at t=%.3f s after %.3f s: T_in %.2f N, "
+        log.info("operator %s: segment %d/%d (tendon %s to %g N) %s at clock %.3f s after %.3f s: T_in %.2f N, "
                  "seen %.2f N", self.name, ev["segment"], len(self.segments), "ab"[seg.side], seg.target,
                  "reached" if reached else "timed out", t, t - self._t_segment, T, T_seen)
 
@@ -195,6 +195,7 @@ class AxisScript:
         seg = self.segments[index]
         self._T_last, self._rate = None, 0.0          # a segment starts after a pause: the rate is read anew
         self.index, self.marker, self._t_segment = index, seg.marker, t
+        self._stopped = 0
         self.direction = 1 if seg.target > T_in[seg.side] else -1
 
 
