@@ -80,8 +80,11 @@ def test_stale_estimate_on_left_arm_makes_it_safe_and_right_arm_keeps_tracking(t
                    "--inject", "drop=1,stream=estimate,arm=left,on=usr1"] + common, tmp_path / "slave.log")
     procs = [slave]
     try:
-        wait_for(lambda: (tmp_path / "slave.log").is_file() and "fault injection on left" in
-                 (tmp_path / "slave.log").read_text(), 45.0, "the slave's fault injector")
+        # the slave armed its fault injector and is past calibration and its estimators' set-up (their first
+        # compilation takes longer than the master's --max-duration on a cold numba cache)
+        wait_for(lambda: (tmp_path / "slave.log").is_file() and all(
+            line in (tmp_path / "slave.log").read_text() for line in ("fault injection on left", "STARTING -> SAFE")),
+            90.0, "the slave's fault injector and start-up")
         master = start(["master", "--connect", ep, "--protocol", "paper"] + common, tmp_path / "master.log")
         procs.append(master)
         wait_for(lambda: all(_tracking(run / i / "master.csv") for i in ("notes_left", "notes_right")), 45.0,
