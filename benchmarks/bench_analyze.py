@@ -3,7 +3,10 @@
 Generates the recording with :func:`study.scenarios.record` (not timed), writes it as a measured-data
 CSV, then runs ``teleop analyze FILE --json OUT --report DIR`` as a separate process pinned to one
 thread (OMP/MKL/OpenBLAS/NUMBA threads = 1) and prints the wall time, split into reading,
-diagnosis and report from the same steps run in-process. Prints figures, never fails on them.
+diagnosis and report from the same steps run in-process, and the machine's speed on a fixed reference (the plain
+memory kernel over 100000 samples, best of 5, before and after the runs), by which figures taken on different
+machines or days compare: a shared VM's speed varies from one to the next, and within a run. Prints figures,
+never fails on them.
 
     .venv/bin/python benchmarks/bench_analyze.py [--minutes 10] [--rate 1000] [--effect friction_offset]
 """
@@ -22,11 +25,31 @@ ONE_THREAD = {k: "1" for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_N
 os.environ.update(ONE_THREAD)           # before numpy loads: the in-process split runs on one thread too
 ROOT = Path(__file__).resolve().parents[1]
 
+import numpy as np  # noqa: E402 - after the thread settings
+
 from estimator.offline.diagnosis.selection import diagnose  # noqa: E402 - after the thread settings
+from estimator.offline.effects.kernels import run_extended  # noqa: E402 - after the thread settings
 from study.report import write_report  # noqa: E402 - after the thread settings
 from study.scenarios import record  # noqa: E402 - after the thread settings
 from teleop.recording.measured import write_measured_csv  # noqa: E402 - after the thread settings
 from teleop.recording.measured_csv import read_measured_csv  # noqa: E402 - after the thread settings
+
+
+def reference_ms(n: int = 100_000, nodes: int = 33, repeats: int = 5) -> float:
+    """The machine's speed: the plain memory kernel over ``n`` samples of a fixed triangle-wave pull on ``nodes``
+    nodes, best of ``repeats`` runs after a warm-up [ms]."""
+    t = np.arange(n) * 1e-3
+    T_in = 10.0 + 8.0 * (2.0 / np.pi) * np.arcsin(np.sin(2.0 * np.pi * 0.5 * t))
+    v = np.gradient(T_in, t) * 1e-4
+    u = np.linspace(0.0, 1.0, nodes)
+    w = np.full(nodes, 1.0 / (nodes - 1))
+    w[[0, -1]] *= 0.5
+    best = float("inf")
+    for _ in range(repeats + 1):
+        t0 = time.perf_counter()
+        run_extended(T_in, v, t, u, w, K=1.0)
+        best = min(best, time.perf_counter() - t0)
+    return 1e3 * best
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -35,6 +58,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--rate", type=float, default=1000.0)
     ap.add_argument("--effect", default="friction_offset")
     args = ap.parse_args([] if argv is None else argv)
+    ref_before = reference_ms()
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         rec = record(args.effect, seed=1, level=0.5, duration=60.0 * args.minutes, rate_hz=args.rate)
@@ -66,6 +90,8 @@ def main(argv: list[str] | None = None) -> None:
           f"(model choice at {res['settings']['selection_rate_hz']:.0f} Hz, refit and test at "
           f"{res['settings']['target_rate_hz']:.0f} Hz)")
     print(f"  in-process split: read {t1 - t0:.1f} s, diagnose {t2 - t1:.1f} s, report {t3 - t2:.1f} s")
+    print(f"  machine reference: the plain memory kernel, 100000 samples on 33 nodes: {ref_before:.1f} ms before, "
+          f"{reference_ms():.1f} ms after")
 
 
 if __name__ == "__main__":
