@@ -178,8 +178,8 @@ def _node_kernel(T_in, t, u, w, K, K_rate, T_p, r, T0, beta, Tc, xd, T_out, E1):
         _segment_slopes(T, bet, T_p, ds, kk, cc, m)
         dT0 = Tp - T[0]
         top = m - 1                     # the most distal segment whose status changed: the shot starts there
+        _distal_end(k, xd, use_xd, r, aT, bT, ad, bd, m)      # the shot's start: the passes leave node m as it is
         for _ in range(8):
-            _distal_end(k, xd, use_xd, r, aT, bT, ad, bd, m)
             _shoot(top, st, kk, cc, bet, F, ds, aT, bT, ad, bd)
             x = (dT0 - aT[0]) / bT[0] if bT[0] != 0.0 else 0.0
             top = _segment_status(x, T, F, st, kk, bet, aT, bT, ad, bd, m)
