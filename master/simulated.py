@@ -155,7 +155,7 @@ class AxisScript:
         """After a segment's dwell: whether the read-out ``T`` [N] settled more than APPROACH_BAND short of the
         target the operator stopped for (the anticipation misjudged a rate that collapsed, e.g. a capstan dead
         zone ending); if so the operator pulls on in the same segment, its timeout still counting."""
-        if self.index < 0 or not self._stopped:
+        if not self._stopped:           # 0 before the first segment, after a timeout and once a segment starts
             return False
         target = self.segments[self.index].target
         if self._stopped * (target - T) <= APPROACH_BAND:
