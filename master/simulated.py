@@ -8,8 +8,8 @@ tendon a, - pulls tendon b). The axis watches the T_in of the tendon named by it
 latest Estimate (what a surgeon sees on the endoscope and the tension read-out), moves its intended
 hand position at a set speed toward the target, stops when the read-out carried on at its rate for the
 hand's lag crosses the target, dwells briefly, and goes on to the next segment, or pulls on in the same
-one when the read-out settled more than ``APPROACH_BAND`` short of the target (a rate that collapsed
-at the end of a capstan dead zone, where the tension moves fast and the tip does not); all axes run
+one when the read-out never came within ``APPROACH_BAND`` of the target (a rate that collapsed at the
+end of a capstan dead zone, where the tension moves fast and the tip does not); all axes run
 together and the operator is finished when every axis is. The hand is not a position source: it is a
 human arm as haptics models it, a mass-damper-spring about the intended position holding a device
 with its own mass and friction, one per axis (:mod:`master.arm`; Hogan 1985, Tsuji et al. 1995)::
@@ -76,8 +76,8 @@ class AxisScript:
     events : list of dict, one per stop: ``segment`` (1-based), ``side`` (0 = a, 1 = b), ``target`` [N],
     ``t_start``, ``t_end`` [s] (the device's clock), ``T_in`` (the reading [N]) and ``T_seen`` (the reading
     carried on at its rate for the hand's lag [N]) at the stop, ``reached`` (False: ``segment_timeout``),
-    ``resumed`` (the reading settled more than APPROACH_BAND short of the target during the dwell and the
-    segment went on); each is also logged.
+    ``resumed`` (the reading never came within APPROACH_BAND of the target through the segment and its
+    dwell, and the segment went on); each is also logged.
     name : str, the axis's name in those log lines.
     """
 
@@ -100,6 +100,7 @@ class AxisScript:
         self._wait_until: float | None = None    # start delay / dwell end [s]
         self._t_segment = 0.0
         self._stopped = 0                        # direction of a segment stopped as reached, until its dwell ends
+        self._peak = 0.0                         # [N] the reading nearest the segment's target so far
         self.events: list[dict[str, Any]] = []
         self.name = "axis"
 
@@ -119,6 +120,8 @@ class AxisScript:
         side = self.segments[max(self.index, 0)].side
         self._read_rate(t, T_in[side])
         T = T_in[side]
+        if self.index >= 0 and self._stopped * (T - self._peak) > 0.0:
+            self._peak = T                       # the reading nearest the target since the stop's segment began
         if self.index < 0 or self._wait_until is not None:     # waiting to start, or dwelling after a segment
             if self._wait_until is None:
                 self._wait_until = t + self.start_delay
@@ -141,6 +144,7 @@ class AxisScript:
             self.timeouts += 0 if reached else 1
             self._ended(seg, t, T, T_seen, reached)
             self._stopped = self.direction if reached else 0
+            self._peak = max(T, self._peak) if self.direction > 0 else min(T, self._peak)
             self.direction = 0
             self._wait_until = t + self.dwell
             return
@@ -150,21 +154,24 @@ class AxisScript:
         sign = 1.0 if seg.side == 0 else -1.0
         self.velocity = sign * self.direction * self.speed * approach(abs(seg.target - T_seen))
         self.intended += self.velocity * dt
+        self._peak = max(T, self._peak) if self.direction > 0 else min(T, self._peak)
 
     def _short_of_target(self, T: float) -> bool:
-        """After a segment's dwell: whether the read-out ``T`` [N] settled more than APPROACH_BAND short of the
-        target the operator stopped for (the anticipation misjudged a rate that collapsed, e.g. a capstan dead
-        zone ending); if so the operator pulls on in the same segment, its timeout still counting."""
+        """After a segment's dwell: whether the read-out never came within APPROACH_BAND of the target the
+        operator stopped for, through the segment and its dwell (the anticipation misjudged a rate that
+        collapsed, e.g. a capstan dead zone ending); if so the operator pulls on in the same segment, its
+        timeout still counting. A reading that reached the band and then relaxed (friction that grows with
+        speed letting go at rest) is not pulled on again. ``T``: the reading now [N], for the log."""
         if not self._stopped:           # 0 before the first segment, after a timeout and once a segment starts
             return False
         target = self.segments[self.index].target
-        if self._stopped * (target - T) <= APPROACH_BAND:
+        if self._stopped * (target - self._peak) <= APPROACH_BAND:
             return False
         self.direction, self._stopped = self._stopped, 0
         self._T_last, self._rate = None, 0.0
         self.events[-1]["resumed"] = True
-        log.info("operator %s: segment %d/%d: T_in settled at %.2f N, short of %g N: pulling on", self.name,
-                 self.index + 1, len(self.segments), T, target)
+        log.info("operator %s: segment %d/%d: T_in came to %.2f N and settled at %.2f N, short of %g N: pulling on",
+                 self.name, self.index + 1, len(self.segments), self._peak, T, target)
         return True
 
     def _ended(self, seg: Segment, t: float, T: float, T_seen: float, reached: bool) -> None:
@@ -197,6 +204,7 @@ class AxisScript:
         self.index, self.marker, self._t_segment = index, seg.marker, t
         self._stopped = 0
         self.direction = 1 if seg.target > T_in[seg.side] else -1
+        self._peak = T_in[seg.side]
 
 
 def _per_axis(protocols) -> list[tuple[Segment, ...]]:

@@ -30,7 +30,10 @@ def test_slave_bridge_and_master_as_three_processes_complete_the_paper_protocol(
     assert all("Traceback" not in v for v in logs.values()), logs
     assert "bridge: simulated rig of itbridge" in logs["bridge"]             # the third process served the rig
     summary = json.loads((run_dir / "summary.json").read_text())
-    assert summary["problems"] == [] and summary["ok"] and proc.returncode == 0, (summary["problems"], proc.stdout)
+    failed = [name for name, ok in summary["checks"].items() if not ok]
+    operator = [line for line in logs["master"].splitlines() if "operator" in line]
+    assert summary["problems"] == [] and summary["ok"] and proc.returncode == 0, (
+        summary["problems"], failed, summary.get("experiments"), operator, proc.stdout[-2000:])
     head = (run_dir / "slave.csv").read_text(encoding="utf-8").split("\n", 12)
     assert any(line.startswith("# rig: zenoh") for line in head)
     p = summary["experiments"]["paper"]["profile_memory"]

@@ -35,11 +35,16 @@ def _config(tmp_path: Path) -> Path:
     return cfg
 
 
-def _demo(cfg: Path, run_dir: Path, *extra: str) -> tuple[str, dict]:
+def _demo(cfg: Path, run_dir: Path, *extra: str, checks: bool = True) -> tuple[str, dict]:
+    """Run the demo; it must complete without problems, and with ``checks`` pass every check of its own. The base
+    estimator facing the hidden effect it lacks is held only to completing: its accuracy against the demo's
+    bounds is what the hidden effect costs, and the comparison below measures it."""
     proc = subprocess.run([sys.executable, "-m", "live.cli", "demo", "--config", str(cfg), "--run-dir", str(run_dir),
                            "--timeout", "60", *extra], capture_output=True, text=True, timeout=150)
     summary = json.loads((run_dir / "summary.json").read_text())
-    assert summary["problems"] == [] and proc.returncode == 0, (summary["problems"], proc.stdout[-3000:])
+    failed = [name for name, ok in summary["checks"].items() if not ok]
+    assert summary["problems"] == [] and "Traceback" not in proc.stderr, (summary["problems"], proc.stderr[-3000:])
+    assert not (checks and failed) and proc.returncode == (1 if failed else 0), (failed, proc.stdout[-3000:])
     return proc.stdout, summary
 
 
@@ -54,7 +59,7 @@ def test_diagnose_names_the_effect_and_the_demo_with_its_model_beats_the_demo_wi
     model = tmp_path / "cal" / "itdiag.model.yaml"
     assert f"--model {model}" in proc.stdout
 
-    out_base, base = _demo(cfg, tmp_path / "base")
+    out_base, base = _demo(cfg, tmp_path / "base", checks=False)
     out_model, ext = _demo(cfg, tmp_path / "model", "--model", str(model))
     assert base["model"] is None and "model: none (the base estimator)" in out_base
     sha = hashlib.sha256(model.read_bytes()).hexdigest()

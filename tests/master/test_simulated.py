@@ -219,3 +219,19 @@ def test_a_pull_that_settles_within_the_approach_band_goes_on_to_the_next_segmen
     peak = _pull(op, lambda p: 500.0 * max(0.0, p), 0.0)
     assert op.index == 1 and [e["resumed"] for e in op.axes[0].events] == [False]
     assert peak == pytest.approx(20.0, abs=1.0)
+
+
+def test_a_pull_that_reached_the_band_and_relaxed_at_rest_is_not_pulled_on():
+    """Friction that grows with sliding speed (saturating at 2 mm/s) holds the read-out up while the hand moves
+    and lets it go at rest: it reaches 20 N, then settles about 2.5 N lower. The reading came within APPROACH_BAND of the target, so the
+    operator goes on to the next segment instead of pulling again."""
+    last = [0.0]
+
+    def viscous(p: float) -> float:
+        v, last[0] = (p - last[0]) / DT, p
+        return 500.0 * max(0.0, p) + 2.5 * min(1.0, max(0.0, v) / 2e-3)
+
+    op = ScriptedOperator((Segment(20.0, 1), Segment(5.0, 1)), speed=0.025, dwell=0.2, start_delay=0.0)
+    peak = _pull(op, viscous, 0.0)
+    assert op.index == 1 and [e["resumed"] for e in op.axes[0].events] == [False]
+    assert peak > 19.0 and viscous(last[0]) < 18.5               # reached the band, then settled below it
