@@ -1,8 +1,8 @@
 """Two causes at once: pairs of the strongest single candidates, where the model chosen so far leaves structure.
 
 A step of :func:`estimator.offline.diagnosis.selection.diagnose_recording` after the forward selection
-(:func:`estimator.offline.diagnosis.rules.select`): :func:`consider_pairs`, :func:`second_at_floor` and
-:func:`speed_beside_offset` (their docstrings give the rules; the
+(:func:`estimator.offline.diagnosis.rules.select`): :func:`consider_pairs`, :func:`offset_beside_physical`,
+:func:`second_at_floor` and :func:`speed_beside_offset` (their docstrings give the rules; the
 numbers are PENALTY, RANK_FACTOR, DOMINANT_SCORE and STRUCTURE_RATIO of :mod:`estimator.offline.diagnosis.thresholds`,
 and the run-time bound :data:`PAIR_POOL`).
 """
@@ -21,9 +21,10 @@ from estimator.offline.diagnosis.folds import Fit, unresolved
 from estimator.offline.diagnosis.readings import speed_or_lag
 from estimator.offline.diagnosis.rules import Context, shown_at_floor, worst
 from estimator.offline.effects.catalogue import CATALOGUE
-from estimator.offline.effects.types import ROUTE_KEYS
+from estimator.offline.effects.types import ROUTE, ROUTE_FORMS, ROUTE_KEYS
 
-__all__ = ["consider_pairs", "second_at_floor", "speed_beside_offset", "PAIR_POOL", "PAIR_REFINED"]
+__all__ = ["consider_pairs", "second_at_floor", "speed_beside_offset", "offset_beside_physical", "PAIR_POOL",
+           "PAIR_REFINED"]
 
 #: [count] the strongest single candidates (lowest S), and the strongest physical ones, whose pairs are fitted when
 #: the model so far leaves structure: a run-time bound (at most 15 pair fits), not tuned
@@ -85,12 +86,7 @@ def consider_pairs(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fit
         if {a, b} == set(chosen.ids) or (CATALOGUE[a].channel and CATALOGUE[b].channel):
             continue        # the model so far, or two sensor effects: a pair names a physical cause
         f = _pair_fit(ctx, base, singles, a, b)
-        if not f.complete and f.sole_fold is None:
-            continue        # stopped after one fold: it cannot be accepted
-        own = all(f.S / singles[e].S + th.PENALTY * (f.n_params - singles[e].n_params) < 1.0 for e in (a, b))
-        if (f.S + th.PENALTY * f.n_params < 1.0 and own and _rank(f) < best_rank
-                and not any(unresolved(f.effects, v, ctx.floor, dominant=f.S < th.DOMINANT_SCORE)
-                            for v in f.values)):
+        if _acceptable(ctx, f, singles, (a, b)) and _rank(f) < best_rank:
             best, best_rank = f, _rank(f)
     return best
 
@@ -170,3 +166,44 @@ def speed_beside_offset(ctx: Context, base: Fit, singles: dict[str, Fit], chosen
     if f.S < singles[first.id].S and not any(unresolved(f.effects, v, ctx.floor) for v in f.values):
         return f
     return chosen
+
+
+def _acceptable(ctx: Context, f: Fit, singles: dict[str, Fit], ids: tuple[str, str]) -> bool:
+    """The pair's price and resolution as :func:`consider_pairs` asks them: S + PENALTY x (its parameters) < 1, each
+    effect earning its own parameters against the other alone, neither fitted below what the recording resolves."""
+    if not f.complete and f.sole_fold is None:
+        return False        # stopped after one fold: it cannot be accepted
+    own = all(f.S / singles[e].S + th.PENALTY * (f.n_params - singles[e].n_params) < 1.0 for e in ids)
+    return (f.S + th.PENALTY * f.n_params < 1.0 and own
+            and not any(unresolved(f.effects, v, ctx.floor, dominant=f.S < th.DOMINANT_SCORE) for v in f.values))
+
+
+def offset_beside_physical(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fit) -> Fit:
+    """A load-cell offset beside the physical effect chosen first, fitted with the route free.
+
+    Symptom: the model kept so far is one physical effect (not a sensor effect) and leaves structure (above
+    STRUCTURE_RATIO on a signal, the base above it too). A constant offset on T_in or T_out changes the apparent
+    capstan ratio ln T_in - ln T_out by an amount that falls with the tension; the base's route bends to explain it
+    (the wrap pushed to one end of the sheath), and every single fit, the physical effect's among them, inherits the
+    bent route. Fitted beside the offset on that route, the physical effect still cannot bring the distal
+    elongation to the floor, and the pair's offset alone is too weak a single to enter the pairs' pool
+    (:func:`consider_pairs`). Remedy: the chosen effect beside each tension offset, the route free, from the chosen
+    values with the offset's single fit and from the same values on the uniform route (as a single's route refit,
+    :func:`estimator.offline.diagnosis.rules.refit_routes`). A pair is kept on the terms of :func:`consider_pairs`
+    (its price, each effect earning its parameters, resolved) when it ranks below the model so far (log S +
+    log(RANK_FACTOR) x parameters). Returns the pair or ``chosen``."""
+    if (not ctx.route or len(chosen.effects) != 1 or chosen.effects[0].channel
+            or worst(chosen, ctx.floor) <= th.STRUCTURE_RATIO or worst(base, ctx.floor) <= th.STRUCTURE_RATIO):
+        return chosen
+    first = chosen.effects[0].id
+    uniform = {p.name: p.neutral for p in (ROUTE_FORMS[ctx.route] if isinstance(ctx.route, str) else ROUTE)}
+    best, best_rank = chosen, _rank(chosen)
+    for offset in (eid for eid in _TENSION_OFFSETS if eid in singles):
+        fx = [chosen.effects[0], CATALOGUE[offset]]
+        v0 = {**singles[offset].values[0], **chosen.values[0]}
+        kept = {k: v for k, v in v0.items() if k in settings_keys(fx)}
+        f = Fit(fx, ctx.folds, [v0, {**v0, **uniform}], route=ctx.route, fixed=kept or None, base=base,
+                floor=ctx.floor, need=1.0 - th.PENALTY * sum(len(e.parameters) for e in fx), refined=PAIR_REFINED)
+        if _acceptable(ctx, f, {**singles, first: chosen}, (first, offset)) and _rank(f) < best_rank:
+            best, best_rank = f, _rank(f)
+    return best

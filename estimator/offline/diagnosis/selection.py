@@ -38,7 +38,12 @@ from estimator.offline.diagnosis.fit import SIGNALS, Progress, fit_model, prepar
 from estimator.data import noise_level
 from estimator.offline.diagnosis.folds import (FORM_NAME, UNITS, Fit, Folds, gain, parameters_table, route_of,
                                                structure)
-from estimator.offline.diagnosis.pairs import consider_pairs, second_at_floor, speed_beside_offset
+from estimator.offline.diagnosis.pairs import (
+    consider_pairs,
+    offset_beside_physical,
+    second_at_floor,
+    speed_beside_offset,
+)
 from estimator.offline.diagnosis.readings import (distal_at_end, distal_end_held, rest_offset, rest_reading,
                                                   sample_block, stick_slip_ratio)
 from estimator.offline.diagnosis.result import Candidate, Diagnosis, Model, RestOffset, StickSlip
@@ -166,7 +171,8 @@ def diagnose_recording(data: MeasuredData, *, train_fraction: float = 0.6, progr
     # 6. selection, then the model-free readings: stick-slip on the training block, the encoders at the initial rest
     chosen = select(ctx, base, singles, max_effects, used)
     if max_effects >= 2:
-        chosen = second_at_floor(ctx, base, singles, consider_pairs(ctx, base, singles, chosen))
+        chosen = offset_beside_physical(ctx, base, singles, consider_pairs(ctx, base, singles, chosen))
+        chosen = second_at_floor(ctx, base, singles, chosen)
         chosen = speed_beside_offset(ctx, base, singles, chosen, used.slice(0, blocks.n_train(used)))
     i_t = blocks.n_train(used)
     chatter = stick_slip_ratio(used.time[:i_t], used.x_in[:i_t], used.T_in[:i_t])
