@@ -11,9 +11,9 @@ hidden effect. Two simulators, reported apart:
   routes of arcs and straight runs, random distal loads, 200-2000 Hz, its own noise).
 
 Seed sets (``SEED_BASE``): ``dev`` (effects 100+, clean 500+, uncatalogued 900+), ``dev2`` ... ``dev54`` (the
-same offsets + 100000 each), ``final`` (offsets + 5400000), ``final2`` (offsets + 5700000) and ``final3`` (offsets
-+ 5800000). The ``dev`` sets are development data; ``final``, ``final2`` and ``final3`` were held out, each run
-once.
+same offsets + 100000 each), ``final`` (offsets + 5400000), ``final2`` (offsets + 5700000), ``final3`` (offsets
++ 5800000) and ``final4`` (offsets + 5900000). The ``dev`` sets are development data; ``final``, ``final2``,
+``final3`` and ``final4`` were held out, each run once.
 
 ``--family`` chooses what is hidden: ``catalogue`` (default: every catalogue effect, clean, uncatalogued), ``step``
 (the friction step, :data:`STEP_FAMILY`, beside its look-alike, a steady drift of K, and clean recordings: right is
@@ -31,7 +31,7 @@ Prints per effect and per channel: accuracy (strict, and up to the inseparable p
 estimator.offline.effects.catalogue.EQUIVALENT), gains, false alarms on clean data; never fails on the figures (the
 pass/fail checks are in tests/estimator/test_diagnosis*.py).
 
-    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|...|dev54|final|final3]
+    .venv/bin/python benchmarks/bench_diagnosis.py [--sim rig|lumped|both] [--set dev|...|dev54|final|...|final4]
         [--seeds 2]
         [--levels 0.2,0.8] [--clean 12] [--duration 90] [--rate 1000] [--jobs 2] [--json OUT] [--speed-only] [--twins]
         [--shared-rigs] [--family catalogue|step|compound]
@@ -69,10 +69,10 @@ from estimator.offline.diagnosis.thresholds import FLOOR_FACTOR, MID_SCORE, STRU
 from estimator.offline.effects.catalogue import CATALOGUE, EFFECT_IDS
 from estimator.offline.effects.types import NONE
 
-#: seed offset of each set: ``dev``, ``dev2`` ... ``dev54`` (development data), ``final``, ``final2``, ``final3`` (held
-#: out, each run once)
+#: seed offset of each set: ``dev``, ``dev2`` ... ``dev54`` (development data), ``final`` ... ``final4`` (held out,
+#: each run once)
 SEED_BASE = {"dev": 0, **{f"dev{k}": 100000 * (k - 1) for k in range(2, 55)}, "final": 5400000, "final2": 5700000,
-             "final3": 5800000}
+             "final3": 5800000, "final4": 5900000}
 #: the change-point family: the friction step and its look-alike, a steady drift of K
 STEP_FAMILY = ("friction_step", "curvature_drift")
 #: the compound family: two physical causes at once (ids joined by "+")
