@@ -198,6 +198,9 @@ def format_summary(result: Diagnosis | dict) -> str:
     lines = [f"cause: {r.cause}{more}{eq}", f"held-out gain on {r.primary_signal}: {r.gain:.2f}"]
     if r.stick_slip.named:
         lines.append(_stick_slip_line(r))
+    if r.settings.get("pair_rule"):
+        lines.append(f"two causes at once: named by the step {r.settings['pair_rule']} after the forward selection "
+                     "(docs/concepts/diagnosis.md)")
     rest = r.rest_offset
     if rest.named and rest.reads is not None:
         ch = rest.reads.split(":")[1]

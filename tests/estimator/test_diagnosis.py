@@ -131,6 +131,7 @@ def test_result_keys_units_and_json(clean_result):
                 "parameters", "equivalent", "fold_values", "fold_scores", "scored_on"} <= set(c)
         assert 1 <= len(c["fold_scores"]) <= 2 and c["score"] in c["fold_scores"]
     assert res["parameters"]["compliance"]["unit"] == "m/N"
+    assert res["settings"]["pair_rule"] is None          # one cause or none: no step of two causes named it
     assert res["candidates"]["sensor_lag:T_in"]["parameters"]["tau_T_in"]["unit"] == "s"
     again = json.loads(json.dumps(res))
     assert again["cause"] == res["cause"]

@@ -12,6 +12,7 @@ from estimator.offline.diagnosis.selection import diagnose
 from estimator.offline.effects.catalogue import effect, predict
 from estimator.offline.effects.types import Series
 from study import scenarios
+from study.report import format_summary
 from tests.estimator.effects_series import K, _pull, series
 
 
@@ -96,3 +97,5 @@ def test_an_offset_beside_the_physical_effect_chosen_first_is_fitted_with_the_ro
     assert set(d["causes"]) == {"velocity_friction", "sensor_offset:T_out"}
     assert d["parameters"]["b_T_out"]["value"] == pytest.approx(rec.truth["parameters"]["offset"], abs=0.05)
     assert d["parameters"]["c_v"]["value"] == pytest.approx(rec.truth["parameters"]["viscous"], rel=0.2)
+    assert d["settings"]["pair_rule"] == "offset_beside_physical"
+    assert "named by the step offset_beside_physical" in format_summary(d)

@@ -132,7 +132,8 @@ def diagnose(data: MeasuredData, *, train_fraction: float = 0.6, progress: bool 
         named nothing), x_in_m, x_out_m (|median| at the initial rest [m])}, ``model`` and
         ``base_model`` (refitted on the training block; enough to re-run both, see
         :func:`study.report.write_report`), ``settings`` (the arguments, the thresholds, ``selection_rate_hz`` the
-        averaging rate of steps 2-6: ``target_rate`` or, beyond SELECTION_SAMPLES, lower), ``elapsed_s``.
+        averaging rate of steps 2-6: ``target_rate`` or, beyond SELECTION_SAMPLES, lower; ``pair_rule`` the step of
+        two causes at once whose model the answer names, e.g. ``"offset_beside_physical"``, or None), ``elapsed_s``.
 
     Raises
     ------
@@ -170,14 +171,15 @@ def diagnose_recording(data: MeasuredData, *, train_fraction: float = 0.6, progr
     refit_routes(ctx, singles, base, alone)
     # 6. selection, then the model-free readings: stick-slip on the training block, the encoders at the initial rest
     chosen = select(ctx, base, singles, max_effects, used)
+    pair_rule = None
     if max_effects >= 2:
-        chosen = offset_beside_physical(ctx, base, singles, consider_pairs(ctx, base, singles, chosen))
-        chosen = second_at_floor(ctx, base, singles, chosen)
-        chosen = speed_beside_offset(ctx, base, singles, chosen, used.slice(0, blocks.n_train(used)))
+        chosen, pair_rule = _two_causes(ctx, base, singles, chosen, used.slice(0, blocks.n_train(used)))
+    paired = chosen
     i_t = blocks.n_train(used)
     chatter = stick_slip_ratio(used.time[:i_t], used.x_in[:i_t], used.T_in[:i_t])
     chosen, by_chatter, weak, overruled = stick_slip_rule(ctx, chosen, singles, chatter)
     chosen, by_rest = rest_rule(chosen, singles, off_zero := rest_offset(used))
+    pair_rule = pair_rule if chosen is paired else None
     # 7-8. the base and the chosen model refitted on the training block, the test block used once
     final_base, final = _refit(ctx, base, chosen, full.slice(int(np.searchsorted(full.time, blocks.t_split))))
     ids, equivalent, rename = report_channels(chosen, used)
@@ -189,12 +191,29 @@ def diagnose_recording(data: MeasuredData, *, train_fraction: float = 0.6, progr
                                     None if used.x_out is None else rest_reading(used, "x_out"))
     result.settings.update(_settings(ctx, train_fraction, n_nodes, target_rate, channels, final[0], held, at_end,
                                      wrap_shape))
+    result.settings["pair_rule"] = pair_rule
     result.elapsed_s = _time.perf_counter() - t_start
     if held is None and used.T_out is not None and UNKNOWN in causes:
         return _without_pressed_distal_end(result, used, t_start, dict(
             train_fraction=train_fraction, effects=effects, max_effects=max_effects, n_nodes=n_nodes,
             target_rate=target_rate, wrap_shape=wrap_shape, recorded=recorded))
     return result
+
+
+def _two_causes(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fit, train: MeasuredData
+                ) -> tuple[Fit, str | None]:
+    """The steps of two causes at once in turn (:mod:`estimator.offline.diagnosis.pairs`) on the model the forward
+    selection chose; ``train``: the training block's samples. Returns the model kept and the name of the last step
+    that changed it (None: none did)."""
+    rule = None
+    steps = (("consider_pairs", consider_pairs), ("offset_beside_physical", offset_beside_physical),
+             ("second_at_floor", second_at_floor))
+    for name, step in steps:
+        kept = step(ctx, base, singles, chosen)
+        if kept is not chosen:
+            chosen, rule = kept, name
+    kept = speed_beside_offset(ctx, base, singles, chosen, train)
+    return (chosen, rule) if kept is chosen else (kept, "speed_beside_offset")
 
 
 def _check_inputs(data: MeasuredData, effects: tuple[str, ...] | None, max_effects: int,
