@@ -182,6 +182,7 @@ def one(case: tuple) -> dict:
             "structure": max(res["structure"]["base"].values()),
             "structure_ext": max(res["structure"]["extended"].values()),
             "at_end": (res["settings"].get("distal_at_end") or {}).get("share"),
+            "pair_rule": res["settings"].get("pair_rule"),
             "footprint": fp, **extra,
             "detail": _detail(res)}
 

@@ -56,7 +56,8 @@ def family_right(r: dict) -> bool:
 
 def family_table(rows: list[dict], title: str) -> None:
     """Print the summary of one simulator's rows of the step or compound family: per hidden effect the share named
-    right (:func:`family_right`) with its 95 % interval and what was named; the instants' errors of the steps."""
+    right (:func:`family_right`) with its 95 % interval and what was named; the instants' errors of the steps; how
+    many answers each step of two causes at once decided."""
     print(f"\n## {title}\n")
     print("| hidden | n | right | 95 % interval | answers |")
     print("|---|---|---|---|---|")
@@ -72,6 +73,9 @@ def family_table(rows: list[dict], title: str) -> None:
     steps = [instant_error(r) for r in rows if r["effect"] == "friction_step" and r["cause"] == "friction_step"]
     if steps:
         print(f"\nfriction step named: instant error median {np.median(steps):.2f} s, largest {max(steps):.2f} s")
+    rules = Counter(r["pair_rule"] for r in rows if r.get("pair_rule"))
+    print("\nanswers decided by a step of two causes at once (settings.pair_rule): "
+          + (", ".join(f"{k} {v}" for k, v in rules.most_common()) or "none"))
 
 
 def _want(effect: str) -> set[str]:
