@@ -223,8 +223,8 @@ def test_a_pull_that_settles_within_the_approach_band_goes_on_to_the_next_segmen
 
 def test_a_pull_that_reached_the_band_and_relaxed_at_rest_is_not_pulled_on():
     """Friction that grows with sliding speed (saturating at 2 mm/s) holds the read-out up while the hand moves
-    and lets it go at rest: it reaches 20 N, then settles about 2.5 N lower. The reading came within APPROACH_BAND of the target, so the
-    operator goes on to the next segment instead of pulling again."""
+    and lets it go at rest: it reaches 20 N, then settles about 2.5 N lower. The reading came within APPROACH_BAND
+    of the target, so the operator goes on to the next segment instead of pulling again."""
     last = [0.0]
 
     def viscous(p: float) -> float:
