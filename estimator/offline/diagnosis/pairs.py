@@ -21,7 +21,7 @@ from estimator.offline.diagnosis.folds import Fit, unresolved
 from estimator.offline.diagnosis.readings import speed_or_lag
 from estimator.offline.diagnosis.rules import Context, shown_at_floor, worst
 from estimator.offline.effects.catalogue import CATALOGUE
-from estimator.offline.effects.types import ROUTE, ROUTE_FORMS, ROUTE_KEYS
+from estimator.offline.effects.types import ROUTE_KEYS, uniform_route
 
 __all__ = ["consider_pairs", "second_at_floor", "speed_beside_offset", "offset_beside_physical", "PAIR_POOL",
            "PAIR_REFINED"]
@@ -195,8 +195,7 @@ def offset_beside_physical(ctx: Context, base: Fit, singles: dict[str, Fit], cho
     if (not ctx.route or len(chosen.effects) != 1 or chosen.effects[0].channel
             or worst(chosen, ctx.floor) <= th.STRUCTURE_RATIO or worst(base, ctx.floor) <= th.STRUCTURE_RATIO):
         return chosen
-    first = chosen.effects[0].id
-    uniform = {p.name: p.neutral for p in (ROUTE_FORMS[ctx.route] if isinstance(ctx.route, str) else ROUTE)}
+    uniform, alone = uniform_route(ctx.route), {**singles, chosen.effects[0].id: chosen}
     best, best_rank = chosen, _rank(chosen)
     for offset in (eid for eid in _TENSION_OFFSETS if eid in singles):
         fx = [chosen.effects[0], CATALOGUE[offset]]
@@ -204,6 +203,6 @@ def offset_beside_physical(ctx: Context, base: Fit, singles: dict[str, Fit], cho
         kept = {k: v for k, v in v0.items() if k in settings_keys(fx)}
         f = Fit(fx, ctx.folds, [v0, {**v0, **uniform}], route=ctx.route, fixed=kept or None, base=base,
                 floor=ctx.floor, need=1.0 - th.PENALTY * sum(len(e.parameters) for e in fx), refined=PAIR_REFINED)
-        if _acceptable(ctx, f, {**singles, first: chosen}, (first, offset)) and _rank(f) < best_rank:
+        if _acceptable(ctx, f, alone, (chosen.effects[0].id, offset)) and _rank(f) < best_rank:
             best, best_rank = f, _rank(f)
     return best

@@ -25,7 +25,7 @@ from estimator.offline.diagnosis.readings import (
     toe_or_play,
 )
 from estimator.offline.effects.catalogue import CATALOGUE, EQUIVALENT, Effect
-from estimator.offline.effects.types import ROUTE, ROUTE_FORMS, ROUTE_KEYS, UNKNOWN, Series, finer_route
+from estimator.offline.effects.types import ROUTE_FORMS, ROUTE_KEYS, UNKNOWN, Series, finer_route, uniform_route
 
 __all__ = ["Context", "noise_floors", "candidate_effects", "refine_route", "fit_candidates", "refit_routes",
            "select", "shown_at_floor", "stick_slip_rule", "rest_rule", "report_channels", "verdict",
@@ -131,7 +131,7 @@ def _refit_route_free(ctx: Context, eid: str, singles: dict[str, Fit], base: Fit
     route, bent by what it lacks, can sit in a corner) and from the uniform route with a parameter read at the
     initial rest (Parameter.rest); kept when it scores better."""
     fitted = singles[eid].values[0]
-    uniform = {p.name: p.neutral for p in (ROUTE_FORMS[ctx.route] if isinstance(ctx.route, str) else ROUTE)}
+    uniform = uniform_route(ctx.route)
     at_rest = rest_window(ctx.s)
     read = {p.name: max(r, 0.1) if p.rest == "replace" else r for p in CATALOGUE[eid].parameters
             if p.rest and math.isfinite(r := rest_start(p.name, ctx.s, at_rest))}

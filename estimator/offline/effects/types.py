@@ -8,7 +8,7 @@ from typing import Literal
 import numpy as np
 
 __all__ = ["Parameter", "Series", "Prediction", "NONE", "UNKNOWN", "K_MAX", "route_shape", "ROUTE", "ROUTE_FINE",
-           "ROUTE_TWELFTHS", "ROUTE_KEYS", "ROUTE_FORMS", "route_values", "finer_route"]
+           "ROUTE_TWELFTHS", "ROUTE_KEYS", "ROUTE_FORMS", "route_values", "finer_route", "uniform_route"]
 
 NONE = "none"          # the base model explains the data within the noise
 UNKNOWN = "unknown"    # structure left in the residual that no extension explains
@@ -147,3 +147,9 @@ def finer_route(values: dict, form: tuple = ROUTE_FINE) -> dict[str, float]:
     q, left = np.diff(u), 1.0 - u[:-1]
     return {p.name: float(min(max(q[k] / left[k], 0.0), 1.0)) if left[k] > 1e-12 else 0.5
             for k, p in enumerate(form)}
+
+
+def uniform_route(form: bool | str) -> dict[str, float]:
+    """The shares of a route ``form`` (True: the thirds, :data:`ROUTE`; or a name of :data:`ROUTE_FORMS`) at their
+    neutral values: the wrap spread evenly along the sheath."""
+    return {p.name: p.neutral for p in (ROUTE_FORMS[form] if isinstance(form, str) else ROUTE)}
