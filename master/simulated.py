@@ -99,7 +99,8 @@ class AxisScript:
         self._rate = 0.0                         # smoothed dT_in/dt of the watched tendon [N/s]
         self._wait_until: float | None = None    # start delay / dwell end [s]
         self._t_segment = 0.0
-        self._stopped = 0                        # direction of a segment stopped as reached, until its dwell ends
+        self._sense = 0                          # the current segment's direction: +1 raising its tension, -1 lowering
+        self._reached = False                    # the segment stopped as reached, until its dwell ends
         self._peak = 0.0                         # [N] the reading nearest the segment's target so far
         self.events: list[dict[str, Any]] = []
         self.name = "axis"
@@ -120,8 +121,8 @@ class AxisScript:
         side = self.segments[max(self.index, 0)].side
         self._read_rate(t, T_in[side])
         T = T_in[side]
-        if self.index >= 0 and self._stopped * (T - self._peak) > 0.0:
-            self._peak = T                       # the reading nearest the target since the stop's segment began
+        if self.index >= 0 and self._sense * (T - self._peak) > 0.0:
+            self._peak = T
         if self.index < 0 or self._wait_until is not None:     # waiting to start, or dwelling after a segment
             if self._wait_until is None:
                 self._wait_until = t + self.start_delay
@@ -143,8 +144,7 @@ class AxisScript:
         if reached or t - self._t_segment > self.segment_timeout:
             self.timeouts += 0 if reached else 1
             self._ended(seg, t, T, T_seen, reached)
-            self._stopped = self.direction if reached else 0
-            self._peak = max(T, self._peak) if self.direction > 0 else min(T, self._peak)
+            self._reached = reached
             self.direction = 0
             self._wait_until = t + self.dwell
             return
@@ -154,7 +154,6 @@ class AxisScript:
         sign = 1.0 if seg.side == 0 else -1.0
         self.velocity = sign * self.direction * self.speed * approach(abs(seg.target - T_seen))
         self.intended += self.velocity * dt
-        self._peak = max(T, self._peak) if self.direction > 0 else min(T, self._peak)
 
     def _short_of_target(self, T: float) -> bool:
         """After a segment's dwell: whether the read-out never came within APPROACH_BAND of the target the
@@ -162,12 +161,12 @@ class AxisScript:
         collapsed, e.g. a capstan dead zone ending); if so the operator pulls on in the same segment, its
         timeout still counting. A reading that reached the band and then relaxed (friction that grows with
         speed letting go at rest) is not pulled on again. ``T``: the reading now [N], for the log."""
-        if not self._stopped:           # 0 before the first segment, after a timeout and once a segment starts
+        if not self._reached:           # before the first segment, after a timeout and once a segment starts
             return False
         target = self.segments[self.index].target
-        if self._stopped * (target - self._peak) <= APPROACH_BAND:
+        if self._sense * (target - self._peak) <= APPROACH_BAND:
             return False
-        self.direction, self._stopped = self._stopped, 0
+        self.direction, self._reached = self._sense, False
         self._T_last, self._rate = None, 0.0
         self.events[-1]["resumed"] = True
         log.info("operator %s: segment %d/%d: T_in came to %.2f N and settled at %.2f N, short of %g N: pulling on",
@@ -202,8 +201,8 @@ class AxisScript:
         seg = self.segments[index]
         self._T_last, self._rate = None, 0.0          # a segment starts after a pause: the rate is read anew
         self.index, self.marker, self._t_segment = index, seg.marker, t
-        self._stopped = 0
-        self.direction = 1 if seg.target > T_in[seg.side] else -1
+        self._reached = False
+        self.direction = self._sense = 1 if seg.target > T_in[seg.side] else -1
         self._peak = T_in[seg.side]
 
 
