@@ -29,6 +29,7 @@ import numpy as np  # noqa: E402 - after the thread settings
 
 from estimator.offline.diagnosis.selection import diagnose  # noqa: E402 - after the thread settings
 from estimator.offline.effects.kernels import run_extended  # noqa: E402 - after the thread settings
+from estimator.sheath import SheathModel  # noqa: E402 - after the thread settings
 from study.report import write_report  # noqa: E402 - after the thread settings
 from study.scenarios import record  # noqa: E402 - after the thread settings
 from teleop.recording.measured import write_measured_csv  # noqa: E402 - after the thread settings
@@ -41,9 +42,7 @@ def reference_ms(n: int = 100_000, nodes: int = 33, repeats: int = 5) -> float:
     t = np.arange(n) * 1e-3
     T_in = 10.0 + 8.0 * (2.0 / np.pi) * np.arcsin(np.sin(2.0 * np.pi * 0.5 * t))
     v = np.gradient(T_in, t) * 1e-4
-    u = np.linspace(0.0, 1.0, nodes)
-    w = np.full(nodes, 1.0 / (nodes - 1))
-    w[[0, -1]] *= 0.5
+    u, w = SheathModel(K=1.0, compliance=1.0).nodes(nodes - 1)       # a uniform wrap: the trapezoid rule
     best = float("inf")
     for _ in range(repeats + 1):
         t0 = time.perf_counter()
