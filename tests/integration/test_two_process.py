@@ -64,6 +64,7 @@ def test_demo_runs_both_processes_and_writes_the_summary(tmp_path):
     data = read_measured_csv(run_dir / "slave.csv")
     assert set(np.unique(data.extra["marker"])) == {0.0, 1.0}
     assert "round trip" in proc.stdout and str(run_dir / "slave.rrd") in proc.stdout
+    assert summary["model"] is None and "model: none (the base estimator)" in proc.stdout     # no --model given
 
 
 def test_killing_the_master_makes_the_slave_go_safe(tmp_path):
