@@ -23,17 +23,20 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+from yaml.composer import Composer
+from yaml.constructor import SafeConstructor
 from yaml.error import Mark, MarkedYAMLError
 from yaml.events import AliasEvent, CollectionStartEvent
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
+from yaml.resolver import Resolver
 
 from teleop.errors import ConfigError
 from teleop.recording.text_files import text_problem
 
 __all__ = ["MAX_BYTES", "MAX_DEPTH", "MAX_ALIASES", "MAX_NODES", "MAX_INT_DIGITS", "read_yaml"]
 
-#: [B] largest config file read (256 KiB: 15 times the fully commented configs/default.yaml; pure-Python
-#: PyYAML scans 256 KiB of the costliest text in about 0.25 s)
+#: [B] largest config file read (256 KiB: 12 times the fully commented configs/default.yaml; libyaml scans 256 KiB
+#: of the costliest text in about 0.01 s of a 2-core VM's processor, the pure-Python fallback in about 0.7 s)
 MAX_BYTES = 256 * 1024
 #: deepest nesting of lists and mappings (the shipped configs nest at most 10 deep)
 MAX_DEPTH = 64
@@ -41,8 +44,11 @@ MAX_DEPTH = 64
 MAX_ALIASES = 100
 #: most values (scalars, lists, mappings, keys included) in one file with its aliases expanded: the largest
 #: shipped config (notes-bimanual.yaml) holds 736, a bimanual file of two 16-joint arms spelled out about
-#: 3,500; reading 10,000 takes about 0.25 s
+#: 3,500; composing 10,000 (in Python, the limits kept as it goes) takes about 0.1 s
 MAX_NODES = 10_000
+#: libyaml's refusal of a flow collection nested past its own limit (1000 levels): a ``[[[...`` deeper than that
+#: reaches it while the scanner looks ahead for a key, before the composer counts :data:`MAX_DEPTH`
+_LIBYAML_DEPTH = "exceeded maximum nesting depth"
 #: most digits of an integer (a 64-bit seed has 20; every other integer setting is far smaller)
 MAX_INT_DIGITS = 64
 
@@ -64,7 +70,28 @@ def _dotted(parts: list[str]) -> str:
     return out if len(parts) <= 6 else f"{out}...({len(parts)} levels)"
 
 
-class _Loader(yaml.SafeLoader):
+if yaml.__with_libyaml__:
+    from yaml.cyaml import CParser
+
+    class _Events(CParser, Composer, SafeConstructor, Resolver):
+        """libyaml's scanner and parser (C, about 10 times the pure-Python ones' speed) under PyYAML's composer and
+        safe constructor (Python): the parser hands out one event at a time, and :class:`_Loader` keeps the limits
+        as it composes them."""
+
+        check_node = Composer.check_node
+        get_node = Composer.get_node
+        get_single_node = Composer.get_single_node
+
+        def __init__(self, stream: str):
+            CParser.__init__(self, stream)
+            Composer.__init__(self)
+            SafeConstructor.__init__(self)
+            Resolver.__init__(self)
+else:                           # a PyYAML built without libyaml: every stage in Python, the same limits
+    _Events = yaml.SafeLoader   # type: ignore[misc,assignment]
+
+
+class _Loader(_Events):
     """A SafeLoader with the YAML 1.2 core scalars (module docstring) that keeps the limits as it composes."""
 
     def __init__(self, stream: str):
@@ -272,6 +299,9 @@ def read_yaml(path: Path, *, hex_integers: bool = False) -> tuple[Any, dict[str,
         mark = getattr(e, "problem_mark", None) or getattr(e, "context_mark", None)
         where = f"{source}:{mark.line + 1}:{mark.column + 1}" if mark else source
         problem = getattr(e, "problem", None) or str(e)
+        if problem == _LIBYAML_DEPTH:    # libyaml's scanner met its own limit while it looked ahead for a key
+            raise ConfigError(f"{where}: nested deeper than {MAX_DEPTH} levels; a config nests at most "
+                              f"{MAX_DEPTH}") from None
         raise ConfigError(f"{where}: YAML syntax error: {problem}") from None
     except (ValueError, TypeError, OverflowError, RecursionError) as e:   # a constructor's, outside any node
         raise ConfigError(f"{source}: cannot read config file ({type(e).__name__}: {e})") from None
