@@ -94,9 +94,8 @@ def test_a_ros2_node_reads_the_crtk_topics_of_slave_and_master(tmp_path):
 
         wait_for(engaged, 45, "the slave's operating_state ENABLED and busy (engaged)")
         wait_for(lambda: len(peer.messages("/itros/measured_cf")) > 100, 20, "100 measured_cf while engaged")
-        # the graph a `ros2 topic list` reads: both nodes, their publishers, the slave's servo_jp subscription. The
-        # master's tokens come over the peer's own link to the master, which it makes once the master listens (a
-        # connect retry, later on a loaded machine)
+        # the graph a `ros2 topic list` reads (GRAPH), waited for: the master's tokens come over the peer's own link to
+        # the master, which it makes once the master listens (a connect retry, later on a loaded machine)
         def graph() -> bool:
             tokens = peer.tokens()
             return all(any(k in t for t in tokens) for k in GRAPH)
