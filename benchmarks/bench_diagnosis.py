@@ -12,8 +12,9 @@ hidden effect. Two simulators, reported apart:
 
 Seed sets (``SEED_BASE``): ``dev`` (effects 100+, clean 500+, uncatalogued 900+), ``dev2`` ... ``dev54`` (the
 same offsets + 100000 each), ``final`` (offsets + 5400000), ``final2`` (offsets + 5700000), ``final3`` (offsets
-+ 5800000) and ``final4`` (offsets + 5900000). The ``dev`` sets are development data; ``final``, ``final2``,
-``final3`` and ``final4`` were held out, each run once.
++ 5800000) and ``final4`` (offsets + 5900000). The ``dev`` sets are development data: the rules are chosen on them.
+``final`` ... ``final4`` are held-out sets: fixed in advance, diagnosed once by the frozen rules, never tuned on (the
+step and compound families of ``final2`` and ``final3`` are development data, docs/results/diagnosis.md).
 
 ``--family`` chooses what is hidden: ``catalogue`` (default: every catalogue effect, clean, uncatalogued), ``step``
 (the friction step, :data:`STEP_FAMILY`, beside its look-alike, a steady drift of K, and clean recordings: right is
@@ -69,8 +70,8 @@ from estimator.offline.diagnosis.thresholds import FLOOR_FACTOR, MID_SCORE, STRU
 from estimator.offline.effects.catalogue import CATALOGUE, EFFECT_IDS
 from estimator.offline.effects.types import NONE
 
-#: seed offset of each set: ``dev``, ``dev2`` ... ``dev54`` (development data), ``final`` ... ``final4`` (held out,
-#: each run once)
+#: seed offset of each set: ``dev``, ``dev2`` ... ``dev54`` (development data), ``final`` ... ``final4`` (held out:
+#: diagnosed once by the frozen rules, never tuned on)
 SEED_BASE = {"dev": 0, **{f"dev{k}": 100000 * (k - 1) for k in range(2, 55)}, "final": 5400000, "final2": 5700000,
              "final3": 5800000, "final4": 5900000}
 #: the change-point family: the friction step and its look-alike, a steady drift of K

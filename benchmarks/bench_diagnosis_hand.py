@@ -8,8 +8,8 @@ Families, each scored per simulator (``study/scenarios.py`` the rig, ``study/lum
 * ``tissue``, ``contact``: clean recordings on nonlinear (stiffening) tissue and on free space then contact, under
   the protocol and under hand motion (answer ``none``).
 
-Seed sets (``SEED_BASE``): ``hdev``, ``hdev2``, ``hdev3``, ``hfinal`` and ``hfinal2`` (each of the last two held out
-and run once) are development data; ``hfinal3`` is held out. Effect k
+Seed sets (``SEED_BASE``): ``hdev``, ``hdev2``, ``hdev3``, ``hfinal`` and ``hfinal2`` are development data (the
+rules are chosen on them); ``hfinal3`` is held out (diagnosed once by the frozen rules, never tuned on). Effect k
 of :data:`HAND_EFFECTS`, level j, repeat s uses base + 1000 k + 10 j + s; clean recordings base + 500 + s (hand),
 base + 600 + s (tissue), base + 700 + s (contact).
 
