@@ -105,6 +105,28 @@ def _write_slide(Y, Yp, g, a):  # pragma: no cover - compiled
         Y[i] = y if y >= a else a
 
 
+#: [count] rows of the bound tables of a friction that steps (:func:`_bound_row`): each K level's kinetic bound both
+#: ways and its static bound
+N_ROWS = 8
+
+
+@njit(cache=True, nogil=True)
+def _bound_row(c, u, keys, rows):  # pragma: no cover - compiled
+    """The row of ``rows`` (N_ROWS, m1) that holds e^{c u_i} for the exponent coefficient ``c`` [-], computed as the
+    untabulated bound is (the same bits): the bounds of a friction that steps, whose K takes two values. A new ``c``
+    replaces the oldest row. ``keys`` (N_ROWS + 1,): each row's c (NaN: none), then the next row to replace."""
+    n = rows.shape[0]
+    for j in range(n):
+        if keys[j] == c:
+            return j
+    j = int(keys[n])
+    keys[n] = float((j + 1) % n)
+    keys[j] = c
+    for i in range(rows.shape[1]):
+        rows[j, i] = math.exp(c * u[i])
+    return j
+
+
 @njit(cache=True, nogil=True)
 def _stribeck_bound(Y, Yp, a, u, w, Kk, r_s, v_st, vp, dY, G, g_kin, varying):  # pragma: no cover - compiled
     """Cumulative friction exponent G_i of a stuck tendon whose nodes near the proximal end slip (Stribeck form);
@@ -173,6 +195,14 @@ def run_span(T_in, v, spd, t, slide, i0, i1, u, w, par, Y, st, tab, dY, G, T_out
     varying = K_rate != 0.0 or c_v != 0.0 or K_step != 0.0
     stiction = r_s > 0.0
     stribeck = stiction and v_st > 0.0    # the Stribeck form: static-kinetic by each node's own speed
+    # a friction that only steps has two levels of K: its bounds are tabulated as they are first met (over a span of
+    # more than a sample; the per-cycle form's one-sample spans compute them)
+    tabled = varying and K_rate == 0.0 and c_v == 0.0 and i1 - i0 > 1
+    none = np.empty(0)          # no table: the bound is computed
+    keys = np.empty(N_ROWS + 1 if tabled else 0)
+    rows = np.empty((N_ROWS if tabled else 0, m1))
+    for j in range(keys.shape[0]):
+        keys[j] = math.nan if j < N_ROWS else 0.0
     seen = slide.shape[0] > 0
     # a slide at the tabulated kinetic bound without stiffening: the profile is Y_p times the bound, so E is Y_p times
     # the bounds' weighted sum (no node loop; the sums taken at the span's first such slide, so that a span without
@@ -255,12 +285,15 @@ def run_span(T_in, v, spd, t, slide, i0, i1, u, w, par, Y, st, tab, dY, G, T_out
             lazy = 0
         if sliding != 0:
             E = 0.0
-            fixed = not varying and not stribeck and t_b == -math.inf      # the kinetic bound: tabulated
+            c = -f * sliding
+            if not varying and not stribeck and t_b == -math.inf:      # the kinetic bound: tabulated
+                gt = g_kin if sliding > 0 else g_kin_inv
+            elif tabled and f == Kk:
+                gt = rows[_bound_row(c, u, keys, rows)]
+            else:
+                gt = none
             for i in range(m1):
-                if fixed:
-                    y = Yp * (g_kin[i] if sliding > 0 else g_kin_inv[i])
-                else:
-                    y = Yp * math.exp(-f * sliding * u[i])
+                y = Yp * (gt[i] if gt.shape[0] > 0 else math.exp(c * u[i]))
                 if y < a:
                     y = a
                 Y[i] = y
@@ -269,15 +302,18 @@ def run_span(T_in, v, spd, t, slide, i0, i1, u, w, par, Y, st, tab, dY, G, T_out
             bound = Kk * (1.0 + r_s) if stuck else Kk
             if stribeck:
                 _stribeck_bound(Y, Yp, a, u, w, Kk, r_s, v_st, abs(v[k]), dY, G, g_kin, varying)
+                gt = none
+            elif varying:
+                gt = rows[_bound_row(-bound, u, keys, rows)] if tabled else none
+            else:
+                gt = g_sta if stuck else g_kin
             for i in range(m1):
                 if stribeck:
                     g = math.exp(-G[i])
-                elif varying:
-                    g = math.exp(-bound * u[i])
-                elif stuck:
-                    g = g_sta[i]
+                elif gt.shape[0] > 0:
+                    g = gt[i]
                 else:
-                    g = g_kin[i]
+                    g = math.exp(-bound * u[i])
                 y = Y[i]
                 lo = (Yp - band) * g
                 hi = (Yp + band) / g
