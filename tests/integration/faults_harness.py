@@ -2,8 +2,8 @@
 
 ``instrument="tendon"`` runs the single tendon of the default config, ``"3dof"`` the three-joint
 instrument of configs/instrument-3dof.yaml and ``"spindle"`` the spindle-driven jaw of
-configs/instrument-spindle.yaml (each calibrated once with ``teleop calibrate``, the file copied under
-each scenario's instrument id; the slave records ``slave_joints.csv``).
+configs/instrument-spindle.yaml (the slave of these two records ``slave_joints.csv``). Each instrument is
+calibrated once with ``teleop calibrate`` and the file copied under each scenario's instrument id.
 
 :func:`run_fault` starts both sides on a free port, waits until both are ENGAGED (seen from their
 heartbeats by an observer session), lets them run, applies the fault (a signal to one process or
@@ -55,7 +55,8 @@ CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 #: joint instrument -> (its config, its instrument id there)
 JOINT_CONFIGS = {"3dof": (CONFIGS / "instrument-3dof.yaml", "flex3"),
                  "spindle": (CONFIGS / "instrument-spindle.yaml", "forceps1")}
-_JOINT_CAL: dict[str, str] = {}          # the calibration text of each joint instrument, made once
+_CALIBRATION: dict[str, str] = {}        # the calibration text of each instrument, made once
+_CAL_ID = "fcalibrated"                  # the instrument id it is made under
 
 
 class Rows:
@@ -72,25 +73,32 @@ class Rows:
             raise ValueError(f"{path}: non-finite values or time going back")
 
 
-def _joint_config(run_dir: Path, ident: str, instrument: str) -> Path:
-    """The joint instrument ``instrument`` under ``ident``, quiet, with its calibration file in ``run_dir``."""
-    config, base_id = JOINT_CONFIGS[instrument]
-    text = config.read_text()
-    cal_dir = run_dir / "calibration"
-    if instrument not in _JOINT_CAL:
+def _calibrated(run_dir: Path, ident: str, instrument: str, text: str) -> Path:
+    """The calibration folder of the run in ``run_dir``, holding ``instrument``'s calibration under ``ident``: the
+    instrument (its config ``text``, its id replaced) is calibrated once with ``teleop calibrate`` and the file copied
+    (a slave that finds it starts without the power-up calibration, which the demo tests run)."""
+    if instrument not in _CALIBRATION:
         tmp = run_dir.parent / f"_{instrument}_calibration"
         tmp.mkdir(exist_ok=True)
         cfg = tmp / "cfg.yaml"
-        cfg.write_text(text.replace(f"id: {base_id}", "id: fjoints").replace("rerun: save", "rerun: off")
-                       .replace("\ncalibration:\n", f"\ncalibration:\n  dir: {tmp}\n"))
+        cfg.write_text(text.replace("\ncalibration:\n", f"\ncalibration:\n  dir: {tmp}\n"), encoding="utf-8")
         assert teleop_main(["calibrate", "--config", str(cfg)]) == 0
-        _JOINT_CAL[instrument] = (tmp / "fjoints.yaml").read_text()
+        _CALIBRATION[instrument] = (tmp / f"{_CAL_ID}.yaml").read_text()
+    cal_dir = run_dir / "calibration"
     cal_dir.mkdir()
-    cal = _JOINT_CAL[instrument].replace("instrument: fjoints", f"instrument: {ident}")
+    cal = _CALIBRATION[instrument].replace(f"instrument: {_CAL_ID}", f"instrument: {ident}")
     (cal_dir / f"{ident}.yaml").write_text(cal)
+    return cal_dir
+
+
+def _joint_config(run_dir: Path, ident: str, instrument: str) -> Path:
+    """The joint instrument ``instrument`` under ``ident``, quiet, with its calibration file in ``run_dir``."""
+    config, base_id = JOINT_CONFIGS[instrument]
+    text = config.read_text().replace("rerun: save", "rerun: off")
+    cal_dir = _calibrated(run_dir, ident, instrument, text.replace(f"id: {base_id}", f"id: {_CAL_ID}"))
     path = run_dir / "cfg.yaml"
     path.write_text(text.replace(f"id: {base_id}", f"id: {ident}")
-                    .replace("rerun: save", "rerun: off\n  csv_every: 1")     # every cycle: the fault timing reads rows
+                    .replace("rerun: off", "rerun: off\n  csv_every: 1")     # every cycle: the fault timing reads rows
                     .replace("\ncalibration:\n", f"\ncalibration:\n  dir: {cal_dir}\n"), encoding="utf-8")
     return path
 
@@ -178,8 +186,10 @@ def _run_config(run_dir: Path, ident: str, instrument: str) -> Path:
     """The run's config in ``run_dir``: the joint instrument's (:func:`_joint_config`) or the default tendon's."""
     if instrument in JOINT_CONFIGS:
         return _joint_config(run_dir, ident, instrument)
+    cal_dir = _calibrated(run_dir, ident, instrument, CONFIG.format(ident=_CAL_ID, caldir="").replace(
+        '  dir: ""\n', ""))
     path = run_dir / "cfg.yaml"
-    path.write_text(CONFIG.format(ident=ident, caldir=run_dir / "calibration"), encoding="utf-8")
+    path.write_text(CONFIG.format(ident=ident, caldir=cal_dir), encoding="utf-8")
     return path
 
 
