@@ -1,6 +1,6 @@
 # `make demo` and `make test` create .venv on first use (and again when pyproject.toml changes).
-# `make test`: ruff (lint + import order), mypy, the documentation site (mkdocs --strict, into the ignored site/),
-# then pytest (the CPU-bound tests, the pinned diagnosis answers again on a generic CPU target, the integration tests).
+# `make test`: ruff (lint + import order); at once pytest on the CPU-bound tests, mypy, the documentation site (mkdocs
+# --strict, into the ignored site/) and the pinned diagnosis answers on a generic CPU target; then the integration tests.
 PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
@@ -9,7 +9,7 @@ STAMP := $(VENV)/.installed
 NUMBA_SOURCES := $(shell grep -rl --include='*.py' njit estimator recorded slave master teleop live study benchmarks 2>/dev/null)
 NUMBA_STAMP := .numba-sources
 
-.PHONY: demo test bench clean
+.PHONY: demo test test-cpu test-types test-docs test-generic bench clean
 
 $(STAMP): pyproject.toml
 	test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
@@ -28,16 +28,28 @@ demo: $(STAMP) $(NUMBA_STAMP)
 # its own cache): the answers hold whatever vector width the machine has.
 PINNED := tests/estimator/test_diagnosis_pinned.py
 
-# pytest runs the CPU-bound tests on both cores (pytest-xdist; a worker that runs out of
-# tests takes queued ones from the other, so one long file does not hold the pass), then the integration tests (real
-# processes with 1 kHz loops over Zenoh) one at a time, alone on the machine, because their timing figures are what they check.
+# `make test` runs ruff, then at once the CPU-bound tests on both cores (pytest-xdist; a worker that runs out of tests
+# takes queued ones from the other, so one long file does not hold the pass) and, beside them, the checks that each keep
+# one process busy: mypy, the documentation site (mkdocs --strict) and the pinned answers on a generic CPU. Each of
+# those prints its output when it ends (--output-sync). Then the integration tests (real processes with 1 kHz loops
+# over Zenoh) one at a time, alone on the machine, because their timing figures are what they check.
 test: $(STAMP) $(NUMBA_STAMP)
 	$(VENV)/bin/ruff check .
-	$(VENV)/bin/mypy
-	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
-	$(VENV)/bin/python -m pytest -q -m "not integration" -n 2 --dist worksteal
-	NUMBA_CPU_NAME=generic NUMBA_CACHE_DIR=.numba-generic $(VENV)/bin/python -m pytest -q -n 2 $(PINNED)
+	@echo "make test: the CPU-bound tests, mypy, the documentation site and the pinned answers on a generic CPU at once"
+	$(MAKE) --no-print-directory -j4 --output-sync=target test-cpu test-types test-docs test-generic
 	$(VENV)/bin/python -m pytest -q -m integration
+
+test-cpu: $(STAMP) $(NUMBA_STAMP)
+	$(VENV)/bin/python -m pytest -q -m "not integration" -n 2 --dist worksteal
+
+test-types: $(STAMP)
+	$(VENV)/bin/mypy
+
+test-docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
+
+test-generic: $(STAMP) $(NUMBA_STAMP)
+	NUMBA_CPU_NAME=generic NUMBA_CACHE_DIR=.numba-generic $(VENV)/bin/python -m pytest -q -p no:cacheprovider $(PINNED)
 
 bench: $(STAMP) $(NUMBA_STAMP)
 	$(VENV)/bin/python benchmarks/run_all.py
