@@ -127,7 +127,7 @@ def _calibrate(node, tick: Callable[[], float], source: str) -> None:
 class _Rows:
     """The excitation's rows, positions zeroed at the first one (the rest before the first move)."""
 
-    def __init__(self, recorder, bench):
+    def __init__(self, recorder, bench) -> None:
         self.recorder, self.bench = recorder, bench
         self.zero: tuple[float, float, float] | None = None
         self.n = 0

@@ -48,7 +48,7 @@ RANGE_MARGIN = 1e-4
 class Loopback:
     """An in-process latest-wins link: a publisher and a subscriber in one (receive time: ``clock.now()``)."""
 
-    def __init__(self, clock):
+    def __init__(self, clock) -> None:
         self.clock = clock
         self.last: Received | None = None
         self.count = self.errors = 0

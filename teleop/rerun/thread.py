@@ -57,7 +57,7 @@ class ThreadedRerunLogger:
         Calls dropped because the thread was more than :data:`MAX_BACKLOG` behind.
     """
 
-    def __init__(self, *args, **kwargs):
+    def __init__(self, *args, **kwargs) -> None:
         self._inner = RerunLogger(*args, **kwargs)
         self.dropped = 0
         self._queue: collections.deque = collections.deque()

@@ -2,6 +2,7 @@
 recording prepared for fitting, a model prediction, and the diagnosis's verdict names."""
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Literal
 
@@ -95,8 +96,13 @@ def route_shape(n1: int, r_1: float, r_2: float, *finer: float) -> np.ndarray:
     """Normalised wrap angle u(s) [-], shape (n1,), at n1 nodes equally spaced in arc length: piecewise
     linear over M = 3 equal thirds (r_1, r_2) or, with ``finer`` = (r_3, ..., r_{M-1}), M equal parts (6 sixths,
     12 twelfths) holding the shares q_k = r_k (1 - q_1 - ... - q_{k-1}) of the total angle, the last share the rest
-    (see :data:`estimator.offline.effects.types.ROUTE` and :data:`estimator.offline.effects.types.ROUTE_FINE`)."""
-    r = (r_1, r_2, *finer)
+    (see :data:`estimator.offline.effects.types.ROUTE` and :data:`estimator.offline.effects.types.ROUTE_FINE`).
+    A new array each call (the last few shapes are kept: a fit varies the other parameters more often)."""
+    return _route_shape(int(n1), tuple(float(v) for v in (r_1, r_2, *finer))).copy()
+
+
+@functools.lru_cache(maxsize=64)
+def _route_shape(n1: int, r: tuple[float, ...]) -> np.ndarray:
     q, left = [], 1.0
     for v in r:
         q.append(left * v)
