@@ -68,6 +68,17 @@ class Estimates:
             return list(self.items)
 
 
+#: [-] the least share of the CRTK messages read whose estimate the test also received. The slave publishes its
+#: estimates with congestion control DROP (its loop never blocks on the link), so a loaded machine may drop one on the
+#: wire, while the CRTK messages are made from the slave's own latest estimate; a wrong field or conversion matches none
+MATCHED = 0.8
+
+
+def _share(values: list, received: set) -> float:
+    """The share of ``values`` found in ``received`` [-] (0 for no values)."""
+    return sum(v in received for v in values) / len(values) if values else 0.0
+
+
 def test_a_ros2_node_reads_the_crtk_topics_of_slave_and_master(tmp_path):
     ident = "itros"
     cfg_path = write_config(tmp_path, ident)
@@ -123,13 +134,15 @@ def test_a_ros2_node_reads_the_crtk_topics_of_slave_and_master(tmp_path):
         while time.monotonic() < deadline and (slave.poll() is None or (master and master.poll() is None)):
             time.sleep(0.05)
         stop_all([p for p in (slave, master) if p is not None])
-    # every decoded message is one of the project's own estimates, value for value
+    # the decoded messages are the project's own estimates, value for value (those whose estimate reached the test)
     by_distal = {(e.axes[0].position_hat, e.axes[0].effort_hat) for e in found}
     by_measured = {(e.tendons[0].x_in, e.tendons[0].T_in) for e in found}
     efforts = {e.axes[0].effort_hat for e in found}
-    assert distal and all((js.position[0], js.effort[0]) in by_distal for _, js in distal)
-    assert measured and all((js.position[0], js.effort[0]) in by_measured for _, js in measured)
-    assert wrenches and all(w.wrench.force.z in efforts and w.wrench.torque.z == 0.0 for _, w in wrenches)
+    shares = {"distal/measured_js": _share([(js.position[0], js.effort[0]) for _, js in distal], by_distal),
+              "measured_js": _share([(js.position[0], js.effort[0]) for _, js in measured], by_measured),
+              "measured_cf": _share([w.wrench.force.z for _, w in wrenches], efforts)}
+    assert min(shares.values()) >= MATCHED, f"share of the messages that match an estimate received: {shares}"
+    assert all(w.wrench.torque.z == 0.0 for _, w in wrenches)
     assert max(abs(w.wrench.force.z) for _, w in wrenches) > 0.1         # a real load, not zeros
     seqs = [int.from_bytes(att[:8], "little") for att, _ in wrenches]
     assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)          # the attachment's sequence numbers
