@@ -44,7 +44,6 @@ instrument:
   id: {ident}
 calibration:
   speed: 0.04
-  dir: "{caldir}"
 recording:
   rerun: "off"
   csv_every: 1
@@ -73,6 +72,11 @@ class Rows:
             raise ValueError(f"{path}: non-finite values or time going back")
 
 
+def _calibration_dir(text: str, cal_dir: Path) -> str:
+    """The config ``text`` with its calibration read from and written to ``cal_dir``."""
+    return text.replace("\ncalibration:\n", f"\ncalibration:\n  dir: {cal_dir}\n")
+
+
 def _calibrated(run_dir: Path, ident: str, instrument: str, text: str) -> Path:
     """The calibration folder of the run in ``run_dir``, holding ``instrument``'s calibration under ``ident``: the
     instrument (its config ``text``, its id replaced) is calibrated once with ``teleop calibrate`` and the file copied
@@ -81,7 +85,7 @@ def _calibrated(run_dir: Path, ident: str, instrument: str, text: str) -> Path:
         tmp = run_dir.parent / f"_{instrument}_calibration"
         tmp.mkdir(exist_ok=True)
         cfg = tmp / "cfg.yaml"
-        cfg.write_text(text.replace("\ncalibration:\n", f"\ncalibration:\n  dir: {tmp}\n"), encoding="utf-8")
+        cfg.write_text(_calibration_dir(text, tmp), encoding="utf-8")
         assert teleop_main(["calibrate", "--config", str(cfg)]) == 0
         _CALIBRATION[instrument] = (tmp / f"{_CAL_ID}.yaml").read_text()
     cal_dir = run_dir / "calibration"
@@ -97,9 +101,9 @@ def _joint_config(run_dir: Path, ident: str, instrument: str) -> Path:
     text = config.read_text().replace("rerun: save", "rerun: off")
     cal_dir = _calibrated(run_dir, ident, instrument, text.replace(f"id: {base_id}", f"id: {_CAL_ID}"))
     path = run_dir / "cfg.yaml"
-    path.write_text(text.replace(f"id: {base_id}", f"id: {ident}")
-                    .replace("rerun: off", "rerun: off\n  csv_every: 1")     # every cycle: the fault timing reads rows
-                    .replace("\ncalibration:\n", f"\ncalibration:\n  dir: {cal_dir}\n"), encoding="utf-8")
+    run_text = text.replace(f"id: {base_id}", f"id: {ident}").replace(
+        "rerun: off", "rerun: off\n  csv_every: 1")       # every cycle: the fault timing reads rows
+    path.write_text(_calibration_dir(run_text, cal_dir), encoding="utf-8")
     return path
 
 
@@ -186,10 +190,9 @@ def _run_config(run_dir: Path, ident: str, instrument: str) -> Path:
     """The run's config in ``run_dir``: the joint instrument's (:func:`_joint_config`) or the default tendon's."""
     if instrument in JOINT_CONFIGS:
         return _joint_config(run_dir, ident, instrument)
-    cal_dir = _calibrated(run_dir, ident, instrument, CONFIG.format(ident=_CAL_ID, caldir="").replace(
-        '  dir: ""\n', ""))
+    cal_dir = _calibrated(run_dir, ident, instrument, CONFIG.format(ident=_CAL_ID))
     path = run_dir / "cfg.yaml"
-    path.write_text(CONFIG.format(ident=ident, caldir=cal_dir), encoding="utf-8")
+    path.write_text(_calibration_dir(CONFIG.format(ident=ident), cal_dir), encoding="utf-8")
     return path
 
 
