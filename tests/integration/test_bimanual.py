@@ -1,8 +1,15 @@
 """The bimanual instrument over real processes (configs/notes-bimanual.yaml, 16 tendons): the slave and the
 master each run both arms in one loop; the left arm's estimate stream is dropped on the slave (``--inject
 drop=1,stream=estimate,arm=left``, from SIGUSR1) while both arms track. The left arm's master goes SAFE within
-100 ms of the fault; the right arm stays ENGAGED on both sides with fresh echoes throughout (its loop runs on).
-The in-process tests of the other faults (an impossible tension, a lost device): tests/live/test_bimanual_faults.py."""
+100 ms of the fault and never re-engages on the dropped stream; the right arm stays ENGAGED on both sides, its
+command echoes fresh by the master's own rule (younger than two watchdog periods), over the two seconds after the
+fault (its loop runs on). The in-process tests of the other faults (an impossible tension, a lost device):
+tests/live/test_bimanual_faults.py.
+
+The two 1 kHz loops of 16 tendons fill most of this 2-core machine, and its kernel stops real-time threads for up to
+50 ms a second when they exceed their budget (docs/how-to/real-time.md): a stall past the watchdog makes an arm safe
+for a moment, on this machine as on any. The checks allow for that: a share of the window, not every row, and the
+faulty arm's last state before the fault may be such a moment's SAFE."""
 from __future__ import annotations
 
 import json
@@ -26,7 +33,7 @@ pytestmark = pytest.mark.integration
 
 ROOT = Path(__file__).resolve().parents[2]
 LIMIT_S = 0.100          # the acceptance: the faulty arm safe within 100 ms
-WINDOW_S = 1.0           # the right arm is watched this long after the fault [s]
+WINDOW_S = 2.0           # the right arm is watched this long after the fault [s]
 RIDE = 0.9               # least fraction of the window the right arm is ENGAGED
 
 
@@ -69,25 +76,28 @@ def _tracking(path: Path, n: int = 100) -> bool:
     return len(rows) == n and all(int(float(r[1])) == int(SideState.ENGAGED) for r in rows)
 
 
-def _config(tmp_path: Path, port: int) -> Path:
+def _config(tmp_path: Path, port: int, side: str, csv_every: int) -> Path:
+    """The bimanual config of one side: its calibration (the simulator's own: no power-up pulls), runs and port in
+    ``tmp_path``, a CSV row every ``csv_every`` cycles."""
     data = yaml.safe_load((ROOT / "configs" / "notes-bimanual.yaml").read_text(encoding="utf-8"))
     data["calibration"]["dir"] = str(tmp_path / "calibration")
-    data["recording"] = {"dir": str(tmp_path / "runs"), "rerun": "off", "csv_every": 1}   # the timing reads every row
+    data["recording"] = {"dir": str(tmp_path / "runs"), "rerun": "off", "csv_every": csv_every}
     data["transport"]["listen"] = [f"tcp/127.0.0.1:{port}"]
-    path = tmp_path / "bimanual.yaml"
+    path = tmp_path / f"bimanual-{side}.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
-    for arm in load_arms(path).arms:    # the simulator's own calibration: no power-up pulls
+    for arm in load_arms(path).arms:
         save_calibration(true_calibration(arm.cfg, SimulatedInstrument.from_config(arm.cfg)), calibration_path(arm.cfg))
     return path
 
 
 def test_stale_estimate_on_left_arm_makes_it_safe_and_right_arm_keeps_tracking(tmp_path):
     port = free_tcp_port()
-    cfg = _config(tmp_path, port)
     run = tmp_path / "run"
     ep = f"tcp/127.0.0.1:{port}"
-    common = ["--config", str(cfg), "--run-dir", str(run), "--max-duration", "20"]
-    slave = start(["slave", "--listen", ep, "--exit-on-master-stop",
+    common = ["--run-dir", str(run), "--max-duration", "20"]
+    # the master's timing reads every row of its CSVs; the slave's are read for their state, at the default rate
+    slave_cfg, master_cfg = _config(tmp_path, port, "slave", 10), _config(tmp_path, port, "master", 1)
+    slave = start(["slave", "--config", str(slave_cfg), "--listen", ep, "--exit-on-master-stop",
                    "--inject", "drop=1,stream=estimate,arm=left,on=usr1"] + common, tmp_path / "slave.log")
     procs = [slave]
     try:
@@ -96,7 +106,8 @@ def test_stale_estimate_on_left_arm_makes_it_safe_and_right_arm_keeps_tracking(t
         wait_for(lambda: (tmp_path / "slave.log").is_file() and all(
             line in (tmp_path / "slave.log").read_text() for line in ("fault injection on left", "STARTING -> SAFE")),
             90.0, "the slave's fault injector and start-up")
-        master = start(["master", "--connect", ep, "--protocol", "paper"] + common, tmp_path / "master.log")
+        master = start(["master", "--config", str(master_cfg), "--connect", ep, "--protocol", "paper"] + common,
+                       tmp_path / "master.log")
         procs.append(master)
         wait_for(lambda: all(_tracking(run / i / "master.csv") for i in ("notes_left", "notes_right")), 45.0,
                  "both arms tracking")
@@ -117,15 +128,23 @@ def test_stale_estimate_on_left_arm_makes_it_safe_and_right_arm_keeps_tracking(t
     assert t_fault is not None
     left, right = (_columns(run / ident / "master.csv") for ident in ("notes_left", "notes_right"))
     after = left["time"] >= t_fault
-    assert left["state"][~after][-1] == int(SideState.ENGAGED)       # the left arm tracked when the fault came
+    # the left arm tracked just before the fault (ENGAGED within the limit before it: a stall's SAFE moment may
+    # fall on the fault's instant), is SAFE within the limit after it and never engages again on a dropped stream
+    before = ~after & (left["time"] >= t_fault - LIMIT_S)
+    assert np.any(left["state"][before] == int(SideState.ENGAGED)), "the left arm was not tracking at the fault"
     safe = left["time"][after & (left["state"] == int(SideState.SAFE))]
     assert safe.size and safe[0] - t_fault <= LIMIT_S, f"left arm safe {safe[:1] - t_fault} s after the fault"
+    late = left["time"] > t_fault + LIMIT_S
+    assert not np.any(left["state"][late] == int(SideState.ENGAGED)), "the left arm engaged on a dropped stream"
     win = (right["time"] >= t_fault) & (right["time"] <= t_fault + WINDOW_S)
     assert win.sum() > 0.8 * WINDOW_S * 1000
-    # the right arm tracks on: ENGAGED, its round trip inside its watchdog (a stall of this shared machine past
-    # the watchdog makes any arm safe for a moment, as it does a single instrument: tolerated up to RIDE)
+    # the right arm tracks on: ENGAGED, its command echoes younger than the master's bound (two watchdog periods,
+    # master/node_base.py), for all but a stall's share of the window
+    fresh = 2.0 * next(a for a in load_arms(master_cfg).arms if a.name == "right").cfg.master.watchdog_ms * 1e-3
+    echo = right["echo_age"][win]
     assert np.mean(right["state"][win] == int(SideState.ENGAGED)) >= RIDE
-    assert np.mean(right["echo_age"][win] < 0.05) >= RIDE
+    assert np.mean((echo >= 0) & (echo < fresh)) >= RIDE, \
+        f"right arm's echo age p50 {np.median(echo):.4f} s, p90 {np.percentile(echo, 90):.4f} s"
     slave_right = _columns(run / "notes_right" / "slave_joints.csv")
     swin = (slave_right["t_node"] >= t_fault) & (slave_right["t_node"] <= t_fault + WINDOW_S)
     assert swin.sum() > 0 and np.mean(slave_right["state"][swin] == int(SideState.ENGAGED)) >= RIDE
