@@ -126,7 +126,7 @@ class Fit:
 
     The forward fold is refined from the ``refined`` least costly of ``starts``
     (:func:`estimator.offline.diagnosis.fit.fit_model` ranks them by their cost), the backward fold from the forward
-    fold's values."""
+    fold's values, both to the model choice's tolerance (``thresholds.CHOICE_TOL``)."""
 
     def __init__(self, effects: list[Effect], folds: Folds, starts: list[dict], *, route: bool | str = False,
                  fixed: dict | list[dict] | None = None, base: Fit | None = None,
@@ -149,7 +149,7 @@ class Fit:
                 break           # cannot be accepted (the worse fold counts): the second fold is not needed
             vals, c, _ = fit_model(effects, tr, starts if j == 0 else [self.values[0]], route=route,
                                    fixed=fixed[j] if isinstance(fixed, list) else fixed, mask=fm,
-                                   max_starts=refined if j == 0 else 1)
+                                   max_starts=refined if j == 0 else 1, tol=th.CHOICE_TOL)
             pred = predict(effects, vals, tr, compliance=c)
             self.values.append(vals)
             self.compliance.append(c)
