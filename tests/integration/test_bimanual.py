@@ -77,17 +77,21 @@ def _tracking(path: Path, n: int = 100) -> bool:
 
 
 def _config(tmp_path: Path, port: int, side: str, csv_every: int) -> Path:
-    """The bimanual config of one side: its calibration (the simulator's own: no power-up pulls), runs and port in
-    ``tmp_path``, a CSV row every ``csv_every`` cycles."""
+    """The bimanual config of one side: its calibration folder, runs and port in ``tmp_path``, a CSV row every
+    ``csv_every`` cycles."""
     data = yaml.safe_load((ROOT / "configs" / "notes-bimanual.yaml").read_text(encoding="utf-8"))
     data["calibration"]["dir"] = str(tmp_path / "calibration")
     data["recording"] = {"dir": str(tmp_path / "runs"), "rerun": "off", "csv_every": csv_every}
     data["transport"]["listen"] = [f"tcp/127.0.0.1:{port}"]
     path = tmp_path / f"bimanual-{side}.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
-    for arm in load_arms(path).arms:
-        save_calibration(true_calibration(arm.cfg, SimulatedInstrument.from_config(arm.cfg)), calibration_path(arm.cfg))
     return path
+
+
+def _calibrate(cfg: Path) -> None:
+    """Each arm's calibration file, the simulator's own (the slave then makes no power-up pulls)."""
+    for arm in load_arms(cfg).arms:
+        save_calibration(true_calibration(arm.cfg, SimulatedInstrument.from_config(arm.cfg)), calibration_path(arm.cfg))
 
 
 def test_stale_estimate_on_left_arm_makes_it_safe_and_right_arm_keeps_tracking(tmp_path):
@@ -97,6 +101,7 @@ def test_stale_estimate_on_left_arm_makes_it_safe_and_right_arm_keeps_tracking(t
     common = ["--run-dir", str(run), "--max-duration", "20"]
     # the master's timing reads every row of its CSVs; the slave's are read for their state, at the default rate
     slave_cfg, master_cfg = _config(tmp_path, port, "slave", 10), _config(tmp_path, port, "master", 1)
+    _calibrate(slave_cfg)
     slave = start(["slave", "--config", str(slave_cfg), "--listen", ep, "--exit-on-master-stop",
                    "--inject", "drop=1,stream=estimate,arm=left,on=usr1"] + common, tmp_path / "slave.log")
     procs = [slave]
