@@ -159,7 +159,7 @@ def _residual_scales(s: Series) -> dict[str, float]:
 
 def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float]], *,
               max_starts: int = 2, route: bool | str = False, fixed: dict[str, float] | None = None,
-              mask: slice | None = None, tol: float | None = None) -> tuple[dict[str, float], float, float]:
+              mask: slice | None = None, tol: float = th.FIT_TOL) -> tuple[dict[str, float], float, float]:
     """Least-squares fit of K and the parameters of ``effects`` on a training series.
 
     Every start (dict of parameter values, missing ones neutral) is scored, the best
@@ -175,7 +175,7 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
     A discrete parameter (``Parameter.discrete``: the instant of a step) not in ``fixed`` is fitted first by a
     profile over candidate instants in the fit block from the best start
     (:func:`estimator.offline.diagnosis.instant.profile_discrete`) and then held. ``tol``: the refinements'
-    relative ftol and xtol (default ``thresholds.FIT_TOL``; the model choice passes ``thresholds.CHOICE_TOL``).
+    relative ftol and xtol (``thresholds.FIT_TOL``; the model choice passes ``thresholds.CHOICE_TOL``).
     Returns (values, compliance [m/N], cost).
     """
     m = slice(None) if mask is None else mask
@@ -210,10 +210,8 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
                          pr.compliance)
         return seen[key][0].copy()
 
-    rtol = th.FIT_TOL if tol is None else tol
-
     def refine(fun, z, lower, upper):
-        return least_squares(fun, z, bounds=(lower, upper), diff_step=1e-2, x_scale=1.0, ftol=rtol, xtol=rtol,
+        return least_squares(fun, z, bounds=(lower, upper), diff_step=1e-2, x_scale=1.0, ftol=tol, xtol=tol,
                              max_nfev=40 * len(z))
 
     z_starts = [np.clip(np.array([st.get(p.name, p.neutral) for p in params]) / scale, lo, hi) for st in starts]
