@@ -18,9 +18,8 @@ __all__ = ["floor_scores", "PENALTY", "STRUCTURE_RATIO", "VALIDATION_FRACTION", 
            "STICK_SLIP_MIN_HOLD", "RELEASE_SHARE", "HELD_STEPS", "HELD_SHARE", "NEAR_HELD_SHARE", "AT_END_SPEED",
            "AT_END_BAND", "AT_END_SHARE", "AT_END_HIDES", "SLIDE_SEEN", "SLIDE_QUANTA", "SLIDE_SIGMAS",
            "SLIDE_SHARE", "FIT_TOL", "CHOICE_TOL", "K_RESTART", "PLATEAU_BISECTIONS", "REST_MIN_S", "REST_RESOLUTIONS",
-           "REST_TENSION_SIGMAS",
-           "REST_TENSION_RATIO", "HAND_WINDOW", "HAND_SLIP_SPEED", "HAND_MIN_SLIP_S", "HAND_LAG_MIN",
-           "HAND_SPEED_MIN", "HAND_T_MIN", "HAND_WEAK_SCORE"]
+           "REST_TENSION_SIGMAS", "REST_TENSION_RATIO", "HAND_WINDOW", "HAND_SLIP_SPEED", "HAND_MIN_SLIP_S",
+           "HAND_LAG_MIN", "HAND_SPEED_MIN", "HAND_T_MIN", "HAND_WEAK_SCORE"]
 
 # ---- model choice: the split, the scores, the price ------------------------------------------------------------
 VALIDATION_FRACTION = 0.35  # [-] share of the training block each fold validates on
@@ -92,11 +91,8 @@ REST_RESOLUTIONS = 3.0      # [resolutions] a position reading further from zero
 FIT_TOL = 1e-6              # [-] relative ftol and xtol of the refits the test block reads (step 7: errors, gain)
 #: [-] relative ftol and xtol of the model choice's refinements (steps 3-6): a fit stopped there has its parameters
 #: within sqrt(CHOICE_TOL) = 0.3 % (relative) of its minimum along its flattest direction, and a score S moves to
-#: first order with them, against bars and ratios that the rules read in steps of 0.05 and more. Chosen between 1e-4
-#: and 1e-5 on 140 development recordings (docs/concepts/diagnosis.md): 1e-4 stopped a slowly converging fit early (a
-#: pretension's S 0.016 against 0.005) and changed its answer; 1e-5 gives the pinned answers and 139 of the 140
-#: answers of 1e-6, with 22 % fewer model evaluations on a 10-minute recording. The chosen model is refitted at
-#: FIT_TOL before the test block.
+#: first order with them, against bars and ratios that the rules read in steps of 0.05 and more; the chosen model is
+#: refitted at FIT_TOL before the test block
 CHOICE_TOL = 1e-5
 PLATEAU_BISECTIONS = 12     # [count] halvings locating the edge of a plateau in K (refinement.below_plateau)
 
