@@ -28,7 +28,7 @@ from numba import njit
 __all__ = ["V_STOP", "NODE_ROUNDING", "BREAK_MARGIN", "stiffening_strain", "friction_bounds", "start_extended",
            "run_span", "N_PAR", "N_ST", "P_K", "P_A", "P_T0", "P_K_RATE", "P_C_V", "P_R_S", "P_T_SLIP", "P_T_MIN",
            "P_SIGMA", "P_BETA", "P_TC", "P_V_ST", "P_BAND", "P_K_STEP", "P_T_STEP",
-           "S_E", "S_E0", "S_SLIDING", "S_T_B", "S_YP_PREV", "S_T_ORIGIN", "S_T_PREV", "S_COUNT"]
+           "S_E", "S_E0", "S_SLIDING", "S_T_B", "S_YP_PREV", "S_T_ORIGIN", "S_T_PREV", "S_COUNT", "S_K_PROFILE"]
 
 V_STOP = 2e-4        # proximal speed below which a slide ends (the tendon sticks) [m/s]
 #: [-] a node of a stuck tendon whose bound it would move to lies within this share of its tension does not move.
@@ -45,9 +45,10 @@ BREAK_MARGIN = 0.35  # share of the kinetic-static gap within which a turn of T_
  P_T_STEP) = range(15)
 N_PAR = 15
 #: indices of ``st``: the running sum E [N] and its start E0 [N], the slide direction (-1, 0, +1), the breakaway
-#: time t_b [s] (-inf: none), the previous proximal Y_p [N] and time [s], the drift's time origin [s], samples run
-S_E, S_E0, S_SLIDING, S_T_B, S_YP_PREV, S_T_ORIGIN, S_T_PREV, S_COUNT = range(8)
-N_ST = 8
+#: time t_b [s] (-inf: none), the previous proximal Y_p [N] and time [s], the drift's time origin [s], samples run,
+#: and the steepest friction exponent the profile was written with since it last held everywhere at a lower one [-]
+S_E, S_E0, S_SLIDING, S_T_B, S_YP_PREV, S_T_ORIGIN, S_T_PREV, S_COUNT, S_K_PROFILE = range(9)
+N_ST = 9
 
 
 @njit(cache=True, nogil=True)
@@ -80,7 +81,9 @@ def start_extended(u, w, par, T0_out, Y, st, tab):  # pragma: no cover - compile
     for i in range(m1):
         Y[i] = T0 + a
     E0 = stiffening_strain(T0, beta, Tc)
+    st[S_K_PROFILE] = 0.0           # uniform: it holds at any friction
     if T0 > 0.0 and T0_out >= 0.0:
+        st[S_K_PROFILE] = K
         E0 = 0.0
         for i in range(m1):
             y = min(T0, T0_out * math.exp(K * (1.0 - u[i])))
@@ -189,6 +192,7 @@ def run_span(T_in, v, spd, t, slide, i0, i1, u, w, par, Y, st, tab, dY, G, T_out
     sliding = int(st[S_SLIDING])
     t_b, Yp_prev, t_prev = st[S_T_B], st[S_YP_PREV], st[S_T_PREV]
     count = int(st[S_COUNT])
+    K_prof = st[S_K_PROFILE]
     if count == 0 and i1 > i0:
         st[S_T_ORIGIN] = t[i0]          # the drift counts from the first sample run
     t0 = st[S_T_ORIGIN]
@@ -298,8 +302,13 @@ def run_span(T_in, v, spd, t, slide, i0, i1, u, w, par, Y, st, tab, dY, G, T_out
                     y = a
                 Y[i] = y
                 E += w[i] * stiffening_strain(y - a, beta, Tc)
+            K_prof = f
         else:
             bound = Kk * (1.0 + r_s) if stuck else Kk
+            # a friction that fell (the speed dropped, the drift or the step went down) below the steepest one the
+            # profile was written with tightens the bounds of nodes beyond one that holds: every node is checked
+            every = varying and (K_prof - bound) * Yp > band
+            moved = False
             if stribeck:
                 _stribeck_bound(Y, Yp, a, u, w, Kk, r_s, v_st, abs(v[k]), dY, G, g_kin, varying)
                 gt = none
@@ -323,16 +332,25 @@ def run_span(T_in, v, spd, t, slide, i0, i1, u, w, par, Y, st, tab, dY, G, T_out
                 elif y > hi:
                     ny = hi if hi > a else a
                     d = -1
+                elif every:
+                    continue
                 else:
                     break
                 if abs(ny - y) <= NODE_ROUNDING * y:
+                    if every:
+                        continue
                     break           # on its bound to rounding (NODE_ROUNDING): the node does not move
                 E += w[i] * (stiffening_strain(ny - a, beta, Tc) - stiffening_strain(y - a, beta, Tc))
                 Y[i] = ny
+                moved = True
                 if i == m1 - 1:         # the slip reached the distal end: the whole tendon slides
                     sliding = d
                     if stuck and not stribeck and Yp - a >= T_min:
                         t_b = tk        # breakaway from static friction
+            if every:
+                K_prof = bound      # every node within the bounds of this friction
+            elif moved and bound > K_prof:
+                K_prof = bound
         T_out[k] = Y[m1 - 1] - a
         E1[k] = E - E0
     if lazy != 0:
@@ -343,3 +361,4 @@ def run_span(T_in, v, spd, t, slide, i0, i1, u, w, par, Y, st, tab, dY, G, T_out
     st[S_YP_PREV] = Yp_prev
     st[S_T_PREV] = t_prev
     st[S_COUNT] = float(count)
+    st[S_K_PROFILE] = K_prof

@@ -44,6 +44,27 @@ def test_velocity_friction_raises_the_slip_exponent_with_speed():
     np.testing.assert_allclose(pr.T_out[m], T_in[m] * math.exp(-K * (1 + c_v * 0.005)), rtol=1e-9)
 
 
+def test_a_pull_that_slows_under_velocity_friction_raises_the_distal_tension_as_its_friction_falls():
+    """A slide ended mid-pull (T_in turning back by more than 2 sigma, as a noisy reading can) leaves the profile
+    written at the pull's friction K (1 + c_v v). As the pull slows to a stop with T_in held, the friction falls to K
+    and the distal tension rises to T_in e^{-K}: the stuck rule checks every node when the friction is below the one
+    the profile was written with (the proximal node holds within its bound, the distal ones do not). A constant
+    friction keeps the memory of the pull instead."""
+    u, w = grid()
+    c_v, v0, n_pull, n_slow, n_rest = 20.0, 0.005, 2000, 200, 100
+    T_hold = 15.0 - 0.05                                 # the turn that ends the slide: 5 sigma
+    T_in = np.concatenate((np.linspace(0.0, 15.0, n_pull), np.full(n_slow + n_rest, T_hold)))
+    v = np.concatenate((np.full(n_pull, v0), np.linspace(v0, 0.0, n_slow), np.zeros(n_rest)))
+    t = np.arange(1, T_in.size + 1) * 1e-3
+    T_out, _ = run_extended(T_in, v, t, u, w, K=K, c_v=c_v, sigma=0.01)
+    slowing = T_out[n_pull:n_pull + n_slow]
+    assert np.all(np.diff(slowing) >= -1e-12)            # rises (or holds) while the speed falls
+    np.testing.assert_allclose(T_out[-1], T_hold * math.exp(-K), rtol=1e-9)
+    assert T_out[-1] - T_out[n_pull - 1] > 0.9 * 15.0 * (math.exp(-K) - math.exp(-K * (1 + c_v * v0)))
+    T_const, _ = run_extended(T_in, v, t, u, w, K=K, sigma=0.01)
+    np.testing.assert_allclose(T_const[-1], 15.0 * math.exp(-K), rtol=1e-9)
+
+
 def test_velocity_friction_distal_speed_form_uses_the_mean_of_both_ends():
     """The second form (velocity_form 1, needs x_out): the sliding speed is the mean of |dx_in/dt| and
     |dx_out/dt| (per-segment friction on each segment's own speed, between the two ends' speeds)."""

@@ -87,6 +87,7 @@ def test_diagnose_names_the_effect_and_the_estimator_with_its_model_beats_the_ba
         b, m = base[name]["vs_truth"], ext["experiments"][name]["profile_memory"]
         assert b["samples"] == ext["experiments"][name]["samples"]
         # the base misses c_v v T in every move; the model where the speed jumps (a late loop cycle) or where the
-        # speed read's noise ends a slide mid-pull (docs/results/live-gain.md, "Where velocity friction errs live")
+        # speed read's noise ends a slide mid-pull, until the pull slows (docs/results/live-gain.md, "Where velocity
+        # friction errs live")
         assert m["force_error_mean_fs"] < GAIN * b["force_error_mean_fs"], (name, b, m)
         assert m["force_error_max_fs"] < b["force_error_max_fs"], (name, b, m)

@@ -22,6 +22,11 @@ distal part slide back) - and is updated in one of two ways:
   node by node from the proximal end until a node does not change (by more than NODE_ROUNDING of its tension: a
   node latched on its bound sits there to rounding), with b = K_k, or
   K_k (1 + r_s) with static friction (E4: the tendon is stuck whenever it does not slide).
+  The early stop holds while b is at least the steepest exponent the profile was written with (K_prof: a slide's,
+  or a bound that moved a node); a friction that has fallen below it by more than the band (K_prof - b) Y_p > h
+  (a pull that slows under viscous friction, a drift or a step down) tightens the bounds beyond a node that holds,
+  so every node is checked and the profile written at the higher friction relaxes to the lower one (the distal
+  tension of a slowing pull rises as its friction falls); K_prof is then b.
   h [N] is the noise band of the reading T_in (``band``; 0 on exact data): the rule latches
   extremes, and on a noisy reading it would latch the noise's own (a hold of a few hundred
   samples reaches about 3 sigma), so the profile moves only for what exceeds h; on exact data h
