@@ -114,7 +114,9 @@ def test_stale_estimate_on_left_arm_makes_it_safe_and_right_arm_keeps_tracking(t
         master = start(["master", "--config", str(master_cfg), "--connect", ep, "--protocol", "paper"] + common,
                        tmp_path / "master.log")
         procs.append(master)
-        wait_for(lambda: all(_tracking(run / i / "master.csv") for i in ("notes_left", "notes_right")), 45.0,
+        # a second of steady tracking: the first moments after engaging can hold a start-up stall (its command echo
+        # goes stale and the arm goes SAFE, then engages again), which would leave the left arm SAFE at the fault
+        wait_for(lambda: all(_tracking(run / i / "master.csv", 1000) for i in ("notes_left", "notes_right")), 45.0,
                  "both arms tracking")
         t_signal = time.monotonic()     # the clock of the recordings' time column (one machine)
         slave.send_signal(signal.SIGUSR1)
