@@ -90,14 +90,14 @@ def test_velocity_friction_beside_an_offset_shows_once_the_offset_is_taken_off(h
 def test_an_offset_beside_the_physical_effect_chosen_first_is_fitted_with_the_route_free():
     # the independent simulator's velocity friction beside a T_out offset on a constant-force load: velocity friction
     # is chosen first and, on the route the offset bent, leaves the distal elongation structured; neither effect's
-    # single is strong enough for the pairs' pool. Beside the offset with the route free, both are named. The
-    # single takes the proximal-speed form (S 0.807, the mean of both ends' speeds 0.808), and the pair fitted in it
-    # from the single's bent route still leaves the distal elongation at 9 floors: "unknown" comes before both
-    # (docs/results/diagnosis.md, "A reshaped sheath and two causes at once")
+    # single is strong enough for the pairs' pool. Beside the offset with the route free, both are named: the single
+    # takes the proximal-speed form (S 0.807, the mean of both ends' speeds 0.808), the pair in that form leaves the
+    # distal elongation at 7 floors, the pair in the mean-speed form from the uniform route at 1.8
     from study.lumped import scenarios as lumped
     rec = lumped.record(("velocity_friction", "sensor_offset:T_out"), seed=5862000, level=0.2, duration=60.0)
     d = diagnose(rec.data)
-    assert set(d["causes"]) - {"unknown"} == {"velocity_friction", "sensor_offset:T_out"}
+    assert set(d["causes"]) == {"velocity_friction", "sensor_offset:T_out"}
+    assert d["parameters"]["velocity_form"]["value"] == 1.0
     assert d["parameters"]["b_T_out"]["value"] == pytest.approx(rec.truth["parameters"]["offset"], abs=0.05)
     assert d["parameters"]["c_v"]["value"] == pytest.approx(rec.truth["parameters"]["viscous"], rel=0.2)
     assert d["settings"]["pair_rule"] == "offset_beside_physical"

@@ -189,20 +189,26 @@ def offset_beside_physical(ctx: Context, base: Fit, singles: dict[str, Fit], cho
     elongation to the floor, and the pair's offset alone is too weak a single to enter the pairs' pool
     (:func:`consider_pairs`). Remedy: the chosen effect beside each tension offset, the route free, from the chosen
     values with the offset's single fit and from the same values on the uniform route (as a single's route refit,
-    :func:`estimator.offline.diagnosis.rules.refit_routes`). A pair is kept on the terms of :func:`consider_pairs`
-    (its price, each effect earning its parameters, resolved) when it ranks below the model so far (log S +
-    log(RANK_FACTOR) x parameters). Returns the pair or ``chosen``."""
+    :func:`estimator.offline.diagnosis.rules.refit_routes`), both starts refined (the uniform one is how the fit
+    leaves a corner of the bent route, whichever costs less at the start), in each form of the physical effect (its
+    held ``variants``: forms its single scores alike, as velocity friction's two speeds can, differ beside the
+    offset). A pair is kept on the terms of :func:`consider_pairs` (its price, each effect earning its parameters,
+    resolved) when it ranks below the model so far (log S + log(RANK_FACTOR) x parameters). Returns the pair or
+    ``chosen``."""
     if (not ctx.route or len(chosen.effects) != 1 or chosen.effects[0].channel
             or worst(chosen, ctx.floor) <= th.STRUCTURE_RATIO or worst(base, ctx.floor) <= th.STRUCTURE_RATIO):
         return chosen
-    uniform, alone = uniform_route(ctx.route), {**singles, chosen.effects[0].id: chosen}
+    physical = chosen.effects[0]
+    uniform, alone = uniform_route(ctx.route), {**singles, physical.id: chosen}
+    forms = [v for v in physical.variants if physical.variant_ok(v, ctx.signals)] or [{}]
     best, best_rank = chosen, _rank(chosen)
     for offset in (eid for eid in _TENSION_OFFSETS if eid in singles):
-        fx = [chosen.effects[0], CATALOGUE[offset]]
-        v0 = {**singles[offset].values[0], **chosen.values[0]}
-        kept = {k: v for k, v in v0.items() if k in settings_keys(fx)}
-        f = Fit(fx, ctx.folds, [v0, {**v0, **uniform}], route=ctx.route, fixed=kept or None, base=base,
-                floor=ctx.floor, need=1.0 - th.PENALTY * sum(len(e.parameters) for e in fx), refined=PAIR_REFINED)
-        if _acceptable(ctx, f, alone, (chosen.effects[0].id, offset)) and _rank(f) < best_rank:
-            best, best_rank = f, _rank(f)
+        fx = [physical, CATALOGUE[offset]]
+        for form in forms:
+            v0 = {**singles[offset].values[0], **chosen.values[0], **form}
+            kept = {k: v for k, v in v0.items() if k in settings_keys(fx)}
+            f = Fit(fx, ctx.folds, [v0, {**v0, **uniform}], route=ctx.route, fixed=kept or None, base=base,
+                    floor=ctx.floor, need=1.0 - th.PENALTY * sum(len(e.parameters) for e in fx), refined=2)
+            if _acceptable(ctx, f, alone, (physical.id, offset)) and _rank(f) < best_rank:
+                best, best_rank = f, _rank(f)
     return best
