@@ -204,11 +204,13 @@ def offset_beside_physical(ctx: Context, base: Fit, singles: dict[str, Fit], cho
     best, best_rank = chosen, _rank(chosen)
     for offset in (eid for eid in _TENSION_OFFSETS if eid in singles):
         fx = [physical, CATALOGUE[offset]]
+        held, need = settings_keys(fx), 1.0 - th.PENALTY * sum(len(e.parameters) for e in fx)
         for form in forms:
             v0 = {**singles[offset].values[0], **chosen.values[0], **form}
-            kept = {k: v for k, v in v0.items() if k in settings_keys(fx)}
-            f = Fit(fx, ctx.folds, [v0, {**v0, **uniform}], route=ctx.route, fixed=kept or None, base=base,
-                    floor=ctx.floor, need=1.0 - th.PENALTY * sum(len(e.parameters) for e in fx), refined=2)
+            kept = {k: v for k, v in v0.items() if k in held}
+            starts = [v0, {**v0, **uniform}]
+            f = Fit(fx, ctx.folds, starts, route=ctx.route, fixed=kept or None, base=base, floor=ctx.floor,
+                    need=need, refined=len(starts))
             if _acceptable(ctx, f, alone, (physical.id, offset)) and _rank(f) < best_rank:
                 best, best_rank = f, _rank(f)
     return best
