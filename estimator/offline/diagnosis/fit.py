@@ -42,10 +42,12 @@ from estimator.errors import DataError
 __all__ = [
     "Progress", "trimmed_ms", "paired_trimmed_ms", "prepare", "split_at_rest", "fit_model", "start_points",
     "rest_window", "rest_start", "heldout_mse", "raw_rmse", "quantum", "SIGNALS", "settings_keys", "predictions",
+    "fit_residual", "SCALE",
 ]
 
 _K = Parameter("K", "-", 0.0, K_MAX, 0.5, (), "friction exponent mu * total wrap angle")
-_SCALE = {"K": 0.1, "c_v": 10.0, "T0": 1.0, "K_rate": 1e-3, "beta": 1.0, "T_c": 1.0, "r_s": 0.1, "a": 0.5,
+#: [unit of each parameter] the fits' variables are the parameters over these (O(1) at a typical magnitude)
+SCALE = {"K": 0.1, "c_v": 10.0, "T0": 1.0, "K_rate": 1e-3, "beta": 1.0, "T_c": 1.0, "r_s": 0.1, "a": 0.5,
           "x_p": 2e-5, "d_b": 2e-5, **{f"r_{k}": 0.1 for k in range(1, 12)},
           "b_T_in": 0.5, "b_T_out": 0.5, "g_T_in": 0.02, "g_T_out": 0.02, "tau_T_in": 0.01, "tau_T_out": 0.01,
           "d_T_in": 2e-3, "d_T_out": 2e-3, "b_x_in": 2e-5, "b_x_out": 2e-5, "tau_x_in": 0.01, "tau_x_out": 0.01,
@@ -178,21 +180,16 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
     relative ftol and xtol (``thresholds.FIT_TOL``; the model choice passes ``thresholds.CHOICE_TOL``).
     Returns (values, compliance [m/N], cost).
     """
-    m = slice(None) if mask is None else mask
+    m, norm, ys, stop = _fit_block(train, mask)
     params = _params(effects, route)
     # an effect's form (Effect.variants: held, not fitted) travels with the first start
     fixed = {**{k: starts[0][k] for k in settings_keys(effects) if starts and k in starts[0]}, **(fixed or {})}
-    scale = np.array([_SCALE[p.name] for p in params])
+    scale = np.array([SCALE[p.name] for p in params])
     lo = np.array([p.lower for p in params]) / scale
     hi = np.array([p.upper for p in params]) / scale
-    norm = _residual_scales(train)
-    ys = {k: getattr(train, k)[m][::FIT_STRIDE] for k in norm}
 
     def values(z):
         return {**fixed, **{p.name: float(v) for p, v in zip(params, z * scale, strict=False)}}
-
-    # the forward fold's residuals end where its fit block does: the model runs no further than they need
-    stop = m.stop if isinstance(m, slice) and m.stop is not None and 0 < m.stop < len(train) else None
 
     # every point evaluated, by its bytes and the held discrete values: (residual, L/EA). The starts are ranked and
     # then refined from, and the solution's L/EA is that of its last evaluation: none is run twice
@@ -206,8 +203,7 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
         key = key_of(z)
         if key not in seen:
             pr = predict(effects, values(z), train, fit_mask=m, stop=stop)
-            seen[key] = (np.concatenate([(getattr(pr, k)[m][::FIT_STRIDE] - ys[k]) / v for k, v in norm.items()]),
-                         pr.compliance)
+            seen[key] = (_residual_of(pr, m, norm, ys), pr.compliance)
         return seen[key][0].copy()
 
     def refine(fun, z, lower, upper):
@@ -225,6 +221,29 @@ def fit_model(effects: list[Effect], train: Series, starts: list[dict[str, float
     key = key_of(best.x)
     c = seen[key][1] if key in seen else predict(effects, vals, train, fit_mask=m, stop=stop).compliance
     return vals, c, float(best.cost)
+
+
+def _fit_block(train: Series, mask: slice | None) -> tuple[slice, dict[str, float], dict[str, np.ndarray], int | None]:
+    """The samples whose residuals count, each signal's scale (its range), its measured samples there (every
+    FIT_STRIDE-th) and the sample the model may stop at (the forward fold's residuals end where its fit block does:
+    the model runs no further than they need; None: the whole series)."""
+    m = slice(None) if mask is None else mask
+    norm = _residual_scales(train)
+    ys = {k: getattr(train, k)[m][::FIT_STRIDE] for k in norm}
+    stop = m.stop if isinstance(m, slice) and m.stop is not None and 0 < m.stop < len(train) else None
+    return m, norm, ys, stop
+
+
+def _residual_of(pr, m: slice, norm: dict[str, float], ys: dict[str, np.ndarray]) -> np.ndarray:
+    return np.concatenate([(getattr(pr, k)[m][::FIT_STRIDE] - ys[k]) / v for k, v in norm.items()])
+
+
+def fit_residual(effects: list[Effect], values: dict[str, float], train: Series, mask: slice | None) -> np.ndarray:
+    """The residual vector :func:`fit_model` minimises, at ``values``: each distal signal's model minus measured
+    samples over ``mask`` (every FIT_STRIDE-th sample), divided by the signal's range; shape (n,), n the kept samples
+    times the signals. The same numbers as inside the fit."""
+    m, norm, ys, stop = _fit_block(train, mask)
+    return _residual_of(predict(effects, values, train, fit_mask=m, stop=stop), m, norm, ys)
 
 
 def settings_keys(effects: list[Effect]) -> set[str]:

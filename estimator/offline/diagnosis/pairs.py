@@ -2,9 +2,9 @@
 
 A step of :func:`estimator.offline.diagnosis.selection.diagnose_recording` after the forward selection
 (:func:`estimator.offline.diagnosis.rules.select`): :func:`consider_pairs`, :func:`offset_beside_physical`,
-:func:`second_at_floor` and :func:`speed_beside_offset` (their docstrings give the rules; the
-numbers are PENALTY, RANK_FACTOR, DOMINANT_SCORE and STRUCTURE_RATIO of :mod:`estimator.offline.diagnosis.thresholds`,
-and the run-time bound :data:`PAIR_POOL`).
+:func:`second_at_floor` and :func:`speed_beside_offset` (their docstrings give the rules; the numbers are PENALTY,
+RANK_FACTOR, DOMINANT_SCORE, STRUCTURE_RATIO and SCREEN_SHARE of :mod:`estimator.offline.diagnosis.thresholds`, and the
+run-time bound :data:`PAIR_POOL`).
 """
 from __future__ import annotations
 
@@ -20,6 +20,7 @@ from estimator.offline.diagnosis.fit import settings_keys, start_points
 from estimator.offline.diagnosis.folds import Fit, unresolved
 from estimator.offline.diagnosis.readings import speed_or_lag
 from estimator.offline.diagnosis.rules import Context, shown_at_floor, worst
+from estimator.offline.diagnosis.screen import Linearised
 from estimator.offline.effects.catalogue import CATALOGUE
 from estimator.offline.effects.types import ROUTE_KEYS, uniform_route
 
@@ -105,7 +106,9 @@ def second_at_floor(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fi
     effect's single fit is bent by the first, so its S alone does not say what it adds beside it (a drift of K
     beside a pretension ranks below the encoder offsets and the play that mimic the pretension). A partner must pay
     its parameters (S_rel + PENALTY x its parameters < 1) and be resolved; among those
-    the lowest log S_rel + log(RANK_FACTOR) x (its parameters) is kept. Returns ``chosen`` or the pair."""
+    the lowest log S_rel + log(RANK_FACTOR) x (its parameters) is kept. A partner whose linearised share of the first
+    model's residual is below SCREEN_SHARE x its price is not fitted (:mod:`estimator.offline.diagnosis.screen`).
+    Returns ``chosen`` or the pair."""
     if (len(chosen.effects) != 1 or worst(base, ctx.floor) <= th.STRUCTURE_RATIO
             or worst(chosen, ctx.floor) > th.STRUCTURE_RATIO):
         return chosen
@@ -114,10 +117,13 @@ def second_at_floor(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fi
     partners = [eid for eid in singles if not CATALOGUE[eid].channel and eid != first.id]
     if not first.channel:
         partners += [eid for eid in _pool(singles, chosen.ids)[:PAIR_POOL] if eid not in partners]
+    screen = Linearised(chosen.effects, chosen.values[0], ctx.folds.train, ctx.folds.fit[0])
     for eid in partners:
         e = CATALOGUE[eid]
         fx = [first, e]
         kept = {k: v for k, v in singles[eid].values[0].items() if k in settings_keys([e])}
+        if screen.skips(e, kept):
+            continue        # its linearised share of the first model's residual is below its price
         v0 = {**chosen.values[0], **kept}
         n = len(e.parameters)
         f = Fit(fx, ctx.folds, start_points(fx, v0, ctx.s, v0),

@@ -367,7 +367,7 @@ def _settings(ctx: Context, train_fraction: float, n_nodes: int, target_rate: fl
             "excess_min_applied": ctx.excess_min, "stick_slip_ratio": th.STICK_SLIP_RATIO,
             "stick_slip_weak": th.STICK_SLIP_WEAK, "stick_slip_weak_score": th.STICK_SLIP_WEAK_SCORE,
             "dominant_score": th.DOMINANT_SCORE, "offset_floors": th.OFFSET_FLOORS,
-            "noise_band_sigmas": NOISE_BAND, "rank_factor": th.RANK_FACTOR,
+            "noise_band_sigmas": NOISE_BAND, "rank_factor": th.RANK_FACTOR, "screen_share": th.SCREEN_SHARE,
             "model_resolution": th.MODEL_RESOLUTION, "trim": th.TRIM, "route_score": th.ROUTE_SCORE,
             "route_form": FORM_NAME[ctx.route], "model_route_form": FORM_NAME[route_of(model_values, ctx.route)],
             "distal_end_held": held, "distal_at_end": at_end, "distal_slide_travel_m": ctx.s.slide_travel,

@@ -11,7 +11,8 @@ import math
 from collections.abc import Iterable, Mapping
 
 __all__ = ["floor_scores", "PENALTY", "STRUCTURE_RATIO", "VALIDATION_FRACTION", "SECOND_ROUND", "MODEL_RESOLUTION",
-           "TRIM", "POLISH", "RANK_FACTOR", "STRONG_SCORE", "WEAK_STRUCTURE", "MID_SCORE", "EXCESS_MIN", "FLOOR_FACTOR",
+           "SCREEN_SHARE", "TRIM", "POLISH", "RANK_FACTOR", "STRONG_SCORE", "WEAK_STRUCTURE", "MID_SCORE", "EXCESS_MIN",
+           "FLOOR_FACTOR",
            "FLOOR_SCORE", "FLOOR_SCORE_WITHOUT", "EXCESS_MIN_WITHOUT", "STICK_SLIP_RATIO", "STICK_SLIP_WEAK",
            "STICK_SLIP_WEAK_SCORE", "ROUTE_SCORE", "DOMINANT_SCORE", "OFFSET_FLOORS", "STICK_SLIP_WINDOW",
            "STICK_SLIP_SPEED", "STICK_SLIP_HOLD", "STICK_SLIP_MIN_SAMPLES", "STICK_SLIP_MIN_MOVE",
@@ -28,6 +29,10 @@ MODEL_RESOLUTION = 0.003    # [-] the base model's own resolution, share of the 
 PENALTY = 0.30              # [-] price per extra parameter on the validation score S (base = 1)
 RANK_FACTOR = 2.0           # [-] among acceptable extensions, each extra parameter must divide S by this
 SECOND_ROUND = 6            # [count] best single extensions tried together with the first accepted one
+#: [-] a second cause beside the first at its floor is fitted only when its linearised share of the fit block's cost
+#: (:mod:`estimator.offline.diagnosis.screen`) reaches this much of its price (PENALTY per parameter): a safety factor
+#: of 3 on the linear model (the partners named on the development recordings remove 1.3-2.9 times their price in it)
+SCREEN_SHARE = 1.0 / 3.0
 POLISH = 3                  # [count] best single extensions refitted with the route shares free
 STRUCTURE_RATIO = 3.0       # [-] validation rmse / noise floor above this on a signal: structure is left
 DOMINANT_SCORE = 0.1        # [-] an extension with S below this removes nearly all of a structure: it is the cause
