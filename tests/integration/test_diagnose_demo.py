@@ -20,7 +20,7 @@ import pytest
 from live.replay.main import replay
 
 pytestmark = pytest.mark.integration
-#: The model's mean distal-tension error is below this share of the base's on the same recording (a session: 0.11 on
+#: The model's mean distal-tension error is below this share of the base's on the same recording (one run: 0.11 on
 #: the paper experiment, 0.07 on the minor loops; the largest errors 0.008 and 0.014 of full scale, the base's 0.066
 #: and 0.059).
 GAIN = 0.75

@@ -68,7 +68,7 @@ class Linearised:
         for p in partner.parameters:
             h = start[p.name] - p.neutral
             if h == 0.0:
-                h = SCALE.get(p.name, 1.0)
+                h = SCALE[p.name]
             v = {**self.values, **held, **{q.name: q.neutral for q in partner.parameters}}
             v[p.name] = p.neutral + h
             cols.append((fit_residual(fx, v, self.train, self.mask) - self.r) / h)
