@@ -131,7 +131,7 @@ def known_route(truth: dict) -> np.ndarray | None:
     """The route shape of a simulated rig as a user who knows the instrument's route would pass it
     (``diagnose(..., wrap_shape=...)``, as ``teleop analyze --route CONFIG`` does): the normalised cumulative
     wrap angle of ``truth["route"]`` ((length [m], radius [m]) pieces), shape (257,)."""
-    from estimator.sheath import SheathGeometry
+    from estimator.geometry import SheathGeometry
     from slave.calibrate import wrap_shape
     return wrap_shape(SheathGeometry(truth["route"]))
 

@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 
-from estimator.sheath import SheathGeometry
+from estimator.geometry import SheathGeometry
 from study.lumped.scenarios import record
 from study.lumped.simulator import Load, LumpedTendon
 

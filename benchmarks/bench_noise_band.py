@@ -15,8 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from estimator.data import noise_level
+from estimator.geometry import SheathGeometry
 from estimator.online.distal import estimate_batch
-from estimator.sheath import SheathGeometry, SheathModel
+from estimator.sheath import SheathModel
 from slave.calibrate import wrap_shape
 
 #: clean recordings (simulator, first seed): two independent seed sets of the lumped simulator and one of the rig

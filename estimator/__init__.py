@@ -42,8 +42,8 @@ from typing import TYPE_CHECKING, Any
 #: public name -> (module, attribute in that module)
 _EXPORTS: dict[str, tuple[str, str]] = {
     # model core
-    "Run": ("estimator.sheath", "Run"),
-    "SheathGeometry": ("estimator.sheath", "SheathGeometry"),
+    "Run": ("estimator.geometry", "Run"),
+    "SheathGeometry": ("estimator.geometry", "SheathGeometry"),
     "SheathModel": ("estimator.sheath", "SheathModel"),
     "Phase": ("estimator.phase", "Phase"),
     "PhaseFormulaEstimator": ("estimator.capstan", "PhaseFormulaEstimator"),
@@ -96,6 +96,7 @@ if TYPE_CHECKING:       # the same names, for type checkers and editors (nothing
     from estimator.capstan import K_from_M_e, PhaseFormulaEstimator, phase_formula_batch
     from estimator.data import MeasuredData, noise_level
     from estimator.errors import CalibrationError, DataError, EstimatorError
+    from estimator.geometry import Run, SheathGeometry
     from estimator.offline.calibration import CalibrationResult, calibrate_joint_limit, detect_knee
     from estimator.offline.calibration import calibrate_joint_limit as calibrate
     from estimator.offline.diagnosis.result import Diagnosis
@@ -111,7 +112,7 @@ if TYPE_CHECKING:       # the same names, for type checkers and editors (nothing
     from estimator.online.spindle import predict_torque as spindle_torque
     from estimator.online.spindle_estimator import SpindleEstimator
     from estimator.phase import Phase
-    from estimator.sheath import Run, SheathGeometry, SheathModel
+    from estimator.sheath import SheathModel
 
 
 def __getattr__(name: str) -> Any:

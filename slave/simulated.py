@@ -10,8 +10,8 @@ import math
 
 import numpy as np
 
+from estimator.geometry import Run, SheathGeometry
 from estimator.kernels import advance_proximal, load_inverse, settle_distal
-from estimator.sheath import Run, SheathGeometry
 from slave.drive import Drive
 from slave.rig import RigInputError, RigState, RigTruth
 from slave.simulated_effects import EffectSwitches, elongation_general

@@ -34,8 +34,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from estimator.data import MeasuredData
+from estimator.geometry import SheathGeometry
 from estimator.offline.effects.catalogue import ALIASES, CATALOGUE, Effect, rig_switches
-from estimator.sheath import SheathGeometry
 from slave.rig import RigState, RigTruth
 from slave.simulated import SimulatedRig
 from study.motion import hand_motion

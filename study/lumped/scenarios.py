@@ -29,8 +29,8 @@ import math
 import numpy as np
 
 from estimator.data import MeasuredData
+from estimator.geometry import SheathGeometry
 from estimator.offline.effects.catalogue import effect
-from estimator.sheath import SheathGeometry
 from study.lumped.protocol import command
 from study.lumped.simulator import Load, LumpedTendon
 from study.motion import hand_motion

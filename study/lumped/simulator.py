@@ -9,7 +9,7 @@ with a bristle friction state per node, so that it can serve as an independent s
   distal node, plus the distal load mass). Element tension from its stretch e_i [m]:
   phi(T_i) = (EA / ds) e_i with phi(T) = T + beta T_c (1 - e^{-T/T_c}) (beta = 0: linear); a
   tendon cannot push, T_i = 0 for e_i <= 0.
-* Route: straight runs and arcs (:class:`estimator.sheath.SheathGeometry`, geometry only); node i
+* Route: straight runs and arcs (:class:`estimator.geometry.SheathGeometry`, geometry only); node i
   carries the wrap angle dtheta_i of the route over [s_i - ds/2, s_i + ds/2] (node 0 also the
   first half element, the distal node the last half).
 * Friction of node i: normal force N_i = Tbar_i dtheta_i + (q + rho g) ds_i (Tbar_i the mean tension
@@ -51,7 +51,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from estimator.sheath import SheathGeometry
+from estimator.geometry import SheathGeometry
 from study.lumped.kernel import simulate
 
 __all__ = ["Load", "LumpedTendon", "LOAD_KINDS"]

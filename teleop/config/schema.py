@@ -15,7 +15,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Literal
 
-from estimator.sheath import Run, SheathGeometry
+from estimator.geometry import Run, SheathGeometry
 from teleop.config.effects import EffectsConfig
 from teleop.config.recording_rig import RecordingRigConfig
 

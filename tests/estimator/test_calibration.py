@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 
 from estimator.errors import CalibrationError
+from estimator.geometry import Run, SheathGeometry
 from estimator.offline.calibration import calibrate_joint_limit, detect_knee
-from estimator.sheath import Run, SheathGeometry, SheathModel
+from estimator.sheath import SheathModel
 
 L, EA = 1.5, 15000.0
 

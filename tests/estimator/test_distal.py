@@ -4,9 +4,10 @@ import math
 import numpy as np
 import pytest
 
+from estimator.geometry import SheathGeometry
 from estimator.online.distal import DistalEstimator, estimate_batch
 from estimator.phase import Phase
-from estimator.sheath import SheathGeometry, SheathModel
+from estimator.sheath import SheathModel
 
 
 def test_online_equals_batch_on_noisy_history():
@@ -117,7 +118,7 @@ def test_noise_band_stops_the_estimate_latching_load_cell_noise():
     closer to the true distal tension, and its mean error is under a third of the envelope's (docs/concepts/model.md:
     a 53 % cut and a 7x smaller bias over 24 such recordings)."""
     from estimator.data import noise_level
-    from estimator.sheath import SheathGeometry as G
+    from estimator.geometry import SheathGeometry as G
     from slave.calibrate import wrap_shape
     from study.lumped.scenarios import record
     rec = record(None, seed=2900508, level=0.2, duration=30.0)

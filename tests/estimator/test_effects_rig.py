@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from estimator.geometry import SheathGeometry
 from estimator.offline.effects import catalogue as effects_module
 from estimator.offline.effects.catalogue import (
     predict,
@@ -16,7 +17,6 @@ from estimator.offline.effects.catalogue import (
 from estimator.offline.effects.types import (
     Series,
 )
-from estimator.sheath import SheathGeometry
 from slave.simulated import SimulatedRig
 from study.scenarios import protocol
 from teleop.config.effects import EffectsConfig, EffectSwitch

@@ -4,7 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from estimator.sheath import Run, SheathGeometry, SheathModel, profile_batch, profile_update, pull_elongation_factor
+from estimator.geometry import Run, SheathGeometry
+from estimator.sheath import SheathModel, profile_batch, profile_update, pull_elongation_factor
 
 
 def test_total_angle_and_K_from_runs():

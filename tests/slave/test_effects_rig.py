@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from estimator.sheath import SheathGeometry
+from estimator.geometry import SheathGeometry
 from slave.simulated import SimulatedRig
 from slave.simulated_effects import EFFECT_IDS
 from study.scenarios import realistic_range, record

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from estimator.sheath import SheathGeometry
+from estimator.geometry import SheathGeometry
 from slave.rig import Rig, RigState
 from slave.simulated import SimulatedRig
 from teleop.config.schema import (

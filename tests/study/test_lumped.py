@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from estimator.sheath import SheathGeometry, SheathModel, profile_batch
+from estimator.geometry import SheathGeometry
+from estimator.sheath import SheathModel, profile_batch
 from study.lumped.simulator import Load, LumpedTendon
 
 L, ANGLE, K, EA = 1.5, 2.0 * math.pi, 0.8, 15000.0

@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from estimator.sheath import SheathGeometry, SheathModel
+from estimator.geometry import SheathGeometry
+from estimator.sheath import SheathModel
 from study.lumped.scenarios import EFFECT_IDS, UNCATALOGUED, record
 from study.lumped.simulator import Load, LumpedTendon
 from study.scenarios import Recording
