@@ -34,7 +34,8 @@ import numpy as np
 from numba import njit
 
 from estimator.band import NOISE_BAND_SIGMAS, band_batch, band_update
-from estimator.phase import Phase, new_phase_state, readable_step
+from estimator.phase import Phase
+from estimator.readable_phase import new_phase_state, readable_step
 from estimator.sheath import SheathModel, profile_batch, profile_update
 
 __all__ = ["DistalEstimator", "DistalSample", "BatchEstimate", "estimate_batch", "classify_phase", "smoothed_velocity",

@@ -13,7 +13,7 @@ from numba import njit
 from estimator.band import band_update
 from estimator.distal_slip import distal_clip, distal_tension, elongation
 from estimator.online.distal import velocity_step
-from estimator.phase import readable_step
+from estimator.readable_phase import readable_step
 from estimator.sheath import profile_update
 
 __all__ = ["couple", "weighted_angle", "step_pair"]

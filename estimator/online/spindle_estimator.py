@@ -19,7 +19,8 @@ import numpy as np
 from numba import njit
 
 from estimator.online.spindle import N_NODES, OMEGA_S, SpindleParams
-from estimator.phase import Phase, new_phase_state, readable_step
+from estimator.phase import Phase
+from estimator.readable_phase import new_phase_state, readable_step
 from estimator.sheath import envelope_clip
 
 __all__ = ["SpindleSample", "SpindleEstimator"]

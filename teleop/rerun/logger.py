@@ -18,7 +18,7 @@ Entity layout::
     elongation/<name>      Scalars   names starting with "elongation" [m]
     displacement/<name>    Scalars   names starting with "x_" [m]
     signals/<name>         Scalars   anything else
-    phase                  StateChange  the transmission phase label (readable: estimator/phase.py), on change
+    phase                  StateChange  the transmission phase label (readable: estimator/readable_phase.py), on change
     sheath/route           LineStrips3D the sheath route from the config (static, grey), when ``route`` is given
     sheath/tension         LineStrips3D the route coloured by the estimated tension along it [N]
     sheath/tension_true    LineStrips3D the same from the truth, drawn beside it

@@ -1,0 +1,28 @@
+"""A process that reads a configuration and speaks the wire protocol (the master, the recorder, the router, the
+``teleop`` command line itself) loads no compiled code: the sheath's route (:mod:`estimator.geometry`) and the
+phase codes (:mod:`estimator.phase`) are plain Python, and numba, which costs about a third of a second of every
+start, stays out of such a process until something runs a kernel."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+LIGHT = ("live.cli", "teleop.config.schema", "teleop.config.load", "teleop.wire.codec", "master.node_base",
+         "live.record.recorder", "live.router",
+         "live.discovery", "live.faults", "teleop.recording.journal", "estimator.geometry", "estimator.phase")
+
+
+@pytest.mark.parametrize("module", LIGHT)
+def test_a_configuration_and_wire_process_does_not_load_numba(module):
+    code = f"import sys, {module}; print(sorted(m for m in sys.modules if m.split('.')[0] == 'numba')[:3])"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]", (module, out)
+
+
+def test_the_estimator_still_loads_its_kernels():
+    # the counter-check: the modules with compiled code do load numba (the test above can fail)
+    code = "import sys, estimator.sheath; print('numba' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "True"
