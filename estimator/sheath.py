@@ -28,8 +28,6 @@ from numba import njit
 
 from estimator.geometry import SheathGeometry
 
-# the banded update lives in its own module; its names stay importable from here
-
 __all__ = [
     "SheathModel", "envelope_clip", "profile_update", "profile_batch", "pull_elongation_factor",
 ]
