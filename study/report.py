@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from estimator.data import MeasuredData
+from estimator.offline.diagnosis import thresholds as th
 from estimator.offline.diagnosis.fit import predictions
 from estimator.offline.diagnosis.result import Diagnosis, as_diagnosis
 from estimator.offline.effects.catalogue import CATALOGUE
@@ -284,6 +285,11 @@ def _tables(r: Diagnosis) -> list[str]:
         x = c.validation.get("rmse_x_out_m")
         md.append(f"| {k} | {c.score:.3f} | {c.penalised_score:.3f} | {g(c.validation.get('rmse_T_out_N'))} | "
                   f"{'-' if x is None else f'{x * 1e6:.2f}'} | {'yes' if c.accepted else ''} |")
+    if r.screened:
+        listed = ", ".join(f"{k} (share {v['share']:.4f}, price {v['price']:.2f})"
+                           for k, v in sorted(r.screened.items()))
+        md += ["", "Screened at the base, not fitted (their linearised share of the base's residual is below "
+               f"SCREEN_SHARE = {th.SCREEN_SHARE:.2f} of their price): {listed}."]
     if r.equivalent:
         md += ["", f"Equivalent explanations (the same outputs, not separable from these signals): "
                f"{', '.join(r.equivalent)}."]

@@ -120,19 +120,25 @@ def test_distal_tension_only_and_distal_position_only():
 
 def test_result_keys_units_and_json(clean_result):
     rec, res = clean_result
-    for key in ("cause", "causes", "base", "extended", "gain", "parameters", "candidates", "primary_signal",
-                "split", "noise", "structure", "model", "base_model", "settings", "elapsed_s"):
+    for key in ("cause", "causes", "base", "extended", "gain", "parameters", "candidates", "screened",
+                "primary_signal", "split", "noise", "structure", "model", "base_model", "settings", "elapsed_s"):
         assert key in res
     assert set(res["base"]) == {"rmse_T_out_N", "rmse_x_out_m"}
-    # one of each pair of equivalent effects is fitted (they give the same outputs)
-    assert set(res["candidates"]) == set(EFFECT_IDS) - {"sensor_gain:T_out", "sensor_offset:x_out"}
+    # one of each pair of equivalent effects is a candidate (they give the same outputs): fitted, or screened
+    assert set(res["candidates"]) | set(res["screened"]) == set(EFFECT_IDS) - {"sensor_gain:T_out",
+                                                                               "sensor_offset:x_out"}
+    assert not set(res["candidates"]) & set(res["screened"])
     for c in res["candidates"].values():
         assert {"validation_rmse_T_out_N", "validation_rmse_x_out_m", "score", "penalised_score", "accepted",
                 "parameters", "equivalent", "fold_values", "fold_scores", "scored_on"} <= set(c)
         assert 1 <= len(c["fold_scores"]) <= 2 and c["score"] in c["fold_scores"]
+        assert all(p["unit"] for p in c["parameters"].values())
+    for s in res["screened"].values():
+        assert set(s) == {"share", "price"} and 0.0 <= s["share"] < s["price"]
     assert res["parameters"]["compliance"]["unit"] == "m/N"
     assert res["settings"]["pair_rule"] is None          # one cause or none: no step of two causes named it
-    assert res["candidates"]["sensor_lag:T_in"]["parameters"]["tau_T_in"]["unit"] == "s"
+    # a step's instant is not linearised: the friction step is always fitted, its parameters with their units
+    assert res["candidates"]["friction_step"]["parameters"]["t_s"]["unit"] == "s"
     again = json.loads(json.dumps(res))
     assert again["cause"] == res["cause"]
 
@@ -144,7 +150,8 @@ def test_the_typed_result_writes_and_reads_the_same_json_keys(clean_result):
     assert typed.cause == res["cause"] and typed.stick_slip.ratio == res["stick_slip"]["ratio"]
     out = typed.to_json()
     assert list(out) == list(res) and out == res
-    assert list(out["candidates"]["stiction"]) == list(res["candidates"]["stiction"])
+    assert list(out["candidates"]["friction_step"]) == list(res["candidates"]["friction_step"])
+    assert out["screened"] == res["screened"]
     assert as_diagnosis(typed) is typed
     # a key a caller adds (the file name) travels along, after the documented ones
     assert list(Diagnosis.from_json({**res, "file": "run.csv"}).to_json())[-1] == "file"

@@ -32,7 +32,7 @@ def test_a_distal_end_held_on_its_stop_sets_x_out_aside_and_gives_none():
     assert held is not None and held["range_m"] < 0.01 * held["travel_m"]
     assert res["causes"] == [], (res["structure"], {k: c["score"] for k, c in res["candidates"].items()})
     assert set(res["structure"]["base"]) == {"T_out"} and res["base"]["rmse_x_out_m"] is None
-    assert "distal_backlash" not in res["candidates"]
+    assert "distal_backlash" not in res["candidates"] and "distal_backlash" not in res["screened"]
     assert res["parameters"]["K"]["value"] == pytest.approx(rec.truth["K"], rel=0.05)
     assert predictions(res, rec.data)["x_out_base"] is None
 

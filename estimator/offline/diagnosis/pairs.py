@@ -21,7 +21,8 @@ from estimator.offline.diagnosis.folds import Fit, unresolved
 from estimator.offline.diagnosis.readings import speed_or_lag
 from estimator.offline.diagnosis.rules import Context, shown_at_floor, worst
 from estimator.offline.diagnosis.screen import Linearised
-from estimator.offline.effects.catalogue import CATALOGUE
+from estimator.offline.diagnosis.singles import Singles, forms
+from estimator.offline.effects.catalogue import CATALOGUE, Effect
 from estimator.offline.effects.types import ROUTE_KEYS, uniform_route
 
 __all__ = ["consider_pairs", "second_at_floor", "speed_beside_offset", "offset_beside_physical", "PAIR_POOL",
@@ -92,7 +93,7 @@ def consider_pairs(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fit
     return best
 
 
-def second_at_floor(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fit) -> Fit:
+def second_at_floor(ctx: Context, base: Fit, singles: Singles, chosen: Fit) -> Fit:
     """A second cause under the first: where the base leaves structure and one effect brings it to the floor
     (STRUCTURE_RATIO or less), a second effect is named when, beside the first, it passes the bars at the floor with
     the first effect's model as the base.
@@ -107,43 +108,56 @@ def second_at_floor(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fi
     beside a pretension ranks below the encoder offsets and the play that mimic the pretension). A partner must pay
     its parameters (S_rel + PENALTY x its parameters < 1) and be resolved; among those
     the lowest log S_rel + log(RANK_FACTOR) x (its parameters) is kept. A partner whose linearised share of the first
-    model's residual is below SCREEN_SHARE x its price is not fitted (:mod:`estimator.offline.diagnosis.screen`).
+    model's residual is below SCREEN_SHARE x its price is not fitted (:mod:`estimator.offline.diagnosis.screen`); a
+    partner fitted alone is tried in its single fit's form, one screened at the base
+    (:mod:`estimator.offline.diagnosis.singles`), which has no form of its own, in each form whose share passes.
     Returns ``chosen`` or the pair."""
     if (len(chosen.effects) != 1 or worst(base, ctx.floor) <= th.STRUCTURE_RATIO
             or worst(chosen, ctx.floor) > th.STRUCTURE_RATIO):
         return chosen
     first = chosen.effects[0]
     best, best_rank = chosen, 0.0
-    partners = [eid for eid in singles if not CATALOGUE[eid].channel and eid != first.id]
+    partners = [eid for eid in (*singles, *singles.screened) if not CATALOGUE[eid].channel and eid != first.id]
     if not first.channel:
         partners += [eid for eid in _pool(singles, chosen.ids)[:PAIR_POOL] if eid not in partners]
     screen = Linearised(chosen.effects, chosen.values[0], ctx.folds.train, ctx.folds.fit[0])
     for eid in partners:
         e = CATALOGUE[eid]
-        fx = [first, e]
-        kept = {k: v for k, v in singles[eid].values[0].items() if k in settings_keys([e])}
-        if screen.skips(e, kept):
-            continue        # its linearised share of the first model's residual is below its price
-        v0 = {**chosen.values[0], **kept}
-        n = len(e.parameters)
-        f = Fit(fx, ctx.folds, start_points(fx, v0, ctx.s, v0),
-                fixed=[{**{k: v[k] for k in ROUTE_KEYS if k in v}, **kept} for v in chosen.values],
-                base=base, floor=ctx.floor, need=chosen.S * (1.0 - th.PENALTY * n), refined=PAIR_REFINED)
-        if not f.complete and f.sole_fold is None:
-            continue
-        rel = copy.copy(f)
-        rel.S = f.S / max(chosen.S, 1e-12)
-        rank = math.log(max(rel.S, 1e-12)) + math.log(th.RANK_FACTOR) * n
-        if (rel.S + th.PENALTY * n < 1.0 and rank < best_rank and shown_at_floor(ctx, chosen, eid, rel)
-                and not any(unresolved(f.effects, v, ctx.floor) for v in f.values)):
-            best, best_rank = f, rank
+        if eid in singles.screened:     # no form of its own: each form whose share passes
+            held = [form for form in forms(ctx, e) if not screen.skips(e, form)]
+        else:
+            kept = {k: v for k, v in singles[eid].values[0].items() if k in settings_keys([e])}
+            held = [] if screen.skips(e, kept) else [kept]      # below its price: not fitted
+        for kept in held:
+            f, rank = _beside_first(ctx, base, chosen, e, kept)
+            if rank < best_rank:
+                best, best_rank = f, rank
     return best
+
+
+def _beside_first(ctx: Context, base: Fit, chosen: Fit, e: Effect, kept: dict) -> tuple[Fit, float]:
+    """``e`` fitted beside the single effect of ``chosen`` in its form ``kept``, judged as :func:`second_at_floor`
+    asks: (the pair, its rank log S_rel + log(RANK_FACTOR) x (its parameters), inf when it is not named)."""
+    fx = [chosen.effects[0], e]
+    v0 = {**chosen.values[0], **kept}
+    n = len(e.parameters)
+    f = Fit(fx, ctx.folds, start_points(fx, v0, ctx.s, v0),
+            fixed=[{**{k: v[k] for k in ROUTE_KEYS if k in v}, **kept} for v in chosen.values],
+            base=base, floor=ctx.floor, need=chosen.S * (1.0 - th.PENALTY * n), refined=PAIR_REFINED)
+    if not f.complete and f.sole_fold is None:
+        return f, math.inf
+    rel = copy.copy(f)
+    rel.S = f.S / max(chosen.S, 1e-12)
+    rank = math.log(max(rel.S, 1e-12)) + math.log(th.RANK_FACTOR) * n
+    named = (rel.S + th.PENALTY * n < 1.0 and shown_at_floor(ctx, chosen, e.id, rel)
+             and not any(unresolved(f.effects, v, ctx.floor) for v in f.values))
+    return f, rank if named else math.inf
 
 
 _TENSION_OFFSETS = ("sensor_offset:T_in", "sensor_offset:T_out")
 
 
-def speed_beside_offset(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fit, data: MeasuredData) -> Fit:
+def speed_beside_offset(ctx: Context, base: Fit, singles: Singles, chosen: Fit, data: MeasuredData) -> Fit:
     """Velocity friction beside a load-cell offset: the speed term read once the offset is taken off its channel.
 
     Symptom: the chosen model holds an offset of T_in or T_out and no velocity friction, and the speed-or-lag reading
@@ -157,7 +171,7 @@ def speed_beside_offset(ctx: Context, base: Fit, singles: dict[str, Fit], chosen
     explains some of what the offset leaves (S below the offset's alone) and is resolved. Returns the pair or
     ``chosen``."""
     first = next((e for e in chosen.effects if e.id in _TENSION_OFFSETS), None)
-    if first is None or "velocity_friction" in chosen.ids or "velocity_friction" not in singles \
+    if first is None or "velocity_friction" in chosen.ids or not singles.has("velocity_friction") \
             or first.id not in singles:
         return chosen
     channel = first.id.split(":")[1]
@@ -168,6 +182,7 @@ def speed_beside_offset(ctx: Context, base: Fit, singles: dict[str, Fit], chosen
     if (reading is None or reading["delay"] >= th.HAND_LAG_MIN or reading["speed_t"] < th.HAND_T_MIN
             or reading["speed"] < th.HAND_SPEED_MIN * max(reading["K"], 0.05)):
         return chosen
+    singles.need("velocity_friction")
     f = _pair_fit(ctx, base, singles, first.id, "velocity_friction")
     if f.S < singles[first.id].S and not any(unresolved(f.effects, v, ctx.floor) for v in f.values):
         return f

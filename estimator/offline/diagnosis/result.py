@@ -118,6 +118,7 @@ class Diagnosis:
     settings: dict
     elapsed_s: float
     extra: dict = field(default_factory=dict)
+    screened: dict[str, dict[str, float]] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         """The JSON object (a dict of str, numbers, lists, dicts and None), keys in the documented order; keys a
@@ -125,7 +126,8 @@ class Diagnosis:
         return {"cause": self.cause, "causes": self.causes, "equivalent": self.equivalent, "base": self.base,
                 "extended": self.extended, "gain": self.gain, "primary_signal": self.primary_signal,
                 "parameters": self.parameters,
-                "candidates": {k: c.to_json() for k, c in self.candidates.items()}, "split": self.split,
+                "candidates": {k: c.to_json() for k, c in self.candidates.items()}, "screened": self.screened,
+                "split": self.split,
                 "noise": self.noise, "structure": self.structure, "stick_slip": self.stick_slip.to_json(),
                 "rest_offset": self.rest_offset.to_json(), "model": self.model.to_json(),
                 "base_model": self.base_model.to_json(), "settings": self.settings, "elapsed_s": self.elapsed_s,
@@ -151,7 +153,7 @@ class Diagnosis:
                    {k: Candidate.from_json(c) for k, c in d["candidates"].items()}, d["split"], d["noise"],
                    d["structure"], StickSlip(**d["stick_slip"]), RestOffset(**d["rest_offset"]),
                    Model(**d["model"]), Model(**d["base_model"]), d["settings"], d["elapsed_s"],
-                   {k: v for k, v in d.items() if k not in known})
+                   {k: v for k, v in d.items() if k not in known | {"screened"}}, dict(d.get("screened", {})))
 
 
 def as_diagnosis(result: Diagnosis | dict) -> Diagnosis:

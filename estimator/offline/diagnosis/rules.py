@@ -24,10 +24,11 @@ from estimator.offline.diagnosis.readings import (
     speed_or_lag,
     toe_or_play,
 )
+from estimator.offline.diagnosis.singles import Singles
 from estimator.offline.effects.catalogue import CATALOGUE, EQUIVALENT, Effect
 from estimator.offline.effects.types import ROUTE_FORMS, ROUTE_KEYS, UNKNOWN, Series, finer_route, uniform_route
 
-__all__ = ["Context", "noise_floors", "candidate_effects", "refine_route", "fit_candidates", "refit_routes",
+__all__ = ["Context", "noise_floors", "candidate_effects", "refine_route", "refit_routes",
            "select", "shown_at_floor", "stick_slip_rule", "rest_rule", "report_channels", "verdict",
            "pretension_at_rest", "speed_or_delay", "speed_or_delay_alone"]
 
@@ -110,22 +111,6 @@ def refine_route(ctx: Context, base: Fit, alone: dict[str, Fit]) -> Fit:
     return base
 
 
-def fit_candidates(ctx: Context, cands: list[Effect], base: Fit) -> dict[str, Fit]:
-    """Every candidate fitted alone on the base's route; an effect with several forms (its held ``variants``, e.g.
-    where pre-sliding sits) keeps its best."""
-    shape = [{k: v[k] for k in ROUTE_KEYS if k in v} for v in base.values]
-    singles: dict[str, Fit] = {}
-    for e in cands:
-        for var in [v for v in e.variants if e.variant_ok(v, ctx.signals)] or [{}]:
-            f = Fit([e], ctx.folds, start_points([e], base.values[0], ctx.s, var),
-                    fixed=[{**sh, **var} for sh in shape], base=base, floor=ctx.floor,
-                    need=1.0 - th.PENALTY * len(e.parameters))
-            if e.id not in singles or f.S < singles[e.id].S:
-                singles[e.id] = f
-        ctx.bar(e.id)
-    return singles
-
-
 def _refit_route_free(ctx: Context, eid: str, singles: dict[str, Fit], base: Fit) -> None:
     """Refit one candidate with the route shares free, from its fitted values, from the uniform route (the base's
     route, bent by what it lacks, can sit in a corner) and from the uniform route with a parameter read at the
@@ -163,7 +148,7 @@ def _on_finer_routes(ctx: Context, singles: dict[str, Fit], base: Fit, alone: di
                 singles[eid] = f
 
 
-def refit_routes(ctx: Context, singles: dict[str, Fit], base: Fit, alone: dict[str, Fit]) -> None:
+def refit_routes(ctx: Context, singles: Singles, base: Fit, alone: dict[str, Fit]) -> None:
     """Route refits: an effect the base lacks distorts the base's fitted route, and its fit on that route may gain
     nothing. Symptom and remedy, in turn:
 
@@ -173,18 +158,25 @@ def refit_routes(ctx: Context, singles: dict[str, Fit], base: Fit, alone: dict[s
       bend the route so that it scores above 1 on it);
     * when still none does, the best few on the finer routes (an effect whose model needs the wrap where it is:
       the drift of a load cell on a route of one arc).
+
+    The candidates screened at the base (:mod:`estimator.offline.diagnosis.singles`) are fitted first where every
+    candidate is refitted (the first two cases): their single fit on the base's route can gain nothing either.
     """
     if not ctx.route:
         return
+    none_acceptable = (min((f.S + th.PENALTY * f.n_params for f in singles.values()), default=1.0) >= 1.0
+                       and worst(base, ctx.floor) > th.STRUCTURE_RATIO)
+    if none_acceptable:
+        singles.complete()
     polish = sorted(singles, key=lambda k: singles[k].S)[:th.POLISH]
-    if (min(f.S + th.PENALTY * f.n_params for f in singles.values()) >= 1.0
-            and worst(base, ctx.floor) > th.STRUCTURE_RATIO):
+    if none_acceptable:
         polish += [eid for eid in singles if eid not in polish]
     for j, eid in enumerate(polish):
         _refit_route_free(ctx, eid, singles, base)
         if j < th.POLISH:
             ctx.bar(f"{eid}, route")
     if _none_explains(ctx, singles, base):
+        singles.complete()
         for eid in [eid for eid in singles if eid not in polish]:
             _refit_route_free(ctx, eid, singles, base)
     if _none_explains(ctx, singles, base):
@@ -232,7 +224,7 @@ def _prices(ctx: Context, trial: dict[str, Fit], chosen: Fit, at_floor: bool) ->
             for eid, p in price.items()}
 
 
-def select(ctx: Context, base: Fit, singles: dict[str, Fit], max_effects: int, data: MeasuredData) -> Fit:
+def select(ctx: Context, base: Fit, singles: Singles, max_effects: int, data: MeasuredData) -> Fit:
     """Forward selection on the validation blocks, with a price per parameter relative to the model so far.
 
     An extension is acceptable when its price is below 1; among those, the lowest log S + log(RANK_FACTOR) per extra
@@ -309,7 +301,7 @@ def speed_or_delay(best: str, price: dict[str, float], data: MeasuredData) -> st
     return "sensor_lag:T_out" if reading["delay"] >= th.HAND_LAG_MIN else "velocity_friction"
 
 
-def speed_or_delay_alone(chosen: Fit, base: Fit, singles: dict[str, Fit], data: MeasuredData) -> Fit:
+def speed_or_delay_alone(chosen: Fit, base: Fit, singles: Singles, data: MeasuredData) -> Fit:
     """Velocity friction or a distal load-cell lag at the floor, where the models named nothing: two signs together.
 
     Symptom: the speed-or-lag reading (:func:`estimator.offline.diagnosis.readings.speed_or_lag`, training block)
@@ -320,7 +312,7 @@ def speed_or_delay_alone(chosen: Fit, base: Fit, singles: dict[str, Fit], data: 
     mostly holds it shows on a few seconds of slip: there the reading measures it over every slip sample, while the
     fit's score, over every sample of the blocks, is diluted by the holds where both models agree. A clean recording
     shows neither term. Returns the named single or ``chosen``."""
-    if chosen is not base or not all(e in singles for e in _SPEED_OR_LAG):
+    if chosen is not base or not all(singles.has(e) for e in _SPEED_OR_LAG):
         return chosen
     reading = speed_or_lag(data)
     if reading is None:
@@ -331,7 +323,8 @@ def speed_or_delay_alone(chosen: Fit, base: Fit, singles: dict[str, Fit], data: 
         eid = "velocity_friction"
     else:
         return chosen
-    return singles[eid] if singles[eid].S < th.HAND_WEAK_SCORE else chosen
+    f = singles.need(eid)
+    return f if f is not None and f.S < th.HAND_WEAK_SCORE else chosen
 
 
 def stick_slip_rule(ctx: Context, chosen: Fit, singles: dict[str, Fit], chatter: float | None

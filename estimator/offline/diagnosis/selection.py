@@ -8,7 +8,8 @@
 2. the noise floor of each distal signal, from the recording itself;
 3. the base model (profile memory with K, L/EA and the route shares) fitted on each fold, on a finer route when
    the coarse one leaves structure;
-4. every extension of the catalogue (:mod:`estimator.offline.effects.catalogue`) the recording can show, fitted alone;
+4. every extension of the catalogue (:mod:`estimator.offline.effects.catalogue`) the recording can show, fitted alone
+   (one a linearised screen at the base prices out when a step needs it: :mod:`estimator.offline.diagnosis.singles`);
 5. its score S against the base on the validation blocks (the worse fold counts),
 
        S = sum_signals (rms_ext / floor)^2 / sum_signals (rms_base / floor)^2;
@@ -32,10 +33,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from estimator.data import MeasuredData
+from estimator.data import MeasuredData, noise_level
 from estimator.offline.diagnosis import thresholds as th
 from estimator.offline.diagnosis.fit import SIGNALS, Progress, fit_model, prepare, raw_rmse, split_at_rest
-from estimator.data import noise_level
 from estimator.offline.diagnosis.folds import (FORM_NAME, UNITS, Fit, Folds, gain, parameters_table, route_of,
                                                structure)
 from estimator.offline.diagnosis.pairs import (
@@ -47,12 +47,12 @@ from estimator.offline.diagnosis.pairs import (
 from estimator.offline.diagnosis.readings import (distal_at_end, distal_end_held, rest_offset, rest_reading,
                                                   sample_block, stick_slip_ratio)
 from estimator.offline.diagnosis.result import Candidate, Diagnosis, Model, RestOffset, StickSlip
-from estimator.offline.diagnosis.rules import (Context, candidate_effects, fit_candidates, noise_floors,
-                                               refine_route, refit_routes, rest_rule, select, stick_slip_rule,
-                                               report_channels, verdict)
+from estimator.offline.diagnosis.rules import (Context, candidate_effects, noise_floors, refine_route,
+                                               refit_routes, rest_rule, report_channels, select, stick_slip_rule,
+                                               verdict, worst)
+from estimator.offline.diagnosis.singles import Singles
 from estimator.offline.effects.catalogue import CATALOGUE, EQUIVALENT, NOISE_BAND, Effect, effect, predict
-from estimator.offline.effects.types import NONE, Series
-from estimator.offline.effects.types import UNKNOWN
+from estimator.offline.effects.types import NONE, UNKNOWN, Series
 
 __all__ = ["diagnose", "diagnose_recording"]
 
@@ -166,19 +166,27 @@ def diagnose_recording(data: MeasuredData, *, train_fraction: float = 0.6, progr
                   bar, th.FLOOR_SCORE_WITHOUT.get(missing, {}), th.EXCESS_MIN_WITHOUT.get(missing, th.EXCESS_MIN))
     alone: dict[str, Fit] = {}          # the finer routes fitted without an effect
     base = refine_route(ctx, base, alone)
-    # 4-5. every candidate alone, scored against the base; route refits where what the base lacks bent its route
-    singles = fit_candidates(ctx, cands, base)
-    refit_routes(ctx, singles, base, alone)
-    # 6. selection, then the model-free readings: stick-slip on the training block, the encoders at the initial rest
-    chosen = select(ctx, base, singles, max_effects, used)
-    pair_rule = None
-    if max_effects >= 2:
-        chosen, pair_rule = _two_causes(ctx, base, singles, chosen, used.slice(0, blocks.n_train(used)))
-    paired = chosen
+    # the model-free readings: stick-slip on the training block, the encoders at the initial rest
     i_t = blocks.n_train(used)
     chatter = stick_slip_ratio(used.time[:i_t], used.x_in[:i_t], used.T_in[:i_t])
+    off_zero = rest_offset(used)
+    keep = ({"stiction"} if chatter is not None and chatter >= th.STICK_SLIP_WEAK else set()) \
+        | ({off_zero, *EQUIVALENT.get(off_zero, ())} if off_zero else set())
+    # 4-5. every candidate alone (those screened at the base on demand), scored against the base; route refits where
+    # what the base lacks bent its route
+    singles = Singles.screen(ctx, base, cands, keep)
+    refit_routes(ctx, singles, base, alone)
+    # 6. selection (on every candidate where the model chosen leaves structure), the steps of two causes, the readings
+    chosen = select(ctx, base, singles, max_effects, used)
+    if singles.screened and min(worst(chosen, ctx.floor), worst(base, ctx.floor)) > th.STRUCTURE_RATIO:
+        singles.complete()
+        chosen = select(ctx, base, singles, max_effects, used)
+    pair_rule = None
+    if max_effects >= 2:
+        chosen, pair_rule = _two_causes(ctx, base, singles, chosen, used.slice(0, i_t))
+    paired = chosen
     chosen, by_chatter, weak, overruled = stick_slip_rule(ctx, chosen, singles, chatter)
-    chosen, by_rest = rest_rule(chosen, singles, off_zero := rest_offset(used))
+    chosen, by_rest = rest_rule(chosen, singles, off_zero)
     pair_rule = pair_rule if chosen is paired else None
     # 7-8. the base and the chosen model refitted on the training block, the test block used once
     final_base, final = _refit(ctx, base, chosen, full.slice(int(np.searchsorted(full.time, blocks.t_split))))
@@ -200,7 +208,7 @@ def diagnose_recording(data: MeasuredData, *, train_fraction: float = 0.6, progr
     return result
 
 
-def _two_causes(ctx: Context, base: Fit, singles: dict[str, Fit], chosen: Fit, train: MeasuredData
+def _two_causes(ctx: Context, base: Fit, singles: Singles, chosen: Fit, train: MeasuredData
                 ) -> tuple[Fit, str | None]:
     """The steps of two causes at once in turn (:mod:`estimator.offline.diagnosis.pairs`) on the model the forward
     selection chose; ``train``: the training block's samples. Returns the model kept and the name of the last step
@@ -328,7 +336,7 @@ def _candidate(f: Fit, accepted: bool) -> Candidate:
 
 
 def _result(ctx: Context, s: Series, data: MeasuredData, blocks: _Blocks, base: Fit, chosen: Fit,
-            singles: dict[str, Fit], final_base: tuple[dict, float], final: tuple[dict, float], causes: list[str],
+            singles: Singles, final_base: tuple[dict, float], final: tuple[dict, float], causes: list[str],
             equivalent: list[str], rename: dict) -> Diagnosis:
     """Step 8 and the result: both refitted models run once over the series ``s`` at the full rate, judged on the test
     block (measured samples), the gain on the chosen model's primary signal; the readings and settings are filled in
@@ -344,7 +352,8 @@ def _result(ctx: Context, s: Series, data: MeasuredData, blocks: _Blocks, base: 
         cause=causes[0] if causes else NONE, causes=causes, equivalent=equivalent, base=base_raw, extended=ext_raw,
         gain=(gain(ext_raw, base_raw, prim) or 0.0) if chosen.effects else 0.0, primary_signal=prim,
         parameters=parameters_table(chosen.effects, final[0], final[1], rename),
-        candidates={eid: _candidate(f, eid in chosen.ids) for eid, f in singles.items()},
+        candidates={eid: _candidate(singles[eid], eid in chosen.ids) for eid in singles.effects if eid in singles},
+        screened={eid: dict(v) for eid, v in singles.screened.items()},
         split=blocks.to_json(data, blocks.folds.judged),
         noise={**{f"{k}_{UNITS[k]}": v for k, v in sensor_raw.items()}, "T_in_N": s.sigma_T_in,
                **{f"floor_{k}_{UNITS[k]}": v for k, v in ctx.floor.items()}},

@@ -31,7 +31,8 @@ RANK_FACTOR = 2.0           # [-] among acceptable extensions, each extra parame
 SECOND_ROUND = 6            # [count] best single extensions tried together with the first accepted one
 #: [-] a second cause beside the first at its floor is fitted only when its linearised share of the fit block's cost
 #: (:mod:`estimator.offline.diagnosis.screen`) reaches this much of its price (PENALTY per parameter): a safety factor
-#: of 3 on the linear model (the partners named on the development recordings remove 1.3-2.9 times their price in it)
+#: of 3 on the linear model (the partners named on the development recordings remove 1.3-2.9 times their price in it).
+#: The same bound screens the single candidates at the base (:mod:`estimator.offline.diagnosis.singles`)
 SCREEN_SHARE = 1.0 / 3.0
 POLISH = 3                  # [count] best single extensions refitted with the route shares free
 STRUCTURE_RATIO = 3.0       # [-] validation rmse / noise floor above this on a signal: structure is left
