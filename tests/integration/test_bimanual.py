@@ -70,10 +70,13 @@ def _last_time(path: Path) -> float:
     return float(rows[-1][0]) if rows else -np.inf
 
 
-def _tracking(path: Path, n: int = 100) -> bool:
-    """Whether the master recording's last ``n`` rows are all ENGAGED (the arm tracks)."""
+def _tracking(path: Path, n: int = 1000, last: int = 200) -> bool:
+    """Whether the arm tracks steadily: the master recording holds ``n`` rows past its start, at least ``RIDE`` of
+    them ENGAGED, and its last ``last`` rows all ENGAGED. A stall's SAFE moment (up to 50 ms a second on this
+    machine) may fall anywhere in the ``n`` rows but not just before the fault."""
     rows = _tail(path, n)
-    return len(rows) == n and all(int(float(r[1])) == int(SideState.ENGAGED) for r in rows)
+    engaged = [int(float(r[1])) == int(SideState.ENGAGED) for r in rows]
+    return len(rows) == n and all(engaged[-last:]) and sum(engaged) >= RIDE * n
 
 
 def _config(tmp_path: Path, port: int, side: str, csv_every: int) -> Path:
@@ -98,7 +101,7 @@ def test_stale_estimate_on_left_arm_makes_it_safe_and_right_arm_keeps_tracking(t
     port = free_tcp_port()
     run = tmp_path / "run"
     ep = f"tcp/127.0.0.1:{port}"
-    common = ["--run-dir", str(run), "--max-duration", "20"]
+    common = ["--run-dir", str(run), "--max-duration", "60"]     # a bound; the test stops both with SIGINT
     # the master's timing reads every row of its CSVs; the slave's are read for their state, at the default rate
     slave_cfg, master_cfg = _config(tmp_path, port, "slave", 10), _config(tmp_path, port, "master", 1)
     _calibrate(slave_cfg)
@@ -116,7 +119,7 @@ def test_stale_estimate_on_left_arm_makes_it_safe_and_right_arm_keeps_tracking(t
         procs.append(master)
         # a second of steady tracking: the first moments after engaging can hold a start-up stall (its command echo
         # goes stale and the arm goes SAFE, then engages again), which would leave the left arm SAFE at the fault
-        wait_for(lambda: all(_tracking(run / i / "master.csv", 1000) for i in ("notes_left", "notes_right")), 45.0,
+        wait_for(lambda: all(_tracking(run / i / "master.csv") for i in ("notes_left", "notes_right")), 45.0,
                  "both arms tracking")
         t_signal = time.monotonic()     # the clock of the recordings' time column (one machine)
         slave.send_signal(signal.SIGUSR1)
