@@ -96,17 +96,27 @@ def test_the_rules_name_what_the_readings_show():
     assert speed_or_delay("pretension", price, _capstan(t, x, c_v=20.0)) == "pretension"
 
 
+class _Fitted(dict):
+    """Single candidates all fitted, as the rules read them (estimator.offline.diagnosis.singles.Singles)."""
+
+    def has(self, eid: str) -> bool:
+        return eid in self
+
+    def need(self, eid: str):
+        return self.get(eid)
+
+
 def test_at_the_floor_the_reading_and_a_weak_fit_together_name_the_effect():
     from types import SimpleNamespace
 
     from estimator.offline.diagnosis.rules import speed_or_delay_alone
     t, x = _moves(6)
     base = SimpleNamespace(S=1.0)
-    singles = {"velocity_friction": SimpleNamespace(S=0.8), "sensor_lag:T_out": SimpleNamespace(S=0.85)}
+    singles = _Fitted({"velocity_friction": SimpleNamespace(S=0.8), "sensor_lag:T_out": SimpleNamespace(S=0.85)})
     assert speed_or_delay_alone(base, base, singles, _capstan(t, x, c_v=20.0)) is singles["velocity_friction"]
     assert speed_or_delay_alone(base, base, singles, _capstan(t, x, lag=0.02)) is singles["sensor_lag:T_out"]
     assert speed_or_delay_alone(base, base, singles, _capstan(t, x)) is base                 # clean: neither sign
-    weak = {k: SimpleNamespace(S=1.02) for k in singles}                                      # the fit explains nothing
+    weak = _Fitted({k: SimpleNamespace(S=1.02) for k in singles})                             # the fit explains nothing
     assert speed_or_delay_alone(base, base, weak, _capstan(t, x, c_v=20.0)) is base
     named = SimpleNamespace(S=0.3)
     assert speed_or_delay_alone(named, base, singles, _capstan(t, x, c_v=20.0)) is named     # the models named one
@@ -143,7 +153,7 @@ def test_a_speed_term_within_its_standard_error_names_nothing_at_the_floor(monke
     from estimator.offline.diagnosis import rules
     t, x = _mostly_holds(10)
     base = SimpleNamespace(S=1.0)
-    singles = {"velocity_friction": SimpleNamespace(S=0.97), "sensor_lag:T_out": SimpleNamespace(S=0.99)}
+    singles = _Fitted({"velocity_friction": SimpleNamespace(S=0.97), "sensor_lag:T_out": SimpleNamespace(S=0.99)})
     shown = _capstan(t, x, c_v=8.0)
     assert rules.speed_or_delay_alone(base, base, singles, shown) is singles["velocity_friction"]
     assert rules.speed_or_delay_alone(base, base, singles, _capstan(t, x)) is base
