@@ -221,12 +221,11 @@ def offset_beside_physical(ctx: Context, base: Fit, singles: dict[str, Fit], cho
         return chosen
     physical = chosen.effects[0]
     uniform, alone = uniform_route(ctx.route), {**singles, physical.id: chosen}
-    forms = [v for v in physical.variants if physical.variant_ok(v, ctx.signals)] or [{}]
     best, best_rank = chosen, _rank(chosen)
     for offset in (eid for eid in _TENSION_OFFSETS if eid in singles):
         fx = [physical, CATALOGUE[offset]]
         held, need = settings_keys(fx), 1.0 - th.PENALTY * sum(len(e.parameters) for e in fx)
-        for form in forms:
+        for form in forms(ctx, physical):
             v0 = {**singles[offset].values[0], **chosen.values[0], **form}
             kept = {k: v for k, v in v0.items() if k in held}
             starts = [v0, {**v0, **uniform}]
