@@ -20,7 +20,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from estimator.data import MeasuredData
-from estimator.offline.diagnosis import thresholds as th
 from estimator.offline.diagnosis.fit import predictions
 from estimator.offline.diagnosis.result import Diagnosis, as_diagnosis
 from estimator.offline.effects.catalogue import CATALOGUE
@@ -289,7 +288,7 @@ def _tables(r: Diagnosis) -> list[str]:
         listed = ", ".join(f"{k} (share {v['share']:.4f}, price {v['price']:.2f})"
                            for k, v in sorted(r.screened.items()))
         md += ["", "Screened at the base, not fitted (their linearised share of the base's residual is below "
-               f"SCREEN_SHARE = {th.SCREEN_SHARE:.2f} of their price): {listed}."]
+               f"{r.settings['screen_share']:.2f} of their price): {listed}."]
     if r.equivalent:
         md += ["", f"Equivalent explanations (the same outputs, not separable from these signals): "
                f"{', '.join(r.equivalent)}."]
