@@ -84,7 +84,7 @@ class NodeBase:
     """
 
     side: Side
-    log: logging.Logger
+    log: logging.Logger | logging.LoggerAdapter[logging.Logger]
 
     links: Any                                 # the subclass's links (``heartbeat`` at least)
 

@@ -17,6 +17,9 @@ The group times each arm's step (:meth:`arm_step_stats`: p50, p99, max [ms]) so 
 in the shared period is visible, and after the loop gives each node the loop's pacer figures, so
 each arm's stats read like a single instrument's. The group's own state, which only labels the loop's
 per-state figures, is ENGAGED while any arm is, else the first arm's.
+
+Each arm's node logs under its arm's name (:class:`ArmLog`): ``[master] INFO right master ENGAGED -> SAFE at ...:
+command echo stale`` says which arm went safe, where both arms share one process's log.
 """
 from __future__ import annotations
 
@@ -32,7 +35,15 @@ from teleop.node import NodeBase
 from teleop.timing.clock import Clock
 from teleop.wire.messages import Side, SideState
 
-__all__ = ["NodeGroup"]
+__all__ = ["ArmLog", "NodeGroup"]
+
+
+class ArmLog(logging.LoggerAdapter[logging.Logger]):
+    """One arm's node log in a process that runs several arms: the arm's name (``extra["arm"]``) before each
+    message."""
+
+    def process(self, msg: Any, kwargs: Any) -> tuple[Any, Any]:
+        return f"{self.extra['arm']} {msg}" if self.extra else msg, kwargs
 
 
 class NodeGroup(NodeBase):
@@ -62,6 +73,9 @@ class NodeGroup(NodeBase):
         super().__init__(heartbeat_hz=1.0)        # each arm's node sends its own heartbeats
         self.nodes = list(nodes)
         self.names = tuple(names)
+        for node, name in zip(self.nodes, self.names, strict=True):
+            base = node.log if isinstance(node.log, logging.Logger) else node.log.logger
+            node.log = ArmLog(base, {"arm": name})
         self.side = side
         self.cfg = cfg
         self.log = logging.getLogger(f"teleop.{side.name.lower()}")

@@ -2,6 +2,8 @@
 any arm's second phase, done arms left alone, stats per arm."""
 from __future__ import annotations
 
+import logging
+
 import pytest
 
 from teleop.node import NodeBase
@@ -12,6 +14,7 @@ from teleop.wire.messages import Side, SideState
 
 class Arm(NodeBase):
     side = Side.SLAVE
+    log = logging.getLogger("teleop.slave")
 
     def __init__(self, steps: int, name: str = "", events: list | None = None):
         super().__init__(heartbeat_hz=50.0)
@@ -72,3 +75,15 @@ def test_every_arm_sends_before_any_arm_records():
     a.events.clear()
     a.step(0.0)                                                 # a node alone: both phases in one step
     assert events == [("send", "left"), ("after", "left")]
+
+
+def test_each_arm_logs_under_its_name(caplog):
+    a, b = Arm(1), Arm(1)
+    NodeGroup([a, b], ["left", "right"], Side.SLAVE, 1000.0)
+    with caplog.at_level(logging.INFO, logger="teleop.slave"):
+        b._set_state(SideState.SAFE, None, "estimate stale")
+        a._warn(1.0, "slave: %s", "a tendon at its limit")
+    assert [r.getMessage() for r in caplog.records] == [
+        "right slave STARTING -> SAFE at start-up: estimate stale",
+        "left slave: a tendon at its limit"]
+    assert Arm.log.name == "teleop.slave" and not isinstance(Arm.log, logging.LoggerAdapter)   # the class's own
