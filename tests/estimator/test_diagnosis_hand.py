@@ -118,6 +118,9 @@ def test_at_the_floor_the_reading_and_a_weak_fit_together_name_the_effect():
     assert speed_or_delay_alone(base, base, singles, _capstan(t, x)) is base                 # clean: neither sign
     weak = _Fitted({k: SimpleNamespace(S=1.02) for k in singles})                             # the fit explains nothing
     assert speed_or_delay_alone(base, base, weak, _capstan(t, x, c_v=20.0)) is base
+    # a fit that gives the base back (its lag at zero) is below 1 by less than the model choice's resolution
+    back = _Fitted({k: SimpleNamespace(S=1.0 - 1e-6) for k in singles})
+    assert speed_or_delay_alone(base, base, back, _capstan(t, x, lag=0.02)) is base
     named = SimpleNamespace(S=0.3)
     assert speed_or_delay_alone(named, base, singles, _capstan(t, x, c_v=20.0)) is named     # the models named one
 

@@ -111,7 +111,10 @@ HAND_MIN_SLIP_S = 0.5       # [s] least slip time for the speed-or-lag reading t
 HAND_LAG_MIN = 0.004        # [s] a delay of T_out behind the capstan ratio from this up is a lag, below it none
 HAND_SPEED_MIN = 4.0        # [s/m] c_v = speed term / K from this up: friction rising with sliding speed
 HAND_T_MIN = 3.0            # [-] a term of the speed-or-lag reading this many standard errors from zero is read
-HAND_WEAK_SCORE = 1.0       # [-] at the floor, the reading names its effect when that extension's S is below this
+#: [-] at the floor, the reading names its effect when that extension's S is below this: below the base by more than
+#: the model choice's own resolution (a fit stopped at CHOICE_TOL moves S by up to sqrt(CHOICE_TOL), 0.3 %), so that
+#: an extension that fits the base back (its lag or its speed term at zero) is not read as one that explains something
+HAND_WEAK_SCORE = 1.0 - math.sqrt(CHOICE_TOL)
 
 
 def floor_scores(clean: Iterable[Mapping[str, float]], factor: float = FLOOR_FACTOR,
