@@ -29,7 +29,6 @@ import math
 
 import numpy as np
 from numba import njit
-from scipy.optimize import newton
 
 from estimator.phase import Phase
 
@@ -126,6 +125,8 @@ def K_from_M_e(M_e_value: float, L: float, EA: float) -> float:
         why = ("more compliant than the bare tendon L/EA: sheath compression, slack or a wrong L or EA"
                if r >= 1.0 else "no positive stretch was measured")
         raise ValueError(f"M_e * EA / L = {r:.4g} is outside (0, 1): {why}; cannot solve eq. (13) for K")
+    from scipy.optimize import newton  # lazy: every process that builds the command line imports this module
+
     f = lambda K: elongation_factor(K) - r  # noqa: E731
     fprime = lambda K: (math.exp(-K) * (K + 1.0) - 1.0) / (K * K) if K > 1e-6 else -0.5 + K / 3.0  # noqa: E731
     # (1 - e^-K)/K is convex and decreasing: Newton from K = 0 climbs monotonically to the root.

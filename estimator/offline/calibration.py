@@ -19,7 +19,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import newton
 
 from estimator.capstan import K_from_M_e
 from estimator.data import noise_level
@@ -143,6 +142,8 @@ def calibrate_joint_limit(x_in: np.ndarray, T_in: np.ndarray, L: float, EA: floa
         else:
             if not (0.0 < ratio < 1.0):
                 K_from_M_e(M_e, L, EA)  # raises with the physical explanation
+            from scipy.optimize import newton  # lazy: the slave loads this module at start-up, rarely solves here
+
             w = np.asarray(wrap_shape, dtype=float)
             dfac = lambda K: -float(np.mean(0.5 * ((w * np.exp(-K * w))[1:] + (w * np.exp(-K * w))[:-1])))  # noqa: E731
             # convex decreasing in K, so Newton from K = 0 converges monotonically

@@ -1,7 +1,8 @@
 """A process that reads a configuration and speaks the wire protocol (the master, the recorder, the router, the
 ``teleop`` command line itself) loads no compiled code: the sheath's route (:mod:`estimator.geometry`) and the
 phase codes (:mod:`estimator.phase`) are plain Python, and numba, which costs about a third of a second of every
-start, stays out of such a process until something runs a kernel."""
+start, stays out of such a process until something runs a kernel. The live sides load no fitting library
+(scipy.optimize, about half a second) until a calibration solves for K."""
 from __future__ import annotations
 
 import subprocess
@@ -24,5 +25,18 @@ def test_a_configuration_and_wire_process_does_not_load_numba(module):
 def test_the_estimator_still_loads_its_kernels():
     # the counter-check: the modules with compiled code do load numba (the test above can fail)
     code = "import sys, estimator.sheath; print('numba' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "True"
+
+
+def test_a_live_side_starts_without_the_fitting_library():
+    # scipy.optimize costs about half a second of a start (its docstrings are parsed on import); the live sides
+    # solve nothing with it unless a calibration asks for K, so its imports wait for that call
+    code = ("import sys, live.cli, slave.node, master.node, slave.calibration_file, estimator.capstan; "
+            "[live.cli.build_parser([c]) for c in ('slave', 'master', 'demo')]; "
+            "print('scipy.optimize' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"
+    code = "import sys, estimator.offline.diagnosis.fit; print('scipy.optimize' in sys.modules)"   # the counter-check
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "True"
