@@ -70,8 +70,8 @@ def version() -> str:
 
 
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
-    """The argument parser. ``argv`` (default ``sys.argv[1:]``) decides whether ``study.analyze`` and the HID
-    device list are imported (only for ``analyze`` and ``devices``)."""
+    """The argument parser. ``argv`` (default ``sys.argv[1:]``) decides whether ``study.analyze``, the replay and the
+    HID device list are imported (only for ``analyze``, ``replay`` and ``devices``)."""
     parser = argparse.ArgumentParser(prog=PROG, description="Haptic teleoperation of tendon-sheath instruments.")
     parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
     sub = parser.add_subparsers(dest="command",
@@ -178,21 +178,27 @@ def _add_services(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument("--window-size", metavar="WxH", default=None, help="the viewer's window size in points")
     p.set_defaults(func=_cmd_view)
 
-    p = sub.add_parser("replay", help="play a recorded run back through the estimator and the Rerun view, "
-                                      "compared with the recorded estimate and the truth (live/replay/main.py)")
-    from live.replay import main as replay
-    replay.add_arguments(p)
-    p.set_defaults(func=replay.main_replay)
 
 
 def _add_lazy(sub: argparse._SubParsersAction[argparse.ArgumentParser], args: list[str]) -> None:
-    """The commands whose modules load only when ``args`` name them (hidapi, the offline study)."""
+    """The commands whose modules load only when ``args`` name them (hidapi, the estimator's kernels, the offline
+    study)."""
     p = sub.add_parser("devices", help="list what each device backend finds (hid, evdev, forcedimension, touch)")
     if "devices" in args[:1]:
         from master import devices_list  # lazy: only `teleop devices` imports hidapi
         devices_list.add_arguments(p)
         p.set_defaults(func=devices_list.main_devices)
     else:
+        p.set_defaults(func=None)
+    help_replay = ("play a recorded run back through the estimator and the Rerun view, compared with the recorded "
+                   "estimate and the truth (live/replay/main.py)")
+    if "replay" in args[:1]:
+        from live.replay import main as replay  # lazy: the estimator's kernels load only for `teleop replay`
+        p = sub.add_parser("replay", help=help_replay)
+        replay.add_arguments(p)
+        p.set_defaults(func=replay.main_replay)
+    else:
+        p = sub.add_parser("replay", help=help_replay + " (see `teleop replay -h`)", add_help=False)
         p.set_defaults(func=None)
     if "analyze" in args[:1]:
         from study import analyze  # lazy: only `teleop analyze` pays for it
@@ -321,7 +327,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         parser = build_parser(argv)
     except ImportError as e:
-        print(f"{PROG}: error: analyze is not available ({e})", file=sys.stderr)
+        print(f"{PROG}: error: {argv[0] if argv else PROG} is not available ({e})", file=sys.stderr)
         return 2
     args = parser.parse_args(argv)
     if args.func is None:

@@ -40,3 +40,12 @@ def test_a_live_side_starts_without_the_fitting_library():
     code = "import sys, estimator.offline.diagnosis.fit; print('scipy.optimize' in sys.modules)"   # the counter-check
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "True"
+
+
+@pytest.mark.parametrize("command", ["master", "record", "router", "view"])
+def test_the_command_line_of_a_process_without_kernels_loads_none(command):
+    # the replay's and the analysis's arguments load with their modules only when the command names them
+    code = (f"import sys, live.cli; live.cli.build_parser([{command!r}]); "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'numba')[:3])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]", (command, out)
