@@ -26,10 +26,11 @@ pytestmark = pytest.mark.integration
 #: the paper experiment, 0.07 on the minor loops; on a loaded machine 0.12 and 0.46).
 GAIN = 0.75
 #: The model's error is below the base's at this quantile of each experiment's rows. Not the largest error: a late loop
-#: cycle on a loaded machine makes the operator's command jump (0.15 mm in one cycle), the model reads a speed it
-#: then carries in the profile through the next hold, and its error can exceed the base's for a few hundred
-#: milliseconds (on one loaded run 0.11 of full scale against 0.04 over 5 % of the minor loops, the largest 0.220
-#: against 0.215; docs/results/live-gain.md, "Where velocity friction errs live").
+#: cycle on a loaded machine makes the operator's command jump (0.15 mm in one cycle); when the pull stops, the model
+#: relaxes its profile to the slow friction while the simulated tendon holds what the jerk left, and its error can
+#: exceed the base's through the hold, for a few hundred milliseconds (on one loaded run 0.11 of full scale against
+#: 0.04 over 5 % of the minor loops, the largest 0.220 against 0.215; docs/results/live-gain.md, "Where velocity
+#: friction errs live").
 QUANTILE = 90.0
 SIM = Path(__file__).resolve().parents[2] / "configs" / "sim.yaml"
 HIDDEN = """
