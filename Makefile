@@ -2,6 +2,11 @@
 # `make test`: ruff (lint + import order); at once pytest on the CPU-bound tests, mypy, the documentation site (mkdocs
 # --strict, into the ignored site/) and the pinned diagnosis answers on a generic CPU target; then the integration tests.
 PYTHON ?= python3
+# Python and pytest keep compiled bytecode (__pycache__, ignored by git) under make even where the environment sets
+# PYTHONDONTWRITEBYTECODE: without it every process the suite starts compiles the project's modules from source
+# again (0.3-0.5 s a start; the integration tests alone start over a hundred), and every pytest run rewrites the
+# asserts of every test module it collects (about 9 s a run).
+export PYTHONDONTWRITEBYTECODE :=
 VENV := .venv
 STAMP := $(VENV)/.installed
 # numba caches a compiled function beside its module and checks only that module's file: a caller compiled in another

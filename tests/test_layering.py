@@ -24,6 +24,7 @@ benchmark or example puts anything on ``sys.path``: they import the installed pa
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -64,17 +65,20 @@ def _walk(tree: ast.AST):
                                                  and child in node.body)))
 
 
-def _graph():
-    """modules -> list of (imported module, name or None, typing only), over the project's packages."""
+@functools.cache
+def _graph() -> tuple[dict[str, Path], dict[str, list[tuple[str, str | None, bool]]], list[str]]:
+    """(module -> file, module -> list of (imported module, name or None, typing only), the files that do not parse),
+    over the project's packages; parsed once per process, when a test first asks (not at collection)."""
     files = {_module_name(p): p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")}
     graph: dict[str, list[tuple[str, str | None, bool]]] = {}
+    unparsed: list[str] = []
     for mod, path in files.items():
         is_pkg = path.name == "__init__.py"
-        edges = []
+        edges: list[tuple[str, str | None, bool]] = []
         try:
             tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
         except SyntaxError as e:
-            UNPARSED.append(f"{path.relative_to(ROOT)}:{e.lineno}: {e.msg}")
+            unparsed.append(f"{path.relative_to(ROOT)}:{e.lineno}: {e.msg}")
             tree = ast.Module(body=[], type_ignores=[])
         for node, typing_only in _walk(tree):
             if isinstance(node, ast.Import):
@@ -96,11 +100,7 @@ def _graph():
                 else:
                     edges.append((base, a.name, typing_only))
         graph[mod] = edges
-    return files, graph
-
-
-UNPARSED: list[str] = []
-FILES, GRAPH = _graph()
+    return files, graph, unparsed
 
 
 #: The floor of ``estimator/__init__.py``: the public face, above the core, online and offline parts it names.
@@ -133,26 +133,30 @@ FORBIDDEN = {
 
 
 def test_every_source_parses():
-    assert not UNPARSED, f"not Python: {UNPARSED}"
+    unparsed = _graph()[2]
+    assert not unparsed, f"not Python: {unparsed}"
 
 
 def test_the_walk_sees_the_packages():
+    graph = _graph()[1]
     assert {"estimator.sheath", "estimator.online.distal", "estimator.offline.diagnosis.selection",
-            "teleop.wire.messages", "live.cli", "slave.node", "master.node"} <= set(GRAPH)
-    assert any(dep == "estimator.geometry" for dep, _, _ in GRAPH["slave.simulated"])
+            "teleop.wire.messages", "live.cli", "slave.node", "master.node"} <= set(graph)
+    assert any(dep == "estimator.geometry" for dep, _, _ in graph["slave.simulated"])
 
 
 @pytest.mark.parametrize("floor", sorted(FORBIDDEN))
 def test_no_import_breaks_the_floors(floor):
-    bad = sorted(f"{mod} -> {dep}" for mod, edges in GRAPH.items() if _floor(mod) == floor
+    graph = _graph()[1]
+    bad = sorted(f"{mod} -> {dep}" for mod, edges in graph.items() if _floor(mod) == floor
                  for dep, _, _ in edges if _floor(dep) in FORBIDDEN[floor])
     assert not bad, f"{floor} must not import {sorted(FORBIDDEN[floor])}: " + "; ".join(bad)
 
 
 def _components() -> list[frozenset[str]]:
     """Strongly connected components (Tarjan) of the runtime import graph, of more than one module."""
-    adj = {m: sorted({d for d, _, typing_only in e if d in GRAPH and d != m and not typing_only})
-           for m, e in GRAPH.items()}
+    graph = _graph()[1]
+    adj = {m: sorted({d for d, _, typing_only in e if d in graph and d != m and not typing_only})
+           for m, e in graph.items()}
     index: dict[str, int] = {}
     low: dict[str, int] = {}
     stack: list[str] = []
@@ -192,7 +196,7 @@ def test_no_new_import_circle():
 
 
 def test_no_private_helper_imported_across_modules():
-    found = {(mod, dep, name) for mod, edges in GRAPH.items() for dep, name, _ in edges
+    found = {(mod, dep, name) for mod, edges in _graph()[1].items() for dep, name, _ in edges
              if name is not None and name.startswith("_") and not name.startswith("__") and dep != mod}
     new = sorted(found - KNOWN_PRIVATE)
     assert not new, f"private helpers imported across modules: {new}"
@@ -262,7 +266,7 @@ def test_every_package_says_what_it_holds():
 def _top_level_names(mod: str) -> tuple[set[str], set[str]]:
     """(names a module defines at its top level, names it imports there) of one project module."""
     defined, imported = set(), set()
-    for node in ast.parse(FILES[mod].read_text(encoding="utf-8")).body:
+    for node in ast.parse(_graph()[0][mod].read_text(encoding="utf-8")).body:
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
             defined.add(node.name)
         elif isinstance(node, (ast.Assign, ast.AnnAssign)):
@@ -276,15 +280,16 @@ def _top_level_names(mod: str) -> tuple[set[str], set[str]]:
 def test_every_name_has_one_import_path():
     """No module other than a package's ``__init__`` hands on a name it imported: a name is imported from the
     module that defines it, and ``__all__`` lists only what its module defines."""
+    files, graph, _ = _graph()
     passed_on = []
-    for mod, edges in GRAPH.items():
+    for mod, edges in graph.items():
         for dep, name, _ in edges:
-            if name is None or dep not in FILES or FILES[dep].name == "__init__.py" or name.startswith("_"):
+            if name is None or dep not in files or files[dep].name == "__init__.py" or name.startswith("_"):
                 continue
             defined, imported = _top_level_names(dep)
             if name not in defined and name in imported:
                 passed_on.append(f"{mod} imports {name} from {dep}")
-    for mod, path in FILES.items():
+    for mod, path in files.items():
         if path.name == "__init__.py":
             continue
         defined, _ = _top_level_names(mod)
