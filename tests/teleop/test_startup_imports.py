@@ -29,17 +29,20 @@ def test_the_estimator_still_loads_its_kernels():
     assert out.strip() == "True"
 
 
+def _fitting_library_loaded(code: str) -> bool:
+    """Whether a fresh interpreter that runs ``code`` has loaded scipy.optimize."""
+    out = subprocess.run([sys.executable, "-c", f"import sys; {code}; print('scipy.optimize' in sys.modules)"],
+                         capture_output=True, text=True, check=True).stdout
+    return out.strip() == "True"
+
+
 def test_a_live_side_starts_without_the_fitting_library():
     # scipy.optimize costs about half a second of a start (its docstrings are parsed on import); the live sides
     # solve nothing with it unless a calibration asks for K, so its imports wait for that call
-    code = ("import sys, live.cli, slave.node, master.node, slave.calibration_file, estimator.capstan; "
-            "[live.cli.build_parser([c]) for c in ('slave', 'master', 'demo')]; "
-            "print('scipy.optimize' in sys.modules)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert out.strip() == "False"
-    code = "import sys, estimator.offline.diagnosis.fit; print('scipy.optimize' in sys.modules)"   # the counter-check
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert out.strip() == "True"
+    assert not _fitting_library_loaded("import live.cli, slave.node, master.node, slave.calibration_file, "
+                                       "estimator.capstan; [live.cli.build_parser([c]) for c in "
+                                       "('slave', 'master', 'demo')]")
+    assert _fitting_library_loaded("import estimator.offline.diagnosis.fit")     # the counter-check
 
 
 @pytest.mark.parametrize("command", ["master", "record", "router", "view"])
