@@ -268,7 +268,9 @@ def model_choice(pair: str, pair_split_fs: float, pair_in_fs: float, cal: list[R
         if not eligible:            # the nearest to the reading, not the best split (LOAD_FALLBACK)
             lo, hi = lc["slope_interval"]
             far = {n: _log_distance(1.0 / gains[n] if gains[n] > 0 else math.inf, lo, hi) for n in cands}
-            lc["log_distance"], lc["fallback"] = far, LOAD_FALLBACK
+            # JSON has no infinity: None where no finite distance exists (a non-positive slope or interval end)
+            lc["log_distance"] = {n: d if math.isfinite(d) else None for n, d in far.items()}
+            lc["fallback"] = LOAD_FALLBACK
             eligible = [min(cands, key=lambda n: (far[n], cands[n], n))]
     out["chosen"] = min(eligible, key=lambda n: (cands[n], n))
     return out

@@ -3,6 +3,7 @@ synthetic runs whose band edges follow the capstan law c +- F0 + r e^(+-K) tau_d
 depends on the angle, the direction and the load."""
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -192,6 +193,10 @@ def test_model_choice_at_one_load_keeps_only_a_load_gain_the_run_allows():
     assert not any(near["load_gain_check"]["eligible"].values())        # nothing eligible: the
     assert near["chosen"] == CENTRE                                     # nearest to the run's reading, not the split
     assert near["load_gain_check"]["log_distance"][CENTRE] == pytest.approx(math.log(1.05))
+    # a load gain of the wrong sign lies no finite distance from the reading: null in the JSON the result is
+    neg = model_choice("pair", 0.5 * split, 0.01, cal, 0.05, 0.002, {"pair": 0.2, CENTRE: -1.0})
+    assert neg["load_gain_check"]["log_distance"][CENTRE] is None and neg["chosen"] == "pair"
+    assert json.loads(json.dumps(neg, allow_nan=False)) == neg
     two = [synth("a", 0.01, freq=0.4), synth("b", 0.04, freq=0.4, seed=2)]     # two loads: a tight reading
     lc = model_choice("pair", 0.0, 0.01, two, 0.05, 0.002, {"pair": 0.9 * GAIN, CENTRE: GAIN})["load_gain_check"]
     assert lc["slope"] == pytest.approx(1.0 / GAIN, rel=0.02) and lc["eligible"] == {"pair": False, CENTRE: True}
