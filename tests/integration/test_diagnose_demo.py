@@ -2,10 +2,10 @@
 ``teleop demo`` with the model file it wrote, each as its own process: the diagnosis names the effect, and the
 estimator with the model beats the base estimator on the distal tension of the same recording.
 
-The comparison is paired: the base estimator is replayed over the model run's own recording (``teleop replay``,
-whose estimates equal the live loop's), so both face the same moves. Two demo runs would not: the scripted operator
-feels the rendered force of its own run's estimate, so the two runs' moves, and with velocity friction their errors,
-differ more between runs than between estimators."""
+The comparison is paired: the base estimator is replayed over the model run's own recording (what ``teleop
+replay`` computes, whose estimates equal the live loop's), so both face the same moves. Two demo runs would not: the
+scripted operator feels the rendered force of its own run's estimate, so the two runs' moves, and with velocity
+friction their errors, differ more between runs than between estimators."""
 from __future__ import annotations
 
 import hashlib
@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from live.replay.main import EXPERIMENTS, load_model, load_run, reestimate, replay, tension_noise
+from estimator.data import MeasuredData
+from live.replay.main import EXPERIMENTS, compare, load_model, load_run, reestimate, tension_noise
 from teleop.config.load import load_config
 
 pytestmark = pytest.mark.integration
@@ -92,33 +93,29 @@ def test_diagnose_names_the_effect_and_the_estimator_with_its_model_beats_the_ba
     assert ext["model"]["sha256"] == sha and ext["model"]["id"] == "itdiag/tendon/profile_memory+velocity_friction"
     assert f"model {ext['model']['id']} (sha256 {sha[:12]}..." in out
     assert ext["slave"]["model"]["cycles"] > 0
-    base = replay(tmp_path / "model", rrd=tmp_path / "base.rrd")["comparison"]     # the base estimator, same inputs
-    for name in ("paper", "minor"):
+    data, base_est = _base_estimate(tmp_path / "model")       # the base estimator, same inputs
+    base = compare(data, base_est)
+    assert data.T_out is not None
+    for code, name in EXPERIMENTS.items():
         b, m = base[name]["vs_truth"], ext["experiments"][name]["profile_memory"]
         assert b["samples"] == ext["experiments"][name]["samples"]
         # the base misses c_v v T in every move; the model where the speed jumps (a late loop cycle) or where the
         # speed read's noise ends a slide mid-pull, until the pull slows (docs/results/live-gain.md, "Where velocity
         # friction errs live")
         assert m["force_error_mean_fs"] < GAIN * b["force_error_mean_fs"], (name, b, m)
-    for name, (q_model, q_base) in _quantile_errors(tmp_path / "model").items():
+        # the QUANTILE of the distal-tension error [N] against the simulator's truth: the live model's (recorded)
+        # below the base's
+        sel = data.extra["marker"].astype(int) == code
+        assert sel.sum() > 1000, name
+        q_model, q_base = (float(np.percentile(np.abs(est[sel] - data.T_out[sel]), QUANTILE))
+                           for est in (data.extra["T_out_hat"], base_est["T_out"]))
         assert q_model < q_base, (name, QUANTILE, q_model, q_base)
 
 
-def _quantile_errors(run: Path) -> dict[str, tuple[float, float]]:
-    """Per experiment, the ``QUANTILE`` of the distal-tension error [N] of the live model's estimate (recorded) and of
-    the base estimator replayed over the same rows (:func:`live.replay.main.reestimate`), against the simulator's
-    truth."""
+def _base_estimate(run: Path) -> tuple[MeasuredData, dict[str, np.ndarray]]:
+    """The run's recording and the base estimator replayed over it with the run's config and calibration, what
+    ``teleop replay`` computes (:func:`live.replay.main.reestimate`)."""
     inp = load_run(run)
     cfg = load_config(run / "config.yaml")
     model, source = load_model(cfg, inp)
-    base = reestimate(inp.data, model, cfg, "profile", tension_noise(cfg, source))["T_out"]
-    d = inp.data
-    assert d.T_out is not None
-    out = {}
-    for code, name in EXPERIMENTS.items():
-        sel = d.extra["marker"].astype(int) == code
-        assert sel.sum() > 1000, name
-        q_model, q_base = (float(np.percentile(np.abs(est[sel] - d.T_out[sel]), QUANTILE))
-                           for est in (d.extra["T_out_hat"], base))
-        out[name] = (q_model, q_base)
-    return out
+    return inp.data, reestimate(inp.data, model, cfg, "profile", tension_noise(cfg, source))
