@@ -190,27 +190,29 @@ def _add_lazy(sub: argparse._SubParsersAction[argparse.ArgumentParser], args: li
         p.set_defaults(func=devices_list.main_devices)
     else:
         p.set_defaults(func=None)
-    help_replay = ("play a recorded run back through the estimator and the Rerun view, compared with the recorded "
-                   "estimate and the truth (live/replay/main.py)")
-    if "replay" in args[:1]:
-        from live.replay import main as replay  # lazy: the estimator's kernels load only for `teleop replay`
-        p = sub.add_parser("replay", help=help_replay)
-        replay.add_arguments(p)
-        p.set_defaults(func=replay.main_replay)
-    else:
-        p = sub.add_parser("replay", help=help_replay + " (see `teleop replay -h`)", add_help=False)
-        p.set_defaults(func=None)
-    if "analyze" in args[:1]:
+    replay = _lazy_parser(sub, args, "replay", "play a recorded run back through the estimator and the Rerun view, "
+                          "compared with the recorded estimate and the truth (live/replay/main.py)")
+    if replay is not None:
+        from live.replay import main as replay_main  # lazy: the estimator's kernels load only for `teleop replay`
+        replay_main.add_arguments(replay)
+        replay.set_defaults(func=replay_main.main_replay)
+    analysis = _lazy_parser(sub, args, "analyze", "run the model against a recording")
+    if analysis is not None:
         from study import analyze  # lazy: only `teleop analyze` pays for it
-        p = sub.add_parser("analyze", help="run the model against a recording")
-        analyze.add_arguments(p)
+        analyze.add_arguments(analysis)
         from study.mrd.tools import add_tool_argument
-        add_tool_argument(p)
-        p.set_defaults(func=analyze.main_analyze)
-    else:
-        p = sub.add_parser("analyze", help="run the model against a recording (see `teleop analyze -h`)",
-                           add_help=False)
-        p.set_defaults(func=None)
+        add_tool_argument(analysis)
+        analysis.set_defaults(func=analyze.main_analyze)
+
+
+def _lazy_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser], args: list[str], name: str,
+                 help_text: str) -> argparse.ArgumentParser | None:
+    """The subcommand ``name``'s parser, for its caller to fill, when ``args`` name it; else a placeholder listed
+    with its help (no arguments, no function) and None: its module is not imported."""
+    if name in args[:1]:
+        return sub.add_parser(name, help=help_text)
+    sub.add_parser(name, help=f"{help_text} (see `teleop {name} -h`)", add_help=False).set_defaults(func=None)
+    return None
 
 
 # ---- subcommands ---------------------------------------------------------------------------------
