@@ -5,6 +5,7 @@ start, stays out of such a process until something runs a kernel. The live sides
 (scipy.optimize, about half a second) until a calibration solves for K."""
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
@@ -15,40 +16,34 @@ LIGHT = ("live.cli", "teleop.config.schema", "teleop.config.load", "teleop.wire.
          "live.discovery", "live.faults", "teleop.recording.journal", "estimator.geometry", "estimator.phase")
 
 
+def _loaded(code: str, package: str) -> list[str]:
+    """The modules of ``package`` (itself and its submodules) that a fresh interpreter has loaded after running
+    ``code``, sorted (the first three)."""
+    probe = (f"import json, sys; {code}; print(json.dumps(sorted(m for m in sys.modules "
+             f"if m == {package!r} or m.startswith({package + '.'!r}))[:3]))")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout
+    return json.loads(out)
+
+
 @pytest.mark.parametrize("module", LIGHT)
 def test_a_configuration_and_wire_process_does_not_load_numba(module):
-    code = f"import sys, {module}; print(sorted(m for m in sys.modules if m.split('.')[0] == 'numba')[:3])"
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert out.strip() == "[]", (module, out)
+    assert _loaded(f"import {module}", "numba") == [], module
 
 
 def test_the_estimator_still_loads_its_kernels():
     # the counter-check: the modules with compiled code do load numba (the test above can fail)
-    code = "import sys, estimator.sheath; print('numba' in sys.modules)"
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert out.strip() == "True"
-
-
-def _fitting_library_loaded(code: str) -> bool:
-    """Whether a fresh interpreter that runs ``code`` has loaded scipy.optimize."""
-    out = subprocess.run([sys.executable, "-c", f"import sys; {code}; print('scipy.optimize' in sys.modules)"],
-                         capture_output=True, text=True, check=True).stdout
-    return out.strip() == "True"
+    assert _loaded("import estimator.sheath", "numba")
 
 
 def test_a_live_side_starts_without_the_fitting_library():
     # scipy.optimize costs about half a second of a start (its docstrings are parsed on import); the live sides
     # solve nothing with it unless a calibration asks for K, so its imports wait for that call
-    assert not _fitting_library_loaded("import live.cli, slave.node, master.node, slave.calibration_file, "
-                                       "estimator.capstan; [live.cli.build_parser([c]) for c in "
-                                       "('slave', 'master', 'demo')]")
-    assert _fitting_library_loaded("import estimator.offline.diagnosis.fit")     # the counter-check
+    assert _loaded("import live.cli, slave.node, master.node, slave.calibration_file, estimator.capstan; "
+                   "[live.cli.build_parser([c]) for c in ('slave', 'master', 'demo')]", "scipy.optimize") == []
+    assert _loaded("import estimator.offline.diagnosis.fit", "scipy.optimize")     # the counter-check
 
 
 @pytest.mark.parametrize("command", ["master", "record", "router", "view"])
 def test_the_command_line_of_a_process_without_kernels_loads_none(command):
     # the replay's and the analysis's arguments load with their modules only when the command names them
-    code = (f"import sys, live.cli; live.cli.build_parser([{command!r}]); "
-            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'numba')[:3])")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert out.strip() == "[]", (command, out)
+    assert _loaded(f"import live.cli; live.cli.build_parser([{command!r}])", "numba") == [], command
