@@ -263,8 +263,10 @@ def test_every_package_says_what_it_holds():
     assert not bare, f"packages without a docstring saying what they hold: {bare}"
 
 
-def _top_level_names(mod: str) -> tuple[set[str], set[str]]:
-    """(names a module defines at its top level, names it imports there) of one project module."""
+@functools.cache
+def _top_level_names(mod: str) -> tuple[frozenset[str], frozenset[str]]:
+    """(names a module defines at its top level, names it imports there) of one project module (parsed once a
+    process: every import edge asks for its module's names)."""
     defined, imported = set(), set()
     for node in ast.parse(_graph()[0][mod].read_text(encoding="utf-8")).body:
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
@@ -274,7 +276,7 @@ def _top_level_names(mod: str) -> tuple[set[str], set[str]]:
             defined |= {n.id for t in targets for n in ast.walk(t) if isinstance(n, ast.Name)}
         elif isinstance(node, (ast.Import, ast.ImportFrom)):
             imported |= {a.asname or a.name.split(".")[0] for a in node.names}
-    return defined, imported
+    return frozenset(defined), frozenset(imported)
 
 
 def test_every_name_has_one_import_path():
