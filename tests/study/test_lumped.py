@@ -89,6 +89,21 @@ def test_return_point_memory_matches_the_profile_memory():
     assert np.max(np.abs(r["T_out"][after] / r["T_in"][after] / math.exp(-K) - 1)) < 0.02
 
 
+def test_velocity_friction_creeps_to_the_rest_friction_after_a_fast_pull_stops():
+    # a pull at 25 mm/s under c_v = 30 s/m writes a profile 1.75 x steeper than friction at rest holds. The motor
+    # stops at once; the tendon slides on: T_in falls and T_out rises until T_out = e^-K T_in, within 0.2 s
+    # (docs/concepts/model.md, the simulators: the quasi-static rig holds the steep profile instead)
+    tl = LumpedTendon(uniform(), MU, EA, Load("spring", stiffness=2000.0), speed_coefficient=30.0, pretension=2.0,
+                      motor_bandwidth_hz=2000.0, motor_max_speed=1.0)
+    r = tl.run(ramp([(0, 0), (0.3, 0), (3.3, 6e-3), (3.4, 8.5e-3), (4.4, 8.5e-3)]), RATE)
+    T_in, T_out = r["T_in"], r["T_out"]
+    stop, end = int(3.4 * RATE) - 1, int(3.6 * RATE)
+    ratio = T_out[stop:] / T_in[stop:] / math.exp(-K)
+    assert ratio[0] < 0.8                               # the fast pull's profile, steeper than rest friction
+    assert np.all(np.abs(ratio[end - stop:] - 1.0) < 0.01)     # crept to the rest friction and held there
+    assert T_in[end] < 0.75 * T_in[stop] and T_out[end] > 1.05 * T_out[stop]
+
+
 def test_route_shape_changes_the_elongation_not_the_capstan_ratio():
     # the same total wrap 2 pi, concentrated near the proximal or near the distal end
     near = SheathGeometry([(0.4, 0.4 / ANGLE), (1.1, math.inf)])
