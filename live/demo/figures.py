@@ -58,8 +58,11 @@ def demo_figure(csv_path: str | Path, calibration: dict, deadband: float, out_pn
         ax_t.set(title=f"{name} experiment: distal tension", xlabel="time [s]", ylabel="tension [N]")
         ax_loop.set(title="distal vs proximal tension", xlabel="T_in [N]", ylabel="T_out [N]")
         ax_e.set(title="tendon elongation", xlabel="T_in [N]", ylabel="elongation [mm]")
-        for ax in (ax_t, ax_loop, ax_e):
+        # each legend where its panel has no data: in two columns in headroom above the tensions, below the pull line,
+        # above the elongation loop's start
+        ax_t.set_ylim(top=1.3 * ax_t.get_ylim()[1])
+        for ax, where, cols in ((ax_t, "upper center", 2), (ax_loop, "lower right", 1), (ax_e, "upper left", 1)):
             ax.grid(alpha=0.3)
-            ax.legend(fontsize=8, loc="upper left")
+            ax.legend(fontsize=8, loc=where, ncol=cols)
     fig.suptitle("Distal estimates from proximal sensors: truth (simulated rig) vs profile memory vs paper formulas")
     return save_figure(fig, out_png, 90)
