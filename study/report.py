@@ -99,7 +99,8 @@ def _fig_by(data, pred, held, path) -> str:
             ax.bar(np.arange(len(codes)) + off, rms, width=0.36, label=lab)
         ax.set_xticks(range(len(codes)), [Phase(c).label for c in codes], rotation=30, fontsize=7)
         ax.set_ylabel(f"rms {name} residual [{unit}]")
-        ax.legend(fontsize=7)
+        ax.set_ylim(top=1.3 * ax.get_ylim()[1])         # headroom: the legend sits above the bars, not over one
+        ax.legend(fontsize=7, ncol=2, loc="upper center")
     fig.suptitle("held-out residuals by sliding speed, tension and phase")
     return _save(fig, path)
 
