@@ -26,6 +26,7 @@ from __future__ import annotations
 import ast
 import functools
 from pathlib import Path
+from typing import NamedTuple
 
 import pytest
 
@@ -65,11 +66,22 @@ def _walk(tree: ast.AST):
                                                  and child in node.body)))
 
 
+class _Project(NamedTuple):
+    """The project's packages parsed: each module's file and syntax tree (empty where it does not parse), its
+    imports as (imported module, name or None, typing only), and the files that do not parse."""
+
+    files: dict[str, Path]
+    trees: dict[str, ast.Module]
+    graph: dict[str, list[tuple[str, str | None, bool]]]
+    unparsed: list[str]
+
+
 @functools.cache
-def _graph() -> tuple[dict[str, Path], dict[str, list[tuple[str, str | None, bool]]], list[str]]:
-    """(module -> file, module -> list of (imported module, name or None, typing only), the files that do not parse),
-    over the project's packages; parsed once per process, when a test first asks (not at collection)."""
+def _graph() -> _Project:
+    """The project's packages (:class:`_Project`), parsed once per process when a test first asks (not at
+    collection)."""
     files = {_module_name(p): p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")}
+    trees: dict[str, ast.Module] = {}
     graph: dict[str, list[tuple[str, str | None, bool]]] = {}
     unparsed: list[str] = []
     for mod, path in files.items():
@@ -80,6 +92,7 @@ def _graph() -> tuple[dict[str, Path], dict[str, list[tuple[str, str | None, boo
         except SyntaxError as e:
             unparsed.append(f"{path.relative_to(ROOT)}:{e.lineno}: {e.msg}")
             tree = ast.Module(body=[], type_ignores=[])
+        trees[mod] = tree
         for node, typing_only in _walk(tree):
             if isinstance(node, ast.Import):
                 for a in node.names:
@@ -100,7 +113,7 @@ def _graph() -> tuple[dict[str, Path], dict[str, list[tuple[str, str | None, boo
                 else:
                     edges.append((base, a.name, typing_only))
         graph[mod] = edges
-    return files, graph, unparsed
+    return _Project(files, trees, graph, unparsed)
 
 
 #: The floor of ``estimator/__init__.py``: the public face, above the core, online and offline parts it names.
@@ -133,12 +146,12 @@ FORBIDDEN = {
 
 
 def test_every_source_parses():
-    unparsed = _graph()[2]
+    unparsed = _graph().unparsed
     assert not unparsed, f"not Python: {unparsed}"
 
 
 def test_the_walk_sees_the_packages():
-    graph = _graph()[1]
+    graph = _graph().graph
     assert {"estimator.sheath", "estimator.online.distal", "estimator.offline.diagnosis.selection",
             "teleop.wire.messages", "live.cli", "slave.node", "master.node"} <= set(graph)
     assert any(dep == "estimator.geometry" for dep, _, _ in graph["slave.simulated"])
@@ -146,7 +159,7 @@ def test_the_walk_sees_the_packages():
 
 @pytest.mark.parametrize("floor", sorted(FORBIDDEN))
 def test_no_import_breaks_the_floors(floor):
-    graph = _graph()[1]
+    graph = _graph().graph
     bad = sorted(f"{mod} -> {dep}" for mod, edges in graph.items() if _floor(mod) == floor
                  for dep, _, _ in edges if _floor(dep) in FORBIDDEN[floor])
     assert not bad, f"{floor} must not import {sorted(FORBIDDEN[floor])}: " + "; ".join(bad)
@@ -154,7 +167,7 @@ def test_no_import_breaks_the_floors(floor):
 
 def _components() -> list[frozenset[str]]:
     """Strongly connected components (Tarjan) of the runtime import graph, of more than one module."""
-    graph = _graph()[1]
+    graph = _graph().graph
     adj = {m: sorted({d for d, _, typing_only in e if d in graph and d != m and not typing_only})
            for m, e in graph.items()}
     index: dict[str, int] = {}
@@ -196,7 +209,7 @@ def test_no_new_import_circle():
 
 
 def test_no_private_helper_imported_across_modules():
-    found = {(mod, dep, name) for mod, edges in _graph()[1].items() for dep, name, _ in edges
+    found = {(mod, dep, name) for mod, edges in _graph().graph.items() for dep, name, _ in edges
              if name is not None and name.startswith("_") and not name.startswith("__") and dep != mod}
     new = sorted(found - KNOWN_PRIVATE)
     assert not new, f"private helpers imported across modules: {new}"
@@ -265,10 +278,10 @@ def test_every_package_says_what_it_holds():
 
 @functools.cache
 def _top_level_names(mod: str) -> tuple[frozenset[str], frozenset[str]]:
-    """(names a module defines at its top level, names it imports there) of one project module (parsed once a
-    process: every import edge asks for its module's names)."""
+    """(names a module defines at its top level, names it imports there) of one project module (once a process:
+    every import edge asks for its module's names)."""
     defined, imported = set(), set()
-    for node in ast.parse(_graph()[0][mod].read_text(encoding="utf-8")).body:
+    for node in _graph().trees[mod].body:
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
             defined.add(node.name)
         elif isinstance(node, (ast.Assign, ast.AnnAssign)):
@@ -282,7 +295,7 @@ def _top_level_names(mod: str) -> tuple[frozenset[str], frozenset[str]]:
 def test_every_name_has_one_import_path():
     """No module other than a package's ``__init__`` hands on a name it imported: a name is imported from the
     module that defines it, and ``__all__`` lists only what its module defines."""
-    files, graph, _ = _graph()
+    files, trees, graph, _ = _graph()
     passed_on = []
     for mod, edges in graph.items():
         for dep, name, _ in edges:
@@ -295,7 +308,7 @@ def test_every_name_has_one_import_path():
         if path.name == "__init__.py":
             continue
         defined, _ = _top_level_names(mod)
-        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+        for node in trees[mod].body:
             if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "__all__"
                                                     for t in node.targets):
                 listed = [e.value for e in getattr(node.value, "elts", ()) if isinstance(e, ast.Constant)]
