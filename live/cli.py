@@ -179,7 +179,6 @@ def _add_services(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.set_defaults(func=_cmd_view)
 
 
-
 def _add_lazy(sub: argparse._SubParsersAction[argparse.ArgumentParser], args: list[str]) -> None:
     """The commands whose modules load only when ``args`` name them (hidapi, the estimator's kernels, the offline
     study)."""
