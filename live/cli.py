@@ -99,6 +99,9 @@ def _add_sides(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="play this measured recording as the hardware (rig.type recording, rig.recording.path): an "
                         "MRD run, a KAIST recording or a measured-data CSV, told apart by its content; without "
                         "--config the instrument of configs/recording-mrd.yaml, recording-kaist.yaml or sim.yaml")
+    p.add_argument("--keep-realtime", action="store_true",
+                   help="run the sides at their configured SCHED_FIFO priorities even on a machine of fewer than 4 "
+                        "CPUs, where the demo otherwise runs them with normal scheduling (docs/how-to/real-time.md)")
     _model_flag(p)
     _rerun_flag(p)
     p.set_defaults(func=_cmd_demo)

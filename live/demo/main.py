@@ -5,7 +5,9 @@ instrument (``--config configs/instrument-3dof.yaml``); the same processes and n
 both (:class:`slave.node.SlaveNode`, :class:`master.node.MasterNode` over the instrument's axes):
 
 1. ``runs/<id>/`` (id = timestamp) gets the resolved config with ``calibration.dir`` set to
-   ``runs/<id>/calibration``;
+   ``runs/<id>/calibration``; on a machine of fewer than
+   :data:`teleop.timing.realtime.CO_LOCATED_MIN_CPUS` CPUs the sides' ``realtime_priority`` is 0 there, said in
+   one line (:func:`co_located`; ``--keep-realtime`` keeps the configured priorities);
 2. ``teleop calibrate`` (in this process, simulated as fast as it computes) runs the instrument's
    power-up routine (a tendon pulled into its joint limit, a pair both directions, a spindle over its
    stroke) and writes ``runs/<id>/calibration/<id>.yaml``:
@@ -287,6 +289,19 @@ def format_summary(s: dict) -> str:
     return "\n".join(L)
 
 
+def co_located(cfg: Config) -> tuple[Config, str | None]:
+    """The run's config with the sides' real-time priorities for one machine that runs both sides and the recorder
+    (:func:`teleop.timing.realtime.co_located_priority`), and the line that says why they changed (None: as
+    configured)."""
+    from teleop.timing.realtime import co_located_priority
+    master, why = co_located_priority(cfg.master.realtime_priority)
+    slave, why_slave = co_located_priority(cfg.slave.realtime_priority)
+    if why is None and why_slave is None:
+        return cfg, None
+    return dataclasses.replace(cfg, master=dataclasses.replace(cfg.master, realtime_priority=master),
+                               slave=dataclasses.replace(cfg.slave, realtime_priority=slave)), why or why_slave
+
+
 def main_demo(args) -> int:
     """``teleop demo``: returns 0 when the run finished and every check passed, else 1 (module docstring)."""
     from live.calibrate import run_calibrate
@@ -321,6 +336,9 @@ def main_demo(args) -> int:
     # evaluation's chatter above 30 Hz needs them; the demo lasts seconds, recording.csv_every bounds long sessions)
     cfg = dataclasses.replace(cfg, calibration=dataclasses.replace(cfg.calibration, dir=str(run_dir / "calibration")),
                               recording=dataclasses.replace(cfg.recording, csv_every=1))
+    cfg, scheduling = (cfg, None) if getattr(args, "keep_realtime", False) else co_located(cfg)
+    if scheduling is not None:
+        print(scheduling, flush=True)
     cfg_file = write_config(cfg, run_dir / "config.yaml")
     t0 = time.monotonic()
     problems: list[str] = []
@@ -329,6 +347,7 @@ def main_demo(args) -> int:
                      "kind": kind_of(cfg).summary, "axes": names,
                      "protocol": args.protocol, "calibration_file": str(calibration_path(cfg)),
                      "safety_waivers": waivers(cfg),   # teleop/config/bounds.py: keys run past their hard bound
+                     "scheduling": scheduling or "as configured",
                      "model": None if model is None else {"id": model.model_id, "sha256": model.sha256,
                                                           "path": model.path}}
     try:

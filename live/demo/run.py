@@ -149,10 +149,11 @@ def rt_budget_lines(s: dict) -> list[str]:
     :func:`teleop.timing.realtime.rt_budget`), then, per loop at ``SCHED_FIFO`` whose worst stall (its worst
     lateness or longest step) lies in :data:`THROTTLE_WINDOW` of the kernel's longest hold (the budget's
     stop when it is limited, else :data:`FAIR_SERVER_MS`), a note that the stall is likely the kernel
-    making room for ordinary tasks; [] when no side reports a budget."""
+    making room for ordinary tasks; [] when no side reports a budget or neither runs at ``SCHED_FIFO`` (the budget
+    holds back real-time threads only)."""
     sides = [(side, s.get(side, {}).get("pacer", {})) for side in ("master", "slave")]
     sides = [(side, pc) for side, pc in sides if "rt_budget_ms" in pc]
-    if not sides:
+    if not any(str(pc.get("scheduling", "")).startswith("SCHED_FIFO") for _, pc in sides):
         return []
     pc0 = sides[0][1]
     if pc0["rt_budget_ms"] == "unlimited":

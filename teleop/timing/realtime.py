@@ -41,7 +41,7 @@ import threading
 import time
 
 __all__ = ["promote_threads", "demote_threads", "IdleWindow", "IDLE", "HELPER_PREFIXES", "scheduling",
-           "machine_steal", "RtBudget", "rt_budget", "rt_budget_note"]
+           "machine_steal", "RtBudget", "rt_budget", "rt_budget_note", "CO_LOCATED_MIN_CPUS", "co_located_priority"]
 
 HELPER_PREFIXES = ("csv-writer", "rerun-logger")
 
@@ -189,6 +189,39 @@ def rt_budget_note(budget: RtBudget | None) -> str | None:
     return (f"the kernel stops real-time threads that use more than {1e3 * budget.per_second:.0f} ms of a CPU "
             f"in a second, for up to {1e3 * budget.longest_stop:.0f} ms (sched_rt_runtime_us); on a dedicated "
             "control host `sysctl -w kernel.sched_rt_runtime_us=-1` lifts it (docs/how-to/real-time.md)")
+
+
+#: [count] the fewest CPUs on which master, slave and recorder sharing one machine (``teleop demo``) run their loops
+#: at ``SCHED_FIFO``: each side's loop and transport may hold most of a CPU on a slow machine, and the recorder and the
+#: CSV writers need the rest. On fewer, the real-time threads starve the ordinary ones and the kernel stops them for
+#: up to 50 ms so that those run (the real-time budget, or the fair server of kernels from 6.12): a stop of a side's
+#: transport threads leaves both links stale past the 50 ms watchdog while the loops themselves run on time.
+CO_LOCATED_MIN_CPUS = 4
+
+
+def co_located_priority(priority: int, cpus: int | None = None) -> tuple[int, str | None]:
+    """The ``SCHED_FIFO`` priority of a side that shares the machine with the other side and the recorder.
+
+    Parameters
+    ----------
+    priority : int
+        The configured ``<side>.realtime_priority`` (0: normal scheduling already).
+    cpus : int, optional
+        The machine's CPUs (default :func:`os.cpu_count`).
+
+    Returns
+    -------
+    (int, str or None)
+        ``priority`` and None on :data:`CO_LOCATED_MIN_CPUS` CPUs or more (or when ``priority`` is 0); else 0 and one
+        line saying why the loops run with normal scheduling.
+    """
+    n = os.cpu_count() if cpus is None else cpus
+    if priority <= 0 or n is None or n >= CO_LOCATED_MIN_CPUS:
+        return priority, None
+    return 0, (f"{n} CPU{'s' if n != 1 else ''} for master, slave and recorder: their loops run with normal "
+               f"scheduling (at SCHED_FIFO {priority} their threads would hold the CPUs, and the kernel stops "
+               "real-time threads for up to 50 ms so that ordinary tasks run: both links would go stale past the "
+               "watchdog); docs/how-to/real-time.md")
 
 
 class IdleWindow:

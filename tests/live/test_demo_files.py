@@ -44,3 +44,17 @@ def test_the_rerun_hint_names_a_viewer_that_exists_or_the_plain_command(monkeypa
     monkeypatch.setenv("PATH", "")
     cmd = rerun_command()
     assert cmd == "rerun" or Path(cmd).parent == Path(sys.executable).parent
+
+
+def test_the_demo_runs_its_sides_with_normal_scheduling_where_the_machine_cannot_hold_their_real_time_threads(
+        monkeypatch):
+    from live.demo import main as demo_main
+    cfg = load_config(DEFAULT_CONFIG)
+    assert cfg.master.realtime_priority > 0 and cfg.slave.realtime_priority > 0
+    monkeypatch.setattr("os.cpu_count", lambda: 2)
+    small, why = demo_main.co_located(cfg)
+    assert small.master.realtime_priority == 0 and small.slave.realtime_priority == 0
+    assert why is not None and why.startswith("2 CPUs for master, slave and recorder")
+    assert small.master.mapping == cfg.master.mapping and small.slave.watchdog_ms == cfg.slave.watchdog_ms
+    monkeypatch.setattr("os.cpu_count", lambda: 8)
+    assert demo_main.co_located(cfg) == (cfg, None)

@@ -53,6 +53,8 @@ def test_an_unlimited_budget_still_notes_a_stall_of_the_fair_servers_length():
 def test_a_loop_at_normal_scheduling_is_not_throttled():
     lines = rt_budget_lines(_summary(_pc(0.0012), _pc(0.051, scheduling="not permitted (EPERM): normal scheduling")))
     assert len(lines) == 1
+    # neither side real-time (the demo's sides on a small machine): the budget holds nothing back, no line
+    assert rt_budget_lines(_summary(_pc(0.051, scheduling="off"), _pc(0.051, scheduling="off"))) == []
 
 
 def test_no_budget_in_the_stats_gives_no_line_and_the_detailed_summary_carries_it():

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from teleop.timing.realtime import RtBudget, rt_budget, rt_budget_note
+from teleop.timing.realtime import CO_LOCATED_MIN_CPUS, RtBudget, co_located_priority, rt_budget, rt_budget_note
 
 
 def _kernel(tmp_path, runtime: str, period: str = "1000000"):
@@ -88,3 +88,14 @@ def test_a_loop_without_real_time_priority_logs_no_budget_note(monkeypatch, capl
     notes, stats = _run_one_cycle(monkeypatch, caplog, "off", Side.MASTER)
     assert not notes
     assert stats["rt_budget_ms"] == 950.0               # the host's budget is reported all the same
+
+
+def test_sides_sharing_a_small_machine_with_the_recorder_run_with_normal_scheduling():
+    # two SCHED_FIFO loops with their transport threads hold a 2-CPU machine; the kernel then stops them for up to
+    # 50 ms so that the recorder runs, and both links go stale past the watchdog
+    priority, why = co_located_priority(20, cpus=2)
+    assert priority == 0 and why is not None and why.startswith("2 CPUs for master, slave and recorder")
+    assert "normal scheduling" in why and "SCHED_FIFO 20" in why and "docs/how-to/real-time.md" in why
+    assert co_located_priority(20, cpus=CO_LOCATED_MIN_CPUS) == (20, None)        # room for both loops and the rest
+    assert co_located_priority(0, cpus=1) == (0, None)                             # normal scheduling already
+    assert co_located_priority(20, cpus=1)[1].startswith("1 CPU for")
