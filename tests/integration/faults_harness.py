@@ -38,6 +38,7 @@ from teleop.recording.measured_csv import read_measured_csv
 from teleop.session.transport import Session, accepts_connections, free_tcp_ports, loopback_endpoint, zenoh_config
 from teleop.wire.keys import heartbeat_key
 from teleop.wire.messages import Heartbeat, SideState
+from tests.integration.processes import co_located
 
 CONFIG = """\
 instrument:
@@ -103,7 +104,7 @@ def _joint_config(run_dir: Path, ident: str, instrument: str) -> Path:
     path = run_dir / "cfg.yaml"
     run_text = text.replace(f"id: {base_id}", f"id: {ident}").replace(
         "rerun: off", "rerun: off\n  csv_every: 1")       # every cycle: the fault timing reads rows
-    path.write_text(_calibration_dir(run_text, cal_dir), encoding="utf-8")
+    path.write_text(co_located(_calibration_dir(run_text, cal_dir)), encoding="utf-8")
     return path
 
 
@@ -192,7 +193,7 @@ def _run_config(run_dir: Path, ident: str, instrument: str) -> Path:
         return _joint_config(run_dir, ident, instrument)
     cal_dir = _calibrated(run_dir, ident, instrument, CONFIG.format(ident=_CAL_ID))
     path = run_dir / "cfg.yaml"
-    path.write_text(_calibration_dir(CONFIG.format(ident=ident), cal_dir), encoding="utf-8")
+    path.write_text(co_located(_calibration_dir(CONFIG.format(ident=ident), cal_dir)), encoding="utf-8")
     return path
 
 

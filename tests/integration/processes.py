@@ -6,10 +6,13 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import time
 from pathlib import Path
+
+from teleop.timing.realtime import co_located_priority
 
 BARE_CONFIG = """\
 instrument:
@@ -26,9 +29,26 @@ transport:
 """
 
 
+def co_located(text: str) -> str:
+    """A config's YAML ``text`` with the sides' real-time priorities that ``teleop demo`` gives them on this machine
+    (:func:`teleop.timing.realtime.co_located_priority`): every integration test runs both sides, and most a recorder
+    too, on it. Unchanged on a machine with the CPUs for ``SCHED_FIFO`` loops; else ``realtime_priority: 0`` in the
+    ``master`` and ``slave`` sections (added where the text has none)."""
+    if co_located_priority(1)[1] is None:
+        return text
+    for side in ("master", "slave"):
+        head = re.compile(rf"^{side}:[ \t]*(#[^\n]*)?\n", re.M)
+        if head.search(text):
+            text = head.sub(f"{side}:\n  realtime_priority: 0\n", text, count=1)
+        else:
+            text = text.rstrip("\n") + f"\n{side}:\n  realtime_priority: 0\n"
+    return text
+
+
 def write_bare_config(path: Path, ident: str, runs: Path, port: int) -> Path:
-    """A quiet config for sides started bare: instrument ``ident``, runs under ``runs``, listening on ``port``."""
-    path.write_text(BARE_CONFIG.format(ident=ident, runs=runs, port=port), encoding="utf-8")
+    """A quiet config for sides started bare: instrument ``ident``, runs under ``runs``, listening on ``port``; the
+    sides' priorities those of one shared machine (:func:`co_located`)."""
+    path.write_text(co_located(BARE_CONFIG.format(ident=ident, runs=runs, port=port)), encoding="utf-8")
     return path
 
 

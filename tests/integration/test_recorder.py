@@ -32,7 +32,7 @@ from teleop.recording.measured_csv import read_measured_csv
 from teleop.recording.publish_log import read_publish_attempts, read_publish_log
 from teleop.session.transport import free_tcp_port
 from teleop.wire.codec import decode
-from tests.integration.processes import start, stop_all, wait_for
+from tests.integration.processes import co_located, start, stop_all, wait_for
 
 pytestmark = pytest.mark.integration
 
@@ -86,7 +86,7 @@ def test_sigkill_of_a_side_loses_no_published_message(tmp_path, victim):
     ident = f"rk{victim}"
     runs = tmp_path / "runs"
     cfg = tmp_path / "c.yaml"
-    cfg.write_text(CONFIG.format(ident=ident, runs=runs, port=free_tcp_port()), encoding="utf-8")
+    cfg.write_text(co_located(CONFIG.format(ident=ident, runs=runs, port=free_tcp_port())), encoding="utf-8")
     logs = {side: tmp_path / f"{side}.pub" for side in ("slave", "master")}
     procs: dict[str, subprocess.Popen] = {}
     try:
@@ -157,7 +157,7 @@ def test_sigkill_of_the_recorder_then_repair_gives_an_mcap_file_with_every_publi
     ident = "rkrec"
     runs = tmp_path / "runs"
     cfg = tmp_path / "c.yaml"
-    cfg.write_text(CONFIG.format(ident=ident, runs=runs, port=free_tcp_port()), encoding="utf-8")
+    cfg.write_text(co_located(CONFIG.format(ident=ident, runs=runs, port=free_tcp_port())), encoding="utf-8")
     logs = {side: tmp_path / f"{side}.pub" for side in ("slave", "master")}
     procs: dict[str, subprocess.Popen] = {}
     try:

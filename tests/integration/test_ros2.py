@@ -20,7 +20,7 @@ from teleop.session.transport import free_tcp_port, free_tcp_ports, loopback_end
 from teleop.wire.codec import decode
 from teleop.wire.keys import estimate_key
 from teleop.wire.messages import Estimate
-from tests.integration.processes import start, stop_all, wait_for
+from tests.integration.processes import co_located, start, stop_all, wait_for
 from tests.ros2_peer import JOINT_STATE, OPERATING_STATE, WRENCH_STAMPED, RosPeer, joint_state
 
 pytestmark = pytest.mark.integration
@@ -46,7 +46,7 @@ ros2:
 
 def write_config(tmp_path: Path, ident: str) -> Path:
     path = tmp_path / "ros2.yaml"
-    path.write_text(CONFIG.format(ident=ident, caldir=tmp_path / "calibration"), encoding="utf-8")
+    path.write_text(co_located(CONFIG.format(ident=ident, caldir=tmp_path / "calibration")), encoding="utf-8")
     return path
 
 

@@ -14,7 +14,7 @@ import pytest
 
 from teleop.recording.publish_log import read_publish_log
 from teleop.session.transport import free_tcp_port
-from tests.integration.processes import stalled_past_watchdog, start, stop_all, wait_text
+from tests.integration.processes import co_located, stalled_past_watchdog, start, stop_all, wait_text
 
 pytestmark = pytest.mark.integration
 
@@ -39,7 +39,7 @@ def test_router_slave_master_recorder_as_four_processes(tmp_path):
     port = free_tcp_port()
     runs = tmp_path / "runs"
     cfg = tmp_path / "client.yaml"
-    cfg.write_text(CLIENT.format(runs=runs, port=port), encoding="utf-8")
+    cfg.write_text(co_located(CLIENT.format(runs=runs, port=port)), encoding="utf-8")
     procs: list[subprocess.Popen] = []
     try:
         procs.append(start(["router", "--config", str(cfg), "--listen", f"tcp/127.0.0.1:{port}",

@@ -21,7 +21,7 @@ from teleop.recording.measured_csv import read_measured_csv
 from teleop.session.transport import Session, free_tcp_port, loopback_endpoint, zenoh_config
 from teleop.wire.keys import estimate_key, heartbeat_key
 from teleop.wire.messages import Estimate, Heartbeat, SideState
-from tests.integration.processes import start, stop_all, wait_for
+from tests.integration.processes import co_located, start, stop_all, wait_for
 
 pytestmark = pytest.mark.integration
 
@@ -41,7 +41,8 @@ recording:
 
 def write_config(tmp_path: Path, ident: str, rerun: str = "off") -> Path:
     path = tmp_path / "test.yaml"
-    path.write_text(CONFIG.format(ident=ident, rerun=rerun, caldir=tmp_path / "calibration"), encoding="utf-8")
+    text = CONFIG.format(ident=ident, rerun=rerun, caldir=tmp_path / "calibration")
+    path.write_text(co_located(text), encoding="utf-8")
     return path
 
 
