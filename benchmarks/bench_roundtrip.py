@@ -113,7 +113,8 @@ def demo_roundtrip(timeout: float = 120.0, config: Path | None = None) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         run = Path(tmp) / "run"
         extra = [] if config is None else ["--config", str(config)]
-        subprocess.run([sys.executable, "-m", "live.cli", "demo", "--protocol", "short", *extra,
+        # --keep-realtime: the sides at SCHED_FIFO as configured, as the bare ping-pong beside it, on any machine
+        subprocess.run([sys.executable, "-m", "live.cli", "demo", "--protocol", "short", "--keep-realtime", *extra,
                         "--run-dir", str(run), "--timeout", str(timeout)], check=False, cwd=ROOT, capture_output=True,
                        timeout=timeout + 30, env=dict(os.environ, PYTHONUNBUFFERED="1"))
         s = json.loads((run / "summary.json").read_text())

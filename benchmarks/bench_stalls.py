@@ -201,7 +201,8 @@ def main(argv: list[str]) -> None:
     time.sleep(0.5)
     env = dict(os.environ, TELEOP_CYCLE_TRACE=str(d))
     try:
-        out = subprocess.run([sys.executable, "-m", "live.cli", "demo", "--run-dir", str(d / "run"), *argv],
+        out = subprocess.run([sys.executable, "-m", "live.cli", "demo", "--keep-realtime", "--run-dir", str(d / "run"),
+                              *argv],
                              capture_output=True, text=True, env=env, cwd=ROOT).stdout
     finally:
         _stop(procs)
