@@ -199,6 +199,14 @@ def rt_budget_note(budget: RtBudget | None) -> str | None:
 CO_LOCATED_MIN_CPUS = 4
 
 
+def _available_cpus() -> int | None:
+    """The CPUs this process may run on: its affinity (a container's or a ``taskset``'s CPUs), else the machine's."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count()
+
+
 def co_located_priority(priority: int, cpus: int | None = None) -> tuple[int, str | None]:
     """The ``SCHED_FIFO`` priority of a side that shares the machine with the other side and the recorder.
 
@@ -207,7 +215,8 @@ def co_located_priority(priority: int, cpus: int | None = None) -> tuple[int, st
     priority : int
         The configured ``<side>.realtime_priority`` (0: normal scheduling already).
     cpus : int, optional
-        The machine's CPUs (default :func:`os.cpu_count`).
+        The CPUs the sides may run on (default: this process's CPU affinity, e.g. a container's cpuset; where that
+        cannot be read, :func:`os.cpu_count`).
 
     Returns
     -------
@@ -215,7 +224,7 @@ def co_located_priority(priority: int, cpus: int | None = None) -> tuple[int, st
         ``priority`` and None on :data:`CO_LOCATED_MIN_CPUS` CPUs or more (or when ``priority`` is 0); else 0 and one
         line saying why the loops run with normal scheduling.
     """
-    n = os.cpu_count() if cpus is None else cpus
+    n = _available_cpus() if cpus is None else cpus
     if priority <= 0 or n is None or n >= CO_LOCATED_MIN_CPUS:
         return priority, None
     return 0, (f"{n} CPU{'s' if n != 1 else ''} for master, slave and recorder: their loops run with normal "

@@ -51,10 +51,10 @@ def test_the_demo_runs_its_sides_with_normal_scheduling_where_the_machine_cannot
     from live.demo import main as demo_main
     cfg = load_config(DEFAULT_CONFIG)
     assert cfg.master.realtime_priority > 0 and cfg.slave.realtime_priority > 0
-    monkeypatch.setattr("os.cpu_count", lambda: 2)
+    monkeypatch.setattr("os.sched_getaffinity", lambda pid: {0, 1})      # the CPUs the demo's processes may use
     small, why = demo_main.co_located(cfg)
     assert small.master.realtime_priority == 0 and small.slave.realtime_priority == 0
     assert why is not None and why.startswith("2 CPUs for master, slave and recorder")
     assert small.master.mapping == cfg.master.mapping and small.slave.watchdog_ms == cfg.slave.watchdog_ms
-    monkeypatch.setattr("os.cpu_count", lambda: 8)
+    monkeypatch.setattr("os.sched_getaffinity", lambda pid: set(range(8)))
     assert demo_main.co_located(cfg) == (cfg, None)
