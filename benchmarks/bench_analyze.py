@@ -1,14 +1,14 @@
 """`teleop analyze` speed: a 10-minute 1 kHz recording with a hidden effect, diagnosed and reported.
 
-Generates the recording with :func:`study.scenarios.record` (not timed), writes it as a measured-data
-CSV, then runs ``teleop analyze FILE --json OUT --report DIR`` as a separate process pinned to one
-thread (OMP/MKL/OpenBLAS/NUMBA threads = 1) and prints the wall time, split into reading,
-diagnosis and report from the same steps run in-process, and the machine's speed on a fixed reference (the plain
-memory kernel over 100000 samples, best of 5, before and after the runs), by which figures taken on different
-machines or days compare: a shared VM's speed varies from one to the next, and within a run. Prints figures,
-never fails on them.
+Generates the recording with :func:`study.scenarios.record` (not timed), writes it as a measured-data CSV, then runs
+``teleop analyze FILE --json OUT --report DIR`` ``--runs`` times as a separate process pinned to one thread
+(OMP/MKL/OpenBLAS/NUMBA threads = 1) and prints each run's wall time (the first may fill numba's cache) and their
+median, split into reading, diagnosis and report from the same steps run in-process, and the machine's speed on a
+fixed reference (the plain memory kernel over 100000 samples, best of 5, before and after the runs), by which figures
+taken on different machines or days compare: a shared VM's speed varies from one to the next, and within a run. Prints
+figures, never fails on them.
 
-    .venv/bin/python benchmarks/bench_analyze.py [--minutes 10] [--rate 1000] [--effect friction_offset]
+    .venv/bin/python benchmarks/bench_analyze.py [--minutes 10] [--rate 1000] [--effect friction_offset] [--runs 3]
 """
 from __future__ import annotations
 
@@ -56,6 +56,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--minutes", type=float, default=10.0)
     ap.add_argument("--rate", type=float, default=1000.0)
     ap.add_argument("--effect", default="friction_offset")
+    ap.add_argument("--runs", type=int, default=3, help="timed runs of the command (default 3)")
     args = ap.parse_args([] if argv is None else argv)
     ref_before = reference_ms()
     with tempfile.TemporaryDirectory() as tmp:
@@ -68,12 +69,14 @@ def main(argv: list[str] | None = None) -> None:
         env = {**os.environ, **ONE_THREAD}
         cmd = [sys.executable, "-m", "live.cli", "analyze", str(csv), "--json", str(d / "d.json"),
                "--report", str(d / "report")]
-        t0 = time.perf_counter()
-        proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
-        wall = time.perf_counter() - t0
-        if proc.returncode != 0:
-            print(f"teleop analyze failed ({proc.returncode}): {proc.stderr.strip()}")
-            return
+        walls = []
+        for _ in range(max(args.runs, 1)):
+            t0 = time.perf_counter()
+            proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
+            walls.append(time.perf_counter() - t0)
+            if proc.returncode != 0:
+                print(f"teleop analyze failed ({proc.returncode}): {proc.stderr.strip()}")
+                return
         res = json.loads((d / "d.json").read_text())
         # the same steps in-process, for the split (numba caches are warm by now)
         t0 = time.perf_counter()
@@ -85,7 +88,8 @@ def main(argv: list[str] | None = None) -> None:
         t3 = time.perf_counter()
     n = len(rec.data)
     print(f"teleop analyze, {args.minutes:g} min at {args.rate:g} Hz ({n} samples, {mb:.0f} MB CSV, hidden "
-          f"{args.effect}): {wall:.1f} s wall on one thread, cause {res['cause']}, gain {res['gain']:.2f} "
+          f"{args.effect}): {float(np.median(walls)):.1f} s wall on one thread (median of {len(walls)}: "
+          f"{', '.join(f'{w:.1f}' for w in walls)} s), cause {res['cause']}, gain {res['gain']:.2f} "
           f"(model choice at {res['settings']['selection_rate_hz']:.0f} Hz, refit and test at "
           f"{res['settings']['target_rate_hz']:.0f} Hz)")
     print(f"  in-process split: read {t1 - t0:.1f} s, diagnose {t2 - t1:.1f} s, report {t3 - t2:.1f} s")
