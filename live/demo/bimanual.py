@@ -2,8 +2,11 @@
 
 The flow of every demo (:mod:`live.demo.main`) for two arms (:mod:`teleop.arms`):
 
-1. ``runs/<id>/config.yaml`` is the bimanual file with ``calibration.dir`` set to ``runs/<id>/calibration``;
-   each arm's resolved config goes to ``runs/<id>/<arm id>/config.yaml``;
+1. ``runs/<id>/config.yaml`` is the bimanual file with ``calibration.dir`` set to ``runs/<id>/calibration``
+   and, on a machine of fewer than :data:`teleop.timing.realtime.CO_LOCATED_MIN_CPUS` CPUs, the sides'
+   ``realtime_priority`` 0, said in one line (:func:`live.demo.main.co_located`, as for one arm;
+   ``--keep-realtime`` keeps the configured priorities); each arm's resolved config goes to
+   ``runs/<id>/<arm id>/config.yaml``;
 2. ``teleop calibrate`` of each arm (in this process, simulated as fast as it computes): every tendon of
    every pair into its joint limit both ways, ``runs/<id>/calibration/<arm id>.yaml``, which the slave reloads;
 3. one ``teleop record`` per arm (its arm's config, into ``runs/<id>/<arm id>/recorder``, completing its recording
@@ -48,13 +51,22 @@ __all__ = ["main_bimanual", "recorder_check", "format_bimanual", "bimanual_figur
 OVERRUN_TARGET = 0.005
 
 
-def _resolved(src: Path, run_dir: Path) -> Bimanual:
-    """The bimanual file with ``calibration.dir`` = ``<run_dir>/calibration`` and ``recording.csv_every`` = 1 (the
-    chatter check reads every cycle) written to ``<run_dir>/config.yaml``, loaded; each arm's config written to
-    ``<run_dir>/<arm id>/config.yaml``."""
+def _resolved(src: Path, run_dir: Path, keep_realtime: bool = False) -> tuple[Bimanual, str | None]:
+    """The bimanual file with ``calibration.dir`` = ``<run_dir>/calibration``, ``recording.csv_every`` = 1 (the
+    chatter check reads every cycle) and, unless ``keep_realtime``, the sides' real-time priorities of one machine
+    that runs both sides and the recorders (:func:`live.demo.main.co_located`) written to ``<run_dir>/config.yaml``,
+    loaded; each arm's config written to ``<run_dir>/<arm id>/config.yaml``. Returns (the loaded file, the line that
+    says why the priorities changed, or None)."""
+    from live.demo.main import co_located
     data, _ = read_yaml(src)
     data["calibration"] = {**(data.get("calibration") or {}), "dir": str(run_dir / "calibration")}
     data["recording"] = {**(data.get("recording") or {}), "csv_every": 1}
+    why = None
+    if not keep_realtime:      # the sides' sections are shared by both arms: one loop per side
+        cfg, why = co_located(load_arms(src).arms[0].cfg)
+        if why is not None:
+            data["master"] = {**(data.get("master") or {}), "realtime_priority": cfg.master.realtime_priority}
+            data["slave"] = {**(data.get("slave") or {}), "realtime_priority": cfg.slave.realtime_priority}
     out = run_dir / "config.yaml"
     out.write_text("# resolved bimanual configuration of this run (teleop/arms.py)\n"
                    + yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
@@ -62,7 +74,7 @@ def _resolved(src: Path, run_dir: Path) -> Bimanual:
     for arm in bim.arms:
         (run_dir / arm.ident).mkdir(parents=True, exist_ok=True)
         write_config(arm.cfg, run_dir / arm.ident / "config.yaml")
-    return bim
+    return bim, why
 
 
 def recorder_check(out_dir: Path) -> tuple[bool, str]:
@@ -174,11 +186,13 @@ def main_bimanual(args, cfg_path: Path) -> int:
     for arm in bim.arms:
         check_protocol(arm.cfg, args.protocol)
     run_dir = prepare_run_dir(args, bim.arms[0].cfg).resolve()
-    bim = _resolved(Path(cfg_path), run_dir)
+    bim, scheduling = _resolved(Path(cfg_path), run_dir, getattr(args, "keep_realtime", False))
+    if scheduling is not None:
+        print(scheduling, flush=True)
     t0 = time.monotonic()
     problems: list[str] = []
     summary: dict = {"run_dir": str(run_dir), "config": str(run_dir / "config.yaml"), "kind": "bimanual",
-                     "protocol": args.protocol, "arms": {}}
+                     "protocol": args.protocol, "scheduling": scheduling or "as configured", "arms": {}}
     try:
         for arm in bim.arms:
             names = ", ".join(j.name for j in arm.cfg.instrument.joints)
