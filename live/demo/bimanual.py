@@ -4,7 +4,7 @@ The flow of every demo (:mod:`live.demo.main`) for two arms (:mod:`teleop.arms`)
 
 1. ``runs/<id>/config.yaml`` is the bimanual file with ``calibration.dir`` set to ``runs/<id>/calibration``
    and, on a machine of fewer than :data:`teleop.timing.realtime.CO_LOCATED_MIN_CPUS` CPUs, the sides'
-   ``realtime_priority`` 0, said in one line (:func:`live.demo.main.co_located`, as for one arm;
+   ``realtime_priority`` 0, said in one line (:func:`live.demo.run.co_located`, as for one arm;
    ``--keep-realtime`` keeps the configured priorities); each arm's resolved config goes to
    ``runs/<id>/<arm id>/config.yaml``;
 2. ``teleop calibrate`` of each arm (in this process, simulated as fast as it computes): every tendon of
@@ -34,6 +34,7 @@ from estimator.errors import DataError
 from live.demo.run import (
     RecorderRun,
     check_protocol,
+    co_located,
     finish,
     loop_lines,
     master_console_line,
@@ -54,10 +55,9 @@ OVERRUN_TARGET = 0.005
 def _resolved(src: Path, run_dir: Path, keep_realtime: bool = False) -> tuple[Bimanual, str | None]:
     """The bimanual file with ``calibration.dir`` = ``<run_dir>/calibration``, ``recording.csv_every`` = 1 (the
     chatter check reads every cycle) and, unless ``keep_realtime``, the sides' real-time priorities of one machine
-    that runs both sides and the recorders (:func:`live.demo.main.co_located`) written to ``<run_dir>/config.yaml``,
+    that runs both sides and the recorders (:func:`live.demo.run.co_located`) written to ``<run_dir>/config.yaml``,
     loaded; each arm's config written to ``<run_dir>/<arm id>/config.yaml``. Returns (the loaded file, the line that
     says why the priorities changed, or None)."""
-    from live.demo.main import co_located
     data, _ = read_yaml(src)
     data["calibration"] = {**(data.get("calibration") or {}), "dir": str(run_dir / "calibration")}
     data["recording"] = {**(data.get("recording") or {}), "csv_every": 1}

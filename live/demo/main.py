@@ -7,7 +7,7 @@ both (:class:`slave.node.SlaveNode`, :class:`master.node.MasterNode` over the in
 1. ``runs/<id>/`` (id = timestamp) gets the resolved config with ``calibration.dir`` set to
    ``runs/<id>/calibration``; on a machine of fewer than
    :data:`teleop.timing.realtime.CO_LOCATED_MIN_CPUS` CPUs the sides' ``realtime_priority`` is 0 there, said in
-   one line (:func:`co_located`; ``--keep-realtime`` keeps the configured priorities);
+   one line (:func:`live.demo.run.co_located`; ``--keep-realtime`` keeps the configured priorities);
 2. ``teleop calibrate`` (in this process, simulated as fast as it computes) runs the instrument's
    power-up routine (a tendon pulled into its joint limit, a pair both directions, a spindle over its
    stroke) and writes ``runs/<id>/calibration/<id>.yaml``:
@@ -49,6 +49,7 @@ from estimator.capstan import phase_formula_batch
 from estimator.errors import DataError
 from live.demo.run import (
     check_protocol,
+    co_located,
     finish,
     full_scale_errors,
     loop_lines,
@@ -287,19 +288,6 @@ def format_summary(s: dict) -> str:
         L.append(f"figure:    {s['figure']}  (distal tension and elongation: truth vs estimates)")
     L.append(f"summary:   {s['run_dir']}/summary.json")
     return "\n".join(L)
-
-
-def co_located(cfg: Config) -> tuple[Config, str | None]:
-    """The run's config with the sides' real-time priorities for one machine that runs both sides and the recorder
-    (:func:`teleop.timing.realtime.co_located_priority`), and the line that says why they changed (None: as
-    configured)."""
-    from teleop.timing.realtime import co_located_priority
-    master, why = co_located_priority(cfg.master.realtime_priority)
-    slave, why_slave = co_located_priority(cfg.slave.realtime_priority)
-    if why is None and why_slave is None:
-        return cfg, None
-    return dataclasses.replace(cfg, master=dataclasses.replace(cfg.master, realtime_priority=master),
-                               slave=dataclasses.replace(cfg.slave, realtime_priority=slave)), why or why_slave
 
 
 def main_demo(args) -> int:

@@ -19,6 +19,8 @@ do not depend on the instrument.
 * :func:`finish`: checks, problems and wall time into the summary, ``summary.json``, the printed
   table, the exit code.
 * :func:`check_protocol`: ``--protocol`` checked against the instrument before anything starts.
+* :func:`co_located`: the sides' scheduling on a machine too small for their real-time threads beside the
+  recorders (:data:`teleop.timing.realtime.CO_LOCATED_MIN_CPUS`).
 """
 from __future__ import annotations
 
@@ -43,7 +45,20 @@ if TYPE_CHECKING:
     from teleop.config.schema import Config
 
 __all__ = ["run_processes", "RecorderRun", "read_json", "full_scale_errors", "master_console_line", "loop_lines",
-           "machine_line", "rt_budget_lines", "verdict_lines", "finish", "check_protocol"]
+           "machine_line", "rt_budget_lines", "verdict_lines", "finish", "check_protocol", "co_located"]
+
+
+def co_located(cfg: Config) -> tuple[Config, str | None]:
+    """The run's config with the sides' real-time priorities for one machine that runs both sides and the recorders
+    (:func:`teleop.timing.realtime.co_located_priority`; :mod:`live.demo.main` and :mod:`live.demo.bimanual`), and
+    the line that says why they changed (None: as configured)."""
+    from teleop.timing.realtime import co_located_priority
+    master, why = co_located_priority(cfg.master.realtime_priority)
+    slave, why_slave = co_located_priority(cfg.slave.realtime_priority)
+    if why is None and why_slave is None:
+        return cfg, None
+    return dataclasses.replace(cfg, master=dataclasses.replace(cfg.master, realtime_priority=master),
+                               slave=dataclasses.replace(cfg.slave, realtime_priority=slave)), why or why_slave
 
 
 def check_protocol(cfg: Config, protocol: str) -> None:

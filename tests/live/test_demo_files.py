@@ -48,16 +48,16 @@ def test_the_rerun_hint_names_a_viewer_that_exists_or_the_plain_command(monkeypa
 
 def test_the_demo_runs_its_sides_with_normal_scheduling_where_the_machine_cannot_hold_their_real_time_threads(
         monkeypatch):
-    from live.demo import main as demo_main
+    from live.demo.run import co_located
     cfg = load_config(DEFAULT_CONFIG)
     assert cfg.master.realtime_priority > 0 and cfg.slave.realtime_priority > 0
     monkeypatch.setattr("os.sched_getaffinity", lambda pid: {0, 1})      # the CPUs the demo's processes may use
-    small, why = demo_main.co_located(cfg)
+    small, why = co_located(cfg)
     assert small.master.realtime_priority == 0 and small.slave.realtime_priority == 0
     assert why is not None and why.startswith("2 CPUs for master, slave and recorder")
     assert small.master.mapping == cfg.master.mapping and small.slave.watchdog_ms == cfg.slave.watchdog_ms
     monkeypatch.setattr("os.sched_getaffinity", lambda pid: set(range(8)))
-    assert demo_main.co_located(cfg) == (cfg, None)
+    assert co_located(cfg) == (cfg, None)
 
 
 def test_the_bimanual_demo_gives_both_sides_the_same_scheduling_rule(tmp_path, monkeypatch):
