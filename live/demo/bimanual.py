@@ -52,18 +52,19 @@ __all__ = ["main_bimanual", "recorder_check", "format_bimanual", "bimanual_figur
 OVERRUN_TARGET = 0.005
 
 
-def _resolved(src: Path, run_dir: Path, keep_realtime: bool = False) -> tuple[Bimanual, str | None]:
-    """The bimanual file with ``calibration.dir`` = ``<run_dir>/calibration``, ``recording.csv_every`` = 1 (the
-    chatter check reads every cycle) and, unless ``keep_realtime``, the sides' real-time priorities of one machine
-    that runs both sides and the recorders (:func:`live.demo.run.co_located`) written to ``<run_dir>/config.yaml``,
-    loaded; each arm's config written to ``<run_dir>/<arm id>/config.yaml``. Returns (the loaded file, the line that
-    says why the priorities changed, or None)."""
+def _resolved(src: Path, run_dir: Path, loaded: Bimanual, keep_realtime: bool = False) -> tuple[Bimanual, str | None]:
+    """The bimanual file ``src`` (``loaded``: as :func:`teleop.arms.load_arms` read it) with ``calibration.dir`` =
+    ``<run_dir>/calibration``, ``recording.csv_every`` = 1 (the chatter check reads every cycle) and, unless
+    ``keep_realtime``, the sides' real-time priorities of one machine that runs both sides and the recorders
+    (:func:`live.demo.run.co_located`) written to ``<run_dir>/config.yaml``, loaded; each arm's config written to
+    ``<run_dir>/<arm id>/config.yaml``. Returns (the loaded file, the line that says why the priorities changed, or
+    None)."""
     data, _ = read_yaml(src)
     data["calibration"] = {**(data.get("calibration") or {}), "dir": str(run_dir / "calibration")}
     data["recording"] = {**(data.get("recording") or {}), "csv_every": 1}
     why = None
     if not keep_realtime:      # the sides' sections are shared by both arms: one loop per side
-        cfg, why = co_located(load_arms(src).arms[0].cfg)
+        cfg, why = co_located(loaded.arms[0].cfg)
         if why is not None:
             data["master"] = {**(data.get("master") or {}), "realtime_priority": cfg.master.realtime_priority}
             data["slave"] = {**(data.get("slave") or {}), "realtime_priority": cfg.slave.realtime_priority}
@@ -186,7 +187,7 @@ def main_bimanual(args, cfg_path: Path) -> int:
     for arm in bim.arms:
         check_protocol(arm.cfg, args.protocol)
     run_dir = prepare_run_dir(args, bim.arms[0].cfg).resolve()
-    bim, scheduling = _resolved(Path(cfg_path), run_dir, getattr(args, "keep_realtime", False))
+    bim, scheduling = _resolved(Path(cfg_path), run_dir, bim, getattr(args, "keep_realtime", False))
     if scheduling is not None:
         print(scheduling, flush=True)
     t0 = time.monotonic()

@@ -62,20 +62,22 @@ def test_the_demo_runs_its_sides_with_normal_scheduling_where_the_machine_cannot
 
 def test_the_bimanual_demo_gives_both_sides_the_same_scheduling_rule(tmp_path, monkeypatch):
     from live.demo import bimanual
+    from teleop.arms import load_arms
     src = shipped_config("notes-bimanual.yaml")
+    loaded = load_arms(src)
     for d in ("small", "kept", "large"):
         (tmp_path / d).mkdir()           # the run's folder, made by the demo before
     monkeypatch.setattr("os.sched_getaffinity", lambda pid: {0, 1})
-    bim, why = bimanual._resolved(src, tmp_path / "small")
+    bim, why = bimanual._resolved(src, tmp_path / "small", loaded)
     assert why is not None and why.startswith("2 CPUs for master, slave and recorder")
     for arm in bim.arms:         # the run's file and each arm's own config, which the sides and recorders read
         own = load_config(tmp_path / "small" / arm.ident / "config.yaml")
         assert arm.cfg.master.realtime_priority == own.master.realtime_priority == 0
         assert arm.cfg.slave.realtime_priority == own.slave.realtime_priority == 0
-    kept, why = bimanual._resolved(src, tmp_path / "kept", keep_realtime=True)
+    kept, why = bimanual._resolved(src, tmp_path / "kept", loaded, keep_realtime=True)
     assert why is None and all(a.cfg.master.realtime_priority > 0 and a.cfg.slave.realtime_priority > 0
                                for a in kept.arms)
     monkeypatch.setattr("os.sched_getaffinity", lambda pid: set(range(8)))
-    large, why = bimanual._resolved(src, tmp_path / "large")
+    large, why = bimanual._resolved(src, tmp_path / "large", loaded)
     assert why is None
     assert [a.cfg.master.realtime_priority for a in large.arms] == [a.cfg.master.realtime_priority for a in kept.arms]
