@@ -15,6 +15,9 @@ from teleop.config.load import load_config
 from tests.integration.processes import quiet_instrument, run_demo
 
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "instrument-3dof.yaml"
+# why a side leaves ENGAGED when a link, not the instrument, is at fault: the master's watchdog (master/node_base.py)
+# and the slave's (slave/node_base.py), whose SAFE the master then reads as "slave SAFE"
+WATCHDOG_REASONS = ("estimate stale", "slave heartbeat missing", "command echo stale", "slave SAFE", "command stale")
 
 
 def quiet_config(tmp_path: Path, ident: str) -> Path:
@@ -37,7 +40,14 @@ def test_three_joint_demo_end_to_end_over_zenoh(tmp_path):
     assert summary["master"]["finished"] and summary["slave"]["commands_applied"] > 1000
     assert summary["master"]["latency_rtt"]["n"] > 1000
     m = summary["master"]                                    # the joint master has the whole console
-    assert m["engage_count"] >= 1 and m["clutches"] == 0 and m["align_refusals"] == 0 and "console" in m
+    # one engagement for the whole run; only the watchdog (a link stale while the shared machine stalls a side)
+    # may end it, and then each new engagement is an alignment or the scripted hand's clutch, one per SAFE
+    safe = {side: [ln for ln in (run_dir / f"{side}.log").read_text().splitlines() if "ENGAGED -> SAFE" in ln]
+            for side in ("master", "slave")}
+    assert all(ln.endswith(WATCHDOG_REASONS) for lines in safe.values() for ln in lines), safe
+    n_safe = len(safe["master"])
+    assert 1 <= m["engage_count"] <= 1 + n_safe and "console" in m, (m["engage_count"], safe)
+    assert m["clutches"] <= n_safe and m["align_refusals"] <= n_safe, (m["clutches"], m["align_refusals"], safe)
     assert m["max_abs_force"] <= m["force_limit"] and m["axes"] == ["bend_ud", "bend_lr", "grasp"]
     assert m["recording"].endswith("master.csv") and "master console: engaged" in proc.stdout
     header = [ln for ln in (run_dir / "master.csv").read_text().splitlines() if not ln.startswith("#")]
