@@ -16,10 +16,12 @@ NUMBA_STAMP := .numba-sources
 
 .PHONY: demo test test-cpu test-types test-docs test-generic bench clean
 
+# The project and its test tools are installed by uv (the versions pip would pick, in a sixth of pip's minute); where
+# uv cannot install (an index only pip is configured for), pip does.
 $(STAMP): pyproject.toml
 	test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
-	$(VENV)/bin/python -m pip install --quiet --upgrade pip
-	$(VENV)/bin/python -m pip install --quiet -e '.[test]'
+	$(VENV)/bin/python -m pip install --quiet uv && $(VENV)/bin/uv pip install --quiet --python $(VENV)/bin/python \
+		-e '.[test]' || $(VENV)/bin/python -m pip install --quiet -e '.[test]'
 	touch $(STAMP)
 
 $(NUMBA_STAMP): $(NUMBA_SOURCES)
