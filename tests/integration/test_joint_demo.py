@@ -41,11 +41,13 @@ def test_three_joint_demo_end_to_end_over_zenoh(tmp_path):
     assert summary["master"]["latency_rtt"]["n"] > 1000
     m = summary["master"]                                    # the joint master has the whole console
     # one engagement for the whole run; only the watchdog (a link stale while the shared machine stalls a side)
-    # may end it, and then each new engagement is an alignment or the scripted hand's clutch, one per SAFE
+    # may end it, rarely, and then each new engagement is an alignment or the scripted hand's clutch, one per SAFE
     safe = {side: [ln for ln in (run_dir / f"{side}.log").read_text().splitlines() if "ENGAGED -> SAFE" in ln]
             for side in ("master", "slave")}
+    late = {side: summary[side]["pacer"]["max_lateness"] for side in ("master", "slave")}
     assert all(ln.endswith(WATCHDOG_REASONS) for lines in safe.values() for ln in lines), safe
     n_safe = len(safe["master"])
+    assert n_safe <= 2, (safe, late)
     assert 1 <= m["engage_count"] <= 1 + n_safe and "console" in m, (m["engage_count"], safe)
     assert m["clutches"] <= n_safe and m["align_refusals"] <= n_safe, (m["clutches"], m["align_refusals"], safe)
     assert m["max_abs_force"] <= m["force_limit"] and m["axes"] == ["bend_ud", "bend_lr", "grasp"]
