@@ -16,7 +16,7 @@ NUMBA_STAMP := .numba-sources
 
 .PHONY: demo test test-cpu test-types test-docs test-generic bench clean
 
-# The project and its test tools are installed by uv (the versions pip would pick, in a sixth of pip's minute); where
+# The project and its test tools are installed by uv (the versions pip would pick, in a quarter of pip's minute); where
 # uv cannot install (an index only pip is configured for), pip does.
 $(STAMP): pyproject.toml
 	test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
