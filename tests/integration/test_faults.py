@@ -143,11 +143,12 @@ def test_fault(name, instrument, tmp_path_factory):
         safe[side] = ms
     counts = _counts(run)
     blips = 0
-    if not sc["safe"]:                # ride-through: teleoperation goes on (a process stall on a loaded
-        for side in ("slave", "master"):  # machine may still cost a brief SAFE: counted and reported)
+    # ride-through: teleoperation goes on (a process stall on a loaded machine may still cost a brief SAFE: counted
+    # and reported); the sides' state changes with their reasons, and the console's prompts, tell a stall from a fault
+    if not sc["safe"]:
+        changes = [ln for lg in run.logs.values() for ln in lg.splitlines() if " -> " in ln or "align" in ln]
+        for side in ("slave", "master"):
             states = run.states_after(side, run.t_fault)
-            # the sides' state changes with their reasons, and the console's prompts, tell a stall from a fault
-            changes = [ln for lg in run.logs.values() for ln in lg.splitlines() if " -> " in ln or "align" in ln]
             assert states[-1] == ENGAGED and np.mean(states == ENGAGED) > 0.9, (f"{side} stopped under {name}",
                                                                                  changes[-12:])
             blips += int(np.sum(np.diff((states == SAFE).astype(int)) == 1))
